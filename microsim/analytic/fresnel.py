@@ -1,2 +1,123 @@
-"""(placeholder, being written)"""
-__all__ = []
+"""Fresnel reflectance of a planar interface, unpolarised (Mikkelsen §2.1, Mally "Fresnel's Law").
+
+Light arrives from air (index 1) at a medium of complex index η = n + ik (k ≥ 0: absorption).
+A real index is a dielectric, a complex one a conductor, ``None`` an ideal mirror (R = 1).
+``cos_theta`` is always the cosine between the incident direction and the *facet* normal.
+"""
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+
+__all__ = ["fresnel", "fresnel_transmittance", "schlick", "f0_from_ior",
+           "MATERIALS", "resolve_material"]
+
+MATERIALS = {"aluminium": 0.769 + 6.08j, "methanol": 1.329, "mirror": None}
+"""Indices of refraction at 500 nm used by Mikkelsen (Fig. 5): η = n + ik, None = mirror."""
+
+_ALIASES = {"aluminum": "aluminium"}
+
+
+def _check_ior(ior) -> complex:
+    """Return ``ior`` as complex η = n + ik, or raise unless n > 0, k ≥ 0, both finite."""
+    if isinstance(ior, (bool, np.bool_)) or not isinstance(ior, numbers.Number):
+        raise ValueError(f"ior must be a real or complex number n+ik (n > 0, k >= 0) or None, "
+                         f"got {ior!r}")
+    eta = complex(ior)
+    if not (np.isfinite(eta.real) and np.isfinite(eta.imag)):
+        raise ValueError(f"ior must be finite (n > 0, k >= 0), got {ior!r}")
+    if not eta.real > 0:
+        raise ValueError(f"ior real part n must be > 0, got {ior!r}")
+    if not eta.imag >= 0:
+        raise ValueError(f"ior imaginary part k (extinction) must be >= 0, got {ior!r}")
+    return eta
+
+
+def _cos(cos_theta) -> np.ndarray:
+    """cos θ as float64, clipped to [0, 1]; NaN rejected."""
+    c = np.asarray(cos_theta, dtype=np.float64)
+    if np.any(np.isnan(c)):
+        raise ValueError("cos_theta must not be NaN")
+    return np.clip(c, 0.0, 1.0)
+
+
+def fresnel(cos_theta, ior=None):
+    """Exact unpolarised reflectance (R_s + R_p)/2 from air onto index ``ior`` (dimensionless).
+
+    ``cos_theta``: cosine of the incidence angle to the facet normal, clipped to [0, 1].
+    ``ior``: real n > 0 (dielectric; n < 1 means the light comes from the denser medium and
+    total internal reflection gives R = 1), complex n + ik with k ≥ 0 (conductor), or None
+    (mirror, R = 1). R = 1 exactly at grazing incidence (cos θ = 0) for every interface.
+
+    With g = η cos θ_t = √(η² − sin²θ) (principal complex root: Re g ≥ 0, Im g ≥ 0, the
+    decaying transmitted wave), the amplitude ratios are written without subtracting nearly
+    equal numbers (multiply r_s = (c − g)/(c + g) by (c + g)/(c + g) and use c² − g² = 1 − η²):
+        r_s = (1 − η²) / (c + g)²,
+        r_p = (η² c − g)/(η² c + g) = (η² − 1)(c²(η² + 1) − 1) / (η² c + g)².
+    The second factor of r_p vanishes at Brewster's angle, where r_p is legitimately ~0.
+    """
+    c = _cos(cos_theta)
+    if ior is None:
+        return np.ones_like(c)
+    eta = _check_ior(ior)
+    if eta == 1.0:                                 # no interface: nothing reflects but grazing
+        return np.where(c == 0.0, 1.0, 0.0)
+    eta2 = eta * eta
+    eta2m1 = (eta - 1.0) * (eta + 1.0)             # η² − 1 without cancellation for η ≈ 1
+    g = np.sqrt(eta2m1 + c * c + 0j)               # √(η² − 1 + cos²θ) = √(η² − sin²θ)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rs = -eta2m1 / (c + g) ** 2
+        rp = eta2m1 * (c * c * (eta2 + 1.0) - 1.0) / (eta2 * c + g) ** 2
+    r = 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+    # grazing incidence: R → 1 for every η ≠ 1 (η = 1 is given the same value by that limit)
+    r = np.where(c == 0.0, 1.0, r)
+    return np.clip(r, 0.0, 1.0)
+
+
+def fresnel_transmittance(cos_theta, ior=None):
+    """Fresnel transmittance F_t = 1 − F_r (Mikkelsen §2.1; Fig. 6(c)(d))."""
+    return 1.0 - fresnel(cos_theta, ior)
+
+
+def f0_from_ior(ior) -> float:
+    """Normal-incidence reflectance |(η − 1)/(η + 1)|² (Edwards eq. 31; 1 for a mirror)."""
+    if ior is None:
+        return 1.0
+    eta = _check_ior(ior)
+    return abs((eta - 1.0) / (eta + 1.0)) ** 2
+
+
+def schlick(cos_theta, f0):
+    """Schlick's approximation F = F0 + (1 − F0)(1 − cos θ)⁵ (Edwards eq. 30).
+
+    ``f0`` ∈ [0, 1] is the normal-incidence reflectance (``f0_from_ior``); broadcasts.
+    """
+    c = _cos(cos_theta)
+    f0 = np.asarray(f0, dtype=np.float64)
+    if not np.all((f0 >= 0.0) & (f0 <= 1.0)):
+        raise ValueError(f"f0 must lie in [0, 1], got {f0!r}")
+    return f0 + (1.0 - f0) * (1.0 - c) ** 5
+
+
+def resolve_material(material):
+    """Index of refraction from a material name (case-insensitive), a number, or None.
+
+    Names: those of ``MATERIALS`` (plus "aluminum"); numbers are validated like ``ior``.
+    Returns a float (dielectric), a complex (conductor) or None (mirror).
+    """
+    if material is None:
+        return None
+    if isinstance(material, str):
+        key = material.strip().lower()
+        key = _ALIASES.get(key, key)
+        if key not in MATERIALS:
+            allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
+            raise ValueError(f"material must be one of {allowed} (or a number n / n+ik / None), "
+                             f"got {material!r}")
+        return MATERIALS[key]
+    eta = _check_ior(material)
+    if isinstance(material, complex | np.complexfloating):
+        return eta
+    return eta.real

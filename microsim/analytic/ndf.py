@@ -5,22 +5,28 @@ upper hemisphere, n = +z. ``pdf(h) = D(h) (h·n)`` is then a probability density
 and ``sample(u1, u2)`` draws unit half vectors h from it by inverting the CDF of the tilt
 θ_h (density 2π D(θ) cosθ sinθ) and taking φ_h = 2π u2.
 
-All isotropic NDFs implement two things: the radial profile ``D_cos(cos θ_h)`` and the tilt
-quantile ``tilt_quantile(u)`` (inverse CDF of θ_h). Everything else follows in this base class.
+All isotropic NDFs implement three things: the radial profile ``D_cos(cos θ_h)``, the tilt
+CDF ``cdf_theta(θ)`` and its inverse ``tilt_quantile(u)``. Everything else follows in this base
+class.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
+from scipy import special
 
 from . import _checks
 
-__all__ = ["NDF"]
+__all__ = ["NDF", "Beckmann", "GGX", "BlinnPhong", "VonMisesFisher", "ABC",
+           "beckmann_to_phong", "phong_to_beckmann"]
 
 
 class NDF:
     """Base class of an isotropic microfacet normal distribution.
 
-    Subclasses set ``name`` and implement ``D_cos``, ``tilt_quantile`` and ``params``.
+    Subclasses set ``name`` and implement ``D_cos``, ``tilt_quantile``, ``cdf_theta`` and
+    ``params``.
     Those with a closed-form Smith Λ set ``has_closed_smith = True`` and implement
     ``smith_lambda_cos``; for the others the shadowing module integrates the
     projected-area identity numerically.
@@ -41,6 +47,10 @@ class NDF:
 
     def tilt_quantile(self, u):
         """θ_h (radians) at cumulative probability u ∈ [0, 1] of the tilt density 2πD cosθ sinθ."""
+        raise NotImplementedError
+
+    def cdf_theta(self, theta):
+        """P(θ_h ≤ θ) in closed form; θ in radians, clipped to [0, π/2]. Inverse: tilt_quantile."""
         raise NotImplementedError
 
     def smith_lambda_cos(self, cos_theta):
@@ -73,3 +83,336 @@ class NDF:
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params().items())
         return f"{type(self).__name__}({args})"
+
+
+# --- numerically careful building blocks -----------------------------------------------------
+def _unit_interval(u) -> np.ndarray:
+    """Cumulative probabilities as float64 clipped to [0, 1]."""
+    return np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
+
+
+def _one_minus_cos(theta) -> np.ndarray:
+    """x = 1 − cos θ = 2 sin²(θ/2), accurate for small θ; θ clipped to [0, π/2]."""
+    t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
+    return 2.0 * np.sin(0.5 * t) ** 2
+
+
+def _theta_from_x(x) -> np.ndarray:
+    """θ = 2 arcsin √(x/2) from x = 1 − cos θ (accurate for small θ); x clipped to [0, 1]."""
+    return np.minimum(2.0 * np.arcsin(np.sqrt(0.5 * np.clip(x, 0.0, 1.0))), 0.5 * np.pi)
+
+
+def _sin2(c) -> np.ndarray:
+    """sin²θ = (1 − c)(1 + c) from c = cos θ, without the cancellation of 1 − c²."""
+    return (1.0 - c) * (1.0 + c)
+
+
+def _expm1x(z) -> np.ndarray:
+    """(e^z − 1)/z with its limit 1 at z = 0 (= ∫₀¹ e^{zt} dt)."""
+    z = np.asarray(z, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.expm1(z) / z
+    return np.where(z == 0.0, 1.0, r)
+
+
+def _cos_array(cos_theta) -> np.ndarray:
+    """cos θ as a float64 array (not clipped: D is 0 below the horizon)."""
+    return np.asarray(cos_theta, dtype=np.float64)
+
+
+# --- Beckmann -------------------------------------------------------------------------------
+@dataclass(frozen=True, repr=False)
+class Beckmann(NDF):
+    """Beckmann NDF, D = exp(−tan²θ/m²)/(π m² cos⁴θ) (Mikkelsen eq. 20); rms slope m > 0.
+
+    For a Gaussian heightfield the per-axis slope variance is m²/2 (DESIGN.md).
+    """
+
+    m: float
+    name = "beckmann"
+    has_closed_smith = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "m", _checks.positive("m", self.m))
+
+    def params(self) -> dict:
+        return {"m": self.m}
+
+    def D_cos(self, cos_theta):
+        """D(cos θ) in sr⁻¹, evaluated as exp(−sin²/(c² m²) − 4 ln c)/(π m²); 0 for c ≤ 0."""
+        c = _cos_array(cos_theta)
+        pos = c > 0.0
+        cs = np.where(pos, np.minimum(c, 1.0), 1.0)
+        with np.errstate(divide="ignore", over="ignore"):
+            expo = -_sin2(cs) / (cs * cs * self.m ** 2) - 4.0 * np.log(cs)
+        return np.where(pos, np.exp(expo) / (np.pi * self.m ** 2), 0.0)
+
+    def cdf_theta(self, theta):
+        """P(θ_h ≤ θ) = 1 − exp(−tan²θ/m²)."""
+        t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
+        return -np.expm1(-(np.tan(t) / self.m) ** 2)
+
+    def tilt_quantile(self, u):
+        """θ_h with tan²θ = −m² ln(1 − u); u = 1 gives π/2."""
+        u = _unit_interval(u)
+        with np.errstate(divide="ignore"):
+            t = -np.log1p(-u)
+        return np.arctan(self.m * np.sqrt(t))
+
+    def smith_lambda_cos(self, cos_theta):
+        """Smith Λ = [erf(a) − 1]/2 + e^{−a²}/(2a√π), a = 1/(m tan θ) (DESIGN.md), cos θ in [0, 1].
+
+        Evaluated as Λ = e^{−a²}(1/(a√π) − erfcx(a))/2, which avoids the cancellation of
+        erf(a) − 1 (erfcx(a) = e^{a²} erfc(a)). Λ = 0 at θ = 0 and Λ = +inf at θ = 90°
+        (a = 0), so that G1 = 1/(1 + Λ) = 0 there.
+        """
+        c = np.clip(_cos_array(cos_theta), 0.0, 1.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = c / (self.m * np.sqrt(_sin2(c)))          # inf at c = 1
+            lam = 0.5 * np.exp(-a * a) * (1.0 / (a * np.sqrt(np.pi)) - special.erfcx(a))
+        return np.where(c == 1.0, 0.0, lam)
+
+
+# --- GGX ------------------------------------------------------------------------------------
+@dataclass(frozen=True, repr=False)
+class GGX(NDF):
+    """GGX / Trowbridge–Reitz NDF, D = α²/(π cos⁴θ (α² + tan²θ)²), α > 0 (DESIGN.md).
+
+    Evaluated as α²/(π (α² cos²θ + sin²θ)²), finite at θ = 90°.
+    """
+
+    alpha: float
+    name = "ggx"
+    has_closed_smith = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "alpha", _checks.positive("alpha", self.alpha))
+
+    def params(self) -> dict:
+        return {"alpha": self.alpha}
+
+    def D_cos(self, cos_theta):
+        """D(cos θ) in sr⁻¹; 0 for c ≤ 0."""
+        c = np.minimum(_cos_array(cos_theta), 1.0)
+        a2 = self.alpha ** 2
+        d = a2 / (np.pi * (a2 * c * c + _sin2(c)) ** 2)
+        return np.where(c > 0.0, d, 0.0)
+
+    def cdf_theta(self, theta):
+        """P(θ_h ≤ θ) = tan²θ/(α² + tan²θ) = sin²θ/(α² cos²θ + sin²θ)."""
+        t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
+        s2, c2 = np.sin(t) ** 2, np.cos(t) ** 2
+        return s2 / (self.alpha ** 2 * c2 + s2)
+
+    def tilt_quantile(self, u):
+        """θ_h with tan θ = α √(u/(1 − u)); u = 1 gives π/2."""
+        u = _unit_interval(u)
+        return np.arctan2(self.alpha * np.sqrt(u), np.sqrt(1.0 - u))
+
+    def smith_lambda_cos(self, cos_theta):
+        """Smith Λ = (−1 + √(1 + α² tan²θ))/2 (DESIGN.md), cos θ in [0, 1].
+
+        Evaluated as α² sin²/(2c(√(c² + α² sin²) + c)): no cancellation; +inf at θ = 90°.
+        """
+        c = np.clip(_cos_array(cos_theta), 0.0, 1.0)
+        q = self.alpha ** 2 * _sin2(c)
+        with np.errstate(divide="ignore"):
+            return q / (2.0 * c * (np.sqrt(c * c + q) + c))
+
+
+# --- normalised Blinn–Phong -----------------------------------------------------------------
+@dataclass(frozen=True, repr=False)
+class BlinnPhong(NDF):
+    """Normalised Blinn–Phong NDF, D = (e + 2)/(2π) cos^e θ (Mikkelsen eq. 19; Mally), e ≥ 0."""
+
+    e: float
+    name = "blinn_phong"
+
+    def __post_init__(self):
+        object.__setattr__(self, "e", _checks.in_range("e", self.e, 0.0, np.inf, hi_open=True))
+
+    def params(self) -> dict:
+        return {"e": self.e}
+
+    def D_cos(self, cos_theta):
+        """D(cos θ) in sr⁻¹; 0 for c ≤ 0."""
+        c = np.minimum(_cos_array(cos_theta), 1.0)
+        pos = c > 0.0
+        return np.where(pos, (self.e + 2.0) / (2.0 * np.pi) * np.where(pos, c, 1.0) ** self.e,
+                        0.0)
+
+    def cdf_theta(self, theta):
+        """P(θ_h ≤ θ) = 1 − cos^{e+2} θ, evaluated as −expm1((e + 2) log1p(−x)), x = 1 − cos θ."""
+        x = _one_minus_cos(theta)
+        with np.errstate(divide="ignore"):
+            return -np.expm1((self.e + 2.0) * np.log1p(-np.minimum(x, 1.0)))
+
+    def tilt_quantile(self, u):
+        """θ_h with cos θ = (1 − u)^{1/(e+2)}; 1 − cos θ = −expm1(log1p(−u)/(e + 2))."""
+        u = _unit_interval(u)
+        with np.errstate(divide="ignore"):
+            x = -np.expm1(np.log1p(-u) / (self.e + 2.0))
+        return _theta_from_x(x)
+
+
+def beckmann_to_phong(m) -> float:
+    """Phong exponent with the same normalisation constant as Beckmann m: e = 2/m² − 2.
+
+    Mikkelsen eq. 21 (equates (e+2)/2π with 1/(π m²)); needs 0 < m ≤ 1 so that e ≥ 0.
+    Visually close for e > 8 (Mikkelsen).
+    """
+    m = _checks.in_range("m", m, 0.0, 1.0, lo_open=True)
+    return 2.0 / m ** 2 - 2.0
+
+
+def phong_to_beckmann(e) -> float:
+    """Inverse of Mikkelsen eq. 21: m = √(2/(e + 2)) for e ≥ 0."""
+    e = _checks.in_range("e", e, 0.0, np.inf, hi_open=True)
+    return float(np.sqrt(2.0 / (e + 2.0)))
+
+
+# --- von Mises–Fisher on the hemisphere -----------------------------------------------------
+@dataclass(frozen=True, repr=False)
+class VonMisesFisher(NDF):
+    """Hemispherical von Mises–Fisher lobe, concentration κ > 0 (Mikkelsen eq. 29–33).
+
+    pdf p(h) = κ e^{κ(h·n)}/(2π(e^κ − 1)) (Mikkelsen eq. 29), normalised over the hemisphere,
+    and D = p/(h·n) (Mikkelsen eq. 18 / 14). Evaluated as κ e^{−κ(1 − h·n)}/(2π(1 − e^{−κ})),
+    which never forms e^κ. D grows like p(0)/cos θ towards the horizon (p(0) > 0) and is
+    set to 0 for cos θ ≤ 0 (base-class convention); pdf = D cos θ stays finite.
+    """
+
+    kappa: float
+    name = "vmf"
+
+    def __post_init__(self):
+        object.__setattr__(self, "kappa", _checks.positive("kappa", self.kappa))
+
+    def params(self) -> dict:
+        return {"kappa": self.kappa}
+
+    def _p_x(self, x):
+        """Solid-angle density p as a function of x = 1 − h·n (Mikkelsen eq. 29)."""
+        k = self.kappa
+        return k * np.exp(-k * x) / (2.0 * np.pi * -np.expm1(-k))
+
+    def D_cos(self, cos_theta):
+        """D = p/cos θ in sr⁻¹; 0 for c ≤ 0."""
+        c = np.minimum(_cos_array(cos_theta), 1.0)
+        pos = c > 0.0
+        cs = np.where(pos, c, 1.0)
+        return np.where(pos, self._p_x(1.0 - cs) / cs, 0.0)
+
+    def cdf_theta(self, theta):
+        """P(θ_h ≤ θ) = (1 − e^{−κ(1 − cos θ)})/(1 − e^{−κ}) (Mikkelsen's CDF before eq. 31)."""
+        x = _one_minus_cos(theta)
+        return np.minimum(np.expm1(-self.kappa * x) / np.expm1(-self.kappa), 1.0)
+
+    def tilt_quantile(self, u):
+        """θ_h with 1 − cos θ = −ln(1 − u(1 − e^{−κ}))/κ (Mikkelsen eq. 31 without e^κ)."""
+        u = _unit_interval(u)
+        with np.errstate(divide="ignore"):
+            x = -np.log1p(u * np.expm1(-self.kappa)) / self.kappa
+        return _theta_from_x(np.where(u == 1.0, 1.0, x))
+
+
+# --- Löw's ABC facet distribution -----------------------------------------------------------
+@dataclass(frozen=True, repr=False)
+class ABC(NDF):
+    """ABC facet distribution D(h) = M/(1 + B(1 − h·n))^C, B > 0, C > 0 (Löw eq. 15, 23).
+
+    Löw normalises the *solid-angle* pdf M_h A/(1 + B(1 − cos θ))^C (eq. 23–24); here D is a
+    true NDF, ∫ D (h·n) dω = 1 (Mikkelsen eq. 14), so the normaliser carries the cos factor.
+    With x = 1 − cos θ, y = B x and L = ln(1 + y):
+
+        J(x) = ∫₀ˣ (1 − t)(1 + Bt)^{−C} dt
+             = ∫₀ˣ (1 + Bt)^{−C} dt − ∫₀ˣ t (1 + Bt)^{−C} dt
+             = L·φ((1−C)L)/B − L·[φ((2−C)L) − φ((1−C)L)]/B²,     φ(z) = (e^z − 1)/z,
+
+    using s = 1 + Bt = e^v: ∫₁^{1+y} s^{−a} ds = ∫₀^L e^{(1−a)v} dv = L φ((1−a)L).
+    φ is evaluated with expm1 and is smooth through z = 0, so C = 1 (where both integrals
+    become logarithms) needs no special case and C = 1 ± 1e−9 loses nothing. The second
+    difference costs a relative error of about ε(1 + 1/B) — fine for B ≳ 1e−6.
+
+        normaliser  M = 1/(2π J(1)),   tilt CDF  P(θ_h ≤ θ) = J(1 − cos θ)/J(1).
+
+    The CDF has no closed-form inverse (the cos factor adds a term linear in s to Löw's
+    eq. 25 power law), so ``tilt_quantile`` inverts it by safeguarded Newton steps in
+    w = ln(1 + Bx), started from a table of the CDF on a uniform grid in w.
+    """
+
+    B: float
+    C: float
+    M: float = field(init=False, repr=False, compare=False)
+    _table: tuple = field(init=False, repr=False, compare=False)   # (P_k, w_k): Newton starts
+    name = "abc"
+    _TABLE_SIZE = 2049
+
+    def __post_init__(self):
+        object.__setattr__(self, "B", _checks.positive("B", self.B))
+        object.__setattr__(self, "C", _checks.positive("C", self.C))
+        w_k = np.linspace(0.0, np.log1p(self.B), self._TABLE_SIZE)
+        j_k = self._J_w(w_k)
+        object.__setattr__(self, "M", 1.0 / (2.0 * np.pi * j_k[-1]))
+        object.__setattr__(self, "_table", (np.maximum.accumulate(j_k / j_k[-1]), w_k))
+
+    def params(self) -> dict:
+        return {"B": self.B, "C": self.C}
+
+    def _J_w(self, w):
+        """J (class docstring) as a function of w = ln(1 + Bx)."""
+        C, B = self.C, self.B
+        first = _expm1x((1.0 - C) * w)
+        second = _expm1x((2.0 - C) * w) - first
+        return w * (first / B - second / B ** 2)
+
+    def _D_x(self, x):
+        """D as a function of x = 1 − h·n ∈ [0, 1]."""
+        return self.M * np.exp(-self.C * np.log1p(self.B * x))
+
+    def D_cos(self, cos_theta):
+        """D(cos θ) in sr⁻¹; 0 for c ≤ 0 (use ``D(h)`` for full accuracy near the peak)."""
+        c = np.minimum(_cos_array(cos_theta), 1.0)
+        return np.where(c > 0.0, self._D_x(1.0 - np.clip(c, 0.0, 1.0)), 0.0)
+
+    def D(self, h):
+        """D(h) with 1 − h_z = (h_x² + h_y²)/(1 + h_z), exact for unit h; 0 for h_z ≤ 0."""
+        h = _checks.directions("h", h)
+        hz = h[..., 2]
+        up = hz > 0.0
+        x = (h[..., 0] ** 2 + h[..., 1] ** 2) / (1.0 + np.where(up, hz, 1.0))
+        return np.where(up, self._D_x(np.minimum(x, 1.0)), 0.0)
+
+    def pdf(self, h):
+        """D(h)(h·n) with the accurate D(h)."""
+        h = _checks.directions("h", h)
+        return self.D(h) * np.maximum(h[..., 2], 0.0)
+
+    def cdf_theta(self, theta):
+        """P(θ_h ≤ θ) = J(1 − cos θ)/J(1) (class docstring)."""
+        w = np.log1p(self.B * _one_minus_cos(theta))
+        return np.clip(self._J_w(w) * (2.0 * np.pi * self.M), 0.0, 1.0)
+
+    def tilt_quantile(self, u, *, tol: float = 1e-14, max_iter: int = 100):
+        """θ_h with cdf_theta(θ_h) = u, to |cdf − u| ≤ tol (safeguarded Newton in w)."""
+        u = _unit_interval(u)
+        B, C = self.B, self.C
+        w_max = np.log1p(B)
+        norm = 2.0 * np.pi * self.M                          # 1/J(1)
+        w = np.interp(u, *self._table)
+        lo, hi = np.zeros_like(u), np.full_like(u, w_max)
+        for _ in range(max_iter):
+            f = self._J_w(w) * norm - u
+            lo = np.where(f <= 0.0, w, lo)
+            hi = np.where(f >= 0.0, w, hi)
+            done = (np.abs(f) <= tol) | (hi - lo <= 4e-16 * w_max)
+            if np.all(done):
+                break
+            x = np.expm1(w) / B
+            dfdw = (1.0 - x) * np.exp((1.0 - C) * w) / B * norm   # dP/dw
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step = w - f / dfdw
+            inside = np.isfinite(step) & (step >= lo) & (step <= hi)
+            w = np.where(done, w, np.where(inside, step, 0.5 * (lo + hi)))
+        x = np.where(u == 1.0, 1.0, np.where(u == 0.0, 0.0, np.expm1(w) / B))   # exact ends
+        return _theta_from_x(x)
