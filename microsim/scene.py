@@ -1,0 +1,362 @@
+"""Scene files: a surface, a material and simulation settings in TOML (``surfaces/*.toml``).
+
+Schema (every key optional unless marked required; unknown keys are errors)::
+
+    name = "vgroove-beckmann-0.3"      # default: the file stem
+    description = "..."
+    [surface]
+    kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat
+    # vgrooves: n_grooves = 4000, ndf (required) = beckmann | ggx | blinn-phong | vmf | abc with
+    #           its parameter m | alpha | e | kappa | B and C (required), sampling = "stratified"
+    #           | "random", tile = 1.0
+    # gaussian: n = 512, dx = 1.0, sigma, corr_len (required), exact_amplitude = true
+    # abc:      n = 512, dx = 1.0, sigma, B, C (required), band_limit = 4, exact_amplitude = true
+    # file:     path (required; relative to the scene file), dx (required), periodic = false
+    # flat:     size = 1.0
+    [material]
+    ior = "mirror"                     # aluminium | methanol | mirror, a number n, or [n, k]
+    [simulation]
+    theta_i = [0, 30, 60, 80]          # degrees, each in [0, 90)
+    rays = 1_000_000                   # per incidence, an integer > 0 or "auto"
+    theta_bins = 45                    # over θo ∈ [0°, 90°]
+    phi_bins = 72                      # over φo ∈ [0°, 360°)
+    realisations = 1                   # independent random surfaces (seeds seed, seed+1, …)
+    seed = 0
+
+Every problem raises ``SceneError`` (a ``ValueError``) with a one-line message naming the file,
+the key and the allowed values.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:                                   # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["SceneError", "Scene", "SurfaceSpec", "SimSettings", "load_scene", "make_ndf",
+           "describe_surface", "NDF_PARAMS", "SURFACE_KINDS"]
+
+
+class SceneError(ValueError):
+    """A malformed scene file: the message names the file, the key and the allowed values."""
+
+
+# --- value checks: (predicate, description of the allowed values) ---------------------------
+def _is_int(v):
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+
+
+_POS = (lambda v: _is_num(v) and v > 0, "a number > 0")
+_POS_INT = (lambda v: _is_int(v) and v >= 1, "an integer >= 1")
+_GRID = (lambda v: _is_int(v) and v >= 8, "an integer >= 8")
+_BOOL = (lambda v: isinstance(v, bool), "true or false")
+_STR = (lambda v: isinstance(v, str), "a string")
+_C_ABC = (lambda v: _is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
+_BAND = (lambda v: _is_num(v) and v >= 1, "a number >= 1")
+
+NDF_PARAMS = {"beckmann": ("m",), "ggx": ("alpha",), "blinn-phong": ("e",), "vmf": ("kappa",),
+              "abc": ("B", "C")}
+"""Scene NDF names and the parameters each one requires."""
+_NDF_ALIASES = {"blinn_phong": "blinn-phong", "phong": "blinn-phong", "von-mises-fisher": "vmf"}
+
+_REQUIRED = object()
+_SURFACE_KEYS: dict[str, dict[str, tuple[Any, tuple[Callable, str]]]] = {
+    "vgrooves": {"n_grooves": (4000, _POS_INT), "ndf": (_REQUIRED, _STR),
+                 "sampling": ("stratified", (lambda v: v in ("stratified", "random"),
+                                             "\"stratified\" or \"random\"")),
+                 "tile": (1.0, _POS)},
+    "gaussian": {"n": (512, _GRID), "dx": (1.0, _POS), "sigma": (_REQUIRED, _POS),
+                 "corr_len": (_REQUIRED, _POS), "exact_amplitude": (True, _BOOL)},
+    "abc": {"n": (512, _GRID), "dx": (1.0, _POS), "sigma": (_REQUIRED, _POS),
+            "B": (_REQUIRED, _POS), "C": (_REQUIRED, _C_ABC), "band_limit": (4.0, _BAND),
+            "exact_amplitude": (True, _BOOL)},
+    "file": {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _POS), "periodic": (False, _BOOL)},
+    "flat": {"size": (1.0, _POS)},
+}
+SURFACE_KINDS = tuple(_SURFACE_KEYS)
+_NDF_PARAM_CHECK = (_POS[0], "a number > 0")
+
+_THETA_I = (lambda v: isinstance(v, list) and len(v) > 0
+            and all(_is_num(t) and 0 <= t < 90 for t in v),
+            "a non-empty list of angles in degrees, each in [0, 90)")
+_RAYS = (lambda v: v == "auto" or (_is_int(v) and v >= 1), "an integer >= 1 or \"auto\"")
+_SIM_KEYS = {"theta_i": ([0.0, 30.0, 60.0, 80.0], _THETA_I), "rays": (1_000_000, _RAYS),
+             "theta_bins": (45, _POS_INT), "phi_bins": (72, _POS_INT),
+             "realisations": (1, _POS_INT),
+             "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0"))}
+_TOP_KEYS = ("name", "description", "surface", "material", "simulation")
+
+
+# --- the scene ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SurfaceSpec:
+    """``kind`` and its parameters (read-only mapping, defaults filled in, validated)."""
+
+    kind: str
+    params: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """Simulation settings: incidence angles (degrees), rays per incidence (or "auto"),
+    outgoing bins (θ over [0°, 90°], φ over [0°, 360°)), realisations, base seed."""
+
+    theta_i: tuple[float, ...] = (0.0, 30.0, 60.0, 80.0)
+    rays: int | str = 1_000_000
+    theta_bins: int = 45
+    phi_bins: int = 72
+    realisations: int = 1
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A loaded scene file. ``ior``: None (mirror), float (dielectric) or complex n + ik."""
+
+    name: str
+    path: Path | None
+    description: str
+    surface: SurfaceSpec
+    ior: float | complex | None
+    simulation: SimSettings
+
+    def build_surface(self, seed: int | None = None, scale: float = 1.0):
+        """Generate the surface (``microsim.surfaces``); ``seed`` defaults to the scene's.
+
+        ``scale`` shrinks (or grows) the size for quick builds: the grid size n (keeping dx,
+        so statistics stay, only the tile shrinks; at least 8) or the number of grooves.
+        Realisation r of a random surface uses seed ``simulation.seed + r``.
+        """
+        from . import surfaces
+        seed = self.simulation.seed if seed is None else seed
+        p = dict(self.surface.params)
+        kind = self.surface.kind
+        if kind == "vgrooves":
+            return surfaces.vgrooves(max(1, round(p["n_grooves"] * scale)), self.ndf(), seed,
+                                     p["sampling"], p["tile"])
+        if kind in ("gaussian", "abc"):
+            p["n"] = max(8, round(p["n"] * scale))
+            return getattr(surfaces, kind)(seed=seed, **p)
+        if kind == "file":
+            base = self.path.parent if self.path is not None else Path.cwd()
+            return surfaces.from_file(base / p["path"], p["dx"], p["periodic"])
+        return surfaces.flat(p["size"])
+
+    def ndf(self):
+        """The analytic NDF of the scene's surface, or None when it has none.
+
+        V-grooves: the NDF the tilts were drawn from. Gaussian: Beckmann(m = 2σ/ℓ) (nominal).
+        ABC heightfield: Beckmann with the predicted mesh m — the facet slopes of any Gaussian
+        random field are Gaussian, so its NDF is Beckmann with m² = 2 × per-axis slope variance
+        (Löw's ABC *NDF* is a different object). File and flat: None.
+        """
+        from .analytic import Beckmann
+        p = self.surface.params
+        if self.surface.kind == "vgrooves":
+            return make_ndf(p["ndf"], {k: p[k] for k in NDF_PARAMS[p["ndf"]]})
+        if self.surface.kind == "gaussian":
+            return Beckmann(2.0 * p["sigma"] / p["corr_len"])
+        if self.surface.kind == "abc":
+            from .surfaces import heightfields as hf
+            A = hf.abc_amplitude(p["sigma"], p["B"], p["C"])
+            S, FX, FY = hf.psd_grid(lambda f: hf.abc_psd(f, A, p["B"], p["C"]), (p["n"], p["n"]),
+                                    p["dx"], 1.0 / (2.0 * p["band_limit"] * p["dx"]))
+            mom = hf.spectrum_moments(S, FX, FY, p["dx"])
+            return Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
+        return None
+
+
+def make_ndf(name: str, params: Mapping[str, float]):
+    """Analytic NDF from a scene name (``NDF_PARAMS``) and its parameters."""
+    from . import analytic as an
+    cls = {"beckmann": an.Beckmann, "ggx": an.GGX, "blinn-phong": an.BlinnPhong,
+           "vmf": an.VonMisesFisher, "abc": an.ABC}
+    if name not in cls:
+        raise ValueError(f"ndf must be one of {', '.join(NDF_PARAMS)}, got {name!r}")
+    return cls[name](**params)
+
+
+# --- loading -----------------------------------------------------------------------------------
+def _fail(where: str, key: str, msg: str):
+    raise SceneError(f"{where}: {key}: {msg}")
+
+
+def _check_value(where, key, value, check):
+    pred, allowed = check
+    try:
+        ok = bool(pred(value))
+    except TypeError:
+        ok = False
+    if not ok:
+        _fail(where, key, f"must be {allowed}, got {value!r}")
+    return value
+
+
+def _check_keys(where, section, table, allowed):
+    if not isinstance(table, dict):
+        _fail(where, section, f"must be a table, got {table!r}")
+    extra = sorted(set(table) - set(allowed))
+    if extra:
+        _fail(where, f"{section}.{extra[0]}", f"unknown key; allowed keys: {', '.join(allowed)}")
+
+
+def _fill(where, section, table, schema):
+    out = {}
+    for key, (default, check) in schema.items():
+        if key in table:
+            out[key] = _check_value(where, f"{section}.{key}", table[key], check)
+        elif default is _REQUIRED:
+            _fail(where, f"{section}.{key}", f"required; must be {check[1]}")
+        else:
+            out[key] = default
+    return out
+
+
+def _surface_spec(where, table) -> SurfaceSpec:
+    if not isinstance(table, dict):
+        _fail(where, "surface", f"must be a table, got {table!r}")
+    kind = table.get("kind", _REQUIRED)
+    if kind is _REQUIRED:
+        _fail(where, "surface.kind", f"required; one of {', '.join(SURFACE_KINDS)}")
+    if kind not in _SURFACE_KEYS:
+        _fail(where, "surface.kind", f"must be one of {', '.join(SURFACE_KINDS)}, got {kind!r}")
+    schema = dict(_SURFACE_KEYS[kind])
+    if kind == "vgrooves":
+        ndf = table.get("ndf")
+        ndf = _NDF_ALIASES.get(ndf, ndf) if isinstance(ndf, str) else ndf
+        if ndf not in NDF_PARAMS:
+            _fail(where, "surface.ndf", f"must be one of {', '.join(NDF_PARAMS)}, got {ndf!r}")
+        table = {**table, "ndf": ndf}
+        schema.update({k: (_REQUIRED, _NDF_PARAM_CHECK) for k in NDF_PARAMS[ndf]})
+    _check_keys(where, "surface", table, ["kind", *schema])
+    params = _fill(where, "surface", {k: v for k, v in table.items() if k != "kind"}, schema)
+    for key in ("sigma", "corr_len", "B", "C", "dx", "tile", "size", "band_limit", "m",
+                "alpha", "e", "kappa"):
+        if key in params:
+            params[key] = float(params[key])
+    if kind == "vgrooves":
+        try:
+            make_ndf(params["ndf"], {k: params[k] for k in NDF_PARAMS[params["ndf"]]})
+        except ValueError as e:
+            raise SceneError(f"{where}: surface: {e}") from None
+    return SurfaceSpec(kind, MappingProxyType(params))
+
+
+def _material(where, table):
+    from .analytic import MATERIALS, resolve_material
+    if table is None:
+        return None
+    _check_keys(where, "material", table, ["ior"])
+    v = table.get("ior", "mirror")
+    allowed = (f"a name ({', '.join(MATERIALS)}), a number n > 0, or [n, k] with n > 0, k >= 0")
+    if isinstance(v, list):
+        if len(v) != 2 or not all(_is_num(x) for x in v):
+            _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
+        v = complex(v[0], v[1])
+    elif not (isinstance(v, str) or _is_num(v)):
+        _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
+    try:
+        return resolve_material(v)
+    except ValueError:
+        _fail(where, "material.ior", f"must be {allowed}, got {table.get('ior')!r}")
+
+
+def _simulation(where, table) -> SimSettings:
+    table = {} if table is None else table
+    _check_keys(where, "simulation", table, list(_SIM_KEYS))
+    s = _fill(where, "simulation", table, _SIM_KEYS)
+    s["theta_i"] = tuple(float(t) for t in s["theta_i"])
+    return SimSettings(**s)
+
+
+def load_scene(path) -> Scene:
+    """Read and validate a scene file (module docstring for the schema)."""
+    path = Path(path)
+    where = str(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise SceneError(f"{where}: no such scene file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{where}: not valid TOML ({e})") from None
+    _check_keys(where, "scene", data, list(_TOP_KEYS))
+    if "surface" not in data:
+        _fail(where, "surface", f"required table with kind = one of {', '.join(SURFACE_KINDS)}")
+    name = _check_value(where, "name", data.get("name", path.stem), _STR)
+    description = _check_value(where, "description", data.get("description", ""), _STR)
+    return Scene(name=name, path=path, description=description,
+                 surface=_surface_spec(where, data["surface"]),
+                 ior=_material(where, data.get("material")),
+                 simulation=_simulation(where, data.get("simulation")))
+
+
+# --- description -------------------------------------------------------------------------------
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def describe_surface(scene_or_surface) -> str:
+    """Plain-text table of a surface's measured statistics next to predicted and nominal values.
+
+    Accepts a ``Scene`` (its surface is built with the scene's seed) or a ``Surface``.
+    Slope variances are per axis; the prediction is mesh-exact (Gaussian 2σ²(1 − e^{−u})/dx²,
+    ABC discrete spectrum × finite-difference response); "nominal" is the generator's target.
+    """
+    head = []
+    if isinstance(scene_or_surface, Scene):
+        sc = scene_or_surface
+        head.append(f"scene {sc.name} ({sc.path})" + (f": {sc.description}" if sc.description else ""))
+        head.append(f"material ior: {_fmt(sc.ior) if sc.ior is not None else 'mirror (R = 1)'}")
+        surf = sc.build_surface()
+    else:
+        surf = scene_or_surface
+    st = surf.stats()
+    nom = st["nominal"]
+    lx, ly = st["tile_size"]
+    head.append(f"surface {surf.kind}: tile {lx:g} x {ly:g}, {st['triangles']} triangles, "
+                f"{'periodic' if surf.periodic else 'not periodic'}"
+                + (f", grid {st['grid'][1]} x {st['grid'][0]}, dx {st['dx']:g}" if "grid" in st else ""))
+    head.append("nominal: " + ", ".join(f"{k} = {_fmt(v)}" for k, v in nom.items()))
+    rows = [("quantity", "measured", "predicted", "nominal")]
+    if "rms_height" in st:
+        rows.append(("rms height", st["rms_height"], st.get("predicted_rms_height"),
+                     nom.get("sigma")))
+    pred = st.get("predicted_slope_var")
+    cont = st.get("continuum_slope_var")
+    rows += [("slope variance x", st["slope_var_x"], pred, cont),
+             ("slope variance y", st["slope_var_y"], pred, cont),
+             ("slope correlation", st["slope_corr"], None, 0.0),
+             ("m = sqrt(var_x + var_y)", st["m_realised"], st.get("predicted_m"), nom.get("m")),
+             ("z min", st["z_range"][0], None, None),
+             ("z max", st["z_range"][1], None, None)]
+    if surf.kind == "vgrooves":
+        rows += [("grooves", st["n_grooves"], None, nom.get("n_grooves")),
+                 ("rms tilt (deg)", st["tilt_rms_deg"], None, None),
+                 ("max tilt (deg)", st["tilt_max_deg"], None, None)]
+        if "cdf_max_dev" in st:
+            rows.append(("tilt CDF distance to NDF", st["cdf_max_dev"], st["cdf_bound"], None))
+    cells = [[r[0]] + [_fmt(v) for v in r[1:]] for r in rows]
+    widths = [max(len(c[i]) for c in cells) for i in range(4)]
+    lines = ["  ".join(c[i].ljust(widths[i]) for i in range(4)).rstrip() for c in cells]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    notes = ["(slope variances per axis; predicted = mesh-exact; nominal slope variance = "
+             "continuum value)"]
+    notes += [f"warning: {w}" for w in surf.warnings]
+    return "\n".join(head + lines + notes)

@@ -1,0 +1,248 @@
+"""Random periodic heightfields by FFT synthesis: Gaussian-correlated and fractal (ABC PSD).
+
+Both are stationary Gaussian random fields given by a 2D isotropic power spectral density
+PSD(f) (length⁴, f in cycles per length), normalised so that ∫ PSD d²f = height variance.
+Synthesis (DESIGN.md, "Facts — Surfaces"): the Fourier transform of real white noise is
+multiplied by √PSD(f)/dx and transformed back; PSD(0) = 0 so the mean height is zero.
+
+*Exact-amplitude* mode (the default) keeps only the phases of the noise and gives every
+Fourier mode exactly the amplitude √PSD, so the realised periodogram, height variance and
+mesh slope variance equal their discrete-spectrum predictions (random phases, Hermitian
+symmetry inherited from the real noise, so the field is real). With ``exact_amplitude=False``
+each mode's power scatters as an exponential variable (plain filtered noise).
+
+Mesh slopes are finite differences over one grid step, whose response is
+(2 sin(π f dx)/dx)² instead of the continuum (2π f)²; ``spectrum_moments`` predicts the mesh
+slope variance from the discrete spectrum with that response.
+"""
+from __future__ import annotations
+
+import warnings as _warnings
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import integrate
+
+from microsim.analytic._checks import positive
+from .surface import Surface, heightfield_mesh
+
+__all__ = ["gaussian", "abc", "gaussian_psd", "abc_psd", "abc_amplitude", "psd_grid",
+           "synthesize", "spectrum_moments", "SpectrumMoments", "gaussian_mesh_slope_var",
+           "abc_continuum_slope_var", "predictions"]
+
+MIN_GRID = 8
+GAUSS_MIN_CORR_CELLS = 7.0      # ℓ ≥ 7·dx keeps the triangulation slope bias under 1 %
+
+
+# --- spectra -----------------------------------------------------------------------------------
+def gaussian_psd(f, sigma: float, corr_len: float):
+    """PSD of the autocorrelation σ² exp(−r²/ℓ²): S(f) = π σ² ℓ² exp(−π² ℓ² f²) (length⁴)."""
+    f = np.asarray(f, dtype=np.float64)
+    return np.pi * sigma ** 2 * corr_len ** 2 * np.exp(-(np.pi * corr_len * f) ** 2)
+
+
+def abc_amplitude(sigma: float, B: float, C: float) -> float:
+    """A of the 2D ABC PSD with ∫ PSD d²f = σ²: A = σ² B² (C − 1)/(2π) (needs C > 1)."""
+    return sigma ** 2 * B ** 2 * (C - 1.0) / (2.0 * np.pi)
+
+
+def abc_psd(f, A: float, B: float, C: float):
+    """Isotropic 2D ABC PSD (Löw eq. 7, Church et al. 1989): A/(1 + B² f²)^((C+1)/2)."""
+    f = np.asarray(f, dtype=np.float64)
+    return A * np.exp(-0.5 * (C + 1.0) * np.log1p((B * f) ** 2))
+
+
+def psd_grid(psd, shape: tuple[int, int], dx: float, f_max: float = np.inf):
+    """``psd(|f|)`` on the FFT frequency grid of a (ny, nx) grid, 0 at f = 0 and beyond f_max.
+
+    Returns (S, FX, FY) with FX, FY the frequencies (cycles per length) of each FFT cell.
+    """
+    ny, nx = shape
+    FX, FY = np.meshgrid(np.fft.fftfreq(nx, dx), np.fft.fftfreq(ny, dx))
+    f = np.hypot(FX, FY)
+    S = np.where((f > 0) & (f <= f_max), psd(f), 0.0)
+    return S, FX, FY
+
+
+def synthesize(S: np.ndarray, dx: float, rng: np.random.Generator, exact_amplitude: bool = True):
+    """Real periodic heightfield with discrete spectrum S (length⁴) on the FFT grid.
+
+    h = IFFT(W · √S / dx) with W the FFT of real unit white noise, so E[h²] = Σ S df²
+    (df² = 1/(N dx²), N grid cells). ``exact_amplitude`` replaces W by √N · W/|W|: random
+    phases, exact amplitude, realised variance = Σ S df² exactly.
+    """
+    ny, nx = S.shape
+    W = np.fft.fft2(rng.standard_normal((ny, nx)))
+    if exact_amplitude:
+        mag = np.abs(W)
+        W = np.sqrt(nx * ny) * np.divide(W, mag, out=np.ones_like(W), where=mag > 0)
+    h = np.fft.ifft2(W * np.sqrt(S) / dx).real
+    return h - h.mean()
+
+
+@dataclass(frozen=True)
+class SpectrumMoments:
+    """Discrete-spectrum predictions for a synthesised grid (per axis for slopes).
+
+    ``*_rel_sd``: relative standard deviation of the realised value between plain-noise
+    realisations (every mode's power ~ Exp(1): var = 2 Σ a_k² for a sum Σ a_k over modes).
+    """
+
+    height_var: float
+    slope_var_x: float
+    slope_var_y: float
+    height_var_rel_sd: float
+    slope_var_x_rel_sd: float
+    slope_var_y_rel_sd: float
+
+
+def spectrum_moments(S: np.ndarray, FX: np.ndarray, FY: np.ndarray, dx: float) -> SpectrumMoments:
+    """Height variance and mesh per-axis slope variance of a grid with discrete spectrum S.
+
+    Mesh slopes are one-step finite differences: response (2 sin(π f dx)/dx)² per axis
+    (DESIGN.md) — the continuum (2πf)² overestimates the mesh slope variance.
+    """
+    df2 = 1.0 / (S.size * dx * dx)
+
+    def moment(a):
+        total = float(a.sum() * df2)
+        rel = float(np.sqrt(2.0 * np.sum(a * a)) / a.sum()) if total > 0 else 0.0
+        return total, rel
+
+    hv, hr = moment(S)
+    vx, rx = moment(S * (2.0 * np.sin(np.pi * FX * dx) / dx) ** 2)
+    vy, ry = moment(S * (2.0 * np.sin(np.pi * FY * dx) / dx) ** 2)
+    return SpectrumMoments(hv, vx, vy, hr, rx, ry)
+
+
+def gaussian_mesh_slope_var(sigma: float, corr_len: float, dx: float) -> float:
+    """Per-axis slope variance of the triangulated Gaussian heightfield: 2σ²(1 − e^{−u})/dx²,
+    u = (dx/ℓ)² (→ continuum 2σ²/ℓ² as dx → 0)."""
+    u = (dx / corr_len) ** 2
+    return 2.0 * sigma ** 2 * (-np.expm1(-u)) / dx ** 2
+
+
+def abc_continuum_slope_var(sigma: float, B: float, C: float, f_max: float) -> float:
+    """Per-axis continuum slope variance ½ ∫_{|f| ≤ f_max} (2πf)² PSD d²f of the ABC surface."""
+    A = abc_amplitude(sigma, B, C)
+    val, _ = integrate.quad(lambda f: f ** 3 * abc_psd(f, A, B, C), 0.0, f_max, limit=200)
+    return 0.5 * (2.0 * np.pi) ** 2 * 2.0 * np.pi * val
+
+
+# --- generators --------------------------------------------------------------------------------
+def _grid_args(n, dx, seed):
+    if isinstance(n, bool) or int(n) != n or n < MIN_GRID:
+        raise ValueError(f"n must be an integer >= {MIN_GRID} (grid points per side), got {n!r}")
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    return int(n), positive("dx", dx), int(seed)
+
+
+def _heightfield_surface(kind, heights, dx, nominal, warns):
+    for w in warns:
+        _warnings.warn(w, stacklevel=3)
+    vertices, faces = heightfield_mesh(heights, dx)
+    ny, nx = heights.shape
+    return Surface(kind=kind, vertices=vertices, faces=faces, tile_size=(nx * dx, ny * dx),
+                   periodic=True, nominal=nominal, heights=heights, dx=dx, warnings=tuple(warns))
+
+
+def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
+             exact_amplitude: bool = True) -> Surface:
+    """Periodic n×n Gaussian heightfield with autocorrelation σ² exp(−r²/ℓ²).
+
+    ``dx`` grid spacing, ``sigma`` rms height, ``corr_len`` ℓ (all in the same length unit).
+    Spectrum S(f) = π σ² ℓ² exp(−π² ℓ² f²), S(0) = 0 (module docstring for the synthesis).
+    Facet normals follow Beckmann with nominal m = 2σ/ℓ (per-axis slope variance 2σ²/ℓ²);
+    the mesh realises 2σ²(1 − e^{−u})/dx², u = (dx/ℓ)², which warns when ℓ < 7·dx.
+    """
+    n, dx, seed = _grid_args(n, dx, seed)
+    sigma, corr_len = positive("sigma", sigma), positive("corr_len", corr_len)
+    warns = []
+    if corr_len < GAUSS_MIN_CORR_CELLS * dx:
+        bias = gaussian_mesh_slope_var(sigma, corr_len, dx) / (2 * sigma ** 2 / corr_len ** 2)
+        warns.append(f"gaussian: corr_len = {corr_len:g} < 7·dx = {7 * dx:g}: the mesh slope "
+                     f"variance is {bias:.4f} × the continuum 2σ²/ℓ² (realised m "
+                     f"{np.sqrt(bias) * 2 * sigma / corr_len:.4g} vs nominal {2 * sigma / corr_len:.4g})")
+    S, _, _ = psd_grid(lambda f: gaussian_psd(f, sigma, corr_len), (n, n), dx)
+    h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
+    nominal = {"sigma": sigma, "corr_len": corr_len, "m": 2.0 * sigma / corr_len, "n": n,
+               "dx": dx, "seed": seed, "exact_amplitude": bool(exact_amplitude)}
+    return _heightfield_surface("gaussian", h, dx, nominal, warns)
+
+
+def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
+        band_limit: float = 4, exact_amplitude: bool = True) -> Surface:
+    """Periodic n×n fractal heightfield with the isotropic 2D ABC PSD (Löw eq. 7–8; Church 1989).
+
+        PSD(f) = A / (1 + B² f²)^((C+1)/2),   ∫ PSD d²f = 2π A / (B² (C − 1)) = σ²,
+
+    so A = σ² B² (C − 1)/(2π): ``sigma`` is the rms height of the continuum (unbounded-band)
+    surface; ``B`` (length; B = 2π × correlation length) sets the knee, ``C`` > 1 the fall-off
+    f^−(C+1). These are Löw's lowercase (a, b, c) of eq. 7; his condensed eq. 11 writes the same
+    function as A'/(1 + B' f²)^C' with A' = A, B' = B², C' = (C + 1)/2. (Löw's eq. 8 normalises
+    a *1D profile* spectrum, a = σ² b Γ((c+1)/2)/(√π Γ(c/2)); here the spectrum is 2D.)
+
+    The PSD is band-limited radially to f ≤ 1/(2k·dx), k = ``band_limit`` ≥ 1 (k = 4 keeps the
+    normals isotropic; DESIGN.md). C ≤ 1: infinite height variance (ValueError). 1 < C ≤ 3: the
+    slope variance grows without bound as the cut-off rises, so the ray-traced BRDF depends on
+    dx (warning). Also warns when the tile and band keep < 90 % of σ².
+    """
+    n, dx, seed = _grid_args(n, dx, seed)
+    sigma, B = positive("sigma", sigma), positive("B", B)
+    C = float(C)
+    if not C > 1.0 or not np.isfinite(C):
+        raise ValueError(f"C must be a finite number > 1 (the ABC height variance "
+                         f"2πA/(B²(C−1)) is infinite for C <= 1), got {C!r}")
+    k = float(band_limit)
+    if not (k >= 1.0) or not np.isfinite(k):
+        raise ValueError(f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), "
+                         f"got {band_limit!r}")
+    f_max = 1.0 / (2.0 * k * dx)
+    A = abc_amplitude(sigma, B, C)
+    S, FX, FY = psd_grid(lambda f: abc_psd(f, A, B, C), (n, n), dx, f_max)
+    warns = []
+    if C <= 3.0:
+        warns.append(f"abc: C = {C:g} <= 3: the slope variance depends on the grid cut-off "
+                     f"f_max = 1/(2·{k:g}·dx) (it diverges as dx → 0), so the ray-traced BRDF "
+                     f"depends on dx = {dx:g}")
+    kept = spectrum_moments(S, FX, FY, dx).height_var / sigma ** 2
+    if kept < 0.9:
+        warns.append(f"abc: the tile (L = {n * dx:g}) and band (f <= {f_max:g}) keep only "
+                     f"{100 * kept:.1f} % of the nominal height variance σ² = {sigma ** 2:g}")
+    h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
+    nominal = {"sigma": sigma, "B": B, "C": C, "A": A, "band_limit": k, "f_max": f_max,
+               "n": n, "dx": dx, "seed": seed, "exact_amplitude": bool(exact_amplitude)}
+    return _heightfield_surface("abc", h, dx, nominal, warns)
+
+
+# --- predictions for Surface.stats -----------------------------------------------------------
+def predictions(surface: Surface) -> dict:
+    """Predicted statistics of a generated heightfield (empty dict for other kinds).
+
+    ``predicted_rms_height`` and ``predicted_slope_var`` (per axis, mesh-exact): Gaussian from
+    2σ²(1 − e^{−u})/dx², ABC from the discrete spectrum with the finite-difference response;
+    ``spectrum_slope_var`` the discrete-spectrum value for both, ``continuum_slope_var`` the
+    dx → 0 value (ABC: within the band), ``predicted_m`` = √(2 · predicted_slope_var).
+    """
+    p = surface.nominal
+    if surface.kind == "gaussian":
+        S, FX, FY = psd_grid(lambda f: gaussian_psd(f, p["sigma"], p["corr_len"]),
+                             surface.heights.shape, p["dx"])
+        mesh = gaussian_mesh_slope_var(p["sigma"], p["corr_len"], p["dx"])
+        continuum = 2.0 * p["sigma"] ** 2 / p["corr_len"] ** 2
+    elif surface.kind == "abc":
+        S, FX, FY = psd_grid(lambda f: abc_psd(f, p["A"], p["B"], p["C"]),
+                             surface.heights.shape, p["dx"], p["f_max"])
+        mesh = None
+        continuum = abc_continuum_slope_var(p["sigma"], p["B"], p["C"], p["f_max"])
+    else:
+        return {}
+    mom = spectrum_moments(S, FX, FY, p["dx"])
+    spec = 0.5 * (mom.slope_var_x + mom.slope_var_y)
+    mesh = spec if mesh is None else mesh
+    return {"predicted_rms_height": float(np.sqrt(mom.height_var)),
+            "predicted_slope_var": float(mesh),
+            "spectrum_slope_var": float(spec),
+            "continuum_slope_var": float(continuum),
+            "predicted_m": float(np.sqrt(2.0 * mesh))}

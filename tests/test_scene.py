@@ -1,0 +1,140 @@
+"""Scene files: the catalogue loads and builds; malformed files fail with one-line errors."""
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from microsim import analytic as an
+from microsim.scene import SceneError, SimSettings, describe_surface, load_scene
+
+CATALOGUE = sorted((Path(__file__).resolve().parents[1] / "surfaces").glob("*.toml"))
+
+
+@pytest.fixture(autouse=True)
+def _quiet():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)   # C <= 3 / height-retention notices
+        yield
+
+
+@pytest.mark.parametrize("path", CATALOGUE, ids=[p.stem for p in CATALOGUE])
+def test_catalogue_scene_loads_builds_and_describes(path):
+    sc = load_scene(path)
+    assert sc.name == path.stem
+    surf = sc.build_surface(scale=0.25)
+    assert surf.kind == sc.surface.kind and np.all(surf.facet_normals()[:, 2] > 0)
+    if sc.surface.kind == "vgrooves":
+        assert len(surf.faces) == 4 * round(sc.surface.params["n_grooves"] * 0.25)
+    if sc.surface.kind in ("gaussian", "abc"):
+        assert surf.heights.shape == (128, 128)
+        assert sc.simulation.realisations > 1
+    if sc.surface.kind in ("vgrooves", "gaussian", "abc"):
+        assert isinstance(sc.ndf(), an.NDF)
+    text = describe_surface(surf)
+    assert "slope variance x" in text and surf.kind in text
+
+
+def test_catalogue_covers_the_issue():
+    scenes = [load_scene(p) for p in CATALOGUE]
+    vg = {(s.surface.params["ndf"], tuple(sorted((k, s.surface.params[k]) for k in ("m", "alpha", "e", "kappa", "B", "C")
+                                                  if k in s.surface.params)))
+          for s in scenes if s.surface.kind == "vgrooves"}
+    assert {n for n, _ in vg} == {"beckmann", "ggx", "blinn-phong", "vmf", "abc"}
+    assert ("vmf", (("kappa", 17.0),)) in vg and ("vmf", (("kappa", 1024.0),)) in vg
+    gauss = [s for s in scenes if s.surface.kind == "gaussian"]
+    assert sorted(round(s.ndf().m, 6) for s in gauss) == [0.1, 0.3, 0.5]
+    assert all(s.surface.params["corr_len"] >= 7 * s.surface.params["dx"] for s in gauss)
+    cs = sorted(s.surface.params["C"] for s in scenes if s.surface.kind == "abc")
+    assert len(cs) == 2 and 1 < cs[0] <= 3 < cs[1]
+
+
+def test_full_size_describe_gaussian():
+    sc = load_scene(next(p for p in CATALOGUE if p.stem == "gaussian-m0.3"))
+    text = describe_surface(sc)
+    st = sc.build_surface().stats()
+    assert "rms height" in text and f"{st['rms_height']:.6g}" in text and sc.name in text
+
+
+def write(tmp_path, text, name="scene.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_defaults(tmp_path):
+    sc = load_scene(write(tmp_path, '[surface]\nkind = "flat"\n', "my-flat.toml"))
+    assert sc.name == "my-flat" and sc.ior is None and sc.simulation == SimSettings()
+    assert sc.build_surface().kind == "flat" and sc.ndf() is None
+
+
+@pytest.mark.parametrize("ior, expect", [('"methanol"', 1.329), ("1.5", 1.5),
+                                         ("[0.769, 6.08]", 0.769 + 6.08j), ('"mirror"', None)])
+def test_material(tmp_path, ior, expect):
+    sc = load_scene(write(tmp_path, f'[surface]\nkind = "flat"\n[material]\nior = {ior}\n'))
+    assert sc.ior == expect
+
+
+def test_rays_auto_and_seed(tmp_path):
+    text = ('[surface]\nkind = "gaussian"\nn = 32\nsigma = 1.0\ncorr_len = 8.0\n'
+            '[simulation]\nrays = "auto"\nseed = 3\ntheta_i = [0, 89.5]\n')
+    sc = load_scene(write(tmp_path, text))
+    assert sc.simulation.rays == "auto" and sc.simulation.theta_i == (0.0, 89.5)
+    a, b, c = sc.build_surface(), sc.build_surface(seed=3), sc.build_surface(seed=4)
+    assert np.array_equal(a.heights, b.heights) and not np.allclose(a.heights, c.heights)
+    assert sc.ndf().m == pytest.approx(0.25)
+
+
+def test_file_scene_relative_path(tmp_path):
+    np.save(tmp_path / "h.npy", np.random.default_rng(0).normal(size=(16, 16)))
+    sc = load_scene(write(tmp_path, '[surface]\nkind = "file"\npath = "h.npy"\ndx = 0.5\nperiodic = true\n'))
+    assert sc.build_surface().heights.shape == (16, 16)
+
+
+VG = '[surface]\nkind = "vgrooves"\nndf = "beckmann"\nm = 0.3\n'
+
+
+@pytest.mark.parametrize("text, key", [
+    ('foo = 1\n' + VG, "foo"),
+    (VG + 'colour = "red"\n', "surface.colour"),
+    (VG + 'n_grooves = "many"\n', "surface.n_grooves"),
+    (VG + 'n_grooves = 2.5\n', "surface.n_grooves"),
+    (VG + 'n_grooves = true\n', "surface.n_grooves"),
+    (VG.replace("m = 0.3", "m = -1"), "surface.m"),
+    (VG.replace("m = 0.3", 'm = "rough"'), "surface.m"),
+    (VG.replace("m = 0.3", "alpha = 0.3"), "surface.alpha"),
+    (VG.replace("m = 0.3\n", ""), "surface.m"),
+    (VG.replace('"beckmann"', '"cauchy"'), "surface.ndf"),
+    (VG + 'sampling = "sobol"\n', "surface.sampling"),
+    ('[surface]\nkind = "sphere"\n', "surface.kind"),
+    ('[surface]\nn = 8\n', "surface.kind"),
+    ('name = "x"\n', "surface"),
+    ('[surface]\nkind = "gaussian"\nsigma = 1.0\n', "surface.corr_len"),
+    ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 8.0\nn = 4\n', "surface.n"),
+    ('[surface]\nkind = "abc"\nsigma = 1.0\nB = 8.0\nC = 1.0\n', "surface.C"),
+    (VG + '[material]\nior = "gold"\n', "material.ior"),
+    (VG + '[material]\nior = [1.0]\n', "material.ior"),
+    (VG + '[material]\nior = -2.0\n', "material.ior"),
+    (VG + '[material]\nn = 1.5\n', "material.n"),
+    (VG + '[simulation]\ntheta_i = [0, 95]\n', "simulation.theta_i"),
+    (VG + '[simulation]\ntheta_i = 30\n', "simulation.theta_i"),
+    (VG + '[simulation]\nrays = "lots"\n', "simulation.rays"),
+    (VG + '[simulation]\nrays = 0\n', "simulation.rays"),
+    (VG + '[simulation]\ntheta_bins = 4.5\n', "simulation.theta_bins"),
+    (VG + '[simulation]\nseed = -1\n', "simulation.seed"),
+    (VG + '[simulation]\nlambda = 500\n', "simulation.lambda"),
+    ('name = 3\n' + VG, "name"),
+    ('[surface\nkind = 1', "TOML"),
+])
+def test_malformed_scene(tmp_path, text, key):
+    p = write(tmp_path, text, "bad-scene.toml")
+    with pytest.raises(SceneError) as exc:
+        load_scene(p)
+    msg = str(exc.value)
+    assert isinstance(exc.value, ValueError)
+    assert "bad-scene.toml" in msg and key in msg and "\n" not in msg
+
+
+def test_missing_scene_file(tmp_path):
+    with pytest.raises(ValueError, match="no such scene file"):
+        load_scene(tmp_path / "nope.toml")
