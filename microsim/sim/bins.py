@@ -1,0 +1,123 @@
+"""Bins over the outgoing hemisphere, shared by the estimator and the model predictions.
+
+A result is always a BRDF averaged over a bin B (DESIGN.md, Conventions):
+
+    f̄_B = (1/Ω_B) ∫_B f(wi, wo) cos θo dω_o,   Ω_B = ∫_B cos θo dω_o,
+
+with Ω_B the bin's exact projected solid angle, (φ₂ − φ₁)(sin²θ₂ − sin²θ₁)/2.
+
+Azimuths are measured *relative to the incident azimuth*: Δφ = φo − φi, so the mirror direction
+lies at Δφ = 180°. The φ edges are offset by half a bin so that one bin is centred on Δφ = 180°
+(the in-plane forward-scattering slice) and one on Δφ = 0° (the backward slice). For isotropic
+surfaces ``folded=True`` maps Δφ and −Δφ together: Δφ ∈ [0°, 180°], the first and last bins
+being half bins centred on 0° and 180°.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Bins"]
+
+
+@dataclass(frozen=True)
+class Bins:
+    """(θo, Δφ) grid. ``n_theta`` bins uniform over θo ∈ [0°, 90°]; ``n_phi`` bins over Δφ.
+
+    Unfolded: ``n_phi`` bins of width 360°/n_phi, centred on k·360°/n_phi (n_phi must be even
+    so that 180° is a bin centre). Folded: Δφ ∈ [0°, 180°] with ``n_phi`` bins, width
+    180°/(n_phi − 1), the first and last being half-width bins centred on 0° and 180°.
+    """
+
+    n_theta: int = 45
+    n_phi: int = 72
+    folded: bool = True
+
+    def __post_init__(self):
+        if int(self.n_theta) != self.n_theta or self.n_theta < 1:
+            raise ValueError(f"n_theta must be an integer >= 1, got {self.n_theta!r}")
+        if int(self.n_phi) != self.n_phi or self.n_phi < 2:
+            raise ValueError(f"n_phi must be an integer >= 2, got {self.n_phi!r}")
+        if not self.folded and self.n_phi % 2:
+            raise ValueError(f"n_phi must be even when folded=False (a bin centred on 180°), got {self.n_phi}")
+
+    # --- edges ------------------------------------------------------------------------
+    @property
+    def theta_edges(self) -> np.ndarray:
+        """θo edges in degrees, shape (n_theta + 1,)."""
+        return np.linspace(0.0, 90.0, self.n_theta + 1)
+
+    @property
+    def phi_edges(self) -> np.ndarray:
+        """Δφ edges in degrees, shape (n_phi + 1,). Unfolded edges start at −half a bin."""
+        if self.folded:
+            w = 180.0 / (self.n_phi - 1)
+            inner = (np.arange(self.n_phi - 1) + 0.5) * w
+            return np.concatenate([[0.0], inner, [180.0]])
+        w = 360.0 / self.n_phi
+        return (np.arange(self.n_phi + 1) - 0.5) * w
+
+    @property
+    def theta_centers(self) -> np.ndarray:
+        e = self.theta_edges
+        return 0.5 * (e[1:] + e[:-1])
+
+    @property
+    def phi_centers(self) -> np.ndarray:
+        """Nominal Δφ centres in degrees (0°, …, 180° exactly for folded bins)."""
+        if self.folded:
+            return np.linspace(0.0, 180.0, self.n_phi)
+        return np.arange(self.n_phi) * (360.0 / self.n_phi)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.n_theta, self.n_phi)
+
+    @property
+    def forward_index(self) -> int:
+        """Index of the Δφ bin centred on 180° (the mirror direction's azimuth)."""
+        return self.n_phi - 1 if self.folded else self.n_phi // 2
+
+    @property
+    def backward_index(self) -> int:
+        """Index of the Δφ bin centred on 0° (back towards the light)."""
+        return 0
+
+    def projected_solid_angle(self) -> np.ndarray:
+        """Exact Ω_B = Δφ (sin²θ₂ − sin²θ₁)/2 per bin in sr, shape (n_theta, n_phi).
+
+        Folded bins cover both ±Δφ, so their Ω counts both halves.
+        """
+        t = np.radians(self.theta_edges)
+        p = np.radians(self.phi_edges)
+        s2 = np.sin(t) ** 2
+        band = 0.5 * (s2[1:] - s2[:-1])
+        dphi = np.diff(p) * (2.0 if self.folded else 1.0)
+        return band[:, None] * dphi[None, :]
+
+    # --- locating directions ------------------------------------------------------------
+    def relative_azimuth(self, wo: np.ndarray, phi_i_deg: float) -> np.ndarray:
+        """Δφ = φo − φi in degrees: in [−half bin, 360 − half bin) unfolded, [0, 180] folded."""
+        wo = np.asarray(wo, dtype=np.float64)
+        d = np.degrees(np.arctan2(wo[..., 1], wo[..., 0])) - phi_i_deg
+        d = np.mod(d, 360.0)
+        if self.folded:
+            return np.where(d > 180.0, 360.0 - d, d)
+        w = 360.0 / self.n_phi
+        return np.where(d >= 360.0 - 0.5 * w, d - 360.0, d)
+
+    def locate(self, wo: np.ndarray, phi_i_deg: float = 0.0) -> np.ndarray:
+        """Flat bin index (θ-major, i·n_phi + j) of each unit direction wo; −1 if wo_z ≤ 0."""
+        wo = np.asarray(wo, dtype=np.float64)
+        z = wo[..., 2]
+        theta = np.degrees(np.arctan2(np.hypot(wo[..., 0], wo[..., 1]), z))
+        it = np.minimum((theta * (self.n_theta / 90.0)).astype(np.int64), self.n_theta - 1)
+        dphi = self.relative_azimuth(wo, phi_i_deg)
+        ip = np.searchsorted(self.phi_edges, dphi, side="right") - 1
+        ip = np.clip(ip, 0, self.n_phi - 1)
+        idx = it * self.n_phi + ip
+        return np.where(z > 0.0, idx, -1)
+
+    def to_dict(self) -> dict:
+        return {"n_theta": self.n_theta, "n_phi": self.n_phi, "folded": self.folded}

@@ -1,0 +1,481 @@
+"""Bin-averaged predictions of analytic BRDF models on the simulation's bins.
+
+The simulation reports, per (θo, Δφ) bin B of ``Bins``, the bin average (DESIGN.md, Conventions)
+
+    f̄_B = (1/Ω_B) ∫_B f(wi, wo) cos θo dω_o,     Ω_B = ∫_B cos θo dω_o,
+
+so every model is reduced to the same numbers before it is compared. Three ways:
+
+``bin_average``         any vectorised ``brdf_fn(wi, wo)``: adaptive tensor Gauss–Legendre
+                        quadrature per bin with an error estimate (the default, deterministic).
+``bin_average_ts``      Torrance–Sparrow-type models by randomised quasi-Monte Carlo over the
+                        NDF's half vectors (a cross-check; tail bins get few samples).
+``bin_average_facets``  Torrance–Sparrow with the *surface's own* facets as a discrete D.
+
+``predict`` evaluates a list of ``ModelSpec`` for several incidence angles.
+
+Incidence: ``wi`` is a unit (3,) vector with θi < 90°; ``phi_i`` (degrees) is the azimuth from
+which the bins' relative azimuth Δφ = φo − φi is measured. ``phi_i=None`` takes it from ``wi``
+(0° at normal incidence), which is what the estimator does.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Callable, Iterable, Mapping, NamedTuple
+
+import numpy as np
+from scipy.stats import qmc
+
+from microsim.analytic import _checks
+from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.analytic.shadowing import SHADOWING_KINDS, shadowing_g
+
+from .bins import Bins
+
+__all__ = ["BinAverage", "BinEstimate", "bin_average", "bin_average_ts", "bin_average_facets",
+           "ModelSpec", "predict"]
+
+_MAX_POINTS = 2 ** 20          # directions per brdf_fn call / per facet chunk (bounds memory)
+_MAX_CELLS = 2 ** 21           # live quadrature cells; refinement stops (unconverged) beyond
+
+
+class BinAverage(NamedTuple):
+    """Deterministic quadrature result, arrays of shape ``bins.shape``.
+
+    ``values``: f̄_B in sr⁻¹; ``error``: estimated absolute error of f̄_B in sr⁻¹ (|high − low|
+    order, summed over the bin's cells: conservative); ``converged``: error within tolerance.
+    """
+
+    values: np.ndarray
+    error: np.ndarray
+    converged: np.ndarray
+
+
+class BinEstimate(NamedTuple):
+    """Sampling result, arrays of shape ``bins.shape``: ``values`` f̄_B and their standard
+    errors ``stderr`` (sr⁻¹)."""
+
+    values: np.ndarray
+    stderr: np.ndarray
+
+
+# --- incidence ---------------------------------------------------------------------------------
+def _incidence(wi, phi_i) -> tuple[np.ndarray, float]:
+    """Validated unit ``wi`` (3,) above the horizon and the reference azimuth in degrees."""
+    wi = _checks.directions("wi", wi)
+    if wi.shape != (3,):
+        raise ValueError(f"wi must be one direction of shape (3,), got shape {wi.shape}")
+    if not wi[2] > 1e-12:
+        raise ValueError(f"wi must point above the horizon (θi < 90°), got wi_z = {wi[2]!r}")
+    if phi_i is None:
+        phi_i = float(np.degrees(np.arctan2(wi[1], wi[0]))) if np.hypot(wi[0], wi[1]) > 0 else 0.0
+    return wi, float(phi_i)
+
+
+# --- adaptive quadrature ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Rule:
+    """Two tensor Gauss–Legendre rules on [−1, 1]², stacked: nodes (P, 2) and weights (P, 2)
+    whose first column is the low-order rule (zero on the high-order nodes) and second the high."""
+
+    nodes: np.ndarray
+    weights: np.ndarray
+
+    @classmethod
+    def of(cls, n_lo: int, n_hi: int) -> "_Rule":
+        if not (isinstance(n_lo, int) and isinstance(n_hi, int) and 1 <= n_lo < n_hi <= 64):
+            raise ValueError(f"order must be two integers 1 <= n_lo < n_hi <= 64, "
+                             f"got {(n_lo, n_hi)!r}")
+        parts = []
+        for n in (n_lo, n_hi):
+            x, w = np.polynomial.legendre.leggauss(n)
+            gx, gy = np.meshgrid(x, x, indexing="ij")
+            parts.append((np.stack([gx.ravel(), gy.ravel()], axis=1), np.outer(w, w).ravel()))
+        (x_lo, w_lo), (x_hi, w_hi) = parts
+        weights = np.zeros((len(w_lo) + len(w_hi), 2))
+        weights[:len(w_lo), 0] = w_lo
+        weights[len(w_lo):, 1] = w_hi
+        return cls(np.concatenate([x_lo, x_hi]), weights)
+
+
+@dataclass(frozen=True)
+class _Cells:
+    """Rectangles [t0, t1] × [p0, p1] in (θo, Δφ) radians, each a piece of bin ``b``."""
+
+    t0: np.ndarray
+    t1: np.ndarray
+    p0: np.ndarray
+    p1: np.ndarray
+    b: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.b)
+
+    def omega(self) -> np.ndarray:
+        """Projected solid angle of each cell, (p1 − p0)(sin²t1 − sin²t0)/2."""
+        return 0.5 * (self.p1 - self.p0) * (np.sin(self.t1) ** 2 - np.sin(self.t0) ** 2)
+
+    def take(self, mask) -> "_Cells":
+        return _Cells(self.t0[mask], self.t1[mask], self.p0[mask], self.p1[mask], self.b[mask])
+
+    def split(self) -> "_Cells":
+        """Each cell into 2 × 2 children."""
+        tm, pm = 0.5 * (self.t0 + self.t1), 0.5 * (self.p0 + self.p1)
+        t0 = np.concatenate([self.t0, self.t0, tm, tm])
+        t1 = np.concatenate([tm, tm, self.t1, self.t1])
+        p0 = np.concatenate([self.p0, pm, self.p0, pm])
+        p1 = np.concatenate([pm, self.p1, pm, self.p1])
+        return _Cells(t0, t1, p0, p1, np.tile(self.b, 4))
+
+
+def _initial_cells(bins: Bins, symmetric: bool) -> _Cells:
+    """One cell per bin; folded bins also get their mirror half [−p1, −p0] unless ``symmetric``."""
+    t = np.radians(bins.theta_edges)
+    p = np.radians(bins.phi_edges)
+    it, ip = np.meshgrid(np.arange(bins.n_theta), np.arange(bins.n_phi), indexing="ij")
+    it, ip = it.ravel(), ip.ravel()
+    cells = _Cells(t[it], t[it + 1], p[ip], p[ip + 1], it * bins.n_phi + ip)
+    if bins.folded and not symmetric:
+        mirror = _Cells(cells.t0, cells.t1, -cells.p1, -cells.p0, cells.b)
+        cells = _Cells(*(np.concatenate([a, m]) for a, m in zip(
+            (cells.t0, cells.t1, cells.p0, cells.p1, cells.b),
+            (mirror.t0, mirror.t1, mirror.p0, mirror.p1, mirror.b))))
+    return cells
+
+
+def _integrate_cells(brdf_fn, wi, phi_i_rad: float, cells: _Cells, rule: _Rule):
+    """Low- and high-order estimates of ∫_cell f cos θo dω_o = ∫∫ f sinθ cosθ dθ dφ, (C, 2)."""
+    out = np.empty((len(cells), 2))
+    per_call = max(1, _MAX_POINTS // len(rule.nodes))
+    for s in range(0, len(cells), per_call):
+        c = cells.take(slice(s, s + per_call))
+        tc, th = 0.5 * (c.t0 + c.t1), 0.5 * (c.t1 - c.t0)
+        pc, ph = 0.5 * (c.p0 + c.p1), 0.5 * (c.p1 - c.p0)
+        theta = tc[:, None] + th[:, None] * rule.nodes[None, :, 0]
+        phi = phi_i_rad + pc[:, None] + ph[:, None] * rule.nodes[None, :, 1]
+        f = np.asarray(brdf_fn(wi, _checks.spherical(theta, phi)), dtype=np.float64)
+        if f.shape != theta.shape or not np.all(np.isfinite(f)):
+            raise ValueError("brdf_fn(wi, wo) must return finite values of shape wo.shape[:-1]; "
+                             f"got shape {f.shape}" + ("" if f.shape != theta.shape
+                                                       else " with NaN/inf"))
+        g = f * np.sin(theta) * np.cos(theta)
+        out[s:s + len(c)] = (g @ rule.weights) * (th * ph)[:, None]
+    return out
+
+
+def bin_average(brdf_fn: Callable, wi, bins: Bins, phi_i: float | None = None,
+                rtol: float = 1e-3, *, floor: float = 1e-6, symmetric: bool = True,
+                order: tuple[int, int] = (4, 8), max_depth: int = 8,
+                min_depth: int = 0) -> BinAverage:
+    """Bin averages f̄_B (sr⁻¹) of a vectorised ``brdf_fn(wi, wo) -> sr⁻¹`` (wi (3,), wo (..., 3)).
+
+    Quadrature variable. ∫_B f cos θo dω = ∫∫ f sinθ cosθ dθ dφ over the bin rectangle in
+    (θo, Δφ), integrated by tensor Gauss–Legendre in (θ, φ). (θ, φ) is chosen over s = sin²θ,
+    where the cos weight would be exact, because wo(θ, φ) is analytic in θ while in s it has
+    √s and √(1 − s) branch points at both ends of the hemisphere (sin θ and cos θ); the weight
+    sinθ cosθ = sin(2θ)/2 is entire, and 8 nodes integrate it to ~1e-15 even over [0, π/2].
+    The result is divided by the exact Ω_B (``Bins.projected_solid_angle``).
+
+    Adaptivity. Every cell gets an ``order`` = (n_lo, n_hi) pair of rules; |I_hi − I_lo| is the
+    error estimate of I_hi (conservative: it is really the low rule's error). A bin is done
+    when its summed error ≤ tol_B = max(rtol |I_B|, rtol · floor · peak · Ω_B), peak being the
+    largest current f̄; otherwise each of its cells whose error exceeds its Ω-proportional
+    share of tol_B is split 2 × 2, all failing cells of all bins at once (one Python loop over
+    levels, none over bins). Cells still failing at ``max_depth`` (or when refining them would
+    exceed ~2e6 live cells) are accepted and their bins flagged ``converged = False``;
+    ``min_depth`` forces that many uniform refinements first.
+
+    ``symmetric=True`` states that f(Δφ) = f(−Δφ) (isotropic models, relative azimuth): folded
+    bins then integrate only Δφ ∈ [φ₁, φ₂]; with ``symmetric=False`` they also integrate the
+    mirror half [−φ₂, −φ₁]. Unfolded bins are unaffected.
+    """
+    wi, phi_i = _incidence(wi, phi_i)
+    rtol = _checks.in_range("rtol", rtol, 0.0, 1.0, lo_open=True)
+    floor = _checks.in_range("floor", floor, 0.0, 1.0)
+    max_depth = int(_checks.in_range("max_depth", max_depth, 0, 30))
+    min_depth = int(_checks.in_range("min_depth", min_depth, 0, max_depth))
+    rule = _Rule.of(*order)
+    nb = bins.n_theta * bins.n_phi
+    cells = _initial_cells(bins, symmetric)
+    omega = np.bincount(cells.b, cells.omega(), minlength=nb)    # Ω of the integrated region
+    acc = np.zeros((2, nb))                                       # accepted integral, error
+
+    def tolerance(total):
+        peak = np.max(np.abs(total) / omega)
+        return np.maximum(rtol * np.abs(total), rtol * floor * peak * omega)
+
+    for depth in range(max_depth + 1):
+        est = _integrate_cells(brdf_fn, wi, np.radians(phi_i), cells, rule)
+        val, err = est[:, 1], np.abs(est[:, 1] - est[:, 0])
+        tol = tolerance(acc[0] + np.bincount(cells.b, val, minlength=nb))
+        bin_done = acc[1] + np.bincount(cells.b, err, minlength=nb) <= tol
+        share = tol[cells.b] * cells.omega() / omega[cells.b]
+        accept = bin_done[cells.b] | (err <= share)
+        if depth < min_depth:
+            accept[:] = False
+        if depth == max_depth or 4 * np.count_nonzero(~accept) > _MAX_CELLS:
+            accept[:] = True
+        acc += np.stack([np.bincount(cells.b[accept], val[accept], minlength=nb),
+                         np.bincount(cells.b[accept], err[accept], minlength=nb)])
+        cells = cells.take(~accept).split()
+        if len(cells) == 0:
+            break
+    converged = acc[1] <= tolerance(acc[0]) * (1.0 + 1e-12)
+    return BinAverage((acc[0] / omega).reshape(bins.shape), (acc[1] / omega).reshape(bins.shape),
+                      converged.reshape(bins.shape))
+
+
+# --- Torrance–Sparrow by sampling half vectors --------------------------------------------------
+def _reflection_terms(wi, h, cos_i: float, ior, shadowing: str, ndf):
+    """wo = 2(wi·h)h − wi and x = F(wi·h) G(wi, wo, h) (wi·h)⁺/(cos θi h_z) for unit h (N, 3).
+
+    x is what one half vector contributes to ∫_B f cos θo dω_o (see ``bin_average_ts``); it is 0
+    where wi·h ≤ 0, wo is below the horizon (G = 0) or h_z = 0.
+    """
+    wih = h @ wi
+    wo = _checks.normalize(2.0 * wih[:, None] * h - wi)
+    g = shadowing_g(shadowing, ndf, np.broadcast_to(wi, wo.shape), wo, h)
+    hz = h[:, 2]
+    ok = (wih > 0.0) & (hz > 0.0) & (wo[:, 2] > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = fresnel(np.clip(wih, 0.0, 1.0), ior) * g * wih / (cos_i * hz)
+    return wo, np.where(ok, x, 0.0)
+
+
+def _check_shadowing(shadowing: str) -> str:
+    if shadowing not in SHADOWING_KINDS:
+        raise ValueError(f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, "
+                         f"got {shadowing!r}")
+    return shadowing
+
+
+def bin_average_ts(ndf, wi, bins: Bins, shadowing: str = "vgroove", ior=None,
+                   phi_i: float | None = None, n: int = 2 ** 20, *, replicates: int = 16,
+                   seed: int = 0) -> BinEstimate:
+    """Torrance–Sparrow bin averages by randomised quasi-Monte Carlo over half vectors (sr⁻¹).
+
+    ``ior``: anything ``fresnel.resolve_material`` accepts (None = mirror, name, n, n + ik).
+
+    Identity. With f = F G D/(4 cos θi cos θo) (Mikkelsen eq. 13/18) and the Jacobian
+    dω_o = 4 (wo·h) dω_h of wo = 2(wi·h)h − wi (Mikkelsen eq. 15; wo·h = wi·h):
+
+        ∫_B f cos θo dω_o = ∫ F G D(h) (wi·h) / (cos θi) 1(wo(h) ∈ B) dω_h
+                          = E_{h ~ D(h) h_z} [ F(wi·h) G(wi, wo, h) (wi·h)/(cos θi h_z) 1(wo ∈ B) ],
+
+    the cos θo of the weight cancelling the 1/cos θo of f and 4(wo·h) cancelling the 4.
+    h is drawn with ``ndf.sample`` from scrambled Sobol points: ``replicates`` independent
+    scramblings (seeded from ``seed``) of n/replicates points each (a power of 2); the value is
+    their mean and ``stderr`` their standard deviation / √replicates (randomised QMC).
+    Tail bins get few samples: use this to cross-check ``bin_average``, not instead of it.
+    """
+    wi, phi_i = _incidence(wi, phi_i)
+    shadowing, ior = _check_shadowing(shadowing), resolve_material(ior)
+    replicates = int(_checks.in_range("replicates", replicates, 2, 2 ** 12))
+    per = int(n) // replicates
+    if int(n) != n or per < 1 or per & (per - 1):
+        raise ValueError(f"n must be an integer with n/replicates a power of 2, got n={n!r}, "
+                         f"replicates={replicates}")
+    nb = bins.n_theta * bins.n_phi
+    omega = bins.projected_solid_angle().ravel()
+    sums = np.zeros((replicates, nb))
+    for r, child in enumerate(np.random.SeedSequence(seed).spawn(replicates)):
+        sobol = qmc.Sobol(d=2, scramble=True, seed=np.random.default_rng(child))
+        for s in range(0, per, _MAX_POINTS):
+            u = sobol.random(min(_MAX_POINTS, per - s))
+            h = ndf.sample(u[:, 0], u[:, 1])
+            wo, x = _reflection_terms(wi, h, wi[2], ior, shadowing, ndf)
+            idx = bins.locate(wo, phi_i)
+            keep = (idx >= 0) & (x > 0.0)
+            sums[r] += np.bincount(idx[keep], x[keep], minlength=nb)
+    vals = sums / (per * omega)
+    return BinEstimate(vals.mean(axis=0).reshape(bins.shape),
+                       (vals.std(axis=0, ddof=1) / np.sqrt(replicates)).reshape(bins.shape))
+
+
+# --- Torrance–Sparrow with the surface's own facets ---------------------------------------------
+def _rotate_z(normals: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """normals (K, 3) rotated about z by angles psi (K, J): (K, J, 3)."""
+    c, s = np.cos(psi), np.sin(psi)
+    nx, ny, nz = (normals[:, i, None] for i in range(3))
+    return np.stack([c * nx - s * ny, s * nx + c * ny, np.broadcast_to(nz, psi.shape)], axis=-1)
+
+
+def _merge_tilts(normals: np.ndarray, weights: np.ndarray, decimals: int = 12):
+    """One normal (sin θ, 0, cos θ) per distinct tilt θ (rounded to ``decimals`` radians) with
+    the summed weight: under azimuth averaging only the tilt matters, and merging the faces
+    of a groove (equal tilts) keeps the facets that ``stderr`` treats as independent distinct."""
+    theta = np.round(np.arctan2(np.hypot(normals[:, 0], normals[:, 1]), normals[:, 2]), decimals)
+    tilts, inv = np.unique(theta, return_inverse=True)
+    w = np.bincount(inv.ravel(), weights)
+    return _checks.spherical(tilts, 0.0), w
+
+
+def bin_average_facets(normals, weights, wi, bins: Bins, ior=None, shadowing: str = "vgroove",
+                       phi_i: float | None = None, azimuths: int | None = None, *,
+                       smith_ndf=None, seed: int = 0) -> BinEstimate:
+    """Torrance–Sparrow bin averages with the surface's own facet normals as D (sr⁻¹).
+
+    Discrete NDF: the facets' projected-area fractions a_k = weights_k/Σ weights (weights =
+    facet area × n_z) give the pdf D(h) h_z = Σ_k a_k δ(h − n_k), and the half-vector identity
+    of ``bin_average_ts`` becomes an exact finite sum:
+
+        ∫_B f cos θo dω_o = Σ_k a_k F(wi·n_k) G(wi, wo_k, n_k) (wi·n_k)/(cos θi n_kz) 1(wo_k ∈ B),
+
+    wo_k = 2(wi·n_k)n_k − wi (Mikkelsen eq. 9 read facet by facet: facet k intercepts the
+    fraction a_k (wi·n_k)/(n_kz cos θi) of the incident flux). G: "vgroove" is local
+    (Mikkelsen eq. 25); "smith"/"smith-correlated" use Λ of ``smith_ndf`` (default
+    ``Empirical(normals, weights)``, isotropic); "none" keeps only the χ⁺ conditions.
+
+    ``azimuths=J`` averages the facet set over a uniform rotation ψ about z (V-groove surfaces,
+    ``Surface.azimuth_average``: the isotropic V-cavity). Choice: each facet is replaced by J
+    copies at ψ_kj = 2π(j + u_k)/J with one uniform offset u_k per facet (stratified and
+    randomised, seeded by ``seed``): unbiased for every J, with an azimuthal error that averages
+    out over facets and is included in ``stderr``. Only tilts matter then, so facets of equal
+    tilt (the faces of a groove) are first merged into one with their summed weight.
+    Take J so that the reflected directions of
+    one facet, which move by up to ~2 θ_k · 2π/J between copies, sample each bin they cross
+    several times (J ≳ 4 · 2π · 2θ_max / bin width).
+
+    ``stderr``: the (merged) facets are treated as independent draws from D h_z — exact for
+    i.i.d. normals, conservative for stratified ones (e.g. quantile groove tilts) — so with X_kB the
+    (azimuth-averaged) contribution of facet k to bin B, Var(I_B) = Σ_k a_k² (X_kB − I_B)².
+    Memory is bounded by processing ~1e6 (facet, azimuth) pairs at a time.
+    """
+    wi, phi_i = _incidence(wi, phi_i)
+    shadowing, ior = _check_shadowing(shadowing), resolve_material(ior)
+    nrm = _checks.directions("normals", normals)
+    if nrm.ndim != 2 or len(nrm) == 0 or np.any(nrm[:, 2] <= 0.0):
+        raise ValueError("normals must be a non-empty (N, 3) array of unit vectors with n_z > 0")
+    w = np.ones(len(nrm)) if weights is None else np.asarray(weights, dtype=np.float64)
+    if w.shape != (len(nrm),) or not np.all(np.isfinite(w)) or np.any(w < 0) or not w.sum() > 0:
+        raise ValueError(f"weights must be {len(nrm)} finite values >= 0 with a positive sum")
+    J = 1 if azimuths is None else int(_checks.in_range("azimuths", azimuths, 1, 2 ** 16))
+    if shadowing.startswith("smith") and smith_ndf is None:
+        from microsim.analytic.empirical import Empirical
+        smith_ndf = Empirical(nrm, w)
+    if azimuths is not None:
+        nrm, w = _merge_tilts(nrm, w)
+    a = w / w.sum()
+    rng = np.random.default_rng(seed)
+    nb = bins.n_theta * bins.n_phi
+    total, s1, s2 = np.zeros(nb), np.zeros(nb), np.zeros(nb)   # Σ a X, Σ a² X, Σ a² X²
+    per_chunk = max(1, _MAX_POINTS // J)
+    for s in range(0, len(nrm), per_chunk):
+        n_k, a_k = nrm[s:s + per_chunk], a[s:s + per_chunk]
+        if J == 1:
+            h = n_k
+        else:
+            psi = 2.0 * np.pi * (np.arange(J)[None, :] + rng.random((len(n_k), 1))) / J
+            h = _rotate_z(n_k, psi).reshape(-1, 3)
+        wo, x = _reflection_terms(wi, h, wi[2], ior, shadowing, smith_ndf)
+        idx = bins.locate(wo, phi_i)
+        facet = np.repeat(np.arange(len(n_k)), J)
+        keep = (idx >= 0) & (x > 0.0)
+        key, inv = np.unique(facet[keep] * nb + idx[keep], return_inverse=True)
+        xk = np.bincount(inv.ravel(), x[keep] / J)                 # X_kB per (facet, bin) pair
+        kb, ak = key % nb, a_k[key // nb]
+        total += np.bincount(kb, ak * xk, minlength=nb)
+        s1 += np.bincount(kb, ak * ak * xk, minlength=nb)
+        s2 += np.bincount(kb, (ak * xk) ** 2, minlength=nb)
+    var = np.maximum(s2 - 2.0 * total * s1 + total ** 2 * np.sum(a * a), 0.0)
+    omega = bins.projected_solid_angle().ravel()
+    shape = bins.shape
+    return BinEstimate((total / omega).reshape(shape), (np.sqrt(var) / omega).reshape(shape))
+
+
+# --- many models, many incidences ---------------------------------------------------------------
+MODEL_KINDS = ("function", "ts", "ts-qmc", "facets")
+
+
+@dataclass(frozen=True, eq=False)
+class ModelSpec:
+    """A named model to predict: ``kind`` and its parameters (read-only mapping).
+
+    kinds and params:
+      "function": brdf_fn (wi, wo) -> sr⁻¹, symmetric (bool)          → ``bin_average``
+      "ts":       ndf, shadowing, ior (Torrance–Sparrow, quadrature)   → ``bin_average``
+      "ts-qmc":   ndf, shadowing, ior, n                               → ``bin_average_ts``
+      "facets":   normals, weights, shadowing, ior, azimuths           → ``bin_average_facets``
+    Build them with the class methods below. Compared by identity (params hold arrays).
+    """
+
+    name: str
+    kind: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.kind not in MODEL_KINDS:
+            raise ValueError(f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, "
+                             f"got {self.kind!r}")
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+
+    @classmethod
+    def function(cls, name: str, brdf_fn: Callable, symmetric: bool = True) -> "ModelSpec":
+        return cls(name, "function", {"brdf_fn": brdf_fn, "symmetric": bool(symmetric)})
+
+    @classmethod
+    def torrance_sparrow(cls, name: str, ndf, shadowing: str = "vgroove", ior=None,
+                         qmc_samples: int | None = None) -> "ModelSpec":
+        """Torrance–Sparrow (Mikkelsen eq. 13); ``qmc_samples`` selects the sampling path."""
+        params = {"ndf": ndf, "shadowing": _check_shadowing(shadowing), "ior": ior}
+        if qmc_samples is None:
+            return cls(name, "ts", params)
+        return cls(name, "ts-qmc", {**params, "n": int(qmc_samples)})
+
+    @classmethod
+    def facets(cls, name: str, normals, weights=None, shadowing: str = "vgroove", ior=None,
+               azimuths: int | None = None) -> "ModelSpec":
+        return cls(name, "facets", {"normals": normals, "weights": weights,
+                                    "shadowing": _check_shadowing(shadowing), "ior": ior,
+                                    "azimuths": azimuths})
+
+
+def _ts_brdf(ndf, shadowing: str, ior) -> Callable:
+    from microsim.analytic.brdf import torrance_sparrow
+
+    def f(wi, wo):
+        return torrance_sparrow(wi, wo, ndf, shadowing=shadowing, ior=ior)
+    return f
+
+
+def _predict_one(spec: ModelSpec, wi, bins: Bins, phi_i: float, rtol: float) -> np.ndarray:
+    p = spec.params
+    if spec.kind in ("function", "ts"):
+        if spec.kind == "function":
+            fn, symmetric = p["brdf_fn"], p["symmetric"]
+        else:
+            fn, symmetric = _ts_brdf(p["ndf"], p["shadowing"], p["ior"]), getattr(
+                p["ndf"], "isotropic", True)
+        res = bin_average(fn, wi, bins, phi_i, rtol, symmetric=symmetric)
+        if not res.converged.all():
+            warnings.warn(f"model {spec.name!r}: {int((~res.converged).sum())} bins did not "
+                          f"reach rtol={rtol} (max error {res.error.max():.3g} sr^-1)",
+                          RuntimeWarning, stacklevel=3)
+        return res.values
+    if spec.kind == "ts-qmc":
+        return bin_average_ts(p["ndf"], wi, bins, p["shadowing"], p["ior"], phi_i, p["n"]).values
+    return bin_average_facets(p["normals"], p["weights"], wi, bins, p["ior"], p["shadowing"],
+                              phi_i, p["azimuths"]).values
+
+
+def predict(models: Iterable[ModelSpec], wi_deg: Iterable[float], bins: Bins,
+            phi_i: float = 0.0, rtol: float = 1e-3) -> dict[str, np.ndarray]:
+    """Bin averages (sr⁻¹) of every model for incidence angles θi = ``wi_deg`` (degrees, < 90)
+    at azimuth ``phi_i`` (degrees): name → array (len(wi_deg), n_theta, n_phi).
+
+    Quadrature models warn (RuntimeWarning) when a bin misses ``rtol``.
+    """
+    models = list(models)
+    names = [m.name for m in models]
+    if len(set(names)) != len(names):
+        raise ValueError(f"model names must be unique, got {names}")
+    thetas = np.atleast_1d(np.asarray(wi_deg, dtype=np.float64))
+    for t in thetas:
+        _checks.in_range("wi_deg", t, 0.0, 90.0, hi_open=True)
+    out = {}
+    for m in models:
+        out[m.name] = np.stack([_predict_one(m, _checks.spherical_deg(t, phi_i), bins, phi_i, rtol)
+                                for t in thetas])
+    return out

@@ -1,0 +1,143 @@
+"""Result of a simulation: bin-averaged BRDF, standard errors, energy ledger, raw tallies.
+
+Arrays are indexed (incidence T, θo bin Θ, Δφ bin Φ); angles in degrees, BRDFs in sr⁻¹.
+``save(dir)`` writes ``brdf.npz`` and ``meta.json`` atomically (temporary files in the same
+directory, then ``os.replace``); ``Result.load(dir)`` reads them back.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bins import Bins
+
+__all__ = ["Result", "InPlane"]
+
+NPZ, META = "brdf.npz", "meta.json"
+_OPTIONAL = ("stderr_ray", "stderr_realisation", "brdf_realisations", "rays_realisations")
+
+
+@dataclass(frozen=True)
+class InPlane:
+    """Incidence-plane slice: signed θo in degrees (Δφ = 180°, specular side, positive;
+    Δφ = 0°, backward side, negative), ``brdf`` and ``stderr`` (T, 2Θ) in sr⁻¹."""
+
+    theta: np.ndarray
+    brdf: np.ndarray
+    stderr: np.ndarray
+
+
+@dataclass(eq=False)
+class Result:
+    """Bin-averaged single-bounce BRDF of one surface (pooled over realisations).
+
+    ``theta_i``/``phi_i`` (T,) deg; ``bins`` the outgoing grid (``theta_edges``/``phi_edges``
+    in deg); ``brdf``/``stderr`` (T, Θ, Φ) sr⁻¹ (stderr combines ray noise and, with several
+    realisations, realisation scatter: see ``stderr_ray``/``stderr_realisation``); ``rays`` (T,)
+    primary rays; ``ledger`` name → (T,) fractions of primary rays (see ``estimator``);
+    ``ledger_counts`` name → (T,) integer ray counts; ``counts`` (T, Θ, Φ) single-bounce rays
+    per bin; ``sum_w``/``sum_w2`` raw Fresnel-weight tallies; ``models`` name → (T, Θ, Φ)
+    bin-averaged model predictions (filled by the caller); ``meta`` JSON-able run description.
+    """
+
+    theta_i: np.ndarray
+    phi_i: np.ndarray
+    bins: Bins
+    brdf: np.ndarray
+    stderr: np.ndarray
+    rays: np.ndarray
+    ledger: dict
+    ledger_counts: dict
+    counts: np.ndarray
+    sum_w: np.ndarray
+    sum_w2: np.ndarray
+    meta: dict
+    models: dict = field(default_factory=dict)
+    stderr_ray: np.ndarray | None = None
+    stderr_realisation: np.ndarray | None = None
+    brdf_realisations: np.ndarray | None = None
+    rays_realisations: np.ndarray | None = None
+
+    @property
+    def theta_edges(self) -> np.ndarray:
+        return self.bins.theta_edges
+
+    @property
+    def phi_edges(self) -> np.ndarray:
+        return self.bins.phi_edges
+
+    def albedo(self) -> np.ndarray:
+        """Σ_B f̄_B Ω_B per incidence (T,): the single-bounce albedo ρ(θi) seen by the bins."""
+        return np.sum(self.brdf * self.bins.projected_solid_angle(), axis=(1, 2))
+
+    def in_plane(self) -> InPlane:
+        """Signed-θo scattering curve in the incidence plane (``InPlane``)."""
+        f, b = self.bins.forward_index, self.bins.backward_index
+        tc = self.bins.theta_centers
+        theta = np.concatenate([-tc[::-1], tc])
+        cat = lambda a: np.concatenate([a[:, ::-1, b], a[:, :, f]], axis=1)  # noqa: E731
+        return InPlane(theta=theta, brdf=cat(self.brdf), stderr=cat(self.stderr))
+
+    # --- persistence ------------------------------------------------------------------------
+    def _arrays(self) -> dict:
+        out = {"theta_i": self.theta_i, "phi_i": self.phi_i, "theta_edges": self.theta_edges,
+               "phi_edges": self.phi_edges, "brdf": self.brdf, "stderr": self.stderr,
+               "rays": self.rays, "counts": self.counts, "sum_w": self.sum_w, "sum_w2": self.sum_w2}
+        out.update({f"ledger_{k}": v for k, v in self.ledger.items()})
+        out.update({f"count_{k}": v for k, v in self.ledger_counts.items()})
+        out.update({f"model_{k}": v for k, v in self.models.items()})
+        out.update({k: getattr(self, k) for k in _OPTIONAL if getattr(self, k) is not None})
+        return {k: np.asarray(v) for k, v in out.items()}
+
+    def save(self, directory) -> None:
+        """Write ``brdf.npz`` and ``meta.json`` into ``directory`` (created if needed), atomically:
+        both are written to temporary files first and renamed only when both succeeded."""
+        os.makedirs(directory, exist_ok=True)
+        meta = {**self.meta, "bins": self.bins.to_dict()}
+        temps = []
+        try:
+            with tempfile.NamedTemporaryFile(dir=directory, prefix=".brdf-", suffix=".tmp",
+                                             delete=False) as fh:
+                temps.append(fh.name)
+                np.savez(fh, **self._arrays())
+            with tempfile.NamedTemporaryFile("w", dir=directory, prefix=".meta-", suffix=".tmp",
+                                             delete=False, encoding="utf-8") as fh:
+                temps.append(fh.name)
+                json.dump(meta, fh, indent=1, default=_jsonable)
+            os.replace(temps[0], os.path.join(directory, NPZ))
+            os.replace(temps[1], os.path.join(directory, META))
+            temps.clear()
+        finally:
+            for t in temps:
+                if os.path.exists(t):
+                    os.remove(t)
+
+    @classmethod
+    def load(cls, directory) -> "Result":
+        """Read a result written by ``save``."""
+        with open(os.path.join(directory, META), encoding="utf-8") as fh:
+            meta = json.load(fh)
+        bins = Bins(**meta.pop("bins"))
+        with np.load(os.path.join(directory, NPZ)) as z:
+            a = {k: z[k] for k in z.files}
+        pick = lambda prefix: {k[len(prefix):]: v for k, v in a.items() if k.startswith(prefix)}  # noqa: E731
+        return cls(theta_i=a["theta_i"], phi_i=a["phi_i"], bins=bins, brdf=a["brdf"],
+                   stderr=a["stderr"], rays=a["rays"], ledger=pick("ledger_"),
+                   ledger_counts=pick("count_"), counts=a["counts"], sum_w=a["sum_w"],
+                   sum_w2=a["sum_w2"], meta=meta, models=pick("model_"),
+                   **{k: a[k] for k in _OPTIONAL if k in a})
+
+
+def _jsonable(obj):
+    """JSON fallback for numpy scalars/arrays and other objects (their repr)."""
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, complex):
+        return [obj.real, obj.imag]
+    return repr(obj)
