@@ -1,0 +1,308 @@
+"""Verdicts: is a closed-form model statistically indistinguishable from the simulation?
+
+One verdict compares, for ONE incidence θi and ONE model, the simulated bin averages f̄_B
+(sr⁻¹, ``Result.brdf[t]``) with the model's bin averages m_B over the (θo, Δφ) bins
+(DESIGN.md, Verdicts). Definitions (all documented again in ``VERDICT_SCHEMA``):
+
+* Used bins U: ≥ ``min_events`` single-bounce events, and sim, stderr, model finite, σ_B > 0.
+* σ_B² = se_B² + (model_rtol · m_B)²: the simulation's standard error and, in quadrature, the
+  model's own quadrature error (``predict.bin_average`` converges to relative ``rtol``).
+  z_B = (f̄_B − m_B)/σ_B.
+* χ² = Σ_U z², dof = |U| − k (k = number of fitted parameters, 0 for a prescribed model),
+  p = P(χ²_dof ≥ χ²).
+* Agreement is a family of two tests per (incidence, model): the χ² test and the max-|z| test
+  (two-sided, Šidák over the |U| bins). With α_eff = Šidák(α, n_tests) for the whole run, each
+  of the two is run at Šidák(α_eff, 2), so that under the null hypothesis "model = truth" the
+  verdict says "deviates" with probability ≤ α_eff (exactly α_eff for independent tests).
+* rel_rms over the energy set E ⊂ U: the fewest used bins, taken in order of decreasing
+  f̄_B Ω_B, whose Σ f̄ Ω reaches 90 % of Σ_U f̄ Ω; energy-weighted:
+  rel_rms = √(Σ_E f̄Ω ((m − f̄)/f̄)² / Σ_E f̄Ω). For m = f̄(1 + ε) it is |ε| exactly.
+* deviations: θo ranges of bins with |z| > 5 and |m − f̄|/f̄ > 5 % (any Δφ), adjacent θo bins
+  merged. max_rel_dev: the signed (m − f̄)/f̄ of largest magnitude over E ∪ deviating bins
+  (noisy far-tail bins of a model that agrees there are not reported as "worst").
+
+Limitation: bins are selected by the *simulation's* event count, so a model predicting a lobe
+where the simulation has (almost) no events is not tested there.
+"""
+from __future__ import annotations
+
+from typing import Iterable, Mapping
+
+import numpy as np
+from scipy import stats
+
+from microsim.analytic import _checks
+
+__all__ = ["VERDICT_SCHEMA", "verdict", "verdicts_for_result", "validate_verdict", "summary_row",
+           "sidak", "energy_set", "Z_DEVIATION", "REL_DEVIATION", "ENERGY_FRACTION"]
+
+Z_DEVIATION = 5.0          # |z| beyond which a bin counts as a deviation ...
+REL_DEVIATION = 0.05       # ... if its relative error also exceeds this
+ENERGY_FRACTION = 0.9      # rel_rms is taken over the bins carrying this share of the energy
+
+_NUM = (int, float)
+_OPT_NUM = (int, float, type(None))
+
+# name → (allowed Python types, description). Floats that cannot be defined (no used bins,
+# dof ≤ 0) are null. ``validate_verdict`` checks keys, types and the simple invariants.
+VERDICT_SCHEMA: dict = {
+    "theta_i": (_NUM, "incidence polar angle θi, degrees"),
+    "model": ((str,), "model name"),
+    "params": ((dict,), "model parameters (name → JSON value); fitted values for fitted models"),
+    "fitted": ((bool,), "True if the parameters were fitted to this simulation"),
+    "n_params": ((int,), "number of fitted parameters k (0 unless fitted)"),
+    "n_bins": ((int,), "used bins U: ≥ min_events single-bounce events, finite sim/stderr/model, "
+                       "σ > 0"),
+    "min_events": ((int,), "event threshold for a used bin"),
+    "chi2": (_NUM, "Σ_U z², z = (sim − model)/σ, σ² = stderr² + (model_rtol·model)²"),
+    "dof": ((int,), "n_bins − n_params"),
+    "chi2_dof": (_OPT_NUM, "chi2/dof (null if dof ≤ 0)"),
+    "p_value": (_OPT_NUM, "P(χ²_dof ≥ chi2) (null if dof ≤ 0)"),
+    "max_abs_z": (_OPT_NUM, "max_U |z| (null if no used bins)"),
+    "rel_rms": (_OPT_NUM, "energy-weighted relative RMS error over the energy set E (the fewest "
+                          "used bins, by decreasing sim·Ω, reaching 90% of Σ_U sim·Ω): "
+                          "√(Σ_E sim·Ω·((model − sim)/sim)² / Σ_E sim·Ω)"),
+    "energy_bins": ((int,), "number of bins in the energy set E"),
+    "alpha": (_NUM, "family significance level α of the run"),
+    "n_tests": ((int,), "number of (incidence, model) verdicts in the family"),
+    "alpha_eff": (_NUM, "Šidák(α, n_tests) = 1 − (1 − α)^(1/n_tests) for this verdict"),
+    "p_threshold": (_NUM, "the χ² test rejects when p_value < Šidák(alpha_eff, 2)"),
+    "z_threshold": (_OPT_NUM, "the max-|z| test rejects when max_abs_z ≥ this two-sided normal "
+                              "quantile at Šidák(Šidák(alpha_eff, 2), n_bins)"),
+    "model_rtol": (_NUM, "relative quadrature error of the model added to σ in quadrature"),
+    "agrees": ((bool,), "p_value ≥ p_threshold and max_abs_z < z_threshold (false if n_bins = 0"
+                        " or dof ≤ 0): statistically indistinguishable at the run's precision"),
+    "deviations": ((list,), "[θo_lo, θo_hi] ranges in degrees of bins with |z| > 5 and "
+                            "|model − sim|/sim > 0.05 at any Δφ, adjacent θo bins merged"),
+    "max_rel_dev": (_OPT_NUM, "signed (model − sim)/sim of largest magnitude over E ∪ deviating "
+                              "bins (null if empty)"),
+    "worst_bin": ((list, type(None)), "[θo, Δφ] bin centre (degrees) of max_rel_dev"),
+}
+
+
+def sidak(alpha: float, n: int) -> float:
+    """Per-test level 1 − (1 − α)^(1/n) keeping the family-wise error at α (Šidák)."""
+    alpha = _checks.in_range("alpha", alpha, 0.0, 1.0, lo_open=True, hi_open=True)
+    if int(n) != n or n < 1:
+        raise ValueError(f"n must be an integer >= 1, got {n!r}")
+    return float(-np.expm1(np.log1p(-alpha) / n))
+
+
+def energy_set(energy: np.ndarray, fraction: float = ENERGY_FRACTION) -> np.ndarray:
+    """Boolean mask of the fewest entries of ``energy`` (≥ 0, flat), taken in decreasing order,
+    whose sum reaches ``fraction`` of the total (ties broken by position)."""
+    e = np.asarray(energy, dtype=np.float64).ravel()
+    mask = np.zeros(e.shape, dtype=bool)
+    total = e.sum()
+    if e.size == 0 or not total > 0:
+        return mask
+    order = np.argsort(-e, kind="stable")
+    n = int(np.searchsorted(np.cumsum(e[order]), fraction * total * (1.0 - 1e-12))) + 1
+    mask[order[:min(n, e.size)]] = True
+    return mask
+
+
+def _merge_ranges(flag_theta: np.ndarray, theta_edges: np.ndarray) -> list[list[float]]:
+    """[lo, hi] degree ranges of runs of True in ``flag_theta`` (one per θo bin)."""
+    out, start = [], None
+    for i, f in enumerate(list(flag_theta) + [False]):
+        if f and start is None:
+            start = i
+        elif not f and start is not None:
+            out.append([float(theta_edges[start]), float(theta_edges[i])])
+            start = None
+    return out
+
+
+def _opt(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def verdict(sim, stderr, counts, model, omega, theta_edges, *, phi_edges=None, theta_i=0.0,
+            name: str = "model", params: Mapping | None = None, fitted: bool = False,
+            n_params: int = 0, model_rtol: float = 1e-3, min_events: int = 25,
+            alpha: float = 0.01, n_tests: int = 1) -> dict:
+    """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``).
+
+    ``sim``, ``stderr``, ``model`` (sr⁻¹), ``counts`` (events) and ``omega`` (projected solid
+    angle, sr) are (Θ, Φ) arrays; ``theta_edges`` (Θ+1,) and ``phi_edges`` (Φ+1,, default: the
+    folded grid of ``Bins``) in degrees. ``n_params`` fitted parameters reduce the dof.
+    """
+    sim, se, cnt, mod, om = (np.asarray(a, dtype=np.float64) for a in
+                             (sim, stderr, counts, model, omega))
+    shape = sim.shape
+    if sim.ndim != 2 or any(a.shape != shape for a in (se, cnt, mod, om)):
+        raise ValueError("sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
+                         f"got {[a.shape for a in (sim, se, cnt, mod, om)]}")
+    theta_edges = np.asarray(theta_edges, dtype=np.float64)
+    if theta_edges.shape != (shape[0] + 1,):
+        raise ValueError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
+    if phi_edges is None:
+        from microsim.sim.bins import Bins
+        phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
+    phi_edges = np.asarray(phi_edges, dtype=np.float64)
+    if phi_edges.shape != (shape[1] + 1,):
+        raise ValueError(f"phi_edges must have shape ({shape[1] + 1},), got {phi_edges.shape}")
+    model_rtol = _checks.in_range("model_rtol", model_rtol, 0.0, 1.0)
+    if int(min_events) != min_events or min_events < 1:
+        raise ValueError(f"min_events must be an integer >= 1, got {min_events!r}")
+    if int(n_params) != n_params or n_params < 0:
+        raise ValueError(f"n_params must be an integer >= 0, got {n_params!r}")
+    alpha_eff = sidak(alpha, n_tests)
+    alpha_each = sidak(alpha_eff, 2)
+
+    with np.errstate(invalid="ignore", over="ignore"):
+        sigma = np.sqrt(se ** 2 + (model_rtol * mod) ** 2)
+        used = ((cnt >= min_events) & np.isfinite(sim) & np.isfinite(mod) & np.isfinite(se)
+                & (sigma > 0) & (sim > 0))
+    z = np.where(used, (sim - mod) / np.where(used, sigma, 1.0), 0.0)
+    rel = np.where(used, (mod - sim) / np.where(used, sim, 1.0), 0.0)
+    n_bins = int(used.sum())
+    dof = n_bins - int(n_params)
+    chi2 = float(np.sum(z ** 2))
+    p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else None
+    max_abs_z = float(np.max(np.abs(z))) if n_bins else None
+    z_thr = float(stats.norm.isf(0.5 * sidak(alpha_each, n_bins))) if n_bins else None
+    agrees = bool(dof > 0 and p_value >= alpha_each and max_abs_z < z_thr)
+
+    energy = np.where(used, sim * om, 0.0)
+    E = energy_set(energy).reshape(shape)
+    ew = energy[E]
+    rel_rms = float(np.sqrt(np.sum(ew * rel[E] ** 2) / ew.sum())) if E.any() else None
+
+    dev = used & (np.abs(z) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
+    cand = E | dev
+    if cand.any():
+        flat = np.flatnonzero(cand.ravel())
+        k = flat[np.argmax(np.abs(rel.ravel()[flat]))]
+        it, ip = np.unravel_index(k, shape)
+        max_rel_dev = float(rel.ravel()[k])
+        worst = [float(0.5 * (theta_edges[it] + theta_edges[it + 1])),
+                 float(0.5 * (phi_edges[ip] + phi_edges[ip + 1]))]
+    else:
+        max_rel_dev, worst = None, None
+    return {
+        "theta_i": float(theta_i), "model": str(name), "params": _jsonable_params(params),
+        "fitted": bool(fitted), "n_params": int(n_params), "n_bins": n_bins,
+        "min_events": int(min_events), "chi2": chi2, "dof": int(dof),
+        "chi2_dof": chi2 / dof if dof > 0 else None, "p_value": p_value,
+        "max_abs_z": max_abs_z, "rel_rms": _opt(rel_rms) if rel_rms is not None else None,
+        "energy_bins": int(E.sum()), "alpha": float(alpha), "n_tests": int(n_tests),
+        "alpha_eff": alpha_eff, "p_threshold": alpha_each, "z_threshold": z_thr,
+        "model_rtol": float(model_rtol), "agrees": agrees,
+        "deviations": _merge_ranges(dev.any(axis=1), theta_edges),
+        "max_rel_dev": max_rel_dev, "worst_bin": worst,
+    }
+
+
+def _jsonable_params(params: Mapping | None) -> dict:
+    """Parameters as plain JSON values (numbers, strings, lists; complex → [re, im])."""
+    def conv(v):
+        if isinstance(v, (bool, str)) or v is None:
+            return v
+        if isinstance(v, (complex, np.complexfloating)):
+            return [float(np.real(v)), float(np.imag(v))]
+        if isinstance(v, (int, float, np.integer, np.floating)):
+            return v.item() if isinstance(v, np.generic) else v
+        if isinstance(v, np.ndarray):
+            return [conv(x) for x in v.tolist()]
+        if isinstance(v, (list, tuple)):
+            return [conv(x) for x in v]
+        if isinstance(v, Mapping):
+            return {str(k): conv(x) for k, x in v.items()}
+        return repr(v)
+    return {str(k): conv(v) for k, v in dict(params or {}).items()}
+
+
+def validate_verdict(d) -> dict:
+    """Check a verdict dict against ``VERDICT_SCHEMA`` (keys, types, invariants); return it.
+    Raises ValueError naming the offending key."""
+    if not isinstance(d, Mapping):
+        raise ValueError(f"verdict must be a dict, got {type(d).__name__}")
+    missing = [k for k in VERDICT_SCHEMA if k not in d]
+    if missing:
+        raise ValueError(f"verdict is missing keys {missing}")
+    extra = [k for k in d if k not in VERDICT_SCHEMA]
+    if extra:
+        raise ValueError(f"verdict has unknown keys {extra}")
+    for key, (types, _) in VERDICT_SCHEMA.items():
+        v = d[key]
+        if isinstance(v, bool) and bool not in types:
+            raise ValueError(f"verdict[{key!r}] must be of type {types}, got bool")
+        if not isinstance(v, types):
+            raise ValueError(f"verdict[{key!r}] must be of type {types}, got {type(v).__name__}")
+        if isinstance(v, float) and not np.isfinite(v):
+            raise ValueError(f"verdict[{key!r}] must be finite or null, got {v!r}")
+    if d["n_bins"] < 0 or d["dof"] != d["n_bins"] - d["n_params"]:
+        raise ValueError("verdict['dof'] must equal n_bins - n_params with n_bins >= 0")
+    if d["p_value"] is not None and not 0.0 <= d["p_value"] <= 1.0:
+        raise ValueError(f"verdict['p_value'] must lie in [0, 1], got {d['p_value']}")
+    for r in d["deviations"]:
+        if not (isinstance(r, list) and len(r) == 2 and 0.0 <= r[0] < r[1] <= 90.0):
+            raise ValueError(f"verdict['deviations'] entries must be [lo, hi] in [0, 90], got {r}")
+    if d["worst_bin"] is not None and len(d["worst_bin"]) != 2:
+        raise ValueError("verdict['worst_bin'] must be [θo, Δφ] or null")
+    return d
+
+
+def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
+                        model_rtol: float = 1e-3, min_events: int = 25,
+                        alpha: float = 0.01) -> list[dict]:
+    """Verdicts for every incidence × model of ``result.models`` (prescribed models) and of
+    ``fitted`` (an iterable or name → mapping of ``fits.FitResult``; their ``model_values`` are
+    compared and their parameter count reduces the dof). ``params``: optional name → parameter
+    dict for the prescribed models (default ``result.meta.get("model_params", {})``).
+    The family size n_tests = #incidences × #models (prescribed + fitted)."""
+    fits = list(fitted.values()) if isinstance(fitted, Mapping) else list(fitted or [])
+    params = dict(result.meta.get("model_params", {}) if params is None else params)
+    entries = [(name, values, params.get(name, {}), False, 0)
+               for name, values in result.models.items()]
+    entries += [(f.name, f.model_values, f.params, True, len(f.params)) for f in fits]
+    names = [e[0] for e in entries]
+    if len(set(names)) != len(names):
+        raise ValueError(f"model names must be unique across prescribed and fitted, got {names}")
+    T = len(result.theta_i)
+    n_tests = max(1, T * len(entries))
+    omega = result.bins.projected_solid_angle()
+    out = []
+    for t in range(T):
+        for name, values, p, is_fit, k in entries:
+            values = np.asarray(values)
+            if values.shape != result.brdf.shape:
+                raise ValueError(f"model {name!r} has shape {values.shape}, "
+                                 f"expected {result.brdf.shape}")
+            out.append(verdict(result.brdf[t], result.stderr[t], result.counts[t], values[t],
+                               omega, result.theta_edges, phi_edges=result.phi_edges,
+                               theta_i=float(result.theta_i[t]), name=name, params=p,
+                               fitted=is_fit, n_params=k, model_rtol=model_rtol,
+                               min_events=min_events, alpha=alpha, n_tests=n_tests))
+    return out
+
+
+def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
+    """One line per model (in order of appearance) for the index table: "agrees" if every
+    incidence agrees, else e.g. "deviates at θi=80°: rel RMS 12% at θi=80°, worst +35% at θo 84°
+    (θi=80°)" (the largest rel_rms and |max_rel_dev| over the deviating incidences)."""
+    by_model: dict[str, list] = {}
+    for v in verdicts:
+        by_model.setdefault(v["model"], []).append(v)
+    out = {}
+    for name, vs in by_model.items():
+        bad = [v for v in vs if not v["agrees"]]
+        if not bad:
+            out[name] = "agrees"
+            continue
+        where = ", ".join(f"{v['theta_i']:g}°" for v in bad)
+        parts = [f"deviates at θi={where}"]
+        rms = [v for v in bad if v["rel_rms"] is not None]
+        if rms:
+            r = max(rms, key=lambda v: v["rel_rms"])
+            parts.append(f"rel RMS {100 * r['rel_rms']:.3g}% at θi={r['theta_i']:g}°")
+        worst = [v for v in bad if v["max_rel_dev"] is not None]
+        if worst:
+            w = max(worst, key=lambda v: abs(v["max_rel_dev"]))
+            parts.append(f"worst {100 * w['max_rel_dev']:+.3g}% at θo {w['worst_bin'][0]:g}°, "
+                         f"Δφ {w['worst_bin'][1]:g}° (θi={w['theta_i']:g}°)")
+        out[name] = parts[0] + (": " + ", ".join(parts[1:]) if len(parts) > 1 else "")
+    return out

@@ -1,0 +1,240 @@
+"""Verdict statistics (calibration, localisation, exact definitions, schema) and the known
+physics of issue 5 (V-groove G exact on V-grooves; Smith vs V-groove G on a Gaussian surface)."""
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from microsim import analytic as an
+from microsim import surfaces as sf
+from microsim.analysis import verdicts as V
+from microsim.sim import Bins, simulate
+from microsim.sim.predict import ModelSpec, predict
+
+BINS = Bins(30, 19)
+OMEGA = BINS.projected_solid_angle()
+
+
+def _lobe():
+    """A smooth positive 'BRDF' over the bins (sr⁻¹): a lobe at θo = 40°, Δφ = 180° on a floor."""
+    t = BINS.theta_centers[:, None]
+    p = BINS.phi_centers[None, :]
+    return 0.2 + 5.0 * np.exp(-((t - 40.0) / 12.0) ** 2 - ((p - 180.0) / 40.0) ** 2)
+
+
+def _verdict(sim, se, model, **kw):
+    counts = np.full(sim.shape, 1000)
+    return V.verdict(sim, se, counts, model, OMEGA, BINS.theta_edges, phi_edges=BINS.phi_edges,
+                     **kw)
+
+
+# --- calibration ------------------------------------------------------------------------------
+def test_false_alarm_rate_is_alpha_and_p_values_uniform():
+    """Sim = model + Gaussian noise of known σ (model_rtol = 0: σ is exact). The verdict is two
+    tests at Šidák(α, 2), so P(agrees = False) = α for independent tests and ≤ α otherwise:
+    binomial test (two-sided, 0.01) of the rejection count; the χ² p-values are uniform (KS)."""
+    rng = np.random.default_rng(1)
+    truth = _lobe()
+    se = 0.02 * truth + 0.01
+    alpha, n_rep = 0.1, 1000
+    rejected, pvals = 0, []
+    for _ in range(n_rep):
+        sim = truth + se * rng.standard_normal(truth.shape)
+        v = _verdict(sim, se, truth, model_rtol=0.0, alpha=alpha)
+        rejected += not v["agrees"]
+        pvals.append(v["p_value"])
+    assert stats.binomtest(rejected, n_rep, alpha).pvalue > V.sidak(0.01, 2)
+    assert stats.kstest(pvals, "uniform").pvalue > V.sidak(0.01, 2)
+
+
+def test_n_tests_applies_sidak_to_the_family():
+    truth = _lobe()
+    v = _verdict(truth, 0.01 * truth, truth, alpha=0.05, n_tests=8)
+    assert v["alpha_eff"] == pytest.approx(1.0 - 0.95 ** (1 / 8), rel=1e-12)
+    assert v["p_threshold"] == pytest.approx(1.0 - (1.0 - v["alpha_eff"]) ** 0.5, rel=1e-12)
+    a_bin = 1.0 - (1.0 - v["p_threshold"]) ** (1.0 / v["n_bins"])
+    assert v["z_threshold"] == pytest.approx(stats.norm.isf(a_bin / 2), rel=1e-12)
+
+
+# --- localisation and exact definitions ---------------------------------------------------------
+def test_model_off_by_ten_percent_in_a_theta_range_is_located_exactly():
+    """model = truth·1.1 for θo ∈ [30°, 45°) at every Δφ, noise 1 %: there z ≈ 10 ± 1 > 5 and the
+    relative error 10 % > 5 %; elsewhere z ~ N(0, 1) never reaches 5 (P ≈ 3e-7 per bin)."""
+    rng = np.random.default_rng(2)
+    truth = _lobe()
+    se = 0.01 * truth
+    sim = truth + se * rng.standard_normal(truth.shape)
+    region = (BINS.theta_centers >= 30.0) & (BINS.theta_centers < 45.0)
+    model = truth * np.where(region[:, None], 1.1, 1.0)
+    v = _verdict(sim, se, model)
+    assert v["agrees"] is False
+    assert v["deviations"] == [[30.0, 45.0]]
+    assert 30.0 <= v["worst_bin"][0] <= 45.0
+    assert v["max_rel_dev"] == pytest.approx(0.1, abs=0.05)
+    assert _verdict(sim, se, truth)["deviations"] == []
+
+
+@pytest.mark.parametrize("eps", [0.12, -0.07, 0.0])
+def test_rel_rms_of_a_uniform_relative_error_is_exactly_eps(eps):
+    sim = _lobe()
+    v = _verdict(sim, 0.01 * sim, sim * (1.0 + eps))
+    assert v["rel_rms"] == pytest.approx(abs(eps), rel=1e-12, abs=1e-15)
+
+
+def test_energy_set_is_the_smallest_set_reaching_the_fraction():
+    rng = np.random.default_rng(3)
+    e = rng.exponential(size=500)
+    mask = V.energy_set(e, 0.9)
+    assert e[mask].sum() >= 0.9 * e.sum() * (1 - 1e-12)
+    assert e[mask].min() >= e[~mask].max()
+    assert e[mask].sum() - e[mask].min() < 0.9 * e.sum()            # minimal
+
+
+def test_bins_below_min_events_are_ignored():
+    truth = _lobe()
+    counts = np.full(truth.shape, 1000)
+    counts[:10] = 24
+    model = truth * np.where(np.arange(BINS.n_theta)[:, None] < 10, 2.0, 1.0)
+    v = V.verdict(truth, 0.01 * truth, counts, model, OMEGA, BINS.theta_edges, min_events=25)
+    assert v["n_bins"] == (BINS.n_theta - 10) * BINS.n_phi
+    assert v["agrees"] and v["deviations"] == []
+
+
+def test_fitted_parameters_reduce_dof():
+    truth = _lobe()
+    v = _verdict(truth, 0.01 * truth, truth, fitted=True, n_params=3, params={"m": 0.3})
+    assert v["dof"] == v["n_bins"] - 3 and v["fitted"] and v["params"] == {"m": 0.3}
+
+
+# --- schema -----------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def small_vgroove_result():
+    surface = sf.vgrooves(1000, an.Beckmann(0.3))
+    res = simulate(surface, "aluminium", [0.0, 60.0], rays=100_000, bins=BINS)
+    res.models.update(predict([ModelSpec.torrance_sparrow("ts_vgroove", an.Beckmann(0.3),
+                                                          "vgroove", "aluminium")],
+                              res.theta_i, BINS))
+    return res
+
+
+def test_schema_accepts_real_output_and_json_round_trip(small_vgroove_result):
+    vs = V.verdicts_for_result(small_vgroove_result, params={"ts_vgroove": {"m": 0.3}})
+    assert len(vs) == 2 and all(v["n_tests"] == 2 for v in vs)
+    for v in vs:
+        V.validate_verdict(json.loads(json.dumps(v, allow_nan=False)))
+    assert set(V.summary_row(vs)) == {"ts_vgroove"}
+
+
+def test_schema_rejects_missing_keys_and_wrong_types():
+    truth = _lobe()
+    v = _verdict(truth, 0.01 * truth, truth)
+    V.validate_verdict(v)
+    for key in ("chi2", "agrees", "deviations"):
+        bad = dict(v)
+        del bad[key]
+        with pytest.raises(ValueError, match=key):
+            V.validate_verdict(bad)
+    with pytest.raises(ValueError, match="agrees"):
+        V.validate_verdict({**v, "agrees": "yes"})
+    with pytest.raises(ValueError, match="n_bins"):
+        V.validate_verdict({**v, "n_bins": 3.0})
+    with pytest.raises(ValueError, match="unknown"):
+        V.validate_verdict({**v, "extra": 1})
+
+
+def test_summary_row_wording():
+    truth = _lobe()
+    good = _verdict(truth, 0.01 * truth, truth, name="a", theta_i=30.0)
+    bad = _verdict(truth, 0.01 * truth, truth * 1.2, name="b", theta_i=80.0)
+    rows = V.summary_row([good, bad])
+    assert rows["a"] == "agrees"
+    assert rows["b"].startswith("deviates at θi=80°") and "rel RMS 20% at θi=80°" in rows["b"]
+    assert "worst +20%" in rows["b"]
+
+
+def test_invalid_arguments_raise():
+    truth = _lobe()
+    with pytest.raises(ValueError, match="alpha"):
+        _verdict(truth, truth, truth, alpha=0.0)
+    with pytest.raises(ValueError, match="shape"):
+        V.verdict(truth, truth, truth, truth[:3], OMEGA, BINS.theta_edges)
+    with pytest.raises(ValueError, match="min_events"):
+        _verdict(truth, truth, truth, min_events=0)
+
+
+# --- known physics (issue 5) --------------------------------------------------------------------
+def _vgroove_verdicts(rays, n_grooves=4000, masking="traced"):
+    """TS with Blinn's V-groove G is exact for single scattering on V-grooves (DESIGN.md)."""
+    surface = sf.vgrooves(n_grooves, an.Beckmann(0.3))
+    res = simulate(surface, "aluminium", [0.0, 30.0, 60.0, 80.0], rays=rays, bins=BINS,
+                   masking=masking)
+    res.models.update(predict([ModelSpec.torrance_sparrow("ts_vgroove", an.Beckmann(0.3),
+                                                          "vgroove", "aluminium")],
+                              res.theta_i, BINS))
+    return V.verdicts_for_result(res)
+
+
+def _assert_vgroove_agrees(vs):
+    for v in vs:
+        V.validate_verdict(v)
+        assert v["agrees"], v
+        assert v["deviations"] == []
+
+
+def test_vgroove_g_agrees_on_vgrooves():
+    _assert_vgroove_agrees(_vgroove_verdicts(1_000_000))
+
+
+@pytest.mark.slow
+def test_vgroove_g_agrees_on_vgrooves_slow():
+    """At 8e6 rays the run resolves what 1e6 cannot: the discreteness of 4000 stratified groove
+    tilts (~1 tilt in ~100 per bin, χ²/dof ≈ 1.5 at θi = 0°) and the traced-masking offset bias
+    near the horizon. A surface model with no more detail than the question needs then has
+    40000 grooves and the exact float64 masking test."""
+    _assert_vgroove_agrees(_vgroove_verdicts(8_000_000, 40_000, "exact"))
+
+
+def _gaussian_comparison(rays, seeds):
+    """Gaussian heightfield m = 2σ/ℓ = 0.5 at θi ∈ {60°, 80°} against TS with Beckmann at the
+    realised m and either V-groove G or height-correlated Smith G2."""
+    surfaces = [sf.gaussian(512, 1.0, 2.0, 8.0, seed=s) for s in seeds]
+    m = float(np.mean([s.stats()["m_realised"] for s in surfaces]))
+    res = simulate(surfaces[0], "aluminium", [60.0, 80.0], rays=rays, bins=BINS,
+                   realisations=surfaces if len(surfaces) > 1 else None)
+    ndf = an.Beckmann(m)
+    res.models.update(predict([ModelSpec.torrance_sparrow("vgroove", ndf, "vgroove", "aluminium"),
+                               ModelSpec.torrance_sparrow("smith", ndf, "smith-correlated",
+                                                          "aluminium")], res.theta_i, BINS))
+    return res
+
+
+def _peak_ratio(res, name, t):
+    """Σ model Ω / Σ sim Ω over the in-plane forward bins within 4° of the mirror direction."""
+    f = BINS.forward_index
+    near = np.abs(BINS.theta_centers - res.theta_i[t]) < 4.0
+    om = OMEGA[near, f]
+    return np.sum(res.models[name][t, near, f] * om) / np.sum(res.brdf[t, near, f] * om)
+
+
+def _assert_gaussian_physics(res):
+    vs = {(v["model"], v["theta_i"]): v for v in V.verdicts_for_result(res)}
+    t80 = int(np.flatnonzero(res.theta_i == 80.0)[0])
+    vg_peak, sm_peak = _peak_ratio(res, "vgroove", t80), _peak_ratio(res, "smith", t80)
+    # V-groove G: the m = 0.5 specular peak far too bright at 80° (DESIGN.md: 1.8×).
+    assert vg_peak > 1.4
+    # Height-correlated Smith: much closer at the peak. (Measured +8–13 % at 80°, see report;
+    # the DESIGN 0.2 % statement is about G1 masking, not about the G2 of forward scattering.)
+    assert abs(sm_peak - 1.0) < 0.5 * (vg_peak - 1.0)
+    assert not vs[("vgroove", 80.0)]["agrees"]
+    assert vs[("smith", 80.0)]["rel_rms"] < vs[("vgroove", 80.0)]["rel_rms"] / 3.0
+    assert vs[("smith", 60.0)]["rel_rms"] < vs[("vgroove", 60.0)]["rel_rms"]
+
+
+def test_smith_beats_vgroove_g_on_a_gaussian_surface():
+    _assert_gaussian_physics(_gaussian_comparison(1_000_000, [0]))
+
+
+@pytest.mark.slow
+def test_smith_beats_vgroove_g_on_a_gaussian_surface_slow():
+    _assert_gaussian_physics(_gaussian_comparison(4_000_000, [0, 1, 2, 3]))
