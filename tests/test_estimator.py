@@ -299,3 +299,21 @@ def test_exact_and_traced_agree_near_the_horizon_on_4000_grooves():
         near = lambda e: (e.status == 0) & (e.wo[:, 2] < np.cos(np.radians(80.0)))  # noqa: E731
         nx, ny = near(x).sum(), near(y).sum()
         assert abs(int(ny) - int(nx)) <= zc * np.sqrt(nx)   # paired: bias below the ray noise
+
+
+# --- ray origins ------------------------------------------------------------------------------------
+def test_independent_origins_agree_with_stratified_and_are_recorded():
+    """i.i.d. origins (sorted per block) estimate the same BRDF: two-run χ² and masked fraction."""
+    s = heightfield_surface(random_heights(sigma=0.03, seed=6), 1 / 64)
+    kw = dict(rays=200_000, bins=Bins(15, 7))
+    a = simulate(s, "aluminium", [30.0, 75.0], seed=1, origins="stratified", **kw)
+    b = simulate(s, "aluminium", [30.0, 75.0], seed=2, origins="independent", **kw)
+    assert (a.meta["origins"], b.meta["origins"]) == ("stratified", "independent")
+    chi2, dof = chi2_two_runs(a, b)
+    assert dof > 50 and stats.chi2.sf(chi2, dof) > ALPHA / 2
+    p, q = a.ledger["masked"], b.ledger["masked"]
+    se = np.sqrt((p * (1 - p) + q * (1 - q)) / a.rays)
+    assert np.all(np.abs(p - q) <= sidak_z(4) * se)
+    c = simulate(s, "aluminium", [30.0, 75.0], seed=2, origins="independent", threads=1,
+                 chunk=BLOCK, **kw)
+    assert np.array_equal(b.sum_w, c.sum_w)               # still bitwise reproducible

@@ -265,14 +265,19 @@ def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
     T = len(result.theta_i)
     n_tests = max(1, T * len(entries))
     omega = result.bins.projected_solid_angle()
+    # models of the realised surfaces themselves (``ts-facets``) differ from the simulation by
+    # ray noise only; ensemble models also by the tile-to-tile scatter (``result.stderr``)
+    own = set(result.meta.get("realisation_models", ()))
+    ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
     out = []
     for t in range(T):
         for name, values, p, is_fit, k in entries:
+            stderr = ray_err if name in own else result.stderr
             values = np.asarray(values)
             if values.shape != result.brdf.shape:
                 raise ValueError(f"model {name!r} has shape {values.shape}, "
                                  f"expected {result.brdf.shape}")
-            out.append(verdict(result.brdf[t], result.stderr[t], result.counts[t], values[t],
+            out.append(verdict(result.brdf[t], stderr[t], result.counts[t], values[t],
                                omega, result.theta_edges, phi_edges=result.phi_edges,
                                theta_i=float(result.theta_i[t]), name=name, params=p,
                                fitted=is_fit, n_params=k, model_rtol=model_rtol,

@@ -21,14 +21,21 @@ single-bounce albedo ρ(θi) (Mikkelsen eq. 27); ``lost``/``lost_fresnel`` are t
 Fresnel-weighted fractions that single scattering loses (masked + downward).
 
 Reproducibility: the rays of (realisation r, incidence i) are cut into fixed blocks of
-``BLOCK`` rays; block b draws its numbers from ``default_rng([seed, r, i, b])``, is traced as
-its own batch and tallied on its own; block tallies are summed in block order. A ``chunk`` (a
-whole number of blocks) is only the unit of work handed to a thread, so results are bitwise
-identical for any ``threads``/``chunk``.
+``BLOCK`` rays; block b draws its numbers from ``default_rng([seed, r, i, b])`` and is tallied
+on its own; block tallies are summed in block order. A ``chunk`` (a whole number of blocks) is
+traced as one vectorised batch — every per-ray operation is elementwise (Fresnel, whose complex
+kernels round by array position, is evaluated per block) and ``np.bincount`` on a combined
+(block, bin) index sums each block sequentially — so results are bitwise identical for any
+``threads``/``chunk``. The same makes runs resumable: an interrupted run keeps
+its exact running sums and block counts (``Result.tallies``), and ``simulate(resume=...)``
+continues with the next block (see ``simulate``).
 
 V-grooves (``surface.azimuth_average``): each ray gets its own uniformly random groove azimuth
-ψ; wi is rotated by −ψ about z into the groove frame, traced, and wo rotated back by +ψ. This
-gives the isotropic V-cavity BRDF with independent rays (so the per-ray variance is valid).
+ψ; wi is rotated by −ψ about z into the groove frame, traced, and wo binned against the
+rotated incident azimuth (Δφ is rotation-invariant). This gives the isotropic V-cavity BRDF
+with independent rays (so the per-ray variance is valid). Heightfields with no more facets
+than an incidence has rays use a per-facet table of Fresnel weight, mirror direction and bin
+(``_facet_table``): only the two ray casts remain per ray.
 
 Masking offsets: traced masking rays start eps ≈ 2 float32 ulp of the largest coordinate above
 the facet (1.2e-7 on a unit tile). The resulting bias scales like eps/feature depth, amplified
@@ -38,6 +45,9 @@ relative (≪ 0.1%); on a unit tile of 4000 V-grooves it was measured at +0.1–
 """
 from __future__ import annotations
 
+import hashlib
+import signal
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -51,14 +61,15 @@ from microsim.analytic.fresnel import fresnel, resolve_material
 
 from .bins import Bins
 from .result import Result
-from .tracer import ESCAPED, HIT, MISSED, Tracer, VGrooveProfile
+from .tracer import ESCAPED, HIT, MISSED, UNRESOLVED, Tracer, VGrooveProfile
 
-__all__ = ["simulate", "ray_events", "Events", "BLOCK", "LEDGER", "MASKING"]
+__all__ = ["simulate", "ray_events", "Events", "BLOCK", "LEDGER", "MASKING", "ORIGINS"]
 
 BLOCK = 4096
 SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = range(5)
 LEDGER = ("single", "masked", "downward", "unresolved", "missed")
 MASKING = ("traced", "exact")
+ORIGINS = ("stratified", "independent")
 
 
 @dataclass(frozen=True)
@@ -88,12 +99,17 @@ def _rotate_z(w: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     return out
 
 
-def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool):
+def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
+                origins: str = "stratified"):
     """Origins (n, 3) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one block.
 
-    Ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a row-major sweep of the tile
-    (``rows`` rows, ~square strata), jittered uniformly inside it; y is jittered inside its
-    row. The union of strata is the whole tile, so origins are uniform over one period.
+    ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
+    row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
+    y is jittered inside its row. The union of strata is the whole tile, so origins are uniform
+    over one period (and a block covers a compact strip: coherent rays).
+    ``origins="independent"``: i.i.d. uniform origins over the whole tile, then sorted
+    row-major on a ~square grid of the block's size (coherence only: the set is unchanged).
+    Both draw the same random numbers from ``default_rng([*key, block])``.
     """
     lx, ly = tracer.tile
     start = block * BLOCK
@@ -101,24 +117,53 @@ def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], az
     rng = np.random.default_rng(list(key) + [block])
     xi, eta = rng.random(len(r)), rng.random(len(r))
     psi = 2 * np.pi * rng.random(len(r)) if azimuth else np.zeros(len(r))
+    z = np.full(len(r), tracer.zmax + tracer.top_margin)
+    if origins == "independent":
+        rows = max(1, int(round(np.sqrt(len(r) * ly / lx))))
+        row = np.minimum(np.floor(eta * rows), rows - 1)
+        order = np.lexsort((xi, row))
+        x, y, psi = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2, psi[order]
+        return np.stack([x, y, z], axis=1), psi
     rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
     q = (r + xi) / n_total * rows
     row = np.minimum(np.floor(q), rows - 1)
     x = (q - row) * lx - lx / 2
     y = (row + eta) / rows * ly - ly / 2
-    z = np.full(len(r), tracer.zmax + tracer.top_margin)
     return np.stack([x, y, z], axis=1), psi
 
 
+def _fresnel_by_block(c: np.ndarray, rows: np.ndarray, ior) -> np.ndarray:
+    """Fresnel weights F(c) of the rays ``rows`` (sorted indices into a batch of whole blocks),
+    evaluated with one ``fresnel`` call per block.
+
+    NumPy's complex kernels round the last bit differently in the SIMD body and in the scalar
+    tail of an array (measured: (η² − 1)·z over a complex array differs by 1 ulp depending on
+    the position), so evaluating block by block keeps every weight independent of how many
+    blocks share a batch; all other per-ray operations are elementwise and position-independent.
+    """
+    if rows.size == 0:
+        return np.zeros(0)
+    cuts = np.searchsorted(rows, np.arange(BLOCK, int(rows[-1]) + 1, BLOCK))
+    return np.concatenate([fresnel(part, ior) for part in np.split(c, cuts)])
+
+
+_FROM_ESCAPE = np.zeros(4, dtype=np.int8)                  # tracer status -> ledger class
+_FROM_ESCAPE[[HIT, ESCAPED, UNRESOLVED, MISSED]] = [MASKED, SINGLE, RAY_UNRESOLVED, RAY_MISSED]
+
+
 def _trace(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior, azimuth: bool) -> Events:
-    """Follow primary rays from direction ``wi`` (global) to their ledger class (vectorised)."""
+    """Follow primary rays from direction ``wi`` (global) to their ledger class (vectorised).
+
+    ``origins`` is a batch of whole ``BLOCK``s (the last may be short); the outcome of every
+    ray is independent of the batch size (see ``_fresnel_by_block``)."""
     n = len(origins)
     if azimuth:                                          # trace in the groove frame: wi by −ψ
         cpsi, spsi = np.cos(psi), np.sin(psi)
         wl = _rotate_z(wi, cpsi, -spsi)
+        hits = tracer.first_hit(origins, -wl)
     else:
         wl = np.broadcast_to(wi, (n, 3))
-    hits = tracer.first_hit(origins, -wl)
+        hits = tracer.first_hit(origins, -np.asarray(wi, dtype=np.float64))  # one shared direction
     status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
     status[hits.status == MISSED] = RAY_MISSED
     status[hits.status == ESCAPED] = RAY_MISSED          # a falling ray cannot escape
@@ -130,7 +175,7 @@ def _trace(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior, azimuth: 
     c = np.einsum("ij,ij->i", wl[h], nrm)
     front = c > 0                                        # back-facing hits stay unresolved
     h, nrm, c = h[front], nrm[front], c[front]
-    weight[h] = fresnel(c, ior)
+    weight[h] = _fresnel_by_block(c, h, ior)
     wlo = 2.0 * c[:, None] * nrm - wl[h]
     up = wlo[:, 2] > 0
     status[h[~up]] = DOWNWARD
@@ -140,40 +185,229 @@ def _trace(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior, azimuth: 
         margin[hu] = m
         status[hu] = np.where(m > 0, MASKED, SINGLE)
     else:
-        esc = tracer.escapes(hits.point[hu], nrm[up], wlo[up])
-        status[hu] = np.select([esc == ESCAPED, esc == HIT, esc == MISSED],
-                               [SINGLE, MASKED, RAY_MISSED], RAY_UNRESOLVED)
+        status[hu] = _FROM_ESCAPE[tracer.escapes(hits.point[hu], nrm[up], wlo[up])]
     wo[h] = wlo if not azimuth else _rotate_z(wlo, cpsi[h], spsi[h])   # back by +ψ
     normal = np.full((n, 3), np.nan)
     normal[h] = nrm if not azimuth else _rotate_z(nrm, cpsi[h], spsi[h])
     return Events(status=status, weight=weight, wo=wo, normal=normal, margin=margin)
 
 
+@dataclass(frozen=True)
+class _FacetTable:
+    """What a primary ray from ``wi`` does on each facet of a surface traced without azimuth
+    averaging (wi is then the same for every ray): ``code`` (F,) int8 SINGLE (lit, reflects
+    upwards: a masking ray decides), DOWNWARD or RAY_UNRESOLVED (back-facing); ``weight`` (F,)
+    Fresnel F(n·wi) (0 when back-facing); ``wo`` (F, 3) mirror direction 2(wi·n)n − wi;
+    ``bin`` (F,) flat bin index of wo (−1 below the horizon). Per-axis copies for the
+    masking rays: ``wo_cols`` (3 × (F,)), ``wo32`` (F, 3) float32, ``normal_cols`` (3 × (F,))
+    and ``lift`` (F,) = n·v0 + eps (a point p starts its masking ray at p − (p·n − lift) n:
+    on the facet plane, eps above it)."""
+
+    code: np.ndarray
+    weight: np.ndarray
+    wo: np.ndarray
+    bin: np.ndarray
+    wo_cols: tuple
+    wo32: np.ndarray
+    normal_cols: tuple
+    lift: np.ndarray
+
+
+def _facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float) -> _FacetTable:
+    n = tracer.normals
+    c = n[:, 0] * wi[0] + n[:, 1] * wi[1] + n[:, 2] * wi[2]
+    front = c > 0
+    wo = 2.0 * c[:, None] * n - wi
+    up = wo[:, 2] > 0
+    code = np.where(~front, RAY_UNRESOLVED, np.where(up, SINGLE, DOWNWARD)).astype(np.int8)
+    weight = np.where(front, fresnel(np.clip(c, 0.0, 1.0), ior), 0.0)
+    return _FacetTable(code=code, weight=weight, wo=wo, bin=bins.locate(wo, phi_i),
+                       wo_cols=tuple(np.ascontiguousarray(wo[:, k]) for k in range(3)),
+                       wo32=wo.astype(np.float32),
+                       normal_cols=tuple(np.ascontiguousarray(n[:, k]) for k in range(3)),
+                       lift=tracer._plane + tracer.eps)
+
+
+def _trace_tabled(tracer: Tracer, table: _FacetTable, wi: np.ndarray, origins):
+    """(status, weight, bin) per primary ray, looked up per hit facet in ``table`` (the fast
+    path for surfaces without azimuth averaging: only the two ray casts are per ray, and the
+    masking-ray starts are computed on per-axis columns)."""
+    n = len(origins)
+    x = [np.ascontiguousarray(origins[:, k]) for k in range(3)]
+    wi = np.asarray(wi, dtype=np.float64)
+    hs, prim, p = tracer.trace_columns(x, [float(-c) for c in wi], (-wi).astype(np.float32)[None])
+    status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
+    status[(hs == MISSED) | (hs == ESCAPED)] = RAY_MISSED   # a falling ray cannot escape
+    weight = np.zeros(n)
+    where = np.full(n, -1, dtype=np.int64)
+    h = np.flatnonzero(hs == HIT)
+    pr = prim[h]
+    code = table.code[pr]
+    status[h] = code
+    weight[h] = table.weight[pr]
+    lit = code == SINGLE
+    hc, pc = h[lit], pr[lit]
+    ph = [c[hc] for c in p]
+    nc = [c[pc] for c in table.normal_cols]
+    off = ph[0] * nc[0] + ph[1] * nc[1] + ph[2] * nc[2] - table.lift[pc]
+    start = [ph[k] - off * nc[k] for k in range(3)]
+    esc = tracer.escape_columns(start, [c[pc] for c in table.wo_cols], table.wo32[pc])
+    status[hc] = _FROM_ESCAPE[esc]
+    where[hc] = table.bin[pc]
+    return status, weight, where
+
+
+def _stack32(cols) -> np.ndarray:
+    """(N, 3) float32 array from three (N,) columns."""
+    out = np.empty((len(cols[0]), 3), dtype=np.float32)
+    for k in range(3):
+        out[:, k] = cols[k]
+    return out
+
+
+def _trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, ior):
+    """(status, weight, bin) per primary ray — the fast path of ``_trace`` for tallies, on
+    per-axis columns. ``psi`` None: one shared direction −wi. ``psi`` (N,) (``azimuth_average``
+    surfaces): each ray is traced in its groove frame (wi rotated by −ψ) and binned there too —
+    Δφ = φo − φi is unchanged by the rotation, so wo is located against the rotated incident
+    azimuth φi − ψ instead of being rotated back."""
+    n = len(origins)
+    x = [np.ascontiguousarray(origins[:, k]) for k in range(3)]
+    if psi is None:
+        wl = [float(c) for c in wi]
+        down = [-c for c in wl]
+        hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32))
+    else:
+        cp, sp = np.cos(psi), np.sin(psi)
+        wl = [cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], np.full(n, float(wi[2]))]
+        down = [-c for c in wl]
+        hs, prim, p = tracer.trace_columns(x, down, _stack32(down))
+    status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
+    status[(hs == MISSED) | (hs == ESCAPED)] = RAY_MISSED   # a falling ray cannot escape
+    weight = np.zeros(n)
+    where = np.full(n, -1, dtype=np.int64)
+    h = np.flatnonzero(hs == HIT)
+    pr = prim[h]
+    ncols = tracer.memo("normal-columns", lambda: tuple(np.ascontiguousarray(tracer.normals[:, k])
+                                                        for k in range(3)))
+    nc = [c[pr] for c in ncols]
+    wh = wl if psi is None else [c[h] for c in wl]
+    c = wh[0] * nc[0] + wh[1] * nc[1] + wh[2] * nc[2]
+    front = c > 0                                           # back-facing hits stay unresolved
+    if not front.all():
+        h, pr, c = h[front], pr[front], c[front]
+        nc = [a[front] for a in nc]
+        wh = wh if psi is None else [a[front] for a in wh]
+    weight[h] = _fresnel_by_block(c, h, ior)
+    wo = [2.0 * c * nc[k] - wh[k] for k in range(3)]
+    up = wo[2] > 0
+    hu, pu = h, pr
+    if not up.all():
+        status[h[~up]] = DOWNWARD
+        hu, pu = h[up], pr[up]
+        wo, nc = [a[up] for a in wo], [a[up] for a in nc]
+    if profile is not None:
+        margin = profile.margin_columns(pu, p[0][hu], wo[0], wo[2])
+        status[hu] = np.where(margin > 0, MASKED, SINGLE)
+    else:
+        ph = [a[hu] for a in p]
+        off = ph[0] * nc[0] + ph[1] * nc[1] + ph[2] * nc[2] - (tracer._plane[pu] + tracer.eps)
+        start = [ph[k] - off * nc[k] for k in range(3)]
+        status[hu] = _FROM_ESCAPE[tracer.escape_columns(start, wo, _stack32(wo))]
+    single = status[hu] == SINGLE
+    hs_ = hu[single]
+    ws = np.stack([a[single] for a in wo], axis=1)
+    where[hs_] = bins.locate(ws, phi_i if psi is None else phi_i - np.degrees(psi[hs_]))
+    return status, weight, where
+
+
+def _split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "_Handout":
+    """Per-block tallies (Σw, Σw², counts per bin; ledger counts and Fresnel sums) of a batch of
+    whole blocks. ``np.bincount`` on the combined (block, bin) index adds each block's rays
+    sequentially in ray order, so every block's sums are bitwise those of the block alone."""
+    blk = np.arange(len(status)) // BLOCK
+    s = np.flatnonzero((status == SINGLE) & (where >= 0))
+    flat, w = blk[s] * nbin + where[s], weight[s]
+    size = n_blocks * nbin
+    sw = np.bincount(flat, weights=w, minlength=size).reshape(n_blocks, nbin)
+    sw2 = np.bincount(flat, weights=w * w, minlength=size).reshape(n_blocks, nbin)
+    cnt = np.bincount(flat, minlength=size).reshape(n_blocks, nbin)
+    led = blk * len(LEDGER) + status
+    ln = np.bincount(led, minlength=n_blocks * len(LEDGER)).reshape(n_blocks, len(LEDGER))
+    lf = np.bincount(led, weights=weight, minlength=n_blocks * len(LEDGER)).reshape(n_blocks, -1)
+    return _Handout([(sw[k], sw2[k], cnt[k], ln[k], lf[k]) for k in range(n_blocks)])
+
+
+class _Handout:
+    """Per-block tallies of one chunk, handed out once, in block order: iterating releases
+    them, so a finished future its caller still holds keeps no arrays (memory stays
+    independent of the number of rays)."""
+
+    def __init__(self, items: list):
+        self._items = items[::-1]
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __iter__(self):
+        while self._items:
+            yield self._items.pop()
+
+
 # --- tallies -------------------------------------------------------------------------------
-def _block_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, block, key, azimuth):
-    """Tallies of one block: Σw, Σw², counts per bin; ledger counts and Fresnel sums.
+_ROTATION_STREAM = 0x150   # extra key of the per-block incidence-azimuth generator
 
-    Each block is traced as its own batch: NumPy's SIMD kernels may round a value differently
-    depending on its position in an array, so batching blocks together would make the last
-    bits depend on the chunk size."""
-    origins, psi = _block_rays(tracer, n_total, block, key, azimuth)
-    ev = _trace(tracer, profile, wi, origins, psi, ior, azimuth)
+
+def _block_rotation(key, block: int) -> float:
+    """Incidence-azimuth rotation ψ_b (radians, uniform in [0, 2π)) of block ``block``."""
+    return 2.0 * np.pi * np.random.default_rng(list(key) + [block, _ROTATION_STREAM]).random()
+
+
+def _rotated_tallies(tracer, profile, wi, phi_i, bins, ior, key, blocks, drawn):
+    """(status, weight, bin) with the incidence azimuth of every block rotated by its own ψ_b
+    about the macro normal, the bins taken relative to the rotated azimuth φi + ψ_b: φi is
+    then uniform, which averages a statistically isotropic surface's realisation over incident
+    azimuths without changing the expected BRDF. One shared direction per block keeps the
+    batch coherent."""
+    out = []
+    for b, (starts, _) in zip(blocks, drawn):
+        psi = _block_rotation(key, b)
+        c, s = np.cos(psi), np.sin(psi)
+        wb = np.array([c * wi[0] - s * wi[1], s * wi[0] + c * wi[1], wi[2]])
+        out.append(_trace_columns(tracer, profile, wb, phi_i + np.degrees(psi), bins, starts,
+                                  None, ior))
+    return tuple(np.concatenate(parts) for parts in zip(*out))
+
+
+def _chunk_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, blocks, *, key, azimuth,
+                   origins="stratified", rotate=False):
+    """Per-block tallies of a chunk of consecutive blocks (one thread task), traced as one batch.
+
+    Every block draws its own rays (``_block_rays``); per-ray work is position-independent and
+    the tallies are split per block (``_split_tallies``), so the result is bitwise the same for
+    any chunk size or thread count. Surfaces without azimuth averaging use a per-facet table
+    of Fresnel weight, mirror direction and bin (``_facet_table``, built once per incidence and
+    shared by the threads) when the mesh has no more facets than the incidence has rays.
+    ``rotate`` (statistically isotropic surfaces without ``azimuth_average``): rotate the
+    incidence azimuth per block (``_rotated_tallies``); rays of a block share ψ_b, so the
+    per-ray standard error then omits the (small) azimuth-to-azimuth scatter of one surface."""
+    blocks = list(blocks)
+    drawn = [_block_rays(tracer, n_total, b, key, azimuth, origins) for b in blocks]
     nbin = bins.shape[0] * bins.shape[1]
-    single = np.flatnonzero(ev.status == SINGLE)
-    idx = bins.locate(ev.wo[single], phi_i)
-    ok = idx >= 0
-    flat, w = idx[ok], ev.weight[single[ok]]
-    return (np.bincount(flat, weights=w, minlength=nbin),
-            np.bincount(flat, weights=w * w, minlength=nbin),
-            np.bincount(flat, minlength=nbin),
-            np.bincount(ev.status, minlength=len(LEDGER)),
-            np.bincount(ev.status, weights=ev.weight, minlength=len(LEDGER)))
-
-
-def _chunk_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, blocks, *, key, azimuth):
-    """Per-block tallies of a chunk of consecutive blocks (one thread task)."""
-    return [_block_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, b, key, azimuth)
-            for b in blocks]
+    if rotate and not azimuth:
+        status, weight, where = _rotated_tallies(tracer, profile, wi, phi_i, bins, ior, key,
+                                                 blocks, drawn)
+        return _split_tallies(status, weight, where, len(blocks), nbin)
+    starts = np.concatenate([d[0] for d in drawn])
+    if not azimuth and profile is None and len(tracer.faces) <= n_total:
+        wi = np.asarray(wi, dtype=np.float64)
+        table = tracer.memo(("facet-table", tuple(wi), ior, bins, float(phi_i)),
+                            lambda: _facet_table(tracer, wi, ior, bins, phi_i))
+        status, weight, where = _trace_tabled(tracer, table, wi, starts)
+    else:
+        psi = np.concatenate([d[1] for d in drawn]) if azimuth else None
+        status, weight, where = _trace_columns(tracer, profile, wi, phi_i, bins, starts, psi, ior)
+    return _split_tallies(status, weight, where, len(blocks), nbin)
 
 
 @dataclass
@@ -275,15 +509,74 @@ def _surface_meta(surface) -> dict:
         warnings.append("the tile was traced as periodic although surface.periodic is False: "
                         "its seams act as steps")
     z = surface.vertices[:, 2]
-    return {"kind": surface.kind, "nominal": dict(surface.nominal),
+    digest = hashlib.sha1(np.ascontiguousarray(surface.vertices, dtype=np.float64).tobytes())
+    digest.update(np.ascontiguousarray(surface.faces, dtype=np.int64).tobytes())
+    return {"kind": surface.kind, "fingerprint": digest.hexdigest()[:16],
+            "nominal": dict(surface.nominal),
             "tile_size": [float(t) for t in surface.tile_size], "triangles": int(len(surface.faces)),
             "z_range": [float(np.min(z)), float(np.max(z))], "periodic": bool(surface.periodic),
             "warnings": warnings}
 
 
+class _DeferredInterrupt:
+    """While active (main thread only), SIGINT sets ``event`` instead of raising, so that the
+    running sums are never left half-updated; ``simulate`` checks the event between chunks."""
+
+    def __enter__(self):
+        self.event = threading.Event()
+        self._installed = threading.current_thread() is threading.main_thread()
+        if self._installed:
+            self._old = signal.signal(signal.SIGINT, lambda signum, frame: self.event.set())
+        return self.event
+
+    def __exit__(self, *exc):
+        if self._installed:
+            signal.signal(signal.SIGINT, signal.default_int_handler if self._old is None
+                          else self._old)
+        return False
+
+
+def _run_config(th, ph, bins, seed, rays, masking, origins, material, n_real) -> dict:
+    """What a resumed run must share with the partial one (JSON-able, compared key by key)."""
+    return {"theta_i": [float(t) for t in th], "phi_i": [float(p) for p in ph],
+            "bins": bins.to_dict(), "seed": seed, "rays": rays, "masking": masking,
+            "origins": origins, "material": material, "realisations": n_real, "block": BLOCK}
+
+
+def _resume_state(resume, config, n_real, n_th, nbin):
+    """Running sums, blocks done (R, T) and surface metas restored from a partial ``Result``."""
+    if not isinstance(resume, Result):
+        raise ValueError(f"resume must be a microsim.sim.Result (a partial run), got {resume!r}")
+    if resume.tallies is None:
+        raise ValueError("resume holds no raw tallies (Result.tallies): it cannot be continued")
+    old = _run_config(resume.theta_i, resume.phi_i, resume.bins, resume.meta.get("seed"),
+                      resume.meta.get("rays"), resume.meta.get("masking"),
+                      resume.meta.get("origins", "stratified"), resume.meta.get("material"),
+                      int(resume.tallies["blocks"].shape[0]))
+    old["block"] = resume.meta.get("block")
+    diff = [f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in config
+            if old[k] != config[k]]
+    if diff:
+        raise ValueError("resume does not match this run's configuration: " + "; ".join(diff))
+    t = resume.tallies
+    tallies = [[_Tally(t["sum_w"][r, i].copy(), t["sum_w2"][r, i].copy(), t["count"][r, i].copy(),
+                       t["led_n"][r, i].copy(), t["led_f"][r, i].copy()) for i in range(n_th)]
+               for r in range(n_real)]
+    metas = resume.meta.get("realisations") if n_real > 1 else [resume.meta.get("surface")]
+    return tallies, np.array(t["blocks"], dtype=np.int64), list(metas or [None] * n_real)
+
+
+def _check_same_surface(old: dict | None, new: dict, r: int) -> None:
+    if old is not None and old.get("fingerprint") != new["fingerprint"]:
+        raise ValueError(f"resume does not match this run's configuration: surface of realisation "
+                         f"{r} (partial run: {old.get('kind')} {old.get('fingerprint')}, now: "
+                         f"{new['kind']} {new['fingerprint']})")
+
+
 def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins: Bins = Bins(),
              seed: int = 0, threads: int = 2, chunk: int = 2 ** 16, masking: str = "traced",
-             realisations=None, progress: Callable[[str], None] | None = None) -> Result:
+             realisations=None, progress: Callable[[str], None] | None = None,
+             origins: str = "stratified", resume: Result | None = None) -> Result:
     """Bin-averaged single-bounce BRDF of ``surface`` by ray tracing (Mikkelsen eq. 9).
 
     ``material``: name, index n / n+ik or None (mirror), see ``resolve_material``.
@@ -297,11 +590,23 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     ``azimuth_average`` surfaces). ``realisations``: None (trace ``surface``), a list of
     surfaces, or ``(factory, seeds)`` with ``factory(seed) -> Surface``; the BRDF then pools all
     realisations and ``stderr`` combines ray noise with realisation-to-realisation scatter.
-    Returns a ``Result`` (BRDF in sr⁻¹).
+    ``origins``: "stratified" (jittered strata over the tile, the default) or "independent"
+    (i.i.d. uniform origins, sorted spatially per block) — see ``_block_rays``.
+
+    Interrupt and resume. A KeyboardInterrupt (SIGINT, or raised by ``progress``/a factory)
+    stops the run after the chunk in flight and *returns* a Result with ``meta["partial"] =
+    True`` holding every complete block (``Result.rays`` counts them; incidences not started
+    have 0 rays and NaN estimates). ``resume=<that Result>`` (same surface(s), material, θi,
+    φi, bins, seed, rays, masking, origins; else ValueError naming what differs) continues from
+    the first block not yet done; the final tallies are bitwise identical to an uninterrupted
+    run, because blocks are seeded by index and the raw running sums (``Result.tallies``) are
+    stored exactly. Returns a ``Result`` (BRDF in sr⁻¹).
     """
     th, ph = _check_inputs(theta_i, phi_i, rays, threads, chunk, masking)
     if not isinstance(bins, Bins):
         raise ValueError(f"bins must be a microsim.sim.Bins, got {bins!r}")
+    if origins not in ORIGINS:
+        raise ValueError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
     ior = resolve_material(material)
     n_real, get_surface = _realisation_list(surface, realisations)
     rays, seed = int(rays), int(seed)
@@ -310,70 +615,107 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
         raise ValueError(f"rays must be >= the number of realisations ({n_real}), got {rays}")
     nbin = bins.shape[0] * bins.shape[1]
     chunk_blocks = max(1, int(round(int(chunk) / BLOCK)))
-    tallies = [[_Tally.empty(nbin) for _ in th] for _ in range(n_real)]
-    surfaces_meta, timings, build = [], [], 0.0
+    material_meta = _json_material(material, ior)
+    config = _run_config(th, ph, bins, seed, rays, masking, origins, material_meta, n_real)
+    if resume is None:
+        tallies = [[_Tally.empty(nbin) for _ in th] for _ in range(n_real)]
+        done = np.zeros((n_real, len(th)), dtype=np.int64)
+        surfaces_meta = [None] * n_real
+    else:
+        tallies, done, surfaces_meta = _resume_state(resume, config, n_real, len(th), nbin)
+    nblk = np.array([-(-n // BLOCK) for n in per_real], dtype=np.int64)
+    done_before = done.copy()
+    timings, build, interrupted = [], 0.0, False
     t_all = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=int(threads)) as pool:
-        for r in range(n_real):
-            surf = get_surface(r)
-            t0 = time.perf_counter()
-            tracer, profile, azimuth = _tracer_for(surf, masking)
-            build += time.perf_counter() - t0
-            surfaces_meta.append({**_surface_meta(surf), "eps": tracer.eps,
-                                  "max_wraps": tracer.max_wraps})
-            n_r = per_real[r]
-            nblk = -(-n_r // BLOCK)
-            groups = [range(a, min(a + chunk_blocks, nblk)) for a in range(0, nblk, chunk_blocks)]
-            for i, (t_deg, p_deg) in enumerate(zip(th, ph)):
-                wi = spherical_deg(t_deg, p_deg)
-                key = (seed, r, i)
-                work = partial(_chunk_tallies, tracer, profile, wi, p_deg, bins, ior, n_r,
-                               key=key, azimuth=azimuth)
-                jobs = pool.map(work, groups)
-                for part in jobs:                       # in chunk order, blocks in block order
-                    for block in part:
-                        tallies[r][i].add(block)
-                if progress is not None:
-                    progress(f"realisation {r + 1}/{n_real}, theta_i = {t_deg:g}°: done")
-            timings.append(time.perf_counter() - t0)
-            del tracer, profile
+    with _DeferredInterrupt() as stop, ThreadPoolExecutor(max_workers=int(threads)) as pool:
+        try:
+            for r in range(n_real):
+                if np.all(done[r] >= nblk[r]):
+                    continue
+                t0 = time.perf_counter()
+                surf = get_surface(r)
+                smeta = _surface_meta(surf)
+                _check_same_surface(surfaces_meta[r], smeta, r)
+                tracer, profile, azimuth = _tracer_for(surf, masking)
+                build += time.perf_counter() - t0
+                surfaces_meta[r] = {**smeta, "eps": tracer.eps, "max_wraps": tracer.max_wraps}
+                for i, (t_deg, p_deg) in enumerate(zip(th, ph)):
+                    if stop.is_set():                   # SIGINT while building the surface
+                        raise KeyboardInterrupt
+                    start, end = int(done[r, i]), int(nblk[r])
+                    groups = [range(a, min(a + chunk_blocks, end))
+                              for a in range(start, end, chunk_blocks)]
+                    work = partial(_chunk_tallies, tracer, profile, spherical_deg(t_deg, p_deg),
+                                   p_deg, bins, ior, per_real[r], key=(seed, r, i),
+                                   azimuth=azimuth, origins=origins)
+                    futures = [pool.submit(work, g) for g in groups]
+                    try:
+                        for fut in futures:             # in chunk order, blocks in block order
+                            for block in fut.result():
+                                tallies[r][i].add(block)
+                                done[r, i] += 1
+                            if stop.is_set():
+                                raise KeyboardInterrupt
+                    finally:
+                        for fut in futures:
+                            fut.cancel()
+                    if groups and progress is not None:
+                        progress(f"realisation {r + 1}/{n_real}, theta_i = {t_deg:g}°: done")
+                timings.append(time.perf_counter() - t0)
+                del tracer, profile
+        except KeyboardInterrupt:
+            interrupted = True
     elapsed = time.perf_counter() - t_all
+    n_done = np.minimum(done * BLOCK, np.array(per_real)[:, None])
+    traced = int(n_done.sum() - np.minimum(done_before * BLOCK, np.array(per_real)[:, None]).sum())
     meta = {"surface": surfaces_meta[0], "realisations": surfaces_meta if n_real > 1 else None,
-            "material": _json_material(material, ior), "seed": seed, "rays": rays,
-            "masking": masking, "threads": int(threads), "chunk_blocks": chunk_blocks,
+            "material": material_meta, "seed": seed, "rays": rays, "masking": masking,
+            "origins": origins, "partial": bool(np.any(done < nblk[:, None])),
+            "interrupted": interrupted, "resumed": resume is not None,
+            "threads": int(threads), "chunk_blocks": chunk_blocks,
             "block": BLOCK, "versions": _versions(), "seconds": elapsed,
             "seconds_scene_build": build, "seconds_per_realisation": timings,
-            "rays_per_second": rays * len(th) / (elapsed - build) if elapsed > build else None}
-    return _result(th, ph, bins, tallies, per_real, meta)
+            "rays_traced": traced,
+            "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None}
+    return _result(th, ph, bins, tallies, n_done, per_real, done, meta)
 
 
 def _estimate(sum_w, sum_w2, n, omega):
-    """BRDF and per-ray standard error of one tally (sr⁻¹)."""
+    """BRDF and per-ray standard error of one tally (sr⁻¹); NaN when no ray was traced."""
+    if n < 1:
+        return np.full_like(sum_w, np.nan), np.full_like(sum_w, np.nan)
     mean = sum_w / n
     var = np.maximum(sum_w2 / n - mean * mean, 0.0)
     se = np.sqrt(var / (n - 1)) if n > 1 else np.full_like(mean, np.nan)
     return mean / omega, se / omega
 
 
-def _result(th, ph, bins, tallies, per_real, meta) -> Result:
+def _result(th, ph, bins, tallies, n_done, per_real, done, meta) -> Result:
+    """Assemble the Result from the running sums; ``n_done`` (R, T) rays tallied per
+    realisation and incidence (== per_real for a complete run), ``done`` (R, T) blocks."""
     omega = bins.projected_solid_angle().ravel()
     shape = (len(th),) + bins.shape
     n_real = len(per_real)
-    n_tot = sum(per_real)
+    n_tot = n_done.sum(axis=0)
     pooled = [_Tally.empty(len(omega)) for _ in th]
     for r in range(n_real):
         for i in range(len(th)):
             t = tallies[r][i]
             pooled[i].add((t.sum_w, t.sum_w2, t.count, t.led_n, t.led_f))
-    brdf, se_ray = map(np.array, zip(*[_estimate(p.sum_w, p.sum_w2, n_tot, omega) for p in pooled]))
+    brdf, se_ray = map(np.array, zip(*[_estimate(p.sum_w, p.sum_w2, n_tot[i], omega)
+                                       for i, p in enumerate(pooled)]))
     extra = {}
     stderr = se_ray
     if n_real > 1:
-        per = np.array([[_estimate(tallies[r][i].sum_w, tallies[r][i].sum_w2, per_real[r], omega)[0]
+        per = np.array([[_estimate(tallies[r][i].sum_w, tallies[r][i].sum_w2, n_done[r, i], omega)[0]
                          for i in range(len(th))] for r in range(n_real)])
         # scatter of the realisation means estimates the total variance of their mean (ray
         # noise included); the realisation component is what exceeds the ray noise
-        total_var = np.var(per, axis=0, ddof=1) / n_real
+        total_var = np.full(per.shape[1:], np.nan)
+        for i in range(len(th)):
+            have = n_done[:, i] > 0
+            if have.sum() > 1:
+                total_var[i] = np.var(per[have, i], axis=0, ddof=1) / have.sum()
         se_real = np.sqrt(np.maximum(total_var - se_ray ** 2, 0.0))
         stderr = np.sqrt(se_ray ** 2 + se_real ** 2)
         extra = {"stderr_ray": se_ray.reshape(shape), "stderr_realisation": se_real.reshape(shape),
@@ -381,19 +723,26 @@ def _result(th, ph, bins, tallies, per_real, meta) -> Result:
                  "rays_realisations": np.array(per_real, dtype=np.int64)}
     led_n = np.array([p.led_n for p in pooled])
     led_f = np.array([p.led_f for p in pooled])
-    ledger = {name: led_n[:, k] / n_tot for k, name in enumerate(LEDGER)}
-    for k, name in enumerate(LEDGER[:3]):
-        ledger[f"{name}_fresnel"] = led_f[:, k] / n_tot
-    ledger["lost"] = (led_n[:, MASKED] + led_n[:, DOWNWARD]) / n_tot
-    ledger["lost_fresnel"] = (led_f[:, MASKED] + led_f[:, DOWNWARD]) / n_tot
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ledger = {name: led_n[:, k] / n_tot for k, name in enumerate(LEDGER)}
+        for k, name in enumerate(LEDGER[:3]):
+            ledger[f"{name}_fresnel"] = led_f[:, k] / n_tot
+        ledger["lost"] = (led_n[:, MASKED] + led_n[:, DOWNWARD]) / n_tot
+        ledger["lost_fresnel"] = (led_f[:, MASKED] + led_f[:, DOWNWARD]) / n_tot
     counts = {name: led_n[:, k] for k, name in enumerate(LEDGER)}
+    raw = {"sum_w": np.array([[t.sum_w for t in row] for row in tallies]),
+           "sum_w2": np.array([[t.sum_w2 for t in row] for row in tallies]),
+           "count": np.array([[t.count for t in row] for row in tallies]),
+           "led_n": np.array([[t.led_n for t in row] for row in tallies]),
+           "led_f": np.array([[t.led_f for t in row] for row in tallies]),
+           "blocks": done.copy(), "rays": n_done.astype(np.int64)}
     return Result(theta_i=th, phi_i=ph, bins=bins, brdf=brdf.reshape(shape),
-                  stderr=stderr.reshape(shape), rays=np.full(len(th), n_tot, dtype=np.int64),
+                  stderr=stderr.reshape(shape), rays=n_tot.astype(np.int64),
                   ledger=ledger, ledger_counts=counts,
                   counts=np.array([p.count for p in pooled]).reshape(shape),
                   sum_w=np.array([p.sum_w for p in pooled]).reshape(shape),
                   sum_w2=np.array([p.sum_w2 for p in pooled]).reshape(shape),
-                  meta=meta, **extra)
+                  meta=meta, tallies=raw, **extra)
 
 
 def _json_material(material, ior):

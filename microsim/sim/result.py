@@ -42,6 +42,12 @@ class Result:
     ``ledger_counts`` name → (T,) integer ray counts; ``counts`` (T, Θ, Φ) single-bounce rays
     per bin; ``sum_w``/``sum_w2`` raw Fresnel-weight tallies; ``models`` name → (T, Θ, Φ)
     bin-averaged model predictions (filled by the caller); ``meta`` JSON-able run description.
+
+    Partial runs (interrupted ``simulate``): ``meta["partial"]`` is True (``is_partial``),
+    ``rays`` counts the rays of the complete blocks per incidence (0 and NaN estimates for
+    incidences not started). ``tallies`` holds the exact running sums needed to resume:
+    ``sum_w``/``sum_w2``/``count`` (R, T, Θ·Φ), ``led_n``/``led_f`` (R, T, 5) per realisation
+    and incidence, ``blocks`` (R, T) blocks done and ``rays`` (R, T) rays tallied.
     """
 
     theta_i: np.ndarray
@@ -61,6 +67,12 @@ class Result:
     stderr_realisation: np.ndarray | None = None
     brdf_realisations: np.ndarray | None = None
     rays_realisations: np.ndarray | None = None
+    tallies: dict | None = None
+
+    @property
+    def is_partial(self) -> bool:
+        """True for an interrupted run (resume it with ``simulate(..., resume=result)``)."""
+        return bool(self.meta.get("partial", False))
 
     @property
     def theta_edges(self) -> np.ndarray:
@@ -91,6 +103,7 @@ class Result:
         out.update({f"count_{k}": v for k, v in self.ledger_counts.items()})
         out.update({f"model_{k}": v for k, v in self.models.items()})
         out.update({k: getattr(self, k) for k in _OPTIONAL if getattr(self, k) is not None})
+        out.update({f"tally_{k}": v for k, v in (self.tallies or {}).items()})
         return {k: np.asarray(v) for k, v in out.items()}
 
     def save(self, directory) -> None:
@@ -129,7 +142,7 @@ class Result:
                    stderr=a["stderr"], rays=a["rays"], ledger=pick("ledger_"),
                    ledger_counts=pick("count_"), counts=a["counts"], sum_w=a["sum_w"],
                    sum_w2=a["sum_w2"], meta=meta, models=pick("model_"),
-                   **{k: a[k] for k in _OPTIONAL if k in a})
+                   tallies=pick("tally_") or None, **{k: a[k] for k in _OPTIONAL if k in a})
 
 
 def _jsonable(obj):

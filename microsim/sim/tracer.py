@@ -7,14 +7,20 @@ without a hit, the ray re-enters through the opposite wall at the same height an
 A ray that reaches z >= zmax going up has escaped; one that sinks below zmin without a hit has
 leaked through the mesh ("missed", impossible for a closed periodic surface).
 
-Secondary rays start from the hit point recomputed in float64 (barycentrics on the float64
-vertices, then projected onto the facet plane) offset along the unit facet normal by ``eps``,
-a few float32 ulp of the tile's largest coordinate (Embree's tnear is fixed at 0). The offset
-biases grazing masking by ~eps / feature depth (DESIGN.md "Facts"), so V-groove surfaces
+Secondary rays start from the hit point o + t·d (float64, Embree's float32 distance t)
+projected along the unit facet normal onto the facet plane, then offset along that normal by
+``eps``, a few float32 ulp of the tile's largest coordinate (Embree's tnear is fixed at 0). The
+offset biases grazing masking by ~eps / feature depth (DESIGN.md "Facts"), so V-groove surfaces
 can instead decide masking exactly in float64 (``VGrooveProfile``).
+
+Speed: the walk works on contiguous per-axis columns (``trace_columns``/``escape_columns``),
+hands Embree a single direction when all rays share it, and compacts the live rays after each
+segment; most rays finish in the first, so NumPy touches each ray a few dozen times.
 """
 from __future__ import annotations
 
+import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,15 +72,6 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     return v, f.astype(np.int64), lx, ly
 
 
-def wrap_into_tile(p: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """Points moved by whole periods so that x ∈ [-Lx/2, Lx/2), y ∈ [-Ly/2, Ly/2) (in place)."""
-    for a in (0, 1):
-        out = (p[:, a] < -half[a]) | (p[:, a] >= half[a])
-        if np.any(out):
-            p[out, a] = np.mod(p[out, a] + half[a], 2 * half[a]) - half[a]
-    return p
-
-
 class Tracer:
     """Periodic Embree scene of one tile of ``surface`` (a ``microsim.surfaces.Surface``).
 
@@ -97,6 +94,7 @@ class Tracer:
         self.vertices, self.faces = v, f
         self._v0, self._e1, self._e2 = v[f[:, 0]], v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
         self.normals = cross / norm[:, None]
+        self._plane = np.einsum("ij,ij->i", self.normals, self._v0)   # n·v0 per facet
         self.tile = (lx, ly)
         self.half = np.array([lx / 2, ly / 2])
         self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
@@ -107,94 +105,197 @@ class Tracer:
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
+        self._lock, self._memo = threading.Lock(), {}
         self._scene = rs.EmbreeScene(robust=True)
         self._mesh = mc.TriangleMesh(self._scene, v.astype(np.float32), f.astype(np.int32))
 
     # --- periodic walk ------------------------------------------------------------------
-    def _segments(self, o, d):
-        """Distance to the exit wall (N,), which walls (N, 2) bool, and distance up to z = zmax
-        (inf unless rising)."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            txy = (np.copysign(self.half, d[:, :2]) - o[:, :2]) / d[:, :2]
-            ttop = (self.zmax - o[:, 2]) / d[:, 2]
-        txy[d[:, :2] == 0] = np.inf
-        np.maximum(txy, 0.0, out=txy)
-        twall = txy.min(axis=1)
-        ttop[~(d[:, 2] > 0)] = np.inf
-        return twall, txy <= twall[:, None], np.maximum(ttop, 0.0)
-
     def _walk(self, origins, dirs, occlusion: bool):
-        """Trace rays through the periodic repetition; returns (status, prim, u, v).
+        """Trace rays through the periodic repetition; returns (status, prim, point).
 
-        The arrays of live rays are compacted after every segment; embree gets float32 copies."""
-        oo = wrap_into_tile(np.array(origins, dtype=np.float64), self.half)
-        dd = np.asarray(dirs, dtype=np.float64)
-        d32 = dd.astype(np.float32)
-        n = len(oo)
+        ``dirs`` is (N, 3) or one direction (3,) shared by all rays (handed to Embree once).
+        ``prim`` (N,) int32 face index, −1 without a hit; ``point`` (N, 3) float64 hit point
+        o + t·d (Embree's float32 distance, not yet on the facet plane; NaN without a hit);
+        both None for occlusion queries."""
+        o = np.asarray(origins, dtype=np.float64)
+        dirs = np.asarray(dirs, dtype=np.float64)
+        shared = dirs.ndim == 1
+        d = [float(c) for c in dirs] if shared else [np.ascontiguousarray(dirs[:, k]) for k in range(3)]
+        d32 = (dirs.astype(np.float32)[None] if shared
+               else np.ascontiguousarray(dirs, dtype=np.float32))
+        x = [np.ascontiguousarray(o[:, k]) for k in range(3)]
+        status, prim, p = self._walk_columns(x, d, d32, occlusion)
+        if occlusion:
+            return status, None, None
+        point = np.empty((len(status), 3))
+        for k in range(3):
+            point[:, k] = p[k]
+        point[status != HIT] = np.nan
+        return status, prim, point
+
+    def _walk_columns(self, x, d, d32, occlusion: bool):
+        """``_walk`` on per-axis columns: origins ``x`` (3 arrays (N,), float64, wrapped into
+        the tile here), directions ``d`` (3 arrays (N,) or 3 floats shared by all rays) and
+        their float32 (N, 3) (or (1, 3)) copy ``d32``. Returns (status, prim, point columns);
+        the point columns are undefined where status is not HIT. The live rays are compacted
+        after every segment (most finish in the first)."""
+        n = len(x[0])
+        shared = np.isscalar(d[0])
+        x = list(x)
+        for a in (0, 1):                                  # wrap the starts into the tile
+            h = self.half[a]
+            if n and (x[a].min() < -h or x[a].max() >= h):
+                out = (x[a] < -h) | (x[a] >= h)
+                x[a] = np.where(out, np.mod(x[a] + h, 2 * h) - h, x[a])
         status = np.full(n, UNRESOLVED, dtype=np.int8)
-        prim = np.full(n, -1, dtype=np.int64)
-        u = np.zeros(n)
-        v = np.zeros(n)
+        prim = None if occlusion else np.full(n, -1, dtype=np.int32)
+        point = None if occlusion else [np.empty(n) for _ in range(3)]
         live = np.arange(n)
         query = "OCCLUDED" if occlusion else "INTERSECT"
         for _ in range(self.max_wraps + 1):
-            gone = (dd[:, 2] > 0) & (oo[:, 2] >= self.zmax)           # nothing above zmax
-            if gone.any():
+            gone = False if shared and d[2] <= 0 else (d[2] > 0) & (x[2] >= self.zmax)
+            if np.any(gone):                              # nothing above zmax
                 status[live[gone]] = ESCAPED
                 keep = ~gone
-                live, oo, dd, d32 = live[keep], oo[keep], dd[keep], d32[keep]
-            if live.size == 0:
-                break
-            twall, walls, ttop = self._segments(oo, dd)
-            tend = np.minimum(twall, ttop)
-            tq = tend * (1 + _TFAR_REL) + self.eps                      # inf stays inf
-            res = self._scene.run(oo.astype(np.float32), d32, dists=tq.astype(np.float32),
-                                  query=query, output=None if occlusion else 1)
-            pid = np.asarray(res if occlusion else res["primID"])
+                live, x = live[keep], [c[keep] for c in x]
+                if not shared:
+                    d, d32 = [c[keep] for c in d], d32[keep]
+                if live.size == 0:
+                    break
+            t = [self._wall_distance(x[a], d[a], self.half[a]) for a in (0, 1)]
+            twall = np.minimum(t[0], t[1])
+            if shared and d[2] <= 0:                      # falling: never through the top
+                ttop = np.inf
+            else:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ttop = np.where(d[2] > 0, np.maximum((self.zmax - x[2]) / d[2], 0.0), np.inf)
+            with np.errstate(over="ignore"):                 # beyond float32: inf, as meant
+                tq = (np.minimum(twall, ttop) * (1 + _TFAR_REL) + self.eps).astype(np.float32)
+            o32 = np.empty((live.size, 3), dtype=np.float32)
+            for k in range(3):
+                o32[:, k] = x[k]
+            res = self._scene.run(o32, d32, dists=tq, query=query, output=None if occlusion else 1)
+            pid = res if occlusion else res["primID"]
             hit = pid >= 0
-            lh = live[hit]
-            status[lh] = HIT
-            if not occlusion:
-                prim[lh] = pid[hit]
-                u[lh] = res["u"][hit]
-                v[lh] = res["v"][hit]
+            whole = live.size == n                        # nothing compacted yet: whole arrays
+            lh = None if whole else live[hit]
+            if whole:
+                status[hit] = HIT
+            else:
+                status[lh] = HIT
+            if not occlusion:                             # p = o + t·d in float64
+                tf = res["tfar"].astype(np.float64)
+                if whole:
+                    prim[:] = pid                         # −1 for misses
+                    for k in range(3):
+                        point[k] = x[k] + tf * d[k]       # garbage for misses
+                else:
+                    prim[lh] = pid[hit]
+                    for k in range(3):
+                        point[k][lh] = x[k][hit] + tf[hit] * (d[k] if shared else d[k][hit])
             # no hit: escaped through the top, leaked below, or re-enter through the opposite wall
-            top = ~hit & (ttop <= twall)
-            status[live[top]] = ESCAPED
-            go = np.flatnonzero(~hit & ~top)
-            p = oo[go] + twall[go, None] * dd[go]
-            leaked = (p[:, 2] < self.zmin - self.eps) | ~np.isfinite(twall[go])
+            if np.isscalar(ttop):
+                go = np.flatnonzero(~hit)
+            else:
+                top = ~hit & (ttop <= twall)
+                status[live[top]] = ESCAPED
+                go = np.flatnonzero(~hit & ~top)
+            if go.size == 0:
+                break
+            tw = twall[go]
+            dg = d if shared else [c[go] for c in d]
+            p = [x[k][go] + tw * dg[k] for k in range(3)]
+            leaked = (p[2] < self.zmin - self.eps) | ~np.isfinite(tw)
+            for a in (0, 1):
+                np.clip(p[a], -self.half[a], self.half[a], out=p[a])   # rounding along the wall
+                wall = t[a][go] <= tw
+                p[a][wall] = -np.copysign(self.half[a], dg[a] if shared else dg[a][wall])
             if leaked.any():
                 status[live[go[leaked]]] = MISSED
-                go, p = go[~leaked], p[~leaked]
-            np.clip(p[:, :2], -self.half, self.half, out=p[:, :2])   # rounding along the wall
-            p[:, :2] = np.where(walls[go], -np.copysign(self.half, dd[go, :2]), p[:, :2])
-            live, oo, dd, d32 = live[go], p, dd[go], d32[go]
+                keep = ~leaked
+                go, p = go[keep], [c[keep] for c in p]
+                dg = dg if shared else [c[keep] for c in dg]
+            live, x = live[go], p
+            if not shared:
+                d, d32 = dg, d32[go]
             if live.size == 0:
                 break
-        return status, prim, u, v
+        return status, prim, point
+
+    @staticmethod
+    def _wall_distance(x, d, half):
+        """Distance ≥ 0 along the ray to the tile wall it heads for (inf if parallel to it)."""
+        if np.isscalar(d):
+            if d == 0:
+                return np.full(x.shape, np.inf)
+            return np.maximum((math.copysign(half, d) - x) / d, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (np.copysign(half, d) - x) / d
+        t[d == 0] = np.inf
+        return np.maximum(t, 0.0)
+
+    def trace(self, origins: np.ndarray, dirs: np.ndarray):
+        """Lean first-hit query: (status (N,) int8, prim (N,) int32, point (N, 3) float64).
+
+        ``point`` is the hit Embree found (its float32 ray and distance, evaluated in float64),
+        not yet projected onto the facet plane (NaN without a hit); see ``first_hit``."""
+        return self._walk(origins, dirs, occlusion=False)
+
+    def trace_columns(self, x, d, d32):
+        """``trace`` on per-axis columns (see ``_walk_columns``): (status, prim, [px, py, pz]),
+        the point columns undefined where status is not HIT."""
+        return self._walk_columns(x, d, d32, occlusion=False)
+
+    def escape_columns(self, x, d, d32) -> np.ndarray:
+        """Occlusion status of rays given as per-axis columns (see ``_walk_columns``); the
+        starts ``x`` must already be offset from the surface."""
+        return self._walk_columns(x, d, d32, occlusion=True)[0]
+
+    def on_plane(self, prim: np.ndarray, point: np.ndarray, lift: float = 0.0) -> np.ndarray:
+        """``point`` (N, 3) moved along the unit normal of facet ``prim`` (N,) onto that facet's
+        plane, then ``lift`` (length units) above it."""
+        nrm = self.normals[prim]
+        off = (point[:, 0] * nrm[:, 0] + point[:, 1] * nrm[:, 1] + point[:, 2] * nrm[:, 2]
+               - self._plane[prim] - lift)
+        return point - off[:, None] * nrm
 
     def first_hit(self, origins: np.ndarray, dirs: np.ndarray) -> Hits:
         """Closest intersection of rays ``origins + t·dirs`` (t > 0) with the periodic surface.
 
-        ``origins`` (N, 3) anywhere (wrapped into the tile), ``dirs`` (N, 3) unit, float64.
-        The hit point p = v0 + u(v1 − v0) + v(v2 − v0) is evaluated in float64 from Embree's
-        barycentrics, so it lies on the facet plane to float64 precision.
+        ``origins`` (N, 3) anywhere (wrapped into the tile), ``dirs`` (N, 3) unit float64, or
+        one direction (3,) shared by all rays (faster). The hit point Embree found (its float32
+        ray, float32 distance, evaluated in float64) is projected along the facet normal onto
+        the facet plane, so it lies on the plane to float64 precision.
         """
-        status, prim, u, v = self._walk(origins, dirs, occlusion=False)
+        status, prim, p = self._walk(origins, dirs, occlusion=False)
         hit = np.flatnonzero(status == HIT)
         pr = prim[hit]
-        point = np.full((len(status), 3), np.nan)
         normal = np.full((len(status), 3), np.nan)
-        point[hit] = self._v0[pr] + u[hit, None] * self._e1[pr] + v[hit, None] * self._e2[pr]
         normal[hit] = self.normals[pr]
-        return Hits(status=status, prim=prim, point=point, normal=normal)
+        p[hit] = self.on_plane(pr, p[hit])
+        return Hits(status=status, prim=prim.astype(np.int64), point=p, normal=normal)
 
     def escapes(self, points: np.ndarray, normals: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """Status of rays leaving surface ``points`` (offset by ``eps`` along ``normals``) along
-        ``dirs``: ESCAPED, BLOCKED (= HIT), UNRESOLVED or MISSED, (N,) int8."""
+        ``dirs`` ((N, 3) or one shared (3,)): ESCAPED, BLOCKED (= HIT), UNRESOLVED or MISSED,
+        (N,) int8."""
         start = np.asarray(points) + self.eps * np.asarray(normals)
         return self._walk(start, dirs, occlusion=True)[0]
+
+    def escapes_from(self, prim: np.ndarray, point: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """``escapes`` for raw hit points of ``trace`` on facets ``prim``: each start is put on
+        its facet plane and ``eps`` above it (one step)."""
+        return self._walk(self.on_plane(prim, point, self.eps), dirs, occlusion=True)[0]
+
+    def memo(self, key, build):
+        """``build()`` cached under ``key`` (thread-safe; the two most recent keys are kept):
+        per-incidence tables shared by the worker threads."""
+        with self._lock:
+            if key not in self._memo:
+                self._memo[key] = build()
+                while len(self._memo) > 2:
+                    self._memo.pop(next(iter(self._memo)))
+            return self._memo[key]
 
 
 class VGrooveProfile:
@@ -241,10 +342,14 @@ class VGrooveProfile:
 
     def masking_margin(self, prim: np.ndarray, point: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """s(1 + tanθ σ w_x/w_z) − W in length units: > 0 ⇔ masked (−inf for flat facets)."""
+        return self.margin_columns(prim, point[:, 0], wo[:, 0], wo[:, 2])
+
+    def margin_columns(self, prim, x, wo_x, wo_z) -> np.ndarray:
+        """``masking_margin`` from the hit points' x and the reflected directions' x and z."""
         rim, opp, t = self.rim[prim], self.opposite[prim], self.tan[prim]
         width = np.abs(np.where(np.isnan(opp), 0.0, opp) - rim)
-        s = np.clip(np.abs(point[:, 0] - rim), 0.0, self.extent[prim])
+        s = np.clip(np.abs(x - rim), 0.0, self.extent[prim])
         sigma = np.sign(opp - rim)
         with np.errstate(divide="ignore", invalid="ignore"):
-            margin = s * (1.0 + t * sigma * wo[:, 0] / wo[:, 2]) - width
+            margin = s * (1.0 + t * sigma * wo_x / wo_z) - width
         return np.where(self.sloped[prim], margin, -np.inf)

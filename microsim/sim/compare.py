@@ -1,0 +1,190 @@
+"""Which closed forms a simulation is compared with, their bin-averaged predictions, and a
+direct ray-traced measurement of Smith's masking function G1.
+
+Default models (``default_models``; names are short and stable, used as ``Result.models`` keys
+and in reports). All are Torrance–Sparrow, f = F G D / (4 cos θi cos θo) (Mikkelsen eq. 13/18)
+with exact Fresnel for the run's material; they differ in D and G:
+
+V-groove surfaces (``kind == "vgrooves"``; D = the NDF the groove tilts were drawn from):
+  ``ts-vgroove``        D analytic, V-groove G (Mikkelsen eq. 25) — exact for the V-cavity surface
+  ``ts-smith``          D analytic, separable Smith G1(wi)G1(wo)
+  ``ts-smith-corr``     D analytic, height-correlated Smith 1/(1 + Λi + Λo)
+  ``ts-facets``         D = the surface's own groove tilts (azimuth-averaged), V-groove G: what
+                        the explicit surface represents exactly (no tail beyond its last groove)
+Heightfields (``gaussian``, ``abc``, ``file``; m_nom = the scene's nominal Beckmann m — Gaussian
+2σ/ℓ, ABC the predicted mesh m —, m_real = ``surface.stats()["m_realised"]``):
+  ``ts-beckmann-nominal-{vgroove,smith,smith-corr}``    Beckmann(m_nom) (not for ``file``)
+  ``ts-beckmann-realised-{vgroove,smith,smith-corr}``   Beckmann(m_real)
+  ``ts-facets``         D = the surface's own facets (Empirical), height-correlated Smith G with
+                        the facets' own Λ
+Flat surfaces get no models.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from microsim.analytic import _checks
+from microsim.analytic.fresnel import resolve_material
+from microsim.analytic.ndf import Beckmann
+
+from .predict import ModelSpec, predict
+from .result import Result
+from .tracer import ESCAPED, Tracer
+
+__all__ = ["default_models", "attach_models", "measure_g1", "G1Measurement", "SHADOWING_SUFFIX",
+           "VGROOVE_AZIMUTHS"]
+
+SHADOWING_SUFFIX = {"vgroove": "vgroove", "smith": "smith", "smith-correlated": "smith-corr"}
+# copies per groove tilt in V-groove ts-facets (predict.bin_average_facets): ~3 s per θi for
+# 4000 grooves on 45 × 37 bins; its azimuthal noise per bin is ~0.1–0.2 × the stderr of a
+# 1e6-ray run (measured with seeded replicates); raise it for much longer runs
+VGROOVE_AZIMUTHS = 256
+
+
+def _surfaces_and_ndf(scene_or_surfaces, ndf):
+    """(surfaces, analytic NDF or None): a Scene builds its surface and supplies its NDF; a
+    Surface or a sequence of Surfaces (the realisations of one random scene) is used as is."""
+    if hasattr(scene_or_surfaces, "build_surface"):
+        ndf = ndf if ndf is not None else scene_or_surfaces.ndf()
+        return [scene_or_surfaces.build_surface()], ndf
+    surfaces = list(scene_or_surfaces) if isinstance(scene_or_surfaces, (list, tuple)) \
+        else [scene_or_surfaces]
+    if not surfaces or not all(hasattr(s, "kind") and hasattr(s, "facet_normals") for s in surfaces):
+        raise ValueError(f"scene_or_surface must be a Scene, a Surface or a non-empty sequence "
+                         f"of Surfaces, got {scene_or_surfaces!r}")
+    if len({s.kind for s in surfaces}) != 1:
+        raise ValueError("scene_or_surface: realisations must all be of one surface kind")
+    surface = surfaces[0]
+    if ndf is None:
+        if surface.kind == "vgrooves":
+            ndf = surface.source_ndf
+        elif surface.kind == "gaussian":
+            ndf = Beckmann(surface.nominal["m"])
+        elif surface.kind == "abc":
+            ndf = Beckmann(surface.stats()["predicted_m"])
+    return surfaces, ndf
+
+
+def _pooled_facets(surfaces):
+    """Facet normals and projected-area weights of all realisations together, and the realised
+    m of the pool, √(mean over realisations of var_x + var_y).
+
+    ``simulate`` gives every realisation the same number of rays over tiles of equal area, so
+    its BRDF is the average of the realisations' BRDFs; Torrance–Sparrow with the pooled facets
+    is the same average (exactly for V-groove G; for Smith G the pooled Λ stands in for each
+    realisation's own, a difference far below the tile-to-tile scatter)."""
+    normals = np.concatenate([s.facet_normals() for s in surfaces])
+    weights = np.concatenate([s.projected_areas() / s.projected_areas().sum() for s in surfaces])
+    if surfaces[0].kind in ("vgrooves", "flat"):
+        return normals, weights, None
+    stats = [s.stats() for s in surfaces]
+    m_real = float(np.sqrt(np.mean([st["slope_var_x"] + st["slope_var_y"] for st in stats])))
+    return normals, weights, m_real
+
+
+def default_models(scene_or_surface, ior, ndf=None, *,
+                   azimuths: int = VGROOVE_AZIMUTHS) -> list[ModelSpec]:
+    """The standard model set for a Scene, a Surface, or the realisations of one random scene
+    (a sequence of Surfaces: ``ts-facets`` and the realised m then pool all of them, see
+    ``_pooled_facets``) — module docstring for the names.
+
+    ``ior``: the material (name, n, n + ik or None, see ``resolve_material``). ``ndf``: the
+    analytic NDF (default: the V-groove surface's source NDF, Beckmann(nominal m) for Gaussian,
+    Beckmann(predicted mesh m) for ABC heightfields — as ``Scene.ndf``). ``azimuths``: groove
+    azimuth copies of ``ts-facets`` on V-grooves.
+    """
+    surfaces, ndf = _surfaces_and_ndf(scene_or_surface, ndf)
+    resolve_material(ior)                                   # validate now, not at predict time
+    kinds = tuple(SHADOWING_SUFFIX)
+    if surfaces[0].kind == "flat":
+        return []
+    normals, weights, m_real = _pooled_facets(surfaces)
+    if surfaces[0].kind == "vgrooves":
+        if ndf is None:
+            raise ValueError("ndf must be given for a V-groove surface without source_ndf")
+        specs = [ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, ior) for k in kinds]
+        return specs + [ModelSpec.facets("ts-facets", normals, weights, "vgroove", ior,
+                                         azimuths=int(azimuths))]
+    ndfs = [("realised", Beckmann(m_real))]
+    if ndf is not None:
+        ndfs.insert(0, ("nominal", ndf))
+    specs = [ModelSpec.torrance_sparrow(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", d, k, ior)
+             for label, d in ndfs for k in kinds]
+    return specs + [ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", ior)]
+
+
+def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
+    """Fill ``result.models`` (name → (T, Θ, Φ) sr⁻¹) with the bin-averaged predictions of
+    ``specs`` on the result's bins, θi and φi (one ``predict`` call per distinct φi).
+    Returns ``result`` (modified in place)."""
+    specs = list(specs)
+    out = {s.name: np.empty((len(result.theta_i),) + result.bins.shape) for s in specs}
+    phis = np.asarray(result.phi_i, dtype=np.float64)
+    for phi in np.unique(phis):
+        sel = np.flatnonzero(phis == phi)
+        pred = predict(specs, result.theta_i[sel], result.bins, phi_i=float(phi), rtol=rtol)
+        for name, values in pred.items():
+            out[name][sel] = values
+    result.models.update(out)
+    own = set(result.meta.get("realisation_models", ())) | {s.name for s in specs if s.kind == "facets"}
+    result.meta["realisation_models"] = sorted(own)
+    return result
+
+
+class G1Measurement(NamedTuple):
+    """``measure_g1`` result: ``g1`` and its standard error ``stderr``, (K,) over θo."""
+
+    g1: np.ndarray
+    stderr: np.ndarray
+
+
+def measure_g1(surface, theta_o_deg, rays: int = 100_000, seed: int = 0,
+               phi_o_deg: float = 0.0) -> G1Measurement:
+    """Ray-traced masking G1(wo) of ``surface`` for polar angles ``theta_o_deg`` (deg, < 90).
+
+    Projected-area identity: the microsurface seen from wo has projected area cos θo per unit
+    macro area, so with dA the microsurface area element and V the visibility of a point
+    along wo (Smith's G1(wo) is this ratio for his random surface):
+
+        G1(wo) = ∫ V (wo·n)⁺ dA / ∫ (wo·n)⁺ dA.
+
+    Estimator: ``rays`` points drawn uniformly over the true area (facet ∝ area, uniform in
+    the triangle), x_k = (wo·n_k)⁺, V_k from a traced masking ray (``Tracer.escapes``, the
+    same offsets as the estimator); G1 = Σ V x / Σ x, stderr by the ratio-estimator delta
+    method. Seeded per angle with ``default_rng([seed, k])``. For V-grooves (azimuth-averaged
+    surfaces) wo is in the groove frame at azimuth ``phi_o_deg``: pass several to average.
+    """
+    th = np.atleast_1d(np.asarray(theta_o_deg, dtype=np.float64))
+    if th.ndim != 1 or th.size == 0 or not np.all((th >= 0) & (th < 90)):
+        raise ValueError(f"theta_o_deg must be degrees in [0, 90), got {theta_o_deg!r}")
+    if isinstance(rays, bool) or int(rays) != rays or rays < 2:
+        raise ValueError(f"rays must be an integer >= 2, got {rays!r}")
+    tracer = Tracer(surface)
+    vert, faces = np.asarray(surface.vertices, np.float64), np.asarray(surface.faces)
+    v0, e1, e2 = (vert[faces[:, 0]], vert[faces[:, 1]] - vert[faces[:, 0]],
+                  vert[faces[:, 2]] - vert[faces[:, 0]])
+    normals = surface.facet_normals()
+    cdf = np.cumsum(surface.facet_areas())
+    g1, se = np.empty(th.size), np.empty(th.size)
+    for k, t in enumerate(th):
+        rng = np.random.default_rng([int(seed), k])
+        face = np.minimum(np.searchsorted(cdf, rng.random(int(rays)) * cdf[-1], side="right"),
+                          len(cdf) - 1)
+        u, v = rng.random(int(rays)), rng.random(int(rays))
+        flip = u + v > 1.0
+        u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
+        points = v0[face] + u[:, None] * e1[face] + v[:, None] * e2[face]
+        wo = _checks.spherical_deg(t, phi_o_deg)
+        nrm = normals[face]
+        x = np.maximum(nrm @ wo, 0.0)
+        lit = np.flatnonzero(x > 0)
+        vis = np.zeros(int(rays))
+        status = tracer.escapes(points[lit], nrm[lit], np.broadcast_to(wo, (lit.size, 3)))
+        vis[lit] = status == ESCAPED
+        y = vis * x
+        g1[k] = y.sum() / x.sum()
+        resid = y - g1[k] * x
+        se[k] = np.sqrt(np.sum(resid ** 2) / (rays * (rays - 1))) / x.mean()
+    return G1Measurement(g1, se)
