@@ -1,0 +1,519 @@
+"""Report charts (issue 5): pure functions from plain arrays / a ``Result`` to a PNG file.
+
+Every chart builds its own ``matplotlib.figure.Figure`` (Agg canvas, no pyplot, no global
+state), writes the PNG atomically (temporary file in the target directory, then ``os.replace``)
+and returns the path. The image is exactly ``figsize × DPI`` pixels (no tight bounding box).
+
+Conventions: angles in degrees, BRDFs in sr⁻¹, Δφ = φo − φi (mirror direction at Δφ = 180°).
+Colours are fixed per name (``model_colour``) so a model looks the same in every chart; the
+simulation is always drawn in ``SIM_COLOUR``.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import textwrap
+import zlib
+from typing import Iterable, Mapping
+
+import matplotlib as mpl
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import LogNorm, TwoSlopeNorm
+from matplotlib.figure import Figure
+
+__all__ = ["DPI", "figure_size", "SIM_COLOUR", "FAIL_THRESHOLD", "model_colour", "inplane_curves",
+           "hemisphere_maps", "energy_chart", "mikkelsen_fig6", "speed_accuracy",
+           "stability_chart", "Z_LIMIT"]
+
+DPI = 100
+SIM_COLOUR = "#c2185b"        # magenta: simulation points everywhere (no model uses it)
+FRESNEL_COLOUR = "#000000"
+Z_LIMIT = 10.0               # z-score colour range ±Z_LIMIT (beyond saturates); ±5 marked
+FAIL_THRESHOLD = 0.05         # relative error above which a closed form "fails" (stability chart)
+
+# Fixed colours for the model names the runner uses; other names get a stable colour from
+# _PALETTE (disjoint from the fixed colours) chosen by CRC-32 of the normalised name, the same
+# in every chart and every run.
+_PALETTE = ("#e6550d", "#843c39", "#5254a3", "#31a354", "#6b6ecf", "#e7ba52", "#3182bd",
+            "#756bb1", "#636363", "#8ca252", "#ad494a", "#7b4173")
+_FIXED = {
+    "ts-vgroove": "#1f77b4", "ts-smith": "#ff7f0e", "ts-smith-correlated": "#2ca02c",
+    "ts-none": "#7f7f7f", "ts-facets": "#17becf", "facets": "#17becf",
+    "low-smooth": "#8c564b", "low-microfacet": "#9467bd", "rayleigh-rice": "#bcbd22",
+    "edwards": "#393b79", "edwards-fit": "#393b79", "mikkelsen-mix": "#637939",
+    "stratified": "#1f77b4", "independent": "#ff7f0e",
+    "κ=17": "#2ca02c", "κ=1024": "#1f77b4",     # Mikkelsen Fig. 6 has κ=1024 red: too close to SIM_COLOUR
+}
+
+
+def model_colour(name: str) -> str:
+    """Hex colour of a model (or estimator variant) ``name``; fixed for the names in ``_FIXED``
+    (case, spaces and underscores ignored), otherwise stable from a CRC-32 of the name."""
+    key = "-".join(str(name).strip().lower().replace("_", "-").split())
+    if key in _FIXED:
+        return _FIXED[key]
+    return _PALETTE[zlib.crc32(key.encode("utf-8")) % len(_PALETTE)]
+
+
+# --- writing ---------------------------------------------------------------------------------
+def figure_size(chart: str, n: int = 1) -> tuple[float, float]:
+    """(width, height) in inches of ``chart``; the PNG is that × ``DPI`` pixels. ``n``: panels
+    for "inplane" (incidences), materials for "mikkelsen_fig6", text lines of estimator notes
+    for "stability"; ignored otherwise."""
+    if chart == "inplane":
+        rows, cols = _grid(n)
+        return 4.6 * cols + 0.4, 3.6 * rows + 0.6
+    if chart == "mikkelsen_fig6":
+        return 5.2 * n + 0.4, 4.6
+    if chart == "stability":
+        return 9.0, 5.6 + 0.18 * n
+    fixed = {"hemisphere_maps": (13.0, 8.6), "energy": (11.0, 4.6), "speed_accuracy": (7.0, 5.0)}
+    if chart not in fixed:
+        raise ValueError(f"chart must be one of inplane, mikkelsen_fig6, stability, "
+                         f"{', '.join(fixed)}; got {chart!r}")
+    return fixed[chart]
+
+
+def _figure(size: tuple[float, float]) -> Figure:
+    fig = Figure(figsize=size, dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path) -> str:
+    """Write ``fig`` as PNG to ``path`` atomically; return ``path`` as str."""
+    path = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(path))
+    os.makedirs(directory, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + "-",
+                               suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fig.savefig(fh, format="png", dpi=DPI)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+    return path
+
+
+def _title(prefix: str, text: str) -> str:
+    return f"{prefix} — {text}" if prefix else text
+
+
+def _grid(n: int) -> tuple[int, int]:
+    """(rows, cols) for ``n`` panels: one row up to 3, 2×2 for 4, then rows of 3."""
+    cols = n if n <= 3 else (2 if n == 4 else 3)
+    return math.ceil(n / cols), cols
+
+
+def _positive(a) -> np.ndarray:
+    """Float copy with non-positive / non-finite values set to NaN (for log axes)."""
+    a = np.array(a, dtype=np.float64)
+    a[~(np.isfinite(a) & (a > 0))] = np.nan
+    return a
+
+
+def _log_limits(values: Iterable[np.ndarray], floor_ratio: float) -> tuple[float, float]:
+    """(lo, hi) of a log axis covering the positive values, reaching down to at most
+    ``floor_ratio`` × the maximum (far-tail model values would otherwise squash the plot)."""
+    pos = np.concatenate([np.ravel(_positive(v)) for v in values])
+    pos = pos[np.isfinite(pos)]
+    if pos.size == 0:
+        return 1e-3, 1.0
+    hi = pos.max()
+    lo = max(pos.min(), hi * floor_ratio)
+    return lo / 2.0, hi * 2.0
+
+
+# --- 1. in-plane curves ----------------------------------------------------------------------
+def _in_plane_slice(a: np.ndarray, bins) -> np.ndarray:
+    """(T, Θ, Φ) → (T, 2Θ): backward side (Δφ = 0° bin) reversed, then forward (Δφ = 180°)."""
+    a = np.asarray(a, dtype=np.float64)
+    return np.concatenate([a[:, ::-1, bins.backward_index], a[:, :, bins.forward_index]], axis=1)
+
+
+def inplane_curves(result, models: Mapping[str, np.ndarray], path, scene_name: str = "") -> str:
+    """In-plane scattering curves, one panel per incidence (as Löw Figs. 3 and 12).
+
+    x: signed θo in degrees (specular side Δφ = 180° positive, backward side Δφ = 0° negative);
+    y: bin-averaged BRDF in sr⁻¹, log scale. Simulation: points with ±1 standard-error bars;
+    models (name → (T, Θ, Φ) bin averages on ``result.bins``): constant over each bin (steps).
+    The mirror direction θo = +θi is marked. Bins with zero value are not drawn (log axis).
+    """
+    bins = result.bins
+    ip = result.in_plane()
+    te = np.asarray(bins.theta_edges, dtype=np.float64)
+    edges = np.concatenate([-te[::-1], te[1:]])
+    curves = {name: _in_plane_slice(m, bins) for name, m in models.items()}
+    n_t = len(result.theta_i)
+    rows, cols = _grid(n_t)
+    fig = _figure(figure_size("inplane", n_t))
+    axes = fig.subplots(rows, cols, squeeze=False, sharey=True)
+    lo, hi = _log_limits([ip.brdf] + [c for c in curves.values()], 1e-6)
+    for t in range(rows * cols):
+        ax = axes.flat[t]
+        if t >= n_t:
+            ax.set_visible(False)
+            continue
+        for name, c in curves.items():
+            ax.stairs(_positive(c[t]), edges, baseline=None, color=model_colour(name), lw=1.6,
+                      label=name)
+        y = _positive(ip.brdf[t])
+        ax.errorbar(ip.theta, y, yerr=np.where(np.isfinite(y), ip.stderr[t], np.nan), fmt="o",
+                    ms=3.0, color=SIM_COLOUR, ecolor=SIM_COLOUR, elinewidth=1.0, capsize=1.5,
+                    label="simulation ±1σ", zorder=5)
+        th_i = float(result.theta_i[t])
+        ax.axvline(th_i, color="0.35", ls="--", lw=0.9, label="mirror θo = +θi")
+        ax.axvline(0.0, color="0.75", lw=0.6)
+        ax.set_yscale("log")
+        ax.set_ylim(lo, hi)
+        ax.set_xlim(-90, 90)
+        ax.set_xticks(np.arange(-90, 91, 30))
+        ax.set_title(f"θi = {th_i:g}°")
+        ax.set_xlabel("θo (°)   − backward (Δφ=0°) | + specular (Δφ=180°)")
+        if t % cols == 0:
+            ax.set_ylabel("BRDF (sr⁻¹)")
+        ax.grid(True, which="major", alpha=0.3)
+    axes.flat[0].legend(fontsize=8, loc="lower center")
+    fig.suptitle(_title(scene_name, "in-plane scattering (bin averages)"))
+    return _save(fig, path)
+
+
+# --- 2. hemisphere maps ----------------------------------------------------------------------
+def _flatten_verdicts(verdicts) -> list[dict]:
+    """All verdict dicts (those with a "model" key) in any nesting of lists / dicts."""
+    if isinstance(verdicts, Mapping):
+        if "model" in verdicts:
+            return [dict(verdicts)]
+        verdicts = verdicts.values()
+    out = []
+    for v in verdicts:
+        out += _flatten_verdicts(v)
+    return out
+
+
+def _num(v) -> float:
+    """A verdict number as float; None (undefined) → NaN."""
+    return np.nan if v is None else float(v)
+
+
+def _select_verdicts(verdicts, theta_i: float, names) -> list[dict]:
+    """Verdicts of incidence ``theta_i`` (deg) for the models in ``names`` with a finite rel_rms."""
+    sel = [v for v in _flatten_verdicts(verdicts)
+           if v["model"] in names and math.isclose(float(v["theta_i"]), theta_i, abs_tol=1e-6)
+           and np.isfinite(_num(v.get("rel_rms")))]
+    if not sel:
+        raise ValueError(f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}° "
+                         f"and one of the models {sorted(names)}")
+    return sorted(sel, key=lambda v: _num(v["rel_rms"]))
+
+
+def _unfold(values: np.ndarray, bins) -> tuple[np.ndarray, np.ndarray]:
+    """(Θ, Φ) map → (azimuth edges in rad, (Θ, Φ') values) covering the full circle.
+    Folded grids are mirrored about Δφ = 0 (the BRDF is symmetric in ±Δφ)."""
+    pe = np.asarray(bins.phi_edges, dtype=np.float64)
+    if not bins.folded:
+        return np.radians(pe), values
+    edges = np.concatenate([-pe[::-1], pe[1:]])
+    return np.radians(edges), np.concatenate([values[:, ::-1], values], axis=1)
+
+
+def _polar_panel(fig, spec, values, bins, theta_i, norm, cmap, title, colour):
+    ax = fig.add_subplot(spec, projection="polar")
+    ang, v = _unfold(values, bins)
+    r = np.sin(np.radians(bins.theta_edges))
+    cm = cmap.with_extremes(bad="0.85")
+    mesh = ax.pcolormesh(ang, r, np.ma.masked_invalid(v), norm=norm, cmap=cm, shading="flat",
+                         rasterized=True)
+    ax.plot([math.pi], [math.sin(math.radians(theta_i))], marker="o", ms=9, mfc="none",
+            mec="k", mew=1.5, ls="none", clip_on=False, zorder=6, label="mirror")
+    ax.set_theta_zero_location("W")        # Δφ = 0° (back towards the light) on the left
+    ax.set_theta_direction(-1)
+    ax.set_ylim(0, 1)
+    ax.set_yticks(np.sin(np.radians([30, 60, 90])))
+    ax.set_yticklabels(["30°", "60°", "90°"], fontsize=7)
+    ax.set_rlabel_position(315.0)   # lower left: clear of the azimuth labels
+    ax.set_xticks(np.radians([0, 90, 180, 270]))
+    ax.set_xticklabels(["Δφ=0°", "90°", "180°", "270°"], fontsize=7)
+    ax.spines["polar"].set_color(colour)
+    ax.spines["polar"].set_linewidth(3.0)
+    ax.set_title(title, fontsize=9, color=colour if colour != "k" else "k")
+    return ax, mesh
+
+
+def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path, t_index: int,
+                    scene_name: str = "") -> str:
+    """Polar maps at incidence ``t_index``: r = sin θo, angle = Δφ (folded grids mirrored),
+    of the simulation, the best and the worst model by ``rel_rms`` (shared log colour scale,
+    sr⁻¹), and the z-scores (sim − model)/stderr of both (diverging, symmetric, ±5 marked;
+    bins without events grey). ``verdicts``: verdict dicts (keys theta_i, model, rel_rms,
+    chi2_dof, max_abs_z, agrees, …) in any list/dict nesting. The mirror direction is circled.
+    """
+    n_t = len(result.theta_i)
+    if not (0 <= int(t_index) < n_t):
+        raise ValueError(f"t_index must be in [0, {n_t - 1}], got {t_index}")
+    t = int(t_index)
+    theta_i = float(result.theta_i[t])
+    sel = _select_verdicts(verdicts, theta_i, set(models))
+    best, worst = sel[0], sel[-1]
+    shown = [best] if best["model"] == worst["model"] else [best, worst]
+    sim = _positive(result.brdf[t])
+    err = np.asarray(result.stderr[t], dtype=np.float64)
+    maps = {v["model"]: np.asarray(models[v["model"]][t], dtype=np.float64) for v in shown}
+    lo, hi = _log_limits([sim], 1e-4)
+    hi = max(hi, _log_limits(list(maps.values()), 1e-4)[1])
+    norm = LogNorm(vmin=lo, vmax=hi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zs = {k: np.where(err > 0, (result.brdf[t] - m) / err, np.nan) for k, m in maps.items()}
+    zmax = max([np.nanmax(np.abs(z)) if np.isfinite(z).any() else 0.0 for z in zs.values()])
+    zlim = Z_LIMIT
+    znorm = TwoSlopeNorm(vcenter=0.0, vmin=-zlim, vmax=zlim)
+
+    fig = _figure(figure_size("hemisphere_maps"))
+    gs = fig.add_gridspec(2, 3)
+    ax, mesh = _polar_panel(fig, gs[0, 0], sim, result.bins, theta_i, norm,
+                            mpl.colormaps["viridis"], "simulation", SIM_COLOUR)
+    brdf_axes, z_axes = [ax], []
+    for j, v in enumerate(shown):
+        role = "best" if v is best else "worst"
+        col = model_colour(v["model"])
+        brdf_axes.append(_polar_panel(fig, gs[0, j + 1], _positive(maps[v["model"]]), result.bins,
+                                      theta_i, norm, mpl.colormaps["viridis"],
+                                      f"{role}: {v['model']}", col)[0])
+        zax, zmesh = _polar_panel(fig, gs[1, j + 1], zs[v["model"]], result.bins, theta_i, znorm,
+                                  mpl.colormaps["RdBu_r"], f"z = (sim − {v['model']}) / σ", col)
+        _mark_z5(zax, zs[v["model"]], result.bins)
+        z_axes.append(zax)
+    cb = fig.colorbar(mesh, ax=brdf_axes, shrink=0.8, pad=0.02)
+    cb.set_label("BRDF (sr⁻¹), log scale")
+    zcb = fig.colorbar(zmesh, ax=z_axes, shrink=0.8, pad=0.02,
+                       extend="both" if zmax > zlim else "neither")
+    zcb.set_label("z-score (σ)")
+    for s in (-5.0, 5.0):
+        zcb.ax.axhline(s, color="k", lw=1.5)
+    zcb.set_ticks(sorted({-zlim, -5.0, 0.0, 5.0, zlim}))
+    tax = fig.add_subplot(gs[1, 0])
+    tax.axis("off")
+    tax.text(0.0, 1.0, _verdict_table(sel), family="monospace", fontsize=8, va="top",
+             transform=tax.transAxes)
+    tax.text(0.0, 0.0, "r = sin θo, angle = Δφ (mirrored from the folded half)\n"
+             "○ mirror direction; black contour |z| = 5; grey: no events",
+             fontsize=8, va="bottom", transform=tax.transAxes)
+    fig.suptitle(_title(scene_name, f"hemisphere at θi = {theta_i:g}°"))
+    return _save(fig, path)
+
+
+def _mark_z5(ax, z, bins):
+    """Contour |z| = 5 over the bin centres (skipped when no bin reaches it)."""
+    a = np.abs(z)
+    if not (np.isfinite(a) & (a >= 5.0)).any():
+        return
+    ang, v = _unfold(a, bins)
+    ac = 0.5 * (ang[1:] + ang[:-1])
+    rc = np.sin(np.radians(bins.theta_centers))
+    ax.contour(ac, rc, np.ma.masked_invalid(v), levels=[5.0], colors="k", linewidths=0.8)
+
+
+def _verdict_table(sel: list[dict]) -> str:
+    head = f"{'model':<22}{'χ²/dof':>8}{'max|z|':>8}{'rel rms':>9}  agrees"
+    rows = [head, "-" * len(head)]
+    for v in sel:
+        rows.append(f"{str(v['model'])[:21]:<22}{_num(v.get('chi2_dof')):>8.2f}"
+                    f"{_num(v.get('max_abs_z')):>8.1f}{_num(v['rel_rms']):>9.3f}"
+                    f"  {'yes' if v.get('agrees') else 'no'}")
+    return "\n".join(rows)
+
+
+# --- 3. energy ------------------------------------------------------------------------------
+def energy_chart(theta_i, rho_sim, rho_sim_err, rho_models: Mapping[str, tuple], lost_sim, path,
+                 scene_name: str = "") -> str:
+    """Single-bounce albedo ρ(θi) (Mikkelsen eq. 27) of the simulation (points, ±1σ) against
+    each model's ρ (name → (θ grid in deg, ρ)), and, on a second panel, the fraction of the
+    incident energy single scattering loses: ``lost_sim`` either an array over θi or a dict
+    name → array (e.g. masked, downward; their sum is drawn as "total"). Fractions of incident
+    power, dimensionless.
+    """
+    th = np.asarray(theta_i, dtype=np.float64)
+    fig = _figure(figure_size("energy"))
+    ax, bx = fig.subplots(1, 2)
+    for name, (grid, rho) in rho_models.items():
+        ax.plot(np.asarray(grid, float), np.asarray(rho, float), color=model_colour(name), lw=1.6,
+                label=name)
+    ax.errorbar(th, np.asarray(rho_sim, float), yerr=np.asarray(rho_sim_err, float), fmt="o",
+                ms=4, color=SIM_COLOUR, capsize=2, label="simulation ±1σ", zorder=5)
+    ax.set_xlabel("θi (°)")
+    ax.set_ylabel("ρ(θi), single-bounce albedo")
+    ax.set_title("albedo ρ(θi) (Mikkelsen eq. 27)")
+    ax.legend(fontsize=8)
+    if isinstance(lost_sim, Mapping):
+        parts = {k: np.asarray(v, float) for k, v in lost_sim.items()}
+        total = np.sum(list(parts.values()), axis=0) if len(parts) > 1 else None
+    else:
+        parts, total = {"lost": np.asarray(lost_sim, float)}, None
+    markers = iter(["s", "^", "v", "D", "P", "X"])
+    for name, v in parts.items():
+        bx.plot(th, v, marker=next(markers, "o"), ms=4, ls="--", lw=1.0, color=SIM_COLOUR,
+                label=name)
+    if total is not None:
+        bx.plot(th, total, marker="o", ms=4, lw=1.8, color=SIM_COLOUR, label="total")
+    bx.set_xlabel("θi (°)")
+    bx.set_ylabel("fraction of incident power")
+    bx.set_title("energy lost by single scattering (simulation)")
+    bx.legend(fontsize=8)
+    bx.set_ylim(bottom=0)
+    for a in (ax, bx):
+        a.set_xlim(0, 90)
+        a.set_xticks(np.arange(0, 91, 15))
+        a.grid(True, alpha=0.3)
+    fig.suptitle(_title(scene_name, "energy"))
+    return _save(fig, path)
+
+
+# --- 4. Mikkelsen Fig. 6(c)(d) -----------------------------------------------------------------
+def _material_of(curve: Mapping) -> str:
+    return str(curve.get("material") or str(curve["label"]).split()[0])
+
+
+def _series_of(curve: Mapping) -> str:
+    """The curve's label without its material word (e.g. "κ=17"): keys the colour, so the
+    same κ has the same colour in both panels."""
+    words = str(curve["label"]).split()
+    rest = words[1:] if not curve.get("material") and len(words) > 1 else words
+    return " ".join(rest)
+
+
+def mikkelsen_fig6(curves: list[Mapping], path, title: str = "") -> str:
+    """Mikkelsen Fig. 6(c)(d): 1 − ρ(θ) (ρ of eq. 27, vMF NDF) and the Fresnel transmittance
+    Ft(θ) = 1 − F(θ) against θ (deg), one panel per material side by side.
+
+    ``curves``: dicts {label, theta, one_minus_rho_model, fresnel_T, sim_theta,
+    sim_one_minus_rho, sim_err} (optional "material"; otherwise the label's first word, e.g.
+    "methanol κ=17"). Model: line in ``model_colour(label)``; simulation: points ±1σ.
+    As in the paper, 1 − ρ approaches Ft as κ grows.
+    """
+    groups: dict[str, list] = {}
+    for c in curves:
+        groups.setdefault(_material_of(c), []).append(c)
+    if not groups:
+        raise ValueError("curves must hold at least one curve dict")
+    fig = _figure(figure_size("mikkelsen_fig6", len(groups)))
+    axes = fig.subplots(1, len(groups), squeeze=False)[0]
+    markers = ("o", "s", "^", "D", "v", "P")
+    for ax, (material, group) in zip(axes, groups.items()):
+        c0 = group[0]
+        ax.plot(np.asarray(c0["theta"], float), np.asarray(c0["fresnel_T"], float),
+                color=FRESNEL_COLOUR, ls="--", lw=1.4, label="Fresnel transmittance Ft(θ)")
+        top = [np.nanmax(np.asarray(c0["fresnel_T"], float))]
+        for k, c in enumerate(group):
+            series = _series_of(c)
+            col = model_colour(series)
+            ax.plot(np.asarray(c["theta"], float), np.asarray(c["one_minus_rho_model"], float),
+                    color=col, lw=1.8, label=f"1 − ρ model, {series}")
+            ax.errorbar(np.asarray(c["sim_theta"], float),
+                        np.asarray(c["sim_one_minus_rho"], float),
+                        yerr=np.asarray(c["sim_err"], float), fmt=markers[k % len(markers)],
+                        ms=5, mfc=SIM_COLOUR, mec=col, mew=1.2, ecolor=SIM_COLOUR, capsize=2,
+                        ls="none", label=f"1 − ρ simulation ±1σ, {series}", zorder=5)
+            top += [np.nanmax(np.asarray(c["one_minus_rho_model"], float)),
+                    np.nanmax(np.asarray(c["sim_one_minus_rho"], float))]
+        ax.set_title(material)
+        ax.set_xlim(0, 90)
+        ax.set_xticks(np.arange(0, 91, 15))
+        ax.set_ylim(0, min(1.02, 1.1 * max(top)))
+        ax.set_xlabel("θ between n and ω (°)")
+        ax.set_ylabel("fraction of incident power")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="lower left")
+    fig.suptitle(_title(title, "Mikkelsen Fig. 6(c)(d): 1 − ρ(θ) vs Fresnel transmittance"))
+    return _save(fig, path)
+
+
+# --- 5. speed vs accuracy ------------------------------------------------------------------------
+def speed_accuracy(runs: Mapping[str, tuple], path, title: str = "",
+                   error_label: str = "error (relative RMS)") -> str:
+    """Error against wall time (s), log–log, per estimator variant (name → (wall_times, errors)),
+    each with a dotted 1/√t reference anchored at the variant's first point (Monte Carlo rate).
+    """
+    fig = _figure(figure_size("speed_accuracy"))
+    ax = fig.subplots()
+    for k, (name, (times, errors)) in enumerate(runs.items()):
+        t = np.asarray(times, float)
+        e = np.asarray(errors, float)
+        order = np.argsort(t)
+        t, e = t[order], e[order]
+        col = model_colour(name)
+        ax.plot(t, e, marker="o", color=col, lw=1.6, label=name)
+        ref = np.geomspace(t[0], t[-1] if t[-1] > t[0] else t[0] * 10, 50)
+        ax.plot(ref, e[0] * np.sqrt(t[0] / ref), color=col, ls=":", lw=1.2,
+                label="∝ 1/√t" if k == 0 else None)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel(error_label)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(_title(title, "speed vs accuracy"))
+    return _save(fig, path)
+
+
+# --- 6. stability ----------------------------------------------------------------------------------
+def _fail_ranges(th: np.ndarray, err: np.ndarray, threshold: float) -> list[tuple[float, float]]:
+    """Contiguous θi ranges (deg) where ``err`` exceeds ``threshold`` (NaN: undefined, not failing)."""
+    with np.errstate(invalid="ignore"):
+        edge = np.diff(np.concatenate([[0], (err > threshold).astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1) - 1
+    return [(float(th[a]), float(th[b])) for a, b in zip(starts, ends)]
+
+
+def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path, warnings: list[str],
+                    title: str = "") -> str:
+    """Relative error of each closed form against θi ∈ [0°, 89°] (log y); the region above
+    ``FAIL_THRESHOLD`` (5 %) is shaded and each model's failing θi ranges are drawn as a
+    coloured bar under the plot. Estimator ``warnings`` are printed as text notes below.
+    """
+    th = np.asarray(theta_i, dtype=np.float64)
+    notes = [textwrap.fill("• " + str(w), 120) for w in warnings] or ["• no estimator warnings"]
+    n_lines = sum(n.count("\n") + 1 for n in notes)
+    fig = _figure(figure_size("stability", n_lines))
+    gs = fig.add_gridspec(3, 1, height_ratios=[5.0, 0.25 * max(1, len(rel_err)),
+                                               0.22 * n_lines + 0.2])
+    ax = fig.add_subplot(gs[0])
+    bar = fig.add_subplot(gs[1], sharex=ax)
+    txt = fig.add_subplot(gs[2])
+    half = 0.5 * (np.median(np.diff(th)) if th.size > 1 else 1.0)   # half a θi step (bars)
+    all_err = []
+    for k, (name, e) in enumerate(rel_err.items()):
+        e = np.abs(np.asarray(e, dtype=np.float64))
+        all_err.append(e)
+        col = model_colour(name)
+        ax.plot(th, _positive(e), marker="o", ms=3, color=col, lw=1.6, label=name)
+        for a, b in _fail_ranges(th, e, FAIL_THRESHOLD):
+            bar.barh(k, b - a + 2 * half, left=a - half, height=0.7, color=col)
+    lo, hi = _log_limits(all_err + [np.array([FAIL_THRESHOLD])], 1e-5)
+    ax.set_yscale("log")
+    ax.set_ylim(lo, max(hi, 2 * FAIL_THRESHOLD))
+    ax.axhspan(FAIL_THRESHOLD, ax.get_ylim()[1], color="#f4cccc", alpha=0.6, zorder=0,
+               label=f"fails (> {FAIL_THRESHOLD:.0%})")
+    ax.axhline(FAIL_THRESHOLD, color="#b71c1c", lw=1.0)
+    ax.set_xlim(0, 89)
+    ax.set_ylabel("relative error of the model")
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    ax.set_title(_title(title, "where each closed form fails"))
+    ax.tick_params(labelbottom=False)
+    bar.set_yticks(range(len(rel_err)))
+    bar.set_yticklabels(list(rel_err), fontsize=7)
+    bar.set_ylim(-0.6, len(rel_err) - 0.4)
+    bar.invert_yaxis()
+    bar.set_title(f"θi where the relative error exceeds {FAIL_THRESHOLD:.0%}", fontsize=8)
+    bar.set_xlabel("θi (°)")
+    bar.set_xticks([0, 15, 30, 45, 60, 75, 89])
+    bar.grid(True, axis="x", alpha=0.3)
+    txt.axis("off")
+    txt.text(0.0, 1.0, "Estimator notes:\n" + "\n".join(notes), fontsize=8, va="top",
+             transform=txt.transAxes)
+    return _save(fig, path)

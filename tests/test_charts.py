@@ -1,0 +1,214 @@
+"""Report charts: each writes a PNG of the stated pixel size, not blank, showing the simulation's
+and the models' colours, atomically (no temporary leftovers; an existing file replaced whole)."""
+import os
+
+import matplotlib.figure
+import matplotlib.image
+import numpy as np
+import pytest
+
+from microsim import analytic as an
+from microsim import surfaces as sf
+from microsim.analysis import charts as ch
+from microsim.sim import Bins, simulate
+from microsim.sim.predict import ModelSpec, predict
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+COLOUR_TOL = 12 / 255          # max per-channel distance for a pixel to "be" a colour
+MIN_PIXELS = 15                # a drawn line/marker/frame covers far more pixels than this
+CONTROL = "#00ff00"            # pure green: drawn by no chart, so its count must be zero
+
+
+def rgb(hex_colour):
+    h = hex_colour.lstrip("#")
+    return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)]) / 255.0
+
+
+def load(path):
+    img = matplotlib.image.imread(path)
+    assert img.ndim == 3 and img.shape[2] in (3, 4)
+    return img[..., :3]
+
+
+def count_colour(img, hex_colour):
+    return int(np.sum(np.all(np.abs(img - rgb(hex_colour)) <= COLOUR_TOL, axis=-1)))
+
+
+def check_png(path, size_in, colours):
+    """The PNG at ``path``: ``size_in`` × DPI pixels (±1 for float rounding), not blank, every
+    colour in ``colours`` present and the control colour absent."""
+    with open(path, "rb") as fh:
+        assert fh.read(8) == PNG_SIGNATURE
+    img = load(path)
+    w, h = size_in
+    assert abs(img.shape[1] - w * ch.DPI) <= 1 and abs(img.shape[0] - h * ch.DPI) <= 1
+    assert img.mean(axis=-1).std() > 0.05, "image is (nearly) blank"
+    for c in colours:
+        assert count_colour(img, c) >= MIN_PIXELS, f"colour {c} missing"
+    assert count_colour(img, CONTROL) == 0
+    assert not [f for f in os.listdir(os.path.dirname(path)) if f.endswith(".tmp")]
+
+
+# --- a real tiny run ---------------------------------------------------------------------------
+NDF = an.Beckmann(0.3)
+MODELS = ("ts-vgroove", "ts-ggx")
+
+
+@pytest.fixture(scope="module")
+def run():
+    ior = an.resolve_material("aluminium")
+    bins = Bins(12, 13)
+    res = simulate(sf.vgrooves(400, NDF, seed=0), ior, [0.0, 45.0], rays=20_000, bins=bins,
+                   seed=3)
+    models = predict([ModelSpec.torrance_sparrow("ts-vgroove", NDF, "vgroove", ior),
+                      ModelSpec.torrance_sparrow("ts-ggx", an.GGX(0.6), "smith", ior)],
+                     res.theta_i, bins, rtol=1e-2)
+    return res, models
+
+
+def verdicts_of(res, models):
+    """Minimal verdict dicts (the keys the hemisphere chart reads), computed from the run."""
+    out = []
+    for t, th in enumerate(res.theta_i):
+        ok = res.stderr[t] > 0
+        for name, m in models.items():
+            z = (res.brdf[t][ok] - m[t][ok]) / res.stderr[t][ok]
+            rel = np.sqrt(np.sum((res.brdf[t] - m[t])[ok] ** 2) / np.sum(res.brdf[t][ok] ** 2))
+            out.append({"theta_i": float(th), "model": name, "rel_rms": float(rel),
+                        "chi2_dof": float(np.mean(z ** 2)), "max_abs_z": float(np.abs(z).max()),
+                        "agrees": bool(np.abs(z).max() < 5)})
+    return out
+
+
+def test_model_colours_fixed_distinct_and_never_the_simulation_colour():
+    assert ch.model_colour("ts-vgroove") == ch.model_colour("TS_vgroove")
+    assert ch.model_colour("some new model") == ch.model_colour("some new model")
+    fixed = [ch.model_colour(n) for n in ("ts-vgroove", "ts-smith", "ts-smith-correlated",
+                                          "low-smooth", "low-microfacet", "rayleigh-rice")]
+    assert len(set(fixed)) == len(fixed)
+    hashed = [ch.model_colour(f"model {k}") for k in range(50)]
+    assert not set(hashed) & set(ch._FIXED.values())      # a new model never looks like a known one
+    for c in fixed + hashed:
+        assert np.abs(rgb(c) - rgb(ch.SIM_COLOUR)).max() > 3 * COLOUR_TOL
+
+
+def test_inplane_curves(run, tmp_path):
+    res, models = run
+    p = ch.inplane_curves(res, models, tmp_path / "inplane.png", "tiny V-grooves")
+    check_png(p, ch.figure_size("inplane", len(res.theta_i)),
+              [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS])
+    assert count_colour(load(p), ch.model_colour("ts-smith")) == 0     # a model not drawn
+
+
+def test_hemisphere_maps_best_and_worst(run, tmp_path):
+    res, models = run
+    verdicts = verdicts_of(res, models)
+    p = ch.hemisphere_maps(res, models, verdicts, tmp_path / "hemi.png", 1, scene_name="tiny")
+    check_png(p, ch.figure_size("hemisphere_maps"),
+              [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS])
+    # nested containers (per incidence, per model) are accepted as well
+    nested = {float(t): {v["model"]: v for v in verdicts if v["theta_i"] == t}
+              for t in res.theta_i}
+    nested[0.0]["ts-ggx"].update(chi2_dof=None, max_abs_z=None)     # undefined numbers
+    ch.hemisphere_maps(res, models, nested, tmp_path / "hemi2.png", 0)
+    check_png(tmp_path / "hemi2.png", ch.figure_size("hemisphere_maps"), [ch.SIM_COLOUR])
+
+
+def test_hemisphere_maps_rejects_bad_index_and_missing_verdicts(run, tmp_path):
+    res, models = run
+    with pytest.raises(ValueError, match="t_index"):
+        ch.hemisphere_maps(res, models, verdicts_of(res, models), tmp_path / "x.png", 2)
+    with pytest.raises(ValueError, match="verdicts"):
+        ch.hemisphere_maps(res, models, [], tmp_path / "x.png", 0)
+    assert not os.listdir(tmp_path)
+
+
+def test_unfold_covers_the_circle_and_mirrors_the_folded_half():
+    bins = Bins(3, 5)
+    v = np.arange(15.0).reshape(3, 5)
+    ang, full = ch._unfold(v, bins)
+    assert ang[0] == pytest.approx(-np.pi) and ang[-1] == pytest.approx(np.pi)
+    assert np.all(np.diff(ang) > 0) and full.shape == (3, len(ang) - 1)
+    np.testing.assert_array_equal(full, full[:, ::-1])     # symmetric in ±Δφ
+
+
+def test_energy_chart(run, tmp_path):
+    res, _ = run
+    g = np.linspace(0.0, 89.0, 60)
+    rho_models = {"ts-vgroove": (g, an.AlbedoTable(NDF, "vgroove", "aluminium").rho(
+        np.cos(np.radians(g))))}
+    rho = res.ledger["single_fresnel"]
+    err = np.sqrt(rho * (1 - rho) / res.rays)
+    lost = {"masked": res.ledger["masked_fresnel"], "downward": res.ledger["downward_fresnel"]}
+    p = ch.energy_chart(res.theta_i, rho, err, rho_models, lost, tmp_path / "energy.png",
+                        scene_name="tiny")
+    check_png(p, ch.figure_size("energy"), [ch.SIM_COLOUR, ch.model_colour("ts-vgroove")])
+    p = ch.energy_chart(res.theta_i, rho, err, rho_models, res.ledger["lost_fresnel"],
+                        tmp_path / "energy2.png")
+    check_png(p, ch.figure_size("energy"), [ch.SIM_COLOUR])
+
+
+def test_mikkelsen_fig6(tmp_path):
+    g = np.linspace(0.0, 89.5, 90)
+    sim_t = np.arange(0.0, 90.0, 15.0)
+    curves = []
+    for mat in ("methanol", "aluminium"):
+        ior = an.resolve_material(mat)
+        ft = an.fresnel_transmittance(np.cos(np.radians(g)), ior)
+        for kappa in (17, 1024):
+            tab = an.AlbedoTable(an.VonMisesFisher(kappa), "vgroove", ior, n_theta=10,
+                                 n_grazing=4, n_gl_phi=4)
+            one_minus = 1 - tab.rho(np.cos(np.radians(g)))
+            sim = 1 - tab.rho(np.cos(np.radians(sim_t)))
+            curves.append({"label": f"{mat} κ={kappa}", "theta": g, "one_minus_rho_model": one_minus,
+                           "fresnel_T": ft, "sim_theta": sim_t, "sim_one_minus_rho": sim,
+                           "sim_err": np.full_like(sim, 0.01)})
+    p = ch.mikkelsen_fig6(curves, tmp_path / "fig6.png")
+    check_png(p, ch.figure_size("mikkelsen_fig6", 2),
+              [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"), ch.model_colour("κ=1024")])
+    assert ch._series_of(curves[0]) == "κ=17" and ch._material_of(curves[-1]) == "aluminium"
+
+
+def test_speed_accuracy(tmp_path):
+    t = np.geomspace(0.5, 50.0, 6)
+    runs = {"stratified": (t, 0.01 / np.sqrt(t)), "independent": (t * 1.2, 0.03 / np.sqrt(t))}
+    p = ch.speed_accuracy(runs, tmp_path / "speed.png")
+    check_png(p, ch.figure_size("speed_accuracy"),
+              [ch.model_colour("stratified"), ch.model_colour("independent")])
+
+
+def test_stability_chart_and_fail_ranges(tmp_path):
+    th = np.arange(0.0, 90.0, 1.0)
+    rel = {"ts-vgroove": 0.003 + 0.2 * np.exp((th - 89) / 6), "ts-smith": np.full_like(th, 0.004)}
+    warnings = ["unresolved rays at grazing incidence", "lobe narrower than a bin"]
+    p = ch.stability_chart(th, rel, tmp_path / "stab.png", warnings)
+    check_png(p, ch.figure_size("stability", len(warnings)),
+              [ch.model_colour("ts-vgroove"), ch.model_colour("ts-smith")])
+    e = np.array([0.01, 0.06, 0.07, 0.01, np.nan, 0.2])
+    assert ch._fail_ranges(np.arange(6.0), e, 0.05) == [(1.0, 2.0), (5.0, 5.0)]
+    assert ch._fail_ranges(np.arange(3.0), np.full(3, 0.01), 0.05) == []
+
+
+def test_existing_file_replaced_whole_and_kept_on_failure(tmp_path, monkeypatch):
+    path = tmp_path / "chart.png"
+    path.write_bytes(b"old contents " * 10_000)
+    runs = {"stratified": ([1.0, 4.0], [0.1, 0.05])}
+    ch.speed_accuracy(runs, path)
+    data = path.read_bytes()
+    assert data.startswith(PNG_SIGNATURE) and b"old contents" not in data
+    assert os.listdir(tmp_path) == ["chart.png"]
+
+    def broken(self, fh, **kwargs):
+        fh.write(b"partial")
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", broken)
+    with pytest.raises(RuntimeError, match="disk full"):
+        ch.speed_accuracy(runs, path)
+    assert path.read_bytes() == data
+    assert os.listdir(tmp_path) == ["chart.png"]
+
+
+def test_figure_size_rejects_unknown_chart():
+    with pytest.raises(ValueError, match="chart"):
+        ch.figure_size("pie")
