@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 .PHONY: demo test
 
 demo: $(VENV)/.installed
-	$(BIN)/microsim models
+	$(BIN)/microsim report --quick
 
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest

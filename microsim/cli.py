@@ -27,6 +27,29 @@ def _cmd_surface(args) -> int:
     return 0
 
 
+def _theta_list(text: str) -> list[float]:
+    """``--theta-i 0,30,60`` or ``--theta-i 0 30 60`` (argparse nargs) → floats."""
+    try:
+        return [float(t) for t in text.replace(",", " ").split()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be angles in degrees, got {text!r}") from None
+
+
+def _cmd_run(args) -> int:
+    from .runner import execute, plan_run
+    theta = None if args.theta_i is None else [t for part in args.theta_i for t in part]
+    plan = plan_run(args.scene, rays=args.rays, theta_i=theta, out=args.out,
+                    threads=args.threads, seed=args.seed, quick=args.quick, resume=args.resume,
+                    force=args.force)
+    return execute(plan, progress=not args.no_progress).status
+
+
+def _cmd_report(args) -> int:
+    from .runner import run_report
+    return run_report(args.catalogue, args.out, quick=args.quick, threads=args.threads,
+                      progress=not args.no_progress)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="microsim", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -35,6 +58,31 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("surface", help="build a scene's surface and print its statistics next to the nominal values")
     s.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
     s.set_defaults(func=_cmd_surface)
+    r = sub.add_parser("run", help="simulate a scene, compare and fit the models, write "
+                                   "brdf.npz, meta.json, verdicts.json, report.md and charts")
+    r.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
+    r.add_argument("--rays", type=int, help="primary rays per incidence (default: the scene's; "
+                                            "--quick caps it at 200000)")
+    r.add_argument("--theta-i", type=_theta_list, nargs="+", metavar="DEG",
+                   help="incidence angles in degrees (default: the scene's)")
+    r.add_argument("--out", help="output directory (default: runs/<scene name>)")
+    r.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
+    r.add_argument("--seed", type=int, help="random seed (default: the scene's)")
+    r.add_argument("--quick", action="store_true", help="fewer rays, smaller surface, quick "
+                                                        "fits and side studies (README)")
+    g = r.add_mutually_exclusive_group()
+    g.add_argument("--resume", metavar="DIR", help="continue an interrupted run saved in DIR")
+    g.add_argument("--force", action="store_true", help="replace an existing output directory")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    r.set_defaults(func=_cmd_run)
+    q = sub.add_parser("report", help="run the whole scene catalogue and write reports/index.md")
+    q.add_argument("--quick", action="store_true", help="quick runs (as `run --quick`)")
+    q.add_argument("--out", default="reports", help="report directory (default reports)")
+    q.add_argument("--catalogue", default="surfaces", help="directory of scene files "
+                                                           "(default surfaces)")
+    q.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
+    q.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
+    q.set_defaults(func=_cmd_report)
     return p
 
 
