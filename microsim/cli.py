@@ -83,6 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
     q.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
     q.set_defaults(func=_cmd_report)
+    from .bench import add_bench_command
+    from .sweep import add_sweep_command
+    add_bench_command(sub)
+    add_sweep_command(sub)
     return p
 
 

@@ -19,6 +19,7 @@ segment; most rays finish in the first, so NumPy touches each ray a few dozen ti
 """
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from dataclasses import dataclass
@@ -72,6 +73,12 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     return v, f.astype(np.int64), lx, ly
 
 
+def _cross_columns(a: np.ndarray, b: np.ndarray) -> list:
+    """a × b for (N, 3) arrays, as three (N,) columns."""
+    return [a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]]
+
+
 class Tracer:
     """Periodic Embree scene of one tile of ``surface`` (a ``microsim.surfaces.Surface``).
 
@@ -84,17 +91,22 @@ class Tracer:
 
     def __init__(self, surface):
         v, f, lx, ly = _validated_mesh(surface)
-        cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-        norm = np.linalg.norm(cross, axis=1)
+        self.vertices, self.faces = v, f
+        cross = _cross_columns(self._e1, self._e2)
+        norm = np.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2)
         if np.any(norm == 0):
             raise ValueError("surface.faces must not contain degenerate (zero-area) triangles")
-        if np.any(cross[:, 2] <= 0):
+        if np.any(cross[2] <= 0):
             raise ValueError("surface.faces must be ordered so that every normal "
                              "cross(v1 - v0, v2 - v0) points up (z > 0)")
-        self.vertices, self.faces = v, f
-        self._v0, self._e1, self._e2 = v[f[:, 0]], v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
-        self.normals = cross / norm[:, None]
-        self._plane = np.einsum("ij,ij->i", self.normals, self._v0)   # n·v0 per facet
+        self.normals = np.empty((len(f), 3))
+        for k in range(3):
+            self.normals[:, k] = cross[k] / norm
+        del cross, self._e1, self._e2                           # cached: only needed to build
+        v0 = self._v0
+        self._plane = (self.normals[:, 0] * v0[:, 0] + self.normals[:, 1] * v0[:, 1]
+                       + self.normals[:, 2] * v0[:, 2])          # n·v0 per facet
+        del self._v0
         self.tile = (lx, ly)
         self.half = np.array([lx / 2, ly / 2])
         self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
@@ -108,6 +120,22 @@ class Tracer:
         self._lock, self._memo = threading.Lock(), {}
         self._scene = rs.EmbreeScene(robust=True)
         self._mesh = mc.TriangleMesh(self._scene, v.astype(np.float32), f.astype(np.int32))
+
+    # --- facet geometry (float64, built on demand: 72 bytes per facet) --------------------
+    @functools.cached_property
+    def _v0(self) -> np.ndarray:
+        """First vertex of every facet, (F, 3)."""
+        return self.vertices[self.faces[:, 0]]
+
+    @functools.cached_property
+    def _e1(self) -> np.ndarray:
+        """Edge v1 − v0 of every facet, (F, 3)."""
+        return self.vertices[self.faces[:, 1]] - self._v0
+
+    @functools.cached_property
+    def _e2(self) -> np.ndarray:
+        """Edge v2 − v0 of every facet, (F, 3)."""
+        return self.vertices[self.faces[:, 2]] - self._v0
 
     # --- periodic walk ------------------------------------------------------------------
     def _walk(self, origins, dirs, occlusion: bool):

@@ -1,0 +1,240 @@
+"""`microsim bench`: measured throughput, memory and time to accuracy (nothing asserted).
+
+For a fixed mesh and ray set — a periodic Gaussian heightfield (the gaussian-m0.3 scene's
+surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2° θ bins — it reports
+
+* raw embreex rays/s on 1 and 2 threads for exactly the rays the pipeline casts: every
+  primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit, in batches
+  of 65 536 (float32 arrays prepared beforehand, so only Embree is timed);
+* the pipeline's samples/s (``simulate``: primary ray, Fresnel, reflection, masking ray,
+  tally; scene build excluded) on 1 and 2 threads and its ratio to the raw figure, both
+  expressed per sample (a sample = one primary ray and, when lit, its masking ray);
+* the peak resident memory of a ``simulate`` run in a fresh process at two ray counts (it
+  does not grow with the ray count: tallies are per bin, rays live only per chunk; both
+  counts exceed the facet count, so both runs take the per-facet-table path);
+* the time ``simulate_auto`` needs to reach 1 % relative standard error on the V-groove
+  Beckmann m = 0.3 scene (aluminium, θi = 30°, 2° bins, exact masking), and the relative RMS
+  error it actually achieves against the exact closed form (Torrance–Sparrow with V-groove G,
+  Mikkelsen eq. 25, bin-averaged).
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["BenchConfig", "raw_embree", "pipeline", "peak_rss_mb", "time_to_accuracy",
+           "run_bench", "format_bench", "add_bench_command"]
+
+BATCH = 2 ** 16
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """What is measured: heightfield ``n``² (dx = 1, σ, ℓ), ``rays`` primary rays at
+    ``theta_i`` degrees; memory probed at ``memory_rays`` (two counts); time to ``target``
+    relative error on the V-groove scene with ``vgrooves`` grooves (``skip_accuracy`` omits it)."""
+
+    n: int = 512
+    sigma: float = 1.2
+    corr_len: float = 8.0
+    theta_i: float = 30.0
+    rays: int = 2 ** 22
+    memory_rays: tuple = (2 ** 20, 2 ** 23)       # both above the mesh's facet count
+    target: float = 0.01
+    vgrooves: int = 4000
+    max_rays: int = 10 ** 8
+    skip_accuracy: bool = False
+
+
+def _surface(cfg: BenchConfig):
+    from microsim.surfaces import gaussian
+    return gaussian(cfg.n, 1.0, cfg.sigma, cfg.corr_len, seed=0)
+
+
+def _bins():
+    from microsim.sim import Bins
+    return Bins(45, 37)                          # 2° θo bins, 5° Δφ bins (folded)
+
+
+def _ray_set(tracer, wi: np.ndarray, rays: int):
+    """float32 (origins, directions) of the primary rays (one shared direction) and of the
+    masking rays the pipeline casts for them (same origins, offsets and directions)."""
+    from microsim.sim.estimator import BLOCK, SINGLE, _block_rays, _facet_table
+    from microsim.analytic.fresnel import resolve_material
+    nblk = -(-rays // BLOCK)
+    o = np.concatenate([_block_rays(tracer, rays, b, (0, 0, 0), False)[0] for b in range(nblk)])
+    status, prim, point = tracer.trace(o, -wi)
+    h = np.flatnonzero(status == 0)
+    table = _facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
+    lit = h[table.code[prim[h]] == SINGLE]
+    mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
+    md = table.wo[prim[lit]]
+    return ((o.astype(np.float32), (-wi).astype(np.float32)[None]),
+            (mo.astype(np.float32), md.astype(np.float32)))
+
+
+def _time_raw(tracer, primary, masking, threads: int) -> float:
+    """Wall seconds Embree needs for both ray sets in BATCH-sized calls on ``threads``."""
+    (po, pd), (mo, md) = primary, masking
+    scene = tracer._scene
+
+    def prim_batch(a):
+        scene.run(po[a:a + BATCH], pd, output=1)
+
+    def mask_batch(a):
+        scene.run(mo[a:a + BATCH], md[a:a + BATCH], query="OCCLUDED")
+
+    with ThreadPoolExecutor(threads) as pool:
+        t0 = time.perf_counter()
+        list(pool.map(prim_batch, range(0, len(po), BATCH)))
+        list(pool.map(mask_batch, range(0, len(mo), BATCH)))
+        return time.perf_counter() - t0
+
+
+def raw_embree(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 2) -> dict:
+    """Raw embreex throughput for the pipeline's own rays: best of ``repeat`` per thread count.
+    Returns {"rays", "primary_rays", "masking_rays", "rays_per_s": {1: .., 2: ..},
+    "samples_per_s": {1: .., 2: ..}} (rays/s counts both kinds; samples/s = primary rays/s)."""
+    from microsim.analytic._checks import spherical_deg
+    from microsim.sim import Tracer
+    tracer = Tracer(surface if surface is not None else _surface(cfg))
+    primary, masking = _ray_set(tracer, spherical_deg(cfg.theta_i, 0.0), cfg.rays)
+    n_p, n_m = len(primary[0]), len(masking[0])
+    out = {"rays": n_p + n_m, "primary_rays": n_p, "masking_rays": n_m, "rays_per_s": {},
+           "samples_per_s": {}}
+    for threads in (1, 2):
+        t = min(_time_raw(tracer, primary, masking, threads) for _ in range(repeat))
+        out["rays_per_s"][threads] = (n_p + n_m) / t
+        out["samples_per_s"][threads] = n_p / t
+    return out
+
+
+def pipeline(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 2) -> dict:
+    """``simulate`` samples/s (scene build excluded), best of ``repeat``, on 1 and 2 threads."""
+    from microsim.sim import simulate
+    surface = surface if surface is not None else _surface(cfg)
+    out = {}
+    for threads in (1, 2):
+        best = 0.0
+        for _ in range(repeat):
+            res = simulate(surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(),
+                           threads=threads)
+            best = max(best, res.meta["rays_per_second"])
+        out[threads] = best
+    return out
+
+
+_PROBE = """
+import json, resource, sys
+from microsim.bench import BenchConfig, _bins, _surface
+from microsim.sim import simulate
+cfg = BenchConfig(**json.loads(sys.argv[1]))
+simulate(_surface(cfg), "aluminium", cfg.theta_i, rays=int(sys.argv[2]), bins=_bins(), threads=2)
+try:        # this process's own high-water mark (ru_maxrss may carry the parent's over exec)
+    with open("/proc/self/status") as fh:
+        print(next(int(l.split()[1]) for l in fh if l.startswith("VmHWM:")) / 1024.0)
+except OSError:
+    print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)
+"""
+
+
+def peak_rss_mb(cfg: BenchConfig = BenchConfig(), rays: int | None = None) -> float:
+    """Peak resident memory (MB) of building the surface and one ``simulate`` run of ``rays``
+    rays (2 threads) in a fresh Python process."""
+    conf = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
+    out = subprocess.run([sys.executable, "-c", _PROBE, json.dumps(conf), str(int(rays or cfg.rays))],
+                         capture_output=True, text=True, check=True)
+    return float(out.stdout.split()[-1])
+
+
+def time_to_accuracy(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> dict:
+    """Seconds and rays ``simulate_auto`` needs on the V-groove Beckmann m = 0.3 scene
+    (aluminium, θi = 30°, Bins(45, 91): 2° bins, exact masking) to reach ``cfg.target``
+    relative standard error; also the achieved rel. RMS error against the exact closed form
+    (bin-averaged Torrance–Sparrow with V-groove G) and its χ²/dof."""
+    from microsim import analytic as an
+    from microsim.analysis.verdicts import verdict
+    from microsim.sim import Bins
+    from microsim.sim.auto import simulate_auto
+    from microsim.sim.predict import ModelSpec, predict
+    from microsim.surfaces import vgrooves
+    bins = Bins(45, 91)
+    surface = vgrooves(cfg.vgrooves, an.Beckmann(0.3), seed=0)
+    t0 = time.perf_counter()
+    res = simulate_auto(surface, "aluminium", 30.0, target=cfg.target, bins=bins,
+                        masking="exact", threads=threads, max_rays=cfg.max_rays)
+    seconds = time.perf_counter() - t0
+    model = predict([ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")],
+                    [30.0], bins)["ts"][0]
+    v = verdict(res.brdf[0], res.stderr[0], res.counts[0], model, bins.projected_solid_angle(),
+                bins.theta_edges, phi_edges=bins.phi_edges)
+    info = res.meta["auto"]["incidences"][0]
+    return {"seconds": seconds, "rays": int(res.rays[0]), "rse": info["rse"],
+            "converged": info["converged"], "rel_rms_vs_closed_form": v["rel_rms"],
+            "chi2_dof": v["chi2_dof"], "threads": threads}
+
+
+def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
+    """Every figure of the module docstring, as a JSON-able dict."""
+    surface = _surface(cfg)
+    raw = raw_embree(cfg, surface)
+    pipe = pipeline(cfg, surface)
+    out = {"config": asdict(cfg), "load_average": list(os.getloadavg()), "cpus": os.cpu_count(),
+           "mesh_triangles": int(len(surface.faces)), "raw": raw, "pipeline_samples_per_s": pipe,
+           "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
+           "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays}}
+    if not cfg.skip_accuracy:
+        out["time_to_accuracy"] = time_to_accuracy(cfg)
+    return out
+
+
+def format_bench(b: dict) -> str:
+    """Human-readable table of ``run_bench`` output."""
+    raw, pipe, ratio = b["raw"], b["pipeline_samples_per_s"], b["ratio"]
+    lines = [f"mesh: {b['mesh_triangles']} triangles; {raw['primary_rays']} primary + "
+             f"{raw['masking_rays']} masking rays; load average {b['load_average'][0]:.2f} "
+             f"on {b['cpus']} CPUs",
+             f"{'':28s}{'1 thread':>14s}{'2 threads':>14s}",
+             f"{'raw embreex rays/s':28s}{raw['rays_per_s'][1]:14.4g}{raw['rays_per_s'][2]:14.4g}",
+             f"{'raw embreex samples/s':28s}{raw['samples_per_s'][1]:14.4g}"
+             f"{raw['samples_per_s'][2]:14.4g}",
+             f"{'pipeline samples/s':28s}{pipe[1]:14.4g}{pipe[2]:14.4g}",
+             f"{'pipeline / raw':28s}{ratio[1]:14.1%}{ratio[2]:14.1%}"]
+    lines += [f"peak RSS, {r} rays: {mb:.0f} MB" for r, mb in b["peak_rss_mb"].items()]
+    t = b.get("time_to_accuracy")
+    if t:
+        lines.append(f"time to {b['config']['target']:.0%} (V-groove Beckmann 0.3, Al, 30°, 2° bins, "
+                     f"{t['threads']} threads): {t['seconds']:.2f} s, {t['rays']} rays, rse "
+                     f"{t['rse']:.4f}, rel. RMS vs closed form {t['rel_rms_vs_closed_form']:.4f}"
+                     f" (χ²/dof {t['chi2_dof']:.3f})")
+    return "\n".join(lines)
+
+
+def _cmd_bench(args) -> int:
+    cfg = BenchConfig(rays=args.rays, skip_accuracy=args.skip_accuracy)
+    if args.quick:
+        cfg = BenchConfig(n=128, rays=2 ** 17, memory_rays=(2 ** 16, 2 ** 18), target=0.05,
+                          vgrooves=1000, skip_accuracy=args.skip_accuracy)
+    b = run_bench(cfg)
+    print(json.dumps(b, indent=1) if args.json else format_bench(b))
+    return 0
+
+
+def add_bench_command(subparsers) -> None:
+    """Register ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]``."""
+    p = subparsers.add_parser("bench", help="measure raw Embree vs pipeline throughput, peak "
+                                            "memory and time to 1%% precision")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument("--rays", type=int, default=BenchConfig.rays,
+                   help=f"primary rays of the throughput runs (default {BenchConfig.rays})")
+    p.add_argument("--quick", action="store_true",
+                   help="small mesh and ray counts (seconds; for smoke tests)")
+    p.add_argument("--skip-accuracy", action="store_true", help="omit the time-to-1%% run")
+    p.set_defaults(func=_cmd_bench)

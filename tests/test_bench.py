@@ -1,0 +1,145 @@
+"""Performance machinery (microsim.bench, the batched pipeline of microsim.sim.estimator):
+figures are measured, never asserted; what is asserted is that batching changes no result,
+that the per-facet table path equals the per-ray path, and that memory does not grow with
+the number of rays."""
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from microsim.analytic._checks import spherical_deg
+from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.bench import BenchConfig, add_bench_command, format_bench, peak_rss_mb, pipeline, raw_embree
+from microsim.sim import BLOCK, Bins, simulate
+from microsim.sim import estimator as E
+from microsim.surfaces.surface import flat
+from test_tracer import heightfield_surface, random_heights
+
+AL = resolve_material("aluminium")
+
+
+@pytest.fixture(scope="module")
+def rough():
+    return heightfield_surface(random_heights(sigma=0.03, seed=4), 1 / 64)   # 8192 facets
+
+
+def test_per_ray_path_is_identical_for_any_threads_and_chunk(rough):
+    """Fewer rays than facets: the per-ray path (no facet table) with Fresnel per block."""
+    rays = BLOCK + 77
+    assert rays < len(rough.faces)
+    kw = dict(rays=rays, bins=Bins(10, 7), seed=3)
+    a = simulate(rough, "aluminium", [25.0, 75.0], threads=1, chunk=BLOCK, **kw)
+    b = simulate(rough, "aluminium", [25.0, 75.0], threads=2, chunk=2 * BLOCK, **kw)
+    for name in ("sum_w", "sum_w2", "counts", "brdf"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert all(np.array_equal(a.ledger[k], b.ledger[k]) for k in a.ledger)
+
+
+@pytest.mark.parametrize("theta", [0.0, 40.0, 85.0])
+def test_fast_paths_equal_the_per_ray_events(rough, theta):
+    """Same rays through the facet-table and column paths (tallies) and ``_trace`` (the
+    per-ray Events of ``ray_events``): identical ledger classes and bins; Fresnel weights equal
+    to rounding (the table evaluates F once per facet, the others once per hit)."""
+    tracer, profile, az = E._tracer_for(rough, "traced")
+    wi = spherical_deg(theta, 10.0)
+    bins = Bins(18, 13)
+    starts = np.concatenate([E._block_rays(tracer, 3 * BLOCK, b, (0, 0, 0), False)[0]
+                             for b in range(3)])
+    ev = E._trace(tracer, profile, wi, starts, None, AL, False)
+    single = ev.status == E.SINGLE
+    assert single.mean() > 0.5 and np.any(ev.status == E.MASKED)        # not vacuous
+    table = E._facet_table(tracer, wi, AL, bins, 10.0)
+    for status, weight, where in (E._trace_tabled(tracer, table, wi, starts),
+                                  E._trace_columns(tracer, None, wi, 10.0, bins, starts, None, AL)):
+        assert np.mean(status != ev.status) <= 1e-4           # float32-grazing decisions only
+        same = status == ev.status
+        assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
+        ok = same & single
+        assert np.array_equal(where[ok], bins.locate(ev.wo[ok], 10.0))
+
+
+@pytest.mark.parametrize("masking", ["traced", "exact"])
+def test_groove_column_path_equals_the_per_ray_events(masking):
+    """Azimuth-averaged grooves: binning in the groove frame against φi − ψ gives the bins of
+    the rotated-back wo."""
+    from microsim import analytic as an
+    from microsim.surfaces import vgrooves
+    tracer, profile, az = E._tracer_for(vgrooves(64, an.Beckmann(0.4), seed=1), masking)
+    wi, bins = spherical_deg(60.0, 25.0), Bins(18, 13)
+    drawn = [E._block_rays(tracer, 2 * BLOCK, b, (1, 0, 0), True) for b in range(2)]
+    starts, psi = (np.concatenate(x) for x in zip(*drawn))
+    ev = E._trace(tracer, profile, wi, starts, psi, AL, True)
+    status, weight, where = E._trace_columns(tracer, profile, wi, 25.0, bins, starts, psi, AL)
+    assert np.mean(status != ev.status) <= 1e-4 and np.any(status == E.MASKED)
+    same = status == ev.status
+    assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
+    ok = same & (ev.status == E.SINGLE)
+    assert np.mean(where[ok] != bins.locate(ev.wo[ok], 25.0)) <= 1e-4   # bin edges to rounding
+
+
+def test_peak_memory_does_not_grow_with_the_ray_count():
+    """Any per-ray storage costs ≥ 8 bytes per ray (one float64); 8x more rays must add less
+    than half of that, i.e. memory is bounded by the chunk, not by the run."""
+    cfg = BenchConfig(n=64)
+    small, large = 2 ** 18, 2 ** 21
+    a, b = peak_rss_mb(cfg, small), peak_rss_mb(cfg, large)
+    assert b - a < 0.5 * 8 * (large - small) / 2 ** 20, (a, b)
+
+
+def test_bench_figures_are_measured_and_printable():
+    cfg = BenchConfig(n=32, rays=2 ** 14)
+    raw = raw_embree(cfg, repeat=1)
+    pipe = pipeline(cfg, repeat=1)
+    assert raw["primary_rays"] == 2 ** 14 and 0 < raw["masking_rays"] <= raw["primary_rays"]
+    for t in (1, 2):
+        assert np.isfinite(raw["rays_per_s"][t]) and raw["rays_per_s"][t] > 0
+        assert np.isfinite(pipe[t]) and pipe[t] > 0
+    b = {"config": {"target": 0.01}, "load_average": [0.0], "cpus": 2, "mesh_triangles": 2048,
+         "raw": raw, "pipeline_samples_per_s": pipe,
+         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
+         "peak_rss_mb": {2 ** 14: 100.0}}
+    text = format_bench(b)
+    assert "raw embreex rays/s" in text and "pipeline / raw" in text
+    json.dumps(b)
+
+
+def test_bench_subcommand_registers():
+    p = argparse.ArgumentParser()
+    add_bench_command(p.add_subparsers())
+    args = p.parse_args(["bench", "--json", "--quick"])
+    assert args.json and args.quick and callable(args.func)
+
+
+# --- incidence-azimuth rotation (statistically isotropic heightfields) ---------------------------
+def _tallies(tracer, wi, blocks_per_chunk, n_total, bins, rotate):
+    nblk = -(-n_total // BLOCK)
+    out = []
+    for a in range(0, nblk, blocks_per_chunk):
+        out += list(E._chunk_tallies(tracer, None, wi, 0.0, bins, AL, n_total,
+                                     range(a, min(a + blocks_per_chunk, nblk)), key=(5, 0, 0),
+                                     azimuth=False, rotate=rotate))
+    return out
+
+
+def test_rotated_incidence_is_reproducible_for_any_chunk(rough):
+    tracer = E._tracer_for(rough, "traced")[0]
+    wi, bins, n = spherical_deg(50.0, 0.0), Bins(10, 7), 3 * BLOCK + 5
+    a = _tallies(tracer, wi, 1, n, bins, True)
+    b = _tallies(tracer, wi, 3, n, bins, True)
+    c = _tallies(tracer, wi, 4, n, bins, False)
+    assert all(np.array_equal(x, y) for p, q in zip(a, b) for x, y in zip(p, q))
+    assert not all(np.array_equal(p[0], q[0]) for p, q in zip(a, c))    # the rotation acts
+
+
+@pytest.mark.parametrize("theta", [20.0, 65.0])
+def test_rotated_incidence_keeps_the_mirror_direction_of_a_flat_surface(theta):
+    """Bins follow the rotated incidence: all energy F(θi) stays in the mirror bin Δφ = 180°."""
+    tracer = E._tracer_for(flat(), "traced")[0]
+    bins = Bins(45, 37)
+    tallies = _tallies(tracer, spherical_deg(theta, 0.0), 2, 3 * BLOCK, bins, True)
+    sw = sum(t[0] for t in tallies)
+    k = bins.locate(spherical_deg(theta, 180.0), 0.0)
+    assert sw[k] / (3 * BLOCK) == pytest.approx(float(fresnel(np.cos(np.radians(theta)), AL)),
+                                                 rel=1e-12)
+    assert np.count_nonzero(sw) == 1
