@@ -258,7 +258,7 @@ def test_default_models_names_and_attach():
     names = [m.name for m in default_models(g, "aluminium")]
     assert names == [f"ts-beckmann-{d}-{k}" for d in ("nominal", "realised")
                      for k in ("vgroove", "smith", "smith-corr")] + ["ts-facets"]
-    assert default_models(flat(), None) == []
+    assert [m.name for m in default_models(flat(), None)] == ["mirror-fresnel"]
     bins = Bins(10, 7)
     res = simulate(vg, "aluminium", [20.0, 60.0, 20.0], phi_i=[0.0, 0.0, 45.0], rays=20_000,
                    bins=bins)
@@ -268,3 +268,19 @@ def test_default_models_names_and_attach():
     # isotropic model, relative azimuth: φi does not matter (to the quadrature tolerance)
     assert np.allclose(res.models["ts-vgroove"][2], want[0], rtol=1e-2, atol=1e-9)
     assert all(v.shape == (3,) + bins.shape for v in res.models.values())
+
+
+def test_flat_mirror_model_is_the_fresnel_delta():
+    """The flat scene's model puts exactly F(θi) into the mirror bin and nothing elsewhere, and
+    the simulation agrees with it (both are exact up to rounding)."""
+    from microsim.analysis.verdicts import verdicts_for_result
+    from microsim.sim.compare import attach_models, default_models
+    theta = [0.0, 40.0, 85.0]
+    res = simulate(flat(), "aluminium", theta, rays=4096, bins=Bins(18, 13))
+    attach_models(res, default_models(flat(), "aluminium"))
+    model = res.models["mirror-fresnel"]
+    omega = res.bins.projected_solid_angle()
+    f = an.fresnel(np.cos(np.radians(theta)), an.resolve_material("aluminium"))
+    np.testing.assert_allclose((model * omega).sum(axis=(1, 2)), f, rtol=1e-12)
+    assert all((m > 0).sum() == 1 for m in model)
+    assert all(v["agrees"] for v in verdicts_for_result(res))

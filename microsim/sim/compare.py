@@ -17,7 +17,11 @@ Heightfields (``gaussian``, ``abc``, ``file``; m_nom = the scene's nominal Beckm
   ``ts-beckmann-realised-{vgroove,smith,smith-corr}``   Beckmann(m_real)
   ``ts-facets``         D = the surface's own facets (Empirical), height-correlated Smith G with
                         the facets' own Λ
-Flat surfaces get no models.
+  For random scenes run over several realisations, ``ts-facets`` and m_real pool all of them
+  (pass the realisations as a sequence); these realisation-specific models are judged against
+  ray noise only (``attach_models`` lists them in ``meta["realisation_models"]``).
+Flat surfaces (``kind == "flat"``):
+  ``mirror-fresnel``    the exact answer: all reflected light in the mirror bin, weight F(θi)
 """
 from __future__ import annotations
 
@@ -98,9 +102,9 @@ def default_models(scene_or_surface, ior, ndf=None, *,
     surfaces, ndf = _surfaces_and_ndf(scene_or_surface, ndf)
     resolve_material(ior)                                   # validate now, not at predict time
     kinds = tuple(SHADOWING_SUFFIX)
-    if surfaces[0].kind == "flat":
-        return []
     normals, weights, m_real = _pooled_facets(surfaces)
+    if surfaces[0].kind == "flat":       # the exact answer: all light in the mirror bin, F(θi)
+        return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", ior)]
     if surfaces[0].kind == "vgrooves":
         if ndf is None:
             raise ValueError("ndf must be given for a V-groove surface without source_ndf")
