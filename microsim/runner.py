@@ -574,8 +574,10 @@ def _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log) -> 
     t0 = time.perf_counter()
     _attach(result, _models_for(plan))
     from .analysis.fits import FIT_MODELS
-    fits = fit_all(result, sc.ior, names=plan.effort.fit_names or tuple(FIT_MODELS),
-                   quick=plan.effort.quick_fits)
+    # a flat mirror's lobe is a delta, narrower than any bin: fitting a lobe shape is meaningless
+    fits = {} if sc.surface.kind == "flat" else fit_all(
+        result, sc.ior, names=plan.effort.fit_names or tuple(FIT_MODELS),
+        quick=plan.effort.quick_fits)
     verdicts = verdicts_for_result(result, fitted=fits)
     shown = {**result.models, **{f.name: f.model_values for f in fits.values()}}
     ranking = _ranking(verdicts)
