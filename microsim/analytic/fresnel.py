@@ -47,7 +47,7 @@ def fresnel(cos_theta, ior=None):
     """Exact unpolarised reflectance (R_s + R_p)/2 from air onto index ``ior`` (dimensionless).
 
     ``cos_theta``: cosine of the incidence angle to the facet normal, clipped to [0, 1].
-    ``ior``: real n > 0 (dielectric; n < 1 means the light comes from the denser medium and
+    ``ior``: a material name (``MATERIALS``), real n > 0 (dielectric; n < 1 means the light comes from the denser medium and
     total internal reflection gives R = 1), complex n + ik with k ≥ 0 (conductor), or None
     (mirror, R = 1). R = 1 exactly at grazing incidence (cos θ = 0) for every interface.
 
@@ -59,6 +59,11 @@ def fresnel(cos_theta, ior=None):
     The second factor of r_p vanishes at Brewster's angle, where r_p is legitimately ~0.
     """
     c = _cos(cos_theta)
+    if isinstance(ior, str):                       # a material name ("aluminium", "mirror", …)
+        try:
+            ior = resolve_material(ior)
+        except ValueError as exc:
+            raise ValueError(f"ior: {exc}") from None
     if ior is None:
         return np.ones_like(c)
     eta = _check_ior(ior)
