@@ -16,6 +16,12 @@ Ctrl-C during the simulation keeps the tallies so far: they are saved with
 ``meta["partial"] = True`` (exit status 130) and ``--resume DIR`` continues them to the requested
 ray count, giving the same tallies as an uninterrupted run.
 
+A scene with ``rays = "auto"`` (and no ``--rays``) is traced with ``sim.auto.simulate_auto``
+until the energy-weighted relative standard error is ≤ ``AUTO_TARGET`` (1 %) per incidence, at
+most ``AUTO_MAX_RAYS`` rays (``Effort.max_rays`` if smaller); the rays and seconds each
+incidence used are in ``meta.json`` (``auto``, ``run.auto``) and ``verdicts.json``
+(``rays_auto``). Such runs need one realisation and cannot be resumed.
+
 ``Effort`` says what a run spends; ``QUICK`` is exactly what ``--quick`` changes.
 """
 from __future__ import annotations
@@ -37,12 +43,14 @@ import numpy as np
 
 from .analysis.report import albedo_stderr
 
-__all__ = ["Effort", "FULL", "QUICK", "AUTO_RAYS", "RunPlan", "RunOutcome", "plan_run",
+__all__ = ["Effort", "FULL", "QUICK", "AUTO_TARGET", "AUTO_MAX_RAYS", "RunPlan", "RunOutcome", "plan_run",
            "execute", "run_report", "publish_dir", "write_json_atomic", "VERDICTS_FILE",
            "REPORT_FILE"]
 
-AUTO_RAYS = 1_000_000
-"""Rays per incidence used when a scene says ``rays = "auto"``."""
+AUTO_TARGET = 0.01
+"""Energy-weighted relative standard error a ``rays = "auto"`` scene is traced to."""
+AUTO_MAX_RAYS = 100_000_000
+"""Cap on the rays per incidence of a ``rays = "auto"`` scene."""
 VERDICTS_FILE, REPORT_FILE = "verdicts.json", "report.md"
 SCHEMA_VERSION = 1
 SWEEP_SEED, SPEED_SEED = 7919, 104729
@@ -114,6 +122,7 @@ class RunPlan:
     quick: bool
     previous: object | None = None        # Result loaded for --resume
     force: bool = False
+    auto: bool = False                    # rays = "auto": ``rays`` is then the cap
 
     @property
     def bins(self):
@@ -150,8 +159,15 @@ def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=N
     rays = _int_option("rays", rays, 1)
     threads = _int_option("threads", threads, 1)
     seed = _int_option("seed", seed, 0)
+    auto = rays is None and scene.simulation.rays == "auto"
+    if auto and scene.simulation.realisations != 1:
+        raise ValueError(f"rays = \"auto\" needs realisations = 1 (scene {scene.name} has "
+                         f"{scene.simulation.realisations}); give --rays instead")
+    if auto and resume is not None:
+        raise ValueError("--resume is not available for a rays = \"auto\" scene; "
+                         "use --force to run it again")
     if rays is None:
-        rays = AUTO_RAYS if scene.simulation.rays == "auto" else scene.simulation.rays
+        rays = AUTO_MAX_RAYS if auto else scene.simulation.rays
         if effort.max_rays is not None:
             rays = min(rays, effort.max_rays)
     if rays < scene.simulation.realisations:
@@ -181,7 +197,7 @@ def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=N
                              f"--force to replace it")
     return RunPlan(scene=scene, out=Path(out), rays=rays, theta_i=theta_i, seed=seed,
                    threads=threads, effort=effort, quick=bool(quick), previous=previous,
-                   force=bool(force))
+                   force=bool(force), auto=auto)
 
 
 def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where):
@@ -253,10 +269,32 @@ def _simulate(plan: RunPlan, theta_i, rays, seed, bins, progress=None, resume=No
                     origins=origins, resume=resume)
 
 
+def _simulate_auto(plan: RunPlan, log):
+    """``simulate_auto`` to ``AUTO_TARGET`` on the scene's surface, at most ``plan.rays`` rays
+    per incidence; one progress line per batch through ``log`` (None: silent)."""
+    from .sim.auto import simulate_auto
+    sc = plan.scene
+    surface = sc.build_surface(seed=plan.seed, scale=plan.effort.scale_for(sc.surface.kind))
+    return simulate_auto(surface, sc.ior, list(plan.theta_i), target=AUTO_TARGET,
+                         bins=plan.bins, seed=plan.seed, threads=plan.threads,
+                         max_rays=plan.rays, progress=log)
+
+
+def _auto_summary(result) -> dict | None:
+    """Rays, seconds, achieved rse and convergence per incidence of an auto run (or None)."""
+    auto = result.meta.get("auto")
+    if not auto:
+        return None
+    keys = ("theta_i", "rays", "seconds", "rse", "converged", "batches")
+    return {"target": auto["target"], "seconds": float(result.meta.get("seconds", 0.0)),
+            "incidences": [{k: d[k] for k in keys} for d in auto["incidences"]]}
+
+
 def _run_meta(plan: RunPlan) -> dict:
     sc = plan.scene
+    rays = {"rays": "auto", "max_rays": plan.rays} if plan.auto else {"rays": plan.rays}
     return {"scene": sc.name, "scene_file": str(sc.path), "description": sc.description,
-            "rays": plan.rays, "theta_i": list(plan.theta_i), "seed": plan.seed,
+            **rays, "theta_i": list(plan.theta_i), "seed": plan.seed,
             "quick": plan.quick, "bins": [plan.bins.n_theta, plan.bins.n_phi],
             "realisations": sc.simulation.realisations,
             "surface_scale": plan.effort.scale_for(sc.surface.kind),
@@ -538,6 +576,8 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
         if done:
             result = prev
             result.models.clear()
+        elif plan.auto:
+            result = _simulate_auto(plan, log if progress else None)
         else:
             bar = RayProgress(_remaining_rays(plan), plan.theta_i, plan.scene.name,
                               enabled=progress)
@@ -547,6 +587,8 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
             finally:
                 bar.close()
         result.meta["run"] = _run_meta(plan)
+        if plan.auto:
+            result.meta["run"]["auto"] = _auto_summary(result)
         if result.is_partial:
             result.save(stage)
             publish_dir(stage, plan.out)
@@ -593,7 +635,8 @@ def _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log) -> 
     result.meta["seconds_analysis"] = time.perf_counter() - t0
     result.save(stage)
     doc = {"schema_version": SCHEMA_VERSION, "scene": sc.name, "scene_file": str(sc.path),
-           "description": sc.description, "quick": plan.quick, "rays": plan.rays,
+           "description": sc.description, "quick": plan.quick,
+           "rays": int(result.rays.max()) if plan.auto else plan.rays,
            "theta_i": list(plan.theta_i), "seed": plan.seed, "ranking": ranking,
            "verdicts": verdicts, "fits": [fit_record(f) for f in fits.values()],
            "speed": {"theta_i": speed_theta, "reference": speed_ref,
@@ -601,6 +644,8 @@ def _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log) -> 
                                   "rel_rms": e} for k, (t, e) in speed.items()}},
            "stability": {"theta_i": sweep.theta_i, "rays": plan.effort.sweep_rays,
                          "rel_rms": stability, "warnings": _warnings_for(plan, sweep)}}
+    if plan.auto:
+        doc["rays_auto"] = _auto_summary(result)
     doc = _clean(doc)
     write_json_atomic(stage / VERDICTS_FILE, doc)
     write_text_atomic(stage / REPORT_FILE, report.scene_report(doc, result, files))

@@ -12,8 +12,11 @@ rel_rms² = Σ_E f̄Ω ((m − f̄)/f̄)² / Σ_E f̄Ω has expectation ≈ rse�
 
 The run is a sequence of independent batches (``simulate`` with seeds derived from ``seed`` and
 the batch index), each itself stratified over the tile; their raw sums Σw, Σw², counts and
-ledger tallies are added in batch order, which keeps the estimate unbiased and the per-ray
-standard error valid (conservative under stratification). After each batch the number of rays
+ledger tallies are added in batch order, which keeps the estimate unbiased. Batches are
+independent and each is a whole number of blocks (an even number of rays, so no pair of the
+collapsed-strata error straddles two batches): the variance of the pooled mean is the sum of
+the batches' pair terms, (Σx² − 2 Σ pairs)/N², i.e. the same ``estimator._estimate`` on the
+pooled sums (per-ray formula for ``origins="independent"``). After each batch the number of rays
 still needed is predicted from rse ∝ N^(-1/2); batches grow at most 4× per step.
 """
 from __future__ import annotations
@@ -23,7 +26,7 @@ import time
 import numpy as np
 
 from .bins import Bins
-from .estimator import BLOCK, LEDGER, simulate
+from .estimator import BLOCK, LEDGER, _estimate, simulate
 from .result import Result
 
 __all__ = ["simulate_auto", "relative_standard_error", "ENERGY_FRACTION"]
@@ -64,7 +67,8 @@ class _Sums:
 
     def __init__(self, nbin: int):
         self.n = 0
-        self.sum_w, self.sum_w2 = np.zeros(nbin), np.zeros(nbin)
+        self.sum_w, self.sum_w2, self.sum_pair = np.zeros(nbin), np.zeros(nbin), np.zeros(nbin)
+        self.pairs = True                      # every batch used the pair estimate
         self.count = np.zeros(nbin, np.int64)
         self.led_n, self.led_f = np.zeros(len(LEDGER), np.int64), np.zeros(len(LEDGER))
 
@@ -74,6 +78,10 @@ class _Sums:
         self.sum_w += res.sum_w[0].ravel()
         self.sum_w2 += res.sum_w2[0].ravel()
         self.count += res.counts[0].ravel()
+        self.pairs &= (res.meta.get("stderr_method") == "pairs" and res.tallies is not None
+                       and "sum_pair" in res.tallies)
+        if self.pairs:
+            self.sum_pair += res.tallies["sum_pair"][:, 0].sum(axis=0)
         self.led_n += np.array([res.ledger_counts[k][0] for k in LEDGER], dtype=np.int64)
         if res.tallies is not None and "led_f" in res.tallies:
             self.led_f += res.tallies["led_f"][:, 0].sum(axis=0)
@@ -82,12 +90,10 @@ class _Sums:
                                     for k in LEDGER])
 
     def estimate(self, omega: np.ndarray):
-        """BRDF and per-ray standard error (sr⁻¹), flat."""
-        n = self.n
-        mean = self.sum_w / n
-        var = np.maximum(self.sum_w2 / n - mean * mean, 0.0)
-        se = np.sqrt(var / (n - 1)) if n > 1 else np.full_like(mean, np.nan)
-        return mean / omega, se / omega
+        """BRDF and standard error (sr⁻¹), flat: collapsed-strata pairs when every batch had
+        them, else per-ray (``estimator._estimate``)."""
+        return _estimate(self.sum_w, self.sum_w2, self.n, omega,
+                         self.sum_pair if self.pairs else None)
 
 
 def _next_batch(n_done: int, rse: float, target: float, first: int, max_rays: int) -> int:
@@ -115,7 +121,8 @@ def simulate_auto(surface, material, theta_i, target: float = 0.01, *, phi_i=0.0
     ``theta_i``/``phi_i`` degrees (scalar or sequences), ``first`` rays in the first batch;
     the other arguments as in ``simulate`` (one surface; no realisations). Returns a
     ``Result`` whose ``meta["auto"]`` lists per incidence the rays used, seconds, batches,
-    the achieved rse and whether the target was met (``converged``).
+    the achieved rse and whether the target was met (``converged``). An interrupt (SIGINT)
+    raises KeyboardInterrupt (there is no partial result to resume).
     """
     if not (isinstance(target, (int, float)) and 0 < target < 1):
         raise ValueError(f"target must be a relative error in (0, 1), got {target!r}")
@@ -137,6 +144,8 @@ def simulate_auto(surface, material, theta_i, target: float = 0.01, *, phi_i=0.0
             res = simulate(surface, material, float(t_deg), phi_i=float(p_deg), rays=n_next,
                            bins=bins, seed=_batch_seed(seed, i, batch), threads=threads,
                            chunk=chunk, masking=masking, origins=origins)
+            if res.is_partial:                 # interrupted (SIGINT): batches cannot resume
+                raise KeyboardInterrupt
             meta0 = meta0 or res.meta
             acc.add(res)
             batch += 1
@@ -169,6 +178,7 @@ def _assemble(th, ph, bins, omega, sums, meta0, info, target, energy, seed) -> R
     meta = {k: v for k, v in meta0.items()
             if k not in ("seconds", "rays_per_second", "rays_traced", "partial", "interrupted",
                          "resumed", "seconds_per_realisation", "seconds_scene_build")}
+    meta.update(stderr_method="pairs" if all(s.pairs for s in sums) else "per-ray")
     meta.update(seed=int(seed), rays="auto", seconds=float(sum(d["seconds"] for d in info)),
                 auto={"target": float(target), "energy": float(energy), "incidences": info})
     return Result(theta_i=th, phi_i=np.array(ph, dtype=np.float64), bins=bins,
