@@ -26,7 +26,6 @@ incidence used are in ``meta.json`` (``auto``, ``run.auto``) and ``verdicts.json
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import re
@@ -40,6 +39,8 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+
+from . import atomic
 
 from .analysis.report import albedo_stderr
 
@@ -498,30 +499,8 @@ def _clean(obj):
 
 
 def write_json_atomic(path: Path, data) -> None:
-    """``json.dump`` to a temporary file beside ``path``, then ``os.replace``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(_clean(data), fh, indent=1, allow_nan=False)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    """Strict JSON (NaN → null) of ``data`` written atomically (``microsim.atomic``)."""
+    atomic.write_json(path, _clean(data), allow_nan=False)
 
 
 def _staging(out: Path) -> Path:
@@ -653,7 +632,7 @@ def _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log) -> 
         doc["rays_auto"] = _auto_summary(result)
     doc = _clean(doc)
     write_json_atomic(stage / VERDICTS_FILE, doc)
-    write_text_atomic(stage / REPORT_FILE, report.scene_report(doc, result, files))
+    atomic.write_text(stage / REPORT_FILE, report.scene_report(doc, result, files))
     publish_dir(stage, plan.out)
     log(f"microsim: wrote {plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, brdf.npz, meta.json, "
         f"{len(files)} charts)")
@@ -726,6 +705,6 @@ def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, prog
         fig6 = "mikkelsen-fig6.png"
         ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
     seconds = time.perf_counter() - t0
-    write_text_atomic(out / "index.md", report.index_report(docs, fig6, quick, seconds))
+    atomic.write_text(out / "index.md", report.index_report(docs, fig6, quick, seconds))
     log(f"microsim: wrote {out}/index.md ({len(docs)} scenes, {seconds:.0f} s)")
     return 0

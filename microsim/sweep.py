@@ -42,12 +42,13 @@ import itertools
 import json
 import os
 import sys
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
+
+from . import atomic
 
 __all__ = ["SweepSpec", "Task", "load_sweep", "expand_tasks", "run_task", "run_sweep",
            "gather", "summary_table", "write_summary", "add_sweep_command"]
@@ -212,21 +213,8 @@ def run_task(task: Task, out_dir) -> dict:
     record = {"id": task.id, "task": task.to_dict(), "roughness_param": key, "roughness": value,
               "rays": int(res.rays[0]), "seconds": time.perf_counter() - t0,
               "ledger": {k: float(v[0]) for k, v in res.ledger.items()}, "verdicts": verdicts}
-    _write_json_atomic(Path(out_dir) / "tasks" / f"{task.id}.json", record)
+    atomic.write_json(Path(out_dir) / "tasks" / f"{task.id}.json", record)
     return record
-
-
-def _write_json_atomic(path: Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(obj, fh, indent=1)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
 
 
 def _done(task: Task, out_dir: Path) -> bool:
@@ -329,7 +317,7 @@ def write_summary(spec: SweepSpec, out) -> dict:
     w = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
     w.writeheader()
     w.writerows(rows)
-    _write_text_atomic(out / "summary.csv", buf.getvalue())
+    atomic.write_text(out / "summary.csv", buf.getvalue())
     cols = [c for c in COLUMNS if c != "task"]
     md = [f"# Sweep {spec.name}", "", spec.description, "",
           f"{len(recs)}/{len(spec.tasks)} tasks done. rel_rms: energy-weighted relative RMS "
@@ -337,18 +325,11 @@ def write_summary(spec: SweepSpec, out) -> dict:
           "max_abs_z: see microsim.analysis.verdicts.", "",
           "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     md += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in rows]
-    _write_text_atomic(out / "summary.md", "\n".join(md) + "\n")
+    atomic.write_text(out / "summary.md", "\n".join(md) + "\n")
     chart = out / "error_vs_roughness.png"
     _chart(rows, chart, spec.name)
     return {"csv": str(out / "summary.csv"), "markdown": str(out / "summary.md"),
             "chart": str(chart)}
-
-
-def _write_text_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".tmp")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
 
 
 def _chart(rows: list[dict], path: Path, title: str) -> None:
@@ -382,11 +363,11 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
     if groups:
         ax.legend(fontsize=5.5, ncol=2)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=".png")
-    os.close(fd)
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        with atomic.atomic_open(path, "wb") as fh:
+            fig.savefig(fh, format="png", dpi=120)
+    finally:
+        plt.close(fig)
 
 
 def _cmd_sweep(args) -> int:

@@ -206,7 +206,6 @@ def test_facets_smith_agree_with_quadrature(beckmann_facets):
     ndf, normals = beckmann_facets
     emp = Empirical(normals)
     bins, wi = Bins(30, 31), _checks.spherical_deg(60.0, 0.0)
-    omega = bins.projected_solid_angle()
 
     def f(wi, wo):
         h = _checks.half_vector(wi, wo)

@@ -8,7 +8,8 @@ import os
 
 import pytest
 
-from microsim.sweep import (SweepSpec, _write_json_atomic, add_sweep_command, expand_tasks,
+from microsim.atomic import write_json
+from microsim.sweep import (SweepSpec, add_sweep_command, expand_tasks,
                             load_sweep, run_sweep)
 
 TINY = {"rays": 12_000, "theta_bins": 10, "phi_bins": 7, "theta_i": [30, 70], "seed": 1,
@@ -84,7 +85,7 @@ def test_unreadable_result_is_recomputed(tmp_path):
 
 def test_atomic_write_leaves_nothing_on_failure(tmp_path):
     with pytest.raises(TypeError):
-        _write_json_atomic(tmp_path / "x.json", {"a": object()})
+        write_json(tmp_path / "x.json", {"a": object()})
     assert list(tmp_path.iterdir()) == []
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 import textwrap
 import zlib
 from typing import Iterable, Mapping
@@ -22,6 +21,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm, TwoSlopeNorm
 from matplotlib.figure import Figure
+
+from ..atomic import atomic_open
 
 __all__ = ["DPI", "figure_size", "SIM_COLOUR", "FAIL_THRESHOLD", "model_colour", "inplane_curves",
            "hemisphere_maps", "energy_chart", "mikkelsen_fig6", "speed_accuracy",
@@ -84,20 +85,9 @@ def _figure(size: tuple[float, float]) -> Figure:
 
 def _save(fig: Figure, path) -> str:
     """Write ``fig`` as PNG to ``path`` atomically; return ``path`` as str."""
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
-    os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix="." + os.path.basename(path) + "-",
-                               suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format="png", dpi=DPI)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
-    return path
+    with atomic_open(path, "wb") as fh:
+        fig.savefig(fh, format="png", dpi=DPI)
+    return os.fspath(path)
 
 
 def _title(prefix: str, text: str) -> str:
