@@ -65,7 +65,7 @@ def figure_size(chart: str, n: int = 1) -> tuple[float, float]:
     for "stability"; ignored otherwise."""
     if chart == "inplane":
         rows, cols = _grid(n)
-        return 4.6 * cols + 0.4, 3.6 * rows + 0.6
+        return 4.6 * cols + 3.0, 3.6 * rows + 0.6          # + a legend column on the right
     if chart == "mikkelsen_fig6":
         return 5.2 * n + 0.4, 4.6
     if chart == "stability":
@@ -168,7 +168,8 @@ def inplane_curves(result, models: Mapping[str, np.ndarray], path, scene_name: s
         if t % cols == 0:
             ax.set_ylabel("BRDF (sr⁻¹)")
         ax.grid(True, which="major", alpha=0.3)
-    axes.flat[0].legend(fontsize=8, loc="lower center")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=8, loc="outside right upper")   # never over the data
     fig.suptitle(_title(scene_name, "in-plane scattering (bin averages)"))
     return _save(fig, path)
 
