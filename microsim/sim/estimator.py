@@ -48,6 +48,15 @@ the facet (1.2e-7 on a unit tile). The resulting bias scales like eps/feature de
 ~1/cos θo near the horizon: on heightfields with features ≥ 1e-3 of the tile it is ~1e-4
 relative (≪ 0.1%); on a unit tile of 4000 V-grooves it was measured at +0.1–0.4% for θo ≥ 80°
 (below the statistical error of 10⁶ rays), and ``masking="exact"`` removes it.
+
+``masking="analytic"`` (V-grooves only) replaces Embree altogether: every rim lies at z = 0,
+so the groove a falling ray enters at z = 0 decides its facet, and the hit follows in closed
+form (``VGrooveCaster``); masking is the same float64 test as ``"exact"``. Same rays, bins and
+per-block streams as the traced paths (they agree ray by ray except where Embree's float32 hit
+is within a few ulp of a groove edge or masking threshold: tests/test_analytic_vgroove.py),
+with the Fresnel weight in real arithmetic (``fresnel.fresnel_real_arithmetic``) and batches of
+``ANALYTIC_BATCH`` blocks sized for the cache. It is the fast path; the traced paths stay the
+reference in the tests.
 """
 from __future__ import annotations
 
@@ -63,18 +72,21 @@ from typing import Callable, Sequence
 import numpy as np
 
 from microsim.analytic._checks import spherical_deg
-from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.analytic.fresnel import fresnel, fresnel_real_arithmetic, resolve_material
 
 from .bins import Bins
 from .result import Result
-from .tracer import ESCAPED, HIT, MISSED, UNRESOLVED, Tracer, VGrooveProfile
+from .tracer import (ESCAPED, HIT, MISSED, UNRESOLVED, Hits, Tracer, VGrooveCaster,
+                     VGrooveProfile)
 
 __all__ = ["simulate", "ray_events", "Events", "BLOCK", "LEDGER", "MASKING", "ORIGINS"]
 
 BLOCK = 4096
+ANALYTIC_BATCH = 16         # blocks per vectorised batch of masking="analytic" (measured best)
 SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = range(5)
 LEDGER = ("single", "masked", "downward", "unresolved", "missed")
-MASKING = ("traced", "exact")
+MASKING = ("traced", "exact", "analytic")
+assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)             # _analytic_columns relies on it
 ORIGINS = ("stratified", "independent")
 
 
@@ -106,8 +118,9 @@ def _rotate_z(w: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
-                origins: str = "stratified"):
-    """Origins (n, 3) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one block.
+                origins: str = "stratified", x_only: bool = False):
+    """Origins (n, 3) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one block;
+    ``x_only``: the origins' x (n,) instead (all start at z = zmax + top_margin).
 
     ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
     row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
@@ -123,19 +136,22 @@ def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], az
     rng = np.random.default_rng(list(key) + [block])
     xi, eta = rng.random(len(r)), rng.random(len(r))
     psi = 2 * np.pi * rng.random(len(r)) if azimuth else np.zeros(len(r))
-    z = np.full(len(r), tracer.zmax + tracer.top_margin)
     if origins == "independent":
         rows = max(1, int(round(np.sqrt(len(r) * ly / lx))))
         row = np.minimum(np.floor(eta * rows), rows - 1)
         order = np.lexsort((xi, row))
         x, y, psi = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2, psi[order]
-        return np.stack([x, y, z], axis=1), psi
-    rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-    q = (r + xi) / n_total * rows
-    row = np.minimum(np.floor(q), rows - 1)
-    x = (q - row) * lx - lx / 2
-    y = (row + eta) / rows * ly - ly / 2
-    return np.stack([x, y, z], axis=1), psi
+    else:
+        rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
+        q = (r + xi) / n_total * rows
+        row = np.minimum(np.floor(q), rows - 1)
+        x = (q - row) * lx - lx / 2
+        if x_only:
+            return x, psi
+        y = (row + eta) / rows * ly - ly / 2
+    if x_only:
+        return x, psi
+    return np.stack([x, y, np.full(len(r), tracer.zmax + tracer.top_margin)], axis=1), psi
 
 
 def _fresnel_by_block(c: np.ndarray, rows: np.ndarray, ior) -> np.ndarray:
@@ -166,7 +182,8 @@ def _trace(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior, azimuth: 
     if azimuth:                                          # trace in the groove frame: wi by −ψ
         cpsi, spsi = np.cos(psi), np.sin(psi)
         wl = _rotate_z(wi, cpsi, -spsi)
-        hits = tracer.first_hit(origins, -wl)
+        hits = (_analytic_hits(tracer, profile, origins, wl)
+                if isinstance(profile, VGrooveCaster) else tracer.first_hit(origins, -wl))
     else:
         wl = np.broadcast_to(wi, (n, 3))
         hits = tracer.first_hit(origins, -np.asarray(wi, dtype=np.float64))  # one shared direction
@@ -196,6 +213,17 @@ def _trace(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior, azimuth: 
     normal = np.full((n, 3), np.nan)
     normal[h] = nrm if not azimuth else _rotate_z(nrm, cpsi[h], spsi[h])
     return Events(status=status, weight=weight, wo=wo, normal=normal, margin=margin)
+
+
+def _analytic_hits(tracer: Tracer, caster: VGrooveCaster, origins, wl) -> "Hits":
+    """``Tracer.first_hit`` of rays ``origins`` along −``wl`` (N, 3), computed exactly by
+    ``caster`` (masking="analytic"): every ray hits; ``point`` holds x only (y, z are NaN,
+    unused by the V-groove masking test)."""
+    prim, x = caster.first_hit_columns(origins[:, 0], origins[:, 2], wl[:, 0], wl[:, 2])
+    point = np.full((len(prim), 3), np.nan)
+    point[:, 0] = x
+    return Hits(status=np.full(len(prim), HIT, dtype=np.int8), prim=prim, point=point,
+                normal=tracer.normals[prim])
 
 
 @dataclass(frozen=True)
@@ -327,6 +355,60 @@ def _trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi,
     return status, weight, where
 
 
+def _folded_bins(bins: Bins, wo, e):
+    """Flat bin index of directions ``wo`` (3 columns, wo_z > 0) for folded ``bins``, with the
+    incident azimuth given as the horizontal unit vector ``e`` (2 columns): θo as in
+    ``Bins.locate`` (in radians); the folded Δφ ∈ [0°, 180°] directly as
+    atan2(|e × wo_h|, e·wo_h) (full precision everywhere), its bin from the uniform folded
+    edges (k ± ½)·180°/(n_φ − 1)."""
+    theta = np.arctan2(np.sqrt(wo[0] * wo[0] + wo[1] * wo[1]), wo[2])      # radians
+    it = np.minimum((theta * (bins.n_theta / (np.pi / 2))).astype(np.int64), bins.n_theta - 1)
+    dphi = np.arctan2(np.abs(e[0] * wo[1] - e[1] * wo[0]), e[0] * wo[0] + e[1] * wo[1])
+    ip = np.minimum((dphi * ((bins.n_phi - 1) / np.pi) + 0.5).astype(np.int64), bins.n_phi - 1)
+    return it * bins.n_phi + ip
+
+
+def _cos_sin(psi: np.ndarray):
+    """(cos ψ, sin ψ) from t = tan(ψ/2): ((1 − t²), 2t)/(1 + t²) (finite for every float ψ)."""
+    t = np.tan(0.5 * psi)
+    d = 1.0 / (1.0 + t * t)
+    return (1.0 - t * t) * d, (2.0 * d) * t
+
+
+def _analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, psi, ior):
+    """(status, weight, bin) per primary ray of ``masking="analytic"``: ``_trace_columns`` for
+    V-grooves with the primary hit computed exactly by ``caster`` instead of Embree (every ray
+    hits; ``VGrooveCaster.groove_hits``), the masking test ``margin_from_rim`` on the hit's
+    distance from its rim, all in the groove frame (wi rotated by −ψ, n_y = 0). Rays start at
+    x (N,) (y is irrelevant: grooves run along y) and height ``z``. cos ψ, sin ψ
+    from t = tan(ψ/2) (a few ulp, like cos/sin, and ~3× faster in NumPy)."""
+    cp, sp = _cos_sin(psi)
+    wx, wy, wz = cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], float(wi[2])
+    f, s = caster.groove_hits(x, z, wx, wz)
+    nx, nz = caster.facet_nx[f], caster.facet_nz[f]
+    c = wx * nx + wz * nz
+    weight = fresnel_real_arithmetic(c, ior)
+    wo = [2.0 * c * nx - wx, -wy, 2.0 * c * nz - wz]
+    margin = caster.margin_from_rim(s, caster.facet_signed_tan[f], caster.facet_width[f],
+                                    wo[0], wo[2])
+    # SINGLE = 0 < MASKED = 1 < DOWNWARD = 2: the larger class wins
+    status = np.maximum((margin > 0).astype(np.int8), (wo[2] <= 0).astype(np.int8) * DOWNWARD)
+    back = c <= 0                                            # back-facing hits stay unresolved
+    if back.any():
+        status[back] = RAY_UNRESOLVED
+        weight[back] = 0.0
+    single = status == SINGLE
+    if bins.folded:                                          # binned for all, kept if single
+        phi = np.radians(phi_i)
+        e = (cp * np.cos(phi) + sp * np.sin(phi), -sp * np.cos(phi) + cp * np.sin(phi))
+        where = (_folded_bins(bins, wo, e) + 1) * single - 1        # −1 unless single
+    else:
+        where = np.full(len(c), -1, dtype=np.int64)
+        ws = np.stack([a[single] for a in wo], axis=1)
+        where[single] = bins.locate(ws, phi_i - np.degrees(psi[single]))
+    return status, weight, where
+
+
 def _split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "_Handout":
     """Per-block tallies (Σw, Σw², counts, Σ_pairs w w' per bin; ledger counts and Fresnel
     sums) of a batch of whole blocks. ``np.bincount`` on the combined (block, bin) index adds
@@ -410,8 +492,18 @@ def _chunk_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, blocks, *, ke
     incidence azimuth per block (``_rotated_tallies``); rays of a block share ψ_b, so the
     per-ray standard error then omits the (small) azimuth-to-azimuth scatter of one surface."""
     blocks = list(blocks)
-    drawn = [_block_rays(tracer, n_total, b, key, azimuth, origins) for b in blocks]
     nbin = bins.shape[0] * bins.shape[1]
+    if isinstance(profile, VGrooveCaster):              # cache-sized batches of blocks
+        wi, z = np.asarray(wi, dtype=np.float64), tracer.zmax + tracer.top_margin
+        parts = []
+        for a in range(0, len(blocks), ANALYTIC_BATCH):
+            x, psi = (np.concatenate(c) for c in zip(*(
+                _block_rays(tracer, n_total, b, key, True, origins, x_only=True)
+                for b in blocks[a:a + ANALYTIC_BATCH])))
+            parts.append(_analytic_columns(profile, wi, phi_i, bins, x, z, psi, ior))
+        status, weight, where = (np.concatenate(c) for c in zip(*parts))
+        return _split_tallies(status, weight, where, len(blocks), nbin)
+    drawn = [_block_rays(tracer, n_total, b, key, azimuth, origins) for b in blocks]
     if rotate and not azimuth:
         status, weight, where = _rotated_tallies(tracer, profile, wi, phi_i, bins, ior, key,
                                                  blocks, drawn)
@@ -495,11 +587,11 @@ def _tracer_for(surface, masking):
     tracer = Tracer(surface)
     azimuth = bool(getattr(surface, "azimuth_average", False))
     profile = None
-    if masking == "exact":
+    if masking in ("exact", "analytic"):
         if not azimuth:
-            raise ValueError("masking='exact' is only available for V-groove surfaces "
+            raise ValueError(f"masking={masking!r} is only available for V-groove surfaces "
                              "(azimuth_average=True); use masking='traced'")
-        profile = VGrooveProfile(tracer)
+        profile = VGrooveProfile(tracer) if masking == "exact" else VGrooveCaster(tracer)
     return tracer, profile, azimuth
 
 
@@ -611,10 +703,12 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     degrees (scalar or one per θi). ``rays``: primary rays per incidence (spread over the
     realisations). ``bins``: outgoing (θo, Δφ) grid. ``seed``: random stream; results are
     bitwise identical for any ``threads`` and ``chunk`` (rays per thread task, rounded to
-    whole ``BLOCK``s). ``progress``: optional callback receiving one line per finished
-    (realisation, incidence).
-    ``masking``: "traced" (Embree, the reference) or "exact" (float64 V-groove test, only for
-    ``azimuth_average`` surfaces). ``realisations``: None (trace ``surface``), a list of
+    whole ``BLOCK``s; smaller when needed to give every thread a task). ``progress``:
+    optional callback receiving one line per finished (realisation, incidence).
+    ``masking``: "traced" (Embree, the reference), "exact" (Embree primary hit, float64
+    V-groove masking test) or "analytic" (primary hit and masking both exact in float64, no
+    Embree: ``VGrooveCaster``; the fast path) — the last two only for ``azimuth_average``
+    V-groove surfaces. ``realisations``: None (trace ``surface``), a list of
     surfaces, or ``(factory, seeds)`` with ``factory(seed) -> Surface``; the BRDF then pools all
     realisations and ``stderr`` combines ray noise with realisation-to-realisation scatter.
     ``origins``: "stratified" (jittered strata over the tile, the default) or "independent"
@@ -685,8 +779,8 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
                     if stop.is_set():                   # SIGINT while building the surface
                         raise KeyboardInterrupt
                     start, end = int(done[r, i]), int(nblk[r])
-                    groups = [range(a, min(a + chunk_blocks, end))
-                              for a in range(start, end, chunk_blocks)]
+                    step = min(chunk_blocks, max(1, -(-(end - start) // int(threads))))
+                    groups = [range(a, min(a + step, end)) for a in range(start, end, step)]
                     work = partial(_chunk_tallies, tracer, profile, spherical_deg(t_deg, p_deg),
                                    p_deg, bins, ior, per_real[r], key=(seed, r, i),
                                    azimuth=azimuth, origins=origins, rotate=isotropic)

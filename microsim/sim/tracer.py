@@ -28,8 +28,8 @@ import numpy as np
 from embreex import mesh_construction as mc
 from embreex import rtcore_scene as rs
 
-__all__ = ["Tracer", "Hits", "VGrooveProfile", "HIT", "ESCAPED", "UNRESOLVED", "MISSED",
-           "BLOCKED", "MAX_TRACED_DEG"]
+__all__ = ["Tracer", "Hits", "VGrooveProfile", "VGrooveCaster", "HIT", "ESCAPED", "UNRESOLVED",
+           "MISSED", "BLOCKED", "MAX_TRACED_DEG"]
 
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
 BLOCKED = HIT                      # an occlusion ray that met the surface
@@ -377,7 +377,88 @@ class VGrooveProfile:
         rim, opp, t = self.rim[prim], self.opposite[prim], self.tan[prim]
         width = np.abs(np.where(np.isnan(opp), 0.0, opp) - rim)
         s = np.clip(np.abs(x - rim), 0.0, self.extent[prim])
-        sigma = np.sign(opp - rim)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            margin = s * (1.0 + t * sigma * wo_x / wo_z) - width
+        margin = self.margin_from_rim(s, t * np.sign(opp - rim), width, wo_x, wo_z)
         return np.where(self.sloped[prim], margin, -np.inf)
+
+    @staticmethod
+    def margin_from_rim(s, signed_tan, width, wo_x, wo_z):
+        """The masking margin s(1 + tanθ σ w_x/w_z) − W of a hit at horizontal distance ``s``
+        from its facet's rim (``signed_tan`` = tanθ σ, σ = ±1 the side of the opposite rim,
+        ``width`` W rim to rim): > 0 ⇔ masked."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return s * (1.0 + signed_tan * wo_x / wo_z) - width
+
+
+class VGrooveCaster(VGrooveProfile):
+    """``VGrooveProfile`` plus the exact float64 primary hit of a falling ray (no Embree), for
+    equal-width grooves tiling the tile in x (``surfaces.vgrooves``).
+
+    Every rim lies at z = 0 with the surface below, so a falling ray that crosses z = 0 at x0
+    (wrapped into the tile) inside groove k = [x_k, x_k + W] must hit one of groove k's two
+    facets before leaving it. With a = −wi_x/wi_z the horizontal advance per unit depth of the
+    ray −wi, u = x0 − x_k, rim-to-bottom widths w_L, w_R and depth D, the walls are met at
+    horizontal distance from their own rim
+        s_L = u w_L / (w_L − a D)           (left facet, n_x > 0)   if u + a D < w_L,
+        s_R = (W − u) w_R / (w_R + a D)     (right facet, n_x < 0)  otherwise,
+    i.e. on the wall the ray reaches before the bottom (the denominator is then > 0). Facet
+    f = 2k (left) or 2k + 1 (right) is reported as mesh triangle ``facet_prim[f]`` (the
+    lower-index half of its quad), whose normal ``tracer.normals[facet_prim[f]]`` is the one a
+    traced hit on that facet gets (to rounding: the quad's two triangles are coplanar).
+    Per-facet columns (index f): ``facet_prim``, ``facet_rim`` (x), ``facet_nx``/``facet_nz``
+    (unit normal, n_y = 0), ``facet_sigma`` (σ: +1 left, −1 right), ``facet_wall`` (w_L or w_R),
+    ``facet_signed_tan`` (tanθ σ) and ``facet_width`` (W), the last two for ``margin_from_rim``.
+    In this notation s = |x0 − rim| w / (w − σ a D) for both walls.
+    """
+
+    def __init__(self, tracer: Tracer):
+        super().__init__(tracer)
+        if not np.all(self.sloped):
+            raise ValueError("masking='analytic' needs every groove tilt > 0 (a flat facet has "
+                             "no V-groove walls)")
+        n, lx = tracer.normals, tracer.tile[0]
+        tol = 1e-12 * max(tracer.tile)
+        left, right = np.flatnonzero(n[:, 0] > 0), np.flatnonzero(n[:, 0] < 0)
+        rim_l, first_l = np.unique(self.rim[left], return_index=True)   # sorted, one per facet
+        rim_r, first_r = np.unique(self.rim[right], return_index=True)
+        pl, pr = left[first_l], right[first_r]
+        xr = self.opposite[pl]
+        g = len(rim_l)
+        if (len(rim_r) != g or not np.array_equal(rim_r, xr) or abs(rim_l[0] + lx / 2) > tol
+                or np.any(np.abs(xr - rim_l - lx / g) > tol)
+                or np.any(np.abs(rim_l[1:] - xr[:-1]) > tol)):
+            raise ValueError("masking='analytic' needs whole equal-width V-grooves tiling the "
+                             "tile in x (surface.kind 'vgrooves')")
+        self.n_grooves, self.half = g, lx / 2
+        self.x_left, self.x_right = rim_l, xr
+        self.w_left, self.w_right = self.extent[pl], self.extent[pr]
+        self.depth = self.w_left * self.tan[pl]
+        self.facet_prim = np.stack([pl, pr], axis=1).ravel()
+        self.facet_rim = np.stack([rim_l, xr], axis=1).ravel()
+        self.facet_nx, self.facet_nz = n[self.facet_prim, 0], n[self.facet_prim, 2]
+        self.facet_sigma = np.tile([1.0, -1.0], g)
+        self.facet_wall = np.stack([self.w_left, self.w_right], axis=1).ravel()
+        self.facet_signed_tan = self.tan[self.facet_prim] * self.facet_sigma
+        self.facet_width = np.repeat(xr - rim_l, 2)
+
+    def groove_hits(self, x, z, wi_x, wi_z):
+        """(facet f (N,) int64, s (N,)) of rays from (x, z) (z ≥ 0: at or above the rims)
+        along −wi (wi_z > 0): the facet hit and the hit's horizontal distance from its rim."""
+        h = self.half
+        x0 = x - (z / wi_z) * wi_x                                    # z = 0 crossing
+        if x0.size and (x0.min() < -h or x0.max() >= h):              # wrap into the tile
+            x0 = np.mod(x0 + h, 2 * h) - h
+        g = self.n_grooves
+        k = np.minimum(((x0 + h) * (g / (2 * h))).astype(np.int64), g - 1)  # ±1 at most
+        k -= (x0 < self.x_left[k]) & (k > 0)
+        k += (x0 >= self.x_right[k]) & (k < g - 1)
+        ad = (-wi_x / wi_z) * self.depth[k]
+        f = 2 * k + (x0 - self.x_left[k] + ad >= self.w_left[k])     # left wall unless
+        w, sig = self.facet_wall[f], self.facet_sigma[f]              # the bottom comes first
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.abs(x0 - self.facet_rim[f]) * w / (w - sig * ad)
+        return f, s
+
+    def first_hit_columns(self, x, z, wi_x, wi_z):
+        """(prim (N,) int64, hit x (N,) in tile coordinates): ``groove_hits`` as a mesh hit."""
+        f, s = self.groove_hits(x, z, wi_x, wi_z)
+        return self.facet_prim[f], self.facet_rim[f] + np.where(f % 2, -s, s)
