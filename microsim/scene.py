@@ -42,7 +42,7 @@ else:                                   # pragma: no cover
     import tomli as tomllib
 
 __all__ = ["SceneError", "Scene", "SurfaceSpec", "SimSettings", "load_scene", "make_ndf",
-           "describe_surface", "NDF_PARAMS", "SURFACE_KINDS"]
+           "describe_surface", "read_toml", "NDF_PARAMS", "SURFACE_KINDS"]
 
 
 class SceneError(ValueError):
@@ -281,17 +281,23 @@ def _simulation(where, table) -> SimSettings:
     return SimSettings(**s)
 
 
+def read_toml(path, what: str = "scene") -> dict:
+    """The TOML table of ``path``; a missing or malformed file raises ``SceneError`` (one line,
+    naming the file) — shared by scene and sweep files."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such {what} file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{path}: not valid TOML ({e})") from None
+
+
 def load_scene(path) -> Scene:
     """Read and validate a scene file (module docstring for the schema)."""
     path = Path(path)
     where = str(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise SceneError(f"{where}: no such scene file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{where}: not valid TOML ({e})") from None
+    data = read_toml(path)
     _check_keys(where, "scene", data, list(_TOP_KEYS))
     if "surface" not in data:
         _fail(where, "surface", f"required table with kind = one of {', '.join(SURFACE_KINDS)}")

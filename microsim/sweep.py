@@ -158,15 +158,9 @@ def expand_tasks(data: dict, where: str = "sweep") -> list[Task]:
 
 def load_sweep(path) -> SweepSpec:
     """Read and validate a sweep file; ValueError names the file and the key."""
-    import tomllib
+    from .scene import read_toml
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such sweep file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"{path}: not valid TOML ({e})") from None
+    data = read_toml(path, "sweep")
     tasks = expand_tasks(data, str(path))
     return SweepSpec(str(data.get("name", path.stem)), str(data.get("description", "")),
                      tuple(tasks))
