@@ -79,7 +79,7 @@ def _ray_set(tracer, wi: np.ndarray, rays: int):
     table = _facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
     lit = h[table.code[prim[h]] == SINGLE]
     mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
-    md = table.wo[prim[lit]]
+    md = np.stack([c[prim[lit]] for c in table.wo_cols], axis=1)
     return ((o.astype(np.float32), (-wi).astype(np.float32)[None]),
             (mo.astype(np.float32), md.astype(np.float32)))
 

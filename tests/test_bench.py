@@ -116,9 +116,12 @@ def _tallies(tracer, wi, blocks_per_chunk, n_total, bins, rotate):
     nblk = -(-n_total // BLOCK)
     out = []
     for a in range(0, nblk, blocks_per_chunk):
-        out += list(E._chunk_tallies(tracer, None, wi, 0.0, bins, AL, n_total,
-                                     range(a, min(a + blocks_per_chunk, nblk)), key=(5, 0, 0),
-                                     azimuth=False, rotate=rotate))
+        for block in E._chunk_tallies(tracer, None, wi, 0.0, bins, AL, n_total,
+                                      range(a, min(a + blocks_per_chunk, nblk)), key=(5, 0, 0),
+                                      azimuth=False, rotate=rotate):
+            dense = E._Tally.empty(bins.shape[0] * bins.shape[1])    # block sums, all bins
+            dense.add(block)
+            out.append(dense.items())
     return out
 
 

@@ -32,7 +32,7 @@ def assert_identical(a: Result, b: Result):
 
 def interrupt_at(monkeypatch, call: int, action):
     """Make the ``call``-th origin generation (one per block) run ``action`` once."""
-    real = estimator._block_rays
+    real = estimator._block_columns
     state = {"n": 0}
 
     def wrapped(*args, **kwargs):
@@ -41,7 +41,7 @@ def interrupt_at(monkeypatch, call: int, action):
             action()
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(estimator, "_block_rays", wrapped)
+    monkeypatch.setattr(estimator, "_block_columns", wrapped)
     return state
 
 

@@ -6,9 +6,11 @@ A real index is a dielectric, a complex one a conductor, ``None`` an ideal mirro
 """
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
+from numba import njit
 
 
 __all__ = ["fresnel", "fresnel_transmittance", "schlick", "f0_from_ior",
@@ -130,31 +132,45 @@ def resolve_material(material):
 
 def fresnel_real_arithmetic(c, ior):
     """``fresnel`` (unpolarised reflectance, c = cos θ ∈ [0, 1], ior a number or None) in real
-    arithmetic only, so that every value is independent of its array position (NumPy's real
-    +, −, ×, ÷, √ round correctly everywhere, complex products do not) — the estimator's
-    reproducible fast path (``microsim.sim.estimator``). Agrees with ``fresnel`` to 1e-12 for
-    physical materials; ``fresnel`` stays the reference (it is also stable for η → 1). For η = n + ik (Born & Wolf §14.2; Cook–Torrance form), with
-    s² = 1 − c², A = n² − k² − s², B = √(A² + 4n²k²), a² = (B + A)/2, b² = (B − A)/2
-    (the cancelling one of the two taken as 2n²k²/(B ∓ A)):
-        R_s = ((a − c)² + b²) / ((a + c)² + b²),
-        R_p = R_s ((ac − s²)² + b²c²) / ((ac + s²)² + b²c²)      (× c² on both sides),
-    F = (R_s + R_p)/2; at c = 0 both ratios are 1. A mirror (None) and η = 1 (no interface)
-    are real already in ``fresnel``."""
+    arithmetic, compiled (``fresnel_real_scalar``): every value is independent of its array
+    position (NumPy's complex kernels round the last bit differently in their SIMD body and
+    scalar tail) and ~10× faster than ``fresnel`` — the estimator's path for per-facet tables
+    and analytic V-grooves. Agrees with ``fresnel`` to 1e-12 for physical materials (tests);
+    ``fresnel`` stays the reference (it is also stable for η → 1). A mirror (None) and η = 1
+    (no interface) are delegated to ``fresnel``."""
     if ior is None or complex(ior) == 1:
         return fresnel(c, ior)
     eta = complex(ior)
-    n2, k2 = eta.real ** 2, eta.imag ** 2
-    c = np.clip(c, 0.0, 1.0)
+    c = np.ascontiguousarray(c, dtype=np.float64)
+    out = np.empty_like(c)
+    _fresnel_real_fill(c.ravel(), eta.real ** 2, eta.imag ** 2, out.ravel())
+    return out
+
+
+@njit(cache=True, nogil=True)
+def fresnel_real_scalar(c, n2, k2):
+    """Unpolarised Fresnel reflectance onto η = n + ik (n2 = n², k2 = k²) at c = cos θ
+    (clipped to [0, 1]) in real arithmetic (Born & Wolf §14.2; Cook–Torrance form): with
+    s² = 1 − c², A = n² − k² − s², B = √(A² + 4n²k²), a² = (B + A)/2, b² = (B − A)/2 (the
+    cancelling one of the two taken as 2n²k²/(B ∓ A)),
+        R_s = ((a − c)² + b²) / ((a + c)² + b²),
+        R_p = R_s ((ac − s²)² + b²c²) / ((ac + s²)² + b²c²)      (× c² on both sides),
+    F = (R_s + R_p)/2; at c = 0 both ratios are 1. Needs η ≠ 1 (see ``fresnel``)."""
+    c = min(max(c, 0.0), 1.0)
     s2 = (1.0 - c) * (1.0 + c)
     a_ = n2 - k2 - s2
-    b_ = np.sqrt(a_ * a_ + 4.0 * n2 * k2)
-    pos = a_ >= 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        big = np.where(pos, b_ + a_, b_ - a_)                 # the sum without cancellation
-        small = np.where(big > 0, 4.0 * n2 * k2 / big, 0.0)
-    a2, b2 = 0.5 * np.where(pos, big, small), 0.5 * np.where(pos, small, big)
-    a = np.sqrt(a2)
-    rs = ((a - c) ** 2 + b2) / ((a + c) ** 2 + b2)
+    b_ = math.sqrt(a_ * a_ + 4.0 * n2 * k2)
+    big = b_ + a_ if a_ >= 0 else b_ - a_                 # the sum without cancellation
+    small = 4.0 * n2 * k2 / big if big > 0 else 0.0
+    a2, b2 = (0.5 * big, 0.5 * small) if a_ >= 0 else (0.5 * small, 0.5 * big)
+    a = math.sqrt(a2)
+    rs = ((a - c) * (a - c) + b2) / ((a + c) * (a + c) + b2)
     ac = a * c
-    rp = rs * ((ac - s2) ** 2 + b2 * c * c) / ((ac + s2) ** 2 + b2 * c * c)
-    return np.clip(0.5 * (rs + rp), 0.0, 1.0)
+    rp = rs * ((ac - s2) * (ac - s2) + b2 * c * c) / ((ac + s2) * (ac + s2) + b2 * c * c)
+    return min(max(0.5 * (rs + rp), 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True)
+def _fresnel_real_fill(c, n2, k2, out):
+    for i in range(len(c)):
+        out[i] = fresnel_real_scalar(c[i], n2, k2)

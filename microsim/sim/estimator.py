@@ -74,6 +74,7 @@ import numpy as np
 from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel, fresnel_real_arithmetic, resolve_material
 
+from . import kernels
 from .bins import Bins
 from .result import Result
 from .tracer import (ESCAPED, HIT, MISSED, UNRESOLVED, Hits, Tracer, VGrooveCaster,
@@ -87,6 +88,8 @@ SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = range(5)
 LEDGER = ("single", "masked", "downward", "unresolved", "missed")
 MASKING = ("traced", "exact", "analytic")
 assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)             # _analytic_columns relies on it
+assert (SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED) == (
+    kernels.SINGLE, kernels.MASKED, kernels.DOWNWARD, kernels.RAY_UNRESOLVED, kernels.RAY_MISSED)
 ORIGINS = ("stratified", "independent")
 
 
@@ -117,41 +120,48 @@ def _rotate_z(w: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     return out
 
 
-def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
-                origins: str = "stratified", x_only: bool = False):
-    """Origins (n, 3) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one block;
-    ``x_only``: the origins' x (n,) instead (all start at z = zmax + top_margin).
+def _block_columns(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
+                   origins: str = "stratified"):
+    """Origins' x and y (n,) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one
+    block; every origin starts at z = zmax + top_margin.
 
     ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
     row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
-    y is jittered inside its row. The union of strata is the whole tile, so origins are uniform
-    over one period (and a block covers a compact strip: coherent rays).
-    ``origins="independent"``: i.i.d. uniform origins over the whole tile, then sorted
+    y is jittered inside its row (``kernels.stratified_xy``). The union of strata is the whole
+    tile, so origins are uniform over one period (and a block covers a compact strip: coherent
+    rays). ``origins="independent"``: i.i.d. uniform origins over the whole tile, then sorted
     row-major on a ~square grid of the block's size (coherence only: the set is unchanged).
     Both draw the same random numbers from ``default_rng([*key, block])``.
     """
     lx, ly = tracer.tile
     start = block * BLOCK
-    r = np.arange(start, min(start + BLOCK, n_total), dtype=np.float64)
+    n = min(BLOCK, n_total - start)
     rng = np.random.default_rng(list(key) + [block])
-    xi, eta = rng.random(len(r)), rng.random(len(r))
-    psi = 2 * np.pi * rng.random(len(r)) if azimuth else np.zeros(len(r))
+    xi, eta = rng.random(n), rng.random(n)
+    psi = 2 * np.pi * rng.random(n) if azimuth else np.zeros(n)
     if origins == "independent":
-        rows = max(1, int(round(np.sqrt(len(r) * ly / lx))))
+        rows = max(1, int(round(np.sqrt(n * ly / lx))))
         row = np.minimum(np.floor(eta * rows), rows - 1)
         order = np.lexsort((xi, row))
-        x, y, psi = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2, psi[order]
-    else:
-        rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-        q = (r + xi) / n_total * rows
-        row = np.minimum(np.floor(q), rows - 1)
-        x = (q - row) * lx - lx / 2
-        if x_only:
-            return x, psi
-        y = (row + eta) / rows * ly - ly / 2
-    if x_only:
-        return x, psi
-    return np.stack([x, y, np.full(len(r), tracer.zmax + tracer.top_margin)], axis=1), psi
+        return xi[order] * lx - lx / 2, eta[order] * ly - ly / 2, psi[order]
+    rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
+    x, y = np.empty(n), np.empty(n)
+    kernels.stratified_xy(start, xi, eta, float(n_total), float(rows), float(lx), float(ly), x, y)
+    return x, y, psi
+
+
+def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
+                origins: str = "stratified"):
+    """Origins (n, 3) and groove azimuths ψ (n,) of one block (``_block_columns``)."""
+    x, y, psi = _block_columns(tracer, n_total, block, key, azimuth, origins)
+    return np.stack([x, y, np.full(len(x), tracer.zmax + tracer.top_margin)], axis=1), psi
+
+
+def _chunk_columns(tracer: Tracer, n_total: int, blocks, key, azimuth: bool, origins: str):
+    """Origin columns [x, y, z] and ψ of consecutive ``blocks`` (``_block_columns``)."""
+    x, y, psi = (np.concatenate(c) for c in zip(*(
+        _block_columns(tracer, n_total, b, key, azimuth, origins) for b in blocks)))
+    return [x, y, np.full(len(x), tracer.zmax + tracer.top_margin)], psi
 
 
 def _fresnel_by_block(c: np.ndarray, rows: np.ndarray, ior) -> np.ndarray:
@@ -231,15 +241,14 @@ class _FacetTable:
     """What a primary ray from ``wi`` does on each facet of a surface traced without azimuth
     averaging (wi is then the same for every ray): ``code`` (F,) int8 SINGLE (lit, reflects
     upwards: a masking ray decides), DOWNWARD or RAY_UNRESOLVED (back-facing); ``weight`` (F,)
-    Fresnel F(n·wi) (0 when back-facing); ``wo`` (F, 3) mirror direction 2(wi·n)n − wi;
-    ``bin`` (F,) flat bin index of wo (−1 below the horizon). Per-axis copies for the
-    masking rays: ``wo_cols`` (3 × (F,)), ``wo32`` (F, 3) float32, ``normal_cols`` (3 × (F,))
+    Fresnel F(n·wi) (0 when back-facing); ``bin`` (F,) flat bin index of the mirror direction
+    wo = 2(wi·n)n − wi (−1 below the horizon); wo per axis, ``wo_cols`` (3 × (F,)), and as
+    float32 (F, 3) ``wo32`` (the masking rays' directions); ``normal_cols`` (3 × (F,))
     and ``lift`` (F,) = n·v0 + eps (a point p starts its masking ray at p − (p·n − lift) n:
     on the facet plane, eps above it)."""
 
     code: np.ndarray
     weight: np.ndarray
-    wo: np.ndarray
     bin: np.ndarray
     wo_cols: tuple
     wo32: np.ndarray
@@ -247,48 +256,69 @@ class _FacetTable:
     lift: np.ndarray
 
 
-def _facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float) -> _FacetTable:
-    n = tracer.normals
-    c = n[:, 0] * wi[0] + n[:, 1] * wi[1] + n[:, 2] * wi[2]
-    front = c > 0
-    wo = 2.0 * c[:, None] * n - wi
-    up = wo[:, 2] > 0
-    code = np.where(~front, RAY_UNRESOLVED, np.where(up, SINGLE, DOWNWARD)).astype(np.int8)
-    weight = np.where(front, fresnel(np.clip(c, 0.0, 1.0), ior), 0.0)
-    return _FacetTable(code=code, weight=weight, wo=wo, bin=bins.locate(wo, phi_i),
-                       wo_cols=tuple(np.ascontiguousarray(wo[:, k]) for k in range(3)),
-                       wo32=wo.astype(np.float32),
-                       normal_cols=tuple(np.ascontiguousarray(n[:, k]) for k in range(3)),
-                       lift=tracer._plane + tracer.eps)
+def _facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float,
+                 pool: ThreadPoolExecutor | None = None, parts: int = 1) -> _FacetTable:
+    """The ``_FacetTable`` of incidence ``wi`` (``kernels.facet_mirror``; Fresnel weights in
+    compiled real arithmetic, ``fresnel_real_arithmetic``; bins by ``Bins.locate``), computed
+    in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
+    facet alone, so the split changes nothing)."""
+    f = len(tracer.faces)
+    ncols = tracer.normal_columns
+    c, weight, wo_cols = np.empty(f), np.empty(f), tuple(np.empty(f) for _ in range(3))
+    code, wo32 = np.empty(f, dtype=np.int8), np.empty((f, 3), dtype=np.float32)
+    where, wi = np.empty(f, dtype=np.int64), [float(w) for w in wi]
+
+    def fill(part: slice) -> None:
+        kernels.facet_mirror(*(a[part] for a in ncols), *wi, c[part], code[part],
+                             *(a[part] for a in wo_cols), wo32[part])
+        cp = c[part]
+        weight[part] = np.where(cp > 0, fresnel_real_arithmetic(np.clip(cp, 0.0, 1.0), ior), 0.0)
+        where[part] = bins.locate(np.stack([a[part] for a in wo_cols], axis=1), phi_i)
+
+    cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
+    slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
+    list(pool.map(fill, slices) if pool is not None else map(fill, slices))
+    return _FacetTable(code=code, weight=weight, bin=where, wo_cols=wo_cols, wo32=wo32,
+                       normal_cols=ncols, lift=tracer.masking_lift)
+
+
+def _uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:
+    """Whether ``_chunk_tallies`` traces through a per-facet table: surfaces without azimuth
+    averaging or per-block rotation, with no more facets than the incidence has rays."""
+    return not azimuth and not rotate and profile is None and len(tracer.faces) <= n_total
+
+
+def _facet_table_key(wi, ior, bins: Bins, phi_i) -> tuple:
+    return ("facet-table", tuple(np.asarray(wi, dtype=np.float64)), ior, bins, float(phi_i))
 
 
 def _trace_tabled(tracer: Tracer, table: _FacetTable, wi: np.ndarray, origins):
     """(status, weight, bin) per primary ray, looked up per hit facet in ``table`` (the fast
-    path for surfaces without azimuth averaging: only the two ray casts are per ray, and the
-    masking-ray starts are computed on per-axis columns)."""
-    n = len(origins)
-    x = [np.ascontiguousarray(origins[:, k]) for k in range(3)]
+    path for surfaces without azimuth averaging: only the two ray casts are per ray, the rest
+    is one compiled pass, ``kernels.tabled_primary``). ``origins``: (N, 3) or 3 columns."""
+    x = _columns(origins)
+    n = len(x[0])
     wi = np.asarray(wi, dtype=np.float64)
     hs, prim, p = tracer.trace_columns(x, [float(-c) for c in wi], (-wi).astype(np.float32)[None])
-    status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
-    status[(hs == MISSED) | (hs == ESCAPED)] = RAY_MISSED   # a falling ray cannot escape
+    status = np.empty(n, dtype=np.int8)
     weight = np.zeros(n)
     where = np.full(n, -1, dtype=np.int64)
-    h = np.flatnonzero(hs == HIT)
-    pr = prim[h]
-    code = table.code[pr]
-    status[h] = code
-    weight[h] = table.weight[pr]
-    lit = code == SINGLE
-    hc, pc = h[lit], pr[lit]
-    ph = [c[hc] for c in p]
-    nc = [c[pc] for c in table.normal_cols]
-    off = ph[0] * nc[0] + ph[1] * nc[1] + ph[2] * nc[2] - table.lift[pc]
-    start = [ph[k] - off * nc[k] for k in range(3)]
-    esc = tracer.escape_columns(start, [c[pc] for c in table.wo_cols], table.wo32[pc])
-    status[hc] = _FROM_ESCAPE[esc]
-    where[hc] = table.bin[pc]
+    mi = np.empty(n, dtype=np.int64)
+    start, wo = [np.empty(n) for _ in range(3)], [np.empty(n) for _ in range(3)]
+    wo32 = np.empty((n, 3), dtype=np.float32)
+    m = kernels.tabled_primary(hs, prim, *p, table.code, table.weight, *table.normal_cols,
+                               table.lift, *table.wo_cols, table.wo32, table.bin, status, weight,
+                               where, mi, *start, *wo, wo32)
+    esc = tracer.escape_columns([c[:m] for c in start], [c[:m] for c in wo], wo32[:m])
+    kernels.apply_escape(status, mi[:m], esc, _FROM_ESCAPE)
     return status, weight, where
+
+
+def _columns(origins) -> list:
+    """Three contiguous float64 columns from an (N, 3) array or a sequence of 3 columns."""
+    if isinstance(origins, np.ndarray):
+        return [np.ascontiguousarray(origins[:, k], dtype=np.float64) for k in range(3)]
+    return [np.ascontiguousarray(c, dtype=np.float64) for c in origins]
 
 
 def _stack32(cols) -> np.ndarray:
@@ -305,8 +335,8 @@ def _trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi,
     surfaces): each ray is traced in its groove frame (wi rotated by −ψ) and binned there too —
     Δφ = φo − φi is unchanged by the rotation, so wo is located against the rotated incident
     azimuth φi − ψ instead of being rotated back."""
-    n = len(origins)
-    x = [np.ascontiguousarray(origins[:, k]) for k in range(3)]
+    x = _columns(origins)
+    n = len(x[0])
     if psi is None:
         wl = [float(c) for c in wi]
         down = [-c for c in wl]
@@ -322,9 +352,7 @@ def _trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi,
     where = np.full(n, -1, dtype=np.int64)
     h = np.flatnonzero(hs == HIT)
     pr = prim[h]
-    ncols = tracer.memo("normal-columns", lambda: tuple(np.ascontiguousarray(tracer.normals[:, k])
-                                                        for k in range(3)))
-    nc = [c[pr] for c in ncols]
+    nc = [c[pr] for c in tracer.normal_columns]
     wh = wl if psi is None else [c[h] for c in wl]
     c = wh[0] * nc[0] + wh[1] * nc[1] + wh[2] * nc[2]
     front = c > 0                                           # back-facing hits stay unresolved
@@ -345,7 +373,7 @@ def _trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi,
         status[hu] = np.where(margin > 0, MASKED, SINGLE)
     else:
         ph = [a[hu] for a in p]
-        off = ph[0] * nc[0] + ph[1] * nc[1] + ph[2] * nc[2] - (tracer._plane[pu] + tracer.eps)
+        off = ph[0] * nc[0] + ph[1] * nc[1] + ph[2] * nc[2] - tracer.masking_lift[pu]
         start = [ph[k] - off * nc[k] for k in range(3)]
         status[hu] = _FROM_ESCAPE[tracer.escape_columns(start, wo, _stack32(wo))]
     single = status[hu] == SINGLE
@@ -355,87 +383,60 @@ def _trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi,
     return status, weight, where
 
 
-def _folded_bins(bins: Bins, wo, e):
-    """Flat bin index of directions ``wo`` (3 columns, wo_z > 0) for folded ``bins``, with the
-    incident azimuth given as the horizontal unit vector ``e`` (2 columns): θo as in
-    ``Bins.locate`` (in radians); the folded Δφ ∈ [0°, 180°] directly as
-    atan2(|e × wo_h|, e·wo_h) (full precision everywhere), its bin from the uniform folded
-    edges (k ± ½)·180°/(n_φ − 1)."""
-    theta = np.arctan2(np.sqrt(wo[0] * wo[0] + wo[1] * wo[1]), wo[2])      # radians
-    it = np.minimum((theta * (bins.n_theta / (np.pi / 2))).astype(np.int64), bins.n_theta - 1)
-    dphi = np.arctan2(np.abs(e[0] * wo[1] - e[1] * wo[0]), e[0] * wo[0] + e[1] * wo[1])
-    ip = np.minimum((dphi * ((bins.n_phi - 1) / np.pi) + 0.5).astype(np.int64), bins.n_phi - 1)
-    return it * bins.n_phi + ip
-
-
-def _cos_sin(psi: np.ndarray):
-    """(cos ψ, sin ψ) from t = tan(ψ/2): ((1 − t²), 2t)/(1 + t²) (finite for every float ψ)."""
-    t = np.tan(0.5 * psi)
-    d = 1.0 / (1.0 + t * t)
-    return (1.0 - t * t) * d, (2.0 * d) * t
-
-
 def _analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, psi, ior):
     """(status, weight, bin) per primary ray of ``masking="analytic"``: ``_trace_columns`` for
     V-grooves with the primary hit computed exactly by ``caster`` instead of Embree (every ray
     hits; ``VGrooveCaster.groove_hits``), the masking test ``margin_from_rim`` on the hit's
-    distance from its rim, all in the groove frame (wi rotated by −ψ, n_y = 0). Rays start at
-    x (N,) (y is irrelevant: grooves run along y) and height ``z``. cos ψ, sin ψ
-    from t = tan(ψ/2) (a few ulp, like cos/sin, and ~3× faster in NumPy)."""
-    cp, sp = _cos_sin(psi)
-    wx, wy, wz = cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], float(wi[2])
-    f, s = caster.groove_hits(x, z, wx, wz)
-    nx, nz = caster.facet_nx[f], caster.facet_nz[f]
-    c = wx * nx + wz * nz
-    weight = fresnel_real_arithmetic(c, ior)
-    wo = [2.0 * c * nx - wx, -wy, 2.0 * c * nz - wz]
-    margin = caster.margin_from_rim(s, caster.facet_signed_tan[f], caster.facet_width[f],
-                                    wo[0], wo[2])
-    # SINGLE = 0 < MASKED = 1 < DOWNWARD = 2: the larger class wins
-    status = np.maximum((margin > 0).astype(np.int8), (wo[2] <= 0).astype(np.int8) * DOWNWARD)
-    back = c <= 0                                            # back-facing hits stay unresolved
-    if back.any():
-        status[back] = RAY_UNRESOLVED
-        weight[back] = 0.0
-    single = status == SINGLE
-    if bins.folded:                                          # binned for all, kept if single
-        phi = np.radians(phi_i)
-        e = (cp * np.cos(phi) + sp * np.sin(phi), -sp * np.cos(phi) + cp * np.sin(phi))
-        where = (_folded_bins(bins, wo, e) + 1) * single - 1        # −1 unless single
+    distance from its rim, all in the groove frame (wi rotated by −ψ, n_y = 0), in one
+    compiled pass (``kernels.analytic_vgroove``). Rays start at x (N,) (y is irrelevant:
+    grooves run along y) and height ``z``."""
+    n = len(x)
+    status, weight = np.empty(n, dtype=np.int8), np.empty(n)
+    where = np.empty(n, dtype=np.int64)
+    wo = [np.empty(n) for _ in range(3)]
+    if ior is None:
+        mode, n2, k2 = kernels.FRESNEL_MIRROR, 0.0, 0.0
     else:
-        where = np.full(len(c), -1, dtype=np.int64)
+        eta = complex(ior)
+        mode = kernels.FRESNEL_NONE if eta == 1 else kernels.FRESNEL_REAL
+        n2, k2 = eta.real ** 2, eta.imag ** 2
+    phi = np.radians(phi_i)
+    c = caster
+    kernels.analytic_vgroove(np.ascontiguousarray(x, dtype=np.float64), float(z),
+                             np.ascontiguousarray(psi, dtype=np.float64),
+                             np.asarray(wi, dtype=np.float64), float(np.cos(phi)),
+                             float(np.sin(phi)), float(c.half), c.x_left, c.x_right, c.w_left,
+                             c.depth, c.facet_rim, c.facet_wall, c.facet_sigma, c.facet_nx,
+                             c.facet_nz, c.facet_signed_tan, c.facet_width, n2, k2, mode,
+                             bins.n_theta, bins.n_phi, bins.folded, status, weight, where, *wo)
+    if not bins.folded:
+        single = status == SINGLE
         ws = np.stack([a[single] for a in wo], axis=1)
         where[single] = bins.locate(ws, phi_i - np.degrees(psi[single]))
     return status, weight, where
 
 
 def _split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "_Handout":
-    """Per-block tallies (Σw, Σw², counts, Σ_pairs w w' per bin; ledger counts and Fresnel
-    sums) of a batch of whole blocks. ``np.bincount`` on the combined (block, bin) index adds
-    each block's rays sequentially in ray order, so every block's sums are bitwise those of
-    the block alone.
+    """Per-block tallies of a batch of whole blocks (``kernels.block_tallies``): for each
+    block, its bins (sparse: only those it touches) with Σw, Σw², counts and Σ_pairs w w', and
+    its ledger counts and Fresnel sums. Rays are added in ray order, so every block's sums
+    are bitwise those of the block alone.
 
     Pair sum (collapsed strata, see ``_estimate``): rays 2k and 2k+1 of the run (adjacent
     strata; ``BLOCK`` is even and batches start on a block boundary, so pairs never straddle
     a block) contribute w_2k·w_2k+1 to their bin when both are single-bounce events in the
     same bin. A trailing unpaired ray (odd last block) has no partner and adds nothing."""
-    blk = np.arange(len(status)) // BLOCK
-    tallied = (status == SINGLE) & (where >= 0)
-    s = np.flatnonzero(tallied)
-    flat, w = blk[s] * nbin + where[s], weight[s]
-    size = n_blocks * nbin
-    sw = np.bincount(flat, weights=w, minlength=size).reshape(n_blocks, nbin)
-    sw2 = np.bincount(flat, weights=w * w, minlength=size).reshape(n_blocks, nbin)
-    cnt = np.bincount(flat, minlength=size).reshape(n_blocks, nbin)
-    even = np.arange(0, len(status) - 1, 2)
-    odd = even + 1
-    both = even[tallied[even] & tallied[odd] & (where[even] == where[odd])]
-    sp = np.bincount(blk[both] * nbin + where[both], weights=weight[both] * weight[both + 1],
-                     minlength=size).reshape(n_blocks, nbin)
-    led = blk * len(LEDGER) + status
-    ln = np.bincount(led, minlength=n_blocks * len(LEDGER)).reshape(n_blocks, len(LEDGER))
-    lf = np.bincount(led, weights=weight, minlength=n_blocks * len(LEDGER)).reshape(n_blocks, -1)
-    return _Handout([(sw[k], sw2[k], cnt[k], ln[k], lf[k], sp[k]) for k in range(n_blocks)])
+    n = len(status)
+    acc, touched = np.zeros((3, nbin)), np.zeros(nbin, dtype=np.int64)
+    out_bin, out_sums = np.empty(n, dtype=np.int64), np.empty((3, n))
+    out_cnt, offsets = np.empty(n, dtype=np.int64), np.empty(n_blocks + 1, dtype=np.int64)
+    ln = np.zeros((n_blocks, len(LEDGER)), dtype=np.int64)
+    lf = np.zeros((n_blocks, len(LEDGER)))
+    kernels.block_tallies(status, weight, where, BLOCK, acc, touched, out_bin, out_sums,
+                          out_cnt, offsets, ln, lf)
+    parts = [slice(offsets[k], offsets[k + 1]) for k in range(n_blocks)]
+    return _Handout([(out_bin[p], out_sums[0, p], out_sums[1, p], out_cnt[p], ln[k], lf[k],
+                      out_sums[2, p]) for k, p in enumerate(parts)])
 
 
 class _Handout:
@@ -463,14 +464,15 @@ def _block_rotation(key, block: int) -> float:
     return 2.0 * np.pi * np.random.default_rng(list(key) + [block, _ROTATION_STREAM]).random()
 
 
-def _rotated_tallies(tracer, profile, wi, phi_i, bins, ior, key, blocks, drawn):
+def _rotated_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, blocks, key, origins):
     """(status, weight, bin) with the incidence azimuth of every block rotated by its own ψ_b
     about the macro normal, the bins taken relative to the rotated azimuth φi + ψ_b: φi is
     then uniform, which averages a statistically isotropic surface's realisation over incident
     azimuths without changing the expected BRDF. One shared direction per block keeps the
     batch coherent."""
     out = []
-    for b, (starts, _) in zip(blocks, drawn):
+    for b in blocks:
+        starts, _ = _chunk_columns(tracer, n_total, [b], key, False, origins)
         psi = _block_rotation(key, b)
         c, s = np.cos(psi), np.sin(psi)
         wb = np.array([c * wi[0] - s * wi[1], s * wi[0] + c * wi[1], wi[2]])
@@ -483,13 +485,13 @@ def _chunk_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, blocks, *, ke
                    origins="stratified", rotate=False):
     """Per-block tallies of a chunk of consecutive blocks (one thread task), traced as one batch.
 
-    Every block draws its own rays (``_block_rays``); per-ray work is position-independent and
-    the tallies are split per block (``_split_tallies``), so the result is bitwise the same for
-    any chunk size or thread count. Surfaces without azimuth averaging use a per-facet table
-    of Fresnel weight, mirror direction and bin (``_facet_table``, built once per incidence and
-    shared by the threads) when the mesh has no more facets than the incidence has rays.
-    ``rotate`` (statistically isotropic surfaces without ``azimuth_average``): rotate the
-    incidence azimuth per block (``_rotated_tallies``); rays of a block share ψ_b, so the
+    Every block draws its own rays (``_block_columns``); per-ray work is position-independent
+    and the tallies are split per block (``_split_tallies``), so the result is bitwise the same
+    for any chunk size or thread count. Surfaces without azimuth averaging use a per-facet
+    table of Fresnel weight, mirror direction and bin (``_facet_table``, built once per
+    incidence and shared by the threads) when the mesh has no more facets than the incidence
+    has rays. ``rotate`` (statistically isotropic surfaces without ``azimuth_average``): rotate
+    the incidence azimuth per block (``_rotated_tallies``); rays of a block share ψ_b, so the
     per-ray standard error then omits the (small) azimuth-to-azimuth scatter of one surface."""
     blocks = list(blocks)
     nbin = bins.shape[0] * bins.shape[1]
@@ -497,26 +499,22 @@ def _chunk_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, blocks, *, ke
         wi, z = np.asarray(wi, dtype=np.float64), tracer.zmax + tracer.top_margin
         parts = []
         for a in range(0, len(blocks), ANALYTIC_BATCH):
-            x, psi = (np.concatenate(c) for c in zip(*(
-                _block_rays(tracer, n_total, b, key, True, origins, x_only=True)
-                for b in blocks[a:a + ANALYTIC_BATCH])))
+            (x, _, _), psi = _chunk_columns(tracer, n_total, blocks[a:a + ANALYTIC_BATCH], key,
+                                            True, origins)
             parts.append(_analytic_columns(profile, wi, phi_i, bins, x, z, psi, ior))
         status, weight, where = (np.concatenate(c) for c in zip(*parts))
-        return _split_tallies(status, weight, where, len(blocks), nbin)
-    drawn = [_block_rays(tracer, n_total, b, key, azimuth, origins) for b in blocks]
-    if rotate and not azimuth:
-        status, weight, where = _rotated_tallies(tracer, profile, wi, phi_i, bins, ior, key,
-                                                 blocks, drawn)
-        return _split_tallies(status, weight, where, len(blocks), nbin)
-    starts = np.concatenate([d[0] for d in drawn])
-    if not azimuth and profile is None and len(tracer.faces) <= n_total:
-        wi = np.asarray(wi, dtype=np.float64)
-        table = tracer.memo(("facet-table", tuple(wi), ior, bins, float(phi_i)),
+    elif rotate and not azimuth:
+        status, weight, where = _rotated_tallies(tracer, profile, wi, phi_i, bins, ior, n_total,
+                                                 blocks, key, origins)
+    elif _uses_facet_table(tracer, profile, azimuth, rotate, n_total):
+        starts, _ = _chunk_columns(tracer, n_total, blocks, key, False, origins)
+        table = tracer.memo(_facet_table_key(wi, ior, bins, phi_i),
                             lambda: _facet_table(tracer, wi, ior, bins, phi_i))
         status, weight, where = _trace_tabled(tracer, table, wi, starts)
     else:
-        psi = np.concatenate([d[1] for d in drawn]) if azimuth else None
-        status, weight, where = _trace_columns(tracer, profile, wi, phi_i, bins, starts, psi, ior)
+        starts, psi = _chunk_columns(tracer, n_total, blocks, key, azimuth, origins)
+        status, weight, where = _trace_columns(tracer, profile, wi, phi_i, bins, starts,
+                                               psi if azimuth else None, ior)
     return _split_tallies(status, weight, where, len(blocks), nbin)
 
 
@@ -541,8 +539,17 @@ class _Tally:
         return (self.sum_w, self.sum_w2, self.count, self.led_n, self.led_f, self.sum_pair)
 
     def add(self, block) -> None:
-        """Add one block's tallies (callers add blocks in block order)."""
-        for total, part in zip(self.items(), block):
+        """Add one block's tallies (callers add blocks in block order): ``block`` is
+        (bins, Σw, Σw², counts, ledger counts, ledger Fresnel sums, Σ_pairs) with the per-bin
+        sums given for ``bins`` only (``_split_tallies``); the other bins add nothing."""
+        idx, sw, sw2, cnt, ln, lf, sp = block
+        kernels.add_block(self.sum_w, self.sum_w2, self.count, self.sum_pair, idx, sw, sw2, cnt, sp)
+        self.led_n += ln
+        self.led_f += lf
+
+    def add_totals(self, other: "_Tally") -> None:
+        """Add another tally's running sums (pooling realisations)."""
+        for total, part in zip(self.items(), other.items()):
             total += part
 
 
@@ -781,6 +788,12 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
                     start, end = int(done[r, i]), int(nblk[r])
                     step = min(chunk_blocks, max(1, -(-(end - start) // int(threads))))
                     groups = [range(a, min(a + step, end)) for a in range(start, end, step)]
+                    if start < end and _uses_facet_table(tracer, profile, azimuth, isotropic,
+                                                         per_real[r]):
+                        wi = spherical_deg(t_deg, p_deg)        # built by all threads at once
+                        tracer.memo(_facet_table_key(wi, ior, bins, p_deg),
+                                    partial(_facet_table, tracer, wi, ior, bins, p_deg, pool,
+                                            int(threads)))
                     work = partial(_chunk_tallies, tracer, profile, spherical_deg(t_deg, p_deg),
                                    p_deg, bins, ior, per_real[r], key=(seed, r, i),
                                    azimuth=azimuth, origins=origins, rotate=isotropic)
@@ -856,7 +869,7 @@ def _result(th, ph, bins, tallies, n_done, per_real, done, meta) -> Result:
     pooled = [_Tally.empty(len(omega)) for _ in th]
     for r in range(n_real):
         for i in range(len(th)):
-            pooled[i].add(tallies[r][i].items())
+            pooled[i].add_totals(tallies[r][i])
     pairs = meta["stderr_method"] == "pairs"
     brdf, se_ray = map(np.array, zip(*[_estimate(p.sum_w, p.sum_w2, n_tot[i], omega,
                                                  p.sum_pair if pairs else None)

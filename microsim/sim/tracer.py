@@ -20,7 +20,6 @@ segment; most rays finish in the first, so NumPy touches each ray a few dozen ti
 from __future__ import annotations
 
 import functools
-import math
 import threading
 from dataclasses import dataclass
 
@@ -28,10 +27,14 @@ import numpy as np
 from embreex import mesh_construction as mc
 from embreex import rtcore_scene as rs
 
+from . import kernels
+
 __all__ = ["Tracer", "Hits", "VGrooveProfile", "VGrooveCaster", "HIT", "ESCAPED", "UNRESOLVED",
            "MISSED", "BLOCKED", "MAX_TRACED_DEG"]
 
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
+assert (HIT, ESCAPED, UNRESOLVED, MISSED) == (kernels.HIT, kernels.ESCAPED, kernels.UNRESOLVED,
+                                        kernels.MISSED)
 BLOCKED = HIT                      # an occlusion ray that met the surface
 MAX_TRACED_DEG = 89.5              # rays up to this polar angle are always resolved (wrap cap)
 BASE_WRAPS = 64
@@ -137,6 +140,17 @@ class Tracer:
         """Edge v2 − v0 of every facet, (F, 3)."""
         return self.vertices[self.faces[:, 2]] - self._v0
 
+    @functools.cached_property
+    def normal_columns(self) -> tuple:
+        """Contiguous per-axis columns (3 × (F,)) of the unit facet normals."""
+        return tuple(np.ascontiguousarray(self.normals[:, k]) for k in range(3))
+
+    @functools.cached_property
+    def masking_lift(self) -> np.ndarray:
+        """n·v0 + eps per facet (F,): a point p on facet f's plane moved to
+        p − (p·n − lift)·n starts its secondary ray eps above the plane."""
+        return self._plane + self.eps
+
     # --- periodic walk ------------------------------------------------------------------
     def _walk(self, origins, dirs, occlusion: bool):
         """Trace rays through the periodic repetition; returns (status, prim, point).
@@ -165,102 +179,60 @@ class Tracer:
         """``_walk`` on per-axis columns: origins ``x`` (3 arrays (N,), float64, wrapped into
         the tile here), directions ``d`` (3 arrays (N,) or 3 floats shared by all rays) and
         their float32 (N, 3) (or (1, 3)) copy ``d32``. Returns (status, prim, point columns);
-        the point columns are undefined where status is not HIT. The live rays are compacted
-        after every segment (most finish in the first)."""
+        the point columns are undefined where status is not HIT.
+
+        Each segment is one Embree call between two compiled passes (``kernels.segment_setup``
+        / ``segment_finish``): the rays still live after a segment (those re-entering through
+        a wall; most finish in the first) are compacted for the next."""
         n = len(x[0])
         shared = np.isscalar(d[0])
-        x = list(x)
+        x = [np.ascontiguousarray(c, dtype=np.float64) for c in x]
         for a in (0, 1):                                  # wrap the starts into the tile
             h = self.half[a]
             if n and (x[a].min() < -h or x[a].max() >= h):
                 out = (x[a] < -h) | (x[a] >= h)
                 x[a] = np.where(out, np.mod(x[a] + h, 2 * h) - h, x[a])
+        d = ([np.array([float(c)]) for c in d] if shared
+             else [np.array(c, dtype=np.float64) for c in d])
+        d32 = np.ascontiguousarray(d32, dtype=np.float32)
+        falling_shared = bool(shared and d[2][0] <= 0)
         status = np.full(n, UNRESOLVED, dtype=np.int8)
-        prim = None if occlusion else np.full(n, -1, dtype=np.int32)
-        point = None if occlusion else [np.empty(n) for _ in range(3)]
-        live = np.arange(n)
+        prim = np.full(0 if occlusion else n, -1, dtype=np.int32)
+        point = [np.empty(0 if occlusion else n) for _ in range(3)]
+        live = np.arange(n, dtype=np.int64)
+        # per-segment buffers (reused; sized for the first, largest segment)
+        o32 = np.empty((n, 3), dtype=np.float32)
+        d32k = np.empty((0, 3) if shared else (n, 3), dtype=np.float32)
+        tq = np.empty(n, dtype=np.float32)
+        keep = np.empty(n, dtype=np.int64)
+        tw, tt, tx, ty = (np.empty(n) for _ in range(4))
         query = "OCCLUDED" if occlusion else "INTERSECT"
+        no_tfar = np.empty(0, dtype=np.float32)
+        hx, hy = float(self.half[0]), float(self.half[1])
         for _ in range(self.max_wraps + 1):
-            gone = False if shared and d[2] <= 0 else (d[2] > 0) & (x[2] >= self.zmax)
-            if np.any(gone):                              # nothing above zmax
-                status[live[gone]] = ESCAPED
-                keep = ~gone
-                live, x = live[keep], [c[keep] for c in x]
-                if not shared:
-                    d, d32 = [c[keep] for c in d], d32[keep]
-                if live.size == 0:
-                    break
-            t = [self._wall_distance(x[a], d[a], self.half[a]) for a in (0, 1)]
-            twall = np.minimum(t[0], t[1])
-            if shared and d[2] <= 0:                      # falling: never through the top
-                ttop = np.inf
-            else:
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    ttop = np.where(d[2] > 0, np.maximum((self.zmax - x[2]) / d[2], 0.0), np.inf)
-            with np.errstate(over="ignore"):                 # beyond float32: inf, as meant
-                tq = (np.minimum(twall, ttop) * (1 + _TFAR_REL) + self.eps).astype(np.float32)
-            o32 = np.empty((live.size, 3), dtype=np.float32)
-            for k in range(3):
-                o32[:, k] = x[k]
-            res = self._scene.run(o32, d32, dists=tq, query=query, output=None if occlusion else 1)
-            pid = res if occlusion else res["primID"]
-            hit = pid >= 0
-            whole = live.size == n                        # nothing compacted yet: whole arrays
-            lh = None if whole else live[hit]
-            if whole:
-                status[hit] = HIT
-            else:
-                status[lh] = HIT
-            if not occlusion:                             # p = o + t·d in float64
-                tf = res["tfar"].astype(np.float64)
-                if whole:
-                    prim[:] = pid                         # −1 for misses
-                    for k in range(3):
-                        point[k] = x[k] + tf * d[k]       # garbage for misses
-                else:
-                    prim[lh] = pid[hit]
-                    for k in range(3):
-                        point[k][lh] = x[k][hit] + tf[hit] * (d[k] if shared else d[k][hit])
-            # no hit: escaped through the top, leaked below, or re-enter through the opposite wall
-            if np.isscalar(ttop):
-                go = np.flatnonzero(~hit)
-            else:
-                top = ~hit & (ttop <= twall)
-                status[live[top]] = ESCAPED
-                go = np.flatnonzero(~hit & ~top)
-            if go.size == 0:
-                break
-            tw = twall[go]
-            dg = d if shared else [c[go] for c in d]
-            p = [x[k][go] + tw * dg[k] for k in range(3)]
-            leaked = (p[2] < self.zmin - self.eps) | ~np.isfinite(tw)
-            for a in (0, 1):
-                np.clip(p[a], -self.half[a], self.half[a], out=p[a])   # rounding along the wall
-                wall = t[a][go] <= tw
-                p[a][wall] = -np.copysign(self.half[a], dg[a] if shared else dg[a][wall])
-            if leaked.any():
-                status[live[go[leaked]]] = MISSED
-                keep = ~leaked
-                go, p = go[keep], [c[keep] for c in p]
-                dg = dg if shared else [c[keep] for c in dg]
-            live, x = live[go], p
-            if not shared:
-                d, d32 = dg, d32[go]
             if live.size == 0:
                 break
-        return status, prim, point
-
-    @staticmethod
-    def _wall_distance(x, d, half):
-        """Distance ≥ 0 along the ray to the tile wall it heads for (inf if parallel to it)."""
-        if np.isscalar(d):
-            if d == 0:
-                return np.full(x.shape, np.inf)
-            return np.maximum((math.copysign(half, d) - x) / d, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (np.copysign(half, d) - x) / d
-        t[d == 0] = np.inf
-        return np.maximum(t, 0.0)
+            k = kernels.segment_setup(x[0], x[1], x[2], d[0], d[1], d[2], shared, live, d32,
+                                      hx, hy, self.zmax, self.eps, _TFAR_REL, status, o32, d32k,
+                                      tq, keep, tw, tt, tx, ty)
+            if k == 0:
+                break
+            res = self._scene.run(o32[:k], d32 if shared else d32k[:k], dists=tq[:k],
+                                  query=query, output=None if occlusion else 1)
+            pid, tfar = (res, no_tfar) if occlusion else (res["primID"], res["tfar"])
+            m_live = np.empty(k, dtype=np.int64)
+            nx_ = [np.empty(k) for _ in range(3)]
+            nd = [np.empty(0 if shared else k) for _ in range(3)]
+            nd32 = np.empty((0, 3) if shared else (k, 3), dtype=np.float32)
+            m = kernels.segment_finish(k, pid, tfar, occlusion, keep, live, x[0], x[1], x[2],
+                                       d[0], d[1], d[2], shared, falling_shared, d32k, tw, tt,
+                                       tx, ty, hx, hy, self.zmin, self.eps, status, prim,
+                                       point[0], point[1], point[2], m_live, nx_[0], nx_[1],
+                                       nx_[2], nd[0], nd[1], nd[2], nd32)
+            live, x = m_live[:m], [c[:m] for c in nx_]
+            if not shared:
+                d, d32 = [c[:m] for c in nd], nd32[:m]
+        return status, (None if occlusion else prim), (None if occlusion else point)
 
     def trace(self, origins: np.ndarray, dirs: np.ndarray):
         """Lean first-hit query: (status (N,) int8, prim (N,) int32, point (N, 3) float64).
