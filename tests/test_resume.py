@@ -31,17 +31,18 @@ def assert_identical(a: Result, b: Result):
 
 
 def interrupt_at(monkeypatch, call: int, action):
-    """Make the ``call``-th origin generation (one per block) run ``action`` once."""
-    real = estimator._block_columns
+    """Make the origin generation of the chunk holding block ``call`` − 1 (the ``call``-th
+    block; the first incidence's, whichever thread reaches it) run ``action`` once."""
+    real = estimator._chunk_columns
     state = {"n": 0}
 
     def wrapped(*args, **kwargs):
-        state["n"] += 1
-        if state["n"] == call:
+        if call - 1 in list(args[2]) and not state["n"]:
+            state["n"] += 1
             action()
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(estimator, "_block_columns", wrapped)
+    monkeypatch.setattr(estimator, "_chunk_columns", wrapped)
     return state
 
 

@@ -158,7 +158,7 @@ def test_pair_rule_falls_back_to_per_ray_where_the_pair_estimate_is_zero():
 # --- isotropic (per-block incidence-azimuth rotation) ------------------------------------------
 def test_isotropic_is_part_of_the_resume_configuration(monkeypatch, heightfield):
     calls = {"n": 0}
-    real = estimator._block_columns
+    real = estimator._chunk_columns
 
     def interrupt_on_third(*args, **kwargs):
         calls["n"] += 1
@@ -167,9 +167,9 @@ def test_isotropic_is_part_of_the_resume_configuration(monkeypatch, heightfield)
         return real(*args, **kwargs)
 
     kw = dict(rays=6 * BLOCK, bins=Bins(9, 7), seed=5, threads=1, chunk=BLOCK)
-    monkeypatch.setattr(estimator, "_block_columns", interrupt_on_third)
+    monkeypatch.setattr(estimator, "_chunk_columns", interrupt_on_third)
     part = simulate(heightfield, "aluminium", 50.0, isotropic=True, **kw)
-    monkeypatch.setattr(estimator, "_block_columns", real)
+    monkeypatch.setattr(estimator, "_chunk_columns", real)
     assert part.is_partial and part.meta["isotropic"] and part.meta["stderr_method"] == "per-ray"
     with pytest.raises(ValueError, match="isotropic"):
         simulate(heightfield, "aluminium", 50.0, isotropic=False, resume=part, **kw)

@@ -100,8 +100,13 @@ class Bins:
     def relative_azimuth(self, wo: np.ndarray, phi_i_deg: float) -> np.ndarray:
         """Δφ = φo − φi in degrees: in [−half bin, 360 − half bin) unfolded, [0, 180] folded."""
         wo = np.asarray(wo, dtype=np.float64)
-        d = np.degrees(np.arctan2(wo[..., 1], wo[..., 0])) - phi_i_deg
-        d = np.mod(d, 360.0)
+        return self._relative_azimuth(wo[..., 0], wo[..., 1], phi_i_deg)
+
+    def _relative_azimuth(self, x, y, phi_i_deg) -> np.ndarray:
+        phi_i = np.mod(phi_i_deg, 360.0)
+        phi_i = np.where(phi_i > 180.0, phi_i - 360.0, phi_i)       # (−180°, 180°]
+        d = np.degrees(np.arctan2(y, x)) - phi_i                     # (−360°, 360°)
+        d = np.where(d < 0.0, d + 360.0, d)                          # = np.mod(d, 360), cheaper
         if self.folded:
             return np.where(d > 180.0, 360.0 - d, d)
         w = 360.0 / self.n_phi
@@ -110,14 +115,28 @@ class Bins:
     def locate(self, wo: np.ndarray, phi_i_deg: float = 0.0) -> np.ndarray:
         """Flat bin index (θ-major, i·n_phi + j) of each unit direction wo; −1 if wo_z ≤ 0."""
         wo = np.asarray(wo, dtype=np.float64)
-        z = wo[..., 2]
-        theta = np.degrees(np.arctan2(np.hypot(wo[..., 0], wo[..., 1]), z))
+        return self.locate_xyz(wo[..., 0], wo[..., 1], wo[..., 2], phi_i_deg)
+
+    def locate_xyz(self, x, y, z, phi_i_deg: float = 0.0) -> np.ndarray:
+        """``locate`` for unit directions given by their coordinates ``x``, ``y``, ``z``
+        (arrays of one shape; contiguous columns are fastest)."""
+        theta = np.degrees(np.arctan2(np.sqrt(x * x + y * y), z))
         it = np.minimum((theta * (self.n_theta / 90.0)).astype(np.int64), self.n_theta - 1)
-        dphi = self.relative_azimuth(wo, phi_i_deg)
-        ip = np.searchsorted(self.phi_edges, dphi, side="right") - 1
-        ip = np.clip(ip, 0, self.n_phi - 1)
-        idx = it * self.n_phi + ip
-        return np.where(z > 0.0, idx, -1)
+        ip = self._phi_index(self._relative_azimuth(x, y, phi_i_deg))
+        return np.where(z > 0.0, it * self.n_phi + ip, -1)
+
+    def _phi_index(self, dphi: np.ndarray) -> np.ndarray:
+        """Δφ bin index: ``clip(searchsorted(phi_edges, dphi, "right") − 1, 0, n_phi − 1)``,
+        i.e. the i with edge_i ≤ Δφ < edge_i+1, found from the uniform spacing w (bin k is
+        centred on k·w: guess ⌊Δφ/w + ½⌋) and corrected by comparing with the edges
+        themselves, so it equals the search exactly (the guess is off by one at most, only
+        within rounding of an edge) at a fraction of its cost."""
+        e, n = self.phi_edges, self.n_phi
+        w = (180.0 / (n - 1)) if self.folded else (360.0 / n)
+        ip = np.clip(np.floor(dphi / w + 0.5), 0, n - 1).astype(np.int64)
+        ip -= dphi < e[ip]
+        ip += dphi >= e[ip + 1]
+        return np.clip(ip, 0, n - 1)
 
     def to_dict(self) -> dict:
         return {"n_theta": self.n_theta, "n_phi": self.n_phi, "folded": self.folded}

@@ -26,14 +26,15 @@ single-bounce albedo ρ(θi) (Mikkelsen eq. 27); ``lost``/``lost_fresnel`` are t
 Fresnel-weighted fractions that single scattering loses (masked + downward).
 
 Reproducibility: the rays of (realisation r, incidence i) are cut into fixed blocks of
-``BLOCK`` rays; block b draws its numbers from ``default_rng([seed, r, i, b])`` and is tallied
-on its own; block tallies are summed in block order. A ``chunk`` (a whole number of blocks) is
-traced as one vectorised batch — every per-ray operation is elementwise (Fresnel, whose complex
-kernels round by array position, is evaluated per block) and ``np.bincount`` on a combined
-(block, bin) index sums each block sequentially — so results are bitwise identical for any
-``threads``/``chunk``. The same makes runs resumable: an interrupted run keeps
-its exact running sums and block counts (``Result.tallies``), and ``simulate(resume=...)``
-continues with the next block (see ``simulate``).
+``BLOCK`` rays; block b draws its numbers from its own slot of the stream seeded with
+(seed, r, i) (``_block_generator``) and is tallied on its own; block tallies are summed in
+block order. A ``chunk`` (a whole number of blocks) is traced as one batch — every per-ray
+operation is elementwise, in compiled loops that evaluate each ray alone (``kernels``;
+Fresnel, whose complex NumPy kernels round by array position, is evaluated per block or in
+real arithmetic) and the tallies add each block's rays in ray order — so results are
+bitwise identical for any ``threads``/``chunk``. The same makes runs resumable: an
+interrupted run keeps its exact running sums and block counts (``Result.tallies``), and
+``simulate(resume=...)`` continues with the next block (see ``simulate``).
 
 V-grooves (``surface.azimuth_average``): each ray gets its own uniformly random groove azimuth
 ψ; wi is rotated by −ψ about z into the groove frame, traced, and wo binned against the
@@ -54,12 +55,13 @@ so the groove a falling ray enters at z = 0 decides its facet, and the hit follo
 form (``VGrooveCaster``); masking is the same float64 test as ``"exact"``. Same rays, bins and
 per-block streams as the traced paths (they agree ray by ray except where Embree's float32 hit
 is within a few ulp of a groove edge or masking threshold: tests/test_analytic_vgroove.py),
-with the Fresnel weight in real arithmetic (``fresnel.fresnel_real_arithmetic``) and batches of
+with the Fresnel weight in real arithmetic (``fresnel.fresnel_real_scalar``) and batches of
 ``ANALYTIC_BATCH`` blocks sized for the cache. It is the fast path; the traced paths stay the
 reference in the tests.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import signal
 import threading
@@ -72,12 +74,13 @@ from typing import Callable, Sequence
 import numpy as np
 
 from microsim.analytic._checks import spherical_deg
-from microsim.analytic.fresnel import fresnel, fresnel_real_arithmetic, resolve_material
+from microsim.analytic.fresnel import fresnel, resolve_material
 
 from . import kernels
 from .bins import Bins
 from .result import Result
-from .tracer import (ESCAPED, HIT, MISSED, UNRESOLVED, Hits, Tracer, VGrooveCaster,
+from .scratch import work
+from .tracer import (ESCAPED, HIT, MISSED, TFAR_REL, UNRESOLVED, Hits, Tracer, VGrooveCaster,
                      VGrooveProfile)
 
 __all__ = ["simulate", "ray_events", "Events", "BLOCK", "LEDGER", "MASKING", "ORIGINS"]
@@ -120,48 +123,79 @@ def _rotate_z(w: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     return out
 
 
-def _block_columns(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
+def _chunk_columns(tracer: Tracer, n_total: int, blocks, key, azimuth: bool,
                    origins: str = "stratified"):
-    """Origins' x and y (n,) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one
-    block; every origin starts at z = zmax + top_margin.
+    """Origin columns [x, y, z] and groove azimuths ψ (None unless ``azimuth``) of the rays of
+    consecutive ``blocks``, in this thread's work arrays (valid until its next call). Every
+    origin starts at z = zmax + top_margin.
 
+    Each block draws ξ, η, then ψ/2π (n each, n its length) from its own slot of the stream
+    ``key`` (``_block_generator``), so a block's rays do not depend on the chunking.
     ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
     row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
-    y is jittered inside its row (``kernels.stratified_xy``). The union of strata is the whole
-    tile, so origins are uniform over one period (and a block covers a compact strip: coherent
-    rays). ``origins="independent"``: i.i.d. uniform origins over the whole tile, then sorted
-    row-major on a ~square grid of the block's size (coherence only: the set is unchanged).
-    Both draw the same random numbers from ``default_rng([*key, block])``.
+    y is jittered inside its row (``kernels.stratified_origins``). The union of strata is the
+    whole tile, so origins are uniform over one period (and a block covers a compact strip:
+    coherent rays). ``origins="independent"``: i.i.d. uniform origins over the whole tile,
+    then sorted row-major on a ~square grid of the block's size (coherence only: the set is
+    unchanged).
     """
+    blocks = list(blocks)
+    lo = blocks[0] * BLOCK
+    n = min(n_total, (blocks[-1] + 1) * BLOCK) - lo
+    x, y, z = (work("chunk-" + a, n) for a in "xyz")
+    z.fill(tracer.zmax + tracer.top_margin)
+    psi = work("chunk-psi", n if azimuth else 0)
     lx, ly = tracer.tile
-    start = block * BLOCK
-    n = min(BLOCK, n_total - start)
-    rng = np.random.default_rng(list(key) + [block])
-    xi, eta = rng.random(n), rng.random(n)
-    psi = 2 * np.pi * rng.random(n) if azimuth else np.zeros(n)
+    rng = _block_generator(key, blocks[0])                # consecutive slots from here on
+    u = work("chunk-uniform", 3 * n)                      # ξ, η, ψ/2π of each block in turn
+    rng.random(out=u)
     if origins == "independent":
-        rows = max(1, int(round(np.sqrt(n * ly / lx))))
-        row = np.minimum(np.floor(eta * rows), rows - 1)
-        order = np.lexsort((xi, row))
-        return xi[order] * lx - lx / 2, eta[order] * ly - ly / 2, psi[order]
-    rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-    x, y = np.empty(n), np.empty(n)
-    kernels.stratified_xy(start, xi, eta, float(n_total), float(rows), float(lx), float(ly), x, y)
-    return x, y, psi
+        for b in blocks:
+            k = b * BLOCK - lo
+            m = min(n - k, BLOCK)
+            xi, eta = u[3 * k:3 * k + m], u[3 * k + m:3 * k + 2 * m]
+            rows = max(1, int(round(np.sqrt(m * ly / lx))))
+            order = np.lexsort((xi, np.minimum(np.floor(eta * rows), rows - 1)))
+            x[k:k + m], y[k:k + m] = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2
+            if azimuth:
+                psi[k:k + m] = 2 * np.pi * u[3 * k + 2 * m:3 * k + 3 * m][order]
+    else:
+        rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
+        kernels.stratified_origins(u, lo, n, BLOCK, float(n_total), float(rows), float(lx),
+                                   float(ly), azimuth, x, y, psi)
+    return [x, y, z], (psi if azimuth else None)
 
 
 def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
                 origins: str = "stratified"):
-    """Origins (n, 3) and groove azimuths ψ (n,) of one block (``_block_columns``)."""
-    x, y, psi = _block_columns(tracer, n_total, block, key, azimuth, origins)
-    return np.stack([x, y, np.full(len(x), tracer.zmax + tracer.top_margin)], axis=1), psi
+    """Origins (n, 3) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one block
+    (``_chunk_columns``)."""
+    cols, psi = _chunk_columns(tracer, n_total, [block], key, azimuth, origins)
+    return np.stack(cols, axis=1), (psi.copy() if azimuth else np.zeros(len(cols[0])))
 
 
-def _chunk_columns(tracer: Tracer, n_total: int, blocks, key, azimuth: bool, origins: str):
-    """Origin columns [x, y, z] and ψ of consecutive ``blocks`` (``_block_columns``)."""
-    x, y, psi = (np.concatenate(c) for c in zip(*(
-        _block_columns(tracer, n_total, b, key, azimuth, origins) for b in blocks)))
-    return [x, y, np.full(len(x), tracer.zmax + tracer.top_margin)], psi
+_DRAWS_PER_BLOCK = 3 * BLOCK          # ξ, η and ψ of every ray of a (full) block
+_streams = threading.local()
+
+
+@functools.lru_cache(maxsize=64)
+def _stream_state(key: tuple) -> dict:
+    """Initial PCG64 state of the random stream ``key`` = (seed, realisation, incidence)."""
+    return np.random.PCG64(np.random.SeedSequence(list(key))).state
+
+
+def _block_generator(key, block: int) -> np.random.Generator:
+    """This thread's generator positioned at block ``block``'s slot of stream ``key``: block b
+    owns the numbers [b·3·BLOCK, (b + 1)·3·BLOCK) of the PCG64 stream seeded with
+    SeedSequence(key) — ξ, η, ψ of its rays in that order — so every block's rays depend only
+    on (key, b), whatever the chunking, and one generator serves consecutive blocks."""
+    try:
+        rng = _streams.rng
+    except AttributeError:
+        rng = _streams.rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = _stream_state(tuple(int(k) for k in key))
+    rng.bit_generator.advance(block * _DRAWS_PER_BLOCK)
+    return rng
 
 
 def _fresnel_by_block(c: np.ndarray, rows: np.ndarray, ior) -> np.ndarray:
@@ -259,21 +293,20 @@ class _FacetTable:
 def _facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float,
                  pool: ThreadPoolExecutor | None = None, parts: int = 1) -> _FacetTable:
     """The ``_FacetTable`` of incidence ``wi`` (``kernels.facet_mirror``; Fresnel weights in
-    compiled real arithmetic, ``fresnel_real_arithmetic``; bins by ``Bins.locate``), computed
+    compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
     in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
     facet alone, so the split changes nothing)."""
     f = len(tracer.faces)
     ncols = tracer.normal_columns
-    c, weight, wo_cols = np.empty(f), np.empty(f), tuple(np.empty(f) for _ in range(3))
+    weight, wo_cols = np.empty(f), tuple(np.empty(f) for _ in range(3))
     code, wo32 = np.empty(f, dtype=np.int8), np.empty((f, 3), dtype=np.float32)
     where, wi = np.empty(f, dtype=np.int64), [float(w) for w in wi]
+    fresnel_args = kernels.fresnel_mode(ior)
 
     def fill(part: slice) -> None:
-        kernels.facet_mirror(*(a[part] for a in ncols), *wi, c[part], code[part],
-                             *(a[part] for a in wo_cols), wo32[part])
-        cp = c[part]
-        weight[part] = np.where(cp > 0, fresnel_real_arithmetic(np.clip(cp, 0.0, 1.0), ior), 0.0)
-        where[part] = bins.locate(np.stack([a[part] for a in wo_cols], axis=1), phi_i)
+        kernels.facet_mirror(*(a[part] for a in ncols), *wi, *fresnel_args[1:], fresnel_args[0],
+                             weight[part], code[part], *(a[part] for a in wo_cols), wo32[part])
+        where[part] = bins.locate_xyz(*(a[part] for a in wo_cols), phi_i)
 
     cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
@@ -300,16 +333,21 @@ def _trace_tabled(tracer: Tracer, table: _FacetTable, wi: np.ndarray, origins):
     n = len(x[0])
     wi = np.asarray(wi, dtype=np.float64)
     hs, prim, p = tracer.trace_columns(x, [float(-c) for c in wi], (-wi).astype(np.float32)[None])
-    status = np.empty(n, dtype=np.int8)
-    weight = np.zeros(n)
-    where = np.full(n, -1, dtype=np.int64)
-    mi = np.empty(n, dtype=np.int64)
-    start, wo = [np.empty(n) for _ in range(3)], [np.empty(n) for _ in range(3)]
-    wo32 = np.empty((n, 3), dtype=np.float32)
+    status, weight = np.empty(n, dtype=np.int8), np.empty(n)
+    where = np.empty(n, dtype=np.int64)
+    mi = work("tabled-ray", n, np.int64)                  # the masking rays, this thread's
+    start = [work("tabled-start-" + a, n) for a in "xyz"]
+    wo = [work("tabled-wo-" + a, n) for a in "xyz"]
+    wo32, o32 = work("tabled-wo32", (n, 3), np.float32), work("tabled-o32", (n, 3), np.float32)
+    tq, keep = work("tabled-tfar", n, np.float32), work("tabled-keep", n, np.int64)
+    top = work("tabled-top", n, np.bool_)
     m = kernels.tabled_primary(hs, prim, *p, table.code, table.weight, *table.normal_cols,
-                               table.lift, *table.wo_cols, table.wo32, table.bin, status, weight,
-                               where, mi, *start, *wo, wo32)
-    esc = tracer.escape_columns([c[:m] for c in start], [c[:m] for c in wo], wo32[:m])
+                               table.lift, *table.wo_cols, table.wo32, table.bin,
+                               float(tracer.half[0]), float(tracer.half[1]), tracer.zmax,
+                               tracer.eps, TFAR_REL, status, weight, where, mi, *start, *wo, wo32,
+                               o32, tq, keep, top)
+    esc = tracer.escape_columns([c[:m] for c in start], [c[:m] for c in wo], wo32[:m],
+                                first=(o32, tq, keep, top))
     kernels.apply_escape(status, mi[:m], esc, _FROM_ESCAPE)
     return status, weight, where
 
@@ -394,12 +432,7 @@ def _analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float,
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
     where = np.empty(n, dtype=np.int64)
     wo = [np.empty(n) for _ in range(3)]
-    if ior is None:
-        mode, n2, k2 = kernels.FRESNEL_MIRROR, 0.0, 0.0
-    else:
-        eta = complex(ior)
-        mode = kernels.FRESNEL_NONE if eta == 1 else kernels.FRESNEL_REAL
-        n2, k2 = eta.real ** 2, eta.imag ** 2
+    mode, n2, k2 = kernels.fresnel_mode(ior)
     phi = np.radians(phi_i)
     c = caster
     kernels.analytic_vgroove(np.ascontiguousarray(x, dtype=np.float64), float(z),
@@ -416,7 +449,7 @@ def _analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float,
     return status, weight, where
 
 
-def _split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "_Handout":
+def _split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "_ChunkTallies":
     """Per-block tallies of a batch of whole blocks (``kernels.block_tallies``): for each
     block, its bins (sparse: only those it touches) with Σw, Σw², counts and Σ_pairs w w', and
     its ledger counts and Fresnel sums. Rays are added in ray order, so every block's sums
@@ -428,31 +461,32 @@ def _split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "_Handout
     same bin. A trailing unpaired ray (odd last block) has no partner and adds nothing."""
     n = len(status)
     acc, touched = np.zeros((3, nbin)), np.zeros(nbin, dtype=np.int64)
-    out_bin, out_sums = np.empty(n, dtype=np.int64), np.empty((3, n))
-    out_cnt, offsets = np.empty(n, dtype=np.int64), np.empty(n_blocks + 1, dtype=np.int64)
+    out_bin, out_sums = work("tally-bin", n, np.int64), work("tally-sums", (3, n))
+    out_cnt, offsets = work("tally-count", n, np.int64), np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, len(LEDGER)), dtype=np.int64)
     lf = np.zeros((n_blocks, len(LEDGER)))
     kernels.block_tallies(status, weight, where, BLOCK, acc, touched, out_bin, out_sums,
                           out_cnt, offsets, ln, lf)
-    parts = [slice(offsets[k], offsets[k + 1]) for k in range(n_blocks)]
-    return _Handout([(out_bin[p], out_sums[0, p], out_sums[1, p], out_cnt[p], ln[k], lf[k],
-                      out_sums[2, p]) for k, p in enumerate(parts)])
+    used = int(offsets[-1])                 # the blocks' bins, copied out of the work arrays
+    return _ChunkTallies((out_bin[:used].copy(), out_sums[:, :used].copy(),
+                          out_cnt[:used].copy(), offsets, ln, lf))
 
 
-class _Handout:
-    """Per-block tallies of one chunk, handed out once, in block order: iterating releases
-    them, so a finished future its caller still holds keeps no arrays (memory stays
-    independent of the number of rays)."""
+class _ChunkTallies:
+    """The per-block tallies of one chunk (``_split_tallies``), handed out once (``take``):
+    taking releases them, so a finished future its caller still holds keeps no arrays
+    (memory stays independent of the number of rays)."""
 
-    def __init__(self, items: list):
-        self._items = items[::-1]
+    def __init__(self, parts: tuple):
+        self._parts = parts
+        self.blocks = len(parts[3]) - 1
 
-    def __len__(self) -> int:
-        return len(self._items)
-
-    def __iter__(self):
-        while self._items:
-            yield self._items.pop()
+    def take(self) -> tuple:
+        """(bins, sums (3, ·), counts, offsets, ledger counts, ledger Fresnel sums)."""
+        parts, self._parts = self._parts, None
+        if parts is None:
+            raise RuntimeError("these chunk tallies were already taken")
+        return parts
 
 
 # --- tallies -------------------------------------------------------------------------------
@@ -485,7 +519,7 @@ def _chunk_tallies(tracer, profile, wi, phi_i, bins, ior, n_total, blocks, *, ke
                    origins="stratified", rotate=False):
     """Per-block tallies of a chunk of consecutive blocks (one thread task), traced as one batch.
 
-    Every block draws its own rays (``_block_columns``); per-ray work is position-independent
+    Every block draws its own rays (``_chunk_columns``); per-ray work is position-independent
     and the tallies are split per block (``_split_tallies``), so the result is bitwise the same
     for any chunk size or thread count. Surfaces without azimuth averaging use a per-facet
     table of Fresnel weight, mirror direction and bin (``_facet_table``, built once per
@@ -538,14 +572,12 @@ class _Tally:
         """The sums in the order of a block's tallies (``_split_tallies``)."""
         return (self.sum_w, self.sum_w2, self.count, self.led_n, self.led_f, self.sum_pair)
 
-    def add(self, block) -> None:
-        """Add one block's tallies (callers add blocks in block order): ``block`` is
-        (bins, Σw, Σw², counts, ledger counts, ledger Fresnel sums, Σ_pairs) with the per-bin
-        sums given for ``bins`` only (``_split_tallies``); the other bins add nothing."""
-        idx, sw, sw2, cnt, ln, lf, sp = block
-        kernels.add_block(self.sum_w, self.sum_w2, self.count, self.sum_pair, idx, sw, sw2, cnt, sp)
-        self.led_n += ln
-        self.led_f += lf
+    def add_chunk(self, chunk: _ChunkTallies) -> int:
+        """Add a chunk's per-block tallies, block by block in block order (callers add chunks
+        in block order; ``kernels.add_blocks``); returns the number of blocks added."""
+        kernels.add_blocks(self.sum_w, self.sum_w2, self.count, self.sum_pair, self.led_n,
+                           self.led_f, *chunk.take())
+        return chunk.blocks
 
     def add_totals(self, other: "_Tally") -> None:
         """Add another tally's running sums (pooling realisations)."""
@@ -800,9 +832,7 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
                     futures = [pool.submit(work, g) for g in groups]
                     try:
                         for fut in futures:             # in chunk order, blocks in block order
-                            for block in fut.result():
-                                tallies[r][i].add(block)
-                                done[r, i] += 1
+                            done[r, i] += tallies[r][i].add_chunk(fut.result())
                             if stop.is_set():
                                 raise KeyboardInterrupt
                     finally:

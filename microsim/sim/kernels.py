@@ -24,29 +24,39 @@ from numba import njit
 
 from microsim.analytic.fresnel import fresnel_real_scalar
 
-__all__ = ["stratified_xy", "segment_setup", "segment_finish", "tabled_primary",
+__all__ = ["fresnel_mode", "stratified_origins", "segment_setup", "segment_finish", "tabled_primary",
            "block_tallies", "apply_escape", "facet_mirror", "analytic_vgroove",
-           "add_block"]
+           "add_blocks"]
 
 # tracer status codes (``tracer.HIT`` ...) and ledger classes (``estimator.SINGLE`` ...),
 # repeated here as compile-time constants; ``estimator``/``tracer`` assert they agree
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
 SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = 0, 1, 2, 3, 4
-FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2     # analytic_vgroove's fresnel_mode
+FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2     # ``_fresnel_weight``'s modes
 
 _compiled = njit(cache=True, nogil=True)
 
 
 @_compiled
-def stratified_xy(r0, xi, eta, n_total, rows, lx, ly, x, y):
-    """Stratified origins of rays r0, r0 + 1, … (``estimator._block_rays``): ray r's stratum
-    q = (r + ξ)/N · rows of a row-major sweep of ``rows`` rows, x = (q − ⌊q⌋)·Lx − Lx/2,
-    y = (⌊q⌋ + η)/rows · Ly − Ly/2 (⌊q⌋ capped at rows − 1). Writes ``x``, ``y`` (N,)."""
-    for i in range(len(xi)):
-        q = (float(r0 + i) + xi[i]) / n_total * rows
-        row = min(math.floor(q), rows - 1.0)
-        x[i] = (q - row) * lx - lx / 2
-        y[i] = (row + eta[i]) / rows * ly - ly / 2
+def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, psi):
+    """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``estimator.
+    _chunk_columns``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
+    chunk (m rays) holds ξ, η, ψ/2π as three runs of m numbers from u[3·block·j]. Ray r's
+    stratum q = (r + ξ)/N · rows of a row-major sweep of ``rows`` rows gives
+    x = (q − ⌊q⌋)·Lx − Lx/2, y = (⌊q⌋ + η)/rows · Ly − Ly/2 (⌊q⌋ capped at rows − 1), and
+    ψ = 2π·(ψ/2π) if ``azimuth``. Writes ``x``, ``y`` (and ``psi``)."""
+    for j in range((n + block - 1) // block):
+        lo = j * block
+        m = min(block, n - lo)
+        base = 3 * lo
+        for q in range(m):
+            i = lo + q
+            s = (float(r0 + i) + u[base + q]) / n_total * rows
+            row = min(math.floor(s), rows - 1.0)
+            x[i] = (s - row) * lx - lx / 2
+            y[i] = (row + u[base + m + q]) / rows * ly - ly / 2
+            if azimuth:
+                psi[i] = 2 * np.pi * u[base + 2 * m + q]
 
 
 @_compiled
@@ -59,59 +69,73 @@ def _wall_distance(x, d, half):
 
 
 @_compiled
+def _segment_bounds(x, y, z, dx, dy, dz, hx, hy, zmax):
+    """Distances along a ray at (x, y, z) with direction (dx, dy, dz) to the x wall, the y
+    wall, the nearer of the two, and up to zmax (inf unless rising)."""
+    a = _wall_distance(x, dx, hx)
+    b = _wall_distance(y, dy, hy)
+    t = max((zmax - z) / dz, 0.0) if dz > 0.0 else math.inf
+    return a, b, min(a, b), t
+
+
+@_compiled
+def _setup_ray(k, x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, top):
+    """Slot k of a segment's Embree input for the ray at (x, y, z) along (dx, dy, dz): float32
+    origin ``o32[k]``, tfar ``tq[k]`` = min(wall distance, distance to zmax when rising)·
+    (1 + rel) + eps (float32; inf beyond float32) and ``top[k]``: whether it reaches the top
+    no later than a wall."""
+    _, _, w, t = _segment_bounds(x, y, z, dx, dy, dz, hx, hy, zmax)
+    tq[k] = np.float32(min(w, t) * (1.0 + rel) + eps)
+    top[k] = t <= w
+    o32[k, 0] = np.float32(x)
+    o32[k, 1] = np.float32(y)
+    o32[k, 2] = np.float32(z)
+
+
+@_compiled
 def segment_setup(ox, oy, oz, dx, dy, dz, shared, live, d32, hx, hy, zmax, eps, rel,
-                  status, o32, d32k, tq, keep, tw, tt, tx, ty):
+                  status, o32, d32k, tq, keep, top):
     """First half of one segment of the periodic walk (``Tracer._walk_columns``).
 
     Live ray i (global index ``live[i]``) at (ox, oy, oz)[i] with direction (dx, dy, dz)[j]
     (j = 0 if ``shared`` else i) and float32 copy ``d32[j]``: a ray rising from at or above
-    ``zmax`` has escaped (``status`` ← ESCAPED); every other ray gets its float32 origin
-    ``o32[k]`` (and direction ``d32k[k]`` unless shared), its Embree tfar
-    ``tq[k]`` = min(wall distance, distance to zmax when rising)·(1 + rel) + eps (float32;
-    inf beyond float32), ``keep[k]`` = i and the distances ``tw`` (nearest wall), ``tt`` (top),
-    ``tx``, ``ty`` (x and y walls). Returns k, the number of rays to trace."""
+    ``zmax`` has escaped (``status`` ← ESCAPED); every other ray gets slot k of the Embree
+    input (``_setup_ray``; direction ``d32k[k]`` unless shared) and ``keep[k]`` = i.
+    Returns k, the number of rays to trace."""
     k = 0
     for i in range(len(live)):
         j = 0 if shared else i
         if dz[j] > 0.0 and oz[i] >= zmax:
             status[live[i]] = ESCAPED
             continue
-        a = _wall_distance(ox[i], dx[j], hx)
-        b = _wall_distance(oy[i], dy[j], hy)
-        w = min(a, b)
-        t = max((zmax - oz[i]) / dz[j], 0.0) if dz[j] > 0.0 else math.inf
-        tq[k] = np.float32(min(w, t) * (1.0 + rel) + eps)
-        o32[k, 0] = np.float32(ox[i])
-        o32[k, 1] = np.float32(oy[i])
-        o32[k, 2] = np.float32(oz[i])
+        _setup_ray(k, ox[i], oy[i], oz[i], dx[j], dy[j], dz[j], hx, hy, zmax, eps, rel, o32,
+                   tq, top)
         if not shared:
             d32k[k, 0] = d32[i, 0]
             d32k[k, 1] = d32[i, 1]
             d32k[k, 2] = d32[i, 2]
         keep[k] = i
-        tw[k] = w
-        tt[k] = t
-        tx[k] = a
-        ty[k] = b
         k += 1
     return k
 
 
 @_compiled
-def segment_finish(k, pid, tfar, occlusion, keep, live, ox, oy, oz, dx, dy, dz, shared,
-                   falling_shared, d32k, tw, tt, tx, ty, hx, hy, zmin, eps,
+def segment_finish(k, pid, tfar, occlusion, keep, top, live, ox, oy, oz, dx, dy, dz, shared,
+                   falling_shared, d32k, hx, hy, zmax, zmin, eps,
                    status, prim, px, py, pz, nlive, nox, noy, noz, ndx, ndy, ndz, nd32):
     """Second half of a segment: Embree's answers ``pid`` (primID or geomID, −1 = none) and
     ``tfar`` (float32, intersect queries) for the k traced rays of ``segment_setup``.
 
     A hit sets ``status`` ← HIT and, for intersect queries, ``prim`` and the float64 point
-    o + t·d (``px``, ``py``, ``pz``, by global index). A ray without a hit whose top distance
-    is no larger than its wall distance has escaped (not for ``falling_shared``: one shared
-    falling direction never reaches the top); a ray that would leave below zmin − eps (or
-    never meets a wall) has leaked (MISSED); every other ray re-enters through the opposite
-    wall at the same height: its wall point, clipped into the tile, moved to −copysign(half,
-    d) on the axis (or axes) whose wall it reached. The re-entering rays are written compacted
-    to ``nlive``/``nox``/``noy``/``noz`` (and ``ndx``/``ndy``/``ndz``/``nd32`` unless shared).
+    o + t·d (``px``, ``py``, ``pz``, by global index). A ray without a hit whose top is no
+    farther than its nearer wall (``top``) has escaped (not for ``falling_shared``: one shared
+    falling direction never reaches the top); for the others the segment's distances are
+    recomputed (``_segment_bounds``, as in the setup): a ray that would leave below
+    zmin − eps (or never meets a wall) has leaked (MISSED); the others re-enter through the
+    opposite wall at the same height: the wall point, clipped into the tile, moved to
+    −copysign(half, d) on the axis (or axes) whose wall it reached. The re-entering rays are
+    written compacted to
+    ``nlive``/``nox``/``noy``/``noz`` (and ``ndx``/``ndy``/``ndz``/``nd32`` unless shared).
     Returns their number."""
     m = 0
     for q in range(k):
@@ -127,10 +151,10 @@ def segment_finish(k, pid, tfar, occlusion, keep, live, ox, oy, oz, dx, dy, dz, 
                 py[g] = oy[i] + t * dy[j]
                 pz[g] = oz[i] + t * dz[j]
             continue
-        w = tw[q]
-        if not falling_shared and tt[q] <= w:
+        if not falling_shared and top[q]:
             status[g] = ESCAPED
             continue
+        a, b, w, _ = _segment_bounds(ox[i], oy[i], oz[i], dx[j], dy[j], dz[j], hx, hy, zmax)
         x = ox[i] + w * dx[j]
         y = oy[i] + w * dy[j]
         z = oz[i] + w * dz[j]
@@ -139,9 +163,9 @@ def segment_finish(k, pid, tfar, occlusion, keep, live, ox, oy, oz, dx, dy, dz, 
             continue
         x = min(max(x, -hx), hx)                        # rounding along the wall
         y = min(max(y, -hy), hy)
-        if tx[q] <= w:
+        if a <= w:
             x = -math.copysign(hx, dx[j])
-        if ty[q] <= w:
+        if b <= w:
             y = -math.copysign(hy, dy[j])
         nlive[m] = g
         nox[m] = x
@@ -160,21 +184,28 @@ def segment_finish(k, pid, tfar, occlusion, keep, live, ox, oy, oz, dx, dy, dz, 
 
 @_compiled
 def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wox, woy, woz,
-                   wo32, fbin, status, weight, where, mi, sx, sy, sz, mdx, mdy, mdz, md32):
+                   wo32, fbin, hx, hy, zmax, eps, rel, status, weight, where, mi, sx, sy, sz,
+                   mdx, mdy, mdz, md32, o32, tq, keep, top):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``estimator._FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
     ``lift`` = n·v0 + eps, mirror direction ``wox/woy/woz`` and its float32 copy ``wo32``,
-    bin ``fbin``), and the masking rays of the lit ones (code SINGLE): ray ``mi[m]`` starts at
-    its hit point p moved along n onto the facet plane and eps above it,
-    p − (p·n − lift)·n (``sx/sy/sz``), along the facet's mirror direction (``mdx``… ``md32``).
-    ``hs`` is the walk status: HIT, MISSED/ESCAPED (→ RAY_MISSED) or UNRESOLVED. Writes
-    ``status``, ``weight`` (0 without a hit), ``where`` (the facet bin for lit rays, else
-    untouched); returns the number of masking rays."""
+    bin ``fbin``), and the masking rays of the lit ones (code SINGLE), set up as the first
+    segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
+    ray ``mi[m]`` starts at its hit point p moved along n onto the facet plane and eps above
+    it, p − (p·n − lift)·n, wrapped into the tile (``sx/sy/sz``), along the facet's mirror
+    direction (``mdx``… ``md32``), with its Embree input in slot m (``_setup_ray``: ``o32``,
+    ``tq``, ``top``; ``keep[m]`` = m). A start at or above zmax has nothing above it: the ray
+    escapes without a masking ray (as ``segment_setup`` decides). ``hs`` is the walk status:
+    HIT, MISSED/ESCAPED (→ RAY_MISSED) or UNRESOLVED. Writes ``status``, ``weight`` (0
+    without a hit) and ``where`` (the facet bin for lit rays, else −1) of every ray; returns
+    the number of masking rays."""
     m = 0
     for i in range(len(hs)):
         h = hs[i]
+        where[i] = -1
         if h != HIT:
             status[i] = RAY_MISSED if (h == MISSED or h == ESCAPED) else RAY_UNRESOLVED
+            weight[i] = 0.0
             continue
         f = prim[i]
         c = code[f]
@@ -182,18 +213,23 @@ def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wox, w
         weight[i] = fweight[f]
         if c != SINGLE:
             continue
+        where[i] = fbin[f]
         a, b, e = nx[f], ny[f], nz[f]
         off = px[i] * a + py[i] * b + pz[i] * e - lift[f]
-        sx[m] = px[i] - off * a
-        sy[m] = py[i] - off * b
-        sz[m] = pz[i] - off * e
-        mdx[m] = wox[f]
-        mdy[m] = woy[f]
-        mdz[m] = woz[f]
+        x, y, z = px[i] - off * a, py[i] - off * b, pz[i] - off * e
+        if woz[f] > 0.0 and z >= zmax:                  # nothing above: escaped
+            continue
+        if x < -hx or x >= hx:                          # into the tile
+            x = (x + hx) % (2.0 * hx) - hx
+        if y < -hy or y >= hy:
+            y = (y + hy) % (2.0 * hy) - hy
+        sx[m], sy[m], sz[m] = x, y, z
+        mdx[m], mdy[m], mdz[m] = wox[f], woy[f], woz[f]
         md32[m, 0] = wo32[f, 0]
         md32[m, 1] = wo32[f, 1]
         md32[m, 2] = wo32[f, 2]
-        where[i] = fbin[f]
+        _setup_ray(m, x, y, z, wox[f], woy[f], woz[f], hx, hy, zmax, eps, rel, o32, tq, top)
+        keep[m] = m
         mi[m] = i
         m += 1
     return m
@@ -218,10 +254,25 @@ def block_tallies(status, weight, where, block, acc, touched, out_bin, out_sums,
     for b in range((n + block - 1) // block):
         offsets[b] = j
         lo, hi = b * block, min(n, (b + 1) * block)
+        n0 = n1 = n2 = n3 = n4 = 0                    # ledger sums in registers, per class
+        f0 = f1 = f2 = f3 = f4 = 0.0
         for i in range(lo, hi):
             s = status[i]
-            ln[b, s] += 1
-            lf[b, s] += weight[i]
+            if s == SINGLE:
+                n0 += 1
+                f0 += weight[i]
+            elif s == MASKED:
+                n1 += 1
+                f1 += weight[i]
+            elif s == DOWNWARD:
+                n2 += 1
+                f2 += weight[i]
+            elif s == RAY_UNRESOLVED:
+                n3 += 1
+                f3 += weight[i]
+            else:
+                n4 += 1
+                f4 += weight[i]
             if s == SINGLE and where[i] >= 0:
                 k = where[i]
                 if touched[k] == 0:
@@ -231,6 +282,10 @@ def block_tallies(status, weight, where, block, acc, touched, out_bin, out_sums,
                 acc[0, k] += w
                 acc[1, k] += w * w
                 touched[k] += 1
+        ln[b, SINGLE], ln[b, MASKED], ln[b, DOWNWARD] = n0, n1, n2
+        ln[b, RAY_UNRESOLVED], ln[b, RAY_MISSED] = n3, n4
+        lf[b, SINGLE], lf[b, MASKED], lf[b, DOWNWARD] = f0, f1, f2
+        lf[b, RAY_UNRESOLVED], lf[b, RAY_MISSED] = f3, f4
         for i in range(lo, hi - 1, 2):
             if (status[i] == SINGLE and status[i + 1] == SINGLE and where[i] >= 0
                     and where[i] == where[i + 1]):
@@ -253,24 +308,39 @@ def apply_escape(status, rays, esc, from_escape):
 
 
 @_compiled
-def facet_mirror(nx, ny, nz, wix, wiy, wiz, cos, code, wox, woy, woz, wo32):
-    """Per facet with unit normal n (``nx/ny/nz``) lit from wi: c = n·wi (``cos``), the mirror
-    direction wo = 2c·n − wi (``wox/woy/woz``, float32 copy ``wo32``) and the class a primary
-    hit gets (``code``): SINGLE if lit and wo rises (a masking ray decides), DOWNWARD if lit
-    and wo points down, RAY_UNRESOLVED if back-facing (c ≤ 0)."""
+def _fresnel_weight(c, n2, k2, fresnel_mode):
+    """F(c) for c > 0 by ``fresnel_mode``: FRESNEL_REAL ``fresnel_real_scalar`` onto η² with
+    n2 = n², k2 = k²; FRESNEL_MIRROR 1; FRESNEL_NONE 0 (η = 1: nothing reflects off grazing)."""
+    if fresnel_mode == FRESNEL_REAL:
+        return fresnel_real_scalar(c, n2, k2)
+    return 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
+
+
+@_compiled
+def facet_mirror(nx, ny, nz, wix, wiy, wiz, n2, k2, fresnel_mode, weight, code, wox, woy,
+                 woz, wo32):
+    """Per facet with unit normal n (``nx/ny/nz``) lit from wi: the Fresnel weight F(n·wi)
+    (``weight``, 0 if back-facing; ``_fresnel_weight``), the mirror direction
+    wo = 2(n·wi)·n − wi (``wox/woy/woz``, float32 copy ``wo32``) and the class a primary hit
+    gets (``code``): SINGLE if lit and wo rises (a masking ray decides), DOWNWARD if lit and
+    wo points down, RAY_UNRESOLVED if back-facing (n·wi ≤ 0)."""
     for f in range(len(nx)):
         c = nx[f] * wix + ny[f] * wiy + nz[f] * wiz
         x = 2.0 * c * nx[f] - wix
         y = 2.0 * c * ny[f] - wiy
         z = 2.0 * c * nz[f] - wiz
-        cos[f] = c
         wox[f] = x
         woy[f] = y
         woz[f] = z
         wo32[f, 0] = np.float32(x)
         wo32[f, 1] = np.float32(y)
         wo32[f, 2] = np.float32(z)
-        code[f] = RAY_UNRESOLVED if c <= 0.0 else (SINGLE if z > 0.0 else DOWNWARD)
+        if c <= 0.0:
+            code[f] = RAY_UNRESOLVED
+            weight[f] = 0.0
+        else:
+            code[f] = SINGLE if z > 0.0 else DOWNWARD
+            weight[f] = _fresnel_weight(c, n2, k2, fresnel_mode)
 
 
 @_compiled
@@ -286,8 +356,7 @@ def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_l
     * the primary hit (``VGrooveCaster.groove_hits``): the z = 0 crossing x0, wrapped into the
       tile; its groove k; the left wall unless the bottom comes first; the hit's distance
       s = |x0 − rim| w/(w − σ a D) from the facet's rim;
-    * the Fresnel weight F(c), c = n·wi (``fresnel_mode``: FRESNEL_REAL ``fresnel_real_scalar``
-      onto n2 = n², k2 = k²; FRESNEL_MIRROR 1; FRESNEL_NONE 0, η = 1 and c > 0), the mirror
+    * the Fresnel weight F(c), c = n·wi (``_fresnel_weight``), the mirror
       direction wo (groove frame, ``wox/woy/woz``) and the masking margin
       s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``): class MASKED if > 0,
       DOWNWARD if wo_z ≤ 0 (wins), RAY_UNRESOLVED if back-facing (c ≤ 0, weight 0), else SINGLE;
@@ -329,10 +398,7 @@ def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_l
             status[i] = RAY_UNRESOLVED
             weight[i] = 0.0
             continue
-        if fresnel_mode == FRESNEL_REAL:
-            weight[i] = fresnel_real_scalar(c, n2, k2)
-        else:                                                    # mirror 1, no interface 0
-            weight[i] = 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
+        weight[i] = _fresnel_weight(c, n2, k2, fresnel_mode)
         if oz <= 0.0:
             status[i] = DOWNWARD
             continue
@@ -351,12 +417,25 @@ def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_l
 
 
 @_compiled
-def add_block(sum_w, sum_w2, count, sum_pair, bins, sw, sw2, cnt, sp):
-    """Add one block's sparse sums (``block_tallies``: bins ``bins``, distinct) to the running
-    per-bin totals; bins the block did not touch add nothing (as + 0 would)."""
-    for q in range(len(bins)):
-        k = bins[q]
-        sum_w[k] += sw[q]
-        sum_w2[k] += sw2[q]
-        count[k] += cnt[q]
-        sum_pair[k] += sp[q]
+def add_blocks(sum_w, sum_w2, count, sum_pair, led_n, led_f, bins, sums, cnt, offsets, ln, lf):
+    """Add a chunk's sparse per-block sums (``block_tallies``: block b's distinct bins are
+    ``bins[offsets[b]:offsets[b + 1]]``) to the running totals, block by block in block order
+    — bitwise what adding each block's dense sums would give (an untouched bin adds 0)."""
+    for b in range(len(offsets) - 1):
+        for q in range(offsets[b], offsets[b + 1]):
+            k = bins[q]
+            sum_w[k] += sums[0, q]
+            sum_w2[k] += sums[1, q]
+            count[k] += cnt[q]
+            sum_pair[k] += sums[2, q]
+        for c in range(led_n.shape[0]):
+            led_n[c] += ln[b, c]
+            led_f[c] += lf[b, c]
+
+
+def fresnel_mode(ior) -> tuple:
+    """(mode, n², k²) of ``_fresnel_weight`` for a resolved index ``ior`` (None = mirror)."""
+    if ior is None:
+        return FRESNEL_MIRROR, 0.0, 0.0
+    eta = complex(ior)
+    return (FRESNEL_NONE if eta == 1 else FRESNEL_REAL), eta.real ** 2, eta.imag ** 2

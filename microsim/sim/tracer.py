@@ -28,6 +28,7 @@ from embreex import mesh_construction as mc
 from embreex import rtcore_scene as rs
 
 from . import kernels
+from .scratch import work
 
 __all__ = ["Tracer", "Hits", "VGrooveProfile", "VGrooveCaster", "HIT", "ESCAPED", "UNRESOLVED",
            "MISSED", "BLOCKED", "MAX_TRACED_DEG"]
@@ -38,7 +39,7 @@ assert (HIT, ESCAPED, UNRESOLVED, MISSED) == (kernels.HIT, kernels.ESCAPED, kern
 BLOCKED = HIT                      # an occlusion ray that met the surface
 MAX_TRACED_DEG = 89.5              # rays up to this polar angle are always resolved (wrap cap)
 BASE_WRAPS = 64
-_TFAR_REL = 4e-7                   # a segment is traced a hair beyond its exit (float32 rounding)
+TFAR_REL = 4e-7                   # a segment is traced a hair beyond its exit (float32 rounding)
 
 
 @dataclass(frozen=True)
@@ -123,6 +124,10 @@ class Tracer:
         self._lock, self._memo = threading.Lock(), {}
         self._scene = rs.EmbreeScene(robust=True)
         self._mesh = mc.TriangleMesh(self._scene, v.astype(np.float32), f.astype(np.int32))
+        # embreex builds the BVH (rtcCommit) on the first query: do it now, as part of the
+        # scene build, so that tracing times exclude it
+        self._scene.run(np.zeros((1, 3), dtype=np.float32),
+                        np.array([[0.0, 0.0, -1.0]], dtype=np.float32), dists=0.0)
 
     # --- facet geometry (float64, built on demand: 72 bytes per facet) --------------------
     @functools.cached_property
@@ -175,7 +180,7 @@ class Tracer:
         point[status != HIT] = np.nan
         return status, prim, point
 
-    def _walk_columns(self, x, d, d32, occlusion: bool):
+    def _walk_columns(self, x, d, d32, occlusion: bool, first=None):
         """``_walk`` on per-axis columns: origins ``x`` (3 arrays (N,), float64, wrapped into
         the tile here), directions ``d`` (3 arrays (N,) or 3 floats shared by all rays) and
         their float32 (N, 3) (or (1, 3)) copy ``d32``. Returns (status, prim, point columns);
@@ -183,50 +188,58 @@ class Tracer:
 
         Each segment is one Embree call between two compiled passes (``kernels.segment_setup``
         / ``segment_finish``): the rays still live after a segment (those re-entering through
-        a wall; most finish in the first) are compacted for the next."""
+        a wall; most finish in the first) are compacted for the next. ``first``: the first
+        segment's Embree input (o32, tq, keep, top) already set up by the caller exactly as
+        ``segment_setup`` would from these rays, which then all lie in the tile and are all
+        traced (``kernels.tabled_primary``); per-ray directions only."""
         n = len(x[0])
         shared = np.isscalar(d[0])
         x = [np.ascontiguousarray(c, dtype=np.float64) for c in x]
-        for a in (0, 1):                                  # wrap the starts into the tile
+        for a in (0, 1) if first is None else ():        # wrap the starts into the tile
             h = self.half[a]
             if n and (x[a].min() < -h or x[a].max() >= h):
                 out = (x[a] < -h) | (x[a] >= h)
                 x[a] = np.where(out, np.mod(x[a] + h, 2 * h) - h, x[a])
         d = ([np.array([float(c)]) for c in d] if shared
-             else [np.array(c, dtype=np.float64) for c in d])
+             else [np.ascontiguousarray(c, dtype=np.float64) for c in d])
         d32 = np.ascontiguousarray(d32, dtype=np.float32)
         falling_shared = bool(shared and d[2][0] <= 0)
         status = np.full(n, UNRESOLVED, dtype=np.int8)
         prim = np.full(0 if occlusion else n, -1, dtype=np.int32)
         point = [np.empty(0 if occlusion else n) for _ in range(3)]
         live = np.arange(n, dtype=np.int64)
-        # per-segment buffers (reused; sized for the first, largest segment)
-        o32 = np.empty((n, 3), dtype=np.float32)
-        d32k = np.empty((0, 3) if shared else (n, 3), dtype=np.float32)
-        tq = np.empty(n, dtype=np.float32)
-        keep = np.empty(n, dtype=np.int64)
-        tw, tt, tx, ty = (np.empty(n) for _ in range(4))
+        # per-segment work arrays (this thread's, reused; sized for the first, largest segment)
+        o32 = work("walk-o32", (n, 3), np.float32)
+        d32k = work("walk-d32", (0, 3) if shared else (n, 3), np.float32)
+        tq = work("walk-tfar", n, np.float32)
+        keep = work("walk-keep", n, np.int64)
+        top = work("walk-top", n, np.bool_)
         query = "OCCLUDED" if occlusion else "INTERSECT"
         no_tfar = np.empty(0, dtype=np.float32)
         hx, hy = float(self.half[0]), float(self.half[1])
-        for _ in range(self.max_wraps + 1):
+        for segment in range(self.max_wraps + 1):
             if live.size == 0:
                 break
-            k = kernels.segment_setup(x[0], x[1], x[2], d[0], d[1], d[2], shared, live, d32,
-                                      hx, hy, self.zmax, self.eps, _TFAR_REL, status, o32, d32k,
-                                      tq, keep, tw, tt, tx, ty)
+            if segment == 0 and first is not None:
+                k, (o32_, tq_, keep_, top_), d32k_ = n, first, d32
+            else:
+                k = kernels.segment_setup(x[0], x[1], x[2], d[0], d[1], d[2], shared, live,
+                                          d32, hx, hy, self.zmax, self.eps, TFAR_REL, status,
+                                          o32, d32k, tq, keep, top)
+                o32_, tq_, keep_, top_, d32k_ = o32, tq, keep, top, d32k
             if k == 0:
                 break
-            res = self._scene.run(o32[:k], d32 if shared else d32k[:k], dists=tq[:k],
+            res = self._scene.run(o32_[:k], d32 if shared else d32k_[:k], dists=tq_[:k],
                                   query=query, output=None if occlusion else 1)
             pid, tfar = (res, no_tfar) if occlusion else (res["primID"], res["tfar"])
-            m_live = np.empty(k, dtype=np.int64)
-            nx_ = [np.empty(k) for _ in range(3)]
-            nd = [np.empty(0 if shared else k) for _ in range(3)]
-            nd32 = np.empty((0, 3) if shared else (k, 3), dtype=np.float32)
-            m = kernels.segment_finish(k, pid, tfar, occlusion, keep, live, x[0], x[1], x[2],
-                                       d[0], d[1], d[2], shared, falling_shared, d32k, tw, tt,
-                                       tx, ty, hx, hy, self.zmin, self.eps, status, prim,
+            nxt = f"walk-next{segment % 2}-"          # written here, read by the next segment
+            m_live = work(nxt + "live", k, np.int64)
+            nx_ = [work(nxt + a, k) for a in "xyz"]
+            nd = [work(nxt + "d" + a, 0 if shared else k) for a in "xyz"]
+            nd32 = work(nxt + "d32", (0, 3) if shared else (k, 3), np.float32)
+            m = kernels.segment_finish(k, pid, tfar, occlusion, keep_, top_, live, x[0], x[1],
+                                       x[2], d[0], d[1], d[2], shared, falling_shared, d32k_, hx, hy,
+                                       self.zmax, self.zmin, self.eps, status, prim,
                                        point[0], point[1], point[2], m_live, nx_[0], nx_[1],
                                        nx_[2], nd[0], nd[1], nd[2], nd32)
             live, x = m_live[:m], [c[:m] for c in nx_]
@@ -246,10 +259,10 @@ class Tracer:
         the point columns undefined where status is not HIT."""
         return self._walk_columns(x, d, d32, occlusion=False)
 
-    def escape_columns(self, x, d, d32) -> np.ndarray:
-        """Occlusion status of rays given as per-axis columns (see ``_walk_columns``); the
-        starts ``x`` must already be offset from the surface."""
-        return self._walk_columns(x, d, d32, occlusion=True)[0]
+    def escape_columns(self, x, d, d32, first=None) -> np.ndarray:
+        """Occlusion status of rays given as per-axis columns (see ``_walk_columns``, also for
+        ``first``); the starts ``x`` must already be offset from the surface."""
+        return self._walk_columns(x, d, d32, occlusion=True, first=first)[0]
 
     def on_plane(self, prim: np.ndarray, point: np.ndarray, lift: float = 0.0) -> np.ndarray:
         """``point`` (N, 3) moved along the unit normal of facet ``prim`` (N,) onto that facet's
