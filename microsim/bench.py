@@ -7,8 +7,11 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit, in batches
   of 65 536 (float32 arrays prepared beforehand, so only Embree is timed);
 * the pipeline's samples/s (``simulate``: primary ray, Fresnel, reflection, masking ray,
-  tally; scene build excluded) on 1 and 2 threads and its ratio to the raw figure, both
-  expressed per sample (a sample = one primary ray and, when lit, its masking ray);
+  tally; scene build — mesh, Embree BVH — excluded, the per-incidence facet table included)
+  on 1 and 2 threads and its ratio to the raw figure, both expressed per sample (a sample =
+  one primary ray and, when lit, its masking ray). Both figures are the best of three runs,
+  raw and pipeline measured alternately (``throughput``): on a shared 2-core machine single
+  runs scatter by several per cent;
 * the peak resident memory of a ``simulate`` run in a fresh process at two ray counts (it
   does not grow with the ray count: tallies are per bin, rays live only per chunk; both
   counts exceed the facet count, so both runs take the per-facet-table path);
@@ -31,7 +34,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["BenchConfig", "raw_embree", "pipeline", "peak_rss_mb", "time_to_accuracy",
+__all__ = ["BenchConfig", "throughput", "peak_rss_mb", "time_to_accuracy",
            "run_bench", "format_bench", "add_bench_command"]
 
 BATCH = 2 ** 16
@@ -102,37 +105,31 @@ def _time_raw(tracer, primary, masking, threads: int) -> float:
         return time.perf_counter() - t0
 
 
-def raw_embree(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 2) -> dict:
-    """Raw embreex throughput for the pipeline's own rays: best of ``repeat`` per thread count.
-    Returns {"rays", "primary_rays", "masking_rays", "rays_per_s": {1: .., 2: ..},
-    "samples_per_s": {1: .., 2: ..}} (rays/s counts both kinds; samples/s = primary rays/s)."""
+def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> tuple:
+    """Raw embreex throughput for the pipeline's own rays and the pipeline's (``simulate``,
+    scene build excluded), on 1 and 2 threads, best of ``repeat`` each. The two are measured
+    alternately (raw, pipeline, raw, …), so that a transient slowdown of the shared machine
+    hits both rather than one. Returns (raw, pipeline): raw = {"rays", "primary_rays",
+    "masking_rays", "rays_per_s": {1: .., 2: ..}, "samples_per_s": {1: .., 2: ..}} (rays/s
+    counts both kinds; samples/s = primary rays/s), pipeline = {1: samples/s, 2: samples/s}."""
     from microsim.analytic._checks import spherical_deg
-    from microsim.sim import Tracer
-    tracer = Tracer(surface if surface is not None else _surface(cfg))
+    from microsim.sim import Tracer, simulate
+    surface = surface if surface is not None else _surface(cfg)
+    tracer = Tracer(surface)
     primary, masking = _ray_set(tracer, spherical_deg(cfg.theta_i, 0.0), cfg.rays)
     n_p, n_m = len(primary[0]), len(masking[0])
-    out = {"rays": n_p + n_m, "primary_rays": n_p, "masking_rays": n_m, "rays_per_s": {},
-           "samples_per_s": {}}
-    for threads in (1, 2):
-        t = min(_time_raw(tracer, primary, masking, threads) for _ in range(repeat))
-        out["rays_per_s"][threads] = (n_p + n_m) / t
-        out["samples_per_s"][threads] = n_p / t
-    return out
-
-
-def pipeline(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 2) -> dict:
-    """``simulate`` samples/s (scene build excluded), best of ``repeat``, on 1 and 2 threads."""
-    from microsim.sim import simulate
-    surface = surface if surface is not None else _surface(cfg)
-    out = {}
-    for threads in (1, 2):
-        best = 0.0
-        for _ in range(repeat):
+    best_raw, pipe = {1: np.inf, 2: np.inf}, {1: 0.0, 2: 0.0}
+    for _ in range(repeat):
+        for threads in (1, 2):
+            best_raw[threads] = min(best_raw[threads],
+                                    _time_raw(tracer, primary, masking, threads))
             res = simulate(surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(),
                            threads=threads)
-            best = max(best, res.meta["rays_per_second"])
-        out[threads] = best
-    return out
+            pipe[threads] = max(pipe[threads], res.meta["rays_per_second"])
+    raw = {"rays": n_p + n_m, "primary_rays": n_p, "masking_rays": n_m,
+           "rays_per_s": {t: (n_p + n_m) / best_raw[t] for t in (1, 2)},
+           "samples_per_s": {t: n_p / best_raw[t] for t in (1, 2)}}
+    return raw, pipe
 
 
 _PROBE = """
@@ -191,8 +188,7 @@ def time_to_accuracy(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> dict
 def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
     """Every figure of the module docstring, as a JSON-able dict."""
     surface = _surface(cfg)
-    raw = raw_embree(cfg, surface)
-    pipe = pipeline(cfg, surface)
+    raw, pipe = throughput(cfg, surface)
     out = {"config": asdict(cfg), "load_average": list(os.getloadavg()), "cpus": os.cpu_count(),
            "mesh_triangles": int(len(surface.faces)), "raw": raw, "pipeline_samples_per_s": pipe,
            "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},

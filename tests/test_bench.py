@@ -10,7 +10,7 @@ import pytest
 
 from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.bench import BenchConfig, add_bench_command, format_bench, peak_rss_mb, pipeline, raw_embree
+from microsim.bench import BenchConfig, add_bench_command, format_bench, peak_rss_mb, throughput
 from microsim.sim import BLOCK, Bins, simulate
 from microsim.sim import estimator as E
 from microsim.surfaces.surface import flat
@@ -89,8 +89,7 @@ def test_peak_memory_does_not_grow_with_the_ray_count():
 
 def test_bench_figures_are_measured_and_printable():
     cfg = BenchConfig(n=32, rays=2 ** 14)
-    raw = raw_embree(cfg, repeat=1)
-    pipe = pipeline(cfg, repeat=1)
+    raw, pipe = throughput(cfg, repeat=1)
     assert raw["primary_rays"] == 2 ** 14 and 0 < raw["masking_rays"] <= raw["primary_rays"]
     for t in (1, 2):
         assert np.isfinite(raw["rays_per_s"][t]) and raw["rays_per_s"][t] > 0

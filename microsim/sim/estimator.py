@@ -129,8 +129,8 @@ def _chunk_columns(tracer: Tracer, n_total: int, blocks, key, azimuth: bool,
     consecutive ``blocks``, in this thread's work arrays (valid until its next call). Every
     origin starts at z = zmax + top_margin.
 
-    Each block draws ξ, η, then ψ/2π (n each, n its length) from its own slot of the stream
-    ``key`` (``_block_generator``), so a block's rays do not depend on the chunking.
+    Each block draws ξ, η, then (``azimuth``) ψ/2π, n each (n its length), from its own slot
+    of the stream ``key`` (``_block_generator``), so its rays do not depend on the chunking.
     ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
     row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
     y is jittered inside its row (``kernels.stratified_origins``). The union of strata is the
@@ -146,19 +146,20 @@ def _chunk_columns(tracer: Tracer, n_total: int, blocks, key, azimuth: bool,
     z.fill(tracer.zmax + tracer.top_margin)
     psi = work("chunk-psi", n if azimuth else 0)
     lx, ly = tracer.tile
-    rng = _block_generator(key, blocks[0])                # consecutive slots from here on
-    u = work("chunk-uniform", 3 * n)                      # ξ, η, ψ/2π of each block in turn
+    per_ray = 3 if azimuth else 2
+    rng = _block_generator(key, blocks[0], per_ray)       # consecutive slots from here on
+    u = work("chunk-uniform", per_ray * n)                # ξ, η (, ψ/2π) of each block in turn
     rng.random(out=u)
     if origins == "independent":
         for b in blocks:
             k = b * BLOCK - lo
-            m = min(n - k, BLOCK)
-            xi, eta = u[3 * k:3 * k + m], u[3 * k + m:3 * k + 2 * m]
+            m, base = min(n - k, BLOCK), per_ray * k
+            xi, eta = u[base:base + m], u[base + m:base + 2 * m]
             rows = max(1, int(round(np.sqrt(m * ly / lx))))
             order = np.lexsort((xi, np.minimum(np.floor(eta * rows), rows - 1)))
             x[k:k + m], y[k:k + m] = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2
             if azimuth:
-                psi[k:k + m] = 2 * np.pi * u[3 * k + 2 * m:3 * k + 3 * m][order]
+                psi[k:k + m] = 2 * np.pi * u[base + 2 * m:base + 3 * m][order]
     else:
         rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
         kernels.stratified_origins(u, lo, n, BLOCK, float(n_total), float(rows), float(lx),
@@ -174,7 +175,6 @@ def _block_rays(tracer: Tracer, n_total: int, block: int, key: Sequence[int], az
     return np.stack(cols, axis=1), (psi.copy() if azimuth else np.zeros(len(cols[0])))
 
 
-_DRAWS_PER_BLOCK = 3 * BLOCK          # ξ, η and ψ of every ray of a (full) block
 _streams = threading.local()
 
 
@@ -184,17 +184,18 @@ def _stream_state(key: tuple) -> dict:
     return np.random.PCG64(np.random.SeedSequence(list(key))).state
 
 
-def _block_generator(key, block: int) -> np.random.Generator:
+def _block_generator(key, block: int, per_ray: int) -> np.random.Generator:
     """This thread's generator positioned at block ``block``'s slot of stream ``key``: block b
-    owns the numbers [b·3·BLOCK, (b + 1)·3·BLOCK) of the PCG64 stream seeded with
-    SeedSequence(key) — ξ, η, ψ of its rays in that order — so every block's rays depend only
-    on (key, b), whatever the chunking, and one generator serves consecutive blocks."""
+    owns the numbers [b·k·BLOCK, (b + 1)·k·BLOCK) of the PCG64 stream seeded with
+    SeedSequence(key), k = ``per_ray`` numbers per ray (ξ, η, and ψ for groove azimuths, in
+    runs of the block's length), so every block's rays depend only on (key, b), whatever the
+    chunking, and one generator serves consecutive blocks."""
     try:
         rng = _streams.rng
     except AttributeError:
         rng = _streams.rng = np.random.Generator(np.random.PCG64())
     rng.bit_generator.state = _stream_state(tuple(int(k) for k in key))
-    rng.bit_generator.advance(block * _DRAWS_PER_BLOCK)
+    rng.bit_generator.advance(block * per_ray * BLOCK)
     return rng
 
 

@@ -41,14 +41,16 @@ _compiled = njit(cache=True, nogil=True)
 def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, psi):
     """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``estimator.
     _chunk_columns``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
-    chunk (m rays) holds ξ, η, ψ/2π as three runs of m numbers from u[3·block·j]. Ray r's
+    chunk (m rays) holds ξ, η (and ψ/2π if ``azimuth``) as runs of m numbers from
+    u[k·block·j], k = 3 if ``azimuth`` else 2. Ray r's
     stratum q = (r + ξ)/N · rows of a row-major sweep of ``rows`` rows gives
     x = (q − ⌊q⌋)·Lx − Lx/2, y = (⌊q⌋ + η)/rows · Ly − Ly/2 (⌊q⌋ capped at rows − 1), and
     ψ = 2π·(ψ/2π) if ``azimuth``. Writes ``x``, ``y`` (and ``psi``)."""
+    per_ray = 3 if azimuth else 2
     for j in range((n + block - 1) // block):
         lo = j * block
         m = min(block, n - lo)
-        base = 3 * lo
+        base = per_ray * lo
         for q in range(m):
             i = lo + q
             s = (float(r0 + i) + u[base + q]) / n_total * rows

@@ -1,0 +1,168 @@
+"""Compiled per-ray bookkeeping (microsim.sim.kernels and its callers): each kernel against the
+plain NumPy statement of what it computes. Reproducibility for any threads/chunk is tested on
+whole runs in test_bench.py and test_resume.py; the periodic walk against a replicated mesh in
+test_tracer.py; the analytic V-groove kernel ray by ray against Embree in
+test_analytic_vgroove.py."""
+import threading
+
+import numpy as np
+import pytest
+
+from microsim.analytic._checks import spherical_deg
+from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.sim import BLOCK, Bins
+from microsim.sim import estimator as E
+from microsim.sim.scratch import work
+from microsim.surfaces.surface import flat
+
+AL = resolve_material("aluminium")
+
+
+def ray_outcomes(n, nbin, seed):
+    """Spatially coherent synthetic ledger classes, weights and bins (runs of equal bins, as
+    coherent rays give), with every class present."""
+    rng = np.random.default_rng(seed)
+    status = rng.choice(np.array([E.SINGLE] * 6 + [E.MASKED, E.DOWNWARD, E.RAY_UNRESOLVED,
+                                                   E.RAY_MISSED], dtype=np.int8), n)
+    where = (np.arange(n) // 7 + rng.integers(0, 3, n)) % nbin
+    where = np.where((status == E.SINGLE) & (rng.random(n) > 0.05), where, -1).astype(np.int64)
+    return status, rng.random(n), where
+
+
+@pytest.mark.parametrize("n", [3 * BLOCK, 3 * BLOCK + 77])
+def test_block_tallies_are_per_block_bincounts(n):
+    """Per block: Σw, Σw², counts per bin exactly as np.bincount (rays added in order), the
+    pair sums over (2k, 2k + 1) in the same bin, and the ledger per class."""
+    nbin = 50
+    status, weight, where = ray_outcomes(n, nbin, seed=1)
+    n_blocks = -(-n // BLOCK)
+    bins, sums, cnt, offsets, ln, lf = E._split_tallies(status, weight, where, n_blocks,
+                                                        nbin).take()
+    for b in range(n_blocks):
+        lo, hi = b * BLOCK, min(n, (b + 1) * BLOCK)
+        s, w, k = status[lo:hi], weight[lo:hi], where[lo:hi]
+        tallied = (s == E.SINGLE) & (k >= 0)
+        part = slice(offsets[b], offsets[b + 1])
+        assert len(np.unique(bins[part])) == offsets[b + 1] - offsets[b]     # each bin once
+        dense = np.zeros((4, nbin))
+        dense[:3, bins[part]] = sums[:, part]
+        dense[3, bins[part]] = cnt[part]
+        assert np.array_equal(dense[0], np.bincount(k[tallied], w[tallied], nbin))
+        assert np.array_equal(dense[1], np.bincount(k[tallied], w[tallied] ** 2, nbin))
+        assert np.array_equal(dense[3], np.bincount(k[tallied], minlength=nbin))
+        e = np.arange(0, hi - lo - 1, 2)
+        both = e[tallied[e] & tallied[e + 1] & (k[e] == k[e + 1])]
+        assert len(both) > 0                                   # not vacuous
+        assert np.array_equal(dense[2], np.bincount(k[both], w[both] * w[both + 1], nbin))
+        assert np.array_equal(ln[b], np.bincount(s, minlength=len(E.LEDGER)))
+        assert np.array_equal(lf[b], np.bincount(s, w, len(E.LEDGER)))
+
+
+def test_adding_a_chunk_adds_its_blocks_in_order():
+    """``_Tally.add_chunk`` (sparse, one call) equals adding every block's dense sums in block
+    order, bitwise."""
+    nbin, n = 40, 4 * BLOCK
+    status, weight, where = ray_outcomes(n, nbin, seed=2)
+    got = E._Tally.empty(nbin)
+    got.sum_w += 0.1                                           # a running total to add to
+    want = E._Tally.empty(nbin)
+    want.sum_w += 0.1
+    assert got.add_chunk(E._split_tallies(status, weight, where, 4, nbin)) == 4
+    for b in range(4):
+        one = E._Tally.empty(nbin)
+        one.add_chunk(E._split_tallies(*(a[b * BLOCK:(b + 1) * BLOCK] for a in
+                                         (status, weight, where)), 1, nbin))
+        for total, part in zip(want.items(), one.items()):
+            total += part
+    assert all(np.array_equal(a, b) for a, b in zip(got.items(), want.items()))
+
+
+def test_chunk_tallies_hand_out_once():
+    chunk = E._split_tallies(*ray_outcomes(BLOCK, 5, seed=3), 1, 5)
+    chunk.take()
+    with pytest.raises(RuntimeError, match="already taken"):
+        chunk.take()
+
+
+@pytest.mark.parametrize("azimuth", [False, True])
+@pytest.mark.parametrize("origins", ["stratified", "independent"])
+def test_block_rays_do_not_depend_on_the_chunking(azimuth, origins):
+    tracer = E._tracer_for(flat(), "traced")[0]
+    n = 5 * BLOCK + 11
+    (x, y, z), psi = (np.copy(a) if a is not None else None for a in
+                      E._chunk_columns(tracer, n, range(6), (3, 1, 2), azimuth, origins))
+    one = [E._block_rays(tracer, n, b, (3, 1, 2), azimuth, origins) for b in range(6)]
+    assert np.array_equal(np.stack([x, y, z], axis=1), np.concatenate([o for o, _ in one]))
+    if azimuth:
+        assert np.array_equal(psi, np.concatenate([p for _, p in one]))
+        assert 0 <= psi.min() and psi.max() < 2 * np.pi and np.ptp(psi) > 6
+    other = E._chunk_columns(tracer, n, range(6), (3, 1, 3), azimuth, origins)[0][0]
+    assert not np.array_equal(x, other)                        # the key selects the stream
+
+
+def test_stratified_origins_lie_in_their_own_strata():
+    """Ray r's origin is q = (r + ξ)/N·rows of the row-major sweep with ξ ∈ [0, 1) and its y
+    jittered inside row ⌊q⌋ (η ∈ [0, 1))."""
+    tracer = E._tracer_for(flat(), "traced")[0]
+    lx, ly = tracer.tile
+    n = 3 * BLOCK + 5
+    rows = max(1, int(round(np.sqrt(n * ly / lx))))
+    (x, y, z), _ = E._chunk_columns(tracer, n, range(4), (0, 0, 0), False, "stratified")
+    row = np.floor((y + ly / 2) / ly * rows)
+    q = row + (x + lx / 2) / lx
+    xi = q * n / rows - np.arange(n)
+    eta = (y + ly / 2) / ly * rows - row
+    tol = 1e-9
+    assert np.all((xi > -tol) & (xi < 1 + tol)) and np.all((eta > -tol) & (eta < 1 + tol))
+    assert np.all(z == tracer.zmax + tracer.top_margin)
+
+
+@pytest.mark.parametrize("bins", [Bins(45, 37), Bins(45, 91), Bins(9, 2), Bins(18, 72, folded=False),
+                                  Bins(10, 4, folded=False)])
+def test_phi_bin_is_the_search_over_the_edges(bins):
+    """``Bins._phi_index`` (arithmetic guess corrected against the edges) is exactly
+    searchsorted(edges, Δφ, 'right') − 1, clipped — also on and next to every edge."""
+    e = bins.phi_edges
+    lo, hi = (0.0, 180.0) if bins.folded else (e[0], 360.0 + e[0])
+    d = np.concatenate([np.random.default_rng(0).uniform(lo, hi, 200_000), e,
+                        np.nextafter(e, -np.inf), np.nextafter(e, np.inf)])
+    d = d[(d >= lo) & (d <= hi)]
+    want = np.clip(np.searchsorted(e, d, side="right") - 1, 0, bins.n_phi - 1)
+    assert np.array_equal(bins._phi_index(d), want)
+
+
+@pytest.mark.parametrize("ior", [AL, 1.5, None])
+def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
+    rng = np.random.default_rng(4)
+    n = rng.normal(size=(20_000, 3))
+    n[:, 2] = np.abs(n[:, 2]) + 0.05
+    n /= np.linalg.norm(n, axis=1)[:, None]
+
+    class Facets:                                              # the table reads only these
+        faces = n
+        normal_columns = tuple(np.ascontiguousarray(n[:, k]) for k in range(3))
+        masking_lift = np.zeros(len(n))
+
+    wi, bins = spherical_deg(55.0, 20.0), Bins(18, 13)
+    table = E._facet_table(Facets, wi, ior, bins, 20.0)
+    c = n @ wi
+    wo = 2 * c[:, None] * n - wi
+    assert np.allclose(np.stack(table.wo_cols, axis=1), wo, rtol=0, atol=1e-15)
+    assert np.array_equal(table.wo32, wo.astype(np.float32))
+    want = np.where(c <= 0, E.RAY_UNRESOLVED, np.where(wo[:, 2] > 0, E.SINGLE, E.DOWNWARD))
+    assert np.array_equal(table.code, want) and len(set(want)) == 3
+    np.testing.assert_allclose(table.weight, np.where(c > 0, fresnel(np.clip(c, 0, 1), ior), 0.0),
+                               rtol=1e-12, atol=1e-15)
+    assert np.array_equal(table.bin, bins.locate(wo, 20.0))
+
+
+def test_work_arrays_are_reused_per_name_and_thread():
+    a = work("test-a", 100)
+    assert np.shares_memory(a, work("test-a", (10, 10)))          # same buffer, new view
+    assert not np.shares_memory(a, work("test-b", 100))
+    assert work("test-a", 1000).size == 1000                      # grows when too small
+    other = {}
+    t = threading.Thread(target=lambda: other.setdefault("a", work("test-a", 100)))
+    t.start()
+    t.join()
+    assert not np.shares_memory(work("test-a", 100), other["a"])  # per thread
