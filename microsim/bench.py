@@ -9,7 +9,7 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
 * the pipeline's samples/s (``simulate``: primary ray, Fresnel, reflection, masking ray,
   tally; scene build — mesh, Embree BVH — excluded, the per-incidence facet table included)
   on 1 and 2 threads and its ratio to the raw figure, both expressed per sample (a sample =
-  one primary ray and, when lit, its masking ray). Both figures are the best of three runs,
+  one primary ray and, when lit, its masking ray). Both figures are the best of five runs,
   raw and pipeline measured alternately (``throughput``): on a shared 2-core machine single
   runs scatter by several per cent;
 * the peak resident memory of a ``simulate`` run in a fresh process at two ray counts (it
@@ -105,7 +105,7 @@ def _time_raw(tracer, primary, masking, threads: int) -> float:
         return time.perf_counter() - t0
 
 
-def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> tuple:
+def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) -> tuple:
     """Raw embreex throughput for the pipeline's own rays and the pipeline's (``simulate``,
     scene build excluded), on 1 and 2 threads, best of ``repeat`` each. The two are measured
     alternately (raw, pipeline, raw, …), so that a transient slowdown of the shared machine

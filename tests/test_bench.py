@@ -82,7 +82,7 @@ def test_peak_memory_does_not_grow_with_the_ray_count():
     """Any per-ray storage costs ≥ 8 bytes per ray (one float64); 8x more rays must add less
     than half of that, i.e. memory is bounded by the chunk, not by the run."""
     cfg = BenchConfig(n=64)
-    small, large = 2 ** 18, 2 ** 21
+    small, large = 2 ** 19, 2 ** 22          # both long enough for every buffer to reach its size
     a, b = peak_rss_mb(cfg, small), peak_rss_mb(cfg, large)
     assert b - a < 0.5 * 8 * (large - small) / 2 ** 20, (a, b)
 

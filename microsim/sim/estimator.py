@@ -819,8 +819,7 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
                     if stop.is_set():                   # SIGINT while building the surface
                         raise KeyboardInterrupt
                     start, end = int(done[r, i]), int(nblk[r])
-                    step = min(chunk_blocks, max(1, -(-(end - start) // int(threads))))
-                    groups = [range(a, min(a + step, end)) for a in range(start, end, step)]
+                    groups = _chunk_groups(start, end, chunk_blocks, int(threads))
                     if start < end and _uses_facet_table(tracer, profile, azimuth, isotropic,
                                                          per_real[r]):
                         wi = spherical_deg(t_deg, p_deg)        # built by all threads at once
@@ -860,6 +859,19 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
             "rays_traced": traced,
             "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None}
     return _result(th, ph, bins, tallies, n_done, per_real, done, meta)
+
+
+def _chunk_groups(start: int, end: int, chunk_blocks: int, threads: int) -> list:
+    """Blocks start … end − 1 cut into consecutive thread tasks of ``chunk_blocks`` blocks,
+    guided: no task takes more than 1/(2·threads) of the blocks still left, so the tasks
+    shrink towards the end and the threads finish together (and a short run still gives
+    every thread work)."""
+    groups, a = [], start
+    while a < end:
+        step = min(chunk_blocks, max(1, (end - a) // (2 * threads)))
+        groups.append(range(a, a + step))
+        a += step
+    return groups
 
 
 def _estimate(sum_w, sum_w2, n, omega, sum_pair=None):
