@@ -82,7 +82,7 @@ def _ray_set(tracer, wi: np.ndarray, rays: int):
     table = _facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
     lit = h[table.code[prim[h]] == SINGLE]
     mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
-    md = np.stack([c[prim[lit]] for c in table.wo_cols], axis=1)
+    md = table.wo32[prim[lit]]
     return ((o.astype(np.float32), (-wi).astype(np.float32)[None]),
             (mo.astype(np.float32), md.astype(np.float32)))
 

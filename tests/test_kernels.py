@@ -147,7 +147,6 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
     table = E._facet_table(Facets, wi, ior, bins, 20.0)
     c = n @ wi
     wo = 2 * c[:, None] * n - wi
-    assert np.allclose(np.stack(table.wo_cols, axis=1), wo, rtol=0, atol=1e-15)
     assert np.array_equal(table.wo32, wo.astype(np.float32))
     want = np.where(c <= 0, E.RAY_UNRESOLVED, np.where(wo[:, 2] > 0, E.SINGLE, E.DOWNWARD))
     assert np.array_equal(table.code, want) and len(set(want)) == 3

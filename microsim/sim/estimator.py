@@ -63,10 +63,11 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import os
 import signal
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from functools import partial
 from typing import Callable, Sequence
@@ -276,16 +277,16 @@ class _FacetTable:
     """What a primary ray from ``wi`` does on each facet of a surface traced without azimuth
     averaging (wi is then the same for every ray): ``code`` (F,) int8 SINGLE (lit, reflects
     upwards: a masking ray decides), DOWNWARD or RAY_UNRESOLVED (back-facing); ``weight`` (F,)
-    Fresnel F(n·wi) (0 when back-facing); ``bin`` (F,) flat bin index of the mirror direction
-    wo = 2(wi·n)n − wi (−1 below the horizon); wo per axis, ``wo_cols`` (3 × (F,)), and as
-    float32 (F, 3) ``wo32`` (the masking rays' directions); ``normal_cols`` (3 × (F,))
-    and ``lift`` (F,) = n·v0 + eps (a point p starts its masking ray at p − (p·n − lift) n:
-    on the facet plane, eps above it)."""
+    Fresnel F(n·wi) (0 when back-facing); ``wo32`` (F, 3) the mirror direction
+    wo = 2(wi·n)n − wi in float32 — the direction Embree traces the masking ray along, whose
+    float64 value the walk uses too; ``bin`` (F,) int32 flat bin index of wo (from float64
+    wo; −1 below the horizon); ``normal_cols`` (3 × (F,)) and ``lift`` (F,) = n·v0 + eps (a
+    point p starts its masking ray at p − (p·n − lift) n: on the facet plane, eps above it).
+    25 bytes per facet besides the tracer's own columns."""
 
     code: np.ndarray
     weight: np.ndarray
     bin: np.ndarray
-    wo_cols: tuple
     wo32: np.ndarray
     normal_cols: tuple
     lift: np.ndarray
@@ -299,21 +300,22 @@ def _facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float,
     facet alone, so the split changes nothing)."""
     f = len(tracer.faces)
     ncols = tracer.normal_columns
-    weight, wo_cols = np.empty(f), tuple(np.empty(f) for _ in range(3))
-    code, wo32 = np.empty(f, dtype=np.int8), np.empty((f, 3), dtype=np.float32)
-    where, wi = np.empty(f, dtype=np.int64), [float(w) for w in wi]
+    weight, code = np.empty(f), np.empty(f, dtype=np.int8)
+    wo32, where = np.empty((f, 3), dtype=np.float32), np.empty(f, dtype=np.int32)
+    wi = [float(w) for w in wi]
     fresnel_args = kernels.fresnel_mode(ior)
 
     def fill(part: slice) -> None:
+        wo = [work("table-wo-" + a, part.stop - part.start) for a in "xyz"]
         kernels.facet_mirror(*(a[part] for a in ncols), *wi, *fresnel_args[1:], fresnel_args[0],
-                             weight[part], code[part], *(a[part] for a in wo_cols), wo32[part])
-        where[part] = bins.locate_xyz(*(a[part] for a in wo_cols), phi_i)
+                             weight[part], code[part], *wo, wo32[part])
+        where[part] = bins.locate_xyz(*wo, phi_i)
 
     cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
     list(pool.map(fill, slices) if pool is not None else map(fill, slices))
-    return _FacetTable(code=code, weight=weight, bin=where, wo_cols=wo_cols, wo32=wo32,
-                       normal_cols=ncols, lift=tracer.masking_lift)
+    return _FacetTable(code=code, weight=weight, bin=where, wo32=wo32, normal_cols=ncols,
+                       lift=tracer.masking_lift)
 
 
 def _uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:
@@ -343,7 +345,7 @@ def _trace_tabled(tracer: Tracer, table: _FacetTable, wi: np.ndarray, origins):
     tq, keep = work("tabled-tfar", n, np.float32), work("tabled-keep", n, np.int64)
     top = work("tabled-top", n, np.bool_)
     m = kernels.tabled_primary(hs, prim, *p, table.code, table.weight, *table.normal_cols,
-                               table.lift, *table.wo_cols, table.wo32, table.bin,
+                               table.lift, table.wo32, table.bin,
                                float(tracer.half[0]), float(tracer.half[1]), tracer.zmax,
                                tracer.eps, TFAR_REL, status, weight, where, mi, *start, *wo, wo32,
                                o32, tq, keep, top)
@@ -803,7 +805,8 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     done_before = done.copy()
     timings, build, interrupted = [], 0.0, False
     t_all = time.perf_counter()
-    with _DeferredInterrupt() as stop, ThreadPoolExecutor(max_workers=int(threads)) as pool:
+    pool = _thread_pool(int(threads))
+    with _DeferredInterrupt() as stop:
         try:
             for r in range(n_real):
                 if np.all(done[r] >= nblk[r]):
@@ -835,9 +838,10 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
                             done[r, i] += tallies[r][i].add_chunk(fut.result())
                             if stop.is_set():
                                 raise KeyboardInterrupt
-                    finally:
+                    finally:                            # nothing left running on return
                         for fut in futures:
                             fut.cancel()
+                        wait(futures)
                     if groups and progress is not None:
                         progress(f"realisation {r + 1}/{n_real}, theta_i = {t_deg:g}°: done")
                 timings.append(time.perf_counter() - t0)
@@ -859,6 +863,23 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
             "rays_traced": traced,
             "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None}
     return _result(th, ph, bins, tallies, n_done, per_real, done, meta)
+
+
+_POOLS: dict = {}
+_POOLS_LOCK = threading.Lock()
+os.register_at_fork(after_in_child=_POOLS.clear)   # a forked child has none of the threads
+
+
+def _thread_pool(threads: int) -> ThreadPoolExecutor:
+    """The process's pool of ``threads`` worker threads, kept between ``simulate`` calls: its
+    threads keep their work arrays (``scratch``), so a run does not pay for faulting in fresh
+    pages (expensive on this VM: ~4 µs per 4 KiB page), and ``simulate_auto``'s batches do not
+    start threads anew."""
+    with _POOLS_LOCK:
+        if threads not in _POOLS:
+            _POOLS[threads] = ThreadPoolExecutor(max_workers=threads,
+                                                 thread_name_prefix=f"microsim-{threads}")
+        return _POOLS[threads]
 
 
 def _chunk_groups(start: int, end: int, chunk_blocks: int, threads: int) -> list:

@@ -185,12 +185,12 @@ def segment_finish(k, pid, tfar, occlusion, keep, top, live, ox, oy, oz, dx, dy,
 
 
 @_compiled
-def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wox, woy, woz,
-                   wo32, fbin, hx, hy, zmax, eps, rel, status, weight, where, mi, sx, sy, sz,
-                   mdx, mdy, mdz, md32, o32, tq, keep, top):
+def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wo32, fbin, hx, hy,
+                   zmax, eps, rel, status, weight, where, mi, sx, sy, sz, mdx, mdy, mdz, md32,
+                   o32, tq, keep, top):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``estimator._FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
-    ``lift`` = n·v0 + eps, mirror direction ``wox/woy/woz`` and its float32 copy ``wo32``,
+    ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
     bin ``fbin``), and the masking rays of the lit ones (code SINGLE), set up as the first
     segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
     ray ``mi[m]`` starts at its hit point p moved along n onto the facet plane and eps above
@@ -219,18 +219,19 @@ def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wox, w
         a, b, e = nx[f], ny[f], nz[f]
         off = px[i] * a + py[i] * b + pz[i] * e - lift[f]
         x, y, z = px[i] - off * a, py[i] - off * b, pz[i] - off * e
-        if woz[f] > 0.0 and z >= zmax:                  # nothing above: escaped
+        dx, dy, dz = np.float64(wo32[f, 0]), np.float64(wo32[f, 1]), np.float64(wo32[f, 2])
+        if dz > 0.0 and z >= zmax:                      # nothing above: escaped
             continue
         if x < -hx or x >= hx:                          # into the tile
             x = (x + hx) % (2.0 * hx) - hx
         if y < -hy or y >= hy:
             y = (y + hy) % (2.0 * hy) - hy
         sx[m], sy[m], sz[m] = x, y, z
-        mdx[m], mdy[m], mdz[m] = wox[f], woy[f], woz[f]
+        mdx[m], mdy[m], mdz[m] = dx, dy, dz
         md32[m, 0] = wo32[f, 0]
         md32[m, 1] = wo32[f, 1]
         md32[m, 2] = wo32[f, 2]
-        _setup_ray(m, x, y, z, wox[f], woy[f], woz[f], hx, hy, zmax, eps, rel, o32, tq, top)
+        _setup_ray(m, x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, top)
         keep[m] = m
         mi[m] = i
         m += 1

@@ -24,8 +24,8 @@ _local = threading.local()
 def work(name: str, shape, dtype=np.float64) -> np.ndarray:
     """This thread's work array ``name`` viewed as ``shape`` (int or tuple of ints) of
     ``dtype`` (contents undefined; see the module docstring for its lifetime)."""
-    if isinstance(shape, int):
-        size = shape
+    if isinstance(shape, (int, np.integer)):
+        shape = size = int(shape)
     else:
         size = 1
         for s in shape:
