@@ -13,9 +13,10 @@ projected along the unit facet normal onto the facet plane, then offset along th
 offset biases grazing masking by ~eps / feature depth (DESIGN.md "Facts"), so V-groove surfaces
 can instead decide masking exactly in float64 (``VGrooveProfile``).
 
-Speed: the walk works on contiguous per-axis columns (``trace_columns``/``escape_columns``),
-hands Embree a single direction when all rays share it, and compacts the live rays after each
-segment; most rays finish in the first, so NumPy touches each ray a few dozen times.
+Speed: each segment of the walk is one Embree call between two compiled passes over the live
+rays (``kernels.segment_setup``/``segment_finish``: float32 inputs and tfar; hits, escapes and
+wall re-entries), which hands Embree a single direction when all rays share it and compacts
+the rays still live (most finish in the first segment). The BVH is built in ``__init__``.
 """
 from __future__ import annotations
 
