@@ -165,3 +165,23 @@ def test_work_arrays_are_reused_per_name_and_thread():
     t.start()
     t.join()
     assert not np.shares_memory(work("test-a", 100), other["a"])  # per thread
+
+
+def test_rays_rounding_onto_a_wall_still_hit():
+    """Starts within half a float32 ulp of the walls round onto them; a ray on the wall runs
+    along the mesh's boundary edge, which Embree's watertight test may give to the absent
+    neighbour. ``_strictly_inside`` keeps them in the tile: every falling ray hits."""
+    from microsim.sim import Tracer
+    from microsim.sim.tracer import HIT
+    from test_tracer import heightfield_surface, random_heights
+    tracer = Tracer(heightfield_surface(random_heights(n=32, sigma=0.02, seed=5), 1 / 32))
+    h = tracer.tile[0] / 2
+    edge = np.nextafter(h, 0.0)                                    # rounds to h in float32
+    rng = np.random.default_rng(6)
+    n = 4000
+    along = rng.uniform(-h, h, n)
+    z = np.full(n, tracer.zmax + tracer.top_margin)
+    for origins in (np.stack([along, np.full(n, edge), z], 1), np.stack([np.full(n, edge), along, z], 1)):
+        for theta, phi in ((0.0, 0.0), (30.0, 90.0), (30.0, 0.0), (60.0, 180.0)):
+            status = tracer.trace(origins, -spherical_deg(theta, phi))[0]
+            assert np.all(status == HIT), (theta, phi, np.count_nonzero(status != HIT))
