@@ -119,16 +119,28 @@ def test_stratified_origins_lie_in_their_own_strata():
 
 @pytest.mark.parametrize("bins", [Bins(45, 37), Bins(45, 91), Bins(9, 2), Bins(18, 72, folded=False),
                                   Bins(10, 4, folded=False)])
-def test_phi_bin_is_the_search_over_the_edges(bins):
-    """``Bins._phi_index`` (arithmetic guess corrected against the edges) is exactly
-    searchsorted(edges, Δφ, 'right') − 1, clipped — also on and next to every edge."""
-    e = bins.phi_edges
-    lo, hi = (0.0, 180.0) if bins.folded else (e[0], 360.0 + e[0])
-    d = np.concatenate([np.random.default_rng(0).uniform(lo, hi, 200_000), e,
-                        np.nextafter(e, -np.inf), np.nextafter(e, np.inf)])
-    d = d[(d >= lo) & (d <= hi)]
-    want = np.clip(np.searchsorted(e, d, side="right") - 1, 0, bins.n_phi - 1)
-    assert np.array_equal(bins._phi_index(d), want)
+@pytest.mark.parametrize("phi_i", [0.0, 30.0, -170.0, 725.0, "per ray"])
+def test_locate_is_the_search_over_the_edges(bins, phi_i):
+    """``Bins.locate`` (compiled ``kernels.bin_index``: arithmetic guess corrected against the
+    edges) gives θo bin ⌊θo·n/90⌋ and the Δφ bin of ``relative_azimuth`` exactly as
+    searchsorted(phi_edges, Δφ, 'right') − 1 — also for directions on and next to every
+    Δφ edge."""
+    rng = np.random.default_rng(0)
+    wo = rng.normal(size=(100_000, 3))
+    edges = np.radians(np.concatenate([bins.phi_edges[:, None] + [[-1e-9, 0.0, 1e-9]]]).ravel())
+    phi = float(phi_i) if phi_i != "per ray" else 0.0
+    on_edges = np.stack([np.cos(edges + np.radians(phi)), np.sin(edges + np.radians(phi)),
+                         np.full(len(edges), 0.3)], axis=1)
+    wo = np.concatenate([wo, on_edges, -on_edges])
+    wo /= np.linalg.norm(wo, axis=1)[:, None]
+    if phi_i == "per ray":
+        phi = rng.uniform(-400.0, 400.0, len(wo))
+    theta = np.degrees(np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2]))
+    it = np.minimum((theta * (bins.n_theta / 90.0)).astype(np.int64), bins.n_theta - 1)
+    ip = np.clip(np.searchsorted(bins.phi_edges, bins.relative_azimuth(wo, phi), side="right") - 1,
+                 0, bins.n_phi - 1)
+    want = np.where(wo[:, 2] > 0, it * bins.n_phi + ip, -1)
+    assert np.array_equal(bins.locate(wo, phi), want)
 
 
 @pytest.mark.parametrize("ior", [AL, 1.5, None])

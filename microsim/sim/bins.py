@@ -21,6 +21,12 @@ import numpy as np
 __all__ = ["Bins"]
 
 
+def _half_turn(phi_deg):
+    """Azimuth(s) in degrees taken to (−180°, 180°]."""
+    phi = np.mod(phi_deg, 360.0)
+    return np.where(phi > 180.0, phi - 360.0, phi)
+
+
 @dataclass(frozen=True)
 class Bins:
     """(θo, Δφ) grid. ``n_theta`` bins uniform over θo ∈ [0°, 90°]; ``n_phi`` bins over Δφ.
@@ -103,9 +109,7 @@ class Bins:
         return self._relative_azimuth(wo[..., 0], wo[..., 1], phi_i_deg)
 
     def _relative_azimuth(self, x, y, phi_i_deg) -> np.ndarray:
-        phi_i = np.mod(phi_i_deg, 360.0)
-        phi_i = np.where(phi_i > 180.0, phi_i - 360.0, phi_i)       # (−180°, 180°]
-        d = np.degrees(np.arctan2(y, x)) - phi_i                     # (−360°, 360°)
+        d = np.degrees(np.arctan2(y, x)) - _half_turn(phi_i_deg)   # (−360°, 360°)
         d = np.where(d < 0.0, d + 360.0, d)                          # = np.mod(d, 360), cheaper
         if self.folded:
             return np.where(d > 180.0, 360.0 - d, d)
@@ -119,24 +123,23 @@ class Bins:
 
     def locate_xyz(self, x, y, z, phi_i_deg: float = 0.0) -> np.ndarray:
         """``locate`` for unit directions given by their coordinates ``x``, ``y``, ``z``
-        (arrays of one shape; contiguous columns are fastest)."""
-        theta = np.degrees(np.arctan2(np.sqrt(x * x + y * y), z))
-        it = np.minimum((theta * (self.n_theta / 90.0)).astype(np.int64), self.n_theta - 1)
-        ip = self._phi_index(self._relative_azimuth(x, y, phi_i_deg))
-        return np.where(z > 0.0, it * self.n_phi + ip, -1)
-
-    def _phi_index(self, dphi: np.ndarray) -> np.ndarray:
-        """Δφ bin index: ``clip(searchsorted(phi_edges, dphi, "right") − 1, 0, n_phi − 1)``,
-        i.e. the i with edge_i ≤ Δφ < edge_i+1, found from the uniform spacing w (bin k is
-        centred on k·w: guess ⌊Δφ/w + ½⌋) and corrected by comparing with the edges
-        themselves, so it equals the search exactly (the guess is off by one at most, only
-        within rounding of an edge) at a fraction of its cost."""
-        e, n = self.phi_edges, self.n_phi
-        w = (180.0 / (n - 1)) if self.folded else (360.0 / n)
-        ip = np.clip(np.floor(dphi / w + 0.5), 0, n - 1).astype(np.int64)
-        ip -= dphi < e[ip]
-        ip += dphi >= e[ip + 1]
-        return np.clip(ip, 0, n - 1)
+        (arrays of one shape; contiguous columns are fastest). θo = atan2(√(x² + y²), z) in
+        degrees, bin ⌊θo·n_theta/90⌋; Δφ = φo − φi as ``relative_azimuth``, its bin the one
+        whose ``phi_edges`` hold it (edge_j ≤ Δφ < edge_j+1), computed by
+        ``kernels.bin_index`` after NumPy's arctan2."""
+        from . import kernels                             # (kernels imports nothing of ours)
+        x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
+        shape = np.broadcast_shapes(x.shape, y.shape, z.shape)
+        theta = np.arctan2(np.sqrt(x * x + y * y), z)
+        phi = np.arctan2(y, x)
+        phi_i = _half_turn(phi_i_deg)
+        phi_i = (np.array([float(phi_i)]) if np.ndim(phi_i) == 0
+                 else np.ascontiguousarray(np.broadcast_to(phi_i, shape), dtype=np.float64).ravel())
+        out = np.empty(shape, dtype=np.int64)
+        kernels.bin_index(*(np.ascontiguousarray(np.broadcast_to(a, shape)).ravel()
+                            for a in (theta, phi, z)), phi_i, self.n_theta, self.n_phi,
+                          self.folded, self.phi_edges, out.reshape(-1))
+        return out
 
     def to_dict(self) -> dict:
         return {"n_theta": self.n_theta, "n_phi": self.n_phi, "folded": self.folded}

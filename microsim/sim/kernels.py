@@ -27,7 +27,7 @@ from microsim.analytic.fresnel import fresnel_real_scalar
 
 __all__ = ["fresnel_mode", "stratified_origins", "segment_setup", "segment_finish",
            "tabled_primary", "block_tallies", "apply_escape", "facet_mirror", "analytic_vgroove",
-           "add_blocks"]
+           "add_blocks", "bin_index"]
 
 # tracer status codes (``tracer.HIT`` ...) and ledger classes (``estimator.SINGLE`` ...),
 # repeated here as compile-time constants; ``estimator``/``tracer`` assert they agree
@@ -457,3 +457,36 @@ def fresnel_mode(ior) -> tuple:
         return FRESNEL_MIRROR, 0.0, 0.0
     eta = complex(ior)
     return (FRESNEL_NONE if eta == 1 else FRESNEL_REAL), eta.real ** 2, eta.imag ** 2
+
+
+@_compiled
+def bin_index(theta, phi, z, phi_i, n_theta, n_phi, folded, edges, out):
+    """Flat (θo, Δφ) bin index of directions with polar angle ``theta`` and azimuth ``phi``
+    (radians, from NumPy's arctan2) and z-component ``z`` (``Bins.locate``): θo in degrees,
+    bin ⌊θo·n_θ/90⌋ (capped); Δφ = φ − φi in degrees (``phi_i``: one value, or one per
+    direction, in (−180°, 180°]) taken to [0°, 360°), folded to [0°, 180°] or shifted to
+    [−w/2, 360° − w/2); its bin the i with edges[i] ≤ Δφ < edges[i + 1] (capped), found from
+    the uniform spacing w (bin k centred on k·w) and corrected against ``edges`` themselves;
+    −1 where z ≤ 0. Writes ``out``."""
+    to_deg = 180.0 / math.pi
+    w = 180.0 / (n_phi - 1) if folded else 360.0 / n_phi
+    for i in range(len(theta)):
+        if not z[i] > 0.0:
+            out[i] = -1
+            continue
+        it = min(int(theta[i] * to_deg * (n_theta / 90.0)), n_theta - 1)
+        d = phi[i] * to_deg - phi_i[i if len(phi_i) > 1 else 0]
+        if d < 0.0:
+            d += 360.0
+        if folded:
+            if d > 180.0:
+                d = 360.0 - d
+        elif d >= 360.0 - 0.5 * w:
+            d -= 360.0
+        ip = min(max(math.floor(d / w + 0.5), 0.0), n_phi - 1.0)
+        k = int(ip)
+        if d < edges[k]:
+            k -= 1
+        if d >= edges[k + 1]:
+            k += 1
+        out[i] = it * n_phi + min(max(k, 0), n_phi - 1)
