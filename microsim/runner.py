@@ -26,6 +26,7 @@ incidence used are in ``meta.json`` (``auto``, ``run.auto``) and ``verdicts.json
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import math
 import os
 import re
@@ -143,7 +144,7 @@ def _int_option(name, value, lo):
     if value is None:
         return None
     if isinstance(value, bool) or int(value) != value or value < lo:
-        raise ValueError(f"--{name} must be an integer >= {lo}, got {value!r}")
+        raise UsageError(f"--{name} must be an integer >= {lo}, got {value!r}")
     return int(value)
 
 
@@ -162,39 +163,39 @@ def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=N
     seed = _int_option("seed", seed, 0)
     auto = rays is None and scene.simulation.rays == "auto"
     if auto and scene.simulation.realisations != 1:
-        raise ValueError(f"rays = \"auto\" needs realisations = 1 (scene {scene.name} has "
+        raise UsageError(f"rays = \"auto\" needs realisations = 1 (scene {scene.name} has "
                          f"{scene.simulation.realisations}); give --rays instead")
     if auto and resume is not None:
-        raise ValueError("--resume is not available for a rays = \"auto\" scene; "
+        raise UsageError("--resume is not available for a rays = \"auto\" scene; "
                          "use --force to run it again")
     if rays is None:
         rays = AUTO_MAX_RAYS if auto else scene.simulation.rays
         if effort.max_rays is not None:
             rays = min(rays, effort.max_rays)
     if rays < scene.simulation.realisations:
-        raise ValueError(f"--rays must be >= the scene's realisations "
+        raise UsageError(f"--rays must be >= the scene's realisations "
                          f"({scene.simulation.realisations}), got {rays}")
     if theta_i is None:
         theta_i = scene.simulation.theta_i
     theta_i = tuple(float(t) for t in theta_i)
     if not theta_i or not all(math.isfinite(t) and 0 <= t < 90 for t in theta_i):
-        raise ValueError(f"--theta-i must be angles in degrees, each in [0, 90), got {list(theta_i)}")
+        raise UsageError(f"--theta-i must be angles in degrees, each in [0, 90), got {list(theta_i)}")
     seed = scene.simulation.seed if seed is None else seed
     Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)      # validates the grid
     previous = None
     if resume is not None:
         resume = Path(resume)
         if out is not None and Path(out) != resume:
-            raise ValueError(f"--out {out} and --resume {resume} must name the same directory")
+            raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
         out = resume
         if not (resume / "meta.json").is_file() or not (resume / "brdf.npz").is_file():
-            raise ValueError(f"--resume {resume}: no saved run there (brdf.npz and meta.json)")
+            raise UsageError(f"--resume {resume}: no saved run there (brdf.npz and meta.json)")
         previous = Result.load(resume)
         _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, resume)
     else:
         out = Path(out) if out is not None else Path("runs") / scene.name
         if out.exists() and not force:
-            raise ValueError(f"{out} already exists; pass --resume {out} to continue it or "
+            raise UsageError(f"{out} already exists; pass --resume {out} to continue it or "
                              f"--force to replace it")
     return RunPlan(scene=scene, out=Path(out), rays=rays, theta_i=theta_i, seed=seed,
                    threads=threads, effort=effort, quick=bool(quick), previous=previous,
@@ -209,7 +210,7 @@ def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where):
     have = {k: run.get(k) for k in want}
     for key in want:
         if have[key] != want[key]:
-            raise ValueError(f"--resume {where}: {key} is {have[key]!r} there but "
+            raise UsageError(f"--resume {where}: {key} is {have[key]!r} there but "
                              f"{want[key]!r} now; resume with the same settings")
 
 
@@ -679,14 +680,14 @@ def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, prog
     log = log or (lambda s: print(s, file=sys.stderr))
     catalogue, out = Path(catalogue), Path(out)
     if not catalogue.is_dir():
-        raise ValueError(f"--catalogue {catalogue}: not a directory")
+        raise UsageError(f"--catalogue {catalogue}: not a directory")
     paths = sorted(catalogue.glob("*.toml"))
     if not paths:
-        raise ValueError(f"--catalogue {catalogue}: no *.toml scene files")
+        raise UsageError(f"--catalogue {catalogue}: no *.toml scene files")
     scenes = [load_scene(p) for p in paths]
     names = [s.name for s in scenes]
     if len(set(names)) != len(names):
-        raise ValueError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
+        raise UsageError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
     plans = [plan_run(p, out=out / s.name, threads=threads, quick=quick, force=True)
              for p, s in zip(paths, scenes)]
     t0 = time.perf_counter()

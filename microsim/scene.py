@@ -28,6 +28,7 @@ the key and the allowed values.
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,7 +46,7 @@ __all__ = ["SceneError", "Scene", "SurfaceSpec", "SimSettings", "load_scene", "m
            "describe_surface", "read_toml", "NDF_PARAMS", "SURFACE_KINDS"]
 
 
-class SceneError(ValueError):
+class SceneError(UsageError):
     """A malformed scene file: the message names the file, the key and the allowed values."""
 
 
@@ -184,7 +185,7 @@ def make_ndf(name: str, params: Mapping[str, float]):
     cls = {"beckmann": an.Beckmann, "ggx": an.GGX, "blinn-phong": an.BlinnPhong,
            "vmf": an.VonMisesFisher, "abc": an.ABC}
     if name not in cls:
-        raise ValueError(f"ndf must be one of {', '.join(NDF_PARAMS)}, got {name!r}")
+        raise UsageError(f"ndf must be one of {', '.join(NDF_PARAMS)}, got {name!r}")
     return cls[name](**params)
 
 

@@ -35,6 +35,7 @@ or, with ``--scheduler ADDRESS``, the same task function on a Dask distributed c
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import csv
 import hashlib
 import io
@@ -99,7 +100,7 @@ class SweepSpec:
 
 
 def _fail(where: str, msg: str):
-    raise ValueError(f"{where}: {msg}")
+    raise UsageError(f"{where}: {msg}")
 
 
 def _axis(v) -> list:

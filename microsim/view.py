@@ -28,6 +28,7 @@ without ``--screenshot`` the image goes to ``microsim-view-<scene>-<what>.png``.
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import argparse
 import os
 import sys
@@ -100,7 +101,7 @@ def _resolve(scene_or_surface, material=None, seed=None) -> _Scene:
         return _Scene(surf, ior, obj.ndf(), obj.name)
     if isinstance(obj, Surface):
         return _Scene(obj, material, obj.source_ndf, obj.kind)
-    raise ValueError("scene_or_surface must be a scene file path, a microsim.scene.Scene or a "
+    raise UsageError("scene_or_surface must be a scene file path, a microsim.scene.Scene or a "
                      f"microsim.surfaces.Surface, got {type(obj).__name__}")
 
 
@@ -189,7 +190,7 @@ def view_surface(scene_or_surface, color: str = "slope", grooves: int = 16, mate
     """The tile's mesh coloured by ``color`` = "height" (z, length units) or "slope" (facet tilt
     θ in degrees), with the displayed region outlined; V-grooves as a section of ``grooves``."""
     if color not in ("height", "slope"):
-        raise ValueError(f"color must be 'height' or 'slope', got {color!r}")
+        raise UsageError(f"color must be 'height' or 'slope', got {color!r}")
     sc = _resolve(scene_or_surface, material, seed)
     sec = _section(sc.surface, int(grooves))
     mesh = _section_mesh(sec)
@@ -421,7 +422,7 @@ def view_lobe(scene_or_surface, theta_i: float = DEFAULT_THETA["lobe"],
     from .sim.predict import ModelSpec, predict
     from .analytic._checks import spherical_deg
     if scale not in ("linear", "log"):
-        raise ValueError(f"scale must be 'linear' or 'log', got {scale!r}")
+        raise UsageError(f"scale must be 'linear' or 'log', got {scale!r}")
     sc = _resolve(scene_or_surface, material, seed)
     bins = Bins(int(n_theta), int(n_phi), folded=True)
     res = simulate(sc.surface, sc.ior, theta_i, rays=int(rays), bins=bins, seed=int(seed))
@@ -709,7 +710,7 @@ def view(scene_or_surface, what: str = "surface", theta_i: float | None = None, 
     ``theta_i`` (degrees): incidence for rays/lobe, viewing direction θo for disk; ignored by
     surface/normals. ``rays``: rays traced (default per view: 300 / 200 000 / 100 000)."""
     if what not in VIEWS:
-        raise ValueError(f"what must be one of {', '.join(VIEWS)}, got {what!r}")
+        raise UsageError(f"what must be one of {', '.join(VIEWS)}, got {what!r}")
     theta = DEFAULT_THETA[what] if theta_i is None else float(theta_i)
     if what in ("rays", "lobe", "disk"):
         from .analytic._checks import in_range

@@ -10,6 +10,7 @@ simulation is always drawn in ``SIM_COLOUR``.
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import math
 import os
 import textwrap
@@ -72,7 +73,7 @@ def figure_size(chart: str, n: int = 1) -> tuple[float, float]:
         return 9.0, 5.6 + 0.18 * n
     fixed = {"hemisphere_maps": (13.0, 8.6), "energy": (11.0, 4.6), "speed_accuracy": (7.0, 5.0)}
     if chart not in fixed:
-        raise ValueError(f"chart must be one of inplane, mikkelsen_fig6, stability, "
+        raise UsageError(f"chart must be one of inplane, mikkelsen_fig6, stability, "
                          f"{', '.join(fixed)}; got {chart!r}")
     return fixed[chart]
 
@@ -198,7 +199,7 @@ def _select_verdicts(verdicts, theta_i: float, names) -> list[dict]:
            if v["model"] in names and math.isclose(float(v["theta_i"]), theta_i, abs_tol=1e-6)
            and np.isfinite(_num(v.get("rel_rms")))]
     if not sel:
-        raise ValueError(f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}° "
+        raise UsageError(f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}° "
                          f"and one of the models {sorted(names)}")
     return sorted(sel, key=lambda v: _num(v["rel_rms"]))
 
@@ -246,7 +247,7 @@ def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path, t_
     """
     n_t = len(result.theta_i)
     if not (0 <= int(t_index) < n_t):
-        raise ValueError(f"t_index must be in [0, {n_t - 1}], got {t_index}")
+        raise UsageError(f"t_index must be in [0, {n_t - 1}], got {t_index}")
     t = int(t_index)
     theta_i = float(result.theta_i[t])
     sel = _select_verdicts(verdicts, theta_i, set(models))
@@ -390,7 +391,7 @@ def mikkelsen_fig6(curves: list[Mapping], path, title: str = "") -> str:
     for c in curves:
         groups.setdefault(_material_of(c), []).append(c)
     if not groups:
-        raise ValueError("curves must hold at least one curve dict")
+        raise UsageError("curves must hold at least one curve dict")
     fig = _figure(figure_size("mikkelsen_fig6", len(groups)))
     axes = fig.subplots(1, len(groups), squeeze=False)[0]
     markers = ("o", "s", "^", "D", "v", "P")

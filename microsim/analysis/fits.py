@@ -28,6 +28,7 @@ are run and the lowest cost is kept. Models (``FIT_MODELS``):
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
@@ -204,7 +205,7 @@ def bin_rule(bins: Bins, wi, order: int = 3, phi_i: float | None = None) -> BinR
     """
     wi = _checks.directions("wi", wi)
     if int(order) != order or not 1 <= order <= 16:
-        raise ValueError(f"order must be an integer in [1, 16], got {order!r}")
+        raise UsageError(f"order must be an integer in [1, 16], got {order!r}")
     if phi_i is None:
         phi_i = float(np.degrees(np.arctan2(wi[1], wi[0]))) if np.hypot(wi[0], wi[1]) > 0 else 0.0
     x, w = np.polynomial.legendre.leggauss(int(order))
@@ -239,7 +240,7 @@ class _Problem:
     def build(cls, data: FitData, order: int) -> "_Problem":
         used = data.used
         if not used.any():
-            raise ValueError(f"no bin has >= min_events={data.min_events} events: nothing to fit")
+            raise UsageError(f"no bin has >= min_events={data.min_events} events: nothing to fit")
         geo = np.broadcast_arrays(*data.geometry(), data.sim)[:5]
         ti, to, dti, dto, dpo = (g[used] for g in geo)
         wis, wos, ws = [], [], []
@@ -303,9 +304,9 @@ def fit_model(name: str, data: FitData, ior=None, *, n_starts: int = 4, seed: in
     ``max_nfev`` caps the residual evaluations per start (the finite-difference Jacobian
     costs another #params evaluations per iteration on top)."""
     if name not in FIT_MODELS:
-        raise ValueError(f"name must be one of {', '.join(map(repr, FIT_MODELS))}, got {name!r}")
+        raise UsageError(f"name must be one of {', '.join(map(repr, FIT_MODELS))}, got {name!r}")
     if int(n_starts) != n_starts or n_starts < 1:
-        raise ValueError(f"n_starts must be an integer >= 1, got {n_starts!r}")
+        raise UsageError(f"n_starts must be an integer >= 1, got {n_starts!r}")
     model = FIT_MODELS[name]
     ior = an.resolve_material(ior)
     problem = _Problem.build(data, order)

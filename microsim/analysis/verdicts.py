@@ -26,6 +26,7 @@ where the simulation has (almost) no events is not tested there.
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 from typing import Iterable, Mapping
 
 import numpy as np
@@ -84,7 +85,7 @@ def sidak(alpha: float, n: int) -> float:
     """Per-test level 1 − (1 − α)^(1/n) keeping the family-wise error at α (Šidák)."""
     alpha = _checks.in_range("alpha", alpha, 0.0, 1.0, lo_open=True, hi_open=True)
     if int(n) != n or n < 1:
-        raise ValueError(f"n must be an integer >= 1, got {n!r}")
+        raise UsageError(f"n must be an integer >= 1, got {n!r}")
     return float(-np.expm1(np.log1p(-alpha) / n))
 
 
@@ -133,22 +134,22 @@ def verdict(sim, stderr, counts, model, omega, theta_edges, *, phi_edges=None, t
                              (sim, stderr, counts, model, omega))
     shape = sim.shape
     if sim.ndim != 2 or any(a.shape != shape for a in (se, cnt, mod, om)):
-        raise ValueError("sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
+        raise UsageError("sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
                          f"got {[a.shape for a in (sim, se, cnt, mod, om)]}")
     theta_edges = np.asarray(theta_edges, dtype=np.float64)
     if theta_edges.shape != (shape[0] + 1,):
-        raise ValueError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
+        raise UsageError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
     if phi_edges is None:
         from microsim.sim.bins import Bins
         phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
     phi_edges = np.asarray(phi_edges, dtype=np.float64)
     if phi_edges.shape != (shape[1] + 1,):
-        raise ValueError(f"phi_edges must have shape ({shape[1] + 1},), got {phi_edges.shape}")
+        raise UsageError(f"phi_edges must have shape ({shape[1] + 1},), got {phi_edges.shape}")
     model_rtol = _checks.in_range("model_rtol", model_rtol, 0.0, 1.0)
     if int(min_events) != min_events or min_events < 1:
-        raise ValueError(f"min_events must be an integer >= 1, got {min_events!r}")
+        raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
     if int(n_params) != n_params or n_params < 0:
-        raise ValueError(f"n_params must be an integer >= 0, got {n_params!r}")
+        raise UsageError(f"n_params must be an integer >= 0, got {n_params!r}")
     alpha_eff = sidak(alpha, n_tests)
     alpha_each = sidak(alpha_eff, 2)
 
@@ -219,30 +220,30 @@ def validate_verdict(d) -> dict:
     """Check a verdict dict against ``VERDICT_SCHEMA`` (keys, types, invariants); return it.
     Raises ValueError naming the offending key."""
     if not isinstance(d, Mapping):
-        raise ValueError(f"verdict must be a dict, got {type(d).__name__}")
+        raise UsageError(f"verdict must be a dict, got {type(d).__name__}")
     missing = [k for k in VERDICT_SCHEMA if k not in d]
     if missing:
-        raise ValueError(f"verdict is missing keys {missing}")
+        raise UsageError(f"verdict is missing keys {missing}")
     extra = [k for k in d if k not in VERDICT_SCHEMA]
     if extra:
-        raise ValueError(f"verdict has unknown keys {extra}")
+        raise UsageError(f"verdict has unknown keys {extra}")
     for key, (types, _) in VERDICT_SCHEMA.items():
         v = d[key]
         if isinstance(v, bool) and bool not in types:
-            raise ValueError(f"verdict[{key!r}] must be of type {types}, got bool")
+            raise UsageError(f"verdict[{key!r}] must be of type {types}, got bool")
         if not isinstance(v, types):
-            raise ValueError(f"verdict[{key!r}] must be of type {types}, got {type(v).__name__}")
+            raise UsageError(f"verdict[{key!r}] must be of type {types}, got {type(v).__name__}")
         if isinstance(v, float) and not np.isfinite(v):
-            raise ValueError(f"verdict[{key!r}] must be finite or null, got {v!r}")
+            raise UsageError(f"verdict[{key!r}] must be finite or null, got {v!r}")
     if d["n_bins"] < 0 or d["dof"] != d["n_bins"] - d["n_params"]:
-        raise ValueError("verdict['dof'] must equal n_bins - n_params with n_bins >= 0")
+        raise UsageError("verdict['dof'] must equal n_bins - n_params with n_bins >= 0")
     if d["p_value"] is not None and not 0.0 <= d["p_value"] <= 1.0:
-        raise ValueError(f"verdict['p_value'] must lie in [0, 1], got {d['p_value']}")
+        raise UsageError(f"verdict['p_value'] must lie in [0, 1], got {d['p_value']}")
     for r in d["deviations"]:
         if not (isinstance(r, list) and len(r) == 2 and 0.0 <= r[0] < r[1] <= 90.0):
-            raise ValueError(f"verdict['deviations'] entries must be [lo, hi] in [0, 90], got {r}")
+            raise UsageError(f"verdict['deviations'] entries must be [lo, hi] in [0, 90], got {r}")
     if d["worst_bin"] is not None and len(d["worst_bin"]) != 2:
-        raise ValueError("verdict['worst_bin'] must be [θo, Δφ] or null")
+        raise UsageError("verdict['worst_bin'] must be [θo, Δφ] or null")
     return d
 
 
@@ -261,7 +262,7 @@ def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
     entries += [(f.name, f.model_values, f.params, True, len(f.params)) for f in fits]
     names = [e[0] for e in entries]
     if len(set(names)) != len(names):
-        raise ValueError(f"model names must be unique across prescribed and fitted, got {names}")
+        raise UsageError(f"model names must be unique across prescribed and fitted, got {names}")
     T = len(result.theta_i)
     n_tests = max(1, T * len(entries))
     omega = result.bins.projected_solid_angle()
@@ -275,7 +276,7 @@ def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
             stderr = ray_err if name in own else result.stderr
             values = np.asarray(values)
             if values.shape != result.brdf.shape:
-                raise ValueError(f"model {name!r} has shape {values.shape}, "
+                raise UsageError(f"model {name!r} has shape {values.shape}, "
                                  f"expected {result.brdf.shape}")
             out.append(verdict(result.brdf[t], stderr[t], result.counts[t], values[t],
                                omega, result.theta_edges, phi_edges=result.phi_edges,

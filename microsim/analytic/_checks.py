@@ -5,6 +5,7 @@ researcher who passes a bad value learns what to pass instead.
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import numpy as np
 
 UNIT_TOL = 1e-6  # allowed | |w| - 1 | for a direction called "unit"
@@ -14,7 +15,7 @@ def positive(name: str, value, *, allow_inf: bool = False) -> float:
     """Return ``value`` as float, or raise if it is not a finite number > 0."""
     v = float(value)
     if not (v > 0) or (np.isinf(v) and not allow_inf) or np.isnan(v):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+        raise UsageError(f"{name} must be a finite number > 0, got {value!r}")
     return v
 
 
@@ -24,7 +25,7 @@ def in_range(name: str, value, lo: float, hi: float, *, lo_open=False, hi_open=F
     ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
     if not ok or np.isnan(v):
         lb, rb = ("(" if lo_open else "["), (")" if hi_open else "]")
-        raise ValueError(f"{name} must lie in {lb}{lo}, {hi}{rb}, got {value!r}")
+        raise UsageError(f"{name} must lie in {lb}{lo}, {hi}{rb}, got {value!r}")
     return v
 
 
@@ -36,15 +37,15 @@ def directions(name: str, w, *, upper: bool = False) -> np.ndarray:
     """
     a = np.asarray(w, dtype=np.float64)
     if a.ndim == 0 or a.shape[-1] != 3:
-        raise ValueError(f"{name} must be an array of shape (..., 3), got shape {a.shape}")
+        raise UsageError(f"{name} must be an array of shape (..., 3), got shape {a.shape}")
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite unit vectors; got NaN or inf")
+        raise UsageError(f"{name} must be finite unit vectors; got NaN or inf")
     norm = np.sqrt(np.einsum("...i,...i->...", a, a))
     if np.any(np.abs(norm - 1.0) > UNIT_TOL):
-        raise ValueError(f"{name} must be unit vectors (| |w| - 1 | <= {UNIT_TOL}), "
+        raise UsageError(f"{name} must be unit vectors (| |w| - 1 | <= {UNIT_TOL}), "
                          f"got norms in [{norm.min():.6g}, {norm.max():.6g}]")
     if upper and np.any(a[..., 2] < -UNIT_TOL):
-        raise ValueError(f"{name} must lie in the upper hemisphere (z >= 0), "
+        raise UsageError(f"{name} must lie in the upper hemisphere (z >= 0), "
                          f"got z down to {a[..., 2].min():.6g}")
     return a
 

@@ -6,6 +6,7 @@ accepts: None (mirror, F = 1), a material name, a real (dielectric) or complex (
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.stats import qmc
@@ -120,11 +121,11 @@ def directional_albedo(brdf_fn, theta_deg, n: int = 2 ** 14, ndf=None, n_rep: in
     """
     n = int(n)
     if n < 2 or n & (n - 1):
-        raise ValueError(f"n must be a power of 2 >= 2 (Sobol points), got {n!r}")
+        raise UsageError(f"n must be a power of 2 >= 2 (Sobol points), got {n!r}")
     n_rep = int(_checks.in_range("n_rep", n_rep, 2, 10 ** 6))
     theta = np.radians(np.asarray(theta_deg, dtype=np.float64))
     if np.any((theta < 0) | (theta > 0.5 * np.pi)):
-        raise ValueError(f"theta_deg must lie in [0, 90], got {theta_deg!r}")
+        raise UsageError(f"theta_deg must lie in [0, 90], got {theta_deg!r}")
     wi = _checks.spherical(theta, 0.0)[..., None, :]             # (..., 1, 3)
     wi_up = wi[..., 2] > 0.0
     rng = np.random.default_rng(seed)
@@ -272,9 +273,9 @@ def mikkelsen_mix(wi, wo, specular_table: AlbedoTable, kd, ks: float = 1.0,
     ks = _checks.in_range("ks", ks, 0.0, 1.0)
     kd = np.asarray(kd, dtype=np.float64)
     if kd.ndim > 1 or np.any((kd < 0) | (kd > 1)) or np.any(np.isnan(kd)):
-        raise ValueError(f"kd must be a scalar or 1-D array with values in [0, 1], got {kd!r}")
+        raise UsageError(f"kd must be a scalar or 1-D array with values in [0, 1], got {kd!r}")
     if ks * specular_table.rho_max > 1.0 + 1e-3:
-        raise ValueError(f"specular_table must have ks·ρ <= 1 (energy conserving specular), got "
+        raise UsageError(f"specular_table must have ks·ρ <= 1 (energy conserving specular), got "
                          f"ks·max ρ = {ks * specular_table.rho_max:.6g}; use V-groove or Smith G")
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)

@@ -27,6 +27,7 @@ Reciprocity: neither model is reciprocal — the framework enforces energy conse
 of reciprocity" (Edwards §1, §6, Fig. 14): f(wi, wo) ≠ f(wo, wi) in general.
 
 Conventions: local frame with the macro normal +z; unit directions of shape (..., 3) pointing away
+from microsim.errors import UsageError
 from the surface; (u, v) points of shape (..., 2); BRDFs and densities in solid angle in sr⁻¹,
 disk densities per unit disk area. All functions broadcast over leading axes.
 """
@@ -62,7 +63,7 @@ DiskDensity = Union["Lump", "LumpMixture", Callable[[np.ndarray, np.ndarray], np
 # --------------------------------------------------------------------------------------------
 def _check_projection(projection: str) -> str:
     if projection not in DISK_PROJECTIONS:
-        raise ValueError(f"projection must be one of {DISK_PROJECTIONS}, got {projection!r}")
+        raise UsageError(f"projection must be one of {DISK_PROJECTIONS}, got {projection!r}")
     return projection
 
 
@@ -267,10 +268,10 @@ class Lump:
             _checks.positive("Lump.radius", self.radius)
         _checks.positive("Lump.aspect", self.aspect)
         if self.anchor not in _ANCHORS:
-            raise ValueError(f"Lump.anchor must be one of {_ANCHORS}, got {self.anchor!r}")
+            raise UsageError(f"Lump.anchor must be one of {_ANCHORS}, got {self.anchor!r}")
         off = np.asarray(self.offset, dtype=float)
         if off.shape != (2,) or not np.all(np.isfinite(off)):
-            raise ValueError("Lump.offset must be two finite numbers (Δu, Δv), "
+            raise UsageError("Lump.offset must be two finite numbers (Δu, Δv), "
                              f"got {self.offset!r}")
 
     def geometry(self, wo):
@@ -325,11 +326,11 @@ class LumpMixture:
 
     def __post_init__(self):
         if len(self.lumps) == 0 or len(self.lumps) != len(self.weights):
-            raise ValueError("LumpMixture.lumps and LumpMixture.weights must be non-empty and of "
+            raise UsageError("LumpMixture.lumps and LumpMixture.weights must be non-empty and of "
                              f"equal length, got {len(self.lumps)} and {len(self.weights)}")
         w = np.asarray(self.weights, float)
         if np.any(~np.isfinite(w)) or np.any(w < 0) or abs(w.sum() - 1.0) > 1e-12:
-            raise ValueError(f"LumpMixture.weights must be ≥ 0 and sum to 1, got {self.weights!r}")
+            raise UsageError(f"LumpMixture.weights must be ≥ 0 and sum to 1, got {self.weights!r}")
 
     def fits_on_disk(self, wo) -> np.ndarray:
         """True where every lump with positive weight lies on the disk (see Lump.fits_on_disk)."""
@@ -377,7 +378,7 @@ def _disk_density(density: DiskDensity, wo, uv) -> np.ndarray:
         return density.pdf(wo, uv)
     if callable(density):
         return np.asarray(density(uv, wo), dtype=np.float64)
-    raise ValueError("lumps must be a Lump, a LumpMixture or a callable pdf_disk(uv, wo), "
+    raise UsageError("lumps must be a Lump, a LumpMixture or a callable pdf_disk(uv, wo), "
                      f"got {type(density).__name__}")
 
 
@@ -415,7 +416,7 @@ def edwards_empirical(wi, wo, lumps: DiskDensity, projection: str = "scaling",
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
     if isinstance(lumps, (Lump, LumpMixture)) and not np.all(lumps.fits_on_disk(wo)):
-        raise ValueError("lumps must lie on the halfway disk for every wo: each lump needs "
+        raise UsageError("lumps must lie on the halfway disk for every wo: each lump needs "
                          "max(R_u, R_v) + |centre − wo_xy| <= 1 (Edwards §4: R_s <= 1 − sin θo, "
                          "R_r <= 1); use radius=None for the largest allowed radius")
     F = _fresnel_factor(fresnel, _cos_o(wo))
@@ -495,7 +496,7 @@ class EdwardsParams:
         """Inverse of ``to_vector``."""
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (len(cls.names()),):
-            raise ValueError(f"x must have shape ({len(cls.names())},) in order {cls.names()}, "
+            raise UsageError(f"x must have shape ({len(cls.names())},) in order {cls.names()}, "
                              f"got {x.shape}")
         return cls(*map(float, x))
 
@@ -519,7 +520,7 @@ def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogona
     """
     projection = _check_projection(projection)
     if not isinstance(params, EdwardsParams):
-        raise ValueError(f"params must be an EdwardsParams, got {type(params).__name__}")
+        raise UsageError(f"params must be an EdwardsParams, got {type(params).__name__}")
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
     F = params.fresnel(_cos_o(wo))
@@ -536,7 +537,7 @@ def _as_mixture(lumps) -> LumpMixture:
         return LumpMixture((lumps,), (1.0,))
     if isinstance(lumps, LumpMixture):
         return lumps
-    raise ValueError(f"lumps must be a Lump or a LumpMixture, got {type(lumps).__name__}")
+    raise UsageError(f"lumps must be a Lump or a LumpMixture, got {type(lumps).__name__}")
 
 
 def pdf_edwards(wo, wi, lumps: DiskDensity, projection: str = "scaling") -> np.ndarray:

@@ -21,6 +21,7 @@ clip(round(N^(1/3)/2), 4, 128) and n_phi = 4 clip(round(N^(1/3)/16), 1, 32) unif
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import numpy as np
 
 from . import _checks
@@ -89,9 +90,9 @@ class Empirical(NDF):
                  n_phi: int | None = None, isotropic: bool = True, max_bin_deg: float = 2.0):
         nrm = _checks.directions("normals", normals)
         if nrm.ndim != 2 or nrm.shape[0] == 0:
-            raise ValueError(f"normals must be a non-empty array of shape (N, 3), got {nrm.shape}")
+            raise UsageError(f"normals must be a non-empty array of shape (N, 3), got {nrm.shape}")
         if np.any(nrm[:, 2] <= 0.0):
-            raise ValueError("normals must point into the upper hemisphere (n_z > 0); "
+            raise UsageError("normals must point into the upper hemisphere (n_z > 0); "
                              f"got n_z down to {nrm[:, 2].min():.6g}")
         n = nrm.shape[0]
         w = self._check_weights(weights, n)
@@ -130,11 +131,11 @@ class Empirical(NDF):
             return np.ones(n)
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (n,):
-            raise ValueError(f"weights must have shape ({n},) like normals, got {w.shape}")
+            raise UsageError(f"weights must have shape ({n},) like normals, got {w.shape}")
         if not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise ValueError("weights must be finite projected areas >= 0")
+            raise UsageError("weights must be finite projected areas >= 0")
         if not w.sum() > 0:
-            raise ValueError("weights must have a positive sum")
+            raise UsageError("weights must have a positive sum")
         return w
 
     # --- NDF interface --------------------------------------------------------------------

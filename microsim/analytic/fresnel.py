@@ -6,6 +6,7 @@ A real index is a dielectric, a complex one a conductor, ``None`` an ideal mirro
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import math
 import numbers
 
@@ -25,15 +26,15 @@ _ALIASES = {"aluminum": "aluminium"}
 def _check_ior(ior) -> complex:
     """Return ``ior`` as complex η = n + ik, or raise unless n > 0, k ≥ 0, both finite."""
     if isinstance(ior, (bool, np.bool_)) or not isinstance(ior, numbers.Number):
-        raise ValueError(f"ior must be a real or complex number n+ik (n > 0, k >= 0) or None, "
+        raise UsageError(f"ior must be a real or complex number n+ik (n > 0, k >= 0) or None, "
                          f"got {ior!r}")
     eta = complex(ior)
     if not (np.isfinite(eta.real) and np.isfinite(eta.imag)):
-        raise ValueError(f"ior must be finite (n > 0, k >= 0), got {ior!r}")
+        raise UsageError(f"ior must be finite (n > 0, k >= 0), got {ior!r}")
     if not eta.real > 0:
-        raise ValueError(f"ior real part n must be > 0, got {ior!r}")
+        raise UsageError(f"ior real part n must be > 0, got {ior!r}")
     if not eta.imag >= 0:
-        raise ValueError(f"ior imaginary part k (extinction) must be >= 0, got {ior!r}")
+        raise UsageError(f"ior imaginary part k (extinction) must be >= 0, got {ior!r}")
     return eta
 
 
@@ -41,7 +42,7 @@ def _cos(cos_theta) -> np.ndarray:
     """cos θ as float64, clipped to [0, 1]; NaN rejected."""
     c = np.asarray(cos_theta, dtype=np.float64)
     if np.any(np.isnan(c)):
-        raise ValueError("cos_theta must not be NaN")
+        raise UsageError("cos_theta must not be NaN")
     return np.clip(c, 0.0, 1.0)
 
 
@@ -65,7 +66,7 @@ def fresnel(cos_theta, ior=None):
         try:
             ior = resolve_material(ior)
         except ValueError as exc:
-            raise ValueError(f"ior: {exc}") from None
+            raise UsageError(f"ior: {exc}") from None
     if ior is None:
         return np.ones_like(c)
     eta = _check_ior(ior)
@@ -104,7 +105,7 @@ def schlick(cos_theta, f0):
     c = _cos(cos_theta)
     f0 = np.asarray(f0, dtype=np.float64)
     if not np.all((f0 >= 0.0) & (f0 <= 1.0)):
-        raise ValueError(f"f0 must lie in [0, 1], got {f0!r}")
+        raise UsageError(f"f0 must lie in [0, 1], got {f0!r}")
     return f0 + (1.0 - f0) * (1.0 - c) ** 5
 
 
@@ -121,7 +122,7 @@ def resolve_material(material):
         key = _ALIASES.get(key, key)
         if key not in MATERIALS:
             allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
-            raise ValueError(f"material must be one of {allowed} (or a number n / n+ik / None), "
+            raise UsageError(f"material must be one of {allowed} (or a number n / n+ik / None), "
                              f"got {material!r}")
         return MATERIALS[key]
     eta = _check_ior(material)

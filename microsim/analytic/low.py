@@ -13,6 +13,7 @@ because the mirror direction R of L has Rp = −Lp. |Dp| = 0 exactly in the spec
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 from typing import NamedTuple
 
 import numpy as np
@@ -45,7 +46,7 @@ def _nonneg(name: str, value) -> float:
     """``value`` as float, or raise unless it is finite and ≥ 0."""
     v = float(value)
     if not (np.isfinite(v) and v >= 0.0):
-        raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        raise UsageError(f"{name} must be a finite number >= 0, got {value!r}")
     return v
 
 
@@ -58,13 +59,13 @@ def _unit_numbers(name: str, u) -> np.ndarray:
     """Uniform numbers as float64, or raise unless all lie in [0, 1]."""
     u = np.asarray(u, dtype=np.float64)
     if not np.all((u >= 0.0) & (u <= 1.0)):
-        raise ValueError(f"{name} must lie in [0, 1]")
+        raise UsageError(f"{name} must lie in [0, 1]")
     return u
 
 
 def _choice(name: str, value: str, allowed: tuple) -> str:
     if value not in allowed:
-        raise ValueError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
+        raise UsageError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
     return value
 
 
@@ -136,7 +137,7 @@ def abc_psd_church_integral(A, B, C) -> float:
     A, B = _nonneg("A", A), _checks.positive("B", B)
     C = _checks.positive("C", C)
     if not C > 1.0:
-        raise ValueError(f"C must be > 1 for a finite PSD integral (Church's c), got {C!r}")
+        raise UsageError(f"C must be > 1 for a finite PSD integral (Church's c), got {C!r}")
     return 2.0 * np.pi * A / (B * B * (C - 1.0))
 
 
@@ -210,7 +211,7 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, ior, polarisation="unpolarised"):
     A, B, C = _abc(A, B, C)
     eta = resolve_material(ior)
     if eta is None:
-        raise ValueError("ior must be a number n or n+ik (Rayleigh–Rice needs ε = ior²), got None")
+        raise UsageError("ior must be a number n or n+ik (Rayleigh–Rice needs ε = ior²), got None")
     _choice("polarisation", polarisation, RR_POLARISATIONS)
     ci, co = wi[..., 2], wo[..., 2]
     s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam ** 2)
@@ -400,7 +401,7 @@ def pdf_low_halfvector(h, B, C):
     ``h`` (..., 3), unit or unnormalised (1 − ĥ·n is computed without cancellation)."""
     h = np.asarray(h, dtype=np.float64)
     if h.ndim == 0 or h.shape[-1] != 3 or not np.all(np.isfinite(h)):
-        raise ValueError(f"h must be a finite array of shape (..., 3), got shape {h.shape}")
+        raise UsageError(f"h must be a finite array of shape (..., 3), got shape {h.shape}")
     B, C = _checks.positive("B", B), _checks.positive("C", C)
     up = h[..., 2] >= 0.0
     return np.where(up, _halfvector_density(B, C, _one_minus_cos_h(np.where(up[..., None], h, -h))),
@@ -464,13 +465,13 @@ def _fit_error(transform, measured, model, theta_i, theta_o, d_theta_i, d_theta_
     meas, mod, ti, to, dti, dto, dpo = arrays
     for name, a in (("measured", meas), ("model", mod)):
         if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name} must be finite")
+            raise UsageError(f"{name} must be finite")
     for name, a in (("theta_i", ti), ("theta_o", to)):
         if not np.all((a >= 0.0) & (a <= 90.0)):
-            raise ValueError(f"{name} must lie in [0, 90] degrees")
+            raise UsageError(f"{name} must lie in [0, 90] degrees")
     for name, a in (("d_theta_i", dti), ("d_theta_o", dto), ("d_phi_o", dpo)):
         if not np.all((a > 0.0) & np.isfinite(a)):
-            raise ValueError(f"{name} must be finite and > 0 (degrees)")
+            raise UsageError(f"{name} must be finite and > 0 (degrees)")
     ci = np.cos(np.radians(ti))
     w = np.sin(np.radians(to)) * np.radians(dti) * np.radians(dto) * np.radians(dpo)
     return float(np.sum(w * (transform(ci * meas, "measured") - transform(ci * mod, "model")) ** 2))
@@ -482,7 +483,7 @@ def _identity(g, name):
 
 def _log1p_checked(g, name):
     if not np.all(g > -1.0):
-        raise ValueError(f"{name} must satisfy cos θi · f > −1 for the E2 logarithm")
+        raise UsageError(f"{name} must satisfy cos θi · f > −1 for the E2 logarithm")
     return np.log1p(g)
 
 

@@ -24,6 +24,7 @@ G1 = 1/(1 + Λ) is accurate to 1e-4 there (tests/test_shadowing.py).
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import weakref
 
 import numpy as np
@@ -219,13 +220,13 @@ def _table(ndf, kind):
 def _lambda(ndf, w: np.ndarray, method: str = "auto") -> np.ndarray:
     """Smith Λ(w) for unit w (no validation); inf at cos θ_w ≤ 0."""
     if method not in ("auto", "closed", "numerical"):
-        raise ValueError(f"method must be one of 'auto', 'closed', 'numerical', got {method!r}")
+        raise UsageError(f"method must be one of 'auto', 'closed', 'numerical', got {method!r}")
     c = w[..., 2]
     if not getattr(ndf, "isotropic", True):
         return _table(ndf, _AnisotropicLambdaTable).lambda_w(w)
     closed = getattr(ndf, "has_closed_smith", False)
     if method == "closed" and not closed:
-        raise ValueError(f"method='closed' needs an NDF with a closed-form Smith Λ; "
+        raise UsageError(f"method='closed' needs an NDF with a closed-form Smith Λ; "
                          f"{type(ndf).__name__} has none (use 'auto' or 'numerical')")
     if closed and method != "numerical":
         pos = c > 0.0
@@ -278,7 +279,7 @@ def smith_g2(ndf, wi, wo, h, correlated: bool = False):
 
 def _check_kind(kind) -> str:
     if kind not in SHADOWING_KINDS:
-        raise ValueError(f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, "
+        raise UsageError(f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, "
                          f"got {kind!r}")
     return kind
 

@@ -21,6 +21,7 @@ still needed is predicted from rse ∝ N^(-1/2); batches grow at most 4× per st
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import time
 
 import numpy as np
@@ -125,12 +126,12 @@ def simulate_auto(surface, material, theta_i, target: float = 0.01, *, phi_i=0.0
     raises KeyboardInterrupt (there is no partial result to resume).
     """
     if not (isinstance(target, (int, float)) and 0 < target < 1):
-        raise ValueError(f"target must be a relative error in (0, 1), got {target!r}")
+        raise UsageError(f"target must be a relative error in (0, 1), got {target!r}")
     for name, v, lo in (("first", first, 1), ("max_rays", max_rays, 2)):
         if isinstance(v, bool) or int(v) != v or v < lo:
-            raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
+            raise UsageError(f"{name} must be an integer >= {lo}, got {v!r}")
     if not 0 < energy <= 1:
-        raise ValueError(f"energy must be a fraction in (0, 1], got {energy!r}")
+        raise UsageError(f"energy must be a fraction in (0, 1], got {energy!r}")
     th = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     ph = np.broadcast_to(np.asarray(phi_i, dtype=np.float64), th.shape)
     omega = bins.projected_solid_angle()

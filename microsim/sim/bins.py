@@ -14,6 +14,7 @@ being half bins centred on 0° and 180°.
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,11 +43,11 @@ class Bins:
 
     def __post_init__(self):
         if int(self.n_theta) != self.n_theta or self.n_theta < 1:
-            raise ValueError(f"n_theta must be an integer >= 1, got {self.n_theta!r}")
+            raise UsageError(f"n_theta must be an integer >= 1, got {self.n_theta!r}")
         if int(self.n_phi) != self.n_phi or self.n_phi < 2:
-            raise ValueError(f"n_phi must be an integer >= 2, got {self.n_phi!r}")
+            raise UsageError(f"n_phi must be an integer >= 2, got {self.n_phi!r}")
         if not self.folded and self.n_phi % 2:
-            raise ValueError(f"n_phi must be even when folded=False (a bin centred on 180°), got {self.n_phi}")
+            raise UsageError(f"n_phi must be even when folded=False (a bin centred on 180°), got {self.n_phi}")
 
     # --- edges ------------------------------------------------------------------------
     @property

@@ -25,6 +25,7 @@ Flat surfaces (``kind == "flat"``):
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 from typing import NamedTuple
 
 import numpy as np
@@ -56,10 +57,10 @@ def _surfaces_and_ndf(scene_or_surfaces, ndf):
     surfaces = list(scene_or_surfaces) if isinstance(scene_or_surfaces, (list, tuple)) \
         else [scene_or_surfaces]
     if not surfaces or not all(hasattr(s, "kind") and hasattr(s, "facet_normals") for s in surfaces):
-        raise ValueError(f"scene_or_surface must be a Scene, a Surface or a non-empty sequence "
+        raise UsageError(f"scene_or_surface must be a Scene, a Surface or a non-empty sequence "
                          f"of Surfaces, got {scene_or_surfaces!r}")
     if len({s.kind for s in surfaces}) != 1:
-        raise ValueError("scene_or_surface: realisations must all be of one surface kind")
+        raise UsageError("scene_or_surface: realisations must all be of one surface kind")
     surface = surfaces[0]
     if ndf is None:
         if surface.kind == "vgrooves":
@@ -107,7 +108,7 @@ def default_models(scene_or_surface, ior, ndf=None, *,
         return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", ior)]
     if surfaces[0].kind == "vgrooves":
         if ndf is None:
-            raise ValueError("ndf must be given for a V-groove surface without source_ndf")
+            raise UsageError("ndf must be given for a V-groove surface without source_ndf")
         specs = [ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, ior) for k in kinds]
         return specs + [ModelSpec.facets("ts-facets", normals, weights, "vgroove", ior,
                                          azimuths=int(azimuths))]
@@ -162,9 +163,9 @@ def measure_g1(surface, theta_o_deg, rays: int = 100_000, seed: int = 0,
     """
     th = np.atleast_1d(np.asarray(theta_o_deg, dtype=np.float64))
     if th.ndim != 1 or th.size == 0 or not np.all((th >= 0) & (th < 90)):
-        raise ValueError(f"theta_o_deg must be degrees in [0, 90), got {theta_o_deg!r}")
+        raise UsageError(f"theta_o_deg must be degrees in [0, 90), got {theta_o_deg!r}")
     if isinstance(rays, bool) or int(rays) != rays or rays < 2:
-        raise ValueError(f"rays must be an integer >= 2, got {rays!r}")
+        raise UsageError(f"rays must be an integer >= 2, got {rays!r}")
     tracer = Tracer(surface)
     vert, faces = np.asarray(surface.vertices, np.float64), np.asarray(surface.faces)
     v0, e1, e2 = (vert[faces[:, 0]], vert[faces[:, 1]] - vert[faces[:, 0]],

@@ -2,6 +2,7 @@
 
 Parallel primary rays from wi fall on the periodic surface from origins spread uniformly over
 one tile (uniform origins on a horizontal plane = flux-weighted sampling of the surface seen
+from microsim.errors import UsageError
 from wi, i.e. the (n_j·wi) dx_j / ((n·wi) dA) factor of eq. 9). At the first hit with unit
 facet normal n a ray carries the weight F(n·wi) (exact Fresnel) and reflects to
 wo = 2(wi·n)n − wi; if wo points up and the reflected ray escapes (visibility V), the weight is
@@ -591,17 +592,17 @@ class _Tally:
 def _check_inputs(theta_i, phi_i, rays, threads, chunk, masking):
     th = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     if th.ndim != 1 or th.size == 0:
-        raise ValueError(f"theta_i must be a scalar or a non-empty 1-D sequence of degrees, got {theta_i!r}")
+        raise UsageError(f"theta_i must be a scalar or a non-empty 1-D sequence of degrees, got {theta_i!r}")
     if not np.all((th >= 0) & (th < 90)):
-        raise ValueError(f"theta_i must lie in [0, 90) degrees, got {theta_i!r}")
+        raise UsageError(f"theta_i must lie in [0, 90) degrees, got {theta_i!r}")
     ph = np.broadcast_to(np.asarray(phi_i, dtype=np.float64), th.shape).copy()
     if not np.all(np.isfinite(ph)):
-        raise ValueError(f"phi_i must be finite degrees (scalar or one per theta_i), got {phi_i!r}")
+        raise UsageError(f"phi_i must be finite degrees (scalar or one per theta_i), got {phi_i!r}")
     for name, val in (("rays", rays), ("threads", threads), ("chunk", chunk)):
         if isinstance(val, (bool, np.bool_)) or not float(val).is_integer() or val < 1:
-            raise ValueError(f"{name} must be an integer >= 1, got {val!r}")
+            raise UsageError(f"{name} must be an integer >= 1, got {val!r}")
     if masking not in MASKING:
-        raise ValueError(f"masking must be one of {', '.join(MASKING)}, got {masking!r}")
+        raise UsageError(f"masking must be one of {', '.join(MASKING)}, got {masking!r}")
     return th, ph
 
 
@@ -610,18 +611,18 @@ def _realisation_list(surface, realisations):
     (factory, seeds) built lazily one at a time."""
     if realisations is None:
         if surface is None:
-            raise ValueError("surface must be a Surface (or pass realisations)")
+            raise UsageError("surface must be a Surface (or pass realisations)")
         return 1, lambda r: surface
     if (isinstance(realisations, tuple) and len(realisations) == 2
             and callable(realisations[0])):
         factory, seeds = realisations
         seeds = list(seeds)
         if not seeds:
-            raise ValueError("realisations must hold at least one seed")
+            raise UsageError("realisations must hold at least one seed")
         return len(seeds), lambda r: factory(seeds[r])
     lst = list(realisations)
     if not lst:
-        raise ValueError("realisations must be a non-empty list of surfaces or (factory, seeds)")
+        raise UsageError("realisations must be a non-empty list of surfaces or (factory, seeds)")
     return len(lst), lambda r: lst[r]
 
 
@@ -631,7 +632,7 @@ def _tracer_for(surface, masking):
     profile = None
     if masking in ("exact", "analytic"):
         if not azimuth:
-            raise ValueError(f"masking={masking!r} is only available for V-groove surfaces "
+            raise UsageError(f"masking={masking!r} is only available for V-groove surfaces "
                              "(azimuth_average=True); use masking='traced'")
         profile = VGrooveProfile(tracer) if masking == "exact" else VGrooveCaster(tracer)
     return tracer, profile, azimuth
@@ -702,9 +703,9 @@ def _run_config(th, ph, bins, seed, rays, masking, origins, material, n_real,
 def _resume_state(resume, config, n_real, n_th, nbin):
     """Running sums, blocks done (R, T) and surface metas restored from a partial ``Result``."""
     if not isinstance(resume, Result):
-        raise ValueError(f"resume must be a microsim.sim.Result (a partial run), got {resume!r}")
+        raise UsageError(f"resume must be a microsim.sim.Result (a partial run), got {resume!r}")
     if resume.tallies is None:
-        raise ValueError("resume holds no raw tallies (Result.tallies): it cannot be continued")
+        raise UsageError("resume holds no raw tallies (Result.tallies): it cannot be continued")
     old = _run_config(resume.theta_i, resume.phi_i, resume.bins, resume.meta.get("seed"),
                       resume.meta.get("rays"), resume.meta.get("masking"),
                       resume.meta.get("origins", "stratified"), resume.meta.get("material"),
@@ -714,10 +715,10 @@ def _resume_state(resume, config, n_real, n_th, nbin):
     diff = [f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in config
             if old[k] != config[k]]
     if diff:
-        raise ValueError("resume does not match this run's configuration: " + "; ".join(diff))
+        raise UsageError("resume does not match this run's configuration: " + "; ".join(diff))
     t = resume.tallies
     if "sum_pair" not in t:
-        raise ValueError("resume holds no pair tally (Result.tallies['sum_pair'], written by an "
+        raise UsageError("resume holds no pair tally (Result.tallies['sum_pair'], written by an "
                          "older microsim): it cannot be continued")
     names = ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair")
     tallies = [[_Tally(*(t[k][r, i].copy() for k in names)) for i in range(n_th)]
@@ -728,7 +729,7 @@ def _resume_state(resume, config, n_real, n_th, nbin):
 
 def _check_same_surface(old: dict | None, new: dict, r: int) -> None:
     if old is not None and old.get("fingerprint") != new["fingerprint"]:
-        raise ValueError(f"resume does not match this run's configuration: surface of realisation "
+        raise UsageError(f"resume does not match this run's configuration: surface of realisation "
                          f"{r} (partial run: {old.get('kind')} {old.get('fingerprint')}, now: "
                          f"{new['kind']} {new['fingerprint']})")
 
@@ -778,20 +779,20 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     """
     th, ph = _check_inputs(theta_i, phi_i, rays, threads, chunk, masking)
     if not isinstance(bins, Bins):
-        raise ValueError(f"bins must be a microsim.sim.Bins, got {bins!r}")
+        raise UsageError(f"bins must be a microsim.sim.Bins, got {bins!r}")
     if origins not in ORIGINS:
-        raise ValueError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
+        raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
     ior = resolve_material(material)
     n_real, get_surface = _realisation_list(surface, realisations)
     rays, seed = int(rays), int(seed)
     per_real = [rays // n_real + (r < rays % n_real) for r in range(n_real)]
     if min(per_real) < 1:
-        raise ValueError(f"rays must be >= the number of realisations ({n_real}), got {rays}")
+        raise UsageError(f"rays must be >= the number of realisations ({n_real}), got {rays}")
     nbin = bins.shape[0] * bins.shape[1]
     chunk_blocks = max(1, int(round(int(chunk) / BLOCK)))
     material_meta = _json_material(material, ior)
     if not isinstance(isotropic, (bool, np.bool_)):
-        raise ValueError(f"isotropic must be True or False, got {isotropic!r}")
+        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
     isotropic = bool(isotropic)
     config = _run_config(th, ph, bins, seed, rays, masking, origins, material_meta, n_real,
                          isotropic)

@@ -20,6 +20,7 @@ which the bins' relative azimuth Δφ = φo − φi is measured. ``phi_i=None`` 
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import warnings
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -66,9 +67,9 @@ def _incidence(wi, phi_i) -> tuple[np.ndarray, float]:
     """Validated unit ``wi`` (3,) above the horizon and the reference azimuth in degrees."""
     wi = _checks.directions("wi", wi)
     if wi.shape != (3,):
-        raise ValueError(f"wi must be one direction of shape (3,), got shape {wi.shape}")
+        raise UsageError(f"wi must be one direction of shape (3,), got shape {wi.shape}")
     if not wi[2] > 1e-12:
-        raise ValueError(f"wi must point above the horizon (θi < 90°), got wi_z = {wi[2]!r}")
+        raise UsageError(f"wi must point above the horizon (θi < 90°), got wi_z = {wi[2]!r}")
     if phi_i is None:
         phi_i = float(np.degrees(np.arctan2(wi[1], wi[0]))) if np.hypot(wi[0], wi[1]) > 0 else 0.0
     return wi, float(phi_i)
@@ -86,7 +87,7 @@ class _Rule:
     @classmethod
     def of(cls, n_lo: int, n_hi: int) -> "_Rule":
         if not (isinstance(n_lo, int) and isinstance(n_hi, int) and 1 <= n_lo < n_hi <= 64):
-            raise ValueError(f"order must be two integers 1 <= n_lo < n_hi <= 64, "
+            raise UsageError(f"order must be two integers 1 <= n_lo < n_hi <= 64, "
                              f"got {(n_lo, n_hi)!r}")
         parts = []
         for n in (n_lo, n_hi):
@@ -157,7 +158,7 @@ def _integrate_cells(brdf_fn, wi, phi_i_rad: float, cells: _Cells, rule: _Rule):
         phi = phi_i_rad + pc[:, None] + ph[:, None] * rule.nodes[None, :, 1]
         f = np.asarray(brdf_fn(wi, _checks.spherical(theta, phi)), dtype=np.float64)
         if f.shape != theta.shape or not np.all(np.isfinite(f)):
-            raise ValueError("brdf_fn(wi, wo) must return finite values of shape wo.shape[:-1]; "
+            raise UsageError("brdf_fn(wi, wo) must return finite values of shape wo.shape[:-1]; "
                              f"got shape {f.shape}" + ("" if f.shape != theta.shape
                                                        else " with NaN/inf"))
         g = f * np.sin(theta) * np.cos(theta)
@@ -246,7 +247,7 @@ def _reflection_terms(wi, h, cos_i: float, ior, shadowing: str, ndf):
 
 def _check_shadowing(shadowing: str) -> str:
     if shadowing not in SHADOWING_KINDS:
-        raise ValueError(f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, "
+        raise UsageError(f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, "
                          f"got {shadowing!r}")
     return shadowing
 
@@ -275,7 +276,7 @@ def bin_average_ts(ndf, wi, bins: Bins, shadowing: str = "vgroove", ior=None,
     replicates = int(_checks.in_range("replicates", replicates, 2, 2 ** 12))
     per = int(n) // replicates
     if int(n) != n or per < 1 or per & (per - 1):
-        raise ValueError(f"n must be an integer with n/replicates a power of 2, got n={n!r}, "
+        raise UsageError(f"n must be an integer with n/replicates a power of 2, got n={n!r}, "
                          f"replicates={replicates}")
     nb = bins.n_theta * bins.n_phi
     omega = bins.projected_solid_angle().ravel()
@@ -347,10 +348,10 @@ def bin_average_facets(normals, weights, wi, bins: Bins, ior=None, shadowing: st
     shadowing, ior = _check_shadowing(shadowing), resolve_material(ior)
     nrm = _checks.directions("normals", normals)
     if nrm.ndim != 2 or len(nrm) == 0 or np.any(nrm[:, 2] <= 0.0):
-        raise ValueError("normals must be a non-empty (N, 3) array of unit vectors with n_z > 0")
+        raise UsageError("normals must be a non-empty (N, 3) array of unit vectors with n_z > 0")
     w = np.ones(len(nrm)) if weights is None else np.asarray(weights, dtype=np.float64)
     if w.shape != (len(nrm),) or not np.all(np.isfinite(w)) or np.any(w < 0) or not w.sum() > 0:
-        raise ValueError(f"weights must be {len(nrm)} finite values >= 0 with a positive sum")
+        raise UsageError(f"weights must be {len(nrm)} finite values >= 0 with a positive sum")
     J = 1 if azimuths is None else int(_checks.in_range("azimuths", azimuths, 1, 2 ** 16))
     if shadowing.startswith("smith") and smith_ndf is None:
         from microsim.analytic.empirical import Empirical
@@ -407,7 +408,7 @@ class ModelSpec:
 
     def __post_init__(self):
         if self.kind not in MODEL_KINDS:
-            raise ValueError(f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, "
+            raise UsageError(f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, "
                              f"got {self.kind!r}")
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
 
@@ -470,7 +471,7 @@ def predict(models: Iterable[ModelSpec], wi_deg: Iterable[float], bins: Bins,
     models = list(models)
     names = [m.name for m in models]
     if len(set(names)) != len(names):
-        raise ValueError(f"model names must be unique, got {names}")
+        raise UsageError(f"model names must be unique, got {names}")
     thetas = np.atleast_1d(np.asarray(wi_deg, dtype=np.float64))
     for t in thetas:
         _checks.in_range("wi_deg", t, 0.0, 90.0, hi_open=True)

@@ -20,6 +20,7 @@ the rays still live (most finish in the first segment). The BVH is built in ``__
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import functools
 import threading
 from dataclasses import dataclass
@@ -62,19 +63,19 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     v = np.asarray(surface.vertices, dtype=np.float64)
     f = np.asarray(surface.faces)
     if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
-        raise ValueError(f"surface.vertices must be a (V >= 3, 3) array, got shape {v.shape}")
+        raise UsageError(f"surface.vertices must be a (V >= 3, 3) array, got shape {v.shape}")
     if not np.all(np.isfinite(v)):
-        raise ValueError("surface.vertices must be finite (got NaN or inf)")
+        raise UsageError("surface.vertices must be finite (got NaN or inf)")
     if f.ndim != 2 or f.shape[1] != 3 or len(f) < 1:
-        raise ValueError(f"surface.faces must be a non-empty (F, 3) integer array, got shape {f.shape}")
+        raise UsageError(f"surface.faces must be a non-empty (F, 3) integer array, got shape {f.shape}")
     if not np.issubdtype(f.dtype, np.integer) or f.min() < 0 or f.max() >= len(v):
-        raise ValueError(f"surface.faces must hold vertex indices in [0, {len(v) - 1}]")
+        raise UsageError(f"surface.faces must hold vertex indices in [0, {len(v) - 1}]")
     lx, ly = (float(t) for t in surface.tile_size)
     if not (lx > 0 and ly > 0 and np.isfinite(lx) and np.isfinite(ly)):
-        raise ValueError(f"surface.tile_size must be two finite lengths > 0, got {surface.tile_size!r}")
+        raise UsageError(f"surface.tile_size must be two finite lengths > 0, got {surface.tile_size!r}")
     tol = 1e-9 * max(lx, ly)
     if np.any(np.abs(v[:, 0]) > lx / 2 + tol) or np.any(np.abs(v[:, 1]) > ly / 2 + tol):
-        raise ValueError("surface.vertices must lie in the tile [-Lx/2, Lx/2] x [-Ly/2, Ly/2]")
+        raise UsageError("surface.vertices must lie in the tile [-Lx/2, Lx/2] x [-Ly/2, Ly/2]")
     return v, f.astype(np.int64), lx, ly
 
 
@@ -100,9 +101,9 @@ class Tracer:
         cross = _cross_columns(self._e1, self._e2)
         norm = np.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2)
         if np.any(norm == 0):
-            raise ValueError("surface.faces must not contain degenerate (zero-area) triangles")
+            raise UsageError("surface.faces must not contain degenerate (zero-area) triangles")
         if np.any(cross[2] <= 0):
-            raise ValueError("surface.faces must be ordered so that every normal "
+            raise UsageError("surface.faces must be ordered so that every normal "
                              "cross(v1 - v0, v2 - v0) points up (z > 0)")
         self.normals = np.empty((len(f), 3))
         for k in range(3):
@@ -326,7 +327,7 @@ class VGrooveProfile:
         v, f, n = tracer.vertices, tracer.faces, tracer.normals
         scale = max(tracer.tile)
         if np.any(np.abs(n[:, 1]) > 1e-12) or tracer.zmax > 1e-12 * scale:
-            raise ValueError("masking='exact' needs V-grooves running along y with every rim at "
+            raise UsageError("masking='exact' needs V-grooves running along y with every rim at "
                              "z = 0 and nothing above (surface.kind 'vgrooves')")
         xs = v[f, 0]
         lo, hi = xs.min(axis=1), xs.max(axis=1)
@@ -342,7 +343,7 @@ class VGrooveProfile:
             k = np.clip(np.searchsorted(ob[order], bottom[mine]), 0, max(len(ob) - 1, 0))
             found = ob[order][k] == bottom[mine] if len(ob) else np.zeros(mine.sum(), bool)
             if not np.all(found):
-                raise ValueError("masking='exact' needs whole V-grooves inside "
+                raise UsageError("masking='exact' needs whole V-grooves inside "
                                  "the tile (a facet has no opposite facet sharing its bottom)")
             self.opposite[mine] = orim[order][k]
         # rims at z = 0, bottoms at depth |bottom − rim|·tanθ: the mesh must be such a profile
@@ -350,7 +351,7 @@ class VGrooveProfile:
         zb = np.where(np.isclose(xs, bottom[:, None], rtol=0, atol=1e-12 * scale),
                       v[f, 2] + np.abs(bottom - self.rim)[:, None] * self.tan[:, None], 0.0)
         if np.any(np.abs(zr) > 1e-9 * scale) or np.any(np.abs(zb) > 1e-9 * scale):
-            raise ValueError("masking='exact' needs every groove rim at z = 0 (surface.kind 'vgrooves')")
+            raise UsageError("masking='exact' needs every groove rim at z = 0 (surface.kind 'vgrooves')")
         self.extent = np.abs(bottom - self.rim)
         self.sloped = left | right
 
@@ -399,7 +400,7 @@ class VGrooveCaster(VGrooveProfile):
     def __init__(self, tracer: Tracer):
         super().__init__(tracer)
         if not np.all(self.sloped):
-            raise ValueError("masking='analytic' needs every groove tilt > 0 (a flat facet has "
+            raise UsageError("masking='analytic' needs every groove tilt > 0 (a flat facet has "
                              "no V-groove walls)")
         n, lx = tracer.normals, tracer.tile[0]
         tol = 1e-12 * max(tracer.tile)
@@ -412,7 +413,7 @@ class VGrooveCaster(VGrooveProfile):
         if (len(rim_r) != g or not np.array_equal(rim_r, xr) or abs(rim_l[0] + lx / 2) > tol
                 or np.any(np.abs(xr - rim_l - lx / g) > tol)
                 or np.any(np.abs(rim_l[1:] - xr[:-1]) > tol)):
-            raise ValueError("masking='analytic' needs whole equal-width V-grooves tiling the "
+            raise UsageError("masking='analytic' needs whole equal-width V-grooves tiling the "
                              "tile in x (surface.kind 'vgrooves')")
         self.n_grooves, self.half = g, lx / 2
         self.x_left, self.x_right = rim_l, xr

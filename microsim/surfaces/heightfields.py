@@ -17,6 +17,7 @@ slope variance from the discrete spectrum with that response.
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import warnings as _warnings
 from dataclasses import dataclass
 
@@ -132,9 +133,9 @@ def abc_continuum_slope_var(sigma: float, B: float, C: float, f_max: float) -> f
 # --- generators --------------------------------------------------------------------------------
 def _grid_args(n, dx, seed):
     if isinstance(n, bool) or int(n) != n or n < MIN_GRID:
-        raise ValueError(f"n must be an integer >= {MIN_GRID} (grid points per side), got {n!r}")
+        raise UsageError(f"n must be an integer >= {MIN_GRID} (grid points per side), got {n!r}")
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     return int(n), positive("dx", dx), int(seed)
 
 
@@ -192,11 +193,11 @@ def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
     sigma, B = positive("sigma", sigma), positive("B", B)
     C = float(C)
     if not C > 1.0 or not np.isfinite(C):
-        raise ValueError(f"C must be a finite number > 1 (the ABC height variance "
+        raise UsageError(f"C must be a finite number > 1 (the ABC height variance "
                          f"2πA/(B²(C−1)) is infinite for C <= 1), got {C!r}")
     k = float(band_limit)
     if not (k >= 1.0) or not np.isfinite(k):
-        raise ValueError(f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), "
+        raise UsageError(f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), "
                          f"got {band_limit!r}")
     f_max = 1.0 / (2.0 * k * dx)
     A = abc_amplitude(sigma, B, C)

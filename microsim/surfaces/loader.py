@@ -1,6 +1,7 @@
 """Measured or externally generated heightfields from files."""
 from __future__ import annotations
 
+from microsim.errors import UsageError
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ def read_heights(path) -> np.ndarray:
     whitespace-separated text (any other suffix). Raises ValueError naming the file."""
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"path: no such heightfield file {str(path)!r}")
+        raise UsageError(f"path: no such heightfield file {str(path)!r}")
     try:
         if path.suffix == ".npy":
             a = np.load(path, allow_pickle=False)
@@ -29,24 +30,24 @@ def read_heights(path) -> np.ndarray:
                 elif len(keys) == 1:
                     a = z[keys[0]]
                 else:
-                    raise ValueError(f"{path}: .npz must hold a single array or the key 'heights', "
+                    raise UsageError(f"{path}: .npz must hold a single array or the key 'heights', "
                                      f"found keys {keys}")
         else:
             a = np.loadtxt(path, ndmin=2)
     except ValueError as e:
-        raise ValueError(f"{path}: cannot read heights ({e})") from None
+        raise UsageError(f"{path}: cannot read heights ({e})") from None
     a = np.asarray(a)
     if a.ndim != 2:
-        raise ValueError(f"{path}: heights must be a 2D array (rows = y, columns = x), "
+        raise UsageError(f"{path}: heights must be a 2D array (rows = y, columns = x), "
                          f"got shape {a.shape}")
     if not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
-        raise ValueError(f"{path}: heights must be real numbers, got dtype {a.dtype}")
+        raise UsageError(f"{path}: heights must be real numbers, got dtype {a.dtype}")
     a = a.astype(np.float64)
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"{path}: heights contain NaN or inf ({int(np.sum(~np.isfinite(a)))} "
+        raise UsageError(f"{path}: heights contain NaN or inf ({int(np.sum(~np.isfinite(a)))} "
                          f"values); fill or crop them first")
     if min(a.shape) < MIN_GRID:
-        raise ValueError(f"{path}: heights grid must be at least {MIN_GRID}x{MIN_GRID}, "
+        raise UsageError(f"{path}: heights grid must be at least {MIN_GRID}x{MIN_GRID}, "
                          f"got {a.shape[0]}x{a.shape[1]}")
     return a
 

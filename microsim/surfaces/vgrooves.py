@@ -12,6 +12,7 @@ estimator's job: ``Surface.azimuth_average``) gives the isotropic V-cavity surfa
 """
 from __future__ import annotations
 
+from microsim.errors import UsageError
 import numpy as np
 
 from microsim.analytic._checks import positive
@@ -38,9 +39,9 @@ def groove_tilts(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified
     elif sampling == "random":
         theta = np.asarray(ndf.tilt_quantile(rng.random(n_grooves)), dtype=np.float64)
     else:
-        raise ValueError(f"sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
+        raise UsageError(f"sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
     if not np.all(np.isfinite(theta) & (theta >= 0.0) & (theta < np.pi / 2)):
-        raise ValueError(f"ndf.tilt_quantile must return tilts in [0, π/2) for groove depths "
+        raise UsageError(f"ndf.tilt_quantile must return tilts in [0, π/2) for groove depths "
                          f"to be finite; {ndf!r} gave {theta[~(theta < np.pi / 2)][:3]!r}")
     return theta
 
@@ -78,12 +79,12 @@ def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
     nothing above; 4 triangles per groove; periodic; ``azimuth_average`` is True.
     """
     if isinstance(n_grooves, bool) or int(n_grooves) != n_grooves or n_grooves < 1:
-        raise ValueError(f"n_grooves must be an integer >= 1, got {n_grooves!r}")
+        raise UsageError(f"n_grooves must be an integer >= 1, got {n_grooves!r}")
     if not callable(getattr(ndf, "tilt_quantile", None)):
-        raise ValueError(f"ndf must be an NDF with tilt_quantile(u) (e.g. microsim.analytic."
+        raise UsageError(f"ndf must be an NDF with tilt_quantile(u) (e.g. microsim.analytic."
                          f"Beckmann(0.3)), got {ndf!r}")
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     n_grooves, seed, tile = int(n_grooves), int(seed), positive("tile", tile)
     tilts = groove_tilts(n_grooves, ndf, seed, sampling)
     vertices, faces = _extrude(*groove_profile(tilts, tile), tile)
