@@ -27,11 +27,12 @@ Reciprocity: neither model is reciprocal — the framework enforces energy conse
 of reciprocity" (Edwards §1, §6, Fig. 14): f(wi, wo) ≠ f(wo, wi) in general.
 
 Conventions: local frame with the macro normal +z; unit directions of shape (..., 3) pointing away
-from microsim.errors import UsageError
 from the surface; (u, v) points of shape (..., 2); BRDFs and densities in solid angle in sr⁻¹,
 disk densities per unit disk area. All functions broadcast over leading axes.
 """
 from __future__ import annotations
+
+from microsim.errors import UsageError
 
 from dataclasses import astuple, dataclass, fields
 from typing import Callable, Union

@@ -2,7 +2,6 @@
 
 Parallel primary rays from wi fall on the periodic surface from origins spread uniformly over
 one tile (uniform origins on a horizontal plane = flux-weighted sampling of the surface seen
-from microsim.errors import UsageError
 from wi, i.e. the (n_j·wi) dx_j / ((n·wi) dA) factor of eq. 9). At the first hit with unit
 facet normal n a ray carries the weight F(n·wi) (exact Fresnel) and reflects to
 wo = 2(wi·n)n − wi; if wo points up and the reflected ray escapes (visibility V), the weight is
@@ -61,6 +60,8 @@ with the Fresnel weight in real arithmetic (``fresnel.fresnel_real_scalar``) and
 reference in the tests.
 """
 from __future__ import annotations
+
+from microsim.errors import UsageError
 
 import functools
 import hashlib
