@@ -2,33 +2,45 @@
 
 Schema (every key optional unless marked required; unknown keys are errors)::
 
-    name = "vgroove-beckmann-0.3"      # default: the file stem
+    name = "vgroove-beckmann-0.3"      # default: the file stem; a safe single path component
+                                       # (it names the output folder): 1-100 characters from
+                                       # letters, digits, ".", "_", "-", not starting with "."
     description = "..."
     [surface]
     kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat
-    # vgrooves: n_grooves = 4000, ndf (required) = beckmann | ggx | blinn-phong | vmf | abc with
+    # vgrooves: n_grooves = 4000 (at most 1 000 000), ndf (required) = beckmann | ggx | blinn-phong | vmf | abc with
     #           its parameter m | alpha | e | kappa | B and C (required), sampling = "stratified"
     #           | "random", tile = 1.0
-    # gaussian: n = 512, dx = 1.0, sigma, corr_len (required), exact_amplitude = true
-    # abc:      n = 512, dx = 1.0, sigma, B, C (required), band_limit = 4, exact_amplitude = true
-    # file:     path (required; relative to the scene file), dx (required), periodic = false
+    # gaussian: n = 512 (8 … 4096), dx = 1.0, sigma, corr_len (required; corr_len >= dx and
+    #           rms slope 2 sigma / corr_len <= 10), exact_amplitude = true
+    # abc:      n = 512 (8 … 4096), dx = 1.0, sigma, B, C (required), band_limit = 4,
+    #           exact_amplitude = true
+    # file:     path (required; relative to the scene file; .npy, .npz or text, a real 2D
+    #           array of at least 8 x 8 and at most 4096 x 4096 finite heights, checked when
+    #           the scene is loaded), dx (required), periodic = false
     # flat:     size = 1.0
+    # every length (dx, sigma, corr_len, B, tile, size) is a number in [1e-6, 1e6]
     [material]
     ior = "mirror"                     # aluminium | methanol | mirror, a number n, or [n, k]
     [simulation]
-    theta_i = [0, 30, 60, 80]          # degrees, each in [0, 90)
+    theta_i = [0, 30, 60, 80]          # degrees, each in [0, 90); at most 180 angles
     rays = 1_000_000                   # per incidence, an integer > 0 or "auto"
-    theta_bins = 45                    # over θo ∈ [0°, 90°]
-    phi_bins = 72                      # over φo ∈ [0°, 360°)
-    realisations = 1                   # independent random surfaces (seeds seed, seed+1, …)
+    theta_bins = 45                    # over θo ∈ [0°, 90°]; an integer in [1, 900]
+    phi_bins = 72                      # over φo ∈ [0°, 360°); an integer in [2, 1440]
+    realisations = 1                   # independent random surfaces (seeds seed, seed+1, …),
+                                       # an integer in [1, 1000]
     seed = 0
 
-Every problem raises ``SceneError`` (a ``ValueError``) with a one-line message naming the file,
-the key and the allowed values.
+The file itself must be a regular file of at most 1 MiB of UTF-8 TOML. Every problem raises
+``SceneError`` (a ``UsageError``) with a one-line message naming the file, the key and the
+allowed values.
 """
 from __future__ import annotations
 
 from microsim.errors import UsageError
+import os
+import re
+import stat
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,9 +71,21 @@ def _is_num(v):
     return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
 
 
+def _int_in(lo, hi):
+    return (lambda v: _is_int(v) and lo <= v <= hi, f"an integer in [{lo}, {hi}]")
+
+
 _POS = (lambda v: _is_num(v) and v > 0, "a number > 0")
+_LENGTH = (lambda v: _is_num(v) and 1e-6 <= v <= 1e6, "a number in [1e-6, 1e6]")
 _POS_INT = (lambda v: _is_int(v) and v >= 1, "an integer >= 1")
-_GRID = (lambda v: _is_int(v) and v >= 8, "an integer >= 8")
+_GRID = _int_in(8, 4096)
+MAX_GRID = 4096
+"""Largest heightfield grid side a scene may ask for (grid points per side)."""
+MAX_SCENE_BYTES = 1 << 20
+"""Largest scene (or sweep) file read: 1 MiB."""
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")
+NAME_RULE = ("1-100 characters from letters, digits, '.', '_', '-', not starting with '.' "
+             "(it names the output folder)")
 _BOOL = (lambda v: isinstance(v, bool), "true or false")
 _STR = (lambda v: isinstance(v, str), "a string")
 _C_ABC = (lambda v: _is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
@@ -74,28 +98,28 @@ _NDF_ALIASES = {"blinn_phong": "blinn-phong", "phong": "blinn-phong", "von-mises
 
 _REQUIRED = object()
 _SURFACE_KEYS: dict[str, dict[str, tuple[Any, tuple[Callable, str]]]] = {
-    "vgrooves": {"n_grooves": (4000, _POS_INT), "ndf": (_REQUIRED, _STR),
+    "vgrooves": {"n_grooves": (4000, _int_in(1, 1_000_000)), "ndf": (_REQUIRED, _STR),
                  "sampling": ("stratified", (lambda v: v in ("stratified", "random"),
                                              "\"stratified\" or \"random\"")),
-                 "tile": (1.0, _POS)},
-    "gaussian": {"n": (512, _GRID), "dx": (1.0, _POS), "sigma": (_REQUIRED, _POS),
-                 "corr_len": (_REQUIRED, _POS), "exact_amplitude": (True, _BOOL)},
-    "abc": {"n": (512, _GRID), "dx": (1.0, _POS), "sigma": (_REQUIRED, _POS),
-            "B": (_REQUIRED, _POS), "C": (_REQUIRED, _C_ABC), "band_limit": (4.0, _BAND),
+                 "tile": (1.0, _LENGTH)},
+    "gaussian": {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
+                 "corr_len": (_REQUIRED, _LENGTH), "exact_amplitude": (True, _BOOL)},
+    "abc": {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
+            "B": (_REQUIRED, _LENGTH), "C": (_REQUIRED, _C_ABC), "band_limit": (4.0, _BAND),
             "exact_amplitude": (True, _BOOL)},
-    "file": {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _POS), "periodic": (False, _BOOL)},
-    "flat": {"size": (1.0, _POS)},
+    "file": {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
+    "flat": {"size": (1.0, _LENGTH)},
 }
 SURFACE_KINDS = tuple(_SURFACE_KEYS)
 _NDF_PARAM_CHECK = (_POS[0], "a number > 0")
 
-_THETA_I = (lambda v: isinstance(v, list) and len(v) > 0
+_THETA_I = (lambda v: isinstance(v, list) and 0 < len(v) <= 180
             and all(_is_num(t) and 0 <= t < 90 for t in v),
-            "a non-empty list of angles in degrees, each in [0, 90)")
+            "a non-empty list of at most 180 angles in degrees, each in [0, 90)")
 _RAYS = (lambda v: v == "auto" or (_is_int(v) and v >= 1), "an integer >= 1 or \"auto\"")
 _SIM_KEYS = {"theta_i": ([0.0, 30.0, 60.0, 80.0], _THETA_I), "rays": (1_000_000, _RAYS),
-             "theta_bins": (45, _POS_INT), "phi_bins": (72, _POS_INT),
-             "realisations": (1, _POS_INT),
+             "theta_bins": (45, _int_in(1, 900)), "phi_bins": (72, _int_in(2, 1440)),
+             "realisations": (1, _int_in(1, 1000)),
              "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0"))}
 _TOP_KEYS = ("name", "description", "surface", "material", "simulation")
 
@@ -140,6 +164,12 @@ class Scene:
         so statistics stay, only the tile shrinks; at least 8) or the number of grooves.
         Realisation r of a random surface uses seed ``simulation.seed + r``.
         """
+        try:
+            return self._build(seed, scale)
+        except UsageError as e:           # a value the generator refuses: name the scene file
+            raise SceneError(f"{self.path}: surface: {' '.join(str(e).split())}") from None
+
+    def _build(self, seed, scale):
         from . import surfaces
         seed = self.simulation.seed if seed is None else seed
         p = dict(self.surface.params)
@@ -250,9 +280,61 @@ def _surface_spec(where, table) -> SurfaceSpec:
     if kind == "vgrooves":
         try:
             make_ndf(params["ndf"], {k: params[k] for k in NDF_PARAMS[params["ndf"]]})
-        except ValueError as e:
+        except UsageError as e:
             raise SceneError(f"{where}: surface: {e}") from None
+    if kind == "gaussian":
+        if params["corr_len"] < params["dx"]:
+            _fail(where, "surface.corr_len", f"must be >= dx = {params['dx']:g} (a shorter "
+                  f"correlation length is not resolved by the grid), got {params['corr_len']:g}")
+        if 2.0 * params["sigma"] / params["corr_len"] > 10.0:
+            _fail(where, "surface.sigma", f"rms slope 2 sigma / corr_len must be <= 10, got "
+                  f"{2.0 * params['sigma'] / params['corr_len']:.3g} (sigma = "
+                  f"{params['sigma']:g}, corr_len = {params['corr_len']:g})")
     return SurfaceSpec(kind, MappingProxyType(params))
+
+
+def _check_heightfield(where: str, path: Path) -> None:
+    """A heightfield file usable by ``surfaces.from_file``, checked before anything runs:
+    a regular file holding a real 2D array of finite heights, 8 … ``MAX_GRID`` per side.
+    .npy files are checked through a memory map (header first), others read in full."""
+    key = "surface.path"
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        _fail(where, key, f"no such heightfield file {str(path)!r}")
+    except OSError as e:
+        _fail(where, key, f"cannot read heightfield file {str(path)!r} ({e.strerror})")
+    if not path.is_file():
+        _fail(where, key, f"{path} is not a regular file")
+    if path.suffix == ".npy":
+        try:
+            a = np.load(path, mmap_mode="r", allow_pickle=False)
+        except (ValueError, EOFError, OSError) as e:
+            msg = getattr(e, "strerror", None) or " ".join(str(e).split())
+            _fail(where, key, f"{path}: not a readable .npy array ({msg})")
+        if not isinstance(a, np.ndarray) or a.ndim != 2:
+            _fail(where, key, f"{path}: heights must be a 2D array (rows = y, columns = x), "
+                              f"got shape {getattr(a, 'shape', None)}")
+        if a.dtype.kind not in "iuf":
+            _fail(where, key, f"{path}: heights must be real numbers, got dtype {a.dtype}")
+        shape = a.shape
+        if min(shape) >= 8 and max(shape) <= MAX_GRID:
+            bad = sum(int(np.count_nonzero(~np.isfinite(a[i:i + 256])))
+                      for i in range(0, shape[0], 256))
+            if bad:
+                _fail(where, key, f"{path}: heights contain NaN or inf ({bad} values)")
+        del a
+    else:
+        if st.st_size > 256 << 20:
+            _fail(where, key, f"{path}: heightfield file larger than 256 MiB")
+        from .surfaces.loader import read_heights
+        try:
+            shape = read_heights(path).shape
+        except UsageError as e:
+            _fail(where, key, " ".join(str(e).split()))
+    if min(shape) < 8 or max(shape) > MAX_GRID:
+        _fail(where, key, f"{path}: heights grid must be 8 … {MAX_GRID} points per side, "
+                          f"got {shape[0]}x{shape[1]}")
 
 
 def _material(where, table):
@@ -270,7 +352,7 @@ def _material(where, table):
         _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
     try:
         return resolve_material(v)
-    except ValueError:
+    except UsageError:
         _fail(where, "material.ior", f"must be {allowed}, got {table.get('ior')!r}")
 
 
@@ -283,15 +365,41 @@ def _simulation(where, table) -> SimSettings:
 
 
 def read_toml(path, what: str = "scene") -> dict:
-    """The TOML table of ``path``; a missing or malformed file raises ``SceneError`` (one line,
-    naming the file) — shared by scene and sweep files."""
+    """The TOML table of ``path``; a missing, non-regular (directory, device), larger than
+    ``MAX_SCENE_BYTES``, non-UTF-8 or malformed file raises ``SceneError`` (one line, naming
+    the file) — shared by scene and sweep files. Other OS errors (permission) propagate as
+    ``OSError`` (the CLI reports them with the path, exit status 1)."""
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except FileNotFoundError:
         raise SceneError(f"{path}: no such {what} file") from None
+    except IsADirectoryError:
+        raise SceneError(f"{path}: is a directory, not a {what} file") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise SceneError(f"{path}: is a directory, not a {what} file")
+        if not stat.S_ISREG(mode):
+            raise SceneError(f"{path}: not a regular file (a {what} file must be a TOML file)")
+        raw = b""
+        while len(raw) <= MAX_SCENE_BYTES:
+            part = os.read(fd, MAX_SCENE_BYTES + 1 - len(raw))
+            if not part:
+                break
+            raw += part
+    finally:
+        os.close(fd)
+    if len(raw) > MAX_SCENE_BYTES:
+        raise SceneError(f"{path}: larger than {MAX_SCENE_BYTES >> 20} MiB; not a {what} file")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SceneError(f"{path}: not UTF-8 text (invalid byte at offset {e.start}); "
+                         f"a {what} file is UTF-8 TOML") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{path}: not valid TOML ({e})") from None
+        raise SceneError(f"{path}: not valid TOML ({' '.join(str(e).split())})") from None
 
 
 def load_scene(path) -> Scene:
@@ -303,9 +411,14 @@ def load_scene(path) -> Scene:
     if "surface" not in data:
         _fail(where, "surface", f"required table with kind = one of {', '.join(SURFACE_KINDS)}")
     name = _check_value(where, "name", data.get("name", path.stem), _STR)
+    if not NAME_PATTERN.fullmatch(name):
+        _fail(where, "name", f"must be {NAME_RULE}, got {name!r}"
+              + (" (the default is the file name)" if "name" not in data else ""))
     description = _check_value(where, "description", data.get("description", ""), _STR)
-    return Scene(name=name, path=path, description=description,
-                 surface=_surface_spec(where, data["surface"]),
+    surface = _surface_spec(where, data["surface"])
+    if surface.kind == "file":
+        _check_heightfield(where, path.parent / surface.params["path"])
+    return Scene(name=name, path=path, description=description, surface=surface,
                  ior=_material(where, data.get("material")),
                  simulation=_simulation(where, data.get("simulation")))
 

@@ -138,3 +138,88 @@ def test_malformed_scene(tmp_path, text, key):
 def test_missing_scene_file(tmp_path):
     with pytest.raises(ValueError, match="no such scene file"):
         load_scene(tmp_path / "nope.toml")
+
+
+# --- hardening (issue #11): names, sizes, encodings, heightfield files ------------------------
+@pytest.mark.parametrize("name", ["", ".", "..", "../../escape", "a/b", ".hidden", "x" * 101,
+                                  "a b", "ü"])
+def test_unsafe_scene_name_refused(tmp_path, name):
+    """A scene name becomes a folder name: only a safe single path component passes."""
+    p = write(tmp_path, f'name = "{name}"\n' + VG, "bad-scene.toml")
+    with pytest.raises(SceneError) as exc:
+        load_scene(p)
+    msg = str(exc.value)
+    assert "bad-scene.toml" in msg and "name" in msg and "letters, digits" in msg
+
+
+def test_default_name_from_an_unsafe_file_stem_refused(tmp_path):
+    p = write(tmp_path, VG, ".toml")            # stem "" → would name runs/ itself
+    with pytest.raises(SceneError, match="name"):
+        load_scene(p)
+
+
+@pytest.mark.parametrize("text, key", [
+    (VG + '[simulation]\ntheta_bins = 1e6\n', "simulation.theta_bins"),
+    (VG + '[simulation]\ntheta_bins = 1000000\n', "simulation.theta_bins"),
+    (VG + '[simulation]\nphi_bins = 1\n', "simulation.phi_bins"),
+    (VG + '[simulation]\nphi_bins = 100000\n', "simulation.phi_bins"),
+    (VG + '[simulation]\nrealisations = 100000\n', "simulation.realisations"),
+    (VG + 'n_grooves = 1e8\n', "surface.n_grooves"),
+    (VG + 'n_grooves = 100000000\n', "surface.n_grooves"),
+    ('[surface]\nkind = "gaussian"\nsigma = 1e200\ncorr_len = 8.0\n', "surface.sigma"),
+    ('[surface]\nkind = "gaussian"\nsigma = 1e5\ncorr_len = 8.0\n', "surface.sigma"),
+    ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 1e-9\n', "surface.corr_len"),
+    ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 8.0\nn = 100000\n', "surface.n"),
+    ('[surface]\nkind = "abc"\nsigma = 1e200\nB = 8.0\nC = 3.0\n', "surface.sigma"),
+    ('[surface]\nkind = "flat"\nsize = 1e300\n', "surface.size"),
+])
+def test_values_that_cannot_be_built_are_refused_up_front(tmp_path, text, key):
+    p = write(tmp_path, text, "bad-scene.toml")
+    with pytest.raises(SceneError) as exc:
+        load_scene(p)
+    assert "bad-scene.toml" in str(exc.value) and key in str(exc.value)
+
+
+def test_scene_file_not_regular_too_large_or_not_utf8(tmp_path):
+    for path, what in [(Path("/dev/zero"), "regular"), (tmp_path, "directory")]:
+        with pytest.raises(SceneError) as exc:
+            load_scene(path)
+        assert str(path) in str(exc.value) and what in str(exc.value)
+    big = write(tmp_path, VG + "#" + "x" * (1 << 20) + "\n", "big.toml")
+    with pytest.raises(SceneError, match="big.toml.*MiB"):
+        load_scene(big)
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes(('description = "caf\u00e9"\n' + VG).encode("latin-1"))
+    with pytest.raises(SceneError, match="latin.toml.*UTF-8"):
+        load_scene(latin)
+
+
+def _truncated_npy(p):
+    np.save(p, np.zeros((16, 16)))
+    p.write_bytes(p.read_bytes()[:200])          # header intact, data cut short
+
+
+FILE_SCENE = '[surface]\nkind = "file"\npath = "{}"\ndx = 1.0\n'
+
+
+@pytest.mark.parametrize("make, what", [
+    (None, "no such heightfield"),
+    (lambda p: p.write_bytes(b"not numpy at all"), "not a readable"),
+    (lambda p: np.save(p, np.zeros((4, 4, 4))), "2D"),
+    (lambda p: np.save(p, np.zeros((4, 4))), "8"),
+    (lambda p: np.save(p, np.full((16, 16), np.nan)), "NaN"),
+    (lambda p: np.save(p, np.zeros((16, 16), dtype=complex)), "real"),
+    (lambda p: _truncated_npy(p), "not a readable"),
+    (lambda p: p.mkdir(), "regular file"),
+])
+def test_bad_heightfield_file_refused_at_load(tmp_path, make, what):
+    """Heightfield problems are found when the scene is loaded, naming the scene, key and file."""
+    h = tmp_path / "h.npy"
+    if make is not None:
+        make(h)
+    p = write(tmp_path, FILE_SCENE.format("h.npy"), "bad-scene.toml")
+    with pytest.raises(SceneError) as exc:
+        load_scene(p)
+    msg = str(exc.value)
+    assert "bad-scene.toml" in msg and "surface.path" in msg and "h.npy" in msg and what in msg
+    assert "\n" not in msg
