@@ -1,9 +1,9 @@
 """`microsim sweep SWEEP.toml`: a grid of scenes × parameters × incidences, one verdict table.
 
-Sweep file (TOML)::
+Sweep file (TOML, UTF-8)::
 
-    name = "vgroove-roughness"          # default: the file stem
-    description = "..."
+    name = "vgroove-roughness"          # default: the file stem; names the default output
+    description = "..."                 #   directory sweeps/out/<name>
     rays = 200_000                      # primary rays per task (one task = one θi)
     seed = 0
     theta_bins = 45                     # outgoing bins (folded Δφ)
@@ -13,52 +13,82 @@ Sweep file (TOML)::
     theta_i = [0, 30, 60, 80]           # degrees: the incidence axis
 
     [[scenes]]                          # one or more; every list value is a grid axis
-    name = "vgroove-beckmann"
+    name = "vgroove-beckmann"           # letters, digits, '.', '_', '-' (not starting with '.')
     ior = ["aluminium", 1.5]            # material axis (names, n, or [n, k] — not a list of lists)
     [scenes.surface]                    # a scene file's [surface] table (microsim.scene)
     kind = "vgrooves"
     n_grooves = 1000
     ndf = "beckmann"
-    m = [0.05, 0.1, 0.3, 0.5, 1.0]      # roughness axis
+    m = [0.05, 0.1, 0.3, 0.5, 1.0]      # roughness axis (an empty list is an error)
 
 A task is one (scene, parameter combination, material, θi). Its result — the verdict of each
 model (``microsim.analysis.verdicts.verdict``: χ²/dof, p, max |z|, relative RMS error over the
 bins carrying 90 % of the energy, …) against the bin-averaged Torrance–Sparrow prediction with
-the scene's NDF — is written as ``OUT/tasks/<id>.json`` as soon as the task finishes
-(temporary file + ``os.replace``: atomic). The id is a hash of the task's full description, so
-rerunning the sweep computes only the tasks whose JSON is missing. Finally every task JSON is
-gathered into ``OUT/summary.csv``, ``OUT/summary.md`` and ``OUT/error_vs_roughness.png``.
+the scene's NDF — is written as ``OUT/tasks/<id>.json`` as soon as the task finishes, and only
+if its simulation is complete (an interrupted simulation writes nothing); writes are atomic
+(``microsim.atomic``). The id is a hash of the task's full description. A rerun computes every
+task whose JSON is missing, unreadable, or not a complete result of that very task (fewer rays
+than requested, marked partial, no verdicts); ``gather`` ignores such files too. Finally every
+task JSON is gathered into ``OUT/summary.csv``, ``OUT/summary.md`` and
+``OUT/error_vs_roughness.png``.
+
+Interrupts (Ctrl-C): the finished tasks stay in ``OUT/tasks``, tasks in flight are stopped and
+leave nothing, no summary is written, and ``run_sweep`` raises ``SweepInterrupted`` (a
+``KeyboardInterrupt``); the CLI prints one line telling to rerun the same command, exit 130.
 
 Execution: local worker processes (``concurrent.futures.ProcessPoolExecutor``, ``--workers``),
 or, with ``--scheduler ADDRESS``, the same task function on a Dask distributed cluster
-(``dask.distributed.Client(ADDRESS)``). Each task traces on one thread.
+(``dask.distributed.Client(ADDRESS)``; the cluster's workers must see ``OUT``). Each task
+traces on one thread. One sweep at a time may write to an output directory (a lock file
+``OUT/.sweep.lock``).
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import csv
 import hashlib
 import io
 import itertools
 import json
+import math
 import os
+import re
+import signal
+import stat
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from . import atomic
+from .checkpoints import checkpoint
+from .errors import EnvironmentFailure, UsageError
 
-__all__ = ["SweepSpec", "Task", "load_sweep", "expand_tasks", "run_task", "run_sweep",
-           "gather", "summary_table", "write_summary", "add_sweep_command"]
+__all__ = ["SweepSpec", "Task", "SweepInterrupted", "load_sweep", "expand_tasks", "run_task",
+           "run_sweep", "gather", "summary_table", "write_summary", "task_label",
+           "add_sweep_command"]
 
 _TOP = ("name", "description", "rays", "seed", "theta_bins", "phi_bins", "models", "masking",
         "theta_i", "scenes")
 _SHADOWING = ("vgroove", "smith", "smith-correlated", "none")
 COLUMNS = ("task", "scene", "params", "material", "roughness", "theta_i", "model", "rel_rms",
            "chi2_dof", "p_value", "max_abs_z", "agrees", "n_bins", "rays", "seconds")
+MAX_FILE_BYTES = 1 << 20            # a sweep file is a few hundred bytes; refuse anything > 1 MiB
+MAX_TASKS = 100_000                 # tasks per sweep file (each is seconds to minutes of tracing)
+MAX_BINS = 1_000_000                # theta_bins × phi_bins (tallies per thread scale with it)
+_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")
+_NAME_RULE = "1-100 letters, digits, '.', '_' or '-', not starting with '.'"
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """A sweep stopped by Ctrl-C: ``done`` of ``total`` tasks have complete results in ``out``
+    (kept; a rerun computes the rest)."""
+
+    def __init__(self, out, done: int, total: int):
+        super().__init__(f"sweep interrupted: {done}/{total} tasks done in {out}")
+        self.out, self.done, self.total = str(out), int(done), int(total)
 
 
 @dataclass(frozen=True)
@@ -109,34 +139,67 @@ def _axis(v) -> list:
     return list(v) if isinstance(v, list) else [v]
 
 
-def expand_tasks(data: dict, where: str = "sweep") -> list[Task]:
-    """Tasks of a parsed sweep table (module docstring), in grid order."""
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _check_name(where: str, key: str, name) -> str:
+    """A name used as a path component (task files, default output directory)."""
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        _fail(where, f"{key}: must be {_NAME_RULE}, got {name!r}")
+    return name
+
+
+def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
+    """Tasks of a parsed sweep table (module docstring), in grid order. ``base``: directory
+    that relative heightfield ``path``s of ``kind = "file"`` surfaces are relative to (the
+    sweep file's; default the working directory). Every value is checked before any task
+    exists; UsageError names ``where`` and the key."""
+    if not isinstance(data, dict):
+        _fail(where, "must be a table of sweep settings")
     extra = sorted(set(data) - set(_TOP))
     if extra:
         _fail(where, f"{extra[0]}: unknown key; allowed keys: {', '.join(_TOP)}")
     rays, seed = data.get("rays", 200_000), data.get("seed", 0)
-    if isinstance(rays, bool) or not isinstance(rays, int) or rays < 1:
+    if not _is_int(rays) or rays < 1:
         _fail(where, f"rays: must be an integer >= 1, got {rays!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        _fail(where, f"seed: must be an integer, got {seed!r}")
+    if not _is_int(seed) or seed < 0:
+        _fail(where, f"seed: must be an integer >= 0, got {seed!r}")
     models = tuple(_axis(data.get("models", ["vgroove", "smith"])))
-    bad = [m for m in models if m not in _SHADOWING]
-    if bad or not models:
-        _fail(where, f"models: must be a non-empty list of {', '.join(_SHADOWING)}, got {models!r}")
+    bad = [m for m in models if not isinstance(m, str) or m not in _SHADOWING]
+    if not models:
+        _fail(where, f"models: empty; must be a non-empty list of {', '.join(_SHADOWING)}")
+    if bad or len(set(models)) != len(models):
+        _fail(where, f"models: must be a list of distinct {', '.join(_SHADOWING)}, "
+                     f"got {list(models)!r}")
     masking = data.get("masking", "traced")
     if masking not in ("traced", "exact"):
         _fail(where, f"masking: must be traced or exact, got {masking!r}")
     nt, npf = data.get("theta_bins", 45), data.get("phi_bins", 37)
     for key, v in (("theta_bins", nt), ("phi_bins", npf)):
-        if isinstance(v, bool) or not isinstance(v, int) or v < 2:
+        if not _is_int(v) or v < 2:
             _fail(where, f"{key}: must be an integer >= 2, got {v!r}")
+    if nt * npf > MAX_BINS:
+        _fail(where, f"theta_bins × phi_bins: at most {MAX_BINS:,} bins (every task keeps "
+                     f"tallies of that size per thread), got {nt} × {npf} = {nt * npf:,}")
+    from microsim.sim import Bins
+    try:
+        Bins(nt, npf)
+    except ValueError as e:
+        _fail(where, f"theta_bins/phi_bins: {e}")
     thetas = _axis(data.get("theta_i", [0.0, 30.0, 60.0, 80.0]))
-    if not thetas or not all(isinstance(t, (int, float)) and 0 <= t < 90 for t in thetas):
+    if not thetas:
+        _fail(where, "theta_i: empty; must be one or more degrees in [0, 90)")
+    if not all(isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t < 90
+               for t in thetas):
         _fail(where, f"theta_i: must be degrees in [0, 90), got {thetas!r}")
     scenes = data.get("scenes")
+    if scenes is None:
+        _fail(where, "scenes: required; one or more [[scenes]] tables")
     if not isinstance(scenes, list) or not scenes:
-        _fail(where, "scenes: required; a non-empty array of [[scenes]] tables")
-    tasks = []
+        _fail(where, f"scenes: must be a non-empty array of [[scenes]] tables (empty or "
+                     f"missing runs nothing), got {scenes!r}")
+    grid, n_tasks = [], 0
     for k, sc in enumerate(scenes):
         w = f"{where}: scenes[{k}]"
         if not isinstance(sc, dict) or not isinstance(sc.get("surface"), dict):
@@ -144,27 +207,118 @@ def expand_tasks(data: dict, where: str = "sweep") -> list[Task]:
         extra = sorted(set(sc) - {"name", "ior", "surface"})
         if extra:
             _fail(w, f"{extra[0]}: unknown key; allowed keys: name, ior, surface")
-        name = sc.get("name", f"scene{k}")
+        name = _check_name(w, "name", sc.get("name", f"scene{k}"))
         surf = sc["surface"]
         keys = sorted(surf)
-        for values in itertools.product(*(_axis(surf[key]) for key in keys)):
-            concrete = dict(zip(keys, values))
+        axes = [_axis(surf[key]) for key in keys]
+        for key, ax in zip(keys, axes):
+            if not ax:
+                _fail(w, f"surface.{key}: empty axis; give one or more values")
+        iors = _axis(sc.get("ior", "aluminium"))
+        if not iors:
+            _fail(w, "ior: empty axis; give one or more materials")
+        n_tasks += math.prod(len(a) for a in axes) * len(iors) * len(thetas)
+        if n_tasks > MAX_TASKS:
+            _fail(w, f"the grid has more than {MAX_TASKS:,} tasks (the product of the axis "
+                     f"lengths); split the sweep")
+        for ior in iors:
+            _check_ior(w, ior)
+        grid.append((name, keys, axes, iors))
+    tasks = []
+    for k, (name, keys, axes, iors) in enumerate(grid):
+        w = f"{where}: scenes[{k}]"
+        for values in itertools.product(*axes):
+            concrete = _resolve_paths(dict(zip(keys, values)), base)
             _scene(name, concrete, None, w)                     # validate early
-            for ior in _axis(sc.get("ior", "aluminium")):
+            _check_heightfield_file(w, concrete)
+            for ior in iors:
                 for t in thetas:
                     tasks.append(Task(name, concrete, ior, float(t), rays, seed, nt, npf,
                                       models, masking))
     return tasks
 
 
+def _check_ior(where: str, ior) -> None:
+    from microsim import scene as sc
+    try:
+        sc._material(where, {"ior": ior})
+    except ValueError as e:
+        raise UsageError(str(e).replace("material.ior", "ior")) from None
+
+
+def _resolve_paths(surface: dict, base) -> dict:
+    """``kind = "file"``: a relative heightfield path made relative to ``base``."""
+    if surface.get("kind") == "file" and isinstance(surface.get("path"), str) and base:
+        p = Path(surface["path"]).expanduser()
+        if not p.is_absolute():
+            surface = {**surface, "path": str(Path(base) / p)}
+    return surface
+
+
+def _check_heightfield_file(where: str, surface: dict) -> None:
+    if surface.get("kind") != "file":
+        return
+    p = Path(surface["path"])
+    try:
+        ok = stat.S_ISREG(p.stat().st_mode)
+    except OSError as e:
+        _fail(where, f"surface.path: cannot read heightfield file {p} ({e.strerror})")
+    if not ok:
+        _fail(where, f"surface.path: {p} is not a regular file")
+
+
+def _read_sweep_file(path: Path) -> dict:
+    """The TOML table of a sweep file; one-line UsageError naming the file for anything that
+    is not a readable, small, UTF-8 TOML text file."""
+    from microsim.scene import tomllib
+    try:
+        st = path.stat()
+        if stat.S_ISDIR(st.st_mode):
+            _fail(str(path), "is a directory, not a sweep file")
+        if not stat.S_ISREG(st.st_mode):
+            _fail(str(path), "not a regular file (a sweep file is a small TOML text file)")
+        if st.st_size > MAX_FILE_BYTES:
+            _fail(str(path), f"{st.st_size:,} bytes; a sweep file is at most "
+                             f"{MAX_FILE_BYTES:,} bytes of TOML")
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_FILE_BYTES + 1)
+    except FileNotFoundError:
+        _fail(str(path), "no such sweep file")
+    except PermissionError:
+        _fail(str(path), "permission denied (cannot read the sweep file)")
+    except OSError as e:
+        raise EnvironmentFailure(f"{path}: cannot read the sweep file ({e.strerror or e})") \
+            from None
+    if len(raw) > MAX_FILE_BYTES:
+        _fail(str(path), f"more than {MAX_FILE_BYTES:,} bytes; not a sweep file")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        _fail(str(path), f"not UTF-8 text (byte {e.start}); a sweep file is TOML")
+    if "\x00" in text:
+        _fail(str(path), "contains NUL bytes (a binary file?); a sweep file is TOML text")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        _fail(str(path), f"not valid TOML ({' '.join(str(e).split())})")
+
+
 def load_sweep(path) -> SweepSpec:
-    """Read and validate a sweep file; ValueError names the file and the key."""
-    from .scene import read_toml
+    """Read and validate a sweep file; UsageError (one line) names the file and the key."""
     path = Path(path)
-    data = read_toml(path, "sweep")
-    tasks = expand_tasks(data, str(path))
-    return SweepSpec(str(data.get("name", path.stem)), str(data.get("description", "")),
-                     tuple(tasks))
+    data = _read_sweep_file(path)
+    where = str(path)
+    name = data.get("name", path.stem)
+    if "name" in data:
+        _check_name(where, "name", name)
+    elif not _NAME.fullmatch(name):
+        _fail(where, f"name: the file stem {name!r} cannot name the output directory; set "
+                     f"name = \"...\" ({_NAME_RULE})")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        _fail(where, f"description: must be a string, got {description!r}")
+    tasks = expand_tasks(data, where, base=path.parent)
+    return SweepSpec(name, description, tuple(tasks))
 
 
 def _scene(name: str, surface: dict, ior, where: str):
@@ -185,9 +339,22 @@ def _roughness(ndf) -> tuple[str, float | None]:
     return key, float(params[key])
 
 
+_WORKER = {"pool": False, "stop": False}   # in a local worker process: interrupted yet?
+
+
+def _worker_init() -> None:
+    """Local worker processes: Ctrl-C between tasks only stops them from starting new ones
+    (inside ``simulate`` it makes the simulation return partial, see ``run_task``)."""
+    _WORKER.update(pool=True, stop=False)
+    signal.signal(signal.SIGINT, lambda signum, frame: _WORKER.update(stop=True))
+
+
 def run_task(task: Task, out_dir) -> dict:
     """Simulate one task, judge every model, write ``out_dir/tasks/<id>.json`` atomically and
-    return the record."""
+    return the record. An interrupted simulation (``Result.is_partial``, e.g. Ctrl-C) writes
+    nothing and returns ``{"id", "partial": True, "rays", "requested"}``."""
+    if _WORKER["stop"]:
+        return {"id": task.id, "partial": True, "rays": 0, "requested": task.rays}
     from microsim.analysis.verdicts import verdict
     from microsim.sim import Bins, simulate
     from microsim.sim.predict import ModelSpec, predict
@@ -197,6 +364,9 @@ def run_task(task: Task, out_dir) -> dict:
     bins = Bins(task.theta_bins, task.phi_bins)
     res = simulate(surface, scene.ior, task.theta_i, rays=task.rays, bins=bins, seed=task.seed,
                    threads=1, masking=task.masking)
+    if res.is_partial or int(res.rays[0]) < task.rays:
+        _WORKER["stop"] = _WORKER["pool"]         # a pool worker starts no further task
+        return {"id": task.id, "partial": True, "rays": int(res.rays[0]), "requested": task.rays}
     ndf = scene.ndf()
     specs = [ModelSpec.torrance_sparrow(f"ts-{g}", ndf, g, scene.ior) for g in task.models]
     preds = predict(specs, [task.theta_i], bins) if ndf is not None else {}
@@ -208,82 +378,270 @@ def run_task(task: Task, out_dir) -> dict:
     record = {"id": task.id, "task": task.to_dict(), "roughness_param": key, "roughness": value,
               "rays": int(res.rays[0]), "seconds": time.perf_counter() - t0,
               "ledger": {k: float(v[0]) for k, v in res.ledger.items()}, "verdicts": verdicts}
-    atomic.write_json(Path(out_dir) / "tasks" / f"{task.id}.json", record)
+    path = Path(out_dir) / "tasks" / f"{task.id}.json"
+    try:
+        atomic.write_json(path, record)
+    except OSError as e:
+        raise EnvironmentFailure(f"{path}: cannot write the task result "
+                                 f"({e.strerror or e})") from None
     return record
+
+
+_VERDICT_KEYS = ("model", "rel_rms", "chi2_dof", "p_value", "max_abs_z", "agrees", "n_bins")
+
+
+def _complete(rec, task: Task) -> bool:
+    """Is ``rec`` a complete result of ``task`` (its description, every ray, every verdict)?"""
+    if not isinstance(rec, dict) or rec.get("id") != task.id or rec.get("partial"):
+        return False
+    if rec.get("task") != json.loads(json.dumps(task.to_dict())):
+        return False
+    rays, verdicts = rec.get("rays"), rec.get("verdicts")
+    if not _is_int(rays) or rays != task.rays or not isinstance(verdicts, list):
+        return False
+    if not isinstance(rec.get("seconds"), (int, float)) or "roughness" not in rec:
+        return False
+    return all(isinstance(v, dict) and all(k in v for k in _VERDICT_KEYS) for v in verdicts)
+
+
+def _load(task: Task, out: Path) -> dict | None:
+    """The complete record of ``task`` in ``out``, or None (missing, unreadable, truncated,
+    partial, or another task's)."""
+    try:
+        with open(Path(out) / "tasks" / f"{task.id}.json", encoding="utf-8") as fh:
+            rec = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    return rec if _complete(rec, task) else None
 
 
 def _done(task: Task, out_dir: Path) -> bool:
     """Is a complete, readable result of ``task`` on disk?"""
+    return _load(task, out_dir) is not None
+
+
+def _fmt_num(x) -> str:
+    return f"{x:.12g}" if isinstance(x, float) else str(x)
+
+
+def material_text(ior) -> str:
+    """A material as plain text: a name as is, ``1.5``, or ``n+ki`` for ``[n, k]``."""
+    if isinstance(ior, (list, tuple)) and len(ior) == 2:
+        return f"{_fmt_num(ior[0])}+{_fmt_num(ior[1])}i"
+    return _fmt_num(ior)
+
+
+def _varying(tasks) -> dict:
+    """scene → the [surface] keys whose value differs between that scene's tasks."""
+    seen: dict = {}
+    for t in tasks:
+        for k, v in t.surface.items():
+            seen.setdefault(t.scene, {}).setdefault(k, set()).add(json.dumps(v))
+    return {s: {k for k, vals in d.items() if len(vals) > 1} for s, d in seen.items()}
+
+
+def task_label(task: Task, varying=None) -> str:
+    """Readable task description, e.g. "vg m=0.3, aluminium, θi=30°": the scene, its surface
+    parameters (only the ``varying`` ones if given), the material and the incidence."""
+    keys = sorted(k for k in task.surface if k != "kind" and (varying is None or k in varying))
+    params = " ".join(f"{k}={_fmt_num(task.surface[k])}" for k in keys)
+    return (f"{task.scene}{' ' + params if params else ''}, {material_text(task.ior)}, "
+            f"θi={task.theta_i:g}°")
+
+
+def _check_out(out: Path) -> None:
+    """Refuse, before anything runs or is written, an output path that cannot work."""
     try:
-        with open(out_dir / "tasks" / f"{task.id}.json", encoding="utf-8") as fh:
-            return json.load(fh).get("id") == task.id
-    except (OSError, ValueError):
-        return False
+        if out.exists() and not out.is_dir():
+            _fail(str(out), "exists and is not a directory; --out must be a directory")
+        anc = out
+        while not anc.exists() and anc != anc.parent:
+            anc = anc.parent
+        if not anc.is_dir():
+            _fail(str(out), f"{anc} is a file, not a directory")
+        tasks = out / "tasks"
+        if tasks.exists() and not tasks.is_dir():
+            _fail(str(out), f"{tasks} exists and is not a directory")
+        if out.is_dir() and not tasks.is_dir() and any(out.iterdir()):
+            _fail(str(out), "not empty and not a sweep output (no tasks/ folder); choose a new "
+                            "or empty --out directory")
+    except OSError as e:
+        _fail(str(out), f"unusable output path ({e.strerror or e})")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise EnvironmentFailure(f"{out}: {anc} is not writable (permission denied or a "
+                                 "read-only file system)")
+
+
+@contextmanager
+def _locked(out: Path):
+    """Create ``out/tasks``, hold ``out/.sweep.lock`` for the sweep, and remove the temporary
+    files that interrupted atomic writes of earlier sweeps left behind."""
+    try:
+        (out / "tasks").mkdir(parents=True, exist_ok=True)
+        fd = os.open(out / ".sweep.lock", os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as e:
+        raise EnvironmentFailure(f"{out}: cannot create the sweep output "
+                                 f"({e.strerror or e})") from None
+    try:
+        try:
+            import fcntl
+        except ImportError:                          # pragma: no cover  (not POSIX: no lock)
+            fcntl = None
+        if fcntl is not None:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                _fail(str(out), "another microsim sweep is writing to this directory; wait for "
+                                "it to finish or choose another --out")
+        for d in (out, out / "tasks"):
+            for p in d.glob(".*.tmp"):
+                try:
+                    p.unlink()
+                except OSError:
+                    pass
+        yield
+    finally:
+        os.close(fd)
+
+
+def _client(scheduler, timeout: float):
+    """A ``dask.distributed.Client``; one-line errors for a bad or unreachable address."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise EnvironmentFailure("--scheduler needs dask.distributed (pip install "
+                                 "'dask[distributed]')") from None
+    try:
+        return Client(scheduler, timeout=timeout)
+    except ValueError as e:
+        _fail(f"--scheduler {scheduler}", f"not a Dask scheduler address ({e})")
+    except (OSError, TimeoutError) as e:
+        raise EnvironmentFailure(f"--scheduler {scheduler}: no Dask scheduler reachable "
+                                 f"there within {timeout:g} s ({' '.join(str(e).split())})") \
+            from None
+
+
+def _local(todo, out: Path, workers: int, collect) -> None:
+    """Run ``todo`` in local worker processes; ``collect(record)`` for each finished one. On
+    any exception (Ctrl-C included) the queued tasks are cancelled, the running ones asked to
+    stop (SIGINT: their simulation returns partial and writes nothing), and the exception
+    re-raised once they have; a second Ctrl-C kills them."""
+    pool = ProcessPoolExecutor(max_workers=min(int(workers), len(todo)),
+                               initializer=_worker_init)
+    futures = []
+    try:
+        futures = [pool.submit(run_task, t, str(out)) for t in todo]
+        for fut in as_completed(futures):
+            collect(fut.result())
+    except BaseException:
+        for f in futures:
+            f.cancel()
+        procs = list(getattr(pool, "_processes", None) or {}).copy()
+        for pid in procs:
+            try:
+                os.kill(pid, signal.SIGINT)
+            except OSError:
+                pass
+        try:
+            pool.shutdown(wait=True, cancel_futures=True)
+        except KeyboardInterrupt:
+            for p in list((getattr(pool, "_processes", None) or {}).values()):
+                p.kill()
+            pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _dask(todo, out: Path, client, collect) -> None:
+    from dask.distributed import as_completed as dask_completed
+    futures = [client.submit(run_task, t, str(out), key=f"microsim-{t.id}", pure=False)
+               for t in todo]
+    try:
+        for fut in dask_completed(futures):
+            collect(fut.result())
+    except BaseException:
+        client.cancel(futures)          # tasks already running finish and store complete results
+        raise
 
 
 def run_sweep(spec: SweepSpec, out, *, scheduler=None, workers: int = 2,
-              limit: int | None = None, progress: Callable[[str], None] | None = None) -> dict:
-    """Run the tasks of ``spec`` that have no result in ``out`` yet, then ``write_summary``.
+              limit: int | None = None, progress: Callable[[str], None] | None = None,
+              connect_timeout: float = 10.0) -> dict:
+    """Run the tasks of ``spec`` that have no complete result in ``out`` yet, then
+    ``write_summary``.
 
     ``scheduler``: None (local processes, ``workers`` of them) or a Dask scheduler address
-    (anything ``dask.distributed.Client`` accepts, e.g. "tcp://host:8786" or a LocalCluster).
-    ``limit``: run at most this many of the missing tasks (then stop, as if interrupted).
+    (anything ``dask.distributed.Client`` accepts, e.g. "tcp://host:8786" or a LocalCluster),
+    reached within ``connect_timeout`` seconds or EnvironmentFailure. ``limit``: run at most
+    this many of the missing tasks, then summarise what is done. ``progress``: receives one
+    line per finished task ("k/N done: <scene params, material, θi> (s)"), and one at the start.
+    Ctrl-C: raises ``SweepInterrupted`` (finished tasks kept, no summary written).
     Returns {"computed": [ids], "skipped": [ids], "summary": paths}.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    todo = [t for t in spec.tasks if not _done(t, out)]
-    skipped = [t.id for t in spec.tasks if t not in todo]
-    if limit is not None:
-        todo = todo[:int(limit)]
-    computed = []
-    if todo:
-        if scheduler is None:
-            with ProcessPoolExecutor(max_workers=int(workers)) as pool:
-                futures = [pool.submit(run_task, t, str(out)) for t in todo]
-                for fut in as_completed(futures):
-                    rec = fut.result()
-                    computed.append(rec["id"])
-                    if progress:
-                        progress(f"{len(computed)}/{len(todo)} {rec['id']}")
-        else:
-            from dask.distributed import Client
-            from dask.distributed import as_completed as dask_completed
-            with Client(scheduler) as client:
-                futures = [client.submit(run_task, t, str(out), key=f"microsim-{t.id}", pure=False)
-                           for t in todo]
-                for fut in dask_completed(futures):
-                    rec = fut.result()
-                    computed.append(rec["id"])
-                    if progress:
-                        progress(f"{len(computed)}/{len(todo)} {rec['id']}")
-    paths = write_summary(spec, out)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        _fail("--workers", f"must be an integer >= 1, got {workers!r}")
+    if not (isinstance(connect_timeout, (int, float)) and 0 < connect_timeout <= 3600):
+        _fail("--scheduler-timeout", f"must be seconds in (0, 3600], got {connect_timeout!r}")
+    out = Path(out).absolute()
+    _check_out(out)
+    with ExitStack() as stack:
+        client = None
+        if scheduler is not None:
+            client = stack.enter_context(_client(scheduler, float(connect_timeout)))
+        stack.enter_context(_locked(out))
+        todo = [t for t in spec.tasks if not _done(t, out)]
+        skipped = [t.id for t in spec.tasks if t not in todo]
+        if limit is not None:
+            todo = todo[:int(limit)]
+        varying = _varying(spec.tasks)
+        total, computed = len(spec.tasks), []
+        by_id = {t.id: t for t in todo}
+        if progress and todo:
+            where = f"{len(by_id)} on {min(workers, len(todo))} local workers" \
+                if client is None else f"{len(by_id)} on the Dask cluster"
+            progress(f"sweep {spec.name}: {total} tasks, {len(skipped)} already done, "
+                     f"running {where}")
+
+        def collect(rec: dict) -> None:
+            if rec.get("partial"):                   # a worker was interrupted
+                raise KeyboardInterrupt
+            computed.append(rec["id"])
+            if progress:
+                progress(f"sweep {spec.name}: {len(skipped) + len(computed)}/{total} done: "
+                         f"{task_label(by_id[rec['id']], varying.get(rec['task']['scene']))} "
+                         f"({rec['seconds']:.1f} s)")
+            checkpoint("sweep-task")
+
+        try:
+            if todo and client is None:
+                _local(todo, out, workers, collect)
+            elif todo:
+                _dask(todo, out, client, collect)
+        except KeyboardInterrupt:
+            raise SweepInterrupted(out, sum(_done(t, out) for t in spec.tasks), total) \
+                from None
+        paths = write_summary(spec, out)
     return {"computed": computed, "skipped": skipped, "summary": paths}
 
 
 def gather(spec: SweepSpec, out) -> list[dict]:
-    """Task records of ``spec`` found in ``out`` (in task order; missing ones left out)."""
-    recs = []
-    for t in spec.tasks:
-        p = Path(out) / "tasks" / f"{t.id}.json"
-        if p.exists():
-            with open(p, encoding="utf-8") as fh:
-                recs.append(json.load(fh))
-    return recs
+    """Complete task records of ``spec`` in ``out``, in task order (missing, unreadable and
+    partial ones left out)."""
+    return [r for r in (_load(t, Path(out)) for t in spec.tasks) if r is not None]
 
 
 def _params_text(surface: dict) -> str:
-    return " ".join(f"{k}={v}" for k, v in sorted(surface.items()) if k != "kind")
+    return " ".join(f"{k}={_fmt_num(v)}" for k, v in sorted(surface.items()) if k != "kind")
 
 
 def summary_table(records: list[dict]) -> list[dict]:
-    """One row per (task, model) with the ``COLUMNS`` fields."""
+    """One row per (task, model) with the ``COLUMNS`` fields (``material`` plain text)."""
     rows = []
     for r in records:
         t = r["task"]
         for v in r["verdicts"]:
             rows.append({"task": r["id"], "scene": t["scene"], "params": _params_text(t["surface"]),
-                         "material": json.dumps(t["ior"]), "roughness": r["roughness"],
+                         "material": material_text(t["ior"]), "roughness": r["roughness"],
                          "theta_i": t["theta_i"], "model": v["model"], "rel_rms": v["rel_rms"],
                          "chi2_dof": v["chi2_dof"], "p_value": v["p_value"],
                          "max_abs_z": v["max_abs_z"], "agrees": v["agrees"],
@@ -304,8 +662,16 @@ def _fmt(v) -> str:
 
 def write_summary(spec: SweepSpec, out) -> dict:
     """Write ``summary.csv``, ``summary.md`` and ``error_vs_roughness.png`` (atomically) from
-    the task JSONs present; returns their paths."""
+    the complete task JSONs present; returns their paths."""
     out = Path(out)
+    try:
+        return _write_summary(spec, out)
+    except OSError as e:
+        raise EnvironmentFailure(f"{e.filename or out}: cannot write the sweep summary "
+                                 f"({e.strerror or e})") from None
+
+
+def _write_summary(spec: SweepSpec, out: Path) -> dict:
     recs = gather(spec, out)
     rows = summary_table(recs)
     buf = io.StringIO()
@@ -350,7 +716,7 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
         ax.plot(x, y, color=cmap(thetas.index(th) / max(1, len(thetas) - 1) * 0.9),
                 linestyle=("-", "--", ":", "-.")[models.index(model) % 4],
                 marker="osD^v<>"[looks.index((scene, mat)) % 7], markersize=4,
-                label=f"{scene} {json.loads(mat)} {model} θi={th:g}°")
+                label=f"{scene} {mat} {model} θi={th:g}°")
     ax.set_xlabel("roughness (first NDF parameter)")
     ax.set_ylabel("relative RMS error (90 % energy bins)")
     ax.set_yscale("log")
@@ -368,20 +734,31 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
 def _cmd_sweep(args) -> int:
     spec = load_sweep(args.sweep)
     out = args.out or os.path.join("sweeps", "out", spec.name)
-    res = run_sweep(spec, out, scheduler=args.scheduler, workers=args.workers,
-                    progress=lambda s: print(s, file=sys.stderr))
+    try:
+        res = run_sweep(spec, out, scheduler=args.scheduler, workers=args.workers,
+                        progress=lambda s: print(s, file=sys.stderr, flush=True),
+                        connect_timeout=args.scheduler_timeout)
+    except SweepInterrupted as e:
+        print(f"microsim: interrupted: {e.done}/{e.total} tasks done and kept in "
+              f"{os.path.join(out, 'tasks')}, no summary written; rerun the same command "
+              f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}) "
+              f"to compute the rest", file=sys.stderr)
+        return 130
     print(f"{len(res['computed'])} tasks computed, {len(res['skipped'])} already done; "
           f"{res['summary']['markdown']}, {res['summary']['csv']}, {res['summary']['chart']}")
     return 0
 
 
 def add_sweep_command(subparsers) -> None:
-    """Register ``microsim sweep SWEEP.toml [--scheduler ADDRESS] [--out DIR] [--workers N]``."""
+    """Register ``microsim sweep SWEEP.toml [--scheduler ADDRESS] [--scheduler-timeout S]
+    [--out DIR] [--workers N]``."""
     p = subparsers.add_parser("sweep", help="run a grid of scenes x parameters x incidences "
                                             "and gather the verdicts into one table and chart")
     p.add_argument("sweep", help="sweep file (TOML), e.g. sweeps/vgroove-roughness.toml")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="Dask distributed scheduler address (default: local worker processes)")
+    p.add_argument("--scheduler-timeout", type=float, default=10.0, metavar="SECONDS",
+                   help="give up connecting to --scheduler after this long (default 10)")
     p.add_argument("--out", help="output directory (default sweeps/out/<name>)")
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     p.set_defaults(func=_cmd_sweep)

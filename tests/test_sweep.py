@@ -5,6 +5,7 @@ import argparse
 import csv
 import json
 import os
+import re
 
 import pytest
 
@@ -107,3 +108,193 @@ def test_sweep_subcommand_registers():
     add_sweep_command(p.add_subparsers())
     args = p.parse_args(["sweep", "s.toml", "--scheduler", "tcp://h:8786", "--workers", "3"])
     assert args.scheduler == "tcp://h:8786" and args.workers == 3 and callable(args.func)
+
+
+# --- issue 11: interrupts, partial results, progress, empty axes, CSV, scheduler ----------------
+def _json(path):
+    return json.loads(path.read_text())
+
+
+def test_partial_simulation_writes_no_task_file(tmp_path, monkeypatch):
+    """A task whose simulate comes back partial (SIGINT in the worker) is not stored as done."""
+    import microsim.sim as sim
+    from microsim.sweep import run_task
+    real = sim.simulate
+
+    def interrupted(surface, material, theta_i, *, rays, **kw):
+        res = real(surface, material, theta_i, rays=rays // 2, **kw)   # fewer rays tallied …
+        res.meta["partial"] = True                                     # … as after a Ctrl-C
+        return res
+
+    monkeypatch.setattr(sim, "simulate", interrupted)
+    task = tiny_spec().tasks[0]
+    rec = run_task(task, tmp_path)
+    assert rec["id"] == task.id and rec.get("partial") is True
+    assert not (tmp_path / "tasks" / f"{task.id}.json").exists()
+
+
+def test_simulation_checkpoint_interrupt_writes_no_task_file(tmp_path):
+    """The same through the in-process hook, if simulate marks its chunks with checkpoints."""
+    from microsim.checkpoints import interrupt_at
+    from microsim.sweep import run_task
+    task = expand_tasks({**TINY, "rays": 400_000, "theta_i": [30]})[0]
+    with interrupt_at("simulation") as state:
+        rec = run_task(task, tmp_path)
+    if not state["fired"]:
+        pytest.skip("simulate() has no 'simulation' checkpoint in this tree")
+    assert rec.get("partial") is True
+    assert not (tmp_path / "tasks" / f"{task.id}.json").exists()
+
+
+@pytest.mark.parametrize("damage", ["short", "partial", "truncated", "other-task", "no-verdicts"])
+def test_incomplete_task_files_are_recomputed_and_never_summarised(tmp_path, damage):
+    """Task JSONs left by an older interrupted sweep (fewer rays than requested, a partial flag,
+    cut short, another task's record, no verdicts) count as missing: not in the summary, and
+    the rerun computes them again."""
+    from microsim.sweep import gather, write_summary
+    spec = tiny_spec()
+    run_sweep(spec, tmp_path, workers=2)
+    victim = tmp_path / "tasks" / f"{spec.tasks[0].id}.json"
+    rec = _json(victim)
+    if damage == "short":
+        rec["rays"] = rec["rays"] * 1_769_472 // 2_000_000
+    elif damage == "partial":
+        rec["partial"] = True
+    elif damage == "other-task":
+        rec["task"] = _json(tmp_path / "tasks" / f"{spec.tasks[1].id}.json")["task"]
+    elif damage == "no-verdicts":
+        del rec["verdicts"]
+    victim.write_text(json.dumps(rec)[: -5 if damage == "truncated" else None])
+    assert spec.tasks[0].id not in {r["id"] for r in gather(spec, tmp_path)}
+    write_summary(spec, tmp_path)
+    assert spec.tasks[0].id not in {r["task"] for r in table(tmp_path)}
+    res = run_sweep(spec, tmp_path, workers=1)
+    assert res["computed"] == [spec.tasks[0].id]
+    back = _json(victim)
+    assert back["rays"] == spec.tasks[0].rays and not back.get("partial")
+    assert len(table(tmp_path)) == 2 * len(spec.tasks)
+
+
+def test_interrupted_sweep_keeps_finished_tasks_and_writes_no_summary(tmp_path):
+    """Ctrl-C after the 2nd finished task: the finished tasks stay (complete), no summary is
+    written, and the rerun computes only the rest and equals an uninterrupted sweep."""
+    from microsim.checkpoints import interrupt_at
+    spec = tiny_spec()
+    out = tmp_path / "sweep"
+    with interrupt_at("sweep-task", after=1) as state, pytest.raises(KeyboardInterrupt):
+        run_sweep(spec, out, workers=1)
+    assert state["fired"]
+    kept = sorted((out / "tasks").glob("*.json"))
+    assert 2 <= len(kept) < len(spec.tasks)
+    for p in kept:
+        rec = _json(p)
+        assert rec["rays"] == spec.tasks[0].rays and not rec.get("partial")
+    assert not (out / "summary.csv").exists() and not (out / "summary.md").exists()
+    again = run_sweep(spec, out, workers=2)
+    assert sorted(again["skipped"]) == sorted(p.stem for p in kept)
+    assert len(again["computed"]) == len(spec.tasks) - len(kept)
+    run_sweep(spec, tmp_path / "fresh", workers=2)
+    assert table(out) == table(tmp_path / "fresh")
+
+
+def test_cli_interrupt_exits_130_with_one_line_telling_how_to_continue(tmp_path, capsys):
+    from microsim.checkpoints import interrupt_at
+    from microsim.cli import main
+    sweep = tmp_path / "tiny.toml"
+    sweep.write_text(TINY_TOML)
+    out = tmp_path / "out"
+    with interrupt_at("sweep-task", after=0):
+        rc = main(["sweep", str(sweep), "--out", str(out), "--workers", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 130
+    assert "Traceback" not in "\n".join(err)
+    last = err[-1]
+    assert "interrupted" in last and "rerun" in last and str(sweep) in last
+    assert not (out / "summary.csv").exists()
+    assert len(list((out / "tasks").glob("*.json"))) >= 1
+
+
+TINY_TOML = """
+name = "tiny"
+rays = 12_000
+theta_bins = 10
+phi_bins = 7
+seed = 1
+theta_i = [30, 70]
+[[scenes]]
+name = "vg"
+ior = ["aluminium", [1.5, 0.25], 1.33]
+[scenes.surface]
+kind = "vgrooves"
+n_grooves = 100
+ndf = "beckmann"
+m = [0.2, 0.6]
+"""
+
+
+def test_progress_lines_show_parameter_values_not_task_ids(tmp_path):
+    spec = load_sweep_text(tmp_path, TINY_TOML)
+    lines = []
+    run_sweep(spec, tmp_path / "out", workers=2, progress=lines.append)
+    done = [ln for ln in lines if "/12" in ln]
+    assert len(done) == len(spec.tasks) == 12
+    for t in spec.tasks:
+        assert t.id not in "\n".join(lines)                     # no hashed ids …
+    for k in range(1, 13):
+        assert sum(bool(re.search(rf"\b{k}/12\b", ln)) for ln in done) == 1   # … but k/N
+    for ln in done:                                             # and the task's parameters
+        assert "vg" in ln and ("m=0.2" in ln or "m=0.6" in ln)
+        assert ("aluminium" in ln) + ("1.5+0.25i" in ln) + ("1.33" in ln) == 1
+        assert "θi=30°" in ln or "θi=70°" in ln
+
+
+def load_sweep_text(tmp_path, text, name="s.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return load_sweep(p)
+
+
+@pytest.mark.parametrize("where, key", [("surface", "m"), ("scene", "ior"), ("top", "theta_i"),
+                                         ("top", "scenes"), ("top", "models")])
+def test_empty_axis_is_a_usage_error(where, key):
+    from microsim.errors import UsageError
+    data = json.loads(json.dumps(TINY))
+    if where == "surface":
+        data["scenes"][0]["surface"][key] = []
+    elif where == "scene":
+        data["scenes"][0][key] = []
+    else:
+        data[key] = []
+    with pytest.raises(UsageError, match=rf"\b{key}\b.*empty|empty.*\b{key}\b"):
+        expand_tasks(data, "sweeps/x.toml")
+
+
+def test_csv_material_column_is_plain_text(tmp_path):
+    spec = load_sweep_text(tmp_path, TINY_TOML.replace("m = [0.2, 0.6]", "m = 0.3")
+                           .replace("theta_i = [30, 70]", "theta_i = [30]"))
+    run_sweep(spec, tmp_path / "out", workers=2)
+    with open(tmp_path / "out" / "summary.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    col = rows[0].index("material")
+    assert all(len(r) == len(rows[0]) for r in rows)
+    assert {r[col] for r in rows[1:]} == {"aluminium", "1.5+0.25i", "1.33"}
+    assert '"' not in (tmp_path / "out" / "summary.csv").read_text()
+
+
+def _free_port():
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_unreachable_scheduler_fails_fast_naming_the_address(tmp_path):
+    pytest.importorskip("distributed")
+    import time
+    from microsim.errors import EnvironmentFailure
+    addr = f"tcp://127.0.0.1:{_free_port()}"                     # loopback, nothing listens
+    t0 = time.monotonic()
+    with pytest.raises(EnvironmentFailure, match=addr):
+        run_sweep(tiny_spec(), tmp_path / "out", scheduler=addr, connect_timeout=1.0)
+    assert time.monotonic() - t0 < 20
+    assert not (tmp_path / "out").exists()
