@@ -77,9 +77,9 @@ COLUMNS = ("task", "scene", "params", "material", "roughness", "theta_i", "model
            "chi2_dof", "p_value", "max_abs_z", "agrees", "n_bins", "rays", "seconds")
 MAX_FILE_BYTES = 1 << 20            # a sweep file is a few hundred bytes; refuse anything > 1 MiB
 MAX_TASKS = 100_000                 # tasks per sweep file (each is seconds to minutes of tracing)
-MAX_BINS = 1_000_000                # theta_bins × phi_bins (tallies per thread scale with it)
-_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")
-_NAME_RULE = "1-100 letters, digits, '.', '_' or '-', not starting with '.'"
+MAX_BINS = 2 ** 22                  # theta_bins × phi_bins, as microsim.sim.bins.MAX_BINS
+_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")   # = microsim.scene.NAME_PATTERN
+_NAME_RULE = "1-100 characters from letters, digits, '.', '_', '-', not starting with '.'"
 
 
 class SweepInterrupted(KeyboardInterrupt):
@@ -181,7 +181,8 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
             _fail(where, f"{key}: must be an integer >= 2, got {v!r}")
     if nt * npf > MAX_BINS:
         _fail(where, f"theta_bins × phi_bins: at most {MAX_BINS:,} bins (every task keeps "
-                     f"tallies of that size per thread), got {nt} × {npf} = {nt * npf:,}")
+                     f"several float64 tallies of that size, {8 * nt * npf / 2**20:,.0f} MiB "
+                     f"each here), got {nt} × {npf} = {nt * npf:,}")
     from microsim.sim import Bins
     try:
         Bins(nt, npf)
