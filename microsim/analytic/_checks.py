@@ -1,19 +1,82 @@
-"""Argument validation shared by the analytic models.
+"""Argument validation shared by the analytic models, the surfaces and the simulation.
 
-Every check raises ``ValueError`` naming the parameter and the allowed range, so that a
-researcher who passes a bad value learns what to pass instead.
+Every check raises ``UsageError`` (a ``ValueError``) with a one-line message naming the
+parameter and the allowed range, so that a researcher who passes a bad value learns what to
+pass instead. ``check_memory`` refuses, before allocating, an object that would need more than
+``memory_limit()`` (``MEMORY_FRACTION`` of the physical memory).
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
+import numbers
+import os
+
 import numpy as np
 
+from microsim.errors import UsageError
+
 UNIT_TOL = 1e-6  # allowed | |w| - 1 | for a direction called "unit"
+
+MEMORY_FRACTION = 0.5
+"""Share of the physical memory one object (a mesh, a bin grid, a heightfield) may need."""
+
+
+def memory_limit() -> int:
+    """Bytes one microsim object may take: ``MEMORY_FRACTION`` of the physical memory
+    (``os.sysconf``; 8 GiB assumed where the platform does not say). The rest is left to
+    the Python process, its other objects and the system; a request above it would swap or be
+    killed, so it is refused up front (``check_memory``)."""
+    try:
+        phys = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        phys = 8 << 30
+    return int(MEMORY_FRACTION * phys)
+
+
+def short(value, width: int = 80) -> str:
+    """One-line ``repr`` of ``value`` for a message, cut to ``width`` characters."""
+    text = " ".join(repr(value).split())
+    return text if len(text) <= width else text[:width - 1] + "…"
+
+
+def gigabytes(n: float) -> str:
+    """``n`` bytes as a short text in GB (10⁹ bytes)."""
+    return f"{n / 1e9:.3g} GB"
+
+
+def check_memory(name: str, need: float, what: str) -> None:
+    """Raise a UsageError naming ``name`` if ``need`` bytes (``what`` needs them) exceed
+    ``memory_limit()``. Called before the allocation."""
+    limit = memory_limit()
+    if need > limit:
+        raise UsageError(f"{name}: {what} would need about {gigabytes(need)} of memory, above "
+                         f"the limit of {gigabytes(limit)} ({MEMORY_FRACTION:.0%} of this "
+                         f"machine's physical memory)")
+
+
+def integer(name: str, value, lo: int = 1, hi: int | None = None, why: str = "") -> int:
+    """Return ``value`` as int, or raise unless it is an integer (int, NumPy integer, or an
+    integral float) in [lo, hi]. Strings, bools, NaN and None are refused."""
+    ok = (not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real)
+          and np.isfinite(float(value)) and float(value).is_integer())
+    rng = f">= {lo}" if hi is None else f"in [{lo}, {hi:,}]"
+    if not ok or not lo <= int(value) or (hi is not None and int(value) > hi):
+        raise UsageError(f"{name} must be an integer {rng}{why}, got {short(value)}")
+    return int(value)
+
+
+def _real(name: str, value, what: str) -> float:
+    """``value`` as float; text, bools, None and non-numbers are refused naming ``name``."""
+    if isinstance(value, (bool, np.bool_, str, bytes)) or value is None:
+        raise UsageError(f"{name} must be {what}, got {short(value)}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise UsageError(f"{name} must be {what}, got {short(value)}") from None
 
 
 def positive(name: str, value, *, allow_inf: bool = False) -> float:
     """Return ``value`` as float, or raise if it is not a finite number > 0."""
-    v = float(value)
+    v = _real(name, value, "a finite number > 0")
     if not (v > 0) or (np.isinf(v) and not allow_inf) or np.isnan(v):
         raise UsageError(f"{name} must be a finite number > 0, got {value!r}")
     return v
@@ -21,7 +84,7 @@ def positive(name: str, value, *, allow_inf: bool = False) -> float:
 
 def in_range(name: str, value, lo: float, hi: float, *, lo_open=False, hi_open=False) -> float:
     """Return ``value`` as float, or raise if it lies outside [lo, hi] (open ends as flagged)."""
-    v = float(value)
+    v = _real(name, value, f"a number in [{lo}, {hi}]")
     ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
     if not ok or np.isnan(v):
         lb, rb = ("(" if lo_open else "["), (")" if hi_open else "]")

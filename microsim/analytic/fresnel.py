@@ -2,16 +2,20 @@
 
 Light arrives from air (index 1) at a medium of complex index η = n + ik (k ≥ 0: absorption).
 A real index is a dielectric, a complex one a conductor, ``None`` an ideal mirror (R = 1).
-``cos_theta`` is always the cosine between the incident direction and the *facet* normal.
+``cos_theta`` is always the cosine between the incident direction and the *facet* normal; it
+must lie in [0, 1] up to ``COS_TOL`` (values within the tolerance are clipped, others raise).
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import math
 import numbers
 
 import numpy as np
 from numba import njit
+
+from microsim.errors import UsageError
+
+from ._checks import UNIT_TOL
 
 
 __all__ = ["fresnel", "fresnel_transmittance", "schlick", "f0_from_ior",
@@ -22,34 +26,49 @@ MATERIALS = {"aluminium": 0.769 + 6.08j, "methanol": 1.329, "mirror": None}
 
 _ALIASES = {"aluminum": "aluminium"}
 
+COS_TOL = 3 * UNIT_TOL
+"""Rounding allowed outside [0, 1] for a cosine: the package accepts as "unit" any vector with
+| |w| − 1 | ≤ ``UNIT_TOL`` (``_checks.directions``), and for two of them
+|a·b| ≤ |a||b| ≤ (1 + UNIT_TOL)² < 1 + 3·UNIT_TOL; a cosine further out is not one of two unit
+vectors (e.g. a bug or a value in degrees) and is refused."""
 
-def _check_ior(ior) -> complex:
-    """Return ``ior`` as complex η = n + ik, or raise unless n > 0, k ≥ 0, both finite."""
+
+def _check_ior(ior, name: str = "ior") -> complex:
+    """Return ``ior`` as complex η = n + ik, or raise unless n > 0, k ≥ 0, both finite.
+    ``name`` prefixes the message (the caller's parameter)."""
+    pre = "" if name == "ior" else f"{name}: "
     if isinstance(ior, (bool, np.bool_)) or not isinstance(ior, numbers.Number):
-        raise UsageError(f"ior must be a real or complex number n+ik (n > 0, k >= 0) or None, "
-                         f"got {ior!r}")
+        raise UsageError(f"{pre}ior must be a real or complex number n+ik (n > 0, k >= 0) or "
+                         f"None, got {ior!r}")
     eta = complex(ior)
     if not (np.isfinite(eta.real) and np.isfinite(eta.imag)):
-        raise UsageError(f"ior must be finite (n > 0, k >= 0), got {ior!r}")
+        raise UsageError(f"{pre}ior must be finite (n > 0, k >= 0), got {ior!r}")
     if not eta.real > 0:
-        raise UsageError(f"ior real part n must be > 0, got {ior!r}")
+        raise UsageError(f"{pre}ior real part n must be > 0, got {ior!r}")
     if not eta.imag >= 0:
-        raise UsageError(f"ior imaginary part k (extinction) must be >= 0, got {ior!r}")
+        raise UsageError(f"{pre}ior imaginary part k (extinction) must be >= 0, got {ior!r}")
     return eta
 
 
 def _cos(cos_theta) -> np.ndarray:
-    """cos θ as float64, clipped to [0, 1]; NaN rejected."""
-    c = np.asarray(cos_theta, dtype=np.float64)
-    if np.any(np.isnan(c)):
-        raise UsageError("cos_theta must not be NaN")
+    """cos θ as float64 in [0, 1]: values within ``COS_TOL`` outside are clipped; NaN, inf,
+    non-numbers and values further out raise a UsageError naming ``cos_theta``."""
+    a = np.asarray(cos_theta)
+    if a.dtype.kind not in "iuf":
+        raise UsageError(f"cos_theta must be real numbers in [0, 1], got {cos_theta!r}")
+    c = a.astype(np.float64, copy=False)
+    bad = ~((c >= -COS_TOL) & (c <= 1.0 + COS_TOL))        # also NaN
+    if np.any(bad):
+        worst = float(c[bad].flat[0])
+        raise UsageError(f"cos_theta must lie in [0, 1] (a cosine; tolerance {COS_TOL:g}), "
+                         f"got {worst!r}" + (f" among {c.size} values" if c.size > 1 else ""))
     return np.clip(c, 0.0, 1.0)
 
 
 def fresnel(cos_theta, ior=None):
     """Exact unpolarised reflectance (R_s + R_p)/2 from air onto index ``ior`` (dimensionless).
 
-    ``cos_theta``: cosine of the incidence angle to the facet normal, clipped to [0, 1].
+    ``cos_theta``: cosine of the incidence angle to the facet normal, in [0, 1] (``COS_TOL``).
     ``ior``: a material name (``MATERIALS``), real n > 0 (dielectric; n < 1 means the light comes from the denser medium and
     total internal reflection gives R = 1), complex n + ik with k ≥ 0 (conductor), or None
     (mirror, R = 1). R = 1 exactly at grazing incidence (cos θ = 0) for every interface.
@@ -125,7 +144,7 @@ def resolve_material(material):
             raise UsageError(f"material must be one of {allowed} (or a number n / n+ik / None), "
                              f"got {material!r}")
         return MATERIALS[key]
-    eta = _check_ior(material)
+    eta = _check_ior(material, "material")
     if isinstance(material, complex | np.complexfloating):
         return eta
     return eta.real
@@ -139,9 +158,10 @@ def fresnel_real_arithmetic(c, ior):
     and analytic V-grooves. Agrees with ``fresnel`` to 1e-12 for physical materials (tests);
     ``fresnel`` stays the reference (it is also stable for η → 1). A mirror (None) and η = 1
     (no interface) are delegated to ``fresnel``."""
+    c = _cos(c)
     if ior is None or complex(ior) == 1:
         return fresnel(c, ior)
-    eta = complex(ior)
+    eta = _check_ior(ior)
     c = np.ascontiguousarray(c, dtype=np.float64)
     out = np.empty_like(c)
     _fresnel_real_fill(c.ravel(), eta.real ** 2, eta.imag ** 2, out.ravel())

@@ -6,8 +6,9 @@
 """
 from .bins import Bins
 from .estimator import BLOCK, LEDGER, Events, ray_events, simulate
+from .progress import RaysDone
 from .result import InPlane, Result
 from .tracer import Tracer, VGrooveProfile
 
 __all__ = ["simulate", "ray_events", "Events", "Result", "InPlane", "Bins", "Tracer",
-           "VGrooveProfile", "BLOCK", "LEDGER"]
+           "VGrooveProfile", "BLOCK", "LEDGER", "RaysDone"]

@@ -21,13 +21,17 @@ still needed is predicted from rse ∝ N^(-1/2); batches grow at most 4× per st
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import time
 
 import numpy as np
 
+from microsim.analytic._checks import in_range, integer
+from microsim.analytic.fresnel import resolve_material
+from microsim.errors import UsageError
+
 from .bins import Bins
-from .estimator import BLOCK, LEDGER, _estimate, simulate
+from .estimator import (BLOCK, LEDGER, MAX_RAYS, ORIGINS, _check_inputs, _estimate, _is_surface,
+                        _surface_error, simulate)
 from .result import Result
 
 __all__ = ["simulate_auto", "relative_standard_error", "ENERGY_FRACTION"]
@@ -122,18 +126,28 @@ def simulate_auto(surface, material, theta_i, target: float = 0.01, *, phi_i=0.0
     ``theta_i``/``phi_i`` degrees (scalar or sequences), ``first`` rays in the first batch;
     the other arguments as in ``simulate`` (one surface; no realisations). Returns a
     ``Result`` whose ``meta["auto"]`` lists per incidence the rays used, seconds, batches,
-    the achieved rse and whether the target was met (``converged``). An interrupt (SIGINT)
-    raises KeyboardInterrupt (there is no partial result to resume).
+    the achieved rse and whether the target was met (``converged``). Every bad argument
+    raises a UsageError naming it before any work. ``progress`` receives one text line per
+    batch. An interrupt (SIGINT, or ``checkpoints.checkpoint("simulation")`` inside a batch)
+    raises KeyboardInterrupt within one chunk of rays (there is no partial result to
+    resume); memory does not depend on ``max_rays`` (each batch is scheduled lazily).
     """
-    if not (isinstance(target, (int, float)) and 0 < target < 1):
-        raise UsageError(f"target must be a relative error in (0, 1), got {target!r}")
-    for name, v, lo in (("first", first, 1), ("max_rays", max_rays, 2)):
-        if isinstance(v, bool) or int(v) != v or v < lo:
-            raise UsageError(f"{name} must be an integer >= {lo}, got {v!r}")
-    if not 0 < energy <= 1:
-        raise UsageError(f"energy must be a fraction in (0, 1], got {energy!r}")
-    th = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
-    ph = np.broadcast_to(np.asarray(phi_i, dtype=np.float64), th.shape)
+    th, ph = _check_inputs(theta_i, phi_i, 1, threads, chunk, masking, seed)
+    target = in_range("target", target, 0.0, 1.0, lo_open=True, hi_open=True)
+    first = integer("first", first, 1, MAX_RAYS)
+    max_rays = integer("max_rays", max_rays, 2, MAX_RAYS, " (rays per incidence at most)")
+    energy = in_range("energy", energy, 0.0, 1.0, lo_open=True)
+    min_events = integer("min_events", min_events, 0)
+    if not isinstance(bins, Bins):
+        raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
+    if not isinstance(origins, str) or origins not in ORIGINS:
+        raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
+    if progress is not None and not callable(progress):
+        raise UsageError(f"progress must be None or a callable receiving one text line, "
+                         f"got {progress!r}")
+    if not _is_surface(surface):
+        raise _surface_error("surface", surface)
+    resolve_material(material)
     omega = bins.projected_solid_angle()
     nbin = omega.size
     first = -(-int(min(first, max_rays)) // BLOCK) * BLOCK

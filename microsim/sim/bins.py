@@ -14,12 +14,20 @@ being half bins centred on 0° and 180°.
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Bins"]
+from microsim.analytic._checks import integer
+from microsim.errors import UsageError
+
+__all__ = ["Bins", "MAX_BINS"]
+
+MAX_BINS = 2 ** 22
+"""Most bins of a grid (4,194,304, e.g. 2048 × 2048): every bin costs ≥ 72 bytes per
+(realisation, incidence) in the running sums and the Result, ~96 more per incidence and
+32 per thread task (``estimator.BIN_BYTES_*``), i.e. ~0.7 GB per incidence at the cap; and
+finer bins than 90°/2048 ≈ 0.04° hold almost no events at any feasible ray count."""
 
 
 def _half_turn(phi_deg):
@@ -30,7 +38,8 @@ def _half_turn(phi_deg):
 
 @dataclass(frozen=True)
 class Bins:
-    """(θo, Δφ) grid. ``n_theta`` bins uniform over θo ∈ [0°, 90°]; ``n_phi`` bins over Δφ.
+    """(θo, Δφ) grid. ``n_theta`` bins uniform over θo ∈ [0°, 90°]; ``n_phi`` bins over Δφ;
+    at most ``MAX_BINS`` in all (else UsageError stating the limit and why).
 
     Unfolded: ``n_phi`` bins of width 360°/n_phi, centred on k·360°/n_phi (n_phi must be even
     so that 180° is a bin centre). Folded: Δφ ∈ [0°, 180°] with ``n_phi`` bins, width
@@ -42,10 +51,18 @@ class Bins:
     folded: bool = True
 
     def __post_init__(self):
-        if int(self.n_theta) != self.n_theta or self.n_theta < 1:
-            raise UsageError(f"n_theta must be an integer >= 1, got {self.n_theta!r}")
-        if int(self.n_phi) != self.n_phi or self.n_phi < 2:
-            raise UsageError(f"n_phi must be an integer >= 2, got {self.n_phi!r}")
+        cost = "each bin takes >= 72 bytes of tallies per realisation and incidence, 32 per thread"
+        n_theta = integer("n_theta", self.n_theta, 1, MAX_BINS, " (the limit: MAX_BINS in all)")
+        n_phi = integer("n_phi", self.n_phi, 2, MAX_BINS, " (the limit: MAX_BINS in all)")
+        if not isinstance(self.folded, (bool, np.bool_)):
+            raise UsageError(f"folded must be True or False, got {self.folded!r}")
+        if n_theta * n_phi > MAX_BINS:
+            raise UsageError(f"n_theta × n_phi = {n_theta:,} × {n_phi:,} = {n_theta * n_phi:,} "
+                             f"bins is above the limit of {MAX_BINS:,} bins ({cost}: "
+                             f"{n_theta * n_phi * 72 / 1e9:.3g} GB per incidence)")
+        object.__setattr__(self, "n_theta", n_theta)
+        object.__setattr__(self, "n_phi", n_phi)
+        object.__setattr__(self, "folded", bool(self.folded))
         if not self.folded and self.n_phi % 2:
             raise UsageError(f"n_phi must be even when folded=False (a bin centred on 180°), got {self.n_phi}")
 

@@ -61,26 +61,29 @@ reference in the tests.
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
-
 import functools
 import hashlib
+import itertools
 import os
 import signal
 import threading
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from functools import partial
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-from microsim.analytic._checks import spherical_deg
+from microsim.analytic._checks import check_memory, integer, short, spherical_deg
 from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.checkpoints import checkpoint
+from microsim.errors import UsageError
 
 from . import kernels
 from .bins import Bins
+from .progress import RaysDone
 from .result import Result
 from .scratch import work
 from .tracer import (ESCAPED, HIT, MISSED, TFAR_REL, UNRESOLVED, Hits, Tracer, VGrooveCaster,
@@ -97,6 +100,26 @@ assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)             # _analytic_columns r
 assert (SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED) == (
     kernels.SINGLE, kernels.MASKED, kernels.DOWNWARD, kernels.RAY_UNRESOLVED, kernels.RAY_MISSED)
 ORIGINS = ("stratified", "independent")
+MAX_RAYS = 2 ** 48
+"""Most primary rays per incidence (2.8·10¹⁴): a ray's stratum position r + ξ is a float64,
+which above 2⁴⁸ keeps fewer than 5 bits of the jitter ξ; at ~10⁷ rays/s it is also a year of
+tracing. Memory does not depend on it (rays are drawn and tallied one chunk at a time)."""
+MAX_THREADS = 1024
+MAX_CHUNK = 2 ** 22
+"""Most rays per thread task: every task holds ~200 bytes per ray of work arrays (0.8 GB)."""
+IN_FLIGHT = 2
+"""Thread tasks submitted ahead per thread: the scheduler keeps at most IN_FLIGHT·threads
+tasks queued or running, so memory and the reaction to an interrupt do not depend on rays."""
+EVENT_BYTES = 65
+"""Bytes per ray of ``Events``: status 1, weight 8, wo 24, normal 24, margin 8."""
+BIN_BYTES_TALLY = 72
+"""Bytes per bin per (realisation, incidence): the running sums Σw, Σw², Σpairs, counts
+(32 B), their copies in ``Result.tallies`` (32 B) and the per-realisation BRDF (8 B)."""
+BIN_BYTES_INCIDENCE = 96
+"""Bytes per bin per incidence in the Result: brdf, stderr, counts, sums, pooled tally (≈12
+float64 arrays)."""
+BIN_BYTES_THREAD = 32
+"""Bytes per bin per running thread task: its scratch sums and touched flags."""
 
 
 @dataclass(frozen=True)
@@ -590,40 +613,86 @@ class _Tally:
             total += part
 
 
-def _check_inputs(theta_i, phi_i, rays, threads, chunk, masking):
-    th = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
-    if th.ndim != 1 or th.size == 0:
-        raise UsageError(f"theta_i must be a scalar or a non-empty 1-D sequence of degrees, got {theta_i!r}")
+def _angles(name: str, value, what: str) -> np.ndarray:
+    """``value`` (scalar or 1-D sequence of numbers) as a float64 array, or a UsageError."""
+    if value is None or isinstance(value, (str, bytes)):
+        raise UsageError(f"{name} must be {what}, got {short(value)}")
+    try:
+        a = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    except (TypeError, ValueError):
+        raise UsageError(f"{name} must be {what}, got {short(value)}") from None
+    if a.ndim != 1 or a.size == 0:
+        raise UsageError(f"{name} must be {what}, got {short(value)}")
+    return a
+
+
+def _check_inputs(theta_i, phi_i, rays, threads, chunk, masking, seed=0):
+    """Validated (θi, φi) arrays (degrees); raises a UsageError naming the first bad one of
+    theta_i, phi_i, rays, threads, chunk, masking, seed (``MAX_RAYS``, ``MAX_THREADS``,
+    ``MAX_CHUNK`` bound the integers)."""
+    th = _angles("theta_i", theta_i, "a scalar or a non-empty 1-D sequence of degrees in [0, 90)")
     if not np.all((th >= 0) & (th < 90)):
-        raise UsageError(f"theta_i must lie in [0, 90) degrees, got {theta_i!r}")
-    ph = np.broadcast_to(np.asarray(phi_i, dtype=np.float64), th.shape).copy()
+        raise UsageError(f"theta_i must lie in [0, 90) degrees, got {short(theta_i)}")
+    ph = _angles("phi_i", phi_i, f"finite degrees: a scalar or one per theta_i ({th.size})")
+    if ph.size not in (1, th.size):
+        raise UsageError(f"phi_i must be a scalar or one azimuth per theta_i ({th.size} values), "
+                         f"got {ph.size}: {short(phi_i)}")
+    ph = np.broadcast_to(ph, th.shape).copy()
     if not np.all(np.isfinite(ph)):
-        raise UsageError(f"phi_i must be finite degrees (scalar or one per theta_i), got {phi_i!r}")
-    for name, val in (("rays", rays), ("threads", threads), ("chunk", chunk)):
-        if isinstance(val, (bool, np.bool_)) or not float(val).is_integer() or val < 1:
-            raise UsageError(f"{name} must be an integer >= 1, got {val!r}")
-    if masking not in MASKING:
+        raise UsageError(f"phi_i must be finite degrees (scalar or one per theta_i), got {short(phi_i)}")
+    integer("rays", rays, 1, MAX_RAYS, " (primary rays per incidence)")
+    integer("threads", threads, 1, MAX_THREADS)
+    integer("chunk", chunk, 1, MAX_CHUNK, " (rays per thread task)")
+    integer("seed", seed, 0, None, " (the random stream)")
+    if not isinstance(masking, str) or masking not in MASKING:
         raise UsageError(f"masking must be one of {', '.join(MASKING)}, got {masking!r}")
     return th, ph
 
 
+def _is_surface(obj) -> bool:
+    """A ``microsim.surfaces.Surface`` or an object with its mesh contract."""
+    return all(hasattr(obj, a) for a in ("vertices", "faces", "tile_size", "periodic"))
+
+
+def _surface_error(name: str, obj) -> UsageError:
+    return UsageError(f"{name} must be a microsim.surfaces.Surface (e.g. microsim.surfaces."
+                      f"vgrooves(4000, microsim.analytic.Beckmann(0.3)) or gaussian(...)), "
+                      f"got {type(obj).__name__} {short(obj, 60)}")
+
+
 def _realisation_list(surface, realisations):
     """(count, getter) over the surfaces to trace: ``surface`` alone, a list of surfaces, or
-    (factory, seeds) built lazily one at a time."""
+    (factory, seeds) built lazily one at a time (the getter checks what the factory returns)."""
     if realisations is None:
-        if surface is None:
-            raise UsageError("surface must be a Surface (or pass realisations)")
+        if not _is_surface(surface):
+            raise _surface_error("surface", surface)
         return 1, lambda r: surface
     if (isinstance(realisations, tuple) and len(realisations) == 2
             and callable(realisations[0])):
         factory, seeds = realisations
-        seeds = list(seeds)
+        try:
+            seeds = list(seeds)
+        except TypeError:
+            raise UsageError(f"realisations: seeds must be a sequence, got {seeds!r}") from None
         if not seeds:
             raise UsageError("realisations must hold at least one seed")
-        return len(seeds), lambda r: factory(seeds[r])
+
+        def build(r):
+            s = factory(seeds[r])
+            if not _is_surface(s):
+                raise _surface_error(f"realisations: factory({seeds[r]!r}) returned "
+                                     f"{type(s).__name__}; it", s)
+            return s
+        return len(seeds), build
+    if isinstance(realisations, (str, bytes)) or not hasattr(realisations, "__iter__"):
+        raise UsageError("realisations must be a non-empty list of surfaces or (factory, seeds), "
+                         f"got {realisations!r}")
     lst = list(realisations)
     if not lst:
         raise UsageError("realisations must be a non-empty list of surfaces or (factory, seeds)")
+    for k, s in enumerate(lst):
+        if not _is_surface(s):
+            raise _surface_error(f"realisations[{k}]", s)
     return len(lst), lambda r: lst[r]
 
 
@@ -644,11 +713,19 @@ def ray_events(surface, material, theta_i: float, phi_i: float = 0.0, rays: int 
     """Per-ray outcomes of ``rays`` primary rays at one incidence (degrees), global frame.
 
     Same ray stream as ``simulate(surface, material, theta_i, ...)`` (realisation 0,
-    incidence 0); for diagnostics and tests (paired comparisons of masking modes).
+    incidence 0); for diagnostics and tests (paired comparisons of masking modes). The
+    output is per ray (``EVENT_BYTES`` each): ray counts whose events exceed the memory limit
+    are refused (``_checks.check_memory``).
     """
-    th, ph = _check_inputs(theta_i, phi_i, rays, 1, 1, masking)
-    tracer, profile, azimuth = _tracer_for(surface, masking)
+    th, ph = _check_inputs(theta_i, phi_i, rays, 1, 1, masking, seed)
+    if th.size != 1:
+        raise UsageError(f"theta_i must be a single incidence in degrees, got {theta_i!r}")
+    if not _is_surface(surface):
+        raise _surface_error("surface", surface)
+    check_memory("rays", 2 * EVENT_BYTES * int(rays), f"ray_events of {int(rays):,} rays "
+                 f"({EVENT_BYTES} bytes per ray, twice while concatenating)")
     ior = resolve_material(material)
+    tracer, profile, azimuth = _tracer_for(surface, masking)
     wi = spherical_deg(th[0], ph[0])
     blocks = []
     for b in range(-(-int(rays) // BLOCK)):                 # block by block, as in simulate
@@ -737,7 +814,7 @@ def _check_same_surface(old: dict | None, new: dict, r: int) -> None:
 
 def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins: Bins = Bins(),
              seed: int = 0, threads: int = 2, chunk: int = 2 ** 16, masking: str = "traced",
-             realisations=None, progress: Callable[[str], None] | None = None,
+             realisations=None, progress: Callable[[RaysDone], None] | None = None,
              origins: str = "stratified", resume: Result | None = None,
              isotropic: bool = False) -> Result:
     """Bin-averaged single-bounce BRDF of ``surface`` by ray tracing (Mikkelsen eq. 9).
@@ -747,8 +824,15 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     degrees (scalar or one per θi). ``rays``: primary rays per incidence (spread over the
     realisations). ``bins``: outgoing (θo, Δφ) grid. ``seed``: random stream; results are
     bitwise identical for any ``threads`` and ``chunk`` (rays per thread task, rounded to
-    whole ``BLOCK``s; smaller when needed to give every thread a task). ``progress``:
-    optional callback receiving one line per finished (realisation, incidence).
+    whole ``BLOCK``s, at most ``MAX_CHUNK``; smaller when needed to give every thread a
+    task). ``progress``: optional callback, called in the calling thread after every chunk is
+    tallied with a ``RaysDone`` event (the rays that chunk added to its (realisation,
+    incidence); the events of a pair sum to its rays and the last has ``finished=True``).
+    Integers: ``rays`` in [1, ``MAX_RAYS``], ``threads`` in [1, ``MAX_THREADS``], ``seed``
+    ≥ 0; every bad argument raises a ``UsageError`` naming it, before any work. Memory does
+    not grow with ``rays``: chunks are scheduled lazily, at most ``IN_FLIGHT``·threads at a
+    time; the per-bin tallies are checked against the memory limit up front
+    (``BIN_BYTES_*``, ``_checks.check_memory``).
     ``masking``: "traced" (Embree, the reference), "exact" (Embree primary hit, float64
     V-groove masking test) or "analytic" (primary hit and masking both exact in float64, no
     Embree: ``VGrooveCaster``; the fast path) — the last two only for ``azimuth_average``
@@ -769,31 +853,39 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     azimuths ψ_b, which is shared by all rays of a block). ``meta["stderr_method"]`` records
     which ("pairs" or "per-ray").
 
-    Interrupt and resume. A KeyboardInterrupt (SIGINT, or raised by ``progress``/a factory)
-    stops the run after the chunk in flight and *returns* a Result with ``meta["partial"] =
-    True`` holding every complete block (``Result.rays`` counts them; incidences not started
+    Interrupt and resume. A KeyboardInterrupt (SIGINT, or raised by ``progress``, by
+    ``microsim.checkpoints.checkpoint("simulation")`` — called after every chunk, after
+    ``progress`` — or by a factory) stops the run after the chunk in flight (within one
+    thread task, well under a second at the default ``chunk``, whatever ``rays``) and
+    *returns* a Result with ``meta["partial"] = True`` holding every complete block (``Result.rays`` counts them; incidences not started
     have 0 rays and NaN estimates). ``resume=<that Result>`` (same surface(s), material, θi,
     φi, bins, seed, rays, masking, origins, isotropic; else ValueError naming what differs)
     continues from the first block not yet done; the final tallies are bitwise identical to an uninterrupted
     run, because blocks are seeded by index and the raw running sums (``Result.tallies``) are
     stored exactly. Returns a ``Result`` (BRDF in sr⁻¹).
     """
-    th, ph = _check_inputs(theta_i, phi_i, rays, threads, chunk, masking)
+    th, ph = _check_inputs(theta_i, phi_i, rays, threads, chunk, masking, seed)
     if not isinstance(bins, Bins):
-        raise UsageError(f"bins must be a microsim.sim.Bins, got {bins!r}")
-    if origins not in ORIGINS:
+        raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
+    if not isinstance(origins, str) or origins not in ORIGINS:
         raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
+    if progress is not None and not callable(progress):
+        raise UsageError(f"progress must be None or a callable receiving "
+                         f"microsim.sim.RaysDone events, got {progress!r}")
+    if not isinstance(isotropic, (bool, np.bool_)):
+        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
     ior = resolve_material(material)
     n_real, get_surface = _realisation_list(surface, realisations)
-    rays, seed = int(rays), int(seed)
+    rays, seed, threads = int(rays), int(seed), int(threads)
     per_real = [rays // n_real + (r < rays % n_real) for r in range(n_real)]
     if min(per_real) < 1:
         raise UsageError(f"rays must be >= the number of realisations ({n_real}), got {rays}")
     nbin = bins.shape[0] * bins.shape[1]
+    check_memory("bins", nbin * (BIN_BYTES_TALLY * n_real * len(th) + BIN_BYTES_INCIDENCE
+                                 * len(th) + BIN_BYTES_THREAD * threads),
+                 f"the tallies of {nbin:,} bins × {len(th)} incidences × {n_real} realisations")
     chunk_blocks = max(1, int(round(int(chunk) / BLOCK)))
     material_meta = _json_material(material, ior)
-    if not isinstance(isotropic, (bool, np.bool_)):
-        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
     isotropic = bool(isotropic)
     config = _run_config(th, ph, bins, seed, rays, masking, origins, material_meta, n_real,
                          isotropic)
@@ -807,7 +899,7 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     done_before = done.copy()
     timings, build, interrupted = [], 0.0, False
     t_all = time.perf_counter()
-    pool = _thread_pool(int(threads))
+    pool = _thread_pool(threads)
     with _DeferredInterrupt() as stop:
         try:
             for r in range(n_real):
@@ -824,28 +916,30 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
                     if stop.is_set():                   # SIGINT while building the surface
                         raise KeyboardInterrupt
                     start, end = int(done[r, i]), int(nblk[r])
-                    groups = _chunk_groups(start, end, chunk_blocks, int(threads))
-                    if start < end and _uses_facet_table(tracer, profile, azimuth, isotropic,
-                                                         per_real[r]):
+                    if start >= end:
+                        continue
+                    if _uses_facet_table(tracer, profile, azimuth, isotropic, per_real[r]):
                         wi = spherical_deg(t_deg, p_deg)        # built by all threads at once
                         tracer.memo(_facet_table_key(wi, ior, bins, p_deg),
                                     partial(_facet_table, tracer, wi, ior, bins, p_deg, pool,
-                                            int(threads)))
+                                            threads))
                     work = partial(_chunk_tallies, tracer, profile, spherical_deg(t_deg, p_deg),
                                    p_deg, bins, ior, per_real[r], key=(seed, r, i),
                                    azimuth=azimuth, origins=origins, rotate=isotropic)
-                    futures = [pool.submit(work, g) for g in groups]
-                    try:
-                        for fut in futures:             # in chunk order, blocks in block order
-                            done[r, i] += tallies[r][i].add_chunk(fut.result())
-                            if stop.is_set():
-                                raise KeyboardInterrupt
-                    finally:                            # nothing left running on return
-                        for fut in futures:
-                            fut.cancel()
-                        wait(futures)
-                    if groups and progress is not None:
-                        progress(f"realisation {r + 1}/{n_real}, theta_i = {t_deg:g}°: done")
+
+                    def tally(chunk, r=r, i=i, t_deg=t_deg):
+                        """Add one chunk (main thread, block order), then report it."""
+                        before = min(int(done[r, i]) * BLOCK, per_real[r])
+                        done[r, i] += tallies[r][i].add_chunk(chunk)
+                        after = min(int(done[r, i]) * BLOCK, per_real[r])
+                        if progress is not None:
+                            progress(RaysDone(realisation=r, realisations=n_real, incidence=i,
+                                              theta_i=float(t_deg), rays=after - before,
+                                              finished=bool(done[r, i] >= nblk[r])))
+                        checkpoint("simulation")
+
+                    _run_chunks(pool, work, _chunk_groups(start, end, chunk_blocks, threads),
+                                IN_FLIGHT * threads, stop, tally)
                 timings.append(time.perf_counter() - t0)
                 del tracer, profile
         except KeyboardInterrupt:
@@ -884,17 +978,42 @@ def _thread_pool(threads: int) -> ThreadPoolExecutor:
         return _POOLS[threads]
 
 
-def _chunk_groups(start: int, end: int, chunk_blocks: int, threads: int) -> list:
+def _chunk_groups(start: int, end: int, chunk_blocks: int, threads: int) -> Iterator[range]:
     """Blocks start … end − 1 cut into consecutive thread tasks of ``chunk_blocks`` blocks,
     guided: no task takes more than 1/(2·threads) of the blocks still left, so the tasks
     shrink towards the end and the threads finish together (and a short run still gives
-    every thread work)."""
-    groups, a = [], start
+    every thread work). A generator: nothing is built ahead of the scheduler (``_run_chunks``),
+    whatever the number of blocks."""
+    a = start
     while a < end:
         step = min(chunk_blocks, max(1, (end - a) // (2 * threads)))
-        groups.append(range(a, a + step))
+        yield range(a, a + step)
         a += step
-    return groups
+
+
+def _run_chunks(pool: ThreadPoolExecutor, work, groups, depth: int, stop: threading.Event,
+                consume) -> None:
+    """Run ``work(group)`` on ``pool`` for the groups of the iterator ``groups``, submitting
+    lazily with at most ``depth`` tasks queued or running, and hand each result to
+    ``consume`` in group order (main thread). Raises KeyboardInterrupt when ``stop`` is set
+    after a result was consumed; anything ``consume`` or a task raises propagates. On return
+    no task of this call is left queued or running, so memory and the delay before an
+    interrupt is honoured (one task) do not depend on the number of groups."""
+    groups = iter(groups)
+    pending: deque = deque(pool.submit(work, g) for g in itertools.islice(groups, depth))
+    try:
+        while pending:
+            chunk = pending.popleft().result()     # in group order, blocks in block order
+            nxt = next(groups, None)
+            if nxt is not None:                     # keep the pool busy while we tally
+                pending.append(pool.submit(work, nxt))
+            consume(chunk)
+            if stop.is_set():
+                raise KeyboardInterrupt
+    finally:
+        for fut in pending:
+            fut.cancel()
+        wait(pending)
 
 
 def _estimate(sum_w, sum_w2, n, omega, sum_pair=None):

@@ -20,7 +20,6 @@ the rays still live (most finish in the first segment). The BVH is built in ``__
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import functools
 import threading
 from dataclasses import dataclass
@@ -28,6 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 from embreex import mesh_construction as mc
 from embreex import rtcore_scene as rs
+
+from microsim.errors import UsageError
+from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 
 from . import kernels
 from .scratch import work
@@ -73,6 +75,10 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     lx, ly = (float(t) for t in surface.tile_size)
     if not (lx > 0 and ly > 0 and np.isfinite(lx) and np.isfinite(ly)):
         raise UsageError(f"surface.tile_size must be two finite lengths > 0, got {surface.tile_size!r}")
+    if not (max(lx, ly) <= MAX_COORDINATE):
+        raise UsageError(f"surface.tile_size must be within {MAX_COORDINATE:g} (float32), "
+                         f"got {surface.tile_size!r}")
+    check_relief("surface", v[:, 2].min(), v[:, 2].max(), (lx, ly))
     tol = 1e-9 * max(lx, ly)
     if np.any(np.abs(v[:, 0]) > lx / 2 + tol) or np.any(np.abs(v[:, 1]) > ly / 2 + tol):
         raise UsageError("surface.vertices must lie in the tile [-Lx/2, Lx/2] x [-Ly/2, Ly/2]")

@@ -17,15 +17,16 @@ slope variance from the discrete spectrum with that response.
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import warnings as _warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import integrate
 
-from microsim.analytic._checks import positive
-from .surface import Surface, heightfield_mesh
+from microsim.analytic._checks import check_memory, integer, positive
+from microsim.errors import UsageError
+
+from .surface import Surface, check_relief, heightfield_mesh
 
 __all__ = ["gaussian", "abc", "gaussian_psd", "abc_psd", "abc_amplitude", "psd_grid",
            "synthesize", "spectrum_moments", "SpectrumMoments", "gaussian_mesh_slope_var",
@@ -33,13 +34,28 @@ __all__ = ["gaussian", "abc", "gaussian_psd", "abc_psd", "abc_amplitude", "psd_g
 
 MIN_GRID = 8
 GAUSS_MIN_CORR_CELLS = 7.0      # ℓ ≥ 7·dx keeps the triangulation slope bias under 1 %
+GAUSS_RESOLVED_CELLS = 1.0
+"""Shortest Gaussian ℓ, in grid steps, that the grid resolves: the synthesis keeps the spectrum
+up to the Nyquist frequency 1/(2dx), i.e. erf(πℓ/(2dx))² of σ² — 95 % at ℓ = dx, 18 % at dx/4,
+nothing as ℓ → 0 (the mesh turns flat whatever the nominal m = 2σ/ℓ). Shorter ℓ is refused."""
+BYTES_PER_GRID_POINT = 600
+"""Peak memory per grid point of a heightfield built and traced (two triangles): measured
+≈ 520 bytes (RSS growth, 1024² and 2048² Gaussian grids: synthesis FFTs, mesh, Embree BVH,
+tracer facet arrays and per-facet table); checked against ``_checks.memory_limit`` before
+synthesis."""
 
 
 # --- spectra -----------------------------------------------------------------------------------
 def gaussian_psd(f, sigma: float, corr_len: float):
     """PSD of the autocorrelation σ² exp(−r²/ℓ²): S(f) = π σ² ℓ² exp(−π² ℓ² f²) (length⁴)."""
     f = np.asarray(f, dtype=np.float64)
+    sigma, corr_len = np.float64(sigma), np.float64(corr_len)      # inf on overflow, no raise
     return np.pi * sigma ** 2 * corr_len ** 2 * np.exp(-(np.pi * corr_len * f) ** 2)
+
+
+def _erf2(x: float) -> float:
+    from scipy.special import erf
+    return float(erf(x) ** 2)
 
 
 def abc_amplitude(sigma: float, B: float, C: float) -> float:
@@ -132,14 +148,25 @@ def abc_continuum_slope_var(sigma: float, B: float, C: float, f_max: float) -> f
 
 # --- generators --------------------------------------------------------------------------------
 def _grid_args(n, dx, seed):
-    if isinstance(n, bool) or int(n) != n or n < MIN_GRID:
-        raise UsageError(f"n must be an integer >= {MIN_GRID} (grid points per side), got {n!r}")
-    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
-    return int(n), positive("dx", dx), int(seed)
+    """(n, dx, seed) validated; an n×n grid that would not fit in memory is refused here,
+    before anything is allocated (``BYTES_PER_GRID_POINT``)."""
+    n = integer("n", n, MIN_GRID, None, " (grid points per side)")
+    dx, seed = positive("dx", dx), integer("seed", seed, 0)
+    check_memory("n", float(n) * n * BYTES_PER_GRID_POINT,
+                 f"a {n}x{n} heightfield ({BYTES_PER_GRID_POINT} bytes per grid point to "
+                 f"synthesise, mesh and trace)")
+    return n, dx, seed
+
+
+def _finite_spectrum(S: np.ndarray, names: str) -> None:
+    if not np.all(np.isfinite(S)):
+        raise UsageError(f"{names}: the spectrum overflows float64 (height variance beyond "
+                         f"1e308); use lengths of a sensible scale")
 
 
 def _heightfield_surface(kind, heights, dx, nominal, warns):
+    ny, nx = heights.shape
+    check_relief("sigma", heights.min(), heights.max(), (nx * dx, ny * dx))
     for w in warns:
         _warnings.warn(w, stacklevel=3)
     vertices, faces = heightfield_mesh(heights, dx)
@@ -155,17 +182,29 @@ def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
     ``dx`` grid spacing, ``sigma`` rms height, ``corr_len`` ℓ (all in the same length unit).
     Spectrum S(f) = π σ² ℓ² exp(−π² ℓ² f²), S(0) = 0 (module docstring for the synthesis).
     Facet normals follow Beckmann with nominal m = 2σ/ℓ (per-axis slope variance 2σ²/ℓ²);
-    the mesh realises 2σ²(1 − e^{−u})/dx², u = (dx/ℓ)², which warns when ℓ < 7·dx.
+    the mesh realises the discrete-spectrum slope variance (``spectrum_moments``; equal to
+    2σ²(1 − e^{−u})/dx², u = (dx/ℓ)², within 1e-4 for ℓ ≥ 2·dx), which warns — stating that
+    realised m — when ℓ < 7·dx. ℓ < dx (``GAUSS_RESOLVED_CELLS``) is not resolved by the grid
+    and raises a UsageError. Grids beyond the memory limit are refused before synthesis.
     """
     n, dx, seed = _grid_args(n, dx, seed)
     sigma, corr_len = positive("sigma", sigma), positive("corr_len", corr_len)
+    if corr_len < GAUSS_RESOLVED_CELLS * dx:
+        raise UsageError(f"corr_len must be >= dx = {dx:g} (a shorter correlation length is not "
+                         f"resolved by the grid: it keeps erf(πℓ/(2dx))² of σ², "
+                         f"{100 * _erf2(np.pi * corr_len / (2 * dx)):.3g} % here), got "
+                         f"{corr_len:g}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        S, FX, FY = psd_grid(lambda f: gaussian_psd(f, sigma, corr_len), (n, n), dx)
+    _finite_spectrum(S, f"sigma = {sigma:g}, corr_len = {corr_len:g}")
     warns = []
     if corr_len < GAUSS_MIN_CORR_CELLS * dx:
-        bias = gaussian_mesh_slope_var(sigma, corr_len, dx) / (2 * sigma ** 2 / corr_len ** 2)
+        mom = spectrum_moments(S, FX, FY, dx)
+        mesh = 0.5 * (mom.slope_var_x + mom.slope_var_y)
+        bias = mesh / (2 * np.float64(sigma) ** 2 / np.float64(corr_len) ** 2)
         warns.append(f"gaussian: corr_len = {corr_len:g} < 7·dx = {7 * dx:g}: the mesh slope "
                      f"variance is {bias:.4f} × the continuum 2σ²/ℓ² (realised m "
-                     f"{np.sqrt(bias) * 2 * sigma / corr_len:.4g} vs nominal {2 * sigma / corr_len:.4g})")
-    S, _, _ = psd_grid(lambda f: gaussian_psd(f, sigma, corr_len), (n, n), dx)
+                     f"{np.sqrt(2 * mesh):.4g} vs nominal {2 * sigma / corr_len:.4g})")
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     nominal = {"sigma": sigma, "corr_len": corr_len, "m": 2.0 * sigma / corr_len, "n": n,
                "dx": dx, "seed": seed, "exact_amplitude": bool(exact_amplitude)}
@@ -200,8 +239,10 @@ def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
         raise UsageError(f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), "
                          f"got {band_limit!r}")
     f_max = 1.0 / (2.0 * k * dx)
-    A = abc_amplitude(sigma, B, C)
-    S, FX, FY = psd_grid(lambda f: abc_psd(f, A, B, C), (n, n), dx, f_max)
+    with np.errstate(over="ignore", invalid="ignore"):
+        A = abc_amplitude(np.float64(sigma), np.float64(B), C)
+        S, FX, FY = psd_grid(lambda f: abc_psd(f, A, B, C), (n, n), dx, f_max)
+    _finite_spectrum(S, f"sigma = {sigma:g}, B = {B:g}")
     warns = []
     if C <= 3.0:
         warns.append(f"abc: C = {C:g} <= 3: the slope variance depends on the grid cut-off "
@@ -221,8 +262,9 @@ def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
 def predictions(surface: Surface) -> dict:
     """Predicted statistics of a generated heightfield (empty dict for other kinds).
 
-    ``predicted_rms_height`` and ``predicted_slope_var`` (per axis, mesh-exact): Gaussian from
-    2σ²(1 − e^{−u})/dx², ABC from the discrete spectrum with the finite-difference response;
+    ``predicted_rms_height`` and ``predicted_slope_var`` (per axis, mesh-exact): from the
+    discrete spectrum with the finite-difference response (Gaussian: equal to 2σ²(1 − e^{−u})/dx²
+    within 1e-4 for ℓ ≥ 2·dx, and still exact below, where that point-sampled formula is not);
     ``spectrum_slope_var`` the discrete-spectrum value for both, ``continuum_slope_var`` the
     dx → 0 value (ABC: within the band), ``predicted_m`` = √(2 · predicted_slope_var).
     """
@@ -230,7 +272,7 @@ def predictions(surface: Surface) -> dict:
     if surface.kind == "gaussian":
         S, FX, FY = psd_grid(lambda f: gaussian_psd(f, p["sigma"], p["corr_len"]),
                              surface.heights.shape, p["dx"])
-        mesh = gaussian_mesh_slope_var(p["sigma"], p["corr_len"], p["dx"])
+        mesh = None                      # the discrete spectrum: exact for any ℓ ≥ dx
         continuum = 2.0 * p["sigma"] ** 2 / p["corr_len"] ** 2
     elif surface.kind == "abc":
         S, FX, FY = psd_grid(lambda f: abc_psd(f, p["A"], p["B"], p["C"]),

@@ -1,54 +1,171 @@
-"""Measured or externally generated heightfields from files."""
+"""Measured or externally generated heightfields from files.
+
+Formats: ``.npy`` (read through its header first), ``.npz`` (its single array or the key
+'heights'; the member's header is read before it is inflated) or whitespace-separated text
+(any other suffix; at most ``MAX_TEXT_BYTES``). ``check_heightfield_file(path, dx)`` validates
+a file without building anything — callers run it before creating outputs; every problem is a
+one-line ``UsageError`` naming the file.
+"""
 from __future__ import annotations
 
-from microsim.errors import UsageError
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from microsim.analytic._checks import positive
-from .heightfields import MIN_GRID
+from microsim.analytic._checks import check_memory, positive
+from microsim.errors import UsageError
+
+from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
 from .surface import Surface, heightfield_mesh
 
-__all__ = ["from_file", "read_heights", "mirror_periodic"]
+__all__ = ["from_file", "read_heights", "check_heightfield_file", "mirror_periodic",
+           "MAX_TEXT_BYTES"]
+
+MAX_TEXT_BYTES = 64 << 20
+"""Largest text heightfield read (64 MiB): ``np.loadtxt`` holds every value as a Python object
+while parsing (~10× the file); save larger grids as ``.npy``."""
 
 
-def read_heights(path) -> np.ndarray:
-    """A 2D float64 height array from .npy, .npz (its single array, or the key 'heights') or
-    whitespace-separated text (any other suffix). Raises ValueError naming the file."""
-    path = Path(path)
+def _fail(path: Path, what: str) -> UsageError:
+    return UsageError(f"{path}: {' '.join(str(what).split())}")
+
+
+def _header(path: Path, f) -> tuple[tuple, np.dtype]:
+    """(shape, dtype) from the .npy header at the current position of the binary file ``f``."""
+    try:
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+        else:
+            shape, _, dtype = np.lib.format.read_array_header_2_0(f)
+    except (ValueError, EOFError, OSError, SyntaxError) as e:
+        raise _fail(path, f"not a readable .npy array ({e or type(e).__name__})") from None
+    return tuple(int(s) for s in shape), np.dtype(dtype)
+
+
+def _check_shape(path: Path, shape: tuple, dtype: np.dtype | None, periodic: bool) -> None:
+    """Refuse a wrong dtype, ndim or size, and a grid whose surface would not fit in memory."""
+    if dtype is not None and dtype.kind not in "iuf":
+        raise _fail(path, f"heights must be real numbers, got dtype {dtype}")
+    if len(shape) != 2:
+        raise _fail(path, f"heights must be a 2D array (rows = y, columns = x), got shape {shape}")
+    if min(shape) < MIN_GRID:
+        raise _fail(path, f"heights grid must be at least {MIN_GRID}x{MIN_GRID}, "
+                          f"got {shape[0]}x{shape[1]}")
+    ny, nx = shape
+    points = ny * nx if periodic else (2 * ny - 2) * (2 * nx - 2)
+    try:
+        check_memory(str(path), points * BYTES_PER_GRID_POINT,
+                     f"a {ny}x{nx} heightfield ({'as is' if periodic else 'mirrored'}: "
+                     f"{points:,} grid points × {BYTES_PER_GRID_POINT} bytes to mesh and trace)")
+    except UsageError as e:
+        raise UsageError(" ".join(str(e).split())) from None
+
+
+def _npz_member(path: Path) -> str:
+    """Name of the array a .npz holds: 'heights', or its only member."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = [n[:-4] if n.endswith(".npy") else n for n in z.namelist()]
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise _fail(path, f"not a readable .npz archive ({e or type(e).__name__})") from None
+    if "heights" in names:
+        return "heights"
+    if len(names) != 1:
+        raise _fail(path, f".npz must hold a single array or the key 'heights', found keys {names}")
+    return names[0]
+
+
+def _regular_file(path: Path) -> None:
+    if not path.exists():
+        raise _fail(path, "no such heightfield file")
     if not path.is_file():
-        raise UsageError(f"path: no such heightfield file {str(path)!r}")
+        raise _fail(path, "not a regular file (a heightfield file must be .npy, .npz or text)")
+
+
+def check_heightfield_file(path, dx=None, periodic: bool = False) -> tuple[int, int]:
+    """Validate a heightfield file for ``from_file(path, dx, periodic)`` without building the
+    surface; returns its grid shape (ny, nx). Headers are read first (shape, dtype, size: a
+    file that would not fit in memory is refused before it is read); the values are then
+    checked to be finite (.npy through a memory map, in slabs). ``dx`` (None: not checked)
+    must be a finite length > 0. Every problem raises a one-line UsageError naming the file
+    (or ``dx``); OS errors such as a permission denied propagate as ``OSError``."""
+    path = Path(path)
+    if dx is not None:
+        positive("dx", dx)
+    _regular_file(path)
+    if path.suffix == ".npy":
+        with open(path, "rb") as f:
+            shape, dtype = _header(path, f)
+            offset = f.tell()
+        _check_shape(path, shape, dtype, periodic)
+        need = offset + dtype.itemsize * shape[0] * shape[1]
+        size = path.stat().st_size
+        if size < need:
+            raise _fail(path, f"truncated .npy file: {size} bytes, its header promises {need}")
+        try:
+            a = np.load(path, mmap_mode="r", allow_pickle=False)
+        except (ValueError, EOFError, OSError) as e:
+            raise _fail(path, f"not a readable .npy array ({e})") from None
+        bad = sum(int(np.count_nonzero(~np.isfinite(a[i:i + 1024])))
+                  for i in range(0, shape[0], 1024))
+        del a
+        if bad:
+            raise _fail(path, f"heights contain NaN or inf ({bad} values); fill or crop them first")
+        return shape
+    if path.suffix == ".npz":
+        key = _npz_member(path)
+        with zipfile.ZipFile(path) as z:
+            member = key + ".npy" if key + ".npy" in z.namelist() else key
+            with z.open(member) as f:
+                shape, dtype = _header(path, f)
+        _check_shape(path, shape, dtype, periodic)
+    elif path.stat().st_size > MAX_TEXT_BYTES:
+        raise _fail(path, f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB "
+                          f"({path.stat().st_size:,} bytes); save it as .npy")
+    return read_heights(path, periodic=periodic).shape
+
+
+def read_heights(path, periodic: bool = False) -> np.ndarray:
+    """A 2D float64 height array from .npy, .npz (its single array, or the key 'heights') or
+    whitespace-separated text (any other suffix). Raises a one-line UsageError naming the file
+    for a missing or unreadable file, a wrong dtype, ndim or size, non-finite values, or a
+    grid whose surface (mirrored unless ``periodic``) would not fit in memory."""
+    path = Path(path)
+    _regular_file(path)
     try:
         if path.suffix == ".npy":
+            with open(path, "rb") as f:
+                shape, dtype = _header(path, f)
+            _check_shape(path, shape, dtype, periodic)
             a = np.load(path, allow_pickle=False)
         elif path.suffix == ".npz":
+            key = _npz_member(path)
+            with zipfile.ZipFile(path) as z:
+                member = key + ".npy" if key + ".npy" in z.namelist() else key
+                with z.open(member) as f:
+                    shape, dtype = _header(path, f)
+            _check_shape(path, shape, dtype, periodic)
             with np.load(path, allow_pickle=False) as z:
-                keys = list(z.keys())
-                if "heights" in keys:
-                    a = z["heights"]
-                elif len(keys) == 1:
-                    a = z[keys[0]]
-                else:
-                    raise UsageError(f"{path}: .npz must hold a single array or the key 'heights', "
-                                     f"found keys {keys}")
+                a = z[key]
         else:
+            if path.stat().st_size > MAX_TEXT_BYTES:
+                raise _fail(path, f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB; "
+                                  f"save it as .npy")
             a = np.loadtxt(path, ndmin=2)
-    except ValueError as e:
-        raise UsageError(f"{path}: cannot read heights ({e})") from None
+    except UsageError:
+        raise
+    except (ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise _fail(path, f"cannot read heights ({e or type(e).__name__})") from None
     a = np.asarray(a)
-    if a.ndim != 2:
-        raise UsageError(f"{path}: heights must be a 2D array (rows = y, columns = x), "
-                         f"got shape {a.shape}")
     if not np.issubdtype(a.dtype, np.number) or np.iscomplexobj(a):
-        raise UsageError(f"{path}: heights must be real numbers, got dtype {a.dtype}")
+        raise _fail(path, f"heights must be real numbers, got dtype {a.dtype}")
+    _check_shape(path, a.shape, None, periodic)
     a = a.astype(np.float64)
     if not np.all(np.isfinite(a)):
-        raise UsageError(f"{path}: heights contain NaN or inf ({int(np.sum(~np.isfinite(a)))} "
-                         f"values); fill or crop them first")
-    if min(a.shape) < MIN_GRID:
-        raise UsageError(f"{path}: heights grid must be at least {MIN_GRID}x{MIN_GRID}, "
-                         f"got {a.shape[0]}x{a.shape[1]}")
+        raise _fail(path, f"heights contain NaN or inf ({int(np.sum(~np.isfinite(a)))} values); "
+                          f"fill or crop them first")
     return a
 
 
@@ -75,7 +192,7 @@ def from_file(path, dx: float, periodic: bool = False) -> Surface:
     The mean height is subtracted.
     """
     dx = positive("dx", dx)
-    raw = read_heights(path)
+    raw = read_heights(path, periodic=periodic)
     h = raw if periodic else mirror_periodic(raw)
     h = h - h.mean()
     vertices, faces = heightfield_mesh(h, dx)

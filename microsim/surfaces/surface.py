@@ -12,7 +12,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Surface", "flat", "heightfield_mesh", "facet_slopes"]
+from microsim.errors import UsageError
+
+__all__ = ["Surface", "flat", "heightfield_mesh", "facet_slopes", "check_relief", "MAX_RELIEF",
+           "MAX_COORDINATE"]
+
+MAX_RELIEF = 1000.0
+"""Largest height range of a surface in units of its (smaller) tile side. The tracer walks a
+ray through copies of the tile; one 89.5° from the normal crosses the tile ~230 times per tile
+height it descends, so a relief of 1000 tiles already allows ~2·10⁵ crossings per ray."""
+MAX_COORDINATE = 1e30
+"""Largest vertex coordinate: Embree traces in float32 (max 3.4e38), with room for products."""
+
+
+def check_relief(name: str, zmin: float, zmax: float, tile) -> None:
+    """Raise a UsageError naming ``name`` unless the height range zmax − zmin is finite,
+    within ``MAX_COORDINATE`` and at most ``MAX_RELIEF`` × the smaller tile side."""
+    relief, side = float(zmax) - float(zmin), float(min(tile))
+    big = max(abs(float(zmin)), abs(float(zmax)))
+    if not (np.isfinite(relief) and big <= MAX_COORDINATE):
+        raise UsageError(f"{name}: surface heights must be finite and within ±{MAX_COORDINATE:g} "
+                         f"(Embree traces in float32), got the range [{zmin:g}, {zmax:g}]")
+    if relief > MAX_RELIEF * side:
+        raise UsageError(f"{name}: the surface's height range {relief:.4g} is more than "
+                         f"{MAX_RELIEF:g} × its tile side {side:.4g}: a grazing ray would cross "
+                         f"the tile ~{230 * relief / side:.2g} times (reduce the heights or "
+                         f"enlarge the tile)")
 
 
 @dataclass(frozen=True, eq=False)

@@ -12,15 +12,21 @@ estimator's job: ``Surface.azimuth_average``) gives the isotropic V-cavity surfa
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import numpy as np
 
-from microsim.analytic._checks import positive
+from microsim.analytic._checks import check_memory, integer, positive
+from microsim.errors import UsageError
+
 from .surface import Surface
 
 __all__ = ["vgrooves", "groove_tilts", "groove_profile", "groove_stats"]
 
 SAMPLINGS = ("stratified", "random")
+BYTES_PER_GROOVE = 1600
+"""Peak memory per groove of a V-groove surface built and traced (four triangles): measured
+≈ 1100 (traced masking) to 1500 bytes (analytic) of RSS growth at 10⁶ and 4·10⁶ grooves
+(tilts, profile, mesh, Embree BVH, tracer facet arrays, groove caster); checked against
+``_checks.memory_limit`` before anything is allocated."""
 
 
 def groove_tilts(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified") -> np.ndarray:
@@ -76,16 +82,19 @@ def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
 
     Tilts from ``ndf`` (any object with ``tilt_quantile``; see ``groove_tilts`` for the
     stratified/random choice and the seeded shuffle). Grooves run along y; all rims at z = 0,
-    nothing above; 4 triangles per groove; periodic; ``azimuth_average`` is True.
+    nothing above; 4 triangles per groove; periodic; ``azimuth_average`` is True. Groove
+    counts beyond the memory limit (``BYTES_PER_GROOVE``) are refused before any allocation.
     """
-    if isinstance(n_grooves, bool) or int(n_grooves) != n_grooves or n_grooves < 1:
-        raise UsageError(f"n_grooves must be an integer >= 1, got {n_grooves!r}")
+    n_grooves = integer("n_grooves", n_grooves, 1)
     if not callable(getattr(ndf, "tilt_quantile", None)):
         raise UsageError(f"ndf must be an NDF with tilt_quantile(u) (e.g. microsim.analytic."
                          f"Beckmann(0.3)), got {ndf!r}")
-    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
-    n_grooves, seed, tile = int(n_grooves), int(seed), positive("tile", tile)
+    seed, tile = integer("seed", seed, 0), positive("tile", tile)
+    if sampling not in SAMPLINGS:
+        raise UsageError(f"sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
+    check_memory("n_grooves", float(n_grooves) * BYTES_PER_GROOVE,
+                 f"{n_grooves:,} grooves ({BYTES_PER_GROOVE} bytes per groove to build and "
+                 f"trace)")
     tilts = groove_tilts(n_grooves, ndf, seed, sampling)
     vertices, faces = _extrude(*groove_profile(tilts, tile), tile)
     params = ndf.params() if callable(getattr(ndf, "params", None)) else {}
