@@ -1,18 +1,60 @@
-"""Atomic file writes: nothing is ever half-written.
+"""Atomic file writes, output directories published in one rename, and output locks.
 
-Every output goes to a temporary file in the target's directory and is renamed onto the target
-with ``os.replace`` only once it is complete; on any error the temporary file is removed and the
-old target, if any, is left untouched.
+Every output goes to a temporary file (or staging directory) beside its target and is renamed
+onto the target with ``os.replace`` only once it is complete; on any error the temporary is
+removed and the old target, if any, is left untouched. Files and directories get the user's
+normal permissions (0o666 / 0o777 minus the umask), not ``mkstemp``'s 0o600 / 0o700.
+
+Temporaries of a directory ``DIR`` are named ``.DIR.tmp-<pid>-*`` (staging) and
+``.DIR.old-<pid>-*`` (the replaced directory, removed after the swap). A process killed by
+SIGKILL/SIGTERM leaves them behind; ``clean_stale(DIR)`` removes exactly those whose process
+is gone — call it only while holding ``output_lock(DIR)``.
+
+``output_lock(DIR)`` is an exclusive ``fcntl.flock`` on ``.DIR.lock`` beside ``DIR`` (holding
+the owner's pid), held for a run's duration: a second run on the same ``DIR`` is refused with
+a ``UsageError``. The kernel drops the lock when its process dies, so a stale lock file never
+blocks anyone.
 """
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import os
+import re
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_open", "write_text", "write_json"]
+from .errors import UsageError
+
+__all__ = ["atomic_open", "write_text", "write_json", "umask", "file_mode", "dir_mode",
+           "make_staging", "publish_dir", "output_lock", "clean_stale", "normalise_modes"]
+
+
+def umask() -> int:
+    """The process umask (read without changing it where /proc allows)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    old = os.umask(0o022)
+    os.umask(old)
+    return old
+
+
+def file_mode() -> int:
+    """Mode of a new regular file: 0o666 minus the umask."""
+    return 0o666 & ~umask()
+
+
+def dir_mode() -> int:
+    """Mode of a new directory: 0o777 minus the umask."""
+    return 0o777 & ~umask()
 
 
 @contextmanager
@@ -23,6 +65,7 @@ def atomic_open(path, mode: str = "w"):
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
     try:
+        os.fchmod(fd, file_mode())
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as fh:
             yield fh
         os.replace(tmp, path)
@@ -42,3 +85,126 @@ def write_json(path, obj, **dump_options) -> None:
     """``json.dump(obj, indent=1, **dump_options)`` to ``path`` atomically."""
     with atomic_open(path) as fh:
         json.dump(obj, fh, indent=1, **dump_options)
+
+
+# --- directories -------------------------------------------------------------------------------
+def _temp_dir(out: Path, kind: str) -> Path:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    d = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.{kind}-{os.getpid()}-"))
+    os.chmod(d, dir_mode())
+    return d
+
+
+def make_staging(out) -> Path:
+    """A new empty staging directory ``.OUT.tmp-<pid>-*`` beside ``out`` (normal mode)."""
+    return _temp_dir(Path(out), "tmp")
+
+
+def normalise_modes(root) -> None:
+    """Give ``root`` and everything under it the normal modes (files 0o666, directories 0o777,
+    minus the umask): undo ``mkstemp``/``mkdtemp``'s private 0o600/0o700."""
+    fmode, dmode = file_mode(), dir_mode()
+    os.chmod(root, dmode)
+    for base, dirs, files in os.walk(root):
+        for d in dirs:
+            os.chmod(os.path.join(base, d), dmode)
+        for f in files:
+            os.chmod(os.path.join(base, f), fmode)
+
+
+def publish_dir(stage, out) -> None:
+    """Move the finished ``stage`` directory to ``out``: one rename when ``out`` is new; else
+    the old one is renamed aside (``.OUT.old-<pid>-*``), the new one renamed in, and only then
+    the old one removed. If the second rename fails the old directory is put back, so the old
+    result is never lost before the new one is in place."""
+    stage, out = Path(stage), Path(out)
+    normalise_modes(stage)
+    if not out.exists():
+        os.rename(stage, out)
+        return
+    old = _temp_dir(out, "old")
+    os.rename(out, old / "d")
+    try:
+        os.rename(stage, out)
+    except BaseException:
+        os.rename(old / "d", out)
+        os.rmdir(old)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def clean_stale(out) -> list[Path]:
+    """Remove ``.OUT.tmp-<pid>-*`` and ``.OUT.old-<pid>-*`` beside ``out`` left by processes
+    that no longer exist (only microsim's own names; a live or unknown owner is left alone).
+    Returns what was removed. Call only while holding ``output_lock(out)``."""
+    out = Path(out)
+    pattern = re.compile(re.escape(f".{out.name}.") + r"(tmp|old)-(\d+)-[A-Za-z0-9_]+")
+    removed = []
+    try:
+        entries = list(os.scandir(out.parent))
+    except OSError:
+        return removed
+    for e in entries:
+        m = pattern.fullmatch(e.name)
+        if not m or int(m.group(2)) == os.getpid() or _alive(int(m.group(2))):
+            continue
+        if e.is_dir(follow_symlinks=False):
+            shutil.rmtree(e.path, ignore_errors=True)
+            removed.append(Path(e.path))
+    return removed
+
+
+def lock_path(out) -> Path:
+    """The lock file of output ``out``: ``.OUT.lock`` in its parent."""
+    out = Path(out)
+    return out.parent / f".{out.name}.lock"
+
+
+@contextmanager
+def output_lock(out):
+    """Hold an exclusive lock on output ``out`` for the block; a second holder (another
+    process or another plan in this one) gets a one-line ``UsageError``. The lock file is
+    removed on exit; the kernel releases the lock if the process dies."""
+    path = lock_path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, file_mode())
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as e:
+            os.close(fd)
+            if e.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                try:
+                    owner = path.read_text().strip() or "?"
+                except OSError:
+                    owner = "?"
+                raise UsageError(f"{out}: another microsim run (pid {owner}) is writing it; "
+                                 f"wait for it to finish or choose another --out") from None
+            raise
+        try:                   # the file may have been unlinked by its previous holder
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        yield path
+    finally:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+        os.close(fd)

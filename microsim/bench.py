@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["BenchConfig", "throughput", "peak_rss_mb", "time_to_accuracy",
+__all__ = ["BenchConfig", "bench_config", "throughput", "peak_rss_mb", "time_to_accuracy",
            "run_bench", "format_bench", "add_bench_command"]
 
 BATCH = 2 ** 16
@@ -221,11 +221,25 @@ def format_bench(b: dict) -> str:
     return "\n".join(lines)
 
 
+QUICK = dict(n=128, rays=2 ** 17, memory_rays=(2 ** 16, 2 ** 18), target=0.05, vgrooves=1000)
+"""``bench --quick``: a 128² mesh, 2**17 rays (an explicit ``--rays`` wins), small memory probes."""
+
+
+def bench_config(rays: int | None = None, quick: bool = False,
+                 skip_accuracy: bool = False) -> BenchConfig:
+    """The configuration of ``microsim bench``: ``QUICK`` or the defaults, ``rays`` (primary
+    rays of the throughput runs, an integer >= 1) overriding either."""
+    if rays is not None and (isinstance(rays, bool) or int(rays) != rays or rays < 1):
+        from .errors import UsageError
+        raise UsageError(f"--rays must be an integer >= 1, got {rays!r}")
+    conf = dict(QUICK) if quick else {}
+    if rays is not None:
+        conf["rays"] = int(rays)
+    return BenchConfig(skip_accuracy=skip_accuracy, **conf)
+
+
 def _cmd_bench(args) -> int:
-    cfg = BenchConfig(rays=args.rays, skip_accuracy=args.skip_accuracy)
-    if args.quick:
-        cfg = BenchConfig(n=128, rays=2 ** 17, memory_rays=(2 ** 16, 2 ** 18), target=0.05,
-                          vgrooves=1000, skip_accuracy=args.skip_accuracy)
+    cfg = bench_config(args.rays, args.quick, args.skip_accuracy)
     b = run_bench(cfg)
     print(json.dumps(b, indent=1) if args.json else format_bench(b))
     return 0
@@ -236,8 +250,9 @@ def add_bench_command(subparsers) -> None:
     p = subparsers.add_parser("bench", help="measure raw Embree vs pipeline throughput, peak "
                                             "memory and time to 1%% precision")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
-    p.add_argument("--rays", type=int, default=BenchConfig.rays,
-                   help=f"primary rays of the throughput runs (default {BenchConfig.rays})")
+    p.add_argument("--rays", type=int, default=None,
+                   help=f"primary rays of the throughput runs (default {BenchConfig.rays}; "
+                        f"with --quick {QUICK['rays']})")
     p.add_argument("--quick", action="store_true",
                    help="small mesh and ray counts (seconds; for smoke tests)")
     p.add_argument("--skip-accuracy", action="store_true", help="omit the time-to-1%% run")

@@ -1,12 +1,26 @@
 """`microsim` command line.
 
-Every user error (bad parameter, malformed scene file) is printed as one line on stderr and
-exits with status 2, without a traceback; nothing is written.
+Exit statuses: 0 success; 2 usage error (bad option, malformed scene/sweep/heightfield file,
+unusable output path, output locked by another run) — one line on stderr naming the option,
+file or key, nothing written; 1 environment failure (disk full, read-only file system,
+permission denied, unreachable scheduler) — one line naming the path; 130 interrupted
+(Ctrl-C: finished results kept, partial ones saved for --resume). Anything else is a bug and
+is shown with its traceback (status 1).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import traceback
+
+from .errors import (EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure,
+                     UsageError)
+
+EPILOG = ("exit status: 0 ok; 1 environment failure (disk full, read-only, permission; one "
+          "line naming the path) or a bug (with traceback); 2 usage error (one line naming "
+          "the option, file or key; nothing written); 130 interrupted (finished results "
+          "kept, partial ones saved for --resume)")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -22,8 +36,11 @@ def _cmd_models(args) -> int:
 
 
 def _cmd_surface(args) -> int:
+    import warnings
     from .scene import describe_surface, load_scene
-    print(describe_surface(load_scene(args.scene)))
+    with warnings.catch_warnings():       # describe_surface lists the generator's warnings
+        warnings.simplefilter("ignore", UserWarning)
+        print(describe_surface(load_scene(args.scene)))
     return 0
 
 
@@ -47,11 +64,11 @@ def _cmd_run(args) -> int:
 def _cmd_report(args) -> int:
     from .runner import run_report
     return run_report(args.catalogue, args.out, quick=args.quick, threads=args.threads,
-                      progress=not args.no_progress)
+                      progress=not args.no_progress, resume=args.resume)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="microsim", description=__doc__.splitlines()[0])
+    p = _Parser(prog="microsim", description=__doc__.splitlines()[0], epilog=EPILOG)
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     m = sub.add_parser("models", help="list every closed-form model with its parameters and source")
     m.set_defaults(func=_cmd_models)
@@ -61,6 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="simulate a scene, compare and fit the models, write "
                                    "brdf.npz, meta.json, verdicts.json, report.md and charts")
     r.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
+    r.epilog = EPILOG
     r.add_argument("--rays", type=int, help="primary rays per incidence (default: the scene's; "
                                             "--quick caps it at 200000)")
     r.add_argument("--theta-i", type=_theta_list, nargs="+", metavar="DEG",
@@ -82,6 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                            "(default surfaces)")
     q.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
     q.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
+    q.add_argument("--resume", action="store_true",
+                   help="continue an interrupted report (same options): skip the scenes it "
+                        "finished, continue the interrupted one from its saved tallies")
     q.set_defaults(func=_cmd_report)
     from .bench import add_bench_command
     from .sweep import add_sweep_command
@@ -92,17 +113,38 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _one_line(text) -> str:
+    return " ".join(str(text).split())
+
+
+def _os_error(exc: OSError) -> str:
+    """One line naming the path(s) and the system's reason."""
+    reason = exc.strerror or _one_line(exc) or type(exc).__name__
+    paths = [p for p in (exc.filename, exc.filename2) if p is not None]
+    where = " -> ".join(os.fsdecode(p) if isinstance(p, (str, bytes)) else str(p) for p in paths)
+    return f"{where}: {reason}" if where else reason
+
+
 def main(argv=None) -> int:
+    """Run the command line; returns the exit status (module docstring)."""
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError) as exc:
-        msg = " ".join(str(exc).split())
-        print(f"microsim: error: {msg}", file=sys.stderr)
-        return 2
+    except UsageError as exc:
+        print(f"microsim: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    except EnvironmentFailure as exc:
+        print(f"microsim: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_ENVIRONMENT
+    except OSError as exc:
+        print(f"microsim: error: {_os_error(exc)}", file=sys.stderr)
+        return EXIT_ENVIRONMENT
     except KeyboardInterrupt:
         print("microsim: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except Exception:                      # a bug: show it as one
+        traceback.print_exc()
+        return EXIT_ENVIRONMENT
 
 
 if __name__ == "__main__":

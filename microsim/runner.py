@@ -14,7 +14,17 @@ One run (``plan_run`` → ``execute``):
 
 Ctrl-C during the simulation keeps the tallies so far: they are saved with
 ``meta["partial"] = True`` (exit status 130) and ``--resume DIR`` continues them to the requested
-ray count, giving the same tallies as an uninterrupted run.
+ray count, giving the same tallies as an uninterrupted run. Ctrl-C after the simulation (side
+studies, fits, charts, publishing) saves the complete tallies the same way (130); a side study
+cut short is never used for a report. ``microsim report`` keeps the tallies of an interrupted
+scene in ``OUT/.<scene>.partial/`` (the previous report of that scene stays in place) and
+``report --resume`` continues: finished scenes are skipped, the interrupted one resumed.
+
+Safety: a run holds ``atomic.output_lock(DIR)`` for its whole duration (a second run on the
+same DIR is refused), removes stale ``.DIR.tmp-<pid>-*`` left by killed runs, never replaces the
+current directory, one of its parents or a directory holding the scene file, and replaces an
+existing DIR (``--force``) only if it is empty or a microsim result. Wall times go to
+``timings.json`` only, so report.md, verdicts.json and index.md are reproducible.
 
 A scene with ``rays = "auto"`` (and no ``--rays``) is traced with ``sim.auto.simulate_auto``
 until the energy-weighted relative standard error is ≤ ``AUTO_TARGET`` (1 %) per incidence, at
@@ -27,12 +37,12 @@ incidence used are in ``meta.json`` (``auto``, ``run.auto``) and ``verdicts.json
 from __future__ import annotations
 
 from microsim.errors import UsageError
+import json
 import math
 import os
 import re
 import shutil
 import sys
-import tempfile
 import time
 import warnings
 from dataclasses import asdict, dataclass
@@ -42,18 +52,21 @@ from typing import Callable
 import numpy as np
 
 from . import atomic
+from .checkpoints import checkpoint
 
 from .analysis.report import albedo_stderr
 
 __all__ = ["Effort", "FULL", "QUICK", "AUTO_TARGET", "AUTO_MAX_RAYS", "RunPlan", "RunOutcome", "plan_run",
            "execute", "run_report", "publish_dir", "write_json_atomic", "VERDICTS_FILE",
-           "REPORT_FILE"]
+           "REPORT_FILE", "TIMINGS_FILE", "REPORT_STATE"]
 
 AUTO_TARGET = 0.01
 """Energy-weighted relative standard error a ``rays = "auto"`` scene is traced to."""
 AUTO_MAX_RAYS = 100_000_000
 """Cap on the rays per incidence of a ``rays = "auto"`` scene."""
-VERDICTS_FILE, REPORT_FILE = "verdicts.json", "report.md"
+VERDICTS_FILE, REPORT_FILE, TIMINGS_FILE = "verdicts.json", "report.md", "timings.json"
+REPORT_STATE = ".report-state.json"
+"""``microsim report``'s progress file in OUT (finished scenes), for ``report --resume``."""
 SCHEMA_VERSION = 1
 SWEEP_SEED, SPEED_SEED = 7919, 104729
 """Seed offsets of the side studies (added to the run's seed): independent of the main run."""
@@ -125,6 +138,8 @@ class RunPlan:
     previous: object | None = None        # Result loaded for --resume
     force: bool = False
     auto: bool = False                    # rays = "auto": ``rays`` is then the cap
+    partial_dir: Path | None = None       # where interrupted tallies go (None: ``out``)
+    resume_hint: str | None = None        # how to continue, for the interrupt message
 
     @property
     def bins(self):
@@ -149,11 +164,16 @@ def _int_option(name, value, lo):
 
 
 def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=None,
-             quick=False, resume=None, force=False) -> RunPlan:
-    """Validate a run without touching the disk; every problem is a one-line ``ValueError``.
+             quick=False, resume=None, force=False, tallies=None, partial_dir=None,
+             resume_hint=None) -> RunPlan:
+    """Validate a run without touching the disk; every problem is a one-line ``UsageError``.
 
     ``out`` defaults to ``runs/<scene name>`` (or ``resume``). An existing ``out`` is refused
-    unless ``resume`` names it (continue its tallies) or ``force`` (replace it)."""
+    unless ``resume`` names it (continue its tallies) or ``force`` (replace it; only an empty
+    directory or a microsim result, never the current directory, one of its parents or one
+    holding the scene file). ``tallies`` (``microsim report --resume``): a directory of saved
+    partial tallies to continue into ``out``; ``partial_dir``: where tallies go if the run is
+    interrupted (default ``out``); ``resume_hint``: how to continue, for that message."""
     from .scene import load_scene
     from .sim import Bins, Result
     scene = load_scene(scene_path)
@@ -188,18 +208,101 @@ def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=N
         if out is not None and Path(out) != resume:
             raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
         out = resume
-        if not (resume / "meta.json").is_file() or not (resume / "brdf.npz").is_file():
-            raise UsageError(f"--resume {resume}: no saved run there (brdf.npz and meta.json)")
-        previous = Result.load(resume)
+        _check_out(out, scene, "--resume")
+        previous = _load_saved(resume, "--resume")
         _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, resume)
     else:
         out = Path(out) if out is not None else Path("runs") / scene.name
+        _check_out(out, scene, "--out")
         if out.exists() and not force:
             raise UsageError(f"{out} already exists; pass --resume {out} to continue it or "
                              f"--force to replace it")
+        if out.exists():
+            _check_replaceable(out)
+        if tallies is not None:
+            previous = _load_saved(Path(tallies), "saved tallies")
+            _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, tallies)
     return RunPlan(scene=scene, out=Path(out), rays=rays, theta_i=theta_i, seed=seed,
                    threads=threads, effort=effort, quick=bool(quick), previous=previous,
-                   force=bool(force), auto=auto)
+                   force=bool(force), auto=auto,
+                   partial_dir=None if partial_dir is None else Path(partial_dir),
+                   resume_hint=resume_hint)
+
+
+_RESULT_FILES = ("meta.json", "verdicts.json", "report.md", "brdf.npz")
+
+
+def _check_out(out: Path, scene, option: str) -> None:
+    """Refuse an output path that is not a usable directory name: the current directory or
+    one of its parents, a directory holding the scene file, an existing non-directory, or
+    one whose parent is not a directory."""
+    norm = Path(os.path.normpath(out))
+    if norm.name in ("", ".", ".."):
+        raise UsageError(f"{option} {out}: must name a directory of its own, not the current "
+                         f"directory or a parent of it")
+    try:
+        target = norm.resolve()
+        cwd = Path.cwd().resolve()
+    except OSError as e:
+        raise UsageError(f"{option} {out}: cannot resolve the path ({e.strerror})") from None
+    if target == cwd or target in cwd.parents:
+        raise UsageError(f"{option} {out}: is the current directory or one of its parents; "
+                         f"choose a directory of its own")
+    if scene.path is not None:
+        spath = Path(scene.path).resolve()
+        if target == spath or target in spath.parents:
+            raise UsageError(f"{option} {out}: holds the scene file {scene.path}; choose "
+                             f"another directory")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"{option} {out}: exists and is not a directory")
+    parent = norm.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise UsageError(f"{option} {out}: {parent} is not a directory")
+
+
+def _check_replaceable(out: Path) -> None:
+    """``--force`` replaces only an empty directory or a microsim result."""
+    try:
+        names = set(os.listdir(out))
+    except OSError as e:
+        raise UsageError(f"--out {out}: cannot list it ({e.strerror})") from None
+    if names and not names & set(_RESULT_FILES):
+        raise UsageError(f"--force {out}: not a microsim result (none of "
+                         f"{', '.join(_RESULT_FILES)}); refusing to replace it")
+
+
+def _load_saved(where: Path, what: str):
+    """``Result.load(where)``; a missing, truncated or corrupt brdf.npz/meta.json is a
+    one-line ``UsageError`` naming the file."""
+    import zipfile
+    from .sim import Result
+    meta, npz = where / "meta.json", where / "brdf.npz"
+    for f in (meta, npz):
+        if not f.is_file():
+            raise UsageError(f"{what} {where}: no saved run there ({f.name} missing)")
+    try:
+        with open(meta, encoding="utf-8") as fh:
+            m = json.load(fh)
+        if not isinstance(m, dict):
+            raise ValueError("not a JSON object")
+    except (ValueError, UnicodeDecodeError) as e:
+        raise UsageError(f"{what} {where}: {meta} is unreadable ({' '.join(str(e).split())})"
+                         f"; rerun with --force") from None
+    try:
+        with np.load(npz, allow_pickle=False) as z:
+            for k in z.files:
+                z[k]
+    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as e:
+        raise UsageError(f"{what} {where}: {npz} is unreadable ({' '.join(str(e).split())})"
+                         f"; rerun with --force") from None
+    try:
+        return Result.load(where)
+    except (ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as e:
+        raise UsageError(f"{what} {where}: the saved run is inconsistent "
+                         f"({type(e).__name__}: {' '.join(str(e).split())}); rerun with "
+                         f"--force") from None
 
 
 def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where):
@@ -226,23 +329,62 @@ def _surface_source(scene, seed: int, scale: float):
 class RayProgress:
     """tqdm bar on stderr over the primary rays still to trace (rays/s and time left).
 
-    ``simulate`` reports each finished (realisation, incidence) as a line
-    "realisation r/R, theta_i = θ°: done"; the bar advances by the rays that pair still had
-    (``remaining`` (R, T): all of them, or what a resumed partial run had left)."""
+    ``simulate`` calls it with a ``microsim.sim.progress.RaysDone`` event per chunk of rays
+    tallied: the bar advances by ``event.rays``. The older text form, one line
+    "realisation r/R, theta_i = θ°: done" per finished pair, is still understood: the bar then
+    advances by what that pair still had (``remaining`` (R, T): all its rays, or what a resumed
+    partial run had left) minus what its chunk events already counted."""
 
     def __init__(self, remaining: np.ndarray, theta_i, desc: str, enabled: bool = True):
         from tqdm import tqdm
         self.remaining = np.asarray(remaining, dtype=np.int64)
+        self.counted = np.zeros_like(self.remaining)
         self.labels = [f"{t:g}" for t in theta_i]
         self.bar = tqdm(total=int(self.remaining.sum()), unit="ray", unit_scale=True, desc=desc,
                         file=sys.stderr, disable=not enabled, dynamic_ncols=True, smoothing=0.1)
 
-    def __call__(self, line: str) -> None:
-        m = re.match(r"realisation (\d+)/\d+, theta_i = ([^°]+)°", str(line))
+    def _advance(self, r: int, t: int, n: int) -> None:
+        if 0 <= r < self.remaining.shape[0] and 0 <= t < self.remaining.shape[1]:
+            n = int(max(0, min(n, self.remaining[r, t] - self.counted[r, t])))
+            self.counted[r, t] += n
+            if n:
+                self.bar.update(n)
+
+    def __call__(self, event) -> None:
+        from .sim.progress import RaysDone
+        if isinstance(event, RaysDone):
+            self._advance(event.realisation, event.incidence, event.rays)
+            return
+        m = re.match(r"realisation (\d+)/\d+, theta_i = ([^°]+)°", str(event))
         if m and m.group(2) in self.labels:
-            self.bar.update(int(self.remaining[int(m.group(1)) - 1, self.labels.index(m.group(2))]))
+            self._advance(int(m.group(1)) - 1, self.labels.index(m.group(2)), 1 << 62)
 
     def close(self) -> None:
+        self.bar.close()
+
+
+class StageProgress:
+    """The analysis after the simulation as a second bar on stderr, one step per stage
+    (models, fits, stability sweep, speed runs, charts, writing), the current one named."""
+
+    STAGES = ("models", "fits", "stability sweep", "speed runs", "charts", "writing")
+
+    def __init__(self, desc: str, enabled: bool = True):
+        from tqdm import tqdm
+        self.bar = tqdm(total=len(self.STAGES), desc=f"{desc} analysis", unit="stage",
+                        file=sys.stderr, disable=not enabled, dynamic_ncols=True,
+                        bar_format="{desc}: {n_fmt}/{total_fmt} {bar} {postfix} [{elapsed}]")
+        self.current = None
+
+    def stage(self, name: str) -> None:
+        if self.current is not None:
+            self.bar.update(1)
+        self.current = name
+        self.bar.set_postfix_str(name)
+
+    def close(self) -> None:
+        if self.current is not None:
+            self.bar.update(1)
         self.bar.close()
 
 
@@ -269,6 +411,14 @@ def _simulate(plan: RunPlan, theta_i, rays, seed, bins, progress=None, resume=No
     return simulate(surface, sc.ior, list(theta_i), rays=rays, bins=bins, seed=seed,
                     threads=plan.threads, realisations=reals, progress=progress,
                     origins=origins, resume=resume)
+
+
+def _complete(result):
+    """A side study's ``Result``, or ``KeyboardInterrupt`` when it was cut short: ``simulate``
+    returns partial tallies on Ctrl-C, and a side study must never feed a report from them."""
+    if result.is_partial:
+        raise KeyboardInterrupt
+    return result
 
 
 def _simulate_auto(plan: RunPlan, log):
@@ -391,8 +541,10 @@ def _stability(plan: RunPlan):
     from .sim import Bins
     e = plan.effort
     bins = Bins(*e.sweep_bins) if e.sweep_bins else plan.bins
-    sweep = _simulate(plan, e.sweep_theta, max(e.sweep_rays, plan.scene.simulation.realisations),
-                      plan.seed + SWEEP_SEED, bins)
+    checkpoint("side-studies")
+    sweep = _complete(_simulate(plan, e.sweep_theta,
+                                max(e.sweep_rays, plan.scene.simulation.realisations),
+                                plan.seed + SWEEP_SEED, bins))
     specs = [m for m in _models_for(plan) if e.sweep_facets or m.kind != "facets"]
     _attach(sweep, specs)
     return sweep, verdicts_for_result(sweep)
@@ -415,9 +567,10 @@ def _speed_runs(plan: RunPlan, result, shown, verdicts):
     for origins in ("stratified", "independent"):
         times, errs = [], []
         for n in plan.effort.speed_rays:
+            checkpoint("side-studies")
             t0 = time.perf_counter()
-            r = _simulate(plan, [theta], n, plan.seed + SPEED_SEED, result.bins, origins=origins,
-                          realisations=False)
+            r = _complete(_simulate(plan, [theta], n, plan.seed + SPEED_SEED, result.bins,
+                                    origins=origins, realisations=False))
             times.append(time.perf_counter() - t0)
             errs.append(_energy_rel_rms(r.brdf[0], ref, omega))
         runs[origins] = (times, errs)
@@ -505,20 +658,13 @@ def write_json_atomic(path: Path, data) -> None:
 
 
 def _staging(out: Path) -> Path:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
+    return atomic.make_staging(out)
 
 
 def publish_dir(stage: Path, out: Path) -> None:
-    """Move the finished ``stage`` directory to ``out``: one rename when ``out`` is new; else
-    the old one is renamed aside first and removed after the swap."""
-    if not out.exists():
-        os.rename(stage, out)
-        return
-    old = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.old-"))
-    os.rename(out, old / "d")
-    os.rename(stage, out)
-    shutil.rmtree(old, ignore_errors=True)
+    """Move the finished ``stage`` directory to ``out`` (``atomic.publish_dir``: the old
+    result is removed only once the new one is in place)."""
+    atomic.publish_dir(stage, out)
 
 
 def fit_record(fit) -> dict:
@@ -543,10 +689,33 @@ class RunOutcome:
 
 def execute(plan: RunPlan, progress: bool = True, log: Callable[[str], None] | None = None) -> RunOutcome:
     """Run a validated plan and write its directory (module docstring). The surface
-    generators' UserWarnings are silenced: every surface warning is in meta.json and report.md."""
+    generators' UserWarnings are silenced: every surface warning is in meta.json and report.md.
+    Holds ``atomic.output_lock(plan.out)`` throughout (a concurrent run on the same output is
+    refused with a ``UsageError``) and first removes stale staging directories of killed runs."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        return _execute(plan, progress, log)
+        with atomic.output_lock(plan.out):
+            atomic.clean_stale(plan.out)
+            if plan.partial_dir is not None:
+                atomic.clean_stale(plan.partial_dir)
+            if plan.previous is None and plan.out.exists():
+                if not plan.force:          # appeared since planning
+                    raise UsageError(f"{plan.out} already exists; pass --resume {plan.out} to "
+                                     f"continue it or --force to replace it")
+                _check_replaceable(plan.out)
+            return _execute(plan, progress, log)
+
+
+def _save_tallies(result, dest: Path) -> None:
+    """Publish the tallies of ``result`` (brdf.npz + meta.json, no models) to ``dest``."""
+    result.models.clear()
+    stage = _staging(dest)
+    try:
+        result.save(stage)
+        publish_dir(stage, dest)
+    finally:
+        if stage.exists():
+            shutil.rmtree(stage, ignore_errors=True)
 
 
 def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
@@ -554,89 +723,108 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     from .analysis.fits import fit_all
     from .analysis.verdicts import verdicts_for_result
     log = log or (lambda s: print(s, file=sys.stderr))
+    dest = plan.partial_dir or plan.out
+    hint = plan.resume_hint or f"--resume {dest}"
+    prev = plan.previous
+    done = prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays
+    if done:
+        result = prev
+        result.models.clear()
+    elif plan.auto:
+        result = _simulate_auto(plan, log if progress else None)
+    else:
+        bar = RayProgress(_remaining_rays(plan), plan.theta_i, plan.scene.name,
+                          enabled=progress)
+        try:
+            result = _simulate(plan, plan.theta_i, plan.rays, plan.seed, plan.bins,
+                               progress=bar, resume=prev)
+        finally:
+            bar.close()
+    result.meta["run"] = _run_meta(plan)
+    if plan.auto:
+        result.meta["run"]["auto"] = _auto_summary(result)
+    if result.is_partial:
+        _save_tallies(result, dest)
+        log(f"microsim: interrupted; partial tallies saved in {dest} (continue with {hint})")
+        return RunOutcome(130, plan.out)
     stage = _staging(plan.out)
     try:
-        prev = plan.previous
-        done = prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays
-        if done:
-            result = prev
-            result.models.clear()
-        elif plan.auto:
-            result = _simulate_auto(plan, log if progress else None)
-        else:
-            bar = RayProgress(_remaining_rays(plan), plan.theta_i, plan.scene.name,
-                              enabled=progress)
-            try:
-                result = _simulate(plan, plan.theta_i, plan.rays, plan.seed, plan.bins,
-                                   progress=bar, resume=prev)
-            finally:
-                bar.close()
-        result.meta["run"] = _run_meta(plan)
-        if plan.auto:
-            result.meta["run"]["auto"] = _auto_summary(result)
-        if result.is_partial:
-            result.save(stage)
-            publish_dir(stage, plan.out)
-            log(f"microsim: interrupted; partial tallies saved in {plan.out} "
-                f"(continue with --resume {plan.out})")
-            return RunOutcome(130, plan.out)
-        try:
-            return _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log)
-        except KeyboardInterrupt:            # the tallies are complete: keep them
-            result.models.clear()
-            shutil.rmtree(stage, ignore_errors=True)
-            stage = _staging(plan.out)
-            result.save(stage)
-            publish_dir(stage, plan.out)
-            log(f"microsim: interrupted after the simulation; tallies saved in {plan.out} "
-                f"(finish with --resume {plan.out})")
-            return RunOutcome(130, plan.out)
+        return _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log,
+                        progress)
+    except KeyboardInterrupt:            # the tallies are complete: keep them, no report
+        shutil.rmtree(stage, ignore_errors=True)
+        _save_tallies(result, dest)
+        log(f"microsim: interrupted after the simulation; tallies saved in {dest} "
+            f"(finish with {hint})")
+        return RunOutcome(130, plan.out)
     finally:
         if stage.exists():
             shutil.rmtree(stage, ignore_errors=True)
 
 
-def _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log) -> RunOutcome:
+def _analyse(plan, stage, result, report, fit_all, verdicts_for_result, log,
+             progress=False) -> RunOutcome:
     sc = plan.scene
     t0 = time.perf_counter()
-    _attach(result, _models_for(plan))
-    from .analysis.fits import FIT_MODELS
-    # a flat mirror's lobe is a delta, narrower than any bin: fitting a lobe shape is meaningless
-    fits = {} if sc.surface.kind == "flat" else fit_all(
-        result, sc.ior, names=plan.effort.fit_names or tuple(FIT_MODELS),
-        quick=plan.effort.quick_fits)
-    verdicts = verdicts_for_result(result, fitted=fits)
-    shown = {**result.models, **{f.name: f.model_values for f in fits.values()}}
-    ranking = _ranking(verdicts)
-    sweep, sweep_verdicts = _stability(plan)
-    speed, speed_theta, speed_ref = _speed_runs(plan, result, shown, verdicts)
-    files, stability = _charts(plan, stage, result, shown, verdicts, ranking, sweep,
-                               sweep_verdicts)
-    from .analysis import charts as ch
-    files["speed"] = "speed.png"
-    ch.speed_accuracy(speed, stage / files["speed"],
-                      f"{sc.name}, θi = {speed_theta:g}°",
-                      f"relative RMS error against {speed_ref}")
-    result.meta["seconds_analysis"] = time.perf_counter() - t0
-    result.save(stage)
-    doc = {"schema_version": SCHEMA_VERSION, "scene": sc.name, "scene_file": str(sc.path),
-           "description": sc.description, "quick": plan.quick,
-           "rays": int(result.rays.max()) if plan.auto else plan.rays,
-           "theta_i": list(plan.theta_i), "seed": plan.seed, "ranking": ranking,
-           "verdicts": verdicts, "fits": [fit_record(f) for f in fits.values()],
-           "speed": {"theta_i": speed_theta, "reference": speed_ref,
-                     "runs": {k: {"rays": list(plan.effort.speed_rays), "seconds": t,
-                                  "rel_rms": e} for k, (t, e) in speed.items()}},
-           "stability": {"theta_i": sweep.theta_i, "rays": plan.effort.sweep_rays,
-                         "rel_rms": stability, "warnings": _warnings_for(plan, sweep)}}
-    if plan.auto:
-        doc["rays_auto"] = _auto_summary(result)
-    doc = _clean(doc)
-    write_json_atomic(stage / VERDICTS_FILE, doc)
-    atomic.write_text(stage / REPORT_FILE, report.scene_report(doc, result, files))
+    stages = StageProgress(sc.name, enabled=progress)
+    try:
+        stages.stage("models")
+        _attach(result, _models_for(plan))
+        from .analysis.fits import FIT_MODELS
+        stages.stage("fits")
+        checkpoint("fits")
+        # a flat mirror's lobe is a delta, narrower than any bin: fitting a lobe shape is
+        # meaningless
+        fits = {} if sc.surface.kind == "flat" else fit_all(
+            result, sc.ior, names=plan.effort.fit_names or tuple(FIT_MODELS),
+            quick=plan.effort.quick_fits)
+        verdicts = verdicts_for_result(result, fitted=fits)
+        shown = {**result.models, **{f.name: f.model_values for f in fits.values()}}
+        ranking = _ranking(verdicts)
+        stages.stage("stability sweep")
+        sweep, sweep_verdicts = _stability(plan)
+        stages.stage("speed runs")
+        speed, speed_theta, speed_ref = _speed_runs(plan, result, shown, verdicts)
+        stages.stage("charts")
+        checkpoint("charts")
+        files, stability = _charts(plan, stage, result, shown, verdicts, ranking, sweep,
+                                   sweep_verdicts)
+        from .analysis import charts as ch
+        files["speed"] = "speed.png"
+        ch.speed_accuracy(speed, stage / files["speed"],
+                          f"{sc.name}, θi = {speed_theta:g}°",
+                          f"relative RMS error against {speed_ref}")
+        stages.stage("writing")
+        result.meta["seconds_analysis"] = time.perf_counter() - t0
+        result.save(stage)
+        doc = {"schema_version": SCHEMA_VERSION, "scene": sc.name, "scene_file": str(sc.path),
+               "description": sc.description, "quick": plan.quick,
+               "rays": int(result.rays.max()) if plan.auto else plan.rays,
+               "theta_i": list(plan.theta_i), "seed": plan.seed, "ranking": ranking,
+               "verdicts": verdicts, "fits": [fit_record(f) for f in fits.values()],
+               "speed": {"theta_i": speed_theta, "reference": speed_ref,
+                         "runs": {k: {"rays": list(plan.effort.speed_rays), "rel_rms": e}
+                                  for k, (t, e) in speed.items()}},
+               "stability": {"theta_i": sweep.theta_i, "rays": plan.effort.sweep_rays,
+                             "rel_rms": stability, "warnings": _warnings_for(plan, sweep)}}
+        if plan.auto:
+            doc["rays_auto"] = _auto_summary(result)
+        doc = _clean(doc)
+        timings = _clean({"simulation_seconds": result.meta.get("seconds"),
+                          "rays_per_second": result.meta.get("rays_per_second"),
+                          "analysis_seconds": result.meta["seconds_analysis"],
+                          "speed": {"theta_i": speed_theta,
+                                    "runs": {k: {"rays": list(plan.effort.speed_rays),
+                                                 "seconds": t} for k, (t, e) in speed.items()}}})
+        write_json_atomic(stage / VERDICTS_FILE, doc)
+        write_json_atomic(stage / TIMINGS_FILE, timings)
+        atomic.write_text(stage / REPORT_FILE, report.scene_report(doc, result, files))
+    finally:
+        stages.close()
+    checkpoint("publish")
     publish_dir(stage, plan.out)
-    log(f"microsim: wrote {plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, brdf.npz, meta.json, "
-        f"{len(files)} charts)")
+    log(f"microsim: wrote {plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, {TIMINGS_FILE}, "
+        f"brdf.npz, meta.json, {len(files)} charts)")
     return RunOutcome(0, plan.out, doc, tuple(ranking))
 
 
@@ -655,8 +843,10 @@ def _fig6_curves(scenes, effort: Effort, threads: int, log) -> list[dict]:
         surface = sc.build_surface(scale=effort.scale_for("vgrooves"))
         for material in ("methanol", "aluminium"):
             ior = an.resolve_material(material)
-            res = simulate(surface, ior, list(effort.fig6_theta), rays=effort.fig6_rays,
-                           bins=Bins(9, 5), seed=sc.simulation.seed, threads=threads)
+            checkpoint("side-studies")
+            res = _complete(simulate(surface, ior, list(effort.fig6_theta),
+                                     rays=effort.fig6_rays, bins=Bins(9, 5),
+                                     seed=sc.simulation.seed, threads=threads))
             n_t, n_g, n_p = effort.albedo_nodes
             table = an.AlbedoTable(sc.ndf(), "vgroove", ior, n_theta=n_t, n_grazing=n_g,
                                    n_gl_phi=n_p)
@@ -670,10 +860,30 @@ def _fig6_curves(scenes, effort: Effort, threads: int, log) -> list[dict]:
     return curves
 
 
+def _read_state(out: Path) -> dict | None:
+    path = out / REPORT_STATE
+    if not path.is_file():
+        return None
+    try:
+        state = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(state, dict) or not isinstance(state.get("done"), list):
+            raise ValueError("not a report state")
+        return state
+    except (ValueError, UnicodeDecodeError) as e:
+        raise UsageError(f"--resume: {path} is unreadable ({' '.join(str(e).split())}); run "
+                         f"`microsim report` without --resume") from None
+
+
 def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, progress=True,
-               log: Callable[[str], None] | None = None) -> int:
+               log: Callable[[str], None] | None = None, resume=False) -> int:
     """Run every ``*.toml`` of ``catalogue`` into ``out/<scene>/`` (each folder replaced in one
-    rename) and write ``out/index.md``. All scene files are validated before anything runs."""
+    rename) and write ``out/index.md``. All scene files are validated before anything runs.
+
+    Ctrl-C (status 130): finished scenes stay; the interrupted scene's previous report stays
+    in place and its tallies are kept in ``out/.<scene>.partial/``; ``resume=True``
+    (``report --resume``, same options) skips the scenes finished since the interrupted report
+    started (``out/.report-state.json``), continues the interrupted one from its tallies and
+    runs the rest. Holds ``atomic.output_lock(out)`` throughout."""
     from .analysis import charts as ch
     from .analysis import report
     from .scene import load_scene
@@ -688,24 +898,66 @@ def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, prog
     names = [s.name for s in scenes]
     if len(set(names)) != len(names):
         raise UsageError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
-    plans = [plan_run(p, out=out / s.name, threads=threads, quick=quick, force=True)
-             for p, s in zip(paths, scenes)]
-    t0 = time.perf_counter()
-    docs = []
-    for k, plan in enumerate(plans, 1):
-        log(f"[{k}/{len(plans)}] {plan.scene.name}")
-        outcome = execute(plan, progress=progress, log=log)
-        if outcome.status != 0:
-            return outcome.status
-        docs.append(outcome.document)
-    out.mkdir(parents=True, exist_ok=True)
-    effort = QUICK if quick else FULL
-    fig6 = None
-    curves = _fig6_curves(scenes, effort, threads, log)
-    if curves:
-        fig6 = "mikkelsen-fig6.png"
-        ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
-    seconds = time.perf_counter() - t0
-    atomic.write_text(out / "index.md", report.index_report(docs, fig6, quick, seconds))
-    log(f"microsim: wrote {out}/index.md ({len(docs)} scenes, {seconds:.0f} s)")
+    norm = Path(os.path.normpath(out))
+    cwd, cat = Path.cwd().resolve(), catalogue.resolve()
+    if (norm.name in ("", ".", "..") or norm.resolve() in (cwd, *cwd.parents)
+            or norm.resolve() == cat or norm.resolve() in cat.parents):
+        raise UsageError(f"--out {out}: must be a directory of its own, not the current "
+                         f"directory, a parent of it or the catalogue's")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a directory")
+    hint = (f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
+            f"--out {out}`")
+    with atomic.output_lock(out):
+        state = _read_state(out) if resume else None
+        if resume:
+            if state is None:
+                raise UsageError(f"--resume: no interrupted report in {out} ({REPORT_STATE} "
+                                 f"missing); run `microsim report` without --resume")
+            if state.get("quick") != bool(quick) or state.get("catalogue") != str(catalogue):
+                raise UsageError(f"--resume: the interrupted report in {out} ran with quick = "
+                                 f"{state.get('quick')}, catalogue {state.get('catalogue')}; "
+                                 f"resume with the same options")
+        done = set(state["done"]) if state else set()
+        plans = []
+        for p, s in zip(paths, scenes):
+            scene_out, partial = out / s.name, out / f".{s.name}.partial"
+            if s.name in done and (scene_out / VERDICTS_FILE).is_file():
+                plans.append(scene_out)
+                continue
+            tallies = partial if resume and (partial / "meta.json").is_file() else None
+            plans.append(plan_run(p, out=scene_out, threads=threads, quick=quick, force=True,
+                                  tallies=tallies, partial_dir=partial, resume_hint=hint))
+        state = {"quick": bool(quick), "catalogue": str(catalogue), "done": sorted(done)}
+        atomic.write_json(out / REPORT_STATE, state)
+        try:
+            docs = []
+            for k, plan in enumerate(plans, 1):
+                checkpoint("report-scene")
+                if isinstance(plan, Path):
+                    log(f"[{k}/{len(plans)}] {plan.name}: finished earlier, kept")
+                    docs.append(json.loads((plan / VERDICTS_FILE).read_text(encoding="utf-8")))
+                    continue
+                log(f"[{k}/{len(plans)}] {plan.scene.name}")
+                outcome = execute(plan, progress=progress, log=log)
+                if outcome.status != 0:
+                    return outcome.status
+                shutil.rmtree(plan.partial_dir, ignore_errors=True)
+                docs.append(outcome.document)
+                state["done"] = sorted({*state["done"], plan.scene.name})
+                atomic.write_json(out / REPORT_STATE, state)
+            checkpoint("report-index")
+            effort = QUICK if quick else FULL
+            fig6 = None
+            curves = _fig6_curves(scenes, effort, threads, log)
+            if curves:
+                fig6 = "mikkelsen-fig6.png"
+                ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
+            atomic.write_text(out / "index.md", report.index_report(docs, fig6, quick))
+        except KeyboardInterrupt:
+            log(f"microsim: interrupted; finished scene reports kept in {out}; continue with "
+                f"{hint}")
+            return 130
+        (out / REPORT_STATE).unlink(missing_ok=True)
+    log(f"microsim: wrote {out}/index.md ({len(docs)} scenes)")
     return 0

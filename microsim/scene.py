@@ -293,10 +293,24 @@ def _surface_spec(where, table) -> SurfaceSpec:
     return SurfaceSpec(kind, MappingProxyType(params))
 
 
-def _check_heightfield(where: str, path: Path) -> None:
-    """A heightfield file usable by ``surfaces.from_file``, checked before anything runs:
-    a regular file holding a real 2D array of finite heights, 8 … ``MAX_GRID`` per side.
-    .npy files are checked through a memory map (header first), others read in full."""
+def _check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> None:
+    """A heightfield file usable by ``surfaces.from_file``, checked before anything runs
+    (``surfaces.loader.check_heightfield_file``: a regular file holding a real 2D array of
+    finite heights that fits in memory); the one-line error names the scene file, the key
+    and the heightfield file."""
+    key = "surface.path"
+    try:
+        from .surfaces.loader import check_heightfield_file
+    except ImportError:                   # pragma: no cover - older loader
+        return _check_heightfield_fallback(where, path)
+    try:
+        check_heightfield_file(path, dx, periodic)
+    except UsageError as e:
+        _fail(where, key, " ".join(str(e).split()))
+
+
+def _check_heightfield_fallback(where: str, path: Path) -> None:
+    """``_check_heightfield`` without the loader's checker: 8 … ``MAX_GRID`` per side."""
     key = "surface.path"
     try:
         st = path.stat()
@@ -417,7 +431,8 @@ def load_scene(path) -> Scene:
     description = _check_value(where, "description", data.get("description", ""), _STR)
     surface = _surface_spec(where, data["surface"])
     if surface.kind == "file":
-        _check_heightfield(where, path.parent / surface.params["path"])
+        _check_heightfield(where, path.parent / surface.params["path"], surface.params["dx"],
+                           surface.params["periodic"])
     return Scene(name=name, path=path, description=description, surface=surface,
                  ior=_material(where, data.get("material")),
                  simulation=_simulation(where, data.get("simulation")))

@@ -110,6 +110,23 @@ def test_bench_subcommand_registers():
     assert args.json and args.quick and callable(args.func)
 
 
+@pytest.mark.parametrize("argv, rays", [(["--quick", "--rays", "5000"], 5000),
+                                        (["--rays", "7000"], 7000),
+                                        (["--quick"], 2 ** 17), ([], BenchConfig.rays)])
+def test_bench_rays_option_is_honoured_with_and_without_quick(monkeypatch, capsys, argv, rays):
+    """``bench --quick --rays N`` measures N rays (issue #11: --quick ignored --rays)."""
+    import microsim.bench as B
+    seen = []
+    monkeypatch.setattr(B, "run_bench", lambda cfg: seen.append(cfg) or {})
+    monkeypatch.setattr(B, "format_bench", lambda b: "")
+    p = argparse.ArgumentParser()
+    add_bench_command(p.add_subparsers())
+    args = p.parse_args(["bench", *argv])
+    assert args.func(args) == 0
+    assert seen[0].rays == rays
+    assert seen[0].n == (128 if "--quick" in argv else BenchConfig.n)
+
+
 # --- incidence-azimuth rotation (statistically isotropic heightfields) ---------------------------
 def _tallies(tracer, wi, blocks_per_chunk, n_total, bins, rotate):
     """Running totals (``_Tally.items()``) after adding the chunks of ``blocks_per_chunk``."""

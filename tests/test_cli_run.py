@@ -108,11 +108,15 @@ def test_interrupt_then_resume_matches_uninterrupted(reference, tmp_path):
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, env=_env())
     seen = b""
     deadline = time.monotonic() + 60
-    while b"50%" not in seen and time.monotonic() < deadline:   # first incidence done
+    # the bar advances per chunk of rays, incidences in order: past 50 % the first incidence
+    # (half the rays) is complete and the second under way
+    while time.monotonic() < deadline:
         ch = proc.stderr.read(1)
         if not ch:
             break
         seen += ch
+        if ch == b"%" and int(re.findall(rb"(\d+)%$", seen)[-1]) >= 51:
+            break
     proc.send_signal(signal.SIGINT)
     proc.stderr.read()
     assert proc.wait(timeout=60) == 130, seen.decode(errors="replace")
@@ -159,21 +163,42 @@ def test_malformed_scene_one_line_nothing_written(tmp_path, edit, key):
     assert sorted(p.name for p in tmp_path.iterdir()) == [scene.name]      # no out/, no runs/
 
 
+CATALOGUE = Path(__file__).resolve().parents[1] / "surfaces"
+
+
+def test_catalogue_file_heightfield_scene_runs(tmp_path):
+    """Bug 1 of issue #11: every ``kind = "file"`` scene crashed after its simulation (the
+    report formatted the grid shape as a number). The catalogue's file scene runs end to end."""
+    out = tmp_path / "run"
+    r = microsim("run", CATALOGUE / "file-gaussian-64.toml", "--quick", "--rays", "20000",
+                 "--theta-i", "30", "--out", out, "--no-progress", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    report = (out / "report.md").read_text()
+    assert "input_shape = 64 × 64" in report and "heightfields/gaussian-64.npy" in report
+    doc = json.loads((out / "verdicts.json").read_text())
+    assert doc["scene"] == "file-gaussian-64" and doc["verdicts"]
+
+
 def test_report_indexes_catalogue_with_working_links(tmp_path):
     cat = tmp_path / "cat"
     cat.mkdir()
     _scene(cat, "tiny-a", 0.2)
     _scene(cat, "tiny-b", 0.4)
+    np.save(cat / "h.npy", 0.5 * np.random.default_rng(0).normal(size=(16, 16)))
+    _scene(cat, "tiny-file", text=TINY.format(name="tiny-file", m=0).replace(
+        'kind = "vgrooves"\nn_grooves = 800\nndf = "beckmann"\nm = 0\n',
+        'kind = "file"\npath = "h.npy"\ndx = 1.0\n'))
     out = tmp_path / "reports"
     r = microsim("report", "--quick", "--catalogue", cat, "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
     index = (out / "index.md").read_text()
     links = re.findall(r"\]\(([^)]+)\)", index)
-    for name in ("tiny-a", "tiny-b"):
+    for name in ("tiny-a", "tiny-b", "tiny-file"):
         assert f"{name}/report.md" in links
     for link in links:
         assert (out / link).is_file(), link
-    for name in ("tiny-a", "tiny-b"):
+    for name in ("tiny-a", "tiny-b", "tiny-file"):
         report = (out / name / "report.md").read_text()
         for link in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report):
             assert (out / name / link).is_file(), link

@@ -209,7 +209,7 @@ FILE_SCENE = '[surface]\nkind = "file"\npath = "{}"\ndx = 1.0\n'
     (lambda p: np.save(p, np.zeros((4, 4))), "8"),
     (lambda p: np.save(p, np.full((16, 16), np.nan)), "NaN"),
     (lambda p: np.save(p, np.zeros((16, 16), dtype=complex)), "real"),
-    (lambda p: _truncated_npy(p), "not a readable"),
+    (lambda p: _truncated_npy(p), "npy"),
     (lambda p: p.mkdir(), "regular file"),
 ])
 def test_bad_heightfield_file_refused_at_load(tmp_path, make, what):

@@ -2,7 +2,8 @@
 
 Pure formatting: every number comes from the verdict document written as ``verdicts.json``
 (see ``microsim.runner`` and the README for its schema) and, for the energy ledger, from the
-``Result``. Percentages are relative errors (model − sim)/sim; BRDFs in sr⁻¹, angles in degrees.
+``Result``. No wall-clock time appears in either report (they are in ``timings.json``), so
+rerunning an unchanged scene rewrites them byte for byte. Percentages are relative errors (model − sim)/sim; BRDFs in sr⁻¹, angles in degrees.
 """
 from __future__ import annotations
 
@@ -17,13 +18,16 @@ __all__ = ["md_table", "scene_report", "index_report", "fmt", "albedo_stderr"]
 
 
 def fmt(x, digits: int = 3) -> str:
-    """Compact number: None/NaN → "–", else ``digits`` significant figures."""
+    """Compact number: None/NaN → "–", else ``digits`` significant figures; a string as is; a
+    sequence (e.g. a grid shape) as "a × b" of its formatted items."""
     if x is None:
         return "–"
     if isinstance(x, str):
         return x
     if isinstance(x, bool):
         return "yes" if x else "no"
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return " × ".join(fmt(v, digits) for v in x) if len(x) else "–"
     if isinstance(x, (int, np.integer)):
         return str(int(x))
     x = float(x)
@@ -113,9 +117,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                   ["bins (θo × Δφ)", " × ".join(str(b) for b in run.get("bins", []))],
                   ["seed", str(doc["seed"])],
                   ["mode", "quick (`--quick`)" if doc["quick"] else "full"],
-                  ["simulation time", f"{fmt(meta.get('seconds'))} s "
-                                      f"({fmt(meta.get('rays_per_second'))} rays/s)"],
-                  ["analysis time", f"{fmt(meta.get('seconds_analysis'))} s"]]), ""]
+                  ["wall times", "`timings.json` (machine-dependent)"]]), ""]
     warns = list(surf.get("warnings", [])) + list(meta.get("model_warnings", []))
     if warns:
         lines += ["Warnings (surface generator, tracer, model quadrature):", ""] + [f"- {w}" for w in warns] + [""]
@@ -158,10 +160,11 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                       f"each."] + [f"- warning: {w}" for w in st.get("warnings", [])] + [""]
         if key == "speed":
             sp = doc.get("speed", {})
-            rows = [[name, f"{n:,}", fmt(t), _pct(e)] for name, r in sp.get("runs", {}).items()
-                    for n, t, e in zip(r["rays"], r["seconds"], r["rel_rms"])]
-            lines += [f"θi = {fmt(sp.get('theta_i'))}°, error against {sp.get('reference')}.", "",
-                      md_table(["origins", "rays", "wall time (s)", "rel RMS error"], rows), ""]
+            rows = [[name, f"{n:,}", _pct(e)] for name, r in sp.get("runs", {}).items()
+                    for n, e in zip(r["rays"], r["rel_rms"])]
+            lines += [f"θi = {fmt(sp.get('theta_i'))}°, error against {sp.get('reference')}; "
+                      "the wall times (this chart's x axis) are in `timings.json`.", "",
+                      md_table(["origins", "rays", "rel RMS error"], rows), ""]
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -203,9 +206,10 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
 
 
 def index_report(docs: Sequence[Mapping], fig6: str | None, quick: bool,
-                 seconds: float) -> str:
+                 seconds: float | None = None) -> str:
     """``index.md``: verdict tables (scenes × models), Löw-style fit table, Mikkelsen Fig. 6,
-    links to every scene's ``<scene>/report.md``."""
+    links to every scene's ``<scene>/report.md``. ``seconds`` (the wall time) is accepted for
+    compatibility and not written: the index is reproducible."""
     fit_models: list[str] = []
     for d in docs:
         fit_models += [f["model"] for f in d.get("fits", []) if f["model"] not in fit_models]
@@ -215,8 +219,8 @@ def index_report(docs: Sequence[Mapping], fig6: str | None, quick: bool,
         fit_rows.append([d["scene"]] + [f"{fmt(by[m]['sqrt_e1'])} / {fmt(by[m]['sqrt_e2'])}"
                                         if m in by else "–" for m in fit_models])
     lines = ["# microsim report", "",
-             f"{len(docs)} scenes, {'quick mode (`microsim report --quick`)' if quick else 'full runs'}, "
-             f"{seconds:.0f} s. Each scene links to its own report with charts, the energy "
+             f"{len(docs)} scenes, {'quick mode (`microsim report --quick`)' if quick else 'full runs'}. "
+             f"Each scene links to its own report with charts, the energy "
              "ledger and every verdict.", "",
              "## Verdicts", "",
              "✓: statistically indistinguishable from the simulation at every incidence "
