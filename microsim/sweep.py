@@ -618,10 +618,10 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, workers: int = 2,
                 _local(todo, out, workers, collect)
             elif todo:
                 _dask(todo, out, client, collect)
+            paths = write_summary(spec, out)
         except KeyboardInterrupt:
             raise SweepInterrupted(out, sum(_done(t, out) for t in spec.tasks), total) \
                 from None
-        paths = write_summary(spec, out)
     return {"computed": computed, "skipped": skipped, "summary": paths}
 
 
@@ -741,7 +741,7 @@ def _cmd_sweep(args) -> int:
                         connect_timeout=args.scheduler_timeout)
     except SweepInterrupted as e:
         print(f"microsim: interrupted: {e.done}/{e.total} tasks done and kept in "
-              f"{os.path.join(out, 'tasks')}, no summary written; rerun the same command "
+              f"{os.path.join(out, 'tasks')}, summary not written; rerun the same command "
               f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}) "
               f"to compute the rest", file=sys.stderr)
         return 130
