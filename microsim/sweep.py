@@ -65,6 +65,7 @@ from typing import Callable
 from . import atomic
 from .checkpoints import checkpoint
 from .errors import EnvironmentFailure, UsageError
+from .sim.bins import MAX_BINS                # theta_bins × phi_bins at most
 
 __all__ = ["SweepSpec", "Task", "SweepInterrupted", "load_sweep", "expand_tasks", "run_task",
            "run_sweep", "gather", "summary_table", "write_summary", "task_label",
@@ -77,7 +78,6 @@ COLUMNS = ("task", "scene", "params", "material", "roughness", "theta_i", "model
            "chi2_dof", "p_value", "max_abs_z", "agrees", "n_bins", "rays", "seconds")
 MAX_FILE_BYTES = 1 << 20            # a sweep file is a few hundred bytes; refuse anything > 1 MiB
 MAX_TASKS = 100_000                 # tasks per sweep file (each is seconds to minutes of tracing)
-MAX_BINS = 2 ** 22                  # theta_bins × phi_bins, as microsim.sim.bins.MAX_BINS
 _NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")   # = microsim.scene.NAME_PATTERN
 _NAME_RULE = "1-100 characters from letters, digits, '.', '_', '-', not starting with '.'"
 
