@@ -7,7 +7,8 @@ sweep task, catalogue scene). By default it does nothing. A test installs a hook
 so the behaviour of every phase under an interrupt is tested deterministically, without
 sending signals or racing a progress bar.
 
-Phases (``PHASES``): "simulation" (after each chunk of the main simulation), "side-studies"
+Phases (``PHASES``): "simulation" (after each chunk of rays tallied by ``simulate``, in the
+main run and in the side studies alike), "side-studies"
 (before the stability sweep and each speed run), "fits", "charts", "publish" (just before the
 finished directory replaces the old one), "report-scene" (before each scene of
 ``microsim report``), "report-index" (before the catalogue index), "sweep-task" (after each

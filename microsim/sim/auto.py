@@ -27,10 +27,9 @@ import numpy as np
 
 from microsim.analytic._checks import in_range, integer
 from microsim.analytic.fresnel import resolve_material
-from microsim.errors import UsageError
 
 from .bins import Bins
-from .estimator import (BLOCK, LEDGER, MAX_RAYS, ORIGINS, _check_inputs, _estimate, _is_surface,
+from .estimator import (BLOCK, LEDGER, MAX_RAYS, _check_inputs, _check_run_options, _estimate, _is_surface,
                         _surface_error, simulate)
 from .result import Result
 
@@ -138,13 +137,7 @@ def simulate_auto(surface, material, theta_i, target: float = 0.01, *, phi_i=0.0
     max_rays = integer("max_rays", max_rays, 2, MAX_RAYS, " (rays per incidence at most)")
     energy = in_range("energy", energy, 0.0, 1.0, lo_open=True)
     min_events = integer("min_events", min_events, 0)
-    if not isinstance(bins, Bins):
-        raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
-    if not isinstance(origins, str) or origins not in ORIGINS:
-        raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
-    if progress is not None and not callable(progress):
-        raise UsageError(f"progress must be None or a callable receiving one text line, "
-                         f"got {progress!r}")
+    _check_run_options(bins, origins, progress, "one text line")
     if not _is_surface(surface):
         raise _surface_error("surface", surface)
     resolve_material(material)

@@ -649,6 +649,18 @@ def _check_inputs(theta_i, phi_i, rays, threads, chunk, masking, seed=0):
     return th, ph
 
 
+def _check_run_options(bins, origins, progress, progress_receives: str) -> None:
+    """UsageError unless ``bins`` is a ``Bins``, ``origins`` one of ``ORIGINS`` and
+    ``progress`` None or a callable (receiving ``progress_receives``)."""
+    if not isinstance(bins, Bins):
+        raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
+    if not isinstance(origins, str) or origins not in ORIGINS:
+        raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
+    if progress is not None and not callable(progress):
+        raise UsageError(f"progress must be None or a callable receiving {progress_receives}, "
+                         f"got {progress!r}")
+
+
 def _is_surface(obj) -> bool:
     """A ``microsim.surfaces.Surface`` or an object with its mesh contract."""
     return all(hasattr(obj, a) for a in ("vertices", "faces", "tile_size", "periodic"))
@@ -865,13 +877,7 @@ def simulate(surface, material, theta_i, phi_i=0.0, rays: int = 1_000_000, bins:
     stored exactly. Returns a ``Result`` (BRDF in sr⁻¹).
     """
     th, ph = _check_inputs(theta_i, phi_i, rays, threads, chunk, masking, seed)
-    if not isinstance(bins, Bins):
-        raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
-    if not isinstance(origins, str) or origins not in ORIGINS:
-        raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
-    if progress is not None and not callable(progress):
-        raise UsageError(f"progress must be None or a callable receiving "
-                         f"microsim.sim.RaysDone events, got {progress!r}")
+    _check_run_options(bins, origins, progress, "microsim.sim.RaysDone events")
     if not isinstance(isotropic, (bool, np.bool_)):
         raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
     ior = resolve_material(material)

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from microsim.atomic import atomic_open
 
 from .bins import Bins
 
@@ -110,27 +111,14 @@ class Result:
         return {k: np.asarray(v) for k, v in out.items()}
 
     def save(self, directory) -> None:
-        """Write ``brdf.npz`` and ``meta.json`` into ``directory`` (created if needed), atomically:
-        both are written to temporary files first and renamed only when both succeeded."""
-        os.makedirs(directory, exist_ok=True)
+        """Write ``brdf.npz`` and ``meta.json`` into ``directory`` (created if needed), atomically
+        and with the user's normal file modes (``microsim.atomic``): each is written to a
+        temporary file, and nothing is renamed into place unless both were written."""
         meta = {**self.meta, "bins": self.bins.to_dict()}
-        temps = []
-        try:
-            with tempfile.NamedTemporaryFile(dir=directory, prefix=".brdf-", suffix=".tmp",
-                                             delete=False) as fh:
-                temps.append(fh.name)
-                np.savez(fh, **self._arrays())
-            with tempfile.NamedTemporaryFile("w", dir=directory, prefix=".meta-", suffix=".tmp",
-                                             delete=False, encoding="utf-8") as fh:
-                temps.append(fh.name)
+        with atomic_open(os.path.join(directory, NPZ), "wb") as npz:
+            np.savez(npz, **self._arrays())
+            with atomic_open(os.path.join(directory, META)) as fh:
                 json.dump(meta, fh, indent=1, default=_jsonable)
-            os.replace(temps[0], os.path.join(directory, NPZ))
-            os.replace(temps[1], os.path.join(directory, META))
-            temps.clear()
-        finally:
-            for t in temps:
-                if os.path.exists(t):
-                    os.remove(t)
 
     @classmethod
     def load(cls, directory) -> "Result":

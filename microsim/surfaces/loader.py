@@ -63,6 +63,18 @@ def _check_shape(path: Path, shape: tuple, dtype: np.dtype | None, periodic: boo
         raise UsageError(" ".join(str(e).split())) from None
 
 
+def _check_npz_header(path: Path, periodic: bool) -> str:
+    """Check the shape and dtype of the heights in an .npz from its header alone (nothing is
+    inflated); returns the array's key."""
+    key = _npz_member(path)
+    with zipfile.ZipFile(path) as z:
+        member = key + ".npy" if key + ".npy" in z.namelist() else key
+        with z.open(member) as f:
+            shape, dtype = _header(path, f)
+    _check_shape(path, shape, dtype, periodic)
+    return key
+
+
 def _npz_member(path: Path) -> str:
     """Name of the array a .npz holds: 'heights', or its only member."""
     try:
@@ -115,12 +127,7 @@ def check_heightfield_file(path, dx=None, periodic: bool = False) -> tuple[int, 
             raise _fail(path, f"heights contain NaN or inf ({bad} values); fill or crop them first")
         return shape
     if path.suffix == ".npz":
-        key = _npz_member(path)
-        with zipfile.ZipFile(path) as z:
-            member = key + ".npy" if key + ".npy" in z.namelist() else key
-            with z.open(member) as f:
-                shape, dtype = _header(path, f)
-        _check_shape(path, shape, dtype, periodic)
+        _check_npz_header(path, periodic)
     elif path.stat().st_size > MAX_TEXT_BYTES:
         raise _fail(path, f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB "
                           f"({path.stat().st_size:,} bytes); save it as .npy")
@@ -141,12 +148,7 @@ def read_heights(path, periodic: bool = False) -> np.ndarray:
             _check_shape(path, shape, dtype, periodic)
             a = np.load(path, allow_pickle=False)
         elif path.suffix == ".npz":
-            key = _npz_member(path)
-            with zipfile.ZipFile(path) as z:
-                member = key + ".npy" if key + ".npy" in z.namelist() else key
-                with z.open(member) as f:
-                    shape, dtype = _header(path, f)
-            _check_shape(path, shape, dtype, periodic)
+            key = _check_npz_header(path, periodic)
             with np.load(path, allow_pickle=False) as z:
                 a = z[key]
         else:
