@@ -163,7 +163,9 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
             rows = [[name, f"{n:,}", _pct(e)] for name, r in sp.get("runs", {}).items()
                     for n, e in zip(r["rays"], r["rel_rms"])]
             lines += [f"θi = {fmt(sp.get('theta_i'))}°, error against {sp.get('reference')}; "
-                      "the wall times (this chart's x axis) are in `timings.json`.", "",
+                      "the wall times (this chart's x axis) are in `timings.json`. Both files "
+                      "are written by every run but not kept in git, since wall times differ "
+                      "from run to run.", "",
                       md_table(["origins", "rays", "rel RMS error"], rows), ""]
     return "\n".join(lines).rstrip() + "\n"
 
