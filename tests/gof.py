@@ -1,4 +1,4 @@
-"""Goodness-of-fit helpers shared by the sampler tests (DESIGN.md, "Tests").
+"""Goodness-of-fit helpers shared by the sampler tests (docs/design.md, "Tests").
 
 Pearson χ² of observed counts against expected counts, with cells whose expected count is
 below ``min_expected`` pooled into one, and Šidák's correction for running several tests at
@@ -9,10 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-
-def sidak(alpha: float, n_tests: int) -> float:
-    """Per-test significance giving family-wise level ``alpha`` over ``n_tests`` independent tests."""
-    return 1.0 - (1.0 - alpha) ** (1.0 / n_tests)
+from microsim.stats import sidak  # noqa: F401  (re-exported for the tests)
 
 
 def pearson_chi2(observed, expected, min_expected: float = 5.0):

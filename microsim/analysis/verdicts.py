@@ -33,13 +33,13 @@ import numpy as np
 from scipy import stats
 
 from microsim.analytic import _checks
+from microsim.stats import ENERGY_FRACTION, MIN_EVENTS, energy_set, sidak
 
 __all__ = ["VERDICT_SCHEMA", "verdict", "verdicts_for_result", "validate_verdict", "summary_row",
            "sidak", "energy_set", "Z_DEVIATION", "REL_DEVIATION", "ENERGY_FRACTION"]
 
 Z_DEVIATION = 5.0          # |z| beyond which a bin counts as a deviation ...
 REL_DEVIATION = 0.05       # ... if its relative error also exceeds this
-ENERGY_FRACTION = 0.9      # rel_rms is taken over the bins carrying this share of the energy
 
 _NUM = (int, float)
 _OPT_NUM = (int, float, type(None))
@@ -81,28 +81,6 @@ VERDICT_SCHEMA: dict = {
 }
 
 
-def sidak(alpha: float, n: int) -> float:
-    """Per-test level 1 − (1 − α)^(1/n) keeping the family-wise error at α (Šidák)."""
-    alpha = _checks.in_range("alpha", alpha, 0.0, 1.0, lo_open=True, hi_open=True)
-    if int(n) != n or n < 1:
-        raise UsageError(f"n must be an integer >= 1, got {n!r}")
-    return float(-np.expm1(np.log1p(-alpha) / n))
-
-
-def energy_set(energy: np.ndarray, fraction: float = ENERGY_FRACTION) -> np.ndarray:
-    """Boolean mask of the fewest entries of ``energy`` (≥ 0, flat), taken in decreasing order,
-    whose sum reaches ``fraction`` of the total (ties broken by position)."""
-    e = np.asarray(energy, dtype=np.float64).ravel()
-    mask = np.zeros(e.shape, dtype=bool)
-    total = e.sum()
-    if e.size == 0 or not total > 0:
-        return mask
-    order = np.argsort(-e, kind="stable")
-    n = int(np.searchsorted(np.cumsum(e[order]), fraction * total * (1.0 - 1e-12))) + 1
-    mask[order[:min(n, e.size)]] = True
-    return mask
-
-
 def _merge_ranges(flag_theta: np.ndarray, theta_edges: np.ndarray) -> list[list[float]]:
     """[lo, hi] degree ranges of runs of True in ``flag_theta`` (one per θo bin)."""
     out, start = [], None
@@ -122,7 +100,7 @@ def _opt(x) -> float | None:
 
 def verdict(sim, stderr, counts, model, omega, theta_edges, *, phi_edges=None, theta_i=0.0,
             name: str = "model", params: Mapping | None = None, fitted: bool = False,
-            n_params: int = 0, model_rtol: float = 1e-3, min_events: int = 25,
+            n_params: int = 0, model_rtol: float = 1e-3, min_events: int = MIN_EVENTS,
             alpha: float = 0.01, n_tests: int = 1) -> dict:
     """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``).
 
@@ -248,7 +226,7 @@ def validate_verdict(d) -> dict:
 
 
 def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
-                        model_rtol: float = 1e-3, min_events: int = 25,
+                        model_rtol: float = 1e-3, min_events: int = MIN_EVENTS,
                         alpha: float = 0.01) -> list[dict]:
     """Verdicts for every incidence × model of ``result.models`` (prescribed models) and of
     ``fitted`` (an iterable or name → mapping of ``fits.FitResult``; their ``model_values`` are
