@@ -1,10 +1,11 @@
 # The two commands a fresh machine needs: `make demo` and `make test`.
-# Both create .venv on first use and (re)install when pyproject.toml changes.
+# Both create .venv on first use and (re)install when pyproject.toml changes; both install
+# every extra (pyvista for the views, dask.distributed for cluster sweeps).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test
+.PHONY: demo test test-fast lint
 
 demo: $(VENV)/.installed
 	$(BIN)/microsim report --quick
@@ -12,14 +13,22 @@ demo: $(VENV)/.installed
 test: $(VENV)/.installed-test
 	$(BIN)/python -m pytest
 
+# inner loop while developing: no slow and no end-to-end tests
+test-fast: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -m "not slow and not integration"
+
+lint: $(VENV)/.installed-test
+	$(BIN)/ruff check microsim tests
+	$(BIN)/ruff format --check microsim tests
+
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e .
+	$(BIN)/python -m pip install --quiet -e '.[all]'
 	touch $@
 
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[all,test]'
 	touch $@ $(VENV)/.installed
