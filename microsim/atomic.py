@@ -20,6 +20,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import json
+import math
 import os
 import re
 import shutil
@@ -27,9 +28,11 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
+
 from .errors import UsageError
 
-__all__ = ["atomic_open", "write_text", "write_json", "umask", "file_mode", "dir_mode",
+__all__ = ["atomic_open", "write_text", "json_safe", "write_json", "umask", "file_mode", "dir_mode",
            "make_staging", "publish_dir", "output_lock", "clean_stale", "normalise_modes"]
 
 
@@ -81,10 +84,31 @@ def write_text(path, text: str) -> None:
         fh.write(text)
 
 
-def write_json(path, obj, **dump_options) -> None:
-    """``json.dump(obj, indent=1, **dump_options)`` to ``path`` atomically."""
+def json_safe(obj):
+    """JSON-safe copy of ``obj``: NumPy arrays and scalars → Python lists and numbers,
+    NaN/±inf → None, tuples → lists, complex → [re, im], mapping keys → str. Anything else is
+    left for ``json`` to refuse (TypeError)."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, complex):
+        return [json_safe(obj.real), json_safe(obj.imag)]
+    return obj
+
+
+def write_json(path, obj) -> None:
+    """Strict JSON (``json_safe(obj)``, indent 1, non-ASCII escaped) to ``path`` atomically;
+    nothing is written if ``obj`` holds something JSON cannot represent (TypeError)."""
+    data = json.dumps(json_safe(obj), indent=1, allow_nan=False)
     with atomic_open(path) as fh:
-        json.dump(obj, fh, indent=1, **dump_options)
+        fh.write(data)
 
 
 # --- directories -------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 
 from microsim import atomic, runner
+from microsim.runner import planning, tracing
 from microsim.analysis import charts
 from microsim.checkpoints import interrupt_at
 from microsim.cli import main
@@ -63,7 +64,7 @@ def _stub_chart(*args, **kwargs):
 
 
 def _fast(mp) -> None:
-    mp.setattr(runner, "QUICK", FAST)
+    mp.setattr(planning, "QUICK", FAST)
     for name in CHARTS:
         mp.setattr(charts, name, _stub_chart)
 
@@ -462,7 +463,7 @@ def test_partial_side_study_is_an_interrupt(tmp_path, capsys, monkeypatch, fast)
     monkeypatch.chdir(tmp_path)
     sc = scene(tmp_path)
     out = tmp_path / "run"
-    real = runner._simulate
+    real = tracing.simulate_scene
 
     def cut_short(plan, theta_i, rays, seed, bins, progress=None, resume=None, **kw):
         r = real(plan, theta_i, rays, seed, bins, progress=progress, resume=resume, **kw)
@@ -470,7 +471,7 @@ def test_partial_side_study_is_an_interrupt(tmp_path, capsys, monkeypatch, fast)
             r.meta["partial"] = True
         return r
 
-    monkeypatch.setattr(runner, "_simulate", cut_short)
+    monkeypatch.setattr(tracing, "simulate_scene", cut_short)
     status, lines, err = run_cli(capsys, "run", sc, "--quick", "--out", out, "--no-progress")
     assert status == 130 and len(lines) == 1, err
     assert not (out / "report.md").exists() and not (out / "verdicts.json").exists()
@@ -575,8 +576,8 @@ def test_two_in_process_plans_cannot_both_publish(tmp_path, capsys, monkeypatch,
                 outcome["second"] = e
         return real(*a, **k)
 
-    real = runner._simulate
-    monkeypatch.setattr(runner, "_simulate", race)
+    real = tracing.simulate_scene
+    monkeypatch.setattr(tracing, "simulate_scene", race)
     assert runner.execute(first, progress=False).status == 0
     assert isinstance(outcome["second"], ValueError) and "another microsim run" in str(
         outcome["second"])

@@ -1,0 +1,113 @@
+"""``run_report``: ``microsim report``, every scene of a catalogue into ``OUT/<scene>/`` and
+the catalogue index ``OUT/index.md`` with the Mikkelsen Fig. 6 chart."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+from pathlib import Path
+from typing import Callable
+
+from .. import atomic
+from ..analysis import charts as ch
+from ..analysis import report
+from ..checkpoints import checkpoint
+from ..errors import UsageError
+from ..scene import load_scene
+from . import planning
+from .publishing import REPORT_STATE, VERDICTS_FILE, read_report_state, write_report_state
+from .run import execute
+from .side_studies import fig6_curves
+
+__all__ = ["run_report"]
+
+
+def _check_catalogue_out(catalogue: Path, out: Path) -> None:
+    norm = Path(os.path.normpath(out))
+    cwd, cat = Path.cwd().resolve(), catalogue.resolve()
+    if (norm.name in ("", ".", "..") or norm.resolve() in (cwd, *cwd.parents)
+            or norm.resolve() == cat or norm.resolve() in cat.parents):
+        raise UsageError(f"--out {out}: must be a directory of its own, not the current "
+                         f"directory, a parent of it or the catalogue's")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: exists and is not a directory")
+
+
+def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, progress=True,
+               log: Callable[[str], None] | None = None, resume=False) -> int:
+    """Run every ``*.toml`` of ``catalogue`` into ``out/<scene>/`` (each folder replaced in one
+    rename) and write ``out/index.md``. All scene files are validated before anything runs.
+
+    Ctrl-C (status 130): finished scenes stay; the interrupted scene's previous report stays
+    in place and its tallies are kept in ``out/.<scene>.partial/``; ``resume=True``
+    (``report --resume``, same options) skips the scenes finished since the interrupted report
+    started (``out/.report-state.json``), continues the interrupted one from its tallies and
+    runs the rest. Holds ``atomic.output_lock(out)`` throughout."""
+    log = log or (lambda s: print(s, file=sys.stderr))
+    catalogue, out = Path(catalogue), Path(out)
+    if not catalogue.is_dir():
+        raise UsageError(f"--catalogue {catalogue}: not a directory")
+    paths = sorted(catalogue.glob("*.toml"))
+    if not paths:
+        raise UsageError(f"--catalogue {catalogue}: no *.toml scene files")
+    scenes = [load_scene(p) for p in paths]
+    names = [s.name for s in scenes]
+    if len(set(names)) != len(names):
+        raise UsageError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
+    _check_catalogue_out(catalogue, out)
+    hint = (f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
+            f"--out {out}`")
+    with atomic.output_lock(out):
+        state = read_report_state(out) if resume else None
+        if resume:
+            if state is None:
+                raise UsageError(f"--resume: no interrupted report in {out} ({REPORT_STATE} "
+                                 f"missing); run `microsim report` without --resume")
+            if state.get("quick") != bool(quick) or state.get("catalogue") != str(catalogue):
+                raise UsageError(f"--resume: the interrupted report in {out} ran with quick = "
+                                 f"{state.get('quick')}, catalogue {state.get('catalogue')}; "
+                                 f"resume with the same options")
+        done = set(state["done"]) if state else set()
+        plans = []
+        for p, s in zip(paths, scenes):
+            scene_out, partial = out / s.name, out / f".{s.name}.partial"
+            if s.name in done and (scene_out / VERDICTS_FILE).is_file():
+                plans.append(scene_out)
+                continue
+            tallies = partial if resume and (partial / "meta.json").is_file() else None
+            plans.append(planning.plan_run(p, out=scene_out, threads=threads, quick=quick,
+                                           force=True, tallies=tallies, partial_dir=partial,
+                                           resume_hint=hint))
+        state = {"quick": bool(quick), "catalogue": str(catalogue), "done": sorted(done)}
+        write_report_state(out, state)
+        try:
+            docs = []
+            for k, plan in enumerate(plans, 1):
+                checkpoint("report-scene")
+                if isinstance(plan, Path):
+                    log(f"[{k}/{len(plans)}] {plan.name}: finished earlier, kept")
+                    docs.append(json.loads((plan / VERDICTS_FILE).read_text(encoding="utf-8")))
+                    continue
+                log(f"[{k}/{len(plans)}] {plan.scene.name}")
+                outcome = execute(plan, progress=progress, log=log)
+                if outcome.status != 0:
+                    return outcome.status
+                shutil.rmtree(plan.partial_dir, ignore_errors=True)
+                docs.append(outcome.document)
+                state["done"] = sorted({*state["done"], plan.scene.name})
+                write_report_state(out, state)
+            checkpoint("report-index")
+            fig6 = None
+            curves = fig6_curves(scenes, planning.effort_for(quick), threads)
+            if curves:
+                fig6 = "mikkelsen-fig6.png"
+                ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
+            atomic.write_text(out / "index.md", report.index_report(docs, fig6, quick))
+        except KeyboardInterrupt:
+            log(f"microsim: interrupted; finished scene reports kept in {out}; continue with "
+                f"{hint}")
+            return 130
+        (out / REPORT_STATE).unlink(missing_ok=True)
+    log(f"microsim: wrote {out}/index.md ({len(docs)} scenes)")
+    return 0

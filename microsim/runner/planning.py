@@ -1,0 +1,270 @@
+"""Planning a run: what it spends (``Effort``, ``FULL``, ``QUICK``) and ``plan_run``, which
+validates every option and path before anything is written (each problem a one-line
+``UsageError``), including the checks that a saved run may be resumed or an output replaced.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UsageError
+from ..scene import load_scene
+from ..sim import Bins, Result
+
+__all__ = ["AUTO_TARGET", "AUTO_MAX_RAYS", "Effort", "FULL", "QUICK", "effort_for", "RunPlan",
+           "plan_run", "check_replaceable", "RESULT_FILES"]
+
+AUTO_TARGET = 0.01
+"""Energy-weighted relative standard error a ``rays = "auto"`` scene is traced to."""
+AUTO_MAX_RAYS = 100_000_000
+"""Cap on the rays per incidence of a ``rays = "auto"`` scene."""
+RESULT_FILES = ("meta.json", "verdicts.json", "report.md", "brdf.npz")
+"""A directory holding one of these is a microsim result (``--force`` may replace it)."""
+
+
+@dataclass(frozen=True)
+class Effort:
+    """What a run spends beyond the scene's own settings.
+
+    ``max_rays``: cap on primary rays per incidence (None: the scene's ``rays``);
+    ``scale``: surface size factor per surface kind for ``Scene.build_surface(scale=…)``
+    (V-groove count, heightfield grid n at fixed dx); ``quick_fits``: ``fit_all(quick=…)``
+    (fewer multi-starts); ``sweep_theta``/``sweep_rays``/``sweep_bins``: the θi sweep of the
+    stability and energy charts (rays per θi; (θ, φ) bins, None = the scene's);
+    ``albedo_nodes``: (n_theta, n_grazing, n_gl_phi) of the model ρ(θ) tables
+    (``AlbedoTable``); ``speed_rays``: ray counts of the speed-vs-accuracy runs (per estimator
+    variant, one incidence);
+    ``fig6_theta``/``fig6_rays``: the Mikkelsen Fig. 6 sweep of ``microsim report``;
+    ``fit_names``: the models to fit (None: every ``fits.FIT_MODELS``); ``sweep_facets``:
+    include the surface's own facets (``ts-facets``) in the stability sweep; ``max_bins``:
+    cap on the main run's (θo, Δφ) bin counts (None: the scene's).
+    """
+
+    max_rays: int | None = None
+    scale: tuple[tuple[str, float], ...] = ()
+    quick_fits: bool = False
+    sweep_theta: tuple[float, ...] = (0, 10, 20, 30, 40, 50, 60, 70, 75, 80, 85, 89)
+    sweep_rays: int = 200_000
+    sweep_bins: tuple[int, int] | None = None
+    albedo_nodes: tuple[int, int, int] = (46, 24, 16)
+    speed_rays: tuple[int, ...] = (10_000, 100_000, 1_000_000)
+    fig6_theta: tuple[float, ...] = (0, 10, 20, 30, 40, 50, 60, 70, 75, 80, 85, 89)
+    fig6_rays: int = 200_000
+    fit_names: tuple[str, ...] | None = None
+    sweep_facets: bool = True
+    max_bins: tuple[int, int] | None = None
+
+    def scale_for(self, kind: str) -> float:
+        return dict(self.scale).get(kind, 1.0)
+
+
+FULL = Effort()
+QUICK = Effort(max_rays=200_000, scale=(("vgrooves", 0.25), ("gaussian", 0.5), ("abc", 0.5)),
+               quick_fits=True, sweep_theta=(0, 30, 60, 75, 85, 89), sweep_rays=200_000,
+               sweep_bins=(30, 37), albedo_nodes=(16, 16, 8), speed_rays=(10_000, 30_000, 100_000),
+               fig6_theta=(0, 30, 50, 65, 75, 82, 89), fig6_rays=20_000,
+               fit_names=("cook_torrance", "low_microfacet", "low_smooth"), sweep_facets=False,
+               max_bins=(30, 37))
+"""``--quick``: ≤ 2e5 rays per incidence on at most 30 × 37 bins (3° in θo, 5° in Δφ); 1/4 of the V-grooves and half the heightfield grid
+(same dx, so the statistics stay, the tile shrinks); quick fits (2 starts) of Cook–Torrance and
+Löw's two models (the Edwards fit, 10–30 s a scene, only in full runs); a 6-angle sweep with
+2e5 rays on 30 × 37 bins without ``ts-facets``; coarser albedo tables (16 + 16 nodes in θ, 8 in
+φ: ρ within 1e-4 of the full table for vMF κ = 1024); speed runs at 1e4, 3e4 and 1e5 rays; Mikkelsen Fig. 6 at 7 angles with 2e4 rays."""
+
+
+def effort_for(quick: bool) -> Effort:
+    """``QUICK`` for ``--quick``, else ``FULL``."""
+    return QUICK if quick else FULL
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """A validated run: the scene, where it goes, and what to spend."""
+
+    scene: object
+    out: Path
+    rays: int
+    theta_i: tuple[float, ...]
+    seed: int
+    threads: int
+    effort: Effort
+    quick: bool
+    previous: object | None = None        # Result loaded for --resume
+    force: bool = False
+    auto: bool = False                    # rays = "auto": ``rays`` is then the cap
+    partial_dir: Path | None = None       # where interrupted tallies go (None: ``out``)
+    resume_hint: str | None = None        # how to continue, for the interrupt message
+
+    @property
+    def bins(self) -> Bins:
+        return Bins(*bins_shape(self.scene, self.effort))
+
+
+def bins_shape(scene, effort: Effort) -> tuple[int, int]:
+    """(θo, Δφ) bin counts: the scene's, capped by ``effort.max_bins``."""
+    shape = (scene.simulation.theta_bins, scene.simulation.phi_bins)
+    if effort.max_bins is None:
+        return shape
+    return tuple(min(a, b) for a, b in zip(shape, effort.max_bins))
+
+
+def _int_option(name, value, lo):
+    if value is None:
+        return None
+    if isinstance(value, bool) or int(value) != value or value < lo:
+        raise UsageError(f"--{name} must be an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=None,
+             quick=False, resume=None, force=False, tallies=None, partial_dir=None,
+             resume_hint=None) -> RunPlan:
+    """Validate a run without touching the disk; every problem is a one-line ``UsageError``.
+
+    ``out`` defaults to ``runs/<scene name>`` (or ``resume``). An existing ``out`` is refused
+    unless ``resume`` names it (continue its tallies) or ``force`` (replace it; only an empty
+    directory or a microsim result, never the current directory, one of its parents or one
+    holding the scene file). ``tallies`` (``microsim report --resume``): a directory of saved
+    partial tallies to continue into ``out``; ``partial_dir``: where tallies go if the run is
+    interrupted (default ``out``); ``resume_hint``: how to continue, for that message."""
+    scene = load_scene(scene_path)
+    effort = effort_for(quick)
+    rays = _int_option("rays", rays, 1)
+    threads = _int_option("threads", threads, 1)
+    seed = _int_option("seed", seed, 0)
+    auto = rays is None and scene.simulation.rays == "auto"
+    if auto and scene.simulation.realisations != 1:
+        raise UsageError(f"rays = \"auto\" needs realisations = 1 (scene {scene.name} has "
+                         f"{scene.simulation.realisations}); give --rays instead")
+    if auto and resume is not None:
+        raise UsageError("--resume is not available for a rays = \"auto\" scene; "
+                         "use --force to run it again")
+    if rays is None:
+        rays = AUTO_MAX_RAYS if auto else scene.simulation.rays
+        if effort.max_rays is not None:
+            rays = min(rays, effort.max_rays)
+    if rays < scene.simulation.realisations:
+        raise UsageError(f"--rays must be >= the scene's realisations "
+                         f"({scene.simulation.realisations}), got {rays}")
+    if theta_i is None:
+        theta_i = scene.simulation.theta_i
+    theta_i = tuple(float(t) for t in theta_i)
+    if not theta_i or not all(math.isfinite(t) and 0 <= t < 90 for t in theta_i):
+        raise UsageError(f"--theta-i must be angles in degrees, each in [0, 90), got {list(theta_i)}")
+    seed = scene.simulation.seed if seed is None else seed
+    Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)      # validates the grid
+    previous = None
+    if resume is not None:
+        resume = Path(resume)
+        if out is not None and Path(out) != resume:
+            raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
+        out = resume
+        _check_out(out, scene, "--resume")
+        previous = _load_saved(resume, "--resume")
+        _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, resume)
+    else:
+        out = Path(out) if out is not None else Path("runs") / scene.name
+        _check_out(out, scene, "--out")
+        if out.exists() and not force:
+            raise UsageError(f"{out} already exists; pass --resume {out} to continue it or "
+                             f"--force to replace it")
+        if out.exists():
+            check_replaceable(out)
+        if tallies is not None:
+            previous = _load_saved(Path(tallies), "saved tallies")
+            _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, tallies)
+    return RunPlan(scene=scene, out=Path(out), rays=rays, theta_i=theta_i, seed=seed,
+                   threads=threads, effort=effort, quick=bool(quick), previous=previous,
+                   force=bool(force), auto=auto,
+                   partial_dir=None if partial_dir is None else Path(partial_dir),
+                   resume_hint=resume_hint)
+
+
+def _check_out(out: Path, scene, option: str) -> None:
+    """Refuse an output path that is not a usable directory name: the current directory or
+    one of its parents, a directory holding the scene file, an existing non-directory, or
+    one whose parent is not a directory."""
+    norm = Path(os.path.normpath(out))
+    if norm.name in ("", ".", ".."):
+        raise UsageError(f"{option} {out}: must name a directory of its own, not the current "
+                         f"directory or a parent of it")
+    try:
+        target = norm.resolve()
+        cwd = Path.cwd().resolve()
+    except OSError as e:
+        raise UsageError(f"{option} {out}: cannot resolve the path ({e.strerror})") from None
+    if target == cwd or target in cwd.parents:
+        raise UsageError(f"{option} {out}: is the current directory or one of its parents; "
+                         f"choose a directory of its own")
+    if scene.path is not None:
+        spath = Path(scene.path).resolve()
+        if target == spath or target in spath.parents:
+            raise UsageError(f"{option} {out}: holds the scene file {scene.path}; choose "
+                             f"another directory")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"{option} {out}: exists and is not a directory")
+    parent = norm.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        raise UsageError(f"{option} {out}: {parent} is not a directory")
+
+
+def check_replaceable(out: Path) -> None:
+    """``--force`` replaces only an empty directory or a microsim result."""
+    try:
+        names = set(os.listdir(out))
+    except OSError as e:
+        raise UsageError(f"--out {out}: cannot list it ({e.strerror})") from None
+    if names and not names & set(RESULT_FILES):
+        raise UsageError(f"--force {out}: not a microsim result (none of "
+                         f"{', '.join(RESULT_FILES)}); refusing to replace it")
+
+
+def _load_saved(where: Path, what: str) -> Result:
+    """``Result.load(where)``; a missing, truncated or corrupt brdf.npz/meta.json is a
+    one-line ``UsageError`` naming the file."""
+    meta, npz = where / "meta.json", where / "brdf.npz"
+    for f in (meta, npz):
+        if not f.is_file():
+            raise UsageError(f"{what} {where}: no saved run there ({f.name} missing)")
+    try:
+        with open(meta, encoding="utf-8") as fh:
+            m = json.load(fh)
+        if not isinstance(m, dict):
+            raise ValueError("not a JSON object")
+    except (ValueError, UnicodeDecodeError) as e:
+        raise UsageError(f"{what} {where}: {meta} is unreadable ({' '.join(str(e).split())})"
+                         f"; rerun with --force") from None
+    try:
+        with np.load(npz, allow_pickle=False) as z:
+            for k in z.files:
+                z[k]
+    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as e:
+        raise UsageError(f"{what} {where}: {npz} is unreadable ({' '.join(str(e).split())})"
+                         f"; rerun with --force") from None
+    try:
+        return Result.load(where)
+    except (ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as e:
+        raise UsageError(f"{what} {where}: the saved run is inconsistent "
+                         f"({type(e).__name__}: {' '.join(str(e).split())}); rerun with "
+                         f"--force") from None
+
+
+def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where) -> None:
+    """The saved run was made with the same scene, seed, effort, rays, incidences and bins."""
+    run = prev.meta.get("run", {})
+    want = {"scene": scene.name, "seed": seed, "quick": bool(quick), "rays": rays,
+            "theta_i": list(theta_i),
+            "bins": list(bins_shape(scene, effort))}
+    have = {k: run.get(k) for k in want}
+    for key in want:
+        if have[key] != want[key]:
+            raise UsageError(f"--resume {where}: {key} is {have[key]!r} there but "
+                             f"{want[key]!r} now; resume with the same settings")

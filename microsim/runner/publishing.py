@@ -1,0 +1,111 @@
+"""Publishing a run: the output files and their JSON documents, staging directories moved to
+their place in one rename (``microsim.atomic``), saved tallies for ``--resume`` and the
+progress file of ``microsim report --resume``.
+
+Wall times go to ``timings.json`` only, so ``report.md``, ``verdicts.json`` and ``index.md``
+are reproducible byte for byte.
+"""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from .. import atomic
+from ..errors import UsageError
+from .planning import RunPlan
+from .tracing import auto_summary
+
+__all__ = ["VERDICTS_FILE", "REPORT_FILE", "TIMINGS_FILE", "REPORT_STATE", "SCHEMA_VERSION",
+           "staging", "publish_dir", "save_tallies", "fit_record", "verdict_document",
+           "timings_document", "read_report_state", "write_report_state"]
+
+VERDICTS_FILE, REPORT_FILE, TIMINGS_FILE = "verdicts.json", "report.md", "timings.json"
+REPORT_STATE = ".report-state.json"
+"""``microsim report``'s progress file in OUT (finished scenes), for ``report --resume``."""
+SCHEMA_VERSION = 1
+
+
+def staging(out: Path) -> Path:
+    """A new empty staging directory beside ``out`` (``atomic.make_staging``)."""
+    return atomic.make_staging(out)
+
+
+def publish_dir(stage: Path, out: Path) -> None:
+    """Move the finished ``stage`` directory to ``out`` (``atomic.publish_dir``: the old
+    result is removed only once the new one is in place)."""
+    atomic.publish_dir(stage, out)
+
+
+def save_tallies(result, dest: Path) -> None:
+    """Publish the tallies of ``result`` (brdf.npz + meta.json, no models) to ``dest``."""
+    result.models.clear()
+    stage = staging(dest)
+    try:
+        result.save(stage)
+        publish_dir(stage, dest)
+    finally:
+        if stage.exists():
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+def fit_record(fit) -> dict:
+    """JSON form of a ``FitResult`` (Löw E1/E2 with their square roots, as Löw et al. 2012,
+    Table II)."""
+    e1, e2 = fit.e1, fit.e2
+    root = lambda e: math.sqrt(e) if e is not None and np.isfinite(e) and e >= 0 else None  # noqa: E731
+    return {"model": fit.name, "params": dict(fit.params), "cost": fit.cost, "e1": e1, "e2": e2,
+            "sqrt_e1": root(e1), "sqrt_e2": root(e2), "success": bool(fit.success),
+            "n_starts": int(fit.n_starts)}
+
+
+def verdict_document(plan: RunPlan, result, ranking, verdicts, fits, speed, speed_theta,
+                     speed_ref, sweep, stability, warnings) -> dict:
+    """``verdicts.json``: the run's settings, model ranking, verdicts, fits, speed runs (errors
+    only) and the stability sweep (README: schema)."""
+    sc = plan.scene
+    doc = {"schema_version": SCHEMA_VERSION, "scene": sc.name, "scene_file": str(sc.path),
+           "description": sc.description, "quick": plan.quick,
+           "rays": int(result.rays.max()) if plan.auto else plan.rays,
+           "theta_i": list(plan.theta_i), "seed": plan.seed, "ranking": ranking,
+           "verdicts": verdicts, "fits": [fit_record(f) for f in fits.values()],
+           "speed": {"theta_i": speed_theta, "reference": speed_ref,
+                     "runs": {k: {"rays": list(plan.effort.speed_rays), "rel_rms": e}
+                              for k, (t, e) in speed.items()}},
+           "stability": {"theta_i": sweep.theta_i, "rays": plan.effort.sweep_rays,
+                         "rel_rms": stability, "warnings": warnings}}
+    if plan.auto:
+        doc["rays_auto"] = auto_summary(result)
+    return atomic.json_safe(doc)
+
+
+def timings_document(plan: RunPlan, result, speed, speed_theta) -> dict:
+    """``timings.json``: the wall times (simulation, analysis, speed runs)."""
+    return {"simulation_seconds": result.meta.get("seconds"),
+            "rays_per_second": result.meta.get("rays_per_second"),
+            "analysis_seconds": result.meta["seconds_analysis"],
+            "speed": {"theta_i": speed_theta,
+                      "runs": {k: {"rays": list(plan.effort.speed_rays), "seconds": t}
+                               for k, (t, e) in speed.items()}}}
+
+
+def read_report_state(out: Path) -> dict | None:
+    """The interrupted report's state in ``out`` (None if there is none)."""
+    path = out / REPORT_STATE
+    if not path.is_file():
+        return None
+    try:
+        state = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(state, dict) or not isinstance(state.get("done"), list):
+            raise ValueError("not a report state")
+        return state
+    except (ValueError, UnicodeDecodeError) as e:
+        raise UsageError(f"--resume: {path} is unreadable ({' '.join(str(e).split())}); run "
+                         f"`microsim report` without --resume") from None
+
+
+def write_report_state(out: Path, state: dict) -> None:
+    atomic.write_json(out / REPORT_STATE, state)
