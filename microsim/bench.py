@@ -73,13 +73,15 @@ def _bins():
 def _ray_set(tracer, wi: np.ndarray, rays: int):
     """float32 (origins, directions) of the primary rays (one shared direction) and of the
     masking rays the pipeline casts for them (same origins, offsets and directions)."""
-    from microsim.sim.estimator import BLOCK, SINGLE, _block_rays, _facet_table
     from microsim.analytic.fresnel import resolve_material
+    from microsim.sim.paths import SINGLE, facet_table
+    from microsim.sim.streams import BLOCK, block_origins
     nblk = -(-rays // BLOCK)
-    o = np.concatenate([_block_rays(tracer, rays, b, (0, 0, 0), False)[0] for b in range(nblk)])
+    o = np.concatenate([block_origins(tracer, rays, b, (0, 0, 0), False)[0]
+                        for b in range(nblk)])
     status, prim, point = tracer.trace(o, -wi)
     h = np.flatnonzero(status == 0)
-    table = _facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
+    table = facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
     lit = h[table.code[prim[h]] == SINGLE]
     mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
     md = table.wo32[prim[lit]]

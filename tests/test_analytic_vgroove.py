@@ -19,8 +19,7 @@ from microsim import analytic as an
 from microsim import surfaces as sf
 from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel_real_arithmetic, resolve_material
-from microsim.sim import Bins, simulate
-from microsim.sim import estimator as E
+from microsim.sim import BLOCK, Bins, paths, ray_events, simulate, streams
 from microsim.sim.tracer import VGrooveCaster
 
 AL = resolve_material("aluminium")
@@ -65,14 +64,14 @@ def _ambiguous(caster, lx, origins, psi, wi):
 
 @pytest.mark.parametrize("theta", [0.0, 30.0, 60.0, 80.0, 89.0])
 def test_analytic_path_matches_the_traced_one_ray_by_ray(grooves, theta):
-    exact = E._tracer_for(grooves, "exact")
-    tracer, caster, _ = E._tracer_for(grooves, "analytic")
-    wi, n = spherical_deg(theta, 20.0), 64 * E.BLOCK
-    drawn = [E._block_rays(tracer, n, b, (7, 0, 0), True) for b in range(n // E.BLOCK)]
+    exact = paths.tracer_for(grooves, "exact")
+    tracer, caster, _ = paths.tracer_for(grooves, "analytic")
+    wi, n = spherical_deg(theta, 20.0), 64 * BLOCK
+    drawn = [streams.block_origins(tracer, n, b, (7, 0, 0), True) for b in range(n // BLOCK)]
     origins, psi = (np.concatenate(x) for x in zip(*drawn))
-    ref = E._trace_columns(exact[0], exact[1], wi, 20.0, BINS, origins, psi, AL)
-    got = E._analytic_columns(caster, wi, 20.0, BINS, origins[:, 0], origins[0, 2], psi, AL)
-    assert np.all(got[0] != E.RAY_MISSED) and np.any(got[0] == E.SINGLE)
+    ref = paths.trace_columns(exact[0], exact[1], wi, 20.0, BINS, origins, psi, AL)
+    got = paths.analytic_columns(caster, wi, 20.0, BINS, origins[:, 0], origins[0, 2], psi, AL)
+    assert np.all(got[0] != paths.RAY_MISSED) and np.any(got[0] == paths.SINGLE)
     differ = (got[0] != ref[0]) | ~np.isclose(got[1], ref[1], rtol=0, atol=1e-9)
     same_bin = got[2] == ref[2]
     assert np.mean(differ | ~same_bin) <= 1e-3
@@ -81,7 +80,7 @@ def test_analytic_path_matches_the_traced_one_ray_by_ray(grooves, theta):
     assert np.mean(ambiguous) < 0.02                   # the zones are narrow (measured ≤ 0.7 %)
     assert np.mean(~same_bin & ~differ) <= 1e-4        # both bin the same wo: edges to rounding
     # the per-ray diagnostics (ray_events, analytic) take the same decisions
-    ev = E.ray_events(grooves, "aluminium", theta, 20.0, rays=n, seed=7, masking="analytic")
+    ev = ray_events(grooves, "aluminium", theta, phi_i=20.0, rays=n, seed=7, masking="analytic")
     assert np.mean(ev.status != got[0]) <= 1e-4
     same = ev.status == got[0]
     assert np.allclose(ev.weight[same], got[1][same], rtol=0, atol=1e-12)
@@ -115,8 +114,8 @@ def test_independent_runs_of_both_paths_agree(grooves, theta):
 
 
 def test_analytic_results_do_not_depend_on_threads_or_chunks(grooves):
-    kw = dict(rays=5 * E.BLOCK + 123, bins=BINS, masking="analytic", seed=3)
-    a = simulate(grooves, "aluminium", [30.0, 70.0], threads=1, chunk=E.BLOCK, **kw)
+    kw = dict(rays=5 * BLOCK + 123, bins=BINS, masking="analytic", seed=3)
+    a = simulate(grooves, "aluminium", [30.0, 70.0], threads=1, chunk=BLOCK, **kw)
     b = simulate(grooves, "aluminium", [30.0, 70.0], threads=2, chunk=2 ** 20, **kw)
     for key in ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair"):
         assert np.array_equal(a.tallies[key], b.tallies[key])
@@ -125,7 +124,7 @@ def test_analytic_results_do_not_depend_on_threads_or_chunks(grooves):
 
 def test_unfolded_bins_use_the_generic_locator(grooves):
     """Unfolded bins go through ``Bins.locate``; folding them by hand gives the folded run."""
-    kw = dict(rays=4 * E.BLOCK, masking="analytic", seed=5)
+    kw = dict(rays=4 * BLOCK, masking="analytic", seed=5)
     u = simulate(grooves, "aluminium", 40.0, bins=Bins(9, 8, folded=False), **kw)
     f = simulate(grooves, "aluminium", 40.0, bins=Bins(9, 5), **kw)
     cu, cf = u.counts[0], f.counts[0]
@@ -142,15 +141,15 @@ def test_bad_use_raises(grooves):
     with pytest.raises(ValueError, match="masking"):
         simulate(hf, "aluminium", 30.0, rays=10, masking="analytic")
     with pytest.raises(ValueError, match="masking"):
-        E.ray_events(hf, "aluminium", 30.0, rays=10, masking="analytic")
+        ray_events(hf, "aluminium", 30.0, rays=10, masking="analytic")
     with pytest.raises(ValueError, match="masking"):
         simulate(grooves, "aluminium", 30.0, rays=10, masking="analytical")
-    assert "analytic" in E.MASKING
+    assert "analytic" in paths.MASKING
 
 
 def test_caster_geometry(grooves):
     """Facet columns reproduce the mesh: rims, normals of the reported triangles, depth."""
-    tracer, caster, _ = E._tracer_for(grooves, "analytic")
+    tracer, caster, _ = paths.tracer_for(grooves, "analytic")
     assert isinstance(caster, VGrooveCaster)
     w = 1.0 / 1000
     assert np.allclose(np.diff(caster.x_left), w, rtol=0, atol=1e-12)

@@ -1,4 +1,4 @@
-"""Performance machinery (microsim.bench, the batched pipeline of microsim.sim.estimator):
+"""Performance machinery (microsim.bench, the batched pipeline of microsim.sim):
 figures are measured, never asserted; what is asserted is that batching changes no result,
 that the per-facet table path equals the per-ray path, and that memory does not grow with
 the number of rays."""
@@ -7,14 +7,14 @@ import json
 
 import numpy as np
 import pytest
+from test_tracer import heightfield_surface, random_heights
 
 from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.bench import BenchConfig, add_bench_command, format_bench, peak_rss_mb, throughput
-from microsim.sim import BLOCK, Bins, simulate
-from microsim.sim import estimator as E
+from microsim.sim import BLOCK, Bins, paths, simulate, streams
+from microsim.sim.tallies import Tally, chunk_tallies
 from microsim.surfaces.surface import flat
-from test_tracer import heightfield_surface, random_heights
 
 AL = resolve_material("aluminium")
 
@@ -41,17 +41,18 @@ def test_fast_paths_equal_the_per_ray_events(rough, theta):
     """Same rays through the facet-table and column paths (tallies) and ``_trace`` (the
     per-ray Events of ``ray_events``): identical ledger classes and bins; Fresnel weights equal
     to rounding (the table evaluates F once per facet, the others once per hit)."""
-    tracer, profile, az = E._tracer_for(rough, "traced")
+    tracer, profile, az = paths.tracer_for(rough, "traced")
     wi = spherical_deg(theta, 10.0)
     bins = Bins(18, 13)
-    starts = np.concatenate([E._block_rays(tracer, 3 * BLOCK, b, (0, 0, 0), False)[0]
+    starts = np.concatenate([streams.block_origins(tracer, 3 * BLOCK, b, (0, 0, 0), False)[0]
                              for b in range(3)])
-    ev = E._trace(tracer, profile, wi, starts, None, AL, False)
-    single = ev.status == E.SINGLE
-    assert single.mean() > 0.5 and np.any(ev.status == E.MASKED)        # not vacuous
-    table = E._facet_table(tracer, wi, AL, bins, 10.0)
-    for status, weight, where in (E._trace_tabled(tracer, table, wi, starts),
-                                  E._trace_columns(tracer, None, wi, 10.0, bins, starts, None, AL)):
+    ev = paths.trace_events(tracer, profile, wi, starts, None, AL, False)
+    single = ev.status == paths.SINGLE
+    assert single.mean() > 0.5 and np.any(ev.status == paths.MASKED)        # not vacuous
+    table = paths.facet_table(tracer, wi, AL, bins, 10.0)
+    for status, weight, where in (paths.trace_tabled(tracer, table, wi, starts),
+                                  paths.trace_columns(tracer, None, wi, 10.0, bins, starts, None,
+                                                      AL)):
         assert np.mean(status != ev.status) <= 1e-4           # float32-grazing decisions only
         same = status == ev.status
         assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
@@ -65,16 +66,16 @@ def test_groove_column_path_equals_the_per_ray_events(masking):
     the rotated-back wo."""
     from microsim import analytic as an
     from microsim.surfaces import vgrooves
-    tracer, profile, az = E._tracer_for(vgrooves(64, an.Beckmann(0.4), seed=1), masking)
+    tracer, profile, az = paths.tracer_for(vgrooves(64, an.Beckmann(0.4), seed=1), masking)
     wi, bins = spherical_deg(60.0, 25.0), Bins(18, 13)
-    drawn = [E._block_rays(tracer, 2 * BLOCK, b, (1, 0, 0), True) for b in range(2)]
+    drawn = [streams.block_origins(tracer, 2 * BLOCK, b, (1, 0, 0), True) for b in range(2)]
     starts, psi = (np.concatenate(x) for x in zip(*drawn))
-    ev = E._trace(tracer, profile, wi, starts, psi, AL, True)
-    status, weight, where = E._trace_columns(tracer, profile, wi, 25.0, bins, starts, psi, AL)
-    assert np.mean(status != ev.status) <= 1e-4 and np.any(status == E.MASKED)
+    ev = paths.trace_events(tracer, profile, wi, starts, psi, AL, True)
+    status, weight, where = paths.trace_columns(tracer, profile, wi, 25.0, bins, starts, psi, AL)
+    assert np.mean(status != ev.status) <= 1e-4 and np.any(status == paths.MASKED)
     same = status == ev.status
     assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
-    ok = same & (ev.status == E.SINGLE)
+    ok = same & (ev.status == paths.SINGLE)
     assert np.mean(where[ok] != bins.locate(ev.wo[ok], 25.0)) <= 1e-4   # bin edges to rounding
 
 
@@ -129,18 +130,18 @@ def test_bench_rays_option_is_honoured_with_and_without_quick(monkeypatch, capsy
 
 # --- incidence-azimuth rotation (statistically isotropic heightfields) ---------------------------
 def _tallies(tracer, wi, blocks_per_chunk, n_total, bins, rotate):
-    """Running totals (``_Tally.items()``) after adding the chunks of ``blocks_per_chunk``."""
-    nblk = -(-n_total // BLOCK)
-    total = E._Tally.empty(bins.shape[0] * bins.shape[1])
+    """Running totals (``Tally.items()``) after adding the chunks of ``blocks_per_chunk``."""
+    nblk, nbin = -(-n_total // BLOCK), bins.shape[0] * bins.shape[1]
+    incidence = paths.Incidence(tracer, wi, 0.0, bins, AL, n_total, (5, 0, 0))
+    path = paths.choose_path(incidence, None, False, isotropic=rotate)
+    total = Tally.empty(nbin)
     for a in range(0, nblk, blocks_per_chunk):
-        total.add_chunk(E._chunk_tallies(tracer, None, wi, 0.0, bins, AL, n_total,
-                                         range(a, min(a + blocks_per_chunk, nblk)), key=(5, 0, 0),
-                                         azimuth=False, rotate=rotate))
+        total.add_chunk(chunk_tallies(path, nbin, range(a, min(a + blocks_per_chunk, nblk))))
     return total.items()
 
 
 def test_rotated_incidence_is_reproducible_for_any_chunk(rough):
-    tracer = E._tracer_for(rough, "traced")[0]
+    tracer = paths.tracer_for(rough, "traced")[0]
     wi, bins, n = spherical_deg(50.0, 0.0), Bins(10, 7), 3 * BLOCK + 5
     a = _tallies(tracer, wi, 1, n, bins, True)
     b = _tallies(tracer, wi, 3, n, bins, True)
@@ -152,7 +153,7 @@ def test_rotated_incidence_is_reproducible_for_any_chunk(rough):
 @pytest.mark.parametrize("theta", [20.0, 65.0])
 def test_rotated_incidence_keeps_the_mirror_direction_of_a_flat_surface(theta):
     """Bins follow the rotated incidence: all energy F(θi) stays in the mirror bin Δφ = 180°."""
-    tracer = E._tracer_for(flat(), "traced")[0]
+    tracer = paths.tracer_for(flat(), "traced")[0]
     bins = Bins(45, 37)
     tallies = _tallies(tracer, spherical_deg(theta, 0.0), 2, 3 * BLOCK, bins, True)
     sw = tallies[0]

@@ -177,7 +177,7 @@ def test_ledger_accounts_for_every_ray():
 def test_realisations_pool_rays_and_separate_error_components(tmp_path):
     make = lambda seed: heightfield_surface(random_heights(sigma=0.02, seed=seed), 1 / 64)  # noqa: E731
     kw = dict(rays=3 * 8000 + 1, bins=Bins(10, 5), seed=1)
-    res = simulate(None, "aluminium", [30.0, 70.0], realisations=(make, [11, 12, 13]), **kw)
+    res = simulate(None, "aluminium", [30.0, 70.0], surface_factory=make, seeds=[11, 12, 13], **kw)
     same = simulate(None, "aluminium", [30.0, 70.0], realisations=[make(11), make(12), make(13)], **kw)
     assert np.array_equal(res.brdf, same.brdf)
     nr = res.rays_realisations
@@ -190,6 +190,32 @@ def test_realisations_pool_rays_and_separate_error_components(tmp_path):
     back = Result.load(tmp_path)
     assert np.array_equal(back.stderr_realisation, res.stderr_realisation)
     assert np.array_equal(back.brdf_realisations, res.brdf_realisations)
+
+
+def test_a_realisation_count_takes_the_seeds_from_seed():
+    """``realisations=n`` with ``surface_factory`` builds seeds seed, seed + 1, …, seed + n − 1."""
+    make = lambda seed: heightfield_surface(random_heights(n=16, sigma=0.02, seed=seed), 1 / 16)  # noqa: E731
+    kw = dict(rays=2 * BLOCK + 1, bins=Bins(6, 4), seed=5)
+    counted = simulate(None, "aluminium", 40.0, surface_factory=make, realisations=2, **kw)
+    listed = simulate(None, "aluminium", 40.0, surface_factory=make, seeds=[5, 6], **kw)
+    for name in ("brdf", "stderr", "stderr_realisation", "sum_w", "sum_w2"):
+        assert np.array_equal(getattr(counted, name), getattr(listed, name), equal_nan=True), name
+    assert counted.meta["realisations"][1]["fingerprint"] != counted.meta["surface"]["fingerprint"]
+
+
+def test_threads_default_to_the_cpu_count_and_change_no_number():
+    s = heightfield_surface(random_heights(n=16, sigma=0.02, seed=2), 1 / 16)
+    kw = dict(rays=3 * BLOCK + 5, bins=Bins(6, 4), seed=4)
+    default = simulate(s, "aluminium", [20.0, 60.0], **kw)
+    one = simulate(s, "aluminium", [20.0, 60.0], threads=1, **kw)
+    assert default.meta["threads"] == min(os.cpu_count() or 1, 1024)
+    for name in ("brdf", "stderr", "sum_w", "sum_w2", "counts"):
+        assert np.array_equal(getattr(default, name), getattr(one, name), equal_nan=True), name
+
+
+def test_options_are_keyword_only():
+    with pytest.raises(TypeError):
+        simulate(flat(), "aluminium", 30.0, 0.0)                 # phi_i by position
 
 
 # --- Result ---------------------------------------------------------------------------------------

@@ -91,8 +91,21 @@ SIMULATE_CASES = [
     (sim(progress=5), "progress"), (sim(resume={"rays": 10}), "resume"),
     (sim(surface=None, realisations=[]), "realisations"),
     (sim(surface=None, realisations=["vgrooves"]), "realisations"),
-    (sim(surface=None, realisations=(lambda s: "not a surface", [1, 2])), "realisations"),
-    (sim(surface=None, realisations=(lambda s: FLAT, [])), "realisations"),
+    (sim(surface=None, realisations=(lambda s: FLAT, [1, 2])), "surface_factory"),
+    (sim(surface=None, surface_factory=lambda s: "not a surface", seeds=[1, 2]),
+     "surface_factory"),
+    (sim(surface=None, surface_factory=lambda s: FLAT, seeds=[]), "seeds"),
+    (sim(surface=None, surface_factory=lambda s: FLAT, seeds=[1.5]), "seeds"),
+    (sim(surface=None, surface_factory=lambda s: FLAT, seeds=7), "seeds"),
+    (sim(surface=None, surface_factory=lambda s: FLAT, seeds=[1, 2], realisations=3),
+     "realisations"),
+    (sim(surface=None, surface_factory=lambda s: FLAT, realisations=0), "realisations"),
+    (sim(surface=None, surface_factory=lambda s: FLAT, realisations=2.5), "realisations"),
+    (sim(surface=None, surface_factory=lambda s: FLAT, realisations=[FLAT]), "realisations"),
+    (sim(surface=None, surface_factory="flat"), "surface_factory"),
+    (sim(surface_factory=lambda s: FLAT, realisations=2), "surface"),
+    (sim(seeds=[1, 2]), "seeds"),
+    (sim(realisations=[flat(), FLAT]), "surface"),
     (sim(surface=None, realisations=5), "realisations"),
     (sim(rays=1, surface=None, realisations=[FLAT, FLAT]), "rays"),
 ]
@@ -143,6 +156,7 @@ AUTO_CASES = [
     (auto(seed=-1), "seed"), (auto(threads=1.5), "threads"), (auto(chunk="big"), "chunk"),
     (auto(material="gold"), "material"), (auto(masking="bogus"), "masking"),
     (auto(origins="grid"), "origins"), (auto(progress=3), "progress"),
+    (auto(threads=0), "threads"), (auto(threads="all"), "threads"),
 ]
 
 
@@ -382,7 +396,7 @@ def test_rays_done_events_sum_to_the_rays_of_each_pair_and_arrive_per_chunk():
     rays = 2 * (5 * BLOCK) + 7                   # realisation 0 gets one ray more (odd total)
     got = []
     res = simulate(None, "aluminium", [20.0, 70.0], rays=rays, bins=Bins(6, 4), chunk=BLOCK,
-                   threads=2, realisations=(make, [1, 2]), progress=got.append)
+                   threads=2, surface_factory=make, seeds=[1, 2], progress=got.append)
     assert not res.is_partial and all(isinstance(e, RaysDone) for e in got)
     for r in range(2):
         for i, th in enumerate([20.0, 70.0]):

@@ -10,9 +10,9 @@ import pytest
 
 from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.sim import BLOCK, Bins
-from microsim.sim import estimator as E
+from microsim.sim import BLOCK, Bins, paths, streams
 from microsim.sim.scratch import work
+from microsim.sim.tallies import Tally, split_tallies
 from microsim.surfaces.surface import flat
 
 AL = resolve_material("aluminium")
@@ -22,10 +22,11 @@ def ray_outcomes(n, nbin, seed):
     """Spatially coherent synthetic ledger classes, weights and bins (runs of equal bins, as
     coherent rays give), with every class present."""
     rng = np.random.default_rng(seed)
-    status = rng.choice(np.array([E.SINGLE] * 6 + [E.MASKED, E.DOWNWARD, E.RAY_UNRESOLVED,
-                                                   E.RAY_MISSED], dtype=np.int8), n)
+    status = rng.choice(np.array([paths.SINGLE] * 6 + [paths.MASKED, paths.DOWNWARD,
+                                                       paths.RAY_UNRESOLVED, paths.RAY_MISSED],
+                                 dtype=np.int8), n)
     where = (np.arange(n) // 7 + rng.integers(0, 3, n)) % nbin
-    where = np.where((status == E.SINGLE) & (rng.random(n) > 0.05), where, -1).astype(np.int64)
+    where = np.where((status == paths.SINGLE) & (rng.random(n) > 0.05), where, -1).astype(np.int64)
     return status, rng.random(n), where
 
 
@@ -36,12 +37,12 @@ def test_block_tallies_are_per_block_bincounts(n):
     nbin = 50
     status, weight, where = ray_outcomes(n, nbin, seed=1)
     n_blocks = -(-n // BLOCK)
-    bins, sums, cnt, offsets, ln, lf = E._split_tallies(status, weight, where, n_blocks,
+    bins, sums, cnt, offsets, ln, lf = split_tallies(status, weight, where, n_blocks,
                                                         nbin).take()
     for b in range(n_blocks):
         lo, hi = b * BLOCK, min(n, (b + 1) * BLOCK)
         s, w, k = status[lo:hi], weight[lo:hi], where[lo:hi]
-        tallied = (s == E.SINGLE) & (k >= 0)
+        tallied = (s == paths.SINGLE) & (k >= 0)
         part = slice(offsets[b], offsets[b + 1])
         assert len(np.unique(bins[part])) == offsets[b + 1] - offsets[b]     # each bin once
         dense = np.zeros((4, nbin))
@@ -54,23 +55,23 @@ def test_block_tallies_are_per_block_bincounts(n):
         both = e[tallied[e] & tallied[e + 1] & (k[e] == k[e + 1])]
         assert len(both) > 0                                   # not vacuous
         assert np.array_equal(dense[2], np.bincount(k[both], w[both] * w[both + 1], nbin))
-        assert np.array_equal(ln[b], np.bincount(s, minlength=len(E.LEDGER)))
-        assert np.array_equal(lf[b], np.bincount(s, w, len(E.LEDGER)))
+        assert np.array_equal(ln[b], np.bincount(s, minlength=len(paths.LEDGER)))
+        assert np.array_equal(lf[b], np.bincount(s, w, len(paths.LEDGER)))
 
 
 def test_adding_a_chunk_adds_its_blocks_in_order():
-    """``_Tally.add_chunk`` (sparse, one call) equals adding every block's dense sums in block
+    """``Tally.add_chunk`` (sparse, one call) equals adding every block's dense sums in block
     order, bitwise."""
     nbin, n = 40, 4 * BLOCK
     status, weight, where = ray_outcomes(n, nbin, seed=2)
-    got = E._Tally.empty(nbin)
+    got = Tally.empty(nbin)
     got.sum_w += 0.1                                           # a running total to add to
-    want = E._Tally.empty(nbin)
+    want = Tally.empty(nbin)
     want.sum_w += 0.1
-    assert got.add_chunk(E._split_tallies(status, weight, where, 4, nbin)) == 4
+    assert got.add_chunk(split_tallies(status, weight, where, 4, nbin)) == 4
     for b in range(4):
-        one = E._Tally.empty(nbin)
-        one.add_chunk(E._split_tallies(*(a[b * BLOCK:(b + 1) * BLOCK] for a in
+        one = Tally.empty(nbin)
+        one.add_chunk(split_tallies(*(a[b * BLOCK:(b + 1) * BLOCK] for a in
                                          (status, weight, where)), 1, nbin))
         for total, part in zip(want.items(), one.items()):
             total += part
@@ -78,7 +79,7 @@ def test_adding_a_chunk_adds_its_blocks_in_order():
 
 
 def test_chunk_tallies_hand_out_once():
-    chunk = E._split_tallies(*ray_outcomes(BLOCK, 5, seed=3), 1, 5)
+    chunk = split_tallies(*ray_outcomes(BLOCK, 5, seed=3), 1, 5)
     chunk.take()
     with pytest.raises(RuntimeError, match="already taken"):
         chunk.take()
@@ -87,27 +88,27 @@ def test_chunk_tallies_hand_out_once():
 @pytest.mark.parametrize("azimuth", [False, True])
 @pytest.mark.parametrize("origins", ["stratified", "independent"])
 def test_block_rays_do_not_depend_on_the_chunking(azimuth, origins):
-    tracer = E._tracer_for(flat(), "traced")[0]
+    tracer = paths.tracer_for(flat(), "traced")[0]
     n = 5 * BLOCK + 11
     (x, y, z), psi = (np.copy(a) if a is not None else None for a in
-                      E._chunk_columns(tracer, n, range(6), (3, 1, 2), azimuth, origins))
-    one = [E._block_rays(tracer, n, b, (3, 1, 2), azimuth, origins) for b in range(6)]
+                      streams.chunk_origins(tracer, n, range(6), (3, 1, 2), azimuth, origins))
+    one = [streams.block_origins(tracer, n, b, (3, 1, 2), azimuth, origins) for b in range(6)]
     assert np.array_equal(np.stack([x, y, z], axis=1), np.concatenate([o for o, _ in one]))
     if azimuth:
         assert np.array_equal(psi, np.concatenate([p for _, p in one]))
         assert 0 <= psi.min() and psi.max() < 2 * np.pi and np.ptp(psi) > 6
-    other = E._chunk_columns(tracer, n, range(6), (3, 1, 3), azimuth, origins)[0][0]
+    other = streams.chunk_origins(tracer, n, range(6), (3, 1, 3), azimuth, origins)[0][0]
     assert not np.array_equal(x, other)                        # the key selects the stream
 
 
 def test_stratified_origins_lie_in_their_own_strata():
     """Ray r's origin is q = (r + ξ)/N·rows of the row-major sweep with ξ ∈ [0, 1) and its y
     jittered inside row ⌊q⌋ (η ∈ [0, 1))."""
-    tracer = E._tracer_for(flat(), "traced")[0]
+    tracer = paths.tracer_for(flat(), "traced")[0]
     lx, ly = tracer.tile
     n = 3 * BLOCK + 5
     rows = max(1, int(round(np.sqrt(n * ly / lx))))
-    (x, y, z), _ = E._chunk_columns(tracer, n, range(4), (0, 0, 0), False, "stratified")
+    (x, y, z), _ = streams.chunk_origins(tracer, n, range(4), (0, 0, 0), False, "stratified")
     row = np.floor((y + ly / 2) / ly * rows)
     q = row + (x + lx / 2) / lx
     xi = q * n / rows - np.arange(n)
@@ -156,11 +157,12 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
         masking_lift = np.zeros(len(n))
 
     wi, bins = spherical_deg(55.0, 20.0), Bins(18, 13)
-    table = E._facet_table(Facets, wi, ior, bins, 20.0)
+    table = paths.facet_table(Facets, wi, ior, bins, 20.0)
     c = n @ wi
     wo = 2 * c[:, None] * n - wi
     assert np.array_equal(table.wo32, wo.astype(np.float32))
-    want = np.where(c <= 0, E.RAY_UNRESOLVED, np.where(wo[:, 2] > 0, E.SINGLE, E.DOWNWARD))
+    want = np.where(c <= 0, paths.RAY_UNRESOLVED,
+                    np.where(wo[:, 2] > 0, paths.SINGLE, paths.DOWNWARD))
     assert np.array_equal(table.code, want) and len(set(want)) == 3
     np.testing.assert_allclose(table.weight, np.where(c > 0, fresnel(np.clip(c, 0, 1), ior), 0.0),
                                rtol=1e-12, atol=1e-15)
@@ -183,9 +185,10 @@ def test_rays_rounding_onto_a_wall_still_hit():
     """Starts within half a float32 ulp of the walls round onto them; a ray on the wall runs
     along the mesh's boundary edge, which Embree's watertight test may give to the absent
     neighbour. ``_strictly_inside`` keeps them in the tile: every falling ray hits."""
+    from test_tracer import heightfield_surface, random_heights
+
     from microsim.sim import Tracer
     from microsim.sim.tracer import HIT
-    from test_tracer import heightfield_surface, random_heights
     tracer = Tracer(heightfield_surface(random_heights(n=32, sigma=0.02, seed=5), 1 / 32))
     h = tracer.tile[0] / 2
     edge = np.nextafter(h, 0.0)                                    # rounds to h in float32

@@ -6,9 +6,10 @@ import signal
 
 import numpy as np
 import pytest
-
-from microsim.sim import BLOCK, Bins, Result, estimator, simulate
 from test_tracer import heightfield_surface, random_heights, vgroove_surface
+
+from microsim.checkpoints import interrupt_at
+from microsim.sim import BLOCK, LEDGER, Bins, Result, simulate
 
 THETA = [20.0, 70.0]
 KW = dict(rays=7 * BLOCK + 321, bins=Bins(10, 7), seed=4)     # not a whole number of blocks
@@ -30,37 +31,18 @@ def assert_identical(a: Result, b: Result):
         assert np.array_equal(a.tallies[k], b.tallies[k]), k
 
 
-def interrupt_at(monkeypatch, call: int, action):
-    """Make the origin generation of the chunk holding block ``call`` − 1 (the ``call``-th
-    block; the first incidence's, whichever thread reaches it) run ``action`` once."""
-    real = estimator._chunk_columns
-    state = {"n": 0}
-
-    def wrapped(*args, **kwargs):
-        if call - 1 in list(args[2]) and not state["n"]:
-            state["n"] += 1
-            action()
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(estimator, "_chunk_columns", wrapped)
-    return state
-
-
-def raise_interrupt():
-    raise KeyboardInterrupt
-
-
 @pytest.mark.parametrize("threads", [1, 2])
-def test_interrupted_run_is_partial_and_resumes_bitwise(monkeypatch, tmp_path, threads):
+def test_interrupted_run_is_partial_and_resumes_bitwise(tmp_path, threads):
     s = surface()
     full = simulate(s, "aluminium", THETA, threads=threads, chunk=BLOCK, **KW)
     assert not full.is_partial and np.all(full.rays == KW["rays"])
-    interrupt_at(monkeypatch, 4, raise_interrupt)          # inside the first incidence
-    part = simulate(s, "aluminium", THETA, threads=threads, chunk=BLOCK, **KW)
+    with interrupt_at("simulation", after=3) as hit:       # after 4 of the first incidence's 8
+        part = simulate(s, "aluminium", THETA, threads=threads, chunk=BLOCK, **KW)
+    assert hit["fired"]
     assert part.is_partial and part.meta["interrupted"]
     assert 0 < part.rays[0] < KW["rays"] and part.rays[0] % BLOCK == 0   # whole blocks only
     assert part.rays[1] == 0 and np.all(np.isnan(part.brdf[1]))         # not started
-    led = sum(part.ledger_counts[k] for k in estimator.LEDGER)
+    led = sum(part.ledger_counts[k] for k in LEDGER)
     assert np.array_equal(led, part.rays)                  # the ledger closes on done blocks
     assert 0 < part.counts[0].sum() <= part.ledger_counts["single"][0]
     part.save(tmp_path)
@@ -73,12 +55,19 @@ def test_interrupted_run_is_partial_and_resumes_bitwise(monkeypatch, tmp_path, t
     assert_identical(full, resumed)
 
 
-def test_sigint_stops_after_the_chunk_in_flight_and_restores_the_handler(monkeypatch):
+def test_sigint_stops_after_the_chunk_in_flight_and_restores_the_handler():
     s = vgroove_surface([20.0, 35.0, 50.0, 10.0] * 8)
     full = simulate(s, "aluminium", THETA, chunk=BLOCK, **KW)
     before = signal.getsignal(signal.SIGINT)
-    interrupt_at(monkeypatch, 3, lambda: os.kill(os.getpid(), signal.SIGINT))
-    part = simulate(s, "aluminium", THETA, threads=1, chunk=BLOCK, **KW)   # returns, no raise
+    seen = []
+
+    def sigint_at_third_chunk(event):                      # a real SIGINT, mid-incidence
+        seen.append(event)
+        if len(seen) == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    part = simulate(s, "aluminium", THETA, threads=1, chunk=BLOCK,   # returns, no raise
+                    progress=sigint_at_third_chunk, **KW)
     assert signal.getsignal(signal.SIGINT) is before
     assert part.is_partial and part.rays.sum() < 2 * KW["rays"]
     resumed = simulate(s, "aluminium", THETA, resume=part, **KW)
@@ -88,18 +77,19 @@ def test_sigint_stops_after_the_chunk_in_flight_and_restores_the_handler(monkeyp
 def test_realisations_interrupted_between_surfaces_resume_bitwise():
     make = lambda seed: heightfield_surface(random_heights(sigma=0.02, seed=seed), 1 / 32)  # noqa: E731
     kw = dict(KW, rays=3 * 2 * BLOCK + 5)
-    full = simulate(None, "aluminium", THETA, realisations=(make, [1, 2, 3]), **kw)
+    full = simulate(None, "aluminium", THETA, surface_factory=make, seeds=[1, 2, 3], **kw)
 
     def flaky(seed):                                       # Ctrl-C while building realisation 2
         if seed == 2:
             raise KeyboardInterrupt
         return make(seed)
 
-    part = simulate(None, "aluminium", THETA, realisations=(flaky, [1, 2, 3]), **kw)
+    part = simulate(None, "aluminium", THETA, surface_factory=flaky, seeds=[1, 2, 3], **kw)
     assert part.is_partial
     assert np.array_equal(part.tallies["rays"][:, 0], [full.rays_realisations[0], 0, 0])
     assert part.meta["realisations"][1] is None
-    resumed = simulate(None, "aluminium", THETA, realisations=(make, [1, 2, 3]), resume=part, **kw)
+    resumed = simulate(None, "aluminium", THETA, surface_factory=make, seeds=[1, 2, 3],
+                       resume=part, **kw)
     assert_identical(full, resumed)
     for name in ("stderr_ray", "stderr_realisation", "brdf_realisations"):
         assert np.array_equal(getattr(full, name), getattr(resumed, name)), name
@@ -119,11 +109,11 @@ def test_resuming_a_complete_run_traces_nothing():
     (dict(material="methanol"), "material"), (dict(origins="independent"), "origins"),
     (dict(surface=vgroove_surface([30.0] * 4)), "surface"),
 ])
-def test_resume_with_a_different_configuration_is_refused(monkeypatch, change, word):
+def test_resume_with_a_different_configuration_is_refused(change, word):
     s = surface()
-    interrupt_at(monkeypatch, 2, raise_interrupt)
-    part = simulate(s, "aluminium", THETA, **KW)
-    monkeypatch.undo()
+    with interrupt_at("simulation", after=1):
+        part = simulate(s, "aluminium", THETA, **KW)
+    assert part.is_partial
     args = {**KW, "surface": s, "material": "aluminium", "theta_i": THETA, **change}
     with pytest.raises(ValueError, match=word):
         simulate(resume=part, **args)

@@ -1,4 +1,4 @@
-"""Standard error of stratified ray tracing (collapsed strata, ``estimator._estimate``).
+"""Standard error of stratified ray tracing (collapsed strata, ``tallies.bin_estimate``).
 
 Calibration: K independent seeds of one configuration give K independent estimates per bin;
 their scatter is the true ray noise, against which the reported ``stderr`` is judged.
@@ -22,11 +22,13 @@ import warnings
 
 import numpy as np
 import pytest
+from gof import sidak
 from scipy import stats
 
-from gof import sidak
 from microsim import analytic as an
-from microsim.sim import BLOCK, Bins, Result, estimator, ray_events, simulate
+from microsim.checkpoints import interrupt_at
+from microsim.sim import BLOCK, LEDGER, Bins, Result, ray_events, simulate
+from microsim.sim.tallies import bin_estimate
 from microsim.surfaces import flat, gaussian, vgrooves
 
 K, RAYS, THETA, BINS = 16, 200_000, [30.0, 70.0], Bins(9, 7)
@@ -43,8 +45,7 @@ def chi2_interval(dof: int) -> tuple[float, float]:
 def per_ray_stderr(res: Result, i: int) -> np.ndarray:
     """The old i.i.d. formula √((Σw²/N − (Σw/N)²)/(N − 1))/Ω, flat."""
     omega = res.bins.projected_solid_angle().ravel()
-    return estimator._estimate(res.sum_w[i].ravel(), res.sum_w2[i].ravel(), int(res.rays[i]),
-                               omega)[1]
+    return bin_estimate(res.sum_w[i].ravel(), res.sum_w2[i].ravel(), int(res.rays[i]), omega)[1]
 
 
 def calibration(surface):
@@ -103,7 +104,7 @@ def test_sum_pair_is_the_sum_over_adjacent_ray_pairs_in_one_bin(heightfield):
     n, bins = 5 * BLOCK + 7, Bins(9, 7)
     res = simulate(heightfield, "aluminium", 40.0, rays=n, bins=bins, seed=3)
     ev = ray_events(heightfield, "aluminium", 40.0, rays=n, seed=3)
-    where = np.where(ev.status == estimator.SINGLE,
+    where = np.where(ev.status == LEDGER.index("single"),
                      bins.locate(np.nan_to_num(ev.wo), 0.0), -1)
     x = np.zeros((n, bins.shape[0] * bins.shape[1]))
     ok = where >= 0
@@ -149,27 +150,17 @@ def test_pair_rule_falls_back_to_per_ray_where_the_pair_estimate_is_zero():
     assert np.all(res.stderr <= 1e-7 * res.brdf.max())
     # pair estimate 0 but per-ray > 0 (constructed): the per-ray value is used
     omega = np.ones(2)
-    f, se = estimator._estimate(np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega,
-                                sum_pair=np.array([1.0, 0.0]))
-    per = estimator._estimate(np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega)[1]
+    f, se = bin_estimate(np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega,
+                         sum_pair=np.array([1.0, 0.0]))
+    per = bin_estimate(np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega)[1]
     assert se[0] == per[0] > 0 and se[1] == pytest.approx(0.1)     # √(1 − 0)/10
 
 
 # --- isotropic (per-block incidence-azimuth rotation) ------------------------------------------
-def test_isotropic_is_part_of_the_resume_configuration(monkeypatch, heightfield):
-    calls = {"n": 0}
-    real = estimator._chunk_columns
-
-    def interrupt_on_third(*args, **kwargs):
-        calls["n"] += 1
-        if calls["n"] == 3:
-            raise KeyboardInterrupt
-        return real(*args, **kwargs)
-
+def test_isotropic_is_part_of_the_resume_configuration(heightfield):
     kw = dict(rays=6 * BLOCK, bins=Bins(9, 7), seed=5, threads=1, chunk=BLOCK)
-    monkeypatch.setattr(estimator, "_chunk_columns", interrupt_on_third)
-    part = simulate(heightfield, "aluminium", 50.0, isotropic=True, **kw)
-    monkeypatch.setattr(estimator, "_chunk_columns", real)
+    with interrupt_at("simulation", after=1):              # after two of the six blocks
+        part = simulate(heightfield, "aluminium", 50.0, isotropic=True, **kw)
     assert part.is_partial and part.meta["isotropic"] and part.meta["stderr_method"] == "per-ray"
     with pytest.raises(ValueError, match="isotropic"):
         simulate(heightfield, "aluminium", 50.0, isotropic=False, resume=part, **kw)

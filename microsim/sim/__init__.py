@@ -1,13 +1,21 @@
-"""Ray-traced explicit-integral BRDFs (Mikkelsen eq. 9) on periodic microsurfaces.
+"""Ray-traced explicit-integral BRDFs (Mikkelsen 2009, eq. 9) on periodic microsurfaces.
 
     from microsim.sim import simulate, Bins
     res = simulate(surface, "aluminium", [0, 30, 60, 80], rays=10**6, bins=Bins(45, 37))
     res.brdf, res.stderr, res.ledger["single_fresnel"], res.in_plane(), res.save("out/")
+
+Modules: ``estimator`` (``simulate``, ``ray_events``: the driver), ``auto``
+(``simulate_auto``), ``streams`` (random streams, ray origins), ``paths`` (trace paths,
+ledger), ``tallies`` (running sums, bin estimate and standard error), ``schedule`` (threads,
+interrupts), ``arguments`` (argument checks), ``tracer``/``kernels`` (Embree walk, compiled
+per-ray loops), ``bins``, ``result``, ``progress``, ``predict``, ``compare``.
 """
 from .bins import Bins
-from .estimator import BLOCK, LEDGER, Events, ray_events, simulate
+from .estimator import ray_events, simulate
+from .paths import LEDGER, Events
 from .progress import RaysDone
 from .result import InPlane, Result
+from .streams import BLOCK
 from .tracer import Tracer, VGrooveProfile
 
 __all__ = ["simulate", "ray_events", "Events", "Result", "InPlane", "Bins", "Tracer",

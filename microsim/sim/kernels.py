@@ -13,7 +13,7 @@ thread count. When they replaced the NumPy code they gave its results bitwise (c
 configurations); tests/test_kernels.py checks each against the NumPy statement of what it
 computes.
 
-Units and frames are the callers' (``tracer``/``estimator``): tile coordinates, unit
+Units and frames are the callers' (``tracer``/``streams``/``paths``/``tallies``): tile coordinates, unit
 directions, distances along the ray.
 """
 from __future__ import annotations
@@ -29,8 +29,8 @@ __all__ = ["fresnel_mode", "stratified_origins", "segment_setup", "segment_finis
            "tabled_primary", "block_tallies", "apply_escape", "facet_mirror", "analytic_vgroove",
            "add_blocks", "bin_index"]
 
-# tracer status codes (``tracer.HIT`` ...) and ledger classes (``estimator.SINGLE`` ...),
-# repeated here as compile-time constants; ``estimator``/``tracer`` assert they agree
+# tracer status codes (``tracer.HIT`` ...) and ledger classes (``paths.SINGLE`` ...),
+# repeated here as compile-time constants; ``paths``/``tracer`` assert they agree
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
 SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = 0, 1, 2, 3, 4
 FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2     # ``_fresnel_weight``'s modes
@@ -40,8 +40,8 @@ _compiled = njit(cache=True, nogil=True)
 
 @_compiled
 def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, psi):
-    """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``estimator.
-    _chunk_columns``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
+    """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``streams.
+    chunk_origins``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
     chunk (m rays) holds ξ, η (and ψ/2π if ``azimuth``) as runs of m numbers from
     u[k·block·j], k = 3 if ``azimuth`` else 2. Ray r's
     stratum q = (r + ξ)/N · rows of a row-major sweep of ``rows`` rows gives
@@ -204,7 +204,7 @@ def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wo32, 
                    zmax, eps, rel, status, weight, where, mi, sx, sy, sz, mdx, mdy, mdz, md32,
                    o32, tq, keep, top):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
-    per facet (``estimator._FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
+    per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
     ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
     bin ``fbin``), and the masking rays of the lit ones (code SINGLE), set up as the first
     segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
@@ -256,7 +256,7 @@ def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wo32, 
 @_compiled
 def block_tallies(status, weight, where, block, acc, touched, out_bin, out_sums, out_cnt,
                   offsets, ln, lf):
-    """Per-block sums of a batch of whole blocks of ``block`` rays (``estimator._split_tallies``),
+    """Per-block sums of a batch of whole blocks of ``block`` rays (``tallies.split_tallies``),
     added in ray order, stored sparsely (only the bins a block touches: a block has at most
     ``block`` events, while a fine grid has thousands of bins).
 
@@ -366,8 +366,8 @@ def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_l
                      facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz, facet_signed_tan,
                      facet_width, n2, k2, fresnel_mode, n_theta, n_phi, folded,
                      status, weight, where, wox, woy, woz):
-    """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``estimator.
-    _analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
+    """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``paths.
+    analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
     per-facet columns passed as arrays). Per ray, in the groove frame (wi rotated by −ψ, with
     cos ψ, sin ψ from t = tan(ψ/2): ((1 − t²), 2t)/(1 + t²)):
 

@@ -39,7 +39,7 @@ class Result:
     ``theta_i``/``phi_i`` (T,) deg; ``bins`` the outgoing grid (``theta_edges``/``phi_edges``
     in deg); ``brdf``/``stderr`` (T, Θ, Φ) sr⁻¹ (stderr combines ray noise and, with several
     realisations, realisation scatter: see ``stderr_ray``/``stderr_realisation``); ``rays`` (T,)
-    primary rays; ``ledger`` name → (T,) fractions of primary rays (see ``estimator``);
+    primary rays; ``ledger`` name → (T,) fractions of primary rays (see ``paths.LEDGER``);
     ``ledger_counts`` name → (T,) integer ray counts; ``counts`` (T, Θ, Φ) single-bounce rays
     per bin; ``sum_w``/``sum_w2`` raw Fresnel-weight tallies; ``models`` name → (T, Θ, Φ)
     bin-averaged model predictions (filled by the caller); ``meta`` JSON-able run description.
@@ -49,7 +49,7 @@ class Result:
     incidences not started). ``tallies`` holds the exact running sums needed to resume:
     ``sum_w``/``sum_w2``/``count`` (R, T, Θ·Φ), ``sum_pair`` (R, T, Θ·Φ) Σ_k w_2k w_2k+1 over
     ray pairs (2k, 2k+1) landing in the same bin (the collapsed-strata standard error, see
-    ``estimator._estimate``; ``meta["stderr_method"]`` says whether ``stderr`` uses it),
+    ``tallies.bin_estimate``; ``meta["stderr_method"]`` says whether ``stderr`` uses it),
     ``led_n``/``led_f`` (R, T, 5) per realisation and incidence, ``blocks`` (R, T) blocks done
     and ``rays`` (R, T) rays tallied. Saved as ``tally_<name>`` arrays in ``brdf.npz``.
     """

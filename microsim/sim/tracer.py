@@ -21,7 +21,6 @@ the rays still live (most finish in the first segment). The BVH is built in ``__
 from __future__ import annotations
 
 import functools
-import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,7 +128,6 @@ class Tracer:
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
-        self._lock, self._memo = threading.Lock(), {}
         self._scene = rs.EmbreeScene(robust=True)
         self._mesh = mc.TriangleMesh(self._scene, v.astype(np.float32), f.astype(np.int32))
         # embreex builds the BVH (rtcCommit) on the first query: do it now, as part of the
@@ -307,16 +305,6 @@ class Tracer:
         """``escapes`` for raw hit points of ``trace`` on facets ``prim``: each start is put on
         its facet plane and ``eps`` above it (one step)."""
         return self._walk(self.on_plane(prim, point, self.eps), dirs, occlusion=True)[0]
-
-    def memo(self, key, build):
-        """``build()`` cached under ``key`` (thread-safe; the two most recent keys are kept):
-        per-incidence tables shared by the worker threads."""
-        with self._lock:
-            if key not in self._memo:
-                self._memo[key] = build()
-                while len(self._memo) > 2:
-                    self._memo.pop(next(iter(self._memo)))
-            return self._memo[key]
 
 
 class VGrooveProfile:

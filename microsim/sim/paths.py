@@ -1,0 +1,502 @@
+"""Trace paths: how a chunk of primary rays is followed to its ledger class, weight and bin.
+
+At its first hit with unit facet normal n a primary ray from wi carries the weight F(n·wi)
+(exact Fresnel) and reflects to wo = 2(wi·n)n − wi; if wo points up and the reflected ray
+escapes (visibility V), the weight counts in the (θo, Δφ) bin of wo — one sample of the
+explicit microfacet integral (Mikkelsen 2009, eq. 9). Every primary ray ends in exactly one
+ledger class (``LEDGER``): ``single`` (escaped after one bounce), ``masked`` (the reflected ray
+met the surface), ``downward`` (wo_z ≤ 0: a multiple-scattering event), ``unresolved`` (wrap
+cap reached, or a numerically back-facing hit) or ``missed`` (no hit at all: impossible for a
+closed periodic surface).
+
+One interface, ``TracePath.follow(blocks) -> (status, weight, bin)``, chosen once per
+(surface, masking, incidence) by ``choose_path``:
+
+- ``AnalyticVGroovePath`` (``masking="analytic"``, V-grooves): no Embree. Every rim lies at
+  z = 0, so the groove a falling ray enters decides its facet and the hit follows in closed
+  form (``VGrooveCaster``); masking is the float64 test of ``"exact"``. Same rays, bins and
+  streams as the traced paths, which stay the reference in the tests.
+- ``RotatedIncidencePath`` (``isotropic=True``): each block's incidence azimuth rotated by its
+  own ψ_b (``streams.block_rotation``).
+- ``FacetTablePath``: surfaces without azimuth averaging and with no more facets than the
+  incidence has rays look up Fresnel weight, mirror direction and bin per hit facet
+  (``facet_table``); only the two ray casts remain per ray.
+- ``TracedPath``: everything else (Embree hit; masking traced, or exact for V-grooves).
+
+V-grooves (``surface.azimuth_average``): each ray gets its own uniformly random groove azimuth
+ψ; wi is rotated by −ψ about z into the groove frame, traced, and wo binned against the rotated
+incident azimuth (Δφ is rotation-invariant). This gives the isotropic V-cavity BRDF.
+
+Masking offsets: traced masking rays start eps ≈ 2 float32 ulp of the largest coordinate above
+the facet (1.2e-7 on a unit tile). The resulting bias scales like eps/feature depth, amplified
+~1/cos θo near the horizon: on heightfields with features ≥ 1e-3 of the tile it is ~1e-4
+relative (≪ 0.1 %); on a unit tile of 4000 V-grooves it was measured at +0.1–0.4 % for
+θo ≥ 80° (below the statistical error of 10⁶ rays), and ``masking="exact"`` removes it.
+
+Bitwise reproducibility: every per-ray operation is elementwise, in compiled loops that
+evaluate each ray alone (``kernels``); Fresnel, whose complex NumPy kernels round by array
+position, is evaluated per block (``fresnel_by_block``) or in real arithmetic. So a ray's
+outcome never depends on the chunk it is traced in. ``trace_events`` is the per-ray
+diagnostic path behind ``ray_events`` (full ``Events``, slower).
+Directions are unit vectors in the global frame pointing away from the surface; φi in degrees.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from microsim.analytic.fresnel import fresnel
+from microsim.errors import UsageError
+
+from . import kernels
+from .bins import Bins
+from .scratch import work
+from .streams import BLOCK, block_rotation, chunk_origins
+from .tracer import (
+    ESCAPED,
+    HIT,
+    MISSED,
+    TFAR_REL,
+    UNRESOLVED,
+    Hits,
+    Tracer,
+    VGrooveCaster,
+    VGrooveProfile,
+)
+
+__all__ = ["SINGLE", "MASKED", "DOWNWARD", "RAY_UNRESOLVED", "RAY_MISSED", "LEDGER", "MASKING",
+           "Events", "tracer_for", "trace_events", "Incidence", "TracePath", "TracedPath",
+           "FacetTablePath", "RotatedIncidencePath", "AnalyticVGroovePath", "choose_path",
+           "FacetTable", "facet_table", "uses_facet_table", "trace_tabled", "trace_columns",
+           "analytic_columns"]
+
+SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = range(5)
+LEDGER = ("single", "masked", "downward", "unresolved", "missed")
+MASKING = ("traced", "exact", "analytic")
+ANALYTIC_BATCH = 16         # blocks per vectorised batch of masking="analytic" (measured best)
+assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)             # kernels.analytic_vgroove relies on it
+assert (SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED) == (
+    kernels.SINGLE, kernels.MASKED, kernels.DOWNWARD, kernels.RAY_UNRESOLVED, kernels.RAY_MISSED)
+
+_FROM_ESCAPE = np.zeros(4, dtype=np.int8)                  # tracer status -> ledger class
+_FROM_ESCAPE[[HIT, ESCAPED, UNRESOLVED, MISSED]] = [MASKED, SINGLE, RAY_UNRESOLVED, RAY_MISSED]
+
+
+@dataclass(frozen=True)
+class Events:
+    """Per-ray outcome of primary rays (global frame).
+
+    ``status`` (N,) int8 index into ``LEDGER``; ``weight`` (N,) Fresnel weight F(n·wi) (0 when
+    nothing was hit); ``wo`` (N, 3) reflected direction (NaN without a hit); ``normal`` (N, 3)
+    facet normal (rotated back to the global frame for azimuth-averaged grooves);
+    ``margin`` (N,) exact V-groove masking margin (> 0 ⇔ masked; NaN unless computed).
+    """
+
+    status: np.ndarray
+    weight: np.ndarray
+    wo: np.ndarray
+    normal: np.ndarray
+    margin: np.ndarray
+
+
+def tracer_for(surface, masking: str):
+    """(tracer, masking profile, azimuth) of ``surface``: its ``Tracer``; None for traced
+    masking, else the V-groove ``VGrooveProfile`` ("exact") or ``VGrooveCaster``
+    ("analytic"); whether each ray gets its own groove azimuth (``surface.azimuth_average``).
+    UsageError for "exact"/"analytic" on a surface that is not azimuth-averaged V-grooves."""
+    tracer = Tracer(surface)
+    azimuth = bool(getattr(surface, "azimuth_average", False))
+    profile = None
+    if masking in ("exact", "analytic"):
+        if not azimuth:
+            raise UsageError(f"masking={masking!r} is only available for V-groove surfaces "
+                             "(azimuth_average=True); use masking='traced'")
+        profile = VGrooveProfile(tracer) if masking == "exact" else VGrooveCaster(tracer)
+    return tracer, profile, azimuth
+
+
+def _rotate_z(w: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Rotate vectors (N, 3) about +z by the angles whose cosines/sines are ``c``/``s`` (N,)."""
+    out = np.empty(np.broadcast_shapes(w.shape, c.shape + (3,)))
+    out[:, 0] = c * w[..., 0] - s * w[..., 1]
+    out[:, 1] = s * w[..., 0] + c * w[..., 1]
+    out[:, 2] = w[..., 2]
+    return out
+
+
+def fresnel_by_block(c: np.ndarray, rows: np.ndarray, ior) -> np.ndarray:
+    """Fresnel weights F(c) of the rays ``rows`` (sorted indices into a batch of whole blocks),
+    evaluated with one ``fresnel`` call per block.
+
+    NumPy's complex kernels round the last bit differently in the SIMD body and in the scalar
+    tail of an array (measured: (η² − 1)·z over a complex array differs by 1 ulp depending on
+    the position), so evaluating block by block keeps every weight independent of how many
+    blocks share a batch; all other per-ray operations are elementwise and position-independent.
+    """
+    if rows.size == 0:
+        return np.zeros(0)
+    cuts = np.searchsorted(rows, np.arange(BLOCK, int(rows[-1]) + 1, BLOCK))
+    return np.concatenate([fresnel(part, ior) for part in np.split(c, cuts)])
+
+
+# --- per-ray events (diagnostics: ray_events) ----------------------------------------------
+def trace_events(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior,
+                 azimuth: bool) -> Events:
+    """Follow primary rays from direction ``wi`` (global) to their ledger class (vectorised),
+    keeping every per-ray quantity (``Events``).
+
+    ``origins`` is a batch of whole ``BLOCK``s (the last may be short); the outcome of every
+    ray is independent of the batch size (see ``fresnel_by_block``)."""
+    n = len(origins)
+    if azimuth:                                          # trace in the groove frame: wi by −ψ
+        cpsi, spsi = np.cos(psi), np.sin(psi)
+        wl = _rotate_z(wi, cpsi, -spsi)
+        hits = (_analytic_hits(tracer, profile, origins, wl)
+                if isinstance(profile, VGrooveCaster) else tracer.first_hit(origins, -wl))
+    else:
+        wl = np.broadcast_to(wi, (n, 3))
+        hits = tracer.first_hit(origins, -np.asarray(wi, dtype=np.float64))  # one shared direction
+    status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
+    status[hits.status == MISSED] = RAY_MISSED
+    status[hits.status == ESCAPED] = RAY_MISSED          # a falling ray cannot escape
+    weight = np.zeros(n)
+    wo = np.full((n, 3), np.nan)
+    margin = np.full(n, np.nan)
+    h = np.flatnonzero(hits.status == HIT)
+    nrm = hits.normal[h]
+    c = np.einsum("ij,ij->i", wl[h], nrm)
+    front = c > 0                                        # back-facing hits stay unresolved
+    h, nrm, c = h[front], nrm[front], c[front]
+    weight[h] = fresnel_by_block(c, h, ior)
+    wlo = 2.0 * c[:, None] * nrm - wl[h]
+    up = wlo[:, 2] > 0
+    status[h[~up]] = DOWNWARD
+    hu = h[up]
+    if profile is not None:
+        m = profile.masking_margin(hits.prim[hu], hits.point[hu], wlo[up])
+        margin[hu] = m
+        status[hu] = np.where(m > 0, MASKED, SINGLE)
+    else:
+        status[hu] = _FROM_ESCAPE[tracer.escapes(hits.point[hu], nrm[up], wlo[up])]
+    wo[h] = wlo if not azimuth else _rotate_z(wlo, cpsi[h], spsi[h])   # back by +ψ
+    normal = np.full((n, 3), np.nan)
+    normal[h] = nrm if not azimuth else _rotate_z(nrm, cpsi[h], spsi[h])
+    return Events(status=status, weight=weight, wo=wo, normal=normal, margin=margin)
+
+
+def _analytic_hits(tracer: Tracer, caster: VGrooveCaster, origins, wl) -> Hits:
+    """``Tracer.first_hit`` of rays ``origins`` along −``wl`` (N, 3), computed exactly by
+    ``caster`` (masking="analytic"): every ray hits; ``point`` holds x only (y, z are NaN,
+    unused by the V-groove masking test)."""
+    prim, x = caster.first_hit_columns(origins[:, 0], origins[:, 2], wl[:, 0], wl[:, 2])
+    point = np.full((len(prim), 3), np.nan)
+    point[:, 0] = x
+    return Hits(status=np.full(len(prim), HIT, dtype=np.int8), prim=prim, point=point,
+                normal=tracer.normals[prim])
+
+
+# --- the tally paths: (status, weight, bin) per ray ----------------------------------------
+@dataclass(frozen=True)
+class FacetTable:
+    """What a primary ray from ``wi`` does on each facet of a surface traced without azimuth
+    averaging (wi is then the same for every ray): ``code`` (F,) int8 SINGLE (lit, reflects
+    upwards: a masking ray decides), DOWNWARD or RAY_UNRESOLVED (back-facing); ``weight`` (F,)
+    Fresnel F(n·wi) (0 when back-facing); ``wo32`` (F, 3) the mirror direction
+    wo = 2(wi·n)n − wi in float32 — the direction Embree traces the masking ray along, whose
+    float64 value the walk uses too; ``bin`` (F,) int32 flat bin index of wo (from float64
+    wo; −1 below the horizon); ``normal_cols`` (3 × (F,)) and ``lift`` (F,) = n·v0 + eps (a
+    point p starts its masking ray at p − (p·n − lift) n: on the facet plane, eps above it).
+    25 bytes per facet besides the tracer's own columns."""
+
+    code: np.ndarray
+    weight: np.ndarray
+    bin: np.ndarray
+    wo32: np.ndarray
+    normal_cols: tuple
+    lift: np.ndarray
+
+
+def facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float,
+                pool: ThreadPoolExecutor | None = None, parts: int = 1) -> FacetTable:
+    """The ``FacetTable`` of incidence ``wi`` (``kernels.facet_mirror``; Fresnel weights in
+    compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
+    in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
+    facet alone, so the split changes nothing)."""
+    f = len(tracer.faces)
+    ncols = tracer.normal_columns
+    weight, code = np.empty(f), np.empty(f, dtype=np.int8)
+    wo32, where = np.empty((f, 3), dtype=np.float32), np.empty(f, dtype=np.int32)
+    wi = [float(w) for w in wi]
+    fresnel_args = kernels.fresnel_mode(ior)
+
+    def fill(part: slice) -> None:
+        wo = [work("table-wo-" + a, part.stop - part.start) for a in "xyz"]
+        kernels.facet_mirror(*(a[part] for a in ncols), *wi, *fresnel_args[1:], fresnel_args[0],
+                             weight[part], code[part], *wo, wo32[part])
+        where[part] = bins.locate_xyz(*wo, phi_i)
+
+    cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
+    slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
+    list(pool.map(fill, slices) if pool is not None else map(fill, slices))
+    return FacetTable(code=code, weight=weight, bin=where, wo32=wo32, normal_cols=ncols,
+                      lift=tracer.masking_lift)
+
+
+def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:
+    """Whether ``choose_path`` traces through a per-facet table: surfaces without azimuth
+    averaging or per-block rotation, with no more facets than the incidence has rays."""
+    return not azimuth and not rotate and profile is None and len(tracer.faces) <= n_total
+
+
+def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
+    """(status, weight, bin) per primary ray, looked up per hit facet in ``table`` (the fast
+    path for surfaces without azimuth averaging: only the two ray casts are per ray, the rest
+    is one compiled pass, ``kernels.tabled_primary``). ``origins``: (N, 3) or 3 columns."""
+    x = _columns(origins)
+    n = len(x[0])
+    wi = np.asarray(wi, dtype=np.float64)
+    hs, prim, p = tracer.trace_columns(x, [float(-c) for c in wi], (-wi).astype(np.float32)[None])
+    status, weight = np.empty(n, dtype=np.int8), np.empty(n)
+    where = np.empty(n, dtype=np.int64)
+    mi = work("tabled-ray", n, np.int64)                  # the masking rays, this thread's
+    start = [work("tabled-start-" + a, n) for a in "xyz"]
+    wo = [work("tabled-wo-" + a, n) for a in "xyz"]
+    wo32, o32 = work("tabled-wo32", (n, 3), np.float32), work("tabled-o32", (n, 3), np.float32)
+    tq, keep = work("tabled-tfar", n, np.float32), work("tabled-keep", n, np.int64)
+    top = work("tabled-top", n, np.bool_)
+    m = kernels.tabled_primary(hs, prim, *p, table.code, table.weight, *table.normal_cols,
+                               table.lift, table.wo32, table.bin,
+                               float(tracer.half[0]), float(tracer.half[1]), tracer.zmax,
+                               tracer.eps, TFAR_REL, status, weight, where, mi, *start, *wo, wo32,
+                               o32, tq, keep, top)
+    esc = tracer.escape_columns([c[:m] for c in start], [c[:m] for c in wo], wo32[:m],
+                                first=(o32, tq, keep, top))
+    kernels.apply_escape(status, mi[:m], esc, _FROM_ESCAPE)
+    return status, weight, where
+
+
+def _columns(origins) -> list:
+    """Three contiguous float64 columns from an (N, 3) array or a sequence of 3 columns."""
+    if isinstance(origins, np.ndarray):
+        return [np.ascontiguousarray(origins[:, k], dtype=np.float64) for k in range(3)]
+    return [np.ascontiguousarray(c, dtype=np.float64) for c in origins]
+
+
+def _stack32(cols) -> np.ndarray:
+    """(N, 3) float32 array from three (N,) columns."""
+    out = np.empty((len(cols[0]), 3), dtype=np.float32)
+    for k in range(3):
+        out[:, k] = cols[k]
+    return out
+
+
+def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, ior):
+    """(status, weight, bin) per primary ray — ``trace_events`` reduced to what the tallies
+    need, on per-axis columns. ``psi`` None: one shared direction −wi. ``psi`` (N,)
+    (``azimuth_average`` surfaces): each ray is traced in its groove frame (wi rotated by −ψ)
+    and binned there too — Δφ = φo − φi is unchanged by the rotation, so wo is located against
+    the rotated incident azimuth φi − ψ instead of being rotated back."""
+    x = _columns(origins)
+    n = len(x[0])
+    if psi is None:
+        wl = [float(c) for c in wi]
+        down = [-c for c in wl]
+        hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32))
+    else:
+        cp, sp = np.cos(psi), np.sin(psi)
+        wl = [cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], np.full(n, float(wi[2]))]
+        down = [-c for c in wl]
+        hs, prim, p = tracer.trace_columns(x, down, _stack32(down))
+    status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
+    status[(hs == MISSED) | (hs == ESCAPED)] = RAY_MISSED   # a falling ray cannot escape
+    weight = np.zeros(n)
+    where = np.full(n, -1, dtype=np.int64)
+    h = np.flatnonzero(hs == HIT)
+    pr = prim[h]
+    nc = [c[pr] for c in tracer.normal_columns]
+    wh = wl if psi is None else [c[h] for c in wl]
+    c = wh[0] * nc[0] + wh[1] * nc[1] + wh[2] * nc[2]
+    front = c > 0                                           # back-facing hits stay unresolved
+    if not front.all():
+        h, pr, c = h[front], pr[front], c[front]
+        nc = [a[front] for a in nc]
+        wh = wh if psi is None else [a[front] for a in wh]
+    weight[h] = fresnel_by_block(c, h, ior)
+    wo = [2.0 * c * nc[k] - wh[k] for k in range(3)]
+    up = wo[2] > 0
+    hu, pu = h, pr
+    if not up.all():
+        status[h[~up]] = DOWNWARD
+        hu, pu = h[up], pr[up]
+        wo, nc = [a[up] for a in wo], [a[up] for a in nc]
+    if profile is not None:
+        margin = profile.margin_columns(pu, p[0][hu], wo[0], wo[2])
+        status[hu] = np.where(margin > 0, MASKED, SINGLE)
+    else:
+        ph = [a[hu] for a in p]
+        off = ph[0] * nc[0] + ph[1] * nc[1] + ph[2] * nc[2] - tracer.masking_lift[pu]
+        start = [ph[k] - off * nc[k] for k in range(3)]
+        status[hu] = _FROM_ESCAPE[tracer.escape_columns(start, wo, _stack32(wo))]
+    single = status[hu] == SINGLE
+    hs_ = hu[single]
+    ws = np.stack([a[single] for a in wo], axis=1)
+    where[hs_] = bins.locate(ws, phi_i if psi is None else phi_i - np.degrees(psi[hs_]))
+    return status, weight, where
+
+
+def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, psi, ior):
+    """(status, weight, bin) per primary ray of ``masking="analytic"``: ``trace_columns`` for
+    V-grooves with the primary hit computed exactly by ``caster`` instead of Embree (every ray
+    hits; ``VGrooveCaster.groove_hits``), the masking test ``margin_from_rim`` on the hit's
+    distance from its rim, all in the groove frame (wi rotated by −ψ, n_y = 0), in one
+    compiled pass (``kernels.analytic_vgroove``, Fresnel in real arithmetic,
+    ``fresnel.fresnel_real_scalar``). Rays start at x (N,) (y is irrelevant: grooves run
+    along y) and height ``z``. They agree with the traced paths ray by ray except where
+    Embree's float32 hit is within a few ulp of a groove edge or masking threshold
+    (tests/test_analytic_vgroove.py)."""
+    n = len(x)
+    status, weight = np.empty(n, dtype=np.int8), np.empty(n)
+    where = np.empty(n, dtype=np.int64)
+    wo = [np.empty(n) for _ in range(3)]
+    mode, n2, k2 = kernels.fresnel_mode(ior)
+    phi = np.radians(phi_i)
+    c = caster
+    kernels.analytic_vgroove(np.ascontiguousarray(x, dtype=np.float64), float(z),
+                             np.ascontiguousarray(psi, dtype=np.float64),
+                             np.asarray(wi, dtype=np.float64), float(np.cos(phi)),
+                             float(np.sin(phi)), float(c.half), c.x_left, c.x_right, c.w_left,
+                             c.depth, c.facet_rim, c.facet_wall, c.facet_sigma, c.facet_nx,
+                             c.facet_nz, c.facet_signed_tan, c.facet_width, n2, k2, mode,
+                             bins.n_theta, bins.n_phi, bins.folded, status, weight, where, *wo)
+    if not bins.folded:
+        single = status == SINGLE
+        ws = np.stack([a[single] for a in wo], axis=1)
+        where[single] = bins.locate(ws, phi_i - np.degrees(psi[single]))
+    return status, weight, where
+
+
+@dataclass(frozen=True, eq=False)
+class Incidence:
+    """One incidence on one traced surface: what every trace path needs. ``wi`` unit incident
+    direction (global frame), ``phi_i`` its azimuth in degrees (Δφ is taken from it), ``ior``
+    as ``resolve_material`` returns it, ``rays`` the primary rays N of this (realisation,
+    incidence), ``key`` its random stream (seed, realisation, incidence), ``origins`` one of
+    ``streams.ORIGINS``."""
+
+    tracer: Tracer
+    wi: np.ndarray
+    phi_i: float
+    bins: Bins
+    ior: object
+    rays: int
+    key: tuple
+    origins: str = "stratified"
+
+    def origins_of(self, blocks, azimuth: bool):
+        """Origin columns and groove azimuths of consecutive ``blocks`` (``chunk_origins``)."""
+        return chunk_origins(self.tracer, self.rays, blocks, self.key, azimuth, self.origins)
+
+
+class TracePath:
+    """How the primary rays of one ``Incidence`` are followed (module docstring).
+
+    ``follow(blocks)`` → (status (n,) int8 ledger class, weight (n,) Fresnel F(n·wi),
+    bin (n,) int64 flat bin of wo or −1) for the rays of the consecutive ``blocks``, in ray
+    order; bitwise independent of how blocks are grouped. Thread-safe: one path serves all
+    worker threads."""
+
+    def __init__(self, incidence: Incidence):
+        self.incidence = incidence
+
+    def follow(self, blocks):
+        raise NotImplementedError
+
+
+class TracedPath(TracePath):
+    """Embree primary hit; masking traced (``profile`` None) or decided exactly in float64
+    (``VGrooveProfile``); groove azimuths per ray when ``azimuth``."""
+
+    def __init__(self, incidence: Incidence, profile, azimuth: bool):
+        super().__init__(incidence)
+        self.profile, self.azimuth = profile, azimuth
+
+    def follow(self, blocks):
+        inc = self.incidence
+        starts, psi = inc.origins_of(blocks, self.azimuth)
+        return trace_columns(inc.tracer, self.profile, inc.wi, inc.phi_i, inc.bins, starts,
+                             psi if self.azimuth else None, inc.ior)
+
+
+class FacetTablePath(TracePath):
+    """Embree primary and masking rays; weight, mirror direction and bin looked up per hit
+    facet in a ``FacetTable`` built once for the incidence (``trace_tabled``)."""
+
+    def __init__(self, incidence: Incidence, table: FacetTable):
+        super().__init__(incidence)
+        self.table = table
+
+    def follow(self, blocks):
+        inc = self.incidence
+        starts, _ = inc.origins_of(blocks, False)
+        return trace_tabled(inc.tracer, self.table, inc.wi, starts)
+
+
+class RotatedIncidencePath(TracePath):
+    """Every block's incidence azimuth rotated by its own ψ_b (``streams.block_rotation``)
+    about the macro normal, bins taken relative to the rotated azimuth φi + ψ_b: φi is then
+    uniform, which averages a statistically isotropic surface's realisation over incident
+    azimuths without changing the expected BRDF. One shared direction per block keeps the
+    batch coherent; the rays of a block share ψ_b, so the per-ray standard error omits the
+    (small) azimuth-to-azimuth scatter of one surface."""
+
+    def __init__(self, incidence: Incidence, profile):
+        super().__init__(incidence)
+        self.profile = profile
+
+    def follow(self, blocks):
+        inc, wi, out = self.incidence, self.incidence.wi, []
+        for b in blocks:
+            starts, _ = inc.origins_of([b], False)
+            psi = block_rotation(inc.key, b)
+            c, s = np.cos(psi), np.sin(psi)
+            wb = np.array([c * wi[0] - s * wi[1], s * wi[0] + c * wi[1], wi[2]])
+            out.append(trace_columns(inc.tracer, self.profile, wb, inc.phi_i + np.degrees(psi),
+                                     inc.bins, starts, None, inc.ior))
+        return tuple(np.concatenate(parts) for parts in zip(*out))
+
+
+class AnalyticVGroovePath(TracePath):
+    """``masking="analytic"``: closed-form V-groove hits and masking (``analytic_columns``),
+    in cache-sized batches of ``ANALYTIC_BATCH`` blocks."""
+
+    def __init__(self, incidence: Incidence, caster: VGrooveCaster):
+        super().__init__(incidence)
+        self.caster = caster
+
+    def follow(self, blocks):
+        inc, blocks, parts = self.incidence, list(blocks), []
+        wi = np.asarray(inc.wi, dtype=np.float64)
+        z = inc.tracer.zmax + inc.tracer.top_margin
+        for a in range(0, len(blocks), ANALYTIC_BATCH):
+            (x, _, _), psi = inc.origins_of(blocks[a:a + ANALYTIC_BATCH], True)
+            parts.append(analytic_columns(self.caster, wi, inc.phi_i, inc.bins, x, z, psi,
+                                          inc.ior))
+        return tuple(np.concatenate(c) for c in zip(*parts))
+
+
+def choose_path(incidence: Incidence, profile, azimuth: bool, isotropic: bool = False,
+                pool: ThreadPoolExecutor | None = None, parts: int = 1) -> TracePath:
+    """The trace path of ``incidence`` on a surface prepared by ``tracer_for`` (``profile``,
+    ``azimuth``), with ``isotropic`` block rotations or not. A facet table is built here, in
+    ``parts`` facet ranges on ``pool`` (once per incidence, shared by the threads)."""
+    inc = incidence
+    if isinstance(profile, VGrooveCaster):
+        return AnalyticVGroovePath(inc, profile)
+    if isotropic and not azimuth:
+        return RotatedIncidencePath(inc, profile)
+    if uses_facet_table(inc.tracer, profile, azimuth, isotropic, inc.rays):
+        return FacetTablePath(inc, facet_table(inc.tracer, inc.wi, inc.ior, inc.bins,
+                                               inc.phi_i, pool, parts))
+    return TracedPath(inc, profile, azimuth)

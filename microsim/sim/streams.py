@@ -1,0 +1,118 @@
+"""Per-block random streams and the origins of the primary rays.
+
+The primary rays of one (realisation r, incidence i) are numbered 0 … N − 1 and cut into
+blocks of ``BLOCK`` rays. Block b draws its numbers from its own slot of the PCG64 stream
+seeded with the key (seed, r, i) (``block_generator``), so its rays depend on (key, b) alone:
+never on how blocks are grouped into chunks or spread over threads. This is what makes
+``simulate`` bitwise reproducible for any ``threads``/``chunk`` and resumable block by block.
+
+Origins lie on the horizontal plane z = zmax + top_margin above one tile
+[−Lx/2, Lx/2] × [−Ly/2, Ly/2] (tile coordinates), spread uniformly over it: uniform origins on
+a horizontal plane sample the surface seen from wi flux-weighted, which is the
+(n_j·wi) dx_j / ((n·wi) dA) factor of the explicit integral (Mikkelsen 2009, eq. 9).
+``"stratified"`` origins give ray r its own stratum [r/N, (r + 1)/N) of a row-major sweep of
+the tile, jittered inside it; ``"independent"`` origins are i.i.d. uniform. Angles are in
+radians here (groove azimuths ψ, block rotations ψ_b).
+"""
+from __future__ import annotations
+
+import functools
+import threading
+from typing import Sequence
+
+import numpy as np
+
+from . import kernels
+from .scratch import work
+from .tracer import Tracer
+
+__all__ = ["BLOCK", "ORIGINS", "stream_state", "block_generator", "chunk_origins",
+           "block_origins", "block_rotation"]
+
+BLOCK = 4096
+"""Rays per block: the unit of the random streams, of the tallies and of resuming (even, so
+the pairs (2k, 2k + 1) of the collapsed-strata error never straddle two blocks)."""
+ORIGINS = ("stratified", "independent")
+ROTATION_STREAM = 0x150
+"""Extra key of the per-block incidence-azimuth generator (``block_rotation``)."""
+
+_streams = threading.local()
+
+
+@functools.lru_cache(maxsize=64)
+def stream_state(key: tuple) -> dict:
+    """Initial PCG64 state of the random stream ``key`` = (seed, realisation, incidence)."""
+    return np.random.PCG64(np.random.SeedSequence(list(key))).state
+
+
+def block_generator(key, block: int, per_ray: int) -> np.random.Generator:
+    """This thread's generator positioned at block ``block``'s slot of stream ``key``: block b
+    owns the numbers [b·k·BLOCK, (b + 1)·k·BLOCK) of the PCG64 stream seeded with
+    SeedSequence(key), k = ``per_ray`` numbers per ray (ξ, η, and ψ for groove azimuths, in
+    runs of the block's length), so every block's rays depend only on (key, b), whatever the
+    chunking, and one generator serves consecutive blocks."""
+    try:
+        rng = _streams.rng
+    except AttributeError:
+        rng = _streams.rng = np.random.Generator(np.random.PCG64())
+    rng.bit_generator.state = stream_state(tuple(int(k) for k in key))
+    rng.bit_generator.advance(block * per_ray * BLOCK)
+    return rng
+
+
+def chunk_origins(tracer: Tracer, n_total: int, blocks, key, azimuth: bool,
+                  origins: str = "stratified"):
+    """Origin columns [x, y, z] and groove azimuths ψ (None unless ``azimuth``) of the rays of
+    consecutive ``blocks``, in this thread's work arrays (valid until its next call). Every
+    origin starts at z = zmax + top_margin.
+
+    Each block draws ξ, η, then (``azimuth``) ψ/2π, n each (n its length), from its own slot
+    of the stream ``key`` (``block_generator``), so its rays do not depend on the chunking.
+    ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
+    row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
+    y is jittered inside its row (``kernels.stratified_origins``). The union of strata is the
+    whole tile, so origins are uniform over one period (and a block covers a compact strip:
+    coherent rays). ``origins="independent"``: i.i.d. uniform origins over the whole tile,
+    then sorted row-major on a ~square grid of the block's size (coherence only: the set is
+    unchanged).
+    """
+    blocks = list(blocks)
+    lo = blocks[0] * BLOCK
+    n = min(n_total, (blocks[-1] + 1) * BLOCK) - lo
+    x, y, z = (work("chunk-" + a, n) for a in "xyz")
+    z.fill(tracer.zmax + tracer.top_margin)
+    psi = work("chunk-psi", n if azimuth else 0)
+    lx, ly = tracer.tile
+    per_ray = 3 if azimuth else 2
+    rng = block_generator(key, blocks[0], per_ray)        # consecutive slots from here on
+    u = work("chunk-uniform", per_ray * n)                # ξ, η (, ψ/2π) of each block in turn
+    rng.random(out=u)
+    if origins == "independent":
+        for b in blocks:
+            k = b * BLOCK - lo
+            m, base = min(n - k, BLOCK), per_ray * k
+            xi, eta = u[base:base + m], u[base + m:base + 2 * m]
+            rows = max(1, int(round(np.sqrt(m * ly / lx))))
+            order = np.lexsort((xi, np.minimum(np.floor(eta * rows), rows - 1)))
+            x[k:k + m], y[k:k + m] = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2
+            if azimuth:
+                psi[k:k + m] = 2 * np.pi * u[base + 2 * m:base + 3 * m][order]
+    else:
+        rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
+        kernels.stratified_origins(u, lo, n, BLOCK, float(n_total), float(rows), float(lx),
+                                   float(ly), azimuth, x, y, psi)
+    return [x, y, z], (psi if azimuth else None)
+
+
+def block_origins(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
+                  origins: str = "stratified"):
+    """Origins (n, 3) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one block, in
+    arrays of their own (``chunk_origins``)."""
+    cols, psi = chunk_origins(tracer, n_total, [block], key, azimuth, origins)
+    return np.stack(cols, axis=1), (psi.copy() if azimuth else np.zeros(len(cols[0])))
+
+
+def block_rotation(key, block: int) -> float:
+    """Incidence-azimuth rotation ψ_b (radians, uniform in [0, 2π)) of block ``block`` of the
+    stream ``key`` (``simulate(isotropic=True)``), from a generator of its own."""
+    return 2.0 * np.pi * np.random.default_rng(list(key) + [block, ROTATION_STREAM]).random()
