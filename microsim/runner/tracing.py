@@ -37,9 +37,10 @@ def simulate_scene(plan: RunPlan, theta_i, rays, seed, bins, progress=None, resu
         surface, reals = surface_source(sc, seed, scale)
     else:
         surface, reals = sc.build_surface(seed=seed, scale=scale), None
+    factory, seeds = reals if reals is not None else (None, None)
     return simulate(surface, sc.ior, list(theta_i), rays=rays, bins=bins, seed=seed,
-                    threads=plan.threads, realisations=reals, progress=progress,
-                    origins=origins, resume=resume)
+                    threads=plan.threads, surface_factory=factory, seeds=seeds,
+                    progress=progress, origins=origins, resume=resume)
 
 
 def complete(result):
