@@ -13,8 +13,8 @@ thread count. When they replaced the NumPy code they gave its results bitwise (c
 configurations); tests/test_kernels.py checks each against the NumPy statement of what it
 computes.
 
-Units and frames are the callers' (``tracer``/``streams``/``paths``/``tallies``): tile coordinates, unit
-directions, distances along the ray.
+Units and frames are the callers' (``tracer``/``streams``/``paths``/``tallies``): tile
+coordinates, unit directions, distances along the ray.
 """
 from __future__ import annotations
 
