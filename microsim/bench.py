@@ -19,8 +19,8 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   Beckmann m = 0.3 scene (aluminium, θi = 30°, 2° bins) with the exact analytic V-groove path
   (``masking="analytic"``: primary hit and masking in float64, no Embree; the ray-traced paths
   stay the reference in the tests), its rays/s, and the relative RMS error it actually
-  achieves against the exact closed form (Torrance–Sparrow with V-groove G, Mikkelsen eq. 25,
-  bin-averaged).
+  achieves against the exact closed form (Torrance–Sparrow with V-groove G, Mikkelsen 2009,
+  eq. 25, bin-averaged).
 """
 from __future__ import annotations
 

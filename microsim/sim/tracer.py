@@ -10,8 +10,8 @@ leaked through the mesh ("missed", impossible for a closed periodic surface).
 Secondary rays start from the hit point o + t·d (float64, Embree's float32 distance t)
 projected along the unit facet normal onto the facet plane, then offset along that normal by
 ``eps``, a few float32 ulp of the tile's largest coordinate (Embree's tnear is fixed at 0). The
-offset biases grazing masking by ~eps / feature depth (DESIGN.md "Facts"), so V-groove surfaces
-can instead decide masking exactly in float64 (``VGrooveProfile``).
+offset biases grazing masking by ~eps / feature depth (docs/design.md, "Numerical hazards"), so
+V-groove surfaces can instead decide masking exactly in float64 (``VGrooveProfile``).
 
 Speed: each segment of the walk is one Embree call between two compiled passes over the live
 rays (``kernels.segment_setup``/``segment_finish``: float32 inputs and tfar; hits, escapes and
@@ -308,7 +308,7 @@ class Tracer:
 
 
 class VGrooveProfile:
-    """Exact float64 masking for straight V-grooves running along y (Mikkelsen eq. 25 geometry).
+    """Exact float64 masking for straight V-grooves running along y (Mikkelsen 2009, eq. 25 geometry).
 
     Every rim lies at z = 0 and the surface lies below, so a ray leaving a facet upwards can
     only be blocked by the opposite facet of the same groove before rising above z = 0. For a
