@@ -140,7 +140,7 @@ def test_special_points_of_the_disk():
 # --------------------------------------------------------------------------------------------
 def fd_jacobian(wo, theta, phi, proj, step):
     """|det ∂(u, v)/∂(θi, φi)| / sin θi by central differences: dA_disk/dω_i."""
-    uv = lambda t, p: ed.incident_to_disk(wo, spherical(t, p), proj)
+    uv = lambda t, p: ed.incident_to_disk(spherical(t, p), wo, proj)
     d_t = (uv(theta + step, phi) - uv(theta - step, phi)) / (2 * step)
     d_p = (uv(theta, phi + step) - uv(theta, phi - step)) / (2 * step)
     return np.abs(d_t[..., 0] * d_p[..., 1] - d_t[..., 1] * d_p[..., 0]) / np.sin(theta)
@@ -157,7 +157,7 @@ def test_jacobian_matches_finite_differences(proj):
     delta = 1e-4
     fd1 = fd_jacobian(wo, ti, pi_, proj, delta)
     fd2 = fd_jacobian(wo, ti, pi_, proj, 2 * delta)
-    J = ed.disk_jacobian(wo, spherical(ti, pi_), proj)
+    J = ed.disk_jacobian(spherical(ti, pi_), wo, proj)
     assert np.all(np.abs(fd1 - J) <= np.abs(fd1 - fd2) + 1e-9 * (1.0 + J))
 
 
@@ -170,8 +170,8 @@ def test_jacobians_equal_paper_forms():
     wi_h = np.sum(wi * H, -1)
     eq19 = wo[:, 2] ** 2 / H[:, 2] ** 3
     eq23 = np.sum((wi + wo) ** 2, -1) * wi[:, 2] / wi_h
-    assert np.allclose(ed.scaling_jacobian(wo, wi), eq19 / (4 * wi_h), rtol=1e-12)
-    assert np.allclose(ed.orthogonal_jacobian(wo, wi), eq23 / (4 * wi_h), rtol=1e-12)
+    assert np.allclose(ed.scaling_jacobian(wi, wo), eq19 / (4 * wi_h), rtol=1e-12)
+    assert np.allclose(ed.orthogonal_jacobian(wi, wo), eq23 / (4 * wi_h), rtol=1e-12)
 
 
 def test_brdfs_equal_paper_forms():
@@ -355,7 +355,7 @@ def test_sample_edwards_chi2_in_wi(proj, theta_o):
     wi, pdf = ed.sample_edwards(wo, rng.random(N_SAMPLES), rng.random(N_SAMPLES), mix, proj)
     assert np.all(pdf > 0) and np.all(wi[:, 2] >= 0)
     sub = slice(0, 2000)
-    assert np.allclose(pdf[sub], ed.pdf_edwards(wo, wi[sub], mix, proj), rtol=1e-9)
+    assert np.allclose(pdf[sub], ed.pdf_edwards(wi[sub], wo, mix, proj), rtol=1e-9)
     assert np.allclose(pdf[sub], ed.edwards_empirical(wi[sub], wo, mix, proj) * wi[sub, 2],
                        rtol=1e-9)
     lt, lp = lobe_edges(wo, mix.lumps[0], proj)
@@ -364,7 +364,7 @@ def test_sample_edwards_chi2_in_wi(proj, theta_o):
     th = np.arccos(np.clip(wi[:, 2], -1, 1))
     ph = np.mod(np.arctan2(wi[:, 1], wi[:, 0]) + PI / 2, 2 * PI) - PI / 2
     obs, _, _ = np.histogram2d(th, ph, [e_t, e_p])
-    mass = cell_integrals(lambda t, p: ed.pdf_edwards(wo, spherical(t, p), mix, proj)
+    mass = cell_integrals(lambda t, p: ed.pdf_edwards(spherical(t, p), wo, mix, proj)
                           * np.sin(t), e_t, e_p, order=8)
     assert abs(mass.sum() - 1.0) < 1e-3           # quadrature sanity (furnace identity)
     _, _, p_value = pearson_chi2(obs, N_SAMPLES * mass / mass.sum())
@@ -393,12 +393,12 @@ def test_finite_everywhere(theta_o, phi_o, theta_i, phi_i, u1, u2):
     for proj in ed.DISK_PROJECTIONS:
         uv = ed.disk_projection(wo, h, proj)
         values = [uv, ed.disk_projection_inverse(wo, uv, proj),
-                  ed.disk_jacobian(wo, wi, proj), ed.incident_to_disk(wo, wi, proj),
+                  ed.disk_jacobian(wi, wo, proj), ed.incident_to_disk(wi, wo, proj),
                   ed.edwards_empirical(wi, wo, lumps, proj),
                   ed.edwards_empirical(wi, wo, lumps, proj, fresnel=0.04, diffuse=0.5),
                   ed.edwards_fit_brdf(wi, wo, params, proj),
-                  ed.pdf_edwards(wo, wi, lumps, proj),
-                  ed.brdf_to_disk_density(1.0, wi, wo, proj),
+                  ed.pdf_edwards(wi, wo, lumps, proj),
+                  ed.brdf_to_disk_density(wi, wo, 1.0, proj),
                   *ed.sample_edwards(wo, u1, u2, lumps, proj),
                   *ed.sample_edwards(wo, u1, u2, params.lumps(), proj)]
         for v in values:

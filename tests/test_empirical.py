@@ -29,9 +29,9 @@ def test_exactly_normalised(emp):
     gx, gw = np.polynomial.legendre.leggauss(4)
     a, b = emp.theta_edges[:-1, None], emp.theta_edges[1:, None]
     t = 0.5 * (a + b) + 0.5 * (b - a) * gx
-    integral = np.sum(0.5 * (b - a) * gw * emp.tilt_pdf(t))
+    integral = np.sum(0.5 * (b - a) * gw * emp.tilt_pdf_rad(t))
     assert abs(integral - 1.0) < 1e-9
-    assert emp.cdf_theta(np.pi / 2) == 1.0 and emp.cdf_theta(0.0) == 0.0
+    assert emp.cdf_theta_rad(np.pi / 2) == 1.0 and emp.cdf_theta_rad(0.0) == 0.0
 
 
 def test_matches_beckmann_per_bin(beckmann_normals, emp):
@@ -40,7 +40,7 @@ def test_matches_beckmann_per_bin(beckmann_normals, emp):
     The probability content between order statistics is Beta-distributed with the binomial
     variance p(1 − p)/N, so |w − p| < 5σ per bin (≈ 200 bins: false alarm ≲ 1e-4)."""
     ndf = beckmann_normals[0]
-    p = np.diff(ndf.cdf_theta(emp.theta_edges))
+    p = np.diff(ndf.cdf_theta_rad(emp.theta_edges))
     w = emp.bin_weights
     sigma = np.sqrt(np.maximum(p, w) * (1 - np.minimum(p, w)) / N) + 1e-12
     assert np.all(np.abs(w - p) < Z * sigma)
@@ -54,7 +54,7 @@ def test_narrow_lobe_is_resolved():
     rng = np.random.default_rng(7)
     ndf = an.VonMisesFisher(1024.0)
     emp = an.Empirical(ndf.sample(rng.random(200_000), rng.random(200_000)))
-    p0 = ndf.cdf_theta(emp.theta_edges[1])
+    p0 = ndf.cdf_theta_rad(emp.theta_edges[1])
     d0 = p0 / (np.pi * emp.q_edges[1])
     sigma = np.sqrt(p0 / 200_000) / (np.pi * emp.q_edges[1])
     assert abs(emp.D_cos(1.0) - d0) < Z * sigma
@@ -63,9 +63,9 @@ def test_narrow_lobe_is_resolved():
 
 def test_quantile_inverts_cdf(emp):
     u = np.linspace(0.0, 1.0, 1001)
-    assert np.allclose(emp.cdf_theta(emp.tilt_quantile(u)), u, atol=1e-12)
+    assert np.allclose(emp.cdf_theta_rad(emp.tilt_quantile_rad(u)), u, atol=1e-12)
     th = np.linspace(0.0, emp.max_tilt, 777)
-    assert np.allclose(emp.tilt_quantile(emp.cdf_theta(th)), th, atol=1e-9)
+    assert np.allclose(emp.tilt_quantile_rad(emp.cdf_theta_rad(th)), th, atol=1e-9)
 
 
 def test_default_bin_rule(emp):
@@ -123,13 +123,13 @@ def test_weights_are_projected_areas():
     """Weights reweight the histogram: two tilts, one with 3× the projected area."""
     n = np.array([[0.0, 0.0, 1.0], [np.sin(0.5), 0.0, np.cos(0.5)]])
     emp = an.Empirical(n, weights=[1.0, 3.0], n_theta=2)
-    assert np.isclose(emp.cdf_theta(0.25), 0.25)
+    assert np.isclose(emp.cdf_theta_rad(0.25), 0.25)
 
 
 def test_atom_is_smeared_over_one_bin():
     """A flat facet set (all θ = 0) is a delta: it fills the first 2° bin, exactly normalised."""
     emp = an.Empirical(np.tile([0.0, 0.0, 1.0], (1000, 1)))
-    assert emp.cdf_theta(np.radians(2.0)) == 1.0
+    assert emp.cdf_theta_rad(np.radians(2.0)) == 1.0
     assert np.isclose(emp.D_cos(1.0) * np.pi * np.sin(np.radians(2.0)) ** 2, 1.0)
 
 

@@ -44,14 +44,14 @@ def test_grazing_incidence_reflects_everything(ior):
 def test_dielectric_normal_incidence(n):
     expected = ((n - 1) / (n + 1)) ** 2
     assert an.fresnel(1.0, n) == pytest.approx(expected, rel=1e-13)
-    assert an.f0_from_ior(n) == pytest.approx(expected, rel=1e-13)
+    assert an.f0_from_material(n) == pytest.approx(expected, rel=1e-13)
 
 
 def test_conductor_normal_incidence():
     n, k = ALUMINIUM.real, ALUMINIUM.imag
     expected = ((n - 1) ** 2 + k ** 2) / ((n + 1) ** 2 + k ** 2)
     assert an.fresnel(1.0, ALUMINIUM) == pytest.approx(expected, rel=1e-13)
-    assert an.f0_from_ior(ALUMINIUM) == pytest.approx(expected, rel=1e-13)
+    assert an.f0_from_material(ALUMINIUM) == pytest.approx(expected, rel=1e-13)
 
 
 @pytest.mark.parametrize("n", [0.5, 1.329, 3.0])
@@ -120,11 +120,11 @@ def test_schlick_is_separate_and_matches_at_the_ends():
     """Schlick (Edwards eq. 30–31) equals the exact value at 0° and 90° only; for aluminium it
     misses the dip before grazing by ~0.078 near 83° (DESIGN.md)."""
     for ior in (ALUMINIUM, METHANOL):
-        f0 = an.f0_from_ior(ior)
+        f0 = an.f0_from_material(ior)
         assert an.schlick(1.0, f0) == pytest.approx(an.fresnel(1.0, ior), rel=1e-14)
         assert an.schlick(0.0, f0) == pytest.approx(1.0, abs=1e-15)
     deg = np.linspace(0, 90, 9001)
-    err = an.schlick(cosd(deg), an.f0_from_ior(ALUMINIUM)) - an.fresnel(cosd(deg), ALUMINIUM)
+    err = an.schlick(cosd(deg), an.f0_from_material(ALUMINIUM)) - an.fresnel(cosd(deg), ALUMINIUM)
     assert 80 < deg[np.argmax(np.abs(err))] < 86
     assert np.max(np.abs(err)) == pytest.approx(0.078, abs=0.002)
 
@@ -140,7 +140,7 @@ def test_invalid_ior(ior):
     with pytest.raises(ValueError, match="ior"):
         an.fresnel(0.5, ior)
     with pytest.raises(ValueError, match="ior"):
-        an.f0_from_ior(ior)
+        an.f0_from_material(ior)
 
 
 def test_nan_cosine_rejected():

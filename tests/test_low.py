@@ -117,12 +117,12 @@ def test_rr_spatial_frequency_follows_eq_4_5():
 
 # --- reciprocity ---------------------------------------------------------------------------------
 BRDFS = {
-    "smooth": lambda wi, wo: an.low_smooth(wi, wo, 3.0, 200.0, 1.3, kd=0.1, ior=1.5),
-    "smooth-cos-al": lambda wi, wo: an.low_smooth(wi, wo, 3.0, 50.0, 0.7, ior=AL,
+    "smooth": lambda wi, wo: an.low_smooth(wi, wo, 3.0, 200.0, 1.3, kd=0.1, material=1.5),
+    "smooth-cos-al": lambda wi, wo: an.low_smooth(wi, wo, 3.0, 50.0, 0.7, material=AL,
                                                   obliquity="cos"),
     "smooth-harvey": lambda wi, wo: an.low_smooth(wi, wo, 1.0, 1e4, 2.0, obliquity="harvey"),
-    "microfacet": lambda wi, wo: an.low_microfacet(wi, wo, 2.0, 300.0, 1.7, kd=0.2, ior=1.5),
-    "microfacet-al": lambda wi, wo: an.low_microfacet(wi, wo, 2.0, 30.0, 1.0, ior=AL),
+    "microfacet": lambda wi, wo: an.low_microfacet(wi, wo, 2.0, 300.0, 1.7, kd=0.2, material=1.5),
+    "microfacet-al": lambda wi, wo: an.low_microfacet(wi, wo, 2.0, 30.0, 1.0, material=AL),
     "microfacet-noG": lambda wi, wo: an.low_microfacet(wi, wo, 2.0, 30.0, 0.5, shadowing="none"),
     "rr": lambda wi, wo: an.rayleigh_rice(wi, wo, LAMBDA, 1e-3, 2.0, 1.5, AL),
     "rr-ss": lambda wi, wo: an.rayleigh_rice(wi, wo, LAMBDA, 1e-3, 2.0, 1.5, 1.5, "ss"),
@@ -153,7 +153,7 @@ def test_smooth_specular_value(ior):
     F = an.fresnel(np.cos(theta), None if ior is None else complex(ior).real)
     A, kd = 2.5, 0.3
     for obl, g in [("one", 1.0), ("cos", np.cos(theta) ** 2), ("harvey", np.cos(theta) ** 2)]:
-        f = an.low_smooth(wi, wo, A, 1e3, 1.2, kd=kd, ior=ior, obliquity=obl)
+        f = an.low_smooth(wi, wo, A, 1e3, 1.2, kd=kd, material=ior, obliquity=obl)
         np.testing.assert_allclose(f, kd / np.pi + g * A * F, rtol=1e-12)
 
 
@@ -167,7 +167,7 @@ def test_smooth_fresnel_angle_exact_for_equal_elevations():
     A, B, C = 1.0, 40.0, 1.3
     s = A / (1 + B * np.sum((wi + wo)[..., :2] ** 2, axis=-1)) ** C
     expect = s * an.fresnel(np.sum(wi * h, axis=-1), 1.5)
-    np.testing.assert_allclose(an.low_smooth(wi, wo, A, B, C, ior=1.5), expect, rtol=1e-12)
+    np.testing.assert_allclose(an.low_smooth(wi, wo, A, B, C, material=1.5), expect, rtol=1e-12)
 
 
 def test_smooth_argument_is_lows_polar_form():
@@ -206,14 +206,14 @@ def test_microfacet_with_ndf_amplitude_is_torrance_sparrow(B, C, ior):
     G = np.minimum(1.0, np.minimum(2 * hz * co / vh, 2 * hz * ci / vh))
     ts = D * an.fresnel(vh, ior) * G / (4 * ci * co)
     A = an.low_microfacet_A_from_ndf(B, C)
-    np.testing.assert_allclose(an.low_microfacet(wi, wo, A, B, C, ior=ior), ts, rtol=1e-10)
+    np.testing.assert_allclose(an.low_microfacet(wi, wo, A, B, C, material=ior), ts, rtol=1e-10)
 
 
 def test_microfacet_at_h_equal_n():
     """ĥ = n: S = A, G = 1, so f = kd/π + A F(θ)/(π cos²θ) (Löw eq. 15)."""
     theta = np.radians([0.0, 10.0, 45.0, 75.0])
     wi, wo = spherical(theta, 1.0), spherical(theta, 1.0 + np.pi)
-    f = an.low_microfacet(wi, wo, 0.7, 1e8, 1 - 1e-9, kd=0.05, ior=1.5)
+    f = an.low_microfacet(wi, wo, 0.7, 1e8, 1 - 1e-9, kd=0.05, material=1.5)
     expect = 0.05 / np.pi + 0.7 * an.fresnel(np.cos(theta), 1.5) / (np.pi * np.cos(theta) ** 2)
     np.testing.assert_allclose(f, expect, rtol=1e-12)
 
@@ -284,12 +284,12 @@ def test_sample_low_smooth_chi2(B, theta_o):
     s = an.sample_low_smooth(wo, rng.random(N_SAMPLES), rng.random(N_SAMPLES), B)
     assert np.all(s.wi[..., 2] >= 0)          # the disk maps onto the upper hemisphere only
     np.testing.assert_array_equal(s.above, s.wi[..., 2] > 0)
-    np.testing.assert_allclose(s.pdf[:100_000], an.pdf_low_smooth(wo, s.wi[:100_000], B),
+    np.testing.assert_allclose(s.pdf[:100_000], an.pdf_low_smooth(s.wi[:100_000], wo, B),
                                rtol=1e-9)
 
     def density(r, phi):                            # area density on the disk × r
         wi = spherical(np.arcsin(r), phi)
-        return an.pdf_low_smooth(wo, wi, B) / wi[..., 2] * r
+        return an.pdf_low_smooth(wi, wo, B) / wi[..., 2] * r
 
     p = chi2_against_pdf(smooth_coords(s.wi), density, smooth_coords(pilot.wi),
                          ((0.0, 1.0), (-np.pi, np.pi)))
@@ -320,13 +320,13 @@ def test_sample_low_microfacet_chi2(B, C, theta_o):
     pilot = an.sample_low_microfacet(wo, rng.random(100_000), rng.random(100_000), B, C)
     s = an.sample_low_microfacet(wo, rng.random(N_SAMPLES), rng.random(N_SAMPLES), B, C)
     np.testing.assert_array_equal(s.above, s.wi[..., 2] > 0)
-    np.testing.assert_allclose(s.pdf[:100_000], an.pdf_low_microfacet(wo, s.wi[:100_000], B, C),
+    np.testing.assert_allclose(s.pdf[:100_000], an.pdf_low_microfacet(s.wi[:100_000], wo, B, C),
                                rtol=1e-8)
 
     def density(a, b):
         wi = (-np.cos(a)[..., None] * wo
               + np.sin(a)[..., None] * (np.cos(b)[..., None] * e1 + np.sin(b)[..., None] * e2))
-        return an.pdf_low_microfacet(wo, wi, B, C) * np.sin(a)
+        return an.pdf_low_microfacet(wi, wo, B, C) * np.sin(a)
 
     p = chi2_against_pdf(facet_coords(s.wi, wo, e1, e2), density,
                          facet_coords(pilot.wi, wo, e1, e2), ((0.0, np.pi), (-np.pi, np.pi)))
@@ -411,12 +411,12 @@ def exact_dir(theta_deg, phi_deg):
 @example(0.0, 0.0, 0.0, 0.0, 1e8, 2.5)
 def test_models_and_pdfs_finite(ti, pi_, to, po, B, C):
     wi, wo = exact_dir(ti, pi_), exact_dir(to, po)
-    vals = [an.low_smooth(wi, wo, 1.0, B, C, kd=0.1, ior=AL, obliquity=o)
+    vals = [an.low_smooth(wi, wo, 1.0, B, C, kd=0.1, material=AL, obliquity=o)
             for o in an.LOW_OBLIQUITIES]
-    vals += [an.low_microfacet(wi, wo, 1.0, B, C, kd=0.1, ior=ior) for ior in (1.5, AL, None)]
+    vals += [an.low_microfacet(wi, wo, 1.0, B, C, kd=0.1, material=ior) for ior in (1.5, AL, None)]
     vals += [an.rayleigh_rice(wi, wo, LAMBDA, 1e-3, B, C, ior, p)
              for ior in (1.5, AL) for p in ("unpolarised", "ss", "pp")]
-    vals += [an.pdf_low_smooth(wo, wi, B), an.pdf_low_microfacet(wo, wi, B, C),
+    vals += [an.pdf_low_smooth(wi, wo, B), an.pdf_low_microfacet(wi, wo, B, C),
              an.pdf_low_halfvector(half_vector(wi, wo), B, C)]
     for v in vals:
         assert np.isfinite(v) and v >= 0.0
@@ -438,7 +438,7 @@ def test_smooth_sampler_stays_in_upper_hemisphere_for_sharp_lobes():
     wo = spherical_deg(89.0, 0.0)
     s = an.sample_low_smooth(wo, RNG.random(100_000), RNG.random(100_000), 1e8)
     assert np.all(s.wi[..., 2] >= 0.0) and np.all(np.isfinite(s.pdf)) and np.all(s.pdf > 0)
-    np.testing.assert_allclose(s.pdf, an.pdf_low_smooth(wo, s.wi, 1e8), rtol=1e-9)
+    np.testing.assert_allclose(s.pdf, an.pdf_low_smooth(s.wi, wo, 1e8), rtol=1e-9)
 
 
 # --- fit metrics ---------------------------------------------------------------------------------
@@ -509,8 +509,8 @@ W = spherical_deg(30.0, 0.0)
     (lambda: an.sample_low_smooth(Z, 1.5, 0.5, 1.0), "u1"),
     (lambda: an.sample_low_microfacet(Z, 0.5, 0.5, -1.0, 1.0), "B"),
     (lambda: an.sample_low_microfacet(Z, 0.5, 0.5, 1.0, 0.0), "C"),
-    (lambda: an.pdf_low_microfacet(Z, W, 1.0, -1.0), "C"),
-    (lambda: an.pdf_low_smooth(Z, W, -1.0), "B"),
+    (lambda: an.pdf_low_microfacet(W, Z, 1.0, -1.0), "C"),
+    (lambda: an.pdf_low_smooth(W, Z, -1.0), "B"),
     (lambda: an.pdf_low_halfvector(Z, 0.0, 1.0), "B"),
     (lambda: an.low_microfacet_A_from_ndf(1.0, 0.0), "C"),
     (lambda: an.sample_low_smooth(-Z, 0.5, 0.5, 1.0), "wo"),

@@ -60,26 +60,26 @@ CDF_CASES = [an.Beckmann(0.05), an.Beckmann(1.5), an.GGX(0.3), an.BlinnPhong(0),
 def test_cdf_is_the_integral_of_the_tilt_density(ndf):
     """cdf_theta(θ) = ∫₀^θ 2π D cos sin dθ', integrated in θ with log-spaced break points."""
     for u in (1e-3, 0.1, 0.5, 0.9, 0.999):
-        theta = float(ndf.tilt_quantile(u))
+        theta = float(ndf.tilt_quantile_rad(u))
         edges = np.append(0.0, theta * np.logspace(-9, 0, 19))
-        integral = sum(integrate.quad(ndf.tilt_pdf, a, b, epsabs=1e-13, epsrel=1e-10, limit=200)[0]
+        integral = sum(integrate.quad(ndf.tilt_pdf_rad, a, b, epsabs=1e-13, epsrel=1e-10, limit=200)[0]
                        for a, b in zip(edges[:-1], edges[1:]))
-        assert ndf.cdf_theta(theta) == pytest.approx(integral, abs=1e-6)
-    assert ndf.cdf_theta(0.0) == 0.0
-    assert ndf.cdf_theta(HALF_PI) == pytest.approx(1.0, abs=1e-12)
+        assert ndf.cdf_theta_rad(theta) == pytest.approx(integral, abs=1e-6)
+    assert ndf.cdf_theta_rad(0.0) == 0.0
+    assert ndf.cdf_theta_rad(HALF_PI) == pytest.approx(1.0, abs=1e-12)
 
 
 @pytest.mark.parametrize("ndf", CDF_CASES, ids=repr)
 def test_quantile_inverts_cdf(ndf):
     u = np.concatenate([[0.0, 1e-12, 1e-6], np.linspace(0.001, 0.999, 999), [1 - 1e-9, 1.0]])
-    theta = ndf.tilt_quantile(u)
+    theta = ndf.tilt_quantile_rad(u)
     assert np.all((theta >= 0) & (theta <= HALF_PI))
     assert np.all(np.diff(theta) >= 0)
-    np.testing.assert_allclose(ndf.cdf_theta(theta), u, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ndf.cdf_theta_rad(theta), u, rtol=0, atol=1e-12)
     assert theta[-1] == pytest.approx(HALF_PI, abs=1e-15)
     # θ round trip where the CDF is neither 0 nor 1 to double precision
     inner = theta[(u >= 1e-6) & (u <= 0.999)]
-    np.testing.assert_allclose(ndf.tilt_quantile(ndf.cdf_theta(inner)), inner, rtol=1e-8)
+    np.testing.assert_allclose(ndf.tilt_quantile_rad(ndf.cdf_theta_rad(inner)), inner, rtol=1e-8)
 
 
 # --- closed-form special values ------------------------------------------------------------
@@ -105,7 +105,7 @@ def test_abc_c_near_one_is_continuous():
     for dc in (1e-9, -1e-9, 1e-12):
         other = an.ABC(1e8, 1.0 + dc)
         assert other.M == pytest.approx(base.M, rel=1e-7)
-        np.testing.assert_allclose(other.cdf_theta(theta), base.cdf_theta(theta), rtol=1e-7)
+        np.testing.assert_allclose(other.cdf_theta_rad(theta), base.cdf_theta_rad(theta), rtol=1e-7)
 
 
 def test_abc_D_from_vector_is_accurate_near_the_peak():
@@ -142,11 +142,11 @@ def mean_projected_area_over_cos(ndf, theta_o):
     b = np.cos(theta_o)
 
     def over_phi(v):
-        a = np.sin(theta_o) * np.tan(ndf.tilt_quantile(1.0 - v * v))
+        a = np.sin(theta_o) * np.tan(ndf.tilt_quantile_rad(1.0 - v * v))
         mean = b if a <= b else (b * np.arccos(-b / a) + np.sqrt(a * a - b * b)) / np.pi
         return mean * 2.0 * v                            # du = 2v dv
 
-    v_kink = np.sqrt(1.0 - ndf.cdf_theta(HALF_PI - theta_o))   # where a = b
+    v_kink = np.sqrt(1.0 - ndf.cdf_theta_rad(HALF_PI - theta_o))   # where a = b
     edges = np.unique(np.append(np.logspace(-8, 0, 17), max(v_kink, 1e-8)))
     # epsabs: for v ≲ 1e-7 the rounding of u = 1 − v² makes the integrand noisy
     total = sum(integrate.quad(over_phi, lo, hi, epsabs=1e-11, epsrel=1e-10, limit=200)[0]
@@ -209,10 +209,10 @@ def test_sampler_chi2(case):
     theta = np.arctan2(np.hypot(h[:, 0], h[:, 1]), h[:, 2])
     phi = np.mod(np.arctan2(h[:, 1], h[:, 0]), 2 * np.pi)
 
-    theta_edges = ndf.tilt_quantile(U_EDGES)
+    theta_edges = ndf.tilt_quantile_rad(U_EDGES)
     theta_edges[-1] = HALF_PI
-    p_theta = np.diff(ndf.cdf_theta(theta_edges))
-    p_theta[-1] += 1.0 - ndf.cdf_theta(HALF_PI)          # zero up to rounding
+    p_theta = np.diff(ndf.cdf_theta_rad(theta_edges))
+    p_theta[-1] += 1.0 - ndf.cdf_theta_rad(HALF_PI)          # zero up to rounding
     phi_edges = np.linspace(0, 2 * np.pi, N_PHI + 1)
     observed, _, _ = np.histogram2d(theta, phi, bins=[theta_edges, phi_edges])
     assert observed.sum() == N_SAMPLES
@@ -250,11 +250,11 @@ def test_densities_finite_on_closed_hemisphere(ndf, theta, phi):
     hs = np.stack([spherical(theta, phi), [0, 0, 1.0], [1.0, 0, 0],
                    spherical(HALF_PI, phi)])
     for values in (ndf.D(hs), ndf.pdf(hs), ndf.D_cos(hs[:, 2]),
-                   ndf.tilt_pdf(np.array([theta, 0.0, HALF_PI])),
-                   ndf.cdf_theta(np.array([theta, 0.0, HALF_PI]))):
+                   ndf.tilt_pdf_rad(np.array([theta, 0.0, HALF_PI])),
+                   ndf.cdf_theta_rad(np.array([theta, 0.0, HALF_PI]))):
         assert np.all(np.isfinite(values)) and np.all(values >= 0)
     assert ndf.D(hs[2]) == 0.0                        # h exactly in the tangent plane
-    assert 0.0 <= ndf.cdf_theta(theta) <= 1.0
+    assert 0.0 <= ndf.cdf_theta_rad(theta) <= 1.0
     if ndf.has_closed_smith:
         lam = ndf.smith_lambda_cos(np.array([np.cos(theta), 1.0, 0.0]))
         assert np.isfinite(lam[0]) or np.cos(theta) == 0.0
@@ -267,10 +267,10 @@ def test_densities_finite_on_closed_hemisphere(ndf, theta, phi):
 @example(ndf=an.VonMisesFisher(1e8), u1=1.0, u2=0.0)
 @example(ndf=an.Beckmann(1e-3), u1=0.0, u2=0.5)
 def test_quantile_and_samples_finite(ndf, u1, u2):
-    theta = ndf.tilt_quantile(np.array([u1, 0.0, 1.0]))
+    theta = ndf.tilt_quantile_rad(np.array([u1, 0.0, 1.0]))
     assert np.all(np.isfinite(theta)) and np.all((theta >= 0) & (theta <= HALF_PI))
     assert theta[1] == 0.0 and theta[2] == pytest.approx(HALF_PI, abs=1e-15)
-    assert abs(ndf.cdf_theta(theta[0]) - u1) <= 1e-12
+    assert abs(ndf.cdf_theta_rad(theta[0]) - u1) <= 1e-12
     h = ndf.sample(u1, u2)
     assert np.all(np.isfinite(h)) and h[2] >= 0 and np.linalg.norm(h) == pytest.approx(1, abs=1e-15)
 

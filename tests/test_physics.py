@@ -102,7 +102,7 @@ def test_vcavity_brdf_matches_ts_vgroove(name):
 
 def grooves_per_bin(ndf, wi, bins: Bins, n_grooves: int, k: int = 6) -> np.ndarray:
     """How many stratified groove tilts can reflect wi into each bin: n·(F(θh,max) − F(θh,min))
-    over the half-vector tilts θh of a k × k grid of directions in the bin (F = ndf.cdf_theta).
+    over the half-vector tilts θh of a k × k grid of directions in the bin (F = ndf.cdf_theta_rad).
     Quantile tilts represent D to ~1/count in a bin, so bins with few grooves show the
     quantisation (DESIGN.md: nothing beyond the 1 − 1/(2n) quantile; lumps in the tail)."""
     te, pe = np.radians(bins.theta_edges), np.radians(bins.phi_edges)
@@ -111,7 +111,7 @@ def grooves_per_bin(ndf, wi, bins: Bins, n_grooves: int, k: int = 6) -> np.ndarr
     ph = (pe[:-1, None] + np.diff(pe)[:, None] * u)[None, :, None, :]
     shape = (bins.n_theta, bins.n_phi, k, k)
     h = normalize(spherical(np.broadcast_to(th, shape), np.broadcast_to(ph, shape)) + wi)
-    F = ndf.cdf_theta(np.arccos(np.clip(h[..., 2], -1.0, 1.0))).reshape(bins.shape + (-1,))
+    F = ndf.cdf_theta_rad(np.arccos(np.clip(h[..., 2], -1.0, 1.0))).reshape(bins.shape + (-1,))
     return n_grooves * (F.max(axis=-1) - F.min(axis=-1))
 
 
@@ -120,8 +120,8 @@ def facets_model(surface, theta, bins, replicates: int = 4, azimuths: int = 1024
     independently seeded replicates; its error is their scatter / √replicates (the per-facet
     stderr of bin_average_facets treats stratified tilts as i.i.d., far too conservative)."""
     wi = spherical_deg(theta, 0.0)
-    reps = np.array([bin_average_facets(surface.facet_normals(), surface.projected_areas(), wi,
-                                        bins, "aluminium", "vgroove", azimuths=azimuths,
+    reps = np.array([bin_average_facets(wi, bins, surface.facet_normals(), surface.projected_areas(),
+                                        "vgroove", "aluminium", azimuths=azimuths,
                                         seed=q).values for q in range(replicates)])
     return reps.mean(axis=0), reps.std(axis=0, ddof=1) / np.sqrt(replicates)
 
@@ -160,7 +160,7 @@ def check_g1(n: int, rays: int, theta, max_rel_se: float):
     meas = measure_g1(s, theta, rays=rays, seed=3)
     wo = spherical_deg(np.asarray(theta), 0.0)
     for ndf in (s.ndf(), an.Beckmann(s.stats()["m_realised"])):
-        smith = 1.0 / (1.0 + an.smith_lambda(ndf, wo))
+        smith = 1.0 / (1.0 + an.smith_lambda(wo, ndf))
         assert np.all(meas.stderr / smith < max_rel_se)   # 1 % is resolvable
         assert np.all(np.abs(meas.g1 / smith - 1.0) < 0.01), (type(ndf).__name__, meas.g1, smith)
 
@@ -200,7 +200,7 @@ def check_reciprocity(n: int, n_real: int, rays: int):
     bins = Bins(30, 19)
     a_list, b_list = [p[0] for p in PAIRS], [p[1] for p in PAIRS]
     res = simulate(None, "aluminium", a_list + b_list, rays=rays * n_real, bins=bins, seed=5,
-                   realisations=(make, list(range(10, 10 + n_real))))
+                   surface_factory=make, seeds=list(range(10, 10 + n_real)))
     per = res.brdf_realisations                            # (R, T, Θ, Φ)
     fwd = bins.forward_index
     it = lambda t: int(t // 3.0)                           # noqa: E731  bin of θo = t

@@ -27,7 +27,7 @@ ALPHA = 0.01
 
 
 def ts_fn(ndf, shadowing="vgroove", ior=None):
-    return lambda wi, wo: torrance_sparrow(wi, wo, ndf, shadowing=shadowing, ior=ior)
+    return lambda wi, wo: torrance_sparrow(wi, wo, ndf, shadowing=shadowing, material=ior)
 
 
 def facet_weight(wi, h, G, ior=None):
@@ -41,7 +41,7 @@ def sample_fraction(ndf, wi, bins):
     def density(wi, wo):                        # per unit cos θo dω_o, as bin_average expects
         h = _checks.half_vector(wi, wo)
         return ndf.D(h) * h[..., 2] / (4.0 * np.sum(wo * h, -1) * wo[..., 2])
-    return bin_average(density, wi, bins, rtol=1e-6).values * bins.projected_solid_angle()
+    return bin_average(wi, bins, density, rtol=1e-6).values * bins.projected_solid_angle()
 
 
 def relative_azimuth(wo, phi_i_deg):
@@ -52,7 +52,7 @@ def relative_azimuth(wo, phi_i_deg):
 @pytest.mark.parametrize("bins", [Bins(45, 72), Bins(9, 8, folded=False), Bins(1, 2)])
 def test_lambertian_is_exact_and_conserves_energy(bins):
     wi = _checks.spherical_deg(40.0, 25.0)
-    res = bin_average(lambda wi, wo: np.full(wo.shape[:-1], 1.0 / np.pi), wi, bins)
+    res = bin_average(wi, bins, lambda wi, wo: np.full(wo.shape[:-1], 1.0 / np.pi))
     assert res.converged.all()
     np.testing.assert_allclose(res.values, 1.0 / np.pi, rtol=1e-12)
     assert abs(np.sum(res.values * bins.projected_solid_angle()) - 1.0) < 1e-12
@@ -71,7 +71,7 @@ def test_separable_model_matches_closed_form(bins, symmetric):
         d = relative_azimuth(wo, phi_i)
         return wo[..., 2] ** 3 * (1.0 + 0.5 * np.cos(d) + s * np.sin(d))
 
-    res = bin_average(f, _checks.spherical_deg(20.0, phi_i), bins, phi_i=phi_i, rtol=1e-9,
+    res = bin_average(_checks.spherical_deg(20.0, phi_i), bins, f, phi_i=phi_i, rtol=1e-9,
                       symmetric=symmetric)
     t, p = np.radians(bins.theta_edges), np.radians(bins.phi_edges)
     theta_part = (np.cos(t[:-1]) ** 5 - np.cos(t[1:]) ** 5) / 5.0
@@ -91,8 +91,8 @@ def test_sharp_lobe_reaches_rtol(ndf, theta_i):
     bins = Bins(45, 91)                                    # 2° bins
     wi = _checks.spherical_deg(theta_i, 0.0)
     fn = ts_fn(ndf, "vgroove", "aluminium")
-    res = bin_average(fn, wi, bins, rtol=1e-3)
-    ref = bin_average(fn, wi, bins, rtol=1e-7, order=(8, 16), max_depth=10)
+    res = bin_average(wi, bins, fn, rtol=1e-3)
+    ref = bin_average(wi, bins, fn, rtol=1e-7, order=(8, 16), max_depth=10)
     assert res.converged.all() and ref.converged.all()
     diff = np.abs(res.values - ref.values)
     big = ref.values >= 1e-6 * ref.values.max()
@@ -107,11 +107,11 @@ def test_refinement_is_needed_and_converged_flag_is_honest():
     bins, rtol, floor = Bins(9, 19), 1e-3, 1e-6
     fn = ts_fn(VonMisesFisher(1e5))
     wi = _checks.spherical_deg(30.0, 0.0)
-    ref = bin_average(fn, wi, bins, rtol=1e-8, order=(8, 16), max_depth=14)
+    ref = bin_average(wi, bins, fn, rtol=1e-8, order=(8, 16), max_depth=14)
     assert ref.converged.all()
     tol = np.maximum(rtol * ref.values, rtol * floor * ref.values.max()) * (1 + 1e-6)
-    coarse = bin_average(fn, wi, bins, rtol=rtol, floor=floor, max_depth=0)
-    fine = bin_average(fn, wi, bins, rtol=rtol, floor=floor)
+    coarse = bin_average(wi, bins, fn, rtol=rtol, floor=floor, max_depth=0)
+    fine = bin_average(wi, bins, fn, rtol=rtol, floor=floor)
     assert not coarse.converged.all()
     assert fine.converged.all()
     for res in (coarse, fine):
@@ -130,8 +130,8 @@ def test_qmc_agrees_with_quadrature_within_its_error(theta_i):
     kept where every replicate expects ≥ 50 samples (the t approximation needs them)."""
     ndf, bins, n, R = Beckmann(0.3), Bins(30, 31), 2 ** 20, 16
     wi = _checks.spherical_deg(theta_i, 0.0)
-    ref = bin_average(ts_fn(ndf, "vgroove", 1.329), wi, bins, rtol=1e-6)
-    est = bin_average_ts(ndf, wi, bins, "vgroove", 1.329, n=n, replicates=R)
+    ref = bin_average(wi, bins, ts_fn(ndf, "vgroove", 1.329), rtol=1e-6)
+    est = bin_average_ts(wi, bins, ndf, "vgroove", 1.329, n=n, replicates=R)
     keep = sample_fraction(ndf, wi, bins) * (n // R) >= 50
     assert keep.sum() > 50
     t = (est.values - ref.values)[keep] / est.stderr[keep]
@@ -166,10 +166,10 @@ def test_facets_agree_with_quadrature_within_mc_error(beckmann_facets, theta_i):
         h = _checks.half_vector(wi, wo)
         return facet_weight(wi, h, vgroove_g(wi, wo, h)) * f(wi, wo)
 
-    ref = bin_average(f, wi, bins, rtol=1e-6).values * omega
-    second = bin_average(x_times_f, wi, bins, rtol=1e-6).values * omega
+    ref = bin_average(wi, bins, f, rtol=1e-6).values * omega
+    second = bin_average(wi, bins, x_times_f, rtol=1e-6).values * omega
     count = N * sample_fraction(ndf, wi, bins)
-    est = bin_average_facets(normals, None, wi, bins, shadowing="vgroove")
+    est = bin_average_facets(wi, bins, normals, None, shadowing="vgroove")
     keep = count >= 25
     K = int(keep.sum())
     assert K > 100
@@ -192,7 +192,8 @@ def test_facet_energy_equals_direct_albedo(beckmann_facets, theta_i):
     weights = rng.uniform(0.5, 1.5, len(normals))
     bins = Bins(45, 72, folded=False)
     wi = _checks.spherical_deg(theta_i, 10.0)
-    est = bin_average_facets(normals, weights, wi, bins, ior="aluminium", shadowing="vgroove")
+    est = bin_average_facets(wi, bins, normals, weights, material="aluminium",
+                             shadowing="vgroove")
     wo = 2.0 * (normals @ wi)[:, None] * normals - wi
     x = facet_weight(wi, normals, vgroove_g(wi, _checks.normalize(wo), normals), 0.769 + 6.08j)
     albedo = np.sum((weights / weights.sum() * x)[wo[:, 2] > 0])
@@ -209,11 +210,11 @@ def test_facets_smith_agree_with_quadrature(beckmann_facets):
 
     def f(wi, wo):
         h = _checks.half_vector(wi, wo)
-        g = smith_g2(emp, np.broadcast_to(wi, wo.shape), wo, h)
+        g = smith_g2(np.broadcast_to(wi, wo.shape), wo, h, emp)
         return ndf.D(h) * g / (4.0 * wi[2] * wo[..., 2])
 
-    ref = bin_average(f, wi, bins, rtol=1e-6).values
-    est = bin_average_facets(normals, None, wi, bins, shadowing="smith", smith_ndf=emp)
+    ref = bin_average(wi, bins, f, rtol=1e-6).values
+    est = bin_average_facets(wi, bins, normals, None, shadowing="smith", smith_ndf=emp)
     keep = sample_fraction(ndf, wi, bins) * len(normals) >= 25
     K = int(keep.sum())
     chi = np.sum(((est.values - ref)[keep] / est.stderr[keep]) ** 2)
@@ -226,11 +227,11 @@ def test_vgroove_azimuth_average_matches_isotropic_ts():
     Torrance–Sparrow with Beckmann D and V-groove G (Mikkelsen eq. 25; DESIGN.md)."""
     ndf = Beckmann(0.3)
     rng = np.random.default_rng(99)
-    theta = ndf.tilt_quantile(rng.random(3000))
+    theta = ndf.tilt_quantile_rad(rng.random(3000))
     faces = np.concatenate([_checks.spherical(theta, 0.0), _checks.spherical(theta, np.pi)])
     bins, wi = Bins(18, 19), _checks.spherical_deg(50.0, 0.0)
-    est = bin_average_facets(faces, None, wi, bins, shadowing="vgroove", azimuths=512)
-    ref = bin_average(ts_fn(ndf), wi, bins, rtol=1e-6).values
+    est = bin_average_facets(wi, bins, faces, None, shadowing="vgroove", azimuths=512)
+    ref = bin_average(wi, bins, ts_fn(ndf), rtol=1e-6).values
     keep = sample_fraction(ndf, wi, bins) * len(theta) >= 25
     K = int(keep.sum())
     chi = np.sum(((est.values - ref)[keep] / est.stderr[keep]) ** 2)
@@ -251,7 +252,7 @@ def test_predict_runs_every_kind_and_matches_direct_calls(beckmann_facets):
         assert arr.shape == (len(angles),) + bins.shape and np.all(np.isfinite(arr))
     np.testing.assert_allclose(out["lambert"], 1 / np.pi, rtol=1e-12)
     wi = _checks.spherical_deg(45.0, 0.0)
-    direct = bin_average(ts_fn(ndf, "smith", "methanol"), wi, bins).values
+    direct = bin_average(wi, bins, ts_fn(ndf, "smith", "methanol")).values
     np.testing.assert_array_equal(out["ts"][1], direct)
     with pytest.raises(ValueError, match="unique"):
         predict(models[:1] * 2, angles, bins)
@@ -265,10 +266,10 @@ def test_predict_runs_every_kind_and_matches_direct_calls(beckmann_facets):
 def test_finite_nonnegative_for_every_incidence(theta_i):
     ndf, bins = Beckmann(0.3), Bins(9, 10)
     wi = _checks.spherical_deg(theta_i, 0.0)
-    for res in (bin_average(ts_fn(ndf, "smith"), wi, bins, rtol=1e-2, max_depth=3).values,
-                bin_average_ts(ndf, wi, bins, "vgroove", n=2 ** 10, replicates=4).values,
-                bin_average_facets(ndf.sample(*np.random.default_rng(0).random((2, 1000))),
-                                   None, wi, bins, shadowing="smith").values):
+    for res in (bin_average(wi, bins, ts_fn(ndf, "smith"), rtol=1e-2, max_depth=3).values,
+                bin_average_ts(wi, bins, ndf, "vgroove", n=2 ** 10, replicates=4).values,
+                bin_average_facets(wi, bins, ndf.sample(*np.random.default_rng(0).random((2, 1000))),
+                                   None, shadowing="smith").values):
         assert np.all(np.isfinite(res)) and np.all(res >= 0)
 
 
@@ -276,16 +277,16 @@ def test_invalid_arguments_raise():
     bins, wi = Bins(9, 10), _checks.spherical_deg(30.0, 0.0)
     lam = lambda wi, wo: np.full(wo.shape[:-1], 1 / np.pi)   # noqa: E731
     with pytest.raises(ValueError, match="horizon"):
-        bin_average(lam, _checks.spherical_deg(90.0, 0.0), bins)
+        bin_average(_checks.spherical_deg(90.0, 0.0), bins, lam)
     with pytest.raises(ValueError, match="rtol"):
-        bin_average(lam, wi, bins, rtol=0.0)
+        bin_average(wi, bins, lam, rtol=0.0)
     with pytest.raises(ValueError, match="order"):
-        bin_average(lam, wi, bins, order=(8, 4))
+        bin_average(wi, bins, lam, order=(8, 4))
     with pytest.raises(ValueError, match="finite"):
-        bin_average(lambda wi, wo: np.full(wo.shape[:-1], np.nan), wi, bins)
+        bin_average(wi, bins, lambda wi, wo: np.full(wo.shape[:-1], np.nan))
     with pytest.raises(ValueError, match="power of 2"):
-        bin_average_ts(Beckmann(0.3), wi, bins, n=1000)
+        bin_average_ts(wi, bins, Beckmann(0.3), n=1000)
     with pytest.raises(ValueError, match="shadowing"):
-        bin_average_facets(np.array([[0.0, 0.0, 1.0]]), None, wi, bins, shadowing="blinn")
+        bin_average_facets(wi, bins, np.array([[0.0, 0.0, 1.0]]), None, shadowing="blinn")
     with pytest.raises(ValueError, match="weights"):
-        bin_average_facets(np.array([[0.0, 0.0, 1.0]]), [-1.0], wi, bins)
+        bin_average_facets(wi, bins, np.array([[0.0, 0.0, 1.0]]), [-1.0])

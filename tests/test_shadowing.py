@@ -35,8 +35,8 @@ def ndf_named(name):
 
 def _tilt_nodes(ndf, n_gl=8):
     """θ_h Gauss–Legendre nodes/weights on panels at the NDF's tilt quantiles (and bin edges)."""
-    edges = [ndf.tilt_quantile(np.linspace(0, 1, 129)), np.linspace(0, np.pi / 2, 65),
-             ndf.tilt_quantile(1 - np.logspace(-9, -3, 7))]
+    edges = [ndf.tilt_quantile_rad(np.linspace(0, 1, 129)), np.linspace(0, np.pi / 2, 65),
+             ndf.tilt_quantile_rad(1 - np.logspace(-9, -3, 7))]
     if hasattr(ndf, "theta_edges"):
         edges.append(ndf.theta_edges)
     e = np.unique(np.concatenate(edges))
@@ -61,7 +61,7 @@ def projected_area(ndf, g1, theta_o_deg, n_phi=512):
 def test_projected_area_identity(name, kind):
     """∫ G1 (wo·h)⁺ D dω = cos θo (DESIGN.md); V-groove holds because D is isotropic."""
     ndf = ndf_named(name)
-    g1 = (lambda d, w, h: an.vgroove_g1(w, h)) if kind == "vgroove" else an.smith_g1
+    g1 = (lambda d, w, h: an.vgroove_g1(w, h)) if kind == "vgroove" else (lambda d, w, h: an.smith_g1(w, h, d))
     for theta in (0.0, 30.0, 60.0, 80.0, 85.0):
         got = projected_area(ndf, g1, theta)
         assert abs(got - np.cos(np.radians(theta))) < 1e-3, (theta, got)
@@ -80,26 +80,26 @@ def test_identity_fails_without_masking():
 def test_numerical_lambda_matches_closed_form(ndf):
     theta = np.radians(np.linspace(0.0, 85.0, 1701))
     w = spherical(theta, 0.7)
-    num = an.smith_lambda(ndf, w, method="numerical")
-    ref = an.smith_lambda(ndf, w, method="closed")
+    num = an.smith_lambda(w, ndf, method="numerical")
+    ref = an.smith_lambda(w, ndf, method="closed")
     big = ref > 1e-30
     assert np.all(np.abs(num - ref)[big] <= 1e-4 * ref[big])
     assert np.all(np.abs(num - ref)[~big] <= 1e-30)
     # beyond 85° (Λ → ∞) the masking G1 = 1/(1 + Λ) still agrees to 1e-4 relative
     theta = np.radians(np.linspace(85.0, 89.999, 500))
     w = spherical(theta, 0.0)
-    g_num = 1 / (1 + an.smith_lambda(ndf, w, method="numerical"))
-    g_ref = 1 / (1 + an.smith_lambda(ndf, w, method="closed"))
+    g_num = 1 / (1 + an.smith_lambda(w, ndf, method="numerical"))
+    g_ref = 1 / (1 + an.smith_lambda(w, ndf, method="closed"))
     assert np.all(np.abs(g_num - g_ref) <= 1e-4 * g_ref)
 
 
 def test_lambda_methods_and_grazing():
     ndf = an.VonMisesFisher(17.0)
     with pytest.raises(ValueError, match="method"):
-        an.smith_lambda(ndf, [0.0, 0.0, 1.0], method="closed")
+        an.smith_lambda([0.0, 0.0, 1.0], ndf, method="closed")
     with pytest.raises(ValueError, match="method"):
-        an.smith_lambda(an.Beckmann(0.3), [0.0, 0.0, 1.0], method="exact")
-    lam = an.smith_lambda(ndf, np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]))
+        an.smith_lambda([0.0, 0.0, 1.0], an.Beckmann(0.3), method="exact")
+    lam = an.smith_lambda(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]), ndf)
     assert lam[0] == 0.0                        # no facet is tilted beyond 90°
     assert np.isinf(lam[1])
 
@@ -131,16 +131,16 @@ def test_anisotropic_empirical_lambda():
     theta = np.radians(np.array([20.0, 45.0, 60.0, 70.0, 75.0, 80.0, 83.0, 85.0, 87.3, 89.1]))
     for phi in (0.0, 0.9, 2.0):
         w = spherical(theta, phi)
-        g_tab = 1 / (1 + an.smith_lambda(aniso, w))
+        g_tab = 1 / (1 + an.smith_lambda(w, aniso))
         g_ref = 1 / (1 + np.maximum(_cell_lambda_reference(aniso, w), 0.0))
         assert np.max(np.abs(g_tab - g_ref)) < 1e-4
-        g_iso = 1 / (1 + an.smith_lambda(iso, w))
+        g_iso = 1 / (1 + an.smith_lambda(w, iso))
         assert np.max(np.abs(g_iso - g_tab)) < 2e-3
     s = np.stack([rng.normal(0, 0.1, 400_000), rng.normal(0, 0.4, 400_000),
                   np.ones(400_000)], -1)
     stretched = an.Empirical(s / np.linalg.norm(s, axis=-1, keepdims=True), isotropic=False)
     w = spherical(np.radians(80.0), np.array([0.0, np.pi / 2]))
-    lam = an.smith_lambda(stretched, w)
+    lam = an.smith_lambda(w, stretched)
     assert lam[1] > 2 * lam[0]                  # masking is stronger along the rough axis
 
 
@@ -159,11 +159,11 @@ def test_smith_g2_forms():
     ndf = an.Beckmann(0.5)
     wi, wo = spherical(np.radians(70.0), 0.0), spherical(np.radians(50.0), 2.0)
     h = an._checks.half_vector(wi, wo)
-    li, lo = an.smith_lambda(ndf, wi), an.smith_lambda(ndf, wo)
-    assert np.isclose(an.smith_g2(ndf, wi, wo, h), 1 / ((1 + li) * (1 + lo)))
-    assert np.isclose(an.smith_g2(ndf, wi, wo, h, correlated=True), 1 / (1 + li + lo))
-    assert np.isclose(an.shadowing_g("smith-correlated", ndf, wi, wo, h), 1 / (1 + li + lo))
-    assert an.shadowing_g("none", ndf, wi, wo, h) == 1.0
+    li, lo = an.smith_lambda(wi, ndf), an.smith_lambda(wo, ndf)
+    assert np.isclose(an.smith_g2(wi, wo, h, ndf), 1 / ((1 + li) * (1 + lo)))
+    assert np.isclose(an.smith_g2(wi, wo, h, ndf, correlated=True), 1 / (1 + li + lo))
+    assert np.isclose(an.shadowing_g(wi, wo, h, ndf, "smith-correlated"), 1 / (1 + li + lo))
+    assert an.shadowing_g(wi, wo, h, ndf, "none") == 1.0
 
 
 def _unit(theta_deg, phi_deg):
@@ -189,8 +189,8 @@ def test_finite_everywhere(ti, pi, to, po, th, ph, which, name):
     if not np.any(h):
         h = np.array([0.0, 0.0, 1.0])
     ndf = ndf_named(name)
-    for g in (an.vgroove_g(wi, wo, h), an.smith_g1(ndf, wi, h), an.smith_g1(ndf, wo, h),
-              an.shadowing_g("smith-correlated", ndf, wi, wo, h)):
+    for g in (an.vgroove_g(wi, wo, h), an.smith_g1(wi, h, ndf), an.smith_g1(wo, h, ndf),
+              an.shadowing_g(wi, wo, h, ndf, "smith-correlated")):
         assert np.isfinite(g) and 0.0 <= g <= 1.0
 
 
@@ -198,10 +198,10 @@ def test_argument_checks():
     ndf = an.Beckmann(0.3)
     n = np.array([0.0, 0.0, 1.0])
     with pytest.raises(ValueError, match="shadowing.*vgroove.*smith"):
-        an.shadowing_g("cook", ndf, n, n, n)
+        an.shadowing_g(n, n, n, ndf, "cook")
     with pytest.raises(ValueError, match="unit"):
         an.vgroove_g([0.0, 0.0, 2.0], n, n)
     with pytest.raises(ValueError, match="upper hemisphere"):
-        an.smith_lambda(ndf, [0.0, 0.6, -0.8])
+        an.smith_lambda([0.0, 0.6, -0.8], ndf)
     with pytest.raises(ValueError, match="shape"):
-        an.smith_g1(ndf, [0.0, 1.0], n)
+        an.smith_g1([0.0, 1.0], n, ndf)

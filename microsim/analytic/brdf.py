@@ -1,8 +1,11 @@
 """Torrance–Sparrow BRDF, its microfacet sampler, albedo, and Mikkelsen's diffuse mix.
 
-Conventions (DESIGN.md): unit directions (..., 3) pointing away from the surface, n = +z,
-BRDFs in sr⁻¹, public angles in degrees. ``ior`` is anything ``fresnel.resolve_material``
-accepts: None (mirror, F = 1), a material name, a real (dielectric) or complex (conductor) index.
+Conventions (docs/design.md, "Conventions"): unit directions (..., 3) pointing away from the
+surface, n = +z, BRDFs in sr⁻¹, public angles in degrees. Arguments come in one order:
+directions first — ``(wi, wo, ...)`` for a BRDF or a pdf, ``(wo, u1, u2, ...)`` for a sampler,
+the incidence first for an integral over a BRDF — then the model. ``material`` is anything
+``fresnel.resolve_material`` accepts: None (mirror, F = 1), a material name, a real
+(dielectric) or complex (conductor) index.
 """
 from __future__ import annotations
 
@@ -36,7 +39,7 @@ def _ts(wi, wo, ndf, kind: str, eta) -> np.ndarray:
         inv = 1.0 / norm
         hz = s[..., 2] * inv
         cos_d = 0.5 * norm                 # wi·h = wo·h = |wi + wo|/2 for unit wi, wo
-        if kind == "vgroove":              # Mikkelsen eq. 25 with a shared denominator
+        if kind == "vgroove":              # Mikkelsen 2009, eq. 25 with a shared denominator
             val = np.minimum(2.0 * hz * np.minimum(ci, co) / cos_d, 1.0)
         else:
             wi_b, wo_b = np.broadcast_arrays(wi, wo)
@@ -52,24 +55,25 @@ def _ts(wi, wo, ndf, kind: str, eta) -> np.ndarray:
     return np.where(valid, val, 0.0)
 
 
-def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", ior=None):
-    """Torrance–Sparrow BRDF f = F(wi·h) D(h) G / (4 |wi·n| |wo·n|) in sr⁻¹ (Mikkelsen eq. 13/18).
+def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None):
+    """Torrance–Sparrow BRDF f = F(wi·h) D(h) G / (4 |wi·n| |wo·n|) in sr⁻¹ (Mikkelsen 2009,
+    eq. 13/18).
 
-    h = (wi + wo)/|wi + wo| (Mikkelsen eq. 10); ``shadowing`` ∈ {"vgroove", "smith",
-    "smith-correlated", "none"}; ``ior`` as in the module docstring. Returns 0 where wi or wo is
+    h = (wi + wo)/|wi + wo| (Mikkelsen 2009, eq. 10); ``shadowing`` ∈ {"vgroove", "smith",
+    "smith-correlated", "none"}; ``material`` as in the module docstring. Returns 0 where wi or wo is
     at or below the horizon. At exactly cos θi · cos θo = 0 the value is set to 0: there
     G → 0 like the vanishing cosine, so f cos θ → 0 and the choice carries no energy (the
     limit of f itself stays finite). Reciprocal: every factor is symmetric in wi, wo.
     """
     kind = _check_kind(shadowing)
-    eta = resolve_material(ior)
+    eta = resolve_material(material)
     return _ts(_checks.directions("wi", wi), _checks.directions("wo", wo), ndf, kind, eta)
 
 
-def sample_microfacet(ndf, wo, u1, u2):
+def sample_microfacet(wo, u1, u2, ndf):
     """Sample wi by reflecting wo about h ~ D(h)(h·n): returns (wi, pdf(wi) in sr⁻¹).
 
-    pdf(wi) = D(h)(h·n) / (4 |wo·h|) (Jacobian of Mikkelsen eq. 15). wi may fall below the
+    pdf(wi) = D(h)(h·n) / (4 |wo·h|) (Jacobian of Mikkelsen 2009, eq. 15). wi may fall below the
     horizon (the caller discards those; their probability is 1 − ∫_upper pdf). ``wo``: unit,
     upper hemisphere; ``u1``, ``u2`` ∈ [0, 1) broadcast with wo's leading shape.
     """
@@ -82,7 +86,7 @@ def sample_microfacet(ndf, wo, u1, u2):
     return wi, pdf
 
 
-def pdf_microfacet(ndf, wo, wi):
+def pdf_microfacet(wi, wo, ndf):
     """Density (sr⁻¹, over the whole sphere of wi) of ``sample_microfacet``.
 
     The upper-hemisphere h with wi = 2(wo·h)h − wo is ±(wi + wo)/|wi + wo|, and
@@ -108,9 +112,10 @@ def _cosine_sample(u1, u2) -> np.ndarray:
                     axis=-1)
 
 
-def directional_albedo(brdf_fn, theta_deg, n: int = 2 ** 14, ndf=None, n_rep: int = 8,
+def directional_albedo(theta_deg, brdf_fn, n: int = 2 ** 14, ndf=None, n_rep: int = 8,
                        seed: int = 0):
-    """Directional albedo ρ(θ) = ∫ f(ω, ω') cos θ' dω' (Mikkelsen eq. 27) by randomised QMC.
+    """Directional albedo ρ(θ) = ∫ f(ω, ω') cos θ' dω' (Mikkelsen 2009, eq. 27) by randomised
+    QMC.
 
     ``brdf_fn(wi, wo)`` broadcasts over (..., 3) arrays; ω lies in the xz-plane at polar angle
     ``theta_deg`` (degrees, any shape). Each of ``n_rep`` independently scrambled Sobol sets of
@@ -134,15 +139,15 @@ def directional_albedo(brdf_fn, theta_deg, n: int = 2 ** 14, ndf=None, n_rep: in
         u = qmc.Sobol(d=2, scramble=True, seed=rng).random(n)
         cands = [np.broadcast_to(_cosine_sample(u[:, 0], u[:, 1]), wi.shape[:-2] + (n, 3))]
         if ndf is not None:
-            cands.append(sample_microfacet(ndf, np.broadcast_to(wi, wi.shape[:-2] + (n, 3)),
-                                           u[:, 0], u[:, 1])[0])
+            cands.append(sample_microfacet(np.broadcast_to(wi, wi.shape[:-2] + (n, 3)),
+                                           u[:, 0], u[:, 1], ndf)[0])
         total = 0.0
         for wo in cands:
             co = wo[..., 2]
             p = co / np.pi * (co > 0)
             if ndf is not None:
-                p = 0.5 * p + 0.5 * pdf_microfacet(ndf, np.where(wi_up[..., None], wi,
-                                                                 (0.0, 0.0, 1.0)), wo)
+                p = 0.5 * p + 0.5 * pdf_microfacet(wo, np.where(wi_up[..., None], wi,
+                                                                (0.0, 0.0, 1.0)), ndf)
             up = co > 0.0
             safe_wo = np.where(up[..., None], wo, (0.0, 0.0, 1.0))
             f = np.where(up, brdf_fn(wi, safe_wo), 0.0)
@@ -172,7 +177,7 @@ def _phi_breakpoints(cos_i: float, cos_h: np.ndarray) -> np.ndarray:
 
 
 def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int) -> np.ndarray:
-    """ρ(θi) of Torrance–Sparrow by quadrature over h (Mikkelsen eq. 27 with eq. 15):
+    """ρ(θi) of Torrance–Sparrow by quadrature over h (Mikkelsen 2009, eq. 27 with eq. 15):
     ρ = ∫ f(wi, wo(h)) cos θo 4 (wi·h) dω_h. θ_h: Gauss–Legendre on the NDF's quantile panels;
     φ_h: Gauss–Legendre (``n_gl_phi`` nodes) between the kinks of ``_phi_breakpoints`` (over
     [0, π], doubled by symmetry; anisotropic D: over [0, 2π] with its cell edges added)."""
@@ -209,7 +214,7 @@ def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int)
 
 
 class AlbedoTable:
-    """Directional albedo ρ(θ) of a Torrance–Sparrow model (Mikkelsen eq. 27), tabulated.
+    """Directional albedo ρ(θ) of a Torrance–Sparrow model (Mikkelsen 2009, eq. 27), tabulated.
 
     ρ is computed by deterministic quadrature over h at ``n_theta`` polar angles uniform on
     [0°, 90°] plus ``n_grazing`` angles geometrically approaching 90° (90° − 0.01° … 90° − 12°,
@@ -220,11 +225,11 @@ class AlbedoTable:
     (tests/test_brdf.py).
     """
 
-    def __init__(self, ndf, shadowing: str = "vgroove", ior=None, n_theta: int = 46,
+    def __init__(self, ndf, shadowing: str = "vgroove", material=None, n_theta: int = 46,
                  n_grazing: int = 24, n_gl_phi: int = 16):
         self.ndf = ndf
         self.shadowing = _check_kind(shadowing)
-        self.ior = resolve_material(ior)
+        self.material = resolve_material(material)
         n_theta = int(_checks.in_range("n_theta", n_theta, 3, 10 ** 5))
         n_grazing = int(_checks.in_range("n_grazing", n_grazing, 0, 10 ** 5))
         n_gl_phi = int(_checks.in_range("n_gl_phi", n_gl_phi, 2, 1000))
@@ -233,7 +238,7 @@ class AlbedoTable:
         theta = np.radians(deg)
         theta[-1] -= 1e-7
         self.theta_nodes = theta
-        self.rho_nodes = _albedo_by_quadrature(ndf, self.shadowing, self.ior, np.cos(theta),
+        self.rho_nodes = _albedo_by_quadrature(ndf, self.shadowing, self.material, np.cos(theta),
                                                n_gl_phi)
         self._interp = CubicSpline(theta, self.rho_nodes)
         edges = np.append(theta, 0.5 * np.pi)                     # 2∫ρ cos sin dθ, per interval
@@ -250,13 +255,14 @@ class AlbedoTable:
         return np.maximum(self._interp(np.arccos(c)), 0.0)
 
     def __repr__(self) -> str:
-        return (f"AlbedoTable({self.ndf!r}, shadowing={self.shadowing!r}, ior={self.ior!r}, "
+        return (f"AlbedoTable({self.ndf!r}, shadowing={self.shadowing!r}, "
+                f"material={self.material!r}, "
                 f"rho_bar={self.rho_bar:.6g})")
 
 
 def mikkelsen_mix(wi, wo, specular_table: AlbedoTable, kd, ks: float = 1.0,
                   renormalise: bool = False):
-    """Specular + energy-conserving reciprocal diffuse BRDF in sr⁻¹ (Mikkelsen eq. 28):
+    """Specular + energy-conserving reciprocal diffuse BRDF in sr⁻¹ (Mikkelsen 2009, eq. 28):
 
         f = ks f_s(wi, wo) + (1 − ks ρ(wi)) (kd/π) (1 − ks ρ(wo)) [/ (1 − ks ρ̄)],
 
@@ -280,7 +286,7 @@ def mikkelsen_mix(wi, wo, specular_table: AlbedoTable, kd, ks: float = 1.0,
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     t = specular_table
-    fs = _ts(wi, wo, t.ndf, t.shadowing, t.ior)
+    fs = _ts(wi, wo, t.ndf, t.shadowing, t.material)
     ci, co = np.broadcast_arrays(wi[..., 2], wo[..., 2])
     up = (ci > 0.0) & (co > 0.0)
     diffuse = (1.0 - ks * t.rho(ci)) * (1.0 - ks * t.rho(co)) / np.pi

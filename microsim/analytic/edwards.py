@@ -1,6 +1,6 @@
-"""Edwards et al., *The halfway vector disk for BRDF modeling* (seed 002).
+"""Edwards et al. 2006, *The halfway vector disk for BRDF modeling*.
 
-Framework (Edwards eq. 9–13). For a fixed outgoing direction wo, the unnormalised half vectors
+Framework (Edwards et al. 2006, eq. 9–13; "eq. N" below refers to that paper). For a fixed outgoing direction wo, the unnormalised half vectors
 H = wi + wo of all upper-hemisphere wi form the unit hemisphere translated to the tip of wo
 (Fig. 3). A projection maps them bijectively onto the base of that hemisphere: the unit-radius
 disk in the plane z = cos θo centred at wo. Points of the disk are written in (u, v) = their x, y
@@ -9,7 +9,7 @@ centre ``disk_centre(wo)`` = (wo_x, wo_y) is retro-reflection (wi = wo) in the s
 (§3.1) but wi = n in the orthogonal one (Fig. 4; Fig. 13: "the disk shifts ... because it is
 centred on wo in (u, v) space"). Any density p(u, v) on the disk defines
 
-    f(wi, wo) = p(u(wi)) · J(wo, wi) / cos θi,      J = dA_disk / dω_i   (eq. 11)
+    f(wi, wo) = p(u(wi)) · J(wi, wo) / cos θi,      J = dA_disk / dω_i   (eq. 11)
 
 whose cosine-weighted albedo ∫ f cos θi dω_i = ∫_disk p dA = 1 for every wo: the BRDF conserves
 energy exactly. Here J is the Jacobian with respect to the incident solid angle, i.e. the
@@ -28,7 +28,9 @@ of reciprocity" (Edwards §1, §6, Fig. 14): f(wi, wo) ≠ f(wo, wi) in general.
 
 Conventions: local frame with the macro normal +z; unit directions of shape (..., 3) pointing away
 from the surface; (u, v) points of shape (..., 2); BRDFs and densities in solid angle in sr⁻¹,
-disk densities per unit disk area. All functions broadcast over leading axes.
+disk densities per unit disk area. All functions broadcast over leading axes. Arguments come
+directions first: ``(wi, wo, ...)`` where both are given, ``(wo, h)``, ``(wo, uv)`` or
+``(wo, u1, u2, ...)`` where wo alone fixes the disk.
 """
 from __future__ import annotations
 
@@ -125,7 +127,7 @@ def scaling_projection_inverse(wo, uv) -> np.ndarray:
     return _unit_or_normal(np.concatenate([np.broadcast_to(uv, c.shape + (2,)), c[..., None]], -1))
 
 
-def scaling_jacobian(wo, wi) -> np.ndarray:
+def scaling_jacobian(wi, wo) -> np.ndarray:
     """dA_disk/dω_i of the scaling projection (dimensionless per sr).
 
     Edwards eq. 19 gives dμ/dΩ(Ĥ) = cos²θo/(Ĥ·n)³ (re-derived: the plane z = cos θo seen from
@@ -170,7 +172,7 @@ def orthogonal_projection_inverse(wo, uv) -> np.ndarray:
     return _unit_or_normal(np.concatenate([uv, hz[..., None]], -1))
 
 
-def orthogonal_jacobian(wo, wi) -> np.ndarray:
+def orthogonal_jacobian(wi, wo) -> np.ndarray:
     """dA_disk/dω_i of the orthogonal projection: cos θi (0 below the horizon).
 
     Edwards eq. 23, dμ/dΩ(Ĥ) = |wi+wo|² (wi·n)/(wi·Ĥ), times dΩ(Ĥ)/dω_i = 1/(4 wi·Ĥ) (eq. 8)
@@ -201,12 +203,12 @@ def disk_projection_inverse(wo, uv, projection: str = "scaling") -> np.ndarray:
     return _INVERSE[_check_projection(projection)](wo, uv)
 
 
-def disk_jacobian(wo, wi, projection: str = "scaling") -> np.ndarray:
+def disk_jacobian(wi, wo, projection: str = "scaling") -> np.ndarray:
     """dA_disk/dω_i for the named projection (eq. 19 or 23 over 4 wi·Ĥ)."""
-    return _JACOBIAN[_check_projection(projection)](wo, wi)
+    return _JACOBIAN[_check_projection(projection)](wi, wo)
 
 
-def incident_to_disk(wo, wi, projection: str = "scaling") -> np.ndarray:
+def incident_to_disk(wi, wo, projection: str = "scaling") -> np.ndarray:
     """Disk point (u, v) of the pair (wi, wo): project Ĥ = (wi + wo)/|wi + wo| (Fig. 13 view).
 
     For wi = −wo (both on the horizon) Ĥ is undefined and the normal is used.
@@ -221,8 +223,8 @@ def disk_to_incident(wo, uv, projection: str = "scaling") -> np.ndarray:
     return reflect_halfway(wo, disk_projection_inverse(wo, uv, projection))
 
 
-def _brdf_factor(wo, wi, projection: str) -> np.ndarray:
-    """J(wo, wi)/cos θi: the BRDF per unit disk density (Edwards eq. 20 and 24); 0 if cos θi ≤ 0.
+def _brdf_factor(wi, wo, projection: str) -> np.ndarray:
+    """J(wi, wo)/cos θi: the BRDF per unit disk density (Edwards eq. 20 and 24); 0 if cos θi ≤ 0.
 
     Scaling: cos²θo/(4 cos θi (wi·Ĥ)(Ĥ·n)³) (eq. 20). Orthogonal: 1 (eq. 24, see module doc).
     """
@@ -230,7 +232,7 @@ def _brdf_factor(wo, wi, projection: str) -> np.ndarray:
     if projection == "orthogonal":
         return np.broadcast_to(np.where(wi_z > 0.0, 1.0, 0.0),
                                np.broadcast_shapes(np.shape(wo)[:-1], wi_z.shape)).copy()
-    J = scaling_jacobian(wo, wi)
+    J = scaling_jacobian(wi, wo)
     return np.where(wi_z > 0.0, _safe_div(J, wi_z), 0.0)
 
 
@@ -399,7 +401,7 @@ def edwards_empirical(wi, wo, lumps: DiskDensity, projection: str = "scaling",
                       fresnel=None, diffuse: float = 0.0) -> np.ndarray:
     """Energy-conserving empirical BRDF (Edwards eq. 33; eq. 11 for either projection), sr⁻¹.
 
-    f = (1 − F(θo)) C_d/π + F(θo) p(u, v) J(wo, wi)/cos θi, with (u, v) the disk point of
+    f = (1 − F(θo)) C_d/π + F(θo) p(u, v) J(wi, wo)/cos θi, with (u, v) the disk point of
     Ĥ = (wi + wo)/|wi + wo| and J from ``disk_jacobian``. With fresnel=None F = 1 and the albedo
     ∫ f cos θi dω_i = ∫_disk p dA, which is 1 for every wo when p is a pdf on the disk.
 
@@ -421,13 +423,14 @@ def edwards_empirical(wi, wo, lumps: DiskDensity, projection: str = "scaling",
                          "max(R_u, R_v) + |centre − wo_xy| <= 1 (Edwards §4: R_s <= 1 − sin θo, "
                          "R_r <= 1); use radius=None for the largest allowed radius")
     F = _fresnel_factor(fresnel, _cos_o(wo))
-    spec = _disk_density(lumps, wo, incident_to_disk(wo, wi, projection)) * _brdf_factor(
-        wo, wi, projection)
+    spec = _disk_density(lumps, wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
+        wi, wo, projection)
     return np.where(wi[..., 2] > 0.0, (1.0 - F) * diffuse / np.pi + F * spec, 0.0)
 
 
-def brdf_to_disk_density(rho, wi, wo, projection: str = "scaling") -> np.ndarray:
-    """Disk density implied by BRDF values: p = f cos θi / J(wo, wi) (eq. 11 inverted), per area.
+def brdf_to_disk_density(wi, wo, rho, projection: str = "scaling") -> np.ndarray:
+    """Disk density implied by BRDF values ``rho`` (sr⁻¹) at (wi, wo): p = f cos θi / J(wi, wo)
+    (eq. 11 inverted), per area.
 
     Places measured or simulated BRDF samples on the halfway disk, as the fitting tool of
     Fig. 13 does (pair with ``incident_to_disk`` for the (u, v) positions). 0 where J = 0.
@@ -435,7 +438,7 @@ def brdf_to_disk_density(rho, wi, wo, projection: str = "scaling") -> np.ndarray
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
     cos_i = np.maximum(wi[..., 2], 0.0)
-    return _safe_div(np.asarray(rho, float) * cos_i, disk_jacobian(wo, wi, projection))
+    return _safe_div(np.asarray(rho, float) * cos_i, disk_jacobian(wi, wo, projection))
 
 
 # --------------------------------------------------------------------------------------------
@@ -514,7 +517,7 @@ class EdwardsParams:
 def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogonal") -> np.ndarray:
     """Data-fitting BRDF (Edwards eq. 36), sr⁻¹.
 
-    f = (1 − F_fit(θo)) C_d/π + F_fit(θo) p(u, v) J(wo, wi)/cos θi with p from eq. 35. The paper
+    f = (1 − F_fit(θo)) C_d/π + F_fit(θo) p(u, v) J(wi, wo)/cos θi with p from eq. 35. The paper
     uses the orthogonal projection, where the lump term is p(u, v) |wi+wo|²/(4(wi·Ĥ)²) = p(u, v);
     "scaling" swaps in eq. 20. Not energy conserving where the lumps leave the disk, and not
     reciprocal. 0 where wi is on or below the horizon.
@@ -525,8 +528,8 @@ def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogona
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
     F = params.fresnel(_cos_o(wo))
-    spec = params.lumps().pdf(wo, incident_to_disk(wo, wi, projection)) * _brdf_factor(
-        wo, wi, projection)
+    spec = params.lumps().pdf(wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
+        wi, wo, projection)
     return np.where(wi[..., 2] > 0.0, (1.0 - F) * params.cd / np.pi + F * spec, 0.0)
 
 
@@ -541,8 +544,8 @@ def _as_mixture(lumps) -> LumpMixture:
     raise UsageError(f"lumps must be a Lump or a LumpMixture, got {type(lumps).__name__}")
 
 
-def pdf_edwards(wo, wi, lumps: DiskDensity, projection: str = "scaling") -> np.ndarray:
-    """Solid-angle density of ``sample_edwards``: p(u(wi)) J(wo, wi), sr⁻¹ (eq. 10–11).
+def pdf_edwards(wi, wo, lumps: DiskDensity, projection: str = "scaling") -> np.ndarray:
+    """Solid-angle density of ``sample_edwards``: p(u(wi)) J(wi, wo), sr⁻¹ (eq. 10–11).
 
     Equals edwards_empirical(wi, wo, lumps, projection) · cos θi (F = 1), so sampling is exact
     importance sampling of the specular term. 0 for wi on or below the horizon.
@@ -550,15 +553,15 @@ def pdf_edwards(wo, wi, lumps: DiskDensity, projection: str = "scaling") -> np.n
     projection = _check_projection(projection)
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
-    p = _disk_density(lumps, wo, incident_to_disk(wo, wi, projection))
-    return np.where(wi[..., 2] > 0.0, p * disk_jacobian(wo, wi, projection), 0.0)
+    p = _disk_density(lumps, wo, incident_to_disk(wi, wo, projection))
+    return np.where(wi[..., 2] > 0.0, p * disk_jacobian(wi, wo, projection), 0.0)
 
 
 def sample_edwards(wo, u1, u2, lumps, projection: str = "scaling"):
     """Incident directions wi and their solid-angle pdf for outgoing wo (Edwards eq. 12–13, 28–29).
 
     Draws (u, v) from the lump density (u1 also chooses the lump), maps it to Ĥ by the inverse
-    projection and reflects wo about Ĥ. pdf = p(u, v) J(wo, wi) (= ``pdf_edwards``). A sample
+    projection and reflects wo about Ĥ. pdf = p(u, v) J(wi, wo) (= ``pdf_edwards``). A sample
     with pdf 0 carries no density: it fell off the disk (lumps of the data-fitting model may leave
     it; wi then lies below the horizon) or came from a zero-radius lump (wo on the horizon).
     """
@@ -570,5 +573,5 @@ def sample_edwards(wo, u1, u2, lumps, projection: str = "scaling"):
     d = uv - wo[..., :2]
     on_disk = np.sum(d * d, axis=-1) < 1.0
     pdf = np.where(on_disk & (wi[..., 2] > 0.0),
-                   p * disk_jacobian(wo, _checks.normalize(wi), projection), 0.0)
+                   p * disk_jacobian(_checks.normalize(wi), wo, projection), 0.0)
     return wi, pdf

@@ -169,8 +169,8 @@ class Empirical(NDF):
                     0, len(self.phi_edges) - 2)
         return np.where(h[..., 2] > 0.0, self.cell_D[k, j], 0.0)
 
-    def cdf_theta(self, theta):
-        """P(θ_h ≤ θ), θ in radians clipped to [0, π/2]; piecewise linear in sin²θ."""
+    def _cdf_theta(self, theta):
+        """P(θ_h ≤ θ), θ in radians; piecewise linear in sin²θ."""
         t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
         q = np.sin(t) ** 2
         k = self._bin_of_q(q)
@@ -188,8 +188,8 @@ class Empirical(NDF):
                             (u - self.cdf_edges[k]) / self.bin_weights[k], 0.0)
         return k, np.clip(frac, 0.0, 1.0)
 
-    def tilt_quantile(self, u):
-        """θ_h in radians at cumulative probability u (exact inverse of ``cdf_theta``)."""
+    def tilt_quantile_rad(self, u):
+        """θ_h in radians at cumulative probability u (exact inverse of ``cdf_theta_rad``)."""
         k, frac = self._tilt_bin_and_fraction(u)
         q = self.q_edges[k] + frac * (self.q_edges[k + 1] - self.q_edges[k])
         return np.arcsin(np.sqrt(np.clip(q, 0.0, 1.0)))

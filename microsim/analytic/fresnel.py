@@ -1,7 +1,10 @@
-"""Fresnel reflectance of a planar interface, unpolarised (Mikkelsen §2.1, Mally "Fresnel's Law").
+"""Fresnel reflectance of a planar interface, unpolarised (Mikkelsen 2009, §2.1; Mally 2015,
+"Fresnel's Law").
 
 Light arrives from air (index 1) at a medium of complex index η = n + ik (k ≥ 0: absorption).
 A real index is a dielectric, a complex one a conductor, ``None`` an ideal mirror (R = 1).
+Public functions take a ``material``: a name from ``MATERIALS``, an index n or n + ik, or None
+(``resolve_material``).
 ``cos_theta`` is always the cosine between the incident direction and the *facet* normal; it
 must lie in [0, 1] up to ``COS_TOL`` (values within the tolerance are clipped, others raise).
 """
@@ -18,11 +21,11 @@ from microsim.errors import UsageError
 from ._checks import UNIT_TOL
 
 
-__all__ = ["fresnel", "fresnel_transmittance", "schlick", "f0_from_ior",
+__all__ = ["fresnel", "fresnel_transmittance", "schlick", "f0_from_material",
            "MATERIALS", "resolve_material"]
 
 MATERIALS = {"aluminium": 0.769 + 6.08j, "methanol": 1.329, "mirror": None}
-"""Indices of refraction at 500 nm used by Mikkelsen (Fig. 5): η = n + ik, None = mirror."""
+"""Indices of refraction at 500 nm used by Mikkelsen 2009 (Fig. 5): η = n + ik, None = mirror."""
 
 _ALIASES = {"aluminum": "aluminium"}
 
@@ -65,13 +68,13 @@ def _cos(cos_theta) -> np.ndarray:
     return np.clip(c, 0.0, 1.0)
 
 
-def fresnel(cos_theta, ior=None):
-    """Exact unpolarised reflectance (R_s + R_p)/2 from air onto index ``ior`` (dimensionless).
+def fresnel(cos_theta, material=None):
+    """Exact unpolarised reflectance (R_s + R_p)/2 from air onto ``material`` (dimensionless).
 
     ``cos_theta``: cosine of the incidence angle to the facet normal, in [0, 1] (``COS_TOL``).
-    ``ior``: a material name (``MATERIALS``), real n > 0 (dielectric; n < 1 means the light comes from the denser medium and
-    total internal reflection gives R = 1), complex n + ik with k ≥ 0 (conductor), or None
-    (mirror, R = 1). R = 1 exactly at grazing incidence (cos θ = 0) for every interface.
+    ``material``: a name (``MATERIALS``), a real index n > 0 (dielectric; n < 1 means the light
+    comes from the denser medium and total internal reflection gives R = 1), a complex index
+    n + ik with k ≥ 0 (conductor), or None (mirror, R = 1). R = 1 exactly at grazing incidence (cos θ = 0) for every interface.
 
     With g = η cos θ_t = √(η² − sin²θ) (principal complex root: Re g ≥ 0, Im g ≥ 0, the
     decaying transmitted wave), the amplitude ratios are written without subtracting nearly
@@ -81,14 +84,10 @@ def fresnel(cos_theta, ior=None):
     The second factor of r_p vanishes at Brewster's angle, where r_p is legitimately ~0.
     """
     c = _cos(cos_theta)
-    if isinstance(ior, str):                       # a material name ("aluminium", "mirror", …)
-        try:
-            ior = resolve_material(ior)
-        except ValueError as exc:
-            raise UsageError(f"ior: {exc}") from None
+    ior = resolve_material(material) if isinstance(material, str) else material
     if ior is None:
         return np.ones_like(c)
-    eta = _check_ior(ior)
+    eta = _check_ior(ior, "material")
     if eta == 1.0:                                 # no interface: nothing reflects but grazing
         return np.where(c == 0.0, 1.0, 0.0)
     eta2 = eta * eta
@@ -103,23 +102,26 @@ def fresnel(cos_theta, ior=None):
     return np.clip(r, 0.0, 1.0)
 
 
-def fresnel_transmittance(cos_theta, ior=None):
-    """Fresnel transmittance F_t = 1 − F_r (Mikkelsen §2.1; Fig. 6(c)(d))."""
-    return 1.0 - fresnel(cos_theta, ior)
+def fresnel_transmittance(cos_theta, material=None):
+    """Fresnel transmittance F_t = 1 − F_r (Mikkelsen 2009, §2.1 and Fig. 6(c)(d))."""
+    return 1.0 - fresnel(cos_theta, material)
 
 
-def f0_from_ior(ior) -> float:
-    """Normal-incidence reflectance |(η − 1)/(η + 1)|² (Edwards eq. 31; 1 for a mirror)."""
+def f0_from_material(material) -> float:
+    """Normal-incidence reflectance |(η − 1)/(η + 1)|² of ``material`` (Edwards et al. 2006,
+    eq. 31; 1 for a mirror)."""
+    ior = resolve_material(material) if isinstance(material, str) else material
     if ior is None:
         return 1.0
-    eta = _check_ior(ior)
+    eta = _check_ior(ior, "material")
     return abs((eta - 1.0) / (eta + 1.0)) ** 2
 
 
 def schlick(cos_theta, f0):
-    """Schlick's approximation F = F0 + (1 − F0)(1 − cos θ)⁵ (Edwards eq. 30).
+    """Schlick's approximation F = F0 + (1 − F0)(1 − cos θ)⁵ (Schlick 1994; Edwards et al. 2006,
+    eq. 30).
 
-    ``f0`` ∈ [0, 1] is the normal-incidence reflectance (``f0_from_ior``); broadcasts.
+    ``f0`` ∈ [0, 1] is the normal-incidence reflectance (``f0_from_material``); broadcasts.
     """
     c = _cos(cos_theta)
     f0 = np.asarray(f0, dtype=np.float64)
@@ -131,7 +133,8 @@ def schlick(cos_theta, f0):
 def resolve_material(material):
     """Index of refraction from a material name (case-insensitive), a number, or None.
 
-    Names: those of ``MATERIALS`` (plus "aluminum"); numbers are validated like ``ior``.
+    Names: those of ``MATERIALS`` (plus "aluminum"); numbers are an index of refraction
+    (ior) n > 0 or n + ik with k ≥ 0.
     Returns a float (dielectric), a complex (conductor) or None (mirror).
     """
     if material is None:
@@ -141,8 +144,8 @@ def resolve_material(material):
         key = _ALIASES.get(key, key)
         if key not in MATERIALS:
             allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
-            raise UsageError(f"material must be one of {allowed} (or a number n / n+ik / None), "
-                             f"got {material!r}")
+            raise UsageError(f"material must be one of {allowed} or an index of refraction "
+                             f"(ior) n / n+ik / None, got {material!r}")
         return MATERIALS[key]
     eta = _check_ior(material, "material")
     if isinstance(material, complex | np.complexfloating):

@@ -2,9 +2,11 @@
 glossy surfaces*: the ABC spectrum, the Rayleigh–Rice BRDF, the smooth-surface and microfacet
 BRDFs, their importance samplers and the fit metrics E1/E2.
 
-Conventions (DESIGN.md): macro normal n = +z; ``wi`` (towards the light) and ``wo`` (towards the
-viewer) are unit (..., 3) arrays pointing *away* from the surface; BRDFs in sr⁻¹; model
-parameters A, B, C, kd, ior are scalars. Löw's L, V are our wi, wo, so their unnormalised
+Conventions (docs/design.md, "Conventions"): macro normal n = +z; ``wi`` (towards the light)
+and ``wo`` (towards the viewer) are unit (..., 3) arrays pointing *away* from the surface and
+come first, ``(wi, wo, ...)`` (samplers: ``(wo, u1, u2, ...)``); BRDFs in sr⁻¹; model
+parameters A, B, C, kd are scalars and ``material`` is anything ``fresnel.resolve_material``
+accepts. Löw's L, V are our wi, wo, so their unnormalised
 half vector H = L + V is ours, and the projected deviation vector (Löw eq. 9–10, §4)
 
     Dp = Vp − Rp = Vp + Lp = wo_t + wi_t          (_t: component in the tangent plane),
@@ -95,7 +97,7 @@ def _s_of_sq(A: float, B: float, C: float, x2) -> np.ndarray:
 
 
 def _one_minus_cos_h(H: np.ndarray) -> np.ndarray:
-    """1 − ĥ·n from the *unnormalised* half vector H with H_z ≥ 0 (DESIGN.md, Löw eq. 25):
+    """1 − ĥ·n from the *unnormalised* half vector H with H_z ≥ 0 (Löw et al. 2012, eq. 25):
     (|H| − H_z)/|H| = |H_t|²/(|H|(|H| + H_z)), free of cancellation near ĥ = n; 0 for H = 0."""
     t2 = _tsq(H)
     norm = np.sqrt(t2 + H[..., 2] ** 2)
@@ -133,7 +135,7 @@ def abc_psd_church(f, A, B, C):
 
 def abc_psd_church_integral(A, B, C) -> float:
     """∫ PSD d²f = 2πA/(B²(C − 1)) of ``abc_psd_church`` over the whole frequency plane, i.e. the
-    surface's height variance σ² (DESIGN.md); finite only for C > 1 (Church's c)."""
+    surface's height variance σ² (Church et al. 1989); finite only for C > 1 (Church's c)."""
     A, B = _nonneg("A", A), _checks.positive("B", B)
     C = _checks.positive("C", C)
     if not C > 1.0:
@@ -193,7 +195,7 @@ def _rr_q(wi, wo, eta: complex, polarisation: str) -> np.ndarray:
     return 0.5 * total if polarisation == "unpolarised" else total
 
 
-def rayleigh_rice(wi, wo, wavelength, A, B, C, ior, polarisation="unpolarised"):
+def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolarised"):
     """First-order Rayleigh–Rice BRDF (sr⁻¹) of a smooth surface with an ABC PSD (Löw eq. 3–5):
 
         f = (16π²/λ⁴) cosθi cosθo Q S(|Dp|/λ),   S(f) = A/(1 + B f²)^C  (``abc_psd``).
@@ -201,17 +203,18 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, ior, polarisation="unpolarised"):
     The spatial frequency is |Dp|/λ with Dp = wi_t + wo_t, which is (f_x, f_y) of eq. 4–5 when wi
     lies in the φ = π half-plane. Units: ``wavelength`` and √B in one length unit, A in that
     unit⁴ (a 2D PSD: height² × area). Q is the full polarisation factor (``_rr_q``; Löw gives no
-    expression and cites Stover), for a material of index ``ior`` (real: dielectric; complex
-    n + ik: conductor; a name from ``fresnel.MATERIALS``). Reciprocal for "unpolarised", "s"+"p"
+    expression and cites Stover 1995), for a ``material`` of index η (real: dielectric;
+    complex n + ik: conductor; a name from ``fresnel.MATERIALS``; not the mirror None). Reciprocal for "unpolarised", "s"+"p"
     sums and ss/pp. Zero if either direction is below the horizon.
     """
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     lam = _checks.positive("wavelength", wavelength)
     A, B, C = _abc(A, B, C)
-    eta = resolve_material(ior)
+    eta = resolve_material(material)
     if eta is None:
-        raise UsageError("ior must be a number n or n+ik (Rayleigh–Rice needs ε = ior²), got None")
+        raise UsageError("material must have an index of refraction (ior) n or n+ik "
+                         "(Rayleigh–Rice needs ε = ior²), got None")
     _choice("polarisation", polarisation, RR_POLARISATIONS)
     ci, co = wi[..., 2], wo[..., 2]
     s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam ** 2)
@@ -229,7 +232,7 @@ def _obliquity(kind: str, ci, co):
     return 0.25 * (ci + co) ** 2
 
 
-def low_smooth(wi, wo, A, B, C, kd=0.0, ior=None, obliquity="one"):
+def low_smooth(wi, wo, A, B, C, kd=0.0, material=None, obliquity="one"):
     """Löw's smooth-surface BRDF (sr⁻¹), Löw eq. 12:  f = kd/π + G' Q' S(|Dp|).
 
     S(|Dp|) = A/(1 + B|wi_t + wo_t|²)^C (eq. 11; A in sr⁻¹). Q' = F(θd; η) (eq. 13–14) with
@@ -237,7 +240,8 @@ def low_smooth(wi, wo, A, B, C, kd=0.0, ior=None, obliquity="one"):
     the surface, as here; in the specular direction wo_t = −wi_t so θd = θi, and in general
     |wi − wo| = 2 sin θd exactly, so θd approximates the wi–h angle (Neumann et al. 1999).
     F is Cook–Torrance's Fresnel "with extinction set to zero" = the exact unpolarised dielectric
-    ``fresnel`` of the real part of ``ior``; ``ior=None`` gives Q' = 1 (Löw's other choice).
+    ``fresnel`` of the real part of ``material``'s index; ``material=None`` gives Q' = 1 (Löw's
+    other choice).
     G' (``obliquity``): "one" (Löw's choice), "cos" = cosθi cosθo (eq. 3), "harvey" =
     ((cosθi + cosθo)/2)² (eq. 6). Reciprocal. Zero if either direction is below the horizon.
     """
@@ -246,7 +250,7 @@ def low_smooth(wi, wo, A, B, C, kd=0.0, ior=None, obliquity="one"):
     A, B, C = _abc(A, B, C)
     kd = _nonneg("kd", kd)
     _choice("obliquity", obliquity, LOW_OBLIQUITIES)
-    eta = resolve_material(ior)
+    eta = resolve_material(material)
     ci, co = wi[..., 2], wo[..., 2]
     cos_d = np.sqrt(np.clip(1.0 - 0.25 * _tsq(wi - wo), 0.0, 1.0))
     q = fresnel(cos_d, None if eta is None else complex(eta).real)
@@ -255,7 +259,7 @@ def low_smooth(wi, wo, A, B, C, kd=0.0, ior=None, obliquity="one"):
 
 
 # --- microfacet BRDF (Löw eq. 15) ---------------------------------------------------------------
-def low_microfacet(wi, wo, A, B, C, kd=0.0, ior=None, shadowing="cook-torrance"):
+def low_microfacet(wi, wo, A, B, C, kd=0.0, material=None, shadowing="cook-torrance"):
     """Löw's ABC microfacet BRDF (sr⁻¹), Löw eq. 15 (Cook–Torrance 1982 with an ABC facet term):
 
         f = kd/π + S(√(1 − ĥ·n)) F(wi·ĥ; η) G / (π (n·wi)(n·wo)),
@@ -264,8 +268,8 @@ def low_microfacet(wi, wo, A, B, C, kd=0.0, ior=None, shadowing="cook-torrance")
     The OCR of eq. 15's denominator is garbled; π(n·wi)(n·wo) is Cook & Torrance's. A (sr⁻¹) is
     a free amplitude; ``low_microfacet_A_from_ndf`` gives the A that makes the specular term the
     Torrance–Sparrow BRDF of the normalised ``ndf.ABC``. 1 − ĥ·n is computed from the unnormalised
-    half vector (DESIGN.md). F: exact unpolarised ``fresnel`` for ``ior`` (real: identical to
-    Cook–Torrance's formula; complex: conductor; None: 1). G (``shadowing``): "cook-torrance" =
+    half vector (docs/design.md). F: exact unpolarised ``fresnel`` for ``material`` (real:
+    identical to Cook–Torrance's formula; complex: conductor; None: 1). G (``shadowing``): "cook-torrance" =
     V-groove ``shadowing.vgroove_g`` (Mikkelsen eq. 25), or "none" (G = 1). The specular term is
     0 when either direction is at or below the horizon (as G is). Reciprocal.
     """
@@ -274,7 +278,7 @@ def low_microfacet(wi, wo, A, B, C, kd=0.0, ior=None, shadowing="cook-torrance")
     A, B, C = _abc(A, B, C)
     kd = _nonneg("kd", kd)
     _choice("shadowing", shadowing, ("cook-torrance", "none"))
-    eta = resolve_material(ior)
+    eta = resolve_material(material)
     wi, wo = np.broadcast_arrays(wi, wo)
     ci, co = wi[..., 2], wo[..., 2]
     H = wi + wo
@@ -329,7 +333,7 @@ def _disk_density(B: float, wo, wi):
     return B / (np.pi * lam) / (1.0 + B * _tsq(wi + wo))
 
 
-def pdf_low_smooth(wo, wi, B):
+def pdf_low_smooth(wi, wo, B):
     """Solid-angle density (sr⁻¹) of ``sample_low_smooth``: P_ω = P_d cos θi (Löw eq. 17–19);
     0 for wi below the horizon. Integrates to 1 over the upper hemisphere."""
     wo = _checks.normalize(_checks.directions("wo", wo, upper=True))
@@ -423,7 +427,7 @@ def _reflected_pdf(B, C, H):
     return np.where(ok, ph / (2.0 * np.where(ok, hlen, 1.0)), 0.0)
 
 
-def pdf_low_microfacet(wo, wi, B, C):
+def pdf_low_microfacet(wi, wo, B, C):
     """Solid-angle density (sr⁻¹) of ``sample_low_microfacet`` at any wi on the sphere (Löw eq. 28),
     below-horizon directions included; integrates to 1 over the sphere."""
     wo = _checks.normalize(_checks.directions("wo", wo, upper=True))

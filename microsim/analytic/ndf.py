@@ -1,13 +1,15 @@
 """Microfacet normal distributions (NDFs).
 
-Convention (Mikkelsen eq. 14): an NDF D(h) is normalised so that ∫ D(h) (h·n) dω_h = 1 over the
+Convention (Mikkelsen 2009, eq. 14): an NDF D(h) is normalised so that ∫ D(h) (h·n) dω_h = 1 over the
 upper hemisphere, n = +z. ``pdf(h) = D(h) (h·n)`` is then a probability density in solid angle,
 and ``sample(u1, u2)`` draws unit half vectors h from it by inverting the CDF of the tilt
 θ_h (density 2π D(θ) cosθ sinθ) and taking φ_h = 2π u2.
 
 All isotropic NDFs implement three things: the radial profile ``D_cos(cos θ_h)``, the tilt
-CDF ``cdf_theta(θ)`` and its inverse ``tilt_quantile(u)``. Everything else follows in this base
-class.
+CDF ``_cdf_theta(θ)`` and its inverse ``tilt_quantile_rad(u)``. Everything else follows in this
+base class. Tilt angles are in radians, and every method taking or returning one says so
+(``cdf_theta_rad``, ``tilt_pdf_rad``, ``tilt_quantile_rad``); tilts outside [0, π/2] — say, a
+value in degrees — raise a UsageError.
 """
 from __future__ import annotations
 
@@ -15,6 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import special
+
+from microsim.errors import UsageError
 
 from . import _checks
 
@@ -25,7 +29,7 @@ __all__ = ["NDF", "Beckmann", "GGX", "BlinnPhong", "VonMisesFisher", "ABC",
 class NDF:
     """Base class of an isotropic microfacet normal distribution.
 
-    Subclasses set ``name`` and implement ``D_cos``, ``tilt_quantile``, ``cdf_theta`` and
+    Subclasses set ``name`` and implement ``D_cos``, ``tilt_quantile_rad``, ``_cdf_theta`` and
     ``params``.
     Those with a closed-form Smith Λ set ``has_closed_smith = True`` and implement
     ``smith_lambda_cos``; for the others the shadowing module integrates the
@@ -45,12 +49,12 @@ class NDF:
         """D as a function of cos θ_h (sr⁻¹); 0 for cos θ_h ≤ 0; finite at cos θ_h = 1 and 0."""
         raise NotImplementedError
 
-    def tilt_quantile(self, u):
+    def tilt_quantile_rad(self, u):
         """θ_h (radians) at cumulative probability u ∈ [0, 1] of the tilt density 2πD cosθ sinθ."""
         raise NotImplementedError
 
-    def cdf_theta(self, theta):
-        """P(θ_h ≤ θ) in closed form; θ in radians, clipped to [0, π/2]. Inverse: tilt_quantile."""
+    def _cdf_theta(self, theta):
+        """P(θ_h ≤ θ) for θ in radians, already checked to lie in [0, π/2] (up to rounding)."""
         raise NotImplementedError
 
     def smith_lambda_cos(self, cos_theta):
@@ -58,6 +62,11 @@ class NDF:
         raise NotImplementedError
 
     # --- derived ------------------------------------------------------------------------
+    def cdf_theta_rad(self, theta):
+        """P(θ_h ≤ θ), θ in radians in [0, π/2] (UsageError outside, e.g. for degrees).
+        Inverse: ``tilt_quantile_rad``."""
+        return self._cdf_theta(_tilt_rad("theta", theta))
+
     def D(self, h):
         """D(h) in sr⁻¹ for unit half vectors h of shape (..., 3); 0 below the horizon."""
         h = _checks.directions("h", h)
@@ -69,15 +78,16 @@ class NDF:
         c = h[..., 2]
         return self.D_cos(c) * np.maximum(c, 0.0)
 
-    def tilt_pdf(self, theta):
-        """Density of the tilt angle θ_h in radians⁻¹: 2π D(θ) cos θ sin θ."""
-        theta = np.asarray(theta, dtype=np.float64)
+    def tilt_pdf_rad(self, theta):
+        """Density of the tilt angle θ_h in radians⁻¹ at θ in radians in [0, π/2]:
+        2π D(θ) cos θ sin θ."""
+        theta = _tilt_rad("theta", theta)
         return 2.0 * np.pi * self.D_cos(np.cos(theta)) * np.cos(theta) * np.sin(theta)
 
     def sample(self, u1, u2):
         """Unit half vectors h ~ pdf from uniform numbers u1, u2 ∈ [0, 1) (inverse CDF)."""
         u1, u2 = np.broadcast_arrays(np.asarray(u1, float), np.asarray(u2, float))
-        theta = self.tilt_quantile(u1)
+        theta = self.tilt_quantile_rad(u1)
         return _checks.spherical(theta, 2.0 * np.pi * u2)
 
     def __repr__(self) -> str:
@@ -86,6 +96,20 @@ class NDF:
 
 
 # --- numerically careful building blocks -----------------------------------------------------
+TILT_SLACK = 1e-9
+"""Rounding allowed beyond [0, π/2] in a tilt angle (radians) before it is refused."""
+
+
+def _tilt_rad(name: str, theta) -> np.ndarray:
+    """Tilt angle(s) in radians as float64, or a UsageError naming ``name`` unless every value
+    lies in [0, π/2] (± ``TILT_SLACK``); NaN passes through."""
+    t = np.asarray(theta, dtype=np.float64)
+    if np.any(t < -TILT_SLACK) or np.any(t > 0.5 * np.pi + TILT_SLACK):
+        raise UsageError(f"{name} must be tilt angles in radians within [0, π/2], got values in "
+                         f"[{np.nanmin(t):.6g}, {np.nanmax(t):.6g}] (degrees? use np.radians)")
+    return t
+
+
 def _unit_interval(u) -> np.ndarray:
     """Cumulative probabilities as float64 clipped to [0, 1]."""
     return np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
@@ -147,12 +171,12 @@ class Beckmann(NDF):
             expo = -_sin2(cs) / (cs * cs * self.m ** 2) - 4.0 * np.log(cs)
         return np.where(pos, np.exp(expo) / (np.pi * self.m ** 2), 0.0)
 
-    def cdf_theta(self, theta):
+    def _cdf_theta(self, theta):
         """P(θ_h ≤ θ) = 1 − exp(−tan²θ/m²)."""
         t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
         return -np.expm1(-(np.tan(t) / self.m) ** 2)
 
-    def tilt_quantile(self, u):
+    def tilt_quantile_rad(self, u):
         """θ_h with tan²θ = −m² ln(1 − u); u = 1 gives π/2."""
         u = _unit_interval(u)
         with np.errstate(divide="ignore"):
@@ -198,13 +222,13 @@ class GGX(NDF):
         d = a2 / (np.pi * (a2 * c * c + _sin2(c)) ** 2)
         return np.where(c > 0.0, d, 0.0)
 
-    def cdf_theta(self, theta):
+    def _cdf_theta(self, theta):
         """P(θ_h ≤ θ) = tan²θ/(α² + tan²θ) = sin²θ/(α² cos²θ + sin²θ)."""
         t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
         s2, c2 = np.sin(t) ** 2, np.cos(t) ** 2
         return s2 / (self.alpha ** 2 * c2 + s2)
 
-    def tilt_quantile(self, u):
+    def tilt_quantile_rad(self, u):
         """θ_h with tan θ = α √(u/(1 − u)); u = 1 gives π/2."""
         u = _unit_interval(u)
         return np.arctan2(self.alpha * np.sqrt(u), np.sqrt(1.0 - u))
@@ -241,13 +265,13 @@ class BlinnPhong(NDF):
         return np.where(pos, (self.e + 2.0) / (2.0 * np.pi) * np.where(pos, c, 1.0) ** self.e,
                         0.0)
 
-    def cdf_theta(self, theta):
+    def _cdf_theta(self, theta):
         """P(θ_h ≤ θ) = 1 − cos^{e+2} θ, evaluated as −expm1((e + 2) log1p(−x)), x = 1 − cos θ."""
         x = _one_minus_cos(theta)
         with np.errstate(divide="ignore"):
             return -np.expm1((self.e + 2.0) * np.log1p(-np.minimum(x, 1.0)))
 
-    def tilt_quantile(self, u):
+    def tilt_quantile_rad(self, u):
         """θ_h with cos θ = (1 − u)^{1/(e+2)}; 1 − cos θ = −expm1(log1p(−u)/(e + 2))."""
         u = _unit_interval(u)
         with np.errstate(divide="ignore"):
@@ -303,12 +327,12 @@ class VonMisesFisher(NDF):
         cs = np.where(pos, c, 1.0)
         return np.where(pos, self._p_x(1.0 - cs) / cs, 0.0)
 
-    def cdf_theta(self, theta):
+    def _cdf_theta(self, theta):
         """P(θ_h ≤ θ) = (1 − e^{−κ(1 − cos θ)})/(1 − e^{−κ}) (Mikkelsen's CDF before eq. 31)."""
         x = _one_minus_cos(theta)
         return np.minimum(np.expm1(-self.kappa * x) / np.expm1(-self.kappa), 1.0)
 
-    def tilt_quantile(self, u):
+    def tilt_quantile_rad(self, u):
         """θ_h with 1 − cos θ = −ln(1 − u(1 − e^{−κ}))/κ (Mikkelsen eq. 31 without e^κ)."""
         u = _unit_interval(u)
         with np.errstate(divide="ignore"):
@@ -337,7 +361,7 @@ class ABC(NDF):
         normaliser  M = 1/(2π J(1)),   tilt CDF  P(θ_h ≤ θ) = J(1 − cos θ)/J(1).
 
     The CDF has no closed-form inverse (the cos factor adds a term linear in s to Löw's
-    eq. 25 power law), so ``tilt_quantile`` inverts it by safeguarded Newton steps in
+    eq. 25 power law), so ``tilt_quantile_rad`` inverts it by safeguarded Newton steps in
     w = ln(1 + Bx), started from a table of the CDF on a uniform grid in w.
     """
 
@@ -388,13 +412,13 @@ class ABC(NDF):
         h = _checks.directions("h", h)
         return self.D(h) * np.maximum(h[..., 2], 0.0)
 
-    def cdf_theta(self, theta):
+    def _cdf_theta(self, theta):
         """P(θ_h ≤ θ) = J(1 − cos θ)/J(1) (class docstring)."""
         w = np.log1p(self.B * _one_minus_cos(theta))
         return np.clip(self._J_w(w) * (2.0 * np.pi * self.M), 0.0, 1.0)
 
-    def tilt_quantile(self, u, *, tol: float = 1e-14, max_iter: int = 100):
-        """θ_h with cdf_theta(θ_h) = u, to |cdf − u| ≤ tol (safeguarded Newton in w)."""
+    def tilt_quantile_rad(self, u, *, tol: float = 1e-14, max_iter: int = 100):
+        """θ_h with cdf_theta_rad(θ_h) = u, to |cdf − u| ≤ tol (safeguarded Newton in w)."""
         u = _unit_interval(u)
         B, C = self.B, self.C
         w_max = np.log1p(B)

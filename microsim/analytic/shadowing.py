@@ -1,6 +1,8 @@
-"""Shadowing–masking functions G: V-groove (Mikkelsen eq. 25) and Smith (DESIGN.md).
+"""Shadowing–masking functions G: V-groove (Mikkelsen 2009, eq. 25) and Smith (Smith 1967;
+Heitz 2014; docs/design.md, "Shadowing and Fresnel").
 
-Directions are unit (..., 3) arrays pointing away from the surface, macro normal n = +z.
+Directions are unit (..., 3) arrays pointing away from the surface, macro normal n = +z; every
+function takes its directions first, ``(wi, wo, h, ...)`` or ``(w, h, ...)``, then the NDF.
 Every G here is dimensionless in [0, 1], finite everywhere (also h = n and θ = 90°), and 0 for
 a direction at or below the horizon (the macro surface itself blocks it) or on the back of the
 facet (χ⁺(w·h) = 0).
@@ -88,7 +90,7 @@ def _tilt_breakpoints(ndf) -> np.ndarray:
         return np.unique(np.concatenate([edges, np.linspace(0, 0.5 * np.pi, 33)]))
     u = np.concatenate([np.linspace(0.0, 1.0, 65)[1:-1], np.logspace(-10, -2, 9),
                         1.0 - np.logspace(-10, -2, 9)])
-    q = np.asarray(ndf.tilt_quantile(u), dtype=np.float64)
+    q = np.asarray(ndf.tilt_quantile_rad(u), dtype=np.float64)
     return np.unique(np.concatenate([q[np.isfinite(q)], np.linspace(0, 0.5 * np.pi, 33)]))
 
 
@@ -236,7 +238,7 @@ def _lambda(ndf, w: np.ndarray, method: str = "auto") -> np.ndarray:
     return _table(ndf, _IsotropicLambdaTable).lambda_cos(c)
 
 
-def smith_lambda(ndf, w, method: str = "auto"):
+def smith_lambda(w, ndf, method: str = "auto"):
     """Smith Λ(w) (dimensionless, ≥ 0; inf at θ_w = 90°) for upper-hemisphere unit w.
 
     ``method``: "auto" (closed form when ``ndf.has_closed_smith``, else numerical), "closed",
@@ -252,8 +254,9 @@ def _g1_from_lambda(lam, w_dot_h, cos_w):
         return np.where((w_dot_h > 0.0) & (cos_w > 0.0), 1.0 / (1.0 + lam), 0.0)
 
 
-def smith_g1(ndf, w, h):
-    """Smith masking G1(w, h) = χ⁺(w·h)/(1 + Λ(w)) (DESIGN.md "Shadowing and Fresnel")."""
+def smith_g1(w, h, ndf):
+    """Smith masking G1(w, h) = χ⁺(w·h)/(1 + Λ(w)) (Smith 1967; Heitz 2014; docs/design.md,
+    "Shadowing and Fresnel")."""
     w = _checks.directions("w", w)
     h = _checks.directions("h", h)
     return _g1_from_lambda(_lambda(ndf, w), _checks.dot(w, h), w[..., 2])
@@ -268,7 +271,7 @@ def _smith_g2(ndf, wi, wo, wih, woh, correlated: bool):
     return _g1_from_lambda(lam_i, wih, wi[..., 2]) * _g1_from_lambda(lam_o, woh, wo[..., 2])
 
 
-def smith_g2(ndf, wi, wo, h, correlated: bool = False):
+def smith_g2(wi, wo, h, ndf, correlated: bool = False):
     """Smith shadowing–masking: separable G1(wi)G1(wo), or height-correlated
     χ⁺(wi·h)χ⁺(wo·h)/(1 + Λ(wi) + Λ(wo)) when ``correlated``."""
     wi = _checks.directions("wi", wi)
@@ -293,10 +296,11 @@ def _shadowing(kind: str, ndf, wi, wo, cos_h, wih, woh):
     return _smith_g2(ndf, wi, wo, wih, woh, correlated=(kind == "smith-correlated"))
 
 
-def shadowing_g(kind: str, ndf, wi, wo, h):
-    """G(wi, wo, h) of the named model: "vgroove" (Mikkelsen eq. 25), "smith" (separable),
-    "smith-correlated" (height-correlated) or "none" (χ⁺(wi·h)χ⁺(wo·h) only)."""
-    kind = _check_kind(kind)
+def shadowing_g(wi, wo, h, ndf, shadowing: str):
+    """G(wi, wo, h) of the model named by ``shadowing``: "vgroove" (Mikkelsen 2009, eq. 25),
+    "smith" (separable), "smith-correlated" (height-correlated) or "none" (χ⁺(wi·h)χ⁺(wo·h)
+    only); ``ndf`` is used by the Smith models only."""
+    kind = _check_kind(shadowing)
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)

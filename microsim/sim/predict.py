@@ -1,6 +1,7 @@
 """Bin-averaged predictions of analytic BRDF models on the simulation's bins.
 
-The simulation reports, per (θo, Δφ) bin B of ``Bins``, the bin average (DESIGN.md, Conventions)
+The simulation reports, per (θo, Δφ) bin B of ``Bins``, the bin average (docs/design.md,
+"Conventions")
 
     f̄_B = (1/Ω_B) ∫_B f(wi, wo) cos θo dω_o,     Ω_B = ∫_B cos θo dω_o,
 
@@ -14,9 +15,12 @@ so every model is reduced to the same numbers before it is compared. Three ways:
 
 ``predict`` evaluates a list of ``ModelSpec`` for several incidence angles.
 
-Incidence: ``wi`` is a unit (3,) vector with θi < 90°; ``phi_i`` (degrees) is the azimuth from
-which the bins' relative azimuth Δφ = φo − φi is measured. ``phi_i=None`` takes it from ``wi``
-(0° at normal incidence), which is what the estimator does.
+Arguments come in one order: the incidence and the bins first, then the model — as the
+analytic BRDFs take ``(wi, wo, ...)`` first. Incidence: ``wi`` is a unit (3,) vector with
+θi < 90°; ``phi_i`` (degrees) is the azimuth from which the bins' relative azimuth
+Δφ = φo − φi is measured. ``phi_i=None`` takes it from ``wi`` (0° at normal incidence), which is
+what the estimator does. ``material`` is anything ``fresnel.resolve_material`` accepts (None =
+mirror, a name, n, n + ik).
 """
 from __future__ import annotations
 
@@ -30,6 +34,8 @@ import numpy as np
 from scipy.stats import qmc
 
 from microsim.analytic import _checks
+from microsim.analytic.brdf import torrance_sparrow
+from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.analytic.shadowing import SHADOWING_KINDS, shadowing_g
 
@@ -166,7 +172,7 @@ def _integrate_cells(brdf_fn, wi, phi_i_rad: float, cells: _Cells, rule: _Rule):
     return out
 
 
-def bin_average(brdf_fn: Callable, wi, bins: Bins, phi_i: float | None = None,
+def bin_average(wi, bins: Bins, brdf_fn: Callable, phi_i: float | None = None,
                 rtol: float = 1e-3, *, floor: float = 1e-6, symmetric: bool = True,
                 order: tuple[int, int] = (4, 8), max_depth: int = 8,
                 min_depth: int = 0) -> BinAverage:
@@ -229,7 +235,7 @@ def bin_average(brdf_fn: Callable, wi, bins: Bins, phi_i: float | None = None,
 
 
 # --- Torrance–Sparrow by sampling half vectors --------------------------------------------------
-def _reflection_terms(wi, h, cos_i: float, ior, shadowing: str, ndf):
+def _reflection_terms(wi, h, cos_i: float, eta, shadowing: str, ndf):
     """wo = 2(wi·h)h − wi and x = F(wi·h) G(wi, wo, h) (wi·h)⁺/(cos θi h_z) for unit h (N, 3).
 
     x is what one half vector contributes to ∫_B f cos θo dω_o (see ``bin_average_ts``); it is 0
@@ -237,11 +243,11 @@ def _reflection_terms(wi, h, cos_i: float, ior, shadowing: str, ndf):
     """
     wih = h @ wi
     wo = _checks.normalize(2.0 * wih[:, None] * h - wi)
-    g = shadowing_g(shadowing, ndf, np.broadcast_to(wi, wo.shape), wo, h)
+    g = shadowing_g(np.broadcast_to(wi, wo.shape), wo, h, ndf, shadowing)
     hz = h[:, 2]
     ok = (wih > 0.0) & (hz > 0.0) & (wo[:, 2] > 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        x = fresnel(np.clip(wih, 0.0, 1.0), ior) * g * wih / (cos_i * hz)
+        x = fresnel(np.clip(wih, 0.0, 1.0), eta) * g * wih / (cos_i * hz)
     return wo, np.where(ok, x, 0.0)
 
 
@@ -252,15 +258,13 @@ def _check_shadowing(shadowing: str) -> str:
     return shadowing
 
 
-def bin_average_ts(ndf, wi, bins: Bins, shadowing: str = "vgroove", ior=None,
+def bin_average_ts(wi, bins: Bins, ndf, shadowing: str = "vgroove", material=None,
                    phi_i: float | None = None, n: int = 2 ** 20, *, replicates: int = 16,
                    seed: int = 0) -> BinEstimate:
     """Torrance–Sparrow bin averages by randomised quasi-Monte Carlo over half vectors (sr⁻¹).
 
-    ``ior``: anything ``fresnel.resolve_material`` accepts (None = mirror, name, n, n + ik).
-
-    Identity. With f = F G D/(4 cos θi cos θo) (Mikkelsen eq. 13/18) and the Jacobian
-    dω_o = 4 (wo·h) dω_h of wo = 2(wi·h)h − wi (Mikkelsen eq. 15; wo·h = wi·h):
+    Identity. With f = F G D/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18) and the Jacobian
+    dω_o = 4 (wo·h) dω_h of wo = 2(wi·h)h − wi (Mikkelsen 2009, eq. 15; wo·h = wi·h):
 
         ∫_B f cos θo dω_o = ∫ F G D(h) (wi·h) / (cos θi) 1(wo(h) ∈ B) dω_h
                           = E_{h ~ D(h) h_z} [ F(wi·h) G(wi, wo, h) (wi·h)/(cos θi h_z) 1(wo ∈ B) ],
@@ -272,7 +276,7 @@ def bin_average_ts(ndf, wi, bins: Bins, shadowing: str = "vgroove", ior=None,
     Tail bins get few samples: use this to cross-check ``bin_average``, not instead of it.
     """
     wi, phi_i = _incidence(wi, phi_i)
-    shadowing, ior = _check_shadowing(shadowing), resolve_material(ior)
+    shadowing, eta = _check_shadowing(shadowing), resolve_material(material)
     replicates = int(_checks.in_range("replicates", replicates, 2, 2 ** 12))
     per = int(n) // replicates
     if int(n) != n or per < 1 or per & (per - 1):
@@ -286,7 +290,7 @@ def bin_average_ts(ndf, wi, bins: Bins, shadowing: str = "vgroove", ior=None,
         for s in range(0, per, _MAX_POINTS):
             u = sobol.random(min(_MAX_POINTS, per - s))
             h = ndf.sample(u[:, 0], u[:, 1])
-            wo, x = _reflection_terms(wi, h, wi[2], ior, shadowing, ndf)
+            wo, x = _reflection_terms(wi, h, wi[2], eta, shadowing, ndf)
             idx = bins.locate(wo, phi_i)
             keep = (idx >= 0) & (x > 0.0)
             sums[r] += np.bincount(idx[keep], x[keep], minlength=nb)
@@ -313,9 +317,9 @@ def _merge_tilts(normals: np.ndarray, weights: np.ndarray, decimals: int = 12):
     return _checks.spherical(tilts, 0.0), w
 
 
-def bin_average_facets(normals, weights, wi, bins: Bins, ior=None, shadowing: str = "vgroove",
-                       phi_i: float | None = None, azimuths: int | None = None, *,
-                       smith_ndf=None, seed: int = 0) -> BinEstimate:
+def bin_average_facets(wi, bins: Bins, normals, weights=None, shadowing: str = "vgroove",
+                       material=None, phi_i: float | None = None, azimuths: int | None = None,
+                       *, smith_ndf=None, seed: int = 0) -> BinEstimate:
     """Torrance–Sparrow bin averages with the surface's own facet normals as D (sr⁻¹).
 
     Discrete NDF: the facets' projected-area fractions a_k = weights_k/Σ weights (weights =
@@ -324,9 +328,9 @@ def bin_average_facets(normals, weights, wi, bins: Bins, ior=None, shadowing: st
 
         ∫_B f cos θo dω_o = Σ_k a_k F(wi·n_k) G(wi, wo_k, n_k) (wi·n_k)/(cos θi n_kz) 1(wo_k ∈ B),
 
-    wo_k = 2(wi·n_k)n_k − wi (Mikkelsen eq. 9 read facet by facet: facet k intercepts the
+    wo_k = 2(wi·n_k)n_k − wi (Mikkelsen 2009, eq. 9 read facet by facet: facet k intercepts the
     fraction a_k (wi·n_k)/(n_kz cos θi) of the incident flux). G: "vgroove" is local
-    (Mikkelsen eq. 25); "smith"/"smith-correlated" use Λ of ``smith_ndf`` (default
+    (Mikkelsen 2009, eq. 25); "smith"/"smith-correlated" use Λ of ``smith_ndf`` (default
     ``Empirical(normals, weights)``, isotropic); "none" keeps only the χ⁺ conditions.
 
     ``azimuths=J`` averages the facet set over a uniform rotation ψ about z (V-groove surfaces,
@@ -345,7 +349,7 @@ def bin_average_facets(normals, weights, wi, bins: Bins, ior=None, shadowing: st
     Memory is bounded by processing ~1e6 (facet, azimuth) pairs at a time.
     """
     wi, phi_i = _incidence(wi, phi_i)
-    shadowing, ior = _check_shadowing(shadowing), resolve_material(ior)
+    shadowing, eta = _check_shadowing(shadowing), resolve_material(material)
     nrm = _checks.directions("normals", normals)
     if nrm.ndim != 2 or len(nrm) == 0 or np.any(nrm[:, 2] <= 0.0):
         raise UsageError("normals must be a non-empty (N, 3) array of unit vectors with n_z > 0")
@@ -354,7 +358,6 @@ def bin_average_facets(normals, weights, wi, bins: Bins, ior=None, shadowing: st
         raise UsageError(f"weights must be {len(nrm)} finite values >= 0 with a positive sum")
     J = 1 if azimuths is None else int(_checks.in_range("azimuths", azimuths, 1, 2 ** 16))
     if shadowing.startswith("smith") and smith_ndf is None:
-        from microsim.analytic.empirical import Empirical
         smith_ndf = Empirical(nrm, w)
     if azimuths is not None:
         nrm, w = _merge_tilts(nrm, w)
@@ -370,7 +373,7 @@ def bin_average_facets(normals, weights, wi, bins: Bins, ior=None, shadowing: st
         else:
             psi = 2.0 * np.pi * (np.arange(J)[None, :] + rng.random((len(n_k), 1))) / J
             h = _rotate_z(n_k, psi).reshape(-1, 3)
-        wo, x = _reflection_terms(wi, h, wi[2], ior, shadowing, smith_ndf)
+        wo, x = _reflection_terms(wi, h, wi[2], eta, shadowing, smith_ndf)
         idx = bins.locate(wo, phi_i)
         facet = np.repeat(np.arange(len(n_k)), J)
         keep = (idx >= 0) & (x > 0.0)
@@ -396,9 +399,9 @@ class ModelSpec:
 
     kinds and params:
       "function": brdf_fn (wi, wo) -> sr⁻¹, symmetric (bool)          → ``bin_average``
-      "ts":       ndf, shadowing, ior (Torrance–Sparrow, quadrature)   → ``bin_average``
-      "ts-qmc":   ndf, shadowing, ior, n                               → ``bin_average_ts``
-      "facets":   normals, weights, shadowing, ior, azimuths           → ``bin_average_facets``
+      "ts":       ndf, shadowing, material (Torrance–Sparrow, quadrature) → ``bin_average``
+      "ts-qmc":   ndf, shadowing, material, n                             → ``bin_average_ts``
+      "facets":   normals, weights, shadowing, material, azimuths         → ``bin_average_facets``
     Build them with the class methods below. Compared by identity (params hold arrays).
     """
 
@@ -417,27 +420,25 @@ class ModelSpec:
         return cls(name, "function", {"brdf_fn": brdf_fn, "symmetric": bool(symmetric)})
 
     @classmethod
-    def torrance_sparrow(cls, name: str, ndf, shadowing: str = "vgroove", ior=None,
+    def torrance_sparrow(cls, name: str, ndf, shadowing: str = "vgroove", material=None,
                          qmc_samples: int | None = None) -> "ModelSpec":
-        """Torrance–Sparrow (Mikkelsen eq. 13); ``qmc_samples`` selects the sampling path."""
-        params = {"ndf": ndf, "shadowing": _check_shadowing(shadowing), "ior": ior}
+        """Torrance–Sparrow (Mikkelsen 2009, eq. 13); ``qmc_samples`` selects the sampling path."""
+        params = {"ndf": ndf, "shadowing": _check_shadowing(shadowing), "material": material}
         if qmc_samples is None:
             return cls(name, "ts", params)
         return cls(name, "ts-qmc", {**params, "n": int(qmc_samples)})
 
     @classmethod
-    def facets(cls, name: str, normals, weights=None, shadowing: str = "vgroove", ior=None,
-               azimuths: int | None = None) -> "ModelSpec":
+    def facets(cls, name: str, normals, weights=None, shadowing: str = "vgroove",
+               material=None, azimuths: int | None = None) -> "ModelSpec":
         return cls(name, "facets", {"normals": normals, "weights": weights,
-                                    "shadowing": _check_shadowing(shadowing), "ior": ior,
-                                    "azimuths": azimuths})
+                                    "shadowing": _check_shadowing(shadowing),
+                                    "material": material, "azimuths": azimuths})
 
 
-def _ts_brdf(ndf, shadowing: str, ior) -> Callable:
-    from microsim.analytic.brdf import torrance_sparrow
-
+def _ts_brdf(ndf, shadowing: str, material) -> Callable:
     def f(wi, wo):
-        return torrance_sparrow(wi, wo, ndf, shadowing=shadowing, ior=ior)
+        return torrance_sparrow(wi, wo, ndf, shadowing=shadowing, material=material)
     return f
 
 
@@ -447,24 +448,25 @@ def _predict_one(spec: ModelSpec, wi, bins: Bins, phi_i: float, rtol: float) -> 
         if spec.kind == "function":
             fn, symmetric = p["brdf_fn"], p["symmetric"]
         else:
-            fn, symmetric = _ts_brdf(p["ndf"], p["shadowing"], p["ior"]), getattr(
+            fn, symmetric = _ts_brdf(p["ndf"], p["shadowing"], p["material"]), getattr(
                 p["ndf"], "isotropic", True)
-        res = bin_average(fn, wi, bins, phi_i, rtol, symmetric=symmetric)
+        res = bin_average(wi, bins, fn, phi_i, rtol, symmetric=symmetric)
         if not res.converged.all():
             warnings.warn(f"model {spec.name!r}: {int((~res.converged).sum())} bins did not "
                           f"reach rtol={rtol} (max error {res.error.max():.3g} sr^-1)",
                           RuntimeWarning, stacklevel=3)
         return res.values
     if spec.kind == "ts-qmc":
-        return bin_average_ts(p["ndf"], wi, bins, p["shadowing"], p["ior"], phi_i, p["n"]).values
-    return bin_average_facets(p["normals"], p["weights"], wi, bins, p["ior"], p["shadowing"],
-                              phi_i, p["azimuths"]).values
+        return bin_average_ts(wi, bins, p["ndf"], p["shadowing"], p["material"], phi_i,
+                              p["n"]).values
+    return bin_average_facets(wi, bins, p["normals"], p["weights"], p["shadowing"],
+                              p["material"], phi_i, p["azimuths"]).values
 
 
-def predict(models: Iterable[ModelSpec], wi_deg: Iterable[float], bins: Bins,
+def predict(models: Iterable[ModelSpec], theta_i: Iterable[float], bins: Bins,
             phi_i: float = 0.0, rtol: float = 1e-3) -> dict[str, np.ndarray]:
-    """Bin averages (sr⁻¹) of every model for incidence angles θi = ``wi_deg`` (degrees, < 90)
-    at azimuth ``phi_i`` (degrees): name → array (len(wi_deg), n_theta, n_phi).
+    """Bin averages (sr⁻¹) of every model for incidence angles ``theta_i`` (degrees, < 90)
+    at azimuth ``phi_i`` (degrees): name → array (len(theta_i), n_theta, n_phi).
 
     Quadrature models warn (RuntimeWarning) when a bin misses ``rtol``.
     """
@@ -472,9 +474,9 @@ def predict(models: Iterable[ModelSpec], wi_deg: Iterable[float], bins: Bins,
     names = [m.name for m in models]
     if len(set(names)) != len(names):
         raise UsageError(f"model names must be unique, got {names}")
-    thetas = np.atleast_1d(np.asarray(wi_deg, dtype=np.float64))
+    thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     for t in thetas:
-        _checks.in_range("wi_deg", t, 0.0, 90.0, hi_open=True)
+        _checks.in_range("theta_i", t, 0.0, 90.0, hi_open=True)
     out = {}
     for m in models:
         out[m.name] = np.stack([_predict_one(m, _checks.spherical_deg(t, phi_i), bins, phi_i, rtol)
