@@ -37,7 +37,6 @@ allowed values.
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import os
 import re
 import stat
@@ -48,6 +47,12 @@ from types import MappingProxyType
 from typing import Any, Callable, Mapping
 
 import numpy as np
+
+from microsim import analytic as an
+from microsim import surfaces
+from microsim.errors import UsageError
+from microsim.surfaces.heightfields import abc_ensemble_ndf, gaussian_ensemble_ndf
+from microsim.surfaces.loader import check_heightfield_file
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -97,20 +102,62 @@ NDF_PARAMS = {"beckmann": ("m",), "ggx": ("alpha",), "blinn-phong": ("e",), "vmf
 _NDF_ALIASES = {"blinn_phong": "blinn-phong", "phong": "blinn-phong", "von-mises-fisher": "vmf"}
 
 _REQUIRED = object()
-_SURFACE_KEYS: dict[str, dict[str, tuple[Any, tuple[Callable, str]]]] = {
-    "vgrooves": {"n_grooves": (4000, _int_in(1, 1_000_000)), "ndf": (_REQUIRED, _STR),
-                 "sampling": ("stratified", (lambda v: v in ("stratified", "random"),
-                                             "\"stratified\" or \"random\"")),
-                 "tile": (1.0, _LENGTH)},
-    "gaussian": {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
-                 "corr_len": (_REQUIRED, _LENGTH), "exact_amplitude": (True, _BOOL)},
-    "abc": {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
-            "B": (_REQUIRED, _LENGTH), "C": (_REQUIRED, _C_ABC), "band_limit": (4.0, _BAND),
-            "exact_amplitude": (True, _BOOL)},
-    "file": {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
-    "flat": {"size": (1.0, _LENGTH)},
+
+
+# --- surface kinds: the scene-file keys of each generator, how it is built, its NDF -----------
+@dataclass(frozen=True)
+class _Kind:
+    """``keys``: name → (default or _REQUIRED, check) of the ``[surface]`` table;
+    ``build(params, seed, scale, base_dir) -> Surface`` (``scale`` shrinks the grid or the
+    groove count, see ``Scene.build_surface``); ``ensemble_ndf(params) -> NDF | None``, the
+    ``Surface.ensemble_ndf`` of the full-size surface, without building it."""
+
+    keys: dict[str, tuple[Any, tuple[Callable, str]]]
+    build: Callable
+    ensemble_ndf: Callable
+
+
+def _vgroove_ndf(p):
+    return make_ndf(p["ndf"], {k: p[k] for k in NDF_PARAMS[p["ndf"]]})
+
+
+def _heightfield(generator) -> Callable:
+    def build(p, seed, scale, base):
+        return generator(seed=seed, **{**p, "n": max(8, round(p["n"] * scale))})
+    return build
+
+
+_KINDS = {
+    "vgrooves": _Kind(
+        {"n_grooves": (4000, _int_in(1, 1_000_000)), "ndf": (_REQUIRED, _STR),
+         "sampling": ("stratified", (lambda v: v in ("stratified", "random"),
+                                     "\"stratified\" or \"random\"")),
+         "tile": (1.0, _LENGTH)},
+        lambda p, seed, scale, base: surfaces.vgrooves(
+            max(1, round(p["n_grooves"] * scale)), _vgroove_ndf(p), seed, p["sampling"],
+            p["tile"]),
+        _vgroove_ndf),
+    "gaussian": _Kind(
+        {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
+         "corr_len": (_REQUIRED, _LENGTH), "exact_amplitude": (True, _BOOL)},
+        _heightfield(surfaces.gaussian),
+        lambda p: gaussian_ensemble_ndf(p["sigma"], p["corr_len"])),
+    "abc": _Kind(
+        {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
+         "B": (_REQUIRED, _LENGTH), "C": (_REQUIRED, _C_ABC), "band_limit": (4.0, _BAND),
+         "exact_amplitude": (True, _BOOL)},
+        _heightfield(surfaces.abc),
+        lambda p: abc_ensemble_ndf(p["n"], p["dx"], p["sigma"], p["B"], p["C"],
+                                   p["band_limit"])),
+    "file": _Kind(
+        {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
+        lambda p, seed, scale, base: surfaces.from_file(base / p["path"], p["dx"],
+                                                        p["periodic"]),
+        lambda p: None),
+    "flat": _Kind({"size": (1.0, _LENGTH)},
+                  lambda p, seed, scale, base: surfaces.flat(p["size"]), lambda p: None),
 }
-SURFACE_KINDS = tuple(_SURFACE_KEYS)
+SURFACE_KINDS = tuple(_KINDS)
 _NDF_PARAM_CHECK = (_POS[0], "a number > 0")
 
 _THETA_I = (lambda v: isinstance(v, list) and 0 < len(v) <= 180
@@ -170,48 +217,19 @@ class Scene:
             raise SceneError(f"{self.path}: surface: {' '.join(str(e).split())}") from None
 
     def _build(self, seed, scale):
-        from . import surfaces
         seed = self.simulation.seed if seed is None else seed
-        p = dict(self.surface.params)
-        kind = self.surface.kind
-        if kind == "vgrooves":
-            return surfaces.vgrooves(max(1, round(p["n_grooves"] * scale)), self.ndf(), seed,
-                                     p["sampling"], p["tile"])
-        if kind in ("gaussian", "abc"):
-            p["n"] = max(8, round(p["n"] * scale))
-            return getattr(surfaces, kind)(seed=seed, **p)
-        if kind == "file":
-            base = self.path.parent if self.path is not None else Path.cwd()
-            return surfaces.from_file(base / p["path"], p["dx"], p["periodic"])
-        return surfaces.flat(p["size"])
+        base = self.path.parent if self.path is not None else Path.cwd()
+        return _KINDS[self.surface.kind].build(dict(self.surface.params), seed, scale, base)
 
     def ndf(self):
-        """The analytic NDF of the scene's surface, or None when it has none.
-
-        V-grooves: the NDF the tilts were drawn from. Gaussian: Beckmann(m = 2σ/ℓ) (nominal).
-        ABC heightfield: Beckmann with the predicted mesh m — the facet slopes of any Gaussian
-        random field are Gaussian, so its NDF is Beckmann with m² = 2 × per-axis slope variance
-        (Löw's ABC *NDF* is a different object). File and flat: None.
-        """
-        from .analytic import Beckmann
-        p = self.surface.params
-        if self.surface.kind == "vgrooves":
-            return make_ndf(p["ndf"], {k: p[k] for k in NDF_PARAMS[p["ndf"]]})
-        if self.surface.kind == "gaussian":
-            return Beckmann(2.0 * p["sigma"] / p["corr_len"])
-        if self.surface.kind == "abc":
-            from .surfaces import heightfields as hf
-            A = hf.abc_amplitude(p["sigma"], p["B"], p["C"])
-            S, FX, FY = hf.psd_grid(lambda f: hf.abc_psd(f, A, p["B"], p["C"]), (p["n"], p["n"]),
-                                    p["dx"], 1.0 / (2.0 * p["band_limit"] * p["dx"]))
-            mom = hf.spectrum_moments(S, FX, FY, p["dx"])
-            return Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
-        return None
+        """The ensemble NDF of the scene's surface at its full size — the ``ensemble_ndf`` that
+        ``build_surface()`` attaches (``microsim.surfaces.Surface``), computed from the
+        parameters without building the surface — or None (file, flat)."""
+        return _KINDS[self.surface.kind].ensemble_ndf(self.surface.params)
 
 
 def make_ndf(name: str, params: Mapping[str, float]):
     """Analytic NDF from a scene name (``NDF_PARAMS``) and its parameters."""
-    from . import analytic as an
     cls = {"beckmann": an.Beckmann, "ggx": an.GGX, "blinn-phong": an.BlinnPhong,
            "vmf": an.VonMisesFisher, "abc": an.ABC}
     if name not in cls:
@@ -261,9 +279,9 @@ def _surface_spec(where, table) -> SurfaceSpec:
     kind = table.get("kind", _REQUIRED)
     if kind is _REQUIRED:
         _fail(where, "surface.kind", f"required; one of {', '.join(SURFACE_KINDS)}")
-    if kind not in _SURFACE_KEYS:
+    if kind not in _KINDS:
         _fail(where, "surface.kind", f"must be one of {', '.join(SURFACE_KINDS)}, got {kind!r}")
-    schema = dict(_SURFACE_KEYS[kind])
+    schema = dict(_KINDS[kind].keys)
     if kind == "vgrooves":
         ndf = table.get("ndf")
         ndf = _NDF_ALIASES.get(ndf, ndf) if isinstance(ndf, str) else ndf
@@ -298,66 +316,18 @@ def _check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> Non
     (``surfaces.loader.check_heightfield_file``: a regular file holding a real 2D array of
     finite heights that fits in memory); the one-line error names the scene file, the key
     and the heightfield file."""
-    key = "surface.path"
-    try:
-        from .surfaces.loader import check_heightfield_file
-    except ImportError:                   # pragma: no cover - older loader
-        return _check_heightfield_fallback(where, path)
     try:
         check_heightfield_file(path, dx, periodic)
     except UsageError as e:
-        _fail(where, key, " ".join(str(e).split()))
-
-
-def _check_heightfield_fallback(where: str, path: Path) -> None:
-    """``_check_heightfield`` without the loader's checker: 8 … ``MAX_GRID`` per side."""
-    key = "surface.path"
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        _fail(where, key, f"no such heightfield file {str(path)!r}")
-    except OSError as e:
-        _fail(where, key, f"cannot read heightfield file {str(path)!r} ({e.strerror})")
-    if not path.is_file():
-        _fail(where, key, f"{path} is not a regular file")
-    if path.suffix == ".npy":
-        try:
-            a = np.load(path, mmap_mode="r", allow_pickle=False)
-        except (ValueError, EOFError, OSError) as e:
-            msg = getattr(e, "strerror", None) or " ".join(str(e).split())
-            _fail(where, key, f"{path}: not a readable .npy array ({msg})")
-        if not isinstance(a, np.ndarray) or a.ndim != 2:
-            _fail(where, key, f"{path}: heights must be a 2D array (rows = y, columns = x), "
-                              f"got shape {getattr(a, 'shape', None)}")
-        if a.dtype.kind not in "iuf":
-            _fail(where, key, f"{path}: heights must be real numbers, got dtype {a.dtype}")
-        shape = a.shape
-        if min(shape) >= 8 and max(shape) <= MAX_GRID:
-            bad = sum(int(np.count_nonzero(~np.isfinite(a[i:i + 256])))
-                      for i in range(0, shape[0], 256))
-            if bad:
-                _fail(where, key, f"{path}: heights contain NaN or inf ({bad} values)")
-        del a
-    else:
-        if st.st_size > 256 << 20:
-            _fail(where, key, f"{path}: heightfield file larger than 256 MiB")
-        from .surfaces.loader import read_heights
-        try:
-            shape = read_heights(path).shape
-        except UsageError as e:
-            _fail(where, key, " ".join(str(e).split()))
-    if min(shape) < 8 or max(shape) > MAX_GRID:
-        _fail(where, key, f"{path}: heights grid must be 8 … {MAX_GRID} points per side, "
-                          f"got {shape[0]}x{shape[1]}")
+        _fail(where, "surface.path", " ".join(str(e).split()))
 
 
 def _material(where, table):
-    from .analytic import MATERIALS, resolve_material
     if table is None:
         return None
     _check_keys(where, "material", table, ["ior"])
     v = table.get("ior", "mirror")
-    allowed = (f"a name ({', '.join(MATERIALS)}), a number n > 0, or [n, k] with n > 0, k >= 0")
+    allowed = (f"a name ({', '.join(an.MATERIALS)}), a number n > 0, or [n, k] with n > 0, k >= 0")
     if isinstance(v, list):
         if len(v) != 2 or not all(_is_num(x) for x in v):
             _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
@@ -365,7 +335,7 @@ def _material(where, table):
     elif not (isinstance(v, str) or _is_num(v)):
         _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
     try:
-        return resolve_material(v)
+        return an.resolve_material(v)
     except UsageError:
         _fail(where, "material.ior", f"must be {allowed}, got {table.get('ior')!r}")
 
@@ -481,7 +451,7 @@ def describe_surface(scene_or_surface) -> str:
              ("m = sqrt(var_x + var_y)", st["m_realised"], st.get("predicted_m"), nom.get("m")),
              ("z min", st["z_range"][0], None, None),
              ("z max", st["z_range"][1], None, None)]
-    if surf.kind == "vgrooves":
+    if "n_grooves" in st:                 # the V-groove generator's tilt statistics
         rows += [("grooves", st["n_grooves"], None, nom.get("n_grooves")),
                  ("rms tilt (deg)", st["tilt_rms_deg"], None, None),
                  ("max tilt (deg)", st["tilt_max_deg"], None, None)]

@@ -45,7 +45,7 @@ def test_empirical_ndf_of_surface():
     assert isinstance(e, an.Empirical)
     n = surf.facet_normals()
     med = np.median(np.arctan2(np.hypot(n[:, 0], n[:, 1]), n[:, 2]))
-    assert abs(e.cdf_theta(med) - 0.5) < 0.02
+    assert abs(e.cdf_theta_rad(med) - 0.5) < 0.02
 
 
 def write(tmp_path, name, arr):

@@ -16,6 +16,7 @@ import pytest
 from scipy import integrate, stats
 
 from gof import pearson_chi2, sidak
+from microsim.analytic import abc_psd_church
 from microsim.surfaces import abc, gaussian
 from microsim.surfaces import heightfields as hf
 
@@ -125,7 +126,7 @@ def test_abc_normalisation():
     """A = σ²B²(C − 1)/(2π) makes ∫ PSD d²f = σ² (2D, Church)."""
     sigma, B, C = 1.3, 20.0, 2.5
     A = hf.abc_amplitude(sigma, B, C)
-    val = integrate.quad(lambda f: 2 * np.pi * f * hf.abc_psd(f, A, B, C), 0, np.inf)[0]
+    val = integrate.quad(lambda f: 2 * np.pi * f * abc_psd_church(f, A, B, C), 0, np.inf)[0]
     assert val == pytest.approx(sigma ** 2, rel=1e-7)
 
 
@@ -133,7 +134,7 @@ def test_abc_exact_amplitude_periodogram_is_the_target():
     sigma, B, C, k = 1.0, 32.0, 2.0, 4
     with pytest.warns(UserWarning, match="C = 2"):
         surf = abc(N, DX, sigma, B, C, seed=2, band_limit=k)
-    S, FX, FY = hf.psd_grid(lambda f: hf.abc_psd(f, hf.abc_amplitude(sigma, B, C), B, C),
+    S, FX, FY = hf.psd_grid(lambda f: abc_psd_church(f, hf.abc_amplitude(sigma, B, C), B, C),
                             (N, N), DX, 1 / (2 * k * DX))
     P = periodogram(surf.heights, DX)
     inside = S > 0
@@ -149,7 +150,7 @@ def test_abc_plain_noise_periodogram_follows_target():
     """Band means of P/S over ≥ 5000 independent modes (sd ≤ 1.4 %) each: |mean − 1| within
     the Šidák z bound (≈ 3.4 sd), which is ≤ 5 %."""
     n, sigma, B, C, k, n_real = 256, 1.0, 16.0, 4.0, 2, 8
-    S, FX, FY = hf.psd_grid(lambda f: hf.abc_psd(f, hf.abc_amplitude(sigma, B, C), B, C),
+    S, FX, FY = hf.psd_grid(lambda f: abc_psd_church(f, hf.abc_amplitude(sigma, B, C), B, C),
                             (n, n), DX, 1 / (2 * k * DX))
     ratios = np.mean([periodogram(abc(n, DX, sigma, B, C, seed=s, band_limit=k,
                                       exact_amplitude=False).heights, DX) for s in range(n_real)],
@@ -170,7 +171,7 @@ def test_abc_plain_noise_slope_variance():
     """Mean over 4 plain-noise realisations (sd = rel_sd/2) within 4 sd of the discrete-spectrum
     prediction; with the continuum (2πf)² response it would be larger."""
     sigma, B, C, n_real = 1.35, 32.0, 4.0, 4
-    S, FX, FY = hf.psd_grid(lambda f: hf.abc_psd(f, hf.abc_amplitude(sigma, B, C), B, C),
+    S, FX, FY = hf.psd_grid(lambda f: abc_psd_church(f, hf.abc_amplitude(sigma, B, C), B, C),
                             (N, N), DX, 1 / (8 * DX))
     mom = hf.spectrum_moments(S, FX, FY, DX)
     sts = [abc(N, DX, sigma, B, C, seed=s, exact_amplitude=False).stats() for s in range(n_real)]

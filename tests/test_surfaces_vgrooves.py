@@ -28,9 +28,9 @@ def test_random_groove_tilts_pass_chi2_against_projected_ndf(name):
     ndf = NDFS[name]
     n = 1_000_000
     theta = groove_tilts_from_mesh(vgrooves(n, ndf, seed=7, sampling="random"))
-    top = float(ndf.tilt_quantile(1 - 1e-4))
+    top = float(ndf.tilt_quantile_rad(1 - 1e-4))
     edges = np.append(np.linspace(0.0, top, 41), np.pi / 2)
-    probs = np.array([integrate.quad(ndf.tilt_pdf, a, b, limit=200, epsabs=1e-13)[0]
+    probs = np.array([integrate.quad(ndf.tilt_pdf_rad, a, b, limit=200, epsabs=1e-13)[0]
                       for a, b in zip(edges[:-1], edges[1:])])
     assert abs(probs.sum() - 1) < 1e-6           # D is normalised (Mikkelsen eq. 14)
     observed, _ = np.histogram(theta, edges)
@@ -44,13 +44,13 @@ def test_stratified_tilt_cdf_within_quantisation(name):
     n = 4000
     surf = vgrooves(n, NDFS[name], seed=3)
     theta = np.sort(groove_tilts_from_mesh(surf))
-    F = NDFS[name].cdf_theta(theta)
+    F = NDFS[name].cdf_theta_rad(theta)
     i = np.arange(1, n + 1)
     d = max(np.max(i / n - F), np.max(F - (i - 1) / n))
     assert d <= 0.5 / n + 1e-9
     assert surf.stats()["cdf_max_dev"] <= 0.5 / n + 1e-9
     # nothing beyond the 1 − 1/(2n) quantile exists (DESIGN.md)
-    assert theta.max() <= NDFS[name].tilt_quantile(1 - 0.5 / n) + 1e-12
+    assert theta.max() <= NDFS[name].tilt_quantile_rad(1 - 0.5 / n) + 1e-12
 
 
 def test_stratified_order_is_shuffled():

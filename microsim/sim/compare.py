@@ -2,26 +2,30 @@
 direct ray-traced measurement of Smith's masking function G1.
 
 Default models (``default_models``; names are short and stable, used as ``Result.models`` keys
-and in reports). All are Torrance–Sparrow, f = F G D / (4 cos θi cos θo) (Mikkelsen eq. 13/18)
-with exact Fresnel for the run's material; they differ in D and G:
+and in reports). All are Torrance–Sparrow, f = F G D / (4 cos θi cos θo) (Mikkelsen 2009,
+eq. 13/18) with exact Fresnel for the run's material; they differ in D and G. The choice asks
+the surface what its generator knows (``Surface.ensemble_ndf``, ``Surface.exact_shadowing``):
 
-V-groove surfaces (``kind == "vgrooves"``; D = the NDF the groove tilts were drawn from):
-  ``ts-vgroove``        D analytic, V-groove G (Mikkelsen eq. 25) — exact for the V-cavity surface
+Surfaces with an exact shadowing and an ensemble NDF (V-grooves: D = the NDF the groove tilts
+were drawn from, G = V-groove, Mikkelsen 2009, eq. 25, exact for the V-cavity surface):
+  ``ts-vgroove``        D analytic, V-groove G
   ``ts-smith``          D analytic, separable Smith G1(wi)G1(wo)
   ``ts-smith-corr``     D analytic, height-correlated Smith 1/(1 + Λi + Λo)
-  ``ts-facets``         D = the surface's own groove tilts (azimuth-averaged), V-groove G: what
-                        the explicit surface represents exactly (no tail beyond its last groove)
-Heightfields (``gaussian``, ``abc``, ``file``; m_nom = the scene's nominal Beckmann m — Gaussian
-2σ/ℓ, ABC the predicted mesh m —, m_real = ``surface.stats()["m_realised"]``):
-  ``ts-beckmann-nominal-{vgroove,smith,smith-corr}``    Beckmann(m_nom) (not for ``file``)
+  ``ts-facets``         D = the surface's own facets (azimuth-averaged when the surface asks
+                        for it), the exact G: what the explicit surface represents exactly (no
+                        tail beyond its last groove)
+Surfaces with an exact shadowing and no NDF (the flat mirror, exact shadowing "none"):
+  ``mirror-fresnel``    the exact answer: all reflected light in the mirror bin, weight F(θi)
+Surfaces without an exact shadowing (heightfields: ``gaussian``, ``abc``, ``file``;
+m_nom = the ensemble NDF's Beckmann m — Gaussian 2σ/ℓ, ABC the predicted mesh m —,
+m_real = ``surface.stats()["m_realised"]``):
+  ``ts-beckmann-nominal-{vgroove,smith,smith-corr}``    the ensemble NDF (none for ``file``)
   ``ts-beckmann-realised-{vgroove,smith,smith-corr}``   Beckmann(m_real)
   ``ts-facets``         D = the surface's own facets (Empirical), height-correlated Smith G with
                         the facets' own Λ
   For random scenes run over several realisations, ``ts-facets`` and m_real pool all of them
   (pass the realisations as a sequence); these realisation-specific models are judged against
   ray noise only (``attach_models`` lists them in ``meta["realisation_models"]``).
-Flat surfaces (``kind == "flat"``):
-  ``mirror-fresnel``    the exact answer: all reflected light in the mirror bin, weight F(θi)
 """
 from __future__ import annotations
 
@@ -49,11 +53,12 @@ VGROOVE_AZIMUTHS = 256
 
 
 def _surfaces_and_ndf(scene_or_surfaces, ndf):
-    """(surfaces, analytic NDF or None): a Scene builds its surface and supplies its NDF; a
-    Surface or a sequence of Surfaces (the realisations of one random scene) is used as is."""
+    """(surfaces, analytic NDF or None): a Scene builds its surface; a Surface or a sequence of
+    Surfaces (the realisations of one random scene) is used as is. The NDF defaults to the
+    surface's ``ensemble_ndf``."""
     if hasattr(scene_or_surfaces, "build_surface"):
-        ndf = ndf if ndf is not None else scene_or_surfaces.ndf()
-        return [scene_or_surfaces.build_surface()], ndf
+        surface = scene_or_surfaces.build_surface()
+        return [surface], ndf if ndf is not None else surface.ensemble_ndf
     surfaces = list(scene_or_surfaces) if isinstance(scene_or_surfaces, (list, tuple)) \
         else [scene_or_surfaces]
     if not surfaces or not all(hasattr(s, "kind") and hasattr(s, "facet_normals") for s in surfaces):
@@ -61,15 +66,7 @@ def _surfaces_and_ndf(scene_or_surfaces, ndf):
                          f"of Surfaces, got {scene_or_surfaces!r}")
     if len({s.kind for s in surfaces}) != 1:
         raise UsageError("scene_or_surface: realisations must all be of one surface kind")
-    surface = surfaces[0]
-    if ndf is None:
-        if surface.kind == "vgrooves":
-            ndf = surface.source_ndf
-        elif surface.kind == "gaussian":
-            ndf = Beckmann(surface.nominal["m"])
-        elif surface.kind == "abc":
-            ndf = Beckmann(surface.stats()["predicted_m"])
-    return surfaces, ndf
+    return surfaces, ndf if ndf is not None else surfaces[0].ensemble_ndf
 
 
 def _pooled_facets(surfaces):
@@ -79,45 +76,53 @@ def _pooled_facets(surfaces):
     ``simulate`` gives every realisation the same number of rays over tiles of equal area, so
     its BRDF is the average of the realisations' BRDFs; Torrance–Sparrow with the pooled facets
     is the same average (exactly for V-groove G; for Smith G the pooled Λ stands in for each
-    realisation's own, a difference far below the tile-to-tile scatter)."""
+    realisation's own, a difference far below the tile-to-tile scatter). Surfaces with an exact
+    shadowing (V-grooves, flat) need no realised m: None."""
     normals = np.concatenate([s.facet_normals() for s in surfaces])
     weights = np.concatenate([s.projected_areas() / s.projected_areas().sum() for s in surfaces])
-    if surfaces[0].kind in ("vgrooves", "flat"):
+    if surfaces[0].exact_shadowing is not None:
         return normals, weights, None
     stats = [s.stats() for s in surfaces]
     m_real = float(np.sqrt(np.mean([st["slope_var_x"] + st["slope_var_y"] for st in stats])))
     return normals, weights, m_real
 
 
-def default_models(scene_or_surface, ior, ndf=None, *,
+def default_models(scene_or_surface, material, ndf=None, *,
                    azimuths: int = VGROOVE_AZIMUTHS) -> list[ModelSpec]:
     """The standard model set for a Scene, a Surface, or the realisations of one random scene
     (a sequence of Surfaces: ``ts-facets`` and the realised m then pool all of them, see
     ``_pooled_facets``) — module docstring for the names.
 
-    ``ior``: the material (name, n, n + ik or None, see ``resolve_material``). ``ndf``: the
-    analytic NDF (default: the V-groove surface's source NDF, Beckmann(nominal m) for Gaussian,
-    Beckmann(predicted mesh m) for ABC heightfields — as ``Scene.ndf``). ``azimuths``: groove
-    azimuth copies of ``ts-facets`` on V-grooves.
+    ``material``: name, n, n + ik or None (see ``resolve_material``). ``ndf``: the analytic
+    NDF (default: the surface's ``ensemble_ndf`` — the V-groove surface's source NDF,
+    Beckmann(nominal m) for Gaussian, Beckmann(predicted mesh m) for ABC heightfields, as
+    ``Scene.ndf``). ``azimuths``: azimuth copies of ``ts-facets`` on surfaces whose
+    ``azimuth_average`` is set (V-grooves).
     """
     surfaces, ndf = _surfaces_and_ndf(scene_or_surface, ndf)
-    resolve_material(ior)                                   # validate now, not at predict time
+    resolve_material(material)                              # validate now, not at predict time
     kinds = tuple(SHADOWING_SUFFIX)
     normals, weights, m_real = _pooled_facets(surfaces)
-    if surfaces[0].kind == "flat":       # the exact answer: all light in the mirror bin, F(θi)
-        return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", ior)]
-    if surfaces[0].kind == "vgrooves":
+    exact = surfaces[0].exact_shadowing
+    if exact == "none":       # nothing shadows (flat): all light in the mirror bin, weight F(θi)
+        return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", material)]
+    if exact is not None:
         if ndf is None:
-            raise UsageError("ndf must be given for a V-groove surface without source_ndf")
-        specs = [ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, ior) for k in kinds]
-        return specs + [ModelSpec.facets("ts-facets", normals, weights, "vgroove", ior,
-                                         azimuths=int(azimuths))]
+            raise UsageError(f"ndf must be given for a {surfaces[0].kind} surface without an "
+                             f"ensemble_ndf")
+        copies = int(azimuths) if surfaces[0].azimuth_average else None
+        specs = [ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, material)
+                 for k in kinds]
+        return specs + [ModelSpec.facets("ts-facets", normals, weights, exact, material,
+                                         azimuths=copies)]
     ndfs = [("realised", Beckmann(m_real))]
     if ndf is not None:
         ndfs.insert(0, ("nominal", ndf))
-    specs = [ModelSpec.torrance_sparrow(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", d, k, ior)
+    specs = [ModelSpec.torrance_sparrow(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", d, k,
+                                        material)
              for label, d in ndfs for k in kinds]
-    return specs + [ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", ior)]
+    return specs + [ModelSpec.facets("ts-facets", normals, weights, "smith-correlated",
+                                     material)]
 
 
 def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:

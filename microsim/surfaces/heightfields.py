@@ -2,8 +2,8 @@
 
 Both are stationary Gaussian random fields given by a 2D isotropic power spectral density
 PSD(f) (length⁴, f in cycles per length), normalised so that ∫ PSD d²f = height variance.
-Synthesis (DESIGN.md, "Facts — Surfaces"): the Fourier transform of real white noise is
-multiplied by √PSD(f)/dx and transformed back; PSD(0) = 0 so the mean height is zero.
+Synthesis (docs/design.md, "Facts to build on — Surfaces"): the Fourier transform of real
+white noise is multiplied by √PSD(f)/dx and transformed back; PSD(0) = 0 so the mean height is zero.
 
 *Exact-amplitude* mode (the default) keeps only the phases of the noise and gives every
 Fourier mode exactly the amplitude √PSD, so the realised periodogram, height variance and
@@ -13,7 +13,10 @@ each mode's power scatters as an exponential variable (plain filtered noise).
 
 Mesh slopes are finite differences over one grid step, whose response is
 (2 sin(π f dx)/dx)² instead of the continuum (2π f)²; ``spectrum_moments`` predicts the mesh
-slope variance from the discrete spectrum with that response.
+slope variance from the discrete spectrum with that response. Each generated ``Surface``
+carries those predictions (``Surface.predicted``) and the NDF the field samples
+(``Surface.ensemble_ndf``): the slopes of a Gaussian random field are Gaussian, so it is
+Beckmann with m² = 2 × per-axis slope variance (Beckmann & Spizzichino 1963).
 """
 from __future__ import annotations
 
@@ -23,14 +26,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate
 
+from microsim.analytic import Beckmann, abc_psd_church
 from microsim.analytic._checks import check_memory, integer, positive
 from microsim.errors import UsageError
 
-from .surface import Surface, check_relief, heightfield_mesh
+from .surface import Predicted, Surface, check_relief, heightfield_mesh
 
-__all__ = ["gaussian", "abc", "gaussian_psd", "abc_psd", "abc_amplitude", "psd_grid",
-           "synthesize", "spectrum_moments", "SpectrumMoments", "gaussian_mesh_slope_var",
-           "abc_continuum_slope_var", "predictions"]
+__all__ = ["gaussian", "abc", "gaussian_psd", "abc_amplitude", "psd_grid", "synthesize",
+           "spectrum_moments", "SpectrumMoments", "gaussian_mesh_slope_var",
+           "abc_continuum_slope_var", "abc_spectrum", "gaussian_ensemble_ndf",
+           "abc_ensemble_ndf"]
 
 MIN_GRID = 8
 GAUSS_MIN_CORR_CELLS = 7.0      # ℓ ≥ 7·dx keeps the triangulation slope bias under 1 %
@@ -61,12 +66,6 @@ def _erf2(x: float) -> float:
 def abc_amplitude(sigma: float, B: float, C: float) -> float:
     """A of the 2D ABC PSD with ∫ PSD d²f = σ²: A = σ² B² (C − 1)/(2π) (needs C > 1)."""
     return sigma ** 2 * B ** 2 * (C - 1.0) / (2.0 * np.pi)
-
-
-def abc_psd(f, A: float, B: float, C: float):
-    """Isotropic 2D ABC PSD (Löw eq. 7, Church et al. 1989): A/(1 + B² f²)^((C+1)/2)."""
-    f = np.asarray(f, dtype=np.float64)
-    return A * np.exp(-0.5 * (C + 1.0) * np.log1p((B * f) ** 2))
 
 
 def psd_grid(psd, shape: tuple[int, int], dx: float, f_max: float = np.inf):
@@ -117,7 +116,7 @@ def spectrum_moments(S: np.ndarray, FX: np.ndarray, FY: np.ndarray, dx: float) -
     """Height variance and mesh per-axis slope variance of a grid with discrete spectrum S.
 
     Mesh slopes are one-step finite differences: response (2 sin(π f dx)/dx)² per axis
-    (DESIGN.md) — the continuum (2πf)² overestimates the mesh slope variance.
+    (docs/design.md, "Facts to build on — Surfaces") — the continuum (2πf)² overestimates the mesh slope variance.
     """
     df2 = 1.0 / (S.size * dx * dx)
 
@@ -142,7 +141,8 @@ def gaussian_mesh_slope_var(sigma: float, corr_len: float, dx: float) -> float:
 def abc_continuum_slope_var(sigma: float, B: float, C: float, f_max: float) -> float:
     """Per-axis continuum slope variance ½ ∫_{|f| ≤ f_max} (2πf)² PSD d²f of the ABC surface."""
     A = abc_amplitude(sigma, B, C)
-    val, _ = integrate.quad(lambda f: f ** 3 * abc_psd(f, A, B, C), 0.0, f_max, limit=200)
+    val, _ = integrate.quad(lambda f: f ** 3 * abc_psd_church(f, A, B, C), 0.0, f_max,
+                            limit=200)
     return 0.5 * (2.0 * np.pi) ** 2 * 2.0 * np.pi * val
 
 
@@ -164,15 +164,54 @@ def _finite_spectrum(S: np.ndarray, names: str) -> None:
                          f"1e308); use lengths of a sensible scale")
 
 
-def _heightfield_surface(kind, heights, dx, nominal, warns):
+def _heightfield_surface(kind, heights, dx, nominal, warns, ensemble_ndf, predicted):
     ny, nx = heights.shape
     check_relief("sigma", heights.min(), heights.max(), (nx * dx, ny * dx))
     for w in warns:
         _warnings.warn(w, stacklevel=3)
     vertices, faces = heightfield_mesh(heights, dx)
-    ny, nx = heights.shape
     return Surface(kind=kind, vertices=vertices, faces=faces, tile_size=(nx * dx, ny * dx),
-                   periodic=True, nominal=nominal, heights=heights, dx=dx, warnings=tuple(warns))
+                   periodic=True, nominal=nominal, heights=heights, dx=dx, warnings=tuple(warns),
+                   ensemble_ndf=ensemble_ndf, predicted=predicted)
+
+
+def _predicted(mom: SpectrumMoments, continuum: float) -> Predicted:
+    """Predicted statistics from the discrete spectrum with the finite-difference response:
+    exact for the mesh (Gaussian: equal to 2σ²(1 − e^{−u})/dx² within 1e-4 for ℓ ≥ 2·dx, and
+    still exact below, where that point-sampled formula is not); ``continuum`` the dx → 0
+    per-axis slope variance (ABC: within the band)."""
+    spec = 0.5 * (mom.slope_var_x + mom.slope_var_y)
+    return Predicted(rms_height=float(np.sqrt(mom.height_var)), slope_var=float(spec),
+                     spectrum_slope_var=float(spec), continuum_slope_var=float(continuum),
+                     m=float(np.sqrt(2.0 * spec)))
+
+
+def gaussian_ensemble_ndf(sigma: float, corr_len: float) -> Beckmann:
+    """The NDF a Gaussian heightfield samples: Beckmann with the nominal m = 2σ/ℓ (per-axis
+    slope variance 2σ²/ℓ² = m²/2; the mesh realises slightly less, see ``gaussian``)."""
+    return Beckmann(2.0 * sigma / corr_len)
+
+
+def abc_spectrum(n: int, dx: float, sigma: float, B: float, C: float, band_limit: float):
+    """(A, f_max, S, FX, FY): amplitude, radial cut-off 1/(2·band_limit·dx) and the discrete
+    ABC spectrum (``abc_psd_church``) of an n×n grid (``psd_grid``). Arguments as ``abc``
+    (validated there); an amplitude beyond float64 raises a UsageError."""
+    f_max = 1.0 / (2.0 * band_limit * dx)
+    with np.errstate(over="ignore", invalid="ignore"):
+        A = abc_amplitude(np.float64(sigma), np.float64(B), C)
+        _finite_spectrum(A, f"sigma = {sigma:g}, B = {B:g}")      # S ≤ A
+        S, FX, FY = psd_grid(lambda f: abc_psd_church(f, A, B, C), (n, n), dx, f_max)
+    return A, f_max, S, FX, FY
+
+
+def abc_ensemble_ndf(n: int, dx: float, sigma: float, B: float, C: float,
+                     band_limit: float = 4) -> Beckmann:
+    """The NDF an ``abc`` heightfield of these parameters samples: Beckmann with the predicted
+    mesh m, m² = 2 × per-axis slope variance of the discrete spectrum (the facet slopes of any
+    Gaussian random field are Gaussian; Löw et al. 2012's ABC *NDF* is a different object)."""
+    *_, S, FX, FY = abc_spectrum(n, dx, sigma, B, C, band_limit)
+    mom = spectrum_moments(S, FX, FY, dx)
+    return Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
 
 
 def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
@@ -198,8 +237,8 @@ def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
         S, FX, FY = psd_grid(lambda f: gaussian_psd(f, sigma, corr_len), (n, n), dx)
     _finite_spectrum(S, f"sigma = {sigma:g}, corr_len = {corr_len:g}")
     warns = []
+    mom = spectrum_moments(S, FX, FY, dx)
     if corr_len < GAUSS_MIN_CORR_CELLS * dx:
-        mom = spectrum_moments(S, FX, FY, dx)
         mesh = 0.5 * (mom.slope_var_x + mom.slope_var_y)
         bias = mesh / (2 * np.float64(sigma) ** 2 / np.float64(corr_len) ** 2)
         warns.append(f"gaussian: corr_len = {corr_len:g} < 7·dx = {7 * dx:g}: the mesh slope "
@@ -208,12 +247,15 @@ def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     nominal = {"sigma": sigma, "corr_len": corr_len, "m": 2.0 * sigma / corr_len, "n": n,
                "dx": dx, "seed": seed, "exact_amplitude": bool(exact_amplitude)}
-    return _heightfield_surface("gaussian", h, dx, nominal, warns)
+    predicted = _predicted(mom, 2.0 * sigma ** 2 / corr_len ** 2)
+    return _heightfield_surface("gaussian", h, dx, nominal, warns,
+                                gaussian_ensemble_ndf(sigma, corr_len), predicted)
 
 
 def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
         band_limit: float = 4, exact_amplitude: bool = True) -> Surface:
-    """Periodic n×n fractal heightfield with the isotropic 2D ABC PSD (Löw eq. 7–8; Church 1989).
+    """Periodic n×n fractal heightfield with the isotropic 2D ABC PSD (Löw et al. 2012, eq. 7–8;
+    Church et al. 1989).
 
         PSD(f) = A / (1 + B² f²)^((C+1)/2),   ∫ PSD d²f = 2π A / (B² (C − 1)) = σ²,
 
@@ -224,7 +266,7 @@ def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
     a *1D profile* spectrum, a = σ² b Γ((c+1)/2)/(√π Γ(c/2)); here the spectrum is 2D.)
 
     The PSD is band-limited radially to f ≤ 1/(2k·dx), k = ``band_limit`` ≥ 1 (k = 4 keeps the
-    normals isotropic; DESIGN.md). C ≤ 1: infinite height variance (ValueError). 1 < C ≤ 3: the
+    normals isotropic; docs/design.md). C ≤ 1: infinite height variance (ValueError). 1 < C ≤ 3: the
     slope variance grows without bound as the cut-off rises, so the ray-traced BRDF depends on
     dx (warning). Also warns when the tile and band keep < 90 % of σ².
     """
@@ -238,54 +280,20 @@ def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
     if not (k >= 1.0) or not np.isfinite(k):
         raise UsageError(f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), "
                          f"got {band_limit!r}")
-    f_max = 1.0 / (2.0 * k * dx)
-    with np.errstate(over="ignore", invalid="ignore"):
-        A = abc_amplitude(np.float64(sigma), np.float64(B), C)
-        S, FX, FY = psd_grid(lambda f: abc_psd(f, A, B, C), (n, n), dx, f_max)
-    _finite_spectrum(S, f"sigma = {sigma:g}, B = {B:g}")
+    A, f_max, S, FX, FY = abc_spectrum(n, dx, sigma, B, C, k)
     warns = []
     if C <= 3.0:
         warns.append(f"abc: C = {C:g} <= 3: the slope variance depends on the grid cut-off "
                      f"f_max = 1/(2·{k:g}·dx) (it diverges as dx → 0), so the ray-traced BRDF "
                      f"depends on dx = {dx:g}")
-    kept = spectrum_moments(S, FX, FY, dx).height_var / sigma ** 2
+    mom = spectrum_moments(S, FX, FY, dx)
+    kept = mom.height_var / sigma ** 2
     if kept < 0.9:
         warns.append(f"abc: the tile (L = {n * dx:g}) and band (f <= {f_max:g}) keep only "
                      f"{100 * kept:.1f} % of the nominal height variance σ² = {sigma ** 2:g}")
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     nominal = {"sigma": sigma, "B": B, "C": C, "A": A, "band_limit": k, "f_max": f_max,
                "n": n, "dx": dx, "seed": seed, "exact_amplitude": bool(exact_amplitude)}
-    return _heightfield_surface("abc", h, dx, nominal, warns)
-
-
-# --- predictions for Surface.stats -----------------------------------------------------------
-def predictions(surface: Surface) -> dict:
-    """Predicted statistics of a generated heightfield (empty dict for other kinds).
-
-    ``predicted_rms_height`` and ``predicted_slope_var`` (per axis, mesh-exact): from the
-    discrete spectrum with the finite-difference response (Gaussian: equal to 2σ²(1 − e^{−u})/dx²
-    within 1e-4 for ℓ ≥ 2·dx, and still exact below, where that point-sampled formula is not);
-    ``spectrum_slope_var`` the discrete-spectrum value for both, ``continuum_slope_var`` the
-    dx → 0 value (ABC: within the band), ``predicted_m`` = √(2 · predicted_slope_var).
-    """
-    p = surface.nominal
-    if surface.kind == "gaussian":
-        S, FX, FY = psd_grid(lambda f: gaussian_psd(f, p["sigma"], p["corr_len"]),
-                             surface.heights.shape, p["dx"])
-        mesh = None                      # the discrete spectrum: exact for any ℓ ≥ dx
-        continuum = 2.0 * p["sigma"] ** 2 / p["corr_len"] ** 2
-    elif surface.kind == "abc":
-        S, FX, FY = psd_grid(lambda f: abc_psd(f, p["A"], p["B"], p["C"]),
-                             surface.heights.shape, p["dx"], p["f_max"])
-        mesh = None
-        continuum = abc_continuum_slope_var(p["sigma"], p["B"], p["C"], p["f_max"])
-    else:
-        return {}
-    mom = spectrum_moments(S, FX, FY, p["dx"])
-    spec = 0.5 * (mom.slope_var_x + mom.slope_var_y)
-    mesh = spec if mesh is None else mesh
-    return {"predicted_rms_height": float(np.sqrt(mom.height_var)),
-            "predicted_slope_var": float(mesh),
-            "spectrum_slope_var": float(spec),
-            "continuum_slope_var": float(continuum),
-            "predicted_m": float(np.sqrt(2.0 * mesh))}
+    predicted = _predicted(mom, abc_continuum_slope_var(sigma, B, C, f_max))
+    ensemble = Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
+    return _heightfield_surface("abc", h, dx, nominal, warns, ensemble, predicted)

@@ -1,21 +1,28 @@
 """The explicit microsurface: a periodic triangle mesh plus what generated it.
 
-Conventions (DESIGN.md): macro normal +z; the tile is [-Lx/2, Lx/2] x [-Ly/2, Ly/2]; every face
+Conventions (docs/design.md, "Conventions"): macro normal +z; the tile is [-Lx/2, Lx/2] x [-Ly/2, Ly/2]; every face
 is ordered so that its geometric normal cross(v1 - v0, v2 - v0) points up. A facet with unit
 normal n has slopes (∂z/∂x, ∂z/∂y) = (-n_x/n_z, -n_y/n_z); statistics over facets are weighted
 by projected area (area · n_z), so that a histogram of facet normals samples D(h)(h·n)
-(Mikkelsen eq. 14).
+(Mikkelsen 2009, eq. 14).
+
+Each generator attaches what only it knows (``Surface.ensemble_ndf``, ``exact_shadowing``,
+``predicted``, ``generator_stats``), so code above this package asks the surface instead of
+switching on ``kind``.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
+from microsim.analytic import Empirical
+from microsim.analytic._checks import positive
 from microsim.errors import UsageError
 
-__all__ = ["Surface", "flat", "heightfield_mesh", "facet_slopes", "check_relief", "MAX_RELIEF",
-           "MAX_COORDINATE"]
+__all__ = ["Surface", "Predicted", "flat", "heightfield_mesh", "facet_slopes", "check_relief",
+           "MAX_RELIEF", "MAX_COORDINATE"]
 
 MAX_RELIEF = 1000.0
 """Largest height range of a surface in units of its (smaller) tile side. The tracer walks a
@@ -40,7 +47,30 @@ def check_relief(name: str, zmin: float, zmax: float, tile) -> None:
                          f"enlarge the tile)")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True)
+class Predicted:
+    """Statistics a generator predicts for the surface it built (lengths in vertex units).
+
+    ``rms_height``; ``slope_var``: per-axis slope variance of the mesh (mesh-exact);
+    ``spectrum_slope_var``: the discrete-spectrum value; ``continuum_slope_var``: the dx → 0
+    value; ``m`` = √(2 · slope_var), the Beckmann m of those slopes (per-axis variance m²/2).
+    """
+
+    rms_height: float
+    slope_var: float
+    spectrum_slope_var: float
+    continuum_slope_var: float
+    m: float
+
+    def as_stats(self) -> dict:
+        """The ``Surface.stats()`` keys: ``predicted_rms_height``, ``predicted_slope_var``,
+        ``spectrum_slope_var``, ``continuum_slope_var``, ``predicted_m``."""
+        return {"predicted_rms_height": self.rms_height, "predicted_slope_var": self.slope_var,
+                "spectrum_slope_var": self.spectrum_slope_var,
+                "continuum_slope_var": self.continuum_slope_var, "predicted_m": self.m}
+
+
+@dataclass(frozen=True, eq=False, repr=False)
 class Surface:
     """A periodic microsurface tile (the contract between surfaces and the tracer).
 
@@ -49,6 +79,19 @@ class Surface:
     spacing ``dx`` for heightfields (row = y index, col = x index); ``azimuth_average`` is True
     for V-grooves (the estimator averages the groove azimuth to get the isotropic V-cavity
     surface); ``warnings`` are caveats to show in reports.
+
+    What the generator knows about its surface:
+
+    ``ensemble_ndf``     the analytic NDF the generator samples, or None (V-grooves: the NDF
+                         the tilts were drawn from; Gaussian: Beckmann(2σ/ℓ); ABC: Beckmann
+                         with the predicted mesh m; file and flat: None)
+    ``exact_shadowing``  the shadowing kind (``microsim.analytic.SHADOWING_KINDS``) that is
+                         exact for single scattering on this surface, or None (V-grooves:
+                         "vgroove", Mikkelsen 2009, eq. 25; flat: "none"; heightfields: None)
+    ``predicted``        ``Predicted`` statistics (heightfields synthesised from a spectrum),
+                         or None
+    ``generator_stats``  a function of the surface returning the generator's own measured
+                         statistics for ``stats()`` (V-grooves: the tilt distribution), or None
     """
 
     kind: str
@@ -61,7 +104,25 @@ class Surface:
     dx: float | None = None
     azimuth_average: bool = False
     warnings: tuple[str, ...] = ()
-    source_ndf: object = None           # the analytic NDF a V-groove surface was drawn from
+    ensemble_ndf: object = None
+    exact_shadowing: str | None = None
+    predicted: Predicted | None = None
+    generator_stats: Callable[["Surface"], dict] | None = None
+
+    def __repr__(self) -> str:
+        """One line: kind, grid or groove count, tile, triangles and the nominal parameters."""
+        shown = {"n", "dx", "tile", "size", "n_grooves", "A", "f_max"}
+        parts = [self.kind]
+        if self.heights is not None:
+            ny, nx = self.heights.shape
+            parts.append(f"grid {nx}x{ny}, dx {self.dx:g}")
+        if "n_grooves" in self.nominal:
+            parts.append(f"{self.nominal['n_grooves']} grooves")
+        lx, ly = self.tile_size
+        parts.append(f"tile {lx:g}x{ly:g}, {len(self.faces)} triangles")
+        parts += [f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                  for k, v in self.nominal.items() if k not in shown]
+        return f"Surface({', '.join(parts)})"
 
     def mesh(self):
         """``trimesh.Trimesh`` (process=False) of the tile, centred on the origin.
@@ -99,7 +160,6 @@ class Surface:
 
     def ndf(self):
         """Empirical NDF of the facets, weighted by projected area (``microsim.analytic.Empirical``)."""
-        from microsim.analytic import Empirical
         return Empirical(self.facet_normals(), weights=self.projected_areas())
 
     def stats(self) -> dict:
@@ -109,11 +169,10 @@ class Surface:
         ``z_range``, ``slope_var_x``, ``slope_var_y`` (projected-area weighted, about zero),
         ``slope_corr`` (correlation of the two slopes over facets), ``mean_tan2`` (E[tan²θ]),
         ``m_realised`` = √(var_x + var_y) (Beckmann: per-axis variance m²/2), ``nominal``;
-        heightfields add ``rms_height`` and the generator's predictions (``predicted_*``);
-        V-grooves add their tilt distribution (see ``vgrooves.groove_stats``).
+        heightfields add ``grid``, ``dx``, ``rms_height``; then come the generator's predictions
+        (``Predicted.as_stats``) and its own measurements (``generator_stats``; V-grooves: the
+        tilt distribution, see ``vgrooves.groove_stats``).
         """
-        from .heightfields import predictions
-        from .vgrooves import groove_stats
         sx, sy = facet_slopes(self.facet_normals())
         w = self.projected_areas()
         w = w / w.sum()
@@ -136,8 +195,10 @@ class Surface:
             out["grid"] = tuple(int(s) for s in self.heights.shape)
             out["dx"] = float(self.dx)
             out["rms_height"] = float(np.sqrt(np.mean(self.heights ** 2)))
-        out.update(predictions(self))
-        out.update(groove_stats(self))
+        if self.predicted is not None:
+            out.update(self.predicted.as_stats())
+        if self.generator_stats is not None:
+            out.update(self.generator_stats(self))
         return out
 
 
@@ -171,10 +232,10 @@ def heightfield_mesh(heights: np.ndarray, dx: float) -> tuple[np.ndarray, np.nda
 
 
 def flat(size: float = 1.0) -> Surface:
-    """A flat square mirror at z = 0 of side ``size`` (2 triangles), periodic."""
-    from microsim.analytic._checks import positive
+    """A flat square mirror at z = 0 of side ``size`` (2 triangles), periodic; nothing shadows,
+    so ``exact_shadowing`` is "none"."""
     s = positive("size", size) / 2.0
     vertices = np.array([[-s, -s, 0.0], [s, -s, 0.0], [s, s, 0.0], [-s, s, 0.0]])
     faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
     return Surface(kind="flat", vertices=vertices, faces=faces, tile_size=(2 * s, 2 * s),
-                   periodic=True, nominal={"size": 2 * s})
+                   periodic=True, nominal={"size": 2 * s}, exact_shadowing="none")

@@ -1,12 +1,13 @@
-"""V-groove surfaces: a 1D profile of symmetric V-grooves, extruded (DESIGN.md, "Facts — Surfaces").
+"""V-groove surfaces: a 1D profile of symmetric V-grooves, extruded (docs/design.md, "Facts to
+build on — Surfaces").
 
-Long straight symmetric grooves whose rims all lie at z = 0 with the surface below make Blinn's
-V-groove G (Mikkelsen eq. 25) exact for single scattering. Grooves run along y over the whole
+Long straight symmetric grooves whose rims all lie at z = 0 with the surface below make the
+V-groove G (Mikkelsen 2009, eq. 25; Blinn 1977) exact for single scattering. Grooves run along y over the whole
 tile; groove k spans [x_k, x_k + w] with equal width w = L/n, its two planar faces tilted by θ_k
 towards ±x, depth (w/2) tan θ_k; four triangles per groove describe it exactly.
 
 With equal widths, every face has the same projected area, so the tilts must be drawn from
-the projected-area tilt density 2π D(θ) cos θ sin θ of the NDF (its ``tilt_quantile``); equal
+the projected-area tilt density 2π D(θ) cos θ sin θ of the NDF (its ``tilt_quantile_rad``); equal
 depths would be wrong (weight ∝ cot θ). Averaging the groove azimuth uniformly (the
 estimator's job: ``Surface.azimuth_average``) gives the isotropic V-cavity surface.
 """
@@ -36,18 +37,18 @@ def groove_tilts(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified
     carries no information, and a monotone depth ramp would look nothing like a rough surface);
     the empirical tilt CDF then deviates from the NDF's by at most 1/(2n) and nothing beyond
     the 1 − 1/(2n) quantile exists (the tail is missing). ``random``: independent draws
-    ``tilt_quantile(u)``, u ~ U[0, 1).
+    ``tilt_quantile_rad(u)``, u ~ U[0, 1).
     """
     rng = np.random.default_rng(seed)
     if sampling == "stratified":
         u = (np.arange(n_grooves) + 0.5) / n_grooves
-        theta = np.asarray(ndf.tilt_quantile(u), dtype=np.float64)[rng.permutation(n_grooves)]
+        theta = np.asarray(ndf.tilt_quantile_rad(u), dtype=np.float64)[rng.permutation(n_grooves)]
     elif sampling == "random":
-        theta = np.asarray(ndf.tilt_quantile(rng.random(n_grooves)), dtype=np.float64)
+        theta = np.asarray(ndf.tilt_quantile_rad(rng.random(n_grooves)), dtype=np.float64)
     else:
         raise UsageError(f"sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
     if not np.all(np.isfinite(theta) & (theta >= 0.0) & (theta < np.pi / 2)):
-        raise UsageError(f"ndf.tilt_quantile must return tilts in [0, π/2) for groove depths "
+        raise UsageError(f"ndf.tilt_quantile_rad must return tilts in [0, π/2) for groove depths "
                          f"to be finite; {ndf!r} gave {theta[~(theta < np.pi / 2)][:3]!r}")
     return theta
 
@@ -80,14 +81,15 @@ def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
              tile: float = 1.0) -> Surface:
     """Square tile of side ``tile`` holding ``n_grooves`` equal-width symmetric V-grooves.
 
-    Tilts from ``ndf`` (any object with ``tilt_quantile``; see ``groove_tilts`` for the
+    Tilts from ``ndf`` (any object with ``tilt_quantile_rad``; see ``groove_tilts`` for the
     stratified/random choice and the seeded shuffle). Grooves run along y; all rims at z = 0,
-    nothing above; 4 triangles per groove; periodic; ``azimuth_average`` is True. Groove
+    nothing above; 4 triangles per groove; periodic; ``azimuth_average`` is True; the surface
+    carries ``ndf`` as its ``ensemble_ndf`` and "vgroove" as its ``exact_shadowing``. Groove
     counts beyond the memory limit (``BYTES_PER_GROOVE``) are refused before any allocation.
     """
     n_grooves = integer("n_grooves", n_grooves, 1)
-    if not callable(getattr(ndf, "tilt_quantile", None)):
-        raise UsageError(f"ndf must be an NDF with tilt_quantile(u) (e.g. microsim.analytic."
+    if not callable(getattr(ndf, "tilt_quantile_rad", None)):
+        raise UsageError(f"ndf must be an NDF with tilt_quantile_rad(u) (e.g. microsim.analytic."
                          f"Beckmann(0.3)), got {ndf!r}")
     seed, tile = integer("seed", seed, 0), positive("tile", tile)
     if sampling not in SAMPLINGS:
@@ -101,18 +103,17 @@ def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
     nominal = {"ndf": getattr(ndf, "name", type(ndf).__name__), **params,
                "n_grooves": n_grooves, "sampling": sampling, "seed": seed, "tile": tile}
     return Surface(kind="vgrooves", vertices=vertices, faces=faces, tile_size=(tile, tile),
-                   periodic=True, nominal=nominal, azimuth_average=True, source_ndf=ndf)
+                   periodic=True, nominal=nominal, azimuth_average=True, ensemble_ndf=ndf,
+                   exact_shadowing="vgroove", generator_stats=groove_stats)
 
 
 def groove_stats(surface: Surface) -> dict:
-    """Tilt distribution of a V-groove surface (empty dict for other kinds).
+    """Tilt distribution of a V-groove surface (its ``generator_stats``).
 
-    ``n_grooves``, ``tilt_rms_deg``, ``tilt_max_deg``; with the source NDF's ``cdf_theta``:
+    ``n_grooves``, ``tilt_rms_deg``, ``tilt_max_deg``; with the ensemble NDF's ``cdf_theta_rad``:
     ``cdf_max_dev`` = Kolmogorov distance sup|F_n(θ) − F(θ)| of the groove tilts (stratified
     tilts give exactly 1/(2n), the quantisation ``cdf_bound``).
     """
-    if surface.kind != "vgrooves":
-        return {}
     nrm = surface.facet_normals()[0::4]
     tilts = np.arctan2(np.hypot(nrm[:, 0], nrm[:, 1]), nrm[:, 2])
     n = len(tilts)
@@ -120,7 +121,7 @@ def groove_stats(surface: Surface) -> dict:
            "tilt_rms_deg": float(np.degrees(np.sqrt(np.mean(tilts ** 2)))),
            "tilt_max_deg": float(np.degrees(tilts.max())),
            "cdf_bound": 0.5 / n if surface.nominal.get("sampling") == "stratified" else None}
-    cdf = getattr(surface.source_ndf, "cdf_theta", None)
+    cdf = getattr(surface.ensemble_ndf, "cdf_theta_rad", None)
     if callable(cdf):
         F = np.asarray(cdf(np.sort(tilts)), dtype=np.float64)
         i = np.arange(1, n + 1)
