@@ -25,6 +25,9 @@ are run and the lowest cost is kept. Models (``FIT_MODELS``):
 ``low_microfacet``  Löw eq. 15: A, B, C, kd, real ior n (as the paper).
 ``low_smooth``      Löw eq. 12: A, B, C, kd, real ior n; G' = 1 (Löw's choice).
 ``edwards``         Edwards eq. 36 with ``EdwardsParams`` (orthogonal projection, as the paper).
+
+``fit_edwards_disk`` fits the Edwards BRDF at a single viewing direction to a histogram of
+simulated half vectors on Edwards' disk (the contours of ``microsim view --what disk``).
 """
 from __future__ import annotations
 
@@ -42,7 +45,7 @@ from microsim.sim.bins import Bins
 from microsim.sim.predict import bin_average
 
 __all__ = ["Param", "FitModel", "FIT_MODELS", "FitData", "FitResult", "BinRule", "bin_rule",
-           "fit_model", "fit_all", "model_bin_values"]
+           "fit_model", "fit_all", "model_bin_values", "DiskFit", "fit_edwards_disk"]
 
 
 # --- parameters and models ----------------------------------------------------------------------
@@ -293,7 +296,7 @@ def model_bin_values(model: FitModel, params: Mapping[str, float], ior, theta_i,
                      bins: Bins, rtol: float = 1e-3) -> np.ndarray:
     """Accurate bin averages (T, Θ, Φ) of ``model`` with ``params`` (``predict.bin_average``)."""
     fn = model.make(params, ior)
-    return np.stack([bin_average(fn, _checks.spherical_deg(t, p), bins, p, rtol).values
+    return np.stack([bin_average(_checks.spherical_deg(t, p), bins, fn, p, rtol).values
                      for t, p in zip(np.atleast_1d(theta_i), np.atleast_1d(phi_i))])
 
 
@@ -340,3 +343,71 @@ def fit_all(result, ior, names: Sequence[str] = tuple(FIT_MODELS), quick: bool =
     n_starts, max_nfev = (2, 60) if quick else (4, 300)
     return {n: fit_model(n, data, ior, n_starts=n_starts, seed=seed, max_nfev=max_nfev)
             for n in names}
+
+
+# --- Edwards' halfway disk at one viewing direction ----------------------------------------------
+@dataclass(frozen=True)
+class DiskFit:
+    """Edwards data-fitting BRDF fitted at one viewing direction (orthogonal projection) by
+    ``fit_edwards_disk``.
+
+    ``params`` (``EdwardsParams``: cd = 0, f0 = f90 = F(θo) since at a single θo only the product
+    F·p is identifiable), ``grid_uv`` (M, 2) cell centres, ``density`` (M,) simulated disk density
+    per unit area (= f, Edwards eq. 24), ``cost`` (½Σ residual², residuals in standard errors)."""
+
+    params: object
+    grid_uv: np.ndarray
+    density: np.ndarray
+    cost: float
+
+
+def fit_edwards_disk(wo, uv: np.ndarray, weight: np.ndarray, rays: int, cells: int = 40) -> DiskFit:
+    """Least-squares fit of the Edwards data-fitting BRDF (Edwards et al. 2006, eq. 34–36,
+    orthogonal projection) at one viewing direction ``wo`` (unit vector) to the weighted disk
+    histogram of simulated half vectors (the ``microsim view --what disk`` contours).
+
+    ``uv`` (K, 2) orthogonal-projection points of single-bounce escaping rays, ``weight`` (K,)
+    their Fresnel weights, ``rays`` primary rays traced. Σw/N over a disk region equals
+    ∫ f cos θi dω_i = ∫ f du dv (orthogonal: du dv = cos θi dω_i), so the histogram density per
+    unit area is f itself. Cells: a square grid over [−R, R]² (R from the 99.5% radius of the
+    points) keeping cells inside the disk; residuals are divided by the cells' standard errors.
+    """
+    wo = np.asarray(wo, dtype=np.float64)
+    centre = an.disk_centre(wo)
+    rad = np.linalg.norm(uv, axis=1)
+    R = float(min(1.0 + np.linalg.norm(centre), max(1.5 * np.quantile(rad, 0.995), 1e-3)))
+    edges = np.linspace(-R, R, cells + 1)
+    s, _, _ = np.histogram2d(uv[:, 0], uv[:, 1], [edges, edges], weights=weight)
+    s2, _, _ = np.histogram2d(uv[:, 0], uv[:, 1], [edges, edges], weights=weight ** 2)
+    area = (edges[1] - edges[0]) ** 2
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    U, V = np.meshgrid(mid, mid, indexing="ij")
+    grid = np.stack([U.ravel(), V.ravel()], axis=1)
+    half_diag = (edges[1] - edges[0]) / np.sqrt(2)
+    inside = np.linalg.norm(grid - centre, axis=1) + half_diag <= 1.0
+    dens = (s.ravel() / (rays * area))[inside]
+    var = np.maximum(s2.ravel() / rays - (s.ravel() / rays) ** 2, 0.0) / (rays - 1) / area ** 2
+    floor = np.max(weight) / (rays * area)             # one ray's worth: empty cells count
+    sigma = np.sqrt(var[inside] + floor ** 2)
+    grid = grid[inside]
+    r2 = float(np.sum(weight * np.sum(uv * uv, axis=1)) / max(np.sum(weight), 1e-300))
+    r1 = 1.2 * float(np.quantile(rad, 0.99)) + 1e-3
+    n1 = max(r1 * r1 / max(r2, 1e-12) - 2.0, 0.0)     # E[r²] = R²/(n+2) for the lump (eq. 26)
+    F0 = float(np.sum(weight) / rays)
+    lo, hi = an.EdwardsParams.bounds()
+    names = an.EdwardsParams.names()
+    idx = [names.index(k) for k in ("k", "r1", "n1", "r2", "n2")]
+    x0 = np.array([min(max(F0, 1e-3), 1.0), 0.1, min(r1, 4.0), min(n1, 1e4), min(2 * r1, 4.0), 1.0])
+    lower = np.concatenate([[0.0], lo[idx]])
+    upper = np.concatenate([[1.0], hi[idx]])
+
+    def params(x):
+        return an.EdwardsParams(cd=0.0, f0=x[0], f90=x[0], k=x[1], r1=x[2], n1=x[3], r2=x[4],
+                                n2=x[5])
+
+    def resid(x):
+        return (x[0] * params(x).lumps().pdf(wo, grid) - dens) / sigma
+
+    fit = optimize.least_squares(resid, np.clip(x0, lower, upper), bounds=(lower, upper),
+                                 x_scale="jac", max_nfev=400)
+    return DiskFit(params=params(fit.x), grid_uv=grid, density=dens, cost=float(fit.cost))

@@ -1,0 +1,7 @@
+"""``python -m microsim.view SCENE [options]`` (same options as ``microsim view``)."""
+import sys
+
+from .command import main
+
+if __name__ == "__main__":
+    sys.exit(main())
