@@ -1,9 +1,12 @@
-"""Report charts: each writes a PNG of the stated pixel size, not blank, showing the simulation's
-and the models' colours, atomically (no temporary leftovers; an existing file replaced whole)."""
+"""Report charts: each returns its Figure and writes a PNG of the stated pixel size, not blank,
+showing the simulation's and the models' colours, atomically (no temporary leftovers; an existing
+file replaced whole); with ``ax=`` a chart draws into the caller's axes, with ``path=None`` it
+writes nothing."""
 import os
 
 import matplotlib.figure
 import matplotlib.image
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 import numpy as np
 import pytest
 
@@ -94,7 +97,8 @@ def test_model_colours_fixed_distinct_and_never_the_simulation_colour():
 
 def test_inplane_curves(run, tmp_path):
     res, models = run
-    p = ch.inplane_curves(res, models, tmp_path / "inplane.png", "tiny V-grooves")
+    p = tmp_path / "inplane.png"
+    ch.inplane_curves(res, models, p, "tiny V-grooves")
     check_png(p, ch.figure_size("inplane", len(res.theta_i)),
               [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS])
     assert count_colour(load(p), ch.model_colour("ts-smith")) == 0     # a model not drawn
@@ -103,7 +107,8 @@ def test_inplane_curves(run, tmp_path):
 def test_hemisphere_maps_best_and_worst(run, tmp_path):
     res, models = run
     verdicts = verdicts_of(res, models)
-    p = ch.hemisphere_maps(res, models, verdicts, tmp_path / "hemi.png", 1, scene_name="tiny")
+    p = tmp_path / "hemi.png"
+    ch.hemisphere_maps(res, models, verdicts, p, 1, scene_name="tiny")
     check_png(p, ch.figure_size("hemisphere_maps"),
               [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS])
     # nested containers (per incidence, per model) are accepted as well
@@ -140,11 +145,11 @@ def test_energy_chart(run, tmp_path):
     rho = res.ledger["single_fresnel"]
     err = np.sqrt(rho * (1 - rho) / res.rays)
     lost = {"masked": res.ledger["masked_fresnel"], "downward": res.ledger["downward_fresnel"]}
-    p = ch.energy_chart(res.theta_i, rho, err, rho_models, lost, tmp_path / "energy.png",
-                        scene_name="tiny")
+    p = tmp_path / "energy.png"
+    ch.energy_chart(res.theta_i, rho, err, rho_models, lost, p, scene_name="tiny")
     check_png(p, ch.figure_size("energy"), [ch.SIM_COLOUR, ch.model_colour("ts-vgroove")])
-    p = ch.energy_chart(res.theta_i, rho, err, rho_models, res.ledger["lost_fresnel"],
-                        tmp_path / "energy2.png")
+    p = tmp_path / "energy2.png"
+    ch.energy_chart(res.theta_i, rho, err, rho_models, res.ledger["lost_fresnel"], p)
     check_png(p, ch.figure_size("energy"), [ch.SIM_COLOUR])
 
 
@@ -163,7 +168,8 @@ def test_mikkelsen_fig6(tmp_path):
             curves.append({"label": f"{mat} κ={kappa}", "theta": g, "one_minus_rho_model": one_minus,
                            "fresnel_T": ft, "sim_theta": sim_t, "sim_one_minus_rho": sim,
                            "sim_err": np.full_like(sim, 0.01)})
-    p = ch.mikkelsen_fig6(curves, tmp_path / "fig6.png")
+    p = tmp_path / "fig6.png"
+    ch.mikkelsen_fig6(curves, p)
     check_png(p, ch.figure_size("mikkelsen_fig6", 2),
               [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"), ch.model_colour("κ=1024")])
     assert ch._series_of(curves[0]) == "κ=17" and ch._material_of(curves[-1]) == "aluminium"
@@ -172,7 +178,8 @@ def test_mikkelsen_fig6(tmp_path):
 def test_speed_accuracy(tmp_path):
     t = np.geomspace(0.5, 50.0, 6)
     runs = {"stratified": (t, 0.01 / np.sqrt(t)), "independent": (t * 1.2, 0.03 / np.sqrt(t))}
-    p = ch.speed_accuracy(runs, tmp_path / "speed.png")
+    p = tmp_path / "speed.png"
+    ch.speed_accuracy(runs, p)
     check_png(p, ch.figure_size("speed_accuracy"),
               [ch.model_colour("stratified"), ch.model_colour("independent")])
 
@@ -181,7 +188,8 @@ def test_stability_chart_and_fail_ranges(tmp_path):
     th = np.arange(0.0, 90.0, 1.0)
     rel = {"ts-vgroove": 0.003 + 0.2 * np.exp((th - 89) / 6), "ts-smith": np.full_like(th, 0.004)}
     warnings = ["unresolved rays at grazing incidence", "lobe narrower than a bin"]
-    p = ch.stability_chart(th, rel, tmp_path / "stab.png", warnings)
+    p = tmp_path / "stab.png"
+    ch.stability_chart(th, rel, p, warnings)
     check_png(p, ch.figure_size("stability", len(warnings)),
               [ch.model_colour("ts-vgroove"), ch.model_colour("ts-smith")])
     e = np.array([0.01, 0.06, 0.07, 0.01, np.nan, 0.2])
@@ -212,3 +220,50 @@ def test_existing_file_replaced_whole_and_kept_on_failure(tmp_path, monkeypatch)
 def test_figure_size_rejects_unknown_chart():
     with pytest.raises(ValueError, match="chart"):
         ch.figure_size("pie")
+
+
+def _agg_figure(size=(8.0, 6.0)):
+    fig = matplotlib.figure.Figure(figsize=size, dpi=ch.DPI)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def test_charts_return_the_figure_and_draw_into_given_axes(run, tmp_path):
+    """path=None writes nothing and returns a Figure; ax= draws into the caller's axes (the
+    caller's figure is returned, the panels get the chart's content)."""
+    res, models = run
+    fig = ch.inplane_curves(res, models)
+    assert isinstance(fig, matplotlib.figure.Figure) and fig.axes
+    assert ch.speed_accuracy({"stratified": ([1.0, 4.0], [0.1, 0.05])}).axes[0].get_xscale() == "log"
+    assert not os.listdir(tmp_path)
+
+    mine = _agg_figure()
+    axes = mine.subplots(1, 2)
+    assert ch.inplane_curves(res, models, ax=axes) is mine
+    assert [a.get_yscale() for a in axes] == ["log", "log"]
+    assert axes[1].get_title() == f"θi = {res.theta_i[1]:g}°"
+
+    polar = _agg_figure((13.0, 8.6))
+    hemi = polar.subplots(2, 3, subplot_kw={"projection": "polar"})
+    out = tmp_path / "hemi-ax.png"
+    assert ch.hemisphere_maps(res, models, verdicts_of(res, models), out, 1, ax=hemi) is polar
+    check_png(out, (13.0, 8.6), [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS])
+
+    g = np.linspace(0.0, 89.0, 30)
+    pair = _agg_figure().subplots(1, 2)
+    ch.energy_chart(res.theta_i, res.ledger["single_fresnel"], np.zeros(2),
+                    {"ts-vgroove": (g, np.ones_like(g))}, res.ledger["lost_fresnel"], ax=pair)
+    assert pair[0].get_ylabel().startswith("ρ")
+    three = _agg_figure().subplots(3, 1)
+    ch.stability_chart(g, {"ts-vgroove": 0.01 + g / 900}, ax=three, warnings=["note"])
+    assert three[1].get_title().startswith("θi where")
+    assert not [p for p in os.listdir(tmp_path) if p != "hemi-ax.png"]
+
+
+def test_given_axes_are_checked(run):
+    res, models = run
+    with pytest.raises(ValueError, match="ax must be 2"):
+        ch.inplane_curves(res, models, ax=_agg_figure().subplots(1, 3))
+    with pytest.raises(ValueError, match="polar"):
+        ch.hemisphere_maps(res, models, verdicts_of(res, models), t_index=1,
+                           ax=_agg_figure().subplots(2, 3))

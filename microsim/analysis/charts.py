@@ -1,8 +1,12 @@
-"""Report charts (issue 5): pure functions from plain arrays / a ``Result`` to a PNG file.
+"""Report charts: pure functions from plain arrays / a ``Result`` to a matplotlib Figure.
 
-Every chart builds its own ``matplotlib.figure.Figure`` (Agg canvas, no pyplot, no global
-state), writes the PNG atomically (temporary file in the target directory, then ``os.replace``)
-and returns the path. The image is exactly ``figsize × DPI`` pixels (no tight bounding box).
+Every chart returns its ``matplotlib.figure.Figure``, so it shows inline in a notebook. By
+default it builds its own Figure (Agg canvas, no pyplot, no global state) of exactly
+``figure_size(...)`` × ``DPI`` pixels (no tight bounding box); ``ax=`` draws into the caller's
+Axes instead (one Axes, or a sequence for a multi-panel chart, as each chart says; the caller's
+figure then keeps its own title and layout). With ``path`` the figure is also written as a PNG,
+atomically (temporary file in the target directory, then ``os.replace``); ``path=None`` writes
+nothing.
 
 Conventions: angles in degrees, BRDFs in sr⁻¹, Δφ = φo − φi (mirror direction at Δφ = 180°).
 Colours are fixed per name (``model_colour``) so a model looks the same in every chart; the
@@ -15,10 +19,11 @@ import math
 import os
 import textwrap
 import zlib
-from typing import Iterable, Mapping
+from typing import Iterable, Mapping, Sequence
 
 import matplotlib as mpl
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm, TwoSlopeNorm
 from matplotlib.figure import Figure
@@ -84,11 +89,22 @@ def _figure(size: tuple[float, float]) -> Figure:
     return fig
 
 
-def _save(fig: Figure, path) -> str:
-    """Write ``fig`` as PNG to ``path`` atomically; return ``path`` as str."""
-    with atomic_open(path, "wb") as fh:
-        fig.savefig(fh, format="png", dpi=DPI)
-    return os.fspath(path)
+def _output(fig: Figure, path) -> Figure:
+    """Write ``fig`` as PNG to ``path`` atomically (unless ``path`` is None); return ``fig``."""
+    if path is not None:
+        with atomic_open(os.fspath(path), "wb") as fh:
+            fig.savefig(fh, format="png", dpi=DPI)
+    return fig
+
+
+def _given_axes(ax, n: int, chart: str, what: str) -> list | None:
+    """The caller's ``ax`` as a list of ``n`` Axes (None: the chart makes its own figure)."""
+    if ax is None:
+        return None
+    axes = [ax] if isinstance(ax, Axes) else list(np.ravel(np.asarray(ax, dtype=object)))
+    if len(axes) != n or not all(isinstance(a, Axes) for a in axes):
+        raise UsageError(f"{chart}: ax must be {n} matplotlib Axes ({what}), got {ax!r}")
+    return axes
 
 
 def _title(prefix: str, text: str) -> str:
@@ -127,13 +143,15 @@ def _in_plane_slice(a: np.ndarray, bins) -> np.ndarray:
     return np.concatenate([a[:, ::-1, bins.backward_index], a[:, :, bins.forward_index]], axis=1)
 
 
-def inplane_curves(result, models: Mapping[str, np.ndarray], path, scene_name: str = "") -> str:
-    """In-plane scattering curves, one panel per incidence (as Löw Figs. 3 and 12).
+def inplane_curves(result, models: Mapping[str, np.ndarray], path=None, scene_name: str = "", *,
+                   ax=None) -> Figure:
+    """In-plane scattering curves, one panel per incidence (as Löw et al. 2012, Figs. 3 and 12).
 
     x: signed θo in degrees (specular side Δφ = 180° positive, backward side Δφ = 0° negative);
     y: bin-averaged BRDF in sr⁻¹, log scale. Simulation: points with ±1 standard-error bars;
     models (name → (T, Θ, Φ) bin averages on ``result.bins``): constant over each bin (steps).
     The mirror direction θo = +θi is marked. Bins with zero value are not drawn (log axis).
+    ``ax``: one Axes per incidence (the legend then goes in the first).
     """
     bins = result.bins
     ip = result.in_plane()
@@ -141,12 +159,16 @@ def inplane_curves(result, models: Mapping[str, np.ndarray], path, scene_name: s
     edges = np.concatenate([-te[::-1], te[1:]])
     curves = {name: _in_plane_slice(m, bins) for name, m in models.items()}
     n_t = len(result.theta_i)
-    rows, cols = _grid(n_t)
-    fig = _figure(figure_size("inplane", n_t))
-    axes = fig.subplots(rows, cols, squeeze=False, sharey=True)
+    given = _given_axes(ax, n_t, "inplane_curves", "one per incidence")
+    if given is None:
+        rows, cols = _grid(n_t)
+        fig = _figure(figure_size("inplane", n_t))
+        axes = list(fig.subplots(rows, cols, squeeze=False, sharey=True).flat)
+    else:
+        rows, cols, axes, fig = 1, n_t, given, given[0].figure
     lo, hi = _log_limits([ip.brdf] + [c for c in curves.values()], 1e-6)
     for t in range(rows * cols):
-        ax = axes.flat[t]
+        ax = axes[t]
         if t >= n_t:
             ax.set_visible(False)
             continue
@@ -169,10 +191,13 @@ def inplane_curves(result, models: Mapping[str, np.ndarray], path, scene_name: s
         if t % cols == 0:
             ax.set_ylabel("BRDF (sr⁻¹)")
         ax.grid(True, which="major", alpha=0.3)
-    handles, labels = axes.flat[0].get_legend_handles_labels()
+    if given is not None:
+        axes[0].legend(fontsize=8)
+        return _output(fig, path)
+    handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="outside right upper")   # never over the data
     fig.suptitle(_title(scene_name, "in-plane scattering (bin averages)"))
-    return _save(fig, path)
+    return _output(fig, path)
 
 
 # --- 2. hemisphere maps ----------------------------------------------------------------------
@@ -214,8 +239,8 @@ def _unfold(values: np.ndarray, bins) -> tuple[np.ndarray, np.ndarray]:
     return np.radians(edges), np.concatenate([values[:, ::-1], values], axis=1)
 
 
-def _polar_panel(fig, spec, values, bins, theta_i, norm, cmap, title, colour):
-    ax = fig.add_subplot(spec, projection="polar")
+def _polar_panel(ax, values, bins, theta_i, norm, cmap, title, colour):
+    """Draw the (Θ, Φ) map ``values`` on the polar Axes ``ax``: (ax, its QuadMesh)."""
     ang, v = _unfold(values, bins)
     r = np.sin(np.radians(bins.theta_edges))
     cm = cmap.with_extremes(bad="0.85")
@@ -237,13 +262,16 @@ def _polar_panel(fig, spec, values, bins, theta_i, norm, cmap, title, colour):
     return ax, mesh
 
 
-def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path, t_index: int,
-                    scene_name: str = "") -> str:
+def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path=None,
+                    t_index: int = 0, scene_name: str = "", *, ax=None) -> Figure:
     """Polar maps at incidence ``t_index``: r = sin θo, angle = Δφ (folded grids mirrored),
     of the simulation, the best and the worst model by ``rel_rms`` (shared log colour scale,
     sr⁻¹), and the z-scores (sim − model)/stderr of both (diverging, symmetric, ±5 marked;
     bins without events grey). ``verdicts``: verdict dicts (keys theta_i, model, rel_rms,
     chi2_dof, max_abs_z, agrees, …) in any list/dict nesting. The mirror direction is circled.
+    ``ax``: six Axes in the 2 × 3 layout of the PNG, row by row — simulation, best, worst
+    (polar), verdict table, z of best, z of worst (polar); those of the worst model stay empty
+    when one model is shown.
     """
     n_t = len(result.theta_i)
     if not (0 <= int(t_index) < n_t):
@@ -265,18 +293,32 @@ def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path, t_
     zlim = Z_LIMIT
     znorm = TwoSlopeNorm(vcenter=0.0, vmin=-zlim, vmax=zlim)
 
-    fig = _figure(figure_size("hemisphere_maps"))
-    gs = fig.add_gridspec(2, 3)
-    ax, mesh = _polar_panel(fig, gs[0, 0], sim, result.bins, theta_i, norm,
+    given = _given_axes(ax, 6, "hemisphere_maps", "simulation, best, worst, table, z best, "
+                                                  "z worst")
+    if given is None:
+        fig = _figure(figure_size("hemisphere_maps"))
+        gs = fig.add_gridspec(2, 3)
+    else:
+        fig = given[0].figure
+        for k in (0, 1, 2, 4, 5):
+            if given[k].name != "polar":
+                raise UsageError(f"hemisphere_maps: ax[{k}] must be a polar Axes")
+
+    def panel(row: int, col: int, polar: bool = True) -> Axes:
+        if given is not None:
+            return given[3 * row + col]
+        return fig.add_subplot(gs[row, col], **({"projection": "polar"} if polar else {}))
+
+    ax, mesh = _polar_panel(panel(0, 0), sim, result.bins, theta_i, norm,
                             mpl.colormaps["viridis"], "simulation", SIM_COLOUR)
     brdf_axes, z_axes = [ax], []
     for j, v in enumerate(shown):
         role = "best" if v is best else "worst"
         col = model_colour(v["model"])
-        brdf_axes.append(_polar_panel(fig, gs[0, j + 1], _positive(maps[v["model"]]), result.bins,
+        brdf_axes.append(_polar_panel(panel(0, j + 1), _positive(maps[v["model"]]), result.bins,
                                       theta_i, norm, mpl.colormaps["viridis"],
                                       f"{role}: {v['model']}", col)[0])
-        zax, zmesh = _polar_panel(fig, gs[1, j + 1], zs[v["model"]], result.bins, theta_i, znorm,
+        zax, zmesh = _polar_panel(panel(1, j + 1), zs[v["model"]], result.bins, theta_i, znorm,
                                   mpl.colormaps["RdBu_r"], f"z = (sim − {v['model']}) / σ", col)
         _mark_z5(zax, zs[v["model"]], result.bins)
         z_axes.append(zax)
@@ -288,15 +330,19 @@ def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path, t_
     for s in (-5.0, 5.0):
         zcb.ax.axhline(s, color="k", lw=1.5)
     zcb.set_ticks(sorted({-zlim, -5.0, 0.0, 5.0, zlim}))
-    tax = fig.add_subplot(gs[1, 0])
+    tax = panel(1, 0, polar=False)
     tax.axis("off")
     tax.text(0.0, 1.0, _verdict_table(sel), family="monospace", fontsize=8, va="top",
              transform=tax.transAxes)
     tax.text(0.0, 0.0, "r = sin θo, angle = Δφ (mirrored from the folded half)\n"
              "○ mirror direction; black contour |z| = 5; grey: no events",
              fontsize=8, va="bottom", transform=tax.transAxes)
-    fig.suptitle(_title(scene_name, f"hemisphere at θi = {theta_i:g}°"))
-    return _save(fig, path)
+    if given is None:
+        fig.suptitle(_title(scene_name, f"hemisphere at θi = {theta_i:g}°"))
+    elif len(shown) == 1:
+        given[2].axis("off")
+        given[5].axis("off")
+    return _output(fig, path)
 
 
 def _mark_z5(ax, z, bins):
@@ -321,17 +367,21 @@ def _verdict_table(sel: list[dict]) -> str:
 
 
 # --- 3. energy ------------------------------------------------------------------------------
-def energy_chart(theta_i, rho_sim, rho_sim_err, rho_models: Mapping[str, tuple], lost_sim, path,
-                 scene_name: str = "") -> str:
+def energy_chart(theta_i, rho_sim, rho_sim_err, rho_models: Mapping[str, tuple], lost_sim,
+                 path=None, scene_name: str = "", *, ax=None) -> Figure:
     """Single-bounce albedo ρ(θi) (Mikkelsen eq. 27) of the simulation (points, ±1σ) against
     each model's ρ (name → (θ grid in deg, ρ)), and, on a second panel, the fraction of the
     incident energy single scattering loses: ``lost_sim`` either an array over θi or a dict
     name → array (e.g. masked, downward; their sum is drawn as "total"). Fractions of incident
-    power, dimensionless.
+    power, dimensionless. ``ax``: two Axes (albedo, energy lost).
     """
     th = np.asarray(theta_i, dtype=np.float64)
-    fig = _figure(figure_size("energy"))
-    ax, bx = fig.subplots(1, 2)
+    given = _given_axes(ax, 2, "energy_chart", "albedo, energy lost")
+    if given is None:
+        fig = _figure(figure_size("energy"))
+        ax, bx = fig.subplots(1, 2)
+    else:
+        (ax, bx), fig = given, given[0].figure
     for name, (grid, rho) in rho_models.items():
         ax.plot(np.asarray(grid, float), np.asarray(rho, float), color=model_colour(name), lw=1.6,
                 label=name)
@@ -361,8 +411,9 @@ def energy_chart(theta_i, rho_sim, rho_sim_err, rho_models: Mapping[str, tuple],
         a.set_xlim(0, 90)
         a.set_xticks(np.arange(0, 91, 15))
         a.grid(True, alpha=0.3)
-    fig.suptitle(_title(scene_name, "energy"))
-    return _save(fig, path)
+    if given is None:
+        fig.suptitle(_title(scene_name, "energy"))
+    return _output(fig, path)
 
 
 # --- 4. Mikkelsen Fig. 6(c)(d) -----------------------------------------------------------------
@@ -378,22 +429,26 @@ def _series_of(curve: Mapping) -> str:
     return " ".join(rest)
 
 
-def mikkelsen_fig6(curves: list[Mapping], path, title: str = "") -> str:
-    """Mikkelsen Fig. 6(c)(d): 1 − ρ(θ) (ρ of eq. 27, vMF NDF) and the Fresnel transmittance
+def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None) -> Figure:
+    """Mikkelsen 2009, Fig. 6(c)(d): 1 − ρ(θ) (ρ of eq. 27, vMF NDF) and the Fresnel transmittance
     Ft(θ) = 1 − F(θ) against θ (deg), one panel per material side by side.
 
     ``curves``: dicts {label, theta, one_minus_rho_model, fresnel_T, sim_theta,
     sim_one_minus_rho, sim_err} (optional "material"; otherwise the label's first word, e.g.
     "methanol κ=17"). Model: line in ``model_colour(label)``; simulation: points ±1σ.
-    As in the paper, 1 − ρ approaches Ft as κ grows.
+    As in the paper, 1 − ρ approaches Ft as κ grows. ``ax``: one Axes per material.
     """
     groups: dict[str, list] = {}
     for c in curves:
         groups.setdefault(_material_of(c), []).append(c)
     if not groups:
         raise UsageError("curves must hold at least one curve dict")
-    fig = _figure(figure_size("mikkelsen_fig6", len(groups)))
-    axes = fig.subplots(1, len(groups), squeeze=False)[0]
+    given = _given_axes(ax, len(groups), "mikkelsen_fig6", "one per material")
+    if given is None:
+        fig = _figure(figure_size("mikkelsen_fig6", len(groups)))
+        axes = fig.subplots(1, len(groups), squeeze=False)[0]
+    else:
+        axes, fig = given, given[0].figure
     markers = ("o", "s", "^", "D", "v", "P")
     for ax, (material, group) in zip(axes, groups.items()):
         c0 = group[0]
@@ -420,18 +475,24 @@ def mikkelsen_fig6(curves: list[Mapping], path, title: str = "") -> str:
         ax.set_ylabel("fraction of incident power")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="lower left")
-    fig.suptitle(_title(title, "Mikkelsen Fig. 6(c)(d): 1 − ρ(θ) vs Fresnel transmittance"))
-    return _save(fig, path)
+    if given is None:
+        fig.suptitle(_title(title, "Mikkelsen Fig. 6(c)(d): 1 − ρ(θ) vs Fresnel transmittance"))
+    return _output(fig, path)
 
 
 # --- 5. speed vs accuracy ------------------------------------------------------------------------
-def speed_accuracy(runs: Mapping[str, tuple], path, title: str = "",
-                   error_label: str = "error (relative RMS)") -> str:
+def speed_accuracy(runs: Mapping[str, tuple], path=None, title: str = "",
+                   error_label: str = "error (relative RMS)", *, ax=None) -> Figure:
     """Error against wall time (s), log–log, per estimator variant (name → (wall_times, errors)),
     each with a dotted 1/√t reference anchored at the variant's first point (Monte Carlo rate).
+    ``ax``: one Axes.
     """
-    fig = _figure(figure_size("speed_accuracy"))
-    ax = fig.subplots()
+    given = _given_axes(ax, 1, "speed_accuracy", "one")
+    if given is None:
+        fig = _figure(figure_size("speed_accuracy"))
+        ax = fig.subplots()
+    else:
+        ax, fig = given[0], given[0].figure
     for k, (name, (times, errors)) in enumerate(runs.items()):
         t = np.asarray(times, float)
         e = np.asarray(errors, float)
@@ -449,7 +510,7 @@ def speed_accuracy(runs: Mapping[str, tuple], path, title: str = "",
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(_title(title, "speed vs accuracy"))
-    return _save(fig, path)
+    return _output(fig, path)
 
 
 # --- 6. stability ----------------------------------------------------------------------------------
@@ -461,21 +522,26 @@ def _fail_ranges(th: np.ndarray, err: np.ndarray, threshold: float) -> list[tupl
     return [(float(th[a]), float(th[b])) for a, b in zip(starts, ends)]
 
 
-def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path, warnings: list[str],
-                    title: str = "") -> str:
+def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path=None,
+                    warnings: Sequence[str] = (), title: str = "", *, ax=None) -> Figure:
     """Relative error of each closed form against θi ∈ [0°, 89°] (log y); the region above
     ``FAIL_THRESHOLD`` (5 %) is shaded and each model's failing θi ranges are drawn as a
     coloured bar under the plot. Estimator ``warnings`` are printed as text notes below.
+    ``ax``: three Axes (errors, failing ranges, notes).
     """
     th = np.asarray(theta_i, dtype=np.float64)
     notes = [textwrap.fill("• " + str(w), 120) for w in warnings] or ["• no estimator warnings"]
     n_lines = sum(n.count("\n") + 1 for n in notes)
-    fig = _figure(figure_size("stability", n_lines))
-    gs = fig.add_gridspec(3, 1, height_ratios=[5.0, 0.25 * max(1, len(rel_err)),
-                                               0.22 * n_lines + 0.2])
-    ax = fig.add_subplot(gs[0])
-    bar = fig.add_subplot(gs[1], sharex=ax)
-    txt = fig.add_subplot(gs[2])
+    given = _given_axes(ax, 3, "stability_chart", "errors, failing ranges, notes")
+    if given is None:
+        fig = _figure(figure_size("stability", n_lines))
+        gs = fig.add_gridspec(3, 1, height_ratios=[5.0, 0.25 * max(1, len(rel_err)),
+                                                   0.22 * n_lines + 0.2])
+        ax = fig.add_subplot(gs[0])
+        bar = fig.add_subplot(gs[1], sharex=ax)
+        txt = fig.add_subplot(gs[2])
+    else:
+        (ax, bar, txt), fig = given, given[0].figure
     half = 0.5 * (np.median(np.diff(th)) if th.size > 1 else 1.0)   # half a θi step (bars)
     all_err = []
     for k, (name, e) in enumerate(rel_err.items()):
@@ -504,8 +570,9 @@ def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path, warnings: 
     bar.set_title(f"θi where the relative error exceeds {FAIL_THRESHOLD:.0%}", fontsize=8)
     bar.set_xlabel("θi (°)")
     bar.set_xticks([0, 15, 30, 45, 60, 75, 89])
+    bar.set_xlim(0, 89)
     bar.grid(True, axis="x", alpha=0.3)
     txt.axis("off")
     txt.text(0.0, 1.0, "Estimator notes:\n" + "\n".join(notes), fontsize=8, va="top",
              transform=txt.transAxes)
-    return _save(fig, path)
+    return _output(fig, path)
