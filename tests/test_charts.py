@@ -6,9 +6,9 @@ import os
 
 import matplotlib.figure
 import matplotlib.image
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 import numpy as np
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from microsim import analytic as an
 from microsim import surfaces as sf
@@ -165,13 +165,15 @@ def test_mikkelsen_fig6(tmp_path):
                                  n_grazing=4, n_gl_phi=4)
             one_minus = 1 - tab.rho(np.cos(np.radians(g)))
             sim = 1 - tab.rho(np.cos(np.radians(sim_t)))
-            curves.append({"label": f"{mat} κ={kappa}", "theta": g, "one_minus_rho_model": one_minus,
+            curves.append({"label": f"{mat} κ={kappa}", "theta": g,
+                           "one_minus_rho_model": one_minus,
                            "fresnel_T": ft, "sim_theta": sim_t, "sim_one_minus_rho": sim,
                            "sim_err": np.full_like(sim, 0.01)})
     p = tmp_path / "fig6.png"
     ch.mikkelsen_fig6(curves, p)
     check_png(p, ch.figure_size("mikkelsen_fig6", 2),
-              [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"), ch.model_colour("κ=1024")])
+              [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"),
+               ch.model_colour("κ=1024")])
     assert ch._series_of(curves[0]) == "κ=17" and ch._material_of(curves[-1]) == "aluminium"
 
 
@@ -234,7 +236,8 @@ def test_charts_return_the_figure_and_draw_into_given_axes(run, tmp_path):
     res, models = run
     fig = ch.inplane_curves(res, models)
     assert isinstance(fig, matplotlib.figure.Figure) and fig.axes
-    assert ch.speed_accuracy({"stratified": ([1.0, 4.0], [0.1, 0.05])}).axes[0].get_xscale() == "log"
+    speed = ch.speed_accuracy({"stratified": ([1.0, 4.0], [0.1, 0.05])})
+    assert speed.axes[0].get_xscale() == "log"
     assert not os.listdir(tmp_path)
 
     mine = _agg_figure()

@@ -21,17 +21,16 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from microsim import atomic, runner
-from microsim.runner import planning, tracing
 from microsim.analysis import charts
 from microsim.checkpoints import interrupt_at
 from microsim.cli import main
+from microsim.runner import planning, tracing
 
 TINY = """\
 name = "{name}"
@@ -512,7 +511,7 @@ def test_report_interrupt_keeps_previous_report_and_resumes(capsys, catalogue, p
         status, lines, err = run_cli(capsys, *opts)
     assert hit["fired"], f"no checkpoint({phase!r}) reached"
     assert status == 130 and "Traceback" not in err, err
-    last = [l for l in lines if "interrupted" in l]
+    last = [line for line in lines if "interrupted" in line]
     assert len(last) == 1 and "report --resume" in last[0], err
     if cut is not None:
         assert tree(rep / cut) == before[cut]                   # previous report intact
@@ -524,7 +523,8 @@ def test_report_interrupt_keeps_previous_report_and_resumes(capsys, catalogue, p
             assert meta["partial"] is (saved == "partial")
     status, lines, err = run_cli(capsys, *opts, "--resume")
     assert status == 0, err
-    finished = {l.split("] ")[1].split(":")[0] for l in lines if "finished earlier" in l}
+    finished = {line.split("] ")[1].split(":")[0] for line in lines
+                if "finished earlier" in line}
     order = ["tiny-a", "tiny-b"]
     assert finished == set(order[:order.index(cut)] if cut else order), err
     index = (rep / "index.md").read_text()

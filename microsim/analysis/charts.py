@@ -14,7 +14,6 @@ simulation is always drawn in ``SIM_COLOUR``.
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import math
 import os
 import textwrap
@@ -27,6 +26,8 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm, TwoSlopeNorm
 from matplotlib.figure import Figure
+
+from microsim.errors import UsageError
 
 from ..atomic import atomic_open
 
@@ -51,7 +52,8 @@ _FIXED = {
     "low-smooth": "#8c564b", "low-microfacet": "#9467bd", "rayleigh-rice": "#bcbd22",
     "edwards": "#393b79", "edwards-fit": "#393b79", "mikkelsen-mix": "#637939",
     "stratified": "#1f77b4", "independent": "#ff7f0e",
-    "κ=17": "#2ca02c", "κ=1024": "#1f77b4",     # Mikkelsen Fig. 6 has κ=1024 red: too close to SIM_COLOUR
+    # Mikkelsen Fig. 6 draws κ=1024 in red: too close to SIM_COLOUR
+    "κ=17": "#2ca02c", "κ=1024": "#1f77b4",
 }
 
 
@@ -513,9 +515,10 @@ def speed_accuracy(runs: Mapping[str, tuple], path=None, title: str = "",
     return _output(fig, path)
 
 
-# --- 6. stability ----------------------------------------------------------------------------------
+# --- 6. stability ----------------------------------------------------------------------------
 def _fail_ranges(th: np.ndarray, err: np.ndarray, threshold: float) -> list[tuple[float, float]]:
-    """Contiguous θi ranges (deg) where ``err`` exceeds ``threshold`` (NaN: undefined, not failing)."""
+    """Contiguous θi ranges (deg) where ``err`` exceeds ``threshold`` (NaN: undefined, not
+    failing)."""
     with np.errstate(invalid="ignore"):
         edge = np.diff(np.concatenate([[0], (err > threshold).astype(np.int8), [0]]))
     starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1) - 1

@@ -71,11 +71,12 @@ QUICK = Effort(max_rays=200_000, scale=(("vgrooves", 0.25), ("gaussian", 0.5), (
                fig6_theta=(0, 30, 50, 65, 75, 82, 89), fig6_rays=20_000,
                fit_names=("cook_torrance", "low_microfacet", "low_smooth"), sweep_facets=False,
                max_bins=(30, 37))
-"""``--quick``: ≤ 2e5 rays per incidence on at most 30 × 37 bins (3° in θo, 5° in Δφ); 1/4 of the V-grooves and half the heightfield grid
-(same dx, so the statistics stay, the tile shrinks); quick fits (2 starts) of Cook–Torrance and
-Löw's two models (the Edwards fit, 10–30 s a scene, only in full runs); a 6-angle sweep with
-2e5 rays on 30 × 37 bins without ``ts-facets``; coarser albedo tables (16 + 16 nodes in θ, 8 in
-φ: ρ within 1e-4 of the full table for vMF κ = 1024); speed runs at 1e4, 3e4 and 1e5 rays; Mikkelsen Fig. 6 at 7 angles with 2e4 rays."""
+"""``--quick``: ≤ 2e5 rays per incidence on at most 30 × 37 bins (3° in θo, 5° in Δφ); 1/4 of
+the V-grooves and half the heightfield grid (same dx, so the statistics stay, the tile shrinks);
+quick fits (2 starts) of Cook–Torrance and Löw's two models (the Edwards fit, 10–30 s a scene,
+only in full runs); a 6-angle sweep with 2e5 rays on 30 × 37 bins without ``ts-facets``;
+coarser albedo tables (16 + 16 nodes in θ, 8 in φ: ρ within 1e-4 of the full table for vMF
+κ = 1024); speed runs at 1e4, 3e4 and 1e5 rays; Mikkelsen Fig. 6 at 7 angles with 2e4 rays."""
 
 
 def effort_for(quick: bool) -> Effort:
@@ -156,7 +157,8 @@ def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=N
         theta_i = scene.simulation.theta_i
     theta_i = tuple(float(t) for t in theta_i)
     if not theta_i or not all(math.isfinite(t) and 0 <= t < 90 for t in theta_i):
-        raise UsageError(f"--theta-i must be angles in degrees, each in [0, 90), got {list(theta_i)}")
+        raise UsageError(f"--theta-i must be angles in degrees, each in [0, 90), "
+                         f"got {list(theta_i)}")
     seed = scene.simulation.seed if seed is None else seed
     Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)      # validates the grid
     previous = None

@@ -33,8 +33,16 @@ from ..errors import UsageError
 from . import side_studies, tracing
 from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress
-from .publishing import (REPORT_FILE, TIMINGS_FILE, VERDICTS_FILE, publish_dir, save_tallies,
-                         staging, timings_document, verdict_document)
+from .publishing import (
+    REPORT_FILE,
+    TIMINGS_FILE,
+    VERDICTS_FILE,
+    publish_dir,
+    save_tallies,
+    staging,
+    timings_document,
+    verdict_document,
+)
 
 __all__ = ["RunOutcome", "execute"]
 
@@ -50,7 +58,8 @@ class RunOutcome:
     ranking: tuple[str, ...] = ()
 
 
-def execute(plan: RunPlan, progress: bool = True, log: Callable[[str], None] | None = None) -> RunOutcome:
+def execute(plan: RunPlan, progress: bool = True,
+            log: Callable[[str], None] | None = None) -> RunOutcome:
     """Run a validated plan and write its directory (module docstring). The surface
     generators' UserWarnings are silenced: every surface warning is in meta.json and report.md.
     Holds ``atomic.output_lock(plan.out)`` throughout (a concurrent run on the same output is
@@ -202,7 +211,8 @@ def _charts(plan: RunPlan, stage: Path, result, shown, verdicts, ranking, sweep,
     # the sweep's own noise adds its floor² to every model's rel_rms² on average: subtract it
     # so the chart shows the model's error; a model whose excess is below the noise is not drawn
     floor2 = side_studies.noise_floor(sweep) ** 2
-    excess = {m: np.sqrt(np.where(r ** 2 > floor2, r ** 2 - floor2, np.nan)) for m, r in rel.items()}
+    excess = {m: np.sqrt(np.where(r ** 2 > floor2, r ** 2 - floor2, np.nan))
+              for m, r in rel.items()}
     notes = (["relative error = energy-weighted rel RMS with the sweep's own noise subtracted in "
               "quadrature; a missing point: not resolved above the noise"]
              + estimator_notes)

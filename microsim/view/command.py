@@ -51,7 +51,8 @@ def _window_size(text: str) -> tuple[int, int]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT, e.g. 1200x800, got {text!r}")
     if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise argparse.ArgumentTypeError(f"size must be between 16 and 8192 pixels per side, got {text!r}")
+        raise argparse.ArgumentTypeError(f"size must be between 16 and 8192 pixels per side, "
+                                         f"got {text!r}")
     return w, h
 
 

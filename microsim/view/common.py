@@ -143,7 +143,8 @@ def section(surface, grooves: int = 16, length: float = 0.5) -> Section:
     v[:, 1] = np.sign(v[:, 1]) * half                  # cut the grooves' length to the width
     return Section(v, inv.reshape(-1, 3).astype(np.int64),
                    (v[:, 0].min(), v[:, 0].max(), -half, half),
-                   f"zoomed section: {grooves} of {n} grooves, groove length cut (the profile is extruded)")
+                   f"zoomed section: {grooves} of {n} grooves, groove length cut (the profile "
+                   f"is extruded)")
 
 
 def section_mesh(sec: Section):

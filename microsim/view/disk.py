@@ -10,8 +10,17 @@ from .. import analytic as an
 from ..analysis.fits import DiskFit, fit_edwards_disk
 from ..analytic._checks import normalize, spherical_deg
 from ..sim import LEDGER, ray_events
-from .common import (DEFAULT_RAYS, DEFAULT_THETA, WINDOW, ascii_text, colour_key, plotter,
-                     pyvista, resolve, title)
+from .common import (
+    DEFAULT_RAYS,
+    DEFAULT_THETA,
+    WINDOW,
+    ascii_text,
+    colour_key,
+    plotter,
+    pyvista,
+    resolve,
+    title,
+)
 
 __all__ = ["view_disk"]
 
@@ -78,19 +87,20 @@ def view_disk(scene_or_surface, theta_o: float = DEFAULT_THETA["disk"],
                        render_points_as_spheres=True)
         where = "retro-reflection" if projection == "scaling" else "wi = n"
         title(p, f"{projection} projection (Edwards eq. {15 if projection == 'scaling' else 22})"
-                  f"\nblue: disk centre ({where})\nred: (u,v) = 0 (mirror)")
+              f"\nblue: disk centre ({where})\nred: (u,v) = 0 (mirror)")
         if col == 1:
             colour_key(p, [(f"fitted BRDF density: {100 * f:g}% of its peak", c_)
-                     for f, c_ in zip(CONTOUR_LEVELS, CONTOUR_COLOURS)])
+                           for f, c_ in zip(CONTOUR_LEVELS, CONTOUR_COLOURS)])
         p.view_xy()
         p.enable_parallel_projection()
         p.reset_camera()
         p.camera.zoom(1.25)
     q = fit.params
     p.subplot(0, 0)
-    p.add_text(ascii_text(f"{sc.name}, viewer θo = {theta_o:g}°\n{len(h)} single-bounce rays of "
-                      f"{int(rays)} ({len(show)} shown)\nEdwards fit (eq. 36, orthogonal disk):\n"
-                      f"F(θo) = {q.f0:.3f}, k = {q.k:.2f}, C_d = 0\n"
-                      f"lump 1: r = {q.r1:.3g}, n = {q.n1:.3g}\nlump 2: r = {q.r2:.3g}, "
-                      f"n = {q.n2:.3g}"), position="lower_left", font_size=10, color="black")
+    p.add_text(ascii_text(f"{sc.name}, viewer θo = {theta_o:g}°\n{len(h)} single-bounce rays "
+                          f"of {int(rays)} ({len(show)} shown)\n"
+                          f"Edwards fit (eq. 36, orthogonal disk):\n"
+                          f"F(θo) = {q.f0:.3f}, k = {q.k:.2f}, C_d = 0\n"
+                          f"lump 1: r = {q.r1:.3g}, n = {q.n1:.3g}\nlump 2: r = {q.r2:.3g}, "
+                          f"n = {q.n2:.3g}"), position="lower_left", font_size=10, color="black")
     return p

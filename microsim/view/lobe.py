@@ -11,8 +11,20 @@ from ..analytic._checks import spherical_deg
 from ..errors import UsageError
 from ..sim import Bins, simulate
 from ..sim.predict import ModelSpec, predict
-from .common import (COLOURS, DEFAULT_RAYS, DEFAULT_THETA, WINDOW, ascii_text, plotter,
-                     polar_surface, pyvista, resolve, scalar_bar, side_camera, title)
+from .common import (
+    COLOURS,
+    DEFAULT_RAYS,
+    DEFAULT_THETA,
+    WINDOW,
+    ascii_text,
+    plotter,
+    polar_surface,
+    pyvista,
+    resolve,
+    scalar_bar,
+    side_camera,
+    title,
+)
 
 __all__ = ["lobe_z", "view_lobe"]
 
@@ -52,8 +64,8 @@ def _directions(p, wi: np.ndarray, length: float = 1.25) -> None:
     pv = pyvista()
     mirror = np.array([-wi[0], -wi[1], wi[2]])
     for w, col in ((wi, COLOURS["incident"]), (mirror, COLOURS["mirror"])):
-        p.add_mesh(pv.Arrow(start=(0, 0, 0), direction=w, scale=length, tip_length=0.12, tip_radius=0.04,
-                            shaft_radius=0.012), color=col)
+        p.add_mesh(pv.Arrow(start=(0, 0, 0), direction=w, scale=length, tip_length=0.12,
+                            tip_radius=0.04, shaft_radius=0.012), color=col)
     p.add_mesh(pv.Circle(radius=1.0, resolution=120).extract_feature_edges(), color="#999999",
                line_width=1)
 
@@ -100,16 +112,17 @@ def view_lobe(scene_or_surface, theta_i: float = DEFAULT_THETA["lobe"],
                    scalar_bar_args=scalar_bar("z = (sim − model)/σ", vertical=False, position_x=0.3,
                                         position_y=0.1, width=0.6, height=0.08))
         title(p, f"{sc.name}: simulation\nθi = {theta_i:g}°, {int(res.rays[0])} rays, "
-                  f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})")
+              f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})")
     else:
         g = polar_surface(r_sim, bins.theta_centers, phi, _full_circle(sim, bins)[0], "f")
         p.add_mesh(g, scalars="f", cmap="viridis",
                    scalar_bar_args=scalar_bar("f (1/sr)"))
         title(p, f"{sc.name}: simulated BRDF\nθi = {theta_i:g}°, {int(res.rays[0])} rays "
-                  "(no analytic NDF: no model)")
+              "(no analytic NDF: no model)")
     _directions(p, wi)
-    p.add_text(ascii_text(f"{radius_txt}; peak of the {'model' if model is not None else 'simulation'}"
-                      f" f·cosθo = {peak:.3g} 1/sr\ngold: incident, grey: mirror"),
+    scale_from = "model" if model is not None else "simulation"
+    p.add_text(ascii_text(f"{radius_txt}; peak of the {scale_from}"
+                          f" f·cosθo = {peak:.3g} 1/sr\ngold: incident, grey: mirror"),
                position="lower_left", font_size=10, color="black")
     side_camera(p, 20.0, -20.0, 1.3)
     if model is not None:
@@ -119,6 +132,6 @@ def view_lobe(scene_or_surface, theta_i: float = DEFAULT_THETA["lobe"],
                    smooth_shading=True)
         _directions(p, wi)
         title(p, f"model: Torrance–Sparrow\n{type(sc.ndf).__name__} NDF, {shadow} G\n"
-                  "(same bins, same radius scale)")
+              "(same bins, same radius scale)")
         p.link_views()
     return p

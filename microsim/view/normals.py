@@ -4,8 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import (COLOURS, WINDOW, plotter, polar_surface, pyvista, resolve, scalar_bar,
-                     side_camera, tilt_deg, title)
+from .common import (
+    COLOURS,
+    WINDOW,
+    plotter,
+    polar_surface,
+    pyvista,
+    resolve,
+    scalar_bar,
+    side_camera,
+    tilt_deg,
+    title,
+)
 
 __all__ = ["view_normals"]
 
@@ -59,9 +69,11 @@ def view_normals(scene_or_surface, n_theta: int = 30, n_phi: int = 36, material=
         m = polar_surface(ndf_D * cos_c / peak, np.minimum(tc * scale_t, 90.0), pc)
         p.add_mesh(m, style="wireframe", color=COLOURS["model"], line_width=1.5)
     avg = " (azimuth-averaged grooves)" if sc.surface.azimuth_average else ""
-    title(p, f"{sc.name}: facet normals{avg} (surface)\nvs "
-              f"{'NDF ' + type(sc.ndf).__name__ + ' (green wireframe)' if ndf_D is not None else 'no analytic NDF'}"
-              f"\nradius: D cos θh / peak\npolar angle stretched ×{scale_t:.3g} (θh ≤ {theta_max:.3g}°)")
+    against = (f"NDF {type(sc.ndf).__name__} (green wireframe)" if ndf_D is not None
+               else "no analytic NDF")
+    title(p, f"{sc.name}: facet normals{avg} (surface)\nvs {against}"
+          f"\nradius: D cos θh / peak\npolar angle stretched ×{scale_t:.3g} "
+          f"(θh ≤ {theta_max:.3g}°)")
     side_camera(p, 20.0, -30.0, 1.2)
     p.subplot(0, 1)
     pv = pyvista()

@@ -10,9 +10,23 @@ import numpy as np
 from ..analytic._checks import spherical_deg
 from ..sim import Tracer
 from ..sim.tracer import ESCAPED, HIT
-from .common import (COLOURS, DEFAULT_RAYS, DEFAULT_THETA, WINDOW, Section, colour_key, outline,
-                     plotter, pyvista, resolve, section, section_mesh, side_camera, title,
-                     whole_tile)
+from .common import (
+    COLOURS,
+    DEFAULT_RAYS,
+    DEFAULT_THETA,
+    WINDOW,
+    Section,
+    colour_key,
+    outline,
+    plotter,
+    pyvista,
+    resolve,
+    section,
+    section_mesh,
+    side_camera,
+    title,
+    whole_tile,
+)
 
 __all__ = ["RayPaths", "trace_paths", "view_rays"]
 
@@ -119,8 +133,8 @@ def view_rays(scene_or_surface, theta_i: float = DEFAULT_THETA["rays"], phi_i: f
         key.append((f"{label}: {counts[kind]}", COLOURS[kind]))
     colour_key(p, key)
     title(p, f"{sc.name}: {len(paths.hit)} rays at θi = {theta_i:g}°, φi = {phi_i:g}°"
-              f"{' (across the grooves)' if sc.surface.kind == 'vgrooves' and phi_i == 0 else ''}"
-              f"\n{sec.note}")
+          f"{' (across the grooves)' if sc.surface.kind == 'vgrooves' and phi_i == 0 else ''}"
+          f"\n{sec.note}")
     side_camera(p, 8.0, -10.0, 1.3)
     return p
 

@@ -6,8 +6,19 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UsageError
-from .common import (COLOURS, WINDOW, outline, plotter, resolve, scalar_bar, section,
-                     section_mesh, side_camera, tilt_deg, title)
+from .common import (
+    COLOURS,
+    WINDOW,
+    outline,
+    plotter,
+    resolve,
+    scalar_bar,
+    section,
+    section_mesh,
+    side_camera,
+    tilt_deg,
+    title,
+)
 
 __all__ = ["view_surface"]
 
