@@ -219,7 +219,7 @@ def test_fresnel_callers_stay_in_range():
     for scale in (1.0, 1.0 + 0.9 * _checks.UNIT_TOL):
         for kind in ("smith", "vgroove"):
             val = an.torrance_sparrow(wi * scale, wo * scale, an.Beckmann(0.3), shadowing=kind,
-                                      ior="aluminium")
+                                      material="aluminium")
             assert np.all(np.isfinite(val))
 
 
