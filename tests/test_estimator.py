@@ -343,3 +343,14 @@ def test_independent_origins_agree_with_stratified_and_are_recorded():
     c = simulate(s, "aluminium", [30.0, 75.0], seed=2, origins="independent", threads=1,
                  chunk=BLOCK, **kw)
     assert np.array_equal(b.sum_w, c.sum_w)               # still bitwise reproducible
+
+
+def test_result_repr_is_one_short_line_that_says_what_was_run():
+    """A Result in a notebook prints its settings and albedo, not kilobytes of arrays."""
+    s = vgroove_surface([20.0, 35.0, 50.0, 10.0] * 8)
+    res = simulate(s, "aluminium", [0.0, 60.0], rays=2 * BLOCK, bins=Bins(9, 5), seed=1)
+    text = repr(res)
+    assert "\n" not in text and len(text) < 300
+    assert "θi=[0, 60]°" in text and "aluminium" in text and "PARTIAL" not in text
+    for a in res.albedo():
+        assert f"{a:.4g}" in text

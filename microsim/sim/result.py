@@ -73,6 +73,20 @@ class Result:
     rays_realisations: np.ndarray | None = None
     tallies: dict | None = None
 
+    def __repr__(self) -> str:
+        """One line: surface, material, incidences, rays, bins, albedo, models (no arrays)."""
+        surface = (self.meta.get("surface") or {}).get("kind", "?")
+        material = (self.meta.get("material") or {}).get("name") or "custom ior"
+        n_real = len(self.meta.get("realisations") or ()) or 1
+        theta = ", ".join(f"{t:g}" for t in self.theta_i)
+        rays = ", ".join(f"{int(r):,}" for r in self.rays)
+        albedo = ", ".join(f"{a:.4g}" for a in self.albedo())
+        state = " PARTIAL" if self.is_partial else ""
+        models = f", models=[{', '.join(self.models)}]" if self.models else ""
+        return (f"<Result{state} {surface}{f' ×{n_real}' if n_real > 1 else ''}, {material}, "
+                f"θi=[{theta}]°, rays=[{rays}], bins={self.bins.n_theta}×{self.bins.n_phi}, "
+                f"albedo=[{albedo}]{models}>")
+
     @property
     def is_partial(self) -> bool:
         """True for an interrupted run (resume it with ``simulate(..., resume=result)``)."""
