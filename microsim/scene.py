@@ -8,9 +8,9 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     description = "..."
     [surface]
     kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat
-    # vgrooves: n_grooves = 4000 (at most 1 000 000), ndf (required) = beckmann | ggx | blinn-phong | vmf | abc with
-    #           its parameter m | alpha | e | kappa | B and C (required), sampling = "stratified"
-    #           | "random", tile = 1.0
+    # vgrooves: n_grooves = 4000 (at most 1 000 000), ndf (required) = beckmann | ggx |
+    #           blinn-phong | vmf | abc with its parameter m | alpha | e | kappa | B and C
+    #           (required), sampling = "stratified" | "random", tile = 1.0
     # gaussian: n = 512 (8 … 4096), dx = 1.0, sigma, corr_len (required; corr_len >= dx and
     #           rms slope 2 sigma / corr_len <= 10), exact_amplitude = true
     # abc:      n = 512 (8 … 4096), dx = 1.0, sigma, B, C (required), band_limit = 4,
@@ -427,7 +427,8 @@ def describe_surface(scene_or_surface) -> str:
     head = []
     if isinstance(scene_or_surface, Scene):
         sc = scene_or_surface
-        head.append(f"scene {sc.name} ({sc.path})" + (f": {sc.description}" if sc.description else ""))
+        head.append(f"scene {sc.name} ({sc.path})"
+                    + (f": {sc.description}" if sc.description else ""))
         head.append(f"material ior: {_fmt(sc.ior) if sc.ior is not None else 'mirror (R = 1)'}")
         surf = sc.build_surface()
     else:
@@ -437,7 +438,8 @@ def describe_surface(scene_or_surface) -> str:
     lx, ly = st["tile_size"]
     head.append(f"surface {surf.kind}: tile {lx:g} x {ly:g}, {st['triangles']} triangles, "
                 f"{'periodic' if surf.periodic else 'not periodic'}"
-                + (f", grid {st['grid'][1]} x {st['grid'][0]}, dx {st['dx']:g}" if "grid" in st else ""))
+                + (f", grid {st['grid'][1]} x {st['grid'][0]}, dx {st['dx']:g}"
+                   if "grid" in st else ""))
     head.append("nominal: " + ", ".join(f"{k} = {_fmt(v)}" for k, v in nom.items()))
     rows = [("quantity", "measured", "predicted", "nominal")]
     if "rms_height" in st:

@@ -1,4 +1,4 @@
-"""Torrance–Sparrow, microfacet sampling, albedo (Mikkelsen eq. 27) and the eq. 28 mix."""
+"""Torrance–Sparrow, microfacet sampling, albedo (Mikkelsen 2009, eq. 27) and the eq. 28 mix."""
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -110,7 +110,7 @@ def test_albedo_of_lambertian_is_exact():
 
 
 def test_albedo_tends_to_fresnel_for_narrow_lobes():
-    """Mikkelsen §3: ρ(ω) → F(ω·n) as κ → ∞ (κ = 1024 already within 1e-3 at 30°)."""
+    """Mikkelsen 2009, §3: ρ(ω) → F(ω·n) as κ → ∞ (κ = 1024 already within 1e-3 at 30°)."""
     table = an.AlbedoTable(an.VonMisesFisher(1024.0), "vgroove", "aluminium", n_theta=7,
                            n_grazing=0)
     c = np.cos(np.radians(30.0))
@@ -174,7 +174,7 @@ def test_sample_microfacet_chi2(theta_o):
     assert p > ALPHA
 
 
-# --- Mikkelsen eq. 28 mix ------------------------------------------------------------------
+# --- Mikkelsen 2009, eq. 28 mix ------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def vmf_table():
     return an.AlbedoTable(an.VonMisesFisher(17.0), "vgroove", "methanol")

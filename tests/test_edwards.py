@@ -1,4 +1,4 @@
-"""Tests of the halfway-vector-disk models (Edwards et al., seed 002).
+"""Tests of the halfway-vector-disk models (Edwards et al. 2006).
 
 Facts checked: the projections are bijections between the halfway disk and the unit disk centred
 at wo_xy (eq. 15/21, 22/25); their Jacobians agree with finite differences and with the paper's
@@ -123,7 +123,8 @@ def test_every_disk_point_is_a_halfway_vector(theta_o, phi_o, r, psi):
 
 def test_special_points_of_the_disk():
     """(u, v) = 0 is mirror reflection in both projections; the disk centre is retro-reflection
-    in the scaling projection (Edwards §3.1) and wi = n in the orthogonal one, whose retro point
+    in the scaling projection (Edwards et al. 2006, §3.1) and wi = n in the orthogonal one, whose
+    retro point
     is 2 wo_xy ((u, v) = wo_xy + wi_xy, eq. 22)."""
     wo = spherical_deg(np.array([0.0, 35.0, 80.0]), np.array([0.0, 120.0, 300.0]))
     mirror, normal = wo * [-1, -1, 1], np.array([0.0, 0.0, 1.0])
@@ -162,7 +163,7 @@ def test_jacobian_matches_finite_differences(proj):
 
 
 def test_jacobians_equal_paper_forms():
-    """J = (dμ/dΩ(Ĥ)) / (4 wi·Ĥ) with dμ/dΩ from Edwards eq. 19 and eq. 23."""
+    """J = (dμ/dΩ(Ĥ)) / (4 wi·Ĥ) with dμ/dΩ from Edwards et al. 2006, eq. 19 and eq. 23."""
     rng = np.random.default_rng(7)
     wo = spherical(np.arccos(rng.random(500)), 2 * PI * rng.random(500))
     wi = spherical(np.arccos(rng.random(500)), 2 * PI * rng.random(500))
@@ -191,7 +192,7 @@ def test_brdfs_equal_paper_forms():
 
 
 # --------------------------------------------------------------------------------------------
-# white furnace (energy conservation, Edwards eq. 4, 11)
+# white furnace (energy conservation, Edwards et al. 2006, eq. 4, 11)
 # --------------------------------------------------------------------------------------------
 def albedo(brdf, wo, theta_o):
     """∫ f cos θi dω_i by graded composite Gauss–Legendre (order 6) in (θi, φi), panels refined
@@ -245,7 +246,8 @@ def lump_mass_on_disk(R, n, s):
 
 def test_fit_brdf_loses_exactly_the_lump_mass_off_the_disk():
     """Eq. 36 (orthogonal): albedo = (1 − F) C_d + F · (mass of the eq. 35 lumps on the disk);
-    = (1 − F) C_d + F when the lumps fit, less when they leave the disk (Edwards §5)."""
+    = (1 − F) C_d + F when the lumps fit, less when they leave the disk (Edwards et al. 2006,
+    §5)."""
     theta_o = 50.0
     wo = spherical_deg(theta_o, 0.0)
     for r1 in (0.2, 0.9):                 # 1 − sin 50° = 0.234: fits, then leaves the disk

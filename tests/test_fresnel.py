@@ -22,7 +22,7 @@ def textbook_fresnel(c, eta):
     return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
 
 
-# DESIGN.md "Facts to build on": exact unpolarised reflectance, checked independently
+# docs/design.md "Facts to build on": exact unpolarised reflectance, checked independently
 @pytest.mark.parametrize("deg, r_al, r_meoh", [(0, 0.923284, 0.019955), (60, 0.909966, 0.058937),
                                                (80, 0.879388, 0.346580), (89, 0.973137, 0.895969)])
 def test_reference_values(deg, r_al, r_meoh):
@@ -117,8 +117,9 @@ def test_reflectance_is_a_finite_fraction(c, n, k):
 
 
 def test_schlick_is_separate_and_matches_at_the_ends():
-    """Schlick (Edwards eq. 30–31) equals the exact value at 0° and 90° only; for aluminium it
-    misses the dip before grazing by ~0.078 near 83° (DESIGN.md)."""
+    """Schlick (Edwards et al. 2006, eq. 30–31) equals the exact value at 0° and 90° only; for
+    aluminium it
+    misses the dip before grazing by ~0.078 near 83° (docs/design.md)."""
     for ior in (ALUMINIUM, METHANOL):
         f0 = an.f0_from_material(ior)
         assert an.schlick(1.0, f0) == pytest.approx(an.fresnel(1.0, ior), rel=1e-14)

@@ -32,7 +32,7 @@ def random_upper(n, rng, max_theta_deg=89.5):
 
 # --- ABC spectrum --------------------------------------------------------------------------------
 def test_condensed_abc_is_church_reparametrised():
-    """Löw eq. 11: S(f; A=a, B=b², C=(c+1)/2) equals Church's eq. 7."""
+    """Löw et al. 2012, eq. 11: S(f; A=a, B=b², C=(c+1)/2) equals Church's eq. 7."""
     f = np.concatenate([[0.0], np.geomspace(1e-4, 1e4, 50)])
     for a, b, c in [(2.0, 3.0, 1.5), (1e-3, 0.1, 0.2), (5.0, 40.0, 3.0)]:
         A, B, C = an.church_to_condensed(a, b, c)
@@ -43,7 +43,7 @@ def test_condensed_abc_is_church_reparametrised():
 
 @pytest.mark.parametrize("a,b,c", [(2.0, 3.0, 1.5), (1.0, 0.1, 4.0), (0.3, 7.0, 1.1)])
 def test_church_integral_matches_quadrature(a, b, c):
-    """∫ PSD d²f = 2π ∫₀^∞ f PSD(f) df = 2πa/(b²(c−1)) (DESIGN.md)."""
+    """∫ PSD d²f = 2π ∫₀^∞ f PSD(f) df = 2πa/(b²(c−1)) (docs/design.md)."""
     # v = ln(1 + b²f²): f df = e^v dv/(2b²), so 2π f PSD df = π e^v PSD(f(v)) dv / b²
     integrand = lambda v: np.pi * np.exp(v) * an.abc_psd_church(np.sqrt(np.expm1(v)) / b,
                                                                  a, b, c) / b ** 2
@@ -147,7 +147,8 @@ def test_rr_cross_polarisations_swap_under_reciprocity():
 # --- smooth-surface BRDF -------------------------------------------------------------------------
 @pytest.mark.parametrize("ior", [1.5, AL, None])
 def test_smooth_specular_value(ior):
-    """In the specular direction Dp = 0 and θd = θi (Löw eq. 13–14): f = kd/π + G' A F(θi; Re η)."""
+    """In the specular direction Dp = 0 and θd = θi (Löw et al. 2012, eq. 13–14): f = kd/π + G' A
+    F(θi; Re η)."""
     theta = np.radians([0.0, 30.0, 60.0, 80.0, 89.0])
     wi, wo = spherical(theta, 0.3), spherical(theta, 0.3 + np.pi)
     F = an.fresnel(np.cos(theta), None if ior is None else complex(ior).real)
@@ -194,7 +195,8 @@ def abc_ndf_norm_by_quadrature(B, C):
 @pytest.mark.parametrize("B,C,ior", [(10.0, 1.0, 1.5), (300.0, 2.5, AL), (1e4, 0.6, METHANOL),
                                      (50.0, 1 + 1e-9, None)])
 def test_microfacet_with_ndf_amplitude_is_torrance_sparrow(B, C, ior):
-    """With A = low_microfacet_A_from_ndf(B, C), Löw eq. 15 equals D F G/(4 cosθi cosθo) with
+    """With A = low_microfacet_A_from_ndf(B, C), Löw et al. 2012, eq. 15 equals D F G/(4 cosθi
+    cosθo) with
     the normalised ABC NDF and the V-groove G, all computed here from their formulas."""
     wi, wo = random_upper(3000, RNG, 89.0), random_upper(3000, RNG, 89.0)
     H = wi + wo
@@ -210,7 +212,7 @@ def test_microfacet_with_ndf_amplitude_is_torrance_sparrow(B, C, ior):
 
 
 def test_microfacet_at_h_equal_n():
-    """ĥ = n: S = A, G = 1, so f = kd/π + A F(θ)/(π cos²θ) (Löw eq. 15)."""
+    """ĥ = n: S = A, G = 1, so f = kd/π + A F(θ)/(π cos²θ) (Löw et al. 2012, eq. 15)."""
     theta = np.radians([0.0, 10.0, 45.0, 75.0])
     wi, wo = spherical(theta, 1.0), spherical(theta, 1.0 + np.pi)
     f = an.low_microfacet(wi, wo, 0.7, 1e8, 1 - 1e-9, kd=0.05, material=1.5)
@@ -277,7 +279,8 @@ def smooth_coords(wi):
 
 @pytest.mark.parametrize("B,theta_o", SMOOTH_CASES)
 def test_sample_low_smooth_chi2(B, theta_o):
-    """Samples of Löw eq. 20–22 follow pdf_low_smooth (eq. 17–19), in (r, φ) disk coordinates."""
+    """Samples of Löw et al. 2012, eq. 20–22 follow pdf_low_smooth (eq. 17–19), in (r, φ) disk
+    coordinates."""
     rng = np.random.default_rng(int(B) * 100 + int(theta_o))
     wo = spherical_deg(theta_o, 180.0)              # lobe centred at φ = 0, away from the seam
     pilot = an.sample_low_smooth(wo, rng.random(100_000), rng.random(100_000), B)
@@ -312,7 +315,8 @@ def facet_coords(wi, wo, e1, e2):
 
 @pytest.mark.parametrize("B,C,theta_o", FACET_CASES)
 def test_sample_low_microfacet_chi2(B, C, theta_o):
-    """Samples of Löw eq. 25–27 follow pdf_low_microfacet (eq. 28) over the whole sphere of wi
+    """Samples of Löw et al. 2012, eq. 25–27 follow pdf_low_microfacet (eq. 28) over the whole
+    sphere of wi
     (below-horizon samples counted). Cells are polar about −wo, where pdf·sin α stays finite."""
     rng = np.random.default_rng(int(B) * 1000 + int(C * 10) + int(theta_o))
     wo = spherical_deg(theta_o, 30.0)
@@ -336,7 +340,8 @@ def test_sample_low_microfacet_chi2(B, C, theta_o):
 @pytest.mark.parametrize("B", [1e-3, 10.0, 1e3, 1e8])
 @pytest.mark.parametrize("C", [0.3, 1 - 1e-9, 1.0, 1 + 1e-9, 2.5])
 def test_halfvector_pdf_integrates_to_one(B, C):
-    """∫ P_h dω = 2π ∫₀¹ P_h dx over the upper hemisphere (Löw eq. 23–24), in w = ln(1 + Bx)."""
+    """∫ P_h dω = 2π ∫₀¹ P_h dx over the upper hemisphere (Löw et al. 2012, eq. 23–24), in w = ln(1
+    + Bx)."""
     def integrand(w):
         x = np.expm1(w) / B
         h = np.stack([np.sqrt(x * (2 - x)), 0 * x, 1 - x], -1)
@@ -346,7 +351,8 @@ def test_halfvector_pdf_integrates_to_one(B, C):
 
 
 def decimal_tilt_quantile(u, B, C):
-    """Löw eq. 25 in 60-digit decimal arithmetic: x = 1 − cos θh at tilt CDF value u."""
+    """Löw et al. 2012, eq. 25 in 60-digit decimal arithmetic: x = 1 − cos θh at tilt CDF value
+    u."""
     getcontext().prec = 60
     u = u if isinstance(u, Decimal) else Decimal(repr(float(u)))
     B, C = Decimal(repr(float(B))), Decimal(repr(float(C)))
@@ -361,7 +367,8 @@ def decimal_tilt_quantile(u, B, C):
 @pytest.mark.parametrize("C", [0.3, 1 - 1e-9, 1.0, 1 + 1e-9, 2.5])
 def test_tilt_quantile_precision(B, C):
     """The half-vector tilt quantile matches eq. 25 evaluated in 60-digit arithmetic, also for
-    C = 1 ± 1e-9 and B = 1e8 (DESIGN.md numerical hazard), to a few ulps plus the quantile's own
+    C = 1 ± 1e-9 and B = 1e8 (docs/design.md numerical hazard), to a few ulps plus the quantile's
+    own
     conditioning (the change of x when u moves by one ulp; large in the C > 1 tail).
     The private quantile is tested directly: reconstructing 1 − ĥ·n from a sampled wi is itself
     ill-conditioned near ĥ ⊥ wo."""

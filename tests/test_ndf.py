@@ -1,4 +1,4 @@
-"""NDFs: normalisation (Mikkelsen eq. 14), CDF/quantile consistency, sampler χ², Smith Λ,
+"""NDFs: normalisation (Mikkelsen 2009, eq. 14), CDF/quantile consistency, sampler χ², Smith Λ,
 finiteness on the closed hemisphere, parameter validation."""
 import numpy as np
 import pytest
@@ -45,7 +45,7 @@ NORMALISATION_CASES = (
 
 @pytest.mark.parametrize("ndf", NORMALISATION_CASES, ids=repr)
 def test_normalisation(ndf):
-    """∫ D(h)(h·n) dω = 1 (Mikkelsen eq. 14)."""
+    """∫ D(h)(h·n) dω = 1 (Mikkelsen 2009, eq. 14)."""
     with np.errstate(all="ignore"):
         mass = projected_mass(ndf)
     assert mass == pytest.approx(1.0, abs=1e-4)
@@ -62,7 +62,8 @@ def test_cdf_is_the_integral_of_the_tilt_density(ndf):
     for u in (1e-3, 0.1, 0.5, 0.9, 0.999):
         theta = float(ndf.tilt_quantile_rad(u))
         edges = np.append(0.0, theta * np.logspace(-9, 0, 19))
-        integral = sum(integrate.quad(ndf.tilt_pdf_rad, a, b, epsabs=1e-13, epsrel=1e-10, limit=200)[0]
+        integral = sum(integrate.quad(ndf.tilt_pdf_rad, a, b, epsabs=1e-13, epsrel=1e-10,
+                                      limit=200)[0]
                        for a, b in zip(edges[:-1], edges[1:]))
         assert ndf.cdf_theta_rad(theta) == pytest.approx(integral, abs=1e-6)
     assert ndf.cdf_theta_rad(0.0) == 0.0
@@ -120,7 +121,7 @@ def test_abc_D_from_vector_is_accurate_near_the_peak():
 
 
 def test_beckmann_phong_conversion():
-    """Mikkelsen eq. 21: e = 2/m² − 2 equates the normalisation constants at h = n."""
+    """Mikkelsen 2009, eq. 21: e = 2/m² − 2 equates the normalisation constants at h = n."""
     for m in (0.05, 0.3, 1.0):
         e = an.beckmann_to_phong(m)
         assert e == pytest.approx(2 / m ** 2 - 2, rel=1e-15)
@@ -157,7 +158,7 @@ def mean_projected_area_over_cos(ndf, theta_o):
 @pytest.mark.parametrize("ndf", [an.Beckmann(0.5), an.Beckmann(0.1), an.GGX(0.5), an.GGX(0.1)],
                          ids=repr)
 def test_smith_lambda_satisfies_projected_area_identity(ndf):
-    """∫ G1(wo,h)(wo·h)⁺ D dω = cos θo with G1 = 1/(1 + Λ(wo)) (DESIGN.md): the integral over
+    """∫ G1(wo,h)(wo·h)⁺ D dω = cos θo with G1 = 1/(1 + Λ(wo)) (docs/design.md): the integral over
     (wo·h)⁺ D must equal (1 + Λ) cos θo."""
     for deg in (0.0, 30.0, 70.0, 85.0):
         t = np.radians(deg)
@@ -297,3 +298,15 @@ def test_frozen_and_repr():
         ndf.B = 5.0
     assert repr(ndf) == "ABC(B=100.0, C=3.0)"
     assert an.Beckmann(0.3) == an.Beckmann(0.3) and hash(an.GGX(0.1)) == hash(an.GGX(0.1))
+
+
+@pytest.mark.parametrize("ndf", CDF_CASES, ids=repr)
+def test_tilt_angles_in_degrees_are_refused(ndf):
+    """Tilt angles are radians and say so: a value in degrees raises instead of being clipped
+    (``Beckmann(0.3).cdf_theta(30)`` used to return 1.0)."""
+    for method in (ndf.cdf_theta_rad, ndf.tilt_pdf_rad):
+        with pytest.raises(ValueError, match="radians"):
+            method(30.0)
+        with pytest.raises(ValueError, match="radians"):
+            method(np.array([0.1, -0.5]))
+    assert ndf.cdf_theta_rad(0.5 * np.pi + 1e-12) == ndf.cdf_theta_rad(0.5 * np.pi)

@@ -1,6 +1,7 @@
-"""Issue 4's physics: the ray-traced explicit-integral BRDF (Mikkelsen eq. 9) against the closed
+"""Issue 4's physics: the ray-traced explicit-integral BRDF (Mikkelsen 2009, eq. 9) against the
+closed
 forms it must reproduce — bin-averaged Torrance–Sparrow with V-groove G on V-cavity surfaces
-(exact there: DESIGN.md "Facts"), including the last 10° above the horizon; Smith masking on a
+(exact there: docs/design.md "Facts"), including the last 10° above the horizon; Smith masking on a
 Gaussian heightfield (measured directly); reciprocity; and input validation.
 
 Each heavy (``slow``) test has a light default twin asserting the same fact at lower precision.
@@ -104,7 +105,7 @@ def grooves_per_bin(ndf, wi, bins: Bins, n_grooves: int, k: int = 6) -> np.ndarr
     """How many stratified groove tilts can reflect wi into each bin: n·(F(θh,max) − F(θh,min))
     over the half-vector tilts θh of a k × k grid of directions in the bin (F = ndf.cdf_theta_rad).
     Quantile tilts represent D to ~1/count in a bin, so bins with few grooves show the
-    quantisation (DESIGN.md: nothing beyond the 1 − 1/(2n) quantile; lumps in the tail)."""
+    quantisation (docs/design.md: nothing beyond the 1 − 1/(2n) quantile; lumps in the tail)."""
     te, pe = np.radians(bins.theta_edges), np.radians(bins.phi_edges)
     u = (np.arange(k) + 0.5) / k
     th = (te[:-1, None] + np.diff(te)[:, None] * u)[:, None, :, None]
@@ -120,8 +121,9 @@ def facets_model(surface, theta, bins, replicates: int = 4, azimuths: int = 1024
     independently seeded replicates; its error is their scatter / √replicates (the per-facet
     stderr of bin_average_facets treats stratified tilts as i.i.d., far too conservative)."""
     wi = spherical_deg(theta, 0.0)
-    reps = np.array([bin_average_facets(wi, bins, surface.facet_normals(), surface.projected_areas(),
-                                        "vgroove", "aluminium", azimuths=azimuths,
+    reps = np.array([bin_average_facets(wi, bins, surface.facet_normals(),
+                                        surface.projected_areas(), "vgroove", "aluminium",
+                                        azimuths=azimuths,
                                         seed=q).values for q in range(replicates)])
     return reps.mean(axis=0), reps.std(axis=0, ddof=1) / np.sqrt(replicates)
 

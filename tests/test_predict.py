@@ -37,7 +37,8 @@ def facet_weight(wi, h, G, ior=None):
 
 
 def sample_fraction(ndf, wi, bins):
-    """P(wo(h) ∈ B) for h ~ D(h) h_z: ∫_B D h_z /(4 wo·h) dω_o (Mikkelsen eq. 15), by quadrature."""
+    """P(wo(h) ∈ B) for h ~ D(h) h_z: ∫_B D h_z /(4 wo·h) dω_o (Mikkelsen 2009, eq. 15), by
+    quadrature."""
     def density(wi, wo):                        # per unit cos θo dω_o, as bin_average expects
         h = _checks.half_vector(wi, wo)
         return ndf.D(h) * h[..., 2] / (4.0 * np.sum(wo * h, -1) * wo[..., 2])
@@ -224,7 +225,7 @@ def test_facets_smith_agree_with_quadrature(beckmann_facets):
 def test_vgroove_azimuth_average_matches_isotropic_ts():
     """Grooves along y with i.i.d. Beckmann 0.3 tilts (both faces of each groove, normals in the
     xz plane, equal weights), averaged over the groove azimuth, give the isotropic V-cavity:
-    Torrance–Sparrow with Beckmann D and V-groove G (Mikkelsen eq. 25; DESIGN.md)."""
+    Torrance–Sparrow with Beckmann D and V-groove G (Mikkelsen 2009, eq. 25; docs/design.md)."""
     ndf = Beckmann(0.3)
     rng = np.random.default_rng(99)
     theta = ndf.tilt_quantile_rad(rng.random(3000))
@@ -268,7 +269,8 @@ def test_finite_nonnegative_for_every_incidence(theta_i):
     wi = _checks.spherical_deg(theta_i, 0.0)
     for res in (bin_average(wi, bins, ts_fn(ndf, "smith"), rtol=1e-2, max_depth=3).values,
                 bin_average_ts(wi, bins, ndf, "vgroove", n=2 ** 10, replicates=4).values,
-                bin_average_facets(wi, bins, ndf.sample(*np.random.default_rng(0).random((2, 1000))),
+                bin_average_facets(wi, bins,
+                                   ndf.sample(*np.random.default_rng(0).random((2, 1000))),
                                    None, shadowing="smith").values):
         assert np.all(np.isfinite(res)) and np.all(res >= 0)
 

@@ -59,9 +59,10 @@ def projected_area(ndf, g1, theta_o_deg, n_phi=512):
 @pytest.mark.parametrize("kind", ["vgroove", "smith"])
 @pytest.mark.parametrize("name", list(NDFS))
 def test_projected_area_identity(name, kind):
-    """∫ G1 (wo·h)⁺ D dω = cos θo (DESIGN.md); V-groove holds because D is isotropic."""
+    """∫ G1 (wo·h)⁺ D dω = cos θo (docs/design.md); V-groove holds because D is isotropic."""
     ndf = ndf_named(name)
-    g1 = (lambda d, w, h: an.vgroove_g1(w, h)) if kind == "vgroove" else (lambda d, w, h: an.smith_g1(w, h, d))
+    g1 = ((lambda d, w, h: an.vgroove_g1(w, h)) if kind == "vgroove"
+          else (lambda d, w, h: an.smith_g1(w, h, d)))
     for theta in (0.0, 30.0, 60.0, 80.0, 85.0):
         got = projected_area(ndf, g1, theta)
         assert abs(got - np.cos(np.radians(theta))) < 1e-3, (theta, got)

@@ -106,3 +106,19 @@ def test_surface_is_frozen():
     assert isinstance(s, Surface)
     with pytest.raises(AttributeError):
         s.kind = "other"
+
+
+def test_surfaces_carry_what_their_generator_knows():
+    """Each generator attaches its ensemble NDF, the shadowing exact for it and its predictions,
+    and the repr is one line, not a vertex dump."""
+    vg = vgrooves(50, an.Beckmann(0.3))
+    assert vg.ensemble_ndf == an.Beckmann(0.3) and vg.exact_shadowing == "vgroove"
+    assert vg.predicted is None and "n_grooves" in vg.stats()
+    g = gaussian(64, 1.0, 1.0, 8.0)
+    assert g.ensemble_ndf == an.Beckmann(0.25) and g.exact_shadowing is None
+    assert g.stats()["predicted_m"] == g.predicted.m
+    f = flat()
+    assert f.ensemble_ndf is None and f.exact_shadowing == "none" and f.predicted is None
+    for s in (vg, g, f):
+        text = repr(s)
+        assert "\n" not in text and len(text) < 200 and text.startswith(f"Surface({s.kind}")

@@ -1,4 +1,4 @@
-"""Gaussian and ABC heightfields: realised statistics against the theory in DESIGN.md.
+"""Gaussian and ABC heightfields: realised statistics against the theory in docs/design.md.
 
 Tolerances. Exact-amplitude synthesis makes the realised height and mesh slope variance equal
 their discrete-spectrum sums (Parseval), so those agree to rounding; the discrete sum differs
@@ -89,7 +89,8 @@ def gaussian_samples():
 
 
 def test_facet_tilts_are_beckmann_with_realised_m(gaussian_samples):
-    """χ² of tilts against Beckmann(m_realised): P(θ ≤ t) = 1 − exp(−tan²t/m²) (Mikkelsen eq. 20),
+    """χ² of tilts against Beckmann(m_realised): P(θ ≤ t) = 1 − exp(−tan²t/m²) (Mikkelsen 2009, eq.
+    20),
     m_realised² = var_x + var_y of the whole mesh; 20 equal-probability cells."""
     _, theta, m = gaussian_samples
     u = -np.expm1(-(np.tan(theta) / m) ** 2)

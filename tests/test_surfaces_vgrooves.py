@@ -1,4 +1,5 @@
-"""V-groove surfaces: facet tilts follow D(h)(h·n) for every NDF; exact geometry (DESIGN.md)."""
+"""V-groove surfaces: facet tilts follow D(h)(h·n) for every NDF; exact geometry
+(docs/design.md)."""
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -32,7 +33,7 @@ def test_random_groove_tilts_pass_chi2_against_projected_ndf(name):
     edges = np.append(np.linspace(0.0, top, 41), np.pi / 2)
     probs = np.array([integrate.quad(ndf.tilt_pdf_rad, a, b, limit=200, epsabs=1e-13)[0]
                       for a, b in zip(edges[:-1], edges[1:])])
-    assert abs(probs.sum() - 1) < 1e-6           # D is normalised (Mikkelsen eq. 14)
+    assert abs(probs.sum() - 1) < 1e-6           # D is normalised (Mikkelsen 2009, eq. 14)
     observed, _ = np.histogram(theta, edges)
     _, _, p = pearson_chi2(observed, probs / probs.sum() * n)
     assert p > ALPHA, f"{name}: p = {p:.3g}"
@@ -49,7 +50,7 @@ def test_stratified_tilt_cdf_within_quantisation(name):
     d = max(np.max(i / n - F), np.max(F - (i - 1) / n))
     assert d <= 0.5 / n + 1e-9
     assert surf.stats()["cdf_max_dev"] <= 0.5 / n + 1e-9
-    # nothing beyond the 1 − 1/(2n) quantile exists (DESIGN.md)
+    # nothing beyond the 1 − 1/(2n) quantile exists (docs/design.md)
     assert theta.max() <= NDFS[name].tilt_quantile_rad(1 - 0.5 / n) + 1e-12
 
 

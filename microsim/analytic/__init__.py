@@ -1,12 +1,12 @@
-"""Closed-form microfacet models of the four papers (see ../shared/DESIGN.md).
+"""Closed-form microfacet models of the four papers (see docs/design.md).
 
     from microsim import analytic as an
-    an.fresnel(cos_theta, ior); an.Beckmann(m); an.torrance_sparrow(wi, wo, ndf, ...)
+    an.fresnel(cos_theta, material); an.Beckmann(m); an.torrance_sparrow(wi, wo, ndf, ...)
 """
-from .fresnel import *      # noqa: F401,F403
-from .ndf import *          # noqa: F401,F403
-from .empirical import *    # noqa: F401,F403
-from .shadowing import *    # noqa: F401,F403
-from .brdf import *         # noqa: F401,F403
-from .low import *          # noqa: F401,F403
-from .edwards import *      # noqa: F401,F403
+from .brdf import *  # noqa: F401,F403
+from .edwards import *  # noqa: F401,F403
+from .empirical import *  # noqa: F401,F403
+from .fresnel import *  # noqa: F401,F403
+from .low import *  # noqa: F401,F403
+from .ndf import *  # noqa: F401,F403
+from .shadowing import *  # noqa: F401,F403

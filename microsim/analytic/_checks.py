@@ -126,7 +126,7 @@ def normalize(v: np.ndarray) -> np.ndarray:
 
 
 def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """Unit half vector h = (wi + wo)/|wi + wo| (Mikkelsen eq. 11)."""
+    """Unit half vector h = (wi + wo)/|wi + wo| (Mikkelsen 2009, eq. 11)."""
     return normalize(np.asarray(wi, dtype=np.float64) + np.asarray(wo, dtype=np.float64))
 
 

@@ -9,10 +9,11 @@ the incidence first for an integral over a BRDF — then the model. ``material``
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.stats import qmc
+
+from microsim.errors import UsageError
 
 from . import _checks
 from .fresnel import fresnel, resolve_material
@@ -60,8 +61,8 @@ def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None):
     eq. 13/18).
 
     h = (wi + wo)/|wi + wo| (Mikkelsen 2009, eq. 10); ``shadowing`` ∈ {"vgroove", "smith",
-    "smith-correlated", "none"}; ``material`` as in the module docstring. Returns 0 where wi or wo is
-    at or below the horizon. At exactly cos θi · cos θo = 0 the value is set to 0: there
+    "smith-correlated", "none"}; ``material`` as in the module docstring. Returns 0 where wi or
+    wo is at or below the horizon. At exactly cos θi · cos θo = 0 the value is set to 0: there
     G → 0 like the vanishing cosine, so f cos θ → 0 and the choice carries no energy (the
     limit of f itself stays finite). Reciprocal: every factor is symmetric in wi, wo.
     """

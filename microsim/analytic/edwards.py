@@ -1,9 +1,10 @@
 """Edwards et al. 2006, *The halfway vector disk for BRDF modeling*.
 
-Framework (Edwards et al. 2006, eq. 9–13; "eq. N" below refers to that paper). For a fixed outgoing direction wo, the unnormalised half vectors
-H = wi + wo of all upper-hemisphere wi form the unit hemisphere translated to the tip of wo
-(Fig. 3). A projection maps them bijectively onto the base of that hemisphere: the unit-radius
-disk in the plane z = cos θo centred at wo. Points of the disk are written in (u, v) = their x, y
+Equation, figure and section numbers below refer to that paper. Framework (eq. 9–13). For a
+fixed outgoing direction wo, the unnormalised half vectors H = wi + wo of all upper-hemisphere
+wi form the unit hemisphere translated to the tip of wo (Fig. 3). A projection maps them
+bijectively onto the base of that hemisphere: the unit-radius disk in the plane z = cos θo
+centred at wo. Points of the disk are written in (u, v) = their x, y
 coordinates, so (u, v) = (0, 0) is Ĥ = n, mirror reflection, in both projections; the disk's
 centre ``disk_centre(wo)`` = (wo_x, wo_y) is retro-reflection (wi = wo) in the scaling projection
 (§3.1) but wi = n in the orthogonal one (Fig. 4; Fig. 13: "the disk shifts ... because it is
@@ -24,7 +25,7 @@ Densities: lumps (eq. 26–27, sampled by eq. 28–29) and their weighted sums (
 Models: the energy-conserving empirical BRDF (eq. 30–33) and the data-fitting BRDF (eq. 34–36).
 
 Reciprocity: neither model is reciprocal — the framework enforces energy conservation "at the cost
-of reciprocity" (Edwards §1, §6, Fig. 14): f(wi, wo) ≠ f(wo, wi) in general.
+of reciprocity" (§1, §6, Fig. 14): f(wi, wo) ≠ f(wo, wi) in general.
 
 Conventions: local frame with the macro normal +z; unit directions of shape (..., 3) pointing away
 from the surface; (u, v) points of shape (..., 2); BRDFs and densities in solid angle in sr⁻¹,
@@ -34,12 +35,12 @@ directions first: ``(wi, wo, ...)`` where both are given, ``(wo, h)``, ``(wo, uv
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
-
 from dataclasses import astuple, dataclass, fields
 from typing import Callable, Union
 
 import numpy as np
+
+from microsim.errors import UsageError
 
 from . import _checks
 from .fresnel import schlick
@@ -98,7 +99,7 @@ def disk_centre(wo) -> np.ndarray:
 
 
 def reflect_halfway(wo, h) -> np.ndarray:
-    """Incident direction wi = 2(wo·h)h − wo for a unit half vector h (Edwards eq. 13)."""
+    """Incident direction wi = 2(wo·h)h − wo for a unit half vector h (eq. 13)."""
     wo, h = np.asarray(wo, float), np.asarray(h, float)
     return 2.0 * _checks.dot(wo, h)[..., None] * h - wo
 
@@ -107,7 +108,7 @@ def reflect_halfway(wo, h) -> np.ndarray:
 # scaling projection (eq. 15–21)
 # --------------------------------------------------------------------------------------------
 def scaling_projection(wo, h) -> np.ndarray:
-    """(u, v) of half vector h under the scaling projection: cos θo · h_xy / h_z (Edwards eq. 15).
+    """(u, v) of half vector h under the scaling projection: cos θo · h_xy / h_z (eq. 15).
 
     At cos θo = 0 the disk plane contains the origin and every half vector maps to (0, 0).
     """
@@ -117,7 +118,7 @@ def scaling_projection(wo, h) -> np.ndarray:
 
 
 def scaling_projection_inverse(wo, uv) -> np.ndarray:
-    """Unit half vector of the disk point (u, v): normalise (u, v, cos θo) (Edwards eq. 21).
+    """Unit half vector of the disk point (u, v): normalise (u, v, cos θo) (eq. 21).
 
     At cos θo = 0 and (u, v) = (0, 0) the inverse is undefined; the normal is returned.
     """
@@ -130,7 +131,7 @@ def scaling_projection_inverse(wo, uv) -> np.ndarray:
 def scaling_jacobian(wi, wo) -> np.ndarray:
     """dA_disk/dω_i of the scaling projection (dimensionless per sr).
 
-    Edwards eq. 19 gives dμ/dΩ(Ĥ) = cos²θo/(Ĥ·n)³ (re-derived: the plane z = cos θo seen from
+    eq. 19 gives dμ/dΩ(Ĥ) = cos²θo/(Ĥ·n)³ (re-derived: the plane z = cos θo seen from
     the origin, dΩ = dA (Ĥ·n)/|h|² with |h| = cos θo/(Ĥ·n)); with dΩ(Ĥ)/dω_i = 1/(4 wi·Ĥ) (eq. 8)
     and |H| = 2 wi·Ĥ, Ĥ·n = H_z/|H| this is J = cos²θo |H|² / (2 H_z³), H = wi + wo.
     0 where wi is below the horizon, and 0 at cos θo = 0 (the projection collapses the disk).
@@ -148,7 +149,7 @@ def scaling_jacobian(wi, wo) -> np.ndarray:
 # orthogonal projection (eq. 22–25)
 # --------------------------------------------------------------------------------------------
 def orthogonal_projection(wo, h) -> np.ndarray:
-    """(u, v) of half vector h under the orthogonal projection (Edwards eq. 22).
+    """(u, v) of half vector h under the orthogonal projection (eq. 22).
 
     H − (wi·n)n keeps the x, y part of H = wi + wo = 2(wo·h)h, so (u, v) = 2(wo·h) h_xy.
     """
@@ -158,7 +159,7 @@ def orthogonal_projection(wo, h) -> np.ndarray:
 
 
 def orthogonal_projection_inverse(wo, uv) -> np.ndarray:
-    """Unit half vector of (u, v): normalise (u, v, cos θo + cos θi) (Edwards eq. 25).
+    """Unit half vector of (u, v): normalise (u, v, cos θo + cos θi) (eq. 25).
 
     Eq. 25 adds (wi·n) n, which the disk point itself fixes: wi_xy = (u, v) − wo_xy, so
     wi·n = √(1 − |(u, v) − wo_xy|²) (clipped to 0 outside the disk).
@@ -175,7 +176,7 @@ def orthogonal_projection_inverse(wo, uv) -> np.ndarray:
 def orthogonal_jacobian(wi, wo) -> np.ndarray:
     """dA_disk/dω_i of the orthogonal projection: cos θi (0 below the horizon).
 
-    Edwards eq. 23, dμ/dΩ(Ĥ) = |wi+wo|² (wi·n)/(wi·Ĥ), times dΩ(Ĥ)/dω_i = 1/(4 wi·Ĥ) (eq. 8)
+    eq. 23, dμ/dΩ(Ĥ) = |wi+wo|² (wi·n)/(wi·Ĥ), times dΩ(Ĥ)/dω_i = 1/(4 wi·Ĥ) (eq. 8)
     is cos θi, since |wi + wo| = 2 wi·Ĥ. (Equivalently: (u, v) = wo_xy + wi_xy, the orthographic
     projection of the unit hemisphere onto its base.)
     """
@@ -224,7 +225,7 @@ def disk_to_incident(wo, uv, projection: str = "scaling") -> np.ndarray:
 
 
 def _brdf_factor(wi, wo, projection: str) -> np.ndarray:
-    """J(wi, wo)/cos θi: the BRDF per unit disk density (Edwards eq. 20 and 24); 0 if cos θi ≤ 0.
+    """J(wi, wo)/cos θi: the BRDF per unit disk density (eq. 20 and 24); 0 if cos θi ≤ 0.
 
     Scaling: cos²θo/(4 cos θi (wi·Ĥ)(Ĥ·n)³) (eq. 20). Orthogonal: 1 (eq. 24, see module doc).
     """
@@ -244,7 +245,7 @@ _ANCHORS = ("normal", "centre")
 
 @dataclass(frozen=True)
 class Lump:
-    """Lump density on the disk (Edwards eq. 26; elliptical eq. 27), per unit (u, v) area.
+    """Lump density on the disk (eq. 26; elliptical eq. 27), per unit (u, v) area.
 
     p = (n+1)/(π R_u R_v) [1 − (Δu/R_u)² − (Δv/R_v)²]^n inside the ellipse, 0 outside; it has
     unit volume over its own ellipse, so it is a pdf on the disk when the ellipse lies on the disk.
@@ -299,7 +300,7 @@ class Lump:
         return np.maximum(ru, rv) + np.linalg.norm(centre - wo[..., :2], axis=-1) <= 1.0 + tol
 
     def pdf(self, wo, uv) -> np.ndarray:
-        """Density per unit disk area at (u, v) (Edwards eq. 26/27); 0 for a zero-radius lump."""
+        """Density per unit disk area at (u, v) (eq. 26/27); 0 for a zero-radius lump."""
         centre, ru, rv = self.geometry(wo)
         d = np.asarray(uv, float) - centre
         q = _safe_div(d[..., 0], ru) ** 2 + _safe_div(d[..., 1], rv) ** 2
@@ -308,7 +309,7 @@ class Lump:
         return np.where(inside, norm * np.clip(1.0 - q, 0.0, 1.0) ** self.n, 0.0)
 
     def sample(self, wo, u1, u2) -> np.ndarray:
-        """(u, v) ~ lump from uniforms u1, u2 ∈ [0, 1] (Edwards eq. 28–29, scaled by R_u, R_v).
+        """(u, v) ~ lump from uniforms u1, u2 ∈ [0, 1] (eq. 28–29, scaled by R_u, R_v).
 
         r/R = √(1 − u1^(1/(n+1))), evaluated as √(−expm1(ln u1/(n+1))) for large n.
         """
@@ -322,7 +323,7 @@ class Lump:
 
 @dataclass(frozen=True)
 class LumpMixture:
-    """Weighted sum of lumps, Σ w_j p_j (Edwards eq. 32, 35); weights ≥ 0 summing to 1."""
+    """Weighted sum of lumps, Σ w_j p_j (eq. 32, 35); weights ≥ 0 summing to 1."""
 
     lumps: tuple[Lump, ...]
     weights: tuple[float, ...]
@@ -363,7 +364,7 @@ class LumpMixture:
 
 def empirical_lumps(k: float = 0.0, n_s: float = 0.0, n_r: float = 0.0,
                     r_s: float | None = None, r_r: float | None = None) -> LumpMixture:
-    """Disk density of the empirical BRDF (Edwards eq. 32).
+    """Disk density of the empirical BRDF (eq. 32).
 
     (1 − k) × specular lump at (u, v) = 0 (radius r_s, exponent n_s) + k × retro lump at the disk
     centre (r_r, n_r) — retro-reflective under the scaling projection the paper uses for this
@@ -399,14 +400,14 @@ def _fresnel_factor(fresnel, cos_o) -> np.ndarray:
 
 def edwards_empirical(wi, wo, lumps: DiskDensity, projection: str = "scaling",
                       fresnel=None, diffuse: float = 0.0) -> np.ndarray:
-    """Energy-conserving empirical BRDF (Edwards eq. 33; eq. 11 for either projection), sr⁻¹.
+    """Energy-conserving empirical BRDF (eq. 33; eq. 11 for either projection), sr⁻¹.
 
     f = (1 − F(θo)) C_d/π + F(θo) p(u, v) J(wi, wo)/cos θi, with (u, v) the disk point of
     Ĥ = (wi + wo)/|wi + wo| and J from ``disk_jacobian``. With fresnel=None F = 1 and the albedo
     ∫ f cos θi dω_i = ∫_disk p dA, which is 1 for every wo when p is a pdf on the disk.
 
     lumps       a Lump / LumpMixture (e.g. ``empirical_lumps``; each must lie on the disk —
-                ValueError otherwise, Edwards §4) or a callable pdf_disk(uv, wo) normalised on
+                ValueError otherwise, §4) or a callable pdf_disk(uv, wo) normalised on
                 the disk of each wo (the caller's responsibility).
     projection  "scaling" (the paper's choice for this model) or "orthogonal".
     fresnel     None (F = 1), f0 ∈ [0, 1] for Schlick's F(θo) (eq. 30–31), or callable F(cos θo).
@@ -420,7 +421,7 @@ def edwards_empirical(wi, wo, lumps: DiskDensity, projection: str = "scaling",
     wi = _checks.directions("wi", wi)
     if isinstance(lumps, (Lump, LumpMixture)) and not np.all(lumps.fits_on_disk(wo)):
         raise UsageError("lumps must lie on the halfway disk for every wo: each lump needs "
-                         "max(R_u, R_v) + |centre − wo_xy| <= 1 (Edwards §4: R_s <= 1 − sin θo, "
+                         "max(R_u, R_v) + |centre − wo_xy| <= 1 (§4: R_s <= 1 − sin θo, "
                          "R_r <= 1); use radius=None for the largest allowed radius")
     F = _fresnel_factor(fresnel, _cos_o(wo))
     spec = _disk_density(lumps, wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
@@ -446,7 +447,7 @@ def brdf_to_disk_density(wi, wo, rho, projection: str = "scaling") -> np.ndarray
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EdwardsParams:
-    """Parameters of the data-fitting BRDF (Edwards eq. 34–36), constant over wo.
+    """Parameters of the data-fitting BRDF (eq. 34–36), constant over wo.
 
     cd        diffuse colour C_d ∈ [0, 1]
     f0, f90   F_fit at normal incidence and at grazing, ∈ [0, 1] (eq. 34)
@@ -510,12 +511,12 @@ class EdwardsParams:
                            (1.0 - self.k, self.k))
 
     def fresnel(self, cos_o) -> np.ndarray:
-        """F_fit(θo) = F0 + (F_π/2 − F0)(1 − cos θo)⁵ (Edwards eq. 34), via Schlick with f0 = 0."""
+        """F_fit(θo) = F0 + (F_π/2 − F0)(1 − cos θo)⁵ (eq. 34), via Schlick with f0 = 0."""
         return self.f0 + (self.f90 - self.f0) * np.asarray(schlick(cos_o, 0.0))
 
 
 def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogonal") -> np.ndarray:
-    """Data-fitting BRDF (Edwards eq. 36), sr⁻¹.
+    """Data-fitting BRDF (eq. 36), sr⁻¹.
 
     f = (1 − F_fit(θo)) C_d/π + F_fit(θo) p(u, v) J(wi, wo)/cos θi with p from eq. 35. The paper
     uses the orthogonal projection, where the lump term is p(u, v) |wi+wo|²/(4(wi·Ĥ)²) = p(u, v);
@@ -558,7 +559,7 @@ def pdf_edwards(wi, wo, lumps: DiskDensity, projection: str = "scaling") -> np.n
 
 
 def sample_edwards(wo, u1, u2, lumps, projection: str = "scaling"):
-    """Incident directions wi and their solid-angle pdf for outgoing wo (Edwards eq. 12–13, 28–29).
+    """Incident directions wi and their solid-angle pdf for outgoing wo (eq. 12–13, 28–29).
 
     Draws (u, v) from the lump density (u1 also chooses the lump), maps it to Ĥ by the inverse
     projection and reflects wo about Ĥ. pdf = p(u, v) J(wi, wo) (= ``pdf_edwards``). A sample

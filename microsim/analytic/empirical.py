@@ -1,6 +1,6 @@
-"""Empirical NDF: a histogram of measured facet normals (Mikkelsen eq. 14 and 17).
+"""Empirical NDF: a histogram of measured facet normals (Mikkelsen 2009, eq. 14 and 17).
 
-Mikkelsen eq. 17 defines the distribution of normals through the *projected* (macro-surface)
+Mikkelsen 2009, eq. 17 defines the distribution of normals through the *projected* (macro-surface)
 area: p(n) dn is the fraction of the macro area dA whose micro normal lies in dn, and
 D(h) = p(h)/(h·n). So the weight of a facet is its projected area, facet area × n_z; on a
 heightfield mesh every grid triangle has the same projected area and equal weights are exact.
@@ -21,8 +21,9 @@ clip(round(N^(1/3)/2), 4, 128) and n_phi = 4 clip(round(N^(1/3)/16), 1, 32) unif
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import numpy as np
+
+from microsim.errors import UsageError
 
 from . import _checks
 from .ndf import NDF
@@ -74,7 +75,7 @@ def _split_wide(edges: np.ndarray, max_width: float) -> np.ndarray:
 
 
 class Empirical(NDF):
-    """Histogram NDF from facet normals with projected-area weights (Mikkelsen eq. 14, 17).
+    """Histogram NDF from facet normals with projected-area weights (Mikkelsen 2009, eq. 14, 17).
 
     ``normals``: (N, 3) unit facet normals with n_z > 0. ``weights``: (N,) projected areas
     (facet area × n_z; None = equal, exact for heightfield triangles), ≥ 0 with a positive sum.

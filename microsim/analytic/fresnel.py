@@ -20,7 +20,6 @@ from microsim.errors import UsageError
 
 from ._checks import UNIT_TOL
 
-
 __all__ = ["fresnel", "fresnel_transmittance", "schlick", "f0_from_material",
            "MATERIALS", "resolve_material"]
 
@@ -74,7 +73,8 @@ def fresnel(cos_theta, material=None):
     ``cos_theta``: cosine of the incidence angle to the facet normal, in [0, 1] (``COS_TOL``).
     ``material``: a name (``MATERIALS``), a real index n > 0 (dielectric; n < 1 means the light
     comes from the denser medium and total internal reflection gives R = 1), a complex index
-    n + ik with k ≥ 0 (conductor), or None (mirror, R = 1). R = 1 exactly at grazing incidence (cos θ = 0) for every interface.
+    n + ik with k ≥ 0 (conductor), or None (mirror, R = 1). R = 1 exactly at grazing incidence
+    (cos θ = 0) for every interface.
 
     With g = η cos θ_t = √(η² − sin²θ) (principal complex root: Re g ≥ 0, Im g ≥ 0, the
     decaying transmitted wave), the amplitude ratios are written without subtracting nearly

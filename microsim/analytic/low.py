@@ -6,8 +6,9 @@ Conventions (docs/design.md, "Conventions"): macro normal n = +z; ``wi`` (toward
 and ``wo`` (towards the viewer) are unit (..., 3) arrays pointing *away* from the surface and
 come first, ``(wi, wo, ...)`` (samplers: ``(wo, u1, u2, ...)``); BRDFs in sr⁻¹; model
 parameters A, B, C, kd are scalars and ``material`` is anything ``fresnel.resolve_material``
-accepts. Löw's L, V are our wi, wo, so their unnormalised
-half vector H = L + V is ours, and the projected deviation vector (Löw eq. 9–10, §4)
+accepts. Equation and section numbers without an author refer to Löw et al. 2012. Löw's L, V
+are our wi, wo, so their unnormalised half vector H = L + V is ours, and the projected
+deviation vector (eq. 9–10, §4)
 
     Dp = Vp − Rp = Vp + Lp = wo_t + wi_t          (_t: component in the tangent plane),
 
@@ -15,10 +16,11 @@ because the mirror direction R of L has Rp = −Lp. |Dp| = 0 exactly in the spec
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 from typing import NamedTuple
 
 import numpy as np
+
+from microsim.errors import UsageError
 
 from . import _checks
 from .fresnel import fresnel, resolve_material
@@ -39,7 +41,7 @@ RR_POLARISATIONS = ("unpolarised", "s", "p", "ss", "sp", "ps", "pp")
 both scattered polarisations), incident+scattered pairs, or unpolarised light."""
 
 LOW_OBLIQUITIES = ("one", "cos", "harvey")
-"""``obliquity`` values of ``low_smooth`` (G' of Löw eq. 12): 1, cosθi cosθo (eq. 3),
+"""``obliquity`` values of ``low_smooth`` (G' of eq. 12): 1, cosθi cosθo (eq. 3),
 ((cosθi + cosθo)/2)² (eq. 6, scaled to agree with eq. 3 in the specular direction)."""
 
 
@@ -53,7 +55,7 @@ def _nonneg(name: str, value) -> float:
 
 
 def _abc(A, B, C) -> tuple[float, float, float]:
-    """Validated ABC parameters: A ≥ 0, B > 0, C > 0 (Löw eq. 11)."""
+    """Validated ABC parameters: A ≥ 0, B > 0, C > 0 (eq. 11)."""
     return _nonneg("A", A), _checks.positive("B", B), _checks.positive("C", C)
 
 
@@ -97,7 +99,7 @@ def _s_of_sq(A: float, B: float, C: float, x2) -> np.ndarray:
 
 
 def _one_minus_cos_h(H: np.ndarray) -> np.ndarray:
-    """1 − ĥ·n from the *unnormalised* half vector H with H_z ≥ 0 (Löw et al. 2012, eq. 25):
+    """1 − ĥ·n from the *unnormalised* half vector H with H_z ≥ 0 (eq. 25):
     (|H| − H_z)/|H| = |H_t|²/(|H|(|H| + H_z)), free of cancellation near ĥ = n; 0 for H = 0."""
     t2 = _tsq(H)
     norm = np.sqrt(t2 + H[..., 2] ** 2)
@@ -106,9 +108,9 @@ def _one_minus_cos_h(H: np.ndarray) -> np.ndarray:
         return np.where(den > 0.0, np.minimum(t2 / np.where(den > 0.0, den, 1.0), 1.0), 0.0)
 
 
-# --- the ABC spectrum (Löw eq. 7, 8, 11) --------------------------------------------------------
+# --- the ABC spectrum (eq. 7, 8, 11) --------------------------------------------------------
 def abc_psd(f, A, B, C):
-    """Löw's condensed ABC function S(f) = A/(1 + B f²)^C (Löw eq. 11).
+    """Löw's condensed ABC function S(f) = A/(1 + B f²)^C (eq. 11).
 
     It is Church's ABC PSD (eq. 7) re-parametrised: S(f; A=a, B=b², C=(c+1)/2) equals
     ``abc_psd_church(f, a, b, c)`` (``church_to_condensed``). In the BRDFs of Löw §3.2, f is the
@@ -122,11 +124,11 @@ def abc_psd(f, A, B, C):
 
 
 def abc_psd_church(f, A, B, C):
-    """Church's isotropic 2D ABC PSD A/(1 + B² f²)^((C+1)/2) (Löw eq. 7; Church et al. 1989).
+    """Church's isotropic 2D ABC PSD A/(1 + B² f²)^((C+1)/2) (eq. 7; Church et al. 1989).
 
     Here A, B, C are Church's a, b, c: a ≥ 0 (length⁴, the low-frequency level), b > 0 (length,
     b = 2π × correlation length), c > 0 (high-frequency fall-off); f in 1/length.
-    Equal to ``abc_psd(f, a, b², (c+1)/2)`` (Löw eq. 11).
+    Equal to ``abc_psd(f, a, b², (c+1)/2)`` (eq. 11).
     """
     A, B, C = _nonneg("A", A), _checks.positive("B", B), _checks.positive("C", C)
     f = np.asarray(f, dtype=np.float64)
@@ -144,12 +146,12 @@ def abc_psd_church_integral(A, B, C) -> float:
 
 
 def church_to_condensed(a, b, c) -> tuple[float, float, float]:
-    """Church's (a, b, c) → Löw's condensed (A, B, C) = (a, b², (c + 1)/2) (Löw eq. 11)."""
+    """Church's (a, b, c) → Löw's condensed (A, B, C) = (a, b², (c + 1)/2) (eq. 11)."""
     a, b, c = _nonneg("a", a), _checks.positive("b", b), _checks.positive("c", c)
     return a, b * b, 0.5 * (c + 1.0)
 
 
-# --- Rayleigh–Rice (Löw eq. 3–5) ----------------------------------------------------------------
+# --- Rayleigh–Rice (eq. 3–5) ----------------------------------------------------------------
 def _rr_q(wi, wo, eta: complex, polarisation: str) -> np.ndarray:
     """Rayleigh–Rice polarisation factor Q for a surface of relative permittivity ε = η².
 
@@ -196,7 +198,7 @@ def _rr_q(wi, wo, eta: complex, polarisation: str) -> np.ndarray:
 
 
 def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolarised"):
-    """First-order Rayleigh–Rice BRDF (sr⁻¹) of a smooth surface with an ABC PSD (Löw eq. 3–5):
+    """First-order Rayleigh–Rice BRDF (sr⁻¹) of a smooth surface with an ABC PSD (eq. 3–5):
 
         f = (16π²/λ⁴) cosθi cosθo Q S(|Dp|/λ),   S(f) = A/(1 + B f²)^C  (``abc_psd``).
 
@@ -204,8 +206,9 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolaris
     lies in the φ = π half-plane. Units: ``wavelength`` and √B in one length unit, A in that
     unit⁴ (a 2D PSD: height² × area). Q is the full polarisation factor (``_rr_q``; Löw gives no
     expression and cites Stover 1995), for a ``material`` of index η (real: dielectric;
-    complex n + ik: conductor; a name from ``fresnel.MATERIALS``; not the mirror None). Reciprocal for "unpolarised", "s"+"p"
-    sums and ss/pp. Zero if either direction is below the horizon.
+    complex n + ik: conductor; a name from ``fresnel.MATERIALS``; not the mirror None).
+    Reciprocal for "unpolarised", "s"+"p" sums and ss/pp. Zero if either direction is below the
+    horizon.
     """
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
@@ -223,7 +226,7 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolaris
     return np.where((ci >= 0.0) & (co >= 0.0), f, 0.0)
 
 
-# --- smooth-surface BRDF (Löw eq. 12–14) --------------------------------------------------------
+# --- smooth-surface BRDF (eq. 12–14) --------------------------------------------------------
 def _obliquity(kind: str, ci, co):
     if kind == "one":
         return np.ones(np.broadcast_shapes(np.shape(ci), np.shape(co)))
@@ -233,7 +236,7 @@ def _obliquity(kind: str, ci, co):
 
 
 def low_smooth(wi, wo, A, B, C, kd=0.0, material=None, obliquity="one"):
-    """Löw's smooth-surface BRDF (sr⁻¹), Löw eq. 12:  f = kd/π + G' Q' S(|Dp|).
+    """Löw's smooth-surface BRDF (sr⁻¹), eq. 12:  f = kd/π + G' Q' S(|Dp|).
 
     S(|Dp|) = A/(1 + B|wi_t + wo_t|²)^C (eq. 11; A in sr⁻¹). Q' = F(θd; η) (eq. 13–14) with
     cos θd = √(1 − |wi_t − wo_t|²/4): Löw writes arcsin(|Lp − Vp|/2) with L, V pointing away from
@@ -258,9 +261,9 @@ def low_smooth(wi, wo, A, B, C, kd=0.0, material=None, obliquity="one"):
     return np.where((ci >= 0.0) & (co >= 0.0), kd / np.pi + spec, 0.0)
 
 
-# --- microfacet BRDF (Löw eq. 15) ---------------------------------------------------------------
+# --- microfacet BRDF (eq. 15) ---------------------------------------------------------------
 def low_microfacet(wi, wo, A, B, C, kd=0.0, material=None, shadowing="cook-torrance"):
-    """Löw's ABC microfacet BRDF (sr⁻¹), Löw eq. 15 (Cook–Torrance 1982 with an ABC facet term):
+    """Löw's ABC microfacet BRDF (sr⁻¹), eq. 15 (Cook–Torrance 1982 with an ABC facet term):
 
         f = kd/π + S(√(1 − ĥ·n)) F(wi·ĥ; η) G / (π (n·wi)(n·wo)),
         S(√(1 − ĥ·n)) = A/(1 + B(1 − ĥ·n))^C.
@@ -269,9 +272,10 @@ def low_microfacet(wi, wo, A, B, C, kd=0.0, material=None, shadowing="cook-torra
     a free amplitude; ``low_microfacet_A_from_ndf`` gives the A that makes the specular term the
     Torrance–Sparrow BRDF of the normalised ``ndf.ABC``. 1 − ĥ·n is computed from the unnormalised
     half vector (docs/design.md). F: exact unpolarised ``fresnel`` for ``material`` (real:
-    identical to Cook–Torrance's formula; complex: conductor; None: 1). G (``shadowing``): "cook-torrance" =
-    V-groove ``shadowing.vgroove_g`` (Mikkelsen eq. 25), or "none" (G = 1). The specular term is
-    0 when either direction is at or below the horizon (as G is). Reciprocal.
+    identical to Cook–Torrance's formula; complex: conductor; None: 1). G (``shadowing``):
+    "cook-torrance" = V-groove ``shadowing.vgroove_g`` (Mikkelsen 2009, eq. 25), or "none"
+    (G = 1). The specular term is 0 when either direction is at or below the horizon (as G is).
+    Reciprocal.
     """
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
@@ -296,7 +300,7 @@ def low_microfacet_A_from_ndf(B, C) -> float:
     """The A of ``low_microfacet`` that makes its specular term Torrance–Sparrow with the
     normalised ABC NDF D = M/(1 + B(1 − ĥ·n))^C (``ndf.ABC``, ∫ D (ĥ·n) dω = 1):
 
-        TS = D F G/(4 cosθi cosθo),   Löw eq. 15: S F G/(π cosθi cosθo), S = A/(1 + B(1−ĥ·n))^C
+        TS = D F G/(4 cosθi cosθo),   eq. 15: S F G/(π cosθi cosθo), S = A/(1 + B(1−ĥ·n))^C
         ⇒ S/π = D/4  ⇒  A = π M/4,   M = 1/(2π ∫₀¹ (1 − x)(1 + Bx)^−C dx).
 
     Used to compare V-groove surfaces whose facets follow the ABC NDF with Löw's model.
@@ -315,14 +319,14 @@ class LowSample(NamedTuple):
 
 
 def _disk_log_norm(B: float, ro2, k):
-    """Λ = ln[(1 + Bk + √(1 + 2B(1 + r_o²) + B²k²))/2], k = 1 − r_o² = cos²θo (Löw eq. 19,
+    """Λ = ln[(1 + Bk + √(1 + 2B(1 + r_o²) + B²k²))/2], k = 1 − r_o² = cos²θo (eq. 19,
     re-derived: the OCR is garbled), written with log1p and √(1+X) − 1 = X/(√(1+X) + 1)."""
     X = 2.0 * B * (1.0 + ro2) + (B * k) ** 2
     return np.log1p(0.5 * (B * k + X / (1.0 + np.sqrt(1.0 + X))))
 
 
 def _disk_density(B: float, wo, wi):
-    """Löw eq. 18 with C = 1: P_d = M_d/(1 + B|Lp + Vp|²) on the unit disk, M_d = B/(πΛ).
+    """eq. 18 with C = 1: P_d = M_d/(1 + B|Lp + Vp|²) on the unit disk, M_d = B/(πΛ).
 
     Derivation of M_d (eq. 19): ∫₀^{2π} dψ/(a + b cos ψ) = 2π/√(a² − b²) with a = 1 + B(r² + r_o²),
     b = 2B r r_o; in s = r², a² − b² = B²s² + 2Bs(1 − B r_o²) + (1 + B r_o²)², whose
@@ -334,7 +338,7 @@ def _disk_density(B: float, wo, wi):
 
 
 def pdf_low_smooth(wi, wo, B):
-    """Solid-angle density (sr⁻¹) of ``sample_low_smooth``: P_ω = P_d cos θi (Löw eq. 17–19);
+    """Solid-angle density (sr⁻¹) of ``sample_low_smooth``: P_ω = P_d cos θi (eq. 17–19);
     0 for wi below the horizon. Integrates to 1 over the upper hemisphere."""
     wo = _checks.normalize(_checks.directions("wo", wo, upper=True))
     wi = _checks.directions("wi", wi)
@@ -344,7 +348,7 @@ def pdf_low_smooth(wi, wo, B):
 
 
 def sample_low_smooth(wo, u1, u2, B) -> LowSample:
-    """Draw wi for Löw's smooth-surface BRDF with the C = 1 disk density (Löw eq. 17–22).
+    """Draw wi for Löw's smooth-surface BRDF with the C = 1 disk density (eq. 17–22).
 
     Lp = r(cos φ, sin φ) on the unit disk with density ∝ 1/(1 + B|Lp + Vp|²), centred on −Vp
     (the projected mirror direction of wo). Inversion (re-derived; eq. 20–22 are garbled):
@@ -372,19 +376,19 @@ def sample_low_smooth(wo, u1, u2, B) -> LowSample:
 
 
 def _halfvector_norm(B: float, C: float) -> float:
-    """M_h of Löw eq. 24 (A omitted): 1/(2π ∫₀¹ (1 + Bx)^−C dx) = B/(2π L φ((1−C)L)),
+    """M_h of eq. 24 (A omitted): 1/(2π ∫₀¹ (1 + Bx)^−C dx) = B/(2π L φ((1−C)L)),
     L = ln(1 + B), φ(z) = (eᶻ − 1)/z; smooth through C = 1 (eq. 24's two cases in one)."""
     L = np.log1p(B)
     return float(B / (2.0 * np.pi * L * _expm1_ratio((1.0 - C) * L)))
 
 
 def _halfvector_density(B: float, C: float, x):
-    """Löw eq. 23: P_h = M_h/(1 + B x)^C as a function of x = 1 − ĥ·n (solid angle, sr⁻¹)."""
+    """eq. 23: P_h = M_h/(1 + B x)^C as a function of x = 1 − ĥ·n (solid angle, sr⁻¹)."""
     return _halfvector_norm(B, C) * np.exp(-C * np.log1p(B * x))
 
 
 def _tilt_quantile(u, B: float, C: float):
-    """x = 1 − cos θh at tilt CDF value u (Löw eq. 25), in one form for all C:
+    """x = 1 − cos θh at tilt CDF value u (eq. 25), in one form for all C:
 
         x = (e^ℓ − 1)/B,  ℓ = ln(1 + u((1+B)^{1−C} − 1))/(1 − C)  (→ u L as C → 1)
           = u L φ(aL) · ln(1 + y)/y,   a = 1 − C, y = u (e^{aL} − 1) = u aL φ(aL),
@@ -400,7 +404,7 @@ def _tilt_quantile(u, B: float, C: float):
 
 
 def pdf_low_halfvector(h, B, C):
-    """Löw eq. 23–24: solid-angle density (sr⁻¹) of the sampled half vectors,
+    """eq. 23–24: solid-angle density (sr⁻¹) of the sampled half vectors,
     ∝ 1/(1 + B(1 − ĥ·n))^C, normalised over the upper hemisphere; 0 below it.
     ``h`` (..., 3), unit or unnormalised (1 − ĥ·n is computed without cancellation)."""
     h = np.asarray(h, dtype=np.float64)
@@ -413,7 +417,7 @@ def pdf_low_halfvector(h, B, C):
 
 
 def _reflected_pdf(B, C, H):
-    """P_h(ĥ)/(4|wo·ĥ|) (Löw eq. 28) at H = wi + wo, ĥ = ±H/|H| taken in the upper hemisphere.
+    """P_h(ĥ)/(4|wo·ĥ|) (eq. 28) at H = wi + wo, ĥ = ±H/|H| taken in the upper hemisphere.
 
     Every wi on the sphere comes from exactly one ĥ in the upper hemisphere, with Jacobian
     4|wo·ĥ|, so this integrates to 1 over the sphere; where wo·ĥ < 0 the wi lies below the horizon.
@@ -428,7 +432,7 @@ def _reflected_pdf(B, C, H):
 
 
 def pdf_low_microfacet(wi, wo, B, C):
-    """Solid-angle density (sr⁻¹) of ``sample_low_microfacet`` at any wi on the sphere (Löw eq. 28),
+    """Solid-angle density (sr⁻¹) of ``sample_low_microfacet`` at any wi on the sphere (eq. 28),
     below-horizon directions included; integrates to 1 over the sphere."""
     wo = _checks.normalize(_checks.directions("wo", wo, upper=True))
     wi = _checks.normalize(_checks.directions("wi", wi))
@@ -437,7 +441,7 @@ def pdf_low_microfacet(wi, wo, B, C):
 
 
 def sample_low_microfacet(wo, u1, u2, B, C) -> LowSample:
-    """Draw wi for Löw's microfacet BRDF (Löw eq. 23–28).
+    """Draw wi for Löw's microfacet BRDF (eq. 23–28).
 
     ĥ from P_h ∝ 1/(1 + B(1 − cos θh))^C in solid angle (eq. 23–25, ``_tilt_quantile``; the
     sampler uses the exact C — no switch to C = 1 near 1 is needed in this form), φh = 2π u2
@@ -460,9 +464,9 @@ def sample_low_microfacet(wo, u1, u2, B, C) -> LowSample:
     return LowSample(wi, pdf, (wi[..., 2] > 0.0) & (voh > 0.0))
 
 
-# --- fit metrics (Löw eq. 29–33) ----------------------------------------------------------------
+# --- fit metrics (eq. 29–33) ----------------------------------------------------------------
 def _fit_error(transform, measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o):
-    """Σ (g(measured) − g(model))² sin θo Δθi Δθo Δφo (Löw eq. 33, widths in radians)."""
+    """Σ (g(measured) − g(model))² sin θo Δθi Δθo Δφo (eq. 33, widths in radians)."""
     arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in
                                    (measured, model, theta_i, theta_o, d_theta_i, d_theta_o,
                                     d_phi_o)))

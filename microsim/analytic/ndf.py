@@ -1,9 +1,9 @@
 """Microfacet normal distributions (NDFs).
 
-Convention (Mikkelsen 2009, eq. 14): an NDF D(h) is normalised so that ∫ D(h) (h·n) dω_h = 1 over the
-upper hemisphere, n = +z. ``pdf(h) = D(h) (h·n)`` is then a probability density in solid angle,
-and ``sample(u1, u2)`` draws unit half vectors h from it by inverting the CDF of the tilt
-θ_h (density 2π D(θ) cosθ sinθ) and taking φ_h = 2π u2.
+Convention (Mikkelsen 2009, eq. 14): an NDF D(h) is normalised so that ∫ D(h) (h·n) dω_h = 1
+over the upper hemisphere, n = +z. ``pdf(h) = D(h) (h·n)`` is then a probability density in
+solid angle, and ``sample(u1, u2)`` draws unit half vectors h from it by inverting the CDF of
+the tilt θ_h (density 2π D(θ) cosθ sinθ) and taking φ_h = 2π u2.
 
 All isotropic NDFs implement three things: the radial profile ``D_cos(cos θ_h)``, the tilt
 CDF ``_cdf_theta(θ)`` and its inverse ``tilt_quantile_rad(u)``. Everything else follows in this
@@ -73,7 +73,7 @@ class NDF:
         return self.D_cos(h[..., 2])
 
     def pdf(self, h):
-        """Solid-angle density of sampled half vectors, D(h)(h·n) (Mikkelsen eq. 14)."""
+        """Solid-angle density of sampled half vectors, D(h)(h·n) (Mikkelsen 2009, eq. 14)."""
         h = _checks.directions("h", h)
         c = h[..., 2]
         return self.D_cos(c) * np.maximum(c, 0.0)
@@ -147,9 +147,9 @@ def _cos_array(cos_theta) -> np.ndarray:
 # --- Beckmann -------------------------------------------------------------------------------
 @dataclass(frozen=True, repr=False)
 class Beckmann(NDF):
-    """Beckmann NDF, D = exp(−tan²θ/m²)/(π m² cos⁴θ) (Mikkelsen eq. 20); rms slope m > 0.
+    """Beckmann NDF, D = exp(−tan²θ/m²)/(π m² cos⁴θ) (Mikkelsen 2009, eq. 20); rms slope m > 0.
 
-    For a Gaussian heightfield the per-axis slope variance is m²/2 (DESIGN.md).
+    For a Gaussian heightfield the per-axis slope variance is m²/2 (docs/design.md).
     """
 
     m: float
@@ -184,7 +184,8 @@ class Beckmann(NDF):
         return np.arctan(self.m * np.sqrt(t))
 
     def smith_lambda_cos(self, cos_theta):
-        """Smith Λ = [erf(a) − 1]/2 + e^{−a²}/(2a√π), a = 1/(m tan θ) (DESIGN.md), cos θ in [0, 1].
+        """Smith Λ = [erf(a) − 1]/2 + e^{−a²}/(2a√π), a = 1/(m tan θ) (Smith 1967; Heitz 2014),
+        cos θ in [0, 1].
 
         Evaluated as Λ = e^{−a²}(1/(a√π) − erfcx(a))/2, which avoids the cancellation of
         erf(a) − 1 (erfcx(a) = e^{a²} erfc(a)). Λ = 0 at θ = 0 and Λ = +inf at θ = 90°
@@ -200,7 +201,7 @@ class Beckmann(NDF):
 # --- GGX ------------------------------------------------------------------------------------
 @dataclass(frozen=True, repr=False)
 class GGX(NDF):
-    """GGX / Trowbridge–Reitz NDF, D = α²/(π cos⁴θ (α² + tan²θ)²), α > 0 (DESIGN.md).
+    """GGX / Trowbridge–Reitz NDF, D = α²/(π cos⁴θ (α² + tan²θ)²), α > 0 (docs/design.md).
 
     Evaluated as α²/(π (α² cos²θ + sin²θ)²), finite at θ = 90°.
     """
@@ -234,7 +235,7 @@ class GGX(NDF):
         return np.arctan2(self.alpha * np.sqrt(u), np.sqrt(1.0 - u))
 
     def smith_lambda_cos(self, cos_theta):
-        """Smith Λ = (−1 + √(1 + α² tan²θ))/2 (DESIGN.md), cos θ in [0, 1].
+        """Smith Λ = (−1 + √(1 + α² tan²θ))/2 (docs/design.md), cos θ in [0, 1].
 
         Evaluated as α² sin²/(2c(√(c² + α² sin²) + c)): no cancellation; +inf at θ = 90°.
         """
@@ -247,7 +248,8 @@ class GGX(NDF):
 # --- normalised Blinn–Phong -----------------------------------------------------------------
 @dataclass(frozen=True, repr=False)
 class BlinnPhong(NDF):
-    """Normalised Blinn–Phong NDF, D = (e + 2)/(2π) cos^e θ (Mikkelsen eq. 19; Mally), e ≥ 0."""
+    """Normalised Blinn–Phong NDF, D = (e + 2)/(2π) cos^e θ, e ≥ 0 (Mikkelsen 2009, eq. 19;
+    Mally 2015)."""
 
     e: float
     name = "blinn_phong"
@@ -282,7 +284,7 @@ class BlinnPhong(NDF):
 def beckmann_to_phong(m) -> float:
     """Phong exponent with the same normalisation constant as Beckmann m: e = 2/m² − 2.
 
-    Mikkelsen eq. 21 (equates (e+2)/2π with 1/(π m²)); needs 0 < m ≤ 1 so that e ≥ 0.
+    Mikkelsen 2009, eq. 21 (equates (e+2)/2π with 1/(π m²)); needs 0 < m ≤ 1 so that e ≥ 0.
     Visually close for e > 8 (Mikkelsen).
     """
     m = _checks.in_range("m", m, 0.0, 1.0, lo_open=True)
@@ -290,7 +292,7 @@ def beckmann_to_phong(m) -> float:
 
 
 def phong_to_beckmann(e) -> float:
-    """Inverse of Mikkelsen eq. 21: m = √(2/(e + 2)) for e ≥ 0."""
+    """Inverse of Mikkelsen 2009, eq. 21: m = √(2/(e + 2)) for e ≥ 0."""
     e = _checks.in_range("e", e, 0.0, np.inf, hi_open=True)
     return float(np.sqrt(2.0 / (e + 2.0)))
 
@@ -298,10 +300,10 @@ def phong_to_beckmann(e) -> float:
 # --- von Mises–Fisher on the hemisphere -----------------------------------------------------
 @dataclass(frozen=True, repr=False)
 class VonMisesFisher(NDF):
-    """Hemispherical von Mises–Fisher lobe, concentration κ > 0 (Mikkelsen eq. 29–33).
+    """Hemispherical von Mises–Fisher lobe, concentration κ > 0 (Mikkelsen 2009, eq. 29–33).
 
-    pdf p(h) = κ e^{κ(h·n)}/(2π(e^κ − 1)) (Mikkelsen eq. 29), normalised over the hemisphere,
-    and D = p/(h·n) (Mikkelsen eq. 18 / 14). Evaluated as κ e^{−κ(1 − h·n)}/(2π(1 − e^{−κ})),
+    pdf p(h) = κ e^{κ(h·n)}/(2π(e^κ − 1)) (Mikkelsen 2009, eq. 29), normalised over the hemisphere,
+    and D = p/(h·n) (Mikkelsen 2009, eq. 18 / 14). Evaluated as κ e^{−κ(1 − h·n)}/(2π(1 − e^{−κ})),
     which never forms e^κ. D grows like p(0)/cos θ towards the horizon (p(0) > 0) and is
     set to 0 for cos θ ≤ 0 (base-class convention); pdf = D cos θ stays finite.
     """
@@ -316,7 +318,7 @@ class VonMisesFisher(NDF):
         return {"kappa": self.kappa}
 
     def _p_x(self, x):
-        """Solid-angle density p as a function of x = 1 − h·n (Mikkelsen eq. 29)."""
+        """Solid-angle density p as a function of x = 1 − h·n (Mikkelsen 2009, eq. 29)."""
         k = self.kappa
         return k * np.exp(-k * x) / (2.0 * np.pi * -np.expm1(-k))
 
@@ -333,7 +335,7 @@ class VonMisesFisher(NDF):
         return np.minimum(np.expm1(-self.kappa * x) / np.expm1(-self.kappa), 1.0)
 
     def tilt_quantile_rad(self, u):
-        """θ_h with 1 − cos θ = −ln(1 − u(1 − e^{−κ}))/κ (Mikkelsen eq. 31 without e^κ)."""
+        """θ_h with 1 − cos θ = −ln(1 − u(1 − e^{−κ}))/κ (Mikkelsen 2009, eq. 31 without e^κ)."""
         u = _unit_interval(u)
         with np.errstate(divide="ignore"):
             x = -np.log1p(u * np.expm1(-self.kappa)) / self.kappa
@@ -343,10 +345,11 @@ class VonMisesFisher(NDF):
 # --- Löw's ABC facet distribution -----------------------------------------------------------
 @dataclass(frozen=True, repr=False)
 class ABC(NDF):
-    """ABC facet distribution D(h) = M/(1 + B(1 − h·n))^C, B > 0, C > 0 (Löw eq. 15, 23).
+    """ABC facet distribution D(h) = M/(1 + B(1 − h·n))^C, B > 0, C > 0 (Löw et al. 2012,
+    eq. 15, 23).
 
     Löw normalises the *solid-angle* pdf M_h A/(1 + B(1 − cos θ))^C (eq. 23–24); here D is a
-    true NDF, ∫ D (h·n) dω = 1 (Mikkelsen eq. 14), so the normaliser carries the cos factor.
+    true NDF, ∫ D (h·n) dω = 1 (Mikkelsen 2009, eq. 14), so the normaliser carries the cos factor.
     With x = 1 − cos θ, y = B x and L = ln(1 + y):
 
         J(x) = ∫₀ˣ (1 − t)(1 + Bt)^{−C} dt

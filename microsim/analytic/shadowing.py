@@ -26,11 +26,12 @@ G1 = 1/(1 + Λ) is accurate to 1e-4 there (tests/test_shadowing.py).
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import weakref
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
+
+from microsim.errors import UsageError
 
 from . import _checks
 
@@ -46,7 +47,7 @@ _TABLES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 # --- V-groove (Blinn / Cook–Torrance) ---------------------------------------------------------
 def _vgroove_g1(cos_w, w_dot_h, cos_h):
-    """min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) χ⁺(n·w) from the three cosines (Mikkelsen eq. 25)."""
+    """min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) χ⁺(n·w) from the three cosines (Mikkelsen 2009, eq. 25)."""
     ok = (w_dot_h > 0.0) & (cos_w > 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = 2.0 * cos_h * cos_w / w_dot_h
@@ -54,7 +55,7 @@ def _vgroove_g1(cos_w, w_dot_h, cos_h):
 
 
 def vgroove_g1(w, h):
-    """One-sided V-groove masking min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) (Mikkelsen eq. 25)."""
+    """One-sided V-groove masking min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) (Mikkelsen 2009, eq. 25)."""
     w = _checks.directions("w", w)
     h = _checks.directions("h", h)
     return _vgroove_g1(w[..., 2], _checks.dot(w, h), h[..., 2])
@@ -62,7 +63,7 @@ def vgroove_g1(w, h):
 
 def vgroove_g(wi, wo, h):
     """V-groove shadowing–masking min(1, 2(n·h)(n·wo)/(wo·h), 2(n·h)(n·wi)/(wi·h)) with χ⁺
-    conditions (Mikkelsen eq. 25, Blinn 1977); 0 where wi·h ≤ 0 or wo·h ≤ 0."""
+    conditions (Mikkelsen 2009, eq. 25, Blinn 1977); 0 where wi·h ≤ 0 or wo·h ≤ 0."""
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)

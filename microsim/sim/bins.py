@@ -1,6 +1,6 @@
 """Bins over the outgoing hemisphere, shared by the estimator and the model predictions.
 
-A result is always a BRDF averaged over a bin B (DESIGN.md, Conventions):
+A result is always a BRDF averaged over a bin B (docs/design.md, Conventions):
 
     f̄_B = (1/Ω_B) ∫_B f(wi, wo) cos θo dω_o,   Ω_B = ∫_B cos θo dω_o,
 
@@ -64,7 +64,8 @@ class Bins:
         object.__setattr__(self, "n_phi", n_phi)
         object.__setattr__(self, "folded", bool(self.folded))
         if not self.folded and self.n_phi % 2:
-            raise UsageError(f"n_phi must be even when folded=False (a bin centred on 180°), got {self.n_phi}")
+            raise UsageError(f"n_phi must be even when folded=False (a bin centred on 180°), "
+                             f"got {self.n_phi}")
 
     # --- edges ------------------------------------------------------------------------
     @property
@@ -145,7 +146,7 @@ class Bins:
         degrees, bin ⌊θo·n_theta/90⌋; Δφ = φo − φi as ``relative_azimuth``, its bin the one
         whose ``phi_edges`` hold it (edge_j ≤ Δφ < edge_j+1), computed by
         ``kernels.bin_index`` after NumPy's arctan2."""
-        from . import kernels                             # (kernels imports nothing of ours)
+        from . import kernels  # (kernels imports nothing of ours)
         x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
         shape = np.broadcast_shapes(x.shape, y.shape, z.shape)
         theta = np.arctan2(np.sqrt(x * x + y * y), z)

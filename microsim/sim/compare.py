@@ -29,7 +29,6 @@ m_real = ``surface.stats()["m_realised"]``):
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 from typing import NamedTuple
 
 import numpy as np
@@ -37,6 +36,7 @@ import numpy as np
 from microsim.analytic import _checks
 from microsim.analytic.fresnel import resolve_material
 from microsim.analytic.ndf import Beckmann
+from microsim.errors import UsageError
 
 from .predict import ModelSpec, predict
 from .result import Result
@@ -61,7 +61,8 @@ def _surfaces_and_ndf(scene_or_surfaces, ndf):
         return [surface], ndf if ndf is not None else surface.ensemble_ndf
     surfaces = list(scene_or_surfaces) if isinstance(scene_or_surfaces, (list, tuple)) \
         else [scene_or_surfaces]
-    if not surfaces or not all(hasattr(s, "kind") and hasattr(s, "facet_normals") for s in surfaces):
+    if not surfaces or not all(hasattr(s, "kind") and hasattr(s, "facet_normals")
+                               for s in surfaces):
         raise UsageError(f"scene_or_surface must be a Scene, a Surface or a non-empty sequence "
                          f"of Surfaces, got {scene_or_surfaces!r}")
     if len({s.kind for s in surfaces}) != 1:
@@ -138,7 +139,8 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
         for name, values in pred.items():
             out[name][sel] = values
     result.models.update(out)
-    own = set(result.meta.get("realisation_models", ())) | {s.name for s in specs if s.kind == "facets"}
+    own = (set(result.meta.get("realisation_models", ()))
+           | {s.name for s in specs if s.kind == "facets"})
     result.meta["realisation_models"] = sorted(own)
     return result
 

@@ -24,7 +24,6 @@ mirror, a name, n, n + ik).
 """
 from __future__ import annotations
 
-from microsim.errors import UsageError
 import warnings
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -38,6 +37,7 @@ from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.analytic.shadowing import SHADOWING_KINDS, shadowing_g
+from microsim.errors import UsageError
 
 from .bins import Bins
 

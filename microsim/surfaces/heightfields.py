@@ -116,7 +116,8 @@ def spectrum_moments(S: np.ndarray, FX: np.ndarray, FY: np.ndarray, dx: float) -
     """Height variance and mesh per-axis slope variance of a grid with discrete spectrum S.
 
     Mesh slopes are one-step finite differences: response (2 sin(π f dx)/dx)² per axis
-    (docs/design.md, "Facts to build on — Surfaces") — the continuum (2πf)² overestimates the mesh slope variance.
+    (docs/design.md, "Facts to build on — Surfaces") — the continuum (2πf)² overestimates the
+    mesh slope variance.
     """
     df2 = 1.0 / (S.size * dx * dx)
 

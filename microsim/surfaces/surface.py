@@ -1,7 +1,8 @@
 """The explicit microsurface: a periodic triangle mesh plus what generated it.
 
-Conventions (docs/design.md, "Conventions"): macro normal +z; the tile is [-Lx/2, Lx/2] x [-Ly/2, Ly/2]; every face
-is ordered so that its geometric normal cross(v1 - v0, v2 - v0) points up. A facet with unit
+Conventions (docs/design.md, "Conventions"): macro normal +z; the tile is [-Lx/2, Lx/2] x
+[-Ly/2, Ly/2]; every face is ordered so that its geometric normal cross(v1 - v0, v2 - v0)
+points up. A facet with unit
 normal n has slopes (∂z/∂x, ∂z/∂y) = (-n_x/n_z, -n_y/n_z); statistics over facets are weighted
 by projected area (area · n_z), so that a histogram of facet normals samples D(h)(h·n)
 (Mikkelsen 2009, eq. 14).
@@ -159,7 +160,7 @@ class Surface:
         return float(z.min()), float(z.max())
 
     def ndf(self):
-        """Empirical NDF of the facets, weighted by projected area (``microsim.analytic.Empirical``)."""
+        """Empirical NDF of the facets, weighted by projected area (``analytic.Empirical``)."""
         return Empirical(self.facet_normals(), weights=self.projected_areas())
 
     def stats(self) -> dict:

@@ -2,9 +2,10 @@
 build on — Surfaces").
 
 Long straight symmetric grooves whose rims all lie at z = 0 with the surface below make the
-V-groove G (Mikkelsen 2009, eq. 25; Blinn 1977) exact for single scattering. Grooves run along y over the whole
-tile; groove k spans [x_k, x_k + w] with equal width w = L/n, its two planar faces tilted by θ_k
-towards ±x, depth (w/2) tan θ_k; four triangles per groove describe it exactly.
+V-groove G (Mikkelsen 2009, eq. 25; Blinn 1977) exact for single scattering. Grooves run
+along y over the whole tile; groove k spans [x_k, x_k + w] with equal width w = L/n, its two
+planar faces tilted by θ_k towards ±x, depth (w/2) tan θ_k; four triangles per groove describe
+it exactly.
 
 With equal widths, every face has the same projected area, so the tilts must be drawn from
 the projected-area tilt density 2π D(θ) cos θ sin θ of the NDF (its ``tilt_quantile_rad``); equal
@@ -20,7 +21,7 @@ from microsim.errors import UsageError
 
 from .surface import Surface
 
-__all__ = ["vgrooves", "groove_tilts", "groove_profile", "groove_stats"]
+__all__ = ["vgrooves", "groove_tilts_rad", "groove_profile", "groove_stats"]
 
 SAMPLINGS = ("stratified", "random")
 BYTES_PER_GROOVE = 1600
@@ -30,7 +31,8 @@ BYTES_PER_GROOVE = 1600
 ``_checks.memory_limit`` before anything is allocated."""
 
 
-def groove_tilts(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified") -> np.ndarray:
+def groove_tilts_rad(n_grooves: int, ndf, seed: int = 0,
+                     sampling: str = "stratified") -> np.ndarray:
     """Tilts θ_k (radians, in x order) of ``n_grooves`` grooves drawn from ``ndf``'s tilt density.
 
     ``stratified``: θ at the quantiles (k + ½)/n, then shuffled along x with ``seed`` (the order
@@ -81,7 +83,7 @@ def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
              tile: float = 1.0) -> Surface:
     """Square tile of side ``tile`` holding ``n_grooves`` equal-width symmetric V-grooves.
 
-    Tilts from ``ndf`` (any object with ``tilt_quantile_rad``; see ``groove_tilts`` for the
+    Tilts from ``ndf`` (any object with ``tilt_quantile_rad``; see ``groove_tilts_rad`` for the
     stratified/random choice and the seeded shuffle). Grooves run along y; all rims at z = 0,
     nothing above; 4 triangles per groove; periodic; ``azimuth_average`` is True; the surface
     carries ``ndf`` as its ``ensemble_ndf`` and "vgroove" as its ``exact_shadowing``. Groove
@@ -97,7 +99,7 @@ def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
     check_memory("n_grooves", float(n_grooves) * BYTES_PER_GROOVE,
                  f"{n_grooves:,} grooves ({BYTES_PER_GROOVE} bytes per groove to build and "
                  f"trace)")
-    tilts = groove_tilts(n_grooves, ndf, seed, sampling)
+    tilts = groove_tilts_rad(n_grooves, ndf, seed, sampling)
     vertices, faces = _extrude(*groove_profile(tilts, tile), tile)
     params = ndf.params() if callable(getattr(ndf, "params", None)) else {}
     nominal = {"ndf": getattr(ndf, "name", type(ndf).__name__), **params,
