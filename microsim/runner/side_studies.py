@@ -92,7 +92,7 @@ def estimator_warnings(plan: RunPlan, sweep) -> list[str]:
         out.append(f"the reflection lobe of a flat surface is a delta: narrower than any bin "
                    f"({bin_w:g}° wide); relative errors are bin averages of a spike")
     else:
-        lobe = 2.0 * math.degrees(float(ndf.tilt_quantile(0.5)))     # median lobe half-width
+        lobe = 2.0 * math.degrees(float(ndf.tilt_quantile_rad(0.5)))  # median lobe half-width
         if lobe < bin_w:
             out.append(f"the reflection lobe (median half-width ≈ {lobe:.2g}°, twice the median "
                        f"facet tilt) is narrower than a {bin_w:g}° bin: bin averages smear it")
