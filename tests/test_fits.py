@@ -37,7 +37,7 @@ def test_bin_rule_matches_accurate_bin_average_on_a_smooth_lobe(theta_i):
     fn = fits.FIT_MODELS["cook_torrance"].make({"ks": 1.0, "m": 0.3, "kd": 0.0}, ALU)
     wi = _checks.spherical_deg(theta_i, 0.0)
     approx = fits.bin_rule(bins, wi).average(fn, wi)
-    exact = bin_average(fn, wi, bins, 0.0, rtol=1e-5).values
+    exact = bin_average(wi, bins, fn, 0.0, rtol=1e-5).values
     sig = exact > 1e-3 * exact.max()
     np.testing.assert_allclose(approx[sig], exact[sig], rtol=1e-2)
 
