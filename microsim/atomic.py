@@ -15,6 +15,7 @@ the owner's pid), held for a run's duration: a second run on the same ``DIR`` is
 a ``UsageError``. The kernel drops the lock when its process dies, so a stale lock file never
 blocks anyone.
 """
+
 from __future__ import annotations
 
 import errno
@@ -32,8 +33,20 @@ import numpy as np
 
 from .errors import UsageError
 
-__all__ = ["atomic_open", "write_text", "json_safe", "write_json", "umask", "file_mode", "dir_mode",
-           "make_staging", "publish_dir", "output_lock", "clean_stale", "normalise_modes"]
+__all__ = [
+    "atomic_open",
+    "write_text",
+    "json_safe",
+    "write_json",
+    "umask",
+    "file_mode",
+    "dir_mode",
+    "make_staging",
+    "publish_dir",
+    "output_lock",
+    "clean_stale",
+    "normalise_modes",
+]
 
 
 def umask() -> int:
@@ -212,10 +225,12 @@ def output_lock(out):
                     owner = path.read_text().strip() or "?"
                 except OSError:
                     owner = "?"
-                raise UsageError(f"{out}: another microsim run (pid {owner}) is writing it; "
-                                 f"wait for it to finish or choose another --out") from None
+                raise UsageError(
+                    f"{out}: another microsim run (pid {owner}) is writing it; "
+                    f"wait for it to finish or choose another --out"
+                ) from None
             raise
-        try:                   # the file may have been unlinked by its previous holder
+        try:  # the file may have been unlinked by its previous holder
             same = os.fstat(fd).st_ino == os.stat(path).st_ino
         except FileNotFoundError:
             same = False

@@ -22,6 +22,7 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   achieves against the exact closed form (Torrance–Sparrow with V-groove G, Mikkelsen 2009,
   eq. 25, bin-averaged).
 """
+
 from __future__ import annotations
 
 import json
@@ -34,12 +35,20 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["BenchConfig", "bench_config", "throughput", "peak_rss_mb", "time_to_accuracy",
-           "run_bench", "format_bench", "add_bench_command"]
+__all__ = [
+    "BenchConfig",
+    "bench_config",
+    "throughput",
+    "peak_rss_mb",
+    "time_to_accuracy",
+    "run_bench",
+    "format_bench",
+    "add_bench_command",
+]
 
-BATCH = 2 ** 16
-ACCURACY_MASKING = "analytic"      # the V-groove path timed by ``time_to_accuracy``
-ACCURACY_CHUNK = 2 ** 18           # rays per thread task there (fewer per-task overheads)
+BATCH = 2**16
+ACCURACY_MASKING = "analytic"  # the V-groove path timed by ``time_to_accuracy``
+ACCURACY_CHUNK = 2**18  # rays per thread task there (fewer per-task overheads)
 
 
 @dataclass(frozen=True)
@@ -52,22 +61,24 @@ class BenchConfig:
     sigma: float = 1.2
     corr_len: float = 8.0
     theta_i: float = 30.0
-    rays: int = 2 ** 22
-    memory_rays: tuple = (2 ** 20, 2 ** 23)       # both above the mesh's facet count
+    rays: int = 2**22
+    memory_rays: tuple = (2**20, 2**23)  # both above the mesh's facet count
     target: float = 0.01
     vgrooves: int = 4000
-    max_rays: int = 10 ** 8
+    max_rays: int = 10**8
     skip_accuracy: bool = False
 
 
 def _surface(cfg: BenchConfig):
     from microsim.surfaces import gaussian
+
     return gaussian(cfg.n, 1.0, cfg.sigma, cfg.corr_len, seed=0)
 
 
 def _bins():
     from microsim.sim import Bins
-    return Bins(45, 37)                          # 2° θo bins, 5° Δφ bins (folded)
+
+    return Bins(45, 37)  # 2° θo bins, 5° Δφ bins (folded)
 
 
 def _ray_set(tracer, wi: np.ndarray, rays: int):
@@ -76,17 +87,19 @@ def _ray_set(tracer, wi: np.ndarray, rays: int):
     from microsim.analytic.fresnel import resolve_material
     from microsim.sim.paths import SINGLE, facet_table
     from microsim.sim.streams import BLOCK, block_origins
+
     nblk = -(-rays // BLOCK)
-    o = np.concatenate([block_origins(tracer, rays, b, (0, 0, 0), False)[0]
-                        for b in range(nblk)])
+    o = np.concatenate([block_origins(tracer, rays, b, (0, 0, 0), False)[0] for b in range(nblk)])
     status, prim, point = tracer.trace(o, -wi)
     h = np.flatnonzero(status == 0)
     table = facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
     lit = h[table.code[prim[h]] == SINGLE]
     mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
     md = table.wo32[prim[lit]]
-    return ((o.astype(np.float32), (-wi).astype(np.float32)[None]),
-            (mo.astype(np.float32), md.astype(np.float32)))
+    return (
+        (o.astype(np.float32), (-wi).astype(np.float32)[None]),
+        (mo.astype(np.float32), md.astype(np.float32)),
+    )
 
 
 def _time_raw(tracer, primary, masking, threads: int) -> float:
@@ -95,10 +108,10 @@ def _time_raw(tracer, primary, masking, threads: int) -> float:
     scene = tracer._scene
 
     def prim_batch(a):
-        scene.run(po[a:a + BATCH], pd, output=1)
+        scene.run(po[a : a + BATCH], pd, output=1)
 
     def mask_batch(a):
-        scene.run(mo[a:a + BATCH], md[a:a + BATCH], query="OCCLUDED")
+        scene.run(mo[a : a + BATCH], md[a : a + BATCH], query="OCCLUDED")
 
     with ThreadPoolExecutor(threads) as pool:
         t0 = time.perf_counter()
@@ -114,8 +127,9 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
     hits both rather than one. Returns (raw, pipeline): raw = {"rays", "primary_rays",
     "masking_rays", "rays_per_s": {1: .., 2: ..}, "samples_per_s": {1: .., 2: ..}} (rays/s
     counts both kinds; samples/s = primary rays/s), pipeline = {1: samples/s, 2: samples/s}."""
-    from microsim.analytic._checks import spherical_deg
     from microsim.sim import Tracer, simulate
+    from microsim.vectors import spherical_deg
+
     surface = surface if surface is not None else _surface(cfg)
     tracer = Tracer(surface)
     primary, masking = _ray_set(tracer, spherical_deg(cfg.theta_i, 0.0), cfg.rays)
@@ -123,14 +137,18 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
     best_raw, pipe = {1: np.inf, 2: np.inf}, {1: 0.0, 2: 0.0}
     for _ in range(repeat):
         for threads in (1, 2):
-            best_raw[threads] = min(best_raw[threads],
-                                    _time_raw(tracer, primary, masking, threads))
-            res = simulate(surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(),
-                           threads=threads)
+            best_raw[threads] = min(best_raw[threads], _time_raw(tracer, primary, masking, threads))
+            res = simulate(
+                surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(), threads=threads
+            )
             pipe[threads] = max(pipe[threads], res.meta["rays_per_second"])
-    raw = {"rays": n_p + n_m, "primary_rays": n_p, "masking_rays": n_m,
-           "rays_per_s": {t: (n_p + n_m) / best_raw[t] for t in (1, 2)},
-           "samples_per_s": {t: n_p / best_raw[t] for t in (1, 2)}}
+    raw = {
+        "rays": n_p + n_m,
+        "primary_rays": n_p,
+        "masking_rays": n_m,
+        "rays_per_s": {t: (n_p + n_m) / best_raw[t] for t in (1, 2)},
+        "samples_per_s": {t: n_p / best_raw[t] for t in (1, 2)},
+    }
     return raw, pipe
 
 
@@ -152,8 +170,12 @@ def peak_rss_mb(cfg: BenchConfig = BenchConfig(), rays: int | None = None) -> fl
     """Peak resident memory (MB) of building the surface and one ``simulate`` run of ``rays``
     rays (2 threads) in a fresh Python process."""
     conf = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
-    out = subprocess.run([sys.executable, "-c", _PROBE, json.dumps(conf), str(int(rays or cfg.rays))],
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE, json.dumps(conf), str(int(rays or cfg.rays))],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return float(out.stdout.split()[-1])
 
 
@@ -169,32 +191,62 @@ def time_to_accuracy(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> dict
     from microsim.sim.auto import simulate_auto
     from microsim.sim.predict import ModelSpec, predict
     from microsim.surfaces import vgrooves
+
     bins = Bins(45, 91)
     surface = vgrooves(cfg.vgrooves, an.Beckmann(0.3), seed=0)
     t0 = time.perf_counter()
-    res = simulate_auto(surface, "aluminium", 30.0, target=cfg.target, bins=bins,
-                        masking=ACCURACY_MASKING, threads=threads, chunk=ACCURACY_CHUNK,
-                        max_rays=cfg.max_rays)
+    res = simulate_auto(
+        surface,
+        "aluminium",
+        30.0,
+        target=cfg.target,
+        bins=bins,
+        masking=ACCURACY_MASKING,
+        threads=threads,
+        chunk=ACCURACY_CHUNK,
+        max_rays=cfg.max_rays,
+    )
     seconds = time.perf_counter() - t0
-    model = predict([ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")],
-                    [30.0], bins)["ts"][0]
-    v = verdict(res.brdf[0], res.stderr[0], res.counts[0], model, bins.projected_solid_angle(),
-                bins.theta_edges, phi_edges=bins.phi_edges)
+    model = predict(
+        [ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")], [30.0], bins
+    )["ts"][0]
+    v = verdict(
+        res.brdf[0],
+        res.stderr[0],
+        res.counts[0],
+        model,
+        bins.projected_solid_angle(),
+        bins.theta_edges,
+        phi_edges=bins.phi_edges,
+    )
     info = res.meta["auto"]["incidences"][0]
-    return {"seconds": seconds, "rays": int(res.rays[0]), "rays_per_s": res.rays[0] / seconds,
-            "masking": ACCURACY_MASKING, "rse": info["rse"],
-            "converged": info["converged"], "rel_rms_vs_closed_form": v["rel_rms"],
-            "chi2_dof": v["chi2_dof"], "threads": threads}
+    return {
+        "seconds": seconds,
+        "rays": int(res.rays[0]),
+        "rays_per_s": res.rays[0] / seconds,
+        "masking": ACCURACY_MASKING,
+        "rse": info["rse"],
+        "converged": info["converged"],
+        "rel_rms_vs_closed_form": v["rel_rms"],
+        "chi2_dof": v["chi2_dof"],
+        "threads": threads,
+    }
 
 
 def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
     """Every figure of the module docstring, as a JSON-able dict."""
     surface = _surface(cfg)
     raw, pipe = throughput(cfg, surface)
-    out = {"config": asdict(cfg), "load_average": list(os.getloadavg()), "cpus": os.cpu_count(),
-           "mesh_triangles": int(len(surface.faces)), "raw": raw, "pipeline_samples_per_s": pipe,
-           "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
-           "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays}}
+    out = {
+        "config": asdict(cfg),
+        "load_average": list(os.getloadavg()),
+        "cpus": os.cpu_count(),
+        "mesh_triangles": int(len(surface.faces)),
+        "raw": raw,
+        "pipeline_samples_per_s": pipe,
+        "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
+        "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
+    }
     if not cfg.skip_accuracy:
         out["time_to_accuracy"] = time_to_accuracy(cfg)
     return out
@@ -203,36 +255,42 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
 def format_bench(b: dict) -> str:
     """Human-readable table of ``run_bench`` output."""
     raw, pipe, ratio = b["raw"], b["pipeline_samples_per_s"], b["ratio"]
-    lines = [f"mesh: {b['mesh_triangles']} triangles; {raw['primary_rays']} primary + "
-             f"{raw['masking_rays']} masking rays; load average {b['load_average'][0]:.2f} "
-             f"on {b['cpus']} CPUs",
-             f"{'':28s}{'1 thread':>14s}{'2 threads':>14s}",
-             f"{'raw embreex rays/s':28s}{raw['rays_per_s'][1]:14.4g}{raw['rays_per_s'][2]:14.4g}",
-             f"{'raw embreex samples/s':28s}{raw['samples_per_s'][1]:14.4g}"
-             f"{raw['samples_per_s'][2]:14.4g}",
-             f"{'pipeline samples/s':28s}{pipe[1]:14.4g}{pipe[2]:14.4g}",
-             f"{'pipeline / raw':28s}{ratio[1]:14.1%}{ratio[2]:14.1%}"]
+    lines = [
+        f"mesh: {b['mesh_triangles']} triangles; {raw['primary_rays']} primary + "
+        f"{raw['masking_rays']} masking rays; load average {b['load_average'][0]:.2f} "
+        f"on {b['cpus']} CPUs",
+        f"{'':28s}{'1 thread':>14s}{'2 threads':>14s}",
+        f"{'raw embreex rays/s':28s}{raw['rays_per_s'][1]:14.4g}{raw['rays_per_s'][2]:14.4g}",
+        f"{'raw embreex samples/s':28s}{raw['samples_per_s'][1]:14.4g}"
+        f"{raw['samples_per_s'][2]:14.4g}",
+        f"{'pipeline samples/s':28s}{pipe[1]:14.4g}{pipe[2]:14.4g}",
+        f"{'pipeline / raw':28s}{ratio[1]:14.1%}{ratio[2]:14.1%}",
+    ]
     lines += [f"peak RSS, {r} rays: {mb:.0f} MB" for r, mb in b["peak_rss_mb"].items()]
     t = b.get("time_to_accuracy")
     if t:
-        lines.append(f"time to {b['config']['target']:.0%} (V-groove Beckmann 0.3, Al, 30°, 2° bins, "
-                     f"masking={t['masking']}, {t['threads']} threads): {t['seconds']:.2f} s, "
-                     f"{t['rays']} rays ({t['rays_per_s']:.3g} rays/s), rse "
-                     f"{t['rse']:.4f}, rel. RMS vs closed form {t['rel_rms_vs_closed_form']:.4f}"
-                     f" (χ²/dof {t['chi2_dof']:.3f})")
+        lines.append(
+            f"time to {b['config']['target']:.0%} (V-groove Beckmann 0.3, Al, 30°, 2° bins, "
+            f"masking={t['masking']}, {t['threads']} threads): {t['seconds']:.2f} s, "
+            f"{t['rays']} rays ({t['rays_per_s']:.3g} rays/s), rse "
+            f"{t['rse']:.4f}, rel. RMS vs closed form {t['rel_rms_vs_closed_form']:.4f}"
+            f" (χ²/dof {t['chi2_dof']:.3f})"
+        )
     return "\n".join(lines)
 
 
-QUICK = dict(n=128, rays=2 ** 17, memory_rays=(2 ** 16, 2 ** 18), target=0.05, vgrooves=1000)
+QUICK = dict(n=128, rays=2**17, memory_rays=(2**16, 2**18), target=0.05, vgrooves=1000)
 """``bench --quick``: a 128² mesh, 2**17 rays (an explicit ``--rays`` wins), small memory probes."""
 
 
-def bench_config(rays: int | None = None, quick: bool = False,
-                 skip_accuracy: bool = False) -> BenchConfig:
+def bench_config(
+    rays: int | None = None, quick: bool = False, skip_accuracy: bool = False
+) -> BenchConfig:
     """The configuration of ``microsim bench``: ``QUICK`` or the defaults, ``rays`` (primary
     rays of the throughput runs, an integer >= 1) overriding either."""
     if rays is not None and (isinstance(rays, bool) or int(rays) != rays or rays < 1):
         from .errors import UsageError
+
         raise UsageError(f"--rays must be an integer >= 1, got {rays!r}")
     conf = dict(QUICK) if quick else {}
     if rays is not None:
@@ -249,13 +307,20 @@ def _cmd_bench(args) -> int:
 
 def add_bench_command(subparsers) -> None:
     """Register ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]``."""
-    p = subparsers.add_parser("bench", help="measure raw Embree vs pipeline throughput, peak "
-                                            "memory and time to 1%% precision")
+    p = subparsers.add_parser(
+        "bench",
+        help="measure raw Embree vs pipeline throughput, peak memory and time to 1%% precision",
+    )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
-    p.add_argument("--rays", type=int, default=None,
-                   help=f"primary rays of the throughput runs (default {BenchConfig.rays}; "
-                        f"with --quick {QUICK['rays']})")
-    p.add_argument("--quick", action="store_true",
-                   help="small mesh and ray counts (seconds; for smoke tests)")
+    p.add_argument(
+        "--rays",
+        type=int,
+        default=None,
+        help=f"primary rays of the throughput runs (default {BenchConfig.rays}; "
+        f"with --quick {QUICK['rays']})",
+    )
+    p.add_argument(
+        "--quick", action="store_true", help="small mesh and ray counts (seconds; for smoke tests)"
+    )
     p.add_argument("--skip-accuracy", action="store_true", help="omit the time-to-1%% run")
     p.set_defaults(func=_cmd_bench)

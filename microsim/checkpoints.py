@@ -14,6 +14,7 @@ finished directory replaces the old one), "report-scene" (before each scene of
 ``microsim report``), "report-index" (before the catalogue index), "sweep-task" (after each
 finished sweep task is collected).
 """
+
 from __future__ import annotations
 
 from contextlib import contextmanager
@@ -21,8 +22,16 @@ from typing import Callable, Iterator
 
 __all__ = ["PHASES", "checkpoint", "interrupt_at", "set_hook"]
 
-PHASES = ("simulation", "side-studies", "fits", "charts", "publish", "report-scene",
-          "report-index", "sweep-task")
+PHASES = (
+    "simulation",
+    "side-studies",
+    "fits",
+    "charts",
+    "publish",
+    "report-scene",
+    "report-index",
+    "sweep-task",
+)
 
 _hook: Callable[[str], None] | None = None
 

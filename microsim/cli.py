@@ -7,6 +7,7 @@ permission denied, unreachable scheduler) — one line naming the path; 130 inte
 (Ctrl-C: finished results kept, partial ones saved for --resume). Anything else is a bug and
 is shown with its traceback (status 1).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -14,13 +15,14 @@ import os
 import sys
 import traceback
 
-from .errors import (EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure,
-                     UsageError)
+from .errors import EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure, UsageError
 
-EPILOG = ("exit status: 0 ok; 1 environment failure (disk full, read-only, permission; one "
-          "line naming the path) or a bug (with traceback); 2 usage error (one line naming "
-          "the option, file or key; nothing written); 130 interrupted (finished results "
-          "kept, partial ones saved for --resume)")
+EPILOG = (
+    "exit status: 0 ok; 1 environment failure (disk full, read-only, permission; one "
+    "line naming the path) or a bug (with traceback); 2 usage error (one line naming "
+    "the option, file or key; nothing written); 130 interrupted (finished results "
+    "kept, partial ones saved for --resume)"
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -31,14 +33,17 @@ class _Parser(argparse.ArgumentParser):
 
 def _cmd_models(args) -> int:
     from .analytic.catalogue import model_table
+
     print(model_table())
     return 0
 
 
 def _cmd_surface(args) -> int:
     import warnings
+
     from .scene import describe_surface, load_scene
-    with warnings.catch_warnings():       # describe_surface lists the generator's warnings
+
+    with warnings.catch_warnings():  # describe_surface lists the generator's warnings
         warnings.simplefilter("ignore", UserWarning)
         print(describe_surface(load_scene(args.scene)))
     return 0
@@ -54,17 +59,33 @@ def _theta_list(text: str) -> list[float]:
 
 def _cmd_run(args) -> int:
     from .runner import execute, plan_run
+
     theta = None if args.theta_i is None else [t for part in args.theta_i for t in part]
-    plan = plan_run(args.scene, rays=args.rays, theta_i=theta, out=args.out,
-                    threads=args.threads, seed=args.seed, quick=args.quick, resume=args.resume,
-                    force=args.force)
+    plan = plan_run(
+        args.scene,
+        rays=args.rays,
+        theta_i=theta,
+        out=args.out,
+        threads=args.threads,
+        seed=args.seed,
+        quick=args.quick,
+        resume=args.resume,
+        force=args.force,
+    )
     return execute(plan, progress=not args.no_progress).status
 
 
 def _cmd_report(args) -> int:
     from .runner import run_report
-    return run_report(args.catalogue, args.out, quick=args.quick, threads=args.threads,
-                      progress=not args.no_progress, resume=args.resume)
+
+    return run_report(
+        args.catalogue,
+        args.out,
+        quick=args.quick,
+        threads=args.threads,
+        progress=not args.no_progress,
+        resume=args.resume,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -72,22 +93,39 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     m = sub.add_parser("models", help="list every closed-form model with its parameters and source")
     m.set_defaults(func=_cmd_models)
-    s = sub.add_parser("surface", help="build a scene's surface and print its statistics next to the nominal values")
+    s = sub.add_parser(
+        "surface",
+        help="build a scene's surface and print its statistics next to the nominal values",
+    )
     s.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
     s.set_defaults(func=_cmd_surface)
-    r = sub.add_parser("run", help="simulate a scene, compare and fit the models, write "
-                                   "brdf.npz, meta.json, verdicts.json, report.md and charts")
+    r = sub.add_parser(
+        "run",
+        help="simulate a scene, compare and fit the models, write "
+        "brdf.npz, meta.json, verdicts.json, report.md and charts",
+    )
     r.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
     r.epilog = EPILOG
-    r.add_argument("--rays", type=int, help="primary rays per incidence (default: the scene's; "
-                                            "--quick caps it at 200000)")
-    r.add_argument("--theta-i", type=_theta_list, nargs="+", metavar="DEG",
-                   help="incidence angles in degrees (default: the scene's)")
+    r.add_argument(
+        "--rays",
+        type=int,
+        help="primary rays per incidence (default: the scene's; --quick caps it at 200000)",
+    )
+    r.add_argument(
+        "--theta-i",
+        type=_theta_list,
+        nargs="+",
+        metavar="DEG",
+        help="incidence angles in degrees (default: the scene's)",
+    )
     r.add_argument("--out", help="output directory (default: runs/<scene name>)")
     r.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
     r.add_argument("--seed", type=int, help="random seed (default: the scene's)")
-    r.add_argument("--quick", action="store_true", help="fewer rays, smaller surface, quick "
-                                                        "fits and side studies (README)")
+    r.add_argument(
+        "--quick",
+        action="store_true",
+        help="fewer rays, smaller surface, quick fits and side studies (README)",
+    )
     g = r.add_mutually_exclusive_group()
     g.add_argument("--resume", metavar="DIR", help="continue an interrupted run saved in DIR")
     g.add_argument("--force", action="store_true", help="replace an existing output directory")
@@ -96,17 +134,22 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("report", help="run the whole scene catalogue and write reports/index.md")
     q.add_argument("--quick", action="store_true", help="quick runs (as `run --quick`)")
     q.add_argument("--out", default="reports", help="report directory (default reports)")
-    q.add_argument("--catalogue", default="surfaces", help="directory of scene files "
-                                                           "(default surfaces)")
+    q.add_argument(
+        "--catalogue", default="surfaces", help="directory of scene files (default surfaces)"
+    )
     q.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
     q.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
-    q.add_argument("--resume", action="store_true",
-                   help="continue an interrupted report (same options): skip the scenes it "
-                        "finished, continue the interrupted one from its saved tallies")
+    q.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted report (same options): skip the scenes it "
+        "finished, continue the interrupted one from its saved tallies",
+    )
     q.set_defaults(func=_cmd_report)
     from .bench import add_bench_command
     from .sweep import add_sweep_command
     from .view import add_view_command
+
     add_view_command(sub)
     add_bench_command(sub)
     add_sweep_command(sub)
@@ -142,7 +185,7 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("microsim: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except Exception:                      # a bug: show it as one
+    except Exception:  # a bug: show it as one
         traceback.print_exc()
         return EXIT_ENVIRONMENT
 

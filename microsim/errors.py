@@ -15,10 +15,17 @@ Exit statuses of ``microsim``: 0 success; 1 environment failure (or, with a trac
 2 usage error; 130 interrupted (Ctrl-C: finished results kept, partial ones saved for
 ``--resume`` or recomputed on the next run).
 """
+
 from __future__ import annotations
 
-__all__ = ["UsageError", "EnvironmentFailure", "EXIT_OK", "EXIT_ENVIRONMENT", "EXIT_USAGE",
-           "EXIT_INTERRUPTED"]
+__all__ = [
+    "UsageError",
+    "EnvironmentFailure",
+    "EXIT_OK",
+    "EXIT_ENVIRONMENT",
+    "EXIT_USAGE",
+    "EXIT_INTERRUPTED",
+]
 
 EXIT_OK, EXIT_ENVIRONMENT, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 

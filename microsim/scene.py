@@ -35,6 +35,7 @@ The file itself must be a regular file of at most 1 MiB of UTF-8 TOML. Every pro
 ``SceneError`` (a ``UsageError``) with a one-line message naming the file, the key and the
 allowed values.
 """
+
 from __future__ import annotations
 
 import os
@@ -56,11 +57,21 @@ from microsim.surfaces.loader import check_heightfield_file
 
 if sys.version_info >= (3, 11):
     import tomllib
-else:                                   # pragma: no cover
+else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["SceneError", "Scene", "SurfaceSpec", "SimSettings", "load_scene", "make_ndf",
-           "describe_surface", "read_toml", "NDF_PARAMS", "SURFACE_KINDS"]
+__all__ = [
+    "SceneError",
+    "Scene",
+    "SurfaceSpec",
+    "SimSettings",
+    "load_scene",
+    "make_ndf",
+    "describe_surface",
+    "read_toml",
+    "NDF_PARAMS",
+    "SURFACE_KINDS",
+]
 
 
 class SceneError(UsageError):
@@ -89,15 +100,22 @@ MAX_GRID = 4096
 MAX_SCENE_BYTES = 1 << 20
 """Largest scene (or sweep) file read: 1 MiB."""
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")
-NAME_RULE = ("1-100 characters from letters, digits, '.', '_', '-', not starting with '.' "
-             "(it names the output folder)")
+NAME_RULE = (
+    "1-100 characters from letters, digits, '.', '_', '-', not starting with '.' "
+    "(it names the output folder)"
+)
 _BOOL = (lambda v: isinstance(v, bool), "true or false")
 _STR = (lambda v: isinstance(v, str), "a string")
 _C_ABC = (lambda v: _is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
 _BAND = (lambda v: _is_num(v) and v >= 1, "a number >= 1")
 
-NDF_PARAMS = {"beckmann": ("m",), "ggx": ("alpha",), "blinn-phong": ("e",), "vmf": ("kappa",),
-              "abc": ("B", "C")}
+NDF_PARAMS = {
+    "beckmann": ("m",),
+    "ggx": ("alpha",),
+    "blinn-phong": ("e",),
+    "vmf": ("kappa",),
+    "abc": ("B", "C"),
+}
 """Scene NDF names and the parameters each one requires."""
 _NDF_ALIASES = {"blinn_phong": "blinn-phong", "phong": "blinn-phong", "von-mises-fisher": "vmf"}
 
@@ -124,50 +142,79 @@ def _vgroove_ndf(p):
 def _heightfield(generator) -> Callable:
     def build(p, seed, scale, base):
         return generator(seed=seed, **{**p, "n": max(8, round(p["n"] * scale))})
+
     return build
 
 
 _KINDS = {
     "vgrooves": _Kind(
-        {"n_grooves": (4000, _int_in(1, 1_000_000)), "ndf": (_REQUIRED, _STR),
-         "sampling": ("stratified", (lambda v: v in ("stratified", "random"),
-                                     "\"stratified\" or \"random\"")),
-         "tile": (1.0, _LENGTH)},
+        {
+            "n_grooves": (4000, _int_in(1, 1_000_000)),
+            "ndf": (_REQUIRED, _STR),
+            "sampling": (
+                "stratified",
+                (lambda v: v in ("stratified", "random"), '"stratified" or "random"'),
+            ),
+            "tile": (1.0, _LENGTH),
+        },
         lambda p, seed, scale, base: surfaces.vgrooves(
-            max(1, round(p["n_grooves"] * scale)), _vgroove_ndf(p), seed, p["sampling"],
-            p["tile"]),
-        _vgroove_ndf),
+            max(1, round(p["n_grooves"] * scale)), _vgroove_ndf(p), seed, p["sampling"], p["tile"]
+        ),
+        _vgroove_ndf,
+    ),
     "gaussian": _Kind(
-        {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
-         "corr_len": (_REQUIRED, _LENGTH), "exact_amplitude": (True, _BOOL)},
+        {
+            "n": (512, _GRID),
+            "dx": (1.0, _LENGTH),
+            "sigma": (_REQUIRED, _LENGTH),
+            "corr_len": (_REQUIRED, _LENGTH),
+            "exact_amplitude": (True, _BOOL),
+        },
         _heightfield(surfaces.gaussian),
-        lambda p: gaussian_ensemble_ndf(p["sigma"], p["corr_len"])),
+        lambda p: gaussian_ensemble_ndf(p["sigma"], p["corr_len"]),
+    ),
     "abc": _Kind(
-        {"n": (512, _GRID), "dx": (1.0, _LENGTH), "sigma": (_REQUIRED, _LENGTH),
-         "B": (_REQUIRED, _LENGTH), "C": (_REQUIRED, _C_ABC), "band_limit": (4.0, _BAND),
-         "exact_amplitude": (True, _BOOL)},
+        {
+            "n": (512, _GRID),
+            "dx": (1.0, _LENGTH),
+            "sigma": (_REQUIRED, _LENGTH),
+            "B": (_REQUIRED, _LENGTH),
+            "C": (_REQUIRED, _C_ABC),
+            "band_limit": (4.0, _BAND),
+            "exact_amplitude": (True, _BOOL),
+        },
         _heightfield(surfaces.abc),
-        lambda p: abc_ensemble_ndf(p["n"], p["dx"], p["sigma"], p["B"], p["C"],
-                                   p["band_limit"])),
+        lambda p: abc_ensemble_ndf(p["n"], p["dx"], p["sigma"], p["B"], p["C"], p["band_limit"]),
+    ),
     "file": _Kind(
         {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
-        lambda p, seed, scale, base: surfaces.from_file(base / p["path"], p["dx"],
-                                                        p["periodic"]),
-        lambda p: None),
-    "flat": _Kind({"size": (1.0, _LENGTH)},
-                  lambda p, seed, scale, base: surfaces.flat(p["size"]), lambda p: None),
+        lambda p, seed, scale, base: surfaces.from_file(base / p["path"], p["dx"], p["periodic"]),
+        lambda p: None,
+    ),
+    "flat": _Kind(
+        {"size": (1.0, _LENGTH)},
+        lambda p, seed, scale, base: surfaces.flat(p["size"]),
+        lambda p: None,
+    ),
 }
 SURFACE_KINDS = tuple(_KINDS)
 _NDF_PARAM_CHECK = (_POS[0], "a number > 0")
 
-_THETA_I = (lambda v: isinstance(v, list) and 0 < len(v) <= 180
-            and all(_is_num(t) and 0 <= t < 90 for t in v),
-            "a non-empty list of at most 180 angles in degrees, each in [0, 90)")
-_RAYS = (lambda v: v == "auto" or (_is_int(v) and v >= 1), "an integer >= 1 or \"auto\"")
-_SIM_KEYS = {"theta_i": ([0.0, 30.0, 60.0, 80.0], _THETA_I), "rays": (1_000_000, _RAYS),
-             "theta_bins": (45, _int_in(1, 900)), "phi_bins": (72, _int_in(2, 1440)),
-             "realisations": (1, _int_in(1, 1000)),
-             "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0"))}
+_THETA_I = (
+    lambda v: (
+        isinstance(v, list) and 0 < len(v) <= 180 and all(_is_num(t) and 0 <= t < 90 for t in v)
+    ),
+    "a non-empty list of at most 180 angles in degrees, each in [0, 90)",
+)
+_RAYS = (lambda v: v == "auto" or (_is_int(v) and v >= 1), 'an integer >= 1 or "auto"')
+_SIM_KEYS = {
+    "theta_i": ([0.0, 30.0, 60.0, 80.0], _THETA_I),
+    "rays": (1_000_000, _RAYS),
+    "theta_bins": (45, _int_in(1, 900)),
+    "phi_bins": (72, _int_in(2, 1440)),
+    "realisations": (1, _int_in(1, 1000)),
+    "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0")),
+}
 _TOP_KEYS = ("name", "description", "surface", "material", "simulation")
 
 
@@ -213,7 +260,7 @@ class Scene:
         """
         try:
             return self._build(seed, scale)
-        except UsageError as e:           # a value the generator refuses: name the scene file
+        except UsageError as e:  # a value the generator refuses: name the scene file
             raise SceneError(f"{self.path}: surface: {' '.join(str(e).split())}") from None
 
     def _build(self, seed, scale):
@@ -230,8 +277,13 @@ class Scene:
 
 def make_ndf(name: str, params: Mapping[str, float]):
     """Analytic NDF from a scene name (``NDF_PARAMS``) and its parameters."""
-    cls = {"beckmann": an.Beckmann, "ggx": an.GGX, "blinn-phong": an.BlinnPhong,
-           "vmf": an.VonMisesFisher, "abc": an.ABC}
+    cls = {
+        "beckmann": an.Beckmann,
+        "ggx": an.GGX,
+        "blinn-phong": an.BlinnPhong,
+        "vmf": an.VonMisesFisher,
+        "abc": an.ABC,
+    }
     if name not in cls:
         raise UsageError(f"ndf must be one of {', '.join(NDF_PARAMS)}, got {name!r}")
     return cls[name](**params)
@@ -291,8 +343,20 @@ def _surface_spec(where, table) -> SurfaceSpec:
         schema.update({k: (_REQUIRED, _NDF_PARAM_CHECK) for k in NDF_PARAMS[ndf]})
     _check_keys(where, "surface", table, ["kind", *schema])
     params = _fill(where, "surface", {k: v for k, v in table.items() if k != "kind"}, schema)
-    for key in ("sigma", "corr_len", "B", "C", "dx", "tile", "size", "band_limit", "m",
-                "alpha", "e", "kappa"):
+    for key in (
+        "sigma",
+        "corr_len",
+        "B",
+        "C",
+        "dx",
+        "tile",
+        "size",
+        "band_limit",
+        "m",
+        "alpha",
+        "e",
+        "kappa",
+    ):
         if key in params:
             params[key] = float(params[key])
     if kind == "vgrooves":
@@ -302,12 +366,20 @@ def _surface_spec(where, table) -> SurfaceSpec:
             raise SceneError(f"{where}: surface: {e}") from None
     if kind == "gaussian":
         if params["corr_len"] < params["dx"]:
-            _fail(where, "surface.corr_len", f"must be >= dx = {params['dx']:g} (a shorter "
-                  f"correlation length is not resolved by the grid), got {params['corr_len']:g}")
+            _fail(
+                where,
+                "surface.corr_len",
+                f"must be >= dx = {params['dx']:g} (a shorter "
+                f"correlation length is not resolved by the grid), got {params['corr_len']:g}",
+            )
         if 2.0 * params["sigma"] / params["corr_len"] > 10.0:
-            _fail(where, "surface.sigma", f"rms slope 2 sigma / corr_len must be <= 10, got "
-                  f"{2.0 * params['sigma'] / params['corr_len']:.3g} (sigma = "
-                  f"{params['sigma']:g}, corr_len = {params['corr_len']:g})")
+            _fail(
+                where,
+                "surface.sigma",
+                f"rms slope 2 sigma / corr_len must be <= 10, got "
+                f"{2.0 * params['sigma'] / params['corr_len']:.3g} (sigma = "
+                f"{params['sigma']:g}, corr_len = {params['corr_len']:g})",
+            )
     return SurfaceSpec(kind, MappingProxyType(params))
 
 
@@ -327,7 +399,7 @@ def _material(where, table):
         return None
     _check_keys(where, "material", table, ["ior"])
     v = table.get("ior", "mirror")
-    allowed = (f"a name ({', '.join(an.MATERIALS)}), a number n > 0, or [n, k] with n > 0, k >= 0")
+    allowed = f"a name ({', '.join(an.MATERIALS)}), a number n > 0, or [n, k] with n > 0, k >= 0"
     if isinstance(v, list):
         if len(v) != 2 or not all(_is_num(x) for x in v):
             _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
@@ -378,8 +450,10 @@ def read_toml(path, what: str = "scene") -> dict:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise SceneError(f"{path}: not UTF-8 text (invalid byte at offset {e.start}); "
-                         f"a {what} file is UTF-8 TOML") from None
+        raise SceneError(
+            f"{path}: not UTF-8 text (invalid byte at offset {e.start}); "
+            f"a {what} file is UTF-8 TOML"
+        ) from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -396,16 +470,29 @@ def load_scene(path) -> Scene:
         _fail(where, "surface", f"required table with kind = one of {', '.join(SURFACE_KINDS)}")
     name = _check_value(where, "name", data.get("name", path.stem), _STR)
     if not NAME_PATTERN.fullmatch(name):
-        _fail(where, "name", f"must be {NAME_RULE}, got {name!r}"
-              + (" (the default is the file name)" if "name" not in data else ""))
+        _fail(
+            where,
+            "name",
+            f"must be {NAME_RULE}, got {name!r}"
+            + (" (the default is the file name)" if "name" not in data else ""),
+        )
     description = _check_value(where, "description", data.get("description", ""), _STR)
     surface = _surface_spec(where, data["surface"])
     if surface.kind == "file":
-        _check_heightfield(where, path.parent / surface.params["path"], surface.params["dx"],
-                           surface.params["periodic"])
-    return Scene(name=name, path=path, description=description, surface=surface,
-                 ior=_material(where, data.get("material")),
-                 simulation=_simulation(where, data.get("simulation")))
+        _check_heightfield(
+            where,
+            path.parent / surface.params["path"],
+            surface.params["dx"],
+            surface.params["periodic"],
+        )
+    return Scene(
+        name=name,
+        path=path,
+        description=description,
+        surface=surface,
+        ior=_material(where, data.get("material")),
+        simulation=_simulation(where, data.get("simulation")),
+    )
 
 
 # --- description -------------------------------------------------------------------------------
@@ -427,8 +514,9 @@ def describe_surface(scene_or_surface) -> str:
     head = []
     if isinstance(scene_or_surface, Scene):
         sc = scene_or_surface
-        head.append(f"scene {sc.name} ({sc.path})"
-                    + (f": {sc.description}" if sc.description else ""))
+        head.append(
+            f"scene {sc.name} ({sc.path})" + (f": {sc.description}" if sc.description else "")
+        )
         head.append(f"material ior: {_fmt(sc.ior) if sc.ior is not None else 'mirror (R = 1)'}")
         surf = sc.build_surface()
     else:
@@ -436,34 +524,42 @@ def describe_surface(scene_or_surface) -> str:
     st = surf.stats()
     nom = st["nominal"]
     lx, ly = st["tile_size"]
-    head.append(f"surface {surf.kind}: tile {lx:g} x {ly:g}, {st['triangles']} triangles, "
-                f"{'periodic' if surf.periodic else 'not periodic'}"
-                + (f", grid {st['grid'][1]} x {st['grid'][0]}, dx {st['dx']:g}"
-                   if "grid" in st else ""))
+    head.append(
+        f"surface {surf.kind}: tile {lx:g} x {ly:g}, {st['triangles']} triangles, "
+        f"{'periodic' if surf.periodic else 'not periodic'}"
+        + (f", grid {st['grid'][1]} x {st['grid'][0]}, dx {st['dx']:g}" if "grid" in st else "")
+    )
     head.append("nominal: " + ", ".join(f"{k} = {_fmt(v)}" for k, v in nom.items()))
     rows = [("quantity", "measured", "predicted", "nominal")]
     if "rms_height" in st:
-        rows.append(("rms height", st["rms_height"], st.get("predicted_rms_height"),
-                     nom.get("sigma")))
+        rows.append(
+            ("rms height", st["rms_height"], st.get("predicted_rms_height"), nom.get("sigma"))
+        )
     pred = st.get("predicted_slope_var")
     cont = st.get("continuum_slope_var")
-    rows += [("slope variance x", st["slope_var_x"], pred, cont),
-             ("slope variance y", st["slope_var_y"], pred, cont),
-             ("slope correlation", st["slope_corr"], None, 0.0),
-             ("m = sqrt(var_x + var_y)", st["m_realised"], st.get("predicted_m"), nom.get("m")),
-             ("z min", st["z_range"][0], None, None),
-             ("z max", st["z_range"][1], None, None)]
-    if "n_grooves" in st:                 # the V-groove generator's tilt statistics
-        rows += [("grooves", st["n_grooves"], None, nom.get("n_grooves")),
-                 ("rms tilt (deg)", st["tilt_rms_deg"], None, None),
-                 ("max tilt (deg)", st["tilt_max_deg"], None, None)]
+    rows += [
+        ("slope variance x", st["slope_var_x"], pred, cont),
+        ("slope variance y", st["slope_var_y"], pred, cont),
+        ("slope correlation", st["slope_corr"], None, 0.0),
+        ("m = sqrt(var_x + var_y)", st["m_realised"], st.get("predicted_m"), nom.get("m")),
+        ("z min", st["z_range"][0], None, None),
+        ("z max", st["z_range"][1], None, None),
+    ]
+    if "n_grooves" in st:  # the V-groove generator's tilt statistics
+        rows += [
+            ("grooves", st["n_grooves"], None, nom.get("n_grooves")),
+            ("rms tilt (deg)", st["tilt_rms_deg"], None, None),
+            ("max tilt (deg)", st["tilt_max_deg"], None, None),
+        ]
         if "cdf_max_dev" in st:
             rows.append(("tilt CDF distance to NDF", st["cdf_max_dev"], st["cdf_bound"], None))
     cells = [[r[0]] + [_fmt(v) for v in r[1:]] for r in rows]
     widths = [max(len(c[i]) for c in cells) for i in range(4)]
     lines = ["  ".join(c[i].ljust(widths[i]) for i in range(4)).rstrip() for c in cells]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    notes = ["(slope variances per axis; predicted = mesh-exact; nominal slope variance = "
-             "continuum value)"]
+    notes = [
+        "(slope variances per axis; predicted = mesh-exact; nominal slope variance = "
+        "continuum value)"
+    ]
     notes += [f"warning: {w}" for w in surf.warnings]
     return "\n".join(head + lines + notes)

@@ -6,6 +6,7 @@ errors are weighted; ``MIN_EVENTS`` is the number of single-bounce events a bin 
 its standard error is trusted in a test (below it the collapsed-strata estimate is too noisy;
 docs/design.md, "Verdicts").
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,8 +24,11 @@ MIN_EVENTS = 25
 def sidak(alpha: float, n: int) -> float:
     """Per-test level 1 − (1 − α)^(1/n) keeping the family-wise error of n independent tests at
     α (Šidák 1967); α in (0, 1), n an integer ≥ 1."""
-    if isinstance(alpha, bool) or not isinstance(alpha, (int, float, np.floating)) \
-            or not 0.0 < float(alpha) < 1.0:
+    if (
+        isinstance(alpha, bool)
+        or not isinstance(alpha, (int, float, np.floating))
+        or not 0.0 < float(alpha) < 1.0
+    ):
         raise UsageError(f"alpha must lie in (0, 1), got {alpha!r}")
     if isinstance(n, bool) or int(n) != n or n < 1:
         raise UsageError(f"n must be an integer >= 1, got {n!r}")
@@ -41,5 +45,5 @@ def energy_set(energy: np.ndarray, fraction: float = ENERGY_FRACTION) -> np.ndar
         return mask
     order = np.argsort(-e, kind="stable")
     n = int(np.searchsorted(np.cumsum(e[order]), fraction * total * (1.0 - 1e-12))) + 1
-    mask[order[:min(n, e.size)]] = True
+    mask[order[: min(n, e.size)]] = True
     return mask

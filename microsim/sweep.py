@@ -42,6 +42,7 @@ or, with ``--scheduler ADDRESS``, the same task function on a Dask distributed c
 traces on one thread. One sweep at a time may write to an output directory (a lock file
 ``OUT/.sweep.lock``).
 """
+
 from __future__ import annotations
 
 import csv
@@ -65,20 +66,56 @@ from typing import Callable
 from . import atomic
 from .checkpoints import checkpoint
 from .errors import EnvironmentFailure, UsageError
-from .sim.bins import MAX_BINS                # theta_bins × phi_bins at most
+from .sim.bins import MAX_BINS  # theta_bins × phi_bins at most
 
-__all__ = ["SweepSpec", "Task", "SweepInterrupted", "load_sweep", "expand_tasks", "run_task",
-           "run_sweep", "gather", "summary_table", "write_summary", "task_label",
-           "add_sweep_command"]
+__all__ = [
+    "SweepSpec",
+    "Task",
+    "SweepInterrupted",
+    "load_sweep",
+    "expand_tasks",
+    "run_task",
+    "run_sweep",
+    "gather",
+    "summary_table",
+    "write_summary",
+    "task_label",
+    "add_sweep_command",
+]
 
-_TOP = ("name", "description", "rays", "seed", "theta_bins", "phi_bins", "models", "masking",
-        "theta_i", "scenes")
+_TOP = (
+    "name",
+    "description",
+    "rays",
+    "seed",
+    "theta_bins",
+    "phi_bins",
+    "models",
+    "masking",
+    "theta_i",
+    "scenes",
+)
 _SHADOWING = ("vgroove", "smith", "smith-correlated", "none")
-COLUMNS = ("task", "scene", "params", "material", "roughness", "theta_i", "model", "rel_rms",
-           "chi2_dof", "p_value", "max_abs_z", "agrees", "n_bins", "rays", "seconds")
-MAX_FILE_BYTES = 1 << 20            # a sweep file is a few hundred bytes; refuse anything > 1 MiB
-MAX_TASKS = 100_000                 # tasks per sweep file (each is seconds to minutes of tracing)
-_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")   # = microsim.scene.NAME_PATTERN
+COLUMNS = (
+    "task",
+    "scene",
+    "params",
+    "material",
+    "roughness",
+    "theta_i",
+    "model",
+    "rel_rms",
+    "chi2_dof",
+    "p_value",
+    "max_abs_z",
+    "agrees",
+    "n_bins",
+    "rays",
+    "seconds",
+)
+MAX_FILE_BYTES = 1 << 20  # a sweep file is a few hundred bytes; refuse anything > 1 MiB
+MAX_TASKS = 100_000  # tasks per sweep file (each is seconds to minutes of tracing)
+_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")  # = microsim.scene.NAME_PATTERN
 _NAME_RULE = "1-100 characters from letters, digits, '.', '_', '-', not starting with '.'"
 
 
@@ -114,10 +151,18 @@ class Task:
         return f"{self.scene}-{hashlib.sha1(blob.encode()).hexdigest()[:12]}"
 
     def to_dict(self) -> dict:
-        return {"scene": self.scene, "surface": self.surface, "ior": self.ior,
-                "theta_i": self.theta_i, "rays": self.rays, "seed": self.seed,
-                "theta_bins": self.theta_bins, "phi_bins": self.phi_bins,
-                "models": list(self.models), "masking": self.masking}
+        return {
+            "scene": self.scene,
+            "surface": self.surface,
+            "ior": self.ior,
+            "theta_i": self.theta_i,
+            "rays": self.rays,
+            "seed": self.seed,
+            "theta_bins": self.theta_bins,
+            "phi_bins": self.phi_bins,
+            "models": list(self.models),
+            "masking": self.masking,
+        }
 
 
 @dataclass(frozen=True)
@@ -170,8 +215,10 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
     if not models:
         _fail(where, f"models: empty; must be a non-empty list of {', '.join(_SHADOWING)}")
     if bad or len(set(models)) != len(models):
-        _fail(where, f"models: must be a list of distinct {', '.join(_SHADOWING)}, "
-                     f"got {list(models)!r}")
+        _fail(
+            where,
+            f"models: must be a list of distinct {', '.join(_SHADOWING)}, got {list(models)!r}",
+        )
     masking = data.get("masking", "traced")
     if masking not in ("traced", "exact"):
         _fail(where, f"masking: must be traced or exact, got {masking!r}")
@@ -180,10 +227,14 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         if not _is_int(v) or v < 2:
             _fail(where, f"{key}: must be an integer >= 2, got {v!r}")
     if nt * npf > MAX_BINS:
-        _fail(where, f"theta_bins × phi_bins: at most {MAX_BINS:,} bins (every task keeps "
-                     f"several float64 tallies of that size, {8 * nt * npf / 2**20:,.0f} MiB "
-                     f"each here), got {nt} × {npf} = {nt * npf:,}")
+        _fail(
+            where,
+            f"theta_bins × phi_bins: at most {MAX_BINS:,} bins (every task keeps "
+            f"several float64 tallies of that size, {8 * nt * npf / 2**20:,.0f} MiB "
+            f"each here), got {nt} × {npf} = {nt * npf:,}",
+        )
     from microsim.sim import Bins
+
     try:
         Bins(nt, npf)
     except ValueError as e:
@@ -191,15 +242,19 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
     thetas = _axis(data.get("theta_i", [0.0, 30.0, 60.0, 80.0]))
     if not thetas:
         _fail(where, "theta_i: empty; must be one or more degrees in [0, 90)")
-    if not all(isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t < 90
-               for t in thetas):
+    if not all(
+        isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t < 90 for t in thetas
+    ):
         _fail(where, f"theta_i: must be degrees in [0, 90), got {thetas!r}")
     scenes = data.get("scenes")
     if scenes is None:
         _fail(where, "scenes: required; one or more [[scenes]] tables")
     if not isinstance(scenes, list) or not scenes:
-        _fail(where, f"scenes: must be a non-empty array of [[scenes]] tables (empty or "
-                     f"missing runs nothing), got {scenes!r}")
+        _fail(
+            where,
+            f"scenes: must be a non-empty array of [[scenes]] tables (empty or "
+            f"missing runs nothing), got {scenes!r}",
+        )
     grid, n_tasks = [], 0
     for k, sc in enumerate(scenes):
         w = f"{where}: scenes[{k}]"
@@ -220,8 +275,11 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
             _fail(w, "ior: empty axis; give one or more materials")
         n_tasks += math.prod(len(a) for a in axes) * len(iors) * len(thetas)
         if n_tasks > MAX_TASKS:
-            _fail(w, f"the grid has more than {MAX_TASKS:,} tasks (the product of the axis "
-                     f"lengths); split the sweep")
+            _fail(
+                w,
+                f"the grid has more than {MAX_TASKS:,} tasks (the product of the axis "
+                f"lengths); split the sweep",
+            )
         for ior in iors:
             _check_ior(w, ior)
         grid.append((name, keys, axes, iors))
@@ -230,17 +288,19 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         w = f"{where}: scenes[{k}]"
         for values in itertools.product(*axes):
             concrete = _resolve_paths(dict(zip(keys, values)), base)
-            _scene(name, concrete, None, w)                     # validate early
+            _scene(name, concrete, None, w)  # validate early
             _check_heightfield_file(w, concrete)
             for ior in iors:
                 for t in thetas:
-                    tasks.append(Task(name, concrete, ior, float(t), rays, seed, nt, npf,
-                                      models, masking))
+                    tasks.append(
+                        Task(name, concrete, ior, float(t), rays, seed, nt, npf, models, masking)
+                    )
     return tasks
 
 
 def _check_ior(where: str, ior) -> None:
     from microsim import scene as sc
+
     try:
         sc._material(where, {"ior": ior})
     except ValueError as e:
@@ -272,6 +332,7 @@ def _read_sweep_file(path: Path) -> dict:
     """The TOML table of a sweep file; one-line UsageError naming the file for anything that
     is not a readable, small, UTF-8 TOML text file."""
     from microsim.scene import tomllib
+
     try:
         st = path.stat()
         if stat.S_ISDIR(st.st_mode):
@@ -279,8 +340,10 @@ def _read_sweep_file(path: Path) -> dict:
         if not stat.S_ISREG(st.st_mode):
             _fail(str(path), "not a regular file (a sweep file is a small TOML text file)")
         if st.st_size > MAX_FILE_BYTES:
-            _fail(str(path), f"{st.st_size:,} bytes; a sweep file is at most "
-                             f"{MAX_FILE_BYTES:,} bytes of TOML")
+            _fail(
+                str(path),
+                f"{st.st_size:,} bytes; a sweep file is at most {MAX_FILE_BYTES:,} bytes of TOML",
+            )
         with open(path, "rb") as fh:
             raw = fh.read(MAX_FILE_BYTES + 1)
     except FileNotFoundError:
@@ -288,8 +351,9 @@ def _read_sweep_file(path: Path) -> dict:
     except PermissionError:
         _fail(str(path), "permission denied (cannot read the sweep file)")
     except OSError as e:
-        raise EnvironmentFailure(f"{path}: cannot read the sweep file ({e.strerror or e})") \
-            from None
+        raise EnvironmentFailure(
+            f"{path}: cannot read the sweep file ({e.strerror or e})"
+        ) from None
     if len(raw) > MAX_FILE_BYTES:
         _fail(str(path), f"more than {MAX_FILE_BYTES:,} bytes; not a sweep file")
     try:
@@ -313,8 +377,11 @@ def load_sweep(path) -> SweepSpec:
     if "name" in data:
         _check_name(where, "name", name)
     elif not _NAME.fullmatch(name):
-        _fail(where, f"name: the file stem {name!r} cannot name the output directory; set "
-                     f"name = \"...\" ({_NAME_RULE})")
+        _fail(
+            where,
+            f"name: the file stem {name!r} cannot name the output directory; set "
+            f'name = "..." ({_NAME_RULE})',
+        )
     description = data.get("description", "")
     if not isinstance(description, str):
         _fail(where, f"description: must be a string, got {description!r}")
@@ -325,10 +392,12 @@ def load_sweep(path) -> SweepSpec:
 def _scene(name: str, surface: dict, ior, where: str):
     """A ``microsim.scene.Scene`` from a concrete [surface] table (validated like a scene file)."""
     from microsim import scene as sc
+
     spec = sc._surface_spec(where, dict(surface))
     mat = None if ior is None else sc._material(where, {"ior": ior})
-    return sc.Scene(name=name, path=None, description="", surface=spec, ior=mat,
-                    simulation=sc.SimSettings())
+    return sc.Scene(
+        name=name, path=None, description="", surface=spec, ior=mat, simulation=sc.SimSettings()
+    )
 
 
 def _roughness(ndf) -> tuple[str, float | None]:
@@ -340,7 +409,7 @@ def _roughness(ndf) -> tuple[str, float | None]:
     return key, float(params[key])
 
 
-_WORKER = {"pool": False, "stop": False}   # in a local worker process: interrupted yet?
+_WORKER = {"pool": False, "stop": False}  # in a local worker process: interrupted yet?
 
 
 def _worker_init() -> None:
@@ -359,32 +428,62 @@ def run_task(task: Task, out_dir) -> dict:
     from microsim.analysis.verdicts import verdict
     from microsim.sim import Bins, simulate
     from microsim.sim.predict import ModelSpec, predict
+
     t0 = time.perf_counter()
     scene = _scene(task.scene, task.surface, task.ior, f"task {task.scene}")
     surface = scene.build_surface(seed=task.seed)
     bins = Bins(task.theta_bins, task.phi_bins)
-    res = simulate(surface, scene.ior, task.theta_i, rays=task.rays, bins=bins, seed=task.seed,
-                   threads=1, masking=task.masking)
+    res = simulate(
+        surface,
+        scene.ior,
+        task.theta_i,
+        rays=task.rays,
+        bins=bins,
+        seed=task.seed,
+        threads=1,
+        masking=task.masking,
+    )
     if res.is_partial or int(res.rays[0]) < task.rays:
-        _WORKER["stop"] = _WORKER["pool"]         # a pool worker starts no further task
+        _WORKER["stop"] = _WORKER["pool"]  # a pool worker starts no further task
         return {"id": task.id, "partial": True, "rays": int(res.rays[0]), "requested": task.rays}
     ndf = scene.ndf()
     specs = [ModelSpec.torrance_sparrow(f"ts-{g}", ndf, g, scene.ior) for g in task.models]
     preds = predict(specs, [task.theta_i], bins) if ndf is not None else {}
     omega = bins.projected_solid_angle()
-    verdicts = [verdict(res.brdf[0], res.stderr[0], res.counts[0], preds[s.name][0], omega,
-                        bins.theta_edges, phi_edges=bins.phi_edges, theta_i=task.theta_i,
-                        name=s.name, n_tests=len(specs)) for s in specs if s.name in preds]
+    verdicts = [
+        verdict(
+            res.brdf[0],
+            res.stderr[0],
+            res.counts[0],
+            preds[s.name][0],
+            omega,
+            bins.theta_edges,
+            phi_edges=bins.phi_edges,
+            theta_i=task.theta_i,
+            name=s.name,
+            n_tests=len(specs),
+        )
+        for s in specs
+        if s.name in preds
+    ]
     key, value = _roughness(ndf)
-    record = {"id": task.id, "task": task.to_dict(), "roughness_param": key, "roughness": value,
-              "rays": int(res.rays[0]), "seconds": time.perf_counter() - t0,
-              "ledger": {k: float(v[0]) for k, v in res.ledger.items()}, "verdicts": verdicts}
+    record = {
+        "id": task.id,
+        "task": task.to_dict(),
+        "roughness_param": key,
+        "roughness": value,
+        "rays": int(res.rays[0]),
+        "seconds": time.perf_counter() - t0,
+        "ledger": {k: float(v[0]) for k, v in res.ledger.items()},
+        "verdicts": verdicts,
+    }
     path = Path(out_dir) / "tasks" / f"{task.id}.json"
     try:
         atomic.write_json(path, record)
     except OSError as e:
-        raise EnvironmentFailure(f"{path}: cannot write the task result "
-                                 f"({e.strerror or e})") from None
+        raise EnvironmentFailure(
+            f"{path}: cannot write the task result ({e.strerror or e})"
+        ) from None
     return record
 
 
@@ -446,8 +545,10 @@ def task_label(task: Task, varying=None) -> str:
     parameters (only the ``varying`` ones if given), the material and the incidence."""
     keys = sorted(k for k in task.surface if k != "kind" and (varying is None or k in varying))
     params = " ".join(f"{k}={_fmt_num(task.surface[k])}" for k in keys)
-    return (f"{task.scene}{' ' + params if params else ''}, {material_text(task.ior)}, "
-            f"θi={task.theta_i:g}°")
+    return (
+        f"{task.scene}{' ' + params if params else ''}, {material_text(task.ior)}, "
+        f"θi={task.theta_i:g}°"
+    )
 
 
 def _check_out(out: Path) -> None:
@@ -464,13 +565,17 @@ def _check_out(out: Path) -> None:
         if tasks.exists() and not tasks.is_dir():
             _fail(str(out), f"{tasks} exists and is not a directory")
         if out.is_dir() and not tasks.is_dir() and any(out.iterdir()):
-            _fail(str(out), "not empty and not a sweep output (no tasks/ folder); choose a new "
-                            "or empty --out directory")
+            _fail(
+                str(out),
+                "not empty and not a sweep output (no tasks/ folder); choose a new "
+                "or empty --out directory",
+            )
     except OSError as e:
         _fail(str(out), f"unusable output path ({e.strerror or e})")
     if not os.access(anc, os.W_OK | os.X_OK):
-        raise EnvironmentFailure(f"{out}: {anc} is not writable (permission denied or a "
-                                 "read-only file system)")
+        raise EnvironmentFailure(
+            f"{out}: {anc} is not writable (permission denied or a read-only file system)"
+        )
 
 
 @contextmanager
@@ -481,19 +586,23 @@ def _locked(out: Path):
         (out / "tasks").mkdir(parents=True, exist_ok=True)
         fd = os.open(out / ".sweep.lock", os.O_RDWR | os.O_CREAT, 0o666)
     except OSError as e:
-        raise EnvironmentFailure(f"{out}: cannot create the sweep output "
-                                 f"({e.strerror or e})") from None
+        raise EnvironmentFailure(
+            f"{out}: cannot create the sweep output ({e.strerror or e})"
+        ) from None
     try:
         try:
             import fcntl
-        except ImportError:                          # pragma: no cover  (not POSIX: no lock)
+        except ImportError:  # pragma: no cover  (not POSIX: no lock)
             fcntl = None
         if fcntl is not None:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError:
-                _fail(str(out), "another microsim sweep is writing to this directory; wait for "
-                                "it to finish or choose another --out")
+                _fail(
+                    str(out),
+                    "another microsim sweep is writing to this directory; wait for "
+                    "it to finish or choose another --out",
+                )
         for d in (out, out / "tasks"):
             for p in d.glob(".*.tmp"):
                 try:
@@ -510,16 +619,18 @@ def _client(scheduler, timeout: float):
     try:
         from dask.distributed import Client
     except ImportError:
-        raise EnvironmentFailure("--scheduler needs dask.distributed (pip install "
-                                 "'dask[distributed]')") from None
+        raise EnvironmentFailure(
+            "--scheduler needs dask.distributed, an optional extra: pip install 'microsim[cluster]'"
+        ) from None
     try:
         return Client(scheduler, timeout=timeout)
     except ValueError as e:
         _fail(f"--scheduler {scheduler}", f"not a Dask scheduler address ({e})")
     except (OSError, TimeoutError) as e:
-        raise EnvironmentFailure(f"--scheduler {scheduler}: no Dask scheduler reachable "
-                                 f"there within {timeout:g} s ({' '.join(str(e).split())})") \
-            from None
+        raise EnvironmentFailure(
+            f"--scheduler {scheduler}: no Dask scheduler reachable "
+            f"there within {timeout:g} s ({' '.join(str(e).split())})"
+        ) from None
 
 
 def _local(todo, out: Path, workers: int, collect) -> None:
@@ -527,8 +638,7 @@ def _local(todo, out: Path, workers: int, collect) -> None:
     any exception (Ctrl-C included) the queued tasks are cancelled, the running ones asked to
     stop (SIGINT: their simulation returns partial and writes nothing), and the exception
     re-raised once they have; a second Ctrl-C kills them."""
-    pool = ProcessPoolExecutor(max_workers=min(int(workers), len(todo)),
-                               initializer=_worker_init)
+    pool = ProcessPoolExecutor(max_workers=min(int(workers), len(todo)), initializer=_worker_init)
     futures = []
     try:
         futures = [pool.submit(run_task, t, str(out)) for t in todo]
@@ -555,19 +665,28 @@ def _local(todo, out: Path, workers: int, collect) -> None:
 
 def _dask(todo, out: Path, client, collect) -> None:
     from dask.distributed import as_completed as dask_completed
-    futures = [client.submit(run_task, t, str(out), key=f"microsim-{t.id}", pure=False)
-               for t in todo]
+
+    futures = [
+        client.submit(run_task, t, str(out), key=f"microsim-{t.id}", pure=False) for t in todo
+    ]
     try:
         for fut in dask_completed(futures):
             collect(fut.result())
     except BaseException:
-        client.cancel(futures)          # tasks already running finish and store complete results
+        client.cancel(futures)  # tasks already running finish and store complete results
         raise
 
 
-def run_sweep(spec: SweepSpec, out, *, scheduler=None, workers: int = 2,
-              limit: int | None = None, progress: Callable[[str], None] | None = None,
-              connect_timeout: float = 10.0) -> dict:
+def run_sweep(
+    spec: SweepSpec,
+    out,
+    *,
+    scheduler=None,
+    workers: int = 2,
+    limit: int | None = None,
+    progress: Callable[[str], None] | None = None,
+    connect_timeout: float = 10.0,
+) -> dict:
     """Run the tasks of ``spec`` that have no complete result in ``out`` yet, then
     ``write_summary``.
 
@@ -593,24 +712,30 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, workers: int = 2,
         todo = [t for t in spec.tasks if not _done(t, out)]
         skipped = [t.id for t in spec.tasks if t not in todo]
         if limit is not None:
-            todo = todo[:int(limit)]
+            todo = todo[: int(limit)]
         varying = _varying(spec.tasks)
         total, computed = len(spec.tasks), []
         by_id = {t.id: t for t in todo}
         if progress and todo:
-            where = f"{len(by_id)} on {min(workers, len(todo))} local workers" \
-                if client is None else f"{len(by_id)} on the Dask cluster"
-            progress(f"sweep {spec.name}: {total} tasks, {len(skipped)} already done, "
-                     f"running {where}")
+            where = (
+                f"{len(by_id)} on {min(workers, len(todo))} local workers"
+                if client is None
+                else f"{len(by_id)} on the Dask cluster"
+            )
+            progress(
+                f"sweep {spec.name}: {total} tasks, {len(skipped)} already done, running {where}"
+            )
 
         def collect(rec: dict) -> None:
-            if rec.get("partial"):                   # a worker was interrupted
+            if rec.get("partial"):  # a worker was interrupted
                 raise KeyboardInterrupt
             computed.append(rec["id"])
             if progress:
-                progress(f"sweep {spec.name}: {len(skipped) + len(computed)}/{total} done: "
-                         f"{task_label(by_id[rec['id']], varying.get(rec['task']['scene']))} "
-                         f"({rec['seconds']:.1f} s)")
+                progress(
+                    f"sweep {spec.name}: {len(skipped) + len(computed)}/{total} done: "
+                    f"{task_label(by_id[rec['id']], varying.get(rec['task']['scene']))} "
+                    f"({rec['seconds']:.1f} s)"
+                )
             checkpoint("sweep-task")
 
         try:
@@ -620,8 +745,7 @@ def run_sweep(spec: SweepSpec, out, *, scheduler=None, workers: int = 2,
                 _dask(todo, out, client, collect)
             paths = write_summary(spec, out)
         except KeyboardInterrupt:
-            raise SweepInterrupted(out, sum(_done(t, out) for t in spec.tasks), total) \
-                from None
+            raise SweepInterrupted(out, sum(_done(t, out) for t in spec.tasks), total) from None
     return {"computed": computed, "skipped": skipped, "summary": paths}
 
 
@@ -641,13 +765,25 @@ def summary_table(records: list[dict]) -> list[dict]:
     for r in records:
         t = r["task"]
         for v in r["verdicts"]:
-            rows.append({"task": r["id"], "scene": t["scene"], "params": _params_text(t["surface"]),
-                         "material": material_text(t["ior"]), "roughness": r["roughness"],
-                         "theta_i": t["theta_i"], "model": v["model"], "rel_rms": v["rel_rms"],
-                         "chi2_dof": v["chi2_dof"], "p_value": v["p_value"],
-                         "max_abs_z": v["max_abs_z"], "agrees": v["agrees"],
-                         "n_bins": v["n_bins"], "rays": r["rays"],
-                         "seconds": round(r["seconds"], 3)})
+            rows.append(
+                {
+                    "task": r["id"],
+                    "scene": t["scene"],
+                    "params": _params_text(t["surface"]),
+                    "material": material_text(t["ior"]),
+                    "roughness": r["roughness"],
+                    "theta_i": t["theta_i"],
+                    "model": v["model"],
+                    "rel_rms": v["rel_rms"],
+                    "chi2_dof": v["chi2_dof"],
+                    "p_value": v["p_value"],
+                    "max_abs_z": v["max_abs_z"],
+                    "agrees": v["agrees"],
+                    "n_bins": v["n_bins"],
+                    "rays": r["rays"],
+                    "seconds": round(r["seconds"], 3),
+                }
+            )
     return rows
 
 
@@ -668,8 +804,9 @@ def write_summary(spec: SweepSpec, out) -> dict:
     try:
         return _write_summary(spec, out)
     except OSError as e:
-        raise EnvironmentFailure(f"{e.filename or out}: cannot write the sweep summary "
-                                 f"({e.strerror or e})") from None
+        raise EnvironmentFailure(
+            f"{e.filename or out}: cannot write the sweep summary ({e.strerror or e})"
+        ) from None
 
 
 def _write_summary(spec: SweepSpec, out: Path) -> dict:
@@ -681,25 +818,37 @@ def _write_summary(spec: SweepSpec, out: Path) -> dict:
     w.writerows(rows)
     atomic.write_text(out / "summary.csv", buf.getvalue())
     cols = [c for c in COLUMNS if c != "task"]
-    md = [f"# Sweep {spec.name}", "", spec.description, "",
-          f"{len(recs)}/{len(spec.tasks)} tasks done. rel_rms: energy-weighted relative RMS "
-          "error of the model over the bins carrying 90 % of the energy; chi2_dof, p_value, "
-          "max_abs_z: see microsim.analysis.verdicts.", "",
-          "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    md = [
+        f"# Sweep {spec.name}",
+        "",
+        spec.description,
+        "",
+        f"{len(recs)}/{len(spec.tasks)} tasks done. rel_rms: energy-weighted relative RMS "
+        "error of the model over the bins carrying 90 % of the energy; chi2_dof, p_value, "
+        "max_abs_z: see microsim.analysis.verdicts.",
+        "",
+        "| " + " | ".join(cols) + " |",
+        "|" + "---|" * len(cols),
+    ]
     md += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in rows]
     atomic.write_text(out / "summary.md", "\n".join(md) + "\n")
     chart = out / "error_vs_roughness.png"
     _chart(rows, chart, spec.name)
-    return {"csv": str(out / "summary.csv"), "markdown": str(out / "summary.md"),
-            "chart": str(chart)}
+    return {
+        "csv": str(out / "summary.csv"),
+        "markdown": str(out / "summary.md"),
+        "chart": str(chart),
+    }
 
 
 def _chart(rows: list[dict], path: Path, title: str) -> None:
     """Model relative RMS error against roughness: colour = θi, line style = model, marker =
     scene and material (one line per combination)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     groups: dict = {}
     for r in rows:
@@ -714,10 +863,15 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
     for (scene, mat, model, th), pts in sorted(groups.items()):
         pts.sort()
         x, y = zip(*pts)
-        ax.plot(x, y, color=cmap(thetas.index(th) / max(1, len(thetas) - 1) * 0.9),
-                linestyle=("-", "--", ":", "-.")[models.index(model) % 4],
-                marker="osD^v<>"[looks.index((scene, mat)) % 7], markersize=4,
-                label=f"{scene} {mat} {model} θi={th:g}°")
+        ax.plot(
+            x,
+            y,
+            color=cmap(thetas.index(th) / max(1, len(thetas) - 1) * 0.9),
+            linestyle=("-", "--", ":", "-.")[models.index(model) % 4],
+            marker="osD^v<>"[looks.index((scene, mat)) % 7],
+            markersize=4,
+            label=f"{scene} {mat} {model} θi={th:g}°",
+        )
     ax.set_xlabel("roughness (first NDF parameter)")
     ax.set_ylabel("relative RMS error (90 % energy bins)")
     ax.set_yscale("log")
@@ -736,30 +890,51 @@ def _cmd_sweep(args) -> int:
     spec = load_sweep(args.sweep)
     out = args.out or os.path.join("sweeps", "out", spec.name)
     try:
-        res = run_sweep(spec, out, scheduler=args.scheduler, workers=args.workers,
-                        progress=lambda s: print(s, file=sys.stderr, flush=True),
-                        connect_timeout=args.scheduler_timeout)
+        res = run_sweep(
+            spec,
+            out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            progress=lambda s: print(s, file=sys.stderr, flush=True),
+            connect_timeout=args.scheduler_timeout,
+        )
     except SweepInterrupted as e:
-        print(f"microsim: interrupted: {e.done}/{e.total} tasks done and kept in "
-              f"{os.path.join(out, 'tasks')}, summary not written; rerun the same command "
-              f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}) "
-              f"to compute the rest", file=sys.stderr)
+        print(
+            f"microsim: interrupted: {e.done}/{e.total} tasks done and kept in "
+            f"{os.path.join(out, 'tasks')}, summary not written; rerun the same command "
+            f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}) "
+            f"to compute the rest",
+            file=sys.stderr,
+        )
         return 130
-    print(f"{len(res['computed'])} tasks computed, {len(res['skipped'])} already done; "
-          f"{res['summary']['markdown']}, {res['summary']['csv']}, {res['summary']['chart']}")
+    print(
+        f"{len(res['computed'])} tasks computed, {len(res['skipped'])} already done; "
+        f"{res['summary']['markdown']}, {res['summary']['csv']}, {res['summary']['chart']}"
+    )
     return 0
 
 
 def add_sweep_command(subparsers) -> None:
     """Register ``microsim sweep SWEEP.toml [--scheduler ADDRESS] [--scheduler-timeout S]
     [--out DIR] [--workers N]``."""
-    p = subparsers.add_parser("sweep", help="run a grid of scenes x parameters x incidences "
-                                            "and gather the verdicts into one table and chart")
+    p = subparsers.add_parser(
+        "sweep",
+        help="run a grid of scenes x parameters x incidences "
+        "and gather the verdicts into one table and chart",
+    )
     p.add_argument("sweep", help="sweep file (TOML), e.g. sweeps/vgroove-roughness.toml")
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="Dask distributed scheduler address (default: local worker processes)")
-    p.add_argument("--scheduler-timeout", type=float, default=10.0, metavar="SECONDS",
-                   help="give up connecting to --scheduler after this long (default 10)")
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="Dask distributed scheduler address (default: local worker processes)",
+    )
+    p.add_argument(
+        "--scheduler-timeout",
+        type=float,
+        default=10.0,
+        metavar="SECONDS",
+        help="give up connecting to --scheduler after this long (default 10)",
+    )
     p.add_argument("--out", help="output directory (default sweeps/out/<name>)")
     p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     p.set_defaults(func=_cmd_sweep)

@@ -11,16 +11,17 @@ and δ = δ0 (1 + |a|) at the hit, which decides the wall (bottom vertex) and th
 margin; every disagreement must fall in one of these ambiguity zones, and there must be fewer
 than 0.1 % of them.
 """
+
 import numpy as np
 import pytest
 from scipy import stats
 
 from microsim import analytic as an
 from microsim import surfaces as sf
-from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel_real_arithmetic, resolve_material
 from microsim.sim import BLOCK, Bins, paths, ray_events, simulate, streams
 from microsim.sim.tracer import VGrooveCaster
+from microsim.vectors import spherical_deg
 
 AL = resolve_material("aluminium")
 BINS = Bins(45, 37)
@@ -77,8 +78,8 @@ def test_analytic_path_matches_the_traced_one_ray_by_ray(grooves, theta):
     assert np.mean(differ | ~same_bin) <= 1e-3
     ambiguous = _ambiguous(caster, tracer.tile[0], origins, psi, wi)
     assert not np.any(differ & ~ambiguous)
-    assert np.mean(ambiguous) < 0.02                   # the zones are narrow (measured ≤ 0.7 %)
-    assert np.mean(~same_bin & ~differ) <= 1e-4        # both bin the same wo: edges to rounding
+    assert np.mean(ambiguous) < 0.02  # the zones are narrow (measured ≤ 0.7 %)
+    assert np.mean(~same_bin & ~differ) <= 1e-4  # both bin the same wo: edges to rounding
     # the per-ray diagnostics (ray_events, analytic) take the same decisions
     ev = ray_events(grooves, "aluminium", theta, phi_i=20.0, rays=n, seed=7, masking="analytic")
     assert np.mean(ev.status != got[0]) <= 1e-4
@@ -101,22 +102,24 @@ def test_independent_runs_of_both_paths_agree(grooves, theta):
     """Independent origins (per-ray standard errors, unbiased) from different seeds: the
     two-sample χ² over the populated bins is χ²(dof) under equal expectations; two-sided
     α = 0.01, Šidák-corrected over the incidences."""
-    kw = dict(rays=10 ** 6, bins=BINS, origins="independent")
+    kw = dict(rays=10**6, bins=BINS, origins="independent")
     a = simulate(grooves, "aluminium", theta, seed=11, masking="exact", **kw)
     b = simulate(grooves, "aluminium", theta, seed=12, masking="analytic", **kw)
     chi2, dof = _two_sample_chi2(a, b)
     alpha = 1 - (1 - 0.01) ** (1 / len(THETAS))
     assert dof > 50
     assert stats.chi2.ppf(alpha / 2, dof) < chi2 < stats.chi2.ppf(1 - alpha / 2, dof)
-    for key in ("single", "masked", "downward"):      # ledger fractions within 5σ (binomial)
+    for key in ("single", "masked", "downward"):  # ledger fractions within 5σ (binomial)
         p = 0.5 * (a.ledger[key][0] + b.ledger[key][0])
-        assert abs(a.ledger[key][0] - b.ledger[key][0]) <= 5 * np.sqrt(2 * p * (1 - p) / 1e6) + 1e-12
+        assert (
+            abs(a.ledger[key][0] - b.ledger[key][0]) <= 5 * np.sqrt(2 * p * (1 - p) / 1e6) + 1e-12
+        )
 
 
 def test_analytic_results_do_not_depend_on_threads_or_chunks(grooves):
     kw = dict(rays=5 * BLOCK + 123, bins=BINS, masking="analytic", seed=3)
     a = simulate(grooves, "aluminium", [30.0, 70.0], threads=1, chunk=BLOCK, **kw)
-    b = simulate(grooves, "aluminium", [30.0, 70.0], threads=2, chunk=2 ** 20, **kw)
+    b = simulate(grooves, "aluminium", [30.0, 70.0], threads=2, chunk=2**20, **kw)
     for key in ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair"):
         assert np.array_equal(a.tallies[key], b.tallies[key])
     assert a.meta["masking"] == "analytic"
@@ -130,10 +133,11 @@ def test_unfolded_bins_use_the_generic_locator(grooves):
     cu, cf = u.counts[0], f.counts[0]
     # unfolded edges (k − ½)·45°; folded edges 0, 22.5, 67.5, …, 180: bin j of the folded
     # grid collects unfolded bins j and 8 − j (the same |Δφ| ranges)
-    folded = np.stack([cu[:, 0], cu[:, 1] + cu[:, 7], cu[:, 2] + cu[:, 6], cu[:, 3] + cu[:, 5],
-                       cu[:, 4]], axis=1)
+    folded = np.stack(
+        [cu[:, 0], cu[:, 1] + cu[:, 7], cu[:, 2] + cu[:, 6], cu[:, 3] + cu[:, 5], cu[:, 4]], axis=1
+    )
     assert abs(int(folded.sum()) - int(cf.sum())) <= 2
-    assert np.abs(folded - cf).sum() <= 4                 # Δφ exactly on an edge: rounding
+    assert np.abs(folded - cf).sum() <= 4  # Δφ exactly on an edge: rounding
 
 
 def test_bad_use_raises(grooves):
@@ -161,12 +165,12 @@ def test_caster_geometry(grooves):
 
 @pytest.mark.parametrize("ior", ["aluminium", "methanol", "mirror", 20 + 3j, 0.7 + 0.01j, 0.7])
 def test_real_arithmetic_fresnel_equals_fresnel(ior):
-    """``fresnel_real_arithmetic`` (position-independent rounding) is ``fresnel`` to rounding, grazing
-    (c = 0: R = 1) and normal incidence included."""
+    """``fresnel_real_arithmetic`` (position-independent rounding) is ``fresnel`` to rounding,
+    grazing (c = 0: R = 1) and normal incidence included."""
     from microsim.analytic.fresnel import fresnel
+
     eta = resolve_material(ior)
-    c = np.concatenate([[0.0, 1e-300, 1e-8, 0.5, 1.0],
-                        np.random.default_rng(0).random(100_000)])
+    c = np.concatenate([[0.0, 1e-300, 1e-8, 0.5, 1.0], np.random.default_rng(0).random(100_000)])
     got, ref = fresnel_real_arithmetic(c, eta), fresnel(c, eta)
     assert got[0] == 1.0 and np.all(np.isfinite(got))
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-14)

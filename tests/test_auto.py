@@ -1,6 +1,7 @@
 """rays = "auto" (microsim.sim.auto): the run stops at the requested precision, and the error
 it then achieves against the exact closed form (V-grooves: Torrance–Sparrow with V-groove G,
 Mikkelsen eq. 25, bin-averaged) is what that precision predicts."""
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -36,12 +37,14 @@ def test_auto_stops_at_target_and_matches_the_exact_model_at_that_precision(groo
     own errors (quadrature rtol 1e-3, 1000 stratified groove tilts instead of the continuous
     Beckmann NDF: quantile error ≤ 1/2000 per bin) add at most (2e-3)² — included as slack."""
     target = 0.02
-    res = simulate_auto(grooves, "aluminium", THETA, target=target, bins=BINS, masking="exact",
-                        first=8192, seed=1)
-    model = predict([ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")],
-                    THETA, BINS)["ts"]
+    res = simulate_auto(
+        grooves, "aluminium", THETA, target=target, bins=BINS, masking="exact", first=8192, seed=1
+    )
+    model = predict(
+        [ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")], THETA, BINS
+    )["ts"]
     omega = BINS.projected_solid_angle()
-    alpha = 1 - (1 - ALPHA) ** (1 / len(THETA))             # Šidák over the incidences
+    alpha = 1 - (1 - ALPHA) ** (1 / len(THETA))  # Šidák over the incidences
     for i, info in enumerate(res.meta["auto"]["incidences"]):
         assert info["converged"] and info["rse"] <= target
         # each batch is at most 4x what was done: the last one cannot overshoot by more than 5x
@@ -73,19 +76,23 @@ def test_one_batch_run_is_the_plain_simulation(grooves):
 def test_batches_are_merged_as_one_larger_run(grooves):
     """Batches pool Σw, Σw² and counts: the merged estimate is the mean of the batch
     estimates weighted by rays, and max_rays caps the run (not converged then)."""
-    res = simulate_auto(grooves, "aluminium", 30.0, target=1e-4, bins=BINS, first=4096,
-                        max_rays=5 * 4096, seed=2)
+    res = simulate_auto(
+        grooves, "aluminium", 30.0, target=1e-4, bins=BINS, first=4096, max_rays=5 * 4096, seed=2
+    )
     info = res.meta["auto"]["incidences"][0]
     assert not info["converged"] and info["rays"] == 5 * 4096 and info["batches"] == 2
-    parts = [simulate(grooves, "aluminium", 30.0, rays=n, bins=BINS, seed=_batch_seed(2, 0, b))
-             for b, n in enumerate((4096, 4 * 4096))]
+    parts = [
+        simulate(grooves, "aluminium", 30.0, rays=n, bins=BINS, seed=_batch_seed(2, 0, b))
+        for b, n in enumerate((4096, 4 * 4096))
+    ]
     pooled = sum(p.sum_w for p in parts) / (5 * 4096) / BINS.projected_solid_angle()
     assert np.allclose(res.brdf, pooled, rtol=1e-12, atol=0)
     assert np.array_equal(res.counts, parts[0].counts + parts[1].counts)
 
 
-@pytest.mark.parametrize("kw", [dict(target=0.0), dict(target=1.5), dict(first=0),
-                                dict(max_rays=1), dict(energy=0.0)])
+@pytest.mark.parametrize(
+    "kw", [dict(target=0.0), dict(target=1.5), dict(first=0), dict(max_rays=1), dict(energy=0.0)]
+)
 def test_bad_arguments_raise(grooves, kw):
     args = dict(target=0.05) | kw
     with pytest.raises(ValueError, match=next(iter(kw))):

@@ -2,26 +2,27 @@
 figures are measured, never asserted; what is asserted is that batching changes no result,
 that the per-facet table path equals the per-ray path, and that memory does not grow with
 the number of rays."""
+
 import argparse
 import json
 
 import numpy as np
 import pytest
-from test_tracer import heightfield_surface, random_heights
+from support import heightfield_surface, random_heights
 
-from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.bench import BenchConfig, add_bench_command, format_bench, peak_rss_mb, throughput
 from microsim.sim import BLOCK, Bins, paths, simulate, streams
 from microsim.sim.tallies import Tally, chunk_tallies
 from microsim.surfaces.surface import flat
+from microsim.vectors import spherical_deg
 
 AL = resolve_material("aluminium")
 
 
 @pytest.fixture(scope="module")
 def rough():
-    return heightfield_surface(random_heights(sigma=0.03, seed=4), 1 / 64)   # 8192 facets
+    return heightfield_surface(random_heights(sigma=0.03, seed=4), 1 / 64)  # 8192 facets
 
 
 def test_per_ray_path_is_identical_for_any_threads_and_chunk(rough):
@@ -44,16 +45,18 @@ def test_fast_paths_equal_the_per_ray_events(rough, theta):
     tracer, profile, az = paths.tracer_for(rough, "traced")
     wi = spherical_deg(theta, 10.0)
     bins = Bins(18, 13)
-    starts = np.concatenate([streams.block_origins(tracer, 3 * BLOCK, b, (0, 0, 0), False)[0]
-                             for b in range(3)])
+    starts = np.concatenate(
+        [streams.block_origins(tracer, 3 * BLOCK, b, (0, 0, 0), False)[0] for b in range(3)]
+    )
     ev = paths.trace_events(tracer, profile, wi, starts, None, AL, False)
     single = ev.status == paths.SINGLE
-    assert single.mean() > 0.5 and np.any(ev.status == paths.MASKED)        # not vacuous
+    assert single.mean() > 0.5 and np.any(ev.status == paths.MASKED)  # not vacuous
     table = paths.facet_table(tracer, wi, AL, bins, 10.0)
-    for status, weight, where in (paths.trace_tabled(tracer, table, wi, starts),
-                                  paths.trace_columns(tracer, None, wi, 10.0, bins, starts, None,
-                                                      AL)):
-        assert np.mean(status != ev.status) <= 1e-4           # float32-grazing decisions only
+    for status, weight, where in (
+        paths.trace_tabled(tracer, table, wi, starts),
+        paths.trace_columns(tracer, None, wi, 10.0, bins, starts, None, AL),
+    ):
+        assert np.mean(status != ev.status) <= 1e-4  # float32-grazing decisions only
         same = status == ev.status
         assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
         ok = same & single
@@ -66,6 +69,7 @@ def test_groove_column_path_equals_the_per_ray_events(masking):
     the rotated-back wo."""
     from microsim import analytic as an
     from microsim.surfaces import vgrooves
+
     tracer, profile, az = paths.tracer_for(vgrooves(64, an.Beckmann(0.4), seed=1), masking)
     wi, bins = spherical_deg(60.0, 25.0), Bins(18, 13)
     drawn = [streams.block_origins(tracer, 2 * BLOCK, b, (1, 0, 0), True) for b in range(2)]
@@ -76,29 +80,35 @@ def test_groove_column_path_equals_the_per_ray_events(masking):
     same = status == ev.status
     assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
     ok = same & (ev.status == paths.SINGLE)
-    assert np.mean(where[ok] != bins.locate(ev.wo[ok], 25.0)) <= 1e-4   # bin edges to rounding
+    assert np.mean(where[ok] != bins.locate(ev.wo[ok], 25.0)) <= 1e-4  # bin edges to rounding
 
 
 def test_peak_memory_does_not_grow_with_the_ray_count():
     """Any per-ray storage costs ≥ 8 bytes per ray (one float64); 8x more rays must add less
     than half of that, i.e. memory is bounded by the chunk, not by the run."""
     cfg = BenchConfig(n=64)
-    small, large = 2 ** 19, 2 ** 22          # both long enough for every buffer to reach its size
+    small, large = 2**19, 2**22  # both long enough for every buffer to reach its size
     a, b = peak_rss_mb(cfg, small), peak_rss_mb(cfg, large)
-    assert b - a < 0.5 * 8 * (large - small) / 2 ** 20, (a, b)
+    assert b - a < 0.5 * 8 * (large - small) / 2**20, (a, b)
 
 
 def test_bench_figures_are_measured_and_printable():
-    cfg = BenchConfig(n=32, rays=2 ** 14)
+    cfg = BenchConfig(n=32, rays=2**14)
     raw, pipe = throughput(cfg, repeat=1)
-    assert raw["primary_rays"] == 2 ** 14 and 0 < raw["masking_rays"] <= raw["primary_rays"]
+    assert raw["primary_rays"] == 2**14 and 0 < raw["masking_rays"] <= raw["primary_rays"]
     for t in (1, 2):
         assert np.isfinite(raw["rays_per_s"][t]) and raw["rays_per_s"][t] > 0
         assert np.isfinite(pipe[t]) and pipe[t] > 0
-    b = {"config": {"target": 0.01}, "load_average": [0.0], "cpus": 2, "mesh_triangles": 2048,
-         "raw": raw, "pipeline_samples_per_s": pipe,
-         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
-         "peak_rss_mb": {2 ** 14: 100.0}}
+    b = {
+        "config": {"target": 0.01},
+        "load_average": [0.0],
+        "cpus": 2,
+        "mesh_triangles": 2048,
+        "raw": raw,
+        "pipeline_samples_per_s": pipe,
+        "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
+        "peak_rss_mb": {2**14: 100.0},
+    }
     text = format_bench(b)
     assert "raw embreex rays/s" in text and "pipeline / raw" in text
     json.dumps(b)
@@ -111,12 +121,19 @@ def test_bench_subcommand_registers():
     assert args.json and args.quick and callable(args.func)
 
 
-@pytest.mark.parametrize("argv, rays", [(["--quick", "--rays", "5000"], 5000),
-                                        (["--rays", "7000"], 7000),
-                                        (["--quick"], 2 ** 17), ([], BenchConfig.rays)])
+@pytest.mark.parametrize(
+    "argv, rays",
+    [
+        (["--quick", "--rays", "5000"], 5000),
+        (["--rays", "7000"], 7000),
+        (["--quick"], 2**17),
+        ([], BenchConfig.rays),
+    ],
+)
 def test_bench_rays_option_is_honoured_with_and_without_quick(monkeypatch, capsys, argv, rays):
     """``bench --quick --rays N`` measures N rays (issue #11: --quick ignored --rays)."""
     import microsim.bench as B
+
     seen = []
     monkeypatch.setattr(B, "run_bench", lambda cfg: seen.append(cfg) or {})
     monkeypatch.setattr(B, "format_bench", lambda b: "")
@@ -147,7 +164,7 @@ def test_rotated_incidence_is_reproducible_for_any_chunk(rough):
     b = _tallies(tracer, wi, 3, n, bins, True)
     c = _tallies(tracer, wi, 4, n, bins, False)
     assert all(np.array_equal(x, y) for x, y in zip(a, b))
-    assert not np.array_equal(a[0], c[0])                                 # the rotation acts
+    assert not np.array_equal(a[0], c[0])  # the rotation acts
 
 
 @pytest.mark.parametrize("theta", [20.0, 65.0])
@@ -158,6 +175,7 @@ def test_rotated_incidence_keeps_the_mirror_direction_of_a_flat_surface(theta):
     tallies = _tallies(tracer, spherical_deg(theta, 0.0), 2, 3 * BLOCK, bins, True)
     sw = tallies[0]
     k = bins.locate(spherical_deg(theta, 180.0), 0.0)
-    assert sw[k] / (3 * BLOCK) == pytest.approx(float(fresnel(np.cos(np.radians(theta)), AL)),
-                                                 rel=1e-12)
+    assert sw[k] / (3 * BLOCK) == pytest.approx(
+        float(fresnel(np.cos(np.radians(theta)), AL)), rel=1e-12
+    )
     assert np.count_nonzero(sw) == 1

@@ -1,11 +1,13 @@
 """Torrance–Sparrow, microfacet sampling, albedo (Mikkelsen 2009, eq. 27) and the eq. 28 mix."""
+
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from support import pearson_chi2, sidak
 
-from gof import pearson_chi2, sidak
 from microsim import analytic as an
-from microsim.analytic._checks import spherical
+from microsim.vectors import spherical
 
 KINDS = ["vgroove", "smith", "smith-correlated", "none"]
 
@@ -43,7 +45,7 @@ def test_torrance_sparrow_value_and_horizon():
     for kind in KINDS:
         assert an.torrance_sparrow(wi, below, ndf, kind) == 0.0
         assert an.torrance_sparrow(grazing, wo, ndf, kind) == 0.0
-        assert an.torrance_sparrow(grazing, -grazing, ndf, kind) == 0.0   # h undefined
+        assert an.torrance_sparrow(grazing, -grazing, ndf, kind) == 0.0  # h undefined
 
 
 def _unit(theta_deg, phi_deg):
@@ -53,25 +55,37 @@ def _unit(theta_deg, phi_deg):
     return v
 
 
-_NDFS = [an.Beckmann(0.1), an.GGX(0.3), an.BlinnPhong(20.0), an.VonMisesFisher(1024.0),
-         an.ABC(100.0, 1.5)]
+_NDFS = [
+    an.Beckmann(0.1),
+    an.GGX(0.3),
+    an.BlinnPhong(20.0),
+    an.VonMisesFisher(1024.0),
+    an.ABC(100.0, 1.5),
+]
 
 
 @settings(max_examples=200, deadline=None)
-@given(ti=st.floats(0.0, 90.0) | st.sampled_from([0.0, 90.0]), pi=st.floats(0.0, 360.0),
-       to=st.floats(0.0, 90.0) | st.sampled_from([0.0, 90.0]), po=st.floats(0.0, 360.0),
-       mirror=st.booleans(), k=st.integers(0, len(_NDFS) - 1), kind=st.sampled_from(KINDS),
-       ior=st.sampled_from([None, "aluminium", "methanol"]))
+@given(
+    ti=st.floats(0.0, 90.0) | st.sampled_from([0.0, 90.0]),
+    pi=st.floats(0.0, 360.0),
+    to=st.floats(0.0, 90.0) | st.sampled_from([0.0, 90.0]),
+    po=st.floats(0.0, 360.0),
+    mirror=st.booleans(),
+    k=st.integers(0, len(_NDFS) - 1),
+    kind=st.sampled_from(KINDS),
+    ior=st.sampled_from([None, "aluminium", "methanol"]),
+)
 def test_torrance_sparrow_finite(ti, pi, to, po, mirror, k, kind, ior):
     wi = _unit(ti, pi)
-    wo = np.array([-wi[0], -wi[1], wi[2]]) if mirror else _unit(to, po)   # mirror: h = n
+    wo = np.array([-wi[0], -wi[1], wi[2]]) if mirror else _unit(to, po)  # mirror: h = n
     f = an.torrance_sparrow(wi, wo, _NDFS[k], kind, ior)
     assert np.isfinite(f) and f >= 0.0
 
 
-def _albedo(ndf, kind, ior, theta, n=2 ** 14):
-    return an.directional_albedo(theta, lambda a, b: an.torrance_sparrow(a, b, ndf, kind, ior),
-                                 n=n, ndf=ndf)
+def _albedo(ndf, kind, ior, theta, n=2**14):
+    return an.directional_albedo(
+        theta, lambda a, b: an.torrance_sparrow(a, b, ndf, kind, ior), n=n, ndf=ndf
+    )
 
 
 @pytest.mark.parametrize("ndf", [an.Beckmann(1.0), an.GGX(0.3), an.BlinnPhong(20.0)], ids=repr)
@@ -84,11 +98,15 @@ def test_albedo_without_masking_at_normal_incidence(ndf):
     assert abs(table.rho(1.0) - ndf.cdf_theta_rad(np.pi / 4)) < 1e-5
 
 
-@pytest.mark.parametrize("ndf, kind, ior", [
-    (an.Beckmann(0.5), "smith", "methanol"),
-    (an.VonMisesFisher(1024.0), "vgroove", "methanol"),
-    (an.GGX(0.3), "smith-correlated", "aluminium"),
-], ids=["beckmann-smith", "vmf1024-vgroove", "ggx-correlated"])
+@pytest.mark.parametrize(
+    "ndf, kind, ior",
+    [
+        (an.Beckmann(0.5), "smith", "methanol"),
+        (an.VonMisesFisher(1024.0), "vgroove", "methanol"),
+        (an.GGX(0.3), "smith-correlated", "aluminium"),
+    ],
+    ids=["beckmann-smith", "vmf1024-vgroove", "ggx-correlated"],
+)
 def test_albedo_table_matches_qmc(ndf, kind, ior):
     """Two independent methods (h-quadrature table, MIS randomised QMC) agree within the
     QMC standard error (5σ) plus the table's stated interpolation accuracy 2e-5."""
@@ -104,15 +122,17 @@ def test_albedo_table_matches_qmc(ndf, kind, ior):
 
 def test_albedo_of_lambertian_is_exact():
     """Cosine-weighted samples make f cos θ / p constant for f = kd/π: ρ = kd to rounding."""
-    rho, se = an.directional_albedo(np.array([0.0, 45.0, 90.0]),
-                                    lambda a, b: np.full(b.shape[:-1], 0.7 / np.pi), n=2 ** 10)
+    rho, se = an.directional_albedo(
+        np.array([0.0, 45.0, 90.0]), lambda a, b: np.full(b.shape[:-1], 0.7 / np.pi), n=2**10
+    )
     assert np.allclose(rho, 0.7, atol=1e-12) and np.all(se < 1e-12)
 
 
 def test_albedo_tends_to_fresnel_for_narrow_lobes():
     """Mikkelsen 2009, §3: ρ(ω) → F(ω·n) as κ → ∞ (κ = 1024 already within 1e-3 at 30°)."""
-    table = an.AlbedoTable(an.VonMisesFisher(1024.0), "vgroove", "aluminium", n_theta=7,
-                           n_grazing=0)
+    table = an.AlbedoTable(
+        an.VonMisesFisher(1024.0), "vgroove", "aluminium", n_theta=7, n_grazing=0
+    )
     c = np.cos(np.radians(30.0))
     assert abs(table.rho(c) - an.fresnel(c, an.resolve_material("aluminium"))) < 1e-3
 
@@ -163,7 +183,7 @@ def test_sample_microfacet_chi2(theta_o):
     p_edges = np.linspace(0, 2 * np.pi, 49)
     upper = _cell_mass(ndf, wo, t_up, p_edges)
     lower = _mass_below_horizon(ndf, wo)
-    assert abs(upper.sum() + lower - 1.0) < 1e-5        # the pdf is normalised on the sphere
+    assert abs(upper.sum() + lower - 1.0) < 1e-5  # the pdf is normalised on the sphere
     theta = np.arccos(np.clip(wi[:, 2], -1, 1))
     phi = np.mod(np.arctan2(wi[:, 1], wi[:, 0]), 2 * np.pi)
     up = wi[:, 2] >= 0
@@ -204,7 +224,7 @@ def test_mix_albedo(vmf_table, renormalise):
     assert np.all(alb <= 1 + tol)
     assert np.all(np.abs(alb - predicted) < tol)
     if not renormalise:
-        assert np.all(alb < 1 - 0.01)          # eq. 28 as printed loses ρ̄(1 − ρ) here
+        assert np.all(alb < 1 - 0.01)  # eq. 28 as printed loses ρ̄(1 − ρ) here
 
 
 def test_mix_rejects_bad_arguments(vmf_table):

@@ -2,6 +2,7 @@
 showing the simulation's and the models' colours, atomically (no temporary leftovers; an existing
 file replaced whole); with ``ax=`` a chart draws into the caller's axes, with ``path=None`` it
 writes nothing."""
+
 import os
 
 import matplotlib.figure
@@ -17,14 +18,14 @@ from microsim.sim import Bins, simulate
 from microsim.sim.predict import ModelSpec, predict
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-COLOUR_TOL = 12 / 255          # max per-channel distance for a pixel to "be" a colour
-MIN_PIXELS = 15                # a drawn line/marker/frame covers far more pixels than this
-CONTROL = "#00ff00"            # pure green: drawn by no chart, so its count must be zero
+COLOUR_TOL = 12 / 255  # max per-channel distance for a pixel to "be" a colour
+MIN_PIXELS = 15  # a drawn line/marker/frame covers far more pixels than this
+CONTROL = "#00ff00"  # pure green: drawn by no chart, so its count must be zero
 
 
 def rgb(hex_colour):
     h = hex_colour.lstrip("#")
-    return np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)]) / 255.0
+    return np.array([int(h[i : i + 2], 16) for i in (0, 2, 4)]) / 255.0
 
 
 def load(path):
@@ -61,11 +62,16 @@ MODELS = ("ts-vgroove", "ts-ggx")
 def run():
     ior = an.resolve_material("aluminium")
     bins = Bins(12, 13)
-    res = simulate(sf.vgrooves(400, NDF, seed=0), ior, [0.0, 45.0], rays=20_000, bins=bins,
-                   seed=3)
-    models = predict([ModelSpec.torrance_sparrow("ts-vgroove", NDF, "vgroove", ior),
-                      ModelSpec.torrance_sparrow("ts-ggx", an.GGX(0.6), "smith", ior)],
-                     res.theta_i, bins, rtol=1e-2)
+    res = simulate(sf.vgrooves(400, NDF, seed=0), ior, [0.0, 45.0], rays=20_000, bins=bins, seed=3)
+    models = predict(
+        [
+            ModelSpec.torrance_sparrow("ts-vgroove", NDF, "vgroove", ior),
+            ModelSpec.torrance_sparrow("ts-ggx", an.GGX(0.6), "smith", ior),
+        ],
+        res.theta_i,
+        bins,
+        rtol=1e-2,
+    )
     return res, models
 
 
@@ -77,20 +83,36 @@ def verdicts_of(res, models):
         for name, m in models.items():
             z = (res.brdf[t][ok] - m[t][ok]) / res.stderr[t][ok]
             rel = np.sqrt(np.sum((res.brdf[t] - m[t])[ok] ** 2) / np.sum(res.brdf[t][ok] ** 2))
-            out.append({"theta_i": float(th), "model": name, "rel_rms": float(rel),
-                        "chi2_dof": float(np.mean(z ** 2)), "max_abs_z": float(np.abs(z).max()),
-                        "agrees": bool(np.abs(z).max() < 5)})
+            out.append(
+                {
+                    "theta_i": float(th),
+                    "model": name,
+                    "rel_rms": float(rel),
+                    "chi2_dof": float(np.mean(z**2)),
+                    "max_abs_z": float(np.abs(z).max()),
+                    "agrees": bool(np.abs(z).max() < 5),
+                }
+            )
     return out
 
 
 def test_model_colours_fixed_distinct_and_never_the_simulation_colour():
     assert ch.model_colour("ts-vgroove") == ch.model_colour("TS_vgroove")
     assert ch.model_colour("some new model") == ch.model_colour("some new model")
-    fixed = [ch.model_colour(n) for n in ("ts-vgroove", "ts-smith", "ts-smith-correlated",
-                                          "low-smooth", "low-microfacet", "rayleigh-rice")]
+    fixed = [
+        ch.model_colour(n)
+        for n in (
+            "ts-vgroove",
+            "ts-smith",
+            "ts-smith-correlated",
+            "low-smooth",
+            "low-microfacet",
+            "rayleigh-rice",
+        )
+    ]
     assert len(set(fixed)) == len(fixed)
     hashed = [ch.model_colour(f"model {k}") for k in range(50)]
-    assert not set(hashed) & set(ch._FIXED.values())      # a new model never looks like a known one
+    assert not set(hashed) & set(ch._FIXED.values())  # a new model never looks like a known one
     for c in fixed + hashed:
         assert np.abs(rgb(c) - rgb(ch.SIM_COLOUR)).max() > 3 * COLOUR_TOL
 
@@ -99,9 +121,12 @@ def test_inplane_curves(run, tmp_path):
     res, models = run
     p = tmp_path / "inplane.png"
     ch.inplane_curves(res, models, p, "tiny V-grooves")
-    check_png(p, ch.figure_size("inplane", len(res.theta_i)),
-              [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS])
-    assert count_colour(load(p), ch.model_colour("ts-smith")) == 0     # a model not drawn
+    check_png(
+        p,
+        ch.figure_size("inplane", len(res.theta_i)),
+        [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS],
+    )
+    assert count_colour(load(p), ch.model_colour("ts-smith")) == 0  # a model not drawn
 
 
 def test_hemisphere_maps_best_and_worst(run, tmp_path):
@@ -109,12 +134,12 @@ def test_hemisphere_maps_best_and_worst(run, tmp_path):
     verdicts = verdicts_of(res, models)
     p = tmp_path / "hemi.png"
     ch.hemisphere_maps(res, models, verdicts, p, 1, scene_name="tiny")
-    check_png(p, ch.figure_size("hemisphere_maps"),
-              [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS])
+    check_png(
+        p, ch.figure_size("hemisphere_maps"), [ch.SIM_COLOUR] + [ch.model_colour(n) for n in MODELS]
+    )
     # nested containers (per incidence, per model) are accepted as well
-    nested = {float(t): {v["model"]: v for v in verdicts if v["theta_i"] == t}
-              for t in res.theta_i}
-    nested[0.0]["ts-ggx"].update(chi2_dof=None, max_abs_z=None)     # undefined numbers
+    nested = {float(t): {v["model"]: v for v in verdicts if v["theta_i"] == t} for t in res.theta_i}
+    nested[0.0]["ts-ggx"].update(chi2_dof=None, max_abs_z=None)  # undefined numbers
     ch.hemisphere_maps(res, models, nested, tmp_path / "hemi2.png", 0)
     check_png(tmp_path / "hemi2.png", ch.figure_size("hemisphere_maps"), [ch.SIM_COLOUR])
 
@@ -134,14 +159,15 @@ def test_unfold_covers_the_circle_and_mirrors_the_folded_half():
     ang, full = ch._unfold(v, bins)
     assert ang[0] == pytest.approx(-np.pi) and ang[-1] == pytest.approx(np.pi)
     assert np.all(np.diff(ang) > 0) and full.shape == (3, len(ang) - 1)
-    np.testing.assert_array_equal(full, full[:, ::-1])     # symmetric in ±Δφ
+    np.testing.assert_array_equal(full, full[:, ::-1])  # symmetric in ±Δφ
 
 
 def test_energy_chart(run, tmp_path):
     res, _ = run
     g = np.linspace(0.0, 89.0, 60)
-    rho_models = {"ts-vgroove": (g, an.AlbedoTable(NDF, "vgroove", "aluminium").rho(
-        np.cos(np.radians(g))))}
+    rho_models = {
+        "ts-vgroove": (g, an.AlbedoTable(NDF, "vgroove", "aluminium").rho(np.cos(np.radians(g))))
+    }
     rho = res.ledger["single_fresnel"]
     err = np.sqrt(rho * (1 - rho) / res.rays)
     lost = {"masked": res.ledger["masked_fresnel"], "downward": res.ledger["downward_fresnel"]}
@@ -161,19 +187,29 @@ def test_mikkelsen_fig6(tmp_path):
         ior = an.resolve_material(mat)
         ft = an.fresnel_transmittance(np.cos(np.radians(g)), ior)
         for kappa in (17, 1024):
-            tab = an.AlbedoTable(an.VonMisesFisher(kappa), "vgroove", ior, n_theta=10,
-                                 n_grazing=4, n_gl_phi=4)
+            tab = an.AlbedoTable(
+                an.VonMisesFisher(kappa), "vgroove", ior, n_theta=10, n_grazing=4, n_gl_phi=4
+            )
             one_minus = 1 - tab.rho(np.cos(np.radians(g)))
             sim = 1 - tab.rho(np.cos(np.radians(sim_t)))
-            curves.append({"label": f"{mat} κ={kappa}", "theta": g,
-                           "one_minus_rho_model": one_minus,
-                           "fresnel_T": ft, "sim_theta": sim_t, "sim_one_minus_rho": sim,
-                           "sim_err": np.full_like(sim, 0.01)})
+            curves.append(
+                {
+                    "label": f"{mat} κ={kappa}",
+                    "theta": g,
+                    "one_minus_rho_model": one_minus,
+                    "fresnel_T": ft,
+                    "sim_theta": sim_t,
+                    "sim_one_minus_rho": sim,
+                    "sim_err": np.full_like(sim, 0.01),
+                }
+            )
     p = tmp_path / "fig6.png"
     ch.mikkelsen_fig6(curves, p)
-    check_png(p, ch.figure_size("mikkelsen_fig6", 2),
-              [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"),
-               ch.model_colour("κ=1024")])
+    check_png(
+        p,
+        ch.figure_size("mikkelsen_fig6", 2),
+        [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"), ch.model_colour("κ=1024")],
+    )
     assert ch._series_of(curves[0]) == "κ=17" and ch._material_of(curves[-1]) == "aluminium"
 
 
@@ -182,8 +218,11 @@ def test_speed_accuracy(tmp_path):
     runs = {"stratified": (t, 0.01 / np.sqrt(t)), "independent": (t * 1.2, 0.03 / np.sqrt(t))}
     p = tmp_path / "speed.png"
     ch.speed_accuracy(runs, p)
-    check_png(p, ch.figure_size("speed_accuracy"),
-              [ch.model_colour("stratified"), ch.model_colour("independent")])
+    check_png(
+        p,
+        ch.figure_size("speed_accuracy"),
+        [ch.model_colour("stratified"), ch.model_colour("independent")],
+    )
 
 
 def test_stability_chart_and_fail_ranges(tmp_path):
@@ -192,8 +231,11 @@ def test_stability_chart_and_fail_ranges(tmp_path):
     warnings = ["unresolved rays at grazing incidence", "lobe narrower than a bin"]
     p = tmp_path / "stab.png"
     ch.stability_chart(th, rel, p, warnings)
-    check_png(p, ch.figure_size("stability", len(warnings)),
-              [ch.model_colour("ts-vgroove"), ch.model_colour("ts-smith")])
+    check_png(
+        p,
+        ch.figure_size("stability", len(warnings)),
+        [ch.model_colour("ts-vgroove"), ch.model_colour("ts-smith")],
+    )
     e = np.array([0.01, 0.06, 0.07, 0.01, np.nan, 0.2])
     assert ch._fail_ranges(np.arange(6.0), e, 0.05) == [(1.0, 2.0), (5.0, 5.0)]
     assert ch._fail_ranges(np.arange(3.0), np.full(3, 0.01), 0.05) == []
@@ -254,8 +296,14 @@ def test_charts_return_the_figure_and_draw_into_given_axes(run, tmp_path):
 
     g = np.linspace(0.0, 89.0, 30)
     pair = _agg_figure().subplots(1, 2)
-    ch.energy_chart(res.theta_i, res.ledger["single_fresnel"], np.zeros(2),
-                    {"ts-vgroove": (g, np.ones_like(g))}, res.ledger["lost_fresnel"], ax=pair)
+    ch.energy_chart(
+        res.theta_i,
+        res.ledger["single_fresnel"],
+        np.zeros(2),
+        {"ts-vgroove": (g, np.ones_like(g))},
+        res.ledger["lost_fresnel"],
+        ax=pair,
+    )
     assert pair[0].get_ylabel().startswith("ρ")
     three = _agg_figure().subplots(3, 1)
     ch.stability_chart(g, {"ts-vgroove": 0.01 + g / 900}, ax=three, warnings=["note"])
@@ -268,5 +316,6 @@ def test_given_axes_are_checked(run):
     with pytest.raises(ValueError, match="ax must be 2"):
         ch.inplane_curves(res, models, ax=_agg_figure().subplots(1, 3))
     with pytest.raises(ValueError, match="polar"):
-        ch.hemisphere_maps(res, models, verdicts_of(res, models), t_index=1,
-                           ax=_agg_figure().subplots(2, 3))
+        ch.hemisphere_maps(
+            res, models, verdicts_of(res, models), t_index=1, ax=_agg_figure().subplots(2, 3)
+        )

@@ -6,21 +6,22 @@ tallies of an uninterrupted run with the same seed (bitwise: blocks are seeded b
 existing output is never overwritten; malformed scenes fail with one line and write nothing;
 ``report`` indexes every scene of a catalogue with working links.
 """
+
 from __future__ import annotations
 
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from microsim.analysis.verdicts import validate_verdict
+
+pytestmark = pytest.mark.integration  # end to end: subprocesses, whole runs and reports
 
 TINY = """\
 name = "{name}"
@@ -39,7 +40,7 @@ theta_bins = 9
 phi_bins = 10
 seed = 3
 """
-RESUME_RAYS = "1200000"         # per incidence: ~2 s of tracing, time to interrupt in between
+RESUME_RAYS = "1200000"  # per incidence: ~2 s of tracing, time to interrupt in between
 
 
 def _env():
@@ -48,8 +49,14 @@ def _env():
 
 
 def microsim(*args, cwd=None, timeout=120):
-    return subprocess.run([sys.executable, "-m", "microsim.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout, env=_env())
+    return subprocess.run(
+        [sys.executable, "-m", "microsim.cli", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=_env(),
+    )
 
 
 def _scene(tmp: Path, name="tiny-vg", m=0.3, text=None) -> Path:
@@ -78,7 +85,7 @@ def test_run_writes_every_file_and_valid_verdicts(reference):
     scene, out = reference
     for f in ("brdf.npz", "meta.json", "verdicts.json", "report.md"):
         assert (out / f).is_file(), f
-    assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]   # no leftovers
+    assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no leftovers
     doc = json.loads((out / "verdicts.json").read_text())
     assert doc["scene"] == "tiny-vg" and doc["theta_i"] == [0.0, 45.0]
     assert doc["verdicts"], "no verdicts"
@@ -100,31 +107,25 @@ def test_run_writes_every_file_and_valid_verdicts(reference):
         assert (out / link).is_file(), link
 
 
-def test_interrupt_then_resume_matches_uninterrupted(reference, tmp_path):
+def test_interrupt_then_resume_matches_uninterrupted(reference, tmp_path, capsys):
+    """Ctrl-C (the in-process interrupt hook, deterministic) during the second incidence: exit
+    130, partial tallies saved, no report; --resume completes them bitwise."""
+    from microsim.checkpoints import interrupt_at
+    from microsim.cli import main
+
     scene, ref = reference
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "microsim.cli", "run", str(scene), "--quick", "--rays",
-           RESUME_RAYS, "--out", str(out)]
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, env=_env())
-    seen = b""
-    deadline = time.monotonic() + 60
-    # the bar advances per chunk of rays, incidences in order: past 50 % the first incidence
-    # (half the rays) is complete and the second under way
-    while time.monotonic() < deadline:
-        ch = proc.stderr.read(1)
-        if not ch:
-            break
-        seen += ch
-        if ch == b"%" and int(re.findall(rb"(\d+)%$", seen)[-1]) >= 51:
-            break
-    proc.send_signal(signal.SIGINT)
-    proc.stderr.read()
-    assert proc.wait(timeout=60) == 130, seen.decode(errors="replace")
+    args = ["run", str(scene), "--quick", "--rays", RESUME_RAYS, "--out", str(out)]
+    # the first incidence takes ~26 chunks (16 blocks each, shrinking at the end): stop in the
+    # second one
+    with interrupt_at("simulation", after=32) as hook:
+        assert main([*args, "--no-progress"]) == 130
+    assert hook["fired"]
     meta = json.loads((out / "meta.json").read_text())
     assert meta["partial"] is True
     assert not (out / "verdicts.json").exists()
     partial = _arrays(out)
-    assert partial["rays"][0] == int(RESUME_RAYS) and partial["rays"][1] < int(RESUME_RAYS)
+    assert partial["rays"][0] == int(RESUME_RAYS) and 0 < partial["rays"][1] < int(RESUME_RAYS)
 
     r = microsim("run", scene, "--quick", "--rays", RESUME_RAYS, "--resume", out, "--no-progress")
     assert r.returncode == 0, r.stderr
@@ -147,11 +148,14 @@ def test_existing_directory_is_refused(tmp_path):
     assert (out / "keep.txt").read_text() == "mine"
 
 
-@pytest.mark.parametrize("edit, key", [
-    (lambda t: t.replace("seed = 3", "seed = 3\nspeed = 1"), "simulation.speed"),
-    (lambda t: t.replace("rays = 20000", 'rays = "many"'), "simulation.rays"),
-    (lambda t: t.replace('ndf = "beckmann"', 'ndf = "gauss"'), "surface.ndf"),
-])
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        (lambda t: t.replace("seed = 3", "seed = 3\nspeed = 1"), "simulation.speed"),
+        (lambda t: t.replace("rays = 20000", 'rays = "many"'), "simulation.rays"),
+        (lambda t: t.replace('ndf = "beckmann"', 'ndf = "gauss"'), "surface.ndf"),
+    ],
+)
 def test_malformed_scene_one_line_nothing_written(tmp_path, edit, key):
     scene = _scene(tmp_path, text=edit(TINY.format(name="bad", m=0.3)))
     out = tmp_path / "out"
@@ -160,7 +164,7 @@ def test_malformed_scene_one_line_nothing_written(tmp_path, edit, key):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
     assert str(scene) in lines[0] and key in lines[0] and "Traceback" not in r.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == [scene.name]      # no out/, no runs/
+    assert sorted(p.name for p in tmp_path.iterdir()) == [scene.name]  # no out/, no runs/
 
 
 CATALOGUE = Path(__file__).resolve().parents[1] / "surfaces"
@@ -170,8 +174,19 @@ def test_catalogue_file_heightfield_scene_runs(tmp_path):
     """Bug 1 of issue #11: every ``kind = "file"`` scene crashed after its simulation (the
     report formatted the grid shape as a number). The catalogue's file scene runs end to end."""
     out = tmp_path / "run"
-    r = microsim("run", CATALOGUE / "file-gaussian-64.toml", "--quick", "--rays", "20000",
-                 "--theta-i", "30", "--out", out, "--no-progress", cwd=tmp_path)
+    r = microsim(
+        "run",
+        CATALOGUE / "file-gaussian-64.toml",
+        "--quick",
+        "--rays",
+        "20000",
+        "--theta-i",
+        "30",
+        "--out",
+        out,
+        "--no-progress",
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     assert "Traceback" not in r.stderr
     report = (out / "report.md").read_text()
@@ -186,9 +201,14 @@ def test_report_indexes_catalogue_with_working_links(tmp_path):
     _scene(cat, "tiny-a", 0.2)
     _scene(cat, "tiny-b", 0.4)
     np.save(cat / "h.npy", 0.5 * np.random.default_rng(0).normal(size=(16, 16)))
-    _scene(cat, "tiny-file", text=TINY.format(name="tiny-file", m=0).replace(
-        'kind = "vgrooves"\nn_grooves = 800\nndf = "beckmann"\nm = 0\n',
-        'kind = "file"\npath = "h.npy"\ndx = 1.0\n'))
+    _scene(
+        cat,
+        "tiny-file",
+        text=TINY.format(name="tiny-file", m=0).replace(
+            'kind = "vgrooves"\nn_grooves = 800\nndf = "beckmann"\nm = 0\n',
+            'kind = "file"\npath = "h.npy"\ndx = 1.0\n',
+        ),
+    )
     out = tmp_path / "reports"
     r = microsim("report", "--quick", "--catalogue", cat, "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr

@@ -6,19 +6,21 @@ eq. 19/23; the framework BRDF (eq. 11, 20, 24, 33) has albedo exactly 1 for ever
 (eq. 26–27) have unit volume; the lump sampler (eq. 28–29) and ``sample_edwards`` draw from the
 densities they report (Pearson χ², α = 0.01 with Šidák over the 9 sampler tests).
 """
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import example, given, settings, strategies as st
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 from scipy import integrate
+from support import pearson_chi2, sidak
 
-from gof import pearson_chi2, sidak
 from microsim.analytic import edwards as ed
-from microsim.analytic._checks import half_vector, spherical, spherical_deg
+from microsim.vectors import half_vector, spherical, spherical_deg
 
 PI = np.pi
-N_SAMPLER_TESTS = 9                      # 3 lump-sampler + 6 sample_edwards χ² tests
+N_SAMPLER_TESTS = 9  # 3 lump-sampler + 6 sample_edwards χ² tests
 ALPHA = sidak(0.01, N_SAMPLER_TESTS)
 N_SAMPLES = 1_000_000
 
@@ -60,9 +62,11 @@ def hemisphere_integral(f, theta_centres, phi_centres, order=6):
 def cell_integrals(f, x_edges, y_edges, order=6):
     """∫∫ f(x, y) over each cell of the tensor grid (shape (len(x)−1, len(y)−1))."""
     xg, wx = np.polynomial.legendre.leggauss(order)
+
     def nodes(e):
         a, b = e[:-1, None], e[1:, None]
         return 0.5 * (b - a) * xg + 0.5 * (a + b), 0.5 * (b - a) * wx
+
     X, WX = nodes(np.asarray(x_edges, float))
     Y, WY = nodes(np.asarray(y_edges, float))
     vals = f(X[:, None, :, None], Y[None, :, None, :])
@@ -96,8 +100,8 @@ def test_projection_round_trip_and_image_in_unit_disk(theta_o, phi_o, theta_i, p
         tol = 1e-10 + (rim if proj == "orthogonal" else 0.0)
         assert np.abs(ed.disk_projection_inverse(wo, uv, proj) - h).max() <= tol
         r = np.linalg.norm(uv - ed.disk_centre(wo))
-        assert r <= 1.0 + 1e-12                      # halfway disk → unit disk around wo_xy
-        if theta_i == 90.0:                          # horizon ↔ rim of the disk
+        assert r <= 1.0 + 1e-12  # halfway disk → unit disk around wo_xy
+        if theta_i == 90.0:  # horizon ↔ rim of the disk
             assert abs(r - 1.0) <= 1e-10
 
 
@@ -116,7 +120,7 @@ def test_every_disk_point_is_a_halfway_vector(theta_o, phi_o, r, psi):
         assert abs(np.linalg.norm(wi) - 1.0) <= 1e-12
         assert wi[2] >= -1e-12
         if r == 1.0:
-            assert wi[2] <= 1e-7          # rim → horizon (√ of a rounding error ≤ 1.5e-8)
+            assert wi[2] <= 1e-7  # rim → horizon (√ of a rounding error ≤ 1.5e-8)
         assert np.abs(ed.disk_projection(wo, h, proj) - uv).max() <= 1e-10
         assert np.abs(ed.disk_to_incident(wo, uv, proj) - wi).max() <= 1e-12
 
@@ -141,7 +145,10 @@ def test_special_points_of_the_disk():
 # --------------------------------------------------------------------------------------------
 def fd_jacobian(wo, theta, phi, proj, step):
     """|det ∂(u, v)/∂(θi, φi)| / sin θi by central differences: dA_disk/dω_i."""
-    uv = lambda t, p: ed.incident_to_disk(spherical(t, p), wo, proj)
+
+    def uv(t, p):
+        return ed.incident_to_disk(spherical(t, p), wo, proj)
+
     d_t = (uv(theta + step, phi) - uv(theta - step, phi)) / (2 * step)
     d_p = (uv(theta, phi + step) - uv(theta, phi - step)) / (2 * step)
     return np.abs(d_t[..., 0] * d_p[..., 1] - d_t[..., 1] * d_p[..., 0]) / np.sin(theta)
@@ -151,9 +158,12 @@ def fd_jacobian(wo, theta, phi, proj, step):
 def test_jacobian_matches_finite_differences(proj):
     """FD error of the step-δ estimate ≈ |FD(δ) − FD(2δ)|/3 (O(δ²)); allow that estimate itself
     plus rounding (ε|uv|/δ ≈ 1e-12) — i.e. a 3× margin on the truncation error."""
-    to, ti, pi_ = np.meshgrid(np.radians([0.0, 30.0, 60.0, 85.0]),
-                              np.radians([5.0, 40.0, 70.0, 85.0]),
-                              np.radians([0.0, 60.0, 150.0, 200.0]), indexing="ij")
+    to, ti, pi_ = np.meshgrid(
+        np.radians([0.0, 30.0, 60.0, 85.0]),
+        np.radians([5.0, 40.0, 70.0, 85.0]),
+        np.radians([0.0, 60.0, 150.0, 200.0]),
+        indexing="ij",
+    )
     wo = spherical(to, np.radians(20.0))
     delta = 1e-4
     fd1 = fd_jacobian(wo, ti, pi_, proj, delta)
@@ -182,11 +192,14 @@ def test_brdfs_equal_paper_forms():
     wi = spherical(np.arccos(rng.random(500)), 2 * PI * rng.random(500))
     H = half_vector(wi, wo)
     wi_h = np.sum(wi * H, -1)
-    density = lambda uv, wo_: np.exp(-np.sum(uv * uv, -1))      # any function of (u, v)
+
+    def density(uv, wo_):
+        return np.exp(-np.sum(uv * uv, -1))  # any function of (u, v)
+
     p_s = density(ed.scaling_projection(wo, H), wo)
     p_o = density(ed.orthogonal_projection(wo, H), wo)
     eq20 = p_s * wo[:, 2] ** 2 / (4 * wi[:, 2] * wi_h * H[:, 2] ** 3)
-    eq24 = p_o * np.sum((wi + wo) ** 2, -1) / (4 * wi_h ** 2)
+    eq24 = p_o * np.sum((wi + wo) ** 2, -1) / (4 * wi_h**2)
     assert np.allclose(ed.edwards_empirical(wi, wo, density, "scaling"), eq20, rtol=1e-12)
     assert np.allclose(ed.edwards_empirical(wi, wo, density, "orthogonal"), eq24, rtol=1e-12)
 
@@ -199,7 +212,10 @@ def albedo(brdf, wo, theta_o):
     geometrically down to 1e-5 rad around θo, the horizon and the azimuths φ = 0 and π of the
     plane of incidence, where the lumps live. Its error on these integrands is < 1e-4 (checked
     against orders 8 and 12 during development), far below the 1e-3 asserted."""
-    f = lambda wi: brdf(wi, wo) * np.maximum(wi[..., 2], 0.0)
+
+    def f(wi):
+        return brdf(wi, wo) * np.maximum(wi[..., 2], 0.0)
+
     return hemisphere_integral(f, [theta_o, PI / 2], [0.0, PI])
 
 
@@ -209,15 +225,21 @@ def uniform_disk(uv, wo):
 
 
 @pytest.mark.parametrize("proj", ed.DISK_PROJECTIONS)
-@pytest.mark.parametrize("density", [ed.empirical_lumps(k=0.3, n_s=3, n_r=4),
-                                     ed.empirical_lumps(k=0.3, n_s=60, n_r=4),
-                                     uniform_disk],
-                         ids=["wide", "narrow", "uniform-callable"])
+@pytest.mark.parametrize(
+    "density",
+    [
+        ed.empirical_lumps(k=0.3, n_s=3, n_r=4),
+        ed.empirical_lumps(k=0.3, n_s=60, n_r=4),
+        uniform_disk,
+    ],
+    ids=["wide", "narrow", "uniform-callable"],
+)
 def test_white_furnace(proj, density):
     for theta_o in (0.0, 30.0, 60.0, 80.0, 89.0):
         wo = spherical_deg(theta_o, 0.0)
-        a = albedo(lambda wi, w: ed.edwards_empirical(wi, w, density, proj), wo,
-                   np.radians(theta_o))
+        a = albedo(
+            lambda wi, w: ed.edwards_empirical(wi, w, density, proj), wo, np.radians(theta_o)
+        )
         assert abs(a - 1.0) < 1e-3, (proj, theta_o, a)
 
 
@@ -228,8 +250,11 @@ def test_albedo_with_fresnel_and_diffuse(proj):
     for theta_o in (20.0, 75.0):
         wo = spherical_deg(theta_o, 0.0)
         F = 0.04 + 0.96 * (1 - np.cos(np.radians(theta_o))) ** 5
-        a = albedo(lambda wi, w: ed.edwards_empirical(wi, w, lumps, proj, fresnel=0.04,
-                                                      diffuse=0.5), wo, np.radians(theta_o))
+        a = albedo(
+            lambda wi, w: ed.edwards_empirical(wi, w, lumps, proj, fresnel=0.04, diffuse=0.5),
+            wo,
+            np.radians(theta_o),
+        )
         assert abs(a - ((1 - F) * 0.5 + F)) < 1e-3
 
 
@@ -237,9 +262,11 @@ def lump_mass_on_disk(R, n, s):
     """Mass of the eq. 26 lump (radius R, exponent n, centred at the origin) inside the unit disk
     centred at distance s: ∫ (n+1)/(πR²)(1 − r²/R²)^n · 2r · α(r) dr, where α(r) ∈ [0, π] is the
     half-angle of the circle of radius r inside the disk, cos α = (r² + s² − 1)/(2rs)."""
+
     def integrand(r):
         alpha = np.arccos(np.clip((r * r + s * s - 1) / (2 * r * s), -1.0, 1.0))
         return (n + 1) / (PI * R * R) * (1 - r * r / R / R) ** n * 2 * r * alpha
+
     points = [1 - s] if 0 < 1 - s < R else None
     return integrate.quad(integrand, 0, R, points=points, epsabs=1e-12, epsrel=1e-12)[0]
 
@@ -250,11 +277,12 @@ def test_fit_brdf_loses_exactly_the_lump_mass_off_the_disk():
     §5)."""
     theta_o = 50.0
     wo = spherical_deg(theta_o, 0.0)
-    for r1 in (0.2, 0.9):                 # 1 − sin 50° = 0.234: fits, then leaves the disk
+    for r1 in (0.2, 0.9):  # 1 − sin 50° = 0.234: fits, then leaves the disk
         params = ed.EdwardsParams(cd=0.3, f0=0.05, f90=0.8, k=0.4, r1=r1, n1=8, r2=0.1, n2=3)
-        mass = sum(w * lump_mass_on_disk(r, n, np.sin(np.radians(theta_o)))
-                   for w, r, n in [(1 - params.k, params.r1, params.n1),
-                                   (params.k, params.r2, params.n2)])
+        mass = sum(
+            w * lump_mass_on_disk(r, n, np.sin(np.radians(theta_o)))
+            for w, r, n in [(1 - params.k, params.r1, params.n1), (params.k, params.r2, params.n2)]
+        )
         F = params.fresnel(wo[2])
         a = albedo(lambda wi, w: ed.edwards_fit_brdf(wi, w, params), wo, np.radians(theta_o))
         assert abs(a - ((1 - F) * params.cd + F * mass)) < 1e-3
@@ -277,10 +305,19 @@ def test_lump_has_unit_volume_on_the_disk(lump, theta_o):
     wo = spherical_deg(theta_o, 40.0)
     assert lump.fits_on_disk(wo)
     (cu, cv), ru, rv = (np.asarray(g) for g in lump.geometry(wo))
-    half = lambda u: rv * np.sqrt(max(0.0, 1 - ((u - cu) / ru) ** 2))
-    vol, _ = integrate.dblquad(lambda v, u: lump.pdf(wo, np.array([u, v])),
-                               cu - ru, cu + ru, lambda u: cv - half(u), lambda u: cv + half(u),
-                               epsabs=1e-10, epsrel=1e-10)
+
+    def half(u):
+        return rv * np.sqrt(max(0.0, 1 - ((u - cu) / ru) ** 2))
+
+    vol, _ = integrate.dblquad(
+        lambda v, u: lump.pdf(wo, np.array([u, v])),
+        cu - ru,
+        cu + ru,
+        lambda u: cv - half(u),
+        lambda u: cv + half(u),
+        epsabs=1e-10,
+        epsrel=1e-10,
+    )
     assert abs(vol - 1.0) < 1e-6
 
 
@@ -306,8 +343,16 @@ def test_lump_sampler_chi2(lump, theta_o):
     rho2, psi = np.sum(d * d, -1), np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * PI)
     e_r, e_p = np.linspace(0, 1, 21), np.linspace(0, 2 * PI, 17)
     obs, _, _ = np.histogram2d(rho2, psi, [e_r, e_p])
-    pdf = lambda s, p: lump.pdf(wo, centre + np.stack(
-        np.broadcast_arrays(ru * np.sqrt(s) * np.cos(p), rv * np.sqrt(s) * np.sin(p)), -1))
+
+    def pdf(s, p):
+        return lump.pdf(
+            wo,
+            centre
+            + np.stack(
+                np.broadcast_arrays(ru * np.sqrt(s) * np.cos(p), rv * np.sqrt(s) * np.sin(p)), -1
+            ),
+        )
+
     exp = N_SAMPLES * cell_integrals(pdf, e_r, e_p) * ru * rv / 2
     assert obs.sum() == N_SAMPLES
     _, _, p_value = pearson_chi2(obs, exp)
@@ -324,10 +369,16 @@ def test_mixture_sampler_chi2():
     c = ed.disk_centre(wo)
     d = uv - c
     e_r, e_p = np.linspace(0, 1, 21), np.linspace(0, 2 * PI, 25)
-    obs, _, _ = np.histogram2d(np.sum(d * d, -1), np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * PI),
-                               [e_r, e_p])
-    pdf = lambda s, q: mix.pdf(wo, c + np.stack(
-        np.broadcast_arrays(np.sqrt(s) * np.cos(q), np.sqrt(s) * np.sin(q)), -1))
+    obs, _, _ = np.histogram2d(
+        np.sum(d * d, -1), np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * PI), [e_r, e_p]
+    )
+
+    def pdf(s, q):
+        return mix.pdf(
+            wo,
+            c + np.stack(np.broadcast_arrays(np.sqrt(s) * np.cos(q), np.sqrt(s) * np.sin(q)), -1),
+        )
+
     exp = N_SAMPLES * cell_integrals(pdf, e_r, e_p, order=8) / 2
     _, _, p_value = pearson_chi2(obs, exp)
     assert p_value > ALPHA
@@ -358,17 +409,19 @@ def test_sample_edwards_chi2_in_wi(proj, theta_o):
     assert np.all(pdf > 0) and np.all(wi[:, 2] >= 0)
     sub = slice(0, 2000)
     assert np.allclose(pdf[sub], ed.pdf_edwards(wi[sub], wo, mix, proj), rtol=1e-9)
-    assert np.allclose(pdf[sub], ed.edwards_empirical(wi[sub], wo, mix, proj) * wi[sub, 2],
-                       rtol=1e-9)
+    assert np.allclose(
+        pdf[sub], ed.edwards_empirical(wi[sub], wo, mix, proj) * wi[sub, 2], rtol=1e-9
+    )
     lt, lp = lobe_edges(wo, mix.lumps[0], proj)
     e_t = np.unique(np.concatenate([np.linspace(0, PI / 2, 19), lt]))
     e_p = np.unique(np.concatenate([np.linspace(-PI / 2, 1.5 * PI, 25), lp]))
     th = np.arccos(np.clip(wi[:, 2], -1, 1))
     ph = np.mod(np.arctan2(wi[:, 1], wi[:, 0]) + PI / 2, 2 * PI) - PI / 2
     obs, _, _ = np.histogram2d(th, ph, [e_t, e_p])
-    mass = cell_integrals(lambda t, p: ed.pdf_edwards(spherical(t, p), wo, mix, proj)
-                          * np.sin(t), e_t, e_p, order=8)
-    assert abs(mass.sum() - 1.0) < 1e-3           # quadrature sanity (furnace identity)
+    mass = cell_integrals(
+        lambda t, p: ed.pdf_edwards(spherical(t, p), wo, mix, proj) * np.sin(t), e_t, e_p, order=8
+    )
+    assert abs(mass.sum() - 1.0) < 1e-3  # quadrature sanity (furnace identity)
     _, _, p_value = pearson_chi2(obs, N_SAMPLES * mass / mass.sum())
     assert p_value > ALPHA
 
@@ -394,23 +447,27 @@ def test_finite_everywhere(theta_o, phi_o, theta_i, phi_i, u1, u2):
     params = ed.EdwardsParams(cd=0.2, k=0.5, r1=0.3, n1=20, r2=2.0, n2=1)
     for proj in ed.DISK_PROJECTIONS:
         uv = ed.disk_projection(wo, h, proj)
-        values = [uv, ed.disk_projection_inverse(wo, uv, proj),
-                  ed.disk_jacobian(wi, wo, proj), ed.incident_to_disk(wi, wo, proj),
-                  ed.edwards_empirical(wi, wo, lumps, proj),
-                  ed.edwards_empirical(wi, wo, lumps, proj, fresnel=0.04, diffuse=0.5),
-                  ed.edwards_fit_brdf(wi, wo, params, proj),
-                  ed.pdf_edwards(wi, wo, lumps, proj),
-                  ed.brdf_to_disk_density(wi, wo, 1.0, proj),
-                  *ed.sample_edwards(wo, u1, u2, lumps, proj),
-                  *ed.sample_edwards(wo, u1, u2, params.lumps(), proj)]
+        values = [
+            uv,
+            ed.disk_projection_inverse(wo, uv, proj),
+            ed.disk_jacobian(wi, wo, proj),
+            ed.incident_to_disk(wi, wo, proj),
+            ed.edwards_empirical(wi, wo, lumps, proj),
+            ed.edwards_empirical(wi, wo, lumps, proj, fresnel=0.04, diffuse=0.5),
+            ed.edwards_fit_brdf(wi, wo, params, proj),
+            ed.pdf_edwards(wi, wo, lumps, proj),
+            ed.brdf_to_disk_density(wi, wo, 1.0, proj),
+            *ed.sample_edwards(wo, u1, u2, lumps, proj),
+            *ed.sample_edwards(wo, u1, u2, params.lumps(), proj),
+        ]
         for v in values:
             assert np.all(np.isfinite(v))
         assert ed.edwards_empirical(wi, wo, lumps, proj) >= 0
 
 
 def test_broadcasting():
-    wo = spherical_deg(np.array([10.0, 50.0, 80.0])[:, None], 0.0)     # (3, 1, 3)
-    wi = spherical_deg(np.array([0.0, 20.0, 40.0, 60.0]), 170.0)      # (4, 3)
+    wo = spherical_deg(np.array([10.0, 50.0, 80.0])[:, None], 0.0)  # (3, 1, 3)
+    wi = spherical_deg(np.array([0.0, 20.0, 40.0, 60.0]), 170.0)  # (4, 3)
     lumps = ed.empirical_lumps(k=0.2, n_s=8, n_r=2)
     for proj in ed.DISK_PROJECTIONS:
         f = ed.edwards_empirical(wi, wo, lumps, proj)
@@ -428,34 +485,37 @@ def test_edwards_params_vector_and_bounds():
     assert np.all((lo <= p.to_vector()) & (p.to_vector() <= hi))
     assert np.all((lo <= ed.EdwardsParams().to_vector()) & (ed.EdwardsParams().to_vector() <= hi))
     F = p.fresnel(np.array([1.0, 0.0]))
-    assert np.allclose(F, [p.f0, p.f90])                 # eq. 34 end points
+    assert np.allclose(F, [p.f0, p.f90])  # eq. 34 end points
 
 
-@pytest.mark.parametrize("make,match", [
-    (lambda: ed.Lump(n=-1.0), "Lump.n"),
-    (lambda: ed.Lump(radius=0.0), "Lump.radius"),
-    (lambda: ed.Lump(radius=-0.2), "Lump.radius"),
-    (lambda: ed.Lump(aspect=0.0), "Lump.aspect"),
-    (lambda: ed.Lump(anchor="side"), "Lump.anchor"),
-    (lambda: ed.Lump(offset=(0.1,)), "Lump.offset"),
-    (lambda: ed.LumpMixture((ed.Lump(),), (0.5,)), "weights"),
-    (lambda: ed.LumpMixture((ed.Lump(), ed.Lump()), (1.5, -0.5)), "weights"),
-    (lambda: ed.empirical_lumps(k=1.5), "k"),
-    (lambda: ed.EdwardsParams(r1=0.0), "EdwardsParams.r1"),
-    (lambda: ed.EdwardsParams(f0=1.2), "EdwardsParams.f0"),
-    (lambda: ed.EdwardsParams(n2=-1.0), "EdwardsParams.n2"),
-    (lambda: ed.EdwardsParams.from_vector(np.ones(3)), "x must have shape"),
-    (lambda: ed.disk_projection([0, 0, 1.0], [0, 0, 1.0], "stereographic"), "projection"),
-    (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], ed.Lump(), "polar"), "projection"),
-    (lambda: ed.sample_edwards([0, 0, 1.0], 0.5, 0.5, ed.Lump(), "x"), "projection"),
-    (lambda: ed.sample_edwards([0, 0, 1.0], 0.5, 0.5, uniform_disk), "lumps"),
-    (lambda: ed.edwards_empirical([0, 0, 1.0], spherical_deg(60, 0), ed.Lump(2, 0.5)), "lumps"),
-    (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], ed.Lump(), diffuse=2.0), "diffuse"),
-    (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], ed.Lump(), fresnel=-0.1), "f0"),
-    (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], "lump"), "lumps"),
-    (lambda: ed.edwards_fit_brdf([0, 0, 1.0], [0, 0, 1.0], {"k": 0}), "params"),
-    (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, -1.0], ed.Lump()), "wo"),
-])
+@pytest.mark.parametrize(
+    "make,match",
+    [
+        (lambda: ed.Lump(n=-1.0), "Lump.n"),
+        (lambda: ed.Lump(radius=0.0), "Lump.radius"),
+        (lambda: ed.Lump(radius=-0.2), "Lump.radius"),
+        (lambda: ed.Lump(aspect=0.0), "Lump.aspect"),
+        (lambda: ed.Lump(anchor="side"), "Lump.anchor"),
+        (lambda: ed.Lump(offset=(0.1,)), "Lump.offset"),
+        (lambda: ed.LumpMixture((ed.Lump(),), (0.5,)), "weights"),
+        (lambda: ed.LumpMixture((ed.Lump(), ed.Lump()), (1.5, -0.5)), "weights"),
+        (lambda: ed.empirical_lumps(k=1.5), "k"),
+        (lambda: ed.EdwardsParams(r1=0.0), "EdwardsParams.r1"),
+        (lambda: ed.EdwardsParams(f0=1.2), "EdwardsParams.f0"),
+        (lambda: ed.EdwardsParams(n2=-1.0), "EdwardsParams.n2"),
+        (lambda: ed.EdwardsParams.from_vector(np.ones(3)), "x must have shape"),
+        (lambda: ed.disk_projection([0, 0, 1.0], [0, 0, 1.0], "stereographic"), "projection"),
+        (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], ed.Lump(), "polar"), "projection"),
+        (lambda: ed.sample_edwards([0, 0, 1.0], 0.5, 0.5, ed.Lump(), "x"), "projection"),
+        (lambda: ed.sample_edwards([0, 0, 1.0], 0.5, 0.5, uniform_disk), "lumps"),
+        (lambda: ed.edwards_empirical([0, 0, 1.0], spherical_deg(60, 0), ed.Lump(2, 0.5)), "lumps"),
+        (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], ed.Lump(), diffuse=2.0), "diffuse"),
+        (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], ed.Lump(), fresnel=-0.1), "f0"),
+        (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, 1.0], "lump"), "lumps"),
+        (lambda: ed.edwards_fit_brdf([0, 0, 1.0], [0, 0, 1.0], {"k": 0}), "params"),
+        (lambda: ed.edwards_empirical([0, 0, 1.0], [0, 0, -1.0], ed.Lump()), "wo"),
+    ],
+)
 def test_invalid_arguments_raise(make, match):
     with pytest.raises(ValueError, match=match):
         make()

@@ -1,14 +1,15 @@
 """Empirical (histogram) NDF: normalisation, agreement with the sampled NDF, sampler, checks."""
+
 import numpy as np
 import pytest
+from support import pearson_chi2, sidak
 
-from gof import pearson_chi2, sidak
 from microsim import analytic as an
-from microsim.analytic._checks import spherical
+from microsim.vectors import spherical
 
 N = 1_000_000
-ALPHA = sidak(0.01, 3)         # sampler χ² family of this file: isotropic, anisotropic, φ marginal
-Z = 5.0                        # per-bin tolerance in standard deviations
+ALPHA = sidak(0.01, 3)  # sampler χ² family of this file: isotropic, anisotropic, φ marginal
+Z = 5.0  # per-bin tolerance in standard deviations
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +59,7 @@ def test_narrow_lobe_is_resolved():
     d0 = p0 / (np.pi * emp.q_edges[1])
     sigma = np.sqrt(p0 / 200_000) / (np.pi * emp.q_edges[1])
     assert abs(emp.D_cos(1.0) - d0) < Z * sigma
-    assert emp.theta_edges[1] < 0.01          # first bin far narrower than the lobe
+    assert emp.theta_edges[1] < 0.01  # first bin far narrower than the lobe
 
 
 def test_quantile_inverts_cdf(emp):
@@ -72,7 +73,7 @@ def test_default_bin_rule(emp):
     # 2 N^(1/3) = 200 equal-weight bins, plus splits of bins wider than 2°
     assert np.sum(emp.bin_weights > 0) >= 200
     assert np.max(np.diff(emp.theta_edges)) <= np.radians(2.0) + 1e-12
-    assert emp.D_cos(np.cos(np.radians(89.0))) == 0.0      # no facet tilted that far
+    assert emp.D_cos(np.cos(np.radians(89.0))) == 0.0  # no facet tilted that far
     assert emp.params()["n_facets"] == N
 
 
@@ -105,11 +106,13 @@ def test_anisotropic_phi_marginal_and_sampler():
     w = emp.cell_weights.sum(axis=0)
     assert np.all(np.abs(w - p) < Z * np.sqrt(p * (1 - p) / N))
     # D(h) follows the cells; D_cos is their azimuthal mean; normalised
-    assert abs(np.sum(emp.cell_D * 0.5 * np.diff(e)[None, :] * np.diff(emp.q_edges)[:, None])
-               - 1.0) < 1e-9
+    assert (
+        abs(np.sum(emp.cell_D * 0.5 * np.diff(e)[None, :] * np.diff(emp.q_edges)[:, None]) - 1.0)
+        < 1e-9
+    )
     hx = spherical(np.radians(15.0), 0.0)
     hy = spherical(np.radians(15.0), np.pi / 2)
-    assert emp.D(hy) > 3.0 * emp.D(hx)          # rougher along y: Beckmann ratio 4.5 here
+    assert emp.D(hy) > 3.0 * emp.D(hx)  # rougher along y: Beckmann ratio 4.5 here
     # sampler χ² over (θ, φ) cells against the cell weights
     h = emp.sample(rng.random(N), rng.random(N))
     theta = np.arctan2(np.hypot(h[:, 0], h[:, 1]), h[:, 2])
@@ -133,15 +136,18 @@ def test_atom_is_smeared_over_one_bin():
     assert np.isclose(emp.D_cos(1.0) * np.pi * np.sin(np.radians(2.0)) ** 2, 1.0)
 
 
-@pytest.mark.parametrize("normals, weights, match", [
-    (np.zeros((0, 3)), None, "normals"),
-    ([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]], None, "upper hemisphere"),
-    ([[0.0, 0.6, -0.8]], None, "upper hemisphere"),
-    ([[0.0, 0.0, 1.1]], None, "unit"),
-    ([[0.0, 0.0, 1.0]], [-1.0], "weights"),
-    ([[0.0, 0.0, 1.0]], [0.0], "weights"),
-    ([[0.0, 0.0, 1.0]], [1.0, 2.0], "weights"),
-])
+@pytest.mark.parametrize(
+    "normals, weights, match",
+    [
+        (np.zeros((0, 3)), None, "normals"),
+        ([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]], None, "upper hemisphere"),
+        ([[0.0, 0.6, -0.8]], None, "upper hemisphere"),
+        ([[0.0, 0.0, 1.1]], None, "unit"),
+        ([[0.0, 0.0, 1.0]], [-1.0], "weights"),
+        ([[0.0, 0.0, 1.0]], [0.0], "weights"),
+        ([[0.0, 0.0, 1.0]], [1.0, 2.0], "weights"),
+    ],
+)
 def test_invalid_input(normals, weights, match):
     with pytest.raises(ValueError, match=match):
         an.Empirical(normals, weights)

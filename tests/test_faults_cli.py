@@ -11,6 +11,7 @@ report intact. Runs are tiny (200 V-grooves, 2·10⁴ rays, one incidence) with 
 ``--quick`` effort and stub charts, so the module takes well under a minute; the real charts
 are covered by test_cli_run.py.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -49,11 +50,24 @@ theta_bins = 9
 phi_bins = 10
 seed = 3
 """
-FAST = dataclasses.replace(runner.QUICK, sweep_theta=(0.0, 60.0), sweep_rays=4000,
-                           speed_rays=(2000, 4000), fig6_theta=(0.0, 60.0), fig6_rays=2000,
-                           albedo_nodes=(8, 8, 4), fit_names=("cook_torrance",))
-CHARTS = ("inplane_curves", "hemisphere_maps", "energy_chart", "stability_chart",
-          "speed_accuracy", "mikkelsen_fig6")
+FAST = dataclasses.replace(
+    runner.QUICK,
+    sweep_theta=(0.0, 60.0),
+    sweep_rays=4000,
+    speed_rays=(2000, 4000),
+    fig6_theta=(0.0, 60.0),
+    fig6_rays=2000,
+    albedo_nodes=(8, 8, 4),
+    fit_names=("cook_torrance",),
+)
+CHARTS = (
+    "inplane_curves",
+    "hemisphere_maps",
+    "energy_chart",
+    "stability_chart",
+    "speed_accuracy",
+    "mikkelsen_fig6",
+)
 
 
 def _stub_chart(*args, **kwargs):
@@ -78,7 +92,7 @@ def run_cli(capsys, *args) -> tuple[int, list[str], str]:
     capsys.readouterr()
     try:
         status = main([str(a) for a in args])
-    except SystemExit as e:                 # argparse's own errors
+    except SystemExit as e:  # argparse's own errors
         status = e.code
     err = capsys.readouterr().err
     return status, err.strip().splitlines(), err
@@ -89,8 +103,9 @@ def tree(root: Path) -> dict:
     out = {}
     for p in sorted(root.rglob("*")):
         rel = str(p.relative_to(root))
-        out[rel] = ("dir",) if p.is_dir() else (p.stat().st_size,
-                                               hashlib.sha1(p.read_bytes()).hexdigest())
+        out[rel] = (
+            ("dir",) if p.is_dir() else (p.stat().st_size, hashlib.sha1(p.read_bytes()).hexdigest())
+        )
     return out
 
 
@@ -117,8 +132,12 @@ def _heightfield_scene(h_maker):
     def make(tmp):
         if h_maker is not None:
             h_maker(tmp / "h.npy")
-        return scene(tmp, text='name = "hf"\n[surface]\nkind = "file"\npath = "h.npy"\n'
-                               'dx = 1.0\n', file_name="hf.toml")
+        return scene(
+            tmp,
+            text='name = "hf"\n[surface]\nkind = "file"\npath = "h.npy"\ndx = 1.0\n',
+            file_name="hf.toml",
+        )
+
     return make
 
 
@@ -138,8 +157,9 @@ def _latin1(tmp):
 
 
 def _big(tmp):
-    return scene(tmp, text=TINY.format(name="big") + "#" + "x" * (2 << 20) + "\n",
-                 file_name="big.toml")
+    return scene(
+        tmp, text=TINY.format(name="big") + "#" + "x" * (2 << 20) + "\n", file_name="big.toml"
+    )
 
 
 def _dir(tmp):
@@ -154,57 +174,117 @@ BAD_SCENES = [
     ("missing", lambda tmp: tmp / "nope.toml", ["nope.toml", "no such"]),
     ("not-utf8", _latin1, ["latin.toml", "UTF-8"]),
     ("too-large", _big, ["big.toml", "MiB"]),
-    ("not-toml", lambda tmp: scene(tmp, text="[surface\nkind=", file_name="bad.toml"),
-     ["bad.toml", "TOML"]),
+    (
+        "not-toml",
+        lambda tmp: scene(tmp, text="[surface\nkind=", file_name="bad.toml"),
+        ["bad.toml", "TOML"],
+    ),
     ("name-empty", _edit(lambda t: t.replace('name = "bad"', 'name = ""')), ["bad.toml", "name"]),
-    ("name-escape", _edit(lambda t: t.replace('name = "bad"', 'name = "../../escape"')),
-     ["bad.toml", "name"]),
+    (
+        "name-escape",
+        _edit(lambda t: t.replace('name = "bad"', 'name = "../../escape"')),
+        ["bad.toml", "name"],
+    ),
     ("name-dot", _edit(lambda t: t.replace('name = "bad"', 'name = "."')), ["bad.toml", "name"]),
-    ("name-slash", _edit(lambda t: t.replace('name = "bad"', 'name = "a/b"')),
-     ["bad.toml", "name"]),
-    ("theta-bins-1e6", _edit(lambda t: t.replace("theta_bins = 9", "theta_bins = 1e6")),
-     ["bad.toml", "simulation.theta_bins"]),
-    ("theta-bins-huge", _edit(lambda t: t.replace("theta_bins = 9", "theta_bins = 1000000")),
-     ["bad.toml", "simulation.theta_bins"]),
-    ("phi-bins-1", _edit(lambda t: t.replace("phi_bins = 10", "phi_bins = 1")),
-     ["bad.toml", "simulation.phi_bins"]),
-    ("n-grooves-1e8", _edit(lambda t: t.replace("n_grooves = 200", "n_grooves = 100000000")),
-     ["bad.toml", "surface.n_grooves"]),
-    ("theta-i-95", _edit(lambda t: t.replace("theta_i = [30]", "theta_i = [95]")),
-     ["bad.toml", "simulation.theta_i"]),
-    ("rays-zero", _edit(lambda t: t.replace("rays = 20000", "rays = 0")),
-     ["bad.toml", "simulation.rays"]),
+    (
+        "name-slash",
+        _edit(lambda t: t.replace('name = "bad"', 'name = "a/b"')),
+        ["bad.toml", "name"],
+    ),
+    (
+        "theta-bins-1e6",
+        _edit(lambda t: t.replace("theta_bins = 9", "theta_bins = 1e6")),
+        ["bad.toml", "simulation.theta_bins"],
+    ),
+    (
+        "theta-bins-huge",
+        _edit(lambda t: t.replace("theta_bins = 9", "theta_bins = 1000000")),
+        ["bad.toml", "simulation.theta_bins"],
+    ),
+    (
+        "phi-bins-1",
+        _edit(lambda t: t.replace("phi_bins = 10", "phi_bins = 1")),
+        ["bad.toml", "simulation.phi_bins"],
+    ),
+    (
+        "n-grooves-1e8",
+        _edit(lambda t: t.replace("n_grooves = 200", "n_grooves = 100000000")),
+        ["bad.toml", "surface.n_grooves"],
+    ),
+    (
+        "theta-i-95",
+        _edit(lambda t: t.replace("theta_i = [30]", "theta_i = [95]")),
+        ["bad.toml", "simulation.theta_i"],
+    ),
+    (
+        "rays-zero",
+        _edit(lambda t: t.replace("rays = 20000", "rays = 0")),
+        ["bad.toml", "simulation.rays"],
+    ),
     ("unknown-key", _edit(lambda t: t + "colour = 1\n"), ["bad.toml", "simulation.colour"]),
-    ("sigma-1e200", lambda tmp: scene(tmp, file_name="bad.toml", text=(
-        '[surface]\nkind = "gaussian"\nn = 16\nsigma = 1e200\ncorr_len = 8.0\n')),
-     ["bad.toml", "surface.sigma"]),
-    ("corr-len-1e-9", lambda tmp: scene(tmp, file_name="bad.toml", text=(
-        '[surface]\nkind = "gaussian"\nn = 16\nsigma = 1.0\ncorr_len = 1e-9\n')),
-     ["bad.toml", "surface.corr_len"]),
-    ("grid-100000", lambda tmp: scene(tmp, file_name="bad.toml", text=(
-        '[surface]\nkind = "gaussian"\nn = 100000\nsigma = 1.0\ncorr_len = 8.0\n')),
-     ["bad.toml", "surface.n"]),
+    (
+        "sigma-1e200",
+        lambda tmp: scene(
+            tmp,
+            file_name="bad.toml",
+            text=('[surface]\nkind = "gaussian"\nn = 16\nsigma = 1e200\ncorr_len = 8.0\n'),
+        ),
+        ["bad.toml", "surface.sigma"],
+    ),
+    (
+        "corr-len-1e-9",
+        lambda tmp: scene(
+            tmp,
+            file_name="bad.toml",
+            text=('[surface]\nkind = "gaussian"\nn = 16\nsigma = 1.0\ncorr_len = 1e-9\n'),
+        ),
+        ["bad.toml", "surface.corr_len"],
+    ),
+    (
+        "grid-100000",
+        lambda tmp: scene(
+            tmp,
+            file_name="bad.toml",
+            text=('[surface]\nkind = "gaussian"\nn = 100000\nsigma = 1.0\ncorr_len = 8.0\n'),
+        ),
+        ["bad.toml", "surface.n"],
+    ),
     ("hf-missing", _heightfield_scene(None), ["hf.toml", "surface.path", "h.npy"]),
-    ("hf-3d", _heightfield_scene(lambda p: np.save(p, np.zeros((8, 8, 8)))),
-     ["hf.toml", "surface.path", "2D"]),
-    ("hf-tiny", _heightfield_scene(lambda p: np.save(p, np.zeros((4, 4)))),
-     ["hf.toml", "surface.path", "8"]),
-    ("hf-nan", _heightfield_scene(lambda p: np.save(p, np.full((16, 16), np.nan))),
-     ["hf.toml", "surface.path", "NaN"]),
-    ("hf-complex", _heightfield_scene(lambda p: np.save(p, np.zeros((16, 16), complex))),
-     ["hf.toml", "surface.path", "real"]),
+    (
+        "hf-3d",
+        _heightfield_scene(lambda p: np.save(p, np.zeros((8, 8, 8)))),
+        ["hf.toml", "surface.path", "2D"],
+    ),
+    (
+        "hf-tiny",
+        _heightfield_scene(lambda p: np.save(p, np.zeros((4, 4)))),
+        ["hf.toml", "surface.path", "8"],
+    ),
+    (
+        "hf-nan",
+        _heightfield_scene(lambda p: np.save(p, np.full((16, 16), np.nan))),
+        ["hf.toml", "surface.path", "NaN"],
+    ),
+    (
+        "hf-complex",
+        _heightfield_scene(lambda p: np.save(p, np.zeros((16, 16), complex))),
+        ["hf.toml", "surface.path", "real"],
+    ),
     ("hf-truncated", _heightfield_scene(_truncated_npy), ["hf.toml", "surface.path", "h.npy"]),
-    ("hf-garbage", _heightfield_scene(lambda p: p.write_bytes(b"\x00garbage" * 10)),
-     ["hf.toml", "surface.path", "h.npy"]),
+    (
+        "hf-garbage",
+        _heightfield_scene(lambda p: p.write_bytes(b"\x00garbage" * 10)),
+        ["hf.toml", "surface.path", "h.npy"],
+    ),
     ("hf-directory", _heightfield_scene(lambda p: p.mkdir()), ["hf.toml", "surface.path"]),
 ]
 
 
-@pytest.mark.parametrize("make, words", [c[1:] for c in BAD_SCENES],
-                         ids=[c[0] for c in BAD_SCENES])
+@pytest.mark.parametrize("make, words", [c[1:] for c in BAD_SCENES], ids=[c[0] for c in BAD_SCENES])
 @pytest.mark.parametrize("command", ["run", "surface"])
-def test_bad_scene_one_line_nothing_written_nothing_lost(tmp_path, capsys, monkeypatch,
-                                                         finished, make, words, command):
+def test_bad_scene_one_line_nothing_written_nothing_lost(
+    tmp_path, capsys, monkeypatch, finished, make, words, command
+):
     monkeypatch.chdir(tmp_path)
     path = make(tmp_path)
     before = tree(tmp_path)
@@ -215,8 +295,8 @@ def test_bad_scene_one_line_nothing_written_nothing_lost(tmp_path, capsys, monke
     assert len(lines) == 1 and "Traceback" not in err, err
     for w in words:
         assert w in lines[0], (w, lines[0])
-    assert tree(tmp_path) == before                           # nothing written (no runs/)
-    assert tree(finished[1]) == done                          # nothing lost
+    assert tree(tmp_path) == before  # nothing written (no runs/)
+    assert tree(finished[1]) == done  # nothing lost
 
 
 def _out_options(tmp: Path, sc: Path):
@@ -243,10 +323,24 @@ def _out_options(tmp: Path, sc: Path):
     }
 
 
-OUT_CASES = ["out-dot-force", "out-dotdot-force", "out-cwd-abs-force", "out-parent-of-cwd",
-             "out-parent-is-file", "out-is-file", "force-non-result", "rays-zero", "rays-text",
-             "rays-float", "threads-zero", "seed-negative", "theta-95", "theta-text",
-             "resume-missing", "resume-and-force"]
+OUT_CASES = [
+    "out-dot-force",
+    "out-dotdot-force",
+    "out-cwd-abs-force",
+    "out-parent-of-cwd",
+    "out-parent-is-file",
+    "out-is-file",
+    "force-non-result",
+    "rays-zero",
+    "rays-text",
+    "rays-float",
+    "threads-zero",
+    "seed-negative",
+    "theta-95",
+    "theta-text",
+    "resume-missing",
+    "resume-and-force",
+]
 
 
 @pytest.mark.parametrize("case", OUT_CASES)
@@ -263,12 +357,15 @@ def test_bad_options_one_line_nothing_written(tmp_path, capsys, monkeypatch, cas
     assert tree(tmp_path) == before
 
 
-@pytest.mark.parametrize("damage, name", [
-    (lambda d: (d / "meta.json").write_text((d / "meta.json").read_text()[:50]), "meta.json"),
-    (lambda d: (d / "brdf.npz").write_bytes((d / "brdf.npz").read_bytes()[:300]), "brdf.npz"),
-    (lambda d: (d / "meta.json").write_text("[1, 2]"), "meta.json"),
-    (lambda d: (d / "brdf.npz").unlink(), "brdf.npz"),
-])
+@pytest.mark.parametrize(
+    "damage, name",
+    [
+        (lambda d: (d / "meta.json").write_text((d / "meta.json").read_text()[:50]), "meta.json"),
+        (lambda d: (d / "brdf.npz").write_bytes((d / "brdf.npz").read_bytes()[:300]), "brdf.npz"),
+        (lambda d: (d / "meta.json").write_text("[1, 2]"), "meta.json"),
+        (lambda d: (d / "brdf.npz").unlink(), "brdf.npz"),
+    ],
+)
 def test_truncated_saved_run_on_resume(tmp_path, capsys, monkeypatch, fast, damage, name):
     monkeypatch.chdir(tmp_path)
     sc = scene(tmp_path)
@@ -283,17 +380,20 @@ def test_truncated_saved_run_on_resume(tmp_path, capsys, monkeypatch, fast, dama
     assert tree(tmp_path) == before
 
 
-@pytest.mark.parametrize("args, word", [
-    (["report", "--catalogue", "nowhere"], "nowhere"),
-    (["report", "--catalogue", "empty"], "empty"),
-    (["report", "--catalogue", "dups"], "unique"),
-    (["report", "--catalogue", "cat", "--out", "."], "--out"),
-    (["report", "--catalogue", "cat", "--out", "cat"], "--out"),
-    (["report", "--catalogue", "cat", "--resume"], "--resume"),
-    (["report", "--catalogue", "badcat"], "name"),
-    (["bench", "--rays", "0"], "--rays"),
-    (["sweep-not-a-command"], "invalid choice"),
-])
+@pytest.mark.parametrize(
+    "args, word",
+    [
+        (["report", "--catalogue", "nowhere"], "nowhere"),
+        (["report", "--catalogue", "empty"], "empty"),
+        (["report", "--catalogue", "dups"], "unique"),
+        (["report", "--catalogue", "cat", "--out", "."], "--out"),
+        (["report", "--catalogue", "cat", "--out", "cat"], "--out"),
+        (["report", "--catalogue", "cat", "--resume"], "--resume"),
+        (["report", "--catalogue", "badcat"], "name"),
+        (["bench", "--rays", "0"], "--rays"),
+        (["sweep-not-a-command"], "invalid choice"),
+    ],
+)
 def test_bad_report_and_bench_options(tmp_path, capsys, monkeypatch, args, word):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "empty").mkdir()
@@ -355,11 +455,14 @@ def test_disk_full_while_writing_keeps_the_previous_result(tmp_path, capsys, mon
     assert run_cli(capsys, "run", sc, "--quick", "--out", out, "--no-progress")[0] == 0
     before = tree(tmp_path)
     real = atomic.write_text
-    monkeypatch.setattr(atomic, "write_text",
-                        lambda path, text: _enospc(path) if path.name == "report.md"
-                        else real(path, text))
-    status, lines, err = run_cli(capsys, "run", sc, "--quick", "--out", out, "--force",
-                                 "--no-progress")
+    monkeypatch.setattr(
+        atomic,
+        "write_text",
+        lambda path, text: _enospc(path) if path.name == "report.md" else real(path, text),
+    )
+    status, lines, err = run_cli(
+        capsys, "run", sc, "--quick", "--out", out, "--force", "--no-progress"
+    )
     assert status == 1 and len(lines) == 1 and "Traceback" not in err, err
     assert "report.md" in lines[0] and "No space left" in lines[0]
     assert tree(tmp_path) == before
@@ -421,16 +524,38 @@ def reference(tmp_path_factory):
         _fast(mp)
         mp.chdir(tmp)
         sc = scene(tmp)
-        assert main(["run", str(sc), "--quick", "--rays", "150000", "--out", str(tmp / "ref"),
-                     "--no-progress"]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    str(sc),
+                    "--quick",
+                    "--rays",
+                    "150000",
+                    "--out",
+                    str(tmp / "ref"),
+                    "--no-progress",
+                ]
+            )
+            == 0
+        )
     return _arrays(tmp / "ref")
 
 
-@pytest.mark.parametrize("phase, after", [("simulation", 0), ("side-studies", 0),
-                                          ("side-studies", 2), ("fits", 0), ("charts", 0),
-                                          ("publish", 0)])
-def test_interrupt_at_each_phase_saves_tallies_and_resumes(tmp_path, capsys, monkeypatch,
-                                                            fast, reference, phase, after):
+@pytest.mark.parametrize(
+    "phase, after",
+    [
+        ("simulation", 0),
+        ("side-studies", 0),
+        ("side-studies", 2),
+        ("fits", 0),
+        ("charts", 0),
+        ("publish", 0),
+    ],
+)
+def test_interrupt_at_each_phase_saves_tallies_and_resumes(
+    tmp_path, capsys, monkeypatch, fast, reference, phase, after
+):
     """Ctrl-C at ``phase``: exit 130, one line naming the directory and --resume, the tallies
     saved (complete ones after the simulation), no report; --resume finishes bitwise equal to
     an uninterrupted run."""
@@ -446,8 +571,8 @@ def test_interrupt_at_each_phase_saves_tallies_and_resumes(tmp_path, capsys, mon
     assert f"--resume {out}" in lines[0]
     meta = json.loads((out / "meta.json").read_text())
     assert meta["partial"] is (phase == "simulation")
-    assert sorted(p.name for p in out.iterdir()) == ["brdf.npz", "meta.json"]   # no report
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["run", sc.name]     # no leftovers
+    assert sorted(p.name for p in out.iterdir()) == ["brdf.npz", "meta.json"]  # no report
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run", sc.name]  # no leftovers
     status, lines, err = run_cli(capsys, "run", sc, *opts, "--resume", out, "--no-progress")
     assert status == 0, err
     got = _arrays(out)
@@ -466,7 +591,7 @@ def test_partial_side_study_is_an_interrupt(tmp_path, capsys, monkeypatch, fast)
 
     def cut_short(plan, theta_i, rays, seed, bins, progress=None, resume=None, **kw):
         r = real(plan, theta_i, rays, seed, bins, progress=progress, resume=resume, **kw)
-        if seed != plan.seed:                   # a side study (own seed offset)
+        if seed != plan.seed:  # a side study (own seed offset)
             r.meta["partial"] = True
         return r
 
@@ -487,20 +612,26 @@ def catalogue(tmp_path, monkeypatch, fast, capsys):
     scene(cat, "tiny-a")
     scene(cat, "tiny-b", text=TINY.format(name="tiny-b").replace("seed = 3", "seed = 4"))
     rep = tmp_path / "rep"
-    assert run_cli(capsys, "report", "--quick", "--catalogue", cat, "--out", rep,
-                   "--no-progress")[0] == 0
+    assert (
+        run_cli(capsys, "report", "--quick", "--catalogue", cat, "--out", rep, "--no-progress")[0]
+        == 0
+    )
     return cat, rep
 
 
-@pytest.mark.parametrize("phase, after, cut, saved", [
-    ("report-scene", 1, "tiny-b", None),           # between the scenes
-    ("fits", 1, "tiny-b", "complete"),             # after tiny-b's simulation
-    ("charts", 1, "tiny-b", "complete"),
-    ("simulation", 0, "tiny-a", "partial"),        # inside tiny-a's simulation
-    ("report-index", 0, None, None),               # every scene done
-])
-def test_report_interrupt_keeps_previous_report_and_resumes(capsys, catalogue, phase, after,
-                                                            cut, saved):
+@pytest.mark.parametrize(
+    "phase, after, cut, saved",
+    [
+        ("report-scene", 1, "tiny-b", None),  # between the scenes
+        ("fits", 1, "tiny-b", "complete"),  # after tiny-b's simulation
+        ("charts", 1, "tiny-b", "complete"),
+        ("simulation", 0, "tiny-a", "partial"),  # inside tiny-a's simulation
+        ("report-index", 0, None, None),  # every scene done
+    ],
+)
+def test_report_interrupt_keeps_previous_report_and_resumes(
+    capsys, catalogue, phase, after, cut, saved
+):
     """Ctrl-C in ``microsim report``: exit 130, one line saying how to continue (``report
     --resume``, which exists), the interrupted scene's previous report intact and its tallies
     kept aside; ``report --resume`` skips the finished scenes and completes the rest."""
@@ -514,7 +645,7 @@ def test_report_interrupt_keeps_previous_report_and_resumes(capsys, catalogue, p
     last = [line for line in lines if "interrupted" in line]
     assert len(last) == 1 and "report --resume" in last[0], err
     if cut is not None:
-        assert tree(rep / cut) == before[cut]                   # previous report intact
+        assert tree(rep / cut) == before[cut]  # previous report intact
         partial = rep / f".{cut}.partial"
         if saved is None:
             assert not partial.exists()
@@ -523,20 +654,20 @@ def test_report_interrupt_keeps_previous_report_and_resumes(capsys, catalogue, p
             assert meta["partial"] is (saved == "partial")
     status, lines, err = run_cli(capsys, *opts, "--resume")
     assert status == 0, err
-    finished = {line.split("] ")[1].split(":")[0] for line in lines
-                if "finished earlier" in line}
+    finished = {line.split("] ")[1].split(":")[0] for line in lines if "finished earlier" in line}
     order = ["tiny-a", "tiny-b"]
-    assert finished == set(order[:order.index(cut)] if cut else order), err
+    assert finished == set(order[: order.index(cut)] if cut else order), err
     index = (rep / "index.md").read_text()
     assert "tiny-a/report.md" in index and "tiny-b/report.md" in index
     assert (rep / "tiny-b" / "report.md").is_file()
-    assert not [p.name for p in rep.iterdir() if p.name.startswith(".")]      # state cleaned
+    assert not [p.name for p in rep.iterdir() if p.name.startswith(".")]  # state cleaned
 
 
 def test_report_without_resume_state_refuses_resume(capsys, catalogue):
     cat, rep = catalogue
-    status, lines, err = run_cli(capsys, "report", "--quick", "--catalogue", cat, "--out", rep,
-                                 "--resume")
+    status, lines, err = run_cli(
+        capsys, "report", "--quick", "--catalogue", cat, "--out", rep, "--resume"
+    )
     assert status == 2 and len(lines) == 1 and "--resume" in lines[0], err
 
 
@@ -567,7 +698,7 @@ def test_two_in_process_plans_cannot_both_publish(tmp_path, capsys, monkeypatch,
     second = runner.plan_run(sc, out=out, quick=True, seed=9)
     outcome = {}
 
-    def race(*a, **k):                  # the second run starts while the first simulates
+    def race(*a, **k):  # the second run starts while the first simulates
         if "second" not in outcome:
             outcome["second"] = None
             try:
@@ -580,7 +711,8 @@ def test_two_in_process_plans_cannot_both_publish(tmp_path, capsys, monkeypatch,
     monkeypatch.setattr(tracing, "simulate_scene", race)
     assert runner.execute(first, progress=False).status == 0
     assert isinstance(outcome["second"], ValueError) and "another microsim run" in str(
-        outcome["second"])
+        outcome["second"]
+    )
     assert json.loads((out / "verdicts.json").read_text())["seed"] == first.seed
 
 
@@ -590,10 +722,19 @@ def test_lock_of_a_killed_process_does_not_block(tmp_path, capsys, monkeypatch, 
     monkeypatch.chdir(tmp_path)
     sc = scene(tmp_path)
     out = tmp_path / "run"
-    holder = subprocess.Popen([sys.executable, "-c", (
-        "import sys, time\nfrom microsim.atomic import output_lock\n"
-        f"with output_lock({str(out)!r}):\n    print('held', flush=True)\n    time.sleep(60)\n")],
-        stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            (
+                "import sys, time\nfrom microsim.atomic import output_lock\n"
+                f"with output_lock({str(out)!r}):\n"
+                "    print('held', flush=True)\n    time.sleep(60)\n"
+            ),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "held"
         status, lines, err = run_cli(capsys, "run", sc, "--quick", "--out", out)
@@ -601,7 +742,7 @@ def test_lock_of_a_killed_process_does_not_block(tmp_path, capsys, monkeypatch, 
     finally:
         holder.send_signal(signal.SIGKILL)
         holder.wait(timeout=10)
-    assert atomic.lock_path(out).exists()                    # stale file left by the kill
+    assert atomic.lock_path(out).exists()  # stale file left by the kill
     assert run_cli(capsys, "run", sc, "--quick", "--out", out, "--no-progress")[0] == 0
 
 
@@ -613,13 +754,15 @@ def test_stale_staging_of_dead_processes_is_cleaned(tmp_path, capsys, monkeypatc
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     stale = [tmp_path / f".run.tmp-{dead.pid}-abc123", tmp_path / f".run.old-{dead.pid}-x_y"]
-    keep = [tmp_path / f".run.tmp-{os.getppid()}-live", tmp_path / ".run.tmp-nopid",
-            tmp_path / f".other.tmp-{dead.pid}-abc"]
+    keep = [
+        tmp_path / f".run.tmp-{os.getppid()}-live",
+        tmp_path / ".run.tmp-nopid",
+        tmp_path / f".other.tmp-{dead.pid}-abc",
+    ]
     for d in stale + keep:
         d.mkdir()
         (d / "brdf.npz").write_text("x")
-    assert run_cli(capsys, "run", sc, "--quick", "--out", tmp_path / "run",
-                   "--no-progress")[0] == 0
+    assert run_cli(capsys, "run", sc, "--quick", "--out", tmp_path / "run", "--no-progress")[0] == 0
     assert not any(d.exists() for d in stale)
     assert all(d.exists() for d in keep)
 
@@ -629,8 +772,10 @@ def test_outputs_get_the_users_normal_permissions(tmp_path, capsys, monkeypatch,
     sc = scene(tmp_path)
     old = os.umask(0o027)
     try:
-        assert run_cli(capsys, "run", sc, "--quick", "--out", tmp_path / "run",
-                       "--no-progress")[0] == 0
+        assert (
+            run_cli(capsys, "run", sc, "--quick", "--out", tmp_path / "run", "--no-progress")[0]
+            == 0
+        )
     finally:
         os.umask(old)
     out = tmp_path / "run"
@@ -643,11 +788,15 @@ def test_file_heightfield_scene_runs_end_to_end(tmp_path, capsys, monkeypatch, f
     """Bug 1: a ``kind = "file"`` scene used to crash after its simulation (report fmt())."""
     monkeypatch.chdir(tmp_path)
     np.save(tmp_path / "h.npy", 0.5 * np.random.default_rng(0).normal(size=(16, 16)))
-    sc = scene(tmp_path, text='name = "hf"\n[surface]\nkind = "file"\npath = "h.npy"\n'
-                              'dx = 1.0\n[simulation]\ntheta_i = [30]\nrays = 20000\n'
-                              'theta_bins = 9\nphi_bins = 10\n')
-    status, lines, err = run_cli(capsys, "run", sc, "--quick", "--out", tmp_path / "run",
-                                 "--no-progress")
+    sc = scene(
+        tmp_path,
+        text='name = "hf"\n[surface]\nkind = "file"\npath = "h.npy"\n'
+        "dx = 1.0\n[simulation]\ntheta_i = [30]\nrays = 20000\n"
+        "theta_bins = 9\nphi_bins = 10\n",
+    )
+    status, lines, err = run_cli(
+        capsys, "run", sc, "--quick", "--out", tmp_path / "run", "--no-progress"
+    )
     assert status == 0, err
     report = (tmp_path / "run" / "report.md").read_text()
     assert "input_shape = 16 × 16" in report
@@ -661,3 +810,21 @@ def test_surface_prints_each_warning_once(tmp_path, capsys):
     cap = capsys.readouterr()
     text = cap.out + cap.err
     assert text.count("made periodic by mirroring") == 1, text
+
+
+def test_a_missing_optional_extra_is_one_line_naming_the_extra(tmp_path, capsys, monkeypatch):
+    """Without pyvista (the 'view' extra) `microsim view` says what to install, exit 1, no
+    traceback; likewise Surface.mesh without trimesh."""
+    monkeypatch.setitem(sys.modules, "pyvista", None)  # makes `import pyvista` fail
+    monkeypatch.setitem(sys.modules, "trimesh", None)
+    path = scene(tmp_path)
+    status, lines, err = run_cli(
+        capsys, "view", path, "--what", "surface", "--screenshot", tmp_path / "v.png"
+    )
+    assert status == 1 and len(lines) == 1 and "Traceback" not in err
+    assert "microsim[view]" in lines[0]
+    from microsim.errors import EnvironmentFailure
+    from microsim.surfaces import flat
+
+    with pytest.raises(EnvironmentFailure, match=r"microsim\[view\]"):
+        flat().mesh()

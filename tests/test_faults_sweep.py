@@ -4,6 +4,7 @@ For each case: the exit status (2 usage, 1 environment), exactly one line on std
 the file, key, option or path at fault, no traceback, and nothing written (no output
 directory, nothing under the working directory). Plus Ctrl-C through the in-process hook and a
 real SIGINT to a CLI subprocess: exit 130, finished tasks kept complete, no summary."""
+
 import json
 import os
 import re
@@ -11,7 +12,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
@@ -42,7 +42,7 @@ def edit(old, new):
 
 # (case id, sweep file content (str or bytes), words the error line must contain besides the file)
 FILES = [
-    ("unknown-top-key", OK + "\n", None),          # placeholder replaced below
+    ("unknown-top-key", OK + "\n", None),  # placeholder replaced below
     ("rays-zero", edit("rays = 20_000", "rays = 0"), ["rays"]),
     ("rays-float", edit("rays = 20_000", "rays = 2e4"), ["rays"]),
     ("rays-string", edit("rays = 20_000", 'rays = "many"'), ["rays"]),
@@ -61,8 +61,11 @@ FILES = [
     ("scenes-empty", OK.split("[[scenes]]")[0] + "scenes = []\n", ["scenes"]),
     ("scenes-missing", OK.split("[[scenes]]")[0], ["scenes"]),
     ("scenes-not-tables", OK.split("[[scenes]]")[0] + "scenes = [1]\n", ["scenes[0]"]),
-    ("scene-unknown-key", edit('name = "vg"', 'name = "vg"\ncolour = "red"'),
-     ["scenes[0]", "colour"]),
+    (
+        "scene-unknown-key",
+        edit('name = "vg"', 'name = "vg"\ncolour = "red"'),
+        ["scenes[0]", "colour"],
+    ),
     ("scene-no-surface", OK.split("[scenes.surface]")[0], ["scenes[0]", "surface"]),
     ("surface-no-kind", edit('kind = "vgrooves"\n', ""), ["scenes[0]", "surface.kind"]),
     ("surface-kind", edit('kind = "vgrooves"', 'kind = "fractal"'), ["surface.kind"]),
@@ -81,14 +84,27 @@ FILES = [
     ("sweep-name-escape", edit('name = "ok"', 'name = "../../escape"'), ["name"]),
     ("sweep-name-empty", edit('name = "ok"', 'name = ""'), ["name"]),
     ("sweep-name-dot", edit('name = "ok"', 'name = ".."'), ["name"]),
-    ("description-number", edit('name = "ok"', 'name = "ok"\ndescription = 3'),
-     ["description"]),
-    ("heightfield-missing", edit('kind = "vgrooves"\nn_grooves = 100\nndf = "beckmann"\nm = 0.3',
-                                 'kind = "file"\npath = "nowhere.npy"\ndx = 1.0'),
-     ["surface.path"]),
-    ("grid-too-big", edit("m = 0.3", "n_grooves = [" + ", ".join(map(str, range(100, 600)))
-                          + "]\nm = [" + ", ".join(f"0.{k:03d}" for k in range(1, 300)) + "]")
-     .replace("n_grooves = 100\n", ""), ["scenes[0]", "tasks"]),
+    ("description-number", edit('name = "ok"', 'name = "ok"\ndescription = 3'), ["description"]),
+    (
+        "heightfield-missing",
+        edit(
+            'kind = "vgrooves"\nn_grooves = 100\nndf = "beckmann"\nm = 0.3',
+            'kind = "file"\npath = "nowhere.npy"\ndx = 1.0',
+        ),
+        ["surface.path"],
+    ),
+    (
+        "grid-too-big",
+        edit(
+            "m = 0.3",
+            "n_grooves = ["
+            + ", ".join(map(str, range(100, 600)))
+            + "]\nm = ["
+            + ", ".join(f"0.{k:03d}" for k in range(1, 300))
+            + "]",
+        ).replace("n_grooves = 100\n", ""),
+        ["scenes[0]", "tasks"],
+    ),
     ("not-toml", "this is = not [toml\n", ["TOML"]),
     ("empty-file", "", ["scenes"]),
     ("non-utf8", OK.encode().replace(b'"vg"', b'"v\xe9g"'), ["UTF-8"]),
@@ -112,7 +128,7 @@ def _nothing_written(tmp_path, keep):
 
 @pytest.mark.parametrize("case, content, words", FILES, ids=[c[0] for c in FILES])
 def test_bad_sweep_file(tmp_path, monkeypatch, capsys, case, content, words):
-    monkeypatch.chdir(tmp_path)                       # the default output would be sweeps/out
+    monkeypatch.chdir(tmp_path)  # the default output would be sweeps/out
     sweep = tmp_path / "bad.toml"
     (sweep.write_bytes if isinstance(content, bytes) else sweep.write_text)(content)
     rc = main(["sweep", str(sweep), "--workers", "1"])
@@ -132,6 +148,7 @@ def _write_ok(tmp_path):
 
 def _free_port():
     import socket
+
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -155,8 +172,7 @@ def _setup_option(case, tmp_path):
         return ["--out", str(tmp_path / "taken")], 2, [str(tmp_path / "taken")], ["taken"]
     if case == "out-parent-is-file":
         (tmp_path / "taken").write_text("mine")
-        return ["--out", str(tmp_path / "taken" / "sub")], 2, [str(tmp_path / "taken")], \
-            ["taken"]
+        return ["--out", str(tmp_path / "taken" / "sub")], 2, [str(tmp_path / "taken")], ["taken"]
     if case == "out-foreign-dir":
         (tmp_path / "mine").mkdir()
         (tmp_path / "mine" / "summary.csv").write_text("my own table")
@@ -166,8 +182,12 @@ def _setup_option(case, tmp_path):
         (tmp_path / "o" / "tasks").write_text("x")
         return ["--out", str(tmp_path / "o")], 2, [str(tmp_path / "o" / "tasks")], ["o"]
     if case == "scheduler-timeout-0":
-        return ["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "0"], 2, \
-            ["--scheduler-timeout"], []
+        return (
+            ["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "0"],
+            2,
+            ["--scheduler-timeout"],
+            [],
+        )
     if case == "scheduler-bad-address":
         pytest.importorskip("distributed")
         return ["--scheduler", "not an address"], 2, ["--scheduler", "not an address"], []
@@ -176,15 +196,26 @@ def _setup_option(case, tmp_path):
         return ["--scheduler", "foo://127.0.0.1:1"], 2, ["--scheduler", "foo://127.0.0.1:1"], []
     if case == "scheduler-unreachable":
         pytest.importorskip("distributed")
-        addr = f"tcp://127.0.0.1:{_free_port()}"      # loopback, nothing listens there
+        addr = f"tcp://127.0.0.1:{_free_port()}"  # loopback, nothing listens there
         return ["--scheduler", addr, "--scheduler-timeout", "1"], 1, [addr], []
     raise AssertionError(case)
 
 
-OPTIONS = ["no-such-file", "directory", "dev-zero", "workers-0", "workers-negative",
-           "out-is-file", "out-parent-is-file", "out-foreign-dir", "out-tasks-is-file",
-           "scheduler-timeout-0", "scheduler-bad-address", "scheduler-bad-scheme",
-           "scheduler-unreachable"]
+OPTIONS = [
+    "no-such-file",
+    "directory",
+    "dev-zero",
+    "workers-0",
+    "workers-negative",
+    "out-is-file",
+    "out-parent-is-file",
+    "out-foreign-dir",
+    "out-tasks-is-file",
+    "scheduler-timeout-0",
+    "scheduler-bad-address",
+    "scheduler-bad-scheme",
+    "scheduler-unreachable",
+]
 
 
 @pytest.mark.parametrize("case", OPTIONS)
@@ -193,8 +224,11 @@ def test_bad_option_or_path(tmp_path, monkeypatch, capsys, case):
     argv, status, words, keep = _setup_option(case, tmp_path)
     before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
     if argv is None:
-        sweep = {"no-such-file": str(tmp_path / "missing.toml"), "directory":
-                 str(tmp_path / "dir.toml"), "dev-zero": "/dev/zero"}[case]
+        sweep = {
+            "no-such-file": str(tmp_path / "missing.toml"),
+            "directory": str(tmp_path / "dir.toml"),
+            "dev-zero": "/dev/zero",
+        }[case]
         argv = []
     else:
         sweep = str(_write_ok(tmp_path))
@@ -211,8 +245,10 @@ def test_bad_option_or_path(tmp_path, monkeypatch, capsys, case):
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
-@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
-                    reason="root writes through any permission bits")
+@pytest.mark.skipif(
+    not hasattr(os, "geteuid") or os.geteuid() == 0,
+    reason="root writes through any permission bits",
+)
 def test_unwritable_out_parent_is_an_environment_failure(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     sweep = _write_ok(tmp_path)
@@ -230,6 +266,7 @@ def test_unwritable_out_parent_is_an_environment_failure(tmp_path, monkeypatch, 
 def test_concurrent_sweep_to_the_same_out_is_refused(tmp_path, monkeypatch, capsys):
     """While one sweep holds OUT, a second one to the same OUT stops with one line."""
     from microsim.sweep import _locked
+
     monkeypatch.chdir(tmp_path)
     sweep = _write_ok(tmp_path)
     out = tmp_path / "out"
@@ -247,14 +284,13 @@ def test_stale_temporary_files_are_cleaned_and_results_kept(tmp_path, monkeypatc
     assert main(["sweep", str(sweep), "--out", str(out), "--workers", "1"]) == 0
     done = sorted((out / "tasks").glob("*.json"))
     assert len(done) == 1
-    (out / "tasks" / ".vg-0123.json-xyz.tmp").write_text('{"id": ')   # a SIGKILLed write
+    (out / "tasks" / ".vg-0123.json-xyz.tmp").write_text('{"id": ')  # a SIGKILLed write
     assert main(["sweep", str(sweep), "--out", str(out), "--workers", "1"]) == 0
     assert "1 already done" in capsys.readouterr().out
     assert sorted(p.name for p in (out / "tasks").iterdir()) == [p.name for p in done]
 
 
-MULTI = edit("m = 0.3", "m = [0.2, 0.3, 0.4, 0.5]").replace("theta_i = [30]",
-                                                            "theta_i = [30, 60]")
+MULTI = edit("m = 0.3", "m = [0.2, 0.3, 0.4, 0.5]").replace("theta_i = [30]", "theta_i = [30, 60]")
 
 
 def _complete_tasks(out, rays):
@@ -266,6 +302,7 @@ def _complete_tasks(out, rays):
 @pytest.mark.parametrize("after", [0, 3])
 def test_interrupt_via_hook(tmp_path, monkeypatch, capsys, after):
     from microsim.checkpoints import interrupt_at
+
     monkeypatch.chdir(tmp_path)
     sweep = tmp_path / "multi.toml"
     sweep.write_text(MULTI)
@@ -293,12 +330,25 @@ def test_real_sigint_to_the_cli_process_group(tmp_path):
     sweep = tmp_path / "slow.toml"
     sweep.write_text(MULTI.replace("rays = 20_000", "rays = 2_000_000"))
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "microsim.cli", "sweep", str(sweep),
-                             "--out", str(out), "--workers", "2"], stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "microsim.cli",
+            "sweep",
+            str(sweep),
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         err = []
-        for line in proc.stderr:                          # wait for the first finished task
+        for line in proc.stderr:  # wait for the first finished task
             err.append(line)
             if re.search(r"\b1/8 done", line):
                 break

@@ -1,4 +1,5 @@
 """Fresnel reflectance: reference values, limits, physical identities, stability, validation."""
+
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
@@ -16,22 +17,30 @@ def cosd(deg):
 def textbook_fresnel(c, eta):
     """(R_s + R_p)/2 as printed in Mally's slides, with the complex root of Snell's law."""
     eta = complex(eta)
-    g = np.sqrt(eta ** 2 - (1.0 - c ** 2) + 0j)          # η cos θ_t
+    g = np.sqrt(eta**2 - (1.0 - c**2) + 0j)  # η cos θ_t
     rs = (c - g) / (c + g)
-    rp = (eta ** 2 * c - g) / (eta ** 2 * c + g)
+    rp = (eta**2 * c - g) / (eta**2 * c + g)
     return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
 
 
 # docs/design.md "Facts to build on": exact unpolarised reflectance, checked independently
-@pytest.mark.parametrize("deg, r_al, r_meoh", [(0, 0.923284, 0.019955), (60, 0.909966, 0.058937),
-                                               (80, 0.879388, 0.346580), (89, 0.973137, 0.895969)])
+@pytest.mark.parametrize(
+    "deg, r_al, r_meoh",
+    [
+        (0, 0.923284, 0.019955),
+        (60, 0.909966, 0.058937),
+        (80, 0.879388, 0.346580),
+        (89, 0.973137, 0.895969),
+    ],
+)
 def test_reference_values(deg, r_al, r_meoh):
     assert an.fresnel(cosd(deg), ALUMINIUM) == pytest.approx(r_al, abs=1e-5)
     assert an.fresnel(cosd(deg), METHANOL) == pytest.approx(r_meoh, abs=1e-5)
 
 
-@pytest.mark.parametrize("ior", [ALUMINIUM, METHANOL, 1 / METHANOL, 1.5 + 0j, 1.0, 1 + 1e-12,
-                                 0.2 + 3j, 40.0, None])
+@pytest.mark.parametrize(
+    "ior", [ALUMINIUM, METHANOL, 1 / METHANOL, 1.5 + 0j, 1.0, 1 + 1e-12, 0.2 + 3j, 40.0, None]
+)
 def test_grazing_incidence_reflects_everything(ior):
     r = an.fresnel(np.array([0.0, -1e-7]), ior)  # cos < 0 by rounding is clipped to grazing
     assert np.all(np.isfinite(r))
@@ -49,7 +58,7 @@ def test_dielectric_normal_incidence(n):
 
 def test_conductor_normal_incidence():
     n, k = ALUMINIUM.real, ALUMINIUM.imag
-    expected = ((n - 1) ** 2 + k ** 2) / ((n + 1) ** 2 + k ** 2)
+    expected = ((n - 1) ** 2 + k**2) / ((n + 1) ** 2 + k**2)
     assert an.fresnel(1.0, ALUMINIUM) == pytest.approx(expected, rel=1e-13)
     assert an.f0_from_material(ALUMINIUM) == pytest.approx(expected, rel=1e-13)
 
@@ -73,11 +82,12 @@ def test_no_cancellation_for_index_close_to_one():
         assert an.fresnel(1.0, 1 + delta) == pytest.approx(expected, rel=1e-9)
     # and at 60°: series in δ, R ≈ δ² (r_s² + r_p²)/2 with the δ → 0 limits of r/δ
     c = 0.5
-    rs_over_d = -1 / (2 * c * c)             # r_s = (1 − η²)/(c + g)² → −2δ/(4c²)
+    rs_over_d = -1 / (2 * c * c)  # r_s = (1 − η²)/(c + g)² → −2δ/(4c²)
     rp_over_d = (2 * c * c - 1) / (2 * c * c)  # r_p = (η² − 1)(c²(η² + 1) − 1)/(η²c + g)²
     delta = 1e-9
     assert an.fresnel(c, 1 + delta) == pytest.approx(
-        0.5 * delta ** 2 * (rs_over_d ** 2 + rp_over_d ** 2), rel=1e-6)
+        0.5 * delta**2 * (rs_over_d**2 + rp_over_d**2), rel=1e-6
+    )
 
 
 def test_stokes_reciprocity_and_total_internal_reflection():
@@ -86,8 +96,9 @@ def test_stokes_reciprocity_and_total_internal_reflection():
     n = METHANOL
     theta_i = np.radians(np.linspace(0, 89.9, 300))
     theta_t = np.arcsin(np.sin(theta_i) / n)
-    np.testing.assert_allclose(an.fresnel(np.cos(theta_t), 1 / n), an.fresnel(np.cos(theta_i), n),
-                               rtol=1e-11)
+    np.testing.assert_allclose(
+        an.fresnel(np.cos(theta_t), 1 / n), an.fresnel(np.cos(theta_i), n), rtol=1e-11
+    )
     critical = np.arcsin(1 / n)
     beyond = np.linspace(critical + 1e-9, np.pi / 2, 200)
     np.testing.assert_allclose(an.fresnel(np.cos(beyond), 1 / n), 1.0, rtol=0, atol=1e-12)
@@ -97,8 +108,9 @@ def test_stokes_reciprocity_and_total_internal_reflection():
 
 def test_transmittance_is_complement():
     c = np.linspace(0, 1, 101)
-    np.testing.assert_allclose(an.fresnel_transmittance(c, METHANOL) + an.fresnel(c, METHANOL), 1.0,
-                               rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        an.fresnel_transmittance(c, METHANOL) + an.fresnel(c, METHANOL), 1.0, rtol=0, atol=1e-15
+    )
 
 
 def test_mirror_is_one_everywhere():
@@ -135,8 +147,9 @@ def test_schlick_rejects_bad_f0():
         an.schlick(0.5, 1.5)
 
 
-@pytest.mark.parametrize("ior", [-1.0, 0.0, 0j, -1 + 2j, 1.5 - 0.1j, np.nan, complex(np.nan, 1),
-                                 np.inf, "glass", True])
+@pytest.mark.parametrize(
+    "ior", [-1.0, 0.0, 0j, -1 + 2j, 1.5 - 0.1j, np.nan, complex(np.nan, 1), np.inf, "glass", True]
+)
 def test_invalid_ior(ior):
     with pytest.raises(ValueError, match="ior"):
         an.fresnel(0.5, ior)

@@ -3,17 +3,18 @@ plain NumPy statement of what it computes. Reproducibility for any threads/chunk
 whole runs in test_bench.py and test_resume.py; the periodic walk against a replicated mesh in
 test_tracer.py; the analytic V-groove kernel ray by ray against Embree in
 test_analytic_vgroove.py."""
+
 import threading
 
 import numpy as np
 import pytest
 
-from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.sim import BLOCK, Bins, paths, streams
 from microsim.sim.scratch import work
 from microsim.sim.tallies import Tally, split_tallies
 from microsim.surfaces.surface import flat
+from microsim.vectors import spherical_deg
 
 AL = resolve_material("aluminium")
 
@@ -22,9 +23,14 @@ def ray_outcomes(n, nbin, seed):
     """Spatially coherent synthetic ledger classes, weights and bins (runs of equal bins, as
     coherent rays give), with every class present."""
     rng = np.random.default_rng(seed)
-    status = rng.choice(np.array([paths.SINGLE] * 6 + [paths.MASKED, paths.DOWNWARD,
-                                                       paths.RAY_UNRESOLVED, paths.RAY_MISSED],
-                                 dtype=np.int8), n)
+    status = rng.choice(
+        np.array(
+            [paths.SINGLE] * 6
+            + [paths.MASKED, paths.DOWNWARD, paths.RAY_UNRESOLVED, paths.RAY_MISSED],
+            dtype=np.int8,
+        ),
+        n,
+    )
     where = (np.arange(n) // 7 + rng.integers(0, 3, n)) % nbin
     where = np.where((status == paths.SINGLE) & (rng.random(n) > 0.05), where, -1).astype(np.int64)
     return status, rng.random(n), where
@@ -37,14 +43,13 @@ def test_block_tallies_are_per_block_bincounts(n):
     nbin = 50
     status, weight, where = ray_outcomes(n, nbin, seed=1)
     n_blocks = -(-n // BLOCK)
-    bins, sums, cnt, offsets, ln, lf = split_tallies(status, weight, where, n_blocks,
-                                                        nbin).take()
+    bins, sums, cnt, offsets, ln, lf = split_tallies(status, weight, where, n_blocks, nbin).take()
     for b in range(n_blocks):
         lo, hi = b * BLOCK, min(n, (b + 1) * BLOCK)
         s, w, k = status[lo:hi], weight[lo:hi], where[lo:hi]
         tallied = (s == paths.SINGLE) & (k >= 0)
         part = slice(offsets[b], offsets[b + 1])
-        assert len(np.unique(bins[part])) == offsets[b + 1] - offsets[b]     # each bin once
+        assert len(np.unique(bins[part])) == offsets[b + 1] - offsets[b]  # each bin once
         dense = np.zeros((4, nbin))
         dense[:3, bins[part]] = sums[:, part]
         dense[3, bins[part]] = cnt[part]
@@ -53,7 +58,7 @@ def test_block_tallies_are_per_block_bincounts(n):
         assert np.array_equal(dense[3], np.bincount(k[tallied], minlength=nbin))
         e = np.arange(0, hi - lo - 1, 2)
         both = e[tallied[e] & tallied[e + 1] & (k[e] == k[e + 1])]
-        assert len(both) > 0                                   # not vacuous
+        assert len(both) > 0  # not vacuous
         assert np.array_equal(dense[2], np.bincount(k[both], w[both] * w[both + 1], nbin))
         assert np.array_equal(ln[b], np.bincount(s, minlength=len(paths.LEDGER)))
         assert np.array_equal(lf[b], np.bincount(s, w, len(paths.LEDGER)))
@@ -65,14 +70,17 @@ def test_adding_a_chunk_adds_its_blocks_in_order():
     nbin, n = 40, 4 * BLOCK
     status, weight, where = ray_outcomes(n, nbin, seed=2)
     got = Tally.empty(nbin)
-    got.sum_w += 0.1                                           # a running total to add to
+    got.sum_w += 0.1  # a running total to add to
     want = Tally.empty(nbin)
     want.sum_w += 0.1
     assert got.add_chunk(split_tallies(status, weight, where, 4, nbin)) == 4
     for b in range(4):
         one = Tally.empty(nbin)
-        one.add_chunk(split_tallies(*(a[b * BLOCK:(b + 1) * BLOCK] for a in
-                                         (status, weight, where)), 1, nbin))
+        one.add_chunk(
+            split_tallies(
+                *(a[b * BLOCK : (b + 1) * BLOCK] for a in (status, weight, where)), 1, nbin
+            )
+        )
         for total, part in zip(want.items(), one.items()):
             total += part
     assert all(np.array_equal(a, b) for a, b in zip(got.items(), want.items()))
@@ -90,15 +98,17 @@ def test_chunk_tallies_hand_out_once():
 def test_block_rays_do_not_depend_on_the_chunking(azimuth, origins):
     tracer = paths.tracer_for(flat(), "traced")[0]
     n = 5 * BLOCK + 11
-    (x, y, z), psi = (np.copy(a) if a is not None else None for a in
-                      streams.chunk_origins(tracer, n, range(6), (3, 1, 2), azimuth, origins))
+    (x, y, z), psi = (
+        np.copy(a) if a is not None else None
+        for a in streams.chunk_origins(tracer, n, range(6), (3, 1, 2), azimuth, origins)
+    )
     one = [streams.block_origins(tracer, n, b, (3, 1, 2), azimuth, origins) for b in range(6)]
     assert np.array_equal(np.stack([x, y, z], axis=1), np.concatenate([o for o, _ in one]))
     if azimuth:
         assert np.array_equal(psi, np.concatenate([p for _, p in one]))
         assert 0 <= psi.min() and psi.max() < 2 * np.pi and np.ptp(psi) > 6
     other = streams.chunk_origins(tracer, n, range(6), (3, 1, 3), azimuth, origins)[0][0]
-    assert not np.array_equal(x, other)                        # the key selects the stream
+    assert not np.array_equal(x, other)  # the key selects the stream
 
 
 def test_stratified_origins_lie_in_their_own_strata():
@@ -118,8 +128,10 @@ def test_stratified_origins_lie_in_their_own_strata():
     assert np.all(z == tracer.zmax + tracer.top_margin)
 
 
-@pytest.mark.parametrize("bins", [Bins(45, 37), Bins(45, 91), Bins(9, 2), Bins(18, 72, folded=False),
-                                  Bins(10, 4, folded=False)])
+@pytest.mark.parametrize(
+    "bins",
+    [Bins(45, 37), Bins(45, 91), Bins(9, 2), Bins(18, 72, folded=False), Bins(10, 4, folded=False)],
+)
 @pytest.mark.parametrize("phi_i", [0.0, 30.0, -170.0, 725.0, "per ray"])
 def test_locate_is_the_search_over_the_edges(bins, phi_i):
     """``Bins.locate`` (compiled ``kernels.bin_index``: arithmetic guess corrected against the
@@ -130,16 +142,25 @@ def test_locate_is_the_search_over_the_edges(bins, phi_i):
     wo = rng.normal(size=(100_000, 3))
     edges = np.radians(np.concatenate([bins.phi_edges[:, None] + [[-1e-9, 0.0, 1e-9]]]).ravel())
     phi = float(phi_i) if phi_i != "per ray" else 0.0
-    on_edges = np.stack([np.cos(edges + np.radians(phi)), np.sin(edges + np.radians(phi)),
-                         np.full(len(edges), 0.3)], axis=1)
+    on_edges = np.stack(
+        [
+            np.cos(edges + np.radians(phi)),
+            np.sin(edges + np.radians(phi)),
+            np.full(len(edges), 0.3),
+        ],
+        axis=1,
+    )
     wo = np.concatenate([wo, on_edges, -on_edges])
     wo /= np.linalg.norm(wo, axis=1)[:, None]
     if phi_i == "per ray":
         phi = rng.uniform(-400.0, 400.0, len(wo))
     theta = np.degrees(np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2]))
     it = np.minimum((theta * (bins.n_theta / 90.0)).astype(np.int64), bins.n_theta - 1)
-    ip = np.clip(np.searchsorted(bins.phi_edges, bins.relative_azimuth(wo, phi), side="right") - 1,
-                 0, bins.n_phi - 1)
+    ip = np.clip(
+        np.searchsorted(bins.phi_edges, bins.relative_azimuth(wo, phi), side="right") - 1,
+        0,
+        bins.n_phi - 1,
+    )
     want = np.where(wo[:, 2] > 0, it * bins.n_phi + ip, -1)
     assert np.array_equal(bins.locate(wo, phi), want)
 
@@ -151,7 +172,7 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
     n[:, 2] = np.abs(n[:, 2]) + 0.05
     n /= np.linalg.norm(n, axis=1)[:, None]
 
-    class Facets:                                              # the table reads only these
+    class Facets:  # the table reads only these
         faces = n
         normal_columns = tuple(np.ascontiguousarray(n[:, k]) for k in range(3))
         masking_lift = np.zeros(len(n))
@@ -161,19 +182,21 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
     c = n @ wi
     wo = 2 * c[:, None] * n - wi
     assert np.array_equal(table.wo32, wo.astype(np.float32))
-    want = np.where(c <= 0, paths.RAY_UNRESOLVED,
-                    np.where(wo[:, 2] > 0, paths.SINGLE, paths.DOWNWARD))
+    want = np.where(
+        c <= 0, paths.RAY_UNRESOLVED, np.where(wo[:, 2] > 0, paths.SINGLE, paths.DOWNWARD)
+    )
     assert np.array_equal(table.code, want) and len(set(want)) == 3
-    np.testing.assert_allclose(table.weight, np.where(c > 0, fresnel(np.clip(c, 0, 1), ior), 0.0),
-                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(
+        table.weight, np.where(c > 0, fresnel(np.clip(c, 0, 1), ior), 0.0), rtol=1e-12, atol=1e-15
+    )
     assert np.array_equal(table.bin, bins.locate(wo, 20.0))
 
 
 def test_work_arrays_are_reused_per_name_and_thread():
     a = work("test-a", 100)
-    assert np.shares_memory(a, work("test-a", (10, 10)))          # same buffer, new view
+    assert np.shares_memory(a, work("test-a", (10, 10)))  # same buffer, new view
     assert not np.shares_memory(a, work("test-b", 100))
-    assert work("test-a", 1000).size == 1000                      # grows when too small
+    assert work("test-a", 1000).size == 1000  # grows when too small
     other = {}
     t = threading.Thread(target=lambda: other.setdefault("a", work("test-a", 100)))
     t.start()
@@ -185,18 +208,22 @@ def test_rays_rounding_onto_a_wall_still_hit():
     """Starts within half a float32 ulp of the walls round onto them; a ray on the wall runs
     along the mesh's boundary edge, which Embree's watertight test may give to the absent
     neighbour. ``_strictly_inside`` keeps them in the tile: every falling ray hits."""
-    from test_tracer import heightfield_surface, random_heights
+    from support import heightfield_surface, random_heights
 
     from microsim.sim import Tracer
     from microsim.sim.tracer import HIT
+
     tracer = Tracer(heightfield_surface(random_heights(n=32, sigma=0.02, seed=5), 1 / 32))
     h = tracer.tile[0] / 2
-    edge = np.nextafter(h, 0.0)                                    # rounds to h in float32
+    edge = np.nextafter(h, 0.0)  # rounds to h in float32
     rng = np.random.default_rng(6)
     n = 4000
     along = rng.uniform(-h, h, n)
     z = np.full(n, tracer.zmax + tracer.top_margin)
-    for origins in (np.stack([along, np.full(n, edge), z], 1), np.stack([np.full(n, edge), along, z], 1)):
+    for origins in (
+        np.stack([along, np.full(n, edge), z], 1),
+        np.stack([np.full(n, edge), along, z], 1),
+    ):
         for theta, phi in ((0.0, 0.0), (30.0, 90.0), (30.0, 0.0), (60.0, 180.0)):
             status = tracer.trace(origins, -spherical_deg(theta, phi))[0]
             assert np.all(status == HIT), (theta, phi, np.count_nonzero(status != HIT))

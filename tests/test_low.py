@@ -5,6 +5,7 @@ Reference values are computed here from the formulas in the paper (or textbook F
 amplitudes), by independent quadrature, or in 50-digit decimal arithmetic — never copied from
 the module's output.
 """
+
 from __future__ import annotations
 
 from decimal import Decimal, getcontext
@@ -14,13 +15,13 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import integrate
+from support import pearson_chi2, sidak
 
-from gof import pearson_chi2, sidak
 from microsim import analytic as an
-from microsim.analytic._checks import half_vector, spherical, spherical_deg
+from microsim.vectors import half_vector, spherical, spherical_deg
 
 RNG = np.random.default_rng(20120601)
-LAMBDA = 0.5          # µm
+LAMBDA = 0.5  # µm
 AL, METHANOL = 0.769 + 6.08j, 1.329
 
 
@@ -36,18 +37,21 @@ def test_condensed_abc_is_church_reparametrised():
     f = np.concatenate([[0.0], np.geomspace(1e-4, 1e4, 50)])
     for a, b, c in [(2.0, 3.0, 1.5), (1e-3, 0.1, 0.2), (5.0, 40.0, 3.0)]:
         A, B, C = an.church_to_condensed(a, b, c)
-        np.testing.assert_allclose(an.abc_psd(f, A, B, C), an.abc_psd_church(f, a, b, c),
-                                   rtol=1e-13)
+        np.testing.assert_allclose(
+            an.abc_psd(f, A, B, C), an.abc_psd_church(f, a, b, c), rtol=1e-13
+        )
         assert an.abc_psd(0.0, A, B, C) == a
 
 
 @pytest.mark.parametrize("a,b,c", [(2.0, 3.0, 1.5), (1.0, 0.1, 4.0), (0.3, 7.0, 1.1)])
 def test_church_integral_matches_quadrature(a, b, c):
     """∫ PSD d²f = 2π ∫₀^∞ f PSD(f) df = 2πa/(b²(c−1)) (docs/design.md)."""
+
     # v = ln(1 + b²f²): f df = e^v dv/(2b²), so 2π f PSD df = π e^v PSD(f(v)) dv / b²
-    integrand = lambda v: np.pi * np.exp(v) * an.abc_psd_church(np.sqrt(np.expm1(v)) / b,
-                                                                 a, b, c) / b ** 2
-    v_max = 64.0 / (c - 1.0)            # the tail beyond holds a fraction e^-32 of the total
+    def integrand(v):
+        return np.pi * np.exp(v) * an.abc_psd_church(np.sqrt(np.expm1(v)) / b, a, b, c) / b**2
+
+    v_max = 64.0 / (c - 1.0)  # the tail beyond holds a fraction e^-32 of the total
     val, _ = integrate.quad(integrand, 0.0, v_max, epsabs=0, epsrel=1e-12, limit=500)
     np.testing.assert_allclose(an.abc_psd_church_integral(a, b, c), val, rtol=1e-9)
 
@@ -61,7 +65,7 @@ def test_church_integral_needs_c_above_one():
 def textbook_rs_rp(cos_t, ior):
     """|r_s|², |r_p|² from the textbook amplitudes (c ∓ g)/(c ± g), (ε c ∓ g)/(ε c ± g)."""
     eps = complex(ior) ** 2
-    g = np.sqrt(eps - (1 - cos_t ** 2) + 0j)
+    g = np.sqrt(eps - (1 - cos_t**2) + 0j)
     rs = (cos_t - g) / (cos_t + g)
     rp = (eps * cos_t - g) / (eps * cos_t + g)
     return np.abs(rs) ** 2, np.abs(rp) ** 2
@@ -72,13 +76,15 @@ def test_rr_q_in_specular_direction_is_fresnel(ior):
     """Stover's Q reduces to the Fresnel reflectances in the specular direction (S(0) = A)."""
     theta = np.radians([0.0, 20.0, 45.0, 70.0, 85.0])
     wi, wo = spherical(theta, np.pi), spherical(theta, 0.0)
-    scale = 16 * np.pi ** 2 / LAMBDA ** 4 * np.cos(theta) ** 2      # A = 1
-    q = {p: an.rayleigh_rice(wi, wo, LAMBDA, 1.0, 2.0, 1.5, ior, p) / scale
-         for p in an.RR_POLARISATIONS}
+    scale = 16 * np.pi**2 / LAMBDA**4 * np.cos(theta) ** 2  # A = 1
+    q = {
+        p: an.rayleigh_rice(wi, wo, LAMBDA, 1.0, 2.0, 1.5, ior, p) / scale
+        for p in an.RR_POLARISATIONS
+    }
     rs, rp = textbook_rs_rp(np.cos(theta), ior)
     np.testing.assert_allclose(q["ss"], rs, rtol=1e-12)
     np.testing.assert_allclose(q["pp"], rp, rtol=1e-12, atol=1e-15)
-    assert np.all(q["sp"] < 1e-25) and np.all(q["ps"] < 1e-25)   # sin φ = 0 up to rounding
+    assert np.all(q["sp"] < 1e-25) and np.all(q["ps"] < 1e-25)  # sin φ = 0 up to rounding
     np.testing.assert_allclose(q["unpolarised"], an.fresnel(np.cos(theta), ior), rtol=1e-12)
 
 
@@ -107,19 +113,21 @@ def test_rr_spatial_frequency_follows_eq_4_5():
     ti, to, po = (RNG.uniform(0, 1.5, n), RNG.uniform(0, 1.5, n), RNG.uniform(0, 2 * np.pi, n))
     wi, wo = spherical(ti, np.pi), spherical(to, po)
     b1, b2 = 0.3, 5.0
-    ratio = (an.rayleigh_rice(wi, wo, LAMBDA, 1.0, b1, 1.0, 1.5)
-             / an.rayleigh_rice(wi, wo, LAMBDA, 1.0, b2, 1.0, 1.5))
+    ratio = an.rayleigh_rice(wi, wo, LAMBDA, 1.0, b1, 1.0, 1.5) / an.rayleigh_rice(
+        wi, wo, LAMBDA, 1.0, b2, 1.0, 1.5
+    )
     f2 = (ratio - 1.0) / (b2 - ratio * b1)
     fx = (np.sin(to) * np.cos(po) - np.sin(ti)) / LAMBDA
     fy = np.sin(to) * np.sin(po) / LAMBDA
-    np.testing.assert_allclose(f2, fx ** 2 + fy ** 2, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(f2, fx**2 + fy**2, rtol=1e-9, atol=1e-12)
 
 
 # --- reciprocity ---------------------------------------------------------------------------------
 BRDFS = {
     "smooth": lambda wi, wo: an.low_smooth(wi, wo, 3.0, 200.0, 1.3, kd=0.1, material=1.5),
-    "smooth-cos-al": lambda wi, wo: an.low_smooth(wi, wo, 3.0, 50.0, 0.7, material=AL,
-                                                  obliquity="cos"),
+    "smooth-cos-al": lambda wi, wo: an.low_smooth(
+        wi, wo, 3.0, 50.0, 0.7, material=AL, obliquity="cos"
+    ),
     "smooth-harvey": lambda wi, wo: an.low_smooth(wi, wo, 1.0, 1e4, 2.0, obliquity="harvey"),
     "microfacet": lambda wi, wo: an.low_microfacet(wi, wo, 2.0, 300.0, 1.7, kd=0.2, material=1.5),
     "microfacet-al": lambda wi, wo: an.low_microfacet(wi, wo, 2.0, 30.0, 1.0, material=AL),
@@ -140,7 +148,10 @@ def test_reciprocity(name):
 def test_rr_cross_polarisations_swap_under_reciprocity():
     """Q_sp(wi, wo) = Q_ps(wo, wi): the polarised cross terms are reciprocal as a pair."""
     wi, wo = random_upper(500, RNG), random_upper(500, RNG)
-    rr = lambda a, b, p: an.rayleigh_rice(a, b, LAMBDA, 1e-3, 2.0, 1.5, AL, p)
+
+    def rr(a, b, p):
+        return an.rayleigh_rice(a, b, LAMBDA, 1e-3, 2.0, 1.5, AL, p)
+
     np.testing.assert_allclose(rr(wi, wo, "sp"), rr(wo, wi, "ps"), rtol=1e-12)
 
 
@@ -177,7 +188,7 @@ def test_smooth_argument_is_lows_polar_form():
     ti, to = RNG.uniform(0, 1.57, n), RNG.uniform(0, 1.57, n)
     pi_, po = RNG.uniform(0, 6.3, n), RNG.uniform(0, 6.3, n)
     ri, ro = np.sin(ti), np.sin(to)
-    d2 = ri ** 2 + 2 * ri * ro * np.cos(pi_ - po) + ro ** 2
+    d2 = ri**2 + 2 * ri * ro * np.cos(pi_ - po) + ro**2
     A, B, C = 2.0, 500.0, 0.8
     f = an.low_smooth(spherical(ti, pi_), spherical(to, po), A, B, C)
     np.testing.assert_allclose(f, A / (1 + B * d2) ** C, rtol=1e-10)
@@ -187,13 +198,17 @@ def test_smooth_argument_is_lows_polar_form():
 def abc_ndf_norm_by_quadrature(B, C):
     """M with 2π M ∫₀¹ (1 − x)(1 + Bx)^−C dx = 1, integrated in w = ln(1 + Bx)."""
     L = np.log1p(B)
-    g = lambda w: (1 - np.expm1(w) / B) * np.exp((1 - C) * w) / B
+
+    def g(w):
+        return (1 - np.expm1(w) / B) * np.exp((1 - C) * w) / B
+
     val, _ = integrate.quad(g, 0.0, L, epsabs=0, epsrel=1e-13, limit=200)
     return 1.0 / (2 * np.pi * val)
 
 
-@pytest.mark.parametrize("B,C,ior", [(10.0, 1.0, 1.5), (300.0, 2.5, AL), (1e4, 0.6, METHANOL),
-                                     (50.0, 1 + 1e-9, None)])
+@pytest.mark.parametrize(
+    "B,C,ior", [(10.0, 1.0, 1.5), (300.0, 2.5, AL), (1e4, 0.6, METHANOL), (50.0, 1 + 1e-9, None)]
+)
 def test_microfacet_with_ndf_amplitude_is_torrance_sparrow(B, C, ior):
     """With A = low_microfacet_A_from_ndf(B, C), Löw et al. 2012, eq. 15 equals D F G/(4 cosθi
     cosθo) with
@@ -201,8 +216,9 @@ def test_microfacet_with_ndf_amplitude_is_torrance_sparrow(B, C, ior):
     wi, wo = random_upper(3000, RNG, 89.0), random_upper(3000, RNG, 89.0)
     H = wi + wo
     h = H / np.linalg.norm(H, axis=-1, keepdims=True)
-    x = np.sum(H[..., :2] ** 2, -1) / (np.linalg.norm(H, axis=-1) * (np.linalg.norm(H, axis=-1)
-                                                                      + H[..., 2]))
+    x = np.sum(H[..., :2] ** 2, -1) / (
+        np.linalg.norm(H, axis=-1) * (np.linalg.norm(H, axis=-1) + H[..., 2])
+    )
     D = abc_ndf_norm_by_quadrature(B, C) / (1 + B * x) ** C
     ci, co, hz, vh = wi[..., 2], wo[..., 2], h[..., 2], np.sum(wo * h, -1)
     G = np.minimum(1.0, np.minimum(2 * hz * co / vh, 2 * hz * ci / vh))
@@ -223,8 +239,9 @@ def test_microfacet_at_h_equal_n():
 # --- samplers: χ² against the integrated pdf -----------------------------------------------------
 N_SAMPLES = 1_000_000
 SMOOTH_CASES = [(B, t) for B in (10.0, 1e3) for t in (0.0, 45.0, 80.0)]
-FACET_CASES = [(B, C, t) for B in (10.0, 1e3) for C in (1.0, 1 - 1e-9, 2.5)
-               for t in (0.0, 45.0, 80.0)]
+FACET_CASES = [
+    (B, C, t) for B in (10.0, 1e3) for C in (1.0, 1 - 1e-9, 2.5) for t in (0.0, 45.0, 80.0)
+]
 ALPHA = sidak(0.01, len(SMOOTH_CASES) + len(FACET_CASES))
 GL_N = 8
 
@@ -282,20 +299,20 @@ def test_sample_low_smooth_chi2(B, theta_o):
     """Samples of Löw et al. 2012, eq. 20–22 follow pdf_low_smooth (eq. 17–19), in (r, φ) disk
     coordinates."""
     rng = np.random.default_rng(int(B) * 100 + int(theta_o))
-    wo = spherical_deg(theta_o, 180.0)              # lobe centred at φ = 0, away from the seam
+    wo = spherical_deg(theta_o, 180.0)  # lobe centred at φ = 0, away from the seam
     pilot = an.sample_low_smooth(wo, rng.random(100_000), rng.random(100_000), B)
     s = an.sample_low_smooth(wo, rng.random(N_SAMPLES), rng.random(N_SAMPLES), B)
-    assert np.all(s.wi[..., 2] >= 0)          # the disk maps onto the upper hemisphere only
+    assert np.all(s.wi[..., 2] >= 0)  # the disk maps onto the upper hemisphere only
     np.testing.assert_array_equal(s.above, s.wi[..., 2] > 0)
-    np.testing.assert_allclose(s.pdf[:100_000], an.pdf_low_smooth(s.wi[:100_000], wo, B),
-                               rtol=1e-9)
+    np.testing.assert_allclose(s.pdf[:100_000], an.pdf_low_smooth(s.wi[:100_000], wo, B), rtol=1e-9)
 
-    def density(r, phi):                            # area density on the disk × r
+    def density(r, phi):  # area density on the disk × r
         wi = spherical(np.arcsin(r), phi)
         return an.pdf_low_smooth(wi, wo, B) / wi[..., 2] * r
 
-    p = chi2_against_pdf(smooth_coords(s.wi), density, smooth_coords(pilot.wi),
-                         ((0.0, 1.0), (-np.pi, np.pi)))
+    p = chi2_against_pdf(
+        smooth_coords(s.wi), density, smooth_coords(pilot.wi), ((0.0, 1.0), (-np.pi, np.pi))
+    )
     assert p > ALPHA
 
 
@@ -324,16 +341,22 @@ def test_sample_low_microfacet_chi2(B, C, theta_o):
     pilot = an.sample_low_microfacet(wo, rng.random(100_000), rng.random(100_000), B, C)
     s = an.sample_low_microfacet(wo, rng.random(N_SAMPLES), rng.random(N_SAMPLES), B, C)
     np.testing.assert_array_equal(s.above, s.wi[..., 2] > 0)
-    np.testing.assert_allclose(s.pdf[:100_000], an.pdf_low_microfacet(s.wi[:100_000], wo, B, C),
-                               rtol=1e-8)
+    np.testing.assert_allclose(
+        s.pdf[:100_000], an.pdf_low_microfacet(s.wi[:100_000], wo, B, C), rtol=1e-8
+    )
 
     def density(a, b):
-        wi = (-np.cos(a)[..., None] * wo
-              + np.sin(a)[..., None] * (np.cos(b)[..., None] * e1 + np.sin(b)[..., None] * e2))
+        wi = -np.cos(a)[..., None] * wo + np.sin(a)[..., None] * (
+            np.cos(b)[..., None] * e1 + np.sin(b)[..., None] * e2
+        )
         return an.pdf_low_microfacet(wi, wo, B, C) * np.sin(a)
 
-    p = chi2_against_pdf(facet_coords(s.wi, wo, e1, e2), density,
-                         facet_coords(pilot.wi, wo, e1, e2), ((0.0, np.pi), (-np.pi, np.pi)))
+    p = chi2_against_pdf(
+        facet_coords(s.wi, wo, e1, e2),
+        density,
+        facet_coords(pilot.wi, wo, e1, e2),
+        ((0.0, np.pi), (-np.pi, np.pi)),
+    )
     assert p > ALPHA
 
 
@@ -342,10 +365,12 @@ def test_sample_low_microfacet_chi2(B, C, theta_o):
 def test_halfvector_pdf_integrates_to_one(B, C):
     """∫ P_h dω = 2π ∫₀¹ P_h dx over the upper hemisphere (Löw et al. 2012, eq. 23–24), in w = ln(1
     + Bx)."""
+
     def integrand(w):
         x = np.expm1(w) / B
         h = np.stack([np.sqrt(x * (2 - x)), 0 * x, 1 - x], -1)
         return 2 * np.pi * an.pdf_low_halfvector(h, B, C) * np.exp(w) / B
+
     val, _ = integrate.quad(integrand, 0.0, np.log1p(B), epsabs=0, epsrel=1e-12, limit=200)
     assert abs(val - 1.0) < 1e-10
 
@@ -375,8 +400,10 @@ def test_tilt_quantile_precision(B, C):
     u = np.array([0.0, 1e-12, 1e-6, 0.1, 0.5, 0.9, 0.999999, 1 - 1e-12, 1.0])
     ref = [decimal_tilt_quantile(ui, B, C) for ui in u]
     ulp = 1 + Decimal(2) ** -52
-    one_ulp = [abs(decimal_tilt_quantile(Decimal(repr(float(ui))) * ulp, B, C) - r)
-               for ui, r in zip(u, ref)]
+    one_ulp = [
+        abs(decimal_tilt_quantile(Decimal(repr(float(ui))) * ulp, B, C) - r)
+        for ui, r in zip(u, ref)
+    ]
     ref, one_ulp = np.array(ref, dtype=float), np.array(one_ulp, dtype=float)
     err = np.abs(an.low._tilt_quantile(u, B, C) - ref)
     assert np.all(err <= 1e-13 * ref + 4 * one_ulp), (err, ref, one_ulp)
@@ -412,26 +439,34 @@ def exact_dir(theta_deg, phi_deg):
 
 @settings(max_examples=300, deadline=None)
 @given(angle, azimuth, angle, azimuth, B_values, C_values)
-@example(90.0, 0.0, 90.0, 180.0, 1e8, 1 + 1e-9)   # both on the horizon, wi = −wo
-@example(90.0, 0.0, 90.0, 0.0, 1e8, 1 - 1e-9)     # wi = wo on the horizon
-@example(35.0, 10.0, 35.0, 190.0, 1e8, 1.0)       # ĥ = n
+@example(90.0, 0.0, 90.0, 180.0, 1e8, 1 + 1e-9)  # both on the horizon, wi = −wo
+@example(90.0, 0.0, 90.0, 0.0, 1e8, 1 - 1e-9)  # wi = wo on the horizon
+@example(35.0, 10.0, 35.0, 190.0, 1e8, 1.0)  # ĥ = n
 @example(0.0, 0.0, 0.0, 0.0, 1e8, 2.5)
 def test_models_and_pdfs_finite(ti, pi_, to, po, B, C):
     wi, wo = exact_dir(ti, pi_), exact_dir(to, po)
-    vals = [an.low_smooth(wi, wo, 1.0, B, C, kd=0.1, material=AL, obliquity=o)
-            for o in an.LOW_OBLIQUITIES]
+    vals = [
+        an.low_smooth(wi, wo, 1.0, B, C, kd=0.1, material=AL, obliquity=o)
+        for o in an.LOW_OBLIQUITIES
+    ]
     vals += [an.low_microfacet(wi, wo, 1.0, B, C, kd=0.1, material=ior) for ior in (1.5, AL, None)]
-    vals += [an.rayleigh_rice(wi, wo, LAMBDA, 1e-3, B, C, ior, p)
-             for ior in (1.5, AL) for p in ("unpolarised", "ss", "pp")]
-    vals += [an.pdf_low_smooth(wi, wo, B), an.pdf_low_microfacet(wi, wo, B, C),
-             an.pdf_low_halfvector(half_vector(wi, wo), B, C)]
+    vals += [
+        an.rayleigh_rice(wi, wo, LAMBDA, 1e-3, B, C, ior, p)
+        for ior in (1.5, AL)
+        for p in ("unpolarised", "ss", "pp")
+    ]
+    vals += [
+        an.pdf_low_smooth(wi, wo, B),
+        an.pdf_low_microfacet(wi, wo, B, C),
+        an.pdf_low_halfvector(half_vector(wi, wo), B, C),
+    ]
     for v in vals:
         assert np.isfinite(v) and v >= 0.0
 
 
 @settings(max_examples=300, deadline=None)
 @given(angle, azimuth, unit, unit, B_values, C_values)
-@example(90.0, 0.0, 0.0, 0.0, 1e8, 1.0)           # wo on the horizon, ĥ = n: wi = −wo
+@example(90.0, 0.0, 0.0, 0.0, 1e8, 1.0)  # wo on the horizon, ĥ = n: wi = −wo
 @example(90.0, 0.0, 1.0, 1.0, 1e8, 1 + 1e-9)
 @example(0.0, 0.0, 1.0, 0.5, 1e8, 1 - 1e-9)
 def test_samplers_finite(to, po, u1, u2, B, C):
@@ -464,7 +499,7 @@ def test_e1_is_the_riemann_sum_of_eq_33():
     measured = model + delta / np.cos(np.radians(ti))
     e1 = an.low_e1(measured, model, ti, to, d_ti, step, step)
     # midpoint rule on sinθ: relative error ≈ (Δθ)²/24 ≈ 1.3e-5 for 1° bins
-    np.testing.assert_allclose(e1, 2 * np.pi * delta ** 2 * np.radians(d_ti), rtol=1e-4)
+    np.testing.assert_allclose(e1, 2 * np.pi * delta**2 * np.radians(d_ti), rtol=1e-4)
     assert an.low_e1(model, model, ti, to, d_ti, step, step) == 0.0
 
 
@@ -491,37 +526,40 @@ Z = np.array([0.0, 0.0, 1.0])
 W = spherical_deg(30.0, 0.0)
 
 
-@pytest.mark.parametrize("call,name", [
-    (lambda: an.abc_psd(1.0, 1.0, 0.0, 1.0), "B"),
-    (lambda: an.abc_psd(1.0, 1.0, 1.0, -1.0), "C"),
-    (lambda: an.abc_psd(1.0, -1.0, 1.0, 1.0), "A"),
-    (lambda: an.low_smooth(Z, W, 1.0, -2.0, 1.0), "B"),
-    (lambda: an.low_smooth(Z, W, 1.0, 2.0, 0.0), "C"),
-    (lambda: an.low_smooth(Z, W, -1.0, 2.0, 1.0), "A"),
-    (lambda: an.low_smooth(Z, W, 1.0, 2.0, 1.0, kd=-0.1), "kd"),
-    (lambda: an.low_smooth(Z, W, 1.0, 2.0, 1.0, obliquity="bad"), "obliquity"),
-    (lambda: an.low_microfacet(Z, W, 1.0, 0.0, 1.0), "B"),
-    (lambda: an.low_microfacet(Z, W, 1.0, 2.0, -1.0), "C"),
-    (lambda: an.low_microfacet(Z, W, -1.0, 2.0, 1.0), "A"),
-    (lambda: an.low_microfacet(Z, W, 1.0, 2.0, 1.0, kd=-1.0), "kd"),
-    (lambda: an.low_microfacet(Z, W, 1.0, 2.0, 1.0, shadowing="smith"), "shadowing"),
-    (lambda: an.rayleigh_rice(Z, W, 0.0, 1.0, 2.0, 1.0, 1.5), "wavelength"),
-    (lambda: an.rayleigh_rice(Z, W, -0.5, 1.0, 2.0, 1.0, 1.5), "wavelength"),
-    (lambda: an.rayleigh_rice(Z, W, 0.5, -1.0, 2.0, 1.0, 1.5), "A"),
-    (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 0.0, 1.0, 1.5), "B"),
-    (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 2.0, 0.0, 1.5), "C"),
-    (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 2.0, 1.0, None), "ior"),
-    (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 2.0, 1.0, 1.5, "x"), "polarisation"),
-    (lambda: an.sample_low_smooth(Z, 0.5, 0.5, 0.0), "B"),
-    (lambda: an.sample_low_smooth(Z, 1.5, 0.5, 1.0), "u1"),
-    (lambda: an.sample_low_microfacet(Z, 0.5, 0.5, -1.0, 1.0), "B"),
-    (lambda: an.sample_low_microfacet(Z, 0.5, 0.5, 1.0, 0.0), "C"),
-    (lambda: an.pdf_low_microfacet(W, Z, 1.0, -1.0), "C"),
-    (lambda: an.pdf_low_smooth(W, Z, -1.0), "B"),
-    (lambda: an.pdf_low_halfvector(Z, 0.0, 1.0), "B"),
-    (lambda: an.low_microfacet_A_from_ndf(1.0, 0.0), "C"),
-    (lambda: an.sample_low_smooth(-Z, 0.5, 0.5, 1.0), "wo"),
-])
+@pytest.mark.parametrize(
+    "call,name",
+    [
+        (lambda: an.abc_psd(1.0, 1.0, 0.0, 1.0), "B"),
+        (lambda: an.abc_psd(1.0, 1.0, 1.0, -1.0), "C"),
+        (lambda: an.abc_psd(1.0, -1.0, 1.0, 1.0), "A"),
+        (lambda: an.low_smooth(Z, W, 1.0, -2.0, 1.0), "B"),
+        (lambda: an.low_smooth(Z, W, 1.0, 2.0, 0.0), "C"),
+        (lambda: an.low_smooth(Z, W, -1.0, 2.0, 1.0), "A"),
+        (lambda: an.low_smooth(Z, W, 1.0, 2.0, 1.0, kd=-0.1), "kd"),
+        (lambda: an.low_smooth(Z, W, 1.0, 2.0, 1.0, obliquity="bad"), "obliquity"),
+        (lambda: an.low_microfacet(Z, W, 1.0, 0.0, 1.0), "B"),
+        (lambda: an.low_microfacet(Z, W, 1.0, 2.0, -1.0), "C"),
+        (lambda: an.low_microfacet(Z, W, -1.0, 2.0, 1.0), "A"),
+        (lambda: an.low_microfacet(Z, W, 1.0, 2.0, 1.0, kd=-1.0), "kd"),
+        (lambda: an.low_microfacet(Z, W, 1.0, 2.0, 1.0, shadowing="smith"), "shadowing"),
+        (lambda: an.rayleigh_rice(Z, W, 0.0, 1.0, 2.0, 1.0, 1.5), "wavelength"),
+        (lambda: an.rayleigh_rice(Z, W, -0.5, 1.0, 2.0, 1.0, 1.5), "wavelength"),
+        (lambda: an.rayleigh_rice(Z, W, 0.5, -1.0, 2.0, 1.0, 1.5), "A"),
+        (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 0.0, 1.0, 1.5), "B"),
+        (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 2.0, 0.0, 1.5), "C"),
+        (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 2.0, 1.0, None), "ior"),
+        (lambda: an.rayleigh_rice(Z, W, 0.5, 1.0, 2.0, 1.0, 1.5, "x"), "polarisation"),
+        (lambda: an.sample_low_smooth(Z, 0.5, 0.5, 0.0), "B"),
+        (lambda: an.sample_low_smooth(Z, 1.5, 0.5, 1.0), "u1"),
+        (lambda: an.sample_low_microfacet(Z, 0.5, 0.5, -1.0, 1.0), "B"),
+        (lambda: an.sample_low_microfacet(Z, 0.5, 0.5, 1.0, 0.0), "C"),
+        (lambda: an.pdf_low_microfacet(W, Z, 1.0, -1.0), "C"),
+        (lambda: an.pdf_low_smooth(W, Z, -1.0), "B"),
+        (lambda: an.pdf_low_halfvector(Z, 0.0, 1.0), "B"),
+        (lambda: an.low_microfacet_A_from_ndf(1.0, 0.0), "C"),
+        (lambda: an.sample_low_smooth(-Z, 0.5, 0.5, 1.0), "wo"),
+    ],
+)
 def test_invalid_parameters_are_named(call, name):
     with pytest.raises(ValueError, match=rf"\b{name}\b"):
         call()

@@ -1,14 +1,15 @@
 """NDFs: normalisation (Mikkelsen 2009, eq. 14), CDF/quantile consistency, sampler χ², Smith Λ,
 finiteness on the closed hemisphere, parameter validation."""
+
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import integrate, special
+from support import pearson_chi2, sidak
 
-from gof import pearson_chi2, sidak
 from microsim import analytic as an
-from microsim.analytic._checks import spherical
+from microsim.vectors import spherical
 
 HALF_PI = 0.5 * np.pi
 
@@ -20,8 +21,10 @@ X_EDGES = np.concatenate([[0.0], np.logspace(-18, 0, 37)])
 def integrate_x(f, x_max=1.0):
     """∫₀^x_max f(x) dx, split at logarithmically spaced points."""
     edges = np.append(X_EDGES[X_EDGES < x_max], x_max)
-    return sum(integrate.quad(f, a, b, epsabs=1e-14, epsrel=1e-10, limit=200)[0]
-               for a, b in zip(edges[:-1], edges[1:]))
+    return sum(
+        integrate.quad(f, a, b, epsabs=1e-14, epsrel=1e-10, limit=200)[0]
+        for a, b in zip(edges[:-1], edges[1:])
+    )
 
 
 def h_at(x):
@@ -51,9 +54,18 @@ def test_normalisation(ndf):
     assert mass == pytest.approx(1.0, abs=1e-4)
 
 
-CDF_CASES = [an.Beckmann(0.05), an.Beckmann(1.5), an.GGX(0.3), an.BlinnPhong(0),
-             an.BlinnPhong(1e4), an.VonMisesFisher(1e-3), an.VonMisesFisher(1024),
-             an.ABC(1e4, 1 + 1e-9), an.ABC(1e8, 0.6), an.ABC(1, 3)]
+CDF_CASES = [
+    an.Beckmann(0.05),
+    an.Beckmann(1.5),
+    an.GGX(0.3),
+    an.BlinnPhong(0),
+    an.BlinnPhong(1e4),
+    an.VonMisesFisher(1e-3),
+    an.VonMisesFisher(1024),
+    an.ABC(1e4, 1 + 1e-9),
+    an.ABC(1e8, 0.6),
+    an.ABC(1, 3),
+]
 
 
 @pytest.mark.parametrize("ndf", CDF_CASES, ids=repr)
@@ -62,9 +74,10 @@ def test_cdf_is_the_integral_of_the_tilt_density(ndf):
     for u in (1e-3, 0.1, 0.5, 0.9, 0.999):
         theta = float(ndf.tilt_quantile_rad(u))
         edges = np.append(0.0, theta * np.logspace(-9, 0, 19))
-        integral = sum(integrate.quad(ndf.tilt_pdf_rad, a, b, epsabs=1e-13, epsrel=1e-10,
-                                      limit=200)[0]
-                       for a, b in zip(edges[:-1], edges[1:]))
+        integral = sum(
+            integrate.quad(ndf.tilt_pdf_rad, a, b, epsabs=1e-13, epsrel=1e-10, limit=200)[0]
+            for a, b in zip(edges[:-1], edges[1:])
+        )
         assert ndf.cdf_theta_rad(theta) == pytest.approx(integral, abs=1e-6)
     assert ndf.cdf_theta_rad(0.0) == 0.0
     assert ndf.cdf_theta_rad(HALF_PI) == pytest.approx(1.0, abs=1e-12)
@@ -95,7 +108,7 @@ def test_closed_forms_at_the_normal():
     # ABC with C = 2: J(1) = ∫₀¹ (1 − t)/(1 + Bt)² dt = (B − ln(1 + B))/B² by hand (s = 1 + Bt)
     B = 3.0
     j1 = integrate.quad(lambda t: (1 - t) / (1 + B * t) ** 2, 0, 1, epsrel=1e-13)[0]
-    assert j1 == pytest.approx((B - np.log1p(B)) / B ** 2, rel=1e-12)
+    assert j1 == pytest.approx((B - np.log1p(B)) / B**2, rel=1e-12)
     assert an.ABC(B, 2).D(n) == pytest.approx(1 / (2 * np.pi * j1), rel=1e-12)
 
 
@@ -124,7 +137,7 @@ def test_beckmann_phong_conversion():
     """Mikkelsen 2009, eq. 21: e = 2/m² − 2 equates the normalisation constants at h = n."""
     for m in (0.05, 0.3, 1.0):
         e = an.beckmann_to_phong(m)
-        assert e == pytest.approx(2 / m ** 2 - 2, rel=1e-15)
+        assert e == pytest.approx(2 / m**2 - 2, rel=1e-15)
         assert an.BlinnPhong(e).D_cos(1.0) == pytest.approx(an.Beckmann(m).D_cos(1.0), rel=1e-13)
         assert an.phong_to_beckmann(e) == pytest.approx(m, rel=1e-13)
     with pytest.raises(ValueError, match="m"):
@@ -145,18 +158,21 @@ def mean_projected_area_over_cos(ndf, theta_o):
     def over_phi(v):
         a = np.sin(theta_o) * np.tan(ndf.tilt_quantile_rad(1.0 - v * v))
         mean = b if a <= b else (b * np.arccos(-b / a) + np.sqrt(a * a - b * b)) / np.pi
-        return mean * 2.0 * v                            # du = 2v dv
+        return mean * 2.0 * v  # du = 2v dv
 
-    v_kink = np.sqrt(1.0 - ndf.cdf_theta_rad(HALF_PI - theta_o))   # where a = b
+    v_kink = np.sqrt(1.0 - ndf.cdf_theta_rad(HALF_PI - theta_o))  # where a = b
     edges = np.unique(np.append(np.logspace(-8, 0, 17), max(v_kink, 1e-8)))
     # epsabs: for v ≲ 1e-7 the rounding of u = 1 − v² makes the integrand noisy
-    total = sum(integrate.quad(over_phi, lo, hi, epsabs=1e-11, epsrel=1e-10, limit=200)[0]
-                for lo, hi in zip(edges[:-1], edges[1:]))
+    total = sum(
+        integrate.quad(over_phi, lo, hi, epsabs=1e-11, epsrel=1e-10, limit=200)[0]
+        for lo, hi in zip(edges[:-1], edges[1:])
+    )
     return total / b
 
 
-@pytest.mark.parametrize("ndf", [an.Beckmann(0.5), an.Beckmann(0.1), an.GGX(0.5), an.GGX(0.1)],
-                         ids=repr)
+@pytest.mark.parametrize(
+    "ndf", [an.Beckmann(0.5), an.Beckmann(0.1), an.GGX(0.5), an.GGX(0.1)], ids=repr
+)
 def test_smith_lambda_satisfies_projected_area_identity(ndf):
     """∫ G1(wo,h)(wo·h)⁺ D dω = cos θo with G1 = 1/(1 + Λ(wo)) (docs/design.md): the integral over
     (wo·h)⁺ D must equal (1 + Λ) cos θo."""
@@ -172,11 +188,12 @@ def test_smith_lambda_matches_textbook_forms():
     m = 0.4
     a = 1 / (m * tan)
     lam_b = (special.erf(a) - 1) / 2 + np.exp(-a * a) / (2 * a * np.sqrt(np.pi))
-    ok = lam_b > 1e-6                               # the textbook form cancels below that
+    ok = lam_b > 1e-6  # the textbook form cancels below that
     np.testing.assert_allclose(an.Beckmann(m).smith_lambda_cos(c)[ok], lam_b[ok], rtol=1e-9)
     alpha = 0.4
-    np.testing.assert_allclose(an.GGX(alpha).smith_lambda_cos(c),
-                               (-1 + np.sqrt(1 + alpha ** 2 * tan ** 2)) / 2, rtol=1e-12)
+    np.testing.assert_allclose(
+        an.GGX(alpha).smith_lambda_cos(c), (-1 + np.sqrt(1 + alpha**2 * tan**2)) / 2, rtol=1e-12
+    )
 
 
 @pytest.mark.parametrize("ndf", [an.Beckmann(0.3), an.GGX(0.3)], ids=repr)
@@ -187,20 +204,30 @@ def test_smith_lambda_limits(ndf):
 
 
 # --- sampler χ² ------------------------------------------------------------------------------
-SAMPLER_CASES = [an.Beckmann(0.3), an.Beckmann(0.02), an.GGX(0.3), an.GGX(0.05),
-                 an.BlinnPhong(20), an.BlinnPhong(1e4), an.VonMisesFisher(17),
-                 an.VonMisesFisher(1024), an.ABC(1e4, 1 + 1e-9), an.ABC(1e4, 1 - 1e-9),
-                 an.ABC(100, 3), an.ABC(1e8, 0.6)]
+SAMPLER_CASES = [
+    an.Beckmann(0.3),
+    an.Beckmann(0.02),
+    an.GGX(0.3),
+    an.GGX(0.05),
+    an.BlinnPhong(20),
+    an.BlinnPhong(1e4),
+    an.VonMisesFisher(17),
+    an.VonMisesFisher(1024),
+    an.ABC(1e4, 1 + 1e-9),
+    an.ABC(1e4, 1 - 1e-9),
+    an.ABC(100, 3),
+    an.ABC(1e8, 0.6),
+]
 N_SAMPLES = 1_000_000
 # two tests per case (joint θ×φ cells, φ marginal); Šidák over the whole family of the file
 ALPHA = sidak(0.01, 2 * len(SAMPLER_CASES))
-U_EDGES = np.concatenate([[0, 1e-4, 1e-3, 0.01, 0.03], np.linspace(0.05, 0.95, 19),
-                          [0.97, 0.99, 0.999, 0.9999, 1]])
+U_EDGES = np.concatenate(
+    [[0, 1e-4, 1e-3, 0.01, 0.03], np.linspace(0.05, 0.95, 19), [0.97, 0.99, 0.999, 0.9999, 1]]
+)
 N_PHI = 8
 
 
-@pytest.mark.parametrize("case", range(len(SAMPLER_CASES)),
-                         ids=[repr(n) for n in SAMPLER_CASES])
+@pytest.mark.parametrize("case", range(len(SAMPLER_CASES)), ids=[repr(n) for n in SAMPLER_CASES])
 def test_sampler_chi2(case):
     ndf = SAMPLER_CASES[case]
     rng = np.random.default_rng(20240 + case)
@@ -213,7 +240,7 @@ def test_sampler_chi2(case):
     theta_edges = ndf.tilt_quantile_rad(U_EDGES)
     theta_edges[-1] = HALF_PI
     p_theta = np.diff(ndf.cdf_theta_rad(theta_edges))
-    p_theta[-1] += 1.0 - ndf.cdf_theta_rad(HALF_PI)          # zero up to rounding
+    p_theta[-1] += 1.0 - ndf.cdf_theta_rad(HALF_PI)  # zero up to rounding
     phi_edges = np.linspace(0, 2 * np.pi, N_PHI + 1)
     observed, _, _ = np.histogram2d(theta, phi, bins=[theta_edges, phi_edges])
     assert observed.sum() == N_SAMPLES
@@ -228,7 +255,7 @@ def test_sampler_chi2(case):
 
 # --- finiteness on the closed hemisphere (hypothesis) --------------------------------------
 def log_uniform(lo, hi):
-    return st.floats(np.log10(lo), np.log10(hi)).map(lambda v: 10.0 ** v)
+    return st.floats(np.log10(lo), np.log10(hi)).map(lambda v: 10.0**v)
 
 
 NDFS = st.one_of(
@@ -236,8 +263,11 @@ NDFS = st.one_of(
     log_uniform(1e-3, 10).map(an.GGX),
     st.one_of(st.just(0.0), log_uniform(1e-3, 1e6)).map(an.BlinnPhong),
     log_uniform(1e-6, 1e8).map(an.VonMisesFisher),
-    st.builds(an.ABC, log_uniform(1e-2, 1e10),
-              st.one_of(log_uniform(0.05, 10), st.floats(1 - 1e-8, 1 + 1e-8))),
+    st.builds(
+        an.ABC,
+        log_uniform(1e-2, 1e10),
+        st.one_of(log_uniform(0.05, 10), st.floats(1 - 1e-8, 1 + 1e-8)),
+    ),
 )
 ANGLES = st.floats(0.0, HALF_PI)
 UNIT = st.floats(0.0, 1.0)
@@ -248,13 +278,16 @@ UNIT = st.floats(0.0, 1.0)
 @example(ndf=an.VonMisesFisher(1e-6), theta=HALF_PI, phi=0.0)
 @example(ndf=an.ABC(1e10, 1 + 1e-9), theta=0.0, phi=0.0)
 def test_densities_finite_on_closed_hemisphere(ndf, theta, phi):
-    hs = np.stack([spherical(theta, phi), [0, 0, 1.0], [1.0, 0, 0],
-                   spherical(HALF_PI, phi)])
-    for values in (ndf.D(hs), ndf.pdf(hs), ndf.D_cos(hs[:, 2]),
-                   ndf.tilt_pdf_rad(np.array([theta, 0.0, HALF_PI])),
-                   ndf.cdf_theta_rad(np.array([theta, 0.0, HALF_PI]))):
+    hs = np.stack([spherical(theta, phi), [0, 0, 1.0], [1.0, 0, 0], spherical(HALF_PI, phi)])
+    for values in (
+        ndf.D(hs),
+        ndf.pdf(hs),
+        ndf.D_cos(hs[:, 2]),
+        ndf.tilt_pdf_rad(np.array([theta, 0.0, HALF_PI])),
+        ndf.cdf_theta_rad(np.array([theta, 0.0, HALF_PI])),
+    ):
         assert np.all(np.isfinite(values)) and np.all(values >= 0)
-    assert ndf.D(hs[2]) == 0.0                        # h exactly in the tangent plane
+    assert ndf.D(hs[2]) == 0.0  # h exactly in the tangent plane
     assert 0.0 <= ndf.cdf_theta_rad(theta) <= 1.0
     if ndf.has_closed_smith:
         lam = ndf.smith_lambda_cos(np.array([np.cos(theta), 1.0, 0.0]))
@@ -277,16 +310,27 @@ def test_quantile_and_samples_finite(ndf, u1, u2):
 
 
 # --- parameter validation ------------------------------------------------------------------
-@pytest.mark.parametrize("make, name", [
-    (lambda: an.Beckmann(0), "m"), (lambda: an.Beckmann(-1), "m"),
-    (lambda: an.Beckmann(np.nan), "m"), (lambda: an.Beckmann(np.inf), "m"),
-    (lambda: an.GGX(0), "alpha"), (lambda: an.GGX(np.nan), "alpha"),
-    (lambda: an.BlinnPhong(-1), "e"), (lambda: an.BlinnPhong(np.nan), "e"),
-    (lambda: an.BlinnPhong(np.inf), "e"),
-    (lambda: an.VonMisesFisher(0), "kappa"), (lambda: an.VonMisesFisher(np.nan), "kappa"),
-    (lambda: an.ABC(0, 1), "B"), (lambda: an.ABC(1, 0), "C"), (lambda: an.ABC(1, -1), "C"),
-    (lambda: an.ABC(np.nan, 1), "B"), (lambda: an.ABC(1, np.nan), "C"),
-])
+@pytest.mark.parametrize(
+    "make, name",
+    [
+        (lambda: an.Beckmann(0), "m"),
+        (lambda: an.Beckmann(-1), "m"),
+        (lambda: an.Beckmann(np.nan), "m"),
+        (lambda: an.Beckmann(np.inf), "m"),
+        (lambda: an.GGX(0), "alpha"),
+        (lambda: an.GGX(np.nan), "alpha"),
+        (lambda: an.BlinnPhong(-1), "e"),
+        (lambda: an.BlinnPhong(np.nan), "e"),
+        (lambda: an.BlinnPhong(np.inf), "e"),
+        (lambda: an.VonMisesFisher(0), "kappa"),
+        (lambda: an.VonMisesFisher(np.nan), "kappa"),
+        (lambda: an.ABC(0, 1), "B"),
+        (lambda: an.ABC(1, 0), "C"),
+        (lambda: an.ABC(1, -1), "C"),
+        (lambda: an.ABC(np.nan, 1), "B"),
+        (lambda: an.ABC(1, np.nan), "C"),
+    ],
+)
 def test_invalid_parameters(make, name):
     with pytest.raises(ValueError, match=rf"^{name} must"):
         make()

@@ -7,20 +7,21 @@ Gaussian heightfield (measured directly); reciprocity; and input validation.
 Each heavy (``slow``) test has a light default twin asserting the same fact at lower precision.
 Tolerances come from the runs' own standard errors plus the quadrature tolerance of the model
 (rtol 1e-3, added in quadrature)."""
+
 import numpy as np
 import pytest
 from scipy import stats
 
 from microsim import analytic as an
 from microsim import surfaces as sf
-from microsim.analytic._checks import normalize, spherical, spherical_deg
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.compare import measure_g1
 from microsim.sim.predict import ModelSpec, bin_average_facets, predict
 from microsim.surfaces.surface import Surface, flat
+from microsim.vectors import normalize, spherical, spherical_deg
 
 ALPHA = 0.01
-QUAD_RTOL = 1e-3                      # predict()'s quadrature tolerance, used as model error
+QUAD_RTOL = 1e-3  # predict()'s quadrature tolerance, used as model error
 
 
 def sidak_alpha(n: int, alpha: float = ALPHA) -> float:
@@ -55,8 +56,8 @@ def check_horizon(rays: int, max_rel_se: float):
     model = ts_vgroove(an.Beckmann(0.3), [80.0], bins)[0]
     sel = bins.theta_edges[:-1] >= 80.0
     want = float(np.sum((model * bins.projected_solid_angle())[sel]))
-    assert want > 0.05                                   # the band carries real energy
-    assert se / want < max_rel_se                        # 1 % is resolvable at this ray count
+    assert want > 0.05  # the band carries real energy
+    assert se / want < max_rel_se  # 1 % is resolvable at this ray count
     diff = got - want
     assert abs(diff) < 0.01 * want
     assert abs(diff) < 3.0 * np.hypot(se, QUAD_RTOL * want)
@@ -73,8 +74,12 @@ def test_near_horizon_energy_matches_ts_vgroove_precisely():
 
 
 # --- V-cavity surfaces for four NDFs: χ² against TS with V-groove G -----------------------------
-NDFS = {"beckmann": an.Beckmann(0.3), "ggx": an.GGX(0.3), "vmf": an.VonMisesFisher(17.0),
-        "abc": an.ABC(200.0, 2.0)}
+NDFS = {
+    "beckmann": an.Beckmann(0.3),
+    "ggx": an.GGX(0.3),
+    "vmf": an.VonMisesFisher(17.0),
+    "abc": an.ABC(200.0, 2.0),
+}
 THETAS = [0.0, 30.0, 60.0, 80.0]
 
 
@@ -98,7 +103,12 @@ def test_vcavity_brdf_matches_ts_vgroove(name):
     """Light version: 2e5 rays per θi on 20 × 10 bins; p-value ≥ α (Šidák over 4 NDFs × 4 θi)."""
     for (chi2, dof), t in zip(vcavity_chi2(name, 200_000, Bins(20, 10)), THETAS):
         assert dof >= 30, (name, t, dof)
-        assert stats.chi2.sf(chi2, dof) >= sidak_alpha(len(NDFS) * len(THETAS)), (name, t, chi2, dof)
+        assert stats.chi2.sf(chi2, dof) >= sidak_alpha(len(NDFS) * len(THETAS)), (
+            name,
+            t,
+            chi2,
+            dof,
+        )
 
 
 def grooves_per_bin(ndf, wi, bins: Bins, n_grooves: int, k: int = 6) -> np.ndarray:
@@ -121,10 +131,21 @@ def facets_model(surface, theta, bins, replicates: int = 4, azimuths: int = 1024
     independently seeded replicates; its error is their scatter / √replicates (the per-facet
     stderr of bin_average_facets treats stratified tilts as i.i.d., far too conservative)."""
     wi = spherical_deg(theta, 0.0)
-    reps = np.array([bin_average_facets(wi, bins, surface.facet_normals(),
-                                        surface.projected_areas(), "vgroove", "aluminium",
-                                        azimuths=azimuths,
-                                        seed=q).values for q in range(replicates)])
+    reps = np.array(
+        [
+            bin_average_facets(
+                wi,
+                bins,
+                surface.facet_normals(),
+                surface.projected_areas(),
+                "vgroove",
+                "aluminium",
+                azimuths=azimuths,
+                seed=q,
+            ).values
+            for q in range(replicates)
+        ]
+    )
     return reps.mean(axis=0), reps.std(axis=0, ddof=1) / np.sqrt(replicates)
 
 
@@ -151,19 +172,21 @@ def test_vcavity_brdf_matches_ts_vgroove_at_1e7_rays(name):
         assert ok.sum() >= 200, (name, t, ok.sum())
         assert z2.mean() < 1.3, (name, t, "facets", z2.mean(), ok.sum())
         dense = ok & (grooves_per_bin(ndf, spherical_deg(t, 0.0), bins, 4000) >= 30)
-        z2 = ((res.brdf[i] - model[i]) ** 2 / (res.stderr[i] ** 2 + (QUAD_RTOL * model[i]) ** 2))[dense]
+        z2 = ((res.brdf[i] - model[i]) ** 2 / (res.stderr[i] ** 2 + (QUAD_RTOL * model[i]) ** 2))[
+            dense
+        ]
         assert dense.sum() >= 50, (name, t, dense.sum())
         assert z2.mean() < 1.3, (name, t, "analytic", z2.mean(), dense.sum())
 
 
 # --- Smith masking on a Gaussian heightfield ----------------------------------------------------
 def check_g1(n: int, rays: int, theta, max_rel_se: float):
-    s = sf.gaussian(n, 1.0, 2.0, 8.0, seed=2)             # m = 2σ/ℓ = 0.5
+    s = sf.gaussian(n, 1.0, 2.0, 8.0, seed=2)  # m = 2σ/ℓ = 0.5
     meas = measure_g1(s, theta, rays=rays, seed=3)
     wo = spherical_deg(np.asarray(theta), 0.0)
     for ndf in (s.ndf(), an.Beckmann(s.stats()["m_realised"])):
         smith = 1.0 / (1.0 + an.smith_lambda(wo, ndf))
-        assert np.all(meas.stderr / smith < max_rel_se)   # 1 % is resolvable
+        assert np.all(meas.stderr / smith < max_rel_se)  # 1 % is resolvable
         assert np.all(np.abs(meas.g1 / smith - 1.0) < 0.01), (type(ndf).__name__, meas.g1, smith)
 
 
@@ -183,7 +206,7 @@ def test_measure_g1_is_one_without_masking():
 
 
 # --- reciprocity ----------------------------------------------------------------------------------
-PAIRS = [(16.5, 46.5), (31.5, 58.5), (46.5, 73.5)]      # θ bin centres of Bins(30, ·)
+PAIRS = [(16.5, 46.5), (31.5, 58.5), (46.5, 73.5)]  # θ bin centres of Bins(30, ·)
 
 
 def check_reciprocity(n: int, n_real: int, rays: int):
@@ -198,14 +221,22 @@ def check_reciprocity(n: int, n_real: int, rays: int):
     correlation cells, and f̄(a → b) and f̄(b → a) differ by ~6 % (measured) although the
     tile is reciprocal; the ensemble BRDF (smooth D) is the object that is reciprocal bin by
     bin, and the scatter of d_r carries both ray and realisation noise (and their pairing)."""
-    make = lambda seed: sf.gaussian(n, 1.0, 2.0, 8.0, seed=seed)   # noqa: E731
+    make = lambda seed: sf.gaussian(n, 1.0, 2.0, 8.0, seed=seed)  # noqa: E731
     bins = Bins(30, 19)
     a_list, b_list = [p[0] for p in PAIRS], [p[1] for p in PAIRS]
-    res = simulate(None, "aluminium", a_list + b_list, rays=rays * n_real, bins=bins, seed=5,
-                   surface_factory=make, seeds=list(range(10, 10 + n_real)))
-    per = res.brdf_realisations                            # (R, T, Θ, Φ)
+    res = simulate(
+        None,
+        "aluminium",
+        a_list + b_list,
+        rays=rays * n_real,
+        bins=bins,
+        seed=5,
+        surface_factory=make,
+        seeds=list(range(10, 10 + n_real)),
+    )
+    per = res.brdf_realisations  # (R, T, Θ, Φ)
     fwd = bins.forward_index
-    it = lambda t: int(t // 3.0)                           # noqa: E731  bin of θo = t
+    it = lambda t: int(t // 3.0)  # noqa: E731  bin of θo = t
     tc = stats.t.isf(0.5 * sidak_alpha(len(PAIRS)), n_real - 1)
     for k, (a, b) in enumerate(PAIRS):
         ia, ib = k, len(PAIRS) + k
@@ -237,11 +268,17 @@ def _empty():
     return Surface("flat", s.vertices, np.zeros((0, 3), np.int32), s.tile_size, True, {})
 
 
-@pytest.mark.parametrize("make, kwargs, word", [
-    (flat, dict(theta_i=90.0), "theta_i"), (flat, dict(theta_i=[30.0, 95.0]), "theta_i"),
-    (flat, dict(rays=0), "rays"), (_empty, {}, "faces"), (_nan_heights, {}, "vertices"),
-    (flat, dict(origins="halton"), "origins"),
-])
+@pytest.mark.parametrize(
+    "make, kwargs, word",
+    [
+        (flat, dict(theta_i=90.0), "theta_i"),
+        (flat, dict(theta_i=[30.0, 95.0]), "theta_i"),
+        (flat, dict(rays=0), "rays"),
+        (_empty, {}, "faces"),
+        (_nan_heights, {}, "vertices"),
+        (flat, dict(origins="halton"), "origins"),
+    ],
+)
 def test_bad_input_raises_before_anything_is_written(tmp_path, make, kwargs, word):
     args = {"theta_i": 30.0, "rays": 100, **kwargs}
     out = tmp_path / "run"
@@ -253,17 +290,22 @@ def test_bad_input_raises_before_anything_is_written(tmp_path, make, kwargs, wor
 # --- the default model set ----------------------------------------------------------------------
 def test_default_models_names_and_attach():
     from microsim.sim.compare import attach_models, default_models
+
     vg = sf.vgrooves(200, an.Beckmann(0.3))
     names = [m.name for m in default_models(vg, "aluminium")]
     assert names == ["ts-vgroove", "ts-smith", "ts-smith-corr", "ts-facets"]
     g = sf.gaussian(32, 1.0, 0.5, 8.0)
     names = [m.name for m in default_models(g, "aluminium")]
-    assert names == [f"ts-beckmann-{d}-{k}" for d in ("nominal", "realised")
-                     for k in ("vgroove", "smith", "smith-corr")] + ["ts-facets"]
+    assert names == [
+        f"ts-beckmann-{d}-{k}"
+        for d in ("nominal", "realised")
+        for k in ("vgroove", "smith", "smith-corr")
+    ] + ["ts-facets"]
     assert [m.name for m in default_models(flat(), None)] == ["mirror-fresnel"]
     bins = Bins(10, 7)
-    res = simulate(vg, "aluminium", [20.0, 60.0, 20.0], phi_i=[0.0, 0.0, 45.0], rays=20_000,
-                   bins=bins)
+    res = simulate(
+        vg, "aluminium", [20.0, 60.0, 20.0], phi_i=[0.0, 0.0, 45.0], rays=20_000, bins=bins
+    )
     attach_models(res, default_models(vg, "aluminium", azimuths=64))
     want = ts_vgroove(an.Beckmann(0.3), [20.0, 60.0], bins)
     assert np.array_equal(res.models["ts-vgroove"][:2], want)
@@ -277,6 +319,7 @@ def test_flat_mirror_model_is_the_fresnel_delta():
     the simulation agrees with it (both are exact up to rounding)."""
     from microsim.analysis.verdicts import verdicts_for_result
     from microsim.sim.compare import attach_models, default_models
+
     theta = [0.0, 40.0, 85.0]
     res = simulate(flat(), "aluminium", theta, rays=4096, bins=Bins(18, 13))
     attach_models(res, default_models(flat(), "aluminium"))

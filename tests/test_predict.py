@@ -5,23 +5,24 @@ accuracy on sharp lobes against a much tighter reference; honesty of its ``conve
 agreement of the quasi-Monte Carlo and facet-sum paths with the quadrature within their own
 (or theory-derived) standard errors; energy bookkeeping of the facet sum.
 """
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
+from support import sidak
 
-from gof import sidak
-from microsim.analytic import _checks
+from microsim import vectors
 from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel
 from microsim.analytic.ndf import Beckmann, VonMisesFisher
 from microsim.analytic.shadowing import smith_g2, vgroove_g
 from microsim.sim.bins import Bins
-from microsim.sim.predict import (ModelSpec, bin_average, bin_average_facets, bin_average_ts,
-                                  predict)
+from microsim.sim.predict import ModelSpec, bin_average, bin_average_facets, bin_average_ts, predict
 
 ALPHA = 0.01
 
@@ -39,9 +40,11 @@ def facet_weight(wi, h, G, ior=None):
 def sample_fraction(ndf, wi, bins):
     """P(wo(h) ∈ B) for h ~ D(h) h_z: ∫_B D h_z /(4 wo·h) dω_o (Mikkelsen 2009, eq. 15), by
     quadrature."""
-    def density(wi, wo):                        # per unit cos θo dω_o, as bin_average expects
-        h = _checks.half_vector(wi, wo)
+
+    def density(wi, wo):  # per unit cos θo dω_o, as bin_average expects
+        h = vectors.half_vector(wi, wo)
         return ndf.D(h) * h[..., 2] / (4.0 * np.sum(wo * h, -1) * wo[..., 2])
+
     return bin_average(wi, bins, density, rtol=1e-6).values * bins.projected_solid_angle()
 
 
@@ -52,15 +55,17 @@ def relative_azimuth(wo, phi_i_deg):
 # --- exact cases ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("bins", [Bins(45, 72), Bins(9, 8, folded=False), Bins(1, 2)])
 def test_lambertian_is_exact_and_conserves_energy(bins):
-    wi = _checks.spherical_deg(40.0, 25.0)
+    wi = vectors.spherical_deg(40.0, 25.0)
     res = bin_average(wi, bins, lambda wi, wo: np.full(wo.shape[:-1], 1.0 / np.pi))
     assert res.converged.all()
     np.testing.assert_allclose(res.values, 1.0 / np.pi, rtol=1e-12)
     assert abs(np.sum(res.values * bins.projected_solid_angle()) - 1.0) < 1e-12
 
 
-@pytest.mark.parametrize("bins,symmetric", [(Bins(18, 19), True), (Bins(18, 19), False),
-                                            (Bins(18, 36, folded=False), False)])
+@pytest.mark.parametrize(
+    "bins,symmetric",
+    [(Bins(18, 19), True), (Bins(18, 19), False), (Bins(18, 36, folded=False), False)],
+)
 def test_separable_model_matches_closed_form(bins, symmetric):
     """f = cos³θo (1 + ½ cos Δφ + s sin Δφ): ∫ cos³θ cosθ sinθ dθ = [−cos⁵θ/5],
     ∫ (1 + ½ cos + s sin) dφ = Δφ + ½[sin φ] − s[cos φ]; folded bins add the mirror half, where
@@ -72,8 +77,9 @@ def test_separable_model_matches_closed_form(bins, symmetric):
         d = relative_azimuth(wo, phi_i)
         return wo[..., 2] ** 3 * (1.0 + 0.5 * np.cos(d) + s * np.sin(d))
 
-    res = bin_average(_checks.spherical_deg(20.0, phi_i), bins, f, phi_i=phi_i, rtol=1e-9,
-                      symmetric=symmetric)
+    res = bin_average(
+        vectors.spherical_deg(20.0, phi_i), bins, f, phi_i=phi_i, rtol=1e-9, symmetric=symmetric
+    )
     t, p = np.radians(bins.theta_edges), np.radians(bins.phi_edges)
     theta_part = (np.cos(t[:-1]) ** 5 - np.cos(t[1:]) ** 5) / 5.0
     phi_part = np.diff(p) + 0.5 * np.diff(np.sin(p)) - s * np.diff(np.cos(p))
@@ -85,12 +91,13 @@ def test_separable_model_matches_closed_form(bins, symmetric):
 
 
 # --- adaptive quadrature on sharp lobes ----------------------------------------------------------
-@pytest.mark.parametrize("ndf", [VonMisesFisher(1024.0), Beckmann(0.05)],
-                         ids=["vmf1024", "beck005"])
+@pytest.mark.parametrize(
+    "ndf", [VonMisesFisher(1024.0), Beckmann(0.05)], ids=["vmf1024", "beck005"]
+)
 @pytest.mark.parametrize("theta_i", [0.0, 30.0, 60.0, 80.0])
 def test_sharp_lobe_reaches_rtol(ndf, theta_i):
-    bins = Bins(45, 91)                                    # 2° bins
-    wi = _checks.spherical_deg(theta_i, 0.0)
+    bins = Bins(45, 91)  # 2° bins
+    wi = vectors.spherical_deg(theta_i, 0.0)
     fn = ts_fn(ndf, "vgroove", "aluminium")
     res = bin_average(wi, bins, fn, rtol=1e-3)
     ref = bin_average(wi, bins, fn, rtol=1e-7, order=(8, 16), max_depth=10)
@@ -107,7 +114,7 @@ def test_refinement_is_needed_and_converged_flag_is_honest():
     flagged converged — refined or not — is within its tolerance of a tight reference."""
     bins, rtol, floor = Bins(9, 19), 1e-3, 1e-6
     fn = ts_fn(VonMisesFisher(1e5))
-    wi = _checks.spherical_deg(30.0, 0.0)
+    wi = vectors.spherical_deg(30.0, 0.0)
     ref = bin_average(wi, bins, fn, rtol=1e-8, order=(8, 16), max_depth=14)
     assert ref.converged.all()
     tol = np.maximum(rtol * ref.values, rtol * floor * ref.values.max()) * (1 + 1e-6)
@@ -129,8 +136,8 @@ def test_qmc_agrees_with_quadrature_within_its_error(theta_i):
     """Each bin's RQMC mean over R scramblings minus the exact value, over its replicate standard
     error, is Student-t with R − 1 dof; all bins of all angles form one Šidák family. Bins are
     kept where every replicate expects ≥ 50 samples (the t approximation needs them)."""
-    ndf, bins, n, R = Beckmann(0.3), Bins(30, 31), 2 ** 20, 16
-    wi = _checks.spherical_deg(theta_i, 0.0)
+    ndf, bins, n, R = Beckmann(0.3), Bins(30, 31), 2**20, 16
+    wi = vectors.spherical_deg(theta_i, 0.0)
     ref = bin_average(wi, bins, ts_fn(ndf, "vgroove", 1.329), rtol=1e-6)
     est = bin_average_ts(wi, bins, ndf, "vgroove", 1.329, n=n, replicates=R)
     keep = sample_fraction(ndf, wi, bins) * (n // R) >= 50
@@ -145,7 +152,7 @@ def test_qmc_agrees_with_quadrature_within_its_error(theta_i):
 def beckmann_facets():
     rng = np.random.default_rng(12345)
     ndf = Beckmann(0.3)
-    return ndf, ndf.sample(*rng.random((2, 10 ** 6)))
+    return ndf, ndf.sample(*rng.random((2, 10**6)))
 
 
 FACET_ANGLES = [30.0, 70.0]
@@ -159,12 +166,12 @@ def test_facets_agree_with_quadrature_within_mc_error(beckmann_facets, theta_i):
     N P_B ≥ 25, Σ z² (theory variance) and Σ z² (the returned stderr) are χ²_K two-sided."""
     ndf, normals = beckmann_facets
     N, bins = len(normals), Bins(30, 31)
-    wi = _checks.spherical_deg(theta_i, 0.0)
+    wi = vectors.spherical_deg(theta_i, 0.0)
     omega = bins.projected_solid_angle()
     f = ts_fn(ndf, "vgroove")
 
     def x_times_f(wi, wo):
-        h = _checks.half_vector(wi, wo)
+        h = vectors.half_vector(wi, wo)
         return facet_weight(wi, h, vgroove_g(wi, wo, h)) * f(wi, wo)
 
     ref = bin_average(wi, bins, f, rtol=1e-6).values * omega
@@ -175,7 +182,7 @@ def test_facets_agree_with_quadrature_within_mc_error(beckmann_facets, theta_i):
     K = int(keep.sum())
     assert K > 100
     diff = (est.values * omega - ref)[keep]
-    chi_theory = np.sum(diff ** 2 / ((second - ref ** 2)[keep] / N))
+    chi_theory = np.sum(diff**2 / ((second - ref**2)[keep] / N))
     chi_est = np.sum((diff / (est.stderr * omega)[keep]) ** 2)
     a = sidak(ALPHA, 2 * len(FACET_ANGLES))
     lo, hi = stats.chi2.ppf(0.5 * a, K), stats.chi2.isf(0.5 * a, K)
@@ -192,11 +199,10 @@ def test_facet_energy_equals_direct_albedo(beckmann_facets, theta_i):
     rng = np.random.default_rng(7)
     weights = rng.uniform(0.5, 1.5, len(normals))
     bins = Bins(45, 72, folded=False)
-    wi = _checks.spherical_deg(theta_i, 10.0)
-    est = bin_average_facets(wi, bins, normals, weights, material="aluminium",
-                             shadowing="vgroove")
+    wi = vectors.spherical_deg(theta_i, 10.0)
+    est = bin_average_facets(wi, bins, normals, weights, material="aluminium", shadowing="vgroove")
     wo = 2.0 * (normals @ wi)[:, None] * normals - wi
-    x = facet_weight(wi, normals, vgroove_g(wi, _checks.normalize(wo), normals), 0.769 + 6.08j)
+    x = facet_weight(wi, normals, vgroove_g(wi, vectors.normalize(wo), normals), 0.769 + 6.08j)
     albedo = np.sum((weights / weights.sum() * x)[wo[:, 2] > 0])
     total = np.sum(est.values * bins.projected_solid_angle())
     assert abs(total - albedo) <= 1e-12 * albedo
@@ -207,10 +213,10 @@ def test_facets_smith_agree_with_quadrature(beckmann_facets):
     parent Beckmann D differs from the facet sum only by facet sampling (χ², returned stderr)."""
     ndf, normals = beckmann_facets
     emp = Empirical(normals)
-    bins, wi = Bins(30, 31), _checks.spherical_deg(60.0, 0.0)
+    bins, wi = Bins(30, 31), vectors.spherical_deg(60.0, 0.0)
 
     def f(wi, wo):
-        h = _checks.half_vector(wi, wo)
+        h = vectors.half_vector(wi, wo)
         g = smith_g2(np.broadcast_to(wi, wo.shape), wo, h, emp)
         return ndf.D(h) * g / (4.0 * wi[2] * wo[..., 2])
 
@@ -229,8 +235,8 @@ def test_vgroove_azimuth_average_matches_isotropic_ts():
     ndf = Beckmann(0.3)
     rng = np.random.default_rng(99)
     theta = ndf.tilt_quantile_rad(rng.random(3000))
-    faces = np.concatenate([_checks.spherical(theta, 0.0), _checks.spherical(theta, np.pi)])
-    bins, wi = Bins(18, 19), _checks.spherical_deg(50.0, 0.0)
+    faces = np.concatenate([vectors.spherical(theta, 0.0), vectors.spherical(theta, np.pi)])
+    bins, wi = Bins(18, 19), vectors.spherical_deg(50.0, 0.0)
     est = bin_average_facets(wi, bins, faces, None, shadowing="vgroove", azimuths=512)
     ref = bin_average(wi, bins, ts_fn(ndf), rtol=1e-6).values
     keep = sample_fraction(ndf, wi, bins) * len(theta) >= 25
@@ -243,16 +249,18 @@ def test_vgroove_azimuth_average_matches_isotropic_ts():
 def test_predict_runs_every_kind_and_matches_direct_calls(beckmann_facets):
     ndf, normals = beckmann_facets
     bins, angles = Bins(9, 10), [0.0, 45.0]
-    models = [ModelSpec.function("lambert", lambda wi, wo: np.full(wo.shape[:-1], 1 / np.pi)),
-              ModelSpec.torrance_sparrow("ts", ndf, "smith", "methanol"),
-              ModelSpec.torrance_sparrow("ts-qmc", ndf, "smith", "methanol", qmc_samples=2 ** 14),
-              ModelSpec.facets("facets", normals[:10_000], shadowing="vgroove")]
+    models = [
+        ModelSpec.function("lambert", lambda wi, wo: np.full(wo.shape[:-1], 1 / np.pi)),
+        ModelSpec.torrance_sparrow("ts", ndf, "smith", "methanol"),
+        ModelSpec.torrance_sparrow("ts-qmc", ndf, "smith", "methanol", qmc_samples=2**14),
+        ModelSpec.facets("facets", normals[:10_000], shadowing="vgroove"),
+    ]
     out = predict(models, angles, bins)
     assert set(out) == {m.name for m in models}
     for name, arr in out.items():
         assert arr.shape == (len(angles),) + bins.shape and np.all(np.isfinite(arr))
     np.testing.assert_allclose(out["lambert"], 1 / np.pi, rtol=1e-12)
-    wi = _checks.spherical_deg(45.0, 0.0)
+    wi = vectors.spherical_deg(45.0, 0.0)
     direct = bin_average(wi, bins, ts_fn(ndf, "smith", "methanol")).values
     np.testing.assert_array_equal(out["ts"][1], direct)
     with pytest.raises(ValueError, match="unique"):
@@ -266,20 +274,26 @@ def test_predict_runs_every_kind_and_matches_direct_calls(beckmann_facets):
 @given(theta_i=st.one_of(st.just(0.0), st.just(89.999), st.floats(0.0, 89.999)))
 def test_finite_nonnegative_for_every_incidence(theta_i):
     ndf, bins = Beckmann(0.3), Bins(9, 10)
-    wi = _checks.spherical_deg(theta_i, 0.0)
-    for res in (bin_average(wi, bins, ts_fn(ndf, "smith"), rtol=1e-2, max_depth=3).values,
-                bin_average_ts(wi, bins, ndf, "vgroove", n=2 ** 10, replicates=4).values,
-                bin_average_facets(wi, bins,
-                                   ndf.sample(*np.random.default_rng(0).random((2, 1000))),
-                                   None, shadowing="smith").values):
+    wi = vectors.spherical_deg(theta_i, 0.0)
+    for res in (
+        bin_average(wi, bins, ts_fn(ndf, "smith"), rtol=1e-2, max_depth=3).values,
+        bin_average_ts(wi, bins, ndf, "vgroove", n=2**10, replicates=4).values,
+        bin_average_facets(
+            wi,
+            bins,
+            ndf.sample(*np.random.default_rng(0).random((2, 1000))),
+            None,
+            shadowing="smith",
+        ).values,
+    ):
         assert np.all(np.isfinite(res)) and np.all(res >= 0)
 
 
 def test_invalid_arguments_raise():
-    bins, wi = Bins(9, 10), _checks.spherical_deg(30.0, 0.0)
-    lam = lambda wi, wo: np.full(wo.shape[:-1], 1 / np.pi)   # noqa: E731
+    bins, wi = Bins(9, 10), vectors.spherical_deg(30.0, 0.0)
+    lam = lambda wi, wo: np.full(wo.shape[:-1], 1 / np.pi)  # noqa: E731
     with pytest.raises(ValueError, match="horizon"):
-        bin_average(_checks.spherical_deg(90.0, 0.0), bins, lam)
+        bin_average(vectors.spherical_deg(90.0, 0.0), bins, lam)
     with pytest.raises(ValueError, match="rtol"):
         bin_average(wi, bins, lam, rtol=0.0)
     with pytest.raises(ValueError, match="order"):

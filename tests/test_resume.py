@@ -1,18 +1,19 @@
 """Interrupt and resume (microsim.sim.simulate(..., resume=)): an interrupted run returns the
 complete blocks as a partial Result; resuming it — also after save/load — gives tallies
 bitwise identical to an uninterrupted run; mismatched configurations are refused."""
+
 import os
 import signal
 
 import numpy as np
 import pytest
-from test_tracer import heightfield_surface, random_heights, vgroove_surface
+from support import heightfield_surface, random_heights, vgroove_surface
 
 from microsim.checkpoints import interrupt_at
 from microsim.sim import BLOCK, LEDGER, Bins, Result, simulate
 
 THETA = [20.0, 70.0]
-KW = dict(rays=7 * BLOCK + 321, bins=Bins(10, 7), seed=4)     # not a whole number of blocks
+KW = dict(rays=7 * BLOCK + 321, bins=Bins(10, 7), seed=4)  # not a whole number of blocks
 FIELDS = ("sum_w", "sum_w2", "counts", "brdf", "stderr", "rays")
 
 
@@ -36,20 +37,21 @@ def test_interrupted_run_is_partial_and_resumes_bitwise(tmp_path, threads):
     s = surface()
     full = simulate(s, "aluminium", THETA, threads=threads, chunk=BLOCK, **KW)
     assert not full.is_partial and np.all(full.rays == KW["rays"])
-    with interrupt_at("simulation", after=3) as hit:       # after 4 of the first incidence's 8
+    with interrupt_at("simulation", after=3) as hit:  # after 4 of the first incidence's 8
         part = simulate(s, "aluminium", THETA, threads=threads, chunk=BLOCK, **KW)
     assert hit["fired"]
     assert part.is_partial and part.meta["interrupted"]
-    assert 0 < part.rays[0] < KW["rays"] and part.rays[0] % BLOCK == 0   # whole blocks only
-    assert part.rays[1] == 0 and np.all(np.isnan(part.brdf[1]))         # not started
+    assert 0 < part.rays[0] < KW["rays"] and part.rays[0] % BLOCK == 0  # whole blocks only
+    assert part.rays[1] == 0 and np.all(np.isnan(part.brdf[1]))  # not started
     led = sum(part.ledger_counts[k] for k in LEDGER)
-    assert np.array_equal(led, part.rays)                  # the ledger closes on done blocks
+    assert np.array_equal(led, part.rays)  # the ledger closes on done blocks
     assert 0 < part.counts[0].sum() <= part.ledger_counts["single"][0]
     part.save(tmp_path)
     back = Result.load(tmp_path)
     assert back.is_partial
-    resumed = simulate(s, "aluminium", THETA, threads=3 - threads, chunk=3 * BLOCK, resume=back,
-                       **KW)
+    resumed = simulate(
+        s, "aluminium", THETA, threads=3 - threads, chunk=3 * BLOCK, resume=back, **KW
+    )
     assert not resumed.is_partial and resumed.meta["resumed"]
     assert resumed.meta["rays_traced"] == 2 * KW["rays"] - part.rays.sum()
     assert_identical(full, resumed)
@@ -61,13 +63,20 @@ def test_sigint_stops_after_the_chunk_in_flight_and_restores_the_handler():
     before = signal.getsignal(signal.SIGINT)
     seen = []
 
-    def sigint_at_third_chunk(event):                      # a real SIGINT, mid-incidence
+    def sigint_at_third_chunk(event):  # a real SIGINT, mid-incidence
         seen.append(event)
         if len(seen) == 3:
             os.kill(os.getpid(), signal.SIGINT)
 
-    part = simulate(s, "aluminium", THETA, threads=1, chunk=BLOCK,   # returns, no raise
-                    progress=sigint_at_third_chunk, **KW)
+    part = simulate(
+        s,
+        "aluminium",
+        THETA,
+        threads=1,
+        chunk=BLOCK,  # returns, no raise
+        progress=sigint_at_third_chunk,
+        **KW,
+    )
     assert signal.getsignal(signal.SIGINT) is before
     assert part.is_partial and part.rays.sum() < 2 * KW["rays"]
     resumed = simulate(s, "aluminium", THETA, resume=part, **KW)
@@ -79,7 +88,7 @@ def test_realisations_interrupted_between_surfaces_resume_bitwise():
     kw = dict(KW, rays=3 * 2 * BLOCK + 5)
     full = simulate(None, "aluminium", THETA, surface_factory=make, seeds=[1, 2, 3], **kw)
 
-    def flaky(seed):                                       # Ctrl-C while building realisation 2
+    def flaky(seed):  # Ctrl-C while building realisation 2
         if seed == 2:
             raise KeyboardInterrupt
         return make(seed)
@@ -88,8 +97,9 @@ def test_realisations_interrupted_between_surfaces_resume_bitwise():
     assert part.is_partial
     assert np.array_equal(part.tallies["rays"][:, 0], [full.rays_realisations[0], 0, 0])
     assert part.meta["realisations"][1] is None
-    resumed = simulate(None, "aluminium", THETA, surface_factory=make, seeds=[1, 2, 3],
-                       resume=part, **kw)
+    resumed = simulate(
+        None, "aluminium", THETA, surface_factory=make, seeds=[1, 2, 3], resume=part, **kw
+    )
     assert_identical(full, resumed)
     for name in ("stderr_ray", "stderr_realisation", "brdf_realisations"):
         assert np.array_equal(getattr(full, name), getattr(resumed, name)), name
@@ -103,12 +113,19 @@ def test_resuming_a_complete_run_traces_nothing():
     assert_identical(full, again)
 
 
-@pytest.mark.parametrize("change, word", [
-    (dict(seed=5), "seed"), (dict(theta_i=[20.0, 60.0]), "theta_i"), (dict(phi_i=10.0), "phi_i"),
-    (dict(bins=Bins(10, 9)), "bins"), (dict(rays=KW["rays"] + 1), "rays"),
-    (dict(material="methanol"), "material"), (dict(origins="independent"), "origins"),
-    (dict(surface=vgroove_surface([30.0] * 4)), "surface"),
-])
+@pytest.mark.parametrize(
+    "change, word",
+    [
+        (dict(seed=5), "seed"),
+        (dict(theta_i=[20.0, 60.0]), "theta_i"),
+        (dict(phi_i=10.0), "phi_i"),
+        (dict(bins=Bins(10, 9)), "bins"),
+        (dict(rays=KW["rays"] + 1), "rays"),
+        (dict(material="methanol"), "material"),
+        (dict(origins="independent"), "origins"),
+        (dict(surface=vgroove_surface([30.0] * 4)), "surface"),
+    ],
+)
 def test_resume_with_a_different_configuration_is_refused(change, word):
     s = surface()
     with interrupt_at("simulation", after=1):

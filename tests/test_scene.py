@@ -1,4 +1,5 @@
 """Scene files: the catalogue loads and builds; malformed files fail with one-line errors."""
+
 import warnings
 from pathlib import Path
 
@@ -14,7 +15,7 @@ CATALOGUE = sorted((Path(__file__).resolve().parents[1] / "surfaces").glob("*.to
 @pytest.fixture(autouse=True)
 def _quiet():
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)   # C <= 3 / height-retention notices
+        warnings.simplefilter("ignore", UserWarning)  # C <= 3 / height-retention notices
         yield
 
 
@@ -37,9 +38,20 @@ def test_catalogue_scene_loads_builds_and_describes(path):
 
 def test_catalogue_covers_the_issue():
     scenes = [load_scene(p) for p in CATALOGUE]
-    vg = {(s.surface.params["ndf"], tuple(sorted((k, s.surface.params[k]) for k in ("m", "alpha", "e", "kappa", "B", "C")
-                                                  if k in s.surface.params)))
-          for s in scenes if s.surface.kind == "vgrooves"}
+    vg = {
+        (
+            s.surface.params["ndf"],
+            tuple(
+                sorted(
+                    (k, s.surface.params[k])
+                    for k in ("m", "alpha", "e", "kappa", "B", "C")
+                    if k in s.surface.params
+                )
+            ),
+        )
+        for s in scenes
+        if s.surface.kind == "vgrooves"
+    }
     assert {n for n, _ in vg} == {"beckmann", "ggx", "blinn-phong", "vmf", "abc"}
     assert ("vmf", (("kappa", 17.0),)) in vg and ("vmf", (("kappa", 1024.0),)) in vg
     gauss = [s for s in scenes if s.surface.kind == "gaussian"]
@@ -68,16 +80,20 @@ def test_defaults(tmp_path):
     assert sc.build_surface().kind == "flat" and sc.ndf() is None
 
 
-@pytest.mark.parametrize("ior, expect", [('"methanol"', 1.329), ("1.5", 1.5),
-                                         ("[0.769, 6.08]", 0.769 + 6.08j), ('"mirror"', None)])
+@pytest.mark.parametrize(
+    "ior, expect",
+    [('"methanol"', 1.329), ("1.5", 1.5), ("[0.769, 6.08]", 0.769 + 6.08j), ('"mirror"', None)],
+)
 def test_material(tmp_path, ior, expect):
     sc = load_scene(write(tmp_path, f'[surface]\nkind = "flat"\n[material]\nior = {ior}\n'))
     assert sc.ior == expect
 
 
 def test_rays_auto_and_seed(tmp_path):
-    text = ('[surface]\nkind = "gaussian"\nn = 32\nsigma = 1.0\ncorr_len = 8.0\n'
-            '[simulation]\nrays = "auto"\nseed = 3\ntheta_i = [0, 89.5]\n')
+    text = (
+        '[surface]\nkind = "gaussian"\nn = 32\nsigma = 1.0\ncorr_len = 8.0\n'
+        '[simulation]\nrays = "auto"\nseed = 3\ntheta_i = [0, 89.5]\n'
+    )
     sc = load_scene(write(tmp_path, text))
     assert sc.simulation.rays == "auto" and sc.simulation.theta_i == (0.0, 89.5)
     a, b, c = sc.build_surface(), sc.build_surface(seed=3), sc.build_surface(seed=4)
@@ -87,45 +103,50 @@ def test_rays_auto_and_seed(tmp_path):
 
 def test_file_scene_relative_path(tmp_path):
     np.save(tmp_path / "h.npy", np.random.default_rng(0).normal(size=(16, 16)))
-    sc = load_scene(write(tmp_path, '[surface]\nkind = "file"\npath = "h.npy"\ndx = 0.5\nperiodic = true\n'))
+    sc = load_scene(
+        write(tmp_path, '[surface]\nkind = "file"\npath = "h.npy"\ndx = 0.5\nperiodic = true\n')
+    )
     assert sc.build_surface().heights.shape == (16, 16)
 
 
 VG = '[surface]\nkind = "vgrooves"\nndf = "beckmann"\nm = 0.3\n'
 
 
-@pytest.mark.parametrize("text, key", [
-    ('foo = 1\n' + VG, "foo"),
-    (VG + 'colour = "red"\n', "surface.colour"),
-    (VG + 'n_grooves = "many"\n', "surface.n_grooves"),
-    (VG + 'n_grooves = 2.5\n', "surface.n_grooves"),
-    (VG + 'n_grooves = true\n', "surface.n_grooves"),
-    (VG.replace("m = 0.3", "m = -1"), "surface.m"),
-    (VG.replace("m = 0.3", 'm = "rough"'), "surface.m"),
-    (VG.replace("m = 0.3", "alpha = 0.3"), "surface.alpha"),
-    (VG.replace("m = 0.3\n", ""), "surface.m"),
-    (VG.replace('"beckmann"', '"cauchy"'), "surface.ndf"),
-    (VG + 'sampling = "sobol"\n', "surface.sampling"),
-    ('[surface]\nkind = "sphere"\n', "surface.kind"),
-    ('[surface]\nn = 8\n', "surface.kind"),
-    ('name = "x"\n', "surface"),
-    ('[surface]\nkind = "gaussian"\nsigma = 1.0\n', "surface.corr_len"),
-    ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 8.0\nn = 4\n', "surface.n"),
-    ('[surface]\nkind = "abc"\nsigma = 1.0\nB = 8.0\nC = 1.0\n', "surface.C"),
-    (VG + '[material]\nior = "gold"\n', "material.ior"),
-    (VG + '[material]\nior = [1.0]\n', "material.ior"),
-    (VG + '[material]\nior = -2.0\n', "material.ior"),
-    (VG + '[material]\nn = 1.5\n', "material.n"),
-    (VG + '[simulation]\ntheta_i = [0, 95]\n', "simulation.theta_i"),
-    (VG + '[simulation]\ntheta_i = 30\n', "simulation.theta_i"),
-    (VG + '[simulation]\nrays = "lots"\n', "simulation.rays"),
-    (VG + '[simulation]\nrays = 0\n', "simulation.rays"),
-    (VG + '[simulation]\ntheta_bins = 4.5\n', "simulation.theta_bins"),
-    (VG + '[simulation]\nseed = -1\n', "simulation.seed"),
-    (VG + '[simulation]\nlambda = 500\n', "simulation.lambda"),
-    ('name = 3\n' + VG, "name"),
-    ('[surface\nkind = 1', "TOML"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("foo = 1\n" + VG, "foo"),
+        (VG + 'colour = "red"\n', "surface.colour"),
+        (VG + 'n_grooves = "many"\n', "surface.n_grooves"),
+        (VG + "n_grooves = 2.5\n", "surface.n_grooves"),
+        (VG + "n_grooves = true\n", "surface.n_grooves"),
+        (VG.replace("m = 0.3", "m = -1"), "surface.m"),
+        (VG.replace("m = 0.3", 'm = "rough"'), "surface.m"),
+        (VG.replace("m = 0.3", "alpha = 0.3"), "surface.alpha"),
+        (VG.replace("m = 0.3\n", ""), "surface.m"),
+        (VG.replace('"beckmann"', '"cauchy"'), "surface.ndf"),
+        (VG + 'sampling = "sobol"\n', "surface.sampling"),
+        ('[surface]\nkind = "sphere"\n', "surface.kind"),
+        ("[surface]\nn = 8\n", "surface.kind"),
+        ('name = "x"\n', "surface"),
+        ('[surface]\nkind = "gaussian"\nsigma = 1.0\n', "surface.corr_len"),
+        ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 8.0\nn = 4\n', "surface.n"),
+        ('[surface]\nkind = "abc"\nsigma = 1.0\nB = 8.0\nC = 1.0\n', "surface.C"),
+        (VG + '[material]\nior = "gold"\n', "material.ior"),
+        (VG + "[material]\nior = [1.0]\n", "material.ior"),
+        (VG + "[material]\nior = -2.0\n", "material.ior"),
+        (VG + "[material]\nn = 1.5\n", "material.n"),
+        (VG + "[simulation]\ntheta_i = [0, 95]\n", "simulation.theta_i"),
+        (VG + "[simulation]\ntheta_i = 30\n", "simulation.theta_i"),
+        (VG + '[simulation]\nrays = "lots"\n', "simulation.rays"),
+        (VG + "[simulation]\nrays = 0\n", "simulation.rays"),
+        (VG + "[simulation]\ntheta_bins = 4.5\n", "simulation.theta_bins"),
+        (VG + "[simulation]\nseed = -1\n", "simulation.seed"),
+        (VG + "[simulation]\nlambda = 500\n", "simulation.lambda"),
+        ("name = 3\n" + VG, "name"),
+        ("[surface\nkind = 1", "TOML"),
+    ],
+)
 def test_malformed_scene(tmp_path, text, key):
     p = write(tmp_path, text, "bad-scene.toml")
     with pytest.raises(SceneError) as exc:
@@ -141,8 +162,9 @@ def test_missing_scene_file(tmp_path):
 
 
 # --- hardening (issue #11): names, sizes, encodings, heightfield files ------------------------
-@pytest.mark.parametrize("name", ["", ".", "..", "../../escape", "a/b", ".hidden", "x" * 101,
-                                  "a b", "ü"])
+@pytest.mark.parametrize(
+    "name", ["", ".", "..", "../../escape", "a/b", ".hidden", "x" * 101, "a b", "ü"]
+)
 def test_unsafe_scene_name_refused(tmp_path, name):
     """A scene name becomes a folder name: only a safe single path component passes."""
     p = write(tmp_path, f'name = "{name}"\n' + VG, "bad-scene.toml")
@@ -153,26 +175,29 @@ def test_unsafe_scene_name_refused(tmp_path, name):
 
 
 def test_default_name_from_an_unsafe_file_stem_refused(tmp_path):
-    p = write(tmp_path, VG, ".toml")            # stem "" → would name runs/ itself
+    p = write(tmp_path, VG, ".toml")  # stem "" → would name runs/ itself
     with pytest.raises(SceneError, match="name"):
         load_scene(p)
 
 
-@pytest.mark.parametrize("text, key", [
-    (VG + '[simulation]\ntheta_bins = 1e6\n', "simulation.theta_bins"),
-    (VG + '[simulation]\ntheta_bins = 1000000\n', "simulation.theta_bins"),
-    (VG + '[simulation]\nphi_bins = 1\n', "simulation.phi_bins"),
-    (VG + '[simulation]\nphi_bins = 100000\n', "simulation.phi_bins"),
-    (VG + '[simulation]\nrealisations = 100000\n', "simulation.realisations"),
-    (VG + 'n_grooves = 1e8\n', "surface.n_grooves"),
-    (VG + 'n_grooves = 100000000\n', "surface.n_grooves"),
-    ('[surface]\nkind = "gaussian"\nsigma = 1e200\ncorr_len = 8.0\n', "surface.sigma"),
-    ('[surface]\nkind = "gaussian"\nsigma = 1e5\ncorr_len = 8.0\n', "surface.sigma"),
-    ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 1e-9\n', "surface.corr_len"),
-    ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 8.0\nn = 100000\n', "surface.n"),
-    ('[surface]\nkind = "abc"\nsigma = 1e200\nB = 8.0\nC = 3.0\n', "surface.sigma"),
-    ('[surface]\nkind = "flat"\nsize = 1e300\n', "surface.size"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        (VG + "[simulation]\ntheta_bins = 1e6\n", "simulation.theta_bins"),
+        (VG + "[simulation]\ntheta_bins = 1000000\n", "simulation.theta_bins"),
+        (VG + "[simulation]\nphi_bins = 1\n", "simulation.phi_bins"),
+        (VG + "[simulation]\nphi_bins = 100000\n", "simulation.phi_bins"),
+        (VG + "[simulation]\nrealisations = 100000\n", "simulation.realisations"),
+        (VG + "n_grooves = 1e8\n", "surface.n_grooves"),
+        (VG + "n_grooves = 100000000\n", "surface.n_grooves"),
+        ('[surface]\nkind = "gaussian"\nsigma = 1e200\ncorr_len = 8.0\n', "surface.sigma"),
+        ('[surface]\nkind = "gaussian"\nsigma = 1e5\ncorr_len = 8.0\n', "surface.sigma"),
+        ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 1e-9\n', "surface.corr_len"),
+        ('[surface]\nkind = "gaussian"\nsigma = 1.0\ncorr_len = 8.0\nn = 100000\n', "surface.n"),
+        ('[surface]\nkind = "abc"\nsigma = 1e200\nB = 8.0\nC = 3.0\n', "surface.sigma"),
+        ('[surface]\nkind = "flat"\nsize = 1e300\n', "surface.size"),
+    ],
+)
 def test_values_that_cannot_be_built_are_refused_up_front(tmp_path, text, key):
     p = write(tmp_path, text, "bad-scene.toml")
     with pytest.raises(SceneError) as exc:
@@ -196,22 +221,25 @@ def test_scene_file_not_regular_too_large_or_not_utf8(tmp_path):
 
 def _truncated_npy(p):
     np.save(p, np.zeros((16, 16)))
-    p.write_bytes(p.read_bytes()[:200])          # header intact, data cut short
+    p.write_bytes(p.read_bytes()[:200])  # header intact, data cut short
 
 
 FILE_SCENE = '[surface]\nkind = "file"\npath = "{}"\ndx = 1.0\n'
 
 
-@pytest.mark.parametrize("make, what", [
-    (None, "no such heightfield"),
-    (lambda p: p.write_bytes(b"not numpy at all"), "not a readable"),
-    (lambda p: np.save(p, np.zeros((4, 4, 4))), "2D"),
-    (lambda p: np.save(p, np.zeros((4, 4))), "8"),
-    (lambda p: np.save(p, np.full((16, 16), np.nan)), "NaN"),
-    (lambda p: np.save(p, np.zeros((16, 16), dtype=complex)), "real"),
-    (lambda p: _truncated_npy(p), "npy"),
-    (lambda p: p.mkdir(), "regular file"),
-])
+@pytest.mark.parametrize(
+    "make, what",
+    [
+        (None, "no such heightfield"),
+        (lambda p: p.write_bytes(b"not numpy at all"), "not a readable"),
+        (lambda p: np.save(p, np.zeros((4, 4, 4))), "2D"),
+        (lambda p: np.save(p, np.zeros((4, 4))), "8"),
+        (lambda p: np.save(p, np.full((16, 16), np.nan)), "NaN"),
+        (lambda p: np.save(p, np.zeros((16, 16), dtype=complex)), "real"),
+        (lambda p: _truncated_npy(p), "npy"),
+        (lambda p: p.mkdir(), "regular file"),
+    ],
+)
 def test_bad_heightfield_file_refused_at_load(tmp_path, make, what):
     """Heightfield problems are found when the scene is loaded, naming the scene, key and file."""
     h = tmp_path / "h.npy"

@@ -1,10 +1,12 @@
 """Shadowing–masking: projected-area identity, numerical Smith Λ, finiteness, argument checks."""
+
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from microsim import analytic as an
-from microsim.analytic._checks import spherical
+from microsim.vectors import half_vector, spherical
 
 
 def _empirical_beckmann():
@@ -35,8 +37,11 @@ def ndf_named(name):
 
 def _tilt_nodes(ndf, n_gl=8):
     """θ_h Gauss–Legendre nodes/weights on panels at the NDF's tilt quantiles (and bin edges)."""
-    edges = [ndf.tilt_quantile_rad(np.linspace(0, 1, 129)), np.linspace(0, np.pi / 2, 65),
-             ndf.tilt_quantile_rad(1 - np.logspace(-9, -3, 7))]
+    edges = [
+        ndf.tilt_quantile_rad(np.linspace(0, 1, 129)),
+        np.linspace(0, np.pi / 2, 65),
+        ndf.tilt_quantile_rad(1 - np.logspace(-9, -3, 7)),
+    ]
     if hasattr(ndf, "theta_edges"):
         edges.append(ndf.theta_edges)
     e = np.unique(np.concatenate(edges))
@@ -61,8 +66,11 @@ def projected_area(ndf, g1, theta_o_deg, n_phi=512):
 def test_projected_area_identity(name, kind):
     """∫ G1 (wo·h)⁺ D dω = cos θo (docs/design.md); V-groove holds because D is isotropic."""
     ndf = ndf_named(name)
-    g1 = ((lambda d, w, h: an.vgroove_g1(w, h)) if kind == "vgroove"
-          else (lambda d, w, h: an.smith_g1(w, h, d)))
+    g1 = (
+        (lambda d, w, h: an.vgroove_g1(w, h))
+        if kind == "vgroove"
+        else (lambda d, w, h: an.smith_g1(w, h, d))
+    )
     for theta in (0.0, 30.0, 60.0, 80.0, 85.0):
         got = projected_area(ndf, g1, theta)
         assert abs(got - np.cos(np.radians(theta))) < 1e-3, (theta, got)
@@ -76,8 +84,11 @@ def test_identity_fails_without_masking():
     assert abs(got - (1 + lam) * np.cos(np.radians(80.0))) < 1e-4 and lam > 0.1
 
 
-@pytest.mark.parametrize("ndf", [an.Beckmann(0.1), an.Beckmann(0.5), an.Beckmann(1.0),
-                                 an.GGX(0.05), an.GGX(0.3), an.GGX(1.0)], ids=repr)
+@pytest.mark.parametrize(
+    "ndf",
+    [an.Beckmann(0.1), an.Beckmann(0.5), an.Beckmann(1.0), an.GGX(0.05), an.GGX(0.3), an.GGX(1.0)],
+    ids=repr,
+)
 def test_numerical_lambda_matches_closed_form(ndf):
     theta = np.radians(np.linspace(0.0, 85.0, 1701))
     w = spherical(theta, 0.7)
@@ -101,7 +112,7 @@ def test_lambda_methods_and_grazing():
     with pytest.raises(ValueError, match="method"):
         an.smith_lambda([0.0, 0.0, 1.0], an.Beckmann(0.3), method="exact")
     lam = an.smith_lambda(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]), ndf)
-    assert lam[0] == 0.0                        # no facet is tilted beyond 90°
+    assert lam[0] == 0.0  # no facet is tilted beyond 90°
     assert np.isinf(lam[1])
 
 
@@ -117,7 +128,7 @@ def _cell_lambda_reference(emp, w, n_t=12, n_p=24):
     h = spherical(th[:, :, None, None], ph[None, None, :, :])
     dw = emp.cell_D[:, None, :, None] * wt[:, :, None, None] * wp[None, None, :, :]
     m = np.sum(h * dw[..., None], axis=(0, 1, 2, 3))
-    m = m / m[2]                                  # ∫ h_z D dω = 1 exactly
+    m = m / m[2]  # ∫ h_z D dω = 1 exactly
     return np.array([(np.sum(np.maximum(-(h @ wk), 0) * dw) + m @ wk) / wk[2] - 1 for wk in w])
 
 
@@ -137,29 +148,28 @@ def test_anisotropic_empirical_lambda():
         assert np.max(np.abs(g_tab - g_ref)) < 1e-4
         g_iso = 1 / (1 + an.smith_lambda(w, iso))
         assert np.max(np.abs(g_iso - g_tab)) < 2e-3
-    s = np.stack([rng.normal(0, 0.1, 400_000), rng.normal(0, 0.4, 400_000),
-                  np.ones(400_000)], -1)
+    s = np.stack([rng.normal(0, 0.1, 400_000), rng.normal(0, 0.4, 400_000), np.ones(400_000)], -1)
     stretched = an.Empirical(s / np.linalg.norm(s, axis=-1, keepdims=True), isotropic=False)
     w = spherical(np.radians(80.0), np.array([0.0, np.pi / 2]))
     lam = an.smith_lambda(w, stretched)
-    assert lam[1] > 2 * lam[0]                  # masking is stronger along the rough axis
+    assert lam[1] > 2 * lam[0]  # masking is stronger along the rough axis
 
 
 def test_vgroove_values():
     n = np.array([0.0, 0.0, 1.0])
     w = spherical(np.radians(60.0), 0.0)
-    assert an.vgroove_g1(w, n) == 1.0                           # h = n: never masked
-    h = spherical(np.radians(20.0), np.pi)                      # facet tilted away from w
+    assert an.vgroove_g1(w, n) == 1.0  # h = n: never masked
+    h = spherical(np.radians(20.0), np.pi)  # facet tilted away from w
     expected = 2 * h[2] * w[2] / (w @ h)
     assert np.isclose(an.vgroove_g1(w, h), min(1.0, expected))
-    assert an.vgroove_g1(spherical(np.pi / 2, 0.0), h) == 0.0    # grazing
+    assert an.vgroove_g1(spherical(np.pi / 2, 0.0), h) == 0.0  # grazing
     assert an.vgroove_g(w, n, h) == min(an.vgroove_g1(w, h), an.vgroove_g1(n, h))
 
 
 def test_smith_g2_forms():
     ndf = an.Beckmann(0.5)
     wi, wo = spherical(np.radians(70.0), 0.0), spherical(np.radians(50.0), 2.0)
-    h = an._checks.half_vector(wi, wo)
+    h = half_vector(wi, wo)
     li, lo = an.smith_lambda(wi, ndf), an.smith_lambda(wo, ndf)
     assert np.isclose(an.smith_g2(wi, wo, h, ndf), 1 / ((1 + li) * (1 + lo)))
     assert np.isclose(an.smith_g2(wi, wo, h, ndf, correlated=True), 1 / (1 + li + lo))
@@ -180,18 +190,32 @@ azimuth = st.floats(0.0, 360.0)
 
 
 @settings(max_examples=150, deadline=None)
-@given(ti=angle, pi=azimuth, to=angle, po=azimuth, th=angle, ph=azimuth,
-       which=st.sampled_from(["half", "normal", "free"]),
-       name=st.sampled_from(list(NDFS)))
+@given(
+    ti=angle,
+    pi=azimuth,
+    to=angle,
+    po=azimuth,
+    th=angle,
+    ph=azimuth,
+    which=st.sampled_from(["half", "normal", "free"]),
+    name=st.sampled_from(list(NDFS)),
+)
 def test_finite_everywhere(ti, pi, to, po, th, ph, which, name):
     wi, wo = _unit(ti, pi), _unit(to, po)
-    h = {"half": an._checks.half_vector(wi, wo), "normal": np.array([0.0, 0.0, 1.0]),
-         "free": _unit(th, ph)}[which]
+    h = {
+        "half": half_vector(wi, wo),
+        "normal": np.array([0.0, 0.0, 1.0]),
+        "free": _unit(th, ph),
+    }[which]
     if not np.any(h):
         h = np.array([0.0, 0.0, 1.0])
     ndf = ndf_named(name)
-    for g in (an.vgroove_g(wi, wo, h), an.smith_g1(wi, h, ndf), an.smith_g1(wo, h, ndf),
-              an.shadowing_g(wi, wo, h, ndf, "smith-correlated")):
+    for g in (
+        an.vgroove_g(wi, wo, h),
+        an.smith_g1(wi, h, ndf),
+        an.smith_g1(wo, h, ndf),
+        an.shadowing_g(wi, wo, h, ndf, "smith-correlated"),
+    ):
         assert np.isfinite(g) and 0.0 <= g <= 1.0
 
 

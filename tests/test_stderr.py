@@ -18,12 +18,13 @@ variance is O(1/(K·events))). The same holds for the pooled χ²/dof of seed-vs
 differences, z = (f_a − f_b)/√(se_a² + se_b²) over K/2 disjoint seed pairs (M·K/2 dof).
 α = 0.01 with Šidák correction over the 4 interval checks (2 surfaces × 2 statistics).
 """
+
 import warnings
 
 import numpy as np
 import pytest
-from gof import sidak
 from scipy import stats
+from support import sidak
 
 from microsim import analytic as an
 from microsim.checkpoints import interrupt_at
@@ -34,7 +35,7 @@ from microsim.surfaces import flat, gaussian, vgrooves
 K, RAYS, THETA, BINS = 16, 200_000, [30.0, 70.0], Bins(9, 7)
 MIN_EVENTS = 100
 ALPHA = sidak(0.01, 4)
-C_MIN = 1.0 / 3.0                      # worst collapse bias (step edge, module docstring)
+C_MIN = 1.0 / 3.0  # worst collapse bias (step edge, module docstring)
 
 
 def chi2_interval(dof: int) -> tuple[float, float]:
@@ -50,8 +51,9 @@ def per_ray_stderr(res: Result, i: int) -> np.ndarray:
 
 def calibration(surface):
     """(mean ratio new, mean ratio old, pooled χ²/dof new, M bins) over the incidences."""
-    runs = [simulate(surface, "aluminium", THETA, rays=RAYS, bins=BINS, seed=1000 + k)
-            for k in range(K)]
+    runs = [
+        simulate(surface, "aluminium", THETA, rays=RAYS, bins=BINS, seed=1000 + k) for k in range(K)
+    ]
     assert all(r.meta["stderr_method"] == "pairs" for r in runs)
     r_new, r_old, chi2, dof = [], [], 0.0, 0
     for i in range(len(THETA)):
@@ -64,7 +66,7 @@ def calibration(surface):
         r_old.append(s2 / np.mean(old[:, used] ** 2, axis=0))
         a, b = f[0::2, used], f[1::2, used]
         sa, sb = se[0::2, used], se[1::2, used]
-        chi2 += float(np.sum((a - b) ** 2 / (sa ** 2 + sb ** 2)))
+        chi2 += float(np.sum((a - b) ** 2 / (sa**2 + sb**2)))
         dof += a.size
     r_new, r_old = np.concatenate(r_new), np.concatenate(r_old)
     return float(r_new.mean()), float(r_old.mean()), chi2 / dof, r_new.size, dof
@@ -86,13 +88,15 @@ def grooves():
 def test_pair_stderr_matches_the_scatter_between_seeds(request, name):
     ratio, ratio_old, chi2_dof, m, dof = calibration(request.getfixturevalue(name))
     lo, hi = chi2_interval(m * (K - 1))
-    print(f"{name}: M = {m}, ratio new {ratio:.3f}, old {ratio_old:.3f}, chi2/dof {chi2_dof:.3f}, "
-          f"interval [{C_MIN * lo:.3f}, {hi:.3f}]")
+    print(
+        f"{name}: M = {m}, ratio new {ratio:.3f}, old {ratio_old:.3f}, chi2/dof {chi2_dof:.3f}, "
+        f"interval [{C_MIN * lo:.3f}, {hi:.3f}]"
+    )
     assert m >= 30
     assert C_MIN * lo <= ratio <= hi
     lo2, hi2 = chi2_interval(dof)
     assert C_MIN * lo2 <= chi2_dof <= hi2
-    if name == "heightfield":          # the per-ray formula ignores the stratification
+    if name == "heightfield":  # the per-ray formula ignores the stratification
         assert ratio_old < C_MIN * lo
 
 
@@ -104,17 +108,18 @@ def test_sum_pair_is_the_sum_over_adjacent_ray_pairs_in_one_bin(heightfield):
     n, bins = 5 * BLOCK + 7, Bins(9, 7)
     res = simulate(heightfield, "aluminium", 40.0, rays=n, bins=bins, seed=3)
     ev = ray_events(heightfield, "aluminium", 40.0, rays=n, seed=3)
-    where = np.where(ev.status == LEDGER.index("single"),
-                     bins.locate(np.nan_to_num(ev.wo), 0.0), -1)
+    where = np.where(
+        ev.status == LEDGER.index("single"), bins.locate(np.nan_to_num(ev.wo), 0.0), -1
+    )
     x = np.zeros((n, bins.shape[0] * bins.shape[1]))
     ok = where >= 0
     x[np.flatnonzero(ok), where[ok]] = ev.weight[ok]
-    want = np.sum(x[0:n - 1:2] * x[1:n:2], axis=0)
+    want = np.sum(x[0 : n - 1 : 2] * x[1:n:2], axis=0)
     got = res.tallies["sum_pair"][0, 0]
     assert np.any(want > 0)
     assert np.allclose(got, want, rtol=1e-12, atol=0)
     # Σx² − 2Σpair = Σ_k (x_2k − x_2k+1)² + x_last²: the variance estimate is a sum of squares
-    sq = np.sum((x[0:n - 1:2] - x[1:n:2]) ** 2, axis=0) + x[-1] ** 2
+    sq = np.sum((x[0 : n - 1 : 2] - x[1:n:2]) ** 2, axis=0) + x[-1] ** 2
     assert np.allclose(res.tallies["sum_w2"][0, 0] - 2 * got, sq, rtol=1e-9, atol=1e-12)
 
 
@@ -136,8 +141,9 @@ def test_save_load_keeps_the_pair_tally(tmp_path, grooves):
 
 
 def test_independent_origins_keep_the_per_ray_formula(grooves):
-    res = simulate(grooves, "aluminium", 30.0, rays=3 * BLOCK, bins=Bins(9, 7),
-                   origins="independent")
+    res = simulate(
+        grooves, "aluminium", 30.0, rays=3 * BLOCK, bins=Bins(9, 7), origins="independent"
+    )
     assert res.meta["stderr_method"] == "per-ray"
     assert np.array_equal(res.stderr[0].ravel(), per_ray_stderr(res, 0), equal_nan=True)
 
@@ -150,16 +156,17 @@ def test_pair_rule_falls_back_to_per_ray_where_the_pair_estimate_is_zero():
     assert np.all(res.stderr <= 1e-7 * res.brdf.max())
     # pair estimate 0 but per-ray > 0 (constructed): the per-ray value is used
     omega = np.ones(2)
-    f, se = bin_estimate(np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega,
-                         sum_pair=np.array([1.0, 0.0]))
+    f, se = bin_estimate(
+        np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega, sum_pair=np.array([1.0, 0.0])
+    )
     per = bin_estimate(np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega)[1]
-    assert se[0] == per[0] > 0 and se[1] == pytest.approx(0.1)     # √(1 − 0)/10
+    assert se[0] == per[0] > 0 and se[1] == pytest.approx(0.1)  # √(1 − 0)/10
 
 
 # --- isotropic (per-block incidence-azimuth rotation) ------------------------------------------
 def test_isotropic_is_part_of_the_resume_configuration(heightfield):
     kw = dict(rays=6 * BLOCK, bins=Bins(9, 7), seed=5, threads=1, chunk=BLOCK)
-    with interrupt_at("simulation", after=1):              # after two of the six blocks
+    with interrupt_at("simulation", after=1):  # after two of the six blocks
         part = simulate(heightfield, "aluminium", 50.0, isotropic=True, **kw)
     assert part.is_partial and part.meta["isotropic"] and part.meta["stderr_method"] == "per-ray"
     with pytest.raises(ValueError, match="isotropic"):
@@ -169,7 +176,7 @@ def test_isotropic_is_part_of_the_resume_configuration(heightfield):
     for k in full.tallies:
         assert np.array_equal(full.tallies[k], resumed.tallies[k]), k
     plain = simulate(heightfield, "aluminium", 50.0, **kw)
-    assert not np.array_equal(plain.sum_w, full.sum_w)                 # the rotation acts
+    assert not np.array_equal(plain.sum_w, full.sum_w)  # the rotation acts
 
 
 def test_isotropic_rejects_non_booleans(grooves):
@@ -200,6 +207,7 @@ seed = 3
 
 def test_runner_traces_an_auto_scene_to_the_target(tmp_path):
     from microsim import runner
+
     scene = tmp_path / "auto.toml"
     scene.write_text(AUTO_SCENE.format(realisations=1))
     plan = runner.plan_run(scene, out=tmp_path / "run", quick=True)
@@ -212,11 +220,12 @@ def test_runner_traces_an_auto_scene_to_the_target(tmp_path):
     meta = runner.tracing.run_meta(plan)
     assert meta["rays"] == "auto" and meta["max_rays"] == plan.rays
     fixed = runner.plan_run(scene, out=tmp_path / "run2", quick=True, rays=5000)
-    assert not fixed.auto and fixed.rays == 5000                      # --rays overrides
+    assert not fixed.auto and fixed.rays == 5000  # --rays overrides
 
 
 def test_runner_refuses_auto_with_several_realisations(tmp_path):
     from microsim import runner
+
     scene = tmp_path / "auto.toml"
     scene.write_text(AUTO_SCENE.format(realisations=2))
     with pytest.raises(ValueError, match="auto"):

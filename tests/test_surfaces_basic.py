@@ -1,4 +1,5 @@
 """Surface container, flat mirror, meshes, and heightfields read from files."""
+
 import numpy as np
 import pytest
 
@@ -18,21 +19,30 @@ def test_flat():
         flat(-1.0)
 
 
-@pytest.mark.parametrize("surf", [gaussian(32, 0.1, 0.05, 0.8), vgrooves(40, an.GGX(0.5), tile=3.0), flat()],
-                         ids=["gaussian", "vgrooves", "flat"])
+@pytest.mark.parametrize(
+    "surf",
+    [gaussian(32, 0.1, 0.05, 0.8), vgrooves(40, an.GGX(0.5), tile=3.0), flat()],
+    ids=["gaussian", "vgrooves", "flat"],
+)
 def test_mesh_contract(surf):
     m = surf.mesh()
     v32 = surf.vertices.astype(np.float32)
-    assert np.array_equal(m.vertices, v32) and np.array_equal(m.faces, surf.faces)   # float32 values
-    assert len(m.vertices) == len(surf.vertices) and len(m.faces) == len(surf.faces)   # not processed
+    assert np.array_equal(m.vertices, v32) and np.array_equal(m.faces, surf.faces)  # float32 values
+    assert len(m.vertices) == len(surf.vertices) and len(m.faces) == len(
+        surf.faces
+    )  # not processed
     lx, ly = surf.tile_size
-    assert np.allclose(surf.vertices[:, 0].min(), -lx / 2) and np.allclose(surf.vertices[:, 0].max(), lx / 2)
-    assert np.allclose(surf.vertices[:, 1].min(), -ly / 2) and np.allclose(surf.vertices[:, 1].max(), ly / 2)
+    assert np.allclose(surf.vertices[:, 0].min(), -lx / 2) and np.allclose(
+        surf.vertices[:, 0].max(), lx / 2
+    )
+    assert np.allclose(surf.vertices[:, 1].min(), -ly / 2) and np.allclose(
+        surf.vertices[:, 1].max(), ly / 2
+    )
     assert surf.vertices.dtype == np.float64 and surf.faces.dtype == np.int32
     n = surf.facet_normals()
     assert np.allclose(np.linalg.norm(n, axis=1), 1) and np.all(n[:, 2] > 0)
     assert np.allclose(surf.projected_areas(), surf.facet_areas() * n[:, 2])
-    assert surf.projected_areas().sum() == pytest.approx(lx * ly)        # covers the tile once
+    assert surf.projected_areas().sum() == pytest.approx(lx * ly)  # covers the tile once
     zmin, zmax = surf.z_range
     assert zmin <= zmax
 
@@ -72,7 +82,7 @@ def test_from_file_formats(tmp_path, name):
 def test_from_file_mirrors_non_periodic(tmp_path):
     """Even reflection: (2n − 2)² grid, every x/y slope of the input kept (up to sign), none new."""
     rng = np.random.default_rng(1)
-    h = np.cumsum(rng.normal(size=(9, 11)), axis=1)               # strongly non-periodic
+    h = np.cumsum(rng.normal(size=(9, 11)), axis=1)  # strongly non-periodic
     s = from_file(write(tmp_path, "h.npy", h), dx=1.0)
     assert s.heights.shape == (16, 20) and s.tile_size == (20.0, 16.0) and s.periodic
     assert s.warnings and "mirror" in s.warnings[0]
@@ -84,11 +94,18 @@ def test_from_file_mirrors_non_periodic(tmp_path):
     assert np.array_equal(mirror_periodic(h)[:9, :11], h)
 
 
-@pytest.mark.parametrize("arr, dx, key", [
-    (np.full((10, 10), np.nan), 1.0, "NaN"), (np.zeros(20), 1.0, "2D"),
-    (np.zeros((7, 20)), 1.0, "8x8"), (np.zeros((10, 10)), 0.0, "dx"),
-    (np.zeros((10, 10)), float("nan"), "dx"), (np.zeros((10, 10)), float("inf"), "dx"),
-    (np.zeros((10, 10, 2)), 1.0, "2D")])
+@pytest.mark.parametrize(
+    "arr, dx, key",
+    [
+        (np.full((10, 10), np.nan), 1.0, "NaN"),
+        (np.zeros(20), 1.0, "2D"),
+        (np.zeros((7, 20)), 1.0, "8x8"),
+        (np.zeros((10, 10)), 0.0, "dx"),
+        (np.zeros((10, 10)), float("nan"), "dx"),
+        (np.zeros((10, 10)), float("inf"), "dx"),
+        (np.zeros((10, 10, 2)), 1.0, "2D"),
+    ],
+)
 def test_from_file_errors(tmp_path, arr, dx, key):
     with pytest.raises(ValueError, match=key):
         from_file(write(tmp_path, "h.npy", arr), dx=dx)

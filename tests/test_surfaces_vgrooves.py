@@ -1,18 +1,25 @@
 """V-groove surfaces: facet tilts follow D(h)(h·n) for every NDF; exact geometry
 (docs/design.md)."""
+
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import integrate, stats
+from support import pearson_chi2, sidak
 
-from gof import pearson_chi2, sidak
 from microsim import analytic as an
 from microsim.surfaces import vgrooves
 
-NDFS = {"beckmann-0.3": an.Beckmann(0.3), "ggx-0.3": an.GGX(0.3), "blinn-phong-20": an.BlinnPhong(20.0),
-        "vmf-17": an.VonMisesFisher(17.0), "vmf-1024": an.VonMisesFisher(1024.0),
-        "abc-200-2": an.ABC(200.0, 2.0)}
-ALPHA = sidak(0.01, len(NDFS))        # one χ² test per NDF in this family
+NDFS = {
+    "beckmann-0.3": an.Beckmann(0.3),
+    "ggx-0.3": an.GGX(0.3),
+    "blinn-phong-20": an.BlinnPhong(20.0),
+    "vmf-17": an.VonMisesFisher(17.0),
+    "vmf-1024": an.VonMisesFisher(1024.0),
+    "abc-200-2": an.ABC(200.0, 2.0),
+}
+ALPHA = sidak(0.01, len(NDFS))  # one χ² test per NDF in this family
 
 
 def groove_tilts_from_mesh(surf):
@@ -31,9 +38,13 @@ def test_random_groove_tilts_pass_chi2_against_projected_ndf(name):
     theta = groove_tilts_from_mesh(vgrooves(n, ndf, seed=7, sampling="random"))
     top = float(ndf.tilt_quantile_rad(1 - 1e-4))
     edges = np.append(np.linspace(0.0, top, 41), np.pi / 2)
-    probs = np.array([integrate.quad(ndf.tilt_pdf_rad, a, b, limit=200, epsabs=1e-13)[0]
-                      for a, b in zip(edges[:-1], edges[1:])])
-    assert abs(probs.sum() - 1) < 1e-6           # D is normalised (Mikkelsen 2009, eq. 14)
+    probs = np.array(
+        [
+            integrate.quad(ndf.tilt_pdf_rad, a, b, limit=200, epsabs=1e-13)[0]
+            for a, b in zip(edges[:-1], edges[1:])
+        ]
+    )
+    assert abs(probs.sum() - 1) < 1e-6  # D is normalised (Mikkelsen 2009, eq. 14)
     observed, _ = np.histogram(theta, edges)
     _, _, p = pearson_chi2(observed, probs / probs.sum() * n)
     assert p > ALPHA, f"{name}: p = {p:.3g}"
@@ -60,7 +71,7 @@ def test_stratified_order_is_shuffled():
     theta = groove_tilts_from_mesh(vgrooves(n, NDFS["beckmann-0.3"], seed=1))
     rho = stats.spearmanr(np.arange(n), theta).statistic
     assert abs(rho) < 4 / np.sqrt(n)
-    assert np.mean(np.diff(theta) > 0) < 0.6    # not monotone
+    assert np.mean(np.diff(theta) > 0) < 0.6  # not monotone
 
 
 def test_geometry_rims_depths_triangles():
@@ -101,10 +112,17 @@ def test_seeds():
         assert not np.array_equal(a.vertices, c.vertices)
 
 
-@pytest.mark.parametrize("kwargs, key", [
-    (dict(n_grooves=0), "n_grooves"), (dict(n_grooves=2.5), "n_grooves"),
-    (dict(sampling="sobol"), "sampling"), (dict(ndf="beckmann"), "ndf"),
-    (dict(tile=-1.0), "tile"), (dict(seed=-1), "seed")])
+@pytest.mark.parametrize(
+    "kwargs, key",
+    [
+        (dict(n_grooves=0), "n_grooves"),
+        (dict(n_grooves=2.5), "n_grooves"),
+        (dict(sampling="sobol"), "sampling"),
+        (dict(ndf="beckmann"), "ndf"),
+        (dict(tile=-1.0), "tile"),
+        (dict(seed=-1), "seed"),
+    ],
+)
 def test_bad_input(kwargs, key):
     args = dict(n_grooves=10, ndf=NDFS["beckmann-0.3"]) | kwargs
     with pytest.raises(ValueError, match=key):
@@ -112,8 +130,13 @@ def test_bad_input(kwargs, key):
 
 
 @settings(max_examples=40, deadline=None)
-@given(n=st.integers(1, 60), m=st.floats(0.01, 3.0), tile=st.floats(1e-3, 1e3),
-       sampling=st.sampled_from(["stratified", "random"]), seed=st.integers(0, 10))
+@given(
+    n=st.integers(1, 60),
+    m=st.floats(0.01, 3.0),
+    tile=st.floats(1e-3, 1e3),
+    sampling=st.sampled_from(["stratified", "random"]),
+    seed=st.integers(0, 10),
+)
 def test_property_finite_and_below_rims(n, m, tile, sampling, seed):
     surf = vgrooves(n, an.Beckmann(m), seed=seed, sampling=sampling, tile=tile)
     assert np.all(np.isfinite(surf.vertices)) and np.all(surf.vertices[:, 2] <= 0)

@@ -1,6 +1,7 @@
 """Sweeps (microsim.sweep): grid expansion, per-task atomic JSON results, resuming only the
 missing tasks after an interruption, and the same table from a Dask LocalCluster as from the
 local process pool."""
+
 import argparse
 import csv
 import json
@@ -10,14 +11,23 @@ import re
 import pytest
 
 from microsim.atomic import write_json
-from microsim.sweep import (SweepSpec, add_sweep_command, expand_tasks,
-                            load_sweep, run_sweep)
+from microsim.sweep import SweepSpec, add_sweep_command, expand_tasks, load_sweep, run_sweep
 
-TINY = {"rays": 12_000, "theta_bins": 10, "phi_bins": 7, "theta_i": [30, 70], "seed": 1,
-        "models": ["vgroove", "smith"],
-        "scenes": [{"name": "vg", "ior": ["aluminium"],
-                    "surface": {"kind": "vgrooves", "n_grooves": 100, "ndf": "beckmann",
-                                "m": [0.2, 0.6]}}]}
+TINY = {
+    "rays": 12_000,
+    "theta_bins": 10,
+    "phi_bins": 7,
+    "theta_i": [30, 70],
+    "seed": 1,
+    "models": ["vgroove", "smith"],
+    "scenes": [
+        {
+            "name": "vg",
+            "ior": ["aluminium"],
+            "surface": {"kind": "vgrooves", "n_grooves": 100, "ndf": "beckmann", "m": [0.2, 0.6]},
+        }
+    ],
+}
 
 
 def tiny_spec() -> SweepSpec:
@@ -31,16 +41,25 @@ def table(out, drop=("seconds",)):
 
 def test_grid_expands_every_axis():
     spec = tiny_spec()
-    assert len(spec.tasks) == 2 * 1 * 2                      # m × ior × θi
+    assert len(spec.tasks) == 2 * 1 * 2  # m × ior × θi
     assert len({t.id for t in spec.tasks}) == len(spec.tasks)
     assert {t.surface["m"] for t in spec.tasks} == {0.2, 0.6}
-    for path, n in (("sweeps/vgroove-roughness.toml", 7 * 2 * 4),
-                    ("sweeps/gaussian-roughness.toml", 5 * 4)):
+    for path, n in (
+        ("sweeps/vgroove-roughness.toml", 7 * 2 * 4),
+        ("sweeps/gaussian-roughness.toml", 5 * 4),
+    ):
         assert len(load_sweep(path).tasks) == n
 
 
-@pytest.mark.parametrize("bad, key", [({"raysx": 1}, "raysx"), ({"theta_i": [95]}, "theta_i"),
-                                      ({"models": ["cook"]}, "models"), ({"scenes": []}, "scenes")])
+@pytest.mark.parametrize(
+    "bad, key",
+    [
+        ({"raysx": 1}, "raysx"),
+        ({"theta_i": [95]}, "theta_i"),
+        ({"models": ["cook"]}, "models"),
+        ({"scenes": []}, "scenes"),
+    ],
+)
 def test_bad_sweeps_raise_naming_the_key(bad, key):
     with pytest.raises(ValueError, match=key):
         expand_tasks({**TINY, **bad})
@@ -55,9 +74,9 @@ def test_bad_surface_parameters_raise():
 def test_interrupted_sweep_resumes_with_only_the_missing_tasks(tmp_path):
     spec = tiny_spec()
     out = tmp_path / "sweep"
-    first = run_sweep(spec, out, workers=2, limit=2)          # "killed" after 2 results
+    first = run_sweep(spec, out, workers=2, limit=2)  # "killed" after 2 results
     assert len(first["computed"]) == 2 and first["skipped"] == []
-    assert len(table(out)) == 2 * 2                           # partial table: 2 tasks × 2 models
+    assert len(table(out)) == 2 * 2  # partial table: 2 tasks × 2 models
     # a write interrupted mid-way leaves only a temporary file, never a truncated result
     (out / "tasks" / ".junk-abc.tmp").write_text("{")
     second = run_sweep(spec, out, workers=2)
@@ -79,7 +98,7 @@ def test_unreadable_result_is_recomputed(tmp_path):
     spec = tiny_spec()
     run_sweep(spec, tmp_path, workers=2, limit=1)
     done = next((tmp_path / "tasks").glob("*.json"))
-    done.write_text('{"id": ')                                 # corrupt
+    done.write_text('{"id": ')  # corrupt
     res = run_sweep(spec, tmp_path, workers=2)
     assert done.stem in res["computed"]
 
@@ -90,12 +109,14 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.integration
 def test_dask_local_cluster_gives_the_same_table(tmp_path):
     distributed = pytest.importorskip("distributed")
     spec = tiny_spec()
     run_sweep(spec, tmp_path / "local", workers=2)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
         res = run_sweep(spec, tmp_path / "dask", scheduler=cluster.scheduler_address)
     assert len(res["computed"]) == len(spec.tasks)
     assert table(tmp_path / "dask") == table(tmp_path / "local")
@@ -110,7 +131,7 @@ def test_sweep_subcommand_registers():
     assert args.scheduler == "tcp://h:8786" and args.workers == 3 and callable(args.func)
 
 
-# --- issue 11: interrupts, partial results, progress, empty axes, CSV, scheduler ----------------
+# --- hardening: interrupts, partial results, progress, empty axes, CSV, scheduler ----------------
 def _json(path):
     return json.loads(path.read_text())
 
@@ -119,11 +140,12 @@ def test_partial_simulation_writes_no_task_file(tmp_path, monkeypatch):
     """A task whose simulate comes back partial (SIGINT in the worker) is not stored as done."""
     import microsim.sim as sim
     from microsim.sweep import run_task
+
     real = sim.simulate
 
     def interrupted(surface, material, theta_i, *, rays, **kw):
-        res = real(surface, material, theta_i, rays=rays // 2, **kw)   # fewer rays tallied …
-        res.meta["partial"] = True                                     # … as after a Ctrl-C
+        res = real(surface, material, theta_i, rays=rays // 2, **kw)  # fewer rays tallied …
+        res.meta["partial"] = True  # … as after a Ctrl-C
         return res
 
     monkeypatch.setattr(sim, "simulate", interrupted)
@@ -137,6 +159,7 @@ def test_simulation_checkpoint_interrupt_writes_no_task_file(tmp_path):
     """The same through the in-process hook, if simulate marks its chunks with checkpoints."""
     from microsim.checkpoints import interrupt_at
     from microsim.sweep import run_task
+
     task = expand_tasks({**TINY, "rays": 400_000, "theta_i": [30]})[0]
     with interrupt_at("simulation") as state:
         rec = run_task(task, tmp_path)
@@ -152,6 +175,7 @@ def test_incomplete_task_files_are_recomputed_and_never_summarised(tmp_path, dam
     cut short, another task's record, no verdicts) count as missing: not in the summary, and
     the rerun computes them again."""
     from microsim.sweep import gather, write_summary
+
     spec = tiny_spec()
     run_sweep(spec, tmp_path, workers=2)
     victim = tmp_path / "tasks" / f"{spec.tasks[0].id}.json"
@@ -179,6 +203,7 @@ def test_interrupted_sweep_keeps_finished_tasks_and_writes_no_summary(tmp_path):
     """Ctrl-C after the 2nd finished task: the finished tasks stay (complete), no summary is
     written, and the rerun computes only the rest and equals an uninterrupted sweep."""
     from microsim.checkpoints import interrupt_at
+
     spec = tiny_spec()
     out = tmp_path / "sweep"
     with interrupt_at("sweep-task", after=1) as state, pytest.raises(KeyboardInterrupt):
@@ -200,6 +225,7 @@ def test_interrupted_sweep_keeps_finished_tasks_and_writes_no_summary(tmp_path):
 def test_cli_interrupt_exits_130_with_one_line_telling_how_to_continue(tmp_path, capsys):
     from microsim.checkpoints import interrupt_at
     from microsim.cli import main
+
     sweep = tmp_path / "tiny.toml"
     sweep.write_text(TINY_TOML)
     out = tmp_path / "out"
@@ -239,10 +265,10 @@ def test_progress_lines_show_parameter_values_not_task_ids(tmp_path):
     done = [ln for ln in lines if "/12" in ln]
     assert len(done) == len(spec.tasks) == 12
     for t in spec.tasks:
-        assert t.id not in "\n".join(lines)                     # no hashed ids …
+        assert t.id not in "\n".join(lines)  # no hashed ids …
     for k in range(1, 13):
-        assert sum(bool(re.search(rf"\b{k}/12\b", ln)) for ln in done) == 1   # … but k/N
-    for ln in done:                                             # and the task's parameters
+        assert sum(bool(re.search(rf"\b{k}/12\b", ln)) for ln in done) == 1  # … but k/N
+    for ln in done:  # and the task's parameters
         assert "vg" in ln and ("m=0.2" in ln or "m=0.6" in ln)
         assert ("aluminium" in ln) + ("1.5+0.25i" in ln) + ("1.33" in ln) == 1
         assert "θi=30°" in ln or "θi=70°" in ln
@@ -254,10 +280,13 @@ def load_sweep_text(tmp_path, text, name="s.toml"):
     return load_sweep(p)
 
 
-@pytest.mark.parametrize("where, key", [("surface", "m"), ("scene", "ior"), ("top", "theta_i"),
-                                         ("top", "scenes"), ("top", "models")])
+@pytest.mark.parametrize(
+    "where, key",
+    [("surface", "m"), ("scene", "ior"), ("top", "theta_i"), ("top", "scenes"), ("top", "models")],
+)
 def test_empty_axis_is_a_usage_error(where, key):
     from microsim.errors import UsageError
+
     data = json.loads(json.dumps(TINY))
     if where == "surface":
         data["scenes"][0]["surface"][key] = []
@@ -270,8 +299,12 @@ def test_empty_axis_is_a_usage_error(where, key):
 
 
 def test_csv_material_column_is_plain_text(tmp_path):
-    spec = load_sweep_text(tmp_path, TINY_TOML.replace("m = [0.2, 0.6]", "m = 0.3")
-                           .replace("theta_i = [30, 70]", "theta_i = [30]"))
+    spec = load_sweep_text(
+        tmp_path,
+        TINY_TOML.replace("m = [0.2, 0.6]", "m = 0.3").replace(
+            "theta_i = [30, 70]", "theta_i = [30]"
+        ),
+    )
     run_sweep(spec, tmp_path / "out", workers=2)
     with open(tmp_path / "out" / "summary.csv", newline="") as fh:
         rows = list(csv.reader(fh))
@@ -283,6 +316,7 @@ def test_csv_material_column_is_plain_text(tmp_path):
 
 def _free_port():
     import socket
+
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -291,8 +325,10 @@ def _free_port():
 def test_unreachable_scheduler_fails_fast_naming_the_address(tmp_path):
     pytest.importorskip("distributed")
     import time
+
     from microsim.errors import EnvironmentFailure
-    addr = f"tcp://127.0.0.1:{_free_port()}"                     # loopback, nothing listens
+
+    addr = f"tcp://127.0.0.1:{_free_port()}"  # loopback, nothing listens
     t0 = time.monotonic()
     with pytest.raises(EnvironmentFailure, match=addr):
         run_sweep(tiny_spec(), tmp_path / "out", scheduler=addr, connect_timeout=1.0)

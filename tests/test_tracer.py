@@ -4,50 +4,19 @@ energy, exact V-groove masking against traced masking, input validation.
 Test geometry is built here with plain numpy (``Surface`` only as the container), so these
 tests do not depend on the surface generators.
 """
+
 import numpy as np
 import pytest
+from support import heightfield_surface, random_heights, vgroove_surface
 
-from microsim.analytic._checks import spherical_deg
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.sim import Bins, Tracer, VGrooveProfile, ray_events, simulate
 from microsim.sim.tracer import ESCAPED, HIT, MISSED, UNRESOLVED
 from microsim.surfaces.surface import Surface, flat, heightfield_mesh
+from microsim.vectors import spherical_deg
 
 
 # --- test geometry -------------------------------------------------------------------------
-def vgroove_surface(tilts_deg, tile=1.0) -> Surface:
-    """Equal-width symmetric V-grooves along y with the given tilts (deg); rims at z = 0."""
-    t = np.radians(np.asarray(tilts_deg, dtype=float))
-    n, w = len(t), tile / len(t)
-    x = -tile / 2 + np.arange(2 * n + 1) * (w / 2)
-    z = np.zeros(2 * n + 1)
-    z[1::2] = -(w / 2) * np.tan(t)
-    m = len(x)
-    lo = np.stack([x, np.full(m, -tile / 2), z], axis=1)
-    hi = np.stack([x, np.full(m, tile / 2), z], axis=1)
-    a = np.arange(m - 1)
-    faces = np.concatenate([np.stack([a, a + 1, a + 1 + m], 1), np.stack([a, a + 1 + m, a + m], 1)])
-    return Surface("vgrooves", np.concatenate([lo, hi]), faces.astype(np.int32), (tile, tile),
-                   True, {"tilts_deg": list(map(float, tilts_deg))}, azimuth_average=True)
-
-
-def random_heights(n=64, sigma=0.02, corr_cells=8.0, seed=0) -> np.ndarray:
-    """Periodic Gaussian-filtered white noise, rms ``sigma`` (unit tile, dx = 1/n)."""
-    rng = np.random.default_rng(seed)
-    f = np.fft.fftfreq(n)
-    fx, fy = np.meshgrid(f, f)
-    spec = np.exp(-(np.pi * corr_cells) ** 2 * (fx ** 2 + fy ** 2) / 2)
-    h = np.real(np.fft.ifft2(np.fft.fft2(rng.normal(size=(n, n))) * spec))
-    h -= h.mean()
-    return h * (sigma / h.std())
-
-
-def heightfield_surface(h: np.ndarray, dx: float) -> Surface:
-    v, f = heightfield_mesh(h, dx)
-    ny, nx = h.shape
-    return Surface("gaussian", v, f, (nx * dx, ny * dx), True, {}, heights=h, dx=dx)
-
-
 # --- periodic walk ---------------------------------------------------------------------------
 def _grazing_rays(n, theta_lo, theta_hi, seed, z0):
     rng = np.random.default_rng(seed)
@@ -59,31 +28,32 @@ def _grazing_rays(n, theta_lo, theta_hi, seed, z0):
 
 def test_periodic_walk_matches_a_3x3_replicated_mesh():
     """Hits on the wrapped unit tile equal hits on an explicit 3×3 copy (modulo the period)."""
-    h = random_heights(sigma=0.012, seed=3)           # height range < 0.1: at 85° a ray crosses < 1 tile
+    h = random_heights(sigma=0.012, seed=3)  # height range < 0.1: at 85° a ray crosses < 1 tile
     small = Tracer(heightfield_surface(h, 1 / 64))
-    big = Tracer(Surface("gaussian", *heightfield_mesh(np.tile(h, (3, 3)), 1 / 64), (3.0, 3.0),
-                         False, {}))
+    big = Tracer(
+        Surface("gaussian", *heightfield_mesh(np.tile(h, (3, 3)), 1 / 64), (3.0, 3.0), False, {})
+    )
     o, d = _grazing_rays(20_000, 60, 88, 1, small.zmax + small.top_margin)
     a, b = small.first_hit(o, -d), big.first_hit(o, -d)
     assert np.all(a.status == HIT) and np.all(b.status == HIT)
     delta = a.point - b.point
-    delta[:, :2] -= np.round(delta[:, :2])             # equal modulo the unit period
+    delta[:, :2] -= np.round(delta[:, :2])  # equal modulo the unit period
     assert np.max(np.abs(delta)) < 1e-5
     # secondary rays from those hits, upwards 50°–85° from +z: same fate on both meshes
-    small.eps = big.eps                               # one offset for both (valid for both)
+    small.eps = big.eps  # one offset for both (valid for both)
     rng = np.random.default_rng(2)
     up = spherical_deg(rng.uniform(50, 85, len(o)), rng.uniform(0, 360, len(o)))
     ea = small.escapes(a.point, a.normal, up)
     eb = big.escapes(b.point, b.normal, up)
     assert set(np.unique(ea)) <= {ESCAPED, HIT}
     blocked = np.mean(ea == HIT)
-    assert 0.02 < blocked < 0.98                       # the comparison is not vacuous
+    assert 0.02 < blocked < 0.98  # the comparison is not vacuous
     # decisions may differ only for rays grazing the surface within float32 rounding
     assert np.sum(ea != eb) <= 1e-3 * len(o)
 
 
 def test_no_unresolved_or_missed_rays_below_85_degrees():
-    h = random_heights(sigma=0.03, seed=5)             # height range ~ 0.2 tile: many wraps at 85°
+    h = random_heights(sigma=0.03, seed=5)  # height range ~ 0.2 tile: many wraps at 85°
     tr = Tracer(heightfield_surface(h, 1 / 64))
     o, d = _grazing_rays(20_000, 0, 85, 7, tr.zmax + tr.top_margin)
     hits = tr.first_hit(o, -d)
@@ -106,7 +76,7 @@ def test_wrap_cap_covers_89_5_degrees():
 # --- flat mirror ------------------------------------------------------------------------------
 @pytest.mark.parametrize("material", ["aluminium", "methanol"])
 def test_flat_mirror_puts_fresnel_energy_in_the_specular_bin(material):
-    bins = Bins(n_theta=45, n_phi=37)                   # 2° bins: odd θ lie at bin centres
+    bins = Bins(n_theta=45, n_phi=37)  # 2° bins: odd θ lie at bin centres
     theta = np.array([0.0, 31.0, 61.0, 81.0, 89.0])
     res = simulate(flat(), material, theta, phi_i=17.0, rays=5000, bins=bins, seed=4)
     omega = bins.projected_solid_angle()
@@ -118,7 +88,7 @@ def test_flat_mirror_puts_fresnel_energy_in_the_specular_bin(material):
         # at normal incidence Δφ is undefined: the whole first θo ring is the mirror bin
         in_mirror_bin = energy[0].sum() if t == 0 else energy.ravel()[k]
         assert in_mirror_bin == pytest.approx(F[i], rel=1e-6)
-        assert np.sum(energy) == pytest.approx(F[i], rel=1e-6)   # nothing anywhere else
+        assert np.sum(energy) == pytest.approx(F[i], rel=1e-6)  # nothing anywhere else
         assert res.ledger["single"][i] == 1.0
         assert res.ledger["single_fresnel"][i] == pytest.approx(F[i], rel=1e-12)
 
@@ -135,7 +105,7 @@ def test_exact_and_traced_masking_agree_ray_by_ray():
         a = ray_events(s, None, th, rays=100_000, seed=2, masking="traced")
         b = ray_events(s, None, th, rays=100_000, seed=2, masking="exact")
         differ = a.status != b.status
-        assert np.sum(b.status == 1) > 100              # some rays are masked
+        assert np.sum(b.status == 1) > 100  # some rays are masked
         tan_o = np.hypot(b.wo[differ, 0], b.wo[differ, 1]) / b.wo[differ, 2]
         assert np.all(np.abs(b.margin[differ]) < 4 * eps * (1 + tan_o))
         assert differ.sum() <= 1e-4 * len(differ) + 2

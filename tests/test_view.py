@@ -3,6 +3,7 @@
 Each view runs in a subprocess with DISPLAY unset, as on a headless CI machine. The tests are
 skipped only when no OpenGL implementation can be loaded at all (a tiny probe render fails).
 """
+
 import argparse
 import os
 import subprocess
@@ -15,8 +16,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "surfaces" / "vgroove-beckmann-0.3.toml"
 SIZE = (640, 480)
-PROBE = ("import pyvista as pv; p = pv.Plotter(off_screen=True, window_size=(64, 64)); "
-         "p.add_mesh(pv.Sphere()); p.screenshot({path!r}); p.close()")
+PROBE = (
+    "import pyvista as pv; p = pv.Plotter(off_screen=True, window_size=(64, 64)); "
+    "p.add_mesh(pv.Sphere()); p.screenshot({path!r}); p.close()"
+)
 
 
 def _env():
@@ -28,22 +31,36 @@ def _env():
 @pytest.fixture(scope="module")
 def opengl(tmp_path_factory):
     path = tmp_path_factory.mktemp("probe") / "probe.png"
-    r = subprocess.run([sys.executable, "-c", PROBE.format(path=str(path))], env=_env(),
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-c", PROBE.format(path=str(path))],
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     if r.returncode != 0 or not path.exists():
-        pytest.skip("no OpenGL implementation could be loaded off screen (VTK needs libEGL, "
-                    "e.g. apt-get install libegl1, or an OSMesa build): "
-                    + (r.stderr.strip().splitlines() or ["no output"])[-1])
+        pytest.skip(
+            "no OpenGL implementation could be loaded off screen (VTK needs libEGL, "
+            "e.g. apt-get install libegl1, or an OSMesa build): "
+            + (r.stderr.strip().splitlines() or ["no output"])[-1]
+        )
     return True
 
 
 def _run(args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "microsim.view", *map(str, args)], env=_env(),
-                          capture_output=True, text=True, timeout=120, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "microsim.view", *map(str, args)],
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=cwd,
+    )
 
 
 def _image(path) -> np.ndarray:
     from PIL import Image
+
     return np.asarray(Image.open(path).convert("RGB")).astype(np.int32)
 
 
@@ -55,6 +72,7 @@ def _content_fraction(img: np.ndarray) -> float:
 RAYS = {"rays": 200, "lobe": 20_000, "disk": 20_000}
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("what", ["surface", "rays", "lobe", "disk", "normals"])
 def test_view_renders_off_screen(opengl, tmp_path, what):
     out = tmp_path / f"{what}.png"
@@ -66,16 +84,28 @@ def test_view_renders_off_screen(opengl, tmp_path, what):
     assert out.exists()
     img = _image(out)
     assert img.shape[:2] == (SIZE[1], SIZE[0])
-    assert img.std() > 10.0                              # not one flat colour
+    assert img.std() > 10.0  # not one flat colour
     # titles alone cover well under 2% of the image; the geometry covers much more
     assert _content_fraction(img) > 0.02
 
 
+@pytest.mark.integration
 def test_lobe_shows_model_and_simulation_colours(opengl, tmp_path):
     """Simulation (left, coolwarm z-colours) and model (right, green) are both drawn."""
     out = tmp_path / "lobe.png"
-    r = _run([SCENE, "--what", "lobe", "--rays", 20_000, "--screenshot", out,
-              "--size", f"{SIZE[0]}x{SIZE[1]}"])
+    r = _run(
+        [
+            SCENE,
+            "--what",
+            "lobe",
+            "--rays",
+            20_000,
+            "--screenshot",
+            out,
+            "--size",
+            f"{SIZE[0]}x{SIZE[1]}",
+        ]
+    )
     assert r.returncode == 0, r.stderr
     img = _image(out)
     red, green, blue = img[..., 0], img[..., 1], img[..., 2]
@@ -90,6 +120,7 @@ def test_lobe_shows_model_and_simulation_colours(opengl, tmp_path):
     assert tinted[:, :half].mean() > 0.005
 
 
+@pytest.mark.integration
 def test_headless_without_screenshot_writes_default_file(opengl, tmp_path):
     r = _run([SCENE, "--what", "surface", "--size", "320x240"], cwd=tmp_path)
     assert r.returncode == 0, r.stderr
@@ -110,6 +141,7 @@ def test_bad_arguments_give_one_line_errors(tmp_path):
 
 def test_add_view_command_registers_the_subcommand():
     from microsim.view import add_view_command, run_view
+
     parser = argparse.ArgumentParser()
     add_view_command(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["view", "s.toml", "--what", "disk", "--theta-i", "45"])
@@ -120,6 +152,7 @@ def test_lobe_z_uses_stderr_and_poisson_floor():
     """z = (sim − model)/σ; an empty bin (σ = 0) whose model predicts λ = model·N·Ω/w̄ rays
     gets z = −√λ (Poisson), and a bin where both vanish gets 0."""
     from microsim.view import lobe_z
+
     sim = np.array([1.0, 0.0, 0.0])
     se = np.array([0.5, 0.0, 0.0])
     model = np.array([0.0, 2.0, 0.0])

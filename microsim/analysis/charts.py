@@ -12,6 +12,7 @@ Conventions: angles in degrees, BRDFs in sr⁻¹, Δφ = φo − φi (mirror dir
 Colours are fixed per name (``model_colour``) so a model looks the same in every chart; the
 simulation is always drawn in ``SIM_COLOUR``.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,29 +32,62 @@ from microsim.errors import UsageError
 
 from ..atomic import atomic_open
 
-__all__ = ["DPI", "figure_size", "SIM_COLOUR", "FAIL_THRESHOLD", "model_colour", "inplane_curves",
-           "hemisphere_maps", "energy_chart", "mikkelsen_fig6", "speed_accuracy",
-           "stability_chart", "Z_LIMIT"]
+__all__ = [
+    "DPI",
+    "figure_size",
+    "SIM_COLOUR",
+    "FAIL_THRESHOLD",
+    "model_colour",
+    "inplane_curves",
+    "hemisphere_maps",
+    "energy_chart",
+    "mikkelsen_fig6",
+    "speed_accuracy",
+    "stability_chart",
+    "Z_LIMIT",
+]
 
 DPI = 100
-SIM_COLOUR = "#c2185b"        # magenta: simulation points everywhere (no model uses it)
+SIM_COLOUR = "#c2185b"  # magenta: simulation points everywhere (no model uses it)
 FRESNEL_COLOUR = "#000000"
-Z_LIMIT = 10.0               # z-score colour range ±Z_LIMIT (beyond saturates); ±5 marked
-FAIL_THRESHOLD = 0.05         # relative error above which a closed form "fails" (stability chart)
+Z_LIMIT = 10.0  # z-score colour range ±Z_LIMIT (beyond saturates); ±5 marked
+FAIL_THRESHOLD = 0.05  # relative error above which a closed form "fails" (stability chart)
 
 # Fixed colours for the model names the runner uses; other names get a stable colour from
 # _PALETTE (disjoint from the fixed colours) chosen by CRC-32 of the normalised name, the same
 # in every chart and every run.
-_PALETTE = ("#e6550d", "#843c39", "#5254a3", "#31a354", "#6b6ecf", "#e7ba52", "#3182bd",
-            "#756bb1", "#636363", "#8ca252", "#ad494a", "#7b4173")
+_PALETTE = (
+    "#e6550d",
+    "#843c39",
+    "#5254a3",
+    "#31a354",
+    "#6b6ecf",
+    "#e7ba52",
+    "#3182bd",
+    "#756bb1",
+    "#636363",
+    "#8ca252",
+    "#ad494a",
+    "#7b4173",
+)
 _FIXED = {
-    "ts-vgroove": "#1f77b4", "ts-smith": "#ff7f0e", "ts-smith-correlated": "#2ca02c",
-    "ts-none": "#7f7f7f", "ts-facets": "#17becf", "facets": "#17becf",
-    "low-smooth": "#8c564b", "low-microfacet": "#9467bd", "rayleigh-rice": "#bcbd22",
-    "edwards": "#393b79", "edwards-fit": "#393b79", "mikkelsen-mix": "#637939",
-    "stratified": "#1f77b4", "independent": "#ff7f0e",
+    "ts-vgroove": "#1f77b4",
+    "ts-smith": "#ff7f0e",
+    "ts-smith-correlated": "#2ca02c",
+    "ts-none": "#7f7f7f",
+    "ts-facets": "#17becf",
+    "facets": "#17becf",
+    "low-smooth": "#8c564b",
+    "low-microfacet": "#9467bd",
+    "rayleigh-rice": "#bcbd22",
+    "edwards": "#393b79",
+    "edwards-fit": "#393b79",
+    "mikkelsen-mix": "#637939",
+    "stratified": "#1f77b4",
+    "independent": "#ff7f0e",
     # Mikkelsen Fig. 6 draws κ=1024 in red: too close to SIM_COLOUR
-    "κ=17": "#2ca02c", "κ=1024": "#1f77b4",
+    "κ=17": "#2ca02c",
+    "κ=1024": "#1f77b4",
 }
 
 
@@ -73,15 +107,17 @@ def figure_size(chart: str, n: int = 1) -> tuple[float, float]:
     for "stability"; ignored otherwise."""
     if chart == "inplane":
         rows, cols = _grid(n)
-        return 4.6 * cols + 3.0, 3.6 * rows + 0.6          # + a legend column on the right
+        return 4.6 * cols + 3.0, 3.6 * rows + 0.6  # + a legend column on the right
     if chart == "mikkelsen_fig6":
         return 5.2 * n + 0.4, 4.6
     if chart == "stability":
         return 9.0, 5.6 + 0.18 * n
     fixed = {"hemisphere_maps": (13.0, 8.6), "energy": (11.0, 4.6), "speed_accuracy": (7.0, 5.0)}
     if chart not in fixed:
-        raise UsageError(f"chart must be one of inplane, mikkelsen_fig6, stability, "
-                         f"{', '.join(fixed)}; got {chart!r}")
+        raise UsageError(
+            f"chart must be one of inplane, mikkelsen_fig6, stability, "
+            f"{', '.join(fixed)}; got {chart!r}"
+        )
     return fixed[chart]
 
 
@@ -145,8 +181,9 @@ def _in_plane_slice(a: np.ndarray, bins) -> np.ndarray:
     return np.concatenate([a[:, ::-1, bins.backward_index], a[:, :, bins.forward_index]], axis=1)
 
 
-def inplane_curves(result, models: Mapping[str, np.ndarray], path=None, scene_name: str = "", *,
-                   ax=None) -> Figure:
+def inplane_curves(
+    result, models: Mapping[str, np.ndarray], path=None, scene_name: str = "", *, ax=None
+) -> Figure:
     """In-plane scattering curves, one panel per incidence (as Löw et al. 2012, Figs. 3 and 12).
 
     x: signed θo in degrees (specular side Δφ = 180° positive, backward side Δφ = 0° negative);
@@ -175,12 +212,23 @@ def inplane_curves(result, models: Mapping[str, np.ndarray], path=None, scene_na
             ax.set_visible(False)
             continue
         for name, c in curves.items():
-            ax.stairs(_positive(c[t]), edges, baseline=None, color=model_colour(name), lw=1.6,
-                      label=name)
+            ax.stairs(
+                _positive(c[t]), edges, baseline=None, color=model_colour(name), lw=1.6, label=name
+            )
         y = _positive(ip.brdf[t])
-        ax.errorbar(ip.theta, y, yerr=np.where(np.isfinite(y), ip.stderr[t], np.nan), fmt="o",
-                    ms=3.0, color=SIM_COLOUR, ecolor=SIM_COLOUR, elinewidth=1.0, capsize=1.5,
-                    label="simulation ±1σ", zorder=5)
+        ax.errorbar(
+            ip.theta,
+            y,
+            yerr=np.where(np.isfinite(y), ip.stderr[t], np.nan),
+            fmt="o",
+            ms=3.0,
+            color=SIM_COLOUR,
+            ecolor=SIM_COLOUR,
+            elinewidth=1.0,
+            capsize=1.5,
+            label="simulation ±1σ",
+            zorder=5,
+        )
         th_i = float(result.theta_i[t])
         ax.axvline(th_i, color="0.35", ls="--", lw=0.9, label="mirror θo = +θi")
         ax.axvline(0.0, color="0.75", lw=0.6)
@@ -197,7 +245,7 @@ def inplane_curves(result, models: Mapping[str, np.ndarray], path=None, scene_na
         axes[0].legend(fontsize=8)
         return _output(fig, path)
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=8, loc="outside right upper")   # never over the data
+    fig.legend(handles, labels, fontsize=8, loc="outside right upper")  # never over the data
     fig.suptitle(_title(scene_name, "in-plane scattering (bin averages)"))
     return _output(fig, path)
 
@@ -222,12 +270,18 @@ def _num(v) -> float:
 
 def _select_verdicts(verdicts, theta_i: float, names) -> list[dict]:
     """Verdicts of incidence ``theta_i`` (deg) for the models in ``names`` with a finite rel_rms."""
-    sel = [v for v in _flatten_verdicts(verdicts)
-           if v["model"] in names and math.isclose(float(v["theta_i"]), theta_i, abs_tol=1e-6)
-           and np.isfinite(_num(v.get("rel_rms")))]
+    sel = [
+        v
+        for v in _flatten_verdicts(verdicts)
+        if v["model"] in names
+        and math.isclose(float(v["theta_i"]), theta_i, abs_tol=1e-6)
+        and np.isfinite(_num(v.get("rel_rms")))
+    ]
     if not sel:
-        raise UsageError(f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}° "
-                         f"and one of the models {sorted(names)}")
+        raise UsageError(
+            f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}° "
+            f"and one of the models {sorted(names)}"
+        )
     return sorted(sel, key=lambda v: _num(v["rel_rms"]))
 
 
@@ -246,16 +300,28 @@ def _polar_panel(ax, values, bins, theta_i, norm, cmap, title, colour):
     ang, v = _unfold(values, bins)
     r = np.sin(np.radians(bins.theta_edges))
     cm = cmap.with_extremes(bad="0.85")
-    mesh = ax.pcolormesh(ang, r, np.ma.masked_invalid(v), norm=norm, cmap=cm, shading="flat",
-                         rasterized=True)
-    ax.plot([math.pi], [math.sin(math.radians(theta_i))], marker="o", ms=9, mfc="none",
-            mec="k", mew=1.5, ls="none", clip_on=False, zorder=6, label="mirror")
-    ax.set_theta_zero_location("W")        # Δφ = 0° (back towards the light) on the left
+    mesh = ax.pcolormesh(
+        ang, r, np.ma.masked_invalid(v), norm=norm, cmap=cm, shading="flat", rasterized=True
+    )
+    ax.plot(
+        [math.pi],
+        [math.sin(math.radians(theta_i))],
+        marker="o",
+        ms=9,
+        mfc="none",
+        mec="k",
+        mew=1.5,
+        ls="none",
+        clip_on=False,
+        zorder=6,
+        label="mirror",
+    )
+    ax.set_theta_zero_location("W")  # Δφ = 0° (back towards the light) on the left
     ax.set_theta_direction(-1)
     ax.set_ylim(0, 1)
     ax.set_yticks(np.sin(np.radians([30, 60, 90])))
     ax.set_yticklabels(["30°", "60°", "90°"], fontsize=7)
-    ax.set_rlabel_position(315.0)   # lower left: clear of the azimuth labels
+    ax.set_rlabel_position(315.0)  # lower left: clear of the azimuth labels
     ax.set_xticks(np.radians([0, 90, 180, 270]))
     ax.set_xticklabels(["Δφ=0°", "90°", "180°", "270°"], fontsize=7)
     ax.spines["polar"].set_color(colour)
@@ -264,8 +330,16 @@ def _polar_panel(ax, values, bins, theta_i, norm, cmap, title, colour):
     return ax, mesh
 
 
-def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path=None,
-                    t_index: int = 0, scene_name: str = "", *, ax=None) -> Figure:
+def hemisphere_maps(
+    result,
+    models: Mapping[str, np.ndarray],
+    verdicts,
+    path=None,
+    t_index: int = 0,
+    scene_name: str = "",
+    *,
+    ax=None,
+) -> Figure:
     """Polar maps at incidence ``t_index``: r = sin θo, angle = Δφ (folded grids mirrored),
     of the simulation, the best and the worst model by ``rel_rms`` (shared log colour scale,
     sr⁻¹), and the z-scores (sim − model)/stderr of both (diverging, symmetric, ±5 marked;
@@ -295,8 +369,7 @@ def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path=Non
     zlim = Z_LIMIT
     znorm = TwoSlopeNorm(vcenter=0.0, vmin=-zlim, vmax=zlim)
 
-    given = _given_axes(ax, 6, "hemisphere_maps", "simulation, best, worst, table, z best, "
-                                                  "z worst")
+    given = _given_axes(ax, 6, "hemisphere_maps", "simulation, best, worst, table, z best, z worst")
     if given is None:
         fig = _figure(figure_size("hemisphere_maps"))
         gs = fig.add_gridspec(2, 3)
@@ -311,34 +384,73 @@ def hemisphere_maps(result, models: Mapping[str, np.ndarray], verdicts, path=Non
             return given[3 * row + col]
         return fig.add_subplot(gs[row, col], **({"projection": "polar"} if polar else {}))
 
-    ax, mesh = _polar_panel(panel(0, 0), sim, result.bins, theta_i, norm,
-                            mpl.colormaps["viridis"], "simulation", SIM_COLOUR)
+    ax, mesh = _polar_panel(
+        panel(0, 0),
+        sim,
+        result.bins,
+        theta_i,
+        norm,
+        mpl.colormaps["viridis"],
+        "simulation",
+        SIM_COLOUR,
+    )
     brdf_axes, z_axes = [ax], []
     for j, v in enumerate(shown):
         role = "best" if v is best else "worst"
         col = model_colour(v["model"])
-        brdf_axes.append(_polar_panel(panel(0, j + 1), _positive(maps[v["model"]]), result.bins,
-                                      theta_i, norm, mpl.colormaps["viridis"],
-                                      f"{role}: {v['model']}", col)[0])
-        zax, zmesh = _polar_panel(panel(1, j + 1), zs[v["model"]], result.bins, theta_i, znorm,
-                                  mpl.colormaps["RdBu_r"], f"z = (sim − {v['model']}) / σ", col)
+        brdf_axes.append(
+            _polar_panel(
+                panel(0, j + 1),
+                _positive(maps[v["model"]]),
+                result.bins,
+                theta_i,
+                norm,
+                mpl.colormaps["viridis"],
+                f"{role}: {v['model']}",
+                col,
+            )[0]
+        )
+        zax, zmesh = _polar_panel(
+            panel(1, j + 1),
+            zs[v["model"]],
+            result.bins,
+            theta_i,
+            znorm,
+            mpl.colormaps["RdBu_r"],
+            f"z = (sim − {v['model']}) / σ",
+            col,
+        )
         _mark_z5(zax, zs[v["model"]], result.bins)
         z_axes.append(zax)
     cb = fig.colorbar(mesh, ax=brdf_axes, shrink=0.8, pad=0.02)
     cb.set_label("BRDF (sr⁻¹), log scale")
-    zcb = fig.colorbar(zmesh, ax=z_axes, shrink=0.8, pad=0.02,
-                       extend="both" if zmax > zlim else "neither")
+    zcb = fig.colorbar(
+        zmesh, ax=z_axes, shrink=0.8, pad=0.02, extend="both" if zmax > zlim else "neither"
+    )
     zcb.set_label("z-score (σ)")
     for s in (-5.0, 5.0):
         zcb.ax.axhline(s, color="k", lw=1.5)
     zcb.set_ticks(sorted({-zlim, -5.0, 0.0, 5.0, zlim}))
     tax = panel(1, 0, polar=False)
     tax.axis("off")
-    tax.text(0.0, 1.0, _verdict_table(sel), family="monospace", fontsize=8, va="top",
-             transform=tax.transAxes)
-    tax.text(0.0, 0.0, "r = sin θo, angle = Δφ (mirrored from the folded half)\n"
-             "○ mirror direction; black contour |z| = 5; grey: no events",
-             fontsize=8, va="bottom", transform=tax.transAxes)
+    tax.text(
+        0.0,
+        1.0,
+        _verdict_table(sel),
+        family="monospace",
+        fontsize=8,
+        va="top",
+        transform=tax.transAxes,
+    )
+    tax.text(
+        0.0,
+        0.0,
+        "r = sin θo, angle = Δφ (mirrored from the folded half)\n"
+        "○ mirror direction; black contour |z| = 5; grey: no events",
+        fontsize=8,
+        va="bottom",
+        transform=tax.transAxes,
+    )
     if given is None:
         fig.suptitle(_title(scene_name, f"hemisphere at θi = {theta_i:g}°"))
     elif len(shown) == 1:
@@ -362,15 +474,26 @@ def _verdict_table(sel: list[dict]) -> str:
     head = f"{'model':<22}{'χ²/dof':>8}{'max|z|':>8}{'rel rms':>9}  agrees"
     rows = [head, "-" * len(head)]
     for v in sel:
-        rows.append(f"{str(v['model'])[:21]:<22}{_num(v.get('chi2_dof')):>8.2f}"
-                    f"{_num(v.get('max_abs_z')):>8.1f}{_num(v['rel_rms']):>9.3f}"
-                    f"  {'yes' if v.get('agrees') else 'no'}")
+        rows.append(
+            f"{str(v['model'])[:21]:<22}{_num(v.get('chi2_dof')):>8.2f}"
+            f"{_num(v.get('max_abs_z')):>8.1f}{_num(v['rel_rms']):>9.3f}"
+            f"  {'yes' if v.get('agrees') else 'no'}"
+        )
     return "\n".join(rows)
 
 
 # --- 3. energy ------------------------------------------------------------------------------
-def energy_chart(theta_i, rho_sim, rho_sim_err, rho_models: Mapping[str, tuple], lost_sim,
-                 path=None, scene_name: str = "", *, ax=None) -> Figure:
+def energy_chart(
+    theta_i,
+    rho_sim,
+    rho_sim_err,
+    rho_models: Mapping[str, tuple],
+    lost_sim,
+    path=None,
+    scene_name: str = "",
+    *,
+    ax=None,
+) -> Figure:
     """Single-bounce albedo ρ(θi) (Mikkelsen eq. 27) of the simulation (points, ±1σ) against
     each model's ρ (name → (θ grid in deg, ρ)), and, on a second panel, the fraction of the
     incident energy single scattering loses: ``lost_sim`` either an array over θi or a dict
@@ -385,10 +508,24 @@ def energy_chart(theta_i, rho_sim, rho_sim_err, rho_models: Mapping[str, tuple],
     else:
         (ax, bx), fig = given, given[0].figure
     for name, (grid, rho) in rho_models.items():
-        ax.plot(np.asarray(grid, float), np.asarray(rho, float), color=model_colour(name), lw=1.6,
-                label=name)
-    ax.errorbar(th, np.asarray(rho_sim, float), yerr=np.asarray(rho_sim_err, float), fmt="o",
-                ms=4, color=SIM_COLOUR, capsize=2, label="simulation ±1σ", zorder=5)
+        ax.plot(
+            np.asarray(grid, float),
+            np.asarray(rho, float),
+            color=model_colour(name),
+            lw=1.6,
+            label=name,
+        )
+    ax.errorbar(
+        th,
+        np.asarray(rho_sim, float),
+        yerr=np.asarray(rho_sim_err, float),
+        fmt="o",
+        ms=4,
+        color=SIM_COLOUR,
+        capsize=2,
+        label="simulation ±1σ",
+        zorder=5,
+    )
     ax.set_xlabel("θi (°)")
     ax.set_ylabel("ρ(θi), single-bounce albedo")
     ax.set_title("albedo ρ(θi) (Mikkelsen eq. 27)")
@@ -400,8 +537,9 @@ def energy_chart(theta_i, rho_sim, rho_sim_err, rho_models: Mapping[str, tuple],
         parts, total = {"lost": np.asarray(lost_sim, float)}, None
     markers = iter(["s", "^", "v", "D", "P", "X"])
     for name, v in parts.items():
-        bx.plot(th, v, marker=next(markers, "o"), ms=4, ls="--", lw=1.0, color=SIM_COLOUR,
-                label=name)
+        bx.plot(
+            th, v, marker=next(markers, "o"), ms=4, ls="--", lw=1.0, color=SIM_COLOUR, label=name
+        )
     if total is not None:
         bx.plot(th, total, marker="o", ms=4, lw=1.8, color=SIM_COLOUR, label="total")
     bx.set_xlabel("θi (°)")
@@ -454,21 +592,44 @@ def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None
     markers = ("o", "s", "^", "D", "v", "P")
     for ax, (material, group) in zip(axes, groups.items()):
         c0 = group[0]
-        ax.plot(np.asarray(c0["theta"], float), np.asarray(c0["fresnel_T"], float),
-                color=FRESNEL_COLOUR, ls="--", lw=1.4, label="Fresnel transmittance Ft(θ)")
+        ax.plot(
+            np.asarray(c0["theta"], float),
+            np.asarray(c0["fresnel_T"], float),
+            color=FRESNEL_COLOUR,
+            ls="--",
+            lw=1.4,
+            label="Fresnel transmittance Ft(θ)",
+        )
         top = [np.nanmax(np.asarray(c0["fresnel_T"], float))]
         for k, c in enumerate(group):
             series = _series_of(c)
             col = model_colour(series)
-            ax.plot(np.asarray(c["theta"], float), np.asarray(c["one_minus_rho_model"], float),
-                    color=col, lw=1.8, label=f"1 − ρ model, {series}")
-            ax.errorbar(np.asarray(c["sim_theta"], float),
-                        np.asarray(c["sim_one_minus_rho"], float),
-                        yerr=np.asarray(c["sim_err"], float), fmt=markers[k % len(markers)],
-                        ms=5, mfc=SIM_COLOUR, mec=col, mew=1.2, ecolor=SIM_COLOUR, capsize=2,
-                        ls="none", label=f"1 − ρ simulation ±1σ, {series}", zorder=5)
-            top += [np.nanmax(np.asarray(c["one_minus_rho_model"], float)),
-                    np.nanmax(np.asarray(c["sim_one_minus_rho"], float))]
+            ax.plot(
+                np.asarray(c["theta"], float),
+                np.asarray(c["one_minus_rho_model"], float),
+                color=col,
+                lw=1.8,
+                label=f"1 − ρ model, {series}",
+            )
+            ax.errorbar(
+                np.asarray(c["sim_theta"], float),
+                np.asarray(c["sim_one_minus_rho"], float),
+                yerr=np.asarray(c["sim_err"], float),
+                fmt=markers[k % len(markers)],
+                ms=5,
+                mfc=SIM_COLOUR,
+                mec=col,
+                mew=1.2,
+                ecolor=SIM_COLOUR,
+                capsize=2,
+                ls="none",
+                label=f"1 − ρ simulation ±1σ, {series}",
+                zorder=5,
+            )
+            top += [
+                np.nanmax(np.asarray(c["one_minus_rho_model"], float)),
+                np.nanmax(np.asarray(c["sim_one_minus_rho"], float)),
+            ]
         ax.set_title(material)
         ax.set_xlim(0, 90)
         ax.set_xticks(np.arange(0, 91, 15))
@@ -483,8 +644,14 @@ def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None
 
 
 # --- 5. speed vs accuracy ------------------------------------------------------------------------
-def speed_accuracy(runs: Mapping[str, tuple], path=None, title: str = "",
-                   error_label: str = "error (relative RMS)", *, ax=None) -> Figure:
+def speed_accuracy(
+    runs: Mapping[str, tuple],
+    path=None,
+    title: str = "",
+    error_label: str = "error (relative RMS)",
+    *,
+    ax=None,
+) -> Figure:
     """Error against wall time (s), log–log, per estimator variant (name → (wall_times, errors)),
     each with a dotted 1/√t reference anchored at the variant's first point (Monte Carlo rate).
     ``ax``: one Axes.
@@ -503,8 +670,14 @@ def speed_accuracy(runs: Mapping[str, tuple], path=None, title: str = "",
         col = model_colour(name)
         ax.plot(t, e, marker="o", color=col, lw=1.6, label=name)
         ref = np.geomspace(t[0], t[-1] if t[-1] > t[0] else t[0] * 10, 50)
-        ax.plot(ref, e[0] * np.sqrt(t[0] / ref), color=col, ls=":", lw=1.2,
-                label="∝ 1/√t" if k == 0 else None)
+        ax.plot(
+            ref,
+            e[0] * np.sqrt(t[0] / ref),
+            color=col,
+            ls=":",
+            lw=1.2,
+            label="∝ 1/√t" if k == 0 else None,
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("wall time (s)")
@@ -525,8 +698,15 @@ def _fail_ranges(th: np.ndarray, err: np.ndarray, threshold: float) -> list[tupl
     return [(float(th[a]), float(th[b])) for a, b in zip(starts, ends)]
 
 
-def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path=None,
-                    warnings: Sequence[str] = (), title: str = "", *, ax=None) -> Figure:
+def stability_chart(
+    theta_i,
+    rel_err: Mapping[str, np.ndarray],
+    path=None,
+    warnings: Sequence[str] = (),
+    title: str = "",
+    *,
+    ax=None,
+) -> Figure:
     """Relative error of each closed form against θi ∈ [0°, 89°] (log y); the region above
     ``FAIL_THRESHOLD`` (5 %) is shaded and each model's failing θi ranges are drawn as a
     coloured bar under the plot. Estimator ``warnings`` are printed as text notes below.
@@ -538,14 +718,15 @@ def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path=None,
     given = _given_axes(ax, 3, "stability_chart", "errors, failing ranges, notes")
     if given is None:
         fig = _figure(figure_size("stability", n_lines))
-        gs = fig.add_gridspec(3, 1, height_ratios=[5.0, 0.25 * max(1, len(rel_err)),
-                                                   0.22 * n_lines + 0.2])
+        gs = fig.add_gridspec(
+            3, 1, height_ratios=[5.0, 0.25 * max(1, len(rel_err)), 0.22 * n_lines + 0.2]
+        )
         ax = fig.add_subplot(gs[0])
         bar = fig.add_subplot(gs[1], sharex=ax)
         txt = fig.add_subplot(gs[2])
     else:
         (ax, bar, txt), fig = given, given[0].figure
-    half = 0.5 * (np.median(np.diff(th)) if th.size > 1 else 1.0)   # half a θi step (bars)
+    half = 0.5 * (np.median(np.diff(th)) if th.size > 1 else 1.0)  # half a θi step (bars)
     all_err = []
     for k, (name, e) in enumerate(rel_err.items()):
         e = np.abs(np.asarray(e, dtype=np.float64))
@@ -557,8 +738,14 @@ def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path=None,
     lo, hi = _log_limits(all_err + [np.array([FAIL_THRESHOLD])], 1e-5)
     ax.set_yscale("log")
     ax.set_ylim(lo, max(hi, 2 * FAIL_THRESHOLD))
-    ax.axhspan(FAIL_THRESHOLD, ax.get_ylim()[1], color="#f4cccc", alpha=0.6, zorder=0,
-               label=f"fails (> {FAIL_THRESHOLD:.0%})")
+    ax.axhspan(
+        FAIL_THRESHOLD,
+        ax.get_ylim()[1],
+        color="#f4cccc",
+        alpha=0.6,
+        zorder=0,
+        label=f"fails (> {FAIL_THRESHOLD:.0%})",
+    )
     ax.axhline(FAIL_THRESHOLD, color="#b71c1c", lw=1.0)
     ax.set_xlim(0, 89)
     ax.set_ylabel("relative error of the model")
@@ -576,6 +763,12 @@ def stability_chart(theta_i, rel_err: Mapping[str, np.ndarray], path=None,
     bar.set_xlim(0, 89)
     bar.grid(True, axis="x", alpha=0.3)
     txt.axis("off")
-    txt.text(0.0, 1.0, "Estimator notes:\n" + "\n".join(notes), fontsize=8, va="top",
-             transform=txt.transAxes)
+    txt.text(
+        0.0,
+        1.0,
+        "Estimator notes:\n" + "\n".join(notes),
+        fontsize=8,
+        va="top",
+        transform=txt.transAxes,
+    )
     return _output(fig, path)

@@ -29,9 +29,9 @@ are run and the lowest cost is kept. Models (``FIT_MODELS``):
 ``fit_edwards_disk`` fits the Edwards BRDF at a single viewing direction to a histogram of
 simulated half vectors on Edwards' disk (the contours of ``microsim view --what disk``).
 """
+
 from __future__ import annotations
 
-from microsim.errors import UsageError
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
@@ -40,12 +40,26 @@ from scipy import optimize
 from scipy.stats import qmc
 
 from microsim import analytic as an
-from microsim.analytic import _checks
+from microsim import checks as _checks
+from microsim import vectors
+from microsim.errors import UsageError
 from microsim.sim.bins import Bins
 from microsim.sim.predict import bin_average
 
-__all__ = ["Param", "FitModel", "FIT_MODELS", "FitData", "FitResult", "BinRule", "bin_rule",
-           "fit_model", "fit_all", "model_bin_values", "DiskFit", "fit_edwards_disk"]
+__all__ = [
+    "Param",
+    "FitModel",
+    "FIT_MODELS",
+    "FitData",
+    "FitResult",
+    "BinRule",
+    "bin_rule",
+    "fit_model",
+    "fit_all",
+    "model_bin_values",
+    "DiskFit",
+    "fit_edwards_disk",
+]
 
 
 # --- parameters and models ----------------------------------------------------------------------
@@ -81,8 +95,10 @@ class FitModel:
         return tuple(p.name for p in self.params)
 
     def bounds_x(self) -> tuple[np.ndarray, np.ndarray]:
-        return (np.array([p.encode(p.lo) for p in self.params]),
-                np.array([p.encode(p.hi) for p in self.params]))
+        return (
+            np.array([p.encode(p.lo) for p in self.params]),
+            np.array([p.encode(p.hi) for p in self.params]),
+        )
 
     def decode(self, x) -> dict[str, float]:
         """Parameters from the optimiser's x, clipped into the bounds (rounding at the ends)."""
@@ -97,18 +113,21 @@ def _cook_torrance(p, ior):
 
     def f(wi, wo):
         return p["kd"] / np.pi + p["ks"] * an.torrance_sparrow(wi, wo, ndf, "vgroove", ior)
+
     return f
 
 
 def _low_microfacet(p, ior):
     def f(wi, wo):
         return an.low_microfacet(wi, wo, p["A"], p["B"], p["C"], p["kd"], p["ior"])
+
     return f
 
 
 def _low_smooth(p, ior):
     def f(wi, wo):
         return an.low_smooth(wi, wo, p["A"], p["B"], p["C"], p["kd"], p["ior"])
+
     return f
 
 
@@ -117,6 +136,7 @@ def _edwards(p, ior):
 
     def f(wi, wo):
         return an.edwards_fit_brdf(wi, wo, params, "orthogonal")
+
     return f
 
 
@@ -124,28 +144,46 @@ def _edwards_params() -> tuple[Param, ...]:
     lo, hi = an.EdwardsParams.bounds()
     start = an.EdwardsParams(cd=0.01, f0=0.5, f90=1.0, k=0.3, r1=0.5, n1=10.0, r2=1.0, n2=1.0)
     scales = {"r1": "log", "r2": "log", "n1": "log1p", "n2": "log1p"}
-    return tuple(Param(n, float(a), float(b), float(s), scales.get(n, "lin"))
-                 for n, a, b, s in zip(an.EdwardsParams.names(), lo, hi, start.to_vector()))
+    return tuple(
+        Param(n, float(a), float(b), float(s), scales.get(n, "lin"))
+        for n, a, b, s in zip(an.EdwardsParams.names(), lo, hi, start.to_vector())
+    )
 
 
 # Löw: A is a free amplitude (sr⁻¹); B spans "nearly flat" to "mirror-sharp" (fit in ln B);
 # C > 0.05 (C ≤ 0.5 is already a very heavy tail); real ior n from a weak dielectric to a
 # near-perfect reflector. These ranges are practical choices, not from the paper.
-_LOW_PARAMS = (Param("A", 1e-4, 1e6, 10.0, "log"), Param("B", 1e-2, 1e8, 100.0, "log"),
-               Param("C", 0.05, 10.0, 1.5), Param("kd", 0.0, 1.0, 0.01),
-               Param("ior", 1.01, 100.0, 1.5, "log"))
+_LOW_PARAMS = (
+    Param("A", 1e-4, 1e6, 10.0, "log"),
+    Param("B", 1e-2, 1e8, 100.0, "log"),
+    Param("C", 0.05, 10.0, 1.5),
+    Param("kd", 0.0, 1.0, 0.01),
+    Param("ior", 1.01, 100.0, 1.5, "log"),
+)
 
 FIT_MODELS: dict[str, FitModel] = {
     "cook_torrance": FitModel(
-        "cook_torrance", (Param("ks", 0.0, 10.0, 1.0), Param("m", 0.01, 1.5, 0.3, "log"),
-                          Param("kd", 0.0, 1.0, 0.01)),
-        _cook_torrance, "kd/π + ks·TS(Beckmann m, V-groove G, exact Fresnel of the scene ior)"),
-    "low_microfacet": FitModel("low_microfacet", _LOW_PARAMS, _low_microfacet,
-                               "Löw eq. 15 (ABC microfacet, real ior)"),
-    "low_smooth": FitModel("low_smooth", _LOW_PARAMS, _low_smooth,
-                           "Löw eq. 12 (smooth surface, real ior, G' = 1)"),
-    "edwards": FitModel("edwards", _edwards_params(), _edwards,
-                        "Edwards eq. 36 (data-fitting BRDF, orthogonal projection)"),
+        "cook_torrance",
+        (
+            Param("ks", 0.0, 10.0, 1.0),
+            Param("m", 0.01, 1.5, 0.3, "log"),
+            Param("kd", 0.0, 1.0, 0.01),
+        ),
+        _cook_torrance,
+        "kd/π + ks·TS(Beckmann m, V-groove G, exact Fresnel of the scene ior)",
+    ),
+    "low_microfacet": FitModel(
+        "low_microfacet", _LOW_PARAMS, _low_microfacet, "Löw eq. 15 (ABC microfacet, real ior)"
+    ),
+    "low_smooth": FitModel(
+        "low_smooth", _LOW_PARAMS, _low_smooth, "Löw eq. 12 (smooth surface, real ior, G' = 1)"
+    ),
+    "edwards": FitModel(
+        "edwards",
+        _edwards_params(),
+        _edwards,
+        "Edwards eq. 36 (data-fitting BRDF, orthogonal projection)",
+    ),
 }
 
 
@@ -164,9 +202,14 @@ class FitData:
 
     @classmethod
     def from_result(cls, result, min_events: int = 25) -> "FitData":
-        return cls(np.asarray(result.brdf, float), np.asarray(result.counts),
-                   np.asarray(result.theta_i, float), np.asarray(result.phi_i, float),
-                   result.bins, int(min_events))
+        return cls(
+            np.asarray(result.brdf, float),
+            np.asarray(result.counts),
+            np.asarray(result.theta_i, float),
+            np.asarray(result.phi_i, float),
+            result.bins,
+            int(min_events),
+        )
 
     @property
     def used(self) -> np.ndarray:
@@ -179,8 +222,13 @@ class FitData:
         ti = self.theta_i
         d_ti = np.abs(np.gradient(ti)) if len(ti) > 1 else np.ones(1)
         d_phi = np.diff(b.phi_edges) * (2.0 if b.folded else 1.0)
-        return (ti[:, None, None], b.theta_centers[None, :, None], d_ti[:, None, None],
-                np.diff(b.theta_edges)[None, :, None], d_phi[None, None, :])
+        return (
+            ti[:, None, None],
+            b.theta_centers[None, :, None],
+            d_ti[:, None, None],
+            np.diff(b.theta_edges)[None, :, None],
+            d_phi[None, None, :],
+        )
 
 
 @dataclass(frozen=True)
@@ -201,9 +249,10 @@ class BinRule:
 def bin_rule(bins: Bins, wi, order: int = 3, phi_i: float | None = None) -> BinRule:
     """Tensor Gauss–Legendre rule with ``order`` × ``order`` nodes per bin in (θo, Δφ).
 
-    The bin average f̄_B = ∫∫ f sinθ cosθ dθ dφ / Ω_B (DESIGN.md) is approximated with the
-    cos-weighted nodes; the weights are normalised to sum to 1 in each bin (a constant f is
-    exact). Folded bins integrate Δφ ∈ [φ₁, φ₂] only (isotropic models are even in Δφ).
+    The bin average f̄_B = ∫∫ f sinθ cosθ dθ dφ / Ω_B (docs/design.md, "Conventions") is
+    approximated with the cos-weighted nodes; the weights are normalised to sum to 1 in each
+    bin (a constant f is exact). Folded bins integrate Δφ ∈ [φ₁, φ₂] only (isotropic models are
+    even in Δφ).
     ``phi_i`` (deg) defaults to wi's azimuth (0° at normal incidence), as in ``bin_average``.
     """
     wi = _checks.directions("wi", wi)
@@ -215,14 +264,14 @@ def bin_rule(bins: Bins, wi, order: int = 3, phi_i: float | None = None) -> BinR
     t, p = np.radians(bins.theta_edges), np.radians(bins.phi_edges)
     tc, th = 0.5 * (t[1:] + t[:-1]), 0.5 * np.diff(t)
     pc, ph = 0.5 * (p[1:] + p[:-1]), 0.5 * np.diff(p)
-    theta = (tc[:, None] + th[:, None] * x[None, :])[:, None, :, None]     # (Θ, 1, n, 1)
-    phi = (pc[:, None] + ph[:, None] * x[None, :])[None, :, None, :]       # (1, Φ, 1, n)
+    theta = (tc[:, None] + th[:, None] * x[None, :])[:, None, :, None]  # (Θ, 1, n, 1)
+    phi = (pc[:, None] + ph[:, None] * x[None, :])[None, :, None, :]  # (1, Φ, 1, n)
     wt = (th[:, None] * w[None, :] * np.sin(2.0 * theta[:, 0, :, 0]) / 2.0)[:, None, :, None]
     wp = (ph[:, None] * w[None, :])[None, :, None, :]
     theta, phi = np.broadcast_arrays(theta, phi + np.radians(phi_i))
     weights = (wt * wp).reshape(bins.n_theta, bins.n_phi, -1)
     weights = weights / weights.sum(axis=-1, keepdims=True)
-    dirs = _checks.spherical(theta, phi).reshape(bins.n_theta, bins.n_phi, -1, 3)
+    dirs = vectors.spherical(theta, phi).reshape(bins.n_theta, bins.n_phi, -1, 3)
     return BinRule(dirs, weights)
 
 
@@ -248,7 +297,7 @@ class _Problem:
         ti, to, dti, dto, dpo = (g[used] for g in geo)
         wis, wos, ws = [], [], []
         for t, (th_i, ph_i) in enumerate(zip(data.theta_i, data.phi_i)):
-            wi = _checks.spherical_deg(th_i, ph_i)
+            wi = vectors.spherical_deg(th_i, ph_i)
             rule = bin_rule(data.bins, wi, order, ph_i)
             u = used[t]
             wos.append(rule.directions[u])
@@ -256,8 +305,14 @@ class _Problem:
             wis.append(np.broadcast_to(wi, rule.directions[u].shape))
         cos_i = np.cos(np.radians(ti))
         w = np.sin(np.radians(to)) * np.radians(dti) * np.radians(dto) * np.radians(dpo)
-        return cls(np.concatenate(wis), np.concatenate(wos), np.concatenate(ws), cos_i,
-                   np.log1p(cos_i * data.sim[used]), np.sqrt(w))
+        return cls(
+            np.concatenate(wis),
+            np.concatenate(wos),
+            np.concatenate(ws),
+            cos_i,
+            np.log1p(cos_i * data.sim[used]),
+            np.sqrt(w),
+        )
 
     def residuals(self, brdf_fn: Callable) -> np.ndarray:
         fbar = np.sum(self.weights * brdf_fn(self.wi, self.wo), axis=-1)
@@ -292,16 +347,36 @@ def _starts(model: FitModel, n_starts: int, seed: int) -> list[np.ndarray]:
     return out
 
 
-def model_bin_values(model: FitModel, params: Mapping[str, float], ior, theta_i, phi_i,
-                     bins: Bins, rtol: float = 1e-3) -> np.ndarray:
+def model_bin_values(
+    model: FitModel,
+    params: Mapping[str, float],
+    ior,
+    theta_i,
+    phi_i,
+    bins: Bins,
+    rtol: float = 1e-3,
+) -> np.ndarray:
     """Accurate bin averages (T, Θ, Φ) of ``model`` with ``params`` (``predict.bin_average``)."""
     fn = model.make(params, ior)
-    return np.stack([bin_average(_checks.spherical_deg(t, p), bins, fn, p, rtol).values
-                     for t, p in zip(np.atleast_1d(theta_i), np.atleast_1d(phi_i))])
+    return np.stack(
+        [
+            bin_average(vectors.spherical_deg(t, p), bins, fn, p, rtol).values
+            for t, p in zip(np.atleast_1d(theta_i), np.atleast_1d(phi_i))
+        ]
+    )
 
 
-def fit_model(name: str, data: FitData, ior=None, *, n_starts: int = 4, seed: int = 0,
-              order: int = 3, rtol: float = 1e-3, max_nfev: int = 300) -> FitResult:
+def fit_model(
+    name: str,
+    data: FitData,
+    ior=None,
+    *,
+    n_starts: int = 4,
+    seed: int = 0,
+    order: int = 3,
+    rtol: float = 1e-3,
+    max_nfev: int = 300,
+) -> FitResult:
     """Fit ``FIT_MODELS[name]`` to ``data`` on Löw's E2 (module docstring); ``ior`` is the
     scene's material (used by ``cook_torrance``). Several starts; the lowest cost wins.
     ``max_nfev`` caps the residual evaluations per start (the finite-difference Jacobian
@@ -320,8 +395,17 @@ def fit_model(name: str, data: FitData, ior=None, *, n_starts: int = 4, seed: in
 
     best = None
     for x0 in _starts(model, int(n_starts), seed):
-        sol = optimize.least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale="jac",
-                                     ftol=1e-12, xtol=1e-12, gtol=1e-12, max_nfev=max_nfev)
+        sol = optimize.least_squares(
+            res,
+            x0,
+            bounds=(lo, hi),
+            method="trf",
+            x_scale="jac",
+            ftol=1e-12,
+            xtol=1e-12,
+            gtol=1e-12,
+            max_nfev=max_nfev,
+        )
         if best is None or sol.cost < best.cost:
             best = sol
     params = model.decode(best.x)
@@ -330,19 +414,28 @@ def fit_model(name: str, data: FitData, ior=None, *, n_starts: int = 4, seed: in
     geo = [np.broadcast_to(g, data.sim.shape)[used] for g in data.geometry()]
     e1 = an.low_e1(data.sim[used], values[used], *geo)
     e2 = an.low_e2(data.sim[used], values[used], *geo)
-    return FitResult(name, params, float(2.0 * best.cost), e1, e2, bool(best.success),
-                     int(n_starts), values)
+    return FitResult(
+        name, params, float(2.0 * best.cost), e1, e2, bool(best.success), int(n_starts), values
+    )
 
 
-def fit_all(result, ior, names: Sequence[str] = tuple(FIT_MODELS), quick: bool = False, *,
-            min_events: int = 25, seed: int = 0) -> dict[str, FitResult]:
+def fit_all(
+    result,
+    ior,
+    names: Sequence[str] = tuple(FIT_MODELS),
+    quick: bool = False,
+    *,
+    min_events: int = 25,
+    seed: int = 0,
+) -> dict[str, FitResult]:
     """Fit each model in ``names`` to all incidences of ``result`` jointly: name → FitResult.
     ``quick``: 2 starts of at most 60 evaluations each, instead of 4 of at most 300 (a capped
     start reports ``success = False``)."""
     data = FitData.from_result(result, min_events)
     n_starts, max_nfev = (2, 60) if quick else (4, 300)
-    return {n: fit_model(n, data, ior, n_starts=n_starts, seed=seed, max_nfev=max_nfev)
-            for n in names}
+    return {
+        n: fit_model(n, data, ior, n_starts=n_starts, seed=seed, max_nfev=max_nfev) for n in names
+    }
 
 
 # --- Edwards' halfway disk at one viewing direction ----------------------------------------------
@@ -378,7 +471,7 @@ def fit_edwards_disk(wo, uv: np.ndarray, weight: np.ndarray, rays: int, cells: i
     R = float(min(1.0 + np.linalg.norm(centre), max(1.5 * np.quantile(rad, 0.995), 1e-3)))
     edges = np.linspace(-R, R, cells + 1)
     s, _, _ = np.histogram2d(uv[:, 0], uv[:, 1], [edges, edges], weights=weight)
-    s2, _, _ = np.histogram2d(uv[:, 0], uv[:, 1], [edges, edges], weights=weight ** 2)
+    s2, _, _ = np.histogram2d(uv[:, 0], uv[:, 1], [edges, edges], weights=weight**2)
     area = (edges[1] - edges[0]) ** 2
     mid = 0.5 * (edges[1:] + edges[:-1])
     U, V = np.meshgrid(mid, mid, indexing="ij")
@@ -386,13 +479,13 @@ def fit_edwards_disk(wo, uv: np.ndarray, weight: np.ndarray, rays: int, cells: i
     half_diag = (edges[1] - edges[0]) / np.sqrt(2)
     inside = np.linalg.norm(grid - centre, axis=1) + half_diag <= 1.0
     dens = (s.ravel() / (rays * area))[inside]
-    var = np.maximum(s2.ravel() / rays - (s.ravel() / rays) ** 2, 0.0) / (rays - 1) / area ** 2
-    floor = np.max(weight) / (rays * area)             # one ray's worth: empty cells count
-    sigma = np.sqrt(var[inside] + floor ** 2)
+    var = np.maximum(s2.ravel() / rays - (s.ravel() / rays) ** 2, 0.0) / (rays - 1) / area**2
+    floor = np.max(weight) / (rays * area)  # one ray's worth: empty cells count
+    sigma = np.sqrt(var[inside] + floor**2)
     grid = grid[inside]
     r2 = float(np.sum(weight * np.sum(uv * uv, axis=1)) / max(np.sum(weight), 1e-300))
     r1 = 1.2 * float(np.quantile(rad, 0.99)) + 1e-3
-    n1 = max(r1 * r1 / max(r2, 1e-12) - 2.0, 0.0)     # E[r²] = R²/(n+2) for the lump (eq. 26)
+    n1 = max(r1 * r1 / max(r2, 1e-12) - 2.0, 0.0)  # E[r²] = R²/(n+2) for the lump (eq. 26)
     F0 = float(np.sum(weight) / rays)
     lo, hi = an.EdwardsParams.bounds()
     names = an.EdwardsParams.names()
@@ -402,12 +495,14 @@ def fit_edwards_disk(wo, uv: np.ndarray, weight: np.ndarray, rays: int, cells: i
     upper = np.concatenate([[1.0], hi[idx]])
 
     def params(x):
-        return an.EdwardsParams(cd=0.0, f0=x[0], f90=x[0], k=x[1], r1=x[2], n1=x[3], r2=x[4],
-                                n2=x[5])
+        return an.EdwardsParams(
+            cd=0.0, f0=x[0], f90=x[0], k=x[1], r1=x[2], n1=x[3], r2=x[4], n2=x[5]
+        )
 
     def resid(x):
         return (x[0] * params(x).lumps().pdf(wo, grid) - dens) / sigma
 
-    fit = optimize.least_squares(resid, np.clip(x0, lower, upper), bounds=(lower, upper),
-                                 x_scale="jac", max_nfev=400)
+    fit = optimize.least_squares(
+        resid, np.clip(x0, lower, upper), bounds=(lower, upper), x_scale="jac", max_nfev=400
+    )
     return DiskFit(params=params(fit.x), grid_uv=grid, density=dens, cost=float(fit.cost))

@@ -3,8 +3,10 @@
 Pure formatting: every number comes from the verdict document written as ``verdicts.json``
 (see ``microsim.runner`` and the README for its schema) and, for the energy ledger, from the
 ``Result``. No wall-clock time appears in either report (they are in ``timings.json``), so
-rerunning an unchanged scene rewrites them byte for byte. Percentages are relative errors (model − sim)/sim; BRDFs in sr⁻¹, angles in degrees.
+rerunning an unchanged scene rewrites them byte for byte. Percentages are relative errors
+(model − sim)/sim; BRDFs in sr⁻¹, angles in degrees.
 """
+
 from __future__ import annotations
 
 import math
@@ -46,8 +48,10 @@ def _cell(s) -> str:
 
 def md_table(header: Sequence[str], rows: Iterable[Sequence]) -> str:
     """GitHub-flavoured markdown table (cells escaped)."""
-    lines = ["| " + " | ".join(_cell(h) for h in header) + " |",
-             "|" + "|".join("---" for _ in header) + "|"]
+    lines = [
+        "| " + " | ".join(_cell(h) for h in header) + " |",
+        "|" + "|".join("---" for _ in header) + "|",
+    ]
     lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
     return "\n".join(lines)
 
@@ -75,24 +79,48 @@ def albedo_stderr(result) -> np.ndarray:
     n = result.rays.astype(np.float64)
     m2 = result.sum_w2.reshape(len(n), -1).sum(axis=1) / np.maximum(n, 1)
     rho = result.ledger["single_fresnel"]
-    return np.sqrt(np.maximum(m2 - rho ** 2, 0.0) / np.maximum(n - 1, 1))
+    return np.sqrt(np.maximum(m2 - rho**2, 0.0) / np.maximum(n - 1, 1))
 
 
 def _ledger_rows(doc, result) -> list[list[str]]:
     led = result.ledger
     rho, se = led["single_fresnel"], albedo_stderr(result)
-    return [[f"{t:g}", f"{int(r)}", f"{rho[k]:.4f} ± {se[k]:.1g}", f"{led['single'][k]:.4f}",
-             f"{led['masked'][k]:.4f}", f"{led['downward'][k]:.4f}",
-             f"{led['unresolved'][k]:.2g}", f"{led['lost_fresnel'][k]:.4f}"]
-            for k, (t, r) in enumerate(zip(result.theta_i, result.rays))]
+    return [
+        [
+            f"{t:g}",
+            f"{int(r)}",
+            f"{rho[k]:.4f} ± {se[k]:.1g}",
+            f"{led['single'][k]:.4f}",
+            f"{led['masked'][k]:.4f}",
+            f"{led['downward'][k]:.4f}",
+            f"{led['unresolved'][k]:.2g}",
+            f"{led['lost_fresnel'][k]:.4f}",
+        ]
+        for k, (t, r) in enumerate(zip(result.theta_i, result.rays))
+    ]
 
 
 def _verdict_rows(verdicts) -> list[list[str]]:
-    return [[f"{v['theta_i']:g}", v["model"] + (" (fit)" if v["fitted"] else ""),
-             "**agrees**" if v["agrees"] else "deviates", fmt(v["chi2_dof"]), fmt(v["p_value"]),
-             fmt(v["max_abs_z"]), _pct(v["rel_rms"]), _pct(v["max_rel_dev"]),
-             ("–" if v["worst_bin"] is None else f"θo {v['worst_bin'][0]:g}°, Δφ {v['worst_bin'][1]:g}°"),
-             _ranges(v["deviations"]), str(v["n_bins"])] for v in verdicts]
+    return [
+        [
+            f"{v['theta_i']:g}",
+            v["model"] + (" (fit)" if v["fitted"] else ""),
+            "**agrees**" if v["agrees"] else "deviates",
+            fmt(v["chi2_dof"]),
+            fmt(v["p_value"]),
+            fmt(v["max_abs_z"]),
+            _pct(v["rel_rms"]),
+            _pct(v["max_rel_dev"]),
+            (
+                "–"
+                if v["worst_bin"] is None
+                else f"θo {v['worst_bin'][0]:g}°, Δφ {v['worst_bin'][1]:g}°"
+            ),
+            _ranges(v["deviations"]),
+            str(v["n_bins"]),
+        ]
+        for v in verdicts
+    ]
 
 
 def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
@@ -104,69 +132,143 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     lines = [f"# {doc['scene']}", ""]
     if doc.get("description"):
         lines += [doc["description"], ""]
-    lines += ["## Run", "",
-              md_table(["setting", "value"], [
-                  ["scene file", f"`{doc.get('scene_file')}`"],
-                  ["surface", f"{surf.get('kind')}, tile {' × '.join(fmt(x, 4) for x in surf.get('tile_size', []))}, "
-                              f"{surf.get('triangles')} triangles (scale {fmt(run.get('surface_scale'))})"],
-                  ["nominal", _params(surf.get("nominal", {}))],
-                  ["material", _material(mat)],
-                  ["incidences θi", ", ".join(f"{t:g}°" for t in doc["theta_i"])],
-                  ["rays per incidence", f"{doc['rays']:,}"],
-                  ["realisations", str(run.get("realisations"))],
-                  ["bins (θo × Δφ)", " × ".join(str(b) for b in run.get("bins", []))],
-                  ["seed", str(doc["seed"])],
-                  ["mode", "quick (`--quick`)" if doc["quick"] else "full"],
-                  ["wall times", "`timings.json` (machine-dependent)"]]), ""]
+    lines += [
+        "## Run",
+        "",
+        md_table(
+            ["setting", "value"],
+            [
+                ["scene file", f"`{doc.get('scene_file')}`"],
+                [
+                    "surface",
+                    f"{surf.get('kind')}, tile "
+                    f"{' × '.join(fmt(x, 4) for x in surf.get('tile_size', []))}, "
+                    f"{surf.get('triangles')} triangles (scale {fmt(run.get('surface_scale'))})",
+                ],
+                ["nominal", _params(surf.get("nominal", {}))],
+                ["material", _material(mat)],
+                ["incidences θi", ", ".join(f"{t:g}°" for t in doc["theta_i"])],
+                ["rays per incidence", f"{doc['rays']:,}"],
+                ["realisations", str(run.get("realisations"))],
+                ["bins (θo × Δφ)", " × ".join(str(b) for b in run.get("bins", []))],
+                ["seed", str(doc["seed"])],
+                ["mode", "quick (`--quick`)" if doc["quick"] else "full"],
+                ["wall times", "`timings.json` (machine-dependent)"],
+            ],
+        ),
+        "",
+    ]
     warns = list(surf.get("warnings", [])) + list(meta.get("model_warnings", []))
     if warns:
-        lines += ["Warnings (surface generator, tracer, model quadrature):", ""] + [f"- {w}" for w in warns] + [""]
-    lines += ["## Energy ledger", "",
-              "Fractions of the incident rays (ρ: Fresnel-weighted single-bounce albedo, "
-              "Mikkelsen eq. 27, ± 1 standard error; lost: Fresnel-weighted masked + downward).",
-              "", md_table(["θi", "rays", "ρ", "single", "masked", "downward", "unresolved",
-                            "lost"], _ledger_rows(doc, result)), ""]
+        lines += (
+            ["Warnings (surface generator, tracer, model quadrature):", ""]
+            + [f"- {w}" for w in warns]
+            + [""]
+        )
+    lines += [
+        "## Energy ledger",
+        "",
+        "Fractions of the incident rays (ρ: Fresnel-weighted single-bounce albedo, "
+        "Mikkelsen eq. 27, ± 1 standard error; lost: Fresnel-weighted masked + downward).",
+        "",
+        md_table(
+            ["θi", "rays", "ρ", "single", "masked", "downward", "unresolved", "lost"],
+            _ledger_rows(doc, result),
+        ),
+        "",
+    ]
     summary = summary_row(doc["verdicts"])
-    lines += ["## Verdicts", "",
-              "A model *agrees* when the χ² and max-|z| tests (Šidák-corrected over the run's "
-              "family of verdicts, α = 0.01) cannot tell it from the simulation; otherwise the "
-              "size and place of the deviation are given.", "",
-              md_table(["model", "verdict"], [[m, s] for m, s in summary.items()]), "",
-              "Best to worst by mean relative RMS error: "
-              + ", ".join(f"`{m}`" for m in doc.get("ranking", [])) + ".", "",
-              "<details><summary>Every incidence × model</summary>", "",
-              md_table(["θi", "model", "verdict", "χ²/dof", "p", "max |z|", "rel RMS",
-                        "max rel dev", "worst bin", "deviating θo", "bins"],
-                       _verdict_rows(doc["verdicts"])), "", "</details>", ""]
+    lines += [
+        "## Verdicts",
+        "",
+        "A model *agrees* when the χ² and max-|z| tests (Šidák-corrected over the run's "
+        "family of verdicts, α = 0.01) cannot tell it from the simulation; otherwise the "
+        "size and place of the deviation are given.",
+        "",
+        md_table(["model", "verdict"], [[m, s] for m, s in summary.items()]),
+        "",
+        "Best to worst by mean relative RMS error: "
+        + ", ".join(f"`{m}`" for m in doc.get("ranking", []))
+        + ".",
+        "",
+        "<details><summary>Every incidence × model</summary>",
+        "",
+        md_table(
+            [
+                "θi",
+                "model",
+                "verdict",
+                "χ²/dof",
+                "p",
+                "max |z|",
+                "rel RMS",
+                "max rel dev",
+                "worst bin",
+                "deviating θo",
+                "bins",
+            ],
+            _verdict_rows(doc["verdicts"]),
+        ),
+        "",
+        "</details>",
+        "",
+    ]
     if doc.get("fits"):
-        lines += ["## Fits (Löw eq. 29–33)", "",
-                  "One parameter set per model for all incidences, least squares on E2; "
-                  "√E1 and √E2 as in Löw Table II.", "",
-                  md_table(["model", "parameters", "√E1", "√E2", "converged", "starts"],
-                           [[f["model"], _params(f["params"]), fmt(f["sqrt_e1"]),
-                             fmt(f["sqrt_e2"]), fmt(f["success"]), str(f["n_starts"])]
-                            for f in doc["fits"]]), ""]
-    captions = {"inplane": "In-plane scattering curves (simulation ± 1σ, models as bin averages)",
-                "hemisphere": "Hemisphere maps: simulation, best and worst model, z-scores",
-                "energy": "Single-bounce albedo ρ(θi) and lost energy against θi",
-                "stability": "Stability: model relative RMS error against θi",
-                "speed": "Speed against accuracy of the estimator variants"}
+        lines += [
+            "## Fits (Löw eq. 29–33)",
+            "",
+            "One parameter set per model for all incidences, least squares on E2; "
+            "√E1 and √E2 as in Löw Table II.",
+            "",
+            md_table(
+                ["model", "parameters", "√E1", "√E2", "converged", "starts"],
+                [
+                    [
+                        f["model"],
+                        _params(f["params"]),
+                        fmt(f["sqrt_e1"]),
+                        fmt(f["sqrt_e2"]),
+                        fmt(f["success"]),
+                        str(f["n_starts"]),
+                    ]
+                    for f in doc["fits"]
+                ],
+            ),
+            "",
+        ]
+    captions = {
+        "inplane": "In-plane scattering curves (simulation ± 1σ, models as bin averages)",
+        "hemisphere": "Hemisphere maps: simulation, best and worst model, z-scores",
+        "energy": "Single-bounce albedo ρ(θi) and lost energy against θi",
+        "stability": "Stability: model relative RMS error against θi",
+        "speed": "Speed against accuracy of the estimator variants",
+    }
     lines += ["## Charts", ""]
     for key, path in charts.items():
         lines += [f"### {captions.get(key, key)}", "", f"![{key}]({path})", ""]
         if key == "stability":
             st = doc.get("stability", {})
-            lines += [f"Sweep: {len(st.get('theta_i', []))} incidences, {st.get('rays')} rays "
-                      f"each."] + [f"- warning: {w}" for w in st.get("warnings", [])] + [""]
+            lines += (
+                [f"Sweep: {len(st.get('theta_i', []))} incidences, {st.get('rays')} rays each."]
+                + [f"- warning: {w}" for w in st.get("warnings", [])]
+                + [""]
+            )
         if key == "speed":
             sp = doc.get("speed", {})
-            rows = [[name, f"{n:,}", _pct(e)] for name, r in sp.get("runs", {}).items()
-                    for n, e in zip(r["rays"], r["rel_rms"])]
-            lines += [f"θi = {fmt(sp.get('theta_i'))}°, error against {sp.get('reference')}; "
-                      "the wall times (this chart's x axis) are in `timings.json`. Both files "
-                      "are written by every run but not kept in git, since wall times differ "
-                      "from run to run.", "",
-                      md_table(["origins", "rays", "rel RMS error"], rows), ""]
+            rows = [
+                [name, f"{n:,}", _pct(e)]
+                for name, r in sp.get("runs", {}).items()
+                for n, e in zip(r["rays"], r["rel_rms"])
+            ]
+            lines += [
+                f"θi = {fmt(sp.get('theta_i'))}°, error against {sp.get('reference')}; "
+                "the wall times (this chart's x axis) are in `timings.json`. Both files "
+                "are written by every run but not kept in git, since wall times differ "
+                "from run to run.",
+                "",
+                md_table(["origins", "rays", "rel RMS error"], rows),
+                "",
+            ]
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -175,13 +277,15 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
     its largest relative RMS error over the deviating incidences and where."""
     if summary == "agrees":
         return "✓"
-    bad = [v for v in verdicts if v["model"] == model and not v["agrees"]
-           and v["rel_rms"] is not None]
+    bad = [
+        v for v in verdicts if v["model"] == model and not v["agrees"] and v["rel_rms"] is not None
+    ]
     if not bad:
         return "✗"
     w = max(bad, key=lambda v: v["rel_rms"])
-    where = ",".join(f"{v['theta_i']:g}" for v in verdicts if v["model"] == model
-                     and not v["agrees"])
+    where = ",".join(
+        f"{v['theta_i']:g}" for v in verdicts if v["model"] == model and not v["agrees"]
+    )
     return f"✗ {100 * w['rel_rms']:.2g}% (θi {where}°)"
 
 
@@ -194,21 +298,27 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
         groups.setdefault(pres, []).append(d)
     out = []
     for pres, group in groups.items():
-        fitted = list(dict.fromkeys(v["model"] for d in group for v in d["verdicts"]
-                                    if v["fitted"]))
+        fitted = list(
+            dict.fromkeys(v["model"] for d in group for v in d["verdicts"] if v["fitted"])
+        )
         models = list(pres) + fitted
         rows = []
         for d in group:
             s = summary_row(d["verdicts"])
-            rows.append([f"[{d['scene']}]({d['scene']}/report.md)"]
-                        + [_compact(d["verdicts"], m, s[m]) if m in s else "–" for m in models])
-        out += [md_table(["scene"] + [m + (" (fit)" if m in fitted else "") for m in models],
-                         rows), ""]
+            rows.append(
+                [f"[{d['scene']}]({d['scene']}/report.md)"]
+                + [_compact(d["verdicts"], m, s[m]) if m in s else "–" for m in models]
+            )
+        out += [
+            md_table(["scene"] + [m + (" (fit)" if m in fitted else "") for m in models], rows),
+            "",
+        ]
     return out
 
 
-def index_report(docs: Sequence[Mapping], fig6: str | None, quick: bool,
-                 seconds: float | None = None) -> str:
+def index_report(
+    docs: Sequence[Mapping], fig6: str | None, quick: bool, seconds: float | None = None
+) -> str:
     """``index.md``: verdict tables (scenes × models), Löw-style fit table, Mikkelsen Fig. 6,
     links to every scene's ``<scene>/report.md``. ``seconds`` (the wall time) is accepted for
     compatibility and not written: the index is reproducible."""
@@ -218,27 +328,51 @@ def index_report(docs: Sequence[Mapping], fig6: str | None, quick: bool,
     fit_rows = []
     for d in docs:
         by = {f["model"]: f for f in d.get("fits", [])}
-        fit_rows.append([d["scene"]] + [f"{fmt(by[m]['sqrt_e1'])} / {fmt(by[m]['sqrt_e2'])}"
-                                        if m in by else "–" for m in fit_models])
-    lines = ["# microsim report", "",
-             f"{len(docs)} scenes, {'quick mode (`microsim report --quick`)' if quick else 'full runs'}. "
-             f"Each scene links to its own report with charts, the energy "
-             "ledger and every verdict.", "",
-             "## Verdicts", "",
-             "✓: statistically indistinguishable from the simulation at every incidence "
-             "(χ² and max-|z| tests, Šidák-corrected, α = 0.01). ✗: the model deviates at the "
-             "listed incidences; the percentage is its largest energy-weighted relative RMS "
-             "error there. Each scene's report says where (θo ranges, worst bin) and by how "
-             "much.", ""] + _verdict_tables(docs)
+        fit_rows.append(
+            [d["scene"]]
+            + [
+                f"{fmt(by[m]['sqrt_e1'])} / {fmt(by[m]['sqrt_e2'])}" if m in by else "–"
+                for m in fit_models
+            ]
+        )
+    lines = [
+        "# microsim report",
+        "",
+        f"{len(docs)} scenes, "
+        f"{'quick mode (`microsim report --quick`)' if quick else 'full runs'}. "
+        f"Each scene links to its own report with charts, the energy "
+        "ledger and every verdict.",
+        "",
+        "## Verdicts",
+        "",
+        "✓: statistically indistinguishable from the simulation at every incidence "
+        "(χ² and max-|z| tests, Šidák-corrected, α = 0.01). ✗: the model deviates at the "
+        "listed incidences; the percentage is its largest energy-weighted relative RMS "
+        "error there. Each scene's report says where (θo ranges, worst bin) and by how "
+        "much.",
+        "",
+    ] + _verdict_tables(docs)
     if fit_models:
-        lines += ["## Fits: √E1 / √E2 (Löw et al. 2012, eq. 29–33, as their Table II)", "",
-                  "Each model fitted to all incidences of a scene at once; smaller is better.", "",
-                  md_table(["scene"] + fit_models, fit_rows), ""]
+        lines += [
+            "## Fits: √E1 / √E2 (Löw et al. 2012, eq. 29–33, as their Table II)",
+            "",
+            "Each model fitted to all incidences of a scene at once; smaller is better.",
+            "",
+            md_table(["scene"] + fit_models, fit_rows),
+            "",
+        ]
     if fig6:
-        lines += ["## Mikkelsen Fig. 6(c)(d)", "",
-                  "1 − ρ(θ) of V-groove surfaces with the von Mises–Fisher NDF (κ = 17, 1024) "
-                  "for methanol and aluminium: simulation (points) against Mikkelsen eq. 27 "
-                  "(lines) and the Fresnel transmittance.", "", f"![Mikkelsen Fig. 6]({fig6})", ""]
-    lines += ["## Scenes", ""] + [f"- [{d['scene']}]({d['scene']}/report.md): "
-                                  f"{d.get('description', '')}" for d in docs]
+        lines += [
+            "## Mikkelsen Fig. 6(c)(d)",
+            "",
+            "1 − ρ(θ) of V-groove surfaces with the von Mises–Fisher NDF (κ = 17, 1024) "
+            "for methanol and aluminium: simulation (points) against Mikkelsen eq. 27 "
+            "(lines) and the Fresnel transmittance.",
+            "",
+            f"![Mikkelsen Fig. 6]({fig6})",
+            "",
+        ]
+    lines += ["## Scenes", ""] + [
+        f"- [{d['scene']}]({d['scene']}/report.md): {d.get('description', '')}" for d in docs
+    ]
     return "\n".join(lines).rstrip() + "\n"

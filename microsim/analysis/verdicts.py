@@ -2,7 +2,7 @@
 
 One verdict compares, for ONE incidence θi and ONE model, the simulated bin averages f̄_B
 (sr⁻¹, ``Result.brdf[t]``) with the model's bin averages m_B over the (θo, Δφ) bins
-(DESIGN.md, Verdicts). Definitions (all documented again in ``VERDICT_SCHEMA``):
+(docs/design.md, "Verdicts"). Definitions (all documented again in ``VERDICT_SCHEMA``):
 
 * Used bins U: ≥ ``min_events`` single-bounce events, and sim, stderr, model finite, σ_B > 0.
 * σ_B² = se_B² + (model_rtol · m_B)²: the simulation's standard error and, in quadrature, the
@@ -24,22 +24,33 @@ One verdict compares, for ONE incidence θi and ONE model, the simulated bin ave
 Limitation: bins are selected by the *simulation's* event count, so a model predicting a lobe
 where the simulation has (almost) no events is not tested there.
 """
+
 from __future__ import annotations
 
-from microsim.errors import UsageError
 from typing import Iterable, Mapping
 
 import numpy as np
 from scipy import stats
 
-from microsim.analytic import _checks
+from microsim import checks as _checks
+from microsim.errors import UsageError
 from microsim.stats import ENERGY_FRACTION, MIN_EVENTS, energy_set, sidak
 
-__all__ = ["VERDICT_SCHEMA", "verdict", "verdicts_for_result", "validate_verdict", "summary_row",
-           "sidak", "energy_set", "Z_DEVIATION", "REL_DEVIATION", "ENERGY_FRACTION"]
+__all__ = [
+    "VERDICT_SCHEMA",
+    "verdict",
+    "verdicts_for_result",
+    "validate_verdict",
+    "summary_row",
+    "sidak",
+    "energy_set",
+    "Z_DEVIATION",
+    "REL_DEVIATION",
+    "ENERGY_FRACTION",
+]
 
-Z_DEVIATION = 5.0          # |z| beyond which a bin counts as a deviation ...
-REL_DEVIATION = 0.05       # ... if its relative error also exceeds this
+Z_DEVIATION = 5.0  # |z| beyond which a bin counts as a deviation ...
+REL_DEVIATION = 0.05  # ... if its relative error also exceeds this
 
 _NUM = (int, float)
 _OPT_NUM = (int, float, type(None))
@@ -52,31 +63,47 @@ VERDICT_SCHEMA: dict = {
     "params": ((dict,), "model parameters (name → JSON value); fitted values for fitted models"),
     "fitted": ((bool,), "True if the parameters were fitted to this simulation"),
     "n_params": ((int,), "number of fitted parameters k (0 unless fitted)"),
-    "n_bins": ((int,), "used bins U: ≥ min_events single-bounce events, finite sim/stderr/model, "
-                       "σ > 0"),
+    "n_bins": (
+        (int,),
+        "used bins U: ≥ min_events single-bounce events, finite sim/stderr/model, σ > 0",
+    ),
     "min_events": ((int,), "event threshold for a used bin"),
     "chi2": (_NUM, "Σ_U z², z = (sim − model)/σ, σ² = stderr² + (model_rtol·model)²"),
     "dof": ((int,), "n_bins − n_params"),
     "chi2_dof": (_OPT_NUM, "chi2/dof (null if dof ≤ 0)"),
     "p_value": (_OPT_NUM, "P(χ²_dof ≥ chi2) (null if dof ≤ 0)"),
     "max_abs_z": (_OPT_NUM, "max_U |z| (null if no used bins)"),
-    "rel_rms": (_OPT_NUM, "energy-weighted relative RMS error over the energy set E (the fewest "
-                          "used bins, by decreasing sim·Ω, reaching 90% of Σ_U sim·Ω): "
-                          "√(Σ_E sim·Ω·((model − sim)/sim)² / Σ_E sim·Ω)"),
+    "rel_rms": (
+        _OPT_NUM,
+        "energy-weighted relative RMS error over the energy set E (the fewest "
+        "used bins, by decreasing sim·Ω, reaching 90% of Σ_U sim·Ω): "
+        "√(Σ_E sim·Ω·((model − sim)/sim)² / Σ_E sim·Ω)",
+    ),
     "energy_bins": ((int,), "number of bins in the energy set E"),
     "alpha": (_NUM, "family significance level α of the run"),
     "n_tests": ((int,), "number of (incidence, model) verdicts in the family"),
     "alpha_eff": (_NUM, "Šidák(α, n_tests) = 1 − (1 − α)^(1/n_tests) for this verdict"),
     "p_threshold": (_NUM, "the χ² test rejects when p_value < Šidák(alpha_eff, 2)"),
-    "z_threshold": (_OPT_NUM, "the max-|z| test rejects when max_abs_z ≥ this two-sided normal "
-                              "quantile at Šidák(Šidák(alpha_eff, 2), n_bins)"),
+    "z_threshold": (
+        _OPT_NUM,
+        "the max-|z| test rejects when max_abs_z ≥ this two-sided normal "
+        "quantile at Šidák(Šidák(alpha_eff, 2), n_bins)",
+    ),
     "model_rtol": (_NUM, "relative quadrature error of the model added to σ in quadrature"),
-    "agrees": ((bool,), "p_value ≥ p_threshold and max_abs_z < z_threshold (false if n_bins = 0"
-                        " or dof ≤ 0): statistically indistinguishable at the run's precision"),
-    "deviations": ((list,), "[θo_lo, θo_hi] ranges in degrees of bins with |z| > 5 and "
-                            "|model − sim|/sim > 0.05 at any Δφ, adjacent θo bins merged"),
-    "max_rel_dev": (_OPT_NUM, "signed (model − sim)/sim of largest magnitude over E ∪ deviating "
-                              "bins (null if empty)"),
+    "agrees": (
+        (bool,),
+        "p_value ≥ p_threshold and max_abs_z < z_threshold (false if n_bins = 0"
+        " or dof ≤ 0): statistically indistinguishable at the run's precision",
+    ),
+    "deviations": (
+        (list,),
+        "[θo_lo, θo_hi] ranges in degrees of bins with |z| > 5 and "
+        "|model − sim|/sim > 0.05 at any Δφ, adjacent θo bins merged",
+    ),
+    "max_rel_dev": (
+        _OPT_NUM,
+        "signed (model − sim)/sim of largest magnitude over E ∪ deviating bins (null if empty)",
+    ),
     "worst_bin": ((list, type(None)), "[θo, Δφ] bin centre (degrees) of max_rel_dev"),
 }
 
@@ -98,27 +125,46 @@ def _opt(x) -> float | None:
     return x if np.isfinite(x) else None
 
 
-def verdict(sim, stderr, counts, model, omega, theta_edges, *, phi_edges=None, theta_i=0.0,
-            name: str = "model", params: Mapping | None = None, fitted: bool = False,
-            n_params: int = 0, model_rtol: float = 1e-3, min_events: int = MIN_EVENTS,
-            alpha: float = 0.01, n_tests: int = 1) -> dict:
+def verdict(
+    sim,
+    stderr,
+    counts,
+    model,
+    omega,
+    theta_edges,
+    *,
+    phi_edges=None,
+    theta_i=0.0,
+    name: str = "model",
+    params: Mapping | None = None,
+    fitted: bool = False,
+    n_params: int = 0,
+    model_rtol: float = 1e-3,
+    min_events: int = MIN_EVENTS,
+    alpha: float = 0.01,
+    n_tests: int = 1,
+) -> dict:
     """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``).
 
     ``sim``, ``stderr``, ``model`` (sr⁻¹), ``counts`` (events) and ``omega`` (projected solid
     angle, sr) are (Θ, Φ) arrays; ``theta_edges`` (Θ+1,) and ``phi_edges`` (Φ+1,, default: the
     folded grid of ``Bins``) in degrees. ``n_params`` fitted parameters reduce the dof.
     """
-    sim, se, cnt, mod, om = (np.asarray(a, dtype=np.float64) for a in
-                             (sim, stderr, counts, model, omega))
+    sim, se, cnt, mod, om = (
+        np.asarray(a, dtype=np.float64) for a in (sim, stderr, counts, model, omega)
+    )
     shape = sim.shape
     if sim.ndim != 2 or any(a.shape != shape for a in (se, cnt, mod, om)):
-        raise UsageError("sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
-                         f"got {[a.shape for a in (sim, se, cnt, mod, om)]}")
+        raise UsageError(
+            "sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
+            f"got {[a.shape for a in (sim, se, cnt, mod, om)]}"
+        )
     theta_edges = np.asarray(theta_edges, dtype=np.float64)
     if theta_edges.shape != (shape[0] + 1,):
         raise UsageError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
     if phi_edges is None:
         from microsim.sim.bins import Bins
+
         phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
     phi_edges = np.asarray(phi_edges, dtype=np.float64)
     if phi_edges.shape != (shape[1] + 1,):
@@ -132,14 +178,20 @@ def verdict(sim, stderr, counts, model, omega, theta_edges, *, phi_edges=None, t
     alpha_each = sidak(alpha_eff, 2)
 
     with np.errstate(invalid="ignore", over="ignore"):
-        sigma = np.sqrt(se ** 2 + (model_rtol * mod) ** 2)
-        used = ((cnt >= min_events) & np.isfinite(sim) & np.isfinite(mod) & np.isfinite(se)
-                & (sigma > 0) & (sim > 0))
+        sigma = np.sqrt(se**2 + (model_rtol * mod) ** 2)
+        used = (
+            (cnt >= min_events)
+            & np.isfinite(sim)
+            & np.isfinite(mod)
+            & np.isfinite(se)
+            & (sigma > 0)
+            & (sim > 0)
+        )
     z = np.where(used, (sim - mod) / np.where(used, sigma, 1.0), 0.0)
     rel = np.where(used, (mod - sim) / np.where(used, sim, 1.0), 0.0)
     n_bins = int(used.sum())
     dof = n_bins - int(n_params)
-    chi2 = float(np.sum(z ** 2))
+    chi2 = float(np.sum(z**2))
     p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else None
     max_abs_z = float(np.max(np.abs(z))) if n_bins else None
     z_thr = float(stats.norm.isf(0.5 * sidak(alpha_each, n_bins))) if n_bins else None
@@ -157,26 +209,43 @@ def verdict(sim, stderr, counts, model, omega, theta_edges, *, phi_edges=None, t
         k = flat[np.argmax(np.abs(rel.ravel()[flat]))]
         it, ip = np.unravel_index(k, shape)
         max_rel_dev = float(rel.ravel()[k])
-        worst = [float(0.5 * (theta_edges[it] + theta_edges[it + 1])),
-                 float(0.5 * (phi_edges[ip] + phi_edges[ip + 1]))]
+        worst = [
+            float(0.5 * (theta_edges[it] + theta_edges[it + 1])),
+            float(0.5 * (phi_edges[ip] + phi_edges[ip + 1])),
+        ]
     else:
         max_rel_dev, worst = None, None
     return {
-        "theta_i": float(theta_i), "model": str(name), "params": _jsonable_params(params),
-        "fitted": bool(fitted), "n_params": int(n_params), "n_bins": n_bins,
-        "min_events": int(min_events), "chi2": chi2, "dof": int(dof),
-        "chi2_dof": chi2 / dof if dof > 0 else None, "p_value": p_value,
-        "max_abs_z": max_abs_z, "rel_rms": _opt(rel_rms) if rel_rms is not None else None,
-        "energy_bins": int(E.sum()), "alpha": float(alpha), "n_tests": int(n_tests),
-        "alpha_eff": alpha_eff, "p_threshold": alpha_each, "z_threshold": z_thr,
-        "model_rtol": float(model_rtol), "agrees": agrees,
+        "theta_i": float(theta_i),
+        "model": str(name),
+        "params": _jsonable_params(params),
+        "fitted": bool(fitted),
+        "n_params": int(n_params),
+        "n_bins": n_bins,
+        "min_events": int(min_events),
+        "chi2": chi2,
+        "dof": int(dof),
+        "chi2_dof": chi2 / dof if dof > 0 else None,
+        "p_value": p_value,
+        "max_abs_z": max_abs_z,
+        "rel_rms": _opt(rel_rms) if rel_rms is not None else None,
+        "energy_bins": int(E.sum()),
+        "alpha": float(alpha),
+        "n_tests": int(n_tests),
+        "alpha_eff": alpha_eff,
+        "p_threshold": alpha_each,
+        "z_threshold": z_thr,
+        "model_rtol": float(model_rtol),
+        "agrees": agrees,
         "deviations": _merge_ranges(dev.any(axis=1), theta_edges),
-        "max_rel_dev": max_rel_dev, "worst_bin": worst,
+        "max_rel_dev": max_rel_dev,
+        "worst_bin": worst,
     }
 
 
 def _jsonable_params(params: Mapping | None) -> dict:
     """Parameters as plain JSON values (numbers, strings, lists; complex → [re, im])."""
+
     def conv(v):
         if isinstance(v, (bool, str)) or v is None:
             return v
@@ -191,6 +260,7 @@ def _jsonable_params(params: Mapping | None) -> dict:
         if isinstance(v, Mapping):
             return {str(k): conv(x) for k, x in v.items()}
         return repr(v)
+
     return {str(k): conv(v) for k, v in dict(params or {}).items()}
 
 
@@ -225,9 +295,15 @@ def validate_verdict(d) -> dict:
     return d
 
 
-def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
-                        model_rtol: float = 1e-3, min_events: int = MIN_EVENTS,
-                        alpha: float = 0.01) -> list[dict]:
+def verdicts_for_result(
+    result,
+    fitted=None,
+    *,
+    params: Mapping | None = None,
+    model_rtol: float = 1e-3,
+    min_events: int = MIN_EVENTS,
+    alpha: float = 0.01,
+) -> list[dict]:
     """Verdicts for every incidence × model of ``result.models`` (prescribed models) and of
     ``fitted`` (an iterable or name → mapping of ``fits.FitResult``; their ``model_values`` are
     compared and their parameter count reduces the dof). ``params``: optional name → parameter
@@ -235,8 +311,9 @@ def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
     The family size n_tests = #incidences × #models (prescribed + fitted)."""
     fits = list(fitted.values()) if isinstance(fitted, Mapping) else list(fitted or [])
     params = dict(result.meta.get("model_params", {}) if params is None else params)
-    entries = [(name, values, params.get(name, {}), False, 0)
-               for name, values in result.models.items()]
+    entries = [
+        (name, values, params.get(name, {}), False, 0) for name, values in result.models.items()
+    ]
     entries += [(f.name, f.model_values, f.params, True, len(f.params)) for f in fits]
     names = [e[0] for e in entries]
     if len(set(names)) != len(names):
@@ -254,13 +331,29 @@ def verdicts_for_result(result, fitted=None, *, params: Mapping | None = None,
             stderr = ray_err if name in own else result.stderr
             values = np.asarray(values)
             if values.shape != result.brdf.shape:
-                raise UsageError(f"model {name!r} has shape {values.shape}, "
-                                 f"expected {result.brdf.shape}")
-            out.append(verdict(result.brdf[t], stderr[t], result.counts[t], values[t],
-                               omega, result.theta_edges, phi_edges=result.phi_edges,
-                               theta_i=float(result.theta_i[t]), name=name, params=p,
-                               fitted=is_fit, n_params=k, model_rtol=model_rtol,
-                               min_events=min_events, alpha=alpha, n_tests=n_tests))
+                raise UsageError(
+                    f"model {name!r} has shape {values.shape}, expected {result.brdf.shape}"
+                )
+            out.append(
+                verdict(
+                    result.brdf[t],
+                    stderr[t],
+                    result.counts[t],
+                    values[t],
+                    omega,
+                    result.theta_edges,
+                    phi_edges=result.phi_edges,
+                    theta_i=float(result.theta_i[t]),
+                    name=name,
+                    params=p,
+                    fitted=is_fit,
+                    n_params=k,
+                    model_rtol=model_rtol,
+                    min_events=min_events,
+                    alpha=alpha,
+                    n_tests=n_tests,
+                )
+            )
     return out
 
 
@@ -286,7 +379,9 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
         worst = [v for v in bad if v["max_rel_dev"] is not None]
         if worst:
             w = max(worst, key=lambda v: abs(v["max_rel_dev"]))
-            parts.append(f"worst {100 * w['max_rel_dev']:+.3g}% at θo {w['worst_bin'][0]:g}°, "
-                         f"Δφ {w['worst_bin'][1]:g}° (θi={w['theta_i']:g}°)")
+            parts.append(
+                f"worst {100 * w['max_rel_dev']:+.3g}% at θo {w['worst_bin'][0]:g}°, "
+                f"Δφ {w['worst_bin'][1]:g}° (θi={w['theta_i']:g}°)"
+            )
         out[name] = parts[0] + (": " + ", ".join(parts[1:]) if len(parts) > 1 else "")
     return out

@@ -1,8 +1,9 @@
 """Closed-form microfacet models of the four papers (see docs/design.md).
 
-    from microsim import analytic as an
-    an.fresnel(cos_theta, material); an.Beckmann(m); an.torrance_sparrow(wi, wo, ndf, ...)
+from microsim import analytic as an
+an.fresnel(cos_theta, material); an.Beckmann(m); an.torrance_sparrow(wi, wo, ndf, ...)
 """
+
 from .brdf import *  # noqa: F401,F403
 from .edwards import *  # noqa: F401,F403
 from .empirical import *  # noqa: F401,F403

@@ -7,20 +7,28 @@ the incidence first for an integral over a BRDF — then the model. ``material``
 ``fresnel.resolve_material`` accepts: None (mirror, F = 1), a material name, a real
 (dielectric) or complex (conductor) index.
 """
+
 from __future__ import annotations
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.stats import qmc
 
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 
-from . import _checks
 from .fresnel import fresnel, resolve_material
 from .shadowing import _check_kind, _shadowing, _tilt_breakpoints
 
-__all__ = ["torrance_sparrow", "sample_microfacet", "pdf_microfacet", "directional_albedo",
-           "AlbedoTable", "mikkelsen_mix"]
+__all__ = [
+    "torrance_sparrow",
+    "sample_microfacet",
+    "pdf_microfacet",
+    "directional_albedo",
+    "AlbedoTable",
+    "mikkelsen_mix",
+]
 
 
 def _D_of(ndf, h: np.ndarray) -> np.ndarray:
@@ -39,8 +47,8 @@ def _ts(wi, wo, ndf, kind: str, eta) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / norm
         hz = s[..., 2] * inv
-        cos_d = 0.5 * norm                 # wi·h = wo·h = |wi + wo|/2 for unit wi, wo
-        if kind == "vgroove":              # Mikkelsen 2009, eq. 25 with a shared denominator
+        cos_d = 0.5 * norm  # wi·h = wo·h = |wi + wo|/2 for unit wi, wo
+        if kind == "vgroove":  # Mikkelsen 2009, eq. 25 with a shared denominator
             val = np.minimum(2.0 * hz * np.minimum(ci, co) / cos_d, 1.0)
         else:
             wi_b, wo_b = np.broadcast_arrays(wi, wo)
@@ -109,12 +117,10 @@ def _cosine_sample(u1, u2) -> np.ndarray:
     """Cosine-weighted hemisphere directions (pdf cos θ/π)."""
     r = np.sqrt(u1)
     phi = 2.0 * np.pi * u2
-    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(1.0 - u1, 0.0))],
-                    axis=-1)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.maximum(1.0 - u1, 0.0))], axis=-1)
 
 
-def directional_albedo(theta_deg, brdf_fn, n: int = 2 ** 14, ndf=None, n_rep: int = 8,
-                       seed: int = 0):
+def directional_albedo(theta_deg, brdf_fn, n: int = 2**14, ndf=None, n_rep: int = 8, seed: int = 0):
     """Directional albedo ρ(θ) = ∫ f(ω, ω') cos θ' dω' (Mikkelsen 2009, eq. 27) by randomised
     QMC.
 
@@ -128,27 +134,31 @@ def directional_albedo(theta_deg, brdf_fn, n: int = 2 ** 14, ndf=None, n_rep: in
     n = int(n)
     if n < 2 or n & (n - 1):
         raise UsageError(f"n must be a power of 2 >= 2 (Sobol points), got {n!r}")
-    n_rep = int(_checks.in_range("n_rep", n_rep, 2, 10 ** 6))
+    n_rep = int(_checks.in_range("n_rep", n_rep, 2, 10**6))
     theta = np.radians(np.asarray(theta_deg, dtype=np.float64))
     if np.any((theta < 0) | (theta > 0.5 * np.pi)):
         raise UsageError(f"theta_deg must lie in [0, 90], got {theta_deg!r}")
-    wi = _checks.spherical(theta, 0.0)[..., None, :]             # (..., 1, 3)
+    wi = vectors.spherical(theta, 0.0)[..., None, :]  # (..., 1, 3)
     wi_up = wi[..., 2] > 0.0
     rng = np.random.default_rng(seed)
     reps = []
-    for _ in range(n_rep):                                        # replicates, not per-sample
+    for _ in range(n_rep):  # replicates, not per-sample
         u = qmc.Sobol(d=2, scramble=True, seed=rng).random(n)
         cands = [np.broadcast_to(_cosine_sample(u[:, 0], u[:, 1]), wi.shape[:-2] + (n, 3))]
         if ndf is not None:
-            cands.append(sample_microfacet(np.broadcast_to(wi, wi.shape[:-2] + (n, 3)),
-                                           u[:, 0], u[:, 1], ndf)[0])
+            cands.append(
+                sample_microfacet(
+                    np.broadcast_to(wi, wi.shape[:-2] + (n, 3)), u[:, 0], u[:, 1], ndf
+                )[0]
+            )
         total = 0.0
         for wo in cands:
             co = wo[..., 2]
             p = co / np.pi * (co > 0)
             if ndf is not None:
-                p = 0.5 * p + 0.5 * pdf_microfacet(wo, np.where(wi_up[..., None], wi,
-                                                                (0.0, 0.0, 1.0)), ndf)
+                p = 0.5 * p + 0.5 * pdf_microfacet(
+                    wo, np.where(wi_up[..., None], wi, (0.0, 0.0, 1.0)), ndf
+                )
             up = co > 0.0
             safe_wo = np.where(up[..., None], wo, (0.0, 0.0, 1.0))
             f = np.where(up, brdf_fn(wi, safe_wo), 0.0)
@@ -170,9 +180,16 @@ def _phi_breakpoints(cos_i: float, cos_h: np.ndarray) -> np.ndarray:
     sin_i = np.sqrt(max(1.0 - cos_i * cos_i, 0.0))
     sin_h = np.sqrt((1.0 - cos_h) * (1.0 + cos_h))
     with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.stack([np.zeros_like(cos_h), 2.0 * cos_h * cos_i, cos_i / (2.0 * cos_h),
-                      np.where(4 * cos_h ** 2 > 1, 2 * cos_h * cos_i / (4 * cos_h ** 2 - 1), 0.0),
-                      cos_i / cos_h], axis=-1)
+        d = np.stack(
+            [
+                np.zeros_like(cos_h),
+                2.0 * cos_h * cos_i,
+                cos_i / (2.0 * cos_h),
+                np.where(4 * cos_h**2 > 1, 2 * cos_h * cos_i / (4 * cos_h**2 - 1), 0.0),
+                cos_i / cos_h,
+            ],
+            axis=-1,
+        )
         x = (d - cos_i * cos_h[:, None]) / (sin_i * sin_h[:, None])
     return np.arccos(np.clip(np.nan_to_num(x, nan=1.0), -1.0, 1.0))
 
@@ -190,20 +207,26 @@ def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int)
     wth = (0.5 * (b - a) * gw).ravel() * np.sin(th)
     px, pw = np.polynomial.legendre.leggauss(n_gl_phi)
     out = np.empty(len(cos_i))
-    for k, c in enumerate(cos_i):                                # one row per table node
+    for k, c in enumerate(cos_i):  # one row per table node
         kinks = _phi_breakpoints(c, np.cos(th))
         if isotropic:
             bp = np.concatenate([np.zeros((len(th), 1)), kinks, np.full((len(th), 1), np.pi)], 1)
             scale = 2.0
         else:
-            bp = np.concatenate([kinks, 2 * np.pi - kinks,
-                                 np.broadcast_to(ndf.phi_edges, (len(th), len(ndf.phi_edges)))], 1)
+            bp = np.concatenate(
+                [
+                    kinks,
+                    2 * np.pi - kinks,
+                    np.broadcast_to(ndf.phi_edges, (len(th), len(ndf.phi_edges))),
+                ],
+                1,
+            )
             scale = 1.0
         bp = np.sort(bp, axis=1)
         pa, pb = bp[:, :-1, None], bp[:, 1:, None]
-        ph = 0.5 * (pa + pb) + 0.5 * (pb - pa) * px              # (n_t, n_panels, n_gl_phi)
+        ph = 0.5 * (pa + pb) + 0.5 * (pb - pa) * px  # (n_t, n_panels, n_gl_phi)
         wph = 0.5 * (pb - pa) * pw * scale
-        h = _checks.spherical(th[:, None, None], ph)
+        h = vectors.spherical(th[:, None, None], ph)
         wi = np.array([np.sqrt(max(1.0 - c * c, 0.0)), 0.0, c])
         wih = h @ wi
         wo = 2.0 * wih[..., None] * h - wi
@@ -226,28 +249,40 @@ class AlbedoTable:
     (tests/test_brdf.py).
     """
 
-    def __init__(self, ndf, shadowing: str = "vgroove", material=None, n_theta: int = 46,
-                 n_grazing: int = 24, n_gl_phi: int = 16):
+    def __init__(
+        self,
+        ndf,
+        shadowing: str = "vgroove",
+        material=None,
+        n_theta: int = 46,
+        n_grazing: int = 24,
+        n_gl_phi: int = 16,
+    ):
         self.ndf = ndf
         self.shadowing = _check_kind(shadowing)
         self.material = resolve_material(material)
-        n_theta = int(_checks.in_range("n_theta", n_theta, 3, 10 ** 5))
-        n_grazing = int(_checks.in_range("n_grazing", n_grazing, 0, 10 ** 5))
+        n_theta = int(_checks.in_range("n_theta", n_theta, 3, 10**5))
+        n_grazing = int(_checks.in_range("n_grazing", n_grazing, 0, 10**5))
         n_gl_phi = int(_checks.in_range("n_gl_phi", n_gl_phi, 2, 1000))
-        deg = np.unique(np.concatenate([np.linspace(0.0, 90.0, n_theta),
-                                        90.0 - np.geomspace(0.01, 12.0, n_grazing)]))
+        deg = np.unique(
+            np.concatenate(
+                [np.linspace(0.0, 90.0, n_theta), 90.0 - np.geomspace(0.01, 12.0, n_grazing)]
+            )
+        )
         theta = np.radians(deg)
         theta[-1] -= 1e-7
         self.theta_nodes = theta
-        self.rho_nodes = _albedo_by_quadrature(ndf, self.shadowing, self.material, np.cos(theta),
-                                               n_gl_phi)
+        self.rho_nodes = _albedo_by_quadrature(
+            ndf, self.shadowing, self.material, np.cos(theta), n_gl_phi
+        )
         self._interp = CubicSpline(theta, self.rho_nodes)
-        edges = np.append(theta, 0.5 * np.pi)                     # 2∫ρ cos sin dθ, per interval
+        edges = np.append(theta, 0.5 * np.pi)  # 2∫ρ cos sin dθ, per interval
         gx, gw = np.polynomial.legendre.leggauss(8)
         a, b = edges[:-1, None], edges[1:, None]
         t = 0.5 * (a + b) + 0.5 * (b - a) * gx
-        self.rho_bar = float(np.sum((b - a) * gw * np.maximum(self._interp(t), 0.0)
-                                    * np.sin(2.0 * t)) / 2.0)
+        self.rho_bar = float(
+            np.sum((b - a) * gw * np.maximum(self._interp(t), 0.0) * np.sin(2.0 * t)) / 2.0
+        )
         self.rho_max = float(self.rho_nodes.max())
 
     def rho(self, cos_theta):
@@ -256,13 +291,16 @@ class AlbedoTable:
         return np.maximum(self._interp(np.arccos(c)), 0.0)
 
     def __repr__(self) -> str:
-        return (f"AlbedoTable({self.ndf!r}, shadowing={self.shadowing!r}, "
-                f"material={self.material!r}, "
-                f"rho_bar={self.rho_bar:.6g})")
+        return (
+            f"AlbedoTable({self.ndf!r}, shadowing={self.shadowing!r}, "
+            f"material={self.material!r}, "
+            f"rho_bar={self.rho_bar:.6g})"
+        )
 
 
-def mikkelsen_mix(wi, wo, specular_table: AlbedoTable, kd, ks: float = 1.0,
-                  renormalise: bool = False):
+def mikkelsen_mix(
+    wi, wo, specular_table: AlbedoTable, kd, ks: float = 1.0, renormalise: bool = False
+):
     """Specular + energy-conserving reciprocal diffuse BRDF in sr⁻¹ (Mikkelsen 2009, eq. 28):
 
         f = ks f_s(wi, wo) + (1 − ks ρ(wi)) (kd/π) (1 − ks ρ(wo)) [/ (1 − ks ρ̄)],
@@ -282,8 +320,10 @@ def mikkelsen_mix(wi, wo, specular_table: AlbedoTable, kd, ks: float = 1.0,
     if kd.ndim > 1 or np.any((kd < 0) | (kd > 1)) or np.any(np.isnan(kd)):
         raise UsageError(f"kd must be a scalar or 1-D array with values in [0, 1], got {kd!r}")
     if ks * specular_table.rho_max > 1.0 + 1e-3:
-        raise UsageError(f"specular_table must have ks·ρ <= 1 (energy conserving specular), got "
-                         f"ks·max ρ = {ks * specular_table.rho_max:.6g}; use V-groove or Smith G")
+        raise UsageError(
+            f"specular_table must have ks·ρ <= 1 (energy conserving specular), got "
+            f"ks·max ρ = {ks * specular_table.rho_max:.6g}; use V-groove or Smith G"
+        )
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     t = specular_table

@@ -33,6 +33,7 @@ disk densities per unit disk area. All functions broadcast over leading axes. Ar
 directions first: ``(wi, wo, ...)`` where both are given, ``(wo, h)``, ``(wo, uv)`` or
 ``(wo, u1, u2, ...)`` where wo alone fixes the disk.
 """
+
 from __future__ import annotations
 
 from dataclasses import astuple, dataclass, fields
@@ -40,21 +41,36 @@ from typing import Callable, Union
 
 import numpy as np
 
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 
-from . import _checks
 from .fresnel import schlick
 
 __all__ = [
-    "DISK_PROJECTIONS", "disk_centre", "reflect_halfway",
-    "scaling_projection", "scaling_projection_inverse", "scaling_jacobian",
-    "orthogonal_projection", "orthogonal_projection_inverse", "orthogonal_jacobian",
-    "disk_projection", "disk_projection_inverse", "disk_jacobian",
-    "incident_to_disk", "disk_to_incident",
-    "Lump", "LumpMixture", "empirical_lumps",
-    "edwards_empirical", "brdf_to_disk_density",
-    "EdwardsParams", "edwards_fit_brdf",
-    "sample_edwards", "pdf_edwards",
+    "DISK_PROJECTIONS",
+    "disk_centre",
+    "reflect_halfway",
+    "scaling_projection",
+    "scaling_projection_inverse",
+    "scaling_jacobian",
+    "orthogonal_projection",
+    "orthogonal_projection_inverse",
+    "orthogonal_jacobian",
+    "disk_projection",
+    "disk_projection_inverse",
+    "disk_jacobian",
+    "incident_to_disk",
+    "disk_to_incident",
+    "Lump",
+    "LumpMixture",
+    "empirical_lumps",
+    "edwards_empirical",
+    "brdf_to_disk_density",
+    "EdwardsParams",
+    "edwards_fit_brdf",
+    "sample_edwards",
+    "pdf_edwards",
 ]
 
 DISK_PROJECTIONS = ("scaling", "orthogonal")
@@ -84,7 +100,7 @@ def _cos_o(wo: np.ndarray) -> np.ndarray:
 
 def _unit_or_normal(v: np.ndarray) -> np.ndarray:
     """Normalise v; a zero vector becomes the normal +z."""
-    h = _checks.normalize(v)
+    h = vectors.normalize(v)
     zero = np.all(h == 0.0, axis=-1, keepdims=True)
     return np.where(zero, np.array([0.0, 0.0, 1.0]), h)
 
@@ -101,7 +117,7 @@ def disk_centre(wo) -> np.ndarray:
 def reflect_halfway(wo, h) -> np.ndarray:
     """Incident direction wi = 2(wo·h)h − wo for a unit half vector h (eq. 13)."""
     wo, h = np.asarray(wo, float), np.asarray(h, float)
-    return 2.0 * _checks.dot(wo, h)[..., None] * h - wo
+    return 2.0 * vectors.dot(wo, h)[..., None] * h - wo
 
 
 # --------------------------------------------------------------------------------------------
@@ -141,7 +157,7 @@ def scaling_jacobian(wi, wo) -> np.ndarray:
     c = _cos_o(wo)
     H = wi + wo
     Hz = H[..., 2]
-    J = _safe_div(c * c * _checks.dot(H, H), 2.0 * Hz ** 3)
+    J = _safe_div(c * c * vectors.dot(H, H), 2.0 * Hz**3)
     return np.where(wi[..., 2] >= 0.0, J, 0.0)
 
 
@@ -155,7 +171,7 @@ def orthogonal_projection(wo, h) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     h = _checks.directions("h", h)
-    return 2.0 * _checks.dot(wo, h)[..., None] * h[..., :2]
+    return 2.0 * vectors.dot(wo, h)[..., None] * h[..., :2]
 
 
 def orthogonal_projection_inverse(wo, uv) -> np.ndarray:
@@ -182,8 +198,9 @@ def orthogonal_jacobian(wi, wo) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
-    return np.broadcast_to(np.maximum(wi[..., 2], 0.0),
-                           np.broadcast_shapes(wo.shape[:-1], wi.shape[:-1])).copy()
+    return np.broadcast_to(
+        np.maximum(wi[..., 2], 0.0), np.broadcast_shapes(wo.shape[:-1], wi.shape[:-1])
+    ).copy()
 
 
 # --------------------------------------------------------------------------------------------
@@ -231,8 +248,9 @@ def _brdf_factor(wi, wo, projection: str) -> np.ndarray:
     """
     wi_z = np.asarray(wi, float)[..., 2]
     if projection == "orthogonal":
-        return np.broadcast_to(np.where(wi_z > 0.0, 1.0, 0.0),
-                               np.broadcast_shapes(np.shape(wo)[:-1], wi_z.shape)).copy()
+        return np.broadcast_to(
+            np.where(wi_z > 0.0, 1.0, 0.0), np.broadcast_shapes(np.shape(wo)[:-1], wi_z.shape)
+        ).copy()
     J = scaling_jacobian(wi, wo)
     return np.where(wi_z > 0.0, _safe_div(J, wi_z), 0.0)
 
@@ -275,8 +293,9 @@ class Lump:
             raise UsageError(f"Lump.anchor must be one of {_ANCHORS}, got {self.anchor!r}")
         off = np.asarray(self.offset, dtype=float)
         if off.shape != (2,) or not np.all(np.isfinite(off)):
-            raise UsageError("Lump.offset must be two finite numbers (Δu, Δv), "
-                             f"got {self.offset!r}")
+            raise UsageError(
+                f"Lump.offset must be two finite numbers (Δu, Δv), got {self.offset!r}"
+            )
 
     def geometry(self, wo):
         """(centre (..., 2), R_u (...), R_v (...)) of the lump for outgoing direction(s) wo."""
@@ -330,8 +349,10 @@ class LumpMixture:
 
     def __post_init__(self):
         if len(self.lumps) == 0 or len(self.lumps) != len(self.weights):
-            raise UsageError("LumpMixture.lumps and LumpMixture.weights must be non-empty and of "
-                             f"equal length, got {len(self.lumps)} and {len(self.weights)}")
+            raise UsageError(
+                "LumpMixture.lumps and LumpMixture.weights must be non-empty and of "
+                f"equal length, got {len(self.lumps)} and {len(self.weights)}"
+            )
         w = np.asarray(self.weights, float)
         if np.any(~np.isfinite(w)) or np.any(w < 0) or abs(w.sum() - 1.0) > 1e-12:
             raise UsageError(f"LumpMixture.weights must be ≥ 0 and sum to 1, got {self.weights!r}")
@@ -362,8 +383,13 @@ class LumpMixture:
         return uv, self.pdf(wo, uv)
 
 
-def empirical_lumps(k: float = 0.0, n_s: float = 0.0, n_r: float = 0.0,
-                    r_s: float | None = None, r_r: float | None = None) -> LumpMixture:
+def empirical_lumps(
+    k: float = 0.0,
+    n_s: float = 0.0,
+    n_r: float = 0.0,
+    r_s: float | None = None,
+    r_r: float | None = None,
+) -> LumpMixture:
     """Disk density of the empirical BRDF (eq. 32).
 
     (1 − k) × specular lump at (u, v) = 0 (radius r_s, exponent n_s) + k × retro lump at the disk
@@ -372,8 +398,9 @@ def empirical_lumps(k: float = 0.0, n_s: float = 0.0, n_r: float = 0.0,
     R_r = 1). k ∈ [0, 1].
     """
     k = _checks.in_range("k", k, 0.0, 1.0)
-    return LumpMixture((Lump(n_s, r_s, anchor="normal"), Lump(n_r, r_r, anchor="centre")),
-                       (1.0 - k, k))
+    return LumpMixture(
+        (Lump(n_s, r_s, anchor="normal"), Lump(n_r, r_r, anchor="centre")), (1.0 - k, k)
+    )
 
 
 def _disk_density(density: DiskDensity, wo, uv) -> np.ndarray:
@@ -382,8 +409,10 @@ def _disk_density(density: DiskDensity, wo, uv) -> np.ndarray:
         return density.pdf(wo, uv)
     if callable(density):
         return np.asarray(density(uv, wo), dtype=np.float64)
-    raise UsageError("lumps must be a Lump, a LumpMixture or a callable pdf_disk(uv, wo), "
-                     f"got {type(density).__name__}")
+    raise UsageError(
+        "lumps must be a Lump, a LumpMixture or a callable pdf_disk(uv, wo), "
+        f"got {type(density).__name__}"
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -398,8 +427,9 @@ def _fresnel_factor(fresnel, cos_o) -> np.ndarray:
     return np.asarray(schlick(cos_o, _checks.in_range("fresnel (f0)", fresnel, 0.0, 1.0)))
 
 
-def edwards_empirical(wi, wo, lumps: DiskDensity, projection: str = "scaling",
-                      fresnel=None, diffuse: float = 0.0) -> np.ndarray:
+def edwards_empirical(
+    wi, wo, lumps: DiskDensity, projection: str = "scaling", fresnel=None, diffuse: float = 0.0
+) -> np.ndarray:
     """Energy-conserving empirical BRDF (eq. 33; eq. 11 for either projection), sr⁻¹.
 
     f = (1 − F(θo)) C_d/π + F(θo) p(u, v) J(wi, wo)/cos θi, with (u, v) the disk point of
@@ -420,12 +450,15 @@ def edwards_empirical(wi, wo, lumps: DiskDensity, projection: str = "scaling",
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
     if isinstance(lumps, (Lump, LumpMixture)) and not np.all(lumps.fits_on_disk(wo)):
-        raise UsageError("lumps must lie on the halfway disk for every wo: each lump needs "
-                         "max(R_u, R_v) + |centre − wo_xy| <= 1 (§4: R_s <= 1 − sin θo, "
-                         "R_r <= 1); use radius=None for the largest allowed radius")
+        raise UsageError(
+            "lumps must lie on the halfway disk for every wo: each lump needs "
+            "max(R_u, R_v) + |centre − wo_xy| <= 1 (§4: R_s <= 1 − sin θo, "
+            "R_r <= 1); use radius=None for the largest allowed radius"
+        )
     F = _fresnel_factor(fresnel, _cos_o(wo))
     spec = _disk_density(lumps, wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
-        wi, wo, projection)
+        wi, wo, projection
+    )
     return np.where(wi[..., 2] > 0.0, (1.0 - F) * diffuse / np.pi + F * spec, 0.0)
 
 
@@ -469,8 +502,16 @@ class EdwardsParams:
     # (lo, hi) for a least-squares fit: fractions in [0, 1]; radii from 1e-4 (far below any
     # measured lobe) to 4 (twice the disk diameter: flat over the disk); exponents up to 1e4.
     # These are practical choices, not from the paper.
-    _BOUNDS = {"cd": (0.0, 1.0), "f0": (0.0, 1.0), "f90": (0.0, 1.0), "k": (0.0, 1.0),
-               "r1": (1e-4, 4.0), "n1": (0.0, 1e4), "r2": (1e-4, 4.0), "n2": (0.0, 1e4)}
+    _BOUNDS = {
+        "cd": (0.0, 1.0),
+        "f0": (0.0, 1.0),
+        "f90": (0.0, 1.0),
+        "k": (0.0, 1.0),
+        "r1": (1e-4, 4.0),
+        "n1": (0.0, 1e4),
+        "r2": (1e-4, 4.0),
+        "n2": (0.0, 1e4),
+    }
 
     def __post_init__(self):
         for name in ("cd", "f0", "f90", "k"):
@@ -478,8 +519,9 @@ class EdwardsParams:
         for name in ("r1", "r2"):
             _checks.positive(f"EdwardsParams.{name}", getattr(self, name))
         for name in ("n1", "n2"):
-            _checks.in_range(f"EdwardsParams.{name}", getattr(self, name), 0.0, np.inf,
-                             hi_open=True)
+            _checks.in_range(
+                f"EdwardsParams.{name}", getattr(self, name), 0.0, np.inf, hi_open=True
+            )
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
@@ -501,14 +543,14 @@ class EdwardsParams:
         """Inverse of ``to_vector``."""
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (len(cls.names()),):
-            raise UsageError(f"x must have shape ({len(cls.names())},) in order {cls.names()}, "
-                             f"got {x.shape}")
+            raise UsageError(
+                f"x must have shape ({len(cls.names())},) in order {cls.names()}, got {x.shape}"
+            )
         return cls(*map(float, x))
 
     def lumps(self) -> LumpMixture:
         """The disk density of eq. 35: (1 − k) lump(r1, n1) + k lump(r2, n2), both at the normal."""
-        return LumpMixture((Lump(self.n1, self.r1), Lump(self.n2, self.r2)),
-                           (1.0 - self.k, self.k))
+        return LumpMixture((Lump(self.n1, self.r1), Lump(self.n2, self.r2)), (1.0 - self.k, self.k))
 
     def fresnel(self, cos_o) -> np.ndarray:
         """F_fit(θo) = F0 + (F_π/2 − F0)(1 − cos θo)⁵ (eq. 34), via Schlick with f0 = 0."""
@@ -530,7 +572,8 @@ def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogona
     wi = _checks.directions("wi", wi)
     F = params.fresnel(_cos_o(wo))
     spec = params.lumps().pdf(wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
-        wi, wo, projection)
+        wi, wo, projection
+    )
     return np.where(wi[..., 2] > 0.0, (1.0 - F) * params.cd / np.pi + F * spec, 0.0)
 
 
@@ -573,6 +616,7 @@ def sample_edwards(wo, u1, u2, lumps, projection: str = "scaling"):
     wi = disk_to_incident(wo, uv, projection)
     d = uv - wo[..., :2]
     on_disk = np.sum(d * d, axis=-1) < 1.0
-    pdf = np.where(on_disk & (wi[..., 2] > 0.0),
-                   p * disk_jacobian(_checks.normalize(wi), wo, projection), 0.0)
+    pdf = np.where(
+        on_disk & (wi[..., 2] > 0.0), p * disk_jacobian(vectors.normalize(wi), wo, projection), 0.0
+    )
     return wi, pdf

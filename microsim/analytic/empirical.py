@@ -19,13 +19,15 @@ bins — 200 bins of 5000 facets (≈1.4 % noise) for N = 10⁶; anisotropic n_t
 clip(round(N^(1/3)/2), 4, 128) and n_phi = 4 clip(round(N^(1/3)/16), 1, 32) uniform azimuth bins
 (a multiple of 4 keeps the x and y axes on bin edges) — 50 × 24 cells of ≈ 830 facets for 10⁶.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 
-from . import _checks
 from .ndf import NDF
 
 __all__ = ["Empirical"]
@@ -87,43 +89,58 @@ class Empirical(NDF):
 
     name = "empirical"
 
-    def __init__(self, normals, weights=None, n_theta: int | None = None,
-                 n_phi: int | None = None, isotropic: bool = True, max_bin_deg: float = 2.0):
+    def __init__(
+        self,
+        normals,
+        weights=None,
+        n_theta: int | None = None,
+        n_phi: int | None = None,
+        isotropic: bool = True,
+        max_bin_deg: float = 2.0,
+    ):
         nrm = _checks.directions("normals", normals)
         if nrm.ndim != 2 or nrm.shape[0] == 0:
             raise UsageError(f"normals must be a non-empty array of shape (N, 3), got {nrm.shape}")
         if np.any(nrm[:, 2] <= 0.0):
-            raise UsageError("normals must point into the upper hemisphere (n_z > 0); "
-                             f"got n_z down to {nrm[:, 2].min():.6g}")
+            raise UsageError(
+                "normals must point into the upper hemisphere (n_z > 0); "
+                f"got n_z down to {nrm[:, 2].min():.6g}"
+            )
         n = nrm.shape[0]
         w = self._check_weights(weights, n)
         self.isotropic = bool(isotropic)
-        n_theta = _default_n_theta(n, self.isotropic) if n_theta is None else int(
-            _checks.in_range("n_theta", n_theta, 1, 100000))
+        n_theta = (
+            _default_n_theta(n, self.isotropic)
+            if n_theta is None
+            else int(_checks.in_range("n_theta", n_theta, 1, 100000))
+        )
         if self.isotropic:
             n_phi = 1
         else:
-            n_phi = _default_n_phi(n) if n_phi is None else int(
-                _checks.in_range("n_phi", n_phi, 1, 100000))
-        max_width = np.radians(_checks.in_range("max_bin_deg", max_bin_deg, 0.0, 90.0,
-                                                lo_open=True))
+            n_phi = (
+                _default_n_phi(n)
+                if n_phi is None
+                else int(_checks.in_range("n_phi", n_phi, 1, 100000))
+            )
+        max_width = np.radians(
+            _checks.in_range("max_bin_deg", max_bin_deg, 0.0, 90.0, lo_open=True)
+        )
         theta = _tilt(nrm)
         self.theta_edges = _split_wide(_quantile_edges(theta, w, n_theta), max_width)
         self.phi_edges = np.linspace(0.0, 2.0 * np.pi, n_phi + 1)
         phi = np.mod(np.arctan2(nrm[:, 1], nrm[:, 0]), 2.0 * np.pi)
-        cells, _, _ = np.histogram2d(theta, phi, bins=[self.theta_edges, self.phi_edges],
-                                     weights=w)
-        self.cell_weights = cells / cells.sum()           # (n_theta_bins, n_phi) fractions
+        cells, _, _ = np.histogram2d(theta, phi, bins=[self.theta_edges, self.phi_edges], weights=w)
+        self.cell_weights = cells / cells.sum()  # (n_theta_bins, n_phi) fractions
         self.bin_weights = self.cell_weights.sum(axis=1)  # tilt marginal
-        self.q_edges = np.sin(self.theta_edges) ** 2      # sin²θ: the tilt CDF is linear in it
+        self.q_edges = np.sin(self.theta_edges) ** 2  # sin²θ: the tilt CDF is linear in it
         dq = np.diff(self.q_edges)
-        self.bin_D = self.bin_weights / (np.pi * dq)      # azimuthal average per tilt bin
+        self.bin_D = self.bin_weights / (np.pi * dq)  # azimuthal average per tilt bin
         self.cell_D = self.cell_weights / (0.5 * np.diff(self.phi_edges)[None, :] * dq[:, None])
         self.cdf_edges = np.concatenate([[0.0], np.cumsum(self.bin_weights)])
         self.cdf_edges[-1] = 1.0
         self.n_facets = n
         self.total_weight = float(w.sum())
-        self.mean_normal = _checks.normalize(np.sum(nrm * w[:, None], axis=0))
+        self.mean_normal = vectors.normalize(np.sum(nrm * w[:, None], axis=0))
         self.max_tilt = float(theta.max())
 
     @staticmethod
@@ -141,13 +158,19 @@ class Empirical(NDF):
 
     # --- NDF interface --------------------------------------------------------------------
     def params(self) -> dict:
-        return {"n_facets": self.n_facets, "n_theta_bins": len(self.bin_weights),
-                "n_phi_bins": len(self.phi_edges) - 1, "isotropic": self.isotropic}
+        return {
+            "n_facets": self.n_facets,
+            "n_theta_bins": len(self.bin_weights),
+            "n_phi_bins": len(self.phi_edges) - 1,
+            "isotropic": self.isotropic,
+        }
 
     def __repr__(self) -> str:
         p = self.params()
-        return (f"Empirical(<{p['n_facets']} facets>, bins={p['n_theta_bins']}x"
-                f"{p['n_phi_bins']}, isotropic={p['isotropic']})")
+        return (
+            f"Empirical(<{p['n_facets']} facets>, bins={p['n_theta_bins']}x"
+            f"{p['n_phi_bins']}, isotropic={p['isotropic']})"
+        )
 
     def _bin_of_q(self, q) -> np.ndarray:
         k = np.searchsorted(self.q_edges, q, side="right") - 1
@@ -166,8 +189,9 @@ class Empirical(NDF):
             return self.D_cos(h[..., 2])
         k = self._bin_of_q(h[..., 0] ** 2 + h[..., 1] ** 2)
         phi = np.mod(np.arctan2(h[..., 1], h[..., 0]), 2.0 * np.pi)
-        j = np.clip(np.searchsorted(self.phi_edges, phi, side="right") - 1,
-                    0, len(self.phi_edges) - 2)
+        j = np.clip(
+            np.searchsorted(self.phi_edges, phi, side="right") - 1, 0, len(self.phi_edges) - 2
+        )
         return np.where(h[..., 2] > 0.0, self.cell_D[k, j], 0.0)
 
     def _cdf_theta(self, theta):
@@ -176,8 +200,7 @@ class Empirical(NDF):
         q = np.sin(t) ** 2
         k = self._bin_of_q(q)
         dq = self.q_edges[k + 1] - self.q_edges[k]
-        return np.minimum(self.cdf_edges[k] + self.bin_weights[k] * (q - self.q_edges[k]) / dq,
-                          1.0)
+        return np.minimum(self.cdf_edges[k] + self.bin_weights[k] * (q - self.q_edges[k]) / dq, 1.0)
 
     def _tilt_bin_and_fraction(self, u):
         """Tilt bin k holding cumulative probability u and the position in it, in [0, 1]."""
@@ -185,8 +208,9 @@ class Empirical(NDF):
         last = np.flatnonzero(self.bin_weights > 0)[-1]
         k = np.clip(np.searchsorted(self.cdf_edges, u, side="right") - 1, 0, last)
         with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(self.bin_weights[k] > 0,
-                            (u - self.cdf_edges[k]) / self.bin_weights[k], 0.0)
+            frac = np.where(
+                self.bin_weights[k] > 0, (u - self.cdf_edges[k]) / self.bin_weights[k], 0.0
+            )
         return k, np.clip(frac, 0.0, 1.0)
 
     def tilt_quantile_rad(self, u):
@@ -206,7 +230,7 @@ class Empirical(NDF):
         n_phi = self.cell_weights.shape[1]
         flat_cdf = np.concatenate([[0.0], np.cumsum(self.cell_weights.ravel())])
         row_lo, row_w = flat_cdf[k * n_phi], self.bin_weights[k]
-        target = row_lo + np.clip(u2, 0.0, 1.0) * row_w           # conditional on row k
+        target = row_lo + np.clip(u2, 0.0, 1.0) * row_w  # conditional on row k
         cell = np.searchsorted(flat_cdf, target, side="right") - 1
         cell = np.clip(cell, k * n_phi, k * n_phi + n_phi - 1)
         j = cell - k * n_phi
@@ -214,4 +238,4 @@ class Empirical(NDF):
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(cell_w > 0, (target - flat_cdf[cell]) / cell_w, 0.5)
         phi = self.phi_edges[j] + np.clip(t, 0.0, 1.0) * np.diff(self.phi_edges)[j]
-        return _checks.spherical(theta, phi)
+        return vectors.spherical(theta, phi)

@@ -8,6 +8,7 @@ Public functions take a ``material``: a name from ``MATERIALS``, an index n or n
 ``cos_theta`` is always the cosine between the incident direction and the *facet* normal; it
 must lie in [0, 1] up to ``COS_TOL`` (values within the tolerance are clipped, others raise).
 """
+
 from __future__ import annotations
 
 import math
@@ -16,12 +17,17 @@ import numbers
 import numpy as np
 from numba import njit
 
+from microsim.checks import UNIT_TOL
 from microsim.errors import UsageError
 
-from ._checks import UNIT_TOL
-
-__all__ = ["fresnel", "fresnel_transmittance", "schlick", "f0_from_material",
-           "MATERIALS", "resolve_material"]
+__all__ = [
+    "fresnel",
+    "fresnel_transmittance",
+    "schlick",
+    "f0_from_material",
+    "MATERIALS",
+    "resolve_material",
+]
 
 MATERIALS = {"aluminium": 0.769 + 6.08j, "methanol": 1.329, "mirror": None}
 """Indices of refraction at 500 nm used by Mikkelsen 2009 (Fig. 5): η = n + ik, None = mirror."""
@@ -30,7 +36,7 @@ _ALIASES = {"aluminum": "aluminium"}
 
 COS_TOL = 3 * UNIT_TOL
 """Rounding allowed outside [0, 1] for a cosine: the package accepts as "unit" any vector with
-| |w| − 1 | ≤ ``UNIT_TOL`` (``_checks.directions``), and for two of them
+| |w| − 1 | ≤ ``UNIT_TOL`` (``microsim.checks.directions``), and for two of them
 |a·b| ≤ |a||b| ≤ (1 + UNIT_TOL)² < 1 + 3·UNIT_TOL; a cosine further out is not one of two unit
 vectors (e.g. a bug or a value in degrees) and is refused."""
 
@@ -40,8 +46,9 @@ def _check_ior(ior, name: str = "ior") -> complex:
     ``name`` prefixes the message (the caller's parameter)."""
     pre = "" if name == "ior" else f"{name}: "
     if isinstance(ior, (bool, np.bool_)) or not isinstance(ior, numbers.Number):
-        raise UsageError(f"{pre}ior must be a real or complex number n+ik (n > 0, k >= 0) or "
-                         f"None, got {ior!r}")
+        raise UsageError(
+            f"{pre}ior must be a real or complex number n+ik (n > 0, k >= 0) or None, got {ior!r}"
+        )
     eta = complex(ior)
     if not (np.isfinite(eta.real) and np.isfinite(eta.imag)):
         raise UsageError(f"{pre}ior must be finite (n > 0, k >= 0), got {ior!r}")
@@ -59,11 +66,13 @@ def _cos(cos_theta) -> np.ndarray:
     if a.dtype.kind not in "iuf":
         raise UsageError(f"cos_theta must be real numbers in [0, 1], got {cos_theta!r}")
     c = a.astype(np.float64, copy=False)
-    bad = ~((c >= -COS_TOL) & (c <= 1.0 + COS_TOL))        # also NaN
+    bad = ~((c >= -COS_TOL) & (c <= 1.0 + COS_TOL))  # also NaN
     if np.any(bad):
         worst = float(c[bad].flat[0])
-        raise UsageError(f"cos_theta must lie in [0, 1] (a cosine; tolerance {COS_TOL:g}), "
-                         f"got {worst!r}" + (f" among {c.size} values" if c.size > 1 else ""))
+        raise UsageError(
+            f"cos_theta must lie in [0, 1] (a cosine; tolerance {COS_TOL:g}), "
+            f"got {worst!r}" + (f" among {c.size} values" if c.size > 1 else "")
+        )
     return np.clip(c, 0.0, 1.0)
 
 
@@ -88,11 +97,11 @@ def fresnel(cos_theta, material=None):
     if ior is None:
         return np.ones_like(c)
     eta = _check_ior(ior, "material")
-    if eta == 1.0:                                 # no interface: nothing reflects but grazing
+    if eta == 1.0:  # no interface: nothing reflects but grazing
         return np.where(c == 0.0, 1.0, 0.0)
     eta2 = eta * eta
-    eta2m1 = (eta - 1.0) * (eta + 1.0)             # η² − 1 without cancellation for η ≈ 1
-    g = np.sqrt(eta2m1 + c * c + 0j)               # √(η² − 1 + cos²θ) = √(η² − sin²θ)
+    eta2m1 = (eta - 1.0) * (eta + 1.0)  # η² − 1 without cancellation for η ≈ 1
+    g = np.sqrt(eta2m1 + c * c + 0j)  # √(η² − 1 + cos²θ) = √(η² − sin²θ)
     with np.errstate(divide="ignore", invalid="ignore"):
         rs = -eta2m1 / (c + g) ** 2
         rp = eta2m1 * (c * c * (eta2 + 1.0) - 1.0) / (eta2 * c + g) ** 2
@@ -144,8 +153,10 @@ def resolve_material(material):
         key = _ALIASES.get(key, key)
         if key not in MATERIALS:
             allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
-            raise UsageError(f"material must be one of {allowed} or an index of refraction "
-                             f"(ior) n / n+ik / None, got {material!r}")
+            raise UsageError(
+                f"material must be one of {allowed} or an index of refraction "
+                f"(ior) n / n+ik / None, got {material!r}"
+            )
         return MATERIALS[key]
     eta = _check_ior(material, "material")
     if isinstance(material, complex | np.complexfloating):
@@ -167,7 +178,7 @@ def fresnel_real_arithmetic(c, ior):
     eta = _check_ior(ior)
     c = np.ascontiguousarray(c, dtype=np.float64)
     out = np.empty_like(c)
-    _fresnel_real_fill(c.ravel(), eta.real ** 2, eta.imag ** 2, out.ravel())
+    _fresnel_real_fill(c.ravel(), eta.real**2, eta.imag**2, out.ravel())
     return out
 
 
@@ -184,7 +195,7 @@ def fresnel_real_scalar(c, n2, k2):
     s2 = (1.0 - c) * (1.0 + c)
     a_ = n2 - k2 - s2
     b_ = math.sqrt(a_ * a_ + 4.0 * n2 * k2)
-    big = b_ + a_ if a_ >= 0 else b_ - a_                 # the sum without cancellation
+    big = b_ + a_ if a_ >= 0 else b_ - a_  # the sum without cancellation
     small = 4.0 * n2 * k2 / big if big > 0 else 0.0
     a2, b2 = (0.5 * big, 0.5 * small) if a_ >= 0 else (0.5 * small, 0.5 * big)
     a = math.sqrt(a2)

@@ -14,26 +14,40 @@ deviation vector (eq. 9–10, §4)
 
 because the mirror direction R of L has Rp = −Lp. |Dp| = 0 exactly in the specular direction.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
 
 import numpy as np
 
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 
-from . import _checks
 from .fresnel import fresnel, resolve_material
 from .ndf import ABC
 from .shadowing import vgroove_g
 
 __all__ = [
-    "abc_psd", "abc_psd_church", "abc_psd_church_integral", "church_to_condensed",
-    "rayleigh_rice", "RR_POLARISATIONS", "low_smooth", "LOW_OBLIQUITIES",
-    "low_microfacet", "low_microfacet_A_from_ndf",
-    "LowSample", "sample_low_smooth", "pdf_low_smooth",
-    "sample_low_microfacet", "pdf_low_microfacet", "pdf_low_halfvector",
-    "low_e1", "low_e2",
+    "abc_psd",
+    "abc_psd_church",
+    "abc_psd_church_integral",
+    "church_to_condensed",
+    "rayleigh_rice",
+    "RR_POLARISATIONS",
+    "low_smooth",
+    "LOW_OBLIQUITIES",
+    "low_microfacet",
+    "low_microfacet_A_from_ndf",
+    "LowSample",
+    "sample_low_smooth",
+    "pdf_low_smooth",
+    "sample_low_microfacet",
+    "pdf_low_microfacet",
+    "pdf_low_halfvector",
+    "low_e1",
+    "low_e2",
 ]
 
 RR_POLARISATIONS = ("unpolarised", "s", "p", "ss", "sp", "ps", "pp")
@@ -169,24 +183,24 @@ def _rr_q(wi, wo, eta: complex, polarisation: str) -> np.ndarray:
     ci, co = wi[..., 2], wo[..., 2]
     si, so = np.sqrt(_tsq(wi)), np.sqrt(_tsq(wo))
     sinsin = si * so
-    cross = -(wi[..., 0] * wo[..., 0] + wi[..., 1] * wo[..., 1])        # sinθi sinθo cosφ
-    wedge = wi[..., 0] * wo[..., 1] - wi[..., 1] * wo[..., 0]            # ± sinθi sinθo sinφ
+    cross = -(wi[..., 0] * wo[..., 0] + wi[..., 1] * wo[..., 1])  # sinθi sinθo cosφ
+    wedge = wi[..., 0] * wo[..., 1] - wi[..., 1] * wo[..., 0]  # ± sinθi sinθo sinφ
     ok = sinsin > 0.0
     safe = np.where(ok, sinsin, 1.0)
     cos_phi = np.where(ok, np.clip(cross / safe, -1.0, 1.0), 1.0)
     sin2_phi = np.where(ok, np.clip((wedge / safe) ** 2, 0.0, 1.0), 0.0)
     eps = eta * eta
     em1 = (eta - 1.0) * (eta + 1.0)
-    if em1 == 0:                                 # no index contrast, no scatter
+    if em1 == 0:  # no index contrast, no scatter
         return np.zeros(np.broadcast_shapes(ci.shape, co.shape))
     gi = np.sqrt(em1 + ci * ci + 0j)
     go = np.sqrt(em1 + co * co + 0j)
-    s_i, s_o = ci + gi, co + go                  # s-type denominators
-    p_i, p_o = eps * ci + gi, eps * co + go      # p-type denominators
+    s_i, s_o = ci + gi, co + go  # s-type denominators
+    p_i, p_o = eps * ci + gi, eps * co + go  # p-type denominators
     a2 = abs(em1) ** 2
     q = {}
     if polarisation in ("unpolarised", "s", "ss"):
-        q["ss"] = a2 * cos_phi ** 2 / np.abs(s_i * s_o) ** 2
+        q["ss"] = a2 * cos_phi**2 / np.abs(s_i * s_o) ** 2
     if polarisation in ("unpolarised", "s", "sp"):
         q["sp"] = a2 * np.abs(go) ** 2 * sin2_phi / np.abs(s_i * p_o) ** 2
     if polarisation in ("unpolarised", "p", "ps"):
@@ -216,13 +230,15 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolaris
     A, B, C = _abc(A, B, C)
     eta = resolve_material(material)
     if eta is None:
-        raise UsageError("material must have an index of refraction (ior) n or n+ik "
-                         "(Rayleigh–Rice needs ε = ior²), got None")
+        raise UsageError(
+            "material must have an index of refraction (ior) n or n+ik "
+            "(Rayleigh–Rice needs ε = ior²), got None"
+        )
     _choice("polarisation", polarisation, RR_POLARISATIONS)
     ci, co = wi[..., 2], wo[..., 2]
-    s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam ** 2)
+    s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam**2)
     q = _rr_q(wi, wo, complex(eta), polarisation)
-    f = 16.0 * np.pi ** 2 / lam ** 4 * ci * co * q * s
+    f = 16.0 * np.pi**2 / lam**4 * ci * co * q * s
     return np.where((ci >= 0.0) & (co >= 0.0), f, 0.0)
 
 
@@ -287,10 +303,10 @@ def low_microfacet(wi, wo, A, B, C, kd=0.0, material=None, shadowing="cook-torra
     ci, co = wi[..., 2], wo[..., 2]
     H = wi + wo
     hlen = np.sqrt(np.sum(H * H, axis=-1, keepdims=True))
-    inside = (ci > 0.0) & (co > 0.0)                        # then H_z > 0, H ≠ 0
+    inside = (ci > 0.0) & (co > 0.0)  # then H_z > 0, H ≠ 0
     h = np.where(inside[..., None], H / np.where(hlen > 0.0, hlen, 1.0), [0.0, 0.0, 1.0])
     d = _s_of_sq(A, B, C, _one_minus_cos_h(np.where(inside[..., None], H, h)))
-    f = fresnel(np.clip(_checks.dot(wi, h), 0.0, 1.0), eta)
+    f = fresnel(np.clip(vectors.dot(wi, h), 0.0, 1.0), eta)
     g = vgroove_g(wi, wo, h) if shadowing == "cook-torrance" else 1.0
     spec = np.where(inside, d * f * g / (np.pi * np.where(inside, ci * co, 1.0)), 0.0)
     return np.where((ci >= 0.0) & (co >= 0.0), kd / np.pi + spec, 0.0)
@@ -313,6 +329,7 @@ def low_microfacet_A_from_ndf(B, C) -> float:
 class LowSample(NamedTuple):
     """Directions drawn by a Löw sampler: ``wi`` unit (..., 3); ``pdf`` its solid-angle density
     (sr⁻¹, over the whole sphere of wi); ``above`` True where wi_z > 0 (others contribute 0)."""
+
     wi: np.ndarray
     pdf: np.ndarray
     above: np.ndarray
@@ -340,7 +357,7 @@ def _disk_density(B: float, wo, wi):
 def pdf_low_smooth(wi, wo, B):
     """Solid-angle density (sr⁻¹) of ``sample_low_smooth``: P_ω = P_d cos θi (eq. 17–19);
     0 for wi below the horizon. Integrates to 1 over the upper hemisphere."""
-    wo = _checks.normalize(_checks.directions("wo", wo, upper=True))
+    wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     wi = _checks.directions("wi", wi)
     B = _checks.positive("B", B)
     ci = wi[..., 2]
@@ -359,7 +376,7 @@ def sample_low_smooth(wo, u1, u2, B) -> LowSample:
     with a − b = 1 + B(r − r_o)², a + b = 1 + B(r + r_o)². wi_z = √(1 − r²) ≥ 0 always.
     ``wo`` unit (..., 3) in the upper hemisphere, u1, u2 ∈ [0, 1] broadcast with it; B > 0.
     """
-    wo = _checks.normalize(_checks.directions("wo", wo, upper=True))
+    wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     B = _checks.positive("B", B)
     u1, u2 = _unit_numbers("u1", u1), _unit_numbers("u2", u2)
     ro2 = _tsq(wo)
@@ -412,8 +429,9 @@ def pdf_low_halfvector(h, B, C):
         raise UsageError(f"h must be a finite array of shape (..., 3), got shape {h.shape}")
     B, C = _checks.positive("B", B), _checks.positive("C", C)
     up = h[..., 2] >= 0.0
-    return np.where(up, _halfvector_density(B, C, _one_minus_cos_h(np.where(up[..., None], h, -h))),
-                    0.0)
+    return np.where(
+        up, _halfvector_density(B, C, _one_minus_cos_h(np.where(up[..., None], h, -h))), 0.0
+    )
 
 
 def _reflected_pdf(B, C, H):
@@ -434,8 +452,8 @@ def _reflected_pdf(B, C, H):
 def pdf_low_microfacet(wi, wo, B, C):
     """Solid-angle density (sr⁻¹) of ``sample_low_microfacet`` at any wi on the sphere (eq. 28),
     below-horizon directions included; integrates to 1 over the sphere."""
-    wo = _checks.normalize(_checks.directions("wo", wo, upper=True))
-    wi = _checks.normalize(_checks.directions("wi", wi))
+    wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
+    wi = vectors.normalize(_checks.directions("wi", wi))
     B, C = _checks.positive("B", B), _checks.positive("C", C)
     return _reflected_pdf(B, C, wi + wo)
 
@@ -450,15 +468,15 @@ def sample_low_microfacet(wo, u1, u2, B, C) -> LowSample:
     ``above = False`` (Löw: their contribution is zero). A degenerate sample with wo·ĥ = 0 (wo on
     the horizon) has wi = −wo and is reported with pdf 0.
     """
-    wo = _checks.normalize(_checks.directions("wo", wo, upper=True))
+    wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     B, C = _checks.positive("B", B), _checks.positive("C", C)
     u1, u2 = _unit_numbers("u1", u1), _unit_numbers("u2", u2)
     x = _tilt_quantile(u1, B, C)
     sin_h = np.sqrt(x * (2.0 - x))
     phi = 2.0 * np.pi * u2
     h = np.stack(np.broadcast_arrays(sin_h * np.cos(phi), sin_h * np.sin(phi), 1.0 - x), axis=-1)
-    voh = _checks.dot(wo, h)
-    wi = _checks.normalize(2.0 * voh[..., None] * h - wo)
+    voh = vectors.dot(wo, h)
+    wi = vectors.normalize(2.0 * voh[..., None] * h - wo)
     ok = voh != 0.0
     pdf = np.where(ok, _halfvector_density(B, C, x) / (4.0 * np.where(ok, np.abs(voh), 1.0)), 0.0)
     return LowSample(wi, pdf, (wi[..., 2] > 0.0) & (voh > 0.0))
@@ -467,9 +485,12 @@ def sample_low_microfacet(wo, u1, u2, B, C) -> LowSample:
 # --- fit metrics (eq. 29–33) ----------------------------------------------------------------
 def _fit_error(transform, measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o):
     """Σ (g(measured) − g(model))² sin θo Δθi Δθo Δφo (eq. 33, widths in radians)."""
-    arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in
-                                   (measured, model, theta_i, theta_o, d_theta_i, d_theta_o,
-                                    d_phi_o)))
+    arrays = np.broadcast_arrays(
+        *(
+            np.asarray(a, dtype=np.float64)
+            for a in (measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o)
+        )
+    )
     meas, mod, ti, to, dti, dto, dpo = arrays
     for name, a in (("measured", meas), ("model", mod)):
         if not np.all(np.isfinite(a)):
@@ -508,5 +529,6 @@ def low_e1(measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o) -> 
 def low_e2(measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o) -> float:
     """Löw's logarithmic fit error E2 (eq. 31–33): as ``low_e1`` on g = ln(1 + cosθi f).
     Returns E itself; Löw's Table II prints √E."""
-    return _fit_error(_log1p_checked, measured, model, theta_i, theta_o, d_theta_i, d_theta_o,
-                      d_phi_o)
+    return _fit_error(
+        _log1p_checked, measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o
+    )

@@ -11,6 +11,7 @@ base class. Tilt angles are in radians, and every method taking or returning one
 (``cdf_theta_rad``, ``tilt_pdf_rad``, ``tilt_quantile_rad``); tilts outside [0, π/2] — say, a
 value in degrees — raise a UsageError.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -18,12 +19,20 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 
-from . import _checks
-
-__all__ = ["NDF", "Beckmann", "GGX", "BlinnPhong", "VonMisesFisher", "ABC",
-           "beckmann_to_phong", "phong_to_beckmann"]
+__all__ = [
+    "NDF",
+    "Beckmann",
+    "GGX",
+    "BlinnPhong",
+    "VonMisesFisher",
+    "ABC",
+    "beckmann_to_phong",
+    "phong_to_beckmann",
+]
 
 
 class NDF:
@@ -88,7 +97,7 @@ class NDF:
         """Unit half vectors h ~ pdf from uniform numbers u1, u2 ∈ [0, 1) (inverse CDF)."""
         u1, u2 = np.broadcast_arrays(np.asarray(u1, float), np.asarray(u2, float))
         theta = self.tilt_quantile_rad(u1)
-        return _checks.spherical(theta, 2.0 * np.pi * u2)
+        return vectors.spherical(theta, 2.0 * np.pi * u2)
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params().items())
@@ -105,8 +114,10 @@ def _tilt_rad(name: str, theta) -> np.ndarray:
     lies in [0, π/2] (± ``TILT_SLACK``); NaN passes through."""
     t = np.asarray(theta, dtype=np.float64)
     if np.any(t < -TILT_SLACK) or np.any(t > 0.5 * np.pi + TILT_SLACK):
-        raise UsageError(f"{name} must be tilt angles in radians within [0, π/2], got values in "
-                         f"[{np.nanmin(t):.6g}, {np.nanmax(t):.6g}] (degrees? use np.radians)")
+        raise UsageError(
+            f"{name} must be tilt angles in radians within [0, π/2], got values in "
+            f"[{np.nanmin(t):.6g}, {np.nanmax(t):.6g}] (degrees? use np.radians)"
+        )
     return t
 
 
@@ -168,13 +179,13 @@ class Beckmann(NDF):
         pos = c > 0.0
         cs = np.where(pos, np.minimum(c, 1.0), 1.0)
         with np.errstate(divide="ignore", over="ignore"):
-            expo = -_sin2(cs) / (cs * cs * self.m ** 2) - 4.0 * np.log(cs)
-        return np.where(pos, np.exp(expo) / (np.pi * self.m ** 2), 0.0)
+            expo = -_sin2(cs) / (cs * cs * self.m**2) - 4.0 * np.log(cs)
+        return np.where(pos, np.exp(expo) / (np.pi * self.m**2), 0.0)
 
     def _cdf_theta(self, theta):
         """P(θ_h ≤ θ) = 1 − exp(−tan²θ/m²)."""
         t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
-        return -np.expm1(-(np.tan(t) / self.m) ** 2)
+        return -np.expm1(-((np.tan(t) / self.m) ** 2))
 
     def tilt_quantile_rad(self, u):
         """θ_h with tan²θ = −m² ln(1 − u); u = 1 gives π/2."""
@@ -193,7 +204,7 @@ class Beckmann(NDF):
         """
         c = np.clip(_cos_array(cos_theta), 0.0, 1.0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            a = c / (self.m * np.sqrt(_sin2(c)))          # inf at c = 1
+            a = c / (self.m * np.sqrt(_sin2(c)))  # inf at c = 1
             lam = 0.5 * np.exp(-a * a) * (1.0 / (a * np.sqrt(np.pi)) - special.erfcx(a))
         return np.where(c == 1.0, 0.0, lam)
 
@@ -219,7 +230,7 @@ class GGX(NDF):
     def D_cos(self, cos_theta):
         """D(cos θ) in sr⁻¹; 0 for c ≤ 0."""
         c = np.minimum(_cos_array(cos_theta), 1.0)
-        a2 = self.alpha ** 2
+        a2 = self.alpha**2
         d = a2 / (np.pi * (a2 * c * c + _sin2(c)) ** 2)
         return np.where(c > 0.0, d, 0.0)
 
@@ -227,7 +238,7 @@ class GGX(NDF):
         """P(θ_h ≤ θ) = tan²θ/(α² + tan²θ) = sin²θ/(α² cos²θ + sin²θ)."""
         t = np.clip(np.asarray(theta, dtype=np.float64), 0.0, 0.5 * np.pi)
         s2, c2 = np.sin(t) ** 2, np.cos(t) ** 2
-        return s2 / (self.alpha ** 2 * c2 + s2)
+        return s2 / (self.alpha**2 * c2 + s2)
 
     def tilt_quantile_rad(self, u):
         """θ_h with tan θ = α √(u/(1 − u)); u = 1 gives π/2."""
@@ -240,7 +251,7 @@ class GGX(NDF):
         Evaluated as α² sin²/(2c(√(c² + α² sin²) + c)): no cancellation; +inf at θ = 90°.
         """
         c = np.clip(_cos_array(cos_theta), 0.0, 1.0)
-        q = self.alpha ** 2 * _sin2(c)
+        q = self.alpha**2 * _sin2(c)
         with np.errstate(divide="ignore"):
             return q / (2.0 * c * (np.sqrt(c * c + q) + c))
 
@@ -264,8 +275,7 @@ class BlinnPhong(NDF):
         """D(cos θ) in sr⁻¹; 0 for c ≤ 0."""
         c = np.minimum(_cos_array(cos_theta), 1.0)
         pos = c > 0.0
-        return np.where(pos, (self.e + 2.0) / (2.0 * np.pi) * np.where(pos, c, 1.0) ** self.e,
-                        0.0)
+        return np.where(pos, (self.e + 2.0) / (2.0 * np.pi) * np.where(pos, c, 1.0) ** self.e, 0.0)
 
     def _cdf_theta(self, theta):
         """P(θ_h ≤ θ) = 1 − cos^{e+2} θ, evaluated as −expm1((e + 2) log1p(−x)), x = 1 − cos θ."""
@@ -288,7 +298,7 @@ def beckmann_to_phong(m) -> float:
     Visually close for e > 8 (Mikkelsen).
     """
     m = _checks.in_range("m", m, 0.0, 1.0, lo_open=True)
-    return 2.0 / m ** 2 - 2.0
+    return 2.0 / m**2 - 2.0
 
 
 def phong_to_beckmann(e) -> float:
@@ -371,7 +381,7 @@ class ABC(NDF):
     B: float
     C: float
     M: float = field(init=False, repr=False, compare=False)
-    _table: tuple = field(init=False, repr=False, compare=False)   # (P_k, w_k): Newton starts
+    _table: tuple = field(init=False, repr=False, compare=False)  # (P_k, w_k): Newton starts
     name = "abc"
     _TABLE_SIZE = 2049
 
@@ -391,7 +401,7 @@ class ABC(NDF):
         C, B = self.C, self.B
         first = _expm1x((1.0 - C) * w)
         second = _expm1x((2.0 - C) * w) - first
-        return w * (first / B - second / B ** 2)
+        return w * (first / B - second / B**2)
 
     def _D_x(self, x):
         """D as a function of x = 1 − h·n ∈ [0, 1]."""
@@ -425,7 +435,7 @@ class ABC(NDF):
         u = _unit_interval(u)
         B, C = self.B, self.C
         w_max = np.log1p(B)
-        norm = 2.0 * np.pi * self.M                          # 1/J(1)
+        norm = 2.0 * np.pi * self.M  # 1/J(1)
         w = np.interp(u, *self._table)
         lo, hi = np.zeros_like(u), np.full_like(u, w_max)
         for _ in range(max_iter):
@@ -436,10 +446,10 @@ class ABC(NDF):
             if np.all(done):
                 break
             x = np.expm1(w) / B
-            dfdw = (1.0 - x) * np.exp((1.0 - C) * w) / B * norm   # dP/dw
+            dfdw = (1.0 - x) * np.exp((1.0 - C) * w) / B * norm  # dP/dw
             with np.errstate(divide="ignore", invalid="ignore"):
                 step = w - f / dfdw
             inside = np.isfinite(step) & (step >= lo) & (step <= hi)
             w = np.where(done, w, np.where(inside, step, 0.5 * (lo + hi)))
-        x = np.where(u == 1.0, 1.0, np.where(u == 0.0, 0.0, np.expm1(w) / B))   # exact ends
+        x = np.where(u == 1.0, 1.0, np.where(u == 0.0, 0.0, np.expm1(w) / B))  # exact ends
         return _theta_from_x(x)

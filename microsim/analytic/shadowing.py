@@ -24,6 +24,7 @@ Beckmann and GGX closed forms in tests/test_shadowing.py. Anisotropic Empirical 
 integrated in 2D over their (θ, φ) cells into a (θ_w, φ_w) table interpolated bilinearly;
 G1 = 1/(1 + Λ) is accurate to 1e-4 there (tests/test_shadowing.py).
 """
+
 from __future__ import annotations
 
 import weakref
@@ -31,12 +32,19 @@ import weakref
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 
-from . import _checks
-
-__all__ = ["vgroove_g", "vgroove_g1", "smith_lambda", "smith_g1", "smith_g2", "shadowing_g",
-           "SHADOWING_KINDS"]
+__all__ = [
+    "vgroove_g",
+    "vgroove_g1",
+    "smith_lambda",
+    "smith_g1",
+    "smith_g2",
+    "shadowing_g",
+    "SHADOWING_KINDS",
+]
 
 SHADOWING_KINDS = ("vgroove", "smith", "smith-correlated", "none")
 """Allowed values of the ``shadowing`` argument."""
@@ -58,7 +66,7 @@ def vgroove_g1(w, h):
     """One-sided V-groove masking min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) (Mikkelsen 2009, eq. 25)."""
     w = _checks.directions("w", w)
     h = _checks.directions("h", h)
-    return _vgroove_g1(w[..., 2], _checks.dot(w, h), h[..., 2])
+    return _vgroove_g1(w[..., 2], vectors.dot(w, h), h[..., 2])
 
 
 def vgroove_g(wi, wo, h):
@@ -68,8 +76,10 @@ def vgroove_g(wi, wo, h):
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)
     hz = h[..., 2]
-    return np.minimum(_vgroove_g1(wi[..., 2], _checks.dot(wi, h), hz),
-                      _vgroove_g1(wo[..., 2], _checks.dot(wo, h), hz))
+    return np.minimum(
+        _vgroove_g1(wi[..., 2], vectors.dot(wi, h), hz),
+        _vgroove_g1(wo[..., 2], vectors.dot(wo, h), hz),
+    )
 
 
 # --- numerical Smith Λ ------------------------------------------------------------------------
@@ -87,10 +97,11 @@ def _azimuthal_excess(sin_w, cos_w, sin_h, cos_h):
 def _tilt_breakpoints(ndf) -> np.ndarray:
     """θ_h (radians) that split [0, π/2] into panels on which D is smooth and well resolved."""
     edges = getattr(ndf, "theta_edges", None)
-    if edges is not None:                      # Empirical: D is constant between its bin edges
+    if edges is not None:  # Empirical: D is constant between its bin edges
         return np.unique(np.concatenate([edges, np.linspace(0, 0.5 * np.pi, 33)]))
-    u = np.concatenate([np.linspace(0.0, 1.0, 65)[1:-1], np.logspace(-10, -2, 9),
-                        1.0 - np.logspace(-10, -2, 9)])
+    u = np.concatenate(
+        [np.linspace(0.0, 1.0, 65)[1:-1], np.logspace(-10, -2, 9), 1.0 - np.logspace(-10, -2, 9)]
+    )
     q = np.asarray(ndf.tilt_quantile_rad(u), dtype=np.float64)
     return np.unique(np.concatenate([q[np.isfinite(q)], np.linspace(0, 0.5 * np.pi, 33)]))
 
@@ -99,18 +110,23 @@ def _lambda_cos_product(ndf, cos_w: np.ndarray) -> np.ndarray:
     """Λ(θ_w) cos θ_w = ∫ D(θ_h) sinθ_h · excess(θ_w, θ_h) dθ_h by panel Gauss–Legendre."""
     cos_w = np.asarray(cos_w, dtype=np.float64)
     sin_w = np.sqrt((1.0 - cos_w) * (1.0 + cos_w))
-    lo = np.arcsin(np.clip(cos_w, 0.0, 1.0))                  # excess = 0 for θ_h < 90° − θ_w
+    lo = np.arcsin(np.clip(cos_w, 0.0, 1.0))  # excess = 0 for θ_h < 90° − θ_w
     half_pi = 0.5 * np.pi
     span = (half_pi - lo)[:, None]
     refine = lo[:, None] + span * 4.0 ** -np.arange(1, 14)[None, :]
     master = np.clip(_tilt_breakpoints(ndf)[None, :], lo[:, None], half_pi)
-    edges = np.sort(np.concatenate([lo[:, None], refine, master,
-                                    np.full_like(lo[:, None], half_pi)], axis=1), axis=1)
+    edges = np.sort(
+        np.concatenate([lo[:, None], refine, master, np.full_like(lo[:, None], half_pi)], axis=1),
+        axis=1,
+    )
     a, b = edges[:, :-1, None], edges[:, 1:, None]
-    t = 0.5 * (a + b) + 0.5 * (b - a) * _GL_X                # (n_w, n_panels, n_gl)
+    t = 0.5 * (a + b) + 0.5 * (b - a) * _GL_X  # (n_w, n_panels, n_gl)
     wt = 0.5 * (b - a) * _GL_W
-    f = ndf.D_cos(np.cos(t)) * np.sin(t) * _azimuthal_excess(
-        sin_w[:, None, None], cos_w[:, None, None], np.sin(t), np.cos(t))
+    f = (
+        ndf.D_cos(np.cos(t))
+        * np.sin(t)
+        * _azimuthal_excess(sin_w[:, None, None], cos_w[:, None, None], np.sin(t), np.cos(t))
+    )
     return np.sum(f * wt, axis=(1, 2))
 
 
@@ -132,7 +148,7 @@ class _IsotropicLambdaTable:
         y = np.concatenate([_lambda_cos_product(ndf, chunk) for chunk in np.array_split(c, 8)])
         ln_y = np.log(np.maximum(y, self.FLOOR))
         self._v0, self._dv = v[0], v[1] - v[0]
-        self._coef = PchipInterpolator(v, ln_y).c            # (4, n − 1) cubic per interval
+        self._coef = PchipInterpolator(v, ln_y).c  # (4, n − 1) cubic per interval
         self._end, self._slope = ln_y[-1], min((ln_y[-1] - ln_y[-2]) / self._dv, -2.0)
 
     def _ln_y(self, v):
@@ -146,8 +162,11 @@ class _IsotropicLambdaTable:
         c = np.clip(np.asarray(cos_w, dtype=np.float64), 0.0, 1.0)
         with np.errstate(divide="ignore", invalid="ignore"):
             v = np.log(c) - 0.5 * np.log1p(-c * c)
-            ln_y = np.where(v > self.V_MAX, self._end + self._slope * (v - self.V_MAX),
-                            self._ln_y(np.clip(v, -self.V_MAX, self.V_MAX)))
+            ln_y = np.where(
+                v > self.V_MAX,
+                self._end + self._slope * (v - self.V_MAX),
+                self._ln_y(np.clip(v, -self.V_MAX, self.V_MAX)),
+            )
             y = np.exp(ln_y)
             y = np.where(y > 1e3 * self.FLOOR, y, 0.0)
             return np.where(c > 0.0, y / c, np.inf)
@@ -168,15 +187,16 @@ class _AnisotropicLambdaTable:
     def __init__(self, ndf):
         gx, gw = np.polynomial.legendre.leggauss(self.N_GL)
         ta, tb = ndf.theta_edges[:-1, None], ndf.theta_edges[1:, None]
-        theta = 0.5 * (ta + tb) + 0.5 * (tb - ta) * gx                      # (n_t, N_GL)
+        theta = 0.5 * (ta + tb) + 0.5 * (tb - ta) * gx  # (n_t, N_GL)
         wtheta = 0.5 * (tb - ta) * gw * np.sin(theta)
         pa, pb = ndf.phi_edges[:-1, None], ndf.phi_edges[1:, None]
         sub = (np.arange(self.N_PHI_SUB) + 0.5) / self.N_PHI_SUB
-        phi = pa + (pb - pa) * sub                                           # (n_p, N_SUB)
+        phi = pa + (pb - pa) * sub  # (n_p, N_SUB)
         wphi = (pb - pa) / self.N_PHI_SUB * np.ones_like(sub)
-        h = _checks.spherical(theta[:, :, None, None], phi[None, None, :, :]).reshape(-1, 3)
-        weight = (ndf.cell_D[:, None, :, None] * wtheta[:, :, None, None]
-                  * wphi[None, None, :, :]).reshape(-1)
+        h = vectors.spherical(theta[:, :, None, None], phi[None, None, :, :]).reshape(-1, 3)
+        weight = (
+            ndf.cell_D[:, None, :, None] * wtheta[:, :, None, None] * wphi[None, None, :, :]
+        ).reshape(-1)
         keep = weight > 0
         self._h, self._weight = h[keep], weight[keep]
         # exact transverse mean normal: ∫ sin²θ dθ ∫ (cos φ, sin φ) dφ per cell
@@ -184,17 +204,22 @@ class _AnisotropicLambdaTable:
         s2 = np.diff(te / 2 - np.sin(2 * te) / 4)[:, None]
         self._mx = np.sum(ndf.cell_D * s2 * np.diff(np.sin(pe))[None, :])
         self._my = np.sum(ndf.cell_D * s2 * -np.diff(np.cos(pe))[None, :])
-        self.theta_nodes = np.radians(np.unique(np.concatenate([np.arange(0.0, 80.0, 1.0),
-                                                                np.arange(80.0, 90.01, 0.25)])))
+        self.theta_nodes = np.radians(
+            np.unique(np.concatenate([np.arange(0.0, 80.0, 1.0), np.arange(80.0, 90.01, 0.25)]))
+        )
         self.phi_nodes = np.radians(np.arange(0.0, 360.1, 7.5))
         t, p = np.meshgrid(self.theta_nodes, self.phi_nodes, indexing="ij")
-        self.y = np.maximum(self.direct(_checks.spherical(t, p)), 0.0)      # Λ cos θ_w
+        self.y = np.maximum(self.direct(vectors.spherical(t, p)), 0.0)  # Λ cos θ_w
 
     def direct(self, w):
         """Λ cos θ_w by the cell quadrature at unit directions w (..., 3), no table."""
         flat = w.reshape(-1, 3)
-        neg = np.concatenate([np.maximum(-(blk @ self._h.T), 0.0) @ self._weight
-                              for blk in np.array_split(flat, max(1, len(flat) // 256))])
+        neg = np.concatenate(
+            [
+                np.maximum(-(blk @ self._h.T), 0.0) @ self._weight
+                for blk in np.array_split(flat, max(1, len(flat) // 256))
+            ]
+        )
         return (neg + flat[:, 0] * self._mx + flat[:, 1] * self._my).reshape(w.shape[:-1])
 
     def lambda_w(self, w):
@@ -206,8 +231,12 @@ class _AnisotropicLambdaTable:
         j = np.clip(np.searchsorted(pn, phi, side="right") - 1, 0, len(pn) - 2)
         a = (theta - tn[i]) / (tn[i + 1] - tn[i])
         b = (phi - pn[j]) / (pn[j + 1] - pn[j])
-        y = ((1 - a) * (1 - b) * self.y[i, j] + a * (1 - b) * self.y[i + 1, j]
-             + (1 - a) * b * self.y[i, j + 1] + a * b * self.y[i + 1, j + 1])
+        y = (
+            (1 - a) * (1 - b) * self.y[i, j]
+            + a * (1 - b) * self.y[i + 1, j]
+            + (1 - a) * b * self.y[i, j + 1]
+            + a * b * self.y[i + 1, j + 1]
+        )
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(c > 0.0, y / c, np.inf)
 
@@ -229,8 +258,10 @@ def _lambda(ndf, w: np.ndarray, method: str = "auto") -> np.ndarray:
         return _table(ndf, _AnisotropicLambdaTable).lambda_w(w)
     closed = getattr(ndf, "has_closed_smith", False)
     if method == "closed" and not closed:
-        raise UsageError(f"method='closed' needs an NDF with a closed-form Smith Λ; "
-                         f"{type(ndf).__name__} has none (use 'auto' or 'numerical')")
+        raise UsageError(
+            f"method='closed' needs an NDF with a closed-form Smith Λ; "
+            f"{type(ndf).__name__} has none (use 'auto' or 'numerical')"
+        )
     if closed and method != "numerical":
         pos = c > 0.0
         lam = np.full(c.shape, np.inf)
@@ -260,7 +291,7 @@ def smith_g1(w, h, ndf):
     "Shadowing and Fresnel")."""
     w = _checks.directions("w", w)
     h = _checks.directions("h", h)
-    return _g1_from_lambda(_lambda(ndf, w), _checks.dot(w, h), w[..., 2])
+    return _g1_from_lambda(_lambda(ndf, w), vectors.dot(w, h), w[..., 2])
 
 
 def _smith_g2(ndf, wi, wo, wih, woh, correlated: bool):
@@ -278,13 +309,14 @@ def smith_g2(wi, wo, h, ndf, correlated: bool = False):
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)
-    return _smith_g2(ndf, wi, wo, _checks.dot(wi, h), _checks.dot(wo, h), correlated)
+    return _smith_g2(ndf, wi, wo, vectors.dot(wi, h), vectors.dot(wo, h), correlated)
 
 
 def _check_kind(kind) -> str:
     if kind not in SHADOWING_KINDS:
-        raise UsageError(f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, "
-                         f"got {kind!r}")
+        raise UsageError(
+            f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, got {kind!r}"
+        )
     return kind
 
 
@@ -305,4 +337,4 @@ def shadowing_g(wi, wo, h, ndf, shadowing: str):
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)
-    return _shadowing(kind, ndf, wi, wo, h[..., 2], _checks.dot(wi, h), _checks.dot(wo, h))
+    return _shadowing(kind, ndf, wi, wo, h[..., 2], vectors.dot(wi, h), vectors.dot(wo, h))

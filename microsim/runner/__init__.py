@@ -31,6 +31,7 @@ most ``AUTO_MAX_RAYS`` rays (``Effort.max_rays`` if smaller); the rays and secon
 incidence used are in ``meta.json`` (``auto``, ``run.auto``) and ``verdicts.json``
 (``rays_auto``). Such runs need one realisation and cannot be resumed.
 """
+
 from __future__ import annotations
 
 from .catalogue import run_report
@@ -38,6 +39,20 @@ from .planning import AUTO_MAX_RAYS, AUTO_TARGET, FULL, QUICK, Effort, RunPlan, 
 from .publishing import REPORT_FILE, REPORT_STATE, TIMINGS_FILE, VERDICTS_FILE, publish_dir
 from .run import RunOutcome, execute
 
-__all__ = ["Effort", "FULL", "QUICK", "AUTO_TARGET", "AUTO_MAX_RAYS", "RunPlan", "RunOutcome",
-           "plan_run", "execute", "run_report", "publish_dir", "VERDICTS_FILE",
-           "REPORT_FILE", "TIMINGS_FILE", "REPORT_STATE"]
+__all__ = [
+    "Effort",
+    "FULL",
+    "QUICK",
+    "AUTO_TARGET",
+    "AUTO_MAX_RAYS",
+    "RunPlan",
+    "RunOutcome",
+    "plan_run",
+    "execute",
+    "run_report",
+    "publish_dir",
+    "VERDICTS_FILE",
+    "REPORT_FILE",
+    "TIMINGS_FILE",
+    "REPORT_STATE",
+]

@@ -1,5 +1,6 @@
 """``run_report``: ``microsim report``, every scene of a catalogue into ``OUT/<scene>/`` and
 the catalogue index ``OUT/index.md`` with the Mikkelsen Fig. 6 chart."""
+
 from __future__ import annotations
 
 import json
@@ -26,16 +27,29 @@ __all__ = ["run_report"]
 def _check_catalogue_out(catalogue: Path, out: Path) -> None:
     norm = Path(os.path.normpath(out))
     cwd, cat = Path.cwd().resolve(), catalogue.resolve()
-    if (norm.name in ("", ".", "..") or norm.resolve() in (cwd, *cwd.parents)
-            or norm.resolve() == cat or norm.resolve() in cat.parents):
-        raise UsageError(f"--out {out}: must be a directory of its own, not the current "
-                         f"directory, a parent of it or the catalogue's")
+    if (
+        norm.name in ("", ".", "..")
+        or norm.resolve() in (cwd, *cwd.parents)
+        or norm.resolve() == cat
+        or norm.resolve() in cat.parents
+    ):
+        raise UsageError(
+            f"--out {out}: must be a directory of its own, not the current "
+            f"directory, a parent of it or the catalogue's"
+        )
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out}: exists and is not a directory")
 
 
-def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, progress=True,
-               log: Callable[[str], None] | None = None, resume=False) -> int:
+def run_report(
+    catalogue="surfaces",
+    out="reports",
+    quick=False,
+    threads=2,
+    progress=True,
+    log: Callable[[str], None] | None = None,
+    resume=False,
+) -> int:
     """Run every ``*.toml`` of ``catalogue`` into ``out/<scene>/`` (each folder replaced in one
     rename) and write ``out/index.md``. All scene files are validated before anything runs.
 
@@ -56,18 +70,24 @@ def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, prog
     if len(set(names)) != len(names):
         raise UsageError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
     _check_catalogue_out(catalogue, out)
-    hint = (f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
-            f"--out {out}`")
+    hint = (
+        f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
+        f"--out {out}`"
+    )
     with atomic.output_lock(out):
         state = read_report_state(out) if resume else None
         if resume:
             if state is None:
-                raise UsageError(f"--resume: no interrupted report in {out} ({REPORT_STATE} "
-                                 f"missing); run `microsim report` without --resume")
+                raise UsageError(
+                    f"--resume: no interrupted report in {out} ({REPORT_STATE} "
+                    f"missing); run `microsim report` without --resume"
+                )
             if state.get("quick") != bool(quick) or state.get("catalogue") != str(catalogue):
-                raise UsageError(f"--resume: the interrupted report in {out} ran with quick = "
-                                 f"{state.get('quick')}, catalogue {state.get('catalogue')}; "
-                                 f"resume with the same options")
+                raise UsageError(
+                    f"--resume: the interrupted report in {out} ran with quick = "
+                    f"{state.get('quick')}, catalogue {state.get('catalogue')}; "
+                    f"resume with the same options"
+                )
         done = set(state["done"]) if state else set()
         plans = []
         for p, s in zip(paths, scenes):
@@ -76,9 +96,18 @@ def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, prog
                 plans.append(scene_out)
                 continue
             tallies = partial if resume and (partial / "meta.json").is_file() else None
-            plans.append(planning.plan_run(p, out=scene_out, threads=threads, quick=quick,
-                                           force=True, tallies=tallies, partial_dir=partial,
-                                           resume_hint=hint))
+            plans.append(
+                planning.plan_run(
+                    p,
+                    out=scene_out,
+                    threads=threads,
+                    quick=quick,
+                    force=True,
+                    tallies=tallies,
+                    partial_dir=partial,
+                    resume_hint=hint,
+                )
+            )
         state = {"quick": bool(quick), "catalogue": str(catalogue), "done": sorted(done)}
         write_report_state(out, state)
         try:
@@ -105,8 +134,9 @@ def run_report(catalogue="surfaces", out="reports", quick=False, threads=2, prog
                 ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
             atomic.write_text(out / "index.md", report.index_report(docs, fig6, quick))
         except KeyboardInterrupt:
-            log(f"microsim: interrupted; finished scene reports kept in {out}; continue with "
-                f"{hint}")
+            log(
+                f"microsim: interrupted; finished scene reports kept in {out}; continue with {hint}"
+            )
             return 130
         (out / REPORT_STATE).unlink(missing_ok=True)
     log(f"microsim: wrote {out}/index.md ({len(docs)} scenes)")

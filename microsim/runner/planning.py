@@ -2,6 +2,7 @@
 validates every option and path before anything is written (each problem a one-line
 ``UsageError``), including the checks that a saved run may be resumed or an output replaced.
 """
+
 from __future__ import annotations
 
 import json
@@ -17,8 +18,18 @@ from ..errors import UsageError
 from ..scene import load_scene
 from ..sim import Bins, Result
 
-__all__ = ["AUTO_TARGET", "AUTO_MAX_RAYS", "Effort", "FULL", "QUICK", "effort_for", "RunPlan",
-           "plan_run", "check_replaceable", "RESULT_FILES"]
+__all__ = [
+    "AUTO_TARGET",
+    "AUTO_MAX_RAYS",
+    "Effort",
+    "FULL",
+    "QUICK",
+    "effort_for",
+    "RunPlan",
+    "plan_run",
+    "check_replaceable",
+    "RESULT_FILES",
+]
 
 AUTO_TARGET = 0.01
 """Energy-weighted relative standard error a ``rays = "auto"`` scene is traced to."""
@@ -65,12 +76,21 @@ class Effort:
 
 
 FULL = Effort()
-QUICK = Effort(max_rays=200_000, scale=(("vgrooves", 0.25), ("gaussian", 0.5), ("abc", 0.5)),
-               quick_fits=True, sweep_theta=(0, 30, 60, 75, 85, 89), sweep_rays=200_000,
-               sweep_bins=(30, 37), albedo_nodes=(16, 16, 8), speed_rays=(10_000, 30_000, 100_000),
-               fig6_theta=(0, 30, 50, 65, 75, 82, 89), fig6_rays=20_000,
-               fit_names=("cook_torrance", "low_microfacet", "low_smooth"), sweep_facets=False,
-               max_bins=(30, 37))
+QUICK = Effort(
+    max_rays=200_000,
+    scale=(("vgrooves", 0.25), ("gaussian", 0.5), ("abc", 0.5)),
+    quick_fits=True,
+    sweep_theta=(0, 30, 60, 75, 85, 89),
+    sweep_rays=200_000,
+    sweep_bins=(30, 37),
+    albedo_nodes=(16, 16, 8),
+    speed_rays=(10_000, 30_000, 100_000),
+    fig6_theta=(0, 30, 50, 65, 75, 82, 89),
+    fig6_rays=20_000,
+    fit_names=("cook_torrance", "low_microfacet", "low_smooth"),
+    sweep_facets=False,
+    max_bins=(30, 37),
+)
 """``--quick``: ≤ 2e5 rays per incidence on at most 30 × 37 bins (3° in θo, 5° in Δφ); 1/4 of
 the V-grooves and half the heightfield grid (same dx, so the statistics stay, the tile shrinks);
 quick fits (2 starts) of Cook–Torrance and Löw's two models (the Edwards fit, 10–30 s a scene,
@@ -96,11 +116,11 @@ class RunPlan:
     threads: int
     effort: Effort
     quick: bool
-    previous: object | None = None        # Result loaded for --resume
+    previous: object | None = None  # Result loaded for --resume
     force: bool = False
-    auto: bool = False                    # rays = "auto": ``rays`` is then the cap
-    partial_dir: Path | None = None       # where interrupted tallies go (None: ``out``)
-    resume_hint: str | None = None        # how to continue, for the interrupt message
+    auto: bool = False  # rays = "auto": ``rays`` is then the cap
+    partial_dir: Path | None = None  # where interrupted tallies go (None: ``out``)
+    resume_hint: str | None = None  # how to continue, for the interrupt message
 
     @property
     def bins(self) -> Bins:
@@ -123,9 +143,21 @@ def _int_option(name, value, lo):
     return int(value)
 
 
-def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=None,
-             quick=False, resume=None, force=False, tallies=None, partial_dir=None,
-             resume_hint=None) -> RunPlan:
+def plan_run(
+    scene_path,
+    *,
+    rays=None,
+    theta_i=None,
+    out=None,
+    threads=2,
+    seed=None,
+    quick=False,
+    resume=None,
+    force=False,
+    tallies=None,
+    partial_dir=None,
+    resume_hint=None,
+) -> RunPlan:
     """Validate a run without touching the disk; every problem is a one-line ``UsageError``.
 
     ``out`` defaults to ``runs/<scene name>`` (or ``resume``). An existing ``out`` is refused
@@ -141,26 +173,32 @@ def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=N
     seed = _int_option("seed", seed, 0)
     auto = rays is None and scene.simulation.rays == "auto"
     if auto and scene.simulation.realisations != 1:
-        raise UsageError(f"rays = \"auto\" needs realisations = 1 (scene {scene.name} has "
-                         f"{scene.simulation.realisations}); give --rays instead")
+        raise UsageError(
+            f'rays = "auto" needs realisations = 1 (scene {scene.name} has '
+            f"{scene.simulation.realisations}); give --rays instead"
+        )
     if auto and resume is not None:
-        raise UsageError("--resume is not available for a rays = \"auto\" scene; "
-                         "use --force to run it again")
+        raise UsageError(
+            '--resume is not available for a rays = "auto" scene; use --force to run it again'
+        )
     if rays is None:
         rays = AUTO_MAX_RAYS if auto else scene.simulation.rays
         if effort.max_rays is not None:
             rays = min(rays, effort.max_rays)
     if rays < scene.simulation.realisations:
-        raise UsageError(f"--rays must be >= the scene's realisations "
-                         f"({scene.simulation.realisations}), got {rays}")
+        raise UsageError(
+            f"--rays must be >= the scene's realisations "
+            f"({scene.simulation.realisations}), got {rays}"
+        )
     if theta_i is None:
         theta_i = scene.simulation.theta_i
     theta_i = tuple(float(t) for t in theta_i)
     if not theta_i or not all(math.isfinite(t) and 0 <= t < 90 for t in theta_i):
-        raise UsageError(f"--theta-i must be angles in degrees, each in [0, 90), "
-                         f"got {list(theta_i)}")
+        raise UsageError(
+            f"--theta-i must be angles in degrees, each in [0, 90), got {list(theta_i)}"
+        )
     seed = scene.simulation.seed if seed is None else seed
-    Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)      # validates the grid
+    Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)  # validates the grid
     previous = None
     if resume is not None:
         resume = Path(resume)
@@ -174,18 +212,29 @@ def plan_run(scene_path, *, rays=None, theta_i=None, out=None, threads=2, seed=N
         out = Path(out) if out is not None else Path("runs") / scene.name
         _check_out(out, scene, "--out")
         if out.exists() and not force:
-            raise UsageError(f"{out} already exists; pass --resume {out} to continue it or "
-                             f"--force to replace it")
+            raise UsageError(
+                f"{out} already exists; pass --resume {out} to continue it or --force to replace it"
+            )
         if out.exists():
             check_replaceable(out)
         if tallies is not None:
             previous = _load_saved(Path(tallies), "saved tallies")
             _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, tallies)
-    return RunPlan(scene=scene, out=Path(out), rays=rays, theta_i=theta_i, seed=seed,
-                   threads=threads, effort=effort, quick=bool(quick), previous=previous,
-                   force=bool(force), auto=auto,
-                   partial_dir=None if partial_dir is None else Path(partial_dir),
-                   resume_hint=resume_hint)
+    return RunPlan(
+        scene=scene,
+        out=Path(out),
+        rays=rays,
+        theta_i=theta_i,
+        seed=seed,
+        threads=threads,
+        effort=effort,
+        quick=bool(quick),
+        previous=previous,
+        force=bool(force),
+        auto=auto,
+        partial_dir=None if partial_dir is None else Path(partial_dir),
+        resume_hint=resume_hint,
+    )
 
 
 def _check_out(out: Path, scene, option: str) -> None:
@@ -194,21 +243,26 @@ def _check_out(out: Path, scene, option: str) -> None:
     one whose parent is not a directory."""
     norm = Path(os.path.normpath(out))
     if norm.name in ("", ".", ".."):
-        raise UsageError(f"{option} {out}: must name a directory of its own, not the current "
-                         f"directory or a parent of it")
+        raise UsageError(
+            f"{option} {out}: must name a directory of its own, not the current "
+            f"directory or a parent of it"
+        )
     try:
         target = norm.resolve()
         cwd = Path.cwd().resolve()
     except OSError as e:
         raise UsageError(f"{option} {out}: cannot resolve the path ({e.strerror})") from None
     if target == cwd or target in cwd.parents:
-        raise UsageError(f"{option} {out}: is the current directory or one of its parents; "
-                         f"choose a directory of its own")
+        raise UsageError(
+            f"{option} {out}: is the current directory or one of its parents; "
+            f"choose a directory of its own"
+        )
     if scene.path is not None:
         spath = Path(scene.path).resolve()
         if target == spath or target in spath.parents:
-            raise UsageError(f"{option} {out}: holds the scene file {scene.path}; choose "
-                             f"another directory")
+            raise UsageError(
+                f"{option} {out}: holds the scene file {scene.path}; choose another directory"
+            )
     if out.exists() and not out.is_dir():
         raise UsageError(f"{option} {out}: exists and is not a directory")
     parent = norm.parent
@@ -225,8 +279,10 @@ def check_replaceable(out: Path) -> None:
     except OSError as e:
         raise UsageError(f"--out {out}: cannot list it ({e.strerror})") from None
     if names and not names & set(RESULT_FILES):
-        raise UsageError(f"--force {out}: not a microsim result (none of "
-                         f"{', '.join(RESULT_FILES)}); refusing to replace it")
+        raise UsageError(
+            f"--force {out}: not a microsim result (none of "
+            f"{', '.join(RESULT_FILES)}); refusing to replace it"
+        )
 
 
 def _load_saved(where: Path, what: str) -> Result:
@@ -242,31 +298,42 @@ def _load_saved(where: Path, what: str) -> Result:
         if not isinstance(m, dict):
             raise ValueError("not a JSON object")
     except (ValueError, UnicodeDecodeError) as e:
-        raise UsageError(f"{what} {where}: {meta} is unreadable ({' '.join(str(e).split())})"
-                         f"; rerun with --force") from None
+        raise UsageError(
+            f"{what} {where}: {meta} is unreadable ({' '.join(str(e).split())}); rerun with --force"
+        ) from None
     try:
         with np.load(npz, allow_pickle=False) as z:
             for k in z.files:
                 z[k]
     except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as e:
-        raise UsageError(f"{what} {where}: {npz} is unreadable ({' '.join(str(e).split())})"
-                         f"; rerun with --force") from None
+        raise UsageError(
+            f"{what} {where}: {npz} is unreadable ({' '.join(str(e).split())}); rerun with --force"
+        ) from None
     try:
         return Result.load(where)
     except (ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as e:
-        raise UsageError(f"{what} {where}: the saved run is inconsistent "
-                         f"({type(e).__name__}: {' '.join(str(e).split())}); rerun with "
-                         f"--force") from None
+        raise UsageError(
+            f"{what} {where}: the saved run is inconsistent "
+            f"({type(e).__name__}: {' '.join(str(e).split())}); rerun with "
+            f"--force"
+        ) from None
 
 
 def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where) -> None:
     """The saved run was made with the same scene, seed, effort, rays, incidences and bins."""
     run = prev.meta.get("run", {})
-    want = {"scene": scene.name, "seed": seed, "quick": bool(quick), "rays": rays,
-            "theta_i": list(theta_i),
-            "bins": list(bins_shape(scene, effort))}
+    want = {
+        "scene": scene.name,
+        "seed": seed,
+        "quick": bool(quick),
+        "rays": rays,
+        "theta_i": list(theta_i),
+        "bins": list(bins_shape(scene, effort)),
+    }
     have = {k: run.get(k) for k in want}
     for key in want:
         if have[key] != want[key]:
-            raise UsageError(f"--resume {where}: {key} is {have[key]!r} there but "
-                             f"{want[key]!r} now; resume with the same settings")
+            raise UsageError(
+                f"--resume {where}: {key} is {have[key]!r} there but "
+                f"{want[key]!r} now; resume with the same settings"
+            )

@@ -1,4 +1,5 @@
 """Progress bars on stderr (tqdm): rays traced by the main simulation, then the analysis stages."""
+
 from __future__ import annotations
 
 import sys
@@ -15,8 +16,16 @@ class RayProgress:
     ``simulate(progress=…)`` callback advancing by each ``RaysDone`` event's ``rays``."""
 
     def __init__(self, total: int, desc: str, enabled: bool = True):
-        self.bar = tqdm(total=int(total), unit="ray", unit_scale=True, desc=desc,
-                        file=sys.stderr, disable=not enabled, dynamic_ncols=True, smoothing=0.1)
+        self.bar = tqdm(
+            total=int(total),
+            unit="ray",
+            unit_scale=True,
+            desc=desc,
+            file=sys.stderr,
+            disable=not enabled,
+            dynamic_ncols=True,
+            smoothing=0.1,
+        )
 
     def __call__(self, event: RaysDone) -> None:
         if event.rays:
@@ -33,9 +42,15 @@ class StageProgress:
     STAGES = ("models", "fits", "stability sweep", "speed runs", "charts", "writing")
 
     def __init__(self, desc: str, enabled: bool = True):
-        self.bar = tqdm(total=len(self.STAGES), desc=f"{desc} analysis", unit="stage",
-                        file=sys.stderr, disable=not enabled, dynamic_ncols=True,
-                        bar_format="{desc}: {n_fmt}/{total_fmt} {bar} {postfix} [{elapsed}]")
+        self.bar = tqdm(
+            total=len(self.STAGES),
+            desc=f"{desc} analysis",
+            unit="stage",
+            file=sys.stderr,
+            disable=not enabled,
+            dynamic_ncols=True,
+            bar_format="{desc}: {n_fmt}/{total_fmt} {bar} {postfix} [{elapsed}]",
+        )
         self.current = None
 
     def stage(self, name: str) -> None:

@@ -5,6 +5,7 @@ progress file of ``microsim report --resume``.
 Wall times go to ``timings.json`` only, so ``report.md``, ``verdicts.json`` and ``index.md``
 are reproducible byte for byte.
 """
+
 from __future__ import annotations
 
 import json
@@ -19,9 +20,21 @@ from ..errors import UsageError
 from .planning import RunPlan
 from .tracing import auto_summary
 
-__all__ = ["VERDICTS_FILE", "REPORT_FILE", "TIMINGS_FILE", "REPORT_STATE", "SCHEMA_VERSION",
-           "staging", "publish_dir", "save_tallies", "fit_record", "verdict_document",
-           "timings_document", "read_report_state", "write_report_state"]
+__all__ = [
+    "VERDICTS_FILE",
+    "REPORT_FILE",
+    "TIMINGS_FILE",
+    "REPORT_STATE",
+    "SCHEMA_VERSION",
+    "staging",
+    "publish_dir",
+    "save_tallies",
+    "fit_record",
+    "verdict_document",
+    "timings_document",
+    "read_report_state",
+    "write_report_state",
+]
 
 VERDICTS_FILE, REPORT_FILE, TIMINGS_FILE = "verdicts.json", "report.md", "timings.json"
 REPORT_STATE = ".report-state.json"
@@ -57,26 +70,62 @@ def fit_record(fit) -> dict:
     Table II)."""
     e1, e2 = fit.e1, fit.e2
     root = lambda e: math.sqrt(e) if e is not None and np.isfinite(e) and e >= 0 else None  # noqa: E731
-    return {"model": fit.name, "params": dict(fit.params), "cost": fit.cost, "e1": e1, "e2": e2,
-            "sqrt_e1": root(e1), "sqrt_e2": root(e2), "success": bool(fit.success),
-            "n_starts": int(fit.n_starts)}
+    return {
+        "model": fit.name,
+        "params": dict(fit.params),
+        "cost": fit.cost,
+        "e1": e1,
+        "e2": e2,
+        "sqrt_e1": root(e1),
+        "sqrt_e2": root(e2),
+        "success": bool(fit.success),
+        "n_starts": int(fit.n_starts),
+    }
 
 
-def verdict_document(plan: RunPlan, result, ranking, verdicts, fits, speed, speed_theta,
-                     speed_ref, sweep, stability, warnings) -> dict:
+def verdict_document(
+    plan: RunPlan,
+    result,
+    ranking,
+    verdicts,
+    fits,
+    speed,
+    speed_theta,
+    speed_ref,
+    sweep,
+    stability,
+    warnings,
+) -> dict:
     """``verdicts.json``: the run's settings, model ranking, verdicts, fits, speed runs (errors
     only) and the stability sweep (README: schema)."""
     sc = plan.scene
-    doc = {"schema_version": SCHEMA_VERSION, "scene": sc.name, "scene_file": str(sc.path),
-           "description": sc.description, "quick": plan.quick,
-           "rays": int(result.rays.max()) if plan.auto else plan.rays,
-           "theta_i": list(plan.theta_i), "seed": plan.seed, "ranking": ranking,
-           "verdicts": verdicts, "fits": [fit_record(f) for f in fits.values()],
-           "speed": {"theta_i": speed_theta, "reference": speed_ref,
-                     "runs": {k: {"rays": list(plan.effort.speed_rays), "rel_rms": e}
-                              for k, (t, e) in speed.items()}},
-           "stability": {"theta_i": sweep.theta_i, "rays": plan.effort.sweep_rays,
-                         "rel_rms": stability, "warnings": warnings}}
+    doc = {
+        "schema_version": SCHEMA_VERSION,
+        "scene": sc.name,
+        "scene_file": str(sc.path),
+        "description": sc.description,
+        "quick": plan.quick,
+        "rays": int(result.rays.max()) if plan.auto else plan.rays,
+        "theta_i": list(plan.theta_i),
+        "seed": plan.seed,
+        "ranking": ranking,
+        "verdicts": verdicts,
+        "fits": [fit_record(f) for f in fits.values()],
+        "speed": {
+            "theta_i": speed_theta,
+            "reference": speed_ref,
+            "runs": {
+                k: {"rays": list(plan.effort.speed_rays), "rel_rms": e}
+                for k, (t, e) in speed.items()
+            },
+        },
+        "stability": {
+            "theta_i": sweep.theta_i,
+            "rays": plan.effort.sweep_rays,
+            "rel_rms": stability,
+            "warnings": warnings,
+        },
+    }
     if plan.auto:
         doc["rays_auto"] = auto_summary(result)
     return atomic.json_safe(doc)
@@ -84,12 +133,18 @@ def verdict_document(plan: RunPlan, result, ranking, verdicts, fits, speed, spee
 
 def timings_document(plan: RunPlan, result, speed, speed_theta) -> dict:
     """``timings.json``: the wall times (simulation, analysis, speed runs)."""
-    return {"simulation_seconds": result.meta.get("seconds"),
-            "rays_per_second": result.meta.get("rays_per_second"),
-            "analysis_seconds": result.meta["seconds_analysis"],
-            "speed": {"theta_i": speed_theta,
-                      "runs": {k: {"rays": list(plan.effort.speed_rays), "seconds": t}
-                               for k, (t, e) in speed.items()}}}
+    return {
+        "simulation_seconds": result.meta.get("seconds"),
+        "rays_per_second": result.meta.get("rays_per_second"),
+        "analysis_seconds": result.meta["seconds_analysis"],
+        "speed": {
+            "theta_i": speed_theta,
+            "runs": {
+                k: {"rays": list(plan.effort.speed_rays), "seconds": t}
+                for k, (t, e) in speed.items()
+            },
+        },
+    }
 
 
 def read_report_state(out: Path) -> dict | None:
@@ -103,8 +158,10 @@ def read_report_state(out: Path) -> dict | None:
             raise ValueError("not a report state")
         return state
     except (ValueError, UnicodeDecodeError) as e:
-        raise UsageError(f"--resume: {path} is unreadable ({' '.join(str(e).split())}); run "
-                         f"`microsim report` without --resume") from None
+        raise UsageError(
+            f"--resume: {path} is unreadable ({' '.join(str(e).split())}); run "
+            f"`microsim report` without --resume"
+        ) from None
 
 
 def write_report_state(out: Path, state: dict) -> None:

@@ -10,6 +10,7 @@
 An interrupted simulation, or an interrupt after it, saves the tallies for ``--resume``
 (status 130); no report is written from partial work.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -58,8 +59,9 @@ class RunOutcome:
     ranking: tuple[str, ...] = ()
 
 
-def execute(plan: RunPlan, progress: bool = True,
-            log: Callable[[str], None] | None = None) -> RunOutcome:
+def execute(
+    plan: RunPlan, progress: bool = True, log: Callable[[str], None] | None = None
+) -> RunOutcome:
     """Run a validated plan and write its directory (module docstring). The surface
     generators' UserWarnings are silenced: every surface warning is in meta.json and report.md.
     Holds ``atomic.output_lock(plan.out)`` throughout (a concurrent run on the same output is
@@ -71,9 +73,11 @@ def execute(plan: RunPlan, progress: bool = True,
             if plan.partial_dir is not None:
                 atomic.clean_stale(plan.partial_dir)
             if plan.previous is None and plan.out.exists():
-                if not plan.force:          # appeared since planning
-                    raise UsageError(f"{plan.out} already exists; pass --resume {plan.out} to "
-                                     f"continue it or --force to replace it")
+                if not plan.force:  # appeared since planning
+                    raise UsageError(
+                        f"{plan.out} already exists; pass --resume {plan.out} to "
+                        f"continue it or --force to replace it"
+                    )
                 check_replaceable(plan.out)
             return _execute(plan, progress, log or (lambda s: print(s, file=sys.stderr)))
 
@@ -83,15 +87,16 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     hint = plan.resume_hint or f"--resume {dest}"
     prev = plan.previous
     if prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays:
-        result = prev                       # finished tallies: only the analysis is left
+        result = prev  # finished tallies: only the analysis is left
         result.models.clear()
     elif plan.auto:
         result = tracing.simulate_auto_scene(plan, log if progress else None)
     else:
         bar = RayProgress(tracing.remaining_rays(plan).sum(), plan.scene.name, enabled=progress)
         try:
-            result = tracing.simulate_scene(plan, plan.theta_i, plan.rays, plan.seed, plan.bins,
-                                            progress=bar, resume=prev)
+            result = tracing.simulate_scene(
+                plan, plan.theta_i, plan.rays, plan.seed, plan.bins, progress=bar, resume=prev
+            )
         finally:
             bar.close()
     result.meta["run"] = tracing.run_meta(plan)
@@ -104,11 +109,13 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     stage = staging(plan.out)
     try:
         return _analyse(plan, stage, result, log, progress)
-    except KeyboardInterrupt:            # the tallies are complete: keep them, no report
+    except KeyboardInterrupt:  # the tallies are complete: keep them, no report
         shutil.rmtree(stage, ignore_errors=True)
         save_tallies(result, dest)
-        log(f"microsim: interrupted after the simulation; tallies saved in {dest} "
-            f"(finish with {hint})")
+        log(
+            f"microsim: interrupted after the simulation; tallies saved in {dest} "
+            f"(finish with {hint})"
+        )
         return RunOutcome(130, plan.out)
     finally:
         if stage.exists():
@@ -127,9 +134,16 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         checkpoint("fits")
         # a flat mirror's lobe is a delta, narrower than any bin: fitting a lobe shape is
         # meaningless
-        fits = {} if sc.surface.kind == "flat" else fit_all(
-            result, sc.ior, names=plan.effort.fit_names or tuple(FIT_MODELS),
-            quick=plan.effort.quick_fits)
+        fits = (
+            {}
+            if sc.surface.kind == "flat"
+            else fit_all(
+                result,
+                sc.ior,
+                names=plan.effort.fit_names or tuple(FIT_MODELS),
+                quick=plan.effort.quick_fits,
+            )
+        )
         verdicts = verdicts_for_result(result, fitted=fits)
         shown = {**result.models, **{f.name: f.model_values for f in fits.values()}}
         ranking = _ranking(verdicts)
@@ -140,27 +154,43 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         speed, speed_theta, speed_ref = side_studies.speed_runs(plan, result, shown, verdicts)
         stages.stage("charts")
         checkpoint("charts")
-        files, stability = _charts(plan, stage, result, shown, verdicts, ranking, sweep,
-                                   sweep_verdicts, notes)
+        files, stability = _charts(
+            plan, stage, result, shown, verdicts, ranking, sweep, sweep_verdicts, notes
+        )
         files["speed"] = "speed.png"
-        ch.speed_accuracy(speed, stage / files["speed"],
-                          f"{sc.name}, θi = {speed_theta:g}°",
-                          f"relative RMS error against {speed_ref}")
+        ch.speed_accuracy(
+            speed,
+            stage / files["speed"],
+            f"{sc.name}, θi = {speed_theta:g}°",
+            f"relative RMS error against {speed_ref}",
+        )
         stages.stage("writing")
         result.meta["seconds_analysis"] = time.perf_counter() - t0
         result.save(stage)
-        doc = verdict_document(plan, result, ranking, verdicts, fits, speed, speed_theta,
-                               speed_ref, sweep, stability, notes)
+        doc = verdict_document(
+            plan,
+            result,
+            ranking,
+            verdicts,
+            fits,
+            speed,
+            speed_theta,
+            speed_ref,
+            sweep,
+            stability,
+            notes,
+        )
         atomic.write_json(stage / VERDICTS_FILE, doc)
-        atomic.write_json(stage / TIMINGS_FILE,
-                          timings_document(plan, result, speed, speed_theta))
+        atomic.write_json(stage / TIMINGS_FILE, timings_document(plan, result, speed, speed_theta))
         atomic.write_text(stage / REPORT_FILE, report.scene_report(doc, result, files))
     finally:
         stages.close()
     checkpoint("publish")
     publish_dir(stage, plan.out)
-    log(f"microsim: wrote {plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, {TIMINGS_FILE}, "
-        f"brdf.npz, meta.json, {len(files)} charts)")
+    log(
+        f"microsim: wrote {plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, {TIMINGS_FILE}, "
+        f"brdf.npz, meta.json, {len(files)} charts)"
+    )
     return RunOutcome(0, plan.out, doc, tuple(ranking))
 
 
@@ -175,13 +205,30 @@ def _ranking(verdicts) -> list[str]:
 
 def _nan_for_none(verdicts) -> list[dict]:
     """Verdicts with undefined numbers (null: no used bins / dof ≤ 0) as NaN, for the charts."""
-    return [{k: (np.nan if v is None and k in ("chi2_dof", "p_value", "max_abs_z", "rel_rms",
-                                                "max_rel_dev") else v) for k, v in d.items()}
-            for d in verdicts]
+    return [
+        {
+            k: (
+                np.nan
+                if v is None and k in ("chi2_dof", "p_value", "max_abs_z", "rel_rms", "max_rel_dev")
+                else v
+            )
+            for k, v in d.items()
+        }
+        for d in verdicts
+    ]
 
 
-def _charts(plan: RunPlan, stage: Path, result, shown, verdicts, ranking, sweep, sweep_verdicts,
-            estimator_notes: list[str]):
+def _charts(
+    plan: RunPlan,
+    stage: Path,
+    result,
+    shown,
+    verdicts,
+    ranking,
+    sweep,
+    sweep_verdicts,
+    estimator_notes: list[str],
+):
     """Write the scene's PNG charts into ``stage``: (name → file name (relative), the
     sweep's rel_rms per model over its θi). ``estimator_notes``: for the stability
     chart."""
@@ -191,31 +238,51 @@ def _charts(plan: RunPlan, stage: Path, result, shown, verdicts, ranking, sweep,
     ch.inplane_curves(result, shown, stage / files["inplane"], name)
     if ranking:
         worst = ranking[-1]
-        zs = [(v.get("chi2_dof") or 0.0, k) for k, v in enumerate(
-            [v for v in verdicts if v["model"] == worst])]
+        zs = [
+            (v.get("chi2_dof") or 0.0, k)
+            for k, v in enumerate([v for v in verdicts if v["model"] == worst])
+        ]
         t_index = max(zs)[1] if zs else 0
         files["hemisphere"] = "hemisphere.png"
-        ch.hemisphere_maps(result, shown, _nan_for_none(verdicts), stage / files["hemisphere"],
-                           t_index, name)
+        ch.hemisphere_maps(
+            result, shown, _nan_for_none(verdicts), stage / files["hemisphere"], t_index, name
+        )
     grid = np.linspace(0.0, 89.9, 180)
     files["energy"] = "energy.png"
-    ch.energy_chart(sweep.theta_i, sweep.ledger["single_fresnel"], albedo_stderr(sweep),
-                    side_studies.albedo_models(plan, grid),
-                    {"masked": sweep.ledger["masked_fresnel"],
-                     "downward": sweep.ledger["downward_fresnel"]},
-                    stage / files["energy"], name)
-    rel = {m: np.array([next((v["rel_rms"] for v in sweep_verdicts
-                              if v["model"] == m and abs(v["theta_i"] - t) < 1e-9), np.nan)
-                        for t in sweep.theta_i], dtype=float)
-           for m in sweep.models}
+    ch.energy_chart(
+        sweep.theta_i,
+        sweep.ledger["single_fresnel"],
+        albedo_stderr(sweep),
+        side_studies.albedo_models(plan, grid),
+        {"masked": sweep.ledger["masked_fresnel"], "downward": sweep.ledger["downward_fresnel"]},
+        stage / files["energy"],
+        name,
+    )
+    rel = {
+        m: np.array(
+            [
+                next(
+                    (
+                        v["rel_rms"]
+                        for v in sweep_verdicts
+                        if v["model"] == m and abs(v["theta_i"] - t) < 1e-9
+                    ),
+                    np.nan,
+                )
+                for t in sweep.theta_i
+            ],
+            dtype=float,
+        )
+        for m in sweep.models
+    }
     # the sweep's own noise adds its floor² to every model's rel_rms² on average: subtract it
     # so the chart shows the model's error; a model whose excess is below the noise is not drawn
     floor2 = side_studies.noise_floor(sweep) ** 2
-    excess = {m: np.sqrt(np.where(r ** 2 > floor2, r ** 2 - floor2, np.nan))
-              for m, r in rel.items()}
-    notes = (["relative error = energy-weighted rel RMS with the sweep's own noise subtracted in "
-              "quadrature; a missing point: not resolved above the noise"]
-             + estimator_notes)
+    excess = {m: np.sqrt(np.where(r**2 > floor2, r**2 - floor2, np.nan)) for m, r in rel.items()}
+    notes = [
+        "relative error = energy-weighted rel RMS with the sweep's own noise subtracted in "
+        "quadrature; a missing point: not resolved above the noise"
+    ] + estimator_notes
     files["stability"] = "stability.png"
     ch.stability_chart(sweep.theta_i, excess, stage / files["stability"], notes, name)
     return files, rel

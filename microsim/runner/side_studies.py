@@ -6,6 +6,7 @@ Each study traces with its own seed offset (independent of the main run) and rai
 ``KeyboardInterrupt`` if a simulation was cut short (``tracing.complete``): a partial side
 study never feeds a report.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,8 +25,18 @@ from ..stats import energy_set
 from . import tracing
 from .planning import Effort, RunPlan
 
-__all__ = ["SWEEP_SEED", "SPEED_SEED", "models_for", "attach", "noise_floor", "estimator_warnings",
-           "stability", "speed_runs", "albedo_models", "fig6_curves"]
+__all__ = [
+    "SWEEP_SEED",
+    "SPEED_SEED",
+    "models_for",
+    "attach",
+    "noise_floor",
+    "estimator_warnings",
+    "stability",
+    "speed_runs",
+    "albedo_models",
+    "fig6_curves",
+]
 
 SWEEP_SEED, SPEED_SEED = 7919, 104729
 """Seed offsets of the side studies (added to the run's seed): independent of the main run."""
@@ -68,8 +79,9 @@ def noise_floor(result) -> np.ndarray:
         sim, se = np.nan_to_num(sim.ravel()), np.nan_to_num(se.ravel())
         e = sim * omega
         k = energy_set(e) & (sim > 0)
-        out.append(np.sqrt(np.sum(e[k] * (se[k] / sim[k]) ** 2) / np.sum(e[k]))
-                   if k.any() else np.nan)
+        out.append(
+            np.sqrt(np.sum(e[k] * (se[k] / sim[k]) ** 2) / np.sum(e[k])) if k.any() else np.nan
+        )
     return np.array(out)
 
 
@@ -79,23 +91,31 @@ def estimator_warnings(plan: RunPlan, sweep) -> list[str]:
     out = []
     for t, floor in zip(sweep.theta_i, noise_floor(sweep)):
         if not floor < 0.01:
-            out.append(f"θi = {t:g}°: the sweep's own noise alone gives a relative error of "
-                       f"≈ {floor:.1%} ({int(sweep.rays[0])} rays): smaller model errors are not "
-                       f"resolved there")
+            out.append(
+                f"θi = {t:g}°: the sweep's own noise alone gives a relative error of "
+                f"≈ {floor:.1%} ({int(sweep.rays[0])} rays): smaller model errors are not "
+                f"resolved there"
+            )
     for t, u in zip(sweep.theta_i, sweep.ledger["unresolved"]):
         if u > 0:
-            out.append(f"θi = {t:g}°: {u:.2%} of the rays were unresolved (wrap cap or "
-                       f"back-facing hits); their energy is missing from the estimate")
+            out.append(
+                f"θi = {t:g}°: {u:.2%} of the rays were unresolved (wrap cap or "
+                f"back-facing hits); their energy is missing from the estimate"
+            )
     bin_w = 90.0 / sweep.bins.n_theta
     ndf = plan.scene.ndf()
     if ndf is None:
-        out.append(f"the reflection lobe of a flat surface is a delta: narrower than any bin "
-                   f"({bin_w:g}° wide); relative errors are bin averages of a spike")
+        out.append(
+            f"the reflection lobe of a flat surface is a delta: narrower than any bin "
+            f"({bin_w:g}° wide); relative errors are bin averages of a spike"
+        )
     else:
         lobe = 2.0 * math.degrees(float(ndf.tilt_quantile_rad(0.5)))  # median lobe half-width
         if lobe < bin_w:
-            out.append(f"the reflection lobe (median half-width ≈ {lobe:.2g}°, twice the median "
-                       f"facet tilt) is narrower than a {bin_w:g}° bin: bin averages smear it")
+            out.append(
+                f"the reflection lobe (median half-width ≈ {lobe:.2g}°, twice the median "
+                f"facet tilt) is narrower than a {bin_w:g}° bin: bin averages smear it"
+            )
     return out
 
 
@@ -104,9 +124,15 @@ def stability(plan: RunPlan):
     e = plan.effort
     bins = Bins(*e.sweep_bins) if e.sweep_bins else plan.bins
     checkpoint("side-studies")
-    sweep = tracing.complete(tracing.simulate_scene(
-        plan, e.sweep_theta, max(e.sweep_rays, plan.scene.simulation.realisations),
-        plan.seed + SWEEP_SEED, bins))
+    sweep = tracing.complete(
+        tracing.simulate_scene(
+            plan,
+            e.sweep_theta,
+            max(e.sweep_rays, plan.scene.simulation.realisations),
+            plan.seed + SWEEP_SEED,
+            bins,
+        )
+    )
     specs = [m for m in models_for(plan) if e.sweep_facets or m.kind != "facets"]
     attach(sweep, specs)
     return sweep, verdicts_for_result(sweep)
@@ -120,8 +146,14 @@ def speed_runs(plan: RunPlan, result, shown, verdicts):
     incidence nearest 30°; without one, the main run (whose own noise then floors the error)."""
     t_index = int(np.argmin(np.abs(np.asarray(plan.theta_i) - 30.0)))
     theta = plan.theta_i[t_index]
-    ok = [v for v in verdicts if v.get("agrees") and not v.get("fitted")
-          and abs(v["theta_i"] - theta) < 1e-9 and v.get("rel_rms") is not None]
+    ok = [
+        v
+        for v in verdicts
+        if v.get("agrees")
+        and not v.get("fitted")
+        and abs(v["theta_i"] - theta) < 1e-9
+        and v.get("rel_rms") is not None
+    ]
     best = min(ok, key=lambda v: v["rel_rms"])["model"] if ok else None
     ref = shown[best][t_index] if best else result.brdf[t_index]
     label = f"{best} (agrees)" if best else "the main run"
@@ -132,9 +164,17 @@ def speed_runs(plan: RunPlan, result, shown, verdicts):
         for n in plan.effort.speed_rays:
             checkpoint("side-studies")
             t0 = time.perf_counter()
-            r = tracing.complete(tracing.simulate_scene(
-                plan, [theta], n, plan.seed + SPEED_SEED, result.bins, origins=origins,
-                realisations=False))
+            r = tracing.complete(
+                tracing.simulate_scene(
+                    plan,
+                    [theta],
+                    n,
+                    plan.seed + SPEED_SEED,
+                    result.bins,
+                    origins=origins,
+                    realisations=False,
+                )
+            )
             times.append(time.perf_counter() - t0)
             errs.append(_energy_rel_rms(r.brdf[0], ref, omega))
         runs[origins] = (times, errs)
@@ -148,9 +188,15 @@ def albedo_models(plan: RunPlan, theta_grid):
     if ndf is None:
         return {"Fresnel (flat mirror)": (theta_grid, an.fresnel(cos, plan.scene.ior))}
     n_t, n_g, n_p = plan.effort.albedo_nodes
-    return {f"TS {kind}": (theta_grid, an.AlbedoTable(ndf, kind, plan.scene.ior, n_theta=n_t,
-                                                      n_grazing=n_g, n_gl_phi=n_p).rho(cos))
-            for kind in ("vgroove", "smith", "smith-correlated")}
+    return {
+        f"TS {kind}": (
+            theta_grid,
+            an.AlbedoTable(ndf, kind, plan.scene.ior, n_theta=n_t, n_grazing=n_g, n_gl_phi=n_p).rho(
+                cos
+            ),
+        )
+        for kind in ("vgroove", "smith", "smith-correlated")
+    }
 
 
 def fig6_curves(scenes, effort: Effort, threads: int) -> list[dict]:
@@ -166,17 +212,31 @@ def fig6_curves(scenes, effort: Effort, threads: int) -> list[dict]:
         for material in ("methanol", "aluminium"):
             ior = an.resolve_material(material)
             checkpoint("side-studies")
-            res = tracing.complete(simulate(surface, ior, list(effort.fig6_theta),
-                                            rays=effort.fig6_rays, bins=Bins(9, 5),
-                                            seed=sc.simulation.seed, threads=threads))
+            res = tracing.complete(
+                simulate(
+                    surface,
+                    ior,
+                    list(effort.fig6_theta),
+                    rays=effort.fig6_rays,
+                    bins=Bins(9, 5),
+                    seed=sc.simulation.seed,
+                    threads=threads,
+                )
+            )
             n_t, n_g, n_p = effort.albedo_nodes
-            table = an.AlbedoTable(sc.ndf(), "vgroove", ior, n_theta=n_t, n_grazing=n_g,
-                                   n_gl_phi=n_p)
-            curves.append({"label": f"{material} κ={sc.surface.params['kappa']:g}",
-                           "material": material, "theta": grid,
-                           "one_minus_rho_model": 1.0 - table.rho(cos),
-                           "fresnel_T": an.fresnel_transmittance(cos, ior),
-                           "sim_theta": res.theta_i,
-                           "sim_one_minus_rho": 1.0 - res.ledger["single_fresnel"],
-                           "sim_err": albedo_stderr(res)})
+            table = an.AlbedoTable(
+                sc.ndf(), "vgroove", ior, n_theta=n_t, n_grazing=n_g, n_gl_phi=n_p
+            )
+            curves.append(
+                {
+                    "label": f"{material} κ={sc.surface.params['kappa']:g}",
+                    "material": material,
+                    "theta": grid,
+                    "one_minus_rho_model": 1.0 - table.rho(cos),
+                    "fresnel_T": an.fresnel_transmittance(cos, ior),
+                    "sim_theta": res.theta_i,
+                    "sim_one_minus_rho": 1.0 - res.ledger["single_fresnel"],
+                    "sim_err": albedo_stderr(res),
+                }
+            )
     return curves

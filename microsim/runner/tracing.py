@@ -5,6 +5,7 @@ Random surfaces are averaged over the scene's realisations; realisation r is bui
 ``seed + r``. Callers reach ``simulate_scene`` through this module (``tracing.simulate_scene``)
 so that one replacement (tests) covers every run.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict
@@ -15,8 +16,15 @@ from ..sim import simulate
 from ..sim.auto import simulate_auto
 from .planning import AUTO_TARGET, RunPlan
 
-__all__ = ["surface_source", "simulate_scene", "complete", "simulate_auto_scene",
-           "auto_summary", "run_meta", "remaining_rays"]
+__all__ = [
+    "surface_source",
+    "simulate_scene",
+    "complete",
+    "simulate_auto_scene",
+    "auto_summary",
+    "run_meta",
+    "remaining_rays",
+]
 
 
 def surface_source(scene, seed: int, scale: float):
@@ -27,8 +35,17 @@ def surface_source(scene, seed: int, scale: float):
     return None, (lambda s: scene.build_surface(seed=s, scale=scale), [seed + r for r in range(n)])
 
 
-def simulate_scene(plan: RunPlan, theta_i, rays, seed, bins, progress=None, resume=None,
-                   origins="stratified", realisations=True):
+def simulate_scene(
+    plan: RunPlan,
+    theta_i,
+    rays,
+    seed,
+    bins,
+    progress=None,
+    resume=None,
+    origins="stratified",
+    realisations=True,
+):
     """``simulate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence;
     ``realisations=False``: one surface (seed ``seed``) whatever the scene's realisations."""
     sc = plan.scene
@@ -38,9 +55,20 @@ def simulate_scene(plan: RunPlan, theta_i, rays, seed, bins, progress=None, resu
     else:
         surface, reals = sc.build_surface(seed=seed, scale=scale), None
     factory, seeds = reals if reals is not None else (None, None)
-    return simulate(surface, sc.ior, list(theta_i), rays=rays, bins=bins, seed=seed,
-                    threads=plan.threads, surface_factory=factory, seeds=seeds,
-                    progress=progress, origins=origins, resume=resume)
+    return simulate(
+        surface,
+        sc.ior,
+        list(theta_i),
+        rays=rays,
+        bins=bins,
+        seed=seed,
+        threads=plan.threads,
+        surface_factory=factory,
+        seeds=seeds,
+        progress=progress,
+        origins=origins,
+        resume=resume,
+    )
 
 
 def complete(result):
@@ -56,9 +84,17 @@ def simulate_auto_scene(plan: RunPlan, log):
     per incidence; one progress line per batch through ``log`` (None: silent)."""
     sc = plan.scene
     surface = sc.build_surface(seed=plan.seed, scale=plan.effort.scale_for(sc.surface.kind))
-    return simulate_auto(surface, sc.ior, list(plan.theta_i), target=AUTO_TARGET,
-                         bins=plan.bins, seed=plan.seed, threads=plan.threads,
-                         max_rays=plan.rays, progress=log)
+    return simulate_auto(
+        surface,
+        sc.ior,
+        list(plan.theta_i),
+        target=AUTO_TARGET,
+        bins=plan.bins,
+        seed=plan.seed,
+        threads=plan.threads,
+        max_rays=plan.rays,
+        progress=log,
+    )
 
 
 def auto_summary(result) -> dict | None:
@@ -67,20 +103,30 @@ def auto_summary(result) -> dict | None:
     if not auto:
         return None
     keys = ("theta_i", "rays", "seconds", "rse", "converged", "batches")
-    return {"target": auto["target"], "seconds": float(result.meta.get("seconds", 0.0)),
-            "incidences": [{k: d[k] for k in keys} for d in auto["incidences"]]}
+    return {
+        "target": auto["target"],
+        "seconds": float(result.meta.get("seconds", 0.0)),
+        "incidences": [{k: d[k] for k in keys} for d in auto["incidences"]],
+    }
 
 
 def run_meta(plan: RunPlan) -> dict:
     """``meta["run"]``: the settings a ``--resume`` must match (``planning``) and the effort."""
     sc = plan.scene
     rays = {"rays": "auto", "max_rays": plan.rays} if plan.auto else {"rays": plan.rays}
-    return {"scene": sc.name, "scene_file": str(sc.path), "description": sc.description,
-            **rays, "theta_i": list(plan.theta_i), "seed": plan.seed,
-            "quick": plan.quick, "bins": [plan.bins.n_theta, plan.bins.n_phi],
-            "realisations": sc.simulation.realisations,
-            "surface_scale": plan.effort.scale_for(sc.surface.kind),
-            "effort": asdict(plan.effort)}
+    return {
+        "scene": sc.name,
+        "scene_file": str(sc.path),
+        "description": sc.description,
+        **rays,
+        "theta_i": list(plan.theta_i),
+        "seed": plan.seed,
+        "quick": plan.quick,
+        "bins": [plan.bins.n_theta, plan.bins.n_phi],
+        "realisations": sc.simulation.realisations,
+        "surface_scale": plan.effort.scale_for(sc.surface.kind),
+        "effort": asdict(plan.effort),
+    }
 
 
 def remaining_rays(plan: RunPlan) -> np.ndarray:

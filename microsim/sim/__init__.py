@@ -10,6 +10,7 @@ ledger), ``tallies`` (running sums, bin estimate and standard error), ``schedule
 interrupts), ``arguments`` (argument checks), ``tracer``/``kernels`` (Embree walk, compiled
 per-ray loops), ``bins``, ``result``, ``progress``, ``predict``, ``compare``.
 """
+
 from .bins import Bins
 from .estimator import ray_events, simulate
 from .paths import LEDGER, Events
@@ -18,5 +19,16 @@ from .result import InPlane, Result
 from .streams import BLOCK
 from .tracer import Tracer, VGrooveProfile
 
-__all__ = ["simulate", "ray_events", "Events", "Result", "InPlane", "Bins", "Tracer",
-           "VGrooveProfile", "BLOCK", "LEDGER", "RaysDone"]
+__all__ = [
+    "simulate",
+    "ray_events",
+    "Events",
+    "Result",
+    "InPlane",
+    "Bins",
+    "Tracer",
+    "VGrooveProfile",
+    "BLOCK",
+    "LEDGER",
+    "RaysDone",
+]

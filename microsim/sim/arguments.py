@@ -5,6 +5,7 @@ finite, scalar or one per θi); the integer bounds (``MAX_RAYS``, ``MAX_THREADS`
 ``MAX_CHUNK``) keep memory and float64 stratum positions sound. ``realisation_source`` gives
 ``realisations`` its one meaning (see ``simulate``).
 """
+
 from __future__ import annotations
 
 import numbers
@@ -12,22 +13,31 @@ import os
 
 import numpy as np
 
-from microsim.analytic._checks import integer, short
+from microsim.checks import integer, short
 from microsim.errors import UsageError
 
 from .bins import Bins
 from .paths import MASKING
 from .streams import ORIGINS
 
-__all__ = ["MAX_RAYS", "MAX_THREADS", "MAX_CHUNK", "check_inputs", "check_run_options",
-           "thread_count", "is_surface", "surface_error", "realisation_source"]
+__all__ = [
+    "MAX_RAYS",
+    "MAX_THREADS",
+    "MAX_CHUNK",
+    "check_inputs",
+    "check_run_options",
+    "thread_count",
+    "is_surface",
+    "surface_error",
+    "realisation_source",
+]
 
-MAX_RAYS = 2 ** 48
+MAX_RAYS = 2**48
 """Most primary rays per incidence (2.8·10¹⁴): a ray's stratum position r + ξ is a float64,
 which above 2⁴⁸ keeps fewer than 5 bits of the jitter ξ; at ~10⁷ rays/s it is also a year of
 tracing. Memory does not depend on it (rays are drawn and tallied one chunk at a time)."""
 MAX_THREADS = 1024
-MAX_CHUNK = 2 ** 22
+MAX_CHUNK = 2**22
 """Most rays per thread task: every task holds ~200 bytes per ray of work arrays (0.8 GB)."""
 
 
@@ -53,12 +63,15 @@ def check_inputs(theta_i, phi_i, rays, chunk, masking, seed=0):
         raise UsageError(f"theta_i must lie in [0, 90) degrees, got {short(theta_i)}")
     ph = _angles("phi_i", phi_i, f"finite degrees: a scalar or one per theta_i ({th.size})")
     if ph.size not in (1, th.size):
-        raise UsageError(f"phi_i must be a scalar or one azimuth per theta_i ({th.size} values), "
-                         f"got {ph.size}: {short(phi_i)}")
+        raise UsageError(
+            f"phi_i must be a scalar or one azimuth per theta_i ({th.size} values), "
+            f"got {ph.size}: {short(phi_i)}"
+        )
     ph = np.broadcast_to(ph, th.shape).copy()
     if not np.all(np.isfinite(ph)):
-        raise UsageError("phi_i must be finite degrees (scalar or one per theta_i), got "
-                         f"{short(phi_i)}")
+        raise UsageError(
+            f"phi_i must be finite degrees (scalar or one per theta_i), got {short(phi_i)}"
+        )
     integer("rays", rays, 1, MAX_RAYS, " (primary rays per incidence)")
     integer("chunk", chunk, 1, MAX_CHUNK, " (rays per thread task)")
     integer("seed", seed, 0, None, " (the random stream)")
@@ -83,8 +96,9 @@ def check_run_options(bins, origins, progress, progress_receives: str) -> None:
     if not isinstance(origins, str) or origins not in ORIGINS:
         raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
     if progress is not None and not callable(progress):
-        raise UsageError(f"progress must be None or a callable receiving {progress_receives}, "
-                         f"got {progress!r}")
+        raise UsageError(
+            f"progress must be None or a callable receiving {progress_receives}, got {progress!r}"
+        )
 
 
 def is_surface(obj) -> bool:
@@ -94,9 +108,11 @@ def is_surface(obj) -> bool:
 
 def surface_error(name: str, obj) -> UsageError:
     """The UsageError for ``name`` = ``obj`` that is not a surface."""
-    return UsageError(f"{name} must be a microsim.surfaces.Surface (e.g. microsim.surfaces."
-                      f"vgrooves(4000, microsim.analytic.Beckmann(0.3)) or gaussian(...)), "
-                      f"got {type(obj).__name__} {short(obj, 60)}")
+    return UsageError(
+        f"{name} must be a microsim.surfaces.Surface (e.g. microsim.surfaces."
+        f"vgrooves(4000, microsim.analytic.Beckmann(0.3)) or gaussian(...)), "
+        f"got {type(obj).__name__} {short(obj, 60)}"
+    )
 
 
 def realisation_source(surface, realisations, surface_factory, seeds, seed: int):
@@ -111,43 +127,58 @@ def realisation_source(surface, realisations, surface_factory, seeds, seed: int)
     """
     if surface_factory is None:
         if seeds is not None:
-            raise UsageError("seeds are the seeds of surface_factory(seed): give surface_factory "
-                             f"too, or leave seeds None (got seeds={short(seeds)})")
+            raise UsageError(
+                "seeds are the seeds of surface_factory(seed): give surface_factory "
+                f"too, or leave seeds None (got seeds={short(seeds)})"
+            )
         if realisations is None:
             if not is_surface(surface):
                 raise surface_error("surface", surface)
             return 1, lambda r: surface
         if _is_count(realisations):
-            raise UsageError(f"realisations={realisations!r} is a count of surfaces built by "
-                             "surface_factory(seed): give surface_factory=callable(seed), or a "
-                             "list of surfaces as realisations")
-        if (isinstance(realisations, tuple) and len(realisations) == 2
-                and callable(realisations[0])):
-            raise UsageError("realisations=(factory, seeds) is written surface_factory=factory, "
-                             "seeds=seeds")
+            raise UsageError(
+                f"realisations={realisations!r} is a count of surfaces built by "
+                "surface_factory(seed): give surface_factory=callable(seed), or a "
+                "list of surfaces as realisations"
+            )
+        if isinstance(realisations, tuple) and len(realisations) == 2 and callable(realisations[0]):
+            raise UsageError(
+                "realisations=(factory, seeds) is written surface_factory=factory, seeds=seeds"
+            )
         if isinstance(realisations, (str, bytes)) or not hasattr(realisations, "__iter__"):
-            raise UsageError("realisations must be None, a non-empty list of surfaces or a count "
-                             f"(with surface_factory), got {short(realisations)}")
+            raise UsageError(
+                "realisations must be None, a non-empty list of surfaces or a count "
+                f"(with surface_factory), got {short(realisations)}"
+            )
         lst = list(realisations)
         if not lst:
-            raise UsageError("realisations must be a non-empty list of surfaces (or a count, with "
-                             "surface_factory)")
+            raise UsageError(
+                "realisations must be a non-empty list of surfaces (or a count, with "
+                "surface_factory)"
+            )
         for k, s in enumerate(lst):
             if not is_surface(s):
                 raise surface_error(f"realisations[{k}]", s)
         if surface is not None and surface is not lst[0]:
-            raise UsageError("surface must be None (or realisations[0]) when realisations lists "
-                             "the surfaces to trace")
+            raise UsageError(
+                "surface must be None (or realisations[0]) when realisations lists "
+                "the surfaces to trace"
+            )
         return len(lst), lambda r: lst[r]
     if not callable(surface_factory):
-        raise UsageError("surface_factory must be a callable(seed) -> Surface, got "
-                         f"{short(surface_factory)}")
+        raise UsageError(
+            f"surface_factory must be a callable(seed) -> Surface, got {short(surface_factory)}"
+        )
     if surface is not None:
-        raise UsageError("surface must be None when surface_factory builds the surfaces, got "
-                         f"{type(surface).__name__}")
+        raise UsageError(
+            "surface must be None when surface_factory builds the surfaces, got "
+            f"{type(surface).__name__}"
+        )
     if realisations is not None and not _is_count(realisations):
-        raise UsageError("realisations must be a count (or None) with surface_factory, got "
-                         f"{short(realisations)}")
+        raise UsageError(
+            "realisations must be a count (or None) with surface_factory, got "
+            f"{short(realisations)}"
+        )
     count = None if realisations is None else integer("realisations", realisations, 1)
     if seeds is None:
         seeds = [seed + r for r in range(count or 1)]
@@ -158,15 +189,17 @@ def realisation_source(surface, realisations, surface_factory, seeds, seed: int)
         if not seeds:
             raise UsageError("seeds must hold at least one seed (one per realisation)")
         if count is not None and count != len(seeds):
-            raise UsageError(f"realisations ({count}) must equal the number of seeds "
-                             f"({len(seeds)}), or be left None")
+            raise UsageError(
+                f"realisations ({count}) must equal the number of seeds "
+                f"({len(seeds)}), or be left None"
+            )
 
     def build(r):
         s = surface_factory(seeds[r])
         if not is_surface(s):
-            raise surface_error(f"surface_factory({seeds[r]!r}) returned "
-                                f"{type(s).__name__}; it", s)
+            raise surface_error(f"surface_factory({seeds[r]!r}) returned {type(s).__name__}; it", s)
         return s
+
     return len(seeds), build
 
 

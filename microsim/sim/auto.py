@@ -20,14 +20,15 @@ pooled sums (``tallies.Tally``; per-ray formula for ``origins="independent"``). 
 batch the number of rays still needed is predicted from rse ∝ N^(-1/2); batches grow at most
 4× per step.
 """
+
 from __future__ import annotations
 
 import time
 
 import numpy as np
 
-from microsim.analytic._checks import in_range, integer
 from microsim.analytic.fresnel import resolve_material
+from microsim.checks import in_range, integer
 from microsim.stats import ENERGY_FRACTION, MIN_EVENTS, energy_set
 
 from .arguments import (
@@ -47,8 +48,9 @@ from .tallies import Tally, tallies_from_arrays, tally_result
 __all__ = ["simulate_auto", "relative_standard_error", "ENERGY_FRACTION"]
 
 
-def relative_standard_error(brdf, stderr, counts, omega, energy: float = ENERGY_FRACTION,
-                            min_events: int = MIN_EVENTS) -> float:
+def relative_standard_error(
+    brdf, stderr, counts, omega, energy: float = ENERGY_FRACTION, min_events: int = MIN_EVENTS
+) -> float:
     """Energy-weighted relative standard error over the bins carrying ``energy`` of the
     reflected energy (module docstring), dimensionless; inf when no bin qualifies.
     ``brdf``/``stderr`` (Θ, Φ) sr⁻¹, ``counts`` (Θ, Φ) events, ``omega`` (Θ, Φ) sr."""
@@ -66,7 +68,8 @@ def _batch_seed(seed: int, incidence: int, batch: int) -> int:
     """Independent 63-bit stream seed for batch ``batch`` of incidence ``incidence`` of a run
     seeded ``seed``."""
     state = np.random.SeedSequence([int(seed), int(incidence), int(batch)]).generate_state(
-        1, np.uint64)
+        1, np.uint64
+    )
     return int(state[0] >> np.uint64(1))
 
 
@@ -100,11 +103,25 @@ def _next_batch(n_done: int, rse: float, target: float, first: int, max_rays: in
     return int(min(n, max_rays - n_done))
 
 
-def simulate_auto(surface, material, theta_i, *, target: float = 0.01, phi_i=0.0,
-                  bins: Bins = Bins(), seed: int = 0, threads: int | None = None,
-                  chunk: int = 2 ** 16, masking: str = "traced", origins: str = "stratified",
-                  first: int = 2 ** 18, max_rays: int = 10 ** 9, energy: float = ENERGY_FRACTION,
-                  min_events: int = MIN_EVENTS, progress=None) -> Result:
+def simulate_auto(
+    surface,
+    material,
+    theta_i,
+    *,
+    target: float = 0.01,
+    phi_i=0.0,
+    bins: Bins = Bins(),
+    seed: int = 0,
+    threads: int | None = None,
+    chunk: int = 2**16,
+    masking: str = "traced",
+    origins: str = "stratified",
+    first: int = 2**18,
+    max_rays: int = 10**9,
+    energy: float = ENERGY_FRACTION,
+    min_events: int = MIN_EVENTS,
+    progress=None,
+) -> Result:
     """``simulate`` with ``rays = "auto"``: trace each incidence until the energy-weighted
     relative standard error over the bins carrying ``energy`` of the reflected energy
     (``relative_standard_error``) is ≤ ``target`` (dimensionless, default 1 %), or until
@@ -139,28 +156,51 @@ def simulate_auto(surface, material, theta_i, *, target: float = 0.01, phi_i=0.0
         acc, t0, rse, batch = _Batches(nbin), time.perf_counter(), float("inf"), 0
         n_next = int(min(first, max_rays))
         while n_next > 0:
-            res = simulate(surface, material, float(t_deg), phi_i=float(p_deg), rays=n_next,
-                           bins=bins, seed=_batch_seed(seed, i, batch), threads=threads,
-                           chunk=chunk, masking=masking, origins=origins)
-            if res.is_partial:                 # interrupted (SIGINT): batches cannot resume
+            res = simulate(
+                surface,
+                material,
+                float(t_deg),
+                phi_i=float(p_deg),
+                rays=n_next,
+                bins=bins,
+                seed=_batch_seed(seed, i, batch),
+                threads=threads,
+                chunk=chunk,
+                masking=masking,
+                origins=origins,
+            )
+            if res.is_partial:  # interrupted (SIGINT): batches cannot resume
                 raise KeyboardInterrupt
             meta0 = meta0 or res.meta
             acc.add(res)
             batch += 1
             f, se = acc.estimate(omega.ravel())
-            rse = relative_standard_error(f.reshape(bins.shape), se.reshape(bins.shape),
-                                          acc.total.count.reshape(bins.shape), omega, energy,
-                                          min_events)
+            rse = relative_standard_error(
+                f.reshape(bins.shape),
+                se.reshape(bins.shape),
+                acc.total.count.reshape(bins.shape),
+                omega,
+                energy,
+                min_events,
+            )
             if progress is not None:
-                progress(f"theta_i = {t_deg:g}°: {acc.rays} rays, rse = {rse:.4g} "
-                         f"(target {target:g})")
+                progress(
+                    f"theta_i = {t_deg:g}°: {acc.rays} rays, rse = {rse:.4g} (target {target:g})"
+                )
             if rse <= target:
                 break
             n_next = _next_batch(acc.rays, rse, target, first, int(max_rays))
         runs.append(acc)
-        info.append({"theta_i": float(t_deg), "rays": acc.rays, "batches": batch,
-                     "seconds": time.perf_counter() - t0, "rse": rse,
-                     "converged": bool(rse <= target)})
+        info.append(
+            {
+                "theta_i": float(t_deg),
+                "rays": acc.rays,
+                "batches": batch,
+                "seconds": time.perf_counter() - t0,
+                "rse": rse,
+                "converged": bool(rse <= target),
+            }
+        )
     return _assemble(th, ph, bins, omega, runs, meta0, info, target, energy, seed)
 
 
@@ -168,12 +208,35 @@ def _assemble(th, ph, bins, omega, runs, meta0, info, target, energy, seed) -> R
     """The Result of all incidences from their pooled batches (``tallies.tally_result``;
     no raw tallies: an auto run is not resumable)."""
     est = [r.estimate(omega.ravel()) for r in runs]
-    meta = {k: v for k, v in meta0.items()
-            if k not in ("seconds", "rays_per_second", "rays_traced", "partial", "interrupted",
-                         "resumed", "seconds_per_realisation", "seconds_scene_build")}
+    meta = {
+        k: v
+        for k, v in meta0.items()
+        if k
+        not in (
+            "seconds",
+            "rays_per_second",
+            "rays_traced",
+            "partial",
+            "interrupted",
+            "resumed",
+            "seconds_per_realisation",
+            "seconds_scene_build",
+        )
+    }
     meta.update(stderr_method="pairs" if all(r.pairs for r in runs) else "per-ray")
-    meta.update(seed=int(seed), rays="auto", seconds=float(sum(d["seconds"] for d in info)),
-                auto={"target": float(target), "energy": float(energy), "incidences": info})
-    return tally_result(th, ph, bins, [r.total for r in runs],
-                        np.array([r.rays for r in runs], dtype=np.int64),
-                        np.array([e[0] for e in est]), np.array([e[1] for e in est]), meta)
+    meta.update(
+        seed=int(seed),
+        rays="auto",
+        seconds=float(sum(d["seconds"] for d in info)),
+        auto={"target": float(target), "energy": float(energy), "incidences": info},
+    )
+    return tally_result(
+        th,
+        ph,
+        bins,
+        [r.total for r in runs],
+        np.array([r.rays for r in runs], dtype=np.int64),
+        np.array([e[0] for e in est]),
+        np.array([e[1] for e in est]),
+        meta,
+    )

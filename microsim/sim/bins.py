@@ -12,18 +12,19 @@ lies at Δφ = 180°. The φ edges are offset by half a bin so that one bin is c
 surfaces ``folded=True`` maps Δφ and −Δφ together: Δφ ∈ [0°, 180°], the first and last bins
 being half bins centred on 0° and 180°.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from microsim.analytic._checks import integer
+from microsim.checks import integer
 from microsim.errors import UsageError
 
 __all__ = ["Bins", "MAX_BINS"]
 
-MAX_BINS = 2 ** 22
+MAX_BINS = 2**22
 """Most bins of a grid (4,194,304, e.g. 2048 × 2048): every bin costs ≥ 72 bytes per
 (realisation, incidence) in the running sums and the Result, ~96 more per incidence and
 32 per thread task (``estimator.BIN_BYTES_*``), i.e. ~0.7 GB per incidence at the cap; and
@@ -57,15 +58,18 @@ class Bins:
         if not isinstance(self.folded, (bool, np.bool_)):
             raise UsageError(f"folded must be True or False, got {self.folded!r}")
         if n_theta * n_phi > MAX_BINS:
-            raise UsageError(f"n_theta × n_phi = {n_theta:,} × {n_phi:,} = {n_theta * n_phi:,} "
-                             f"bins is above the limit of {MAX_BINS:,} bins ({cost}: "
-                             f"{n_theta * n_phi * 72 / 1e9:.3g} GB per incidence)")
+            raise UsageError(
+                f"n_theta × n_phi = {n_theta:,} × {n_phi:,} = {n_theta * n_phi:,} "
+                f"bins is above the limit of {MAX_BINS:,} bins ({cost}: "
+                f"{n_theta * n_phi * 72 / 1e9:.3g} GB per incidence)"
+            )
         object.__setattr__(self, "n_theta", n_theta)
         object.__setattr__(self, "n_phi", n_phi)
         object.__setattr__(self, "folded", bool(self.folded))
         if not self.folded and self.n_phi % 2:
-            raise UsageError(f"n_phi must be even when folded=False (a bin centred on 180°), "
-                             f"got {self.n_phi}")
+            raise UsageError(
+                f"n_phi must be even when folded=False (a bin centred on 180°), got {self.n_phi}"
+            )
 
     # --- edges ------------------------------------------------------------------------
     @property
@@ -128,8 +132,8 @@ class Bins:
         return self._relative_azimuth(wo[..., 0], wo[..., 1], phi_i_deg)
 
     def _relative_azimuth(self, x, y, phi_i_deg) -> np.ndarray:
-        d = np.degrees(np.arctan2(y, x)) - _half_turn(phi_i_deg)   # (−360°, 360°)
-        d = np.where(d < 0.0, d + 360.0, d)                          # = np.mod(d, 360), cheaper
+        d = np.degrees(np.arctan2(y, x)) - _half_turn(phi_i_deg)  # (−360°, 360°)
+        d = np.where(d < 0.0, d + 360.0, d)  # = np.mod(d, 360), cheaper
         if self.folded:
             return np.where(d > 180.0, 360.0 - d, d)
         w = 360.0 / self.n_phi
@@ -147,17 +151,27 @@ class Bins:
         whose ``phi_edges`` hold it (edge_j ≤ Δφ < edge_j+1), computed by
         ``kernels.bin_index`` after NumPy's arctan2."""
         from . import kernels  # (kernels imports nothing of ours)
+
         x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
         shape = np.broadcast_shapes(x.shape, y.shape, z.shape)
         theta = np.arctan2(np.sqrt(x * x + y * y), z)
         phi = np.arctan2(y, x)
         phi_i = _half_turn(phi_i_deg)
-        phi_i = (np.array([float(phi_i)]) if np.ndim(phi_i) == 0
-                 else np.ascontiguousarray(np.broadcast_to(phi_i, shape), dtype=np.float64).ravel())
+        phi_i = (
+            np.array([float(phi_i)])
+            if np.ndim(phi_i) == 0
+            else np.ascontiguousarray(np.broadcast_to(phi_i, shape), dtype=np.float64).ravel()
+        )
         out = np.empty(shape, dtype=np.int64)
-        kernels.bin_index(*(np.ascontiguousarray(np.broadcast_to(a, shape)).ravel()
-                            for a in (theta, phi, z)), phi_i, self.n_theta, self.n_phi,
-                          self.folded, self.phi_edges, out.reshape(-1))
+        kernels.bin_index(
+            *(np.ascontiguousarray(np.broadcast_to(a, shape)).ravel() for a in (theta, phi, z)),
+            phi_i,
+            self.n_theta,
+            self.n_phi,
+            self.folded,
+            self.phi_edges,
+            out.reshape(-1),
+        )
         return out
 
     def to_dict(self) -> dict:

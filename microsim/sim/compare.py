@@ -27,13 +27,14 @@ m_real = ``surface.stats()["m_realised"]``):
   (pass the realisations as a sequence); these realisation-specific models are judged against
   ray noise only (``attach_models`` lists them in ``meta["realisation_models"]``).
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
 
 import numpy as np
 
-from microsim.analytic import _checks
+from microsim import vectors
 from microsim.analytic.fresnel import resolve_material
 from microsim.analytic.ndf import Beckmann
 from microsim.errors import UsageError
@@ -42,8 +43,14 @@ from .predict import ModelSpec, predict
 from .result import Result
 from .tracer import ESCAPED, Tracer
 
-__all__ = ["default_models", "attach_models", "measure_g1", "G1Measurement", "SHADOWING_SUFFIX",
-           "VGROOVE_AZIMUTHS"]
+__all__ = [
+    "default_models",
+    "attach_models",
+    "measure_g1",
+    "G1Measurement",
+    "SHADOWING_SUFFIX",
+    "VGROOVE_AZIMUTHS",
+]
 
 SHADOWING_SUFFIX = {"vgroove": "vgroove", "smith": "smith", "smith-correlated": "smith-corr"}
 # copies per groove tilt in V-groove ts-facets (predict.bin_average_facets): ~3 s per θi for
@@ -59,12 +66,18 @@ def _surfaces_and_ndf(scene_or_surfaces, ndf):
     if hasattr(scene_or_surfaces, "build_surface"):
         surface = scene_or_surfaces.build_surface()
         return [surface], ndf if ndf is not None else surface.ensemble_ndf
-    surfaces = list(scene_or_surfaces) if isinstance(scene_or_surfaces, (list, tuple)) \
+    surfaces = (
+        list(scene_or_surfaces)
+        if isinstance(scene_or_surfaces, (list, tuple))
         else [scene_or_surfaces]
-    if not surfaces or not all(hasattr(s, "kind") and hasattr(s, "facet_normals")
-                               for s in surfaces):
-        raise UsageError(f"scene_or_surface must be a Scene, a Surface or a non-empty sequence "
-                         f"of Surfaces, got {scene_or_surfaces!r}")
+    )
+    if not surfaces or not all(
+        hasattr(s, "kind") and hasattr(s, "facet_normals") for s in surfaces
+    ):
+        raise UsageError(
+            f"scene_or_surface must be a Scene, a Surface or a non-empty sequence "
+            f"of Surfaces, got {scene_or_surfaces!r}"
+        )
     if len({s.kind for s in surfaces}) != 1:
         raise UsageError("scene_or_surface: realisations must all be of one surface kind")
     return surfaces, ndf if ndf is not None else surfaces[0].ensemble_ndf
@@ -88,8 +101,9 @@ def _pooled_facets(surfaces):
     return normals, weights, m_real
 
 
-def default_models(scene_or_surface, material, ndf=None, *,
-                   azimuths: int = VGROOVE_AZIMUTHS) -> list[ModelSpec]:
+def default_models(
+    scene_or_surface, material, ndf=None, *, azimuths: int = VGROOVE_AZIMUTHS
+) -> list[ModelSpec]:
     """The standard model set for a Scene, a Surface, or the realisations of one random scene
     (a sequence of Surfaces: ``ts-facets`` and the realised m then pool all of them, see
     ``_pooled_facets``) — module docstring for the names.
@@ -101,29 +115,33 @@ def default_models(scene_or_surface, material, ndf=None, *,
     ``azimuth_average`` is set (V-grooves).
     """
     surfaces, ndf = _surfaces_and_ndf(scene_or_surface, ndf)
-    resolve_material(material)                              # validate now, not at predict time
+    resolve_material(material)  # validate now, not at predict time
     kinds = tuple(SHADOWING_SUFFIX)
     normals, weights, m_real = _pooled_facets(surfaces)
     exact = surfaces[0].exact_shadowing
-    if exact == "none":       # nothing shadows (flat): all light in the mirror bin, weight F(θi)
+    if exact == "none":  # nothing shadows (flat): all light in the mirror bin, weight F(θi)
         return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", material)]
     if exact is not None:
         if ndf is None:
-            raise UsageError(f"ndf must be given for a {surfaces[0].kind} surface without an "
-                             f"ensemble_ndf")
+            raise UsageError(
+                f"ndf must be given for a {surfaces[0].kind} surface without an ensemble_ndf"
+            )
         copies = int(azimuths) if surfaces[0].azimuth_average else None
-        specs = [ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, material)
-                 for k in kinds]
-        return specs + [ModelSpec.facets("ts-facets", normals, weights, exact, material,
-                                         azimuths=copies)]
+        specs = [
+            ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, material) for k in kinds
+        ]
+        return specs + [
+            ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies)
+        ]
     ndfs = [("realised", Beckmann(m_real))]
     if ndf is not None:
         ndfs.insert(0, ("nominal", ndf))
-    specs = [ModelSpec.torrance_sparrow(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", d, k,
-                                        material)
-             for label, d in ndfs for k in kinds]
-    return specs + [ModelSpec.facets("ts-facets", normals, weights, "smith-correlated",
-                                     material)]
+    specs = [
+        ModelSpec.torrance_sparrow(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", d, k, material)
+        for label, d in ndfs
+        for k in kinds
+    ]
+    return specs + [ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", material)]
 
 
 def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
@@ -139,8 +157,9 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
         for name, values in pred.items():
             out[name][sel] = values
     result.models.update(out)
-    own = (set(result.meta.get("realisation_models", ()))
-           | {s.name for s in specs if s.kind == "facets"})
+    own = set(result.meta.get("realisation_models", ())) | {
+        s.name for s in specs if s.kind == "facets"
+    }
     result.meta["realisation_models"] = sorted(own)
     return result
 
@@ -152,8 +171,9 @@ class G1Measurement(NamedTuple):
     stderr: np.ndarray
 
 
-def measure_g1(surface, theta_o_deg, rays: int = 100_000, seed: int = 0,
-               phi_o_deg: float = 0.0) -> G1Measurement:
+def measure_g1(
+    surface, theta_o_deg, rays: int = 100_000, seed: int = 0, phi_o_deg: float = 0.0
+) -> G1Measurement:
     """Ray-traced masking G1(wo) of ``surface`` for polar angles ``theta_o_deg`` (deg, < 90).
 
     Projected-area identity: the microsurface seen from wo has projected area cos θo per unit
@@ -175,20 +195,24 @@ def measure_g1(surface, theta_o_deg, rays: int = 100_000, seed: int = 0,
         raise UsageError(f"rays must be an integer >= 2, got {rays!r}")
     tracer = Tracer(surface)
     vert, faces = np.asarray(surface.vertices, np.float64), np.asarray(surface.faces)
-    v0, e1, e2 = (vert[faces[:, 0]], vert[faces[:, 1]] - vert[faces[:, 0]],
-                  vert[faces[:, 2]] - vert[faces[:, 0]])
+    v0, e1, e2 = (
+        vert[faces[:, 0]],
+        vert[faces[:, 1]] - vert[faces[:, 0]],
+        vert[faces[:, 2]] - vert[faces[:, 0]],
+    )
     normals = surface.facet_normals()
     cdf = np.cumsum(surface.facet_areas())
     g1, se = np.empty(th.size), np.empty(th.size)
     for k, t in enumerate(th):
         rng = np.random.default_rng([int(seed), k])
-        face = np.minimum(np.searchsorted(cdf, rng.random(int(rays)) * cdf[-1], side="right"),
-                          len(cdf) - 1)
+        face = np.minimum(
+            np.searchsorted(cdf, rng.random(int(rays)) * cdf[-1], side="right"), len(cdf) - 1
+        )
         u, v = rng.random(int(rays)), rng.random(int(rays))
         flip = u + v > 1.0
         u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
         points = v0[face] + u[:, None] * e1[face] + v[:, None] * e2[face]
-        wo = _checks.spherical_deg(t, phi_o_deg)
+        wo = vectors.spherical_deg(t, phi_o_deg)
         nrm = normals[face]
         x = np.maximum(nrm @ wo, 0.0)
         lit = np.flatnonzero(x > 0)
@@ -198,5 +222,5 @@ def measure_g1(surface, theta_o_deg, rays: int = 100_000, seed: int = 0,
         y = vis * x
         g1[k] = y.sum() / x.sum()
         resid = y - g1[k] * x
-        se[k] = np.sqrt(np.sum(resid ** 2) / (rays * (rays - 1))) / x.mean()
+        se[k] = np.sqrt(np.sum(resid**2) / (rays * (rays - 1))) / x.mean()
     return G1Measurement(g1, se)

@@ -21,6 +21,7 @@ own; block tallies are summed in block order. So results are bitwise identical f
 ``threads``/``chunk``, and an interrupted run keeps its exact running sums and block counts
 (``Result.tallies``): ``simulate(resume=...)`` continues with the next block.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -32,10 +33,11 @@ from typing import Callable
 
 import numpy as np
 
-from microsim.analytic._checks import check_memory, spherical_deg
 from microsim.analytic.fresnel import resolve_material
 from microsim.checkpoints import checkpoint
+from microsim.checks import check_memory
 from microsim.errors import UsageError
+from microsim.vectors import spherical_deg
 
 from .arguments import (
     MAX_CHUNK,
@@ -56,8 +58,18 @@ from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, 
 from .streams import BLOCK, ORIGINS, block_origins
 from .tallies import Tally, chunk_tallies, simulation_result, tallies_from_arrays
 
-__all__ = ["simulate", "ray_events", "Events", "BLOCK", "LEDGER", "MASKING", "ORIGINS",
-           "MAX_RAYS", "MAX_THREADS", "MAX_CHUNK"]
+__all__ = [
+    "simulate",
+    "ray_events",
+    "Events",
+    "BLOCK",
+    "LEDGER",
+    "MASKING",
+    "ORIGINS",
+    "MAX_RAYS",
+    "MAX_THREADS",
+    "MAX_CHUNK",
+]
 
 EVENT_BYTES = 65
 """Bytes per ray of ``Events``: status 1, weight 8, wo 24, normal 24, margin 8."""
@@ -71,13 +83,26 @@ BIN_BYTES_THREAD = 32
 """Bytes per bin per running thread task: its scratch sums and touched flags."""
 
 
-def simulate(surface, material, theta_i, *, phi_i=0.0, rays: int = 1_000_000,
-             bins: Bins = Bins(), seed: int = 0, threads: int | None = None,
-             chunk: int = 2 ** 16, masking: str = "traced", realisations=None,
-             surface_factory: Callable[[int], object] | None = None, seeds=None,
-             origins: str = "stratified", isotropic: bool = False,
-             progress: Callable[[RaysDone], None] | None = None,
-             resume: Result | None = None) -> Result:
+def simulate(
+    surface,
+    material,
+    theta_i,
+    *,
+    phi_i=0.0,
+    rays: int = 1_000_000,
+    bins: Bins = Bins(),
+    seed: int = 0,
+    threads: int | None = None,
+    chunk: int = 2**16,
+    masking: str = "traced",
+    realisations=None,
+    surface_factory: Callable[[int], object] | None = None,
+    seeds=None,
+    origins: str = "stratified",
+    isotropic: bool = False,
+    progress: Callable[[RaysDone], None] | None = None,
+    resume: Result | None = None,
+) -> Result:
     """Bin-averaged single-bounce BRDF of ``surface`` by ray tracing (Mikkelsen 2009, eq. 9).
 
     ``surface``: a ``microsim.surfaces.Surface`` (None when ``realisations`` lists the
@@ -95,7 +120,7 @@ def simulate(surface, material, theta_i, *, phi_i=0.0, rays: int = 1_000_000,
     [1, ``MAX_THREADS``], ``seed`` ≥ 0; every bad argument raises a ``UsageError`` naming it,
     before any work. Memory does not grow with ``rays``: chunks are scheduled lazily, at most
     ``IN_FLIGHT``·threads at a time; the per-bin tallies are checked against the memory limit
-    up front (``BIN_BYTES_*``, ``_checks.check_memory``).
+    up front (``BIN_BYTES_*``, ``microsim.checks.check_memory``).
 
     ``masking``: "traced" (Embree, the reference), "exact" (Embree primary hit, float64
     V-groove masking test) or "analytic" (primary hit and masking both exact in float64, no
@@ -150,14 +175,22 @@ def simulate(surface, material, theta_i, *, phi_i=0.0, rays: int = 1_000_000,
     if min(per_real) < 1:
         raise UsageError(f"rays must be >= the number of realisations ({n_real}), got {rays}")
     nbin = bins.shape[0] * bins.shape[1]
-    check_memory("bins", nbin * (BIN_BYTES_TALLY * n_real * len(th) + BIN_BYTES_INCIDENCE
-                                 * len(th) + BIN_BYTES_THREAD * threads),
-                 f"the tallies of {nbin:,} bins × {len(th)} incidences × {n_real} realisations")
+    check_memory(
+        "bins",
+        nbin
+        * (
+            BIN_BYTES_TALLY * n_real * len(th)
+            + BIN_BYTES_INCIDENCE * len(th)
+            + BIN_BYTES_THREAD * threads
+        ),
+        f"the tallies of {nbin:,} bins × {len(th)} incidences × {n_real} realisations",
+    )
     chunk_blocks = max(1, int(round(int(chunk) / BLOCK)))
     material_meta = _json_material(material, ior)
     isotropic = bool(isotropic)
-    config = _run_config(th, ph, bins, seed, rays, masking, origins, material_meta, n_real,
-                         isotropic)
+    config = _run_config(
+        th, ph, bins, seed, rays, masking, origins, material_meta, n_real, isotropic
+    )
     if resume is None:
         tallies = [[Tally.empty(nbin) for _ in th] for _ in range(n_real)]
         done = np.zeros((n_real, len(th)), dtype=np.int64)
@@ -182,13 +215,21 @@ def simulate(surface, material, theta_i, *, phi_i=0.0, rays: int = 1_000_000,
                 build += time.perf_counter() - t0
                 surfaces_meta[r] = {**smeta, "eps": tracer.eps, "max_wraps": tracer.max_wraps}
                 for i, (t_deg, p_deg) in enumerate(zip(th, ph)):
-                    if stop.is_set():                   # SIGINT while building the surface
+                    if stop.is_set():  # SIGINT while building the surface
                         raise KeyboardInterrupt
                     start, end = int(done[r, i]), int(nblk[r])
                     if start >= end:
                         continue
-                    incidence = Incidence(tracer, spherical_deg(t_deg, p_deg), p_deg, bins, ior,
-                                          per_real[r], (seed, r, i), origins)
+                    incidence = Incidence(
+                        tracer,
+                        spherical_deg(t_deg, p_deg),
+                        p_deg,
+                        bins,
+                        ior,
+                        per_real[r],
+                        (seed, r, i),
+                        origins,
+                    )
                     path = choose_path(incidence, profile, azimuth, isotropic, pool, threads)
 
                     def tally(chunk, r=r, i=i, t_deg=t_deg):
@@ -197,14 +238,26 @@ def simulate(surface, material, theta_i, *, phi_i=0.0, rays: int = 1_000_000,
                         done[r, i] += tallies[r][i].add_chunk(chunk)
                         after = min(int(done[r, i]) * BLOCK, per_real[r])
                         if progress is not None:
-                            progress(RaysDone(realisation=r, realisations=n_real, incidence=i,
-                                              theta_i=float(t_deg), rays=after - before,
-                                              finished=bool(done[r, i] >= nblk[r])))
+                            progress(
+                                RaysDone(
+                                    realisation=r,
+                                    realisations=n_real,
+                                    incidence=i,
+                                    theta_i=float(t_deg),
+                                    rays=after - before,
+                                    finished=bool(done[r, i] >= nblk[r]),
+                                )
+                            )
                         checkpoint("simulation")
 
-                    run_in_order(pool, partial(chunk_tallies, path, nbin),
-                                 chunk_groups(start, end, chunk_blocks, threads),
-                                 IN_FLIGHT * threads, stop, tally)
+                    run_in_order(
+                        pool,
+                        partial(chunk_tallies, path, nbin),
+                        chunk_groups(start, end, chunk_blocks, threads),
+                        IN_FLIGHT * threads,
+                        stop,
+                        tally,
+                    )
                     del path
                 timings.append(time.perf_counter() - t0)
                 del tracer, profile
@@ -213,46 +266,74 @@ def simulate(surface, material, theta_i, *, phi_i=0.0, rays: int = 1_000_000,
     elapsed = time.perf_counter() - t_all
     n_done = np.minimum(done * BLOCK, np.array(per_real)[:, None])
     traced = int(n_done.sum() - np.minimum(done_before * BLOCK, np.array(per_real)[:, None]).sum())
-    meta = {"surface": surfaces_meta[0], "realisations": surfaces_meta if n_real > 1 else None,
-            "material": material_meta, "seed": seed, "rays": rays, "masking": masking,
-            "origins": origins, "isotropic": isotropic,
-            "stderr_method": "pairs" if origins == "stratified" and not isotropic else "per-ray",
-            "partial": bool(np.any(done < nblk[:, None])),
-            "interrupted": interrupted, "resumed": resume is not None,
-            "threads": int(threads), "chunk_blocks": chunk_blocks,
-            "block": BLOCK, "versions": _versions(), "seconds": elapsed,
-            "seconds_scene_build": build, "seconds_per_realisation": timings,
-            "rays_traced": traced,
-            "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None}
+    meta = {
+        "surface": surfaces_meta[0],
+        "realisations": surfaces_meta if n_real > 1 else None,
+        "material": material_meta,
+        "seed": seed,
+        "rays": rays,
+        "masking": masking,
+        "origins": origins,
+        "isotropic": isotropic,
+        "stderr_method": "pairs" if origins == "stratified" and not isotropic else "per-ray",
+        "partial": bool(np.any(done < nblk[:, None])),
+        "interrupted": interrupted,
+        "resumed": resume is not None,
+        "threads": int(threads),
+        "chunk_blocks": chunk_blocks,
+        "block": BLOCK,
+        "versions": _versions(),
+        "seconds": elapsed,
+        "seconds_scene_build": build,
+        "seconds_per_realisation": timings,
+        "rays_traced": traced,
+        "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None,
+    }
     return simulation_result(th, ph, bins, tallies, n_done, per_real, done, meta)
 
 
-def ray_events(surface, material, theta_i: float, *, phi_i: float = 0.0, rays: int = 100_000,
-               seed: int = 0, masking: str = "traced") -> Events:
+def ray_events(
+    surface,
+    material,
+    theta_i: float,
+    *,
+    phi_i: float = 0.0,
+    rays: int = 100_000,
+    seed: int = 0,
+    masking: str = "traced",
+) -> Events:
     """Per-ray outcomes of ``rays`` primary rays at one incidence (degrees), global frame.
 
     Same ray stream as ``simulate(surface, material, theta_i, ...)`` (realisation 0,
     incidence 0, stratified origins); for diagnostics and tests (paired comparisons of
     masking modes). Options are keyword-only; one thread. The output is per ray
     (``EVENT_BYTES`` each): ray counts whose events exceed the memory limit are refused
-    (``_checks.check_memory``).
+    (``microsim.checks.check_memory``).
     """
     th, ph = check_inputs(theta_i, phi_i, rays, 1, masking, seed)
     if th.size != 1:
         raise UsageError(f"theta_i must be a single incidence in degrees, got {theta_i!r}")
     if not is_surface(surface):
         raise surface_error("surface", surface)
-    check_memory("rays", 2 * EVENT_BYTES * int(rays), f"ray_events of {int(rays):,} rays "
-                 f"({EVENT_BYTES} bytes per ray, twice while concatenating)")
+    check_memory(
+        "rays",
+        2 * EVENT_BYTES * int(rays),
+        f"ray_events of {int(rays):,} rays "
+        f"({EVENT_BYTES} bytes per ray, twice while concatenating)",
+    )
     ior = resolve_material(material)
     tracer, profile, azimuth = tracer_for(surface, masking)
     wi = spherical_deg(th[0], ph[0])
     blocks = []
-    for b in range(-(-int(rays) // BLOCK)):                 # block by block, as in simulate
+    for b in range(-(-int(rays) // BLOCK)):  # block by block, as in simulate
         origins, psi = block_origins(tracer, int(rays), b, (int(seed), 0, 0), azimuth)
         blocks.append(trace_events(tracer, profile, wi, origins, psi, ior, azimuth))
-    return Events(*(np.concatenate([getattr(e, f) for e in blocks])
-                    for f in ("status", "weight", "wo", "normal", "margin")))
+    return Events(
+        *(
+            np.concatenate([getattr(e, f) for e in blocks])
+            for f in ("status", "weight", "wo", "normal", "margin")
+        )
+    )
 
 
 # --- run description and resume ------------------------------------------------------------
@@ -260,17 +341,23 @@ def _surface_meta(surface) -> dict:
     """JSON-able description of a traced surface (its own warnings plus the tracer's)."""
     warnings = list(getattr(surface, "warnings", ()))
     if not surface.periodic:
-        warnings.append("the tile was traced as periodic although surface.periodic is False: "
-                        "its seams act as steps")
+        warnings.append(
+            "the tile was traced as periodic although surface.periodic is False: "
+            "its seams act as steps"
+        )
     z = surface.vertices[:, 2]
     digest = hashlib.sha1(np.ascontiguousarray(surface.vertices, dtype=np.float64).tobytes())
     digest.update(np.ascontiguousarray(surface.faces, dtype=np.int64).tobytes())
-    return {"kind": surface.kind, "fingerprint": digest.hexdigest()[:16],
-            "nominal": dict(surface.nominal),
-            "tile_size": [float(t) for t in surface.tile_size],
-            "triangles": int(len(surface.faces)),
-            "z_range": [float(np.min(z)), float(np.max(z))], "periodic": bool(surface.periodic),
-            "warnings": warnings}
+    return {
+        "kind": surface.kind,
+        "fingerprint": digest.hexdigest()[:16],
+        "nominal": dict(surface.nominal),
+        "tile_size": [float(t) for t in surface.tile_size],
+        "triangles": int(len(surface.faces)),
+        "z_range": [float(np.min(z)), float(np.max(z))],
+        "periodic": bool(surface.periodic),
+        "warnings": warnings,
+    }
 
 
 def _json_material(material, ior) -> dict:
@@ -292,13 +379,21 @@ def _versions() -> dict:
     return {"numpy": np.__version__, "python": platform.python_version(), "embreex": embree}
 
 
-def _run_config(th, ph, bins, seed, rays, masking, origins, material, n_real,
-                isotropic) -> dict:
+def _run_config(th, ph, bins, seed, rays, masking, origins, material, n_real, isotropic) -> dict:
     """What a resumed run must share with the partial one (JSON-able, compared key by key)."""
-    return {"theta_i": [float(t) for t in th], "phi_i": [float(p) for p in ph],
-            "bins": bins.to_dict(), "seed": seed, "rays": rays, "masking": masking,
-            "origins": origins, "material": material, "realisations": n_real,
-            "isotropic": isotropic, "block": BLOCK}
+    return {
+        "theta_i": [float(t) for t in th],
+        "phi_i": [float(p) for p in ph],
+        "bins": bins.to_dict(),
+        "seed": seed,
+        "rays": rays,
+        "masking": masking,
+        "origins": origins,
+        "material": material,
+        "realisations": n_real,
+        "isotropic": isotropic,
+        "block": BLOCK,
+    }
 
 
 def _resume_state(resume, config, n_real, n_th):
@@ -307,20 +402,30 @@ def _resume_state(resume, config, n_real, n_th):
         raise UsageError(f"resume must be a microsim.sim.Result (a partial run), got {resume!r}")
     if resume.tallies is None:
         raise UsageError("resume holds no raw tallies (Result.tallies): it cannot be continued")
-    old = _run_config(resume.theta_i, resume.phi_i, resume.bins, resume.meta.get("seed"),
-                      resume.meta.get("rays"), resume.meta.get("masking"),
-                      resume.meta.get("origins", "stratified"), resume.meta.get("material"),
-                      int(resume.tallies["blocks"].shape[0]),
-                      bool(resume.meta.get("isotropic", False)))
+    old = _run_config(
+        resume.theta_i,
+        resume.phi_i,
+        resume.bins,
+        resume.meta.get("seed"),
+        resume.meta.get("rays"),
+        resume.meta.get("masking"),
+        resume.meta.get("origins", "stratified"),
+        resume.meta.get("material"),
+        int(resume.tallies["blocks"].shape[0]),
+        bool(resume.meta.get("isotropic", False)),
+    )
     old["block"] = resume.meta.get("block")
-    diff = [f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in config
-            if old[k] != config[k]]
+    diff = [
+        f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in config if old[k] != config[k]
+    ]
     if diff:
         raise UsageError("resume does not match this run's configuration: " + "; ".join(diff))
     t = resume.tallies
     if "sum_pair" not in t:
-        raise UsageError("resume holds no pair tally (Result.tallies['sum_pair'], written by an "
-                         "older microsim): it cannot be continued")
+        raise UsageError(
+            "resume holds no pair tally (Result.tallies['sum_pair'], written by an "
+            "older microsim): it cannot be continued"
+        )
     tallies = tallies_from_arrays(t, n_real, n_th)
     metas = resume.meta.get("realisations") if n_real > 1 else [resume.meta.get("surface")]
     return tallies, np.array(t["blocks"], dtype=np.int64), list(metas or [None] * n_real)
@@ -329,6 +434,8 @@ def _resume_state(resume, config, n_real, n_th):
 def _check_same_surface(old: dict | None, new: dict, r: int) -> None:
     """UsageError when realisation ``r`` of a resumed run is not the partial run's surface."""
     if old is not None and old.get("fingerprint") != new["fingerprint"]:
-        raise UsageError(f"resume does not match this run's configuration: surface of realisation "
-                         f"{r} (partial run: {old.get('kind')} {old.get('fingerprint')}, now: "
-                         f"{new['kind']} {new['fingerprint']})")
+        raise UsageError(
+            f"resume does not match this run's configuration: surface of realisation "
+            f"{r} (partial run: {old.get('kind')} {old.get('fingerprint')}, now: "
+            f"{new['kind']} {new['fingerprint']})"
+        )

@@ -16,6 +16,7 @@ computes.
 Units and frames are the callers' (``tracer``/``streams``/``paths``/``tallies``): tile
 coordinates, unit directions, distances along the ray.
 """
+
 from __future__ import annotations
 
 import math
@@ -25,15 +26,25 @@ from numba import njit
 
 from microsim.analytic.fresnel import fresnel_real_scalar
 
-__all__ = ["fresnel_mode", "stratified_origins", "segment_setup", "segment_finish",
-           "tabled_primary", "block_tallies", "apply_escape", "facet_mirror", "analytic_vgroove",
-           "add_blocks", "bin_index"]
+__all__ = [
+    "fresnel_mode",
+    "stratified_origins",
+    "segment_setup",
+    "segment_finish",
+    "tabled_primary",
+    "block_tallies",
+    "apply_escape",
+    "facet_mirror",
+    "analytic_vgroove",
+    "add_blocks",
+    "bin_index",
+]
 
 # tracer status codes (``tracer.HIT`` ...) and ledger classes (``paths.SINGLE`` ...),
 # repeated here as compile-time constants; ``paths``/``tracer`` assert they agree
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
 SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = 0, 1, 2, 3, 4
-FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2     # ``_fresnel_weight``'s modes
+FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2  # ``_fresnel_weight``'s modes
 
 _compiled = njit(cache=True, nogil=True)
 
@@ -84,9 +95,9 @@ def _segment_bounds(x, y, z, dx, dy, dz, hx, hy, zmax):
 @_compiled
 def _setup_ray(k, x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, top):
     """Slot k of a segment's Embree input for the ray at (x, y, z) along (dx, dy, dz): float32
-    origin ``o32[k]`` (kept strictly inside the tile, ``_strictly_inside``), tfar ``tq[k]`` = min(wall distance, distance to zmax when rising)·
-    (1 + rel) + eps (float32; inf beyond float32) and ``top[k]``: whether it reaches the top
-    no later than a wall."""
+    origin ``o32[k]`` (kept strictly inside the tile, ``_strictly_inside``), tfar
+    ``tq[k]`` = min(wall distance, distance to zmax when rising)·(1 + rel) + eps (float32; inf
+    beyond float32) and ``top[k]``: whether it reaches the top no later than a wall."""
     _, _, w, t = _segment_bounds(x, y, z, dx, dy, dz, hx, hy, zmax)
     tq[k] = np.float32(min(w, t) * (1.0 + rel) + eps)
     top[k] = t <= w
@@ -110,8 +121,28 @@ def _strictly_inside(v, half):
 
 
 @_compiled
-def segment_setup(ox, oy, oz, dx, dy, dz, shared, live, d32, hx, hy, zmax, eps, rel,
-                  status, o32, d32k, tq, keep, top):
+def segment_setup(
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    shared,
+    live,
+    d32,
+    hx,
+    hy,
+    zmax,
+    eps,
+    rel,
+    status,
+    o32,
+    d32k,
+    tq,
+    keep,
+    top,
+):
     """First half of one segment of the periodic walk (``Tracer._walk_columns``).
 
     Live ray i (global index ``live[i]``) at (ox, oy, oz)[i] with direction (dx, dy, dz)[j]
@@ -125,8 +156,9 @@ def segment_setup(ox, oy, oz, dx, dy, dz, shared, live, d32, hx, hy, zmax, eps, 
         if dz[j] > 0.0 and oz[i] >= zmax:
             status[live[i]] = ESCAPED
             continue
-        _setup_ray(k, ox[i], oy[i], oz[i], dx[j], dy[j], dz[j], hx, hy, zmax, eps, rel, o32,
-                   tq, top)
+        _setup_ray(
+            k, ox[i], oy[i], oz[i], dx[j], dy[j], dz[j], hx, hy, zmax, eps, rel, o32, tq, top
+        )
         if not shared:
             d32k[k, 0] = d32[i, 0]
             d32k[k, 1] = d32[i, 1]
@@ -137,9 +169,42 @@ def segment_setup(ox, oy, oz, dx, dy, dz, shared, live, d32, hx, hy, zmax, eps, 
 
 
 @_compiled
-def segment_finish(k, pid, tfar, occlusion, keep, top, live, ox, oy, oz, dx, dy, dz, shared,
-                   falling_shared, d32k, hx, hy, zmax, zmin, eps,
-                   status, prim, px, py, pz, nlive, nox, noy, noz, ndx, ndy, ndz, nd32):
+def segment_finish(
+    k,
+    pid,
+    tfar,
+    occlusion,
+    keep,
+    top,
+    live,
+    ox,
+    oy,
+    oz,
+    dx,
+    dy,
+    dz,
+    shared,
+    falling_shared,
+    d32k,
+    hx,
+    hy,
+    zmax,
+    zmin,
+    eps,
+    status,
+    prim,
+    px,
+    py,
+    pz,
+    nlive,
+    nox,
+    noy,
+    noz,
+    ndx,
+    ndy,
+    ndz,
+    nd32,
+):
     """Second half of a segment: Embree's answers ``pid`` (primID or geomID, −1 = none) and
     ``tfar`` (float32, intersect queries) for the k traced rays of ``segment_setup``.
 
@@ -178,7 +243,7 @@ def segment_finish(k, pid, tfar, occlusion, keep, top, live, ox, oy, oz, dx, dy,
         if z < zmin - eps or not math.isfinite(w):
             status[g] = MISSED
             continue
-        x = min(max(x, -hx), hx)                        # rounding along the wall
+        x = min(max(x, -hx), hx)  # rounding along the wall
         y = min(max(y, -hy), hy)
         if a <= w:
             x = -math.copysign(hx, dx[j])
@@ -200,9 +265,41 @@ def segment_finish(k, pid, tfar, occlusion, keep, top, live, ox, oy, oz, dx, dy,
 
 
 @_compiled
-def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wo32, fbin, hx, hy,
-                   zmax, eps, rel, status, weight, where, mi, sx, sy, sz, mdx, mdy, mdz, md32,
-                   o32, tq, keep, top):
+def tabled_primary(
+    hs,
+    prim,
+    px,
+    py,
+    pz,
+    code,
+    fweight,
+    nx,
+    ny,
+    nz,
+    lift,
+    wo32,
+    fbin,
+    hx,
+    hy,
+    zmax,
+    eps,
+    rel,
+    status,
+    weight,
+    where,
+    mi,
+    sx,
+    sy,
+    sz,
+    mdx,
+    mdy,
+    mdz,
+    md32,
+    o32,
+    tq,
+    keep,
+    top,
+):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
     ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
@@ -235,9 +332,9 @@ def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wo32, 
         off = px[i] * a + py[i] * b + pz[i] * e - lift[f]
         x, y, z = px[i] - off * a, py[i] - off * b, pz[i] - off * e
         dx, dy, dz = np.float64(wo32[f, 0]), np.float64(wo32[f, 1]), np.float64(wo32[f, 2])
-        if dz > 0.0 and z >= zmax:                      # nothing above: escaped
+        if dz > 0.0 and z >= zmax:  # nothing above: escaped
             continue
-        if x < -hx or x >= hx:                          # into the tile
+        if x < -hx or x >= hx:  # into the tile
             x = (x + hx) % (2.0 * hx) - hx
         if y < -hy or y >= hy:
             y = (y + hy) % (2.0 * hy) - hy
@@ -254,8 +351,9 @@ def tabled_primary(hs, prim, px, py, pz, code, fweight, nx, ny, nz, lift, wo32, 
 
 
 @_compiled
-def block_tallies(status, weight, where, block, acc, touched, out_bin, out_sums, out_cnt,
-                  offsets, ln, lf):
+def block_tallies(
+    status, weight, where, block, acc, touched, out_bin, out_sums, out_cnt, offsets, ln, lf
+):
     """Per-block sums of a batch of whole blocks of ``block`` rays (``tallies.split_tallies``),
     added in ray order, stored sparsely (only the bins a block touches: a block has at most
     ``block`` events, while a fine grid has thousands of bins).
@@ -272,7 +370,7 @@ def block_tallies(status, weight, where, block, acc, touched, out_bin, out_sums,
     for b in range((n + block - 1) // block):
         offsets[b] = j
         lo, hi = b * block, min(n, (b + 1) * block)
-        n0 = n1 = n2 = n3 = n4 = 0                    # ledger sums in registers, per class
+        n0 = n1 = n2 = n3 = n4 = 0  # ledger sums in registers, per class
         f0 = f1 = f2 = f3 = f4 = 0.0
         for i in range(lo, hi):
             s = status[i]
@@ -305,8 +403,12 @@ def block_tallies(status, weight, where, block, acc, touched, out_bin, out_sums,
         lf[b, SINGLE], lf[b, MASKED], lf[b, DOWNWARD] = f0, f1, f2
         lf[b, RAY_UNRESOLVED], lf[b, RAY_MISSED] = f3, f4
         for i in range(lo, hi - 1, 2):
-            if (status[i] == SINGLE and status[i + 1] == SINGLE and where[i] >= 0
-                    and where[i] == where[i + 1]):
+            if (
+                status[i] == SINGLE
+                and status[i + 1] == SINGLE
+                and where[i] >= 0
+                and where[i] == where[i + 1]
+            ):
                 acc[2, where[i]] += weight[i] * weight[i + 1]
         for q in range(offsets[b], j):
             k = out_bin[q]
@@ -335,8 +437,9 @@ def _fresnel_weight(c, n2, k2, fresnel_mode):
 
 
 @_compiled
-def facet_mirror(nx, ny, nz, wix, wiy, wiz, n2, k2, fresnel_mode, weight, code, wox, woy,
-                 woz, wo32):
+def facet_mirror(
+    nx, ny, nz, wix, wiy, wiz, n2, k2, fresnel_mode, weight, code, wox, woy, woz, wo32
+):
     """Per facet with unit normal n (``nx/ny/nz``) lit from wi: the Fresnel weight F(n·wi)
     (``weight``, 0 if back-facing; ``_fresnel_weight``), the mirror direction
     wo = 2(n·wi)·n − wi (``wox/woy/woz``, float32 copy ``wo32``) and the class a primary hit
@@ -362,10 +465,38 @@ def facet_mirror(nx, ny, nz, wix, wiy, wiz, n2, k2, fresnel_mode, weight, code, 
 
 
 @_compiled
-def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_left, depth,
-                     facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz, facet_signed_tan,
-                     facet_width, n2, k2, fresnel_mode, n_theta, n_phi, folded,
-                     status, weight, where, wox, woy, woz):
+def analytic_vgroove(
+    x,
+    z,
+    psi,
+    wi,
+    cos_phi,
+    sin_phi,
+    half,
+    x_left,
+    x_right,
+    w_left,
+    depth,
+    facet_rim,
+    facet_wall,
+    facet_sigma,
+    facet_nx,
+    facet_nz,
+    facet_signed_tan,
+    facet_width,
+    n2,
+    k2,
+    fresnel_mode,
+    n_theta,
+    n_phi,
+    folded,
+    status,
+    weight,
+    where,
+    wox,
+    woy,
+    woz,
+):
     """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``paths.
     analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
     per-facet columns passed as arrays). Per ray, in the groove frame (wi rotated by −ψ, with
@@ -379,8 +510,9 @@ def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_l
       s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``): class MASKED if > 0,
       DOWNWARD if wo_z ≤ 0 (wins), RAY_UNRESOLVED if back-facing (c ≤ 0, weight 0), else SINGLE;
     * for folded bins, the bin of wo against the rotated incident azimuth e (``Bins.locate``
-      to rounding: θo = atan2(|wo_h|, wo_z), folded Δφ = atan2(|e × wo_h|, e·wo_h)), written to ``where``
-      for SINGLE rays (−1 otherwise); unfolded bins are left to the caller (``where`` = −1).
+      to rounding: θo = atan2(|wo_h|, wo_z), folded Δφ = atan2(|e × wo_h|, e·wo_h)), written
+      to ``where`` for SINGLE rays (−1 otherwise); unfolded bins are left to the caller
+      (``where`` = −1).
     """
     g = len(x_left)
     scale = g / (2.0 * half)
@@ -393,10 +525,10 @@ def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_l
         wx = cp * wi[0] + sp * wi[1]
         wy = -sp * wi[0] + cp * wi[1]
         wz = wi[2]
-        x0 = x[i] - (z / wz) * wx                                # z = 0 crossing
+        x0 = x[i] - (z / wz) * wx  # z = 0 crossing
         if x0 < -half or x0 >= half:
             x0 = (x0 + half) % (2 * half) - half
-        k = min(int((x0 + half) * scale), g - 1)                 # ±1 at most
+        k = min(int((x0 + half) * scale), g - 1)  # ±1 at most
         if x0 < x_left[k] and k > 0:
             k -= 1
         if x0 >= x_right[k] and k < g - 1:
@@ -412,7 +544,7 @@ def analytic_vgroove(x, z, psi, wi, cos_phi, sin_phi, half, x_left, x_right, w_l
         oz = 2.0 * c * nz - wz
         wox[i], woy[i], woz[i] = ox, oy, oz
         where[i] = -1
-        if c <= 0.0:                                             # back-facing: unresolved
+        if c <= 0.0:  # back-facing: unresolved
             status[i] = RAY_UNRESOLVED
             weight[i] = 0.0
             continue
@@ -456,7 +588,7 @@ def fresnel_mode(ior) -> tuple:
     if ior is None:
         return FRESNEL_MIRROR, 0.0, 0.0
     eta = complex(ior)
-    return (FRESNEL_NONE if eta == 1 else FRESNEL_REAL), eta.real ** 2, eta.imag ** 2
+    return (FRESNEL_NONE if eta == 1 else FRESNEL_REAL), eta.real**2, eta.imag**2
 
 
 @_compiled

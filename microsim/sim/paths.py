@@ -40,6 +40,7 @@ outcome never depends on the chunk it is traced in. ``trace_events`` is the per-
 diagnostic path behind ``ray_events`` (full ``Events``, slower).
 Directions are unit vectors in the global frame pointing away from the surface; φi in degrees.
 """
+
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
@@ -66,21 +67,46 @@ from .tracer import (
     VGrooveProfile,
 )
 
-__all__ = ["SINGLE", "MASKED", "DOWNWARD", "RAY_UNRESOLVED", "RAY_MISSED", "LEDGER", "MASKING",
-           "Events", "tracer_for", "trace_events", "Incidence", "TracePath", "TracedPath",
-           "FacetTablePath", "RotatedIncidencePath", "AnalyticVGroovePath", "choose_path",
-           "FacetTable", "facet_table", "uses_facet_table", "trace_tabled", "trace_columns",
-           "analytic_columns"]
+__all__ = [
+    "SINGLE",
+    "MASKED",
+    "DOWNWARD",
+    "RAY_UNRESOLVED",
+    "RAY_MISSED",
+    "LEDGER",
+    "MASKING",
+    "Events",
+    "tracer_for",
+    "trace_events",
+    "Incidence",
+    "TracePath",
+    "TracedPath",
+    "FacetTablePath",
+    "RotatedIncidencePath",
+    "AnalyticVGroovePath",
+    "choose_path",
+    "FacetTable",
+    "facet_table",
+    "uses_facet_table",
+    "trace_tabled",
+    "trace_columns",
+    "analytic_columns",
+]
 
 SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = range(5)
 LEDGER = ("single", "masked", "downward", "unresolved", "missed")
 MASKING = ("traced", "exact", "analytic")
-ANALYTIC_BATCH = 16         # blocks per vectorised batch of masking="analytic" (measured best)
-assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)             # kernels.analytic_vgroove relies on it
+ANALYTIC_BATCH = 16  # blocks per vectorised batch of masking="analytic" (measured best)
+assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)  # kernels.analytic_vgroove relies on it
 assert (SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED) == (
-    kernels.SINGLE, kernels.MASKED, kernels.DOWNWARD, kernels.RAY_UNRESOLVED, kernels.RAY_MISSED)
+    kernels.SINGLE,
+    kernels.MASKED,
+    kernels.DOWNWARD,
+    kernels.RAY_UNRESOLVED,
+    kernels.RAY_MISSED,
+)
 
-_FROM_ESCAPE = np.zeros(4, dtype=np.int8)                  # tracer status -> ledger class
+_FROM_ESCAPE = np.zeros(4, dtype=np.int8)  # tracer status -> ledger class
 _FROM_ESCAPE[[HIT, ESCAPED, UNRESOLVED, MISSED]] = [MASKED, SINGLE, RAY_UNRESOLVED, RAY_MISSED]
 
 
@@ -111,8 +137,10 @@ def tracer_for(surface, masking: str):
     profile = None
     if masking in ("exact", "analytic"):
         if not azimuth:
-            raise UsageError(f"masking={masking!r} is only available for V-groove surfaces "
-                             "(azimuth_average=True); use masking='traced'")
+            raise UsageError(
+                f"masking={masking!r} is only available for V-groove surfaces "
+                "(azimuth_average=True); use masking='traced'"
+            )
         profile = VGrooveProfile(tracer) if masking == "exact" else VGrooveCaster(tracer)
     return tracer, profile, azimuth
 
@@ -142,32 +170,36 @@ def fresnel_by_block(c: np.ndarray, rows: np.ndarray, ior) -> np.ndarray:
 
 
 # --- per-ray events (diagnostics: ray_events) ----------------------------------------------
-def trace_events(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior,
-                 azimuth: bool) -> Events:
+def trace_events(
+    tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior, azimuth: bool
+) -> Events:
     """Follow primary rays from direction ``wi`` (global) to their ledger class (vectorised),
     keeping every per-ray quantity (``Events``).
 
     ``origins`` is a batch of whole ``BLOCK``s (the last may be short); the outcome of every
     ray is independent of the batch size (see ``fresnel_by_block``)."""
     n = len(origins)
-    if azimuth:                                          # trace in the groove frame: wi by −ψ
+    if azimuth:  # trace in the groove frame: wi by −ψ
         cpsi, spsi = np.cos(psi), np.sin(psi)
         wl = _rotate_z(wi, cpsi, -spsi)
-        hits = (_analytic_hits(tracer, profile, origins, wl)
-                if isinstance(profile, VGrooveCaster) else tracer.first_hit(origins, -wl))
+        hits = (
+            _analytic_hits(tracer, profile, origins, wl)
+            if isinstance(profile, VGrooveCaster)
+            else tracer.first_hit(origins, -wl)
+        )
     else:
         wl = np.broadcast_to(wi, (n, 3))
         hits = tracer.first_hit(origins, -np.asarray(wi, dtype=np.float64))  # one shared direction
     status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
     status[hits.status == MISSED] = RAY_MISSED
-    status[hits.status == ESCAPED] = RAY_MISSED          # a falling ray cannot escape
+    status[hits.status == ESCAPED] = RAY_MISSED  # a falling ray cannot escape
     weight = np.zeros(n)
     wo = np.full((n, 3), np.nan)
     margin = np.full(n, np.nan)
     h = np.flatnonzero(hits.status == HIT)
     nrm = hits.normal[h]
     c = np.einsum("ij,ij->i", wl[h], nrm)
-    front = c > 0                                        # back-facing hits stay unresolved
+    front = c > 0  # back-facing hits stay unresolved
     h, nrm, c = h[front], nrm[front], c[front]
     weight[h] = fresnel_by_block(c, h, ior)
     wlo = 2.0 * c[:, None] * nrm - wl[h]
@@ -180,7 +212,7 @@ def trace_events(tracer: Tracer, profile, wi: np.ndarray, origins, psi, ior,
         status[hu] = np.where(m > 0, MASKED, SINGLE)
     else:
         status[hu] = _FROM_ESCAPE[tracer.escapes(hits.point[hu], nrm[up], wlo[up])]
-    wo[h] = wlo if not azimuth else _rotate_z(wlo, cpsi[h], spsi[h])   # back by +ψ
+    wo[h] = wlo if not azimuth else _rotate_z(wlo, cpsi[h], spsi[h])  # back by +ψ
     normal = np.full((n, 3), np.nan)
     normal[h] = nrm if not azimuth else _rotate_z(nrm, cpsi[h], spsi[h])
     return Events(status=status, weight=weight, wo=wo, normal=normal, margin=margin)
@@ -193,8 +225,12 @@ def _analytic_hits(tracer: Tracer, caster: VGrooveCaster, origins, wl) -> Hits:
     prim, x = caster.first_hit_columns(origins[:, 0], origins[:, 2], wl[:, 0], wl[:, 2])
     point = np.full((len(prim), 3), np.nan)
     point[:, 0] = x
-    return Hits(status=np.full(len(prim), HIT, dtype=np.int8), prim=prim, point=point,
-                normal=tracer.normals[prim])
+    return Hits(
+        status=np.full(len(prim), HIT, dtype=np.int8),
+        prim=prim,
+        point=point,
+        normal=tracer.normals[prim],
+    )
 
 
 # --- the tally paths: (status, weight, bin) per ray ----------------------------------------
@@ -218,8 +254,15 @@ class FacetTable:
     lift: np.ndarray
 
 
-def facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float,
-                pool: ThreadPoolExecutor | None = None, parts: int = 1) -> FacetTable:
+def facet_table(
+    tracer: Tracer,
+    wi: np.ndarray,
+    ior,
+    bins: Bins,
+    phi_i: float,
+    pool: ThreadPoolExecutor | None = None,
+    parts: int = 1,
+) -> FacetTable:
     """The ``FacetTable`` of incidence ``wi`` (``kernels.facet_mirror``; Fresnel weights in
     compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
     in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
@@ -233,15 +276,24 @@ def facet_table(tracer: Tracer, wi: np.ndarray, ior, bins: Bins, phi_i: float,
 
     def fill(part: slice) -> None:
         wo = [work("table-wo-" + a, part.stop - part.start) for a in "xyz"]
-        kernels.facet_mirror(*(a[part] for a in ncols), *wi, *fresnel_args[1:], fresnel_args[0],
-                             weight[part], code[part], *wo, wo32[part])
+        kernels.facet_mirror(
+            *(a[part] for a in ncols),
+            *wi,
+            *fresnel_args[1:],
+            fresnel_args[0],
+            weight[part],
+            code[part],
+            *wo,
+            wo32[part],
+        )
         where[part] = bins.locate_xyz(*wo, phi_i)
 
     cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
     list(pool.map(fill, slices) if pool is not None else map(fill, slices))
-    return FacetTable(code=code, weight=weight, bin=where, wo32=wo32, normal_cols=ncols,
-                      lift=tracer.masking_lift)
+    return FacetTable(
+        code=code, weight=weight, bin=where, wo32=wo32, normal_cols=ncols, lift=tracer.masking_lift
+    )
 
 
 def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:
@@ -260,19 +312,42 @@ def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
     hs, prim, p = tracer.trace_columns(x, [float(-c) for c in wi], (-wi).astype(np.float32)[None])
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
     where = np.empty(n, dtype=np.int64)
-    mi = work("tabled-ray", n, np.int64)                  # the masking rays, this thread's
+    mi = work("tabled-ray", n, np.int64)  # the masking rays, this thread's
     start = [work("tabled-start-" + a, n) for a in "xyz"]
     wo = [work("tabled-wo-" + a, n) for a in "xyz"]
     wo32, o32 = work("tabled-wo32", (n, 3), np.float32), work("tabled-o32", (n, 3), np.float32)
     tq, keep = work("tabled-tfar", n, np.float32), work("tabled-keep", n, np.int64)
     top = work("tabled-top", n, np.bool_)
-    m = kernels.tabled_primary(hs, prim, *p, table.code, table.weight, *table.normal_cols,
-                               table.lift, table.wo32, table.bin,
-                               float(tracer.half[0]), float(tracer.half[1]), tracer.zmax,
-                               tracer.eps, TFAR_REL, status, weight, where, mi, *start, *wo, wo32,
-                               o32, tq, keep, top)
-    esc = tracer.escape_columns([c[:m] for c in start], [c[:m] for c in wo], wo32[:m],
-                                first=(o32, tq, keep, top))
+    m = kernels.tabled_primary(
+        hs,
+        prim,
+        *p,
+        table.code,
+        table.weight,
+        *table.normal_cols,
+        table.lift,
+        table.wo32,
+        table.bin,
+        float(tracer.half[0]),
+        float(tracer.half[1]),
+        tracer.zmax,
+        tracer.eps,
+        TFAR_REL,
+        status,
+        weight,
+        where,
+        mi,
+        *start,
+        *wo,
+        wo32,
+        o32,
+        tq,
+        keep,
+        top,
+    )
+    esc = tracer.escape_columns(
+        [c[:m] for c in start], [c[:m] for c in wo], wo32[:m], first=(o32, tq, keep, top)
+    )
     kernels.apply_escape(status, mi[:m], esc, _FROM_ESCAPE)
     return status, weight, where
 
@@ -310,7 +385,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         down = [-c for c in wl]
         hs, prim, p = tracer.trace_columns(x, down, _stack32(down))
     status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
-    status[(hs == MISSED) | (hs == ESCAPED)] = RAY_MISSED   # a falling ray cannot escape
+    status[(hs == MISSED) | (hs == ESCAPED)] = RAY_MISSED  # a falling ray cannot escape
     weight = np.zeros(n)
     where = np.full(n, -1, dtype=np.int64)
     h = np.flatnonzero(hs == HIT)
@@ -318,7 +393,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     nc = [c[pr] for c in tracer.normal_columns]
     wh = wl if psi is None else [c[h] for c in wl]
     c = wh[0] * nc[0] + wh[1] * nc[1] + wh[2] * nc[2]
-    front = c > 0                                           # back-facing hits stay unresolved
+    front = c > 0  # back-facing hits stay unresolved
     if not front.all():
         h, pr, c = h[front], pr[front], c[front]
         nc = [a[front] for a in nc]
@@ -363,13 +438,36 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
     mode, n2, k2 = kernels.fresnel_mode(ior)
     phi = np.radians(phi_i)
     c = caster
-    kernels.analytic_vgroove(np.ascontiguousarray(x, dtype=np.float64), float(z),
-                             np.ascontiguousarray(psi, dtype=np.float64),
-                             np.asarray(wi, dtype=np.float64), float(np.cos(phi)),
-                             float(np.sin(phi)), float(c.half), c.x_left, c.x_right, c.w_left,
-                             c.depth, c.facet_rim, c.facet_wall, c.facet_sigma, c.facet_nx,
-                             c.facet_nz, c.facet_signed_tan, c.facet_width, n2, k2, mode,
-                             bins.n_theta, bins.n_phi, bins.folded, status, weight, where, *wo)
+    kernels.analytic_vgroove(
+        np.ascontiguousarray(x, dtype=np.float64),
+        float(z),
+        np.ascontiguousarray(psi, dtype=np.float64),
+        np.asarray(wi, dtype=np.float64),
+        float(np.cos(phi)),
+        float(np.sin(phi)),
+        float(c.half),
+        c.x_left,
+        c.x_right,
+        c.w_left,
+        c.depth,
+        c.facet_rim,
+        c.facet_wall,
+        c.facet_sigma,
+        c.facet_nx,
+        c.facet_nz,
+        c.facet_signed_tan,
+        c.facet_width,
+        n2,
+        k2,
+        mode,
+        bins.n_theta,
+        bins.n_phi,
+        bins.folded,
+        status,
+        weight,
+        where,
+        *wo,
+    )
     if not bins.folded:
         single = status == SINGLE
         ws = np.stack([a[single] for a in wo], axis=1)
@@ -425,8 +523,16 @@ class TracedPath(TracePath):
     def follow(self, blocks):
         inc = self.incidence
         starts, psi = inc.origins_of(blocks, self.azimuth)
-        return trace_columns(inc.tracer, self.profile, inc.wi, inc.phi_i, inc.bins, starts,
-                             psi if self.azimuth else None, inc.ior)
+        return trace_columns(
+            inc.tracer,
+            self.profile,
+            inc.wi,
+            inc.phi_i,
+            inc.bins,
+            starts,
+            psi if self.azimuth else None,
+            inc.ior,
+        )
 
 
 class FacetTablePath(TracePath):
@@ -462,8 +568,18 @@ class RotatedIncidencePath(TracePath):
             psi = block_rotation(inc.key, b)
             c, s = np.cos(psi), np.sin(psi)
             wb = np.array([c * wi[0] - s * wi[1], s * wi[0] + c * wi[1], wi[2]])
-            out.append(trace_columns(inc.tracer, self.profile, wb, inc.phi_i + np.degrees(psi),
-                                     inc.bins, starts, None, inc.ior))
+            out.append(
+                trace_columns(
+                    inc.tracer,
+                    self.profile,
+                    wb,
+                    inc.phi_i + np.degrees(psi),
+                    inc.bins,
+                    starts,
+                    None,
+                    inc.ior,
+                )
+            )
         return tuple(np.concatenate(parts) for parts in zip(*out))
 
 
@@ -480,14 +596,19 @@ class AnalyticVGroovePath(TracePath):
         wi = np.asarray(inc.wi, dtype=np.float64)
         z = inc.tracer.zmax + inc.tracer.top_margin
         for a in range(0, len(blocks), ANALYTIC_BATCH):
-            (x, _, _), psi = inc.origins_of(blocks[a:a + ANALYTIC_BATCH], True)
-            parts.append(analytic_columns(self.caster, wi, inc.phi_i, inc.bins, x, z, psi,
-                                          inc.ior))
+            (x, _, _), psi = inc.origins_of(blocks[a : a + ANALYTIC_BATCH], True)
+            parts.append(analytic_columns(self.caster, wi, inc.phi_i, inc.bins, x, z, psi, inc.ior))
         return tuple(np.concatenate(c) for c in zip(*parts))
 
 
-def choose_path(incidence: Incidence, profile, azimuth: bool, isotropic: bool = False,
-                pool: ThreadPoolExecutor | None = None, parts: int = 1) -> TracePath:
+def choose_path(
+    incidence: Incidence,
+    profile,
+    azimuth: bool,
+    isotropic: bool = False,
+    pool: ThreadPoolExecutor | None = None,
+    parts: int = 1,
+) -> TracePath:
     """The trace path of ``incidence`` on a surface prepared by ``tracer_for`` (``profile``,
     ``azimuth``), with ``isotropic`` block rotations or not. A facet table is built here, in
     ``parts`` facet ranges on ``pool`` (once per incidence, shared by the threads)."""
@@ -497,6 +618,7 @@ def choose_path(incidence: Incidence, profile, azimuth: bool, isotropic: bool = 
     if isotropic and not azimuth:
         return RotatedIncidencePath(inc, profile)
     if uses_facet_table(inc.tracer, profile, azimuth, isotropic, inc.rays):
-        return FacetTablePath(inc, facet_table(inc.tracer, inc.wi, inc.ior, inc.bins,
-                                               inc.phi_i, pool, parts))
+        return FacetTablePath(
+            inc, facet_table(inc.tracer, inc.wi, inc.ior, inc.bins, inc.phi_i, pool, parts)
+        )
     return TracedPath(inc, profile, azimuth)

@@ -22,6 +22,7 @@ analytic BRDFs take ``(wi, wo, ...)`` first. Incidence: ``wi`` is a unit (3,) ve
 what the estimator does. ``material`` is anything ``fresnel.resolve_material`` accepts (None =
 mirror, a name, n, n + ik).
 """
+
 from __future__ import annotations
 
 import warnings
@@ -32,7 +33,8 @@ from typing import Any, Callable, Iterable, Mapping, NamedTuple
 import numpy as np
 from scipy.stats import qmc
 
-from microsim.analytic import _checks
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel, resolve_material
@@ -41,11 +43,18 @@ from microsim.errors import UsageError
 
 from .bins import Bins
 
-__all__ = ["BinAverage", "BinEstimate", "bin_average", "bin_average_ts", "bin_average_facets",
-           "ModelSpec", "predict"]
+__all__ = [
+    "BinAverage",
+    "BinEstimate",
+    "bin_average",
+    "bin_average_ts",
+    "bin_average_facets",
+    "ModelSpec",
+    "predict",
+]
 
-_MAX_POINTS = 2 ** 20          # directions per brdf_fn call / per facet chunk (bounds memory)
-_MAX_CELLS = 2 ** 21           # live quadrature cells; refinement stops (unconverged) beyond
+_MAX_POINTS = 2**20  # directions per brdf_fn call / per facet chunk (bounds memory)
+_MAX_CELLS = 2**21  # live quadrature cells; refinement stops (unconverged) beyond
 
 
 class BinAverage(NamedTuple):
@@ -93,8 +102,9 @@ class _Rule:
     @classmethod
     def of(cls, n_lo: int, n_hi: int) -> "_Rule":
         if not (isinstance(n_lo, int) and isinstance(n_hi, int) and 1 <= n_lo < n_hi <= 64):
-            raise UsageError(f"order must be two integers 1 <= n_lo < n_hi <= 64, "
-                             f"got {(n_lo, n_hi)!r}")
+            raise UsageError(
+                f"order must be two integers 1 <= n_lo < n_hi <= 64, got {(n_lo, n_hi)!r}"
+            )
         parts = []
         for n in (n_lo, n_hi):
             x, w = np.polynomial.legendre.leggauss(n)
@@ -102,8 +112,8 @@ class _Rule:
             parts.append((np.stack([gx.ravel(), gy.ravel()], axis=1), np.outer(w, w).ravel()))
         (x_lo, w_lo), (x_hi, w_hi) = parts
         weights = np.zeros((len(w_lo) + len(w_hi), 2))
-        weights[:len(w_lo), 0] = w_lo
-        weights[len(w_lo):, 1] = w_hi
+        weights[: len(w_lo), 0] = w_lo
+        weights[len(w_lo) :, 1] = w_hi
         return cls(np.concatenate([x_lo, x_hi]), weights)
 
 
@@ -146,9 +156,15 @@ def _initial_cells(bins: Bins, symmetric: bool) -> _Cells:
     cells = _Cells(t[it], t[it + 1], p[ip], p[ip + 1], it * bins.n_phi + ip)
     if bins.folded and not symmetric:
         mirror = _Cells(cells.t0, cells.t1, -cells.p1, -cells.p0, cells.b)
-        cells = _Cells(*(np.concatenate([a, m]) for a, m in zip(
-            (cells.t0, cells.t1, cells.p0, cells.p1, cells.b),
-            (mirror.t0, mirror.t1, mirror.p0, mirror.p1, mirror.b))))
+        cells = _Cells(
+            *(
+                np.concatenate([a, m])
+                for a, m in zip(
+                    (cells.t0, cells.t1, cells.p0, cells.p1, cells.b),
+                    (mirror.t0, mirror.t1, mirror.p0, mirror.p1, mirror.b),
+                )
+            )
+        )
     return cells
 
 
@@ -162,20 +178,30 @@ def _integrate_cells(brdf_fn, wi, phi_i_rad: float, cells: _Cells, rule: _Rule):
         pc, ph = 0.5 * (c.p0 + c.p1), 0.5 * (c.p1 - c.p0)
         theta = tc[:, None] + th[:, None] * rule.nodes[None, :, 0]
         phi = phi_i_rad + pc[:, None] + ph[:, None] * rule.nodes[None, :, 1]
-        f = np.asarray(brdf_fn(wi, _checks.spherical(theta, phi)), dtype=np.float64)
+        f = np.asarray(brdf_fn(wi, vectors.spherical(theta, phi)), dtype=np.float64)
         if f.shape != theta.shape or not np.all(np.isfinite(f)):
-            raise UsageError("brdf_fn(wi, wo) must return finite values of shape wo.shape[:-1]; "
-                             f"got shape {f.shape}" + ("" if f.shape != theta.shape
-                                                       else " with NaN/inf"))
+            raise UsageError(
+                "brdf_fn(wi, wo) must return finite values of shape wo.shape[:-1]; "
+                f"got shape {f.shape}" + ("" if f.shape != theta.shape else " with NaN/inf")
+            )
         g = f * np.sin(theta) * np.cos(theta)
-        out[s:s + len(c)] = (g @ rule.weights) * (th * ph)[:, None]
+        out[s : s + len(c)] = (g @ rule.weights) * (th * ph)[:, None]
     return out
 
 
-def bin_average(wi, bins: Bins, brdf_fn: Callable, phi_i: float | None = None,
-                rtol: float = 1e-3, *, floor: float = 1e-6, symmetric: bool = True,
-                order: tuple[int, int] = (4, 8), max_depth: int = 8,
-                min_depth: int = 0) -> BinAverage:
+def bin_average(
+    wi,
+    bins: Bins,
+    brdf_fn: Callable,
+    phi_i: float | None = None,
+    rtol: float = 1e-3,
+    *,
+    floor: float = 1e-6,
+    symmetric: bool = True,
+    order: tuple[int, int] = (4, 8),
+    max_depth: int = 8,
+    min_depth: int = 0,
+) -> BinAverage:
     """Bin averages f̄_B (sr⁻¹) of a vectorised ``brdf_fn(wi, wo) -> sr⁻¹`` (wi (3,), wo (..., 3)).
 
     Quadrature variable. ∫_B f cos θo dω = ∫∫ f sinθ cosθ dθ dφ over the bin rectangle in
@@ -206,8 +232,8 @@ def bin_average(wi, bins: Bins, brdf_fn: Callable, phi_i: float | None = None,
     rule = _Rule.of(*order)
     nb = bins.n_theta * bins.n_phi
     cells = _initial_cells(bins, symmetric)
-    omega = np.bincount(cells.b, cells.omega(), minlength=nb)    # Ω of the integrated region
-    acc = np.zeros((2, nb))                                       # accepted integral, error
+    omega = np.bincount(cells.b, cells.omega(), minlength=nb)  # Ω of the integrated region
+    acc = np.zeros((2, nb))  # accepted integral, error
 
     def tolerance(total):
         peak = np.max(np.abs(total) / omega)
@@ -224,14 +250,21 @@ def bin_average(wi, bins: Bins, brdf_fn: Callable, phi_i: float | None = None,
             accept[:] = False
         if depth == max_depth or 4 * np.count_nonzero(~accept) > _MAX_CELLS:
             accept[:] = True
-        acc += np.stack([np.bincount(cells.b[accept], val[accept], minlength=nb),
-                         np.bincount(cells.b[accept], err[accept], minlength=nb)])
+        acc += np.stack(
+            [
+                np.bincount(cells.b[accept], val[accept], minlength=nb),
+                np.bincount(cells.b[accept], err[accept], minlength=nb),
+            ]
+        )
         cells = cells.take(~accept).split()
         if len(cells) == 0:
             break
     converged = acc[1] <= tolerance(acc[0]) * (1.0 + 1e-12)
-    return BinAverage((acc[0] / omega).reshape(bins.shape), (acc[1] / omega).reshape(bins.shape),
-                      converged.reshape(bins.shape))
+    return BinAverage(
+        (acc[0] / omega).reshape(bins.shape),
+        (acc[1] / omega).reshape(bins.shape),
+        converged.reshape(bins.shape),
+    )
 
 
 # --- Torrance–Sparrow by sampling half vectors --------------------------------------------------
@@ -242,7 +275,7 @@ def _reflection_terms(wi, h, cos_i: float, eta, shadowing: str, ndf):
     where wi·h ≤ 0, wo is below the horizon (G = 0) or h_z = 0.
     """
     wih = h @ wi
-    wo = _checks.normalize(2.0 * wih[:, None] * h - wi)
+    wo = vectors.normalize(2.0 * wih[:, None] * h - wi)
     g = shadowing_g(np.broadcast_to(wi, wo.shape), wo, h, ndf, shadowing)
     hz = h[:, 2]
     ok = (wih > 0.0) & (hz > 0.0) & (wo[:, 2] > 0.0)
@@ -253,14 +286,24 @@ def _reflection_terms(wi, h, cos_i: float, eta, shadowing: str, ndf):
 
 def _check_shadowing(shadowing: str) -> str:
     if shadowing not in SHADOWING_KINDS:
-        raise UsageError(f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, "
-                         f"got {shadowing!r}")
+        raise UsageError(
+            f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, got {shadowing!r}"
+        )
     return shadowing
 
 
-def bin_average_ts(wi, bins: Bins, ndf, shadowing: str = "vgroove", material=None,
-                   phi_i: float | None = None, n: int = 2 ** 20, *, replicates: int = 16,
-                   seed: int = 0) -> BinEstimate:
+def bin_average_ts(
+    wi,
+    bins: Bins,
+    ndf,
+    shadowing: str = "vgroove",
+    material=None,
+    phi_i: float | None = None,
+    n: int = 2**20,
+    *,
+    replicates: int = 16,
+    seed: int = 0,
+) -> BinEstimate:
     """Torrance–Sparrow bin averages by randomised quasi-Monte Carlo over half vectors (sr⁻¹).
 
     Identity. With f = F G D/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18) and the Jacobian
@@ -277,11 +320,13 @@ def bin_average_ts(wi, bins: Bins, ndf, shadowing: str = "vgroove", material=Non
     """
     wi, phi_i = _incidence(wi, phi_i)
     shadowing, eta = _check_shadowing(shadowing), resolve_material(material)
-    replicates = int(_checks.in_range("replicates", replicates, 2, 2 ** 12))
+    replicates = int(_checks.in_range("replicates", replicates, 2, 2**12))
     per = int(n) // replicates
     if int(n) != n or per < 1 or per & (per - 1):
-        raise UsageError(f"n must be an integer with n/replicates a power of 2, got n={n!r}, "
-                         f"replicates={replicates}")
+        raise UsageError(
+            f"n must be an integer with n/replicates a power of 2, got n={n!r}, "
+            f"replicates={replicates}"
+        )
     nb = bins.n_theta * bins.n_phi
     omega = bins.projected_solid_angle().ravel()
     sums = np.zeros((replicates, nb))
@@ -295,8 +340,10 @@ def bin_average_ts(wi, bins: Bins, ndf, shadowing: str = "vgroove", material=Non
             keep = (idx >= 0) & (x > 0.0)
             sums[r] += np.bincount(idx[keep], x[keep], minlength=nb)
     vals = sums / (per * omega)
-    return BinEstimate(vals.mean(axis=0).reshape(bins.shape),
-                       (vals.std(axis=0, ddof=1) / np.sqrt(replicates)).reshape(bins.shape))
+    return BinEstimate(
+        vals.mean(axis=0).reshape(bins.shape),
+        (vals.std(axis=0, ddof=1) / np.sqrt(replicates)).reshape(bins.shape),
+    )
 
 
 # --- Torrance–Sparrow with the surface's own facets ---------------------------------------------
@@ -314,12 +361,22 @@ def _merge_tilts(normals: np.ndarray, weights: np.ndarray, decimals: int = 12):
     theta = np.round(np.arctan2(np.hypot(normals[:, 0], normals[:, 1]), normals[:, 2]), decimals)
     tilts, inv = np.unique(theta, return_inverse=True)
     w = np.bincount(inv.ravel(), weights)
-    return _checks.spherical(tilts, 0.0), w
+    return vectors.spherical(tilts, 0.0), w
 
 
-def bin_average_facets(wi, bins: Bins, normals, weights=None, shadowing: str = "vgroove",
-                       material=None, phi_i: float | None = None, azimuths: int | None = None,
-                       *, smith_ndf=None, seed: int = 0) -> BinEstimate:
+def bin_average_facets(
+    wi,
+    bins: Bins,
+    normals,
+    weights=None,
+    shadowing: str = "vgroove",
+    material=None,
+    phi_i: float | None = None,
+    azimuths: int | None = None,
+    *,
+    smith_ndf=None,
+    seed: int = 0,
+) -> BinEstimate:
     """Torrance–Sparrow bin averages with the surface's own facet normals as D (sr⁻¹).
 
     Discrete NDF: the facets' projected-area fractions a_k = weights_k/Σ weights (weights =
@@ -356,7 +413,7 @@ def bin_average_facets(wi, bins: Bins, normals, weights=None, shadowing: str = "
     w = np.ones(len(nrm)) if weights is None else np.asarray(weights, dtype=np.float64)
     if w.shape != (len(nrm),) or not np.all(np.isfinite(w)) or np.any(w < 0) or not w.sum() > 0:
         raise UsageError(f"weights must be {len(nrm)} finite values >= 0 with a positive sum")
-    J = 1 if azimuths is None else int(_checks.in_range("azimuths", azimuths, 1, 2 ** 16))
+    J = 1 if azimuths is None else int(_checks.in_range("azimuths", azimuths, 1, 2**16))
     if shadowing.startswith("smith") and smith_ndf is None:
         smith_ndf = Empirical(nrm, w)
     if azimuths is not None:
@@ -364,10 +421,10 @@ def bin_average_facets(wi, bins: Bins, normals, weights=None, shadowing: str = "
     a = w / w.sum()
     rng = np.random.default_rng(seed)
     nb = bins.n_theta * bins.n_phi
-    total, s1, s2 = np.zeros(nb), np.zeros(nb), np.zeros(nb)   # Σ a X, Σ a² X, Σ a² X²
+    total, s1, s2 = np.zeros(nb), np.zeros(nb), np.zeros(nb)  # Σ a X, Σ a² X, Σ a² X²
     per_chunk = max(1, _MAX_POINTS // J)
     for s in range(0, len(nrm), per_chunk):
-        n_k, a_k = nrm[s:s + per_chunk], a[s:s + per_chunk]
+        n_k, a_k = nrm[s : s + per_chunk], a[s : s + per_chunk]
         if J == 1:
             h = n_k
         else:
@@ -378,12 +435,12 @@ def bin_average_facets(wi, bins: Bins, normals, weights=None, shadowing: str = "
         facet = np.repeat(np.arange(len(n_k)), J)
         keep = (idx >= 0) & (x > 0.0)
         key, inv = np.unique(facet[keep] * nb + idx[keep], return_inverse=True)
-        xk = np.bincount(inv.ravel(), x[keep] / J)                 # X_kB per (facet, bin) pair
+        xk = np.bincount(inv.ravel(), x[keep] / J)  # X_kB per (facet, bin) pair
         kb, ak = key % nb, a_k[key // nb]
         total += np.bincount(kb, ak * xk, minlength=nb)
         s1 += np.bincount(kb, ak * ak * xk, minlength=nb)
         s2 += np.bincount(kb, (ak * xk) ** 2, minlength=nb)
-    var = np.maximum(s2 - 2.0 * total * s1 + total ** 2 * np.sum(a * a), 0.0)
+    var = np.maximum(s2 - 2.0 * total * s1 + total**2 * np.sum(a * a), 0.0)
     omega = bins.projected_solid_angle().ravel()
     shape = bins.shape
     return BinEstimate((total / omega).reshape(shape), (np.sqrt(var) / omega).reshape(shape))
@@ -411,8 +468,9 @@ class ModelSpec:
 
     def __post_init__(self):
         if self.kind not in MODEL_KINDS:
-            raise UsageError(f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, "
-                             f"got {self.kind!r}")
+            raise UsageError(
+                f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, got {self.kind!r}"
+            )
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
 
     @classmethod
@@ -420,8 +478,14 @@ class ModelSpec:
         return cls(name, "function", {"brdf_fn": brdf_fn, "symmetric": bool(symmetric)})
 
     @classmethod
-    def torrance_sparrow(cls, name: str, ndf, shadowing: str = "vgroove", material=None,
-                         qmc_samples: int | None = None) -> "ModelSpec":
+    def torrance_sparrow(
+        cls,
+        name: str,
+        ndf,
+        shadowing: str = "vgroove",
+        material=None,
+        qmc_samples: int | None = None,
+    ) -> "ModelSpec":
         """Torrance–Sparrow (Mikkelsen 2009, eq. 13); ``qmc_samples`` selects the sampling path."""
         params = {"ndf": ndf, "shadowing": _check_shadowing(shadowing), "material": material}
         if qmc_samples is None:
@@ -429,16 +493,32 @@ class ModelSpec:
         return cls(name, "ts-qmc", {**params, "n": int(qmc_samples)})
 
     @classmethod
-    def facets(cls, name: str, normals, weights=None, shadowing: str = "vgroove",
-               material=None, azimuths: int | None = None) -> "ModelSpec":
-        return cls(name, "facets", {"normals": normals, "weights": weights,
-                                    "shadowing": _check_shadowing(shadowing),
-                                    "material": material, "azimuths": azimuths})
+    def facets(
+        cls,
+        name: str,
+        normals,
+        weights=None,
+        shadowing: str = "vgroove",
+        material=None,
+        azimuths: int | None = None,
+    ) -> "ModelSpec":
+        return cls(
+            name,
+            "facets",
+            {
+                "normals": normals,
+                "weights": weights,
+                "shadowing": _check_shadowing(shadowing),
+                "material": material,
+                "azimuths": azimuths,
+            },
+        )
 
 
 def _ts_brdf(ndf, shadowing: str, material) -> Callable:
     def f(wi, wo):
         return torrance_sparrow(wi, wo, ndf, shadowing=shadowing, material=material)
+
     return f
 
 
@@ -448,23 +528,35 @@ def _predict_one(spec: ModelSpec, wi, bins: Bins, phi_i: float, rtol: float) -> 
         if spec.kind == "function":
             fn, symmetric = p["brdf_fn"], p["symmetric"]
         else:
-            fn, symmetric = _ts_brdf(p["ndf"], p["shadowing"], p["material"]), getattr(
-                p["ndf"], "isotropic", True)
+            fn, symmetric = (
+                _ts_brdf(p["ndf"], p["shadowing"], p["material"]),
+                getattr(p["ndf"], "isotropic", True),
+            )
         res = bin_average(wi, bins, fn, phi_i, rtol, symmetric=symmetric)
         if not res.converged.all():
-            warnings.warn(f"model {spec.name!r}: {int((~res.converged).sum())} bins did not "
-                          f"reach rtol={rtol} (max error {res.error.max():.3g} sr^-1)",
-                          RuntimeWarning, stacklevel=3)
+            warnings.warn(
+                f"model {spec.name!r}: {int((~res.converged).sum())} bins did not "
+                f"reach rtol={rtol} (max error {res.error.max():.3g} sr^-1)",
+                RuntimeWarning,
+                stacklevel=3,
+            )
         return res.values
     if spec.kind == "ts-qmc":
-        return bin_average_ts(wi, bins, p["ndf"], p["shadowing"], p["material"], phi_i,
-                              p["n"]).values
-    return bin_average_facets(wi, bins, p["normals"], p["weights"], p["shadowing"],
-                              p["material"], phi_i, p["azimuths"]).values
+        return bin_average_ts(
+            wi, bins, p["ndf"], p["shadowing"], p["material"], phi_i, p["n"]
+        ).values
+    return bin_average_facets(
+        wi, bins, p["normals"], p["weights"], p["shadowing"], p["material"], phi_i, p["azimuths"]
+    ).values
 
 
-def predict(models: Iterable[ModelSpec], theta_i: Iterable[float], bins: Bins,
-            phi_i: float = 0.0, rtol: float = 1e-3) -> dict[str, np.ndarray]:
+def predict(
+    models: Iterable[ModelSpec],
+    theta_i: Iterable[float],
+    bins: Bins,
+    phi_i: float = 0.0,
+    rtol: float = 1e-3,
+) -> dict[str, np.ndarray]:
     """Bin averages (sr⁻¹) of every model for incidence angles ``theta_i`` (degrees, < 90)
     at azimuth ``phi_i`` (degrees): name → array (len(theta_i), n_theta, n_phi).
 
@@ -479,6 +571,7 @@ def predict(models: Iterable[ModelSpec], theta_i: Iterable[float], bins: Bins,
         _checks.in_range("theta_i", t, 0.0, 90.0, hi_open=True)
     out = {}
     for m in models:
-        out[m.name] = np.stack([_predict_one(m, _checks.spherical_deg(t, phi_i), bins, phi_i, rtol)
-                                for t in thetas])
+        out[m.name] = np.stack(
+            [_predict_one(m, vectors.spherical_deg(t, phi_i), bins, phi_i, rtol) for t in thetas]
+        )
     return out

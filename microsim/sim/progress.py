@@ -4,6 +4,7 @@
 after every chunk is added to the running sums, so a bar can advance ray by ray instead of
 parsing text. ``finished`` marks the last chunk of a (realisation, incidence) pair.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

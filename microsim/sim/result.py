@@ -4,6 +4,7 @@ Arrays are indexed (incidence T, θo bin Θ, Δφ bin Φ); angles in degrees, BR
 ``save(dir)`` writes ``brdf.npz`` and ``meta.json`` atomically (temporary files in the same
 directory, then ``os.replace``); ``Result.load(dir)`` reads them back.
 """
+
 from __future__ import annotations
 
 import json
@@ -83,9 +84,11 @@ class Result:
         albedo = ", ".join(f"{a:.4g}" for a in self.albedo())
         state = " PARTIAL" if self.is_partial else ""
         models = f", models=[{', '.join(self.models)}]" if self.models else ""
-        return (f"<Result{state} {surface}{f' ×{n_real}' if n_real > 1 else ''}, {material}, "
-                f"θi=[{theta}]°, rays=[{rays}], bins={self.bins.n_theta}×{self.bins.n_phi}, "
-                f"albedo=[{albedo}]{models}>")
+        return (
+            f"<Result{state} {surface}{f' ×{n_real}' if n_real > 1 else ''}, {material}, "
+            f"θi=[{theta}]°, rays=[{rays}], bins={self.bins.n_theta}×{self.bins.n_phi}, "
+            f"albedo=[{albedo}]{models}>"
+        )
 
     @property
     def is_partial(self) -> bool:
@@ -114,9 +117,18 @@ class Result:
 
     # --- persistence ------------------------------------------------------------------------
     def _arrays(self) -> dict:
-        out = {"theta_i": self.theta_i, "phi_i": self.phi_i, "theta_edges": self.theta_edges,
-               "phi_edges": self.phi_edges, "brdf": self.brdf, "stderr": self.stderr,
-               "rays": self.rays, "counts": self.counts, "sum_w": self.sum_w, "sum_w2": self.sum_w2}
+        out = {
+            "theta_i": self.theta_i,
+            "phi_i": self.phi_i,
+            "theta_edges": self.theta_edges,
+            "phi_edges": self.phi_edges,
+            "brdf": self.brdf,
+            "stderr": self.stderr,
+            "rays": self.rays,
+            "counts": self.counts,
+            "sum_w": self.sum_w,
+            "sum_w2": self.sum_w2,
+        }
         out.update({f"ledger_{k}": v for k, v in self.ledger.items()})
         out.update({f"count_{k}": v for k, v in self.ledger_counts.items()})
         out.update({f"model_{k}": v for k, v in self.models.items()})
@@ -142,12 +154,24 @@ class Result:
         bins = Bins(**meta.pop("bins"))
         with np.load(os.path.join(directory, NPZ)) as z:
             a = {k: z[k] for k in z.files}
-        pick = lambda prefix: {k[len(prefix):]: v for k, v in a.items() if k.startswith(prefix)}  # noqa: E731
-        return cls(theta_i=a["theta_i"], phi_i=a["phi_i"], bins=bins, brdf=a["brdf"],
-                   stderr=a["stderr"], rays=a["rays"], ledger=pick("ledger_"),
-                   ledger_counts=pick("count_"), counts=a["counts"], sum_w=a["sum_w"],
-                   sum_w2=a["sum_w2"], meta=meta, models=pick("model_"),
-                   tallies=pick("tally_") or None, **{k: a[k] for k in _OPTIONAL if k in a})
+        pick = lambda prefix: {k[len(prefix) :]: v for k, v in a.items() if k.startswith(prefix)}  # noqa: E731
+        return cls(
+            theta_i=a["theta_i"],
+            phi_i=a["phi_i"],
+            bins=bins,
+            brdf=a["brdf"],
+            stderr=a["stderr"],
+            rays=a["rays"],
+            ledger=pick("ledger_"),
+            ledger_counts=pick("count_"),
+            counts=a["counts"],
+            sum_w=a["sum_w"],
+            sum_w2=a["sum_w2"],
+            meta=meta,
+            models=pick("model_"),
+            tallies=pick("tally_") or None,
+            **{k: a[k] for k in _OPTIONAL if k in a},
+        )
 
 
 def _jsonable(obj):

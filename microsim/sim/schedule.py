@@ -8,6 +8,7 @@ in block order on the calling thread. While it does, Ctrl-C only sets an event
 sums are never left half-updated. Memory and the delay before an interrupt is honoured (one
 task) do not depend on the number of rays.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -26,7 +27,7 @@ tasks queued or running, so memory and the reaction to an interrupt do not depen
 
 _POOLS: dict = {}
 _POOLS_LOCK = threading.Lock()
-os.register_at_fork(after_in_child=_POOLS.clear)   # a forked child has none of the threads
+os.register_at_fork(after_in_child=_POOLS.clear)  # a forked child has none of the threads
 
 
 def thread_pool(threads: int) -> ThreadPoolExecutor:
@@ -36,8 +37,9 @@ def thread_pool(threads: int) -> ThreadPoolExecutor:
     start threads anew."""
     with _POOLS_LOCK:
         if threads not in _POOLS:
-            _POOLS[threads] = ThreadPoolExecutor(max_workers=threads,
-                                                 thread_name_prefix=f"microsim-{threads}")
+            _POOLS[threads] = ThreadPoolExecutor(
+                max_workers=threads, thread_name_prefix=f"microsim-{threads}"
+            )
         return _POOLS[threads]
 
 
@@ -54,8 +56,9 @@ def chunk_groups(start: int, end: int, chunk_blocks: int, threads: int) -> Itera
         a += step
 
 
-def run_in_order(pool: ThreadPoolExecutor, work, groups, depth: int, stop: threading.Event,
-                 consume) -> None:
+def run_in_order(
+    pool: ThreadPoolExecutor, work, groups, depth: int, stop: threading.Event, consume
+) -> None:
     """Run ``work(group)`` on ``pool`` for the groups of the iterator ``groups``, submitting
     lazily with at most ``depth`` tasks queued or running, and hand each result to
     ``consume`` in group order (calling thread). Raises KeyboardInterrupt when ``stop`` is set
@@ -65,9 +68,9 @@ def run_in_order(pool: ThreadPoolExecutor, work, groups, depth: int, stop: threa
     pending: deque = deque(pool.submit(work, g) for g in itertools.islice(groups, depth))
     try:
         while pending:
-            chunk = pending.popleft().result()     # in group order, blocks in block order
+            chunk = pending.popleft().result()  # in group order, blocks in block order
             nxt = next(groups, None)
-            if nxt is not None:                     # keep the pool busy while we tally
+            if nxt is not None:  # keep the pool busy while we tally
                 pending.append(pool.submit(work, nxt))
             consume(chunk)
             if stop.is_set():
@@ -91,6 +94,7 @@ class DeferredInterrupt:
 
     def __exit__(self, *exc):
         if self._installed:
-            signal.signal(signal.SIGINT, signal.default_int_handler if self._old is None
-                          else self._old)
+            signal.signal(
+                signal.SIGINT, signal.default_int_handler if self._old is None else self._old
+            )
         return False

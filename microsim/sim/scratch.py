@@ -10,6 +10,7 @@ consumes before it returns (or hands to its caller for immediate use, as documen
 come from here; results that outlive the call are allocated normally. Memory stays bounded
 by the largest chunk each thread has traced.
 """
+
 from __future__ import annotations
 
 import threading

@@ -14,6 +14,7 @@ a horizontal plane sample the surface seen from wi flux-weighted, which is the
 the tile, jittered inside it; ``"independent"`` origins are i.i.d. uniform. Angles are in
 radians here (groove azimuths ψ, block rotations ψ_b).
 """
+
 from __future__ import annotations
 
 import functools
@@ -26,8 +27,15 @@ from . import kernels
 from .scratch import work
 from .tracer import Tracer
 
-__all__ = ["BLOCK", "ORIGINS", "stream_state", "block_generator", "chunk_origins",
-           "block_origins", "block_rotation"]
+__all__ = [
+    "BLOCK",
+    "ORIGINS",
+    "stream_state",
+    "block_generator",
+    "chunk_origins",
+    "block_origins",
+    "block_rotation",
+]
 
 BLOCK = 4096
 """Rays per block: the unit of the random streams, of the tallies and of resuming (even, so
@@ -60,8 +68,9 @@ def block_generator(key, block: int, per_ray: int) -> np.random.Generator:
     return rng
 
 
-def chunk_origins(tracer: Tracer, n_total: int, blocks, key, azimuth: bool,
-                  origins: str = "stratified"):
+def chunk_origins(
+    tracer: Tracer, n_total: int, blocks, key, azimuth: bool, origins: str = "stratified"
+):
     """Origin columns [x, y, z] and groove azimuths ψ (None unless ``azimuth``) of the rays of
     consecutive ``blocks``, in this thread's work arrays (valid until its next call). Every
     origin starts at z = zmax + top_margin.
@@ -84,28 +93,35 @@ def chunk_origins(tracer: Tracer, n_total: int, blocks, key, azimuth: bool,
     psi = work("chunk-psi", n if azimuth else 0)
     lx, ly = tracer.tile
     per_ray = 3 if azimuth else 2
-    rng = block_generator(key, blocks[0], per_ray)        # consecutive slots from here on
-    u = work("chunk-uniform", per_ray * n)                # ξ, η (, ψ/2π) of each block in turn
+    rng = block_generator(key, blocks[0], per_ray)  # consecutive slots from here on
+    u = work("chunk-uniform", per_ray * n)  # ξ, η (, ψ/2π) of each block in turn
     rng.random(out=u)
     if origins == "independent":
         for b in blocks:
             k = b * BLOCK - lo
             m, base = min(n - k, BLOCK), per_ray * k
-            xi, eta = u[base:base + m], u[base + m:base + 2 * m]
+            xi, eta = u[base : base + m], u[base + m : base + 2 * m]
             rows = max(1, int(round(np.sqrt(m * ly / lx))))
             order = np.lexsort((xi, np.minimum(np.floor(eta * rows), rows - 1)))
-            x[k:k + m], y[k:k + m] = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2
+            x[k : k + m], y[k : k + m] = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2
             if azimuth:
-                psi[k:k + m] = 2 * np.pi * u[base + 2 * m:base + 3 * m][order]
+                psi[k : k + m] = 2 * np.pi * u[base + 2 * m : base + 3 * m][order]
     else:
         rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-        kernels.stratified_origins(u, lo, n, BLOCK, float(n_total), float(rows), float(lx),
-                                   float(ly), azimuth, x, y, psi)
+        kernels.stratified_origins(
+            u, lo, n, BLOCK, float(n_total), float(rows), float(lx), float(ly), azimuth, x, y, psi
+        )
     return [x, y, z], (psi if azimuth else None)
 
 
-def block_origins(tracer: Tracer, n_total: int, block: int, key: Sequence[int], azimuth: bool,
-                  origins: str = "stratified"):
+def block_origins(
+    tracer: Tracer,
+    n_total: int,
+    block: int,
+    key: Sequence[int],
+    azimuth: bool,
+    origins: str = "stratified",
+):
     """Origins (n, 3) and groove azimuths ψ (n,) (zeros unless ``azimuth``) of one block, in
     arrays of their own (``chunk_origins``)."""
     cols, psi = chunk_origins(tracer, n_total, [block], key, azimuth, origins)

@@ -24,6 +24,7 @@ they are bitwise the same for any chunking or thread count, and exact enough to 
 albedo ρ(θi) (Mikkelsen 2009, eq. 27); ``lost``/``lost_fresnel`` are the unweighted and
 Fresnel-weighted fractions single scattering loses (masked + downward).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -37,9 +38,18 @@ from .result import Result
 from .scratch import work
 from .streams import BLOCK
 
-__all__ = ["Tally", "ChunkTallies", "split_tallies", "chunk_tallies", "bin_estimate",
-           "tally_result", "simulation_result", "tally_arrays", "tallies_from_arrays",
-           "TALLY_NAMES"]
+__all__ = [
+    "Tally",
+    "ChunkTallies",
+    "split_tallies",
+    "chunk_tallies",
+    "bin_estimate",
+    "tally_result",
+    "simulation_result",
+    "tally_arrays",
+    "tallies_from_arrays",
+    "TALLY_NAMES",
+]
 
 TALLY_NAMES = ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair")
 """The running sums of a ``Tally``, in its field order (keys of ``Result.tallies``)."""
@@ -61,11 +71,13 @@ def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTall
     out_cnt, offsets = work("tally-count", n, np.int64), np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, len(LEDGER)), dtype=np.int64)
     lf = np.zeros((n_blocks, len(LEDGER)))
-    kernels.block_tallies(status, weight, where, BLOCK, acc, touched, out_bin, out_sums,
-                          out_cnt, offsets, ln, lf)
-    used = int(offsets[-1])                 # the blocks' bins, copied out of the work arrays
-    return ChunkTallies((out_bin[:used].copy(), out_sums[:, :used].copy(),
-                         out_cnt[:used].copy(), offsets, ln, lf))
+    kernels.block_tallies(
+        status, weight, where, BLOCK, acc, touched, out_bin, out_sums, out_cnt, offsets, ln, lf
+    )
+    used = int(offsets[-1])  # the blocks' bins, copied out of the work arrays
+    return ChunkTallies(
+        (out_bin[:used].copy(), out_sums[:, :used].copy(), out_cnt[:used].copy(), offsets, ln, lf)
+    )
 
 
 def chunk_tallies(path, nbin: int, blocks) -> "ChunkTallies":
@@ -107,8 +119,14 @@ class Tally:
 
     @classmethod
     def empty(cls, nbin: int) -> "Tally":
-        return cls(np.zeros(nbin), np.zeros(nbin), np.zeros(nbin, np.int64),
-                   np.zeros(len(LEDGER), np.int64), np.zeros(len(LEDGER)), np.zeros(nbin))
+        return cls(
+            np.zeros(nbin),
+            np.zeros(nbin),
+            np.zeros(nbin, np.int64),
+            np.zeros(len(LEDGER), np.int64),
+            np.zeros(len(LEDGER)),
+            np.zeros(nbin),
+        )
 
     def items(self) -> tuple:
         """The sums in the order of a block's tallies (``split_tallies``)."""
@@ -117,8 +135,15 @@ class Tally:
     def add_chunk(self, chunk: ChunkTallies) -> int:
         """Add a chunk's per-block tallies, block by block in block order (callers add chunks
         in block order; ``kernels.add_blocks``); returns the number of blocks added."""
-        kernels.add_blocks(self.sum_w, self.sum_w2, self.count, self.sum_pair, self.led_n,
-                           self.led_f, *chunk.take())
+        kernels.add_blocks(
+            self.sum_w,
+            self.sum_w2,
+            self.count,
+            self.sum_pair,
+            self.led_n,
+            self.led_f,
+            *chunk.take(),
+        )
         return chunk.blocks
 
     def add_totals(self, other: "Tally") -> None:
@@ -129,8 +154,7 @@ class Tally:
     def estimate(self, rays: int, omega: np.ndarray, pairs: bool):
         """BRDF and standard error (sr⁻¹, flat) of these sums over ``rays`` primary rays
         (``bin_estimate``; collapsed-strata pairs when ``pairs``, else per-ray)."""
-        return bin_estimate(self.sum_w, self.sum_w2, rays, omega,
-                            self.sum_pair if pairs else None)
+        return bin_estimate(self.sum_w, self.sum_w2, rays, omega, self.sum_pair if pairs else None)
 
 
 def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None):
@@ -163,8 +187,18 @@ def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None):
     return mean / omega, se / omega
 
 
-def tally_result(theta_i, phi_i, bins: Bins, totals, rays, brdf, stderr, meta: dict,
-                 tallies: dict | None = None, **extra) -> Result:
+def tally_result(
+    theta_i,
+    phi_i,
+    bins: Bins,
+    totals,
+    rays,
+    brdf,
+    stderr,
+    meta: dict,
+    tallies: dict | None = None,
+    **extra,
+) -> Result:
     """A ``Result`` from the pooled sums ``totals`` (one ``Tally`` per incidence) over
     ``rays`` (T,) primary rays, with ``brdf``/``stderr`` (T, Θ·Φ) already estimated: ledger
     fractions and counts, per-bin counts and sums; ``tallies`` and ``extra`` are passed on."""
@@ -178,17 +212,27 @@ def tally_result(theta_i, phi_i, bins: Bins, totals, rays, brdf, stderr, meta: d
         ledger["lost"] = (led_n[:, MASKED] + led_n[:, DOWNWARD]) / rays
         ledger["lost_fresnel"] = (led_f[:, MASKED] + led_f[:, DOWNWARD]) / rays
     counts = {name: led_n[:, k] for k, name in enumerate(LEDGER)}
-    return Result(theta_i=theta_i, phi_i=np.asarray(phi_i, dtype=np.float64), bins=bins,
-                  brdf=np.asarray(brdf).reshape(shape), stderr=np.asarray(stderr).reshape(shape),
-                  rays=np.asarray(rays).astype(np.int64), ledger=ledger, ledger_counts=counts,
-                  counts=np.array([p.count for p in totals]).reshape(shape),
-                  sum_w=np.array([p.sum_w for p in totals]).reshape(shape),
-                  sum_w2=np.array([p.sum_w2 for p in totals]).reshape(shape),
-                  meta=meta, tallies=tallies, **extra)
+    return Result(
+        theta_i=theta_i,
+        phi_i=np.asarray(phi_i, dtype=np.float64),
+        bins=bins,
+        brdf=np.asarray(brdf).reshape(shape),
+        stderr=np.asarray(stderr).reshape(shape),
+        rays=np.asarray(rays).astype(np.int64),
+        ledger=ledger,
+        ledger_counts=counts,
+        counts=np.array([p.count for p in totals]).reshape(shape),
+        sum_w=np.array([p.sum_w for p in totals]).reshape(shape),
+        sum_w2=np.array([p.sum_w2 for p in totals]).reshape(shape),
+        meta=meta,
+        tallies=tallies,
+        **extra,
+    )
 
 
-def simulation_result(theta_i, phi_i, bins: Bins, tallies, rays_done, rays_planned, blocks_done,
-                      meta: dict) -> Result:
+def simulation_result(
+    theta_i, phi_i, bins: Bins, tallies, rays_done, rays_planned, blocks_done, meta: dict
+) -> Result:
     """``simulate``'s Result from the running sums ``tallies`` [r][i] (``Tally``):
     ``rays_done`` (R, T) rays tallied per realisation and incidence (== ``rays_planned`` (R,)
     for a complete run), ``blocks_done`` (R, T). The BRDF pools all realisations; with
@@ -203,13 +247,21 @@ def simulation_result(theta_i, phi_i, bins: Bins, tallies, rays_done, rays_plann
         for i in range(len(theta_i)):
             pooled[i].add_totals(tallies[r][i])
     pairs = meta["stderr_method"] == "pairs"
-    brdf, se_ray = map(np.array, zip(*[p.estimate(n_tot[i], omega, pairs)
-                                       for i, p in enumerate(pooled)]))
+    brdf, se_ray = map(
+        np.array, zip(*[p.estimate(n_tot[i], omega, pairs) for i, p in enumerate(pooled)])
+    )
     extra = {}
     stderr = se_ray
     if n_real > 1:
-        per = np.array([[tallies[r][i].estimate(rays_done[r, i], omega, False)[0]
-                         for i in range(len(theta_i))] for r in range(n_real)])
+        per = np.array(
+            [
+                [
+                    tallies[r][i].estimate(rays_done[r, i], omega, False)[0]
+                    for i in range(len(theta_i))
+                ]
+                for r in range(n_real)
+            ]
+        )
         # scatter of the realisation means estimates the total variance of their mean (ray
         # noise included); the realisation component is what exceeds the ray noise
         total_var = np.full(per.shape[1:], np.nan)
@@ -217,11 +269,14 @@ def simulation_result(theta_i, phi_i, bins: Bins, tallies, rays_done, rays_plann
             have = rays_done[:, i] > 0
             if have.sum() > 1:
                 total_var[i] = np.var(per[have, i], axis=0, ddof=1) / have.sum()
-        se_real = np.sqrt(np.maximum(total_var - se_ray ** 2, 0.0))
-        stderr = np.sqrt(se_ray ** 2 + se_real ** 2)
-        extra = {"stderr_ray": se_ray.reshape(shape), "stderr_realisation": se_real.reshape(shape),
-                 "brdf_realisations": per.reshape((n_real,) + shape),
-                 "rays_realisations": np.array(rays_planned, dtype=np.int64)}
+        se_real = np.sqrt(np.maximum(total_var - se_ray**2, 0.0))
+        stderr = np.sqrt(se_ray**2 + se_real**2)
+        extra = {
+            "stderr_ray": se_ray.reshape(shape),
+            "stderr_realisation": se_real.reshape(shape),
+            "brdf_realisations": per.reshape((n_real,) + shape),
+            "rays_realisations": np.array(rays_planned, dtype=np.int64),
+        }
     raw = tally_arrays(tallies, blocks_done, rays_done)
     return tally_result(theta_i, phi_i, bins, pooled, n_tot, brdf, stderr, meta, raw, **extra)
 
@@ -229,13 +284,16 @@ def simulation_result(theta_i, phi_i, bins: Bins, tallies, rays_done, rays_plann
 def tally_arrays(tallies, blocks_done, rays_done) -> dict:
     """The exact running sums [r][i] as ``Result.tallies`` arrays: each of ``TALLY_NAMES``
     (R, T, ·), ``blocks`` (R, T) blocks done and ``rays`` (R, T) rays tallied."""
-    raw = {name: np.array([[getattr(t, name) for t in row] for row in tallies])
-           for name in TALLY_NAMES}
+    raw = {
+        name: np.array([[getattr(t, name) for t in row] for row in tallies]) for name in TALLY_NAMES
+    }
     raw.update(blocks=np.array(blocks_done), rays=np.asarray(rays_done).astype(np.int64))
     return raw
 
 
 def tallies_from_arrays(arrays: dict, n_real: int, n_incidences: int) -> list:
     """The running sums [r][i] (``Tally``, copies) stored in ``Result.tallies`` arrays."""
-    return [[Tally(*(np.array(arrays[k][r, i]) for k in TALLY_NAMES))
-             for i in range(n_incidences)] for r in range(n_real)]
+    return [
+        [Tally(*(np.array(arrays[k][r, i]) for k in TALLY_NAMES)) for i in range(n_incidences)]
+        for r in range(n_real)
+    ]

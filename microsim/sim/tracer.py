@@ -18,6 +18,7 @@ rays (``kernels.segment_setup``/``segment_finish``: float32 inputs and tfar; hit
 wall re-entries), which hands Embree a single direction when all rays share it and compacts
 the rays still live (most finish in the first segment). The BVH is built in ``__init__``.
 """
+
 from __future__ import annotations
 
 import functools
@@ -33,16 +34,30 @@ from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 from . import kernels
 from .scratch import work
 
-__all__ = ["Tracer", "Hits", "VGrooveProfile", "VGrooveCaster", "HIT", "ESCAPED", "UNRESOLVED",
-           "MISSED", "BLOCKED", "MAX_TRACED_DEG"]
+__all__ = [
+    "Tracer",
+    "Hits",
+    "VGrooveProfile",
+    "VGrooveCaster",
+    "HIT",
+    "ESCAPED",
+    "UNRESOLVED",
+    "MISSED",
+    "BLOCKED",
+    "MAX_TRACED_DEG",
+]
 
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
-assert (HIT, ESCAPED, UNRESOLVED, MISSED) == (kernels.HIT, kernels.ESCAPED, kernels.UNRESOLVED,
-                                        kernels.MISSED)
-BLOCKED = HIT                      # an occlusion ray that met the surface
-MAX_TRACED_DEG = 89.5              # rays up to this polar angle are always resolved (wrap cap)
+assert (HIT, ESCAPED, UNRESOLVED, MISSED) == (
+    kernels.HIT,
+    kernels.ESCAPED,
+    kernels.UNRESOLVED,
+    kernels.MISSED,
+)
+BLOCKED = HIT  # an occlusion ray that met the surface
+MAX_TRACED_DEG = 89.5  # rays up to this polar angle are always resolved (wrap cap)
 BASE_WRAPS = 64
-TFAR_REL = 4e-7                   # a segment is traced a hair beyond its exit (float32 rounding)
+TFAR_REL = 4e-7  # a segment is traced a hair beyond its exit (float32 rounding)
 
 
 @dataclass(frozen=True)
@@ -68,15 +83,21 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     if not np.all(np.isfinite(v)):
         raise UsageError("surface.vertices must be finite (got NaN or inf)")
     if f.ndim != 2 or f.shape[1] != 3 or len(f) < 1:
-        raise UsageError(f"surface.faces must be a non-empty (F, 3) integer array, got shape {f.shape}")
+        raise UsageError(
+            f"surface.faces must be a non-empty (F, 3) integer array, got shape {f.shape}"
+        )
     if not np.issubdtype(f.dtype, np.integer) or f.min() < 0 or f.max() >= len(v):
         raise UsageError(f"surface.faces must hold vertex indices in [0, {len(v) - 1}]")
     lx, ly = (float(t) for t in surface.tile_size)
     if not (lx > 0 and ly > 0 and np.isfinite(lx) and np.isfinite(ly)):
-        raise UsageError(f"surface.tile_size must be two finite lengths > 0, got {surface.tile_size!r}")
+        raise UsageError(
+            f"surface.tile_size must be two finite lengths > 0, got {surface.tile_size!r}"
+        )
     if not (max(lx, ly) <= MAX_COORDINATE):
-        raise UsageError(f"surface.tile_size must be within {MAX_COORDINATE:g} (float32), "
-                         f"got {surface.tile_size!r}")
+        raise UsageError(
+            f"surface.tile_size must be within {MAX_COORDINATE:g} (float32), "
+            f"got {surface.tile_size!r}"
+        )
     check_relief("surface", v[:, 2].min(), v[:, 2].max(), (lx, ly))
     tol = 1e-9 * max(lx, ly)
     if np.any(np.abs(v[:, 0]) > lx / 2 + tol) or np.any(np.abs(v[:, 1]) > ly / 2 + tol):
@@ -86,8 +107,11 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
 
 def _cross_columns(a: np.ndarray, b: np.ndarray) -> list:
     """a × b for (N, 3) arrays, as three (N,) columns."""
-    return [a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]]
+    return [
+        a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+        a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+        a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+    ]
 
 
 class Tracer:
@@ -108,22 +132,27 @@ class Tracer:
         if np.any(norm == 0):
             raise UsageError("surface.faces must not contain degenerate (zero-area) triangles")
         if np.any(cross[2] <= 0):
-            raise UsageError("surface.faces must be ordered so that every normal "
-                             "cross(v1 - v0, v2 - v0) points up (z > 0)")
+            raise UsageError(
+                "surface.faces must be ordered so that every normal "
+                "cross(v1 - v0, v2 - v0) points up (z > 0)"
+            )
         self.normals = np.empty((len(f), 3))
         for k in range(3):
             self.normals[:, k] = cross[k] / norm
-        del cross, self._e1, self._e2                           # cached: only needed to build
+        del cross, self._e1, self._e2  # cached: only needed to build
         v0 = self._v0
-        self._plane = (self.normals[:, 0] * v0[:, 0] + self.normals[:, 1] * v0[:, 1]
-                       + self.normals[:, 2] * v0[:, 2])          # n·v0 per facet
+        self._plane = (
+            self.normals[:, 0] * v0[:, 0]
+            + self.normals[:, 1] * v0[:, 1]
+            + self.normals[:, 2] * v0[:, 2]
+        )  # n·v0 per facet
         del self._v0
         self.tile = (lx, ly)
         self.half = np.array([lx / 2, ly / 2])
         self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
         big = max(float(np.abs(v).max()), lx / 2, ly / 2)
-        self.eps = 2.0 * float(np.spacing(np.float32(big)))   # 2 ulp: 1.2e-7 on a unit tile
-        self.top_margin = 4.0 * self.eps                       # primary rays start this far above zmax
+        self.eps = 2.0 * float(np.spacing(np.float32(big)))  # 2 ulp: 1.2e-7 on a unit tile
+        self.top_margin = 4.0 * self.eps  # primary rays start this far above zmax
         depth = self.zmax - self.zmin + self.top_margin
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
@@ -132,8 +161,11 @@ class Tracer:
         self._mesh = mc.TriangleMesh(self._scene, v.astype(np.float32), f.astype(np.int32))
         # embreex builds the BVH (rtcCommit) on the first query: do it now, as part of the
         # scene build, so that tracing times exclude it
-        self._scene.run(np.zeros((1, 3), dtype=np.float32),
-                        np.array([[0.0, 0.0, -1.0]], dtype=np.float32), dists=0.0)
+        self._scene.run(
+            np.zeros((1, 3), dtype=np.float32),
+            np.array([[0.0, 0.0, -1.0]], dtype=np.float32),
+            dists=0.0,
+        )
 
     # --- facet geometry (float64, built on demand: 72 bytes per facet) --------------------
     @functools.cached_property
@@ -173,9 +205,16 @@ class Tracer:
         o = np.asarray(origins, dtype=np.float64)
         dirs = np.asarray(dirs, dtype=np.float64)
         shared = dirs.ndim == 1
-        d = [float(c) for c in dirs] if shared else [np.ascontiguousarray(dirs[:, k]) for k in range(3)]
-        d32 = (dirs.astype(np.float32)[None] if shared
-               else np.ascontiguousarray(dirs, dtype=np.float32))
+        d = (
+            [float(c) for c in dirs]
+            if shared
+            else [np.ascontiguousarray(dirs[:, k]) for k in range(3)]
+        )
+        d32 = (
+            dirs.astype(np.float32)[None]
+            if shared
+            else np.ascontiguousarray(dirs, dtype=np.float32)
+        )
         x = [np.ascontiguousarray(o[:, k]) for k in range(3)]
         status, prim, p = self._walk_columns(x, d, d32, occlusion)
         if occlusion:
@@ -201,13 +240,16 @@ class Tracer:
         n = len(x[0])
         shared = np.isscalar(d[0])
         x = [np.ascontiguousarray(c, dtype=np.float64) for c in x]
-        for a in (0, 1) if first is None else ():        # wrap the starts into the tile
+        for a in (0, 1) if first is None else ():  # wrap the starts into the tile
             h = self.half[a]
             if n and (x[a].min() < -h or x[a].max() >= h):
                 out = (x[a] < -h) | (x[a] >= h)
                 x[a] = np.where(out, np.mod(x[a] + h, 2 * h) - h, x[a])
-        d = ([np.array([float(c)]) for c in d] if shared
-             else [np.ascontiguousarray(c, dtype=np.float64) for c in d])
+        d = (
+            [np.array([float(c)]) for c in d]
+            if shared
+            else [np.ascontiguousarray(c, dtype=np.float64) for c in d]
+        )
         d32 = np.ascontiguousarray(d32, dtype=np.float32)
         falling_shared = bool(shared and d[2][0] <= 0)
         status = np.full(n, UNRESOLVED, dtype=np.int8)
@@ -229,25 +271,80 @@ class Tracer:
             if segment == 0 and first is not None:
                 k, (o32_, tq_, keep_, top_), d32k_ = n, first, d32
             else:
-                k = kernels.segment_setup(x[0], x[1], x[2], d[0], d[1], d[2], shared, live,
-                                          d32, hx, hy, self.zmax, self.eps, TFAR_REL, status,
-                                          o32, d32k, tq, keep, top)
+                k = kernels.segment_setup(
+                    x[0],
+                    x[1],
+                    x[2],
+                    d[0],
+                    d[1],
+                    d[2],
+                    shared,
+                    live,
+                    d32,
+                    hx,
+                    hy,
+                    self.zmax,
+                    self.eps,
+                    TFAR_REL,
+                    status,
+                    o32,
+                    d32k,
+                    tq,
+                    keep,
+                    top,
+                )
                 o32_, tq_, keep_, top_, d32k_ = o32, tq, keep, top, d32k
             if k == 0:
                 break
-            res = self._scene.run(o32_[:k], d32 if shared else d32k_[:k], dists=tq_[:k],
-                                  query=query, output=None if occlusion else 1)
+            res = self._scene.run(
+                o32_[:k],
+                d32 if shared else d32k_[:k],
+                dists=tq_[:k],
+                query=query,
+                output=None if occlusion else 1,
+            )
             pid, tfar = (res, no_tfar) if occlusion else (res["primID"], res["tfar"])
-            nxt = f"walk-next{segment % 2}-"          # written here, read by the next segment
+            nxt = f"walk-next{segment % 2}-"  # written here, read by the next segment
             m_live = work(nxt + "live", k, np.int64)
             nx_ = [work(nxt + a, k) for a in "xyz"]
             nd = [work(nxt + "d" + a, 0 if shared else k) for a in "xyz"]
             nd32 = work(nxt + "d32", (0, 3) if shared else (k, 3), np.float32)
-            m = kernels.segment_finish(k, pid, tfar, occlusion, keep_, top_, live, x[0], x[1],
-                                       x[2], d[0], d[1], d[2], shared, falling_shared, d32k_, hx, hy,
-                                       self.zmax, self.zmin, self.eps, status, prim,
-                                       point[0], point[1], point[2], m_live, nx_[0], nx_[1],
-                                       nx_[2], nd[0], nd[1], nd[2], nd32)
+            m = kernels.segment_finish(
+                k,
+                pid,
+                tfar,
+                occlusion,
+                keep_,
+                top_,
+                live,
+                x[0],
+                x[1],
+                x[2],
+                d[0],
+                d[1],
+                d[2],
+                shared,
+                falling_shared,
+                d32k_,
+                hx,
+                hy,
+                self.zmax,
+                self.zmin,
+                self.eps,
+                status,
+                prim,
+                point[0],
+                point[1],
+                point[2],
+                m_live,
+                nx_[0],
+                nx_[1],
+                nx_[2],
+                nd[0],
+                nd[1],
+                nd[2],
+                nd32,
+            )
             live, x = m_live[:m], [c[:m] for c in nx_]
             if not shared:
                 d, d32 = [c[:m] for c in nd], nd32[:m]
@@ -274,8 +371,13 @@ class Tracer:
         """``point`` (N, 3) moved along the unit normal of facet ``prim`` (N,) onto that facet's
         plane, then ``lift`` (length units) above it."""
         nrm = self.normals[prim]
-        off = (point[:, 0] * nrm[:, 0] + point[:, 1] * nrm[:, 1] + point[:, 2] * nrm[:, 2]
-               - self._plane[prim] - lift)
+        off = (
+            point[:, 0] * nrm[:, 0]
+            + point[:, 1] * nrm[:, 1]
+            + point[:, 2] * nrm[:, 2]
+            - self._plane[prim]
+            - lift
+        )
         return point - off[:, None] * nrm
 
     def first_hit(self, origins: np.ndarray, dirs: np.ndarray) -> Hits:
@@ -308,7 +410,7 @@ class Tracer:
 
 
 class VGrooveProfile:
-    """Exact float64 masking for straight V-grooves running along y (Mikkelsen 2009, eq. 25 geometry).
+    """Exact float64 masking for straight V-grooves along y (Mikkelsen 2009, eq. 25 geometry).
 
     Every rim lies at z = 0 and the surface lies below, so a ray leaving a facet upwards can
     only be blocked by the opposite facet of the same groove before rising above z = 0. For a
@@ -321,11 +423,13 @@ class VGrooveProfile:
         v, f, n = tracer.vertices, tracer.faces, tracer.normals
         scale = max(tracer.tile)
         if np.any(np.abs(n[:, 1]) > 1e-12) or tracer.zmax > 1e-12 * scale:
-            raise UsageError("masking='exact' needs V-grooves running along y with every rim at "
-                             "z = 0 and nothing above (surface.kind 'vgrooves')")
+            raise UsageError(
+                "masking='exact' needs V-grooves running along y with every rim at "
+                "z = 0 and nothing above (surface.kind 'vgrooves')"
+            )
         xs = v[f, 0]
         lo, hi = xs.min(axis=1), xs.max(axis=1)
-        left = n[:, 0] > 0                        # slopes down towards +x: rim at the low x
+        left = n[:, 0] > 0  # slopes down towards +x: rim at the low x
         right = n[:, 0] < 0
         self.rim = np.where(left, lo, hi)
         bottom = np.where(left, hi, lo)
@@ -337,15 +441,22 @@ class VGrooveProfile:
             k = np.clip(np.searchsorted(ob[order], bottom[mine]), 0, max(len(ob) - 1, 0))
             found = ob[order][k] == bottom[mine] if len(ob) else np.zeros(mine.sum(), bool)
             if not np.all(found):
-                raise UsageError("masking='exact' needs whole V-grooves inside "
-                                 "the tile (a facet has no opposite facet sharing its bottom)")
+                raise UsageError(
+                    "masking='exact' needs whole V-grooves inside "
+                    "the tile (a facet has no opposite facet sharing its bottom)"
+                )
             self.opposite[mine] = orim[order][k]
         # rims at z = 0, bottoms at depth |bottom − rim|·tanθ: the mesh must be such a profile
         zr = np.where(np.isclose(xs, self.rim[:, None], rtol=0, atol=1e-12 * scale), v[f, 2], 0.0)
-        zb = np.where(np.isclose(xs, bottom[:, None], rtol=0, atol=1e-12 * scale),
-                      v[f, 2] + np.abs(bottom - self.rim)[:, None] * self.tan[:, None], 0.0)
+        zb = np.where(
+            np.isclose(xs, bottom[:, None], rtol=0, atol=1e-12 * scale),
+            v[f, 2] + np.abs(bottom - self.rim)[:, None] * self.tan[:, None],
+            0.0,
+        )
         if np.any(np.abs(zr) > 1e-9 * scale) or np.any(np.abs(zb) > 1e-9 * scale):
-            raise UsageError("masking='exact' needs every groove rim at z = 0 (surface.kind 'vgrooves')")
+            raise UsageError(
+                "masking='exact' needs every groove rim at z = 0 (surface.kind 'vgrooves')"
+            )
         self.extent = np.abs(bottom - self.rim)
         self.sloped = left | right
 
@@ -394,21 +505,29 @@ class VGrooveCaster(VGrooveProfile):
     def __init__(self, tracer: Tracer):
         super().__init__(tracer)
         if not np.all(self.sloped):
-            raise UsageError("masking='analytic' needs every groove tilt > 0 (a flat facet has "
-                             "no V-groove walls)")
+            raise UsageError(
+                "masking='analytic' needs every groove tilt > 0 (a flat facet has "
+                "no V-groove walls)"
+            )
         n, lx = tracer.normals, tracer.tile[0]
         tol = 1e-12 * max(tracer.tile)
         left, right = np.flatnonzero(n[:, 0] > 0), np.flatnonzero(n[:, 0] < 0)
-        rim_l, first_l = np.unique(self.rim[left], return_index=True)   # sorted, one per facet
+        rim_l, first_l = np.unique(self.rim[left], return_index=True)  # sorted, one per facet
         rim_r, first_r = np.unique(self.rim[right], return_index=True)
         pl, pr = left[first_l], right[first_r]
         xr = self.opposite[pl]
         g = len(rim_l)
-        if (len(rim_r) != g or not np.array_equal(rim_r, xr) or abs(rim_l[0] + lx / 2) > tol
-                or np.any(np.abs(xr - rim_l - lx / g) > tol)
-                or np.any(np.abs(rim_l[1:] - xr[:-1]) > tol)):
-            raise UsageError("masking='analytic' needs whole equal-width V-grooves tiling the "
-                             "tile in x (surface.kind 'vgrooves')")
+        if (
+            len(rim_r) != g
+            or not np.array_equal(rim_r, xr)
+            or abs(rim_l[0] + lx / 2) > tol
+            or np.any(np.abs(xr - rim_l - lx / g) > tol)
+            or np.any(np.abs(rim_l[1:] - xr[:-1]) > tol)
+        ):
+            raise UsageError(
+                "masking='analytic' needs whole equal-width V-grooves tiling the "
+                "tile in x (surface.kind 'vgrooves')"
+            )
         self.n_grooves, self.half = g, lx / 2
         self.x_left, self.x_right = rim_l, xr
         self.w_left, self.w_right = self.extent[pl], self.extent[pr]
@@ -425,16 +544,16 @@ class VGrooveCaster(VGrooveProfile):
         """(facet f (N,) int64, s (N,)) of rays from (x, z) (z ≥ 0: at or above the rims)
         along −wi (wi_z > 0): the facet hit and the hit's horizontal distance from its rim."""
         h = self.half
-        x0 = x - (z / wi_z) * wi_x                                    # z = 0 crossing
-        if x0.size and (x0.min() < -h or x0.max() >= h):              # wrap into the tile
+        x0 = x - (z / wi_z) * wi_x  # z = 0 crossing
+        if x0.size and (x0.min() < -h or x0.max() >= h):  # wrap into the tile
             x0 = np.mod(x0 + h, 2 * h) - h
         g = self.n_grooves
         k = np.minimum(((x0 + h) * (g / (2 * h))).astype(np.int64), g - 1)  # ±1 at most
         k -= (x0 < self.x_left[k]) & (k > 0)
         k += (x0 >= self.x_right[k]) & (k < g - 1)
         ad = (-wi_x / wi_z) * self.depth[k]
-        f = 2 * k + (x0 - self.x_left[k] + ad >= self.w_left[k])     # left wall unless
-        w, sig = self.facet_wall[f], self.facet_sigma[f]              # the bottom comes first
+        f = 2 * k + (x0 - self.x_left[k] + ad >= self.w_left[k])  # left wall unless
+        w, sig = self.facet_wall[f], self.facet_sigma[f]  # the bottom comes first
         with np.errstate(divide="ignore", invalid="ignore"):
             s = np.abs(x0 - self.facet_rim[f]) * w / (w - sig * ad)
         return f, s

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import integrate
 
 from microsim.analytic import Beckmann, abc_psd_church
-from microsim.analytic._checks import check_memory, integer, positive
+from microsim.checks import check_memory, integer, positive
 from microsim.errors import UsageError
 
 from .surface import Predicted, Surface, check_relief, heightfield_mesh
@@ -46,7 +46,7 @@ nothing as ℓ → 0 (the mesh turns flat whatever the nominal m = 2σ/ℓ). Sho
 BYTES_PER_GRID_POINT = 600
 """Peak memory per grid point of a heightfield built and traced (two triangles): measured
 ≈ 520 bytes (RSS growth, 1024² and 2048² Gaussian grids: synthesis FFTs, mesh, Embree BVH,
-tracer facet arrays and per-facet table); checked against ``_checks.memory_limit`` before
+tracer facet arrays and per-facet table); checked against ``microsim.checks.memory_limit`` before
 synthesis."""
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from microsim.analytic._checks import check_memory, positive
+from microsim.checks import check_memory, positive
 from microsim.errors import UsageError
 
 from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID

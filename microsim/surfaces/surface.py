@@ -19,8 +19,8 @@ from typing import Callable
 import numpy as np
 
 from microsim.analytic import Empirical
-from microsim.analytic._checks import positive
-from microsim.errors import UsageError
+from microsim.checks import positive
+from microsim.errors import EnvironmentFailure, UsageError
 
 __all__ = ["Surface", "Predicted", "flat", "heightfield_mesh", "facet_slopes", "check_relief",
            "MAX_RELIEF", "MAX_COORDINATE"]
@@ -131,7 +131,12 @@ class Surface:
         Vertices are rounded to float32 (what Embree sees); trimesh stores them as float64
         arrays of those float32 values. Faces are int32 values.
         """
-        import trimesh
+        try:
+            import trimesh
+        except ImportError:
+            raise EnvironmentFailure(
+                "Surface.mesh needs trimesh, an optional extra: pip install 'microsim[view]'"
+            ) from None
         return trimesh.Trimesh(vertices=self.vertices.astype(np.float32),
                                faces=self.faces.astype(np.int32), process=False)
 

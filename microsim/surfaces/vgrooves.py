@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from microsim.analytic._checks import check_memory, integer, positive
+from microsim.checks import check_memory, integer, positive
 from microsim.errors import UsageError
 
 from .surface import Surface
@@ -28,7 +28,7 @@ BYTES_PER_GROOVE = 1600
 """Peak memory per groove of a V-groove surface built and traced (four triangles): measured
 ≈ 1100 (traced masking) to 1500 bytes (analytic) of RSS growth at 10⁶ and 4·10⁶ grooves
 (tilts, profile, mesh, Embree BVH, tracer facet arrays, groove caster); checked against
-``_checks.memory_limit`` before anything is allocated."""
+``microsim.checks.memory_limit`` before anything is allocated."""
 
 
 def groove_tilts_rad(n_grooves: int, ndf, seed: int = 0,

@@ -29,6 +29,7 @@ without ``--screenshot`` the image goes to ``microsim-view-<scene>-<what>.png``.
 One module per view (``surface``, ``rays``, ``lobe``, ``disk``, ``normals``), the shared
 set-up in ``common`` and the command line in ``command``.
 """
+
 from __future__ import annotations
 
 from .command import VIEWS, add_view_command, main, run_view, view
@@ -39,6 +40,19 @@ from .normals import view_normals
 from .rays import RayPaths, trace_paths, view_rays
 from .surface import view_surface
 
-__all__ = ["VIEWS", "view", "view_surface", "view_rays", "view_lobe", "view_disk",
-           "view_normals", "add_view_command", "run_view", "main", "headless", "lobe_z",
-           "trace_paths", "RayPaths"]
+__all__ = [
+    "VIEWS",
+    "view",
+    "view_surface",
+    "view_rays",
+    "view_lobe",
+    "view_disk",
+    "view_normals",
+    "add_view_command",
+    "run_view",
+    "main",
+    "headless",
+    "lobe_z",
+    "trace_paths",
+    "RayPaths",
+]

@@ -1,4 +1,5 @@
 """``python -m microsim.view SCENE [options]`` (same options as ``microsim view``)."""
+
 import sys
 
 from .command import main

@@ -1,12 +1,14 @@
 """``microsim view`` / ``python -m microsim.view``: build one view and show it, or render it
 off screen to a PNG (``--screenshot``, or by default with no display)."""
+
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
 
-from ..analytic._checks import in_range
+from microsim.checks import in_range
+
 from ..errors import UsageError
 from ..scene import load_scene
 from .common import DEFAULT_RAYS, DEFAULT_THETA, WINDOW, headless
@@ -21,8 +23,16 @@ __all__ = ["VIEWS", "view", "add_view_command", "run_view", "main"]
 VIEWS = ("surface", "rays", "lobe", "disk", "normals")
 
 
-def view(scene_or_surface, what: str = "surface", theta_i: float | None = None, rays=None,
-         seed: int = 0, window_size=WINDOW, off_screen=None, **options):
+def view(
+    scene_or_surface,
+    what: str = "surface",
+    theta_i: float | None = None,
+    rays=None,
+    seed: int = 0,
+    window_size=WINDOW,
+    off_screen=None,
+    **options,
+):
     """Build the ``what`` view (one of ``VIEWS``) and return its ``pyvista.Plotter``.
 
     ``theta_i`` (degrees): incidence for rays/lobe, viewing direction θo for disk; ignored by
@@ -51,36 +61,62 @@ def _window_size(text: str) -> tuple[int, int]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"size must be WIDTHxHEIGHT, e.g. 1200x800, got {text!r}")
     if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise argparse.ArgumentTypeError(f"size must be between 16 and 8192 pixels per side, "
-                                         f"got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"size must be between 16 and 8192 pixels per side, got {text!r}"
+        )
     return w, h
 
 
 def _configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene file (TOML), e.g. surfaces/vgroove-beckmann-0.3.toml")
     p.add_argument("--what", choices=VIEWS, default="surface", help="which view (default surface)")
-    p.add_argument("--theta-i", type=float, default=None, metavar="DEG",
-                   help="incidence for rays/lobe, viewing angle θo for disk (default: "
-                        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_THETA.items()
-                                    if k in ("rays", "lobe", "disk")) + ")")
-    p.add_argument("--screenshot", metavar="PNG", default=None,
-                   help="render off screen to this PNG (default with no display: "
-                        "microsim-view-<scene>-<what>.png)")
-    p.add_argument("--size", type=_window_size, default=WINDOW, metavar="WxH",
-                   help="image size in pixels (default 1200x800)")
+    p.add_argument(
+        "--theta-i",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help="incidence for rays/lobe, viewing angle θo for disk (default: "
+        + ", ".join(f"{k} {v:g}" for k, v in DEFAULT_THETA.items() if k in ("rays", "lobe", "disk"))
+        + ")",
+    )
+    p.add_argument(
+        "--screenshot",
+        metavar="PNG",
+        default=None,
+        help="render off screen to this PNG (default with no display: "
+        "microsim-view-<scene>-<what>.png)",
+    )
+    p.add_argument(
+        "--size",
+        type=_window_size,
+        default=WINDOW,
+        metavar="WxH",
+        help="image size in pixels (default 1200x800)",
+    )
     p.add_argument("--rays", type=int, default=None, help="rays traced (rays/lobe/disk)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--color", choices=("height", "slope"), default="slope",
-                   help="surface view colouring (default slope)")
-    p.add_argument("--scale", choices=("linear", "log"), default="linear",
-                   help="lobe radius: f·cosθo or log-scaled (default linear)")
+    p.add_argument(
+        "--color",
+        choices=("height", "slope"),
+        default="slope",
+        help="surface view colouring (default slope)",
+    )
+    p.add_argument(
+        "--scale",
+        choices=("linear", "log"),
+        default="linear",
+        help="lobe radius: f·cosθo or log-scaled (default linear)",
+    )
     p.set_defaults(func=run_view)
 
 
 def add_view_command(subparsers) -> argparse.ArgumentParser:
     """Register ``view`` on an argparse subparsers object (``func`` = ``run_view``)."""
-    p = subparsers.add_parser("view", help="inspect a scene with pyvista: surface, rays, lobe, "
-                                           "halfway disk or normals (off screen when headless)")
+    p = subparsers.add_parser(
+        "view",
+        help="inspect a scene with pyvista: surface, rays, lobe, "
+        "halfway disk or normals (off screen when headless)",
+    )
     _configure(p)
     return p
 
@@ -93,8 +129,16 @@ def run_view(args) -> int:
     if shot is None and headless():
         shot = f"microsim-view-{scene.name}-{args.what}.png"
         print(f"microsim: no display: rendering off screen to {shot}", file=sys.stderr)
-    p = view(scene, args.what, args.theta_i, args.rays, args.seed, args.size,
-             off_screen=shot is not None, **options)
+    p = view(
+        scene,
+        args.what,
+        args.theta_i,
+        args.rays,
+        args.seed,
+        args.size,
+        off_screen=shot is not None,
+        **options,
+    )
     if shot is None:
         p.show()
         return 0

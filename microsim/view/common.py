@@ -3,6 +3,7 @@ the displayed section of a surface, text in VTK's fonts, cameras and polar surfa
 
 Local frame with the macro normal +z; angles in degrees.
 """
+
 from __future__ import annotations
 
 import os
@@ -13,35 +14,67 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UsageError
+from ..errors import EnvironmentFailure, UsageError
 from ..scene import Scene, load_scene
 from ..surfaces import Surface
 
-__all__ = ["DEFAULT_THETA", "DEFAULT_RAYS", "WINDOW", "COLOURS", "headless", "pyvista",
-           "plotter", "ViewScene", "resolve", "ascii_text", "title", "colour_key", "scalar_bar",
-           "Section", "whole_tile", "section", "section_mesh", "outline", "tilt_deg", "side_camera",
-           "polar_surface"]
+__all__ = [
+    "DEFAULT_THETA",
+    "DEFAULT_RAYS",
+    "WINDOW",
+    "COLOURS",
+    "headless",
+    "pyvista",
+    "plotter",
+    "ViewScene",
+    "resolve",
+    "ascii_text",
+    "title",
+    "colour_key",
+    "scalar_bar",
+    "Section",
+    "whole_tile",
+    "section",
+    "section_mesh",
+    "outline",
+    "tilt_deg",
+    "side_camera",
+    "polar_surface",
+]
 
 DEFAULT_THETA = {"surface": 0.0, "rays": 60.0, "lobe": 30.0, "disk": 30.0, "normals": 0.0}
 DEFAULT_RAYS = {"rays": 300, "lobe": 200_000, "disk": 100_000}
 WINDOW = (1200, 800)
 BACKGROUND = "white"
-COLOURS = {"incident": "#e6a100", "single": "#2ca02c", "masked": "#d62728",
-           "downward": "#1f57c4", "model": "#2ca02c", "mirror": "#444444", "outline": "black"}
+COLOURS = {
+    "incident": "#e6a100",
+    "single": "#2ca02c",
+    "masked": "#d62728",
+    "downward": "#1f57c4",
+    "model": "#2ca02c",
+    "mirror": "#444444",
+    "outline": "black",
+}
 
 
 # --- set-up --------------------------------------------------------------------------------------
 def headless() -> bool:
     """True on Linux without an X or Wayland display (render off screen)."""
-    return sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
-                                                     or os.environ.get("WAYLAND_DISPLAY"))
+    return sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    )
 
 
 def pyvista():
     """Import pyvista; headless, select VTK's EGL window first (else VTK tries X and warns)."""
     if headless() and "vtkmodules" not in sys.modules:
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    import pyvista as pv
+    try:
+        import pyvista as pv
+    except ImportError:
+        raise EnvironmentFailure(
+            "the views need pyvista, an optional extra: pip install 'microsim[view]'"
+        ) from None
     return pv
 
 
@@ -49,8 +82,9 @@ def plotter(shape=(1, 1), window_size=WINDOW, off_screen=None):
     """A white ``pyvista.Plotter`` of ``shape`` subplots; off screen if headless (or asked)."""
     pv = pyvista()
     off = headless() if off_screen is None else bool(off_screen)
-    p = pv.Plotter(shape=shape, window_size=tuple(int(s) for s in window_size), off_screen=off,
-                   border=False)
+    p = pv.Plotter(
+        shape=shape, window_size=tuple(int(s) for s in window_size), off_screen=off, border=False
+    )
     p.set_background(BACKGROUND)
     return p
 
@@ -71,20 +105,33 @@ def resolve(scene_or_surface, material=None, seed=None) -> ViewScene:
     if isinstance(obj, (str, Path)):
         obj = load_scene(obj)
     if isinstance(obj, Scene):
-        with warnings.catch_warnings():            # generator caveats: printed by `surface`
+        with warnings.catch_warnings():  # generator caveats: printed by `surface`
             warnings.simplefilter("ignore")
             surf = obj.build_surface(seed=seed)
         ior = obj.ior if material is None else material
         return ViewScene(surf, ior, obj.ndf(), obj.name)
     if isinstance(obj, Surface):
         return ViewScene(obj, material, obj.ensemble_ndf, obj.kind)
-    raise UsageError("scene_or_surface must be a scene file path, a microsim.scene.Scene or a "
-                     f"microsim.surfaces.Surface, got {type(obj).__name__}")
+    raise UsageError(
+        "scene_or_surface must be a scene file path, a microsim.scene.Scene or a "
+        f"microsim.surfaces.Surface, got {type(obj).__name__}"
+    )
 
 
 # --- text ----------------------------------------------------------------------------------------
-_ASCII = str.maketrans({"θ": "theta_", "φ": "phi_", "σ": "sigma", "π": "pi", "×": "x",
-                        "≤": "<=", "−": "-", "–": "-", "·": "*"})
+_ASCII = str.maketrans(
+    {
+        "θ": "theta_",
+        "φ": "phi_",
+        "σ": "sigma",
+        "π": "pi",
+        "×": "x",
+        "≤": "<=",
+        "−": "-",
+        "–": "-",
+        "·": "*",
+    }
+)
 
 
 def ascii_text(text: str) -> str:
@@ -100,14 +147,23 @@ def colour_key(p, items, size: int = 10, bottom: int = 8) -> None:
     """Colour key: one line of text per (label, colour), stacked up from the lower left corner
     of the current viewport (pixel offsets; pyvista legends misplace themselves in subplots)."""
     for k, (label, colour) in enumerate(reversed(list(items))):
-        p.add_text(ascii_text(label), position=(10, bottom + int(2.0 * size) * k), font_size=size,
-                   color=colour)
+        p.add_text(
+            ascii_text(label),
+            position=(10, bottom + int(2.0 * size) * k),
+            font_size=size,
+            color=colour,
+        )
 
 
 def scalar_bar(text: str, **extra) -> dict:
     """``scalar_bar_args`` of ``add_mesh`` with the title ``text``."""
-    return {"title": ascii_text(text), "color": "black", "title_font_size": 14,
-            "label_font_size": 12, **extra}
+    return {
+        "title": ascii_text(text),
+        "color": "black",
+        "title_font_size": 14,
+        "label_font_size": 12,
+        **extra,
+    }
 
 
 # --- geometry shown ------------------------------------------------------------------------------
@@ -124,8 +180,12 @@ class Section:
 
 def whole_tile(surface) -> Section:
     lx, ly = surface.tile_size
-    return Section(surface.vertices, surface.faces, (-lx / 2, lx / 2, -ly / 2, ly / 2),
-                   "whole periodic tile outlined")
+    return Section(
+        surface.vertices,
+        surface.faces,
+        (-lx / 2, lx / 2, -ly / 2, ly / 2),
+        "whole periodic tile outlined",
+    )
 
 
 def section(surface, grooves: int = 16, length: float = 0.5) -> Section:
@@ -136,15 +196,17 @@ def section(surface, grooves: int = 16, length: float = 0.5) -> Section:
     if surface.kind != "vgrooves" or n <= grooves:
         return whole_tile(surface)
     k0 = (n - grooves) // 2
-    f = surface.faces[4 * k0: 4 * (k0 + grooves)]
+    f = surface.faces[4 * k0 : 4 * (k0 + grooves)]
     used, inv = np.unique(f, return_inverse=True)
     v = surface.vertices[used].copy()
     half = 0.5 * length * (v[:, 0].max() - v[:, 0].min())
-    v[:, 1] = np.sign(v[:, 1]) * half                  # cut the grooves' length to the width
-    return Section(v, inv.reshape(-1, 3).astype(np.int64),
-                   (v[:, 0].min(), v[:, 0].max(), -half, half),
-                   f"zoomed section: {grooves} of {n} grooves, groove length cut (the profile "
-                   f"is extruded)")
+    v[:, 1] = np.sign(v[:, 1]) * half  # cut the grooves' length to the width
+    return Section(
+        v,
+        inv.reshape(-1, 3).astype(np.int64),
+        (v[:, 0].min(), v[:, 0].max(), -half, half),
+        f"zoomed section: {grooves} of {n} grooves, groove length cut (the profile is extruded)",
+    )
 
 
 def section_mesh(sec: Section):
@@ -176,8 +238,13 @@ def side_camera(p, elevation: float = 25.0, azimuth: float = -30.0, zoom: float 
     p.camera.zoom(zoom)
 
 
-def polar_surface(radius: np.ndarray, theta_deg: np.ndarray, phi_deg: np.ndarray,
-                  scalars: np.ndarray | None = None, name: str = "value"):
+def polar_surface(
+    radius: np.ndarray,
+    theta_deg: np.ndarray,
+    phi_deg: np.ndarray,
+    scalars: np.ndarray | None = None,
+    name: str = "value",
+):
     """StructuredGrid of the polar surface r(θ, φ) (closed in φ, capped at the pole)."""
     pv = pyvista()
     th = np.radians(np.concatenate([[0.0], theta_deg]))

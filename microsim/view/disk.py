@@ -2,13 +2,15 @@
 direction — simulated half vectors in the scaling and the orthogonal projection against
 contours of the Edwards data-fitting BRDF fitted to them (``analysis.fits.fit_edwards_disk``,
 Edwards et al. 2006, eq. 34–36)."""
+
 from __future__ import annotations
 
 import numpy as np
 
+from microsim.vectors import normalize, spherical_deg
+
 from .. import analytic as an
 from ..analysis.fits import DiskFit, fit_edwards_disk
-from ..analytic._checks import normalize, spherical_deg
 from ..sim import LEDGER, ray_events
 from .common import (
     DEFAULT_RAYS,
@@ -43,9 +45,16 @@ def _disk_model_density(fit: DiskFit, wo: np.ndarray, projection: str, n: int = 
     return U, V, np.where(inside & (wi[..., 2] > 0), d, 0.0)
 
 
-def view_disk(scene_or_surface, theta_o: float = DEFAULT_THETA["disk"],
-              rays: int = DEFAULT_RAYS["disk"], points: int = 3000, material=None, seed=0,
-              off_screen=None, window_size=WINDOW):
+def view_disk(
+    scene_or_surface,
+    theta_o: float = DEFAULT_THETA["disk"],
+    rays: int = DEFAULT_RAYS["disk"],
+    points: int = 3000,
+    material=None,
+    seed=0,
+    off_screen=None,
+    window_size=WINDOW,
+):
     """Edwards' halfway-vector disk (Edwards Fig. 13) for the viewing direction θo (degrees,
     φo = 0): half vectors of simulated single-bounce escaping rays in the scaling (eq. 15) and the
     orthogonal (eq. 22) projection, on the unit disk centred at ``disk_centre(wo)``, against
@@ -63,15 +72,19 @@ def view_disk(scene_or_surface, theta_o: float = DEFAULT_THETA["disk"],
     uv_o = an.orthogonal_projection(wo, h)
     fit = fit_edwards_disk(wo, uv_o, ev.weight[single], int(rays))
     rng = np.random.default_rng(seed)
-    show = rng.permutation(len(h))[:int(points)]
+    show = rng.permutation(len(h))[: int(points)]
     pv = pyvista()
     p = plotter((1, 2), window_size, off_screen)
     c = an.disk_centre(wo)
     for col, projection in enumerate(("scaling", "orthogonal")):
         p.subplot(0, col)
         uv = an.disk_projection(wo, h[show], projection)
-        p.add_mesh(pv.PolyData(np.column_stack([uv, np.zeros(len(uv))])), color="black",
-                   point_size=3, render_points_as_spheres=False)
+        p.add_mesh(
+            pv.PolyData(np.column_stack([uv, np.zeros(len(uv))])),
+            color="black",
+            point_size=3,
+            render_points_as_spheres=False,
+        )
         U, V, d = _disk_model_density(fit, wo, projection)
         img = pv.StructuredGrid(U, V, np.zeros_like(U))
         img.point_data["density"] = d.ravel(order="F")
@@ -80,27 +93,51 @@ def view_disk(scene_or_surface, theta_o: float = DEFAULT_THETA["disk"],
             cont = img.contour(isosurfaces=[frac * top], scalars="density") if top > 0 else None
             if cont is not None and cont.n_points:
                 p.add_mesh(cont, color=colour, line_width=3)
-        p.add_mesh(pv.Circle(radius=1.0, resolution=200).translate((c[0], c[1], 0))
-                   .extract_feature_edges(), color="#555555", line_width=2)
+        p.add_mesh(
+            pv.Circle(radius=1.0, resolution=200)
+            .translate((c[0], c[1], 0))
+            .extract_feature_edges(),
+            color="#555555",
+            line_width=2,
+        )
         for point, colour in (((c[0], c[1], 0.0), "#1f57c4"), ((0.0, 0.0, 0.0), "#d62728")):
-            p.add_mesh(pv.PolyData(np.array([point])), color=colour, point_size=14,
-                       render_points_as_spheres=True)
+            p.add_mesh(
+                pv.PolyData(np.array([point])),
+                color=colour,
+                point_size=14,
+                render_points_as_spheres=True,
+            )
         where = "retro-reflection" if projection == "scaling" else "wi = n"
-        title(p, f"{projection} projection (Edwards eq. {15 if projection == 'scaling' else 22})"
-              f"\nblue: disk centre ({where})\nred: (u,v) = 0 (mirror)")
+        title(
+            p,
+            f"{projection} projection (Edwards eq. {15 if projection == 'scaling' else 22})"
+            f"\nblue: disk centre ({where})\nred: (u,v) = 0 (mirror)",
+        )
         if col == 1:
-            colour_key(p, [(f"fitted BRDF density: {100 * f:g}% of its peak", c_)
-                           for f, c_ in zip(CONTOUR_LEVELS, CONTOUR_COLOURS)])
+            colour_key(
+                p,
+                [
+                    (f"fitted BRDF density: {100 * f:g}% of its peak", c_)
+                    for f, c_ in zip(CONTOUR_LEVELS, CONTOUR_COLOURS)
+                ],
+            )
         p.view_xy()
         p.enable_parallel_projection()
         p.reset_camera()
         p.camera.zoom(1.25)
     q = fit.params
     p.subplot(0, 0)
-    p.add_text(ascii_text(f"{sc.name}, viewer θo = {theta_o:g}°\n{len(h)} single-bounce rays "
-                          f"of {int(rays)} ({len(show)} shown)\n"
-                          f"Edwards fit (eq. 36, orthogonal disk):\n"
-                          f"F(θo) = {q.f0:.3f}, k = {q.k:.2f}, C_d = 0\n"
-                          f"lump 1: r = {q.r1:.3g}, n = {q.n1:.3g}\nlump 2: r = {q.r2:.3g}, "
-                          f"n = {q.n2:.3g}"), position="lower_left", font_size=10, color="black")
+    p.add_text(
+        ascii_text(
+            f"{sc.name}, viewer θo = {theta_o:g}°\n{len(h)} single-bounce rays "
+            f"of {int(rays)} ({len(show)} shown)\n"
+            f"Edwards fit (eq. 36, orthogonal disk):\n"
+            f"F(θo) = {q.f0:.3f}, k = {q.k:.2f}, C_d = 0\n"
+            f"lump 1: r = {q.r1:.3g}, n = {q.n1:.3g}\nlump 2: r = {q.r2:.3g}, "
+            f"n = {q.n2:.3g}"
+        ),
+        position="lower_left",
+        font_size=10,
+        color="black",
+    )
     return p

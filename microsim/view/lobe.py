@@ -1,13 +1,15 @@
 """The lobe view: the simulated single-bounce BRDF as a 3D polar surface (radius f·cos θo,
 linear or log-scaled) beside the model's (Torrance–Sparrow with the scene's NDF; V-groove G on
 V-grooves, height-correlated Smith on heightfields), coloured by z = (sim − model)/σ."""
+
 from __future__ import annotations
 
 import warnings
 
 import numpy as np
 
-from ..analytic._checks import spherical_deg
+from microsim.vectors import spherical_deg
+
 from ..errors import UsageError
 from ..sim import Bins, simulate
 from ..sim.predict import ModelSpec, predict
@@ -48,8 +50,14 @@ def _lobe_radius(fcos: np.ndarray, peak: float, scale: str) -> np.ndarray:
     return x if scale == "linear" else np.log10(1.0 + 1000.0 * x) / np.log10(1001.0)
 
 
-def lobe_z(sim: np.ndarray, stderr: np.ndarray, model: np.ndarray, omega: np.ndarray,
-           rays: int, mean_weight: float) -> np.ndarray:
+def lobe_z(
+    sim: np.ndarray,
+    stderr: np.ndarray,
+    model: np.ndarray,
+    omega: np.ndarray,
+    rays: int,
+    mean_weight: float,
+) -> np.ndarray:
     """z = (sim − model)/σ per bin; bins without any ray (σ = 0) use the Poisson error the model
     predicts, √(model · w̄ / (N Ω)) with w̄ the mean Fresnel weight; 0 where both vanish."""
     se_model = np.sqrt(np.maximum(model, 0.0) * mean_weight / (rays * omega))
@@ -64,16 +72,35 @@ def _directions(p, wi: np.ndarray, length: float = 1.25) -> None:
     pv = pyvista()
     mirror = np.array([-wi[0], -wi[1], wi[2]])
     for w, col in ((wi, COLOURS["incident"]), (mirror, COLOURS["mirror"])):
-        p.add_mesh(pv.Arrow(start=(0, 0, 0), direction=w, scale=length, tip_length=0.12,
-                            tip_radius=0.04, shaft_radius=0.012), color=col)
-    p.add_mesh(pv.Circle(radius=1.0, resolution=120).extract_feature_edges(), color="#999999",
-               line_width=1)
+        p.add_mesh(
+            pv.Arrow(
+                start=(0, 0, 0),
+                direction=w,
+                scale=length,
+                tip_length=0.12,
+                tip_radius=0.04,
+                shaft_radius=0.012,
+            ),
+            color=col,
+        )
+    p.add_mesh(
+        pv.Circle(radius=1.0, resolution=120).extract_feature_edges(), color="#999999", line_width=1
+    )
 
 
-def view_lobe(scene_or_surface, theta_i: float = DEFAULT_THETA["lobe"],
-              rays: int = DEFAULT_RAYS["lobe"], scale: str = "linear", shadowing: str | None = None,
-              n_theta: int = 30, n_phi: int = 25, material=None, seed=0, off_screen=None,
-              window_size=WINDOW):
+def view_lobe(
+    scene_or_surface,
+    theta_i: float = DEFAULT_THETA["lobe"],
+    rays: int = DEFAULT_RAYS["lobe"],
+    scale: str = "linear",
+    shadowing: str | None = None,
+    n_theta: int = 30,
+    n_phi: int = 25,
+    material=None,
+    seed=0,
+    off_screen=None,
+    window_size=WINDOW,
+):
     """Simulated BRDF at θi (degrees) as a polar surface (radius f·cos θo, linear or log —
     ``scale``) beside the Torrance–Sparrow model with the scene's NDF (``shadowing`` default:
     "vgroove" on V-grooves, "smith-correlated" on heightfields) on the same folded bins; the
@@ -91,8 +118,12 @@ def view_lobe(scene_or_surface, theta_i: float = DEFAULT_THETA["lobe"],
         shadow = shadowing or _default_shadowing(sc.surface)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            model = predict([ModelSpec.torrance_sparrow("ts", sc.ndf, shadow, sc.ior)],
-                            [theta_i], bins, rtol=1e-2)["ts"][0]
+            model = predict(
+                [ModelSpec.torrance_sparrow("ts", sc.ndf, shadow, sc.ior)],
+                [theta_i],
+                bins,
+                rtol=1e-2,
+            )["ts"][0]
     # the smooth model sets the scale (a noisy bin near the pole, tiny Ω, would set it otherwise)
     peak = float(np.max((sim if model is None else model) * cos_o))
     peak = peak if peak > 0 else 1.0
@@ -100,38 +131,70 @@ def view_lobe(scene_or_surface, theta_i: float = DEFAULT_THETA["lobe"],
     wi = spherical_deg(theta_i, 0.0)
     shape = (1, 2) if model is not None else (1, 1)
     p = plotter(shape, window_size, off_screen)
-    radius_txt = ("radius = f·cosθo / peak" if scale == "linear"
-                  else "radius = log10(1 + 1000 f·cosθo/peak), 3 decades")
+    radius_txt = (
+        "radius = f·cosθo / peak"
+        if scale == "linear"
+        else "radius = log10(1 + 1000 f·cosθo/peak), 3 decades"
+    )
     if model is not None:
         single = res.ledger_counts["single"][0]
         w_mean = res.ledger["single_fresnel"][0] * res.rays[0] / max(single, 1)
         z = lobe_z(sim, se, model, bins.projected_solid_angle(), int(res.rays[0]), w_mean)
         z_full, _ = _full_circle(z, bins)
         g = polar_surface(r_sim, bins.theta_centers, phi, np.clip(z_full, -5, 5), "z")
-        p.add_mesh(g, scalars="z", cmap="coolwarm", clim=(-5, 5), smooth_shading=True,
-                   scalar_bar_args=scalar_bar("z = (sim − model)/σ", vertical=False, position_x=0.3,
-                                        position_y=0.1, width=0.6, height=0.08))
-        title(p, f"{sc.name}: simulation\nθi = {theta_i:g}°, {int(res.rays[0])} rays, "
-              f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})")
+        p.add_mesh(
+            g,
+            scalars="z",
+            cmap="coolwarm",
+            clim=(-5, 5),
+            smooth_shading=True,
+            scalar_bar_args=scalar_bar(
+                "z = (sim − model)/σ",
+                vertical=False,
+                position_x=0.3,
+                position_y=0.1,
+                width=0.6,
+                height=0.08,
+            ),
+        )
+        title(
+            p,
+            f"{sc.name}: simulation\nθi = {theta_i:g}°, {int(res.rays[0])} rays, "
+            f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})",
+        )
     else:
         g = polar_surface(r_sim, bins.theta_centers, phi, _full_circle(sim, bins)[0], "f")
-        p.add_mesh(g, scalars="f", cmap="viridis",
-                   scalar_bar_args=scalar_bar("f (1/sr)"))
-        title(p, f"{sc.name}: simulated BRDF\nθi = {theta_i:g}°, {int(res.rays[0])} rays "
-              "(no analytic NDF: no model)")
+        p.add_mesh(g, scalars="f", cmap="viridis", scalar_bar_args=scalar_bar("f (1/sr)"))
+        title(
+            p,
+            f"{sc.name}: simulated BRDF\nθi = {theta_i:g}°, {int(res.rays[0])} rays "
+            "(no analytic NDF: no model)",
+        )
     _directions(p, wi)
     scale_from = "model" if model is not None else "simulation"
-    p.add_text(ascii_text(f"{radius_txt}; peak of the {scale_from}"
-                          f" f·cosθo = {peak:.3g} 1/sr\ngold: incident, grey: mirror"),
-               position="lower_left", font_size=10, color="black")
+    p.add_text(
+        ascii_text(
+            f"{radius_txt}; peak of the {scale_from}"
+            f" f·cosθo = {peak:.3g} 1/sr\ngold: incident, grey: mirror"
+        ),
+        position="lower_left",
+        font_size=10,
+        color="black",
+    )
     side_camera(p, 20.0, -20.0, 1.3)
     if model is not None:
         p.subplot(0, 1)
         r_mod, _ = _full_circle(_lobe_radius(model * cos_o, peak, scale), bins)
-        p.add_mesh(polar_surface(r_mod, bins.theta_centers, phi), color=COLOURS["model"],
-                   smooth_shading=True)
+        p.add_mesh(
+            polar_surface(r_mod, bins.theta_centers, phi),
+            color=COLOURS["model"],
+            smooth_shading=True,
+        )
         _directions(p, wi)
-        title(p, f"model: Torrance–Sparrow\n{type(sc.ndf).__name__} NDF, {shadow} G\n"
-              "(same bins, same radius scale)")
+        title(
+            p,
+            f"model: Torrance–Sparrow\n{type(sc.ndf).__name__} NDF, {shadow} G\n"
+            "(same bins, same radius scale)",
+        )
         p.link_views()
     return p

@@ -1,5 +1,6 @@
 """The normals view: the facet-normal distribution (projected-area weighted) against the
 scene's NDF, as a polar surface and as tilt densities."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -42,8 +43,15 @@ def _normal_histogram(surface, theta_max: float, n_theta: int, n_phi: int):
     return D, t_edges, p_edges, th, w
 
 
-def view_normals(scene_or_surface, n_theta: int = 30, n_phi: int = 36, material=None, seed=None,
-                 off_screen=None, window_size=WINDOW):
+def view_normals(
+    scene_or_surface,
+    n_theta: int = 30,
+    n_phi: int = 36,
+    material=None,
+    seed=None,
+    off_screen=None,
+    window_size=WINDOW,
+):
     """Facet-normal distribution (projected-area weighted; azimuth-averaged for V-grooves) as a
     polar surface of D(h)·cos θh (per solid angle; radius and colour), with the scene's NDF as a
     green wireframe on the same grid, beside the tilt densities 2π D cos θ sin θ (per degree)."""
@@ -57,23 +65,29 @@ def view_normals(scene_or_surface, n_theta: int = 30, n_phi: int = 36, material=
     ndf_D = None
     if sc.ndf is not None:
         ndf_D = np.broadcast_to(np.asarray(sc.ndf.D_cos(cos_c)), D.shape)
-    peak = float(np.max(D * cos_c) if ndf_D is None else max(np.max(D * cos_c),
-                                                             np.max(ndf_D * cos_c)))
+    peak = float(
+        np.max(D * cos_c) if ndf_D is None else max(np.max(D * cos_c), np.max(ndf_D * cos_c))
+    )
     peak = peak if peak > 0 else 1.0
     p = plotter((1, 2), window_size, off_screen)
-    scale_t = 90.0 / theta_max                        # stretch θ so the lobe fills the plot
+    scale_t = 90.0 / theta_max  # stretch θ so the lobe fills the plot
     g = polar_surface(D * cos_c / peak, np.minimum(tc * scale_t, 90.0), pc, D * cos_c, "pdf")
-    p.add_mesh(g, scalars="pdf", cmap="viridis",
-               scalar_bar_args=scalar_bar("facets: D(h) cos θh (1/sr)"))
+    p.add_mesh(
+        g, scalars="pdf", cmap="viridis", scalar_bar_args=scalar_bar("facets: D(h) cos θh (1/sr)")
+    )
     if ndf_D is not None:
         m = polar_surface(ndf_D * cos_c / peak, np.minimum(tc * scale_t, 90.0), pc)
         p.add_mesh(m, style="wireframe", color=COLOURS["model"], line_width=1.5)
     avg = " (azimuth-averaged grooves)" if sc.surface.azimuth_average else ""
-    against = (f"NDF {type(sc.ndf).__name__} (green wireframe)" if ndf_D is not None
-               else "no analytic NDF")
-    title(p, f"{sc.name}: facet normals{avg} (surface)\nvs {against}"
-          f"\nradius: D cos θh / peak\npolar angle stretched ×{scale_t:.3g} "
-          f"(θh ≤ {theta_max:.3g}°)")
+    against = (
+        f"NDF {type(sc.ndf).__name__} (green wireframe)" if ndf_D is not None else "no analytic NDF"
+    )
+    title(
+        p,
+        f"{sc.name}: facet normals{avg} (surface)\nvs {against}"
+        f"\nradius: D cos θh / peak\npolar angle stretched ×{scale_t:.3g} "
+        f"(θh ≤ {theta_max:.3g}°)",
+    )
     side_camera(p, 20.0, -30.0, 1.2)
     p.subplot(0, 1)
     pv = pyvista()
@@ -89,8 +103,14 @@ def view_normals(scene_or_surface, n_theta: int = 30, n_phi: int = 36, material=
             expected = np.diff(cdf) / width
         except NotImplementedError:
             expected = sc.ndf.tilt_pdf_rad(np.radians(mid)) * np.pi / 180.0
-        chart.line(mid, expected, color=COLOURS["model"], width=2.5, style="--",
-                   label=f"NDF {type(sc.ndf).__name__} (bin average)")
+        chart.line(
+            mid,
+            expected,
+            color=COLOURS["model"],
+            width=2.5,
+            style="--",
+            label=f"NDF {type(sc.ndf).__name__} (bin average)",
+        )
     chart.title = "projected-area weighted tilt density 2 pi D cos(theta) sin(theta)"
     p.add_chart(chart)
     return p

@@ -1,13 +1,15 @@
 """The rays view: a few hundred sampled paths at one incidence — incident segments,
 single-bounce escaping rays, masked rays (reflected up but blocked) and downward
 (multi-bounce) rays — over a section of the surface."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..analytic._checks import spherical_deg
+from microsim.vectors import spherical_deg
+
 from ..sim import Tracer
 from ..sim.tracer import ESCAPED, HIT
 from .common import (
@@ -46,8 +48,9 @@ class RayPaths:
     end: np.ndarray
 
 
-def trace_paths(surface, theta_i: float, phi_i: float = 0.0, rays: int = 300, seed: int = 0,
-                window=None) -> RayPaths:
+def trace_paths(
+    surface, theta_i: float, phi_i: float = 0.0, rays: int = 300, seed: int = 0, window=None
+) -> RayPaths:
     """Trace ``rays`` primary rays from direction (θi, φi) (degrees) aimed uniformly at the
     central 60% of ``window`` (x0, x1, y0, y1; default the tile) and classify them as the
     estimator does (single / masked / downward), with the public ``Tracer`` API (the estimator's
@@ -60,15 +63,21 @@ def trace_paths(surface, theta_i: float, phi_i: float = 0.0, rays: int = 300, se
     rng = np.random.default_rng(seed)
     n = int(rays)
     cx, cy, wx, wy = (x0 + x1) / 2, (y0 + y1) / 2, 0.6 * (x1 - x0), 0.6 * (y1 - y0)
-    target = np.stack([cx + (rng.random(n) - 0.5) * wx, cy + (rng.random(n) - 0.5) * wy,
-                       np.full(n, 0.5 * (tracer.zmin + tracer.zmax))], axis=1)
+    target = np.stack(
+        [
+            cx + (rng.random(n) - 0.5) * wx,
+            cy + (rng.random(n) - 0.5) * wy,
+            np.full(n, 0.5 * (tracer.zmin + tracer.zmax)),
+        ],
+        axis=1,
+    )
     wi = spherical_deg(theta_i, phi_i)
     top = tracer.zmax + tracer.top_margin
     origins = target + wi * ((top - target[:, 2]) / wi[2])[:, None]
     hits = tracer.first_hit(origins, -wi)
     ok = hits.status == HIT
     origins, p_tile, nrm = origins[ok], hits.point[ok], hits.normal[ok]
-    hit = origins - wi * ((origins[:, 2] - p_tile[:, 2]) / wi[2])[:, None]   # unwrapped
+    hit = origins - wi * ((origins[:, 2] - p_tile[:, 2]) / wi[2])[:, None]  # unwrapped
     c = nrm @ wi
     wo = 2.0 * c[:, None] * nrm - wi
     status = np.full(len(hit), "unresolved", dtype=object)
@@ -97,15 +106,23 @@ def segments(a: np.ndarray, b: np.ndarray):
     return pv.PolyData(pts, lines=lines)
 
 
-def view_rays(scene_or_surface, theta_i: float = DEFAULT_THETA["rays"], phi_i: float = 0.0,
-              rays: int = DEFAULT_RAYS["rays"], grooves: int = 12, material=None, seed=0,
-              off_screen=None, window_size=WINDOW):
+def view_rays(
+    scene_or_surface,
+    theta_i: float = DEFAULT_THETA["rays"],
+    phi_i: float = 0.0,
+    rays: int = DEFAULT_RAYS["rays"],
+    grooves: int = 12,
+    material=None,
+    seed=0,
+    off_screen=None,
+    window_size=WINDOW,
+):
     """A few hundred ray paths at incidence (θi, φi) (degrees) over the displayed section:
     incident segments, single-bounce escaping rays, masked and downward (multi-bounce) rays."""
     sc = resolve(scene_or_surface, material, seed)
     sec = section(sc.surface, int(grooves))
     x0, x1, y0, y1 = sec.window
-    if sc.surface.kind != "vgrooves":                 # heightfields: a window of ~128 cells
+    if sc.surface.kind != "vgrooves":  # heightfields: a window of ~128 cells
         span = min(x1 - x0, 128 * (sc.surface.dx or (x1 - x0)))
         sec = crop(sc.surface, span)
         x0, x1, y0, y1 = sec.window
@@ -114,8 +131,12 @@ def view_rays(scene_or_surface, theta_i: float = DEFAULT_THETA["rays"], phi_i: f
     p = plotter(window_size=window_size, off_screen=off_screen)
     p.add_mesh(section_mesh(sec), color="#c8c8c8")
     p.add_mesh(outline(sec.window, float(sec.vertices[:, 2].max())), color="black", line_width=2)
-    p.add_mesh(segments(paths.hit + length * paths.wi, paths.hit), color=COLOURS["incident"],
-               line_width=1, opacity=0.6)
+    p.add_mesh(
+        segments(paths.hit + length * paths.wi, paths.hit),
+        color=COLOURS["incident"],
+        line_width=1,
+        opacity=0.6,
+    )
     counts = {}
     key = [("incident", COLOURS["incident"])]
     for kind in (SINGLE, MASKED, DOWNWARD):
@@ -124,17 +145,27 @@ def view_rays(scene_or_surface, theta_i: float = DEFAULT_THETA["rays"], phi_i: f
         if not sel.any():
             continue
         end = paths.end[sel] if kind != SINGLE else paths.hit[sel] + length * paths.wo[sel]
-        miss = ~np.all(np.isfinite(end), axis=1)        # second hit not resolved: fixed length
+        miss = ~np.all(np.isfinite(end), axis=1)  # second hit not resolved: fixed length
         end[miss] = paths.hit[sel][miss] + 0.2 * length * paths.wo[sel][miss]
-        label = {SINGLE: "escaping (single bounce)", MASKED: "masked (blocked on the way out)",
-                 DOWNWARD: "downward (multi-bounce)"}[kind]
-        p.add_mesh(segments(paths.hit[sel], end), color=COLOURS[kind],
-                   line_width=1.5 if kind == SINGLE else 4, opacity=0.7 if kind == SINGLE else 1)
+        label = {
+            SINGLE: "escaping (single bounce)",
+            MASKED: "masked (blocked on the way out)",
+            DOWNWARD: "downward (multi-bounce)",
+        }[kind]
+        p.add_mesh(
+            segments(paths.hit[sel], end),
+            color=COLOURS[kind],
+            line_width=1.5 if kind == SINGLE else 4,
+            opacity=0.7 if kind == SINGLE else 1,
+        )
         key.append((f"{label}: {counts[kind]}", COLOURS[kind]))
     colour_key(p, key)
-    title(p, f"{sc.name}: {len(paths.hit)} rays at θi = {theta_i:g}°, φi = {phi_i:g}°"
-          f"{' (across the grooves)' if sc.surface.kind == 'vgrooves' and phi_i == 0 else ''}"
-          f"\n{sec.note}")
+    title(
+        p,
+        f"{sc.name}: {len(paths.hit)} rays at θi = {theta_i:g}°, φi = {phi_i:g}°"
+        f"{' (across the grooves)' if sc.surface.kind == 'vgrooves' and phi_i == 0 else ''}"
+        f"\n{sec.note}",
+    )
     side_camera(p, 8.0, -10.0, 1.3)
     return p
 
@@ -148,6 +179,9 @@ def crop(surface, span: float) -> Section:
     keep = np.all(np.abs(cen[:, :2]) < span / 2, axis=1)
     used, inv = np.unique(surface.faces[keep], return_inverse=True)
     v = surface.vertices[used]
-    return Section(v, inv.reshape(-1, 3).astype(np.int64),
-                   (v[:, 0].min(), v[:, 0].max(), v[:, 1].min(), v[:, 1].max()),
-                   f"zoomed section: {span:g} × {span:g} of the {lx:g} × {ly:g} tile")
+    return Section(
+        v,
+        inv.reshape(-1, 3).astype(np.int64),
+        (v[:, 0].min(), v[:, 0].max(), v[:, 1].min(), v[:, 1].max()),
+        f"zoomed section: {span:g} × {span:g} of the {lx:g} × {ly:g} tile",
+    )

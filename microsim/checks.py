@@ -1,10 +1,11 @@
-"""Argument validation shared by the analytic models, the surfaces and the simulation.
+"""Argument validation shared by every layer (the analytic models, surfaces, simulation and app).
 
 Every check raises ``UsageError`` (a ``ValueError``) with a one-line message naming the
 parameter and the allowed range, so that a researcher who passes a bad value learns what to
 pass instead. ``check_memory`` refuses, before allocating, an object that would need more than
 ``memory_limit()`` (``MEMORY_FRACTION`` of the physical memory).
 """
+
 from __future__ import annotations
 
 import numbers
@@ -35,7 +36,7 @@ def memory_limit() -> int:
 def short(value, width: int = 80) -> str:
     """One-line ``repr`` of ``value`` for a message, cut to ``width`` characters."""
     text = " ".join(repr(value).split())
-    return text if len(text) <= width else text[:width - 1] + "…"
+    return text if len(text) <= width else text[: width - 1] + "…"
 
 
 def gigabytes(n: float) -> str:
@@ -48,16 +49,22 @@ def check_memory(name: str, need: float, what: str) -> None:
     ``memory_limit()``. Called before the allocation."""
     limit = memory_limit()
     if need > limit:
-        raise UsageError(f"{name}: {what} would need about {gigabytes(need)} of memory, above "
-                         f"the limit of {gigabytes(limit)} ({MEMORY_FRACTION:.0%} of this "
-                         f"machine's physical memory)")
+        raise UsageError(
+            f"{name}: {what} would need about {gigabytes(need)} of memory, above "
+            f"the limit of {gigabytes(limit)} ({MEMORY_FRACTION:.0%} of this "
+            f"machine's physical memory)"
+        )
 
 
 def integer(name: str, value, lo: int = 1, hi: int | None = None, why: str = "") -> int:
     """Return ``value`` as int, or raise unless it is an integer (int, NumPy integer, or an
     integral float) in [lo, hi]. Strings, bools, NaN and None are refused."""
-    ok = (not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real)
-          and np.isfinite(float(value)) and float(value).is_integer())
+    ok = (
+        not isinstance(value, (bool, np.bool_))
+        and isinstance(value, numbers.Real)
+        and np.isfinite(float(value))
+        and float(value).is_integer()
+    )
     rng = f">= {lo}" if hi is None else f"in [{lo}, {hi:,}]"
     if not ok or not lo <= int(value) or (hi is not None and int(value) > hi):
         raise UsageError(f"{name} must be an integer {rng}{why}, got {short(value)}")
@@ -105,38 +112,12 @@ def directions(name: str, w, *, upper: bool = False) -> np.ndarray:
         raise UsageError(f"{name} must be finite unit vectors; got NaN or inf")
     norm = np.sqrt(np.einsum("...i,...i->...", a, a))
     if np.any(np.abs(norm - 1.0) > UNIT_TOL):
-        raise UsageError(f"{name} must be unit vectors (| |w| - 1 | <= {UNIT_TOL}), "
-                         f"got norms in [{norm.min():.6g}, {norm.max():.6g}]")
+        raise UsageError(
+            f"{name} must be unit vectors (| |w| - 1 | <= {UNIT_TOL}), "
+            f"got norms in [{norm.min():.6g}, {norm.max():.6g}]"
+        )
     if upper and np.any(a[..., 2] < -UNIT_TOL):
-        raise UsageError(f"{name} must lie in the upper hemisphere (z >= 0), "
-                         f"got z down to {a[..., 2].min():.6g}")
+        raise UsageError(
+            f"{name} must lie in the upper hemisphere (z >= 0), got z down to {a[..., 2].min():.6g}"
+        )
     return a
-
-
-def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Broadcast dot product over the last axis."""
-    return np.sum(np.asarray(a) * np.asarray(b), axis=-1)
-
-
-def normalize(v: np.ndarray) -> np.ndarray:
-    """Unit vectors along ``v`` (last axis); zero vectors stay zero."""
-    v = np.asarray(v, dtype=np.float64)
-    n = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
-    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
-
-
-def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """Unit half vector h = (wi + wo)/|wi + wo| (Mikkelsen 2009, eq. 11)."""
-    return normalize(np.asarray(wi, dtype=np.float64) + np.asarray(wo, dtype=np.float64))
-
-
-def spherical(theta, phi) -> np.ndarray:
-    """Unit vectors from polar angle θ and azimuth φ in radians, shape broadcast(θ, φ) + (3,)."""
-    theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
-    s = np.sin(theta)
-    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
-
-
-def spherical_deg(theta_deg, phi_deg) -> np.ndarray:
-    """`spherical` with angles in degrees (the public-interface unit)."""
-    return spherical(np.radians(theta_deg), np.radians(phi_deg))

@@ -1,0 +1,80 @@
+"""Helpers shared by the tests (importable as ``support``: pytest's ``pythonpath = tests``).
+
+* Goodness of fit (docs/design.md, "Tests"): Pearson χ² of observed counts against expected
+  counts, with cells whose expected count is below ``min_expected`` pooled into one, and
+  Šidák's correction (``microsim.stats.sidak``) for several tests at one family-wise level.
+* Small explicit surfaces built directly from their mesh: equal-width V-grooves with given
+  tilts, and a periodic Gaussian-filtered heightfield.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from microsim.stats import sidak  # noqa: F401  (re-exported for the tests)
+from microsim.surfaces.surface import Surface, heightfield_mesh
+
+
+def pearson_chi2(observed, expected, min_expected: float = 5.0):
+    """Return (statistic, dof, p-value) of Pearson's χ² test.
+
+    ``expected`` must sum to the same total as ``observed`` (the caller integrates the pdf over
+    each cell and multiplies by the sample count; any probability outside the cells belongs in
+    one extra cell). Cells with expected count < ``min_expected`` are pooled into one cell.
+    """
+    obs = np.asarray(observed, dtype=np.float64).ravel()
+    exp = np.asarray(expected, dtype=np.float64).ravel()
+    if obs.shape != exp.shape:
+        raise ValueError("observed and expected must have the same number of cells")
+    small = exp < min_expected
+    if small.any():
+        obs = np.append(obs[~small], obs[small].sum())
+        exp = np.append(exp[~small], exp[small].sum())
+        if exp[-1] == 0:
+            if obs[-1] > 0:  # samples where the pdf says none can be: certain failure
+                return np.inf, max(len(exp) - 2, 1), 0.0
+            obs, exp = obs[:-1], exp[:-1]
+    stat = float(np.sum((obs - exp) ** 2 / exp))
+    dof = len(exp) - 1
+    return stat, dof, float(stats.chi2.sf(stat, dof))
+
+
+def vgroove_surface(tilts_deg, tile=1.0) -> Surface:
+    """Equal-width symmetric V-grooves along y with the given tilts (deg); rims at z = 0."""
+    t = np.radians(np.asarray(tilts_deg, dtype=float))
+    n, w = len(t), tile / len(t)
+    x = -tile / 2 + np.arange(2 * n + 1) * (w / 2)
+    z = np.zeros(2 * n + 1)
+    z[1::2] = -(w / 2) * np.tan(t)
+    m = len(x)
+    lo = np.stack([x, np.full(m, -tile / 2), z], axis=1)
+    hi = np.stack([x, np.full(m, tile / 2), z], axis=1)
+    a = np.arange(m - 1)
+    faces = np.concatenate([np.stack([a, a + 1, a + 1 + m], 1), np.stack([a, a + 1 + m, a + m], 1)])
+    return Surface(
+        "vgrooves",
+        np.concatenate([lo, hi]),
+        faces.astype(np.int32),
+        (tile, tile),
+        True,
+        {"tilts_deg": list(map(float, tilts_deg))},
+        azimuth_average=True,
+    )
+
+
+def random_heights(n=64, sigma=0.02, corr_cells=8.0, seed=0) -> np.ndarray:
+    """Periodic Gaussian-filtered white noise, rms ``sigma`` (unit tile, dx = 1/n)."""
+    rng = np.random.default_rng(seed)
+    f = np.fft.fftfreq(n)
+    fx, fy = np.meshgrid(f, f)
+    spec = np.exp(-((np.pi * corr_cells) ** 2) * (fx**2 + fy**2) / 2)
+    h = np.real(np.fft.ifft2(np.fft.fft2(rng.normal(size=(n, n))) * spec))
+    h -= h.mean()
+    return h * (sigma / h.std())
+
+
+def heightfield_surface(h: np.ndarray, dx: float) -> Surface:
+    v, f = heightfield_mesh(h, dx)
+    ny, nx = h.shape
+    return Surface("gaussian", v, f, (nx * dx, ny * dx), True, {}, heights=h, dx=dx)

@@ -1,0 +1,137 @@
+"""The package's layers: no module imports upwards, no private module is reached across
+layers, and the module import graph has no cycle (function-local imports included).
+
+Layers, bottom to top (docs/design.md, "Package layout"):
+core (errors, checkpoints, atomic, checks, vectors, stats) → analytic → surfaces → sim →
+analysis → app (scene, runner, sweep, bench, view, testing, cli).
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "microsim"
+LAYERS = [
+    (
+        "core",
+        (
+            "microsim.errors",
+            "microsim.checkpoints",
+            "microsim.atomic",
+            "microsim.checks",
+            "microsim.vectors",
+            "microsim.stats",
+        ),
+    ),
+    ("analytic", ("microsim.analytic",)),
+    ("surfaces", ("microsim.surfaces",)),
+    ("sim", ("microsim.sim",)),
+    ("analysis", ("microsim.analysis",)),
+    (
+        "app",
+        (
+            "microsim.scene",
+            "microsim.runner",
+            "microsim.sweep",
+            "microsim.bench",
+            "microsim.view",
+            "microsim.testing",
+            "microsim.cli",
+            "microsim.__main__",
+        ),
+    ),
+]
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+def _imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """Every microsim module ``name`` imports, anywhere in the file (absolute or relative)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            # "from pkg import sub" imports the submodule when there is one
+            targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in known else mod for a in node.names]
+        else:
+            continue
+        out.update(t for t in targets if t == "microsim" or t.startswith("microsim."))
+    return out
+
+
+def _layer(module: str) -> int:
+    for rank, (_, prefixes) in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return rank
+    raise AssertionError(f"{module} belongs to no layer: add it to LAYERS in {__file__}")
+
+
+MODULES = _modules()
+GRAPH = {name: _imports(name, path, set(MODULES)) - {name} for name, path in MODULES.items()}
+
+
+def test_every_module_has_a_layer():
+    for name in MODULES:
+        if name != "microsim":
+            _layer(name)
+
+
+@pytest.mark.parametrize("name", sorted(n for n in MODULES if n != "microsim"))
+def test_no_module_imports_upwards(name):
+    up = sorted(t for t in GRAPH[name] if t != "microsim" and _layer(t) > _layer(name))
+    assert not up, f"{name} ({LAYERS[_layer(name)][0]}) imports the higher layer(s): {up}"
+
+
+def test_no_private_module_is_reached_from_another_package():
+    bad = []
+    for name, targets in GRAPH.items():
+        for t in targets:
+            private = [p for p in t.split(".") if p.startswith("_") and p != "__init__"]
+            if private and t.rpartition(".")[0] != name.rpartition(".")[0]:
+                bad.append(f"{name} -> {t}")
+    assert not bad, bad
+
+
+def test_the_module_graph_has_no_cycle():
+    """Depth-first search over module → imported module (the package's own ``__init__``
+    re-exports are left out: importing ``microsim`` itself is the user's entry point)."""
+    graph = {
+        n: {t for t in ts if t != "microsim" and t in GRAPH}
+        for n, ts in GRAPH.items()
+        if n != "microsim"
+    }
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(n):
+        state[n] = 1
+        stack.append(n)
+        for t in sorted(graph[n]):
+            if state.get(t) == 1:
+                raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(t) :] + [t]))
+            if t not in state:
+                visit(t)
+        stack.pop()
+        state[n] = 2
+
+    for n in sorted(graph):
+        if n not in state:
+            visit(n)
