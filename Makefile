@@ -10,7 +10,7 @@ BIN    := $(VENV)/bin
 demo: $(VENV)/.installed
 	$(BIN)/microsim report --quick
 
-test: $(VENV)/.installed-test
+test: lint
 	$(BIN)/python -m pytest
 
 # inner loop while developing: no slow and no end-to-end tests
