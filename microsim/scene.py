@@ -26,7 +26,8 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     theta_i = [0, 30, 60, 80]          # degrees, each in [0, 90); at most 180 angles
     rays = 1_000_000                   # per incidence, an integer > 0 or "auto"
     theta_bins = 45                    # over θo ∈ [0°, 90°]; an integer in [1, 900]
-    phi_bins = 72                      # over φo ∈ [0°, 360°); an integer in [2, 1440]
+    phi_bins = 72                      # over Δφ = φo − φi folded to [0°, 180°] (half bins at
+                                       # 0° and 180°; microsim.sim.Bins); an integer in [2, 1440]
     realisations = 1                   # independent random surfaces (seeds seed, seed+1, …),
                                        # an integer in [1, 1000]
     seed = 0
