@@ -179,6 +179,9 @@ def main(argv=None) -> int:
     except EnvironmentFailure as exc:
         print(f"microsim: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_ENVIRONMENT
+    except BrokenPipeError:  # stdout closed early (`microsim models | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_ENVIRONMENT
     except OSError as exc:
         print(f"microsim: error: {_os_error(exc)}", file=sys.stderr)
         return EXIT_ENVIRONMENT

@@ -828,3 +828,15 @@ def test_a_missing_optional_extra_is_one_line_naming_the_extra(tmp_path, capsys,
 
     with pytest.raises(EnvironmentFailure, match=r"microsim\[view\]"):
         flat().mesh()
+
+
+def test_a_closed_stdout_stops_quietly():
+    """`microsim models | head -1`: no 'Broken pipe' error line, no traceback."""
+    r = subprocess.run(
+        f"{sys.executable} -m microsim.cli models | head -1",
+        shell=True,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.stdout.startswith("kind") and r.stderr == ""
