@@ -285,3 +285,41 @@ def test_smith_beats_vgroove_g_on_a_gaussian_surface():
 @pytest.mark.slow
 def test_smith_beats_vgroove_g_on_a_gaussian_surface_slow():
     _assert_gaussian_physics(_gaussian_comparison(4_000_000, [0, 1, 2, 3]))
+
+
+# --- ts-facets: the model of the facets that were traced --------------------------------------
+def _random_grooves(seed, n=200, realisations=2):
+    return [
+        sf.vgrooves(n, an.Beckmann(0.3), seed=1000 * seed + r, sampling="random")
+        for r in range(realisations)
+    ]
+
+
+def test_facet_model_of_other_surfaces_is_refused():
+    """Random tilts: each realisation has its own tilts, so ts-facets of the first tile is not
+    the model of the mean over two tiles (its χ² would measure the tile scatter, issue 13).
+    attach_models must refuse it; stratified tiles share their tilt set but not their mesh."""
+    from microsim.errors import UsageError
+    from microsim.sim.compare import attach_models, default_models
+
+    surfs = _random_grooves(0)
+    res = simulate(None, "aluminium", [30.0], rays=20_000, bins=Bins(8, 5), realisations=surfs)
+    with pytest.raises(UsageError, match="realisation"):
+        attach_models(res, default_models(surfs[0], "aluminium", azimuths=16))
+    attach_models(res, default_models(surfs, "aluminium", azimuths=16))  # the pool: accepted
+
+
+def test_facet_model_agrees_on_random_tilts_over_realisations():
+    """ts-facets built from the traced realisations is exact whatever the tilt sampling: its
+    χ² p-value and max-|z| pass at the run's own level (default azimuth copies, whose noise is
+    kept below the ray noise by ``VGROOVE_PAIRS``)."""
+    from microsim.sim.compare import attach_models, default_models
+
+    surfs = _random_grooves(3, n=300, realisations=3)
+    res = simulate(
+        None, "aluminium", [0.0, 60.0], rays=150_000, bins=Bins(12, 7), realisations=surfs, seed=2
+    )
+    specs = [m for m in default_models(surfs, "aluminium") if m.name == "ts-facets"]
+    attach_models(res, specs)
+    for v in V.verdicts_for_result(res):
+        assert v["agrees"], v

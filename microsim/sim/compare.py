@@ -30,6 +30,7 @@ m_real = ``surface.stats()["m_realised"]``):
 
 from __future__ import annotations
 
+import hashlib
 from typing import NamedTuple
 
 import numpy as np
@@ -50,13 +51,20 @@ __all__ = [
     "G1Measurement",
     "SHADOWING_SUFFIX",
     "VGROOVE_AZIMUTHS",
+    "VGROOVE_PAIRS",
+    "surface_fingerprint",
 ]
 
 SHADOWING_SUFFIX = {"vgroove": "vgroove", "smith": "smith", "smith-correlated": "smith-corr"}
-# copies per groove tilt in V-groove ts-facets (predict.bin_average_facets): ~3 s per θi for
-# 4000 grooves on 45 × 37 bins; its azimuthal noise per bin is ~0.1–0.2 × the stderr of a
-# 1e6-ray run (measured with seeded replicates); raise it for much longer runs
+# least copies per groove tilt in V-groove ts-facets (predict.bin_average_facets): ~3 s per θi
+# for 4000 grooves on 45 × 37 bins
 VGROOVE_AZIMUTHS = 256
+# (distinct tilt, azimuth) pairs V-groove ts-facets uses by default (``azimuths=None``): the
+# model's azimuthal noise variance per bin falls as 1/pairs, and is not in the verdict's σ.
+# With 500 grooves, 256 copies (1.3e5 pairs) gave χ²/dof 1.3–2.0 against exact 4e5-ray runs
+# at θi 30–80° (seeds 0–2, Bins(30, 19)); 2e6 pairs gave 0.9–1.15. Its variance relative to
+# the ray variance grows ∝ rays/pairs: pass a larger ``azimuths`` for runs of ≫ 1e6 rays.
+VGROOVE_PAIRS = 2_000_000
 
 
 def _surfaces_and_ndf(scene_or_surfaces, ndf):
@@ -102,7 +110,7 @@ def _pooled_facets(surfaces):
 
 
 def default_models(
-    scene_or_surface, material, ndf=None, *, azimuths: int = VGROOVE_AZIMUTHS
+    scene_or_surface, material, ndf=None, *, azimuths: int | None = None
 ) -> list[ModelSpec]:
     """The standard model set for a Scene, a Surface, or the realisations of one random scene
     (a sequence of Surfaces: ``ts-facets`` and the realised m then pool all of them, see
@@ -112,7 +120,12 @@ def default_models(
     NDF (default: the surface's ``ensemble_ndf`` — the V-groove surface's source NDF,
     Beckmann(nominal m) for Gaussian, Beckmann(predicted mesh m) for ABC heightfields, as
     ``Scene.ndf``). ``azimuths``: azimuth copies of ``ts-facets`` on surfaces whose
-    ``azimuth_average`` is set (V-grooves).
+    ``azimuth_average`` is set (V-grooves); default ⌈``VGROOVE_PAIRS`` / distinct tilts⌉, at
+    least ``VGROOVE_AZIMUTHS`` and at most 2¹⁶.
+
+    ``ts-facets`` records the fingerprints of the surfaces it was built from
+    (``params["fingerprints"]``); ``attach_models`` refuses a result traced over other
+    realisations (a model of one tile compared with the mean of several is not exact).
     """
     surfaces, ndf = _surfaces_and_ndf(scene_or_surface, ndf)
     resolve_material(material)  # validate now, not at predict time
@@ -126,12 +139,17 @@ def default_models(
             raise UsageError(
                 f"ndf must be given for a {surfaces[0].kind} surface without an ensemble_ndf"
             )
-        copies = int(azimuths) if surfaces[0].azimuth_average else None
+        copies = None
+        if surfaces[0].azimuth_average:
+            copies = int(azimuths) if azimuths is not None else _auto_azimuths(normals)
         specs = [
             ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, material) for k in kinds
         ]
         return specs + [
-            ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies)
+            _tagged(
+                ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies),
+                surfaces,
+            )
         ]
     ndfs = [("realised", Beckmann(m_real))]
     if ndf is not None:
@@ -141,14 +159,57 @@ def default_models(
         for label, d in ndfs
         for k in kinds
     ]
-    return specs + [ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", material)]
+    facets = ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", material)
+    return specs + [_tagged(facets, surfaces)]
+
+
+def _auto_azimuths(normals) -> int:
+    """Azimuth copies giving ``VGROOVE_PAIRS`` (distinct tilt, azimuth) pairs (tilts rounded
+    to 1e-12 rad as ``bin_average_facets`` merges them), clipped to [256, 2¹⁶]."""
+    tilts = np.round(np.arctan2(np.hypot(normals[:, 0], normals[:, 1]), normals[:, 2]), 12)
+    n = np.unique(tilts).size
+    return int(np.clip(-(-VGROOVE_PAIRS // n), VGROOVE_AZIMUTHS, 2**16))
+
+
+def surface_fingerprint(surface) -> str:
+    """The traced surface's identity as ``simulate`` records it (``meta["surface"]`` or
+    ``meta["realisations"][r]``, key "fingerprint"): SHA-1 of vertices (float64) and faces
+    (int64), first 16 hex digits."""
+    digest = hashlib.sha1(np.ascontiguousarray(surface.vertices, dtype=np.float64).tobytes())
+    digest.update(np.ascontiguousarray(surface.faces, dtype=np.int64).tobytes())
+    return digest.hexdigest()[:16]
+
+
+def _tagged(spec: ModelSpec, surfaces) -> ModelSpec:
+    """``spec`` with the sorted fingerprints of the surfaces its facets come from."""
+    fps = tuple(sorted(surface_fingerprint(s) for s in surfaces))
+    return ModelSpec(spec.name, spec.kind, {**spec.params, "fingerprints": fps})
+
+
+def _result_fingerprints(result: Result) -> tuple[str, ...] | None:
+    """Sorted fingerprints of the surfaces ``result`` was traced over (None if not recorded)."""
+    metas = result.meta.get("realisations") or [result.meta.get("surface")]
+    fps = [m.get("fingerprint") for m in metas if isinstance(m, dict)]
+    if not fps or None in fps or len(fps) != len(metas):
+        return None
+    return tuple(sorted(fps))
 
 
 def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
     """Fill ``result.models`` (name → (T, Θ, Φ) sr⁻¹) with the bin-averaged predictions of
     ``specs`` on the result's bins, θi and φi (one ``predict`` call per distinct φi).
-    Returns ``result`` (modified in place)."""
+    Facet models tagged with surface fingerprints (``default_models``) must match the result's
+    realisations, else UsageError. Returns ``result`` (modified in place)."""
     specs = list(specs)
+    traced = _result_fingerprints(result)
+    for s in specs:
+        built = s.params.get("fingerprints") if s.kind == "facets" else None
+        if built is not None and traced is not None and tuple(built) != traced:
+            raise UsageError(
+                f"specs: model {s.name!r} was built from {len(built)} surface(s) other than the "
+                f"{len(traced)} realisation(s) the result was traced over; pass the same "
+                f"surfaces (the list of realisations) to default_models"
+            )
     out = {s.name: np.empty((len(result.theta_i),) + result.bins.shape) for s in specs}
     phis = np.asarray(result.phi_i, dtype=np.float64)
     for phi in np.unique(phis):
