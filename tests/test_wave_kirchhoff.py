@@ -23,7 +23,7 @@ def test_fft_interpolation_matches_direct_sum(theta_i, rms):
     |I| ≤ 1, plus rounding of N² terms), smooth and rough (rms 0.8 λ) tiles, oblique azimuth."""
     rng = np.random.default_rng(3)
     h = rms * rng.standard_normal((24, 20))
-    a = kirchhoff_orders(h, 0.23, 1.0, theta_i, 25.0, material="aluminium")
+    a = kirchhoff_orders(h, 0.23, 1.0, theta_i, 25.0, material="aluminium", check_sampling=False)
     b = direct_orders(h, 0.23, 1.0, theta_i, 25.0, material="aluminium")
     assert np.array_equal(a.m, b.m) and np.array_equal(a.n, b.n)
     assert np.max(np.abs(a.amplitude - b.amplitude)) < 1e-10
@@ -75,7 +75,7 @@ def test_grating_orders_follow_bessel_closed_form():
 def test_incident_fresnel_option():
     """fresnel_angle="incident" uses R(θi) for every order; "half" uses R(wi·h)."""
     rng = np.random.default_rng(0)
-    h = 0.05 * rng.standard_normal((16, 16))
+    h = 0.01 * rng.standard_normal((16, 16))
     a = kirchhoff_orders(h, 0.25, 1.0, 40.0, material=1.5, fresnel_angle="incident")
     b = kirchhoff_orders(h, 0.25, 1.0, 40.0, material=1.5, fresnel_angle="half")
     wi = np.array([math.sin(math.radians(40)), 0, math.cos(math.radians(40))])
@@ -106,3 +106,6 @@ def test_bad_input():
         kirchhoff_orders(z, 0.2, 1.0, 0.0, fresnel_angle="local")
     with pytest.raises(UsageError, match="too coarse"):
         kirchhoff_orders(z, 1.0, 1.0, 0.0)
+    steep = np.tile(np.array([0.0, 0.4] * 4), (8, 1))  # phase step 2k·0.4 ≈ 5 rad per sample
+    with pytest.raises(UsageError, match=r"too coarse.*need dx/upsample ≤"):
+        kirchhoff_orders(steep, 0.2, 1.0, 0.0)

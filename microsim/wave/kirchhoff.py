@@ -159,6 +159,28 @@ def _upsampled(h: np.ndarray, u: int) -> np.ndarray:
     return np.real(np.fft.ifft2(big)) * (u * u)
 
 
+def _check_phase_sampling(g: np.ndarray, step: float, k: float, wi, *, upsample: int) -> None:
+    """UsageError unless the integrand exp(i(p·x + q_z h)) is sampled below its Nyquist limit:
+    per axis, the largest order phase step |p|·step ≤ k(1 + sin θi)·step plus the largest
+    height phase step q_z,max·|Δh| ≤ 2k·|Δh| between neighbours must stay below π/2 (a quarter
+    of the FFT's band, so that the aliased part of the band-limited integrand is negligible)."""
+    dh = max(
+        float(np.max(np.abs(np.diff(g, axis=1, append=g[:, :1])))),
+        float(np.max(np.abs(np.diff(g, axis=0, append=g[:1, :])))),
+    )
+    s_i = math.hypot(wi[0], wi[1])
+    order_step = k * (1.0 + s_i) * step
+    height_step = k * (wi[2] + 1.0) * dh
+    if order_step + height_step > math.pi:
+        slope = dh / step
+        need = math.pi / (k * ((1.0 + s_i) + (wi[2] + 1.0) * slope))
+        raise UsageError(
+            f"dx = {step * upsample:g} is too coarse for wavelength {2 * math.pi / k:g}: the "
+            f"height phase steps up to {height_step:.3g} rad between grid points (largest slope "
+            f"{slope:.3g}); need dx/upsample ≤ {need:.3g} (upsample = {upsample})"
+        )
+
+
 def _nodes_needed(half_width: float, H: float, tol: float) -> int:
     """Smallest n with (WH/2)^n / n! < tol (bound on |J_n(WH)|), at least 2."""
     z = 0.5 * half_width * H
@@ -181,10 +203,14 @@ def kirchhoff_orders(
     upsample=1,
     tol=1e-12,
     workers=2,
+    check_sampling=True,
 ) -> Orders:
     """Order powers of a periodic heightfield ``heights`` (ny, nx; row = y) with spacing ``dx``
     at wavelength ``wavelength`` (same unit) and incidence (θi, φi) in degrees (module
-    docstring: formulation, Fresnel choice, q_z interpolation to ``tol``)."""
+    docstring: formulation, Fresnel choice, q_z interpolation to ``tol``). The grid must sample
+    the integrand's phase (``_check_phase_sampling``: UsageError naming the dx needed) unless
+    ``check_sampling`` is False (the result is then the trapezoid sum on the grid, as
+    ``direct_orders`` computes it)."""
     h, dx, lam, u = _check(heights, dx, wavelength, theta_i_deg, fresnel_angle, upsample)
     ny, nx = h.shape
     tile = (nx * dx, ny * dx)
@@ -198,6 +224,8 @@ def kirchhoff_orders(
             f"propagating orders (need dx·upsample⁻¹ < λ/4 = {lam / 4:g})"
         )
     k = 2.0 * math.pi / lam
+    if check_sampling:
+        _check_phase_sampling(g, dx / u, k, wi, upsample=u)
     hc = 0.5 * (g.max() + g.min())
     gc = g - hc
     H = float(np.max(np.abs(gc)))
