@@ -7,6 +7,8 @@ order of visit may differ. Those ties are rare (measure-zero for random rays); t
 bounded here at 1e-4 of the rays.
 """
 
+import functools
+
 import numpy as np
 import pytest
 from embreex import mesh_construction as mc
@@ -21,16 +23,21 @@ pytestmark = pytest.mark.skipif(
 TIES = 1e-4  # allowed fraction of edge/vertex ties
 
 
-def _scenes(surface):
+@functools.cache
+def _bound(width):
+    return ep._Lib(ep.library_path(), width)
+
+
+def _scenes(surface, width=None):
     v = np.asarray(surface.vertices, dtype=np.float32)
     f = np.asarray(surface.faces).astype(np.int32)
     ref = rs.EmbreeScene(robust=True)
     mc.TriangleMesh(ref, v, f)
-    return ref, ep.PacketScene(v, f)
+    return ref, ep.PacketScene(v, f, _bound=None if width is None else _bound(width))
 
 
-def _compare(surface, o, d, tf):
-    ref, pk = _scenes(surface)
+def _compare(surface, o, d, tf, width=None):
+    ref, pk = _scenes(surface, width)
     r = ref.run(o, d if len(d) == len(o) else np.repeat(d, len(o), 0), dists=tf, output=1)
     prim, t = pk.run(o, d, tf)
     assert 0.05 < np.mean(prim >= 0) < 0.95  # hits and misses both occur: not vacuous
@@ -55,14 +62,23 @@ def _random_rays(n, zlo, zhi, seed, tmax=3.0):
     return o.T.astype(np.float32), d.astype(np.float32), tf.astype(np.float32)
 
 
-def test_packets_equal_embreex_on_a_random_heightfield():
+@pytest.mark.parametrize("width", [None, 4, 16])  # native width (8 or 16), 4, 16
+def test_packets_equal_embreex_on_a_random_heightfield(width):
     s = heightfield_surface(random_heights(sigma=0.03, seed=5), 1 / 64)
     z = np.asarray(s.vertices)[:, 2]
     o, d, tf = _random_rays(50_003, z.min(), z.max() + 0.05, 1)  # partial last packet
-    _compare(s, o, d, tf)
+    _compare(s, o, d, tf, width)
+    if width is not None:
+        return
     # one shared direction for all rays, falling 40° from the normal
     shared = np.array([[np.sin(0.7), 0.0, -np.cos(0.7)]], dtype=np.float32)
     _compare(s, o, shared, tf)
+
+
+def test_native_width_is_chosen():
+    lib = ep._lib()
+    assert lib.width in (4, 8, 16)
+    assert lib.width == max(lib.native, default=8)
 
 
 def test_packets_equal_embreex_on_vgrooves_from_the_tile_walls():

@@ -1,17 +1,23 @@
-"""Coherent 16-ray Embree packets over the Embree 4 library that embreex bundles (ctypes).
+"""Coherent Embree ray packets over the Embree 4 library that embreex bundles (ctypes).
 
 embreex traces one ray per call (``rtcIntersect1``); Embree's packet calls
-``rtcIntersect16``/``rtcOccluded16`` flagged ``RTC_RAY_QUERY_FLAG_COHERENT`` trace spatially
-ordered rays several times faster (issue 14). This module loads the ``libembree4`` shared
-library shipped in the embreex wheel (``embreex.libs/`` or next to the extension modules),
-binds the handful of C entry points it needs with ctypes, and builds a robust triangle scene
-from (V, 3) float32 vertices and (F, 3) uint32 faces in one ``memmove`` per buffer (Embree
-allocates the padded buffers with ``rtcSetNewGeometryBuffer``).
+``rtcIntersect{4,8,16}``/``rtcOccluded{4,8,16}`` flagged ``RTC_RAY_QUERY_FLAG_COHERENT`` trace
+coherent rays in SIMD lanes (issue 14). The width used is the widest the library traces
+natively on this CPU (device properties ``RTC_DEVICE_PROPERTY_NATIVE_RAY{16,8,4}_SUPPORTED``):
+16 with AVX-512, 8 with AVX2. On an AVX2 CPU, ``rtcIntersect16`` has no native intersector and
+Embree splits it into single rays (measured: no gain over embreex).
+
+This module loads the ``libembree4`` shared library shipped in the embreex wheel
+(``embreex.libs/`` or next to the extension modules), binds the handful of C entry points it
+needs with ctypes, and builds a robust triangle scene from (V, 3) float32 vertices and (F, 3)
+uint32 faces in one ``memmove`` per buffer (Embree allocates the padded buffers with
+``rtcSetNewGeometryBuffer``).
 
 Layouts assumed (Embree 4.x, ``rtcore_ray.h``/``rtcore_scene.h``, RTC_MAX_INSTANCE_LEVEL_COUNT
-1): ``RTCRayHit16`` is structure-of-arrays, 16 lanes of 4 bytes per field, in the order
-org_x org_y org_z tnear dir_x dir_y dir_z time tfar mask id flags | Ng_x Ng_y Ng_z u v primID
-geomID instID (+ instPrimID in 4.3+), 64-byte aligned; ``RTCRay16`` is its first 12 fields.
+1): ``RTCRayHitW`` (W = 4, 8, 16) is structure-of-arrays, W lanes of 4 bytes per field, in
+the order org_x org_y org_z tnear dir_x dir_y dir_z time tfar mask id flags | Ng_x Ng_y Ng_z
+u v primID geomID instID (+ instPrimID in 4.3+), 64-byte aligned; ``RTCRayW`` is its first
+12 fields.
 ``RTCIntersectArguments``/``RTCOccludedArguments`` = {uint32 flags, uint32 feature_mask,
 context*, filter*, intersect/occluded*, [float minWidthDistanceFactor]} (zero padding beyond).
 On load, ``packets_available`` traces one triangle with a known answer through these layouts;
@@ -55,13 +61,11 @@ _DEVICE_PROPERTY_VERSION_MAJOR = 1
 _DEVICE_PROPERTY_VERSION = 0
 INVALID_ID = 0xFFFFFFFF
 
-# RTCRayHit16 field offsets in 4-byte words (16 lanes per field)
-W = 16
-ORG_X, ORG_Y, ORG_Z, TNEAR, DIR_X, DIR_Y, DIR_Z, TIME, TFAR, MASK, RID, RFLAGS = (
-    i * W for i in range(12)
-)
-NG_X, NG_Y, NG_Z, U, V, PRIM_ID, GEOM_ID, INST_ID = (i * W for i in range(12, 20))
-PACKET_WORDS = 512  # 2 KiB per packet buffer: room for instPrimID and future fields
+# RTCRayHitW fields in order (offset of field k, lane j: k * W + j 4-byte words)
+ORG_X, ORG_Y, ORG_Z, TNEAR, DIR_X, DIR_Y, DIR_Z, TIME, TFAR, MASK, RID, RFLAGS = range(12)
+NG_X, NG_Y, NG_Z, U, V, PRIM_ID, GEOM_ID, INST_ID = range(12, 20)
+_NATIVE_RAY_SUPPORTED = {4: 32, 8: 33, 16: 34}  # RTC_DEVICE_PROPERTY_NATIVE_RAYW_SUPPORTED
+PACKET_WORDS = 512  # 2 KiB per packet buffer: 16 lanes x 32 fields (room for instPrimID)
 ARGS_WORDS = 16  # 64 bytes for RTCIntersectArguments / RTCOccludedArguments
 
 
@@ -102,7 +106,7 @@ def aligned(n_words: int, dtype=np.float32, align: int = 64) -> np.ndarray:
 class _Lib:
     """The bound entry points (ctypes) and one Embree device."""
 
-    def __init__(self, path: str):
+    def __init__(self, path: str, width: int | None = None):
         try:
             lib = ctypes.CDLL(path)
         except OSError as exc:
@@ -122,9 +126,10 @@ class _Lib:
             "rtcCommitScene": (None, [vp]),
             "rtcReleaseScene": (None, [vp]),
             # packet calls: pointers passed as machine-word integers (numba-callable)
-            "rtcIntersect16": (None, [ctypes.c_ssize_t] * 4),
-            "rtcOccluded16": (None, [ctypes.c_ssize_t] * 4),
         }
+        for w in _NATIVE_RAY_SUPPORTED:
+            sigs[f"rtcIntersect{w}"] = (None, [ctypes.c_ssize_t] * 4)
+            sigs[f"rtcOccluded{w}"] = (None, [ctypes.c_ssize_t] * 4)
         for name, (res, args) in sigs.items():
             try:
                 fn = getattr(lib, name)
@@ -140,6 +145,13 @@ class _Lib:
         self.version = int(lib.rtcGetDeviceProperty(self.device, _DEVICE_PROPERTY_VERSION))
         if major != 4:
             raise PacketBindingError(f"{path} is Embree {major}, not Embree 4")
+        native = [
+            w
+            for w, prop in _NATIVE_RAY_SUPPORTED.items()
+            if lib.rtcGetDeviceProperty(self.device, prop) == 1
+        ]
+        self.width = width or (max(native) if native else 8)  # lanes per packet call
+        self.native = native
 
     def check(self, what: str) -> None:
         err = self.rtcGetDeviceError(self.device)
@@ -175,13 +187,18 @@ def _make_kernels(lib: _Lib):
     """numba kernels calling the bound packet functions (compiled once per process)."""
     import numba as nb
 
-    intersect16 = lib.rtcIntersect16
-    occluded16 = lib.rtcOccluded16
+    W = lib.width
+    intersect_w = getattr(lib, f"rtcIntersect{W}")
+    occluded_w = getattr(lib, f"rtcOccluded{W}")
     u_all = np.uint32(INVALID_ID)
+    ox, oy, oz, tn = ORG_X * W, ORG_Y * W, ORG_Z * W, TNEAR * W
+    dx, dy, dz, tm, tfr = DIR_X * W, DIR_Y * W, DIR_Z * W, TIME * W, TFAR * W
+    msk, rid, rfl = MASK * W, RID * W, RFLAGS * W
+    pid, gid, iid = PRIM_ID * W, GEOM_ID * W, INST_ID * W
 
     @nb.njit(nogil=True, cache=False)
     def trace(scene, o, d, tfar, occlusion, prim, t_out, buf, ubuf, valid, args):
-        """Rays o[i] + t d[i] (d of shape (1, 3): shared), t in [0, tfar[i]], 16 per call.
+        """Rays o[i] + t d[i] (d of shape (1, 3): shared), t in [0, tfar[i]], W per call.
         Intersection: prim[i] = primID (−1 without a hit), t_out[i] = hit distance;
         occlusion: prim[i] = 0 if blocked else −1."""
         n = o.shape[0]
@@ -195,34 +212,34 @@ def _make_kernels(lib: _Lib):
                 if j < m:
                     i = base + j
                     k = 0 if shared else i
-                    buf[ORG_X + j] = o[i, 0]
-                    buf[ORG_Y + j] = o[i, 1]
-                    buf[ORG_Z + j] = o[i, 2]
-                    buf[TNEAR + j] = 0.0
-                    buf[DIR_X + j] = d[k, 0]
-                    buf[DIR_Y + j] = d[k, 1]
-                    buf[DIR_Z + j] = d[k, 2]
-                    buf[TIME + j] = 0.0
-                    buf[TFAR + j] = tfar[i]
-                    ubuf[MASK + j] = u_all
-                    ubuf[RID + j] = 0
-                    ubuf[RFLAGS + j] = 0
-                    ubuf[GEOM_ID + j] = u_all
-                    ubuf[PRIM_ID + j] = u_all
-                    ubuf[INST_ID + j] = u_all
+                    buf[ox + j] = o[i, 0]
+                    buf[oy + j] = o[i, 1]
+                    buf[oz + j] = o[i, 2]
+                    buf[tn + j] = 0.0
+                    buf[dx + j] = d[k, 0]
+                    buf[dy + j] = d[k, 1]
+                    buf[dz + j] = d[k, 2]
+                    buf[tm + j] = 0.0
+                    buf[tfr + j] = tfar[i]
+                    ubuf[msk + j] = u_all
+                    ubuf[rid + j] = 0
+                    ubuf[rfl + j] = 0
+                    ubuf[gid + j] = u_all
+                    ubuf[pid + j] = u_all
+                    ubuf[iid + j] = u_all
                     valid[j] = -1
                 else:
                     valid[j] = 0
             if occlusion:
-                occluded16(vptr, scene, bptr, aptr)
+                occluded_w(vptr, scene, bptr, aptr)
                 for j in range(m):
-                    prim[base + j] = 0 if buf[TFAR + j] == -np.inf else -1
+                    prim[base + j] = 0 if buf[tfr + j] == -np.inf else -1
             else:
-                intersect16(vptr, scene, bptr, aptr)
+                intersect_w(vptr, scene, bptr, aptr)
                 for j in range(m):
-                    hit = ubuf[GEOM_ID + j] != u_all
-                    prim[base + j] = np.int32(ubuf[PRIM_ID + j]) if hit else -1
-                    t_out[base + j] = buf[TFAR + j]
+                    hit = ubuf[gid + j] != u_all
+                    prim[base + j] = np.int32(ubuf[pid + j]) if hit else -1
+                    t_out[base + j] = buf[tfr + j]
         return n
 
     return trace
@@ -233,11 +250,11 @@ def _buffers():
     args = aligned(ARGS_WORDS, np.uint32)
     args[0] = _QUERY_FLAG_COHERENT
     args[1] = _FEATURE_FLAG_ALL  # context/filter/callback pointers stay NULL
-    return buf, buf.view(np.uint32), aligned(W, np.int32), args
+    return buf, buf.view(np.uint32), aligned(16, np.int32), args
 
 
 class PacketScene:
-    """Robust Embree 4 triangle scene traced in coherent 16-ray packets.
+    """Robust Embree 4 triangle scene traced in coherent ray packets (``width`` lanes).
 
     ``vertices`` (V, 3) and ``faces`` (F, 3) are copied once each into Embree's own
     buffers (float32 / uint32); the BVH is built here (``rtcCommitScene``)."""
@@ -248,7 +265,7 @@ class PacketScene:
         f = np.ascontiguousarray(faces, dtype=np.uint32)
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
             raise ValueError("vertices and faces must be (V, 3) and (F, 3) arrays")
-        self._lib = lib
+        self._lib, self.width = lib, lib.width
         self.scene = lib.rtcNewScene(lib.device)
         lib.rtcSetSceneFlags(self.scene, _SCENE_FLAG_ROBUST)
         geom = lib.rtcNewGeometry(lib.device, _GEOMETRY_TYPE_TRIANGLE)
@@ -300,7 +317,7 @@ def _self_test(lib: _Lib) -> None:
         raise
     except Exception as exc:  # noqa: BLE001 - any failure means the binding is unusable
         raise PacketBindingError(f"building a test scene failed ({exc})") from exc
-    n = 20  # 16 + 4: one full packet and one partial one
+    n = 20  # one or more full packets and a partial one
     o = np.zeros((n, 3), dtype=np.float32)
     o[:, 0] = np.where(np.arange(n) % 2 == 0, 0.25, 2.0)  # even lanes above the triangle
     o[:, 1] = 0.25
@@ -319,6 +336,6 @@ def _self_test(lib: _Lib) -> None:
     )
     if not ok:
         raise PacketBindingError(
-            f"packet self-test failed on {lib.path}: the RTCRayHit16 / argument layouts are "
+            f"packet self-test failed on {lib.path}: the RTCRayHit / argument layouts are "
             "not what microsim.sim.embree_packets expects"
         )
