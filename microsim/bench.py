@@ -6,6 +6,12 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
 * raw embreex rays/s on 1 and 2 threads for exactly the rays the pipeline casts: every
   primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit, in batches
   of 65 536 (float32 arrays prepared beforehand, so only Embree is timed);
+* the same rays traced in coherent Embree packets (``microsim.sim.embree_packets``: the
+  Embree 4 library embreex bundles, called at its native packet width through ctypes), rays/s
+  on 1 and 2 threads, measured alternately with the embreex figure, best of five each;
+* the tracer's fixed cost: building the Embree scene and BVH of the mesh with embreex
+  (``TriangleMesh`` + first query, which commits) and with ``PacketScene`` (one copy per
+  buffer + ``rtcCommitScene``), best of three;
 * the pipeline's samples/s (``simulate``: primary ray, Fresnel, reflection, masking ray,
   tally; scene build — mesh, Embree BVH — excluded, the per-incidence facet table included)
   on 1 and 2 threads and its ratio to the raw figure, both expressed per sample (a sample =
@@ -39,6 +45,7 @@ __all__ = [
     "BenchConfig",
     "bench_config",
     "throughput",
+    "build_times",
     "peak_rss_mb",
     "time_to_accuracy",
     "run_bench",
@@ -120,24 +127,80 @@ def _time_raw(tracer, primary, masking, threads: int) -> float:
         return time.perf_counter() - t0
 
 
+def _time_packets(scene, primary, masking, threads: int) -> float:
+    """Wall seconds the packet scene needs for both ray sets in BATCH-sized calls."""
+    (po, pd), (mo, md) = primary, masking
+    far = np.full(BATCH, 1e37, dtype=np.float32)  # embreex's default tfar
+
+    def prim_batch(a):
+        o = po[a : a + BATCH]
+        scene.run(o, pd, far[: len(o)])
+
+    def mask_batch(a):
+        o = mo[a : a + BATCH]
+        scene.run(o, md[a : a + BATCH], far[: len(o)], occlusion=True)
+
+    with ThreadPoolExecutor(threads) as pool:
+        t0 = time.perf_counter()
+        list(pool.map(prim_batch, range(0, len(po), BATCH)))
+        list(pool.map(mask_batch, range(0, len(mo), BATCH)))
+        return time.perf_counter() - t0
+
+
+def build_times(surface, repeat: int = 3) -> dict:
+    """Seconds to build the Embree scene + BVH of ``surface``'s mesh, best of ``repeat``:
+    {"embreex": s, "packets": s or None, "packets_unavailable": reason or None}."""
+    from embreex import mesh_construction as mc
+    from embreex import rtcore_scene as rs
+
+    from microsim.sim import embree_packets as ep
+
+    v = np.asarray(surface.vertices, dtype=np.float64)
+    f = np.asarray(surface.faces)
+    reason = ep.binding_error()
+    best = {"embreex": np.inf, "packets": np.inf if reason is None else None}
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        scene = rs.EmbreeScene(robust=True)
+        mc.TriangleMesh(scene, v.astype(np.float32), f.astype(np.int32))
+        one = np.zeros((1, 3), dtype=np.float32)
+        scene.run(one, np.array([[0.0, 0.0, -1.0]], dtype=np.float32), dists=0.0)
+        best["embreex"] = min(best["embreex"], time.perf_counter() - t0)
+        del scene
+        if reason is None:
+            t0 = time.perf_counter()
+            ep.PacketScene(v, f)
+            best["packets"] = min(best["packets"], time.perf_counter() - t0)
+    return {**best, "packets_unavailable": reason}
+
+
 def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) -> tuple:
     """Raw embreex throughput for the pipeline's own rays and the pipeline's (``simulate``,
     scene build excluded), on 1 and 2 threads, best of ``repeat`` each. The two are measured
     alternately (raw, pipeline, raw, …), so that a transient slowdown of the shared machine
     hits both rather than one. Returns (raw, pipeline): raw = {"rays", "primary_rays",
     "masking_rays", "rays_per_s": {1: .., 2: ..}, "samples_per_s": {1: .., 2: ..}} (rays/s
-    counts both kinds; samples/s = primary rays/s), pipeline = {1: samples/s, 2: samples/s}."""
+    counts both kinds; samples/s = primary rays/s), pipeline = {1: samples/s, 2: samples/s}.
+    raw also holds "packet_rays_per_s" ({1: .., 2: ..}, None when the packet binding is
+    unavailable), "packet_width" and "packets_unavailable" (the reason, or None)."""
     from microsim.sim import Tracer, simulate
+    from microsim.sim import embree_packets as ep
     from microsim.vectors import spherical_deg
 
     surface = surface if surface is not None else _surface(cfg)
     tracer = Tracer(surface)
     primary, masking = _ray_set(tracer, spherical_deg(cfg.theta_i, 0.0), cfg.rays)
     n_p, n_m = len(primary[0]), len(masking[0])
+    reason = ep.binding_error()
+    packets = None if reason else ep.PacketScene(tracer.vertices, tracer.faces)
     best_raw, pipe = {1: np.inf, 2: np.inf}, {1: 0.0, 2: 0.0}
+    best_pk = {1: np.inf, 2: np.inf}
     for _ in range(repeat):
         for threads in (1, 2):
             best_raw[threads] = min(best_raw[threads], _time_raw(tracer, primary, masking, threads))
+            if packets is not None:
+                dt = _time_packets(packets, primary, masking, threads)
+                best_pk[threads] = min(best_pk[threads], dt)
             res = simulate(
                 surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(), threads=threads
             )
@@ -148,6 +211,11 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
         "masking_rays": n_m,
         "rays_per_s": {t: (n_p + n_m) / best_raw[t] for t in (1, 2)},
         "samples_per_s": {t: n_p / best_raw[t] for t in (1, 2)},
+        "packet_rays_per_s": None
+        if packets is None
+        else {t: (n_p + n_m) / best_pk[t] for t in (1, 2)},
+        "packet_width": None if packets is None else packets.width,
+        "packets_unavailable": reason,
     }
     return raw, pipe
 
@@ -245,6 +313,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
         "raw": raw,
         "pipeline_samples_per_s": pipe,
         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
+        "build_seconds": build_times(surface),
         "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
     }
     if not cfg.skip_accuracy:
@@ -263,9 +332,25 @@ def format_bench(b: dict) -> str:
         f"{'raw embreex rays/s':28s}{raw['rays_per_s'][1]:14.4g}{raw['rays_per_s'][2]:14.4g}",
         f"{'raw embreex samples/s':28s}{raw['samples_per_s'][1]:14.4g}"
         f"{raw['samples_per_s'][2]:14.4g}",
+    ]
+    pk = raw.get("packet_rays_per_s")
+    if pk:
+        w = raw["packet_width"]
+        lines += [
+            f"{f'raw packets ({w} lanes) rays/s':28s}{pk[1]:14.4g}{pk[2]:14.4g}",
+            f"{'packets / embreex':28s}{pk[1] / raw['rays_per_s'][1]:14.2f}"
+            f"{pk[2] / raw['rays_per_s'][2]:14.2f}",
+        ]
+    elif "packets_unavailable" in raw:
+        lines.append(f"packets unavailable: {raw['packets_unavailable']}")
+    lines += [
         f"{'pipeline samples/s':28s}{pipe[1]:14.4g}{pipe[2]:14.4g}",
         f"{'pipeline / raw':28s}{ratio[1]:14.1%}{ratio[2]:14.1%}",
     ]
+    bt = b.get("build_seconds")
+    if bt:
+        pk_s = "unavailable" if bt["packets"] is None else f"{bt['packets']:.3f} s"
+        lines.append(f"scene + BVH build: embreex {bt['embreex']:.3f} s, packets {pk_s}")
     lines += [f"peak RSS, {r} rays: {mb:.0f} MB" for r, mb in b["peak_rss_mb"].items()]
     t = b.get("time_to_accuracy")
     if t:

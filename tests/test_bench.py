@@ -11,7 +11,14 @@ import pytest
 from support import heightfield_surface, random_heights
 
 from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.bench import BenchConfig, add_bench_command, format_bench, peak_rss_mb, throughput
+from microsim.bench import (
+    BenchConfig,
+    add_bench_command,
+    build_times,
+    format_bench,
+    peak_rss_mb,
+    throughput,
+)
 from microsim.sim import BLOCK, Bins, paths, simulate, streams
 from microsim.sim.tallies import Tally, chunk_tallies
 from microsim.surfaces.surface import flat
@@ -99,6 +106,11 @@ def test_bench_figures_are_measured_and_printable():
     for t in (1, 2):
         assert np.isfinite(raw["rays_per_s"][t]) and raw["rays_per_s"][t] > 0
         assert np.isfinite(pipe[t]) and pipe[t] > 0
+    if raw["packets_unavailable"] is None:
+        assert raw["packet_width"] in (4, 8, 16)
+        assert all(np.isfinite(raw["packet_rays_per_s"][t]) for t in (1, 2))
+    else:
+        assert raw["packet_rays_per_s"] is None
     b = {
         "config": {"target": 0.01},
         "load_average": [0.0],
@@ -108,9 +120,12 @@ def test_bench_figures_are_measured_and_printable():
         "pipeline_samples_per_s": pipe,
         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
         "peak_rss_mb": {2**14: 100.0},
+        "build_seconds": build_times(flat(), repeat=1),
     }
+    assert b["build_seconds"]["embreex"] > 0
     text = format_bench(b)
-    assert "raw embreex rays/s" in text and "pipeline / raw" in text
+    assert "raw embreex rays/s" in text and "pipeline / raw" in text and "BVH build" in text
+    assert ("packets / embreex" in text) == (raw["packets_unavailable"] is None)
     json.dumps(b)
 
 
