@@ -3,7 +3,7 @@ layers, and the module import graph has no cycle (function-local imports include
 
 Layers, bottom to top (docs/design.md, "Package layout"):
 core (errors, checkpoints, atomic, checks, vectors, stats) → analytic → surfaces → sim →
-analysis → app (scene, runner, sweep, bench, view, testing, cli).
+wave → analysis → app (scene, runner, sweep, bench, view, testing, cli).
 """
 
 import ast
@@ -27,6 +27,7 @@ LAYERS = [
     ("analytic", ("microsim.analytic",)),
     ("surfaces", ("microsim.surfaces",)),
     ("sim", ("microsim.sim",)),
+    ("wave", ("microsim.wave",)),
     ("analysis", ("microsim.analysis",)),
     (
         "app",
