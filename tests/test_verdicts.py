@@ -323,3 +323,69 @@ def test_facet_model_agrees_on_random_tilts_over_realisations():
     attach_models(res, specs)
     for v in V.verdicts_for_result(res):
         assert v["agrees"], v
+
+
+# --- ensemble models: the "realisations" and "one-tile" references ----------------------------
+def _tiles(rng, truth, R, scatter=0.05, ray=0.005):
+    """R synthetic tile BRDFs: each tile's lobe is brighter/wider as a whole (coherent across
+    bins: a_r, b_r ~ N(0, scatter)) plus independent ray noise of relative σ ``ray``."""
+    t = BINS.theta_centers[:, None] - 40.0
+    out = []
+    for _ in range(R):
+        a, b = rng.normal(0.0, scatter, 2)
+        tile = truth * (1.0 + a + b * (t / 20.0) ** 2)
+        out.append(tile + rng.normal(0.0, ray, truth.shape) * truth)
+    return np.array(out)
+
+
+def _ensemble_verdict(F, model, ray=0.005, **kw):
+    sim = F.mean(axis=0)
+    se = ray * sim / np.sqrt(len(F))
+    return _verdict(sim, se, model, ensemble=True, realisations=F, model_rtol=0.0, **kw)
+
+
+@pytest.mark.parametrize("R", [2, 3, 8])
+def test_realisation_tests_are_calibrated_under_coherent_tile_scatter(R):
+    """Model = ensemble truth, tiles scatter coherently (5 % ≫ ray noise): the fraction of
+    "deviates" is within the binomial bound of α (the per-bin z with the R-tile variance would
+    reject far more often: asserted too, so the test shows what it guards against)."""
+    rng = np.random.default_rng(R)
+    truth, n, alpha = _lobe(), 300, 0.05
+    vs = [_ensemble_verdict(_tiles(rng, truth, R), truth, alpha=alpha) for _ in range(n)]
+    assert all(v["reference"] == "realisations" and v["conclusive"] for v in vs)
+    rejected = sum(not v["agrees"] for v in vs)
+    assert rejected <= stats.binom.isf(1e-3, n, alpha), rejected
+    naive = 0
+    for _ in range(100):
+        F = _tiles(rng, truth, R)
+        se = np.std(F, axis=0, ddof=1) / np.sqrt(R)
+        naive += not _verdict(F.mean(axis=0), se, truth, alpha=alpha)["agrees"]
+    assert naive > stats.binom.isf(1e-3, 100, alpha), naive
+
+
+def test_realisation_energy_test_has_power():
+    """A model 5 % too bright against 8 tiles scattering by 1 % in energy: flagged always."""
+    rng = np.random.default_rng(7)
+    truth = _lobe()
+    vs = [_ensemble_verdict(_tiles(rng, truth, 8, scatter=0.01), 1.05 * truth) for _ in range(20)]
+    assert not any(v["agrees"] for v in vs)
+    assert all(abs(v["energy_dev"] + 0.05 / 1.05) < 5 * v["energy_dev_se"] for v in vs)
+
+
+def test_one_tile_rejection_is_inconclusive_and_summarised_so():
+    """An ensemble model with one realisation: agreement within ray noise is conclusive, a
+    rejection is not (tile scatter and model error cannot be separated)."""
+    rng = np.random.default_rng(3)
+    truth = _lobe()
+    F = _tiles(rng, truth, 1, scatter=0.2)
+    bad = _verdict(F[0], 0.005 * F[0], truth, ensemble=True, realisations=F, theta_i=10.0)
+    good = _verdict(truth, 0.01 * truth, truth, ensemble=True, theta_i=20.0)
+    assert bad["reference"] == good["reference"] == "one-tile"
+    assert not bad["conclusive"] and not bad["agrees"]
+    assert good["conclusive"] and good["agrees"]
+    for v in (bad, good):
+        V.validate_verdict(json.loads(json.dumps(v)))
+    row = V.summary_row([good, bad])["model"]
+    assert row.startswith("inconclusive at θi=10°") and "deviates" not in row
+    with pytest.raises(ValueError, match="conclusive"):
+        V.validate_verdict({**bad, "agrees": True})

@@ -23,6 +23,34 @@ One verdict compares, for ONE incidence θi and ONE model, the simulated bin ave
 
 Limitation: bins are selected by the *simulation's* event count, so a model predicting a lobe
 where the simulation has (almost) no events is not tested there.
+
+Reference of the test (``reference``), by what the model describes:
+
+* ``"ray-noise"``: a model of the traced facets themselves (``ts-facets``, listed in
+  ``meta["realisation_models"]``) or a standalone ``verdict`` call: f̄ differs from m by ray
+  noise only, the χ² and max-|z| tests above are exact. Always ``conclusive``.
+* ``"realisations"``: a model of the *ensemble* (nominal/realised Beckmann, V-groove closed
+  forms, fitted models) with R ≥ 2 realisations f_r (``Result.brdf_realisations``). Each tile
+  is one draw of the random surface, and its BRDF mean f_r (ray noise included) is an i.i.d.
+  draw around the ensemble BRDF; the bins of one tile are strongly correlated (a tile's lobe is
+  wider or narrower as a whole), so a χ² over bins with a per-bin variance from R tiles (R − 1
+  dof) is anti-conservative. The two tests of the family are instead, each at
+  Šidák(alpha_eff, 2):
+    - energy: d_r = Σ_E Ω (f_r − m) / Σ_E Ω m over the *model's* energy set E (chosen from m,
+      not from the data, so the d_r stay i.i.d.): Student's t = d̄ / √(s_d²/R + rtol²) on R − 1
+      dof (one number per tile absorbs every correlation between bins);
+    - shape: per bin t_B = (f̄_B − m_B)/√(s_B²/R + (rtol m_B)²) with s_B the realisations'
+      standard deviation, max_U |t_B| against the two-sided t_{R−1} quantile at
+      Šidák(·, |U|) (conservative for positively correlated bins).
+  Fitted models are judged the same way (their fit pulls m towards f̄: conservative).
+  Always ``conclusive``; with R = 2 the t_1 quantiles are wide and the power is low.
+* ``"one-tile"``: an ensemble model and one realisation. One tile cannot separate its scatter
+  from a model error, so the ray-noise tests are run and only their agreement is conclusive
+  (the model is within ray noise of a tile); a rejection gives ``conclusive`` = False and
+  ``agrees`` = False (reported "inconclusive", never "deviates").
+
+``agrees`` is True only for a conclusive agreement; a verdict "deviates" iff ``conclusive`` and
+not ``agrees``. The false-alarm rate and power are measured in tests/test_calibration.py.
 """
 
 from __future__ import annotations
@@ -68,7 +96,11 @@ VERDICT_SCHEMA: dict = {
         "used bins U: ≥ min_events single-bounce events, finite sim/stderr/model, σ > 0",
     ),
     "min_events": ((int,), "event threshold for a used bin"),
-    "chi2": (_NUM, "Σ_U z², z = (sim − model)/σ, σ² = stderr² + (model_rtol·model)²"),
+    "chi2": (
+        _NUM,
+        "Σ_U z², z = (sim − model)/σ, σ² = stderr² + (model_rtol·model)² (decides only for "
+        "'ray-noise' and 'one-tile'; descriptive for 'realisations')",
+    ),
     "dof": ((int,), "n_bins − n_params"),
     "chi2_dof": (_OPT_NUM, "chi2/dof (null if dof ≤ 0)"),
     "p_value": (_OPT_NUM, "P(χ²_dof ≥ chi2) (null if dof ≤ 0)"),
@@ -92,8 +124,9 @@ VERDICT_SCHEMA: dict = {
     "model_rtol": (_NUM, "relative quadrature error of the model added to σ in quadrature"),
     "agrees": (
         (bool,),
-        "p_value ≥ p_threshold and max_abs_z < z_threshold (false if n_bins = 0"
-        " or dof ≤ 0): statistically indistinguishable at the run's precision",
+        "conclusive agreement: 'ray-noise'/'one-tile': p_value ≥ p_threshold and max_abs_z < "
+        "z_threshold; 'realisations': energy_p ≥ p_threshold and max_abs_t < t_threshold "
+        "(false if n_bins = 0 or dof ≤ 0): statistically indistinguishable at the run's precision",
     ),
     "deviations": (
         (list,),
@@ -105,7 +138,41 @@ VERDICT_SCHEMA: dict = {
         "signed (model − sim)/sim of largest magnitude over E ∪ deviating bins (null if empty)",
     ),
     "worst_bin": ((list, type(None)), "[θo, Δφ] bin centre (degrees) of max_rel_dev"),
+    "reference": (
+        (str,),
+        "what the tests compare against (module docstring): 'ray-noise' (χ² and max-|z|), "
+        "'realisations' (t tests over the R realisations), 'one-tile' (ensemble model, one "
+        "realisation: ray-noise tests, a rejection is inconclusive)",
+    ),
+    "conclusive": (
+        (bool,),
+        "False only for a 'one-tile' rejection: tile scatter and model error cannot be separated",
+    ),
+    "realisations": ((int,), "number of realisations R the verdict used (1 unless 'realisations')"),
+    "energy_dev": (
+        _OPT_NUM,
+        "relative energy deviation Σ_E Ω (sim − model)/Σ_E Ω model over the model's energy set "
+        "(mean over realisations for 'realisations'); null if the set is empty",
+    ),
+    "energy_dev_se": (
+        _OPT_NUM,
+        "standard error of energy_dev from the realisations' scatter, s_d/√R ('realisations' "
+        "only, else null)",
+    ),
+    "energy_p": (
+        _OPT_NUM,
+        "two-sided Student-t p-value of energy_dev on R − 1 dof ('realisations' only); the "
+        "energy test rejects when energy_p < p_threshold",
+    ),
+    "max_abs_t": (_OPT_NUM, "max_U |t_B| over the realisations ('realisations' only)"),
+    "t_threshold": (
+        _OPT_NUM,
+        "two-sided t_{R−1} quantile at Šidák(p_threshold, n_bins): the shape test rejects when "
+        "max_abs_t ≥ this ('realisations' only)",
+    ),
 }
+
+REFERENCES = ("ray-noise", "realisations", "one-tile")
 
 
 def _merge_ranges(flag_theta: np.ndarray, theta_edges: np.ndarray) -> list[list[float]]:
@@ -143,8 +210,14 @@ def verdict(
     min_events: int = MIN_EVENTS,
     alpha: float = 0.01,
     n_tests: int = 1,
+    ensemble: bool = False,
+    realisations=None,
 ) -> dict:
     """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``).
+
+    ``ensemble``: the model describes the random surface's ensemble, not the traced facets;
+    then ``realisations`` (R, Θ, Φ) are the BRDFs of the R tiles (sr⁻¹, equal rays each, their
+    mean is ``sim``): R ≥ 2 selects the "realisations" reference, else "one-tile".
 
     ``sim``, ``stderr``, ``model`` (sr⁻¹), ``counts`` (events) and ``omega`` (projected solid
     angle, sr) are (Θ, Φ) arrays; ``theta_edges`` (Θ+1,) and ``phi_edges`` (Φ+1,, default: the
@@ -176,6 +249,16 @@ def verdict(
         raise UsageError(f"n_params must be an integer >= 0, got {n_params!r}")
     alpha_eff = sidak(alpha, n_tests)
     alpha_each = sidak(alpha_eff, 2)
+    F = None
+    if ensemble and realisations is not None:
+        F = np.asarray(realisations, dtype=np.float64)
+        if F.ndim != 3 or F.shape[1:] != shape:
+            raise UsageError(
+                f"realisations must be an (R, {shape[0]}, {shape[1]}) array, got {F.shape}"
+            )
+        if len(F) < 2:
+            F = None
+    reference = "ray-noise" if not ensemble else ("realisations" if F is not None else "one-tile")
 
     with np.errstate(invalid="ignore", over="ignore"):
         sigma = np.sqrt(se**2 + (model_rtol * mod) ** 2)
@@ -187,6 +270,11 @@ def verdict(
             & (sigma > 0)
             & (sim > 0)
         )
+        if F is not None:
+            R = len(F)
+            s_b = np.std(F, axis=0, ddof=1)
+            se_t = np.sqrt(s_b**2 / R + (model_rtol * mod) ** 2)
+            used &= np.all(np.isfinite(F), axis=0) & (se_t > 0)
     z = np.where(used, (sim - mod) / np.where(used, sigma, 1.0), 0.0)
     rel = np.where(used, (mod - sim) / np.where(used, sim, 1.0), 0.0)
     n_bins = int(used.sum())
@@ -195,7 +283,31 @@ def verdict(
     p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else None
     max_abs_z = float(np.max(np.abs(z))) if n_bins else None
     z_thr = float(stats.norm.isf(0.5 * sidak(alpha_each, n_bins))) if n_bins else None
-    agrees = bool(dof > 0 and p_value >= alpha_each and max_abs_z < z_thr)
+    ray_ok = bool(dof > 0 and p_value >= alpha_each and max_abs_z < z_thr)
+
+    # energy deviation over the model's energy set (independent of the data's noise)
+    Em = energy_set(np.where(used, mod * om, 0.0)).reshape(shape)
+    energy_dev = energy_dev_se = energy_p = max_abs_t = t_thr = None
+    if Em.any():
+        norm = np.sum(om[Em] * mod[Em])
+        energy_dev = float(np.sum(om[Em] * (sim[Em] - mod[Em])) / norm)
+    n_real, conclusive = 1, True
+    if F is not None:
+        n_real = len(F)
+        agrees = False
+        if n_bins and Em.any() and dof > 0:
+            d = np.sum(om[Em] * (F[:, Em] - mod[Em]), axis=1) / norm
+            energy_dev = float(d.mean())
+            energy_dev_se = float(d.std(ddof=1) / np.sqrt(n_real))
+            se_e = np.sqrt(energy_dev_se**2 + model_rtol**2)
+            energy_p = float(2.0 * stats.t.sf(abs(energy_dev) / se_e, n_real - 1))
+            t = np.abs(F.mean(axis=0)[used] - mod[used]) / se_t[used]
+            max_abs_t = float(t.max())
+            t_thr = float(stats.t.isf(0.5 * sidak(alpha_each, n_bins), n_real - 1))
+            agrees = bool(energy_p >= alpha_each and max_abs_t < t_thr)
+    else:
+        agrees = ray_ok
+        conclusive = ray_ok or reference == "ray-noise"
 
     energy = np.where(used, sim * om, 0.0)
     E = energy_set(energy).reshape(shape)
@@ -240,6 +352,14 @@ def verdict(
         "deviations": _merge_ranges(dev.any(axis=1), theta_edges),
         "max_rel_dev": max_rel_dev,
         "worst_bin": worst,
+        "reference": reference,
+        "conclusive": bool(conclusive),
+        "realisations": int(n_real),
+        "energy_dev": energy_dev,
+        "energy_dev_se": energy_dev_se,
+        "energy_p": energy_p,
+        "max_abs_t": max_abs_t,
+        "t_threshold": t_thr,
     }
 
 
@@ -292,6 +412,16 @@ def validate_verdict(d) -> dict:
             raise UsageError(f"verdict['deviations'] entries must be [lo, hi] in [0, 90], got {r}")
     if d["worst_bin"] is not None and len(d["worst_bin"]) != 2:
         raise UsageError("verdict['worst_bin'] must be [θo, Δφ] or null")
+    if d["reference"] not in REFERENCES:
+        raise UsageError(
+            f"verdict['reference'] must be one of {REFERENCES}, got {d['reference']!r}"
+        )
+    if d["agrees"] and not d["conclusive"]:
+        raise UsageError("verdict['agrees'] can be true only for a conclusive verdict")
+    if not d["conclusive"] and d["reference"] != "one-tile":
+        raise UsageError("only a 'one-tile' verdict can be inconclusive")
+    if (d["realisations"] >= 2) != (d["reference"] == "realisations"):
+        raise UsageError("verdict['realisations'] >= 2 iff reference is 'realisations'")
     return d
 
 
@@ -308,7 +438,9 @@ def verdicts_for_result(
     ``fitted`` (an iterable or name → mapping of ``fits.FitResult``; their ``model_values`` are
     compared and their parameter count reduces the dof). ``params``: optional name → parameter
     dict for the prescribed models (default ``result.meta.get("model_params", {})``).
-    The family size n_tests = #incidences × #models (prescribed + fitted)."""
+    The family size n_tests = #incidences × #models (prescribed + fitted). Models in
+    ``meta["realisation_models"]`` are judged against ray noise, the others as ensemble models
+    over ``result.brdf_realisations`` (finite rows; "one-tile" without them)."""
     fits = list(fitted.values()) if isinstance(fitted, Mapping) else list(fitted or [])
     params = dict(result.meta.get("model_params", {}) if params is None else params)
     entries = [
@@ -325,10 +457,16 @@ def verdicts_for_result(
     # ray noise only; ensemble models also by the tile-to-tile scatter (``result.stderr``)
     own = set(result.meta.get("realisation_models", ()))
     ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
+    per = getattr(result, "brdf_realisations", None)
     out = []
     for t in range(T):
         for name, values, p, is_fit, k in entries:
             stderr = ray_err if name in own else result.stderr
+            real_t = None
+            if per is not None and name not in own:
+                real_t = per[:, t]
+                # realisations that were traced at this incidence (a partial run may lack some)
+                real_t = real_t[np.nansum(np.abs(real_t), axis=(1, 2)) > 0]
             values = np.asarray(values)
             if values.shape != result.brdf.shape:
                 raise UsageError(
@@ -352,6 +490,8 @@ def verdicts_for_result(
                     min_events=min_events,
                     alpha=alpha,
                     n_tests=n_tests,
+                    ensemble=name not in own,
+                    realisations=real_t,
                 )
             )
     return out
@@ -359,16 +499,29 @@ def verdicts_for_result(
 
 def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
     """One line per model (in order of appearance) for the index table: "agrees" if every
-    incidence agrees, else e.g. "deviates at θi=80°: rel RMS 12% at θi=80°, worst +35% at θo 84°
+    incidence agrees conclusively; incidences with an inconclusive verdict are listed as
+    "inconclusive at θi=…" (after "; " when others deviate); else e.g.
+    "deviates at θi=80°: rel RMS 12% at θi=80°, worst +35% at θo 84°
     (θi=80°)" (the largest rel_rms and |max_rel_dev| over the deviating incidences)."""
     by_model: dict[str, list] = {}
     for v in verdicts:
         by_model.setdefault(v["model"], []).append(v)
     out = {}
     for name, vs in by_model.items():
-        bad = [v for v in vs if not v["agrees"]]
-        if not bad:
+        bad = [v for v in vs if not v["agrees"] and v.get("conclusive", True)]
+        unsure = [v for v in vs if not v.get("conclusive", True)]
+        if not bad and not unsure:
             out[name] = "agrees"
+            continue
+        note = ""
+        if unsure:
+            where = ", ".join(f"{v['theta_i']:g}°" for v in unsure)
+            note = (
+                f"inconclusive at θi={where} (one realisation cannot separate tile scatter "
+                f"from model error)"
+            )
+        if not bad:
+            out[name] = note
             continue
         where = ", ".join(f"{v['theta_i']:g}°" for v in bad)
         parts = [f"deviates at θi={where}"]
@@ -384,4 +537,5 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
                 f"Δφ {w['worst_bin'][1]:g}° (θi={w['theta_i']:g}°)"
             )
         out[name] = parts[0] + (": " + ", ".join(parts[1:]) if len(parts) > 1 else "")
+        out[name] += f"; {note}" if note else ""
     return out
