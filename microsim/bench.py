@@ -188,7 +188,7 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
     from microsim.vectors import spherical_deg
 
     surface = surface if surface is not None else _surface(cfg)
-    tracer = Tracer(surface)
+    tracer = Tracer(surface, backend="embreex")  # the reference: embreex's single rays
     primary, masking = _ray_set(tracer, spherical_deg(cfg.theta_i, 0.0), cfg.rays)
     n_p, n_m = len(primary[0]), len(masking[0])
     reason = ep.binding_error()

@@ -17,6 +17,13 @@ Speed: each segment of the walk is one Embree call between two compiled passes o
 rays (``kernels.segment_setup``/``segment_finish``: float32 inputs and tfar; hits, escapes and
 wall re-entries), which hands Embree a single direction when all rays share it and compacts
 the rays still live (most finish in the first segment). The BVH is built in ``__init__``.
+
+Backends: each segment's Embree call goes either to embreex (one ray per ``rtcIntersect1``)
+or, when the Embree 4 library embreex bundles can be bound (``embree_packets``), to coherent
+packets of the native width (``rtcIntersect8``/``16``), same robust scene, same float32 rays,
+same tnear/tfar: per-ray answers equal except exact ties between facets at one float32
+distance (tests/test_packets.py). ``backend="auto"`` picks packets when available (the packet
+scene is also built from the arrays in one copy per buffer, not element by element).
 """
 
 from __future__ import annotations
@@ -31,7 +38,7 @@ from embreex import rtcore_scene as rs
 from microsim.errors import UsageError
 from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 
-from . import kernels
+from . import embree_packets, kernels
 from .scratch import work
 
 __all__ = [
@@ -122,9 +129,15 @@ class Tracer:
     offset along the normal, length units), ``top_margin`` (primary rays start at zmax + it)
     and ``max_wraps`` (tile crossings per ray before it counts as unresolved: 64 plus enough
     for a ray 89.5° from the normal to cross the whole height range).
+
+    ``backend``: "auto" (packets when ``embree_packets`` can bind the library, else embreex),
+    "packets" (UsageError when unavailable) or "embreex"; the one used is ``self.backend``.
+    ``MICROSIM_EMBREE_PACKETS=0`` in the environment makes "auto" choose embreex.
     """
 
-    def __init__(self, surface):
+    def __init__(self, surface, *, backend: str = "auto"):
+        if backend not in ("auto", "packets", "embreex"):
+            raise UsageError(f"backend must be 'auto', 'packets' or 'embreex', got {backend!r}")
         v, f, lx, ly = _validated_mesh(surface)
         self.vertices, self.faces = v, f
         cross = _cross_columns(self._e1, self._e2)
@@ -157,6 +170,14 @@ class Tracer:
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
+        reason = None if backend == "embreex" else embree_packets.binding_error()
+        if backend == "packets" and reason is not None:
+            raise UsageError(f"backend='packets' is unavailable here: {reason}")
+        self.backend = "packets" if backend != "embreex" and reason is None else "embreex"
+        self._packets = None
+        if self.backend == "packets":
+            self._packets = embree_packets.PacketScene(v, f)
+            return
         self._scene = rs.EmbreeScene(robust=True)
         self._mesh = mc.TriangleMesh(self._scene, v.astype(np.float32), f.astype(np.int32))
         # embreex builds the BVH (rtcCommit) on the first query: do it now, as part of the
@@ -296,14 +317,20 @@ class Tracer:
                 o32_, tq_, keep_, top_, d32k_ = o32, tq, keep, top, d32k
             if k == 0:
                 break
-            res = self._scene.run(
-                o32_[:k],
-                d32 if shared else d32k_[:k],
-                dists=tq_[:k],
-                query=query,
-                output=None if occlusion else 1,
-            )
-            pid, tfar = (res, no_tfar) if occlusion else (res["primID"], res["tfar"])
+            if self._packets is not None:
+                pid, tfar = self._packets.run(
+                    o32_[:k], d32 if shared else d32k_[:k], tq_[:k], occlusion
+                )
+                tfar = no_tfar if occlusion else tfar
+            else:
+                res = self._scene.run(
+                    o32_[:k],
+                    d32 if shared else d32k_[:k],
+                    dists=tq_[:k],
+                    query=query,
+                    output=None if occlusion else 1,
+                )
+                pid, tfar = (res, no_tfar) if occlusion else (res["primID"], res["tfar"])
             nxt = f"walk-next{segment % 2}-"  # written here, read by the next segment
             m_live = work(nxt + "live", k, np.int64)
             nx_ = [work(nxt + a, k) for a in "xyz"]
