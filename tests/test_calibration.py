@@ -1,0 +1,181 @@
+"""Calibration of the verdicts, measured (issue 13): the false-alarm rate of models that are
+exact, and the power against a model wrong by a few percent in energy.
+
+Truth known exactly: on V-grooves, Torrance–Sparrow with V-groove G (``ts-vgroove``, the NDF
+the tilts are drawn from) is exact for the *ensemble* of random-tilt surfaces while every tile
+scatters around it ("realisations" reference), and ``ts-facets`` is exact for the traced
+facets ("ray-noise" reference; stratified tilts). Each seed is one independent run (surfaces,
+rays); its family of verdicts (incidences × models) says "deviates" somewhere with probability
+≤ α under the null hypothesis, so the number of deviating seeds is ≤ Binomial(seeds, α): the
+tests assert it stays below that distribution's 1 − ``LEVEL`` quantile. Power: the model scaled
+by (1 + ε) (energy wrong by ε) must be flagged in ≥ 90 % of the seeds.
+
+Measured false-alarm rates and power: ``pytest tests/test_calibration.py -m slow -s``.
+"""
+
+import pytest
+from scipy import stats
+
+from microsim import analytic as an
+from microsim import surfaces as sf
+from microsim.analysis.verdicts import validate_verdict, verdicts_for_result
+from microsim.sim import Bins, simulate
+from microsim.sim.compare import attach_models, default_models
+
+LEVEL = 1e-3  # probability that a calibrated verdict machinery fails a false-alarm test
+THETAS = [0.0, 45.0]
+
+
+def _family(seed, sampling, R, grooves, rays, bins, model, scale=1.0, alpha=0.05, azimuths=None):
+    """Verdicts of ``model`` (× ``scale``) at ``THETAS`` on R realisations of ``grooves``
+    Beckmann(0.3) V-grooves, all seeded from ``seed``."""
+    surfs = [
+        sf.vgrooves(grooves, an.Beckmann(0.3), seed=1000 * seed + r, sampling=sampling)
+        for r in range(R)
+    ]
+    res = simulate(
+        surfs[0] if R == 1 else None,
+        "aluminium",
+        THETAS,
+        rays=rays,
+        bins=bins,
+        seed=seed,
+        realisations=surfs if R > 1 else None,
+    )
+    specs = [m for m in default_models(surfs, "aluminium", azimuths=azimuths) if m.name == model]
+    attach_models(res, specs)
+    res.models[model] = res.models[model] * scale
+    return [validate_verdict(v) for v in verdicts_for_result(res, alpha=alpha)]
+
+
+def _deviates(verdicts) -> bool:
+    return any(v["conclusive"] and not v["agrees"] for v in verdicts)
+
+
+def _max_false_alarms(seeds, alpha):
+    """Largest count of deviating seeds a calibrated machinery exceeds with probability < LEVEL."""
+    return int(stats.binom.isf(LEVEL, seeds, alpha))
+
+
+def _rate(runs):
+    fams = list(runs)
+    return sum(_deviates(f) for f in fams), fams
+
+
+# --- default run: seconds -----------------------------------------------------------------
+def test_ensemble_model_false_alarms_within_binomial_bound():
+    """ts-vgroove on random-tilt grooves, 3 realisations: exact for the ensemble."""
+    seeds, alpha = 10, 0.05
+    n_dev, fams = _rate(
+        _family(s, "random", 3, 200, 30_000, Bins(8, 5), "ts-vgroove", alpha=alpha)
+        for s in range(seeds)
+    )
+    assert all(v["reference"] == "realisations" and v["realisations"] == 3 for f in fams for v in f)
+    assert n_dev <= _max_false_alarms(seeds, alpha), n_dev
+
+
+def test_one_tile_never_says_deviates_for_an_ensemble_model():
+    """One random tile: the ensemble model cannot be judged; a rejection of the ray-noise test
+    (the tile's scatter is many ray σ at these settings) is reported inconclusive."""
+    fams = [_family(s, "random", 1, 200, 100_000, Bins(8, 5), "ts-vgroove") for s in range(4)]
+    vs = [v for f in fams for v in f]
+    assert all(v["reference"] == "one-tile" for v in vs)
+    assert not any(_deviates(f) for f in fams)
+    assert any(not v["conclusive"] for v in vs)  # the tile scatter does show
+
+
+def test_facet_model_false_alarms_within_binomial_bound():
+    """ts-facets on stratified grooves, judged against ray noise (azimuth copies: 10× more
+    (tilt, azimuth) pairs than rays, so the model's own noise is small)."""
+    seeds, alpha, rays = 10, 0.05, 15_000
+    n_dev, fams = _rate(
+        _family(
+            s,
+            "stratified",
+            1,
+            200,
+            rays,
+            Bins(8, 5),
+            "ts-facets",
+            alpha=alpha,
+            azimuths=10 * rays // 200,
+        )
+        for s in range(seeds)
+    )
+    assert all(v["reference"] == "ray-noise" for f in fams for v in f)
+    assert n_dev <= _max_false_alarms(seeds, alpha), n_dev
+
+
+def test_ensemble_model_ten_percent_off_is_flagged():
+    """Power, light: ts-vgroove × 1.10 on 4 random-tilt realisations, ≥ 90 % of seeds."""
+    seeds = 10
+    n_dev, _ = _rate(
+        _family(s, "random", 4, 200, 30_000, Bins(8, 5), "ts-vgroove", scale=1.10)
+        for s in range(seeds)
+    )
+    assert n_dev >= 0.9 * seeds, n_dev
+
+
+# --- slow: ≥ 40 seeds, the measured rates are printed (-s) ---------------------------------
+SLOW_SEEDS = 40
+SLOW_BINS = Bins(15, 9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "R, grooves, rays", [(2, 500, 100_000), (4, 500, 400_000), (8, 2000, 400_000)]
+)
+@pytest.mark.parametrize("alpha", [0.01, 0.05])
+def test_ensemble_model_false_alarms_slow(R, grooves, rays, alpha):
+    n_dev, _ = _rate(
+        _family(100 + s, "random", R, grooves, rays, SLOW_BINS, "ts-vgroove", alpha=alpha)
+        for s in range(SLOW_SEEDS)
+    )
+    print(
+        f"\nts-vgroove random R={R} grooves={grooves} rays={rays} alpha={alpha}: "
+        f"{n_dev}/{SLOW_SEEDS} seeds deviate"
+    )
+    assert n_dev <= _max_false_alarms(SLOW_SEEDS, alpha), n_dev
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("grooves, rays", [(500, 100_000), (2000, 400_000)])
+def test_facet_model_false_alarms_slow(grooves, rays):
+    alpha = 0.05
+    n_dev, _ = _rate(
+        _family(
+            100 + s,
+            "stratified",
+            1,
+            grooves,
+            rays,
+            SLOW_BINS,
+            "ts-facets",
+            alpha=alpha,
+            azimuths=max(256, 10 * rays // grooves),
+        )
+        for s in range(SLOW_SEEDS)
+    )
+    print(
+        f"\nts-facets stratified grooves={grooves} rays={rays} alpha={alpha}: "
+        f"{n_dev}/{SLOW_SEEDS} seeds deviate"
+    )
+    assert n_dev <= _max_false_alarms(SLOW_SEEDS, alpha), n_dev
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scale", [1.03, 0.97])
+def test_ensemble_model_three_percent_off_is_flagged_slow(scale):
+    """Power: ts-vgroove with its energy wrong by 3 % (× 1.03 or × 0.97), 8 realisations of 2000
+    random-tilt grooves, 4e5 rays per incidence, α = 0.01: flagged in ≥ 90 % of the seeds."""
+    n_dev, _ = _rate(
+        _family(
+            100 + s, "random", 8, 2000, 400_000, SLOW_BINS, "ts-vgroove", scale=scale, alpha=0.01
+        )
+        for s in range(SLOW_SEEDS)
+    )
+    print(
+        f"\nts-vgroove x{scale} R=8 grooves=2000 rays=4e5 alpha=0.01: "
+        f"{n_dev}/{SLOW_SEEDS} seeds flagged"
+    )
+    assert n_dev >= 0.9 * SLOW_SEEDS, n_dev
