@@ -9,7 +9,9 @@ Embree splits it into single rays (measured: no gain over embreex).
 
 This module loads the ``libembree4`` shared library shipped in the embreex wheel
 (``embreex.libs/`` or next to the extension modules), binds the handful of C entry points it
-needs with ctypes, and builds a robust triangle scene from (V, 3) float32 vertices and (F, 3)
+needs with ctypes (the packet calls are also resolved by name through llvmlite for the numba
+kernel ``_trace``, so that numba caches it on disk instead of compiling it in every process),
+and builds a robust triangle scene from (V, 3) float32 vertices and (F, 3)
 uint32 faces in one ``memmove`` per buffer (Embree allocates the padded buffers with
 ``rtcSetNewGeometryBuffer``).
 
@@ -38,7 +40,10 @@ import functools
 import glob
 import os
 
+import llvmlite.binding as llvm
+import numba as nb
 import numpy as np
+from numba import types as nb_types
 
 __all__ = [
     "PacketBindingError",
@@ -109,7 +114,8 @@ class _Lib:
     def __init__(self, path: str, width: int | None = None):
         try:
             lib = ctypes.CDLL(path)
-        except OSError as exc:
+            llvm.load_library_permanently(path)  # symbols for the numba kernel
+        except (OSError, RuntimeError) as exc:
             raise PacketBindingError(f"cannot load {path} ({exc})") from exc
         vp, u32, sz = ctypes.c_void_p, ctypes.c_uint32, ctypes.c_size_t
         sigs = {
@@ -182,67 +188,92 @@ def packets_available() -> bool:
     return binding_error() is None
 
 
-@functools.cache
-def _make_kernels(lib: _Lib):
-    """numba kernels calling the bound packet functions (compiled once per process)."""
-    import numba as nb
+_SIG = nb_types.void(nb_types.intp, nb_types.intp, nb_types.intp, nb_types.intp)
+# resolved by name in the library loaded with llvmlite (``_Lib``): no address is baked into
+# the compiled kernel, so numba caches it on disk (no compile per process)
+_intersect4 = nb_types.ExternalFunction("rtcIntersect4", _SIG)
+_intersect8 = nb_types.ExternalFunction("rtcIntersect8", _SIG)
+_intersect16 = nb_types.ExternalFunction("rtcIntersect16", _SIG)
+_occluded4 = nb_types.ExternalFunction("rtcOccluded4", _SIG)
+_occluded8 = nb_types.ExternalFunction("rtcOccluded8", _SIG)
+_occluded16 = nb_types.ExternalFunction("rtcOccluded16", _SIG)
 
-    W = lib.width
-    intersect_w = getattr(lib, f"rtcIntersect{W}")
-    occluded_w = getattr(lib, f"rtcOccluded{W}")
-    u_all = np.uint32(INVALID_ID)
-    ox, oy, oz, tn = ORG_X * W, ORG_Y * W, ORG_Z * W, TNEAR * W
-    dx, dy, dz, tm, tfr = DIR_X * W, DIR_Y * W, DIR_Z * W, TIME * W, TFAR * W
-    msk, rid, rfl = MASK * W, RID * W, RFLAGS * W
-    pid, gid, iid = PRIM_ID * W, GEOM_ID * W, INST_ID * W
 
-    @nb.njit(nogil=True, cache=False)
-    def trace(scene, o, d, tfar, occlusion, prim, t_out, buf, ubuf, valid, args):
-        """Rays o[i] + t d[i] (d of shape (1, 3): shared), t in [0, tfar[i]], W per call.
-        Intersection: prim[i] = primID (−1 without a hit), t_out[i] = hit distance;
-        occlusion: prim[i] = 0 if blocked else −1."""
-        n = o.shape[0]
-        shared = d.shape[0] == 1
-        bptr = buf.ctypes.data
-        vptr = valid.ctypes.data
-        aptr = args.ctypes.data
-        for base in range(0, n, W):
-            m = min(W, n - base)
-            for j in range(W):
-                if j < m:
-                    i = base + j
-                    k = 0 if shared else i
-                    buf[ox + j] = o[i, 0]
-                    buf[oy + j] = o[i, 1]
-                    buf[oz + j] = o[i, 2]
-                    buf[tn + j] = 0.0
-                    buf[dx + j] = d[k, 0]
-                    buf[dy + j] = d[k, 1]
-                    buf[dz + j] = d[k, 2]
-                    buf[tm + j] = 0.0
-                    buf[tfr + j] = tfar[i]
-                    ubuf[msk + j] = u_all
-                    ubuf[rid + j] = 0
-                    ubuf[rfl + j] = 0
-                    ubuf[gid + j] = u_all
-                    ubuf[pid + j] = u_all
-                    ubuf[iid + j] = u_all
-                    valid[j] = -1
-                else:
-                    valid[j] = 0
-            if occlusion:
-                occluded_w(vptr, scene, bptr, aptr)
-                for j in range(m):
-                    prim[base + j] = 0 if buf[tfr + j] == -np.inf else -1
+def _layout(width: int) -> np.ndarray:
+    """Word offsets of the RTCRayHitW fields used (ORG_X … INST_ID) for ``width`` lanes."""
+    fields = (ORG_X, ORG_Y, ORG_Z, TNEAR, DIR_X, DIR_Y, DIR_Z, TIME, TFAR, MASK, RID, RFLAGS)
+    fields += (PRIM_ID, GEOM_ID, INST_ID)
+    return np.array(fields, dtype=np.int64) * width
+
+
+@nb.njit(nogil=True, cache=True)
+def _trace(scene, W, lay, o, d, tfar, occlusion, prim, t_out, buf, ubuf, valid, args):
+    """Rays o[i] + t d[i] (d of shape (1, 3): shared), t in [0, tfar[i]], W (4, 8 or 16) per
+    packet call; ``lay`` = ``_layout(W)``. Intersection: prim[i] = primID (−1 without a hit),
+    t_out[i] = hit distance (tfar[i] without); occlusion: prim[i] = 0 if blocked else −1."""
+    ox, oy, oz, tn, dx, dy, dz, tm, tfr = (
+        lay[0],
+        lay[1],
+        lay[2],
+        lay[3],
+        lay[4],
+        lay[5],
+        lay[6],
+        lay[7],
+        lay[8],
+    )
+    msk, rid, rfl, pid, gid, iid = lay[9], lay[10], lay[11], lay[12], lay[13], lay[14]
+    u_all = np.uint32(0xFFFFFFFF)
+    n = o.shape[0]
+    shared = d.shape[0] == 1
+    bptr = buf.ctypes.data
+    vptr = valid.ctypes.data
+    aptr = args.ctypes.data
+    for base in range(0, n, W):
+        m = min(W, n - base)
+        for j in range(W):
+            if j < m:
+                i = base + j
+                k = 0 if shared else i
+                buf[ox + j] = o[i, 0]
+                buf[oy + j] = o[i, 1]
+                buf[oz + j] = o[i, 2]
+                buf[tn + j] = 0.0
+                buf[dx + j] = d[k, 0]
+                buf[dy + j] = d[k, 1]
+                buf[dz + j] = d[k, 2]
+                buf[tm + j] = 0.0
+                buf[tfr + j] = tfar[i]
+                ubuf[msk + j] = u_all
+                ubuf[rid + j] = 0
+                ubuf[rfl + j] = 0
+                ubuf[gid + j] = u_all
+                ubuf[pid + j] = u_all
+                ubuf[iid + j] = u_all
+                valid[j] = -1
             else:
-                intersect_w(vptr, scene, bptr, aptr)
-                for j in range(m):
-                    hit = ubuf[gid + j] != u_all
-                    prim[base + j] = np.int32(ubuf[pid + j]) if hit else -1
-                    t_out[base + j] = buf[tfr + j]
-        return n
-
-    return trace
+                valid[j] = 0
+        if occlusion:
+            if W == 16:
+                _occluded16(vptr, scene, bptr, aptr)
+            elif W == 8:
+                _occluded8(vptr, scene, bptr, aptr)
+            else:
+                _occluded4(vptr, scene, bptr, aptr)
+            for j in range(m):
+                prim[base + j] = 0 if buf[tfr + j] == -np.inf else -1
+        else:
+            if W == 16:
+                _intersect16(vptr, scene, bptr, aptr)
+            elif W == 8:
+                _intersect8(vptr, scene, bptr, aptr)
+            else:
+                _intersect4(vptr, scene, bptr, aptr)
+            for j in range(m):
+                hit = ubuf[gid + j] != u_all
+                prim[base + j] = np.int32(ubuf[pid + j]) if hit else -1
+                t_out[base + j] = buf[tfr + j]
+    return n
 
 
 def _buffers():
@@ -304,7 +335,8 @@ class PacketScene:
         prim = np.empty(n, dtype=np.int32)
         t = np.empty(0 if occlusion else n, dtype=np.float32)
         buf, ubuf, valid, args = _buffers()
-        _make_kernels(self._lib)(self.scene, o, d, tf, occlusion, prim, t, buf, ubuf, valid, args)
+        w = self.width
+        _trace(self.scene, w, _layout(w), o, d, tf, occlusion, prim, t, buf, ubuf, valid, args)
         return prim, (None if occlusion else t)
 
 
