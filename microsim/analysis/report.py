@@ -100,12 +100,21 @@ def _ledger_rows(doc, result) -> list[list[str]]:
     ]
 
 
+def _verdict_word(v: Mapping) -> str:
+    """agrees / deviates / inconclusive (an ensemble model on one realisation that the ray-noise
+    tests reject: tile scatter and model error cannot be told apart; ``verdicts`` docstring)."""
+    if v["agrees"]:
+        return "**agrees**"
+    return "deviates" if v.get("conclusive", True) else "inconclusive"
+
+
 def _verdict_rows(verdicts) -> list[list[str]]:
     return [
         [
             f"{v['theta_i']:g}",
             v["model"] + (" (fit)" if v["fitted"] else ""),
-            "**agrees**" if v["agrees"] else "deviates",
+            _verdict_word(v),
+            f"{v.get('reference', 'ray-noise')} (R = {v.get('realisations', 1)})",
             fmt(v["chi2_dof"]),
             fmt(v["p_value"]),
             fmt(v["max_abs_z"]),
@@ -198,6 +207,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 "θi",
                 "model",
                 "verdict",
+                "judged against",
                 "χ²/dof",
                 "p",
                 "max |z|",
@@ -277,15 +287,16 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
     its largest relative RMS error over the deviating incidences and where."""
     if summary == "agrees":
         return "✓"
-    bad = [
-        v for v in verdicts if v["model"] == model and not v["agrees"] and v["rel_rms"] is not None
-    ]
-    if not bad:
-        return "✗"
-    w = max(bad, key=lambda v: v["rel_rms"])
-    where = ",".join(
-        f"{v['theta_i']:g}" for v in verdicts if v["model"] == model and not v["agrees"]
-    )
+    mine = [v for v in verdicts if v["model"] == model]
+    deviating = [v for v in mine if not v["agrees"] and v.get("conclusive", True)]
+    if not deviating:  # only inconclusive failures: one tile cannot judge an ensemble model
+        where = ",".join(f"{v['theta_i']:g}" for v in mine if not v["agrees"])
+        return f"? (θi {where}°)"
+    where = ",".join(f"{v['theta_i']:g}" for v in deviating)
+    rms = [v for v in deviating if v["rel_rms"] is not None]
+    if not rms:
+        return f"✗ (θi {where}°)"
+    w = max(rms, key=lambda v: v["rel_rms"])
     return f"✗ {100 * w['rel_rms']:.2g}% (θi {where}°)"
 
 
@@ -348,8 +359,11 @@ def index_report(
         "✓: statistically indistinguishable from the simulation at every incidence "
         "(χ² and max-|z| tests, Šidák-corrected, α = 0.01). ✗: the model deviates at the "
         "listed incidences; the percentage is its largest energy-weighted relative RMS "
-        "error there. Each scene's report says where (θo ranges, worst bin) and by how "
-        "much.",
+        "error there. ?: inconclusive — an ensemble model judged on one realisation, where "
+        "tile-to-tile scatter cannot be told from model error. Ensemble models on several "
+        "realisations are judged against the scatter between them (Student t over the "
+        "realisations); models of the realised facets against ray noise. Each scene's report "
+        "says where (θo ranges, worst bin) and by how much.",
         "",
     ] + _verdict_tables(docs)
     if fit_models:
