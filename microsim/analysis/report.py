@@ -13,6 +13,7 @@ import math
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
+from scipy import stats
 
 from .verdicts import summary_row
 
@@ -282,12 +283,21 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
+def _resolvable_energy(v: Mapping) -> float | None:
+    """Smallest relative energy deviation the realisations test of ``v`` would detect:
+    t_{R−1} quantile at the test's level × ``energy_dev_se`` (None for other references)."""
+    if v.get("reference") != "realisations" or v.get("energy_dev_se") is None:
+        return None
+    return float(stats.t.isf(0.5 * v["p_threshold"], v["realisations"] - 1) * v["energy_dev_se"])
+
+
 def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
     """Index cell: "✓" when ``summary_row`` says the model agrees everywhere, else "✗" with
     its largest relative RMS error over the deviating incidences and where."""
-    if summary == "agrees":
-        return "✓"
     mine = [v for v in verdicts if v["model"] == model]
+    if summary == "agrees":
+        res = [r for r in map(_resolvable_energy, mine) if r is not None]
+        return f"✓ ±{100 * max(res):.2g}%" if res else "✓"
     deviating = [v for v in mine if not v["agrees"] and v.get("conclusive", True)]
     if not deviating:  # only inconclusive failures: one tile cannot judge an ensemble model
         where = ",".join(f"{v['theta_i']:g}" for v in mine if not v["agrees"])
@@ -356,13 +366,15 @@ def index_report(
         "",
         "## Verdicts",
         "",
-        "✓: statistically indistinguishable from the simulation at every incidence "
-        "(χ² and max-|z| tests, Šidák-corrected, α = 0.01). ✗: the model deviates at the "
-        "listed incidences; the percentage is its largest energy-weighted relative RMS "
-        "error there. ?: inconclusive — an ensemble model judged on one realisation, where "
-        "tile-to-tile scatter cannot be told from model error. Ensemble models on several "
-        "realisations are judged against the scatter between them (Student t over the "
-        "realisations); models of the realised facets against ray noise. Each scene's report "
+        "✓: statistically indistinguishable from the simulation at every incidence (χ² and "
+        "max-|z| tests, Šidák-corrected, α = 0.01). ✗: the model deviates at the listed "
+        "incidences; the percentage is its largest energy-weighted relative RMS error there. ✓ "
+        "±x%: an ensemble model that agrees as far as the realisations can tell — energy "
+        "deviations below x % (at the test's level) are not resolved, so a large x means a weak "
+        "verdict, not a confirmed model. ?: inconclusive — an ensemble model judged on one "
+        "realisation, where tile-to-tile scatter cannot be told from model error. Ensemble models"
+        " on several realisations are judged against the scatter between them (Student t over the"
+        " realisations); models of the realised facets against ray noise. Each scene's report "
         "says where (θo ranges, worst bin) and by how much.",
         "",
     ] + _verdict_tables(docs)
