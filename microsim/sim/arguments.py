@@ -103,7 +103,9 @@ def check_run_options(bins, origins, progress, progress_receives: str) -> None:
 
 def is_surface(obj) -> bool:
     """A ``microsim.surfaces.Surface`` or an object with its mesh contract."""
-    return all(hasattr(obj, a) for a in ("vertices", "faces", "tile_size", "periodic"))
+    return all(
+        hasattr(obj, a) for a in ("vertices", "faces", "tile_size", "periodic", "fingerprint")
+    )
 
 
 def surface_error(name: str, obj) -> UsageError:

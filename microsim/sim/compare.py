@@ -30,7 +30,6 @@ m_real = ``surface.stats()["m_realised"]``):
 
 from __future__ import annotations
 
-import hashlib
 from typing import NamedTuple
 
 import numpy as np
@@ -173,11 +172,8 @@ def _auto_azimuths(normals) -> int:
 
 def surface_fingerprint(surface) -> str:
     """The traced surface's identity as ``simulate`` records it (``meta["surface"]`` or
-    ``meta["realisations"][r]``, key "fingerprint"): SHA-1 of vertices (float64) and faces
-    (int64), first 16 hex digits."""
-    digest = hashlib.sha1(np.ascontiguousarray(surface.vertices, dtype=np.float64).tobytes())
-    digest.update(np.ascontiguousarray(surface.faces, dtype=np.int64).tobytes())
-    return digest.hexdigest()[:16]
+    ``meta["realisations"][r]``, key "fingerprint"): ``Surface.fingerprint``."""
+    return surface.fingerprint()
 
 
 def _tagged(spec: ModelSpec, surfaces) -> ModelSpec:

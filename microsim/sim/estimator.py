@@ -24,7 +24,6 @@ own; block tallies are summed in block order. So results are bitwise identical f
 
 from __future__ import annotations
 
-import hashlib
 import platform
 import time
 from functools import partial
@@ -346,11 +345,9 @@ def _surface_meta(surface) -> dict:
             "its seams act as steps"
         )
     z = surface.vertices[:, 2]
-    digest = hashlib.sha1(np.ascontiguousarray(surface.vertices, dtype=np.float64).tobytes())
-    digest.update(np.ascontiguousarray(surface.faces, dtype=np.int64).tobytes())
     return {
         "kind": surface.kind,
-        "fingerprint": digest.hexdigest()[:16],
+        "fingerprint": surface.fingerprint(),
         "nominal": dict(surface.nominal),
         "tile_size": [float(t) for t in surface.tile_size],
         "triangles": int(len(surface.faces)),

@@ -13,6 +13,7 @@ switching on ``kind``.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from typing import Callable
 
@@ -144,6 +145,13 @@ class Surface:
         v = self.vertices
         f = self.faces
         return np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+
+    def fingerprint(self) -> str:
+        """The mesh's identity, as ``simulate`` records it in meta ("fingerprint"): SHA-1 of
+        the vertices (float64) and faces (int64), first 16 hex digits."""
+        digest = hashlib.sha1(np.ascontiguousarray(self.vertices, dtype=np.float64).tobytes())
+        digest.update(np.ascontiguousarray(self.faces, dtype=np.int64).tobytes())
+        return digest.hexdigest()[:16]
 
     def facet_normals(self) -> np.ndarray:
         """(F, 3) float64 unit facet normals (z > 0)."""
