@@ -10,8 +10,9 @@ from scipy.special import jv
 
 from microsim.analytic.fresnel import fresnel
 from microsim.errors import UsageError
+from microsim.surfaces import sinusoidal_grating
 from microsim.wave import direct_orders, kirchhoff_orders, obliquity
-from microsim.wave.kirchhoff import _upsampled
+from microsim.wave.kirchhoff import fourier_upsample
 
 GOLD = 0.47 + 2.83j  # a conductor's complex index
 
@@ -46,19 +47,19 @@ def test_flat_tile_all_power_specular(material):
 
 
 def test_grating_orders_follow_bessel_closed_form():
-    """Exact check 2: h = a sin(2πx/Λ) extruded along y, tile = one period. Jacobi–Anger gives
-    I_m = J_{−m}(a q_z), so P_m = R · (1 + wi·wo)²/(cos θi cos θo (cos θi + cos θo)²) · J_m(a q_z)²
+    """Exact check 2: h = a sin(2πx/Λ) extruded along y (``sinusoidal_grating``), tile = one
+    period. Jacobi–Anger gives I_m = J_{−m}(a q_z), so
+    P_m = R · (1 + wi·wo)²/(cos θi cos θo (cos θi + cos θo)²) · J_m(a q_z)²
     (obliquity from the module docstring), with sin θm = sin θi + mλ/Λ. The trapezoid rule is
     exact up to aliased orders J_{N±m}(a q_z) < 1e-12 for N = 128 > a q_z + |m| + 40."""
     lam, period, nx, ny = 1.0, 7.3, 128, 4
     dx = period / nx
-    x = (np.arange(nx) - nx / 2.0) * dx
     k = 2 * np.pi / lam
     checked = []
     for theta in (0.0, 30.0, 60.0):
         for amp in np.geomspace(0.1, 20.0, 7) / (2 * k * math.cos(math.radians(theta))):
-            h = np.tile(amp * np.sin(2 * np.pi * x / period), (ny, 1))
-            o = kirchhoff_orders(h, dx, lam, theta, material=GOLD)
+            s = sinusoidal_grating(nx, dx, amp, period, ny=ny)
+            o = kirchhoff_orders(s.heights, s.dx, lam, theta, material=GOLD)
             assert np.all(o.n == 0)  # Ly < λ: one row of orders
             wi = np.array([math.sin(math.radians(theta)), 0.0, math.cos(math.radians(theta))])
             sin_m = -wi[0] + o.m * lam / period
@@ -70,6 +71,22 @@ def test_grating_orders_follow_bessel_closed_form():
             assert np.max(np.abs(np.abs(o.amplitude) - np.abs(jv(o.m, amp * qz)))) < 1e-9
             checked.append((amp * qz).max())
     assert min(checked) < 0.2 and max(checked) > 19.0
+
+
+def test_grating_generator_is_periodic_and_refuses_bad_periods():
+    """The grating's heights are a sin(2πx/Λ) at the mesh vertices, the tile holds whole
+    periods, and a period that does not divide the tile (or is < 2 dx) is a UsageError."""
+    s = sinusoidal_grating(64, 0.25, 0.3, 4.0, ny=8)
+    x = (np.arange(64) - 32) * 0.25
+    assert s.heights.shape == (8, 64) and s.tile_size == (16.0, 2.0)
+    assert np.allclose(s.heights, 0.3 * np.sin(2 * np.pi * x / 4.0)[None, :], atol=1e-15)
+    assert s.nominal["periods"] == 4 and s.kind == "grating"
+    with pytest.raises(UsageError, match="period must divide"):
+        sinusoidal_grating(64, 0.25, 0.3, 5.0)
+    with pytest.raises(UsageError, match="at least 2"):
+        sinusoidal_grating(64, 0.25, 0.3, 0.25)
+    with pytest.raises(UsageError, match="amplitude"):
+        sinusoidal_grating(64, 0.25, -1.0, 4.0)
 
 
 def test_incident_fresnel_option():
@@ -88,12 +105,12 @@ def test_upsampling_keeps_samples_and_band():
     """Fourier upsampling reproduces the original samples and a band-limited sinusoid."""
     rng = np.random.default_rng(2)
     h = rng.standard_normal((12, 10))
-    g = _upsampled(h, 3)
+    g = fourier_upsample(h, 3)
     assert np.allclose(g[::3, ::3], h, atol=1e-12)
     x = np.arange(16) / 16
     s = np.tile(np.cos(2 * np.pi * 3 * x), (8, 1))
     xf = np.arange(32) / 32
-    assert np.allclose(_upsampled(s, 2)[0], np.cos(2 * np.pi * 3 * xf), atol=1e-12)
+    assert np.allclose(fourier_upsample(s, 2)[0], np.cos(2 * np.pi * 3 * xf), atol=1e-12)
 
 
 def test_bad_input():

@@ -13,7 +13,7 @@ import pytest
 from microsim.sim import Bins
 from microsim.surfaces.heightfields import abc
 from microsim.wave import kirchhoff_orders, obliquity
-from microsim.wave.kirchhoff import _reflectance, _wi
+from microsim.wave.kirchhoff import incident_direction, reflectance
 
 LAM = 1.0
 
@@ -31,8 +31,8 @@ def test_smooth_tile_davies_and_first_order(theta_i):
         surf = abc(256, 0.25, sigma, 20.0, 2.0, seed=4)
     h = surf.heights - surf.heights.mean()
     o = kirchhoff_orders(h, 0.25, LAM, theta_i, material="aluminium", upsample=2)
-    wi, k = _wi(theta_i, 0.0), 2 * math.pi / LAM
-    R = _reflectance(wi, o.wo, "aluminium", "half")
+    wi, k = incident_direction(theta_i, 0.0), 2 * math.pi / LAM
+    R = reflectance(wi, o.wo, "aluminium", "half")
     sp = o.specular_index()
     sigma_r = math.sqrt(np.mean(h**2))
     davies = R[sp] * math.exp(-((2 * k * ci * sigma_r) ** 2))

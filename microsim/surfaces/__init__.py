@@ -3,9 +3,20 @@ heightfields from files, and a flat mirror. Each generator returns a ``Surface``
 nominal parameters, ``stats()`` and what the generator knows about it (``ensemble_ndf``,
 ``exact_shadowing``, ``predicted``). Scene files are read by ``microsim.scene.load_scene``.
 """
+
+from .gratings import sinusoidal_grating
 from .heightfields import abc, gaussian
 from .loader import from_file
 from .surface import Predicted, Surface, flat
 from .vgrooves import vgrooves
 
-__all__ = ["Surface", "Predicted", "vgrooves", "gaussian", "abc", "flat", "from_file"]
+__all__ = [
+    "Surface",
+    "Predicted",
+    "vgrooves",
+    "gaussian",
+    "abc",
+    "flat",
+    "from_file",
+    "sinusoidal_grating",
+]

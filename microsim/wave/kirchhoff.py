@@ -59,7 +59,17 @@ from microsim.analytic.fresnel import fresnel
 from microsim.checks import integer, positive
 from microsim.errors import UsageError
 
-__all__ = ["Orders", "kirchhoff_orders", "direct_orders", "order_directions", "obliquity"]
+__all__ = [
+    "Orders",
+    "kirchhoff_orders",
+    "direct_orders",
+    "order_directions",
+    "obliquity",
+    "incident_direction",
+    "reflectance",
+    "fourier_upsample",
+    "FRESNEL_ANGLES",
+]
 
 FRESNEL_ANGLES = ("half", "incident")
 
@@ -86,7 +96,8 @@ class Orders:
         return int(np.flatnonzero((self.m == 0) & (self.n == 0))[0])
 
 
-def _wi(theta_i_deg: float, phi_i_deg: float) -> np.ndarray:
+def incident_direction(theta_i_deg: float, phi_i_deg: float) -> np.ndarray:
+    """Unit wi = (sin θi cos φi, sin θi sin φi, cos θi) towards the light (angles in degrees)."""
     t, p = math.radians(theta_i_deg), math.radians(phi_i_deg)
     return np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
 
@@ -96,7 +107,7 @@ def order_directions(tile, wavelength, theta_i_deg, phi_i_deg=0.0):
     wo_xy = −wi_xy + λ(m/Lx, n/Ly)."""
     lx, ly = float(tile[0]), float(tile[1])
     lam = positive("wavelength", wavelength)
-    wi = _wi(theta_i_deg, phi_i_deg)
+    wi = incident_direction(theta_i_deg, phi_i_deg)
     mmax = int(math.ceil(2.0 * lx / lam)) + 1
     nmax = int(math.ceil(2.0 * ly / lam)) + 1
     m = np.arange(-mmax, mmax + 1)
@@ -117,7 +128,9 @@ def obliquity(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     return c * c / (wi[2] * wo[..., 2] * (wi[2] + wo[..., 2]) ** 2)
 
 
-def _reflectance(wi, wo, material, fresnel_angle):
+def reflectance(wi, wo, material, fresnel_angle):
+    """R of each order (K,): unpolarised ``fresnel`` of ``material`` at the half-vector angle,
+    cos θd = √((1 + wi·wo)/2) (``fresnel_angle="half"``), or at θi (``"incident"``)."""
     if fresnel_angle == "incident":
         return fresnel(np.full(len(wo), wi[2]), material)
     cos_d = np.sqrt(np.clip(0.5 * (1.0 + wo @ wi), 0.0, 1.0))
@@ -138,7 +151,7 @@ def _check(heights, dx, wavelength, theta_i_deg, fresnel_angle, upsample):
     return h, dx, wavelength, upsample
 
 
-def _upsampled(h: np.ndarray, u: int) -> np.ndarray:
+def fourier_upsample(h: np.ndarray, u: int) -> np.ndarray:
     """Trigonometric (Fourier) interpolation of periodic samples onto a u× finer grid."""
     if u == 1:
         return h
@@ -214,9 +227,9 @@ def kirchhoff_orders(
     h, dx, lam, u = _check(heights, dx, wavelength, theta_i_deg, fresnel_angle, upsample)
     ny, nx = h.shape
     tile = (nx * dx, ny * dx)
-    wi = _wi(theta_i_deg, phi_i_deg)
+    wi = incident_direction(theta_i_deg, phi_i_deg)
     m, n, wo = order_directions(tile, lam, theta_i_deg, phi_i_deg)
-    g = _upsampled(h, u)
+    g = fourier_upsample(h, u)
     gy, gx = g.shape
     if np.any(np.abs(m) > gx // 2) or np.any(np.abs(n) > gy // 2):
         raise UsageError(
@@ -253,7 +266,7 @@ def kirchhoff_orders(
         amp += wts[:, jj] * F[iy, ix]
     # x_j start at −L/2 (mesh convention): phase factor e^{i p·x0}; with the height centre.
     amp *= np.exp(1j * qz * hc) * np.exp(-1j * np.pi * (m + n))
-    R = _reflectance(wi, wo, material, fresnel_angle)
+    R = reflectance(wi, wo, material, fresnel_angle)
     power = R * obliquity(wi, wo) * np.abs(amp) ** 2
     meta = {
         "method": "kirchhoff",
@@ -277,7 +290,7 @@ def direct_orders(
     h, dx, lam, _ = _check(heights, dx, wavelength, theta_i_deg, fresnel_angle, 1)
     ny, nx = h.shape
     tile = (nx * dx, ny * dx)
-    wi = _wi(theta_i_deg, phi_i_deg)
+    wi = incident_direction(theta_i_deg, phi_i_deg)
     m, n, wo = order_directions(tile, lam, theta_i_deg, phi_i_deg)
     k = 2.0 * math.pi / lam
     x = (np.arange(nx) - nx / 2.0) * dx
@@ -288,6 +301,6 @@ def direct_orders(
     for i in range(len(m)):
         px, py = 2 * np.pi * m[i] / tile[0], 2 * np.pi * n[i] / tile[1]
         amp[i] = np.mean(np.exp(1j * (px * X + py * Y + qz[i] * h)))
-    R = _reflectance(wi, wo, material, fresnel_angle)
+    R = reflectance(wi, wo, material, fresnel_angle)
     power = R * obliquity(wi, wo) * np.abs(amp) ** 2
     return Orders(m=m, n=n, wo=wo, power=power, amplitude=amp, meta={"method": "direct"})
