@@ -5,7 +5,17 @@ order powers as the bin-averaged BRDF ``Result`` (``brdf``).
 Layer: "wave", between sim and analysis (imports core, analytic and sim.bins/paths/result)."""
 
 from .brdf import bin_orders, kirchhoff_brdf
-from .kirchhoff import Orders, direct_orders, kirchhoff_orders, obliquity, order_directions
+from .kirchhoff import (
+    Orders,
+    direct_orders,
+    incident_direction,
+    kirchhoff_orders,
+    mesh_direct_orders,
+    obliquity,
+    order_directions,
+    reflectance,
+    triangle_rule,
+)
 
 __all__ = [
     "kirchhoff_brdf",
@@ -15,4 +25,8 @@ __all__ = [
     "direct_orders",
     "order_directions",
     "obliquity",
+    "mesh_direct_orders",
+    "triangle_rule",
+    "incident_direction",
+    "reflectance",
 ]

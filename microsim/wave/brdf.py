@@ -94,6 +94,7 @@ def kirchhoff_brdf(
     upsample=1,
     tol=1e-12,
     workers=2,
+    surface_model="smooth",
 ) -> Result:
     """Bin-averaged Kirchhoff BRDF of a heightfield ``surface`` (a ``Surface`` with ``heights``
     and ``dx``, or a sequence of such realisations) at incidences ``theta_i`` (degrees, scalar
@@ -104,14 +105,22 @@ def kirchhoff_brdf(
     realisations); ``sum_w``/``sum_w2`` the sums of order powers and their squares per bin;
     ``ledger["single"]`` the mean total order power (all single scattering: Kirchhoff has no
     masking or multiple scattering; the other ledger entries are 0); ``stderr`` as the module
-    docstring (``stderr_ray`` = speckle part, ``stderr_realisation`` with ≥ 2 tiles)."""
+    docstring (``stderr_ray`` = speckle part, ``stderr_realisation`` with ≥ 2 tiles).
+    ``surface_model``: "smooth" (band-limited interpolant of the heights) or "mesh" (the ray
+    tracer's triangle mesh), ``kirchhoff_orders``'s ``surface``."""
     surfaces = list(surface) if isinstance(surface, (list, tuple)) else [surface]
     if not surfaces:
         raise UsageError("surface: give a heightfield Surface or a non-empty list of them")
     bins = Bins() if bins is None else bins
     th = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     omega = bins.projected_solid_angle().ravel()
-    opts = dict(fresnel_angle=fresnel_angle, upsample=upsample, tol=tol, workers=workers)
+    opts = dict(
+        fresnel_angle=fresnel_angle,
+        upsample=upsample,
+        tol=tol,
+        workers=workers,
+        surface=surface_model,
+    )
     t0 = time.perf_counter()
     per = [_one_surface(s, material, th, phi_i, bins, wavelength, opts) for s in surfaces]
     n_real = len(per)
@@ -141,6 +150,7 @@ def kirchhoff_brdf(
         "wavelength": float(wavelength),
         "fresnel_angle": fresnel_angle,
         "upsample": int(upsample),
+        "surface_model": surface_model,
         "qz_tol": tol,
         "qz_nodes": [r["nodes"].tolist() for r in per],
         "stderr_method": "realisations" if n_real > 1 else "speckle",
