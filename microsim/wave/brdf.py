@@ -62,7 +62,8 @@ def _one_surface(surface, material, th, phi_i, bins, wavelength, opts):
     """Per-incidence bin sums of one tile: dict of (T, Θ·Φ) arrays and per-incidence lists."""
     if getattr(surface, "heights", None) is None or getattr(surface, "dx", None) is None:
         raise UsageError("surface must be a heightfield (heights and dx) for the wave solver")
-    out = {k: [] for k in ("sum_w", "sum_w2", "counts", "se", "orders", "single", "nodes")}
+    keys = ("sum_w", "sum_w2", "counts", "se", "orders", "single", "nodes", "spec", "spec_bin")
+    out = {k: [] for k in keys}
     for t in th:
         o = kirchhoff_orders(
             surface.heights,
@@ -79,6 +80,9 @@ def _one_surface(surface, material, th, phi_i, bins, wavelength, opts):
         out["orders"].append(len(o.m))
         out["single"].append(float(o.power.sum()))
         out["nodes"].append(o.meta["qz_nodes"])
+        sp = o.specular_index()
+        out["spec"].append(float(o.power[sp]))
+        out["spec_bin"].append(int(bins.locate(o.wo[sp : sp + 1], float(phi_i))[0]))
     return {k: np.asarray(v) for k, v in out.items()}
 
 
@@ -104,7 +108,9 @@ def kirchhoff_brdf(
     over realisations; ``rays`` and ``counts`` count diffraction orders (not rays, summed over
     realisations); ``sum_w``/``sum_w2`` the sums of order powers and their squares per bin;
     ``ledger["single"]`` the mean total order power (all single scattering: Kirchhoff has no
-    masking or multiple scattering; the other ledger entries are 0); ``stderr`` as the module
+    masking or multiple scattering; the other ledger entries are 0); ``meta["specular_power"]``
+    the (0, 0) order's power per incidence (mean over realisations: the coherent part, in the
+    mirror bin ``meta["specular_bin"]``, flat θ-major index); ``stderr`` as the module
     docstring (``stderr_ray`` = speckle part, ``stderr_realisation`` with ≥ 2 tiles).
     ``surface_model``: "smooth" (band-limited interpolant of the heights) or "mesh" (the ray
     tracer's triangle mesh), ``kirchhoff_orders``'s ``surface``."""
@@ -148,12 +154,15 @@ def kirchhoff_brdf(
         "realisations": n_real,
         "material": {"name": material} if isinstance(material, str) else {"ior": repr(material)},
         "wavelength": float(wavelength),
+        "tile": [float(v) for v in surfaces[0].tile_size],
         "fresnel_angle": fresnel_angle,
         "upsample": int(upsample),
         "surface_model": surface_model,
         "qz_tol": tol,
         "qz_nodes": [r["nodes"].tolist() for r in per],
         "stderr_method": "realisations" if n_real > 1 else "speckle",
+        "specular_power": np.mean([r["spec"] for r in per], axis=0).tolist(),
+        "specular_bin": per[0]["spec_bin"].tolist(),
         "partial": False,
         "seconds": time.perf_counter() - t0,
     }
