@@ -1,0 +1,553 @@
+"""Multiple scattering on a Smith microsurface by a random walk (Heitz et al. 2016).
+
+Heitz, Hanika, d'Eon & Dachsbacher 2016 ("Multiple-scattering microfacet BSDFs with the Smith
+model", ACM TOG 35(4)) define the *Smith microsurface*: a random heightfield whose heights and
+normals are uncorrelated, with height density P1 (CDF C1) and an NDF D. Its BRDF, including all
+orders of scattering, is the expectation of a random walk on that surface; its first order is
+exactly Torrance–Sparrow with height-correlated Smith shadowing. This module implements the walk
+for a conductor (or ideal mirror) with a Beckmann or GGX NDF (isotropic roughness α; α = m for
+``Beckmann(m)``), vectorised over paths, and its bin averages per scattering order.
+
+Conventions (docs/design.md): n = +z, unit directions point *away* from the surface; the incident
+direction wi points towards the light. A path starts as the ray −wi and is reflected at every
+hit; the direction in which it finally leaves the surface is wo. Angles in public arguments are
+degrees.
+
+Derivation (the parts this module relies on)
+---------------------------------------------
+*Free flight.* Smith's masking from height h in an upward direction w is G1(w, h) = C1(h)^Λ(w)
+(Heitz et al. 2016, §3; Smith 1967). Differentiating, a ray going up meets the surface at a rate
+Λ(w) P1(h)/C1(h) per unit of height. A ray going *down* sees the facets visible from −w, whose
+projected area is (1 + Λ(−w)) cos θ, so it meets the surface at the rate (1 + Λ(−w)) P1/C1 per
+unit of height descended (Heitz's signed Λ(w) = −1 − Λ(−w) for w_z < 0). In the variable
+
+    τ = −ln C1(h) ∈ [0, ∞)     (τ = 0 at the top of the surface, growing downwards)
+
+both rates are constant: an upward ray from τ₀ travels an Exp(Λ(w)) distance in τ and escapes
+when it exceeds τ₀ (probability e^{−Λ τ₀} = C1(h₀)^Λ = G1), otherwise it hits at τ₀ − L; a
+downward ray hits at τ₀ + E/(1 + Λ(−w)), E ~ Exp(1). This is Heitz et al.'s ``sampleHeight``
+(τ-form of h = C1⁻¹(C1(h₀) (1 − U)^{−1/Λ(w)})), and it shows that the walk — hence the BRDF —
+does not depend on the height distribution (Heitz et al. 2016, §4.1 state the same). The walk
+starts at τ = 0 (C1 = 1, above every facet). ``height_from_tau`` maps τ back to a height for the
+uniform (on [−1, 1]: h = 2e^{−τ} − 1) and the standard Gaussian (h = Φ⁻¹(e^{−τ})) heights.
+
+*Smith Λ.* From the NDF's closed form: ``Beckmann.smith_lambda_cos`` (Λ = [erf(a) − 1]/2 +
+e^{−a²}/(2a√π), a = 1/(m tan θ)) and ``GGX.smith_lambda_cos`` (Λ = (−1 + √(1 + α² tan²θ))/2).
+
+*Phase function.* At a hit by a ray travelling in direction d, the facet normal m is distributed
+as the visible normals from v = −d, D_v(m) = ⟨v, m⟩⁺ D(m) / ∫⟨v, m⟩⁺ D dm (v may point below
+the horizon after a bounce), and the ray leaves in wo = 2(v·m)m − v with weight F(v·m)
+(exact Fresnel, ``fresnel.fresnel``; 1 for the mirror). ``sample_visible_normals``:
+
+* GGX: Heitz 2018 ("Sampling the GGX distribution of visible normals", JCGT 7(4)): stretch v by
+  α, sample the projected visible hemisphere uniformly (disk, warped by s = (1 + v_z)/2), lift to
+  the hemisphere, unstretch. For v below the horizon the warped region is the half disk minus the
+  half ellipse of semi-axis |v_z| — exactly the projection of the hemisphere points facing v
+  (checked: its inner boundary t₂ = |v_z|√(1 − t₁²) lifts to z = 0), so the method holds for
+  every v but straight down (where nothing is visible and no ray arrives: Λ = 0 there).
+* Beckmann: Heitz & d'Eon 2014 / Heitz 2014 slope sampling. In the stretched frame with v at
+  polar angle θ and azimuth 0, the visible slope x̃ along v has density ∝ (a − x̃)⁺ e^{−x̃²},
+  a = cot θ ∈ ℝ (negative for v below the horizon), and the transverse slope ỹ is N(0, 1/2).
+  The CDF of x̃ is F(x) = a(1 + erf x)/2 + e^{−x²}/(2√π) (x ≤ a), written for x < 0 as
+  F = e^{−x²}(a·erfcx(−x) + 1/√π)/2 so that ln F stays finite far in the tail; F(a) is the
+  projected area. x̃ solves ln F(x̃) = ln(U F(a)) by safeguarded Newton iteration (ln F is
+  concave: F is the CDF of a log-concave density), vectorised over paths, to |Δx| < 1e-12.
+  Then the slope is rotated to v's azimuth, scaled by α, and m = (−x, −y, 1)/‖·‖. For a > 1e6
+  (v within 1e-6/α rad of the normal) a is clipped to 1e6: a relative change of the density of
+  O(1e-6).
+
+*Order 1.* The first hit is at τ₁ ~ Exp(1 + Λ(wi)), m ~ D_wi, and the path escapes from τ₁ with
+probability E[e^{−Λ(wo)τ₁}] = (1 + Λ(wi))/(1 + Λ(wi) + Λ(wo)); with the reflection Jacobian
+1/(4 wi·m) the density of wo is F D(m)/(4 cos θi (1 + Λ(wi) + Λ(wo))) = f cos θo with
+f = F D G2/(4 cos θi cos θo), G2 = 1/(1 + Λ(wi) + Λ(wo)): Torrance–Sparrow with
+height-correlated Smith shadowing, exactly (tests/test_multiple_scattering_models.py).
+
+*Energy.* With F = 1 every path eventually leaves (the walk on a Smith microsurface conserves
+energy: Heitz et al. 2016, §5), so the escaping energy is 1 up to the paths cut at
+``max_bounces``, which are reported.
+
+Bins (mirroring ``microsim.sim.bins.Bins``, which this layer cannot import): ``theta_edges``
+(degrees, increasing within [0, 90]) and ``phi_edges`` (degrees, increasing) over the relative
+azimuth Δφ = φo − φi, the mirror direction at Δφ = 180°. ``folded=True``: Δφ is folded to
+|Δφ| ∈ [0°, 180°] and each bin's projected solid angle counts both halves; ``folded=False``: Δφ
+is taken into [phi_edges[0], phi_edges[0] + 360°). A bin average is the energy escaping into the
+bin per incident path divided by the bin's projected solid angle
+Ω_B = Δφ (sin²θ₂ − sin²θ₁)/2 (×2 folded): f̄_B = (1/Ω_B) ∫_B f cos θo dω_o in sr⁻¹.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+from microsim import checks as _checks
+from microsim.errors import UsageError
+
+from .fresnel import fresnel, resolve_material
+from .ndf import GGX, Beckmann
+
+__all__ = [
+    "HEIGHT_DISTRIBUTIONS",
+    "height_from_tau",
+    "tau_from_height",
+    "walk_alpha",
+    "sample_visible_normals",
+    "visible_projected_area",
+    "WalkPaths",
+    "random_walk",
+    "WalkBinAverages",
+    "walk_bin_averages",
+]
+
+HEIGHT_DISTRIBUTIONS = ("uniform", "gaussian")
+"""Height distributions of ``height_from_tau``: uniform on [−1, 1], standard normal."""
+
+_A_MAX = 1e6  # largest |cot θ| used in Beckmann visible-slope sampling (see module docstring)
+_SQRT_PI = np.sqrt(np.pi)
+
+
+# --- heights -----------------------------------------------------------------------------------
+def _check_heights(heights: str) -> str:
+    if heights not in HEIGHT_DISTRIBUTIONS:
+        raise UsageError(
+            f"heights must be one of {', '.join(map(repr, HEIGHT_DISTRIBUTIONS))}, got {heights!r}"
+        )
+    return heights
+
+
+def height_from_tau(tau, heights: str = "uniform"):
+    """Height h with −ln C1(h) = τ (τ ≥ 0; the walk's depth variable) for ``heights``
+    "uniform" (P1 uniform on [−1, 1]: h = 2e^{−τ} − 1) or "gaussian" (standard normal:
+    h = Φ⁻¹(e^{−τ}), by ``scipy.special.ndtri_exp``). τ = 0 is the top (h = 1, resp. +∞).
+    Uniform heights lose τ's digits near the top and bottom (h = −1 exactly for τ ≳ 37); the
+    walk runs in τ and never needs h."""
+    heights = _check_heights(heights)
+    t = np.asarray(tau, dtype=np.float64)
+    if np.any(t < 0) or np.any(np.isnan(t)):
+        raise UsageError("tau must be >= 0 (tau = -ln C1(h))")
+    if heights == "uniform":
+        return 2.0 * np.exp(-t) - 1.0
+    return special.ndtri_exp(-t)
+
+
+def tau_from_height(h, heights: str = "uniform"):
+    """τ = −ln C1(h), the inverse of ``height_from_tau`` (uniform: h ∈ [−1, 1]; gaussian: any h,
+    by ``scipy.special.log_ndtr``)."""
+    heights = _check_heights(heights)
+    h = np.asarray(h, dtype=np.float64)
+    if heights == "uniform":
+        if np.any((h < -1) | (h > 1)) or np.any(np.isnan(h)):
+            raise UsageError("h must lie in [-1, 1] for uniform heights")
+        with np.errstate(divide="ignore"):
+            return -np.log(0.5 * (h + 1.0))
+    return -special.log_ndtr(h)
+
+
+# --- NDF ---------------------------------------------------------------------------------------
+def walk_alpha(ndf) -> tuple[str, float]:
+    """("beckmann" | "ggx", α) of an NDF the walk supports (α = m for Beckmann), else UsageError."""
+    if isinstance(ndf, Beckmann):
+        return "beckmann", float(ndf.m)
+    if isinstance(ndf, GGX):
+        return "ggx", float(ndf.alpha)
+    raise UsageError(
+        f"ndf must be a Beckmann or GGX NDF (the random walk needs their visible-normal "
+        f"sampling), got {ndf!r}"
+    )
+
+
+def _lambda_up(ndf, cos_abs):
+    """Smith Λ of the upward direction with |cos θ| = cos_abs ∈ [0, 1] (inf at 0)."""
+    return ndf.smith_lambda_cos(np.clip(cos_abs, 0.0, 1.0))
+
+
+def visible_projected_area(v, ndf):
+    """∫ ⟨v, m⟩⁺ D(m) dm for unit v of any sign of v_z: (1 + Λ(v)) v_z for v_z ≥ 0 and
+    Λ(−v) |v_z| for v_z < 0 (Smith's projected-area identity), the normaliser of D_v."""
+    v = _checks.directions("v", v)
+    c = v[..., 2]
+    kind, alpha = walk_alpha(ndf)
+    lam = _lambda_up(ndf, np.abs(c))
+    with np.errstate(invalid="ignore"):
+        out = np.where(c >= 0, (1.0 + lam) * c, lam * np.abs(c))
+    # at the horizon Λ|v_z| → α/(2√π) (Beckmann), α/2 (GGX)
+    horizon = alpha / (2.0 * _SQRT_PI) if kind == "beckmann" else 0.5 * alpha
+    return np.where(c == 0.0, horizon, out)
+
+
+def _beckmann_ln_f(a, x):
+    """ln F(x), F(x) = a(1 + erf x)/2 + e^{−x²}/(2√π) = ∫_{−∞}^x (a − s) e^{−s²} ds/√π, x ≤ a;
+    for x < 0 as −x² + ln((a erfcx(−x) + 1/√π)/2) (finite far in the tail)."""
+    neg = x < 0
+    xn = np.where(neg, x, -1.0)
+    xp = np.where(neg, 1.0, x)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lneg = -xn * xn + np.log(0.5 * np.maximum(a * special.erfcx(-xn) + 1.0 / _SQRT_PI, 0.0))
+        lpos = np.log(0.5 * a * (1.0 + special.erf(xp)) + np.exp(-xp * xp) / (2.0 * _SQRT_PI))
+    return np.where(neg, lneg, lpos)
+
+
+def _beckmann_slope_x(a, u):
+    """x̃ ≤ a with F(x̃) = u F(a) (``_beckmann_ln_f``), vectorised over paths.
+
+    Safeguarded Newton on the concave increasing g(x) = ln F(x) − ln(u F(a)) inside the bracket
+    [min(a, 0) − 9, a] (F(lo)/F(a) < 1e-30 < u for every u the walk draws), with bisection
+    whenever a step leaves the bracket; only unconverged entries are iterated.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    target = np.log(u) + _beckmann_ln_f(a, a)
+    lo = np.minimum(a, 0.0) - 9.0
+    hi = a.copy()
+    # start: the root for a → +∞ (x = erfinv(2u − 1)) clipped into the bracket; for a < 0 near
+    # the median of the limiting Gamma(2, 2|a|) law of a − x̃ (density ∝ r e^{−2|a| r}, r = a − x̃)
+    x = np.where(
+        a >= 0,
+        np.clip(special.erfinv(2.0 * u - 1.0), lo, hi),
+        a - 1.68 / (2.0 * np.abs(a) + 1.2),
+    )
+    act = np.arange(len(a))
+    for _ in range(200):
+        xa, aa = x[act], a[act]
+        lf = _beckmann_ln_f(aa, xa)
+        g = lf - target[act]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            dg = (aa - xa) * np.exp(-xa * xa - lf) / _SQRT_PI  # d ln F/dx
+            step = g / dg
+            x_new = xa - step
+        lo_a = np.where(g < 0, xa, lo[act])
+        hi_a = np.where(g > 0, xa, hi[act])
+        bad = ~np.isfinite(x_new) | (x_new < lo_a) | (x_new > hi_a)
+        lo[act], hi[act] = lo_a, hi_a
+        done = (g == 0) | (~bad & (np.abs(step) <= 1e-12 * np.maximum(1.0, np.abs(xa))))
+        x[act] = np.where(g == 0, xa, np.where(bad, 0.5 * (lo_a + hi_a), x_new))
+        act = act[~done]
+        if len(act) == 0:
+            break
+    return np.minimum(x, a)
+
+
+def _beckmann_visible(v, alpha, u1, u2):
+    vs = np.stack([alpha * v[:, 0], alpha * v[:, 1], v[:, 2]], axis=1)
+    vs /= np.linalg.norm(vs, axis=1, keepdims=True)
+    rxy = np.hypot(vs[:, 0], vs[:, 1])
+    with np.errstate(divide="ignore"):
+        a = np.clip(vs[:, 2] / rxy, -_A_MAX, _A_MAX)  # cot θ of the stretched direction
+    a = np.where(rxy > 0, a, np.sign(vs[:, 2]) * _A_MAX)
+    x = _beckmann_slope_x(a, u1)
+    y = special.erfinv(2.0 * u2 - 1.0)
+    safe = rxy > 0
+    cphi = np.where(safe, vs[:, 0] / np.where(safe, rxy, 1.0), 1.0)
+    sphi = np.where(safe, vs[:, 1] / np.where(safe, rxy, 1.0), 0.0)
+    sx = alpha * (cphi * x - sphi * y)
+    sy = alpha * (sphi * x + cphi * y)
+    m = np.stack([-sx, -sy, np.ones_like(sx)], axis=1)
+    return m / np.linalg.norm(m, axis=1, keepdims=True)
+
+
+def _ggx_visible(v, alpha, u1, u2):
+    vh = np.stack([alpha * v[:, 0], alpha * v[:, 1], v[:, 2]], axis=1)
+    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    inv = np.where(lensq > 0, 1.0 / np.sqrt(np.where(lensq > 0, lensq, 1.0)), 0.0)
+    t1v = np.stack(
+        [np.where(lensq > 0, -vh[:, 1] * inv, 1.0), np.where(lensq > 0, vh[:, 0] * inv, 0.0)],
+        axis=1,
+    )
+    T1 = np.stack([t1v[:, 0], t1v[:, 1], np.zeros(len(v))], axis=1)
+    T2 = np.cross(vh, T1)
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    t1 = r * np.cos(phi)
+    t2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2])
+    w = np.sqrt(np.maximum(1.0 - t1 * t1, 0.0))
+    t2 = (1.0 - s) * w + s * t2
+    up = np.sqrt(np.maximum(1.0 - t1 * t1 - t2 * t2, 0.0))
+    nh = t1[:, None] * T1 + t2[:, None] * T2 + up[:, None] * vh
+    m = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 0.0)], axis=1)
+    return m / np.linalg.norm(m, axis=1, keepdims=True)
+
+
+def _visible(kind, alpha, v, u1, u2):
+    if kind == "beckmann":
+        return _beckmann_visible(v, alpha, u1, u2)
+    return _ggx_visible(v, alpha, u1, u2)
+
+
+def sample_visible_normals(v, ndf, u1, u2):
+    """Facet normals m ~ D_v(m) = ⟨v, m⟩⁺ D(m) / ∫⟨v, m'⟩⁺ D dm' for unit view directions v
+    (N, 3) of either hemisphere (not straight down) and uniforms u1, u2 ∈ (0, 1) of shape (N,).
+
+    GGX: Heitz 2018; Beckmann: Heitz & d'Eon 2014 slope inversion (module docstring)."""
+    kind, alpha = walk_alpha(ndf)
+    v = _checks.directions("v", v)
+    if v.ndim != 2:
+        raise UsageError(f"v must have shape (N, 3), got {v.shape}")
+    u1 = np.clip(np.asarray(u1, dtype=np.float64), 1e-300, 1.0)
+    u2 = np.clip(np.asarray(u2, dtype=np.float64), 0.0, 1.0)
+    if u1.shape != (len(v),) or u2.shape != (len(v),):
+        raise UsageError(f"u1 and u2 must have shape ({len(v)},)")
+    return _visible(kind, alpha, v, u1, np.clip(u2, 1e-16, 1 - 1e-16))
+
+
+# --- the walk ----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class WalkPaths:
+    """Outcome of ``random_walk`` per path (arrays of length N).
+
+    ``wo``: exit direction (unit, upper hemisphere; NaN for paths cut off); ``weight``: the
+    energy it carries out (product of the Fresnel factors; 0 if cut off); ``order``: number of
+    reflections before it left (0 if cut off); ``absorbed``: energy lost to Fresnel absorption
+    along the path; ``cut``: energy still on the surface after ``max_bounces`` reflections.
+    Per path, weight + absorbed + cut = 1 up to rounding.
+    """
+
+    wo: np.ndarray
+    weight: np.ndarray
+    order: np.ndarray
+    absorbed: np.ndarray
+    cut: np.ndarray
+
+
+def random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) -> WalkPaths:
+    """Random walk of Heitz et al. 2016 on a Smith microsurface, one path per row of ``wi``.
+
+    ``wi``: unit incident directions (N, 3) pointing to the light, z > 0. ``ndf``: ``Beckmann``
+    or ``GGX``. ``material``: None (mirror) or anything ``fresnel.resolve_material`` accepts
+    (conductor or dielectric treated as reflector only). ``rng``: numpy Generator or seed.
+    All live paths advance together (one NumPy step per reflection order).
+    """
+    kind, alpha = walk_alpha(ndf)
+    eta = resolve_material(material)
+    wi = _checks.directions("wi", wi)
+    if wi.ndim != 2:
+        raise UsageError(f"wi must have shape (N, 3), got {wi.shape}")
+    if np.any(wi[:, 2] <= 0):
+        raise UsageError("wi must point above the horizon (z > 0)")
+    max_bounces = _checks.integer("max_bounces", max_bounces, 1, 10**6)
+    rng = np.random.default_rng(rng)
+    n = len(wi)
+    out_wo = np.full((n, 3), np.nan)
+    out_w = np.zeros(n)
+    out_k = np.zeros(n, dtype=np.int64)
+    absorbed = np.zeros(n)
+    cut = np.zeros(n)
+
+    idx = np.arange(n)
+    d = -wi.copy()  # ray direction
+    tau = np.zeros(n)
+    w = np.ones(n)
+    for k in range(1, max_bounces + 1):
+        # next intersection (or escape) of rays leaving the previous order
+        e = rng.standard_exponential(len(idx))
+        cz = d[:, 2]
+        lam = _lambda_up(ndf, np.abs(cz))
+        up = cz > 0
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            esc = up & ~(lam * tau > e)  # escape when Exp(Λ) flight ≥ τ (Λ = 0: always)
+            tau_up = tau - e / lam
+            tau_dn = tau + e / (1.0 + lam)
+        if k > 1 and np.any(esc):
+            j = idx[esc]
+            out_wo[j], out_w[j], out_k[j] = d[esc], w[esc], k - 1
+        keep = ~esc
+        idx, d, w = idx[keep], d[keep], w[keep]
+        tau = np.where(up, tau_up, tau_dn)[keep]
+        tau = np.maximum(tau, 0.0)
+        if len(idx) == 0:
+            break
+        # reflection at order k
+        v = -d
+        m = _visible(
+            kind,
+            alpha,
+            v,
+            np.clip(1.0 - rng.random(len(idx)), 1e-300, 1.0),
+            np.clip(rng.random(len(idx)), 1e-16, 1 - 1e-16),
+        )
+        vm = np.clip(np.einsum("ij,ij->i", v, m), 0.0, 1.0)
+        d = 2.0 * vm[:, None] * m - v
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        if eta is not None:
+            f = fresnel(vm, eta)
+            absorbed[idx] += w * (1.0 - f)
+            w = w * f
+    if len(idx):  # paths that reflected max_bounces times without leaving
+        cut[idx] = w
+    return WalkPaths(out_wo, out_w, out_k, absorbed, cut)
+
+
+# --- bin averages ------------------------------------------------------------------------------
+def _check_edges(theta_edges, phi_edges, folded):
+    te = np.asarray(theta_edges, dtype=np.float64)
+    pe = np.asarray(phi_edges, dtype=np.float64)
+    if te.ndim != 1 or len(te) < 2 or np.any(np.diff(te) <= 0) or te[0] < 0 or te[-1] > 90:
+        raise UsageError("theta_edges must be >= 2 increasing values in degrees within [0, 90]")
+    if pe.ndim != 1 or len(pe) < 2 or np.any(np.diff(pe) <= 0):
+        raise UsageError("phi_edges must be >= 2 increasing values in degrees")
+    if not isinstance(folded, (bool, np.bool_)):
+        raise UsageError(f"folded must be True or False, got {folded!r}")
+    if folded and (pe[0] < 0 or pe[-1] > 180):
+        raise UsageError("phi_edges must lie within [0, 180] degrees when folded=True")
+    if not folded and pe[-1] - pe[0] > 360:
+        raise UsageError("phi_edges must span at most 360 degrees when folded=False")
+    return te, pe, bool(folded)
+
+
+def _projected_solid_angle(te, pe, folded):
+    s2 = np.sin(np.radians(te)) ** 2
+    band = 0.5 * np.diff(s2)
+    dphi = np.radians(np.diff(pe)) * (2.0 if folded else 1.0)
+    return band[:, None] * dphi[None, :]
+
+
+def _locate(wo, te, pe, folded):
+    """Flat bin index of exit directions (wi at azimuth 0), −1 outside the grid."""
+    x, y, z = wo[:, 0], wo[:, 1], wo[:, 2]
+    theta = np.degrees(np.arctan2(np.hypot(x, y), z))
+    dphi = np.degrees(np.arctan2(y, x))  # (−180, 180]
+    if folded:
+        dphi = np.abs(dphi)
+    else:
+        dphi = pe[0] + np.mod(dphi - pe[0], 360.0)
+    i = np.searchsorted(te, theta, side="right") - 1
+    i = np.where(theta == te[-1], len(te) - 2, i)
+    j = np.searchsorted(pe, dphi, side="right") - 1
+    j = np.where(dphi == pe[-1], len(pe) - 2, j)
+    ok = (i >= 0) & (i < len(te) - 1) & (j >= 0) & (j < len(pe) - 1) & (z > 0)
+    return np.where(ok, i * (len(pe) - 1) + j, -1)
+
+
+@dataclass(frozen=True)
+class WalkBinAverages:
+    """Bin averages of the walk, per incidence and scattering order.
+
+    ``theta_i``: incidence angles (degrees), shape (I,); ``orders``: labels of the order axis
+    ("1", "2", …, "≥K"); ``values``/``stderr``: f̄_B in sr⁻¹, shape (I, K, n_theta, n_phi);
+    ``energy``/``energy_stderr``: escaping energy per order and incident path (I, K) — includes
+    light leaving outside the bin grid; ``absorbed``/``absorbed_stderr``, ``cut``: (I,) energy
+    absorbed by Fresnel losses and energy of paths cut at ``max_bounces``; ``max_order``: the
+    highest order seen per incidence; ``n_paths``: paths per incidence; ``omega``: Ω_B (sr).
+    ``multiple_energy``/``multiple_stderr``: energy escaping in orders ≥ 2 (I,). Standard
+    errors are those of a mean over i.i.d. paths.
+    """
+
+    theta_i: np.ndarray
+    orders: tuple
+    values: np.ndarray
+    stderr: np.ndarray
+    energy: np.ndarray
+    energy_stderr: np.ndarray
+    absorbed: np.ndarray
+    absorbed_stderr: np.ndarray
+    cut: np.ndarray
+    max_order: np.ndarray
+    n_paths: int
+    omega: np.ndarray
+
+    multiple_energy: np.ndarray
+    multiple_stderr: np.ndarray
+
+
+def walk_bin_averages(
+    theta_i,
+    theta_edges,
+    phi_edges,
+    ndf,
+    material=None,
+    n_paths: int = 1_000_000,
+    orders: int = 4,
+    folded: bool = True,
+    seed=0,
+    max_bounces: int = 256,
+    chunk: int = 2**18,
+) -> WalkBinAverages:
+    """Heitz et al. 2016 random-walk BRDF averaged over (θo, Δφ) bins, per scattering order.
+
+    ``theta_i``: incidence angles in degrees (scalar or 1-D, each in [0, 90)); wi lies at
+    azimuth 0 (wi = (sin θi, 0, cos θi)). ``theta_edges``, ``phi_edges``, ``folded``: the bin
+    grid as ``microsim.sim.bins.Bins`` builds it (module docstring). ``orders``: K ≥ 1 tallies
+    orders 1 … K − 1 separately and K and above together ("≥K"). ``n_paths`` per incidence,
+    processed ``chunk`` at a time; ``seed``: anything ``numpy.random.default_rng`` takes (one
+    generator for the whole call: reproducible). Returns ``WalkBinAverages``.
+    """
+    _, _ = walk_alpha(ndf)
+    te, pe, folded = _check_edges(theta_edges, phi_edges, folded)
+    thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+    if thetas.ndim != 1 or np.any(~((thetas >= 0) & (thetas < 90))):
+        raise UsageError(f"theta_i must be angles in degrees within [0, 90), got {theta_i!r}")
+    n_paths = _checks.integer("n_paths", n_paths, 2, 10**11)
+    orders = _checks.integer("orders", orders, 1, 1000)
+    chunk = _checks.integer("chunk", chunk, 1, 2**24)
+    rng = np.random.default_rng(seed)
+    omega = _projected_solid_angle(te, pe, folded)
+    nb = omega.size
+    n_i = len(thetas)
+    s1 = np.zeros((n_i, orders, nb))
+    s2 = np.zeros((n_i, orders, nb))
+    e1 = np.zeros((n_i, orders))
+    e2 = np.zeros((n_i, orders))
+    ms1, ms2 = np.zeros(n_i), np.zeros(n_i)
+    a1, a2, cut = np.zeros(n_i), np.zeros(n_i), np.zeros(n_i)
+    kmax = np.zeros(n_i, dtype=np.int64)
+    for a, th in enumerate(thetas):
+        t = np.radians(th)
+        wi1 = np.array([np.sin(t), 0.0, np.cos(t)])
+        done = 0
+        while done < n_paths:
+            m = min(chunk, n_paths - done)
+            p = random_walk(np.broadcast_to(wi1, (m, 3)), ndf, material, rng, max_bounces)
+            done += m
+            esc = p.order > 0
+            kk = np.minimum(p.order[esc], orders) - 1
+            ww = p.weight[esc]
+            b = _locate(p.wo[esc], te, pe, folded)
+            inb = b >= 0
+            key = kk[inb] * nb + b[inb]
+            s1[a] += np.bincount(key, ww[inb], minlength=orders * nb).reshape(orders, nb)
+            s2[a] += np.bincount(key, ww[inb] ** 2, minlength=orders * nb).reshape(orders, nb)
+            e1[a] += np.bincount(kk, ww, minlength=orders)
+            e2[a] += np.bincount(kk, ww**2, minlength=orders)
+            ms = ww[p.order[esc] >= 2]
+            ms1[a] += ms.sum()
+            ms2[a] += np.sum(ms**2)
+            a1[a] += p.absorbed.sum()
+            a2[a] += np.sum(p.absorbed**2)
+            cut[a] += p.cut.sum()
+            if esc.any():
+                kmax[a] = max(kmax[a], int(p.order.max()))
+    n = float(n_paths)
+
+    def mean_se(s, q):
+        mean = s / n
+        var = np.maximum(q / n - mean * mean, 0.0) / (n - 1.0)
+        return mean, np.sqrt(var)
+
+    f1, fse = mean_se(s1, s2)
+    shape = (n_i, orders) + omega.shape
+    values = (f1 / omega.ravel()).reshape(shape)
+    stderr = (fse / omega.ravel()).reshape(shape)
+    energy, energy_se = mean_se(e1, e2)
+    absorbed, absorbed_se = mean_se(a1, a2)
+    ms, ms_se = mean_se(ms1, ms2)
+    labels = tuple(str(k) for k in range(1, orders)) + (f"≥{orders}",)
+    if orders == 1:
+        labels = ("≥1",)
+    return WalkBinAverages(
+        thetas,
+        labels,
+        values,
+        stderr,
+        energy,
+        energy_se,
+        absorbed,
+        absorbed_se,
+        cut / n,
+        kmax,
+        n_paths,
+        omega,
+        ms,
+        ms_se,
+    )
