@@ -1,0 +1,447 @@
+"""``assert_brdf_agrees``: does a BRDF agree with an explicit surface that has this NDF?
+
+The BRDF under test is bin-averaged exactly as microsim bin-averages its own models
+(``microsim.sim.predict``: adaptive Gauss–Legendre quadrature of f cos θo over each (θo, Δφ)
+bin, divided by the bin's projected solid angle Ω_B, relative accuracy 1e-3) and compared with
+the cached reference simulation (``microsim.testing.cache``) by the verdict machinery
+(``microsim.analysis.verdicts.verdict``), one verdict per incidence, the family of incidences
+kept at level α by Šidák's correction.
+
+Which noise the BRDF is judged against:
+
+* one surface (a scene with ``realisations = 1``, e.g. the stratified V-grooves of
+  ``surfaces/vgroove-ggx-0.3.toml``): reference "ray-noise" — the BRDF is compared with the
+  traced surface within the simulation's ray noise (χ² and max-|z| tests). For stratified
+  V-grooves of an NDF D this is the right question: their azimuth-averaged single-bounce BRDF
+  is Torrance–Sparrow with D and the V-groove G (Mikkelsen 2009, eq. 13, 25) up to the tilt
+  quantisation (empirical tilt CDF within 1/(2n) of D's) and the missing tail beyond the
+  1 − 1/(2n) quantile, both far below the ray noise of any feasible run;
+* several realisations (a random scene, ``realisations = R ≥ 2``): the BRDF is judged as a
+  model of the *ensemble* (reference "realisations": Student-t tests over the R tiles'
+  BRDFs), because each tile is one draw of the random surface.
+
+``rtol`` turns the test into a tolerance check (module function ``tolerance_check``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from microsim.analysis.verdicts import verdict
+from microsim.errors import UsageError
+from microsim.sim.compare import default_models
+from microsim.sim.predict import ModelSpec, predict
+from microsim.stats import MIN_EVENTS, energy_set, sidak
+
+from .cache import AUTO_MAX_RAYS, AUTO_TARGET, cache_dir, cached, resolve_reference
+
+__all__ = [
+    "assert_brdf_agrees",
+    "Agreement",
+    "BRDFMismatch",
+    "tolerance_check",
+    "MODEL_RTOL",
+    "wrap_brdf",
+]
+
+MODEL_RTOL = 1e-3
+"""Relative accuracy of the bin-averaging quadrature, added to σ in quadrature (as for
+microsim's own models)."""
+
+
+class Agreement(dict):
+    """What ``assert_brdf_agrees`` found (a dict): ``verdicts`` (one verdict dict per
+    incidence, ``microsim.analysis.verdicts.VERDICT_SCHEMA``, plus ``tolerance`` entries in
+    rtol mode), ``passed`` (bool), ``failing`` (θi list), ``model`` (T, Θ, Φ) the BRDF's bin
+    averages, ``reference`` (the Result), ``chart`` (path or None), ``message``."""
+
+
+class BRDFMismatch(AssertionError):
+    """Raised by ``assert_brdf_agrees`` when the BRDF fails: an ``AssertionError`` whose
+    message is the report and whose ``agreement`` holds the numbers (``Agreement``)."""
+
+    def __init__(self, message: str, agreement: Agreement):
+        super().__init__(message)
+        self.agreement = agreement
+
+
+def wrap_brdf(brdf):
+    """``brdf(wi, wo)`` over (N, 3) arrays as the ``brdf_fn(wi (3,), wo (..., 3))`` that
+    ``predict.bin_average`` calls: wi is broadcast to wo's rows (a copy, so the callable may
+    write into it), the result must hold one finite value ≥ 0 per pair."""
+
+    def fn(wi, wo):
+        shape = wo.shape[:-1]
+        wo2 = np.ascontiguousarray(wo.reshape(-1, 3))
+        wi2 = np.ascontiguousarray(np.broadcast_to(wi, wo2.shape))
+        f = np.asarray(brdf(wi2, wo2), dtype=np.float64)
+        if f.size != len(wo2) or (f.ndim > 1 and f.shape != (len(wo2), 1)):
+            raise UsageError(
+                f"brdf(wi, wo) must return one value per direction pair, shape ({len(wo2)},); "
+                f"got shape {f.shape} for wi, wo of shape ({len(wo2)}, 3)"
+            )
+        f = f.reshape(shape)
+        if not np.all(np.isfinite(f)) or np.any(f < 0):
+            bad = ~(np.isfinite(f) & (f >= 0))
+            k = np.argwhere(bad)[0]
+            raise AssertionError(
+                f"brdf returned {int(bad.sum())} non-finite or negative value(s), e.g. "
+                f"{f[tuple(k)]!r} at wi = {np.round(wi, 6).tolist()}, "
+                f"wo = {np.round(wo[tuple(k)], 6).tolist()}: a BRDF is finite and >= 0"
+            )
+        return f
+
+    return fn
+
+
+def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray, str]:
+    """(T, Θ, Φ) bin averages of the BRDF (callable or catalogue model name) and its name."""
+    if isinstance(brdf, str):
+        specs = {s.name: s for s in default_models(list(ref.surfaces), ref.material)}
+        if brdf not in specs:
+            raise UsageError(
+                f"brdf must be a callable f(wi, wo) or one of this surface's catalogue models "
+                f"{', '.join(specs)}, got {brdf!r}"
+            )
+        spec, name = specs[brdf], brdf
+    elif callable(brdf):
+        name = label or getattr(brdf, "__qualname__", None) or type(brdf).__name__
+        spec = ModelSpec.function(name, wrap_brdf(brdf), symmetric=isotropic)
+    else:
+        raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # unconverged bins: rare, in σ anyway
+        values = predict([spec], result.theta_i, result.bins, phi_i=0.0, rtol=MODEL_RTOL)[spec.name]
+    return values, name
+
+
+def tolerance_check(
+    sim, stderr, counts, model, omega, rtol: float, p_threshold: float, realisations: int = 1
+) -> dict:
+    """Is the model within ``rtol`` (relative) of the reference, beyond its noise?
+
+    H0: |m_B − f_B| ≤ rtol · m_B in every bin (f the true bin average). Two tests, each at
+    ``p_threshold``, both conservative under H0:
+
+    * per bin: excess z_B = max(|m_B − f̄_B| − rtol m_B, 0)/σ_B, σ_B² = se_B² + (1e-3 m_B)²;
+      rejects when max_U z_B ≥ the two-sided normal quantile at Šidák(p_threshold, |U|)
+      (Student t_{R−1} with R ≥ 2 realisations);
+    * energy: d = Σ_E Ω (f̄ − m)/Σ_E Ω m over the model's energy set E (90 % of its energy
+      in the used bins), se_d = √(Σ_E Ω² se²)/Σ_E Ω m; rejects when |d| − rtol ≥ q se_d with q
+      the two-sided quantile at p_threshold.
+
+    Used bins U as the verdicts' (≥ ``MIN_EVENTS`` events, finite, f̄ > 0). Returns ``passed``,
+    ``max_excess_z``, ``z_threshold``, ``energy_dev``, ``energy_se``, ``energy_threshold``.
+    """
+    sim, se, cnt, mod, om = (
+        np.asarray(a, dtype=np.float64) for a in (sim, stderr, counts, model, omega)
+    )
+    with np.errstate(invalid="ignore"):
+        sigma = np.sqrt(se**2 + (MODEL_RTOL * mod) ** 2)
+        used = (cnt >= MIN_EVENTS) & np.isfinite(sim) & np.isfinite(mod) & (sigma > 0) & (sim > 0)
+    n_bins = int(used.sum())
+    if n_bins == 0:
+        return {
+            "passed": False,
+            "max_excess_z": None,
+            "z_threshold": None,
+            "energy_dev": None,
+            "energy_se": None,
+            "energy_threshold": None,
+        }
+    excess = np.maximum(np.abs(mod[used] - sim[used]) - rtol * mod[used], 0.0) / sigma[used]
+    q_bin = sidak(p_threshold, n_bins)
+    if realisations >= 2:
+        z_thr = float(stats.t.isf(0.5 * q_bin, realisations - 1))
+        q_e = float(stats.t.isf(0.5 * p_threshold, realisations - 1))
+    else:
+        z_thr = float(stats.norm.isf(0.5 * q_bin))
+        q_e = float(stats.norm.isf(0.5 * p_threshold))
+    E = energy_set(np.where(used, mod * om, 0.0)).reshape(sim.shape)
+    norm = np.sum(om[E] * mod[E])
+    d = float(np.sum(om[E] * (sim[E] - mod[E])) / norm)
+    se_d = float(np.sqrt(np.sum((om[E] * sigma[E]) ** 2)) / norm)
+    passed = bool(excess.max() < z_thr and abs(d) - rtol < q_e * se_d)
+    return {
+        "passed": passed,
+        "max_excess_z": float(excess.max()),
+        "z_threshold": z_thr,
+        "energy_dev": d,
+        "energy_se": se_d,
+        "energy_threshold": rtol + q_e * se_d,
+    }
+
+
+def _pct(x) -> str:
+    return "–" if x is None else f"{100 * x:+.2g}%"
+
+
+def _num(x, fmt="{:.3g}") -> str:
+    return "–" if x is None else fmt.format(x)
+
+
+def _worst_bins(result, model, t: int, k: int = 3) -> list[str]:
+    """The ``k`` used bins of largest |z| at incidence ``t``: θo, Δφ, model vs reference."""
+    sim, se, cnt, mod = result.brdf[t], result.stderr[t], result.counts[t], model[t]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sigma = np.sqrt(se**2 + (MODEL_RTOL * mod) ** 2)
+        used = (cnt >= MIN_EVENTS) & np.isfinite(sim) & (sigma > 0) & (sim > 0)
+        z = np.where(used, (mod - sim) / np.where(used, sigma, 1.0), 0.0)
+    order = np.argsort(-np.abs(z).ravel())[:k]
+    tc, pc = result.bins.theta_centers, result.bins.phi_centers
+    out = []
+    for f in order:
+        i, j = np.unravel_index(f, z.shape)
+        if not used[i, j]:
+            continue
+        out.append(
+            f"θo {tc[i]:.1f}° Δφ {pc[j]:.0f}°: brdf {mod[i, j]:.4g} vs reference "
+            f"{sim[i, j]:.4g} ± {se[i, j]:.2g} sr⁻¹ ({100 * (mod[i, j] / sim[i, j] - 1):+.1f}%, "
+            f"z = {z[i, j]:+.1f})"
+        )
+    return out
+
+
+def _chart(result, model, name, verdicts, t: int, where: Path, key: str) -> str:
+    """Hemisphere chart (``analysis.charts.hemisphere_maps``) of incidence ``t``; its path.
+    The file name holds the reference key and a hash of the model's bin averages, so a chart
+    already written for the same numbers is reused, not drawn again."""
+    digest = hashlib.sha1(np.ascontiguousarray(model, dtype=np.float64).tobytes()).hexdigest()
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:60]
+    path = where / f"{safe}-{key}-{digest[:10]}-theta{result.theta_i[t]:g}.png"
+    if path.is_file():
+        return str(path)
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        from microsim.analysis import charts
+
+        where.mkdir(parents=True, exist_ok=True)
+        fig = charts.hemisphere_maps(
+            result, {name: model}, verdicts, path, t_index=t, scene_name=f"brdf {name}"
+        )
+        plt.close(fig)
+        return str(path)
+    except Exception as e:  # a chart is a convenience: never hide the verdict behind it
+        return f"(chart not written: {type(e).__name__}: {e})"
+
+
+def assert_brdf_agrees(
+    brdf,
+    surface_or_scene,
+    material="scene",
+    theta_i=None,
+    *,
+    rays="auto",
+    bins=None,
+    alpha: float = 0.01,
+    rtol: float | None = None,
+    seed: int = 0,
+    target: float = AUTO_TARGET,
+    max_rays: int = AUTO_MAX_RAYS,
+    cache=None,
+    isotropic: bool = False,
+    name: str | None = None,
+    chart_dir=None,
+    threads: int | None = None,
+) -> Agreement:
+    """Assert that ``brdf`` agrees with the explicit surface (module docstring).
+
+    ``brdf``: a callable ``f(wi, wo)`` with ``wi``, ``wo`` float64 arrays of shape (N, 3) —
+    unit vectors pointing away from the surface (towards the light, towards the viewer), z the
+    macro normal, incidence in the x–z plane (φi = 0) — returning N values in sr⁻¹ (one scalar
+    per pair; the cosine factor is *not* included); or the name of one of the surface's
+    catalogue models (``microsim.sim.compare.default_models``: "ts-vgroove", "ts-smith",
+    "ts-smith-corr", "ts-facets", …).
+
+    ``surface_or_scene``: a scene file or catalogue name ("vgroove-ggx-0.3"), a ``Scene``, a
+    ``Surface`` or a sequence of Surfaces; ``material`` ("scene": the scene's; else a name, n,
+    n + ik or None for a mirror), ``theta_i`` (degrees; default the scene's), ``bins``
+    (``Bins`` or (n_theta, n_phi); default the scene's), ``rays`` (per incidence, or "auto":
+    until the reference's energy-weighted relative standard error is ≤ ``target``, at most
+    ``max_rays``; ``microsim.testing.cache.reference``), ``seed``, ``cache`` (directory, or
+    False for no cache) as ``microsim.testing.reference``. ``isotropic=True`` states that the
+    callable is symmetric in the relative azimuth, f(Δφ) = f(−Δφ) (isotropic BRDFs): the
+    folded bins are then integrated over Δφ ≥ 0 only, half the evaluations (as microsim does
+    for its isotropic models); by default both halves are integrated, exact for any callable.
+    ``name``: the BRDF's name in the message and chart (default its ``__qualname__``).
+
+    Statistical mode (``rtol=None``): the verdict of every incidence must agree at family
+    level ``alpha`` (Šidák over the incidences): χ² and max-|z| tests against ray noise for one
+    surface, t tests over the realisations for R ≥ 2. Tolerance mode (``rtol`` = a relative
+    error, e.g. 0.05): every incidence must pass ``tolerance_check`` at the same levels —
+    agreement within rtol rather than statistical indistinguishability.
+
+    On failure raises AssertionError with a table (incidences; χ²/dof, max |z|,
+    energy-weighted relative error rel_rms, energy deviation, θo ranges of deviation), the
+    worst bins of each failing incidence, and the path of a hemisphere chart of the worst
+    incidence (written under ``chart_dir``, default ``<cache>/charts``). Returns the
+    ``Agreement`` when it passes. Bad arguments raise UsageError naming the parameter.
+    """
+    __tracebackhide__ = True
+    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0 < alpha < 1:
+        raise UsageError(f"alpha must lie in (0, 1), got {alpha!r}")
+    if rtol is not None and (
+        isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 < rtol < 1
+    ):
+        raise UsageError(f"rtol must be None or a relative error in (0, 1), got {rtol!r}")
+    if not (callable(brdf) or isinstance(brdf, str)):
+        raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
+    ref = resolve_reference(
+        surface_or_scene,
+        material,
+        theta_i,
+        rays=rays,
+        bins=bins,
+        seed=seed,
+        target=target,
+        max_rays=max_rays,
+    )
+    result = cached(ref, cache=cache, threads=threads)
+    if not isinstance(isotropic, bool):
+        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
+    if name is not None and not isinstance(name, str):
+        raise UsageError(f"name must be a string (the BRDF's name in messages), got {name!r}")
+    model, name = _model_values(brdf, ref, result, isotropic, name)
+    T = len(result.theta_i)
+    omega = result.bins.projected_solid_angle()
+    per = result.brdf_realisations
+    R = 1 if per is None else int(per.shape[0])
+    verdicts, failing = [], []
+    for t in range(T):
+        real_t = None
+        if R >= 2:
+            real_t = per[:, t]
+            real_t = real_t[np.nansum(np.abs(real_t), axis=(1, 2)) > 0]
+        v = verdict(
+            result.brdf[t],
+            result.stderr[t],
+            result.counts[t],
+            model[t],
+            omega,
+            result.theta_edges,
+            phi_edges=result.phi_edges,
+            theta_i=float(result.theta_i[t]),
+            name=name,
+            model_rtol=MODEL_RTOL,
+            alpha=alpha,
+            n_tests=T,
+            ensemble=R >= 2,
+            realisations=real_t,
+        )
+        if rtol is not None:
+            v["tolerance"] = tolerance_check(
+                result.brdf[t],
+                result.stderr[t],
+                result.counts[t],
+                model[t],
+                omega,
+                float(rtol),
+                v["p_threshold"],
+                v["realisations"],
+            )
+            ok = v["tolerance"]["passed"]
+        else:
+            ok = v["agrees"]
+        verdicts.append(v)
+        if not ok:
+            failing.append(t)
+    out = Agreement(
+        verdicts=verdicts,
+        passed=not failing,
+        failing=[float(result.theta_i[t]) for t in failing],
+        model=model,
+        reference=result,
+        chart=None,
+        message="",
+    )
+    if not failing:
+        return out
+    worst = max(failing, key=lambda t: verdicts[t]["chi2_dof"] or 0.0)
+    where = (
+        Path(chart_dir)
+        if chart_dir is not None
+        else (cache_dir(cache if cache is not False else None) / "charts")
+    )
+    out["chart"] = _chart(result, model, name, verdicts, worst, where, ref.key()[:10])
+    out["message"] = _message(
+        name, ref, result, verdicts, failing, model, alpha, rtol, out["chart"]
+    )
+    raise BRDFMismatch(out["message"], out)
+
+
+def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) -> str:
+    rays = np.asarray(result.rays)
+    rays_txt = (
+        f"{int(rays.min()):,}"
+        if rays.min() == rays.max()
+        else f"{int(rays.min()):,}–{int(rays.max()):,}"
+    )
+    v0 = verdicts[0]
+    against = {
+        "ray-noise": "the reference's ray noise",
+        "realisations": f"the scatter of {v0['realisations']} realisations (t tests)",
+        "one-tile": "one tile",
+    }[v0["reference"]]
+    mode = (
+        f"within rtol = {rtol:g} (tolerance check)"
+        if rtol is not None
+        else "statistically indistinguishable"
+    )
+    head = (
+        f"brdf {name!r} is not {mode} from the reference at θi = "
+        f"{', '.join(f'{result.theta_i[t]:g}°' for t in failing)}\n"
+        f"reference: {ref.label}; {rays_txt} rays per incidence, bins {result.bins.n_theta} × "
+        f"{result.bins.n_phi}, seed {ref.seed}; judged against {against}; α = {alpha:g} over "
+        f"{len(verdicts)} incidence(s) (Šidák)"
+    )
+    cols = ["θi", "result", "χ²/dof", "max|z|", "rel err (E)", "energy dev", "deviating θo"]
+    if rtol is not None:
+        cols[3] = "excess z/thr"
+    rows = [cols]
+    for t, v in enumerate(verdicts):
+        ok = t not in failing
+        dev = ", ".join(f"{a:g}–{b:g}°" for a, b in v["deviations"]) or "–"
+        if rtol is not None:
+            tol = v["tolerance"]
+            zcol = f"{_num(tol['max_excess_z'], '{:.2f}')}/{_num(tol['z_threshold'], '{:.2f}')}"
+        else:
+            zcol = _num(v["max_abs_z"], "{:.2f}")
+        energy = v["energy_dev"]
+        rows.append(
+            [
+                f"{v['theta_i']:g}°",
+                "ok" if ok else "FAIL",
+                _num(v["chi2_dof"], "{:.3f}"),
+                zcol,
+                _num(v["rel_rms"], "{:.2%}"),
+                "–" if energy is None else f"{-100 * energy:+.2f}%",
+                dev,
+            ]
+        )
+    widths = [max(len(r[i]) for r in rows) for i in range(len(cols))]
+    table = "\n".join(
+        "  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows
+    )
+    lines = [
+        head,
+        table,
+        "energy dev = Σ Ω (brdf − reference)/Σ Ω brdf over the bins carrying 90 % "
+        "of the brdf's energy; rel err (E) = energy-weighted RMS of (brdf − reference)/"
+        "reference over the reference's 90 % energy bins",
+    ]
+    for t in failing:
+        wb = _worst_bins(result, model, t)
+        if wb:
+            lines.append(f"worst bins at θi = {result.theta_i[t]:g}°:")
+            lines += [f"  {w}" for w in wb]
+    lines.append(f"hemisphere chart: {chart}")
+    return "\n".join(lines)

@@ -1,0 +1,402 @@
+"""Reference simulations for agreement checks, traced once and cached on disk.
+
+A *reference* is the ``Result`` of ``simulate`` (or ``simulate_auto`` for ``rays="auto"``) on
+an explicit surface. It is identified by a key of everything that determines it:
+
+    the surface fingerprint(s) (``Surface.fingerprint``: the mesh; one per realisation),
+    whether the estimator averages the groove azimuth, the material (η = n + ik or mirror),
+    the incidences θi (degrees, φi = 0), the bins, the seed, the ray target (an integer count
+    per incidence, or "auto" with its target relative error and ray cap) and the microsim
+    version (``microsim.__version__``).
+
+The key is the SHA-256 of that description as canonical JSON; the entry is the directory
+``CACHE/<first 24 hex digits>/`` holding ``brdf.npz`` and ``meta.json`` (``Result.save``) and
+``key.json`` (the description, compared on load, so a hash collision or a damaged entry is
+traced again instead of used).
+
+Location, first that is set: the ``cache`` argument, pytest's ``--microsim-cache DIR`` (the
+plugin calls ``set_default_dir``), the environment variable ``MICROSIM_CACHE``, else
+``$XDG_CACHE_HOME/microsim/references`` (default ``~/.cache/microsim/references``).
+
+Concurrency (several pytest-xdist workers asking for one reference): a reader that finds the
+entry loads it without locking (entries appear only by an atomic rename, ``atomic.publish_dir``);
+one that does not waits for the entry's lock (``atomic.output_lock`` on ``CACHE/.<key>.lock``,
+polled every 0.1 s), looks again, and only then traces into a staging directory and publishes
+it in one rename. So each reference is traced once, and nobody ever reads half an entry.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import microsim
+from microsim import atomic
+from microsim.analytic.fresnel import resolve_material
+from microsim.errors import UsageError
+from microsim.scene import Scene, load_scene
+from microsim.sim import Bins, Result, simulate
+from microsim.sim.auto import simulate_auto
+
+__all__ = [
+    "ENV_VAR",
+    "AUTO_TARGET",
+    "AUTO_MAX_RAYS",
+    "AUTO_FIRST",
+    "LOCK_TIMEOUT",
+    "Reference",
+    "cache_dir",
+    "set_default_dir",
+    "resolve_reference",
+    "reference",
+    "find_scene",
+]
+
+ENV_VAR = "MICROSIM_CACHE"
+AUTO_TARGET = 0.02
+"""Default target of ``rays="auto"``: energy-weighted relative standard error of the reference
+(``microsim.sim.auto.relative_standard_error``) ≤ 2 % per incidence."""
+AUTO_MAX_RAYS = 4_000_000
+"""Cap of ``rays="auto"`` per incidence (a reference is never traced without bound)."""
+AUTO_FIRST = 2**18
+"""Rays of the first batch of ``rays="auto"``."""
+LOCK_TIMEOUT = 3600.0
+"""Seconds a process waits for another one tracing the same reference before giving up."""
+
+_default_dir: Path | None = None
+
+
+def set_default_dir(path) -> None:
+    """Set (or with None clear) the cache directory used when no ``cache`` argument is given;
+    the pytest plugin calls it with ``--microsim-cache``."""
+    global _default_dir
+    _default_dir = None if path is None else Path(path)
+
+
+def cache_dir(cache=None) -> Path:
+    """The cache directory: ``cache``, else ``set_default_dir``'s, else ``$MICROSIM_CACHE``,
+    else ``$XDG_CACHE_HOME/microsim/references`` (``~/.cache/microsim/references``)."""
+    if cache is not None:
+        if not isinstance(cache, (str, os.PathLike)) or not str(cache):
+            raise UsageError(f"cache must be a directory path, got {cache!r}")
+        return Path(cache)
+    if _default_dir is not None:
+        return _default_dir
+    env = os.environ.get(ENV_VAR)
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "microsim" / "references"
+
+
+def find_scene(name) -> Path:
+    """Path of a scene given as a file path, or as a catalogue name (``NAME`` or ``NAME.toml``
+    looked up in ``./surfaces/`` and in the ``surfaces/`` folder beside the microsim package
+    of a source checkout). UsageError naming ``surface_or_scene`` if none exists."""
+    p = Path(name)
+    if p.is_file():
+        return p
+    stem = p.name if p.suffix == ".toml" else p.name + ".toml"
+    places = [Path.cwd() / "surfaces", Path(microsim.__file__).resolve().parents[1] / "surfaces"]
+    for d in places:
+        if (d / stem).is_file():
+            return d / stem
+    raise UsageError(
+        f"surface_or_scene: no scene file {str(name)!r} (looked for the path and for {stem} in "
+        f"{', '.join(str(d) for d in places)}); pass a Scene, a Surface, a scene file or a "
+        f"catalogue scene name"
+    )
+
+
+@dataclass(frozen=True)
+class Reference:
+    """What to trace: ``surfaces`` (one, or the realisations of a random scene), the material
+    η (None = mirror), incidences (degrees), ``bins``, ``seed``, ``rays`` (int or "auto") with
+    the auto ``target``/``max_rays``, and a ``label`` for messages (scene file or surface)."""
+
+    surfaces: tuple
+    material: complex | float | None
+    theta_i: tuple[float, ...]
+    bins: Bins
+    seed: int
+    rays: int | str
+    target: float
+    max_rays: int
+    label: str
+
+    def description(self) -> dict:
+        """The cache key's content (module docstring), JSON values only."""
+        m = self.material
+        mat = None if m is None else [float(np.real(m)), float(np.imag(m))]
+        rays = (
+            {"auto": {"target": self.target, "max_rays": self.max_rays, "first": AUTO_FIRST}}
+            if self.rays == "auto"
+            else int(self.rays)
+        )
+        return {
+            "fingerprints": [s.fingerprint() for s in self.surfaces],
+            "azimuth_average": [bool(s.azimuth_average) for s in self.surfaces],
+            "material": mat,
+            "theta_i": [float(t) for t in self.theta_i],
+            "phi_i": 0.0,
+            "bins": self.bins.to_dict(),
+            "seed": int(self.seed),
+            "rays": rays,
+            "microsim": microsim.__version__,
+        }
+
+    def key(self) -> str:
+        text = json.dumps(self.description(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def _bins(bins, default: Bins) -> Bins:
+    if bins is None:
+        return default
+    if isinstance(bins, Bins):
+        return bins
+    if (
+        isinstance(bins, (tuple, list))
+        and len(bins) == 2
+        and all(isinstance(b, (int, np.integer)) and not isinstance(b, bool) for b in bins)
+    ):
+        return Bins(int(bins[0]), int(bins[1]))
+    raise UsageError(f"bins must be a microsim.sim.Bins or (n_theta, n_phi), got {bins!r}")
+
+
+def _theta(theta_i) -> tuple[float, ...]:
+    try:
+        th = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+    except (TypeError, ValueError):
+        th = np.array([np.nan])
+    if th.ndim != 1 or th.size == 0 or not np.all((th >= 0) & (th < 90)):
+        raise UsageError(
+            f"theta_i must be one or more incidence angles in degrees, each in [0, 90), "
+            f"got {theta_i!r}"
+        )
+    return tuple(float(t) for t in th)
+
+
+def _is_surface(s) -> bool:
+    return hasattr(s, "facet_normals") and hasattr(s, "fingerprint")
+
+
+def resolve_reference(
+    surface_or_scene,
+    material="scene",
+    theta_i=None,
+    *,
+    rays="auto",
+    bins=None,
+    seed: int = 0,
+    target: float = AUTO_TARGET,
+    max_rays: int = AUTO_MAX_RAYS,
+) -> Reference:
+    """Validate the arguments of ``reference``/``assert_brdf_agrees`` into a ``Reference``.
+
+    ``surface_or_scene``: a ``Scene``, a scene file or catalogue name (``find_scene``), a
+    ``Surface`` or a sequence of Surfaces (realisations). A scene supplies the defaults:
+    ``material="scene"`` takes its ior, ``theta_i=None`` its incidences, ``bins=None`` its
+    (theta_bins, phi_bins); its realisations r = 0 … R−1 are built with seed
+    ``simulation.seed + r`` at full size. For a Surface, ``material`` (name, n, n + ik, None =
+    mirror) and ``theta_i`` are required and ``bins`` defaults to ``Bins()``."""
+    scene = None
+    if isinstance(surface_or_scene, (str, os.PathLike)):
+        scene = load_scene(find_scene(surface_or_scene))
+    elif isinstance(surface_or_scene, Scene):
+        scene = surface_or_scene
+    if scene is not None:
+        R, s0 = scene.simulation.realisations, scene.simulation.seed
+        surfaces = tuple(scene.build_surface(seed=s0 + r) for r in range(R))
+        label = f"{scene.path or scene.name}"
+        default_bins = Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)
+        if isinstance(material, str) and material == "scene":
+            material = scene.ior
+        if theta_i is None:
+            theta_i = scene.simulation.theta_i
+    else:
+        if _is_surface(surface_or_scene):
+            surfaces = (surface_or_scene,)
+        elif (
+            isinstance(surface_or_scene, (list, tuple))
+            and surface_or_scene
+            and all(_is_surface(s) for s in surface_or_scene)
+        ):
+            surfaces = tuple(surface_or_scene)
+        else:
+            raise UsageError(
+                "surface_or_scene must be a Scene, a scene file or catalogue name, a Surface "
+                f"or a sequence of Surfaces (realisations), got {surface_or_scene!r}"
+            )
+        label = repr(surfaces[0]) + (f" (+{len(surfaces) - 1} realisations)" * (len(surfaces) > 1))
+        default_bins = Bins()
+        if isinstance(material, str) and material == "scene":
+            raise UsageError(
+                "material must be given for a Surface (a name such as 'aluminium', n, n + ik, "
+                "or None for a mirror); 'scene' takes it from a scene"
+            )
+        if theta_i is None:
+            raise UsageError("theta_i must be given for a Surface (degrees, each in [0, 90))")
+    eta = resolve_material(material)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
+    if isinstance(rays, str):
+        if rays != "auto":
+            raise UsageError(f"rays must be an integer >= 1000 or 'auto', got {rays!r}")
+        if len(surfaces) > 1:
+            raise UsageError(
+                f"rays='auto' traces one surface; this reference has {len(surfaces)} "
+                f"realisations: pass rays=N (rays per incidence over all realisations)"
+            )
+    elif isinstance(rays, bool) or not isinstance(rays, (int, np.integer)) or rays < 1000:
+        raise UsageError(f"rays must be an integer >= 1000 or 'auto', got {rays!r}")
+    if not (isinstance(target, (int, float)) and not isinstance(target, bool) and 0 < target < 1):
+        raise UsageError(f"target must be a relative error in (0, 1), got {target!r}")
+    if isinstance(max_rays, bool) or not isinstance(max_rays, (int, np.integer)) or max_rays < 1000:
+        raise UsageError(f"max_rays must be an integer >= 1000, got {max_rays!r}")
+    return Reference(
+        surfaces=surfaces,
+        material=eta,
+        theta_i=_theta(theta_i),
+        bins=_bins(bins, default_bins),
+        seed=int(seed),
+        rays=rays if isinstance(rays, str) else int(rays),
+        target=float(target),
+        max_rays=int(max_rays),
+        label=label,
+    )
+
+
+def _trace(ref: Reference, threads) -> Result:
+    if ref.rays == "auto":
+        return simulate_auto(
+            ref.surfaces[0],
+            ref.material,
+            list(ref.theta_i),
+            target=ref.target,
+            bins=ref.bins,
+            seed=ref.seed,
+            threads=threads,
+            first=AUTO_FIRST,
+            max_rays=ref.max_rays,
+        )
+    if len(ref.surfaces) == 1:
+        return simulate(
+            ref.surfaces[0],
+            ref.material,
+            list(ref.theta_i),
+            rays=ref.rays,
+            bins=ref.bins,
+            seed=ref.seed,
+            threads=threads,
+        )
+    return simulate(
+        None,
+        ref.material,
+        list(ref.theta_i),
+        rays=ref.rays,
+        bins=ref.bins,
+        seed=ref.seed,
+        threads=threads,
+        realisations=list(ref.surfaces),
+    )
+
+
+def _load(entry: Path, description: dict) -> Result | None:
+    """The cached Result of ``entry`` if it exists and was made for ``description``."""
+    try:
+        stored = json.loads((entry / "key.json").read_text(encoding="utf-8"))
+        if stored != json.loads(json.dumps(description)):
+            return None
+        return Result.load(entry)
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def _acquire(path: Path, timeout: float):
+    """Enter ``atomic.output_lock(path)`` (a context manager), retrying while it is held."""
+    start = time.monotonic()
+    while True:
+        cm = atomic.output_lock(path)
+        try:
+            cm.__enter__()
+            return cm
+        except UsageError:
+            if time.monotonic() - start > timeout:
+                raise UsageError(
+                    f"cache: waited {timeout:g} s for another process tracing {path}"
+                ) from None
+            time.sleep(0.1)
+
+
+def reference(
+    surface_or_scene,
+    material="scene",
+    theta_i=None,
+    *,
+    rays="auto",
+    bins=None,
+    seed: int = 0,
+    target: float = AUTO_TARGET,
+    max_rays: int = AUTO_MAX_RAYS,
+    cache=None,
+    threads: int | None = None,
+) -> Result:
+    """The reference ``Result`` (sr⁻¹ bin averages, standard errors, realisations) for these
+    arguments (``resolve_reference``), from the cache or traced once and cached (module
+    docstring). ``cache=False`` traces without reading or writing the cache.
+
+    ``rays``: primary rays per incidence, or ``"auto"``: ``simulate_auto`` traces batches
+    (the first ``AUTO_FIRST`` rays, then as many as predicted from rse ∝ N^(−1/2), at most 4×
+    per step) until the energy-weighted relative standard error over the bins carrying 90 %
+    of the reflected energy is ≤ ``target`` (default 2 %) or ``max_rays`` (default 4·10⁶)
+    rays per incidence were traced — never more."""
+    ref = resolve_reference(
+        surface_or_scene,
+        material,
+        theta_i,
+        rays=rays,
+        bins=bins,
+        seed=seed,
+        target=target,
+        max_rays=max_rays,
+    )
+    return cached(ref, cache=cache, threads=threads)
+
+
+def cached(ref: Reference, *, cache=None, threads: int | None = None) -> Result:
+    """``ref``'s Result from the cache, or traced, published atomically and returned."""
+    if cache is False:
+        return _trace(ref, threads)
+    root = cache_dir(cache)
+    desc = ref.description()
+    entry = root / ref.key()
+    res = _load(entry, desc)
+    if res is not None:
+        return res
+    root.mkdir(parents=True, exist_ok=True)
+    lock = _acquire(entry, LOCK_TIMEOUT)
+    try:
+        res = _load(entry, desc)  # another process may have published it meanwhile
+        if res is not None:
+            return res
+        atomic.clean_stale(entry)
+        res = _trace(ref, threads)
+        stage = atomic.make_staging(entry)
+        try:
+            res.save(stage)
+            atomic.write_json(stage / "key.json", desc)
+            atomic.publish_dir(stage, entry)
+        except BaseException:
+            shutil.rmtree(stage, ignore_errors=True)
+            raise
+        return res
+    finally:
+        lock.__exit__(None, None, None)
