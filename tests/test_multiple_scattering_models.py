@@ -407,3 +407,15 @@ def test_walk_order_one_at_grazing_with_many_paths(m):
     exp[-1] = n - exp[:-1].sum()
     _, dof, pval = pearson_chi2(obs, exp)
     assert dof > 100 and pval > ALPHA
+
+
+def test_kulla_conty_bin_averages_match_quadrature_of_the_lobe(beckmann_kc):
+    """The band-quadrature bin averages equal the project's adaptive bin_average of f_ms, and
+    Σ f̄_B Ω_B is the lobe's albedo."""
+    bins = Bins(n_theta=9, n_phi=7)
+    for th in (20.0, 75.0):
+        ref = bin_average(spherical_deg(th, 0.0), bins, beckmann_kc.brdf, 0.0, 1e-8).values
+        got = beckmann_kc.bin_averages(th, bins.theta_edges, bins.n_phi)[0]
+        np.testing.assert_allclose(got, ref, rtol=1e-7)
+        total = np.sum(got * bins.projected_solid_angle())
+        assert total == pytest.approx(beckmann_kc.albedo(th), rel=1e-7)

@@ -16,7 +16,7 @@ degrees.
 Derivation (the parts this module relies on)
 ---------------------------------------------
 *Free flight.* Smith's masking from height h in an upward direction w is G1(w, h) = C1(h)^Λ(w)
-(Heitz et al. 2016, §3; Smith 1967). Differentiating, a ray going up meets the surface at a rate
+(Smith 1967; Heitz et al. 2016). Differentiating, a ray going up meets the surface at a rate
 Λ(w) P1(h)/C1(h) per unit of height. A ray going *down* sees the facets visible from −w, whose
 projected area is (1 + Λ(−w)) cos θ, so it meets the surface at the rate (1 + Λ(−w)) P1/C1 per
 unit of height descended (Heitz's signed Λ(w) = −1 − Λ(−w) for w_z < 0). In the variable
@@ -27,7 +27,7 @@ both rates are constant: an upward ray from τ₀ travels an Exp(Λ(w)) distance
 when it exceeds τ₀ (probability e^{−Λ τ₀} = C1(h₀)^Λ = G1), otherwise it hits at τ₀ − L; a
 downward ray hits at τ₀ + E/(1 + Λ(−w)), E ~ Exp(1). This is Heitz et al.'s ``sampleHeight``
 (τ-form of h = C1⁻¹(C1(h₀) (1 − U)^{−1/Λ(w)})), and it shows that the walk — hence the BRDF —
-does not depend on the height distribution (Heitz et al. 2016, §4.1 state the same). The walk
+does not depend on the height distribution (as Heitz et al. 2016 also note). The walk
 starts at τ = 0 (C1 = 1, above every facet). ``height_from_tau`` maps τ back to a height for the
 uniform (on [−1, 1]: h = 2e^{−τ} − 1) and the standard Gaussian (h = Φ⁻¹(e^{−τ})) heights.
 
@@ -63,7 +63,7 @@ f = F D G2/(4 cos θi cos θo), G2 = 1/(1 + Λ(wi) + Λ(wo)): Torrance–Sparrow
 height-correlated Smith shadowing, exactly (tests/test_multiple_scattering_models.py).
 
 *Energy.* With F = 1 every path eventually leaves (the walk on a Smith microsurface conserves
-energy: Heitz et al. 2016, §5), so the escaping energy is 1 up to the paths cut at
+energy; Heitz et al. 2016), so the escaping energy is 1 up to the paths cut at
 ``max_bounces``, which are reported.
 
 Bins (mirroring ``microsim.sim.bins.Bins``, which this layer cannot import): ``theta_edges``
@@ -471,7 +471,8 @@ def walk_bin_averages(
     grid as ``microsim.sim.bins.Bins`` builds it (module docstring). ``orders``: K ≥ 1 tallies
     orders 1 … K − 1 separately and K and above together ("≥K"). ``n_paths`` per incidence,
     processed ``chunk`` at a time; ``seed``: anything ``numpy.random.default_rng`` takes (one
-    generator for the whole call: reproducible). Returns ``WalkBinAverages``.
+    generator for the whole call: the same seed, incidences and ``chunk`` give the same
+    result bit for bit). Returns ``WalkBinAverages``.
     """
     _, _ = walk_alpha(ndf)
     te, pe, folded = _check_edges(theta_edges, phi_edges, folded)
