@@ -183,7 +183,7 @@ def test_walk_bins_follow_the_simulation_bins():
         n = 20_000
         r = _walk(35.0, ndf, n=n, seed=11, orders=1, bins=bins)
         np.testing.assert_allclose(r.omega, bins.projected_solid_angle(), rtol=1e-14)
-        p = rw.random_walk(
+        p = rw.smith_random_walk(
             np.tile(spherical_deg(35.0, 0.0), (n, 1)), ndf, None, np.random.default_rng(11)
         )
         idx = bins.locate(p.wo, 0.0)
@@ -208,7 +208,7 @@ def _band_transfer(ndf, band_in, band_out, dphi_band, n, seed, order=2):
     s = s0 + (s1 - s0) * rng.random(n)
     phi = 2 * np.pi * rng.random(n)
     wi = np.stack([np.sqrt(s) * np.cos(phi), np.sqrt(s) * np.sin(phi), np.sqrt(1 - s)], axis=1)
-    p = rw.random_walk(wi, ndf, None, rng)
+    p = rw.smith_random_walk(wi, ndf, None, rng)
     wo = np.where(np.isnan(p.wo), 0.0, p.wo)
     tho = np.degrees(np.arccos(np.clip(wo[:, 2], -1, 1)))
     dphi = np.abs(np.degrees(np.angle(np.exp(1j * (np.arctan2(wo[:, 1], wo[:, 0]) - phi)))))
@@ -244,9 +244,9 @@ def test_order_two_is_reciprocal_in_expectation(ndf):
 
 def test_walk_refuses_bad_input():
     with pytest.raises(UsageError, match="ndf"):
-        rw.random_walk(np.array([[0.0, 0.0, 1.0]]), an.BlinnPhong(20.0))
+        rw.smith_random_walk(np.array([[0.0, 0.0, 1.0]]), an.BlinnPhong(20.0))
     with pytest.raises(UsageError, match="wi"):
-        rw.random_walk(np.array([[0.0, 0.0, -1.0]]), an.GGX(0.3))
+        rw.smith_random_walk(np.array([[0.0, 0.0, -1.0]]), an.GGX(0.3))
     with pytest.raises(UsageError, match="theta_i"):
         _walk(90.0, an.GGX(0.3), n=10)
     with pytest.raises(UsageError, match="theta_edges"):

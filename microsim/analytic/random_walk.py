@@ -96,7 +96,7 @@ __all__ = [
     "sample_visible_normals",
     "visible_projected_area",
     "WalkPaths",
-    "random_walk",
+    "smith_random_walk",
     "WalkBinAverages",
     "walk_bin_averages",
 ]
@@ -295,7 +295,7 @@ def sample_visible_normals(v, ndf, u1, u2):
 # --- the walk ----------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class WalkPaths:
-    """Outcome of ``random_walk`` per path (arrays of length N).
+    """Outcome of ``smith_random_walk`` per path (arrays of length N).
 
     ``wo``: exit direction (unit, upper hemisphere; NaN for paths cut off); ``weight``: the
     energy it carries out (product of the Fresnel factors; 0 if cut off); ``order``: number of
@@ -311,7 +311,7 @@ class WalkPaths:
     cut: np.ndarray
 
 
-def random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) -> WalkPaths:
+def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) -> WalkPaths:
     """Random walk of Heitz et al. 2016 on a Smith microsurface, one path per row of ``wi``.
 
     ``wi``: unit incident directions (N, 3) pointing to the light, z > 0. ``ndf``: ``Beckmann``
@@ -499,7 +499,7 @@ def walk_bin_averages(
         done = 0
         while done < n_paths:
             m = min(chunk, n_paths - done)
-            p = random_walk(np.broadcast_to(wi1, (m, 3)), ndf, material, rng, max_bounces)
+            p = smith_random_walk(np.broadcast_to(wi1, (m, 3)), ndf, material, rng, max_bounces)
             done += m
             esc = p.order > 0
             kk = np.minimum(p.order[esc], orders) - 1
