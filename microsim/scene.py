@@ -29,7 +29,13 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     phi_bins = 72                      # over Δφ = φo − φi folded to [0°, 180°] (half bins at
                                        # 0° and 180°; microsim.sim.Bins); an integer in [2, 1440]
     realisations = 1                   # independent random surfaces (seeds seed, seed+1, …),
-                                       # an integer in [1, 1000]
+                                       # an integer in [1, 1000], or "auto" (random kinds
+                                       # gaussian, abc, vgrooves): a pilot of 8 realisations,
+                                       # then as many as bring the tile scatter of the
+                                       # energy-weighted BRDF below realisation_target
+                                       # (microsim.analysis.budget; at most 64)
+    realisation_target = 0.01          # relative; only with realisations = "auto", in
+                                       # [0.001, 0.5]
     seed = 0
 
 The file itself must be a regular file of at most 1 MiB of UTF-8 TOML. Every problem raises
@@ -199,6 +205,8 @@ _KINDS = {
     ),
 }
 SURFACE_KINDS = tuple(_KINDS)
+RANDOM_KINDS = ("vgrooves", "gaussian", "abc")
+"""Kinds whose realisations (seeds seed, seed + 1, …) are independent draws of one ensemble."""
 _NDF_PARAM_CHECK = (_POS[0], "a number > 0")
 
 _THETA_I = (
@@ -213,7 +221,17 @@ _SIM_KEYS = {
     "rays": (1_000_000, _RAYS),
     "theta_bins": (45, _int_in(1, 900)),
     "phi_bins": (72, _int_in(2, 1440)),
-    "realisations": (1, _int_in(1, 1000)),
+    "realisations": (
+        1,
+        (
+            lambda v: v == "auto" or (_is_int(v) and 1 <= v <= 1000),
+            'an integer in [1, 1000] or "auto"',
+        ),
+    ),
+    "realisation_target": (
+        None,
+        (lambda v: _is_num(v) and 1e-3 <= v <= 0.5, "a number in [0.001, 0.5]"),
+    ),
     "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0")),
 }
 _TOP_KEYS = ("name", "description", "surface", "material", "simulation")
@@ -231,13 +249,15 @@ class SurfaceSpec:
 @dataclass(frozen=True)
 class SimSettings:
     """Simulation settings: incidence angles (degrees), rays per incidence (or "auto"),
-    outgoing bins (θ over [0°, 90°], φ over [0°, 360°)), realisations, base seed."""
+    outgoing bins (θ over [0°, 90°], φ over [0°, 360°)), realisations (a count or "auto",
+    then ``realisation_target``, default ``budget.AUTO_TARGET``), base seed."""
 
     theta_i: tuple[float, ...] = (0.0, 30.0, 60.0, 80.0)
     rays: int | str = 1_000_000
     theta_bins: int = 45
     phi_bins: int = 72
-    realisations: int = 1
+    realisations: int | str = 1
+    realisation_target: float | None = None
     seed: int = 0
 
 
@@ -418,6 +438,8 @@ def _simulation(where, table) -> SimSettings:
     _check_keys(where, "simulation", table, list(_SIM_KEYS))
     s = _fill(where, "simulation", table, _SIM_KEYS)
     s["theta_i"] = tuple(float(t) for t in s["theta_i"])
+    if s["realisation_target"] is not None and s["realisations"] != "auto":
+        _fail(where, "simulation.realisation_target", 'needs realisations = "auto"')
     return SimSettings(**s)
 
 
@@ -486,13 +508,21 @@ def load_scene(path) -> Scene:
             surface.params["dx"],
             surface.params["periodic"],
         )
+    simulation = _simulation(where, data.get("simulation"))
+    if simulation.realisations == "auto" and surface.kind not in RANDOM_KINDS:
+        _fail(
+            where,
+            "simulation.realisations",
+            f'"auto" needs a random surface (kind {", ".join(RANDOM_KINDS)}), '
+            f"got kind {surface.kind!r}",
+        )
     return Scene(
         name=name,
         path=path,
         description=description,
         surface=surface,
         ior=_material(where, data.get("material")),
-        simulation=_simulation(where, data.get("simulation")),
+        simulation=simulation,
     )
 
 

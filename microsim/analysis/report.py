@@ -133,6 +133,52 @@ def _verdict_rows(verdicts) -> list[list[str]]:
     ]
 
 
+def _realisations_text(run: Mapping) -> str:
+    """The realisation count; for ``realisations = "auto"`` also the pilot and the target."""
+    auto = run.get("realisations_auto")
+    if not auto:
+        return str(run.get("realisations"))
+    return (
+        f"{auto['realisations']} (auto: pilot of {auto['pilot_realisations']}, tile-scatter "
+        f"target {100 * auto['target']:.3g} %, at most {auto['max_realisations']})"
+    )
+
+
+def _budget_section(budget, auto) -> list[str]:
+    """ "Error budget": per incidence the energy-weighted relative standard errors of the mean
+    BRDF from ray noise and from tile scatter (``analysis.budget``); empty for one realisation."""
+    if not budget or all(b.get("tile") is None for b in budget):
+        return []
+    target = auto["target"] if auto else None
+    rows = [
+        [
+            f"{b['theta_i']:g}",
+            str(b["realisations"]),
+            _pct(b["ray"]),
+            _pct(b["tile"]),
+            _pct(b["total"]),
+            _pct(b["energy"]),
+        ]
+        + ([("yes" if b["tile"] is not None and b["tile"] <= target else "no")] if target else [])
+        for b in budget
+    ]
+    head = ["θi", "R", "ray noise", "tile scatter", "total", "energy"]
+    text = (
+        "Standard errors of the mean BRDF, energy-weighted relative RMS over the bins carrying "
+        "90 % of the energy (`microsim.analysis.budget`): from the rays' noise, from the "
+        "tile-to-tile scatter of the realisations, and in total; *energy*: the relative "
+        "standard error of the mean's energy from the scatter of the tiles' energies. Ensemble "
+        "models are judged against the realisations' scatter, which includes both."
+    )
+    if target:
+        head.append(f"tile ≤ {100 * target:.3g} %")
+        text += (
+            f' With `realisations = "auto"` the realisations are added until the tile scatter '
+            f"is below {100 * target:.3g} % at every θi, up to {auto['max_realisations']}."
+        )
+    return ["## Error budget", "", text, "", md_table(head, rows), ""]
+
+
 def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     """``report.md`` of one run: settings, energy ledger, verdicts, fits, charts."""
     meta = result.meta
@@ -159,7 +205,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 ["material", _material(mat)],
                 ["incidences θi", ", ".join(f"{t:g}°" for t in doc["theta_i"])],
                 ["rays per incidence", f"{doc['rays']:,}"],
-                ["realisations", str(run.get("realisations"))],
+                ["realisations", _realisations_text(run)],
                 ["bins (θo × Δφ)", " × ".join(str(b) for b in run.get("bins", []))],
                 ["seed", str(doc["seed"])],
                 ["mode", "quick (`--quick`)" if doc["quick"] else "full"],
@@ -187,6 +233,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         ),
         "",
     ]
+    lines += _budget_section(meta.get("error_budget"), run.get("realisations_auto"))
     summary = summary_row(doc["verdicts"])
     lines += [
         "## Verdicts",
@@ -326,8 +373,9 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
         rows = []
         for d in group:
             s = summary_row(d["verdicts"])
+            n_real = max((v.get("realisations", 1) for v in d["verdicts"]), default=1)
             rows.append(
-                [f"[{d['scene']}]({d['scene']}/report.md)"]
+                [f"[{d['scene']}]({d['scene']}/report.md)" + (f" R={n_real}" if n_real > 1 else "")]
                 + [_compact(d["verdicts"], m, s[m]) if m in s else "–" for m in models]
             )
         out += [
@@ -369,7 +417,8 @@ def index_report(
         "✓: statistically indistinguishable from the simulation at every incidence (χ² and "
         "max-|z| tests, Šidák-corrected, α = 0.01). ✗: the model deviates at the listed "
         "incidences; the percentage is its largest energy-weighted relative RMS error there. ✓ "
-        "±x%: an ensemble model that agrees as far as the realisations can tell — energy "
+        "±x%: an ensemble model that agrees as far as the R realisations (after the scene's name) "
+        "can tell — energy "
         "deviations below x % (at the test's level) are not resolved, so a large x means a weak "
         "verdict, not a confirmed model. ?: inconclusive — an ensemble model judged on one "
         "realisation, where tile-to-tile scatter cannot be told from model error. Ensemble models"

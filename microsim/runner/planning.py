@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.budget import AUTO_TARGET as REALISATION_TARGET
+from ..analysis.budget import MAX_AUTO, MIN_AUTO
 from ..errors import UsageError
 from ..scene import load_scene
 from ..sim import Bins, Result
@@ -54,7 +56,10 @@ class Effort:
     ``fig6_theta``/``fig6_rays``: the Mikkelsen Fig. 6 sweep of ``microsim report``;
     ``fit_names``: the models to fit (None: every ``fits.FIT_MODELS``); ``sweep_facets``:
     include the surface's own facets (``ts-facets``) in the stability sweep; ``max_bins``:
-    cap on the main run's (θo, Δφ) bin counts (None: the scene's).
+    cap on the main run's (θo, Δφ) bin counts (None: the scene's);
+    ``max_realisations``/``realisation_target_floor``: cap on the realisations of a
+    ``realisations = "auto"`` scene and the loosest target it may be given (the scene's
+    ``realisation_target`` is raised to at least this).
     """
 
     max_rays: int | None = None
@@ -70,6 +75,8 @@ class Effort:
     fit_names: tuple[str, ...] | None = None
     sweep_facets: bool = True
     max_bins: tuple[int, int] | None = None
+    max_realisations: int = MAX_AUTO
+    realisation_target_floor: float = 0.0
 
     def scale_for(self, kind: str) -> float:
         return dict(self.scale).get(kind, 1.0)
@@ -90,13 +97,17 @@ QUICK = Effort(
     fit_names=("cook_torrance", "low_microfacet", "low_smooth"),
     sweep_facets=False,
     max_bins=(30, 37),
+    max_realisations=8,
+    realisation_target_floor=0.03,
 )
 """``--quick``: ≤ 2e5 rays per incidence on at most 30 × 37 bins (3° in θo, 5° in Δφ); 1/4 of
 the V-grooves and half the heightfield grid (same dx, so the statistics stay, the tile shrinks);
 quick fits (2 starts) of Cook–Torrance and Löw's two models (the Edwards fit, 10–30 s a scene,
 only in full runs); a 6-angle sweep with 2e5 rays on 30 × 37 bins without ``ts-facets``;
 coarser albedo tables (16 + 16 nodes in θ, 8 in φ: ρ within 1e-4 of the full table for vMF
-κ = 1024); speed runs at 1e4, 3e4 and 1e5 rays; Mikkelsen Fig. 6 at 7 angles with 2e4 rays."""
+κ = 1024); speed runs at 1e4, 3e4 and 1e5 rays; Mikkelsen Fig. 6 at 7 angles with 2e4 rays;
+``realisations = "auto"`` stops at its pilot of 8 realisations (its ensemble
+verdicts are weaker than a full run's: the report's ✓ ±x% says by how much)."""
 
 
 def effort_for(quick: bool) -> Effort:
@@ -119,12 +130,25 @@ class RunPlan:
     previous: object | None = None  # Result loaded for --resume
     force: bool = False
     auto: bool = False  # rays = "auto": ``rays`` is then the cap
+    realisations: int = 1  # realisations traced (the pilot's for realisations = "auto")
+    auto_realisations: bool = False  # realisations = "auto": a pilot decides the count
     partial_dir: Path | None = None  # where interrupted tallies go (None: ``out``)
     resume_hint: str | None = None  # how to continue, for the interrupt message
 
     @property
     def bins(self) -> Bins:
         return Bins(*bins_shape(self.scene, self.effort))
+
+    @property
+    def realisation_target(self) -> float:
+        """Tile-scatter target of ``realisations = "auto"`` (``analysis.budget``)."""
+        target = self.scene.simulation.realisation_target or REALISATION_TARGET
+        return max(target, self.effort.realisation_target_floor)
+
+    @property
+    def side_realisations(self) -> int:
+        """Realisations of the side studies: the run's, at most the auto pilot's count."""
+        return min(self.realisations, MIN_AUTO)
 
 
 def bins_shape(scene, effort: Effort) -> tuple[int, int]:
@@ -172,6 +196,8 @@ def plan_run(
     threads = _int_option("threads", threads, 1)
     seed = _int_option("seed", seed, 0)
     auto = rays is None and scene.simulation.rays == "auto"
+    auto_real = scene.simulation.realisations == "auto"
+    n_real = MIN_AUTO if auto_real else scene.simulation.realisations
     if auto and scene.simulation.realisations != 1:
         raise UsageError(
             f'rays = "auto" needs realisations = 1 (scene {scene.name} has '
@@ -185,11 +211,8 @@ def plan_run(
         rays = AUTO_MAX_RAYS if auto else scene.simulation.rays
         if effort.max_rays is not None:
             rays = min(rays, effort.max_rays)
-    if rays < scene.simulation.realisations:
-        raise UsageError(
-            f"--rays must be >= the scene's realisations "
-            f"({scene.simulation.realisations}), got {rays}"
-        )
+    if rays < n_real:
+        raise UsageError(f"--rays must be >= the scene's realisations ({n_real}), got {rays}")
     if theta_i is None:
         theta_i = scene.simulation.theta_i
     theta_i = tuple(float(t) for t in theta_i)
@@ -207,6 +230,8 @@ def plan_run(
         out = resume
         _check_out(out, scene, "--resume")
         previous = _load_saved(resume, "--resume")
+        if auto_real:
+            n_real, rays = _auto_realisations_of(previous, resume, rays)
         _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, resume)
     else:
         out = Path(out) if out is not None else Path("runs") / scene.name
@@ -219,6 +244,8 @@ def plan_run(
             check_replaceable(out)
         if tallies is not None:
             previous = _load_saved(Path(tallies), "saved tallies")
+            if auto_real:
+                n_real, rays = _auto_realisations_of(previous, tallies, rays)
             _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, tallies)
     return RunPlan(
         scene=scene,
@@ -232,9 +259,29 @@ def plan_run(
         previous=previous,
         force=bool(force),
         auto=auto,
+        realisations=n_real,
+        auto_realisations=auto_real,
         partial_dir=None if partial_dir is None else Path(partial_dir),
         resume_hint=resume_hint,
     )
+
+
+def _auto_realisations_of(previous, where, rays: int) -> tuple[int, int]:
+    """(realisations, rays) a saved ``realisations = "auto"`` run was traced with: its pilot
+    chose them, and its continuation must trace the same (``--rays`` was the pilot's)."""
+    auto = previous.meta.get("run", {}).get("realisations_auto") or {}
+    n, total = auto.get("realisations"), auto.get("rays")
+    if not (isinstance(n, int) and isinstance(total, int) and n >= 1 and total >= n):
+        raise UsageError(
+            f"{where}: the saved run does not record the realisations its pilot chose "
+            f'(realisations = "auto"); rerun with --force'
+        )
+    if auto.get("pilot_rays") != rays:
+        raise UsageError(
+            f"{where}: the saved run's pilot traced {auto.get('pilot_rays')} rays per "
+            f"incidence, this run asks for {rays}; use the same --rays or --force"
+        )
+    return n, total
 
 
 def _check_out(out: Path, scene, option: str) -> None:

@@ -26,6 +26,7 @@ import numpy as np
 from .. import atomic
 from ..analysis import charts as ch
 from ..analysis import report
+from ..analysis.budget import error_budget
 from ..analysis.fits import FIT_MODELS, fit_all
 from ..analysis.report import albedo_stderr
 from ..analysis.verdicts import verdicts_for_result
@@ -86,26 +87,38 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     dest = plan.partial_dir or plan.out
     hint = plan.resume_hint or f"--resume {dest}"
     prev = plan.previous
+    record = prev.meta.get("run", {}).get("realisations_auto") if prev is not None else None
     if prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays:
         result = prev  # finished tallies: only the analysis is left
         result.models.clear()
     elif plan.auto:
         result = tracing.simulate_auto_scene(plan, log if progress else None)
+    elif plan.auto_realisations and (record is None or record["stage"] == "pilot"):
+        pilot_plan, pilot = plan, _trace(plan, prev, progress)
+        record = tracing.realisations_record(plan, plan, None, "pilot")
+        result = pilot
+        if not pilot.is_partial:
+            plan = tracing.choose_realisations(pilot_plan, pilot)
+            record = tracing.realisations_record(plan, pilot_plan, pilot, "final")
+            if plan.realisations > pilot_plan.realisations:
+                log(
+                    f"microsim: {plan.scene.name}: {plan.realisations} realisations for a tile "
+                    f"scatter ≤ {plan.realisation_target:.1%} (pilot of "
+                    f"{pilot_plan.realisations})"
+                )
+                result = _trace(plan, None, progress)
     else:
-        bar = RayProgress(tracing.remaining_rays(plan).sum(), plan.scene.name, enabled=progress)
-        try:
-            result = tracing.simulate_scene(
-                plan, plan.theta_i, plan.rays, plan.seed, plan.bins, progress=bar, resume=prev
-            )
-        finally:
-            bar.close()
+        result = _trace(plan, prev, progress)
     result.meta["run"] = tracing.run_meta(plan)
+    if record is not None:
+        result.meta["run"]["realisations_auto"] = record
     if plan.auto:
         result.meta["run"]["auto"] = tracing.auto_summary(result)
     if result.is_partial:
         save_tallies(result, dest)
         log(f"microsim: interrupted; partial tallies saved in {dest} (continue with {hint})")
         return RunOutcome(130, plan.out)
+    result.meta["error_budget"] = error_budget(result)
     stage = staging(plan.out)
     try:
         return _analyse(plan, stage, result, log, progress)
@@ -120,6 +133,17 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     finally:
         if stage.exists():
             shutil.rmtree(stage, ignore_errors=True)
+
+
+def _trace(plan: RunPlan, prev, progress: bool):
+    """The main simulation of ``plan`` with a progress bar, continuing ``prev``'s tallies."""
+    bar = RayProgress(tracing.remaining_rays(plan).sum(), plan.scene.name, enabled=progress)
+    try:
+        return tracing.simulate_scene(
+            plan, plan.theta_i, plan.rays, plan.seed, plan.bins, progress=bar, resume=prev
+        )
+    finally:
+        bar.close()
 
 
 def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutcome:

@@ -42,11 +42,14 @@ SWEEP_SEED, SPEED_SEED = 7919, 104729
 """Seed offsets of the side studies (added to the run's seed): independent of the main run."""
 
 
-def models_for(plan: RunPlan):
+def models_for(plan: RunPlan, seed: int | None = None, realisations: int | None = None):
     """The default model set; for a random scene ``ts-facets`` and the realised m pool every
-    realisation the simulation averaged over (``compare.default_models``)."""
+    realisation the simulation averaged over (``compare.default_models``): the main run's
+    (default), or ``realisations`` surfaces from ``seed`` (a side study's)."""
     sc = plan.scene
-    single, reals = tracing.surface_source(sc, plan.seed, plan.effort.scale_for(sc.surface.kind))
+    seed = plan.seed if seed is None else seed
+    n = plan.realisations if realisations is None else realisations
+    single, reals = tracing.surface_source(sc, seed, plan.effort.scale_for(sc.surface.kind), n)
     surfaces = single if reals is None else [reals[0](s) for s in reals[1]]
     return default_models(surfaces, sc.ior, ndf=sc.ndf())
 
@@ -124,16 +127,14 @@ def stability(plan: RunPlan):
     e = plan.effort
     bins = Bins(*e.sweep_bins) if e.sweep_bins else plan.bins
     checkpoint("side-studies")
+    n, seed = plan.side_realisations, plan.seed + SWEEP_SEED
     sweep = tracing.complete(
         tracing.simulate_scene(
-            plan,
-            e.sweep_theta,
-            max(e.sweep_rays, plan.scene.simulation.realisations),
-            plan.seed + SWEEP_SEED,
-            bins,
+            plan, e.sweep_theta, max(e.sweep_rays, n), seed, bins, realisations=n
         )
     )
-    specs = [m for m in models_for(plan) if e.sweep_facets or m.kind != "facets"]
+    # the sweep's own surfaces: ts-facets must describe the facets it traced
+    specs = [m for m in models_for(plan, seed, n) if e.sweep_facets or m.kind != "facets"]
     attach(sweep, specs)
     return sweep, verdicts_for_result(sweep)
 

@@ -1,17 +1,20 @@
 """Tracing a planned scene: the main run, a ``rays = "auto"`` run and the side studies' runs
 (``simulate_scene``), and the run's description in ``meta.json``.
 
-Random surfaces are averaged over the scene's realisations; realisation r is built with seed
-``seed + r``. Callers reach ``simulate_scene`` through this module (``tracing.simulate_scene``)
-so that one replacement (tests) covers every run.
+Random surfaces are averaged over the plan's realisations (``RunPlan.realisations``: the
+scene's count, or the count the pilot of a ``realisations = "auto"`` scene chose, see
+``choose_realisations``); realisation r is built with seed ``seed + r``. Callers reach
+``simulate_scene`` through this module (``tracing.simulate_scene``) so that one replacement
+(tests) covers every run.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
+from ..analysis.budget import error_budget, realisations_needed
 from ..sim import simulate
 from ..sim.auto import simulate_auto
 from .planning import AUTO_TARGET, RunPlan
@@ -24,12 +27,13 @@ __all__ = [
     "auto_summary",
     "run_meta",
     "remaining_rays",
+    "choose_realisations",
+    "realisations_record",
 ]
 
 
-def surface_source(scene, seed: int, scale: float):
-    """(surface, realisations) arguments of ``simulate`` for the scene."""
-    n = scene.simulation.realisations
+def surface_source(scene, seed: int, scale: float, n: int):
+    """(surface, realisations) arguments of ``simulate`` for ``n`` realisations of the scene."""
     if n == 1:
         return scene.build_surface(seed=seed, scale=scale), None
     return None, (lambda s: scene.build_surface(seed=s, scale=scale), [seed + r for r in range(n)])
@@ -46,14 +50,12 @@ def simulate_scene(
     origins="stratified",
     realisations=True,
 ):
-    """``simulate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence;
-    ``realisations=False``: one surface (seed ``seed``) whatever the scene's realisations."""
+    """``simulate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence over
+    ``realisations`` surfaces: True = the plan's, False = one (seed ``seed``), or a count."""
     sc = plan.scene
     scale = plan.effort.scale_for(sc.surface.kind)
-    if realisations:
-        surface, reals = surface_source(sc, seed, scale)
-    else:
-        surface, reals = sc.build_surface(seed=seed, scale=scale), None
+    n = plan.realisations if realisations is True else max(1, int(realisations))
+    surface, reals = surface_source(sc, seed, scale, n)
     factory, seeds = reals if reals is not None else (None, None)
     return simulate(
         surface,
@@ -123,7 +125,7 @@ def run_meta(plan: RunPlan) -> dict:
         "seed": plan.seed,
         "quick": plan.quick,
         "bins": [plan.bins.n_theta, plan.bins.n_phi],
-        "realisations": sc.simulation.realisations,
+        "realisations": plan.realisations,
         "surface_scale": plan.effort.scale_for(sc.surface.kind),
         "effort": asdict(plan.effort),
     }
@@ -131,10 +133,38 @@ def run_meta(plan: RunPlan) -> dict:
 
 def remaining_rays(plan: RunPlan) -> np.ndarray:
     """(R, T) rays each (realisation, incidence) still has to trace."""
-    n = plan.scene.simulation.realisations
+    n = plan.realisations
     per_real = np.array([plan.rays // n + (r < plan.rays % n) for r in range(n)], dtype=np.int64)
     todo = np.repeat(per_real[:, None], len(plan.theta_i), axis=1)
     prev = plan.previous
     if prev is not None and prev.tallies is not None and "rays" in prev.tallies:
         todo = todo - np.asarray(prev.tallies["rays"], dtype=np.int64).reshape(todo.shape)
     return np.maximum(todo, 0)
+
+
+def choose_realisations(plan: RunPlan, pilot) -> RunPlan:
+    """The plan of a ``realisations = "auto"`` scene after its pilot (``pilot``: the complete
+    result of ``plan``, ``budget.MIN_AUTO`` realisations): as many realisations as bring every
+    incidence's tile scatter below ``plan.realisation_target`` (``budget.realisations_needed``,
+    at most ``plan.effort.max_realisations``), each traced with the pilot's rays per
+    realisation. Realisations 0 … pilot−1 of the new plan are the pilot's (same surfaces, same
+    ray streams), traced again: the chosen run is exactly ``simulate`` with that count."""
+    need = realisations_needed(error_budget(pilot), plan.realisation_target)
+    n = max(plan.realisations, min(need, plan.effort.max_realisations))
+    return replace(plan, realisations=n, rays=(plan.rays // plan.realisations) * n, previous=None)
+
+
+def realisations_record(plan: RunPlan, pilot_plan: RunPlan, pilot, stage: str) -> dict:
+    """``meta["run"]["realisations_auto"]``: the target, the pilot (realisations, rays per
+    incidence, error budget), and the realisations and rays chosen (``stage`` "pilot" while the
+    pilot is unfinished, then "final")."""
+    return {
+        "stage": stage,
+        "target": plan.realisation_target,
+        "max_realisations": plan.effort.max_realisations,
+        "pilot_realisations": pilot_plan.realisations,
+        "pilot_rays": pilot_plan.rays,
+        "pilot_budget": error_budget(pilot) if pilot is not None else None,
+        "realisations": plan.realisations,
+        "rays": plan.rays,
+    }
