@@ -7,7 +7,9 @@ an.fresnel(cos_theta, material); an.Beckmann(m); an.torrance_sparrow(wi, wo, ndf
 from .brdf import *  # noqa: F401,F403
 from .edwards import *  # noqa: F401,F403
 from .empirical import *  # noqa: F401,F403
+from .energy_compensation import *  # noqa: F401,F403
 from .fresnel import *  # noqa: F401,F403
 from .low import *  # noqa: F401,F403
 from .ndf import *  # noqa: F401,F403
+from .random_walk import *  # noqa: F401,F403
 from .shadowing import *  # noqa: F401,F403

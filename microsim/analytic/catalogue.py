@@ -99,6 +99,31 @@ MODELS: tuple[ModelInfo, ...] = (
     ),
     ModelInfo(
         "brdf",
+        "mikkelsen_diffuse / mikkelsen_kd",
+        "wi, wo, AlbedoTable, kd ≥ 0 (fitted to a target energy), ks",
+        "Mikkelsen 2009, eq. 28",
+    ),
+    ModelInfo(
+        "brdf",
+        "KullaConty",
+        "ndf or AlbedoTable (F = 1); fresnel_factor, material",
+        "Kulla & Conty 2017; Kelemen & Szirmay-Kalos 2001",
+    ),
+    ModelInfo(
+        "brdf",
+        "walk_bin_averages",
+        "theta_i (deg), theta_edges/phi_edges (deg, Bins conventions), ndf Beckmann|GGX, "
+        "material, n_paths, orders, folded, seed",
+        "Heitz et al. 2016 (random walk on a Smith microsurface)",
+    ),
+    ModelInfo(
+        "sampler",
+        "sample_visible_normals",
+        "v (N,3) either hemisphere, ndf Beckmann|GGX, u1, u2",
+        "Heitz & d'Eon 2014 (Beckmann); Heitz 2018 (GGX)",
+    ),
+    ModelInfo(
+        "brdf",
         "rayleigh_rice",
         "wi, wo, wavelength > 0, A ≥ 0, B > 0, C > 1, material",
         "Löw et al. 2012, eq. 3–8",
