@@ -16,6 +16,7 @@ from microsim.wave import (
     kirchhoff_orders,
     mesh_direct_orders,
     obliquity,
+    order_directions,
     triangle_rule,
 )
 from microsim.wave.kirchhoff import fourier_upsample
@@ -205,3 +206,13 @@ def test_mesh_and_smooth_differ_by_the_box_spline_in_the_smooth_limit(theta_i):
     strong = d & (b.power >= 1e-2 * b.power[d].max())
     assert strong.sum() >= 50 and box2[strong].min() < 0.97  # the factor is resolved
     assert abs(a.power[d].sum() / (b.power[d] * box2[d]).sum() - 1) < 0.005
+
+
+def test_orders_on_the_horizon_are_dropped():
+    """On a 10 λ tile at θi = 30° the orders (−1, ±8) lie exactly on the horizon
+    ((−0.5 − 0.1)² + 0.8² = 1): they are not propagating orders (their Kirchhoff power would
+    grow as 1/cos θo), and every kept order has cos θo > 1e-6."""
+    m, n, wo = order_directions((10.0, 10.0), 1.0, 30.0)
+    assert not np.any((m == -1) & (np.abs(n) == 8))
+    assert np.all(wo[:, 2] > 1e-6)
+    assert np.any((m == -1) & (np.abs(n) == 7))

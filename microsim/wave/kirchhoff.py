@@ -102,6 +102,13 @@ __all__ = [
 
 FRESNEL_ANGLES = ("half", "incident")
 SURFACES = ("smooth", "mesh")
+HORIZON = 1e-12
+"""Orders with |wo_xy|² ≥ 1 − HORIZON (cos θo ≤ 1e-6: on the horizon up to rounding, e.g.
+(−0.5 + 0.22)² + 0.96² = 1 exactly on a 100 λ tile at θi = 30°) are left out. The tangent-
+plane amplitude carries 1/cos θo (A_mn above), so such an order's power R·obliquity·|I|² grows
+as 1/cos θo without bound (measured: one order with cos θo = 1e-8 carried 0.34 of the incident
+power on a σ = λ tile); the rigorous field of a Rayleigh-anomaly order carries no flux, and
+grazing directions are outside Kirchhoff's domain anyway (shadowing is ignored)."""
 MAX_RULE = 32
 """Most Gauss–Legendre points per direction of the triangle rule (``surface="mesh"``)."""
 
@@ -135,8 +142,9 @@ def incident_direction(theta_i_deg: float, phi_i_deg: float) -> np.ndarray:
 
 
 def order_directions(tile, wavelength, theta_i_deg, phi_i_deg=0.0):
-    """(m, n, wo) of every propagating order (wo_z > 0) of a tile (Lx, Ly) at incidence θi, φi:
-    wo_xy = −wi_xy + λ(m/Lx, n/Ly)."""
+    """(m, n, wo) of every propagating order of a tile (Lx, Ly) at incidence θi, φi:
+    wo_xy = −wi_xy + λ(m/Lx, n/Ly), |wo_xy|² < 1 − ``HORIZON`` (orders on the horizon, the
+    Rayleigh anomalies, are dropped: their Kirchhoff power diverges as 1/cos θo)."""
     lx, ly = float(tile[0]), float(tile[1])
     lam = positive("wavelength", wavelength)
     wi = incident_direction(theta_i_deg, phi_i_deg)
@@ -148,7 +156,7 @@ def order_directions(tile, wavelength, theta_i_deg, phi_i_deg=0.0):
     ax = -wi[0] + lam * M / lx
     ay = -wi[1] + lam * N / ly
     s2 = ax * ax + ay * ay
-    keep = s2 < 1.0
+    keep = s2 < 1.0 - HORIZON
     wo = np.stack([ax[keep], ay[keep], np.sqrt(1.0 - s2[keep])], axis=1)
     return M[keep], N[keep], wo
 
