@@ -50,12 +50,26 @@ from .arguments import (
     thread_count,
 )
 from .bins import Bins
+from .bounces import (
+    MAX_BOUNCES,
+    WEIGHT_FLOOR,
+    check_bounces,
+    choose_bounce_path,
+    ledger_classes,
+    order_slots,
+)
 from .paths import LEDGER, MASKING, Events, Incidence, choose_path, trace_events, tracer_for
 from .progress import RaysDone
 from .result import Result
 from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, thread_pool
 from .streams import BLOCK, ORIGINS, block_origins
-from .tallies import Tally, chunk_tallies, simulation_result, tallies_from_arrays
+from .tallies import (
+    Tally,
+    chunk_order_tallies,
+    chunk_tallies,
+    simulation_result,
+    tallies_from_arrays,
+)
 
 __all__ = [
     "simulate",
@@ -101,6 +115,7 @@ def simulate(
     isotropic: bool = False,
     progress: Callable[[RaysDone], None] | None = None,
     resume: Result | None = None,
+    bounces: int | str = 1,
 ) -> Result:
     """Bin-averaged single-bounce BRDF of ``surface`` by ray tracing (Mikkelsen 2009, eq. 9).
 
@@ -161,8 +176,26 @@ def simulate(
     not yet done; the final tallies are bitwise identical to an uninterrupted run, because
     blocks are seeded by index and the raw running sums (``Result.tallies``) are stored
     exactly. Returns a ``Result`` (BRDF in sr⁻¹).
+
+    ``bounces``: 1 (the default: single scattering, the paths above, results as before) or
+    an int K in [2, ``bounces.MAX_BOUNCES``] or "all": each path goes on after a facet hit
+    whose reflected ray meets the surface again (masked or downward), with the Fresnel
+    weight of every bounce, up to K bounces ("all": until it escapes or its weight falls
+    below ``bounces.WEIGHT_FLOOR``, at most ``MAX_BOUNCES`` bounces); module ``bounces``.
+    The Result then holds the BRDF per scattering order (1, 2, 3, ≥ 4:
+    ``Result.brdf_orders``/``stderr_orders``), the paths' energy ledger (escaped per order,
+    absorbed, cut off) and ``meta["bounces"]``; ``brdf`` stays the order-1 BRDF. Traced
+    masking (Embree) or ``masking="analytic"`` (V-grooves, exact float64 chain);
+    ``masking="exact"`` is refused with K > 1. ``resume`` must match ``bounces`` too.
     """
     th, ph = check_inputs(theta_i, phi_i, rays, chunk, masking, seed)
+    bounces = check_bounces(bounces)
+    if bounces != 1 and masking == "exact":
+        raise UsageError(
+            "masking='exact' decides only the first masking test exactly; with bounces "
+            f"{bounces!r} use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
+        )
+    slots = None if bounces == 1 else order_slots(bounces)
     threads = thread_count(threads)
     check_run_options(bins, origins, progress, "microsim.sim.RaysDone events")
     if not isinstance(isotropic, (bool, np.bool_)):
@@ -174,24 +207,27 @@ def simulate(
     if min(per_real) < 1:
         raise UsageError(f"rays must be >= the number of realisations ({n_real}), got {rays}")
     nbin = bins.shape[0] * bins.shape[1]
+    nslot = nbin * (slots or 1)  # tally slots: bins, or order slots × bins
     check_memory(
         "bins",
-        nbin
+        nslot
         * (
             BIN_BYTES_TALLY * n_real * len(th)
             + BIN_BYTES_INCIDENCE * len(th)
             + BIN_BYTES_THREAD * threads
         ),
-        f"the tallies of {nbin:,} bins × {len(th)} incidences × {n_real} realisations",
+        f"the tallies of {nbin:,} bins × {slots or 1} orders × {len(th)} incidences × "
+        f"{n_real} realisations",
     )
     chunk_blocks = max(1, int(round(int(chunk) / BLOCK)))
     material_meta = _json_material(material, ior)
     isotropic = bool(isotropic)
     config = _run_config(
-        th, ph, bins, seed, rays, masking, origins, material_meta, n_real, isotropic
+        th, ph, bins, seed, rays, masking, origins, material_meta, n_real, isotropic, bounces
     )
     if resume is None:
-        tallies = [[Tally.empty(nbin) for _ in th] for _ in range(n_real)]
+        classes = ledger_classes(bounces)
+        tallies = [[Tally.empty(nslot, classes) for _ in th] for _ in range(n_real)]
         done = np.zeros((n_real, len(th)), dtype=np.int64)
         surfaces_meta = [None] * n_real
     else:
@@ -229,7 +265,14 @@ def simulate(
                         (seed, r, i),
                         origins,
                     )
-                    path = choose_path(incidence, profile, azimuth, isotropic, pool, threads)
+                    if slots is None:
+                        path = choose_path(incidence, profile, azimuth, isotropic, pool, threads)
+                        task = partial(chunk_tallies, path, nbin)
+                    else:
+                        path = choose_bounce_path(
+                            incidence, profile, azimuth, isotropic, bounces, nbin
+                        )
+                        task = partial(chunk_order_tallies, path, nslot)
 
                     def tally(chunk, r=r, i=i, t_deg=t_deg):
                         """Add one chunk (calling thread, block order), then report it."""
@@ -251,13 +294,13 @@ def simulate(
 
                     run_in_order(
                         pool,
-                        partial(chunk_tallies, path, nbin),
+                        task,
                         chunk_groups(start, end, chunk_blocks, threads),
                         IN_FLIGHT * threads,
                         stop,
                         tally,
                     )
-                    del path
+                    del path, task
                 timings.append(time.perf_counter() - t0)
                 del tracer, profile
         except KeyboardInterrupt:
@@ -288,7 +331,11 @@ def simulate(
         "rays_traced": traced,
         "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None,
     }
-    return simulation_result(th, ph, bins, tallies, n_done, per_real, done, meta)
+    if bounces != 1:  # absent: 1 (single-bounce results keep their meta)
+        meta["bounces"] = bounces
+        meta["max_bounces"] = MAX_BOUNCES
+        meta["weight_floor"] = WEIGHT_FLOOR if bounces == "all" else 0.0
+    return simulation_result(th, ph, bins, tallies, n_done, per_real, done, meta, slots)
 
 
 def ray_events(
@@ -376,7 +423,9 @@ def _versions() -> dict:
     return {"numpy": np.__version__, "python": platform.python_version(), "embreex": embree}
 
 
-def _run_config(th, ph, bins, seed, rays, masking, origins, material, n_real, isotropic) -> dict:
+def _run_config(
+    th, ph, bins, seed, rays, masking, origins, material, n_real, isotropic, bounces=1
+) -> dict:
     """What a resumed run must share with the partial one (JSON-able, compared key by key)."""
     return {
         "theta_i": [float(t) for t in th],
@@ -389,6 +438,7 @@ def _run_config(th, ph, bins, seed, rays, masking, origins, material, n_real, is
         "material": material,
         "realisations": n_real,
         "isotropic": isotropic,
+        "bounces": bounces,
         "block": BLOCK,
     }
 
@@ -410,6 +460,7 @@ def _resume_state(resume, config, n_real, n_th):
         resume.meta.get("material"),
         int(resume.tallies["blocks"].shape[0]),
         bool(resume.meta.get("isotropic", False)),
+        resume.meta.get("bounces", 1),
     )
     old["block"] = resume.meta.get("block")
     diff = [

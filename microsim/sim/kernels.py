@@ -622,3 +622,344 @@ def bin_index(theta, phi, z, phi_i, n_theta, n_phi, folded, edges, out):
         if d >= edges[k + 1]:
             k += 1
         out[i] = it * n_phi + min(max(k, 0), n_phi - 1)
+
+
+# --- scattering orders (``bounces``): paths followed beyond the first bounce ----------------
+# terminal classes of a path (``bounces.TERMINAL``): escaped after order 1, 2, 3, >= 4; cut
+# off by the bounce limit; cut off by the weight floor; unresolved; missed
+ESC_1, ESC_2, ESC_3, ESC_4UP, CUT_BOUNCES, CUT_WEIGHT, PATH_UNRESOLVED, PATH_MISSED = range(8)
+N_TERMINAL = 8
+
+
+@_compiled
+def _order_class(order):
+    """Terminal class ESC_1 … ESC_4UP of a path escaping after ``order`` bounces."""
+    return min(order, 4) - 1
+
+
+@_compiled
+def bounce_step(
+    b,
+    limit,
+    floor,
+    live,
+    hs,
+    prim,
+    px,
+    py,
+    pz,
+    dx,
+    dy,
+    dz,
+    shared,
+    w,
+    nx,
+    ny,
+    nz,
+    lift,
+    hx,
+    hy,
+    n2,
+    k2,
+    fresnel_mode,
+    status1,
+    weight1,
+    term,
+    wterm,
+    order,
+    esc,
+    edx,
+    edy,
+    edz,
+    nlive,
+    sx,
+    sy,
+    sz,
+    ndx,
+    ndy,
+    ndz,
+    nd32,
+    nw,
+):
+    """One step of the bounce chain (``bounces.trace_bounces``) over the live paths.
+
+    Live path i (global index ``live[i]``, carried weight ``w[i]``) was traced along
+    (dx, dy, dz)[j] (j = 0 if ``shared`` else i) with walk outcome ``hs[i]``, ``prim[i]``,
+    point (px, py, pz)[i] (``Tracer.trace_columns``); the ray traced at step ``b`` is the
+    primary ray (b = 1) or the ray reflected at bounce b − 1. Per path:
+
+    * ESCAPED at b ≥ 2: the path leaves after order b − 1 (``term`` ESC_*, ``wterm`` = w,
+      its direction written to ``esc``/``edx``/``edy``/``edz`` for binning by the caller);
+    * no hit (MISSED, UNRESOLVED; ESCAPED at b = 1): PATH_MISSED / PATH_UNRESOLVED, weight w;
+    * a hit at b > ``limit``: CUT_BOUNCES (the path would go on; weight w);
+    * a back-facing hit (c = −d·n ≤ 0): PATH_UNRESOLVED;
+    * otherwise bounce b: w ← w·F(c) (``_fresnel_weight``), wo = d + 2c·n (the mirror
+      direction 2(wi·n)n − wi with wi = −d); below the ``floor`` the path is cut
+      (CUT_WEIGHT, weight w·F); a downward wo at the last bounce (b = limit) is cut
+      (CUT_BOUNCES: it must meet the surface again); else the reflected ray is set up for the
+      next step: it starts at p − (p·n − lift)·n (on the facet plane, eps above it; ``lift``
+      = n·v0 + eps) wrapped into the tile, along wo (float32 copy ``nd32``), compacted to
+      ``nlive``/``sx``…``nw``.
+
+    The first-bounce ledger of the same rays (``status1``, ``weight1``: the classes and
+    Fresnel weights of ``paths.LEDGER``, as the single-bounce paths give them) is written at
+    b = 1 (SINGLE provisionally for a rising wo) and settled at b = 2 (MASKED if the reflected
+    ray met the surface, RAY_UNRESOLVED / RAY_MISSED if its walk failed). ``order[g]`` is the
+    number of bounces the path made. Returns (continuing paths m, escapes e)."""
+    m = 0
+    e = 0
+    for i in range(len(live)):
+        g = live[i]
+        j = 0 if shared else i
+        h = hs[i]
+        if b == 2 and status1[g] == SINGLE:  # the first reflected ray's outcome
+            if h == HIT:
+                status1[g] = MASKED
+            elif h == UNRESOLVED:
+                status1[g] = RAY_UNRESOLVED
+            elif h == MISSED:
+                status1[g] = RAY_MISSED
+        if h == ESCAPED and b >= 2:
+            term[g] = _order_class(b - 1)
+            wterm[g] = w[i]
+            order[g] = b - 1
+            esc[e] = g
+            edx[e], edy[e], edz[e] = dx[j], dy[j], dz[j]
+            e += 1
+            continue
+        if h != HIT:
+            term[g] = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
+            wterm[g] = w[i]
+            order[g] = b - 1
+            if b == 1:
+                status1[g] = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
+                weight1[g] = 0.0
+            continue
+        if b > limit:
+            term[g] = CUT_BOUNCES
+            wterm[g] = w[i]
+            order[g] = b - 1
+            continue
+        f = prim[i]
+        a0, a1, a2 = nx[f], ny[f], nz[f]
+        c = -(dx[j] * a0 + dy[j] * a1 + dz[j] * a2)
+        if c <= 0.0:  # back-facing
+            term[g] = PATH_UNRESOLVED
+            wterm[g] = w[i]
+            order[g] = b - 1
+            if b == 1:
+                status1[g] = RAY_UNRESOLVED
+                weight1[g] = 0.0
+            continue
+        fw = _fresnel_weight(c, n2, k2, fresnel_mode)
+        wn = w[i] * fw
+        ox = dx[j] + 2.0 * c * a0
+        oy = dy[j] + 2.0 * c * a1
+        oz = dz[j] + 2.0 * c * a2
+        order[g] = b
+        if b == 1:
+            weight1[g] = fw
+            status1[g] = SINGLE if oz > 0.0 else DOWNWARD
+        if wn < floor:
+            term[g] = CUT_WEIGHT
+            wterm[g] = wn
+            continue
+        if b == limit and not oz > 0.0:
+            term[g] = CUT_BOUNCES
+            wterm[g] = wn
+            continue
+        off = px[i] * a0 + py[i] * a1 + pz[i] * a2 - lift[f]
+        x, y, z = px[i] - off * a0, py[i] - off * a1, pz[i] - off * a2
+        if x < -hx or x >= hx:  # into the tile
+            x = (x + hx) % (2.0 * hx) - hx
+        if y < -hy or y >= hy:
+            y = (y + hy) % (2.0 * hy) - hy
+        nlive[m] = g
+        sx[m], sy[m], sz[m] = x, y, z
+        ndx[m], ndy[m], ndz[m] = ox, oy, oz
+        nd32[m, 0] = np.float32(ox)
+        nd32[m, 1] = np.float32(oy)
+        nd32[m, 2] = np.float32(oz)
+        nw[m] = wn
+        m += 1
+    return m, e
+
+
+@_compiled
+def analytic_vgroove_bounces(
+    x,
+    z,
+    psi,
+    wi,
+    half,
+    x_left,
+    x_right,
+    w_left,
+    depth,
+    facet_rim,
+    facet_wall,
+    facet_sigma,
+    facet_nx,
+    facet_nz,
+    facet_signed_tan,
+    facet_width,
+    n2,
+    k2,
+    fresnel_mode,
+    limit,
+    floor,
+    status1,
+    weight1,
+    term,
+    wterm,
+    order,
+    wox,
+    woy,
+    woz,
+):
+    """The exact float64 bounce chain in a V-groove (``masking="analytic"``, ``bounces`` > 1).
+
+    The primary hit is ``analytic_vgroove``'s (same arithmetic, so ``status1``/``weight1``
+    equal its single-bounce classes and weights bitwise). A ray reflected inside a groove can
+    only meet the groove's other wall (f ↔ f xor 1) before rising above z = 0, where nothing
+    lies (every rim at z = 0): it does when it points down (wo_z ≤ 0) or when the masking
+    margin s(1 + tanθ σ wo_x/wo_z) − W is > 0 (``VGrooveProfile.margin_from_rim``); otherwise
+    the path escapes after this bounce. In the groove frame (x across, z up) a hit at distance
+    s from the rim R of facet f (tilt tanθ, σ = ±1 towards the other rim) lies at
+    (R + σs, −s tanθ); the other wall's points are (R + σW − σs', −s' tanθ'); the ray from the
+    hit along (ox, oz) meets it after
+        t = (s tanθ − (W − s) tanθ') / (oz − σ ox tanθ'),   s' = W − s − σ t ox,
+    clipped to the wall [0, w_f']. Each bounce multiplies the weight by F(c), c = −d·n
+    (``_fresnel_weight``); the chain stops when the path escapes (``term`` ESC_*, ``wterm``,
+    its direction in the groove frame ``wox``/``woy``/``woz``), after ``limit`` bounces with
+    the path still inside (CUT_BOUNCES), below the weight ``floor`` (CUT_WEIGHT) or at a
+    back-facing hit (PATH_UNRESOLVED, only from rounding). ``order`` = bounces made."""
+    g = len(x_left)
+    scale = g / (2.0 * half)
+    for i in range(len(x)):
+        t = math.tan(0.5 * psi[i])
+        d = 1.0 / (1.0 + t * t)
+        cp, sp = (1.0 - t * t) * d, (2.0 * d) * t
+        wx = cp * wi[0] + sp * wi[1]
+        wy = -sp * wi[0] + cp * wi[1]
+        wz = wi[2]
+        x0 = x[i] - (z / wz) * wx  # z = 0 crossing
+        if x0 < -half or x0 >= half:
+            x0 = (x0 + half) % (2 * half) - half
+        k = min(int((x0 + half) * scale), g - 1)  # ±1 at most
+        if x0 < x_left[k] and k > 0:
+            k -= 1
+        if x0 >= x_right[k] and k < g - 1:
+            k += 1
+        ad = (-wx / wz) * depth[k]
+        f = 2 * k + (1 if x0 - x_left[k] + ad >= w_left[k] else 0)
+        w, sig = facet_wall[f], facet_sigma[f]
+        s = abs(x0 - facet_rim[f]) * w / (w - sig * ad)
+        dx, dy, dz = -wx, -wy, -wz
+        weight = 1.0
+        wox[i], woy[i], woz[i] = math.nan, math.nan, math.nan
+        b = 1
+        while True:
+            nx, nz = facet_nx[f], facet_nz[f]
+            c = -(dx * nx + dz * nz)
+            if c <= 0.0:  # back-facing: unresolved
+                term[i] = PATH_UNRESOLVED
+                wterm[i] = weight
+                order[i] = b - 1
+                if b == 1:
+                    status1[i] = RAY_UNRESOLVED
+                    weight1[i] = 0.0
+                break
+            fw = _fresnel_weight(c, n2, k2, fresnel_mode)
+            weight *= fw
+            ox = 2.0 * c * nx + dx
+            oy = dy
+            oz = 2.0 * c * nz + dz
+            order[i] = b
+            down = not oz > 0.0
+            again = down or s * (1.0 + facet_signed_tan[f] * ox / oz) - facet_width[f] > 0.0
+            if b == 1:
+                weight1[i] = fw
+                status1[i] = DOWNWARD if down else (MASKED if again else SINGLE)
+            if not again:
+                term[i] = _order_class(b)
+                wterm[i] = weight
+                wox[i], woy[i], woz[i] = ox, oy, oz
+                break
+            if b >= limit:
+                term[i] = CUT_BOUNCES
+                wterm[i] = weight
+                break
+            if weight < floor:
+                term[i] = CUT_WEIGHT
+                wterm[i] = weight
+                break
+            f2 = f ^ 1
+            sg = facet_sigma[f]
+            tan2 = abs(facet_signed_tan[f2])
+            tt = (s * abs(facet_signed_tan[f]) - (facet_width[f] - s) * tan2) / (
+                oz - sg * ox * tan2
+            )
+            s = min(max(facet_width[f] - s - sg * tt * ox, 0.0), facet_wall[f2])
+            f = f2
+            dx, dy, dz = ox, oy, oz
+            b += 1
+
+
+@_compiled
+def order_block_tallies(
+    status1,
+    weight1,
+    term,
+    wterm,
+    where,
+    block,
+    acc,
+    touched,
+    out_bin,
+    out_sums,
+    out_cnt,
+    offsets,
+    ln,
+    lf,
+):
+    """``block_tallies`` for paths followed over several bounces (``bounces``): a path that
+    escapes adds its carried weight ``wterm`` to its (order, bin) slot ``where`` (≥ 0; −1
+    for paths that do not escape), with Σw, Σw², counts and the pair sum (rays 2k, 2k + 1 in
+    the same slot) per block, stored sparsely as there. Ledger (blocks, 5 + N_TERMINAL):
+    columns 0–4 count the first-bounce classes ``status1`` and sum their Fresnel weights
+    ``weight1`` (``paths.LEDGER``), columns 5 + ``term`` the terminal classes and sum their
+    carried weights ``wterm`` (the energy each class takes away)."""
+    n = len(term)
+    j = 0
+    nl = 5
+    for b in range((n + block - 1) // block):
+        offsets[b] = j
+        lo, hi = b * block, min(n, (b + 1) * block)
+        for i in range(lo, hi):
+            s = status1[i]
+            ln[b, s] += 1
+            lf[b, s] += weight1[i]
+            t = term[i]
+            ln[b, nl + t] += 1
+            lf[b, nl + t] += wterm[i]
+            k = where[i]
+            if k >= 0:
+                if touched[k] == 0:
+                    out_bin[j] = k
+                    j += 1
+                v = wterm[i]
+                acc[0, k] += v
+                acc[1, k] += v * v
+                touched[k] += 1
+        for i in range(lo, hi - 1, 2):
+            if where[i] >= 0 and where[i] == where[i + 1]:
+                acc[2, where[i]] += wterm[i] * wterm[i + 1]
+        for q in range(offsets[b], j):
+            k = out_bin[q]
+            for m in range(3):
+                out_sums[m, q] = acc[m, k]
+                acc[m, k] = 0.0
+            out_cnt[q] = touched[k]
+            touched[k] = 0
+    offsets[(n + block - 1) // block] = j

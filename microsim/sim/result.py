@@ -20,7 +20,15 @@ from .bins import Bins
 __all__ = ["Result", "InPlane"]
 
 NPZ, META = "brdf.npz", "meta.json"
-_OPTIONAL = ("stderr_ray", "stderr_realisation", "brdf_realisations", "rays_realisations")
+_OPTIONAL = (
+    "stderr_ray",
+    "stderr_realisation",
+    "brdf_realisations",
+    "rays_realisations",
+    "brdf_orders",
+    "stderr_orders",
+    "brdf_realisations_orders",
+)
 
 
 @dataclass(frozen=True)
@@ -53,6 +61,19 @@ class Result:
     ``tallies.bin_estimate``; ``meta["stderr_method"]`` says whether ``stderr`` uses it),
     ``led_n``/``led_f`` (R, T, 5) per realisation and incidence, ``blocks`` (R, T) blocks done
     and ``rays`` (R, T) rays tallied. Saved as ``tally_<name>`` arrays in ``brdf.npz``.
+
+    Scattering orders (``simulate(..., bounces=K)``, K > 1 or "all"; ``meta["bounces"]``):
+    ``brdf_orders``/``stderr_orders`` (O, T, Θ, Φ) sr⁻¹, the BRDF of the light leaving after
+    exactly 1, 2, 3 and ≥ 4 bounces (O = min(K, 4) slots, labels ``bounces.ORDER_NAMES``),
+    ``brdf_realisations_orders`` (O, R, T, Θ, Φ) with several realisations. ``brdf``,
+    ``stderr``, ``counts``, ``sum_w``… stay the order-1 (single-scattering) estimate, so every
+    single-bounce model keeps being compared with like; the whole BRDF is
+    ``brdf_orders.sum(0)`` (``brdf_total``). The ledger then also holds the paths' terminal
+    classes (``bounces.TERMINAL``: ``escaped_1`` … ``escaped_4plus``, ``cut_bounces``,
+    ``cut_weight``, ``unresolved_path``, ``missed_path`` as fractions of paths, each with
+    ``<name>_energy``, the fraction of incident energy it takes away) and
+    ``escaped_energy``, ``cut_energy``, ``absorbed_energy`` (Fresnel losses); the tallies
+    hold O·Θ·Φ slots and 5 + 8 ledger columns. All None/absent for ``bounces=1``.
     """
 
     theta_i: np.ndarray
@@ -73,6 +94,9 @@ class Result:
     brdf_realisations: np.ndarray | None = None
     rays_realisations: np.ndarray | None = None
     tallies: dict | None = None
+    brdf_orders: np.ndarray | None = None
+    stderr_orders: np.ndarray | None = None
+    brdf_realisations_orders: np.ndarray | None = None
 
     def __repr__(self) -> str:
         """One line: surface, material, incidences, rays, bins, albedo, models (no arrays)."""
@@ -106,6 +130,11 @@ class Result:
     def albedo(self) -> np.ndarray:
         """Σ_B f̄_B Ω_B per incidence (T,): the single-bounce albedo ρ(θi) seen by the bins."""
         return np.sum(self.brdf * self.bins.projected_solid_angle(), axis=(1, 2))
+
+    def brdf_total(self) -> np.ndarray:
+        """The BRDF summed over scattering orders (T, Θ, Φ) sr⁻¹: ``brdf_orders.sum(0)``, or
+        ``brdf`` for a single-bounce run."""
+        return self.brdf if self.brdf_orders is None else self.brdf_orders.sum(axis=0)
 
     def in_plane(self) -> InPlane:
         """Signed-θo scattering curve in the incidence plane (``InPlane``)."""

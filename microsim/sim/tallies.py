@@ -33,6 +33,7 @@ import numpy as np
 
 from . import kernels
 from .bins import Bins
+from .bounces import TERMINAL
 from .paths import DOWNWARD, LEDGER, MASKED
 from .result import Result
 from .scratch import work
@@ -49,6 +50,9 @@ __all__ = [
     "tally_arrays",
     "tallies_from_arrays",
     "TALLY_NAMES",
+    "terminal_ledger",
+    "split_order_tallies",
+    "chunk_order_tallies",
 ]
 
 TALLY_NAMES = ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair")
@@ -87,6 +91,46 @@ def chunk_tallies(path, nbin: int, blocks) -> "ChunkTallies":
     return split_tallies(*path.follow(blocks), len(blocks), nbin)
 
 
+def split_order_tallies(status1, weight1, term, wterm, where, n_blocks: int, nbin_total: int):
+    """``tallies.split_tallies`` for bounce chains (``kernels.order_block_tallies``):
+    per block, its (slot, bin) tallies and its ledger of 5 first-bounce + ``TERMINAL``
+    classes. ``nbin_total`` = order slots × bins."""
+    n = len(term)
+    ncls = len(LEDGER) + len(TERMINAL)
+    acc, touched = np.zeros((3, nbin_total)), np.zeros(nbin_total, dtype=np.int64)
+    out_bin, out_sums = work("tally-bin", n, np.int64), work("tally-sums", (3, n))
+    out_cnt, offsets = work("tally-count", n, np.int64), np.empty(n_blocks + 1, dtype=np.int64)
+    ln = np.zeros((n_blocks, ncls), dtype=np.int64)
+    lf = np.zeros((n_blocks, ncls))
+    kernels.order_block_tallies(
+        status1,
+        weight1,
+        term,
+        wterm,
+        where,
+        BLOCK,
+        acc,
+        touched,
+        out_bin,
+        out_sums,
+        out_cnt,
+        offsets,
+        ln,
+        lf,
+    )
+    used = int(offsets[-1])
+    return ChunkTallies(
+        (out_bin[:used].copy(), out_sums[:, :used].copy(), out_cnt[:used].copy(), offsets, ln, lf)
+    )
+
+
+def chunk_order_tallies(path, nbin_total: int, blocks):
+    """Per-block tallies of the consecutive ``blocks`` followed by a bounce-chain ``path``:
+    one thread task."""
+    blocks = list(blocks)
+    return split_order_tallies(*path.follow(blocks), len(blocks), nbin_total)
+
+
 class ChunkTallies:
     """The per-block tallies of one chunk (``split_tallies``), handed out once (``take``):
     taking releases them, so a finished future its caller still holds keeps no arrays
@@ -118,13 +162,15 @@ class Tally:
     sum_pair: np.ndarray
 
     @classmethod
-    def empty(cls, nbin: int) -> "Tally":
+    def empty(cls, nbin: int, classes: int = len(LEDGER)) -> "Tally":
+        """Zero sums over ``nbin`` tally slots (bins, or order slots × bins for bounce
+        chains) and ``classes`` ledger columns (``bounces.ledger_classes``)."""
         return cls(
             np.zeros(nbin),
             np.zeros(nbin),
             np.zeros(nbin, np.int64),
-            np.zeros(len(LEDGER), np.int64),
-            np.zeros(len(LEDGER)),
+            np.zeros(classes, np.int64),
+            np.zeros(classes),
             np.zeros(nbin),
         )
 
@@ -212,6 +258,9 @@ def tally_result(
         ledger["lost"] = (led_n[:, MASKED] + led_n[:, DOWNWARD]) / rays
         ledger["lost_fresnel"] = (led_f[:, MASKED] + led_f[:, DOWNWARD]) / rays
     counts = {name: led_n[:, k] for k, name in enumerate(LEDGER)}
+    if led_n.shape[1] > len(LEDGER):  # bounce chains: the paths' terminal classes
+        ledger.update(terminal_ledger(led_n[:, len(LEDGER) :], led_f[:, len(LEDGER) :], rays))
+        counts.update({name: led_n[:, len(LEDGER) + k] for k, name in enumerate(TERMINAL)})
     return Result(
         theta_i=theta_i,
         phi_i=np.asarray(phi_i, dtype=np.float64),
@@ -230,19 +279,53 @@ def tally_result(
     )
 
 
+def terminal_ledger(led_n, led_f, rays) -> dict:
+    """Ledger entries (name → (T,)) of bounce chains from their terminal-class columns
+    (T, ``TERMINAL``) of path counts ``led_n`` and carried weights ``led_f`` over ``rays``
+    (T,) primary rays: per class ``<name>`` the fraction of paths and ``<name>_energy`` the
+    fraction of the incident energy it takes away; ``escaped_energy`` (all orders),
+    ``cut_energy`` (bounce limit + weight floor) and ``absorbed_energy`` = 1 − Σ of all
+    classes' energies (the Fresnel losses Σ_paths (1 − Π_b F_b), over N)."""
+    out = {}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k, name in enumerate(TERMINAL):
+            out[name] = led_n[:, k] / rays
+            out[f"{name}_energy"] = led_f[:, k] / rays
+        out["escaped_energy"] = led_f[:, :4].sum(axis=1) / rays
+        out["cut_energy"] = led_f[:, 4:6].sum(axis=1) / rays
+        out["absorbed_energy"] = (rays - led_f.sum(axis=1)) / rays
+    return out
+
+
 def simulation_result(
-    theta_i, phi_i, bins: Bins, tallies, rays_done, rays_planned, blocks_done, meta: dict
+    theta_i,
+    phi_i,
+    bins: Bins,
+    tallies,
+    rays_done,
+    rays_planned,
+    blocks_done,
+    meta: dict,
+    slots: int | None = None,
 ) -> Result:
     """``simulate``'s Result from the running sums ``tallies`` [r][i] (``Tally``):
     ``rays_done`` (R, T) rays tallied per realisation and incidence (== ``rays_planned`` (R,)
     for a complete run), ``blocks_done`` (R, T). The BRDF pools all realisations; with
     several, ``stderr`` adds to the ray noise the realisation component: what the scatter of
-    the realisation means exceeds the ray noise by."""
-    omega = bins.projected_solid_angle().ravel()
+    the realisation means exceeds the ray noise by.
+
+    ``slots``: None for single-bounce tallies; for bounce chains the number of order slots O
+    (``bounces.order_slots``): the tallies then hold O·(Θ·Φ) slots (slot o·(Θ·Φ) + B), every
+    estimate is made per slot exactly as for one bin, and the Result gets ``brdf_orders``/
+    ``stderr_orders`` (O, T, Θ, Φ) (and ``brdf_realisations_orders`` (O, R, T, Θ, Φ)) while
+    ``brdf``, ``stderr``, ``counts``, ``sum_w``… hold order 1."""
+    nb = bins.shape[0] * bins.shape[1]
+    omega = np.tile(bins.projected_solid_angle().ravel(), 1 if slots is None else slots)
     shape = (len(theta_i),) + bins.shape
     n_real = len(rays_planned)
     n_tot = rays_done.sum(axis=0)
-    pooled = [Tally.empty(len(omega)) for _ in theta_i]
+    classes = len(tallies[0][0].led_n)
+    pooled = [Tally.empty(len(omega), classes) for _ in theta_i]
     for r in range(n_real):
         for i in range(len(theta_i)):
             pooled[i].add_totals(tallies[r][i])
@@ -272,13 +355,27 @@ def simulation_result(
         se_real = np.sqrt(np.maximum(total_var - se_ray**2, 0.0))
         stderr = np.sqrt(se_ray**2 + se_real**2)
         extra = {
-            "stderr_ray": se_ray.reshape(shape),
-            "stderr_realisation": se_real.reshape(shape),
-            "brdf_realisations": per.reshape((n_real,) + shape),
+            "stderr_ray": se_ray[:, :nb].reshape(shape),
+            "stderr_realisation": se_real[:, :nb].reshape(shape),
+            "brdf_realisations": per[:, :, :nb].reshape((n_real,) + shape),
             "rays_realisations": np.array(rays_planned, dtype=np.int64),
         }
+        if slots is not None:
+            extra["brdf_realisations_orders"] = np.moveaxis(
+                per.reshape((n_real, len(theta_i), slots) + bins.shape), 2, 0
+            )
     raw = tally_arrays(tallies, blocks_done, rays_done)
-    return tally_result(theta_i, phi_i, bins, pooled, n_tot, brdf, stderr, meta, raw, **extra)
+    if slots is None:
+        return tally_result(theta_i, phi_i, bins, pooled, n_tot, brdf, stderr, meta, raw, **extra)
+    by_order = lambda a: np.moveaxis(a.reshape((len(theta_i), slots) + bins.shape), 1, 0)  # noqa: E731
+    extra.update(brdf_orders=by_order(brdf), stderr_orders=by_order(stderr))
+    first = [
+        Tally(p.sum_w[:nb], p.sum_w2[:nb], p.count[:nb], p.led_n, p.led_f, p.sum_pair[:nb])
+        for p in pooled
+    ]
+    return tally_result(
+        theta_i, phi_i, bins, first, n_tot, brdf[:, :nb], stderr[:, :nb], meta, raw, **extra
+    )
 
 
 def tally_arrays(tallies, blocks_done, rays_done) -> dict:

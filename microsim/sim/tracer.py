@@ -252,7 +252,7 @@ class Tracer:
         point[status != HIT] = np.nan
         return status, prim, point
 
-    def _walk_columns(self, x, d, d32, occlusion: bool, first=None):
+    def _walk_columns(self, x, d, d32, occlusion: bool, first=None, wraps=None):
         """``_walk`` on per-axis columns: origins ``x`` (3 arrays (N,), float64, wrapped into
         the tile here), directions ``d`` (3 arrays (N,) or 3 floats shared by all rays) and
         their float32 (N, 3) (or (1, 3)) copy ``d32``. Returns (status, prim, point columns);
@@ -263,7 +263,8 @@ class Tracer:
         a wall; most finish in the first) are compacted for the next. ``first``: the first
         segment's Embree input (o32, tq, keep, top) already set up by the caller exactly as
         ``segment_setup`` would from these rays, which then all lie in the tile and are all
-        traced (``kernels.tabled_primary``); per-ray directions only."""
+        traced (``kernels.tabled_primary``); per-ray directions only. ``wraps``: the wrap cap
+        (segments − 1) instead of ``max_wraps``."""
         n = len(x[0])
         shared = np.isscalar(d[0])
         x = [np.ascontiguousarray(c, dtype=np.float64) for c in x]
@@ -292,7 +293,7 @@ class Tracer:
         query = "OCCLUDED" if occlusion else "INTERSECT"
         no_tfar = np.empty(0, dtype=np.float32)
         hx, hy = float(self.half[0]), float(self.half[1])
-        for segment in range(self.max_wraps + 1):
+        for segment in range((self.max_wraps if wraps is None else int(wraps)) + 1):
             if live.size == 0:
                 break
             if segment == 0 and first is not None:
@@ -390,10 +391,21 @@ class Tracer:
         not yet projected onto the facet plane (NaN without a hit); see ``first_hit``."""
         return self._walk(origins, dirs, occlusion=False)
 
-    def trace_columns(self, x, d, d32):
+    def trace_columns(self, x, d, d32, wraps=None):
         """``trace`` on per-axis columns (see ``_walk_columns``): (status, prim, [px, py, pz]),
-        the point columns undefined where status is not HIT."""
-        return self._walk_columns(x, d, d32, occlusion=False)
+        the point columns undefined where status is not HIT. ``wraps``: wrap cap (default
+        ``max_wraps``; ``wraps_needed`` gives what a direction needs)."""
+        return self._walk_columns(x, d, d32, occlusion=False, wraps=wraps)
+
+    def wraps_needed(self, dx, dy, dz) -> np.ndarray:
+        """Tile crossings (N,) after which a ray along (dx, dy, dz) (columns, unit) has either
+        met the surface, risen above zmax or sunk below zmin, wherever it starts between them:
+        ``BASE_WRAPS`` + ⌈(zmax − zmin + top_margin)·|d_h|/|d_z|·(1/Lx + 1/Ly)⌉ (inf for
+        d_z = 0). ``max_wraps`` is this for the steepest traced polar angle (89.5°)."""
+        depth = self.zmax - self.zmin + self.top_margin
+        with np.errstate(divide="ignore", invalid="ignore"):
+            run = depth * np.hypot(dx, dy) / np.abs(dz)
+        return BASE_WRAPS + np.ceil(run * (1 / self.tile[0] + 1 / self.tile[1]))
 
     def escape_columns(self, x, d, d32, first=None) -> np.ndarray:
         """Occlusion status of rays given as per-axis columns (see ``_walk_columns``, also for

@@ -1,0 +1,421 @@
+"""Scattering orders: paths followed beyond the first bounce (``simulate(..., bounces=K)``).
+
+A single-bounce path ends at its first facet hit: the reflected ray either escapes (ledger
+``single``) or meets the surface again (``masked``, or ``downward`` when wo_z ≤ 0). With
+``bounces`` = K > 1 the path goes on from that second hit: every bounce b at a facet with
+unit normal n multiplies the carried weight by the exact Fresnel factor F(c_b), c_b = −d·n
+for the incoming direction d, and reflects d to d + 2c_b·n; the path ends when a reflected
+ray escapes (tallied in the bin of its direction, under its order = number of bounces), or
+is cut off. The weight escaping at order k is one sample of the k-th term of the
+multiple-scattering microsurface BRDF (Heitz et al. 2016, eq. 4 as a sum over path lengths);
+the sum over orders is the explicit surface's whole BRDF for a mirror-like metal.
+
+``bounces``: an int K in [1, ``MAX_BOUNCES``] (the path is cut after K bounces if still
+inside: ``cut_bounces``), or "all": continue until the path escapes or its weight falls
+below ``WEIGHT_FLOOR`` (``cut_weight``), with at most ``MAX_BOUNCES`` bounces
+(``cut_bounces``) so that every path terminates. ``bounces=1`` keeps the single-bounce paths
+(``paths``) untouched; K > 1 and "all" use the paths of this module.
+
+Per-order tallies: orders 1, 2, 3 and ≥ 4 (``ORDER_SLOTS`` = min(K, 4) slots) share the bin
+grid; order slot o of bin B is the flat tally index o·(Θ·Φ) + B, so the running sums, the
+collapsed-strata standard error (``tallies.bin_estimate``), realisations and resume work
+unchanged on (slots · bins) tallies. A path ends in exactly one (slot, bin) or in no bin.
+
+Ledger of a path (``TERMINAL``): ``escaped_1`` … ``escaped_4plus`` (escaped after that many
+bounces), ``cut_bounces`` (still inside after the last allowed bounce), ``cut_weight``
+(weight below the floor), ``unresolved_path`` (a walk hit its wrap cap, or a numerically
+back-facing hit) and ``missed_path`` (a leak through the mesh); each class takes away the
+weight its paths carry at the end, so per primary ray
+    1 = Σ_escaped + cut + unresolved + missed + absorbed,
+absorbed (the Fresnel losses 1 − Π F_b) being the rest. The first-bounce ledger
+(``paths.LEDGER``: single/masked/downward… with F of the first hit) is kept for the same rays.
+
+Trace paths: ``BouncePath`` (Embree, heightfields and traced V-grooves; each bounce is one
+Embree intersect call over the still-live paths, compacted, between two compiled passes,
+``kernels.bounce_step``; the reflected ray is both the masking test and the next hit, so a
+continuing path costs one Embree ray per bounce). ``AnalyticBouncePath``
+(``masking="analytic"``, V-grooves): the exact float64 chain between a groove's two walls
+(``kernels.analytic_vgroove_bounces``), no Embree. Their per-block tallies:
+``tallies.split_order_tallies``. ``masking="exact"`` (Embree primary hit,
+float64 masking) has no bounce chain: it is refused for K > 1.
+
+Reproducibility: every path is followed on its own (compiled per-ray loops, Embree per
+ray, Fresnel in real arithmetic), so results are bitwise independent of threads and chunks.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+from microsim.errors import UsageError
+
+from . import kernels
+from .bins import Bins
+from .paths import LEDGER, Incidence, TracePath
+from .scratch import work
+from .streams import block_rotation
+from .tracer import UNRESOLVED, Tracer, VGrooveCaster
+
+__all__ = [
+    "MAX_BOUNCES",
+    "WEIGHT_FLOOR",
+    "TERMINAL",
+    "ORDER_NAMES",
+    "check_bounces",
+    "bounce_limit",
+    "order_slots",
+    "trace_bounces",
+    "analytic_bounces",
+    "BouncePath",
+    "AnalyticBouncePath",
+    "choose_bounce_path",
+    "ledger_classes",
+]
+
+MAX_BOUNCES = 256
+"""Most bounces of a path (``bounces="all"`` and the largest int): guarantees termination.
+Far above what the catalogue's surfaces need (the highest order seen on m ≈ 0.5 Gaussian
+tiles is ~12); whatever it cuts is in the ledger (``cut_bounces``)."""
+RETRY_WRAPS = 2**17
+"""Largest wrap cap of a re-traced grazing reflected ray (``_resolve_grazing``): rays with
+|d_z| below ~(relief/tile)·2⁻¹⁶ stay unresolved (ledger ``unresolved_path``)."""
+WEIGHT_FLOOR = 1e-6
+"""``bounces="all"``: a path whose carried weight falls below this is cut (``cut_weight``)."""
+TERMINAL = (
+    "escaped_1",
+    "escaped_2",
+    "escaped_3",
+    "escaped_4plus",
+    "cut_bounces",
+    "cut_weight",
+    "unresolved_path",
+    "missed_path",
+)
+"""Terminal classes of a path, in the order of ``kernels.ESC_1`` …"""
+ORDER_NAMES = ("1", "2", "3", "4+")
+"""Labels of the order slots of ``Result.brdf_orders``."""
+assert len(TERMINAL) == kernels.N_TERMINAL and kernels.PATH_MISSED == len(TERMINAL) - 1
+
+
+def check_bounces(bounces):
+    """``bounces`` as an int in [1, ``MAX_BOUNCES``] or the string "all"; else a UsageError."""
+    if isinstance(bounces, str):
+        if bounces == "all":
+            return "all"
+    elif isinstance(bounces, numbers.Integral) and not isinstance(bounces, (bool, np.bool_)):
+        if 1 <= int(bounces) <= MAX_BOUNCES:
+            return int(bounces)
+    raise UsageError(
+        f"bounces must be an integer in [1, {MAX_BOUNCES}] (bounces per path) or 'all' "
+        f"(until the path escapes or its weight falls below {WEIGHT_FLOOR:g}), got {bounces!r}"
+    )
+
+
+def bounce_limit(bounces) -> tuple[int, float]:
+    """(most bounces, weight floor) of a checked ``bounces``: (K, 0) or (``MAX_BOUNCES``,
+    ``WEIGHT_FLOOR``) for "all"."""
+    return (MAX_BOUNCES, WEIGHT_FLOOR) if bounces == "all" else (int(bounces), 0.0)
+
+
+def order_slots(bounces) -> int:
+    """Order slots tallied: min(K, 4) (orders 1, 2, 3, ≥ 4); 4 for "all"."""
+    return 4 if bounces == "all" else min(int(bounces), 4)
+
+
+def ledger_classes(bounces) -> int:
+    """Ledger columns of a tally: the first-bounce classes, plus the terminal ones for K > 1."""
+    return len(LEDGER) + (0 if bounces == 1 else len(TERMINAL))
+
+
+def _columns(origins) -> list:
+    if isinstance(origins, np.ndarray):
+        return [np.ascontiguousarray(origins[:, k], dtype=np.float64) for k in range(3)]
+    return [np.ascontiguousarray(c, dtype=np.float64) for c in origins]
+
+
+def trace_bounces(
+    tracer: Tracer,
+    wi,
+    phi_i,
+    bins: Bins,
+    origins,
+    psi,
+    ior,
+    limit: int,
+    floor: float,
+    nbin: int,
+):
+    """Per primary ray (status1, weight1, term, wterm, where) of the bounce chain on Embree.
+
+    Rays start at ``origins`` (N, 3) or 3 columns, falling along −wi (one shared direction
+    when ``psi`` is None, else wi rotated by −ψ per ray into its groove frame, as
+    ``paths.trace_columns``). Each step traces the live paths' rays (``Tracer.
+    trace_columns``: the periodic walk, wraps exact as there) and hands the hits to
+    ``kernels.bounce_step``, which weights, reflects, ends or continues each path and
+    compacts the continuing ones; at most ``limit`` bounces, paths below ``floor`` cut.
+    ``status1``/``weight1``: first-bounce class (``paths.LEDGER``) and Fresnel weight;
+    ``term``/``wterm``: terminal class (``TERMINAL``) and carried weight; ``where``: flat
+    tally index slot·``nbin`` + bin of the escape direction (Δφ against ``phi_i``, or
+    φi − ψ in the groove frame), −1 for paths that do not escape."""
+    x = _columns(origins)
+    n = len(x[0])
+    mode, n2, k2 = kernels.fresnel_mode(ior)
+    status1 = np.empty(n, dtype=np.int8)
+    weight1 = np.zeros(n)
+    term = np.empty(n, dtype=np.int8)
+    wterm = np.empty(n)
+    order = work("bounce-order", n, np.int64)
+    where = np.full(n, -1, dtype=np.int64)
+    if psi is None:
+        d = [np.array([-float(c)]) for c in wi]
+        d32 = np.array([[c[0] for c in d]], dtype=np.float32)
+        hs, prim, p = tracer.trace_columns(x, [float(c[0]) for c in d], d32)
+        shared, phi = True, float(phi_i)
+    else:
+        cp, sp = np.cos(psi), np.sin(psi)
+        d = [-(cp * wi[0] + sp * wi[1]), -(-sp * wi[0] + cp * wi[1]), np.full(n, -float(wi[2]))]
+        d32 = np.empty((n, 3), dtype=np.float32)
+        for k in range(3):
+            d32[:, k] = d[k]
+        hs, prim, p = tracer.trace_columns(x, d, d32)
+        shared, phi = False, phi_i - np.degrees(psi)
+    live = np.arange(n, dtype=np.int64)
+    w = np.ones(n)
+    ncols, lift = tracer.normal_columns, tracer.masking_lift
+    hx, hy = float(tracer.half[0]), float(tracer.half[1])
+    slots = min(limit, 4)
+    b = 1
+    while True:
+        k = len(live)
+        par = f"bounce{b % 2}-"  # written at this step, read by the next
+        esc = work("bounce-esc", k, np.int64)
+        ed = [work("bounce-ed" + a, k) for a in "xyz"]
+        nlive = work(par + "live", k, np.int64)
+        s = [work(par + "s" + a, k) for a in "xyz"]
+        nd = [work(par + "d" + a, k) for a in "xyz"]
+        nd32 = work(par + "d32", (k, 3), np.float32)
+        nw = work(par + "w", k)
+        m, e = kernels.bounce_step(
+            b,
+            limit,
+            floor,
+            live,
+            hs,
+            prim,
+            *p,
+            *d,
+            shared,
+            w,
+            *ncols,
+            lift,
+            hx,
+            hy,
+            n2,
+            k2,
+            mode,
+            status1,
+            weight1,
+            term,
+            wterm,
+            order,
+            esc,
+            *ed,
+            nlive,
+            *s,
+            *nd,
+            nd32,
+            nw,
+        )
+        if e:
+            g = esc[:e]
+            ph = phi if np.ndim(phi) == 0 else phi[g]
+            loc = bins.locate_xyz(ed[0][:e], ed[1][:e], ed[2][:e], ph)
+            where[g] = np.where(loc >= 0, (min(b - 1, slots) - 1) * nbin + loc, -1)
+        if m == 0:
+            break
+        live, w = nlive[:m], nw[:m]
+        d = [c[:m] for c in nd]
+        starts = [c[:m] for c in s]
+        hs, prim, p = tracer.trace_columns(starts, d, nd32[:m])
+        _resolve_grazing(tracer, starts, d, nd32[:m], hs, prim, p)
+        shared = False
+        b += 1
+    return status1, weight1, term, wterm, where
+
+
+def _resolve_grazing(tracer: Tracer, x, d, d32, hs, prim, p) -> None:
+    """Re-trace the reflected rays whose walk reached the wrap cap (UNRESOLVED): a ray
+    reflected at grazing angles rises or falls so slowly (|d_z| ~ 1e-4) that it crosses the
+    tile thousands of times before it escapes or meets the surface, beyond ``Tracer.
+    max_wraps`` (set for primary rays up to 89.5°). Each is traced again from its start with
+    the wrap cap 2^k ≥ ``Tracer.wraps_needed`` of its direction (rays grouped by k, so a
+    ray's outcome depends on itself alone, not on its batch), at most ``RETRY_WRAPS``;
+    ``hs``/``prim``/``p`` are updated in place. Rays that need more stay unresolved."""
+    u = np.flatnonzero(hs == UNRESOLVED)
+    if u.size == 0:
+        return
+    need = tracer.wraps_needed(d[0][u], d[1][u], d[2][u])
+    with np.errstate(divide="ignore"):
+        k = np.ceil(np.log2(np.maximum(need, 1.0)))
+    for cls in np.unique(k[np.isfinite(k)]):
+        cap = 2 ** int(cls)
+        if cap <= tracer.max_wraps or cap > RETRY_WRAPS:
+            continue
+        sel = u[k == cls]
+        h2, p2, q2 = tracer.trace_columns(
+            [c[sel] for c in x], [c[sel] for c in d], d32[sel], wraps=cap
+        )
+        hs[sel], prim[sel] = h2, p2
+        for c in range(3):
+            p[c][sel] = q2[c]
+
+
+def analytic_bounces(
+    caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z, psi, ior, limit, floor, nbin
+):
+    """``trace_bounces`` for ``masking="analytic"`` V-grooves: the exact float64 chain
+    (``kernels.analytic_vgroove_bounces``) from rays at x (N,) and height ``z`` with groove
+    azimuths ``psi``; escape directions binned against φi − ψ."""
+    n = len(x)
+    status1, weight1 = np.empty(n, dtype=np.int8), np.zeros(n)
+    term, wterm = np.empty(n, dtype=np.int8), np.empty(n)
+    order = np.empty(n, dtype=np.int64)
+    wo = [np.empty(n) for _ in range(3)]
+    mode, n2, k2 = kernels.fresnel_mode(ior)
+    c = caster
+    kernels.analytic_vgroove_bounces(
+        np.ascontiguousarray(x, dtype=np.float64),
+        float(z),
+        np.ascontiguousarray(psi, dtype=np.float64),
+        np.asarray(wi, dtype=np.float64),
+        float(c.half),
+        c.x_left,
+        c.x_right,
+        c.w_left,
+        c.depth,
+        c.facet_rim,
+        c.facet_wall,
+        c.facet_sigma,
+        c.facet_nx,
+        c.facet_nz,
+        c.facet_signed_tan,
+        c.facet_width,
+        n2,
+        k2,
+        mode,
+        int(limit),
+        float(floor),
+        status1,
+        weight1,
+        term,
+        wterm,
+        order,
+        *wo,
+    )
+    where = np.full(n, -1, dtype=np.int64)
+    g = np.flatnonzero(term <= kernels.ESC_4UP)
+    if g.size:
+        slot = np.minimum(order[g], min(limit, 4)) - 1
+        loc = bins.locate_xyz(wo[0][g], wo[1][g], wo[2][g], phi_i - np.degrees(psi[g]))
+        where[g] = np.where(loc >= 0, slot * nbin + loc, -1)
+    return status1, weight1, term, wterm, where
+
+
+class BouncePath(TracePath):
+    """Embree bounce chain (``trace_bounces``) of one ``Incidence``: per-ray groove azimuths
+    when ``azimuth``; per-block incidence rotations (``paths.RotatedIncidencePath``) when
+    ``rotate``. ``follow(blocks)`` → (status1, weight1, term, wterm, where)."""
+
+    def __init__(self, incidence: Incidence, azimuth: bool, rotate: bool, limit, floor, nbin):
+        super().__init__(incidence)
+        self.azimuth, self.rotate = azimuth, rotate
+        self.limit, self.floor, self.nbin = int(limit), float(floor), int(nbin)
+
+    def follow(self, blocks):
+        inc = self.incidence
+        if not self.rotate:
+            starts, psi = inc.origins_of(blocks, self.azimuth)
+            return trace_bounces(
+                inc.tracer,
+                inc.wi,
+                inc.phi_i,
+                inc.bins,
+                starts,
+                psi if self.azimuth else None,
+                inc.ior,
+                self.limit,
+                self.floor,
+                self.nbin,
+            )
+        out, wi = [], inc.wi
+        for b in blocks:
+            starts, _ = inc.origins_of([b], False)
+            psi = block_rotation(inc.key, b)
+            c, s = np.cos(psi), np.sin(psi)
+            wb = np.array([c * wi[0] - s * wi[1], s * wi[0] + c * wi[1], wi[2]])
+            out.append(
+                trace_bounces(
+                    inc.tracer,
+                    wb,
+                    inc.phi_i + np.degrees(psi),
+                    inc.bins,
+                    starts,
+                    None,
+                    inc.ior,
+                    self.limit,
+                    self.floor,
+                    self.nbin,
+                )
+            )
+        return tuple(np.concatenate(parts) for parts in zip(*out))
+
+
+class AnalyticBouncePath(TracePath):
+    """``masking="analytic"`` bounce chain (``analytic_bounces``), in batches of 16 blocks."""
+
+    def __init__(self, incidence: Incidence, caster: VGrooveCaster, limit, floor, nbin):
+        super().__init__(incidence)
+        self.caster = caster
+        self.limit, self.floor, self.nbin = int(limit), float(floor), int(nbin)
+
+    def follow(self, blocks):
+        inc, blocks, parts = self.incidence, list(blocks), []
+        wi = np.asarray(inc.wi, dtype=np.float64)
+        z = inc.tracer.zmax + inc.tracer.top_margin
+        for a in range(0, len(blocks), 16):
+            (x, _, _), psi = inc.origins_of(blocks[a : a + 16], True)
+            parts.append(
+                analytic_bounces(
+                    self.caster,
+                    wi,
+                    inc.phi_i,
+                    inc.bins,
+                    x,
+                    z,
+                    psi,
+                    inc.ior,
+                    self.limit,
+                    self.floor,
+                    self.nbin,
+                )
+            )
+        return tuple(np.concatenate(c) for c in zip(*parts))
+
+
+def choose_bounce_path(
+    incidence: Incidence, profile, azimuth: bool, isotropic: bool, bounces, nbin: int
+) -> TracePath:
+    """The bounce-chain path of ``incidence`` for a checked ``bounces`` > 1 on a surface
+    prepared by ``paths.tracer_for``; ``nbin`` bins per order slot. UsageError for
+    ``masking="exact"`` (``profile`` a ``VGrooveProfile`` but not a caster)."""
+    limit, floor = bounce_limit(bounces)
+    if isinstance(profile, VGrooveCaster):
+        return AnalyticBouncePath(incidence, profile, limit, floor, nbin)
+    if profile is not None:
+        raise UsageError(
+            "masking='exact' decides only the first masking test exactly; with bounces > 1 "
+            "use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
+        )
+    return BouncePath(incidence, azimuth, bool(isotropic and not azimuth), limit, floor, nbin)
