@@ -42,10 +42,10 @@ seed 0; grids 256²–1024²; 1–2 min per family on 2 busy cores), σ/λ at θ
     abc       0.031 0.034 0.059     0.243 0.208 0.396                    0.243 0.214 0.444
 
 RR: σ cos θi/λ = 0.024–0.031 against 0.025 predicted; geometric optics: σ cos θi/λ =
-0.175–0.243 (g = 4.8–9.3), between the g = 1 and g = 10 bounds (0.080, 0.252). Löw smooth never holds on aluminium (its
-Q' = F(Re η) with Re η = 0.769 < 1 and G' = 1: −98 % at θi ≤ 30°, +340 % at 60°). TS-Smith
-fails again at σ = 3 λ on the Gaussian family (−11 to −12 %: m = 0.6, Smith masking, which
-Kirchhoff lacks), not on the ABC one (−3 to −4 %).
+0.175–0.243 (g = 4.8–9.3), between the g = 1 and g = 10 bounds (0.080, 0.252). Löw smooth
+never holds on aluminium (its Q' = F(Re η) with Re η = 0.769 < 1 and G' = 1: −98 % at
+θi ≤ 30°, +340 % at 60°). TS-Smith fails again at σ = 3 λ on the Gaussian family (−11 to
+−12 %: m = 0.6, Smith masking, which Kirchhoff lacks), not on the ABC one (−3 to −4 %).
 """
 
 from __future__ import annotations
