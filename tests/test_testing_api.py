@@ -116,8 +116,9 @@ def _worker(root, log, out):
     np.save(out, res.brdf)
 
 
+@pytest.mark.integration
 def test_concurrent_workers_trace_a_reference_once_and_read_the_same(tmp_path):
-    ctx = multiprocessing.get_context("fork")
+    ctx = multiprocessing.get_context("spawn")  # fresh interpreters, like xdist workers
     log = tmp_path / "traces.log"
     procs = [
         ctx.Process(target=_worker, args=(tmp_path / "cache", log, tmp_path / f"w{k}.npy"))
@@ -126,7 +127,7 @@ def test_concurrent_workers_trace_a_reference_once_and_read_the_same(tmp_path):
     for p in procs:
         p.start()
     for p in procs:
-        p.join(120)
+        p.join(300)
         assert p.exitcode == 0
     assert len(log.read_text().split()) == 1  # one trace, the others waited and read it
     results = [np.load(tmp_path / f"w{k}.npy") for k in range(3)]
@@ -189,6 +190,7 @@ def test_a_brdf_returning_negative_or_nan_values_fails(surface, tmp_path):
         (dict(seed=-1), "seed"),
         (dict(target=2.0, rays="auto"), "target"),
         (dict(isotropic="yes"), "isotropic"),
+        (dict(min_events=0), "min_events"),
     ],
 )
 def test_bad_arguments_raise_usage_errors_naming_them(surface, tmp_path, kwargs, name):
