@@ -213,8 +213,10 @@ def test_bad_inputs_name_the_parameter(surface, tmp_path):
         assert_brdf_agrees("no-such-model", surface, AL, [0], **kw)
     with pytest.raises(UsageError, match="brdf"):
         assert_brdf_agrees(lambda wi, wo: np.ones(3), surface, AL, [0], **kw)
-    with pytest.raises(UsageError, match="rays='auto'"):
-        assert_brdf_agrees(ts_ggx(0.3), [surface, surface], AL, [0], rays="auto", cache=tmp_path)
+    with pytest.raises(UsageError, match="realisations"):
+        assert_brdf_agrees(ts_ggx(0.3), surface, AL, [0], realisations=2, **kw)
+    with pytest.raises(UsageError, match="realisations"):
+        assert_brdf_agrees(ts_ggx(0.3), "vgroove-ggx-0.3", realisations=0, **kw)
 
 
 def test_rays_auto_stops_at_the_target_or_the_cap(surface, tmp_path):
@@ -227,6 +229,19 @@ def test_rays_auto_stops_at_the_target_or_the_cap(surface, tmp_path):
     assert capped.rays[0] <= 50_000 + 4096 and not capped.meta["auto"]["incidences"][0]["converged"]
 
 
+def test_several_realisations_are_judged_as_an_ensemble_with_auto_rays(tmp_path):
+    """Two random-tilt groove tiles: the callable is a model of the ensemble (t tests over the
+    realisations); rays="auto" traces realisation 0 to the target first (a pilot), then every
+    realisation with its ray count."""
+    tiles = [vgrooves(200, GGX(0.3), seed=s, sampling="random") for s in (0, 1)]
+    out = assert_brdf_agrees(
+        ts_ggx(0.3), tiles, AL, [30], rays="auto", target=0.05, bins=(10, 10), cache=tmp_path
+    )
+    (v,) = out["verdicts"]
+    assert v["reference"] == "realisations" and v["realisations"] == 2
+    assert out["reference"].rays[0] == 2 * 262_144  # pilot: one first batch met the target
+
+
 def test_a_scene_name_supplies_material_incidences_and_bins():
     from microsim.testing.cache import resolve_reference
 
@@ -234,6 +249,10 @@ def test_a_scene_name_supplies_material_incidences_and_bins():
     assert ref.material == pytest.approx(0.769 + 6.08j)
     assert ref.theta_i == (0.0, 30.0, 60.0, 80.0) and ref.bins.shape == (45, 72)
     assert len(ref.surfaces) == 1 and ref.surfaces[0].nominal["n_grooves"] == 4000
+    # a random scene whose file says realisations = "auto" gets MIN_AUTO unless told
+    ref = resolve_reference("gaussian-m0.3", rays=1000, realisations=2)
+    assert len({s.fingerprint() for s in ref.surfaces}) == 2
+    assert cache_mod.DEFAULT_REALISATIONS == 8
 
 
 # --- sampler harness ----------------------------------------------------------------------------

@@ -262,6 +262,7 @@ def assert_brdf_agrees(
     seed: int = 0,
     target: float = AUTO_TARGET,
     max_rays: int = AUTO_MAX_RAYS,
+    realisations: int | None = None,
     cache=None,
     isotropic: bool = False,
     name: str | None = None,
@@ -283,8 +284,9 @@ def assert_brdf_agrees(
     n + ik or None for a mirror), ``theta_i`` (degrees; default the scene's), ``bins``
     (``Bins`` or (n_theta, n_phi); default the scene's), ``rays`` (per incidence, or "auto":
     until the reference's energy-weighted relative standard error is ≤ ``target``, at most
-    ``max_rays``; ``microsim.testing.cache.reference``), ``seed``, ``cache`` (directory, or
-    False for no cache) as ``microsim.testing.reference``. ``isotropic=True`` states that the
+    ``max_rays``; ``microsim.testing.cache.reference``), ``seed``, ``realisations`` (overrides
+    a scene's count), ``cache`` (directory, or False for no cache) as
+    ``microsim.testing.reference``. ``isotropic=True`` states that the
     callable is symmetric in the relative azimuth, f(Δφ) = f(−Δφ) (isotropic BRDFs): the
     folded bins are then integrated over Δφ ≥ 0 only, half the evaluations (as microsim does
     for its isotropic models); by default both halves are integrated, exact for any callable.
@@ -322,6 +324,7 @@ def assert_brdf_agrees(
         seed=seed,
         target=target,
         max_rays=max_rays,
+        realisations=realisations,
     )
     result = cached(ref, cache=cache, threads=threads)
     if not isinstance(isotropic, bool):

@@ -39,6 +39,7 @@ import numpy as np
 
 import microsim
 from microsim import atomic
+from microsim.analysis.budget import MIN_AUTO
 from microsim.analytic.fresnel import resolve_material
 from microsim.errors import UsageError
 from microsim.scene import Scene, load_scene
@@ -51,6 +52,7 @@ __all__ = [
     "AUTO_MAX_RAYS",
     "AUTO_FIRST",
     "LOCK_TIMEOUT",
+    "DEFAULT_REALISATIONS",
     "Reference",
     "cache_dir",
     "set_default_dir",
@@ -67,6 +69,8 @@ AUTO_MAX_RAYS = 4_000_000
 """Cap of ``rays="auto"`` per incidence (a reference is never traced without bound)."""
 AUTO_FIRST = 2**18
 """Rays of the first batch of ``rays="auto"``."""
+DEFAULT_REALISATIONS = MIN_AUTO
+"""Realisations of a scene whose file says ``realisations = "auto"``."""
 LOCK_TIMEOUT = 3600.0
 """Seconds a process waits for another one tracing the same reference before giving up."""
 
@@ -198,6 +202,7 @@ def resolve_reference(
     seed: int = 0,
     target: float = AUTO_TARGET,
     max_rays: int = AUTO_MAX_RAYS,
+    realisations: int | None = None,
 ) -> Reference:
     """Validate the arguments of ``reference``/``assert_brdf_agrees`` into a ``Reference``.
 
@@ -205,15 +210,28 @@ def resolve_reference(
     ``Surface`` or a sequence of Surfaces (realisations). A scene supplies the defaults:
     ``material="scene"`` takes its ior, ``theta_i=None`` its incidences, ``bins=None`` its
     (theta_bins, phi_bins); its realisations r = 0 … R−1 are built with seed
-    ``simulation.seed + r`` at full size. For a Surface, ``material`` (name, n, n + ik, None =
+    ``simulation.seed + r`` at full size. ``realisations`` (an integer in [1, 1000]) overrides
+    the scene's count; a scene with ``realisations = "auto"`` gets ``DEFAULT_REALISATIONS``
+    (= ``microsim.analysis.budget.MIN_AUTO``, 8) — the runner's pilot rule, which may choose
+    more, is not run here. For a Surface, ``material`` (name, n, n + ik, None =
     mirror) and ``theta_i`` are required and ``bins`` defaults to ``Bins()``."""
     scene = None
+    if realisations is not None and (
+        isinstance(realisations, bool)
+        or not isinstance(realisations, (int, np.integer))
+        or not 1 <= realisations <= 1000
+    ):
+        raise UsageError(f"realisations must be an integer in [1, 1000], got {realisations!r}")
     if isinstance(surface_or_scene, (str, os.PathLike)):
         scene = load_scene(find_scene(surface_or_scene))
     elif isinstance(surface_or_scene, Scene):
         scene = surface_or_scene
     if scene is not None:
         R, s0 = scene.simulation.realisations, scene.simulation.seed
+        if realisations is not None:
+            R = int(realisations)
+        elif not isinstance(R, (int, np.integer)):  # "auto"
+            R = DEFAULT_REALISATIONS
         surfaces = tuple(scene.build_surface(seed=s0 + r) for r in range(R))
         label = f"{scene.path or scene.name}"
         default_bins = Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)
@@ -222,6 +240,10 @@ def resolve_reference(
         if theta_i is None:
             theta_i = scene.simulation.theta_i
     else:
+        if realisations is not None:
+            raise UsageError(
+                "realisations applies to a scene; for Surfaces pass the list of realisations"
+            )
         if _is_surface(surface_or_scene):
             surfaces = (surface_or_scene,)
         elif (
@@ -250,11 +272,6 @@ def resolve_reference(
     if isinstance(rays, str):
         if rays != "auto":
             raise UsageError(f"rays must be an integer >= 1000 or 'auto', got {rays!r}")
-        if len(surfaces) > 1:
-            raise UsageError(
-                f"rays='auto' traces one surface; this reference has {len(surfaces)} "
-                f"realisations: pass rays=N (rays per incidence over all realisations)"
-            )
     elif isinstance(rays, bool) or not isinstance(rays, (int, np.integer)) or rays < 1000:
         raise UsageError(f"rays must be an integer >= 1000 or 'auto', got {rays!r}")
     if not (isinstance(target, (int, float)) and not isinstance(target, bool) and 0 < target < 1):
@@ -274,8 +291,28 @@ def resolve_reference(
     )
 
 
+def _auto_rays(ref: Reference, threads) -> int:
+    """Rays per incidence of a several-realisation ``rays="auto"`` reference: ``simulate_auto``
+    on realisation 0 (a pilot, seed ``seed``) to ``target``, its largest ray count over the
+    incidences, times the number of realisations — each realisation as precise as one
+    surface traced to ``target``, the mean √R times more (its tile-to-tile scatter is what the
+    t tests then weigh)."""
+    pilot = simulate_auto(
+        ref.surfaces[0],
+        ref.material,
+        list(ref.theta_i),
+        target=ref.target,
+        bins=ref.bins,
+        seed=ref.seed,
+        threads=threads,
+        first=AUTO_FIRST,
+        max_rays=ref.max_rays,
+    )
+    return int(np.max(pilot.rays)) * len(ref.surfaces)
+
+
 def _trace(ref: Reference, threads) -> Result:
-    if ref.rays == "auto":
+    if ref.rays == "auto" and len(ref.surfaces) == 1:
         return simulate_auto(
             ref.surfaces[0],
             ref.material,
@@ -297,11 +334,12 @@ def _trace(ref: Reference, threads) -> Result:
             seed=ref.seed,
             threads=threads,
         )
+    rays = _auto_rays(ref, threads) if ref.rays == "auto" else ref.rays
     return simulate(
         None,
         ref.material,
         list(ref.theta_i),
-        rays=ref.rays,
+        rays=rays,
         bins=ref.bins,
         seed=ref.seed,
         threads=threads,
@@ -346,6 +384,7 @@ def reference(
     seed: int = 0,
     target: float = AUTO_TARGET,
     max_rays: int = AUTO_MAX_RAYS,
+    realisations: int | None = None,
     cache=None,
     threads: int | None = None,
 ) -> Result:
@@ -357,7 +396,9 @@ def reference(
     (the first ``AUTO_FIRST`` rays, then as many as predicted from rse ∝ N^(−1/2), at most 4×
     per step) until the energy-weighted relative standard error over the bins carrying 90 %
     of the reflected energy is ≤ ``target`` (default 2 %) or ``max_rays`` (default 4·10⁶)
-    rays per incidence were traced — never more."""
+    rays per incidence were traced — never more. With several realisations, ``"auto"``
+    traces realisation 0 that way first (a pilot) and then every realisation with the pilot's
+    largest ray count (``_auto_rays``), at most R × ``max_rays`` per incidence."""
     ref = resolve_reference(
         surface_or_scene,
         material,
@@ -367,6 +408,7 @@ def reference(
         seed=seed,
         target=target,
         max_rays=max_rays,
+        realisations=realisations,
     )
     return cached(ref, cache=cache, threads=threads)
 
