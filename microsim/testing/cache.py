@@ -33,7 +33,9 @@ import os
 import shutil
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -121,11 +123,15 @@ def find_scene(name) -> Path:
 
 @dataclass(frozen=True)
 class Reference:
-    """What to trace: ``surfaces`` (one, or the realisations of a random scene), the material
-    η (None = mirror), incidences (degrees), ``bins``, ``seed``, ``rays`` (int or "auto") with
+    """What to trace: the surfaces (one, or the realisations of a random scene) by their
+    ``fingerprints`` and ``azimuth_average`` flags, built on demand by ``build`` (property
+    ``surfaces``: only a cache miss or a facet model needs the meshes), the material η
+    (None = mirror), incidences (degrees), ``bins``, ``seed``, ``rays`` (int or "auto") with
     the auto ``target``/``max_rays``, and a ``label`` for messages (scene file or surface)."""
 
-    surfaces: tuple
+    fingerprints: tuple[str, ...]
+    azimuth_average: tuple[bool, ...]
+    build: Callable[[], tuple]
     material: complex | float | None
     theta_i: tuple[float, ...]
     bins: Bins
@@ -134,6 +140,14 @@ class Reference:
     target: float
     max_rays: int
     label: str
+
+    @cached_property
+    def surfaces(self) -> tuple:
+        """The Surfaces (built once per Reference), checked against ``fingerprints``."""
+        built = tuple(self.build())
+        if tuple(s.fingerprint() for s in built) != self.fingerprints:  # pragma: no cover
+            raise UsageError("surface_or_scene: the scene's surfaces changed while in use")
+        return built
 
     def description(self) -> dict:
         """The cache key's content (module docstring), JSON values only."""
@@ -145,8 +159,8 @@ class Reference:
             else int(self.rays)
         )
         return {
-            "fingerprints": [s.fingerprint() for s in self.surfaces],
-            "azimuth_average": [bool(s.azimuth_average) for s in self.surfaces],
+            "fingerprints": list(self.fingerprints),
+            "azimuth_average": list(self.azimuth_average),
             "material": mat,
             "theta_i": [float(t) for t in self.theta_i],
             "phi_i": 0.0,
@@ -232,7 +246,8 @@ def resolve_reference(
             R = int(realisations)
         elif not isinstance(R, (int, np.integer)):  # "auto"
             R = DEFAULT_REALISATIONS
-        surfaces = tuple(scene.build_surface(seed=s0 + r) for r in range(R))
+        build = _scene_builder(scene, int(s0), int(R))
+        fingerprints, azimuth = _scene_identity(scene, int(s0), int(R), build)
         label = f"{scene.path or scene.name}"
         default_bins = Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)
         if isinstance(material, str) and material == "scene":
@@ -258,6 +273,9 @@ def resolve_reference(
                 f"or a sequence of Surfaces (realisations), got {surface_or_scene!r}"
             )
         label = repr(surfaces[0]) + (f" (+{len(surfaces) - 1} realisations)" * (len(surfaces) > 1))
+        fingerprints = tuple(s.fingerprint() for s in surfaces)
+        azimuth = tuple(bool(s.azimuth_average) for s in surfaces)
+        build = lambda: surfaces  # noqa: E731
         default_bins = Bins()
         if isinstance(material, str) and material == "scene":
             raise UsageError(
@@ -279,7 +297,9 @@ def resolve_reference(
     if isinstance(max_rays, bool) or not isinstance(max_rays, (int, np.integer)) or max_rays < 1000:
         raise UsageError(f"max_rays must be an integer >= 1000, got {max_rays!r}")
     return Reference(
-        surfaces=surfaces,
+        fingerprints=fingerprints,
+        azimuth_average=azimuth,
+        build=build,
         material=eta,
         theta_i=_theta(theta_i),
         bins=_bins(bins, default_bins),
@@ -289,6 +309,41 @@ def resolve_reference(
         max_rays=int(max_rays),
         label=label,
     )
+
+
+_IDENTITIES: dict = {}  # scene identity key → (fingerprints, azimuth flags), this process
+
+
+def _scene_builder(scene: Scene, seed: int, n: int) -> Callable[[], tuple]:
+    return lambda: tuple(scene.build_surface(seed=seed + r) for r in range(n))
+
+
+def _mtime(path) -> tuple:
+    try:
+        st = os.stat(path)
+        return (str(Path(path).resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:
+        return (str(path), None, None)
+
+
+def _scene_identity(scene: Scene, seed: int, n: int, build) -> tuple[tuple, tuple]:
+    """(fingerprints, azimuth flags) of the scene's n realisations from seed ``seed``,
+    memoised in this process by what the surfaces are built from (kind, parameters, seeds,
+    and a heightfield file's path, size and modification time), so that a test suite builds
+    a random scene's meshes once per process to look its reference up, not once per check."""
+    params = tuple(sorted((k, repr(v)) for k, v in scene.surface.params.items()))
+    extra = ()
+    if scene.surface.kind == "file":
+        base = scene.path.parent if scene.path is not None else Path.cwd()
+        extra = _mtime(base / scene.surface.params["path"])
+    key = (scene.surface.kind, params, seed, n, extra)
+    if key not in _IDENTITIES:
+        surfaces = build()
+        _IDENTITIES[key] = (
+            tuple(s.fingerprint() for s in surfaces),
+            tuple(bool(s.azimuth_average) for s in surfaces),
+        )
+    return _IDENTITIES[key]
 
 
 def _auto_rays(ref: Reference, threads) -> int:
