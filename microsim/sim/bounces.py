@@ -53,7 +53,7 @@ from microsim.errors import UsageError
 
 from . import kernels
 from .bins import Bins
-from .paths import LEDGER, Incidence, TracePath
+from .paths import LEDGER, FacetTable, Incidence, TracePath, facet_table, uses_facet_table
 from .scratch import work
 from .streams import block_rotation
 from .tracer import UNRESOLVED, Tracer, VGrooveCaster
@@ -146,6 +146,7 @@ def trace_bounces(
     limit: int,
     floor: float,
     nbin: int,
+    table: FacetTable | None = None,
 ):
     """Per primary ray (status1, weight1, term, wterm, where) of the bounce chain on Embree.
 
@@ -158,7 +159,9 @@ def trace_bounces(
     ``status1``/``weight1``: first-bounce class (``paths.LEDGER``) and Fresnel weight;
     ``term``/``wterm``: terminal class (``TERMINAL``) and carried weight; ``where``: flat
     tally index slot·``nbin`` + bin of the escape direction (Δφ against ``phi_i``, or
-    φi − ψ in the groove frame), −1 for paths that do not escape."""
+    φi − ψ in the groove frame), −1 for paths that do not escape. ``table``: the incidence's
+    ``paths.FacetTable`` (shared direction only), whose per-facet Fresnel weights and bins
+    replace the per-ray arithmetic of the first bounce with the same values."""
     x = _columns(origins)
     n = len(x[0])
     mode, n2, k2 = kernels.fresnel_mode(ior)
@@ -186,6 +189,10 @@ def trace_bounces(
     ncols, lift = tracer.normal_columns, tracer.masking_lift
     hx, hy = float(tracer.half[0]), float(tracer.half[1])
     slots = min(limit, 4)
+    use_table = table is not None and psi is None
+    tab_weight = table.weight if use_table else np.zeros(1)
+    tab_bin = table.bin if use_table else np.zeros(1, dtype=np.int32)
+    first_facet = work("bounce-facet", n if use_table else 1, np.int64)
     b = 1
     while True:
         k = len(live)
@@ -220,6 +227,7 @@ def trace_bounces(
             term,
             wterm,
             order,
+            where,
             esc,
             *ed,
             nlive,
@@ -227,6 +235,10 @@ def trace_bounces(
             *nd,
             nd32,
             nw,
+            use_table,
+            tab_weight,
+            tab_bin,
+            first_facet,
         )
         if e:
             g = esc[:e]
@@ -328,10 +340,13 @@ class BouncePath(TracePath):
     when ``azimuth``; per-block incidence rotations (``paths.RotatedIncidencePath``) when
     ``rotate``. ``follow(blocks)`` → (status1, weight1, term, wterm, where)."""
 
-    def __init__(self, incidence: Incidence, azimuth: bool, rotate: bool, limit, floor, nbin):
+    def __init__(
+        self, incidence: Incidence, azimuth: bool, rotate: bool, limit, floor, nbin, table=None
+    ):
         super().__init__(incidence)
         self.azimuth, self.rotate = azimuth, rotate
         self.limit, self.floor, self.nbin = int(limit), float(floor), int(nbin)
+        self.table = table
 
     def follow(self, blocks):
         inc = self.incidence
@@ -348,6 +363,7 @@ class BouncePath(TracePath):
                 self.limit,
                 self.floor,
                 self.nbin,
+                self.table,
             )
         out, wi = [], inc.wi
         for b in blocks:
@@ -405,10 +421,19 @@ class AnalyticBouncePath(TracePath):
 
 
 def choose_bounce_path(
-    incidence: Incidence, profile, azimuth: bool, isotropic: bool, bounces, nbin: int
+    incidence: Incidence,
+    profile,
+    azimuth: bool,
+    isotropic: bool,
+    bounces,
+    nbin: int,
+    pool=None,
+    parts: int = 1,
 ) -> TracePath:
     """The bounce-chain path of ``incidence`` for a checked ``bounces`` > 1 on a surface
-    prepared by ``paths.tracer_for``; ``nbin`` bins per order slot. UsageError for
+    prepared by ``paths.tracer_for``; ``nbin`` bins per order slot. Where the single-bounce
+    paths use a facet table (``paths.uses_facet_table``) it is built here too (``parts``
+    facet ranges on ``pool``) and serves the first bounce. UsageError for
     ``masking="exact"`` (``profile`` a ``VGrooveProfile`` but not a caster)."""
     limit, floor = bounce_limit(bounces)
     if isinstance(profile, VGrooveCaster):
@@ -418,4 +443,8 @@ def choose_bounce_path(
             "masking='exact' decides only the first masking test exactly; with bounces > 1 "
             "use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
         )
-    return BouncePath(incidence, azimuth, bool(isotropic and not azimuth), limit, floor, nbin)
+    rotate = bool(isotropic and not azimuth)
+    inc, table = incidence, None
+    if uses_facet_table(inc.tracer, profile, azimuth, rotate, inc.rays):
+        table = facet_table(inc.tracer, inc.wi, inc.ior, inc.bins, inc.phi_i, pool, parts)
+    return BouncePath(inc, azimuth, rotate, limit, floor, nbin, table)

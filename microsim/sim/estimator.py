@@ -270,7 +270,7 @@ def simulate(
                         task = partial(chunk_tallies, path, nbin)
                     else:
                         path = choose_bounce_path(
-                            incidence, profile, azimuth, isotropic, bounces, nbin
+                            incidence, profile, azimuth, isotropic, bounces, nbin, pool, threads
                         )
                         task = partial(chunk_order_tallies, path, nslot)
 

@@ -667,6 +667,7 @@ def bounce_step(
     term,
     wterm,
     order,
+    where,
     esc,
     edx,
     edy,
@@ -680,6 +681,10 @@ def bounce_step(
     ndz,
     nd32,
     nw,
+    use_table,
+    tab_weight,
+    tab_bin,
+    first_facet,
 ):
     """One step of the bounce chain (``bounces.trace_bounces``) over the live paths.
 
@@ -705,7 +710,13 @@ def bounce_step(
     Fresnel weights of ``paths.LEDGER``, as the single-bounce paths give them) is written at
     b = 1 (SINGLE provisionally for a rising wo) and settled at b = 2 (MASKED if the reflected
     ray met the surface, RAY_UNRESOLVED / RAY_MISSED if its walk failed). ``order[g]`` is the
-    number of bounces the path made. Returns (continuing paths m, escapes e)."""
+    number of bounces the path made.
+
+    ``use_table``: the incidence's ``paths.FacetTable`` Fresnel weights ``tab_weight`` and
+    bins ``tab_bin`` per facet serve the first bounce (the values the per-ray arithmetic
+    gives, bitwise: same Fresnel kernel, same float64 mirror direction): its facet is kept in
+    ``first_facet`` and a path escaping after order 1 gets ``where`` = its facet's bin here
+    instead of being listed in ``esc``. Returns (continuing paths m, escapes e)."""
     m = 0
     e = 0
     for i in range(len(live)):
@@ -723,6 +734,9 @@ def bounce_step(
             term[g] = _order_class(b - 1)
             wterm[g] = w[i]
             order[g] = b - 1
+            if use_table and b == 2:
+                where[g] = tab_bin[first_facet[g]]
+                continue
             esc[e] = g
             edx[e], edy[e], edz[e] = dx[j], dy[j], dz[j]
             e += 1
@@ -751,7 +765,11 @@ def bounce_step(
                 status1[g] = RAY_UNRESOLVED
                 weight1[g] = 0.0
             continue
-        fw = _fresnel_weight(c, n2, k2, fresnel_mode)
+        if use_table and b == 1:
+            fw = tab_weight[f]
+            first_facet[g] = f
+        else:
+            fw = _fresnel_weight(c, n2, k2, fresnel_mode)
         wn = w[i] * fw
         ox = dx[j] + 2.0 * c * a0
         oy = dy[j] + 2.0 * c * a1
