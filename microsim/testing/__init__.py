@@ -13,21 +13,34 @@ The pytest plugin (``plugin``, entry point ``pytest11``) adds ``--microsim-cache
 ``microsim_reference`` fixture and the ``microsim`` marker. docs/testing.md has the guide.
 """
 
-from .agreement import Agreement, BRDFMismatch, assert_brdf_agrees, tolerance_check
-from .cache import ENV_VAR, cache_dir, find_scene, reference, set_default_dir
-from .sampler import SamplerCheck, assert_sampler_matches, pearson_chi2
+import importlib
 
-__all__ = [
-    "assert_brdf_agrees",
-    "assert_sampler_matches",
-    "pearson_chi2",
-    "reference",
-    "cache_dir",
-    "set_default_dir",
-    "find_scene",
-    "tolerance_check",
-    "Agreement",
-    "BRDFMismatch",
-    "SamplerCheck",
-    "ENV_VAR",
-]
+_WHERE = {
+    "assert_brdf_agrees": "agreement",
+    "tolerance_check": "agreement",
+    "Agreement": "agreement",
+    "BRDFMismatch": "agreement",
+    "reference": "cache",
+    "cache_dir": "cache",
+    "set_default_dir": "cache",
+    "find_scene": "cache",
+    "ENV_VAR": "cache",
+    "assert_sampler_matches": "sampler",
+    "pearson_chi2": "sampler",
+    "SamplerCheck": "sampler",
+}
+__all__ = list(_WHERE)
+
+
+def __getattr__(name: str):
+    """Import the submodule holding ``name`` on first use (PEP 562), so that loading the
+    pytest plugin (``microsim.testing.plugin``) does not import the simulator."""
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

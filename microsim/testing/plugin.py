@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import pytest
 
-from . import cache as _cache
-
 MARKER = (
     "microsim: the test may trace a microsim reference simulation (cached on disk; "
     "--microsim-cache DIR or $MICROSIM_CACHE)"
@@ -41,20 +39,26 @@ def pytest_addoption(parser):
 def pytest_configure(config):
     config.addinivalue_line("markers", MARKER)
     path = config.getoption("--microsim-cache", default=None)
-    if path:
-        _cache.set_default_dir(path)
+    if path:  # the simulator is imported only when a test asks for the cache
+        from .cache import set_default_dir
+
+        set_default_dir(path)
 
 
 def pytest_unconfigure(config):
     if config.getoption("--microsim-cache", default=None):
-        _cache.set_default_dir(None)
+        from .cache import set_default_dir
+
+        set_default_dir(None)
 
 
 @pytest.fixture
 def microsim_reference():
     """``microsim_reference(scene, **options)`` → the cached reference ``Result``."""
 
+    from .cache import reference
+
     def get(scene, **options):
-        return _cache.reference(scene, **options)
+        return reference(scene, **options)
 
     return get
