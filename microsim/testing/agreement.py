@@ -224,26 +224,24 @@ def _worst_bins(result, model, t: int, min_events: int, k: int = 3) -> list[str]
 
 def _chart(result, model, name, verdicts, t: int, where: Path, key: str) -> str:
     """Hemisphere chart (``analysis.charts.hemisphere_maps``) of incidence ``t``; its path.
-    The file name holds the reference key and a hash of the model's bin averages, so a chart
-    already written for the same numbers is reused, not drawn again."""
-    digest = hashlib.sha1(np.ascontiguousarray(model, dtype=np.float64).tobytes()).hexdigest()
+    The file name holds the reference key and a hash of the model's bin averages and the
+    verdicts' settings, so a chart already written for the same numbers is reused."""
+    h = hashlib.sha1(np.ascontiguousarray(model, dtype=np.float64).tobytes())
+    h.update(
+        repr([(v["alpha"], v["n_tests"], v["min_events"], v["agrees"]) for v in verdicts]).encode()
+    )
+    digest = h.hexdigest()
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:60]
     path = where / f"{safe}-{key}-{digest[:10]}-theta{result.theta_i[t]:g}.png"
     if path.is_file():
         return str(path)
     try:
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
-
-        from microsim.analysis import charts
+        from microsim.analysis import charts  # Figure + FigureCanvasAgg: no pyplot, no GUI
 
         where.mkdir(parents=True, exist_ok=True)
-        fig = charts.hemisphere_maps(
+        charts.hemisphere_maps(
             result, {name: model}, verdicts, path, t_index=t, scene_name=f"brdf {name}"
         )
-        plt.close(fig)
         return str(path)
     except Exception as e:  # a chart is a convenience: never hide the verdict behind it
         return f"(chart not written: {type(e).__name__}: {e})"
