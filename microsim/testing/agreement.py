@@ -313,6 +313,12 @@ def assert_brdf_agrees(
         raise UsageError(f"rtol must be None or a relative error in (0, 1), got {rtol!r}")
     if not (callable(brdf) or isinstance(brdf, str)):
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
+    if not isinstance(isotropic, bool):
+        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
+    if isinstance(min_events, bool) or not isinstance(min_events, int) or min_events < 1:
+        raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
+    if name is not None and not isinstance(name, str):
+        raise UsageError(f"name must be a string (the BRDF's name in messages), got {name!r}")
     ref = resolve_reference(
         surface_or_scene,
         material,
@@ -325,12 +331,6 @@ def assert_brdf_agrees(
         realisations=realisations,
     )
     result = cached(ref, cache=cache, threads=threads)
-    if not isinstance(isotropic, bool):
-        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
-    if isinstance(min_events, bool) or not isinstance(min_events, int) or min_events < 1:
-        raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
-    if name is not None and not isinstance(name, str):
-        raise UsageError(f"name must be a string (the BRDF's name in messages), got {name!r}")
     model, name = _model_values(brdf, ref, result, isotropic, name)
     T = len(result.theta_i)
     omega = result.bins.projected_solid_angle()
