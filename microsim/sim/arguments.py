@@ -38,7 +38,9 @@ which above 2⁴⁸ keeps fewer than 5 bits of the jitter ξ; at ~10⁷ rays/s i
 tracing. Memory does not depend on it (rays are drawn and tallied one chunk at a time)."""
 MAX_THREADS = 1024
 MAX_CHUNK = 2**22
-"""Most rays per thread task: every task holds ~200 bytes per ray of work arrays (0.8 GB)."""
+"""Most rays per thread task: every task holds ~200 bytes per ray of work arrays (0.8 GB);
+bounce chains (``simulate(bounces=K)``, K > 1) ~230 bytes per ray more (``bounces.
+trace_bounces``: per-path state and two generations of continuing rays)."""
 
 
 def _angles(name: str, value, what: str) -> np.ndarray:

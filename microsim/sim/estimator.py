@@ -9,6 +9,8 @@ into modules with one job each:
 - ``streams``  per-block random streams and ray origins (reproducibility, stratification);
 - ``paths``    the trace paths (traced, facet table, exact and analytic V-groove masking), one
   interface chosen once per (surface, masking, incidence); the ledger classes;
+- ``bounces``  the paths followed beyond the first bounce (``bounces`` = K > 1 or "all"):
+  scattering orders, their tally slots and the paths' energy ledger;
 - ``tallies``  running sums per block, the bin estimate and its standard error, the Result;
 - ``schedule`` the thread pool, lazy in-order scheduling, deferred SIGINT;
 - ``arguments`` checking every argument before any work;

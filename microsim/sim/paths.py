@@ -7,7 +7,8 @@ explicit microfacet integral (Mikkelsen 2009, eq. 9). Every primary ray ends in 
 ledger class (``LEDGER``): ``single`` (escaped after one bounce), ``masked`` (the reflected ray
 met the surface), ``downward`` (wo_z ≤ 0: a multiple-scattering event), ``unresolved`` (wrap
 cap reached, or a numerically back-facing hit) or ``missed`` (no hit at all: impossible for a
-closed periodic surface).
+closed periodic surface). These are the single-bounce paths (``simulate(bounces=1)``, the
+default); module ``bounces`` follows masked and downward paths on to their later bounces.
 
 One interface, ``TracePath.follow(blocks) -> (status, weight, bin)``, chosen once per
 (surface, masking, incidence) by ``choose_path``:
