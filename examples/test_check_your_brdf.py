@@ -28,7 +28,8 @@ pytestmark = pytest.mark.microsim
 
 # --- the "external" implementation: plain NumPy, nothing from microsim -----------------------
 def fresnel_conductor(cos_i, eta):
-    """Exact unpolarised Fresnel reflectance from air onto n + ik (Born & Wolf)."""
+    """Exact unpolarised Fresnel reflectance (R_s + R_p)/2 from air onto n + ik, with
+    η cos θt = √(η² − sin²θi) (Mikkelsen 2009, §2.1; Mally 2015)."""
     cos_i = np.clip(cos_i, 0.0, 1.0)
     sin2 = 1.0 - cos_i**2
     eta_cos_t = np.sqrt(eta * eta - sin2 + 0j)  # η cos θt
