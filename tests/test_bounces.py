@@ -348,6 +348,23 @@ def test_metal_ledger_balances_and_order_one_is_the_single_bounce_brdf():
     np.testing.assert_allclose(res.brdf_total(), res.brdf_orders.sum(0))
 
 
+def test_order_standard_errors_cover_the_seed_to_seed_scatter():
+    """Two independent ray streams on one tile: per (order ≥ 2, incidence, bin) the
+    difference of the estimates over their combined standard error has mean square ≤ 1 +
+    3·√(2/k) for k bins (the collapsed-strata error is conservative, so ≤ 1 in expectation;
+    χ²₁ terms have variance 2): the order-resolved errors are not too small."""
+    s = gauss(seed=6, n=48)
+    kw = dict(rays=40_000, bins=BINS, bounces="all", threads=2)
+    a = simulate(s, None, [30, 60, 80], seed=1, **kw)
+    b = simulate(s, None, [30, 60, 80], seed=2, **kw)
+    fa, fb = a.brdf_orders[1:], b.brdf_orders[1:]
+    sa, sb = a.stderr_orders[1:], b.stderr_orders[1:]
+    use = (sa > 0) & (sb > 0)
+    z2 = ((fa - fb)[use] / np.hypot(sa, sb)[use]) ** 2
+    assert use.sum() > 100
+    assert z2.mean() <= 1 + 3 * np.sqrt(2 / use.sum()), z2.mean()
+
+
 # --- determinism, persistence, resume -------------------------------------------------------
 def test_bitwise_identical_for_threads_and_chunks():
     s, v = gauss(seed=4, n=48), vgroove_surface(np.linspace(10, 70, 20))
