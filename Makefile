@@ -18,8 +18,8 @@ test-fast: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m "not slow and not integration"
 
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check microsim tests
-	$(BIN)/ruff format --check microsim tests
+	$(BIN)/ruff check microsim tests examples
+	$(BIN)/ruff format --check microsim tests examples
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)

@@ -10,4 +10,15 @@ is a unit vector pointing away from the surface (`wi` to the light, `wo` to the 
 
 __version__ = "0.1.0"
 
-from .sim import Bins, Result, simulate  # noqa: E402,F401
+__all__ = ["Bins", "Result", "simulate", "__version__"]
+
+
+def __getattr__(name: str):
+    """``microsim.simulate``, ``microsim.Bins``, ``microsim.Result`` on first use (PEP 562): the
+    pytest plugin (``microsim.testing.plugin``, loaded by every pytest run where microsim is
+    installed) then does not import the simulator and SciPy until a test needs them."""
+    if name in ("Bins", "Result", "simulate"):
+        from . import sim
+
+        return getattr(sim, name)
+    raise AttributeError(f"module 'microsim' has no attribute {name!r}")
