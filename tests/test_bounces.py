@@ -412,15 +412,16 @@ def test_realisations_give_order_resolved_scatter():
 @pytest.mark.slow
 def test_order_two_is_reciprocal_for_the_ensemble():
     """f₂(θa → θb, Δφ) = f₂(θb → θa, Δφ) for the ensemble of m = 0.5 Gaussian tiles
-    (8 realisations, incidence azimuth rotated per block): in the 5°-wide θ bins centred on
+    (32 realisations, incidence azimuth rotated per block): in the 5°-wide θ bins centred on
     θa = 32.5° and θb = 57.5°, every 30° Δφ bin that holds order-2 light both ways (together
     ≥ 95 % of it: the light is on the specular side) passes a χ² test at the 0.1 % level,
     with the realisation scatter in the standard error (a single tile is not reciprocal bin
-    by bin). Bin averaging over θo (5°) biases each side by O(Δθ² f″) only."""
+    by bin). Bin averaging over θo (5°) biases each side by O(Δθ² f″) only. Resolution: the
+    combined standard error is 6–10 % of f₂ in the three forward bins that hold most of it."""
     bins = Bins(18, 7)
     res = simulate(
         None, None, [32.5, 57.5], surface_factory=lambda seed: gauss(seed, 64),
-        realisations=8, seed=11, rays=4_000_000, bins=bins, bounces="all", isotropic=True,
+        realisations=32, seed=11, rays=4_000_000, bins=bins, bounces="all", isotropic=True,
     )  # fmt: skip
     f, se = res.brdf_orders[1], res.stderr_orders[1]
     ia, ib = 6, 11  # θ bins centred on 32.5° and 57.5°
