@@ -6,9 +6,11 @@ A single-bounce path ends at its first facet hit: the reflected ray either escap
 unit normal n multiplies the carried weight by the exact Fresnel factor F(c_b), c_b = −d·n
 for the incoming direction d, and reflects d to d + 2c_b·n; the path ends when a reflected
 ray escapes (tallied in the bin of its direction, under its order = number of bounces), or
-is cut off. The weight escaping at order k is one sample of the k-th term of the
-multiple-scattering microsurface BRDF (Heitz et al. 2016, eq. 4 as a sum over path lengths);
-the sum over orders is the explicit surface's whole BRDF for a mirror-like metal.
+is cut off. The weight escaping at order k in bin B, over N primary rays and the bin's
+projected solid angle Ω_B, is the bin average of the order-k term of the surface's BRDF
+(f̄_B,k = Σ w / (N Ω_B), as for order 1, Mikkelsen 2009, eq. 9); the sum over orders is the
+explicit surface's whole BRDF (the quantity Heitz et al. 2016 write as a sum over the path
+lengths of a random walk on a Smith microsurface).
 
 ``bounces``: an int K in [1, ``MAX_BOUNCES``] (the path is cut after K bounces if still
 inside: ``cut_bounces``), or "all": continue until the path escapes or its weight falls
