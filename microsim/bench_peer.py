@@ -1,0 +1,466 @@
+"""The bench's peer: the same single-bounce estimator written with Mitsuba 3's LLVM backend.
+
+Issue 14 sets microsim's throughput target relative to "a Mitsuba 3 LLVM single-bounce
+estimator of the same work on the same machine". This module is that estimator, so that
+``microsim bench`` can measure the peer itself instead of quoting a figure. It needs the
+optional extra ``pip install 'microsim[peer]'`` (mitsuba ≥ 3.5, drjit); without it every entry
+point raises ``PeerUnavailable``.
+
+The estimator (same as ``microsim.sim.simulate`` with traced masking, Mikkelsen 2009, eq. 9):
+
+* N primary rays along −wi start on the plane z = zmax + margin over one tile
+  [−Lx/2, Lx/2] × [−Ly/2, Ly/2], stratified like microsim: ray r gets the stratum
+  q ∈ [r/N, (r + 1)/N) of a row-major sweep of the tile (R = round(√(N·Ly/Lx)) rows),
+  jittered uniformly inside it (random numbers: Dr.Jit's PCG32, one stream per ray). Uniform
+  origins on a horizontal plane sample the surface flux-weighted: the (n·wi) dA factor.
+* Closest hit (``Scene.ray_intersect_preliminary``, coherent rays) → facet f with unit
+  geometric normal n (float64, cross(v1 − v0, v2 − v0), as ``microsim.sim.Tracer``); weight
+  F(n·wi), exact unpolarised Fresnel (``microsim.analytic.fresnel``); mirror direction
+  wo = 2(wi·n)n − wi. These depend on the facet alone, so — as microsim's ``facet_table`` —
+  they are computed once per incidence in NumPy (float64) for every facet, with the
+  (θo, Δφ) bin of wo (``microsim.sim.Bins.locate``), and gathered per ray in Dr.Jit.
+* Masking: a shadow ray (``Scene.ray_test``, coherent) from the hit point o + t·d offset by
+  ``eps`` along n, along wo, up to the height zmax (nothing above can block it). Escaped rays
+  with wo_z > 0 add w to their bin: f̄_B = Σ w / (N Ω_B) (sr⁻¹), Ω_B the bin's projected
+  solid angle; the standard error is microsim's collapsed-strata estimate,
+  se_B = √(Σw² − 2 Σ_k w_2k w_2k+1 [same bin]) / (N Ω_B) (``microsim.sim.tallies``).
+  Tallies are Dr.Jit scatter-adds in float64 (atomic: the last bits depend on scheduling).
+  Like microsim's, the pair estimate is conservative: on a 64² Gaussian tile (σ = 1.2,
+  ℓ = 8, θi = 30°, 2·10⁵ rays, Bins(9, 7)) it was 1.5× the scatter of 10 seeds (median over
+  bins; albedo 1.7×).
+
+Ledger (as ``microsim.sim.LEDGER``): single, masked, downward (wo_z ≤ 0), unresolved
+(back-facing facet n·wi ≤ 0, or a masking ray that would leave the tiled copies — below),
+missed (no hit: a leak).
+
+The peer's approximations (where it is *not* the same as microsim):
+
+* No periodic wrap. Mitsuba has none, so the mesh is copied (2m + 1) × (2m + 1) times and
+  primary rays start over the centre copy; m (``copies_per_side``) is the smallest number of
+  copies per side that a ray at θi or at θo = 88° (``MASKING_CAP_DEG``) cannot cross between
+  zmax and zmin: 1 (3 × 3 copies, 4.7 M triangles) for the bench's 512² tile (relief
+  zmax − zmin = 10.7), 3 (7 × 7) for a 64² tile of σ = 1.2, ℓ = 8 (relief 6.3). A masking
+  ray whose climb to zmax would end outside the copies cannot be decided: it is counted as
+  ``unresolved`` and tallied nowhere (a bias towards lower albedo of at most the Fresnel sum
+  of those rays, returned in the ledger). With 3 × 3 copies of that 64² tile 0.07 % of the
+  rays at θi = 30° were unresolved and the albedo fell 3e-4 (5 σ at 2·10⁵ rays) below
+  microsim's — hence the 88° rule. microsim's exact wrap has no such rays.
+* Mitsuba builds its Embree scene with ``RTC_SCENE_FLAG_NONE`` (not robust; no option to
+  change it) and ``RTC_BUILD_QUALITY_HIGH``: rays through shared edges or vertices can leak
+  (counted as ``missed``; the copies' seams are shared edges too). microsim uses Embree's
+  robust mode and has no leaks. Packets are Dr.Jit's LLVM vector width (``rtcIntersect8``
+  /``rtcOccluded8`` on AVX2), flagged coherent.
+* Float32 hit points; the shadow ray's offset ``eps`` is 4 float32 ulp of the largest
+  coordinate of the tiled scene (microsim: 2 ulp of one tile, projected onto the facet plane
+  first in float64).
+
+Timing (``peer_throughput``): marginal samples/s (a sample = one primary ray and, when lit,
+its masking ray) excluding the scene build (mesh upload, BVH) and the JIT compilation (a
+warm-up run first; Dr.Jit caches the kernels), best of ``repeat`` runs, the per-incidence
+facet table included (as microsim's pipeline figure includes its own).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from microsim.checks import integer
+from microsim.errors import EnvironmentFailure, UsageError
+
+__all__ = [
+    "PeerUnavailable",
+    "PeerResult",
+    "PeerScene",
+    "VARIANTS",
+    "PIP_COMMAND",
+    "mitsuba_single_bounce",
+    "peer_throughput",
+    "copies_per_side",
+]
+
+VARIANTS = ("llvm_ad_rgb", "llvm_rgb")
+"""Mitsuba variants tried in turn (LLVM backend; PyPI wheels ship ``llvm_ad_rgb``)."""
+PIP_COMMAND = "pip install 'microsim[peer]'  (or: pip install mitsuba)"
+BATCH = 2**20
+"""Primary rays per Dr.Jit launch (even: the pairs (2k, 2k + 1) never straddle two)."""
+MASKING_CAP_DEG = 88.0
+"""Masking rays up to this polar angle never leave the tiled copies (``copies_per_side``)."""
+MAX_COPIES_PER_SIDE = 16
+LEDGER = ("single", "masked", "downward", "unresolved", "missed")
+_SINGLE, _MASKED, _DOWNWARD, _UNRESOLVED, _MISSED = range(5)
+
+
+class PeerUnavailable(EnvironmentFailure):
+    """Mitsuba 3 (or its LLVM backend) cannot be used here; the message says why and how."""
+
+
+def _mitsuba():
+    """(mi, dr, variant): mitsuba with an LLVM variant set, or PeerUnavailable."""
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError as exc:
+        raise PeerUnavailable(
+            f"the Mitsuba 3 peer needs mitsuba (not importable: {exc}); install it with "
+            f"{PIP_COMMAND}"
+        ) from None
+    errors = []
+    for variant in VARIANTS:
+        if variant not in mi.variants():
+            errors.append(f"{variant}: not built")
+            continue
+        try:
+            mi.set_variant(variant)
+            return mi, dr, variant
+        except Exception as exc:  # noqa: BLE001 - LLVM missing shows as ImportError/RuntimeError
+            errors.append(f"{variant}: {exc}")
+    raise PeerUnavailable(
+        "Mitsuba 3 is installed but no LLVM variant works (Dr.Jit's LLVM backend needs "
+        f"libLLVM; set DRJIT_LIBLLVM_PATH): {'; '.join(errors)}"
+    )
+
+
+def copies_per_side(depth: float, tile: tuple, theta_i_deg: float) -> int:
+    """m such that the (2m + 1)² copies hold every primary ray at θi and every masking ray up
+    to θo = ``MASKING_CAP_DEG`` between zmax and zmin, wherever it starts in the centre copy:
+    a ray at polar angle θ moves depth·tan θ sideways, so
+    m = max(1, ⌈depth·tan max(θi, θcap) / min(Lx, Ly)⌉). Masking rays still steeper than that
+    may leave the copies; they are counted as ``unresolved``."""
+    theta = max(float(theta_i_deg), MASKING_CAP_DEG)
+    reach = depth * np.tan(np.radians(theta))
+    return max(1, int(np.ceil(reach / min(tile))))
+
+
+@dataclass(frozen=True)
+class PeerResult:
+    """The peer's bin-averaged single-bounce BRDF and its bookkeeping.
+
+    ``brdf``/``stderr`` (n_theta, n_phi) in sr⁻¹ (NaN-free: empty bins are 0 ± 0);
+    ``counts`` single-bounce events per bin; ``albedo`` Σ w / N over single events (the
+    single-bounce albedo ρ(θi), Mikkelsen 2009, eq. 27) and ``albedo_stderr`` its
+    collapsed-strata standard error; ``ledger`` rays per class of ``LEDGER`` and
+    ``ledger_fresnel`` their Fresnel sums / N; ``copies`` (2m + 1) tile copies per side.
+    """
+
+    brdf: np.ndarray
+    stderr: np.ndarray
+    counts: np.ndarray
+    albedo: float
+    albedo_stderr: float
+    ledger: dict
+    ledger_fresnel: dict
+    rays: int
+    copies: int
+    seconds: float
+    meta: dict = field(default_factory=dict)
+
+
+def _check_surface(surface):
+    """(vertices float64, faces int64, Lx, Ly) of an explicit (non-V-groove) surface."""
+    if surface is None or not hasattr(surface, "vertices") or not hasattr(surface, "faces"):
+        raise UsageError(
+            f"surface must be a microsim.surfaces.Surface (vertices, faces, tile_size), "
+            f"got {type(surface).__name__}"
+        )
+    if getattr(surface, "azimuth_average", False):
+        raise UsageError(
+            "surface must not be azimuth-averaged V-grooves for the Mitsuba peer (it traces "
+            "the mesh as given, without per-ray groove azimuths); use a heightfield"
+        )
+    v = np.asarray(surface.vertices, dtype=np.float64)
+    f = np.asarray(surface.faces)
+    if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)):
+        raise UsageError(f"surface.vertices must be a finite (V, 3) array, got shape {v.shape}")
+    if (
+        f.ndim != 2
+        or f.shape[1] != 3
+        or len(f) == 0
+        or not np.issubdtype(f.dtype, np.integer)
+        or f.min() < 0
+        or f.max() >= len(v)
+    ):
+        raise UsageError(
+            f"surface.faces must be a non-empty (F, 3) array of indices in [0, {len(v) - 1}]"
+        )
+    lx, ly = (float(t) for t in surface.tile_size)
+    if not (lx > 0 and ly > 0 and np.isfinite(lx) and np.isfinite(ly)):
+        raise UsageError(f"surface.tile_size must be two finite lengths > 0, got {lx, ly}")
+    return v, f.astype(np.int64), lx, ly
+
+
+def _check_threads(threads) -> int:
+    return integer("threads", threads, 1, 1024, " (Dr.Jit worker threads incl. the caller)")
+
+
+class PeerScene:
+    """A Mitsuba scene of (2m + 1)² copies of ``surface``'s tile (``copies_per_side`` for
+    ``theta_max_deg``, or m = ``copies`` in [1, ``MAX_COPIES_PER_SIDE``]) with the float64
+    facet normals; ``run`` traces one incidence up to ``theta_max_deg``.
+    Building uploads the mesh buffers (``mi.Mesh`` + ``mi.traverse``) and builds Embree's BVH
+    (``mi.load_dict``); ``build_seconds`` records it."""
+
+    def __init__(self, surface, theta_max_deg: float = 30.0, copies: int | None = None):
+        v, f, lx, ly = _check_surface(surface)
+        if not (0.0 <= float(theta_max_deg) < 90.0):
+            raise UsageError(f"theta_i must lie in [0, 90) degrees, got {theta_max_deg!r}")
+        mi, dr, variant = _mitsuba()
+        self.mi, self.dr, self.variant = mi, dr, variant
+        t0 = time.perf_counter()
+        e1, e2 = v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
+        cross = np.cross(e1, e2)
+        norm = np.linalg.norm(cross, axis=1)
+        if np.any(norm == 0) or np.any(cross[:, 2] <= 0):
+            raise UsageError(
+                "surface.faces must be non-degenerate and ordered so that every normal "
+                "cross(v1 - v0, v2 - v0) points up (z > 0)"
+            )
+        self.normals = cross / norm[:, None]
+        self.n_faces = len(f)
+        self.tile = (lx, ly)
+        self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
+        depth = self.zmax - self.zmin
+        reach = depth * np.tan(np.radians(float(theta_max_deg)))  # a primary ray's sideways run
+        need = max(1, int(np.ceil(reach / min(lx, ly))))
+        if copies is None:
+            self.m = max(need, min(copies_per_side(depth, self.tile, 0.0), MAX_COPIES_PER_SIDE))
+        else:
+            self.m = integer(
+                "copies",
+                copies,
+                need,
+                max(need, MAX_COPIES_PER_SIDE),
+                f" (tile copies per side; primary rays at {theta_max_deg:g}° cross {need})",
+            )
+        k = np.arange(-self.m, self.m + 1)
+        shifts = np.stack(np.meshgrid(k * lx, k * ly, indexing="ij"), -1).reshape(-1, 2)
+        big = max(float(np.abs(v).max()), (self.m + 0.5) * max(lx, ly))
+        self.eps = 4.0 * float(np.spacing(np.float32(big)))
+        self.top_margin = self.eps
+        verts = np.concatenate([v + np.array([sx, sy, 0.0]) for sx, sy in shifts])
+        faces = np.concatenate([f + i * len(v) for i in range(len(shifts))])
+        mesh = mi.Mesh("microsim-tile", len(verts), len(faces))
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = mi.Float(verts.astype(np.float32).ravel())
+        params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
+        params.update()
+        self.scene = mi.load_dict({"type": "scene", "tile": mesh})
+        dr.eval()
+        self.build_seconds = time.perf_counter() - t0
+        self.theta_max_deg = float(theta_max_deg)
+
+    def _table(self, wi: np.ndarray, ior, bins, phi_i_deg: float):
+        """Per-facet (code, weight, bin, wo) for incidence ``wi`` (microsim's facet table):
+        code 0 = lit and reflected upward, 2 = downward, 3 = back-facing (unresolved)."""
+        from microsim.analytic.fresnel import fresnel_real_arithmetic
+
+        n = self.normals
+        c = n @ wi
+        wo = 2.0 * c[:, None] * n - wi
+        code = np.where(c <= 0.0, _UNRESOLVED, np.where(wo[:, 2] <= 0.0, _DOWNWARD, _SINGLE))
+        weight = np.where(c > 0.0, fresnel_real_arithmetic(np.clip(c, 0.0, 1.0), ior), 0.0)
+        where = bins.locate(wo, phi_i_deg)
+        return code.astype(np.uint32), weight, np.maximum(where, 0).astype(np.uint32), wo
+
+    def run(self, material, theta_i_deg: float, rays: int, bins, seed: int = 0, phi_i_deg=0.0):
+        """Trace ``rays`` primary rays at (θi, φi) degrees; returns a ``PeerResult``."""
+        from microsim.analytic.fresnel import resolve_material
+        from microsim.sim import Bins
+
+        if not isinstance(bins, Bins):
+            raise UsageError(f"bins must be a microsim.sim.Bins, got {type(bins).__name__}")
+        theta = float(theta_i_deg)
+        if not (0.0 <= theta <= self.theta_max_deg):
+            raise UsageError(
+                f"theta_i must lie in [0, {self.theta_max_deg:g}] degrees for this scene "
+                f"(built for theta_max_deg={self.theta_max_deg:g}), got {theta_i_deg!r}"
+            )
+        rays = integer("rays", rays, 2, 2**31 - 2, " (primary rays)")
+        seed = integer("seed", seed, 0, 2**32 - 1, " (the random stream)")
+        ior = resolve_material(material)
+        mi, dr = self.mi, self.dr
+        t0 = time.perf_counter()
+        th, ph = np.radians(theta), np.radians(float(phi_i_deg))
+        wi = np.array([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)])
+        code, weight, where, wo = self._table(wi, ior, bins, float(phi_i_deg))
+        t_code, t_w, t_bin = mi.UInt32(code), mi.Float64(weight), mi.UInt32(where)
+        t_wo = mi.Vector3f(*(mi.Float(wo[:, k].astype(np.float32)) for k in range(3)))
+        t_n = mi.Vector3f(*(mi.Float(self.normals[:, k].astype(np.float32)) for k in range(3)))
+        nbin = bins.n_theta * bins.n_phi
+        acc = [dr.zeros(mi.Float64, nbin) for _ in range(3)]  # Σw, Σw², Σ pairs
+        cnt = dr.zeros(mi.UInt32, nbin)
+        led_n = np.zeros(len(LEDGER), dtype=np.int64)
+        led_f = np.zeros(len(LEDGER))
+        lx, ly = self.tile
+        rows = max(1, int(round(np.sqrt(rays * ly / lx))))
+        # scalars as opaque values: one compiled kernel serves every batch and incidence
+        op = dict(
+            N=dr.opaque(mi.Float64, float(rays)),
+            R=dr.opaque(mi.Float64, float(rows)),
+            lx=dr.opaque(mi.Float64, lx),
+            ly=dr.opaque(mi.Float64, ly),
+            z0=dr.opaque(mi.Float, self.zmax + self.top_margin),
+            ztop=dr.opaque(mi.Float, self.zmax),
+            eps=dr.opaque(mi.Float, self.eps),
+            half_x=dr.opaque(mi.Float, (self.m + 0.5) * lx),
+            half_y=dr.opaque(mi.Float, (self.m + 0.5) * ly),
+            nf=dr.opaque(mi.UInt32, self.n_faces),
+            seed=dr.opaque(mi.UInt64, seed),
+            d=mi.Vector3f(*(dr.opaque(mi.Float, -float(x)) for x in wi)),
+        )
+        albedo_var = np.zeros(1)  # Σx² − 2 Σ_k x_2k x_2k+1 over all single events
+        for lo in range(0, rays, BATCH):
+            n = min(BATCH, rays - lo)
+            table = (t_code, t_w, t_bin, t_wo, t_n)
+            self._batch(op, lo, n, table, acc, cnt, (led_n, led_f, albedo_var))
+        s_w, s_w2, s_pair = (np.asarray(a, dtype=np.float64) for a in acc)
+        counts = np.asarray(cnt, dtype=np.int64)
+        seconds = time.perf_counter() - t0
+        omega = bins.projected_solid_angle().ravel()
+        brdf = s_w / (rays * omega)
+        var = np.maximum(s_w2 - 2.0 * s_pair, 0.0)
+        stderr = np.sqrt(var) / (rays * omega)
+        return PeerResult(
+            brdf=brdf.reshape(bins.shape),
+            stderr=stderr.reshape(bins.shape),
+            counts=counts.reshape(bins.shape),
+            albedo=float(s_w.sum() / rays),
+            albedo_stderr=float(np.sqrt(max(albedo_var[0], 0.0)) / rays),
+            ledger={k: int(c) for k, c in zip(LEDGER, led_n)},
+            ledger_fresnel={k: float(x) / rays for k, x in zip(LEDGER, led_f)},
+            rays=rays,
+            copies=2 * self.m + 1,
+            seconds=seconds,
+            meta={
+                "variant": self.variant,
+                "mitsuba_version": mi.__version__,
+                "eps": self.eps,
+                "rows": rows,
+                "theta_i": theta,
+                "phi_i": float(phi_i_deg),
+            },
+        )
+
+    def _batch(self, op, lo, n, table, acc, cnt, sums_out):
+        """Trace primary rays lo … lo + n − 1 (lo even) and add them to the tallies."""
+        mi, dr = self.mi, self.dr
+        t_code, t_w, t_bin, t_wo, t_n = table
+        led_n, led_f, albedo_var = sums_out
+        r = dr.arange(mi.UInt32, n) + dr.opaque(mi.UInt32, lo)
+        rng = mi.PCG32(n, initstate=op["seed"], initseq=mi.UInt64(r))
+        xi, eta = rng.next_float64(), rng.next_float64()
+        s = (mi.Float64(r) + xi) / op["N"] * op["R"]  # stratum position in rows
+        row = dr.floor(s)
+        row = dr.select(row > op["R"] - 1.0, op["R"] - 1.0, row)  # (dr.minimum: LLVM 14 fails)
+        x = (s - row) * op["lx"] - 0.5 * op["lx"]
+        y = (row + eta) / op["R"] * op["ly"] - 0.5 * op["ly"]
+        o = mi.Point3f(mi.Float(x), mi.Float(y), op["z0"])
+        d = op["d"]
+        pi = self.scene.ray_intersect_preliminary(mi.Ray3f(o, d), coherent=True)
+        hit = pi.is_valid()
+        facet = pi.prim_index % op["nf"]
+        code = dr.gather(mi.UInt32, t_code, facet, hit)
+        w = dr.gather(mi.Float64, t_w, facet, hit)
+        wo = dr.gather(mi.Vector3f, t_wo, facet, hit)
+        nrm = dr.gather(mi.Vector3f, t_n, facet, hit)
+        lit = hit & (code == _SINGLE)
+        mo = o + pi.t * d + op["eps"] * nrm
+        tmax = (op["ztop"] - mo.z) / wo.z
+        end = mo + tmax * wo
+        inside = (dr.abs(end.x) <= op["half_x"]) & (dr.abs(end.y) <= op["half_y"])
+        test = lit & inside
+        ray = mi.Ray3f(mo, wo)
+        ray.maxt = dr.select(tmax > 0.0, tmax, 0.0)
+        blocked = self.scene.ray_test(ray, coherent=True, active=test)
+        single = test & ~blocked
+        status = dr.select(
+            ~hit,
+            _MISSED,
+            dr.select(
+                lit, dr.select(inside, dr.select(blocked, _MASKED, _SINGLE), _UNRESOLVED), code
+            ),
+        )
+        status = mi.UInt32(status)
+        where = dr.select(single, dr.gather(mi.UInt32, t_bin, facet, single), 0)
+        xw = dr.select(single, w, 0.0)
+        # the tallies' scatters join the tracing kernel: one pass over the rays
+        dr.scatter_reduce(dr.ReduceOp.Add, acc[0], xw, where, single)
+        dr.scatter_reduce(dr.ReduceOp.Add, acc[1], xw * xw, where, single)
+        dr.scatter_reduce(dr.ReduceOp.Add, cnt, mi.UInt32(1), where, single)
+        dr.eval(status, where, xw, w)
+        # pairs (2k, 2k + 1): same bin -> the bin's pair sum; any bins -> the albedo's
+        k = dr.arange(mi.UInt32, n // 2) * 2
+        b0, b1 = dr.gather(mi.UInt32, where, k), dr.gather(mi.UInt32, where, k + 1)
+        w0, w1 = dr.gather(mi.Float64, xw, k), dr.gather(mi.Float64, xw, k + 1)
+        both = (w0 > 0.0) & (w1 > 0.0) & (b0 == b1)
+        dr.scatter_reduce(dr.ReduceOp.Add, acc[2], w0 * w1, b0, both)
+        sums = [dr.sum(xw * xw), dr.sum(w0 * w1)]
+        per = [dr.sum(dr.select(status == c, 1, 0)) for c in range(len(LEDGER))]
+        fre = [dr.sum(dr.select(status == c, w, 0.0)) for c in range(len(LEDGER))]
+        dr.eval(acc, cnt, sums, per, fre)
+        led_n += np.array([int(p[0]) for p in per], dtype=np.int64)
+        led_f += np.array([float(f[0]) for f in fre])
+        albedo_var += float(sums[0][0]) - 2.0 * float(sums[1][0])
+
+
+def mitsuba_single_bounce(
+    surface, material, theta_i_deg: float, rays: int, bins=None, seed: int = 0, threads=None
+) -> PeerResult:
+    """The single-bounce BRDF of ``surface`` at θi (degrees, φi = 0) by the Mitsuba 3 peer:
+    ``rays`` stratified primary rays, ``bins`` (default microsim's ``Bins()``), ``seed`` the
+    PCG32 streams, ``threads`` Dr.Jit threads (None: leave Dr.Jit's setting). Per-bin
+    averages f̄_B = Σ w / (N Ω_B) as ``microsim.sim.simulate`` (module docstring)."""
+    from microsim.sim import Bins
+
+    bins = Bins() if bins is None else bins
+    threads = None if threads is None else _check_threads(threads)
+    _check_surface(surface)
+    _, dr, _ = _mitsuba()
+    before = dr.thread_count()
+    if threads is not None:
+        dr.set_thread_count(threads)
+    try:
+        scene = PeerScene(surface, theta_i_deg)
+        return scene.run(material, theta_i_deg, rays, bins, seed)
+    finally:
+        dr.set_thread_count(before)
+
+
+def peer_throughput(
+    surface, material, theta_i_deg: float, rays: int, threads: int = 1, repeat: int = 3, bins=None
+) -> dict:
+    """Marginal samples/s of the peer: scene build and a warm-up run (JIT compilation) first,
+    then the best of ``repeat`` runs of ``rays`` primary rays on ``threads`` Dr.Jit threads.
+    Returns {"samples_per_s", "seconds" (best run), "build_seconds", "variant",
+    "mitsuba_version", "threads", "rays", "ledger" (of the best run)}."""
+    from microsim.sim import Bins
+
+    bins = Bins(45, 37) if bins is None else bins
+    threads = _check_threads(threads)
+    repeat = integer("repeat", repeat, 1, 1000, " (timed runs)")
+    _check_surface(surface)
+    _, dr, _ = _mitsuba()
+    before = dr.thread_count()
+    dr.set_thread_count(threads)
+    try:
+        scene = PeerScene(surface, theta_i_deg)
+        scene.run(material, theta_i_deg, rays, bins, seed=0)  # warm-up: compiles the kernels
+        best = None
+        for k in range(repeat):
+            res = scene.run(material, theta_i_deg, rays, bins, seed=1 + k)
+            if best is None or res.seconds < best.seconds:
+                best = res
+    finally:
+        dr.set_thread_count(before)
+    return {
+        "samples_per_s": best.rays / best.seconds,
+        "seconds": best.seconds,
+        "build_seconds": scene.build_seconds,
+        "variant": scene.variant,
+        "mitsuba_version": scene.mi.__version__,
+        "threads": threads,
+        "rays": best.rays,
+        "ledger": best.ledger,
+    }
