@@ -248,7 +248,10 @@ def simulate(
                 surf = get_surface(r)
                 smeta = _surface_meta(surf)
                 _check_same_surface(surfaces_meta[r], smeta, r)
-                tracer, profile, azimuth = tracer_for(surf, masking)
+                # one surface: keep its tracer for the next call (``tracer_for``); several:
+                # each realisation's tracer is released once it is traced
+                reuse = smeta["fingerprint"] if n_real == 1 else None
+                tracer, profile, azimuth = tracer_for(surf, masking, reuse)
                 build += time.perf_counter() - t0
                 surfaces_meta[r] = {**smeta, "eps": tracer.eps, "max_wraps": tracer.max_wraps}
                 for i, (t_deg, p_deg) in enumerate(zip(th, ph)):

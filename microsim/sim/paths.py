@@ -44,6 +44,8 @@ Directions are unit vectors in the global frame pointing away from the surface; 
 
 from __future__ import annotations
 
+import threading
+import weakref
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -128,11 +130,42 @@ class Events:
     margin: np.ndarray
 
 
-def tracer_for(surface, masking: str):
+_REUSED: dict = {}  # id(weakref to surface) → (weakref, fingerprint, masking, prepared)
+_REUSE_SLOTS = 2
+_REUSE_LOCK = threading.Lock()
+
+
+def tracer_for(surface, masking: str, fingerprint: str | None = None):
     """(tracer, masking profile, azimuth) of ``surface``: its ``Tracer``; None for traced
     masking, else the V-groove ``VGrooveProfile`` ("exact") or ``VGrooveCaster``
     ("analytic"); whether each ray gets its own groove azimuth (``surface.azimuth_average``).
-    UsageError for "exact"/"analytic" on a surface that is not azimuth-averaged V-grooves."""
+    UsageError for "exact"/"analytic" on a surface that is not azimuth-averaged V-grooves.
+
+    Reuse: with ``fingerprint`` (``surface.fingerprint()``, the mesh's identity) the prepared
+    tracer is kept for the same surface object — at most the ``_REUSE_SLOTS`` most recent
+    (surface, masking) pairs, dropped when their surface is garbage-collected — and handed
+    out again while its mesh is unchanged, so repeated ``simulate`` calls on one surface
+    (``simulate_auto``'s batches, sweeps over θi, speed runs) build the Embree scene and BVH
+    once. Tracers are read-only after construction and shared safely between threads."""
+    if fingerprint is None:
+        return _prepare(surface, masking)
+    with _REUSE_LOCK:
+        for ref, fp, mode, prepared in list(_REUSED.values()):
+            if ref() is surface and fp == fingerprint and mode == masking:
+                return prepared
+    prepared = _prepare(surface, masking)
+    try:  # the entry goes with its surface (dict.pop is atomic: safe in a GC callback)
+        ref = weakref.ref(surface, lambda r: _REUSED.pop(id(r), None))
+    except TypeError:  # not weak-referenceable: no reuse
+        return prepared
+    with _REUSE_LOCK:
+        _REUSED[id(ref)] = (ref, fingerprint, masking, prepared)
+        for key in list(_REUSED)[:-_REUSE_SLOTS]:
+            _REUSED.pop(key, None)
+    return prepared
+
+
+def _prepare(surface, masking: str):
     tracer = Tracer(surface)
     azimuth = bool(getattr(surface, "azimuth_average", False))
     profile = None
