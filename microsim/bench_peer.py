@@ -264,8 +264,31 @@ class PeerScene:
         where = bins.locate(wo, phi_i_deg)
         return code.astype(np.uint32), weight, np.maximum(where, 0).astype(np.uint32), wo
 
-    def run(self, material, theta_i_deg: float, rays: int, bins, seed: int = 0, phi_i_deg=0.0):
-        """Trace ``rays`` primary rays at (θi, φi) degrees; returns a ``PeerResult``."""
+    def run(
+        self,
+        material,
+        theta_i_deg: float,
+        rays: int,
+        bins,
+        seed: int = 0,
+        phi_i_deg=0.0,
+        threads: int | None = None,
+    ) -> PeerResult:
+        """Trace ``rays`` primary rays at (θi, φi) degrees on ``threads`` Dr.Jit threads (None:
+        Dr.Jit's current setting; the caller's setting is restored); returns a ``PeerResult``
+        whose ``seconds`` is the wall time of this run (facet table + tracing + tallies; the
+        first run of a process also compiles the kernels)."""
+        if threads is None:
+            return self._trace(material, theta_i_deg, rays, bins, seed, phi_i_deg)
+        threads = _check_threads(threads)
+        before = self.dr.thread_count()
+        self.dr.set_thread_count(threads)
+        try:
+            return self._trace(material, theta_i_deg, rays, bins, seed, phi_i_deg)
+        finally:
+            self.dr.set_thread_count(before)
+
+    def _trace(self, material, theta_i_deg, rays, bins, seed, phi_i_deg) -> PeerResult:
         from microsim.analytic.fresnel import resolve_material
         from microsim.sim import Bins
 
@@ -416,16 +439,8 @@ def mitsuba_single_bounce(
 
     bins = Bins() if bins is None else bins
     threads = None if threads is None else _check_threads(threads)
-    _check_surface(surface)
-    _, dr, _ = _mitsuba()
-    before = dr.thread_count()
-    if threads is not None:
-        dr.set_thread_count(threads)
-    try:
-        scene = PeerScene(surface, theta_i_deg)
-        return scene.run(material, theta_i_deg, rays, bins, seed)
-    finally:
-        dr.set_thread_count(before)
+    scene = PeerScene(surface, theta_i_deg)
+    return scene.run(material, theta_i_deg, rays, bins, seed, threads=threads)
 
 
 def peer_throughput(
@@ -434,26 +449,20 @@ def peer_throughput(
     """Marginal samples/s of the peer: scene build and a warm-up run (JIT compilation) first,
     then the best of ``repeat`` runs of ``rays`` primary rays on ``threads`` Dr.Jit threads.
     Returns {"samples_per_s", "seconds" (best run), "build_seconds", "variant",
-    "mitsuba_version", "threads", "rays", "ledger" (of the best run)}."""
+    "mitsuba_version", "threads", "rays", "ledger" (of the best run), "copies" (per side)}."""
     from microsim.sim import Bins
 
     bins = Bins(45, 37) if bins is None else bins
     threads = _check_threads(threads)
     repeat = integer("repeat", repeat, 1, 1000, " (timed runs)")
     _check_surface(surface)
-    _, dr, _ = _mitsuba()
-    before = dr.thread_count()
-    dr.set_thread_count(threads)
-    try:
-        scene = PeerScene(surface, theta_i_deg)
-        scene.run(material, theta_i_deg, rays, bins, seed=0)  # warm-up: compiles the kernels
-        best = None
-        for k in range(repeat):
-            res = scene.run(material, theta_i_deg, rays, bins, seed=1 + k)
-            if best is None or res.seconds < best.seconds:
-                best = res
-    finally:
-        dr.set_thread_count(before)
+    scene = PeerScene(surface, theta_i_deg)
+    scene.run(material, theta_i_deg, rays, bins, seed=0, threads=threads)  # compiles the kernels
+    best = None
+    for k in range(repeat):
+        res = scene.run(material, theta_i_deg, rays, bins, seed=1 + k, threads=threads)
+        if best is None or res.seconds < best.seconds:
+            best = res
     return {
         "samples_per_s": best.rays / best.seconds,
         "seconds": best.seconds,
@@ -463,4 +472,5 @@ def peer_throughput(
         "threads": threads,
         "rays": best.rays,
         "ledger": best.ledger,
+        "copies": best.copies,
     }
