@@ -26,7 +26,11 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   (``masking="analytic"``: primary hit and masking in float64, no Embree; the ray-traced paths
   stay the reference in the tests), its rays/s, and the relative RMS error it actually
   achieves against the exact closed form (Torrance–Sparrow with V-groove G, Mikkelsen 2009,
-  eq. 25, bin-averaged).
+  eq. 25, bin-averaged);
+* the wave solver (``wave.bench.wave_bench``): wall time of ``kirchhoff_orders`` for one
+  incidence (θi = 30°, aluminium, all propagating orders) on an n² ABC tile of side ``tile``
+  wavelengths (1024² over 200 λ; ``--quick``: 128² over 25 λ), smooth (σ = λ/100) and σ = λ,
+  with the Fourier upsampling the phase sampling needed; ``skip_wave`` omits it.
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ __all__ = [
     "time_to_accuracy",
     "run_bench",
     "format_bench",
+    "wave_rows",
     "add_bench_command",
 ]
 
@@ -62,7 +67,8 @@ ACCURACY_CHUNK = 2**18  # rays per thread task there (fewer per-task overheads)
 class BenchConfig:
     """What is measured: heightfield ``n``² (dx = 1, σ, ℓ), ``rays`` primary rays at
     ``theta_i`` degrees; memory probed at ``memory_rays`` (two counts); time to ``target``
-    relative error on the V-groove scene with ``vgrooves`` grooves (``skip_accuracy`` omits it)."""
+    relative error on the V-groove scene with ``vgrooves`` grooves (``skip_accuracy`` omits it);
+    the wave solver on a ``wave_n``² tile of ``wave_tile`` wavelengths (``skip_wave`` omits it)."""
 
     n: int = 512
     sigma: float = 1.2
@@ -74,6 +80,9 @@ class BenchConfig:
     vgrooves: int = 4000
     max_rays: int = 10**8
     skip_accuracy: bool = False
+    wave_n: int = 1024
+    wave_tile: float = 200.0
+    skip_wave: bool = False
 
 
 def _surface(cfg: BenchConfig):
@@ -318,7 +327,17 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
     }
     if not cfg.skip_accuracy:
         out["time_to_accuracy"] = time_to_accuracy(cfg)
+    if not cfg.skip_wave:
+        out["wave"] = wave_rows(cfg)
     return out
+
+
+def wave_rows(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> list[dict]:
+    """``wave.bench.wave_bench`` on a ``cfg.wave_n``² tile of ``cfg.wave_tile`` λ: one row per
+    roughness (σ = λ/100 and σ = λ), smooth-interpolant solver, ``threads`` FFT workers."""
+    from microsim.wave.bench import wave_bench
+
+    return wave_bench(n=cfg.wave_n, tile=cfg.wave_tile, workers=threads)
 
 
 def format_bench(b: dict) -> str:
@@ -361,11 +380,27 @@ def format_bench(b: dict) -> str:
             f"{t['rse']:.4f}, rel. RMS vs closed form {t['rel_rms_vs_closed_form']:.4f}"
             f" (χ²/dof {t['chi2_dof']:.3f})"
         )
+    for w in b.get("wave", []):
+        lines.append(
+            f"wave solver (Kirchhoff, {w['surface']}), {w['n']}² tile of {w['tile']:g} λ, "
+            f"σ = {w['sigma']:g} λ, θi = {w['theta_i']:g}°: {w['seconds']:.2f} s for one "
+            f"incidence, {w['orders']} orders, {w['qz_nodes']} q_z nodes, upsample "
+            f"{w['upsample']}, order power {w['albedo']:.4f}"
+        )
     return "\n".join(lines)
 
 
-QUICK = dict(n=128, rays=2**17, memory_rays=(2**16, 2**18), target=0.05, vgrooves=1000)
-"""``bench --quick``: a 128² mesh, 2**17 rays (an explicit ``--rays`` wins), small memory probes."""
+QUICK = dict(
+    n=128,
+    rays=2**17,
+    memory_rays=(2**16, 2**18),
+    target=0.05,
+    vgrooves=1000,
+    wave_n=128,
+    wave_tile=25.0,
+)
+"""``bench --quick``: a 128² mesh, 2**17 rays (an explicit ``--rays`` wins), small memory
+probes, the wave solver on a 128² tile of 25 λ."""
 
 
 def bench_config(
@@ -394,7 +429,8 @@ def add_bench_command(subparsers) -> None:
     """Register ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]``."""
     p = subparsers.add_parser(
         "bench",
-        help="measure raw Embree vs pipeline throughput, peak memory and time to 1%% precision",
+        help="measure raw Embree vs pipeline throughput, peak memory, time to 1%% precision "
+        "and the wave solver's time",
     )
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.add_argument(

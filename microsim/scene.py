@@ -37,6 +37,24 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     realisation_target = 0.01          # relative; only with realisations = "auto", in
                                        # [0.001, 0.5]
     seed = 0
+    [wave]                             # optional: also run the wave-optics (Kirchhoff) solver
+    wavelength = 0.5                   # required in [wave]; in the unit of dx (the convention:
+                                       # micrometres), a number in [1e-6, 1e6]; surface kind
+                                       # gaussian or abc only (a heightfield with a nominal PSD)
+    surface_model = "smooth"           # "smooth" (band-limited interpolant of the heights,
+                                       # fast) | "mesh" (the ray tracer's triangles, exact)
+    upsample = 1                       # Fourier upsampling of the heights, an integer in
+                                       # [1, 16] (1 with "mesh")
+    fresnel_angle = "half"             # R at the half-vector angle ("half") or at θi
+                                       # ("incident")
+
+``[wave]`` checks at load time (``WaveSpec``): the tile n·dx must hold at least
+``MIN_TILE_WAVELENGTHS`` (10) wavelengths (fewer put the diffraction orders ≥ 0.1 apart in
+sin θo, coarser than any useful bin, and the tile holds too few correlation lengths); with
+``surface_model = "smooth"`` the grid must sample the orders' phase at the largest incidence,
+dx/upsample < λ/(2(1 + sin θi,max)). The height part of the phase-sampling condition depends
+on the realised heights and is checked when a run is planned (``runner.wave_run``), before
+anything is written. Scenes without ``[wave]`` are geometric only.
 
 The file itself must be a regular file of at most 1 MiB of UTF-8 TOML. Every problem raises
 ``SceneError`` (a ``UsageError``) with a one-line message naming the file, the key and the
@@ -78,6 +96,9 @@ __all__ = [
     "read_toml",
     "NDF_PARAMS",
     "SURFACE_KINDS",
+    "WaveSpec",
+    "WAVE_KINDS",
+    "MIN_TILE_WAVELENGTHS",
 ]
 
 
@@ -234,7 +255,32 @@ _SIM_KEYS = {
     ),
     "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0")),
 }
-_TOP_KEYS = ("name", "description", "surface", "material", "simulation")
+_TOP_KEYS = ("name", "description", "surface", "material", "simulation", "wave")
+WAVE_KINDS = ("gaussian", "abc")
+"""Surface kinds the wave solver accepts: heightfields with a nominal PSD (the wave closed
+forms need it)."""
+MIN_TILE_WAVELENGTHS = 10.0
+"""Smallest tile side, in wavelengths, of a ``[wave]`` scene (module docstring)."""
+_SURFACE_MODELS = ("smooth", "mesh")
+_FRESNEL_ANGLES = ("half", "incident")
+_WAVE_KEYS = {
+    "wavelength": (
+        _REQUIRED,
+        (
+            lambda v: _is_num(v) and 1e-6 <= v <= 1e6,
+            "a number > 0 in [1e-6, 1e6], in the unit of dx (micrometres by convention)",
+        ),
+    ),
+    "surface_model": (
+        "smooth",
+        (lambda v: v in _SURFACE_MODELS, " or ".join(f'"{m}"' for m in _SURFACE_MODELS)),
+    ),
+    "upsample": (1, _int_in(1, 16)),
+    "fresnel_angle": (
+        "half",
+        (lambda v: v in _FRESNEL_ANGLES, " or ".join(f'"{m}"' for m in _FRESNEL_ANGLES)),
+    ),
+}
 
 
 # --- the scene ---------------------------------------------------------------------------------
@@ -262,8 +308,21 @@ class SimSettings:
 
 
 @dataclass(frozen=True)
+class WaveSpec:
+    """The ``[wave]`` table: ``wavelength`` (unit of dx, micrometres by convention),
+    ``surface_model`` ("smooth" | "mesh"), ``upsample`` (Fourier upsampling of the heights),
+    ``fresnel_angle`` ("half" | "incident"), as ``wave.kirchhoff_brdf`` takes them."""
+
+    wavelength: float
+    surface_model: str = "smooth"
+    upsample: int = 1
+    fresnel_angle: str = "half"
+
+
+@dataclass(frozen=True)
 class Scene:
-    """A loaded scene file. ``ior``: None (mirror), float (dielectric) or complex n + ik."""
+    """A loaded scene file. ``ior``: None (mirror), float (dielectric) or complex n + ik.
+    ``wave``: the ``[wave]`` settings, None for a geometric-only scene."""
 
     name: str
     path: Path | None
@@ -271,6 +330,7 @@ class Scene:
     surface: SurfaceSpec
     ior: float | complex | None
     simulation: SimSettings
+    wave: WaveSpec | None = None
 
     def build_surface(self, seed: int | None = None, scale: float = 1.0):
         """Generate the surface (``microsim.surfaces``); ``seed`` defaults to the scene's.
@@ -443,6 +503,47 @@ def _simulation(where, table) -> SimSettings:
     return SimSettings(**s)
 
 
+def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSpec | None:
+    """The ``[wave]`` table checked against the surface and incidences (module docstring)."""
+    if table is None:
+        return None
+    _check_keys(where, "wave", table, list(_WAVE_KEYS))
+    w = _fill(where, "wave", table, _WAVE_KEYS)
+    w["wavelength"] = float(w["wavelength"])
+    lam = w["wavelength"]
+    if surface.kind not in WAVE_KINDS:
+        _fail(
+            where,
+            "wave",
+            f"needs surface.kind {' or '.join(WAVE_KINDS)} (a heightfield with a nominal PSD), "
+            f"got {surface.kind!r}",
+        )
+    if w["surface_model"] == "mesh" and w["upsample"] != 1:
+        _fail(where, "wave.upsample", f'must be 1 with surface_model = "mesh", got {w["upsample"]}')
+    n, dx = surface.params["n"], surface.params["dx"]
+    if n * dx < MIN_TILE_WAVELENGTHS * lam:
+        _fail(
+            where,
+            "wave.wavelength",
+            f"the tile n·dx = {n * dx:g} holds only {n * dx / lam:.3g} wavelengths; the wave "
+            f"solver needs >= {MIN_TILE_WAVELENGTHS:g} (wavelength <= "
+            f"{n * dx / MIN_TILE_WAVELENGTHS:g} or a larger n·dx)",
+        )
+    if w["surface_model"] == "smooth":
+        s_max = float(np.sin(np.radians(max(simulation.theta_i))))
+        need = lam / (2.0 * (1.0 + s_max))
+        if dx / w["upsample"] >= need:
+            _fail(
+                where,
+                "surface.dx",
+                f"grid too coarse for wavelength {lam:g}: dx/upsample = "
+                f"{dx / w['upsample']:g} must be < λ/(2(1 + sin θi)) = {need:.4g} at θi = "
+                f"{max(simulation.theta_i):g}° (the diffraction orders' phase step); need dx < "
+                f"{need * w['upsample']:.4g} or upsample >= {int(np.floor(dx / need)) + 1}",
+            )
+    return WaveSpec(**w)
+
+
 def read_toml(path, what: str = "scene") -> dict:
     """The TOML table of ``path``; a missing, non-regular (directory, device), larger than
     ``MAX_SCENE_BYTES``, non-UTF-8 or malformed file raises ``SceneError`` (one line, naming
@@ -516,6 +617,7 @@ def load_scene(path) -> Scene:
             f'"auto" needs a random surface (kind {", ".join(RANDOM_KINDS)}), '
             f"got kind {surface.kind!r}",
         )
+    wave = _wave(where, data.get("wave"), surface, simulation)
     return Scene(
         name=name,
         path=path,
@@ -523,6 +625,7 @@ def load_scene(path) -> Scene:
         surface=surface,
         ior=_material(where, data.get("material")),
         simulation=simulation,
+        wave=wave,
     )
 
 

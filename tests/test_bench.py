@@ -194,3 +194,42 @@ def test_rotated_incidence_keeps_the_mirror_direction_of_a_flat_surface(theta):
         float(fresnel(np.cos(np.radians(theta)), AL)), rel=1e-12
     )
     assert np.count_nonzero(sw) == 1
+
+
+def test_wave_rows_are_measured_and_printed():
+    """``bench``'s wave rows (issue 16): one per roughness, a measured wall time, and on the
+    smooth tile (σ = λ/100, g = (4πσ cos θi/λ)² = 0.012) the order powers sum to the Fresnel
+    reflectance F(30°): the diffuse share is ~g, and Kirchhoff's obliquity factor moves it by
+    far less than 1 % of F (a broken solver or wrong tile misses it by more)."""
+    from microsim.bench import QUICK, wave_rows
+
+    cfg = BenchConfig(wave_n=64, wave_tile=12.5)  # the quick tile's dx = 0.195 λ
+    rows = wave_rows(cfg)
+    assert [r["sigma"] for r in rows] == [0.01, 1.0]
+    f30 = float(fresnel(np.cos(np.radians(30.0)), AL))
+    assert rows[0]["albedo"] == pytest.approx(f30, rel=1e-2)
+    for r in rows:
+        assert r["n"] == 64 and r["orders"] > 100 and np.isfinite(r["seconds"]) and r["seconds"] > 0
+    text = format_bench({**_minimal_bench(), "wave": rows})
+    assert text.count("wave solver (Kirchhoff") == 2 and "σ = 1 λ" in text
+    assert QUICK["wave_n"] == 128 and BenchConfig().wave_n == 1024
+
+
+def _minimal_bench():
+    raw = {
+        "primary_rays": 1,
+        "masking_rays": 1,
+        "rays_per_s": {1: 1.0, 2: 1.0},
+        "samples_per_s": {1: 1.0, 2: 1.0},
+        "packets_unavailable": "test",
+    }
+    return {
+        "config": {"target": 0.01},
+        "load_average": [0.0],
+        "cpus": 2,
+        "mesh_triangles": 2,
+        "raw": raw,
+        "pipeline_samples_per_s": {1: 1.0, 2: 1.0},
+        "ratio": {1: 1.0, 2: 1.0},
+        "peak_rss_mb": {},
+    }

@@ -17,7 +17,16 @@ from scipy import stats
 
 from .verdicts import summary_row
 
-__all__ = ["md_table", "scene_report", "index_report", "fmt", "albedo_stderr"]
+__all__ = [
+    "md_table",
+    "scene_report",
+    "index_report",
+    "fmt",
+    "albedo_stderr",
+    "wave_section",
+    "regime_section",
+    "OUT_OF_DOMAIN",
+]
 
 
 def fmt(x, digits: int = 3) -> str:
@@ -109,12 +118,18 @@ def _verdict_word(v: Mapping) -> str:
     return "deviates" if v.get("conclusive", True) else "inconclusive"
 
 
-def _verdict_rows(verdicts) -> list[list[str]]:
+OUT_OF_DOMAIN = "outside its domain (wave-optics model; fit-only)"
+"""Summary text of a model the verdict document lists under ``outside_domain``: its
+verdicts against the ray tracer are no test of it (the fit numbers are kept)."""
+
+
+def _verdict_rows(verdicts, outside: Mapping | None = None) -> list[list[str]]:
+    outside = outside or {}
     return [
         [
             f"{v['theta_i']:g}",
             v["model"] + (" (fit)" if v["fitted"] else ""),
-            _verdict_word(v),
+            "outside domain" if v["model"] in outside else _verdict_word(v),
             f"{v.get('reference', 'ray-noise')} (R = {v.get('realisations', 1)})",
             fmt(v["chi2_dof"]),
             fmt(v["p_value"]),
@@ -235,6 +250,8 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     ]
     lines += _budget_section(meta.get("error_budget"), run.get("realisations_auto"))
     summary = summary_row(doc["verdicts"])
+    outside = doc.get("outside_domain") or {}
+    summary.update({m: OUT_OF_DOMAIN for m in outside if m in summary})
     lines += [
         "## Verdicts",
         "",
@@ -244,6 +261,9 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         "",
         md_table(["model", "verdict"], [[m, s] for m, s in summary.items()]),
         "",
+    ]
+    lines += [f"- `{m}`: {why}." for m, why in outside.items()] + ([""] if outside else [])
+    lines += [
         "Best to worst by mean relative RMS error: "
         + ", ".join(f"`{m}`" for m in doc.get("ranking", []))
         + ".",
@@ -265,12 +285,13 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 "deviating θo",
                 "bins",
             ],
-            _verdict_rows(doc["verdicts"]),
+            _verdict_rows(doc["verdicts"], outside),
         ),
         "",
         "</details>",
         "",
     ]
+    lines += wave_section(doc.get("wave"))
     if doc.get("fits"):
         lines += [
             "## Fits (Löw eq. 29–33)",
@@ -330,6 +351,275 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
+_WAVE_STATUS = {
+    "agrees": "**agrees**",
+    "agrees-in-region": "agrees only in a region",
+    "differs": "differs",
+}
+
+
+def _signed_pct(x, se=None) -> str:
+    if x is None or not math.isfinite(float(x)):
+        return "–"
+    text = f"{100 * float(x):+.3g} %"
+    return text if se is None else f"{text} ± {100 * float(se):.2g} %"
+
+
+def _region_text(v: Mapping) -> str:
+    """θo ranges of agreement per side: "forward 0–40°; backward 0–15°"; "none" for a side
+    with tested rows and no agreeing one; sides without tested rows left out."""
+    parts = []
+    for side in ("forward", "backward"):
+        r = v["region"].get(side)
+        if r is None:
+            continue
+        parts.append(f"{side} {_ranges(r) if r else 'none'}")
+    return "; ".join(parts) or "–"
+
+
+def _outside_text(v: Mapping) -> str:
+    parts = []
+    for side in ("forward", "backward"):
+        o = v["outside"].get(side)
+        if o:
+            parts.append(f"{side} {100 * o[0]:+.3g} … {100 * o[1]:+.3g} %")
+    return "; ".join(parts) or "–"
+
+
+def wave_section(wave: Mapping | None) -> list[str]:
+    """Report lines of the wave-optics verdicts (``runner.wave_run``: verdicts.json "wave");
+    empty for a geometric scene. Every verdict names its reference (Kirchhoff, theory vs
+    theory) and gives the agreement region rather than a bare pass/fail."""
+    if not wave:
+        return []
+    tile = " × ".join(
+        f"{fmt(a, 4)} ({fmt(b, 3)} λ)" for a, b in zip(wave["tile"], wave["tile_over_lambda"])
+    )
+    n, n_run = wave["realisations"], wave["run_realisations"]
+    tiles = (
+        ("the run's tile" if n == 1 else f"the run's {n} tiles")
+        if n == n_run
+        else f"{n} of the run's {n_run} tiles"
+    )
+    se_from = (
+        "the scatter over the tiles"
+        if wave["stderr_method"] == "realisations"
+        else "the speckle of the orders in each bin"
+    )
+    lines = [
+        "## Wave optics: closed forms against Kirchhoff (theory vs theory)",
+        "",
+        f"Reference of every verdict in this section: the scalar Kirchhoff (tangent-plane) "
+        f"solver (`microsim.wave`, surface model `{wave['surface_model']}`, Fresnel at the "
+        f"{'half-vector' if wave['fresnel_angle'] == 'half' else 'incidence'} angle, "
+        f"upsample {wave['upsample']}) on {tiles}, tile {tile}, wavelength λ = "
+        f"{fmt(wave['wavelength'], 4)} in the {wave['length_unit']}, σ/λ = "
+        f"{fmt(wave['sigma_over_lambda'])} (nominal; the tiles' realised rms height: "
+        f"{fmt(wave['realised_sigma_over_lambda'])} λ, the σ in g below), on the run's bins; "
+        "its diffuse part "
+        "(the coherent specular order removed); standard errors from "
+        f"{se_from}. "
+        "Both sides are approximations: each verdict gives how far they are apart over the "
+        "bins carrying 90 % of the diffuse energy (energy deviation, and the energy-weighted "
+        "relative RMS error beside the RMS a perfect model would show from the reference's "
+        "noise), and the θo region where they agree within 2 % + 2 standard errors (forward: "
+        "the mirror side, Δφ ≥ 90°); it never calls either wrong. Bins beyond θo = 80° are "
+        "left out (grazing: outside Kirchhoff). The geometric verdicts above are judged "
+        "against the ray tracer.",
+        "",
+        md_table(
+            [
+                "θi",
+                "g = (4πσ cos θi/λ)²",
+                "specular order power",
+                "F(θi)·e^(−g)",
+                "masked (ray tracer)",
+                "Kirchhoff's domain",
+            ],
+            [
+                [
+                    f"{t:g}",
+                    fmt(g),
+                    fmt(p, 4),
+                    fmt(dw, 4),
+                    f"{m:.3g}",
+                    "yes" if ok else f"no (masked ≥ {100 * wave['masked_limit']:g} %)",
+                ]
+                for t, g, p, dw, m, ok in zip(
+                    wave["theta_i"],
+                    wave["g"],
+                    wave["specular_power"],
+                    wave["debye_waller"],
+                    wave["masked_fraction"],
+                    wave["in_domain"],
+                )
+            ],
+        ),
+        "",
+        "F(θi)·e^(−g): the coherent (specular) power of the ensemble for Gaussian heights "
+        "(Davies/Debye–Waller); one tile keeps a speckle floor of about the incident power "
+        "over its number of correlation cells. Kirchhoff's domain: correlation length and "
+        "radii of curvature ≫ λ, no shadowing or multiple scattering (the ray tracer's masked "
+        "fraction stands for the shadowing). "
+        "Rayleigh–Rice is first order in σ/λ (σ ≪ λ); for small g the Kirchhoff diffuse power "
+        "is F(1 − e^(−g)) while Rayleigh–Rice's is ≈ F·g, so Rayleigh–Rice lies ≈ g/2 above.",
+        "",
+        md_table(
+            [
+                "θi",
+                "model",
+                "judged against",
+                "status",
+                "energy deviation",
+                "rel RMS (noise floor)",
+                "agreement region (θo)",
+                "outside the region",
+                "energy bins",
+            ],
+            [
+                [
+                    f"{v['theta_i']:g}",
+                    v["model"],
+                    "Kirchhoff, theory vs theory",
+                    _WAVE_STATUS.get(v["status"], v["status"]),
+                    _signed_pct(v["energy_dev"], v["energy_dev_se"]),
+                    f"{_pct(v['rel_error'])} ({_pct(v['noise_floor'])})",
+                    _region_text(v),
+                    _outside_text(v),
+                    str(v["energy_bins"]),
+                ]
+                for v in wave["verdicts"]
+            ],
+        ),
+        "",
+        f"The Kirchhoff result (order powers as bin-averaged BRDF, `Result` schema, "
+        f'`meta.method = "kirchhoff"`) is in `{wave["file"]}`.',
+        "",
+    ]
+    return lines
+
+
+def _wave_index_rows(docs: Sequence[Mapping]) -> tuple[list[str], list[list[str]]]:
+    models: list[str] = []
+    for d in docs:
+        for v in (d.get("wave") or {}).get("verdicts", []):
+            if v["model"] not in models:
+                models.append(v["model"])
+    rows = []
+    for d in docs:
+        w = d.get("wave")
+        if not w:
+            continue
+        for t in w["theta_i"]:
+            cells = []
+            for m in models:
+                v = next(
+                    (x for x in w["verdicts"] if x["model"] == m and abs(x["theta_i"] - t) < 1e-9),
+                    None,
+                )
+                if v is None:
+                    cells.append("–")
+                    continue
+                text = _signed_pct(v["energy_dev"], v["energy_dev_se"])
+                if v["status"] == "agrees":
+                    text = f"**agrees** {text}"
+                elif v["status"] == "agrees-in-region":
+                    text += f"; agrees only in θo {_region_text(v)}"
+                else:
+                    text += "; differs"
+                cells.append(text)
+            rows.append(
+                [f"[{d['scene']}]({d['scene']}/report.md)", fmt(w["sigma_over_lambda"]), f"{t:g}"]
+                + cells
+            )
+    return models, rows
+
+
+def _crossover_cell(x, devs, criterion: float) -> str:
+    if x is not None:
+        return fmt(x)
+    d = [abs(v) for v in devs if v is not None and math.isfinite(v)]
+    if not d:
+        return "–"
+    if all(v > criterion for v in d):
+        return "never"
+    if all(v <= criterion for v in d):
+        return "whole grid"
+    return "–"
+
+
+def regime_section(docs: Sequence[Mapping], regimes: Mapping | None) -> list[str]:
+    """Index section "Where each method holds": the wave scenes' verdicts against Kirchhoff
+    and, when ``regimes`` is given (``runner.wave_run.regime_maps``: ``chart``, ``maps`` as
+    ``RegimeMap.to_dict``, ``settings`` text), the regime chart and crossover table."""
+    models, rows = _wave_index_rows(docs)
+    if not rows and not regimes:
+        return []
+    lines = ["## Where each method holds", ""]
+    if rows:
+        lines += [
+            "Wave-optics closed forms on the catalogue's scenes with a wavelength, each judged "
+            "against the Kirchhoff solver on the same tiles (theory vs theory: energy "
+            "deviation ± standard error over the bins carrying 90 % of the diffuse energy; "
+            "**agrees**: within 2 % + 2 se over that energy set; *agrees only in θo …*: the "
+            "ranges where they agree within 2 % + 2 se, forward = mirror side). The "
+            "geometric models of these scenes are judged against the ray tracer above.",
+            "",
+            md_table(["scene", "σ/λ", "θi"] + models, rows),
+            "",
+        ]
+    if regimes:
+        lines += [
+            "Regime map: the energy-weighted error (energy deviation over the 90 % energy set) "
+            "of each method against the Kirchhoff reference as the roughness σ/λ grows, for an "
+            "ABC-PSD and a Gaussian family at fixed correlation length "
+            "(`microsim.analysis.regimes`). Rayleigh–Rice and Löw smooth hold at small σ/λ, "
+            "geometric optics (Torrance–Sparrow with Smith masking, and the tile's own facets "
+            "without masking: the ray tracer with masking off) at large σ/λ; Kirchhoff has no "
+            "masking, so the geometric verdicts are clean only where masking is below 1 %.",
+            "",
+            f"Settings: {regimes['settings']}.",
+            "",
+            f"![Where each method holds]({regimes['chart']})",
+            "",
+        ]
+        crit = None
+        table = []
+        for m in regimes["maps"]:
+            crit = m["meta"].get("criterion", crit)
+            for model, by_theta in m["crossovers"].items():
+                side = (
+                    "stops holding above"
+                    if model in ("rayleigh-rice", "low-smooth")
+                    else "holds above"
+                )
+                i = m["models"].index(model)
+                table.append(
+                    [m["family"], model, side]
+                    + [
+                        _crossover_cell(
+                            by_theta.get(str(float(t))),
+                            [row[k] for row in m["energy_dev"][i]],
+                            crit or 0.05,
+                        )
+                        for k, t in enumerate(m["theta_i"])
+                    ]
+                )
+        thetas = regimes["maps"][0]["theta_i"]
+        lines += [
+            f"Crossovers: σ/λ where the |energy deviation| crosses {100 * (crit or 0.05):g} % "
+            "(interpolated in log σ; *never*: above it at every σ/λ of the grid; *whole grid*: "
+            "within it at every σ/λ; – : no crossing of that kind, e.g. a method that holds "
+            "only in the middle of the grid).",
+            "",
+            md_table(
+                ["family", "method", "σ/λ where it"] + [f"θi = {t:g}°" for t in thetas], table
+            ),
+            "",
+        ]
+    return lines
+
+
 def _resolvable_energy(v: Mapping) -> float | None:
     """Smallest relative energy deviation the realisations test of ``v`` would detect:
     t_{R−1} quantile at the test's level × ``energy_dev_se`` (None for other references)."""
@@ -357,6 +647,14 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
     return f"✗ {100 * w['rel_rms']:.2g}% (θi {where}°)"
 
 
+def _index_cell(d: Mapping, model: str, summary: Mapping[str, str]) -> str:
+    if model not in summary:
+        return "–"
+    if model in (d.get("outside_domain") or {}):
+        return OUT_OF_DOMAIN
+    return _compact(d["verdicts"], model, summary[model])
+
+
 def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
     """One scenes × models table per set of prescribed model names (V-grooves and
     heightfields are compared with different closed forms); fitted models at the end."""
@@ -376,7 +674,7 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
             n_real = max((v.get("realisations", 1) for v in d["verdicts"]), default=1)
             rows.append(
                 [f"[{d['scene']}]({d['scene']}/report.md)" + (f" R={n_real}" if n_real > 1 else "")]
-                + [_compact(d["verdicts"], m, s[m]) if m in s else "–" for m in models]
+                + [_index_cell(d, m, s) for m in models]
             )
         out += [
             md_table(["scene"] + [m + (" (fit)" if m in fitted else "") for m in models], rows),
@@ -386,11 +684,17 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
 
 
 def index_report(
-    docs: Sequence[Mapping], fig6: str | None, quick: bool, seconds: float | None = None
+    docs: Sequence[Mapping],
+    fig6: str | None,
+    quick: bool,
+    seconds: float | None = None,
+    regimes: Mapping | None = None,
 ) -> str:
     """``index.md``: verdict tables (scenes × models), Löw-style fit table, Mikkelsen Fig. 6,
-    links to every scene's ``<scene>/report.md``. ``seconds`` (the wall time) is accepted for
-    compatibility and not written: the index is reproducible."""
+    "Where each method holds" (``regime_section``: wave scenes' verdicts against Kirchhoff,
+    the regime chart ``regimes``), links to every scene's ``<scene>/report.md``. ``seconds``
+    (the wall time) is accepted for compatibility and not written: the index is
+    reproducible."""
     fit_models: list[str] = []
     for d in docs:
         fit_models += [f["model"] for f in d.get("fits", []) if f["model"] not in fit_models]
@@ -424,7 +728,11 @@ def index_report(
         "realisation, where tile-to-tile scatter cannot be told from model error. Ensemble models"
         " on several realisations are judged against the scatter between them (Student t over the"
         " realisations); models of the realised facets against ray noise. Each scene's report "
-        "says where (θo ranges, worst bin) and by how much.",
+        "says where (θo ranges, worst bin) and by how much. "
+        f"*{OUT_OF_DOMAIN}*: Löw's smooth-surface model is a wave-optics result for surfaces "
+        "smoother than the wavelength; against the geometric ray trace its verdicts test "
+        "nothing, so only its fit is listed (the scenes with a wavelength judge it against "
+        "the Kirchhoff solver under *Where each method holds*).",
         "",
     ] + _verdict_tables(docs)
     if fit_models:
@@ -447,6 +755,7 @@ def index_report(
             f"![Mikkelsen Fig. 6]({fig6})",
             "",
         ]
+    lines += regime_section(docs, regimes)
     lines += ["## Scenes", ""] + [
         f"- [{d['scene']}]({d['scene']}/report.md): {d.get('description', '')}" for d in docs
     ]

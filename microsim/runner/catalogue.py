@@ -1,5 +1,8 @@
 """``run_report``: ``microsim report``, every scene of a catalogue into ``OUT/<scene>/`` and
-the catalogue index ``OUT/index.md`` with the Mikkelsen Fig. 6 chart."""
+the catalogue index ``OUT/index.md`` with the Mikkelsen Fig. 6 chart and, when the catalogue
+has a scene with a wavelength, the section "Where each method holds" (the wave scenes'
+verdicts against Kirchhoff, the regime chart ``regimes.png`` and the crossover table,
+``wave_run.regime_maps``)."""
 
 from __future__ import annotations
 
@@ -20,8 +23,31 @@ from . import planning
 from .publishing import REPORT_STATE, VERDICTS_FILE, read_report_state, write_report_state
 from .run import execute
 from .side_studies import fig6_curves
+from .wave_run import regime_maps
 
 __all__ = ["run_report"]
+
+REGIME_CHART = "regimes.png"
+
+
+def _regimes(out: Path, quick: bool) -> dict:
+    """Regime maps, their chart ``out/REGIME_CHART`` and what the index prints of them."""
+    import matplotlib.pyplot as plt
+
+    from ..analysis.regimes import regime_chart
+
+    rm = regime_maps(quick)
+    fig = regime_chart(rm["maps"])
+    try:
+        with atomic.atomic_open(str(out / REGIME_CHART), "wb") as fh:
+            fig.savefig(fh, format="png", dpi=100)
+    finally:
+        plt.close(fig)
+    return {
+        "chart": REGIME_CHART,
+        "maps": [m.to_dict() for m in rm["maps"]],
+        "settings": rm["settings"],
+    }
 
 
 def _check_catalogue_out(catalogue: Path, out: Path) -> None:
@@ -49,6 +75,7 @@ def run_report(
     progress=True,
     log: Callable[[str], None] | None = None,
     resume=False,
+    regimes: bool | None = None,
 ) -> int:
     """Run every ``*.toml`` of ``catalogue`` into ``out/<scene>/`` (each folder replaced in one
     rename) and write ``out/index.md``. All scene files are validated before anything runs.
@@ -57,7 +84,9 @@ def run_report(
     in place and its tallies are kept in ``out/.<scene>.partial/``; ``resume=True``
     (``report --resume``, same options) skips the scenes finished since the interrupted report
     started (``out/.report-state.json``), continues the interrupted one from its tallies and
-    runs the rest. Holds ``atomic.output_lock(out)`` throughout."""
+    runs the rest. Holds ``atomic.output_lock(out)`` throughout. ``regimes``: compute the
+    regime maps for the index (None: when some scene has ``[wave]``; reduced in quick
+    mode)."""
     log = log or (lambda s: print(s, file=sys.stderr))
     catalogue, out = Path(catalogue), Path(out)
     if not catalogue.is_dir():
@@ -132,7 +161,12 @@ def run_report(
             if curves:
                 fig6 = "mikkelsen-fig6.png"
                 ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
-            atomic.write_text(out / "index.md", report.index_report(docs, fig6, quick))
+            regime = None
+            if regimes or (regimes is None and any(s.wave is not None for s in scenes)):
+                regime = _regimes(out, quick)
+            atomic.write_text(
+                out / "index.md", report.index_report(docs, fig6, quick, regimes=regime)
+            )
         except KeyboardInterrupt:
             log(
                 f"microsim: interrupted; finished scene reports kept in {out}; continue with {hint}"

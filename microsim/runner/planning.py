@@ -19,6 +19,7 @@ from ..analysis.budget import MAX_AUTO, MIN_AUTO
 from ..errors import UsageError
 from ..scene import load_scene
 from ..sim import Bins, Result
+from .wave_run import check_wave_plan
 
 __all__ = [
     "AUTO_TARGET",
@@ -222,6 +223,7 @@ def plan_run(
         )
     seed = scene.simulation.seed if seed is None else seed
     Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)  # validates the grid
+    check_wave_plan(scene, effort.scale_for(scene.surface.kind), seed, n_real, theta_i)
     previous = None
     if resume is not None:
         resume = Path(resume)

@@ -37,13 +37,14 @@ class RayProgress:
 
 class StageProgress:
     """The analysis after the simulation, one step per stage (models, fits, stability sweep,
-    speed runs, charts, writing), the current one named."""
+    speed runs, [wave optics,] charts, writing), the current one named; ``extra``: stages
+    beyond ``STAGES`` (1 for a scene with ``[wave]``)."""
 
     STAGES = ("models", "fits", "stability sweep", "speed runs", "charts", "writing")
 
-    def __init__(self, desc: str, enabled: bool = True):
+    def __init__(self, desc: str, enabled: bool = True, extra: int = 0):
         self.bar = tqdm(
-            total=len(self.STAGES),
+            total=len(self.STAGES) + extra,
             desc=f"{desc} analysis",
             unit="stage",
             file=sys.stderr,

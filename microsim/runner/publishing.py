@@ -26,6 +26,7 @@ __all__ = [
     "TIMINGS_FILE",
     "REPORT_STATE",
     "SCHEMA_VERSION",
+    "OUTSIDE_DOMAIN",
     "staging",
     "publish_dir",
     "save_tallies",
@@ -40,6 +41,14 @@ VERDICTS_FILE, REPORT_FILE, TIMINGS_FILE = "verdicts.json", "report.md", "timing
 REPORT_STATE = ".report-state.json"
 """``microsim report``'s progress file in OUT (finished scenes), for ``report --resume``."""
 SCHEMA_VERSION = 1
+OUTSIDE_DOMAIN = {
+    "low_smooth": (
+        "wave-optics model (Löw et al. 2012, §2.2: surfaces smoother than the wavelength) "
+        "against the geometric ray trace; fit-only"
+    ),
+}
+"""Models whose verdicts against the ray tracer are outside the model's domain: the report
+and the index show them as such (the fit numbers are kept), not as a test of the model."""
 
 
 def staging(out: Path) -> Path:
@@ -95,9 +104,12 @@ def verdict_document(
     sweep,
     stability,
     warnings,
+    wave=None,
 ) -> dict:
     """``verdicts.json``: the run's settings, model ranking, verdicts, fits, speed runs (errors
-    only) and the stability sweep (README: schema)."""
+    only) and the stability sweep (README: schema); ``outside_domain`` (model → reason: models
+    whose verdicts against the ray tracer are no test of them, ``OUTSIDE_DOMAIN``) and, for a
+    scene with ``[wave]``, ``wave`` (``wave_run.run_wave``: the verdicts against Kirchhoff)."""
     sc = plan.scene
     doc = {
         "schema_version": SCHEMA_VERSION,
@@ -126,6 +138,14 @@ def verdict_document(
             "warnings": warnings,
         },
     }
+    present = {v["model"] for v in verdicts}
+    doc["outside_domain"] = {
+        m: OUTSIDE_DOMAIN[m] + ("; judged against Kirchhoff under Wave optics" if wave else "")
+        for m in OUTSIDE_DOMAIN
+        if m in present
+    }
+    if wave is not None:
+        doc["wave"] = wave
     if plan.auto:
         doc["rays_auto"] = auto_summary(result)
     return atomic.json_safe(doc)

@@ -4,6 +4,8 @@
 2. evaluate the default closed forms on the same bins and fit the parametric ones;
 3. judge every (incidence, model) pair (``verdicts_for_result``);
 4. side studies (``side_studies``): stability sweep and speed runs;
+4b. a scene with ``[wave]``: the Kirchhoff solver on the same tiles and the wave verdicts
+   (``wave_run``; saved in ``kirchhoff/``, verdicts.json ``"wave"``);
 5. write brdf.npz + meta.json, verdicts.json, timings.json, the PNG charts and report.md into
    a staging directory and publish it in one rename (``publishing``).
 
@@ -32,7 +34,7 @@ from ..analysis.report import albedo_stderr
 from ..analysis.verdicts import verdicts_for_result
 from ..checkpoints import checkpoint
 from ..errors import UsageError
-from . import side_studies, tracing
+from . import side_studies, tracing, wave_run
 from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress
 from .publishing import (
@@ -150,7 +152,7 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
     """Models, fits, verdicts, side studies, charts and documents into ``stage``, then publish."""
     sc = plan.scene
     t0 = time.perf_counter()
-    stages = StageProgress(sc.name, enabled=progress)
+    stages = StageProgress(sc.name, enabled=progress, extra=int(sc.wave is not None))
     try:
         stages.stage("models")
         side_studies.attach(result, side_studies.models_for(plan))
@@ -176,6 +178,11 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         notes = side_studies.estimator_warnings(plan, sweep)
         stages.stage("speed runs")
         speed, speed_theta, speed_ref = side_studies.speed_runs(plan, result, shown, verdicts)
+        kres, wave, wave_seconds = None, None, None
+        if sc.wave is not None:
+            stages.stage("wave optics")
+            checkpoint("side-studies")
+            kres, wave, wave_seconds = wave_run.run_wave(plan, result)
         stages.stage("charts")
         checkpoint("charts")
         files, stability = _charts(
@@ -191,6 +198,8 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         stages.stage("writing")
         result.meta["seconds_analysis"] = time.perf_counter() - t0
         result.save(stage)
+        if kres is not None:
+            kres.save(stage / wave_run.WAVE_DIR)
         doc = verdict_document(
             plan,
             result,
@@ -203,9 +212,13 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
             sweep,
             stability,
             notes,
+            wave,
         )
         atomic.write_json(stage / VERDICTS_FILE, doc)
-        atomic.write_json(stage / TIMINGS_FILE, timings_document(plan, result, speed, speed_theta))
+        timings = timings_document(plan, result, speed, speed_theta)
+        if wave_seconds is not None:
+            timings["wave_seconds"] = wave_seconds
+        atomic.write_json(stage / TIMINGS_FILE, timings)
         atomic.write_text(stage / REPORT_FILE, report.scene_report(doc, result, files))
     finally:
         stages.close()
