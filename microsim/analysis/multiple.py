@@ -68,6 +68,7 @@ misses"; ``multiple_chart``: energy of orders ≥ 2 against θi with the models'
 
 from __future__ import annotations
 
+import functools
 import os
 from typing import Mapping, Sequence
 
@@ -77,7 +78,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from scipy import stats
 
-from microsim.analytic import Beckmann
+from microsim.analytic import GGX, Beckmann
 from microsim.analytic.brdf import AlbedoTable
 from microsim.analytic.energy_compensation import (
     KullaConty,
@@ -86,7 +87,7 @@ from microsim.analytic.energy_compensation import (
     mikkelsen_kd,
 )
 from microsim.analytic.fresnel import resolve_material
-from microsim.analytic.random_walk import walk_bin_averages
+from microsim.analytic.random_walk import walk_alpha, walk_bin_averages
 from microsim.atomic import atomic_open
 from microsim.errors import UsageError
 from microsim.stats import MIN_EVENTS, energy_set, sidak
@@ -132,6 +133,21 @@ def _check_result(result):
         )
     if result.is_partial:
         raise UsageError("result must be a complete run (it is partial: resume it first)")
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_table(kind: str, alpha: float, eta) -> AlbedoTable:
+    ndf = Beckmann(alpha) if kind == "beckmann" else GGX(alpha)
+    return AlbedoTable(ndf, shadowing="smith-correlated", material=eta)
+
+
+def _albedo_table(ndf, material) -> AlbedoTable:
+    """Albedo table of Torrance–Sparrow with height-correlated Smith G (Mikkelsen 2009, eq. 27)
+    for ``ndf`` and ``material`` (None: F = 1), memoised per (NDF, α, η): a table costs seconds
+    and a catalogue compares several results of one surface."""
+    kind, alpha = walk_alpha(ndf)
+    eta = resolve_material(material)
+    return _cached_table(kind, float(alpha), None if eta is None else complex(eta))
 
 
 def _check_material(result, material) -> None:
@@ -244,6 +260,17 @@ def specular_share(lobe, omega, phi_edges) -> float | None:
     e = np.asarray(lobe) * omega
     tot = float(np.nansum(e))
     return float(np.nansum(e * frac[None, :]) / tot) if tot > 0 else None
+
+
+def _share_se(F, omega, phi_edges) -> float | None:
+    """Standard error of the specular share from the realisations' lobes F (R, Θ, Φ): the
+    scatter of the R shares, s/√R (None for one tile)."""
+    if F is None:
+        return None
+    shares = [specular_share(x, omega, phi_edges) for x in F]
+    if any(x is None for x in shares):
+        return None
+    return float(np.std(shares, ddof=1) / np.sqrt(len(shares)))
 
 
 def _shape(f, sf, m, sm, omega):
@@ -362,11 +389,14 @@ def order_comparison(
     seed; ``alpha``: family-wise level of each verdict family. Returns a JSON-able dict:
     {"ndf": {...}, "walk_paths", "realisations", "kd" (fitted Mikkelsen k_d), "kd_note",
     "incidences": [per θi: "theta_i", "sim" {orders, order_se, multiple, multiple_se, absorbed,
-    cut, lost (+ _se), specular_share}, "models" {name: {energy verdict, rel_rms,
-    shape_rel_rms, noise_floor, energy_bins, specular_share, orders (walk only)}},
+    cut, lost (+ _se), specular_share (+ _se: the realisations' scatter)}, "models" {name:
+    {energy verdict, rel_rms, shape_rel_rms, noise_floor, energy_bins, specular_share, orders
+    (walk only)}},
     "walk_verdicts" {"2", "2+": verdict dicts}]}.
     """
     _check_result(result)
+    _check_material(result, material)
+    walk_alpha(ndf)
     if not isinstance(walk_paths, (int, np.integer)) or walk_paths < 2:
         raise UsageError(f"walk_paths must be an integer >= 2, got {walk_paths!r}")
     n_slots = result.brdf_orders.shape[0]
@@ -387,12 +417,9 @@ def order_comparison(
         folded=bool(bins.folded),
         seed=seed,
     )
-    _check_material(result, material)
-    white = AlbedoTable(ndf, shadowing="smith-correlated", material=None)
+    white = _albedo_table(ndf, None)
     kc = KullaConty(table=white, material=material, fresnel_factor=material is not None)
-    table = white
-    if material is not None:
-        table = AlbedoTable(ndf, shadowing="smith-correlated", material=material)
+    table = white if material is None else _albedo_table(ndf, material)
     sims = [_sim_energies(result, t) for t in range(T)]
     ms = np.array([s[2] for s in sims])
     ms_se = np.array([s[3] for s in sims])
@@ -410,7 +437,7 @@ def order_comparison(
     for t in range(T):
         E, se, e_ms, se_ms, extra, R, dof = sims[t]
         rows = _realisation_rows(result, t)
-        f, sf, _ = _sim_lobe(result, t, rows)
+        f, sf, F_ms = _sim_lobe(result, t, rows)
         w_lobe = walk.values[t, 1:].sum(axis=0)
         w_se = np.sqrt(np.sum(walk.stderr[t, 1:] ** 2, axis=0))
         models = {}
@@ -459,6 +486,7 @@ def order_comparison(
                     "realisations": int(R),
                     "se_from": "realisations" if R >= 2 else "ray noise (one tile)",
                     "specular_share": specular_share(f, om, bins.phi_edges),
+                    "specular_share_se": _share_se(F_ms, om, bins.phi_edges),
                     "energy_bins_90": int(energy_set(np.where(np.isfinite(f), f * om, 0.0)).sum()),
                 },
                 "models": models,
