@@ -3,7 +3,7 @@ layers, and the module import graph has no cycle (function-local imports include
 
 Layers, bottom to top (docs/design.md, "Package layout"):
 core (errors, checkpoints, atomic, checks, vectors, stats) → analytic → surfaces → sim →
-wave → analysis → app (scene, runner, sweep, bench, view, testing, cli).
+wave → analysis → app (scene, runner, sweep, bench, bench_peer, view, testing, cli).
 """
 
 import ast
@@ -36,6 +36,7 @@ LAYERS = [
             "microsim.runner",
             "microsim.sweep",
             "microsim.bench",
+            "microsim.bench_peer",
             "microsim.view",
             "microsim.testing",
             "microsim.cli",
