@@ -209,3 +209,86 @@ def test_bad_input_is_refused(ensemble, metal):
         order_comparison(res, None, realised_ndf(s), walk_paths=1.5)
     with pytest.raises(UsageError, match="ndf"):
         order_comparison(res, None, "beckmann", walk_paths=100)
+
+
+# --- slow: the measured comparison on the issue's surface -----------------------------------
+@pytest.fixture(scope="module")
+def issue_surface():
+    """256², dx 1, σ 2, ℓ 8 (m = 0.5; the catalogue's gaussian-m0.5 surface on a 256² grid),
+    8 realisations, mirror, θi 0/30/60/80, 2·10⁶ rays per θi, walk 10⁶ paths per θi."""
+    s = tiles(n=256, k=8)
+    res = simulate(None, None, [0, 30, 60, 80], realisations=s, rays=2_000_000,
+                   bins=Bins(18, 12), bounces="all", seed=5, threads=2)  # fmt: skip
+    return res, order_comparison(res, None, realised_ndf(s), walk_paths=1_000_000, seed=3)
+
+
+def _deficit(inc):
+    """1 − E_sim/E_walk of orders ≥ 2 and its standard error (delta method)."""
+    s, w = inc["sim"], inc["models"]["random-walk"]
+    r = s["multiple"] / w["energy"]
+    return 1.0 - r, r * np.hypot(s["multiple_se"] / s["multiple"], w["energy_se"] / w["energy"])
+
+
+@pytest.mark.slow
+def test_issue_claim_less_multiple_scattering_than_the_walk(issue_surface):
+    """Claim: "at oblique incidence the explicit surface scatters 20–30 % less light into
+    orders ≥ 2 than the walk; at normal incidence they agree".
+
+    Measured (8 realisations, errors from their scatter): the deficit 1 − E_sim/E_walk is
+    ≈ 0.21 at θi = 80° (the claim holds there), but only ≈ 0.05–0.06 at 30° and 60° (refuted:
+    well below 20 %), and ≈ 0.17 at normal incidence (refuted: they do not agree for the
+    ensemble; the issue's one tile — seed 0 — happens to lie 5 σ above the ensemble mean).
+    Every bound is 3 standard errors of this run."""
+    _, c = issue_surface
+    d = {inc["theta_i"]: _deficit(inc) for inc in c["incidences"]}
+    x, se = d[80.0]
+    assert x - 3 * se > 0.1 and x + 3 * se > 0.2 and x - 3 * se < 0.3  # in the claimed range
+    for th in (30.0, 60.0):
+        x, se = d[th]
+        assert x - 3 * se > 0.0 and x + 3 * se < 0.2  # less, but far from 20–30 %
+    x, se = d[0.0]
+    assert x - 3 * se > 0.05  # the walk exceeds the ensemble at normal incidence
+    v = {inc["theta_i"]: inc["models"]["random-walk"] for inc in c["incidences"]}
+    assert not v[0.0]["agrees"] and not v[80.0]["agrees"]
+
+
+@pytest.mark.slow
+def test_issue_claim_the_real_lobe_is_on_the_specular_side(issue_surface):
+    """Claim: "Kulla–Conty's lobe is Δφ-independent (half its energy on the specular side)
+    while the real multiply scattered light is 93–100 % on the specular side for θi ≥ 30°".
+
+    Confirmed: the simulated order-≥ 2 share at Δφ > 90° exceeds 0.9 by more than 3 standard
+    errors (realisation scatter) at θi = 30°, 60°, 80°, where KC and eq. 28 put exactly 1/2;
+    at normal incidence, where Δφ has no meaning, it is 1/2 within 3 standard errors. The
+    lobe's shape error (energy-weighted rel RMS) of the diffuse-shaped closed forms is far
+    above the noise floor at every oblique θi, and larger than the walk's."""
+    _, c = issue_surface
+    for inc in c["incidences"]:
+        s, m = inc["sim"], inc["models"]
+        share, se = s["specular_share"], s["specular_share_se"]
+        assert m["kulla-conty"]["specular_share"] == pytest.approx(0.5, abs=1e-12)
+        if inc["theta_i"] == 0.0:
+            assert abs(share - 0.5) < 3 * se
+            continue
+        assert share - 3 * se > 0.9
+        for name in ("kulla-conty", "mikkelsen-eq28"):
+            assert m[name]["shape_rel_rms"] > 5 * m[name]["noise_floor"]
+            assert m[name]["shape_rel_rms"] > m["random-walk"]["shape_rel_rms"]
+
+
+@pytest.mark.slow
+def test_issue_claim_high_orders_exceed_the_walk(issue_surface):
+    """Claim: "paths of order ≥ 4 carry 10–40× the walk's energy". Measured: at θi = 60° and
+    80° the simulated order-≥ 4 energy exceeds 10× the walk's by more than 3 standard errors
+    of the ratio (≈ 20× and ≈ 60×: above the claimed range at 80°); at normal incidence they
+    are equal within errors."""
+    _, c = issue_surface
+    for inc in c["incidences"]:
+        s, w = inc["sim"], inc["models"]["random-walk"]
+        e, es, we, wes = s["orders"][3], s["order_se"][3], w["orders"][3], w["order_se"][3]
+        if inc["theta_i"] == 0.0:
+            assert abs(e - we) < 3 * np.hypot(es, wes)
+        if inc["theta_i"] >= 60.0:
+            r = e / we
+            r_se = r * np.hypot(es / e, wes / we)
+            assert r - 3 * r_se > 10.0
