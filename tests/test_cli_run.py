@@ -210,7 +210,9 @@ def test_report_indexes_catalogue_with_working_links(tmp_path):
         ),
     )
     out = tmp_path / "reports"
-    r = microsim("report", "--quick", "--catalogue", cat, "--out", out, "--no-progress")
+    r = microsim(
+        "report", "--quick", "--catalogue", cat, "--out", out, "--no-progress", timeout=400
+    )
     assert r.returncode == 0, r.stderr
     index = (out / "index.md").read_text()
     links = re.findall(r"\]\(([^)]+)\)", index)
@@ -222,7 +224,17 @@ def test_report_indexes_catalogue_with_working_links(tmp_path):
         report = (out / name / "report.md").read_text()
         for link in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report):
             assert (out / name / link).is_file(), link
-    # regenerated in place: a second report replaces the scene folders
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+@pytest.mark.slow
+def test_report_regenerated_in_place_replaces_the_scene_folders(tmp_path):
+    cat = tmp_path / "cat"
+    cat.mkdir()
+    _scene(cat, "tiny-a", 0.2)
+    out = tmp_path / "reports"
+    r = microsim("report", "--quick", "--catalogue", cat, "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
     before = (out / "tiny-a" / "verdicts.json").stat().st_ino
     r = microsim("report", "--quick", "--catalogue", cat, "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
