@@ -333,3 +333,37 @@ def test_high_orders_converge_as_the_triangulation_refines():
             we, wes = walk.energy[t, 3], walk.energy_stderr[t, 3]
             r = e / we
             assert r - 3 * r * np.hypot(es / e, wes / we) > 10.0, (th, r)
+
+
+def test_specular_share_of_unfolded_bins():
+    """Unfolded edges in any range: the specular side is |Δφ| > 90° with Δφ wrapped into
+    (−180°, 180°]; a bin straddling ±90° counts by the width on that side."""
+    for edges in (np.linspace(-180, 180, 13), np.linspace(0, 360, 13)):
+        om = np.ones((2, 12))
+        centres = 0.5 * (edges[:-1] + edges[1:])
+        spec = np.abs((centres + 180.0) % 360.0 - 180.0) > 90.0
+        assert spec.sum() == 6
+        assert specular_share(np.ones((2, 12)), om, edges) == pytest.approx(0.5, abs=1e-12)
+        assert specular_share(np.where(spec, 1.0, 0.0) * om, om, edges) == pytest.approx(1.0)
+        assert specular_share(np.where(spec, 0.0, 1.0) * om, om, edges) == pytest.approx(0.0)
+    edges = np.linspace(-75, 285, 7)  # [45, 105]: 1/4 beyond 90°; [225, 285]: 3/4 before 270°
+    om = np.ones((1, 6))
+    for j, want in ((0, 0.0), (1, 0.0), (2, 0.25), (3, 1.0), (4, 1.0), (5, 0.75)):
+        lobe = np.zeros((1, 6))
+        lobe[0, j] = 1.0
+        assert specular_share(lobe, om, edges) == pytest.approx(want, abs=1e-12)
+
+
+def test_bounce_limit_is_shared_with_the_walk(ensemble):
+    """bounces = 2: the walk is cut after 2 reflections too, so both last slots hold order 2
+    exactly and, for the mirror, orders 1 + 2 + cut = 1 on both sides."""
+    s = ensemble[0]
+    res = simulate(None, None, [60.0], realisations=s[:2], rays=20_000, bins=BINS, bounces=2,
+                   threads=2)  # fmt: skip
+    c = order_comparison(res, None, realised_ndf(s), walk_paths=20_000, seed=1)
+    inc = c["incidences"][0]
+    assert c["order_labels"] == ["1", "2"]
+    sim, w = inc["sim"], inc["models"]["random-walk"]
+    assert sum(sim["orders"]) + sim["cut"] == pytest.approx(1.0, abs=1e-9) and sim["cut"] > 0
+    assert sum(w["orders"]) + w["cut"] == pytest.approx(1.0, abs=1e-9) and w["cut"] > 0
+    assert needs_more_bounces(res)[0]["cut"] == sim["cut"]

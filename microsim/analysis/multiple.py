@@ -18,10 +18,14 @@ direction at Δφ = 180°.
   and ``lost`` (unresolved and leaked paths) from the per-realisation ledger tallies.
 * *Random walk* (``analytic.walk_bin_averages``, Heitz et al. 2016) on the Smith microsurface
   of ``ndf``, same bins, same material, ``walk_paths`` paths per θi: energy per order ± its own
-  standard error. For a Gaussian heightfield the caller passes Beckmann(m) at the *realised*
-  slope of the traced tiles, m = √(mean over realisations of var_x + var_y) (``realised_ndf``,
-  the m of the ``ts-beckmann-realised-*`` models), so that the walk and the tiles share their
-  slope variance and the comparison tests the walk's geometry, not the surfaces' generator.
+  standard error; its paths are cut after the run's K bounces (``bounces`` = K; 256 for "all",
+  as the simulation's; ``_walk_limit``), so that every order slot holds the same orders. The
+  closed forms below describe all orders ≥ 2: compare them with ``bounces="all"`` runs (or
+  read the ``cut`` energy). For a Gaussian heightfield the caller passes Beckmann(m) at the
+  *realised* slope of the traced tiles, m = √(mean over realisations of var_x + var_y)
+  (``realised_ndf``, the m of the ``ts-beckmann-realised-*`` models), so that the walk and the
+  tiles share their slope variance and the comparison tests the walk's geometry, not the
+  surfaces' generator.
 * *Kulla & Conty 2017*: f_ms with E(μ) the albedo of Torrance–Sparrow with height-correlated
   Smith G and ``ndf`` at F = 1 (``KullaConty``), times F_ms (their Fresnel factor) for a
   non-mirror material. Prescribed, nothing fitted. Energy F_ms (1 − E(μi)).
@@ -126,6 +130,17 @@ def realised_ndf(surfaces: Sequence) -> Beckmann:
 
 
 # --- the simulation's side ---------------------------------------------------------------------
+def _walk_limit(result) -> int:
+    """``max_bounces`` of the walk for a run with bounce limit K: K + 1. The walk tests a path
+    for escape *before* each reflection, so with ``max_bounces`` = K + 1 its escapes after
+    1 … K reflections are tallied and the paths that reflect a (K + 1)-th time are cut, as the
+    simulation cuts paths still inside after K bounces (the cut *weight* of a metal then carries
+    one more Fresnel factor in the walk: only the cut/absorbed split differs). "all": the
+    simulation's ``meta["max_bounces"]`` (256) + 1."""
+    b = result.meta.get("bounces", "all")
+    return (int(result.meta.get("max_bounces", 256)) if b == "all" else int(b)) + 1
+
+
 def _check_result(result):
     if getattr(result, "brdf_orders", None) is None:
         raise UsageError(
@@ -252,12 +267,16 @@ def _counts(result, t, slots):
 
 # --- shape and share ------------------------------------------------------------------------
 def specular_share(lobe, omega, phi_edges) -> float | None:
-    """Fraction of Σ lobe·Ω at Δφ > 90° (folded Δφ ∈ [0°, 180°], or unfolded taken as |Δφ|); a
-    bin straddling 90° contributes the part of its width beyond 90° (a lobe constant within the
-    bin). None if the lobe carries no energy."""
-    pe = np.abs(np.asarray(phi_edges, dtype=np.float64))
-    lo, hi = np.minimum(pe[:-1], pe[1:]), np.maximum(pe[:-1], pe[1:])
-    frac = np.clip((hi - np.maximum(lo, 90.0)) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
+    """Fraction of Σ lobe·Ω on the specular side, |Δφ| > 90° with Δφ taken into (−180°, 180°]
+    (folded or unfolded bin edges in degrees, any range); a bin straddling ±90° contributes the
+    part of its width on that side (exact for a lobe constant within the bin). None if the lobe
+    carries no energy."""
+    pe = np.asarray(phi_edges, dtype=np.float64)
+    lo, hi = pe[:-1], pe[1:]
+    # overlap of [lo, hi] with the specular set ∪_k (90° + 360°k, 270° + 360°k)
+    k = np.arange(-3, 4)[:, None]
+    over = np.clip(np.minimum(hi, 270.0 + 360.0 * k) - np.maximum(lo, 90.0 + 360.0 * k), 0, None)
+    frac = np.clip(over.sum(axis=0) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
     e = np.asarray(lobe) * omega
     tot = float(np.nansum(e))
     return float(np.nansum(e * frac[None, :]) / tot) if tot > 0 else None
@@ -417,6 +436,7 @@ def order_comparison(
         orders=n_slots,
         folded=bool(bins.folded),
         seed=seed,
+        max_bounces=_walk_limit(result),
     )
     white = _albedo_table(ndf, None)
     kc = KullaConty(table=white, material=material, fresnel_factor=material is not None)
@@ -547,14 +567,16 @@ def needs_more_bounces(result, threshold: float = 0.01) -> list[dict]:
     Fraction q = E_{≥2} / Σ_o E_o (reflected = escaping at any order), its standard error (from
     the realisations when R ≥ 2, else ray noise; delta method, q's numerator and denominator
     treated as independent: conservative since they correlate positively), and
-    ``needs`` = q > threshold. Returns [{"theta_i", "multiple_fraction", "multiple_fraction_se",
-    "threshold", "needs"}]."""
+    ``needs`` = q > threshold. With a finite K the paths still inside after K bounces are cut
+    (``cut``, reported): q is then a lower bound (``bounces="all"`` gives the answer).
+    Returns [{"theta_i", "multiple_fraction", "multiple_fraction_se", "cut", "threshold",
+    "needs"}]."""
     _check_result(result)
     if not (isinstance(threshold, (int, float)) and 0.0 < float(threshold) < 1.0):
         raise UsageError(f"threshold must be a fraction in (0, 1), got {threshold!r}")
     out = []
     for t in range(len(result.theta_i)):
-        E, se, e_ms, se_ms, _, _, _ = _sim_energies(result, t)
+        E, se, e_ms, se_ms, extra, _, _ = _sim_energies(result, t)
         tot = float(E.sum())
         q = e_ms / tot if tot > 0 else float("nan")
         q_se = q * float(np.hypot(se_ms / e_ms, np.sqrt(np.sum(se**2)) / tot)) if e_ms > 0 else 0.0
@@ -563,6 +585,7 @@ def needs_more_bounces(result, threshold: float = 0.01) -> list[dict]:
                 "theta_i": float(result.theta_i[t]),
                 "multiple_fraction": float(q),
                 "multiple_fraction_se": float(q_se),
+                "cut": extra["cut"][0],
                 "threshold": float(threshold),
                 "needs": bool(q > threshold),
             }
