@@ -18,6 +18,11 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   one primary ray and, when lit, its masking ray). Both figures are the best of five runs,
   raw and pipeline measured alternately (``throughput``): on a shared 2-core machine single
   runs scatter by several per cent;
+* the same estimator written with Mitsuba 3's LLVM backend (``bench_peer``, the peer the
+  speed target is set against; ``pip install microsim[peer]``, skipped with a note without
+  it), traced alternately with the others, best of the same runs, and the ratio;
+* the fixed cost of a ``simulate`` call: the first call on a surface (scene + BVH built) and a
+  repeated call on the same surface object (its tracer reused), one block of rays each;
 * the peak resident memory of a ``simulate`` run in a fresh process at two ray counts (it
   does not grow with the ray count: tallies are per bin, rays live only per chunk; both
   counts exceed the facet count, so both runs take the per-facet-table path);
@@ -202,14 +207,20 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
     n_p, n_m = len(primary[0]), len(masking[0])
     reason = ep.binding_error()
     packets = None if reason else ep.PacketScene(tracer.vertices, tracer.faces)
+    peer, peer_reason = _peer(surface, cfg)
     best_raw, pipe = {1: np.inf, 2: np.inf}, {1: 0.0, 2: 0.0}
-    best_pk = {1: np.inf, 2: np.inf}
-    for _ in range(repeat):
+    best_pk, best_peer = {1: np.inf, 2: np.inf}, {1: np.inf, 2: np.inf}
+    for rep in range(repeat):
         for threads in (1, 2):
             best_raw[threads] = min(best_raw[threads], _time_raw(tracer, primary, masking, threads))
             if packets is not None:
                 dt = _time_packets(packets, primary, masking, threads)
                 best_pk[threads] = min(best_pk[threads], dt)
+            if peer is not None:
+                r = peer.run(
+                    "aluminium", cfg.theta_i, cfg.rays, _bins(), seed=1 + rep, threads=threads
+                )
+                best_peer[threads] = min(best_peer[threads], r.seconds)
             res = simulate(
                 surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(), threads=threads
             )
@@ -225,8 +236,50 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
         else {t: (n_p + n_m) / best_pk[t] for t in (1, 2)},
         "packet_width": None if packets is None else packets.width,
         "packets_unavailable": reason,
+        "peer_samples_per_s": None
+        if peer is None
+        else {t: cfg.rays / best_peer[t] for t in (1, 2)},
+        "peer": None
+        if peer is None
+        else {
+            "variant": peer.variant,
+            "mitsuba_version": peer.mi.__version__,
+            "copies": 2 * peer.m + 1,
+            "build_seconds": peer.build_seconds,
+        },
+        "peer_unavailable": peer_reason,
     }
     return raw, pipe
+
+
+def _peer(surface, cfg: BenchConfig):
+    """(the Mitsuba 3 peer scene of ``surface`` after a JIT warm-up run, None) or (None, the
+    reason it is unavailable: ``pip install microsim[peer]``)."""
+    from microsim.bench_peer import PeerScene, PeerUnavailable
+
+    try:
+        peer = PeerScene(surface, cfg.theta_i)  # (2m+1)² copies; build + BVH excluded
+        peer.run("aluminium", cfg.theta_i, min(cfg.rays, 2**16), _bins(), threads=1)
+        return peer, None
+    except PeerUnavailable as exc:
+        return None, str(exc)
+
+
+def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> dict:
+    """Wall time of a ``simulate`` call of one block of rays on the bench surface: the first
+    call (Embree scene + BVH built) and the best of ``repeat`` further calls on the same
+    surface object, whose prepared tracer is reused (``sim.paths.tracer_for``), in seconds."""
+    from microsim.sim import BLOCK, simulate
+
+    fresh = _surface(cfg)  # a new object: nothing to reuse yet
+
+    def call(s):
+        t0 = time.perf_counter()
+        simulate(s, "aluminium", cfg.theta_i, rays=BLOCK, bins=_bins(), threads=2)
+        return time.perf_counter() - t0
+
+    first = call(fresh)
+    return {"first_call": first, "reused": min(call(fresh) for _ in range(repeat))}
 
 
 _PROBE = """
@@ -323,6 +376,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
         "pipeline_samples_per_s": pipe,
         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
         "build_seconds": build_times(surface),
+        "fixed_cost": fixed_cost(cfg),
         "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
     }
     if not cfg.skip_accuracy:
@@ -366,6 +420,23 @@ def format_bench(b: dict) -> str:
         f"{'pipeline samples/s':28s}{pipe[1]:14.4g}{pipe[2]:14.4g}",
         f"{'pipeline / raw':28s}{ratio[1]:14.1%}{ratio[2]:14.1%}",
     ]
+    pr = raw.get("peer_samples_per_s")
+    if pr:
+        p = raw["peer"]
+        lines += [
+            f"{'Mitsuba 3 peer samples/s':28s}{pr[1]:14.4g}{pr[2]:14.4g}",
+            f"{'pipeline / Mitsuba peer':28s}{pipe[1] / pr[1]:14.2f}{pipe[2] / pr[2]:14.2f}",
+            f"  (mitsuba {p['mitsuba_version']} {p['variant']}, {p['copies']}×{p['copies']} "
+            f"tile copies, not robust; scene build {p['build_seconds']:.1f} s excluded)",
+        ]
+    elif raw.get("peer_unavailable"):
+        lines.append(f"Mitsuba 3 peer skipped: {raw['peer_unavailable']}")
+    fc = b.get("fixed_cost")
+    if fc:
+        lines.append(
+            f"simulate fixed cost (one block of rays): first call {fc['first_call']:.3f} s, "
+            f"tracer reused {fc['reused']:.3f} s"
+        )
     bt = b.get("build_seconds")
     if bt:
         pk_s = "unavailable" if bt["packets"] is None else f"{bt['packets']:.3f} s"
