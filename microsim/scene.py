@@ -33,9 +33,12 @@ Schema (every key optional unless marked required; unknown keys are errors)::
                                        # gaussian, abc, vgrooves): a pilot of 8 realisations,
                                        # then as many as bring the tile scatter of the
                                        # energy-weighted BRDF below realisation_target
-                                       # (microsim.analysis.budget; at most 64)
+                                       # (microsim.analysis.budget; at most 32)
     realisation_target = 0.01          # relative; only with realisations = "auto", in
                                        # [0.001, 0.5]
+    bounces = 1                        # scattering orders traced: an integer in [1, 256] or
+                                       # "all" (microsim.sim.bounces); the verdicts judge
+                                       # order 1, the report adds the orders >= 2
     seed = 0
     [wave]                             # optional: also run the wave-optics (Kirchhoff) solver
     wavelength = 0.5                   # required in [wave]; in the unit of dx (the convention:
@@ -253,6 +256,10 @@ _SIM_KEYS = {
         None,
         (lambda v: _is_num(v) and 1e-3 <= v <= 0.5, "a number in [0.001, 0.5]"),
     ),
+    "bounces": (
+        1,
+        (lambda v: v == "all" or (_is_int(v) and 1 <= v <= 256), 'an integer in [1, 256] or "all"'),
+    ),
     "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0")),
 }
 _TOP_KEYS = ("name", "description", "surface", "material", "simulation", "wave")
@@ -304,6 +311,7 @@ class SimSettings:
     phi_bins: int = 72
     realisations: int | str = 1
     realisation_target: float | None = None
+    bounces: int | str = 1
     seed: int = 0
 
 

@@ -190,6 +190,9 @@ def test_default_name_from_an_unsafe_file_stem_refused(tmp_path):
         (VG + "[simulation]\nphi_bins = 100000\n", "simulation.phi_bins"),
         (VG + "[simulation]\nrealisations = 100000\n", "simulation.realisations"),
         (VG + '[simulation]\nrealisations = "many"\n', "simulation.realisations"),
+        (VG + "[simulation]\nbounces = 0\n", "simulation.bounces"),
+        (VG + "[simulation]\nbounces = 300\n", "simulation.bounces"),
+        (VG + '[simulation]\nbounces = "some"\n', "simulation.bounces"),
         (VG + "[simulation]\nrealisation_target = 0.01\n", "simulation.realisation_target"),
         (
             VG + '[simulation]\nrealisations = "auto"\nrealisation_target = 0\n',

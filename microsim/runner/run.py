@@ -142,7 +142,14 @@ def _trace(plan: RunPlan, prev, progress: bool):
     bar = RayProgress(tracing.remaining_rays(plan).sum(), plan.scene.name, enabled=progress)
     try:
         return tracing.simulate_scene(
-            plan, plan.theta_i, plan.rays, plan.seed, plan.bins, progress=bar, resume=prev
+            plan,
+            plan.theta_i,
+            plan.rays,
+            plan.seed,
+            plan.bins,
+            progress=bar,
+            resume=prev,
+            bounces=plan.scene.simulation.bounces,
         )
     finally:
         bar.close()

@@ -49,9 +49,11 @@ def simulate_scene(
     resume=None,
     origins="stratified",
     realisations=True,
+    bounces=1,
 ):
     """``simulate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence over
-    ``realisations`` surfaces: True = the plan's, False = one (seed ``seed``), or a count."""
+    ``realisations`` surfaces: True = the plan's, False = one (seed ``seed``), or a count;
+    ``bounces``: scattering orders traced (``simulate``; the side studies trace one)."""
     sc = plan.scene
     scale = plan.effort.scale_for(sc.surface.kind)
     n = plan.realisations if realisations is True else max(1, int(realisations))
@@ -70,6 +72,7 @@ def simulate_scene(
         progress=progress,
         origins=origins,
         resume=resume,
+        bounces=bounces,
     )
 
 
@@ -126,6 +129,7 @@ def run_meta(plan: RunPlan) -> dict:
         "quick": plan.quick,
         "bins": [plan.bins.n_theta, plan.bins.n_phi],
         "realisations": plan.realisations,
+        "bounces": sc.simulation.bounces,
         "surface_scale": plan.effort.scale_for(sc.surface.kind),
         "effort": asdict(plan.effort),
     }
