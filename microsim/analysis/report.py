@@ -148,6 +148,40 @@ def _verdict_rows(verdicts, outside: Mapping | None = None) -> list[list[str]]:
     ]
 
 
+def _orders_section(orders) -> list[str]:
+    """ "How much light single scattering misses" for a run with ``bounces`` > 1: per θi the
+    fraction of reflected energy in orders ≥ 2 (``analysis.multiple.needs_more_bounces``), then
+    the order-resolved comparison (``analysis.multiple.multiple_section``)."""
+    if not orders:
+        return []
+    from .multiple import multiple_section
+
+    rows = [
+        [
+            f"{n['theta_i']:g}",
+            f"{100 * n['multiple_fraction']:.3g} % ± {100 * n['multiple_fraction_se']:.2g} %",
+            _pct(n["cut"]),
+            "yes" if n["needs"] else "no",
+        ]
+        for n in orders["needs"]
+    ]
+    out = [
+        "## Scattering orders",
+        "",
+        f"Traced with `bounces = {orders['bounces']}`; the verdicts above judge order 1. "
+        "Fraction of the reflected energy in orders ≥ 2 (± standard error), the energy cut off "
+        "by the bounce limit, and whether single scattering misses more than 1 % of it.",
+        "",
+        md_table(["θi", "orders ≥ 2", "cut", "> 1 %"], rows),
+        "",
+    ]
+    if orders.get("note"):
+        out += [f"Note: {orders['note']}.", ""]
+    if orders.get("comparison"):
+        out += multiple_section(orders["comparison"]) + [""]
+    return out
+
+
 def _realisations_text(run: Mapping) -> str:
     """The realisation count; for ``realisations = "auto"`` also the pilot and the target."""
     auto = run.get("realisations_auto")
@@ -315,7 +349,9 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
             ),
             "",
         ]
+    lines += _orders_section(doc.get("orders"))
     captions = {
+        "multiple": "Energy in scattering orders ≥ 2 against θi, with the models' predictions",
         "inplane": "In-plane scattering curves (simulation ± 1σ, models as bin averages)",
         "hemisphere": "Hemisphere maps: simulation, best and worst model, z-scores",
         "energy": "Single-bounce albedo ρ(θi) and lost energy against θi",

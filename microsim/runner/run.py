@@ -6,6 +6,8 @@
 4. side studies (``side_studies``): stability sweep and speed runs;
 4b. a scene with ``[wave]``: the Kirchhoff solver on the same tiles and the wave verdicts
    (``wave_run``; saved in ``kirchhoff/``, verdicts.json ``"wave"``);
+4c. a run with ``bounces`` > 1: the scattering orders against the random walk and the
+   energy compensations (``orders``; verdicts.json ``"orders"``, report "Scattering orders");
 5. write brdf.npz + meta.json, verdicts.json, timings.json, the PNG charts and report.md into
    a staging directory and publish it in one rename (``publishing``).
 
@@ -30,11 +32,12 @@ from ..analysis import charts as ch
 from ..analysis import report
 from ..analysis.budget import error_budget
 from ..analysis.fits import FIT_MODELS, fit_all
+from ..analysis.multiple import multiple_chart
 from ..analysis.report import albedo_stderr
 from ..analysis.verdicts import verdicts_for_result
 from ..checkpoints import checkpoint
 from ..errors import UsageError
-from . import side_studies, tracing, wave_run
+from . import orders, side_studies, tracing, wave_run
 from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress
 from .publishing import (
@@ -159,10 +162,14 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
     """Models, fits, verdicts, side studies, charts and documents into ``stage``, then publish."""
     sc = plan.scene
     t0 = time.perf_counter()
-    stages = StageProgress(sc.name, enabled=progress, extra=int(sc.wave is not None))
+    has_orders = getattr(result, "brdf_orders", None) is not None
+    stages = StageProgress(
+        sc.name, enabled=progress, extra=int(sc.wave is not None) + int(has_orders)
+    )
     try:
         stages.stage("models")
-        side_studies.attach(result, side_studies.models_for(plan))
+        specs = side_studies.models_for(plan)
+        side_studies.attach(result, specs)
         stages.stage("fits")
         checkpoint("fits")
         # a flat mirror's lobe is a delta, narrower than any bin: fitting a lobe shape is
@@ -190,11 +197,18 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
             stages.stage("wave optics")
             checkpoint("side-studies")
             kres, wave, wave_seconds = wave_run.run_wave(plan, result)
+        orders_doc = None
+        if has_orders:
+            stages.stage("scattering orders")
+            orders_doc = orders.orders_study(plan, result, specs)
         stages.stage("charts")
         checkpoint("charts")
         files, stability = _charts(
             plan, stage, result, shown, verdicts, ranking, sweep, sweep_verdicts, notes
         )
+        if orders_doc is not None and orders_doc["comparison"] is not None:
+            files = {"multiple": "multiple.png", **files}
+            multiple_chart(orders_doc["comparison"], stage / files["multiple"], sc.name)
         files["speed"] = "speed.png"
         ch.speed_accuracy(
             speed,
@@ -221,6 +235,8 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
             notes,
             wave,
         )
+        if orders_doc is not None:
+            doc["orders"] = atomic.json_safe(orders_doc)
         atomic.write_json(stage / VERDICTS_FILE, doc)
         timings = timings_document(plan, result, speed, speed_theta)
         if wave_seconds is not None:

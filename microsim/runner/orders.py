@@ -1,0 +1,63 @@
+"""Scattering orders of a run traced with ``bounces`` > 1 (scene ``[simulation] bounces``): how
+much light single scattering misses, and the order-resolved comparison with Heitz et al.'s
+random walk, Kulla–Conty and Mikkelsen eq. 28 (``analysis.multiple``).
+
+The verdicts of the run keep judging order 1 (``Result.brdf``), as without bounces. The
+walk needs a Smith microsurface NDF: for Gaussian/ABC heightfields Beckmann at the realised
+slope of the traced tiles (the ``ts-beckmann-realised-*`` models' m), for V-grooves the
+scene's NDF when it is Beckmann or GGX; otherwise only the order energies are reported.
+"""
+
+from __future__ import annotations
+
+from ..analysis.multiple import needs_more_bounces, order_comparison
+from ..analytic.ndf import GGX, Beckmann
+from ..checkpoints import checkpoint
+from ..errors import UsageError
+
+__all__ = ["WALK_PATHS", "walk_ndf", "orders_study"]
+
+WALK_PATHS = {False: 1_000_000, True: 200_000}
+"""Random-walk paths per θi: full runs, ``--quick``."""
+
+
+def walk_ndf(plan, specs):
+    """The Smith microsurface NDF of the scene for the walk (module docstring), or None."""
+    for s in specs:
+        if s.name.startswith("ts-beckmann-realised"):
+            return s.params["ndf"]
+    ndf = plan.scene.ndf()
+    return ndf if isinstance(ndf, (Beckmann, GGX)) else None
+
+
+def orders_study(plan, result, specs) -> dict | None:
+    """``verdicts.json["orders"]`` of a run with ``bounces`` > 1 (None otherwise):
+    {"bounces", "needs" (``needs_more_bounces`` per θi), "comparison" (``order_comparison``,
+    or None when the scene's NDF has no walk), "note"}."""
+    if getattr(result, "brdf_orders", None) is None or result.brdf_orders.shape[0] < 2:
+        return None
+    checkpoint("side-studies")
+    ndf = walk_ndf(plan, specs)
+    comparison, note = None, None
+    if ndf is None:
+        note = (
+            f"the random walk needs a Beckmann or GGX microsurface; this scene's NDF is "
+            f"{type(plan.scene.ndf()).__name__}: order energies only"
+        )
+    else:
+        try:
+            comparison = order_comparison(
+                result,
+                plan.scene.ior,
+                ndf,
+                walk_paths=WALK_PATHS[bool(plan.quick)],
+                seed=plan.seed,
+            )
+        except UsageError as e:  # e.g. no multiply scattered light at some θi to compare
+            note = f"no order-resolved comparison: {e}"
+    return {
+        "bounces": plan.scene.simulation.bounces,
+        "needs": needs_more_bounces(result),
+        "comparison": comparison,
+        "note": note,
+    }
