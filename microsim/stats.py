@@ -4,16 +4,28 @@
 that carry a share (``ENERGY_FRACTION``, 90 %) of the reflected energy, over which relative
 errors are weighted; ``MIN_EVENTS`` is the number of single-bounce events a bin needs before
 its standard error is trusted in a test (below it the collapsed-strata estimate is too noisy;
-docs/design.md, "Verdicts").
+docs/design.md, "Verdicts"). ``chi2_sf``, ``t_sf``, ``t_isf`` and ``norm_isf`` are the tail
+probabilities and quantiles the tests use, from ``scipy.special`` (``scipy.stats`` gives the
+same numbers but takes ~1 s to import, which every ``microsim.testing`` check would pay).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy import special
 
 from microsim.errors import UsageError
 
-__all__ = ["sidak", "energy_set", "ENERGY_FRACTION", "MIN_EVENTS"]
+__all__ = [
+    "sidak",
+    "energy_set",
+    "ENERGY_FRACTION",
+    "MIN_EVENTS",
+    "chi2_sf",
+    "t_sf",
+    "t_isf",
+    "norm_isf",
+]
 
 ENERGY_FRACTION = 0.9
 """Share of the reflected energy carried by the bins relative errors are taken over."""
@@ -47,3 +59,23 @@ def energy_set(energy: np.ndarray, fraction: float = ENERGY_FRACTION) -> np.ndar
     n = int(np.searchsorted(np.cumsum(e[order]), fraction * total * (1.0 - 1e-12))) + 1
     mask[order[: min(n, e.size)]] = True
     return mask
+
+
+def chi2_sf(x, dof):
+    """P(χ²_dof ≥ x) (``scipy.stats.chi2.sf``)."""
+    return special.chdtrc(dof, x)
+
+
+def t_sf(x, dof):
+    """P(T_dof ≥ x), Student's t (``scipy.stats.t.sf``)."""
+    return special.stdtr(dof, -np.asarray(x, dtype=np.float64))
+
+
+def t_isf(q, dof):
+    """x with P(T_dof ≥ x) = q (``scipy.stats.t.isf``)."""
+    return -special.stdtrit(dof, q)
+
+
+def norm_isf(q):
+    """x with P(Z ≥ x) = q for a standard normal Z (``scipy.stats.norm.isf``)."""
+    return -special.ndtri(q)

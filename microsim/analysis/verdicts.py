@@ -58,11 +58,19 @@ from __future__ import annotations
 from typing import Iterable, Mapping
 
 import numpy as np
-from scipy import stats
 
 from microsim import checks as _checks
 from microsim.errors import UsageError
-from microsim.stats import ENERGY_FRACTION, MIN_EVENTS, energy_set, sidak
+from microsim.stats import (
+    ENERGY_FRACTION,
+    MIN_EVENTS,
+    chi2_sf,
+    energy_set,
+    norm_isf,
+    sidak,
+    t_isf,
+    t_sf,
+)
 
 __all__ = [
     "VERDICT_SCHEMA",
@@ -280,9 +288,9 @@ def verdict(
     n_bins = int(used.sum())
     dof = n_bins - int(n_params)
     chi2 = float(np.sum(z**2))
-    p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else None
+    p_value = float(chi2_sf(chi2, dof)) if dof > 0 else None
     max_abs_z = float(np.max(np.abs(z))) if n_bins else None
-    z_thr = float(stats.norm.isf(0.5 * sidak(alpha_each, n_bins))) if n_bins else None
+    z_thr = float(norm_isf(0.5 * sidak(alpha_each, n_bins))) if n_bins else None
     ray_ok = bool(dof > 0 and p_value >= alpha_each and max_abs_z < z_thr)
 
     # energy deviation over the model's energy set (independent of the data's noise)
@@ -300,10 +308,10 @@ def verdict(
             energy_dev = float(d.mean())
             energy_dev_se = float(d.std(ddof=1) / np.sqrt(n_real))
             se_e = np.sqrt(energy_dev_se**2 + model_rtol**2)
-            energy_p = float(2.0 * stats.t.sf(abs(energy_dev) / se_e, n_real - 1))
+            energy_p = float(2.0 * t_sf(abs(energy_dev) / se_e, n_real - 1))
             t = np.abs(F.mean(axis=0)[used] - mod[used]) / se_t[used]
             max_abs_t = float(t.max())
-            t_thr = float(stats.t.isf(0.5 * sidak(alpha_each, n_bins), n_real - 1))
+            t_thr = float(t_isf(0.5 * sidak(alpha_each, n_bins), n_real - 1))
             agrees = bool(energy_p >= alpha_each and max_abs_t < t_thr)
     else:
         agrees = ray_ok

@@ -11,8 +11,6 @@ the incidence first for an integral over a BRDF — then the model. ``material``
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.stats import qmc
 
 from microsim import checks as _checks
 from microsim import vectors
@@ -143,6 +141,8 @@ def directional_albedo(theta_deg, brdf_fn, n: int = 2**14, ndf=None, n_rep: int 
     rng = np.random.default_rng(seed)
     reps = []
     for _ in range(n_rep):  # replicates, not per-sample
+        from scipy.stats import qmc  # ~1 s to import: only when sampling
+
         u = qmc.Sobol(d=2, scramble=True, seed=rng).random(n)
         cands = [np.broadcast_to(_cosine_sample(u[:, 0], u[:, 1]), wi.shape[:-2] + (n, 3))]
         if ndf is not None:
@@ -275,6 +275,8 @@ class AlbedoTable:
         self.rho_nodes = _albedo_by_quadrature(
             ndf, self.shadowing, self.material, np.cos(theta), n_gl_phi
         )
+        from scipy.interpolate import CubicSpline  # imported when a table is built
+
         self._interp = CubicSpline(theta, self.rho_nodes)
         edges = np.append(theta, 0.5 * np.pi)  # 2∫ρ cos sin dθ, per interval
         gx, gw = np.polynomial.legendre.leggauss(8)

@@ -30,7 +30,6 @@ from __future__ import annotations
 import weakref
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from microsim import checks as _checks
 from microsim import vectors
@@ -148,6 +147,8 @@ class _IsotropicLambdaTable:
         y = np.concatenate([_lambda_cos_product(ndf, chunk) for chunk in np.array_split(c, 8)])
         ln_y = np.log(np.maximum(y, self.FLOOR))
         self._v0, self._dv = v[0], v[1] - v[0]
+        from scipy.interpolate import PchipInterpolator  # imported when a table is built
+
         self._coef = PchipInterpolator(v, ln_y).c  # (4, n − 1) cubic per interval
         self._end, self._slope = ln_y[-1], min((ln_y[-1] - ln_y[-2]) / self._dv, -2.0)
 

@@ -31,7 +31,6 @@ from types import MappingProxyType
 from typing import Any, Callable, Iterable, Mapping, NamedTuple
 
 import numpy as np
-from scipy.stats import qmc
 
 from microsim import checks as _checks
 from microsim import vectors
@@ -331,6 +330,8 @@ def bin_average_ts(
     omega = bins.projected_solid_angle().ravel()
     sums = np.zeros((replicates, nb))
     for r, child in enumerate(np.random.SeedSequence(seed).spawn(replicates)):
+        from scipy.stats import qmc  # ~1 s to import: only for the QMC path
+
         sobol = qmc.Sobol(d=2, scramble=True, seed=np.random.default_rng(child))
         for s in range(0, per, _MAX_POINTS):
             u = sobol.random(min(_MAX_POINTS, per - s))

@@ -30,13 +30,12 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
 from microsim.analysis.verdicts import verdict
 from microsim.errors import UsageError
 from microsim.sim.compare import default_models
 from microsim.sim.predict import ModelSpec, predict
-from microsim.stats import energy_set, sidak
+from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
 from .cache import AUTO_MAX_RAYS, AUTO_TARGET, cache_dir, cached, resolve_reference
 
@@ -172,11 +171,11 @@ def tolerance_check(
     excess = np.maximum(np.abs(mod[used] - sim[used]) - rtol * mod[used], 0.0) / sigma[used]
     q_bin = sidak(p_threshold, n_bins)
     if realisations >= 2:
-        z_thr = float(stats.t.isf(0.5 * q_bin, realisations - 1))
-        q_e = float(stats.t.isf(0.5 * p_threshold, realisations - 1))
+        z_thr = float(t_isf(0.5 * q_bin, realisations - 1))
+        q_e = float(t_isf(0.5 * p_threshold, realisations - 1))
     else:
-        z_thr = float(stats.norm.isf(0.5 * q_bin))
-        q_e = float(stats.norm.isf(0.5 * p_threshold))
+        z_thr = float(norm_isf(0.5 * q_bin))
+        q_e = float(norm_isf(0.5 * p_threshold))
     E = energy_set(np.where(used, mod * om, 0.0)).reshape(sim.shape)
     norm = np.sum(om[E] * mod[E])
     d = float(np.sum(om[E] * (sim[E] - mod[E])) / norm)

@@ -10,10 +10,9 @@ same kind of test for their BSDF samplers.
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
 
 from microsim.errors import UsageError
-from microsim.stats import sidak
+from microsim.stats import chi2_sf, sidak
 
 __all__ = ["pearson_chi2", "assert_sampler_matches", "SamplerCheck"]
 
@@ -39,7 +38,7 @@ def pearson_chi2(observed, expected, min_expected: float = 5.0):
             obs, exp = obs[:-1], exp[:-1]
     stat = float(np.sum((obs - exp) ** 2 / exp))
     dof = len(exp) - 1
-    return stat, dof, float(stats.chi2.sf(stat, dof))
+    return stat, dof, float(chi2_sf(stat, dof))
 
 
 class SamplerCheck(dict):
