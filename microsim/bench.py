@@ -21,6 +21,8 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
 * the same estimator written with Mitsuba 3's LLVM backend (``bench_peer``, the peer the
   speed target is set against; ``pip install microsim[peer]``, skipped with a note without
   it), traced alternately with the others, best of the same runs, and the ratio;
+* the pipeline's samples/s with every scattering order traced (``bounces="all"``) beside
+  ``bounces=1``, alternating, best of three;
 * the fixed cost of a ``simulate`` call: the first call on a surface (scene + BVH built) and a
   repeated call on the same surface object (its tracer reused), one block of rays each;
 * the peak resident memory of a ``simulate`` run in a fresh process at two ray counts (it
@@ -265,6 +267,30 @@ def _peer(surface, cfg: BenchConfig):
         return None, str(exc)
 
 
+def bounce_throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> dict:
+    """Pipeline samples/s (primary rays/s, scene build excluded) with ``bounces=1`` and
+    ``bounces="all"`` (every scattering order, ``sim.bounces``) on 1 and 2 threads, best of
+    ``repeat``, alternating: {"1": {1: .., 2: ..}, "all": {1: .., 2: ..}}."""
+    from microsim.sim import simulate
+
+    surface = surface if surface is not None else _surface(cfg)
+    best = {k: {1: 0.0, 2: 0.0} for k in ("1", "all")}
+    for _ in range(repeat):
+        for threads in (1, 2):
+            for key, b in (("1", 1), ("all", "all")):
+                res = simulate(
+                    surface,
+                    "aluminium",
+                    cfg.theta_i,
+                    rays=cfg.rays,
+                    bins=_bins(),
+                    threads=threads,
+                    bounces=b,
+                )
+                best[key][threads] = max(best[key][threads], res.meta["rays_per_second"])
+    return best
+
+
 def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> dict:
     """Wall time of a ``simulate`` call of one block of rays on the bench surface: the first
     call (Embree scene + BVH built) and the best of ``repeat`` further calls on the same
@@ -377,6 +403,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
         "build_seconds": build_times(surface),
         "fixed_cost": fixed_cost(cfg),
+        "bounces": bounce_throughput(cfg, surface),
         "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
     }
     if not cfg.skip_accuracy:
@@ -431,6 +458,15 @@ def format_bench(b: dict) -> str:
         ]
     elif raw.get("peer_unavailable"):
         lines.append(f"Mitsuba 3 peer skipped: {raw['peer_unavailable']}")
+    bo = b.get("bounces")
+    if bo:
+        one, every = (
+            {int(t): v for t, v in bo[k].items()} for k in ("1", "all")
+        )  # JSON keys are strings
+        lines.append(
+            f"{'pipeline, all bounces':28s}{every[1]:14.4g}{every[2]:14.4g}"
+            f"   (bounces=1 in the same runs: {one[1]:.4g}, {one[2]:.4g})"
+        )
     fc = b.get("fixed_cost")
     if fc:
         lines.append(
