@@ -73,7 +73,12 @@ RAYS = {"rays": 200, "lobe": 20_000, "disk": 20_000}
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize("what", ["surface", "rays", "lobe", "disk", "normals"])
+@pytest.mark.parametrize(
+    "what",
+    # one render in the default run (each costs ~6 s of VTK); every view in the slow run
+    ["surface"]
+    + [pytest.param(w, marks=pytest.mark.slow) for w in ("rays", "lobe", "disk", "normals")],
+)
 def test_view_renders_off_screen(opengl, tmp_path, what):
     out = tmp_path / f"{what}.png"
     args = [SCENE, "--what", what, "--screenshot", out, "--size", f"{SIZE[0]}x{SIZE[1]}"]

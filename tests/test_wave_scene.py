@@ -243,6 +243,7 @@ def test_interrupt_in_the_wave_stage_writes_no_report_and_resume_completes(
     assert a == b  # same tiles, same solver: the same verdicts
 
 
+@pytest.mark.slow  # a whole quick run (12 s); reports/index.md shows the marking too
 @pytest.mark.integration
 def test_geometric_scene_marks_low_smooth_outside_its_domain(tmp_path):
     from microsim.analysis.report import OUT_OF_DOMAIN, index_report
