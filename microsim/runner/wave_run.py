@@ -18,7 +18,7 @@ is saved in ``<run>/kirchhoff/`` (``brdf.npz`` + ``meta.json``, the ``Result`` s
 Planning (``check_wave_plan``) checks, before anything is written, what the scene loader
 cannot: the tile actually solved (quick scale) still holds ``MIN_TILE_WAVELENGTHS``
 wavelengths, and, for ``surface_model = "smooth"``, every planned realisation's grid samples
-the integrand's phase — the solver's own condition (``wave.kirchhoff``, sampling check):
+the integrand's phase — the solver's own condition (``wave.kirchhoff.phase_sampling``):
 per incidence, k(1 + sin θi)·s + k(1 + cos θi)·|Δh|max ≤ π, with s = dx/upsample and |Δh|max
 the largest step between neighbours of the Fourier-upsampled heights. For
 ``realisations = "auto"`` only the pilot's realisations are checked; a later one that fails
@@ -41,7 +41,12 @@ from ..analytic.fresnel import fresnel
 from ..errors import UsageError
 from ..scene import MIN_TILE_WAVELENGTHS
 from ..wave import kirchhoff_brdf
-from ..wave.kirchhoff import fourier_upsample
+from ..wave.kirchhoff import (
+    fourier_upsample,
+    incident_direction,
+    largest_height_step,
+    phase_sampling,
+)
 
 __all__ = [
     "WAVE_DIR",
@@ -92,21 +97,15 @@ def check_wave_plan(scene, scale: float, seed: int, realisations: int, theta_i) 
         with warnings.catch_warnings():  # the generator's notes go to meta.json with the run
             warnings.simplefilter("ignore", UserWarning)
             surface = scene.build_surface(seed=seed + r, scale=scale)
-        g = fourier_upsample(surface.heights, u)
-        dh = max(
-            float(np.max(np.abs(np.diff(g, axis=1, append=g[:, :1])))),
-            float(np.max(np.abs(np.diff(g, axis=0, append=g[:1, :])))),
-        )
+        dh = largest_height_step(fourier_upsample(surface.heights, u))
         for t in theta_i:
-            s_i, c_i = math.sin(math.radians(t)), math.cos(math.radians(t))
-            if k * (1.0 + s_i) * step + k * (1.0 + c_i) * dh > math.pi:
-                slope = dh / step
-                need = math.pi / (k * ((1.0 + s_i) + (1.0 + c_i) * slope))
+            ok, height_step, need = phase_sampling(dh, step, k, incident_direction(t, 0.0))
+            if not ok:
                 raise UsageError(
                     f"{where}: surface.dx: grid too coarse for wavelength {lam:g}: realisation "
                     f"{r} (seed {seed + r}) steps the height phase by "
-                    f"{k * (1 + c_i) * dh:.3g} rad between grid points at θi = {t:g}° "
-                    f"(largest slope {slope:.3g}); need dx/upsample <= {need:.3g} "
+                    f"{height_step:.3g} rad between grid points at θi = {t:g}° "
+                    f"(largest slope {dh / step:.3g}); need dx/upsample <= {need:.3g} "
                     f"(dx = {p['dx']:g}, wave.upsample = {u}: try upsample >= "
                     f"{math.ceil(p['dx'] / need)}, at most 16)"
                 )

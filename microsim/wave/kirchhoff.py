@@ -94,6 +94,8 @@ __all__ = [
     "incident_direction",
     "reflectance",
     "fourier_upsample",
+    "largest_height_step",
+    "phase_sampling",
     "FRESNEL_ANGLES",
     "SURFACES",
     "triangle_rule",
@@ -212,25 +214,37 @@ def fourier_upsample(h: np.ndarray, u: int) -> np.ndarray:
     return np.real(np.fft.ifft2(big)) * (u * u)
 
 
-def _check_phase_sampling(g: np.ndarray, step: float, k: float, wi, *, upsample: int) -> None:
-    """UsageError unless the integrand exp(i(p·x + q_z h)) is sampled below its Nyquist limit:
-    per axis, the largest order phase step |p|·step ≤ k(1 + sin θi)·step plus the largest
-    height phase step q_z,max·|Δh| ≤ 2k·|Δh| between neighbours must stay below π/2 (a quarter
-    of the FFT's band, so that the aliased part of the band-limited integrand is negligible)."""
-    dh = max(
+def largest_height_step(g: np.ndarray) -> float:
+    """Largest |Δh| between periodic neighbours of the grid ``g`` along either axis."""
+    return max(
         float(np.max(np.abs(np.diff(g, axis=1, append=g[:, :1])))),
         float(np.max(np.abs(np.diff(g, axis=0, append=g[:1, :])))),
     )
+
+
+def phase_sampling(dh: float, step: float, k: float, wi) -> tuple[bool, float, float]:
+    """Is the integrand exp(i(p·x + q_z h)) sampled below its Nyquist limit on a grid of
+    ``step`` with largest neighbour height step ``dh`` (``largest_height_step``)? Per axis the
+    largest order phase step |p|·step ≤ k(1 + sin θi)·step plus the largest height phase step
+    q_z,max·|Δh| ≤ k(1 + cos θi)·|Δh| must stay below π (within the FFT's band, so that the
+    aliased part of the band-limited integrand is negligible). Returns (ok, height phase step
+    in rad, largest grid step allowed)."""
     s_i = math.hypot(wi[0], wi[1])
-    order_step = k * (1.0 + s_i) * step
     height_step = k * (wi[2] + 1.0) * dh
-    if order_step + height_step > math.pi:
-        slope = dh / step
-        need = math.pi / (k * ((1.0 + s_i) + (wi[2] + 1.0) * slope))
+    ok = k * (1.0 + s_i) * step + height_step <= math.pi
+    need = math.pi / (k * ((1.0 + s_i) + (wi[2] + 1.0) * dh / step))
+    return ok, height_step, need
+
+
+def _check_phase_sampling(g: np.ndarray, step: float, k: float, wi, *, upsample: int) -> None:
+    """UsageError naming the dx needed unless ``phase_sampling`` holds on the grid ``g``."""
+    dh = largest_height_step(g)
+    ok, height_step, need = phase_sampling(dh, step, k, wi)
+    if not ok:
         raise UsageError(
             f"dx = {step * upsample:g} is too coarse for wavelength {2 * math.pi / k:g}: the "
             f"height phase steps up to {height_step:.3g} rad between grid points (largest slope "
-            f"{slope:.3g}); need dx/upsample ≤ {need:.3g} (upsample = {upsample})"
+            f"{dh / step:.3g}); need dx/upsample ≤ {need:.3g} (upsample = {upsample})"
         )
 
 
