@@ -24,9 +24,15 @@ from microsim.analysis.budget import (
     realisations_needed,
 )
 from microsim.errors import UsageError
-from microsim.sim import Bins
+from microsim.sim import Bins, Result
 
 BINS = Bins(12, 9)
+
+
+class _FakeResult(SimpleNamespace):
+    """The fields of a ``Result`` the budget reads, with its own ``realisations_traced``."""
+
+    realisations_traced = Result.realisations_traced
 
 
 def _fake_result(R, ray_rel, tile_rel, seed=0):
@@ -38,7 +44,7 @@ def _fake_result(R, ray_rel, tile_rel, seed=0):
     F = truth * (1.0 + rng.normal(0, tile_rel, (R, *BINS.shape)))
     F = F * (1.0 + rng.normal(0, ray_rel, F.shape))
     mean = F.mean(axis=0)[None]
-    return SimpleNamespace(
+    return _FakeResult(
         theta_i=np.array([30.0]),
         bins=BINS,
         brdf=mean,

@@ -66,8 +66,7 @@ def error_budget(result) -> list[dict]:
         row["ray"] = _ew(se_ray[t][E] / fe, w)
         row["total"] = row["ray"]
         if per is not None:
-            F = per[:, t]
-            F = F[np.nansum(np.abs(F), axis=(1, 2)) > 0]  # realisations traced at this θi
+            F = per[result.realisations_traced(t), t]
             R = len(F)
             if R >= 2:
                 s2 = np.var(F[:, E], axis=0, ddof=1)

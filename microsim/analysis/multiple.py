@@ -94,6 +94,7 @@ from microsim.analytic.fresnel import resolve_material
 from microsim.analytic.random_walk import walk_alpha, walk_bin_averages
 from microsim.atomic import atomic_open
 from microsim.errors import UsageError
+from microsim.sim.compare import realised_m
 from microsim.stats import MIN_EVENTS, energy_set, sidak
 
 from .charts import DPI, SIM_COLOUR, model_colour
@@ -119,14 +120,12 @@ _N_LEDGER = 5  # first-bounce ledger columns before the terminal ones in tallies
 
 
 def realised_ndf(surfaces: Sequence) -> Beckmann:
-    """Beckmann(m) at the realised slope of the traced tiles: m = √(mean_r (var_x + var_y)),
-    the projected-area weighted facet slope variances of each realisation (``Surface.stats``),
-    pooled as the ``ts-beckmann-realised-*`` models pool them."""
+    """Beckmann at the realised slope of the traced tiles (``sim.compare.realised_m``), the m
+    the ``ts-beckmann-realised-*`` models use."""
     surfaces = list(surfaces)
     if not surfaces:
         raise UsageError("surfaces must be a non-empty sequence of Surfaces")
-    st = [s.stats() for s in surfaces]
-    return Beckmann(float(np.sqrt(np.mean([s["slope_var_x"] + s["slope_var_y"] for s in st]))))
+    return Beckmann(realised_m(surfaces))
 
 
 # --- the simulation's side ---------------------------------------------------------------------
@@ -186,12 +185,10 @@ def _check_material(result, material) -> None:
 
 def _realisation_rows(result, t):
     """Indices of the realisations traced at incidence t (all for a complete run)."""
-    per = result.brdf_realisations_orders
-    if per is None or per.shape[1] < 2:
+    if result.brdf_realisations_orders is None:
         return None
-    F = per[:, :, t]
-    ok = np.nansum(np.abs(F), axis=(0, 2, 3)) > 0
-    return np.flatnonzero(ok) if ok.sum() >= 2 else None
+    rows = result.realisations_traced(t)
+    return rows if rows is not None and len(rows) >= 2 else None
 
 
 def _sim_energies(result, t):

@@ -472,9 +472,7 @@ def verdicts_for_result(
             stderr = ray_err if name in own else result.stderr
             real_t = None
             if per is not None and name not in own:
-                real_t = per[:, t]
-                # realisations that were traced at this incidence (a partial run may lack some)
-                real_t = real_t[np.nansum(np.abs(real_t), axis=(1, 2)) > 0]
+                real_t = per[result.realisations_traced(t), t]
             values = np.asarray(values)
             if values.shape != result.brdf.shape:
                 raise UsageError(

@@ -103,9 +103,15 @@ def _pooled_facets(surfaces):
     weights = np.concatenate([s.projected_areas() / s.projected_areas().sum() for s in surfaces])
     if surfaces[0].exact_shadowing is not None:
         return normals, weights, None
+    return normals, weights, realised_m(surfaces)
+
+
+def realised_m(surfaces) -> float:
+    """Beckmann m of the realised slopes of ``surfaces`` (a sequence of realisations):
+    √(mean over realisations of var_x + var_y), the projected-area weighted facet slope
+    variances of ``Surface.stats`` — the m of the ``ts-beckmann-realised-*`` models."""
     stats = [s.stats() for s in surfaces]
-    m_real = float(np.sqrt(np.mean([st["slope_var_x"] + st["slope_var_y"] for st in stats])))
-    return normals, weights, m_real
+    return float(np.sqrt(np.mean([st["slope_var_x"] + st["slope_var_y"] for st in stats])))
 
 
 def default_models(

@@ -136,6 +136,15 @@ class Result:
         ``brdf`` for a single-bounce run."""
         return self.brdf if self.brdf_orders is None else self.brdf_orders.sum(axis=0)
 
+    def realisations_traced(self, t: int) -> np.ndarray | None:
+        """Indices of the realisations traced at incidence ``t`` — all of them in a complete
+        run, a partial one may lack some (their BRDF is still zero) — or None without
+        per-realisation BRDFs (one realisation)."""
+        if self.brdf_realisations is None:
+            return None
+        F = self.brdf_realisations[:, t]
+        return np.flatnonzero(np.nansum(np.abs(F), axis=(1, 2)) > 0)
+
     def in_plane(self) -> InPlane:
         """Signed-θo scattering curve in the incidence plane (``InPlane``)."""
         f, b = self.bins.forward_index, self.bins.backward_index

@@ -339,8 +339,7 @@ def assert_brdf_agrees(
     for t in range(T):
         real_t = None
         if R >= 2:
-            real_t = per[:, t]
-            real_t = real_t[np.nansum(np.abs(real_t), axis=(1, 2)) > 0]
+            real_t = per[result.realisations_traced(t), t]
         v = verdict(
             result.brdf[t],
             result.stderr[t],
