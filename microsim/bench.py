@@ -4,7 +4,9 @@ For a fixed mesh and ray set — a periodic Gaussian heightfield (the gaussian-m
 surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2° θ bins — it reports
 
 * raw embreex rays/s on 1 and 2 threads for exactly the rays the pipeline casts: every
-  primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit, in batches
+  primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit whose
+  mirror direction is not steeper than the heightfield's steepest facet (those escape
+  without a ray, ``Tracer.rise_bound``: 70 % of them here), in batches
   of 65 536 (float32 arrays prepared beforehand, so only Embree is timed);
 * the same rays traced in coherent Embree packets (``microsim.sim.embree_packets``: the
   Embree 4 library embreex bundles, called at its native packet width through ctypes), rays/s
@@ -15,7 +17,7 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
 * the pipeline's samples/s (``simulate``: primary ray, Fresnel, reflection, masking ray,
   tally; scene build — mesh, Embree BVH — excluded, the per-incidence facet table included)
   on 1 and 2 threads and its ratio to the raw figure, both expressed per sample (a sample =
-  one primary ray and, when lit, its masking ray). Both figures are the best of five runs,
+  one primary ray and, when lit and not surely escaping, its masking ray). Both figures are the best of five runs,
   raw and pipeline measured alternately (``throughput``): on a shared 2-core machine single
   runs scatter by several per cent;
 * the same estimator written with Mitsuba 3's LLVM backend (``bench_peer``, the peer the
@@ -106,7 +108,8 @@ def _bins():
 
 def _ray_set(tracer, wi: np.ndarray, rays: int):
     """float32 (origins, directions) of the primary rays (one shared direction) and of the
-    masking rays the pipeline casts for them (same origins, offsets and directions)."""
+    masking rays the pipeline casts for them (same origins, offsets and directions; none for
+    facets whose rays surely escape, ``FacetTable.clear``)."""
     from microsim.analytic.fresnel import resolve_material
     from microsim.sim.paths import SINGLE, facet_table
     from microsim.sim.streams import BLOCK, block_origins
@@ -116,7 +119,7 @@ def _ray_set(tracer, wi: np.ndarray, rays: int):
     status, prim, point = tracer.trace(o, -wi)
     h = np.flatnonzero(status == 0)
     table = facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
-    lit = h[table.code[prim[h]] == SINGLE]
+    lit = h[(table.code[prim[h]] == SINGLE) & ~table.clear[prim[h]]]  # as the pipeline
     mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
     md = table.wo32[prim[lit]]
     return (
@@ -526,6 +529,10 @@ def bench_config(
 
 
 def _cmd_bench(args) -> int:
+    if args.methods is not None:
+        from .bench_methods import run_methods_command
+
+        return run_methods_command(args)
     cfg = bench_config(args.rays, args.quick, args.skip_accuracy)
     b = run_bench(cfg)
     print(json.dumps(b, indent=1) if args.json else format_bench(b))
@@ -533,7 +540,8 @@ def _cmd_bench(args) -> int:
 
 
 def add_bench_command(subparsers) -> None:
-    """Register ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]``."""
+    """Register ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]
+    [--methods [DIR]]``."""
     p = subparsers.add_parser(
         "bench",
         help="measure raw Embree vs pipeline throughput, peak memory, time to 1%% precision "
@@ -551,4 +559,14 @@ def add_bench_command(subparsers) -> None:
         "--quick", action="store_true", help="small mesh and ray counts (seconds; for smoke tests)"
     )
     p.add_argument("--skip-accuracy", action="store_true", help="omit the time-to-1%% run")
+    p.add_argument(
+        "--methods",
+        nargs="?",
+        const="reports",
+        default=None,
+        metavar="DIR",
+        help="instead: wall time against error of each method (closed forms, ray trace, exact "
+        "V-groove path, wave solver); writes DIR/methods.json and DIR/methods.png "
+        "(default DIR: reports; microsim.bench_methods)",
+    )
     p.set_defaults(func=_cmd_bench)

@@ -36,6 +36,7 @@ LAYERS = [
             "microsim.runner",
             "microsim.sweep",
             "microsim.bench",
+            "microsim.bench_methods",
             "microsim.bench_peer",
             "microsim.view",
             "microsim.testing",

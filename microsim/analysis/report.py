@@ -25,6 +25,8 @@ __all__ = [
     "albedo_stderr",
     "wave_section",
     "regime_section",
+    "methods_section",
+    "load_methods",
     "OUT_OF_DOMAIN",
 ]
 
@@ -631,12 +633,14 @@ def _crossover_cell(x, devs, criterion: float) -> str:
     return "–"
 
 
-def regime_section(docs: Sequence[Mapping], regimes: Mapping | None) -> list[str]:
+def regime_section(docs: Sequence[Mapping], regimes: Mapping | None, methods=None) -> list[str]:
     """Index section "Where each method holds": the wave scenes' verdicts against Kirchhoff
     and, when ``regimes`` is given (``runner.wave_run.regime_maps``: ``chart``, ``maps`` as
-    ``RegimeMap.to_dict``, ``settings`` text), the regime chart and crossover table."""
+    ``RegimeMap.to_dict``, ``settings`` text), the regime chart and crossover table; then
+    "What each method costs" (``methods_section``) when ``methods`` is given (the path of
+    ``methods.json``, or its loaded dict)."""
     models, rows = _wave_index_rows(docs)
-    if not rows and not regimes:
+    if not rows and not regimes and methods is None:
         return []
     lines = ["## Where each method holds", ""]
     if rows:
@@ -700,6 +704,105 @@ def regime_section(docs: Sequence[Mapping], regimes: Mapping | None) -> list[str
             ),
             "",
         ]
+    if methods is not None:
+        lines += methods_section(methods)
+    return lines
+
+
+METHODS_COMMAND = "microsim bench --methods"
+_METHODS_KEYS = {
+    "machine": ("cpus", "load_average_start", "threads", "commit"),
+    "panel": ("title", "scene", "reference", "error_measure", "points"),
+    "point": ("method", "kind", "setting", "seconds", "error", "error_se"),
+}
+
+
+def load_methods(path) -> dict:
+    """``methods.json`` (``microsim bench --methods``) read and checked: top-level ``machine``,
+    ``panels``, and the keys ``_METHODS_KEYS`` names in each machine, panel and point; a
+    missing or malformed file raises ValueError (OSError if unreadable) naming what is
+    wrong."""
+    import json
+    from pathlib import Path
+
+    d = json.loads(Path(path).read_text(encoding="utf-8"))
+    if not isinstance(d, dict) or not isinstance(d.get("panels"), list):
+        raise ValueError(f"{path}: no 'panels' list")
+    missing = [k for k in _METHODS_KEYS["machine"] if k not in (d.get("machine") or {})]
+    for i, p in enumerate(d["panels"]):
+        missing += [f"panels[{i}].{k}" for k in _METHODS_KEYS["panel"] if k not in p]
+        for j, q in enumerate(p.get("points") or []):
+            missing += [
+                f"panels[{i}].points[{j}].{k}" for k in _METHODS_KEYS["point"] if k not in q
+            ]
+    if missing:
+        raise ValueError(f"{path}: missing keys {missing[:5]}{' …' if len(missing) > 5 else ''}")
+    return d
+
+
+def _methods_rows(panel: Mapping) -> list[list[str]]:
+    """Every closed form; of each method with several points (ray counts, tile sizes) the
+    first and the last."""
+    by: dict[str, list] = {}
+    for p in panel["points"]:
+        by.setdefault(p["method"], []).append(p)
+    rows = []
+    for method, pts in by.items():
+        for p in pts if len(pts) <= 2 else [pts[0], pts[-1]]:
+            err = "–" if p["error"] is None else f"{100 * p['error']:.3g} %"
+            if p["error"] is not None and p.get("error_se") is not None:
+                err += f" ± {100 * p['error_se']:.2g}"
+            rows.append([f"{method}, {p['setting']}", f"{fmt(p['seconds'])} s", err])
+    return rows
+
+
+def methods_section(methods) -> list[str]:
+    """Subsection "What each method costs": the chart ``methods.png`` and a table (method,
+    wall time, error, scene) from ``methods`` (the path of ``methods.json`` or its dict,
+    ``load_methods``); when the file is absent or unreadable, the command that makes it.
+    Nothing is timed here: the figures are those of the last ``microsim bench --methods``."""
+    head = ["### What each method costs", ""]
+    if not isinstance(methods, Mapping):
+        import os
+
+        if not os.path.isfile(methods):
+            return head + [
+                f"Not measured yet: `{METHODS_COMMAND}` writes `methods.json` and "
+                "`methods.png` here (a few minutes; `--quick` for a small version).",
+                "",
+            ]
+        try:
+            methods = load_methods(methods)
+        except (OSError, ValueError) as err:
+            return head + [f"`methods.json` unreadable ({err}); rerun `{METHODS_COMMAND}`.", ""]
+    m = methods["machine"]
+    load = m["load_average_start"]
+    load = load[0] if isinstance(load, (list, tuple)) else load
+    commit = (m.get("commit") or "unknown")[:7]
+    lines = head + [
+        "Wall time for one incidence against the error of each method on a geometric scene "
+        "and a wave scene, each against its own reference (ray-trace errors include their "
+        "noise, so they fall with the ray count until the method's own error; ± is one "
+        "standard error where a point has one).",
+        "",
+        "![What each method costs](methods.png)",
+        "",
+    ]
+    for p in methods["panels"]:
+        lines += [
+            f"*{p['title']}* — scene: {p['scene']}; reference: {p['reference']}; error: "
+            f"{p['error_measure']}.",
+            "",
+            md_table(["method", "time", "error"], _methods_rows(p)),
+            "",
+        ]
+    lines += [
+        f"Measured by `{METHODS_COMMAND}`{' --quick' if methods.get('quick') else ''} on "
+        f"{m['cpus']} cores at load {float(load):.2f}, commit {commit}"
+        f"{' (with uncommitted changes)' if m.get('worktree_modified') else ''}; "
+        f"{m['threads']} threads; the machine may be shared, so the times are indicative.",
+        "",
+    ]
     return lines
 
 
@@ -772,10 +875,12 @@ def index_report(
     quick: bool,
     seconds: float | None = None,
     regimes: Mapping | None = None,
+    methods=None,
 ) -> str:
     """``index.md``: verdict tables (scenes × models), Löw-style fit table, Mikkelsen Fig. 6,
     "Where each method holds" (``regime_section``: wave scenes' verdicts against Kirchhoff,
-    the regime chart ``regimes``), links to every scene's ``<scene>/report.md``. ``seconds``
+    the regime chart ``regimes``; "What each method costs" from ``methods``, the path of
+    ``methods.json`` or its dict), links to every scene's ``<scene>/report.md``. ``seconds``
     (the wall time) is accepted for compatibility and not written: the index is
     reproducible."""
     fit_models: list[str] = []
@@ -839,7 +944,7 @@ def index_report(
             f"![Mikkelsen Fig. 6]({fig6})",
             "",
         ]
-    lines += regime_section(docs, regimes)
+    lines += regime_section(docs, regimes, methods)
     lines += ["## Scenes", ""] + [
         f"- [{d['scene']}]({d['scene']}/report.md): {d.get('description', '')}" for d in docs
     ]
