@@ -4,7 +4,9 @@ For a fixed mesh and ray set — a periodic Gaussian heightfield (the gaussian-m
 surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2° θ bins — it reports
 
 * raw embreex rays/s on 1 and 2 threads for exactly the rays the pipeline casts: every
-  primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit, in batches
+  primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit whose
+  mirror direction is not steeper than the heightfield's steepest facet (those escape
+  without a ray, ``Tracer.rise_bound``: 70 % of them here), in batches
   of 65 536 (float32 arrays prepared beforehand, so only Embree is timed);
 * the same rays traced in coherent Embree packets (``microsim.sim.embree_packets``: the
   Embree 4 library embreex bundles, called at its native packet width through ctypes), rays/s
@@ -15,9 +17,9 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
 * the pipeline's samples/s (``simulate``: primary ray, Fresnel, reflection, masking ray,
   tally; scene build — mesh, Embree BVH — excluded, the per-incidence facet table included)
   on 1 and 2 threads and its ratio to the raw figure, both expressed per sample (a sample =
-  one primary ray and, when lit, its masking ray). Both figures are the best of five runs,
-  raw and pipeline measured alternately (``throughput``): on a shared 2-core machine single
-  runs scatter by several per cent;
+  one primary ray and, when lit and not surely escaping, its masking ray). Both figures are
+  the best of five runs, raw and pipeline measured alternately (``throughput``): on a shared
+  2-core machine single runs scatter by several per cent;
 * the same estimator written with Mitsuba 3's LLVM backend (``bench_peer``, the peer the
   speed target is set against; ``pip install microsim[peer]``, skipped with a note without
   it), traced alternately with the others, best of the same runs, and the ratio;
@@ -106,7 +108,8 @@ def _bins():
 
 def _ray_set(tracer, wi: np.ndarray, rays: int):
     """float32 (origins, directions) of the primary rays (one shared direction) and of the
-    masking rays the pipeline casts for them (same origins, offsets and directions)."""
+    masking rays the pipeline casts for them (same origins, offsets and directions; none for
+    facets whose rays surely escape, ``FacetTable.clear``)."""
     from microsim.analytic.fresnel import resolve_material
     from microsim.sim.paths import SINGLE, facet_table
     from microsim.sim.streams import BLOCK, block_origins
@@ -116,7 +119,7 @@ def _ray_set(tracer, wi: np.ndarray, rays: int):
     status, prim, point = tracer.trace(o, -wi)
     h = np.flatnonzero(status == 0)
     table = facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
-    lit = h[table.code[prim[h]] == SINGLE]
+    lit = h[(table.code[prim[h]] == SINGLE) & ~table.clear[prim[h]]]  # as the pipeline
     mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
     md = table.wo32[prim[lit]]
     return (

@@ -13,6 +13,7 @@ from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.sim import BLOCK, Bins, paths, streams
 from microsim.sim.scratch import work
 from microsim.sim.tallies import Tally, split_tallies
+from microsim.sim.tracer import CLEAR_MARGIN, Tracer
 from microsim.surfaces.surface import flat
 from microsim.vectors import spherical_deg
 
@@ -176,6 +177,8 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
         faces = n
         normal_columns = tuple(np.ascontiguousarray(n[:, k]) for k in range(3))
         masking_lift = np.zeros(len(n))
+        rise_bound = 0.8  # steepest slope of a pretend heightfield
+        surely_escapes = staticmethod(lambda *d: Tracer.surely_escapes(Facets, *d))
 
     wi, bins = spherical_deg(55.0, 20.0), Bins(18, 13)
     table = paths.facet_table(Facets, wi, ior, bins, 20.0)
@@ -190,6 +193,10 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
         table.weight, np.where(c > 0, fresnel(np.clip(c, 0, 1), ior), 0.0), rtol=1e-12, atol=1e-15
     )
     assert np.array_equal(table.bin, bins.locate(wo, 20.0))
+    w32 = table.wo32.astype(np.float64)  # clear: lit, rising more steeply than slope 0.8
+    steep = w32[:, 2] > CLEAR_MARGIN * 0.8 * np.hypot(w32[:, 0], w32[:, 1])
+    assert np.array_equal(table.clear, (want == paths.SINGLE) & steep)
+    assert 0 < table.clear.sum() < (want == paths.SINGLE).sum()
 
 
 def test_work_arrays_are_reused_per_name_and_thread():

@@ -133,3 +133,77 @@ def test_bad_meshes_raise():
         Tracer(Surface("vgrooves", good.vertices, good.faces, (0.5, 0.5), True, {}))
     with pytest.raises(ValueError, match="faces.*up"):
         Tracer(Surface("vgrooves", good.vertices, good.faces[:, ::-1].copy(), (1.0, 1.0), True, {}))
+
+
+# --- masking rays decided without tracing (Tracer.rise_bound) ----------------------------------
+def test_rise_bound_is_the_steepest_facet_slope_of_heightfields_only():
+    from microsim.surfaces import gaussian
+
+    s = gaussian(64, 1.0, 1.2, 8.0, seed=3)
+    tr = Tracer(s)
+    n = tr.normals
+    assert tr.rise_bound == pytest.approx(np.max(np.hypot(n[:, 0], n[:, 1]) / n[:, 2]), rel=1e-15)
+    assert Tracer(flat()).rise_bound == 0.0
+    other = Surface(  # the same mesh, not known to be a heightfield: every ray is traced
+        kind="custom",
+        vertices=s.vertices,
+        faces=s.faces,
+        tile_size=s.tile_size,
+        periodic=True,
+        nominal={},
+    )
+    assert Tracer(other).rise_bound == np.inf
+    assert not Tracer(other).surely_escapes(0.0, 0.0, 1.0)
+
+
+def test_rays_steeper_than_the_rise_bound_are_never_blocked():
+    """From points on a rough heightfield (σ/ℓ = 0.3, slopes up to ~1.5), rays rising more
+    steeply than the bound all escape when traced; rays just below it are sometimes blocked
+    (so the trace does meet the surface in this geometry)."""
+    from microsim.surfaces import gaussian
+
+    tr = Tracer(gaussian(96, 1.0, 2.4, 8.0, seed=5))
+    L = tr.rise_bound
+    rng = np.random.default_rng(0)
+    n = 40_000
+    hits = tr.first_hit(
+        np.column_stack([rng.uniform(-48, 48, (n, 2)), np.full(n, tr.zmax + 1)]),
+        np.array([0.0, 0.0, -1.0]),
+    )
+    ok = hits.status == HIT
+    p, nrm = hits.point[ok], hits.normal[ok]
+    m = len(p)
+    phi = rng.uniform(0, 2 * np.pi, m)
+
+    def rays(cot):
+        d = np.column_stack([np.cos(phi), np.sin(phi), cot])
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        up = np.einsum("ij,ij->i", d, nrm) > 0  # leaving the facet's front
+        return d[up], up
+
+    steep, up = rays(L * rng.uniform(1.0 + 2e-6, 1.5, m))
+    assert tr.surely_escapes(*steep.T).all()
+    assert np.all(tr.escapes(p[up], nrm[up], steep) == ESCAPED)
+    shallow, up = rays(L * rng.uniform(0.2, 0.9, m))
+    assert not tr.surely_escapes(*shallow.T).any()
+    assert np.sum(tr.escapes(p[up], nrm[up], shallow) == HIT) > 100
+
+
+def test_skipping_sure_masking_rays_changes_no_result(monkeypatch):
+    """simulate with the rise bound (70 % of masking rays untraced at θi = 30°) equals, tally
+    for tally, the run that traces every masking ray: per-facet table path (rays ≥ facets)
+    and per-ray path (fewer rays than facets)."""
+    import microsim.sim.tracer as tracer_module
+    from microsim.surfaces import gaussian
+
+    def run(rays):
+        s = gaussian(32, 1.0, 1.2, 8.0, seed=1)  # a new object: no tracer reuse
+        return simulate(s, "aluminium", [0.0, 30.0, 70.0], rays=rays, bins=Bins(9, 7), seed=2)
+
+    fast = [run(r) for r in (1500, 8000)]
+    monkeypatch.setattr(tracer_module, "rise_bound", lambda surface, normals: np.inf)
+    slow = [run(r) for r in (1500, 8000)]
+    for a, b in zip(fast, slow):
+        assert np.array_equal(a.brdf, b.brdf) and np.array_equal(a.stderr, b.stderr)
+        assert all(np.array_equal(a.ledger_counts[k], b.ledger_counts[k]) for k in a.ledger_counts)
+        assert all(np.array_equal(a.ledger[k], b.ledger[k]) for k in a.ledger)

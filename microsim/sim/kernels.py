@@ -279,6 +279,7 @@ def tabled_primary(
     lift,
     wo32,
     fbin,
+    fclear,
     hx,
     hy,
     zmax,
@@ -303,7 +304,8 @@ def tabled_primary(
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
     ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
-    bin ``fbin``), and the masking rays of the lit ones (code SINGLE), set up as the first
+    bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the masking rays of
+    the other lit ones (code SINGLE), set up as the first
     segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
     ray ``mi[m]`` starts at its hit point p moved along n onto the facet plane and eps above
     it, p − (p·n − lift)·n, wrapped into the tile (``sx/sy/sz``), along the facet's mirror
@@ -328,6 +330,8 @@ def tabled_primary(
         if c != SINGLE:
             continue
         where[i] = fbin[f]
+        if fclear[f]:  # rises more steeply than the surface can: escaped
+            continue
         a, b, e = nx[f], ny[f], nz[f]
         off = px[i] * a + py[i] * b + pz[i] * e - lift[f]
         x, y, z = px[i] - off * a, py[i] - off * b, pz[i] - off * e

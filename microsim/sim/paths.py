@@ -277,8 +277,10 @@ class FacetTable:
     wo = 2(wi·n)n − wi in float32 — the direction Embree traces the masking ray along, whose
     float64 value the walk uses too; ``bin`` (F,) int32 flat bin index of wo (from float64
     wo; −1 below the horizon); ``normal_cols`` (3 × (F,)) and ``lift`` (F,) = n·v0 + eps (a
-    point p starts its masking ray at p − (p·n − lift) n: on the facet plane, eps above it).
-    25 bytes per facet besides the tracer's own columns."""
+    point p starts its masking ray at p − (p·n − lift) n: on the facet plane, eps above it);
+    ``clear`` (F,) bool: lit facets whose mirror direction rises more steeply than the
+    surface can (``Tracer.surely_escapes``): their rays escape without a masking ray.
+    26 bytes per facet besides the tracer's own columns."""
 
     code: np.ndarray
     weight: np.ndarray
@@ -286,6 +288,7 @@ class FacetTable:
     wo32: np.ndarray
     normal_cols: tuple
     lift: np.ndarray
+    clear: np.ndarray
 
 
 def facet_table(
@@ -325,8 +328,16 @@ def facet_table(
     cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
     list(pool.map(fill, slices) if pool is not None else map(fill, slices))
+    wo = wo32.astype(np.float64)  # the direction the masking ray is traced along
+    clear = (code == SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
     return FacetTable(
-        code=code, weight=weight, bin=where, wo32=wo32, normal_cols=ncols, lift=tracer.masking_lift
+        code=code,
+        weight=weight,
+        bin=where,
+        wo32=wo32,
+        normal_cols=ncols,
+        lift=tracer.masking_lift,
+        clear=clear,
     )
 
 
@@ -362,6 +373,7 @@ def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
         table.lift,
         table.wo32,
         table.bin,
+        table.clear,
         float(tracer.half[0]),
         float(tracer.half[1]),
         tracer.zmax,
@@ -444,10 +456,17 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         margin = profile.margin_columns(pu, p[0][hu], wo[0], wo[2])
         status[hu] = np.where(margin > 0, MASKED, SINGLE)
     else:
-        ph = [a[hu] for a in p]
-        off = ph[0] * nc[0] + ph[1] * nc[1] + ph[2] * nc[2] - tracer.masking_lift[pu]
-        start = [ph[k] - off * nc[k] for k in range(3)]
-        status[hu] = _FROM_ESCAPE[tracer.escape_columns(start, wo, _stack32(wo))]
+        wo32 = _stack32(wo)
+        wt = [wo32[:, k].astype(np.float64) for k in range(3)]  # as traced
+        status[hu] = SINGLE  # escapes unless a masking ray decides otherwise
+        traced = ~tracer.surely_escapes(*wt)
+        ht, pt, nt = hu[traced], pu[traced], [a[traced] for a in nc]
+        ph = [a[ht] for a in p]
+        off = ph[0] * nt[0] + ph[1] * nt[1] + ph[2] * nt[2] - tracer.masking_lift[pt]
+        start = [ph[k] - off * nt[k] for k in range(3)]
+        status[ht] = _FROM_ESCAPE[
+            tracer.escape_columns(start, [a[traced] for a in wo], wo32[traced])
+        ]
     single = status[hu] == SINGLE
     hs_ = hu[single]
     ws = np.stack([a[single] for a in wo], axis=1)
