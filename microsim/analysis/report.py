@@ -749,9 +749,12 @@ def _methods_rows(panel: Mapping) -> list[list[str]]:
     rows = []
     for method, pts in by.items():
         for p in pts if len(pts) <= 2 else [pts[0], pts[-1]]:
-            err = "–" if p["error"] is None else f"{100 * p['error']:.3g} %"
+            err = "–" if p["error"] is None else f"{100 * p['error']:.3g}"
             if p["error"] is not None and p.get("error_se") is not None:
                 err += f" ± {100 * p['error_se']:.2g}"
+            err += " %" if p["error"] is not None else ""
+            if p.get("error_se") is None and p.get("noise_floor") is not None:
+                err += f" (ray noise alone {100 * p['noise_floor']:.2g} %)"
             rows.append([f"{method}, {p['setting']}", f"{fmt(p['seconds'])} s", err])
     return rows
 
@@ -790,8 +793,13 @@ def methods_section(methods) -> list[str]:
     ]
     for p in methods["panels"]:
         lines += [
-            f"*{p['title']}* — scene: {p['scene']}; reference: {p['reference']}; error: "
-            f"{p['error_measure']}.",
+            f"*{p['title']}* — scene: {p['scene']}; reference: {p['reference']}"
+            + (
+                f" ({fmt(p['reference_seconds'])} s)"
+                if isinstance(p.get("reference_seconds"), (int, float))
+                else ""
+            )
+            + f"; error: {p['error_measure']}.",
             "",
             md_table(["method", "time", "error"], _methods_rows(p)),
             "",
