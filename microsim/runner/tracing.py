@@ -39,6 +39,12 @@ def surface_source(scene, seed: int, scale: float, n: int):
     return None, (lambda s: scene.build_surface(seed=s, scale=scale), [seed + r for r in range(n)])
 
 
+def scene_surface(plan: RunPlan, seed: int):
+    """The plan's surface realisation ``seed`` at the effort's scale."""
+    sc = plan.scene
+    return sc.build_surface(seed=seed, scale=plan.effort.scale_for(sc.surface.kind))
+
+
 def simulate_scene(
     plan: RunPlan,
     theta_i,
@@ -50,14 +56,19 @@ def simulate_scene(
     origins="stratified",
     realisations=True,
     bounces=1,
+    surface=None,
 ):
     """``simulate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence over
     ``realisations`` surfaces: True = the plan's, False = one (seed ``seed``), or a count;
-    ``bounces``: scattering orders traced (``simulate``; the side studies trace one)."""
+    ``bounces``: scattering orders traced (``simulate``; the side studies trace one).
+    ``surface``: that one realisation already built (``scene_surface``), so that repeated
+    runs on it reuse its tracer instead of building surface and BVH again."""
     sc = plan.scene
     scale = plan.effort.scale_for(sc.surface.kind)
     n = plan.realisations if realisations is True else max(1, int(realisations))
-    surface, reals = surface_source(sc, seed, scale, n)
+    if surface is not None and n != 1:
+        raise ValueError("simulate_scene: a prebuilt surface is one realisation")
+    surface, reals = (surface, None) if surface is not None else surface_source(sc, seed, scale, n)
     factory, seeds = reals if reals is not None else (None, None)
     return simulate(
         surface,
@@ -88,7 +99,7 @@ def simulate_auto_scene(plan: RunPlan, log):
     """``simulate_auto`` to ``AUTO_TARGET`` on the scene's surface, at most ``plan.rays`` rays
     per incidence; one progress line per batch through ``log`` (None: silent)."""
     sc = plan.scene
-    surface = sc.build_surface(seed=plan.seed, scale=plan.effort.scale_for(sc.surface.kind))
+    surface = scene_surface(plan, plan.seed)
     return simulate_auto(
         surface,
         sc.ior,
