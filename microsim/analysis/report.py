@@ -426,7 +426,8 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
             ]
             lines += [
                 f"θi = {fmt(sp.get('theta_i'))}°, error against {sp.get('reference')}; "
-                "the wall times (this chart's x axis) are in `timings.json`. Both files "
+                "the wall times (this chart's x axis: tracing only, the surface and its "
+                "BVH are built once before the runs) are in `timings.json`. Both files "
                 "are written by every run but not kept in git, since wall times differ "
                 "from run to run.",
                 "",

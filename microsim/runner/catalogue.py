@@ -165,7 +165,10 @@ def run_report(
             if regimes or (regimes is None and any(s.wave is not None for s in scenes)):
                 regime = _regimes(out, quick)
             atomic.write_text(
-                out / "index.md", report.index_report(docs, fig6, quick, regimes=regime)
+                out / "index.md",
+                report.index_report(
+                    docs, fig6, quick, regimes=regime, methods=out / "methods.json"
+                ),
             )
         except KeyboardInterrupt:
             log(
