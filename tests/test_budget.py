@@ -173,6 +173,9 @@ def test_auto_run_records_its_choice_and_resumes_bitwise_from_either_stage(auto_
     auto = meta["run"]["realisations_auto"]
     assert auto["stage"] == "final" and auto["pilot_realisations"] == MIN_AUTO
     assert auto["realisations"] == meta["run"]["realisations"] > MIN_AUTO
+    assert auto["pilot_continued"] and meta["rays_traced"] == (  # the pilot is not retraced
+        (auto["rays"] - auto["pilot_rays"]) * len(meta["error_budget"])
+    )
     assert [b["realisations"] for b in meta["error_budget"]] == [auto["realisations"]] * 2
     assert "## Error budget" in (tmp / "ref" / "report.md").read_text()
     want = _arrays(tmp / "ref")

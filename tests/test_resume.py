@@ -105,6 +105,47 @@ def test_realisations_interrupted_between_surfaces_resume_bitwise():
         assert np.array_equal(getattr(full, name), getattr(resumed, name)), name
 
 
+def test_a_run_of_the_first_realisations_is_extended_bitwise():
+    """A complete 2-realisation run, resumed as the first 2 of 4 with the same rays per
+    realisation, traces only realisations 2 and 3 and equals the 4-realisation run bitwise;
+    a prefix with other rays per realisation, or an uneven split, is refused."""
+    make = lambda seed: heightfield_surface(random_heights(sigma=0.02, seed=seed), 1 / 32)  # noqa: E731
+    per = 2 * BLOCK
+    kw = {k: v for k, v in KW.items() if k != "rays"}
+    full = simulate(
+        None, "aluminium", THETA, surface_factory=make, seeds=[1, 2, 3, 4], rays=4 * per, **kw
+    )
+    pilot = simulate(
+        None, "aluminium", THETA, surface_factory=make, seeds=[1, 2], rays=2 * per, **kw
+    )
+    more = simulate(
+        None,
+        "aluminium",
+        THETA,
+        surface_factory=make,
+        seeds=[1, 2, 3, 4],
+        rays=4 * per,
+        resume=pilot,
+        **kw,
+    )
+    assert more.meta["rays_traced"] == 2 * per * len(THETA)
+    assert_identical(full, more)
+    for name in ("stderr_ray", "stderr_realisation", "brdf_realisations"):
+        assert np.array_equal(getattr(full, name), getattr(more, name)), name
+    for rays in (4 * per + 2, 3 * per):  # uneven, or other rays per realisation
+        with pytest.raises(ValueError, match="rays"):
+            simulate(
+                None,
+                "aluminium",
+                THETA,
+                surface_factory=make,
+                seeds=[1, 2, 3, 4],
+                rays=rays,
+                resume=pilot,
+                **kw,
+            )
+
+
 def test_resuming_a_complete_run_traces_nothing():
     s = surface()
     full = simulate(s, "aluminium", THETA, **KW)

@@ -111,7 +111,8 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
                     f"scatter ≤ {plan.realisation_target:.1%} (pilot of "
                     f"{pilot_plan.realisations})"
                 )
-                result = _trace(plan, None, progress)
+                keep = pilot if tracing.pilot_continues(pilot_plan, plan) else None
+                result = _trace(plan, keep, progress)
     else:
         result = _trace(plan, prev, progress)
     result.meta["run"] = tracing.run_meta(plan)
@@ -142,7 +143,7 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
 
 def _trace(plan: RunPlan, prev, progress: bool):
     """The main simulation of ``plan`` with a progress bar, continuing ``prev``'s tallies."""
-    bar = RayProgress(tracing.remaining_rays(plan).sum(), plan.scene.name, enabled=progress)
+    bar = RayProgress(tracing.remaining_rays(plan, prev).sum(), plan.scene.name, enabled=progress)
     try:
         return tracing.simulate_scene(
             plan,

@@ -21,12 +21,14 @@ from .planning import AUTO_TARGET, RunPlan
 
 __all__ = [
     "surface_source",
+    "scene_surface",
     "simulate_scene",
     "complete",
     "simulate_auto_scene",
     "auto_summary",
     "run_meta",
     "remaining_rays",
+    "pilot_continues",
     "choose_realisations",
     "realisations_record",
 ]
@@ -146,15 +148,24 @@ def run_meta(plan: RunPlan) -> dict:
     }
 
 
-def remaining_rays(plan: RunPlan) -> np.ndarray:
-    """(R, T) rays each (realisation, incidence) still has to trace."""
+def remaining_rays(plan: RunPlan, prev) -> np.ndarray:
+    """(R, T) rays each (realisation, incidence) still has to trace when ``prev`` (a Result
+    of the plan's first k ≤ R realisations, or None) is continued."""
     n = plan.realisations
     per_real = np.array([plan.rays // n + (r < plan.rays % n) for r in range(n)], dtype=np.int64)
     todo = np.repeat(per_real[:, None], len(plan.theta_i), axis=1)
-    prev = plan.previous
     if prev is not None and prev.tallies is not None and "rays" in prev.tallies:
-        todo = todo - np.asarray(prev.tallies["rays"], dtype=np.int64).reshape(todo.shape)
+        done = np.asarray(prev.tallies["rays"], dtype=np.int64).reshape(-1, todo.shape[1])
+        todo[: len(done)] -= done
     return np.maximum(todo, 0)
+
+
+def pilot_continues(pilot_plan: RunPlan, plan: RunPlan) -> bool:
+    """Whether the chosen plan can continue its pilot's tallies (``simulate``'s resume of a
+    prefix of realisations): the pilot's rays divide evenly among its realisations, so each
+    of them is exactly realisation r of the chosen run."""
+    k = pilot_plan.realisations
+    return pilot_plan.rays % k == 0 and plan.rays == (pilot_plan.rays // k) * plan.realisations
 
 
 def choose_realisations(plan: RunPlan, pilot) -> RunPlan:
@@ -163,7 +174,8 @@ def choose_realisations(plan: RunPlan, pilot) -> RunPlan:
     incidence's tile scatter below ``plan.realisation_target`` (``budget.realisations_needed``,
     at most ``plan.effort.max_realisations``), each traced with the pilot's rays per
     realisation. Realisations 0 … pilot−1 of the new plan are the pilot's (same surfaces, same
-    ray streams), traced again: the chosen run is exactly ``simulate`` with that count."""
+    ray streams): the runner continues the pilot's tallies (``pilot_continues``) rather than
+    tracing them again, and the chosen run is exactly ``simulate`` with that count."""
     need = realisations_needed(error_budget(pilot), plan.realisation_target)
     n = max(plan.realisations, min(need, plan.effort.max_realisations))
     return replace(plan, realisations=n, rays=(plan.rays // plan.realisations) * n, previous=None)
@@ -171,8 +183,9 @@ def choose_realisations(plan: RunPlan, pilot) -> RunPlan:
 
 def realisations_record(plan: RunPlan, pilot_plan: RunPlan, pilot, stage: str) -> dict:
     """``meta["run"]["realisations_auto"]``: the target, the pilot (realisations, rays per
-    incidence, error budget), and the realisations and rays chosen (``stage`` "pilot" while the
-    pilot is unfinished, then "final")."""
+    incidence, error budget, seconds, whether the chosen run continued its tallies), and the
+    realisations and rays chosen (``stage`` "pilot" while the pilot is unfinished, then
+    "final")."""
     return {
         "stage": stage,
         "target": plan.realisation_target,
@@ -180,6 +193,8 @@ def realisations_record(plan: RunPlan, pilot_plan: RunPlan, pilot, stage: str) -
         "pilot_realisations": pilot_plan.realisations,
         "pilot_rays": pilot_plan.rays,
         "pilot_budget": error_budget(pilot) if pilot is not None else None,
+        "pilot_seconds": pilot.meta.get("seconds") if pilot is not None else None,
+        "pilot_continued": pilot is not None and pilot_continues(pilot_plan, plan),
         "realisations": plan.realisations,
         "rays": plan.rays,
     }

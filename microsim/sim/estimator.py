@@ -177,7 +177,11 @@ def simulate(
     origins, isotropic; else a UsageError naming what differs) continues from the first block
     not yet done; the final tallies are bitwise identical to an uninterrupted run, because
     blocks are seeded by index and the raw running sums (``Result.tallies``) are stored
-    exactly. Returns a ``Result`` (BRDF in sr⁻¹).
+    exactly. ``resume`` may also be a run of the first k < R of this run's realisations
+    with the same rays per realisation (and everything else the same): its k realisations
+    are kept, the others traced — bitwise the run of R realisations (how the runner extends
+    the pilot of ``realisations = "auto"`` without tracing it again). Returns a ``Result``
+    (BRDF in sr⁻¹).
 
     ``bounces``: 1 (the default: single scattering, the paths above, results as before) or
     an int K in [2, ``bounces.MAX_BOUNCES``] or "all": each path goes on after a facet hit
@@ -234,6 +238,12 @@ def simulate(
         surfaces_meta = [None] * n_real
     else:
         tallies, done, surfaces_meta = _resume_state(resume, config, n_real, len(th))
+        extra = n_real - len(tallies)  # realisations the resumed run did not have
+        if extra:
+            classes = ledger_classes(bounces)
+            tallies += [[Tally.empty(nslot, classes) for _ in th] for _ in range(extra)]
+            done = np.vstack([done, np.zeros((extra, len(th)), dtype=np.int64)])
+            surfaces_meta += [None] * extra
     nblk = np.array([-(-n // BLOCK) for n in per_real], dtype=np.int64)
     done_before = done.copy()
     timings, build, interrupted = [], 0.0, False
@@ -468,20 +478,31 @@ def _resume_state(resume, config, n_real, n_th):
         resume.meta.get("bounces", 1),
     )
     old["block"] = resume.meta.get("block")
-    diff = [
-        f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in config if old[k] != config[k]
-    ]
+    diff = [k for k in config if old[k] != config[k]]
+    if set(diff) <= {"rays", "realisations"} and _is_prefix(old, config):
+        diff = []  # the first realisations of this run, each with this run's rays
     if diff:
-        raise UsageError("resume does not match this run's configuration: " + "; ".join(diff))
+        raise UsageError(
+            "resume does not match this run's configuration: "
+            + "; ".join(f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in diff)
+        )
     t = resume.tallies
     if "sum_pair" not in t:
         raise UsageError(
             "resume holds no pair tally (Result.tallies['sum_pair'], written by an "
             "older microsim): it cannot be continued"
         )
-    tallies = tallies_from_arrays(t, n_real, n_th)
-    metas = resume.meta.get("realisations") if n_real > 1 else [resume.meta.get("surface")]
-    return tallies, np.array(t["blocks"], dtype=np.int64), list(metas or [None] * n_real)
+    k = old["realisations"]
+    tallies = tallies_from_arrays(t, k, n_th)
+    metas = resume.meta.get("realisations") if k > 1 else [resume.meta.get("surface")]
+    return tallies, np.array(t["blocks"], dtype=np.int64), list(metas or [None] * k)
+
+
+def _is_prefix(old: dict, new: dict) -> bool:
+    """Whether run configuration ``old`` (k realisations) is the first k realisations of
+    ``new``: fewer realisations, every one with exactly the same rays (no remainder)."""
+    (k, n), (a, b) = (old["realisations"], new["realisations"]), (old["rays"], new["rays"])
+    return k < n and a % k == 0 and b % n == 0 and a // k == b // n
 
 
 def _check_same_surface(old: dict | None, new: dict, r: int) -> None:
