@@ -46,6 +46,7 @@ traces on one thread. One sweep at a time may write to an output directory (a lo
 from __future__ import annotations
 
 import csv
+import functools
 import hashlib
 import io
 import itertools
@@ -409,6 +410,15 @@ def _roughness(ndf) -> tuple[str, float | None]:
     return key, float(params[key])
 
 
+@functools.lru_cache(maxsize=2)
+def _task_surface(name: str, surface_json: str, seed: int):
+    """The surface of a task, kept for the next tasks of this process on the same surface
+    (its materials and incidences follow one another in ``expand_tasks``): ``simulate`` then
+    reuses the surface's tracer instead of building the surface and its BVH again."""
+    scene = _scene(name, json.loads(surface_json), None, f"task {name}")
+    return scene.build_surface(seed=seed)
+
+
 _WORKER = {"pool": False, "stop": False}  # in a local worker process: interrupted yet?
 
 
@@ -431,7 +441,7 @@ def run_task(task: Task, out_dir) -> dict:
 
     t0 = time.perf_counter()
     scene = _scene(task.scene, task.surface, task.ior, f"task {task.scene}")
-    surface = scene.build_surface(seed=task.seed)
+    surface = _task_surface(task.scene, json.dumps(task.surface, sort_keys=True), task.seed)
     bins = Bins(task.theta_bins, task.phi_bins)
     res = simulate(
         surface,
