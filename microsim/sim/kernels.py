@@ -45,6 +45,7 @@ __all__ = [
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
 SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = 0, 1, 2, 3, 4
 FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2  # ``_fresnel_weight``'s modes
+CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope bound × |wo_h|
 
 _compiled = njit(cache=True, nogil=True)
 
@@ -348,6 +349,108 @@ def tabled_primary(
         md32[m, 1] = wo32[f, 1]
         md32[m, 2] = wo32[f, 2]
         _setup_ray(m, x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, top)
+        keep[m] = m
+        mi[m] = i
+        m += 1
+    return m
+
+
+@_compiled
+def traced_primary(
+    hs,
+    prim,
+    px,
+    py,
+    pz,
+    wx,
+    wy,
+    wz,
+    nx,
+    ny,
+    nz,
+    lift,
+    n2,
+    k2,
+    fresnel_mode,
+    trace_masking,
+    clear_slope,
+    hx,
+    hy,
+    zmax,
+    eps,
+    rel,
+    status,
+    weight,
+    wox,
+    woy,
+    woz,
+    mi,
+    sx,
+    sy,
+    sz,
+    mdx,
+    mdy,
+    mdz,
+    md32,
+    o32,
+    tq,
+    keep,
+    top,
+):
+    """``tabled_primary`` for rays that each carry their own incident direction wl (``wx/wy/
+    wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n
+    (unit normal ``nx/ny/nz``, ``lift`` = n·v0 + eps), c = n·wl; back-facing (c ≤ 0):
+    RAY_UNRESOLVED, weight 0; else weight F(c) (``_fresnel_weight``) and the mirror direction
+    wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0, else SINGLE. With
+    ``trace_masking`` the SINGLE rays whose float32 wo rises more steeply than
+    ``clear_slope`` (× ``CLEAR_MARGIN`` as in ``Tracer.surely_escapes``; inf: none) or that
+    start at or above zmax escape without a ray, and the others get their masking ray set up
+    as the first segment of their walk, exactly as ``tabled_primary`` (float64 direction wo,
+    its float32 copy in ``md32``); returns the number of masking rays (0 without
+    ``trace_masking``: the caller decides masking itself)."""
+    m = 0
+    shared = len(wx) == 1
+    for i in range(len(hs)):
+        h = hs[i]
+        if h != HIT:
+            status[i] = RAY_MISSED if (h == MISSED or h == ESCAPED) else RAY_UNRESOLVED
+            weight[i] = 0.0
+            continue
+        f = prim[i]
+        k = 0 if shared else i
+        a, b, e = nx[f], ny[f], nz[f]
+        c = wx[k] * a + wy[k] * b + wz[k] * e
+        if not c > 0.0:  # back-facing: unresolved
+            status[i] = RAY_UNRESOLVED
+            weight[i] = 0.0
+            continue
+        weight[i] = _fresnel_weight(c, n2, k2, fresnel_mode)
+        ox = 2.0 * c * a - wx[k]
+        oy = 2.0 * c * b - wy[k]
+        oz = 2.0 * c * e - wz[k]
+        wox[i], woy[i], woz[i] = ox, oy, oz
+        if not oz > 0.0:
+            status[i] = DOWNWARD
+            continue
+        status[i] = SINGLE
+        if not trace_masking:
+            continue
+        fx, fy, fz = np.float32(ox), np.float32(oy), np.float32(oz)
+        gx, gy, gz = np.float64(fx), np.float64(fy), np.float64(fz)
+        if gz > CLEAR_MARGIN * clear_slope * math.sqrt(gx * gx + gy * gy):
+            continue  # rises more steeply than the surface can: escaped
+        off = px[i] * a + py[i] * b + pz[i] * e - lift[f]
+        x, y, z = px[i] - off * a, py[i] - off * b, pz[i] - off * e
+        if z >= zmax:  # nothing above: escaped
+            continue
+        if x < -hx or x >= hx:  # into the tile
+            x = (x + hx) % (2.0 * hx) - hx
+        if y < -hy or y >= hy:
+            y = (y + hy) % (2.0 * hy) - hy
+        sx[m], sy[m], sz[m] = x, y, z
+        mdx[m], mdy[m], mdz[m] = ox, oy, oz
+        md32[m, 0], md32[m, 1], md32[m, 2] = fx, fy, fz
+        _setup_ray(m, x, y, z, ox, oy, oz, hx, hy, zmax, eps, rel, o32, tq, top)
         keep[m] = m
         mi[m] = i
         m += 1

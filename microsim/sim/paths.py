@@ -423,59 +423,71 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     need, on per-axis columns. ``psi`` None: one shared direction −wi. ``psi`` (N,)
     (``azimuth_average`` surfaces): each ray is traced in its groove frame (wi rotated by −ψ)
     and binned there too — Δφ = φo − φi is unchanged by the rotation, so wo is located against
-    the rotated incident azimuth φi − ψ instead of being rotated back."""
+    the rotated incident azimuth φi − ψ instead of being rotated back. After the primary walk
+    one compiled pass (``kernels.traced_primary``: Fresnel in real arithmetic, mirror
+    direction, ledger class) sets up the masking rays (traced masking, ``profile`` None) or
+    leaves them to ``profile`` (exact V-groove masking)."""
     x = _columns(origins)
     n = len(x[0])
     if psi is None:
-        wl = [float(c) for c in wi]
-        down = [-c for c in wl]
+        wl = [np.array([float(c)]) for c in wi]
+        down = [-float(c[0]) for c in wl]
         hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32))
     else:
         cp, sp = np.cos(psi), np.sin(psi)
         wl = [cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], np.full(n, float(wi[2]))]
         down = [-c for c in wl]
         hs, prim, p = tracer.trace_columns(x, down, _stack32(down))
-    status = np.full(n, RAY_UNRESOLVED, dtype=np.int8)
-    status[(hs == MISSED) | (hs == ESCAPED)] = RAY_MISSED  # a falling ray cannot escape
-    weight = np.zeros(n)
-    where = np.full(n, -1, dtype=np.int64)
-    h = np.flatnonzero(hs == HIT)
-    pr = prim[h]
-    nc = [c[pr] for c in tracer.normal_columns]
-    wh = wl if psi is None else [c[h] for c in wl]
-    c = wh[0] * nc[0] + wh[1] * nc[1] + wh[2] * nc[2]
-    front = c > 0  # back-facing hits stay unresolved
-    if not front.all():
-        h, pr, c = h[front], pr[front], c[front]
-        nc = [a[front] for a in nc]
-        wh = wh if psi is None else [a[front] for a in wh]
-    weight[h] = fresnel_by_block(c, h, ior)
-    wo = [2.0 * c * nc[k] - wh[k] for k in range(3)]
-    up = wo[2] > 0
-    hu, pu = h, pr
-    if not up.all():
-        status[h[~up]] = DOWNWARD
-        hu, pu = h[up], pr[up]
-        wo, nc = [a[up] for a in wo], [a[up] for a in nc]
+    status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
+    wo = [work("traced-wo-" + a, n) for a in "xyz"]
+    mi = work("traced-ray", n, np.int64)  # the masking rays, this thread's
+    start = [work("traced-start-" + a, n) for a in "xyz"]
+    md = [work("traced-md-" + a, n) for a in "xyz"]
+    md32, o32 = work("traced-md32", (n, 3), np.float32), work("traced-o32", (n, 3), np.float32)
+    tq, keep = work("traced-tfar", n, np.float32), work("traced-keep", n, np.int64)
+    top = work("traced-top", n, np.bool_)
+    mode, n2, k2 = kernels.fresnel_mode(ior)
+    m = kernels.traced_primary(
+        hs,
+        prim,
+        *p,
+        *wl,
+        *tracer.normal_columns,
+        tracer.masking_lift,
+        n2,
+        k2,
+        mode,
+        profile is None,
+        tracer.rise_bound,
+        float(tracer.half[0]),
+        float(tracer.half[1]),
+        tracer.zmax,
+        tracer.eps,
+        TFAR_REL,
+        status,
+        weight,
+        *wo,
+        mi,
+        *start,
+        *md,
+        md32,
+        o32,
+        tq,
+        keep,
+        top,
+    )
     if profile is not None:
-        margin = profile.margin_columns(pu, p[0][hu], wo[0], wo[2])
+        hu = np.flatnonzero(status == SINGLE)
+        margin = profile.margin_columns(prim[hu], p[0][hu], wo[0][hu], wo[2][hu])
         status[hu] = np.where(margin > 0, MASKED, SINGLE)
-    else:
-        wo32 = _stack32(wo)
-        wt = [wo32[:, k].astype(np.float64) for k in range(3)]  # as traced
-        status[hu] = SINGLE  # escapes unless a masking ray decides otherwise
-        traced = ~tracer.surely_escapes(*wt)
-        ht, pt, nt = hu[traced], pu[traced], [a[traced] for a in nc]
-        ph = [a[ht] for a in p]
-        off = ph[0] * nt[0] + ph[1] * nt[1] + ph[2] * nt[2] - tracer.masking_lift[pt]
-        start = [ph[k] - off * nt[k] for k in range(3)]
-        status[ht] = _FROM_ESCAPE[
-            tracer.escape_columns(start, [a[traced] for a in wo], wo32[traced])
-        ]
-    single = status[hu] == SINGLE
-    hs_ = hu[single]
+    elif m:
+        esc = tracer.escape_columns(
+            [c[:m] for c in start], [c[:m] for c in md], md32[:m], first=(o32, tq, keep, top)
+        )
+        kernels.apply_escape(status, mi[:m], esc, _FROM_ESCAPE)
+    single = np.flatnonzero(status == SINGLE)
     ws = np.stack([a[single] for a in wo], axis=1)
-    where[hs_] = bins.locate(ws, phi_i if psi is None else phi_i - np.degrees(psi[hs_]))
+    where[single] = bins.locate(ws, phi_i if psi is None else phi_i - np.degrees(psi[single]))
     return status, weight, where
 
 

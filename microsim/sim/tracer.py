@@ -72,7 +72,7 @@ BLOCKED = HIT  # an occlusion ray that met the surface
 MAX_TRACED_DEG = 89.5  # rays up to this polar angle are always resolved (wrap cap)
 BASE_WRAPS = 64
 TFAR_REL = 4e-7  # a segment is traced a hair beyond its exit (float32 rounding)
-CLEAR_MARGIN = 1.0 + 1e-6  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
+CLEAR_MARGIN = kernels.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
 
 
 @dataclass(frozen=True)
