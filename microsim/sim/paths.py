@@ -352,6 +352,54 @@ def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_tot
     return not azimuth and not rotate and profile is None and len(tracer.faces) <= n_total
 
 
+@dataclass(frozen=True)
+class MaskingRays:
+    """The masking rays a compiled pass sets up (``kernels.tabled_primary``/``traced_primary``),
+    in this thread's work arrays: primary ray ``ray[m]`` of masking ray m, its start and
+    direction columns (``start``, ``d``; float32 ``d32``) and the first segment's Embree input
+    (``o32``, ``tfar``, ``keep``, ``top``)."""
+
+    ray: np.ndarray
+    start: list
+    d: list
+    d32: np.ndarray
+    o32: np.ndarray
+    tfar: np.ndarray
+    keep: np.ndarray
+    top: np.ndarray
+
+    @classmethod
+    def work(cls, n: int) -> "MaskingRays":
+        return cls(
+            work("masking-ray", n, np.int64),
+            [work("masking-start-" + a, n) for a in "xyz"],
+            [work("masking-d-" + a, n) for a in "xyz"],
+            work("masking-d32", (n, 3), np.float32),
+            work("masking-o32", (n, 3), np.float32),
+            work("masking-tfar", n, np.float32),
+            work("masking-keep", n, np.int64),
+            work("masking-top", n, np.bool_),
+        )
+
+    def kernel_args(self) -> tuple:
+        """The arrays in the kernels' argument order (mi, sx…sz, mdx…mdz, md32, o32, tq,
+        keep, top)."""
+        return (self.ray, *self.start, *self.d, self.d32, self.o32, self.tfar, self.keep, self.top)
+
+    def trace(self, tracer: Tracer, m: int, status: np.ndarray) -> None:
+        """Walk the first ``m`` masking rays (``Tracer.escape_columns``) and set the ledger
+        class of their primary rays in ``status``."""
+        if m == 0:
+            return
+        esc = tracer.escape_columns(
+            [c[:m] for c in self.start],
+            [c[:m] for c in self.d],
+            self.d32[:m],
+            first=(self.o32, self.tfar, self.keep, self.top),
+        )
+        kernels.apply_escape(status, self.ray[:m], esc, _FROM_ESCAPE)
+
+
 def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
     """(status, weight, bin) per primary ray, looked up per hit facet in ``table`` (the fast
     path for surfaces without azimuth averaging: only the two ray casts are per ray, the rest
@@ -362,12 +410,7 @@ def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
     hs, prim, p = tracer.trace_columns(x, [float(-c) for c in wi], (-wi).astype(np.float32)[None])
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
     where = np.empty(n, dtype=np.int64)
-    mi = work("tabled-ray", n, np.int64)  # the masking rays, this thread's
-    start = [work("tabled-start-" + a, n) for a in "xyz"]
-    wo = [work("tabled-wo-" + a, n) for a in "xyz"]
-    wo32, o32 = work("tabled-wo32", (n, 3), np.float32), work("tabled-o32", (n, 3), np.float32)
-    tq, keep = work("tabled-tfar", n, np.float32), work("tabled-keep", n, np.int64)
-    top = work("tabled-top", n, np.bool_)
+    mask = MaskingRays.work(n)
     m = kernels.tabled_primary(
         hs,
         prim,
@@ -387,19 +430,9 @@ def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
         status,
         weight,
         where,
-        mi,
-        *start,
-        *wo,
-        wo32,
-        o32,
-        tq,
-        keep,
-        top,
+        *mask.kernel_args(),
     )
-    esc = tracer.escape_columns(
-        [c[:m] for c in start], [c[:m] for c in wo], wo32[:m], first=(o32, tq, keep, top)
-    )
-    kernels.apply_escape(status, mi[:m], esc, _FROM_ESCAPE)
+    mask.trace(tracer, m, status)
     return status, weight, where
 
 
@@ -440,12 +473,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         hs, prim, p = tracer.trace_columns(x, down, _stack32(down))
     status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
     wo = [work("traced-wo-" + a, n) for a in "xyz"]
-    mi = work("traced-ray", n, np.int64)  # the masking rays, this thread's
-    start = [work("traced-start-" + a, n) for a in "xyz"]
-    md = [work("traced-md-" + a, n) for a in "xyz"]
-    md32, o32 = work("traced-md32", (n, 3), np.float32), work("traced-o32", (n, 3), np.float32)
-    tq, keep = work("traced-tfar", n, np.float32), work("traced-keep", n, np.int64)
-    top = work("traced-top", n, np.bool_)
+    mask = MaskingRays.work(n)
     mode, n2, k2 = kernels.fresnel_mode(ior)
     m = kernels.traced_primary(
         hs,
@@ -467,24 +495,14 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         status,
         weight,
         *wo,
-        mi,
-        *start,
-        *md,
-        md32,
-        o32,
-        tq,
-        keep,
-        top,
+        *mask.kernel_args(),
     )
     if profile is not None:
         hu = np.flatnonzero(status == SINGLE)
         margin = profile.margin_columns(prim[hu], p[0][hu], wo[0][hu], wo[2][hu])
         status[hu] = np.where(margin > 0, MASKED, SINGLE)
-    elif m:
-        esc = tracer.escape_columns(
-            [c[:m] for c in start], [c[:m] for c in md], md32[:m], first=(o32, tq, keep, top)
-        )
-        kernels.apply_escape(status, mi[:m], esc, _FROM_ESCAPE)
+    else:
+        mask.trace(tracer, m, status)
     single = np.flatnonzero(status == SINGLE)
     ws = np.stack([a[single] for a in wo], axis=1)
     where[single] = bins.locate(ws, phi_i if psi is None else phi_i - np.degrees(psi[single]))
