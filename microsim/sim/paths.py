@@ -352,6 +352,11 @@ def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_tot
     return not azimuth and not rotate and profile is None and len(tracer.faces) <= n_total
 
 
+def _segment_geometry(tracer: Tracer) -> tuple:
+    """(hx, hy, zmax, eps, rel): what ``kernels._setup_ray`` needs of the tile."""
+    return float(tracer.half[0]), float(tracer.half[1]), tracer.zmax, tracer.eps, TFAR_REL
+
+
 @dataclass(frozen=True)
 class MaskingRays:
     """The masking rays a compiled pass sets up (``kernels.tabled_primary``/``traced_primary``),
@@ -422,11 +427,7 @@ def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
         table.wo32,
         table.bin,
         table.clear,
-        float(tracer.half[0]),
-        float(tracer.half[1]),
-        tracer.zmax,
-        tracer.eps,
-        TFAR_REL,
+        *_segment_geometry(tracer),
         status,
         weight,
         where,
@@ -487,11 +488,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         mode,
         profile is None,
         tracer.rise_bound,
-        float(tracer.half[0]),
-        float(tracer.half[1]),
-        tracer.zmax,
-        tracer.eps,
-        TFAR_REL,
+        *_segment_geometry(tracer),
         status,
         weight,
         *wo,
