@@ -4,9 +4,10 @@ For a fixed mesh and ray set — a periodic Gaussian heightfield (the gaussian-m
 surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2° θ bins — it reports
 
 * raw embreex rays/s on 1 and 2 threads for exactly the rays the pipeline casts: every
-  primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit whose
-  mirror direction is not steeper than the heightfield's steepest facet (those escape
-  without a ray, ``Tracer.rise_bound``: 70 % of them here), in batches
+  primary ray (closest hit) and the masking ray (occlusion) of every lit facet hit that is
+  not cleared without tracing (mirror directions steeper than the heightfield's steepest
+  facet, ``Tracer.rise_bound``: 70 % of them here; then the coarse grid of cell maxima,
+  ``Tracer.clears_horizon``), in batches
   of 65 536 (float32 arrays prepared beforehand, so only Embree is timed);
 * the same rays traced in coherent Embree packets (``microsim.sim.embree_packets``: the
   Embree 4 library embreex bundles, called at its native packet width through ctypes), rays/s
@@ -123,6 +124,8 @@ def _ray_set(tracer, wi: np.ndarray, rays: int):
     lit = h[(table.code[prim[h]] == SINGLE) & ~table.clear[prim[h]]]  # as the pipeline
     mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
     md = table.wo32[prim[lit]]
+    traced = ~tracer.clears_horizon(mo, md.astype(np.float64))
+    mo, md = mo[traced], md[traced]
     return (
         (o.astype(np.float32), (-wi).astype(np.float32)[None]),
         (mo.astype(np.float32), md.astype(np.float32)),

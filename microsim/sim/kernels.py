@@ -266,6 +266,100 @@ def segment_finish(
 
 
 @_compiled
+def fill_horizon(vx, vy, vz, faces, slope, x0, y0, cw, ch, cmax, cslope):
+    """The coarse bounds of ``horizon_clear``: for every facet (vertex columns ``vx/vy/vz``,
+    ``faces``, facet slope ``slope`` = |∇h|), every cell of the (ny, nx) grid of cells
+    cw × ch from (x0, y0) that its bounding box overlaps gets the facet's highest vertex in
+    ``cmax`` and its slope in ``cslope`` (running maxima; start from −inf and 0)."""
+    ny, nx = cmax.shape
+    for f in range(len(faces)):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        i0 = max(int(math.floor((min(vx[a], vx[b], vx[c]) - x0) / cw)), 0)
+        i1 = min(int(math.floor((max(vx[a], vx[b], vx[c]) - x0) / cw)), nx - 1)
+        j0 = max(int(math.floor((min(vy[a], vy[b], vy[c]) - y0) / ch)), 0)
+        j1 = min(int(math.floor((max(vy[a], vy[b], vy[c]) - y0) / ch)), ny - 1)
+        top = max(vz[a], vz[b], vz[c])
+        for j in range(j0, j1 + 1):
+            for i in range(i0, i1 + 1):
+                cmax[j, i] = max(cmax[j, i], top)
+                cslope[j, i] = max(cslope[j, i], slope[f])
+
+
+@_compiled
+def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
+    """Whether a ray from (x, y, z) on a periodic heightfield (at or just above it), rising
+    along (dx, dy, dz), surely clears the surface before it rises above ``zmax``, decided on
+    a coarse grid of cells (``fill_horizon``: highest vertex ``cmax`` and steepest facet
+    ``cslope`` of the facets overlapping each cell) without tracing it. The ray's height
+    z + s·cot (s horizontal distance, cot = dz/|d_h|) is followed cell by cell (2-D DDA,
+    indices wrapped) up to s = (zmax − z)/cot; a cell is cleared when the ray enters it above
+    the cell's highest vertex (+ ``tol``), or when it stays above the Lipschitz bound
+    h(p) ≤ z + Σ cslope·(run in each cell so far) at the cell's entry and exit (in the first
+    cell, where the ray starts on the surface: cot > cslope). Any doubt — a cell fails, or
+    more than 64 cells — returns False (the ray is traced)."""
+    if dz <= 0.0:
+        return False
+    h = math.sqrt(dx * dx + dy * dy)
+    if h == 0.0:
+        return True
+    cot = dz / h
+    s_end = (zmax + tol - z) / cot
+    if s_end <= 0.0:
+        return True
+    ny, nx = cmax.shape
+    ux, uy = dx / h, dy / h
+    gx, gy = (x - x0) / cw, (y - y0) / ch
+    ix, iy = int(math.floor(gx)), int(math.floor(gy))
+    tx, dtx, sx = math.inf, math.inf, 0
+    if ux > 0.0:
+        tx, dtx, sx = (ix + 1 - gx) * cw / ux, cw / ux, 1
+    elif ux < 0.0:
+        tx, dtx, sx = (gx - ix) * cw / -ux, cw / -ux, -1
+    ty, dty, sy = math.inf, math.inf, 0
+    if uy > 0.0:
+        ty, dty, sy = (iy + 1 - gy) * ch / uy, ch / uy, 1
+    elif uy < 0.0:
+        ty, dty, sy = (gy - iy) * ch / -uy, ch / -uy, -1
+    s_in, bound = 0.0, z
+    for step in range(64):
+        cx, cy = ix % nx, iy % ny
+        s_out = min(tx, ty, s_end)
+        slope = cslope[cy, cx] * CLEAR_MARGIN
+        z_in = z + cot * s_in
+        if z_in <= cmax[cy, cx] + tol:  # the cell may reach the ray: Lipschitz chain
+            if step == 0:
+                if not cot > slope:
+                    return False
+            elif not (
+                z_in - tol > bound and z + cot * s_out - tol > bound + slope * (s_out - s_in)
+            ):
+                return False
+        bound += slope * (s_out - s_in)
+        if s_out >= s_end:
+            return True
+        if tx < ty:
+            ix += sx
+            s_in = tx
+            tx += dtx
+        else:
+            iy += sy
+            s_in = ty
+            ty += dty
+    return False
+
+
+@_compiled
+def horizon_clear_all(px, py, pz, dx, dy, dz, hz, zmax, out):
+    """``horizon_clear`` for rays from (px, py, pz)[i] (in the tile) along (dx, dy, dz)[i]
+    on the grid ``hz`` (x0, y0, cw, ch, cmax, cslope, tol); writes ``out``."""
+    for i in range(len(px)):
+        out[i] = horizon_clear(
+            px[i], py[i], pz[i], dx[i], dy[i], dz[i], hz[0], hz[1], hz[2], hz[3], hz[4], hz[5],
+            zmax, hz[6],
+        )
+
+
+@_compiled
 def tabled_primary(
     hs,
     prim,
@@ -281,6 +375,7 @@ def tabled_primary(
     wo32,
     fbin,
     fclear,
+    hz,
     hx,
     hy,
     zmax,
@@ -306,7 +401,8 @@ def tabled_primary(
     per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
     ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
     bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the masking rays of
-    the other lit ones (code SINGLE), set up as the first
+    the other lit ones (code SINGLE) that the coarse grid ``hz`` (``horizon_clear``'s
+    x0, y0, cw, ch, cmax, cslope, tol) cannot clear, set up as the first
     segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
     ray ``mi[m]`` starts at its hit point p moved along n onto the facet plane and eps above
     it, p − (p·n − lift)·n, wrapped into the tile (``sx/sy/sz``), along the facet's mirror
@@ -343,6 +439,10 @@ def tabled_primary(
             x = (x + hx) % (2.0 * hx) - hx
         if y < -hy or y >= hy:
             y = (y + hy) % (2.0 * hy) - hy
+        if horizon_clear(
+            x, y, z, dx, dy, dz, hz[0], hz[1], hz[2], hz[3], hz[4], hz[5], zmax, hz[6]
+        ):
+            continue  # clears the coarse grid: escaped
         sx[m], sy[m], sz[m] = x, y, z
         mdx[m], mdy[m], mdz[m] = dx, dy, dz
         md32[m, 0] = wo32[f, 0]
@@ -374,6 +474,7 @@ def traced_primary(
     fresnel_mode,
     trace_masking,
     clear_slope,
+    hz,
     hx,
     hy,
     zmax,
@@ -403,8 +504,9 @@ def traced_primary(
     RAY_UNRESOLVED, weight 0; else weight F(c) (``_fresnel_weight``) and the mirror direction
     wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0, else SINGLE. With
     ``trace_masking`` the SINGLE rays whose float32 wo rises more steeply than
-    ``clear_slope`` (× ``CLEAR_MARGIN`` as in ``Tracer.surely_escapes``; inf: none) or that
-    start at or above zmax escape without a ray, and the others get their masking ray set up
+    ``clear_slope`` (× ``CLEAR_MARGIN`` as in ``Tracer.surely_escapes``; inf: none), that
+    start at or above zmax or that clear the coarse grid ``hz`` (``horizon_clear``) escape
+    without a ray, and the others get their masking ray set up
     as the first segment of their walk, exactly as ``tabled_primary`` (float64 direction wo,
     its float32 copy in ``md32``); returns the number of masking rays (0 without
     ``trace_masking``: the caller decides masking itself)."""
@@ -449,6 +551,10 @@ def traced_primary(
             x = (x + hx) % (2.0 * hx) - hx
         if y < -hy or y >= hy:
             y = (y + hy) % (2.0 * hy) - hy
+        if horizon_clear(
+            x, y, z, ox, oy, oz, hz[0], hz[1], hz[2], hz[3], hz[4], hz[5], zmax, hz[6]
+        ):
+            continue  # clears the coarse grid: escaped
         sx[m], sy[m], sz[m] = x, y, z
         mdx[m], mdy[m], mdz[m] = ox, oy, oz
         md32[m, 0], md32[m, 1], md32[m, 2] = fx, fy, fz

@@ -72,6 +72,7 @@ BLOCKED = HIT  # an occlusion ray that met the surface
 MAX_TRACED_DEG = 89.5  # rays up to this polar angle are always resolved (wrap cap)
 BASE_WRAPS = 64
 TFAR_REL = 4e-7  # a segment is traced a hair beyond its exit (float32 rounding)
+HORIZON_FACETS = 32  # facets per cell of the coarse grid of ``Tracer.horizon``
 CLEAR_MARGIN = kernels.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
 
 
@@ -157,7 +158,9 @@ class Tracer:
     and ``max_wraps`` (tile crossings per ray before it counts as unresolved: 64 plus enough
     for a ray 89.5° from the normal to cross the whole height range), ``rise_bound`` (the
     steepest facet slope of a heightfield, inf otherwise: masking rays steeper than it are
-    not traced, ``surely_escapes``).
+    not traced, ``surely_escapes``), ``horizon`` (a coarse grid of cell maxima on which the
+    other masking rays of a heightfield are cleared without tracing when they can be,
+    ``clears_horizon``).
 
     ``backend``: "embreex" (the default and reference), "auto" (packets when
     ``embree_packets`` can bind the library, else embreex) or "packets" (UsageError when
@@ -201,6 +204,7 @@ class Tracer:
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
         self.rise_bound = rise_bound(surface, self.normals)
+        self.horizon = self._horizon_grid(lx, ly)
         reason = None if backend == "embreex" else embree_packets.binding_error()
         if backend == "packets" and reason is not None:
             raise UsageError(f"backend='packets' is unavailable here: {reason}")
@@ -436,6 +440,34 @@ class Tracer:
         """Occlusion status of rays given as per-axis columns (see ``_walk_columns``, also for
         ``first``); the starts ``x`` must already be offset from the surface."""
         return self._walk_columns(x, d, d32, occlusion=True, first=first)[0]
+
+    def _horizon_grid(self, lx: float, ly: float) -> tuple:
+        """``kernels.horizon_clear``'s coarse grid of a heightfield (finite ``rise_bound``):
+        (x0, y0, cw, ch, cmax, cslope, tol), cells of ~``HORIZON_FACETS`` facets (highest
+        vertex, steepest facet of those overlapping each), tol = 4 eps (float32 rays); for
+        other meshes a 1 × 1 grid that clears nothing."""
+        if not math.isfinite(self.rise_bound):
+            return (0.0, 0.0, 1.0, 1.0, np.full((1, 1), np.inf), np.full((1, 1), np.inf), 0.0)
+        cells = len(self.faces) / HORIZON_FACETS
+        nx = int(np.clip(round(math.sqrt(cells * lx / ly)), 1, 1024))
+        ny = int(np.clip(round(math.sqrt(cells * ly / lx)), 1, 1024))
+        cmax, cslope = np.full((ny, nx), -np.inf), np.zeros((ny, nx))
+        n, v = self.normals, self.vertices
+        slope = np.hypot(n[:, 0], n[:, 1]) / n[:, 2]
+        x0, y0, cw, ch = -lx / 2, -ly / 2, lx / nx, ly / ny
+        cols = [np.ascontiguousarray(v[:, k]) for k in range(3)]
+        kernels.fill_horizon(*cols, self.faces, slope, x0, y0, cw, ch, cmax, cslope)
+        return (x0, y0, cw, ch, cmax, cslope, 4.0 * self.eps)
+
+    def clears_horizon(self, points: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """Whether rays from surface ``points`` (N, 3) (inside the tile, at or just above
+        the surface) along ``dirs`` (N, 3) surely clear the surface by the coarse grid
+        (``kernels.horizon_clear``), (N,) bool; always False off heightfields."""
+        p = [np.ascontiguousarray(points[:, k], dtype=np.float64) for k in range(3)]
+        d = [np.ascontiguousarray(dirs[:, k], dtype=np.float64) for k in range(3)]
+        out = np.empty(len(p[0]), dtype=np.bool_)
+        kernels.horizon_clear_all(*p, *d, self.horizon, self.zmax, out)
+        return out
 
     def surely_escapes(self, dx, dy, dz) -> np.ndarray:
         """Whether a ray leaving the surface along (dx, dy, dz) (columns or scalars) cannot
