@@ -156,6 +156,17 @@ def test_rise_bound_is_the_steepest_facet_slope_of_heightfields_only():
     assert not Tracer(other).surely_escapes(0.0, 0.0, 1.0)
 
 
+def _surface_points(tr, n: int, seed: int):
+    """Points on the tracer's surface (first hits of n vertical rays from random positions)
+    with their facet normals, and the random generator that placed them."""
+    rng = np.random.default_rng(seed)
+    lx, ly = tr.tile
+    xy = rng.uniform(-0.5, 0.5, (n, 2)) * [lx, ly]
+    hits = tr.first_hit(np.column_stack([xy, np.full(n, tr.zmax + 1)]), np.array([0, 0, -1.0]))
+    ok = hits.status == HIT
+    return hits.point[ok], hits.normal[ok], rng
+
+
 def test_rays_steeper_than_the_rise_bound_are_never_blocked():
     """From points on a rough heightfield (σ/ℓ = 0.3, slopes up to ~1.5), rays rising more
     steeply than the bound all escape when traced; rays just below it are sometimes blocked
@@ -164,14 +175,7 @@ def test_rays_steeper_than_the_rise_bound_are_never_blocked():
 
     tr = Tracer(gaussian(96, 1.0, 2.4, 8.0, seed=5))
     L = tr.rise_bound
-    rng = np.random.default_rng(0)
-    n = 40_000
-    hits = tr.first_hit(
-        np.column_stack([rng.uniform(-48, 48, (n, 2)), np.full(n, tr.zmax + 1)]),
-        np.array([0.0, 0.0, -1.0]),
-    )
-    ok = hits.status == HIT
-    p, nrm = hits.point[ok], hits.normal[ok]
+    p, nrm, rng = _surface_points(tr, 40_000, seed=0)
     m = len(p)
     phi = rng.uniform(0, 2 * np.pi, m)
 
@@ -217,14 +221,7 @@ def test_rays_cleared_by_the_coarse_grid_are_never_blocked():
 
     tr = Tracer(gaussian(128, 1.0, 2.0, 8.0, seed=7))
     L = tr.rise_bound
-    rng = np.random.default_rng(3)
-    n = 60_000
-    hits = tr.first_hit(
-        np.column_stack([rng.uniform(-64, 64, (n, 2)), np.full(n, tr.zmax + 1)]),
-        np.array([0.0, 0.0, -1.0]),
-    )
-    ok = hits.status == HIT
-    p, nrm = hits.point[ok], hits.normal[ok]
+    p, nrm, rng = _surface_points(tr, 60_000, seed=3)
     phi = rng.uniform(0, 2 * np.pi, len(p))
     d = np.column_stack([np.cos(phi), np.sin(phi), L * rng.uniform(0.05, 0.99, len(p))])
     d /= np.linalg.norm(d, axis=1)[:, None]

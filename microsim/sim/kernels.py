@@ -354,8 +354,20 @@ def horizon_clear_all(px, py, pz, dx, dy, dz, hz, zmax, out):
     on the grid ``hz`` (x0, y0, cw, ch, cmax, cslope, tol); writes ``out``."""
     for i in range(len(px)):
         out[i] = horizon_clear(
-            px[i], py[i], pz[i], dx[i], dy[i], dz[i], hz[0], hz[1], hz[2], hz[3], hz[4], hz[5],
-            zmax, hz[6],
+            px[i],
+            py[i],
+            pz[i],
+            dx[i],
+            dy[i],
+            dz[i],
+            hz[0],
+            hz[1],
+            hz[2],
+            hz[3],
+            hz[4],
+            hz[5],
+            zmax,
+            hz[6],
         )
 
 
