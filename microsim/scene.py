@@ -170,9 +170,14 @@ def _vgroove_ndf(p):
     return make_ndf(p["ndf"], {k: p[k] for k in NDF_PARAMS[p["ndf"]]})
 
 
+def scaled_grid(n: int, scale: float) -> int:
+    """Grid points per side of a heightfield of ``n`` built at surface scale ``scale``."""
+    return max(8, round(n * scale))
+
+
 def _heightfield(generator) -> Callable:
     def build(p, seed, scale, base):
-        return generator(seed=seed, **{**p, "n": max(8, round(p["n"] * scale))})
+        return generator(seed=seed, **{**p, "n": scaled_grid(p["n"], scale)})
 
     return build
 

@@ -139,8 +139,10 @@ def verdict_document(
         },
     }
     present = {v["model"] for v in verdicts}
+    judged = {v["model"].replace("-", "_") for v in (wave or {}).get("verdicts", [])}
+    suffix = "; judged against Kirchhoff under Wave optics"
     doc["outside_domain"] = {
-        m: OUTSIDE_DOMAIN[m] + ("; judged against Kirchhoff under Wave optics" if wave else "")
+        m: OUTSIDE_DOMAIN[m] + (suffix if m in judged else "")
         for m in OUTSIDE_DOMAIN
         if m in present
     }

@@ -39,7 +39,7 @@ import numpy as np
 from ..analysis.wave_verdicts import wave_verdicts_for_result
 from ..analytic.fresnel import fresnel
 from ..errors import UsageError
-from ..scene import MIN_TILE_WAVELENGTHS
+from ..scene import MIN_TILE_WAVELENGTHS, scaled_grid
 from ..wave import kirchhoff_brdf
 from ..wave.kirchhoff import (
     fourier_upsample,
@@ -80,7 +80,7 @@ def check_wave_plan(scene, scale: float, seed: int, realisations: int, theta_i) 
         return
     where, lam = _where(scene), w.wavelength
     p = scene.surface.params
-    n = max(8, round(p["n"] * scale))
+    n = scaled_grid(p["n"], scale)
     tile = n * p["dx"]
     if tile < MIN_TILE_WAVELENGTHS * lam:
         raise UsageError(
@@ -93,7 +93,7 @@ def check_wave_plan(scene, scale: float, seed: int, realisations: int, theta_i) 
     k = 2.0 * math.pi / lam
     u = w.upsample
     step = p["dx"] / u
-    for r in range(realisations):
+    for r in range(min(int(realisations), MAX_WAVE_REALISATIONS)):  # the tiles solved
         with warnings.catch_warnings():  # the generator's notes go to meta.json with the run
             warnings.simplefilter("ignore", UserWarning)
             surface = scene.build_surface(seed=seed + r, scale=scale)
