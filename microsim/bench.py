@@ -110,25 +110,20 @@ def _bins():
 
 def _ray_set(tracer, wi: np.ndarray, rays: int):
     """float32 (origins, directions) of the primary rays (one shared direction) and of the
-    masking rays the pipeline casts for them (same origins, offsets and directions; none for
-    facets whose rays surely escape, ``FacetTable.clear``)."""
+    masking rays the pipeline casts for them: set up by the pipeline's own compiled pass
+    (``paths.tabled_masking_rays``: its starts, offsets and directions, none for the rays it
+    clears without tracing)."""
     from microsim.analytic.fresnel import resolve_material
-    from microsim.sim.paths import SINGLE, facet_table
+    from microsim.sim.paths import facet_table, tabled_masking_rays
     from microsim.sim.streams import BLOCK, block_origins
 
     nblk = -(-rays // BLOCK)
     o = np.concatenate([block_origins(tracer, rays, b, (0, 0, 0), False)[0] for b in range(nblk)])
-    status, prim, point = tracer.trace(o, -wi)
-    h = np.flatnonzero(status == 0)
     table = facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
-    lit = h[(table.code[prim[h]] == SINGLE) & ~table.clear[prim[h]]]  # as the pipeline
-    mo = tracer.on_plane(prim[lit], point[lit], tracer.eps)
-    md = table.wo32[prim[lit]]
-    traced = ~tracer.clears_horizon(mo, md.astype(np.float64))
-    mo, md = mo[traced], md[traced]
+    *_, mask, m = tabled_masking_rays(tracer, table, wi, o)
     return (
         (o.astype(np.float32), (-wi).astype(np.float32)[None]),
-        (mo.astype(np.float32), md.astype(np.float32)),
+        (mask.o32[:m].copy(), mask.d32[:m].copy()),
     )
 
 
@@ -346,8 +341,9 @@ def time_to_accuracy(
     cfg: BenchConfig = BenchConfig(), threads: int = 2, masking: str = ACCURACY_MASKING
 ) -> dict:
     """Seconds and rays ``simulate_auto`` needs on the V-groove Beckmann m = 0.3 scene
-    (aluminium, θi = 30°, Bins(45, 91): 2° bins, ``masking="analytic"``: the exact analytic
-    V-groove path, no Embree) to reach ``cfg.target`` relative standard error, and its rays/s
+    (aluminium, θi = 30°, Bins(45, 91): 2° bins; ``masking``: "analytic", the exact analytic
+    V-groove path with no Embree, or "traced") to reach ``cfg.target`` relative standard
+    error, and its rays/s
     (scene builds included); also the achieved rel. RMS error against the exact closed form
     (bin-averaged Torrance–Sparrow with V-groove G) and its χ²/dof."""
     from microsim import analytic as an

@@ -24,6 +24,7 @@ __all__ = [
     "chi2_sf",
     "t_sf",
     "t_isf",
+    "norm_sf",
     "norm_isf",
 ]
 
@@ -69,6 +70,11 @@ def chi2_sf(x, dof):
 def t_sf(x, dof):
     """P(T_dof ≥ x), Student's t (``scipy.stats.t.sf``)."""
     return special.stdtr(dof, -np.asarray(x, dtype=np.float64))
+
+
+def norm_sf(x):
+    """P(Z ≥ x) for a standard normal Z (``scipy.stats.norm.sf``)."""
+    return special.ndtr(-np.asarray(x, dtype=np.float64))
 
 
 def t_isf(q, dof):

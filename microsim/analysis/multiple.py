@@ -80,7 +80,6 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from scipy import stats
 
 from microsim.analytic import GGX, Beckmann
 from microsim.analytic.brdf import AlbedoTable
@@ -94,8 +93,11 @@ from microsim.analytic.fresnel import resolve_material
 from microsim.analytic.random_walk import walk_alpha, walk_bin_averages
 from microsim.atomic import atomic_open
 from microsim.errors import UsageError
+from microsim.sim.bounces import MAX_BOUNCES, ORDER_NAMES
 from microsim.sim.compare import realised_m
-from microsim.stats import MIN_EVENTS, energy_set, sidak
+from microsim.sim.paths import LEDGER
+from microsim.sim.tallies import terminal_ledger
+from microsim.stats import MIN_EVENTS, energy_set, norm_isf, norm_sf, sidak, t_isf, t_sf
 
 from .charts import DPI, SIM_COLOUR, model_colour
 from .verdicts import verdict
@@ -114,9 +116,9 @@ __all__ = [
 
 MODELS = ("random-walk", "kulla-conty", "mikkelsen-eq28")
 """Models of the multiply scattered light judged per θi (module docstring)."""
-ORDER_LABELS = ("1", "2", "3", "4+")
+ORDER_LABELS = ORDER_NAMES
 """Order slots of ``Result.brdf_orders`` (``sim.bounces.ORDER_NAMES``)."""
-_N_LEDGER = 5  # first-bounce ledger columns before the terminal ones in tallies["led_f"]
+_N_LEDGER = len(LEDGER)  # first-bounce ledger columns before the terminal ones in led_f
 
 
 def realised_ndf(surfaces: Sequence) -> Beckmann:
@@ -135,9 +137,9 @@ def _walk_limit(result) -> int:
     1 … K reflections are tallied and the paths that reflect a (K + 1)-th time are cut, as the
     simulation cuts paths still inside after K bounces (the cut *weight* of a metal then carries
     one more Fresnel factor in the walk: only the cut/absorbed split differs). "all": the
-    simulation's ``meta["max_bounces"]`` (256) + 1."""
+    simulation's ``meta["max_bounces"]`` (``MAX_BOUNCES``) + 1."""
     b = result.meta.get("bounces", "all")
-    return (int(result.meta.get("max_bounces", 256)) if b == "all" else int(b)) + 1
+    return (int(result.meta.get("max_bounces", MAX_BOUNCES)) if b == "all" else int(b)) + 1
 
 
 def _check_result(result):
@@ -200,7 +202,7 @@ def _sim_energies(result, t):
     ms = float(E[1:].sum())
     rows = _realisation_rows(result, t)
     tal = result.tallies or {}
-    led_f, rays_r = tal.get("led_f"), tal.get("rays")
+    led_n, led_f, rays_r = tal.get("led_n"), tal.get("led_f"), tal.get("rays")
     extra = {}
     led = result.ledger
     extra["absorbed"] = [float(led["absorbed_energy"][t]), None]
@@ -212,12 +214,14 @@ def _sim_energies(result, t):
         R = len(rows)
         se = e_r.std(axis=1, ddof=1) / np.sqrt(R)
         ms_se = float(e_r[1:].sum(axis=0).std(ddof=1) / np.sqrt(R))
-        if led_f is not None and rays_r is not None:
-            lf = led_f[rows, t, _N_LEDGER:] / rays_r[rows, t, None]  # (R, 8)
+        if led_n is not None and led_f is not None and rays_r is not None:
+            term = terminal_ledger(
+                led_n[rows, t, _N_LEDGER:], led_f[rows, t, _N_LEDGER:], rays_r[rows, t]
+            )
             per = {
-                "absorbed": 1.0 - lf.sum(axis=1),
-                "cut": lf[:, 4:6].sum(axis=1),
-                "lost": lf[:, 6:8].sum(axis=1),
+                "absorbed": term["absorbed_energy"],
+                "cut": term["cut_energy"],
+                "lost": term["unresolved_path_energy"] + term["missed_path_energy"],
             }
             for k, v in per.items():
                 extra[k][1] = float(v.std(ddof=1) / np.sqrt(R))
@@ -312,11 +316,11 @@ def _energy_verdict(e_sim, se_sim, e_mod, se_mod, dof, alpha_each, fitted):
     se_d = (e_mod / e_sim) * np.sqrt((se_mod / e_mod) ** 2 + (se_sim / e_sim) ** 2)
     stat = (e_mod - e_sim) / np.hypot(se_sim, se_mod)
     if dof is None:
-        p = float(2.0 * stats.norm.sf(abs(stat)))
-        thr = float(stats.norm.isf(0.5 * alpha_each))
+        p = float(2.0 * norm_sf(abs(stat)))
+        thr = float(norm_isf(0.5 * alpha_each))
     else:
-        p = float(2.0 * stats.t.sf(abs(stat), dof))
-        thr = float(stats.t.isf(0.5 * alpha_each, dof))
+        p = float(2.0 * t_sf(abs(stat), dof))
+        thr = float(t_isf(0.5 * alpha_each, dof))
     return {
         "energy": float(e_mod),
         "energy_se": float(se_mod),
@@ -373,9 +377,9 @@ def _walk_verdict(result, t, slots, m, sm, alpha, n_tests, rows, name):
     d = np.sum(om[Em] * (F[:, Em] - m[Em]), axis=1) / M
     se_M = np.sqrt(np.sum((om[Em] * sm[Em]) ** 2)) / M
     se_e = float(np.sqrt(d.var(ddof=1) / R + se_M**2))
-    p_e = float(2.0 * stats.t.sf(abs(d.mean()) / se_e, R - 1))
+    p_e = float(2.0 * t_sf(abs(d.mean()) / se_e, R - 1))
     tb = np.abs(F.mean(axis=0)[used] - m[used]) / se_t[used]
-    t_thr = float(stats.t.isf(0.5 * sidak(v["p_threshold"], int(used.sum())), R - 1))
+    t_thr = float(t_isf(0.5 * sidak(v["p_threshold"], int(used.sum())), R - 1))
     v.update(
         energy_dev=float(d.mean()),
         energy_dev_se=se_e,

@@ -15,8 +15,7 @@ each model judged against it with ``wave_verdicts.wave_verdict`` (diffuse part, 
                         masking (geometric optics of the ensemble);
     "geometric-facets"  Torrance–Sparrow with the tile's own facets and no masking
                         (``sim.predict.bin_average_facets``): the geometric-optics limit of that
-                        very mesh, i.e. the ray tracer with masking off;
-    ``extra`` callables e.g. the ray trace, which this layer may not import.
+                        very mesh, i.e. the ray tracer with masking off.
 
 The error plotted and used for the crossovers is the energy-weighted mean relative error over
 the energy set, ``energy_dev`` = Σ_E Ω(m − f̄)/Σ_E Ω f̄; the 5 % criterion is applied to its
@@ -59,7 +58,6 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
 
 import numpy as np
 
@@ -205,29 +203,40 @@ def _kirchhoff(family, sigma, theta_i, *, corr, tile, seed, material, bins, grid
     raise UsageError(f"sigma = {sigma:g} λ: no grid up to {grids[-1]}² samples the phase ({last})")
 
 
-def _model_bins(name, surface, result, t, material):
+@dataclass(frozen=True)
+class _TileModels:
+    """What the models need of one tile, computed once for all its incidences: its spectrum
+    (``surface_spectrum``), Beckmann at its realised m, its facet normals and projected
+    areas."""
+
+    spectrum: object
+    ndf: Beckmann
+    normals: np.ndarray
+    areas: np.ndarray
+
+    @classmethod
+    def of(cls, surface) -> "_TileModels":
+        return cls(
+            surface_spectrum(surface),
+            Beckmann(surface.stats()["m_realised"]),
+            surface.facet_normals(),
+            surface.projected_areas(),
+        )
+
+
+def _model_bins(name, tile: _TileModels, result, t, material):
     th, ph = float(result.theta_i[t]), float(result.phi_i[t])
     if name in ("rayleigh-rice", "low-smooth"):
-        spec = surface_spectrum(surface)
-        if name == "low-smooth" and spec.kind != "abc":
+        if name == "low-smooth" and tile.spectrum.kind != "abc":
             return None
-        return lattice_average(result, t, closed_form(name, spec, 1.0, material))
+        return lattice_average(result, t, closed_form(name, tile.spectrum, 1.0, material))
     if name == "ts-smith":
-        ndf = Beckmann(surface.stats()["m_realised"])
         return lattice_average(
-            result, t, lambda wi, wo: torrance_sparrow(wi, wo, ndf, "smith", material)
+            result, t, lambda wi, wo: torrance_sparrow(wi, wo, tile.ndf, "smith", material)
         )
     if name == "geometric-facets":
         wi = spherical_deg(th, ph)
-        est = bin_average_facets(
-            wi,
-            result.bins,
-            surface.facet_normals(),
-            surface.projected_areas(),
-            "none",
-            material,
-            ph,
-        )
+        est = bin_average_facets(wi, result.bins, tile.normals, tile.areas, "none", material, ph)
         return est.values
     raise UsageError(f"model must be one of {MODELS}, got {name!r}")
 
@@ -243,14 +252,11 @@ def regime_map(
     bins: Bins | None = None,
     seed: int = 0,
     models=MODELS,
-    extra: Mapping[str, Callable] | None = None,
     grids=GRIDS,
 ) -> RegimeMap:
     """The regime map of one ``family`` (module docstring). ``sigmas`` σ/λ (default 14 values
-    geometric from 0.01 to 3); ``extra``: name → callable(surface, material, theta_i, bins)
-    returning (T, Θ, Φ) bin averages (e.g. the ray trace), judged like the models. Lengths in
-    units of λ = 1. Default bins 18 × 7 folded (5° × 30°): a 64 λ tile puts ~100 orders in a
-    bin."""
+    geometric from 0.01 to 3). Lengths in units of λ = 1. Default bins 18 × 7 folded
+    (5° × 30°): a 64 λ tile puts ~100 orders in a bin."""
     if family not in FAMILIES:
         raise UsageError(f"family must be one of {FAMILIES}, got {family!r}")
     if not corr_over_lambda >= 10.0:
@@ -260,7 +266,7 @@ def regime_map(
     sig = np.geomspace(0.01, 3.0, 14) if sigmas is None else np.asarray(sigmas, dtype=float)
     th = np.asarray(theta_i, dtype=float)
     bins = Bins(18, 7, True) if bins is None else bins
-    names = tuple(models) + tuple((extra or {}).keys())
+    names = tuple(models)
     shape = (len(names), len(sig), len(th))
     dev, dev_se, rel, noise = (np.full(shape, np.nan) for _ in range(4))
     grid_used, seconds = [], []
@@ -278,10 +284,10 @@ def regime_map(
             grids=grids,
         )
         grid_used.append(int(surf.heights.shape[0]))
-        ext = {k: np.asarray(fn(surf, material, th, bins)) for k, fn in (extra or {}).items()}
+        tile = _TileModels.of(surf)
         for t in range(len(th)):
             for i, name in enumerate(names):
-                mb = ext[name][t] if name in ext else _model_bins(name, surf, res, t, material)
+                mb = _model_bins(name, tile, res, t, material)
                 if mb is None:
                     continue
                 v = wave_verdict(res, t, mb, model=name, tol=CRITERION)

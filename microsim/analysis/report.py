@@ -13,7 +13,8 @@ import math
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
-from scipy import stats
+
+from microsim.stats import t_isf
 
 from .verdicts import summary_row
 
@@ -820,7 +821,7 @@ def _resolvable_energy(v: Mapping) -> float | None:
     t_{R−1} quantile at the test's level × ``energy_dev_se`` (None for other references)."""
     if v.get("reference") != "realisations" or v.get("energy_dev_se") is None:
         return None
-    return float(stats.t.isf(0.5 * v["p_threshold"], v["realisations"] - 1) * v["energy_dev_se"])
+    return float(t_isf(0.5 * v["p_threshold"], v["realisations"] - 1) * v["energy_dev_se"])
 
 
 def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
@@ -882,16 +883,14 @@ def index_report(
     docs: Sequence[Mapping],
     fig6: str | None,
     quick: bool,
-    seconds: float | None = None,
     regimes: Mapping | None = None,
     methods=None,
 ) -> str:
     """``index.md``: verdict tables (scenes × models), Löw-style fit table, Mikkelsen Fig. 6,
     "Where each method holds" (``regime_section``: wave scenes' verdicts against Kirchhoff,
     the regime chart ``regimes``; "What each method costs" from ``methods``, the path of
-    ``methods.json`` or its dict), links to every scene's ``<scene>/report.md``. ``seconds``
-    (the wall time) is accepted for compatibility and not written: the index is
-    reproducible."""
+    ``methods.json`` or its dict), links to every scene's ``<scene>/report.md``. No wall
+    time is written: the index is reproducible."""
     fit_models: list[str] = []
     for d in docs:
         fit_models += [f["model"] for f in d.get("fits", []) if f["model"] not in fit_models]

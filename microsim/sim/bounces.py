@@ -55,7 +55,17 @@ from microsim.errors import UsageError
 
 from . import kernels
 from .bins import Bins
-from .paths import LEDGER, FacetTable, Incidence, TracePath, facet_table, uses_facet_table
+from .paths import (
+    ANALYTIC_BATCH,
+    LEDGER,
+    FacetTable,
+    Incidence,
+    TracePath,
+    _columns,
+    _stack32,
+    facet_table,
+    uses_facet_table,
+)
 from .scratch import work
 from .streams import block_rotation
 from .tracer import UNRESOLVED, Tracer, VGrooveCaster
@@ -131,12 +141,6 @@ def ledger_classes(bounces) -> int:
     return len(LEDGER) + (0 if bounces == 1 else len(TERMINAL))
 
 
-def _columns(origins) -> list:
-    if isinstance(origins, np.ndarray):
-        return [np.ascontiguousarray(origins[:, k], dtype=np.float64) for k in range(3)]
-    return [np.ascontiguousarray(c, dtype=np.float64) for c in origins]
-
-
 def trace_bounces(
     tracer: Tracer,
     wi,
@@ -171,7 +175,6 @@ def trace_bounces(
     weight1 = np.zeros(n)
     term = np.empty(n, dtype=np.int8)
     wterm = np.empty(n)
-    order = work("bounce-order", n, np.int64)
     where = np.full(n, -1, dtype=np.int64)
     if psi is None:
         d = [np.array([-float(c)]) for c in wi]
@@ -181,9 +184,7 @@ def trace_bounces(
     else:
         cp, sp = np.cos(psi), np.sin(psi)
         d = [-(cp * wi[0] + sp * wi[1]), -(-sp * wi[0] + cp * wi[1]), np.full(n, -float(wi[2]))]
-        d32 = np.empty((n, 3), dtype=np.float32)
-        for k in range(3):
-            d32[:, k] = d[k]
+        d32 = _stack32(d)
         hs, prim, p = tracer.trace_columns(x, d, d32)
         shared, phi = False, phi_i - np.degrees(psi)
     live = np.arange(n, dtype=np.int64)
@@ -228,7 +229,6 @@ def trace_bounces(
             weight1,
             term,
             wterm,
-            order,
             where,
             esc,
             *ed,
@@ -391,7 +391,8 @@ class BouncePath(TracePath):
 
 
 class AnalyticBouncePath(TracePath):
-    """``masking="analytic"`` bounce chain (``analytic_bounces``), in batches of 16 blocks."""
+    """``masking="analytic"`` bounce chain (``analytic_bounces``), in batches of
+    ``ANALYTIC_BATCH`` blocks."""
 
     def __init__(self, incidence: Incidence, caster: VGrooveCaster, limit, floor, nbin):
         super().__init__(incidence)
@@ -402,8 +403,8 @@ class AnalyticBouncePath(TracePath):
         inc, blocks, parts = self.incidence, list(blocks), []
         wi = np.asarray(inc.wi, dtype=np.float64)
         z = inc.tracer.zmax + inc.tracer.top_margin
-        for a in range(0, len(blocks), 16):
-            (x, _, _), psi = inc.origins_of(blocks[a : a + 16], True)
+        for a in range(0, len(blocks), ANALYTIC_BATCH):
+            (x, _, _), psi = inc.origins_of(blocks[a : a + ANALYTIC_BATCH], True)
             parts.append(
                 analytic_bounces(
                     self.caster,

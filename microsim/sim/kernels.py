@@ -893,7 +893,6 @@ def bounce_step(
     weight1,
     term,
     wterm,
-    order,
     where,
     esc,
     edx,
@@ -936,8 +935,7 @@ def bounce_step(
     The first-bounce ledger of the same rays (``status1``, ``weight1``: the classes and
     Fresnel weights of ``paths.LEDGER``, as the single-bounce paths give them) is written at
     b = 1 (SINGLE provisionally for a rising wo) and settled at b = 2 (MASKED if the reflected
-    ray met the surface, RAY_UNRESOLVED / RAY_MISSED if its walk failed). ``order[g]`` is the
-    number of bounces the path made.
+    ray met the surface, RAY_UNRESOLVED / RAY_MISSED if its walk failed).
 
     ``use_table``: the incidence's ``paths.FacetTable`` Fresnel weights ``tab_weight`` and
     bins ``tab_bin`` per facet serve the first bounce (the values the per-ray arithmetic
@@ -960,7 +958,6 @@ def bounce_step(
         if h == ESCAPED and b >= 2:
             term[g] = _order_class(b - 1)
             wterm[g] = w[i]
-            order[g] = b - 1
             if use_table and b == 2:
                 where[g] = tab_bin[first_facet[g]]
                 continue
@@ -971,7 +968,6 @@ def bounce_step(
         if h != HIT:
             term[g] = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
             wterm[g] = w[i]
-            order[g] = b - 1
             if b == 1:
                 status1[g] = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
                 weight1[g] = 0.0
@@ -979,7 +975,6 @@ def bounce_step(
         if b > limit:
             term[g] = CUT_BOUNCES
             wterm[g] = w[i]
-            order[g] = b - 1
             continue
         f = prim[i]
         a0, a1, a2 = nx[f], ny[f], nz[f]
@@ -987,7 +982,6 @@ def bounce_step(
         if c <= 0.0:  # back-facing
             term[g] = PATH_UNRESOLVED
             wterm[g] = w[i]
-            order[g] = b - 1
             if b == 1:
                 status1[g] = RAY_UNRESOLVED
                 weight1[g] = 0.0
@@ -1001,7 +995,6 @@ def bounce_step(
         ox = dx[j] + 2.0 * c * a0
         oy = dy[j] + 2.0 * c * a1
         oz = dz[j] + 2.0 * c * a2
-        order[g] = b
         if b == 1:
             weight1[g] = fw
             status1[g] = SINGLE if oz > 0.0 else DOWNWARD

@@ -134,8 +134,8 @@ _REUSED: dict = {}  # id(weakref to surface) → (weakref, fingerprint, masking,
 _REUSE_SLOTS = 2
 TRACER_BACKEND = "auto"
 """The simulations' Embree backend (``Tracer``): coherent packets over the library embreex
-ships when they bind (the scene and BVH build in 0.10 s instead of embreex's 0.56 s on the
-bench mesh; tracing at the same rate on AVX2), else embreex. ``MICROSIM_EMBREE_PACKETS=0``
+ships when they bind (the scene and BVH build in 0.10 s instead of embreex's ~0.5 s on the
+bench mesh; tracing at about the same rate on AVX2), else embreex. ``MICROSIM_EMBREE_PACKETS=0``
 forces embreex, which stays the reference path of the tests."""
 _REUSE_LOCK = threading.Lock()
 
@@ -405,10 +405,10 @@ class MaskingRays:
         kernels.apply_escape(status, self.ray[:m], esc, _FROM_ESCAPE)
 
 
-def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
-    """(status, weight, bin) per primary ray, looked up per hit facet in ``table`` (the fast
-    path for surfaces without azimuth averaging: only the two ray casts are per ray, the rest
-    is one compiled pass, ``kernels.tabled_primary``). ``origins``: (N, 3) or 3 columns."""
+def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
+    """``trace_tabled`` up to its masking rays: (status, weight, bin, ``MaskingRays``, m) with
+    the m masking rays set up but not yet traced (the status of their primary rays still
+    SINGLE)."""
     x = _columns(origins)
     n = len(x[0])
     wi = np.asarray(wi, dtype=np.float64)
@@ -434,6 +434,14 @@ def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
         where,
         *mask.kernel_args(),
     )
+    return status, weight, where, mask, m
+
+
+def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
+    """(status, weight, bin) per primary ray, looked up per hit facet in ``table`` (the fast
+    path for surfaces without azimuth averaging: only the two ray casts are per ray, the rest
+    is one compiled pass, ``kernels.tabled_primary``). ``origins``: (N, 3) or 3 columns."""
+    status, weight, where, mask, m = tabled_masking_rays(tracer, table, wi, origins)
     mask.trace(tracer, m, status)
     return status, weight, where
 
@@ -465,8 +473,8 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     x = _columns(origins)
     n = len(x[0])
     if psi is None:
-        wl = [np.array([float(c)]) for c in wi]
-        down = [-float(c[0]) for c in wl]
+        wl = [np.array([float(c)]) for c in wi]  # one shared direction
+        down = [-float(c) for c in wi]
         hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32))
     else:
         cp, sp = np.cos(psi), np.sin(psi)

@@ -191,10 +191,6 @@ def tolerance_check(
     }
 
 
-def _pct(x) -> str:
-    return "–" if x is None else f"{100 * x:+.2g}%"
-
-
 def _num(x, fmt="{:.3g}") -> str:
     return "–" if x is None else fmt.format(x)
 

@@ -352,7 +352,12 @@ def _auto_rays(ref: Reference, threads) -> int:
     incidences, times the number of realisations — each realisation as precise as one
     surface traced to ``target``, the mean √R times more (its tile-to-tile scatter is what the
     t tests then weigh)."""
-    pilot = simulate_auto(
+    return int(np.max(_auto_first_surface(ref, threads).rays)) * len(ref.surfaces)
+
+
+def _auto_first_surface(ref: Reference, threads) -> Result:
+    """``simulate_auto`` on the reference's first surface to its ``target``."""
+    return simulate_auto(
         ref.surfaces[0],
         ref.material,
         list(ref.theta_i),
@@ -363,22 +368,11 @@ def _auto_rays(ref: Reference, threads) -> int:
         first=AUTO_FIRST,
         max_rays=ref.max_rays,
     )
-    return int(np.max(pilot.rays)) * len(ref.surfaces)
 
 
 def _trace(ref: Reference, threads) -> Result:
     if ref.rays == "auto" and len(ref.surfaces) == 1:
-        return simulate_auto(
-            ref.surfaces[0],
-            ref.material,
-            list(ref.theta_i),
-            target=ref.target,
-            bins=ref.bins,
-            seed=ref.seed,
-            threads=threads,
-            first=AUTO_FIRST,
-            max_rays=ref.max_rays,
-        )
+        return _auto_first_surface(ref, threads)
     if len(ref.surfaces) == 1:
         return simulate(
             ref.surfaces[0],
