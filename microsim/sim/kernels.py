@@ -36,6 +36,10 @@ __all__ = [
     "apply_escape",
     "facet_mirror",
     "analytic_vgroove",
+    "cos_sin",
+    "folded_bin",
+    "groove_frame_directions",
+    "bin_rays",
     "add_blocks",
     "bin_index",
 ]
@@ -48,6 +52,7 @@ FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2  # ``_fresnel_weight``'s mo
 CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope bound × |wo_h|
 
 _compiled = njit(cache=True, nogil=True)
+_inlined = njit(cache=True, nogil=True, inline="always")  # small helpers of the per-ray loops
 
 
 @_compiled
@@ -691,14 +696,234 @@ def facet_mirror(
             weight[f] = _fresnel_weight(c, n2, k2, fresnel_mode)
 
 
+# fdlibm's __kernel_sin / __kernel_cos polynomial coefficients (Sun Microsystems 1993, |r| ≤ π/4)
+_S = (
+    -1.66666666666666324348e-01,
+    8.33333333332248946124e-03,
+    -1.98412698298579493134e-04,
+    2.75573137070700676789e-06,
+    -2.50507602534068634195e-08,
+    1.58969099521155010221e-10,
+)
+_C = (
+    4.16666666666666019037e-02,
+    -1.38888888888741095749e-03,
+    2.48015872894767294178e-05,
+    -2.75573143513906633035e-07,
+    2.08757232129817482790e-09,
+    -1.13596475577881948265e-11,
+)
+_PIO2_HI = 1.57079632673412561417e00  # π/2 in two parts: the first has 33 bits, so q·_PIO2_HI
+_PIO2_LO = 6.07710050650619224932e-11  # is exact for |q| < 2²⁰ (Cody–Waite reduction)
+# atan t = t·P(t²) on [0, 1] (least-squares Chebyshev fit in t², degree 9): max error
+# 2.1e-9 rad, checked against math.atan2 in tests/test_kernels.py
+_ATAN = (
+    0.9999999990538162,
+    -0.33333296715255056,
+    0.1999854225669279,
+    -0.14264389606202937,
+    0.10953448560542803,
+    -0.08407874681541322,
+    0.05804036235197402,
+    -0.031264406303775444,
+    0.010962383774980159,
+    -0.001804475721007023,
+)
+ATAN_ERROR = 3e-9  # rad: bound on _atan_approx's error (fit error + rounding)
+
+
+@_inlined
+def cos_sin(psi):
+    """(cos ψ, sin ψ) in float64 for |ψ| ≤ 2π (the rays' groove azimuths) without libm: ψ
+    reduced by the nearest multiple q of π/2 (two-part π/2), fdlibm's kernel polynomials on
+    |r| ≤ π/4, then the quadrant's swap and signs. Within 2.2e-16 of ``math.cos``/``math.sin``
+    (tests/test_kernels.py); ~5 ns per ray against ~27 ns for libm's tan or sin + cos."""
+    q = math.floor(psi * (2.0 / math.pi) + 0.5)
+    r = (psi - q * _PIO2_HI) - q * _PIO2_LO
+    z = r * r
+    s = r + r * z * (_S[0] + z * (_S[1] + z * (_S[2] + z * (_S[3] + z * (_S[4] + z * _S[5])))))
+    c = (
+        1.0
+        - 0.5 * z
+        + z * z * (_C[0] + z * (_C[1] + z * (_C[2] + z * (_C[3] + z * (_C[4] + z * _C[5])))))
+    )
+    quadrant = int(q) & 3  # signs and swap by arithmetic: a branch per ray mispredicts
+    odd = quadrant & 1
+    cos_sign = 1.0 - 2.0 * (((quadrant + 1) >> 1) & 1)  # −, − in quadrants 1, 2
+    sin_sign = 1.0 - 2.0 * (quadrant >> 1)  # −, − in quadrants 2, 3
+    return cos_sign * (s if odd else c), sin_sign * (c if odd else s)
+
+
+@_inlined
+def _atan_approx(y, x):
+    """atan2(y, x) ∈ [0, π] for y ≥ 0 to within ``ATAN_ERROR`` rad (0 for x = y = 0), without
+    libm and without branches: t = min/max of |x|, y in [0, 1], atan t = t·P(t²) with P the
+    degree-9 Chebyshev fit ``_ATAN``, then reflected to the octant of (x, y)."""
+    ax = abs(x)
+    lo, hi = min(ax, y), max(ax, y)
+    t = lo / hi if hi > 0.0 else 0.0
+    z = t * t
+    c = _ATAN
+    p = c[5] + z * (c[6] + z * (c[7] + z * (c[8] + z * c[9])))
+    a = t * (c[0] + z * (c[1] + z * (c[2] + z * (c[3] + z * (c[4] + z * p)))))
+    a = 0.5 * math.pi - a if y > ax else a
+    return math.pi - a if x < 0.0 else a
+
+
+@_inlined
+def _uniform_bin(y, x, scale, shift, ce, se):
+    """The bin j of the angle α = atan2(y, x) ∈ [0, π] (y ≥ 0) on a grid of uniform bins,
+    j = ⌊α·scale + shift⌋ clamped to [0, n), with n = len(ce): from ``_atan_approx``, and
+    where that lies within its error of an edge, decided exactly by ``_edge_bin``."""
+    u = _atan_approx(y, x) * scale + shift
+    k = int(u)
+    frac = u - k
+    guard = 2.0 * ATAN_ERROR * scale
+    if frac < guard or frac > 1.0 - guard:
+        return _edge_bin(y, x, k, ce, se)
+    return min(k, len(ce) - 1)
+
+
+@_compiled
+def _edge_bin(y, x, k, ce, se):
+    """The bin j of the angle α = atan2(y, x) ∈ [0, π] (y ≥ 0) with edge_j ≤ α < edge_j+1,
+    from a guess ``k`` within a bin of it: ``ce``/``se`` hold cos and sin of the lower edges
+    (edge_0 = 0; n = len(ce) bins, the last one open above) and α ≥ edge_j is decided exactly
+    as sin(α − edge_j) ≥ 0, i.e. y cos edge_j − x sin edge_j ≥ 0 (no inverse trigonometry)."""
+    n = len(ce)
+    k = min(max(k, 0), n - 1)
+    while k > 0 and y * ce[k] - x * se[k] < 0.0:
+        k -= 1
+    while k < n - 1 and y * ce[k + 1] - x * se[k + 1] >= 0.0:
+        k += 1
+    return k
+
+
+@_inlined
+def folded_bin(ox, oy, oz, ex, ey, theta_cos, theta_sin, phi_cos, phi_sin):
+    """Flat folded bin (θ-major) of the rising direction o (oz > 0) against the unit incident
+    azimuth (ex, ey): θo = atan2(|o_h|, oz) and the folded Δφ = atan2(|e × o_h|, e · o_h) ∈
+    [0, π] in uniform bins (``_uniform_bin``), decided against the grid's lower edges
+    (``Bins.edge_tables``: cos and sin of ``theta_edges[:-1]`` and ``phi_edges[:-1]`` in
+    radians) where the angle is within ``ATAN_ERROR`` of one, i.e. by the same edges as
+    ``Bins.locate``, without libm's atan2 (two cost ~70 ns per ray). A vertical o (o_h = 0)
+    takes φo = 0 (π if o_x = −0.0), as ``Bins.locate`` does."""
+    n_theta, n_phi = len(theta_cos), len(phi_cos)
+    rho = math.sqrt(ox * ox + oy * oy)
+    it = _uniform_bin(rho, oz, n_theta / (0.5 * math.pi), 0.0, theta_cos, theta_sin)
+    if rho == 0.0:  # the zenith: φo = atan2(±0, ±0), i.e. o_h along ±x, as NumPy's arctan2
+        ox, oy = math.copysign(1.0, ox), 0.0
+    a = ex * ox + ey * oy
+    b = abs(ex * oy - ey * ox)
+    return it * n_phi + _uniform_bin(b, a, (n_phi - 1) / math.pi, 0.5, phi_cos, phi_sin)
+
+
+@_inlined
+def _groove_hit(x, psi, wi, zw, half, scale, grooves):
+    """The exact primary hit of the ray from (x, ·, z) with groove azimuth ψ on equal-width
+    V-grooves (``tracer.VGrooveCaster``; zw = z/wi_z, ``scale`` = grooves per unit x): wi
+    rotated by −ψ into the groove frame (``cos_sin``); the z = 0 crossing x0, wrapped into the
+    tile; its groove k; the left wall unless the bottom comes first; the hit's distance
+    s = |x0 − rim| w/(w − σ a D) from the facet's rim. ``grooves``: the caster's columns
+    (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma). Returns (wi in the
+    groove frame (wx, wy, wz), facet f, s)."""
+    x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma = grooves
+    g = len(x_left)
+    cp, sp = cos_sin(psi)
+    wx = cp * wi[0] + sp * wi[1]
+    wy = -sp * wi[0] + cp * wi[1]
+    wz = wi[2]
+    x0 = x - zw * wx  # z = 0 crossing
+    if x0 < -half or x0 >= half:
+        x0 = (x0 + half) % (2 * half) - half
+    k = min(int((x0 + half) * scale), g - 1)  # ±1 at most
+    if x0 < x_left[k] and k > 0:
+        k -= 1
+    if x0 >= x_right[k] and k < g - 1:
+        k += 1
+    ad = (-wx / wz) * depth[k]
+    f = 2 * k + (1 if x0 - x_left[k] + ad >= w_left[k] else 0)
+    w, sig = facet_wall[f], facet_sigma[f]
+    return wx, wy, wz, f, abs(x0 - facet_rim[f]) * w / (w - sig * ad)
+
+
+@_compiled
+def groove_frame_directions(psi, wi, wx, wy, wz, dx, dy, dz, d32):
+    """Per ray i: the incident direction wi rotated by −ψ_i into its groove frame (``wx``,
+    ``wy``, ``wz``; cos ψ, sin ψ by ``cos_sin``, as ``analytic_vgroove`` does), the ray
+    direction −w (``dx``, ``dy``, ``dz``) and its float32 copy ``d32`` (N, 3)."""
+    for i in range(len(psi)):
+        cp, sp = cos_sin(psi[i])
+        x = cp * wi[0] + sp * wi[1]
+        y = -sp * wi[0] + cp * wi[1]
+        wx[i], wy[i], wz[i] = x, y, wi[2]
+        dx[i], dy[i], dz[i] = -x, -y, -wi[2]
+        d32[i, 0], d32[i, 1], d32[i, 2] = np.float32(-x), np.float32(-y), np.float32(-wi[2])
+
+
+@_compiled
+def bin_rays(
+    status,
+    wox,
+    woy,
+    woz,
+    psi,
+    rotate,
+    cos_phi,
+    sin_phi,
+    theta_cos,
+    theta_sin,
+    phi_cos,
+    phi_sin,
+    near,
+    where,
+):
+    """``where[i]`` = ``folded_bin`` of wo_i for the SINGLE rays (others untouched), against
+    the incident azimuth (``cos_phi``, ``sin_phi``), rotated by −ψ_i when ``rotate`` (wo in
+    the ray's groove frame: Δφ is unchanged by the rotation). Two passes: a branch-free one
+    that the compiler vectorises (4 rays per instruction: ``_atan_approx`` bins, ~4× faster
+    than the same arithmetic ray by ray) flags in ``near`` (bool work array) the rays whose
+    angle lies within twice ``ATAN_ERROR`` of an edge; the second decides those exactly by
+    ``folded_bin``. The result is ``folded_bin``'s for every ray."""
+    n_theta, n_phi = len(theta_cos), len(phi_cos)
+    t_scale, p_scale = n_theta / (0.5 * math.pi), (n_phi - 1) / math.pi
+    gt, gp = 2.0 * ATAN_ERROR * t_scale, 2.0 * ATAN_ERROR * p_scale
+    for i in range(len(status)):
+        ex, ey = cos_phi, sin_phi
+        if rotate:
+            cp, sp = cos_sin(psi[i])
+            ex = cp * cos_phi + sp * sin_phi
+            ey = -sp * cos_phi + cp * sin_phi
+        ox, oy, oz = wox[i], woy[i], woz[i]
+        rho = math.sqrt(ox * ox + oy * oy)
+        zenith = rho == 0.0  # φo = atan2(±0, ±0): along ±x (``folded_bin``)
+        hx = math.copysign(1.0, ox) if zenith else ox
+        hy = 0.0 if zenith else oy
+        u = _atan_approx(rho, oz) * t_scale
+        v = _atan_approx(abs(ex * hy - ey * hx), ex * hx + ey * hy) * p_scale + 0.5
+        k, j = int(u), int(v)
+        fu, fv = u - k, v - j
+        near[i] = (fu < gt) | (fu > 1.0 - gt) | (fv < gp) | (fv > 1.0 - gp)
+        flat = min(k, n_theta - 1) * n_phi + min(j, n_phi - 1)
+        where[i] = flat if status[i] == SINGLE else where[i]
+    for i in range(len(status)):
+        if near[i] and status[i] == SINGLE:
+            ex, ey = cos_phi, sin_phi
+            if rotate:
+                cp, sp = cos_sin(psi[i])
+                ex = cp * cos_phi + sp * sin_phi
+                ey = -sp * cos_phi + cp * sin_phi
+            where[i] = folded_bin(
+                wox[i], woy[i], woz[i], ex, ey, theta_cos, theta_sin, phi_cos, phi_sin
+            )
+
+
 @_compiled
 def analytic_vgroove(
     x,
     z,
     psi,
     wi,
-    cos_phi,
-    sin_phi,
     half,
     x_left,
     x_right,
@@ -714,63 +939,34 @@ def analytic_vgroove(
     n2,
     k2,
     fresnel_mode,
-    n_theta,
-    n_phi,
-    folded,
     status,
     weight,
-    where,
     wox,
     woy,
     woz,
 ):
     """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``paths.
     analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
-    per-facet columns passed as arrays). Per ray, in the groove frame (wi rotated by −ψ, with
-    cos ψ, sin ψ from t = tan(ψ/2): ((1 − t²), 2t)/(1 + t²)):
+    per-facet columns passed as arrays). Per ray, in the groove frame:
 
-    * the primary hit (``VGrooveCaster.groove_hits``): the z = 0 crossing x0, wrapped into the
-      tile; its groove k; the left wall unless the bottom comes first; the hit's distance
-      s = |x0 − rim| w/(w − σ a D) from the facet's rim;
+    * the primary hit (``_groove_hit``);
     * the Fresnel weight F(c), c = n·wi (``_fresnel_weight``), the mirror
       direction wo (groove frame, ``wox/woy/woz``) and the masking margin
       s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``): class MASKED if > 0,
-      DOWNWARD if wo_z ≤ 0 (wins), RAY_UNRESOLVED if back-facing (c ≤ 0, weight 0), else SINGLE;
-    * for folded bins, the bin of wo against the rotated incident azimuth e (``Bins.locate``
-      to rounding: θo = atan2(|wo_h|, wo_z), folded Δφ = atan2(|e × wo_h|, e·wo_h)), written
-      to ``where`` for SINGLE rays (−1 otherwise); unfolded bins are left to the caller
-      (``where`` = −1).
+      DOWNWARD if wo_z ≤ 0 (wins), RAY_UNRESOLVED if back-facing (c ≤ 0, weight 0), else
+      SINGLE. Bins are the caller's (``paths.locate_single``).
     """
-    g = len(x_left)
-    scale = g / (2.0 * half)
-    t_scale = n_theta / (math.pi / 2)
-    p_scale = (n_phi - 1) / math.pi
+    scale = len(x_left) / (2.0 * half)
+    zw = z / wi[2]
+    grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
     for i in range(len(x)):
-        t = math.tan(0.5 * psi[i])
-        d = 1.0 / (1.0 + t * t)
-        cp, sp = (1.0 - t * t) * d, (2.0 * d) * t
-        wx = cp * wi[0] + sp * wi[1]
-        wy = -sp * wi[0] + cp * wi[1]
-        wz = wi[2]
-        x0 = x[i] - (z / wz) * wx  # z = 0 crossing
-        if x0 < -half or x0 >= half:
-            x0 = (x0 + half) % (2 * half) - half
-        k = min(int((x0 + half) * scale), g - 1)  # ±1 at most
-        if x0 < x_left[k] and k > 0:
-            k -= 1
-        if x0 >= x_right[k] and k < g - 1:
-            k += 1
-        ad = (-wx / wz) * depth[k]
-        f = 2 * k + (1 if x0 - x_left[k] + ad >= w_left[k] else 0)
-        w, sig = facet_wall[f], facet_sigma[f]
-        s = abs(x0 - facet_rim[f]) * w / (w - sig * ad)
+        wx, wy, wz, f, s = _groove_hit(x[i], psi[i], wi, zw, half, scale, grooves)
         nx, nz = facet_nx[f], facet_nz[f]
         c = wx * nx + wz * nz
         ox = 2.0 * c * nx - wx
         oy = -wy
         oz = 2.0 * c * nz - wz
         wox[i], woy[i], woz[i] = ox, oy, oz
-        where[i] = -1
         if c <= 0.0:  # back-facing: unresolved
             status[i] = RAY_UNRESOLVED
             weight[i] = 0.0
@@ -783,14 +979,6 @@ def analytic_vgroove(
             status[i] = MASKED
             continue
         status[i] = SINGLE
-        if folded:
-            ex = cp * cos_phi + sp * sin_phi
-            ey = -sp * cos_phi + cp * sin_phi
-            theta = math.atan2(math.sqrt(ox * ox + oy * oy), oz)
-            it = min(int(theta * t_scale), n_theta - 1)
-            dphi = math.atan2(abs(ex * oy - ey * ox), ex * ox + ey * oy)
-            ip = min(int(dphi * p_scale + 0.5), n_phi - 1)
-            where[i] = it * n_phi + ip
 
 
 @_compiled
@@ -1057,7 +1245,7 @@ def analytic_vgroove_bounces(
 ):
     """The exact float64 bounce chain in a V-groove (``masking="analytic"``, ``bounces`` > 1).
 
-    The primary hit is ``analytic_vgroove``'s (same arithmetic, so ``status1``/``weight1``
+    The primary hit is ``analytic_vgroove``'s (``_groove_hit``, so ``status1``/``weight1``
     equal its single-bounce classes and weights bitwise). A ray reflected inside a groove can
     only meet the groove's other wall (f ↔ f xor 1) before rising above z = 0, where nothing
     lies (every rim at z = 0): it does when it points down (wo_z ≤ 0) or when the masking
@@ -1072,27 +1260,11 @@ def analytic_vgroove_bounces(
     its direction in the groove frame ``wox``/``woy``/``woz``), after ``limit`` bounces with
     the path still inside (CUT_BOUNCES), below the weight ``floor`` (CUT_WEIGHT) or at a
     back-facing hit (PATH_UNRESOLVED, only from rounding). ``order`` = bounces made."""
-    g = len(x_left)
-    scale = g / (2.0 * half)
+    scale = len(x_left) / (2.0 * half)
+    zw = z / wi[2]
+    grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
     for i in range(len(x)):
-        t = math.tan(0.5 * psi[i])
-        d = 1.0 / (1.0 + t * t)
-        cp, sp = (1.0 - t * t) * d, (2.0 * d) * t
-        wx = cp * wi[0] + sp * wi[1]
-        wy = -sp * wi[0] + cp * wi[1]
-        wz = wi[2]
-        x0 = x[i] - (z / wz) * wx  # z = 0 crossing
-        if x0 < -half or x0 >= half:
-            x0 = (x0 + half) % (2 * half) - half
-        k = min(int((x0 + half) * scale), g - 1)  # ±1 at most
-        if x0 < x_left[k] and k > 0:
-            k -= 1
-        if x0 >= x_right[k] and k < g - 1:
-            k += 1
-        ad = (-wx / wz) * depth[k]
-        f = 2 * k + (1 if x0 - x_left[k] + ad >= w_left[k] else 0)
-        w, sig = facet_wall[f], facet_sigma[f]
-        s = abs(x0 - facet_rim[f]) * w / (w - sig * ad)
+        wx, wy, wz, f, s = _groove_hit(x[i], psi[i], wi, zw, half, scale, grooves)
         dx, dy, dz = -wx, -wy, -wz
         weight = 1.0
         wox[i], woy[i], woz[i] = math.nan, math.nan, math.nan

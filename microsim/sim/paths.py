@@ -461,6 +461,30 @@ def _stack32(cols) -> np.ndarray:
     return out
 
 
+def locate_single(bins: Bins, status, wo, phi_i: float, psi, where) -> None:
+    """Set ``where`` to the bin of wo (3 columns) for the SINGLE rays, Δφ taken against
+    φi (degrees) or, with groove azimuths ``psi`` (wo in each ray's groove frame), against
+    φi − ψ: folded grids by ``kernels.bin_rays`` (compiled, vectorised), unfolded ones by
+    ``Bins.locate``."""
+    if bins.folded:
+        phi = np.radians(phi_i)
+        kernels.bin_rays(
+            status,
+            *wo,
+            np.empty(0) if psi is None else psi,
+            psi is not None,
+            float(np.cos(phi)),
+            float(np.sin(phi)),
+            *bins.edge_tables(),
+            work("near-edge", len(status), np.bool_),
+            where,
+        )
+        return
+    single = np.flatnonzero(status == SINGLE)
+    ws = np.stack([a[single] for a in wo], axis=1)
+    where[single] = bins.locate(ws, phi_i if psi is None else phi_i - np.degrees(psi[single]))
+
+
 def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, ior):
     """(status, weight, bin) per primary ray — ``trace_events`` reduced to what the tallies
     need, on per-axis columns. ``psi`` None: one shared direction −wi. ``psi`` (N,)
@@ -477,10 +501,17 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         down = [-float(c) for c in wi]
         hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32))
     else:
-        cp, sp = np.cos(psi), np.sin(psi)
-        wl = [cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], np.full(n, float(wi[2]))]
-        down = [-c for c in wl]
-        hs, prim, p = tracer.trace_columns(x, down, _stack32(down))
+        wl = [work("traced-wl-" + a, n) for a in "xyz"]
+        down = [work("traced-down-" + a, n) for a in "xyz"]
+        d32 = work("traced-d32", (n, 3), np.float32)
+        kernels.groove_frame_directions(
+            np.ascontiguousarray(psi, dtype=np.float64),
+            np.asarray(wi, dtype=np.float64),
+            *wl,
+            *down,
+            d32,
+        )
+        hs, prim, p = tracer.trace_columns(x, down, d32)
     status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
     wo = [work("traced-wo-" + a, n) for a in "xyz"]
     mask = MaskingRays.work(n)
@@ -510,9 +541,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         status[hu] = np.where(margin > 0, MASKED, SINGLE)
     else:
         mask.trace(tracer, m, status)
-    single = np.flatnonzero(status == SINGLE)
-    ws = np.stack([a[single] for a in wo], axis=1)
-    where[single] = bins.locate(ws, phi_i if psi is None else phi_i - np.degrees(psi[single]))
+    locate_single(bins, status, wo, phi_i, psi, where)
     return status, weight, where
 
 
@@ -528,18 +557,14 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
     (tests/test_analytic_vgroove.py)."""
     n = len(x)
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
-    where = np.empty(n, dtype=np.int64)
-    wo = [np.empty(n) for _ in range(3)]
+    wo = [work("analytic-wo-" + a, n) for a in "xyz"]
     mode, n2, k2 = kernels.fresnel_mode(ior)
-    phi = np.radians(phi_i)
     c = caster
     kernels.analytic_vgroove(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),
         np.ascontiguousarray(psi, dtype=np.float64),
         np.asarray(wi, dtype=np.float64),
-        float(np.cos(phi)),
-        float(np.sin(phi)),
         float(c.half),
         c.x_left,
         c.x_right,
@@ -555,18 +580,12 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
         n2,
         k2,
         mode,
-        bins.n_theta,
-        bins.n_phi,
-        bins.folded,
         status,
         weight,
-        where,
         *wo,
     )
-    if not bins.folded:
-        single = status == SINGLE
-        ws = np.stack([a[single] for a in wo], axis=1)
-        where[single] = bins.locate(ws, phi_i - np.degrees(psi[single]))
+    where = np.full(n, -1, dtype=np.int64)
+    locate_single(bins, status, wo, phi_i, psi, where)
     return status, weight, where
 
 
