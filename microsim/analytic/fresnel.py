@@ -182,7 +182,7 @@ def fresnel_real_arithmetic(c, ior):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")  # no zero divisor; vectorisable
 def fresnel_real_scalar(c, n2, k2):
     """Unpolarised Fresnel reflectance onto η = n + ik (n2 = n², k2 = k²) at c = cos θ
     (clipped to [0, 1]) in real arithmetic (Born & Wolf §14.2; Cook–Torrance form): with

@@ -53,6 +53,11 @@ CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope 
 
 _compiled = njit(cache=True, nogil=True)
 _inlined = njit(cache=True, nogil=True, inline="always")  # small helpers of the per-ray loops
+# branch-free passes the compiler vectorises: float division by zero gives inf/NaN there
+# instead of raising (the check is a branch per division), values the selects then discard
+_vectorised = njit(cache=True, nogil=True, error_model="numpy")
+TILE = 1024  # rays per tile of a kernel's vectorised passes (its scratch stays in L1/L2)
+_vector_inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 @_compiled
@@ -326,8 +331,8 @@ def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
     elif uy < 0.0:
         ty, dty, sy = (gy - iy) * ch / -uy, ch / -uy, -1
     s_in, bound = 0.0, z
+    cx, cy = ix % nx, iy % ny  # the cell, wrapped; stepped by ±1 below (no modulo per step)
     for step in range(64):
-        cx, cy = ix % nx, iy % ny
         s_out = min(tx, ty, s_end)
         slope = cslope[cy, cx] * CLEAR_MARGIN
         z_in = z + cot * s_in
@@ -343,11 +348,13 @@ def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
         if s_out >= s_end:
             return True
         if tx < ty:
-            ix += sx
+            cx += sx
+            cx = 0 if cx == nx else (nx - 1 if cx < 0 else cx)
             s_in = tx
             tx += dtx
         else:
-            iy += sy
+            cy += sy
+            cy = 0 if cy == ny else (ny - 1 if cy < 0 else cy)
             s_in = ty
             ty += dty
     return False
@@ -659,7 +666,7 @@ def apply_escape(status, rays, esc, from_escape):
         status[rays[m]] = from_escape[esc[m]]
 
 
-@_compiled
+@_vector_inlined
 def _fresnel_weight(c, n2, k2, fresnel_mode):
     """F(c) for c > 0 by ``fresnel_mode``: FRESNEL_REAL ``fresnel_real_scalar`` onto η² with
     n2 = n², k2 = k²; FRESNEL_MIRROR 1; FRESNEL_NONE 0 (η = 1: nothing reflects off grazing)."""
@@ -732,7 +739,7 @@ _ATAN = (
 ATAN_ERROR = 3e-9  # rad: bound on _atan_approx's error (fit error + rounding)
 
 
-@_inlined
+@_vector_inlined
 def cos_sin(psi):
     """(cos ψ, sin ψ) in float64 for |ψ| ≤ 2π (the rays' groove azimuths) without libm: ψ
     reduced by the nearest multiple q of π/2 (two-part π/2), fdlibm's kernel polynomials on
@@ -747,14 +754,16 @@ def cos_sin(psi):
         - 0.5 * z
         + z * z * (_C[0] + z * (_C[1] + z * (_C[2] + z * (_C[3] + z * (_C[4] + z * _C[5])))))
     )
-    quadrant = int(q) & 3  # signs and swap by arithmetic: a branch per ray mispredicts
-    odd = quadrant & 1
-    cos_sign = 1.0 - 2.0 * (((quadrant + 1) >> 1) & 1)  # −, − in quadrants 1, 2
-    sin_sign = 1.0 - 2.0 * (quadrant >> 1)  # −, − in quadrants 2, 3
-    return cos_sign * (s if odd else c), sin_sign * (c if odd else s)
+    # the quadrant's swap and signs in floating point and selects (no branch, and AVX2 has
+    # no packed int64 conversion), so that loops calling this vectorise
+    quadrant = q - 4.0 * math.floor(0.25 * q)  # 0, 1, 2 or 3, exactly
+    odd = (quadrant == 1.0) | (quadrant == 3.0)
+    cos, sin = (s, c) if odd else (c, s)
+    cos = -cos if (quadrant == 1.0) | (quadrant == 2.0) else cos
+    return cos, (-sin if quadrant >= 2.0 else sin)
 
 
-@_inlined
+@_vector_inlined
 def _atan_approx(y, x):
     """atan2(y, x) ∈ [0, π] for y ≥ 0 to within ``ATAN_ERROR`` rad (0 for x = y = 0), without
     libm and without branches: t = min/max of |x|, y in [0, 1], atan t = t·P(t²) with P the
@@ -818,33 +827,77 @@ def folded_bin(ox, oy, oz, ex, ey, theta_cos, theta_sin, phi_cos, phi_sin):
     return it * n_phi + _uniform_bin(b, a, (n_phi - 1) / math.pi, 0.5, phi_cos, phi_sin)
 
 
+@_vector_inlined
+def _groove_frame(psi, wi):
+    """wi rotated by −ψ into the groove frame (``cos_sin``): (wx, wy, wz)."""
+    cp, sp = cos_sin(psi)
+    return cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], wi[2]
+
+
 @_inlined
-def _groove_hit(x, psi, wi, zw, half, scale, grooves):
-    """The exact primary hit of the ray from (x, ·, z) with groove azimuth ψ on equal-width
-    V-grooves (``tracer.VGrooveCaster``; zw = z/wi_z, ``scale`` = grooves per unit x): wi
-    rotated by −ψ into the groove frame (``cos_sin``); the z = 0 crossing x0, wrapped into the
-    tile; its groove k; the left wall unless the bottom comes first; the hit's distance
-    s = |x0 − rim| w/(w − σ a D) from the facet's rim. ``grooves``: the caster's columns
-    (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma). Returns (wi in the
-    groove frame (wx, wy, wz), facet f, s)."""
+def _groove_facet(x0, r, half, scale, grooves):
+    """The facet met by a ray crossing z = 0 at x0 inside the tile with horizontal advance
+    r = −wi_x/wi_z per unit depth (groove frame; equal-width V-grooves,
+    ``tracer.VGrooveCaster``; ``scale`` = grooves per unit x; ``grooves``: the caster's
+    columns x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma): its groove k
+    (the guess ⌊(x0 + half)·scale⌋ is off by one at most), the left wall unless the bottom
+    comes first. Returns (f, |x0 − rim| w, w − σ a D): the hit's distance from the facet's
+    rim is s = their ratio (``VGrooveCaster``'s s_L, s_R)."""
     x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma = grooves
     g = len(x_left)
-    cp, sp = cos_sin(psi)
-    wx = cp * wi[0] + sp * wi[1]
-    wy = -sp * wi[0] + cp * wi[1]
-    wz = wi[2]
-    x0 = x - zw * wx  # z = 0 crossing
-    if x0 < -half or x0 >= half:
-        x0 = (x0 + half) % (2 * half) - half
-    k = min(int((x0 + half) * scale), g - 1)  # ±1 at most
+    k = min(int((x0 + half) * scale), g - 1)
     if x0 < x_left[k] and k > 0:
         k -= 1
     if x0 >= x_right[k] and k < g - 1:
         k += 1
-    ad = (-wx / wz) * depth[k]
+    ad = r * depth[k]
     f = 2 * k + (1 if x0 - x_left[k] + ad >= w_left[k] else 0)
-    w, sig = facet_wall[f], facet_sigma[f]
-    return wx, wy, wz, f, abs(x0 - facet_rim[f]) * w / (w - sig * ad)
+    w = facet_wall[f]
+    return f, abs(x0 - facet_rim[f]) * w, w - facet_sigma[f] * ad
+
+
+@_inlined
+def _groove_hit(x, psi, wi, zw, half, scale, grooves):
+    """The exact primary hit of the ray from (x, ·, z) with groove azimuth ψ (zw = z/wi_z):
+    ``_groove_frame``, the z = 0 crossing x0 wrapped into the tile, ``_groove_facet``.
+    Returns (wi in the groove frame (wx, wy, wz), facet f, s)."""
+    wx, wy, wz = _groove_frame(psi, wi)
+    x0 = x - zw * wx  # z = 0 crossing
+    if x0 < -half or x0 >= half:
+        x0 = (x0 + half) % (2 * half) - half
+    f, num, den = _groove_facet(x0, -wx / wz, half, scale, grooves)
+    return wx, wy, wz, f, num / den
+
+
+@_vector_inlined
+def _groove_reflection(wx, wy, wz, s, nx, nz, signed_tan, width):
+    """A primary hit at distance s from the rim of a facet with unit normal (nx, 0, nz),
+    tanθ σ ``signed_tan`` and groove width ``width``, lit from the groove-frame
+    wi = (wx, wy, wz): (ledger class, c = n·wi, mirror direction wo = 2c·n − wi) with the
+    masking margin s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``):
+    RAY_UNRESOLVED if back-facing (c ≤ 0), else DOWNWARD if wo_z ≤ 0, MASKED if the margin
+    is > 0, SINGLE otherwise. Branch-free (selects)."""
+    c = wx * nx + wz * nz
+    ox = 2.0 * c * nx - wx
+    oy = -wy
+    oz = 2.0 * c * nz - wz
+    masked = s * (1.0 + signed_tan * ox / oz) - width > 0.0
+    status = MASKED if masked else SINGLE
+    status = DOWNWARD if oz <= 0.0 else status
+    return (RAY_UNRESOLVED if c <= 0.0 else status), c, ox, oy, oz
+
+
+@_vector_inlined
+def _fresnel_weights(c, m, n2, k2, fresnel_mode, weight, t):
+    """weight[t + j] = F(c[j]) (``_fresnel_weight``), 0 where c ≤ 0 (back-facing), for
+    j < m: one loop per mode, so that each vectorises."""
+    if fresnel_mode == FRESNEL_REAL:
+        for j in range(m):
+            weight[t + j] = 0.0 if c[j] <= 0.0 else fresnel_real_scalar(c[j], n2, k2)
+    else:
+        one = 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
+        for j in range(m):
+            weight[t + j] = 0.0 if c[j] <= 0.0 else one
 
 
 @_compiled
@@ -861,7 +914,7 @@ def groove_frame_directions(psi, wi, wx, wy, wz, dx, dy, dz, d32):
         d32[i, 0], d32[i, 1], d32[i, 2] = np.float32(-x), np.float32(-y), np.float32(-wi[2])
 
 
-@_compiled
+@_vectorised
 def bin_rays(
     status,
     wox,
@@ -918,7 +971,7 @@ def bin_rays(
             )
 
 
-@_compiled
+@_vectorised
 def analytic_vgroove(
     x,
     z,
@@ -947,38 +1000,39 @@ def analytic_vgroove(
 ):
     """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``paths.
     analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
-    per-facet columns passed as arrays). Per ray, in the groove frame:
-
-    * the primary hit (``_groove_hit``);
-    * the Fresnel weight F(c), c = n·wi (``_fresnel_weight``), the mirror
-      direction wo (groove frame, ``wox/woy/woz``) and the masking margin
-      s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``): class MASKED if > 0,
-      DOWNWARD if wo_z ≤ 0 (wins), RAY_UNRESOLVED if back-facing (c ≤ 0, weight 0), else
-      SINGLE. Bins are the caller's (``paths.locate_single``).
-    """
+    per-facet columns passed as arrays). Per ray, in the groove frame: the primary hit
+    (``_groove_hit``) and its class, Fresnel weight and mirror direction wo
+    (``_groove_reflection``; ``status``, ``weight``, ``wox/woy/woz``). Bins are the caller's
+    (``paths.locate_single``). In tiles of ``TILE`` rays, three passes: the arithmetic
+    before and after the per-facet look-ups in branch-free loops the compiler vectorises
+    (AVX2 has no gather it deems worth using, so an indexed load keeps a loop scalar), the
+    look-ups one by one between them — the same arithmetic as ``_groove_hit``/
+    ``_groove_reflection`` ray by ray, so ``analytic_vgroove_bounces`` agrees bitwise."""
     scale = len(x_left) / (2.0 * half)
     zw = z / wi[2]
     grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
-    for i in range(len(x)):
-        wx, wy, wz, f, s = _groove_hit(x[i], psi[i], wi, zw, half, scale, grooves)
-        nx, nz = facet_nx[f], facet_nz[f]
-        c = wx * nx + wz * nz
-        ox = 2.0 * c * nx - wx
-        oy = -wy
-        oz = 2.0 * c * nz - wz
-        wox[i], woy[i], woz[i] = ox, oy, oz
-        if c <= 0.0:  # back-facing: unresolved
-            status[i] = RAY_UNRESOLVED
-            weight[i] = 0.0
-            continue
-        weight[i] = _fresnel_weight(c, n2, k2, fresnel_mode)
-        if oz <= 0.0:
-            status[i] = DOWNWARD
-            continue
-        if s * (1.0 + facet_signed_tan[f] * ox / oz) - facet_width[f] > 0.0:
-            status[i] = MASKED
-            continue
-        status[i] = SINGLE
+    w3 = (wi[0], wi[1], wi[2])  # scalars: a store cannot alias them, the loops vectorise
+    wx, wy, x0 = np.empty(TILE), np.empty(TILE), np.empty(TILE)
+    num, den, nx, nz = np.empty(TILE), np.empty(TILE), np.empty(TILE), np.empty(TILE)
+    tan, width, c = np.empty(TILE), np.empty(TILE), np.empty(TILE)
+    for t in range(0, len(x), TILE):
+        m = min(TILE, len(x) - t)
+        for j in range(m):  # vectorised: groove frame and z = 0 crossing
+            wx[j], wy[j], _ = _groove_frame(psi[t + j], w3)
+            x0[j] = x[t + j] - zw * wx[j]
+        for j in range(m):  # one by one: wrap, groove, facet (indexed loads)
+            xj = x0[j]
+            if xj < -half or xj >= half:
+                xj = (xj + half) % (2 * half) - half
+            f, num[j], den[j] = _groove_facet(xj, -wx[j] / w3[2], half, scale, grooves)
+            nx[j], nz[j] = facet_nx[f], facet_nz[f]
+            tan[j], width[j] = facet_signed_tan[f], facet_width[f]
+        for j in range(m):  # vectorised: reflection and class
+            i = t + j
+            status[i], c[j], wox[i], woy[i], woz[i] = _groove_reflection(
+                wx[j], wy[j], w3[2], num[j] / den[j], nx[j], nz[j], tan[j], width[j]
+            )
+        _fresnel_weights(c, m, n2, k2, fresnel_mode, weight, t)
 
 
 @_compiled
