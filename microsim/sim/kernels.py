@@ -60,7 +60,7 @@ TILE = 1024  # rays per tile of a kernel's vectorised passes (its scratch stays 
 _vector_inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
-@_compiled
+@_vectorised
 def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, psi):
     """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``streams.
     chunk_origins``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
@@ -70,18 +70,21 @@ def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, ps
     x = (q − ⌊q⌋)·Lx − Lx/2, y = (⌊q⌋ + η)/rows · Ly − Ly/2 (⌊q⌋ capped at rows − 1), and
     ψ = 2π·(ψ/2π) if ``azimuth``. Writes ``x``, ``y`` (and ``psi``)."""
     per_ray = 3 if azimuth else 2
+    offset = np.arange(block).astype(np.float64)  # q as a float: the loop then vectorises
     for j in range((n + block - 1) // block):
         lo = j * block
         m = min(block, n - lo)
         base = per_ray * lo
+        first = float(r0 + lo)  # float(r0 + lo) + q = float(r0 + lo + q) exactly (< 2⁵³)
         for q in range(m):
             i = lo + q
-            s = (float(r0 + i) + u[base + q]) / n_total * rows
+            s = (first + offset[q] + u[base + q]) / n_total * rows
             row = min(math.floor(s), rows - 1.0)
             x[i] = (s - row) * lx - lx / 2
             y[i] = (row + u[base + m + q]) / rows * ly - ly / 2
-            if azimuth:
-                psi[i] = 2 * np.pi * u[base + 2 * m + q]
+        if azimuth:
+            for q in range(m):
+                psi[lo + q] = 2 * np.pi * u[base + 2 * m + q]
 
 
 @_compiled

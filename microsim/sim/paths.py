@@ -545,7 +545,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     return status, weight, where
 
 
-def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, psi, ior):
+def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, psi, ior, out=None):
     """(status, weight, bin) per primary ray of ``masking="analytic"``: ``trace_columns`` for
     V-grooves with the primary hit computed exactly by ``caster`` instead of Embree (every ray
     hits; ``VGrooveCaster.groove_hits``), the masking test ``margin_from_rim`` on the hit's
@@ -554,9 +554,12 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
     ``fresnel.fresnel_real_scalar``). Rays start at x (N,) (y is irrelevant: grooves run
     along y) and height ``z``. They agree with the traced paths ray by ray except where
     Embree's float32 hit is within a few ulp of a groove edge or masking threshold
-    (tests/test_analytic_vgroove.py)."""
+    (tests/test_analytic_vgroove.py). ``out``: (status, weight, bin) arrays (N,) to fill
+    and return instead of new ones."""
     n = len(x)
-    status, weight = np.empty(n, dtype=np.int8), np.empty(n)
+    if out is None:
+        out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
+    status, weight, where = out
     wo = [work("analytic-wo-" + a, n) for a in "xyz"]
     mode, n2, k2 = kernels.fresnel_mode(ior)
     c = caster
@@ -584,7 +587,7 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
         weight,
         *wo,
     )
-    where = np.full(n, -1, dtype=np.int64)
+    where.fill(-1)
     locate_single(bins, status, wo, phi_i, psi, where)
     return status, weight, where
 
@@ -706,13 +709,17 @@ class AnalyticVGroovePath(TracePath):
         self.caster = caster
 
     def follow(self, blocks):
-        inc, blocks, parts = self.incidence, list(blocks), []
+        inc, blocks = self.incidence, list(blocks)
         wi = np.asarray(inc.wi, dtype=np.float64)
         z = inc.tracer.zmax + inc.tracer.top_margin
+        n = min(inc.rays, (blocks[-1] + 1) * BLOCK) - blocks[0] * BLOCK
+        out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
         for a in range(0, len(blocks), ANALYTIC_BATCH):
             (x, _, _), psi = inc.origins_of(blocks[a : a + ANALYTIC_BATCH], True)
-            parts.append(analytic_columns(self.caster, wi, inc.phi_i, inc.bins, x, z, psi, inc.ior))
-        return tuple(np.concatenate(c) for c in zip(*parts))
+            lo = a * BLOCK
+            part = tuple(c[lo : lo + len(x)] for c in out)
+            analytic_columns(self.caster, wi, inc.phi_i, inc.bins, x, z, psi, inc.ior, part)
+        return out
 
 
 def choose_path(
