@@ -28,6 +28,7 @@ from microsim.analytic.fresnel import fresnel_real_scalar
 
 __all__ = [
     "fresnel_mode",
+    "fresnel_weights",
     "stratified_origins",
     "segment_setup",
     "segment_finish",
@@ -482,6 +483,13 @@ def tabled_primary(
     return m
 
 
+@_vectorised
+def fresnel_weights(c, n2, k2, fresnel_mode, weight):
+    """weight[i] = F(c[i]) (``_fresnel_weight``), 0 where c ≤ 0 (no hit, back-facing), in a
+    vectorised loop (``_fresnel_weights``)."""
+    _fresnel_weights(c, len(c), n2, k2, fresnel_mode, weight, 0)
+
+
 @_compiled
 def traced_primary(
     hs,
@@ -496,9 +504,6 @@ def traced_primary(
     ny,
     nz,
     lift,
-    n2,
-    k2,
-    fresnel_mode,
     trace_masking,
     clear_slope,
     hz,
@@ -508,7 +513,7 @@ def traced_primary(
     eps,
     rel,
     status,
-    weight,
+    cosine,
     wox,
     woy,
     woz,
@@ -527,9 +532,10 @@ def traced_primary(
 ):
     """``tabled_primary`` for rays that each carry their own incident direction wl (``wx/wy/
     wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n
-    (unit normal ``nx/ny/nz``, ``lift`` = n·v0 + eps), c = n·wl; back-facing (c ≤ 0):
-    RAY_UNRESOLVED, weight 0; else weight F(c) (``_fresnel_weight``) and the mirror direction
-    wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0, else SINGLE. With
+    (unit normal ``nx/ny/nz``, ``lift`` = n·v0 + eps), c = n·wl (``cosine``: 0 without a hit
+    or back-facing, for ``fresnel_weights``); back-facing (c ≤ 0): RAY_UNRESOLVED; else the
+    mirror direction wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0, else
+    SINGLE. With
     ``trace_masking`` the SINGLE rays whose float32 wo rises more steeply than
     ``clear_slope`` (× ``CLEAR_MARGIN`` as in ``Tracer.surely_escapes``; inf: none), that
     start at or above zmax or that clear the coarse grid ``hz`` (``horizon_clear``) escape
@@ -543,7 +549,7 @@ def traced_primary(
         h = hs[i]
         if h != HIT:
             status[i] = RAY_MISSED if (h == MISSED or h == ESCAPED) else RAY_UNRESOLVED
-            weight[i] = 0.0
+            cosine[i] = 0.0
             continue
         f = prim[i]
         k = 0 if shared else i
@@ -551,9 +557,9 @@ def traced_primary(
         c = wx[k] * a + wy[k] * b + wz[k] * e
         if not c > 0.0:  # back-facing: unresolved
             status[i] = RAY_UNRESOLVED
-            weight[i] = 0.0
+            cosine[i] = 0.0
             continue
-        weight[i] = _fresnel_weight(c, n2, k2, fresnel_mode)
+        cosine[i] = c
         ox = 2.0 * c * a - wx[k]
         oy = 2.0 * c * b - wy[k]
         oz = 2.0 * c * e - wz[k]
@@ -903,18 +909,19 @@ def _fresnel_weights(c, m, n2, k2, fresnel_mode, weight, t):
             weight[t + j] = 0.0 if c[j] <= 0.0 else one
 
 
-@_compiled
+@_vectorised
 def groove_frame_directions(psi, wi, wx, wy, wz, dx, dy, dz, d32):
     """Per ray i: the incident direction wi rotated by −ψ_i into its groove frame (``wx``,
-    ``wy``, ``wz``; cos ψ, sin ψ by ``cos_sin``, as ``analytic_vgroove`` does), the ray
-    direction −w (``dx``, ``dy``, ``dz``) and its float32 copy ``d32`` (N, 3)."""
+    ``wy``, ``wz``; ``_groove_frame``, as ``analytic_vgroove`` does), the ray direction −w
+    (``dx``, ``dy``, ``dz``) and its float32 copy ``d32`` (N, 3); vectorised but for the
+    interleaved float32 copy."""
+    w3 = (wi[0], wi[1], wi[2])  # scalars: a store cannot alias them
     for i in range(len(psi)):
-        cp, sp = cos_sin(psi[i])
-        x = cp * wi[0] + sp * wi[1]
-        y = -sp * wi[0] + cp * wi[1]
-        wx[i], wy[i], wz[i] = x, y, wi[2]
-        dx[i], dy[i], dz[i] = -x, -y, -wi[2]
-        d32[i, 0], d32[i, 1], d32[i, 2] = np.float32(-x), np.float32(-y), np.float32(-wi[2])
+        x, y, z = _groove_frame(psi[i], w3)
+        wx[i], wy[i], wz[i] = x, y, z
+        dx[i], dy[i], dz[i] = -x, -y, -z
+    for i in range(len(psi)):
+        d32[i, 0], d32[i, 1], d32[i, 2] = np.float32(dx[i]), np.float32(dy[i]), np.float32(dz[i])
 
 
 @_vectorised

@@ -514,6 +514,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         hs, prim, p = tracer.trace_columns(x, down, d32)
     status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
     wo = [work("traced-wo-" + a, n) for a in "xyz"]
+    cosine = work("traced-cosine", n)
     mask = MaskingRays.work(n)
     mode, n2, k2 = kernels.fresnel_mode(ior)
     m = kernels.traced_primary(
@@ -523,18 +524,16 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         *wl,
         *tracer.normal_columns,
         tracer.masking_lift,
-        n2,
-        k2,
-        mode,
         profile is None,
         tracer.rise_bound,
         tracer.horizon,
         *_segment_geometry(tracer),
         status,
-        weight,
+        cosine,
         *wo,
         *mask.kernel_args(),
     )
+    kernels.fresnel_weights(cosine, n2, k2, mode, weight)
     if profile is not None:
         hu = np.flatnonzero(status == SINGLE)
         margin = profile.margin_columns(prim[hu], p[0][hu], wo[0][hu], wo[2][hu])
