@@ -31,6 +31,7 @@ __all__ = [
     "fresnel_weights",
     "stratified_origins",
     "segment_setup",
+    "falling_first_segment",
     "segment_finish",
     "tabled_primary",
     "block_tallies",
@@ -88,7 +89,7 @@ def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, ps
                 psi[lo + q] = 2 * np.pi * u[base + 2 * m + q]
 
 
-@_compiled
+@_vector_inlined
 def _wall_distance(x, d, half):
     """Distance ≥ 0 along a ray at coordinate x with direction component d to the wall
     ±half it heads for (inf if parallel)."""
@@ -97,7 +98,7 @@ def _wall_distance(x, d, half):
     return max((math.copysign(half, d) - x) / d, 0.0)
 
 
-@_compiled
+@_vector_inlined
 def _segment_bounds(x, y, z, dx, dy, dz, hx, hy, zmax):
     """Distances along a ray at (x, y, z) with direction (dx, dy, dz) to the x wall, the y
     wall, the nearer of the two, and up to zmax (inf unless rising)."""
@@ -181,6 +182,29 @@ def segment_setup(
         keep[k] = i
         k += 1
     return k
+
+
+@_vectorised
+def falling_first_segment(x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, keep, top):
+    """``segment_setup`` for the first segment of rays that all start inside the tile and
+    share one falling direction (dx, dy, dz), dz < 0 (primary rays: none escapes, so every
+    ray i takes slot i, ``keep[i]`` = i), in a loop the compiler vectorises: the same
+    ``_segment_bounds`` and float32 arithmetic as ``_setup_ray``, the walls' inner float32
+    neighbours computed once (``_strictly_inside``). Returns the number of rays."""
+    hx32, hy32 = np.float32(hx), np.float32(hy)
+    ix = np.nextafter(hx32, np.float32(0.0))
+    iy = np.nextafter(hy32, np.float32(0.0))
+    for i in range(len(x)):
+        _, _, w, t = _segment_bounds(x[i], y[i], z[i], dx, dy, dz, hx, hy, zmax)
+        tq[i] = np.float32(min(w, t) * (1.0 + rel) + eps)
+        top[i] = t <= w
+        keep[i] = i
+    for i in range(len(x)):
+        u, v = np.float32(x[i]), np.float32(y[i])
+        u = ix if u >= hx32 else (-ix if u <= -hx32 else u)
+        v = iy if v >= hy32 else (-iy if v <= -hy32 else v)
+        o32[i, 0], o32[i, 1], o32[i, 2] = u, v, np.float32(z[i])
+    return len(x)
 
 
 @_compiled

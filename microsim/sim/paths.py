@@ -405,6 +405,21 @@ class MaskingRays:
         kernels.apply_escape(status, self.ray[:m], esc, _FROM_ESCAPE)
 
 
+def falling_first_segment(tracer: Tracer, x, down) -> tuple:
+    """The first segment's Embree input (o32, tfar, keep, top) of rays from x (3 columns,
+    inside the tile: ``Tracer.holds``) along one shared falling direction ``down`` (``kernels.
+    falling_first_segment``, vectorised), for ``Tracer.trace_columns(first=...)``."""
+    n = len(x[0])
+    first = (
+        work("primary-o32", (n, 3), np.float32),
+        work("primary-tfar", n, np.float32),
+        work("primary-keep", n, np.int64),
+        work("primary-top", n, np.bool_),
+    )
+    kernels.falling_first_segment(*x, *down, *_segment_geometry(tracer), *first)
+    return first
+
+
 def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
     """``trace_tabled`` up to its masking rays: (status, weight, bin, ``MaskingRays``, m) with
     the m masking rays set up but not yet traced (the status of their primary rays still
@@ -412,7 +427,9 @@ def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origi
     x = _columns(origins)
     n = len(x[0])
     wi = np.asarray(wi, dtype=np.float64)
-    hs, prim, p = tracer.trace_columns(x, [float(-c) for c in wi], (-wi).astype(np.float32)[None])
+    down = [float(-c) for c in wi]
+    first = falling_first_segment(tracer, x, down) if tracer.holds(x) else None
+    hs, prim, p = tracer.trace_columns(x, down, (-wi).astype(np.float32)[None], first=first)
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
     where = np.empty(n, dtype=np.int64)
     mask = MaskingRays.work(n)

@@ -293,14 +293,14 @@ class Tracer:
         a wall; most finish in the first) are compacted for the next. ``first``: the first
         segment's Embree input (o32, tq, keep, top) already set up by the caller exactly as
         ``segment_setup`` would from these rays, which then all lie in the tile and are all
-        traced (``kernels.tabled_primary``); per-ray directions only. ``wraps``: the wrap cap
-        (segments − 1) instead of ``max_wraps``."""
+        traced (``kernels.tabled_primary``, ``kernels.falling_first_segment``). ``wraps``: the
+        wrap cap (segments − 1) instead of ``max_wraps``."""
         n = len(x[0])
         shared = np.isscalar(d[0])
         x = [np.ascontiguousarray(c, dtype=np.float64) for c in x]
-        for a in (0, 1) if first is None else ():  # wrap the starts into the tile
-            h = self.half[a]
-            if n and (x[a].min() < -h or x[a].max() >= h):
+        if first is None and not self.holds(x):  # wrap the starts into the tile
+            for a in (0, 1):
+                h = self.half[a]
                 out = (x[a] < -h) | (x[a] >= h)
                 x[a] = np.where(out, np.mod(x[a] + h, 2 * h) - h, x[a])
         d = (
@@ -421,11 +421,19 @@ class Tracer:
         not yet projected onto the facet plane (NaN without a hit); see ``first_hit``."""
         return self._walk(origins, dirs, occlusion=False)
 
-    def trace_columns(self, x, d, d32, wraps=None):
-        """``trace`` on per-axis columns (see ``_walk_columns``): (status, prim, [px, py, pz]),
-        the point columns undefined where status is not HIT. ``wraps``: wrap cap (default
-        ``max_wraps``; ``wraps_needed`` gives what a direction needs)."""
-        return self._walk_columns(x, d, d32, occlusion=False, wraps=wraps)
+    def holds(self, x) -> bool:
+        """Whether every start of the columns ``x`` lies in the tile, −L/2 ≤ x, y < L/2
+        (``_walk_columns`` wraps the others)."""
+        return bool(
+            len(x[0]) == 0
+            or all(x[a].min() >= -self.half[a] and x[a].max() < self.half[a] for a in (0, 1))
+        )
+
+    def trace_columns(self, x, d, d32, wraps=None, first=None):
+        """``trace`` on per-axis columns (see ``_walk_columns``, also for ``first``): (status,
+        prim, [px, py, pz]), the point columns undefined where status is not HIT. ``wraps``:
+        wrap cap (default ``max_wraps``; ``wraps_needed`` gives what a direction needs)."""
+        return self._walk_columns(x, d, d32, occlusion=False, first=first, wraps=wraps)
 
     def wraps_needed(self, dx, dy, dz) -> np.ndarray:
         """Tile crossings (N,) after which a ray along (dx, dy, dz) (columns, unit) has either
