@@ -33,6 +33,7 @@ __all__ = [
     "segment_setup",
     "falling_first_segment",
     "segment_finish",
+    "first_segment_hits",
     "tabled_primary",
     "block_tallies",
     "apply_escape",
@@ -205,6 +206,28 @@ def falling_first_segment(x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, 
         v = iy if v >= hy32 else (-iy if v <= -hy32 else v)
         o32[i, 0], o32[i, 1], o32[i, 2] = u, v, np.float32(z[i])
     return len(x)
+
+
+@_vectorised
+def first_segment_hits(
+    pid, tfar, occlusion, ox, oy, oz, dx, dy, dz, shared, status, prim, px, py, pz
+):
+    """``segment_finish``'s hits for a first segment whose slot i is ray i (``first=``):
+    where ``pid[i]`` ≥ 0, status HIT and, for intersect queries, ``prim`` and the float64
+    point o + t·d (direction j = 0 if ``shared`` else i), in a loop the compiler vectorises;
+    the rays without a hit are left to ``segment_finish``."""
+    for i in range(len(pid)):
+        hit = pid[i] >= 0
+        status[i] = HIT if hit else status[i]
+    if not occlusion:
+        for i in range(len(pid)):
+            j = 0 if shared else i
+            t = np.float64(tfar[i])
+            hit = pid[i] >= 0
+            prim[i] = pid[i] if hit else prim[i]
+            px[i] = ox[i] + t * dx[j]
+            py[i] = oy[i] + t * dy[j]
+            pz[i] = oz[i] + t * dz[j]
 
 
 @_compiled
