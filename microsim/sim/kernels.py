@@ -186,17 +186,18 @@ def segment_setup(
 
 
 @_vectorised
-def falling_first_segment(x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, keep, top):
-    """``segment_setup`` for the first segment of rays that all start inside the tile and
-    share one falling direction (dx, dy, dz), dz < 0 (primary rays: none escapes, so every
-    ray i takes slot i, ``keep[i]`` = i), in a loop the compiler vectorises: the same
+def falling_first_segment(x, y, z, dx, dy, dz, shared, hx, hy, zmax, eps, rel, o32, tq, keep, top):
+    """``segment_setup`` for the first segment of falling rays (d_z < 0) that all start
+    inside the tile, along (dx, dy, dz)[j] (j = 0 if ``shared`` else i): none escapes, so
+    ray i takes slot i (``keep[i]`` = i). In loops the compiler vectorises: the same
     ``_segment_bounds`` and float32 arithmetic as ``_setup_ray``, the walls' inner float32
     neighbours computed once (``_strictly_inside``). Returns the number of rays."""
     hx32, hy32 = np.float32(hx), np.float32(hy)
     ix = np.nextafter(hx32, np.float32(0.0))
     iy = np.nextafter(hy32, np.float32(0.0))
     for i in range(len(x)):
-        _, _, w, t = _segment_bounds(x[i], y[i], z[i], dx, dy, dz, hx, hy, zmax)
+        j = 0 if shared else i
+        _, _, w, t = _segment_bounds(x[i], y[i], z[i], dx[j], dy[j], dz[j], hx, hy, zmax)
         tq[i] = np.float32(min(w, t) * (1.0 + rel) + eps)
         top[i] = t <= w
         keep[i] = i

@@ -407,16 +407,22 @@ class MaskingRays:
 
 def falling_first_segment(tracer: Tracer, x, down) -> tuple:
     """The first segment's Embree input (o32, tfar, keep, top) of rays from x (3 columns,
-    inside the tile: ``Tracer.holds``) along one shared falling direction ``down`` (``kernels.
-    falling_first_segment``, vectorised), for ``Tracer.trace_columns(first=...)``."""
+    inside the tile: ``Tracer.holds``) along falling directions ``down`` (3 floats: one
+    shared; or 3 columns) (``kernels.falling_first_segment``, vectorised), for
+    ``Tracer.trace_columns(first=...)``; None (the walk sets them up) unless every start
+    lies in the tile and every direction falls."""
     n = len(x[0])
+    shared = np.isscalar(down[0])
+    d = [np.array([float(c)]) for c in down] if shared else down
+    if not (tracer.holds(x) and np.all(d[2] < 0)):
+        return None
     first = (
         work("primary-o32", (n, 3), np.float32),
         work("primary-tfar", n, np.float32),
         work("primary-keep", n, np.int64),
         work("primary-top", n, np.bool_),
     )
-    kernels.falling_first_segment(*x, *down, *_segment_geometry(tracer), *first)
+    kernels.falling_first_segment(*x, *d, shared, *_segment_geometry(tracer), *first)
     return first
 
 
@@ -428,7 +434,7 @@ def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origi
     n = len(x[0])
     wi = np.asarray(wi, dtype=np.float64)
     down = [float(-c) for c in wi]
-    first = falling_first_segment(tracer, x, down) if tracer.holds(x) else None
+    first = falling_first_segment(tracer, x, down)
     hs, prim, p = tracer.trace_columns(x, down, (-wi).astype(np.float32)[None], first=first)
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
     where = np.empty(n, dtype=np.int64)
@@ -516,7 +522,8 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     if psi is None:
         wl = [np.array([float(c)]) for c in wi]  # one shared direction
         down = [-float(c) for c in wi]
-        hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32))
+        first = falling_first_segment(tracer, x, down)
+        hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32), first=first)
     else:
         wl = [work("traced-wl-" + a, n) for a in "xyz"]
         down = [work("traced-down-" + a, n) for a in "xyz"]
@@ -528,7 +535,8 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
             *down,
             d32,
         )
-        hs, prim, p = tracer.trace_columns(x, down, d32)
+        first = falling_first_segment(tracer, x, down)
+        hs, prim, p = tracer.trace_columns(x, down, d32, first=first)
     status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
     wo = [work("traced-wo-" + a, n) for a in "xyz"]
     cosine = work("traced-cosine", n)
