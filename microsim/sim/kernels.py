@@ -210,25 +210,20 @@ def falling_first_segment(x, y, z, dx, dy, dz, shared, hx, hy, zmax, eps, rel, o
 
 
 @_vectorised
-def first_segment_hits(
-    pid, tfar, occlusion, ox, oy, oz, dx, dy, dz, shared, status, prim, px, py, pz
-):
-    """``segment_finish``'s hits for a first segment whose slot i is ray i (``first=``):
-    where ``pid[i]`` ≥ 0, status HIT and, for intersect queries, ``prim`` and the float64
-    point o + t·d (direction j = 0 if ``shared`` else i), in a loop the compiler vectorises;
-    the rays without a hit are left to ``segment_finish``."""
+def first_segment_hits(pid, tfar, ox, oy, oz, dx, dy, dz, shared, status, prim, px, py, pz):
+    """``segment_finish``'s hits for the first segment of an intersect query whose slot i is
+    ray i (``first=``): where ``pid[i]`` ≥ 0, status HIT, ``prim`` and the float64 point
+    o + t·d (direction j = 0 if ``shared`` else i), in a loop the compiler vectorises; the
+    rays without a hit are left to ``segment_finish``."""
     for i in range(len(pid)):
+        j = 0 if shared else i
+        t = np.float64(tfar[i])
         hit = pid[i] >= 0
         status[i] = HIT if hit else status[i]
-    if not occlusion:
-        for i in range(len(pid)):
-            j = 0 if shared else i
-            t = np.float64(tfar[i])
-            hit = pid[i] >= 0
-            prim[i] = pid[i] if hit else prim[i]
-            px[i] = ox[i] + t * dx[j]
-            py[i] = oy[i] + t * dy[j]
-            pz[i] = oz[i] + t * dz[j]
+        prim[i] = pid[i] if hit else prim[i]
+        px[i] = ox[i] + t * dx[j]
+        py[i] = oy[i] + t * dy[j]
+        pz[i] = oz[i] + t * dz[j]
 
 
 @_compiled

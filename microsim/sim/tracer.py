@@ -368,13 +368,13 @@ class Tracer:
                     output=None if occlusion else 1,
                 )
                 pid, tfar = (res, no_tfar) if occlusion else (res["primID"], res["tfar"])
-            if segment == 0 and first is not None:  # slot i is ray i: hits vectorised
-                kernels.first_segment_hits(
-                    pid, tfar, occlusion, *x, *d, shared, status, prim, *point
-                )
-                rest = np.flatnonzero(pid < 0)  # left to segment_finish
-                k, pid, keep_, top_ = len(rest), pid[rest], keep_[rest], top_[rest]
-                tfar = tfar if occlusion else tfar[rest]
+            if segment == 0 and first is not None and not occlusion:
+                # slot i is ray i and most rays hit (primaries): the hits vectorised, the
+                # others left to segment_finish
+                kernels.first_segment_hits(pid, tfar, *x, *d, shared, status, prim, *point)
+                rest = np.flatnonzero(pid < 0)
+                k, pid, tfar = len(rest), pid[rest], tfar[rest]
+                keep_, top_ = keep_[rest], top_[rest]
                 d32k_ = d32k_ if shared else d32k_[rest]
             nxt = f"walk-next{segment % 2}-"  # written here, read by the next segment
             m_live = work(nxt + "live", k, np.int64)
