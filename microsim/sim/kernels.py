@@ -682,9 +682,8 @@ def block_tallies(
                 f4 += weight[i]
             if s == SINGLE and where[i] >= 0:
                 k = where[i]
-                if touched[k] == 0:
-                    out_bin[j] = k
-                    j += 1
+                out_bin[j] = k  # kept (j advances) only on the bin's first event: no branch
+                j += touched[k] == 0
                 w = weight[i]
                 acc[0, k] += w
                 acc[1, k] += w * w
