@@ -229,30 +229,34 @@ def _trace(scene, W, lay, o, d, tfar, occlusion, prim, t_out, buf, ubuf, valid, 
     bptr = buf.ctypes.data
     vptr = valid.ctypes.data
     aptr = args.ctypes.data
+    for j in range(W):  # the fields Embree only reads, written once for every packet
+        buf[tn + j] = 0.0
+        buf[tm + j] = 0.0
+        ubuf[msk + j] = u_all
+        ubuf[rid + j] = 0
+        ubuf[rfl + j] = 0
+        if shared:
+            buf[dx + j] = d[0, 0]
+            buf[dy + j] = d[0, 1]
+            buf[dz + j] = d[0, 2]
     for base in range(0, n, W):
         m = min(W, n - base)
-        for j in range(W):
-            if j < m:
-                i = base + j
-                k = 0 if shared else i
-                buf[ox + j] = o[i, 0]
-                buf[oy + j] = o[i, 1]
-                buf[oz + j] = o[i, 2]
-                buf[tn + j] = 0.0
-                buf[dx + j] = d[k, 0]
-                buf[dy + j] = d[k, 1]
-                buf[dz + j] = d[k, 2]
-                buf[tm + j] = 0.0
-                buf[tfr + j] = tfar[i]
-                ubuf[msk + j] = u_all
-                ubuf[rid + j] = 0
-                ubuf[rfl + j] = 0
-                ubuf[gid + j] = u_all
-                ubuf[pid + j] = u_all
-                ubuf[iid + j] = u_all
-                valid[j] = -1
-            else:
-                valid[j] = 0
+        for j in range(m):
+            i = base + j
+            buf[ox + j] = o[i, 0]
+            buf[oy + j] = o[i, 1]
+            buf[oz + j] = o[i, 2]
+            if not shared:
+                buf[dx + j] = d[i, 0]
+                buf[dy + j] = d[i, 1]
+                buf[dz + j] = d[i, 2]
+            buf[tfr + j] = tfar[i]
+            ubuf[gid + j] = u_all  # Embree writes the hit fields only on a hit
+            ubuf[pid + j] = u_all
+            ubuf[iid + j] = u_all
+            valid[j] = -1
+        for j in range(m, W):
+            valid[j] = 0
         if occlusion:
             if W == 16:
                 _occluded16(vptr, scene, bptr, aptr)
