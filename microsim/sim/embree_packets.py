@@ -39,6 +39,7 @@ import ctypes
 import functools
 import glob
 import os
+import threading
 
 import llvmlite.binding as llvm
 import numba as nb
@@ -281,11 +282,20 @@ def _trace(scene, W, lay, o, d, tfar, occlusion, prim, t_out, buf, ubuf, valid, 
 
 
 def _buffers():
-    buf = aligned(PACKET_WORDS)
-    args = aligned(ARGS_WORDS, np.uint32)
-    args[0] = _QUERY_FLAG_COHERENT
-    args[1] = _FEATURE_FLAG_ALL  # context/filter/callback pointers stay NULL
-    return buf, buf.view(np.uint32), aligned(16, np.int32), args
+    """This thread's packet buffers (ray/hit words, their uint32 view, the valid mask, the
+    query arguments), made once per thread: ``_trace`` sets every field it relies on."""
+    try:
+        return _thread.buffers
+    except AttributeError:
+        buf = aligned(PACKET_WORDS)
+        args = aligned(ARGS_WORDS, np.uint32)
+        args[0] = _QUERY_FLAG_COHERENT
+        args[1] = _FEATURE_FLAG_ALL  # context/filter/callback pointers stay NULL
+        _thread.buffers = buf, buf.view(np.uint32), aligned(16, np.int32), args
+        return _thread.buffers
+
+
+_thread = threading.local()
 
 
 class PacketScene:
