@@ -880,9 +880,9 @@ def folded_bin(ox, oy, oz, ex, ey, theta_cos, theta_sin, phi_cos, phi_sin):
 
 @_vector_inlined
 def _groove_frame(psi, wi):
-    """wi rotated by −ψ into the groove frame (``cos_sin``): (wx, wy, wz)."""
+    """wi rotated by −ψ into the groove frame: (wx, wy, wz, cos ψ, sin ψ) (``cos_sin``)."""
     cp, sp = cos_sin(psi)
-    return cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], wi[2]
+    return cp * wi[0] + sp * wi[1], -sp * wi[0] + cp * wi[1], wi[2], cp, sp
 
 
 @_inlined
@@ -912,7 +912,7 @@ def _groove_hit(x, psi, wi, zw, half, scale, grooves):
     """The exact primary hit of the ray from (x, ·, z) with groove azimuth ψ (zw = z/wi_z):
     ``_groove_frame``, the z = 0 crossing x0 wrapped into the tile, ``_groove_facet``.
     Returns (wi in the groove frame (wx, wy, wz), facet f, s)."""
-    wx, wy, wz = _groove_frame(psi, wi)
+    wx, wy, wz, _, _ = _groove_frame(psi, wi)
     x0 = x - zw * wx  # z = 0 crossing
     if x0 < -half or x0 >= half:
         x0 = (x0 + half) % (2 * half) - half
@@ -959,11 +959,38 @@ def groove_frame_directions(psi, wi, wx, wy, wz, dx, dy, dz, d32):
     interleaved float32 copy."""
     w3 = (wi[0], wi[1], wi[2])  # scalars: a store cannot alias them
     for i in range(len(psi)):
-        x, y, z = _groove_frame(psi[i], w3)
+        x, y, z, _, _ = _groove_frame(psi[i], w3)
         wx[i], wy[i], wz[i] = x, y, z
         dx[i], dy[i], dz[i] = -x, -y, -z
     for i in range(len(psi)):
         d32[i, 0], d32[i, 1], d32[i, 2] = np.float32(dx[i]), np.float32(dy[i]), np.float32(dz[i])
+
+
+@_vector_inlined
+def _bin_guess(ox, oy, oz, ex, ey, n_theta, n_phi, t_scale, p_scale, gt, gp):
+    """Branch-free part of ``bin_rays``: the flat folded bin of the rising direction o
+    against the unit azimuth (ex, ey) from ``_atan_approx`` (θ bins ``t_scale`` per radian,
+    Δφ bins ``p_scale`` per radian and half a bin shifted), and whether either angle lies
+    within ``gt``/``gp`` (bins) of an edge, where the guess may be wrong: (flat, near)."""
+    rho = math.sqrt(ox * ox + oy * oy)
+    zenith = rho == 0.0  # φo = atan2(±0, ±0): along ±x (``folded_bin``)
+    hx = math.copysign(1.0, ox) if zenith else ox
+    hy = 0.0 if zenith else oy
+    u = _atan_approx(rho, oz) * t_scale
+    v = _atan_approx(abs(ex * hy - ey * hx), ex * hx + ey * hy) * p_scale + 0.5
+    k, j = int(u), int(v)
+    fu, fv = u - k, v - j
+    near = (fu < gt) | (fu > 1.0 - gt) | (fv < gp) | (fv > 1.0 - gp)
+    return min(k, n_theta - 1) * n_phi + min(j, n_phi - 1), near
+
+
+@_vector_inlined
+def _bin_scales(theta_cos, phi_cos):
+    """(n_θ, n_φ, θ bins per radian, Δφ bins per radian, guards in bins) of a folded grid
+    for ``_bin_guess``: the guards are twice ``ATAN_ERROR``."""
+    n_theta, n_phi = len(theta_cos), len(phi_cos)
+    t_scale, p_scale = n_theta / (0.5 * math.pi), (n_phi - 1) / math.pi
+    return n_theta, n_phi, t_scale, p_scale, 2.0 * ATAN_ERROR * t_scale, 2.0 * ATAN_ERROR * p_scale
 
 
 @_vectorised
@@ -990,26 +1017,14 @@ def bin_rays(
     than the same arithmetic ray by ray) flags in ``near`` (bool work array) the rays whose
     angle lies within twice ``ATAN_ERROR`` of an edge; the second decides those exactly by
     ``folded_bin``. The result is ``folded_bin``'s for every ray."""
-    n_theta, n_phi = len(theta_cos), len(phi_cos)
-    t_scale, p_scale = n_theta / (0.5 * math.pi), (n_phi - 1) / math.pi
-    gt, gp = 2.0 * ATAN_ERROR * t_scale, 2.0 * ATAN_ERROR * p_scale
+    nt, nf, ts, fs, gt, gf = _bin_scales(theta_cos, phi_cos)
     for i in range(len(status)):
         ex, ey = cos_phi, sin_phi
         if rotate:
             cp, sp = cos_sin(psi[i])
             ex = cp * cos_phi + sp * sin_phi
             ey = -sp * cos_phi + cp * sin_phi
-        ox, oy, oz = wox[i], woy[i], woz[i]
-        rho = math.sqrt(ox * ox + oy * oy)
-        zenith = rho == 0.0  # φo = atan2(±0, ±0): along ±x (``folded_bin``)
-        hx = math.copysign(1.0, ox) if zenith else ox
-        hy = 0.0 if zenith else oy
-        u = _atan_approx(rho, oz) * t_scale
-        v = _atan_approx(abs(ex * hy - ey * hx), ex * hx + ey * hy) * p_scale + 0.5
-        k, j = int(u), int(v)
-        fu, fv = u - k, v - j
-        near[i] = (fu < gt) | (fu > 1.0 - gt) | (fv < gp) | (fv > 1.0 - gp)
-        flat = min(k, n_theta - 1) * n_phi + min(j, n_phi - 1)
+        flat, near[i] = _bin_guess(wox[i], woy[i], woz[i], ex, ey, nt, nf, ts, fs, gt, gf)
         where[i] = flat if status[i] == SINGLE else where[i]
     for i in range(len(status)):
         if near[i] and status[i] == SINGLE:
@@ -1044,8 +1059,16 @@ def analytic_vgroove(
     n2,
     k2,
     fresnel_mode,
+    cos_phi,
+    sin_phi,
+    folded,
+    theta_cos,
+    theta_sin,
+    phi_cos,
+    phi_sin,
     status,
     weight,
+    where,
     wox,
     woy,
     woz,
@@ -1054,23 +1077,28 @@ def analytic_vgroove(
     analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
     per-facet columns passed as arrays). Per ray, in the groove frame: the primary hit
     (``_groove_hit``) and its class, Fresnel weight and mirror direction wo
-    (``_groove_reflection``; ``status``, ``weight``, ``wox/woy/woz``). Bins are the caller's
-    (``paths.locate_single``). In tiles of ``TILE`` rays, three passes: the arithmetic
-    before and after the per-facet look-ups in branch-free loops the compiler vectorises
-    (AVX2 has no gather it deems worth using, so an indexed load keeps a loop scalar), the
-    look-ups one by one between them — the same arithmetic as ``_groove_hit``/
-    ``_groove_reflection`` ray by ray, so ``analytic_vgroove_bounces`` agrees bitwise."""
+    (``_groove_reflection``; ``status``, ``weight``); on a ``folded`` grid (``Bins.
+    edge_tables``) the bin of wo for SINGLE rays against φi (``cos_phi``, ``sin_phi``)
+    rotated by −ψ, as ``bin_rays`` (``where``, −1 for the others); otherwise ``where`` = −1
+    and wo in ``wox/woy/woz`` for the caller to bin. In tiles of ``TILE`` rays, passes: the
+    arithmetic before and after the per-facet look-ups, and the bins, in branch-free loops
+    the compiler vectorises (AVX2 has no gather it deems worth using, so an indexed load
+    keeps a loop scalar), the look-ups and the bins near an edge one by one — the same
+    arithmetic as ``_groove_hit``/``_groove_reflection`` ray by ray (so
+    ``analytic_vgroove_bounces`` agrees bitwise) and ``bin_rays``'s bins."""
     scale = len(x_left) / (2.0 * half)
     zw = z / wi[2]
     grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
     w3 = (wi[0], wi[1], wi[2])  # scalars: a store cannot alias them, the loops vectorise
-    wx, wy, x0 = np.empty(TILE), np.empty(TILE), np.empty(TILE)
-    num, den, nx, nz = np.empty(TILE), np.empty(TILE), np.empty(TILE), np.empty(TILE)
-    tan, width, c = np.empty(TILE), np.empty(TILE), np.empty(TILE)
+    nt, nf, ts, fs, gt, gf = _bin_scales(theta_cos, phi_cos)
+    tile = np.empty((15, TILE))  # per-ray scratch of one tile
+    wx, wy, x0, cp, sp, num, den = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
+    nx, nz, tan, width, c = tile[7], tile[8], tile[9], tile[10], tile[11]
+    ox, oy, oz, near = tile[12], tile[13], tile[14], np.empty(TILE, np.bool_)
     for t in range(0, len(x), TILE):
         m = min(TILE, len(x) - t)
         for j in range(m):  # vectorised: groove frame and z = 0 crossing
-            wx[j], wy[j], _ = _groove_frame(psi[t + j], w3)
+            wx[j], wy[j], _, cp[j], sp[j] = _groove_frame(psi[t + j], w3)
             x0[j] = x[t + j] - zw * wx[j]
         for j in range(m):  # one by one: wrap, groove, facet (indexed loads)
             xj = x0[j]
@@ -1080,11 +1108,27 @@ def analytic_vgroove(
             nx[j], nz[j] = facet_nx[f], facet_nz[f]
             tan[j], width[j] = facet_signed_tan[f], facet_width[f]
         for j in range(m):  # vectorised: reflection and class
-            i = t + j
-            status[i], c[j], wox[i], woy[i], woz[i] = _groove_reflection(
+            status[t + j], c[j], ox[j], oy[j], oz[j] = _groove_reflection(
                 wx[j], wy[j], w3[2], num[j] / den[j], nx[j], nz[j], tan[j], width[j]
             )
         _fresnel_weights(c, m, n2, k2, fresnel_mode, weight, t)
+        if not folded:  # the caller bins wo
+            for j in range(m):
+                wox[t + j], woy[t + j], woz[t + j] = ox[j], oy[j], oz[j]
+                where[t + j] = -1
+            continue
+        for j in range(m):  # vectorised: bins against φi rotated by −ψ (``bin_rays``)
+            ex = cp[j] * cos_phi + sp[j] * sin_phi
+            ey = -sp[j] * cos_phi + cp[j] * sin_phi
+            flat, near[j] = _bin_guess(ox[j], oy[j], oz[j], ex, ey, nt, nf, ts, fs, gt, gf)
+            where[t + j] = flat if status[t + j] == SINGLE else -1
+        for j in range(m):  # near an edge: decided exactly
+            if near[j] and status[t + j] == SINGLE:
+                ex = cp[j] * cos_phi + sp[j] * sin_phi
+                ey = -sp[j] * cos_phi + cp[j] * sin_phi
+                where[t + j] = folded_bin(
+                    ox[j], oy[j], oz[j], ex, ey, theta_cos, theta_sin, phi_cos, phi_sin
+                )
 
 
 @_compiled

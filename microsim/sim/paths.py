@@ -584,8 +584,9 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
     if out is None:
         out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
     status, weight, where = out
-    wo = [work("analytic-wo-" + a, n) for a in "xyz"]
+    wo = [work("analytic-wo-" + a, 0 if bins.folded else n) for a in "xyz"]
     mode, n2, k2 = kernels.fresnel_mode(ior)
+    phi = np.radians(phi_i)
     c = caster
     kernels.analytic_vgroove(
         np.ascontiguousarray(x, dtype=np.float64),
@@ -607,12 +608,17 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
         n2,
         k2,
         mode,
+        float(np.cos(phi)),
+        float(np.sin(phi)),
+        bins.folded,
+        *bins.edge_tables(),
         status,
         weight,
+        where,
         *wo,
     )
-    where.fill(-1)
-    locate_single(bins, status, wo, phi_i, psi, where)
+    if not bins.folded:
+        locate_single(bins, status, wo, phi_i, psi, where)
     return status, weight, where
 
 
