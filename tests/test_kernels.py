@@ -112,6 +112,19 @@ def test_block_rays_do_not_depend_on_the_chunking(azimuth, origins):
     assert not np.array_equal(x, other)  # the key selects the stream
 
 
+def test_groove_starts_are_the_chunk_origins_without_y():
+    """``streams.groove_starts`` (η skipped by advancing the generator) gives x and ψ bitwise
+    as ``chunk_origins`` does, for any grouping of blocks and a short last block."""
+    tracer = paths.tracer_for(flat(), "traced")[0]
+    n = 5 * BLOCK + 11
+    (x, _, _), psi = streams.chunk_origins(tracer, n, range(6), (3, 1, 2), True)
+    x, psi = x.copy(), psi.copy()
+    for blocks in (range(6), range(2, 6), [5]):
+        gx, gpsi = streams.groove_starts(tracer, n, blocks, (3, 1, 2))
+        part = slice(blocks[0] * BLOCK, n)
+        assert np.array_equal(gx, x[part]) and np.array_equal(gpsi, psi[part])
+
+
 def test_stratified_origins_lie_in_their_own_strata():
     """Ray r's origin is q = (r + ξ)/N·rows of the row-major sweep with ξ ∈ [0, 1) and its y
     jittered inside row ⌊q⌋ (η ∈ [0, 1))."""

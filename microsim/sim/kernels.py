@@ -30,6 +30,7 @@ __all__ = [
     "fresnel_mode",
     "fresnel_weights",
     "stratified_origins",
+    "stratified_groove_starts",
     "segment_setup",
     "falling_first_segment",
     "segment_finish",
@@ -63,15 +64,23 @@ TILE = 1024  # rays per tile of a kernel's vectorised passes (its scratch stays 
 _vector_inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
+@_vector_inlined
+def _stratum(r, xi, n_total, rows):
+    """Ray r's place (r as a float) in its stratum of a row-major sweep of ``rows`` rows:
+    s = (r + ξ)/N · rows; (s − row, row) with row = ⌊s⌋ capped at rows − 1."""
+    s = (r + xi) / n_total * rows
+    row = min(math.floor(s), rows - 1.0)
+    return s - row, row
+
+
 @_vectorised
 def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, psi):
     """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``streams.
     chunk_origins``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
     chunk (m rays) holds ξ, η (and ψ/2π if ``azimuth``) as runs of m numbers from
-    u[k·block·j], k = 3 if ``azimuth`` else 2. Ray r's
-    stratum q = (r + ξ)/N · rows of a row-major sweep of ``rows`` rows gives
-    x = (q − ⌊q⌋)·Lx − Lx/2, y = (⌊q⌋ + η)/rows · Ly − Ly/2 (⌊q⌋ capped at rows − 1), and
-    ψ = 2π·(ψ/2π) if ``azimuth``. Writes ``x``, ``y`` (and ``psi``)."""
+    u[k·block·j], k = 3 if ``azimuth`` else 2. Ray r's stratum (``_stratum``) gives
+    x = (s − ⌊s⌋)·Lx − Lx/2, y = (⌊s⌋ + η)/rows · Ly − Ly/2, and ψ = 2π·(ψ/2π) if
+    ``azimuth``. Writes ``x``, ``y`` (and ``psi``)."""
     per_ray = 3 if azimuth else 2
     offset = np.arange(block).astype(np.float64)  # q as a float: the loop then vectorises
     for j in range((n + block - 1) // block):
@@ -80,14 +89,29 @@ def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, x, y, ps
         base = per_ray * lo
         first = float(r0 + lo)  # float(r0 + lo) + q = float(r0 + lo + q) exactly (< 2⁵³)
         for q in range(m):
-            i = lo + q
-            s = (first + offset[q] + u[base + q]) / n_total * rows
-            row = min(math.floor(s), rows - 1.0)
-            x[i] = (s - row) * lx - lx / 2
-            y[i] = (row + u[base + m + q]) / rows * ly - ly / 2
+            frac, row = _stratum(first + offset[q], u[base + q], n_total, rows)
+            x[lo + q] = frac * lx - lx / 2
+            y[lo + q] = (row + u[base + m + q]) / rows * ly - ly / 2
         if azimuth:
             for q in range(m):
                 psi[lo + q] = 2 * np.pi * u[base + 2 * m + q]
+
+
+@_vectorised
+def stratified_groove_starts(u, r0, n, block, n_total, rows, lx, x, psi):
+    """x and groove azimuth ψ of stratified rays r0 … r0 + n − 1 as ``stratified_origins``
+    (``azimuth``) gives them, from ξ and ψ/2π alone: block j (m rays) holds them as two runs
+    of m numbers from u[2·block·j] (``streams.groove_starts``)."""
+    offset = np.arange(block).astype(np.float64)
+    for j in range((n + block - 1) // block):
+        lo = j * block
+        m = min(block, n - lo)
+        base = 2 * lo
+        first = float(r0 + lo)
+        for q in range(m):
+            frac, _ = _stratum(first + offset[q], u[base + q], n_total, rows)
+            x[lo + q] = frac * lx - lx / 2
+            psi[lo + q] = 2 * np.pi * u[base + m + q]
 
 
 @_vector_inlined

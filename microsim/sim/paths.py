@@ -57,7 +57,7 @@ from microsim.errors import UsageError
 from . import kernels
 from .bins import Bins
 from .scratch import work
-from .streams import BLOCK, block_rotation, chunk_origins
+from .streams import BLOCK, block_rotation, chunk_origins, groove_starts
 from .tracer import (
     ESCAPED,
     HIT,
@@ -745,7 +745,11 @@ class AnalyticVGroovePath(TracePath):
         n = min(inc.rays, (blocks[-1] + 1) * BLOCK) - blocks[0] * BLOCK
         out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
         for a in range(0, len(blocks), ANALYTIC_BATCH):
-            (x, _, _), psi = inc.origins_of(blocks[a : a + ANALYTIC_BATCH], True)
+            batch = blocks[a : a + ANALYTIC_BATCH]
+            if inc.origins == "stratified":  # y plays no part: not even drawn
+                x, psi = groove_starts(inc.tracer, inc.rays, batch, inc.key)
+            else:
+                (x, _, _), psi = inc.origins_of(batch, True)
             lo = a * BLOCK
             part = tuple(c[lo : lo + len(x)] for c in out)
             analytic_columns(self.caster, wi, inc.phi_i, inc.bins, x, z, psi, inc.ior, part)

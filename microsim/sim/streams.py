@@ -33,6 +33,7 @@ __all__ = [
     "stream_state",
     "block_generator",
     "chunk_origins",
+    "groove_starts",
     "block_origins",
     "block_rotation",
 ]
@@ -112,6 +113,31 @@ def chunk_origins(
             u, lo, n, BLOCK, float(n_total), float(rows), float(lx), float(ly), azimuth, x, y, psi
         )
     return [x, y, z], (psi if azimuth else None)
+
+
+def groove_starts(tracer: Tracer, n_total: int, blocks, key):
+    """x and groove azimuths ψ of the stratified rays of consecutive ``blocks``, bitwise as
+    ``chunk_origins(..., azimuth=True)`` gives them, without y (grooves run along y, so the
+    analytic V-groove path never uses it): each block's η run is skipped by advancing the
+    generator instead of drawn. In this thread's work arrays (valid until its next call)."""
+    blocks = list(blocks)
+    lo = blocks[0] * BLOCK
+    n = min(n_total, (blocks[-1] + 1) * BLOCK) - lo
+    lx, ly = tracer.tile
+    rng = block_generator(key, blocks[0], 3)  # consecutive slots from here on
+    u = work("groove-uniform", 2 * n)  # ξ, then ψ/2π, of each block in turn
+    for b in blocks:
+        k = b * BLOCK - lo
+        m = min(n - k, BLOCK)
+        rng.random(out=u[2 * k : 2 * k + m])
+        rng.bit_generator.advance(m)  # η
+        rng.random(out=u[2 * k + m : 2 * k + 2 * m])
+    x, psi = work("groove-x", n), work("groove-psi", n)
+    rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
+    kernels.stratified_groove_starts(
+        u, lo, n, BLOCK, float(n_total), float(rows), float(lx), x, psi
+    )
+    return x, psi
 
 
 def block_origins(
