@@ -150,6 +150,20 @@ def rise_bound(surface, normals: np.ndarray) -> float:
     return float(np.max(np.hypot(n[:, 0], n[:, 1]) / n[:, 2]))
 
 
+
+_IDENTITY = np.arange(0, dtype=np.int64)
+
+
+def _identity(n: int) -> np.ndarray:
+    """0 … n − 1 (int64), a read-only view of one shared array grown when needed (a fresh
+    np.arange of a chunk faults in its pages on every walk)."""
+    global _IDENTITY
+    if len(_IDENTITY) < n:
+        grown = np.arange(max(n, 2 * len(_IDENTITY)), dtype=np.int64)
+        grown.flags.writeable = False
+        _IDENTITY = grown
+    return _IDENTITY[:n]
+
 class Tracer:
     """Periodic Embree scene of one tile of ``surface`` (a ``microsim.surfaces.Surface``).
 
@@ -313,7 +327,7 @@ class Tracer:
         status = np.full(n, UNRESOLVED, dtype=np.int8)
         prim = np.full(0 if occlusion else n, -1, dtype=np.int32)
         point = [np.empty(0 if occlusion else n) for _ in range(3)]
-        live = np.arange(n, dtype=np.int64)
+        live = _identity(n)  # read only: the next segment's live rays are a new array
         # per-segment work arrays (this thread's, reused; sized for the first, largest segment)
         o32 = work("walk-o32", (n, 3), np.float32)
         d32k = work("walk-d32", (0, 3) if shared else (n, 3), np.float32)
