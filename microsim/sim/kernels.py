@@ -506,47 +506,63 @@ def tabled_primary(
     escapes without a masking ray (as ``segment_setup`` decides). ``hs`` is the walk status:
     HIT, MISSED/ESCAPED (→ RAY_MISSED) or UNRESOLVED. Writes ``status``, ``weight`` (0
     without a hit) and ``where`` (the facet bin for lit rays, else −1) of every ray; returns
-    the number of masking rays."""
+    the number of masking rays. In tiles of ``TILE`` rays: the look-ups one by one, the
+    starts in a vectorised loop, the masking rays by ``masking_starts``."""
+    tile = np.empty((10, TILE))  # per-ray scratch of one tile
+    a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
+    dx_, dy_, dz_ = tile[7], tile[8], tile[9]
+    cand = np.empty(TILE, np.bool_)
     m = 0
-    for i in range(len(hs)):
-        h = hs[i]
-        where[i] = -1
-        if h != HIT:
-            status[i] = RAY_MISSED if (h == MISSED or h == ESCAPED) else RAY_UNRESOLVED
-            weight[i] = 0.0
-            continue
-        f = prim[i]
-        c = code[f]
-        status[i] = c
-        weight[i] = fweight[f]
-        if c != SINGLE:
-            continue
-        where[i] = fbin[f]
-        if fclear[f]:  # rises more steeply than the surface can: escaped
-            continue
-        a, b, e = nx[f], ny[f], nz[f]
-        off = px[i] * a + py[i] * b + pz[i] * e - lift[f]
-        x, y, z = px[i] - off * a, py[i] - off * b, pz[i] - off * e
-        dx, dy, dz = np.float64(wo32[f, 0]), np.float64(wo32[f, 1]), np.float64(wo32[f, 2])
-        if dz > 0.0 and z >= zmax:  # nothing above: escaped
-            continue
-        if x < -hx or x >= hx:  # into the tile
-            x = (x + hx) % (2.0 * hx) - hx
-        if y < -hy or y >= hy:
-            y = (y + hy) % (2.0 * hy) - hy
-        if horizon_clear(
-            x, y, z, dx, dy, dz, hz[0], hz[1], hz[2], hz[3], hz[4], hz[5], zmax, hz[6]
-        ):
-            continue  # clears the coarse grid: escaped
-        sx[m], sy[m], sz[m] = x, y, z
-        mdx[m], mdy[m], mdz[m] = dx, dy, dz
-        md32[m, 0] = wo32[f, 0]
-        md32[m, 1] = wo32[f, 1]
-        md32[m, 2] = wo32[f, 2]
-        _setup_ray(m, x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, top)
-        keep[m] = m
-        mi[m] = i
-        m += 1
+    for t in range(0, len(hs), TILE):
+        n = min(TILE, len(hs) - t)
+        for j in range(n):  # one by one: the hit facet's entries (indexed loads)
+            i = t + j
+            h = hs[i]
+            hit = h == HIT
+            f = prim[i] if hit else 0
+            c = code[f]
+            miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
+            status[i] = c if hit else miss
+            weight[i] = fweight[f] if hit else 0.0
+            where[i] = fbin[f] if hit & (c == SINGLE) else -1
+            cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
+            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
+            dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
+        for j in range(n):  # vectorised: the masking rays' starts on the facet planes
+            i = t + j
+            a, b, e = a_[j], b_[j], e_[j]
+            off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]
+            x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
+        m = masking_starts(
+            cand,
+            t,
+            n,
+            x_,
+            y_,
+            z_,
+            dx_,
+            dy_,
+            dz_,
+            hz,
+            hx,
+            hy,
+            zmax,
+            eps,
+            rel,
+            m,
+            mi,
+            sx,
+            sy,
+            sz,
+            mdx,
+            mdy,
+            mdz,
+            md32,
+            o32,
+            tq,
+            keep,
+            top,
+        )
     return m
 
 
@@ -557,7 +573,7 @@ def fresnel_weights(c, n2, k2, fresnel_mode, weight):
     _fresnel_weights(c, len(c), n2, k2, fresnel_mode, weight, 0)
 
 
-@_compiled
+@_vectorised
 def traced_primary(
     hs,
     prim,
@@ -610,57 +626,131 @@ def traced_primary(
     as the first segment of their walk, exactly as ``tabled_primary`` (float64 direction wo,
     its float32 copy in ``md32``); returns the number of masking rays (0 without
     ``trace_masking``: the caller decides masking itself)."""
-    m = 0
     shared = len(wx) == 1
-    for i in range(len(hs)):
-        h = hs[i]
-        if h != HIT:
-            status[i] = RAY_MISSED if (h == MISSED or h == ESCAPED) else RAY_UNRESOLVED
-            cosine[i] = 0.0
+    tile = np.empty((7, TILE))  # per-ray scratch of one tile
+    a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
+    cand = np.empty(TILE, np.bool_)
+    slope = CLEAR_MARGIN * clear_slope
+    m = 0
+    for t in range(0, len(hs), TILE):
+        n = min(TILE, len(hs) - t)
+        for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
+            f = prim[t + j] if hs[t + j] == HIT else 0
+            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
+        for j in range(n):  # vectorised: reflection and class
+            i = t + j
+            k = 0 if shared else i
+            h = hs[i]
+            a, b, e = a_[j], b_[j], e_[j]
+            c = wx[k] * a + wy[k] * b + wz[k] * e
+            oz = 2.0 * c * e - wz[k]
+            st = SINGLE if oz > 0.0 else DOWNWARD
+            st = st if c > 0.0 else RAY_UNRESOLVED
+            miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
+            status[i] = st if h == HIT else miss
+            cosine[i] = c if (h == HIT) & (c > 0.0) else 0.0
+            wox[i], woy[i], woz[i] = 2.0 * c * a - wx[k], 2.0 * c * b - wy[k], oz
+        for j in range(n):  # vectorised: masking candidates and their starts
+            i = t + j
+            ox, oy, oz = wox[i], woy[i], woz[i]
+            gx, gy = np.float64(np.float32(ox)), np.float64(np.float32(oy))
+            gz = np.float64(np.float32(oz))
+            steep = gz > slope * math.sqrt(gx * gx + gy * gy)  # escapes: no masking ray
+            cand[j] = trace_masking & (status[i] == SINGLE) & (not steep)
+            a, b, e = a_[j], b_[j], e_[j]
+            off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]  # on the facet plane, eps above
+            x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
+        m = masking_starts(
+            cand,
+            t,
+            n,
+            x_,
+            y_,
+            z_,
+            wox[t:],
+            woy[t:],
+            woz[t:],
+            hz,
+            hx,
+            hy,
+            zmax,
+            eps,
+            rel,
+            m,
+            mi,
+            sx,
+            sy,
+            sz,
+            mdx,
+            mdy,
+            mdz,
+            md32,
+            o32,
+            tq,
+            keep,
+            top,
+        )
+    return m
+
+
+@_compiled
+def masking_starts(
+    cand,
+    t,
+    n,
+    x_,
+    y_,
+    z_,
+    ox_,
+    oy_,
+    oz_,
+    hz,
+    hx,
+    hy,
+    zmax,
+    eps,
+    rel,
+    m,
+    mi,
+    sx,
+    sy,
+    sz,
+    mdx,
+    mdy,
+    mdz,
+    md32,
+    o32,
+    tq,
+    keep,
+    top,
+):
+    """The masking rays of the candidates j < n of a tile starting at ray t (``cand``: lit,
+    rising, not surely escaping), from (``x_``, ``y_``, ``z_``) along (``ox_``, ``oy_``,
+    ``oz_``) traced as its float32 copy: a start at or above zmax has nothing above it and one
+    that clears the coarse grid ``hz`` (``horizon_clear``) escapes; the others, wrapped into
+    the tile, get slot m onwards of the first segment of their walk (``_setup_ray``;
+    ``keep[m]`` = m, ``mi[m]`` = their ray). Returns the new m."""
+    for j in range(n):
+        if not cand[j]:
             continue
-        f = prim[i]
-        k = 0 if shared else i
-        a, b, e = nx[f], ny[f], nz[f]
-        c = wx[k] * a + wy[k] * b + wz[k] * e
-        if not c > 0.0:  # back-facing: unresolved
-            status[i] = RAY_UNRESOLVED
-            cosine[i] = 0.0
-            continue
-        cosine[i] = c
-        ox = 2.0 * c * a - wx[k]
-        oy = 2.0 * c * b - wy[k]
-        oz = 2.0 * c * e - wz[k]
-        wox[i], woy[i], woz[i] = ox, oy, oz
-        if not oz > 0.0:
-            status[i] = DOWNWARD
-            continue
-        status[i] = SINGLE
-        if not trace_masking:
-            continue
-        fx, fy, fz = np.float32(ox), np.float32(oy), np.float32(oz)
-        gx, gy, gz = np.float64(fx), np.float64(fy), np.float64(fz)
-        if gz > CLEAR_MARGIN * clear_slope * math.sqrt(gx * gx + gy * gy):
-            continue  # rises more steeply than the surface can: escaped
-        # the slot set-up below repeats tabled_primary's on purpose: a shared helper (numba
-        # inline="always", 28 arguments) measured ~20 ns per sample slower on that hot loop
-        off = px[i] * a + py[i] * b + pz[i] * e - lift[f]
-        x, y, z = px[i] - off * a, py[i] - off * b, pz[i] - off * e
+        x, y, z = x_[j], y_[j], z_[j]
         if z >= zmax:  # nothing above: escaped
             continue
         if x < -hx or x >= hx:  # into the tile
             x = (x + hx) % (2.0 * hx) - hx
         if y < -hy or y >= hy:
             y = (y + hy) % (2.0 * hy) - hy
+        ox, oy, oz = ox_[j], oy_[j], oz_[j]
         if horizon_clear(
             x, y, z, ox, oy, oz, hz[0], hz[1], hz[2], hz[3], hz[4], hz[5], zmax, hz[6]
         ):
             continue  # clears the coarse grid: escaped
         sx[m], sy[m], sz[m] = x, y, z
         mdx[m], mdy[m], mdz[m] = ox, oy, oz
-        md32[m, 0], md32[m, 1], md32[m, 2] = fx, fy, fz
+        md32[m, 0], md32[m, 1], md32[m, 2] = np.float32(ox), np.float32(oy), np.float32(oz)
         _setup_ray(m, x, y, z, ox, oy, oz, hx, hy, zmax, eps, rel, o32, tq, top)
         keep[m] = m
-        mi[m] = i
+        mi[m] = t + j
         m += 1
     return m
 
