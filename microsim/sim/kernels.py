@@ -471,26 +471,11 @@ def tabled_primary(
     fbin,
     fclear,
     hz,
-    hx,
-    hy,
-    zmax,
-    eps,
-    rel,
+    geometry,
     status,
     weight,
     where,
-    mi,
-    sx,
-    sy,
-    sz,
-    mdx,
-    mdy,
-    mdz,
-    md32,
-    o32,
-    tq,
-    keep,
-    top,
+    masking,
 ):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
@@ -533,36 +518,7 @@ def tabled_primary(
             a, b, e = a_[j], b_[j], e_[j]
             off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]
             x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
-        m = masking_starts(
-            cand,
-            t,
-            n,
-            x_,
-            y_,
-            z_,
-            dx_,
-            dy_,
-            dz_,
-            hz,
-            hx,
-            hy,
-            zmax,
-            eps,
-            rel,
-            m,
-            mi,
-            sx,
-            sy,
-            sz,
-            mdx,
-            mdy,
-            mdz,
-            md32,
-            o32,
-            tq,
-            keep,
-            top,
-        )
+        m = masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
     return m
 
 
@@ -590,28 +546,13 @@ def traced_primary(
     trace_masking,
     clear_slope,
     hz,
-    hx,
-    hy,
-    zmax,
-    eps,
-    rel,
+    geometry,
     status,
     cosine,
     wox,
     woy,
     woz,
-    mi,
-    sx,
-    sy,
-    sz,
-    mdx,
-    mdy,
-    mdz,
-    md32,
-    o32,
-    tq,
-    keep,
-    top,
+    masking,
 ):
     """``tabled_primary`` for rays that each carry their own incident direction wl (``wx/wy/
     wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n
@@ -661,75 +602,23 @@ def traced_primary(
             off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]  # on the facet plane, eps above
             x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
         m = masking_starts(
-            cand,
-            t,
-            n,
-            x_,
-            y_,
-            z_,
-            wox[t:],
-            woy[t:],
-            woz[t:],
-            hz,
-            hx,
-            hy,
-            zmax,
-            eps,
-            rel,
-            m,
-            mi,
-            sx,
-            sy,
-            sz,
-            mdx,
-            mdy,
-            mdz,
-            md32,
-            o32,
-            tq,
-            keep,
-            top,
+            cand, t, n, x_, y_, z_, wox[t:], woy[t:], woz[t:], hz, geometry, m, masking
         )
     return m
 
 
 @_compiled
-def masking_starts(
-    cand,
-    t,
-    n,
-    x_,
-    y_,
-    z_,
-    ox_,
-    oy_,
-    oz_,
-    hz,
-    hx,
-    hy,
-    zmax,
-    eps,
-    rel,
-    m,
-    mi,
-    sx,
-    sy,
-    sz,
-    mdx,
-    mdy,
-    mdz,
-    md32,
-    o32,
-    tq,
-    keep,
-    top,
-):
+def masking_starts(cand, t, n, x_, y_, z_, ox_, oy_, oz_, hz, geometry, m, masking):
     """The masking rays of the candidates j < n of a tile starting at ray t (``cand``: lit,
     rising, not surely escaping), from (``x_``, ``y_``, ``z_``) along (``ox_``, ``oy_``,
     ``oz_``) traced as its float32 copy: a start at or above zmax has nothing above it and one
     that clears the coarse grid ``hz`` (``horizon_clear``) escapes; the others, wrapped into
     the tile, get slot m onwards of the first segment of their walk (``_setup_ray``;
-    ``keep[m]`` = m, ``mi[m]`` = their ray). Returns the new m."""
+    ``keep[m]`` = m, ``mi[m]`` = their ray). ``geometry``: (hx, hy, zmax, eps, rel);
+    ``masking``: the ``paths.MaskingRays`` arrays (mi, sx, sy, sz, mdx, mdy, mdz, md32, o32,
+    tq, keep, top). Returns the new m."""
+    hx, hy, zmax, eps, rel = geometry
+    mi, sx, sy, sz, mdx, mdy, mdz, md32, o32, tq, keep, top = masking
     for j in range(n):
         if not cand[j]:
             continue

@@ -451,11 +451,11 @@ def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origi
         table.bin,
         table.clear,
         tracer.horizon,
-        *_segment_geometry(tracer),
+        _segment_geometry(tracer),
         status,
         weight,
         where,
-        *mask.kernel_args(),
+        mask.kernel_args(),
     )
     return status, weight, where, mask, m
 
@@ -552,11 +552,11 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         profile is None,
         tracer.rise_bound,
         tracer.horizon,
-        *_segment_geometry(tracer),
+        _segment_geometry(tracer),
         status,
         cosine,
         *wo,
-        *mask.kernel_args(),
+        mask.kernel_args(),
     )
     kernels.fresnel_weights(cosine, n2, k2, mode, weight)
     if profile is not None:

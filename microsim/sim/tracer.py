@@ -150,7 +150,6 @@ def rise_bound(surface, normals: np.ndarray) -> float:
     return float(np.max(np.hypot(n[:, 0], n[:, 1]) / n[:, 2]))
 
 
-
 _IDENTITY = np.arange(0, dtype=np.int64)
 
 
@@ -163,6 +162,7 @@ def _identity(n: int) -> np.ndarray:
         grown.flags.writeable = False
         _IDENTITY = grown
     return _IDENTITY[:n]
+
 
 class Tracer:
     """Periodic Embree scene of one tile of ``surface`` (a ``microsim.surfaces.Surface``).
