@@ -29,6 +29,7 @@ from microsim.analytic.fresnel import fresnel_real_scalar
 __all__ = [
     "fresnel_mode",
     "fresnel_weights",
+    "surely_escaping",
     "stratified_origins",
     "stratified_groove_starts",
     "segment_setup",
@@ -520,6 +521,14 @@ def tabled_primary(
             x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
         m = masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
     return m
+
+
+@_vectorised
+def surely_escaping(dx, dy, dz, slope, out):
+    """out[i] = dz > slope·√(dx² + dy²): rays rising more steeply than the surface can
+    (``Tracer.surely_escapes``, ``traced_primary``), vectorised."""
+    for i in range(len(dx)):
+        out[i] = dz[i] > slope * math.sqrt(dx[i] * dx[i] + dy[i] * dy[i])
 
 
 @_vectorised

@@ -308,7 +308,8 @@ def facet_table(
     """The ``FacetTable`` of incidence ``wi`` (``kernels.facet_mirror``; Fresnel weights in
     compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
     in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
-    facet alone, so the split changes nothing)."""
+    facet alone, so the split changes nothing). Bins are ``Bins.locate``'s (folded grids by
+    ``locate_single``'s compiled pass)."""
     f = len(tracer.faces)
     ncols = tracer.normal_columns
     weight, code = np.empty(f), np.empty(f, dtype=np.int8)
@@ -328,7 +329,12 @@ def facet_table(
             *wo,
             wo32[part],
         )
-        where[part] = bins.locate_xyz(*wo, phi_i)
+        if bins.folded:  # compiled and vectorised: rising mirror directions get their bin
+            rising = np.where(wo[2] > 0.0, SINGLE, MASKED).astype(np.int8)
+            where[part] = -1
+            locate_single(bins, rising, wo, phi_i, None, where[part])
+        else:
+            where[part] = bins.locate_xyz(*wo, phi_i)
 
     cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]

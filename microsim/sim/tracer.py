@@ -503,10 +503,18 @@ class Tracer:
     def surely_escapes(self, dx, dy, dz) -> np.ndarray:
         """Whether a ray leaving the surface along (dx, dy, dz) (columns or scalars) cannot
         meet it again, without tracing it: dz > ``CLEAR_MARGIN`` · ``rise_bound`` · |d_h|
-        (always False when ``rise_bound`` is inf)."""
-        if not math.isfinite(self.rise_bound):
-            return np.zeros(np.shape(dz), dtype=bool)
-        return dz > CLEAR_MARGIN * self.rise_bound * np.hypot(dx, dy)
+        (always False when ``rise_bound`` is inf), |d_h| = √(dx² + dy²) as the kernels
+        compute it (``kernels.surely_escaping``)."""
+        shape = np.broadcast_shapes(np.shape(dx), np.shape(dy), np.shape(dz))
+        out = np.zeros(shape, dtype=bool)
+        if math.isfinite(self.rise_bound):
+            d = [
+                np.ascontiguousarray(np.broadcast_to(c, shape), dtype=np.float64)
+                for c in (dx, dy, dz)
+            ]
+            slope = CLEAR_MARGIN * self.rise_bound
+            kernels.surely_escaping(*(c.reshape(-1) for c in d), slope, out.reshape(-1))
+        return out
 
     def on_plane(self, prim: np.ndarray, point: np.ndarray, lift: float = 0.0) -> np.ndarray:
         """``point`` (N, 3) moved along the unit normal of facet ``prim`` (N,) onto that facet's
