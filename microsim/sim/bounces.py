@@ -404,7 +404,7 @@ class AnalyticBouncePath(TracePath):
         wi = np.asarray(inc.wi, dtype=np.float64)
         z = inc.tracer.zmax + inc.tracer.top_margin
         for a in range(0, len(blocks), ANALYTIC_BATCH):
-            (x, _, _), psi = inc.origins_of(blocks[a : a + ANALYTIC_BATCH], True)
+            x, psi = inc.groove_starts_of(blocks[a : a + ANALYTIC_BATCH])
             parts.append(
                 analytic_bounces(
                     self.caster,

@@ -649,6 +649,15 @@ class Incidence:
         """Origin columns and groove azimuths of consecutive ``blocks`` (``chunk_origins``)."""
         return chunk_origins(self.tracer, self.rays, blocks, self.key, azimuth, self.origins)
 
+    def groove_starts_of(self, blocks):
+        """(x, ψ) of the rays of consecutive ``blocks``, as ``origins_of(blocks, True)``
+        gives them: for the exact V-groove paths, where y plays no part (stratified origins:
+        ``groove_starts``, y not even drawn)."""
+        if self.origins == "stratified":
+            return groove_starts(self.tracer, self.rays, blocks, self.key)
+        (x, _, _), psi = self.origins_of(blocks, True)
+        return x, psi
+
 
 class TracePath:
     """How the primary rays of one ``Incidence`` are followed (module docstring).
@@ -751,11 +760,7 @@ class AnalyticVGroovePath(TracePath):
         n = min(inc.rays, (blocks[-1] + 1) * BLOCK) - blocks[0] * BLOCK
         out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
         for a in range(0, len(blocks), ANALYTIC_BATCH):
-            batch = blocks[a : a + ANALYTIC_BATCH]
-            if inc.origins == "stratified":  # y plays no part: not even drawn
-                x, psi = groove_starts(inc.tracer, inc.rays, batch, inc.key)
-            else:
-                (x, _, _), psi = inc.origins_of(batch, True)
+            x, psi = inc.groove_starts_of(blocks[a : a + ANALYTIC_BATCH])
             lo = a * BLOCK
             part = tuple(c[lo : lo + len(x)] for c in out)
             analytic_columns(self.caster, wi, inc.phi_i, inc.bins, x, z, psi, inc.ior, part)
