@@ -271,7 +271,7 @@ def test_cos_sin_is_libm_to_an_ulp():
 
 def test_atan_approx_is_within_its_bound():
     """``kernels._atan_approx`` is within ``ATAN_ERROR`` of atan2 for y ≥ 0 over every
-    octant (and exactly 0 at the origin): ``folded_bin`` relies on the bound."""
+    octant (and exactly 0 at the origin): ``bin_rays`` relies on the bound."""
     from microsim.sim.kernels import ATAN_ERROR, _atan_approx
 
     rng = np.random.default_rng(3)
@@ -286,38 +286,44 @@ def test_atan_approx_is_within_its_bound():
     assert _atan_approx(0.0, 0.0) == 0.0
 
 
-@pytest.mark.parametrize("bins", [Bins(45, 37), Bins(45, 91), Bins(9, 2), Bins(90, 181)])
+@pytest.mark.parametrize(
+    "bins", [Bins(45, 37), Bins(45, 91), Bins(9, 2), Bins(90, 181), Bins(30, 145)]
+)
 @pytest.mark.parametrize("rotate", [False, True])
-def test_folded_bin_is_locate(bins, rotate):
-    """``kernels.bin_rays`` (vectorised ``_atan_approx`` bins, those near an edge decided exactly by
-    ``folded_bin``) bins every
-    SINGLE ray as ``Bins.locate`` does against φi (rotated by −ψ per ray when ``rotate``),
-    for random directions, for directions 1e-9 rad either side of every θ and ±Δφ edge and
-    for the zenith; other rays keep their bin."""
+def test_bin_rays_is_locate(bins, rotate):
+    """``kernels.bin_rays`` (vectorised ``_atan_approx`` bins, those near an edge by
+    ``Bins.locate``'s own arithmetic) bins every SINGLE ray as ``Bins.locate`` does against
+    φi (less ψ per ray when ``rotate``): random directions, directions on and 1e-9 rad either
+    side of every θ and ±Δφ edge, the mirror directions of a flat facet (θo = θi, Δφ = 180°:
+    on an edge for θi = 30° and 60° on 2° or 3° bins) and the zenith; other rays keep their
+    bin."""
     from microsim.sim import kernels
 
     rng = np.random.default_rng(4)
     phi_i = 35.0
-    te = np.radians(bins.theta_edges[1:-1])[:, None] + [[-1e-9, 1e-9]]
-    pe = np.radians(bins.phi_edges[1:-1])[:, None] + [[-1e-9, 1e-9]]
+    te = np.radians(bins.theta_edges[1:-1])[:, None] + [[-1e-9, 0.0, 1e-9]]
+    pe = np.radians(bins.phi_edges[1:-1])[:, None] + [[-1e-9, 0.0, 1e-9]]
     t, dp = np.meshgrid(np.append(te, 0.4), np.concatenate([pe.ravel(), -pe.ravel(), [0.3]]))
-    t, dp = t.ravel(), dp.ravel()
+    t = np.concatenate([t.ravel(), np.radians(np.arange(0.0, 90.0, 0.5))])
+    dp = np.concatenate([dp.ravel(), np.full(180, np.pi)])  # the mirror of a flat facet
     n = 60_000
     m = n + len(t) + 1
     psi = rng.uniform(0, 2 * np.pi, m) if rotate else np.zeros(m)
     wo = rng.normal(size=(m, 3)) * [0.4, 0.4, 1.0]
     wo[:, 2] = np.abs(wo[:, 2])
-    phi = dp + np.radians(phi_i) - psi[n : n + len(t)]  # Δφ = dp against φi − ψ
+    phi = dp + np.radians(phi_i - np.degrees(psi[n : n + len(t)]))  # Δφ = dp against φi − ψ
     wo[n : n + len(t)] = np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.cos(t)], 1)
     wo[-1] = [0.0, 0.0, 1.0]
-    wo /= np.linalg.norm(wo, axis=1)[:, None]
+    wo[:n] /= np.linalg.norm(wo[:n], axis=1)[:, None]
     status = np.where(rng.random(m) < 0.9, paths.SINGLE, paths.MASKED).astype(np.int8)
+    status[n:] = paths.SINGLE
     where = np.full(m, -7, dtype=np.int64)
-    c, s = np.cos(np.radians(phi_i)), np.sin(np.radians(phi_i))
-    cols = [np.ascontiguousarray(wo[:, k]) for k in range(3)]
     near = np.empty(m, dtype=np.bool_)
-    kernels.bin_rays(status, *cols, psi, rotate, c, s, *bins.edge_tables(), near, where)
+    cols = [np.ascontiguousarray(wo[:, k]) for k in range(3)]
+    args = (bins.n_theta, bins.phi_edges, near, where)
+    kernels.bin_rays(status, *cols, psi, rotate, phi_i, *args)
     want = bins.locate(wo, phi_i - np.degrees(psi))
     single = status == paths.SINGLE
     assert np.array_equal(where[single], want[single])
     assert np.all(where[~single] == -7)
+    assert near[n:].mean() > 0.5  # the edge directions did take the exact branch

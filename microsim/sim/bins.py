@@ -126,13 +126,6 @@ class Bins:
         return band[:, None] * dphi[None, :]
 
     # --- locating directions ------------------------------------------------------------
-    def edge_tables(self) -> tuple:
-        """(cos, sin) of the lower θo edges and (cos, sin) of the lower Δφ edges (radians;
-        ``theta_edges[:-1]``, ``phi_edges[:-1]``): the folded grid as ``kernels.folded_bin``
-        locates directions in it (an angle α ≥ edge e exactly when sin(α − e) ≥ 0)."""
-        t, p = np.radians(self.theta_edges[:-1]), np.radians(self.phi_edges[:-1])
-        return np.cos(t), np.sin(t), np.cos(p), np.sin(p)
-
     def relative_azimuth(self, wo: np.ndarray, phi_i_deg: float) -> np.ndarray:
         """Δφ = φo − φi in degrees: in [−half bin, 360 − half bin) unfolded, [0, 180] folded."""
         wo = np.asarray(wo, dtype=np.float64)

@@ -51,7 +51,7 @@ __all__ = [
     "facet_mirror",
     "analytic_vgroove",
     "cos_sin",
-    "folded_bin",
+    "locate_one",
     "groove_frame_directions",
     "bin_rays",
     "add_blocks",
@@ -851,52 +851,16 @@ def _atan_approx(y, x):
     return math.pi - a if x < 0.0 else a
 
 
-@_inlined
-def _uniform_bin(y, x, scale, shift, ce, se):
-    """The bin j of the angle α = atan2(y, x) ∈ [0, π] (y ≥ 0) on a grid of uniform bins,
-    j = ⌊α·scale + shift⌋ clamped to [0, n), with n = len(ce): from ``_atan_approx``, and
-    where that lies within its error of an edge, decided exactly by ``_edge_bin``."""
-    u = _atan_approx(y, x) * scale + shift
-    k = int(u)
-    frac = u - k
-    guard = 2.0 * ATAN_ERROR * scale
-    if frac < guard or frac > 1.0 - guard:
-        return _edge_bin(y, x, k, ce, se)
-    return min(k, len(ce) - 1)
-
-
 @_compiled
-def _edge_bin(y, x, k, ce, se):
-    """The bin j of the angle α = atan2(y, x) ∈ [0, π] (y ≥ 0) with edge_j ≤ α < edge_j+1,
-    from a guess ``k`` within a bin of it: ``ce``/``se`` hold cos and sin of the lower edges
-    (edge_0 = 0; n = len(ce) bins, the last one open above) and α ≥ edge_j is decided exactly
-    as sin(α − edge_j) ≥ 0, i.e. y cos edge_j − x sin edge_j ≥ 0 (no inverse trigonometry)."""
-    n = len(ce)
-    k = min(max(k, 0), n - 1)
-    while k > 0 and y * ce[k] - x * se[k] < 0.0:
-        k -= 1
-    while k < n - 1 and y * ce[k + 1] - x * se[k + 1] >= 0.0:
-        k += 1
-    return k
-
-
-@_inlined
-def folded_bin(ox, oy, oz, ex, ey, theta_cos, theta_sin, phi_cos, phi_sin):
-    """Flat folded bin (θ-major) of the rising direction o (oz > 0) against the unit incident
-    azimuth (ex, ey): θo = atan2(|o_h|, oz) and the folded Δφ = atan2(|e × o_h|, e · o_h) ∈
-    [0, π] in uniform bins (``_uniform_bin``), decided against the grid's lower edges
-    (``Bins.edge_tables``: cos and sin of ``theta_edges[:-1]`` and ``phi_edges[:-1]`` in
-    radians) where the angle is within ``ATAN_ERROR`` of one, i.e. by the same edges as
-    ``Bins.locate``, without libm's atan2 (two cost ~70 ns per ray). A vertical o (o_h = 0)
-    takes φo = 0 (π if o_x = −0.0), as ``Bins.locate`` does."""
-    n_theta, n_phi = len(theta_cos), len(phi_cos)
-    rho = math.sqrt(ox * ox + oy * oy)
-    it = _uniform_bin(rho, oz, n_theta / (0.5 * math.pi), 0.0, theta_cos, theta_sin)
-    if rho == 0.0:  # the zenith: φo = atan2(±0, ±0), i.e. o_h along ±x, as NumPy's arctan2
-        ox, oy = math.copysign(1.0, ox), 0.0
-    a = ex * ox + ey * oy
-    b = abs(ex * oy - ey * ox)
-    return it * n_phi + _uniform_bin(b, a, (n_phi - 1) / math.pi, 0.5, phi_cos, phi_sin)
+def locate_one(ox, oy, oz, phi_i_deg, n_theta, n_phi, folded, edges):
+    """``Bins.locate`` of one direction o against the incident azimuth ``phi_i_deg`` (degrees,
+    any value), with its arithmetic: θo = atan2(√(ox² + oy²), oz) and φo = atan2(oy, ox)
+    (libm, as NumPy's arctan2), φi taken to (−180°, 180°] as ``bins._half_turn`` does, then
+    ``_bin_of``. The exact decision of ``bin_rays`` near an edge, ties included."""
+    phi_i = phi_i_deg % 360.0  # np.mod's (Python's) float remainder
+    phi_i = phi_i - 360.0 if phi_i > 180.0 else phi_i
+    theta = math.atan2(math.sqrt(ox * ox + oy * oy), oz)
+    return _bin_of(theta, math.atan2(oy, ox), oz, phi_i, n_theta, n_phi, folded, edges)
 
 
 @_vector_inlined
@@ -992,9 +956,10 @@ def _bin_guess(ox, oy, oz, ex, ey, n_theta, n_phi, t_scale, p_scale, gt, gp):
     """Branch-free part of ``bin_rays``: the flat folded bin of the rising direction o
     against the unit azimuth (ex, ey) from ``_atan_approx`` (θ bins ``t_scale`` per radian,
     Δφ bins ``p_scale`` per radian and half a bin shifted), and whether either angle lies
-    within ``gt``/``gp`` (bins) of an edge, where the guess may be wrong: (flat, near)."""
+    within ``gt``/``gp`` (bins) of an edge, where the guess may differ from ``Bins.locate``'s:
+    (flat, near)."""
     rho = math.sqrt(ox * ox + oy * oy)
-    zenith = rho == 0.0  # φo = atan2(±0, ±0): along ±x (``folded_bin``)
+    zenith = rho == 0.0  # φo = atan2(±0, ±0): along ±x, as NumPy's arctan2 takes it
     hx = math.copysign(1.0, ox) if zenith else ox
     hy = 0.0 if zenith else oy
     u = _atan_approx(rho, oz) * t_scale
@@ -1006,57 +971,39 @@ def _bin_guess(ox, oy, oz, ex, ey, n_theta, n_phi, t_scale, p_scale, gt, gp):
 
 
 @_vector_inlined
-def _bin_scales(theta_cos, phi_cos):
-    """(n_θ, n_φ, θ bins per radian, Δφ bins per radian, guards in bins) of a folded grid
-    for ``_bin_guess``: the guards are twice ``ATAN_ERROR``."""
-    n_theta, n_phi = len(theta_cos), len(phi_cos)
+def _bin_scales(n_theta, n_phi):
+    """(θ bins per radian, Δφ bins per radian, guards in bins) of a folded grid for
+    ``_bin_guess``: the guards are twice ``ATAN_ERROR``."""
     t_scale, p_scale = n_theta / (0.5 * math.pi), (n_phi - 1) / math.pi
-    return n_theta, n_phi, t_scale, p_scale, 2.0 * ATAN_ERROR * t_scale, 2.0 * ATAN_ERROR * p_scale
+    return t_scale, p_scale, 2.0 * ATAN_ERROR * t_scale, 2.0 * ATAN_ERROR * p_scale
 
 
 @_vectorised
-def bin_rays(
-    status,
-    wox,
-    woy,
-    woz,
-    psi,
-    rotate,
-    cos_phi,
-    sin_phi,
-    theta_cos,
-    theta_sin,
-    phi_cos,
-    phi_sin,
-    near,
-    where,
-):
-    """``where[i]`` = ``folded_bin`` of wo_i for the SINGLE rays (others untouched), against
-    the incident azimuth (``cos_phi``, ``sin_phi``), rotated by −ψ_i when ``rotate`` (wo in
-    the ray's groove frame: Δφ is unchanged by the rotation). Two passes: a branch-free one
-    that the compiler vectorises (4 rays per instruction: ``_atan_approx`` bins, ~4× faster
-    than the same arithmetic ray by ray) flags in ``near`` (bool work array) the rays whose
-    angle lies within twice ``ATAN_ERROR`` of an edge; the second decides those exactly by
-    ``folded_bin``. The result is ``folded_bin``'s for every ray."""
-    nt, nf, ts, fs, gt, gf = _bin_scales(theta_cos, phi_cos)
+def bin_rays(status, wox, woy, woz, psi, rotate, phi_i_deg, n_theta, edges, near, where):
+    """``where[i]`` = ``Bins.locate`` of wo_i on the folded grid (``n_theta``, Δφ ``edges``
+    in degrees) for the SINGLE rays (others untouched), against the incident azimuth
+    ``phi_i_deg`` (degrees), less ψ_i when ``rotate`` (wo in the ray's groove frame: Δφ is
+    unchanged by the rotation). Two passes: a branch-free one that the compiler vectorises
+    (``_bin_guess``: ``_atan_approx`` angles, ~4× faster than the same arithmetic ray by
+    ray) flags in ``near`` (bool work array) the rays whose angle lies within twice
+    ``ATAN_ERROR`` of an edge; the second bins those with ``Bins.locate``'s own arithmetic
+    (``locate_one``), so the result is ``Bins.locate``'s for every ray, ties on an edge
+    included (a mirror at θo = 30° on 2° bins)."""
+    n_phi = len(edges) - 1
+    ts, fs, gt, gf = _bin_scales(n_theta, n_phi)
+    cos_phi, sin_phi = math.cos(math.radians(phi_i_deg)), math.sin(math.radians(phi_i_deg))
     for i in range(len(status)):
         ex, ey = cos_phi, sin_phi
         if rotate:
             cp, sp = cos_sin(psi[i])
             ex = cp * cos_phi + sp * sin_phi
             ey = -sp * cos_phi + cp * sin_phi
-        flat, near[i] = _bin_guess(wox[i], woy[i], woz[i], ex, ey, nt, nf, ts, fs, gt, gf)
+        flat, near[i] = _bin_guess(wox[i], woy[i], woz[i], ex, ey, n_theta, n_phi, ts, fs, gt, gf)
         where[i] = flat if status[i] == SINGLE else where[i]
     for i in range(len(status)):
         if near[i] and status[i] == SINGLE:
-            ex, ey = cos_phi, sin_phi
-            if rotate:
-                cp, sp = cos_sin(psi[i])
-                ex = cp * cos_phi + sp * sin_phi
-                ey = -sp * cos_phi + cp * sin_phi
-            where[i] = folded_bin(
-                wox[i], woy[i], woz[i], ex, ey, theta_cos, theta_sin, phi_cos, phi_sin
-            )
+            phi = phi_i_deg - psi[i] * (180.0 / math.pi) if rotate else phi_i_deg
+            where[i] = locate_one(wox[i], woy[i], woz[i], phi, n_theta, n_phi, True, edges)
 
 
 @_vectorised
@@ -1080,13 +1027,10 @@ def analytic_vgroove(
     n2,
     k2,
     fresnel_mode,
-    cos_phi,
-    sin_phi,
+    phi_i_deg,
     folded,
-    theta_cos,
-    theta_sin,
-    phi_cos,
-    phi_sin,
+    n_theta,
+    edges,
     status,
     weight,
     where,
@@ -1098,9 +1042,9 @@ def analytic_vgroove(
     analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
     per-facet columns passed as arrays). Per ray, in the groove frame: the primary hit
     (``_groove_hit``) and its class, Fresnel weight and mirror direction wo
-    (``_groove_reflection``; ``status``, ``weight``); on a ``folded`` grid (``Bins.
-    edge_tables``) the bin of wo for SINGLE rays against φi (``cos_phi``, ``sin_phi``)
-    rotated by −ψ, as ``bin_rays`` (``where``, −1 for the others); otherwise ``where`` = −1
+    (``_groove_reflection``; ``status``, ``weight``); on a ``folded`` grid (``n_theta``,
+    Δφ ``edges`` in degrees) the bin of wo for SINGLE rays against φi (``phi_i_deg``) less
+    ψ, as ``bin_rays`` (``where``, −1 for the others); otherwise ``where`` = −1
     and wo in ``wox/woy/woz`` for the caller to bin. In tiles of ``TILE`` rays, passes: the
     arithmetic before and after the per-facet look-ups, and the bins, in branch-free loops
     the compiler vectorises (AVX2 has no gather it deems worth using, so an indexed load
@@ -1111,7 +1055,9 @@ def analytic_vgroove(
     zw = z / wi[2]
     grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
     w3 = (wi[0], wi[1], wi[2])  # scalars: a store cannot alias them, the loops vectorise
-    nt, nf, ts, fs, gt, gf = _bin_scales(theta_cos, phi_cos)
+    n_phi = len(edges) - 1
+    ts, fs, gt, gf = _bin_scales(n_theta, n_phi)
+    cos_phi, sin_phi = math.cos(math.radians(phi_i_deg)), math.sin(math.radians(phi_i_deg))
     tile = np.empty((15, TILE))  # per-ray scratch of one tile
     wx, wy, x0, cp, sp, num, den = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
     nx, nz, tan, width, c = tile[7], tile[8], tile[9], tile[10], tile[11]
@@ -1141,15 +1087,12 @@ def analytic_vgroove(
         for j in range(m):  # vectorised: bins against φi rotated by −ψ (``bin_rays``)
             ex = cp[j] * cos_phi + sp[j] * sin_phi
             ey = -sp[j] * cos_phi + cp[j] * sin_phi
-            flat, near[j] = _bin_guess(ox[j], oy[j], oz[j], ex, ey, nt, nf, ts, fs, gt, gf)
+            flat, near[j] = _bin_guess(ox[j], oy[j], oz[j], ex, ey, n_theta, n_phi, ts, fs, gt, gf)
             where[t + j] = flat if status[t + j] == SINGLE else -1
-        for j in range(m):  # near an edge: decided exactly
+        for j in range(m):  # near an edge: Bins.locate's own arithmetic
             if near[j] and status[t + j] == SINGLE:
-                ex = cp[j] * cos_phi + sp[j] * sin_phi
-                ey = -sp[j] * cos_phi + cp[j] * sin_phi
-                where[t + j] = folded_bin(
-                    ox[j], oy[j], oz[j], ex, ey, theta_cos, theta_sin, phi_cos, phi_sin
-                )
+                phi = phi_i_deg - psi[t + j] * (180.0 / math.pi)
+                where[t + j] = locate_one(ox[j], oy[j], oz[j], phi, n_theta, n_phi, True, edges)
 
 
 @_compiled
@@ -1177,6 +1120,31 @@ def fresnel_mode(ior) -> tuple:
     return (FRESNEL_NONE if eta == 1 else FRESNEL_REAL), eta.real**2, eta.imag**2
 
 
+@_inlined
+def _bin_of(theta, phi, z, phi_i, n_theta, n_phi, folded, edges):
+    """Flat (θo, Δφ) bin of one direction (``bin_index``), −1 if z ≤ 0."""
+    if not z > 0.0:
+        return -1
+    to_deg = 180.0 / math.pi
+    w = 180.0 / (n_phi - 1) if folded else 360.0 / n_phi
+    it = min(int(theta * to_deg * (n_theta / 90.0)), n_theta - 1)
+    d = phi * to_deg - phi_i
+    if d < 0.0:
+        d += 360.0
+    if folded:
+        if d > 180.0:
+            d = 360.0 - d
+    elif d >= 360.0 - 0.5 * w:
+        d -= 360.0
+    ip = min(max(math.floor(d / w + 0.5), 0.0), n_phi - 1.0)
+    k = int(ip)
+    if d < edges[k]:
+        k -= 1
+    if d >= edges[k + 1]:
+        k += 1
+    return it * n_phi + min(max(k, 0), n_phi - 1)
+
+
 @_compiled
 def bin_index(theta, phi, z, phi_i, n_theta, n_phi, folded, edges, out):
     """Flat (θo, Δφ) bin index of directions with polar angle ``theta`` and azimuth ``phi``
@@ -1185,29 +1153,10 @@ def bin_index(theta, phi, z, phi_i, n_theta, n_phi, folded, edges, out):
     direction, in (−180°, 180°]) taken to [0°, 360°), folded to [0°, 180°] or shifted to
     [−w/2, 360° − w/2); its bin the i with edges[i] ≤ Δφ < edges[i + 1] (capped), found from
     the uniform spacing w (bin k centred on k·w) and corrected against ``edges`` themselves;
-    −1 where z ≤ 0. Writes ``out``."""
-    to_deg = 180.0 / math.pi
-    w = 180.0 / (n_phi - 1) if folded else 360.0 / n_phi
+    −1 where z ≤ 0 (``_bin_of``). Writes ``out``."""
     for i in range(len(theta)):
-        if not z[i] > 0.0:
-            out[i] = -1
-            continue
-        it = min(int(theta[i] * to_deg * (n_theta / 90.0)), n_theta - 1)
-        d = phi[i] * to_deg - phi_i[i if len(phi_i) > 1 else 0]
-        if d < 0.0:
-            d += 360.0
-        if folded:
-            if d > 180.0:
-                d = 360.0 - d
-        elif d >= 360.0 - 0.5 * w:
-            d -= 360.0
-        ip = min(max(math.floor(d / w + 0.5), 0.0), n_phi - 1.0)
-        k = int(ip)
-        if d < edges[k]:
-            k -= 1
-        if d >= edges[k + 1]:
-            k += 1
-        out[i] = it * n_phi + min(max(k, 0), n_phi - 1)
+        pi = phi_i[i if len(phi_i) > 1 else 0]
+        out[i] = _bin_of(theta[i], phi[i], z[i], pi, n_theta, n_phi, folded, edges)
 
 
 # --- scattering orders (``bounces``): paths followed beyond the first bounce ----------------

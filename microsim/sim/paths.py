@@ -496,15 +496,14 @@ def locate_single(bins: Bins, status, wo, phi_i: float, psi, where) -> None:
     φi − ψ: folded grids by ``kernels.bin_rays`` (compiled, vectorised), unfolded ones by
     ``Bins.locate``."""
     if bins.folded:
-        phi = np.radians(phi_i)
         kernels.bin_rays(
             status,
             *wo,
             np.empty(0) if psi is None else psi,
             psi is not None,
-            float(np.cos(phi)),
-            float(np.sin(phi)),
-            *bins.edge_tables(),
+            float(phi_i),
+            bins.n_theta,
+            bins.phi_edges,
             work("near-edge", len(status), np.bool_),
             where,
         )
@@ -592,7 +591,6 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
     status, weight, where = out
     wo = [work("analytic-wo-" + a, 0 if bins.folded else n) for a in "xyz"]
     mode, n2, k2 = kernels.fresnel_mode(ior)
-    phi = np.radians(phi_i)
     c = caster
     kernels.analytic_vgroove(
         np.ascontiguousarray(x, dtype=np.float64),
@@ -614,10 +612,10 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
         n2,
         k2,
         mode,
-        float(np.cos(phi)),
-        float(np.sin(phi)),
+        float(phi_i),
         bins.folded,
-        *bins.edge_tables(),
+        bins.n_theta,
+        bins.phi_edges,
         status,
         weight,
         where,
