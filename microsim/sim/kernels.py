@@ -10,7 +10,7 @@ Vectorised passes: the heavier per-ray arithmetic (groove-frame rotations, Fresn
 bins, masking-ray starts) runs in branch-free loops over tiles of ``TILE`` rays that LLVM
 compiles to AVX2 (4 doubles per instruction), with the per-facet look-ups (indexed loads,
 which it does not vectorise on this CPU) in scalar loops between them, and without a libm call
-per ray (``cos_sin``, ``_atan_approx``; bins near an edge are decided exactly). Those loops
+per ray (``cos_sin``, ``_atan_approx``; bins near an edge by ``Bins.locate``'s arithmetic). Those
 use ``error_model="numpy"``: a zero-divisor check is a branch per division, which keeps a
 loop scalar (the values a select then discards may be inf or NaN). Measured on the bench
 V-groove scene: the exact analytic path went from ~200 to ~45 ns per ray.
