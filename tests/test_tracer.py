@@ -144,7 +144,14 @@ def test_rise_bound_is_the_steepest_facet_slope_of_heightfields_only():
     n = tr.normals
     assert tr.rise_bound == pytest.approx(np.max(np.hypot(n[:, 0], n[:, 1]) / n[:, 2]), rel=1e-15)
     assert Tracer(flat()).rise_bound == 0.0
-    other = Surface(  # the same mesh, not known to be a heightfield: every ray is traced
+    other = _not_a_heightfield(s)  # the same mesh: every ray is traced
+    assert Tracer(other).rise_bound == np.inf
+    assert not Tracer(other).surely_escapes(0.0, 0.0, 1.0)
+
+
+def _not_a_heightfield(s):
+    """The periodic mesh of ``s`` as a custom surface, not known to be a heightfield."""
+    return Surface(
         kind="custom",
         vertices=s.vertices,
         faces=s.faces,
@@ -152,8 +159,6 @@ def test_rise_bound_is_the_steepest_facet_slope_of_heightfields_only():
         periodic=True,
         nominal={},
     )
-    assert Tracer(other).rise_bound == np.inf
-    assert not Tracer(other).surely_escapes(0.0, 0.0, 1.0)
 
 
 def _surface_points(tr, n: int, seed: int):
@@ -233,12 +238,5 @@ def test_rays_cleared_by_the_coarse_grid_are_never_blocked():
     assert np.all(status[clear] == ESCAPED)
     assert np.sum(status[~clear] == HIT) > 100
     s = gaussian(128, 1.0, 2.0, 8.0, seed=7)
-    other = Surface(  # the same mesh, not known to be a heightfield: nothing is cleared
-        kind="custom",
-        vertices=s.vertices,
-        faces=s.faces,
-        tile_size=s.tile_size,
-        periodic=True,
-        nominal={},
-    )
+    other = _not_a_heightfield(s)  # the same mesh: nothing is cleared
     assert not Tracer(other).clears_horizon(p + tr.eps * nrm, d).any()

@@ -62,8 +62,8 @@ from .paths import (
     Incidence,
     TracePath,
     _columns,
-    _stack32,
     facet_table,
+    groove_frame_rays,
     uses_facet_table,
 )
 from .scratch import work
@@ -182,9 +182,7 @@ def trace_bounces(
         hs, prim, p = tracer.trace_columns(x, [float(c[0]) for c in d], d32)
         shared, phi = True, float(phi_i)
     else:
-        cp, sp = np.cos(psi), np.sin(psi)
-        d = [-(cp * wi[0] + sp * wi[1]), -(-sp * wi[0] + cp * wi[1]), np.full(n, -float(wi[2]))]
-        d32 = _stack32(d)
+        _, d, d32 = groove_frame_rays(psi, wi, "bounce-")
         hs, prim, p = tracer.trace_columns(x, d, d32)
         shared, phi = False, phi_i - np.degrees(psi)
     live = np.arange(n, dtype=np.int64)

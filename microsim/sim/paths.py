@@ -57,7 +57,7 @@ from microsim.errors import UsageError
 from . import kernels
 from .bins import Bins
 from .scratch import work
-from .streams import BLOCK, block_rotation, chunk_origins, groove_starts
+from .streams import BLOCK, block_rotation, block_span, chunk_origins, groove_starts
 from .tracer import (
     ESCAPED,
     HIT,
@@ -308,8 +308,8 @@ def facet_table(
     """The ``FacetTable`` of incidence ``wi`` (``kernels.facet_mirror``; Fresnel weights in
     compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
     in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
-    facet alone, so the split changes nothing). Bins are ``Bins.locate``'s (folded grids by
-    ``locate_single``'s compiled pass)."""
+    facet alone, so the split changes nothing). Bins are ``Bins.locate``'s
+    (``locate_single``: a compiled pass on folded grids)."""
     f = len(tracer.faces)
     ncols = tracer.normal_columns
     weight, code = np.empty(f), np.empty(f, dtype=np.int8)
@@ -329,12 +329,9 @@ def facet_table(
             *wo,
             wo32[part],
         )
-        if bins.folded:  # compiled and vectorised: rising mirror directions get their bin
-            rising = np.where(wo[2] > 0.0, SINGLE, MASKED).astype(np.int8)
-            where[part] = -1
-            locate_single(bins, rising, wo, phi_i, None, where[part])
-        else:
-            where[part] = bins.locate_xyz(*wo, phi_i)
+        rising = np.where(wo[2] > 0.0, SINGLE, MASKED).astype(np.int8)  # the others: −1
+        where[part] = -1
+        locate_single(bins, rising, wo, phi_i, None, where[part])
 
     cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
@@ -482,12 +479,22 @@ def _columns(origins) -> list:
     return [np.ascontiguousarray(c, dtype=np.float64) for c in origins]
 
 
-def _stack32(cols) -> np.ndarray:
-    """(N, 3) float32 array from three (N,) columns."""
-    out = np.empty((len(cols[0]), 3), dtype=np.float32)
-    for k in range(3):
-        out[:, k] = cols[k]
-    return out
+def groove_frame_rays(psi, wi, prefix: str) -> tuple:
+    """Per ray, wi rotated by −ψ into its groove frame: (wl, down, d32) — the rotated wi and
+    the ray direction −wl as 3 columns each and its float32 (N, 3) copy
+    (``kernels.groove_frame_directions``), in this thread's work arrays named ``prefix``…"""
+    n = len(psi)
+    wl = [work(prefix + "wl-" + a, n) for a in "xyz"]
+    down = [work(prefix + "down-" + a, n) for a in "xyz"]
+    d32 = work(prefix + "d32", (n, 3), np.float32)
+    kernels.groove_frame_directions(
+        np.ascontiguousarray(psi, dtype=np.float64),
+        np.asarray(wi, dtype=np.float64),
+        *wl,
+        *down,
+        d32,
+    )
+    return wl, down, d32
 
 
 def locate_single(bins: Bins, status, wo, phi_i: float, psi, where) -> None:
@@ -530,16 +537,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         first = falling_first_segment(tracer, x, down)
         hs, prim, p = tracer.trace_columns(x, down, np.array([down], dtype=np.float32), first=first)
     else:
-        wl = [work("traced-wl-" + a, n) for a in "xyz"]
-        down = [work("traced-down-" + a, n) for a in "xyz"]
-        d32 = work("traced-d32", (n, 3), np.float32)
-        kernels.groove_frame_directions(
-            np.ascontiguousarray(psi, dtype=np.float64),
-            np.asarray(wi, dtype=np.float64),
-            *wl,
-            *down,
-            d32,
-        )
+        wl, down, d32 = groove_frame_rays(psi, wi, "traced-")
         first = falling_first_segment(tracer, x, down)
         hs, prim, p = tracer.trace_columns(x, down, d32, first=first)
     status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
@@ -755,7 +753,7 @@ class AnalyticVGroovePath(TracePath):
         inc, blocks = self.incidence, list(blocks)
         wi = np.asarray(inc.wi, dtype=np.float64)
         z = inc.tracer.zmax + inc.tracer.top_margin
-        n = min(inc.rays, (blocks[-1] + 1) * BLOCK) - blocks[0] * BLOCK
+        n = block_span(inc.rays, blocks)[1]
         out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
         for a in range(0, len(blocks), ANALYTIC_BATCH):
             x, psi = inc.groove_starts_of(blocks[a : a + ANALYTIC_BATCH])

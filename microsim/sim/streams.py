@@ -32,6 +32,7 @@ __all__ = [
     "ORIGINS",
     "stream_state",
     "block_generator",
+    "block_span",
     "chunk_origins",
     "groove_starts",
     "block_origins",
@@ -69,6 +70,13 @@ def block_generator(key, block: int, per_ray: int) -> np.random.Generator:
     return rng
 
 
+def block_span(n_total: int, blocks) -> tuple:
+    """(first ray, number of rays) of the consecutive ``blocks`` (a sequence) of a run of
+    ``n_total`` rays: the last block may be short."""
+    lo = blocks[0] * BLOCK
+    return lo, min(n_total, (blocks[-1] + 1) * BLOCK) - lo
+
+
 def chunk_origins(
     tracer: Tracer, n_total: int, blocks, key, azimuth: bool, origins: str = "stratified"
 ):
@@ -87,8 +95,7 @@ def chunk_origins(
     unchanged).
     """
     blocks = list(blocks)
-    lo = blocks[0] * BLOCK
-    n = min(n_total, (blocks[-1] + 1) * BLOCK) - lo
+    lo, n = block_span(n_total, blocks)
     x, y, z = (work("chunk-" + a, n) for a in "xyz")
     z.fill(tracer.zmax + tracer.top_margin)
     psi = work("chunk-psi", n if azimuth else 0)
@@ -121,8 +128,7 @@ def groove_starts(tracer: Tracer, n_total: int, blocks, key):
     analytic V-groove path never uses it): each block's η run is skipped by advancing the
     generator instead of drawn. In this thread's work arrays (valid until its next call)."""
     blocks = list(blocks)
-    lo = blocks[0] * BLOCK
-    n = min(n_total, (blocks[-1] + 1) * BLOCK) - lo
+    lo, n = block_span(n_total, blocks)
     lx, ly = tracer.tile
     rng = block_generator(key, blocks[0], 3)  # consecutive slots from here on
     u = work("groove-uniform", 2 * n)  # ξ, then ψ/2π, of each block in turn
