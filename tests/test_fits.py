@@ -119,9 +119,11 @@ def _assert_vgroove_fit(res, fitted):
     assert fit.params["kd"] < 0.02
     assert fit.success and 0.0 < fit.e2 and 0.0 < fit.e1
     # The fitted exact model is statistically indistinguishable from the simulation.
-    for v in verdicts_for_result(res, fitted):
+    verdicts = verdicts_for_result(res, fitted)
+    for v in verdicts:
         validate_verdict(v)
         assert v["fitted"] and v["dof"] == v["n_bins"] - 3 and v["agrees"], v
+    return verdicts
 
 
 def test_cook_torrance_recovers_vgroove_roughness():
@@ -129,5 +131,21 @@ def test_cook_torrance_recovers_vgroove_roughness():
 
 
 @pytest.mark.slow
-def test_cook_torrance_recovers_vgroove_roughness_slow():
-    _assert_vgroove_fit(*_vgroove_fit(8_000_000))
+def test_cook_torrance_recovers_vgroove_roughness_over_realisations_slow():
+    """At 8e6 rays one 4000-groove tile no longer stands for the Beckmann ensemble: its tail
+    beyond the last few grooves (tilt ≳ 40°, mass ≲ 1/n) is resolved better than the ray noise,
+    so the one-tile verdict of an ensemble model is rightly "inconclusive". Judged as the
+    ensemble model it is, over 8 independent random-tilt tiles (``reference`` "realisations":
+    a Student's t on the energy and on every bin, verdicts.py), the fit must still agree."""
+    res = simulate(
+        None,
+        "aluminium",
+        [0.0, 30.0, 60.0],
+        rays=8_000_000,
+        bins=Bins(30, 19),
+        realisations=8,
+        surface_factory=lambda s: sf.vgrooves(4000, an.Beckmann(0.3), seed=s, sampling="random"),
+    )
+    fitted = fits.fit_all(res, "aluminium", names=("cook_torrance",), quick=True)
+    verdicts = _assert_vgroove_fit(res, fitted)
+    assert all(v["reference"] == "realisations" and v["realisations"] == 8 for v in verdicts)
