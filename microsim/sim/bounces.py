@@ -64,6 +64,7 @@ from .paths import (
     _columns,
     facet_table,
     groove_frame_rays,
+    primary_hits,
     uses_facet_table,
 )
 from .scratch import work
@@ -179,7 +180,7 @@ def trace_bounces(
     if psi is None:
         d = [np.array([-float(c)]) for c in wi]
         d32 = np.array([[c[0] for c in d]], dtype=np.float32)
-        hs, prim, p = tracer.trace_columns(x, [float(c[0]) for c in d], d32)
+        hs, prim, p = primary_hits(tracer, x, [float(c[0]) for c in d], d32)
         shared, phi = True, float(phi_i)
     else:
         _, d, d32 = groove_frame_rays(psi, wi, "bounce-")

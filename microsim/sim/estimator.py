@@ -263,7 +263,12 @@ def simulate(
                 reuse = smeta["fingerprint"] if n_real == 1 else None
                 tracer, profile, azimuth = tracer_for(surf, masking, reuse)
                 build += time.perf_counter() - t0
-                surfaces_meta[r] = {**smeta, "eps": tracer.eps, "max_wraps": tracer.max_wraps}
+                surfaces_meta[r] = {
+                    **smeta,
+                    "eps": tracer.eps,
+                    "max_wraps": tracer.max_wraps,
+                    "grid_walk": tracer.grid is not None,
+                }
                 for i, (t_deg, p_deg) in enumerate(zip(th, ph)):
                     if stop.is_set():  # SIGINT while building the surface
                         raise KeyboardInterrupt

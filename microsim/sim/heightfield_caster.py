@@ -1,0 +1,231 @@
+"""First hits of falling rays on a periodic heightfield, by walking its grid (no Embree).
+
+A heightfield tile (``surfaces.heightfield_mesh``: heights H (ny, nx) on a square grid of
+spacing c, cell (i, j) split along its (i, j)–(i + 1, j + 1) diagonal into triangle A =
+(v00, v01, v11), face j·nx + i, and B = (v00, v11, v10), face nx·ny + j·nx + i) is a
+continuous, piecewise-linear height function h(x, y), periodic in x and y. Along a ray
+o + t·d the height above the surface f(t) = z(t) − h(x(t), y(t)) is then piecewise linear in t,
+with breakpoints where the ray's footprint crosses a cell wall or a cell's diagonal. The first
+hit is the first root of f: the walk visits the footprint's cells in order (2-D DDA, indices
+wrapped), evaluates f once at every breakpoint (from the two vertices of the edge crossed) and
+stops in the first piece where f falls from > 0 to ≤ 0; the hit is that piece's root, on that
+piece's triangle. Because f is evaluated once per breakpoint and shared by the two pieces that
+meet there, the walk is watertight by construction: a ray cannot pass between two triangles.
+
+The walk starts where the ray falls through z = zmax (nothing lies above it) and is exact in
+float64 on the float64 heights, where Embree tests the float32 mesh: the two agree on the hit
+triangle except for rays within float32 rounding of an edge (ties), and on the hit point to
+float32 precision. A ray that crosses the tile walls more than ``max_wraps`` times is
+UNRESOLVED, as in ``Tracer``'s walk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .kernels import HIT, UNRESOLVED
+
+__all__ = ["HeightfieldGrid", "heightfield_grid", "cast_falling"]
+
+_compiled = njit(cache=True, nogil=True, error_model="numpy")
+
+
+class HeightfieldGrid:
+    """The grid of a heightfield tile: padded heights ``hp`` (ny + 1, nx + 1) (last row and
+    column repeat the first), cell size ``cell``, lower tile corner (``x0``, ``y0``), tile
+    size (``lx``, ``ly``)."""
+
+    def __init__(self, heights: np.ndarray, cell: float):
+        h = np.ascontiguousarray(heights, dtype=np.float64)
+        self.ny, self.nx = h.shape
+        self.hp = np.pad(h, ((0, 1), (0, 1)), mode="wrap")
+        hp = self.hp
+        self.cell_max = np.maximum(
+            np.maximum(hp[:-1, :-1], hp[:-1, 1:]), np.maximum(hp[1:, :-1], hp[1:, 1:])
+        )
+        self.cell = float(cell)
+        self.lx, self.ly = self.nx * self.cell, self.ny * self.cell
+        self.x0, self.y0 = -self.lx / 2.0, -self.ly / 2.0
+
+    def geometry(self, zmin: float, zmax: float, max_wraps: int) -> tuple:
+        """The kernels' grid argument: (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
+        max_wraps)."""
+        return (
+            self.hp,
+            self.cell_max,
+            self.nx,
+            self.ny,
+            self.cell,
+            self.x0,
+            self.y0,
+            float(zmin),
+            float(zmax),
+            int(max_wraps),
+        )
+
+
+def heightfield_grid(surface, vertices: np.ndarray, faces: np.ndarray) -> HeightfieldGrid | None:
+    """The ``HeightfieldGrid`` of ``surface`` when its mesh (``vertices``, ``faces``, as the
+    tracer holds them) is exactly ``heightfield_mesh(surface.heights, surface.dx)``, else
+    None (any other mesh is traced by Embree)."""
+    heights, dx = getattr(surface, "heights", None), getattr(surface, "dx", None)
+    if heights is None or dx is None or not getattr(surface, "periodic", False):
+        return None
+    from microsim.surfaces.surface import heightfield_mesh
+
+    heights = np.asarray(heights, dtype=np.float64)
+    if heights.ndim != 2:
+        return None
+    v, f = heightfield_mesh(heights, float(dx))
+    if v.shape != vertices.shape or f.shape != faces.shape:
+        return None
+    if not (np.array_equal(v, vertices) and np.array_equal(f, faces)):
+        return None
+    return HeightfieldGrid(heights, float(dx))
+
+
+@_compiled
+def _plane_height(hp, ci, cj, fu, fv, upper):
+    """h at fractions (fu, fv) of cell (ci, cj) on the plane of its triangle A (``upper``,
+    where fu ≥ fv) or B."""
+    h00 = hp[cj, ci]
+    h11 = hp[cj + 1, ci + 1]
+    if upper:
+        return h00 + fu * (hp[cj, ci + 1] - h00) + fv * (h11 - hp[cj, ci + 1])
+    return h00 + fv * (hp[cj + 1, ci] - h00) + fu * (h11 - hp[cj + 1, ci])
+
+
+@_compiled
+def _tile_of(i, n):
+    """⌊i / n⌋ (the starts lie in or next to the first tile)."""
+    return 0 if 0 <= i < n else i // n
+
+
+@_compiled
+def direction_terms(dx, dy, dz, cell):
+    """Per-direction constants of ``cast_one``: grid steps du, dv and their reciprocals
+    (inf for 0), 1/dz, da = du − dv and 1/da (inf for 0), step signs si, sj."""
+    du, dv = dx / cell, dy / cell
+    rdu = 1.0 / du if du != 0.0 else math.inf
+    rdv = 1.0 / dv if dv != 0.0 else math.inf
+    da = du - dv
+    rda = 1.0 / da if da != 0.0 else math.inf
+    si = 1 if du > 0.0 else (-1 if du < 0.0 else 0)
+    sj = 1 if dv > 0.0 else (-1 if dv < 0.0 else 0)
+    return du, dv, rdu, rdv, 1.0 / dz, da, rda, si, sj
+
+
+@_compiled
+def _step(k, t_wall, dt, c, tile, s, n):
+    """One DDA step along an axis: (index k, time of its next wall, index c wrapped into
+    [0, n), the tile, 1 if a tile wall was crossed else 0) after moving by ``s`` = ±1."""
+    c += s
+    if c == n or c < 0:
+        return k + s, t_wall + dt, c - s * n, tile + s, 1
+    return k + s, t_wall + dt, c, tile, 0
+
+
+@_compiled
+def _clamp01(a):
+    return 0.0 if a < 0.0 else (1.0 if a > 1.0 else a)
+
+
+@_compiled
+def cast_one(x, y, z, dx, dy, dz, terms, geometry):
+    """(status, face, px, py, pz) of the ray (x, y, z) + t·(dx, dy, dz), dz < 0, started at
+    or above the surface, on ``geometry`` = (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
+    max_wraps) with the ray's ``direction_terms``: HIT with the face and the hit point (x and
+    y shifted by whole tiles into the tile of the face's cell), or UNRESOLVED after
+    ``max_wraps`` wall crossings (module docstring). Cells the ray leaves above their highest
+    vertex (``cell_max``) are stepped over without evaluating f."""
+    hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax, max_wraps = geometry
+    du, dv, rdu, rdv, rdz, da, rda, si, sj = terms
+    t = (zmax - z) * rdz if z > zmax else 0.0
+    t_end = max(t, (zmin - z) * rdz)  # z(t_end) = zmin: f ≤ 0 there, the walk ends by then
+    inv = 1.0 / cell
+    u0, v0 = (x - x0) * inv, (y - y0) * inv  # grid coordinates at t = 0
+    i, j = int(math.floor(u0 + t * du)), int(math.floor(v0 + t * dv))
+    tx = ((i + (1 if si > 0 else 0)) - u0) * rdu if si != 0 else math.inf
+    ty = ((j + (1 if sj > 0 else 0)) - v0) * rdv if sj != 0 else math.inf
+    stx, sty = abs(rdu), abs(rdv)
+    ti, tj = _tile_of(i, nx), _tile_of(j, ny)  # the tile the walk is in
+    ci, cj = i - ti * nx, j - tj * ny
+    wraps = 0
+    fa, known = 0.0, False  # f at t, once known (the previous cell was not stepped over)
+    while True:
+        t_exit = min(tx, ty, t_end)
+        if t_exit < t_end and z + t_exit * dz > cell_max[cj, ci]:
+            known = False  # the ray stays above the whole cell
+        else:
+            # a = (u − i) − (v − j) > 0 in triangle A; the side of a piece is taken at its
+            # midpoint, so that a crossing lost to rounding cannot mislabel it
+            a = (u0 + t * du - i) - (v0 + t * dv - j)
+            upper = a + da * (0.5 * (t_exit - t)) > 0.0
+            if not known:  # f where the ray enters the cell
+                fu, fv = _clamp01(u0 + t * du - i), _clamp01(v0 + t * dv - j)
+                fa = z + t * dz - _plane_height(hp, ci, cj, fu, fv, fu >= fv)
+            tb, fb = t_exit, 1.0
+            if fa <= 0.0:  # at the surface already (entered exactly on an edge)
+                tb, fb = t, fa
+                upper = a > 0.0 or (a == 0.0 and da > 0.0)
+            elif da != 0.0:
+                td = t - a * rda
+                if t < td < t_exit:  # crosses the diagonal inside the cell
+                    upper = a + da * (0.5 * (td - t)) > 0.0
+                    s = _clamp01(u0 + td * du - i)
+                    h00 = hp[cj, ci]
+                    fd = z + td * dz - (h00 + s * (hp[cj + 1, ci + 1] - h00))
+                    if fd <= 0.0:
+                        tb, fb = td, fd
+                    else:
+                        t, fa, upper = td, fd, not upper
+            if tb == t_exit:
+                if t_exit == t_end:  # below every vertex: f ≤ 0 (on this piece's plane)
+                    fu, fv = _clamp01(u0 + t_end * du - i), _clamp01(v0 + t_end * dv - j)
+                    h = _plane_height(hp, ci, cj, fu, fv, upper)
+                elif tx <= ty:  # leaves through the x wall at column ib
+                    ib = ci + 1 if si > 0 else ci
+                    fv = _clamp01(v0 + t_exit * dv - j)
+                    h = hp[cj, ib] + fv * (hp[cj + 1, ib] - hp[cj, ib])
+                else:  # through the y wall at row jb
+                    jb = cj + 1 if sj > 0 else cj
+                    fu = _clamp01(u0 + t_exit * du - i)
+                    h = hp[jb, ci] + fu * (hp[jb, ci + 1] - hp[jb, ci])
+                fb = z + t_exit * dz - h
+            if fb <= 0.0:  # the root of this piece
+                th = t + (tb - t) * (fa / (fa - fb)) if fa > fb else t
+                face = cj * nx + ci if upper else nx * ny + cj * nx + ci
+                return (
+                    HIT,
+                    face,
+                    x + th * dx - ti * nx * cell,
+                    y + th * dy - tj * ny * cell,
+                    z + th * dz,
+                )
+            fa, known = fb, True
+        t = t_exit
+        if tx <= ty:
+            i, tx, ci, ti, wrapped = _step(i, tx, stx, ci, ti, si, nx)
+        else:
+            j, ty, cj, tj, wrapped = _step(j, ty, sty, cj, tj, sj, ny)
+        wraps += wrapped
+        if wraps > max_wraps:
+            return UNRESOLVED, -1, math.nan, math.nan, math.nan
+
+
+@_compiled
+def cast_falling(x, y, z, dx, dy, dz, shared, geometry, status, prim, px, py, pz):
+    """``cast_one`` for rays (x, y, z)[i] along (dx, dy, dz)[j] (j = 0 if ``shared`` else i,
+    all falling) on ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps);
+    writes ``status``, ``prim`` and the hit point columns."""
+    cell = geometry[4]
+    terms = direction_terms(dx[0], dy[0], dz[0], cell)
+    for i in range(len(x)):
+        k = 0 if shared else i
+        if not shared:
+            terms = direction_terms(dx[k], dy[k], dz[k], cell)
+        s, f, a, b, c = cast_one(x[i], y[i], z[i], dx[k], dy[k], dz[k], terms, geometry)
+        status[i], prim[i], px[i], py[i], pz[i] = s, f, a, b, c

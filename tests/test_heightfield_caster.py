@@ -1,0 +1,156 @@
+"""The heightfield grid walk (microsim.sim.heightfield_caster) against Embree.
+
+The walk finds the first root of the ray's height above the surface, exactly in float64 on the
+float64 heights; Embree intersects the float32 mesh. So both must name the same facet except
+for rays within float32 rounding of an edge (ties, bounded at 1e-4 of the rays as in
+test_packets.py), and the walk's hit must lie on its facet's plane, inside its footprint and
+on the ray to float64 rounding. Rays aimed exactly at grid lines, diagonals and vertices must
+never pass through (watertightness).
+"""
+
+import numpy as np
+import pytest
+from support import heightfield_surface, random_heights, vgroove_surface
+
+from microsim import surfaces as sf
+from microsim.sim import BLOCK, Bins, Tracer, paths, simulate
+from microsim.sim.tracer import HIT
+from microsim.vectors import spherical_deg
+
+TIES = 1e-4  # allowed fraction of edge/vertex ties
+
+
+def _rough(seed=4, n=64, sigma=0.03):
+    """A 64² heightfield on a unit tile, slopes up to ~1 (rms 0.4)."""
+    return heightfield_surface(random_heights(n=n, sigma=sigma, seed=seed), 1 / n)
+
+
+def _starts(tracer, n, seed):
+    rng = np.random.default_rng(seed)
+    lx, ly = tracer.tile
+    x = rng.uniform(-lx / 2, lx / 2, n)
+    y = rng.uniform(-ly / 2, ly / 2, n)
+    return [x, y, np.full(n, tracer.zmax + tracer.top_margin)]
+
+
+def _on_facet(tracer, prim, point, down, starts):
+    """Largest plane residual, footprint excess (negative barycentric) and distance from the
+    ray of the hits, relative to the tile size."""
+    v = tracer.vertices[tracer.faces[prim]]  # (N, 3, 3)
+    p = np.stack(point, axis=1)
+    n = tracer.normals[prim]
+    plane = np.abs(np.einsum("ij,ij->i", p - v[:, 0], n))
+    # barycentrics of the footprint (x, y)
+    a, b, c = v[:, 0, :2], v[:, 1, :2], v[:, 2, :2]
+    q = p[:, :2]
+
+    def cross(u, w):
+        return u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+
+    area = cross(b - a, c - a)
+    bary = np.stack([cross(b - q, c - q), cross(c - q, a - q), cross(a - q, b - q)], 1)
+    outside = np.max(-bary / area[:, None], axis=1)
+    # the ray, unwrapped: the hit minus whole tiles must lie on start + t·down
+    o = np.stack(starts, axis=1)
+    rel = p - o
+    lx, ly = tracer.tile
+    d = np.asarray(down)
+    t = -rel[:, 2] / -d[2]
+    off = o + t[:, None] * d - p  # a whole number of tiles in x, y; 0 in z
+    off[:, 0] -= np.round(off[:, 0] / lx) * lx
+    off[:, 1] -= np.round(off[:, 1] / ly) * ly
+    scale = max(lx, ly)
+    return plane.max() / scale, outside.max(), np.abs(off).max() / scale
+
+
+@pytest.mark.parametrize("theta", [0.0, 25.0, 55.0, 75.0])
+def test_grid_walk_names_embrees_facet_and_hits_it_exactly(theta):
+    s = _rough()
+    walk, ref = Tracer(s, grid=True), Tracer(s, backend="embreex")
+    assert walk.grid is not None and ref.grid is None
+    n = 40_000
+    x = _starts(walk, n, seed=int(theta))
+    for phi in (0.0, 33.0, 90.0, 217.0):
+        down = [float(-c) for c in spherical_deg(theta, phi)]
+        cast = walk.cast_falling(x, down)
+        assert cast is not None
+        status, prim, point = cast[0].copy(), cast[1].copy(), [c.copy() for c in cast[2]]
+        assert np.all(status == HIT)
+        hs, rprim, _ = ref.trace_columns(x, down, np.array([down], dtype=np.float32))
+        assert np.all(hs == HIT)
+        assert np.sum(prim != rprim) <= TIES * n, (theta, phi)
+        plane, outside, off_ray = _on_facet(walk, prim, point, down, x)
+        assert plane < 1e-13 and outside < 1e-9 and off_ray < 1e-12, (plane, outside, off_ray)
+
+
+def test_grid_walk_is_watertight_on_grid_lines_diagonals_and_vertices():
+    """Starts exactly above vertices, on cell walls and on diagonals, falling straight down
+    and along the grid's axes and diagonals: every ray hits a facet whose footprint holds the
+    hit (no ray slips between two triangles)."""
+    s = _rough(seed=7, n=32)
+    walk = Tracer(s, grid=True)
+    c = walk.grid.cell
+    k = np.arange(-16, 16)
+    gx, gy = np.meshgrid(k * c, k * c)
+    lines = [
+        (gx.ravel(), gy.ravel()),  # vertices
+        ((gx + 0.5 * c).ravel(), gy.ravel()),  # x walls' midpoints
+        (gx.ravel(), (gy + 0.25 * c).ravel()),  # y walls
+        ((gx + 0.375 * c).ravel(), (gy + 0.375 * c).ravel()),  # diagonals
+    ]
+    x = [np.concatenate([a for a, _ in lines]), np.concatenate([b for _, b in lines])]
+    x.append(np.full(len(x[0]), walk.zmax + walk.top_margin))
+    for theta, phi in [(0.0, 0.0), (40.0, 0.0), (40.0, 90.0), (40.0, 45.0), (60.0, 225.0)]:
+        down = [float(-c) for c in spherical_deg(theta, phi)]
+        if theta == 0.0:
+            down = [0.0, 0.0, -1.0]
+        status, prim, point = walk.cast_falling(x, down)
+        assert np.all(status == HIT)
+        _, outside, off_ray = _on_facet(walk, prim.copy(), [p.copy() for p in point], down, x)
+        assert outside < 1e-9 and off_ray < 1e-12
+
+
+def test_grid_is_found_only_for_heightfield_grids():
+    s = _rough()
+    assert Tracer(s, grid=True).grid is not None
+    assert Tracer(sf.gaussian(32, 1.0, 0.5, 8.0, seed=1), grid=True).grid is not None
+    with pytest.warns(UserWarning):  # a small tile of a fractal surface: warned, still a grid
+        abc = sf.abc(32, 1.0, 0.5, 40.0, 1.5, seed=1)
+    assert Tracer(abc, grid=True).grid is not None
+    assert Tracer(vgroove_surface([30.0, -40.0]), grid=True).grid is None
+    assert Tracer(sf.flat(), grid=True).grid is None
+    v = s.vertices.copy()
+    v[5, 2] += 1e-9  # no longer the mesh of its heights
+    moved = type(s)("gaussian", v, s.faces, s.tile_size, True, {}, heights=s.heights, dx=s.dx)
+    assert Tracer(moved, grid=True).grid is None
+
+
+def test_grazing_or_foreign_rays_are_left_to_embree():
+    s = _rough()
+    walk = Tracer(s, grid=True)
+    x = _starts(walk, 100, seed=1)
+    assert walk.cast_falling(x, [float(-c) for c in spherical_deg(89.0, 10.0)]) is None
+    assert walk.cast_falling(x, [0.0, 0.0, 1.0]) is None  # rising
+    low = [x[0], x[1], np.zeros(100)]  # below zmax: not a primary start
+    assert walk.cast_falling(low, [0.0, 0.0, -1.0]) is None
+
+
+def test_simulate_with_the_grid_walk_equals_embree_and_is_reproducible(monkeypatch):
+    """Whole runs with and without the walk: ledgers and bins equal up to edge ties; with
+    the walk, bitwise identical for 1/2 threads and chunk sizes."""
+    rough = _rough()
+    kw = dict(rays=4 * BLOCK + 77, bins=Bins(18, 13), seed=3)
+    angles = [0.0, 25.0, 70.0]
+    a = simulate(rough, "aluminium", angles, threads=1, chunk=BLOCK, **kw)
+    b = simulate(rough, "aluminium", angles, threads=2, chunk=2 * BLOCK, **kw)
+    for name in ("sum_w", "sum_w2", "counts", "brdf"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert all(np.array_equal(a.ledger[k], b.ledger[k]) for k in a.ledger)
+    monkeypatch.setattr(paths, "GRID_CASTER", False)
+    c = simulate(rough, "aluminium", angles, threads=2, chunk=BLOCK, **kw)
+    rays = kw["rays"]
+    for k in ("single", "masked", "downward", "unresolved", "missed"):
+        assert np.all(np.abs(a.ledger[k] - c.ledger[k]) * rays <= TIES * rays + 1), k
+    moved = np.abs(a.counts.astype(np.int64) - c.counts.astype(np.int64)).sum(axis=(1, 2)) / 2
+    assert np.all(moved <= TIES * rays + 1)
+    assert a.meta["surface"]["grid_walk"] and not c.meta["surface"]["grid_walk"]
