@@ -240,3 +240,39 @@ def test_rays_cleared_by_the_coarse_grid_are_never_blocked():
     s = gaussian(128, 1.0, 2.0, 8.0, seed=7)
     other = _not_a_heightfield(s)  # the same mesh: nothing is cleared
     assert not Tracer(other).clears_horizon(p + tr.eps * nrm, d).any()
+
+
+@pytest.mark.parametrize("theta", [0.0, 45.0, 75.0, 87.0])
+def test_vgroove_masking_rays_cleared_by_their_exact_margin_escape_when_traced(theta, monkeypatch):
+    """On V-grooves the traced path skips the masking rays whose exact float64 margin is
+    below −``GROOVE_CLEAR_EPS``·eps (``Tracer.groove_clear``): the whole traced run is bitwise
+    the same with the test switched off (every skipped ray, traced, escapes), and the test
+    skips most of the masking rays (not vacuous)."""
+    from microsim import analytic as an
+    from microsim.sim import paths
+    from microsim.sim import tracer as tracer_module
+    from microsim.sim.streams import chunk_origins
+    from microsim.surfaces import vgrooves
+
+    s = vgrooves(400, an.Beckmann(0.5), seed=2)
+    tr = Tracer(s, backend="auto")
+    assert len(tr.groove_clear[0]) == len(tr.faces)
+    traced = []
+    real_trace = paths.MaskingRays.trace
+    monkeypatch.setattr(
+        paths.MaskingRays,
+        "trace",
+        lambda self, tracer, m, status: traced.append(m) or real_trace(self, tracer, m, status),
+    )
+    n = 40_000
+    x, psi = chunk_origins(tr, n, range(10), (1, 0, int(theta)), True)
+    wi = spherical_deg(theta, 0.0)
+    ior, bins = resolve_material("aluminium"), Bins(30, 37)
+    on = paths.trace_columns(tr, None, wi, 0.0, bins, x, psi, ior)
+    on = [a.copy() for a in on]
+    tr.groove_clear = tracer_module._NO_GROOVES
+    off = paths.trace_columns(tr, None, wi, 0.0, bins, x, psi, ior)
+    for a, b in zip(on, off):
+        np.testing.assert_array_equal(a, b)
+    assert traced[0] < 0.5 * traced[1] and np.any(on[0] == 1)  # skipped most; some masked
+    assert not Tracer(heightfield_surface(random_heights(), 1 / 64)).groove_clear[0].size

@@ -564,6 +564,7 @@ def traced_primary(
     trace_masking,
     clear_slope,
     hz,
+    groove,
     geometry,
     status,
     cosine,
@@ -584,10 +585,17 @@ def traced_primary(
     without a ray, and the others get their masking ray set up
     as the first segment of their walk, exactly as ``tabled_primary`` (float64 direction wo,
     its float32 copy in ``md32``); returns the number of masking rays (0 without
-    ``trace_masking``: the caller decides masking itself)."""
+    ``trace_masking``: the caller decides masking itself). ``groove``: V-groove surfaces'
+    per-facet (rim x, tanθ σ, rim-to-rim width W, rim-to-bottom extent) and a tolerance
+    (``Tracer.groove_clear``; empty arrays otherwise): a ray whose exact masking margin
+    s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``) is below −tolerance
+    escapes without a ray (the margins within it are left to Embree)."""
     shared = len(wx) == 1
-    tile = np.empty((7, TILE))  # per-ray scratch of one tile
+    grim, gtan, gwidth, gextent, gtol = groove
+    grooved = len(grim) > 0
+    tile = np.empty((11, TILE))  # per-ray scratch of one tile
     a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
+    rim_, tan_, width_, extent_ = tile[7], tile[8], tile[9], tile[10]
     cand = np.empty(TILE, np.bool_)
     slope = CLEAR_MARGIN * clear_slope
     m = 0
@@ -596,6 +604,10 @@ def traced_primary(
         for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
             f = prim[t + j] if hs[t + j] == HIT else 0
             a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
+        if grooved:
+            for j in range(n):
+                f = prim[t + j] if hs[t + j] == HIT else 0
+                rim_[j], tan_[j], width_[j], extent_[j] = grim[f], gtan[f], gwidth[f], gextent[f]
         for j in range(n):  # vectorised: reflection and class
             i = t + j
             k = 0 if shared else i
@@ -615,6 +627,9 @@ def traced_primary(
             gx, gy = np.float64(np.float32(ox)), np.float64(np.float32(oy))
             gz = np.float64(np.float32(oz))
             steep = gz > slope * math.sqrt(gx * gx + gy * gy)  # escapes: no masking ray
+            if grooved:  # clears the opposite facet by more than the tolerance: escapes
+                s = min(abs(px[i] - rim_[j]), extent_[j])
+                steep |= s * (1.0 + tan_[j] * ox / oz) - width_[j] < -gtol
             cand[j] = trace_masking & (status[i] == SINGLE) & (not steep)
             a, b, e = a_[j], b_[j], e_[j]
             off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]  # on the facet plane, eps above

@@ -156,6 +156,30 @@ def rise_bound(surface, normals: np.ndarray) -> float:
     return float(np.max(np.hypot(n[:, 0], n[:, 1]) / n[:, 2]))
 
 
+GROOVE_CLEAR_EPS = 64.0
+"""A masking ray of a V-groove surface escapes without tracing when its exact float64 margin
+(``VGrooveProfile.margin_from_rim``) is below −this × ``Tracer.eps``: 32 times the start
+offset of a traced masking ray, far beyond Embree's float32 error, so Embree would have let it
+pass too (tested by tracing the cleared rays anyway)."""
+_NO_GROOVES = (np.empty(0), np.empty(0), np.empty(0), np.empty(0), 0.0)
+
+
+def groove_clear(tracer) -> tuple:
+    """``kernels.traced_primary``'s V-groove clear test of ``tracer``'s mesh: per facet (rim
+    x, tanθ σ, rim-to-rim width W, rim-to-bottom extent) and the tolerance
+    ``GROOVE_CLEAR_EPS`` · eps in length units; empty arrays when the mesh is not a V-groove
+    profile (``VGrooveProfile`` refuses it). Flat facets get NaN: never cleared."""
+    try:
+        profile = VGrooveProfile(tracer)
+    except UsageError:
+        return _NO_GROOVES
+    opposite, rim = profile.opposite, profile.rim
+    with np.errstate(invalid="ignore"):
+        signed_tan = profile.tan * np.sign(opposite - rim)
+    width = np.abs(opposite - rim)
+    return (rim, signed_tan, width, profile.extent, GROOVE_CLEAR_EPS * tracer.eps)
+
+
 _IDENTITY = np.arange(0, dtype=np.int64)
 
 
@@ -230,6 +254,8 @@ class Tracer:
         self.periodic = bool(surface.periodic)
         self.rise_bound = rise_bound(surface, self.normals)
         self.horizon = self._horizon_grid(lx, ly)
+        grooved = getattr(surface, "azimuth_average", False)
+        self.groove_clear = groove_clear(self) if grooved else _NO_GROOVES
         reason = None if backend == "embreex" else embree_packets.binding_error()
         if backend == "packets" and reason is not None:
             raise UsageError(f"backend='packets' is unavailable here: {reason}")
