@@ -91,14 +91,26 @@ class _Batches:
         return self.total.estimate(self.rays, omega, self.pairs)
 
 
+BATCH_GROWTH = 16
+"""A batch traces at most this many times the rays already done: the predicted shortfall is
+trusted that far (on the V-groove bench scene the first 2¹⁸ rays predict the rays to 1 % within
+a few per cent), so a run to 1 % takes 3 batches instead of 4 at a growth of 4."""
+BATCH_MARGIN = 1.02
+"""The predicted shortfall is traced with this many times the rays (2 % more rays; the
+prediction from a batch of 6.5·10⁶ rays was within 0.1 % on the bench scene, and a run that
+falls short adds a small batch)."""
+
+
 def _next_batch(n_done: int, rse: float, target: float, first: int, max_rays: int) -> int:
-    """Rays of the next batch: the predicted shortfall (rse ∝ N^-1/2, +5 %), at least one
-    block, at most 4× what was done, never beyond ``max_rays``; whole blocks."""
+    """Rays of the next batch: the predicted shortfall (rse ∝ N^-1/2, × ``BATCH_MARGIN``), at
+    least one block, at most ``BATCH_GROWTH``× what was done, never beyond ``max_rays``;
+    whole blocks."""
+    growth = BATCH_GROWTH * n_done
     if np.isfinite(rse) and rse > 0:
-        need = n_done * (rse / target) ** 2 * 1.05 - n_done
+        need = n_done * (rse / target) ** 2 * BATCH_MARGIN - n_done
     else:
-        need = 4 * n_done
-    n = int(np.clip(need, BLOCK, max(4 * n_done, first)))
+        need = growth
+    n = int(np.clip(need, BLOCK, max(growth, first)))
     n = -(-n // BLOCK) * BLOCK
     return int(min(n, max_rays - n_done))
 
