@@ -90,9 +90,11 @@ def chunk_origins(
     row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
     y is jittered inside its row (``kernels.stratified_origins``). The union of strata is the
     whole tile, so origins are uniform over one period (and a block covers a compact strip:
-    coherent rays). ``origins="independent"``: i.i.d. uniform origins over the whole tile,
-    then sorted row-major on a ~square grid of the block's size (coherence only: the set is
-    unchanged).
+    coherent rays). On equal-width V-grooves (``Tracer.groove_strata``, azimuth) x runs over
+    the grooves in order of tilt and ψ is stratified by the row instead
+    (``kernels._groove_strata``). ``origins="independent"``: i.i.d. uniform origins over the
+    whole tile, then sorted row-major on a ~square grid of the block's size (coherence only:
+    the set is unchanged).
     """
     blocks = list(blocks)
     lo, n = block_span(n_total, blocks)
@@ -117,7 +119,19 @@ def chunk_origins(
     else:
         rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
         kernels.stratified_origins(
-            u, lo, n, BLOCK, float(n_total), float(rows), float(lx), float(ly), azimuth, x, y, psi
+            u,
+            lo,
+            n,
+            BLOCK,
+            float(n_total),
+            float(rows),
+            float(lx),
+            float(ly),
+            azimuth,
+            tracer.groove_strata,
+            x,
+            y,
+            psi,
         )
     return [x, y, z], (psi if azimuth else None)
 
@@ -141,7 +155,7 @@ def groove_starts(tracer: Tracer, n_total: int, blocks, key):
     x, psi = work("groove-x", n), work("groove-psi", n)
     rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
     kernels.stratified_groove_starts(
-        u, lo, n, BLOCK, float(n_total), float(rows), float(lx), x, psi
+        u, lo, n, BLOCK, float(n_total), float(rows), float(lx), tracer.groove_strata, x, psi
     )
     return x, psi
 

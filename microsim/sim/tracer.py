@@ -180,6 +180,22 @@ def groove_clear(tracer) -> tuple:
     return (rim, signed_tan, width, profile.extent, GROOVE_CLEAR_EPS * tracer.eps)
 
 
+_NO_STRATA = (np.empty(0), 0.0)
+
+
+def groove_strata(tracer) -> tuple:
+    """(left rim x of every groove in order of tilt (G,), groove width W) of equal-width
+    V-grooves tiling the tile (``VGrooveCaster``'s geometry), for the stratified origins
+    (``kernels._groove_strata``); (empty, 0) for any other mesh. Ties in tilt keep mesh
+    order (grooves sort by left, then right wall slope)."""
+    try:
+        caster = VGrooveCaster(tracer)
+    except UsageError:
+        return _NO_STRATA
+    order = np.lexsort((caster.depth / caster.w_right, caster.depth / caster.w_left))
+    return np.ascontiguousarray(caster.x_left[order]), tracer.tile[0] / caster.n_grooves
+
+
 _IDENTITY = np.arange(0, dtype=np.int64)
 
 
@@ -256,6 +272,7 @@ class Tracer:
         self.horizon = self._horizon_grid(lx, ly)
         grooved = getattr(surface, "azimuth_average", False)
         self.groove_clear = groove_clear(self) if grooved else _NO_GROOVES
+        self.groove_strata = groove_strata(self) if grooved else _NO_STRATA
         reason = None if backend == "embreex" else embree_packets.binding_error()
         if backend == "packets" and reason is not None:
             raise UsageError(f"backend='packets' is unavailable here: {reason}")
