@@ -91,14 +91,20 @@ def test_exact_masking_has_no_bounce_chain():
 
 
 # --- white furnace ---------------------------------------------------------------------------
-def furnace(surface, theta, masking, rays):
+def furnace(surface, theta, masking, rays, ties=0.0):
+    """White furnace (F = 1, all bounces). ``ties``: the fraction of primary rays allowed to
+    end 'unresolved' on Embree's edge ties at the groove rims (traced V-grooves near grazing,
+    ``test_white_furnace_traced_grooves_lose_only_the_primary_edge_ties``)."""
     res = simulate(
         surface, None, theta, rays=rays, bins=BINS, bounces="all", masking=masking, threads=2
     )
     led = res.ledger
-    # every path leaves: escaped energy 1 to within 1e-6, nothing else takes energy
-    assert np.all(np.abs(led["escaped_energy"] - 1.0) <= 1e-6), led["escaped_energy"]
-    for name in ("cut_bounces", "cut_weight", "unresolved_path", "missed_path"):
+    # every path leaves: escaped energy 1 to within 1e-6 (less the primary edge ties),
+    # nothing else takes energy
+    lost = led["unresolved_path_energy"]
+    assert np.all(lost <= max(ties, 1e-6)), lost
+    assert np.all(np.abs(led["escaped_energy"] + lost - 1.0) <= 1e-6), led["escaped_energy"]
+    for name in ("cut_bounces", "cut_weight", "missed_path"):
         assert np.all(led[f"{name}_energy"] <= 1e-6), (name, led[f"{name}_energy"])
     assert np.all(led["absorbed_energy"] == 0.0)  # F = 1: no Fresnel loss
     # the order-resolved BRDF holds exactly what the ledger says escaped at each order
@@ -130,7 +136,8 @@ def test_white_furnace(name):
 def test_white_furnace_every_angle(name):
     make, masking = FURNACE_SURFACES[name]
     theta = [0, 10, 20, 30, 40, 50, 60, 65, 70, 75, 80, 83, 85, 86, 87, 88, 88.5]
-    furnace(make(), theta, masking, 200_000)
+    # traced grooves: Embree's rim ties (~1e-5 of the rays at 89°, 1 of 2·10⁵ at 88.5°)
+    furnace(make(), theta, masking, 200_000, ties=1e-4 if name == "vgrooves-traced" else 0.0)
 
 
 @pytest.mark.slow
