@@ -141,7 +141,7 @@ bench mesh; tracing at about the same rate on AVX2), else embreex. ``MICROSIM_EM
 forces embreex, which stays the reference path of the tests."""
 GRID_CASTER = True
 """Simulations find the primary hits on heightfield tiles by walking the grid
-(``heightfield_caster``, ``Tracer.cast_falling``): 1.6–3.3× Embree's speed at θi ≤ 60° on
+(``heightfield_caster``, ``Tracer.cast_falling``): faster than Embree up to θi ≈ 80° on
 the bench mesh, exact in float64, the same facet as Embree's but for edge ties. ``GRID_SWITCH``
 = "0" in the environment (or ``GRID_CASTER = False``) keeps every ray on Embree."""
 GRID_SWITCH = "MICROSIM_GRID_CASTER"
