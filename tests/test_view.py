@@ -135,12 +135,19 @@ def test_headless_without_screenshot_writes_default_file(opengl, tmp_path):
 
 
 def test_bad_arguments_give_one_line_errors(tmp_path):
-    r = _run([SCENE, "--what", "rays", "--theta-i", "95", "--screenshot", tmp_path / "x.png"])
-    assert r.returncode == 2 and "theta_i" in r.stderr and len(r.stderr.strip().splitlines()) == 1
-    r = _run([SCENE, "--size", "12"])
-    assert r.returncode == 2 and "size" in r.stderr
-    r = _run([tmp_path / "missing.toml"])
-    assert r.returncode == 2 and "error" in r.stderr
+    from concurrent.futures import ThreadPoolExecutor
+
+    cases = [
+        [SCENE, "--what", "rays", "--theta-i", "95", "--screenshot", tmp_path / "x.png"],
+        [SCENE, "--size", "12"],
+        [tmp_path / "missing.toml"],
+    ]
+    with ThreadPoolExecutor(len(cases)) as pool:  # three independent processes at once
+        theta, size, missing = pool.map(_run, cases)
+    assert theta.returncode == 2 and "theta_i" in theta.stderr
+    assert len(theta.stderr.strip().splitlines()) == 1
+    assert size.returncode == 2 and "size" in size.stderr
+    assert missing.returncode == 2 and "error" in missing.stderr
     assert not (tmp_path / "x.png").exists()
 
 
