@@ -36,21 +36,18 @@ _inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 class HeightfieldGrid:
-    """The grid of a heightfield tile: padded heights ``hp`` (ny + 1, nx + 1) (last row and
-    column repeat the first), cell size ``cell``, lower tile corner (``x0``, ``y0``), tile
-    size (``lx``, ``ly``)."""
+    """The grid of a heightfield tile: its mesh's vertex heights ``hp`` (ny + 1, nx + 1) (the
+    last row and column repeat the first), each cell's highest vertex ``cell_max`` (ny, nx),
+    cell size ``cell`` and lower tile corner (``x0``, ``y0``)."""
 
-    def __init__(self, heights: np.ndarray, cell: float):
-        h = np.ascontiguousarray(heights, dtype=np.float64)
-        self.ny, self.nx = h.shape
-        self.hp = np.pad(h, ((0, 1), (0, 1)), mode="wrap")
-        hp = self.hp
+    def __init__(self, hp: np.ndarray, cell: float):
+        self.hp = np.ascontiguousarray(hp, dtype=np.float64)
+        self.ny, self.nx = self.hp.shape[0] - 1, self.hp.shape[1] - 1
         self.cell_max = np.maximum(
             np.maximum(hp[:-1, :-1], hp[:-1, 1:]), np.maximum(hp[1:, :-1], hp[1:, 1:])
         )
         self.cell = float(cell)
-        self.lx, self.ly = self.nx * self.cell, self.ny * self.cell
-        self.x0, self.y0 = -self.lx / 2.0, -self.ly / 2.0
+        self.x0, self.y0 = -self.nx * self.cell / 2.0, -self.ny * self.cell / 2.0
 
     def geometry(self, zmin: float, zmax: float, max_wraps: int) -> tuple:
         """The kernels' grid argument: (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
@@ -86,7 +83,8 @@ def heightfield_grid(surface, vertices: np.ndarray, faces: np.ndarray) -> Height
         return None
     if not (np.array_equal(v, vertices) and np.array_equal(f, faces)):
         return None
-    return HeightfieldGrid(heights, float(dx))
+    ny, nx = heights.shape
+    return HeightfieldGrid(v[:, 2].reshape(ny + 1, nx + 1), float(dx))
 
 
 @_inlined
@@ -219,15 +217,11 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry):
 
 
 @_compiled
-def cast_falling(x, y, z, dx, dy, dz, shared, geometry, status, prim, px, py, pz):
-    """``cast_one`` for rays (x, y, z)[i] along (dx, dy, dz)[j] (j = 0 if ``shared`` else i,
-    all falling) on ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps);
-    writes ``status``, ``prim`` and the hit point columns."""
-    cell = geometry[4]
-    terms = direction_terms(dx[0], dy[0], dz[0], cell)
+def cast_falling(x, y, z, dx, dy, dz, geometry, status, prim, px, py, pz):
+    """``cast_one`` for rays (x, y, z)[i] along one falling direction (dx, dy, dz) on
+    ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps); writes
+    ``status``, ``prim`` and the hit point columns."""
+    terms = direction_terms(dx, dy, dz, geometry[4])
     for i in range(len(x)):
-        k = 0 if shared else i
-        if not shared:
-            terms = direction_terms(dx[k], dy[k], dz[k], cell)
-        s, f, a, b, c = cast_one(x[i], y[i], z[i], dx[k], dy[k], dz[k], terms, geometry)
+        s, f, a, b, c = cast_one(x[i], y[i], z[i], dx, dy, dz, terms, geometry)
         status[i], prim[i], px[i], py[i], pz[i] = s, f, a, b, c

@@ -656,7 +656,7 @@ def traced_primary(
             steep = gz > slope * math.sqrt(gx * gx + gy * gy)  # escapes: no masking ray
             if grooved:  # clears the opposite facet by more than the tolerance: escapes
                 s = min(abs(px[i] - rim_[j]), extent_[j])
-                steep |= s * (1.0 + tan_[j] * ox / oz) - width_[j] < -gtol
+                steep |= groove_margin(s, tan_[j], width_[j], ox, oz) < -gtol
             cand[j] = trace_masking & (status[i] == SINGLE) & (not steep)
             a, b, e = a_[j], b_[j], e_[j]
             off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]  # on the facet plane, eps above
@@ -948,6 +948,14 @@ def _groove_hit(x, psi, wi, zw, half, scale, grooves):
 
 
 @_vector_inlined
+def groove_margin(s, signed_tan, width, ox, oz):
+    """The exact V-groove masking margin s(1 + tanθ σ wo_x/wo_z) − W of a hit at horizontal
+    distance s from its facet's rim, leaving along wo (``VGrooveProfile.margin_from_rim``):
+    > 0 ⇔ masked by the opposite facet."""
+    return s * (1.0 + signed_tan * ox / oz) - width
+
+
+@_vector_inlined
 def _groove_reflection(wx, wy, wz, s, nx, nz, signed_tan, width):
     """A primary hit at distance s from the rim of a facet with unit normal (nx, 0, nz),
     tanθ σ ``signed_tan`` and groove width ``width``, lit from the groove-frame
@@ -959,7 +967,7 @@ def _groove_reflection(wx, wy, wz, s, nx, nz, signed_tan, width):
     ox = 2.0 * c * nx - wx
     oy = -wy
     oz = 2.0 * c * nz - wz
-    masked = s * (1.0 + signed_tan * ox / oz) - width > 0.0
+    masked = groove_margin(s, signed_tan, width, ox, oz) > 0.0
     status = MASKED if masked else SINGLE
     status = DOWNWARD if oz <= 0.0 else status
     return (RAY_UNRESOLVED if c <= 0.0 else status), c, ox, oy, oz
@@ -1449,7 +1457,7 @@ def analytic_vgroove_bounces(
             oz = 2.0 * c * nz + dz
             order[i] = b
             down = not oz > 0.0
-            again = down or s * (1.0 + facet_signed_tan[f] * ox / oz) - facet_width[f] > 0.0
+            again = down or groove_margin(s, facet_signed_tan[f], facet_width[f], ox, oz) > 0.0
             if b == 1:
                 weight1[i] = fw
                 status1[i] = DOWNWARD if down else (MASKED if again else SINGLE)

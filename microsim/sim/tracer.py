@@ -162,38 +162,38 @@ GROOVE_CLEAR_EPS = 64.0
 offset of a traced masking ray, far beyond Embree's float32 error, so Embree would have let it
 pass too (tested by tracing the cleared rays anyway)."""
 _NO_GROOVES = (np.empty(0), np.empty(0), np.empty(0), np.empty(0), 0.0)
+_NO_STRATA = (np.empty(0), 0.0)
 
 
-def groove_clear(tracer) -> tuple:
-    """``kernels.traced_primary``'s V-groove clear test of ``tracer``'s mesh: per facet (rim
-    x, tanθ σ, rim-to-rim width W, rim-to-bottom extent) and the tolerance
-    ``GROOVE_CLEAR_EPS`` · eps in length units; empty arrays when the mesh is not a V-groove
-    profile (``VGrooveProfile`` refuses it). Flat facets get NaN: never cleared."""
+def groove_tables(tracer) -> tuple:
+    """(clear, strata) of a V-groove mesh, from one ``VGrooveCaster`` (or, for grooves with a
+    flat facet, ``VGrooveProfile``):
+
+    - clear: ``kernels.traced_primary``'s exact clear test, per facet (rim x, tanθ σ,
+      rim-to-rim width W, rim-to-bottom extent) and the tolerance ``GROOVE_CLEAR_EPS`` · eps
+      in length units; flat facets get NaN (never cleared);
+    - strata: (left rim x of every groove in order of tilt (G,), groove width W) of
+      equal-width V-grooves tiling the tile, for the stratified origins
+      (``kernels._groove_strata``; ties in tilt keep mesh order: grooves sort by left, then
+      right wall slope).
+
+    Empty tables (``_NO_GROOVES``, ``_NO_STRATA``) for what the profile or caster refuses."""
+    strata = _NO_STRATA
     try:
-        profile = VGrooveProfile(tracer)
+        profile = VGrooveCaster(tracer)
     except UsageError:
-        return _NO_GROOVES
+        try:
+            profile = VGrooveProfile(tracer)
+        except UsageError:
+            return _NO_GROOVES, _NO_STRATA
+    else:
+        order = np.lexsort((profile.depth / profile.w_right, profile.depth / profile.w_left))
+        strata = np.ascontiguousarray(profile.x_left[order]), tracer.tile[0] / profile.n_grooves
     opposite, rim = profile.opposite, profile.rim
     with np.errstate(invalid="ignore"):
         signed_tan = profile.tan * np.sign(opposite - rim)
     width = np.abs(opposite - rim)
-    return (rim, signed_tan, width, profile.extent, GROOVE_CLEAR_EPS * tracer.eps)
-
-
-_NO_STRATA = (np.empty(0), 0.0)
-
-
-def groove_strata(tracer) -> tuple:
-    """(left rim x of every groove in order of tilt (G,), groove width W) of equal-width
-    V-grooves tiling the tile (``VGrooveCaster``'s geometry), for the stratified origins
-    (``kernels._groove_strata``); (empty, 0) for any other mesh. Ties in tilt keep mesh
-    order (grooves sort by left, then right wall slope)."""
-    try:
-        caster = VGrooveCaster(tracer)
-    except UsageError:
-        return _NO_STRATA
-    order = np.lexsort((caster.depth / caster.w_right, caster.depth / caster.w_left))
-    return np.ascontiguousarray(caster.x_left[order]), tracer.tile[0] / caster.n_grooves
+    return (rim, signed_tan, width, profile.extent, GROOVE_CLEAR_EPS * tracer.eps), strata
 
 
 _IDENTITY = np.arange(0, dtype=np.int64)
@@ -271,8 +271,9 @@ class Tracer:
         self.rise_bound = rise_bound(surface, self.normals)
         self.horizon = self._horizon_grid(lx, ly)
         grooved = getattr(surface, "azimuth_average", False)
-        self.groove_clear = groove_clear(self) if grooved else _NO_GROOVES
-        self.groove_strata = groove_strata(self) if grooved else _NO_STRATA
+        self.groove_clear, self.groove_strata = (
+            groove_tables(self) if grooved else (_NO_GROOVES, _NO_STRATA)
+        )
         reason = None if backend == "embreex" else embree_packets.binding_error()
         if backend == "packets" and reason is not None:
             raise UsageError(f"backend='packets' is unavailable here: {reason}")
@@ -521,9 +522,8 @@ class Tracer:
             return None
         status, prim = work("cast-status", n, np.int8), work("cast-prim", n, np.int32)
         point = [work("cast-" + a, n) for a in "xyz"]
-        d = [np.array([float(c)]) for c in down]
         geometry = g.geometry(self.zmin, self.zmax, self.max_wraps)
-        cast_falling(*x, *d, True, geometry, status, prim, *point)
+        cast_falling(*x, *(float(c) for c in down), geometry, status, prim, *point)
         return status, prim, point
 
     def trace_columns(self, x, d, d32, wraps=None, first=None):
