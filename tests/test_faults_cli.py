@@ -624,7 +624,8 @@ def catalogue(tmp_path, monkeypatch, fast, capsys):
     [
         ("report-scene", 1, "tiny-b", None),  # between the scenes
         ("fits", 1, "tiny-b", "complete"),  # after tiny-b's simulation
-        ("charts", 1, "tiny-b", "complete"),
+        # the same saved state as "fits", one phase later: slow (keeps the default run short)
+        pytest.param("charts", 1, "tiny-b", "complete", marks=pytest.mark.slow),
         ("simulation", 0, "tiny-a", "partial"),  # inside tiny-a's simulation
         ("report-index", 0, None, None),  # every scene done
     ],

@@ -9,7 +9,9 @@ import pytest
 
 from microsim.cli import main
 
-pytestmark = pytest.mark.integration
+# slow (15 s end to end): the default run covers the bounce chain (test_bounces) and the
+# orders section and chart (test_multiple_analysis)
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 SCENE = """\
 name = "orders-vg"

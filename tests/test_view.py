@@ -126,6 +126,7 @@ def test_lobe_shows_model_and_simulation_colours(opengl, tmp_path):
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # off-screen rendering runs by default in test_view_renders_off_screen
 def test_headless_without_screenshot_writes_default_file(opengl, tmp_path):
     r = _run([SCENE, "--what", "surface", "--size", "320x240"], cwd=tmp_path)
     assert r.returncode == 0, r.stderr
