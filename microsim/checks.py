@@ -99,6 +99,25 @@ def in_range(name: str, value, lo: float, hi: float, *, lo_open=False, hi_open=F
     return v
 
 
+def broadcast(directions: dict, values: dict | None = None) -> tuple:
+    """The common leading shape of the ``directions`` (name → array (..., 3)) and the
+    ``values`` (name → array of one number per direction); a UsageError naming every argument
+    and its shape if they do not broadcast together (instead of NumPy's message later)."""
+    values = values or {}
+    try:
+        return np.broadcast_shapes(
+            *(np.shape(a)[:-1] for a in directions.values()),
+            *(np.shape(v) for v in values.values()),
+        )
+    except ValueError:
+        arrays = {**directions, **values}
+        *first, last = arrays
+        shapes = ", ".join(f"{k} {np.shape(a)}" for k, a in arrays.items())
+        raise UsageError(
+            f"{', '.join(first)} and {last} must have shapes that broadcast together, got {shapes}"
+        ) from None
+
+
 def directions(name: str, w, *, upper: bool = False) -> np.ndarray:
     """Return ``w`` as a float64 array of shape (..., 3) of unit vectors.
 

@@ -74,7 +74,9 @@ def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None):
     """
     kind = _check_kind(shadowing)
     eta = resolve_material(material)
-    return _ts(_checks.directions("wi", wi), _checks.directions("wo", wo), ndf, kind, eta)
+    wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
+    _checks.broadcast({"wi": wi, "wo": wo})
+    return _ts(wi, wo, ndf, kind, eta)
 
 
 def sample_microfacet(wo, u1, u2, ndf):
@@ -85,6 +87,7 @@ def sample_microfacet(wo, u1, u2, ndf):
     upper hemisphere; ``u1``, ``u2`` ∈ [0, 1) broadcast with wo's leading shape.
     """
     wo = _checks.directions("wo", wo, upper=True)
+    _checks.broadcast({"wo": wo}, {"u1": u1, "u2": u2})
     h = ndf.sample(u1, u2)
     woh = np.einsum("...i,...i->...", wo, h)
     wi = 2.0 * woh[..., None] * h - wo
@@ -101,6 +104,7 @@ def pdf_microfacet(wi, wo, ndf):
     """
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     s = wi + wo
     norm = np.sqrt(np.einsum("...i,...i->...", s, s))
     ok = norm > 0.0
@@ -328,6 +332,7 @@ def mikkelsen_mix(
         )
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
+    _checks.broadcast({"wi": wi, "wo": wo})
     t = specular_table
     fs = _ts(wi, wo, t.ndf, t.shadowing, t.material)
     ci, co = np.broadcast_arrays(wi[..., 2], wo[..., 2])

@@ -38,6 +38,7 @@ from microsim.sim.predict import ModelSpec, predict
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
 from .cache import AUTO_MAX_RAYS, AUTO_TARGET, cache_dir, cached, resolve_reference
+from .returns import real_values
 
 __all__ = [
     "MIN_EVENTS",
@@ -79,13 +80,13 @@ class BRDFMismatch(AssertionError):
 def wrap_brdf(brdf):
     """``brdf(wi, wo)`` over (N, 3) arrays as the ``brdf_fn(wi (3,), wo (..., 3))`` that
     ``predict.bin_average`` calls: wi is broadcast to wo's rows (a copy, so the callable may
-    write into it), the result must hold one finite value ≥ 0 per pair."""
+    write into it), the result must hold one real, finite value ≥ 0 per pair."""
 
     def fn(wi, wo):
         shape = wo.shape[:-1]
         wo2 = np.ascontiguousarray(wo.reshape(-1, 3))
         wi2 = np.ascontiguousarray(np.broadcast_to(wi, wo2.shape))
-        f = np.asarray(brdf(wi2, wo2), dtype=np.float64)
+        f = real_values(brdf(wi2, wo2), "brdf(wi, wo) must return", "(N,)")
         if f.size != len(wo2) or (f.ndim > 1 and f.shape != (len(wo2), 1)):
             raise UsageError(
                 f"brdf(wi, wo) must return one value per direction pair, shape ({len(wo2)},); "

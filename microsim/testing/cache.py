@@ -11,8 +11,9 @@ an explicit surface. It is identified by a key of everything that determines it:
 
 The key is the SHA-256 of that description as canonical JSON; the entry is the directory
 ``CACHE/<first 24 hex digits>/`` holding ``brdf.npz`` and ``meta.json`` (``Result.save``) and
-``key.json`` (the description, compared on load, so a hash collision or a damaged entry is
-traced again instead of used).
+``key.json`` (the description, compared on load). An entry that cannot be used — unreadable,
+truncated, edited, made for another description, or holding arrays that do not fit its
+description — is reported in one warning line naming the file, discarded and traced again.
 
 Location, first that is set: the ``cache`` argument, pytest's ``--microsim-cache DIR`` (the
 plugin calls ``set_default_dir``), the environment variable ``MICROSIM_CACHE``, else
@@ -22,7 +23,8 @@ Concurrency (several pytest-xdist workers asking for one reference): a reader th
 entry loads it without locking (entries appear only by an atomic rename, ``atomic.publish_dir``);
 one that does not waits for the entry's lock (``atomic.output_lock`` on ``CACHE/.<key>.lock``,
 polled every 0.1 s), looks again, and only then traces into a staging directory and publishes
-it in one rename. So each reference is traced once, and nobody ever reads half an entry.
+it in one rename. So each reference is traced once, and nobody ever reads half an entry. A
+damaged entry is discarded only by the lock's holder, after looking at it again.
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ import json
 import os
 import shutil
 import time
+import warnings
+import zipfile
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -47,6 +51,7 @@ from microsim.errors import UsageError
 from microsim.scene import Scene, load_scene
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
+from microsim.sim.result import META, NPZ
 
 __all__ = [
     "ENV_VAR",
@@ -75,6 +80,8 @@ DEFAULT_REALISATIONS = MIN_AUTO
 """Realisations of a scene whose file says ``realisations = "auto"``."""
 LOCK_TIMEOUT = 3600.0
 """Seconds a process waits for another one tracing the same reference before giving up."""
+
+KEY_FILE = "key.json"
 
 _default_dir: Path | None = None
 
@@ -396,15 +403,63 @@ def _trace(ref: Reference, threads) -> Result:
     )
 
 
+class _DamagedEntry(Exception):
+    """A cache entry that exists but cannot be used; the message names the file and why."""
+
+
+def _fault(error: Exception) -> str:
+    text = " ".join(f"{type(error).__name__}: {error}".split())
+    return text if len(text) <= 160 else text[:159] + "…"
+
+
 def _load(entry: Path, description: dict) -> Result | None:
-    """The cached Result of ``entry`` if it exists and was made for ``description``."""
-    try:
-        stored = json.loads((entry / "key.json").read_text(encoding="utf-8"))
-        if stored != json.loads(json.dumps(description)):
-            return None
-        return Result.load(entry)
-    except (OSError, ValueError, KeyError):
+    """The cached Result of ``entry``, or None if there is no entry. Raises ``_DamagedEntry``
+    naming the file if the entry cannot be read (any error: truncated, unreadable, edited),
+    was made for another description (``key.json``), or holds a result that is not the one
+    described (bins, incidences, array shapes, negative or non-finite values)."""
+    if not os.path.lexists(entry):
         return None
+    key, meta, npz = entry / KEY_FILE, entry / META, entry / NPZ
+    try:
+        stored = json.loads(key.read_text(encoding="utf-8"))
+    except Exception as e:
+        raise _DamagedEntry(f"{key}: {_fault(e)}") from None
+    if stored != json.loads(json.dumps(description)):
+        raise _DamagedEntry(f"{key}: made for another reference than its name says")
+    try:
+        bins = Bins(**json.loads(meta.read_text(encoding="utf-8"))["bins"]).to_dict()
+    except Exception as e:
+        raise _DamagedEntry(f"{meta}: {_fault(e)}") from None
+    if bins != description["bins"]:
+        raise _DamagedEntry(f"{meta}: bins {bins} instead of {description['bins']}")
+    try:
+        with zipfile.ZipFile(npz) as z:  # before np.load, which leaves a broken zip open
+            broken = z.testzip()
+        if broken is not None:
+            raise zipfile.BadZipFile(f"bad CRC-32 for {broken}")
+        res = Result.load(entry)
+    except Exception as e:
+        raise _DamagedEntry(f"{npz}: {_fault(e)}") from None
+    shape = (len(description["theta_i"]), res.bins.n_theta, res.bins.n_phi)
+    arrays = {"brdf": res.brdf, "stderr": res.stderr, "counts": res.counts}
+    for name, a in arrays.items():
+        if a.shape != shape or not np.all(np.isfinite(a) & (a >= 0)):
+            raise _DamagedEntry(f"{npz}: {name} is not {shape} finite values >= 0")
+    if not np.array_equal(res.theta_i, description["theta_i"]) or res.is_partial:
+        raise _DamagedEntry(f"{npz}: not the complete result at θi = {description['theta_i']}")
+    return res
+
+
+def _discard(entry: Path) -> None:
+    """Remove a damaged entry (under its lock); what cannot be removed is replaced by the
+    next ``atomic.publish_dir``."""
+    try:
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+    except OSError:
+        pass
 
 
 def _acquire(path: Path, timeout: float):
@@ -469,13 +524,24 @@ def cached(ref: Reference, *, cache=None, threads: int | None = None) -> Result:
     root = cache_dir(cache)
     desc = ref.description()
     entry = root / ref.key()
-    res = _load(entry, desc)
+    try:
+        res = _load(entry, desc)
+    except _DamagedEntry:
+        res = None  # looked at again under the lock: another process may be replacing it
     if res is not None:
         return res
     root.mkdir(parents=True, exist_ok=True)
     lock = _acquire(entry, LOCK_TIMEOUT)
     try:
-        res = _load(entry, desc)  # another process may have published it meanwhile
+        try:
+            res = _load(entry, desc)  # another process may have published it meanwhile
+        except _DamagedEntry as damaged:
+            _discard(entry)  # first: under ``-W error`` the warning raises
+            warnings.warn(
+                f"microsim reference cache: {damaged}; discarded the entry, tracing the "
+                f"reference again",
+                stacklevel=2,
+            )
         if res is not None:
             return res
         atomic.clean_stale(entry)
@@ -483,7 +549,7 @@ def cached(ref: Reference, *, cache=None, threads: int | None = None) -> Result:
         stage = atomic.make_staging(entry)
         try:
             res.save(stage)
-            atomic.write_json(stage / "key.json", desc)
+            atomic.write_json(stage / KEY_FILE, desc)
             atomic.publish_dir(stage, entry)
         except BaseException:
             shutil.rmtree(stage, ignore_errors=True)

@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from microsim import checks as _checks
 from microsim.errors import UsageError
 from microsim.stats import chi2_sf, sidak
+
+from .returns import real_values
 
 __all__ = ["pearson_chi2", "assert_sampler_matches", "SamplerCheck"]
 
@@ -23,11 +26,16 @@ def pearson_chi2(observed, expected, min_expected: float = 5.0):
     ``expected`` must sum to the same total as ``observed`` (the caller integrates the pdf over
     each cell and multiplies by the sample count; any probability outside the cells belongs in
     one extra cell). Cells with expected count < ``min_expected`` are pooled into one cell.
+    Counts that are not finite numbers >= 0 raise a UsageError naming the argument.
     """
-    obs = np.asarray(observed, dtype=np.float64).ravel()
-    exp = np.asarray(expected, dtype=np.float64).ravel()
+    obs = _counts("observed", observed)
+    exp = _counts("expected", expected)
+    min_expected = _checks.positive("min_expected", min_expected)
     if obs.shape != exp.shape:
-        raise ValueError("observed and expected must have the same number of cells")
+        raise UsageError(
+            f"observed and expected must have the same number of cells, got {obs.size} and "
+            f"{exp.size}"
+        )
     small = exp < min_expected
     if small.any():
         obs = np.append(obs[~small], obs[small].sum())
@@ -39,6 +47,15 @@ def pearson_chi2(observed, expected, min_expected: float = 5.0):
     stat = float(np.sum((obs - exp) ** 2 / exp))
     dof = len(exp) - 1
     return stat, dof, float(chi2_sf(stat, dof))
+
+
+def _counts(name: str, value) -> np.ndarray:
+    """``value`` flattened to float64 counts, or a UsageError naming ``name`` unless every one
+    is a finite number >= 0."""
+    c = real_values(value, f"{name} must be", "(cells,)").ravel()
+    if not np.all(np.isfinite(c) & (c >= 0)):
+        raise UsageError(f"{name} must be finite counts >= 0, got {_checks.short(value)}")
+    return c
 
 
 class SamplerCheck(dict):
@@ -60,7 +77,7 @@ def _cell_masses(pdf, t_edges, p_edges, order: int) -> np.ndarray:
     st = np.sin(T)
     dirs = np.stack(np.broadcast_arrays(st * np.cos(P), st * np.sin(P), np.cos(T)), axis=-1)
     flat = dirs.reshape(-1, 3)
-    vals = np.asarray(pdf(flat), dtype=np.float64)
+    vals = real_values(pdf(flat), "pdf(w) must return", f"({len(flat)},)")
     if vals.size != len(flat):
         raise UsageError(
             f"pdf(w) must return one density per direction, shape ({len(flat)},); "
@@ -127,6 +144,8 @@ def assert_sampler_matches(
         raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     if not (isinstance(alpha, (int, float)) and 0 < alpha < 1):
         raise UsageError(f"alpha must lie in (0, 1), got {alpha!r}")
+    min_expected = _checks.positive("min_expected", min_expected)
+    pdf_rtol = _checks.in_range("pdf_rtol", pdf_rtol, 0.0, 1.0)
     p_thr = sidak(float(alpha), int(n_tests))
 
     def draw(m, rng):
@@ -136,7 +155,7 @@ def assert_sampler_matches(
             if len(out) != 2:
                 raise UsageError("sample must return directions (n, 3) or (directions, pdf)")
             out, vals = out
-        w = np.asarray(out, dtype=np.float64)
+        w = real_values(out, "sample(u1, u2) must return directions as", f"({m}, 3)")
         if w.shape != (m, 3):
             raise UsageError(
                 f"sample(u1, u2) must return directions of shape ({m}, 3), got {w.shape}"
@@ -149,10 +168,17 @@ def assert_sampler_matches(
         norm = np.linalg.norm(w, axis=1)
         ok = np.isfinite(norm) & (np.abs(norm - 1.0) < 1e-6)
     if vals is not None:
-        vals = np.asarray(vals, dtype=np.float64).reshape(-1)
+        vals = real_values(vals, "sample(u1, u2)'s pdf values must be", f"({n},)").reshape(-1)
         if vals.shape != (int(n),):
             raise UsageError(f"sample's pdf values must have shape ({n},), got {vals.shape}")
-        ref = np.asarray(pdf(w[ok]), dtype=np.float64)
+        m_ok = int(np.count_nonzero(ok))
+        ref = real_values(pdf(w[ok]), "pdf(w) must return", f"({m_ok},)")
+        if ref.size != m_ok:
+            raise UsageError(
+                f"pdf(w) must return one density per direction, shape ({m_ok},); "
+                f"got shape {ref.shape}"
+            )
+        ref = ref.reshape(-1)
         fin = np.isfinite(vals[ok]) & np.isfinite(ref)
         bad = np.abs(vals[ok][fin] - ref[fin]) > pdf_rtol * np.abs(ref[fin])
         if bad.any():
@@ -188,6 +214,12 @@ def assert_sampler_matches(
     counts, _, _ = np.histogram2d(th, ph, [t_edges, p_edges])
     obs = np.append(counts.ravel(), np.count_nonzero(~ok))
     chi2, dof, p = pearson_chi2(obs, exp, min_expected)
+    if dof < 1:
+        raise UsageError(
+            f"sample and pdf leave nothing to test: fewer than two cells expect "
+            f"{min_expected:g} or more of the {n} samples (pdf integrates to "
+            f"{m_hi.sum():.3g} over the sphere); raise n or check the pdf"
+        )
     out = SamplerCheck(
         chi2=chi2,
         dof=dof,
