@@ -226,7 +226,7 @@ def test_locate_is_the_search_over_the_edges(bins, phi_i):
     wo /= np.linalg.norm(wo, axis=1)[:, None]
     if phi_i == "per ray":
         phi = rng.uniform(-400.0, 400.0, len(wo))
-    theta = np.degrees(np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2]))
+    theta = bins.angles(wo)[0]
     it = np.minimum((theta * (bins.n_theta / 90.0)).astype(np.int64), bins.n_theta - 1)
     ip = np.clip(
         np.searchsorted(bins.phi_edges, bins.relative_azimuth(wo, phi), side="right") - 1,

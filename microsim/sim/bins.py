@@ -37,6 +37,15 @@ def _half_turn(phi_deg):
     return np.where(phi > 180.0, phi - 360.0, phi)
 
 
+def _column(a, shape) -> np.ndarray:
+    """``a`` broadcast to ``shape`` as a flat, C-contiguous, writeable float64 array (a copy
+    only where it is not one already): the compiled bin pass then has one specialisation."""
+    a = np.asarray(a, dtype=np.float64)
+    if a.shape != shape:
+        a = np.broadcast_to(a, shape)
+    return np.require(a.reshape(-1), np.float64, ["C", "W"])
+
+
 @dataclass(frozen=True)
 class Bins:
     """(θo, Δφ) grid. ``n_theta`` bins uniform over θo ∈ [0°, 90°]; ``n_phi`` bins over Δφ;
@@ -126,13 +135,23 @@ class Bins:
         return band[:, None] * dphi[None, :]
 
     # --- locating directions ------------------------------------------------------------
+    @staticmethod
+    def angles(wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(θo, φo) in degrees of unit directions wo (..., 3), by the arctangent ``locate``
+        bins with (``kernels.atan2_portable``: the same bits on every machine)."""
+        from . import kernels
+
+        wo = np.asarray(wo, dtype=np.float64)
+        cols = [np.ascontiguousarray(wo[..., k]).ravel() for k in range(3)]
+        theta, phi = np.empty(len(cols[0])), np.empty(len(cols[0]))
+        kernels.direction_angles(*cols, theta, phi)
+        to_deg = 180.0 / np.pi  # as the kernels convert
+        shape = wo.shape[:-1]
+        return (theta * to_deg).reshape(shape), (phi * to_deg).reshape(shape)
+
     def relative_azimuth(self, wo: np.ndarray, phi_i_deg: float) -> np.ndarray:
         """Δφ = φo − φi in degrees: in [−half bin, 360 − half bin) unfolded, [0, 180] folded."""
-        wo = np.asarray(wo, dtype=np.float64)
-        return self._relative_azimuth(wo[..., 0], wo[..., 1], phi_i_deg)
-
-    def _relative_azimuth(self, x, y, phi_i_deg) -> np.ndarray:
-        d = np.degrees(np.arctan2(y, x)) - _half_turn(phi_i_deg)  # (−360°, 360°)
+        d = self.angles(wo)[1] - _half_turn(phi_i_deg)
         d = np.where(d < 0.0, d + 360.0, d)  # = np.mod(d, 360), cheaper
         if self.folded:
             return np.where(d > 180.0, 360.0 - d, d)
@@ -148,23 +167,19 @@ class Bins:
         """``locate`` for unit directions given by their coordinates ``x``, ``y``, ``z``
         (arrays of one shape; contiguous columns are fastest). θo = atan2(√(x² + y²), z) in
         degrees, bin ⌊θo·n_theta/90⌋; Δφ = φo − φi as ``relative_azimuth``, its bin the one
-        whose ``phi_edges`` hold it (edge_j ≤ Δφ < edge_j+1), computed by
-        ``kernels.bin_index`` after NumPy's arctan2."""
+        whose ``phi_edges`` hold it (edge_j ≤ Δφ < edge_j+1). Computed by
+        ``kernels.bin_index``, whose arctangent (``kernels.atan2_portable``) gives the same
+        bits on every machine, so a direction exactly on an edge is binned alike everywhere
+        and alike by the simulation's compiled bin passes."""
         from . import kernels  # (kernels imports nothing of ours)
 
         x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
         shape = np.broadcast_shapes(x.shape, y.shape, z.shape)
-        theta = np.arctan2(np.sqrt(x * x + y * y), z)
-        phi = np.arctan2(y, x)
         phi_i = _half_turn(phi_i_deg)
-        phi_i = (
-            np.array([float(phi_i)])
-            if np.ndim(phi_i) == 0
-            else np.ascontiguousarray(np.broadcast_to(phi_i, shape), dtype=np.float64).ravel()
-        )
+        phi_i = np.array([float(phi_i)]) if np.ndim(phi_i) == 0 else _column(phi_i, shape)
         out = np.empty(shape, dtype=np.int64)
         kernels.bin_index(
-            *(np.ascontiguousarray(np.broadcast_to(a, shape)).ravel() for a in (theta, phi, z)),
+            *(_column(a, shape) for a in (x, y, z)),
             phi_i,
             self.n_theta,
             self.n_phi,

@@ -853,6 +853,97 @@ _ATAN = (
 ATAN_ERROR = 3e-9  # rad: bound on _atan_approx's error (fit error + rounding)
 
 
+# fdlibm's s_atan.c / e_atan2.c (Sun Microsystems 1993): atan(k/2) for k = 1, 2, 3 and π/2 in
+# two parts, and the odd/even polynomial coefficients of atan on |t| ≤ 7/16
+_ATAN_HI = (
+    4.63647609000806093515e-01,
+    7.85398163397448278999e-01,
+    9.82793723247329054082e-01,
+    1.57079632679489655800e00,
+)
+_ATAN_LO = (
+    2.26987774529616870924e-17,
+    3.06161699786838301793e-17,
+    1.39033110312309984516e-17,
+    6.12323399573676603587e-17,
+)
+_AT = (
+    3.33333333333329318027e-01,
+    -1.99999999998764832476e-01,
+    1.42857142725034663711e-01,
+    -1.11111104054623557880e-01,
+    9.09088713343650656196e-02,
+    -7.69187620504482999495e-02,
+    6.66107313738753120669e-02,
+    -5.83357013379057348645e-02,
+    4.97687799461593236017e-02,
+    -3.65315727442169155270e-02,
+    1.62858201153657823623e-02,
+)
+_PI_LO = 1.2246467991473531772e-16  # π − fl(π)
+
+
+@_inlined
+def _atan_fdlibm(t):
+    """atan t for t ≥ 0 (not NaN), fdlibm's s_atan.c: reduced to |t'| ≤ 7/16 by
+    atan t = atan(k/2) + atan t' (k = 1, 2, 3) or π/2 − atan(1/t), then its degree-22 odd
+    polynomial; error < 1 ulp. Plain IEEE arithmetic only (no libm, no fused multiply-add:
+    numba contracts nothing without fastmath), so every x86-64 machine gets the same bits."""
+    if t >= 7.378697629483821e19:  # 2⁶⁶: atan t = π/2 to double precision
+        return _ATAN_HI[3] + _ATAN_LO[3]
+    k = -1
+    if t >= 0.4375:
+        if t < 0.6875:
+            k, t = 0, (2.0 * t - 1.0) / (2.0 + t)
+        elif t < 1.1875:
+            k, t = 1, (t - 1.0) / (t + 1.0)
+        elif t < 2.4375:
+            k, t = 2, (t - 1.5) / (1.0 + 1.5 * t)
+        else:
+            k, t = 3, -1.0 / t
+    elif t < 1.862645149230957e-09:  # 2⁻²⁹: atan t = t to double precision
+        return t
+    z = t * t
+    w = z * z
+    a = _AT
+    s1 = z * (a[0] + w * (a[2] + w * (a[4] + w * (a[6] + w * (a[8] + w * a[10])))))
+    s2 = w * (a[1] + w * (a[3] + w * (a[5] + w * (a[7] + w * a[9]))))
+    if k < 0:
+        return t - t * (s1 + s2)
+    return _ATAN_HI[k] - ((t * (s1 + s2) - _ATAN_LO[k]) - t)
+
+
+@_inlined
+def atan2_portable(y, x):
+    """atan2(y, x) in (−π, π], bitwise the same on every IEEE-754 machine: fdlibm's e_atan2.c
+    on ``_atan_fdlibm`` (error < 1 ulp), with C99's signed zeros (atan2(±0, −0) = ±π,
+    atan2(±0, +0) = ±0) and infinities. NumPy's arctan2 and libm's atan2 are not: NumPy 2
+    dispatches to AVX-512 SIMD code that differs from libm in the last ulp, so a direction
+    exactly on a bin edge would fall on either side by machine. The one rule by which
+    ``Bins.locate`` and the compiled bin passes take a direction's angles."""
+    if x != x or y != y:
+        return x + y
+    neg_y = math.copysign(1.0, y) < 0.0
+    neg_x = math.copysign(1.0, x) < 0.0
+    ay, ax = abs(y), abs(x)
+    if ay == 0.0:
+        z = math.pi if neg_x else 0.0
+    elif ax == 0.0:
+        z = 0.5 * math.pi
+    elif ax == math.inf:
+        if ay == math.inf:
+            z = 0.75 * math.pi if neg_x else 0.25 * math.pi
+        else:
+            z = math.pi if neg_x else 0.0
+    elif ay == math.inf:
+        z = 0.5 * math.pi
+    else:
+        z = _atan_fdlibm(ay / ax)
+        if neg_x:
+            z = math.pi - (z - _PI_LO)
+    return -z if neg_y else z
+
+
 @_vector_inlined
 def cos_sin(psi):
     """(cos ψ, sin ψ) in float64 for |ψ| ≤ 2π (the rays' groove azimuths) without libm: ψ
@@ -896,13 +987,11 @@ def _atan_approx(y, x):
 @_compiled
 def locate_one(ox, oy, oz, phi_i_deg, n_theta, n_phi, folded, edges):
     """``Bins.locate`` of one direction o against the incident azimuth ``phi_i_deg`` (degrees,
-    any value), with its arithmetic: θo = atan2(√(ox² + oy²), oz) and φo = atan2(oy, ox)
-    (libm, as NumPy's arctan2), φi taken to (−180°, 180°] as ``bins._half_turn`` does, then
-    ``_bin_of``. The exact decision of ``bin_rays`` near an edge, ties included."""
+    any value): φi taken to (−180°, 180°] as ``bins._half_turn`` does, then ``_bin_of``. The
+    exact decision of ``bin_rays`` near an edge, ties included."""
     phi_i = phi_i_deg % 360.0  # np.mod's (Python's) float remainder
     phi_i = phi_i - 360.0 if phi_i > 180.0 else phi_i
-    theta = math.atan2(math.sqrt(ox * ox + oy * oy), oz)
-    return _bin_of(theta, math.atan2(oy, ox), oz, phi_i, n_theta, n_phi, folded, edges)
+    return _bin_of(ox, oy, oz, phi_i, n_theta, n_phi, folded, edges)
 
 
 @_vector_inlined
@@ -1171,10 +1260,13 @@ def fresnel_mode(ior) -> tuple:
 
 
 @_inlined
-def _bin_of(theta, phi, z, phi_i, n_theta, n_phi, folded, edges):
-    """Flat (θo, Δφ) bin of one direction (``bin_index``), −1 if z ≤ 0."""
+def _bin_of(x, y, z, phi_i, n_theta, n_phi, folded, edges):
+    """Flat (θo, Δφ) bin of the unit direction (x, y, z) (``bin_index``), −1 if z ≤ 0: its
+    angles θo = atan2(√(x² + y²), z) and φo = atan2(y, x) by ``atan2_portable``."""
     if not z > 0.0:
         return -1
+    theta = atan2_portable(math.sqrt(x * x + y * y), z)
+    phi = atan2_portable(y, x)
     to_deg = 180.0 / math.pi
     w = 180.0 / (n_phi - 1) if folded else 360.0 / n_phi
     it = min(int(theta * to_deg * (n_theta / 90.0)), n_theta - 1)
@@ -1196,17 +1288,26 @@ def _bin_of(theta, phi, z, phi_i, n_theta, n_phi, folded, edges):
 
 
 @_compiled
-def bin_index(theta, phi, z, phi_i, n_theta, n_phi, folded, edges, out):
-    """Flat (θo, Δφ) bin index of directions with polar angle ``theta`` and azimuth ``phi``
-    (radians, from NumPy's arctan2) and z-component ``z`` (``Bins.locate``): θo in degrees,
+def direction_angles(x, y, z, theta, phi):
+    """θ = atan2(√(x² + y²), z) and φ = atan2(y, x) in radians (``atan2_portable``) of the
+    directions (x, y, z); writes ``theta`` and ``phi``."""
+    for i in range(len(x)):
+        theta[i] = atan2_portable(math.sqrt(x[i] * x[i] + y[i] * y[i]), z[i])
+        phi[i] = atan2_portable(y[i], x[i])
+
+
+@_compiled
+def bin_index(x, y, z, phi_i, n_theta, n_phi, folded, edges, out):
+    """Flat (θo, Δφ) bin index of the unit directions (x, y, z) (``Bins.locate``), their
+    angles by ``atan2_portable``: θo in degrees,
     bin ⌊θo·n_θ/90⌋ (capped); Δφ = φ − φi in degrees (``phi_i``: one value, or one per
     direction, in (−180°, 180°]) taken to [0°, 360°), folded to [0°, 180°] or shifted to
     [−w/2, 360° − w/2); its bin the i with edges[i] ≤ Δφ < edges[i + 1] (capped), found from
     the uniform spacing w (bin k centred on k·w) and corrected against ``edges`` themselves;
     −1 where z ≤ 0 (``_bin_of``). Writes ``out``."""
-    for i in range(len(theta)):
+    for i in range(len(x)):
         pi = phi_i[i if len(phi_i) > 1 else 0]
-        out[i] = _bin_of(theta[i], phi[i], z[i], pi, n_theta, n_phi, folded, edges)
+        out[i] = _bin_of(x[i], y[i], z[i], pi, n_theta, n_phi, folded, edges)
 
 
 # --- scattering orders (``bounces``): paths followed beyond the first bounce ----------------

@@ -199,6 +199,14 @@ def groove_tables(tracer) -> tuple:
 _IDENTITY = np.arange(0, dtype=np.int64)
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a``: the walk's ``live`` rays are always typed read-only, so that
+    its kernels compile one specialisation, not one per segment kind."""
+    view = a.view()
+    view.flags.writeable = False
+    return view
+
+
 def _identity(n: int) -> np.ndarray:
     """0 … n − 1 (int64), a read-only view of one shared array grown when needed (a fresh
     np.arange of a chunk faults in its pages on every walk)."""
@@ -485,7 +493,7 @@ class Tracer:
                 nd[2],
                 nd32,
             )
-            live, x = m_live[:m], [c[:m] for c in nx_]
+            live, x = _read_only(m_live[:m]), [c[:m] for c in nx_]
             if not shared:
                 d, d32 = [c[:m] for c in nd], nd32[:m]
         return status, (None if occlusion else prim), (None if occlusion else point)

@@ -1,0 +1,212 @@
+"""Results that must not depend on the instruction set: the arctangent by which every
+direction is binned (``kernels.atan2_portable``), and bins and tallies compared bitwise between
+this process and one with NumPy's AVX-512 dispatch disabled and numba's target pinned to
+Haswell (AVX2), i.e. the two paths an AVX2 and an AVX-512 machine take."""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import dispatch_probe
+import numpy as np
+
+from microsim import analytic as an
+from microsim import surfaces as sf
+from microsim.sim import Bins, kernels, paths
+
+AVX2_ENV = {
+    # NumPy 2's AVX-512 dispatch targets and NumPy 1's (each ignores the other's names)
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512_SKX",
+    "NUMBA_CPU_NAME": "haswell",
+    "NUMBA_CPU_FEATURES": "",  # the named CPU's own features, not the host's
+}
+
+
+def _ulps(a: float, b: float) -> float:
+    return abs(a - b) / np.spacing(max(abs(a), abs(b), np.finfo(float).tiny))
+
+
+def test_atan2_portable_is_libm_within_an_ulp_with_c99_special_values():
+    """``atan2_portable`` (fdlibm) is within 1 ulp of libm's atan2 on random and octant-edge
+    arguments, and has C99's values at signed zeros, infinities and NaN."""
+    rng = np.random.default_rng(7)
+    y = np.concatenate([rng.normal(size=20_000), rng.normal(size=2000) * 1e-300, [1.0, -1.0]])
+    x = np.concatenate([rng.normal(size=20_000), rng.normal(size=2000) * 1e300, [1.0, -1.0]])
+    a = np.linspace(-np.pi, np.pi, 4001)
+    y, x = np.concatenate([y, np.sin(a), 3 * x]), np.concatenate([x, np.cos(a), 2 * y])
+    worst = max(_ulps(kernels.atan2_portable(p, q), math.atan2(p, q)) for p, q in zip(y, x))
+    assert worst <= 1.0
+    inf, pi = math.inf, math.pi
+    special = [  # a list: 0.0 and -0.0 are the same dict key
+        (0.0, 0.0, 0.0), (-0.0, 0.0, -0.0), (0.0, -0.0, pi), (-0.0, -0.0, -pi),
+        (0.0, -1.0, pi), (-0.0, -1.0, -pi), (0.0, 2.0, 0.0), (1.0, 0.0, pi / 2),
+        (-1.0, -0.0, -pi / 2), (inf, inf, pi / 4), (inf, -inf, 3 * pi / 4),
+        (-inf, 1.0, -pi / 2), (1.0, -inf, pi), (-1.0, inf, -0.0),
+    ]  # fmt: skip
+    for p, q, want in special:
+        got = kernels.atan2_portable(p, q)
+        assert got == want and math.copysign(1, got) == math.copysign(1, want), (p, q, got)
+    assert math.isnan(kernels.atan2_portable(math.nan, 1.0))
+
+
+def _inputs(tmp: Path) -> Path:
+    """Directions on, and 1e-9 rad beside, every θ and ±Δφ edge of the probe's grids, the
+    mirror directions of a flat facet (θo = θi on 0.5° steps, Δφ = 180°) and random ones;
+    a V-groove mesh and a heightfield file, all made in this process."""
+    rng = np.random.default_rng(5)
+    phi_i = 35.0
+    te = np.radians(np.arange(0.0, 90.0, 1.0))[:, None] + [[-1e-9, 0.0, 1e-9]]
+    pe = np.radians(Bins(90, 181).phi_edges)[:, None] + [[-1e-9, 0.0, 1e-9]]
+    t, dp = np.meshgrid(np.append(te, 0.4), np.concatenate([pe.ravel(), -pe.ravel()]))
+    t = np.concatenate([t.ravel(), np.radians(np.arange(0.0, 90.0, 0.5))])
+    dp = np.concatenate([dp.ravel(), np.full(180, np.pi)])
+    n = 20_000
+    psi = np.concatenate([rng.uniform(0, 2 * np.pi, n), np.zeros(len(t))])
+    wo = rng.normal(size=(n, 3)) * [0.4, 0.4, 1.0]
+    wo[:, 2] = np.abs(wo[:, 2])
+    wo /= np.linalg.norm(wo, axis=1)[:, None]
+    phi = dp + np.radians(phi_i)
+    edge = np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.cos(t)], 1)
+    status = np.where(rng.random(n + len(t)) < 0.9, paths.SINGLE, paths.MASKED).astype(np.int8)
+    heights = tmp / "heights.npy"
+    np.save(heights, rng.normal(size=(48, 48)) * 0.4)
+    path = tmp / "inputs.npz"
+    np.savez(
+        path,
+        wo=np.concatenate([wo, edge]),
+        psi=psi,
+        status=status,
+        phi_i=phi_i,
+        grooves=sf.vgrooves(400, an.Beckmann(0.3)).vertices,
+        heightfield_path=str(heights),
+    )
+    return path
+
+
+def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
+    """The compiled bin pass, ``Bins.locate`` and the tallies of V-groove (exact, analytic,
+    traced) and heightfield (traced, all bounces) runs are bitwise the same with NumPy's
+    AVX-512 loops and numba's host target as with both held to AVX2 — and within each
+    process the bin pass is ``Bins.locate``, ties on an edge included."""
+    inputs = _inputs(tmp_path)
+    with np.load(inputs) as f:
+        native = dispatch_probe.probe(dict(f))
+    out = tmp_path / "avx2.npz"
+    env = {**os.environ, **AVX2_ENV}
+    probe = Path(dispatch_probe.__file__)
+    proc = subprocess.run(
+        [sys.executable, "-W", "ignore", str(probe), str(inputs), str(out)],
+        env=env, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    with np.load(out) as f:
+        pinned = dict(f)
+    assert not pinned["numpy_avx512"] and str(pinned["numba_cpu"]) == "haswell"
+    compared = [k for k in native if k not in ("numpy_avx512", "numba_cpu")]
+    assert set(compared) <= set(pinned)
+    differ = [k for k in compared if not np.array_equal(native[k], pinned[k], equal_nan=True)]
+    assert not differ, f"differ across the dispatch paths: {differ}"
+    with np.load(inputs) as f:
+        single = f["status"] == paths.SINGLE
+    for key in (k for k in compared if k.startswith("bin_rays-")):
+        located = native[key.replace("bin_rays", "locate")]
+        assert np.array_equal(native[key][single], located[single]), key
+    assert native["vgroove-traced-counts"].sum() > 0 and native["file-bounces-counts"].sum() > 0
+
+
+def _specular_scenes():
+    from microsim.scene import load_scene
+
+    scenes = [load_scene(p) for p in sorted(Path(__file__).parents[1].glob("surfaces/*.toml"))]
+    return [sc for sc in scenes if sc.surface.kind == "flat" or sc.wave is not None]
+
+
+def test_no_catalogue_specular_peak_sits_on_a_theta_edge():
+    """Where a catalogue scene's reflection has a specular peak — a flat mirror, the
+    diffraction orders of a wave scene — its direction (θo = θi, Δφ = 180°, a Δφ bin centre)
+    lies at least a quarter bin from a θ edge for every incidence, so that no comparison of the
+    peak depends on how a tie is broken (the rough scenes' lobes are continuous there)."""
+    scenes = _specular_scenes()
+    assert {sc.surface.kind for sc in scenes} >= {"flat", "abc"}
+    for sc in scenes:
+        width = 90.0 / sc.simulation.theta_bins
+        for theta_i in sc.simulation.theta_i:
+            if theta_i > 0.0:  # the zenith lies inside the first bin
+                assert 0.25 <= (theta_i / width) % 1.0 <= 0.75, (sc.name, theta_i, width)
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def _jit_in(module: str):
+    import numba
+
+    def twice(x):
+        return 2.0 * x
+
+    twice.__module__ = module
+    return numba.njit(twice)
+
+
+def test_the_first_compilation_of_a_microsim_kernel_is_announced_once():
+    """``compilation._FirstCompilation`` writes its one line at the first cache miss of a
+    ``microsim`` kernel and never again; other packages' compilations say nothing;
+    ``announce_compilation`` installs nothing for a stream that is not a terminal."""
+    from numba.core import event
+
+    from microsim.sim import compilation
+
+    out = _Terminal()
+    with event.install_listener("numba:compile", compilation._FirstCompilation(out)):
+        _jit_in("elsewhere")(1.0)
+        assert out.getvalue() == ""
+        _jit_in("microsim.probe")(1.0)
+        _jit_in("microsim.probe")(2.0)
+    assert out.getvalue() == compilation.MESSAGE + "\n"
+    before = list(compilation._INSTALLED)
+    compilation.announce_compilation(io.StringIO())
+    assert compilation._INSTALLED == before
+
+
+_CACHE_PROBE = """
+import sys, zlib
+import numpy as np
+from numba.core import event
+compiled = []
+class Count(event.Listener):
+    def on_start(self, ev):
+        compiled.append(ev.data["dispatcher"].py_func.__name__)
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Count())
+from microsim.sim import Bins
+wo = np.random.default_rng(1).normal(size=(1000, 3))
+theta, phi = Bins.angles(wo / np.linalg.norm(wo, axis=1)[:, None])
+print(len(compiled), zlib.crc32(theta.tobytes() + phi.tobytes()))
+"""
+
+
+def test_the_kernel_cache_is_keyed_by_cpu_and_safe_for_concurrent_first_starts(tmp_path):
+    """On an empty cache (``NUMBA_CACHE_DIR``) two processes starting at once both compile
+    and agree; a third loads from the cache (compiles nothing); one targeting another CPU
+    (Haswell) compiles anew rather than loading the host's machine code, and agrees too."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    for key in AVX2_ENV:
+        env.pop(key, None)
+    cmd = [sys.executable, "-c", _CACHE_PROBE]
+    run = lambda e: subprocess.Popen(cmd, env=e, stdout=subprocess.PIPE, text=True)  # noqa: E731
+    first = [run(env), run(env)]
+    outs = [p.communicate(timeout=300)[0].split() for p in first]
+    assert all(p.returncode == 0 for p in first)
+    warm = run(env).communicate(timeout=300)[0].split()
+    other = run({**env, **AVX2_ENV}).communicate(timeout=300)[0].split()
+    assert int(outs[0][0]) > 0 and int(outs[1][0]) > 0
+    assert int(warm[0]) == 0 and int(other[0]) > 0
+    assert outs[0][1] == outs[1][1] == warm[1] == other[1]
