@@ -8,7 +8,9 @@ normal permissions (0o666 / 0o777 minus the umask), not ``mkstemp``'s 0o600 / 0o
 Temporaries of a directory ``DIR`` are named ``.DIR.tmp-<pid>-*`` (staging) and
 ``.DIR.old-<pid>-*`` (the replaced directory, removed after the swap). A process killed by
 SIGKILL/SIGTERM leaves them behind; ``clean_stale(DIR)`` removes exactly those whose process
-is gone — call it only while holding ``output_lock(DIR)``.
+is gone — call it only while holding ``output_lock(DIR)`` — once ``recover_publish(DIR)`` has
+dealt with a process killed inside ``publish_dir``: the old ``DIR`` is put back if it was
+aside, and the finished staging directory is kept as ``DIR.unpublished-<pid>-*``.
 
 ``output_lock(DIR)`` is an exclusive ``fcntl.flock`` on ``.DIR.lock`` beside ``DIR`` (holding
 the owner's pid), held for a run's duration: a second run on the same ``DIR`` is refused with
@@ -28,6 +30,7 @@ import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -45,6 +48,7 @@ __all__ = [
     "publish_dir",
     "output_lock",
     "clean_stale",
+    "recover_publish",
     "normalise_modes",
 ]
 
@@ -76,7 +80,8 @@ def dir_mode() -> int:
 @contextmanager
 def atomic_open(path, mode: str = "w"):
     """Open a temporary file beside ``path`` (``mode`` "w" text or "wb" binary); on a clean
-    exit rename it onto ``path``, on an exception remove it. Creates missing parent folders."""
+    exit rename it onto ``path``, on an exception remove it. Creates missing parent folders.
+    An ``OSError`` that names no file (a failed write: disk full) is raised naming ``path``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}-", suffix=".tmp")
@@ -85,6 +90,12 @@ def atomic_open(path, mode: str = "w"):
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as fh:
             yield fh
         os.replace(tmp, path)
+    except OSError as e:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        if e.filename is None:  # a failed write(2) (disk full, I/O error): name the file
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from e
+        raise
     except BaseException:
         if os.path.exists(tmp):
             os.remove(tmp)
@@ -149,16 +160,22 @@ def normalise_modes(root) -> None:
             os.chmod(os.path.join(base, f), fmode)
 
 
-def publish_dir(stage, out) -> None:
+def publish_dir(stage, out, keep: Callable[[str], bool] | None = None) -> None:
     """Move the finished ``stage`` directory to ``out``: one rename when ``out`` is new; else
     the old one is renamed aside (``.OUT.old-<pid>-*``), the new one renamed in, and only then
     the old one removed. If the second rename fails the old directory is put back, so the old
-    result is never lost before the new one is in place."""
+    result is never lost before the new one is in place. ``keep(name)``: entries of the old
+    ``out`` to carry into the new one (hard links, copies where the file system has none;
+    they keep their own modes); entries ``stage`` has are never carried."""
     stage, out = Path(stage), Path(out)
     normalise_modes(stage)
     if not out.exists():
         os.rename(stage, out)
         return
+    if keep is not None:
+        for entry in os.scandir(out):
+            if keep(entry.name) and not os.path.lexists(stage / entry.name):
+                _carry(entry, stage / entry.name)
     old = _temp_dir(out, "old")
     os.rename(out, old / "d")
     try:
@@ -168,6 +185,21 @@ def publish_dir(stage, out) -> None:
         os.rmdir(old)
         raise
     shutil.rmtree(old, ignore_errors=True)
+
+
+def _link_or_copy(src, dst) -> None:
+    try:
+        os.link(src, dst, follow_symlinks=False)
+    except OSError:
+        shutil.copy2(src, dst, follow_symlinks=False)
+
+
+def _carry(entry: os.DirEntry, dst: Path) -> None:
+    """``entry`` (file, symbolic link or directory tree) recreated at ``dst``."""
+    if entry.is_dir(follow_symlinks=False):
+        shutil.copytree(entry.path, dst, symlinks=True, copy_function=_link_or_copy)
+    else:
+        _link_or_copy(entry.path, dst)
 
 
 def _alive(pid: int) -> bool:
@@ -180,24 +212,67 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def clean_stale(out) -> list[Path]:
-    """Remove ``.OUT.tmp-<pid>-*`` and ``.OUT.old-<pid>-*`` beside ``out`` left by processes
-    that no longer exist (only microsim's own names; a live or unknown owner is left alone).
-    Returns what was removed. Call only while holding ``output_lock(out)``."""
-    out = Path(out)
+def _stale(out: Path) -> dict[str, list[os.DirEntry]]:
+    """``"tmp"``/``"old"`` → microsim's temporary directories beside ``out`` whose process
+    is gone (a live or unknown owner's are left out)."""
     pattern = re.compile(re.escape(f".{out.name}.") + r"(tmp|old)-(\d+)-[A-Za-z0-9_]+")
-    removed = []
+    found: dict[str, list[os.DirEntry]] = {"tmp": [], "old": []}
     try:
         entries = list(os.scandir(out.parent))
     except OSError:
-        return removed
+        return found
     for e in entries:
         m = pattern.fullmatch(e.name)
         if not m or int(m.group(2)) == os.getpid() or _alive(int(m.group(2))):
             continue
         if e.is_dir(follow_symlinks=False):
-            shutil.rmtree(e.path, ignore_errors=True)
-            removed.append(Path(e.path))
+            found[m.group(1)].append(e)
+    return found
+
+
+def _pid(entry: os.DirEntry) -> str:
+    return entry.name.rsplit("-", 2)[-2]
+
+
+def recover_publish(out) -> str | None:
+    """Undo what a process killed inside ``publish_dir`` left of ``out``: its aside
+    ``.OUT.old-<pid>-*/d`` is put back when ``out`` is missing, and its staging directory —
+    complete, since ``publish_dir`` had started — is kept as ``OUT.unpublished-<pid>-*``
+    beside it rather than removed as stale. Returns one line saying what was done (None:
+    nothing to recover). Call only while holding ``output_lock(out)``."""
+    out = Path(out)
+    stale = _stale(out)
+    notes = []
+    for old in stale["old"]:
+        pid, aside = _pid(old), Path(old.path) / "d"
+        # between the renames (the old out aside) or just before them (an empty aside folder)
+        publishing = aside.is_dir() or (os.path.lexists(out) and not os.listdir(old.path))
+        if not publishing:
+            continue
+        if not os.path.lexists(out):
+            os.rename(aside, out)
+            notes.append(f"its previous content was put back from {old.name}")
+        for tmp in (t for t in stale["tmp"] if _pid(t) == pid):
+            kept = out.parent / f"{out.name}.unpublished-{pid}-{tmp.name.rsplit('-', 1)[-1]}"
+            os.rename(tmp.path, kept)
+            notes.append(f"the new result it was publishing is kept in {kept}")
+    if not notes:
+        return None
+    return f"{out}: a killed microsim run was replacing it: " + "; ".join(notes)
+
+
+def clean_stale(out) -> list[Path]:
+    """Remove ``.OUT.tmp-<pid>-*`` and ``.OUT.old-<pid>-*`` beside ``out`` left by processes
+    that no longer exist (only microsim's own names; a live or unknown owner is left alone),
+    after ``recover_publish(out)`` has put back or kept what a publication cut short left.
+    Returns what was removed. Call only while holding ``output_lock(out)``."""
+    out = Path(out)
+    recover_publish(out)
+    stale = _stale(out)
+    removed = []
+    for e in (*stale["tmp"], *stale["old"]):
+        shutil.rmtree(e.path, ignore_errors=True)
+        removed.append(Path(e.path))
     return removed
 
 

@@ -12,9 +12,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import traceback
 
+from . import __version__
 from .errors import EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure, UsageError
 
 EPILOG = (
@@ -49,18 +52,52 @@ def _cmd_surface(args) -> int:
     return 0
 
 
-def _theta_list(text: str) -> list[float]:
-    """``--theta-i 0,30,60`` or ``--theta-i 0 30 60`` (argparse nargs) → floats."""
+def _rays(text: str) -> int:
+    """``--rays N``: an integer in [1, ``MAX_RAYS``]."""
+    from .sim.arguments import MAX_RAYS
+
     try:
-        return [float(t) for t in text.replace(",", " ").split()]
+        rays = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"must be angles in degrees, got {text!r}") from None
+        rays = None
+    if rays is None or not 1 <= rays <= MAX_RAYS:
+        raise argparse.ArgumentTypeError(
+            f"must be an integer in [1, {MAX_RAYS:,}] (primary rays per incidence), got {text!r}"
+        )
+    return rays
+
+
+def _theta_list(text: str) -> list[float]:
+    """``--theta-i 0,30,60`` or ``--theta-i 0 30 60`` (argparse nargs) → floats, each in
+    [0, ``scene.MAX_THETA_I``]."""
+    from .scene import MAX_THETA_I
+
+    try:
+        angles = [float(t) for t in text.replace(",", " ").split()]
+    except ValueError:
+        angles = []
+    if not angles or not all(0 <= t <= MAX_THETA_I for t in angles):
+        raise argparse.ArgumentTypeError(
+            f"must be angles in degrees, each in [0, {MAX_THETA_I:g}], got {text!r}"
+        )
+    return angles
+
+
+def _incidences(parts) -> list[float] | None:
+    """The angles of every ``--theta-i`` (None: none given); an angle given twice is refused."""
+    if parts is None:
+        return None
+    angles = [t for part in parts for t in part]
+    twice = sorted({t for t in angles if angles.count(t) > 1})
+    if twice:
+        raise UsageError(f"--theta-i: {twice[0]:g}° given twice; give each incidence once")
+    return angles
 
 
 def _cmd_run(args) -> int:
     from .runner import execute, plan_run
 
-    theta = None if args.theta_i is None else [t for part in args.theta_i for t in part]
+    theta = _incidences(args.theta_i)
     plan = plan_run(
         args.scene,
         rays=args.rays,
@@ -90,6 +127,7 @@ def _cmd_report(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="microsim", description=__doc__.splitlines()[0], epilog=EPILOG)
+    p.add_argument("--version", action="version", version=f"microsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     m = sub.add_parser("models", help="list every closed-form model with its parameters and source")
     m.set_defaults(func=_cmd_models)
@@ -108,15 +146,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.epilog = EPILOG
     r.add_argument(
         "--rays",
-        type=int,
+        type=_rays,
         help="primary rays per incidence (default: the scene's; --quick caps it at 200000)",
     )
     r.add_argument(
         "--theta-i",
         type=_theta_list,
         nargs="+",
+        action="extend",
         metavar="DEG",
-        help="incidence angles in degrees (default: the scene's)",
+        help="incidence angles in degrees, each once (default: the scene's); repeatable: "
+        "--theta-i 30 --theta-i 60 is --theta-i 30 60 (or 30,60)",
     )
     r.add_argument("--out", help="output directory (default: runs/<scene name>)")
     r.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
@@ -168,10 +208,38 @@ def _os_error(exc: OSError) -> str:
     return f"{where}: {reason}" if where else reason
 
 
+class _CtrlC:
+    """While active, SIGINT raises KeyboardInterrupt as Python's default handler does, and is
+    remembered in ``seen``: an extension module whose import it cuts short raises ImportError
+    instead, which ``main`` then reports as the interrupt it is. Only installed over the
+    default handler, in the main thread (an ignored SIGINT stays ignored)."""
+
+    def __enter__(self):
+        self.seen, self._old = False, None
+        main_thread = threading.current_thread() is threading.main_thread()
+        if main_thread and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._old = signal.signal(signal.SIGINT, self._interrupt)
+        return self
+
+    def _interrupt(self, signum, frame):
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+        return False
+
+
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (module docstring)."""
-    args = build_parser().parse_args(argv)
+    with _CtrlC() as ctrl_c:
+        return _main(argv, ctrl_c)
+
+
+def _main(argv, ctrl_c: _CtrlC) -> int:
     try:
+        args = build_parser().parse_args(argv)  # Ctrl-C while its modules load: status 130
         return args.func(args)
     except UsageError as exc:
         print(f"microsim: error: {_one_line(exc)}", file=sys.stderr)
@@ -188,8 +256,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("microsim: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except Exception:  # a bug: show it as one
-        traceback.print_exc()
+    except Exception:
+        if ctrl_c.seen:  # an import cut short by Ctrl-C (ImportError from an extension)
+            print("microsim: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        traceback.print_exc()  # a bug: show it as one
         return EXIT_ENVIRONMENT
 
 

@@ -9,22 +9,25 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     [surface]
     kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat
     # vgrooves: n_grooves = 4000 (at most 1 000 000), ndf (required) = beckmann | ggx |
-    #           blinn-phong | vmf | abc with its parameter m | alpha | e | kappa | B and C
-    #           (required), sampling = "stratified" | "random", tile = 1.0
+    #           blinn-phong | vmf | abc with its parameter m | alpha (in [1e-6, 10]) |
+    #           e | kappa (in [1e-6, 1e12]) | B and C (in [1e-6, 1e6]) (required),
+    #           sampling = "stratified" | "random", tile = 1.0
     # gaussian: n = 512 (8 … 4096), dx = 1.0, sigma, corr_len (required; corr_len >= dx and
     #           rms slope 2 sigma / corr_len <= 10), exact_amplitude = true
     # abc:      n = 512 (8 … 4096), dx = 1.0, sigma, B, C (required), band_limit = 4,
     #           exact_amplitude = true
     # file:     path (required; relative to the scene file; .npy, .npz or text, a real 2D
-    #           array of at least 8 x 8 and at most 4096 x 4096 finite heights, checked when
-    #           the scene is loaded), dx (required), periodic = false
+    #           array of at least 8 x 8 and at most 4096 x 4096 finite heights, not all
+    #           equal, checked when the scene is loaded), dx (required), periodic = false
     # flat:     size = 1.0
     # every length (dx, sigma, corr_len, B, tile, size) is a number in [1e-6, 1e6]
     [material]
     ior = "mirror"                     # aluminium | methanol | mirror, a number n, or [n, k]
+                                       # (n in [0.001, 1000], k in [0, 1000]; not n = 1 with
+                                       # k = 0, which reflects nothing)
     [simulation]
-    theta_i = [0, 30, 60, 80]          # degrees, each in [0, 90); at most 180 angles
-    rays = 1_000_000                   # per incidence, an integer > 0 or "auto"
+    theta_i = [0, 30, 60, 80]          # degrees, distinct, each in [0, 89.99]; at most 180
+    rays = 1_000_000                   # per incidence, an integer in [1, 2**48] or "auto"
     theta_bins = 45                    # over θo ∈ [0°, 90°]; an integer in [1, 900]
     phi_bins = 72                      # over Δφ = φo − φi folded to [0°, 180°] (half bins at
                                        # 0° and 180°; microsim.sim.Bins); an integer in [2, 1440]
@@ -59,13 +62,15 @@ dx/upsample < λ/(2(1 + sin θi,max)). The height part of the phase-sampling con
 on the realised heights and is checked when a run is planned (``runner.wave_run``), before
 anything is written. Scenes without ``[wave]`` are geometric only.
 
-The file itself must be a regular file of at most 1 MiB of UTF-8 TOML. Every problem raises
+The file itself must be a regular file of at most 1 MiB of UTF-8 TOML (a leading byte-order
+mark is allowed). Every problem raises
 ``SceneError`` (a ``UsageError``) with a one-line message naming the file, the key and the
 allowed values.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import stat
@@ -80,6 +85,7 @@ import numpy as np
 from microsim import analytic as an
 from microsim import surfaces
 from microsim.errors import UsageError
+from microsim.sim.arguments import MAX_RAYS
 from microsim.surfaces.heightfields import abc_ensemble_ndf, gaussian_ensemble_ndf
 from microsim.surfaces.loader import check_heightfield_file
 
@@ -102,6 +108,7 @@ __all__ = [
     "WaveSpec",
     "WAVE_KINDS",
     "MIN_TILE_WAVELENGTHS",
+    "MAX_THETA_I",
 ]
 
 
@@ -122,12 +129,13 @@ def _int_in(lo, hi):
     return (lambda v: _is_int(v) and lo <= v <= hi, f"an integer in [{lo}, {hi}]")
 
 
-_POS = (lambda v: _is_num(v) and v > 0, "a number > 0")
 _LENGTH = (lambda v: _is_num(v) and 1e-6 <= v <= 1e6, "a number in [1e-6, 1e6]")
 _POS_INT = (lambda v: _is_int(v) and v >= 1, "an integer >= 1")
 _GRID = _int_in(8, 4096)
 MAX_GRID = 4096
 """Largest heightfield grid side a scene may ask for (grid points per side)."""
+MIN_IOR, MAX_IOR = 1e-3, 1e3
+"""Bounds of a scene's index of refraction n (and of k, from 0)."""
 MAX_SCENE_BYTES = 1 << 20
 """Largest scene (or sweep) file read: 1 MiB."""
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")
@@ -236,15 +244,37 @@ _KINDS = {
 SURFACE_KINDS = tuple(_KINDS)
 RANDOM_KINDS = ("vgrooves", "gaussian", "abc")
 """Kinds whose realisations (seeds seed, seed + 1, …) are independent draws of one ensemble."""
-_NDF_PARAM_CHECK = (_POS[0], "a number > 0")
 
+
+def _num_in(lo, hi):
+    return (lambda v: _is_num(v) and lo <= v <= hi, f"a number in [{lo:g}, {hi:g}]")
+
+
+_NDF_PARAM_CHECKS = {
+    "m": _num_in(1e-6, 10.0),
+    "alpha": _num_in(1e-6, 10.0),
+    "e": _num_in(1e-6, 1e12),
+    "kappa": _num_in(1e-6, 1e12),
+    "B": _num_in(1e-6, 1e6),
+    "C": _num_in(1e-6, 1e6),
+}
+"""Allowed V-groove NDF parameters: beyond them the closed forms over- or underflow (a
+roughness below 1e-6 is a mirror, above 10 the grooves are too deep for single bounces)."""
+MAX_THETA_I = 89.99
+"""Largest incidence angle (degrees) of a scene or ``--theta-i``: closer to grazing the tracer
+loses rays to rounding."""
 _THETA_I = (
     lambda v: (
-        isinstance(v, list) and 0 < len(v) <= 180 and all(_is_num(t) and 0 <= t < 90 for t in v)
+        isinstance(v, list)
+        and 0 < len(v) <= 180
+        and all(_is_num(t) and 0 <= t <= MAX_THETA_I for t in v)
     ),
-    "a non-empty list of at most 180 angles in degrees, each in [0, 90)",
+    f"a non-empty list of at most 180 angles in degrees, each in [0, {MAX_THETA_I:g}]",
 )
-_RAYS = (lambda v: v == "auto" or (_is_int(v) and v >= 1), 'an integer >= 1 or "auto"')
+_RAYS = (
+    lambda v: v == "auto" or (_is_int(v) and 1 <= v <= MAX_RAYS),
+    f'an integer in [1, {MAX_RAYS:,}] or "auto"',
+)
 _SIM_KEYS = {
     "theta_i": ([0.0, 30.0, 60.0, 80.0], _THETA_I),
     "rays": (1_000_000, _RAYS),
@@ -434,7 +464,7 @@ def _surface_spec(where, table) -> SurfaceSpec:
         if ndf not in NDF_PARAMS:
             _fail(where, "surface.ndf", f"must be one of {', '.join(NDF_PARAMS)}, got {ndf!r}")
         table = {**table, "ndf": ndf}
-        schema.update({k: (_REQUIRED, _NDF_PARAM_CHECK) for k in NDF_PARAMS[ndf]})
+        schema.update({k: (_REQUIRED, _NDF_PARAM_CHECKS[k]) for k in NDF_PARAMS[ndf]})
     _check_keys(where, "surface", table, ["kind", *schema])
     params = _fill(where, "surface", {k: v for k, v in table.items() if k != "kind"}, schema)
     for key in (
@@ -480,10 +510,10 @@ def _surface_spec(where, table) -> SurfaceSpec:
 def _check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> None:
     """A heightfield file usable by ``surfaces.from_file``, checked before anything runs
     (``surfaces.loader.check_heightfield_file``: a regular file holding a real 2D array of
-    finite heights that fits in memory); the one-line error names the scene file, the key
-    and the heightfield file."""
+    finite heights that fits in memory, at most ``MAX_GRID`` per side); the one-line error
+    names the scene file, the key and the heightfield file."""
     try:
-        check_heightfield_file(path, dx, periodic)
+        check_heightfield_file(path, dx, periodic, max_side=MAX_GRID)
     except UsageError as e:
         _fail(where, "surface.path", " ".join(str(e).split()))
 
@@ -493,13 +523,23 @@ def _material(where, table):
         return None
     _check_keys(where, "material", table, ["ior"])
     v = table.get("ior", "mirror")
-    allowed = f"a name ({', '.join(an.MATERIALS)}), a number n > 0, or [n, k] with n > 0, k >= 0"
-    if isinstance(v, list):
-        if len(v) != 2 or not all(_is_num(x) for x in v):
+    allowed = (
+        f"a name ({', '.join(an.MATERIALS)}), a number n, or [n, k], with n in "
+        f"[{MIN_IOR:g}, {MAX_IOR:g}] and k in [0, {MAX_IOR:g}]"
+    )
+    if not isinstance(v, str):
+        pair = v if isinstance(v, list) else [v, 0]
+        n, k = pair if len(pair) == 2 else (None, None)
+        if not (_is_num(n) and _is_num(k) and MIN_IOR <= n <= MAX_IOR and 0 <= k <= MAX_IOR):
             _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
-        v = complex(v[0], v[1])
-    elif not (isinstance(v, str) or _is_num(v)):
-        _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
+        if n == 1 and k == 0:
+            _fail(
+                where,
+                "material.ior",
+                f"n = 1 with k = 0 matches the medium above and reflects nothing; must be "
+                f"{allowed}, got {v!r}",
+            )
+        v = complex(n, k) if isinstance(v, list) else v
     try:
         return an.resolve_material(v)
     except UsageError:
@@ -511,6 +551,9 @@ def _simulation(where, table) -> SimSettings:
     _check_keys(where, "simulation", table, list(_SIM_KEYS))
     s = _fill(where, "simulation", table, _SIM_KEYS)
     s["theta_i"] = tuple(float(t) for t in s["theta_i"])
+    twice = sorted({t for t in s["theta_i"] if s["theta_i"].count(t) > 1})
+    if twice:
+        _fail(where, "simulation.theta_i", f"lists {twice[0]:g}° twice; give each angle once")
     if s["realisation_target"] is not None and s["realisations"] != "auto":
         _fail(where, "simulation.realisation_target", 'needs realisations = "auto"')
     return SimSettings(**s)
@@ -568,6 +611,10 @@ def read_toml(path, what: str = "scene") -> dict:
         raise SceneError(f"{path}: no such {what} file") from None
     except IsADirectoryError:
         raise SceneError(f"{path}: is a directory, not a {what} file") from None
+    except OSError as e:  # a symlink loop, a name too long, a file used as a directory
+        if e.errno not in (errno.ELOOP, errno.ENAMETOOLONG, errno.ENOTDIR):
+            raise
+        raise SceneError(f"{path}: {e.strerror}; not a usable {what} file") from None
     try:
         mode = os.fstat(fd).st_mode
         if stat.S_ISDIR(mode):
@@ -592,9 +639,11 @@ def read_toml(path, what: str = "scene") -> dict:
             f"a {what} file is UTF-8 TOML"
         ) from None
     try:
-        return tomllib.loads(text)
+        return tomllib.loads(text.removeprefix("\ufeff"))
     except tomllib.TOMLDecodeError as e:
         raise SceneError(f"{path}: not valid TOML ({' '.join(str(e).split())})") from None
+    except RecursionError:
+        raise SceneError(f"{path}: arrays or tables nested too deeply; not a {what} file") from None
 
 
 def load_scene(path) -> Scene:

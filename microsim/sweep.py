@@ -32,9 +32,12 @@ than requested, marked partial, no verdicts); ``gather`` ignores such files too.
 task JSON is gathered into ``OUT/summary.csv``, ``OUT/summary.md`` and
 ``OUT/error_vs_roughness.png``.
 
-Interrupts (Ctrl-C): the finished tasks stay in ``OUT/tasks``, tasks in flight are stopped and
-leave nothing, no summary is written, and ``run_sweep`` raises ``SweepInterrupted`` (a
-``KeyboardInterrupt``); the CLI prints one line telling to rerun the same command, exit 130.
+Interrupts (Ctrl-C, or SIGTERM to the sweep's process): the finished tasks stay in
+``OUT/tasks``, tasks in flight are stopped and leave nothing, no summary is written, and
+``run_sweep`` raises ``SweepInterrupted`` (a ``KeyboardInterrupt``); the CLI prints one line
+telling to rerun the same command, exit 130 (143 for SIGTERM). A local worker process that
+dies (SIGKILL, out of memory) has its unfinished tasks run again in a fresh pool; two pools
+in a row breaking before any task finishes is an ``EnvironmentFailure``.
 
 Execution: local worker processes (``concurrent.futures.ProcessPoolExecutor``, ``--workers``),
 or, with ``--scheduler ADDRESS``, the same task function on a Dask distributed cluster
@@ -57,8 +60,10 @@ import re
 import signal
 import stat
 import sys
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,6 +72,7 @@ from typing import Callable
 from . import atomic
 from .checkpoints import checkpoint
 from .errors import EnvironmentFailure, UsageError
+from .sim.arguments import MAX_RAYS
 from .sim.bins import MAX_BINS  # theta_bins × phi_bins at most
 
 __all__ = [
@@ -121,12 +127,13 @@ _NAME_RULE = "1-100 characters from letters, digits, '.', '_', '-', not starting
 
 
 class SweepInterrupted(KeyboardInterrupt):
-    """A sweep stopped by Ctrl-C: ``done`` of ``total`` tasks have complete results in ``out``
-    (kept; a rerun computes the rest)."""
+    """A sweep stopped by Ctrl-C (``signum`` SIGINT) or SIGTERM: ``done`` of ``total`` tasks
+    have complete results in ``out`` (kept; a rerun computes the rest)."""
 
-    def __init__(self, out, done: int, total: int):
+    def __init__(self, out, done: int, total: int, signum: int = signal.SIGINT):
         super().__init__(f"sweep interrupted: {done}/{total} tasks done in {out}")
         self.out, self.done, self.total = str(out), int(done), int(total)
+        self.signum = int(signum)
 
 
 @dataclass(frozen=True)
@@ -207,8 +214,8 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
     if extra:
         _fail(where, f"{extra[0]}: unknown key; allowed keys: {', '.join(_TOP)}")
     rays, seed = data.get("rays", 200_000), data.get("seed", 0)
-    if not _is_int(rays) or rays < 1:
-        _fail(where, f"rays: must be an integer >= 1, got {rays!r}")
+    if not _is_int(rays) or not 1 <= rays <= MAX_RAYS:
+        _fail(where, f"rays: must be an integer in [1, {MAX_RAYS:,}] (per task), got {rays!r}")
     if not _is_int(seed) or seed < 0:
         _fail(where, f"seed: must be an integer >= 0, got {seed!r}")
     models = tuple(_axis(data.get("models", ["vgroove", "smith"])))
@@ -247,6 +254,7 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t < 90 for t in thetas
     ):
         _fail(where, f"theta_i: must be degrees in [0, 90), got {thetas!r}")
+    _check_distinct(where, "theta_i", thetas)
     scenes = data.get("scenes")
     if scenes is None:
         _fail(where, "scenes: required; one or more [[scenes]] tables")
@@ -271,9 +279,11 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         for key, ax in zip(keys, axes):
             if not ax:
                 _fail(w, f"surface.{key}: empty axis; give one or more values")
+            _check_distinct(w, f"surface.{key}", ax)
         iors = _axis(sc.get("ior", "aluminium"))
         if not iors:
             _fail(w, "ior: empty axis; give one or more materials")
+        _check_distinct(w, "ior", iors)
         n_tasks += math.prod(len(a) for a in axes) * len(iors) * len(thetas)
         if n_tasks > MAX_TASKS:
             _fail(
@@ -284,19 +294,47 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         for ior in iors:
             _check_ior(w, ior)
         grid.append((name, keys, axes, iors))
-    tasks = []
+    tasks, first_scene, checked = [], {}, set()
     for k, (name, keys, axes, iors) in enumerate(grid):
         w = f"{where}: scenes[{k}]"
         for values in itertools.product(*axes):
             concrete = _resolve_paths(dict(zip(keys, values)), base)
-            _scene(name, concrete, None, w)  # validate early
-            _check_heightfield_file(w, concrete)
+            spec = _scene(name, concrete, None, w).surface
+            if spec.kind == "file":
+                _check_heightfield_file(w, spec, checked)
             for ior in iors:
                 for t in thetas:
-                    tasks.append(
-                        Task(name, concrete, ior, float(t), rays, seed, nt, npf, models, masking)
-                    )
+                    task = Task(name, concrete, ior, float(t), rays, seed, nt, npf, models, masking)
+                    j = first_scene.setdefault(task.id, k)
+                    if j != k:
+                        _fail(
+                            w,
+                            f"duplicate of a task of scenes[{j}] ({task_label(task)}); every "
+                            f"task must be distinct: remove the repeated scene or rename it",
+                        )
+                    tasks.append(task)
     return tasks
+
+
+def _check_distinct(where: str, key: str, values: list) -> None:
+    """An axis lists each value once (a repeated value would compute one task twice; 30 and
+    30.0 are the same value)."""
+    seen = set()
+    for v in values:
+        if _value_key(v) in seen:
+            _fail(where, f"{key}: duplicate value {v!r}; the values of an axis must be distinct")
+        seen.add(_value_key(v))
+
+
+def _value_key(v):
+    """A hashable stand-in for a TOML value, equal for equal values (``True`` is not 1)."""
+    if isinstance(v, bool):
+        return ("bool", v)
+    if isinstance(v, list):
+        return ("list", *map(_value_key, v))
+    if isinstance(v, dict):
+        return ("table", *sorted((k, _value_key(x)) for k, x in v.items()))
+    return v
 
 
 def _check_ior(where: str, ior) -> None:
@@ -317,16 +355,17 @@ def _resolve_paths(surface: dict, base) -> dict:
     return surface
 
 
-def _check_heightfield_file(where: str, surface: dict) -> None:
-    if surface.get("kind") != "file":
+def _check_heightfield_file(where: str, spec, checked: set) -> None:
+    """The heightfield file of a ``kind = "file"`` surface, read and checked as a scene file's
+    (``microsim.scene``; an OS error such as permission denied propagates); ``checked`` holds
+    the (path, dx, periodic) already checked."""
+    from microsim import scene as sc
+
+    key = (spec.params["path"], spec.params["dx"], spec.params["periodic"])
+    if key in checked:
         return
-    p = Path(surface["path"])
-    try:
-        ok = stat.S_ISREG(p.stat().st_mode)
-    except OSError as e:
-        _fail(where, f"surface.path: cannot read heightfield file {p} ({e.strerror})")
-    if not ok:
-        _fail(where, f"surface.path: {p} is not a regular file")
+    sc._check_heightfield(where, Path(key[0]), key[1], key[2])
+    checked.add(key)
 
 
 def _read_sweep_file(path: Path) -> dict:
@@ -427,6 +466,7 @@ def _worker_init() -> None:
     (inside ``simulate`` it makes the simulation return partial, see ``run_task``)."""
     _WORKER.update(pool=True, stop=False)
     signal.signal(signal.SIGINT, lambda signum, frame: _WORKER.update(stop=True))
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the pool terminates broken workers with it
 
 
 def run_task(task: Task, out_dir) -> dict:
@@ -514,14 +554,42 @@ def _complete(rec, task: Task) -> bool:
     return all(isinstance(v, dict) and all(k in v for k in _VERDICT_KEYS) for v in verdicts)
 
 
+_NOT_REGULAR = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+)
+
+
+def _refuse_non_regular(path: Path, mode: int) -> None:
+    """UsageError naming ``path`` unless ``mode`` is a regular file's."""
+    if not stat.S_ISREG(mode):
+        kind = next((what for test, what in _NOT_REGULAR if test(mode)), "not a regular file")
+        _fail(
+            str(path),
+            f"is {kind}, not a task result (a JSON file written by the sweep); "
+            f"remove it and rerun the sweep",
+        )
+
+
 def _load(task: Task, out: Path) -> dict | None:
     """The complete record of ``task`` in ``out``, or None (missing, unreadable, truncated,
-    partial, or another task's)."""
+    partial, or another task's). Anything but a regular file there (a FIFO, a directory) is
+    a UsageError naming it, and never opened for reading."""
+    path = Path(out) / "tasks" / f"{task.id}.json"
     try:
-        with open(Path(out) / "tasks" / f"{task.id}.json", encoding="utf-8") as fh:
-            rec = json.load(fh)
-    except (OSError, ValueError):
+        _refuse_non_regular(path, os.stat(path).st_mode)
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError:
         return None
+    with open(fd, encoding="utf-8") as fh:
+        _refuse_non_regular(path, os.fstat(fd).st_mode)
+        try:
+            rec = json.load(fh)
+        except (OSError, ValueError):
+            return None
     return rec if _complete(rec, task) else None
 
 
@@ -589,6 +657,29 @@ def _check_out(out: Path) -> None:
 
 
 @contextmanager
+def _sigterm_interrupts():
+    """While active (main thread, SIGTERM not ignored), SIGTERM raises KeyboardInterrupt as
+    Ctrl-C does, so the sweep stops its workers before it exits; yields {"signal": the
+    signal that interrupted, SIGINT unless a SIGTERM arrived}."""
+    received = {"signal": signal.SIGINT}
+
+    def terminate(signum, frame):
+        received["signal"] = signum
+        raise KeyboardInterrupt
+
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.getsignal(signal.SIGTERM) if main else None
+    if old is not signal.SIG_DFL:
+        yield received
+        return
+    signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield received
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@contextmanager
 def _locked(out: Path):
     """Create ``out/tasks``, hold ``out/.sweep.lock`` for the sweep, and remove the temporary
     files that interrupted atomic writes of earlier sweeps left behind."""
@@ -643,11 +734,46 @@ def _client(scheduler, timeout: float):
         ) from None
 
 
-def _local(todo, out: Path, workers: int, collect) -> None:
-    """Run ``todo`` in local worker processes; ``collect(record)`` for each finished one. On
-    any exception (Ctrl-C included) the queued tasks are cancelled, the running ones asked to
-    stop (SIGINT: their simulation returns partial and writes nothing), and the exception
-    re-raised once they have; a second Ctrl-C kills them."""
+def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None]) -> None:
+    """Run ``todo`` in local worker processes; ``collect(record)`` for each finished one.
+
+    A worker process that dies (SIGKILL, the out-of-memory killer) breaks the pool: the tasks
+    without a complete result then run again in a fresh pool (``notice`` says so); when two
+    pools in a row break before any task finishes, ``BrokenProcessPool`` is raised."""
+    fruitless = 0
+    while todo:
+        finished = set()
+
+        def note(rec: dict) -> None:
+            collect(rec)
+            finished.add(rec["id"])
+
+        try:
+            _local_pool(todo, out, workers, note)
+            return
+        except BrokenProcessPool:
+            pass
+        rest = []
+        for task in todo:
+            if task.id in finished:
+                continue
+            rec = _load(task, out)
+            if rec is None:
+                rest.append(task)
+            else:  # written just before the pool broke
+                note(rec)
+        fruitless = 0 if finished else fruitless + 1
+        if fruitless == 2:
+            raise BrokenProcessPool("worker processes died twice in a row")
+        notice(f"a worker process died; running its {len(rest)} unfinished tasks again")
+        todo = rest
+
+
+def _local_pool(todo, out: Path, workers: int, collect) -> None:
+    """One process pool for ``todo`` (``_local``). On any exception (Ctrl-C included) the
+    queued tasks are cancelled, the running ones asked to stop (SIGINT: their simulation
+    returns partial and writes nothing), and the exception re-raised once they have; a second
+    Ctrl-C kills them."""
     pool = ProcessPoolExecutor(max_workers=min(int(workers), len(todo)), initializer=_worker_init)
     futures = []
     try:
@@ -657,12 +783,12 @@ def _local(todo, out: Path, workers: int, collect) -> None:
     except BaseException:
         for f in futures:
             f.cancel()
-        procs = list(getattr(pool, "_processes", None) or {}).copy()
-        for pid in procs:
-            try:
-                os.kill(pid, signal.SIGINT)
-            except OSError:
-                pass
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            if proc.is_alive():  # never a pid the pool has already reaped
+                try:
+                    os.kill(proc.pid, signal.SIGINT)
+                except OSError:
+                    pass
         try:
             pool.shutdown(wait=True, cancel_futures=True)
         except KeyboardInterrupt:
@@ -705,8 +831,10 @@ def run_sweep(
     reached within ``connect_timeout`` seconds or EnvironmentFailure. ``limit``: run at most
     this many of the missing tasks, then summarise what is done. ``progress``: receives one
     line per finished task ("k/N done: <scene params, material, θi> (s)"), and one at the start.
-    Ctrl-C: raises ``SweepInterrupted`` (finished tasks kept, no summary written).
-    Returns {"computed": [ids], "skipped": [ids], "summary": paths}.
+    Ctrl-C or SIGTERM: raises ``SweepInterrupted`` (the workers stopped, finished tasks
+    kept, no summary written). Local worker processes that die: their tasks run again
+    (``_local``), or EnvironmentFailure. Returns {"computed": [ids], "skipped": [ids],
+    "summary": paths}.
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         _fail("--workers", f"must be an integer >= 1, got {workers!r}")
@@ -715,6 +843,7 @@ def run_sweep(
     out = Path(out).absolute()
     _check_out(out)
     with ExitStack() as stack:
+        received = stack.enter_context(_sigterm_interrupts())
         client = None
         if scheduler is not None:
             client = stack.enter_context(_client(scheduler, float(connect_timeout)))
@@ -748,14 +877,24 @@ def run_sweep(
                 )
             checkpoint("sweep-task")
 
+        def done() -> int:
+            return sum(_done(t, out) for t in spec.tasks)
+
         try:
             if todo and client is None:
-                _local(todo, out, workers, collect)
+                _local(todo, out, workers, collect, progress or (lambda line: None))
             elif todo:
                 _dask(todo, out, client, collect)
             paths = write_summary(spec, out)
         except KeyboardInterrupt:
-            raise SweepInterrupted(out, sum(_done(t, out) for t in spec.tasks), total) from None
+            raise SweepInterrupted(out, done(), total, received["signal"]) from None
+        except BrokenProcessPool:
+            raise EnvironmentFailure(
+                f"{out}: sweep worker processes died twice in a row before finishing a task "
+                f"(killed, e.g. by the out-of-memory killer); {done()}/{total} tasks done and "
+                f"kept in {out / 'tasks'}, summary not written; rerun the same command to "
+                f"compute the rest"
+            ) from None
     return {"computed": computed, "skipped": skipped, "summary": paths}
 
 
@@ -909,14 +1048,15 @@ def _cmd_sweep(args) -> int:
             connect_timeout=args.scheduler_timeout,
         )
     except SweepInterrupted as e:
+        how = "interrupted" if e.signum == signal.SIGINT else "terminated"
         print(
-            f"microsim: interrupted: {e.done}/{e.total} tasks done and kept in "
+            f"microsim: {how}: {e.done}/{e.total} tasks done and kept in "
             f"{os.path.join(out, 'tasks')}, summary not written; rerun the same command "
             f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}) "
             f"to compute the rest",
             file=sys.stderr,
         )
-        return 130
+        return 128 + e.signum
     print(
         f"{len(res['computed'])} tasks computed, {len(res['skipped'])} already done; "
         f"{res['summary']['markdown']}, {res['summary']['csv']}, {res['summary']['chart']}"

@@ -460,11 +460,14 @@ def hemisphere_maps(
 
 
 def _mark_z5(ax, z, bins):
-    """Contour |z| = 5 over the bin centres (skipped when no bin reaches it)."""
+    """Contour |z| = 5 over the bin centres (skipped when no bin reaches it, and on a grid
+    of one θo bin, where no contour can be drawn)."""
     a = np.abs(z)
     if not (np.isfinite(a) & (a >= 5.0)).any():
         return
     ang, v = _unfold(a, bins)
+    if min(v.shape) < 2:
+        return
     ac = 0.5 * (ang[1:] + ang[:-1])
     rc = np.sin(np.radians(bins.theta_centers))
     ax.contour(ac, rc, np.ma.masked_invalid(v), levels=[5.0], colors="k", linewidths=0.8)

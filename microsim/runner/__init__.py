@@ -14,8 +14,9 @@ Modules, in the order a run uses them:
 Ctrl-C during the simulation keeps the tallies so far: they are saved with
 ``meta["partial"] = True`` (exit status 130) and ``--resume DIR`` continues them to the requested
 ray count, giving the same tallies as an uninterrupted run. Ctrl-C after the simulation (side
-studies, fits, charts, publishing) saves the complete tallies the same way (130); a side study
-cut short is never used for a report. ``microsim report`` keeps the tallies of an interrupted
+studies, fits, charts) saves the complete tallies the same way (130), never over a finished
+result; while the finished directory is moved in it waits until that is done (130); a side
+study cut short is never used for a report. ``microsim report`` keeps the tallies of an interrupted
 scene in ``OUT/.<scene>.partial/`` (the previous report of that scene stays in place) and
 ``report --resume`` continues: finished scenes are skipped, the interrupted one resumed.
 

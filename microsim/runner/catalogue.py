@@ -6,6 +6,7 @@ verdicts against Kirchhoff, the regime chart ``regimes.png`` and the crossover t
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -16,6 +17,7 @@ from typing import Callable
 from .. import atomic
 from ..analysis import charts as ch
 from ..analysis import report
+from ..bench_methods import METHODS_JSON, METHODS_PNG
 from ..checkpoints import checkpoint
 from ..errors import UsageError
 from ..scene import load_scene
@@ -27,7 +29,34 @@ from .wave_run import regime_maps
 
 __all__ = ["run_report"]
 
-REGIME_CHART = "regimes.png"
+INDEX_FILE, FIG6_CHART, REGIME_CHART = "index.md", "mikkelsen-fig6.png", "regimes.png"
+RESERVED_NAMES = frozenset((INDEX_FILE, FIG6_CHART, REGIME_CHART, METHODS_JSON, METHODS_PNG))
+"""Files of the report directory itself (the index and its charts, ``microsim bench
+--methods``'s study): no scene may be named like one (its folder would take the place)."""
+
+
+def _check_scene_names(paths, scenes, out: Path) -> None:
+    """Refuse a scene named like one of ``RESERVED_NAMES`` (letter case aside: some file
+    systems ignore it)."""
+    reserved = {n.lower() for n in RESERVED_NAMES}
+    for path, scene in zip(paths, scenes):
+        if scene.name.lower() in reserved:
+            raise UsageError(
+                f"{path}: name: {scene.name!r} clashes with the report's own file "
+                f"{out / scene.name.lower()}; give the scene another name (reserved: "
+                f"{', '.join(sorted(RESERVED_NAMES))})"
+            )
+
+
+def _scene_digest(path: Path, scene) -> str:
+    """SHA-256 of what a scene's result depends on in files: the scene file and, for a
+    ``kind = "file"`` surface, its heightfield file."""
+    h = hashlib.sha256(path.read_bytes())
+    if scene.surface.kind == "file":
+        with open(path.parent / scene.surface.params["path"], "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
 
 
 def _regimes(out: Path, quick: bool) -> dict:
@@ -84,9 +113,11 @@ def run_report(
     in place and its tallies are kept in ``out/.<scene>.partial/``; ``resume=True``
     (``report --resume``, same options) skips the scenes finished since the interrupted report
     started (``out/.report-state.json``), continues the interrupted one from its tallies and
-    runs the rest. Holds ``atomic.output_lock(out)`` throughout. ``regimes``: compute the
-    regime maps for the index (None: when some scene has ``[wave]``; reduced in quick
-    mode)."""
+    runs the rest; a scene whose scene file (or heightfield file) changed since is run anew,
+    its old report and tallies unused. Holds ``atomic.output_lock(out)`` throughout.
+    ``regimes``: compute the regime maps for the index (None: when some scene has
+    ``[wave]``; reduced in quick mode). A scene named like a file of the report itself
+    (``RESERVED_NAMES``) is refused before anything runs."""
     log = log or (lambda s: print(s, file=sys.stderr))
     catalogue, out = Path(catalogue), Path(out)
     if not catalogue.is_dir():
@@ -98,6 +129,8 @@ def run_report(
     names = [s.name for s in scenes]
     if len(set(names)) != len(names):
         raise UsageError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
+    _check_scene_names(paths, scenes, out)
+    digests = {s.name: _scene_digest(p, s) for p, s in zip(paths, scenes)}
     _check_catalogue_out(catalogue, out)
     hint = (
         f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
@@ -117,14 +150,18 @@ def run_report(
                     f"{state.get('quick')}, catalogue {state.get('catalogue')}; "
                     f"resume with the same options"
                 )
-        done = set(state["done"]) if state else set()
+        recorded = state.get("digests") if state else None
+        recorded = recorded if isinstance(recorded, dict) else {}
+        unchanged = {name for name, digest in recorded.items() if digests.get(name) == digest}
+        done = set(state["done"]) & unchanged if state else set()
         plans = []
         for p, s in zip(paths, scenes):
             scene_out, partial = out / s.name, out / f".{s.name}.partial"
             if s.name in done and (scene_out / VERDICTS_FILE).is_file():
                 plans.append(scene_out)
                 continue
-            tallies = partial if resume and (partial / "meta.json").is_file() else None
+            saved = resume and s.name in unchanged and (partial / "meta.json").is_file()
+            tallies = partial if saved else None
             plans.append(
                 planning.plan_run(
                     p,
@@ -137,7 +174,12 @@ def run_report(
                     resume_hint=hint,
                 )
             )
-        state = {"quick": bool(quick), "catalogue": str(catalogue), "done": sorted(done)}
+        state = {
+            "quick": bool(quick),
+            "catalogue": str(catalogue),
+            "done": sorted(done),
+            "digests": digests,
+        }
         write_report_state(out, state)
         try:
             docs = []
@@ -159,16 +201,14 @@ def run_report(
             fig6 = None
             curves = fig6_curves(scenes, planning.effort_for(quick), threads)
             if curves:
-                fig6 = "mikkelsen-fig6.png"
+                fig6 = FIG6_CHART
                 ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
             regime = None
             if regimes or (regimes is None and any(s.wave is not None for s in scenes)):
                 regime = _regimes(out, quick)
             atomic.write_text(
-                out / "index.md",
-                report.index_report(
-                    docs, fig6, quick, regimes=regime, methods=out / "methods.json"
-                ),
+                out / INDEX_FILE,
+                report.index_report(docs, fig6, quick, regimes=regime, methods=out / METHODS_JSON),
             )
         except KeyboardInterrupt:
             log(

@@ -5,6 +5,7 @@ validates every option and path before anything is written (each problem a one-l
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -16,6 +17,7 @@ import numpy as np
 
 from ..analysis.budget import AUTO_TARGET as REALISATION_TARGET
 from ..analysis.budget import MAX_AUTO, MIN_AUTO
+from ..atomic import json_safe
 from ..errors import UsageError
 from ..scene import load_scene
 from ..sim import Bins, Result
@@ -31,6 +33,7 @@ __all__ = [
     "RunPlan",
     "plan_run",
     "check_replaceable",
+    "tally_settings",
     "RESULT_FILES",
 ]
 
@@ -186,9 +189,12 @@ def plan_run(
     """Validate a run without touching the disk; every problem is a one-line ``UsageError``.
 
     ``out`` defaults to ``runs/<scene name>`` (or ``resume``). An existing ``out`` is refused
-    unless ``resume`` names it (continue its tallies) or ``force`` (replace it; only an empty
-    directory or a microsim result, never the current directory, one of its parents or one
-    holding the scene file). ``tallies`` (``microsim report --resume``): a directory of saved
+    unless ``resume`` names it (continue its tallies, made with the same scene and options,
+    ``_check_resumable``) or ``force`` (replace it; only an empty directory or a microsim
+    result, never the current directory, one of its parents or one holding the scene file;
+    files in it that microsim does not write are kept, ``publishing.publish_dir``). A dangling
+    symbolic link, or a name too long for the file system and the temporaries beside it, is
+    refused. ``tallies`` (``microsim report --resume``): a directory of saved
     partial tallies to continue into ``out``; ``partial_dir``: where tallies go if the run is
     interrupted (default ``out``); ``resume_hint``: how to continue, for that message."""
     scene = load_scene(scene_path)
@@ -296,6 +302,12 @@ def _check_out(out: Path, scene, option: str) -> None:
             f"{option} {out}: must name a directory of its own, not the current "
             f"directory or a parent of it"
         )
+    _check_name_lengths(norm, option)
+    if norm.is_symlink() and not norm.exists():
+        raise UsageError(
+            f"{option} {out}: is a symbolic link to {os.readlink(norm)}, which is not an "
+            f"existing directory; remove the link or choose another directory"
+        )
     try:
         target = norm.resolve()
         cwd = Path.cwd().resolve()
@@ -321,8 +333,47 @@ def _check_out(out: Path, scene, option: str) -> None:
         raise UsageError(f"{option} {out}: {parent} is not a directory")
 
 
+TEMP_NAME_ROOM = 40
+"""Characters the temporaries beside an output (``.OUT.tmp-<pid>-*``, ``.OUT.lock``,
+``OUT.unpublished-<pid>-*``) add to its name."""
+
+
+def _check_name_lengths(norm: Path, option: str) -> None:
+    """Refuse a path with a component the file system cannot hold, or an output name that
+    leaves no room for its temporaries (``TEMP_NAME_ROOM``), or a path over PATH_MAX."""
+    parent = norm.parent
+    while not os.path.isdir(parent) and parent != parent.parent:
+        parent = parent.parent
+    try:
+        name_max = os.pathconf(parent, "PC_NAME_MAX")
+        path_max = os.pathconf(parent, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        name_max, path_max = 255, 4096
+    size = lambda text: len(os.fsencode(text))  # noqa: E731
+    shown = lambda part: part if len(part) <= 40 else f"{part[:20]}…{part[-12:]}"  # noqa: E731
+    for part in norm.parts[:-1]:
+        if size(part) > name_max:
+            raise UsageError(
+                f"{option} {shown(str(norm))}: the folder name {shown(part)!r} is "
+                f"{size(part)} bytes long; the file system allows {name_max}"
+            )
+    limit = name_max - TEMP_NAME_ROOM
+    if size(norm.name) > limit:
+        raise UsageError(
+            f"{option} {shown(str(norm))}: the name {shown(norm.name)!r} is "
+            f"{size(norm.name)} bytes long; at most {limit} (the file system allows "
+            f"{name_max}, less room for the temporaries beside it)"
+        )
+    if size(os.path.abspath(norm)) + TEMP_NAME_ROOM > path_max:
+        raise UsageError(
+            f"{option} {shown(str(norm))}: the path is {size(os.path.abspath(norm))} bytes "
+            f"long; the file system allows {path_max - TEMP_NAME_ROOM} here"
+        )
+
+
 def check_replaceable(out: Path) -> None:
-    """``--force`` replaces only an empty directory or a microsim result."""
+    """``--force`` replaces only an empty directory or a microsim result (the user's own files
+    in it are carried over, ``publishing.publish_dir``)."""
     try:
         names = set(os.listdir(out))
     except OSError as e:
@@ -350,6 +401,11 @@ def _load_saved(where: Path, what: str) -> Result:
         raise UsageError(
             f"{what} {where}: {meta} is unreadable ({' '.join(str(e).split())}); rerun with --force"
         ) from None
+    if not isinstance(m.get("run"), dict):
+        raise UsageError(
+            f"{what} {where}: {meta} has no run record (run is {m.get('run')!r}, a microsim "
+            f"run writes an object); rerun with --force"
+        )
     try:
         with np.load(npz, allow_pickle=False) as z:
             for k in z.files:
@@ -360,6 +416,8 @@ def _load_saved(where: Path, what: str) -> Result:
         ) from None
     try:
         return Result.load(where)
+    except UsageError as e:
+        raise UsageError(f"{what} {where}: {e}; rerun with --force") from None
     except (ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as e:
         raise UsageError(
             f"{what} {where}: the saved run is inconsistent "
@@ -368,9 +426,32 @@ def _load_saved(where: Path, what: str) -> Result:
         ) from None
 
 
+def tally_settings(scene) -> dict:
+    """What a scene's tallies depend on besides the run's options (``meta["run"]``, compared
+    by ``--resume``): the surface (kind and parameters; a heightfield file by the SHA-256 of
+    its content, not its path), the material's index (None: mirror) and the bounces."""
+    surface = {"kind": scene.surface.kind, **scene.surface.params}
+    if scene.surface.kind == "file":
+        path = Path(surface.pop("path"))
+        path = path if path.is_absolute() or scene.path is None else scene.path.parent / path
+        digest = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
+        surface["sha256"] = digest.hexdigest()
+    ior = None if scene.ior is None else [complex(scene.ior).real, complex(scene.ior).imag]
+    record = {"surface": surface, "ior": ior, "bounces": scene.simulation.bounces}
+    return json.loads(json.dumps(json_safe(record)))
+
+
+RESUME_KEYS = {"ior": "material.ior", "bounces": "simulation.bounces"}
+"""How ``--resume`` names a setting of ``meta["run"]`` whose scene key differs."""
+
+
 def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where) -> None:
-    """The saved run was made with the same scene, seed, effort, rays, incidences and bins."""
-    run = prev.meta.get("run", {})
+    """The saved run was made with the same scene (surface, material, bounces, realisations),
+    seed, effort, rays, incidences and bins."""
+    run = prev.meta["run"]
     want = {
         "scene": scene.name,
         "seed": seed,
@@ -378,11 +459,23 @@ def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where) -> 
         "rays": rays,
         "theta_i": list(theta_i),
         "bins": list(bins_shape(scene, effort)),
+        **tally_settings(scene),
     }
-    have = {k: run.get(k) for k in want}
+    if scene.simulation.realisations != "auto":
+        want["realisations"] = scene.simulation.realisations
     for key in want:
-        if have[key] != want[key]:
+        if key not in run:
             raise UsageError(
-                f"--resume {where}: {key} is {have[key]!r} there but "
-                f"{want[key]!r} now; resume with the same settings"
+                f"--resume {where}: the saved run does not record its {key} (saved by an "
+                f"older microsim); rerun with --force"
             )
+        have, now, name = run[key], want[key], RESUME_KEYS.get(key, key)
+        if have == now:
+            continue
+        if isinstance(have, dict) and isinstance(now, dict):  # name the surface key
+            sub = next(k for k in sorted({*have, *now}) if have.get(k) != now.get(k))
+            have, now, name = have.get(sub), now.get(sub), f"{key}.{sub}"
+        raise UsageError(
+            f"--resume {where}: {name} is {have!r} there but {now!r} now; resume with the "
+            f"same settings or rerun with --force"
+        )

@@ -1,4 +1,5 @@
-"""Progress bars on stderr (tqdm): rays traced by the main simulation, then the analysis stages."""
+"""Progress bars on stderr (tqdm): rays traced by the main simulation, then the analysis stages.
+Without a stderr (file descriptor 2 closed: ``sys.stderr`` is None) the bars are off."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ class RayProgress:
             unit_scale=True,
             desc=desc,
             file=sys.stderr,
-            disable=not enabled,
+            disable=not enabled or sys.stderr is None,
             dynamic_ncols=True,
             smoothing=0.1,
         )
@@ -48,7 +49,7 @@ class StageProgress:
             desc=f"{desc} analysis",
             unit="stage",
             file=sys.stderr,
-            disable=not enabled,
+            disable=not enabled or sys.stderr is None,
             dynamic_ncols=True,
             bar_format="{desc}: {n_fmt}/{total_fmt} {bar} {postfix} [{elapsed}]",
         )

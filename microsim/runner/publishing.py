@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -17,8 +18,10 @@ import numpy as np
 
 from .. import atomic
 from ..errors import UsageError
-from .planning import RunPlan
+from ..sim.schedule import DeferredInterrupt
+from .planning import RESULT_FILES, RunPlan
 from .tracing import auto_summary
+from .wave_run import WAVE_DIR
 
 __all__ = [
     "VERDICTS_FILE",
@@ -27,8 +30,11 @@ __all__ = [
     "REPORT_STATE",
     "SCHEMA_VERSION",
     "OUTSIDE_DOMAIN",
+    "CHARTS",
+    "OUTPUT_NAMES",
     "staging",
     "publish_dir",
+    "holds_finished_result",
     "save_tallies",
     "fit_record",
     "verdict_document",
@@ -51,6 +57,19 @@ OUTSIDE_DOMAIN = {
 and the index show them as such (the fit numbers are kept), not as a test of the model."""
 
 
+CHARTS = {
+    "inplane": "inplane.png",
+    "hemisphere": "hemisphere.png",
+    "energy": "energy.png",
+    "stability": "stability.png",
+    "speed": "speed.png",
+    "multiple": "multiple.png",
+}
+"""The charts a run may write (key → file name in the run's directory)."""
+OUTPUT_NAMES = frozenset((*RESULT_FILES, TIMINGS_FILE, WAVE_DIR, *CHARTS.values()))
+"""Everything a run writes into its directory; anything else there is the user's."""
+
+
 def staging(out: Path) -> Path:
     """A new empty staging directory beside ``out`` (``atomic.make_staging``)."""
     return atomic.make_staging(out)
@@ -58,20 +77,40 @@ def staging(out: Path) -> Path:
 
 def publish_dir(stage: Path, out: Path) -> None:
     """Move the finished ``stage`` directory to ``out`` (``atomic.publish_dir``: the old
-    result is removed only once the new one is in place)."""
-    atomic.publish_dir(stage, out)
+    result is removed only once the new one is in place). Entries of the old ``out`` that
+    microsim does not write (not in ``OUTPUT_NAMES``: the user's notes, scripts, folders)
+    are carried into the new one."""
+    atomic.publish_dir(stage, out, keep=lambda name: name not in OUTPUT_NAMES)
+
+
+def holds_finished_result(out: Path) -> bool:
+    """Whether ``out`` holds more than partial tallies — a result, or complete tallies —
+    which an interrupted run must not replace (True when unsure: an unreadable meta.json)."""
+    try:
+        names = set(os.listdir(out))
+    except FileNotFoundError:
+        return False
+    if not names & set(RESULT_FILES):
+        return False  # empty, or only the user's files (publish_dir carries them over)
+    try:
+        meta = json.loads((out / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return True
+    return not (isinstance(meta, dict) and meta.get("partial") is True)
 
 
 def save_tallies(result, dest: Path) -> None:
-    """Publish the tallies of ``result`` (brdf.npz + meta.json, no models) to ``dest``."""
+    """Publish the tallies of ``result`` (brdf.npz + meta.json, no models) to ``dest``. A
+    further Ctrl-C while they are written is held back until they are in place."""
     result.models.clear()
-    stage = staging(dest)
-    try:
-        result.save(stage)
-        publish_dir(stage, dest)
-    finally:
-        if stage.exists():
-            shutil.rmtree(stage, ignore_errors=True)
+    with DeferredInterrupt():
+        stage = staging(dest)
+        try:
+            result.save(stage)
+            publish_dir(stage, dest)
+        finally:
+            if stage.exists():
+                shutil.rmtree(stage, ignore_errors=True)
 
 
 def fit_record(fit) -> dict:

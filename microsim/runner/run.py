@@ -12,7 +12,11 @@
    a staging directory and publish it in one rename (``publishing``).
 
 An interrupted simulation, or an interrupt after it, saves the tallies for ``--resume``
-(status 130); no report is written from partial work.
+(status 130); no report is written from partial work, and no finished result is replaced by
+it: tallies read from the output (a finished run re-analysed) are not written again, and a
+``--force`` run leaves a finished output as it was. A Ctrl-C while the finished directory is
+moved in waits until it is in place (status 130, the result complete). An output a killed run
+was replacing is recovered first (``atomic.recover_publish``).
 """
 
 from __future__ import annotations
@@ -37,13 +41,16 @@ from ..analysis.report import albedo_stderr
 from ..analysis.verdicts import verdicts_for_result
 from ..checkpoints import checkpoint
 from ..errors import UsageError
+from ..sim.schedule import DeferredInterrupt
 from . import orders, side_studies, tracing, wave_run
 from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress
 from .publishing import (
+    CHARTS,
     REPORT_FILE,
     TIMINGS_FILE,
     VERDICTS_FILE,
+    holds_finished_result,
     publish_dir,
     save_tallies,
     staging,
@@ -72,20 +79,24 @@ def execute(
     generators' UserWarnings are silenced: every surface warning is in meta.json and report.md.
     Holds ``atomic.output_lock(plan.out)`` throughout (a concurrent run on the same output is
     refused with a ``UsageError``) and first removes stale staging directories of killed runs."""
+    log = log or (lambda s: print(s, file=sys.stderr))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         with atomic.output_lock(plan.out):
+            recovered = atomic.recover_publish(plan.out)
             atomic.clean_stale(plan.out)
             if plan.partial_dir is not None:
                 atomic.clean_stale(plan.partial_dir)
             if plan.previous is None and plan.out.exists():
-                if not plan.force:  # appeared since planning
+                if not plan.force:  # appeared since planning, or put back just now
                     raise UsageError(
-                        f"{plan.out} already exists; pass --resume {plan.out} to "
-                        f"continue it or --force to replace it"
+                        f"{recovered or f'{plan.out} already exists'}; pass --resume "
+                        f"{plan.out} to continue it or --force to replace it"
                     )
                 check_replaceable(plan.out)
-            return _execute(plan, progress, log or (lambda s: print(s, file=sys.stderr)))
+            if recovered:
+                log(f"microsim: {recovered}")
+            return _execute(plan, progress, log)
 
 
 def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
@@ -121,24 +132,40 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     if plan.auto:
         result.meta["run"]["auto"] = tracing.auto_summary(result)
     if result.is_partial:
-        save_tallies(result, dest)
-        log(f"microsim: interrupted; partial tallies saved in {dest} (continue with {hint})")
-        return RunOutcome(130, plan.out)
+        return _interrupted(plan, result, dest, log, "", "partial tallies", f"continue with {hint}")
     result.meta["error_budget"] = error_budget(result)
     stage = staging(plan.out)
     try:
         return _analyse(plan, stage, result, log, progress)
     except KeyboardInterrupt:  # the tallies are complete: keep them, no report
+        if not stage.exists():  # published: the result is complete
+            log(f"microsim: interrupted after {plan.out} was written completely")
+            return RunOutcome(130, plan.out)
         shutil.rmtree(stage, ignore_errors=True)
-        save_tallies(result, dest)
-        log(
-            f"microsim: interrupted after the simulation; tallies saved in {dest} "
-            f"(finish with {hint})"
+        return _interrupted(
+            plan, result, dest, log, " after the simulation", "tallies", f"finish with {hint}"
         )
-        return RunOutcome(130, plan.out)
     finally:
         if stage.exists():
             shutil.rmtree(stage, ignore_errors=True)
+
+
+def _interrupted(plan: RunPlan, result, dest: Path, log, when: str, what: str, how: str):
+    """Status 130 after Ctrl-C, the tallies saved in ``dest`` for ``--resume`` unless that
+    would lose something: tallies read from ``dest`` are not written again (a finished run
+    re-analysed keeps its report), and a run replacing a finished result (``--force``) leaves
+    it as it was, dropping its own tallies."""
+    if result is plan.previous:
+        log(f"microsim: interrupted{when}; {dest} is unchanged ({how})")
+    elif plan.partial_dir is None and plan.previous is None and holds_finished_result(dest):
+        log(
+            f"microsim: interrupted{when}; {dest} keeps its finished result (this run's "
+            f"tallies are dropped; rerun with --force to replace it)"
+        )
+    else:
+        save_tallies(result, dest)
+        log(f"microsim: interrupted{when}; {what} saved in {dest} ({how})")
+    return RunOutcome(130, plan.out)
 
 
 def _trace(plan: RunPlan, prev, progress: bool):
@@ -208,9 +235,9 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
             plan, stage, result, shown, verdicts, ranking, sweep, sweep_verdicts, notes
         )
         if orders_doc is not None and orders_doc["comparison"] is not None:
-            files = {"multiple": "multiple.png", **files}
+            files = {"multiple": CHARTS["multiple"], **files}
             multiple_chart(orders_doc["comparison"], stage / files["multiple"], sc.name)
-        files["speed"] = "speed.png"
+        files["speed"] = CHARTS["speed"]
         ch.speed_accuracy(
             speed,
             stage / files["speed"],
@@ -247,11 +274,16 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
     finally:
         stages.close()
     checkpoint("publish")
-    publish_dir(stage, plan.out)
-    log(
-        f"microsim: wrote {plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, {TIMINGS_FILE}, "
-        f"brdf.npz, meta.json, {len(files)} charts)"
+    with DeferredInterrupt() as stop:  # a Ctrl-C now waits until the directory is in place
+        publish_dir(stage, plan.out)
+    wrote = (
+        f"{plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, {TIMINGS_FILE}, brdf.npz, meta.json, "
+        f"{len(files)} charts)"
     )
+    if stop.is_set():
+        log(f"microsim: interrupted while publishing; wrote {wrote} completely")
+        return RunOutcome(130, plan.out, doc, tuple(ranking))
+    log(f"microsim: wrote {wrote}")
     return RunOutcome(0, plan.out, doc, tuple(ranking))
 
 
@@ -295,7 +327,7 @@ def _charts(
     chart."""
     name = plan.scene.name
     files = {}
-    files["inplane"] = "inplane.png"
+    files["inplane"] = CHARTS["inplane"]
     ch.inplane_curves(result, shown, stage / files["inplane"], name)
     if ranking:
         worst = ranking[-1]
@@ -304,12 +336,12 @@ def _charts(
             for k, v in enumerate([v for v in verdicts if v["model"] == worst])
         ]
         t_index = max(zs)[1] if zs else 0
-        files["hemisphere"] = "hemisphere.png"
+        files["hemisphere"] = CHARTS["hemisphere"]
         ch.hemisphere_maps(
             result, shown, _nan_for_none(verdicts), stage / files["hemisphere"], t_index, name
         )
     grid = np.linspace(0.0, 89.9, 180)
-    files["energy"] = "energy.png"
+    files["energy"] = CHARTS["energy"]
     ch.energy_chart(
         sweep.theta_i,
         sweep.ledger["single_fresnel"],
@@ -344,6 +376,6 @@ def _charts(
         "relative error = energy-weighted rel RMS with the sweep's own noise subtracted in "
         "quadrature; a missing point: not resolved above the noise"
     ] + estimator_notes
-    files["stability"] = "stability.png"
+    files["stability"] = CHARTS["stability"]
     ch.stability_chart(sweep.theta_i, excess, stage / files["stability"], notes, name)
     return files, rel

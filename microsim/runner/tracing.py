@@ -17,7 +17,7 @@ import numpy as np
 from ..analysis.budget import error_budget, realisations_needed
 from ..sim import simulate
 from ..sim.auto import simulate_auto
-from .planning import AUTO_TARGET, RunPlan
+from .planning import AUTO_TARGET, RunPlan, tally_settings
 
 __all__ = [
     "surface_source",
@@ -129,7 +129,8 @@ def auto_summary(result) -> dict | None:
 
 
 def run_meta(plan: RunPlan) -> dict:
-    """``meta["run"]``: the settings a ``--resume`` must match (``planning``) and the effort."""
+    """``meta["run"]``: the settings a ``--resume`` must match (``planning``: the options and
+    ``tally_settings``, what the scene's tallies depend on) and the effort."""
     sc = plan.scene
     rays = {"rays": "auto", "max_rays": plan.rays} if plan.auto else {"rays": plan.rays}
     return {
@@ -142,7 +143,7 @@ def run_meta(plan: RunPlan) -> dict:
         "quick": plan.quick,
         "bins": [plan.bins.n_theta, plan.bins.n_phi],
         "realisations": plan.realisations,
-        "bounces": sc.simulation.bounces,
+        **tally_settings(sc),
         "surface_scale": plan.effort.scale_for(sc.surface.kind),
         "effort": asdict(plan.effort),
     }

@@ -14,8 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from microsim.atomic import atomic_open
+from microsim.errors import UsageError
 
 from .bins import Bins
+from .paths import LEDGER
 
 __all__ = ["Result", "InPlane"]
 
@@ -186,12 +188,26 @@ class Result:
 
     @classmethod
     def load(cls, directory) -> "Result":
-        """Read a result written by ``save``."""
-        with open(os.path.join(directory, META), encoding="utf-8") as fh:
+        """Read a result written by ``save``. Everything read back is checked (``_check_saved``:
+        shapes, types, signs, finiteness, tallies against the ledger): a damaged or edited file
+        is a ``UsageError`` naming the file and the array or key."""
+        meta_path, npz_path = os.path.join(directory, META), os.path.join(directory, NPZ)
+        with open(meta_path, encoding="utf-8") as fh:
             meta = json.load(fh)
-        bins = Bins(**meta.pop("bins"))
-        with np.load(os.path.join(directory, NPZ)) as z:
+        if not isinstance(meta, dict):
+            raise UsageError(f"{meta_path}: not a JSON object")
+        grid = meta.pop("bins", None)
+        if not isinstance(grid, dict):
+            raise UsageError(
+                f"{meta_path}: bins must be an object {{n_theta, n_phi, folded}}, got {grid!r}"
+            )
+        try:
+            bins = Bins(**grid)
+        except (TypeError, UsageError) as e:
+            raise UsageError(f"{meta_path}: bins {grid!r}: {' '.join(str(e).split())}") from None
+        with np.load(npz_path) as z:
             a = {k: z[k] for k in z.files}
+        _check_saved(a, meta, bins, npz_path, meta_path)
         pick = lambda prefix: {k[len(prefix) :]: v for k, v in a.items() if k.startswith(prefix)}  # noqa: E731
         return cls(
             theta_i=a["theta_i"],
@@ -210,6 +226,140 @@ class Result:
             tallies=pick("tally_") or None,
             **{k: a[k] for k in _OPTIONAL if k in a},
         )
+
+
+_REQUIRED = ("theta_i", "phi_i", "theta_edges", "phi_edges", "brdf", "stderr", "rays")
+_REQUIRED += ("counts", "sum_w", "sum_w2")
+_TALLIES = ("blocks", "rays", "sum_w", "sum_w2", "count", "led_n", "led_f")
+
+
+def _check_saved(a: dict, meta: dict, bins: Bins, npz: str, meta_path: str) -> None:
+    """UsageError (naming ``npz``/``meta_path`` and the array) unless the arrays ``a`` read
+    from ``npz`` form a Result on ``bins``: every array of its shape and kind, counts and
+    sums non-negative and finite, the ledger closing on the rays, and the raw tallies
+    (``tally_*``) agreeing with the blocks done, the rays and the per-bin counts."""
+
+    def fail(msg):
+        raise UsageError(f"{npz}: {msg}")
+
+    for k in _REQUIRED:
+        if k not in a:
+            fail(f"no {k} array")
+    for k, v in a.items():
+        if v.dtype.kind not in "fiu":
+            fail(f"{k} must hold real numbers, got dtype {v.dtype}")
+
+    def integers(k, v):
+        if v.dtype.kind not in "iu" or np.any(v < 0):
+            fail(f"{k} must hold integers >= 0")
+
+    def sums(k, v):
+        if not np.all(np.isfinite(v)) or np.any(v < 0):
+            fail(f"{k} must hold finite sums >= 0")
+
+    def shape(k, want):
+        if a[k].shape != tuple(want):
+            fail(f"{k} has shape {a[k].shape}, expected {tuple(want)}")
+
+    n = a["theta_i"].size
+    shape("theta_i", (n,))
+    shape("phi_i", (n,))
+    if not (np.all(np.isfinite(a["theta_i"])) and np.all(np.isfinite(a["phi_i"]))):
+        fail("theta_i and phi_i must be finite angles")
+    for k, edges in (("theta_edges", bins.theta_edges), ("phi_edges", bins.phi_edges)):
+        if a[k].shape != edges.shape or not np.allclose(a[k], edges, rtol=0, atol=1e-9):
+            raise UsageError(
+                f"{meta_path}: bins {bins.n_theta} × {bins.n_phi} do not match the "
+                f"{k} of {npz} ({a[k].size - 1} bins)"
+            )
+    grid = (n,) + bins.shape
+    for k in ("brdf", "stderr", "counts", "sum_w", "sum_w2", "stderr_ray", "stderr_realisation"):
+        if k in a:
+            shape(k, grid)
+    for k in (k for k in a if k.startswith("model_")):
+        shape(k, grid)
+    for k in ("brdf", "stderr"):
+        if np.any(np.isinf(a[k])) or np.any(a[k] < 0):
+            fail(f"{k} must be finite and >= 0 (NaN where no ray was traced)")
+    shape("rays", (n,))
+    integers("rays", a["rays"])
+    integers("counts", a["counts"])
+    sums("sum_w", a["sum_w"])
+    sums("sum_w2", a["sum_w2"])
+    for k in (k for k in a if k.startswith(("ledger_", "count_"))):
+        shape(k, (n,))
+        if k.startswith("count_"):
+            integers(k, a[k])
+    if all(f"count_{c}" in a for c in LEDGER):
+        closed = sum(a[f"count_{c}"] for c in LEDGER)
+        if not np.array_equal(closed, a["rays"]):
+            fail(
+                f"the ledger (count_{', count_'.join(LEDGER)}) sums to "
+                f"{closed.tolist()} rays, but rays is {a['rays'].tolist()}"
+            )
+    if "brdf_realisations" in a:
+        r = a["brdf_realisations"].shape[0]
+        shape("brdf_realisations", (r,) + grid)
+        if "rays_realisations" in a:
+            shape("rays_realisations", (r,))
+            integers("rays_realisations", a["rays_realisations"])
+    if "brdf_orders" in a:
+        o = a["brdf_orders"].shape[0]
+        shape("brdf_orders", (o,) + grid)
+        if "stderr_orders" in a:
+            shape("stderr_orders", (o,) + grid)
+        if "brdf_realisations_orders" in a and "brdf_realisations" in a:
+            shape("brdf_realisations_orders", (o, a["brdf_realisations"].shape[0]) + grid)
+    if any(k.startswith("tally_") for k in a):
+        _check_tallies(a, meta, n, bins.shape[0] * bins.shape[1], fail)
+    if not isinstance(meta.get("partial", False), bool):
+        raise UsageError(f"{meta_path}: partial must be true or false, got {meta['partial']!r}")
+
+
+def _check_tallies(a: dict, meta: dict, n: int, nbin: int, fail) -> None:
+    """The raw running sums of ``_check_saved``: (R, T, ·) arrays, blocks and rays (R, T)
+    consistent with each other and with ``rays``, every ray in one first-bounce ledger class,
+    the pooled order-1 event counts equal to ``counts``."""
+    for k in _TALLIES:
+        if f"tally_{k}" not in a:
+            fail(f"no tally_{k} array (the raw tallies are incomplete)")
+    t = {k[len("tally_") :]: v for k, v in a.items() if k.startswith("tally_")}
+    r = t["blocks"].shape[0] if t["blocks"].ndim == 2 else -1
+    if t["blocks"].shape != (r, n) or r < 1:
+        fail(f"tally_blocks has shape {t['blocks'].shape}, expected (realisations, {n})")
+    slots = t["sum_w"].shape[-1] if t["sum_w"].ndim == 3 else 0
+    if slots < nbin or slots % nbin:
+        fail(f"tally_sum_w has shape {t['sum_w'].shape}, expected ({r}, {n}, k × {nbin})")
+    classes = t["led_n"].shape[-1] if t["led_n"].ndim == 3 else 0
+    want = {"rays": (r, n), "sum_w2": (r, n, slots), "count": (r, n, slots)}
+    want.update(led_n=(r, n, max(classes, len(LEDGER))), led_f=(r, n, classes))
+    if "sum_pair" in t:
+        want["sum_pair"] = (r, n, slots)
+    for k, s in want.items():
+        if t[k].shape != s:
+            fail(f"tally_{k} has shape {t[k].shape}, expected {s}")
+    for k in ("blocks", "rays", "count", "led_n"):
+        if t[k].dtype.kind not in "iu" or np.any(t[k] < 0):
+            fail(f"tally_{k} must hold integers >= 0")
+    for k in ("sum_w", "sum_w2", "led_f"):
+        if not np.all(np.isfinite(t[k])) or np.any(t[k] < 0):
+            fail(f"tally_{k} must hold finite sums >= 0")
+    if "sum_pair" in t and not np.all(np.isfinite(t["sum_pair"])):
+        fail("tally_sum_pair must be finite")
+    block = meta.get("block")
+    if (
+        isinstance(block, int)
+        and block > 0
+        and not np.array_equal(-(-t["rays"] // block), t["blocks"])
+    ):
+        fail(f"tally_rays and tally_blocks disagree (blocks of {block} rays)")
+    if not np.array_equal(t["rays"].sum(axis=0), a["rays"]):
+        fail(f"tally_rays sums to {t['rays'].sum(axis=0).tolist()}, rays is {a['rays'].tolist()}")
+    if not np.array_equal(t["led_n"][..., : len(LEDGER)].sum(axis=-1), t["rays"]):
+        fail("tally_led_n does not close on tally_rays (every ray is in one ledger class)")
+    counts = t["count"].sum(axis=0)[:, :nbin].reshape(a["counts"].shape)
+    if not np.array_equal(counts, a["counts"]):
+        fail("tally_count does not sum to counts")
 
 
 def _jsonable(obj):

@@ -8,6 +8,10 @@ one-line ``UsageError`` naming the file.
 """
 from __future__ import annotations
 
+import errno
+import os
+import stat
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -17,7 +21,7 @@ from microsim.checks import check_memory, positive
 from microsim.errors import UsageError
 
 from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
-from .surface import Surface, heightfield_mesh
+from .surface import Surface, check_relief, heightfield_mesh
 
 __all__ = ["from_file", "read_heights", "check_heightfield_file", "mirror_periodic",
            "MAX_TEXT_BYTES"]
@@ -44,14 +48,19 @@ def _header(path: Path, f) -> tuple[tuple, np.dtype]:
     return tuple(int(s) for s in shape), np.dtype(dtype)
 
 
-def _check_shape(path: Path, shape: tuple, dtype: np.dtype | None, periodic: bool) -> None:
-    """Refuse a wrong dtype, ndim or size, and a grid whose surface would not fit in memory."""
+def _check_shape(path: Path, shape: tuple, dtype: np.dtype | None, periodic: bool,
+                 max_side: int | None = None) -> None:
+    """Refuse a wrong dtype, ndim or size (``max_side``: largest side, None: any), and a grid
+    whose surface would not fit in memory."""
     if dtype is not None and dtype.kind not in "iuf":
         raise _fail(path, f"heights must be real numbers, got dtype {dtype}")
     if len(shape) != 2:
         raise _fail(path, f"heights must be a 2D array (rows = y, columns = x), got shape {shape}")
     if min(shape) < MIN_GRID:
         raise _fail(path, f"heights grid must be at least {MIN_GRID}x{MIN_GRID}, "
+                          f"got {shape[0]}x{shape[1]}")
+    if max_side is not None and max(shape) > max_side:
+        raise _fail(path, f"heights grid must be at most {max_side}x{max_side}, "
                           f"got {shape[0]}x{shape[1]}")
     ny, nx = shape
     points = ny * nx if periodic else (2 * ny - 2) * (2 * nx - 2)
@@ -63,7 +72,7 @@ def _check_shape(path: Path, shape: tuple, dtype: np.dtype | None, periodic: boo
         raise UsageError(" ".join(str(e).split())) from None
 
 
-def _check_npz_header(path: Path, periodic: bool) -> str:
+def _check_npz_header(path: Path, periodic: bool, max_side: int | None = None) -> str:
     """Check the shape and dtype of the heights in an .npz from its header alone (nothing is
     inflated); returns the array's key."""
     key = _npz_member(path)
@@ -71,7 +80,7 @@ def _check_npz_header(path: Path, periodic: bool) -> str:
         member = key + ".npy" if key + ".npy" in z.namelist() else key
         with z.open(member) as f:
             shape, dtype = _header(path, f)
-    _check_shape(path, shape, dtype, periodic)
+    _check_shape(path, shape, dtype, periodic, max_side)
     return key
 
 
@@ -90,19 +99,56 @@ def _npz_member(path: Path) -> str:
 
 
 def _regular_file(path: Path) -> None:
-    if not path.exists():
-        raise _fail(path, "no such heightfield file")
-    if not path.is_file():
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise _fail(path, "no such heightfield file") from None
+    except OSError as e:  # a symlink loop, a name too long, a file used as a directory
+        if e.errno not in (errno.ELOOP, errno.ENAMETOOLONG, errno.ENOTDIR):
+            raise
+        raise _fail(path, f"{os.strerror(e.errno)}; not a usable heightfield file") from None
+    if not stat.S_ISREG(mode):
         raise _fail(path, "not a regular file (a heightfield file must be .npy, .npz or text)")
 
 
-def check_heightfield_file(path, dx=None, periodic: bool = False) -> tuple[int, int]:
+FLAT_RELIEF = 1e-6
+"""Smallest height range of a heightfield file, in units of dx: a flatter one (slopes below
+1e-6) is a mirror, to be given as ``kind = "flat"``."""
+
+
+def _check_values(path: Path, heights, dx, periodic: bool) -> None:
+    """Refuse NaN or inf heights and, when ``dx`` is given, a surface the tracer cannot take
+    (``check_relief`` on the tile ``from_file`` builds) or a flat one (``FLAT_RELIEF``).
+    ``heights`` may be a memory map: it is read in slabs of 1024 rows."""
+    bad, lo, hi = 0, np.inf, -np.inf
+    for i in range(0, heights.shape[0], 1024):
+        slab = np.asarray(heights[i : i + 1024], dtype=np.float64)
+        finite = np.isfinite(slab)
+        bad += int(slab.size - np.count_nonzero(finite))
+        if finite.any():
+            lo, hi = min(lo, slab[finite].min()), max(hi, slab[finite].max())
+    if bad:
+        raise _fail(path, f"heights contain NaN or inf ({bad} values); fill or crop them first")
+    if dx is None:
+        return
+    ny, nx = heights.shape
+    tile = (nx * dx, ny * dx) if periodic else ((2 * nx - 2) * dx, (2 * ny - 2) * dx)
+    check_relief(str(path), lo, hi, tile)
+    if hi - lo < FLAT_RELIEF * dx:
+        raise _fail(path, f"heights vary by {hi - lo:g}, less than {FLAT_RELIEF:g} × dx: a flat "
+                          f'surface; use kind = "flat"')
+
+
+def check_heightfield_file(path, dx=None, periodic: bool = False,
+                           max_side: int | None = None) -> tuple[int, int]:
     """Validate a heightfield file for ``from_file(path, dx, periodic)`` without building the
-    surface; returns its grid shape (ny, nx). Headers are read first (shape, dtype, size: a
-    file that would not fit in memory is refused before it is read); the values are then
-    checked to be finite (.npy through a memory map, in slabs). ``dx`` (None: not checked)
-    must be a finite length > 0. Every problem raises a one-line UsageError naming the file
-    (or ``dx``); OS errors such as a permission denied propagate as ``OSError``."""
+    surface; returns its grid shape (ny, nx). Headers are read first (shape, dtype, size, at
+    most ``max_side`` per side if given: a file that would not fit in memory is refused
+    before it is read); the values are then checked to be finite (.npy through a memory map,
+    in slabs) and, given ``dx``, neither flat nor too tall or large for the tracer
+    (``_check_values``). ``dx`` (None: those two not checked) must be a finite length > 0.
+    Every problem raises a one-line UsageError naming the file (or ``dx``); OS errors such as
+    a permission denied propagate as ``OSError``."""
     path = Path(path)
     if dx is not None:
         positive("dx", dx)
@@ -111,7 +157,7 @@ def check_heightfield_file(path, dx=None, periodic: bool = False) -> tuple[int, 
         with open(path, "rb") as f:
             shape, dtype = _header(path, f)
             offset = f.tell()
-        _check_shape(path, shape, dtype, periodic)
+        _check_shape(path, shape, dtype, periodic, max_side)
         need = offset + dtype.itemsize * shape[0] * shape[1]
         size = path.stat().st_size
         if size < need:
@@ -120,18 +166,17 @@ def check_heightfield_file(path, dx=None, periodic: bool = False) -> tuple[int, 
             a = np.load(path, mmap_mode="r", allow_pickle=False)
         except (ValueError, EOFError, OSError) as e:
             raise _fail(path, f"not a readable .npy array ({e})") from None
-        bad = sum(int(np.count_nonzero(~np.isfinite(a[i:i + 1024])))
-                  for i in range(0, shape[0], 1024))
-        del a
-        if bad:
-            raise _fail(path, f"heights contain NaN or inf ({bad} values); fill or crop them first")
+        _check_values(path, a, dx, periodic)
         return shape
     if path.suffix == ".npz":
-        _check_npz_header(path, periodic)
+        _check_npz_header(path, periodic, max_side)
     elif path.stat().st_size > MAX_TEXT_BYTES:
         raise _fail(path, f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB "
                           f"({path.stat().st_size:,} bytes); save it as .npy")
-    return read_heights(path, periodic=periodic).shape
+    heights = read_heights(path, periodic=periodic)
+    _check_shape(path, heights.shape, None, periodic, max_side)
+    _check_values(path, heights, dx, periodic)
+    return heights.shape
 
 
 def read_heights(path, periodic: bool = False) -> np.ndarray:
@@ -155,7 +200,11 @@ def read_heights(path, periodic: bool = False) -> np.ndarray:
             if path.stat().st_size > MAX_TEXT_BYTES:
                 raise _fail(path, f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB; "
                                   f"save it as .npy")
-            a = np.loadtxt(path, ndmin=2)
+            with warnings.catch_warnings():  # an empty file: refused below, in one line
+                warnings.simplefilter("ignore", UserWarning)
+                a = np.loadtxt(path, ndmin=2)
+            if a.size == 0:
+                raise _fail(path, "the text file holds no heights")
     except UsageError:
         raise
     except (ValueError, EOFError, zipfile.BadZipFile) as e:
@@ -195,6 +244,7 @@ def from_file(path, dx: float, periodic: bool = False) -> Surface:
     """
     dx = positive("dx", dx)
     raw = read_heights(path, periodic=periodic)
+    _check_values(Path(path), raw, dx, periodic)
     h = raw if periodic else mirror_periodic(raw)
     h = h - h.mean()
     vertices, faces = heightfield_mesh(h, dx)

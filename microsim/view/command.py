@@ -21,6 +21,8 @@ from .surface import view_surface
 __all__ = ["VIEWS", "view", "add_view_command", "run_view", "main"]
 
 VIEWS = ("surface", "rays", "lobe", "disk", "normals")
+IMAGE_SUFFIXES = (".png", ".jpeg", ".jpg", ".bmp", ".tif", ".tiff")
+"""File types ``--screenshot`` writes (pyvista's); a name without a suffix gets ".png"."""
 
 
 def view(
@@ -83,8 +85,8 @@ def _configure(p: argparse.ArgumentParser) -> None:
         "--screenshot",
         metavar="PNG",
         default=None,
-        help="render off screen to this PNG (default with no display: "
-        "microsim-view-<scene>-<what>.png)",
+        help="render off screen to this image file (.png, .jpg, .bmp, .tif; default with no "
+        "display: microsim-view-<scene>-<what>.png)",
     )
     p.add_argument(
         "--size",
@@ -121,11 +123,27 @@ def add_view_command(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _screenshot_file(shot: str) -> str:
+    """The image file ``--screenshot shot`` writes: refused if it is a directory or not an
+    image type of ``IMAGE_SUFFIXES``; ".png" added to a name without a suffix."""
+    path = Path(shot)
+    if path.is_dir():
+        raise UsageError(f"--screenshot {shot}: is a directory; give an image file, e.g. view.png")
+    if not path.suffix:
+        return str(path.with_suffix(".png"))
+    if path.suffix not in IMAGE_SUFFIXES:
+        raise UsageError(
+            f"--screenshot {shot}: must end in one of {', '.join(IMAGE_SUFFIXES)}, "
+            f"got {path.suffix!r}"
+        )
+    return shot
+
+
 def run_view(args) -> int:
     """Run the ``view`` subcommand: show the view, or write a PNG (``--screenshot`` / headless)."""
+    shot = None if args.screenshot is None else _screenshot_file(args.screenshot)
     scene = load_scene(args.scene)
     options = {"surface": {"color": args.color}, "lobe": {"scale": args.scale}}.get(args.what, {})
-    shot = args.screenshot
     if shot is None and headless():
         shot = f"microsim-view-{scene.name}-{args.what}.png"
         print(f"microsim: no display: rendering off screen to {shot}", file=sys.stderr)
