@@ -469,6 +469,7 @@ def test_models_and_pdfs_finite(ti, pi_, to, po, B, C):
 @example(90.0, 0.0, 0.0, 0.0, 1e8, 1.0)  # wo on the horizon, ĥ = n: wi = −wo
 @example(90.0, 0.0, 1.0, 1.0, 1e8, 1 + 1e-9)
 @example(0.0, 0.0, 1.0, 0.5, 1e8, 1 - 1e-9)
+@example(2.2250738585e-313, 0.0, 1.0, 0.0, 1e-3, 0.3)  # ĥ on the horizon, wo·ĥ denormal
 def test_samplers_finite(to, po, u1, u2, B, C):
     wo = exact_dir(to, po)
     for s in (an.sample_low_smooth(wo, u1, u2, B), an.sample_low_microfacet(wo, u1, u2, B, C)):

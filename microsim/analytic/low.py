@@ -466,7 +466,8 @@ def sample_low_microfacet(wo, u1, u2, B, C) -> LowSample:
     (eq. 26), wi = 2(wo·ĥ)ĥ − wo (eq. 27 with both vectors pointing away), pdf = P_h/(4|wo·ĥ|)
     (eq. 28). Samples below the horizon are kept, with their correct pdf, and flagged
     ``above = False`` (Löw: their contribution is zero). A degenerate sample with wo·ĥ = 0 (wo on
-    the horizon) has wi = −wo and is reported with pdf 0.
+    the horizon), or so close to 0 that P_h/(4|wo·ĥ|) exceeds the float64 range (a denormal
+    wo·ĥ), is reported with pdf 0; such samples lie below the horizon and have measure zero.
     """
     wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     B, C = _checks.positive("B", B), _checks.positive("C", C)
@@ -477,8 +478,9 @@ def sample_low_microfacet(wo, u1, u2, B, C) -> LowSample:
     h = np.stack(np.broadcast_arrays(sin_h * np.cos(phi), sin_h * np.sin(phi), 1.0 - x), axis=-1)
     voh = vectors.dot(wo, h)
     wi = vectors.normalize(2.0 * voh[..., None] * h - wo)
-    ok = voh != 0.0
-    pdf = np.where(ok, _halfvector_density(B, C, x) / (4.0 * np.where(ok, np.abs(voh), 1.0)), 0.0)
+    with np.errstate(divide="ignore", over="ignore"):
+        pdf = _halfvector_density(B, C, x) / (4.0 * np.abs(voh))
+    pdf = np.where(np.isfinite(pdf), pdf, 0.0)
     return LowSample(wi, pdf, (wi[..., 2] > 0.0) & (voh > 0.0))
 
 
