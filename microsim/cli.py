@@ -240,6 +240,10 @@ def main(argv=None) -> int:
 def _main(argv, ctrl_c: _CtrlC) -> int:
     try:
         args = build_parser().parse_args(argv)  # Ctrl-C while its modules load: status 130
+        if args.func not in (_cmd_models, _cmd_surface):  # the commands that compile kernels
+            from .sim.compilation import announce_compilation
+
+            announce_compilation(sys.stderr)
         return args.func(args)
     except UsageError as exc:
         print(f"microsim: error: {_one_line(exc)}", file=sys.stderr)

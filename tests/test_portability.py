@@ -175,6 +175,25 @@ def test_the_first_compilation_of_a_microsim_kernel_is_announced_once():
     assert compilation._INSTALLED == before
 
 
+def test_the_cli_announces_compilation_on_a_terminal_for_the_commands_that_compile(monkeypatch):
+    """``microsim run``/``report``/``bench``/``sweep`` install the announcement on a terminal's
+    stderr (before any kernel is needed); ``microsim models`` does not."""
+    from numba.core import event
+
+    from microsim import cli
+    from microsim.sim import compilation
+
+    for argv, installs in ((["models"], False), (["run", "no-such-scene.toml"], True)):
+        terminal = _Terminal()
+        monkeypatch.setattr(sys, "stderr", terminal)
+        monkeypatch.setattr(compilation, "_INSTALLED", [])
+        cli.main(argv)
+        installed = list(compilation._INSTALLED)
+        for listener in installed:
+            event.unregister("numba:compile", listener)
+        assert [x.stream for x in installed] == ([terminal] if installs else [])
+
+
 _CACHE_PROBE = """
 import sys, zlib
 import numpy as np
