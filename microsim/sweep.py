@@ -247,13 +247,17 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         Bins(nt, npf)
     except ValueError as e:
         _fail(where, f"theta_bins/phi_bins: {e}")
+    from microsim.scene import MAX_THETA_I
+
+    allowed = f"degrees in [0, {MAX_THETA_I:g}] (as in a scene file)"
     thetas = _axis(data.get("theta_i", [0.0, 30.0, 60.0, 80.0]))
     if not thetas:
-        _fail(where, "theta_i: empty; must be one or more degrees in [0, 90)")
+        _fail(where, f"theta_i: empty; must be one or more {allowed}")
     if not all(
-        isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t < 90 for t in thetas
+        isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t <= MAX_THETA_I
+        for t in thetas
     ):
-        _fail(where, f"theta_i: must be degrees in [0, 90), got {thetas!r}")
+        _fail(where, f"theta_i: must be {allowed}, got {thetas!r}")
     _check_distinct(where, "theta_i", thetas)
     scenes = data.get("scenes")
     if scenes is None:

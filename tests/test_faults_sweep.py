@@ -50,6 +50,7 @@ FILES = [
     ("seed-negative", edit("rays = 20_000", "rays = 20_000\nseed = -1"), ["seed"]),
     ("theta-empty", edit("theta_i = [30]", "theta_i = []"), ["theta_i", "empty"]),
     ("theta-95", edit("theta_i = [30]", "theta_i = [95]"), ["theta_i"]),
+    ("theta-89.995", edit("theta_i = [30]", "theta_i = [89.995]"), ["theta_i", "89.99"]),
     ("theta-bool", edit("theta_i = [30]", "theta_i = [true]"), ["theta_i"]),
     ("theta-nan", edit("theta_i = [30]", "theta_i = [nan]"), ["theta_i"]),
     ("models-empty", edit('models = ["vgroove"]', "models = []"), ["models"]),

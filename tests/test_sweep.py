@@ -65,6 +65,13 @@ def test_bad_sweeps_raise_naming_the_key(bad, key):
         expand_tasks({**TINY, **bad})
 
 
+def test_the_sweep_takes_every_incidence_a_scene_file_takes():
+    from microsim.scene import MAX_THETA_I
+
+    tasks = expand_tasks({**TINY, "theta_i": [0, MAX_THETA_I]})
+    assert sorted({t.theta_i for t in tasks}) == [0, MAX_THETA_I]
+
+
 def test_bad_surface_parameters_raise():
     sc = {**TINY["scenes"][0], "surface": {"kind": "vgrooves", "ndf": "beckmann", "m": [-1.0]}}
     with pytest.raises(ValueError, match="m"):
