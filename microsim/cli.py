@@ -212,7 +212,11 @@ class _CtrlC:
     """While active, SIGINT raises KeyboardInterrupt as Python's default handler does, and is
     remembered in ``seen``: an extension module whose import it cuts short raises ImportError
     instead, which ``main`` then reports as the interrupt it is. Only installed over the
-    default handler, in the main thread (an ignored SIGINT stays ignored)."""
+    default handler, in the main thread (an ignored SIGINT stays ignored). With
+    ``ignore_after`` SIGINT is ignored, rather than restored, on exit."""
+
+    def __init__(self, ignore_after: bool = False):
+        self.ignore_after = ignore_after
 
     def __enter__(self):
         self.seen, self._old = False, None
@@ -227,13 +231,17 @@ class _CtrlC:
 
     def __exit__(self, *exc):
         if self._old is not None:
-            signal.signal(signal.SIGINT, self._old)
+            signal.signal(signal.SIGINT, signal.SIG_IGN if self.ignore_after else self._old)
         return False
 
 
 def main(argv=None) -> int:
-    """Run the command line; returns the exit status (module docstring)."""
-    with _CtrlC() as ctrl_c:
+    """Run the command line; returns the exit status (module docstring).
+
+    Called as the process's command line (``argv`` None), a Ctrl-C after the command finished
+    (while the interpreter shuts down) is ignored: the work is done and its status stands. Called
+    with ``argv``, the caller's SIGINT handler is restored on return."""
+    with _CtrlC(ignore_after=argv is None) as ctrl_c:
         return _main(argv, ctrl_c)
 
 

@@ -237,6 +237,15 @@ def test_sigint_during_start_up_exits_130_without_traceback(tmp_path, delay):
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
 
 
+def test_sigint_after_the_command_finished_keeps_its_status():
+    """A Ctrl-C between the command's end and the interpreter's exit changes nothing."""
+    entry = ENTRY.replace("sys.exit(main())", "s = main(); os.kill(os.getpid(), 2); sys.exit(s)")
+    proc = subprocess.run(
+        [sys.executable, "-c", "import os; " + entry, "models"], capture_output=True, text=True
+    )
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
 def test_closed_stderr_runs_without_progress(tmp_path, capsys, monkeypatch, fast):
     """With file descriptor 2 closed Python sets ``sys.stderr = None``: the run still happens."""
     monkeypatch.chdir(tmp_path)
