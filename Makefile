@@ -10,12 +10,13 @@ BIN    := $(VENV)/bin
 demo: $(VENV)/.installed
 	$(BIN)/microsim report --quick
 
+# two pytest-xdist workers: both cores of the 2-core machines CI runs on
 test: lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2
 
 # inner loop while developing: no slow and no end-to-end tests
 test-fast: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -m "not slow and not integration"
+	$(BIN)/python -m pytest -n 2 -m "not slow and not integration"
 
 lint: $(VENV)/.installed-test
 	$(BIN)/ruff check microsim tests examples
