@@ -466,7 +466,8 @@ def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where) -> 
     for key in want:
         if key not in run:
             raise UsageError(
-                f"--resume {where}: the saved run does not record its {key} (saved by an "
+                f"--resume {where}: the saved run does not record its "
+                f"{RESUME_KEYS.get(key, key)} (saved by an "
                 f"older microsim); rerun with --force"
             )
         have, now, name = run[key], want[key], RESUME_KEYS.get(key, key)
