@@ -18,6 +18,7 @@ carries those predictions (``Surface.predicted``) and the NDF the field samples
 (``Surface.ensemble_ndf``): the slopes of a Gaussian random field are Gaussian, so it is
 Beckmann with m² = 2 × per-axis slope variance (Beckmann & Spizzichino 1963).
 """
+
 from __future__ import annotations
 
 import warnings as _warnings
@@ -32,13 +33,24 @@ from microsim.errors import UsageError
 
 from .surface import Predicted, Surface, check_relief, heightfield_mesh
 
-__all__ = ["gaussian", "abc", "gaussian_psd", "abc_amplitude", "psd_grid", "synthesize",
-           "spectrum_moments", "SpectrumMoments", "gaussian_mesh_slope_var",
-           "abc_continuum_slope_var", "abc_spectrum", "gaussian_ensemble_ndf",
-           "abc_ensemble_ndf"]
+__all__ = [
+    "gaussian",
+    "abc",
+    "gaussian_psd",
+    "abc_amplitude",
+    "psd_grid",
+    "synthesize",
+    "spectrum_moments",
+    "SpectrumMoments",
+    "gaussian_mesh_slope_var",
+    "abc_continuum_slope_var",
+    "abc_spectrum",
+    "gaussian_ensemble_ndf",
+    "abc_ensemble_ndf",
+]
 
 MIN_GRID = 8
-GAUSS_MIN_CORR_CELLS = 7.0      # ℓ ≥ 7·dx keeps the triangulation slope bias under 1 %
+GAUSS_MIN_CORR_CELLS = 7.0  # ℓ ≥ 7·dx keeps the triangulation slope bias under 1 %
 GAUSS_RESOLVED_CELLS = 1.0
 """Shortest Gaussian ℓ, in grid steps, that the grid resolves: the synthesis keeps the spectrum
 up to the Nyquist frequency 1/(2dx), i.e. erf(πℓ/(2dx))² of σ² — 95 % at ℓ = dx, 18 % at dx/4,
@@ -54,18 +66,19 @@ synthesis."""
 def gaussian_psd(f, sigma: float, corr_len: float):
     """PSD of the autocorrelation σ² exp(−r²/ℓ²): S(f) = π σ² ℓ² exp(−π² ℓ² f²) (length⁴)."""
     f = np.asarray(f, dtype=np.float64)
-    sigma, corr_len = np.float64(sigma), np.float64(corr_len)      # inf on overflow, no raise
-    return np.pi * sigma ** 2 * corr_len ** 2 * np.exp(-(np.pi * corr_len * f) ** 2)
+    sigma, corr_len = np.float64(sigma), np.float64(corr_len)  # inf on overflow, no raise
+    return np.pi * sigma**2 * corr_len**2 * np.exp(-((np.pi * corr_len * f) ** 2))
 
 
 def _erf2(x: float) -> float:
     from scipy.special import erf
+
     return float(erf(x) ** 2)
 
 
 def abc_amplitude(sigma: float, B: float, C: float) -> float:
     """A of the 2D ABC PSD with ∫ PSD d²f = σ²: A = σ² B² (C − 1)/(2π) (needs C > 1)."""
-    return sigma ** 2 * B ** 2 * (C - 1.0) / (2.0 * np.pi)
+    return sigma**2 * B**2 * (C - 1.0) / (2.0 * np.pi)
 
 
 def psd_grid(psd, shape: tuple[int, int], dx: float, f_max: float = np.inf):
@@ -136,14 +149,13 @@ def gaussian_mesh_slope_var(sigma: float, corr_len: float, dx: float) -> float:
     """Per-axis slope variance of the triangulated Gaussian heightfield: 2σ²(1 − e^{−u})/dx²,
     u = (dx/ℓ)² (→ continuum 2σ²/ℓ² as dx → 0)."""
     u = (dx / corr_len) ** 2
-    return 2.0 * sigma ** 2 * (-np.expm1(-u)) / dx ** 2
+    return 2.0 * sigma**2 * (-np.expm1(-u)) / dx**2
 
 
 def abc_continuum_slope_var(sigma: float, B: float, C: float, f_max: float) -> float:
     """Per-axis continuum slope variance ½ ∫_{|f| ≤ f_max} (2πf)² PSD d²f of the ABC surface."""
     A = abc_amplitude(sigma, B, C)
-    val, _ = integrate.quad(lambda f: f ** 3 * abc_psd_church(f, A, B, C), 0.0, f_max,
-                            limit=200)
+    val, _ = integrate.quad(lambda f: f**3 * abc_psd_church(f, A, B, C), 0.0, f_max, limit=200)
     return 0.5 * (2.0 * np.pi) ** 2 * 2.0 * np.pi * val
 
 
@@ -153,16 +165,21 @@ def _grid_args(n, dx, seed):
     before anything is allocated (``BYTES_PER_GRID_POINT``)."""
     n = integer("n", n, MIN_GRID, None, " (grid points per side)")
     dx, seed = positive("dx", dx), integer("seed", seed, 0)
-    check_memory("n", float(n) * n * BYTES_PER_GRID_POINT,
-                 f"a {n}x{n} heightfield ({BYTES_PER_GRID_POINT} bytes per grid point to "
-                 f"synthesise, mesh and trace)")
+    check_memory(
+        "n",
+        float(n) * n * BYTES_PER_GRID_POINT,
+        f"a {n}x{n} heightfield ({BYTES_PER_GRID_POINT} bytes per grid point to "
+        f"synthesise, mesh and trace)",
+    )
     return n, dx, seed
 
 
 def _finite_spectrum(S: np.ndarray, names: str) -> None:
     if not np.all(np.isfinite(S)):
-        raise UsageError(f"{names}: the spectrum overflows float64 (height variance beyond "
-                         f"1e308); use lengths of a sensible scale")
+        raise UsageError(
+            f"{names}: the spectrum overflows float64 (height variance beyond "
+            f"1e308); use lengths of a sensible scale"
+        )
 
 
 def _heightfield_surface(kind, heights, dx, nominal, warns, ensemble_ndf, predicted):
@@ -171,9 +188,19 @@ def _heightfield_surface(kind, heights, dx, nominal, warns, ensemble_ndf, predic
     for w in warns:
         _warnings.warn(w, stacklevel=3)
     vertices, faces = heightfield_mesh(heights, dx)
-    return Surface(kind=kind, vertices=vertices, faces=faces, tile_size=(nx * dx, ny * dx),
-                   periodic=True, nominal=nominal, heights=heights, dx=dx, warnings=tuple(warns),
-                   ensemble_ndf=ensemble_ndf, predicted=predicted)
+    return Surface(
+        kind=kind,
+        vertices=vertices,
+        faces=faces,
+        tile_size=(nx * dx, ny * dx),
+        periodic=True,
+        nominal=nominal,
+        heights=heights,
+        dx=dx,
+        warnings=tuple(warns),
+        ensemble_ndf=ensemble_ndf,
+        predicted=predicted,
+    )
 
 
 def _predicted(mom: SpectrumMoments, continuum: float) -> Predicted:
@@ -182,9 +209,13 @@ def _predicted(mom: SpectrumMoments, continuum: float) -> Predicted:
     still exact below, where that point-sampled formula is not); ``continuum`` the dx → 0
     per-axis slope variance (ABC: within the band)."""
     spec = 0.5 * (mom.slope_var_x + mom.slope_var_y)
-    return Predicted(rms_height=float(np.sqrt(mom.height_var)), slope_var=float(spec),
-                     spectrum_slope_var=float(spec), continuum_slope_var=float(continuum),
-                     m=float(np.sqrt(2.0 * spec)))
+    return Predicted(
+        rms_height=float(np.sqrt(mom.height_var)),
+        slope_var=float(spec),
+        spectrum_slope_var=float(spec),
+        continuum_slope_var=float(continuum),
+        m=float(np.sqrt(2.0 * spec)),
+    )
 
 
 def gaussian_ensemble_ndf(sigma: float, corr_len: float) -> Beckmann:
@@ -200,13 +231,14 @@ def abc_spectrum(n: int, dx: float, sigma: float, B: float, C: float, band_limit
     f_max = 1.0 / (2.0 * band_limit * dx)
     with np.errstate(over="ignore", invalid="ignore"):
         A = abc_amplitude(np.float64(sigma), np.float64(B), C)
-        _finite_spectrum(A, f"sigma = {sigma:g}, B = {B:g}")      # S ≤ A
+        _finite_spectrum(A, f"sigma = {sigma:g}, B = {B:g}")  # S ≤ A
         S, FX, FY = psd_grid(lambda f: abc_psd_church(f, A, B, C), (n, n), dx, f_max)
     return A, f_max, S, FX, FY
 
 
-def abc_ensemble_ndf(n: int, dx: float, sigma: float, B: float, C: float,
-                     band_limit: float = 4) -> Beckmann:
+def abc_ensemble_ndf(
+    n: int, dx: float, sigma: float, B: float, C: float, band_limit: float = 4
+) -> Beckmann:
     """The NDF an ``abc`` heightfield of these parameters samples: Beckmann with the predicted
     mesh m, m² = 2 × per-axis slope variance of the discrete spectrum (the facet slopes of any
     Gaussian random field are Gaussian; Löw et al. 2012's ABC *NDF* is a different object)."""
@@ -215,8 +247,9 @@ def abc_ensemble_ndf(n: int, dx: float, sigma: float, B: float, C: float,
     return Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
 
 
-def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
-             exact_amplitude: bool = True) -> Surface:
+def gaussian(
+    n: int, dx: float, sigma: float, corr_len: float, seed: int = 0, exact_amplitude: bool = True
+) -> Surface:
     """Periodic n×n Gaussian heightfield with autocorrelation σ² exp(−r²/ℓ²).
 
     ``dx`` grid spacing, ``sigma`` rms height, ``corr_len`` ℓ (all in the same length unit).
@@ -230,10 +263,12 @@ def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
     n, dx, seed = _grid_args(n, dx, seed)
     sigma, corr_len = positive("sigma", sigma), positive("corr_len", corr_len)
     if corr_len < GAUSS_RESOLVED_CELLS * dx:
-        raise UsageError(f"corr_len must be >= dx = {dx:g} (a shorter correlation length is not "
-                         f"resolved by the grid: it keeps erf(πℓ/(2dx))² of σ², "
-                         f"{100 * _erf2(np.pi * corr_len / (2 * dx)):.3g} % here), got "
-                         f"{corr_len:g}")
+        raise UsageError(
+            f"corr_len must be >= dx = {dx:g} (a shorter correlation length is not "
+            f"resolved by the grid: it keeps erf(πℓ/(2dx))² of σ², "
+            f"{100 * _erf2(np.pi * corr_len / (2 * dx)):.3g} % here), got "
+            f"{corr_len:g}"
+        )
     with np.errstate(over="ignore", invalid="ignore"):
         S, FX, FY = psd_grid(lambda f: gaussian_psd(f, sigma, corr_len), (n, n), dx)
     _finite_spectrum(S, f"sigma = {sigma:g}, corr_len = {corr_len:g}")
@@ -242,19 +277,37 @@ def gaussian(n: int, dx: float, sigma: float, corr_len: float, seed: int = 0,
     if corr_len < GAUSS_MIN_CORR_CELLS * dx:
         mesh = 0.5 * (mom.slope_var_x + mom.slope_var_y)
         bias = mesh / (2 * np.float64(sigma) ** 2 / np.float64(corr_len) ** 2)
-        warns.append(f"gaussian: corr_len = {corr_len:g} < 7·dx = {7 * dx:g}: the mesh slope "
-                     f"variance is {bias:.4f} × the continuum 2σ²/ℓ² (realised m "
-                     f"{np.sqrt(2 * mesh):.4g} vs nominal {2 * sigma / corr_len:.4g})")
+        warns.append(
+            f"gaussian: corr_len = {corr_len:g} < 7·dx = {7 * dx:g}: the mesh slope "
+            f"variance is {bias:.4f} × the continuum 2σ²/ℓ² (realised m "
+            f"{np.sqrt(2 * mesh):.4g} vs nominal {2 * sigma / corr_len:.4g})"
+        )
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
-    nominal = {"sigma": sigma, "corr_len": corr_len, "m": 2.0 * sigma / corr_len, "n": n,
-               "dx": dx, "seed": seed, "exact_amplitude": bool(exact_amplitude)}
-    predicted = _predicted(mom, 2.0 * sigma ** 2 / corr_len ** 2)
-    return _heightfield_surface("gaussian", h, dx, nominal, warns,
-                                gaussian_ensemble_ndf(sigma, corr_len), predicted)
+    nominal = {
+        "sigma": sigma,
+        "corr_len": corr_len,
+        "m": 2.0 * sigma / corr_len,
+        "n": n,
+        "dx": dx,
+        "seed": seed,
+        "exact_amplitude": bool(exact_amplitude),
+    }
+    predicted = _predicted(mom, 2.0 * sigma**2 / corr_len**2)
+    return _heightfield_surface(
+        "gaussian", h, dx, nominal, warns, gaussian_ensemble_ndf(sigma, corr_len), predicted
+    )
 
 
-def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
-        band_limit: float = 4, exact_amplitude: bool = True) -> Surface:
+def abc(
+    n: int,
+    dx: float,
+    sigma: float,
+    B: float,
+    C: float,
+    seed: int = 0,
+    band_limit: float = 4,
+    exact_amplitude: bool = True,
+) -> Surface:
     """Periodic n×n fractal heightfield with the isotropic 2D ABC PSD (Löw et al. 2012, eq. 7–8;
     Church et al. 1989).
 
@@ -275,26 +328,43 @@ def abc(n: int, dx: float, sigma: float, B: float, C: float, seed: int = 0,
     sigma, B = positive("sigma", sigma), positive("B", B)
     C = float(C)
     if not C > 1.0 or not np.isfinite(C):
-        raise UsageError(f"C must be a finite number > 1 (the ABC height variance "
-                         f"2πA/(B²(C−1)) is infinite for C <= 1), got {C!r}")
+        raise UsageError(
+            f"C must be a finite number > 1 (the ABC height variance "
+            f"2πA/(B²(C−1)) is infinite for C <= 1), got {C!r}"
+        )
     k = float(band_limit)
     if not (k >= 1.0) or not np.isfinite(k):
-        raise UsageError(f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), "
-                         f"got {band_limit!r}")
+        raise UsageError(
+            f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), got {band_limit!r}"
+        )
     A, f_max, S, FX, FY = abc_spectrum(n, dx, sigma, B, C, k)
     warns = []
     if C <= 3.0:
-        warns.append(f"abc: C = {C:g} <= 3: the slope variance depends on the grid cut-off "
-                     f"f_max = 1/(2·{k:g}·dx) (it diverges as dx → 0), so the ray-traced BRDF "
-                     f"depends on dx = {dx:g}")
+        warns.append(
+            f"abc: C = {C:g} <= 3: the slope variance depends on the grid cut-off "
+            f"f_max = 1/(2·{k:g}·dx) (it diverges as dx → 0), so the ray-traced BRDF "
+            f"depends on dx = {dx:g}"
+        )
     mom = spectrum_moments(S, FX, FY, dx)
-    kept = mom.height_var / sigma ** 2
+    kept = mom.height_var / sigma**2
     if kept < 0.9:
-        warns.append(f"abc: the tile (L = {n * dx:g}) and band (f <= {f_max:g}) keep only "
-                     f"{100 * kept:.1f} % of the nominal height variance σ² = {sigma ** 2:g}")
+        warns.append(
+            f"abc: the tile (L = {n * dx:g}) and band (f <= {f_max:g}) keep only "
+            f"{100 * kept:.1f} % of the nominal height variance σ² = {sigma**2:g}"
+        )
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
-    nominal = {"sigma": sigma, "B": B, "C": C, "A": A, "band_limit": k, "f_max": f_max,
-               "n": n, "dx": dx, "seed": seed, "exact_amplitude": bool(exact_amplitude)}
+    nominal = {
+        "sigma": sigma,
+        "B": B,
+        "C": C,
+        "A": A,
+        "band_limit": k,
+        "f_max": f_max,
+        "n": n,
+        "dx": dx,
+        "seed": seed,
+        "exact_amplitude": bool(exact_amplitude),
+    }
     predicted = _predicted(mom, abc_continuum_slope_var(sigma, B, C, f_max))
     ensemble = Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
     return _heightfield_surface("abc", h, dx, nominal, warns, ensemble, predicted)

@@ -6,6 +6,7 @@ Formats: ``.npy`` (read through its header first), ``.npz`` (its single array or
 a file without building anything — callers run it before creating outputs; every problem is a
 one-line ``UsageError`` naming the file.
 """
+
 from __future__ import annotations
 
 import errno
@@ -23,8 +24,13 @@ from microsim.errors import UsageError
 from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
 from .surface import Surface, check_relief, heightfield_mesh
 
-__all__ = ["from_file", "read_heights", "check_heightfield_file", "mirror_periodic",
-           "MAX_TEXT_BYTES"]
+__all__ = [
+    "from_file",
+    "read_heights",
+    "check_heightfield_file",
+    "mirror_periodic",
+    "MAX_TEXT_BYTES",
+]
 
 MAX_TEXT_BYTES = 64 << 20
 """Largest text heightfield read (64 MiB): ``np.loadtxt`` holds every value as a Python object
@@ -48,8 +54,9 @@ def _header(path: Path, f) -> tuple[tuple, np.dtype]:
     return tuple(int(s) for s in shape), np.dtype(dtype)
 
 
-def _check_shape(path: Path, shape: tuple, dtype: np.dtype | None, periodic: bool,
-                 max_side: int | None = None) -> None:
+def _check_shape(
+    path: Path, shape: tuple, dtype: np.dtype | None, periodic: bool, max_side: int | None = None
+) -> None:
     """Refuse a wrong dtype, ndim or size (``max_side``: largest side, None: any), and a grid
     whose surface would not fit in memory."""
     if dtype is not None and dtype.kind not in "iuf":
@@ -57,17 +64,22 @@ def _check_shape(path: Path, shape: tuple, dtype: np.dtype | None, periodic: boo
     if len(shape) != 2:
         raise _fail(path, f"heights must be a 2D array (rows = y, columns = x), got shape {shape}")
     if min(shape) < MIN_GRID:
-        raise _fail(path, f"heights grid must be at least {MIN_GRID}x{MIN_GRID}, "
-                          f"got {shape[0]}x{shape[1]}")
+        raise _fail(
+            path, f"heights grid must be at least {MIN_GRID}x{MIN_GRID}, got {shape[0]}x{shape[1]}"
+        )
     if max_side is not None and max(shape) > max_side:
-        raise _fail(path, f"heights grid must be at most {max_side}x{max_side}, "
-                          f"got {shape[0]}x{shape[1]}")
+        raise _fail(
+            path, f"heights grid must be at most {max_side}x{max_side}, got {shape[0]}x{shape[1]}"
+        )
     ny, nx = shape
     points = ny * nx if periodic else (2 * ny - 2) * (2 * nx - 2)
     try:
-        check_memory(str(path), points * BYTES_PER_GRID_POINT,
-                     f"a {ny}x{nx} heightfield ({'as is' if periodic else 'mirrored'}: "
-                     f"{points:,} grid points × {BYTES_PER_GRID_POINT} bytes to mesh and trace)")
+        check_memory(
+            str(path),
+            points * BYTES_PER_GRID_POINT,
+            f"a {ny}x{nx} heightfield ({'as is' if periodic else 'mirrored'}: "
+            f"{points:,} grid points × {BYTES_PER_GRID_POINT} bytes to mesh and trace)",
+        )
     except UsageError as e:
         raise UsageError(" ".join(str(e).split())) from None
 
@@ -135,12 +147,16 @@ def _check_values(path: Path, heights, dx, periodic: bool) -> None:
     tile = (nx * dx, ny * dx) if periodic else ((2 * nx - 2) * dx, (2 * ny - 2) * dx)
     check_relief(str(path), lo, hi, tile)
     if hi - lo < FLAT_RELIEF * dx:
-        raise _fail(path, f"heights vary by {hi - lo:g}, less than {FLAT_RELIEF:g} × dx: a flat "
-                          f'surface; use kind = "flat"')
+        raise _fail(
+            path,
+            f"heights vary by {hi - lo:g}, less than {FLAT_RELIEF:g} × dx: a flat "
+            f'surface; use kind = "flat"',
+        )
 
 
-def check_heightfield_file(path, dx=None, periodic: bool = False,
-                           max_side: int | None = None) -> tuple[int, int]:
+def check_heightfield_file(
+    path, dx=None, periodic: bool = False, max_side: int | None = None
+) -> tuple[int, int]:
     """Validate a heightfield file for ``from_file(path, dx, periodic)`` without building the
     surface; returns its grid shape (ny, nx). Headers are read first (shape, dtype, size, at
     most ``max_side`` per side if given: a file that would not fit in memory is refused
@@ -171,8 +187,11 @@ def check_heightfield_file(path, dx=None, periodic: bool = False,
     if path.suffix == ".npz":
         _check_npz_header(path, periodic, max_side)
     elif path.stat().st_size > MAX_TEXT_BYTES:
-        raise _fail(path, f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB "
-                          f"({path.stat().st_size:,} bytes); save it as .npy")
+        raise _fail(
+            path,
+            f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB "
+            f"({path.stat().st_size:,} bytes); save it as .npy",
+        )
     heights = read_heights(path, periodic=periodic)
     _check_shape(path, heights.shape, None, periodic, max_side)
     _check_values(path, heights, dx, periodic)
@@ -198,8 +217,10 @@ def read_heights(path, periodic: bool = False) -> np.ndarray:
                 a = z[key]
         else:
             if path.stat().st_size > MAX_TEXT_BYTES:
-                raise _fail(path, f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB; "
-                                  f"save it as .npy")
+                raise _fail(
+                    path,
+                    f"text heightfield larger than {MAX_TEXT_BYTES >> 20} MiB; save it as .npy",
+                )
             with warnings.catch_warnings():  # an empty file: refused below, in one line
                 warnings.simplefilter("ignore", UserWarning)
                 a = np.loadtxt(path, ndmin=2)
@@ -215,8 +236,11 @@ def read_heights(path, periodic: bool = False) -> np.ndarray:
     _check_shape(path, a.shape, None, periodic)
     a = a.astype(np.float64)
     if not np.all(np.isfinite(a)):
-        raise _fail(path, f"heights contain NaN or inf ({int(np.sum(~np.isfinite(a)))} values); "
-                          f"fill or crop them first")
+        raise _fail(
+            path,
+            f"heights contain NaN or inf ({int(np.sum(~np.isfinite(a)))} values); "
+            f"fill or crop them first",
+        )
     return a
 
 
@@ -249,9 +273,28 @@ def from_file(path, dx: float, periodic: bool = False) -> Surface:
     h = h - h.mean()
     vertices, faces = heightfield_mesh(h, dx)
     ny, nx = h.shape
-    nominal = {"path": str(path), "dx": dx, "periodic_input": bool(periodic),
-               "input_shape": tuple(int(s) for s in raw.shape)}
-    warns = () if periodic else (f"file: {Path(path).name} was made periodic by mirroring "
-                                 f"(tile {nx}x{ny} from {raw.shape[1]}x{raw.shape[0]})",)
-    return Surface(kind="file", vertices=vertices, faces=faces, tile_size=(nx * dx, ny * dx),
-                   periodic=True, nominal=nominal, heights=h, dx=dx, warnings=warns)
+    nominal = {
+        "path": str(path),
+        "dx": dx,
+        "periodic_input": bool(periodic),
+        "input_shape": tuple(int(s) for s in raw.shape),
+    }
+    warns = (
+        ()
+        if periodic
+        else (
+            f"file: {Path(path).name} was made periodic by mirroring "
+            f"(tile {nx}x{ny} from {raw.shape[1]}x{raw.shape[0]})",
+        )
+    )
+    return Surface(
+        kind="file",
+        vertices=vertices,
+        faces=faces,
+        tile_size=(nx * dx, ny * dx),
+        periodic=True,
+        nominal=nominal,
+        heights=h,
+        dx=dx,
+        warnings=warns,
+    )

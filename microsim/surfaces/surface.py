@@ -11,6 +11,7 @@ Each generator attaches what only it knows (``Surface.ensemble_ndf``, ``exact_sh
 ``predicted``, ``generator_stats``), so code above this package asks the surface instead of
 switching on ``kind``.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -23,8 +24,16 @@ from microsim.analytic import Empirical
 from microsim.checks import positive
 from microsim.errors import EnvironmentFailure, UsageError
 
-__all__ = ["Surface", "Predicted", "flat", "heightfield_mesh", "facet_slopes", "check_relief",
-           "MAX_RELIEF", "MAX_COORDINATE"]
+__all__ = [
+    "Surface",
+    "Predicted",
+    "flat",
+    "heightfield_mesh",
+    "facet_slopes",
+    "check_relief",
+    "MAX_RELIEF",
+    "MAX_COORDINATE",
+]
 
 MAX_RELIEF = 1000.0
 """Largest height range of a surface in units of its (smaller) tile side. The tracer walks a
@@ -40,13 +49,17 @@ def check_relief(name: str, zmin: float, zmax: float, tile) -> None:
     relief, side = float(zmax) - float(zmin), float(min(tile))
     big = max(abs(float(zmin)), abs(float(zmax)))
     if not (np.isfinite(relief) and big <= MAX_COORDINATE):
-        raise UsageError(f"{name}: surface heights must be finite and within ±{MAX_COORDINATE:g} "
-                         f"(Embree traces in float32), got the range [{zmin:g}, {zmax:g}]")
+        raise UsageError(
+            f"{name}: surface heights must be finite and within ±{MAX_COORDINATE:g} "
+            f"(Embree traces in float32), got the range [{zmin:g}, {zmax:g}]"
+        )
     if relief > MAX_RELIEF * side:
-        raise UsageError(f"{name}: the surface's height range {relief:.4g} is more than "
-                         f"{MAX_RELIEF:g} × its tile side {side:.4g}: a grazing ray would cross "
-                         f"the tile ~{230 * relief / side:.2g} times (reduce the heights or "
-                         f"enlarge the tile)")
+        raise UsageError(
+            f"{name}: the surface's height range {relief:.4g} is more than "
+            f"{MAX_RELIEF:g} × its tile side {side:.4g}: a grazing ray would cross "
+            f"the tile ~{230 * relief / side:.2g} times (reduce the heights or "
+            f"enlarge the tile)"
+        )
 
 
 @dataclass(frozen=True)
@@ -67,9 +80,13 @@ class Predicted:
     def as_stats(self) -> dict:
         """The ``Surface.stats()`` keys: ``predicted_rms_height``, ``predicted_slope_var``,
         ``spectrum_slope_var``, ``continuum_slope_var``, ``predicted_m``."""
-        return {"predicted_rms_height": self.rms_height, "predicted_slope_var": self.slope_var,
-                "spectrum_slope_var": self.spectrum_slope_var,
-                "continuum_slope_var": self.continuum_slope_var, "predicted_m": self.m}
+        return {
+            "predicted_rms_height": self.rms_height,
+            "predicted_slope_var": self.slope_var,
+            "spectrum_slope_var": self.spectrum_slope_var,
+            "continuum_slope_var": self.continuum_slope_var,
+            "predicted_m": self.m,
+        }
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -122,8 +139,11 @@ class Surface:
             parts.append(f"{self.nominal['n_grooves']} grooves")
         lx, ly = self.tile_size
         parts.append(f"tile {lx:g}x{ly:g}, {len(self.faces)} triangles")
-        parts += [f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
-                  for k, v in self.nominal.items() if k not in shown]
+        parts += [
+            f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+            for k, v in self.nominal.items()
+            if k not in shown
+        ]
         return f"Surface({', '.join(parts)})"
 
     def mesh(self):
@@ -138,8 +158,11 @@ class Surface:
             raise EnvironmentFailure(
                 "Surface.mesh needs trimesh, an optional extra: pip install 'microsim[view]'"
             ) from None
-        return trimesh.Trimesh(vertices=self.vertices.astype(np.float32),
-                               faces=self.faces.astype(np.int32), process=False)
+        return trimesh.Trimesh(
+            vertices=self.vertices.astype(np.float32),
+            faces=self.faces.astype(np.int32),
+            process=False,
+        )
 
     def _cross(self) -> np.ndarray:
         v = self.vertices
@@ -208,7 +231,7 @@ class Surface:
         if self.heights is not None:
             out["grid"] = tuple(int(s) for s in self.heights.shape)
             out["dx"] = float(self.dx)
-            out["rms_height"] = float(np.sqrt(np.mean(self.heights ** 2)))
+            out["rms_height"] = float(np.sqrt(np.mean(self.heights**2)))
         if self.predicted is not None:
             out.update(self.predicted.as_stats())
         if self.generator_stats is not None:
@@ -240,8 +263,9 @@ def heightfield_mesh(heights: np.ndarray, dx: float) -> tuple[np.ndarray, np.nda
     idx = np.arange((ny + 1) * (nx + 1), dtype=np.int64).reshape(ny + 1, nx + 1)
     v00, v01 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
     v10, v11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
-    faces = np.concatenate([np.stack([v00, v01, v11], axis=1),
-                            np.stack([v00, v11, v10], axis=1)]).astype(np.int32)
+    faces = np.concatenate(
+        [np.stack([v00, v01, v11], axis=1), np.stack([v00, v11, v10], axis=1)]
+    ).astype(np.int32)
     return vertices, faces
 
 
@@ -251,5 +275,12 @@ def flat(size: float = 1.0) -> Surface:
     s = positive("size", size) / 2.0
     vertices = np.array([[-s, -s, 0.0], [s, -s, 0.0], [s, s, 0.0], [-s, s, 0.0]])
     faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
-    return Surface(kind="flat", vertices=vertices, faces=faces, tile_size=(2 * s, 2 * s),
-                   periodic=True, nominal={"size": 2 * s}, exact_shadowing="none")
+    return Surface(
+        kind="flat",
+        vertices=vertices,
+        faces=faces,
+        tile_size=(2 * s, 2 * s),
+        periodic=True,
+        nominal={"size": 2 * s},
+        exact_shadowing="none",
+    )

@@ -12,6 +12,7 @@ the projected-area tilt density 2π D(θ) cos θ sin θ of the NDF (its ``tilt_q
 depths would be wrong (weight ∝ cot θ). Averaging the groove azimuth uniformly (the
 estimator's job: ``Surface.azimuth_average``) gives the isotropic V-cavity surface.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,8 +32,9 @@ BYTES_PER_GROOVE = 1600
 ``microsim.checks.memory_limit`` before anything is allocated."""
 
 
-def groove_tilts_rad(n_grooves: int, ndf, seed: int = 0,
-                     sampling: str = "stratified") -> np.ndarray:
+def groove_tilts_rad(
+    n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified"
+) -> np.ndarray:
     """Tilts θ_k (radians, in x order) of ``n_grooves`` grooves drawn from ``ndf``'s tilt density.
 
     ``stratified``: θ at the quantiles (k + ½)/n, then shuffled along x with ``seed`` (the order
@@ -50,8 +52,10 @@ def groove_tilts_rad(n_grooves: int, ndf, seed: int = 0,
     else:
         raise UsageError(f"sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
     if not np.all(np.isfinite(theta) & (theta >= 0.0) & (theta < np.pi / 2)):
-        raise UsageError(f"ndf.tilt_quantile_rad must return tilts in [0, π/2) for groove depths "
-                         f"to be finite; {ndf!r} gave {theta[~(theta < np.pi / 2)][:3]!r}")
+        raise UsageError(
+            f"ndf.tilt_quantile_rad must return tilts in [0, π/2) for groove depths "
+            f"to be finite; {ndf!r} gave {theta[~(theta < np.pi / 2)][:3]!r}"
+        )
     return theta
 
 
@@ -79,8 +83,9 @@ def _extrude(x: np.ndarray, z: np.ndarray, length: float) -> tuple[np.ndarray, n
     return vertices, faces.reshape(-1, 3).astype(np.int32)
 
 
-def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
-             tile: float = 1.0) -> Surface:
+def vgrooves(
+    n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified", tile: float = 1.0
+) -> Surface:
     """Square tile of side ``tile`` holding ``n_grooves`` equal-width symmetric V-grooves.
 
     Tilts from ``ndf`` (any object with ``tilt_quantile_rad``; see ``groove_tilts_rad`` for the
@@ -91,22 +96,41 @@ def vgrooves(n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified",
     """
     n_grooves = integer("n_grooves", n_grooves, 1)
     if not callable(getattr(ndf, "tilt_quantile_rad", None)):
-        raise UsageError(f"ndf must be an NDF with tilt_quantile_rad(u) (e.g. microsim.analytic."
-                         f"Beckmann(0.3)), got {ndf!r}")
+        raise UsageError(
+            f"ndf must be an NDF with tilt_quantile_rad(u) (e.g. microsim.analytic."
+            f"Beckmann(0.3)), got {ndf!r}"
+        )
     seed, tile = integer("seed", seed, 0), positive("tile", tile)
     if sampling not in SAMPLINGS:
         raise UsageError(f"sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
-    check_memory("n_grooves", float(n_grooves) * BYTES_PER_GROOVE,
-                 f"{n_grooves:,} grooves ({BYTES_PER_GROOVE} bytes per groove to build and "
-                 f"trace)")
+    check_memory(
+        "n_grooves",
+        float(n_grooves) * BYTES_PER_GROOVE,
+        f"{n_grooves:,} grooves ({BYTES_PER_GROOVE} bytes per groove to build and trace)",
+    )
     tilts = groove_tilts_rad(n_grooves, ndf, seed, sampling)
     vertices, faces = _extrude(*groove_profile(tilts, tile), tile)
     params = ndf.params() if callable(getattr(ndf, "params", None)) else {}
-    nominal = {"ndf": getattr(ndf, "name", type(ndf).__name__), **params,
-               "n_grooves": n_grooves, "sampling": sampling, "seed": seed, "tile": tile}
-    return Surface(kind="vgrooves", vertices=vertices, faces=faces, tile_size=(tile, tile),
-                   periodic=True, nominal=nominal, azimuth_average=True, ensemble_ndf=ndf,
-                   exact_shadowing="vgroove", generator_stats=groove_stats)
+    nominal = {
+        "ndf": getattr(ndf, "name", type(ndf).__name__),
+        **params,
+        "n_grooves": n_grooves,
+        "sampling": sampling,
+        "seed": seed,
+        "tile": tile,
+    }
+    return Surface(
+        kind="vgrooves",
+        vertices=vertices,
+        faces=faces,
+        tile_size=(tile, tile),
+        periodic=True,
+        nominal=nominal,
+        azimuth_average=True,
+        ensemble_ndf=ndf,
+        exact_shadowing="vgroove",
+        generator_stats=groove_stats,
+    )
 
 
 def groove_stats(surface: Surface) -> dict:
@@ -119,10 +143,12 @@ def groove_stats(surface: Surface) -> dict:
     nrm = surface.facet_normals()[0::4]
     tilts = np.arctan2(np.hypot(nrm[:, 0], nrm[:, 1]), nrm[:, 2])
     n = len(tilts)
-    out = {"n_grooves": n,
-           "tilt_rms_deg": float(np.degrees(np.sqrt(np.mean(tilts ** 2)))),
-           "tilt_max_deg": float(np.degrees(tilts.max())),
-           "cdf_bound": 0.5 / n if surface.nominal.get("sampling") == "stratified" else None}
+    out = {
+        "n_grooves": n,
+        "tilt_rms_deg": float(np.degrees(np.sqrt(np.mean(tilts**2)))),
+        "tilt_max_deg": float(np.degrees(tilts.max())),
+        "cdf_bound": 0.5 / n if surface.nominal.get("sampling") == "stratified" else None,
+    }
     cdf = getattr(surface.ensemble_ndf, "cdf_theta_rad", None)
     if callable(cdf):
         F = np.asarray(cdf(np.sort(tilts)), dtype=np.float64)
