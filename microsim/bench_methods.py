@@ -1,5 +1,5 @@
 """`microsim bench --methods`: wall time against error for the methods themselves — which
-method a scene needs, and what it costs (issue 16, "Verdicts and the regime map").
+method a scene needs, and what it costs.
 
 Two scenes, each judged against its own reference; every time is wall seconds on this machine
 (``time.perf_counter``), the best of ``repeat`` (3) runs where one run takes less than

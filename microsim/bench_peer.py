@@ -1,7 +1,7 @@
 """The bench's peer: the same single-bounce estimator written with Mitsuba 3's LLVM backend.
 
-Issue 14 sets microsim's throughput target relative to "a Mitsuba 3 LLVM single-bounce
-estimator of the same work on the same machine". This module is that estimator, so that
+microsim's throughput is judged against "a Mitsuba 3 LLVM single-bounce estimator of the
+same work on the same machine". This module is that estimator, so that
 ``microsim bench`` can measure the peer itself instead of quoting a figure. It needs the
 optional extra ``pip install 'microsim[peer]'`` (mitsuba ≥ 3.5, drjit); without it every entry
 point raises ``PeerUnavailable``.

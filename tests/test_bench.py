@@ -146,7 +146,7 @@ def test_bench_subcommand_registers():
     ],
 )
 def test_bench_rays_option_is_honoured_with_and_without_quick(monkeypatch, capsys, argv, rays):
-    """``bench --quick --rays N`` measures N rays (issue #11: --quick ignored --rays)."""
+    """``bench --quick --rays N`` measures N rays (--quick once ignored --rays)."""
     import microsim.bench as B
 
     seen = []
@@ -197,7 +197,7 @@ def test_rotated_incidence_keeps_the_mirror_direction_of_a_flat_surface(theta):
 
 
 def test_wave_rows_are_measured_and_printed():
-    """``bench``'s wave rows (issue 16): one per roughness, a measured wall time, and on the
+    """``bench``'s wave rows: one per roughness, a measured wall time, and on the
     smooth tile (σ = λ/100, g = (4πσ cos θi/λ)² = 0.012) the order powers sum to the Fresnel
     reflectance F(30°): the diffuse share is ~g, and Kirchhoff's obliquity factor moves it by
     far less than 1 % of F (a broken solver or wrong tile misses it by more)."""

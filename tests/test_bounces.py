@@ -1,4 +1,4 @@
-"""Scattering orders: ``simulate(..., bounces=K)`` (``microsim.sim.bounces``, issue 17).
+"""Scattering orders: ``simulate(..., bounces=K)`` (``microsim.sim.bounces``).
 
 What is established here:
 

@@ -1,4 +1,4 @@
-"""The error budget of an ensemble BRDF and ``realisations = "auto"`` (issue 13).
+"""The error budget of an ensemble BRDF and ``realisations = "auto"``.
 
 Facts checked: ``error_budget`` recovers a known ray noise and a known tile scatter from
 synthetic realisations; ``realisations_needed`` follows its documented rule; a scene with

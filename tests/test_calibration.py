@@ -1,4 +1,4 @@
-"""Calibration of the verdicts, measured (issue 13): the false-alarm rate of models that are
+"""Calibration of the verdicts, measured: the false-alarm rate of models that are
 exact, and the power against a model wrong by a few percent in energy.
 
 Truth known exactly: on V-grooves, Torrance–Sparrow with V-groove G (``ts-vgroove``, the NDF
@@ -188,8 +188,8 @@ def test_gaussian_catalogue_verdicts_at_full_settings_slow():
     runner's own functions). The facet normals of a Gaussian heightfield are Beckmann-distributed
     in expectation and Smith masking is exact to ~1 % there, so TS–Beckmann(realised)–Smith
     (separable and height-correlated) must agree for the ensemble at θi = 0° and 30°, while
-    V-groove G, about 2× too bright at the grazing forward peak, must deviate at 80° (issue 13;
-    the per-bin z test of one pooled run called the first "deviates", 4 tiles could not flag
+    V-groove G, about 2× too bright at the grazing forward peak, must deviate at 80° (the
+    per-bin z test of one pooled run called the first "deviates", 4 tiles could not flag
     the second)."""
     from pathlib import Path
 

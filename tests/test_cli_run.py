@@ -172,7 +172,7 @@ CATALOGUE = Path(__file__).resolve().parents[1] / "surfaces"
 
 @pytest.mark.slow
 def test_catalogue_file_heightfield_scene_runs(tmp_path):
-    """Bug 1 of issue #11: every ``kind = "file"`` scene crashed after its simulation (the
+    """A fault once found: every ``kind = "file"`` scene crashed after its simulation (the
     report formatted the grid shape as a number). The catalogue's file scene runs end to end.
     Slow (11 s in a subprocess): the default run covers a file scene end to end in
     ``test_report_indexes_catalogue_with_working_links`` (its "tiny-file" scene)."""

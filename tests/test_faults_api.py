@@ -1,4 +1,4 @@
-"""Fault corpus of the Python API (issue #11): every bad input is refused up front with a
+"""Fault corpus of the Python API: every bad input is refused up front with a
 ``UsageError`` (a ``ValueError``) whose one-line message names the parameter; a run of any
 size stops promptly on an interrupt with bounded memory; progress arrives per chunk of rays.
 

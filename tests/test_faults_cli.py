@@ -1,4 +1,4 @@
-"""Fault suite of the application layer (issue #11): bad scene files, options and heightfield
+"""Fault suite of the application layer: bad scene files, options and heightfield
 files fed to ``microsim.cli.main`` in-process, interrupts at every phase, concurrent runs,
 disk full and read-only file systems.
 
@@ -582,7 +582,7 @@ def test_interrupt_at_each_phase_saves_tallies_and_resumes(
 
 def test_partial_side_study_is_an_interrupt(tmp_path, capsys, monkeypatch, fast):
     """``simulate`` returns a partial Result on SIGINT; a side study that got one must not
-    feed the report (issue #11 bug 2): exit 130, complete tallies saved, no report."""
+    feed the report: exit 130, complete tallies saved, no report."""
     monkeypatch.chdir(tmp_path)
     sc = scene(tmp_path)
     out = tmp_path / "run"

@@ -1,4 +1,4 @@
-"""The order-resolved comparison (``microsim.analysis.multiple``, issue 17).
+"""The order-resolved comparison (``microsim.analysis.multiple``).
 
 What is established here (fast): on a small ensemble of m = 0.5 Gaussian tiles (8 realisations,
 64², mirror) and one aluminium tile, the comparison runs and its internal facts hold —
@@ -297,7 +297,7 @@ def test_issue_claim_high_orders_exceed_the_walk(issue_surface):
 # --- slow: resolution study ----------------------------------------------------------------
 @pytest.mark.slow
 def test_high_orders_converge_as_the_triangulation_refines():
-    """Resolution study (issue 17): the m = 0.5 Gaussian (σ 2, ℓ 8) on a tile of 128 × 128
+    """Resolution study: the m = 0.5 Gaussian (σ 2, ℓ 8) on a tile of 128 × 128
     length units (16 ℓ) at dx = ℓ/8, ℓ/16, ℓ/32 (128², 256², 512² grids), 4 realisations
     each, mirror, θi 0/60/80, 10⁶ rays per θi.
 

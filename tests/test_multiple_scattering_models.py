@@ -1,4 +1,4 @@
-"""Multiple-scattering models (issue 17): Heitz et al. 2016's random walk on a Smith
+"""Multiple-scattering models: Heitz et al. 2016's random walk on a Smith
 microsurface, Kulla & Conty 2017's energy compensation and Mikkelsen 2009 eq. 28's diffuse term.
 
 Statistical tests compare with closed forms within the run's own standard errors or by Pearson χ²

@@ -1,4 +1,4 @@
-"""`microsim run` with `bounces = "all"` (issue 17): the verdicts keep judging order 1, the
+"""`microsim run` with `bounces = "all"`: the verdicts keep judging order 1, the
 report gains "Scattering orders" with the fraction of light single scattering misses and the
 order-resolved comparison, and verdicts.json its "orders" section."""
 

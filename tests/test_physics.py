@@ -1,8 +1,8 @@
-"""Issue 4's physics: the ray-traced explicit-integral BRDF (Mikkelsen 2009, eq. 9) against the
-closed
-forms it must reproduce — bin-averaged Torrance–Sparrow with V-groove G on V-cavity surfaces
-(exact there: docs/design.md "Facts"), including the last 10° above the horizon; Smith masking on a
-Gaussian heightfield (measured directly); reciprocity; and input validation.
+"""The physics of the single bounce: the ray-traced explicit-integral BRDF (Mikkelsen 2009,
+eq. 9) against the closed forms it must reproduce — bin-averaged Torrance–Sparrow with V-groove
+G on V-cavity surfaces (exact there: docs/design.md "Facts"), including the last 10° above the
+horizon; Smith masking on a Gaussian heightfield (measured directly); reciprocity; and input
+validation.
 
 Each heavy (``slow``) test has a light default twin asserting the same fact at lower precision.
 Tolerances come from the runs' own standard errors plus the quadrature tolerance of the model

@@ -30,7 +30,7 @@ def test_catalogue_scene_loads_builds_and_describes(path):
     if sc.surface.kind in ("gaussian", "abc"):
         assert surf.heights.shape == (128, 128)
         if sc.wave is None:  # wave scenes: 4 fixed tiles (the Kirchhoff solve per tile)
-            assert sc.simulation.realisations == "auto"  # enough tiles for verdicts (issue 13)
+            assert sc.simulation.realisations == "auto"  # enough tiles for verdicts
     if sc.surface.kind in ("vgrooves", "gaussian", "abc"):
         assert isinstance(sc.ndf(), an.NDF)
     text = describe_surface(surf)
@@ -162,7 +162,7 @@ def test_missing_scene_file(tmp_path):
         load_scene(tmp_path / "nope.toml")
 
 
-# --- hardening (issue #11): names, sizes, encodings, heightfield files ------------------------
+# --- hardening: names, sizes, encodings, heightfield files ------------------------
 @pytest.mark.parametrize(
     "name", ["", ".", "..", "../../escape", "a/b", ".hidden", "x" * 101, "a b", "ü"]
 )

@@ -1,6 +1,6 @@
 """microsim.testing: the reference cache (keys, location, concurrent workers), the BRDF
 agreement check (passes for the exact model, fails for a wrong one with a message that says
-where, tolerance mode), the sampler harness, argument checks and the pytest plugin (issue 15).
+where, tolerance mode), the sampler harness, argument checks and the pytest plugin.
 
 References here are small (200 stratified GGX grooves, 2·10⁴–10⁵ rays, 10 × 10 bins) so each
 test traces in about a second; the heavy false-alarm and power measurement is marked slow.

@@ -1,4 +1,4 @@
-"""Tracer reuse (issue 14): repeated ``simulate`` calls on one surface build its Embree scene
+"""Tracer reuse: repeated ``simulate`` calls on one surface build its Embree scene
 once; a changed mesh, another masking mode or a released surface never gets a stale tracer, and
 reuse changes no result."""
 

@@ -297,7 +297,7 @@ def _random_grooves(seed, n=200, realisations=2):
 
 def test_facet_model_of_other_surfaces_is_refused():
     """Random tilts: each realisation has its own tilts, so ts-facets of the first tile is not
-    the model of the mean over two tiles (its χ² would measure the tile scatter, issue 13).
+    the model of the mean over two tiles (its χ² would measure the tile scatter).
     attach_models must refuse it; stratified tiles share their tilt set but not their mesh."""
     from microsim.errors import UsageError
     from microsim.sim.compare import attach_models, default_models

@@ -1,6 +1,6 @@
-"""Exact check 4 of issue 16: the rough limit. For σ ≥ 2λ, ℓ ≥ 20λ and incidences where masking is
-negligible, the Kirchhoff BRDF of a tile converges to the geometric facet model of the *same*
-tile without masking,
+"""Exact check 4 of the wave solver: the rough limit. For σ ≥ 2λ, ℓ ≥ 20λ and incidences where
+masking is negligible, the Kirchhoff BRDF of a tile converges to the geometric facet model of
+the *same* tile without masking,
 
     f_GO(wi, wo) = F(wi·h) D_facets(h) / (4 cos θi cos θo)   (Torrance & Sparrow 1967;
     Mikkelsen 2009, eq. 13/18, with G = 1),

@@ -1,4 +1,4 @@
-"""Scenes with a wavelength (issue 16): the ``[wave]`` table's checks, ``microsim run`` with
+"""Scenes with a wavelength: the ``[wave]`` table's checks, ``microsim run`` with
 the Kirchhoff solver and the wave verdicts, and Löw's smooth-surface model marked outside its
 domain in geometric scenes.
 

@@ -1,5 +1,5 @@
-"""Exact check 3 of issue 16 on a smooth random tile (4πσ cos θi/λ = 0.05): the specular order
-carries F·exp(−(4πσ cos θi/λ)²) (Davies 1954; Debye–Waller) with σ the tile's realised rms
+"""Exact check 3 of the wave solver on a smooth random tile (4πσ cos θi/λ = 0.05): the specular
+order carries F·exp(−(4πσ cos θi/λ)²) (Davies 1954; Debye–Waller) with σ the tile's realised rms
 height, and the diffuse orders, summed over bins, match the first-order Kirchhoff expression
 P = R·obliquity·q_z²|ĥ_mn|² built from the tile's own Fourier coefficients ĥ (its realised PSD,
 no ensemble noise): equivalently BRDF = (16π²/λ⁴) cos θi cos θo Q_K PSD (module docstring)."""

@@ -1,5 +1,5 @@
 """Where each method holds: closed forms and geometric optics against the Kirchhoff solver as
-the roughness σ/λ grows (the regime map of issue 16).
+the roughness σ/λ grows (the regime map).
 
 For a surface family (``"abc"``: Church's ABC PSD with B = 2π ℓ and C = 3.5, band-limited by
 the generator; ``"gaussian"``: autocorrelation σ² exp(−r²/ℓ²)) at a fixed correlation length

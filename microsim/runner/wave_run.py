@@ -1,4 +1,4 @@
-"""The wave-optics part of ``microsim run`` for a scene with a ``[wave]`` table (issue 16).
+"""The wave-optics part of ``microsim run`` for a scene with a ``[wave]`` table.
 
 After the ray trace (whose geometric verdicts are unchanged and judged against the ray
 tracer), the scalar Kirchhoff (tangent-plane) solver ``wave.kirchhoff_brdf`` is run on the

@@ -2,7 +2,7 @@
 
 embreex traces one ray per call (``rtcIntersect1``); Embree's packet calls
 ``rtcIntersect{4,8,16}``/``rtcOccluded{4,8,16}`` flagged ``RTC_RAY_QUERY_FLAG_COHERENT`` trace
-coherent rays in SIMD lanes (issue 14). The width used is the widest the library traces
+coherent rays in SIMD lanes. The width used is the widest the library traces
 natively on this CPU (device properties ``RTC_DEVICE_PROPERTY_NATIVE_RAY{16,8,4}_SUPPORTED``):
 16 with AVX-512, 8 with AVX2. On an AVX2 CPU, ``rtcIntersect16`` has no native intersector and
 Embree splits it into single rays (measured: no gain over embreex).

@@ -1,4 +1,4 @@
-"""Timing of the wave solver for ``microsim bench`` (issue 16, "Performance"): one incidence,
+"""Timing of the wave solver for ``microsim bench``: one incidence,
 all propagating orders, on an n² ABC tile of side ``tile`` λ, in the smooth regime
 (σ = λ/100) and at σ = λ.
 
