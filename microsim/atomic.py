@@ -14,8 +14,9 @@ aside, and the finished staging directory is kept as ``DIR.unpublished-<pid>-*``
 
 ``output_lock(DIR)`` is an exclusive ``fcntl.flock`` on ``.DIR.lock`` beside ``DIR`` (holding
 the owner's pid), held for a run's duration: a second run on the same ``DIR`` is refused with
-a ``UsageError``. The kernel drops the lock when its process dies, so a stale lock file never
-blocks anyone.
+a ``UsageError`` (a sweep holds ``OUT/.sweep.lock`` inside its output instead). The kernel drops
+the lock when its process dies, so a stale lock file never blocks anyone. ``clean_temp_files``
+removes the temporaries of atomic writes cut short, under the lock.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ __all__ = [
     "publish_dir",
     "output_lock",
     "clean_stale",
+    "clean_temp_files",
     "recover_publish",
     "normalise_modes",
 ]
@@ -276,6 +278,20 @@ def clean_stale(out) -> list[Path]:
     return removed
 
 
+def clean_temp_files(directory) -> list[Path]:
+    """Remove the files ``.*.tmp`` in ``directory``: ``atomic_open``'s temporaries left by
+    writes cut short (a killed process). Returns what was removed; what cannot be removed is
+    left. Call only while holding the lock of the output the directory belongs to."""
+    removed = []
+    for p in Path(directory).glob(".*.tmp"):
+        try:
+            p.unlink()
+        except OSError:
+            continue
+        removed.append(p)
+    return removed
+
+
 def lock_path(out) -> Path:
     """The lock file of output ``out``: ``.OUT.lock`` in its parent."""
     out = Path(out)
@@ -283,11 +299,14 @@ def lock_path(out) -> Path:
 
 
 @contextmanager
-def output_lock(out):
+def output_lock(out, lock_file=None, holder: str = "run"):
     """Hold an exclusive lock on output ``out`` for the block; a second holder (another
-    process or another plan in this one) gets a one-line ``UsageError``. The lock file is
-    removed on exit; the kernel releases the lock if the process dies."""
-    path = lock_path(out)
+    process or another plan in this one) gets a one-line ``UsageError`` calling it "another
+    microsim ``holder``". ``lock_file``: the lock file (default ``lock_path(out)``; a sweep
+    keeps it inside its output directory, ``OUT/.sweep.lock``). The lock file is removed on
+    exit; the kernel releases the lock if the process dies, and a lock file so left behind is
+    simply taken over."""
+    path = lock_path(out) if lock_file is None else Path(lock_file)
     path.parent.mkdir(parents=True, exist_ok=True)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, file_mode())
@@ -301,7 +320,7 @@ def output_lock(out):
                 except OSError:
                     owner = "?"
                 raise UsageError(
-                    f"{out}: another microsim run (pid {owner}) is writing it; "
+                    f"{out}: another microsim {holder} (pid {owner}) is writing it; "
                     f"wait for it to finish or choose another --out"
                 ) from None
             raise

@@ -63,7 +63,7 @@ on the realised heights and is checked when a run is planned (``runner.wave_run`
 anything is written. Scenes without ``[wave]`` are geometric only.
 
 The file itself must be a regular file of at most 1 MiB of UTF-8 TOML (a leading byte-order
-mark is allowed). Every problem raises
+mark is allowed; ``read_toml``, which reads sweep files too). Every problem raises
 ``SceneError`` (a ``UsageError``) with a one-line message naming the file, the key and the
 allowed values.
 """
@@ -103,6 +103,9 @@ __all__ = [
     "make_ndf",
     "describe_surface",
     "read_toml",
+    "surface_spec",
+    "material_ior",
+    "check_heightfield",
     "NDF_PARAMS",
     "SURFACE_KINDS",
     "WaveSpec",
@@ -449,7 +452,10 @@ def _fill(where, section, table, schema):
     return out
 
 
-def _surface_spec(where, table) -> SurfaceSpec:
+def surface_spec(where, table) -> SurfaceSpec:
+    """The validated ``SurfaceSpec`` of a ``[surface]`` table (defaults filled in); a bad
+    value raises ``SceneError`` naming ``where`` (the file) and the key. Used by scene and
+    sweep files alike."""
     if not isinstance(table, dict):
         _fail(where, "surface", f"must be a table, got {table!r}")
     kind = table.get("kind", _REQUIRED)
@@ -507,7 +513,7 @@ def _surface_spec(where, table) -> SurfaceSpec:
     return SurfaceSpec(kind, MappingProxyType(params))
 
 
-def _check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> None:
+def check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> None:
     """A heightfield file usable by ``surfaces.from_file``, checked before anything runs
     (``surfaces.loader.check_heightfield_file``: a regular file holding a real 2D array of
     finite heights that fits in memory, at most ``MAX_GRID`` per side); the one-line error
@@ -518,7 +524,10 @@ def _check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> Non
         _fail(where, "surface.path", " ".join(str(e).split()))
 
 
-def _material(where, table):
+def material_ior(where, table):
+    """The index of refraction of a ``[material]`` table (None: no table or a mirror, else a
+    float or complex n + ik); a bad value raises ``SceneError`` naming ``where`` and
+    ``material.ior``."""
     if table is None:
         return None
     _check_keys(where, "material", table, ["ior"])
@@ -601,10 +610,13 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
 
 
 def read_toml(path, what: str = "scene") -> dict:
-    """The TOML table of ``path``; a missing, non-regular (directory, device), larger than
-    ``MAX_SCENE_BYTES``, non-UTF-8 or malformed file raises ``SceneError`` (one line, naming
-    the file) — shared by scene and sweep files. Other OS errors (permission) propagate as
-    ``OSError`` (the CLI reports them with the path, exit status 1)."""
+    """The TOML table of the ``what`` file (scene, sweep) at ``path``, the one reader of both.
+
+    ``SceneError`` (one line naming the file) for a missing file, a symbolic-link loop, a name
+    too long, a directory or anything else not a regular file (opened without blocking, so a
+    FIFO is refused, never read), more than ``MAX_SCENE_BYTES``, not UTF-8, NUL bytes, arrays
+    or tables nested too deeply, or malformed TOML; a leading byte-order mark is allowed.
+    Other OS errors (permission denied) propagate as ``OSError`` naming the path."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except FileNotFoundError:
@@ -615,12 +627,15 @@ def read_toml(path, what: str = "scene") -> dict:
         if e.errno not in (errno.ELOOP, errno.ENAMETOOLONG, errno.ENOTDIR):
             raise
         raise SceneError(f"{path}: {e.strerror}; not a usable {what} file") from None
+    too_large = f"{path}: larger than {MAX_SCENE_BYTES >> 20} MiB; not a {what} file"
     try:
-        mode = os.fstat(fd).st_mode
-        if stat.S_ISDIR(mode):
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
             raise SceneError(f"{path}: is a directory, not a {what} file")
-        if not stat.S_ISREG(mode):
+        if not stat.S_ISREG(st.st_mode):
             raise SceneError(f"{path}: not a regular file (a {what} file must be a TOML file)")
+        if st.st_size > MAX_SCENE_BYTES:
+            raise SceneError(too_large)
         raw = b""
         while len(raw) <= MAX_SCENE_BYTES:
             part = os.read(fd, MAX_SCENE_BYTES + 1 - len(raw))
@@ -629,8 +644,8 @@ def read_toml(path, what: str = "scene") -> dict:
             raw += part
     finally:
         os.close(fd)
-    if len(raw) > MAX_SCENE_BYTES:
-        raise SceneError(f"{path}: larger than {MAX_SCENE_BYTES >> 20} MiB; not a {what} file")
+    if len(raw) > MAX_SCENE_BYTES:  # grew while being read
+        raise SceneError(too_large)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -638,6 +653,8 @@ def read_toml(path, what: str = "scene") -> dict:
             f"{path}: not UTF-8 text (invalid byte at offset {e.start}); "
             f"a {what} file is UTF-8 TOML"
         ) from None
+    if "\x00" in text:
+        raise SceneError(f"{path}: contains NUL bytes (a binary file?); a {what} file is TOML text")
     try:
         return tomllib.loads(text.removeprefix("\ufeff"))
     except tomllib.TOMLDecodeError as e:
@@ -663,9 +680,9 @@ def load_scene(path) -> Scene:
             + (" (the default is the file name)" if "name" not in data else ""),
         )
     description = _check_value(where, "description", data.get("description", ""), _STR)
-    surface = _surface_spec(where, data["surface"])
+    surface = surface_spec(where, data["surface"])
     if surface.kind == "file":
-        _check_heightfield(
+        check_heightfield(
             where,
             path.parent / surface.params["path"],
             surface.params["dx"],
@@ -685,7 +702,7 @@ def load_scene(path) -> Scene:
         path=path,
         description=description,
         surface=surface,
-        ior=_material(where, data.get("material")),
+        ior=material_ior(where, data.get("material")),
         simulation=simulation,
         wave=wave,
     )

@@ -56,7 +56,6 @@ import itertools
 import json
 import math
 import os
-import re
 import signal
 import stat
 import sys
@@ -70,6 +69,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import atomic
+from . import scene as sc
 from .checkpoints import checkpoint
 from .errors import EnvironmentFailure, UsageError
 from .sim.arguments import MAX_RAYS
@@ -120,9 +120,9 @@ COLUMNS = (
     "rays",
     "seconds",
 )
-MAX_FILE_BYTES = 1 << 20  # a sweep file is a few hundred bytes; refuse anything > 1 MiB
 MAX_TASKS = 100_000  # tasks per sweep file (each is seconds to minutes of tracing)
-_NAME = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")  # = microsim.scene.NAME_PATTERN
+LOCK_FILE = ".sweep.lock"
+"""The lock file inside a sweep's output directory (``atomic.output_lock``)."""
 _NAME_RULE = "1-100 characters from letters, digits, '.', '_', '-', not starting with '.'"
 
 
@@ -198,7 +198,7 @@ def _is_int(v) -> bool:
 
 def _check_name(where: str, key: str, name) -> str:
     """A name used as a path component (task files, default output directory)."""
-    if not isinstance(name, str) or not _NAME.fullmatch(name):
+    if not isinstance(name, str) or not sc.NAME_PATTERN.fullmatch(name):
         _fail(where, f"{key}: must be {_NAME_RULE}, got {name!r}")
     return name
 
@@ -247,14 +247,12 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         Bins(nt, npf)
     except ValueError as e:
         _fail(where, f"theta_bins/phi_bins: {e}")
-    from microsim.scene import MAX_THETA_I
-
-    allowed = f"degrees in [0, {MAX_THETA_I:g}] (as in a scene file)"
+    allowed = f"degrees in [0, {sc.MAX_THETA_I:g}] (as in a scene file)"
     thetas = _axis(data.get("theta_i", [0.0, 30.0, 60.0, 80.0]))
     if not thetas:
         _fail(where, f"theta_i: empty; must be one or more {allowed}")
     if not all(
-        isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t <= MAX_THETA_I
+        isinstance(t, (int, float)) and not isinstance(t, bool) and 0 <= t <= sc.MAX_THETA_I
         for t in thetas
     ):
         _fail(where, f"theta_i: must be {allowed}, got {thetas!r}")
@@ -269,22 +267,22 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
             f"missing runs nothing), got {scenes!r}",
         )
     grid, n_tasks = [], 0
-    for k, sc in enumerate(scenes):
+    for k, entry in enumerate(scenes):
         w = f"{where}: scenes[{k}]"
-        if not isinstance(sc, dict) or not isinstance(sc.get("surface"), dict):
+        if not isinstance(entry, dict) or not isinstance(entry.get("surface"), dict):
             _fail(w, "must be a table with a [scenes.surface] table")
-        extra = sorted(set(sc) - {"name", "ior", "surface"})
+        extra = sorted(set(entry) - {"name", "ior", "surface"})
         if extra:
             _fail(w, f"{extra[0]}: unknown key; allowed keys: name, ior, surface")
-        name = _check_name(w, "name", sc.get("name", f"scene{k}"))
-        surf = sc["surface"]
+        name = _check_name(w, "name", entry.get("name", f"scene{k}"))
+        surf = entry["surface"]
         keys = sorted(surf)
         axes = [_axis(surf[key]) for key in keys]
         for key, ax in zip(keys, axes):
             if not ax:
                 _fail(w, f"surface.{key}: empty axis; give one or more values")
             _check_distinct(w, f"surface.{key}", ax)
-        iors = _axis(sc.get("ior", "aluminium"))
+        iors = _axis(entry.get("ior", "aluminium"))
         if not iors:
             _fail(w, "ior: empty axis; give one or more materials")
         _check_distinct(w, "ior", iors)
@@ -342,10 +340,8 @@ def _value_key(v):
 
 
 def _check_ior(where: str, ior) -> None:
-    from microsim import scene as sc
-
     try:
-        sc._material(where, {"ior": ior})
+        sc.material_ior(where, {"ior": ior})
     except ValueError as e:
         raise UsageError(str(e).replace("material.ior", "ior")) from None
 
@@ -363,53 +359,25 @@ def _check_heightfield_file(where: str, spec, checked: set) -> None:
     """The heightfield file of a ``kind = "file"`` surface, read and checked as a scene file's
     (``microsim.scene``; an OS error such as permission denied propagates); ``checked`` holds
     the (path, dx, periodic) already checked."""
-    from microsim import scene as sc
-
     key = (spec.params["path"], spec.params["dx"], spec.params["periodic"])
     if key in checked:
         return
-    sc._check_heightfield(where, Path(key[0]), key[1], key[2])
+    sc.check_heightfield(where, Path(key[0]), key[1], key[2])
     checked.add(key)
 
 
 def _read_sweep_file(path: Path) -> dict:
-    """The TOML table of a sweep file; one-line UsageError naming the file for anything that
-    is not a readable, small, UTF-8 TOML text file."""
-    from microsim.scene import tomllib
-
+    """The TOML table of a sweep file (``microsim.scene.read_toml``: one-line UsageError naming
+    the file for anything not a small UTF-8 TOML text file); permission denied is a UsageError
+    too, any other OS error an EnvironmentFailure."""
     try:
-        st = path.stat()
-        if stat.S_ISDIR(st.st_mode):
-            _fail(str(path), "is a directory, not a sweep file")
-        if not stat.S_ISREG(st.st_mode):
-            _fail(str(path), "not a regular file (a sweep file is a small TOML text file)")
-        if st.st_size > MAX_FILE_BYTES:
-            _fail(
-                str(path),
-                f"{st.st_size:,} bytes; a sweep file is at most {MAX_FILE_BYTES:,} bytes of TOML",
-            )
-        with open(path, "rb") as fh:
-            raw = fh.read(MAX_FILE_BYTES + 1)
-    except FileNotFoundError:
-        _fail(str(path), "no such sweep file")
+        return sc.read_toml(path, "sweep")
     except PermissionError:
         _fail(str(path), "permission denied (cannot read the sweep file)")
     except OSError as e:
         raise EnvironmentFailure(
             f"{path}: cannot read the sweep file ({e.strerror or e})"
         ) from None
-    if len(raw) > MAX_FILE_BYTES:
-        _fail(str(path), f"more than {MAX_FILE_BYTES:,} bytes; not a sweep file")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        _fail(str(path), f"not UTF-8 text (byte {e.start}); a sweep file is TOML")
-    if "\x00" in text:
-        _fail(str(path), "contains NUL bytes (a binary file?); a sweep file is TOML text")
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        _fail(str(path), f"not valid TOML ({' '.join(str(e).split())})")
 
 
 def load_sweep(path) -> SweepSpec:
@@ -420,7 +388,7 @@ def load_sweep(path) -> SweepSpec:
     name = data.get("name", path.stem)
     if "name" in data:
         _check_name(where, "name", name)
-    elif not _NAME.fullmatch(name):
+    elif not sc.NAME_PATTERN.fullmatch(name):
         _fail(
             where,
             f"name: the file stem {name!r} cannot name the output directory; set "
@@ -435,10 +403,8 @@ def load_sweep(path) -> SweepSpec:
 
 def _scene(name: str, surface: dict, ior, where: str):
     """A ``microsim.scene.Scene`` from a concrete [surface] table (validated like a scene file)."""
-    from microsim import scene as sc
-
-    spec = sc._surface_spec(where, dict(surface))
-    mat = None if ior is None else sc._material(where, {"ior": ior})
+    spec = sc.surface_spec(where, dict(surface))
+    mat = None if ior is None else sc.material_ior(where, {"ior": ior})
     return sc.Scene(
         name=name, path=None, description="", surface=spec, ior=mat, simulation=sc.SimSettings()
     )
@@ -683,42 +649,6 @@ def _sigterm_interrupts():
         signal.signal(signal.SIGTERM, old)
 
 
-@contextmanager
-def _locked(out: Path):
-    """Create ``out/tasks``, hold ``out/.sweep.lock`` for the sweep, and remove the temporary
-    files that interrupted atomic writes of earlier sweeps left behind."""
-    try:
-        (out / "tasks").mkdir(parents=True, exist_ok=True)
-        fd = os.open(out / ".sweep.lock", os.O_RDWR | os.O_CREAT, 0o666)
-    except OSError as e:
-        raise EnvironmentFailure(
-            f"{out}: cannot create the sweep output ({e.strerror or e})"
-        ) from None
-    try:
-        try:
-            import fcntl
-        except ImportError:  # pragma: no cover  (not POSIX: no lock)
-            fcntl = None
-        if fcntl is not None:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                _fail(
-                    str(out),
-                    "another microsim sweep is writing to this directory; wait for "
-                    "it to finish or choose another --out",
-                )
-        for d in (out, out / "tasks"):
-            for p in d.glob(".*.tmp"):
-                try:
-                    p.unlink()
-                except OSError:
-                    pass
-        yield
-    finally:
-        os.close(fd)
-
-
 def _client(scheduler, timeout: float):
     """A ``dask.distributed.Client``; one-line errors for a bad or unreachable address."""
     try:
@@ -851,7 +781,15 @@ def run_sweep(
         client = None
         if scheduler is not None:
             client = stack.enter_context(_client(scheduler, float(connect_timeout)))
-        stack.enter_context(_locked(out))
+        try:
+            (out / "tasks").mkdir(parents=True, exist_ok=True)
+            stack.enter_context(atomic.output_lock(out, out / LOCK_FILE, holder="sweep"))
+        except OSError as e:
+            raise EnvironmentFailure(
+                f"{out}: cannot create the sweep output ({e.strerror or e})"
+            ) from None
+        for d in (out, out / "tasks"):  # left by interrupted writes of earlier sweeps
+            atomic.clean_temp_files(d)
         todo = [t for t in spec.tasks if not _done(t, out)]
         skipped = [t.id for t in spec.tasks if t not in todo]
         if limit is not None:

@@ -111,6 +111,8 @@ FILES = [
     ("non-utf8", OK.encode().replace(b'"vg"', b'"v\xe9g"'), ["UTF-8"]),
     ("binary", bytes(range(256)) * 4, []),
     ("utf16", OK.encode("utf-16"), []),
+    ("nul-bytes", OK.replace('"vg"', '"v\x00g"'), ["NUL"]),
+    ("nested-400000", "a = " + "[" * 400_000 + "]" * 400_000 + "\n", ["nested"]),
 ]
 FILES[0] = ("unknown-top-key", edit("rays = 20_000", "rays = 20_000\nraysx = 1"), ["raysx"])
 
@@ -141,6 +143,14 @@ def test_bad_sweep_file(tmp_path, monkeypatch, capsys, case, content, words):
     _nothing_written(tmp_path, ["bad.toml"])
 
 
+def test_a_byte_order_mark_is_accepted(tmp_path):
+    from microsim.sweep import load_sweep
+
+    (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + OK.encode())
+    (tmp_path / "ok.toml").write_text(OK)
+    assert load_sweep(tmp_path / "bom.toml").tasks == load_sweep(tmp_path / "ok.toml").tasks
+
+
 def _write_ok(tmp_path):
     sweep = tmp_path / "ok.toml"
     sweep.write_text(OK)
@@ -164,6 +174,9 @@ def _setup_option(case, tmp_path):
         return None, 2, ["dir.toml", "directory"], ["dir.toml"]
     if case == "dev-zero":
         return None, 2, ["/dev/zero", "regular"], []
+    if case == "symlink-loop":
+        (tmp_path / "loop.toml").symlink_to(tmp_path / "loop.toml")
+        return None, 2, ["loop.toml", "symbolic links"], ["loop.toml"]
     if case == "workers-0":
         return ["--workers", "0"], 2, ["--workers"], []
     if case == "workers-negative":
@@ -206,6 +219,7 @@ OPTIONS = [
     "no-such-file",
     "directory",
     "dev-zero",
+    "symlink-loop",
     "workers-0",
     "workers-negative",
     "out-is-file",
@@ -229,6 +243,7 @@ def test_bad_option_or_path(tmp_path, monkeypatch, capsys, case):
             "no-such-file": str(tmp_path / "missing.toml"),
             "directory": str(tmp_path / "dir.toml"),
             "dev-zero": "/dev/zero",
+            "symlink-loop": str(tmp_path / "loop.toml"),
         }[case]
         argv = []
     else:
@@ -266,12 +281,14 @@ def test_unwritable_out_parent_is_an_environment_failure(tmp_path, monkeypatch, 
 
 def test_concurrent_sweep_to_the_same_out_is_refused(tmp_path, monkeypatch, capsys):
     """While one sweep holds OUT, a second one to the same OUT stops with one line."""
-    from microsim.sweep import _locked
+    from microsim import atomic
+    from microsim.sweep import LOCK_FILE
 
     monkeypatch.chdir(tmp_path)
     sweep = _write_ok(tmp_path)
     out = tmp_path / "out"
-    with _locked(out):
+    (out / "tasks").mkdir(parents=True)
+    with atomic.output_lock(out, out / LOCK_FILE, holder="sweep"):
         rc = main(["sweep", str(sweep), "--out", str(out)])
         line = _one_error_line(capsys)
     assert rc == 2 and str(out) in line and "another" in line
