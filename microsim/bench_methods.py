@@ -402,7 +402,7 @@ def _panel_wave(cfg: MethodsConfig) -> dict:
                 "seconds": sec,
                 "runs": len(outs),
                 **p,
-                "orders": int(r.rays[0]),
+                "orders": int(r.meta["orders"][0]),
             }
         )
 

@@ -43,8 +43,8 @@ def _family(seed, sampling, R, grooves, rays, bins, model, scale=1.0, alpha=0.05
         realisations=surfs if R > 1 else None,
     )
     specs = [m for m in default_models(surfs, "aluminium", azimuths=azimuths) if m.name == model]
-    attach_models(res, specs)
-    res.models[model] = res.models[model] * scale
+    res = attach_models(res, specs)
+    res = res.with_models({**res.models, model: res.models[model] * scale})
     return [validate_verdict(v) for v in verdicts_for_result(res, alpha=alpha)]
 
 
@@ -208,7 +208,9 @@ def test_gaussian_catalogue_verdicts_at_full_settings_slow():
         "ts-beckmann-realised-smith-corr",
         "ts-beckmann-realised-vgroove",
     }
-    attach_models(res, [m for m in default_models(surfs, sc.ior, ndf=sc.ndf()) if m.name in names])
+    res = attach_models(
+        res, [m for m in default_models(surfs, sc.ior, ndf=sc.ndf()) if m.name in names]
+    )
     vs = {(v["model"], v["theta_i"]): v for v in verdicts_for_result(res)}
     for v in vs.values():
         print(

@@ -246,7 +246,7 @@ def test_options_are_keyword_only():
 def test_result_round_trip_and_in_plane(tmp_path):
     bins = Bins(45, 37)
     res = simulate(flat(), "aluminium", [31.0, 61.0], rays=1000, bins=bins)
-    res.models["mirror"] = res.brdf * 1.0
+    res = res.with_models({"mirror": res.brdf * 1.0})
     res.save(tmp_path / "run")
     back = Result.load(tmp_path / "run")
     for name in ("theta_i", "phi_i", "brdf", "stderr", "rays", "sum_w", "sum_w2", "counts"):

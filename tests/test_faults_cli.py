@@ -591,7 +591,7 @@ def test_partial_side_study_is_an_interrupt(tmp_path, capsys, monkeypatch, fast)
     def cut_short(plan, theta_i, rays, seed, bins, progress=None, resume=None, **kw):
         r = real(plan, theta_i, rays, seed, bins, progress=progress, resume=resume, **kw)
         if seed != plan.seed:  # a side study (own seed offset)
-            r.meta["partial"] = True
+            r = r.with_meta(partial=True)
         return r
 
     monkeypatch.setattr(tracing, "simulate_scene", cut_short)

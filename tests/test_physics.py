@@ -306,7 +306,7 @@ def test_default_models_names_and_attach():
     res = simulate(
         vg, "aluminium", [20.0, 60.0, 20.0], phi_i=[0.0, 0.0, 45.0], rays=20_000, bins=bins
     )
-    attach_models(res, default_models(vg, "aluminium", azimuths=64))
+    res = attach_models(res, default_models(vg, "aluminium", azimuths=64))
     want = ts_vgroove(an.Beckmann(0.3), [20.0, 60.0], bins)
     assert np.array_equal(res.models["ts-vgroove"][:2], want)
     # isotropic model, relative azimuth: φi does not matter (to the quadrature tolerance)
@@ -322,7 +322,7 @@ def test_flat_mirror_model_is_the_fresnel_delta():
 
     theta = [0.0, 40.0, 85.0]
     res = simulate(flat(), "aluminium", theta, rays=4096, bins=Bins(18, 13))
-    attach_models(res, default_models(flat(), "aluminium"))
+    res = attach_models(res, default_models(flat(), "aluminium"))
     model = res.models["mirror-fresnel"]
     omega = res.bins.projected_solid_angle()
     f = an.fresnel(np.cos(np.radians(theta)), an.resolve_material("aluminium"))

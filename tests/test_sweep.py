@@ -152,8 +152,7 @@ def test_partial_simulation_writes_no_task_file(tmp_path, monkeypatch):
 
     def interrupted(surface, material, theta_i, *, rays, **kw):
         res = real(surface, material, theta_i, rays=rays // 2, **kw)  # fewer rays tallied …
-        res.meta["partial"] = True  # … as after a Ctrl-C
-        return res
+        return res.with_meta(partial=True)  # … as after a Ctrl-C
 
     monkeypatch.setattr(sim, "simulate", interrupted)
     task = tiny_spec().tasks[0]

@@ -114,7 +114,7 @@ def test_fitted_parameters_reduce_dof():
 def small_vgroove_result():
     surface = sf.vgrooves(1000, an.Beckmann(0.3))
     res = simulate(surface, "aluminium", [0.0, 60.0], rays=100_000, bins=BINS)
-    res.models.update(
+    res = res.with_models(
         predict(
             [ModelSpec.torrance_sparrow("ts_vgroove", an.Beckmann(0.3), "vgroove", "aluminium")],
             res.theta_i,
@@ -177,7 +177,7 @@ def _vgroove_verdicts(rays, n_grooves=4000, masking="traced"):
     res = simulate(
         surface, "aluminium", [0.0, 30.0, 60.0, 80.0], rays=rays, bins=BINS, masking=masking
     )
-    res.models.update(
+    res = res.with_models(
         predict(
             [ModelSpec.torrance_sparrow("ts_vgroove", an.Beckmann(0.3), "vgroove", "aluminium")],
             res.theta_i,
@@ -221,7 +221,7 @@ def _gaussian_comparison(rays, seeds):
         realisations=surfaces if len(surfaces) > 1 else None,
     )
     ndf = an.Beckmann(m)
-    res.models.update(
+    res = res.with_models(
         predict(
             [
                 ModelSpec.torrance_sparrow("vgroove", ndf, "vgroove", "aluminium"),
@@ -320,7 +320,7 @@ def test_facet_model_agrees_on_random_tilts_over_realisations():
         None, "aluminium", [0.0, 60.0], rays=150_000, bins=Bins(12, 7), realisations=surfs, seed=2
     )
     specs = [m for m in default_models(surfs, "aluminium") if m.name == "ts-facets"]
-    attach_models(res, specs)
+    res = attach_models(res, specs)
     for v in V.verdicts_for_result(res):
         assert v["agrees"], v
 

@@ -50,8 +50,11 @@ def test_albedo_is_total_order_power():
     r = kirchhoff_brdf(s, 1.5, 35.0, wavelength=1.0, bins=Bins(20, 9, True))
     o = kirchhoff_orders(s.heights, s.dx, 1.0, 35.0, material=1.5)
     assert r.albedo()[0] == pytest.approx(o.power.sum(), rel=1e-12)
-    assert r.ledger["single"][0] == pytest.approx(o.power.sum(), rel=1e-12)
-    assert r.rays[0] == len(o.m) == r.counts.sum()
+    assert r.meta["order_power"][0] == pytest.approx(o.power.sum(), rel=1e-12)
+    assert r.meta["orders"][0] == len(o.m) == r.counts.sum()
+    # no fake ray ledger: the solver traces no rays
+    assert r.rays is None and r.ledger is None and r.ledger_counts is None
+    assert not r.has_ray_tallies and "rays=" not in repr(r)
 
 
 def test_realisation_stderr_is_calibrated():

@@ -102,7 +102,7 @@ def holds_finished_result(out: Path) -> bool:
 def save_tallies(result, dest: Path) -> None:
     """Publish the tallies of ``result`` (brdf.npz + meta.json, no models) to ``dest``. A
     further Ctrl-C while they are written is held back until they are in place."""
-    result.models.clear()
+    result = result.with_models({})
     with DeferredInterrupt():
         stage = staging(dest)
         try:

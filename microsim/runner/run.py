@@ -104,9 +104,9 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     hint = plan.resume_hint or f"--resume {dest}"
     prev = plan.previous
     record = prev.meta.get("run", {}).get("realisations_auto") if prev is not None else None
-    if prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays:
-        result = prev  # finished tallies: only the analysis is left
-        result.models.clear()
+    from_previous = prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays
+    if from_previous:
+        result = prev.with_models({})  # finished tallies: only the analysis is left
     elif plan.auto:
         result = tracing.simulate_auto_scene(plan, log if progress else None)
     elif plan.auto_realisations and (record is None or record["stage"] == "pilot"):
@@ -126,14 +126,17 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
                 result = _trace(plan, keep, progress)
     else:
         result = _trace(plan, prev, progress)
-    result.meta["run"] = tracing.run_meta(plan)
+    run = tracing.run_meta(plan)
     if record is not None:
-        result.meta["run"]["realisations_auto"] = record
+        run["realisations_auto"] = record
     if plan.auto:
-        result.meta["run"]["auto"] = tracing.auto_summary(result)
+        run["auto"] = tracing.auto_summary(result)
+    result = result.with_meta(run=run)
     if result.is_partial:
-        return _interrupted(plan, result, dest, log, "", "partial tallies", f"continue with {hint}")
-    result.meta["error_budget"] = error_budget(result)
+        return _interrupted(
+            plan, result, dest, log, "", "partial tallies", f"continue with {hint}", from_previous
+        )
+    result = result.with_meta(error_budget=error_budget(result))
     stage = staging(plan.out)
     try:
         return _analyse(plan, stage, result, log, progress)
@@ -143,19 +146,29 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
             return RunOutcome(130, plan.out)
         shutil.rmtree(stage, ignore_errors=True)
         return _interrupted(
-            plan, result, dest, log, " after the simulation", "tallies", f"finish with {hint}"
+            plan,
+            result,
+            dest,
+            log,
+            " after the simulation",
+            "tallies",
+            f"finish with {hint}",
+            from_previous,
         )
     finally:
         if stage.exists():
             shutil.rmtree(stage, ignore_errors=True)
 
 
-def _interrupted(plan: RunPlan, result, dest: Path, log, when: str, what: str, how: str):
+def _interrupted(
+    plan: RunPlan, result, dest: Path, log, when: str, what: str, how: str, from_previous: bool
+):
     """Status 130 after Ctrl-C, the tallies saved in ``dest`` for ``--resume`` unless that
-    would lose something: tallies read from ``dest`` are not written again (a finished run
-    re-analysed keeps its report), and a run replacing a finished result (``--force``) leaves
-    it as it was, dropping its own tallies."""
-    if result is plan.previous:
+    would lose something: tallies read from ``dest`` (``from_previous``: ``result`` derives
+    from ``plan.previous``) are not written again (a finished run re-analysed keeps its
+    report), and a run replacing a finished result (``--force``) leaves it as it was, dropping
+    its own tallies."""
+    if from_previous:
         log(f"microsim: interrupted{when}; {dest} is unchanged ({how})")
     elif plan.partial_dir is None and plan.previous is None and holds_finished_result(dest):
         log(
@@ -197,7 +210,7 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
     try:
         stages.stage("models")
         specs = side_studies.models_for(plan)
-        side_studies.attach(result, specs)
+        result = side_studies.attach(result, specs)
         stages.stage("fits")
         checkpoint("fits")
         # a flat mirror's lobe is a delta, narrower than any bin: fitting a lobe shape is
@@ -245,7 +258,7 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
             f"relative RMS error against {speed_ref}",
         )
         stages.stage("writing")
-        result.meta["seconds_analysis"] = time.perf_counter() - t0
+        result = result.with_meta(seconds_analysis=time.perf_counter() - t0)
         result.save(stage)
         if kres is not None:
             kres.save(stage / wave_run.WAVE_DIR)

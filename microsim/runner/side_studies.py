@@ -53,13 +53,14 @@ def models_for(plan: RunPlan, seed: int | None = None, realisations: int | None 
     return default_models(surfaces, sc.ior, ndf=sc.ndf())
 
 
-def attach(result, specs) -> None:
-    """``attach_models``; quadrature bins that miss their tolerance (predict's RuntimeWarning)
-    are recorded in ``result.meta["model_warnings"]`` for the report instead of stderr."""
+def attach(result, specs):
+    """``attach_models``: a new Result with the models; quadrature bins that miss their
+    tolerance (predict's RuntimeWarning) are recorded in its ``meta["model_warnings"]`` for the
+    report instead of stderr."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
-        attach_models(result, specs)
-    result.meta["model_warnings"] = sorted({str(w.message) for w in caught})
+        out = attach_models(result, specs)
+    return out.with_meta(model_warnings=sorted({str(w.message) for w in caught}))
 
 
 def _energy_rel_rms(sim, ref, omega) -> float:
@@ -134,7 +135,7 @@ def stability(plan: RunPlan):
     )
     # the sweep's own surfaces: ts-facets must describe the facets it traced
     specs = [m for m in models_for(plan, seed, n) if e.sweep_facets or m.kind != "facets"]
-    attach(sweep, specs)
+    sweep = attach(sweep, specs)
     return sweep, verdicts_for_result(sweep)
 
 

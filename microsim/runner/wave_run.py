@@ -179,7 +179,7 @@ def run_wave(plan, result) -> tuple:
         "masked_fraction": masked.tolist(),
         "masked_limit": MASKED_LIMIT,
         "in_domain": [bool(m < MASKED_LIMIT) for m in masked],
-        "orders": [int(v) for v in kres.rays],
+        "orders": [int(v) for v in kres.meta["orders"]],
         "file": f"{WAVE_DIR}/",
         "verdicts": verdicts,
     }

@@ -30,6 +30,7 @@ m_real = ``surface.stats()["m_realised"]``):
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
@@ -198,10 +199,13 @@ def _result_fingerprints(result: Result) -> tuple[str, ...] | None:
 
 
 def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
-    """Fill ``result.models`` (name → (T, Θ, Φ) sr⁻¹) with the bin-averaged predictions of
-    ``specs`` on the result's bins, θi and φi (one ``predict`` call per distinct φi).
+    """A new Result: ``result`` with the bin-averaged predictions of ``specs`` (name → (T, Θ, Φ)
+    sr⁻¹, on the result's bins, θi and φi; one ``predict`` call per distinct φi) added to its
+    ``models`` and their facet models added to ``meta["realisation_models"]``. ``result``
+    itself is left untouched (Results are immutable); predictions travel inside the Result
+    because they are saved with it (``model_*`` arrays) and every report reads them there.
     Facet models tagged with surface fingerprints (``default_models``) must match the result's
-    realisations, else UsageError. Returns ``result`` (modified in place)."""
+    realisations, else UsageError."""
     specs = list(specs)
     traced = _result_fingerprints(result)
     for s in specs:
@@ -219,12 +223,14 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
         pred = predict(specs, result.theta_i[sel], result.bins, phi_i=float(phi), rtol=rtol)
         for name, values in pred.items():
             out[name][sel] = values
-    result.models.update(out)
     own = set(result.meta.get("realisation_models", ())) | {
         s.name for s in specs if s.kind == "facets"
     }
-    result.meta["realisation_models"] = sorted(own)
-    return result
+    return replace(
+        result,
+        models={**result.models, **out},
+        meta={**result.meta, "realisation_models": sorted(own)},
+    )
 
 
 class G1Measurement(NamedTuple):

@@ -1,5 +1,10 @@
 """Result of a simulation: bin-averaged BRDF, standard errors, energy ledger, raw tallies.
 
+A ``Result`` is immutable: a frozen dataclass whose arrays are read-only views, whose
+``meta`` is a deep read-only copy (``FrozenDict``/``FrozenList``: dict and list subclasses, so
+``json``, ``isinstance`` and ``==`` keep working) and whose ``models`` is a read-only mapping.
+Derivations return new objects (``with_meta``, ``with_models``, ``dataclasses.replace``).
+
 Arrays are indexed (incidence T, θo bin Θ, Δφ bin Φ); angles in degrees, BRDFs in sr⁻¹.
 ``save(dir)`` writes ``brdf.npz`` and ``meta.json`` atomically (temporary files in the same
 directory, then ``os.replace``); ``Result.load(dir)`` reads them back.
@@ -7,6 +12,7 @@ directory, then ``os.replace``); ``Result.load(dir)`` reads them back.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
@@ -19,7 +25,7 @@ from microsim.errors import UsageError
 from .bins import Bins
 from .paths import LEDGER
 
-__all__ = ["Result", "InPlane"]
+__all__ = ["Result", "InPlane", "FrozenDict", "FrozenList"]
 
 NPZ, META = "brdf.npz", "meta.json"
 _OPTIONAL = (
@@ -33,6 +39,71 @@ _OPTIONAL = (
 )
 
 
+def _refuse(self, *args, **kwargs):
+    raise TypeError(f"{type(self).__name__} is read-only (a Result never changes: derive one)")
+
+
+class FrozenDict(dict):
+    """A read-only dict (every mutating method raises TypeError); copies (``dict(d)``,
+    ``{**d}``, ``d | e``) are plain dicts."""
+
+    __setitem__ = __delitem__ = __ior__ = clear = pop = popitem = setdefault = update = _refuse
+
+    def __reduce__(self):
+        return (type(self), (dict(self),))
+
+
+class FrozenList(list):
+    """A read-only list (every mutating method raises TypeError); ``list(x)`` copies."""
+
+    __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
+    append = extend = insert = pop = remove = clear = sort = reverse = _refuse
+
+    def __reduce__(self):
+        return (type(self), (list(self),))
+
+
+def _readonly(a):
+    """A read-only view of array ``a`` (the caller's array itself stays writeable); None as is."""
+    if a is None:
+        return None
+    v = np.asarray(a)
+    v = v.view() if v is a else v
+    v.flags.writeable = False
+    return v
+
+
+def _freeze(obj):
+    """Deep read-only copy of a JSON-like value: dicts → FrozenDict, lists → FrozenList,
+    tuples keep their type, arrays → read-only views, anything else as is."""
+    if isinstance(obj, dict):
+        return FrozenDict({k: _freeze(v) for k, v in obj.items()})
+    if isinstance(obj, list):
+        return FrozenList(_freeze(v) for v in obj)
+    if isinstance(obj, tuple) and type(obj) is tuple:
+        return tuple(_freeze(v) for v in obj)
+    if isinstance(obj, np.ndarray):
+        return _readonly(obj)
+    return obj
+
+
+def _arrays_of(mapping):
+    """name → read-only array view (a FrozenDict), or None."""
+    return None if mapping is None else FrozenDict({k: _readonly(v) for k, v in mapping.items()})
+
+
+_ARRAY_FIELDS = (
+    "theta_i",
+    "phi_i",
+    "brdf",
+    "stderr",
+    "rays",
+    "counts",
+    "sum_w",
+    "sum_w2",
+) + _OPTIONAL
+
+
 @dataclass(frozen=True)
 class InPlane:
     """Incidence-plane slice: signed θo in degrees (Δφ = 180°, specular side, positive;
@@ -43,17 +114,23 @@ class InPlane:
     stderr: np.ndarray
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class Result:
-    """Bin-averaged single-bounce BRDF of one surface (pooled over realisations).
+    """Bin-averaged single-bounce BRDF of one surface (pooled over realisations), measured by
+    any method (ray tracer, Kirchhoff solver). Immutable (module docstring).
 
     ``theta_i``/``phi_i`` (T,) deg; ``bins`` the outgoing grid (``theta_edges``/``phi_edges``
     in deg); ``brdf``/``stderr`` (T, Θ, Φ) sr⁻¹ (stderr combines ray noise and, with several
-    realisations, realisation scatter: see ``stderr_ray``/``stderr_realisation``); ``rays`` (T,)
-    primary rays; ``ledger`` name → (T,) fractions of primary rays (see ``paths.LEDGER``);
-    ``ledger_counts`` name → (T,) integer ray counts; ``counts`` (T, Θ, Φ) single-bounce rays
-    per bin; ``sum_w``/``sum_w2`` raw Fresnel-weight tallies; ``models`` name → (T, Θ, Φ)
-    bin-averaged model predictions (filled by the caller); ``meta`` JSON-able run description.
+    realisations, realisation scatter: see ``stderr_ray``/``stderr_realisation``); ``meta``
+    JSON-able run description (read-only); ``models`` name → (T, Θ, Φ) bin-averaged model
+    predictions (read-only; ``compare.attach_models`` returns a Result holding them).
+
+    Ray tallies, an optional part (None for a method without rays, e.g. Kirchhoff: see
+    ``has_ray_tallies``): ``rays`` (T,) primary rays; ``ledger`` name → (T,) fractions of
+    primary rays (see ``paths.LEDGER``); ``ledger_counts`` name → (T,) integer ray counts.
+    Per-bin tallies, also optional: ``counts`` (T, Θ, Φ) events per bin (single-bounce rays;
+    Kirchhoff: diffraction orders); ``sum_w``/``sum_w2`` raw sums of the events' weights
+    (Fresnel weights; Kirchhoff: order powers) and of their squares.
 
     Partial runs (interrupted ``simulate``): ``meta["partial"]`` is True (``is_partial``),
     ``rays`` counts the rays of the complete blocks per incidence (0 and NaN estimates for
@@ -83,13 +160,13 @@ class Result:
     bins: Bins
     brdf: np.ndarray
     stderr: np.ndarray
-    rays: np.ndarray
-    ledger: dict
-    ledger_counts: dict
-    counts: np.ndarray
-    sum_w: np.ndarray
-    sum_w2: np.ndarray
-    meta: dict
+    rays: np.ndarray | None = None
+    ledger: dict | None = None
+    ledger_counts: dict | None = None
+    counts: np.ndarray | None = None
+    sum_w: np.ndarray | None = None
+    sum_w2: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
     models: dict = field(default_factory=dict)
     stderr_ray: np.ndarray | None = None
     stderr_realisation: np.ndarray | None = None
@@ -100,19 +177,45 @@ class Result:
     stderr_orders: np.ndarray | None = None
     brdf_realisations_orders: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        """Store read-only views of the arrays and deep read-only copies of the mappings."""
+        put = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
+        for k in _ARRAY_FIELDS:
+            put(k, _readonly(getattr(self, k)))
+        for k in ("ledger", "ledger_counts", "tallies"):
+            put(k, _arrays_of(getattr(self, k)))
+        put("models", _arrays_of(self.models))
+        put("meta", _freeze(dict(self.meta)))
+
+    @property
+    def has_ray_tallies(self) -> bool:
+        """True if the result carries the ray ledger (``rays``, ``ledger``, ``ledger_counts``)."""
+        return self.rays is not None and self.ledger is not None
+
+    def with_meta(self, **entries) -> "Result":
+        """A new Result with ``meta`` updated by ``entries`` (this one is unchanged)."""
+        return dataclasses.replace(self, meta={**self.meta, **entries})
+
+    def with_models(self, models) -> "Result":
+        """A new Result whose ``models`` is ``models`` (name → (T, Θ, Φ) sr⁻¹)."""
+        return dataclasses.replace(self, models=dict(models))
+
     def __repr__(self) -> str:
         """One line: surface, material, incidences, rays, bins, albedo, models (no arrays)."""
         surface = (self.meta.get("surface") or {}).get("kind", "?")
         material = (self.meta.get("material") or {}).get("name") or "custom ior"
-        n_real = len(self.meta.get("realisations") or ()) or 1
+        reals = self.meta.get("realisations")  # the ray tracer's list, Kirchhoff's count
+        n_real = reals if isinstance(reals, int) else len(reals or ()) or 1
         theta = ", ".join(f"{t:g}" for t in self.theta_i)
-        rays = ", ".join(f"{int(r):,}" for r in self.rays)
+        rays = (
+            "" if self.rays is None else f"rays=[{', '.join(f'{int(r):,}' for r in self.rays)}], "
+        )
         albedo = ", ".join(f"{a:.4g}" for a in self.albedo())
         state = " PARTIAL" if self.is_partial else ""
         models = f", models=[{', '.join(self.models)}]" if self.models else ""
         return (
             f"<Result{state} {surface}{f' ×{n_real}' if n_real > 1 else ''}, {material}, "
-            f"θi=[{theta}]°, rays=[{rays}], bins={self.bins.n_theta}×{self.bins.n_phi}, "
+            f"θi=[{theta}]°, {rays}bins={self.bins.n_theta}×{self.bins.n_phi}, "
             f"albedo=[{albedo}]{models}>"
         )
 
@@ -164,13 +267,12 @@ class Result:
             "phi_edges": self.phi_edges,
             "brdf": self.brdf,
             "stderr": self.stderr,
-            "rays": self.rays,
-            "counts": self.counts,
-            "sum_w": self.sum_w,
-            "sum_w2": self.sum_w2,
         }
-        out.update({f"ledger_{k}": v for k, v in self.ledger.items()})
-        out.update({f"count_{k}": v for k, v in self.ledger_counts.items()})
+        for k in ("rays", "counts", "sum_w", "sum_w2"):
+            if getattr(self, k) is not None:
+                out[k] = getattr(self, k)
+        out.update({f"ledger_{k}": v for k, v in (self.ledger or {}).items()})
+        out.update({f"count_{k}": v for k, v in (self.ledger_counts or {}).items()})
         out.update({f"model_{k}": v for k, v in self.models.items()})
         out.update({k: getattr(self, k) for k in _OPTIONAL if getattr(self, k) is not None})
         out.update({f"tally_{k}": v for k, v in (self.tallies or {}).items()})
@@ -215,12 +317,12 @@ class Result:
             bins=bins,
             brdf=a["brdf"],
             stderr=a["stderr"],
-            rays=a["rays"],
-            ledger=pick("ledger_"),
-            ledger_counts=pick("count_"),
-            counts=a["counts"],
-            sum_w=a["sum_w"],
-            sum_w2=a["sum_w2"],
+            rays=a.get("rays"),
+            ledger=pick("ledger_") or None,
+            ledger_counts=pick("count_") or None,
+            counts=a.get("counts"),
+            sum_w=a.get("sum_w"),
+            sum_w2=a.get("sum_w2"),
             meta=meta,
             models=pick("model_"),
             tallies=pick("tally_") or None,
@@ -228,8 +330,8 @@ class Result:
         )
 
 
-_REQUIRED = ("theta_i", "phi_i", "theta_edges", "phi_edges", "brdf", "stderr", "rays")
-_REQUIRED += ("counts", "sum_w", "sum_w2")
+_REQUIRED = ("theta_i", "phi_i", "theta_edges", "phi_edges", "brdf", "stderr")
+_RAY_REQUIRED = ("rays", "counts", "sum_w", "sum_w2")
 _TALLIES = ("blocks", "rays", "sum_w", "sum_w2", "count", "led_n", "led_f")
 
 
@@ -242,7 +344,9 @@ def _check_saved(a: dict, meta: dict, bins: Bins, npz: str, meta_path: str) -> N
     def fail(msg):
         raise UsageError(f"{npz}: {msg}")
 
-    for k in _REQUIRED:
+    # the ray tallies are optional, but a result with any ray ledger or raw tallies has them all
+    rayed = any(k.startswith(("ledger_", "count_", "tally_")) for k in a) or "rays" in a
+    for k in _REQUIRED + (_RAY_REQUIRED if rayed else ()):
         if k not in a:
             fail(f"no {k} array")
     for k, v in a.items():
@@ -281,11 +385,14 @@ def _check_saved(a: dict, meta: dict, bins: Bins, npz: str, meta_path: str) -> N
     for k in ("brdf", "stderr"):
         if np.any(np.isinf(a[k])) or np.any(a[k] < 0):
             fail(f"{k} must be finite and >= 0 (NaN where no ray was traced)")
-    shape("rays", (n,))
-    integers("rays", a["rays"])
-    integers("counts", a["counts"])
-    sums("sum_w", a["sum_w"])
-    sums("sum_w2", a["sum_w2"])
+    if "rays" in a:
+        shape("rays", (n,))
+        integers("rays", a["rays"])
+    if "counts" in a:
+        integers("counts", a["counts"])
+    for k in ("sum_w", "sum_w2"):
+        if k in a:
+            sums(k, a[k])
     for k in (k for k in a if k.startswith(("ledger_", "count_"))):
         shape(k, (n,))
         if k.startswith("count_"):

@@ -31,7 +31,6 @@ import numpy as np
 
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
-from microsim.sim.paths import LEDGER
 from microsim.sim.result import Result
 
 from .kirchhoff import kirchhoff_orders
@@ -104,11 +103,12 @@ def kirchhoff_brdf(
     and ``dx``, or a sequence of such realisations) at incidences ``theta_i`` (degrees, scalar
     or sequence) and azimuth ``phi_i``; ``wavelength`` in the unit of ``dx``.
 
-    Returns a ``Result`` (T, Θ, Φ) with ``meta["method"] = "kirchhoff"``: ``brdf`` the mean
-    over realisations; ``rays`` and ``counts`` count diffraction orders (not rays, summed over
-    realisations); ``sum_w``/``sum_w2`` the sums of order powers and their squares per bin;
-    ``ledger["single"]`` the mean total order power (all single scattering: Kirchhoff has no
-    masking or multiple scattering; the other ledger entries are 0); ``meta["specular_power"]``
+    Returns a ``Result`` (T, Θ, Φ) with ``meta["method"] = "kirchhoff"`` and no ray tallies
+    (``rays``, ``ledger``, ``ledger_counts`` None): ``brdf`` the mean over realisations;
+    ``counts`` the diffraction orders per bin and ``meta["orders"]`` (T,) per incidence (summed
+    over realisations); ``sum_w``/``sum_w2`` the sums of order powers and their squares per
+    bin; ``meta["order_power"]`` (T,) the mean total order power (the fraction of the incident
+    flux reflected: all single scattering, Kirchhoff has no masking); ``meta["specular_power"]``
     the (0, 0) order's power per incidence (mean over realisations: the coherent part, in the
     mirror bin ``meta["specular_bin"]``, flat θ-major index); ``stderr`` as the module
     docstring (``stderr_ray`` = speckle part, ``stderr_realisation`` with ≥ 2 tiles).
@@ -142,12 +142,7 @@ def kirchhoff_brdf(
         stderr = se_real
     else:
         stderr = se_speckle
-    zeros = np.zeros(len(th))
-    ledger = {name: zeros.copy() for name in LEDGER}
-    ledger["single"] = np.mean([r["single"] for r in per], axis=0)
     n_orders = np.sum([r["orders"] for r in per], axis=0).astype(np.int64)
-    counts = {name: np.zeros(len(th), dtype=np.int64) for name in LEDGER}
-    counts["single"] = n_orders
     meta = {
         "method": "kirchhoff",
         "surface": {"kind": getattr(surfaces[0], "kind", "heightfield"), **surfaces[0].nominal},
@@ -163,6 +158,8 @@ def kirchhoff_brdf(
         "stderr_method": "realisations" if n_real > 1 else "speckle",
         "specular_power": np.mean([r["spec"] for r in per], axis=0).tolist(),
         "specular_bin": per[0]["spec_bin"].tolist(),
+        "orders": n_orders.tolist(),
+        "order_power": np.mean([r["single"] for r in per], axis=0).tolist(),
         "partial": False,
         "seconds": time.perf_counter() - t0,
     }
@@ -172,9 +169,6 @@ def kirchhoff_brdf(
         bins=bins,
         brdf=brdf.reshape(shape),
         stderr=stderr.reshape(shape),
-        rays=n_orders,
-        ledger=ledger,
-        ledger_counts=counts,
         counts=sum(r["counts"] for r in per).reshape(shape),
         sum_w=sum(r["sum_w"] for r in per).reshape(shape),
         sum_w2=sum(r["sum_w2"] for r in per).reshape(shape),
