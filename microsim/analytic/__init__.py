@@ -2,6 +2,7 @@
 
 from microsim import analytic as an
 an.fresnel(cos_theta, material); an.Beckmann(m); an.torrance_sparrow(wi, wo, ndf, ...)
+an.TorranceSparrow(an.GGX(0.3), an.Smith(correlated=True)).f(wi, wo)   # model objects
 """
 
 from .brdf import *  # noqa: F401,F403
@@ -10,6 +11,8 @@ from .empirical import *  # noqa: F401,F403
 from .energy_compensation import *  # noqa: F401,F403
 from .fresnel import *  # noqa: F401,F403
 from .low import *  # noqa: F401,F403
+from .masking import *  # noqa: F401,F403
+from .models import *  # noqa: F401,F403
 from .ndf import *  # noqa: F401,F403
 from .random_walk import *  # noqa: F401,F403
 from .shadowing import *  # noqa: F401,F403

@@ -1,27 +1,43 @@
 """The list of closed-form models microsim implements, for `microsim models` and reports.
 
-Each entry names the Python callable, its arguments in order (with units and allowed ranges)
-and the paper and equation it comes from; docs/references.md has the full entries. Directions
-come first — ``(wi, wo, ...)``, samplers ``(wo, u1, u2, ...)`` — then the model; ``material``
-is a name, n, n + ik or None (``resolve_material``).
+Generated: the BRDFs and masking terms from the class attributes of ``models.MODEL_CLASSES``
+and ``masking.MASKING_CLASSES`` (``name``, ``params_doc``, ``source``, ``functions``; a
+sampleable class adds a "sampler" row from ``sampler_doc``, ``sampler_source``,
+``sampler_functions``), the NDFs, Fresnel terms, albedo tools, the random walk and the metrics
+(which stay plain functions or classes without such attributes) from ``_FUNCTIONS`` below.
+Each entry names the Python object in ``microsim.analytic``, the free functions it wraps, its
+parameters (units and ranges) and the paper and equation; docs/references.md has the full
+entries. Directions come first — ``(wi, wo, ...)``, samplers ``(wo, u1, u2, ...)`` — then the
+model; ``material`` is a name, n, n + ik or None (``resolve_material``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .masking import MASKING_CLASSES
+from .models import MODEL_CLASSES
+
 __all__ = ["ModelInfo", "MODELS", "model_table"]
+
+KINDS = ("fresnel", "ndf", "shadowing", "brdf", "sampler", "metric")
 
 
 @dataclass(frozen=True)
 class ModelInfo:
-    kind: str  # "fresnel" | "ndf" | "shadowing" | "brdf" | "sampler" | "metric"
-    name: str  # Python name in microsim.analytic
+    kind: str  # one of KINDS
+    name: str  # Python name in microsim.analytic ("Class.sample" for a sampler row)
     params: str  # parameters with units / ranges
     source: str  # paper and equation
+    functions: tuple[str, ...] = ()  # free functions of microsim.analytic it wraps
+
+    @property
+    def label(self) -> str:
+        """``name`` and the wrapped functions, as printed: "TorranceSparrow / torrance_sparrow"."""
+        return " / ".join((self.name,) + tuple(self.functions))
 
 
-MODELS: tuple[ModelInfo, ...] = (
+_FUNCTIONS: tuple[ModelInfo, ...] = (
     ModelInfo(
         "fresnel",
         "fresnel",
@@ -65,56 +81,22 @@ MODELS: tuple[ModelInfo, ...] = (
         "beckmann_to_phong",
         "0 < m ≤ 1 → Phong exponent e = 2/m² − 2 (and phong_to_beckmann)",
         "Mikkelsen 2009, eq. 21",
-    ),
-    ModelInfo("shadowing", "vgroove_g", "wi, wo, h", "Mikkelsen 2009, eq. 25 (Blinn 1977)"),
-    ModelInfo(
-        "shadowing",
-        "smith_g1",
-        "w, h, ndf; closed Λ for Beckmann/GGX, projected-area identity otherwise",
-        "Smith 1967; Heitz 2014",
-    ),
-    ModelInfo(
-        "shadowing",
-        "smith_g2",
-        "wi, wo, h, ndf, correlated=False|True",
-        "separable / height-correlated Smith (Heitz 2014)",
+        ("phong_to_beckmann",),
     ),
     ModelInfo(
         "brdf",
-        "torrance_sparrow",
-        "wi, wo, ndf, shadowing=vgroove|smith|smith-correlated|none, material",
-        "Mikkelsen 2009, eq. 13/18",
-    ),
-    ModelInfo(
-        "brdf",
-        "directional_albedo / AlbedoTable",
+        "AlbedoTable",
         "θ (deg), brdf / ndf, shadowing, material",
         "Mikkelsen 2009, eq. 27",
-    ),
-    ModelInfo(
-        "brdf",
-        "mikkelsen_mix",
-        "wi, wo, specular albedo table, diffuse colour",
-        "Mikkelsen 2009, eq. 28",
-    ),
-    ModelInfo(
-        "brdf",
-        "mikkelsen_diffuse / mikkelsen_kd",
-        "wi, wo, AlbedoTable, kd ≥ 0 (fitted to a target energy), ks",
-        "Mikkelsen 2009, eq. 28",
-    ),
-    ModelInfo(
-        "brdf",
-        "KullaConty",
-        "ndf or AlbedoTable (F = 1); fresnel_factor, material",
-        "Kulla & Conty 2017; Kelemen & Szirmay-Kalos 2001",
+        ("directional_albedo",),
     ),
     ModelInfo(
         "brdf",
         "walk_bin_averages",
         "theta_i (deg), theta_edges/phi_edges (deg, Bins conventions), ndf Beckmann|GGX, "
-        "material, n_paths, orders, folded, seed",
+        "material, n_paths, orders, folded, seed (no pointwise f: no model object)",
         "Heitz et al. 2016 (random walk on a Smith microsurface)",
+        ("smith_random_walk",),
     ),
     ModelInfo(
         "sampler",
@@ -123,62 +105,45 @@ MODELS: tuple[ModelInfo, ...] = (
         "Heitz & d'Eon 2014 (Beckmann); Heitz 2018 (GGX)",
     ),
     ModelInfo(
-        "brdf",
-        "rayleigh_rice",
-        "wi, wo, wavelength > 0, A ≥ 0, B > 0, C > 1, material",
-        "Löw et al. 2012, eq. 3–8",
-    ),
-    ModelInfo(
-        "brdf",
-        "low_smooth",
-        "wi, wo, A ≥ 0, B > 0, C > 0, kd ≥ 0, material",
-        "Löw et al. 2012, eq. 12–14",
-    ),
-    ModelInfo(
-        "brdf",
-        "low_microfacet",
-        "wi, wo, A ≥ 0, B > 0, C > 0, kd ≥ 0, material",
-        "Löw et al. 2012, eq. 15",
-    ),
-    ModelInfo(
-        "brdf",
-        "edwards_empirical",
-        "wi, wo, disk density, projection=scaling|orthogonal",
-        "Edwards et al. 2006, eq. 33",
-    ),
-    ModelInfo(
-        "brdf",
-        "edwards_fit_brdf",
-        "wi, wo, EdwardsParams, projection",
-        "Edwards et al. 2006, eq. 34–36",
-    ),
-    ModelInfo(
-        "sampler",
-        "sample_microfacet",
-        "wo, u1, u2, ndf (pdf: pdf_microfacet(wi, wo, ndf))",
-        "Mikkelsen 2009, eq. 15 (Jacobian)",
-    ),
-    ModelInfo("sampler", "sample_low_smooth", "wo, u1, u2, B", "Löw et al. 2012, eq. 17–22"),
-    ModelInfo("sampler", "sample_low_microfacet", "wo, u1, u2, B, C", "Löw et al. 2012, eq. 23–28"),
-    ModelInfo(
-        "sampler",
-        "sample_edwards",
-        "wo, u1, u2, lumps, projection",
-        "Edwards et al. 2006, eq. 26–29",
-    ),
-    ModelInfo(
         "metric",
-        "low_e1 / low_e2",
+        "low_e1",
         "measured, model, bins (θ in degrees)",
         "Löw et al. 2012, eq. 29–33",
+        ("low_e2",),
     ),
 )
+"""The entries that stay plain functions (or classes without catalogue attributes)."""
+
+
+def _class_entries(cls, kind: str) -> list[ModelInfo]:
+    rows = [ModelInfo(kind, cls.name, cls.params_doc, cls.source, tuple(cls.functions))]
+    if hasattr(cls, "sample"):
+        rows.append(
+            ModelInfo(
+                "sampler",
+                f"{cls.name}.sample",
+                cls.sampler_doc,
+                cls.sampler_source,
+                tuple(cls.sampler_functions),
+            )
+        )
+    return rows
+
+
+def _build() -> tuple[ModelInfo, ...]:
+    generated = [e for c in MASKING_CLASSES for e in _class_entries(c, "shadowing")]
+    generated += [e for c in MODEL_CLASSES for e in _class_entries(c, "brdf")]
+    rows = list(_FUNCTIONS) + generated
+    return tuple(sorted(rows, key=lambda m: KINDS.index(m.kind)))  # stable within a kind
+
+
+MODELS: tuple[ModelInfo, ...] = _build()
 
 
 def model_table() -> str:
-    """Plain-text table of every model: kind, name, parameters, source."""
+    """Plain-text table of every model: kind, name (/ wrapped functions), parameters, source."""
     rows = [("kind", "name", "parameters", "source")]
-    rows += [(m.kind, m.name, m.params, m.source) for m in MODELS]
+    rows += [(m.kind, m.label, m.params, m.source) for m in MODELS]
     widths = [max(len(r[i]) for r in rows) for i in range(3)]
     lines = []
     for k, r in enumerate(rows):

@@ -37,6 +37,7 @@ from microsim import vectors
 from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.analytic.models import BRDFModel, TorranceSparrow
 from microsim.analytic.shadowing import SHADOWING_KINDS, shadowing_g
 from microsim.errors import UsageError
 
@@ -460,7 +461,8 @@ class ModelSpec:
       "ts":       ndf, shadowing, material (Torrance–Sparrow, quadrature) → ``bin_average``
       "ts-qmc":   ndf, shadowing, material, n                             → ``bin_average_ts``
       "facets":   normals, weights, shadowing, material, azimuths         → ``bin_average_facets``
-    Build them with the class methods below. Compared by identity (params hold arrays).
+    Build them with the class methods below (``from_model`` for an ``analytic.models``
+    object). Compared by identity (params hold arrays).
     """
 
     name: str
@@ -477,6 +479,22 @@ class ModelSpec:
     @classmethod
     def function(cls, name: str, brdf_fn: Callable, symmetric: bool = True) -> "ModelSpec":
         return cls(name, "function", {"brdf_fn": brdf_fn, "symmetric": bool(symmetric)})
+
+    @classmethod
+    def from_model(cls, name: str, model) -> "ModelSpec":
+        """A spec from a model object (``analytic.models``, any ``BRDFModel``).
+
+        ``TorranceSparrow`` maps to the "ts" kind with its ndf, shadowing and material (the
+        same predictions as ``torrance_sparrow``); any other model to "function" with
+        ``model.f`` and ``model.symmetric`` (False when the model does not say).
+        """
+        if isinstance(model, TorranceSparrow):
+            return cls.torrance_sparrow(name, model.ndf, model.shadowing, model.material)
+        if not isinstance(model, BRDFModel):
+            raise UsageError(
+                f"model must be a BRDFModel (f(wi, wo), params(), source), got {model!r}"
+            )
+        return cls.function(name, model.f, symmetric=bool(getattr(model, "symmetric", False)))
 
     @classmethod
     def torrance_sparrow(
