@@ -130,6 +130,7 @@ def scaling_projection(wo, h) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     h = _checks.directions("h", h)
+    _checks.broadcast({"wo": wo, "h": h})
     return _safe_div(_cos_o(wo)[..., None] * h[..., :2], h[..., 2:3])
 
 
@@ -154,6 +155,7 @@ def scaling_jacobian(wi, wo) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     c = _cos_o(wo)
     H = wi + wo
     Hz = H[..., 2]
@@ -171,6 +173,7 @@ def orthogonal_projection(wo, h) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     h = _checks.directions("h", h)
+    _checks.broadcast({"wo": wo, "h": h})
     return 2.0 * vectors.dot(wo, h)[..., None] * h[..., :2]
 
 
@@ -198,6 +201,7 @@ def orthogonal_jacobian(wi, wo) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     return np.broadcast_to(
         np.maximum(wi[..., 2], 0.0), np.broadcast_shapes(wo.shape[:-1], wi.shape[:-1])
     ).copy()
@@ -233,6 +237,7 @@ def incident_to_disk(wi, wo, projection: str = "scaling") -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     return disk_projection(wo, _unit_or_normal(wi + wo), projection)
 
 
@@ -449,6 +454,7 @@ def edwards_empirical(
     diffuse = _checks.in_range("diffuse", diffuse, 0.0, 1.0)
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     if isinstance(lumps, (Lump, LumpMixture)) and not np.all(lumps.fits_on_disk(wo)):
         raise UsageError(
             "lumps must lie on the halfway disk for every wo: each lump needs "
@@ -471,6 +477,7 @@ def brdf_to_disk_density(wi, wo, rho, projection: str = "scaling") -> np.ndarray
     """
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     cos_i = np.maximum(wi[..., 2], 0.0)
     return _safe_div(np.asarray(rho, float) * cos_i, disk_jacobian(wi, wo, projection))
 
@@ -570,6 +577,7 @@ def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogona
         raise UsageError(f"params must be an EdwardsParams, got {type(params).__name__}")
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     F = params.fresnel(_cos_o(wo))
     spec = params.lumps().pdf(wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
         wi, wo, projection
@@ -597,6 +605,7 @@ def pdf_edwards(wi, wo, lumps: DiskDensity, projection: str = "scaling") -> np.n
     projection = _check_projection(projection)
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     p = _disk_density(lumps, wo, incident_to_disk(wi, wo, projection))
     return np.where(wi[..., 2] > 0.0, p * disk_jacobian(wi, wo, projection), 0.0)
 

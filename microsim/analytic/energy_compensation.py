@@ -149,6 +149,7 @@ class KullaConty:
         """f_ms(wi, wo) in sr⁻¹ (0 where wi or wo is at or below the horizon); reciprocal."""
         wi = _checks.directions("wi", wi)
         wo = _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
         ci, co = np.broadcast_arrays(wi[..., 2], wo[..., 2])
         f = (1.0 - self.E(ci)) * (1.0 - self.E(co)) / (np.pi * (1.0 - self.e_avg))
         return np.where((ci > 0) & (co > 0), self.scale * np.maximum(f, 0.0), 0.0)
@@ -198,6 +199,7 @@ def mikkelsen_diffuse(wi, wo, table: AlbedoTable, kd, ks: float = 1.0):
     kd = _checks.in_range("kd", kd, 0.0, np.inf, hi_open=True)
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
+    _checks.broadcast({"wi": wi, "wo": wo})
     ci, co = np.broadcast_arrays(wi[..., 2], wo[..., 2])
     f = kd / np.pi * (1.0 - ks * table.rho(ci)) * (1.0 - ks * table.rho(co))
     return np.where((ci > 0) & (co > 0), np.maximum(f, 0.0), 0.0)

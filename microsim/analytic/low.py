@@ -226,6 +226,7 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolaris
     """
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
+    _checks.broadcast({"wi": wi, "wo": wo})
     lam = _checks.positive("wavelength", wavelength)
     A, B, C = _abc(A, B, C)
     eta = resolve_material(material)
@@ -266,6 +267,7 @@ def low_smooth(wi, wo, A, B, C, kd=0.0, material=None, obliquity="one"):
     """
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
+    _checks.broadcast({"wi": wi, "wo": wo})
     A, B, C = _abc(A, B, C)
     kd = _nonneg("kd", kd)
     _choice("obliquity", obliquity, LOW_OBLIQUITIES)
@@ -295,6 +297,7 @@ def low_microfacet(wi, wo, A, B, C, kd=0.0, material=None, shadowing="cook-torra
     """
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
+    _checks.broadcast({"wi": wi, "wo": wo})
     A, B, C = _abc(A, B, C)
     kd = _nonneg("kd", kd)
     _choice("shadowing", shadowing, ("cook-torrance", "none"))
@@ -359,6 +362,7 @@ def pdf_low_smooth(wi, wo, B):
     0 for wi below the horizon. Integrates to 1 over the upper hemisphere."""
     wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     wi = _checks.directions("wi", wi)
+    _checks.broadcast({"wi": wi, "wo": wo})
     B = _checks.positive("B", B)
     ci = wi[..., 2]
     return np.where(ci >= 0.0, _disk_density(B, wo, wi) * np.maximum(ci, 0.0), 0.0)
@@ -454,6 +458,7 @@ def pdf_low_microfacet(wi, wo, B, C):
     below-horizon directions included; integrates to 1 over the sphere."""
     wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     wi = vectors.normalize(_checks.directions("wi", wi))
+    _checks.broadcast({"wi": wi, "wo": wo})
     B, C = _checks.positive("B", B), _checks.positive("C", C)
     return _reflected_pdf(B, C, wi + wo)
 

@@ -65,6 +65,7 @@ def vgroove_g1(w, h):
     """One-sided V-groove masking min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) (Mikkelsen 2009, eq. 25)."""
     w = _checks.directions("w", w)
     h = _checks.directions("h", h)
+    _checks.broadcast({"w": w, "h": h})
     return _vgroove_g1(w[..., 2], vectors.dot(w, h), h[..., 2])
 
 
@@ -74,6 +75,7 @@ def vgroove_g(wi, wo, h):
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)
+    _checks.broadcast({"wi": wi, "wo": wo, "h": h})
     hz = h[..., 2]
     return np.minimum(
         _vgroove_g1(wi[..., 2], vectors.dot(wi, h), hz),
@@ -292,6 +294,7 @@ def smith_g1(w, h, ndf):
     "Shadowing and Fresnel")."""
     w = _checks.directions("w", w)
     h = _checks.directions("h", h)
+    _checks.broadcast({"w": w, "h": h})
     return _g1_from_lambda(_lambda(ndf, w), vectors.dot(w, h), w[..., 2])
 
 
@@ -310,6 +313,7 @@ def smith_g2(wi, wo, h, ndf, correlated: bool = False):
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)
+    _checks.broadcast({"wi": wi, "wo": wo, "h": h})
     return _smith_g2(ndf, wi, wo, vectors.dot(wi, h), vectors.dot(wo, h), correlated)
 
 
@@ -338,4 +342,5 @@ def shadowing_g(wi, wo, h, ndf, shadowing: str):
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
     h = _checks.directions("h", h)
+    _checks.broadcast({"wi": wi, "wo": wo, "h": h})
     return _shadowing(kind, ndf, wi, wo, h[..., 2], vectors.dot(wi, h), vectors.dot(wo, h))
