@@ -27,7 +27,7 @@ from support import heightfield_surface, random_heights, vgroove_surface
 
 from microsim.checkpoints import interrupt_at
 from microsim.errors import UsageError
-from microsim.sim import BLOCK, Bins, Result, kernels, simulate
+from microsim.sim import BLOCK, Bins, Result, fresnel_kernels, simulate, vgroove_kernels
 from microsim.sim.bounces import MAX_BOUNCES, TERMINAL
 from microsim.sim.tracer import Tracer, VGrooveCaster
 from microsim.surfaces import gaussian
@@ -218,7 +218,7 @@ GROOVES = [(60.0, 20.0), (70.0, 35.0), (45.0, 30.0), (75.0, 0.0), (80.0, 50.0)]
 
 @pytest.mark.parametrize("tilt,theta", GROOVES)
 def test_analytic_chain_is_the_unfolded_geometry_ray_by_ray(tilt, theta):
-    """The exact float64 chain (``kernels.analytic_vgroove_bounces``) on one groove in its
+    """The exact float64 chain (``vgroove_kernels.analytic_vgroove_bounces``) on one groove in its
     cross-section plane (ψ = 0) gives every ray the order and outgoing direction of the
     unfolding, to float64 rounding."""
     caster = VGrooveCaster(Tracer(vgroove_surface([tilt])))
@@ -231,10 +231,10 @@ def test_analytic_chain_is_the_unfolded_geometry_ray_by_ray(tilt, theta):
     term, order = np.empty(n, np.int8), np.empty(n, np.int64)
     wo = [np.empty(n) for _ in range(3)]
     c = caster
-    kernels.analytic_vgroove_bounces(
+    vgroove_kernels.analytic_vgroove_bounces(
         x, 0.0, np.zeros(n), wi, c.half, c.x_left, c.x_right, c.w_left, c.depth,
         c.facet_rim, c.facet_wall, c.facet_sigma, c.facet_nx, c.facet_nz,
-        c.facet_signed_tan, c.facet_width, 0.0, 0.0, kernels.FRESNEL_MIRROR,
+        c.facet_signed_tan, c.facet_width, 0.0, 0.0, fresnel_kernels.FRESNEL_MIRROR,
         MAX_BOUNCES, 0.0, status1, weight1, term, wterm, order, *wo,
     )  # fmt: skip
     iv = unfolded_orders(tilt, theta)

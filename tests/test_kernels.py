@@ -1,8 +1,8 @@
-"""Compiled per-ray bookkeeping (microsim.sim.kernels and its callers): each kernel against the
-plain NumPy statement of what it computes. Reproducibility for any threads/chunk is tested on
-whole runs in test_bench.py and test_resume.py; the periodic walk against a replicated mesh in
-test_tracer.py; the analytic V-groove kernel ray by ray against Embree in
-test_analytic_vgroove.py."""
+"""Compiled per-ray bookkeeping (``microsim.sim.engine``, the ``sim.*_kernels`` modules and
+their callers): each kernel against the plain NumPy statement of what it computes.
+Reproducibility for any threads/chunk is tested on whole runs in test_bench.py and
+test_resume.py; the periodic walk against a replicated mesh in test_tracer.py; the analytic
+V-groove kernel ray by ray against Embree in test_analytic_vgroove.py."""
 
 import threading
 
@@ -206,7 +206,7 @@ def test_stratified_origins_lie_in_their_own_strata():
 )
 @pytest.mark.parametrize("phi_i", [0.0, 30.0, -170.0, 725.0, "per ray"])
 def test_locate_is_the_search_over_the_edges(bins, phi_i):
-    """``Bins.locate`` (compiled ``kernels.bin_index``: arithmetic guess corrected against the
+    """``Bins.locate`` (compiled ``bin_kernels.bin_index``: arithmetic guess corrected against the
     edges) gives θo bin ⌊θo·n/90⌋ and the Δφ bin of ``relative_azimuth`` exactly as
     searchsorted(phi_edges, Δφ, 'right') − 1 — also for directions on and next to every
     Δφ edge."""
@@ -308,11 +308,11 @@ def test_rays_rounding_onto_a_wall_still_hit():
 
 
 def test_cos_sin_is_libm_to_an_ulp():
-    """``kernels.cos_sin`` (fdlibm's polynomials after a two-part π/2 reduction) agrees with
+    """``trig.cos_sin`` (fdlibm's polynomials after a two-part π/2 reduction) agrees with
     math.cos/math.sin within 2.3e-16 over [−2π, 2π], quadrant edges included."""
     import math
 
-    from microsim.sim.kernels import cos_sin
+    from microsim.sim.trig import cos_sin
 
     psi = np.concatenate(
         [
@@ -328,9 +328,9 @@ def test_cos_sin_is_libm_to_an_ulp():
 
 
 def test_atan_approx_is_within_its_bound():
-    """``kernels._atan_approx`` is within ``ATAN_ERROR`` of atan2 for y ≥ 0 over every
+    """``trig.atan_approx`` is within ``ATAN_ERROR`` of atan2 for y ≥ 0 over every
     octant (and exactly 0 at the origin): ``bin_rays`` relies on the bound."""
-    from microsim.sim.kernels import ATAN_ERROR, _atan_approx
+    from microsim.sim.trig import ATAN_ERROR, atan_approx
 
     rng = np.random.default_rng(3)
     y, x = np.abs(rng.normal(size=50_000)), rng.normal(size=50_000)
@@ -339,9 +339,9 @@ def test_atan_approx_is_within_its_bound():
         np.concatenate([y, np.sin(a), [0.0, 1.0, 0.0]]),
         np.concatenate([x, np.cos(a), [1.0, 0.0, -1.0]]),
     )
-    got = np.array([_atan_approx(float(p), float(q)) for p, q in zip(y, x)])
+    got = np.array([atan_approx(float(p), float(q)) for p, q in zip(y, x)])
     assert np.max(np.abs(got - np.arctan2(y, x))) <= ATAN_ERROR
-    assert _atan_approx(0.0, 0.0) == 0.0
+    assert atan_approx(0.0, 0.0) == 0.0
 
 
 @pytest.mark.parametrize(
@@ -349,13 +349,13 @@ def test_atan_approx_is_within_its_bound():
 )
 @pytest.mark.parametrize("rotate", [False, True])
 def test_bin_rays_is_locate(bins, rotate):
-    """``kernels.bin_rays`` (vectorised ``_atan_approx`` bins, those near an edge by
+    """``bin_kernels.bin_rays`` (vectorised ``atan_approx`` bins, those near an edge by
     ``Bins.locate``'s own arithmetic) bins every SINGLE ray as ``Bins.locate`` does against
     φi (less ψ per ray when ``rotate``): random directions, directions on and 1e-9 rad either
     side of every θ and ±Δφ edge, the mirror directions of a flat facet (θo = θi, Δφ = 180°:
     on an edge for θi = 30° and 60° on 2° or 3° bins) and the zenith; other rays keep their
     bin."""
-    from microsim.sim import kernels
+    from microsim.sim import bin_kernels
 
     rng = np.random.default_rng(4)
     phi_i = 35.0
@@ -379,7 +379,7 @@ def test_bin_rays_is_locate(bins, rotate):
     near = np.empty(m, dtype=np.bool_)
     cols = [np.ascontiguousarray(wo[:, k]) for k in range(3)]
     args = (bins.n_theta, bins.phi_edges, near, where)
-    kernels.bin_rays(status, *cols, psi, rotate, phi_i, *args)
+    bin_kernels.bin_rays(status, *cols, psi, rotate, phi_i, *args)
     want = bins.locate(wo, phi_i - np.degrees(psi))
     single = status == paths.SINGLE
     assert np.array_equal(where[single], want[single])

@@ -1,5 +1,5 @@
 """Results that must not depend on the instruction set: the arctangent by which every
-direction is binned (``kernels.atan2_portable``), and bins and tallies compared bitwise between
+direction is binned (``trig.atan2_portable``), and bins and tallies compared bitwise between
 this process and one with NumPy's AVX-512 dispatch disabled and numba's target pinned to
 Haswell (AVX2), i.e. the two paths an AVX2 and an AVX-512 machine take."""
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from microsim import analytic as an
 from microsim import surfaces as sf
-from microsim.sim import Bins, kernels, paths
+from microsim.sim import Bins, paths, trig
 
 AVX2_ENV = {
     # NumPy 2's AVX-512 dispatch targets and NumPy 1's (each ignores the other's names)
@@ -39,7 +39,7 @@ def test_atan2_portable_is_libm_within_an_ulp_with_c99_special_values():
     x = np.concatenate([rng.normal(size=20_000), rng.normal(size=2000) * 1e300, [1.0, -1.0]])
     a = np.linspace(-np.pi, np.pi, 4001)
     y, x = np.concatenate([y, np.sin(a), 3 * x]), np.concatenate([x, np.cos(a), 2 * y])
-    worst = max(_ulps(kernels.atan2_portable(p, q), math.atan2(p, q)) for p, q in zip(y, x))
+    worst = max(_ulps(trig.atan2_portable(p, q), math.atan2(p, q)) for p, q in zip(y, x))
     assert worst <= 1.0
     inf, pi = math.inf, math.pi
     special = [  # a list: 0.0 and -0.0 are the same dict key
@@ -49,9 +49,9 @@ def test_atan2_portable_is_libm_within_an_ulp_with_c99_special_values():
         (-inf, 1.0, -pi / 2), (1.0, -inf, pi), (-1.0, inf, -0.0),
     ]  # fmt: skip
     for p, q, want in special:
-        got = kernels.atan2_portable(p, q)
+        got = trig.atan2_portable(p, q)
         assert got == want and math.copysign(1, got) == math.copysign(1, want), (p, q, got)
-    assert math.isnan(kernels.atan2_portable(math.nan, 1.0))
+    assert math.isnan(trig.atan2_portable(math.nan, 1.0))
 
 
 def _inputs(tmp: Path) -> Path:

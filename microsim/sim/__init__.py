@@ -7,8 +7,10 @@
 Modules: ``estimator`` (``simulate``, ``ray_events``: the driver), ``auto``
 (``simulate_auto``), ``streams`` (random streams, ray origins), ``paths`` (trace paths,
 ledger), ``tallies`` (running sums, bin estimate and standard error), ``schedule`` (threads,
-interrupts), ``arguments`` (argument checks), ``tracer``/``kernels`` (Embree walk, compiled
-per-ray loops), ``bins``, ``result``, ``progress``, ``predict``, ``compare``.
+interrupts), ``arguments`` (argument checks), ``tracer`` and ``engine`` (Embree, the periodic
+walk and its compiled per-ray loops), the estimator's compiled loops (``bin_kernels``,
+``fresnel_kernels``, ``vgroove_kernels``, ``bounce_kernels``, ``tally_kernels``,
+``origin_kernels``, ``trig``), ``bins``, ``result``, ``progress``, ``predict``, ``compare``.
 """
 
 from .bins import Bins

@@ -138,13 +138,13 @@ class Bins:
     @staticmethod
     def angles(wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(θo, φo) in degrees of unit directions wo (..., 3), by the arctangent ``locate``
-        bins with (``kernels.atan2_portable``: the same bits on every machine)."""
-        from . import kernels
+        bins with (``trig.atan2_portable``: the same bits on every machine)."""
+        from . import bin_kernels
 
         wo = np.asarray(wo, dtype=np.float64)
         cols = [np.ascontiguousarray(wo[..., k]).ravel() for k in range(3)]
         theta, phi = np.empty(len(cols[0])), np.empty(len(cols[0]))
-        kernels.direction_angles(*cols, theta, phi)
+        bin_kernels.direction_angles(*cols, theta, phi)
         to_deg = 180.0 / np.pi  # as the kernels convert
         shape = wo.shape[:-1]
         return (theta * to_deg).reshape(shape), (phi * to_deg).reshape(shape)
@@ -168,17 +168,17 @@ class Bins:
         (arrays of one shape; contiguous columns are fastest). θo = atan2(√(x² + y²), z) in
         degrees, bin ⌊θo·n_theta/90⌋; Δφ = φo − φi as ``relative_azimuth``, its bin the one
         whose ``phi_edges`` hold it (edge_j ≤ Δφ < edge_j+1). Computed by
-        ``kernels.bin_index``, whose arctangent (``kernels.atan2_portable``) gives the same
+        ``bin_kernels.bin_index``, whose arctangent (``trig.atan2_portable``) gives the same
         bits on every machine, so a direction exactly on an edge is binned alike everywhere
         and alike by the simulation's compiled bin passes."""
-        from . import kernels  # (kernels imports nothing of ours)
+        from . import bin_kernels
 
         x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
         shape = np.broadcast_shapes(x.shape, y.shape, z.shape)
         phi_i = _half_turn(phi_i_deg)
         phi_i = np.array([float(phi_i)]) if np.ndim(phi_i) == 0 else _column(phi_i, shape)
         out = np.empty(shape, dtype=np.int64)
-        kernels.bin_index(
+        bin_kernels.bin_index(
             *(_column(a, shape) for a in (x, y, z)),
             phi_i,
             self.n_theta,

@@ -34,10 +34,10 @@ absorbed (the Fresnel losses 1 − Π F_b) being the rest. The first-bounce ledg
 
 Trace paths: ``BouncePath`` (Embree, heightfields and traced V-grooves; each bounce is one
 Embree intersect call over the still-live paths, compacted, between two compiled passes,
-``kernels.bounce_step``; the reflected ray is both the masking test and the next hit, so a
+``bounce_kernels.bounce_step``; the reflected ray is both the masking test and the next hit, so a
 continuing path costs one Embree ray per bounce). ``AnalyticBouncePath``
 (``masking="analytic"``, V-grooves): the exact float64 chain between a groove's two walls
-(``kernels.analytic_vgroove_bounces``), no Embree. Their per-block tallies:
+(``vgroove_kernels.analytic_vgroove_bounces``), no Embree. Their per-block tallies:
 ``tallies.split_order_tallies``. ``masking="exact"`` (Embree primary hit,
 float64 masking) has no bounce chain: it is refused for K > 1.
 
@@ -53,8 +53,9 @@ import numpy as np
 
 from microsim.errors import UsageError
 
-from . import kernels
+from . import bounce_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
+from .engine import codes
 from .paths import (
     ANALYTIC_BATCH,
     LEDGER,
@@ -106,10 +107,10 @@ TERMINAL = (
     "unresolved_path",
     "missed_path",
 )
-"""Terminal classes of a path, in the order of ``kernels.ESC_1`` …"""
+"""Terminal classes of a path, in the order of ``codes.ESC_1`` …"""
 ORDER_NAMES = ("1", "2", "3", "4+")
 """Labels of the order slots of ``Result.brdf_orders``."""
-assert len(TERMINAL) == kernels.N_TERMINAL and kernels.PATH_MISSED == len(TERMINAL) - 1
+assert len(TERMINAL) == codes.N_TERMINAL and codes.PATH_MISSED == len(TERMINAL) - 1
 
 
 def check_bounces(bounces):
@@ -161,7 +162,7 @@ def trace_bounces(
     when ``psi`` is None, else wi rotated by −ψ per ray into its groove frame, as
     ``paths.trace_columns``). Each step traces the live paths' rays (``Tracer.
     trace_columns``: the periodic walk, wraps exact as there) and hands the hits to
-    ``kernels.bounce_step``, which weights, reflects, ends or continues each path and
+    ``bounce_kernels.bounce_step``, which weights, reflects, ends or continues each path and
     compacts the continuing ones; at most ``limit`` bounces, paths below ``floor`` cut.
     ``status1``/``weight1``: first-bounce class (``paths.LEDGER``) and Fresnel weight;
     ``term``/``wterm``: terminal class (``TERMINAL``) and carried weight; ``where``: flat
@@ -171,7 +172,7 @@ def trace_bounces(
     replace the per-ray arithmetic of the first bounce with the same values."""
     x = _columns(origins)
     n = len(x[0])
-    mode, n2, k2 = kernels.fresnel_mode(ior)
+    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
     status1 = np.empty(n, dtype=np.int8)
     weight1 = np.zeros(n)
     term = np.empty(n, dtype=np.int8)
@@ -206,7 +207,7 @@ def trace_bounces(
         nd = [work(par + "d" + a, k) for a in "xyz"]
         nd32 = work(par + "d32", (k, 3), np.float32)
         nw = work(par + "w", k)
-        m, e = kernels.bounce_step(
+        m, e = bounce_kernels.bounce_step(
             b,
             limit,
             floor,
@@ -289,16 +290,16 @@ def analytic_bounces(
     caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z, psi, ior, limit, floor, nbin
 ):
     """``trace_bounces`` for ``masking="analytic"`` V-grooves: the exact float64 chain
-    (``kernels.analytic_vgroove_bounces``) from rays at x (N,) and height ``z`` with groove
+    (``vgroove_kernels.analytic_vgroove_bounces``) from rays at x (N,) and height ``z`` with groove
     azimuths ``psi``; escape directions binned against φi − ψ."""
     n = len(x)
     status1, weight1 = np.empty(n, dtype=np.int8), np.zeros(n)
     term, wterm = np.empty(n, dtype=np.int8), np.empty(n)
     order = np.empty(n, dtype=np.int64)
     wo = [np.empty(n) for _ in range(3)]
-    mode, n2, k2 = kernels.fresnel_mode(ior)
+    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
     c = caster
-    kernels.analytic_vgroove_bounces(
+    vgroove_kernels.analytic_vgroove_bounces(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),
         np.ascontiguousarray(psi, dtype=np.float64),
@@ -328,7 +329,7 @@ def analytic_bounces(
         *wo,
     )
     where = np.full(n, -1, dtype=np.int64)
-    g = np.flatnonzero(term <= kernels.ESC_4UP)
+    g = np.flatnonzero(term <= codes.ESC_4UP)
     if g.size:
         slot = np.minimum(order[g], min(limit, 4)) - 1
         loc = bins.locate_xyz(wo[0][g], wo[1][g], wo[2][g], phi_i - np.degrees(psi[g]))

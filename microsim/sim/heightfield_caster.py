@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import HIT, UNRESOLVED
+from .engine.codes import HIT, UNRESOLVED
 
 __all__ = ["HeightfieldGrid", "heightfield_grid", "cast_falling"]
 

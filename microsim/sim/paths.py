@@ -35,9 +35,9 @@ relative (≪ 0.1 %); on a unit tile of 4000 V-grooves it was measured at +0.1�
 θo ≥ 80° (below the statistical error of 10⁶ rays), and ``masking="exact"`` removes it.
 
 Bitwise reproducibility: every per-ray operation is elementwise, in compiled loops that
-evaluate each ray alone (``kernels``); Fresnel, whose complex NumPy kernels round by array
-position, is evaluated per block (``fresnel_by_block``) or in real arithmetic. So a ray's
-outcome never depends on the chunk it is traced in. ``trace_events`` is the per-ray
+evaluate each ray alone (``engine``, ``*_kernels``); Fresnel, whose complex NumPy kernels
+round by array position, is evaluated per block (``fresnel_by_block``) or in real arithmetic.
+So a ray's outcome never depends on the chunk it is traced in. ``trace_events`` is the per-ray
 diagnostic path behind ``ray_events`` (full ``Events``, slower).
 Directions are unit vectors in the global frame pointing away from the surface; φi in degrees.
 """
@@ -55,8 +55,9 @@ import numpy as np
 from microsim.analytic.fresnel import fresnel
 from microsim.errors import UsageError
 
-from . import kernels
+from . import bin_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
+from .engine import codes, primary, segments
 from .scratch import work
 from .streams import BLOCK, block_rotation, block_span, chunk_origins, groove_starts
 from .tracer import (
@@ -102,13 +103,13 @@ SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = range(5)
 LEDGER = ("single", "masked", "downward", "unresolved", "missed")
 MASKING = ("traced", "exact", "analytic")
 ANALYTIC_BATCH = 16  # blocks per vectorised batch of masking="analytic" (measured best)
-assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)  # kernels.analytic_vgroove relies on it
+assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)  # vgroove_kernels.analytic_vgroove relies on it
 assert (SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED) == (
-    kernels.SINGLE,
-    kernels.MASKED,
-    kernels.DOWNWARD,
-    kernels.RAY_UNRESOLVED,
-    kernels.RAY_MISSED,
+    codes.SINGLE,
+    codes.MASKED,
+    codes.DOWNWARD,
+    codes.RAY_UNRESOLVED,
+    codes.RAY_MISSED,
 )
 
 _FROM_ESCAPE = np.zeros(4, dtype=np.int8)  # tracer status -> ledger class
@@ -314,7 +315,7 @@ def facet_table(
     pool: ThreadPoolExecutor | None = None,
     parts: int = 1,
 ) -> FacetTable:
-    """The ``FacetTable`` of incidence ``wi`` (``kernels.facet_mirror``; Fresnel weights in
+    """The ``FacetTable`` of incidence ``wi`` (``fresnel_kernels.facet_mirror``; Fresnel weights in
     compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
     in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
     facet alone, so the split changes nothing). Bins are ``Bins.locate``'s
@@ -324,11 +325,11 @@ def facet_table(
     weight, code = np.empty(f), np.empty(f, dtype=np.int8)
     wo32, where = np.empty((f, 3), dtype=np.float32), np.empty(f, dtype=np.int32)
     wi = [float(w) for w in wi]
-    fresnel_args = kernels.fresnel_mode(ior)
+    fresnel_args = fresnel_kernels.fresnel_mode(ior)
 
     def fill(part: slice) -> None:
         wo = [work("table-wo-" + a, part.stop - part.start) for a in "xyz"]
-        kernels.facet_mirror(
+        fresnel_kernels.facet_mirror(
             *(a[part] for a in ncols),
             *wi,
             *fresnel_args[1:],
@@ -365,13 +366,13 @@ def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_tot
 
 
 def _segment_geometry(tracer: Tracer) -> tuple:
-    """(hx, hy, zmax, eps, rel): what ``kernels._setup_ray`` needs of the tile."""
+    """(hx, hy, zmax, eps, rel): what ``segments.setup_ray`` needs of the tile."""
     return float(tracer.half[0]), float(tracer.half[1]), tracer.zmax, tracer.eps, TFAR_REL
 
 
 @dataclass(frozen=True)
 class MaskingRays:
-    """The masking rays a compiled pass sets up (``kernels.tabled_primary``/``traced_primary``),
+    """The masking rays a compiled pass sets up (``primary.tabled_primary``/``traced_primary``),
     in this thread's work arrays: primary ray ``ray[m]`` of masking ray m, its start and
     direction columns (``start``, ``d``; float32 ``d32``) and the first segment's Embree input
     (``o32``, ``tfar``, ``keep``, ``top``)."""
@@ -414,13 +415,13 @@ class MaskingRays:
             self.d32[:m],
             first=(self.o32, self.tfar, self.keep, self.top),
         )
-        kernels.apply_escape(status, self.ray[:m], esc, _FROM_ESCAPE)
+        primary.apply_escape(status, self.ray[:m], esc, _FROM_ESCAPE)
 
 
 def falling_first_segment(tracer: Tracer, x, down) -> tuple:
     """The first segment's Embree input (o32, tfar, keep, top) of rays from x (3 columns,
     inside the tile: ``Tracer.holds``) along falling directions ``down`` (3 floats: one
-    shared; or 3 columns) (``kernels.falling_first_segment``, vectorised), for
+    shared; or 3 columns) (``segments.falling_first_segment``, vectorised), for
     ``Tracer.trace_columns(first=...)``; None (the walk sets them up) unless every start
     lies in the tile and every direction falls."""
     n = len(x[0])
@@ -434,7 +435,7 @@ def falling_first_segment(tracer: Tracer, x, down) -> tuple:
         work("primary-keep", n, np.int64),
         work("primary-top", n, np.bool_),
     )
-    kernels.falling_first_segment(*x, *d, shared, *_segment_geometry(tracer), *first)
+    segments.falling_first_segment(*x, *d, shared, *_segment_geometry(tracer), *first)
     return first
 
 
@@ -464,7 +465,7 @@ def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origi
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
     where = np.empty(n, dtype=np.int64)
     mask = MaskingRays.work(n)
-    m = kernels.tabled_primary(
+    m = primary.tabled_primary(
         hs,
         prim,
         *p,
@@ -488,7 +489,7 @@ def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origi
 def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins):
     """(status, weight, bin) per primary ray, looked up per hit facet in ``table`` (the fast
     path for surfaces without azimuth averaging: only the two ray casts are per ray, the rest
-    is one compiled pass, ``kernels.tabled_primary``). ``origins``: (N, 3) or 3 columns."""
+    is one compiled pass, ``primary.tabled_primary``). ``origins``: (N, 3) or 3 columns."""
     status, weight, where, mask, m = tabled_masking_rays(tracer, table, wi, origins)
     mask.trace(tracer, m, status)
     return status, weight, where
@@ -504,12 +505,12 @@ def _columns(origins) -> list:
 def groove_frame_rays(psi, wi, prefix: str) -> tuple:
     """Per ray, wi rotated by −ψ into its groove frame: (wl, down, d32) — the rotated wi and
     the ray direction −wl as 3 columns each and its float32 (N, 3) copy
-    (``kernels.groove_frame_directions``), in this thread's work arrays named ``prefix``…"""
+    (``vgroove_kernels.groove_frame_directions``), in this thread's work arrays named ``prefix``…"""
     n = len(psi)
     wl = [work(prefix + "wl-" + a, n) for a in "xyz"]
     down = [work(prefix + "down-" + a, n) for a in "xyz"]
     d32 = work(prefix + "d32", (n, 3), np.float32)
-    kernels.groove_frame_directions(
+    vgroove_kernels.groove_frame_directions(
         np.ascontiguousarray(psi, dtype=np.float64),
         np.asarray(wi, dtype=np.float64),
         *wl,
@@ -522,10 +523,10 @@ def groove_frame_rays(psi, wi, prefix: str) -> tuple:
 def locate_single(bins: Bins, status, wo, phi_i: float, psi, where) -> None:
     """Set ``where`` to the bin of wo (3 columns) for the SINGLE rays, Δφ taken against
     φi (degrees) or, with groove azimuths ``psi`` (wo in each ray's groove frame), against
-    φi − ψ: folded grids by ``kernels.bin_rays`` (compiled, vectorised), unfolded ones by
+    φi − ψ: folded grids by ``bin_kernels.bin_rays`` (compiled, vectorised), unfolded ones by
     ``Bins.locate``."""
     if bins.folded:
-        kernels.bin_rays(
+        bin_kernels.bin_rays(
             status,
             *wo,
             np.empty(0) if psi is None else psi,
@@ -548,7 +549,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     (``azimuth_average`` surfaces): each ray is traced in its groove frame (wi rotated by −ψ)
     and binned there too — Δφ = φo − φi is unchanged by the rotation, so wo is located against
     the rotated incident azimuth φi − ψ instead of being rotated back. After the primary walk
-    one compiled pass (``kernels.traced_primary``: Fresnel in real arithmetic, mirror
+    one compiled pass (``primary.traced_primary``: Fresnel in real arithmetic, mirror
     direction, ledger class) sets up the masking rays (traced masking, ``profile`` None) or
     leaves them to ``profile`` (exact V-groove masking)."""
     x = _columns(origins)
@@ -564,8 +565,8 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     wo = [work("traced-wo-" + a, n) for a in "xyz"]
     cosine = work("traced-cosine", n)
     mask = MaskingRays.work(n)
-    mode, n2, k2 = kernels.fresnel_mode(ior)
-    m = kernels.traced_primary(
+    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
+    m = primary.traced_primary(
         hs,
         prim,
         *p,
@@ -582,7 +583,7 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         *wo,
         mask.kernel_args(),
     )
-    kernels.fresnel_weights(cosine, n2, k2, mode, weight)
+    fresnel_kernels.fresnel_weights(cosine, n2, k2, mode, weight)
     if profile is not None:
         hu = np.flatnonzero(status == SINGLE)
         margin = profile.margin_columns(prim[hu], p[0][hu], wo[0][hu], wo[2][hu])
@@ -598,7 +599,7 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
     V-grooves with the primary hit computed exactly by ``caster`` instead of Embree (every ray
     hits; ``VGrooveCaster.groove_hits``), the masking test ``margin_from_rim`` on the hit's
     distance from its rim, all in the groove frame (wi rotated by −ψ, n_y = 0), in one
-    compiled pass (``kernels.analytic_vgroove``, Fresnel in real arithmetic,
+    compiled pass (``vgroove_kernels.analytic_vgroove``, Fresnel in real arithmetic,
     ``fresnel.fresnel_real_scalar``). Rays start at x (N,) (y is irrelevant: grooves run
     along y) and height ``z``. They agree with the traced paths ray by ray except where
     Embree's float32 hit is within a few ulp of a groove edge or masking threshold
@@ -609,9 +610,9 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
         out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
     status, weight, where = out
     wo = [work("analytic-wo-" + a, 0 if bins.folded else n) for a in "xyz"]
-    mode, n2, k2 = kernels.fresnel_mode(ior)
+    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
     c = caster
-    kernels.analytic_vgroove(
+    vgroove_kernels.analytic_vgroove(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),
         np.ascontiguousarray(psi, dtype=np.float64),

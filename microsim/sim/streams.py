@@ -23,7 +23,7 @@ from typing import Sequence
 
 import numpy as np
 
-from . import kernels
+from . import origin_kernels
 from .scratch import work
 from .tracer import Tracer
 
@@ -88,11 +88,11 @@ def chunk_origins(
     of the stream ``key`` (``block_generator``), so its rays do not depend on the chunking.
     ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
     row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
-    y is jittered inside its row (``kernels.stratified_origins``). The union of strata is the
+    y is jittered inside its row (``origin_kernels.stratified_origins``). The union of strata is the
     whole tile, so origins are uniform over one period (and a block covers a compact strip:
     coherent rays). On equal-width V-grooves (``Tracer.groove_strata``, azimuth) x runs over
     the grooves in order of tilt and ψ is stratified by the row instead
-    (``kernels._groove_strata``). ``origins="independent"``: i.i.d. uniform origins over the
+    (``origin_kernels._groove_strata``). ``origins="independent"``: i.i.d. uniform origins over the
     whole tile, then sorted row-major on a ~square grid of the block's size (coherence only:
     the set is unchanged).
     """
@@ -118,7 +118,7 @@ def chunk_origins(
                 psi[k : k + m] = 2 * np.pi * u[base + 2 * m : base + 3 * m][order]
     else:
         rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-        kernels.stratified_origins(
+        origin_kernels.stratified_origins(
             u,
             lo,
             n,
@@ -154,7 +154,7 @@ def groove_starts(tracer: Tracer, n_total: int, blocks, key):
         rng.random(out=u[2 * k + m : 2 * k + 2 * m])
     x, psi = work("groove-x", n), work("groove-psi", n)
     rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-    kernels.stratified_groove_starts(
+    origin_kernels.stratified_groove_starts(
         u, lo, n, BLOCK, float(n_total), float(rows), float(lx), tracer.groove_strata, x, psi
     )
     return x, psi

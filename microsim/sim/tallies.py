@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernels
+from . import tally_kernels
 from .bins import Bins
 from .bounces import TERMINAL
 from .paths import DOWNWARD, LEDGER, MASKED
@@ -60,7 +60,7 @@ TALLY_NAMES = ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair")
 
 
 def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTallies":
-    """Per-block tallies of a batch of whole blocks (``kernels.block_tallies``): for each
+    """Per-block tallies of a batch of whole blocks (``tally_kernels.block_tallies``): for each
     block, its bins (sparse: only those it touches) with Σw, Σw², counts and Σ_pairs w w', and
     its ledger counts and Fresnel sums. Rays are added in ray order, so every block's sums
     are bitwise those of the block alone.
@@ -75,7 +75,7 @@ def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTall
     out_cnt, offsets = work("tally-count", n, np.int64), np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, len(LEDGER)), dtype=np.int64)
     lf = np.zeros((n_blocks, len(LEDGER)))
-    kernels.block_tallies(
+    tally_kernels.block_tallies(
         status, weight, where, BLOCK, acc, touched, out_bin, out_sums, out_cnt, offsets, ln, lf
     )
     used = int(offsets[-1])  # the blocks' bins, copied out of the work arrays
@@ -92,7 +92,7 @@ def chunk_tallies(path, nbin: int, blocks) -> "ChunkTallies":
 
 
 def split_order_tallies(status1, weight1, term, wterm, where, n_blocks: int, nbin_total: int):
-    """``tallies.split_tallies`` for bounce chains (``kernels.order_block_tallies``):
+    """``tallies.split_tallies`` for bounce chains (``tally_kernels.order_block_tallies``):
     per block, its (slot, bin) tallies and its ledger of 5 first-bounce + ``TERMINAL``
     classes. ``nbin_total`` = order slots × bins."""
     n = len(term)
@@ -102,7 +102,7 @@ def split_order_tallies(status1, weight1, term, wterm, where, n_blocks: int, nbi
     out_cnt, offsets = work("tally-count", n, np.int64), np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, ncls), dtype=np.int64)
     lf = np.zeros((n_blocks, ncls))
-    kernels.order_block_tallies(
+    tally_kernels.order_block_tallies(
         status1,
         weight1,
         term,
@@ -180,8 +180,8 @@ class Tally:
 
     def add_chunk(self, chunk: ChunkTallies) -> int:
         """Add a chunk's per-block tallies, block by block in block order (callers add chunks
-        in block order; ``kernels.add_blocks``); returns the number of blocks added."""
-        kernels.add_blocks(
+        in block order; ``tally_kernels.add_blocks``); returns the number of blocks added."""
+        tally_kernels.add_blocks(
             self.sum_w,
             self.sum_w2,
             self.count,

@@ -14,7 +14,7 @@ offset biases grazing masking by ~eps / feature depth (docs/design.md, "Numerica
 V-groove surfaces can instead decide masking exactly in float64 (``VGrooveProfile``).
 
 Speed: each segment of the walk is one Embree call between two compiled passes over the live
-rays (``kernels.segment_setup``/``segment_finish``: float32 inputs and tfar; hits, escapes and
+rays (``segments.segment_setup``/``segment_finish``: float32 inputs and tfar; hits, escapes and
 wall re-entries), which hands Embree a single direction when all rays share it and compacts
 the rays still live (most finish in the first segment). The BVH is built in ``__init__``.
 
@@ -45,7 +45,8 @@ from embreex import rtcore_scene as rs
 from microsim.errors import UsageError
 from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 
-from . import embree_packets, kernels
+from . import embree_packets
+from .engine import codes, horizon, segments
 from .heightfield_caster import cast_falling, heightfield_grid
 from .scratch import work
 
@@ -66,10 +67,10 @@ __all__ = [
 
 HIT, ESCAPED, UNRESOLVED, MISSED = 0, 1, 2, 3
 assert (HIT, ESCAPED, UNRESOLVED, MISSED) == (
-    kernels.HIT,
-    kernels.ESCAPED,
-    kernels.UNRESOLVED,
-    kernels.MISSED,
+    codes.HIT,
+    codes.ESCAPED,
+    codes.UNRESOLVED,
+    codes.MISSED,
 )
 BLOCKED = HIT  # an occlusion ray that met the surface
 MAX_TRACED_DEG = 89.5  # rays up to this polar angle are always resolved (wrap cap)
@@ -80,7 +81,7 @@ range): on the 512² bench heightfield the walk and Embree cost about the same p
 at θi = 80° (a 62-cell walk); the walk is several times faster at small θi and slower beyond."""
 TFAR_REL = 4e-7  # a segment is traced a hair beyond its exit (float32 rounding)
 HORIZON_FACETS = 32  # facets per cell of the coarse grid of ``Tracer.horizon``
-CLEAR_MARGIN = kernels.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
+CLEAR_MARGIN = horizon.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
 
 
 @dataclass(frozen=True)
@@ -169,12 +170,12 @@ def groove_tables(tracer) -> tuple:
     """(clear, strata) of a V-groove mesh, from one ``VGrooveCaster`` (or, for grooves with a
     flat facet, ``VGrooveProfile``):
 
-    - clear: ``kernels.traced_primary``'s exact clear test, per facet (rim x, tanθ σ,
+    - clear: ``primary.traced_primary``'s exact clear test, per facet (rim x, tanθ σ,
       rim-to-rim width W, rim-to-bottom extent) and the tolerance ``GROOVE_CLEAR_EPS`` · eps
       in length units; flat facets get NaN (never cleared);
     - strata: (left rim x of every groove in order of tilt (G,), groove width W) of
       equal-width V-grooves tiling the tile, for the stratified origins
-      (``kernels._groove_strata``; ties in tilt keep mesh order: grooves sort by left, then
+      (``origin_kernels._groove_strata``; ties in tilt keep mesh order: grooves sort by left, then
       right wall slope).
 
     Empty tables (``_NO_GROOVES``, ``_NO_STRATA``) for what the profile or caster refuses."""
@@ -364,12 +365,12 @@ class Tracer:
         their float32 (N, 3) (or (1, 3)) copy ``d32``. Returns (status, prim, point columns);
         the point columns are undefined where status is not HIT.
 
-        Each segment is one Embree call between two compiled passes (``kernels.segment_setup``
+        Each segment is one Embree call between two compiled passes (``segments.segment_setup``
         / ``segment_finish``): the rays still live after a segment (those re-entering through
         a wall; most finish in the first) are compacted for the next. ``first``: the first
         segment's Embree input (o32, tq, keep, top) already set up by the caller exactly as
         ``segment_setup`` would from these rays, which then all lie in the tile and are all
-        traced (``kernels.tabled_primary``, ``kernels.falling_first_segment``). ``wraps``: the
+        traced (``primary.tabled_primary``, ``segments.falling_first_segment``). ``wraps``: the
         wrap cap (segments − 1) instead of ``max_wraps``."""
         n = len(x[0])
         shared = np.isscalar(d[0])
@@ -405,7 +406,7 @@ class Tracer:
             if segment == 0 and first is not None:
                 k, (o32_, tq_, keep_, top_), d32k_ = n, first, d32
             else:
-                k = kernels.segment_setup(
+                k = segments.segment_setup(
                     x[0],
                     x[1],
                     x[2],
@@ -447,7 +448,7 @@ class Tracer:
             if segment == 0 and first is not None and not occlusion:
                 # slot i is ray i and most rays hit (primaries): the hits vectorised, the
                 # others left to segment_finish
-                kernels.first_segment_hits(pid, tfar, *x, *d, shared, status, prim, *point)
+                segments.first_segment_hits(pid, tfar, *x, *d, shared, status, prim, *point)
                 rest = np.flatnonzero(pid < 0)
                 k, pid, tfar = len(rest), pid[rest], tfar[rest]
                 keep_, top_ = keep_[rest], top_[rest]
@@ -457,7 +458,7 @@ class Tracer:
             nx_ = [work(nxt + a, k) for a in "xyz"]
             nd = [work(nxt + "d" + a, 0 if shared else k) for a in "xyz"]
             nd32 = work(nxt + "d32", (0, 3) if shared else (k, 3), np.float32)
-            m = kernels.segment_finish(
+            m = segments.segment_finish(
                 k,
                 pid,
                 tfar,
@@ -556,7 +557,7 @@ class Tracer:
         return self._walk_columns(x, d, d32, occlusion=True, first=first)[0]
 
     def _horizon_grid(self, lx: float, ly: float) -> tuple:
-        """``kernels.horizon_clear``'s coarse grid of a heightfield (finite ``rise_bound``):
+        """``horizon.horizon_clear``'s coarse grid of a heightfield (finite ``rise_bound``):
         (x0, y0, cw, ch, cmax, cslope, tol), cells of ~``HORIZON_FACETS`` facets (highest
         vertex, steepest facet of those overlapping each), tol = 4 eps (float32 rays); for
         other meshes a 1 × 1 grid that clears nothing."""
@@ -570,24 +571,24 @@ class Tracer:
         slope = np.hypot(n[:, 0], n[:, 1]) / n[:, 2]
         x0, y0, cw, ch = -lx / 2, -ly / 2, lx / nx, ly / ny
         cols = [np.ascontiguousarray(v[:, k]) for k in range(3)]
-        kernels.fill_horizon(*cols, self.faces, slope, x0, y0, cw, ch, cmax, cslope)
+        horizon.fill_horizon(*cols, self.faces, slope, x0, y0, cw, ch, cmax, cslope)
         return (x0, y0, cw, ch, cmax, cslope, 4.0 * self.eps)
 
     def clears_horizon(self, points: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """Whether rays from surface ``points`` (N, 3) (inside the tile, at or just above
         the surface) along ``dirs`` (N, 3) surely clear the surface by the coarse grid
-        (``kernels.horizon_clear``), (N,) bool; always False off heightfields."""
+        (``horizon.horizon_clear``), (N,) bool; always False off heightfields."""
         p = [np.ascontiguousarray(points[:, k], dtype=np.float64) for k in range(3)]
         d = [np.ascontiguousarray(dirs[:, k], dtype=np.float64) for k in range(3)]
         out = np.empty(len(p[0]), dtype=np.bool_)
-        kernels.horizon_clear_all(*p, *d, self.horizon, self.zmax, out)
+        horizon.horizon_clear_all(*p, *d, self.horizon, self.zmax, out)
         return out
 
     def surely_escapes(self, dx, dy, dz) -> np.ndarray:
         """Whether a ray leaving the surface along (dx, dy, dz) (columns or scalars) cannot
         meet it again, without tracing it: dz > ``CLEAR_MARGIN`` · ``rise_bound`` · |d_h|
         (always False when ``rise_bound`` is inf), |d_h| = √(dx² + dy²) as the kernels
-        compute it (``kernels.surely_escaping``)."""
+        compute it (``horizon.surely_escaping``)."""
         shape = np.broadcast_shapes(np.shape(dx), np.shape(dy), np.shape(dz))
         out = np.zeros(shape, dtype=bool)
         if math.isfinite(self.rise_bound):
@@ -596,7 +597,7 @@ class Tracer:
                 for c in (dx, dy, dz)
             ]
             slope = CLEAR_MARGIN * self.rise_bound
-            kernels.surely_escaping(*(c.reshape(-1) for c in d), slope, out.reshape(-1))
+            horizon.surely_escaping(*(c.reshape(-1) for c in d), slope, out.reshape(-1))
         return out
 
     def on_plane(self, prim: np.ndarray, point: np.ndarray, lift: float = 0.0) -> np.ndarray:

@@ -1,0 +1,127 @@
+"""Masking rays decided without tracing: the steepness test wo_z > slope·|wo_h| against a
+heightfield's Lipschitz bound (``tracer.rise_bound``) and the coarse-grid horizon test
+(``horizon_clear``, a 2-D DDA over cell maxima and slopes). Tile coordinates."""
+
+from __future__ import annotations
+
+import math
+
+from .jit import compiled, vectorised
+
+CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope bound × |wo_h|
+
+
+@compiled
+def fill_horizon(vx, vy, vz, faces, slope, x0, y0, cw, ch, cmax, cslope):
+    """The coarse bounds of ``horizon_clear``: for every facet (vertex columns ``vx/vy/vz``,
+    ``faces``, facet slope ``slope`` = |∇h|), every cell of the (ny, nx) grid of cells
+    cw × ch from (x0, y0) that its bounding box overlaps gets the facet's highest vertex in
+    ``cmax`` and its slope in ``cslope`` (running maxima; start from −inf and 0)."""
+    ny, nx = cmax.shape
+    for f in range(len(faces)):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        i0 = max(int(math.floor((min(vx[a], vx[b], vx[c]) - x0) / cw)), 0)
+        i1 = min(int(math.floor((max(vx[a], vx[b], vx[c]) - x0) / cw)), nx - 1)
+        j0 = max(int(math.floor((min(vy[a], vy[b], vy[c]) - y0) / ch)), 0)
+        j1 = min(int(math.floor((max(vy[a], vy[b], vy[c]) - y0) / ch)), ny - 1)
+        top = max(vz[a], vz[b], vz[c])
+        for j in range(j0, j1 + 1):
+            for i in range(i0, i1 + 1):
+                cmax[j, i] = max(cmax[j, i], top)
+                cslope[j, i] = max(cslope[j, i], slope[f])
+
+
+@compiled
+def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
+    """Whether a ray from (x, y, z) on a periodic heightfield (at or just above it), rising
+    along (dx, dy, dz), surely clears the surface before it rises above ``zmax``, decided on
+    a coarse grid of cells (``fill_horizon``: highest vertex ``cmax`` and steepest facet
+    ``cslope`` of the facets overlapping each cell) without tracing it. The ray's height
+    z + s·cot (s horizontal distance, cot = dz/|d_h|) is followed cell by cell (2-D DDA,
+    indices wrapped) up to s = (zmax − z)/cot; a cell is cleared when the ray enters it above
+    the cell's highest vertex (+ ``tol``), or when it stays above the Lipschitz bound
+    h(p) ≤ z + Σ cslope·(run in each cell so far) at the cell's entry and exit (in the first
+    cell, where the ray starts on the surface: cot > cslope). Any doubt — a cell fails, or
+    more than 64 cells — returns False (the ray is traced)."""
+    if dz <= 0.0:
+        return False
+    h = math.sqrt(dx * dx + dy * dy)
+    if h == 0.0:
+        return True
+    cot = dz / h
+    s_end = (zmax + tol - z) / cot
+    if s_end <= 0.0:
+        return True
+    ny, nx = cmax.shape
+    ux, uy = dx / h, dy / h
+    gx, gy = (x - x0) / cw, (y - y0) / ch
+    ix, iy = int(math.floor(gx)), int(math.floor(gy))
+    tx, dtx, sx = math.inf, math.inf, 0
+    if ux > 0.0:
+        tx, dtx, sx = (ix + 1 - gx) * cw / ux, cw / ux, 1
+    elif ux < 0.0:
+        tx, dtx, sx = (gx - ix) * cw / -ux, cw / -ux, -1
+    ty, dty, sy = math.inf, math.inf, 0
+    if uy > 0.0:
+        ty, dty, sy = (iy + 1 - gy) * ch / uy, ch / uy, 1
+    elif uy < 0.0:
+        ty, dty, sy = (gy - iy) * ch / -uy, ch / -uy, -1
+    s_in, bound = 0.0, z
+    cx, cy = ix % nx, iy % ny  # the cell, wrapped; stepped by ±1 below (no modulo per step)
+    for step in range(64):
+        s_out = min(tx, ty, s_end)
+        slope = cslope[cy, cx] * CLEAR_MARGIN
+        z_in = z + cot * s_in
+        if z_in <= cmax[cy, cx] + tol:  # the cell may reach the ray: Lipschitz chain
+            if step == 0:
+                if not cot > slope:
+                    return False
+            elif not (
+                z_in - tol > bound and z + cot * s_out - tol > bound + slope * (s_out - s_in)
+            ):
+                return False
+        bound += slope * (s_out - s_in)
+        if s_out >= s_end:
+            return True
+        if tx < ty:
+            cx += sx
+            cx = 0 if cx == nx else (nx - 1 if cx < 0 else cx)
+            s_in = tx
+            tx += dtx
+        else:
+            cy += sy
+            cy = 0 if cy == ny else (ny - 1 if cy < 0 else cy)
+            s_in = ty
+            ty += dty
+    return False
+
+
+@compiled
+def horizon_clear_all(px, py, pz, dx, dy, dz, hz, zmax, out):
+    """``horizon_clear`` for rays from (px, py, pz)[i] (in the tile) along (dx, dy, dz)[i]
+    on the grid ``hz`` (x0, y0, cw, ch, cmax, cslope, tol); writes ``out``."""
+    for i in range(len(px)):
+        out[i] = horizon_clear(
+            px[i],
+            py[i],
+            pz[i],
+            dx[i],
+            dy[i],
+            dz[i],
+            hz[0],
+            hz[1],
+            hz[2],
+            hz[3],
+            hz[4],
+            hz[5],
+            zmax,
+            hz[6],
+        )
+
+
+@vectorised
+def surely_escaping(dx, dy, dz, slope, out):
+    """out[i] = dz > slope·√(dx² + dy²): rays rising more steeply than the surface can
+    (``Tracer.surely_escapes``, ``traced_primary``), vectorised."""
+    for i in range(len(dx)):
+        out[i] = dz[i] > slope * math.sqrt(dx[i] * dx[i] + dy[i] * dy[i])

@@ -1,0 +1,228 @@
+"""Primary hits to ledger classes (``paths.LEDGER``), Fresnel cosines, mirror directions
+wo = 2(n·wi)n − wi and the masking rays that must still be traced, set up as the first
+segment of their walk (``segments.setup_ray``); the exact V-groove masking margin
+(``VGrooveProfile.margin_from_rim``) that clears the rest."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .codes import DOWNWARD, ESCAPED, HIT, MISSED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
+from .horizon import CLEAR_MARGIN, horizon_clear
+from .jit import TILE, compiled, vector_inlined, vectorised
+from .segments import setup_ray
+
+
+@compiled
+def tabled_primary(
+    hs,
+    prim,
+    px,
+    py,
+    pz,
+    code,
+    fweight,
+    nx,
+    ny,
+    nz,
+    lift,
+    wo32,
+    fbin,
+    fclear,
+    hz,
+    geometry,
+    status,
+    weight,
+    where,
+    masking,
+):
+    """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
+    per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
+    ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
+    bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the masking rays of
+    the other lit ones (code SINGLE) that the coarse grid ``hz`` (``horizon_clear``'s
+    x0, y0, cw, ch, cmax, cslope, tol) cannot clear, set up as the first
+    segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
+    ray ``mi[m]`` starts at its hit point p moved along n onto the facet plane and eps above
+    it, p − (p·n − lift)·n, wrapped into the tile (``sx/sy/sz``), along the facet's mirror
+    direction (``mdx``… ``md32``), with its Embree input in slot m (``setup_ray``: ``o32``,
+    ``tq``, ``top``; ``keep[m]`` = m). A start at or above zmax has nothing above it: the ray
+    escapes without a masking ray (as ``segment_setup`` decides). ``hs`` is the walk status:
+    HIT, MISSED/ESCAPED (→ RAY_MISSED) or UNRESOLVED. Writes ``status``, ``weight`` (0
+    without a hit) and ``where`` (the facet bin for lit rays, else −1) of every ray; returns
+    the number of masking rays. In tiles of ``TILE`` rays: the look-ups one by one, the
+    starts in a vectorised loop, the masking rays by ``masking_starts``."""
+    tile = np.empty((10, TILE))  # per-ray scratch of one tile
+    a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
+    dx_, dy_, dz_ = tile[7], tile[8], tile[9]
+    cand = np.empty(TILE, np.bool_)
+    m = 0
+    for t in range(0, len(hs), TILE):
+        n = min(TILE, len(hs) - t)
+        for j in range(n):  # one by one: the hit facet's entries (indexed loads)
+            i = t + j
+            h = hs[i]
+            hit = h == HIT
+            f = prim[i] if hit else 0
+            c = code[f]
+            miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
+            status[i] = c if hit else miss
+            weight[i] = fweight[f] if hit else 0.0
+            where[i] = fbin[f] if hit & (c == SINGLE) else -1
+            cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
+            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
+            dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
+        for j in range(n):  # vectorised: the masking rays' starts on the facet planes
+            i = t + j
+            a, b, e = a_[j], b_[j], e_[j]
+            off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]
+            x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
+        m = masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
+    return m
+
+
+@vectorised
+def traced_primary(
+    hs,
+    prim,
+    px,
+    py,
+    pz,
+    wx,
+    wy,
+    wz,
+    nx,
+    ny,
+    nz,
+    lift,
+    trace_masking,
+    clear_slope,
+    hz,
+    groove,
+    geometry,
+    status,
+    cosine,
+    wox,
+    woy,
+    woz,
+    masking,
+):
+    """``tabled_primary`` for rays that each carry their own incident direction wl (``wx/wy/
+    wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n
+    (unit normal ``nx/ny/nz``, ``lift`` = n·v0 + eps), c = n·wl (``cosine``: 0 without a hit
+    or back-facing, for ``fresnel_weights``); back-facing (c ≤ 0): RAY_UNRESOLVED; else the
+    mirror direction wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0, else
+    SINGLE. With
+    ``trace_masking`` the SINGLE rays whose float32 wo rises more steeply than
+    ``clear_slope`` (× ``CLEAR_MARGIN`` as in ``Tracer.surely_escapes``; inf: none), that
+    start at or above zmax or that clear the coarse grid ``hz`` (``horizon_clear``) escape
+    without a ray, and the others get their masking ray set up
+    as the first segment of their walk, exactly as ``tabled_primary`` (float64 direction wo,
+    its float32 copy in ``md32``); returns the number of masking rays (0 without
+    ``trace_masking``: the caller decides masking itself). ``groove``: V-groove surfaces'
+    per-facet (rim x, tanθ σ, rim-to-rim width W, rim-to-bottom extent) and a tolerance
+    (``Tracer.groove_clear``; empty arrays otherwise): a ray whose exact masking margin
+    s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``) is below −tolerance
+    escapes without a ray (the margins within it are left to Embree)."""
+    shared = len(wx) == 1
+    grim, gtan, gwidth, gextent, gtol = groove
+    grooved = len(grim) > 0
+    tile = np.empty((11, TILE))  # per-ray scratch of one tile
+    a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
+    rim_, tan_, width_, extent_ = tile[7], tile[8], tile[9], tile[10]
+    cand = np.empty(TILE, np.bool_)
+    slope = CLEAR_MARGIN * clear_slope
+    m = 0
+    for t in range(0, len(hs), TILE):
+        n = min(TILE, len(hs) - t)
+        for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
+            f = prim[t + j] if hs[t + j] == HIT else 0
+            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
+        if grooved:
+            for j in range(n):
+                f = prim[t + j] if hs[t + j] == HIT else 0
+                rim_[j], tan_[j], width_[j], extent_[j] = grim[f], gtan[f], gwidth[f], gextent[f]
+        for j in range(n):  # vectorised: reflection and class
+            i = t + j
+            k = 0 if shared else i
+            h = hs[i]
+            a, b, e = a_[j], b_[j], e_[j]
+            c = wx[k] * a + wy[k] * b + wz[k] * e
+            oz = 2.0 * c * e - wz[k]
+            st = SINGLE if oz > 0.0 else DOWNWARD
+            st = st if c > 0.0 else RAY_UNRESOLVED
+            miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
+            status[i] = st if h == HIT else miss
+            cosine[i] = c if (h == HIT) & (c > 0.0) else 0.0
+            wox[i], woy[i], woz[i] = 2.0 * c * a - wx[k], 2.0 * c * b - wy[k], oz
+        for j in range(n):  # vectorised: masking candidates and their starts
+            i = t + j
+            ox, oy, oz = wox[i], woy[i], woz[i]
+            gx, gy = np.float64(np.float32(ox)), np.float64(np.float32(oy))
+            gz = np.float64(np.float32(oz))
+            steep = gz > slope * math.sqrt(gx * gx + gy * gy)  # escapes: no masking ray
+            if grooved:  # clears the opposite facet by more than the tolerance: escapes
+                s = min(abs(px[i] - rim_[j]), extent_[j])
+                steep |= groove_margin(s, tan_[j], width_[j], ox, oz) < -gtol
+            cand[j] = trace_masking & (status[i] == SINGLE) & (not steep)
+            a, b, e = a_[j], b_[j], e_[j]
+            off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]  # on the facet plane, eps above
+            x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
+        m = masking_starts(
+            cand, t, n, x_, y_, z_, wox[t:], woy[t:], woz[t:], hz, geometry, m, masking
+        )
+    return m
+
+
+@compiled
+def masking_starts(cand, t, n, x_, y_, z_, ox_, oy_, oz_, hz, geometry, m, masking):
+    """The masking rays of the candidates j < n of a tile starting at ray t (``cand``: lit,
+    rising, not surely escaping), from (``x_``, ``y_``, ``z_``) along (``ox_``, ``oy_``,
+    ``oz_``) traced as its float32 copy: a start at or above zmax has nothing above it and one
+    that clears the coarse grid ``hz`` (``horizon_clear``) escapes; the others, wrapped into
+    the tile, get slot m onwards of the first segment of their walk (``setup_ray``;
+    ``keep[m]`` = m, ``mi[m]`` = their ray). ``geometry``: (hx, hy, zmax, eps, rel);
+    ``masking``: the ``paths.MaskingRays`` arrays (mi, sx, sy, sz, mdx, mdy, mdz, md32, o32,
+    tq, keep, top). Returns the new m."""
+    hx, hy, zmax, eps, rel = geometry
+    mi, sx, sy, sz, mdx, mdy, mdz, md32, o32, tq, keep, top = masking
+    for j in range(n):
+        if not cand[j]:
+            continue
+        x, y, z = x_[j], y_[j], z_[j]
+        if z >= zmax:  # nothing above: escaped
+            continue
+        if x < -hx or x >= hx:  # into the tile
+            x = (x + hx) % (2.0 * hx) - hx
+        if y < -hy or y >= hy:
+            y = (y + hy) % (2.0 * hy) - hy
+        ox, oy, oz = ox_[j], oy_[j], oz_[j]
+        if horizon_clear(
+            x, y, z, ox, oy, oz, hz[0], hz[1], hz[2], hz[3], hz[4], hz[5], zmax, hz[6]
+        ):
+            continue  # clears the coarse grid: escaped
+        sx[m], sy[m], sz[m] = x, y, z
+        mdx[m], mdy[m], mdz[m] = ox, oy, oz
+        md32[m, 0], md32[m, 1], md32[m, 2] = np.float32(ox), np.float32(oy), np.float32(oz)
+        setup_ray(m, x, y, z, ox, oy, oz, hx, hy, zmax, eps, rel, o32, tq, top)
+        keep[m] = m
+        mi[m] = t + j
+        m += 1
+    return m
+
+
+@compiled
+def apply_escape(status, rays, esc, from_escape):
+    """``status[rays[m]] = from_escape[esc[m]]`` for the masking rays' walk statuses ``esc``."""
+    for m in range(len(esc)):
+        status[rays[m]] = from_escape[esc[m]]
+
+
+@vector_inlined
+def groove_margin(s, signed_tan, width, ox, oz):
+    """The exact V-groove masking margin s(1 + tanθ σ wo_x/wo_z) − W of a hit at horizontal
+    distance s from its facet's rim, leaving along wo (``VGrooveProfile.margin_from_rim``):
+    > 0 ⇔ masked by the opposite facet."""
+    return s * (1.0 + signed_tan * ox / oz) - width

@@ -1,0 +1,79 @@
+"""Fresnel weights F(c), c = n·wi > 0, of the compiled passes (``fresnel_real_scalar`` in
+real arithmetic onto η² = n² − k², or 1 for a mirror, 0 for η = 1), and the per-facet
+table of one incidence (``facet_mirror``: weight, mirror direction, ledger class)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from microsim.analytic.fresnel import fresnel_real_scalar
+
+from .engine.codes import DOWNWARD, RAY_UNRESOLVED, SINGLE
+from .engine.jit import compiled, vector_inlined, vectorised
+
+FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2  # ``fresnel_weight``'s modes
+
+
+@vectorised
+def fresnel_weights(c, n2, k2, fresnel_mode, weight):
+    """weight[i] = F(c[i]) (``fresnel_weight``), 0 where c ≤ 0 (no hit, back-facing), in a
+    vectorised loop (``fresnel_tile``)."""
+    fresnel_tile(c, len(c), n2, k2, fresnel_mode, weight, 0)
+
+
+@vector_inlined
+def fresnel_weight(c, n2, k2, fresnel_mode):
+    """F(c) for c > 0 by ``fresnel_mode``: FRESNEL_REAL ``fresnel_real_scalar`` onto η² with
+    n2 = n², k2 = k²; FRESNEL_MIRROR 1; FRESNEL_NONE 0 (η = 1: nothing reflects off grazing)."""
+    if fresnel_mode == FRESNEL_REAL:
+        return fresnel_real_scalar(c, n2, k2)
+    return 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
+
+
+@compiled
+def facet_mirror(
+    nx, ny, nz, wix, wiy, wiz, n2, k2, fresnel_mode, weight, code, wox, woy, woz, wo32
+):
+    """Per facet with unit normal n (``nx/ny/nz``) lit from wi: the Fresnel weight F(n·wi)
+    (``weight``, 0 if back-facing; ``fresnel_weight``), the mirror direction
+    wo = 2(n·wi)·n − wi (``wox/woy/woz``, float32 copy ``wo32``) and the class a primary hit
+    gets (``code``): SINGLE if lit and wo rises (a masking ray decides), DOWNWARD if lit and
+    wo points down, RAY_UNRESOLVED if back-facing (n·wi ≤ 0)."""
+    for f in range(len(nx)):
+        c = nx[f] * wix + ny[f] * wiy + nz[f] * wiz
+        x = 2.0 * c * nx[f] - wix
+        y = 2.0 * c * ny[f] - wiy
+        z = 2.0 * c * nz[f] - wiz
+        wox[f] = x
+        woy[f] = y
+        woz[f] = z
+        wo32[f, 0] = np.float32(x)
+        wo32[f, 1] = np.float32(y)
+        wo32[f, 2] = np.float32(z)
+        if c <= 0.0:
+            code[f] = RAY_UNRESOLVED
+            weight[f] = 0.0
+        else:
+            code[f] = SINGLE if z > 0.0 else DOWNWARD
+            weight[f] = fresnel_weight(c, n2, k2, fresnel_mode)
+
+
+@vector_inlined
+def fresnel_tile(c, m, n2, k2, fresnel_mode, weight, t):
+    """weight[t + j] = F(c[j]) (``fresnel_weight``), 0 where c ≤ 0 (back-facing), for
+    j < m: one loop per mode, so that each vectorises."""
+    if fresnel_mode == FRESNEL_REAL:
+        for j in range(m):
+            weight[t + j] = 0.0 if c[j] <= 0.0 else fresnel_real_scalar(c[j], n2, k2)
+    else:
+        one = 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
+        for j in range(m):
+            weight[t + j] = 0.0 if c[j] <= 0.0 else one
+
+
+def fresnel_mode(ior) -> tuple:
+    """(mode, n², k²) of ``fresnel_weight`` for a resolved index ``ior`` (None = mirror)."""
+    if ior is None:
+        return FRESNEL_MIRROR, 0.0, 0.0
+    eta = complex(ior)
+    return (FRESNEL_NONE if eta == 1 else FRESNEL_REAL), eta.real**2, eta.imag**2

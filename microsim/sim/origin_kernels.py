@@ -1,0 +1,89 @@
+"""Stratified ray origins (``streams.chunk_origins``): ray r of N at place s = (r + ξ)/N·rows
+of a row-major sweep of the tile, y jittered in its row, and, for V-grooves, x and the groove
+azimuth ψ stratified over the grooves in order of tilt and the rows. Tile coordinates,
+ψ in radians."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .engine.jit import vector_inlined, vectorised
+
+
+@vector_inlined
+def _stratum(r, xi, n_total, rows):
+    """Ray r's place (r as a float) in its stratum of a row-major sweep of ``rows`` rows:
+    s = (r + ξ)/N · rows; (s − row, row) with row = ⌊s⌋ capped at rows − 1."""
+    s = (r + xi) / n_total * rows
+    row = min(math.floor(s), rows - 1.0)
+    return s - row, row
+
+
+@vectorised
+def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, x, y, psi):
+    """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``streams.
+    chunk_origins``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
+    chunk (m rays) holds ξ, η (and ψ/2π if ``azimuth``) as runs of m numbers from
+    u[k·block·j], k = 3 if ``azimuth`` else 2. Ray r's stratum (``_stratum``) gives
+    x = (s − ⌊s⌋)·Lx − Lx/2, y = (⌊s⌋ + η)/rows · Ly − Ly/2, and ψ = 2π·(ψ/2π) if
+    ``azimuth``. With groove ``strata`` (``Tracer.groove_strata``: V-grooves, azimuth) x and
+    ψ are stratified over the grooves in order of tilt and the rows instead
+    (``_groove_strata``). Writes ``x``, ``y`` (and ``psi``)."""
+    per_ray = 3 if azimuth else 2
+    offset = np.arange(block).astype(np.float64)  # q as a float: the loop then vectorises
+    for j in range((n + block - 1) // block):
+        lo = j * block
+        m = min(block, n - lo)
+        base = per_ray * lo
+        first = float(r0 + lo)  # float(r0 + lo) + q = float(r0 + lo + q) exactly (< 2⁵³)
+        for q in range(m):
+            frac, row = _stratum(first + offset[q], u[base + q], n_total, rows)
+            x[lo + q] = frac * lx - lx / 2
+            y[lo + q] = (row + u[base + m + q]) / rows * ly - ly / 2
+        if azimuth:
+            _groove_strata(u, base, base + 2 * m, first, m, n_total, rows, strata, lo, x, psi)
+
+
+@vectorised
+def stratified_groove_starts(u, r0, n, block, n_total, rows, lx, strata, x, psi):
+    """x and groove azimuth ψ of stratified rays r0 … r0 + n − 1 as ``stratified_origins``
+    (``azimuth``) gives them, from ξ and ψ/2π alone: block j (m rays) holds them as two runs
+    of m numbers from u[2·block·j] (``streams.groove_starts``)."""
+    offset = np.arange(block).astype(np.float64)
+    for j in range((n + block - 1) // block):
+        lo = j * block
+        m = min(block, n - lo)
+        base = 2 * lo
+        first = float(r0 + lo)
+        for q in range(m):
+            frac, _ = _stratum(first + offset[q], u[base + q], n_total, rows)
+            x[lo + q] = frac * lx - lx / 2
+        _groove_strata(u, base, base + m, first, m, n_total, rows, strata, lo, x, psi)
+
+
+@vector_inlined
+def _groove_strata(u, at_xi, at_psi, first, m, n_total, rows, strata, lo, x, psi):
+    """Groove azimuths ψ of m rays from their uniforms u[at_psi …] (ξ at u[at_xi …]), ray
+    ``first`` + q at x[lo + q], psi[lo + q]. Without ``strata`` (an empty array): ψ = 2π·u.
+    With them, (left rims x of the grooves in order of tilt (G,), groove width) of equal-width
+    V-grooves along y (whose BRDF does not depend on y): the ray's stratum (s − ⌊s⌋ =
+    (k + φ)/G, row ⌊s⌋) is mapped to position φ across the k-th groove in order of tilt,
+    x = strata[k] + φ·W, and ψ = 2π(row + u)/rows is stratified by the row. Both maps keep
+    every stratum's measure (x uniform over the tile, ψ over [0, 2π)), so the estimate stays
+    unbiased; rays 2k and 2k + 1 then meet grooves of neighbouring tilt at neighbouring
+    azimuths, which halves the rays a V-groove run needs for a given error (the collapsed-
+    strata error estimate stays valid: tests/test_kernels.py)."""
+    rim = strata[0]
+    if len(rim) == 0:
+        for q in range(m):
+            psi[lo + q] = 2 * np.pi * u[at_psi + q]
+        return
+    width, g = strata[1], len(rim)
+    for q in range(m):
+        frac, row = _stratum(first + q, u[at_xi + q], n_total, rows)
+        psi[lo + q] = 2 * np.pi * ((row + u[at_psi + q]) / rows)
+        rank = frac * g
+        k = min(math.floor(rank), g - 1.0)
+        x[lo + q] = rim[int(k)] + (rank - k) * width

@@ -1,0 +1,153 @@
+"""Per-block tallies (``tallies``): Σw, Σw², counts and the collapsed-strata pair sum
+Σ w_2k·w_2k+1 per bin, stored sparsely per block, and the ledger per class; added in ray
+order and block order, so bitwise independent of chunking and threads."""
+
+from __future__ import annotations
+
+from .engine.codes import DOWNWARD, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
+from .engine.jit import compiled
+
+
+@compiled
+def block_tallies(
+    status, weight, where, block, acc, touched, out_bin, out_sums, out_cnt, offsets, ln, lf
+):
+    """Per-block sums of a batch of whole blocks of ``block`` rays (``tallies.split_tallies``),
+    added in ray order, stored sparsely (only the bins a block touches: a block has at most
+    ``block`` events, while a fine grid has thousands of bins).
+
+    For single-bounce rays with a bin (``where`` ≥ 0): Σw, Σw² and the pair sum
+    (w_2k·w_2k+1 where rays 2k and 2k + 1, counted from the batch start, are both tallied in
+    the same bin) accumulate in the dense scratch ``acc`` (3, bins) (zero on entry and on
+    return) and the counts in ``touched`` (bins,) int64; block b's bins are then written, in
+    the order first touched, to ``out_bin``/``out_sums`` (3, N)/``out_cnt`` between
+    ``offsets[b]`` and ``offsets[b + 1]``. Ledger counts and Fresnel sums per class go to
+    ``ln``, ``lf`` (blocks, classes)."""
+    n = len(status)
+    j = 0
+    for b in range((n + block - 1) // block):
+        offsets[b] = j
+        lo, hi = b * block, min(n, (b + 1) * block)
+        n0 = n1 = n2 = n3 = n4 = 0  # ledger sums in registers, per class
+        f0 = f1 = f2 = f3 = f4 = 0.0
+        for i in range(lo, hi):
+            s = status[i]
+            if s == SINGLE:
+                n0 += 1
+                f0 += weight[i]
+            elif s == MASKED:
+                n1 += 1
+                f1 += weight[i]
+            elif s == DOWNWARD:
+                n2 += 1
+                f2 += weight[i]
+            elif s == RAY_UNRESOLVED:
+                n3 += 1
+                f3 += weight[i]
+            else:
+                n4 += 1
+                f4 += weight[i]
+            if s == SINGLE and where[i] >= 0:
+                k = where[i]
+                out_bin[j] = k  # kept (j advances) only on the bin's first event: no branch
+                j += touched[k] == 0
+                w = weight[i]
+                acc[0, k] += w
+                acc[1, k] += w * w
+                touched[k] += 1
+        ln[b, SINGLE], ln[b, MASKED], ln[b, DOWNWARD] = n0, n1, n2
+        ln[b, RAY_UNRESOLVED], ln[b, RAY_MISSED] = n3, n4
+        lf[b, SINGLE], lf[b, MASKED], lf[b, DOWNWARD] = f0, f1, f2
+        lf[b, RAY_UNRESOLVED], lf[b, RAY_MISSED] = f3, f4
+        for i in range(lo, hi - 1, 2):
+            if (
+                status[i] == SINGLE
+                and status[i + 1] == SINGLE
+                and where[i] >= 0
+                and where[i] == where[i + 1]
+            ):
+                acc[2, where[i]] += weight[i] * weight[i + 1]
+        for q in range(offsets[b], j):
+            k = out_bin[q]
+            for m in range(3):
+                out_sums[m, q] = acc[m, k]
+                acc[m, k] = 0.0
+            out_cnt[q] = touched[k]
+            touched[k] = 0
+    offsets[(n + block - 1) // block] = j
+
+
+@compiled
+def add_blocks(sum_w, sum_w2, count, sum_pair, led_n, led_f, bins, sums, cnt, offsets, ln, lf):
+    """Add a chunk's sparse per-block sums (``block_tallies``: block b's distinct bins are
+    ``bins[offsets[b]:offsets[b + 1]]``) to the running totals, block by block in block order
+    — bitwise what adding each block's dense sums would give (an untouched bin adds 0)."""
+    for b in range(len(offsets) - 1):
+        for q in range(offsets[b], offsets[b + 1]):
+            k = bins[q]
+            sum_w[k] += sums[0, q]
+            sum_w2[k] += sums[1, q]
+            count[k] += cnt[q]
+            sum_pair[k] += sums[2, q]
+        for c in range(led_n.shape[0]):
+            led_n[c] += ln[b, c]
+            led_f[c] += lf[b, c]
+
+
+@compiled
+def order_block_tallies(
+    status1,
+    weight1,
+    term,
+    wterm,
+    where,
+    block,
+    acc,
+    touched,
+    out_bin,
+    out_sums,
+    out_cnt,
+    offsets,
+    ln,
+    lf,
+):
+    """``block_tallies`` for paths followed over several bounces (``bounces``): a path that
+    escapes adds its carried weight ``wterm`` to its (order, bin) slot ``where`` (≥ 0; −1
+    for paths that do not escape), with Σw, Σw², counts and the pair sum (rays 2k, 2k + 1 in
+    the same slot) per block, stored sparsely as there. Ledger (blocks, 5 + N_TERMINAL):
+    columns 0–4 count the first-bounce classes ``status1`` and sum their Fresnel weights
+    ``weight1`` (``paths.LEDGER``), columns 5 + ``term`` the terminal classes and sum their
+    carried weights ``wterm`` (the energy each class takes away)."""
+    n = len(term)
+    j = 0
+    nl = 5
+    for b in range((n + block - 1) // block):
+        offsets[b] = j
+        lo, hi = b * block, min(n, (b + 1) * block)
+        for i in range(lo, hi):
+            s = status1[i]
+            ln[b, s] += 1
+            lf[b, s] += weight1[i]
+            t = term[i]
+            ln[b, nl + t] += 1
+            lf[b, nl + t] += wterm[i]
+            k = where[i]
+            if k >= 0:
+                if touched[k] == 0:
+                    out_bin[j] = k
+                    j += 1
+                v = wterm[i]
+                acc[0, k] += v
+                acc[1, k] += v * v
+                touched[k] += 1
+        for i in range(lo, hi - 1, 2):
+            if where[i] >= 0 and where[i] == where[i + 1]:
+                acc[2, where[i]] += wterm[i] * wterm[i + 1]
+        for q in range(offsets[b], j):
+            k = out_bin[q]
+            for m in range(3):
+                out_sums[m, q] = acc[m, k]
+                acc[m, k] = 0.0
+            out_cnt[q] = touched[k]
+            touched[k] = 0
+    offsets[(n + block - 1) // block] = j
