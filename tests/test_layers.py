@@ -138,3 +138,31 @@ def test_the_module_graph_has_no_cycle():
     for n in sorted(graph):
         if n not in state:
             visit(n)
+
+
+def test_the_ray_engine_is_below_the_estimator():
+    """``microsim.sim.engine`` (the periodic walk's compiled loops) imports nothing of
+    ``microsim.sim`` outside itself: the estimator is built on the engine, never the reverse."""
+    mods = _modules()
+    known = set(mods)
+    for name, path in mods.items():
+        if name.startswith("microsim.sim.engine"):
+            above = {
+                t
+                for t in _imports(name, path, known)
+                if t.startswith("microsim.sim") and not t.startswith("microsim.sim.engine")
+            }
+            assert not above, f"{name} imports {sorted(above)} from above the engine"
+
+
+def test_the_readme_layout_table_names_every_module():
+    import re
+
+    readme = (PACKAGE.parent / "README.md").read_text(encoding="utf-8")
+    table = readme[readme.index("### Package layout") :]
+    table = table[: table.index("\n## ")]
+    named = set(re.findall(r"`([\w/]+)`", table))
+    missing = sorted(
+        p.stem for p in PACKAGE.rglob("*.py") if p.stem not in ("__init__", "__main__", *named)
+    )
+    assert not missing, f"README's package layout table does not name {missing}"

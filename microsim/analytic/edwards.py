@@ -117,6 +117,7 @@ def disk_centre(wo) -> np.ndarray:
 def reflect_halfway(wo, h) -> np.ndarray:
     """Incident direction wi = 2(wo·h)h − wo for a unit half vector h (eq. 13)."""
     wo, h = np.asarray(wo, float), np.asarray(h, float)
+    _checks.broadcast({"wo": wo, "h": h})
     return 2.0 * vectors.dot(wo, h)[..., None] * h - wo
 
 
@@ -141,6 +142,7 @@ def scaling_projection_inverse(wo, uv) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     uv = np.asarray(uv, dtype=np.float64)
+    _checks.broadcast({"wo": wo, "uv": uv})
     c = np.broadcast_to(_cos_o(wo), np.broadcast_shapes(wo.shape[:-1], uv.shape[:-1]))
     return _unit_or_normal(np.concatenate([np.broadcast_to(uv, c.shape + (2,)), c[..., None]], -1))
 
@@ -185,6 +187,7 @@ def orthogonal_projection_inverse(wo, uv) -> np.ndarray:
     """
     wo = _checks.directions("wo", wo, upper=True)
     uv = np.asarray(uv, dtype=np.float64)
+    _checks.broadcast({"wo": wo, "uv": uv})
     d = uv - wo[..., :2]
     wi_z = np.sqrt(np.clip(1.0 - np.sum(d * d, axis=-1), 0.0, 1.0))
     hz = _cos_o(wo) + wi_z
@@ -325,8 +328,10 @@ class Lump:
 
     def pdf(self, wo, uv) -> np.ndarray:
         """Density per unit disk area at (u, v) (eq. 26/27); 0 for a zero-radius lump."""
+        wo, uv = _checks.directions("wo", wo, upper=True), np.asarray(uv, float)
+        _checks.broadcast({"wo": wo, "uv": uv})
         centre, ru, rv = self.geometry(wo)
-        d = np.asarray(uv, float) - centre
+        d = uv - centre
         q = _safe_div(d[..., 0], ru) ** 2 + _safe_div(d[..., 1], rv) ** 2
         inside = (q < 1.0) & (ru > 0.0)
         norm = _safe_div(self.n + 1.0, np.pi * ru * rv)
@@ -337,8 +342,10 @@ class Lump:
 
         r/R = √(1 − u1^(1/(n+1))), evaluated as √(−expm1(ln u1/(n+1))) for large n.
         """
-        centre, ru, rv = self.geometry(wo)
+        wo = _checks.directions("wo", wo, upper=True)
         u1, u2 = np.asarray(u1, float), np.asarray(u2, float)
+        _checks.broadcast({"wo": wo}, {"u1": u1, "u2": u2})
+        centre, ru, rv = self.geometry(wo)
         with np.errstate(divide="ignore"):
             rho = np.sqrt(-np.expm1(np.log(np.clip(u1, 0.0, 1.0)) / (self.n + 1.0)))
         phi = 2.0 * np.pi * u2
@@ -369,10 +376,12 @@ class LumpMixture:
 
     def pdf(self, wo, uv) -> np.ndarray:
         """Mixture density per unit disk area at (u, v)."""
+        _checks.broadcast({"wo": _checks.directions("wo", wo, upper=True), "uv": np.asarray(uv)})
         return sum(w * lump.pdf(wo, uv) for lump, w in zip(self.lumps, self.weights) if w > 0)
 
     def sample(self, wo, u1, u2):
         """((u, v), density) from uniforms u1, u2: u1 picks the lump and is rescaled for reuse."""
+        _checks.broadcast({"wo": _checks.directions("wo", wo, upper=True)}, {"u1": u1, "u2": u2})
         w = np.asarray(self.weights, float)
         upper = np.cumsum(w)
         upper[-1] = 1.0
@@ -477,7 +486,7 @@ def brdf_to_disk_density(wi, wo, rho, projection: str = "scaling") -> np.ndarray
     """
     wo = _checks.directions("wo", wo, upper=True)
     wi = _checks.directions("wi", wi)
-    _checks.broadcast({"wi": wi, "wo": wo})
+    _checks.broadcast({"wi": wi, "wo": wo}, {"rho": rho})
     cos_i = np.maximum(wi[..., 2], 0.0)
     return _safe_div(np.asarray(rho, float) * cos_i, disk_jacobian(wi, wo, projection))
 
@@ -621,6 +630,7 @@ def sample_edwards(wo, u1, u2, lumps, projection: str = "scaling"):
     projection = _check_projection(projection)
     mix = _as_mixture(lumps)
     wo = _checks.directions("wo", wo, upper=True)
+    _checks.broadcast({"wo": wo}, {"u1": u1, "u2": u2})
     uv, p = mix.sample(wo, u1, u2)
     wi = disk_to_incident(wo, uv, projection)
     d = uv - wo[..., :2]

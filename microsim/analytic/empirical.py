@@ -221,6 +221,7 @@ class Empirical(NDF):
 
     def sample(self, u1, u2):
         """Unit h ~ D(h)h_z from uniforms u1 (tilt), u2 (azimuth; conditional on the tilt bin)."""
+        _checks.broadcast({}, {"u1": u1, "u2": u2})
         u1, u2 = np.broadcast_arrays(np.asarray(u1, float), np.asarray(u2, float))
         if self.isotropic:
             return super().sample(u1, u2)

@@ -383,6 +383,7 @@ def sample_low_smooth(wo, u1, u2, B) -> LowSample:
     wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     B = _checks.positive("B", B)
     u1, u2 = _unit_numbers("u1", u1), _unit_numbers("u2", u2)
+    _checks.broadcast({"wo": wo}, {"u1": u1, "u2": u2})
     ro2 = _tsq(wo)
     ro = np.sqrt(ro2)
     x = u1 * _disk_log_norm(B, ro2, wo[..., 2] ** 2)
@@ -477,6 +478,7 @@ def sample_low_microfacet(wo, u1, u2, B, C) -> LowSample:
     wo = vectors.normalize(_checks.directions("wo", wo, upper=True))
     B, C = _checks.positive("B", B), _checks.positive("C", C)
     u1, u2 = _unit_numbers("u1", u1), _unit_numbers("u2", u2)
+    _checks.broadcast({"wo": wo}, {"u1": u1, "u2": u2})
     x = _tilt_quantile(u1, B, C)
     sin_h = np.sqrt(x * (2.0 - x))
     phi = 2.0 * np.pi * u2

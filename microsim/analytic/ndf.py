@@ -95,6 +95,7 @@ class NDF:
 
     def sample(self, u1, u2):
         """Unit half vectors h ~ pdf from uniform numbers u1, u2 ∈ [0, 1) (inverse CDF)."""
+        _checks.broadcast({}, {"u1": u1, "u2": u2})
         u1, u2 = np.broadcast_arrays(np.asarray(u1, float), np.asarray(u2, float))
         theta = self.tilt_quantile_rad(u1)
         return vectors.spherical(theta, 2.0 * np.pi * u2)

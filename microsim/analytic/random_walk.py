@@ -288,7 +288,10 @@ def sample_visible_normals(v, ndf, u1, u2):
     u1 = np.clip(np.asarray(u1, dtype=np.float64), 1e-300, 1.0)
     u2 = np.clip(np.asarray(u2, dtype=np.float64), 0.0, 1.0)
     if u1.shape != (len(v),) or u2.shape != (len(v),):
-        raise UsageError(f"u1 and u2 must have shape ({len(v)},)")
+        raise UsageError(
+            f"v, u1 and u2 must have shapes (N, 3), (N,) and (N,), "
+            f"got v {v.shape}, u1 {u1.shape}, u2 {u2.shape}"
+        )
     return _visible(kind, alpha, v, u1, np.clip(u2, 1e-16, 1 - 1e-16))
 
 
