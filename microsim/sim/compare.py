@@ -30,6 +30,7 @@ m_real = ``surface.stats()["m_realised"]``):
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -198,6 +199,23 @@ def _result_fingerprints(result: Result) -> tuple[str, ...] | None:
     return tuple(sorted(fps))
 
 
+def _as_specs(specs) -> list:
+    """``specs`` as a list of ``ModelSpec`` (a mapping's model objects through ``from_model``)."""
+    if isinstance(specs, Mapping):
+        return [
+            s if isinstance(s, ModelSpec) else ModelSpec.from_model(str(name), s)
+            for name, s in specs.items()
+        ]
+    specs = list(specs)
+    for s in specs:
+        if not isinstance(s, ModelSpec):
+            raise UsageError(
+                f"specs: a list must hold ModelSpecs (pass model objects as a mapping name → "
+                f"model), got {s!r}"
+            )
+    return specs
+
+
 def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
     """A new Result: ``result`` with the bin-averaged predictions of ``specs`` (name → (T, Θ, Φ)
     sr⁻¹, on the result's bins, θi and φi; one ``predict`` call per distinct φi) added to its
@@ -205,8 +223,9 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
     itself is left untouched (Results are immutable); predictions travel inside the Result
     because they are saved with it (``model_*`` arrays) and every report reads them there.
     Facet models tagged with surface fingerprints (``default_models``) must match the result's
-    realisations, else UsageError."""
-    specs = list(specs)
+    realisations, else UsageError. ``specs``: ``ModelSpec``s, or a mapping name → model object
+    (``analytic.models``, any ``BRDFModel``; ``ModelSpec.from_model``) or ``ModelSpec``."""
+    specs = _as_specs(specs)
     traced = _result_fingerprints(result)
     for s in specs:
         built = s.params.get("fingerprints") if s.kind == "facets" else None
