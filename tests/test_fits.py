@@ -72,7 +72,7 @@ def _synthetic(name, truth, bins=SMALL, theta_i=(0.0, 30.0, 60.0)):
 def test_noise_free_recovery(name, truth):
     data = _synthetic(name, truth)
     res = fits.fit_model(name, data, "aluminium", n_starts=2)
-    assert res.success
+    assert res.success and res.at_bounds == () and res.converged
     for key, value in truth.items():
         assert res.params[key] == pytest.approx(value, rel=1e-3, abs=1e-6), key
     assert res.model_values.shape == data.sim.shape
@@ -82,6 +82,23 @@ def test_noise_free_recovery(name, truth):
     geo = [np.broadcast_to(g, data.sim.shape)[used] for g in data.geometry()]
     scale = an.low_e2(data.sim[used], np.zeros(used.sum()), *geo)
     assert res.cost < 1e-12 * scale and res.e2 < 1e-3 * scale
+
+
+def test_a_fit_ending_at_a_bound_is_not_converged():
+    """Data without a diffuse term: Cook–Torrance's best kd is its lower bound 0."""
+    data = _synthetic("cook_torrance", {"ks": 0.8, "m": 0.25, "kd": 0.0})
+    res = fits.fit_model("cook_torrance", data, "aluminium", n_starts=2)
+    assert res.params["kd"] < fits.AT_BOUND_RTOL  # the optimiser approaches the bound from inside
+    assert res.at_bounds == ("kd",) and not res.converged
+
+
+def test_at_bounds_names_the_parameters_at_either_end():
+    model = fits.FIT_MODELS["low_microfacet"]
+    lo, hi = model.bounds_x()
+    x = (lo + hi) / 2
+    x[2], x[4] = hi[2], lo[4] + 1e-9 * (hi[4] - lo[4])  # C at its top, ior next to its bottom
+    assert model.at_bounds(x) == ("C", "ior")
+    assert model.at_bounds((lo + hi) / 2) == ()
 
 
 def test_invalid_fit_arguments():
@@ -149,3 +166,16 @@ def test_cook_torrance_recovers_vgroove_roughness_over_realisations_slow():
     fitted = fits.fit_all(res, "aluminium", names=("cook_torrance",), quick=True)
     verdicts = _assert_vgroove_fit(res, fitted)
     assert all(v["reference"] == "realisations" and v["realisations"] == 8 for v in verdicts)
+
+
+def test_fits_at_a_bound_are_flagged_in_verdicts_report_and_index():
+    from microsim.analysis import report
+    from microsim.runner.publishing import fit_record
+
+    fit = fits.FitResult("low_microfacet", {"C": 10.0}, 1.0, 0.04, 0.01, True, 2, None, ("C",))
+    record = fit_record(fit)
+    assert record["at_bounds"] == ["C"] and record["converged"] is False
+    assert report._converged(record) == "no: at bound C"
+    assert report._index_fit_cell(record) == "0.2 / 0.1 (at bound: C)"
+    free = fit_record(fits.FitResult("low_smooth", {}, 1.0, 0.04, 0.01, True, 2, None))
+    assert free["converged"] is True and report._converged(free) == "yes"

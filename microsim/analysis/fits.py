@@ -63,6 +63,10 @@ __all__ = [
 
 
 # --- parameters and models ----------------------------------------------------------------------
+AT_BOUND_RTOL = 1e-5
+"""A fitted parameter within this fraction of its (encoded) range from a bound is at the bound."""
+
+
 @dataclass(frozen=True)
 class Param:
     """A bounded parameter. ``scale``: the optimiser works on x = p ("lin"), ln p ("log",
@@ -106,6 +110,14 @@ class FitModel:
 
     def encode(self, params: Mapping[str, float]) -> np.ndarray:
         return np.array([p.encode(params[p.name]) for p in self.params], dtype=np.float64)
+
+    def at_bounds(self, x, rtol: float = AT_BOUND_RTOL) -> tuple[str, ...]:
+        """Names of the parameters whose optimiser value x lies within ``rtol`` of the encoded
+        box's width from one of its ends (the optimum there is the bound, not a minimum)."""
+        lo, hi = self.bounds_x()
+        near = np.abs(np.asarray(x) - lo) <= rtol * (hi - lo)
+        near |= np.abs(hi - np.asarray(x)) <= rtol * (hi - lo)
+        return tuple(p.name for p, n in zip(self.params, near) if n)
 
 
 def _cook_torrance(p, ior):
@@ -324,7 +336,9 @@ class FitResult:
     """A fitted model. ``params``: name → value; ``cost``: E2 (Löw eq. 33, Σ not ½Σ) under the
     fixed rule at the optimum; ``e1``/``e2``: Löw E1/E2 with the accurate bin averages
     (reports print √E); ``success``: the best start converged; ``n_starts`` run;
-    ``model_values`` (T, Θ, Φ) accurate bin averages (sr⁻¹) of the fitted model."""
+    ``model_values`` (T, Θ, Φ) accurate bin averages (sr⁻¹) of the fitted model;
+    ``at_bounds``: the parameters that ended at a bound of their box (``FitModel.at_bounds``):
+    there the optimiser stopped at the box, and the fit is not a converged minimum."""
 
     name: str
     params: dict
@@ -334,6 +348,12 @@ class FitResult:
     success: bool
     n_starts: int
     model_values: np.ndarray
+    at_bounds: tuple[str, ...] = ()
+
+    @property
+    def converged(self) -> bool:
+        """The optimiser converged and no parameter ended at a bound."""
+        return self.success and not self.at_bounds
 
 
 def _starts(model: FitModel, n_starts: int, seed: int) -> list[np.ndarray]:
@@ -415,7 +435,15 @@ def fit_model(
     e1 = an.low_e1(data.sim[used], values[used], *geo)
     e2 = an.low_e2(data.sim[used], values[used], *geo)
     return FitResult(
-        name, params, float(2.0 * best.cost), e1, e2, bool(best.success), int(n_starts), values
+        name,
+        params,
+        float(2.0 * best.cost),
+        e1,
+        e2,
+        bool(best.success),
+        int(n_starts),
+        values,
+        model.at_bounds(best.x),
     )
 
 

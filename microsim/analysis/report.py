@@ -381,7 +381,8 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
             "## Fits (Löw eq. 29–33)",
             "",
             "One parameter set per model for all incidences, least squares on E2; "
-            "√E1 and √E2 as in Löw Table II.",
+            "√E1 and √E2 as in Löw Table II. A fit with a parameter at a bound of its box "
+            "is not converged: the optimiser stopped at the box, not at a minimum.",
             "",
             md_table(
                 ["model", "parameters", "√E1", "√E2", "converged", "starts"],
@@ -391,7 +392,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                         _params(f["params"]),
                         fmt(f["sqrt_e1"]),
                         fmt(f["sqrt_e2"]),
-                        fmt(f["success"]),
+                        _converged(f),
                         str(f["n_starts"]),
                     ]
                     for f in doc["fits"]
@@ -471,6 +472,14 @@ def _outside_text(v: Mapping) -> str:
         if o:
             parts.append(f"{side} {100 * o[0]:+.3g} … {100 * o[1]:+.3g} %")
     return "; ".join(parts) or "–"
+
+
+def _converged(fit: dict) -> str:
+    """The fits table's "converged" cell: yes, no, or no with the parameters at a bound."""
+    at = fit.get("at_bounds") or []
+    if at:
+        return "no: at bound " + ", ".join(at)
+    return fmt(fit["success"])
 
 
 def wave_section(wave: Mapping | None) -> list[str]:
@@ -879,6 +888,13 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
     return out
 
 
+def _index_fit_cell(fit: Mapping) -> str:
+    """√E1 / √E2 of one fit, with the parameters that ended at a bound."""
+    cell = f"{fmt(fit['sqrt_e1'])} / {fmt(fit['sqrt_e2'])}"
+    at = fit.get("at_bounds") or []
+    return cell + (f" (at bound: {', '.join(at)})" if at else "")
+
+
 def index_report(
     docs: Sequence[Mapping],
     fig6: str | None,
@@ -898,11 +914,7 @@ def index_report(
     for d in docs:
         by = {f["model"]: f for f in d.get("fits", [])}
         fit_rows.append(
-            [d["scene"]]
-            + [
-                f"{fmt(by[m]['sqrt_e1'])} / {fmt(by[m]['sqrt_e2'])}" if m in by else "–"
-                for m in fit_models
-            ]
+            [d["scene"]] + [_index_fit_cell(by[m]) if m in by else "–" for m in fit_models]
         )
     lines = [
         "# microsim report",
@@ -936,7 +948,9 @@ def index_report(
         lines += [
             "## Fits: √E1 / √E2 (Löw et al. 2012, eq. 29–33, as their Table II)",
             "",
-            "Each model fitted to all incidences of a scene at once; smaller is better.",
+            "Each model fitted to all incidences of a scene at once; smaller is better. "
+            "(at bound: …) names the parameters that ended at a bound of their box: that fit "
+            "did not converge to a minimum.",
             "",
             md_table(["scene"] + fit_models, fit_rows),
             "",

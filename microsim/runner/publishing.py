@@ -127,6 +127,8 @@ def fit_record(fit) -> dict:
         "sqrt_e1": root(e1),
         "sqrt_e2": root(e2),
         "success": bool(fit.success),
+        "at_bounds": list(fit.at_bounds),
+        "converged": bool(fit.converged),
         "n_starts": int(fit.n_starts),
     }
 
