@@ -1,4 +1,4 @@
-"""Performance machinery (microsim.bench, the batched pipeline of microsim.sim):
+"""Performance machinery (microsim.app.bench, the batched pipeline of microsim.sim):
 figures are measured, never asserted; what is asserted is that batching changes no result,
 that the per-facet table path equals the per-ray path, and that memory does not grow with
 the number of rays."""
@@ -11,7 +11,7 @@ import pytest
 from support import heightfield_surface, random_heights
 
 from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.bench import (
+from microsim.app.bench import (
     BenchConfig,
     add_bench_command,
     build_times,
@@ -147,7 +147,7 @@ def test_bench_subcommand_registers():
 )
 def test_bench_rays_option_is_honoured_with_and_without_quick(monkeypatch, capsys, argv, rays):
     """``bench --quick --rays N`` measures N rays (--quick once ignored --rays)."""
-    import microsim.bench as B
+    import microsim.app.bench as B
 
     seen = []
     monkeypatch.setattr(B, "run_bench", lambda cfg: seen.append(cfg) or {})
@@ -201,7 +201,7 @@ def test_wave_rows_are_measured_and_printed():
     smooth tile (σ = λ/100, g = (4πσ cos θi/λ)² = 0.012) the order powers sum to the Fresnel
     reflectance F(30°): the diffuse share is ~g, and Kirchhoff's obliquity factor moves it by
     far less than 1 % of F (a broken solver or wrong tile misses it by more)."""
-    from microsim.bench import QUICK, wave_rows
+    from microsim.app.bench import QUICK, wave_rows
 
     cfg = BenchConfig(wave_n=64, wave_tile=12.5)  # the quick tile's dx = 0.195 λ
     rows = wave_rows(cfg)

@@ -1,4 +1,4 @@
-"""`microsim bench --methods` (microsim.bench_methods): the quick study, its chart and JSON, and
+"""`microsim bench --methods` (microsim.app.bench_methods): the quick study, its chart and JSON, and
 the index subsection "What each method costs" rendered from that JSON (report.methods_section).
 
 One quick study (~10 s on 2 busy cores) is shared by every test of the module."""
@@ -9,8 +9,8 @@ from argparse import Namespace
 
 import pytest
 
-from microsim import bench_methods as bm
 from microsim.analysis import report
+from microsim.app import bench_methods as bm
 from microsim.errors import UsageError
 
 

@@ -1,4 +1,4 @@
-"""The Mitsuba 3 peer of the bench (microsim.bench_peer): it estimates the same single-bounce
+"""The Mitsuba 3 peer of the bench (microsim.app.bench_peer): it estimates the same single-bounce
 integral as ``simulate`` (agreement within the two runs' own standard errors), it refuses bad
 input with a UsageError naming the parameter, and it fails with PeerUnavailable (naming the
 pip command) when mitsuba cannot be imported. Throughput figures are measured, not asserted."""
@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from microsim.analytic import Beckmann
-from microsim.bench_peer import PeerUnavailable, mitsuba_single_bounce, peer_throughput
+from microsim.app.bench_peer import PeerUnavailable, mitsuba_single_bounce, peer_throughput
 from microsim.errors import EnvironmentFailure, UsageError
 from microsim.sim import Bins, simulate
 from microsim.surfaces import gaussian, vgrooves

@@ -111,7 +111,7 @@ seed = 5
 def auto_scene(tmp_path, monkeypatch):
     """A tiny auto scene, and ``--quick`` allowed up to 32 realisations (quick stops at the
     pilot otherwise), so that the pilot chooses more than its own 8."""
-    from microsim.runner import planning
+    from microsim.app.runner import planning
 
     monkeypatch.setattr(
         planning,
@@ -124,8 +124,8 @@ def auto_scene(tmp_path, monkeypatch):
 
 
 def test_auto_pilot_then_exactly_simulate_with_the_chosen_count(auto_scene):
-    from microsim.runner import tracing
-    from microsim.runner.planning import plan_run
+    from microsim.app.runner import tracing
+    from microsim.app.runner.planning import plan_run
 
     plan = plan_run(auto_scene, quick=True, out=auto_scene.parent / "o")
     assert plan.realisations == MIN_AUTO and plan.auto_realisations
@@ -143,7 +143,7 @@ def test_auto_pilot_then_exactly_simulate_with_the_chosen_count(auto_scene):
 
 
 def _run(args):
-    from microsim.cli import main
+    from microsim.app.cli import main
 
     return main([*map(str, args), "--quick", "--no-progress"])
 
@@ -154,8 +154,8 @@ def _arrays(d):
 
 
 def _save_only(plan, stage, result, log, progress):
-    from microsim.runner.publishing import publish_dir
-    from microsim.runner.run import RunOutcome
+    from microsim.app.runner.publishing import publish_dir
+    from microsim.app.runner.run import RunOutcome
 
     result.save(stage)
     publish_dir(stage, plan.out)
@@ -164,8 +164,8 @@ def _save_only(plan, stage, result, log, progress):
 
 @pytest.mark.integration
 def test_auto_run_records_its_choice_and_resumes_bitwise_from_either_stage(auto_scene, monkeypatch):
+    from microsim.app.runner import run
     from microsim.checkpoints import interrupt_at, set_hook
-    from microsim.runner import run
 
     tmp = auto_scene.parent
     assert _run(["run", auto_scene, "--out", tmp / "ref"]) == 0

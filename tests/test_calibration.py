@@ -193,8 +193,8 @@ def test_gaussian_catalogue_verdicts_at_full_settings_slow():
     the second)."""
     from pathlib import Path
 
-    from microsim.runner import tracing
-    from microsim.runner.planning import plan_run
+    from microsim.app.runner import tracing
+    from microsim.app.runner.planning import plan_run
 
     scene = Path(__file__).resolve().parents[1] / "surfaces" / "gaussian-m0.3.toml"
     plan = plan_run(scene, theta_i=[0.0, 30.0, 80.0], out="unused-out-dir")

@@ -58,7 +58,10 @@ def test_every_public_ndf_and_brdf_is_listed():
 
 def test_cli_models_prints_every_entry():
     out = subprocess.run(
-        [sys.executable, "-m", "microsim.cli", "models"], capture_output=True, text=True, check=True
+        [sys.executable, "-m", "microsim.app.cli", "models"],
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout
     for m in MODELS:
         assert m.label in out and m.source in out and m.params in out

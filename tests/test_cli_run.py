@@ -50,7 +50,7 @@ def _env():
 
 def microsim(*args, cwd=None, timeout=120):
     return subprocess.run(
-        [sys.executable, "-m", "microsim.cli", *map(str, args)],
+        [sys.executable, "-m", "microsim.app.cli", *map(str, args)],
         cwd=cwd,
         capture_output=True,
         text=True,
@@ -110,8 +110,8 @@ def test_run_writes_every_file_and_valid_verdicts(reference):
 def test_interrupt_then_resume_matches_uninterrupted(reference, tmp_path, capsys):
     """Ctrl-C (the in-process interrupt hook, deterministic) during the second incidence: exit
     130, partial tallies saved, no report; --resume completes them bitwise."""
+    from microsim.app.cli import main
     from microsim.checkpoints import interrupt_at
-    from microsim.cli import main
 
     scene, ref = reference
     out = tmp_path / "run"

@@ -1,5 +1,5 @@
 """Fault suite of the application layer: bad scene files, options and heightfield
-files fed to ``microsim.cli.main`` in-process, interrupts at every phase, concurrent runs,
+files fed to ``microsim.app.cli.main`` in-process, interrupts at every phase, concurrent runs,
 disk full and read-only file systems.
 
 For every bad input: the exit status (2 usage, 1 environment), exactly one stderr line naming
@@ -27,11 +27,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from microsim import atomic, runner
+from microsim import atomic
 from microsim.analysis import charts
+from microsim.app import runner
+from microsim.app.cli import main
+from microsim.app.runner import planning, tracing
 from microsim.checkpoints import interrupt_at
-from microsim.cli import main
-from microsim.runner import planning, tracing
 
 TINY = """\
 name = "{name}"
@@ -833,7 +834,7 @@ def test_a_missing_optional_extra_is_one_line_naming_the_extra(tmp_path, capsys,
 def test_a_closed_stdout_stops_quietly():
     """`microsim models | head -1`: no 'Broken pipe' error line, no traceback."""
     r = subprocess.run(
-        f"{sys.executable} -m microsim.cli models | head -1",
+        f"{sys.executable} -m microsim.app.cli models | head -1",
         shell=True,
         capture_output=True,
         text=True,

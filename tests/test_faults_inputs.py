@@ -2,7 +2,7 @@
 refused before anything is built or written, with one stderr line naming the file or option,
 the key and the allowed values (exit status 2); interrupts during start-up exit with 130;
 a closed stderr runs without progress bars; the charts draw the schema's smallest bin grid;
-``microsim --version``. In-process ``microsim.cli.main`` on the tiny scene of
+``microsim --version``. In-process ``microsim.app.cli.main`` on the tiny scene of
 test_faults_cli.py, except the start-up interrupt, which needs a real process.
 """
 
@@ -19,8 +19,9 @@ import pytest
 from test_faults_cli import TINY, _fast, run_cli, scene, tree
 
 import microsim
-from microsim import analytic, runner, sweep
-from microsim.cli import main
+from microsim import analytic
+from microsim.app import runner, sweep
+from microsim.app.cli import main
 
 HF_SCENE = 'name = "hf"\n[surface]\nkind = "file"\npath = "{path}"\ndx = 1.0\n'
 
@@ -125,7 +126,7 @@ def test_a_byte_order_mark_is_accepted(tmp_path, capsys):
     plain = scene(tmp_path)
     bom = tmp_path / "bom.toml"
     bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
-    from microsim.scene import load_scene
+    from microsim.app.scene import load_scene
 
     assert load_scene(bom).simulation == load_scene(plain).simulation
 
@@ -213,7 +214,7 @@ def test_an_import_cut_short_by_ctrl_c_is_an_interrupt(capsys, monkeypatch):
 
 # The console script's way in (`python -m` dies by SIGINT after a KeyboardInterrupt that
 # passed through an eval() of a string, even a caught one: a CPython quirk).
-ENTRY = "import sys; from microsim.cli import main; sys.exit(main())"
+ENTRY = "import sys; from microsim.app.cli import main; sys.exit(main())"
 
 
 @pytest.mark.parametrize("delay", [0.15, 0.4])

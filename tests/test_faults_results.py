@@ -27,8 +27,8 @@ import pytest
 from test_faults_cli import TINY, _fast, run_cli, scene, tree
 
 from microsim import atomic
+from microsim.app.cli import main
 from microsim.checkpoints import interrupt_at
-from microsim.cli import main
 
 QUICK = ["--quick", "--threads", "1", "--no-progress"]
 PARTIAL = ["--rays", "150000"]  # several chunks: an interrupt leaves partial tallies

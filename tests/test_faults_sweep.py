@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from microsim.cli import main
+from microsim.app.cli import main
 
 OK = """
 name = "ok"
@@ -144,7 +144,7 @@ def test_bad_sweep_file(tmp_path, monkeypatch, capsys, case, content, words):
 
 
 def test_a_byte_order_mark_is_accepted(tmp_path):
-    from microsim.sweep import load_sweep
+    from microsim.app.sweep import load_sweep
 
     (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + OK.encode())
     (tmp_path / "ok.toml").write_text(OK)
@@ -282,7 +282,7 @@ def test_unwritable_out_parent_is_an_environment_failure(tmp_path, monkeypatch, 
 def test_concurrent_sweep_to_the_same_out_is_refused(tmp_path, monkeypatch, capsys):
     """While one sweep holds OUT, a second one to the same OUT stops with one line."""
     from microsim import atomic
-    from microsim.sweep import LOCK_FILE
+    from microsim.app.sweep import LOCK_FILE
 
     monkeypatch.chdir(tmp_path)
     sweep = _write_ok(tmp_path)
@@ -352,7 +352,7 @@ def test_real_sigint_to_the_cli_process_group(tmp_path):
         [
             sys.executable,
             "-m",
-            "microsim.cli",
+            "microsim.app.cli",
             "sweep",
             str(sweep),
             "--out",

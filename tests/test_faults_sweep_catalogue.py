@@ -3,7 +3,7 @@ killed, a SIGTERM to the sweep, a FIFO among the task results, duplicate tasks, 
 worker used to find, catalogue scene names that clash with the report's own files, and a
 scene file edited before ``report --resume``.
 
-Through ``microsim.cli.main`` in-process (worker processes are forked from the test process,
+Through ``microsim.app.cli.main`` in-process (worker processes are forked from the test process,
 so a patched ``sweep.run_task`` runs in them) except the SIGTERM, which needs its own process.
 """
 
@@ -22,9 +22,9 @@ import pytest
 from test_faults_cli import TINY, _fast, run_cli, scene, tree
 from test_faults_sweep import OK, _nothing_written, _one_error_line, edit
 
-from microsim import sweep
+from microsim.app import sweep
+from microsim.app.cli import main
 from microsim.checkpoints import interrupt_at
-from microsim.cli import main
 
 THREE = OK.replace("m = 0.3", "m = [0.2, 0.3, 0.4]")
 _REAL_RUN_TASK = sweep.run_task
@@ -193,7 +193,7 @@ def test_sigterm_to_the_sweep_stops_its_workers(tmp_path):
         )
     )
     out, log = tmp_path / "out", tmp_path / "stderr.txt"
-    argv = [sys.executable, "-m", "microsim.cli", "sweep", "s.toml", "--out", "out"]
+    argv = [sys.executable, "-m", "microsim.app.cli", "sweep", "s.toml", "--out", "out"]
     with open(log, "w") as err:  # a file, not a pipe: orphaned workers would keep a pipe open
         proc = subprocess.Popen(argv, cwd=tmp_path, stderr=err, start_new_session=True)
     try:

@@ -170,7 +170,7 @@ def test_cook_torrance_recovers_vgroove_roughness_over_realisations_slow():
 
 def test_fits_at_a_bound_are_flagged_in_verdicts_report_and_index():
     from microsim.analysis import report
-    from microsim.runner.publishing import fit_record
+    from microsim.app.runner.publishing import fit_record
 
     fit = fits.FitResult("low_microfacet", {"C": 10.0}, 1.0, 0.04, 0.01, True, 2, None, ("C",))
     record = fit_record(fit)

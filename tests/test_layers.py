@@ -3,7 +3,8 @@ layers, and the module import graph has no cycle (function-local imports include
 
 Layers, bottom to top (docs/design.md, "Package layout"):
 core (errors, checkpoints, atomic, checks, vectors, stats) → analytic → surfaces → sim →
-wave → analysis → app (scene, runner, sweep, bench, bench_peer, view, testing, cli).
+wave → analysis → app (``microsim.app``: scene, runner, sweep, bench, bench_methods, bench_peer,
+wave_bench, view, cli; and ``microsim.testing``).
 """
 
 import ast
@@ -29,21 +30,7 @@ LAYERS = [
     ("sim", ("microsim.sim",)),
     ("wave", ("microsim.wave",)),
     ("analysis", ("microsim.analysis",)),
-    (
-        "app",
-        (
-            "microsim.scene",
-            "microsim.runner",
-            "microsim.sweep",
-            "microsim.bench",
-            "microsim.bench_methods",
-            "microsim.bench_peer",
-            "microsim.view",
-            "microsim.testing",
-            "microsim.cli",
-            "microsim.__main__",
-        ),
-    ),
+    ("app", ("microsim.app", "microsim.testing", "microsim.__main__")),
 ]
 
 

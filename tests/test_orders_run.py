@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from microsim.cli import main
+from microsim.app.cli import main
 
 # slow (15 s end to end): the default run covers the bounce chain (test_bounces) and the
 # orders section and chart (test_multiple_analysis)

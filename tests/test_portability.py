@@ -120,7 +120,7 @@ def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
 
 
 def _specular_scenes():
-    from microsim.scene import load_scene
+    from microsim.app.scene import load_scene
 
     scenes = [load_scene(p) for p in sorted(Path(__file__).parents[1].glob("surfaces/*.toml"))]
     return [sc for sc in scenes if sc.surface.kind == "flat" or sc.wave is not None]
@@ -180,7 +180,7 @@ def test_the_cli_announces_compilation_on_a_terminal_for_the_commands_that_compi
     stderr (before any kernel is needed); ``microsim models`` does not."""
     from numba.core import event
 
-    from microsim import cli
+    from microsim.app import cli
     from microsim.sim import compilation
 
     for argv, installs in ((["models"], False), (["run", "no-such-scene.toml"], True)):

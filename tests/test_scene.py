@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from microsim import analytic as an
-from microsim.scene import SceneError, SimSettings, describe_surface, load_scene
+from microsim.app.scene import SceneError, SimSettings, describe_surface, load_scene
 
 CATALOGUE = sorted((Path(__file__).resolve().parents[1] / "surfaces").glob("*.toml"))
 

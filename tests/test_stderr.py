@@ -206,7 +206,7 @@ seed = 3
 
 
 def test_runner_traces_an_auto_scene_to_the_target(tmp_path):
-    from microsim import runner
+    from microsim.app import runner
 
     scene = tmp_path / "auto.toml"
     scene.write_text(AUTO_SCENE.format(realisations=1))
@@ -224,7 +224,7 @@ def test_runner_traces_an_auto_scene_to_the_target(tmp_path):
 
 
 def test_runner_refuses_auto_with_several_realisations(tmp_path):
-    from microsim import runner
+    from microsim.app import runner
 
     scene = tmp_path / "auto.toml"
     scene.write_text(AUTO_SCENE.format(realisations=2))

@@ -1,4 +1,4 @@
-"""Sweeps (microsim.sweep): grid expansion, per-task atomic JSON results, resuming only the
+"""Sweeps (microsim.app.sweep): grid expansion, per-task atomic JSON results, resuming only the
 missing tasks after an interruption, and the same table from a Dask LocalCluster as from the
 local process pool."""
 
@@ -10,8 +10,8 @@ import re
 
 import pytest
 
+from microsim.app.sweep import SweepSpec, add_sweep_command, expand_tasks, load_sweep, run_sweep
 from microsim.atomic import write_json
-from microsim.sweep import SweepSpec, add_sweep_command, expand_tasks, load_sweep, run_sweep
 
 TINY = {
     "rays": 12_000,
@@ -66,7 +66,7 @@ def test_bad_sweeps_raise_naming_the_key(bad, key):
 
 
 def test_the_sweep_takes_every_incidence_a_scene_file_takes():
-    from microsim.scene import MAX_THETA_I
+    from microsim.app.scene import MAX_THETA_I
 
     tasks = expand_tasks({**TINY, "theta_i": [0, MAX_THETA_I]})
     assert sorted({t.theta_i for t in tasks}) == [0, MAX_THETA_I]
@@ -146,7 +146,7 @@ def _json(path):
 def test_partial_simulation_writes_no_task_file(tmp_path, monkeypatch):
     """A task whose simulate comes back partial (SIGINT in the worker) is not stored as done."""
     import microsim.sim as sim
-    from microsim.sweep import run_task
+    from microsim.app.sweep import run_task
 
     real = sim.simulate
 
@@ -163,8 +163,8 @@ def test_partial_simulation_writes_no_task_file(tmp_path, monkeypatch):
 
 def test_simulation_checkpoint_interrupt_writes_no_task_file(tmp_path):
     """The same through the in-process hook, if simulate marks its chunks with checkpoints."""
+    from microsim.app.sweep import run_task
     from microsim.checkpoints import interrupt_at
-    from microsim.sweep import run_task
 
     task = expand_tasks({**TINY, "rays": 400_000, "theta_i": [30]})[0]
     with interrupt_at("simulation") as state:
@@ -180,7 +180,7 @@ def test_incomplete_task_files_are_recomputed_and_never_summarised(tmp_path, dam
     """Task JSONs left by an older interrupted sweep (fewer rays than requested, a partial flag,
     cut short, another task's record, no verdicts) count as missing: not in the summary, and
     the rerun computes them again."""
-    from microsim.sweep import gather, write_summary
+    from microsim.app.sweep import gather, write_summary
 
     spec = tiny_spec()
     run_sweep(spec, tmp_path, workers=2)
@@ -229,8 +229,8 @@ def test_interrupted_sweep_keeps_finished_tasks_and_writes_no_summary(tmp_path):
 
 
 def test_cli_interrupt_exits_130_with_one_line_telling_how_to_continue(tmp_path, capsys):
+    from microsim.app.cli import main
     from microsim.checkpoints import interrupt_at
-    from microsim.cli import main
 
     sweep = tmp_path / "tiny.toml"
     sweep.write_text(TINY_TOML)

@@ -49,7 +49,7 @@ def opengl(tmp_path_factory):
 
 def _run(args, cwd=None):
     return subprocess.run(
-        [sys.executable, "-m", "microsim.view", *map(str, args)],
+        [sys.executable, "-m", "microsim.app.view", *map(str, args)],
         env=_env(),
         capture_output=True,
         text=True,
@@ -153,7 +153,7 @@ def test_bad_arguments_give_one_line_errors(tmp_path):
 
 
 def test_add_view_command_registers_the_subcommand():
-    from microsim.view import add_view_command, run_view
+    from microsim.app.view import add_view_command, run_view
 
     parser = argparse.ArgumentParser()
     add_view_command(parser.add_subparsers(dest="command"))
@@ -164,7 +164,7 @@ def test_add_view_command_registers_the_subcommand():
 def test_lobe_z_uses_stderr_and_poisson_floor():
     """z = (sim − model)/σ; an empty bin (σ = 0) whose model predicts λ = model·N·Ω/w̄ rays
     gets z = −√λ (Poisson), and a bin where both vanish gets 0."""
-    from microsim.view import lobe_z
+    from microsim.app.view import lobe_z
 
     sim = np.array([1.0, 0.0, 0.0])
     se = np.array([0.5, 0.0, 0.0])

@@ -1,4 +1,4 @@
-"""The wave solver's bench entry (microsim.wave.bench): one incidence per σ, the upsampling the
+"""The wave solver's bench entry (microsim.app.wave_bench): one incidence per σ, the upsampling the
 sampling check needs at σ = λ, and the smooth tile's total order power ≈ F(θi) (first-order
 redistribution keeps the reflected power up to the Fresnel variation over the narrow lobe)."""
 
@@ -7,7 +7,7 @@ import math
 import pytest
 
 from microsim.analytic.fresnel import fresnel
-from microsim.wave.bench import wave_bench
+from microsim.app.wave_bench import wave_bench
 
 
 def test_wave_bench_small():

@@ -23,10 +23,10 @@ import pytest
 
 from microsim.analysis.wave_verdicts import WAVE_MODELS, validate_wave_verdict
 from microsim.analytic.fresnel import fresnel
-from microsim.cli import main
+from microsim.app.cli import main
+from microsim.app.runner import plan_run
+from microsim.app.scene import MIN_TILE_WAVELENGTHS, SceneError, load_scene
 from microsim.errors import UsageError
-from microsim.runner import plan_run
-from microsim.scene import MIN_TILE_WAVELENGTHS, SceneError, load_scene
 from microsim.sim import Result
 
 CATALOGUE = Path(__file__).resolve().parents[1] / "surfaces"
@@ -224,7 +224,7 @@ def test_wave_scene_runs_end_to_end(wave_run):
 def test_interrupt_in_the_wave_stage_writes_no_report_and_resume_completes(
     wave_run, tmp_path, monkeypatch
 ):
-    from microsim.runner import wave_run as wr
+    from microsim.app.runner import wave_run as wr
 
     scene, done = wave_run
     out = tmp_path / "run"
@@ -278,7 +278,7 @@ def test_index_section_where_each_method_holds(tmp_path, monkeypatch):
     32 λ tiles, one incidence) keeps it fast."""
     from microsim.analysis import regimes
     from microsim.analysis.report import index_report
-    from microsim.runner import catalogue, wave_run
+    from microsim.app.runner import catalogue, wave_run
 
     def tiny(quick):
         maps = [

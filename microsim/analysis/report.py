@@ -1,7 +1,7 @@
 """Markdown reports: one per scene (``report.md``) and the catalogue index (``index.md``).
 
 Pure formatting: every number comes from the verdict document written as ``verdicts.json``
-(see ``microsim.runner`` and the README for its schema) and, for the energy ledger, from the
+(see ``microsim.app.runner`` and the README for its schema) and, for the energy ledger, from the
 ``Result``. No wall-clock time appears in either report (they are in ``timings.json``), so
 rerunning an unchanged scene rewrites them byte for byte. Percentages are relative errors
 (model − sim)/sim; BRDFs in sr⁻¹, angles in degrees.

@@ -1,7 +1,7 @@
 """Explicit periodic microsurfaces: V-grooves, Gaussian and fractal (ABC-PSD) heightfields,
 heightfields from files, and a flat mirror. Each generator returns a ``Surface``: the mesh, its
 nominal parameters, ``stats()`` and what the generator knows about it (``ensemble_ndf``,
-``exact_shadowing``, ``predicted``). Scene files are read by ``microsim.scene.load_scene``.
+``exact_shadowing``, ``predicted``). Scene files are read by ``microsim.app.scene.load_scene``.
 """
 
 from .gratings import sinusoidal_grating

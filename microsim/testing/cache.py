@@ -47,8 +47,8 @@ import microsim
 from microsim import atomic
 from microsim.analysis.budget import MIN_AUTO
 from microsim.analytic.fresnel import resolve_material
+from microsim.app.scene import Scene, load_scene
 from microsim.errors import UsageError
-from microsim.scene import Scene, load_scene
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
 from microsim.sim.result import META, NPZ

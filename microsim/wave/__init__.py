@@ -1,11 +1,10 @@
 """Wave optics on the explicit surfaces: scalar Kirchhoff (tangent-plane) scattering by a
 periodic heightfield tile, far field on the tile's reciprocal lattice, on the smooth
-interpolant of the heights or on the ray tracer's triangle mesh (``kirchhoff``), the order
-powers as the bin-averaged BRDF ``Result`` (``brdf``), and the solver's timing for
-``microsim bench`` (``bench``).
+interpolant of the heights or on the ray tracer's triangle mesh (``kirchhoff``) and the order
+powers as the bin-averaged BRDF ``Result`` (``brdf``). The solver's timing for
+``microsim bench`` is ``microsim.app.wave_bench``.
 
-Layer: "wave", between sim and analysis (imports core, analytic, surfaces (bench only) and
-sim.bins/paths/result)."""
+Layer: "wave", between sim and analysis (imports core, analytic and sim.bins/paths/result)."""
 
 from .brdf import bin_orders, kirchhoff_brdf
 from .kirchhoff import (

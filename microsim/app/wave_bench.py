@@ -1,4 +1,4 @@
-"""Timing of the wave solver for ``microsim bench``: one incidence,
+"""Timing of the wave solver (``microsim.wave``) for ``microsim bench``: one incidence,
 all propagating orders, on an n² ABC tile of side ``tile`` λ, in the smooth regime
 (σ = λ/100) and at σ = λ.
 
@@ -15,8 +15,7 @@ import time
 import warnings
 
 from microsim.errors import UsageError
-
-from .kirchhoff import kirchhoff_orders
+from microsim.wave.kirchhoff import kirchhoff_orders
 
 __all__ = ["wave_bench"]
 

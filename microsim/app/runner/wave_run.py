@@ -36,17 +36,17 @@ import warnings
 
 import numpy as np
 
-from ..analysis.wave_verdicts import wave_verdicts_for_result
-from ..analytic.fresnel import fresnel
-from ..errors import UsageError
-from ..scene import MIN_TILE_WAVELENGTHS, scaled_grid
-from ..wave import kirchhoff_brdf
-from ..wave.kirchhoff import (
+from ...analysis.wave_verdicts import wave_verdicts_for_result
+from ...analytic.fresnel import fresnel
+from ...errors import UsageError
+from ...wave import kirchhoff_brdf
+from ...wave.kirchhoff import (
     fourier_upsample,
     incident_direction,
     largest_height_step,
     phase_sampling,
 )
+from ..scene import MIN_TILE_WAVELENGTHS, scaled_grid
 
 __all__ = [
     "WAVE_DIR",
@@ -197,7 +197,7 @@ def regime_maps(quick: bool) -> dict:
     holds" (``analysis.regimes.regime_map``; ℓ = 10 λ, θi = 0, 30, 60°, aluminium, seed 0,
     18 × 7 folded bins), reduced in quick mode (``REGIME_QUICK``): {"maps": [RegimeMap],
     "settings": one line saying which settings were used}."""
-    from ..analysis.regimes import regime_map
+    from ...analysis.regimes import regime_map
 
     kw = {}
     if quick:

@@ -17,8 +17,8 @@ import sys
 import threading
 import traceback
 
-from . import __version__
-from .errors import EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure, UsageError
+from .. import __version__
+from ..errors import EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure, UsageError
 
 EPILOG = (
     "exit status: 0 ok; 1 environment failure (disk full, read-only, permission; one "
@@ -35,7 +35,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_models(args) -> int:
-    from .analytic.catalogue import model_table
+    from ..analytic.catalogue import model_table
 
     print(model_table())
     return 0
@@ -54,7 +54,7 @@ def _cmd_surface(args) -> int:
 
 def _rays(text: str) -> int:
     """``--rays N``: an integer in [1, ``MAX_RAYS``]."""
-    from .sim.arguments import MAX_RAYS
+    from ..sim.arguments import MAX_RAYS
 
     try:
         rays = int(text)
@@ -249,7 +249,7 @@ def _main(argv, ctrl_c: _CtrlC) -> int:
     try:
         args = build_parser().parse_args(argv)  # Ctrl-C while its modules load: status 130
         if args.func not in (_cmd_models, _cmd_surface):  # the commands that compile kernels
-            from .sim.compilation import announce_compilation
+            from ..sim.compilation import announce_compilation
 
             announce_compilation(sys.stderr)
         return args.func(args)

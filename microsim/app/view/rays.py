@@ -10,8 +10,8 @@ import numpy as np
 
 from microsim.vectors import spherical_deg
 
-from ..sim import Tracer
-from ..sim.tracer import ESCAPED, HIT
+from ...sim import Tracer
+from ...sim.tracer import ESCAPED, HIT
 from .common import (
     COLOURS,
     DEFAULT_RAYS,

@@ -125,7 +125,7 @@ QUICK = dict(
 
 def methods_config(quick: bool = False, **overrides) -> MethodsConfig:
     """``QUICK`` or the defaults, with ``overrides`` (``MethodsConfig`` fields)."""
-    from .errors import UsageError
+    from ..errors import UsageError
 
     conf = dict(QUICK) if quick else {}
     unknown = sorted(set(overrides) - set(MethodsConfig.__dataclass_fields__))
@@ -153,7 +153,7 @@ def _best_of(fn, repeat: int, cheap: float):
 def _commit() -> tuple[str | None, bool | None]:
     """(git HEAD of the package's checkout, whether its microsim/ has uncommitted changes),
     (None, None) when it is not a git checkout."""
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # the microsim package
 
     def git(*a):
         return subprocess.run(["git", *a], cwd=here, capture_output=True, text=True, timeout=10)
@@ -515,7 +515,7 @@ def methods_chart(study: dict, path) -> None:
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    from .atomic import atomic_open
+    from ..atomic import atomic_open
 
     panels = study["panels"]
     fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 4.8), squeeze=False)
@@ -608,11 +608,11 @@ def format_methods(study: dict) -> str:
 
 def write_methods(study: dict, out) -> tuple[Path, Path]:
     """Write ``out/methods.json`` and ``out/methods.png``, each atomically (``atomic``)."""
-    from .atomic import write_json
+    from ..atomic import write_json
 
     out = Path(out)
     if out.exists() and not out.is_dir():
-        from .errors import UsageError
+        from ..errors import UsageError
 
         raise UsageError(f"--methods {out}: exists and is not a directory")
     png, js = out / METHODS_PNG, out / METHODS_JSON
@@ -628,7 +628,7 @@ def run_methods_command(args) -> int:
     and are refused here."""
     import json
 
-    from .errors import UsageError
+    from ..errors import UsageError
 
     if getattr(args, "rays", None) is not None or getattr(args, "skip_accuracy", False):
         raise UsageError(

@@ -14,9 +14,9 @@ from dataclasses import asdict, replace
 
 import numpy as np
 
-from ..analysis.budget import error_budget, realisations_needed
-from ..sim import simulate
-from ..sim.auto import simulate_auto
+from ...analysis.budget import error_budget, realisations_needed
+from ...sim import simulate
+from ...sim.auto import simulate_auto
 from .planning import AUTO_TARGET, RunPlan, tally_settings
 
 __all__ = [

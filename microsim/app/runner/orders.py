@@ -10,10 +10,10 @@ scene's NDF when it is Beckmann or GGX; otherwise only the order energies are re
 
 from __future__ import annotations
 
-from ..analysis.multiple import needs_more_bounces, order_comparison
-from ..analytic.ndf import GGX, Beckmann
-from ..checkpoints import checkpoint
-from ..errors import UsageError
+from ...analysis.multiple import needs_more_bounces, order_comparison
+from ...analytic.ndf import GGX, Beckmann
+from ...checkpoints import checkpoint
+from ...errors import UsageError
 
 __all__ = ["WALK_PATHS", "walk_ndf", "orders_study"]
 

@@ -15,7 +15,7 @@ Sweep file (TOML, UTF-8)::
     [[scenes]]                          # one or more; every list value is a grid axis
     name = "vgroove-beckmann"           # letters, digits, '.', '_', '-' (not starting with '.')
     ior = ["aluminium", 1.5]            # material axis (names, n, or [n, k] — not a list of lists)
-    [scenes.surface]                    # a scene file's [surface] table (microsim.scene)
+    [scenes.surface]                    # a scene file's [surface] table (microsim.app.scene)
     kind = "vgrooves"
     n_grooves = 1000
     ndf = "beckmann"
@@ -68,12 +68,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from . import atomic
+from .. import atomic
+from ..checkpoints import checkpoint
+from ..errors import EnvironmentFailure, UsageError
+from ..sim.arguments import MAX_RAYS
+from ..sim.bins import MAX_BINS  # theta_bins × phi_bins at most
 from . import scene as sc
-from .checkpoints import checkpoint
-from .errors import EnvironmentFailure, UsageError
-from .sim.arguments import MAX_RAYS
-from .sim.bins import MAX_BINS  # theta_bins × phi_bins at most
 
 __all__ = [
     "SweepSpec",
@@ -357,7 +357,7 @@ def _resolve_paths(surface: dict, base) -> dict:
 
 def _check_heightfield_file(where: str, spec, checked: set) -> None:
     """The heightfield file of a ``kind = "file"`` surface, read and checked as a scene file's
-    (``microsim.scene``; an OS error such as permission denied propagates); ``checked`` holds
+    (``microsim.app.scene``; an OS error such as permission denied propagates); ``checked`` holds
     the (path, dx, periodic) already checked."""
     key = (spec.params["path"], spec.params["dx"], spec.params["periodic"])
     if key in checked:
@@ -367,7 +367,7 @@ def _check_heightfield_file(where: str, spec, checked: set) -> None:
 
 
 def _read_sweep_file(path: Path) -> dict:
-    """The TOML table of a sweep file (``microsim.scene.read_toml``: one-line UsageError naming
+    """The TOML table of a sweep file (``microsim.app.scene.read_toml``: one-line UsageError naming
     the file for anything not a small UTF-8 TOML text file); permission denied is a UsageError
     too, any other OS error an EnvironmentFailure."""
     try:
@@ -402,7 +402,8 @@ def load_sweep(path) -> SweepSpec:
 
 
 def _scene(name: str, surface: dict, ior, where: str):
-    """A ``microsim.scene.Scene`` from a concrete [surface] table (validated like a scene file)."""
+    """A ``microsim.app.scene.Scene`` from a concrete [surface] table (validated like a scene
+    file)."""
     spec = sc.surface_spec(where, dict(surface))
     mat = None if ior is None else sc.material_ior(where, {"ior": ior})
     return sc.Scene(

@@ -10,9 +10,9 @@ import numpy as np
 
 from microsim.vectors import spherical_deg
 
-from ..errors import UsageError
-from ..sim import Bins, simulate
-from ..sim.predict import ModelSpec, predict
+from ...errors import UsageError
+from ...sim import Bins, simulate
+from ...sim.predict import ModelSpec, predict
 from .common import (
     COLOURS,
     DEFAULT_RAYS,

@@ -9,9 +9,9 @@ import numpy as np
 
 from microsim.vectors import normalize, spherical_deg
 
-from .. import analytic as an
-from ..analysis.fits import DiskFit, fit_edwards_disk
-from ..sim import LEDGER, ray_events
+from ... import analytic as an
+from ...analysis.fits import DiskFit, fit_edwards_disk
+from ...sim import LEDGER, ray_events
 from .common import (
     DEFAULT_RAYS,
     DEFAULT_THETA,

@@ -14,13 +14,13 @@ import warnings
 
 import numpy as np
 
-from .. import analytic as an
-from ..analysis.report import albedo_stderr
-from ..analysis.verdicts import verdicts_for_result
-from ..checkpoints import checkpoint
-from ..sim import Bins, simulate
-from ..sim.compare import attach_models, default_models
-from ..stats import energy_set
+from ... import analytic as an
+from ...analysis.report import albedo_stderr
+from ...analysis.verdicts import verdicts_for_result
+from ...checkpoints import checkpoint
+from ...sim import Bins, simulate
+from ...sim.compare import attach_models, default_models
+from ...stats import energy_set
 from . import tracing
 from .planning import Effort, RunPlan
 

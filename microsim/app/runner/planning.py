@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.budget import AUTO_TARGET as REALISATION_TARGET
-from ..analysis.budget import MAX_AUTO, MIN_AUTO
-from ..atomic import json_safe
-from ..errors import UsageError
+from ...analysis.budget import AUTO_TARGET as REALISATION_TARGET
+from ...analysis.budget import MAX_AUTO, MIN_AUTO
+from ...atomic import json_safe
+from ...errors import UsageError
+from ...sim import Bins, Result
 from ..scene import load_scene
-from ..sim import Bins, Result
 from .wave_run import check_wave_plan
 
 __all__ = [

@@ -14,12 +14,12 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from .. import atomic
-from ..analysis import charts as ch
-from ..analysis import report
+from ... import atomic
+from ...analysis import charts as ch
+from ...analysis import report
+from ...checkpoints import checkpoint
+from ...errors import UsageError
 from ..bench_methods import METHODS_JSON, METHODS_PNG
-from ..checkpoints import checkpoint
-from ..errors import UsageError
 from ..scene import load_scene
 from . import planning
 from .publishing import REPORT_STATE, VERDICTS_FILE, read_report_state, write_report_state
@@ -63,7 +63,7 @@ def _regimes(out: Path, quick: bool) -> dict:
     """Regime maps, their chart ``out/REGIME_CHART`` and what the index prints of them."""
     import matplotlib.pyplot as plt
 
-    from ..analysis.regimes import regime_chart
+    from ...analysis.regimes import regime_chart
 
     rm = regime_maps(quick)
     fig = regime_chart(rm["maps"])

@@ -31,17 +31,17 @@ from typing import Callable
 
 import numpy as np
 
-from .. import atomic
-from ..analysis import charts as ch
-from ..analysis import report
-from ..analysis.budget import error_budget
-from ..analysis.fits import FIT_MODELS, fit_all
-from ..analysis.multiple import multiple_chart
-from ..analysis.report import albedo_stderr
-from ..analysis.verdicts import verdicts_for_result
-from ..checkpoints import checkpoint
-from ..errors import UsageError
-from ..sim.schedule import DeferredInterrupt
+from ... import atomic
+from ...analysis import charts as ch
+from ...analysis import report
+from ...analysis.budget import error_budget
+from ...analysis.fits import FIT_MODELS, fit_all
+from ...analysis.multiple import multiple_chart
+from ...analysis.report import albedo_stderr
+from ...analysis.verdicts import verdicts_for_result
+from ...checkpoints import checkpoint
+from ...errors import UsageError
+from ...sim.schedule import DeferredInterrupt
 from . import orders, side_studies, tracing, wave_run
 from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress

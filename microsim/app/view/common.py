@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import EnvironmentFailure, UsageError
+from ...errors import EnvironmentFailure, UsageError
+from ...surfaces import Surface
 from ..scene import Scene, load_scene
-from ..surfaces import Surface
 
 __all__ = [
     "DEFAULT_THETA",
@@ -113,7 +113,7 @@ def resolve(scene_or_surface, material=None, seed=None) -> ViewScene:
     if isinstance(obj, Surface):
         return ViewScene(obj, material, obj.ensemble_ndf, obj.kind)
     raise UsageError(
-        "scene_or_surface must be a scene file path, a microsim.scene.Scene or a "
+        "scene_or_surface must be a scene file path, a microsim.app.scene.Scene or a "
         f"microsim.surfaces.Surface, got {type(obj).__name__}"
     )
 

@@ -7,7 +7,7 @@ import sys
 
 from tqdm import tqdm
 
-from ..sim.progress import RaysDone
+from ...sim.progress import RaysDone
 
 __all__ = ["RayProgress", "StageProgress"]
 

@@ -260,7 +260,7 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
 def _peer(surface, cfg: BenchConfig):
     """(the Mitsuba 3 peer scene of ``surface`` after a JIT warm-up run, None) or (None, the
     reason it is unavailable: ``pip install microsim[peer]``)."""
-    from microsim.bench_peer import PeerScene, PeerUnavailable
+    from microsim.app.bench_peer import PeerScene, PeerUnavailable
 
     try:
         peer = PeerScene(surface, cfg.theta_i)  # (2m+1)² copies; build + BVH excluded
@@ -313,7 +313,7 @@ def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> dict:
 
 _PROBE = """
 import json, resource, sys
-from microsim.bench import BenchConfig, _bins, _surface
+from microsim.app.bench import BenchConfig, _bins, _surface
 from microsim.sim import simulate
 cfg = BenchConfig(**json.loads(sys.argv[1]))
 simulate(_surface(cfg), "aluminium", cfg.theta_i, rays=int(sys.argv[2]), bins=_bins(), threads=2)
@@ -455,7 +455,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
 def wave_rows(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> list[dict]:
     """``wave.bench.wave_bench`` on a ``cfg.wave_n``² tile of ``cfg.wave_tile`` λ: one row per
     roughness (σ = λ/100 and σ = λ), smooth-interpolant solver, ``threads`` FFT workers."""
-    from microsim.wave.bench import wave_bench
+    from microsim.app.wave_bench import wave_bench
 
     return wave_bench(n=cfg.wave_n, tile=cfg.wave_tile, workers=threads)
 
@@ -556,7 +556,7 @@ def bench_config(
     """The configuration of ``microsim bench``: ``QUICK`` or the defaults, ``rays`` (primary
     rays of the throughput runs, an integer >= 1) overriding either."""
     if rays is not None and (isinstance(rays, bool) or int(rays) != rays or rays < 1):
-        from .errors import UsageError
+        from ..errors import UsageError
 
         raise UsageError(f"--rays must be an integer >= 1, got {rays!r}")
     conf = dict(QUICK) if quick else {}
@@ -604,6 +604,6 @@ def add_bench_command(subparsers) -> None:
         metavar="DIR",
         help="instead: wall time against error of each method (closed forms, ray trace, exact "
         "V-groove path, wave solver); writes DIR/methods.json and DIR/methods.png "
-        "(default DIR: reports; microsim.bench_methods)",
+        "(default DIR: reports; microsim.app.bench_methods)",
     )
     p.set_defaults(func=_cmd_bench)

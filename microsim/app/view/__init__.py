@@ -6,7 +6,7 @@
 From Python (notebooks) every view returns a ``pyvista.Plotter``; call ``.show()`` or
 ``.screenshot(path)`` on it::
 
-    from microsim import view
+    from microsim.app import view
     view.view_lobe("surfaces/gaussian-m0.3.toml", theta_i=60).show()
 
 Views (local frame, macro normal +z; angles in degrees; BRDFs in sr⁻¹):

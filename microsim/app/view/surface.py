@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import UsageError
+from ...errors import UsageError
 from .common import (
     COLOURS,
     WINDOW,

@@ -1,4 +1,4 @@
-"""``microsim view`` / ``python -m microsim.view``: build one view and show it, or render it
+"""``microsim view`` / ``python -m microsim.app.view``: build one view and show it, or render it
 off screen to a PNG (``--screenshot``, or by default with no display)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 
 from microsim.checks import in_range
 
-from ..errors import UsageError
+from ...errors import UsageError
 from ..scene import load_scene
 from .common import DEFAULT_RAYS, DEFAULT_THETA, WINDOW, headless
 from .disk import view_disk
@@ -174,8 +174,8 @@ class _Parser(argparse.ArgumentParser):
 
 
 def main(argv=None) -> int:
-    """``python -m microsim.view SCENE [options]`` (same options as ``microsim view``)."""
-    p = _Parser(prog="python -m microsim.view", description="Inspect a scene with pyvista.")
+    """``python -m microsim.app.view SCENE [options]`` (same options as ``microsim view``)."""
+    p = _Parser(prog="python -m microsim.app.view", description="Inspect a scene with pyvista.")
     _configure(p)
     args = p.parse_args(argv)
     try:

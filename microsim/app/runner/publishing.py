@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import atomic
-from ..errors import UsageError
-from ..sim.schedule import DeferredInterrupt
+from ... import atomic
+from ...errors import UsageError
+from ...sim.schedule import DeferredInterrupt
 from .planning import RESULT_FILES, RunPlan
 from .tracing import auto_summary
 from .wave_run import WAVE_DIR

@@ -1,8 +1,0 @@
-"""``python -m microsim.view SCENE [options]`` (same options as ``microsim view``)."""
-
-import sys
-
-from .command import main
-
-if __name__ == "__main__":
-    sys.exit(main())
