@@ -218,6 +218,59 @@ def _worst_bins(result, model, t: int, min_events: int, k: int = 3) -> list[str]
     return out
 
 
+def _energy_ratio(result, model, t: int) -> str:
+    """Σ Ω⊥ model / Σ Ω⊥ reference at incidence ``t`` (finite bins), as "1.00×"."""
+    om = result.bins.projected_solid_angle()
+    ref, mod = result.brdf[t], model[t]
+    ok = np.isfinite(ref) & np.isfinite(mod)
+    den = (ref * om)[ok].sum()
+    return "–" if den <= 0 else f"{(mod * om)[ok].sum() / den:.3f}×"
+
+
+def _lobe_spread_deg(result, f) -> float:
+    """Energy-weighted RMS angle (deg) of the bins' centre directions about the energy-weighted
+    mean direction of ``f`` (Θ, Φ) over the outgoing hemisphere: the lobe's width."""
+    from microsim.vectors import spherical_deg
+
+    b = result.bins
+    th, ph = np.meshgrid(b.theta_centers, b.phi_centers, indexing="ij")
+    w = np.where(np.isfinite(f), f, 0.0) * b.projected_solid_angle()
+    if not np.any(w > 0):
+        return float("nan")
+    d = spherical_deg(th, ph)
+    mean = (w[..., None] * d).sum((0, 1))
+    mean /= np.linalg.norm(mean)
+    ang = np.degrees(np.arccos(np.clip(d @ mean, -1.0, 1.0)))
+    return float(np.sqrt((w * ang**2).sum() / w.sum()))
+
+
+def _diagnosis(result, model, t: int, min_events: int) -> str | None:
+    """A hint at the cause of a failing incidence ``t``: a ratio brdf/reference that is the
+    same in every well-measured bin (a normalisation error: a constant factor), else a lobe
+    wider or narrower than the reference's (a roughness error?). None when neither shows."""
+    ref, mod, cnt = result.brdf[t], model[t], result.counts[t]
+    used = (cnt >= min_events) & np.isfinite(ref) & (ref > 0) & np.isfinite(mod)
+    if used.sum() >= 3:
+        w = np.where(used, ref * result.bins.projected_solid_angle(), 0.0)
+        r = np.where(used, mod / np.where(used, ref, 1.0), 0.0)
+        mean = (w * r).sum() / w.sum()
+        spread = np.sqrt((w * (r - mean) ** 2).sum() / w.sum())
+        if mean > 0 and abs(mean - 1.0) > 0.1 and spread < 0.1 * mean:
+            return (
+                f"brdf/reference ≈ {mean:.3g} in every bin (spread {spread / mean:.1%}): "
+                "a constant factor — a normalisation error?"
+            )
+    width_ref, width_mod = _lobe_spread_deg(result, ref), _lobe_spread_deg(result, mod)
+    if np.isfinite(width_ref) and np.isfinite(width_mod) and width_ref > 0:
+        change = width_mod / width_ref - 1.0
+        if abs(change) > 0.05:
+            return (
+                f"lobe {abs(change):.0%} {'wider' if change > 0 else 'narrower'} than the "
+                f"reference's (RMS angle {width_mod:.1f}° vs {width_ref:.1f}°): roughness?"
+            )
+    return None
+
+
 def _chart(result, model, name, verdicts, t: int, where: Path, key: str) -> str:
     """Hemisphere chart (``analysis.charts.hemisphere_maps``) of incidence ``t``; its path.
     The file name holds the reference key and a hash of the model's bin averages and the
@@ -421,7 +474,16 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
         f"{result.bins.n_phi}, seed {ref.seed}; judged against {against}; α = {alpha:g} over "
         f"{len(verdicts)} incidence(s) (Šidák)"
     )
-    cols = ["θi", "result", "χ²/dof", "max|z|", "rel err (E)", "energy dev", "deviating θo"]
+    cols = [
+        "θi",
+        "result",
+        "χ²/dof",
+        "max|z|",
+        "rel err (E)",
+        "energy dev",
+        "energy ratio",
+        "deviating θo",
+    ]
     if rtol is not None:
         cols[3] = "excess z/thr"
     rows = [cols]
@@ -442,6 +504,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
                 zcol,
                 _num(v["rel_rms"], "{:.2%}"),
                 "–" if energy is None else f"{-100 * energy:+.2f}%",
+                _energy_ratio(result, model, t),
                 dev,
             ]
         )
@@ -454,8 +517,13 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
         table,
         "energy dev = Σ Ω (brdf − reference)/Σ Ω brdf over the bins carrying 90 % "
         "of the brdf's energy; rel err (E) = energy-weighted RMS of (brdf − reference)/"
-        "reference over the reference's 90 % energy bins",
+        "reference over the reference's 90 % energy bins; energy ratio = Σ Ω⊥ brdf / "
+        "Σ Ω⊥ reference over the hemisphere (the brdf's albedo over the reference's)",
     ]
+    for t in failing:
+        hint = _diagnosis(result, model, t, verdicts[t]["min_events"])
+        if hint:
+            lines.append(f"at θi = {result.theta_i[t]:g}°: {hint}")
     for t in failing:
         wb = _worst_bins(result, model, t, verdicts[t]["min_events"])
         if wb:
