@@ -78,7 +78,53 @@ def reference(tmp_path_factory):
     out = tmp / "run"
     r = microsim("run", scene, "--quick", "--rays", RESUME_RAYS, "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
+    (tmp / "stdout.txt").write_text(r.stdout)
     return scene, out
+
+
+def test_run_prints_the_verdicts_it_wrote(reference):
+    """stdout: one table row per model, the cell of each (model, θi) saying what
+    verdicts.json says (✓ agrees, ✗ deviates, ? inconclusive), and the conclusion line."""
+    from microsim.analysis.report import run_summary
+
+    scene, out = reference
+    printed = (out.parent / "stdout.txt").read_text()
+    doc = json.loads((out / "verdicts.json").read_text())
+    assert printed == run_summary(doc) + "\n"
+    lines = printed.splitlines()
+    thetas = list(dict.fromkeys(v["theta_i"] for v in doc["verdicts"]))
+    for v in doc["verdicts"]:
+        row = next(line for line in lines[2:-1] if line.split()[0] == v["model"])
+        cells = re.split(r"\s{2,}", row.strip())[1:]
+        if v["model"] in (doc.get("outside_domain") or {}):
+            assert cells == ["outside its domain"]
+            continue
+        cell = cells[thetas.index(v["theta_i"])]
+        want = "✓" if v["agrees"] else ("✗" if v.get("conclusive", True) else "?")
+        assert cell.startswith(want), (v["model"], v["theta_i"], cell)
+    agree = [
+        m
+        for m in dict.fromkeys(v["model"] for v in doc["verdicts"])
+        if all(w["agrees"] for w in doc["verdicts"] if w["model"] == m)
+        and m not in (doc.get("outside_domain") or {})
+    ]
+    assert lines[-1].startswith(f"agrees at every θi: {', '.join(agree) or 'none'}")
+
+
+def test_run_json_prints_verdicts_json(reference, tmp_path, capsys):
+    from microsim.app.cli import main
+
+    scene, out = reference
+    copy = tmp_path / "run"
+    import shutil
+
+    shutil.copytree(out, copy)
+    capsys.readouterr()
+    opts = ["--quick", "--rays", RESUME_RAYS, "--no-progress", "--json"]
+    assert main(["run", str(scene), *opts, "--resume", str(copy)]) == 0
+    printed = capsys.readouterr().out
+    assert printed == (copy / "verdicts.json").read_text()
+    assert json.loads(printed)["verdicts"]
 
 
 def test_run_writes_every_file_and_valid_verdicts(reference):

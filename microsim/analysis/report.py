@@ -971,3 +971,58 @@ def index_report(
         f"- [{d['scene']}]({d['scene']}/report.md): {d.get('description', '')}" for d in docs
     ]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _run_cell(v: Mapping) -> str:
+    """One verdict in the index's symbols: ✓, ✗ with its relative RMS error, ? inconclusive."""
+    if v["agrees"]:
+        return "✓"
+    if not v.get("conclusive", True):
+        return "?"
+    return f"✗ {100 * v['rel_rms']:.2g}%" if v.get("rel_rms") is not None else "✗"
+
+
+def run_summary(doc: Mapping) -> str:
+    """What ``microsim run`` prints on stdout: a models × θi table of the verdicts in the
+    index's symbols and a one-line conclusion (models that agree at every incidence; models
+    that deviate, where and by up to how much; inconclusive ones). Plain text, one line each."""
+    verdicts = doc["verdicts"]
+    outside = doc.get("outside_domain") or {}
+    thetas = list(dict.fromkeys(v["theta_i"] for v in verdicts))
+    models = list(dict.fromkeys(v["model"] for v in verdicts))
+    by = {(v["model"], v["theta_i"]): v for v in verdicts}
+    rows = [["model"] + [f"θi {t:g}°" for t in thetas]]
+    for m in models:
+        label = m + (" (fit)" if any(v["fitted"] for v in verdicts if v["model"] == m) else "")
+        if m in outside:
+            rows.append([label, "outside its domain"] + [""] * (len(thetas) - 1))
+            continue
+        rows.append([label] + [_run_cell(by[m, t]) if (m, t) in by else "–" for t in thetas])
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    agree, deviate, unsure = [], [], []
+    for m in models:
+        if m in outside:
+            continue
+        mine = [by[m, t] for t in thetas if (m, t) in by]
+        bad = [v for v in mine if not v["agrees"] and v.get("conclusive", True)]
+        if all(v["agrees"] for v in mine):
+            agree.append(m)
+        elif bad:
+            rms = [v["rel_rms"] for v in bad if v.get("rel_rms") is not None]
+            size = f" by up to {100 * max(rms):.2g}%" if rms else ""
+            where = ", ".join(f"{v['theta_i']:g}" for v in bad)
+            deviate.append(f"{m} at θi {where}°{size}")
+        else:
+            unsure.append(m)
+    parts = [f"agrees at every θi: {', '.join(agree) or 'none'}"]
+    if deviate:
+        parts.append(f"deviates: {'; '.join(deviate)}")
+    if unsure:
+        parts.append(f"inconclusive (one tile): {', '.join(unsure)}")
+    scene = doc.get("scene", "")
+    return "\n".join(
+        [f"{scene}: ✓ agrees, ✗ deviates (relative RMS error), ? inconclusive"]
+        + lines
+        + ["; ".join(parts)]
+    )

@@ -109,7 +109,17 @@ def _cmd_run(args) -> int:
         resume=args.resume,
         force=args.force,
     )
-    return execute(plan, progress=not args.no_progress).status
+    outcome = execute(plan, progress=not args.no_progress)
+    if outcome.status == 0 and outcome.document is not None:
+        if args.json:  # verdicts.json's content, as written
+            from .runner.publishing import VERDICTS_FILE
+
+            print((outcome.out / VERDICTS_FILE).read_text(encoding="utf-8"), end="")
+        else:
+            from ..analysis.report import run_summary
+
+            print(run_summary(outcome.document))
+    return outcome.status
 
 
 def _cmd_report(args) -> int:
@@ -170,6 +180,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--resume", metavar="DIR", help="continue an interrupted run saved in DIR")
     g.add_argument("--force", action="store_true", help="replace an existing output directory")
     r.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    r.add_argument(
+        "--json",
+        action="store_true",
+        help="print verdicts.json's content on stdout instead of the verdict table",
+    )
     r.set_defaults(func=_cmd_run)
     q = sub.add_parser("report", help="run the whole scene catalogue and write reports/index.md")
     q.add_argument("--quick", action="store_true", help="quick runs (as `run --quick`)")
