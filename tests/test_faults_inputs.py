@@ -160,7 +160,9 @@ def test_repeated_theta_i_options_add_up(tmp_path, capsys, monkeypatch):
     sc = scene(tmp_path)
     planned = []
     monkeypatch.setattr(
-        runner, "execute", lambda plan, progress: planned.append(plan) or SimpleNamespace(status=0)
+        runner,
+        "execute",
+        lambda plan, progress: planned.append(plan) or SimpleNamespace(status=0, document=None),
     )
     status, lines, err = run_cli(capsys, "run", sc, "--theta-i", "30", "--theta-i", "60,70")
     assert status == 0, err
