@@ -19,8 +19,8 @@ test-fast: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -n 2 -m "not slow and not integration"
 
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check microsim tests examples
-	$(BIN)/ruff format --check microsim tests examples
+	$(BIN)/ruff check microsim tests examples tools
+	$(BIN)/ruff format --check microsim tests examples tools
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
