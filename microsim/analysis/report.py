@@ -113,12 +113,18 @@ def _ledger_rows(doc, result) -> list[list[str]]:
     ]
 
 
-def _verdict_word(v: Mapping) -> str:
-    """agrees / deviates / inconclusive (an ensemble model on one realisation that the ray-noise
-    tests reject: tile scatter and model error cannot be told apart; ``verdicts`` docstring)."""
+def verdict_kind(v: Mapping) -> str:
+    """ "agrees", "deviates" or "inconclusive" (an ensemble model on one realisation that the
+    ray-noise tests reject: tile scatter and model error cannot be told apart; ``verdicts``
+    docstring): the one rule every output words its verdicts by."""
     if v["agrees"]:
-        return "**agrees**"
+        return "agrees"
     return "deviates" if v.get("conclusive", True) else "inconclusive"
+
+
+def _verdict_word(v: Mapping) -> str:
+    kind = verdict_kind(v)
+    return "**agrees**" if kind == "agrees" else kind
 
 
 OUT_OF_DOMAIN = "outside its domain (wave-optics model; fit-only)"
@@ -840,7 +846,7 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
     if summary == "agrees":
         res = [r for r in map(_resolvable_energy, mine) if r is not None]
         return f"✓ ±{100 * max(res):.2g}%" if res else "✓"
-    deviating = [v for v in mine if not v["agrees"] and v.get("conclusive", True)]
+    deviating = [v for v in mine if verdict_kind(v) == "deviates"]
     if not deviating:  # only inconclusive failures: one tile cannot judge an ensemble model
         where = ",".join(f"{v['theta_i']:g}" for v in mine if not v["agrees"])
         return f"? (θi {where}°)"
@@ -975,10 +981,9 @@ def index_report(
 
 def _run_cell(v: Mapping) -> str:
     """One verdict in the index's symbols: ✓, ✗ with its relative RMS error, ? inconclusive."""
-    if v["agrees"]:
-        return "✓"
-    if not v.get("conclusive", True):
-        return "?"
+    kind = verdict_kind(v)
+    if kind != "deviates":
+        return "✓" if kind == "agrees" else "?"
     return f"✗ {100 * v['rel_rms']:.2g}%" if v.get("rel_rms") is not None else "✗"
 
 
@@ -1005,7 +1010,7 @@ def run_summary(doc: Mapping) -> str:
         if m in outside:
             continue
         mine = [by[m, t] for t in thetas if (m, t) in by]
-        bad = [v for v in mine if not v["agrees"] and v.get("conclusive", True)]
+        bad = [v for v in mine if verdict_kind(v) == "deviates"]
         if all(v["agrees"] for v in mine):
             agree.append(m)
         elif bad:
