@@ -16,7 +16,7 @@ import numpy as np
 
 from microsim.stats import t_isf
 
-from .verdicts import summary_row
+from .verdicts import summary_row, verdict_kind
 
 __all__ = [
     "md_table",
@@ -111,15 +111,6 @@ def _ledger_rows(doc, result) -> list[list[str]]:
         ]
         for k, (t, r) in enumerate(zip(result.theta_i, result.rays))
     ]
-
-
-def verdict_kind(v: Mapping) -> str:
-    """ "agrees", "deviates" or "inconclusive" (an ensemble model on one realisation that the
-    ray-noise tests reject: tile scatter and model error cannot be told apart; ``verdicts``
-    docstring): the one rule every output words its verdicts by."""
-    if v["agrees"]:
-        return "agrees"
-    return "deviates" if v.get("conclusive", True) else "inconclusive"
 
 
 def _verdict_word(v: Mapping) -> str:

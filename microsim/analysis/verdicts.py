@@ -75,6 +75,7 @@ from microsim.stats import (
 __all__ = [
     "VERDICT_SCHEMA",
     "verdict",
+    "verdict_kind",
     "verdicts_for_result",
     "validate_verdict",
     "summary_row",
@@ -369,6 +370,15 @@ def verdict(
         "max_abs_t": max_abs_t,
         "t_threshold": t_thr,
     }
+
+
+def verdict_kind(v: Mapping) -> str:
+    """ "agrees", "deviates" or "inconclusive" (an ensemble model on one realisation that the
+    ray-noise tests reject: tile scatter and model error cannot be told apart; ``verdicts``
+    docstring): the one rule every output words its verdicts by."""
+    if v["agrees"]:
+        return "agrees"
+    return "deviates" if v.get("conclusive", True) else "inconclusive"
 
 
 def _jsonable_params(params: Mapping | None) -> dict:
