@@ -389,3 +389,46 @@ def test_one_tile_rejection_is_inconclusive_and_summarised_so():
     assert row.startswith("inconclusive at θi=10°") and "deviates" not in row
     with pytest.raises(ValueError, match="conclusive"):
         V.validate_verdict({**bad, "agrees": True})
+
+
+def test_one_tile_departure_decides_between_deviates_and_inconclusive():
+    """One tile with a computed departure δ from its ensemble: a deviation the departure
+    explains stays "inconclusive" (and says how large the departure is); one beyond it by many
+    σ is a resolved "deviates"; within ray noise it agrees."""
+    rng = np.random.default_rng(11)
+    truth = _lobe()
+    tile = truth * (1.0 + 0.03 * np.sign(rng.normal(size=truth.shape)))  # the tile departs ±3 %
+    se = 0.002 * tile
+    sim = tile + rng.normal(size=truth.shape) * se
+    departure = np.abs(tile - truth)
+    explained = _verdict(sim, se, truth, ensemble=True, departure=departure)
+    assert explained["reference"] == "one-tile" and not explained["conclusive"]
+    assert explained["tile_departure"] == pytest.approx(0.03, rel=1e-9)
+    assert V.verdict_kind(explained) == "inconclusive"
+    beyond = _verdict(sim, se, 1.2 * truth, ensemble=True, departure=1.2 * departure)
+    assert V.verdict_kind(beyond) == "deviates" and beyond["rel_rms"] > 0.15
+    assert beyond["departure_max_abs_z"] > beyond["z_threshold"]
+    within = _verdict(
+        truth + rng.normal(size=truth.shape) * se, se, truth, ensemble=True, departure=departure
+    )
+    assert V.verdict_kind(within) == "agrees"
+    for v in (explained, beyond, within):
+        V.validate_verdict(json.loads(json.dumps(v)))
+    with pytest.raises(ValueError, match="departure"):
+        _verdict(sim, se, truth, ensemble=True, departure=-departure)
+
+
+def test_excess_over_departure_is_conservative():
+    """Model = ensemble, the tile departs from it by a random δ per bin and the sim adds ray
+    noise: beyond-departure rejections ("deviates") occur in at most α of the cases (here
+    none need occur: the excess is bounded by the noise's |z|)."""
+    rng = np.random.default_rng(5)
+    truth, n, alpha = _lobe(), 300, 0.05
+    n_dev = 0
+    for _ in range(n):
+        tile = truth * (1.0 + rng.normal(0.0, 0.02, truth.shape))
+        se = 0.005 * tile
+        sim = tile + rng.normal(size=truth.shape) * se
+        v = _verdict(sim, se, truth, ensemble=True, departure=np.abs(tile - truth), alpha=alpha)
+        n_dev += V.verdict_kind(v) == "deviates"
+    assert n_dev <= stats.binom.isf(1e-3, n, alpha), n_dev

@@ -31,6 +31,7 @@ from matplotlib.figure import Figure
 from microsim.errors import UsageError
 
 from ..atomic import atomic_open
+from .verdicts import verdict_kind
 
 __all__ = [
     "DPI",
@@ -474,13 +475,17 @@ def _mark_z5(ax, z, bins):
 
 
 def _verdict_table(sel: list[dict]) -> str:
-    head = f"{'model':<22}{'χ²/dof':>8}{'max|z|':>8}{'rel rms':>9}  agrees"
+    """The chart's text table: one row per verdict, its verdict in ``verdict_kind``'s words
+    (the rule of every output) and, for an inconclusive tile, the tile's departure."""
+    head = f"{'model':<22}{'χ²/dof':>8}{'max|z|':>8}{'rel rms':>9}  verdict"
     rows = [head, "-" * len(head)]
     for v in sel:
+        kind = verdict_kind(v) if "agrees" in v else "–"
+        if kind == "inconclusive" and v.get("tile_departure") is not None:
+            kind += f" (tile departs {100 * v['tile_departure']:.2g}%)"
         rows.append(
             f"{str(v['model'])[:21]:<22}{_num(v.get('chi2_dof')):>8.2f}"
-            f"{_num(v.get('max_abs_z')):>8.1f}{_num(v['rel_rms']):>9.3f}"
-            f"  {'yes' if v.get('agrees') else 'no'}"
+            f"{_num(v.get('max_abs_z')):>8.1f}{_num(v['rel_rms']):>9.3f}  {kind}"
         )
     return "\n".join(rows)
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from microsim.stats import t_isf
 
-from .verdicts import summary_row, verdict_kind
+from .verdicts import summary_row, verdict_kind, verdict_symbol
 
 __all__ = [
     "md_table",
@@ -123,6 +123,14 @@ OUT_OF_DOMAIN = "outside its domain (wave-optics model; fit-only)"
 verdicts against the ray tracer are no test of it (the fit numbers are kept)."""
 
 
+def _reference_text(v: Mapping) -> str:
+    """The verdict's reference, its R and, for a tile whose departure is known, its size."""
+    text = f"{v.get('reference', 'ray-noise')} (R = {v.get('realisations', 1)})"
+    if v.get("tile_departure") is not None:
+        text += f", tile departs {_pct(v['tile_departure'])}"
+    return text
+
+
 def _verdict_rows(verdicts, outside: Mapping | None = None) -> list[list[str]]:
     outside = outside or {}
     return [
@@ -130,7 +138,7 @@ def _verdict_rows(verdicts, outside: Mapping | None = None) -> list[list[str]]:
             f"{v['theta_i']:g}",
             v["model"] + (" (fit)" if v["fitted"] else ""),
             "outside domain" if v["model"] in outside else _verdict_word(v),
-            f"{v.get('reference', 'ray-noise')} (R = {v.get('realisations', 1)})",
+            _reference_text(v),
             fmt(v["chi2_dof"]),
             fmt(v["p_value"]),
             fmt(v["max_abs_z"]),
@@ -838,9 +846,15 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
         res = [r for r in map(_resolvable_energy, mine) if r is not None]
         return f"✓ ±{100 * max(res):.2g}%" if res else "✓"
     deviating = [v for v in mine if verdict_kind(v) == "deviates"]
-    if not deviating:  # only inconclusive failures: one tile cannot judge an ensemble model
-        where = ",".join(f"{v['theta_i']:g}" for v in mine if not v["agrees"])
-        return f"? (θi {where}°)"
+    if not deviating:  # only inconclusive failures: within the tile's departure, or unknown
+        unsure = [v for v in mine if not v["agrees"]]
+        where = ",".join(f"{v['theta_i']:g}" for v in unsure)
+        known = [v for v in unsure if v.get("tile_departure") is not None]
+        if not known or len(known) != len(unsure):
+            return f"? (θi {where}°)"
+        rms = max(v["rel_rms"] for v in known)
+        dep = max(v["tile_departure"] for v in known)
+        return f"? {100 * rms:.2g}% (tile departs {100 * dep:.2g}%; θi {where}°)"
     where = ",".join(f"{v['theta_i']:g}" for v in deviating)
     rms = [v for v in deviating if v["rel_rms"] is not None]
     if not rms:
@@ -929,8 +943,13 @@ def index_report(
         "±x%: an ensemble model that agrees as far as the R realisations (after the scene's name) "
         "can tell — energy "
         "deviations below x % (at the test's level) are not resolved, so a large x means a weak "
-        "verdict, not a confirmed model. ?: inconclusive — an ensemble model judged on one "
-        "realisation, where tile-to-tile scatter cannot be told from model error. Ensemble models"
+        "verdict, not a confirmed model. ? x% (tile departs y%): inconclusive — an ensemble model "
+        "judged on one realisation whose deviation x (energy-weighted relative RMS) the tile's "
+        "own departure from its ensemble, y, and ray noise explain; on V-groove tiles that "
+        "departure is computed from the facets (TS with the tile's facets against TS with the "
+        "ensemble NDF, both with V-groove G), and a deviation beyond it is a resolved ✗. A bare "
+        "? (heightfield tiles): one realisation, whose masking departs from the ensemble too, "
+        "cannot tell tile scatter from model error. Ensemble models"
         " on several realisations are judged against the scatter between them (Student t over the"
         " realisations); models of the realised facets against ray noise. Each scene's report "
         "says where (θo ranges, worst bin) and by how much. "
@@ -970,14 +989,6 @@ def index_report(
     return "\n".join(lines).rstrip() + "\n"
 
 
-def _run_cell(v: Mapping) -> str:
-    """One verdict in the index's symbols: ✓, ✗ with its relative RMS error, ? inconclusive."""
-    kind = verdict_kind(v)
-    if kind != "deviates":
-        return "✓" if kind == "agrees" else "?"
-    return f"✗ {100 * v['rel_rms']:.2g}%" if v.get("rel_rms") is not None else "✗"
-
-
 def run_summary(doc: Mapping) -> str:
     """What ``microsim run`` prints on stdout: a models × θi table of the verdicts in the
     index's symbols and a one-line conclusion (models that agree at every incidence; models
@@ -993,8 +1004,9 @@ def run_summary(doc: Mapping) -> str:
         if m in outside:
             rows.append([label, "outside its domain"] + [""] * (len(thetas) - 1))
             continue
-        rows.append([label] + [_run_cell(by[m, t]) if (m, t) in by else "–" for t in thetas])
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+        rows.append([label] + [verdict_symbol(by[m, t]) if (m, t) in by else "–" for t in thetas])
+    table = [r for r in rows if r[1:2] != ["outside its domain"]]  # that note spans columns
+    widths = [max(len(r[i]) for r in table) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     agree, deviate, unsure = [], [], []
     for m in models:

@@ -44,10 +44,20 @@ Reference of the test (``reference``), by what the model describes:
       Šidák(·, |U|) (conservative for positively correlated bins).
   Fitted models are judged the same way (their fit pulls m towards f̄: conservative).
   Always ``conclusive``; with R = 2 the t_1 quantiles are wide and the power is low.
-* ``"one-tile"``: an ensemble model and one realisation. One tile cannot separate its scatter
-  from a model error, so the ray-noise tests are run and only their agreement is conclusive
-  (the model is within ray noise of a tile); a rejection gives ``conclusive`` = False and
-  ``agrees`` = False (reported "inconclusive", never "deviates").
+* ``"one-tile"``: an ensemble model and one realisation. The ray-noise tests are run; their
+  agreement is conclusive (the model is within ray noise of a tile). A rejection alone cannot
+  separate the tile's departure from its ensemble from a model error. Where that departure is
+  computable without rays (``tile_departure``: V-grooves, whose exact G is a function of the
+  facets alone, so TS with the tile's facets and with the ensemble NDF, both with the V-groove
+  G, differ by the tile's NDF quantisation only), each bin's deviation is discounted by it:
+  the excess e_B = max(|f̄_B − m_B| − δ_B, 0)/σ_B goes through the same χ² and max-|z| tests.
+  Under "model = ensemble" |f̄ − m| ≤ |noise| + δ, so e_B ≤ |z_B of the noise| and both
+  tests keep at most their nominal false-alarm rate (tests/test_calibration.py measures it).
+  A rejection of the excess is a resolved model error ("deviates"); a rejection of the plain
+  tests only is ``conclusive`` = False, ``agrees`` = False ("inconclusive"), reported with
+  the model's rel_rms and the departure's (``tile_departure``). Without a computable departure
+  (heightfields: a tile's masking also departs from the ensemble's) a rejection is always
+  inconclusive.
 
 ``agrees`` is True only for a conclusive agreement; a verdict "deviates" iff ``conclusive`` and
 not ``agrees``. The false-alarm rate and power are measured in tests/test_calibration.py.
@@ -76,7 +86,10 @@ __all__ = [
     "VERDICT_SCHEMA",
     "verdict",
     "verdict_kind",
+    "verdict_symbol",
+    "inconclusive_reason",
     "verdicts_for_result",
+    "tile_departure",
     "validate_verdict",
     "summary_row",
     "sidak",
@@ -151,13 +164,26 @@ VERDICT_SCHEMA: dict = {
         (str,),
         "what the tests compare against (module docstring): 'ray-noise' (χ² and max-|z|), "
         "'realisations' (t tests over the R realisations), 'one-tile' (ensemble model, one "
-        "realisation: ray-noise tests, a rejection is inconclusive)",
+        "realisation: ray-noise tests, and the excess over the tile's departure from its ensemble "
+        "where that is computable; a rejection it explains is inconclusive)",
     ),
     "conclusive": (
         (bool,),
-        "False only for a 'one-tile' rejection: tile scatter and model error cannot be separated",
+        "False only for a 'one-tile' rejection that the tile's departure from its ensemble "
+        "explains (or, where the departure is not computable, any 'one-tile' rejection)",
     ),
     "realisations": ((int,), "number of realisations R the verdict used (1 unless 'realisations')"),
+    "tile_departure": (
+        _OPT_NUM,
+        "'one-tile' with a computable departure only (else null): energy-weighted relative RMS "
+        "√(Σ_E sim·Ω·(δ/model)² / Σ_E sim·Ω) of the tile's departure δ from its ensemble",
+    ),
+    "departure_max_abs_z": (
+        _OPT_NUM,
+        "'one-tile' with a computable departure only (else null): max_U of the excess "
+        "max(|sim − model| − δ, 0)/σ; with its χ² it decides between 'deviates' and "
+        "'inconclusive' against the same thresholds",
+    ),
     "energy_dev": (
         _OPT_NUM,
         "relative energy deviation Σ_E Ω (sim − model)/Σ_E Ω model over the model's energy set "
@@ -221,121 +247,76 @@ def verdict(
     n_tests: int = 1,
     ensemble: bool = False,
     realisations=None,
+    departure=None,
 ) -> dict:
     """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``).
 
     ``ensemble``: the model describes the random surface's ensemble, not the traced facets;
     then ``realisations`` (R, Θ, Φ) are the BRDFs of the R tiles (sr⁻¹, equal rays each, their
     mean is ``sim``): R ≥ 2 selects the "realisations" reference, else "one-tile".
+    ``departure``: for "one-tile", the tile's computed departure from its ensemble per bin
+    (sr⁻¹, ≥ 0, (Θ, Φ); ``tile_departure``), which makes a rejection beyond it conclusive.
 
     ``sim``, ``stderr``, ``model`` (sr⁻¹), ``counts`` (events) and ``omega`` (projected solid
     angle, sr) are (Θ, Φ) arrays; ``theta_edges`` (Θ+1,) and ``phi_edges`` (Φ+1,, default: the
     folded grid of ``Bins``) in degrees. ``n_params`` fitted parameters reduce the dof.
     """
-    sim, se, cnt, mod, om = (
-        np.asarray(a, dtype=np.float64) for a in (sim, stderr, counts, model, omega)
+    a = _Inputs.checked(
+        sim,
+        stderr,
+        counts,
+        model,
+        omega,
+        theta_edges,
+        phi_edges,
+        realisations,
+        departure,
+        ensemble=ensemble,
+        model_rtol=model_rtol,
+        min_events=min_events,
+        n_params=n_params,
     )
-    shape = sim.shape
-    if sim.ndim != 2 or any(a.shape != shape for a in (se, cnt, mod, om)):
-        raise UsageError(
-            "sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
-            f"got {[a.shape for a in (sim, se, cnt, mod, om)]}"
-        )
-    theta_edges = np.asarray(theta_edges, dtype=np.float64)
-    if theta_edges.shape != (shape[0] + 1,):
-        raise UsageError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
-    if phi_edges is None:
-        from microsim.sim.bins import Bins
-
-        phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
-    phi_edges = np.asarray(phi_edges, dtype=np.float64)
-    if phi_edges.shape != (shape[1] + 1,):
-        raise UsageError(f"phi_edges must have shape ({shape[1] + 1},), got {phi_edges.shape}")
-    model_rtol = _checks.in_range("model_rtol", model_rtol, 0.0, 1.0)
-    if int(min_events) != min_events or min_events < 1:
-        raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
-    if int(n_params) != n_params or n_params < 0:
-        raise UsageError(f"n_params must be an integer >= 0, got {n_params!r}")
     alpha_eff = sidak(alpha, n_tests)
     alpha_each = sidak(alpha_eff, 2)
-    F = None
-    if ensemble and realisations is not None:
-        F = np.asarray(realisations, dtype=np.float64)
-        if F.ndim != 3 or F.shape[1:] != shape:
-            raise UsageError(
-                f"realisations must be an (R, {shape[0]}, {shape[1]}) array, got {F.shape}"
-            )
-        if len(F) < 2:
-            F = None
-    reference = "ray-noise" if not ensemble else ("realisations" if F is not None else "one-tile")
-
-    with np.errstate(invalid="ignore", over="ignore"):
-        sigma = np.sqrt(se**2 + (model_rtol * mod) ** 2)
-        used = (
-            (cnt >= min_events)
-            & np.isfinite(sim)
-            & np.isfinite(mod)
-            & np.isfinite(se)
-            & (sigma > 0)
-            & (sim > 0)
-        )
-        if F is not None:
-            R = len(F)
-            s_b = np.std(F, axis=0, ddof=1)
-            se_t = np.sqrt(s_b**2 / R + (model_rtol * mod) ** 2)
-            used &= np.all(np.isfinite(F), axis=0) & (se_t > 0)
-    z = np.where(used, (sim - mod) / np.where(used, sigma, 1.0), 0.0)
-    rel = np.where(used, (mod - sim) / np.where(used, sim, 1.0), 0.0)
+    used, sigma = _used_bins(a, model_rtol, min_events)
     n_bins = int(used.sum())
     dof = n_bins - int(n_params)
-    chi2 = float(np.sum(z**2))
-    p_value = float(chi2_sf(chi2, dof)) if dof > 0 else None
-    max_abs_z = float(np.max(np.abs(z))) if n_bins else None
     z_thr = float(norm_isf(0.5 * sidak(alpha_each, n_bins))) if n_bins else None
-    ray_ok = bool(dof > 0 and p_value >= alpha_each and max_abs_z < z_thr)
-
-    # energy deviation over the model's energy set (independent of the data's noise)
-    Em = energy_set(np.where(used, mod * om, 0.0)).reshape(shape)
-    energy_dev = energy_dev_se = energy_p = max_abs_t = t_thr = None
-    if Em.any():
-        norm = np.sum(om[Em] * mod[Em])
-        energy_dev = float(np.sum(om[Em] * (sim[Em] - mod[Em])) / norm)
-    n_real, conclusive = 1, True
-    if F is not None:
-        n_real = len(F)
-        agrees = False
-        if n_bins and Em.any() and dof > 0:
-            d = np.sum(om[Em] * (F[:, Em] - mod[Em]), axis=1) / norm
-            energy_dev = float(d.mean())
-            energy_dev_se = float(d.std(ddof=1) / np.sqrt(n_real))
-            se_e = np.sqrt(energy_dev_se**2 + model_rtol**2)
-            energy_p = float(2.0 * t_sf(abs(energy_dev) / se_e, n_real - 1))
-            t = np.abs(F.mean(axis=0)[used] - mod[used]) / se_t[used]
-            max_abs_t = float(t.max())
-            t_thr = float(t_isf(0.5 * sidak(alpha_each, n_bins), n_real - 1))
-            agrees = bool(energy_p >= alpha_each and max_abs_t < t_thr)
+    ray = _noise_tests(a.sim - a.mod, sigma, used, dof, alpha_each, z_thr)
+    Em = energy_set(np.where(used, a.mod * a.om, 0.0)).reshape(a.shape)
+    energy = np.where(used, a.sim * a.om, 0.0)
+    E = energy_set(energy).reshape(a.shape)
+    out = {
+        "energy_dev": _energy_dev(a.sim, a.mod, a.om, Em),
+        "energy_dev_se": None,
+        "energy_p": None,
+        "max_abs_t": None,
+        "t_threshold": None,
+        "tile_departure": None,
+        "departure_max_abs_z": None,
+    }
+    z_dev = ray["z"]
+    if a.F is not None:
+        reference, n_real = "realisations", len(a.F)
+        out.update(_realisation_tests(a, used, Em, dof, model_rtol, alpha_each))
+        agrees, conclusive = out.pop("agrees"), True
+    elif ensemble:
+        reference, n_real = "one-tile", 1
+        agrees, conclusive = ray["ok"], ray["ok"]
+        if a.dep is not None:
+            tile = _noise_tests(
+                np.maximum(np.abs(a.sim - a.mod) - a.dep, 0.0), sigma, used, dof, alpha_each, z_thr
+            )
+            z_dev = tile["z"]
+            out["tile_departure"] = _weighted_rms(energy, a.dep / np.where(used, a.mod, 1.0), E)
+            out["departure_max_abs_z"] = tile["max_abs_z"]
+            conclusive = ray["ok"] or not tile["ok"]
     else:
-        agrees = ray_ok
-        conclusive = ray_ok or reference == "ray-noise"
-
-    energy = np.where(used, sim * om, 0.0)
-    E = energy_set(energy).reshape(shape)
-    ew = energy[E]
-    rel_rms = float(np.sqrt(np.sum(ew * rel[E] ** 2) / ew.sum())) if E.any() else None
-
-    dev = used & (np.abs(z) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
-    cand = E | dev
-    if cand.any():
-        flat = np.flatnonzero(cand.ravel())
-        k = flat[np.argmax(np.abs(rel.ravel()[flat]))]
-        it, ip = np.unravel_index(k, shape)
-        max_rel_dev = float(rel.ravel()[k])
-        worst = [
-            float(0.5 * (theta_edges[it] + theta_edges[it + 1])),
-            float(0.5 * (phi_edges[ip] + phi_edges[ip + 1])),
-        ]
-    else:
-        max_rel_dev, worst = None, None
+        reference, n_real = "ray-noise", 1
+        agrees, conclusive = ray["ok"], True
+    rel = np.where(used, (a.mod - a.sim) / np.where(used, a.sim, 1.0), 0.0)
+    dev = used & (np.abs(z_dev) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
+    max_rel_dev, worst = _worst_bin(rel, E | dev, theta_edges, a.phi_edges)
     return {
         "theta_i": float(theta_i),
         "model": str(name),
@@ -344,12 +325,12 @@ def verdict(
         "n_params": int(n_params),
         "n_bins": n_bins,
         "min_events": int(min_events),
-        "chi2": chi2,
+        "chi2": ray["chi2"],
         "dof": int(dof),
-        "chi2_dof": chi2 / dof if dof > 0 else None,
-        "p_value": p_value,
-        "max_abs_z": max_abs_z,
-        "rel_rms": _opt(rel_rms) if rel_rms is not None else None,
+        "chi2_dof": ray["chi2"] / dof if dof > 0 else None,
+        "p_value": ray["p_value"],
+        "max_abs_z": ray["max_abs_z"],
+        "rel_rms": _weighted_rms(energy, rel, E),
         "energy_bins": int(E.sum()),
         "alpha": float(alpha),
         "n_tests": int(n_tests),
@@ -357,28 +338,201 @@ def verdict(
         "p_threshold": alpha_each,
         "z_threshold": z_thr,
         "model_rtol": float(model_rtol),
-        "agrees": agrees,
+        "agrees": bool(agrees),
         "deviations": _merge_ranges(dev.any(axis=1), theta_edges),
         "max_rel_dev": max_rel_dev,
         "worst_bin": worst,
         "reference": reference,
         "conclusive": bool(conclusive),
         "realisations": int(n_real),
-        "energy_dev": energy_dev,
-        "energy_dev_se": energy_dev_se,
-        "energy_p": energy_p,
-        "max_abs_t": max_abs_t,
-        "t_threshold": t_thr,
+        **out,
     }
 
 
+class _Inputs:
+    """The arrays of one verdict, float64 and shape-checked (``verdict``'s arguments)."""
+
+    @classmethod
+    def checked(
+        cls,
+        sim,
+        stderr,
+        counts,
+        model,
+        omega,
+        theta_edges,
+        phi_edges,
+        realisations,
+        departure,
+        *,
+        ensemble,
+        model_rtol,
+        min_events,
+        n_params,
+    ):
+        a = cls()
+        a.sim, a.se, a.cnt, a.mod, a.om = (
+            np.asarray(x, dtype=np.float64) for x in (sim, stderr, counts, model, omega)
+        )
+        a.shape = shape = a.sim.shape
+        if a.sim.ndim != 2 or any(x.shape != shape for x in (a.se, a.cnt, a.mod, a.om)):
+            raise UsageError(
+                "sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
+                f"got {[x.shape for x in (a.sim, a.se, a.cnt, a.mod, a.om)]}"
+            )
+        theta_edges = np.asarray(theta_edges, dtype=np.float64)
+        if theta_edges.shape != (shape[0] + 1,):
+            raise UsageError(
+                f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}"
+            )
+        if phi_edges is None:
+            from microsim.sim.bins import Bins
+
+            phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
+        a.phi_edges = np.asarray(phi_edges, dtype=np.float64)
+        if a.phi_edges.shape != (shape[1] + 1,):
+            raise UsageError(
+                f"phi_edges must have shape ({shape[1] + 1},), got {a.phi_edges.shape}"
+            )
+        _checks.in_range("model_rtol", model_rtol, 0.0, 1.0)
+        if int(min_events) != min_events or min_events < 1:
+            raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
+        if int(n_params) != n_params or n_params < 0:
+            raise UsageError(f"n_params must be an integer >= 0, got {n_params!r}")
+        a.F = None
+        if ensemble and realisations is not None:
+            F = np.asarray(realisations, dtype=np.float64)
+            if F.ndim != 3 or F.shape[1:] != shape:
+                raise UsageError(
+                    f"realisations must be an (R, {shape[0]}, {shape[1]}) array, got {F.shape}"
+                )
+            a.F = F if len(F) >= 2 else None
+        a.dep = None
+        if ensemble and a.F is None and departure is not None:
+            a.dep = np.asarray(departure, dtype=np.float64)
+            if a.dep.shape != shape or not np.all(a.dep >= 0):  # NaN fails too
+                raise UsageError(
+                    f"departure must be a non-negative {shape} array (sr⁻¹), got "
+                    f"shape {a.dep.shape}"
+                )
+        return a
+
+
+def _used_bins(a: _Inputs, model_rtol: float, min_events: int) -> tuple[np.ndarray, np.ndarray]:
+    """(used bins U, σ = √(se² + (model_rtol·m)²)) of the module docstring."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        sigma = np.sqrt(a.se**2 + (model_rtol * a.mod) ** 2)
+        used = (
+            (a.cnt >= min_events)
+            & np.isfinite(a.sim)
+            & np.isfinite(a.mod)
+            & np.isfinite(a.se)
+            & (sigma > 0)
+            & (a.sim > 0)
+        )
+        if a.F is not None:
+            se_t = np.sqrt(np.std(a.F, axis=0, ddof=1) ** 2 / len(a.F) + (model_rtol * a.mod) ** 2)
+            used &= np.all(np.isfinite(a.F), axis=0) & (se_t > 0)
+    return used, sigma
+
+
+def _noise_tests(diff, sigma, used, dof, alpha_each, z_thr) -> dict:
+    """χ² and max-|z| tests of z = diff/σ over the used bins (each at ``alpha_each``)."""
+    z = np.where(used, diff / np.where(used, sigma, 1.0), 0.0)
+    chi2 = float(np.sum(z**2))
+    p_value = float(chi2_sf(chi2, dof)) if dof > 0 else None
+    max_abs_z = float(np.max(np.abs(z))) if used.any() else None
+    ok = bool(dof > 0 and p_value >= alpha_each and max_abs_z < z_thr)
+    return {"z": z, "chi2": chi2, "p_value": p_value, "max_abs_z": max_abs_z, "ok": ok}
+
+
+def _energy_dev(sim, mod, om, Em) -> float | None:
+    """Σ_E Ω (sim − m) / Σ_E Ω m over the model's energy set E (None if E is empty)."""
+    if not Em.any():
+        return None
+    return float(np.sum(om[Em] * (sim[Em] - mod[Em])) / np.sum(om[Em] * mod[Em]))
+
+
+def _realisation_tests(a: _Inputs, used, Em, dof, model_rtol, alpha_each) -> dict:
+    """The energy and shape t tests over R ≥ 2 realisations (module docstring)."""
+    out = {"agrees": False}
+    if not (used.any() and Em.any() and dof > 0):
+        return out
+    R = len(a.F)
+    norm = np.sum(a.om[Em] * a.mod[Em])
+    d = np.sum(a.om[Em] * (a.F[:, Em] - a.mod[Em]), axis=1) / norm
+    se_d = float(d.std(ddof=1) / np.sqrt(R))
+    energy_p = float(2.0 * t_sf(abs(d.mean()) / np.sqrt(se_d**2 + model_rtol**2), R - 1))
+    se_t = np.sqrt(np.std(a.F, axis=0, ddof=1) ** 2 / R + (model_rtol * a.mod) ** 2)
+    max_abs_t = float((np.abs(a.F.mean(axis=0)[used] - a.mod[used]) / se_t[used]).max())
+    t_thr = float(t_isf(0.5 * sidak(alpha_each, int(used.sum())), R - 1))
+    out.update(
+        energy_dev=float(d.mean()),
+        energy_dev_se=se_d,
+        energy_p=energy_p,
+        max_abs_t=max_abs_t,
+        t_threshold=t_thr,
+        agrees=bool(energy_p >= alpha_each and max_abs_t < t_thr),
+    )
+    return out
+
+
+def _weighted_rms(energy, rel, E) -> float | None:
+    """√(Σ_E e·rel² / Σ_E e): the energy-weighted RMS of ``rel`` over the set E."""
+    if not E.any():
+        return None
+    ew = energy[E]
+    return _opt(np.sqrt(np.sum(ew * rel[E] ** 2) / ew.sum()))
+
+
+def _worst_bin(rel, cand, theta_edges, phi_edges) -> tuple[float | None, list | None]:
+    """(signed rel of largest magnitude over ``cand``, its [θo, Δφ] bin centre)."""
+    if not cand.any():
+        return None, None
+    flat = np.flatnonzero(cand.ravel())
+    k = flat[np.argmax(np.abs(rel.ravel()[flat]))]
+    it, ip = np.unravel_index(k, rel.shape)
+    return float(rel.ravel()[k]), [
+        float(0.5 * (theta_edges[it] + theta_edges[it + 1])),
+        float(0.5 * (phi_edges[ip] + phi_edges[ip + 1])),
+    ]
+
+
 def verdict_kind(v: Mapping) -> str:
-    """ "agrees", "deviates" or "inconclusive" (an ensemble model on one realisation that the
-    ray-noise tests reject: tile scatter and model error cannot be told apart; ``verdicts``
-    docstring): the one rule every output words its verdicts by."""
+    """ "agrees", "deviates" or "inconclusive" (an ensemble model on one realisation whose
+    deviation the tile's own departure from the ensemble may explain; module docstring): the
+    one rule every output — run, report, index, charts, sweep, testing — words verdicts by."""
     if v["agrees"]:
         return "agrees"
     return "deviates" if v.get("conclusive", True) else "inconclusive"
+
+
+def verdict_symbol(v: Mapping) -> str:
+    """One verdict in the symbols of the run's table and the index: "✓", "✗ 20%" (its
+    energy-weighted relative RMS error) or "?" — followed, when the tile's departure from its
+    ensemble is known, by both sizes: "? 2% (tile departs 3%)"."""
+    kind = verdict_kind(v)
+    if kind == "agrees":
+        return "✓"
+    if kind == "deviates":
+        return f"✗ {_pct(v['rel_rms'])}" if v.get("rel_rms") is not None else "✗"
+    if v.get("tile_departure") is None or v.get("rel_rms") is None:
+        return "?"
+    return f"? {_pct(v['rel_rms'])} (tile departs {_pct(v['tile_departure'])})"
+
+
+def inconclusive_reason(v: Mapping) -> str:
+    """Why an inconclusive verdict is one, in words (``verdict_kind`` "inconclusive")."""
+    if v.get("tile_departure") is None or v.get("rel_rms") is None:
+        return "one realisation cannot separate tile scatter from model error"
+    return (
+        f"its deviation (rel RMS {_pct(v['rel_rms'])}) is explained by the tile's own "
+        f"departure from its ensemble ({_pct(v['tile_departure'])}) and ray noise"
+    )
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.2g}%"
 
 
 def _jsonable_params(params: Mapping | None) -> dict:
@@ -471,6 +625,7 @@ def verdicts_for_result(
     T = len(result.theta_i)
     n_tests = max(1, T * len(entries))
     omega = result.bins.projected_solid_angle()
+    rel_departure = tile_departure(result)
     # models of the realised surfaces themselves (``ts-facets``) differ from the simulation by
     # ray noise only; ensemble models also by the tile-to-tile scatter (``result.stderr``)
     own = set(result.meta.get("realisation_models", ()))
@@ -508,9 +663,41 @@ def verdicts_for_result(
                     n_tests=n_tests,
                     ensemble=name not in own,
                     realisations=real_t,
+                    departure=(
+                        None
+                        if rel_departure is None or name in own
+                        else _scaled(rel_departure[t], values[t])
+                    ),
                 )
             )
     return out
+
+
+def tile_departure(result) -> np.ndarray | None:
+    """|r| (T, Θ, Φ), r = m_tile/m_ensemble − 1: the relative departure of the traced tile's
+    BRDF from its ensemble's, computed without rays from the two models named by
+    ``meta["tile_departure"]`` ({"tile": facet model, "ensemble": the same closed form with
+    the ensemble NDF}, recorded by ``sim.compare.attach_models``); 0 where the ensemble model
+    is 0 and the tile's too, ∞ where only the tile's is. None if not recorded, or if the
+    result has several realisations (their scatter is measured instead)."""
+    pair = result.meta.get("tile_departure")
+    if not pair or getattr(result, "brdf_realisations", None) is not None:
+        return None
+    if pair["tile"] not in result.models or pair["ensemble"] not in result.models:
+        return None
+    tile = np.asarray(result.models[pair["tile"]], dtype=np.float64)
+    ens = np.asarray(result.models[pair["ensemble"]], dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(ens > 0, np.abs(tile / np.where(ens > 0, ens, 1.0) - 1.0), np.inf)
+    r = np.where((ens == 0) & (tile == 0), 0.0, r)
+    return r
+
+
+def _scaled(rel: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """rel·|values| with 0·∞ = 0 (a bin the model gives no light has no departure)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = rel * np.abs(np.asarray(values, dtype=np.float64))
+    return np.where(np.isnan(out) & (rel >= 0), 0.0, out)
 
 
 def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
@@ -532,10 +719,7 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
         note = ""
         if unsure:
             where = ", ".join(f"{v['theta_i']:g}°" for v in unsure)
-            note = (
-                f"inconclusive at θi={where} (one realisation cannot separate tile scatter "
-                f"from model error)"
-            )
+            note = f"inconclusive at θi={where} ({inconclusive_reason(unsure[-1])})"
         if not bad:
             out[name] = note
             continue

@@ -152,12 +152,9 @@ def default_models(
         specs = [
             ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, material) for k in kinds
         ]
-        return specs + [
-            _tagged(
-                ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies),
-                surfaces,
-            )
-        ]
+        facets = ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies)
+        # the same closed form with the ensemble NDF: the pair measures the tile's departure
+        return specs + [_tagged(facets, surfaces, ensemble=f"ts-{SHADOWING_SUFFIX[exact]}")]
     ndfs = [("realised", Beckmann(m_real))]
     if ndf is not None:
         ndfs.insert(0, ("nominal", ndf))
@@ -184,10 +181,13 @@ def surface_fingerprint(surface) -> str:
     return surface.fingerprint()
 
 
-def _tagged(spec: ModelSpec, surfaces) -> ModelSpec:
-    """``spec`` with the sorted fingerprints of the surfaces its facets come from."""
+def _tagged(spec: ModelSpec, surfaces, ensemble: str | None = None) -> ModelSpec:
+    """``spec`` with the sorted fingerprints of the surfaces its facets come from and, for a
+    surface whose exact shadowing depends on its facets alone (V-grooves), the name of the
+    ensemble model with the same shadowing (``params["ensemble"]``; ``attach_models``)."""
     fps = tuple(sorted(surface_fingerprint(s) for s in surfaces))
-    return ModelSpec(spec.name, spec.kind, {**spec.params, "fingerprints": fps})
+    extra = {"ensemble": ensemble} if ensemble is not None else {}
+    return ModelSpec(spec.name, spec.kind, {**spec.params, "fingerprints": fps, **extra})
 
 
 def _result_fingerprints(result: Result) -> tuple[str, ...] | None:
@@ -219,7 +219,9 @@ def _as_specs(specs) -> list:
 def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
     """A new Result: ``result`` with the bin-averaged predictions of ``specs`` (name → (T, Θ, Φ)
     sr⁻¹, on the result's bins, θi and φi; one ``predict`` call per distinct φi) added to its
-    ``models`` and their facet models added to ``meta["realisation_models"]``. ``result``
+    ``models`` and their facet models added to ``meta["realisation_models"]`` (and, when a
+    facet model names its ensemble counterpart, that pair as ``meta["tile_departure"]``: the
+    verdicts measure the tile's departure from its ensemble with it). ``result``
     itself is left untouched (Results are immutable); predictions travel inside the Result
     because they are saved with it (``model_*`` arrays) and every report reads them there.
     Facet models tagged with surface fingerprints (``default_models``) must match the result's
@@ -245,11 +247,16 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
     own = set(result.meta.get("realisation_models", ())) | {
         s.name for s in specs if s.kind == "facets"
     }
-    return replace(
-        result,
-        models={**result.models, **out},
-        meta={**result.meta, "realisation_models": sorted(own)},
-    )
+    meta = {**result.meta, "realisation_models": sorted(own)}
+    models = {**result.models, **out}
+    pairs = [
+        {"tile": s.name, "ensemble": s.params["ensemble"]}
+        for s in specs
+        if s.kind == "facets" and s.params.get("ensemble") in models
+    ]
+    if pairs:
+        meta["tile_departure"] = pairs[0]
+    return replace(result, models=models, meta=meta)
 
 
 class G1Measurement(NamedTuple):

@@ -1,0 +1,83 @@
+"""One verdict, one answer in every output: ``microsim run``'s table, report.md's verdict
+table, the index cell, the hemisphere chart's table, the index summary line, the sweep rows
+and ``microsim.testing`` all word a verdict by ``verdicts.verdict_kind``.
+
+The three cases are built with ``verdicts.verdict`` itself: an ensemble model within ray noise
+of one tile (agrees), one 20 % too bright beyond the tile's departure (deviates) and one whose
+deviation the tile's departure explains (inconclusive)."""
+
+import numpy as np
+import pytest
+
+from microsim.analysis import charts, report
+from microsim.analysis import verdicts as V
+from microsim.sim import Bins
+
+BINS = Bins(10, 6)
+OMEGA = BINS.projected_solid_angle()
+
+
+def _lobe():
+    t = BINS.theta_centers[:, None]
+    p = BINS.phi_centers[None, :]
+    return 0.2 + 5.0 * np.exp(-(((t - 40.0) / 12.0) ** 2) - ((p - 180.0) / 40.0) ** 2)
+
+
+def _case(kind: str) -> dict:
+    rng = np.random.default_rng(3)
+    truth = _lobe()
+    tile = truth * (1.0 + 0.03 * np.sign(rng.normal(size=truth.shape)))
+    se = 0.002 * tile
+    sim = tile + rng.normal(size=truth.shape) * se
+    departure = np.abs(tile - truth)
+    if kind == "agrees":
+        sim = truth + rng.normal(size=truth.shape) * se
+    scale = 1.2 if kind == "deviates" else 1.0
+    v = V.verdict(
+        sim,
+        se,
+        np.full(sim.shape, 1000),
+        scale * truth,
+        OMEGA,
+        BINS.theta_edges,
+        phi_edges=BINS.phi_edges,
+        theta_i=60.0,
+        name=f"model-{kind}",
+        ensemble=True,
+        departure=scale * departure,
+    )
+    assert V.verdict_kind(v) == kind
+    return v
+
+
+KINDS = ["agrees", "deviates", "inconclusive"]
+SYMBOL = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}
+WORD = {"agrees": "**agrees**", "deviates": "deviates", "inconclusive": "inconclusive"}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_output_words_the_verdict_alike(kind):
+    v = _case(kind)
+    doc = {"scene": "s", "verdicts": [v]}
+    # microsim run's stdout table: the row of the model
+    row = next(r for r in report.run_summary(doc).splitlines() if r.startswith(v["model"]))
+    assert row.split()[1] == SYMBOL[kind]
+    # report.md's verdict table: the verdict column
+    assert report._verdict_rows([v])[0][2] == WORD[kind]
+    # the index cell and the index summary line
+    summary = V.summary_row([v])
+    assert report._index_cell(doc, v["model"], summary).startswith(SYMBOL[kind])
+    assert summary[v["model"]].startswith(kind)
+    # the hemisphere chart's table
+    assert charts._verdict_table([v]).splitlines()[2].split()[4] == kind
+    # the symbol function itself
+    assert V.verdict_symbol(v).startswith(SYMBOL[kind])
+
+
+def test_inconclusive_prints_both_sizes():
+    """ "? x% (tile departs y%)": the deviation and the departure that explains it."""
+    v = _case("inconclusive")
+    text = V.verdict_symbol(v)
+    assert text == f"? {100 * v['rel_rms']:.2g}% (tile departs {100 * v['tile_departure']:.2g}%)"
+    assert "tile departs" in report._index_cell({"verdicts": [v]}, v["model"], V.summary_row([v]))
+    assert "departure" in V.summary_row([v])[v["model"]]
