@@ -73,7 +73,7 @@ def test_model_off_by_ten_percent_in_a_theta_range_is_located_exactly():
     assert v["agrees"] is False
     assert v["deviations"] == [[30.0, 45.0]]
     assert 30.0 <= v["worst_bin"][0] <= 45.0
-    assert v["max_rel_dev"] == pytest.approx(0.1, abs=0.05)
+    assert v["max_rel_dev"] == pytest.approx(-0.1, abs=0.05)  # sim − model: the model is brighter
     assert _verdict(sim, se, truth)["deviations"] == []
 
 
@@ -156,7 +156,7 @@ def test_summary_row_wording():
     rows = V.summary_row([good, bad])
     assert rows["a"] == "agrees"
     assert rows["b"].startswith("deviates at θi=80°") and "rel RMS 20% at θi=80°" in rows["b"]
-    assert "worst +20%" in rows["b"]
+    assert "worst -20%" in rows["b"]  # sim − model: the model is too bright
 
 
 def test_invalid_arguments_raise():

@@ -69,23 +69,24 @@ def test_rayleigh_rice_agrees_at_small_incidence_and_its_region_shrinks_at_60(sm
     assert _width(r30) >= 60.0 and _width(r60) < _width(r30)
     # towards grazing Q_K/Q_RR grows (≈ 1/cos²θo): at 60° RR falls below Kirchhoff there
     assert r60[-1][1] < r30[-1][1]
-    assert d60["outside"]["forward"] is not None and d60["outside"]["forward"][1] < -0.02
+    # reference minus model > 0 everywhere outside: RR below Kirchhoff
+    assert d60["outside"]["forward"] is not None and d60["outside"]["forward"][0] > 0.02
     for d in v.values():
         validate_wave_verdict(d)
         assert d["status"] in ("agrees", "agrees-in-region", "differs")
 
 
 def test_a_model_off_by_a_known_factor(smooth):
-    """m = 1.1 f̄ in every bin: energy_dev = rel_error = 0.1 exactly, and no row agrees within
-    2 % unless its noise is above 4 %."""
+    """m = 1.1 f̄ in every bin: rel_error = 0.1 and energy_dev = −0.1 exactly (reference minus
+    model), and no row agrees within 2 % unless its noise is above 4 %."""
     _, r, _ = smooth
     f = diffuse_brdf(r, 1)
     d = wave_verdict(r, 1, 1.1 * f, model="scaled")
-    assert d["energy_dev"] == pytest.approx(0.1, abs=1e-12)
+    assert d["energy_dev"] == pytest.approx(-0.1, abs=1e-12)
     assert d["rel_error"] == pytest.approx(0.1, abs=1e-12)
-    assert d["max_rel_dev"] == pytest.approx(0.1, abs=1e-12)
+    assert d["max_rel_dev"] == pytest.approx(-0.1, abs=1e-12)
     for side, lo, hi, mean, se, ok in d["rows"]:
-        assert mean == pytest.approx(0.1, abs=1e-12)
+        assert mean == pytest.approx(-0.1, abs=1e-12)
         assert ok == (0.1 <= 0.02 + 2 * np.hypot(se, 1e-3))
     assert d["status"] != "agrees"
     assert set(d) == set(WAVE_VERDICT_SCHEMA)

@@ -36,9 +36,10 @@ direction at Δφ = 180°.
   reciprocal, so the per-θi energies test the θi-dependence (1 − ρ(θi)) of eq. 28, not its
   scale (one fitted parameter; the energy tests of a fitted model are conservative).
 
-Per model and θi the *energy verdict* of orders ≥ 2: d = (E_model − E_sim)/E_sim ± se_d with
+Per model and θi the *energy verdict* of orders ≥ 2: d = (E_sim − E_model)/E_sim ± se_d (the
+sign convention of every output: simulation minus model; negative: the model is too bright),
 se_d = (E_model/E_sim) √((se_model/E_model)² + (se_sim/E_sim)²) (delta method; se_model = 0 for
-the closed forms, the walk's own for the walk); t = (E_model − E_sim)/√(se_sim² + se_model²),
+the closed forms, the walk's own for the walk); t = (E_sim − E_model)/√(se_sim² + se_model²),
 two-sided against Student t on R − 1 dof (R ≥ 2; conservative, the walk's error has ~N dof) or
 the normal (R = 1), at the Šidák level of the family of 3 models × T incidences
 (``alpha`` = 0.01 family-wise). The *angular shape*: over the energy set E (fewest bins carrying
@@ -312,9 +313,9 @@ def _shape(f, sf, m, sm, omega):
 
 
 def _energy_verdict(e_sim, se_sim, e_mod, se_mod, dof, alpha_each, fitted):
-    d = e_mod / e_sim - 1.0
+    d = 1.0 - e_mod / e_sim
     se_d = (e_mod / e_sim) * np.sqrt((se_mod / e_mod) ** 2 + (se_sim / e_sim) ** 2)
-    stat = (e_mod - e_sim) / np.hypot(se_sim, se_mod)
+    stat = (e_sim - e_mod) / np.hypot(se_sim, se_mod)
     if dof is None:
         p = float(2.0 * norm_sf(abs(stat)))
         thr = float(norm_isf(0.5 * alpha_each))
@@ -630,7 +631,7 @@ def multiple_section(comparison: Mapping) -> list[str]:
             f"(E from Torrance–Sparrow with height-correlated Smith G, E_avg = "
             f"{c['kulla_conty_e_avg']:.4f}) and Mikkelsen 2009 eq. 28 (k_d = {c['kd']:.4g}, "
             f"{c['kd_note']}). Energies are fractions of the incident power; deviations "
-            f"(model − sim)/sim; 'agrees' at the Šidák level of {len(MODELS)} models × "
+            f"(sim − model)/sim; 'agrees' at the Šidák level of {len(MODELS)} models × "
             f"{len(c['incidences'])} θi (family α = {c['alpha']:g}). Lobe error: energy-weighted "
             "relative RMS over the bins carrying 90 % of the simulated order-≥ 2 energy (shape "
             "only: after scaling the model to that energy), beside the floor the standard "

@@ -18,17 +18,18 @@ each model judged against it with ``wave_verdicts.wave_verdict`` (diffuse part, 
                         very mesh, i.e. the ray tracer with masking off.
 
 The error plotted and used for the crossovers is the energy-weighted mean relative error over
-the energy set, ``energy_dev`` = Σ_E Ω(m − f̄)/Σ_E Ω f̄; the 5 % criterion is applied to its
-value. Its standard error (``energy_dev_se``, from the result's speckle se, which counts the
-trend of f across a bin as scatter and so overstates the noise of a smooth, exact-amplitude
-tile) is reported beside it: measured 2–30 % (median 5–6 %) where a model is within 10 %. The
-energy-weighted RMS (``rel_error``) is kept too, but one tile's speckle puts a floor of 9–64 %
-under it (``noise_floor``), so it cannot resolve 5 %. Exact check 4 of the issue
-(tests/test_wave_rough.py) removes that floor for "geometric-facets" deep in the rough regime:
-with several independent tiles, each against its own facets, the mean over pairs of tiles of
-Σ_E w e_t e_t' estimates the systematic part of the RMS without the speckle; measured 0.7–1.5 %
-at σ = 2λ, ℓ = 20λ, θi = 0–30° (mesh and smooth surface) and ≤ 1.7 % at σ = 2λ, ℓ = 40λ up to
-θi = 60°, where the Smith masked fraction is below 1 % (it is 2.1 % at 60° for m = 0.2).
+the energy set, ``energy_dev`` = Σ_E Ω(f̄ − m)/Σ_E Ω f̄ (reference minus model); the 5 %
+criterion is applied to its magnitude. Its standard error (``energy_dev_se``, from the result's
+speckle se, which counts the trend of f across a bin as scatter and so overstates the noise of
+a smooth, exact-amplitude tile) is reported beside it: measured 2–30 % (median 5–6 %) where a
+model is within 10 %. The energy-weighted RMS (``rel_error``) is kept too, but one tile's
+speckle puts a floor of 9–64 % under it (``noise_floor``), so it cannot resolve 5 %. Exact
+check of tests/test_wave_rough.py removes that floor for "geometric-facets" deep
+in the rough regime: with several independent tiles, each against its own facets, the mean over
+pairs of tiles of Σ_E w e_t e_t' estimates the systematic part of the RMS without the speckle;
+measured 0.7–1.5 % at σ = 2λ, ℓ = 20λ, θi = 0–30° (mesh and smooth surface) and ≤ 1.7 % at σ =
+2λ, ℓ = 40λ up to θi = 60°, where the Smith masked fraction is below 1 % (it is 2.1 % at 60°
+for m = 0.2).
 
 Expected crossovers (first-order theory, to check the map against): with g = (4πσ cos θi/λ)²
 the Kirchhoff diffuse power is F(1 − e^{−g}) (Davies 1954) while RR's is ≈ F g, so RR

@@ -3,8 +3,9 @@
 Pure formatting: every number comes from the verdict document written as ``verdicts.json``
 (see ``microsim.app.runner`` and the README for its schema) and, for the energy ledger, from the
 ``Result``. No wall-clock time appears in either report (they are in ``timings.json``), so
-rerunning an unchanged scene rewrites them byte for byte. Percentages are relative errors
-(model − sim)/sim; BRDFs in sr⁻¹, angles in degrees.
+rerunning an unchanged scene rewrites them byte for byte. Signed percentages are relative
+deviations (simulation − model)/simulation, the one sign convention of every output (negative:
+the model is too bright); BRDFs in sr⁻¹, angles in degrees.
 """
 
 from __future__ import annotations
@@ -225,7 +226,7 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
         'Scenes traced with `bounces = "all"`: the fraction of the reflected energy in '
         "scattering orders ≥ 2 at each θi, whether a single-bounce model misses more than 1 % "
         "of it (then the scene needs more than one bounce), and the relative energy deviation "
-        "(model − simulation)/simulation of orders ≥ 2 of Heitz et al.'s random walk and of "
+        "(simulation − model)/simulation of orders ≥ 2 of Heitz et al.'s random walk and of "
         "Kulla–Conty's compensation at the same θi. Each scene's report has the order-resolved "
         "tables, Mikkelsen eq. 28 and the lobes' shape errors.",
         "",
@@ -369,7 +370,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 "p",
                 "max |z|",
                 "rel RMS",
-                "max rel dev",
+                "max rel dev (sim − model)/sim",
                 "worst bin",
                 "deviating θo",
                 "bins",
@@ -521,7 +522,8 @@ def wave_section(wave: Mapping | None) -> list[str]:
         "(the coherent specular order removed); standard errors from "
         f"{se_from}. "
         "Both sides are approximations: each verdict gives how far they are apart over the "
-        "bins carrying 90 % of the diffuse energy (energy deviation, and the energy-weighted "
+        "bins carrying 90 % of the diffuse energy (energy deviation (Kirchhoff − model)/Kirchhoff, "
+        "negative where the model is too bright; the energy-weighted "
         "relative RMS error beside the RMS a perfect model would show from the reference's "
         "noise), and the θo region where they agree within 2 % + 2 standard errors (forward: "
         "the mirror side, Δφ ≥ 90°); it never calls either wrong. Bins beyond θo = 80° are "
@@ -663,7 +665,8 @@ def regime_section(docs: Sequence[Mapping], regimes: Mapping | None, methods=Non
         lines += [
             "Wave-optics closed forms on the catalogue's scenes with a wavelength, each judged "
             "against the Kirchhoff solver on the same tiles (theory vs theory: energy "
-            "deviation ± standard error over the bins carrying 90 % of the diffuse energy; "
+            "deviation (Kirchhoff − model)/Kirchhoff ± standard error over the bins carrying "
+            "90 % of the diffuse energy; "
             "**agrees**: within 2 % + 2 se over that energy set; *agrees only in θo …*: the "
             "ranges where they agree within 2 % + 2 se, forward = mirror side). The "
             "geometric models of these scenes are judged against the ray tracer above.",

@@ -2,7 +2,9 @@
 
 One verdict compares, for ONE incidence θi and ONE model, the simulated bin averages f̄_B
 (sr⁻¹, ``Result.brdf[t]``) with the model's bin averages m_B over the (θo, Δφ) bins
-(docs/design.md, "Verdicts"). Definitions (all documented again in ``VERDICT_SCHEMA``):
+(docs/design.md, "Verdicts"). Sign convention, as in every output: simulation minus model
+(z, max_rel_dev, energy_dev are negative where the model is too bright). Definitions (all
+documented again in ``VERDICT_SCHEMA``):
 
 * Used bins U: ≥ ``min_events`` single-bounce events, and sim, stderr, model finite, σ_B > 0.
 * σ_B² = se_B² + (model_rtol · m_B)²: the simulation's standard error and, in quadrature, the
@@ -16,9 +18,9 @@ One verdict compares, for ONE incidence θi and ONE model, the simulated bin ave
   verdict says "deviates" with probability ≤ α_eff (exactly α_eff for independent tests).
 * rel_rms over the energy set E ⊂ U: the fewest used bins, taken in order of decreasing
   f̄_B Ω_B, whose Σ f̄ Ω reaches 90 % of Σ_U f̄ Ω; energy-weighted:
-  rel_rms = √(Σ_E f̄Ω ((m − f̄)/f̄)² / Σ_E f̄Ω). For m = f̄(1 + ε) it is |ε| exactly.
-* deviations: θo ranges of bins with |z| > 5 and |m − f̄|/f̄ > 5 % (any Δφ), adjacent θo bins
-  merged. max_rel_dev: the signed (m − f̄)/f̄ of largest magnitude over E ∪ deviating bins
+  rel_rms = √(Σ_E f̄Ω ((f̄ − m)/f̄)² / Σ_E f̄Ω). For m = f̄(1 + ε) it is |ε| exactly.
+* deviations: θo ranges of bins with |z| > 5 and |f̄ − m|/f̄ > 5 % (any Δφ), adjacent θo bins
+  merged. max_rel_dev: the signed (f̄ − m)/f̄ of largest magnitude over E ∪ deviating bins
   (noisy far-tail bins of a model that agrees there are not reported as "worst").
 
 Limitation: bins are selected by the *simulation's* event count, so a model predicting a lobe
@@ -131,7 +133,7 @@ VERDICT_SCHEMA: dict = {
         _OPT_NUM,
         "energy-weighted relative RMS error over the energy set E (the fewest "
         "used bins, by decreasing sim·Ω, reaching 90% of Σ_U sim·Ω): "
-        "√(Σ_E sim·Ω·((model − sim)/sim)² / Σ_E sim·Ω)",
+        "√(Σ_E sim·Ω·((sim − model)/sim)² / Σ_E sim·Ω)",
     ),
     "energy_bins": ((int,), "number of bins in the energy set E"),
     "alpha": (_NUM, "family significance level α of the run"),
@@ -153,11 +155,12 @@ VERDICT_SCHEMA: dict = {
     "deviations": (
         (list,),
         "[θo_lo, θo_hi] ranges in degrees of bins with |z| > 5 and "
-        "|model − sim|/sim > 0.05 at any Δφ, adjacent θo bins merged",
+        "|sim − model|/sim > 0.05 at any Δφ, adjacent θo bins merged",
     ),
     "max_rel_dev": (
         _OPT_NUM,
-        "signed (model − sim)/sim of largest magnitude over E ∪ deviating bins (null if empty)",
+        "signed (sim − model)/sim of largest magnitude over E ∪ deviating bins (null if empty; "
+        "negative: the model is too bright there)",
     ),
     "worst_bin": ((list, type(None)), "[θo, Δφ] bin centre (degrees) of max_rel_dev"),
     "reference": (
@@ -314,7 +317,7 @@ def verdict(
     else:
         reference, n_real = "ray-noise", 1
         agrees, conclusive = ray["ok"], True
-    rel = np.where(used, (a.mod - a.sim) / np.where(used, a.sim, 1.0), 0.0)
+    rel = np.where(used, (a.sim - a.mod) / np.where(used, a.sim, 1.0), 0.0)
     dev = used & (np.abs(z_dev) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
     max_rel_dev, worst = _worst_bin(rel, E | dev, theta_edges, a.phi_edges)
     return {

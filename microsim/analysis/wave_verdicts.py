@@ -30,8 +30,9 @@ or realisations), Ω_B the projected solid angles.
   outside Kirchhoff's domain and carry spurious power).
 * Energy set E: ``stats.energy_set`` of f̄Ω (the fewest bins carrying ``fraction`` = 90 % of the
   diffuse energy).
-* energy_dev d = Σ_E Ω(m − f̄)/Σ_E Ω f̄ (signed), se_d = (Σ_E Ω m/(Σ_E Ω f̄)²)·√(Σ_E Ω² se²).
-* rel_error = √(Σ_E f̄Ω e² / Σ_E f̄Ω), e_B = (m_B − f̄_B)/f̄_B (as ``verdicts``' rel_rms), with
+* Signs: reference minus model, as in every output (negative where the model is too bright).
+* energy_dev d = Σ_E Ω(f̄ − m)/Σ_E Ω f̄ (signed), se_d = (Σ_E Ω m/(Σ_E Ω f̄)²)·√(Σ_E Ω² se²).
+* rel_error = √(Σ_E f̄Ω e² / Σ_E f̄Ω), e_B = (f̄_B − m_B)/f̄_B (as ``verdicts``' rel_rms), with
   its delta-method standard error from se_B, and noise_floor = √(Σ_E f̄Ω (se/f̄)²/Σ_E f̄Ω), what
   a perfect model would show through the reference's noise alone.
 * Agreement region: over the tested bins (f̄Ω ≥ ``min_share`` of the diffuse energy), per θo
@@ -103,11 +104,11 @@ WAVE_VERDICT_SCHEMA: dict = {
     "z": (_NUM, "noise multiplier: agreement within tol + z·standard error"),
     "fraction": (_NUM, "share of the diffuse energy the energy set carries (0.9)"),
     "energy_bins": ((int,), "bins in the energy set E"),
-    "energy_dev": (_OPT_NUM, "Σ_E Ω(model − ref)/Σ_E Ω ref, signed (null if E is empty)"),
+    "energy_dev": (_OPT_NUM, "Σ_E Ω(ref − model)/Σ_E Ω ref, signed (null if E is empty)"),
     "energy_dev_se": (_OPT_NUM, "standard error of energy_dev from the reference's stderr"),
     "rel_error": (
         _OPT_NUM,
-        "energy-weighted relative RMS error √(Σ_E refΩ e²/Σ_E refΩ), e = (model − ref)/ref",
+        "energy-weighted relative RMS error √(Σ_E refΩ e²/Σ_E refΩ), e = (ref − model)/ref",
     ),
     "rel_error_se": (_OPT_NUM, "delta-method standard error of rel_error"),
     "noise_floor": (_OPT_NUM, "rel_error a perfect model would show: √(Σ_E refΩ (se/ref)²/Σ)"),
@@ -348,9 +349,9 @@ def wave_verdict(
     if E.any():
         fe, me, se_e, oe = f[E], m[E], se[E], omega[E]
         F, M = np.sum(oe * fe), np.sum(oe * me)
-        d = M / F - 1.0
+        d = 1.0 - M / F
         d_se = math.hypot(M / F**2 * math.sqrt(np.sum((oe * se_e) ** 2)), model_rtol * M / F)
-        e = (me - fe) / fe
+        e = (fe - me) / fe
         w = fe * oe
         r2 = np.sum(w * e**2) / F
         r = math.sqrt(r2)
@@ -398,9 +399,9 @@ def wave_verdict(
                 continue
             w = f2[i, sel] * om2[i, sel]
             W = w.sum()
-            e = (m2[i, sel] - f2[i, sel]) / f2[i, sel]
+            e = (f2[i, sel] - m2[i, sel]) / f2[i, sel]
             mean = float(np.sum(w * e) / W)
-            # ē = Σ Ω m / Σ Ω f − 1: se from the reference's se
+            # ē = 1 − Σ Ω m / Σ Ω f: se from the reference's se
             s = float(
                 np.sum(om2[i, sel] * m2[i, sel])
                 / W**2
