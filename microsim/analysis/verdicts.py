@@ -67,7 +67,7 @@ not ``agrees``. The false-alarm rate and power are measured in tests/test_calibr
 
 from __future__ import annotations
 
-from typing import Iterable, Mapping
+from typing import Iterable, Mapping, NamedTuple
 
 import numpy as np
 
@@ -264,16 +264,18 @@ def verdict(
     angle, sr) are (Θ, Φ) arrays; ``theta_edges`` (Θ+1,) and ``phi_edges`` (Φ+1,, default: the
     folded grid of ``Bins``) in degrees. ``n_params`` fitted parameters reduce the dof.
     """
-    a = _Inputs.checked(
-        sim,
-        stderr,
-        counts,
-        model,
-        omega,
-        theta_edges,
-        phi_edges,
-        realisations,
-        departure,
+    a = _checked_inputs(
+        {
+            "sim": sim,
+            "stderr": stderr,
+            "counts": counts,
+            "model": model,
+            "omega": omega,
+            "theta_edges": theta_edges,
+            "phi_edges": phi_edges,
+            "realisations": realisations,
+            "departure": departure,
+        },
         ensemble=ensemble,
         model_rtol=model_rtol,
         min_events=min_events,
@@ -352,73 +354,74 @@ def verdict(
     }
 
 
-class _Inputs:
-    """The arrays of one verdict, float64 and shape-checked (``verdict``'s arguments)."""
+class _Inputs(NamedTuple):
+    """The arrays of one verdict, float64 and shape-checked (``_checked_inputs``): sim, se,
+    counts, model, Ω (Θ, Φ); the φ edges; the R ≥ 2 realisations F (R, Θ, Φ) or None; the
+    tile's departure δ (Θ, Φ, sr⁻¹) or None; se_t = √(s_B²/R + (rtol·m)²) with F, else None."""
 
-    @classmethod
-    def checked(
-        cls,
-        sim,
-        stderr,
-        counts,
-        model,
-        omega,
-        theta_edges,
-        phi_edges,
-        realisations,
-        departure,
-        *,
-        ensemble,
-        model_rtol,
-        min_events,
-        n_params,
-    ):
-        a = cls()
-        a.sim, a.se, a.cnt, a.mod, a.om = (
-            np.asarray(x, dtype=np.float64) for x in (sim, stderr, counts, model, omega)
+    sim: np.ndarray
+    se: np.ndarray
+    cnt: np.ndarray
+    mod: np.ndarray
+    om: np.ndarray
+    phi_edges: np.ndarray
+    F: np.ndarray | None
+    dep: np.ndarray | None
+    se_t: np.ndarray | None
+
+    @property
+    def shape(self) -> tuple:
+        return self.sim.shape
+
+
+def _checked_inputs(args: Mapping, *, ensemble, model_rtol, min_events, n_params) -> _Inputs:
+    """``verdict``'s array arguments (``args``: sim, stderr, counts, model, omega,
+    theta_edges, phi_edges, realisations, departure) converted and checked: one-line
+    UsageErrors naming the argument."""
+    sim, se, cnt, mod, om = (
+        np.asarray(args[k], dtype=np.float64) for k in ("sim", "stderr", "counts", "model", "omega")
+    )
+    shape = sim.shape
+    if sim.ndim != 2 or any(x.shape != shape for x in (se, cnt, mod, om)):
+        raise UsageError(
+            "sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
+            f"got {[x.shape for x in (sim, se, cnt, mod, om)]}"
         )
-        a.shape = shape = a.sim.shape
-        if a.sim.ndim != 2 or any(x.shape != shape for x in (a.se, a.cnt, a.mod, a.om)):
-            raise UsageError(
-                "sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
-                f"got {[x.shape for x in (a.sim, a.se, a.cnt, a.mod, a.om)]}"
-            )
-        theta_edges = np.asarray(theta_edges, dtype=np.float64)
-        if theta_edges.shape != (shape[0] + 1,):
-            raise UsageError(
-                f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}"
-            )
-        if phi_edges is None:
-            from microsim.sim.bins import Bins
+    theta_edges = np.asarray(args["theta_edges"], dtype=np.float64)
+    if theta_edges.shape != (shape[0] + 1,):
+        raise UsageError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
+    phi_edges = args["phi_edges"]
+    if phi_edges is None:
+        from microsim.sim.bins import Bins
 
-            phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
-        a.phi_edges = np.asarray(phi_edges, dtype=np.float64)
-        if a.phi_edges.shape != (shape[1] + 1,):
+        phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
+    phi_edges = np.asarray(phi_edges, dtype=np.float64)
+    if phi_edges.shape != (shape[1] + 1,):
+        raise UsageError(f"phi_edges must have shape ({shape[1] + 1},), got {phi_edges.shape}")
+    _checks.in_range("model_rtol", model_rtol, 0.0, 1.0)
+    if int(min_events) != min_events or min_events < 1:
+        raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
+    if int(n_params) != n_params or n_params < 0:
+        raise UsageError(f"n_params must be an integer >= 0, got {n_params!r}")
+    F = se_t = None
+    if ensemble and args["realisations"] is not None:
+        F = np.asarray(args["realisations"], dtype=np.float64)
+        if F.ndim != 3 or F.shape[1:] != shape:
             raise UsageError(
-                f"phi_edges must have shape ({shape[1] + 1},), got {a.phi_edges.shape}"
+                f"realisations must be an (R, {shape[0]}, {shape[1]}) array, got {F.shape}"
             )
-        _checks.in_range("model_rtol", model_rtol, 0.0, 1.0)
-        if int(min_events) != min_events or min_events < 1:
-            raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
-        if int(n_params) != n_params or n_params < 0:
-            raise UsageError(f"n_params must be an integer >= 0, got {n_params!r}")
-        a.F = None
-        if ensemble and realisations is not None:
-            F = np.asarray(realisations, dtype=np.float64)
-            if F.ndim != 3 or F.shape[1:] != shape:
-                raise UsageError(
-                    f"realisations must be an (R, {shape[0]}, {shape[1]}) array, got {F.shape}"
-                )
-            a.F = F if len(F) >= 2 else None
-        a.dep = None
-        if ensemble and a.F is None and departure is not None:
-            a.dep = np.asarray(departure, dtype=np.float64)
-            if a.dep.shape != shape or not np.all(a.dep >= 0):  # NaN fails too
-                raise UsageError(
-                    f"departure must be a non-negative {shape} array (sr⁻¹), got "
-                    f"shape {a.dep.shape}"
-                )
-        return a
+        F = F if len(F) >= 2 else None
+    if F is not None:
+        with np.errstate(invalid="ignore", over="ignore"):
+            se_t = np.sqrt(np.std(F, axis=0, ddof=1) ** 2 / len(F) + (model_rtol * mod) ** 2)
+    dep = None
+    if ensemble and F is None and args["departure"] is not None:
+        dep = np.asarray(args["departure"], dtype=np.float64)
+        if dep.shape != shape or not np.all(dep >= 0):  # NaN fails too
+            raise UsageError(
+                f"departure must be a non-negative {shape} array (sr⁻¹), got shape {dep.shape}"
+            )
+    return _Inputs(sim, se, cnt, mod, om, phi_edges, F, dep, se_t)
 
 
 def _used_bins(a: _Inputs, model_rtol: float, min_events: int) -> tuple[np.ndarray, np.ndarray]:
@@ -434,8 +437,7 @@ def _used_bins(a: _Inputs, model_rtol: float, min_events: int) -> tuple[np.ndarr
             & (a.sim > 0)
         )
         if a.F is not None:
-            se_t = np.sqrt(np.std(a.F, axis=0, ddof=1) ** 2 / len(a.F) + (model_rtol * a.mod) ** 2)
-            used &= np.all(np.isfinite(a.F), axis=0) & (se_t > 0)
+            used &= np.all(np.isfinite(a.F), axis=0) & (a.se_t > 0)
     return used, sigma
 
 
@@ -466,8 +468,7 @@ def _realisation_tests(a: _Inputs, used, Em, dof, model_rtol, alpha_each) -> dic
     d = np.sum(a.om[Em] * (a.F[:, Em] - a.mod[Em]), axis=1) / norm
     se_d = float(d.std(ddof=1) / np.sqrt(R))
     energy_p = float(2.0 * t_sf(abs(d.mean()) / np.sqrt(se_d**2 + model_rtol**2), R - 1))
-    se_t = np.sqrt(np.std(a.F, axis=0, ddof=1) ** 2 / R + (model_rtol * a.mod) ** 2)
-    max_abs_t = float((np.abs(a.F.mean(axis=0)[used] - a.mod[used]) / se_t[used]).max())
+    max_abs_t = float((np.abs(a.F.mean(axis=0)[used] - a.mod[used]) / a.se_t[used]).max())
     t_thr = float(t_isf(0.5 * sidak(alpha_each, int(used.sum())), R - 1))
     out.update(
         energy_dev=float(d.mean()),
