@@ -8,7 +8,9 @@
 ``assert_brdf_agrees`` bin-averages the callable as microsim bin-averages its own models and
 judges it against a ray-traced explicit surface (``agreement``); the reference simulation is
 cached on disk (``cache``: ``reference``, ``cache_dir``; env ``MICROSIM_CACHE``).
-``assert_sampler_matches`` is the Pearson χ² harness for importance samplers (``sampler``).
+``assert_brdf_matches_model`` checks an implementation against microsim's closed form of the
+same model, without rays (``implementation``). ``assert_sampler_matches`` is the Pearson χ²
+harness for importance samplers (``sampler``).
 The pytest plugin (``plugin``, entry point ``pytest11``) adds ``--microsim-cache DIR``, the
 ``microsim_reference`` fixture and the ``microsim`` marker. docs/testing.md has the guide.
 """
@@ -25,6 +27,7 @@ _WHERE = {
     "set_default_dir": "cache",
     "find_scene": "cache",
     "ENV_VAR": "cache",
+    "assert_brdf_matches_model": "implementation",
     "assert_sampler_matches": "sampler",
     "pearson_chi2": "sampler",
     "SamplerCheck": "sampler",

@@ -227,14 +227,14 @@ def _energy_ratio(result, model, t: int) -> str:
     return "–" if den <= 0 else f"{(mod * om)[ok].sum() / den:.3f}×"
 
 
-def _lobe_spread_deg(result, f) -> float:
+def lobe_width_deg(bins, f) -> float:
     """Energy-weighted RMS angle (deg) of the bins' centre directions about the energy-weighted
-    mean direction of ``f`` (Θ, Φ) over the outgoing hemisphere: the lobe's width."""
+    mean direction of ``f`` (Θ × Φ bin averages on ``bins``) over the outgoing hemisphere:
+    the lobe's width."""
     from microsim.vectors import spherical_deg
 
-    b = result.bins
-    th, ph = np.meshgrid(b.theta_centers, b.phi_centers, indexing="ij")
-    w = np.where(np.isfinite(f), f, 0.0) * b.projected_solid_angle()
+    th, ph = np.meshgrid(bins.theta_centers, bins.phi_centers, indexing="ij")
+    w = np.where(np.isfinite(f), f, 0.0) * bins.projected_solid_angle()
     if not np.any(w > 0):
         return float("nan")
     d = spherical_deg(th, ph)
@@ -260,7 +260,7 @@ def _diagnosis(result, model, t: int, min_events: int) -> str | None:
                 f"brdf/reference ≈ {mean:.3g} in every bin (spread {spread / mean:.1%}): "
                 "a constant factor — a normalisation error?"
             )
-    width_ref, width_mod = _lobe_spread_deg(result, ref), _lobe_spread_deg(result, mod)
+    width_ref, width_mod = lobe_width_deg(result.bins, ref), lobe_width_deg(result.bins, mod)
     if np.isfinite(width_ref) and np.isfinite(width_mod) and width_ref > 0:
         change = width_mod / width_ref - 1.0
         if abs(change) > 0.05:

@@ -1,0 +1,212 @@
+"""``assert_brdf_matches_model``: is *my code* right? — a BRDF against microsim's own verified
+closed form of the same model, with no rays and no noise.
+
+Both the callable and the model (a ``microsim.analytic.models`` object such as
+``TorranceSparrow(GGX(0.3), Smith(correlated=True), "aluminium")``, or any callable
+``f(wi, wo)``) are bin-averaged by the same adaptive quadrature (``microsim.sim.predict``,
+relative accuracy ``QUAD_RTOL`` per bin), so the only tolerance is the quadrature's: a bin fails
+when |brdf − model| > 2 q·model + q·max(model) (each average within q of its integral, plus an
+absolute floor of q times the lobe's peak for bins where the model is ~0). This catches an
+implementation bug at any level, where the surface check (``assert_brdf_agrees``) can only
+resolve what the ray noise resolves.
+
+Two further checks of the callable, which every physical BRDF passes: f ≥ 0 and finite
+(``agreement.wrap_brdf``), and reciprocity f(wi, wo) = f(wo, wi) at ``RECIPROCITY_PAIRS``
+random direction pairs (seeded), to relative ``RECIPROCITY_RTOL``.
+
+Failures say what kind of bug the numbers point at (``_diagnosis``): a ratio brdf/model the
+same in every bin (normalisation: a missing 1/4 or 1/π), a lobe wider or narrower than the
+model's at normal incidence (roughness), or a brdf nowhere darker than the model and brighter
+towards grazing (masking–shadowing G missing or different). Deviations are signed as in
+every microsim output: reference (here microsim's closed form) minus the code under test,
+relative to the code under test.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from microsim.errors import UsageError
+from microsim.sim.bins import Bins
+from microsim.sim.predict import ModelSpec, predict
+
+from .agreement import BRDFMismatch, lobe_width_deg, wrap_brdf
+
+__all__ = ["assert_brdf_matches_model", "QUAD_RTOL", "RECIPROCITY_PAIRS", "RECIPROCITY_RTOL"]
+
+QUAD_RTOL = 1e-4
+"""Relative accuracy of each bin average (``predict``'s adaptive Gauss–Legendre)."""
+RECIPROCITY_PAIRS = 2000
+RECIPROCITY_RTOL = 1e-6
+"""|f(a, b) − f(b, a)| ≤ RECIPROCITY_RTOL · max(f(a, b), f(b, a)) + 1e-300 at every pair."""
+
+
+def _spec(model, name: str) -> ModelSpec:
+    if hasattr(model, "params") and hasattr(model, "source"):
+        return ModelSpec.from_model(name, model)
+    if callable(model):
+        return ModelSpec.function(name, wrap_brdf(model))
+    raise UsageError(
+        f"model must be a microsim.analytic model or a callable f(wi, wo), got {model!r}"
+    )
+
+
+def _default_name(f) -> str:
+    """A readable name for messages and files: "make_ggx.f" for a closure (not
+    "make_ggx.<locals>.f"), "lambda" for a lambda, else the ``__qualname__``."""
+    q = getattr(f, "__qualname__", None) or type(f).__name__
+    q = q.replace(".<locals>", "").replace("<lambda>", "lambda")
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in q)[:60]
+
+
+def _upper_directions(rng, n: int) -> np.ndarray:
+    """n directions uniform over the upper hemisphere (cos θ ∈ (0, 1])."""
+    z = 1.0 - rng.random(n)
+    phi = 2 * np.pi * rng.random(n)
+    s = np.sqrt(1.0 - z * z)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+
+
+def reciprocity_error(brdf, seed: int = 0) -> tuple[float, np.ndarray, np.ndarray]:
+    """max_k |f(a_k, b_k) − f(b_k, a_k)| / max(f(a_k, b_k), f(b_k, a_k)) over
+    ``RECIPROCITY_PAIRS`` seeded uniform pairs of upper-hemisphere directions, and the worst
+    pair (a, b)."""
+    rng = np.random.default_rng(seed)
+    a, b = _upper_directions(rng, RECIPROCITY_PAIRS), _upper_directions(rng, RECIPROCITY_PAIRS)
+    fab = np.asarray(brdf(a.copy(), b.copy()), dtype=np.float64).reshape(-1)
+    fba = np.asarray(brdf(b.copy(), a.copy()), dtype=np.float64).reshape(-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.abs(fab - fba) / np.maximum(np.maximum(fab, fba), 1e-300)
+    rel = np.where(np.isfinite(rel), rel, np.inf)
+    k = int(np.argmax(rel))
+    return float(rel[k]), a[k], b[k]
+
+
+def _energy_ratios(bins: Bins, user, ref) -> np.ndarray:
+    om = bins.projected_solid_angle()
+    return (user * om).sum((1, 2)) / np.maximum((ref * om).sum((1, 2)), 1e-300)
+
+
+def _diagnosis(bins: Bins, theta_i, user, ref) -> str | None:
+    """The bug the numbers point at, or None: a constant factor (normalisation), a lobe of
+    another width at the lowest θi (roughness), or agreement at the lowest θi with an energy
+    excess growing towards grazing (masking–shadowing G)."""
+    w = ref * bins.projected_solid_angle()
+    used = (ref > 1e-6 * ref.max()) & np.isfinite(user)
+    r = np.where(used, user / np.where(used, ref, 1.0), 0.0)
+    ww = np.where(used, w, 0.0)
+    mean = (ww * r).sum() / ww.sum()
+    spread = np.sqrt((ww * (r - mean) ** 2).sum() / ww.sum())
+    if abs(mean - 1.0) > 0.01 and spread < 0.01 * mean:
+        return (
+            f"brdf/model ≈ {mean:.4g} in every bin (spread {spread / mean:.2%}): a constant "
+            "factor — a normalisation error (a missing 1/4, 1/π or cos θ?)"
+        )
+    if r[used].size == 0:
+        return None
+    if r[used].min() >= 1.0 - 1e-3 and r[used].max() > 1.01:
+        e = _energy_ratios(bins, user, ref)
+        return (
+            "brdf ≥ model in every bin, up to "
+            f"{r[used].max():.3g}× towards grazing (energy ratio {e.min():.3f}–{e.max():.3f}×): "
+            "too little masking–shadowing — G missing or different?"
+        )
+    t0 = int(np.argmin(theta_i))
+    w_ref, w_user = lobe_width_deg(bins, ref[t0]), lobe_width_deg(bins, user[t0])
+    change = w_user / w_ref - 1.0
+    if abs(change) > 0.01:
+        return (
+            f"lobe {abs(change):.0%} {'wider' if change > 0 else 'narrower'} than the model's "
+            f"at θi = {theta_i[t0]:g}° (RMS angle {w_user:.2f}° vs {w_ref:.2f}°): roughness?"
+        )
+    return None
+
+
+def assert_brdf_matches_model(
+    brdf,
+    model,
+    theta_i=(0, 30, 60, 80),
+    *,
+    bins=(18, 19),
+    name: str | None = None,
+    seed: int = 0,
+) -> dict:
+    """Assert that the callable ``brdf(wi, wo)`` ((N, 3) unit vectors, away from the
+    surface, n = +z, wi in the x–z plane; N values in sr⁻¹, no cosine) implements ``model``
+    (a ``microsim.analytic.models`` object, e.g. ``TorranceSparrow(GGX(0.3),
+    Smith(correlated=True), "aluminium")``, or a callable) — module docstring for the
+    tolerance, reciprocity and the diagnosis.
+
+    ``theta_i``: incidences (degrees, < 90); ``bins``: (n_theta, n_phi) or ``Bins`` (folded
+    Δφ, as microsim's own verdicts); ``name`` the brdf's name in messages (default its
+    ``__qualname__`` without ``<locals>``); ``seed`` the reciprocity pairs'. Returns a dict
+    (``max_rel_dev``, ``energy_ratio`` per θi, ``reciprocity``) when it passes; raises
+    ``BRDFMismatch`` (an AssertionError) whose message names the failing incidences, the
+    energy ratio brdf/model per θi, the worst bin and the likely cause.
+    """
+    __tracebackhide__ = True
+    if not callable(brdf):
+        raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹, got {brdf!r}")
+    if name is not None and not isinstance(name, str):
+        raise UsageError(f"name must be a string (the BRDF's name in messages), got {name!r}")
+    name = name or _default_name(brdf)
+    b = bins if isinstance(bins, Bins) else Bins(*bins)
+    theta = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+    if theta.ndim != 1 or not np.all((theta >= 0) & (theta < 90)):
+        raise UsageError(f"theta_i must be incidences in [0°, 90°), got {theta_i!r}")
+    specs = [ModelSpec.function("brdf", wrap_brdf(brdf)), _spec(model, "model")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        vals = predict(specs, theta, b, phi_i=0.0, rtol=QUAD_RTOL)
+    user, ref = vals["brdf"], vals["model"]
+    allowed = 2 * QUAD_RTOL * ref + QUAD_RTOL * ref.max(axis=(1, 2), keepdims=True)
+    bad = np.abs(user - ref) > allowed
+    recip, a, bdir = reciprocity_error(brdf, seed)
+    energy = _energy_ratios(b, user, ref)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(
+            user > 0, ref / np.where(user > 0, user, 1.0) - 1.0, np.where(ref > 0, np.inf, 0.0)
+        )
+    out = {
+        "max_rel_dev": [float(np.max(np.abs(rel[t]))) for t in range(len(theta))],
+        "energy_ratio": [float(x) for x in energy],
+        "reciprocity": recip,
+    }
+    failing = [t for t in range(len(theta)) if bad[t].any()]
+    recip_bad = recip > RECIPROCITY_RTOL
+    if not failing and not recip_bad:
+        return out
+    lines = []
+    if failing:
+        lines.append(
+            f"brdf {name!r} does not implement the model ({getattr(model, 'name', 'model')}"
+            f" {getattr(model, 'params', dict)()!r}) at θi = "
+            + ", ".join(f"{theta[t]:g}°" for t in failing)
+            + f" (bin averages {b.n_theta} × {b.n_phi}, quadrature accuracy {QUAD_RTOL:g})"
+        )
+        lines.append("  θi     energy ratio brdf/model   bins off   worst bin (model − brdf)/brdf")
+        for t in range(len(theta)):
+            k = np.unravel_index(
+                int(np.argmax(np.where(bad[t], np.abs(user[t] - ref[t]), -1))), bad[t].shape
+            )
+            worst = (
+                f"θo {b.theta_centers[k[0]]:.1f}° Δφ {b.phi_centers[k[1]]:.0f}°: "
+                f"model {ref[t][k]:.4g} vs brdf {user[t][k]:.4g} sr⁻¹ ({100 * rel[t][k]:+.2f}%)"
+                if bad[t].any()
+                else "–"
+            )
+            lines.append(
+                f"  {theta[t]:>4g}°  {energy[t]:>10.4f}×  {int(bad[t].sum()):>14d}   {worst}"
+            )
+        hint = _diagnosis(b, theta, user, ref)
+        if hint:
+            lines.append(f"likely cause: {hint}")
+    if recip_bad:
+        lines.append(
+            f"brdf {name!r} is not reciprocal: f(wi, wo) and f(wo, wi) differ by {recip:.3g} "
+            f"(relative) at wi = {np.round(a, 6).tolist()}, wo = {np.round(bdir, 6).tolist()} "
+            f"(allowed {RECIPROCITY_RTOL:g}; a physical BRDF is symmetric)"
+        )
+    raise BRDFMismatch("\n".join(lines), out)
