@@ -202,7 +202,7 @@ def _worst_bins(result, model, t: int, min_events: int, k: int = 3) -> list[str]
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma = np.sqrt(se**2 + (MODEL_RTOL * mod) ** 2)
         used = (cnt >= min_events) & np.isfinite(sim) & (sigma > 0) & (sim > 0)
-        z = np.where(used, (mod - sim) / np.where(used, sigma, 1.0), 0.0)
+        z = np.where(used, (sim - mod) / np.where(used, sigma, 1.0), 0.0)
     order = np.argsort(-np.abs(z).ravel())[:k]
     tc, pc = result.bins.theta_centers, result.bins.phi_centers
     out = []
@@ -212,7 +212,7 @@ def _worst_bins(result, model, t: int, min_events: int, k: int = 3) -> list[str]
             continue
         out.append(
             f"θo {tc[i]:.1f}° Δφ {pc[j]:.0f}°: brdf {mod[i, j]:.4g} vs reference "
-            f"{sim[i, j]:.4g} ± {se[i, j]:.2g} sr⁻¹ ({100 * (mod[i, j] / sim[i, j] - 1):+.1f}%, "
+            f"{sim[i, j]:.4g} ± {se[i, j]:.2g} sr⁻¹ ({100 * (sim[i, j] / mod[i, j] - 1):+.1f}%, "
             f"z = {z[i, j]:+.1f})"
         )
     return out
@@ -503,7 +503,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
                 _num(v["chi2_dof"], "{:.3f}"),
                 zcol,
                 _num(v["rel_rms"], "{:.2%}"),
-                "–" if energy is None else f"{-100 * energy:+.2f}%",
+                "–" if energy is None else f"{100 * energy:+.2f}%",
                 _energy_ratio(result, model, t),
                 dev,
             ]
@@ -515,8 +515,10 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
     lines = [
         head,
         table,
-        "energy dev = Σ Ω (brdf − reference)/Σ Ω brdf over the bins carrying 90 % "
-        "of the brdf's energy; rel err (E) = energy-weighted RMS of (brdf − reference)/"
+        "signed as every microsim output: reference minus brdf. energy dev = "
+        "Σ Ω (reference − brdf)/Σ Ω brdf over the bins carrying 90 % "
+        "of the brdf's energy; worst bins' % = reference/brdf − 1, z = (reference − brdf)/σ; "
+        "rel err (E) = energy-weighted RMS of (reference − brdf)/"
         "reference over the reference's 90 % energy bins; energy ratio = Σ Ω⊥ brdf / "
         "Σ Ω⊥ reference over the hemisphere (the brdf's albedo over the reference's)",
     ]
