@@ -106,6 +106,15 @@ def wrap_brdf(brdf):
     return fn
 
 
+def readable_name(f) -> str:
+    """A BRDF callable's name for messages and chart files: its ``__qualname__`` with
+    ``.<locals>`` dropped ("make_ggx.f", not "make_ggx.<locals>.f") and ``<lambda>`` as
+    "lambda", other characters than letters, digits, '-', '_', '.' as '_', at most 60."""
+    q = getattr(f, "__qualname__", None) or type(f).__name__
+    q = q.replace(".<locals>", "").replace("<lambda>", "lambda")
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in q)[:60]
+
+
 def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray, str]:
     """(T, Θ, Φ) bin averages of the BRDF (callable or catalogue model name) and its name."""
     if isinstance(brdf, str):
@@ -117,7 +126,7 @@ def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray
             )
         spec, name = specs[brdf], brdf
     elif callable(brdf):
-        name = label or getattr(brdf, "__qualname__", None) or type(brdf).__name__
+        name = label or readable_name(brdf)
         spec = ModelSpec.function(name, wrap_brdf(brdf), symmetric=isotropic)
     else:
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
@@ -337,7 +346,7 @@ def assert_brdf_agrees(
     callable is symmetric in the relative azimuth, f(Δφ) = f(−Δφ) (isotropic BRDFs): the
     folded bins are then integrated over Δφ ≥ 0 only, half the evaluations (as microsim does
     for its isotropic models); by default both halves are integrated, exact for any callable.
-    ``name``: the BRDF's name in the message and chart (default its ``__qualname__``).
+    ``name``: the BRDF's name in the message and chart (default ``readable_name(brdf)``).
     ``min_events``: single-bounce events a bin needs to be tested (default ``MIN_EVENTS`` =
     100, see there).
 

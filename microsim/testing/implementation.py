@@ -28,11 +28,12 @@ import warnings
 
 import numpy as np
 
+from microsim.analytic.models import BRDFModel
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
 from microsim.sim.predict import ModelSpec, predict
 
-from .agreement import BRDFMismatch, lobe_width_deg, wrap_brdf
+from .agreement import BRDFMismatch, lobe_width_deg, readable_name, wrap_brdf
 
 __all__ = ["assert_brdf_matches_model", "QUAD_RTOL", "RECIPROCITY_PAIRS", "RECIPROCITY_RTOL"]
 
@@ -44,21 +45,13 @@ RECIPROCITY_RTOL = 1e-6
 
 
 def _spec(model, name: str) -> ModelSpec:
-    if hasattr(model, "params") and hasattr(model, "source"):
+    if isinstance(model, BRDFModel):
         return ModelSpec.from_model(name, model)
     if callable(model):
         return ModelSpec.function(name, wrap_brdf(model))
     raise UsageError(
         f"model must be a microsim.analytic model or a callable f(wi, wo), got {model!r}"
     )
-
-
-def _default_name(f) -> str:
-    """A readable name for messages and files: "make_ggx.f" for a closure (not
-    "make_ggx.<locals>.f"), "lambda" for a lambda, else the ``__qualname__``."""
-    q = getattr(f, "__qualname__", None) or type(f).__name__
-    q = q.replace(".<locals>", "").replace("<lambda>", "lambda")
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in q)[:60]
 
 
 def _upper_directions(rng, n: int) -> np.ndarray:
@@ -90,9 +83,9 @@ def _energy_ratios(bins: Bins, user, ref) -> np.ndarray:
 
 
 def _diagnosis(bins: Bins, theta_i, user, ref) -> str | None:
-    """The bug the numbers point at, or None: a constant factor (normalisation), a lobe of
-    another width at the lowest θi (roughness), or agreement at the lowest θi with an energy
-    excess growing towards grazing (masking–shadowing G)."""
+    """The bug the numbers point at, or None, tested in this order: a constant factor
+    (normalisation), a brdf nowhere darker than the model (masking–shadowing G: 1/G ≥ 1), a
+    lobe of another width at the lowest θi (roughness)."""
     w = ref * bins.projected_solid_angle()
     used = (ref > 1e-6 * ref.max()) & np.isfinite(user)
     r = np.where(used, user / np.where(used, ref, 1.0), 0.0)
@@ -141,7 +134,7 @@ def assert_brdf_matches_model(
 
     ``theta_i``: incidences (degrees, < 90); ``bins``: (n_theta, n_phi) or ``Bins`` (folded
     Δφ, as microsim's own verdicts); ``name`` the brdf's name in messages (default its
-    ``__qualname__`` without ``<locals>``); ``seed`` the reciprocity pairs'. Returns a dict
+    ``agreement.readable_name``); ``seed`` the reciprocity pairs'. Returns a dict
     (``max_rel_dev``, ``energy_ratio`` per θi, ``reciprocity``) when it passes; raises
     ``BRDFMismatch`` (an AssertionError) whose message names the failing incidences, the
     energy ratio brdf/model per θi, the worst bin and the likely cause.
@@ -151,7 +144,7 @@ def assert_brdf_matches_model(
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹, got {brdf!r}")
     if name is not None and not isinstance(name, str):
         raise UsageError(f"name must be a string (the BRDF's name in messages), got {name!r}")
-    name = name or _default_name(brdf)
+    name = name or readable_name(brdf)
     b = bins if isinstance(bins, Bins) else Bins(*bins)
     theta = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     if theta.ndim != 1 or not np.all((theta >= 0) & (theta < 90)):
