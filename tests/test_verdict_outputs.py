@@ -81,3 +81,62 @@ def test_inconclusive_prints_both_sizes():
     assert text == f"? {100 * v['rel_rms']:.2g}% (tile departs {100 * v['tile_departure']:.2g}%)"
     assert "tile departs" in report._index_cell({"verdicts": [v]}, v["model"], V.summary_row([v]))
     assert "departure" in V.summary_row([v])[v["model"]]
+
+
+SWEEP_SCENE = {"kind": "vgrooves", "n_grooves": 2000, "ndf": "beckmann", "m": 0.5}
+
+
+@pytest.mark.integration
+def test_a_sweep_task_is_judged_as_microsim_run_judges_it(tmp_path):
+    """One V-groove tile at θi = 60°: the sweep's verdicts of Torrance–Sparrow with V-groove G
+    (exact for the ensemble) and Smith G equal those of the run's pipeline on the same
+    simulation (``default_models`` → ``attach_models`` → ``verdicts_for_result``): the same
+    rel RMS, the same tile departure and the same verdict word, also in the summary's
+    ``verdict`` column. Smith's G (heights uncorrelated between facets) is not a V-groove's
+    (Blinn's V-cavity G): its error is far beyond the tile's departure, so it deviates rather
+    than being left inconclusive."""
+    from microsim.app.scene import load_scene
+    from microsim.app.sweep import expand_tasks, run_task, summary_table
+    from microsim.sim import simulate
+    from microsim.sim.compare import attach_models, default_models
+
+    sweep = {
+        "rays": 200_000,
+        "theta_bins": 18,
+        "phi_bins": 13,
+        "theta_i": [60],
+        "seed": 4,
+        "models": ["vgroove", "smith"],
+        "scenes": [{"name": "vg", "ior": ["aluminium"], "surface": SWEEP_SCENE}],
+    }
+    (task,) = expand_tasks(sweep)
+    rec = run_task(task, tmp_path)
+    swept = {v["model"]: v for v in rec["verdicts"]}
+
+    toml = "\n".join(
+        ["[surface]", *(f"{k} = {v!r}".replace("'", '"') for k, v in SWEEP_SCENE.items())]
+        + ["[material]", 'ior = "aluminium"']
+    )
+    (tmp_path / "vg.toml").write_text(toml + "\n")
+    scene = load_scene(tmp_path / "vg.toml")
+    surface = scene.build_surface(seed=task.seed)
+    res = simulate(
+        surface,
+        scene.ior,
+        task.theta_i,
+        rays=task.rays,
+        bins=BINS.__class__(task.theta_bins, task.phi_bins),
+        seed=task.seed,
+        threads=1,
+        masking=task.masking,
+    )
+    judged = attach_models(res, default_models(surface, scene.ior, scene.ndf()))
+    ran = {v["model"]: v for v in V.verdicts_for_result(judged)}
+
+    for name in ("ts-vgroove", "ts-smith"):
+        assert swept[name]["rel_rms"] == ran[name]["rel_rms"]
+        assert swept[name]["tile_departure"] == ran[name]["tile_departure"] is not None
+        assert V.verdict_kind(swept[name]) == V.verdict_kind(ran[name])
+    assert V.verdict_kind(swept["ts-smith"]) == "deviates"
+    rows = {r["model"]: r["verdict"] for r in summary_table([rec])}
+    assert rows == {n: V.verdict_kind(v) for n, v in swept.items()}

@@ -22,9 +22,13 @@ Sweep file (TOML, UTF-8)::
     m = [0.05, 0.1, 0.3, 0.5, 1.0]      # roughness axis (an empty list is an error)
 
 A task is one (scene, parameter combination, material, θi). Its result — the verdict of each
-model (``microsim.analysis.verdicts.verdict``: χ²/dof, p, max |z|, relative RMS error over the
-bins carrying 90 % of the energy, …) against the bin-averaged Torrance–Sparrow prediction with
-the scene's NDF — is written as ``OUT/tasks/<id>.json`` as soon as the task finishes, and only
+model (``microsim.analysis.verdicts.verdicts_for_result``: χ²/dof, p, max |z|, relative RMS
+error over the bins carrying 90 % of the energy, …) against the bin-averaged Torrance–Sparrow
+prediction with the scene's NDF, judged exactly as ``microsim run`` judges it: an ensemble
+model on the one traced tile, with the tile's own departure from its ensemble computed where
+the surface allows (V-grooves), so the ``verdict`` column reads "agrees", "deviates" or
+"inconclusive" (``verdicts.verdict_kind``) as the run's table would — is written as
+``OUT/tasks/<id>.json`` as soon as the task finishes, and only
 if its simulation is complete (an interrupted simulation writes nothing); writes are atomic
 (``microsim.atomic``). The id is a hash of the task's full description. A rerun computes every
 task whose JSON is missing, unreadable, or not a complete result of that very task (fewer rays
@@ -115,7 +119,8 @@ COLUMNS = (
     "chi2_dof",
     "p_value",
     "max_abs_z",
-    "agrees",
+    "verdict",
+    "tile_departure",
     "n_bins",
     "rays",
     "seconds",
@@ -446,9 +451,10 @@ def run_task(task: Task, out_dir) -> dict:
     nothing and returns ``{"id", "partial": True, "rays", "requested"}``."""
     if _WORKER["stop"]:
         return {"id": task.id, "partial": True, "rays": 0, "requested": task.rays}
-    from microsim.analysis.verdicts import verdict
+    from microsim.analysis.verdicts import verdicts_for_result
     from microsim.sim import Bins, simulate
-    from microsim.sim.predict import ModelSpec, predict
+    from microsim.sim.compare import attach_models
+    from microsim.sim.predict import ModelSpec
 
     t0 = time.perf_counter()
     scene = _scene(task.scene, task.surface, task.ior, f"task {task.scene}")
@@ -469,24 +475,11 @@ def run_task(task: Task, out_dir) -> dict:
         return {"id": task.id, "partial": True, "rays": int(res.rays[0]), "requested": task.rays}
     ndf = scene.ndf()
     specs = [ModelSpec.torrance_sparrow(f"ts-{g}", ndf, g, scene.ior) for g in task.models]
-    preds = predict(specs, [task.theta_i], bins) if ndf is not None else {}
-    omega = bins.projected_solid_angle()
-    verdicts = [
-        verdict(
-            res.brdf[0],
-            res.stderr[0],
-            res.counts[0],
-            preds[s.name][0],
-            omega,
-            bins.theta_edges,
-            phi_edges=bins.phi_edges,
-            theta_i=task.theta_i,
-            name=s.name,
-            n_tests=len(specs),
-        )
-        for s in specs
-        if s.name in preds
-    ]
+    verdicts = []
+    if ndf is not None:
+        judged = attach_models(res, specs + _departure_specs(surface, scene.ior, ndf, specs))
+        asked = {s.name for s in specs}
+        verdicts = [v for v in verdicts_for_result(judged) if v["model"] in asked]
     key, value = _roughness(ndf)
     record = {
         "id": task.id,
@@ -508,7 +501,34 @@ def run_task(task: Task, out_dir) -> dict:
     return record
 
 
-_VERDICT_KEYS = ("model", "rel_rms", "chi2_dof", "p_value", "max_abs_z", "agrees", "n_bins")
+def _departure_specs(surface, ior, ndf, specs) -> list:
+    """The models ``microsim run`` adds to judge an ensemble model on one tile whose exact
+    shadowing is known (V-grooves): the tile's own closed form ``ts-facets`` and the same form
+    with the ensemble NDF, whose ratio is the tile's departure from its ensemble
+    (``verdicts.tile_departure``); none for other surfaces (their ensemble verdicts on one
+    tile stay inconclusive where they reject, as in ``microsim run``)."""
+    if surface.exact_shadowing in (None, "none"):
+        return []
+    from microsim.sim.compare import default_models
+
+    standard = default_models(surface, ior, ndf)
+    facets = standard[-1]
+    asked = {s.name for s in specs}
+    ensemble = [s for s in standard if s.name == facets.params["ensemble"] and s.name not in asked]
+    return ensemble + [facets]
+
+
+_VERDICT_KEYS = (
+    "model",
+    "rel_rms",
+    "chi2_dof",
+    "p_value",
+    "max_abs_z",
+    "agrees",
+    "conclusive",
+    "tile_departure",
+    "n_bins",
+)
 
 
 def _complete(rec, task: Task) -> bool:
@@ -852,7 +872,10 @@ def _params_text(surface: dict) -> str:
 
 
 def summary_table(records: list[dict]) -> list[dict]:
-    """One row per (task, model) with the ``COLUMNS`` fields (``material`` plain text)."""
+    """One row per (task, model) with the ``COLUMNS`` fields (``material`` plain text;
+    ``verdict`` worded by ``verdicts.verdict_kind``, the rule of every microsim output)."""
+    from microsim.analysis.verdicts import verdict_kind
+
     rows = []
     for r in records:
         t = r["task"]
@@ -870,7 +893,8 @@ def summary_table(records: list[dict]) -> list[dict]:
                     "chi2_dof": v["chi2_dof"],
                     "p_value": v["p_value"],
                     "max_abs_z": v["max_abs_z"],
-                    "agrees": v["agrees"],
+                    "verdict": verdict_kind(v),
+                    "tile_departure": v["tile_departure"],
                     "n_bins": v["n_bins"],
                     "rays": r["rays"],
                     "seconds": round(r["seconds"], 3),
@@ -917,7 +941,11 @@ def _write_summary(spec: SweepSpec, out: Path) -> dict:
         "",
         f"{len(recs)}/{len(spec.tasks)} tasks done. rel_rms: energy-weighted relative RMS "
         "error of the model over the bins carrying 90 % of the energy; chi2_dof, p_value, "
-        "max_abs_z: see microsim.analysis.verdicts.",
+        "max_abs_z: see microsim.analysis.verdicts. verdict: agrees, deviates, or "
+        "inconclusive (the model describes the surface's ensemble, one tile was traced, and "
+        "its deviation is within what the tile's own departure from the ensemble, "
+        "tile_departure, and ray noise explain — or that departure is not computable), "
+        "judged as microsim run judges it.",
         "",
         "| " + " | ".join(cols) + " |",
         "|" + "---|" * len(cols),
@@ -935,11 +963,14 @@ def _write_summary(spec: SweepSpec, out: Path) -> dict:
 
 def _chart(rows: list[dict], path: Path, title: str) -> None:
     """Model relative RMS error against roughness: colour = θi, line style = model, marker =
-    scene and material (one line per combination)."""
+    scene and material (one line per combination); a hollow marker is an inconclusive
+    verdict (its error is within what the one tile's departure from its ensemble may
+    explain), a filled one a conclusive verdict."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     groups: dict = {}
@@ -947,27 +978,45 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
         if r["roughness"] is None or r["rel_rms"] is None:
             continue
         key = (r["scene"], r["material"], r["model"], r["theta_i"])
-        groups.setdefault(key, []).append((r["roughness"], r["rel_rms"]))
+        groups.setdefault(key, []).append(
+            (r["roughness"], r["rel_rms"], r["verdict"] == "inconclusive")
+        )
     thetas = sorted({k[3] for k in groups})
     models = sorted({k[2] for k in groups})
     looks = sorted({k[:2] for k in groups})
     cmap = plt.get_cmap("viridis")
     for (scene, mat, model, th), pts in sorted(groups.items()):
         pts.sort()
-        x, y = zip(*pts)
+        x, y, unsure = (np.array(c) for c in zip(*pts))
+        colour = cmap(thetas.index(th) / max(1, len(thetas) - 1) * 0.9)
+        marker = "osD^v<>"[looks.index((scene, mat)) % 7]
         ax.plot(
             x,
             y,
-            color=cmap(thetas.index(th) / max(1, len(thetas) - 1) * 0.9),
+            color=colour,
             linestyle=("-", "--", ":", "-.")[models.index(model) % 4],
-            marker="osD^v<>"[looks.index((scene, mat)) % 7],
+            marker=marker,
             markersize=4,
+            markevery=list(np.flatnonzero(~unsure)),
             label=f"{scene} {mat} {model} θi={th:g}°",
+        )
+        ax.plot(
+            x[unsure],
+            y[unsure],
+            linestyle="none",
+            marker=marker,
+            markersize=4,
+            markerfacecolor="white",
+            markeredgecolor=colour,
         )
     ax.set_xlabel("roughness (first NDF parameter)")
     ax.set_ylabel("relative RMS error (90 % energy bins)")
     ax.set_yscale("log")
-    ax.set_title(f"sweep {title}: model error against roughness and angle")
+    ax.set_title(
+        f"sweep {title}: model error against roughness and angle\n"
+        "filled marker: conclusive verdict; hollow: inconclusive (one tile)",
+        fontsize=9,
+    )
     if groups:
         ax.legend(fontsize=5.5, ncol=2)
     fig.tight_layout()
