@@ -84,12 +84,15 @@ def test_b_three_percent_rougher_fails_with_a_message_that_says_where():
 def test_c_schlick_fails_at_grazing_and_passes_near_normal_incidence():
     """Schlick's error on aluminium grows with the angle on the facet: its energy excess is
     +0.01 % (θi 0°), +0.14 % (30°), +1.4 % (60°), +4.8 % (80°) (bin averages, no noise). At
-    ~2 % reference precision it cannot be seen at 0° and 30°; it is seen at 80° — and at 60°
-    too: there its 1.4 % (up to 5.7 % in single bins) is real and resolved by 10⁶ rays."""
+    ~2 % reference precision it cannot be seen at 0° and 30°; it is seen at 80°. At 60° its
+    1.4 % (up to 5.7 % in single bins) is real and usually resolved by 10⁶ rays beyond the
+    tile's 0.45 % departure from its ensemble, but not always (17 of 20 reference traces in
+    docs/testing.md), so this test asserts only what holds for every trace."""
     schlick = ggx_brdf(0.3, fresnel_schlick)
     with pytest.raises(BRDFMismatch) as err:
         assert_brdf_agrees(schlick, SCENE, theta_i=THETA_I, rays=RAYS, bins=BINS, isotropic=True)
-    assert err.value.agreement["failing"] == [60.0, 80.0], str(err.value)  # 0° and 30° pass
+    failing = err.value.agreement["failing"]
+    assert 80.0 in failing and not {0.0, 30.0} & set(failing), str(err.value)
 
 
 # --- (d) a user's importance sampler against its pdf ---------------------------------------------

@@ -411,10 +411,31 @@ def test_bad_report_and_bench_options(tmp_path, capsys, monkeypatch, args, word)
     assert tree(tmp_path) == before
 
 
-def test_permission_denied_on_scene_is_an_environment_error(tmp_path, capsys, monkeypatch):
-    """Root reads any file, so the denial is injected: exit 1, one line naming the path."""
+SWEEP_FILE = """\
+rays = 1000
+models = ["vgroove"]
+theta_i = [30]
+[[scenes]]
+name = "vg"
+ior = "aluminium"
+[scenes.surface]
+kind = "vgrooves"
+n_grooves = 10
+ndf = "beckmann"
+m = [0.3]
+"""
+
+
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_permission_denied_on_scene_is_an_environment_error(tmp_path, capsys, monkeypatch, command):
+    """Root reads any file, so the denial is injected: exit 1, one line naming the path — the
+    same for a scene file (``microsim run``) and a sweep file (``microsim sweep``)."""
     monkeypatch.chdir(tmp_path)
-    sc = scene(tmp_path)
+    if command == "run":
+        sc, args = scene(tmp_path), ["--quick"]
+    else:
+        sc, args = tmp_path / "s.toml", ["--out", str(tmp_path / "out")]
+        sc.write_text(SWEEP_FILE)
     real_open = os.open
 
     def deny(path, *a, **k):
@@ -423,7 +444,7 @@ def test_permission_denied_on_scene_is_an_environment_error(tmp_path, capsys, mo
         return real_open(path, *a, **k)
 
     monkeypatch.setattr(os, "open", deny)
-    status, lines, err = run_cli(capsys, "run", sc, "--quick")
+    status, lines, err = run_cli(capsys, command, sc, *args)
     assert status == 1 and len(lines) == 1 and "Traceback" not in err, err
     assert str(sc) in lines[0] and "Permission denied" in lines[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == [sc.name]

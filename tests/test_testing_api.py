@@ -144,7 +144,9 @@ def test_the_exact_model_agrees_and_the_result_holds_the_verdicts(surface, tmp_p
     fails with probability ≤ α = 0.01 (false alarms measured in the slow test below)."""
     out = assert_brdf_agrees(ts_ggx(0.3), surface, AL, [0, 60], cache=tmp_path, **SMALL)
     assert out["passed"] and out["failing"] == [] and out["chart"] is None
-    assert [v["reference"] for v in out["verdicts"]] == ["ray-noise"] * 2
+    assert [v["reference"] for v in out["verdicts"]] == ["one-tile"] * 2
+    # the tile's departure from its ensemble is computed and discounted, as microsim run does
+    assert all(v["tile_departure"] is not None for v in out["verdicts"])
     assert all(v["n_tests"] == 2 and v["alpha"] == 0.01 for v in out["verdicts"])
     # a catalogue model by name is bin-averaged the same way
     assert assert_brdf_agrees("ts-vgroove", surface, AL, [0, 60], cache=tmp_path, **SMALL)["passed"]

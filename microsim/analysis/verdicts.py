@@ -92,6 +92,7 @@ __all__ = [
     "inconclusive_reason",
     "verdicts_for_result",
     "tile_departure",
+    "departure_of",
     "validate_verdict",
     "summary_row",
     "sidak",
@@ -670,7 +671,7 @@ def verdicts_for_result(
                     departure=(
                         None
                         if rel_departure is None or name in own
-                        else _scaled(rel_departure[t], values[t])
+                        else departure_of(rel_departure[t], values[t])
                     ),
                 )
             )
@@ -697,8 +698,10 @@ def tile_departure(result) -> np.ndarray | None:
     return r
 
 
-def _scaled(rel: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """rel·|values| with 0·∞ = 0 (a bin the model gives no light has no departure)."""
+def departure_of(rel: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The ``departure`` argument of ``verdict`` for a model's bin values (sr⁻¹) from the
+    tile's relative departure ``rel`` (``tile_departure``): rel·|values| with 0·∞ = 0 (a bin
+    the model gives no light has no departure)."""
     with np.errstate(invalid="ignore", over="ignore"):
         out = rel * np.abs(np.asarray(values, dtype=np.float64))
     return np.where(np.isnan(out) & (rel >= 0), 0.0, out)

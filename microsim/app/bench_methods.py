@@ -34,7 +34,7 @@ the transition regime), aluminium, θi = 30°, ``Bins(18, 13)`` (5° × 15° fol
 the Kirchhoff solver (``wave.kirchhoff_brdf``, the smooth interpolant upsampled 2×, as the
 scene) on the largest tile afforded: ``wave_ref_n``² = 1024² samples, 102.4 µm = 204.8 λ
 (``--quick``: 256², 51.2 λ). Error: |energy deviation| over the reference's 90 % diffuse
-energy set, ``analysis.wave_verdicts.wave_verdict(...)["energy_dev"]`` = Σ_E Ω(m − f̄)/Σ_E Ω f̄
+energy set, ``analysis.wave_verdicts.wave_verdict(...)["energy_dev"]`` = Σ_E Ω(f̄ − m)/Σ_E Ω f̄
 (f̄ the reference's diffuse part, m the method's bins; bins beyond θo = 80° left out), the
 measure of the regime map. Its uncertainty combines in quadrature the reference's speckle
 part (``energy_dev_se``, common to every point of the panel; the reference's own relative

@@ -84,7 +84,7 @@ import numpy as np
 
 from microsim import analytic as an
 from microsim import surfaces
-from microsim.errors import UsageError
+from microsim.errors import EnvironmentFailure, UsageError
 from microsim.sim.arguments import MAX_RAYS
 from microsim.surfaces.heightfields import abc_ensemble_ndf, gaussian_ensemble_ndf
 from microsim.surfaces.loader import check_heightfield_file
@@ -616,7 +616,20 @@ def read_toml(path, what: str = "scene") -> dict:
     too long, a directory or anything else not a regular file (opened without blocking, so a
     FIFO is refused, never read), more than ``MAX_SCENE_BYTES``, not UTF-8, NUL bytes, arrays
     or tables nested too deeply, or malformed TOML; a leading byte-order mark is allowed.
-    Other OS errors (permission denied) propagate as ``OSError`` naming the path."""
+    Other OS errors (permission denied, an I/O error) are an ``EnvironmentFailure`` naming the
+    path (exit status 1, as for any file the machine will not let microsim read)."""
+    try:
+        return _parse_toml(path, what)
+    except SceneError:
+        raise
+    except OSError as e:
+        raise EnvironmentFailure(
+            f"{path}: cannot read the {what} file ({e.strerror or e})"
+        ) from None
+
+
+def _parse_toml(path, what: str) -> dict:
+    """``read_toml`` without its translation of unexpected OS errors."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except FileNotFoundError:

@@ -371,24 +371,10 @@ def _check_heightfield_file(where: str, spec, checked: set) -> None:
     checked.add(key)
 
 
-def _read_sweep_file(path: Path) -> dict:
-    """The TOML table of a sweep file (``microsim.app.scene.read_toml``: one-line UsageError naming
-    the file for anything not a small UTF-8 TOML text file); permission denied is a UsageError
-    too, any other OS error an EnvironmentFailure."""
-    try:
-        return sc.read_toml(path, "sweep")
-    except PermissionError:
-        _fail(str(path), "permission denied (cannot read the sweep file)")
-    except OSError as e:
-        raise EnvironmentFailure(
-            f"{path}: cannot read the sweep file ({e.strerror or e})"
-        ) from None
-
-
 def load_sweep(path) -> SweepSpec:
     """Read and validate a sweep file; UsageError (one line) names the file and the key."""
     path = Path(path)
-    data = _read_sweep_file(path)
+    data = sc.read_toml(path, "sweep")
     where = str(path)
     name = data.get("name", path.stem)
     if "name" in data:
