@@ -140,3 +140,28 @@ def test_a_sweep_task_is_judged_as_microsim_run_judges_it(tmp_path):
     assert V.verdict_kind(swept["ts-smith"]) == "deviates"
     rows = {r["model"]: r["verdict"] for r in summary_table([rec])}
     assert rows == {n: V.verdict_kind(v) for n, v in swept.items()}
+
+
+def test_the_testing_message_words_each_incidence_by_its_verdict(tmp_path):
+    """``assert_brdf_agrees``' table: a model 20 % too bright on one V-groove tile deviates
+    (beyond the tile's departure, far beyond ray noise), and the message's result column says
+    "deviates" for the incidence, the word ``verdict_kind`` gives its verdict."""
+    from microsim.analytic import GGX, torrance_sparrow
+    from microsim.surfaces import vgrooves
+    from microsim.testing import BRDFMismatch, assert_brdf_agrees
+
+    ndf = GGX(0.3)
+    surface = vgrooves(500, ndf)
+    with pytest.raises(BRDFMismatch) as err:
+        assert_brdf_agrees(
+            lambda wi, wo: 1.2 * torrance_sparrow(wi, wo, ndf, "vgroove", "aluminium"),
+            surface,
+            "aluminium",
+            [60],
+            rays=50_000,
+            bins=(10, 7),
+            cache=tmp_path,
+        )
+    (v,) = err.value.agreement["verdicts"]
+    row = next(r for r in str(err.value).splitlines() if r.strip().startswith("60°"))
+    assert V.verdict_kind(v) == "deviates" == row.split()[1]

@@ -538,7 +538,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
         rows.append(
             [
                 f"{v['theta_i']:g}°",
-                "ok" if ok else "FAIL",
+                ("ok" if ok else "FAIL") if rtol is not None else verdict_kind(v),
                 _num(v["chi2_dof"], "{:.3f}"),
                 zcol,
                 _num(v["rel_rms"], "{:.2%}"),
