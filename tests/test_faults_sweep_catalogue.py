@@ -4,7 +4,8 @@ worker used to find, catalogue scene names that clash with the report's own file
 scene file edited before ``report --resume``.
 
 Through ``microsim.app.cli.main`` in-process (worker processes are forked from the test process,
-so a patched ``sweep.run_task`` runs in them) except the SIGTERM, which needs its own process.
+so a patched ``sweep.execution.run_task`` runs in them) except the SIGTERM, which needs its own
+process.
 """
 
 import json
@@ -60,7 +61,7 @@ def test_killed_worker_task_is_rerun(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "s.toml").write_text(THREE)
     _KILL.update(m=0.2, always=False, marker=str(tmp_path / "killed"))
-    monkeypatch.setattr(sweep, "run_task", _killing_run_task)
+    monkeypatch.setattr(sweep.execution, "run_task", _killing_run_task)
     rc = main(["sweep", "s.toml", "--out", "out", "--workers", "2"])
     err = capsys.readouterr().err
     assert os.path.exists(_KILL["marker"])
@@ -76,7 +77,7 @@ def test_worker_killed_every_time_fails_with_one_line_and_keeps_finished_tasks(
     monkeypatch.chdir(tmp_path)
     (tmp_path / "s.toml").write_text(THREE)
     _KILL.update(m=0.4, always=True, marker=str(tmp_path / "killed"))
-    monkeypatch.setattr(sweep, "run_task", _killing_run_task)
+    monkeypatch.setattr(sweep.execution, "run_task", _killing_run_task)
     rc = main(["sweep", "s.toml", "--out", "out", "--workers", "1"])
     err = capsys.readouterr().err
     assert rc == 1 and "Traceback" not in err, err

@@ -1,0 +1,65 @@
+"""``microsim sweep``: the command-line subcommand."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+from .execution import SweepInterrupted, run_sweep
+from .grid import load_sweep
+
+
+def _cmd_sweep(args) -> int:
+    spec = load_sweep(args.sweep)
+    out = args.out or os.path.join("sweeps", "out", spec.name)
+    try:
+        res = run_sweep(
+            spec,
+            out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            progress=lambda s: print(s, file=sys.stderr, flush=True),
+            connect_timeout=args.scheduler_timeout,
+        )
+    except SweepInterrupted as e:
+        how = "interrupted" if e.signum == signal.SIGINT else "terminated"
+        print(
+            f"microsim: {how}: {e.done}/{e.total} tasks done and kept in "
+            f"{os.path.join(out, 'tasks')}, summary not written; rerun the same command "
+            f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}) "
+            f"to compute the rest",
+            file=sys.stderr,
+        )
+        return 128 + e.signum
+    print(
+        f"{len(res['computed'])} tasks computed, {len(res['skipped'])} already done; "
+        f"{res['summary']['markdown']}, {res['summary']['csv']}, {res['summary']['chart']}"
+    )
+    return 0
+
+
+def add_sweep_command(subparsers) -> None:
+    """Register ``microsim sweep SWEEP.toml [--scheduler ADDRESS] [--scheduler-timeout S]
+    [--out DIR] [--workers N]``."""
+    p = subparsers.add_parser(
+        "sweep",
+        help="run a grid of scenes x parameters x incidences "
+        "and gather the verdicts into one table and chart",
+    )
+    p.add_argument("sweep", help="sweep file (TOML), e.g. sweeps/vgroove-roughness.toml")
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="Dask distributed scheduler address (default: local worker processes)",
+    )
+    p.add_argument(
+        "--scheduler-timeout",
+        type=float,
+        default=10.0,
+        metavar="SECONDS",
+        help="give up connecting to --scheduler after this long (default 10)",
+    )
+    p.add_argument("--out", help="output directory (default sweeps/out/<name>)")
+    p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    p.set_defaults(func=_cmd_sweep)

@@ -1,0 +1,274 @@
+"""Running the tasks: local worker processes or a Dask distributed cluster, the output lock,
+interrupts (``SweepInterrupted``) and broken pools; ``run_sweep`` is the entry point."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+from typing import Callable
+
+from ... import atomic
+from ...checkpoints import checkpoint
+from ...errors import EnvironmentFailure
+from .grid import SweepSpec, fail, task_label, varying_values
+from .summary import write_summary
+from .task import is_done, load_result, run_task, worker_init
+
+LOCK_FILE = ".sweep.lock"
+"""The lock file inside a sweep's output directory (``atomic.output_lock``)."""
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """A sweep stopped by Ctrl-C (``signum`` SIGINT) or SIGTERM: ``done`` of ``total`` tasks
+    have complete results in ``out`` (kept; a rerun computes the rest)."""
+
+    def __init__(self, out, done: int, total: int, signum: int = signal.SIGINT):
+        super().__init__(f"sweep interrupted: {done}/{total} tasks done in {out}")
+        self.out, self.done, self.total = str(out), int(done), int(total)
+        self.signum = int(signum)
+
+
+def _check_out(out: Path) -> None:
+    """Refuse, before anything runs or is written, an output path that cannot work."""
+    try:
+        if out.exists() and not out.is_dir():
+            fail(str(out), "exists and is not a directory; --out must be a directory")
+        anc = out
+        while not anc.exists() and anc != anc.parent:
+            anc = anc.parent
+        if not anc.is_dir():
+            fail(str(out), f"{anc} is a file, not a directory")
+        tasks = out / "tasks"
+        if tasks.exists() and not tasks.is_dir():
+            fail(str(out), f"{tasks} exists and is not a directory")
+        if out.is_dir() and not tasks.is_dir() and any(out.iterdir()):
+            fail(
+                str(out),
+                "not empty and not a sweep output (no tasks/ folder); choose a new "
+                "or empty --out directory",
+            )
+    except OSError as e:
+        fail(str(out), f"unusable output path ({e.strerror or e})")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise EnvironmentFailure(
+            f"{out}: {anc} is not writable (permission denied or a read-only file system)"
+        )
+
+
+@contextmanager
+def _sigterm_interrupts():
+    """While active (main thread, SIGTERM not ignored), SIGTERM raises KeyboardInterrupt as
+    Ctrl-C does, so the sweep stops its workers before it exits; yields {"signal": the
+    signal that interrupted, SIGINT unless a SIGTERM arrived}."""
+    received = {"signal": signal.SIGINT}
+
+    def terminate(signum, frame):
+        received["signal"] = signum
+        raise KeyboardInterrupt
+
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.getsignal(signal.SIGTERM) if main else None
+    if old is not signal.SIG_DFL:
+        yield received
+        return
+    signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield received
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def _client(scheduler, timeout: float):
+    """A ``dask.distributed.Client``; one-line errors for a bad or unreachable address."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise EnvironmentFailure(
+            "--scheduler needs dask.distributed, an optional extra: pip install 'microsim[cluster]'"
+        ) from None
+    try:
+        return Client(scheduler, timeout=timeout)
+    except ValueError as e:
+        fail(f"--scheduler {scheduler}", f"not a Dask scheduler address ({e})")
+    except (OSError, TimeoutError) as e:
+        raise EnvironmentFailure(
+            f"--scheduler {scheduler}: no Dask scheduler reachable "
+            f"there within {timeout:g} s ({' '.join(str(e).split())})"
+        ) from None
+
+
+def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None]) -> None:
+    """Run ``todo`` in local worker processes; ``collect(record)`` for each finished one.
+
+    A worker process that dies (SIGKILL, the out-of-memory killer) breaks the pool: the tasks
+    without a complete result then run again in a fresh pool (``notice`` says so); when two
+    pools in a row break before any task finishes, ``BrokenProcessPool`` is raised."""
+    fruitless = 0
+    while todo:
+        finished = set()
+
+        def note(rec: dict) -> None:
+            collect(rec)
+            finished.add(rec["id"])
+
+        try:
+            _local_pool(todo, out, workers, note)
+            return
+        except BrokenProcessPool:
+            pass
+        rest = []
+        for task in todo:
+            if task.id in finished:
+                continue
+            rec = load_result(task, out)
+            if rec is None:
+                rest.append(task)
+            else:  # written just before the pool broke
+                note(rec)
+        fruitless = 0 if finished else fruitless + 1
+        if fruitless == 2:
+            raise BrokenProcessPool("worker processes died twice in a row")
+        notice(f"a worker process died; running its {len(rest)} unfinished tasks again")
+        todo = rest
+
+
+def _local_pool(todo, out: Path, workers: int, collect) -> None:
+    """One process pool for ``todo`` (``_local``). On any exception (Ctrl-C included) the
+    queued tasks are cancelled, the running ones asked to stop (SIGINT: their simulation
+    returns partial and writes nothing), and the exception re-raised once they have; a second
+    Ctrl-C kills them."""
+    pool = ProcessPoolExecutor(max_workers=min(int(workers), len(todo)), initializer=worker_init)
+    futures = []
+    try:
+        futures = [pool.submit(run_task, t, str(out)) for t in todo]
+        for fut in as_completed(futures):
+            collect(fut.result())
+    except BaseException:
+        for f in futures:
+            f.cancel()
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            if proc.is_alive():  # never a pid the pool has already reaped
+                try:
+                    os.kill(proc.pid, signal.SIGINT)
+                except OSError:
+                    pass
+        try:
+            pool.shutdown(wait=True, cancel_futures=True)
+        except KeyboardInterrupt:
+            for p in list((getattr(pool, "_processes", None) or {}).values()):
+                p.kill()
+            pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _dask(todo, out: Path, client, collect) -> None:
+    from dask.distributed import as_completed as dask_completed
+
+    futures = [
+        client.submit(run_task, t, str(out), key=f"microsim-{t.id}", pure=False) for t in todo
+    ]
+    try:
+        for fut in dask_completed(futures):
+            collect(fut.result())
+    except BaseException:
+        client.cancel(futures)  # tasks already running finish and store complete results
+        raise
+
+
+def run_sweep(
+    spec: SweepSpec,
+    out,
+    *,
+    scheduler=None,
+    workers: int = 2,
+    limit: int | None = None,
+    progress: Callable[[str], None] | None = None,
+    connect_timeout: float = 10.0,
+) -> dict:
+    """Run the tasks of ``spec`` that have no complete result in ``out`` yet, then
+    ``write_summary``.
+
+    ``scheduler``: None (local processes, ``workers`` of them) or a Dask scheduler address
+    (anything ``dask.distributed.Client`` accepts, e.g. "tcp://host:8786" or a LocalCluster),
+    reached within ``connect_timeout`` seconds or EnvironmentFailure. ``limit``: run at most
+    this many of the missing tasks, then summarise what is done. ``progress``: receives one
+    line per finished task ("k/N done: <scene params, material, θi> (s)"), and one at the start.
+    Ctrl-C or SIGTERM: raises ``SweepInterrupted`` (the workers stopped, finished tasks
+    kept, no summary written). Local worker processes that die: their tasks run again
+    (``_local``), or EnvironmentFailure. Returns {"computed": [ids], "skipped": [ids],
+    "summary": paths}.
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        fail("--workers", f"must be an integer >= 1, got {workers!r}")
+    if not (isinstance(connect_timeout, (int, float)) and 0 < connect_timeout <= 3600):
+        fail("--scheduler-timeout", f"must be seconds in (0, 3600], got {connect_timeout!r}")
+    out = Path(out).absolute()
+    _check_out(out)
+    with ExitStack() as stack:
+        received = stack.enter_context(_sigterm_interrupts())
+        client = None
+        if scheduler is not None:
+            client = stack.enter_context(_client(scheduler, float(connect_timeout)))
+        try:
+            (out / "tasks").mkdir(parents=True, exist_ok=True)
+            stack.enter_context(atomic.output_lock(out, out / LOCK_FILE, holder="sweep"))
+        except OSError as e:
+            raise EnvironmentFailure(
+                f"{out}: cannot create the sweep output ({e.strerror or e})"
+            ) from None
+        for d in (out, out / "tasks"):  # left by interrupted writes of earlier sweeps
+            atomic.clean_temp_files(d)
+        todo = [t for t in spec.tasks if not is_done(t, out)]
+        skipped = [t.id for t in spec.tasks if t not in todo]
+        if limit is not None:
+            todo = todo[: int(limit)]
+        varying = varying_values(spec.tasks)
+        total, computed = len(spec.tasks), []
+        by_id = {t.id: t for t in todo}
+        if progress and todo:
+            where = (
+                f"{len(by_id)} on {min(workers, len(todo))} local workers"
+                if client is None
+                else f"{len(by_id)} on the Dask cluster"
+            )
+            progress(
+                f"sweep {spec.name}: {total} tasks, {len(skipped)} already done, running {where}"
+            )
+
+        def collect(rec: dict) -> None:
+            if rec.get("partial"):  # a worker was interrupted
+                raise KeyboardInterrupt
+            computed.append(rec["id"])
+            if progress:
+                progress(
+                    f"sweep {spec.name}: {len(skipped) + len(computed)}/{total} done: "
+                    f"{task_label(by_id[rec['id']], varying.get(rec['task']['scene']))} "
+                    f"({rec['seconds']:.1f} s)"
+                )
+            checkpoint("sweep-task")
+
+        def done() -> int:
+            return sum(is_done(t, out) for t in spec.tasks)
+
+        try:
+            if todo and client is None:
+                _local(todo, out, workers, collect, progress or (lambda line: None))
+            elif todo:
+                _dask(todo, out, client, collect)
+            paths = write_summary(spec, out)
+        except KeyboardInterrupt:
+            raise SweepInterrupted(out, done(), total, received["signal"]) from None
+        except BrokenProcessPool:
+            raise EnvironmentFailure(
+                f"{out}: sweep worker processes died twice in a row before finishing a task "
+                f"(killed, e.g. by the out-of-memory killer); {done()}/{total} tasks done and "
+                f"kept in {out / 'tasks'}, summary not written; rerun the same command to "
+                f"compute the rest"
+            ) from None
+    return {"computed": computed, "skipped": skipped, "summary": paths}
