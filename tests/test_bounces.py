@@ -230,11 +230,9 @@ def test_analytic_chain_is_the_unfolded_geometry_ray_by_ray(tilt, theta):
     status1, weight1, wterm = np.empty(n, np.int8), np.empty(n), np.empty(n)
     term, order = np.empty(n, np.int8), np.empty(n, np.int64)
     wo = [np.empty(n) for _ in range(3)]
-    c = caster
+    mirror = fresnel_kernels.FresnelMaterial(0.0, 0.0, fresnel_kernels.FRESNEL_MIRROR)
     vgroove_kernels.analytic_vgroove_bounces(
-        x, 0.0, np.zeros(n), wi, c.half, c.x_left, c.x_right, c.w_left, c.depth,
-        c.facet_rim, c.facet_wall, c.facet_sigma, c.facet_nx, c.facet_nz,
-        c.facet_signed_tan, c.facet_width, 0.0, 0.0, fresnel_kernels.FRESNEL_MIRROR,
+        x, 0.0, np.zeros(n), wi, caster.profile, mirror,
         MAX_BOUNCES, 0.0, status1, weight1, term, wterm, order, *wo,
     )  # fmt: skip
     iv = unfolded_orders(tilt, theta)

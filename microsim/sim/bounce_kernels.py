@@ -4,6 +4,8 @@ and the next ray (on the facet plane, eps above it) of one that goes on."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .engine.codes import (
@@ -26,53 +28,102 @@ from .engine.jit import compiled
 from .fresnel_kernels import fresnel_weight
 
 
+class WalkOutcome(NamedTuple):
+    """What the periodic walk found for each live path (``Tracer.trace_columns``): its
+    ``status`` (HIT, ESCAPED, MISSED, UNRESOLVED), the ``facet`` hit and the hit point
+    (tile coordinates)."""
+
+    status: np.ndarray
+    facet: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+
+
+class RayDirections(NamedTuple):
+    """The unit directions the live paths were traced along: one shared direction (index 0)
+    when ``shared``, else one per path."""
+
+    dx: np.ndarray
+    dy: np.ndarray
+    dz: np.ndarray
+    shared: bool
+
+
+class FacetPlanes(NamedTuple):
+    """The tracer's facets: unit normals (nx, ny, nz), ``lift`` = n·v0 + eps (the plane a
+    reflected ray starts eps above) and the tile's half extents ``half_x``, ``half_y``."""
+
+    nx: np.ndarray
+    ny: np.ndarray
+    nz: np.ndarray
+    lift: np.ndarray
+    half_x: float
+    half_y: float
+
+
+class PathLedger(NamedTuple):
+    """Per primary ray (global index): first-bounce class and Fresnel weight (``status1``,
+    ``weight1``), terminal class and carried weight (``term``, ``wterm``) and the flat tally
+    index of its escape (``where``, −1 if none)."""
+
+    status1: np.ndarray
+    weight1: np.ndarray
+    term: np.ndarray
+    wterm: np.ndarray
+    where: np.ndarray
+
+
+class Escapes(NamedTuple):
+    """Paths escaping at this step, for binning by the caller: global index and direction."""
+
+    index: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    dz: np.ndarray
+
+
+class NextRays(NamedTuple):
+    """The continuing paths, compacted: global index ``live``, start (x, y, z), direction
+    (dx, dy, dz) and its float32 copy ``d32`` (k, 3), carried weight ``w``."""
+
+    live: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    dz: np.ndarray
+    d32: np.ndarray
+    w: np.ndarray
+
+
+class FirstBounceTable(NamedTuple):
+    """``paths.FacetTable``'s per-facet Fresnel ``weight`` and ``bin`` for the first bounce
+    (``use`` False: not used, placeholder arrays), and ``first_facet`` per primary ray, the
+    facet of its first bounce."""
+
+    use: bool
+    weight: np.ndarray
+    bin: np.ndarray
+    first_facet: np.ndarray
+
+
 @compiled
 def bounce_step(
     b,
     limit,
     floor,
     live,
-    hs,
-    prim,
-    px,
-    py,
-    pz,
-    dx,
-    dy,
-    dz,
-    shared,
     w,
-    nx,
-    ny,
-    nz,
-    lift,
-    hx,
-    hy,
-    n2,
-    k2,
-    fresnel_mode,
-    status1,
-    weight1,
-    term,
-    wterm,
-    where,
-    esc,
-    edx,
-    edy,
-    edz,
-    nlive,
-    sx,
-    sy,
-    sz,
-    ndx,
-    ndy,
-    ndz,
-    nd32,
-    nw,
-    use_table,
-    tab_weight,
-    tab_bin,
-    first_facet,
+    walk,
+    rays,
+    facets,
+    material,
+    ledger,
+    escapes,
+    nxt,
+    table,
 ):
     """One step of the bounce chain (``bounces.trace_bounces``) over the live paths.
 
@@ -103,7 +154,23 @@ def bounce_step(
     bins ``tab_bin`` per facet serve the first bounce (the values the per-ray arithmetic
     gives, bitwise: same Fresnel kernel, same float64 mirror direction): its facet is kept in
     ``first_facet`` and a path escaping after order 1 gets ``where`` = its facet's bin here
-    instead of being listed in ``esc``. Returns (continuing paths m, escapes e)."""
+    instead of being listed in ``esc``. Returns (continuing paths m, escapes e).
+
+    Arguments: step ``b``, bounce ``limit``, weight ``floor``, the live paths' global indices
+    ``live`` and weights ``w``; ``walk`` (``WalkOutcome``: hs, prim, px, py, pz), ``rays``
+    (``RayDirections``), ``facets`` (``FacetPlanes``: nx, ny, nz, lift, hx, hy),
+    ``material`` (``fresnel_kernels.FresnelMaterial``), ``ledger`` (``PathLedger``,
+    written), ``escapes`` (``Escapes``: esc, edx, edy, edz, written), ``nxt``
+    (``NextRays``: nlive, sx…nw, written) and ``table`` (``FirstBounceTable``: use_table,
+    tab_weight, tab_bin, first_facet)."""
+    hs, prim, px, py, pz = walk
+    dx, dy, dz, shared = rays
+    nx, ny, nz, lift, hx, hy = facets
+    n2, k2, fresnel_mode = material
+    status1, weight1, term, wterm, where = ledger
+    esc, edx, edy, edz = escapes
+    nlive, sx, sy, sz, ndx, ndy, ndz, nd32, nw = nxt
+    use_table, tab_weight, tab_bin, first_facet = table
     m = 0
     e = 0
     for i in range(len(live)):

@@ -196,6 +196,10 @@ def trace_bounces(
     tab_weight = table.weight if use_table else np.zeros(1)
     tab_bin = table.bin if use_table else np.zeros(1, dtype=np.int32)
     first_facet = work("bounce-facet", n if use_table else 1, np.int64)
+    facets = bounce_kernels.FacetPlanes(*ncols, lift, hx, hy)
+    material = fresnel_kernels.FresnelMaterial(n2, k2, mode)
+    ledger = bounce_kernels.PathLedger(status1, weight1, term, wterm, where)
+    first = bounce_kernels.FirstBounceTable(use_table, tab_weight, tab_bin, first_facet)
     b = 1
     while True:
         k = len(live)
@@ -212,35 +216,15 @@ def trace_bounces(
             limit,
             floor,
             live,
-            hs,
-            prim,
-            *p,
-            *d,
-            shared,
             w,
-            *ncols,
-            lift,
-            hx,
-            hy,
-            n2,
-            k2,
-            mode,
-            status1,
-            weight1,
-            term,
-            wterm,
-            where,
-            esc,
-            *ed,
-            nlive,
-            *s,
-            *nd,
-            nd32,
-            nw,
-            use_table,
-            tab_weight,
-            tab_bin,
-            first_facet,
+            bounce_kernels.WalkOutcome(hs, prim, *p),
+            bounce_kernels.RayDirections(*d, shared),
+            facets,
+            material,
+            ledger,
+            bounce_kernels.Escapes(esc, *ed),
+            bounce_kernels.NextRays(nlive, *s, *nd, nd32, nw),
+            first,
         )
         if e:
             g = esc[:e]
@@ -297,28 +281,13 @@ def analytic_bounces(
     term, wterm = np.empty(n, dtype=np.int8), np.empty(n)
     order = np.empty(n, dtype=np.int64)
     wo = [np.empty(n) for _ in range(3)]
-    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
-    c = caster
     vgroove_kernels.analytic_vgroove_bounces(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),
         np.ascontiguousarray(psi, dtype=np.float64),
         np.asarray(wi, dtype=np.float64),
-        float(c.half),
-        c.x_left,
-        c.x_right,
-        c.w_left,
-        c.depth,
-        c.facet_rim,
-        c.facet_wall,
-        c.facet_sigma,
-        c.facet_nx,
-        c.facet_nz,
-        c.facet_signed_tan,
-        c.facet_width,
-        n2,
-        k2,
-        mode,
+        caster.profile,
+        fresnel_kernels.fresnel_material(ior),
         int(limit),
         float(floor),
         status1,

@@ -4,6 +4,8 @@ table of one incidence (``facet_mirror``: weight, mirror direction, ledger class
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from microsim.analytic.fresnel import fresnel_real_scalar
@@ -69,6 +71,21 @@ def fresnel_tile(c, m, n2, k2, fresnel_mode, weight, t):
         one = 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
         for j in range(m):
             weight[t + j] = 0.0 if c[j] <= 0.0 else one
+
+
+class FresnelMaterial(NamedTuple):
+    """The material as ``fresnel_kernels.fresnel_mode`` encodes it: n², k² (of η = n + ik)
+    and the mode (FRESNEL_REAL: Fresnel of η; FRESNEL_MIRROR: F = 1; FRESNEL_NONE: F = 0)."""
+
+    n2: float
+    k2: float
+    mode: int
+
+
+def fresnel_material(ior) -> FresnelMaterial:
+    """``fresnel_mode(ior)`` as the ``FresnelMaterial`` the kernels take."""
+    mode, n2, k2 = fresnel_mode(ior)
+    return FresnelMaterial(n2, k2, mode)
 
 
 def fresnel_mode(ior) -> tuple:

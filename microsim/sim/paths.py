@@ -610,28 +610,13 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
         out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
     status, weight, where = out
     wo = [work("analytic-wo-" + a, 0 if bins.folded else n) for a in "xyz"]
-    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
-    c = caster
     vgroove_kernels.analytic_vgroove(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),
         np.ascontiguousarray(psi, dtype=np.float64),
         np.asarray(wi, dtype=np.float64),
-        float(c.half),
-        c.x_left,
-        c.x_right,
-        c.w_left,
-        c.depth,
-        c.facet_rim,
-        c.facet_wall,
-        c.facet_sigma,
-        c.facet_nx,
-        c.facet_nz,
-        c.facet_signed_tan,
-        c.facet_width,
-        n2,
-        k2,
-        mode,
+        caster.profile,
+        fresnel_kernels.fresnel_material(ior),
         float(phi_i),
         bins.folded,
         bins.n_theta,

@@ -37,6 +37,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from embreex import mesh_construction as mc
@@ -714,6 +715,28 @@ class VGrooveProfile:
             return s * (1.0 + signed_tan * wo_x / wo_z) - width
 
 
+class GrooveProfile(NamedTuple):
+    """The V-groove closed form's geometry (``VGrooveCaster.profile``, built once per caster;
+    the argument ``groove`` of ``vgroove_kernels.analytic_vgroove*``):
+    half the tile width ``half``; per groove the rims ``x_left``, ``x_right``, the left
+    wall's rim-to-bottom width ``w_left`` and the ``depth``; per facet f (2k left, 2k + 1
+    right) its rim x, wall width, σ (+1 left, −1 right), unit normal (nx, 0, nz), tanθ·σ and
+    the groove width W. Lengths in tile units."""
+
+    half: float
+    x_left: np.ndarray
+    x_right: np.ndarray
+    w_left: np.ndarray
+    depth: np.ndarray
+    facet_rim: np.ndarray
+    facet_wall: np.ndarray
+    facet_sigma: np.ndarray
+    facet_nx: np.ndarray
+    facet_nz: np.ndarray
+    facet_signed_tan: np.ndarray
+    facet_width: np.ndarray
+
+
 class VGrooveCaster(VGrooveProfile):
     """``VGrooveProfile`` plus the exact float64 primary hit of a falling ray (no Embree), for
     equal-width grooves tiling the tile in x (``surfaces.vgrooves``).
@@ -772,6 +795,21 @@ class VGrooveCaster(VGrooveProfile):
         self.facet_wall = np.stack([self.w_left, self.w_right], axis=1).ravel()
         self.facet_signed_tan = self.tan[self.facet_prim] * self.facet_sigma
         self.facet_width = np.repeat(xr - rim_l, 2)
+        self.profile = GrooveProfile(
+            float(self.half),
+            self.x_left,
+            self.x_right,
+            self.w_left,
+            self.depth,
+            self.facet_rim,
+            self.facet_wall,
+            self.facet_sigma,
+            self.facet_nx,
+            self.facet_nz,
+            self.facet_signed_tan,
+            self.facet_width,
+        )
+        """The same geometry as the kernels take it (``GrooveProfile``)."""
 
     def groove_hits(self, x, z, wi_x, wi_z):
         """(facet f (N,) int64, s (N,)) of rays from (x, z) (z ≥ 0: at or above the rims)

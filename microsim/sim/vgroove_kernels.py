@@ -108,21 +108,8 @@ def analytic_vgroove(
     z,
     psi,
     wi,
-    half,
-    x_left,
-    x_right,
-    w_left,
-    depth,
-    facet_rim,
-    facet_wall,
-    facet_sigma,
-    facet_nx,
-    facet_nz,
-    facet_signed_tan,
-    facet_width,
-    n2,
-    k2,
-    fresnel_mode,
+    groove,
+    material,
     phi_i_deg,
     folded,
     n_theta,
@@ -136,8 +123,8 @@ def analytic_vgroove(
 ):
     """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``paths.
     analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
-    per-facet columns passed as arrays). Per ray, in the groove frame: the primary hit
-    (``_groove_hit``) and its class, Fresnel weight and mirror direction wo
+    per-facet columns passed as one ``GrooveProfile``). Per ray, in the groove frame: the
+    primary hit (``_groove_hit``) and its class, Fresnel weight and mirror direction wo
     (``_groove_reflection``; ``status``, ``weight``); on a ``folded`` grid (``n_theta``,
     Δφ ``edges`` in degrees) the bin of wo for SINGLE rays against φi (``phi_i_deg``) less
     ψ, as ``bin_rays`` (``where``, −1 for the others); otherwise ``where`` = −1
@@ -146,7 +133,13 @@ def analytic_vgroove(
     the compiler vectorises (AVX2 has no gather it deems worth using, so an indexed load
     keeps a loop scalar), the look-ups and the bins near an edge one by one — the same
     arithmetic as ``_groove_hit``/``_groove_reflection`` ray by ray (so
-    ``analytic_vgroove_bounces`` agrees bitwise) and ``bin_rays``'s bins."""
+    ``analytic_vgroove_bounces`` agrees bitwise) and ``bin_rays``'s bins.
+    ``groove``: ``tracer.GrooveProfile`` (the caster's ``profile``); ``material``:
+    ``fresnel_kernels.FresnelMaterial``."""
+    half, x_left, x_right, w_left, depth = groove[:5]
+    facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz = groove[5:10]
+    facet_signed_tan, facet_width = groove[10:]
+    n2, k2, fresnel_mode = material
     scale = len(x_left) / (2.0 * half)
     zw = z / wi[2]
     grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
@@ -197,21 +190,8 @@ def analytic_vgroove_bounces(
     z,
     psi,
     wi,
-    half,
-    x_left,
-    x_right,
-    w_left,
-    depth,
-    facet_rim,
-    facet_wall,
-    facet_sigma,
-    facet_nx,
-    facet_nz,
-    facet_signed_tan,
-    facet_width,
-    n2,
-    k2,
-    fresnel_mode,
+    groove,
+    material,
     limit,
     floor,
     status1,
@@ -239,7 +219,13 @@ def analytic_vgroove_bounces(
     (``fresnel_weight``); the chain stops when the path escapes (``term`` ESC_*, ``wterm``,
     its direction in the groove frame ``wox``/``woy``/``woz``), after ``limit`` bounces with
     the path still inside (CUT_BOUNCES), below the weight ``floor`` (CUT_WEIGHT) or at a
-    back-facing hit (PATH_UNRESOLVED, only from rounding). ``order`` = bounces made."""
+    back-facing hit (PATH_UNRESOLVED, only from rounding). ``order`` = bounces made.
+    ``groove``: ``tracer.GrooveProfile`` (the caster's ``profile``); ``material``:
+    ``fresnel_kernels.FresnelMaterial``."""
+    half, x_left, x_right, w_left, depth = groove[:5]
+    facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz = groove[5:10]
+    facet_signed_tan, facet_width = groove[10:]
+    n2, k2, fresnel_mode = material
     scale = len(x_left) / (2.0 * half)
     zw = z / wi[2]
     grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
