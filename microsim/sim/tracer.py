@@ -401,33 +401,17 @@ class Tracer:
         query = "OCCLUDED" if occlusion else "INTERSECT"
         no_tfar = np.empty(0, dtype=np.float32)
         hx, hy = float(self.half[0]), float(self.half[1])
+        box = segments.WalkBox(hx, hy, float(self.zmax), float(self.zmin), float(self.eps))
+        result = segments.WalkResult(status, prim, *point)
         for segment in range((self.max_wraps if wraps is None else int(wraps)) + 1):
             if live.size == 0:
                 break
             if segment == 0 and first is not None:
                 k, (o32_, tq_, keep_, top_), d32k_ = n, first, d32
             else:
+                rays = segments.WalkRays(live, *x, *d, shared)
                 k = segments.segment_setup(
-                    x[0],
-                    x[1],
-                    x[2],
-                    d[0],
-                    d[1],
-                    d[2],
-                    shared,
-                    live,
-                    d32,
-                    hx,
-                    hy,
-                    self.zmax,
-                    self.eps,
-                    TFAR_REL,
-                    status,
-                    o32,
-                    d32k,
-                    tq,
-                    keep,
-                    top,
+                    rays, d32, box, TFAR_REL, status, o32, d32k, tq, keep, top
                 )
                 o32_, tq_, keep_, top_, d32k_ = o32, tq, keep, top, d32k
             if k == 0:
@@ -466,34 +450,12 @@ class Tracer:
                 occlusion,
                 keep_,
                 top_,
-                live,
-                x[0],
-                x[1],
-                x[2],
-                d[0],
-                d[1],
-                d[2],
-                shared,
+                segments.WalkRays(live, *x, *d, shared),
                 falling_shared,
                 d32k_,
-                hx,
-                hy,
-                self.zmax,
-                self.zmin,
-                self.eps,
-                status,
-                prim,
-                point[0],
-                point[1],
-                point[2],
-                m_live,
-                nx_[0],
-                nx_[1],
-                nx_[2],
-                nd[0],
-                nd[1],
-                nd[2],
-                nd32,
+                box,
+                result,
+                segments.NextSegment(m_live, *nx_, *nd, nd32),
             )
             live, x = _read_only(m_live[:m]), [c[:m] for c in nx_]
             if not shared:

@@ -6,11 +6,62 @@ Tile coordinates, unit directions, distances along the ray."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from .codes import ESCAPED, HIT, MISSED
 from .jit import compiled, vector_inlined, vectorised
+
+
+class WalkRays(NamedTuple):
+    """The live rays of a segment: global indices ``live``, origins (x, y, z) per ray and
+    directions (dx, dy, dz), one shared (index 0) when ``shared``, else one per ray."""
+
+    live: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    dz: np.ndarray
+    shared: bool
+
+
+class WalkBox(NamedTuple):
+    """The walk's box: the tile's half extents, the relief's top ``zmax`` and bottom
+    ``zmin``, and the tracer's ``eps`` (tile units)."""
+
+    half_x: float
+    half_y: float
+    zmax: float
+    zmin: float
+    eps: float
+
+
+class WalkResult(NamedTuple):
+    """Per ray (global index): walk ``status``, the ``prim`` hit and the hit point (x, y, z)
+    (empty arrays for occlusion queries)."""
+
+    status: np.ndarray
+    prim: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+
+
+class NextSegment(NamedTuple):
+    """The rays re-entering through a wall, compacted: global index ``live``, origin
+    (x, y, z), and unless shared direction (dx, dy, dz) and its float32 copy ``d32``."""
+
+    live: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    dz: np.ndarray
+    d32: np.ndarray
 
 
 @vector_inlined
@@ -61,35 +112,17 @@ def _strictly_inside(v, half):
 
 
 @compiled
-def segment_setup(
-    ox,
-    oy,
-    oz,
-    dx,
-    dy,
-    dz,
-    shared,
-    live,
-    d32,
-    hx,
-    hy,
-    zmax,
-    eps,
-    rel,
-    status,
-    o32,
-    d32k,
-    tq,
-    keep,
-    top,
-):
+def segment_setup(rays, d32, box, rel, status, o32, d32k, tq, keep, top):
     """First half of one segment of the periodic walk (``Tracer._walk_columns``).
 
     Live ray i (global index ``live[i]``) at (ox, oy, oz)[i] with direction (dx, dy, dz)[j]
     (j = 0 if ``shared`` else i) and float32 copy ``d32[j]``: a ray rising from at or above
     ``zmax`` has escaped (``status`` ← ESCAPED); every other ray gets slot k of the Embree
     input (``setup_ray``; direction ``d32k[k]`` unless shared) and ``keep[k]`` = i.
-    Returns k, the number of rays to trace."""
+    Returns k, the number of rays to trace. ``rays``: ``WalkRays``; ``box``: ``WalkBox``;
+    ``rel``: the relative tfar margin."""
+    live, ox, oy, oz, dx, dy, dz, shared = rays
+    hx, hy, zmax, _, eps = box
     k = 0
     for i in range(len(live)):
         j = 0 if shared else i
@@ -149,40 +182,7 @@ def first_segment_hits(pid, tfar, ox, oy, oz, dx, dy, dz, shared, status, prim, 
 
 @compiled
 def segment_finish(
-    k,
-    pid,
-    tfar,
-    occlusion,
-    keep,
-    top,
-    live,
-    ox,
-    oy,
-    oz,
-    dx,
-    dy,
-    dz,
-    shared,
-    falling_shared,
-    d32k,
-    hx,
-    hy,
-    zmax,
-    zmin,
-    eps,
-    status,
-    prim,
-    px,
-    py,
-    pz,
-    nlive,
-    nox,
-    noy,
-    noz,
-    ndx,
-    ndy,
-    ndz,
-    nd32,
+    k, pid, tfar, occlusion, keep, top, rays, falling_shared, d32k, box, result, nxt
 ):
     """Second half of a segment: Embree's answers ``pid`` (primID or geomID, −1 = none) and
     ``tfar`` (float32, intersect queries) for the k traced rays of ``segment_setup``.
@@ -197,7 +197,13 @@ def segment_finish(
     −copysign(half, d) on the axis (or axes) whose wall it reached. The re-entering rays are
     written compacted to
     ``nlive``/``nox``/``noy``/``noz`` (and ``ndx``/``ndy``/``ndz``/``nd32`` unless shared).
-    Returns their number."""
+    Returns their number. ``rays``: ``WalkRays``; ``box``: ``WalkBox``; ``result``:
+    ``WalkResult`` (status, prim, px, py, pz); ``nxt``: ``NextSegment`` (nlive, nox, noy,
+    noz, ndx, ndy, ndz, nd32)."""
+    live, ox, oy, oz, dx, dy, dz, shared = rays
+    hx, hy, zmax, zmin, eps = box
+    status, prim, px, py, pz = result
+    nlive, nox, noy, noz, ndx, ndy, ndz, nd32 = nxt
     m = 0
     for q in range(k):
         i = keep[q]
