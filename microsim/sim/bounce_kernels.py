@@ -28,18 +28,6 @@ from .engine.jit import compiled
 from .fresnel_kernels import fresnel_weight
 
 
-class WalkOutcome(NamedTuple):
-    """What the periodic walk found for each live path (``Tracer.trace_columns``): its
-    ``status`` (HIT, ESCAPED, MISSED, UNRESOLVED), the ``facet`` hit and the hit point
-    (tile coordinates)."""
-
-    status: np.ndarray
-    facet: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    z: np.ndarray
-
-
 class RayDirections(NamedTuple):
     """The unit directions the live paths were traced along: one shared direction (index 0)
     when ``shared``, else one per path."""
@@ -157,8 +145,9 @@ def bounce_step(
     instead of being listed in ``esc``. Returns (continuing paths m, escapes e).
 
     Arguments: step ``b``, bounce ``limit``, weight ``floor``, the live paths' global indices
-    ``live`` and weights ``w``; ``walk`` (``WalkOutcome``: hs, prim, px, py, pz), ``rays``
-    (``RayDirections``), ``facets`` (``FacetPlanes``: nx, ny, nz, lift, hx, hy),
+    ``live`` and weights ``w``; ``walk`` (``engine.segments.WalkResult`` of the traced
+    rays: hs, prim, px, py, pz), ``rays`` (``RayDirections``), ``facets``
+    (``FacetPlanes``: nx, ny, nz, lift, hx, hy),
     ``material`` (``fresnel_kernels.FresnelMaterial``), ``ledger`` (``PathLedger``,
     written), ``escapes`` (``Escapes``: esc, edx, edy, edz, written), ``nxt``
     (``NextRays``: nlive, sx…nw, written) and ``table`` (``FirstBounceTable``: use_table,

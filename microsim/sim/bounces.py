@@ -55,7 +55,7 @@ from microsim.errors import UsageError
 
 from . import bounce_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
-from .engine import codes
+from .engine import codes, segments
 from .paths import (
     ANALYTIC_BATCH,
     LEDGER,
@@ -217,7 +217,7 @@ def trace_bounces(
             floor,
             live,
             w,
-            bounce_kernels.WalkOutcome(hs, prim, *p),
+            segments.WalkResult(hs, prim, *p),
             bounce_kernels.RayDirections(*d, shared),
             facets,
             material,
