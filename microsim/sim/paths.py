@@ -466,21 +466,19 @@ def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origi
     where = np.empty(n, dtype=np.int64)
     mask = MaskingRays.work(n)
     m = primary.tabled_primary(
-        hs,
-        prim,
-        *p,
-        table.code,
-        table.weight,
-        *table.normal_cols,
-        table.lift,
-        table.wo32,
-        table.bin,
-        table.clear,
+        segments.WalkResult(hs, prim, *p),
+        primary.FacetColumns(
+            table.code,
+            table.weight,
+            *table.normal_cols,
+            table.lift,
+            table.wo32,
+            table.bin,
+            table.clear,
+        ),
         tracer.horizon,
         _segment_geometry(tracer),
-        status,
-        weight,
-        where,
+        primary.PrimaryLedger(status, weight, where),
         mask.kernel_args(),
     )
     return status, weight, where, mask, m
@@ -567,20 +565,15 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
     mask = MaskingRays.work(n)
     mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
     m = primary.traced_primary(
-        hs,
-        prim,
-        *p,
-        *wl,
-        *tracer.normal_columns,
-        tracer.masking_lift,
+        segments.WalkResult(hs, prim, *p),
+        tuple(wl),
+        (*tracer.normal_columns, tracer.masking_lift),
         profile is None,
         tracer.rise_bound,
         tracer.horizon,
         tracer.groove_clear,
         _segment_geometry(tracer),
-        status,
-        cosine,
-        *wo,
+        primary.TracedLedger(status, cosine, *wo),
         mask.kernel_args(),
     )
     fresnel_kernels.fresnel_weights(cosine, n2, k2, mode, weight)

@@ -6,6 +6,7 @@ segment of their walk (``segments.setup_ray``); the exact V-groove masking margi
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -15,29 +16,44 @@ from .jit import TILE, compiled, vector_inlined, vectorised
 from .segments import setup_ray
 
 
+class FacetColumns(NamedTuple):
+    """A ``paths.FacetTable`` as ``tabled_primary`` reads it, per facet: ledger ``code``,
+    Fresnel ``fweight``, unit normal (nx, ny, nz), ``lift`` = n·v0 + eps, float32 mirror
+    direction ``wo32`` (F, 3), bin ``fbin`` and ``fclear`` (surely escapes)."""
+
+    code: np.ndarray
+    fweight: np.ndarray
+    nx: np.ndarray
+    ny: np.ndarray
+    nz: np.ndarray
+    lift: np.ndarray
+    wo32: np.ndarray
+    fbin: np.ndarray
+    fclear: np.ndarray
+
+
+class PrimaryLedger(NamedTuple):
+    """Per primary ray, written by ``tabled_primary``: ledger ``status``, Fresnel ``weight``
+    and flat bin ``where`` (−1 if none)."""
+
+    status: np.ndarray
+    weight: np.ndarray
+    where: np.ndarray
+
+
+class TracedLedger(NamedTuple):
+    """Per primary ray, written by ``traced_primary``: ledger ``status``, ``cosine`` = n·wl
+    (0 without a hit or back-facing) and the float64 mirror direction (wox, woy, woz)."""
+
+    status: np.ndarray
+    cosine: np.ndarray
+    wox: np.ndarray
+    woy: np.ndarray
+    woz: np.ndarray
+
+
 @compiled
-def tabled_primary(
-    hs,
-    prim,
-    px,
-    py,
-    pz,
-    code,
-    fweight,
-    nx,
-    ny,
-    nz,
-    lift,
-    wo32,
-    fbin,
-    fclear,
-    hz,
-    geometry,
-    status,
-    weight,
-    where,
-    masking,
-):
+def tabled_primary(walk, table, hz, geometry, out, masking):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
     ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
@@ -53,7 +69,15 @@ def tabled_primary(
     HIT, MISSED/ESCAPED (→ RAY_MISSED) or UNRESOLVED. Writes ``status``, ``weight`` (0
     without a hit) and ``where`` (the facet bin for lit rays, else −1) of every ray; returns
     the number of masking rays. In tiles of ``TILE`` rays: the look-ups one by one, the
-    starts in a vectorised loop, the masking rays by ``masking_starts``."""
+    starts in a vectorised loop, the masking rays by ``masking_starts``.
+
+    Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``table``
+    (``FacetColumns``: code, fweight, nx, ny, nz, lift, wo32, fbin, fclear), ``hz``,
+    ``geometry``, ``out`` (``PrimaryLedger``: status, weight, where; written) and
+    ``masking`` (the masking rays' arrays, ``paths.MaskingRays.kernel_args``)."""
+    hs, prim, px, py, pz = walk
+    code, fweight, nx, ny, nz, lift, wo32, fbin, fclear = table
+    status, weight, where = out
     tile = np.empty((10, TILE))  # per-ray scratch of one tile
     a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
     dx_, dy_, dz_ = tile[7], tile[8], tile[9]
@@ -85,29 +109,7 @@ def tabled_primary(
 
 @vectorised
 def traced_primary(
-    hs,
-    prim,
-    px,
-    py,
-    pz,
-    wx,
-    wy,
-    wz,
-    nx,
-    ny,
-    nz,
-    lift,
-    trace_masking,
-    clear_slope,
-    hz,
-    groove,
-    geometry,
-    status,
-    cosine,
-    wox,
-    woy,
-    woz,
-    masking,
+    walk, incident, facets, trace_masking, clear_slope, hz, groove, geometry, out, masking
 ):
     """``tabled_primary`` for rays that each carry their own incident direction wl (``wx/wy/
     wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n
@@ -125,7 +127,15 @@ def traced_primary(
     per-facet (rim x, tanθ σ, rim-to-rim width W, rim-to-bottom extent) and a tolerance
     (``Tracer.groove_clear``; empty arrays otherwise): a ray whose exact masking margin
     s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``) is below −tolerance
-    escapes without a ray (the margins within it are left to Embree)."""
+    escapes without a ray (the margins within it are left to Embree).
+
+    Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``incident`` (wx,
+    wy, wz), ``facets`` (the tracer's nx, ny, nz, lift), ``out`` (``TracedLedger``: status,
+    cosine, wox, woy, woz; written); the others as named above."""
+    hs, prim, px, py, pz = walk
+    wx, wy, wz = incident
+    nx, ny, nz, lift = facets
+    status, cosine, wox, woy, woz = out
     shared = len(wx) == 1
     grim, gtan, gwidth, gextent, gtol = groove
     grooved = len(grim) > 0
