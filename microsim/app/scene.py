@@ -620,8 +620,6 @@ def read_toml(path, what: str = "scene") -> dict:
     path (exit status 1, as for any file the machine will not let microsim read)."""
     try:
         return _parse_toml(path, what)
-    except SceneError:
-        raise
     except OSError as e:
         raise EnvironmentFailure(
             f"{path}: cannot read the {what} file ({e.strerror or e})"

@@ -47,6 +47,7 @@ from .tracer import ESCAPED, Tracer
 
 __all__ = [
     "default_models",
+    "departure_models",
     "attach_models",
     "measure_g1",
     "G1Measurement",
@@ -165,6 +166,20 @@ def default_models(
     ]
     facets = ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", material)
     return specs + [_tagged(facets, surfaces)]
+
+
+def departure_models(scene_or_surface, material, ndf=None) -> list[ModelSpec]:
+    """The two models of ``default_models`` whose ratio is one tile's departure from its
+    ensemble (``analysis.verdicts.tile_departure``): [the ensemble closed form with the
+    surface's exact shadowing, ``ts-facets``] for one surface whose exact shadowing depends on
+    its facets alone (V-grooves); [] where that departure is not computable without rays
+    (several realisations, heightfields, a flat mirror)."""
+    surfaces, _ = _surfaces_and_ndf(scene_or_surface, None)
+    if len(surfaces) != 1 or surfaces[0].exact_shadowing in (None, "none"):
+        return []
+    standard = default_models(scene_or_surface, material, ndf)
+    facets = standard[-1]
+    return [s for s in standard if s.name == facets.params["ensemble"]] + [facets]
 
 
 def _auto_azimuths(normals) -> int:

@@ -33,6 +33,7 @@ Which noise the BRDF is judged against:
 from __future__ import annotations
 
 import hashlib
+import json
 import warnings
 from pathlib import Path
 
@@ -40,7 +41,7 @@ import numpy as np
 
 from microsim.analysis.verdicts import departure_of, tile_departure, verdict, verdict_kind
 from microsim.errors import UsageError
-from microsim.sim.compare import attach_models, default_models
+from microsim.sim.compare import attach_models, default_models, departure_models
 from microsim.sim.predict import ModelSpec, predict
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
@@ -143,20 +144,23 @@ def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray
     return values, name
 
 
+_DEPARTURES: dict = {}  # per process: (surfaces, material, θi, bins) → tile departure
+
+
 def _one_tile_departure(ref, result) -> np.ndarray | None:
     """(T, Θ, Φ) relative departure of the one traced tile's BRDF from its ensemble's, where it
-    is computable without rays (V-grooves: the closed form with the tile's facets against the
-    same form with the ensemble NDF, ``verdicts.tile_departure``); None for several
-    realisations or a surface whose exact shadowing is not known (heightfields)."""
-    surfaces = list(ref.surfaces)
-    if len(surfaces) != 1 or surfaces[0].exact_shadowing in (None, "none"):
-        return None
-    standard = default_models(surfaces, ref.material)
-    facets = standard[-1]
-    pair = [s for s in standard if s.name == facets.params.get("ensemble")] + [facets]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # as _model_values
-        return tile_departure(attach_models(result, pair, rtol=MODEL_RTOL))
+    is computable without rays (``compare.departure_models``: V-grooves;
+    ``verdicts.tile_departure``), else None. It depends on the surface, material, incidences
+    and bins only, so each process computes it once per such reference."""
+    key = json.dumps({k: v for k, v in ref.description().items() if k not in ("seed", "rays")})
+    if key not in _DEPARTURES:
+        pair = departure_models(list(ref.surfaces), ref.material)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # as _model_values
+            _DEPARTURES[key] = (
+                tile_departure(attach_models(result, pair, rtol=MODEL_RTOL)) if pair else None
+            )
+    return _DEPARTURES[key]
 
 
 def tolerance_check(

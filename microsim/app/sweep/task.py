@@ -54,7 +54,7 @@ def run_task(task: Task, out_dir) -> dict:
         return {"id": task.id, "partial": True, "rays": 0, "requested": task.rays}
     from microsim.analysis.verdicts import verdicts_for_result
     from microsim.sim import Bins, simulate
-    from microsim.sim.compare import attach_models
+    from microsim.sim.compare import attach_models, departure_models
     from microsim.sim.predict import ModelSpec
 
     t0 = time.perf_counter()
@@ -78,8 +78,11 @@ def run_task(task: Task, out_dir) -> dict:
     specs = [ModelSpec.torrance_sparrow(f"ts-{g}", ndf, g, scene.ior) for g in task.models]
     verdicts = []
     if ndf is not None:
-        judged = attach_models(res, specs + _departure_specs(surface, scene.ior, ndf, specs))
+        # as microsim run: on V-grooves, the tile's departure from its ensemble (the pair's
+        # ensemble twin is dropped when the task asks for that very model)
         asked = {s.name for s in specs}
+        pair = [s for s in departure_models(surface, scene.ior, ndf) if s.name not in asked]
+        judged = attach_models(res, specs + pair)
         verdicts = [v for v in verdicts_for_result(judged) if v["model"] in asked]
     key, value = _roughness(ndf)
     record = {
@@ -100,23 +103,6 @@ def run_task(task: Task, out_dir) -> dict:
             f"{path}: cannot write the task result ({e.strerror or e})"
         ) from None
     return record
-
-
-def _departure_specs(surface, ior, ndf, specs) -> list:
-    """The models ``microsim run`` adds to judge an ensemble model on one tile whose exact
-    shadowing is known (V-grooves): the tile's own closed form ``ts-facets`` and the same form
-    with the ensemble NDF, whose ratio is the tile's departure from its ensemble
-    (``verdicts.tile_departure``); none for other surfaces (their ensemble verdicts on one
-    tile stay inconclusive where they reject, as in ``microsim run``)."""
-    if surface.exact_shadowing in (None, "none"):
-        return []
-    from microsim.sim.compare import default_models
-
-    standard = default_models(surface, ior, ndf)
-    facets = standard[-1]
-    asked = {s.name for s in specs}
-    ensemble = [s for s in standard if s.name == facets.params["ensemble"] and s.name not in asked]
-    return ensemble + [facets]
 
 
 _VERDICT_KEYS = (
