@@ -4,8 +4,14 @@
     res = simulate(surface, "aluminium", [0, 30, 60, 80], rays=10**6, bins=Bins(45, 37))
     res.brdf, res.stderr, res.ledger["single_fresnel"], res.in_plane(), res.save("out/")
 
-Modules: ``estimator`` (``simulate``, ``ray_events``: the driver), ``auto``
-(``simulate_auto``), ``streams`` (random streams, ray origins), ``paths`` (trace paths,
+or, with the run's three frozen descriptions (``experiment``)::
+
+    res = estimate(Experiment(surface, "aluminium", (0, 30, 60, 80), bins=Bins(45, 37)),
+                   Estimator(rays=10**6), Execution(threads=2))
+
+Modules: ``experiment`` (``Experiment``, ``Estimator``, ``Execution``), ``estimator``
+(``estimate``, ``simulate``, ``ray_events``: the driver), ``auto`` (``simulate_auto``,
+``estimate_to_precision``), ``streams`` (random streams, ray origins), ``paths`` (trace paths,
 ledger), ``tallies`` (running sums, bin estimate and standard error), ``schedule`` (threads,
 interrupts), ``arguments`` (argument checks), ``tracer`` and ``engine`` (Embree, the periodic
 walk and its compiled per-ray loops), the estimator's compiled loops (``bin_kernels``,
@@ -14,7 +20,8 @@ walk and its compiled per-ray loops), the estimator's compiled loops (``bin_kern
 """
 
 from .bins import Bins
-from .estimator import ray_events, simulate
+from .estimator import estimate, ray_events, simulate
+from .experiment import Estimator, Execution, Experiment
 from .paths import LEDGER, Events
 from .progress import RaysDone
 from .result import InPlane, Result
@@ -23,6 +30,10 @@ from .tracer import Tracer, VGrooveProfile
 
 __all__ = [
     "simulate",
+    "estimate",
+    "Experiment",
+    "Estimator",
+    "Execution",
     "ray_events",
     "Events",
     "Result",

@@ -24,6 +24,9 @@ __all__ = [
     "MAX_RAYS",
     "MAX_THREADS",
     "MAX_CHUNK",
+    "check_angles",
+    "check_choice",
+    "check_progress",
     "check_inputs",
     "check_run_options",
     "thread_count",
@@ -56,10 +59,9 @@ def _angles(name: str, value, what: str) -> np.ndarray:
     return a
 
 
-def check_inputs(theta_i, phi_i, rays, chunk, masking, seed=0):
-    """Validated (θi, φi) arrays (degrees); raises a UsageError naming the first bad one of
-    theta_i, phi_i, rays, chunk, masking, seed (``MAX_RAYS``, ``MAX_CHUNK`` bound the
-    integers)."""
+def check_angles(theta_i, phi_i) -> tuple[np.ndarray, np.ndarray]:
+    """Validated (θi, φi) float64 arrays in degrees, φi broadcast to θi's shape; a UsageError
+    naming theta_i or phi_i otherwise."""
     th = _angles("theta_i", theta_i, "a scalar or a non-empty 1-D sequence of degrees in [0, 90)")
     if not np.all((th >= 0) & (th < 90)):
         raise UsageError(f"theta_i must lie in [0, 90) degrees, got {short(theta_i)}")
@@ -74,11 +76,33 @@ def check_inputs(theta_i, phi_i, rays, chunk, masking, seed=0):
         raise UsageError(
             f"phi_i must be finite degrees (scalar or one per theta_i), got {short(phi_i)}"
         )
+    return th, ph
+
+
+def check_choice(name: str, value, allowed) -> str:
+    """``value`` if it is one of the strings ``allowed``; else a UsageError naming ``name``."""
+    if not isinstance(value, str) or value not in allowed:
+        raise UsageError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+    return value
+
+
+def check_progress(progress, receives: str) -> None:
+    """UsageError unless ``progress`` is None or a callable (receiving ``receives``)."""
+    if progress is not None and not callable(progress):
+        raise UsageError(
+            f"progress must be None or a callable receiving {receives}, got {progress!r}"
+        )
+
+
+def check_inputs(theta_i, phi_i, rays, chunk, masking, seed=0):
+    """Validated (θi, φi) arrays (degrees); raises a UsageError naming the first bad one of
+    theta_i, phi_i, rays, chunk, masking, seed (``MAX_RAYS``, ``MAX_CHUNK`` bound the
+    integers)."""
+    th, ph = check_angles(theta_i, phi_i)
     integer("rays", rays, 1, MAX_RAYS, " (primary rays per incidence)")
     integer("chunk", chunk, 1, MAX_CHUNK, " (rays per thread task)")
     integer("seed", seed, 0, None, " (the random stream)")
-    if not isinstance(masking, str) or masking not in MASKING:
-        raise UsageError(f"masking must be one of {', '.join(MASKING)}, got {masking!r}")
+    check_choice("masking", masking, MASKING)
     return th, ph
 
 
@@ -95,12 +119,8 @@ def check_run_options(bins, origins, progress, progress_receives: str) -> None:
     ``progress`` None or a callable (receiving ``progress_receives``)."""
     if not isinstance(bins, Bins):
         raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
-    if not isinstance(origins, str) or origins not in ORIGINS:
-        raise UsageError(f"origins must be one of {', '.join(ORIGINS)}, got {origins!r}")
-    if progress is not None and not callable(progress):
-        raise UsageError(
-            f"progress must be None or a callable receiving {progress_receives}, got {progress!r}"
-        )
+    check_choice("origins", origins, ORIGINS)
+    check_progress(progress, progress_receives)
 
 
 def is_surface(obj) -> bool:

@@ -24,28 +24,38 @@ batch the number of rays still needed is predicted from rse ∝ N^(-1/2); batche
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, replace
+from functools import partial
+from typing import Callable
 
 import numpy as np
 
-from microsim.analytic.fresnel import resolve_material
 from microsim.checks import in_range, integer
+from microsim.errors import UsageError
 from microsim.stats import ENERGY_FRACTION, MIN_EVENTS, energy_set
 
 from .arguments import (
     MAX_RAYS,
     check_inputs,
+    check_progress,
     check_run_options,
     is_surface,
     surface_error,
-    thread_count,
 )
 from .bins import Bins
-from .estimator import simulate
+from .estimator import estimate
+from .experiment import Estimator, Execution, Experiment
 from .result import Result
 from .streams import BLOCK
 from .tallies import Tally, tallies_from_arrays, tally_result
 
-__all__ = ["simulate_auto", "relative_standard_error", "ENERGY_FRACTION"]
+__all__ = [
+    "simulate_auto",
+    "estimate_to_precision",
+    "Precision",
+    "relative_standard_error",
+    "ENERGY_FRACTION",
+]
 
 
 def relative_standard_error(
@@ -150,37 +160,68 @@ def simulate_auto(
     memory does not depend on ``max_rays`` (each batch is scheduled lazily).
     """
     th, ph = check_inputs(theta_i, phi_i, 1, chunk, masking, seed)
-    threads = thread_count(threads)
-    target = in_range("target", target, 0.0, 1.0, lo_open=True, hi_open=True)
-    first = integer("first", first, 1, MAX_RAYS)
     max_rays = integer("max_rays", max_rays, 2, MAX_RAYS, " (rays per incidence at most)")
-    energy = in_range("energy", energy, 0.0, 1.0, lo_open=True)
-    min_events = integer("min_events", min_events, 0)
-    check_run_options(bins, origins, progress, "one text line")
+    check_run_options(bins, origins, None, "")
+    check_progress(progress, "one text line")
     if not is_surface(surface):
         raise surface_error("surface", surface)
-    resolve_material(material)
+    return estimate_to_precision(
+        Experiment(surface, material, th, ph, bins),
+        Estimator(max_rays, seed, masking, origins),
+        Execution(threads, chunk),
+        Precision(target, first, energy, min_events),
+        log=progress,
+    )
+
+
+@dataclass(frozen=True)
+class Precision:
+    """The stopping rule of a ``rays = "auto"`` run: trace until the energy-weighted relative
+    standard error over the bins carrying ``energy`` of Σ f̄Ω (bins with ≥ ``min_events``
+    events) is ≤ ``target`` (dimensionless, in (0, 1)); ``first`` rays in the first batch."""
+
+    target: float = 0.01
+    first: int = 2**18
+    energy: float = ENERGY_FRACTION
+    min_events: int = MIN_EVENTS
+
+    def __post_init__(self):
+        check = partial(object.__setattr__, self)
+        check("target", in_range("target", self.target, 0.0, 1.0, lo_open=True, hi_open=True))
+        check("first", integer("first", self.first, 1, MAX_RAYS))
+        check("energy", in_range("energy", self.energy, 0.0, 1.0, lo_open=True))
+        check("min_events", integer("min_events", self.min_events, 0))
+
+
+def estimate_to_precision(
+    experiment: Experiment,
+    estimator: Estimator,
+    execution: Execution,
+    precision: Precision,
+    log: Callable[[str], None] | None = None,
+) -> Result:
+    """Each incidence of ``experiment`` traced in batches (``estimate`` with the batch's rays
+    and seed, module docstring) until ``precision`` holds or ``estimator.rays`` rays were
+    traced; one surface, single bounce, no azimuth randomisation. ``log`` receives one text
+    line per batch. ``execution.progress`` is not called (a batch is not a run to report)."""
+    ex, est = experiment, estimator
+    if ex.surface_factory is not None or ex.realisations is not None:
+        raise UsageError("an auto run traces one surface: realisations must be None")
+    if ex.bounces != 1 or est.isotropic:
+        raise UsageError("an auto run traces single bounces without isotropic rotation")
+    check_progress(log, "one text line")
+    bins, max_rays = ex.bins, est.rays
     omega = bins.projected_solid_angle()
-    nbin = omega.size
-    first = -(-int(min(first, max_rays)) // BLOCK) * BLOCK
+    first = -(-int(min(precision.first, max_rays)) // BLOCK) * BLOCK
+    batch_run = replace(execution, progress=None)
     runs, info, meta0 = [], [], None
-    for i, (t_deg, p_deg) in enumerate(zip(th, ph)):
-        acc, t0, rse, batch = _Batches(nbin), time.perf_counter(), float("inf"), 0
+    for i, (t_deg, p_deg) in enumerate(zip(ex.theta_i, ex.phi_i)):
+        acc, t0, rse, batch = _Batches(omega.size), time.perf_counter(), float("inf"), 0
+        incidence = replace(ex, theta_i=(t_deg,), phi_i=(p_deg,))
         n_next = int(min(first, max_rays))
         while n_next > 0:
-            res = simulate(
-                surface,
-                material,
-                float(t_deg),
-                phi_i=float(p_deg),
-                rays=n_next,
-                bins=bins,
-                seed=_batch_seed(seed, i, batch),
-                threads=threads,
-                chunk=chunk,
-                masking=masking,
-                origins=origins,
-            )
+            seed = _batch_seed(est.seed, i, batch)
+            res = estimate(incidence, replace(est, rays=n_next, seed=seed), batch_run)
             if res.is_partial:  # interrupted (SIGINT): batches cannot resume
                 raise KeyboardInterrupt
             meta0 = meta0 or res.meta
@@ -192,16 +233,17 @@ def simulate_auto(
                 se.reshape(bins.shape),
                 acc.total.count.reshape(bins.shape),
                 omega,
-                energy,
-                min_events,
+                precision.energy,
+                precision.min_events,
             )
-            if progress is not None:
-                progress(
-                    f"theta_i = {t_deg:g}°: {acc.rays} rays, rse = {rse:.4g} (target {target:g})"
+            if log is not None:
+                log(
+                    f"theta_i = {t_deg:g}°: {acc.rays} rays, rse = {rse:.4g} "
+                    f"(target {precision.target:g})"
                 )
-            if rse <= target:
+            if rse <= precision.target:
                 break
-            n_next = _next_batch(acc.rays, rse, target, first, int(max_rays))
+            n_next = _next_batch(acc.rays, rse, precision.target, first, max_rays)
         runs.append(acc)
         info.append(
             {
@@ -210,13 +252,14 @@ def simulate_auto(
                 "batches": batch,
                 "seconds": time.perf_counter() - t0,
                 "rse": rse,
-                "converged": bool(rse <= target),
+                "converged": bool(rse <= precision.target),
             }
         )
-    return _assemble(th, ph, bins, omega, runs, meta0, info, target, energy, seed)
+    th, ph = np.array(ex.theta_i), np.array(ex.phi_i)
+    return _assemble(th, ph, bins, omega, runs, meta0, info, precision, est.seed)
 
 
-def _assemble(th, ph, bins, omega, runs, meta0, info, target, energy, seed) -> Result:
+def _assemble(th, ph, bins, omega, runs, meta0, info, precision, seed) -> Result:
     """The Result of all incidences from their pooled batches (``tallies.tally_result``;
     no raw tallies: an auto run is not resumable)."""
     est = [r.estimate(omega.ravel()) for r in runs]
@@ -240,7 +283,11 @@ def _assemble(th, ph, bins, omega, runs, meta0, info, target, energy, seed) -> R
         seed=int(seed),
         rays="auto",
         seconds=float(sum(d["seconds"] for d in info)),
-        auto={"target": float(target), "energy": float(energy), "incidences": info},
+        auto={
+            "target": float(precision.target),
+            "energy": float(precision.energy),
+            "incidences": info,
+        },
     )
     return tally_result(
         th,

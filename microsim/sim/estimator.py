@@ -30,7 +30,7 @@ import platform
 import time
 from functools import partial
 from importlib.metadata import PackageNotFoundError, version
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -45,21 +45,18 @@ from .arguments import (
     MAX_RAYS,
     MAX_THREADS,
     check_inputs,
-    check_run_options,
     is_surface,
-    realisation_source,
     surface_error,
-    thread_count,
 )
 from .bins import Bins
 from .bounces import (
     MAX_BOUNCES,
     WEIGHT_FLOOR,
-    check_bounces,
     choose_bounce_path,
     ledger_classes,
     order_slots,
 )
+from .experiment import Estimator, Execution, Experiment
 from .paths import LEDGER, MASKING, Events, Incidence, choose_path, trace_events, tracer_for
 from .progress import RaysDone
 from .result import Result
@@ -194,155 +191,89 @@ def simulate(
     masking (Embree) or ``masking="analytic"`` (V-grooves, exact float64 chain);
     ``masking="exact"`` is refused with K > 1. ``resume`` must match ``bounces`` too.
     """
-    th, ph = check_inputs(theta_i, phi_i, rays, chunk, masking, seed)
-    bounces = check_bounces(bounces)
-    if bounces != 1 and masking == "exact":
+    return estimate(
+        Experiment(
+            surface,
+            material,
+            theta_i,
+            phi_i,
+            bins,
+            bounces,
+            realisations=realisations,
+            surface_factory=surface_factory,
+            seeds=seeds,
+        ),
+        Estimator(rays, seed, masking, origins, isotropic),
+        Execution(threads, chunk, progress),
+        resume=resume,
+    )
+
+
+class _Plan(NamedTuple):
+    """What ``estimate`` derives from its descriptions before any work: realisations (count,
+    lazy getter, rays of each), bins and tally slots, blocks per realisation, blocks per
+    thread task, and the configuration a resumed run must share."""
+
+    n_real: int
+    get_surface: Callable[[int], object]
+    per_real: list
+    nbin: int
+    slots: int | None
+    nblk: np.ndarray
+    chunk_blocks: int
+    config: dict
+
+
+class _State(NamedTuple):
+    """The run's running state, updated in place in the calling thread: ``tallies[r][i]``,
+    blocks ``done`` (R, T), each realisation's surface meta."""
+
+    tallies: list
+    done: np.ndarray
+    surfaces: list
+
+
+def estimate(
+    experiment: Experiment,
+    estimator: Estimator = Estimator(),
+    execution: Execution = Execution(),
+    *,
+    resume: Result | None = None,
+) -> Result:
+    """Bin-averaged BRDF of ``experiment`` by ``estimator`` (Mikkelsen 2009, eq. 9), run as
+    ``execution`` says; ``resume``: a partial Result of the same experiment and estimator to
+    continue (``simulate`` documents every field, the interrupt and the resume). Returns a
+    ``Result`` (BRDF in sr⁻¹)."""
+    ex, est, run = experiment, estimator, execution
+    if ex.bounces != 1 and est.masking == "exact":
         raise UsageError(
             "masking='exact' decides only the first masking test exactly; with bounces "
-            f"{bounces!r} use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
+            f"{ex.bounces!r} use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
         )
-    slots = None if bounces == 1 else order_slots(bounces)
-    threads = thread_count(threads)
-    check_run_options(bins, origins, progress, "microsim.sim.RaysDone events")
-    if not isinstance(isotropic, (bool, np.bool_)):
-        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
-    ior = resolve_material(material)
-    rays, seed = int(rays), int(seed)
-    n_real, get_surface = realisation_source(surface, realisations, surface_factory, seeds, seed)
-    per_real = [rays // n_real + (r < rays % n_real) for r in range(n_real)]
-    if min(per_real) < 1:
-        raise UsageError(f"rays must be >= the number of realisations ({n_real}), got {rays}")
-    nbin = bins.shape[0] * bins.shape[1]
-    nslot = nbin * (slots or 1)  # tally slots: bins, or order slots × bins
-    check_memory(
-        "bins",
-        nslot
-        * (
-            BIN_BYTES_TALLY * n_real * len(th)
-            + BIN_BYTES_INCIDENCE * len(th)
-            + BIN_BYTES_THREAD * threads
-        ),
-        f"the tallies of {nbin:,} bins × {slots or 1} orders × {len(th)} incidences × "
-        f"{n_real} realisations",
-    )
-    chunk_blocks = max(1, int(round(int(chunk) / BLOCK)))
-    material_meta = _json_material(material, ior)
-    isotropic = bool(isotropic)
-    config = _run_config(
-        th, ph, bins, seed, rays, masking, origins, material_meta, n_real, isotropic, bounces
-    )
-    if resume is None:
-        classes = ledger_classes(bounces)
-        tallies = [[Tally.empty(nslot, classes) for _ in th] for _ in range(n_real)]
-        done = np.zeros((n_real, len(th)), dtype=np.int64)
-        surfaces_meta = [None] * n_real
-    else:
-        tallies, done, surfaces_meta = _resume_state(resume, config, n_real, len(th))
-        extra = n_real - len(tallies)  # realisations the resumed run did not have
-        if extra:
-            classes = ledger_classes(bounces)
-            tallies += [[Tally.empty(nslot, classes) for _ in th] for _ in range(extra)]
-            done = np.vstack([done, np.zeros((extra, len(th)), dtype=np.int64)])
-            surfaces_meta += [None] * extra
-    nblk = np.array([-(-n // BLOCK) for n in per_real], dtype=np.int64)
-    done_before = done.copy()
-    timings, build, interrupted = [], 0.0, False
+    plan = _plan(ex, est, run)
+    state = _start(plan, ex, resume)
+    done_before = state.done.copy()
     t_all = time.perf_counter()
-    pool = thread_pool(threads)
-    with DeferredInterrupt() as stop:
-        try:
-            for r in range(n_real):
-                if np.all(done[r] >= nblk[r]):
-                    continue
-                t0 = time.perf_counter()
-                surf = get_surface(r)
-                smeta = _surface_meta(surf)
-                _check_same_surface(surfaces_meta[r], smeta, r)
-                # one surface: keep its tracer for the next call (``tracer_for``); several:
-                # each realisation's tracer is released once it is traced
-                reuse = smeta["fingerprint"] if n_real == 1 else None
-                tracer, profile, azimuth = tracer_for(surf, masking, reuse)
-                build += time.perf_counter() - t0
-                surfaces_meta[r] = {
-                    **smeta,
-                    "eps": tracer.eps,
-                    "max_wraps": tracer.max_wraps,
-                    "grid_walk": tracer.grid is not None,
-                }
-                for i, (t_deg, p_deg) in enumerate(zip(th, ph)):
-                    if stop.is_set():  # SIGINT while building the surface
-                        raise KeyboardInterrupt
-                    start, end = int(done[r, i]), int(nblk[r])
-                    if start >= end:
-                        continue
-                    incidence = Incidence(
-                        tracer,
-                        spherical_deg(t_deg, p_deg),
-                        p_deg,
-                        bins,
-                        ior,
-                        per_real[r],
-                        (seed, r, i),
-                        origins,
-                    )
-                    if slots is None:
-                        path = choose_path(incidence, profile, azimuth, isotropic, pool, threads)
-                        task = partial(chunk_tallies, path, nbin)
-                    else:
-                        path = choose_bounce_path(
-                            incidence, profile, azimuth, isotropic, bounces, nbin, pool, threads
-                        )
-                        task = partial(chunk_order_tallies, path, nslot)
-
-                    def tally(chunk, r=r, i=i, t_deg=t_deg):
-                        """Add one chunk (calling thread, block order), then report it."""
-                        before = min(int(done[r, i]) * BLOCK, per_real[r])
-                        done[r, i] += tallies[r][i].add_chunk(chunk)
-                        after = min(int(done[r, i]) * BLOCK, per_real[r])
-                        if progress is not None:
-                            progress(
-                                RaysDone(
-                                    realisation=r,
-                                    realisations=n_real,
-                                    incidence=i,
-                                    theta_i=float(t_deg),
-                                    rays=after - before,
-                                    finished=bool(done[r, i] >= nblk[r]),
-                                )
-                            )
-                        checkpoint("simulation")
-
-                    run_in_order(
-                        pool,
-                        task,
-                        chunk_groups(start, end, chunk_blocks, threads),
-                        IN_FLIGHT * threads,
-                        stop,
-                        tally,
-                    )
-                    del path, task
-                timings.append(time.perf_counter() - t0)
-                del tracer, profile
-        except KeyboardInterrupt:
-            interrupted = True
+    timings, build, interrupted = _trace(plan, state, ex, est, run)
     elapsed = time.perf_counter() - t_all
-    n_done = np.minimum(done * BLOCK, np.array(per_real)[:, None])
-    traced = int(n_done.sum() - np.minimum(done_before * BLOCK, np.array(per_real)[:, None]).sum())
+    per_real = np.array(plan.per_real)[:, None]
+    n_done = np.minimum(state.done * BLOCK, per_real)
+    traced = int(n_done.sum() - np.minimum(done_before * BLOCK, per_real).sum())
     meta = {
-        "surface": surfaces_meta[0],
-        "realisations": surfaces_meta if n_real > 1 else None,
-        "material": material_meta,
-        "seed": seed,
-        "rays": rays,
-        "masking": masking,
-        "origins": origins,
-        "isotropic": isotropic,
-        "stderr_method": "pairs" if origins == "stratified" and not isotropic else "per-ray",
-        "partial": bool(np.any(done < nblk[:, None])),
+        "surface": state.surfaces[0],
+        "realisations": state.surfaces if plan.n_real > 1 else None,
+        "material": plan.config["material"],
+        "seed": est.seed,
+        "rays": est.rays,
+        "masking": est.masking,
+        "origins": est.origins,
+        "isotropic": est.isotropic,
+        "stderr_method": est.stderr_method,
+        "partial": bool(np.any(state.done < plan.nblk[:, None])),
         "interrupted": interrupted,
         "resumed": resume is not None,
-        "threads": int(threads),
-        "chunk_blocks": chunk_blocks,
+        "threads": run.threads,
+        "chunk_blocks": plan.chunk_blocks,
         "block": BLOCK,
         "versions": _versions(),
         "seconds": elapsed,
@@ -351,11 +282,161 @@ def simulate(
         "rays_traced": traced,
         "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None,
     }
-    if bounces != 1:  # absent: 1 (single-bounce results keep their meta)
-        meta["bounces"] = bounces
+    if ex.bounces != 1:  # absent: 1 (single-bounce results keep their meta)
+        meta["bounces"] = ex.bounces
         meta["max_bounces"] = MAX_BOUNCES
-        meta["weight_floor"] = WEIGHT_FLOOR if bounces == "all" else 0.0
-    return simulation_result(th, ph, bins, tallies, n_done, per_real, done, meta, slots)
+        meta["weight_floor"] = WEIGHT_FLOOR if ex.bounces == "all" else 0.0
+    th, ph = np.array(ex.theta_i), np.array(ex.phi_i)
+    return simulation_result(
+        th, ph, ex.bins, state.tallies, n_done, plan.per_real, state.done, meta, plan.slots
+    )
+
+
+def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
+    """The run's realisations, tally slots and blocks; the tallies' memory checked up front
+    (``BIN_BYTES_*``)."""
+    n_real, get_surface = ex.surfaces(est.seed)
+    per_real = [est.rays // n_real + (r < est.rays % n_real) for r in range(n_real)]
+    if min(per_real) < 1:
+        raise UsageError(f"rays must be >= the number of realisations ({n_real}), got {est.rays}")
+    slots = None if ex.bounces == 1 else order_slots(ex.bounces)
+    nbin = ex.bins.shape[0] * ex.bins.shape[1]
+    nslot, n_th = nbin * (slots or 1), len(ex.theta_i)  # tally slots: bins, or orders × bins
+    check_memory(
+        "bins",
+        nslot
+        * (
+            BIN_BYTES_TALLY * n_real * n_th
+            + BIN_BYTES_INCIDENCE * n_th
+            + BIN_BYTES_THREAD * run.threads
+        ),
+        f"the tallies of {nbin:,} bins × {slots or 1} orders × {n_th} incidences × "
+        f"{n_real} realisations",
+    )
+    config = _run_config(
+        ex.theta_i,
+        ex.phi_i,
+        ex.bins,
+        est.seed,
+        est.rays,
+        est.masking,
+        est.origins,
+        _json_material(ex.material, ex.ior),
+        n_real,
+        est.isotropic,
+        ex.bounces,
+    )
+    nblk = np.array([-(-n // BLOCK) for n in per_real], dtype=np.int64)
+    chunk_blocks = max(1, int(round(run.chunk / BLOCK)))
+    return _Plan(n_real, get_surface, per_real, nbin, slots, nblk, chunk_blocks, config)
+
+
+def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
+    """Empty tallies, or those of ``resume`` (plus empty ones for realisations it lacks)."""
+    n_th, nslot = len(ex.theta_i), plan.nbin * (plan.slots or 1)
+    classes = ledger_classes(ex.bounces)
+    if resume is None:
+        tallies, done, metas = [], np.zeros((0, n_th), dtype=np.int64), []
+    else:
+        tallies, done, metas = _resume_state(resume, plan.config, plan.n_real, n_th)
+    extra = plan.n_real - len(tallies)  # realisations not started
+    tallies += [[Tally.empty(nslot, classes) for _ in range(n_th)] for _ in range(extra)]
+    done = np.vstack([done, np.zeros((extra, n_th), dtype=np.int64)])
+    return _State(tallies, done, metas + [None] * extra)
+
+
+def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Execution):
+    """Trace every block not yet done, realisation by realisation, incidence by incidence;
+    (seconds per realisation, seconds building surfaces and tracers, interrupted)."""
+    timings, build, interrupted = [], 0.0, False
+    pool = thread_pool(run.threads)
+    with DeferredInterrupt() as stop:
+        try:
+            for r in range(plan.n_real):
+                if np.all(state.done[r] >= plan.nblk[r]):
+                    continue
+                t0 = time.perf_counter()
+                surf = plan.get_surface(r)
+                smeta = _surface_meta(surf)
+                _check_same_surface(state.surfaces[r], smeta, r)
+                # one surface: keep its tracer for the next call (``tracer_for``); several:
+                # each realisation's tracer is released once it is traced
+                reuse = smeta["fingerprint"] if plan.n_real == 1 else None
+                prepared = tracer_for(surf, est.masking, reuse)
+                build += time.perf_counter() - t0
+                tracer = prepared[0]
+                state.surfaces[r] = {
+                    **smeta,
+                    "eps": tracer.eps,
+                    "max_wraps": tracer.max_wraps,
+                    "grid_walk": tracer.grid is not None,
+                }
+                del tracer
+                for i in range(len(ex.theta_i)):
+                    if stop.is_set():  # SIGINT while building the surface
+                        raise KeyboardInterrupt
+                    _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop)
+                timings.append(time.perf_counter() - t0)
+                del prepared
+        except KeyboardInterrupt:
+            interrupted = True
+    return timings, build, interrupted
+
+
+def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> None:
+    """Trace the blocks of (realisation ``r``, incidence ``i``) not yet done on ``pool`` and
+    tally them in block order in the calling thread, reporting each chunk to ``progress``."""
+    start, end = int(state.done[r, i]), int(plan.nblk[r])
+    if start >= end:
+        return
+    tracer, profile, azimuth = prepared
+    t_deg, p_deg = ex.theta_i[i], ex.phi_i[i]
+    incidence = Incidence(
+        tracer,
+        spherical_deg(t_deg, p_deg),
+        p_deg,
+        ex.bins,
+        ex.ior,
+        plan.per_real[r],
+        (est.seed, r, i),
+        est.origins,
+    )
+    if plan.slots is None:
+        path = choose_path(incidence, profile, azimuth, est.isotropic, pool, run.threads)
+        task = partial(chunk_tallies, path, plan.nbin)
+    else:
+        path = choose_bounce_path(
+            incidence, profile, azimuth, est.isotropic, ex.bounces, plan.nbin, pool, run.threads
+        )
+        task = partial(chunk_order_tallies, path, plan.nbin * plan.slots)
+    rays, done, tally_ri = plan.per_real[r], state.done, state.tallies[r][i]
+
+    def tally(chunk):
+        """Add one chunk (calling thread, block order), then report it."""
+        before = min(int(done[r, i]) * BLOCK, rays)
+        done[r, i] += tally_ri.add_chunk(chunk)
+        after = min(int(done[r, i]) * BLOCK, rays)
+        if run.progress is not None:
+            run.progress(
+                RaysDone(
+                    realisation=r,
+                    realisations=plan.n_real,
+                    incidence=i,
+                    theta_i=float(t_deg),
+                    rays=after - before,
+                    finished=bool(done[r, i] >= plan.nblk[r]),
+                )
+            )
+        checkpoint("simulation")
+
+    run_in_order(
+        pool,
+        task,
+        chunk_groups(start, end, plan.chunk_blocks, run.threads),
+        IN_FLIGHT * run.threads,
+        stop,
+        tally,
+    )
 
 
 def ray_events(

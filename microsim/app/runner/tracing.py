@@ -15,7 +15,7 @@ from dataclasses import asdict, replace
 import numpy as np
 
 from ...analysis.budget import error_budget, realisations_needed
-from ...sim import simulate
+from ...sim import Estimator, Execution, Experiment, estimate
 from ...sim.auto import simulate_auto
 from .planning import AUTO_TARGET, RunPlan, tally_settings
 
@@ -60,7 +60,7 @@ def simulate_scene(
     bounces=1,
     surface=None,
 ):
-    """``simulate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence over
+    """``estimate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence over
     ``realisations`` surfaces: True = the plan's, False = one (seed ``seed``), or a count;
     ``bounces``: scattering orders traced (``simulate``; the side studies trace one).
     ``surface``: that one realisation already built (``scene_surface``), so that repeated
@@ -72,20 +72,19 @@ def simulate_scene(
         raise ValueError("simulate_scene: a prebuilt surface is one realisation")
     surface, reals = (surface, None) if surface is not None else surface_source(sc, seed, scale, n)
     factory, seeds = reals if reals is not None else (None, None)
-    return simulate(
-        surface,
-        sc.ior,
-        list(theta_i),
-        rays=rays,
-        bins=bins,
-        seed=seed,
-        threads=plan.threads,
-        surface_factory=factory,
-        seeds=seeds,
-        progress=progress,
-        origins=origins,
+    return estimate(
+        Experiment(
+            surface,
+            sc.ior,
+            tuple(theta_i),
+            bins=bins,
+            bounces=bounces,
+            surface_factory=factory,
+            seeds=seeds,
+        ),
+        Estimator(rays, seed, origins=origins),
+        Execution(plan.threads, progress=progress),
         resume=resume,
-        bounces=bounces,
     )
 
 
