@@ -11,7 +11,7 @@ import pytest
 
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.sim import BLOCK, Bins, paths, streams
-from microsim.sim.scratch import work
+from microsim.sim.scratch import WorkArray, WorkColumns
 from microsim.sim.tallies import Tally, split_tallies
 from microsim.sim.tracer import CLEAR_MARGIN, Tracer
 from microsim.surfaces.surface import flat
@@ -270,16 +270,35 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
     assert 0 < table.clear.sum() < (want == paths.SINGLE).sum()
 
 
-def test_work_arrays_are_reused_per_name_and_thread():
-    a = work("test-a", 100)
-    assert np.shares_memory(a, work("test-a", (10, 10)))  # same buffer, new view
-    assert not np.shares_memory(a, work("test-b", 100))
-    assert work("test-a", 1000).size == 1000  # grows when too small
+def test_work_arrays_are_reused_per_declaration_generation_and_thread():
+    a, b = WorkArray("test-a"), WorkArray("test-b", np.int32, columns=3)
+    x = a(100)
+    assert np.shares_memory(x, a(50))  # same buffer, new view
+    assert not np.shares_memory(x, b(100)) and b(7).shape == (7, 3) and b(7).dtype == np.int32
+    assert a(1000).size == 1000  # grows when too small
+    g = WorkArray("test-g", generations=2)
+    assert not np.shares_memory(g(10, 0), g(10, 1))
+    assert WorkArray("test-r", rows=3)(5).shape == (3, 5)
+    cols = WorkColumns("test-c")(4)
+    assert len(cols) == 3 and not np.shares_memory(cols[0], cols[1])
     other = {}
-    t = threading.Thread(target=lambda: other.setdefault("a", work("test-a", 100)))
+    t = threading.Thread(target=lambda: other.setdefault("a", a(100)))
     t.start()
     t.join()
-    assert not np.shares_memory(work("test-a", 100), other["a"])  # per thread
+    assert not np.shares_memory(a(100), other["a"])  # per thread
+    with pytest.raises(ValueError, match="declared twice"):
+        WorkArray("test-a")
+
+
+def test_every_work_array_of_the_pipeline_is_declared_once():
+    """The pipeline's modules declare their work arrays at import, each name once (a clash
+    would raise on import); the tracer's, the masking rays' and the bounce chain's exist."""
+    import microsim.sim.bounces  # noqa: F401  (imports paths, tracer, streams, tallies)
+    from microsim.sim.scratch import declared
+
+    names = declared()
+    for name in ("walk-o32", "masking-ray", "bounce-next-live", "chunk-origin-x", "tally-sums"):
+        assert name in names
 
 
 def test_rays_rounding_onto_a_wall_still_hit():

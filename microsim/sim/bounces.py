@@ -60,6 +60,7 @@ from .paths import (
     ANALYTIC_BATCH,
     LEDGER,
     FacetTable,
+    GrooveFrameWork,
     Incidence,
     TracePath,
     _columns,
@@ -68,7 +69,7 @@ from .paths import (
     primary_hits,
     uses_facet_table,
 )
-from .scratch import work
+from .scratch import WorkArray, WorkColumns
 from .streams import block_rotation
 from .tracer import UNRESOLVED, Tracer, VGrooveCaster
 
@@ -111,6 +112,19 @@ TERMINAL = (
 ORDER_NAMES = ("1", "2", "3", "4+")
 """Labels of the order slots of ``Result.brdf_orders``."""
 assert len(TERMINAL) == codes.N_TERMINAL and codes.PATH_MISSED == len(TERMINAL) - 1
+
+
+# this thread's work arrays (``scratch``): a chain's first facets, each step's escapes and the
+# next step's rays (two generations: step b writes what step b + 1 reads)
+_BOUNCE_FRAME = GrooveFrameWork.declare("bounce-frame")
+_BOUNCE_FACET = WorkArray("bounce-facet", np.int64)
+_BOUNCE_ESCAPE = WorkArray("bounce-escape", np.int64)
+_BOUNCE_ESCAPE_DIRECTION = WorkColumns("bounce-escape-direction")
+_NEXT_LIVE = WorkArray("bounce-next-live", np.int64, generations=2)
+_NEXT_START = WorkColumns("bounce-next-start", generations=2)
+_NEXT_DIRECTION = WorkColumns("bounce-next-direction", generations=2)
+_NEXT_D32 = WorkArray("bounce-next-d32", np.float32, columns=3, generations=2)
+_NEXT_WEIGHT = WorkArray("bounce-next-weight", generations=2)
 
 
 def check_bounces(bounces):
@@ -184,7 +198,7 @@ def trace_bounces(
         hs, prim, p = primary_hits(tracer, x, [float(c[0]) for c in d], d32)
         shared, phi = True, float(phi_i)
     else:
-        _, d, d32 = groove_frame_rays(psi, wi, "bounce-")
+        _, d, d32 = groove_frame_rays(psi, wi, _BOUNCE_FRAME)
         hs, prim, p = tracer.trace_columns(x, d, d32)
         shared, phi = False, phi_i - np.degrees(psi)
     live = np.arange(n, dtype=np.int64)
@@ -195,7 +209,7 @@ def trace_bounces(
     use_table = table is not None and psi is None
     tab_weight = table.weight if use_table else np.zeros(1)
     tab_bin = table.bin if use_table else np.zeros(1, dtype=np.int32)
-    first_facet = work("bounce-facet", n if use_table else 1, np.int64)
+    first_facet = _BOUNCE_FACET(n if use_table else 1)
     facets = bounce_kernels.FacetPlanes(*ncols, lift, hx, hy)
     material = fresnel_kernels.FresnelMaterial(n2, k2, mode)
     ledger = bounce_kernels.PathLedger(status1, weight1, term, wterm, where)
@@ -203,14 +217,10 @@ def trace_bounces(
     b = 1
     while True:
         k = len(live)
-        par = f"bounce{b % 2}-"  # written at this step, read by the next
-        esc = work("bounce-esc", k, np.int64)
-        ed = [work("bounce-ed" + a, k) for a in "xyz"]
-        nlive = work(par + "live", k, np.int64)
-        s = [work(par + "s" + a, k) for a in "xyz"]
-        nd = [work(par + "d" + a, k) for a in "xyz"]
-        nd32 = work(par + "d32", (k, 3), np.float32)
-        nw = work(par + "w", k)
+        par = b % 2  # generation: written at this step, read by the next
+        esc, ed = _BOUNCE_ESCAPE(k), _BOUNCE_ESCAPE_DIRECTION(k)
+        nlive, s, nd = _NEXT_LIVE(k, par), _NEXT_START(k, par), _NEXT_DIRECTION(k, par)
+        nd32, nw = _NEXT_D32(k, par), _NEXT_WEIGHT(k, par)
         m, e = bounce_kernels.bounce_step(
             b,
             limit,

@@ -49,6 +49,7 @@ import threading
 import weakref
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,7 +59,7 @@ from microsim.errors import UsageError
 from . import bin_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
 from .engine import codes, primary, segments
-from .scratch import work
+from .scratch import WorkArray, WorkColumns
 from .streams import BLOCK, block_rotation, block_span, chunk_origins, groove_starts
 from .tracer import (
     ESCAPED,
@@ -82,6 +83,7 @@ __all__ = [
     "MASKING",
     "Events",
     "tracer_for",
+    "GrooveFrameWork",
     "trace_events",
     "Incidence",
     "TracePath",
@@ -328,7 +330,7 @@ def facet_table(
     fresnel_args = fresnel_kernels.fresnel_mode(ior)
 
     def fill(part: slice) -> None:
-        wo = [work("table-wo-" + a, part.stop - part.start) for a in "xyz"]
+        wo = _TABLE_WO(part.stop - part.start)
         fresnel_kernels.facet_mirror(
             *(a[part] for a in ncols),
             *wi,
@@ -388,16 +390,8 @@ class MaskingRays:
 
     @classmethod
     def work(cls, n: int) -> "MaskingRays":
-        return cls(
-            work("masking-ray", n, np.int64),
-            [work("masking-start-" + a, n) for a in "xyz"],
-            [work("masking-d-" + a, n) for a in "xyz"],
-            work("masking-d32", (n, 3), np.float32),
-            work("masking-o32", (n, 3), np.float32),
-            work("masking-tfar", n, np.float32),
-            work("masking-keep", n, np.int64),
-            work("masking-top", n, np.bool_),
-        )
+        """This thread's masking rays for ``n`` primary rays (``scratch``)."""
+        return cls(*(declared(n) for declared in _MASKING_RAYS))
 
     def kernel_args(self) -> tuple:
         """The arrays in the kernels' argument order (mi, sx…sz, mdx…mdz, md32, o32, tq,
@@ -418,6 +412,30 @@ class MaskingRays:
         primary.apply_escape(status, self.ray[:m], esc, _FROM_ESCAPE)
 
 
+# this thread's work arrays (``scratch``)
+_MASKING_RAYS = (  # MaskingRays' fields, in order
+    WorkArray("masking-ray", np.int64),
+    WorkColumns("masking-start"),
+    WorkColumns("masking-direction"),
+    WorkArray("masking-d32", np.float32, columns=3),
+    WorkArray("masking-o32", np.float32, columns=3),
+    WorkArray("masking-tfar", np.float32),
+    WorkArray("masking-keep", np.int64),
+    WorkArray("masking-top", np.bool_),
+)
+_PRIMARY_SEGMENT = (  # falling_first_segment's (o32, tfar, keep, top)
+    WorkArray("primary-o32", np.float32, columns=3),
+    WorkArray("primary-tfar", np.float32),
+    WorkArray("primary-keep", np.int64),
+    WorkArray("primary-top", np.bool_),
+)
+_TABLE_WO = WorkColumns("table-wo")
+_NEAR_EDGE = WorkArray("near-edge", np.bool_)
+_TRACED_WO = WorkColumns("traced-wo")
+_TRACED_COSINE = WorkArray("traced-cosine")
+_ANALYTIC_WO = WorkColumns("analytic-wo")
+
+
 def falling_first_segment(tracer: Tracer, x, down) -> tuple:
     """The first segment's Embree input (o32, tfar, keep, top) of rays from x (3 columns,
     inside the tile: ``Tracer.holds``) along falling directions ``down`` (3 floats: one
@@ -429,12 +447,7 @@ def falling_first_segment(tracer: Tracer, x, down) -> tuple:
     d = [np.array([float(c)]) for c in down] if shared else down
     if not (tracer.holds(x) and np.all(d[2] < 0)):
         return None
-    first = (
-        work("primary-o32", (n, 3), np.float32),
-        work("primary-tfar", n, np.float32),
-        work("primary-keep", n, np.int64),
-        work("primary-top", n, np.bool_),
-    )
+    first = tuple(declared(n) for declared in _PRIMARY_SEGMENT)
     segments.falling_first_segment(*x, *d, shared, *_segment_geometry(tracer), *first)
     return first
 
@@ -500,14 +513,32 @@ def _columns(origins) -> list:
     return [np.ascontiguousarray(c, dtype=np.float64) for c in origins]
 
 
-def groove_frame_rays(psi, wi, prefix: str) -> tuple:
+class GrooveFrameWork(NamedTuple):
+    """The work arrays (``scratch``) of ``groove_frame_rays``: the rotated wi and the ray
+    direction −wl (3 columns each) and its float32 (N, 3) copy."""
+
+    wl: WorkColumns
+    down: WorkColumns
+    d32: WorkArray
+
+    @classmethod
+    def declare(cls, name: str) -> "GrooveFrameWork":
+        return cls(
+            WorkColumns(name + "-wl"),
+            WorkColumns(name + "-down"),
+            WorkArray(name + "-d32", np.float32, columns=3),
+        )
+
+
+_TRACED_FRAME = GrooveFrameWork.declare("traced-frame")
+
+
+def groove_frame_rays(psi, wi, scratch: GrooveFrameWork) -> tuple:
     """Per ray, wi rotated by −ψ into its groove frame: (wl, down, d32) — the rotated wi and
     the ray direction −wl as 3 columns each and its float32 (N, 3) copy
-    (``vgroove_kernels.groove_frame_directions``), in this thread's work arrays named ``prefix``…"""
+    (``vgroove_kernels.groove_frame_directions``), in this thread's ``scratch`` arrays."""
     n = len(psi)
-    wl = [work(prefix + "wl-" + a, n) for a in "xyz"]
-    down = [work(prefix + "down-" + a, n) for a in "xyz"]
-    d32 = work(prefix + "d32", (n, 3), np.float32)
+    wl, down, d32 = scratch.wl(n), scratch.down(n), scratch.d32(n)
     vgroove_kernels.groove_frame_directions(
         np.ascontiguousarray(psi, dtype=np.float64),
         np.asarray(wi, dtype=np.float64),
@@ -532,7 +563,7 @@ def locate_single(bins: Bins, status, wo, phi_i: float, psi, where) -> None:
             float(phi_i),
             bins.n_theta,
             bins.phi_edges,
-            work("near-edge", len(status), np.bool_),
+            _NEAR_EDGE(len(status)),
             where,
         )
         return
@@ -557,11 +588,10 @@ def trace_columns(tracer: Tracer, profile, wi, phi_i, bins: Bins, origins, psi, 
         down = [-float(c) for c in wi]
         hs, prim, p = primary_hits(tracer, x, down, np.array([down], dtype=np.float32))
     else:
-        wl, down, d32 = groove_frame_rays(psi, wi, "traced-")
+        wl, down, d32 = groove_frame_rays(psi, wi, _TRACED_FRAME)
         hs, prim, p = primary_hits(tracer, x, down, d32)
     status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
-    wo = [work("traced-wo-" + a, n) for a in "xyz"]
-    cosine = work("traced-cosine", n)
+    wo, cosine = _TRACED_WO(n), _TRACED_COSINE(n)
     mask = MaskingRays.work(n)
     mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
     m = primary.traced_primary(
@@ -602,7 +632,7 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
     if out is None:
         out = np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
     status, weight, where = out
-    wo = [work("analytic-wo-" + a, 0 if bins.folded else n) for a in "xyz"]
+    wo = _ANALYTIC_WO(0 if bins.folded else n)
     vgroove_kernels.analytic_vgroove(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),

@@ -24,7 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from . import origin_kernels
-from .scratch import work
+from .scratch import WorkArray, WorkColumns
 from .tracer import Tracer
 
 __all__ = [
@@ -47,6 +47,13 @@ ROTATION_STREAM = 0x150
 """Extra key of the per-block incidence-azimuth generator (``block_rotation``)."""
 
 _streams = threading.local()
+# this thread's work arrays (``scratch``): a chunk's origins, azimuths and uniforms
+_CHUNK_ORIGIN = WorkColumns("chunk-origin")
+_CHUNK_PSI = WorkArray("chunk-psi")
+_CHUNK_UNIFORM = WorkArray("chunk-uniform")
+_GROOVE_UNIFORM = WorkArray("groove-uniform")
+_GROOVE_X = WorkArray("groove-x")
+_GROOVE_PSI = WorkArray("groove-psi")
 
 
 @functools.lru_cache(maxsize=64)
@@ -98,13 +105,13 @@ def chunk_origins(
     """
     blocks = list(blocks)
     lo, n = block_span(n_total, blocks)
-    x, y, z = (work("chunk-" + a, n) for a in "xyz")
+    x, y, z = _CHUNK_ORIGIN(n)
     z.fill(tracer.zmax + tracer.top_margin)
-    psi = work("chunk-psi", n if azimuth else 0)
+    psi = _CHUNK_PSI(n if azimuth else 0)
     lx, ly = tracer.tile
     per_ray = 3 if azimuth else 2
     rng = block_generator(key, blocks[0], per_ray)  # consecutive slots from here on
-    u = work("chunk-uniform", per_ray * n)  # ξ, η (, ψ/2π) of each block in turn
+    u = _CHUNK_UNIFORM(per_ray * n)  # ξ, η (, ψ/2π) of each block in turn
     rng.random(out=u)
     if origins == "independent":
         for b in blocks:
@@ -145,14 +152,14 @@ def groove_starts(tracer: Tracer, n_total: int, blocks, key):
     lo, n = block_span(n_total, blocks)
     lx, ly = tracer.tile
     rng = block_generator(key, blocks[0], 3)  # consecutive slots from here on
-    u = work("groove-uniform", 2 * n)  # ξ, then ψ/2π, of each block in turn
+    u = _GROOVE_UNIFORM(2 * n)  # ξ, then ψ/2π, of each block in turn
     for b in blocks:
         k = b * BLOCK - lo
         m = min(n - k, BLOCK)
         rng.random(out=u[2 * k : 2 * k + m])
         rng.bit_generator.advance(m)  # η
         rng.random(out=u[2 * k + m : 2 * k + 2 * m])
-    x, psi = work("groove-x", n), work("groove-psi", n)
+    x, psi = _GROOVE_X(n), _GROOVE_PSI(n)
     rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
     origin_kernels.stratified_groove_starts(
         u, lo, n, BLOCK, float(n_total), float(rows), float(lx), tracer.groove_strata, x, psi

@@ -36,7 +36,7 @@ from .bins import Bins
 from .bounces import TERMINAL
 from .paths import DOWNWARD, LEDGER, MASKED
 from .result import Result
-from .scratch import work
+from .scratch import WorkArray
 from .streams import BLOCK
 
 __all__ = [
@@ -59,6 +59,12 @@ TALLY_NAMES = ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair")
 """The running sums of a ``Tally``, in its field order (keys of ``Result.tallies``)."""
 
 
+# this thread's work arrays (``scratch``): a chunk's compacted events per bin
+_TALLY_BIN = WorkArray("tally-bin", np.int64)
+_TALLY_SUMS = WorkArray("tally-sums", rows=3)
+_TALLY_COUNT = WorkArray("tally-count", np.int64)
+
+
 def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTallies":
     """Per-block tallies of a batch of whole blocks (``tally_kernels.block_tallies``): for each
     block, its bins (sparse: only those it touches) with Σw, Σw², counts and Σ_pairs w w', and
@@ -71,8 +77,8 @@ def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTall
     same bin. A trailing unpaired ray (odd last block) has no partner and adds nothing."""
     n = len(status)
     acc, touched = np.zeros((3, nbin)), np.zeros(nbin, dtype=np.int64)
-    out_bin, out_sums = work("tally-bin", n, np.int64), work("tally-sums", (3, n))
-    out_cnt, offsets = work("tally-count", n, np.int64), np.empty(n_blocks + 1, dtype=np.int64)
+    out_bin, out_sums, out_cnt = _TALLY_BIN(n), _TALLY_SUMS(n), _TALLY_COUNT(n)
+    offsets = np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, len(LEDGER)), dtype=np.int64)
     lf = np.zeros((n_blocks, len(LEDGER)))
     tally_kernels.block_tallies(
@@ -98,8 +104,8 @@ def split_order_tallies(status1, weight1, term, wterm, where, n_blocks: int, nbi
     n = len(term)
     ncls = len(LEDGER) + len(TERMINAL)
     acc, touched = np.zeros((3, nbin_total)), np.zeros(nbin_total, dtype=np.int64)
-    out_bin, out_sums = work("tally-bin", n, np.int64), work("tally-sums", (3, n))
-    out_cnt, offsets = work("tally-count", n, np.int64), np.empty(n_blocks + 1, dtype=np.int64)
+    out_bin, out_sums, out_cnt = _TALLY_BIN(n), _TALLY_SUMS(n), _TALLY_COUNT(n)
+    offsets = np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, ncls), dtype=np.int64)
     lf = np.zeros((n_blocks, ncls))
     tally_kernels.order_block_tallies(

@@ -49,7 +49,7 @@ from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 from . import embree_packets
 from .engine import codes, horizon, segments
 from .heightfield_caster import cast_falling, heightfield_grid
-from .scratch import work
+from .scratch import WorkArray, WorkColumns
 
 __all__ = [
     "Tracer",
@@ -163,6 +163,20 @@ GROOVE_CLEAR_EPS = 64.0
 (``VGrooveProfile.margin_from_rim``) is below −this × ``Tracer.eps``: 32 times the start
 offset of a traced masking ray, far beyond Embree's float32 error, so Embree would have let it
 pass too (tested by tracing the cleared rays anyway)."""
+# this thread's work arrays (``scratch``): one walk's per-segment rays (the next segment's in
+# two generations) and the grid walk's hits
+_WALK_O32 = WorkArray("walk-o32", np.float32, columns=3)
+_WALK_D32 = WorkArray("walk-d32", np.float32, columns=3)
+_WALK_TFAR = WorkArray("walk-tfar", np.float32)
+_WALK_KEEP = WorkArray("walk-keep", np.int64)
+_WALK_TOP = WorkArray("walk-top", np.bool_)
+_NEXT_LIVE = WorkArray("walk-next-live", np.int64, generations=2)
+_NEXT_START = WorkColumns("walk-next-start", generations=2)
+_NEXT_DIRECTION = WorkColumns("walk-next-direction", generations=2)
+_NEXT_D32 = WorkArray("walk-next-d32", np.float32, columns=3, generations=2)
+_CAST_STATUS = WorkArray("cast-status", np.int8)
+_CAST_PRIM = WorkArray("cast-prim", np.int32)
+_CAST_POINT = WorkColumns("cast-point")
 _NO_GROOVES = (np.empty(0), np.empty(0), np.empty(0), np.empty(0), 0.0)
 _NO_STRATA = (np.empty(0), 0.0)
 
@@ -393,11 +407,8 @@ class Tracer:
         point = [np.empty(0 if occlusion else n) for _ in range(3)]
         live = _identity(n)  # read only: the next segment's live rays are a new array
         # per-segment work arrays (this thread's, reused; sized for the first, largest segment)
-        o32 = work("walk-o32", (n, 3), np.float32)
-        d32k = work("walk-d32", (0, 3) if shared else (n, 3), np.float32)
-        tq = work("walk-tfar", n, np.float32)
-        keep = work("walk-keep", n, np.int64)
-        top = work("walk-top", n, np.bool_)
+        o32, d32k = _WALK_O32(n), _WALK_D32(0 if shared else n)
+        tq, keep, top = _WALK_TFAR(n), _WALK_KEEP(n), _WALK_TOP(n)
         query = "OCCLUDED" if occlusion else "INTERSECT"
         no_tfar = np.empty(0, dtype=np.float32)
         hx, hy = float(self.half[0]), float(self.half[1])
@@ -438,11 +449,11 @@ class Tracer:
                 k, pid, tfar = len(rest), pid[rest], tfar[rest]
                 keep_, top_ = keep_[rest], top_[rest]
                 d32k_ = d32k_ if shared else d32k_[rest]
-            nxt = f"walk-next{segment % 2}-"  # written here, read by the next segment
-            m_live = work(nxt + "live", k, np.int64)
-            nx_ = [work(nxt + a, k) for a in "xyz"]
-            nd = [work(nxt + "d" + a, 0 if shared else k) for a in "xyz"]
-            nd32 = work(nxt + "d32", (0, 3) if shared else (k, 3), np.float32)
+            nxt = segment % 2  # generation: written here, read by the next segment
+            m_live = _NEXT_LIVE(k, nxt)
+            nx_ = _NEXT_START(k, nxt)
+            nd = _NEXT_DIRECTION(0 if shared else k, nxt)
+            nd32 = _NEXT_D32(0 if shared else k, nxt)
             m = segments.segment_finish(
                 k,
                 pid,
@@ -492,8 +503,7 @@ class Tracer:
         n = len(x[0])
         if run > GRID_WALK_CELLS or (n and x[2].min() < self.zmax):
             return None
-        status, prim = work("cast-status", n, np.int8), work("cast-prim", n, np.int32)
-        point = [work("cast-" + a, n) for a in "xyz"]
+        status, prim, point = _CAST_STATUS(n), _CAST_PRIM(n), _CAST_POINT(n)
         geometry = g.geometry(self.zmin, self.zmax, self.max_wraps)
         cast_falling(*x, *(float(c) for c in down), geometry, status, prim, *point)
         return status, prim, point
