@@ -195,6 +195,10 @@ def _setup_option(case, tmp_path):
         (tmp_path / "o").mkdir()
         (tmp_path / "o" / "tasks").write_text("x")
         return ["--out", str(tmp_path / "o")], 2, [str(tmp_path / "o" / "tasks")], ["o"]
+    if case == "out-is-cwd":  # the checks every output path gets, as for microsim run
+        return ["--out", "."], 2, ["--out", "current directory"], []
+    if case == "out-name-too-long":
+        return ["--out", str(tmp_path / ("n" * 250))], 2, ["--out", "bytes long"], []
     if case == "scheduler-timeout-0":
         return (
             ["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "0"],
@@ -226,6 +230,8 @@ OPTIONS = [
     "out-parent-is-file",
     "out-foreign-dir",
     "out-tasks-is-file",
+    "out-is-cwd",
+    "out-name-too-long",
     "scheduler-timeout-0",
     "scheduler-bad-address",
     "scheduler-bad-scheme",

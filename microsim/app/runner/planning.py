@@ -33,6 +33,7 @@ __all__ = [
     "RunPlan",
     "plan_run",
     "check_replaceable",
+    "check_output_path",
     "tally_settings",
     "RESULT_FILES",
 ]
@@ -236,14 +237,14 @@ def plan_run(
         if out is not None and Path(out) != resume:
             raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
         out = resume
-        _check_out(out, scene, "--resume")
+        check_output_path(out, "--resume", scene.path)
         previous = _load_saved(resume, "--resume")
         if auto_real:
             n_real, rays = _auto_realisations_of(previous, resume, rays)
         _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, resume)
     else:
         out = Path(out) if out is not None else Path("runs") / scene.name
-        _check_out(out, scene, "--out")
+        check_output_path(out, "--out", scene.path)
         if out.exists() and not force:
             raise UsageError(
                 f"{out} already exists; pass --resume {out} to continue it or --force to replace it"
@@ -292,10 +293,12 @@ def _auto_realisations_of(previous, where, rays: int) -> tuple[int, int]:
     return n, total
 
 
-def _check_out(out: Path, scene, option: str) -> None:
-    """Refuse an output path that is not a usable directory name: the current directory or
-    one of its parents, a directory holding the scene file, an existing non-directory, or
-    one whose parent is not a directory."""
+def check_output_path(out: Path, option: str, scene_file=None) -> None:
+    """Refuse (``UsageError`` naming ``option``) an output path that is not a usable
+    directory name: the current directory or one of its parents, a directory holding
+    ``scene_file`` (the scene or sweep file read), an existing non-directory, one whose
+    parent is not a directory, or a name too long for its temporaries. ``microsim run`` and
+    ``microsim sweep`` check their ``--out`` with it."""
     norm = Path(os.path.normpath(out))
     if norm.name in ("", ".", ".."):
         raise UsageError(
@@ -318,11 +321,11 @@ def _check_out(out: Path, scene, option: str) -> None:
             f"{option} {out}: is the current directory or one of its parents; "
             f"choose a directory of its own"
         )
-    if scene.path is not None:
-        spath = Path(scene.path).resolve()
+    if scene_file is not None:
+        spath = Path(scene_file).resolve()
         if target == spath or target in spath.parents:
             raise UsageError(
-                f"{option} {out}: holds the scene file {scene.path}; choose another directory"
+                f"{option} {out}: holds the scene file {scene_file}; choose another directory"
             )
     if out.exists() and not out.is_dir():
         raise UsageError(f"{option} {out}: exists and is not a directory")

@@ -15,6 +15,7 @@ from typing import Callable
 from ... import atomic
 from ...checkpoints import checkpoint
 from ...errors import EnvironmentFailure
+from ..runner.planning import check_output_path
 from .grid import SweepSpec, fail, task_label, varying_values
 from .summary import write_summary
 from .task import is_done, load_result, run_task, worker_init
@@ -34,7 +35,8 @@ class SweepInterrupted(KeyboardInterrupt):
 
 
 def _check_out(out: Path) -> None:
-    """Refuse, before anything runs or is written, an output path that cannot work."""
+    """Refuse, before anything runs or is written, an output that is not a sweep's (beyond
+    the checks every output path gets, ``planning.check_output_path``)."""
     try:
         if out.exists() and not out.is_dir():
             fail(str(out), "exists and is not a directory; --out must be a directory")
@@ -208,6 +210,7 @@ def run_sweep(
         fail("--workers", f"must be an integer >= 1, got {workers!r}")
     if not (isinstance(connect_timeout, (int, float)) and 0 < connect_timeout <= 3600):
         fail("--scheduler-timeout", f"must be seconds in (0, 3600], got {connect_timeout!r}")
+    check_output_path(Path(out), "--out", spec.path)
     out = Path(out).absolute()
     _check_out(out)
     with ExitStack() as stack:

@@ -72,11 +72,13 @@ class Task:
 
 @dataclass(frozen=True)
 class SweepSpec:
-    """A loaded sweep file: its name and the expanded task list."""
+    """A loaded sweep file: its name and the expanded task list; ``path`` the file read
+    (None for a spec built in code)."""
 
     name: str
     description: str
     tasks: tuple
+    path: Path | None = None
 
 
 def fail(where: str, msg: str):
@@ -281,7 +283,7 @@ def load_sweep(path) -> SweepSpec:
     if not isinstance(description, str):
         fail(where, f"description: must be a string, got {description!r}")
     tasks = expand_tasks(data, where, base=path.parent)
-    return SweepSpec(name, description, tuple(tasks))
+    return SweepSpec(name, description, tuple(tasks), path)
 
 
 def fmt_num(x) -> str:
