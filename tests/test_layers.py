@@ -127,19 +127,58 @@ def test_the_module_graph_has_no_cycle():
             visit(n)
 
 
-def test_the_ray_engine_is_below_the_estimator():
-    """``microsim.sim.engine`` (the periodic walk's compiled loops) imports nothing of
-    ``microsim.sim`` outside itself: the estimator is built on the engine, never the reverse."""
-    mods = _modules()
-    known = set(mods)
-    for name, path in mods.items():
-        if name.startswith("microsim.sim.engine"):
-            above = {
-                t
-                for t in _imports(name, path, known)
-                if t.startswith("microsim.sim") and not t.startswith("microsim.sim.engine")
-            }
-            assert not above, f"{name} imports {sorted(above)} from above the engine"
+SIM_LAYERS = [
+    ("compiled support", ("engine.jit", "engine.codes")),
+    (
+        "bins, results, infrastructure",
+        (
+            "bins",
+            "bin_kernels",
+            "trig",
+            "ledger",
+            "result",
+            "progress",
+            "scratch",
+            "schedule",
+            "compilation",
+        ),
+    ),
+    (
+        "ray engine",
+        ("engine", "engine.horizon", "engine.primary", "engine.segments", "tracer")
+        + ("heightfield_caster", "embree_packets"),
+    ),
+    (
+        "estimator",
+        ("streams", "origin_kernels", "fresnel_kernels", "vgroove_kernels", "paths")
+        + ("bounce_kernels", "bounces", "tally_kernels", "tallies", "arguments")
+        + ("experiment", "estimator", "auto"),
+    ),
+    ("model predictions on the bins", ("predict", "compare")),
+]
+"""Sub-layers of ``microsim.sim``, bottom to top: bins and results below the ray engine
+(periodic walk, Embree backends, grid walk), the engine below the estimator (streams, paths,
+the bounce chain, tallies, the drivers), the model predictions on top. The package's
+``__init__`` (its public names) may import any of them."""
+
+
+def _sim_layer(module: str) -> int:
+    short = module.removeprefix("microsim.sim.")
+    for rank, (_, names) in enumerate(SIM_LAYERS):
+        if short in names:
+            return rank
+    raise AssertionError(f"{module} belongs to no sub-layer: add it to SIM_LAYERS in {__file__}")
+
+
+@pytest.mark.parametrize(
+    "name", sorted(n for n in MODULES if n.startswith("microsim.sim.") and not n.endswith("sim"))
+)
+def test_no_sim_module_imports_a_higher_sim_sub_layer(name):
+    up = sorted(
+        t for t in GRAPH[name] if t.startswith("microsim.sim.") and _sim_layer(t) > _sim_layer(name)
+    )
+    level = SIM_LAYERS[_sim_layer(name)][0]
+    assert not up, f"{name} ({level}) imports from above its sub-layer: {up}"
 
 
 def test_the_readme_layout_table_names_every_module():

@@ -56,6 +56,7 @@ from microsim.errors import UsageError
 from . import bounce_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
 from .engine import codes, segments
+from .ledger import ORDER_NAMES, TERMINAL
 from .paths import (
     ANALYTIC_BATCH,
     LEDGER,
@@ -98,20 +99,6 @@ RETRY_WRAPS = 2**17
 |d_z| below ~(relief/tile)·2⁻¹⁶ stay unresolved (ledger ``unresolved_path``)."""
 WEIGHT_FLOOR = 1e-6
 """``bounces="all"``: a path whose carried weight falls below this is cut (``cut_weight``)."""
-TERMINAL = (
-    "escaped_1",
-    "escaped_2",
-    "escaped_3",
-    "escaped_4plus",
-    "cut_bounces",
-    "cut_weight",
-    "unresolved_path",
-    "missed_path",
-)
-"""Terminal classes of a path, in the order of ``codes.ESC_1`` …"""
-ORDER_NAMES = ("1", "2", "3", "4+")
-"""Labels of the order slots of ``Result.brdf_orders``."""
-assert len(TERMINAL) == codes.N_TERMINAL and codes.PATH_MISSED == len(TERMINAL) - 1
 
 
 # this thread's work arrays (``scratch``): a chain's first facets, each step's escapes and the

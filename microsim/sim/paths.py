@@ -58,7 +58,8 @@ from microsim.errors import UsageError
 
 from . import bin_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
-from .engine import codes, primary, segments
+from .engine import primary, segments
+from .ledger import DOWNWARD, LEDGER, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .scratch import WorkArray, WorkColumns
 from .streams import BLOCK, block_rotation, block_span, chunk_origins, groove_starts
 from .tracer import (
@@ -101,18 +102,9 @@ __all__ = [
     "analytic_columns",
 ]
 
-SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED = range(5)
-LEDGER = ("single", "masked", "downward", "unresolved", "missed")
 MASKING = ("traced", "exact", "analytic")
 ANALYTIC_BATCH = 16  # blocks per vectorised batch of masking="analytic" (measured best)
 assert (SINGLE, MASKED, DOWNWARD) == (0, 1, 2)  # vgroove_kernels.analytic_vgroove relies on it
-assert (SINGLE, MASKED, DOWNWARD, RAY_UNRESOLVED, RAY_MISSED) == (
-    codes.SINGLE,
-    codes.MASKED,
-    codes.DOWNWARD,
-    codes.RAY_UNRESOLVED,
-    codes.RAY_MISSED,
-)
 
 _FROM_ESCAPE = np.zeros(4, dtype=np.int8)  # tracer status -> ledger class
 _FROM_ESCAPE[[HIT, ESCAPED, UNRESOLVED, MISSED]] = [MASKED, SINGLE, RAY_UNRESOLVED, RAY_MISSED]

@@ -23,7 +23,7 @@ from microsim.atomic import atomic_open
 from microsim.errors import UsageError
 
 from .bins import Bins
-from .paths import LEDGER
+from .ledger import LEDGER
 
 __all__ = ["Result", "InPlane", "FrozenDict", "FrozenList"]
 

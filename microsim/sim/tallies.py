@@ -33,8 +33,7 @@ import numpy as np
 
 from . import tally_kernels
 from .bins import Bins
-from .bounces import TERMINAL
-from .paths import DOWNWARD, LEDGER, MASKED
+from .ledger import DOWNWARD, LEDGER, MASKED, TERMINAL
 from .result import Result
 from .scratch import WorkArray
 from .streams import BLOCK
