@@ -15,8 +15,10 @@ lengths of a random walk on a Smith microsurface).
 ``bounces``: an int K in [1, ``MAX_BOUNCES``] (the path is cut after K bounces if still
 inside: ``cut_bounces``), or "all": continue until the path escapes or its weight falls
 below ``WEIGHT_FLOOR`` (``cut_weight``), with at most ``MAX_BOUNCES`` bounces
-(``cut_bounces``) so that every path terminates. ``bounces=1`` keeps the single-bounce paths
-(``paths``) untouched; K > 1 and "all" use the paths of this module.
+(``cut_bounces``) so that every path terminates. One chain serves every K
+(``chain_task``): K = 1 is its first bounce alone, traced by the single-bounce paths of
+``paths`` (the reflected ray only has to be tested for escape: an occlusion query); K > 1 and
+"all" continue with the paths of this module, whose first bounce is the same.
 
 Per-order tallies: orders 1, 2, 3 and ≥ 4 (``ORDER_SLOTS`` = min(K, 4) slots) share the bin
 grid; order slot o of bin B is the flat tally index o·(Θ·Φ) + B, so the running sums, the
@@ -48,6 +50,8 @@ ray, Fresnel in real arithmetic), so results are bitwise independent of threads 
 from __future__ import annotations
 
 import numbers
+from functools import partial
+from typing import Callable
 
 import numpy as np
 
@@ -65,6 +69,7 @@ from .paths import (
     Incidence,
     TracePath,
     _columns,
+    choose_path,
     facet_table,
     groove_frame_rays,
     primary_hits,
@@ -72,6 +77,7 @@ from .paths import (
 )
 from .scratch import WorkArray, WorkColumns
 from .streams import block_rotation
+from .tallies import chunk_order_tallies, chunk_tallies
 from .tracer import UNRESOLVED, Tracer, VGrooveCaster
 
 __all__ = [
@@ -87,6 +93,7 @@ __all__ = [
     "BouncePath",
     "AnalyticBouncePath",
     "choose_bounce_path",
+    "chain_task",
     "ledger_classes",
 ]
 
@@ -417,3 +424,30 @@ def choose_bounce_path(
     if uses_facet_table(inc.tracer, profile, azimuth, rotate, inc.rays):
         table = facet_table(inc.tracer, inc.wi, inc.ior, inc.bins, inc.phi_i, pool, parts)
     return BouncePath(inc, azimuth, rotate, limit, floor, nbin, table)
+
+
+def chain_task(
+    incidence: Incidence,
+    profile,
+    azimuth: bool,
+    isotropic: bool,
+    bounces,
+    pool=None,
+    parts: int = 1,
+) -> Callable:
+    """The thread task of one incidence: ``task(blocks)`` follows the paths of those blocks up
+    to a checked ``bounces`` and returns their per-block tallies (``tallies.ChunkTallies``).
+
+    One chain, cut after K bounces: K = 1 is its first bounce alone, where the reflected
+    ray's only question is whether it escapes, so it is an occlusion query (``paths``:
+    ``choose_path``, tallied over the bins by ``tallies.split_tallies``); K > 1 and "all" go
+    on from the reflected ray's hit (``choose_bounce_path``, tallied over order slots × bins
+    by ``tallies.split_order_tallies``). The first bounce is the same in both: the same rays,
+    classes and bins, so order 1 of any chain is the K = 1 estimate
+    (``tests/test_bounces.py``)."""
+    nbin = incidence.bins.shape[0] * incidence.bins.shape[1]
+    if bounces == 1:
+        path = choose_path(incidence, profile, azimuth, isotropic, pool, parts)
+        return partial(chunk_tallies, path, nbin)
+    path = choose_bounce_path(incidence, profile, azimuth, isotropic, bounces, nbin, pool, parts)
+    return partial(chunk_order_tallies, path, nbin * order_slots(bounces))

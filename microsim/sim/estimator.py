@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import platform
 import time
-from functools import partial
 from importlib.metadata import PackageNotFoundError, version
 from typing import Callable, NamedTuple
 
@@ -49,26 +48,14 @@ from .arguments import (
     surface_error,
 )
 from .bins import Bins
-from .bounces import (
-    MAX_BOUNCES,
-    WEIGHT_FLOOR,
-    choose_bounce_path,
-    ledger_classes,
-    order_slots,
-)
+from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
 from .experiment import Estimator, Execution, Experiment
-from .paths import LEDGER, MASKING, Events, Incidence, choose_path, trace_events, tracer_for
+from .paths import LEDGER, MASKING, Events, Incidence, trace_events, tracer_for
 from .progress import RaysDone
 from .result import Result
 from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, thread_pool
 from .streams import BLOCK, ORIGINS, block_origins
-from .tallies import (
-    Tally,
-    chunk_order_tallies,
-    chunk_tallies,
-    simulation_result,
-    tallies_from_arrays,
-)
+from .tallies import Tally, simulation_result, tallies_from_arrays
 
 __all__ = [
     "simulate",
@@ -401,14 +388,8 @@ def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> N
         (est.seed, r, i),
         est.origins,
     )
-    if plan.slots is None:
-        path = choose_path(incidence, profile, azimuth, est.isotropic, pool, run.threads)
-        task = partial(chunk_tallies, path, plan.nbin)
-    else:
-        path = choose_bounce_path(
-            incidence, profile, azimuth, est.isotropic, ex.bounces, plan.nbin, pool, run.threads
-        )
-        task = partial(chunk_order_tallies, path, plan.nbin * plan.slots)
+    # one chain, cut after ex.bounces bounces (single bounce: its first, ``bounces.chain_task``)
+    task = chain_task(incidence, profile, azimuth, est.isotropic, ex.bounces, pool, run.threads)
     rays, done, tally_ri = plan.per_real[r], state.done, state.tallies[r][i]
 
     def tally(chunk):
