@@ -188,8 +188,8 @@ def run_wave(plan, result) -> tuple:
 
 REGIME_QUICK = {"sigmas": 8, "tile_over_lambda": 32.0}
 """``microsim report --quick``'s regime map: 8 σ/λ values geometric from 0.01 to 3 and tiles
-of 32 λ (measured ~25 s for both families on 2 busy cores); the full report uses
-``regime_map``'s defaults (14 values, 64 λ; 1–2 min per family)."""
+of 32 λ; the full report uses ``regime_map``'s defaults (14 values, 64 λ: several times
+the cost)."""
 
 
 def regime_maps(quick: bool) -> dict:

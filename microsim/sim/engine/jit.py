@@ -1,20 +1,19 @@
 """Compile options of every kernel (numba, ``nogil``) and the rules they follow.
 
-Why compiled: around Embree's ~170 ns per ray, the same steps written as NumPy array passes
-(ray origins, segment bounds, hit points, masking-ray starts, per-facet look-ups, tallies)
-cost ~200 ns per sample on a 512² heightfield (measured), so the pipeline ran at ~55–60 % of
-raw Embree throughput; one fused loop per stage does the same arithmetic in a few ns per ray
-and releases the GIL, so both threads run in parallel.
+Why compiled: written as NumPy array passes, the steps around Embree's traversal (ray
+origins, segment bounds, hit points, masking-ray starts, per-facet look-ups, tallies) cost
+about as much per sample as the traversal itself, each pass reading and writing whole arrays;
+one fused loop per stage does the same arithmetic in a few ns per ray and releases the GIL, so
+both threads run in parallel (``microsim bench`` reports the pipeline next to raw Embree).
 
 Vectorised passes: the heavier per-ray arithmetic (groove-frame rotations, Fresnel weights,
 bins, masking-ray starts) runs in branch-free loops over tiles of ``TILE`` rays that LLVM
-compiles to AVX2 (4 doubles per instruction), with the per-facet look-ups (indexed loads,
-which it does not vectorise on this CPU) in scalar loops between them, and without a libm call
+compiles to the CPU's vector instructions (AVX2 or AVX-512), with the per-facet look-ups
+(indexed loads, which it does not vectorise) in scalar loops between them, and without a libm call
 per ray (``trig.cos_sin``, ``trig.atan_approx``; bins near an edge by ``Bins.locate``'s
 arithmetic). Those use ``error_model="numpy"`` (``vectorised``): a zero-divisor check is a
 branch per division, which keeps a loop scalar (the values a select then discards may be inf
-or NaN). Measured on the bench V-groove scene: the exact analytic path went from ~200 to
-~45 ns per ray.
+or NaN).
 
 Reproducibility: every kernel is a loop in ray order that evaluates each ray on its own, with
 no fast-math (no FMA contraction or reassociation); sums (``tally_kernels``) add a block's
