@@ -55,3 +55,19 @@ def heightfield_surface(h: np.ndarray, dx: float) -> Surface:
     v, f = heightfield_mesh(h, dx)
     ny, nx = h.shape
     return Surface("gaussian", v, f, (nx * dx, ny * dx), True, {}, heights=h, dx=dx)
+
+
+def flat_verdict(sim, stderr, counts, model, omega, theta_edges, **kw) -> dict:
+    """``analysis.verdicts.verdict`` from flat arguments: each keyword goes to the group that
+    owns it (``Measured``, ``Prediction`` or ``Significance``)."""
+    from microsim.analysis.verdicts import Measured, Prediction, Significance, verdict
+
+    def take(group):
+        return {k: kw.pop(k) for k in group._fields if k in kw}
+
+    measured = Measured(sim, stderr, counts, omega, theta_edges, **take(Measured))
+    prediction = Prediction(model, **take(Prediction))
+    significance = Significance(**take(Significance))
+    if kw:
+        raise TypeError(f"verdict has no argument {sorted(kw)}")
+    return verdict(measured, prediction, significance)

@@ -5,9 +5,10 @@ Mikkelsen eq. 25, bin-averaged) is what that precision predicts."""
 import numpy as np
 import pytest
 from scipy import stats
+from support import flat_verdict
 
 from microsim import analytic as an
-from microsim.analysis.verdicts import energy_set, verdict
+from microsim.analysis.verdicts import energy_set
 from microsim.sim import Bins, simulate
 from microsim.sim.auto import _batch_seed, relative_standard_error, simulate_auto
 from microsim.sim.predict import ModelSpec, predict
@@ -57,7 +58,7 @@ def test_auto_stops_at_target_and_matches_the_exact_model_at_that_precision(groo
         E = energy_set(w).reshape(f.shape)
         a = w[E] * (se[E] / f[E]) ** 2 / w[E].sum()
         lo, hi = weighted_chi2_bounds(a, alpha)
-        v = verdict(f, se, c, model[i], omega, BINS.theta_edges, phi_edges=BINS.phi_edges)
+        v = flat_verdict(f, se, c, model[i], omega, BINS.theta_edges, phi_edges=BINS.phi_edges)
         assert v["energy_bins"] == E.sum()
         assert lo - 4e-6 <= v["rel_rms"] ** 2 <= hi + 4e-6, (THETA[i], v["rel_rms"], lo, hi)
 

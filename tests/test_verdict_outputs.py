@@ -8,6 +8,7 @@ deviation the tile's departure explains (inconclusive)."""
 
 import numpy as np
 import pytest
+from support import flat_verdict
 
 from microsim.analysis import charts, report
 from microsim.analysis import verdicts as V
@@ -33,7 +34,7 @@ def _case(kind: str) -> dict:
     if kind == "agrees":
         sim = truth + rng.normal(size=truth.shape) * se
     scale = 1.2 if kind == "deviates" else 1.0
-    v = V.verdict(
+    v = flat_verdict(
         sim,
         se,
         np.full(sim.shape, 1000),

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 from scipy import stats
+from support import flat_verdict
 
 from microsim import analytic as an
 from microsim import surfaces as sf
@@ -26,7 +27,7 @@ def _lobe():
 
 def _verdict(sim, se, model, **kw):
     counts = np.full(sim.shape, 1000)
-    return V.verdict(
+    return flat_verdict(
         sim, se, counts, model, OMEGA, BINS.theta_edges, phi_edges=BINS.phi_edges, **kw
     )
 
@@ -98,7 +99,7 @@ def test_bins_below_min_events_are_ignored():
     counts = np.full(truth.shape, 1000)
     counts[:10] = 24
     model = truth * np.where(np.arange(BINS.n_theta)[:, None] < 10, 2.0, 1.0)
-    v = V.verdict(truth, 0.01 * truth, counts, model, OMEGA, BINS.theta_edges, min_events=25)
+    v = flat_verdict(truth, 0.01 * truth, counts, model, OMEGA, BINS.theta_edges, min_events=25)
     assert v["n_bins"] == (BINS.n_theta - 10) * BINS.n_phi
     assert v["agrees"] and v["deviations"] == []
 
@@ -164,7 +165,7 @@ def test_invalid_arguments_raise():
     with pytest.raises(ValueError, match="alpha"):
         _verdict(truth, truth, truth, alpha=0.0)
     with pytest.raises(ValueError, match="shape"):
-        V.verdict(truth, truth, truth, truth[:3], OMEGA, BINS.theta_edges)
+        flat_verdict(truth, truth, truth, truth[:3], OMEGA, BINS.theta_edges)
     with pytest.raises(ValueError, match="min_events"):
         _verdict(truth, truth, truth, min_events=0)
 

@@ -101,7 +101,7 @@ from microsim.sim.tallies import terminal_ledger
 from microsim.stats import MIN_EVENTS, energy_set, norm_isf, norm_sf, sidak, t_isf, t_sf
 
 from .charts import DPI, SIM_COLOUR, model_colour
-from .verdicts import verdict
+from .verdicts import Measured, Prediction, Significance, verdict
 
 __all__ = [
     "MODELS",
@@ -347,22 +347,13 @@ def _walk_verdict(result, t, slots, m, sm, alpha, n_tests, rows, name):
     else:
         F = None
         sf = np.sqrt(np.sum(result.stderr_orders[list(slots), t] ** 2, axis=0))
+    measured = Measured.of(
+        result, t, brdf=f, stderr=np.sqrt(sf**2 + sm**2), counts=_counts(result, t, slots)
+    )
     v = verdict(
-        f,
-        np.sqrt(sf**2 + sm**2),
-        _counts(result, t, slots),
-        m,
-        om,
-        result.theta_edges,
-        phi_edges=result.phi_edges,
-        theta_i=float(result.theta_i[t]),
-        name=name,
-        params={"walk_noise": "in quadrature"},
-        model_rtol=0.0,
-        alpha=alpha,
-        n_tests=n_tests,
-        ensemble=True,
-        realisations=F,
+        measured._replace(omega=om, realisations=F),
+        Prediction(m, name, {"walk_noise": "in quadrature"}, ensemble=True),
+        Significance(0.0, MIN_EVENTS, alpha, n_tests),
     )
     if F is None or v["n_bins"] == 0:
         return v

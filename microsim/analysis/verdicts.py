@@ -87,6 +87,9 @@ from microsim.stats import (
 __all__ = [
     "VERDICT_SCHEMA",
     "verdict",
+    "Measured",
+    "Prediction",
+    "Significance",
     "verdict_kind",
     "verdict_symbol",
     "inconclusive_reason",
@@ -231,51 +234,85 @@ def _opt(x) -> float | None:
     return x if np.isfinite(x) else None
 
 
+class Measured(NamedTuple):
+    """One incidence's measured bin-averaged BRDF, by any method (ray tracer, Kirchhoff
+    solver): ``brdf`` f̄ and ``stderr`` (Θ, Φ) sr⁻¹, ``counts`` (Θ, Φ) events per bin,
+    ``omega`` (Θ, Φ) projected solid angles sr, ``theta_edges`` (Θ+1,) and ``phi_edges``
+    (Φ+1,, None: the folded grid of ``Bins``) degrees; ``realisations`` (R, Θ, Φ) the BRDFs of
+    R tiles of equal rays (sr⁻¹, their mean is ``brdf``) or None; ``theta_i`` degrees."""
+
+    brdf: np.ndarray
+    stderr: np.ndarray
+    counts: np.ndarray
+    omega: np.ndarray
+    theta_edges: np.ndarray
+    phi_edges: np.ndarray | None = None
+    realisations: np.ndarray | None = None
+    theta_i: float = 0.0
+
+    @classmethod
+    def of(cls, result, t: int, **replace) -> "Measured":
+        """Incidence ``t`` of a ``Result`` (``replace``: fields to take from elsewhere, e.g.
+        another ``stderr``)."""
+        fields = {
+            "brdf": result.brdf[t],
+            "stderr": result.stderr[t],
+            "counts": result.counts[t],
+            "omega": result.bins.projected_solid_angle(),
+            "theta_edges": result.theta_edges,
+            "phi_edges": result.phi_edges,
+            "theta_i": float(result.theta_i[t]),
+        }
+        return cls(**{**fields, **replace})
+
+
+class Prediction(NamedTuple):
+    """The model's side of a verdict: ``values`` m (Θ, Φ) sr⁻¹ on the same bins, ``name``,
+    ``params`` (name → value, recorded), ``fitted`` with ``n_params`` fitted parameters (they
+    reduce the dof); ``ensemble``: the model describes the random surface's ensemble, not the
+    traced facets (then realisations, or one tile's ``departure`` (Θ, Φ) sr⁻¹ ≥ 0 from its
+    ensemble, ``tile_departure``, choose the reference; module docstring)."""
+
+    values: np.ndarray
+    name: str = "model"
+    params: Mapping | None = None
+    fitted: bool = False
+    n_params: int = 0
+    ensemble: bool = False
+    departure: np.ndarray | None = None
+
+
+class Significance(NamedTuple):
+    """How a verdict tests: ``model_rtol`` the model's own relative quadrature error (added
+    to σ in quadrature), ``min_events`` per used bin, ``alpha`` the false-alarm rate of the
+    whole family of ``n_tests`` verdicts (Šidák)."""
+
+    model_rtol: float = 1e-3
+    min_events: int = MIN_EVENTS
+    alpha: float = 0.01
+    n_tests: int = 1
+
+
 def verdict(
-    sim,
-    stderr,
-    counts,
-    model,
-    omega,
-    theta_edges,
-    *,
-    phi_edges=None,
-    theta_i=0.0,
-    name: str = "model",
-    params: Mapping | None = None,
-    fitted: bool = False,
-    n_params: int = 0,
-    model_rtol: float = 1e-3,
-    min_events: int = MIN_EVENTS,
-    alpha: float = 0.01,
-    n_tests: int = 1,
-    ensemble: bool = False,
-    realisations=None,
-    departure=None,
+    measured: Measured, prediction: Prediction, significance: Significance = Significance()
 ) -> dict:
-    """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``).
-
-    ``ensemble``: the model describes the random surface's ensemble, not the traced facets;
-    then ``realisations`` (R, Θ, Φ) are the BRDFs of the R tiles (sr⁻¹, equal rays each, their
-    mean is ``sim``): R ≥ 2 selects the "realisations" reference, else "one-tile".
-    ``departure``: for "one-tile", the tile's computed departure from its ensemble per bin
-    (sr⁻¹, ≥ 0, (Θ, Φ); ``tile_departure``), which makes a rejection beyond it conclusive.
-
-    ``sim``, ``stderr``, ``model`` (sr⁻¹), ``counts`` (events) and ``omega`` (projected solid
-    angle, sr) are (Θ, Φ) arrays; ``theta_edges`` (Θ+1,) and ``phi_edges`` (Φ+1,, default: the
-    folded grid of ``Bins``) in degrees. ``n_params`` fitted parameters reduce the dof.
-    """
+    """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``):
+    ``prediction`` against ``measured``, tested as ``significance`` says."""
+    m, p = measured, prediction
+    model_rtol, min_events, alpha, n_tests = significance
+    theta_edges, theta_i = m.theta_edges, m.theta_i
+    name, params, fitted, n_params, ensemble = p.name, p.params, p.fitted, p.n_params, p.ensemble
     a = _checked_inputs(
         {
-            "sim": sim,
-            "stderr": stderr,
-            "counts": counts,
-            "model": model,
-            "omega": omega,
+            "sim": m.brdf,
+            "stderr": m.stderr,
+            "counts": m.counts,
+            "model": p.values,
+            "omega": m.omega,
             "theta_edges": theta_edges,
-            "phi_edges": phi_edges,
-            "realisations": realisations,
-            "departure": departure,
+            "phi_edges": m.phi_edges,
+            "realisations": m.realisations,
+            "departure": p.departure,
         },
         ensemble=ensemble,
         model_rtol=model_rtol,
@@ -648,31 +685,14 @@ def verdicts_for_result(
                 raise UsageError(
                     f"model {name!r} has shape {values.shape}, expected {result.brdf.shape}"
                 )
+            departure = None
+            if rel_departure is not None and name not in own:
+                departure = departure_of(rel_departure[t], values[t])
             out.append(
                 verdict(
-                    result.brdf[t],
-                    stderr[t],
-                    result.counts[t],
-                    values[t],
-                    omega,
-                    result.theta_edges,
-                    phi_edges=result.phi_edges,
-                    theta_i=float(result.theta_i[t]),
-                    name=name,
-                    params=p,
-                    fitted=is_fit,
-                    n_params=k,
-                    model_rtol=model_rtol,
-                    min_events=min_events,
-                    alpha=alpha,
-                    n_tests=n_tests,
-                    ensemble=name not in own,
-                    realisations=real_t,
-                    departure=(
-                        None
-                        if rel_departure is None or name in own
-                        else departure_of(rel_departure[t], values[t])
-                    ),
+                    Measured.of(result, t, stderr=stderr[t], omega=omega, realisations=real_t),
+                    Prediction(values[t], name, p, is_fit, k, name not in own, departure),
+                    Significance(model_rtol, min_events, alpha, n_tests),
                 )
             )
     return out

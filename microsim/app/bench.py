@@ -348,7 +348,7 @@ def time_to_accuracy(
     (scene builds included); also the achieved rel. RMS error against the exact closed form
     (bin-averaged Torrance–Sparrow with V-groove G) and its χ²/dof."""
     from microsim import analytic as an
-    from microsim.analysis.verdicts import verdict
+    from microsim.analysis.verdicts import Measured, Prediction, verdict
     from microsim.sim import Bins
     from microsim.sim.auto import simulate_auto
     from microsim.sim.predict import ModelSpec, predict
@@ -372,15 +372,7 @@ def time_to_accuracy(
     model = predict(
         [ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")], [30.0], bins
     )["ts"][0]
-    v = verdict(
-        res.brdf[0],
-        res.stderr[0],
-        res.counts[0],
-        model,
-        bins.projected_solid_angle(),
-        bins.theta_edges,
-        phi_edges=bins.phi_edges,
-    )
+    v = verdict(Measured.of(res, 0), Prediction(model))
     info = res.meta["auto"]["incidences"][0]
     return {
         "seconds": seconds,

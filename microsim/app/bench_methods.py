@@ -172,11 +172,12 @@ def _commit() -> tuple[str | None, bool | None]:
 def _rel_rms(sim, se, counts, model, bins) -> dict:
     """``verdict``'s rel_rms of ``model`` against ``sim`` and the ray-noise floor over the
     same energy set (used bins: ≥ MIN_EVENTS events, f̄ > 0)."""
-    from microsim.analysis.verdicts import verdict
+    from microsim.analysis.verdicts import Measured, Prediction, verdict
     from microsim.stats import MIN_EVENTS, energy_set
 
     omega = bins.projected_solid_angle()
-    v = verdict(sim, se, counts, model, omega, bins.theta_edges, phi_edges=bins.phi_edges)
+    measured = Measured(sim, se, counts, omega, bins.theta_edges, bins.phi_edges)
+    v = verdict(measured, Prediction(model))
     used = (counts >= MIN_EVENTS) & np.isfinite(sim) & (sim > 0) & np.isfinite(se)
     w = np.where(used, sim * omega, 0.0)
     E = energy_set(w).reshape(w.shape)

@@ -39,7 +39,15 @@ from pathlib import Path
 
 import numpy as np
 
-from microsim.analysis.verdicts import departure_of, tile_departure, verdict, verdict_kind
+from microsim.analysis.verdicts import (
+    Measured,
+    Prediction,
+    Significance,
+    departure_of,
+    tile_departure,
+    verdict,
+    verdict_kind,
+)
 from microsim.errors import UsageError
 from microsim.sim.compare import attach_models, default_models, departure_models
 from microsim.sim.predict import ModelSpec, predict
@@ -431,23 +439,11 @@ def assert_brdf_agrees(
         real_t = None
         if R >= 2:
             real_t = per[result.realisations_traced(t), t]
+        dep_t = None if departure is None else departure_of(departure[t], model[t])
         v = verdict(
-            result.brdf[t],
-            result.stderr[t],
-            result.counts[t],
-            model[t],
-            omega,
-            result.theta_edges,
-            phi_edges=result.phi_edges,
-            theta_i=float(result.theta_i[t]),
-            name=name,
-            model_rtol=MODEL_RTOL,
-            min_events=min_events,
-            alpha=alpha,
-            n_tests=T,
-            ensemble=R >= 2 or departure is not None,
-            realisations=real_t,
-            departure=None if departure is None else departure_of(departure[t], model[t]),
+            Measured.of(result, t, omega=omega, realisations=real_t),
+            Prediction(model[t], name, ensemble=R >= 2 or departure is not None, departure=dep_t),
+            Significance(MODEL_RTOL, min_events, alpha, T),
         )
         if rtol is not None:
             v["tolerance"] = tolerance_check(
