@@ -1,10 +1,13 @@
 """`microsim models` lists every closed form, and every name it lists exists."""
 
+import os
 import subprocess
 import sys
 
+import pytest
+
 from microsim import analytic as an
-from microsim.analytic.catalogue import MODELS
+from microsim.analytic.catalogue import MODELS, REPORT_MODELS, report_names
 
 
 def _resolve(name):
@@ -56,12 +59,44 @@ def test_every_public_ndf_and_brdf_is_listed():
     assert required <= listed, required - listed
 
 
-def test_cli_models_prints_every_entry():
+def _words(text: str) -> str:
+    """The text without its whitespace (wrapping may split a long token across lines)."""
+    return "".join(text.split())
+
+
+@pytest.mark.parametrize("columns", ["60", "100"])
+def test_cli_models_prints_every_entry_wrapped_to_the_terminal(columns):
     out = subprocess.run(
         [sys.executable, "-m", "microsim.app.cli", "models"],
         capture_output=True,
         text=True,
         check=True,
+        env={**os.environ, "COLUMNS": columns},
     ).stdout
+    assert max(len(line) for line in out.splitlines()) <= int(columns)
+    words = _words(out)
     for m in MODELS:
-        assert m.label in out and m.source in out and m.params in out
+        assert _words(m.label) in words and _words(m.source) in words
+        assert _words(m.params) in words
+    for m in REPORT_MODELS:
+        assert _words(m.source) in words and _words(m.what) in words
+
+
+def test_every_model_name_the_runner_produces_is_listed():
+    """The names of default_models (V-grooves, a heightfield, a flat surface), the fits, the
+    wave verdicts and the multiple-scattering section are the names ``microsim models``
+    explains: one name per model everywhere."""
+    from microsim.analysis import multiple, wave_verdicts
+    from microsim.analysis.fits import FIT_MODELS
+    from microsim.sim.compare import default_models
+    from microsim.surfaces import flat, gaussian, vgrooves
+
+    produced = set(FIT_MODELS) | set(wave_verdicts.WAVE_MODELS) | set(multiple.MODELS)
+    produced |= set(multiple.WALK_VERDICTS)
+    for surface in (
+        vgrooves(50, an.Beckmann(0.3)),
+        gaussian(32, 1.0, 0.5, 8.0),
+        flat(),
+    ):
+        produced |= {s.name for s in default_models(surface, "aluminium")}
+    assert produced <= report_names(), produced - report_names()

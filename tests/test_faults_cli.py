@@ -59,7 +59,7 @@ FAST = dataclasses.replace(
     fig6_theta=(0.0, 60.0),
     fig6_rays=2000,
     albedo_nodes=(8, 8, 4),
-    fit_names=("cook_torrance",),
+    fit_names=("cook-torrance",),
 )
 CHARTS = (
     "inplane_curves",
@@ -861,4 +861,4 @@ def test_a_closed_stdout_stops_quietly():
         text=True,
         timeout=60,
     )
-    assert r.stdout.startswith("kind") and r.stderr == ""
+    assert r.stdout.startswith("Models as") and r.stderr == ""

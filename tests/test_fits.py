@@ -36,7 +36,7 @@ def test_bin_rule_matches_accurate_bin_average_on_a_smooth_lobe(theta_i):
     """3×3 Gauss–Legendre on 2° × 5° bins of a Beckmann m = 0.3 lobe (≈ 17° wide in h, 34° in
     wo): the quadrature error is far below 1 % wherever the lobe carries signal."""
     bins = Bins(45, 37)
-    fn = fits.FIT_MODELS["cook_torrance"].make({"ks": 1.0, "m": 0.3, "kd": 0.0}, ALU)
+    fn = fits.FIT_MODELS["cook-torrance"].make({"ks": 1.0, "m": 0.3, "kd": 0.0}, ALU)
     wi = vectors.spherical_deg(theta_i, 0.0)
     approx = fits.bin_rule(bins, wi).average(fn, wi)
     exact = bin_average(wi, bins, fn, 0.0, rtol=1e-5).values
@@ -63,9 +63,9 @@ def _synthetic(name, truth, bins=SMALL, theta_i=(0.0, 30.0, 60.0)):
 @pytest.mark.parametrize(
     "name,truth",
     [
-        ("cook_torrance", {"ks": 0.8, "m": 0.25, "kd": 0.03}),
-        ("low_microfacet", {"A": 3.0, "B": 200.0, "C": 1.8, "kd": 0.05, "ior": 1.5}),
-        ("low_smooth", {"A": 30.0, "B": 300.0, "C": 1.2, "kd": 0.05, "ior": 1.5}),
+        ("cook-torrance", {"ks": 0.8, "m": 0.25, "kd": 0.03}),
+        ("low-microfacet", {"A": 3.0, "B": 200.0, "C": 1.8, "kd": 0.05, "ior": 1.5}),
+        ("low-smooth", {"A": 30.0, "B": 300.0, "C": 1.2, "kd": 0.05, "ior": 1.5}),
         ("edwards", dict(cd=0.1, f0=0.5, f90=0.9, k=0.3, r1=0.4, n1=5.0, r2=1.2, n2=1.5)),
     ],
 )
@@ -86,14 +86,14 @@ def test_noise_free_recovery(name, truth):
 
 def test_a_fit_ending_at_a_bound_is_not_converged():
     """Data without a diffuse term: Cook–Torrance's best kd is its lower bound 0."""
-    data = _synthetic("cook_torrance", {"ks": 0.8, "m": 0.25, "kd": 0.0})
-    res = fits.fit_model("cook_torrance", data, "aluminium", n_starts=2)
+    data = _synthetic("cook-torrance", {"ks": 0.8, "m": 0.25, "kd": 0.0})
+    res = fits.fit_model("cook-torrance", data, "aluminium", n_starts=2)
     assert res.params["kd"] < fits.AT_BOUND_RTOL  # the optimiser approaches the bound from inside
     assert res.at_bounds == ("kd",) and not res.converged
 
 
 def test_at_bounds_names_the_parameters_at_either_end():
-    model = fits.FIT_MODELS["low_microfacet"]
+    model = fits.FIT_MODELS["low-microfacet"]
     lo, hi = model.bounds_x()
     x = (lo + hi) / 2
     x[2], x[4] = hi[2], lo[4] + 1e-9 * (hi[4] - lo[4])  # C at its top, ior next to its bottom
@@ -102,14 +102,14 @@ def test_at_bounds_names_the_parameters_at_either_end():
 
 
 def test_invalid_fit_arguments():
-    data = _synthetic("cook_torrance", {"ks": 1.0, "m": 0.3, "kd": 0.0})
+    data = _synthetic("cook-torrance", {"ks": 1.0, "m": 0.3, "kd": 0.0})
     with pytest.raises(ValueError, match="name"):
         fits.fit_model("phong", data)
     with pytest.raises(ValueError, match="n_starts"):
-        fits.fit_model("cook_torrance", data, n_starts=0)
+        fits.fit_model("cook-torrance", data, n_starts=0)
     empty = fits.FitData(data.sim, np.zeros(data.sim.shape), data.theta_i, data.phi_i, SMALL)
     with pytest.raises(ValueError, match="min_events"):
-        fits.fit_model("cook_torrance", empty)
+        fits.fit_model("cook-torrance", empty)
 
 
 # --- recovery from a simulation -----------------------------------------------------------------
@@ -126,11 +126,11 @@ def _vgroove_fit(rays):
         bins=bins,
         masking="traced",
     )
-    return res, fits.fit_all(res, "aluminium", names=("cook_torrance",), quick=True)
+    return res, fits.fit_all(res, "aluminium", names=("cook-torrance",), quick=True)
 
 
 def _assert_vgroove_fit(res, fitted):
-    fit = fitted["cook_torrance"]
+    fit = fitted["cook-torrance"]
     assert fit.params["m"] == pytest.approx(0.3, rel=0.03)
     assert fit.params["ks"] == pytest.approx(1.0, rel=0.03)
     assert fit.params["kd"] < 0.02
@@ -163,7 +163,7 @@ def test_cook_torrance_recovers_vgroove_roughness_over_realisations_slow():
         realisations=8,
         surface_factory=lambda s: sf.vgrooves(4000, an.Beckmann(0.3), seed=s, sampling="random"),
     )
-    fitted = fits.fit_all(res, "aluminium", names=("cook_torrance",), quick=True)
+    fitted = fits.fit_all(res, "aluminium", names=("cook-torrance",), quick=True)
     verdicts = _assert_vgroove_fit(res, fitted)
     assert all(v["reference"] == "realisations" and v["realisations"] == 8 for v in verdicts)
 
@@ -172,10 +172,10 @@ def test_fits_at_a_bound_are_flagged_in_verdicts_report_and_index():
     from microsim.analysis import report
     from microsim.app.runner.publishing import fit_record
 
-    fit = fits.FitResult("low_microfacet", {"C": 10.0}, 1.0, 0.04, 0.01, True, 2, None, ("C",))
+    fit = fits.FitResult("low-microfacet", {"C": 10.0}, 1.0, 0.04, 0.01, True, 2, None, ("C",))
     record = fit_record(fit)
     assert record["at_bounds"] == ["C"] and record["converged"] is False
     assert report._converged(record) == "no: at bound C"
     assert report._index_fit_cell(record) == "0.2 / 0.1 (at bound: C)"
-    free = fit_record(fits.FitResult("low_smooth", {}, 1.0, 0.04, 0.01, True, 2, None))
+    free = fit_record(fits.FitResult("low-smooth", {}, 1.0, 0.04, 0.01, True, 2, None))
     assert free["converged"] is True and report._converged(free) == "yes"

@@ -8,7 +8,7 @@ a tiny wave scene runs end to end through ``microsim run --quick``: its Kirchhof
 saved, its specular order carries the Davies/Debye–Waller power F(θi)·e^(−g) of the tile the
 ray tracer saw (the quick-scaled one), every wave verdict follows the schema and names its
 reference, and the report has the section; an interrupt in the wave stage writes no report
-and ``--resume`` completes it; a geometric scene's report and index mark ``low_smooth``
+and ``--resume`` completes it; a geometric scene's report and index mark ``low-smooth``
 outside its domain and keep its fit.
 """
 
@@ -259,12 +259,12 @@ def test_geometric_scene_marks_low_smooth_outside_its_domain(tmp_path):
     out = tmp_path / "run"
     assert main(["run", str(scene), "--quick", "--out", str(out), "--no-progress"]) == 0
     doc = json.loads((out / "verdicts.json").read_text())
-    assert "wave" not in doc and "low_smooth" in doc["outside_domain"]
-    assert "low_smooth" in {v["model"] for v in doc["verdicts"]}  # the fit is kept
+    assert "wave" not in doc and "low-smooth" in doc["outside_domain"]
+    assert "low-smooth" in {v["model"] for v in doc["verdicts"]}  # the fit is kept
     report = (out / "report.md").read_text()
-    assert f"| low_smooth | {OUT_OF_DOMAIN} |" in report
+    assert f"| low-smooth | {OUT_OF_DOMAIN} |" in report
     fits = report.split("## Fits")[1].split("##")[0]
-    assert "| low_smooth |" in fits
+    assert "| low-smooth |" in fits
     index = index_report([doc], None, True)
     row = next(line for line in index.splitlines() if line.startswith("| [tiny-vg]"))
     assert OUT_OF_DOMAIN in row and "✗" not in row.split("|")[-2]

@@ -19,11 +19,11 @@ precomputed); the fitted model is then evaluated once with the adaptive
 Several starts (the model's default, then scrambled Halton points within the bounds, seeded)
 are run and the lowest cost is kept. Models (``FIT_MODELS``):
 
-``cook_torrance``   kd/π + ks·TS(Beckmann(m), V-groove G, exact Fresnel of the scene's ior).
+``cook-torrance``   kd/π + ks·TS(Beckmann(m), V-groove G, exact Fresnel of the scene's ior).
                     Single scattering has no diffuse term, but fitting frameworks carry one
                     (Löw §5): kd is included, bounded to [0, 1], and reported (expect ≈ 0).
-``low_microfacet``  Löw eq. 15: A, B, C, kd, real ior n (as the paper).
-``low_smooth``      Löw eq. 12: A, B, C, kd, real ior n; G' = 1 (Löw's choice).
+``low-microfacet``  Löw eq. 15: A, B, C, kd, real ior n (as the paper).
+``low-smooth``      Löw eq. 12: A, B, C, kd, real ior n; G' = 1 (Löw's choice).
 ``edwards``         Edwards eq. 36 with ``EdwardsParams`` (orthogonal projection, as the paper).
 
 ``fit_edwards_disk`` fits the Edwards BRDF at a single viewing direction to a histogram of
@@ -174,8 +174,8 @@ _LOW_PARAMS = (
 )
 
 FIT_MODELS: dict[str, FitModel] = {
-    "cook_torrance": FitModel(
-        "cook_torrance",
+    "cook-torrance": FitModel(
+        "cook-torrance",
         (
             Param("ks", 0.0, 10.0, 1.0),
             Param("m", 0.01, 1.5, 0.3, "log"),
@@ -184,11 +184,11 @@ FIT_MODELS: dict[str, FitModel] = {
         _cook_torrance,
         "kd/π + ks·TS(Beckmann m, V-groove G, exact Fresnel of the scene ior)",
     ),
-    "low_microfacet": FitModel(
-        "low_microfacet", _LOW_PARAMS, _low_microfacet, "Löw eq. 15 (ABC microfacet, real ior)"
+    "low-microfacet": FitModel(
+        "low-microfacet", _LOW_PARAMS, _low_microfacet, "Löw eq. 15 (ABC microfacet, real ior)"
     ),
-    "low_smooth": FitModel(
-        "low_smooth", _LOW_PARAMS, _low_smooth, "Löw eq. 12 (smooth surface, real ior, G' = 1)"
+    "low-smooth": FitModel(
+        "low-smooth", _LOW_PARAMS, _low_smooth, "Löw eq. 12 (smooth surface, real ior, G' = 1)"
     ),
     "edwards": FitModel(
         "edwards",
@@ -398,7 +398,7 @@ def fit_model(
     max_nfev: int = 300,
 ) -> FitResult:
     """Fit ``FIT_MODELS[name]`` to ``data`` on Löw's E2 (module docstring); ``ior`` is the
-    scene's material (used by ``cook_torrance``). Several starts; the lowest cost wins.
+    scene's material (used by ``cook-torrance``). Several starts; the lowest cost wins.
     ``max_nfev`` caps the residual evaluations per start (the finite-difference Jacobian
     costs another #params evaluations per iteration on top)."""
     if name not in FIT_MODELS:

@@ -116,6 +116,8 @@ __all__ = [
 ]
 
 MODELS = ("random-walk", "kulla-conty", "mikkelsen-eq28")
+WALK_VERDICTS = ("walk-2", "walk-2+")
+"""The random walk's verdicts against the traced orders: order 2, and all orders ≥ 2."""
 """Models of the multiply scattered light judged per θi (module docstring)."""
 ORDER_LABELS = ORDER_NAMES
 """Order slots of ``Result.brdf_orders`` (``sim.bounces.ORDER_NAMES``)."""
@@ -478,10 +480,26 @@ def order_comparison(
         wv = {}
         n_tests = 2 * T
         wv["2"] = _walk_verdict(
-            result, t, (1,), walk.values[t, 1], walk.stderr[t, 1], alpha, n_tests, rows, "walk-2"
+            result,
+            t,
+            (1,),
+            walk.values[t, 1],
+            walk.stderr[t, 1],
+            alpha,
+            n_tests,
+            rows,
+            WALK_VERDICTS[0],
         )
         wv["2+"] = _walk_verdict(
-            result, t, tuple(range(1, n_slots)), w_lobe, w_se, alpha, n_tests, rows, "walk-2+"
+            result,
+            t,
+            tuple(range(1, n_slots)),
+            w_lobe,
+            w_se,
+            alpha,
+            n_tests,
+            rows,
+            WALK_VERDICTS[1],
         )
         out.append(
             {

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from .masking import MASKING_CLASSES
 from .models import MODEL_CLASSES
 
-__all__ = ["ModelInfo", "MODELS", "model_table"]
+__all__ = ["ModelInfo", "MODELS", "ReportModel", "REPORT_MODELS", "report_names", "model_table"]
 
 KINDS = ("fresnel", "ndf", "shadowing", "brdf", "sampler", "metric")
 
@@ -140,14 +140,176 @@ def _build() -> tuple[ModelInfo, ...]:
 MODELS: tuple[ModelInfo, ...] = _build()
 
 
-def model_table() -> str:
-    """Plain-text table of every model: kind, name (/ wrapped functions), parameters, source."""
-    rows = [("kind", "name", "parameters", "source")]
-    rows += [(m.kind, m.label, m.params, m.source) for m in MODELS]
-    widths = [max(len(r[i]) for r in rows) for i in range(3)]
-    lines = []
-    for k, r in enumerate(rows):
-        lines.append("  ".join(r[i].ljust(widths[i]) for i in range(3)) + "  " + r[3])
-        if k == 0:
-            lines.append("-" * (sum(widths) + 6 + max(len(r[3]) for r in rows)))
-    return "\n".join(lines)
+@dataclass(frozen=True)
+class ReportModel:
+    """A model as ``microsim run``/``report`` name it: ``names`` (one, or the expansions of a
+    family), ``role`` (where it appears: "closed form", "fit", "wave", "bounces"), what it is,
+    the ``microsim.analytic`` object that computes it, and the paper and equation."""
+
+    names: tuple[str, ...]
+    role: str
+    what: str
+    python: str
+    source: str
+
+    @property
+    def label(self) -> str:
+        """The names as printed: a family as prefix{a|b|c}, others comma-separated."""
+        import os
+
+        prefix = os.path.commonprefix(list(self.names))
+        if len(self.names) > 1 and prefix.endswith("-") and len(prefix) > 3:
+            return prefix + "{" + "|".join(n[len(prefix) :] for n in self.names) + "}"
+        return ", ".join(self.names)
+
+
+_TS_FAMILY = ("vgroove", "smith", "smith-corr")
+REPORT_MODELS: tuple[ReportModel, ...] = (
+    ReportModel(
+        ("ts-vgroove",),
+        "closed form",
+        "Torrance–Sparrow with Blinn's V-groove G and the surface's ensemble NDF",
+        "TorranceSparrow(ndf, VGroove(), material)",
+        "Mikkelsen 2009, eq. 13, 25 (Blinn 1977)",
+    ),
+    ReportModel(
+        ("ts-smith",),
+        "closed form",
+        "Torrance–Sparrow with the separable Smith G and the ensemble NDF",
+        "TorranceSparrow(ndf, Smith(correlated=False), material)",
+        "Mikkelsen 2009, eq. 13; Smith 1967; Heitz 2014",
+    ),
+    ReportModel(
+        ("ts-smith-corr",),
+        "closed form",
+        "Torrance–Sparrow with the height-correlated Smith G and the ensemble NDF",
+        "TorranceSparrow(ndf, Smith(correlated=True), material)",
+        "Mikkelsen 2009, eq. 13; Heitz 2014",
+    ),
+    ReportModel(
+        ("ts-facets",),
+        "closed form",
+        "Torrance–Sparrow with the traced tile's own facets as D and the surface's exact G "
+        "(V-groove G on V-grooves, height-correlated Smith on heightfields)",
+        "TorranceSparrow(Empirical(normals, weights), ...)",
+        "Mikkelsen 2009, eq. 13, 14, 17",
+    ),
+    ReportModel(
+        tuple(f"ts-beckmann-nominal-{g}" for g in _TS_FAMILY),
+        "closed form",
+        "heightfields: Torrance–Sparrow with Beckmann at the scene's nominal m, with each G",
+        "TorranceSparrow(Beckmann(m), VGroove() | Smith(...), material)",
+        "Mikkelsen 2009, eq. 13, 20",
+    ),
+    ReportModel(
+        tuple(f"ts-beckmann-realised-{g}" for g in _TS_FAMILY),
+        "closed form",
+        "heightfields: the same with Beckmann at the rms slope the mesh realises",
+        "TorranceSparrow(Beckmann(m_realised), ..., material)",
+        "Mikkelsen 2009, eq. 13, 20",
+    ),
+    ReportModel(
+        ("mirror-fresnel",),
+        "closed form",
+        "flat surfaces: all light in the mirror bin, weighted by Fresnel",
+        "fresnel(cos θi, material)",
+        "Mikkelsen 2009, §2.1",
+    ),
+    ReportModel(
+        ("cook-torrance",),
+        "fit",
+        "kd/π + ks·Torrance–Sparrow(Beckmann(m), V-groove G), fitted: ks, m, kd",
+        "CookTorrance(ndf, material, ks, kd)",
+        "Cook & Torrance 1982; Mikkelsen 2009, eq. 13, 25",
+    ),
+    ReportModel(
+        ("low-microfacet",),
+        "fit",
+        "Löw's ABC microfacet model, fitted: A, B, C, kd, n",
+        "LowMicrofacet(A, B, C, kd, material)",
+        "Löw et al. 2012, eq. 15",
+    ),
+    ReportModel(
+        ("low-smooth",),
+        "fit, wave",
+        "Löw's smooth-surface model: fitted (A, B, C, kd, n) against the ray trace, where it "
+        "is outside its domain; with A, B, C from the surface's PSD against the Kirchhoff "
+        "solver (wave scenes)",
+        "LowSmooth(A, B, C, kd, material)",
+        "Löw et al. 2012, eq. 12–14",
+    ),
+    ReportModel(
+        ("edwards",),
+        "fit",
+        "Edwards et al.'s data-fitting halfway-disk model",
+        "EdwardsFit(fit_params)",
+        "Edwards et al. 2006, eq. 34–36",
+    ),
+    ReportModel(
+        ("rayleigh-rice",),
+        "wave",
+        "first-order vector perturbation theory on the surface's PSD",
+        "RayleighRice(wavelength, A, B, C, material)",
+        "Löw et al. 2012, eq. 3–8",
+    ),
+    ReportModel(
+        ("kirchhoff-first-order",),
+        "wave",
+        "the Kirchhoff BRDF to first order in the heights",
+        "analysis.wave_verdicts (Q_K · PSD)",
+        "Beckmann & Spizzichino 1963, ch. 3",
+    ),
+    ReportModel(
+        ("walk-2", "walk-2+"),
+        "bounces",
+        "the random walk on a Smith microsurface: order 2 and all orders ≥ 2",
+        "walk_bin_averages(...)",
+        "Heitz et al. 2016",
+    ),
+    ReportModel(
+        ("random-walk", "kulla-conty", "mikkelsen-eq28"),
+        "bounces",
+        "multiple-scattering energy: the random walk, Kulla–Conty's compensation lobe, "
+        "Mikkelsen's diffuse term",
+        "walk_bin_averages, KullaContyLobe, MikkelsenDiffuse",
+        "Heitz et al. 2016; Kulla & Conty 2017; Mikkelsen 2009, eq. 28",
+    ),
+)
+"""Every model name the reports use, one entry per model (``microsim models`` lists them;
+tests/test_catalogue.py checks that every name the runner produces is here)."""
+
+
+def report_names() -> frozenset:
+    """Every model name of ``REPORT_MODELS``."""
+    return frozenset(n for m in REPORT_MODELS for n in m.names)
+
+
+def _wrapped(head: str, lines: list[str], width: int, indent: int) -> list[str]:
+    """``head`` padded to ``indent`` columns, then ``lines`` each wrapped to ``width``."""
+    import textwrap
+
+    out, pad = [], " " * indent
+    for k, text in enumerate(lines):
+        first = head.ljust(indent - 1) + " " if k == 0 else pad
+        if len(first) > indent:  # a long head gets lines of its own
+            out += textwrap.wrap(head, width, subsequent_indent="  ", break_on_hyphens=False)
+            first = pad
+        out += textwrap.wrap(
+            text, width, initial_indent=first, subsequent_indent=pad, break_on_hyphens=False
+        ) or [first.rstrip()]
+    return out
+
+
+def model_table(width: int = 100) -> str:
+    """``microsim models``: the models as the reports name them (name, what it is, the object
+    that computes it, its source), then every building block of ``microsim.analytic``
+    (kind, name / wrapped functions, parameters, source); wrapped to ``width`` columns."""
+    width = max(int(width), 40)
+    out = ["Models as microsim run and microsim report name them", ""]
+    for m in REPORT_MODELS:
+        out += _wrapped(m.label, [f"{m.what} [{m.role}]", m.python, m.source], width, 26)
+    out += ["", "Building blocks (microsim.analytic)", ""]
+    for kind in KINDS:
+        for m in (e for e in MODELS if e.kind == kind):
+            out += _wrapped(f"{kind}: {m.label}", [m.params, m.source], width, 26)
+    return "\n".join(out)

@@ -197,7 +197,7 @@ class TorranceSparrow(_Model):
 @dataclass(frozen=True)
 class CookTorrance(_Model):
     """f = kd/π + ks·TS(ndf, V-groove G, material) for wi, wo above the horizon, 0 otherwise
-    (Cook & Torrance 1982 as Mikkelsen 2009, eq. 13/25; the ``cook_torrance`` fit model).
+    (Cook & Torrance 1982 as Mikkelsen 2009, eq. 13/25; the ``cook-torrance`` fit model).
     ks ≥ 0, kd ≥ 0. Sampler: the specular lobe's (``sample_microfacet``)."""
 
     ndf: Any

@@ -35,9 +35,11 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_models(args) -> int:
+    import shutil
+
     from ..analytic.catalogue import model_table
 
-    print(model_table())
+    print(model_table(shutil.get_terminal_size((100, 24)).columns))
     return 0
 
 

@@ -48,7 +48,7 @@ REPORT_STATE = ".report-state.json"
 """``microsim report``'s progress file in OUT (finished scenes), for ``report --resume``."""
 SCHEMA_VERSION = 1
 OUTSIDE_DOMAIN = {
-    "low_smooth": (
+    "low-smooth": (
         "wave-optics model (Löw et al. 2012, §2.2: surfaces smoother than the wavelength) "
         "against the geometric ray trace; fit-only"
     ),
