@@ -96,25 +96,30 @@ def verdicts_of(res, models):
     return out
 
 
-def test_model_colours_fixed_distinct_and_never_the_simulation_colour():
-    assert ch.model_colour("ts-vgroove") == ch.model_colour("TS_vgroove")
-    assert ch.model_colour("some new model") == ch.model_colour("some new model")
-    fixed = [
-        ch.model_colour(n)
-        for n in (
-            "ts-vgroove",
-            "ts-smith",
-            "ts-smith-correlated",
-            "low-smooth",
-            "low-microfacet",
-            "rayleigh-rice",
-        )
-    ]
-    assert len(set(fixed)) == len(fixed)
-    hashed = [ch.model_colour(f"model {k}") for k in range(50)]
-    assert not set(hashed) & set(ch._FIXED.values())  # a new model never looks like a known one
-    for c in fixed + hashed:
-        assert np.abs(rgb(c) - rgb(ch.SIM_COLOUR)).max() > 3 * COLOUR_TOL
+def test_model_styles_fixed_and_no_colour_twice_in_a_chart():
+    """One style per model (stable, case/underscore-insensitive); in any chart the models get
+    distinct colours, none the simulation's: the heightfield set (nominal and realised
+    Beckmann with each G, facets, the fits) and the V-groove set, with new names mixed in."""
+    from microsim.analytic.catalogue import report_names
+
+    assert ch.model_style("ts-vgroove") == ch.model_style("TS_vgroove")
+    assert ch.model_style("some new model") == ch.model_style("some new model")
+    assert all(n.replace("_", "-") in ch._STYLES for n in report_names())
+    heightfield = [f"ts-beckmann-{v}-{g}" for v in ("nominal", "realised")
+                   for g in ("vgroove", "smith", "smith-corr")]  # fmt: skip
+    fits = ["cook-torrance", "low-microfacet", "low-smooth", "edwards"]
+    for names in (
+        heightfield + ["ts-facets"] + fits,
+        ["ts-vgroove", "ts-smith", "ts-smith-corr", "ts-facets"] + fits,
+        ["ts-vgroove", "my model", "another model", "ts-smith", "model 7"],
+    ):
+        styles = ch.chart_styles(names)
+        colours = [c for c, _ in styles.values()]
+        assert len(set(colours)) == len(colours), styles
+        for c in colours:
+            assert np.abs(rgb(c) - rgb(ch.SIM_COLOUR)).max() > 3 * COLOUR_TOL
+    nominal, realised = ch.model_style(heightfield[0]), ch.model_style(heightfield[3])
+    assert nominal[0] != realised[0] and nominal[1] != realised[1]
 
 
 def test_inplane_curves(run, tmp_path):

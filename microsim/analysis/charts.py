@@ -9,8 +9,9 @@ atomically (temporary file in the target directory, then ``os.replace``); ``path
 nothing.
 
 Conventions: angles in degrees, BRDFs in sr⁻¹, Δφ = φo − φi (mirror direction at Δφ = 180°).
-Colours are fixed per name (``model_colour``) so a model looks the same in every chart; the
-simulation is always drawn in ``SIM_COLOUR``.
+Styles are fixed per name (``model_style``: a colour per model, a line style per family) so a
+model looks the same in every chart, and no chart draws two models in one colour
+(``chart_styles``); the simulation is always drawn in ``SIM_COLOUR``.
 """
 
 from __future__ import annotations
@@ -39,6 +40,8 @@ __all__ = [
     "SIM_COLOUR",
     "FAIL_THRESHOLD",
     "model_colour",
+    "model_style",
+    "chart_styles",
     "inplane_curves",
     "hemisphere_maps",
     "energy_chart",
@@ -54,9 +57,11 @@ FRESNEL_COLOUR = "#000000"
 Z_LIMIT = 10.0  # z-score colour range ±Z_LIMIT (beyond saturates); ±5 marked
 FAIL_THRESHOLD = 0.05  # relative error above which a closed form "fails" (stability chart)
 
-# Fixed colours for the model names the runner uses; other names get a stable colour from
-# _PALETTE (disjoint from the fixed colours) chosen by CRC-32 of the normalised name, the same
-# in every chart and every run.
+# Styles of the model names the runner uses (``catalogue.REPORT_MODELS``): a line style per
+# family — solid the closed forms with the ensemble NDF, dashed Beckmann at the nominal m,
+# dotted Beckmann at the realised m, dash-dot the fitted models, dotted the wave-optics and
+# multiple-scattering models — and a colour per model. A chart never draws two models in one
+# colour (``chart_styles``); names not listed get a stable colour from _PALETTE by CRC-32.
 _PALETTE = (
     "#e6550d",
     "#843c39",
@@ -70,35 +75,77 @@ _PALETTE = (
     "#8ca252",
     "#ad494a",
     "#7b4173",
+    "#17becf",
+    "#bcbd22",
+    "#393b79",
+    "#637939",
 )
-_FIXED = {
-    "ts-vgroove": "#1f77b4",
-    "ts-smith": "#ff7f0e",
-    "ts-smith-correlated": "#2ca02c",
-    "ts-none": "#7f7f7f",
-    "ts-facets": "#17becf",
-    "facets": "#17becf",
-    "low-smooth": "#8c564b",
-    "low-microfacet": "#9467bd",
-    "rayleigh-rice": "#bcbd22",
-    "edwards": "#393b79",
-    "edwards-fit": "#393b79",
-    "mikkelsen-mix": "#637939",
-    "stratified": "#1f77b4",
-    "independent": "#ff7f0e",
+_STYLES = {
+    "ts-vgroove": ("#1f77b4", "-"),
+    "ts-smith": ("#ff7f0e", "-"),
+    "ts-smith-corr": ("#2ca02c", "-"),
+    "ts-smith-correlated": ("#2ca02c", "-"),
+    "ts-none": ("#7f7f7f", "-"),
+    "ts-facets": ("#17becf", "-"),
+    "facets": ("#17becf", "-"),
+    "ts-beckmann-nominal-vgroove": ("#1f77b4", "--"),
+    "ts-beckmann-nominal-smith": ("#ff7f0e", "--"),
+    "ts-beckmann-nominal-smith-corr": ("#2ca02c", "--"),
+    "ts-beckmann-realised-vgroove": ("#5254a3", ":"),
+    "ts-beckmann-realised-smith": ("#e6550d", ":"),
+    "ts-beckmann-realised-smith-corr": ("#8ca252", ":"),
+    "mirror-fresnel": ("#1f77b4", "-"),
+    "cook-torrance": ("#8c564b", "-."),
+    "low-microfacet": ("#9467bd", "-."),
+    "low-smooth": ("#bcbd22", "-."),
+    "edwards": ("#393b79", "-."),
+    "edwards-fit": ("#393b79", "-."),
+    "rayleigh-rice": ("#7b4173", ":"),
+    "kirchhoff-first-order": ("#636363", ":"),
+    "walk-2": ("#31a354", ":"),
+    "walk-2+": ("#756bb1", ":"),
+    "random-walk": ("#3182bd", ":"),
+    "kulla-conty": ("#e7ba52", "--"),
+    "mikkelsen-eq28": ("#843c39", "-."),
+    "mikkelsen-mix": ("#637939", "-."),
+    "stratified": ("#1f77b4", "-"),
+    "independent": ("#ff7f0e", "-"),
     # Mikkelsen Fig. 6 draws κ=1024 in red: too close to SIM_COLOUR
-    "κ=17": "#2ca02c",
-    "κ=1024": "#1f77b4",
+    "κ=17": ("#2ca02c", "-"),
+    "κ=1024": ("#1f77b4", "-"),
 }
 
 
+def _key(name: str) -> str:
+    return "-".join(str(name).strip().lower().replace("_", "-").split())
+
+
+def model_style(name: str) -> tuple[str, str]:
+    """(hex colour, matplotlib line style) of a model (or estimator variant) ``name``: fixed
+    for the report's names (case, spaces and underscores ignored), otherwise a stable colour
+    from a CRC-32 of the name, solid."""
+    key = _key(name)
+    if key in _STYLES:
+        return _STYLES[key]
+    return _PALETTE[zlib.crc32(key.encode("utf-8")) % len(_PALETTE)], "-"
+
+
 def model_colour(name: str) -> str:
-    """Hex colour of a model (or estimator variant) ``name``; fixed for the names in ``_FIXED``
-    (case, spaces and underscores ignored), otherwise stable from a CRC-32 of the name."""
-    key = "-".join(str(name).strip().lower().replace("_", "-").split())
-    if key in _FIXED:
-        return _FIXED[key]
-    return _PALETTE[zlib.crc32(key.encode("utf-8")) % len(_PALETTE)]
+    """The colour of ``model_style(name)``."""
+    return model_style(name)[0]
+
+
+def chart_styles(names: Iterable[str]) -> dict[str, tuple[str, str]]:
+    """``model_style`` of each of ``names``, except that no colour is used twice in the
+    chart: a model whose colour is taken gets the first free one of _PALETTE (then grey)."""
+    out, used = {}, {SIM_COLOUR}
+    for name in names:
+        colour, style = model_style(name)
+        if colour in used:
+            colour = next((c for c in _PALETTE if c not in used), "#7f7f7f")
+        used.add(colour)
+        out[name] = (colour, style)
+    return out
 
 
 # --- writing ---------------------------------------------------------------------------------
@@ -108,7 +155,7 @@ def figure_size(chart: str, n: int = 1) -> tuple[float, float]:
     for "stability"; ignored otherwise."""
     if chart == "inplane":
         rows, cols = _grid(n)
-        return 4.6 * cols + 3.0, 3.6 * rows + 0.6  # + a legend column on the right
+        return 4.6 * cols + 3.0, 5.0 * rows + 0.6  # + a legend column; ratio panels below
     if chart == "mikkelsen_fig6":
         return 5.2 * n + 0.4, 4.6
     if chart == "stability":
@@ -182,39 +229,62 @@ def _in_plane_slice(a: np.ndarray, bins) -> np.ndarray:
     return np.concatenate([a[:, ::-1, bins.backward_index], a[:, :, bins.forward_index]], axis=1)
 
 
+RATIO_MAX_REL_SE = 0.5
+"""The ratio panels leave out bins whose relative standard error exceeds this (noise alone)."""
+
+
 def inplane_curves(
     result, models: Mapping[str, np.ndarray], path=None, scene_name: str = "", *, ax=None
 ) -> Figure:
-    """In-plane scattering curves, one panel per incidence (as Löw et al. 2012, Figs. 3 and 12).
+    """In-plane scattering curves, one panel per incidence (as Löw et al. 2012, Figs. 3 and 12),
+    each with a ratio panel below it.
 
     x: signed θo in degrees (specular side Δφ = 180° positive, backward side Δφ = 0° negative);
     y: bin-averaged BRDF in sr⁻¹, log scale. Simulation: points with ±1 standard-error bars;
-    models (name → (T, Θ, Φ) bin averages on ``result.bins``): constant over each bin (steps).
-    The mirror direction θo = +θi is marked. Bins with zero value are not drawn (log axis).
-    ``ax``: one Axes per incidence (the legend then goes in the first).
+    models (name → (T, Θ, Φ) bin averages on ``result.bins``): constant over each bin (steps),
+    one colour and line style each (``chart_styles``). Ratio panel: model / simulation per bin
+    with the simulation's ±1σ band around 1 (bins with relative standard error above
+    ``RATIO_MAX_REL_SE`` left out; ratios beyond the axis drawn at its edge as triangles), so a
+    20 % error reads as 0.8 or 1.2 whatever the dynamic range above. The mirror direction
+    θo = +θi is marked. ``ax``: one Axes per incidence (the curves only, no ratio panels; the
+    legend then goes in the first).
     """
     bins = result.bins
     ip = result.in_plane()
     te = np.asarray(bins.theta_edges, dtype=np.float64)
     edges = np.concatenate([-te[::-1], te[1:]])
+    centres = 0.5 * (edges[:-1] + edges[1:])
     curves = {name: _in_plane_slice(m, bins) for name, m in models.items()}
+    styles = chart_styles(curves)
     n_t = len(result.theta_i)
     given = _given_axes(ax, n_t, "inplane_curves", "one per incidence")
+    ratio_axes = [None] * n_t
     if given is None:
         rows, cols = _grid(n_t)
         fig = _figure(figure_size("inplane", n_t))
-        axes = list(fig.subplots(rows, cols, squeeze=False, sharey=True).flat)
+        grid = fig.subplots(
+            2 * rows, cols, squeeze=False, height_ratios=[3.0, 1.3] * rows, sharex=True
+        )
+        axes = [grid[2 * (k // cols), k % cols] for k in range(rows * cols)]
+        ratio_axes = [grid[2 * (k // cols) + 1, k % cols] for k in range(rows * cols)]
+        for k in range(1, len(axes)):
+            axes[k].sharey(axes[0])
+            ratio_axes[k].sharey(ratio_axes[0])
     else:
         rows, cols, axes, fig = 1, n_t, given, given[0].figure
     lo, hi = _log_limits([ip.brdf] + [c for c in curves.values()], 1e-6)
+    ratios = []
     for t in range(rows * cols):
-        ax = axes[t]
+        ax, rx = axes[t], ratio_axes[t]
         if t >= n_t:
             ax.set_visible(False)
+            if rx is not None:
+                rx.set_visible(False)
             continue
         for name, c in curves.items():
+            colour, style = styles[name]
             ax.stairs(
-                _positive(c[t]), edges, baseline=None, color=model_colour(name), lw=1.6, label=name
+                _positive(c[t]), edges, baseline=None, color=colour, ls=style, lw=1.6, label=name
             )
         y = _positive(ip.brdf[t])
         ax.errorbar(
@@ -238,17 +308,69 @@ def inplane_curves(
         ax.set_xlim(-90, 90)
         ax.set_xticks(np.arange(-90, 91, 30))
         ax.set_title(f"θi = {th_i:g}°")
-        ax.set_xlabel("θo (°)   − backward (Δφ=0°) | + specular (Δφ=180°)")
         if t % cols == 0:
             ax.set_ylabel("BRDF (sr⁻¹)")
         ax.grid(True, which="major", alpha=0.3)
+        if rx is None:
+            ax.set_xlabel("θo (°)   − backward (Δφ=0°) | + specular (Δφ=180°)")
+            continue
+        ax.tick_params(labelbottom=False)
+        sim = np.array(ip.brdf[t], dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel_se = np.asarray(ip.stderr[t], dtype=np.float64) / sim
+            keep = np.isfinite(rel_se) & (sim > 0) & (rel_se <= RATIO_MAX_REL_SE)
+            rx.fill_between(
+                centres,
+                np.where(keep, 1 - rel_se, np.nan),
+                np.where(keep, 1 + rel_se, np.nan),
+                step="mid",
+                color=SIM_COLOUR,
+                alpha=0.18,
+                lw=0,
+                label="simulation ±1σ",
+            )
+            marks = []
+            for name, c in curves.items():
+                r = np.where(keep, c[t] / sim, np.nan)
+                colour, style = styles[name]
+                marks.append((r, colour))
+                rx.stairs(r, edges, baseline=None, color=colour, ls=style, lw=1.4)
+            ratios.append((rx, centres, marks))
+        rx.axhline(1.0, color=SIM_COLOUR, lw=0.9)
+        rx.axvline(th_i, color="0.35", ls="--", lw=0.9)
+        rx.set_xlabel("θo (°)")
+        if t % cols == 0:
+            rx.set_ylabel("model / sim.")
+        rx.grid(True, which="major", alpha=0.3)
     if given is not None:
         axes[0].legend(fontsize=8)
         return _output(fig, path)
+    _ratio_limits(ratios)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, fontsize=8, loc="outside right upper")  # never over the data
-    fig.suptitle(_title(scene_name, "in-plane scattering (bin averages)"))
+    fig.supxlabel("θo (°): − backward side (Δφ = 0°), + specular side (Δφ = 180°)", fontsize=9)
+    fig.suptitle(
+        _title(scene_name, "in-plane scattering (bin averages); below: model / simulation")
+    )
     return _output(fig, path)
+
+
+def _ratio_limits(panels) -> None:
+    """A common y range for the ratio panels (``panels``: [(Axes, x, [(ratio, colour)])]): the
+    central 98 % of the ratios, at least 0.8–1.2, at most 0–3; ratios beyond it marked at the
+    edge (triangles pointing out)."""
+    vals = [np.ravel(r) for _, _, rs in panels for r, _ in rs]
+    vals = np.concatenate(vals) if vals else np.array([1.0])
+    vals = vals[np.isfinite(vals)]
+    lo, hi = np.percentile(vals, [1, 99]) if vals.size else (1.0, 1.0)
+    lo, hi = max(0.0, min(0.8, lo - 0.05)), min(3.0, max(1.2, hi + 0.05))
+    for rx, x, rs in panels:
+        rx.set_ylim(lo, hi)
+        for r, colour in rs:
+            with np.errstate(invalid="ignore"):
+                up, down = r > hi, r < lo
+            rx.plot(x[up], np.full(up.sum(), hi), "^", ms=4, color=colour)
+            rx.plot(x[down], np.full(down.sum(), lo), "v", ms=4, color=colour)
 
 
 # --- 2. hemisphere maps ----------------------------------------------------------------------
@@ -344,8 +466,10 @@ def hemisphere_maps(
     """Polar maps at incidence ``t_index``: r = sin θo, angle = Δφ (folded grids mirrored),
     of the simulation, the best and the worst model by ``rel_rms`` (shared log colour scale,
     sr⁻¹), and the z-scores (sim − model)/stderr of both (diverging, symmetric, ±5 marked;
-    bins without events grey). ``verdicts``: verdict dicts (keys theta_i, model, rel_rms,
-    chi2_dof, max_abs_z, agrees, …) in any list/dict nesting. The mirror direction is circled.
+    bins without events grey); a single model is shown as "model" (2 × 2 panels). Models
+    outside their domain are not passed in ``models`` by the runner. ``verdicts``: verdict
+    dicts (keys theta_i, model, rel_rms, chi2_dof, max_abs_z, agrees, …) in any list/dict
+    nesting. The mirror direction is circled.
     ``ax``: six Axes in the 2 × 3 layout of the PNG, row by row — simulation, best, worst
     (polar), verdict table, z of best, z of worst (polar); those of the worst model stay empty
     when one model is shown.
@@ -372,8 +496,9 @@ def hemisphere_maps(
 
     given = _given_axes(ax, 6, "hemisphere_maps", "simulation, best, worst, table, z best, z worst")
     if given is None:
-        fig = _figure(figure_size("hemisphere_maps"))
-        gs = fig.add_gridspec(2, 3)
+        w, h = figure_size("hemisphere_maps")
+        fig = _figure((w * (1 + len(shown)) / 3, h))  # no empty column for a single model
+        gs = fig.add_gridspec(2, 1 + len(shown))
     else:
         fig = given[0].figure
         for k in (0, 1, 2, 4, 5):
@@ -397,7 +522,7 @@ def hemisphere_maps(
     )
     brdf_axes, z_axes = [ax], []
     for j, v in enumerate(shown):
-        role = "best" if v is best else "worst"
+        role = "model" if len(shown) == 1 else ("best" if v is best else "worst")
         col = model_colour(v["model"])
         brdf_axes.append(
             _polar_panel(
@@ -515,11 +640,13 @@ def energy_chart(
         ax, bx = fig.subplots(1, 2)
     else:
         (ax, bx), fig = given, given[0].figure
+    styles = chart_styles(rho_models)
     for name, (grid, rho) in rho_models.items():
         ax.plot(
             np.asarray(grid, float),
             np.asarray(rho, float),
-            color=model_colour(name),
+            color=styles[name][0],
+            ls=styles[name][1],
             lw=1.6,
             label=name,
         )
@@ -735,12 +862,12 @@ def stability_chart(
     else:
         (ax, bar, txt), fig = given, given[0].figure
     half = 0.5 * (np.median(np.diff(th)) if th.size > 1 else 1.0)  # half a θi step (bars)
-    all_err = []
+    all_err, styles = [], chart_styles(rel_err)
     for k, (name, e) in enumerate(rel_err.items()):
         e = np.abs(np.asarray(e, dtype=np.float64))
         all_err.append(e)
-        col = model_colour(name)
-        ax.plot(th, _positive(e), marker="o", ms=3, color=col, lw=1.6, label=name)
+        col, style = styles[name]
+        ax.plot(th, _positive(e), marker="o", ms=3, color=col, ls=style, lw=1.6, label=name)
         for a, b in _fail_ranges(th, e, FAIL_THRESHOLD):
             bar.barh(k, b - a + 2 * half, left=a - half, height=0.7, color=col)
     lo, hi = _log_limits(all_err + [np.array([FAIL_THRESHOLD])], 1e-5)

@@ -314,57 +314,77 @@ def regime_map(
     return RegimeMap(family, sig, th, names, dev, dev_se, rel, noise, meta)
 
 
-_STYLE = {
-    "rayleigh-rice": ("C0", "o"),
-    "low-smooth": ("C1", "s"),
-    "ts-smith": ("C2", "^"),
-    "geometric-facets": ("C3", "v"),
-}
+_MARKERS = {"rayleigh-rice": "o", "low-smooth": "s", "ts-smith": "^", "geometric-facets": "v"}
+_COLOUR_OF = {"geometric-facets": "ts-facets"}  # the ray trace of the facets: ts-facets' colour
 
 
 def regime_chart(maps, ax=None, *, theta_i=None, criterion: float = CRITERION):
-    """Chart "Where each method holds": |energy-weighted error| against σ/λ (log–log) for each
-    model (colour) and incidence (line style: solid 0°, dashed 30°, dotted 60°), one panel per
-    family when ``ax`` is None, else all on ``ax``; the 5 % criterion as a grey line. ``maps``
-    a ``RegimeMap`` or a list of them. Returns the matplotlib Figure."""
-    import matplotlib
+    """Chart "Where each method holds": |energy-weighted error| of each method against the
+    Kirchhoff reference over σ/λ (log–log), as small multiples: one row per family (``maps``,
+    a ``RegimeMap`` or a list), one column per incidence (``theta_i``: a subset, default all),
+    one line per method in its report colour and marker (``charts.model_style``), the
+    ``criterion`` band (|error| ≤ 5 %) shaded, the legend outside the panels. With ``ax`` every
+    map, method and incidence goes on that one Axes (line style per incidence). Returns the
+    matplotlib Figure (no pyplot)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    if ax is None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    from .charts import model_style
 
     maps = [maps] if isinstance(maps, RegimeMap) else list(maps)
     if not maps:
         raise UsageError("maps: give at least one RegimeMap")
+    wanted = None if theta_i is None else [float(x) for x in theta_i]
+    thetas = [float(t) for t in maps[0].theta_i if wanted is None or float(t) in wanted]
     if ax is None:
-        fig, axes = plt.subplots(1, len(maps), figsize=(5.5 * len(maps), 4.2), squeeze=False)
-        axes = list(axes[0])
+        fig = Figure(figsize=(3.4 * len(thetas) + 2.2, 3.0 * len(maps) + 0.5), dpi=100,
+                     layout="constrained")  # fmt: skip
+        FigureCanvasAgg(fig)
+        grid = fig.subplots(len(maps), len(thetas), squeeze=False, sharex=True, sharey=True)
+        panels = [(grid[r, c], rm, th, "-") for r, rm in enumerate(maps)
+                  for c, th in enumerate(thetas)]  # fmt: skip
     else:
-        fig, axes = ax.figure, [ax] * len(maps)
-    styles = ["-", "--", ":", "-."]
-    for a, rm in zip(axes, maps):
+        fig, styles = ax.figure, ["-", "--", ":", "-."]
+        panels = [(ax, rm, th, styles[k % 4]) for rm in maps for k, th in enumerate(thetas)]
+    for a, rm, th, style in panels:
+        t = [float(x) for x in rm.theta_i].index(th)
         for i, name in enumerate(rm.models):
-            colour, marker = _STYLE.get(name, (f"C{4 + i}", "d"))
-            for t, th in enumerate(rm.theta_i):
-                if theta_i is not None and float(th) not in [float(x) for x in theta_i]:
-                    continue
-                y = np.abs(rm.energy_dev[i, :, t])
-                if not np.any(np.isfinite(y)):
-                    continue
-                a.plot(
-                    rm.sigma,
-                    np.maximum(y, 1e-4),
-                    linestyle=styles[t % len(styles)],
-                    color=colour,
-                    marker=marker,
-                    markersize=3,
-                    label=f"{name} θi={th:g}°",
-                )
+            y = np.abs(rm.energy_dev[i, :, t])
+            if not np.any(np.isfinite(y)):
+                continue
+            a.plot(
+                rm.sigma,
+                np.maximum(y, 1e-4),
+                linestyle=style,
+                color=model_style(_COLOUR_OF.get(name, name))[0],
+                marker=_MARKERS.get(name, "d"),
+                markersize=3.5,
+                label=name if ax is None else f"{name} θi={th:g}°",
+            )
+        a.axhspan(1e-4, criterion, color="0.9", zorder=0)
         a.axhline(criterion, color="0.5", linewidth=1)
         a.set_xscale("log")
         a.set_yscale("log")
-        a.set_xlabel("σ/λ")
-        a.set_ylabel("|energy-weighted error| vs Kirchhoff")
-        a.set_title(f"{rm.family}: ℓ/λ = {rm.meta.get('corr_over_lambda', float('nan')):g}")
-        a.legend(fontsize=6, ncol=2)
+        a.grid(True, which="major", alpha=0.3)
+        if ax is None:
+            a.set_title(f"{rm.family}, ℓ/λ = {rm.meta.get('corr_over_lambda', float('nan')):g}, "
+                        f"θi = {th:g}°", fontsize=9)  # fmt: skip
+    if ax is not None:
+        ax.set_xlabel("σ/λ")
+        ax.set_ylabel("|energy-weighted error| vs Kirchhoff")
+        ax.legend(fontsize=6, ncol=2)
+        return fig
+    fig.supxlabel("σ/λ (rms height over wavelength)")
+    fig.supylabel("|energy-weighted error| against Kirchhoff")
+    handles, labels = {}, []
+    for a, *_ in panels:
+        for h, lab in zip(*a.get_legend_handles_labels()):
+            handles.setdefault(lab, h)
+    labels = list(handles)
+    labels.append(f"within {100 * criterion:g} %")
+    from matplotlib.patches import Patch
+
+    fig.legend(
+        list(handles.values()) + [Patch(color="0.9")], labels, loc="outside right upper", fontsize=8
+    )
     return fig

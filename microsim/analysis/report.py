@@ -17,6 +17,7 @@ import numpy as np
 
 from microsim.stats import t_isf
 
+from .multiple import NOT_EXPECTED
 from .verdicts import summary_row, verdict_kind, verdict_symbol
 
 __all__ = [
@@ -33,9 +34,18 @@ __all__ = [
 ]
 
 
+def plain(x: float, digits: int = 3) -> str:
+    """``digits`` significant figures in positional notation, never an exponent: "-1080",
+    "0.011", "24"; below 1e-4 or from 1e7 on in magnitude, "1.2e-05" style (too many zeros)."""
+    x = float(x)
+    if x != 0 and not 1e-4 <= abs(x) < 1e7:
+        return f"{x:.{digits}g}"
+    return np.format_float_positional(x, precision=digits, unique=False, fractional=False, trim="-")
+
+
 def fmt(x, digits: int = 3) -> str:
-    """Compact number: None/NaN → "–", else ``digits`` significant figures; a string as is; a
-    sequence (e.g. a grid shape) as "a × b" of its formatted items."""
+    """Compact number: None/NaN → "–", else ``digits`` significant figures (``plain``); a string
+    as is; a sequence (e.g. a grid shape) as "a × b" of its formatted items."""
     if x is None:
         return "–"
     if isinstance(x, str):
@@ -49,11 +59,11 @@ def fmt(x, digits: int = 3) -> str:
     x = float(x)
     if not math.isfinite(x):
         return "–"
-    return f"{x:.{digits}g}"
+    return plain(x, digits)
 
 
 def _pct(x) -> str:
-    return "–" if x is None or not math.isfinite(float(x)) else f"{100 * float(x):.3g}%"
+    return "–" if x is None or not math.isfinite(float(x)) else f"{plain(100 * float(x))}%"
 
 
 def _cell(s) -> str:
@@ -196,46 +206,47 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
     fraction of the reflected energy in orders ≥ 2 at each θi and whether it exceeds 1 % (the
     scene then needs more than one bounce), and the random walk's and Kulla–Conty's relative
     energy deviation there."""
-    rows = []
+    rows, not_expected = [], False
     for d in docs:
         o = d.get("orders")
         if not o:
             continue
         need = [n for n in o["needs"] if n["needs"]]
         cells = ", ".join(
-            f"{n['theta_i']:g}°: {100 * n['multiple_fraction']:.2g} %" for n in o["needs"]
+            f"{n['theta_i']:g}°: {plain(100 * n['multiple_fraction'], 2)} %" for n in o["needs"]
         )
+        comparison = o.get("comparison") or {}
         dev = {}
-        for inc in (o.get("comparison") or {}).get("incidences", []):
+        for inc in comparison.get("incidences", []):
             for name in ("random-walk", "kulla-conty"):
                 m = inc["models"].get(name)
                 if m and m.get("rel_dev") is not None:
-                    dev.setdefault(name, []).append(f"{100 * m['rel_dev']:+.2g}")
+                    dev.setdefault(name, []).append(_signed_pct(m["rel_dev"]))
+        mark = " †" if comparison.get("expected") is False else ""
         rows.append(
             [f"[{d['scene']}]({d['scene']}/report.md)", cells, "yes" if need else "no"]
-            + [
-                ", ".join(dev.get(name, ["–"])) + (" %" if name in dev else "")
-                for name in ("random-walk", "kulla-conty")
-            ]
+            + [", ".join(dev.get(name, ["–"])) + mark for name in ("random-walk", "kulla-conty")]
         )
+        not_expected = not_expected or bool(mark)
     if not rows:
         return []
     return [
         "## How much light single scattering misses",
         "",
-        'Scenes traced with `bounces = "all"`: the fraction of the reflected energy in '
-        "scattering orders ≥ 2 at each θi, whether a single-bounce model misses more than 1 % "
-        "of it (then the scene needs more than one bounce), and the relative energy deviation "
-        "(simulation − model)/simulation of orders ≥ 2 of Heitz et al.'s random walk and of "
-        "Kulla–Conty's compensation at the same θi. Each scene's report has the order-resolved "
-        "tables, Mikkelsen eq. 28 and the lobes' shape errors.",
+        'Scenes traced with `bounces = "all"`. Columns: the fraction of the reflected energy '
+        "in scattering orders ≥ 2 at each θi; whether a single-bounce model misses more than "
+        "1 % of it (then the scene needs more than one bounce); and, at the same θi in the "
+        "same order, the relative energy deviation (simulation − model)/simulation of orders "
+        "≥ 2 of Heitz et al.'s random walk and of Kulla–Conty's compensation (positive: the "
+        "model has too little multiple scattering). Each scene's report has the "
+        "order-resolved tables, Mikkelsen eq. 28 and the lobes' shape errors.",
         "",
         md_table(
             ["scene", "orders ≥ 2 per θi", "> 1 bounce needed", "random walk", "Kulla–Conty"],
             rows,
         ),
         "",
-    ]
+    ] + ([f"† {NOT_EXPECTED}.", ""] if not_expected else [])
 
 
 def _realisations_text(run: Mapping) -> str:
@@ -455,8 +466,8 @@ _WAVE_STATUS = {
 def _signed_pct(x, se=None) -> str:
     if x is None or not math.isfinite(float(x)):
         return "–"
-    text = f"{100 * float(x):+.3g} %"
-    return text if se is None else f"{text} ± {100 * float(se):.2g} %"
+    text = f"{'+' if x > 0 else ''}{plain(100 * float(x))} %"
+    return text if se is None else f"{text} ± {plain(100 * float(se), 2)} %"
 
 
 def _region_text(v: Mapping) -> str:
@@ -638,16 +649,19 @@ def _wave_index_rows(docs: Sequence[Mapping]) -> tuple[list[str], list[list[str]
     return models, rows
 
 
-def _crossover_cell(x, devs, criterion: float) -> str:
+def _crossover_cell(x, devs, criterion: float, below: bool) -> str:
+    """Where a method holds within ``criterion`` on the σ/λ grid, in words: "σ/λ < 0.046"
+    (``below``: a small-roughness theory) or "σ/λ > 0.25"; "never" (beyond it everywhere),
+    "everywhere" (within it everywhere); "–" otherwise (no single crossing)."""
     if x is not None:
-        return fmt(x)
+        return f"σ/λ {'<' if below else '>'} {fmt(x)}"
     d = [abs(v) for v in devs if v is not None and math.isfinite(v)]
     if not d:
         return "–"
     if all(v > criterion for v in d):
         return "never"
     if all(v <= criterion for v in d):
-        return "whole grid"
+        return "everywhere"
     return "–"
 
 
@@ -694,33 +708,29 @@ def regime_section(docs: Sequence[Mapping], regimes: Mapping | None, methods=Non
         for m in regimes["maps"]:
             crit = m["meta"].get("criterion", crit)
             for model, by_theta in m["crossovers"].items():
-                side = (
-                    "stops holding above"
-                    if model in ("rayleigh-rice", "low-smooth")
-                    else "holds above"
-                )
+                below = model in ("rayleigh-rice", "low-smooth")  # small-roughness theories
                 i = m["models"].index(model)
                 table.append(
-                    [m["family"], model, side]
+                    [m["family"], model]
                     + [
                         _crossover_cell(
                             by_theta.get(str(float(t))),
                             [row[k] for row in m["energy_dev"][i]],
                             crit or 0.05,
+                            below,
                         )
                         for k, t in enumerate(m["theta_i"])
                     ]
                 )
         thetas = regimes["maps"][0]["theta_i"]
         lines += [
-            f"Crossovers: σ/λ where the |energy deviation| crosses {100 * (crit or 0.05):g} % "
-            "(interpolated in log σ; *never*: above it at every σ/λ of the grid; *whole grid*: "
-            "within it at every σ/λ; – : no crossing of that kind, e.g. a method that holds "
-            "only in the middle of the grid).",
+            f"Where each method holds: the σ/λ range in which its |energy deviation| from "
+            f"Kirchhoff stays within {100 * (crit or 0.05):g} % (the crossing interpolated in "
+            "log σ); *never*: beyond it at every σ/λ of the grid; *everywhere*: within it at "
+            "every σ/λ; –: no single crossing (e.g. a method that holds only in the middle "
+            "of the grid).",
             "",
-            md_table(
-                ["family", "method", "σ/λ where it"] + [f"θi = {t:g}°" for t in thetas], table
-            ),
+            md_table(["family", "method"] + [f"θi = {t:g}°" for t in thetas], table),
             "",
         ]
     if methods is not None:
@@ -870,7 +880,7 @@ def _index_cell(d: Mapping, model: str, summary: Mapping[str, str]) -> str:
     if model not in summary:
         return "–"
     if model in (d.get("outside_domain") or {}):
-        return OUT_OF_DOMAIN
+        return "outside its domain"
     return _compact(d["verdicts"], model, summary[model])
 
 
@@ -881,12 +891,17 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
     for d in docs:
         pres = tuple(dict.fromkeys(v["model"] for v in d["verdicts"] if not v["fitted"]))
         groups.setdefault(pres, []).append(d)
-    out = []
+    out, dropped = [], {}
     for pres, group in groups.items():
         fitted = list(
             dict.fromkeys(v["model"] for d in group for v in d["verdicts"] if v["fitted"])
         )
         models = list(pres) + fitted
+        for m in list(models):  # a model outside its domain on every scene: said once below
+            reasons = [(d.get("outside_domain") or {}).get(m) for d in group]
+            if all(reasons):
+                models.remove(m)
+                dropped[m + (" (fit)" if m in fitted else "")] = reasons[0]
         rows = []
         for d in group:
             s = summary_row(d["verdicts"])
@@ -897,6 +912,13 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
             )
         out += [
             md_table(["scene"] + [m + (" (fit)" if m in fitted else "") for m in models], rows),
+            "",
+        ]
+    for name, reason in dropped.items():
+        out += [
+            f"Not in these tables: {name}, outside its domain on every scene — {reason}. Its "
+            "fit is in the fit table; the scenes with a wavelength judge it against the "
+            "Kirchhoff solver under *Where each method holds*.",
             "",
         ]
     return out
@@ -940,26 +962,18 @@ def index_report(
         "",
         "## Verdicts",
         "",
-        "✓: statistically indistinguishable from the simulation at every incidence (χ² and "
-        "max-|z| tests, Šidák-corrected, α = 0.01). ✗: the model deviates at the listed "
-        "incidences; the percentage is its largest energy-weighted relative RMS error there. ✓ "
-        "±x%: an ensemble model that agrees as far as the R realisations (after the scene's name) "
-        "can tell — energy "
-        "deviations below x % (at the test's level) are not resolved, so a large x means a weak "
-        "verdict, not a confirmed model. ? x% (tile departs y%): inconclusive — an ensemble model "
-        "judged on one realisation whose deviation x (energy-weighted relative RMS) the tile's "
-        "own departure from its ensemble, y, and ray noise explain; on V-groove tiles that "
-        "departure is computed from the facets (TS with the tile's facets against TS with the "
-        "ensemble NDF, both with V-groove G), and a deviation beyond it is a resolved ✗. A bare "
-        "? (heightfield tiles): one realisation, whose masking departs from the ensemble too, "
-        "cannot tell tile scatter from model error. Ensemble models"
-        " on several realisations are judged against the scatter between them (Student t over the"
-        " realisations); models of the realised facets against ray noise. Each scene's report "
-        "says where (θo ranges, worst bin) and by how much. "
-        f"*{OUT_OF_DOMAIN}*: Löw's smooth-surface model is a wave-optics result for surfaces "
-        "smoother than the wavelength; against the geometric ray trace its verdicts test "
-        "nothing, so only its fit is listed (the scenes with a wavelength judge it against "
-        "the Kirchhoff solver under *Where each method holds*).",
+        "Key (the statistics behind each symbol: `docs/verdicts.md` in the microsim repository):",
+        "",
+        "- ✓ agrees: indistinguishable from the simulation at every incidence (χ² and max-|z| "
+        "tests, Šidák-corrected, α = 0.01 per run).",
+        "- ✓ ±x% agrees as far as the R realisations (R=… after the scene) can tell: energy "
+        "deviations below x % are not resolved.",
+        "- ✗ y% (θi …) deviates at those incidences; y is its largest energy-weighted relative "
+        "RMS error there.",
+        "- ? y% (tile departs z%) inconclusive: one tile, whose computed departure z from its "
+        "ensemble explains the deviation y.",
+        "- ? (θi …) inconclusive: one heightfield tile cannot tell tile scatter from model error.",
+        "- – not compared on this scene.",
         "",
     ] + _verdict_tables(docs)
     lines += _orders_index(docs)

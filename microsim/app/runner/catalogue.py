@@ -61,17 +61,12 @@ def _scene_digest(path: Path, scene) -> str:
 
 def _regimes(out: Path, quick: bool) -> dict:
     """Regime maps, their chart ``out/REGIME_CHART`` and what the index prints of them."""
-    import matplotlib.pyplot as plt
-
     from ...analysis.regimes import regime_chart
 
     rm = regime_maps(quick)
     fig = regime_chart(rm["maps"])
-    try:
-        with atomic.atomic_open(str(out / REGIME_CHART), "wb") as fh:
-            fig.savefig(fh, format="png", dpi=100)
-    finally:
-        plt.close(fig)
+    with atomic.atomic_open(str(out / REGIME_CHART), "wb") as fh:
+        fig.savefig(fh, format="png", dpi=100)
     return {
         "chart": REGIME_CHART,
         "maps": [m.to_dict() for m in rm["maps"]],

@@ -47,6 +47,7 @@ from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress
 from .publishing import (
     CHARTS,
+    OUTSIDE_DOMAIN,
     REPORT_FILE,
     TIMINGS_FILE,
     VERDICTS_FILE,
@@ -342,6 +343,8 @@ def _charts(
     files = {}
     files["inplane"] = CHARTS["inplane"]
     ch.inplane_curves(result, shown, stage / files["inplane"], name)
+    judged = {k: v for k, v in shown.items() if k not in OUTSIDE_DOMAIN}
+    ranking = [m for m in ranking if m in judged]  # best/worst among models in their domain
     if ranking:
         worst = ranking[-1]
         zs = [
@@ -351,7 +354,7 @@ def _charts(
         t_index = max(zs)[1] if zs else 0
         files["hemisphere"] = CHARTS["hemisphere"]
         ch.hemisphere_maps(
-            result, shown, _nan_for_none(verdicts), stage / files["hemisphere"], t_index, name
+            result, judged, _nan_for_none(verdicts), stage / files["hemisphere"], t_index, name
         )
     grid = np.linspace(0.0, 89.9, 180)
     files["energy"] = CHARTS["energy"]
