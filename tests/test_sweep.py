@@ -339,3 +339,27 @@ def test_unreachable_scheduler_fails_fast_naming_the_address(tmp_path):
         run_sweep(tiny_spec(), tmp_path / "out", scheduler=addr, connect_timeout=1.0)
     assert time.monotonic() - t0 < 20
     assert not (tmp_path / "out").exists()
+
+
+# --- effort options and the noise floor ------------------------------------------------------
+def test_rays_and_quick_give_new_tasks_and_the_exact_model_sits_on_its_noise_floor(tmp_path):
+    """``--rays``/``--quick`` change every task (new ids: a quick result never stands in for a
+    full one); each record carries the ray-noise floor, and the exact model (TS with V-groove G
+    on V-grooves) shows a relative RMS error at that floor: rel_rms² ≈ floor²·χ²_k/k over the
+    k ≥ 20 energy bins, so their ratio lies in [0.5, 1.6] far beyond any plausible draw."""
+    from microsim.app.runner.planning import QUICK
+    from microsim.app.sweep.grid import with_effort
+
+    spec = load_sweep("sweeps/quickstart.toml")
+    quick = with_effort(spec, rays=30_000, quick=True)
+    assert {t.id for t in quick.tasks}.isdisjoint({t.id for t in spec.tasks})
+    assert all(t.rays == 30_000 for t in quick.tasks)
+    assert all(t.theta_bins <= QUICK.max_bins[0] for t in quick.tasks)
+    assert all(t.rays == min(s.rays, QUICK.max_rays) for t, s in
+               zip(with_effort(spec, quick=True).tasks, spec.tasks))  # fmt: skip
+    run_sweep(with_effort(spec, rays=200_000), tmp_path / "out", workers=2)
+    rows = list(csv.DictReader(open(tmp_path / "out" / "summary.csv")))
+    exact = [r for r in rows if r["model"] == "ts-vgroove"]
+    assert exact and all(r["noise_floor"] for r in rows)
+    for r in exact:
+        assert 0.5 < float(r["rel_rms"]) / float(r["noise_floor"]) < 1.6, r

@@ -19,6 +19,7 @@ import traceback
 
 from .. import __version__
 from ..errors import EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure, UsageError
+from .options import rays_option
 
 EPILOG = (
     "exit status: 0 ok; 1 environment failure (disk full, read-only, permission; one "
@@ -52,21 +53,6 @@ def _cmd_surface(args) -> int:
         warnings.simplefilter("ignore", UserWarning)
         print(describe_surface(load_scene(args.scene)))
     return 0
-
-
-def _rays(text: str) -> int:
-    """``--rays N``: an integer in [1, ``MAX_RAYS``]."""
-    from ..sim.arguments import MAX_RAYS
-
-    try:
-        rays = int(text)
-    except ValueError:
-        rays = None
-    if rays is None or not 1 <= rays <= MAX_RAYS:
-        raise argparse.ArgumentTypeError(
-            f"must be an integer in [1, {MAX_RAYS:,}] (primary rays per incidence), got {text!r}"
-        )
-    return rays
 
 
 def _theta_list(text: str) -> list[float]:
@@ -158,7 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.epilog = EPILOG
     r.add_argument(
         "--rays",
-        type=_rays,
+        type=rays_option,
         help="primary rays per incidence (default: the scene's; --quick caps it at 200000)",
     )
     r.add_argument(

@@ -6,13 +6,14 @@ import os
 import signal
 import sys
 
+from ..options import rays_option
 from .execution import SweepInterrupted, run_sweep
-from .grid import load_sweep
+from .grid import load_sweep, with_effort
 
 
 def _cmd_sweep(args) -> int:
-    spec = load_sweep(args.sweep)
-    out = args.out or os.path.join("sweeps", "out", spec.name)
+    spec = with_effort(load_sweep(args.sweep), args.rays, args.quick)
+    out = args.out or os.path.join("sweeps", "out", spec.name + ("-quick" if args.quick else ""))
     try:
         res = run_sweep(
             spec,
@@ -27,7 +28,8 @@ def _cmd_sweep(args) -> int:
         print(
             f"microsim: {how}: {e.done}/{e.total} tasks done and kept in "
             f"{os.path.join(out, 'tasks')}, summary not written; rerun the same command "
-            f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}) "
+            f"(microsim sweep {args.sweep}{' --out ' + args.out if args.out else ''}"
+            f"{' --quick' if args.quick else ''}{f' --rays {args.rays}' if args.rays else ''}) "
             f"to compute the rest",
             file=sys.stderr,
         )
@@ -41,7 +43,7 @@ def _cmd_sweep(args) -> int:
 
 def add_sweep_command(subparsers) -> None:
     """Register ``microsim sweep SWEEP.toml [--scheduler ADDRESS] [--scheduler-timeout S]
-    [--out DIR] [--workers N]``."""
+    [--out DIR] [--workers N | --threads N] [--rays N] [--quick]``."""
     p = subparsers.add_parser(
         "sweep",
         help="run a grid of scenes x parameters x incidences "
@@ -61,5 +63,24 @@ def add_sweep_command(subparsers) -> None:
         help="give up connecting to --scheduler after this long (default 10)",
     )
     p.add_argument("--out", help="output directory (default sweeps/out/<name>)")
-    p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    p.add_argument(
+        "--workers",
+        "--threads",
+        dest="workers",
+        type=int,
+        default=2,
+        help="local worker processes, one thread each (default 2; --threads is the same)",
+    )
+    p.add_argument(
+        "--rays", type=rays_option, help="primary rays per task, instead of the sweep file's rays"
+    )
+    from ..runner.planning import QUICK
+
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"the effort of microsim run --quick: at most {QUICK.max_rays:,} rays and "
+        f"{QUICK.max_bins[0]} × {QUICK.max_bins[1]} bins per task (default output "
+        "sweeps/out/<name>-quick)",
+    )
     p.set_defaults(func=_cmd_sweep)

@@ -8,7 +8,7 @@ import hashlib
 import itertools
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ...errors import UsageError
@@ -325,3 +325,24 @@ def scene_from_table(name: str, surface: dict, ior, where: str):
     return sc.Scene(
         name=name, path=None, description="", surface=spec, ior=mat, simulation=sc.SimSettings()
     )
+
+
+def with_effort(spec: SweepSpec, rays: int | None = None, quick: bool = False) -> SweepSpec:
+    """``spec`` with every task's rays set to ``rays`` (``--rays``), and with ``quick``
+    (``--quick``) the effort of ``microsim run --quick`` (``runner.planning.QUICK``): at most
+    its rays per incidence unless ``rays`` is given, and at most its bins. Tasks changed this
+    way get new ids (a quick result never stands in for a full one)."""
+    from ..runner.planning import QUICK
+
+    changes = []
+    for t in spec.tasks:
+        new = {}
+        if rays is not None:
+            new["rays"] = int(rays)
+        elif quick:
+            new["rays"] = min(t.rays, QUICK.max_rays)
+        if quick:
+            nt, nphi = QUICK.max_bins
+            new["theta_bins"], new["phi_bins"] = min(t.theta_bins, nt), min(t.phi_bins, nphi)
+        changes.append(replace(t, **new) if new else t)
+    return replace(spec, tasks=tuple(changes))

@@ -21,6 +21,7 @@ COLUMNS = (
     "theta_i",
     "model",
     "rel_rms",
+    "noise_floor",
     "chi2_dof",
     "p_value",
     "max_abs_z",
@@ -61,6 +62,7 @@ def summary_table(records: list[dict]) -> list[dict]:
                     "theta_i": t["theta_i"],
                     "model": v["model"],
                     "rel_rms": v["rel_rms"],
+                    "noise_floor": r.get("noise_floor"),
                     "chi2_dof": v["chi2_dof"],
                     "p_value": v["p_value"],
                     "max_abs_z": v["max_abs_z"],
@@ -111,7 +113,9 @@ def _write_summary(spec: SweepSpec, out: Path) -> dict:
         spec.description,
         "",
         f"{len(recs)}/{len(spec.tasks)} tasks done. rel_rms: energy-weighted relative RMS "
-        "error of the model over the bins carrying 90 % of the energy; chi2_dof, p_value, "
+        "error of the model over the bins carrying 90 % of the energy, ray noise included; "
+        "noise_floor: what an exact model would show through the ray noise alone (the "
+        "energy-weighted relative standard error over the same bins); chi2_dof, p_value, "
         "max_abs_z: see microsim.analysis.verdicts. verdict: agrees, deviates, or "
         "inconclusive (the model describes the surface's ensemble, one tile was traced, and "
         "its deviation is within what the tile's own departure from the ensemble, "
@@ -143,8 +147,9 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    fig, ax = plt.subplots(figsize=(8.5, 4.8), layout="constrained")
     groups: dict = {}
+    floors: dict = {}
     for r in rows:
         if r["roughness"] is None or r["rel_rms"] is None:
             continue
@@ -152,6 +157,10 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
         groups.setdefault(key, []).append(
             (r["roughness"], r["rel_rms"], r["verdict"] == "inconclusive")
         )
+        if r.get("noise_floor") is not None:
+            floors.setdefault((r["scene"], r["material"], r["theta_i"]), {})[r["roughness"]] = r[
+                "noise_floor"
+            ]
     thetas = sorted({k[3] for k in groups})
     models = sorted({k[2] for k in groups})
     looks = sorted({k[:2] for k in groups})
@@ -180,17 +189,22 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
             markerfacecolor="white",
             markeredgecolor=colour,
         )
+    for (scene, mat, th), by_x in sorted(floors.items()):
+        x = sorted(by_x)
+        colour = cmap(thetas.index(th) / max(1, len(thetas) - 1) * 0.9)
+        ax.plot(x, [by_x[k] for k in x], color=colour, lw=3.0, alpha=0.25,
+                label=f"ray-noise floor {scene} {mat} θi={th:g}°")  # fmt: skip
     ax.set_xlabel("roughness (first NDF parameter)")
     ax.set_ylabel("relative RMS error (90 % energy bins)")
     ax.set_yscale("log")
     ax.set_title(
         f"sweep {title}: model error against roughness and angle\n"
-        "filled marker: conclusive verdict; hollow: inconclusive (one tile)",
+        "filled marker: conclusive verdict; hollow: inconclusive (one tile); wide pale line: "
+        "the ray-noise floor (an exact model's error)",
         fontsize=9,
     )
     if groups:
-        ax.legend(fontsize=5.5, ncol=2)
-    fig.tight_layout()
+        fig.legend(fontsize=6, loc="outside lower center", ncol=2)
     try:
         with atomic.atomic_open(path, "wb") as fh:
             fig.savefig(fh, format="png", dpi=120)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
 import signal
 import stat
@@ -54,6 +55,7 @@ def run_task(task: Task, out_dir) -> dict:
         return {"id": task.id, "partial": True, "rays": 0, "requested": task.rays}
     from microsim.analysis.verdicts import verdicts_for_result
     from microsim.sim import Bins, simulate
+    from microsim.sim.auto import relative_standard_error
     from microsim.sim.compare import attach_models, departure_models
     from microsim.sim.predict import ModelSpec
 
@@ -85,6 +87,9 @@ def run_task(task: Task, out_dir) -> dict:
         judged = attach_models(res, specs + pair)
         verdicts = [v for v in verdicts_for_result(judged) if v["model"] in asked]
     key, value = _roughness(ndf)
+    floor = relative_standard_error(
+        res.brdf[0], res.stderr[0], res.counts[0], bins.projected_solid_angle()
+    )
     record = {
         "id": task.id,
         "task": task.to_dict(),
@@ -94,6 +99,7 @@ def run_task(task: Task, out_dir) -> dict:
         "seconds": time.perf_counter() - t0,
         "ledger": {k: float(v[0]) for k, v in res.ledger.items()},
         "verdicts": verdicts,
+        "noise_floor": floor if math.isfinite(floor) else None,
     }
     path = Path(out_dir) / "tasks" / f"{task.id}.json"
     try:
