@@ -233,3 +233,23 @@ def _minimal_bench():
         "ratio": {1: 1.0, 2: 1.0},
         "peak_rss_mb": {},
     }
+
+
+def test_the_memory_probe_ignores_a_microsim_folder_in_the_working_directory(tmp_path, monkeypatch):
+    """`microsim bench` run from a folder holding a `microsim/` directory (a checkout's parent,
+    say): the probe's child process imports the same microsim as the parent."""
+    from microsim.app import bench
+
+    (tmp_path / "microsim").mkdir()
+    (tmp_path / "microsim" / "__init__.py").write_text("raise ImportError('the wrong microsim')")
+    monkeypatch.chdir(tmp_path)
+    assert bench.peak_rss_mb(bench.BenchConfig(n=64), rays=4096) > 10.0
+
+
+def test_a_failing_memory_probe_is_an_environment_failure_naming_its_error(monkeypatch):
+    from microsim.app import bench
+    from microsim.errors import EnvironmentFailure
+
+    monkeypatch.setattr(bench, "_PROBE", "import sys; sys.exit('probe: out of luck')")
+    with pytest.raises(EnvironmentFailure, match="probe: out of luck"):
+        bench.peak_rss_mb(bench.BenchConfig(n=64), rays=4096)

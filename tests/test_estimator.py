@@ -365,7 +365,7 @@ def test_exact_and_traced_agree_near_the_horizon_on_4000_grooves():
         y = ray_events(s, None, ti, rays=10**6, seed=3, masking="traced")
         near = lambda e: (e.status == 0) & (e.wo[:, 2] < np.cos(np.radians(80.0)))  # noqa: E731
         nx, ny = near(x).sum(), near(y).sum()
-        print(  # the README's offset-bias figure (run with -s)
+        print(  # docs/verdicts.md's offset-bias figure (run with -s)
             f"\nθi = {ti:g}°: traced/exact − 1 of the single-bounce rays with θo > 80°: "
             f"{100 * (ny / nx - 1):+.2f} % ± {100 * np.sqrt(nx) / nx:.2f} % (ray noise)"
         )

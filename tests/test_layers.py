@@ -1,10 +1,10 @@
 """The package's layers: no module imports upwards, no private module is reached across
 layers, and the module import graph has no cycle (function-local imports included).
 
-Layers, bottom to top (docs/design.md, "Package layout"):
-core (errors, checkpoints, atomic, checks, vectors, stats) → analytic → surfaces → sim →
-wave → analysis → app (``microsim.app``: scene, runner, sweep, bench, bench_methods, bench_peer,
-wave_bench, view, cli; and ``microsim.testing``).
+Layers, bottom to top (docs/layout.md): core (errors, checkpoints, atomic, checks, vectors,
+stats, display) → analytic → surfaces → sim → wave → analysis → app (``microsim.app``: scene,
+runner, sweep, bench, bench_methods, bench_peer, wave_bench, view, cli; and
+``microsim.testing``).
 """
 
 import ast
@@ -23,6 +23,7 @@ LAYERS = [
             "microsim.checks",
             "microsim.vectors",
             "microsim.stats",
+            "microsim.display",
         ),
     ),
     ("analytic", ("microsim.analytic",)),
@@ -181,14 +182,14 @@ def test_no_sim_module_imports_a_higher_sim_sub_layer(name):
     assert not up, f"{name} ({level}) imports from above its sub-layer: {up}"
 
 
-def test_the_readme_layout_table_names_every_module():
+def test_the_layout_table_names_every_module():
     import re
 
-    readme = (PACKAGE.parent / "README.md").read_text(encoding="utf-8")
-    table = readme[readme.index("### Package layout") :]
+    layout = (PACKAGE.parent / "docs" / "layout.md").read_text(encoding="utf-8")
+    table = layout[layout.index("### Package layout") :]
     table = table[: table.index("\n## ")]
     named = set(re.findall(r"`([\w/]+)`", table))
     missing = sorted(
         p.stem for p in PACKAGE.rglob("*.py") if p.stem not in ("__init__", "__main__", *named)
     )
-    assert not missing, f"README's package layout table does not name {missing}"
+    assert not missing, f"docs/layout.md's package layout table does not name {missing}"

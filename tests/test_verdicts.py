@@ -247,7 +247,7 @@ def _peak_ratio(res, name, t, brdf=None):
 
 
 def _print_peak_errors(res, t):
-    """The README's Smith-at-80° figures: model/sim − 1 at the forward peak, mean ± standard
+    """docs/verdicts.md's Smith-at-80° figures: model/sim − 1 at the forward peak, mean ± standard
     error over the realisations (their scatter includes the ray noise)."""
     if res.brdf_realisations is None:
         return
@@ -270,7 +270,7 @@ def _assert_gaussian_physics(res):
     _print_peak_errors(res, t80)
     # V-groove G: the m = 0.5 specular peak far too bright at 80° (docs/design.md: ~2×).
     assert vg_peak > 1.4
-    # Height-correlated Smith: much closer at the peak (the README gives the measured figure,
+    # Height-correlated Smith: much closer at the peak (docs/verdicts.md gives the measured figure,
     # from the slow variant of this test run with -s; docs/design.md's 0.2 % is about G1
     # masking, not about the G2 of forward scattering).
     assert abs(sm_peak - 1.0) < 0.5 * (vg_peak - 1.0)

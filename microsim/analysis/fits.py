@@ -355,6 +355,26 @@ class FitResult:
         """The optimiser converged and no parameter ended at a bound."""
         return self.success and not self.at_bounds
 
+    def __repr__(self) -> str:
+        params = ", ".join(f"{k}={v:.4g}" for k, v in self.params.items())
+        return (
+            f"FitResult({self.name!r}, {params}; √E1 = {np.sqrt(self.e1):.3g}, √E2 = "
+            f"{np.sqrt(self.e2):.3g}, {'converged' if self.converged else 'not converged'})"
+        )
+
+    def _repr_html_(self) -> str:
+        from microsim.display import html_table
+
+        rows = [
+            [k, f"{v:.4g}", "yes" if k in self.at_bounds else ""] for k, v in self.params.items()
+        ]
+        caption = (
+            f"fit {self.name}: √E1 = {np.sqrt(self.e1):.3g}, √E2 = {np.sqrt(self.e2):.3g} "
+            f"(Löw et al. 2012, eq. 29–33); "
+            f"{'converged' if self.converged else 'not converged'}, {self.n_starts} starts"
+        )
+        return html_table(["parameter", "value", "at a bound"], rows, caption)
+
 
 def _starts(model: FitModel, n_starts: int, seed: int) -> list[np.ndarray]:
     """The model's default start, then scrambled Halton points in the (encoded) box."""

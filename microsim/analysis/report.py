@@ -1,9 +1,9 @@
 """Markdown reports: one per scene (``report.md``) and the catalogue index (``index.md``).
 
-Pure formatting: every number comes from the verdict document written as ``verdicts.json``
-(see ``microsim.app.runner`` and the README for its schema) and, for the energy ledger, from the
-``Result``. No wall-clock time appears in either report (they are in ``timings.json``), so
-rerunning an unchanged scene rewrites them byte for byte. Signed percentages are relative
+Pure formatting: every number comes from the verdict document written as ``verdicts.json`` (see
+``microsim.app.runner`` and docs/verdicts.md for its schema) and, for the energy ledger, from the
+``Result``. No wall-clock time appears in either report (they are in ``timings.json``), so rerunning
+an unchanged scene rewrites them byte for byte. Signed percentages are relative
 deviations (simulation − model)/simulation, the one sign convention of every output (negative:
 the model is too bright); BRDFs in sr⁻¹, angles in degrees.
 """

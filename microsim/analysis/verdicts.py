@@ -94,6 +94,7 @@ __all__ = [
     "verdict_symbol",
     "inconclusive_reason",
     "verdicts_for_result",
+    "VerdictList",
     "tile_departure",
     "departure_of",
     "validate_verdict",
@@ -695,7 +696,27 @@ def verdicts_for_result(
                     Significance(model_rtol, min_events, alpha, n_tests),
                 )
             )
-    return out
+    return VerdictList(out)
+
+
+class VerdictList(list):
+    """The verdicts of a result (a plain list of verdict dicts) that a notebook shows as a
+    model × θi table in the symbols of every output (``verdict_symbol``)."""
+
+    def _repr_html_(self) -> str:
+        from microsim.display import html_table
+
+        models = list(dict.fromkeys(v["model"] + (" (fit)" if v["fitted"] else "") for v in self))
+        thetas = list(dict.fromkeys(float(v["theta_i"]) for v in self))
+        cell = {
+            (v["model"] + (" (fit)" if v["fitted"] else ""), float(v["theta_i"])): v for v in self
+        }
+        rows = [
+            [m] + [verdict_symbol(cell[m, t]) if (m, t) in cell else "–" for t in thetas]
+            for m in models
+        ]
+        caption = "✓ agrees · ✗ deviates (its relative RMS error) · ? inconclusive"
+        return html_table(["model"] + [f"θi = {t:g}°" for t in thetas], rows, caption)
 
 
 def tile_departure(result) -> np.ndarray | None:

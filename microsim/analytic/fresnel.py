@@ -139,11 +139,27 @@ def schlick(cos_theta, f0):
     return f0 + (1.0 - f0) * (1.0 - c) ** 5
 
 
+def _ior_text(text: str):
+    """``text`` as a number if it is one ("1.5", "0.769+6.08i", "0.769+6.08j"), else None."""
+    t = text.replace(" ", "")
+    try:
+        return float(t)
+    except ValueError:
+        pass
+    if t.endswith(("i", "j")):
+        try:
+            return complex(t[:-1] + "j")
+        except ValueError:
+            return None
+    return None
+
+
 def resolve_material(material):
     """Index of refraction from a material name (case-insensitive), a number, or None.
 
     Names: those of ``MATERIALS`` (plus "aluminum"); numbers are an index of refraction
-    (ior) n > 0 or n + ik with k ≥ 0.
+    (ior) n > 0 or n + ik with k ≥ 0, also as text the way microsim writes them ("1.5",
+    "0.769+6.08i"; "j" for i is accepted too).
     Returns a float (dielectric), a complex (conductor) or None (mirror).
     """
     if material is None:
@@ -151,6 +167,9 @@ def resolve_material(material):
     if isinstance(material, str):
         key = material.strip().lower()
         key = _ALIASES.get(key, key)
+        number = _ior_text(key)
+        if number is not None:
+            return resolve_material(number)
         if key not in MATERIALS:
             allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
             raise UsageError(

@@ -56,6 +56,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..errors import EnvironmentFailure
+
 __all__ = [
     "BenchConfig",
     "bench_config",
@@ -312,7 +314,9 @@ def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> dict:
 
 
 _PROBE = """
-import json, resource, sys
+import sys
+sys.path.pop(0)  # "" (the working directory): a microsim/ folder there must not shadow ours
+import json, resource
 from microsim.app.bench import BenchConfig, _bins, _surface
 from microsim.sim import simulate
 cfg = BenchConfig(**json.loads(sys.argv[1]))
@@ -333,8 +337,13 @@ def peak_rss_mb(cfg: BenchConfig = BenchConfig(), rays: int | None = None) -> fl
         [sys.executable, "-c", _PROBE, json.dumps(conf), str(int(rays or cfg.rays))],
         capture_output=True,
         text=True,
-        check=True,
     )
+    if out.returncode != 0:
+        lines = (out.stderr or "").strip().splitlines() or ["(no output)"]
+        raise EnvironmentFailure(
+            f"the memory probe ({sys.executable} -c …) failed with status {out.returncode}: "
+            f"{lines[-1]}"
+        )
     return float(out.stdout.split()[-1])
 
 
@@ -391,8 +400,8 @@ def warm_up() -> None:
     """Run every trace path the bench times once, on small surfaces of their own (tabled and
     traced heightfield paths, the traced and the exact V-groove paths, one bounce and all),
     so that no timed figure includes a numba compilation: a process compiles each kernel once
-    (seconds after an edit of the sources; the README's "first run") and then loads it from
-    its cache, a per-process cost, not a per-call one."""
+    (seconds after an edit of the sources; docs/performance.md, "First-run compilation") and
+    then loads it from its cache, a per-process cost, not a per-call one."""
     from microsim import analytic as an
     from microsim.sim import BLOCK, Bins, simulate
     from microsim.surfaces import gaussian, vgrooves

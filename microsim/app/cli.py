@@ -162,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--quick",
         action="store_true",
-        help="fewer rays, smaller surface, quick fits and side studies (README)",
+        help="fewer rays, smaller surface, quick fits and side studies (docs/cli.md)",
     )
     g = r.add_mutually_exclusive_group()
     g.add_argument("--resume", metavar="DIR", help="continue an interrupted run saved in DIR")

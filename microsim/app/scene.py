@@ -1,4 +1,5 @@
-"""Scene files: a surface, a material and simulation settings in TOML (``surfaces/*.toml``).
+"""Scene files: a surface, a material and simulation settings in TOML (``surfaces/*.toml``;
+the reference page for users is docs/scenes.md).
 
 Schema (every key optional unless marked required; unknown keys are errors)::
 
@@ -368,7 +369,8 @@ class WaveSpec:
 @dataclass(frozen=True)
 class Scene:
     """A loaded scene file. ``ior``: None (mirror), float (dielectric) or complex n + ik.
-    ``wave``: the ``[wave]`` settings, None for a geometric-only scene."""
+    ``wave``: the ``[wave]`` settings, None for a geometric-only scene. ``material_name``: the
+    material's name when the file gave one ("aluminium"), which results then record."""
 
     name: str
     path: Path | None
@@ -377,6 +379,12 @@ class Scene:
     ior: float | complex | None
     simulation: SimSettings
     wave: WaveSpec | None = None
+    material_name: str | None = None
+
+    @property
+    def material(self):
+        """What ``simulate`` takes as the material: the name if the file gave one, else ior."""
+        return self.material_name if self.material_name is not None else self.ior
 
     def build_surface(self, seed: int | None = None, scale: float = 1.0):
         """Generate the surface (``microsim.surfaces``); ``seed`` defaults to the scene's.
@@ -716,7 +724,18 @@ def load_scene(path) -> Scene:
         ior=material_ior(where, data.get("material")),
         simulation=simulation,
         wave=wave,
+        material_name=_material_name(data.get("material")),
     )
+
+
+def _material_name(table) -> str | None:
+    """The material's name as ``fresnel.MATERIALS`` spells it, if ``[material] ior`` is one."""
+    v = (table or {}).get("ior", "mirror" if table is not None else None)
+    if not isinstance(v, str):
+        return None
+    key = v.strip().lower()
+    key = {"aluminum": "aluminium"}.get(key, key)
+    return key if key in an.MATERIALS else None
 
 
 # --- description -------------------------------------------------------------------------------

@@ -209,6 +209,7 @@ class _Plan(NamedTuple):
     nblk: np.ndarray
     chunk_blocks: int
     config: dict
+    material: dict
 
 
 class _State(NamedTuple):
@@ -249,7 +250,7 @@ def estimate(
     meta = {
         "surface": state.surfaces[0],
         "realisations": state.surfaces if plan.n_real > 1 else None,
-        "material": plan.config["material"],
+        "material": plan.material,
         "seed": est.seed,
         "rays": est.rays,
         "masking": est.masking,
@@ -300,6 +301,7 @@ def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
         f"the tallies of {nbin:,} bins × {slots or 1} orders × {n_th} incidences × "
         f"{n_real} realisations",
     )
+    material = _json_material(ex.material, ex.ior)
     config = _run_config(
         ex.theta_i,
         ex.phi_i,
@@ -308,14 +310,14 @@ def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
         est.rays,
         est.masking,
         est.origins,
-        _json_material(ex.material, ex.ior),
+        material,
         n_real,
         est.isotropic,
         ex.bounces,
     )
     nblk = np.array([-(-n // BLOCK) for n in per_real], dtype=np.int64)
     chunk_blocks = max(1, int(round(run.chunk / BLOCK)))
-    return _Plan(n_real, get_surface, per_real, nbin, slots, nblk, chunk_blocks, config)
+    return _Plan(n_real, get_surface, per_real, nbin, slots, nblk, chunk_blocks, config, material)
 
 
 def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
@@ -517,7 +519,7 @@ def _run_config(
         "rays": rays,
         "masking": masking,
         "origins": origins,
-        "material": material,
+        "material": material["ior"],  # the index; a name given or not is the same material
         "realisations": n_real,
         "isotropic": isotropic,
         "bounces": bounces,
@@ -539,7 +541,7 @@ def _resume_state(resume, config, n_real, n_th):
         resume.meta.get("rays"),
         resume.meta.get("masking"),
         resume.meta.get("origins", "stratified"),
-        resume.meta.get("material"),
+        resume.meta.get("material") or {"ior": None},
         int(resume.tallies["blocks"].shape[0]),
         bool(resume.meta.get("isotropic", False)),
         resume.meta.get("bounces", 1),

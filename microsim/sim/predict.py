@@ -476,6 +476,19 @@ class ModelSpec:
             )
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
 
+    def __repr__(self) -> str:
+        """Name, kind and parameters, arrays by shape only (a facet model holds ~10⁵ normals)."""
+
+        def short(v):
+            if isinstance(v, np.ndarray):
+                return f"<{v.dtype} array {' × '.join(map(str, v.shape))}>"
+            if isinstance(v, (list, tuple)) and len(v) > 4:
+                return f"<{len(v)} values>"
+            return repr(v)
+
+        params = ", ".join(f"{k}={short(v)}" for k, v in self.params.items())
+        return f"ModelSpec({self.name!r}, {self.kind!r}, {params})"
+
     @classmethod
     def function(cls, name: str, brdf_fn: Callable, symmetric: bool = True) -> "ModelSpec":
         return cls(name, "function", {"brdf_fn": brdf_fn, "symmetric": bool(symmetric)})

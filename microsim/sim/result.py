@@ -39,6 +39,17 @@ _OPTIONAL = (
 )
 
 
+def _ior_text(ior) -> str:
+    """[n, k] as "n = 0.769+6.08i" (how microsim writes an unnamed material), "ior ?" if absent."""
+    if ior is None or isinstance(ior, str):
+        return ior or "ior ?"
+    try:
+        n, k = (float(ior), 0.0) if not hasattr(ior, "__len__") else (float(x) for x in ior)
+    except (TypeError, ValueError):
+        return str(ior)
+    return f"n = {n:g}" if k == 0 else f"n = {n:g}+{k:g}i"
+
+
 def _refuse(self, *args, **kwargs):
     raise TypeError(f"{type(self).__name__} is read-only (a Result never changes: derive one)")
 
@@ -203,7 +214,8 @@ class Result:
     def __repr__(self) -> str:
         """One line: surface, material, incidences, rays, bins, albedo, models (no arrays)."""
         surface = (self.meta.get("surface") or {}).get("kind", "?")
-        material = (self.meta.get("material") or {}).get("name") or "custom ior"
+        mat = self.meta.get("material") or {}
+        material = mat.get("name") or _ior_text(mat.get("ior"))
         reals = self.meta.get("realisations")  # the ray tracer's list, Kirchhoff's count
         n_real = reals if isinstance(reals, int) else len(reals or ()) or 1
         theta = ", ".join(f"{t:g}" for t in self.theta_i)
@@ -218,6 +230,29 @@ class Result:
             f"θi=[{theta}]°, {rays}bins={self.bins.n_theta}×{self.bins.n_phi}, "
             f"albedo=[{albedo}]{models}>"
         )
+
+    def _repr_html_(self) -> str:
+        """A notebook's view: one row per incidence (θi, rays, albedo; each model's albedo),
+        under a caption of surface, material and bins — no arrays."""
+        from microsim.display import html_table
+
+        surface = (self.meta.get("surface") or {}).get("kind", "?")
+        mat = self.meta.get("material") or {}
+        albedo = self.albedo()
+        omega = self.bins.projected_solid_angle()
+        names = list(self.models)
+        rows = []
+        for t, th in enumerate(self.theta_i):
+            rays = "–" if self.rays is None else f"{int(self.rays[t]):,}"
+            model_albedo = [f"{float(np.sum(self.models[n][t] * omega)):.4g}" for n in names]
+            rows.append([f"{th:g}°", rays, f"{albedo[t]:.4g}", *model_albedo])
+        caption = (
+            f"Result{' (PARTIAL)' if self.is_partial else ''}: {surface}, "
+            f"{mat.get('name') or _ior_text(mat.get('ior'))}, bins "
+            f"{self.bins.n_theta} × {self.bins.n_phi} (θo × Δφ); albedo = Σ f̄Ω"
+        )
+        header = ["θi", "rays", "albedo (simulation)", *[f"albedo ({n})" for n in names]]
+        return html_table(header, rows, caption)
 
     @property
     def is_partial(self) -> bool:

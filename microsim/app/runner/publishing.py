@@ -148,9 +148,10 @@ def verdict_document(
     wave=None,
 ) -> dict:
     """``verdicts.json``: the run's settings, model ranking, verdicts, fits, speed runs (errors
-    only) and the stability sweep (README: schema); ``outside_domain`` (model → reason: models
-    whose verdicts against the ray tracer are no test of them, ``OUTSIDE_DOMAIN``) and, for a
-    scene with ``[wave]``, ``wave`` (``wave_run.run_wave``: the verdicts against Kirchhoff)."""
+    only) and the stability sweep (docs/verdicts.md: schema); ``outside_domain`` (model →
+    reason: models whose verdicts against the ray tracer are no test of them,
+    ``OUTSIDE_DOMAIN``) and, for a scene with ``[wave]``, ``wave`` (``wave_run.run_wave``: the
+    verdicts against Kirchhoff)."""
     sc = plan.scene
     doc = {
         "schema_version": SCHEMA_VERSION,

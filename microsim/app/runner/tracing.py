@@ -75,7 +75,7 @@ def simulate_scene(
     return estimate(
         Experiment(
             surface,
-            sc.ior,
+            sc.material,
             tuple(theta_i),
             bins=bins,
             bounces=bounces,
