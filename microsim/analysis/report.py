@@ -769,6 +769,14 @@ def load_methods(path) -> dict:
     return d
 
 
+def _setting(text: str) -> str:
+    """A method's setting with its ray count written out ("1.02e+07 rays" → "10,200,000 rays")."""
+    import re
+
+    m = re.fullmatch(r"([0-9.]+(?:e[+-]?[0-9]+)?) rays", str(text))
+    return f"{int(round(float(m.group(1)))):,} rays" if m else str(text)
+
+
 def _methods_rows(panel: Mapping) -> list[list[str]]:
     """Every closed form; of each method with several points (ray counts, tile sizes) the
     first and the last."""
@@ -784,7 +792,7 @@ def _methods_rows(panel: Mapping) -> list[list[str]]:
             err += " %" if p["error"] is not None else ""
             if p.get("error_se") is None and p.get("noise_floor") is not None:
                 err += f" (ray noise alone {100 * p['noise_floor']:.2g} %)"
-            rows.append([f"{method}, {p['setting']}", f"{fmt(p['seconds'])} s", err])
+            rows.append([f"{method}, {_setting(p['setting'])}", f"{fmt(p['seconds'])} s", err])
     return rows
 
 
