@@ -175,3 +175,19 @@ def test_lobe_z_uses_stderr_and_poisson_floor():
     assert z[0] == pytest.approx(2.0)
     assert z[1] == pytest.approx(-np.sqrt(lam))
     assert z[2] == 0.0
+
+
+def test_lobe_z_uses_the_poisson_error_where_a_bin_holds_few_events():
+    """Two events of equal Fresnel weight in one stratum pair give a pair standard error ≈ 0:
+    below MIN_EVENTS events the model's Poisson error is used instead, so |z| stays the size
+    the counts support (not the thousands the pair estimate would give)."""
+    from microsim.app.view import lobe_z
+    from microsim.stats import MIN_EVENTS
+
+    sim, se, model = np.array([0.04, 0.04]), np.array([1e-6, 1e-6]), np.array([0.01, 0.01])
+    omega, rays, w = np.array([0.002, 0.002]), 20_000, 0.9
+    counts = np.array([2, MIN_EVENTS])
+    z = lobe_z(sim, se, model, omega, rays, w, counts)
+    poisson = np.sqrt(model[0] * w / (rays * omega[0]))
+    assert z[0] == pytest.approx((sim[0] - model[0]) / poisson)
+    assert abs(z[0]) < 20 and z[1] == pytest.approx((sim[1] - model[1]) / se[1])

@@ -31,6 +31,7 @@ __all__ = [
     "ascii_text",
     "title",
     "colour_key",
+    "text_size",
     "scalar_bar",
     "Section",
     "whole_tile",
@@ -139,13 +140,21 @@ def ascii_text(text: str) -> str:
     return text.translate(_ASCII).replace("_ ", " ").replace("_=", " =")
 
 
+def text_size(p, size: int) -> int:
+    """``size`` (points, chosen for the default 1200 × 800 window) scaled to ``p``'s window, so
+    that titles and keys keep their share of a smaller or larger image (``--size``)."""
+    w, h = p.window_size
+    return max(5, int(round(size * min(2.0, max(0.4, min(w / 1200.0, h / 800.0))))))
+
+
 def title(p, text: str, size: int = 8) -> None:
-    p.add_text(ascii_text(text), position="upper_edge", font_size=size, color="black")
+    p.add_text(ascii_text(text), position="upper_edge", font_size=text_size(p, size), color="black")
 
 
 def colour_key(p, items, size: int = 10, bottom: int = 8) -> None:
     """Colour key: one line of text per (label, colour), stacked up from the lower left corner
     of the current viewport (pixel offsets; pyvista legends misplace themselves in subplots)."""
+    size = text_size(p, size)
     for k, (label, colour) in enumerate(reversed(list(items))):
         p.add_text(
             ascii_text(label),

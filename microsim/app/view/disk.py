@@ -21,6 +21,7 @@ from .common import (
     plotter,
     pyvista,
     resolve,
+    text_size,
     title,
 )
 
@@ -124,7 +125,12 @@ def view_disk(
         p.view_xy()
         p.enable_parallel_projection()
         p.reset_camera()
-        p.camera.zoom(1.25)
+        # room below the unit disk for the colour key and the fit's text (lower corners)
+        cam = p.camera
+        fx, fy, fz = cam.focal_point
+        px, py, pz = cam.position
+        cam.focal_point, cam.position = (fx, fy - 0.28, fz), (px, py - 0.28, pz)
+        cam.zoom(0.95)
     q = fit.params
     p.subplot(0, 0)
     p.add_text(
@@ -137,7 +143,7 @@ def view_disk(
             f"n = {q.n2:.3g}"
         ),
         position="lower_left",
-        font_size=10,
+        font_size=text_size(p, 10),
         color="black",
     )
     return p

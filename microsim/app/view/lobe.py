@@ -13,6 +13,7 @@ from microsim.vectors import spherical_deg
 from ...errors import UsageError
 from ...sim import Bins, simulate
 from ...sim.predict import ModelSpec, predict
+from ...stats import MIN_EVENTS
 from .common import (
     COLOURS,
     DEFAULT_RAYS,
@@ -25,6 +26,7 @@ from .common import (
     resolve,
     scalar_bar,
     side_camera,
+    text_size,
     title,
 )
 
@@ -57,11 +59,17 @@ def lobe_z(
     omega: np.ndarray,
     rays: int,
     mean_weight: float,
+    counts: np.ndarray | None = None,
 ) -> np.ndarray:
-    """z = (sim − model)/σ per bin; bins without any ray (σ = 0) use the Poisson error the model
-    predicts, √(model · w̄ / (N Ω)) with w̄ the mean Fresnel weight; 0 where both vanish."""
+    """z = (sim − model)/σ per bin. σ is the simulation's standard error where the bin holds
+    at least ``MIN_EVENTS`` events (``counts``; all bins when None); elsewhere — no ray, or so
+    few that the collapsed-strata estimate is meaningless (two equal Fresnel weights in one
+    stratum pair give σ ≈ 0 and |z| in the thousands) — the Poisson error the model predicts,
+    √(model · w̄ / (N Ω)) with w̄ the mean Fresnel weight. 0 where both vanish. The verdicts
+    leave such bins out altogether (``analysis.verdicts``)."""
     se_model = np.sqrt(np.maximum(model, 0.0) * mean_weight / (rays * omega))
-    se = np.where(stderr > 0, stderr, se_model)
+    resolved = stderr > 0 if counts is None else (stderr > 0) & (counts >= MIN_EVENTS)
+    se = np.where(resolved, stderr, se_model)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(se > 0, (sim - model) / se, 0.0)
 
@@ -139,7 +147,8 @@ def view_lobe(
     if model is not None:
         single = res.ledger_counts["single"][0]
         w_mean = res.ledger["single_fresnel"][0] * res.rays[0] / max(single, 1)
-        z = lobe_z(sim, se, model, bins.projected_solid_angle(), int(res.rays[0]), w_mean)
+        omega = bins.projected_solid_angle()
+        z = lobe_z(sim, se, model, omega, int(res.rays[0]), w_mean, res.counts[0])
         z_full, _ = _full_circle(z, bins)
         g = polar_surface(r_sim, bins.theta_centers, phi, np.clip(z_full, -5, 5), "z")
         p.add_mesh(
@@ -160,7 +169,8 @@ def view_lobe(
         title(
             p,
             f"{sc.name}: simulation\nθi = {theta_i:g}°, {int(res.rays[0])} rays, "
-            f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})",
+            f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})\n"
+            f"(σ of bins under {MIN_EVENTS} events: Poisson)",
         )
     else:
         g = polar_surface(r_sim, bins.theta_centers, phi, _full_circle(sim, bins)[0], "f")
@@ -178,7 +188,7 @@ def view_lobe(
             f" f·cosθo = {peak:.3g} 1/sr\ngold: incident, grey: mirror"
         ),
         position="lower_left",
-        font_size=10,
+        font_size=text_size(p, 10),
         color="black",
     )
     side_camera(p, 20.0, -20.0, 1.3)
