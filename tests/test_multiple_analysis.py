@@ -15,7 +15,7 @@ What is established here (fast): on a small ensemble of m = 0.5 Gaussian tiles (
 * the walk's BRDF verdicts pass the verdict schema; needs_more_bounces, the report section and
   the chart run and say what the numbers say; bad input is refused.
 
-Slow: the measured comparison on the issue's surface (256², 8 realisations, θi 0/30/60/80,
+Slow: the measured comparison on the reference surface (256², 8 realisations, θi 0/30/60/80,
 mirror) and the resolution study ℓ/dx = 8, 16, 32 (docstrings of those tests).
 """
 
@@ -211,9 +211,9 @@ def test_bad_input_is_refused(ensemble, metal):
         order_comparison(res, None, "beckmann", walk_paths=100)
 
 
-# --- slow: the measured comparison on the issue's surface -----------------------------------
+# --- slow: the measured comparison on the reference surface -----------------------------------
 @pytest.fixture(scope="module")
-def issue_surface():
+def claim_surface():
     """256², dx 1, σ 2, ℓ 8 (m = 0.5; the catalogue's gaussian-m0.5 surface on a 256² grid),
     8 realisations, mirror, θi 0/30/60/80, 2·10⁶ rays per θi, walk 10⁶ paths per θi."""
     s = tiles(n=256, k=8)
@@ -230,16 +230,16 @@ def _deficit(inc):
 
 
 @pytest.mark.slow
-def test_issue_claim_less_multiple_scattering_than_the_walk(issue_surface):
+def test_claim_less_multiple_scattering_than_the_walk(claim_surface):
     """Claim: "at oblique incidence the explicit surface scatters 20–30 % less light into
     orders ≥ 2 than the walk; at normal incidence they agree".
 
     Measured (8 realisations, errors from their scatter): the deficit 1 − E_sim/E_walk is
     ≈ 0.21 at θi = 80° (the claim holds there), but only ≈ 0.05–0.06 at 30° and 60° (refuted:
     well below 20 %), and ≈ 0.17 at normal incidence (refuted: they do not agree for the
-    ensemble; the issue's one tile — seed 0 — happens to lie 5 σ above the ensemble mean).
+    ensemble; the claim's one tile — seed 0 — happens to lie 5 σ above the ensemble mean).
     Every bound is 3 standard errors of this run."""
-    _, c = issue_surface
+    _, c = claim_surface
     d = {inc["theta_i"]: _deficit(inc) for inc in c["incidences"]}
     x, se = d[80.0]
     assert x - 3 * se > 0.1 and x + 3 * se > 0.2 and x - 3 * se < 0.3  # in the claimed range
@@ -253,7 +253,7 @@ def test_issue_claim_less_multiple_scattering_than_the_walk(issue_surface):
 
 
 @pytest.mark.slow
-def test_issue_claim_the_real_lobe_is_on_the_specular_side(issue_surface):
+def test_claim_the_real_lobe_is_on_the_specular_side(claim_surface):
     """Claim: "Kulla–Conty's lobe is Δφ-independent (half its energy on the specular side)
     while the real multiply scattered light is 93–100 % on the specular side for θi ≥ 30°".
 
@@ -262,7 +262,7 @@ def test_issue_claim_the_real_lobe_is_on_the_specular_side(issue_surface):
     at normal incidence, where Δφ has no meaning, it is 1/2 within 3 standard errors. The
     lobe's shape error (energy-weighted rel RMS) of the diffuse-shaped closed forms is far
     above the noise floor at every oblique θi, and larger than the walk's."""
-    _, c = issue_surface
+    _, c = claim_surface
     for inc in c["incidences"]:
         s, m = inc["sim"], inc["models"]
         share, se = s["specular_share"], s["specular_share_se"]
@@ -277,12 +277,12 @@ def test_issue_claim_the_real_lobe_is_on_the_specular_side(issue_surface):
 
 
 @pytest.mark.slow
-def test_issue_claim_high_orders_exceed_the_walk(issue_surface):
+def test_claim_high_orders_exceed_the_walk(claim_surface):
     """Claim: "paths of order ≥ 4 carry 10–40× the walk's energy". Measured: at θi = 60° and
     80° the simulated order-≥ 4 energy exceeds 10× the walk's by more than 3 standard errors
     of the ratio (≈ 20× and ≈ 60×: above the claimed range at 80°); at normal incidence they
     are equal within errors."""
-    _, c = issue_surface
+    _, c = claim_surface
     for inc in c["incidences"]:
         s, w = inc["sim"], inc["models"]["random-walk"]
         e, es, we, wes = s["orders"][3], s["order_se"][3], w["orders"][3], w["order_se"][3]

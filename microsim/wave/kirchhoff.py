@@ -21,7 +21,8 @@ The bracket is the obliquity factor: Beckmann's F3² ·cos θi/cos θo. On a fla
 at the mirror direction (1 + wi·wo) = 2cos²θi, so P_00 = R exactly: order powers sum to the
 reflected power. To first order in h (|I|² ≈ q_z² |ĥ|²) and with BRDF = P·A/λ² (one order per
 projected solid angle λ²/A) this is (16π²/λ⁴) cos θi cos θo Q_K PSD with
-Q_K = R [(1 + wi·wo)/(2 cos θi cos θo)]² (the issue's smooth-limit expression).
+Q_K = R [(1 + wi·wo)/(2 cos θi cos θo)]², the smooth-limit expression (Beckmann & Spizzichino
+1963, ch. 3).
 
 Fresnel. R is the unpolarised ``fresnel`` of the material at either the half-vector angle,
 cos θd = wi·h = √((1 + wi·wo)/2) (``fresnel_angle="half"``, the default: the stationary-phase
