@@ -81,6 +81,14 @@ def _real(name: str, value, what: str) -> float:
         raise UsageError(f"{name} must be {what}, got {short(value)}") from None
 
 
+def finite(name: str, value) -> float:
+    """Return ``value`` as float, or raise if it is not a finite number."""
+    v = _real(name, value, "a finite number")
+    if not np.isfinite(v):
+        raise UsageError(f"{name} must be a finite number, got {value!r}")
+    return v
+
+
 def positive(name: str, value, *, allow_inf: bool = False) -> float:
     """Return ``value`` as float, or raise if it is not a finite number > 0."""
     v = _real(name, value, "a finite number > 0")

@@ -5,6 +5,7 @@ an.fresnel(cos_theta, material); an.Beckmann(m); an.torrance_sparrow(wi, wo, ndf
 an.TorranceSparrow(an.GGX(0.3), an.Smith(correlated=True)).f(wi, wo)   # model objects
 """
 
+from .anisotropic import *  # noqa: F401,F403
 from .brdf import *  # noqa: F401,F403
 from .edwards import *  # noqa: F401,F403
 from .empirical import *  # noqa: F401,F403

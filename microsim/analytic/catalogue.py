@@ -72,6 +72,20 @@ _FUNCTIONS: tuple[ModelInfo, ...] = (
     ),
     ModelInfo(
         "ndf",
+        "AnisotropicBeckmann",
+        "alpha_x, alpha_y > 0 along its axes, rotation (deg); exact Smith Λ with the projected "
+        "roughness α(φ); isotropic_equivalent(): α = √(αx αy) (MaterialX)",
+        "Heitz 2014 (anisotropic distributions and their Smith Λ)",
+    ),
+    ModelInfo(
+        "ndf",
+        "AnisotropicGGX",
+        "alpha_x, alpha_y > 0 along its axes, rotation (deg); exact Smith Λ with the projected "
+        "roughness α(φ); isotropic_equivalent(): α = √(αx αy) (MaterialX)",
+        "Heitz 2014 (anisotropic distributions and their Smith Λ)",
+    ),
+    ModelInfo(
+        "ndf",
         "Empirical",
         "normals (N,3), projected-area weights",
         "histogram of the surface's own facets",

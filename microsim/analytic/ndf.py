@@ -30,6 +30,8 @@ __all__ = [
     "BlinnPhong",
     "VonMisesFisher",
     "ABC",
+    "beckmann_lambda",
+    "ggx_lambda",
     "beckmann_to_phong",
     "phong_to_beckmann",
 ]
@@ -157,6 +159,25 @@ def _cos_array(cos_theta) -> np.ndarray:
 
 
 # --- Beckmann -------------------------------------------------------------------------------
+def beckmann_lambda(cos_theta, m):
+    """Beckmann Smith Λ at cos θ (array, clipped to [0, 1]) for roughness ``m`` (scalar or an
+    array broadcasting with it): ``Beckmann.smith_lambda_cos``'s formula."""
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = c / (m * np.sqrt(_sin2(c)))  # inf at c = 1
+        lam = 0.5 * np.exp(-a * a) * (1.0 / (a * np.sqrt(np.pi)) - special.erfcx(a))
+    return np.where(c == 1.0, 0.0, lam)
+
+
+def ggx_lambda(cos_theta, alpha):
+    """GGX Smith Λ at cos θ (array, clipped to [0, 1]) for roughness ``alpha`` (scalar or an
+    array broadcasting with it): ``GGX.smith_lambda_cos``'s formula."""
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    q = alpha**2 * _sin2(c)
+    with np.errstate(divide="ignore"):
+        return q / (2.0 * c * (np.sqrt(c * c + q) + c))
+
+
 @dataclass(frozen=True, repr=False)
 class Beckmann(NDF):
     """Beckmann NDF, D = exp(−tan²θ/m²)/(π m² cos⁴θ) (Mikkelsen 2009, eq. 20); rms slope m > 0.
@@ -203,11 +224,7 @@ class Beckmann(NDF):
         erf(a) − 1 (erfcx(a) = e^{a²} erfc(a)). Λ = 0 at θ = 0 and Λ = +inf at θ = 90°
         (a = 0), so that G1 = 1/(1 + Λ) = 0 there.
         """
-        c = np.clip(_cos_array(cos_theta), 0.0, 1.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = c / (self.m * np.sqrt(_sin2(c)))  # inf at c = 1
-            lam = 0.5 * np.exp(-a * a) * (1.0 / (a * np.sqrt(np.pi)) - special.erfcx(a))
-        return np.where(c == 1.0, 0.0, lam)
+        return beckmann_lambda(_cos_array(cos_theta), self.m)
 
 
 # --- GGX ------------------------------------------------------------------------------------
@@ -251,10 +268,7 @@ class GGX(NDF):
 
         Evaluated as α² sin²/(2c(√(c² + α² sin²) + c)): no cancellation; +inf at θ = 90°.
         """
-        c = np.clip(_cos_array(cos_theta), 0.0, 1.0)
-        q = self.alpha**2 * _sin2(c)
-        with np.errstate(divide="ignore"):
-            return q / (2.0 * c * (np.sqrt(c * c + q) + c))
+        return ggx_lambda(_cos_array(cos_theta), self.alpha)
 
 
 # --- normalised Blinn–Phong -----------------------------------------------------------------

@@ -257,6 +257,8 @@ def _lambda(ndf, w: np.ndarray, method: str = "auto") -> np.ndarray:
     if method not in ("auto", "closed", "numerical"):
         raise UsageError(f"method must be one of 'auto', 'closed', 'numerical', got {method!r}")
     c = w[..., 2]
+    if hasattr(ndf, "smith_lambda_w") and method != "numerical":  # anisotropic, closed form
+        return np.where(c > 0.0, ndf.smith_lambda_w(w), np.inf)
     if not getattr(ndf, "isotropic", True):
         return _table(ndf, _AnisotropicLambdaTable).lambda_w(w)
     closed = getattr(ndf, "has_closed_smith", False)
