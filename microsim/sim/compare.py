@@ -142,6 +142,9 @@ def default_models(
     exact = surfaces[0].exact_shadowing
     if exact == "none":  # nothing shadows (flat): all light in the mirror bin, weight F(θi)
         return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", material)]
+    if exact is not None and ndf is None and not surfaces[0].azimuth_average:
+        # oriented V-grooves: no ensemble NDF; TS with the tile's facets and G is exact
+        return [ModelSpec.facets("ts-facets", normals, weights, exact, material)]
     if exact is not None:
         if ndf is None:
             raise UsageError(

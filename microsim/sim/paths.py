@@ -181,7 +181,7 @@ def _prepare(surface, masking: str, grid: bool):
     if masking in ("exact", "analytic"):
         if not azimuth:
             raise UsageError(
-                f"masking={masking!r} is only available for V-groove surfaces "
+                f"masking={masking!r} is only available for azimuth-averaged V-groove surfaces "
                 "(azimuth_average=True); use masking='traced'"
             )
         profile = VGrooveProfile(tracer) if masking == "exact" else VGrooveCaster(tracer)

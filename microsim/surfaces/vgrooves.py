@@ -84,16 +84,34 @@ def _extrude(x: np.ndarray, z: np.ndarray, length: float) -> tuple[np.ndarray, n
 
 
 def vgrooves(
-    n_grooves: int, ndf, seed: int = 0, sampling: str = "stratified", tile: float = 1.0
+    n_grooves: int,
+    ndf,
+    seed: int = 0,
+    sampling: str = "stratified",
+    tile: float = 1.0,
+    oriented: bool = False,
 ) -> Surface:
     """Square tile of side ``tile`` holding ``n_grooves`` equal-width symmetric V-grooves.
 
     Tilts from ``ndf`` (any object with ``tilt_quantile_rad``; see ``groove_tilts_rad`` for the
     stratified/random choice and the seeded shuffle). Grooves run along y; all rims at z = 0,
-    nothing above; 4 triangles per groove; periodic; ``azimuth_average`` is True; the surface
-    carries ``ndf`` as its ``ensemble_ndf`` and "vgroove" as its ``exact_shadowing``. Groove
-    counts beyond the memory limit (``BYTES_PER_GROOVE``) are refused before any allocation.
+    nothing above; 4 triangles per groove; periodic; the surface carries "vgroove" as its
+    ``exact_shadowing``. Groove counts beyond the memory limit (``BYTES_PER_GROOVE``) are
+    refused before any allocation.
+
+    ``oriented=False`` (the V-cavity of Mikkelsen 2009): ``azimuth_average`` is True — every
+    ray sees the grooves at its own uniform azimuth, so the surface is isotropic and ``ndf``
+    is its ``ensemble_ndf``. ``oriented=True`` (brushed metal): the grooves keep their
+    direction, the BRDF depends on the incidence azimuth φi (0°: incidence across the grooves,
+    in the xz plane), there is no ensemble NDF (every facet normal lies in the xz plane), and
+    the exact single-bounce BRDF is Torrance–Sparrow with the tile's own facets and Blinn's
+    V-groove G evaluated with the 3-D directions: for h in the groove's cross-section plane,
+    the G1 = min(1, 2 (n·h)(n·w)/(w·h)) of the directions projected onto that plane equals the
+    one of w itself (n·w and w·h scale alike), so ``ts-facets`` is exact there too
+    (``sim.compare.default_models``; tests/test_oriented_vgrooves.py).
     """
+    if not isinstance(oriented, (bool, np.bool_)):
+        raise UsageError(f"oriented must be True or False, got {oriented!r}")
     n_grooves = integer("n_grooves", n_grooves, 1)
     if not callable(getattr(ndf, "tilt_quantile_rad", None)):
         raise UsageError(
@@ -118,6 +136,7 @@ def vgrooves(
         "sampling": sampling,
         "seed": seed,
         "tile": tile,
+        **({"oriented": True} if oriented else {}),
     }
     return Surface(
         kind="vgrooves",
@@ -126,8 +145,8 @@ def vgrooves(
         tile_size=(tile, tile),
         periodic=True,
         nominal=nominal,
-        azimuth_average=True,
-        ensemble_ndf=ndf,
+        azimuth_average=not oriented,
+        ensemble_ndf=None if oriented else ndf,
         exact_shadowing="vgroove",
         generator_stats=groove_stats,
     )
