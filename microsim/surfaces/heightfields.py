@@ -22,13 +22,13 @@ Beckmann with m² = 2 × per-axis slope variance (Beckmann & Spizzichino 1963).
 from __future__ import annotations
 
 import warnings as _warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import integrate
 
-from microsim.analytic import Beckmann, abc_psd_church
-from microsim.checks import check_memory, integer, positive
+from microsim.analytic import AnisotropicBeckmann, Beckmann, abc_psd_church
+from microsim.checks import check_memory, finite, integer, positive
 from microsim.errors import UsageError
 
 from .surface import Predicted, Surface, check_relief, heightfield_mesh
@@ -247,8 +247,24 @@ def abc_ensemble_ndf(
     return Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
 
 
+def gaussian_anisotropic_psd(FX, FY, sigma: float, lx: float, ly: float, rotation: float):
+    """PSD of the autocorrelation σ² exp(−(x'²/ℓx² + y'²/ℓy²)), (x', y') the frame rotated by
+    ``rotation`` degrees: S(f) = π σ² ℓx ℓy exp(−π² (ℓx² f'x² + ℓy² f'y²)) (length⁴; ∫ S d²f
+    = σ², per-axis slope variances 2σ²/ℓx², 2σ²/ℓy² along x', y')."""
+    c, s = np.cos(np.radians(rotation)), np.sin(np.radians(rotation))
+    fx, fy = c * FX + s * FY, -s * FX + c * FY
+    return np.pi * sigma**2 * lx * ly * np.exp(-(np.pi**2) * ((lx * fx) ** 2 + (ly * fy) ** 2))
+
+
 def gaussian(
-    n: int, dx: float, sigma: float, corr_len: float, seed: int = 0, exact_amplitude: bool = True
+    n: int,
+    dx: float,
+    sigma: float,
+    corr_len: float,
+    seed: int = 0,
+    exact_amplitude: bool = True,
+    corr_len_y: float | None = None,
+    rotation: float = 0.0,
 ) -> Surface:
     """Periodic n×n Gaussian heightfield with autocorrelation σ² exp(−r²/ℓ²).
 
@@ -259,7 +275,19 @@ def gaussian(
     2σ²(1 − e^{−u})/dx², u = (dx/ℓ)², within 1e-4 for ℓ ≥ 2·dx), which warns — stating that
     realised m — when ℓ < 7·dx. ℓ < dx (``GAUSS_RESOLVED_CELLS``) is not resolved by the grid
     and raises a UsageError. Grids beyond the memory limit are refused before synthesis.
+
+    Anisotropic (``corr_len_y`` given): autocorrelation σ² exp(−(x'²/ℓx² + y'²/ℓy²)) with
+    ℓx = ``corr_len``, ℓy = ``corr_len_y`` along axes rotated by ``rotation`` degrees
+    (``gaussian_anisotropic_psd``); the facet slopes are Gaussian with variances 2σ²/ℓx²,
+    2σ²/ℓy² along those axes, so the ensemble NDF is ``AnisotropicBeckmann(2σ/ℓx, 2σ/ℓy,
+    rotation)``; ``predicted`` carries the mesh's per-axis slope variances along the grid axes
+    (exact, as for the isotropic field) and ``predicted.alpha_x``/``alpha_y`` along the
+    rotated axes (``surface.stats()``' ``alpha_x_realised``/``alpha_y_realised`` measure them).
     """
+    if corr_len_y is not None:
+        return _gaussian_anisotropic(
+            n, dx, sigma, corr_len, corr_len_y, rotation, seed, exact_amplitude
+        )
     n, dx, seed = _grid_args(n, dx, seed)
     sigma, corr_len = positive("sigma", sigma), positive("corr_len", corr_len)
     if corr_len < GAUSS_RESOLVED_CELLS * dx:
@@ -368,3 +396,67 @@ def abc(
     predicted = _predicted(mom, abc_continuum_slope_var(sigma, B, C, f_max))
     ensemble = Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
     return _heightfield_surface("abc", h, dx, nominal, warns, ensemble, predicted)
+
+
+def _gaussian_anisotropic(n, dx, sigma, lx, ly, rotation, seed, exact_amplitude) -> Surface:
+    """``gaussian`` with ``corr_len_y`` (its docstring)."""
+    n, dx, seed = _grid_args(n, dx, seed)
+    sigma = positive("sigma", sigma)
+    lx, ly = positive("corr_len", lx), positive("corr_len_y", ly)
+    rotation = finite("rotation", rotation)
+    for name, ell in (("corr_len", lx), ("corr_len_y", ly)):
+        if ell < GAUSS_RESOLVED_CELLS * dx:
+            raise UsageError(f"{name} must be >= dx = {dx:g} (resolved by the grid), got {ell:g}")
+    ny = nx = n
+    FX, FY = np.meshgrid(np.fft.fftfreq(nx, dx), np.fft.fftfreq(ny, dx))
+    with np.errstate(over="ignore", invalid="ignore"):
+        S = gaussian_anisotropic_psd(FX, FY, sigma, lx, ly, rotation)
+    S[0, 0] = 0.0
+    _finite_spectrum(S, f"sigma = {sigma:g}, corr_len = {lx:g}, corr_len_y = {ly:g}")
+    warns = []
+    if min(lx, ly) < GAUSS_MIN_CORR_CELLS * dx:
+        warns.append(
+            f"gaussian: min(corr_len, corr_len_y) = {min(lx, ly):g} < 7·dx = {7 * dx:g}: the "
+            "mesh slope variances fall short of the continuum 2σ²/ℓ² (predicted.alpha_x/_y "
+            "state the mesh values)"
+        )
+    h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
+    mom = spectrum_moments(S, FX, FY, dx)
+    ax_, ay_ = _rotated_mesh_alphas(S, FX, FY, dx, rotation)
+    nominal = {
+        "sigma": sigma,
+        "corr_len": lx,
+        "corr_len_y": ly,
+        "rotation": rotation,
+        "alpha_x": 2.0 * sigma / lx,
+        "alpha_y": 2.0 * sigma / ly,
+        "n": n,
+        "dx": dx,
+        "seed": seed,
+        "exact_amplitude": bool(exact_amplitude),
+    }
+    predicted = replace(
+        _predicted(mom, sigma**2 * (1.0 / lx**2 + 1.0 / ly**2)), alpha_x=ax_, alpha_y=ay_
+    )
+    ndf = AnisotropicBeckmann(2.0 * sigma / lx, 2.0 * sigma / ly, rotation)
+    return _heightfield_surface("gaussian", h, dx, nominal, warns, ndf, predicted)
+
+
+def _rotated_mesh_alphas(S, FX, FY, dx, rotation) -> tuple[float, float]:
+    """(αx, αy) = √(2 × slope variance) of the mesh's facets along the axes rotated by
+    ``rotation``, exact from the discrete spectrum. ``heightfield_mesh`` splits cell (i, j)
+    into (v00, v01, v11), whose gradient is (Δx h at row i, Δy h at column j + 1), and
+    (v00, v11, v10), with (Δx h at row i + 1, Δy h at column j) — equal areas. With
+    a = 2π fx dx, b = 2π fy dx the one-step differences respond as e^{ia} − 1 and e^{ib} − 1
+    (over dx), so var_x = Σ S |e^{ia} − 1|²/dx² df², var_y alike, and the covariance averages
+    the two triangles' Re[(1 − e^{−ia})(e^{−ib} − 1)] and Re[(e^{ia} − 1)(1 − e^{ib})]."""
+    df2 = 1.0 / (S.size * dx * dx)
+    ea, eb = np.exp(2j * np.pi * FX * dx), np.exp(2j * np.pi * FY * dx)
+    vxx = float(np.sum(S * np.abs(ea - 1.0) ** 2) * df2) / dx**2
+    vyy = float(np.sum(S * np.abs(eb - 1.0) ** 2) * df2) / dx**2
+    cross = 0.5 * ((1.0 - np.conj(ea)) * (np.conj(eb) - 1.0) + (ea - 1.0) * (1.0 - eb)).real
+    vxy = float(np.sum(S * cross) * df2) / dx**2
+    c, s = np.cos(np.radians(rotation)), np.sin(np.radians(rotation))
+    v1 = c * c * vxx + 2 * c * s * vxy + s * s * vyy
+    v2 = s * s * vxx - 2 * c * s * vxy + c * c * vyy
+    return float(np.sqrt(2.0 * v1)), float(np.sqrt(2.0 * v2))

@@ -76,17 +76,24 @@ class Predicted:
     spectrum_slope_var: float
     continuum_slope_var: float
     m: float
+    alpha_x: float | None = None
+    alpha_y: float | None = None
 
     def as_stats(self) -> dict:
         """The ``Surface.stats()`` keys: ``predicted_rms_height``, ``predicted_slope_var``,
-        ``spectrum_slope_var``, ``continuum_slope_var``, ``predicted_m``."""
-        return {
+        ``spectrum_slope_var``, ``continuum_slope_var``, ``predicted_m``; for anisotropic
+        fields also ``predicted_alpha_x``/``_y`` (√(2 × slope variance) along the ensemble
+        NDF's rotated axes)."""
+        out = {
             "predicted_rms_height": self.rms_height,
             "predicted_slope_var": self.slope_var,
             "spectrum_slope_var": self.spectrum_slope_var,
             "continuum_slope_var": self.continuum_slope_var,
             "predicted_m": self.m,
         }
+        if self.alpha_x is not None:
+            out.update(predicted_alpha_x=self.alpha_x, predicted_alpha_y=self.alpha_y)
+        return out
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -208,7 +215,9 @@ class Surface:
         ``m_realised`` = √(var_x + var_y) (Beckmann: per-axis variance m²/2), ``nominal``;
         heightfields add ``grid``, ``dx``, ``rms_height``; then come the generator's predictions
         (``Predicted.as_stats``) and its own measurements (``generator_stats``; V-grooves: the
-        tilt distribution, see ``vgrooves.groove_stats``).
+        tilt distribution, see ``vgrooves.groove_stats``). With an anisotropic ensemble NDF
+        (``alpha_x``, ``alpha_y``, ``rotation``): ``alpha_x_realised``/``alpha_y_realised`` =
+        √(2 × slope variance) of the facets along its rotated axes.
         """
         sx, sy = facet_slopes(self.facet_normals())
         w = self.projected_areas()
@@ -234,6 +243,14 @@ class Surface:
             out["rms_height"] = float(np.sqrt(np.mean(self.heights**2)))
         if self.predicted is not None:
             out.update(self.predicted.as_stats())
+        rot = getattr(self.ensemble_ndf, "rotation", None)
+        if rot is not None and getattr(self.ensemble_ndf, "alpha_x", None) is not None:
+            c, s = np.cos(np.radians(rot)), np.sin(np.radians(rot))
+            v1 = c * c * vx + 2 * c * s * cxy + s * s * vy  # along the NDF's rotated axes
+            v2 = s * s * vx - 2 * c * s * cxy + c * c * vy
+            out.update(
+                alpha_x_realised=float(np.sqrt(2 * v1)), alpha_y_realised=float(np.sqrt(2 * v2))
+            )
         if self.generator_stats is not None:
             out.update(self.generator_stats(self))
         return out
