@@ -160,8 +160,16 @@ def test_torrance_sparrow_masking_forms():
     )
     assert an.TorranceSparrow(_GGX).shadowing == "vgroove"
     assert an.TorranceSparrow(_GGX, an.Smith()).masking == an.Smith(_GGX)
-    with pytest.raises(UsageError, match="own ndf"):
-        an.TorranceSparrow(_GGX, an.Smith(_BECK))
+    # a Smith of another NDF: G from its Λ, D from the model's (a renderer's stand-in)
+    from microsim.vectors import half_vector, spherical_deg
+
+    stand_in = an.TorranceSparrow(_GGX, an.Smith(_BECK))
+    own = an.TorranceSparrow(_GGX, an.Smith())
+    assert stand_in.masking_ndf == _BECK and own.masking_ndf is None
+    wi, wo = spherical_deg(70, 0), spherical_deg(60, 180)
+    h = half_vector(wi, wo)
+    ratio = stand_in.f(wi, wo) / own.f(wi, wo)
+    assert ratio == pytest.approx(an.smith_g2(wi, wo, h, _BECK) / an.smith_g2(wi, wo, h, _GGX))
     with pytest.raises(UsageError, match="masking"):
         an.TorranceSparrow(_GGX, 3)
     with pytest.raises(UsageError):

@@ -36,7 +36,7 @@ def _D_of(ndf, h: np.ndarray) -> np.ndarray:
     return ndf.D(h)
 
 
-def _ts(wi, wo, ndf, kind: str, eta) -> np.ndarray:
+def _ts(wi, wo, ndf, kind: str, eta, masking_ndf=None) -> np.ndarray:
     """Torrance–Sparrow on validated unit arrays (see ``torrance_sparrow``)."""
     s = wi + wo
     norm = np.sqrt(np.einsum("...i,...i->...", s, s))
@@ -50,7 +50,8 @@ def _ts(wi, wo, ndf, kind: str, eta) -> np.ndarray:
             val = np.minimum(2.0 * hz * np.minimum(ci, co) / cos_d, 1.0)
         else:
             wi_b, wo_b = np.broadcast_arrays(wi, wo)
-            val = _shadowing(kind, ndf, wi_b, wo_b, hz, cos_d, cos_d)
+            mndf = ndf if masking_ndf is None else masking_ndf
+            val = _shadowing(kind, mndf, wi_b, wo_b, hz, cos_d, cos_d)
         if getattr(ndf, "isotropic", True):
             val *= ndf.D_cos(hz)
         else:
@@ -62,7 +63,7 @@ def _ts(wi, wo, ndf, kind: str, eta) -> np.ndarray:
     return np.where(valid, val, 0.0)
 
 
-def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None):
+def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None, masking_ndf=None):
     """Torrance–Sparrow BRDF f = F(wi·h) D(h) G / (4 |wi·n| |wo·n|) in sr⁻¹ (Mikkelsen 2009,
     eq. 13/18).
 
@@ -71,12 +72,14 @@ def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None):
     wo is at or below the horizon. At exactly cos θi · cos θo = 0 the value is set to 0: there
     G → 0 like the vanishing cosine, so f cos θ → 0 and the choice carries no energy (the
     limit of f itself stays finite). Reciprocal: every factor is symmetric in wi, wo.
+    ``masking_ndf``: the NDF of the Smith G when it is not ``ndf`` (e.g. the isotropic
+    stand-in renderers use for an anisotropic D, ``AnisotropicGGX.isotropic_equivalent``).
     """
     kind = _check_kind(shadowing)
     eta = resolve_material(material)
     wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
     _checks.broadcast({"wi": wi, "wo": wo})
-    return _ts(wi, wo, ndf, kind, eta)
+    return _ts(wi, wo, ndf, kind, eta, masking_ndf)
 
 
 def sample_microfacet(wo, u1, u2, ndf):

@@ -132,9 +132,10 @@ class TorranceSparrow(_Model):
     """f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18):
     ``torrance_sparrow(wi, wo, ndf, masking.kind, material)``.
 
-    ``masking``: ``VGroove()``, ``Smith(correlated=...)`` (bound to ``ndf``; a Smith of another
-    NDF is refused, as ``torrance_sparrow`` uses one), ``NoMasking()`` or a ``shadowing``
-    string. Sampler: h ~ D(h)(h·n), wi = 2(wo·h)h − wo (``sample_microfacet``/``pdf_microfacet``).
+    ``masking``: ``VGroove()``, ``Smith(correlated=...)`` (bound to ``ndf``; ``Smith(other,
+    ...)`` evaluates G with another NDF's Λ — the isotropic stand-in renderers use for an
+    anisotropic D, ``masking_ndf``), ``NoMasking()`` or a ``shadowing`` string. Sampler:
+    h ~ D(h)(h·n), wi = 2(wo·h)h − wo (``sample_microfacet``/``pdf_microfacet``).
     """
 
     ndf: Any
@@ -161,14 +162,8 @@ class TorranceSparrow(_Model):
             raise UsageError(
                 f"masking must be VGroove(), Smith(...), NoMasking() or a shadowing name, got {m!r}"
             )
-        if isinstance(m, Smith):
-            if m.ndf is None:
-                m = Smith(self.ndf, m.correlated)
-            elif m.ndf is not self.ndf and m.ndf != self.ndf:
-                raise UsageError(
-                    "masking=Smith(ndf) must use the model's own ndf (or none: Smith()), "
-                    f"got {m.ndf!r} for ndf {self.ndf!r}"
-                )
+        if isinstance(m, Smith) and m.ndf is None:
+            m = Smith(self.ndf, m.correlated)
         object.__setattr__(self, "masking", m)
         resolve_material(self.material)
         super().__post_init__()
@@ -182,9 +177,23 @@ class TorranceSparrow(_Model):
     def symmetric(self) -> bool:
         return _isotropic(self.ndf)
 
+    @property
+    def masking_ndf(self):
+        """The Smith G's NDF when it is not ``ndf`` (a stand-in such as MaterialX's isotropic
+        α = √(αx αy) for an anisotropic D), else None."""
+        m = self.masking
+        if isinstance(m, Smith) and m.ndf is not self.ndf and m.ndf != self.ndf:
+            return m.ndf
+        return None
+
     def f(self, wi, wo):
         return torrance_sparrow(
-            wi, wo, self.ndf, shadowing=self.masking.kind, material=self.material
+            wi,
+            wo,
+            self.ndf,
+            shadowing=self.masking.kind,
+            material=self.material,
+            masking_ndf=self.masking_ndf,
         )
 
     def sample(self, wo, u1, u2) -> BRDFSample:

@@ -498,10 +498,11 @@ class ModelSpec:
         """A spec from a model object (``analytic.models``, any ``BRDFModel``).
 
         ``TorranceSparrow`` maps to the "ts" kind with its ndf, shadowing and material (the
-        same predictions as ``torrance_sparrow``); any other model to "function" with
+        same predictions as ``torrance_sparrow``) unless its Smith G has an NDF of its own
+        (``masking_ndf``); any other model to "function" with
         ``model.f`` and ``model.symmetric`` (False when the model does not say).
         """
-        if isinstance(model, TorranceSparrow):
+        if isinstance(model, TorranceSparrow) and model.masking_ndf is None:
             return cls.torrance_sparrow(name, model.ndf, model.shadowing, model.material)
         if not isinstance(model, BRDFModel):
             raise UsageError(
