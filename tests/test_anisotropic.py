@@ -143,3 +143,25 @@ def test_bad_parameters_name_themselves(bad, name):
 
     with pytest.raises(UsageError, match=name):
         an.AnisotropicGGX(**bad)
+
+
+@pytest.mark.parametrize("cls, ax, ay, rot", CASES, ids=IDS)
+@pytest.mark.parametrize("theta, phi", [(20, 10), (70, 100)])
+def test_visible_normals_follow_their_density(cls, ax, ay, rot, theta, phi):
+    """Pearson χ² (``microsim.testing.assert_sampler_matches``, Šidák over the 8 cases) of
+    10⁵ visible normals against D_v(m) = ⟨v, m⟩⁺ D(m)/((1 + Λ(v)) cos θ_v), which integrates to
+    1 by the projected-area identity (checked here too)."""
+    from microsim.testing import assert_sampler_matches
+
+    ndf = cls(ax, ay, rot)
+    v = spherical_deg(theta, phi)
+    total = np.sum(ndf.pdf_visible(H, np.broadcast_to(v, H.shape)) * DW)
+    assert total == pytest.approx(1.0, abs=5e-3)
+
+    def sample(u1, u2):
+        return ndf.sample_visible(np.broadcast_to(v, (len(u1), 3)), u1, u2)
+
+    def pdf(m):
+        return np.where(m[:, 2] > 0, ndf.pdf_visible(m, np.broadcast_to(v, m.shape)), 0.0)
+
+    assert_sampler_matches(sample, pdf, n=100_000, n_tests=8)

@@ -121,6 +121,35 @@ class _Anisotropic:
         w = np.asarray(w, dtype=np.float64)
         return self._lambda(np.clip(w[..., 2], 0.0, 1.0), self.projected_alpha(w))
 
+    def sample_visible(self, v, u1, u2):
+        """Visible normals m ~ D_v(m) = ⟨v, m⟩⁺ D(m) / ((1 + Λ(v)) cos θ_v) for unit view
+        directions v (N, 3) of the upper hemisphere and uniforms u1, u2 (N,): by the stretch
+        to unit roughness — v' = normalize(αx v'x, αy v'y, v'z) in the NDF's frame, m' sampled
+        from the unit isotropic NDF seen from v' (``random_walk.sample_visible_normals``:
+        Heitz 2018 for GGX, Heitz & d'Eon 2014 for Beckmann), m = normalize(αx m'x, αy m'y,
+        m'z) — valid because slopes scale by (αx, αy) under the stretch (as pbrt-v4's
+        ``Sample_wm``). Density: ``pdf_visible``."""
+        from .random_walk import sample_visible_normals
+
+        v = _checks.directions("v", v, upper=True)
+        vl = self._to_local(v)
+        stretched = vectors.normalize(
+            np.stack([self.alpha_x * vl[..., 0], self.alpha_y * vl[..., 1], vl[..., 2]], -1)
+        )
+        m = sample_visible_normals(stretched, self._isotropic(1.0), u1, u2)
+        ml = vectors.normalize(
+            np.stack([self.alpha_x * m[..., 0], self.alpha_y * m[..., 1], m[..., 2]], -1)
+        )
+        return self._from_local(ml)
+
+    def pdf_visible(self, m, v):
+        """D_v(m) = ⟨v, m⟩⁺ D(m) / ((1 + Λ(v)) cos θ_v) in sr⁻¹ (the Smith visible-normal
+        density, normalised by the projected-area identity)."""
+        m = _checks.directions("m", m)
+        v = _checks.directions("v", v, upper=True)
+        vm = np.maximum(np.einsum("...i,...i->...", v, m), 0.0)
+        return vm * self.D(m) / ((1.0 + self.smith_lambda_w(v)) * v[..., 2])
+
     def isotropic_equivalent(self):
         """The isotropic NDF of the same family with α = √(αx αy) (the stand-in MaterialX
         uses for the anisotropic Smith G)."""

@@ -74,15 +74,17 @@ _FUNCTIONS: tuple[ModelInfo, ...] = (
         "ndf",
         "AnisotropicBeckmann",
         "alpha_x, alpha_y > 0 along its axes, rotation (deg); exact Smith Λ with the projected "
-        "roughness α(φ); isotropic_equivalent(): α = √(αx αy) (MaterialX)",
-        "Heitz 2014 (anisotropic distributions and their Smith Λ)",
+        "roughness α(φ); sample_visible/pdf_visible (stretched visible normals); "
+        "isotropic_equivalent(): α = √(αx αy) (MaterialX)",
+        "Heitz 2014 (anisotropic distributions and their Smith Λ); Heitz 2018",
     ),
     ModelInfo(
         "ndf",
         "AnisotropicGGX",
         "alpha_x, alpha_y > 0 along its axes, rotation (deg); exact Smith Λ with the projected "
-        "roughness α(φ); isotropic_equivalent(): α = √(αx αy) (MaterialX)",
-        "Heitz 2014 (anisotropic distributions and their Smith Λ)",
+        "roughness α(φ); sample_visible/pdf_visible (stretched visible normals); "
+        "isotropic_equivalent(): α = √(αx αy) (MaterialX)",
+        "Heitz 2014 (anisotropic distributions and their Smith Λ); Heitz 2018",
     ),
     ModelInfo(
         "ndf",
