@@ -31,7 +31,10 @@ def test_catalogue_scene_loads_builds_and_describes(path):
         assert surf.heights.shape == (128, 128)
         if sc.wave is None:  # wave scenes: 4 fixed tiles (the Kirchhoff solve per tile)
             assert sc.simulation.realisations == "auto"  # enough tiles for verdicts
-    if sc.surface.kind in ("vgrooves", "gaussian", "abc"):
+    if sc.anisotropic:  # oriented grooves have none; anisotropic fields an anisotropic one
+        assert sc.ndf() is None if sc.surface.kind == "vgrooves" else sc.ndf().alpha_x > 0
+        assert sc.full_azimuth and not surf.azimuth_average
+    elif sc.surface.kind in ("vgrooves", "gaussian", "abc"):
         assert isinstance(sc.ndf(), an.NDF)
     text = describe_surface(surf)
     assert "slope variance x" in text and surf.kind in text
@@ -55,8 +58,11 @@ def test_catalogue_covers_the_issue():
     }
     assert {n for n, _ in vg} == {"beckmann", "ggx", "blinn-phong", "vmf", "abc"}
     assert ("vmf", (("kappa", 17.0),)) in vg and ("vmf", (("kappa", 1024.0),)) in vg
-    gauss = [s for s in scenes if s.surface.kind == "gaussian"]
+    gauss = [s for s in scenes if s.surface.kind == "gaussian" and not s.anisotropic]
     assert sorted(round(s.ndf().m, 6) for s in gauss) == [0.1, 0.3, 0.5]
+    aniso = [s.ndf() for s in scenes if s.surface.kind == "gaussian" and s.anisotropic]
+    assert any(4 <= max(n.alpha_x / n.alpha_y, n.alpha_y / n.alpha_x) <= 8 for n in aniso)
+    assert any(s.anisotropic and s.surface.kind == "vgrooves" for s in scenes)
     assert all(s.surface.params["corr_len"] >= 7 * s.surface.params["dx"] for s in gauss)
     cs = sorted(s.surface.params["C"] for s in scenes if s.surface.kind == "abc" and s.wave is None)
     assert len(cs) == 2 and 1 < cs[0] <= 3 < cs[1]

@@ -94,6 +94,7 @@ _STYLES = {
     "ts-beckmann-realised-vgroove": ("#5254a3", ":"),
     "ts-beckmann-realised-smith": ("#e6550d", ":"),
     "ts-beckmann-realised-smith-corr": ("#8ca252", ":"),
+    "ts-beckmann-nominal-smith-corr-geomean": ("#d62728", "--"),
     "mirror-fresnel": ("#1f77b4", "-"),
     "cook-torrance": ("#8c564b", "-."),
     "low-microfacet": ("#9467bd", "-."),

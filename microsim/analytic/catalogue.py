@@ -225,6 +225,15 @@ REPORT_MODELS: tuple[ReportModel, ...] = (
         "Mikkelsen 2009, eq. 13, 20",
     ),
     ReportModel(
+        ("ts-beckmann-nominal-smith-corr-geomean",),
+        "closed form",
+        "anisotropic heightfields: the ensemble's anisotropic Beckmann D with the height-"
+        "correlated Smith G of the isotropic α = √(αx αy) (MaterialX's stand-in for the "
+        "anisotropic Smith G)",
+        "TorranceSparrow(ndf, Smith(ndf.isotropic_equivalent(), correlated=True), material)",
+        "Heitz 2014; MaterialX (geometric-mean roughness in G)",
+    ),
+    ReportModel(
         ("mirror-fresnel",),
         "closed form",
         "flat surfaces: all light in the mirror bin, weighted by Fresnel",

@@ -148,6 +148,7 @@ NAME_RULE = (
     "(it names the output folder)"
 )
 _BOOL = (lambda v: isinstance(v, bool), "true or false")
+_ANGLE = (lambda v: _is_num(v) and -360.0 <= v <= 360.0, "degrees in [-360, 360]")
 _STR = (lambda v: isinstance(v, str), "a string")
 _C_ABC = (lambda v: _is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
 _BAND = (lambda v: _is_num(v) and v >= 1, "a number >= 1")
@@ -204,11 +205,17 @@ _KINDS = {
                 (lambda v: v in ("stratified", "random"), '"stratified" or "random"'),
             ),
             "tile": (1.0, _LENGTH),
+            "oriented": (False, _BOOL),
         },
         lambda p, seed, scale, base: surfaces.vgrooves(
-            max(1, round(p["n_grooves"] * scale)), _vgroove_ndf(p), seed, p["sampling"], p["tile"]
+            max(1, round(p["n_grooves"] * scale)),
+            _vgroove_ndf(p),
+            seed,
+            p["sampling"],
+            p["tile"],
+            oriented=p["oriented"],
         ),
-        _vgroove_ndf,
+        lambda p: None if p["oriented"] else _vgroove_ndf(p),
     ),
     "gaussian": _Kind(
         {
@@ -217,9 +224,17 @@ _KINDS = {
             "sigma": (_REQUIRED, _LENGTH),
             "corr_len": (_REQUIRED, _LENGTH),
             "exact_amplitude": (True, _BOOL),
+            "corr_len_y": (None, _LENGTH),
+            "rotation": (0.0, _ANGLE),
         },
         _heightfield(surfaces.gaussian),
-        lambda p: gaussian_ensemble_ndf(p["sigma"], p["corr_len"]),
+        lambda p: (
+            gaussian_ensemble_ndf(p["sigma"], p["corr_len"])
+            if p["corr_len_y"] is None
+            else an.AnisotropicBeckmann(
+                2.0 * p["sigma"] / p["corr_len"], 2.0 * p["sigma"] / p["corr_len_y"], p["rotation"]
+            )
+        ),
     ),
     "abc": _Kind(
         {
@@ -300,6 +315,8 @@ _SIM_KEYS = {
         (lambda v: v == "all" or (_is_int(v) and 1 <= v <= 256), 'an integer in [1, 256] or "all"'),
     ),
     "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0")),
+    "phi_i": (0.0, _ANGLE),
+    "full_azimuth": (None, _BOOL),
 }
 _TOP_KEYS = ("name", "description", "surface", "material", "simulation", "wave")
 WAVE_KINDS = ("gaussian", "abc")
@@ -342,7 +359,11 @@ class SurfaceSpec:
 class SimSettings:
     """Simulation settings: incidence angles (degrees), rays per incidence (or "auto"),
     outgoing bins (θ over [0°, 90°], φ over [0°, 360°)), realisations (a count or "auto",
-    then ``realisation_target``, default ``budget.AUTO_TARGET``), base seed."""
+    then ``realisation_target``, default ``budget.AUTO_TARGET``), base seed; ``phi_i`` the
+    incidence azimuth in degrees (the surface frame: 0° is incidence in the xz plane, across
+    oriented grooves or the x correlation axis) and ``full_azimuth``: Δφ bins over the whole
+    circle instead of folded onto [0°, 180°] (None: full for anisotropic surfaces — oriented
+    V-grooves, Gaussian fields with ``corr_len_y`` — and folded otherwise)."""
 
     theta_i: tuple[float, ...] = (0.0, 30.0, 60.0, 80.0)
     rays: int | str = 1_000_000
@@ -352,6 +373,8 @@ class SimSettings:
     realisation_target: float | None = None
     bounces: int | str = 1
     seed: int = 0
+    phi_i: float = 0.0
+    full_azimuth: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -380,6 +403,20 @@ class Scene:
     simulation: SimSettings
     wave: WaveSpec | None = None
     material_name: str | None = None
+
+    @property
+    def anisotropic(self) -> bool:
+        """Oriented V-grooves or a Gaussian field with two correlation lengths."""
+        p = self.surface.params
+        if self.surface.kind == "vgrooves":
+            return bool(p.get("oriented", False))
+        return self.surface.kind == "gaussian" and p.get("corr_len_y") is not None
+
+    @property
+    def full_azimuth(self) -> bool:
+        """Whether the Δφ bins cover the whole circle (``SimSettings.full_azimuth``)."""
+        f = self.simulation.full_azimuth
+        return self.anisotropic if f is None else bool(f)
 
     @property
     def material(self):
@@ -716,7 +753,7 @@ def load_scene(path) -> Scene:
             f"got kind {surface.kind!r}",
         )
     wave = _wave(where, data.get("wave"), surface, simulation)
-    return Scene(
+    scene = Scene(
         name=name,
         path=path,
         description=description,
@@ -726,6 +763,14 @@ def load_scene(path) -> Scene:
         wave=wave,
         material_name=_material_name(data.get("material")),
     )
+    if scene.full_azimuth and scene.simulation.phi_bins % 2:
+        _fail(
+            where,
+            "simulation.phi_bins",
+            f"must be even with full-azimuth bins (one bin centred on Δφ = 180°), got "
+            f"{scene.simulation.phi_bins}",
+        )
+    return scene
 
 
 def _material_name(table) -> str | None:

@@ -37,7 +37,10 @@ from typing import NamedTuple
 import numpy as np
 
 from microsim import vectors
+from microsim.analytic.anisotropic import AnisotropicBeckmann
 from microsim.analytic.fresnel import resolve_material
+from microsim.analytic.masking import Smith
+from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import Beckmann
 from microsim.errors import UsageError
 
@@ -109,6 +112,24 @@ def _pooled_facets(surfaces):
     return normals, weights, realised_m(surfaces)
 
 
+GEOMEAN_MODEL = "ts-beckmann-nominal-smith-corr-geomean"
+"""The anisotropic ensemble NDF with the height-correlated Smith G of the isotropic
+α = √(αx αy): the stand-in MaterialX uses for the anisotropic Smith G."""
+
+
+def _realised_ndf(surfaces, m_real: float):
+    """Beckmann at the realised m; for anisotropic fields (``alpha_x_realised`` in the stats)
+    the anisotropic Beckmann at the realised αx, αy (means over realisations) and the
+    ensemble's rotation."""
+    ens = surfaces[0].ensemble_ndf
+    if not hasattr(ens, "alpha_x"):
+        return Beckmann(m_real)
+    stats = [s.stats() for s in surfaces]
+    ax = float(np.sqrt(np.mean([st["alpha_x_realised"] ** 2 for st in stats])))
+    ay = float(np.sqrt(np.mean([st["alpha_y_realised"] ** 2 for st in stats])))
+    return AnisotropicBeckmann(ax, ay, ens.rotation)
+
+
 def realised_m(surfaces) -> float:
     """Beckmann m of the realised slopes of ``surfaces`` (a sequence of realisations):
     √(mean over realisations of var_x + var_y), the projected-area weighted facet slope
@@ -159,7 +180,7 @@ def default_models(
         facets = ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies)
         # the same closed form with the ensemble NDF: the pair measures the tile's departure
         return specs + [_tagged(facets, surfaces, ensemble=f"ts-{SHADOWING_SUFFIX[exact]}")]
-    ndfs = [("realised", Beckmann(m_real))]
+    ndfs = [("realised", _realised_ndf(surfaces, m_real))]
     if ndf is not None:
         ndfs.insert(0, ("nominal", ndf))
     specs = [
@@ -167,6 +188,10 @@ def default_models(
         for label, d in ndfs
         for k in kinds
     ]
+    if ndf is not None and hasattr(ndf, "isotropic_equivalent"):  # anisotropic ensemble
+        stand_in = Smith(ndf.isotropic_equivalent(), correlated=True)
+        model = TorranceSparrow(ndf, stand_in, material)
+        specs.append(ModelSpec.from_model(GEOMEAN_MODEL, model))
     facets = ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", material)
     return specs + [_tagged(facets, surfaces)]
 

@@ -142,7 +142,9 @@ class RunPlan:
 
     @property
     def bins(self) -> Bins:
-        return Bins(*bins_shape(self.scene, self.effort))
+        """The run's outgoing bins: folded onto Δφ ∈ [0°, 180°], or over the whole circle for
+        a scene with ``full_azimuth`` (anisotropic surfaces)."""
+        return Bins(*bins_shape(self.scene, self.effort), folded=not self.scene.full_azimuth)
 
     @property
     def realisation_target(self) -> float:
@@ -161,7 +163,10 @@ def bins_shape(scene, effort: Effort) -> tuple[int, int]:
     shape = (scene.simulation.theta_bins, scene.simulation.phi_bins)
     if effort.max_bins is None:
         return shape
-    return tuple(min(a, b) for a, b in zip(shape, effort.max_bins))
+    nt, nphi = (min(a, b) for a, b in zip(shape, effort.max_bins))
+    if scene.full_azimuth:  # the cap over the whole circle: twice the folded one, even
+        nphi = min(scene.simulation.phi_bins, 2 * (effort.max_bins[1] - 1))
+    return nt, nphi
 
 
 def _int_option(name, value, lo):
@@ -434,6 +439,9 @@ def tally_settings(scene) -> dict:
     by ``--resume``): the surface (kind and parameters; a heightfield file by the SHA-256 of
     its content, not its path), the material's index (None: mirror) and the bounces."""
     surface = {"kind": scene.surface.kind, **scene.surface.params}
+    if not scene.anisotropic:  # isotropic surfaces keep the settings they always had
+        for key in ("oriented", "corr_len_y", "rotation"):
+            surface.pop(key, None)
     if scene.surface.kind == "file":
         path = Path(surface.pop("path"))
         path = path if path.is_absolute() or scene.path is None else scene.path.parent / path
@@ -444,10 +452,17 @@ def tally_settings(scene) -> dict:
         surface["sha256"] = digest.hexdigest()
     ior = None if scene.ior is None else [complex(scene.ior).real, complex(scene.ior).imag]
     record = {"surface": surface, "ior": ior, "bounces": scene.simulation.bounces}
+    if scene.anisotropic or scene.simulation.phi_i:  # absent otherwise: older runs resume
+        record.update(phi_i=scene.simulation.phi_i, full_azimuth=scene.full_azimuth)
     return json.loads(json.dumps(json_safe(record)))
 
 
-RESUME_KEYS = {"ior": "material.ior", "bounces": "simulation.bounces"}
+RESUME_KEYS = {
+    "ior": "material.ior",
+    "bounces": "simulation.bounces",
+    "phi_i": "simulation.phi_i",
+    "full_azimuth": "simulation.full_azimuth",
+}
 """How ``--resume`` names a setting of ``meta["run"]`` whose scene key differs."""
 
 

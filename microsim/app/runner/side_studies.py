@@ -107,12 +107,14 @@ def estimator_warnings(plan: RunPlan, sweep) -> list[str]:
             )
     bin_w = 90.0 / sweep.bins.n_theta
     ndf = plan.scene.ndf()
-    if ndf is None:
+    if hasattr(ndf, "alpha_x"):  # anisotropic: the lobe is narrowest along the smooth axis
+        ndf = type(ndf.isotropic_equivalent())(min(ndf.alpha_x, ndf.alpha_y))
+    if ndf is None and plan.scene.surface.kind == "flat":
         out.append(
             f"the reflection lobe of a flat surface is a delta: narrower than any bin "
             f"({bin_w:g}° wide); relative errors are bin averages of a spike"
         )
-    else:
+    elif ndf is not None:
         lobe = 2.0 * math.degrees(float(ndf.tilt_quantile_rad(0.5)))  # median lobe half-width
         if lobe < bin_w:
             out.append(
@@ -185,9 +187,13 @@ def speed_runs(plan: RunPlan, result, shown, verdicts):
 
 
 def albedo_models(plan: RunPlan, theta_grid):
-    """Model ρ(θ) for each Torrance–Sparrow shadowing variant: name → (θ grid, ρ)."""
+    """Model ρ(θ) for each Torrance–Sparrow shadowing variant: name → (θ grid, ρ). None for
+    anisotropic surfaces (their albedo depends on the incidence azimuth as well; the albedo
+    tables are isotropic): the energy chart then shows the simulation alone."""
     ndf = plan.scene.ndf()
     cos = np.cos(np.radians(theta_grid))
+    if plan.scene.anisotropic:
+        return {}
     if ndf is None:
         return {"Fresnel (flat mirror)": (theta_grid, an.fresnel(cos, plan.scene.ior))}
     n_t, n_g, n_p = plan.effort.albedo_nodes

@@ -77,6 +77,7 @@ def simulate_scene(
             surface,
             sc.material,
             tuple(theta_i),
+            sc.simulation.phi_i,
             bins=bins,
             bounces=bounces,
             surface_factory=factory,
