@@ -34,6 +34,7 @@ import numpy as np
 from ... import atomic
 from ...analysis import charts as ch
 from ...analysis import report
+from ...analysis.anisotropy import anisotropy_summary
 from ...analysis.budget import error_budget
 from ...analysis.fits import FIT_MODELS, fit_all
 from ...analysis.multiple import multiple_chart
@@ -279,6 +280,9 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         )
         if orders_doc is not None:
             doc["orders"] = atomic.json_safe(orders_doc)
+        aniso = anisotropy_summary(result, verdicts) if sc.anisotropic else None
+        if aniso is not None:
+            doc["anisotropy"] = atomic.json_safe(aniso)
         atomic.write_json(stage / VERDICTS_FILE, doc)
         timings = timings_document(plan, result, speed, speed_theta)
         if wave_seconds is not None:
