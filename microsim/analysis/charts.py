@@ -348,7 +348,7 @@ def inplane_curves(
         return _output(fig, path)
     _ratio_limits(ratios)
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=8, loc="outside right upper")  # never over the data
+    fig.legend(handles, labels, fontsize=8, loc="outside right center")  # never over the data
     fig.supxlabel("θo (°): − backward side (Δφ = 0°), + specular side (Δφ = 180°)", fontsize=9)
     fig.suptitle(
         _title(scene_name, "in-plane scattering (bin averages); below: model / simulation")
@@ -572,7 +572,8 @@ def hemisphere_maps(
     tax.text(
         0.0,
         0.0,
-        "r = sin θo, angle = Δφ (mirrored from the folded half)\n"
+        f"r = sin θo, angle = Δφ"
+        f"{' (mirrored from the folded half)' if result.bins.folded else ' (full circle)'}\n"
         "○ mirror direction; black contour |z| = 5; grey: no events",
         fontsize=8,
         va="bottom",
