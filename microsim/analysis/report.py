@@ -853,6 +853,18 @@ def methods_section(methods) -> list[str]:
     return lines
 
 
+def _variant_cell(v: Mapping | None) -> str:
+    """One Smith G variant against the simulation: verdict symbol, energy deviation ± se,
+    relative RMS error."""
+    if v is None or v["rel_rms"] is None:
+        return "–"
+    sym = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}[v["verdict"]]
+    return (
+        f"{sym} {_signed_pct(v['energy_dev'], v.get('energy_dev_se'))}, "
+        f"rel RMS {plain(100 * v['rel_rms'], 2)} %"
+    )
+
+
 def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
     """ "Anisotropy: the Smith G variants" for the scenes with an ``anisotropy`` block
     (``analysis.anisotropy``): per θi, the isotropic stand-in against the exact Λ (model
@@ -860,18 +872,6 @@ def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
     rows = []
     for d in docs:
         for inc in (d.get("anisotropy") or {}).get("incidences", []):
-            sim = inc["against_simulation"]
-
-            def cell(label):
-                v = sim.get(label)
-                if v is None or v["rel_rms"] is None:
-                    return "–"
-                sym = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}[v["verdict"]]
-                return (
-                    f"{sym} {_signed_pct(v['energy_dev'], v.get('energy_dev_se'))}, "
-                    f"rel RMS {plain(100 * v['rel_rms'], 2)} %"
-                )
-
             sv = inc["stand_in_vs_exact"]
             rows.append(
                 [
@@ -880,7 +880,7 @@ def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
                     f"{inc['phi_i']:g}°",
                     f"{_signed_pct(sv['energy_dev'])}, rel RMS {plain(100 * sv['rel_rms'], 2)} %",
                 ]
-                + [cell(label) for label in ANISOTROPY_VARIANTS]
+                + [_variant_cell(inc["against_simulation"].get(x)) for x in ANISOTROPY_VARIANTS]
             )
     if not rows:
         return []

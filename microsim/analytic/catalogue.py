@@ -13,6 +13,8 @@ model; ``material`` is a name, n, n + ik or None (``resolve_material``).
 
 from __future__ import annotations
 
+import os
+import textwrap
 from dataclasses import dataclass
 
 from .masking import MASKING_CLASSES
@@ -171,8 +173,6 @@ class ReportModel:
     @property
     def label(self) -> str:
         """The names as printed: a family as prefix{a|b|c}, others comma-separated."""
-        import os
-
         prefix = os.path.commonprefix(list(self.names))
         if len(self.names) > 1 and prefix.endswith("-") and len(prefix) > 3:
             return prefix + "{" + "|".join(n[len(prefix) :] for n in self.names) + "}"
@@ -311,8 +311,6 @@ def report_names() -> frozenset:
 
 def _wrapped(head: str, lines: list[str], width: int, indent: int) -> list[str]:
     """``head`` padded to ``indent`` columns, then ``lines`` each wrapped to ``width``."""
-    import textwrap
-
     out, pad = [], " " * indent
     for k, text in enumerate(lines):
         first = head.ljust(indent - 1) + " " if k == 0 else pad

@@ -27,6 +27,7 @@ __all__ = [
     "f0_from_material",
     "MATERIALS",
     "resolve_material",
+    "material_name",
 ]
 
 MATERIALS = {"aluminium": 0.769 + 6.08j, "methanol": 1.329, "mirror": None}
@@ -139,6 +140,16 @@ def schlick(cos_theta, f0):
     return f0 + (1.0 - f0) * (1.0 - c) ** 5
 
 
+def material_name(material) -> str | None:
+    """The canonical name of ``material`` if it names one of ``MATERIALS`` ("Aluminum" →
+    "aluminium"), else None (numbers, None, unknown text)."""
+    if not isinstance(material, str):
+        return None
+    key = material.strip().lower()
+    key = _ALIASES.get(key, key)
+    return key if key in MATERIALS else None
+
+
 def _ior_text(text: str):
     """``text`` as a number if it is one ("1.5", "0.769+6.08i", "0.769+6.08j"), else None."""
     t = text.replace(" ", "")
@@ -165,18 +176,17 @@ def resolve_material(material):
     if material is None:
         return None
     if isinstance(material, str):
-        key = material.strip().lower()
-        key = _ALIASES.get(key, key)
-        number = _ior_text(key)
+        name = material_name(material)
+        if name is not None:
+            return MATERIALS[name]
+        number = _ior_text(material.strip().lower())
         if number is not None:
             return resolve_material(number)
-        if key not in MATERIALS:
-            allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
-            raise UsageError(
-                f"material must be one of {allowed} or an index of refraction "
-                f"(ior) n / n+ik / None, got {material!r}"
-            )
-        return MATERIALS[key]
+        allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
+        raise UsageError(
+            f"material must be one of {allowed} or an index of refraction "
+            f"(ior) n / n+ik / None, got {material!r}"
+        )
     eta = _check_ior(material, "material")
     if isinstance(material, complex | np.complexfloating):
         return eta

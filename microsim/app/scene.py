@@ -228,13 +228,7 @@ _KINDS = {
             "rotation": (0.0, _ANGLE),
         },
         _heightfield(surfaces.gaussian),
-        lambda p: (
-            gaussian_ensemble_ndf(p["sigma"], p["corr_len"])
-            if p["corr_len_y"] is None
-            else an.AnisotropicBeckmann(
-                2.0 * p["sigma"] / p["corr_len"], 2.0 * p["sigma"] / p["corr_len_y"], p["rotation"]
-            )
-        ),
+        lambda p: gaussian_ensemble_ndf(p["sigma"], p["corr_len"], p["corr_len_y"], p["rotation"]),
     ),
     "abc": _Kind(
         {
@@ -775,12 +769,9 @@ def load_scene(path) -> Scene:
 
 def _material_name(table) -> str | None:
     """The material's name as ``fresnel.MATERIALS`` spells it, if ``[material] ior`` is one."""
-    v = (table or {}).get("ior", "mirror" if table is not None else None)
-    if not isinstance(v, str):
+    if table is None:
         return None
-    key = v.strip().lower()
-    key = {"aluminum": "aluminium"}.get(key, key)
-    return key if key in an.MATERIALS else None
+    return an.material_name(table.get("ior", "mirror"))
 
 
 # --- description -------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ __all__ = [
     "MAX_THREADS",
     "MAX_CHUNK",
     "check_angles",
+    "check_bins",
     "check_choice",
     "check_progress",
     "check_inputs",
@@ -114,11 +115,17 @@ def thread_count(threads) -> int:
     return integer("threads", threads, 1, MAX_THREADS, " (or None: the CPU count)")
 
 
+def check_bins(bins) -> Bins:
+    """``bins`` if it is a ``Bins``; else a UsageError."""
+    if not isinstance(bins, Bins):
+        raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
+    return bins
+
+
 def check_run_options(bins, origins, progress, progress_receives: str) -> None:
     """UsageError unless ``bins`` is a ``Bins``, ``origins`` one of ``ORIGINS`` and
     ``progress`` None or a callable (receiving ``progress_receives``)."""
-    if not isinstance(bins, Bins):
-        raise UsageError(f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {bins!r}")
+    check_bins(bins)
     check_choice("origins", origins, ORIGINS)
     check_progress(progress, progress_receives)
 

@@ -36,11 +36,7 @@ from microsim.stats import ENERGY_FRACTION, MIN_EVENTS, energy_set
 
 from .arguments import (
     MAX_RAYS,
-    check_inputs,
     check_progress,
-    check_run_options,
-    is_surface,
-    surface_error,
 )
 from .bins import Bins
 from .estimator import estimate
@@ -159,14 +155,9 @@ def simulate_auto(
     KeyboardInterrupt within one chunk of rays (there is no partial result to resume);
     memory does not depend on ``max_rays`` (each batch is scheduled lazily).
     """
-    th, ph = check_inputs(theta_i, phi_i, 1, chunk, masking, seed)
     max_rays = integer("max_rays", max_rays, 2, MAX_RAYS, " (rays per incidence at most)")
-    check_run_options(bins, origins, None, "")
-    check_progress(progress, "one text line")
-    if not is_surface(surface):
-        raise surface_error("surface", surface)
-    return estimate_to_precision(
-        Experiment(surface, material, th, ph, bins),
+    return estimate_to_precision(  # each description checks its own arguments
+        Experiment(surface, material, theta_i, phi_i, bins),
         Estimator(max_rays, seed, masking, origins),
         Execution(threads, chunk),
         Precision(target, first, energy, min_events),

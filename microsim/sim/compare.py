@@ -97,19 +97,19 @@ def _surfaces_and_ndf(scene_or_surfaces, ndf):
 
 
 def _pooled_facets(surfaces):
-    """Facet normals and projected-area weights of all realisations together, and the realised
-    m of the pool, √(mean over realisations of var_x + var_y).
+    """Facet normals and projected-area weights of all realisations together, and the NDF the
+    pool realises (``_realised_ndf``).
 
     ``simulate`` gives every realisation the same number of rays over tiles of equal area, so
     its BRDF is the average of the realisations' BRDFs; Torrance–Sparrow with the pooled facets
     is the same average (exactly for V-groove G; for Smith G the pooled Λ stands in for each
     realisation's own, a difference far below the tile-to-tile scatter). Surfaces with an exact
-    shadowing (V-grooves, flat) need no realised m: None."""
+    shadowing (V-grooves, flat) need no realised NDF: None."""
     normals = np.concatenate([s.facet_normals() for s in surfaces])
     weights = np.concatenate([s.projected_areas() / s.projected_areas().sum() for s in surfaces])
     if surfaces[0].exact_shadowing is not None:
         return normals, weights, None
-    return normals, weights, realised_m(surfaces)
+    return normals, weights, _realised_ndf(surfaces)
 
 
 GEOMEAN_MODEL = "ts-beckmann-nominal-smith-corr-geomean"
@@ -117,14 +117,14 @@ GEOMEAN_MODEL = "ts-beckmann-nominal-smith-corr-geomean"
 α = √(αx αy): the stand-in MaterialX uses for the anisotropic Smith G."""
 
 
-def _realised_ndf(surfaces, m_real: float):
-    """Beckmann at the realised m; for anisotropic fields (``alpha_x_realised`` in the stats)
-    the anisotropic Beckmann at the realised αx, αy (means over realisations) and the
-    ensemble's rotation."""
+def _realised_ndf(surfaces):
+    """Beckmann at the realised m (``realised_m``); for anisotropic fields (``alpha_x_realised``
+    in the stats) the anisotropic Beckmann at the realised αx, αy (means over realisations)
+    and the ensemble's rotation. The facet statistics are computed once."""
+    stats = [s.stats() for s in surfaces]
     ens = surfaces[0].ensemble_ndf
     if not hasattr(ens, "alpha_x"):
-        return Beckmann(m_real)
-    stats = [s.stats() for s in surfaces]
+        return Beckmann(_m_of(stats))
     ax = float(np.sqrt(np.mean([st["alpha_x_realised"] ** 2 for st in stats])))
     ay = float(np.sqrt(np.mean([st["alpha_y_realised"] ** 2 for st in stats])))
     return AnisotropicBeckmann(ax, ay, ens.rotation)
@@ -134,7 +134,10 @@ def realised_m(surfaces) -> float:
     """Beckmann m of the realised slopes of ``surfaces`` (a sequence of realisations):
     √(mean over realisations of var_x + var_y), the projected-area weighted facet slope
     variances of ``Surface.stats`` — the m of the ``ts-beckmann-realised-*`` models."""
-    stats = [s.stats() for s in surfaces]
+    return _m_of([s.stats() for s in surfaces])
+
+
+def _m_of(stats) -> float:
     return float(np.sqrt(np.mean([st["slope_var_x"] + st["slope_var_y"] for st in stats])))
 
 
@@ -159,7 +162,7 @@ def default_models(
     surfaces, ndf = _surfaces_and_ndf(scene_or_surface, ndf)
     resolve_material(material)  # validate now, not at predict time
     kinds = tuple(SHADOWING_SUFFIX)
-    normals, weights, m_real = _pooled_facets(surfaces)
+    normals, weights, realised = _pooled_facets(surfaces)
     exact = surfaces[0].exact_shadowing
     if exact == "none":  # nothing shadows (flat): all light in the mirror bin, weight F(θi)
         return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", material)]
@@ -180,7 +183,7 @@ def default_models(
         facets = ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies)
         # the same closed form with the ensemble NDF: the pair measures the tile's departure
         return specs + [_tagged(facets, surfaces, ensemble=f"ts-{SHADOWING_SUFFIX[exact]}")]
-    ndfs = [("realised", _realised_ndf(surfaces, m_real))]
+    ndfs = [("realised", realised)]
     if ndf is not None:
         ndfs.insert(0, ("nominal", ndf))
     specs = [

@@ -30,6 +30,7 @@ from .arguments import (
     MAX_CHUNK,
     MAX_RAYS,
     check_angles,
+    check_bins,
     check_choice,
     check_progress,
     realisation_source,
@@ -78,10 +79,7 @@ class Experiment:
         _set(self, "theta_i", tuple(float(t) for t in th))
         _set(self, "phi_i", tuple(float(p) for p in ph))
         _set(self, "bounces", check_bounces(self.bounces))
-        if not isinstance(self.bins, Bins):
-            raise UsageError(
-                f"bins must be a microsim.sim.Bins (e.g. Bins(45, 37)), got {self.bins!r}"
-            )
+        check_bins(self.bins)
         resolve_material(self.material)
         if isinstance(self.realisations, list):
             _set(self, "realisations", tuple(self.realisations))

@@ -31,7 +31,7 @@ from microsim.analytic import AnisotropicBeckmann, Beckmann, abc_psd_church
 from microsim.checks import check_memory, finite, integer, positive
 from microsim.errors import UsageError
 
-from .surface import Predicted, Surface, check_relief, heightfield_mesh
+from .surface import Predicted, Surface, check_relief, heightfield_mesh, rotated_alphas
 
 __all__ = [
     "gaussian",
@@ -218,10 +218,13 @@ def _predicted(mom: SpectrumMoments, continuum: float) -> Predicted:
     )
 
 
-def gaussian_ensemble_ndf(sigma: float, corr_len: float) -> Beckmann:
+def gaussian_ensemble_ndf(sigma: float, corr_len: float, corr_len_y=None, rotation: float = 0.0):
     """The NDF a Gaussian heightfield samples: Beckmann with the nominal m = 2σ/ℓ (per-axis
-    slope variance 2σ²/ℓ² = m²/2; the mesh realises slightly less, see ``gaussian``)."""
-    return Beckmann(2.0 * sigma / corr_len)
+    slope variance 2σ²/ℓ² = m²/2; the mesh realises slightly less, see ``gaussian``); with
+    ``corr_len_y`` the anisotropic Beckmann (2σ/ℓx, 2σ/ℓy, ``rotation``)."""
+    if corr_len_y is None:
+        return Beckmann(2.0 * sigma / corr_len)
+    return AnisotropicBeckmann(2.0 * sigma / corr_len, 2.0 * sigma / corr_len_y, rotation)
 
 
 def abc_spectrum(n: int, dx: float, sigma: float, B: float, C: float, band_limit: float):
@@ -422,7 +425,9 @@ def _gaussian_anisotropic(n, dx, sigma, lx, ly, rotation, seed, exact_amplitude)
         )
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     mom = spectrum_moments(S, FX, FY, dx)
-    ax_, ay_ = _rotated_mesh_alphas(S, FX, FY, dx, rotation)
+    ax_, ay_ = rotated_alphas(
+        mom.slope_var_x, _mesh_slope_cov(S, FX, FY, dx), mom.slope_var_y, rotation
+    )
     nominal = {
         "sigma": sigma,
         "corr_len": lx,
@@ -438,25 +443,19 @@ def _gaussian_anisotropic(n, dx, sigma, lx, ly, rotation, seed, exact_amplitude)
     predicted = replace(
         _predicted(mom, sigma**2 * (1.0 / lx**2 + 1.0 / ly**2)), alpha_x=ax_, alpha_y=ay_
     )
-    ndf = AnisotropicBeckmann(2.0 * sigma / lx, 2.0 * sigma / ly, rotation)
+    ndf = gaussian_ensemble_ndf(sigma, lx, ly, rotation)
     return _heightfield_surface("gaussian", h, dx, nominal, warns, ndf, predicted)
 
 
-def _rotated_mesh_alphas(S, FX, FY, dx, rotation) -> tuple[float, float]:
-    """(αx, αy) = √(2 × slope variance) of the mesh's facets along the axes rotated by
-    ``rotation``, exact from the discrete spectrum. ``heightfield_mesh`` splits cell (i, j)
-    into (v00, v01, v11), whose gradient is (Δx h at row i, Δy h at column j + 1), and
-    (v00, v11, v10), with (Δx h at row i + 1, Δy h at column j) — equal areas. With
-    a = 2π fx dx, b = 2π fy dx the one-step differences respond as e^{ia} − 1 and e^{ib} − 1
-    (over dx), so var_x = Σ S |e^{ia} − 1|²/dx² df², var_y alike, and the covariance averages
-    the two triangles' Re[(1 − e^{−ia})(e^{−ib} − 1)] and Re[(e^{ia} − 1)(1 − e^{ib})]."""
+def _mesh_slope_cov(S, FX, FY, dx) -> float:
+    """The covariance of the mesh's facet slopes along x and y, exact from the discrete
+    spectrum. ``heightfield_mesh`` splits cell (i, j) into (v00, v01, v11), whose gradient is
+    (Δx h at row i, Δy h at column j + 1), and (v00, v11, v10), with (Δx h at row i + 1,
+    Δy h at column j) — equal areas. With a = 2π fx dx, b = 2π fy dx the one-step
+    differences respond as e^{ia} − 1 and e^{ib} − 1 (over dx), so the covariance averages
+    the two triangles' Re[(1 − e^{−ia})(e^{−ib} − 1)] and Re[(e^{ia} − 1)(1 − e^{ib})]
+    (the variances are ``spectrum_moments``')."""
     df2 = 1.0 / (S.size * dx * dx)
     ea, eb = np.exp(2j * np.pi * FX * dx), np.exp(2j * np.pi * FY * dx)
-    vxx = float(np.sum(S * np.abs(ea - 1.0) ** 2) * df2) / dx**2
-    vyy = float(np.sum(S * np.abs(eb - 1.0) ** 2) * df2) / dx**2
     cross = 0.5 * ((1.0 - np.conj(ea)) * (np.conj(eb) - 1.0) + (ea - 1.0) * (1.0 - eb)).real
-    vxy = float(np.sum(S * cross) * df2) / dx**2
-    c, s = np.cos(np.radians(rotation)), np.sin(np.radians(rotation))
-    v1 = c * c * vxx + 2 * c * s * vxy + s * s * vyy
-    v2 = s * s * vxx - 2 * c * s * vxy + c * c * vyy
-    return float(np.sqrt(2.0 * v1)), float(np.sqrt(2.0 * v2))
+    return float(np.sum(S * cross) * df2) / dx**2

@@ -245,15 +245,20 @@ class Surface:
             out.update(self.predicted.as_stats())
         rot = getattr(self.ensemble_ndf, "rotation", None)
         if rot is not None and getattr(self.ensemble_ndf, "alpha_x", None) is not None:
-            c, s = np.cos(np.radians(rot)), np.sin(np.radians(rot))
-            v1 = c * c * vx + 2 * c * s * cxy + s * s * vy  # along the NDF's rotated axes
-            v2 = s * s * vx - 2 * c * s * cxy + c * c * vy
-            out.update(
-                alpha_x_realised=float(np.sqrt(2 * v1)), alpha_y_realised=float(np.sqrt(2 * v2))
-            )
+            ax, ay = rotated_alphas(vx, cxy, vy, rot)
+            out.update(alpha_x_realised=ax, alpha_y_realised=ay)
         if self.generator_stats is not None:
             out.update(self.generator_stats(self))
         return out
+
+
+def rotated_alphas(vxx: float, vxy: float, vyy: float, rotation: float) -> tuple[float, float]:
+    """(αx, αy) = √(2 × slope variance) along axes rotated by ``rotation`` degrees, from the
+    slope covariance (vxx, vxy, vyy) along the grid axes (Beckmann: per-axis variance α²/2)."""
+    c, s = np.cos(np.radians(rotation)), np.sin(np.radians(rotation))
+    v1 = c * c * vxx + 2 * c * s * vxy + s * s * vyy
+    v2 = s * s * vxx - 2 * c * s * vxy + c * c * vyy
+    return float(np.sqrt(2.0 * v1)), float(np.sqrt(2.0 * v2))
 
 
 def facet_slopes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
