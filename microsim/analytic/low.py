@@ -33,6 +33,7 @@ __all__ = [
     "abc_psd",
     "abc_psd_church",
     "abc_psd_church_integral",
+    "abc_psd_anisotropic",
     "church_to_condensed",
     "rayleigh_rice",
     "RR_POLARISATIONS",
@@ -159,6 +160,25 @@ def abc_psd_church_integral(A, B, C) -> float:
     return 2.0 * np.pi * A / (B * B * (C - 1.0))
 
 
+def abc_psd_anisotropic(fx, fy, A, B, C, B_y, rotation=0.0):
+    """Löw's condensed ABC function (eq. 11) made elliptical: S = A/(1 + B f'x² + B_y f'y²)^C
+    (B_y = B is ``abc_psd`` at |f|).
+
+    (f'x, f'y) is (fx, fy) in the frame rotated by ``rotation`` degrees (counter-clockwise about
+    n = +z, the convention of ``AnisotropicBeckmann``): f'x = c fx + s fy, f'y = −s fx + c fy,
+    c = cos(rotation), s = sin(rotation). Church's elliptical PSD a/(1 + b² f'x² + b_y² f'y²)^
+    ((c+1)/2) is this with (A, B, B_y, C) = (a, b², b_y², (c + 1)/2) (``church_to_condensed``
+    per axis). A ≥ 0, B > 0, B_y > 0, C > 0, rotation finite; broadcasts over fx, fy.
+    """
+    A, B, C = _abc(A, B, C)
+    B_y = _checks.positive("B_y", B_y)
+    rotation = _checks.finite("rotation", rotation)
+    c, s = np.cos(np.radians(rotation)), np.sin(np.radians(rotation))
+    fx, fy = np.asarray(fx, dtype=np.float64), np.asarray(fy, dtype=np.float64)
+    u, v = c * fx + s * fy, -s * fx + c * fy
+    return A * np.exp(-C * np.log1p(B * u * u + B_y * v * v))
+
+
 def church_to_condensed(a, b, c) -> tuple[float, float, float]:
     """Church's (a, b, c) → Löw's condensed (A, B, C) = (a, b², (c + 1)/2) (eq. 11)."""
     a, b, c = _nonneg("a", a), _checks.positive("b", b), _checks.positive("c", c)
@@ -211,7 +231,9 @@ def _rr_q(wi, wo, eta: complex, polarisation: str) -> np.ndarray:
     return 0.5 * total if polarisation == "unpolarised" else total
 
 
-def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolarised"):
+def rayleigh_rice(
+    wi, wo, wavelength, A, B, C, material, polarisation="unpolarised", B_y=None, rotation=0.0
+):
     """First-order Rayleigh–Rice BRDF (sr⁻¹) of a smooth surface with an ABC PSD (eq. 3–5):
 
         f = (16π²/λ⁴) cosθi cosθo Q S(|Dp|/λ),   S(f) = A/(1 + B f²)^C  (``abc_psd``).
@@ -223,6 +245,14 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolaris
     complex n + ik: conductor; a name from ``fresnel.MATERIALS``; not the mirror None).
     Reciprocal for "unpolarised", "s"+"p" sums and ss/pp. Zero if either direction is below the
     horizon.
+
+    Anisotropic PSD (``B_y`` given, length²): S(f) = A/(1 + B f'x² + B_y f'y²)^C at
+    f = (wi_t + wo_t)/λ, (f'x, f'y) its components along axes rotated by ``rotation`` degrees
+    (``abc_psd_anisotropic``). For the heightfield ``surfaces.abc(..., B=b, C=c, B_y=b_y,
+    rotation=r)``, whose PSD is a/(1 + b² f'x² + b_y² f'y²)^((c+1)/2) with a = σ² b b_y (c − 1)/
+    (2π) (its ``nominal["A"]``), the parameters are (A, B, B_y, C) = (a, b², b_y², (c + 1)/2)
+    and the same ``rotation`` — as for the isotropic field, (A, B, C) = (a, b², (c + 1)/2)
+    (``church_to_condensed``). Q is unchanged: it depends on the directions only.
     """
     wi = _checks.directions("wi", wi)
     wo = _checks.directions("wo", wo)
@@ -236,8 +266,13 @@ def rayleigh_rice(wi, wo, wavelength, A, B, C, material, polarisation="unpolaris
             "(Rayleigh–Rice needs ε = ior²), got None"
         )
     _choice("polarisation", polarisation, RR_POLARISATIONS)
+    rotation = _checks.finite("rotation", rotation)
     ci, co = wi[..., 2], wo[..., 2]
-    s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam**2)
+    if B_y is None:
+        s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam**2)
+    else:
+        d = (wi + wo) / lam
+        s = abc_psd_anisotropic(d[..., 0], d[..., 1], A, B, C, B_y, rotation)
     q = _rr_q(wi, wo, complex(eta), polarisation)
     f = 16.0 * np.pi**2 / lam**4 * ci * co * q * s
     return np.where((ci >= 0.0) & (co >= 0.0), f, 0.0)

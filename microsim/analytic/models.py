@@ -312,7 +312,9 @@ class LowMicrofacet(_Model):
 @dataclass(frozen=True)
 class RayleighRice(_Model):
     """First-order Rayleigh–Rice BRDF (16π²/λ⁴) cos θi cos θo Q S(|Dp|/λ) with the ABC PSD
-    (Löw et al. 2012, eq. 3–8): ``rayleigh_rice``. No sampler."""
+    (Löw et al. 2012, eq. 3–8): ``rayleigh_rice``. With ``B_y`` the anisotropic PSD
+    A/(1 + B f'x² + B_y f'y²)^C along axes rotated by ``rotation`` degrees (``B_y`` None: the
+    isotropic PSD, ``rotation`` unused). No sampler."""
 
     wavelength: float
     A: float
@@ -320,16 +322,34 @@ class RayleighRice(_Model):
     C: float
     material: Any
     polarisation: str = "unpolarised"
+    B_y: float | None = None
+    rotation: float = 0.0
     name: ClassVar[str] = "RayleighRice"
     params_doc: ClassVar[str] = (
-        "wavelength > 0, A ≥ 0, B > 0, C > 1 (lengths in one unit), material (an ior), polarisation"
+        "wavelength > 0, A ≥ 0, B > 0, C > 1 (lengths in one unit), material (an ior), "
+        "polarisation, B_y > 0 or None (isotropic), rotation (degrees)"
     )
     source: ClassVar[str] = "Löw et al. 2012, eq. 3–8"
     functions: ClassVar[tuple[str, ...]] = ("rayleigh_rice",)
 
+    @property
+    def symmetric(self) -> bool:
+        """Mirror symmetric about the plane of incidence for an isotropic PSD only (an
+        elliptical one is, only where that plane holds one of its axes)."""
+        return self.B_y is None
+
     def f(self, wi, wo):
         return rayleigh_rice(
-            wi, wo, self.wavelength, self.A, self.B, self.C, self.material, self.polarisation
+            wi,
+            wo,
+            self.wavelength,
+            self.A,
+            self.B,
+            self.C,
+            self.material,
+            self.polarisation,
+            self.B_y,
+            self.rotation,
         )
 
 

@@ -1,7 +1,8 @@
 """Random periodic heightfields by FFT synthesis: Gaussian-correlated and fractal (ABC PSD).
 
 Both are stationary Gaussian random fields given by a 2D isotropic power spectral density
-PSD(f) (length⁴, f in cycles per length), normalised so that ∫ PSD d²f = height variance.
+PSD(f) (length⁴, f in cycles per length), normalised so that ∫ PSD d²f = height variance, or
+by its elliptical variant along axes rotated in the plane (``corr_len_y``, ``B_y``).
 Synthesis (docs/design.md, "Facts to build on — Surfaces"): the Fourier transform of real
 white noise is multiplied by √PSD(f)/dx and transformed back; PSD(0) = 0 so the mean height is zero.
 
@@ -27,7 +28,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import integrate
 
-from microsim.analytic import AnisotropicBeckmann, Beckmann, abc_psd_church
+from microsim.analytic import (
+    AnisotropicBeckmann,
+    Beckmann,
+    abc_psd_anisotropic,
+    abc_psd_church,
+    church_to_condensed,
+)
 from microsim.checks import check_memory, finite, integer, positive
 from microsim.errors import UsageError
 
@@ -38,6 +45,7 @@ __all__ = [
     "abc",
     "gaussian_psd",
     "abc_amplitude",
+    "abc_anisotropic_psd",
     "psd_grid",
     "synthesize",
     "spectrum_moments",
@@ -76,20 +84,38 @@ def _erf2(x: float) -> float:
     return float(erf(x) ** 2)
 
 
-def abc_amplitude(sigma: float, B: float, C: float) -> float:
-    """A of the 2D ABC PSD with ∫ PSD d²f = σ²: A = σ² B² (C − 1)/(2π) (needs C > 1)."""
-    return sigma**2 * B**2 * (C - 1.0) / (2.0 * np.pi)
+def abc_amplitude(sigma: float, B: float, C: float, B_y: float | None = None) -> float:
+    """A of the 2D ABC PSD with ∫ PSD d²f = σ²: A = σ² B² (C − 1)/(2π) (needs C > 1); with
+    ``B_y`` that of the elliptical PSD (``abc_anisotropic_psd``), A = σ² B B_y (C − 1)/(2π)."""
+    if B_y is None:
+        return sigma**2 * B**2 * (C - 1.0) / (2.0 * np.pi)
+    return sigma**2 * B * B_y * (C - 1.0) / (2.0 * np.pi)
 
 
-def psd_grid(psd, shape: tuple[int, int], dx: float, f_max: float = np.inf):
-    """``psd(|f|)`` on the FFT frequency grid of a (ny, nx) grid, 0 at f = 0 and beyond f_max.
+def abc_anisotropic_psd(FX, FY, A: float, B: float, B_y: float, C: float, rotation: float):
+    """Church's ABC PSD made elliptical: S(f) = A/(1 + B² f'x² + B_y² f'y²)^((C+1)/2) (length⁴),
+    (f'x, f'y) the frequency (FX, FY) in the frame rotated by ``rotation`` degrees (as
+    ``gaussian_anisotropic_psd``); Church's a, b, c per axis, evaluated as Löw's condensed
+    ``abc_psd_anisotropic`` with (A, B², B_y², (C + 1)/2) (``church_to_condensed``).
+
+    Normalisation: with u = B f'x, v = B_y f'y (d²f = du dv/(B B_y), the rotation keeps areas),
+    ∫ S d²f = (A/(B B_y)) ∫ (1 + ρ²)^−(C+1)/2 d²(u, v) = (A/(B B_y)) · 2π/(C − 1), so
+    ∫ S d²f = σ² for A = σ² B B_y (C − 1)/(2π) (``abc_amplitude``); B_y = B is the isotropic
+    ``abc_psd_church``."""
+    a, b2, c = church_to_condensed(A, B, C)
+    return abc_psd_anisotropic(FX, FY, a, b2, c, church_to_condensed(A, B_y, C)[1], rotation)
+
+
+def psd_grid(psd, shape: tuple[int, int], dx: float, f_max: float = np.inf, *, of_xy=False):
+    """``psd(|f|)`` on the FFT frequency grid of a (ny, nx) grid, 0 at f = 0 and beyond f_max
+    (radially); with ``of_xy`` an anisotropic ``psd(FX, FY)``.
 
     Returns (S, FX, FY) with FX, FY the frequencies (cycles per length) of each FFT cell.
     """
     ny, nx = shape
     FX, FY = np.meshgrid(np.fft.fftfreq(nx, dx), np.fft.fftfreq(ny, dx))
     f = np.hypot(FX, FY)
-    S = np.where((f > 0) & (f <= f_max), psd(f), 0.0)
+    S = np.where((f > 0) & (f <= f_max), psd(FX, FY) if of_xy else psd(f), 0.0)
     return S, FX, FY
 
 
@@ -152,11 +178,26 @@ def gaussian_mesh_slope_var(sigma: float, corr_len: float, dx: float) -> float:
     return 2.0 * sigma**2 * (-np.expm1(-u)) / dx**2
 
 
-def abc_continuum_slope_var(sigma: float, B: float, C: float, f_max: float) -> float:
-    """Per-axis continuum slope variance ½ ∫_{|f| ≤ f_max} (2πf)² PSD d²f of the ABC surface."""
-    A = abc_amplitude(sigma, B, C)
-    val, _ = integrate.quad(lambda f: f**3 * abc_psd_church(f, A, B, C), 0.0, f_max, limit=200)
-    return 0.5 * (2.0 * np.pi) ** 2 * 2.0 * np.pi * val
+def abc_continuum_slope_var(
+    sigma: float, B: float, C: float, f_max: float, B_y: float | None = None
+) -> float:
+    """Per-axis continuum slope variance ½ ∫_{|f| ≤ f_max} (2πf)² PSD d²f of the ABC surface;
+    with ``B_y`` the mean of the two axes' of the elliptical PSD (``abc_anisotropic_psd``; the
+    band is radial, so the rotation drops out): along the direction θ of the rotated frame the
+    PSD is ``abc_psd_church`` with b(θ)² = B² cos²θ + B_y² sin²θ, integrated over θ (4 × the
+    quadrant, by symmetry)."""
+    if B_y is None:
+        A = abc_amplitude(sigma, B, C)
+        val, _ = integrate.quad(lambda f: f**3 * abc_psd_church(f, A, B, C), 0.0, f_max, limit=200)
+        return 0.5 * (2.0 * np.pi) ** 2 * 2.0 * np.pi * val
+    A = abc_amplitude(sigma, B, C, B_y)
+
+    def radial(theta):
+        b = float(np.hypot(B * np.cos(theta), B_y * np.sin(theta)))
+        return integrate.quad(lambda f: f**3 * abc_psd_church(f, A, b, C), 0.0, f_max, limit=200)[0]
+
+    val, _ = integrate.quad(radial, 0.0, 0.5 * np.pi, limit=200)
+    return 0.5 * (2.0 * np.pi) ** 2 * 4.0 * val
 
 
 # --- generators --------------------------------------------------------------------------------
@@ -227,27 +268,79 @@ def gaussian_ensemble_ndf(sigma: float, corr_len: float, corr_len_y=None, rotati
     return AnisotropicBeckmann(2.0 * sigma / corr_len, 2.0 * sigma / corr_len_y, rotation)
 
 
-def abc_spectrum(n: int, dx: float, sigma: float, B: float, C: float, band_limit: float):
+def abc_spectrum(
+    n: int,
+    dx: float,
+    sigma: float,
+    B: float,
+    C: float,
+    band_limit: float,
+    B_y: float | None = None,
+    rotation: float = 0.0,
+):
     """(A, f_max, S, FX, FY): amplitude, radial cut-off 1/(2·band_limit·dx) and the discrete
-    ABC spectrum (``abc_psd_church``) of an n×n grid (``psd_grid``). Arguments as ``abc``
-    (validated there); an amplitude beyond float64 raises a UsageError."""
+    ABC spectrum (``abc_psd_church``; with ``B_y`` the elliptical ``abc_anisotropic_psd``) of
+    an n×n grid (``psd_grid``). Arguments as ``abc`` (validated there; ``B_y`` and
+    ``rotation`` also here); an amplitude beyond float64 raises a UsageError."""
     f_max = 1.0 / (2.0 * band_limit * dx)
+    if B_y is not None:
+        B_y, rotation = positive("B_y", B_y), finite("rotation", rotation)
     with np.errstate(over="ignore", invalid="ignore"):
-        A = abc_amplitude(np.float64(sigma), np.float64(B), C)
-        _finite_spectrum(A, f"sigma = {sigma:g}, B = {B:g}")  # S ≤ A
-        S, FX, FY = psd_grid(lambda f: abc_psd_church(f, A, B, C), (n, n), dx, f_max)
+        if B_y is None:
+            A = abc_amplitude(np.float64(sigma), np.float64(B), C)
+            _finite_spectrum(A, f"sigma = {sigma:g}, B = {B:g}")  # S ≤ A
+            S, FX, FY = psd_grid(lambda f: abc_psd_church(f, A, B, C), (n, n), dx, f_max)
+            return A, f_max, S, FX, FY
+        A = abc_amplitude(np.float64(sigma), np.float64(B), C, np.float64(B_y))
+        _finite_spectrum(A, f"sigma = {sigma:g}, B = {B:g}, B_y = {B_y:g}")
+        _finite_spectrum(np.float64(B) ** 2 + np.float64(B_y) ** 2, f"B = {B:g}, B_y = {B_y:g}")
+        S, FX, FY = psd_grid(
+            lambda fx, fy: abc_anisotropic_psd(fx, fy, A, B, B_y, C, rotation),
+            (n, n),
+            dx,
+            f_max,
+            of_xy=True,
+        )
     return A, f_max, S, FX, FY
 
 
+def _mesh_alphas(S, FX, FY, dx, mom: SpectrumMoments, rotation: float) -> tuple[float, float]:
+    """(αx, αy) of the mesh's facet slopes along axes rotated by ``rotation`` degrees, exact from
+    the discrete spectrum: ``rotated_alphas`` of the variances of ``spectrum_moments`` (``mom``)
+    and the cross term of ``_mesh_slope_cov``."""
+    return rotated_alphas(
+        mom.slope_var_x, _mesh_slope_cov(S, FX, FY, dx), mom.slope_var_y, rotation
+    )
+
+
+def _abc_ndf(S, FX, FY, dx, mom: SpectrumMoments, B_y, rotation):
+    """The ensemble NDF of an ABC grid with this discrete spectrum: Beckmann with m² = 2 ×
+    per-axis slope variance; with ``B_y`` AnisotropicBeckmann at the mesh's (αx, αy) along the
+    PSD's rotated axes (``_mesh_alphas``)."""
+    if B_y is None:
+        return Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
+    return AnisotropicBeckmann(*_mesh_alphas(S, FX, FY, dx, mom, rotation), rotation)
+
+
 def abc_ensemble_ndf(
-    n: int, dx: float, sigma: float, B: float, C: float, band_limit: float = 4
-) -> Beckmann:
+    n: int,
+    dx: float,
+    sigma: float,
+    B: float,
+    C: float,
+    band_limit: float = 4,
+    B_y: float | None = None,
+    rotation: float = 0.0,
+):
     """The NDF an ``abc`` heightfield of these parameters samples: Beckmann with the predicted
     mesh m, m² = 2 × per-axis slope variance of the discrete spectrum (the facet slopes of any
-    Gaussian random field are Gaussian; Löw et al. 2012's ABC *NDF* is a different object)."""
-    *_, S, FX, FY = abc_spectrum(n, dx, sigma, B, C, band_limit)
+    Gaussian random field are Gaussian; Löw et al. 2012's ABC *NDF* is a different object);
+    with ``B_y`` the anisotropic Beckmann at the predicted mesh (αx, αy) along the PSD's axes
+    rotated by ``rotation`` degrees, where the continuum slope covariance of the elliptical PSD
+    is diagonal (``abc``)."""
+    *_, S, FX, FY = abc_spectrum(n, dx, sigma, B, C, band_limit, B_y, rotation)
     mom = spectrum_moments(S, FX, FY, dx)
-    return Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
+    return _abc_ndf(S, FX, FY, dx, mom, B_y, rotation)
 
 
 def gaussian_anisotropic_psd(FX, FY, sigma: float, lx: float, ly: float, rotation: float):
@@ -338,6 +431,8 @@ def abc(
     seed: int = 0,
     band_limit: float = 4,
     exact_amplitude: bool = True,
+    B_y: float | None = None,
+    rotation: float = 0.0,
 ) -> Surface:
     """Periodic n×n fractal heightfield with the isotropic 2D ABC PSD (Löw et al. 2012, eq. 7–8;
     Church et al. 1989).
@@ -354,9 +449,28 @@ def abc(
     normals isotropic; docs/design.md). C ≤ 1: infinite height variance (ValueError). 1 < C ≤ 3: the
     slope variance grows without bound as the cut-off rises, so the ray-traced BRDF depends on
     dx (warning). Also warns when the tile and band keep < 90 % of σ².
+
+    Anisotropic (``B_y`` given, length): the elliptical PSD (``abc_anisotropic_psd``)
+
+        PSD(f) = A / (1 + B² f'x² + B_y² f'y²)^((C+1)/2),   A = σ² B B_y (C − 1)/(2π),
+
+    (f'x, f'y) the frequency along axes rotated by ``rotation`` degrees (counter-clockwise, as
+    ``gaussian``'s); u = B f'x, v = B_y f'y map it onto the isotropic unit spectrum, whence
+    ∫ PSD d²f = 2π A/(B B_y (C − 1)) = σ². Same radial band limit, warnings and checks. The
+    facet slopes are Gaussian, their continuum covariance diagonal along the rotated axes (the
+    PSD is even in f'x and in f'y), so the ensemble NDF is ``AnisotropicBeckmann(αx, αy,
+    rotation)`` with the mesh's (αx, αy) along those axes predicted exactly from the discrete
+    spectrum (``abc_ensemble_ndf``; ``predicted.alpha_x``/``alpha_y``, measured by ``stats()``'
+    ``alpha_x_realised``/``alpha_y_realised``); the triangulation's own slope correlation, also
+    present on isotropic fields (``stats()["slope_corr"]``), is not in that NDF.
+    ``continuum_slope_var`` is the mean of the two axes' (``abc_continuum_slope_var``).
+    ``B_y = None`` (the default) is the isotropic field above, unchanged.
     """
     n, dx, seed = _grid_args(n, dx, seed)
     sigma, B = positive("sigma", sigma), positive("B", B)
+    if B_y is not None:
+        B_y = positive("B_y", B_y)
+    rotation = finite("rotation", rotation)
     C = float(C)
     if not C > 1.0 or not np.isfinite(C):
         raise UsageError(
@@ -368,7 +482,7 @@ def abc(
         raise UsageError(
             f"band_limit must be a finite number >= 1 (cut-off f <= 1/(2·k·dx)), got {band_limit!r}"
         )
-    A, f_max, S, FX, FY = abc_spectrum(n, dx, sigma, B, C, k)
+    A, f_max, S, FX, FY = abc_spectrum(n, dx, sigma, B, C, k, B_y, rotation)
     warns = []
     if C <= 3.0:
         warns.append(
@@ -384,9 +498,11 @@ def abc(
             f"{100 * kept:.1f} % of the nominal height variance σ² = {sigma**2:g}"
         )
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
+    aniso = {} if B_y is None else {"B_y": B_y, "rotation": rotation}
     nominal = {
         "sigma": sigma,
         "B": B,
+        **aniso,
         "C": C,
         "A": A,
         "band_limit": k,
@@ -396,8 +512,10 @@ def abc(
         "seed": seed,
         "exact_amplitude": bool(exact_amplitude),
     }
-    predicted = _predicted(mom, abc_continuum_slope_var(sigma, B, C, f_max))
-    ensemble = Beckmann(float(np.sqrt(mom.slope_var_x + mom.slope_var_y)))
+    predicted = _predicted(mom, abc_continuum_slope_var(sigma, B, C, f_max, B_y))
+    ensemble = _abc_ndf(S, FX, FY, dx, mom, B_y, rotation)
+    if B_y is not None:
+        predicted = replace(predicted, alpha_x=ensemble.alpha_x, alpha_y=ensemble.alpha_y)
     return _heightfield_surface("abc", h, dx, nominal, warns, ensemble, predicted)
 
 
@@ -410,11 +528,13 @@ def _gaussian_anisotropic(n, dx, sigma, lx, ly, rotation, seed, exact_amplitude)
     for name, ell in (("corr_len", lx), ("corr_len_y", ly)):
         if ell < GAUSS_RESOLVED_CELLS * dx:
             raise UsageError(f"{name} must be >= dx = {dx:g} (resolved by the grid), got {ell:g}")
-    ny = nx = n
-    FX, FY = np.meshgrid(np.fft.fftfreq(nx, dx), np.fft.fftfreq(ny, dx))
     with np.errstate(over="ignore", invalid="ignore"):
-        S = gaussian_anisotropic_psd(FX, FY, sigma, lx, ly, rotation)
-    S[0, 0] = 0.0
+        S, FX, FY = psd_grid(
+            lambda fx, fy: gaussian_anisotropic_psd(fx, fy, sigma, lx, ly, rotation),
+            (n, n),
+            dx,
+            of_xy=True,
+        )
     _finite_spectrum(S, f"sigma = {sigma:g}, corr_len = {lx:g}, corr_len_y = {ly:g}")
     warns = []
     if min(lx, ly) < GAUSS_MIN_CORR_CELLS * dx:
@@ -425,9 +545,7 @@ def _gaussian_anisotropic(n, dx, sigma, lx, ly, rotation, seed, exact_amplitude)
         )
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     mom = spectrum_moments(S, FX, FY, dx)
-    ax_, ay_ = rotated_alphas(
-        mom.slope_var_x, _mesh_slope_cov(S, FX, FY, dx), mom.slope_var_y, rotation
-    )
+    ax_, ay_ = _mesh_alphas(S, FX, FY, dx, mom, rotation)
     nominal = {
         "sigma": sigma,
         "corr_len": lx,
