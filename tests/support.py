@@ -6,6 +6,7 @@
   for several tests at one family-wise level.
 * Small explicit surfaces built directly from their mesh: equal-width V-grooves with given
   tilts, and a periodic Gaussian-filtered heightfield.
+* ``walk_on``: the random walk's bin averages on a ``Bins`` grid.
 """
 
 from __future__ import annotations
@@ -15,6 +16,24 @@ import numpy as np
 from microsim.stats import sidak  # noqa: F401  (re-exported for the tests)
 from microsim.surfaces.surface import Surface, heightfield_mesh
 from microsim.testing import pearson_chi2  # noqa: F401  (the public harness, re-exported)
+
+
+def walk_on(bins, theta_i, ndf, material=None, *, n, seed, orders, phi_i=0.0):
+    """``walk_bin_averages`` of ``ndf`` on ``bins`` (its edges and folding)."""
+    from microsim.analytic import random_walk as rw
+
+    return rw.walk_bin_averages(
+        theta_i,
+        bins.theta_edges,
+        bins.phi_edges,
+        ndf,
+        material,
+        n_paths=n,
+        orders=orders,
+        folded=bins.folded,
+        seed=seed,
+        phi_i=phi_i,
+    )
 
 
 def vgroove_surface(tilts_deg, tile=1.0) -> Surface:

@@ -7,7 +7,7 @@ at a 1e-3 level (Šidák-corrected over the cases of one test)."""
 import numpy as np
 import pytest
 from scipy import stats
-from support import pearson_chi2, sidak
+from support import pearson_chi2, sidak, walk_on
 
 from microsim import analytic as an
 from microsim.analytic import energy_compensation as ec
@@ -89,17 +89,7 @@ BINS = Bins(n_theta=18, n_phi=19, folded=True)
 
 
 def _walk(theta_i, ndf, material=None, n=200_000, seed=1, orders=4, bins=BINS):
-    return rw.walk_bin_averages(
-        theta_i,
-        bins.theta_edges,
-        bins.phi_edges,
-        ndf,
-        material,
-        n_paths=n,
-        orders=orders,
-        folded=bins.folded,
-        seed=seed,
-    )
+    return walk_on(bins, theta_i, ndf, material, n=n, seed=seed, orders=orders)
 
 
 def _ts_bins(theta_i, ndf, material=None, bins=BINS):

@@ -123,15 +123,18 @@ class _Anisotropic:
 
     def sample_visible(self, v, u1, u2):
         """Visible normals m ~ D_v(m) = ⟨v, m⟩⁺ D(m) / ((1 + Λ(v)) cos θ_v) for unit view
-        directions v (N, 3) of the upper hemisphere and uniforms u1, u2 (N,): by the stretch
-        to unit roughness — v' = normalize(αx v'x, αy v'y, v'z) in the NDF's frame, m' sampled
-        from the unit isotropic NDF seen from v' (``random_walk.sample_visible_normals``:
-        Heitz 2018 for GGX, Heitz & d'Eon 2014 for Beckmann), m = normalize(αx m'x, αy m'y,
-        m'z) — valid because slopes scale by (αx, αy) under the stretch (as pbrt-v4's
-        ``Sample_wm``). Density: ``pdf_visible``."""
+        directions v (N, 3) and uniforms u1, u2 (N,): by the stretch to unit roughness —
+        v' = normalize(αx v'x, αy v'y, v'z) in the NDF's frame, m' sampled from the unit
+        isotropic NDF seen from v' (``random_walk.sample_visible_normals``: Heitz 2018 for
+        GGX, Heitz & d'Eon 2014 for Beckmann), m = normalize(αx m'x, αy m'y, m'z) — valid
+        because slopes scale by (αx, αy) under the stretch (as pbrt-v4's ``Sample_wm``), and
+        ⟨v, m⟩ is a linear form in the slopes that the stretch carries to ⟨v', m'⟩. That holds
+        for views below the horizon too (not straight down), where the normaliser is
+        Λ(−v)|v_z| (``random_walk.visible_projected_area``): what a ray going up after a
+        bounce sees in the random walk. Density (upper hemisphere): ``pdf_visible``."""
         from .random_walk import sample_visible_normals
 
-        v = _checks.directions("v", v, upper=True)
+        v = _checks.directions("v", v)
         vl = self._to_local(v)
         stretched = vectors.normalize(
             np.stack([self.alpha_x * vl[..., 0], self.alpha_y * vl[..., 1], vl[..., 2]], -1)

@@ -111,15 +111,16 @@ _FUNCTIONS: tuple[ModelInfo, ...] = (
     ModelInfo(
         "brdf",
         "walk_bin_averages",
-        "theta_i (deg), theta_edges/phi_edges (deg, Bins conventions), ndf Beckmann|GGX, "
-        "material, n_paths, orders, folded, seed (no pointwise f: no model object)",
+        "theta_i (deg), theta_edges/phi_edges (deg, Bins conventions), ndf Beckmann|GGX|"
+        "AnisotropicBeckmann|AnisotropicGGX, material, n_paths, orders, folded, seed, phi_i "
+        "(deg, one or per θi) (no pointwise f: no model object)",
         "Heitz et al. 2016 (random walk on a Smith microsurface)",
         ("smith_random_walk",),
     ),
     ModelInfo(
         "sampler",
         "sample_visible_normals",
-        "v (N,3) either hemisphere, ndf Beckmann|GGX, u1, u2",
+        "v (N,3) either hemisphere, ndf Beckmann|GGX|AnisotropicBeckmann|AnisotropicGGX, u1, u2",
         "Heitz & d'Eon 2014 (Beckmann); Heitz 2018 (GGX)",
     ),
     ModelInfo(
@@ -274,7 +275,7 @@ REPORT_MODELS: tuple[ReportModel, ...] = (
         ("rayleigh-rice",),
         "wave",
         "first-order vector perturbation theory on the surface's PSD",
-        "RayleighRice(wavelength, A, B, C, material)",
+        "RayleighRice(wavelength, A, B, C, material, B_y, rotation)",
         "Löw et al. 2012, eq. 3–8",
     ),
     ReportModel(

@@ -5,8 +5,10 @@ model", ACM TOG 35(4)) define the *Smith microsurface*: a random heightfield who
 normals are uncorrelated, with height density P1 (CDF C1) and an NDF D. Its BRDF, including all
 orders of scattering, is the expectation of a random walk on that surface; its first order is
 exactly Torrance–Sparrow with height-correlated Smith shadowing. This module implements the walk
-for a conductor (or ideal mirror) with a Beckmann or GGX NDF (isotropic roughness α; α = m for
-``Beckmann(m)``), vectorised over paths, and its bin averages per scattering order.
+for a conductor (or ideal mirror) with a Beckmann or GGX NDF — isotropic (roughness α; α = m for
+``Beckmann(m)``) or anisotropic (``AnisotropicBeckmann``, ``AnisotropicGGX``: αx, αy, rotation;
+section "Anisotropic surfaces") — vectorised over paths, and its bin averages per scattering
+order at any incidence azimuth.
 
 Conventions (docs/design.md): n = +z, unit directions point *away* from the surface; the incident
 direction wi points towards the light. A path starts as the ray −wi and is reflected at every
@@ -62,6 +64,28 @@ probability E[e^{−Λ(wo)τ₁}] = (1 + Λ(wi))/(1 + Λ(wi) + Λ(wo)); with the
 f = F D G2/(4 cos θi cos θo), G2 = 1/(1 + Λ(wi) + Λ(wo)): Torrance–Sparrow with
 height-correlated Smith shadowing, exactly (tests/test_multiple_scattering_models.py).
 
+*Anisotropic surfaces* (re-derived here). Nothing above needs D to be isotropic; it needs
+(i) the Smith Λ of each flight direction and (ii) visible normals of D from each view. (i) The
+Smith microsurface keeps heights uncorrelated with slopes whatever D is, so along a straight
+flight in direction w the masking from height h is still C1(h)^Λ(w), with Λ(w) Smith's Λ of
+*that* direction. For a stretched (αx, αy, rotation) distribution that is the isotropic Λ at
+the projected roughness α(φ'_w) (``anisotropic`` module docstring) — exact, not an
+approximation, because Λ(w) depends on D only through the 1-D distribution of the slope along
+w's azimuth. Λ is constant along one flight, so the τ-form of the free flight holds unchanged,
+with Λ looked up per path and per flight; α(φ') = α(φ' + 180°), so Λ(−w) for a downward w is
+Λ of (w_x, w_y, |w_z|), as in the isotropic case. (ii) ``AnisotropicX.sample_visible``
+stretches the view to unit roughness, samples the isotropic unit-roughness visible normals (the
+samplers below) and unstretches. That is exact for views on either side of the horizon: slopes
+map linearly, s = diag(αx, αy) s' in the NDF's frame, so the slope density is the unit one
+stretched, and ⟨v, m⟩ ∝ v_z − v_x s_x − v_y s_y is the same linear form in s' for the
+stretched view v' = (αx v_x, αy v_y, v_z); hence ⟨v, m⟩⁺ D(m) dω maps to ⟨v', m'⟩⁺ D₁(m') dω'
+(D₁ the unit-roughness isotropic NDF) up to a constant factor. The projected-area identity
+∫⟨v, m⟩⁺ D dm = (1 + Λ(v)) v_z holds with the exact Λ (tests/test_anisotropic.py), so order 1
+is Torrance–Sparrow with the anisotropic D and G2 = 1/(1 + Λ(wi) + Λ(wo)), each Λ at its own
+azimuth (tests/test_anisotropic_walk.py; the isotropic equivalent α = √(αx αy) walks a
+different surface). ``WalkNDF`` holds what the walk asks of an NDF; the isotropic families keep
+the samplers below, so their walk is unchanged bit for bit.
+
 *Energy.* With F = 1 every path eventually leaves (the walk on a Smith microsurface conserves
 energy; Heitz et al. 2016), so the escaping energy is 1 up to the paths cut at
 ``max_bounces``, which are reported.
@@ -70,9 +94,12 @@ Bins (mirroring ``microsim.sim.bins.Bins``, which this layer cannot import): ``t
 (degrees, increasing within [0, 90]) and ``phi_edges`` (degrees, increasing) over the relative
 azimuth Δφ = φo − φi, the mirror direction at Δφ = 180°. ``folded=True``: Δφ is folded to
 |Δφ| ∈ [0°, 180°] and each bin's projected solid angle counts both halves; ``folded=False``: Δφ
-is taken into [phi_edges[0], phi_edges[0] + 360°). A bin average is the energy escaping into the
-bin per incident path divided by the bin's projected solid angle
-Ω_B = Δφ (sin²θ₂ − sin²θ₁)/2 (×2 folded): f̄_B = (1/Ω_B) ∫_B f cos θo dω_o in sr⁻¹.
+is taken into [phi_edges[0], phi_edges[0] + 360°). An anisotropic NDF has no mirror symmetry
+about the plane of incidence unless φi lies along one of its axes; elsewhere a folded bin holds
+the mean of f over ±Δφ (what a folded simulation measures) and full-azimuth bins resolve f. A
+bin average is the energy escaping into the bin per incident path divided by the bin's
+projected solid angle Ω_B = Δφ (sin²θ₂ − sin²θ₁)/2 (×2 folded):
+f̄_B = (1/Ω_B) ∫_B f cos θo dω_o in sr⁻¹.
 """
 
 from __future__ import annotations
@@ -93,6 +120,8 @@ __all__ = [
     "height_from_tau",
     "tau_from_height",
     "walk_alpha",
+    "WALK_NDFS",
+    "WalkNDF",
     "sample_visible_normals",
     "visible_projected_area",
     "WalkPaths",
@@ -147,33 +176,113 @@ def tau_from_height(h, heights: str = "uniform"):
 
 # --- NDF ---------------------------------------------------------------------------------------
 def walk_alpha(ndf) -> tuple[str, float]:
-    """("beckmann" | "ggx", α) of an NDF the walk supports (α = m for Beckmann), else UsageError."""
+    """("beckmann" | "ggx", α) of an isotropic NDF the walk supports (α = m for Beckmann), else
+    UsageError (the walk itself also takes anisotropic ones: ``WalkNDF``)."""
     if isinstance(ndf, Beckmann):
         return "beckmann", float(ndf.m)
     if isinstance(ndf, GGX):
         return "ggx", float(ndf.alpha)
     raise UsageError(
-        f"ndf must be a Beckmann or GGX NDF (the random walk needs their visible-normal "
+        f"ndf must be an isotropic Beckmann or GGX NDF (closed Smith Λ and visible-normal "
         f"sampling), got {ndf!r}"
     )
 
 
+WALK_NDFS = ("Beckmann", "GGX", "AnisotropicBeckmann", "AnisotropicGGX")
+"""The NDFs the walk takes: those with a closed Smith Λ of every direction and an exact
+visible-normal sampler for views on either side of the horizon."""
+
+
 def _lambda_up(ndf, cos_abs):
-    """Smith Λ of the upward direction with |cos θ| = cos_abs ∈ [0, 1] (inf at 0)."""
+    """Smith Λ of the upward direction with |cos θ| = cos_abs ∈ [0, 1] (inf at 0), isotropic."""
     return ndf.smith_lambda_cos(np.clip(cos_abs, 0.0, 1.0))
+
+
+def _walk_family(ndf) -> tuple[str, float | None]:
+    """(family, isotropic α or None) of an NDF of ``WALK_NDFS``, else UsageError. An
+    anisotropic NDF is recognised by what the walk asks of it — Λ of a direction, projected
+    roughness, visible-normal sampler, an isotropic equivalent of the Beckmann or GGX family —
+    since ``anisotropic`` imports this module (importing its classes here would close an
+    import cycle, which tests/test_layers.py forbids)."""
+    if isinstance(ndf, (Beckmann, GGX)):
+        return walk_alpha(ndf)
+    needs = ("smith_lambda_w", "projected_alpha", "sample_visible", "isotropic_equivalent")
+    if not getattr(ndf, "isotropic", True) and all(callable(getattr(ndf, a, None)) for a in needs):
+        iso = ndf.isotropic_equivalent()
+        if isinstance(iso, (Beckmann, GGX)):
+            return walk_alpha(iso)[0], None
+    raise UsageError(
+        f"ndf must be one of {', '.join(WALK_NDFS)} (the random walk needs the Smith Λ of "
+        f"every direction and visible-normal sampling), got {ndf!r}"
+    )
+
+
+@dataclass(frozen=True)
+class WalkNDF:
+    """What the walk asks of its NDF (module docstring, "Anisotropic surfaces"): the Smith Λ of
+    a flight direction (``lambda_up``), the roughness a direction sees (``roughness_seen``) and
+    visible normals (``visible``). ``ndf``: one of ``WALK_NDFS``; ``family``: "beckmann" |
+    "ggx"; ``alpha``: the isotropic roughness (α = m for Beckmann), None for an anisotropic NDF
+    (checked against ``ndf``; ``WalkNDF.of(ndf)`` fills them in). Isotropic NDFs use this
+    module's samplers (Heitz 2018, Heitz & d'Eon 2014), anisotropic ones their own
+    ``sample_visible`` (the stretch to unit roughness over the same samplers)."""
+
+    ndf: object
+    family: str
+    alpha: float | None
+
+    def __post_init__(self):
+        family, alpha = _walk_family(self.ndf)
+        if (self.family, self.alpha) != (family, alpha):
+            raise UsageError(
+                f"family and alpha must be those of ndf {self.ndf!r}: {family!r} and {alpha!r} "
+                f"(use WalkNDF.of(ndf)), got {self.family!r} and {self.alpha!r}"
+            )
+
+    @classmethod
+    def of(cls, ndf) -> WalkNDF:
+        """``WalkNDF`` of ``ndf`` (returned as is if it is one); UsageError naming the allowed
+        NDFs for any other."""
+        if isinstance(ndf, WalkNDF):
+            return ndf
+        return cls(ndf, *_walk_family(ndf))
+
+    def lambda_up(self, w):
+        """Smith Λ of the upward direction (w_x, w_y, |w_z|) for unit w (..., 3): Λ(w) for
+        w_z ≥ 0 and Λ(−w) for w_z < 0 (turning the azimuth through 180° leaves Λ unchanged);
+        +inf at the horizon, 0 along ±n."""
+        if self.alpha is not None:
+            return _lambda_up(self.ndf, np.abs(w[..., 2]))
+        up = np.stack([w[..., 0], w[..., 1], np.abs(w[..., 2])], axis=-1)
+        return self.ndf.smith_lambda_w(up)
+
+    def roughness_seen(self, w):
+        """α for an isotropic NDF, the projected roughness α(φ'_w) for an anisotropic one."""
+        if self.alpha is not None:
+            return self.alpha
+        return self.ndf.projected_alpha(w)
+
+    def visible(self, v, u1, u2):
+        """Facet normals m ~ D_v(m) for unit views v (N, 3) of either hemisphere and uniforms
+        u1 ∈ (0, 1], u2 ∈ (0, 1) of shape (N,), without re-checking the isotropic inputs."""
+        if self.alpha is not None:
+            return _visible(self.family, self.alpha, v, u1, u2)
+        return self.ndf.sample_visible(v, u1, u2)
 
 
 def visible_projected_area(v, ndf):
     """∫ ⟨v, m⟩⁺ D(m) dm for unit v of any sign of v_z: (1 + Λ(v)) v_z for v_z ≥ 0 and
-    Λ(−v) |v_z| for v_z < 0 (Smith's projected-area identity), the normaliser of D_v."""
+    Λ(−v) |v_z| for v_z < 0 (Smith's projected-area identity), the normaliser of D_v.
+    ``ndf``: one of ``WALK_NDFS`` (anisotropic: Λ at the direction's azimuth)."""
     v = _checks.directions("v", v)
     c = v[..., 2]
-    kind, alpha = walk_alpha(ndf)
-    lam = _lambda_up(ndf, np.abs(c))
+    walk = WalkNDF.of(ndf)
+    lam = walk.lambda_up(v)
     with np.errstate(invalid="ignore"):
         out = np.where(c >= 0, (1.0 + lam) * c, lam * np.abs(c))
-    # at the horizon Λ|v_z| → α/(2√π) (Beckmann), α/2 (GGX)
-    horizon = alpha / (2.0 * _SQRT_PI) if kind == "beckmann" else 0.5 * alpha
+    # at the horizon Λ|v_z| → α/(2√π) (Beckmann), α/2 (GGX), α the roughness v sees
+    alpha = walk.roughness_seen(v)
+    horizon = alpha / (2.0 * _SQRT_PI) if walk.family == "beckmann" else 0.5 * alpha
     return np.where(c == 0.0, horizon, out)
 
 
@@ -280,8 +389,10 @@ def sample_visible_normals(v, ndf, u1, u2):
     """Facet normals m ~ D_v(m) = ⟨v, m⟩⁺ D(m) / ∫⟨v, m'⟩⁺ D dm' for unit view directions v
     (N, 3) of either hemisphere (not straight down) and uniforms u1, u2 ∈ (0, 1) of shape (N,).
 
-    GGX: Heitz 2018; Beckmann: Heitz & d'Eon 2014 slope inversion (module docstring)."""
-    kind, alpha = walk_alpha(ndf)
+    GGX: Heitz 2018; Beckmann: Heitz & d'Eon 2014 slope inversion (module docstring).
+    ``ndf``: one of ``WALK_NDFS``; an anisotropic one samples with its own ``sample_visible``
+    (the stretch to unit roughness over the isotropic samplers; module docstring)."""
+    walk = WalkNDF.of(ndf)
     v = _checks.directions("v", v)
     if v.ndim != 2:
         raise UsageError(f"v must have shape (N, 3), got {v.shape}")
@@ -292,7 +403,7 @@ def sample_visible_normals(v, ndf, u1, u2):
             f"v, u1 and u2 must have shapes (N, 3), (N,) and (N,), "
             f"got v {v.shape}, u1 {u1.shape}, u2 {u2.shape}"
         )
-    return _visible(kind, alpha, v, u1, np.clip(u2, 1e-16, 1 - 1e-16))
+    return walk.visible(v, u1, np.clip(u2, 1e-16, 1 - 1e-16))
 
 
 # --- the walk ----------------------------------------------------------------------------------
@@ -317,12 +428,15 @@ class WalkPaths:
 def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) -> WalkPaths:
     """Random walk of Heitz et al. 2016 on a Smith microsurface, one path per row of ``wi``.
 
-    ``wi``: unit incident directions (N, 3) pointing to the light, z > 0. ``ndf``: ``Beckmann``
-    or ``GGX``. ``material``: None (mirror) or anything ``fresnel.resolve_material`` accepts
-    (conductor or dielectric treated as reflector only). ``rng``: numpy Generator or seed.
-    All live paths advance together (one NumPy step per reflection order).
+    ``wi``: unit incident directions (N, 3) pointing to the light, z > 0, any azimuth (with an
+    anisotropic NDF the azimuth relative to its axes matters). ``ndf``: one of ``WALK_NDFS``
+    (or a ``WalkNDF``): Λ of every flight direction and the visible normals from the NDF
+    (module docstring, "Anisotropic surfaces"). ``material``: None (mirror) or anything
+    ``fresnel.resolve_material`` accepts (conductor or dielectric treated as reflector only).
+    ``rng``: numpy Generator or seed. All live paths advance together (one NumPy step per
+    reflection order).
     """
-    kind, alpha = walk_alpha(ndf)
+    walk = WalkNDF.of(ndf)
     eta = resolve_material(material)
     wi = _checks.directions("wi", wi)
     if wi.ndim != 2:
@@ -346,7 +460,7 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
         # next intersection (or escape) of rays leaving the previous order
         e = rng.standard_exponential(len(idx))
         cz = d[:, 2]
-        lam = _lambda_up(ndf, np.abs(cz))
+        lam = walk.lambda_up(d)
         up = cz > 0
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             esc = up & ~(lam * tau > e)  # escape when Exp(Λ) flight ≥ τ (Λ = 0: always)
@@ -363,9 +477,7 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
             break
         # reflection at order k
         v = -d
-        m = _visible(
-            kind,
-            alpha,
+        m = walk.visible(
             v,
             np.clip(1.0 - rng.random(len(idx)), 1e-300, 1.0),
             np.clip(rng.random(len(idx)), 1e-16, 1 - 1e-16),
@@ -406,11 +518,15 @@ def _projected_solid_angle(te, pe, folded):
     return band[:, None] * dphi[None, :]
 
 
-def _locate(wo, te, pe, folded):
-    """Flat bin index of exit directions (wi at azimuth 0), −1 outside the grid."""
+def _locate(wo, te, pe, folded, phi_i=0.0):
+    """Flat bin index of exit directions for wi at azimuth ``phi_i`` (degrees), −1 outside the
+    grid."""
     x, y, z = wo[:, 0], wo[:, 1], wo[:, 2]
     theta = np.degrees(np.arctan2(np.hypot(x, y), z))
     dphi = np.degrees(np.arctan2(y, x))  # (−180, 180]
+    if phi_i != 0.0:  # Δφ = φo − φi, back into (−180, 180]
+        dphi = np.mod(dphi - phi_i, 360.0)
+        dphi = np.where(dphi > 180.0, dphi - 360.0, dphi)
     if folded:
         dphi = np.abs(dphi)
     else:
@@ -433,8 +549,9 @@ class WalkBinAverages:
     light leaving outside the bin grid; ``absorbed``/``absorbed_stderr``, ``cut``: (I,) energy
     absorbed by Fresnel losses and energy of paths cut at ``max_bounces``; ``max_order``: the
     highest order seen per incidence; ``n_paths``: paths per incidence; ``omega``: Ω_B (sr).
-    ``multiple_energy``/``multiple_stderr``: energy escaping in orders ≥ 2 (I,). Standard
-    errors are those of a mean over i.i.d. paths.
+    ``multiple_energy``/``multiple_stderr``: energy escaping in orders ≥ 2 (I,); ``phi_i``: the
+    incidence azimuths (degrees, (I,)) the bins' Δφ is measured from. Standard errors are those of a
+    mean over i.i.d. paths.
     """
 
     theta_i: np.ndarray
@@ -452,6 +569,7 @@ class WalkBinAverages:
 
     multiple_energy: np.ndarray
     multiple_stderr: np.ndarray
+    phi_i: np.ndarray | None = None
 
 
 def walk_bin_averages(
@@ -466,22 +584,34 @@ def walk_bin_averages(
     seed=0,
     max_bounces: int = 256,
     chunk: int = 2**18,
+    phi_i: float = 0.0,
 ) -> WalkBinAverages:
     """Heitz et al. 2016 random-walk BRDF averaged over (θo, Δφ) bins, per scattering order.
 
-    ``theta_i``: incidence angles in degrees (scalar or 1-D, each in [0, 90)); wi lies at
-    azimuth 0 (wi = (sin θi, 0, cos θi)). ``theta_edges``, ``phi_edges``, ``folded``: the bin
-    grid as ``microsim.sim.bins.Bins`` builds it (module docstring). ``orders``: K ≥ 1 tallies
-    orders 1 … K − 1 separately and K and above together ("≥K"). ``n_paths`` per incidence,
-    processed ``chunk`` at a time; ``seed``: anything ``numpy.random.default_rng`` takes (one
-    generator for the whole call: the same seed, incidences and ``chunk`` give the same
-    result bit for bit). Returns ``WalkBinAverages``.
+    ``theta_i``: incidence angles in degrees (scalar or 1-D, each in [0, 90)); ``phi_i``: the
+    incidence azimuth in degrees (finite, any value; or one per θi), in the surface frame, where an
+    anisotropic NDF's x axis lies at its ``rotation``: wi = (sin θi cos φi, sin θi sin φi,
+    cos θi), and the bins' Δφ = φo − φi. ``ndf``: one of ``WALK_NDFS``. ``theta_edges``,
+    ``phi_edges``, ``folded``: the bin grid as ``microsim.sim.bins.Bins`` builds it (module
+    docstring; an anisotropic NDF wants ``folded=False`` unless φi lies on one of its axes).
+    ``orders``: K ≥ 1 tallies orders 1 … K − 1 separately and K and above together ("≥K").
+    ``n_paths`` per incidence, processed ``chunk`` at a time; ``seed``: anything
+    ``numpy.random.default_rng`` takes (one generator for the whole call: the same seed,
+    incidences, φi and ``chunk`` give the same result bit for bit). Returns
+    ``WalkBinAverages``.
     """
-    _, _ = walk_alpha(ndf)
+    walk = WalkNDF.of(ndf)
     te, pe, folded = _check_edges(theta_edges, phi_edges, folded)
     thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     if thetas.ndim != 1 or np.any(~((thetas >= 0) & (thetas < 90))):
         raise UsageError(f"theta_i must be angles in degrees within [0, 90), got {theta_i!r}")
+    phis = np.atleast_1d(np.asarray(phi_i, dtype=np.float64))
+    if phis.ndim != 1 or phis.size not in (1, thetas.size) or not np.all(np.isfinite(phis)):
+        raise UsageError(
+            f"phi_i must be a finite azimuth in degrees, or one per θi ({thetas.size}), "
+            f"got {phi_i!r}"
+        )
+    phis = np.broadcast_to(phis, thetas.shape)
     n_paths = _checks.integer("n_paths", n_paths, 2, 10**11)
     orders = _checks.integer("orders", orders, 1, 1000)
     chunk = _checks.integer("chunk", chunk, 1, 2**24)
@@ -497,17 +627,21 @@ def walk_bin_averages(
     a1, a2, cut = np.zeros(n_i), np.zeros(n_i), np.zeros(n_i)
     kmax = np.zeros(n_i, dtype=np.int64)
     for a, th in enumerate(thetas):
-        t = np.radians(th)
-        wi1 = np.array([np.sin(t), 0.0, np.cos(t)])
+        t, phi_i = np.radians(th), float(phis[a])
+        if phi_i == 0.0:  # wi_y exactly 0
+            wi1 = np.array([np.sin(t), 0.0, np.cos(t)])
+        else:
+            ph = np.radians(phi_i)
+            wi1 = np.array([np.sin(t) * np.cos(ph), np.sin(t) * np.sin(ph), np.cos(t)])
         done = 0
         while done < n_paths:
             m = min(chunk, n_paths - done)
-            p = smith_random_walk(np.broadcast_to(wi1, (m, 3)), ndf, material, rng, max_bounces)
+            p = smith_random_walk(np.broadcast_to(wi1, (m, 3)), walk, material, rng, max_bounces)
             done += m
             esc = p.order > 0
             kk = np.minimum(p.order[esc], orders) - 1
             ww = p.weight[esc]
-            b = _locate(p.wo[esc], te, pe, folded)
+            b = _locate(p.wo[esc], te, pe, folded, phi_i)
             inb = b >= 0
             key = kk[inb] * nb + b[inb]
             s1[a] += np.bincount(key, ww[inb], minlength=orders * nb).reshape(orders, nb)
@@ -554,4 +688,5 @@ def walk_bin_averages(
         omega,
         ms,
         ms_se,
+        phis.copy(),
     )
