@@ -26,6 +26,8 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   it), traced alternately with the others, best of the same runs, and the ratio;
 * the pipeline's samples/s with every scattering order traced (``bounces="all"``) beside
   ``bounces=1``, alternating, best of three;
+* the cost of full-azimuth bins (``azimuth_cost``): samples/s on folded and on full-azimuth
+  bins of the same width, and the time of one model's bin averages on each;
 * the fixed cost of a ``simulate`` call: the first call on a surface (scene + BVH built) and a
   repeated call on the same surface object (its tracer reused), one block of rays each;
 * the peak resident memory of a ``simulate`` run in a fresh process at two ray counts (it
@@ -62,6 +64,7 @@ __all__ = [
     "BenchConfig",
     "bench_config",
     "throughput",
+    "azimuth_cost",
     "build_times",
     "peak_rss_mb",
     "time_to_accuracy",
@@ -296,6 +299,35 @@ def bounce_throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: in
     return best
 
 
+def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> dict:
+    """What full-azimuth bins cost: pipeline samples/s on folded bins (Δφ ∈ [0°, 180°], 37
+    bins of 5°) and on full-azimuth bins over the whole circle (72 bins of 5°), 2 threads,
+    alternating, best of ``repeat``; and the wall time of one model's bin averages on each at
+    θi = ``cfg.theta_i`` (``predict``, best of ``repeat``): Torrance–Sparrow with the isotropic
+    Beckmann m = 0.3 and Smith G on the folded bins (integrated over Δφ ≥ 0 only, by
+    symmetry), and with the anisotropic Beckmann αx = 0.3, αy = 0.075 and its exact Smith G on
+    the full bins (no symmetry to use). {"samples_per_s": {"folded", "full"},
+    "predict_seconds": {"folded", "full"}}."""
+    from microsim.analytic import AnisotropicBeckmann, Beckmann, Smith, TorranceSparrow
+    from microsim.sim import Bins, simulate
+    from microsim.sim.predict import ModelSpec, predict
+
+    surface = surface if surface is not None else _surface(cfg)
+    bins = {"folded": _bins(), "full": Bins(45, 72, folded=False)}
+    ndfs = {"folded": Beckmann(0.3), "full": AnisotropicBeckmann(0.3, 0.075)}
+    rate = {k: 0.0 for k in bins}
+    seconds = {k: np.inf for k in bins}
+    for _ in range(repeat):
+        for key, b in bins.items():
+            res = simulate(surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=b, threads=2)
+            rate[key] = max(rate[key], res.meta["rays_per_second"])
+            model = TorranceSparrow(ndfs[key], Smith(ndfs[key]), "aluminium")
+            t0 = time.perf_counter()
+            predict([ModelSpec.from_model("ts", model)], [cfg.theta_i], b)
+            seconds[key] = min(seconds[key], time.perf_counter() - t0)
+    return {"samples_per_s": rate, "predict_seconds": seconds}
+
+
 def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> dict:
     """Wall time of a ``simulate`` call of one block of rays on the bench surface: the first
     call (Embree scene + BVH built) and the best of ``repeat`` further calls on the same
@@ -443,6 +475,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
         "build_seconds": build_times(surface),
         "fixed_cost": fixed_cost(cfg),
         "bounces": bounce_throughput(cfg, surface),
+        "full_azimuth": azimuth_cost(cfg, surface),
         "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
     }
     if not cfg.skip_accuracy:
@@ -506,6 +539,14 @@ def format_bench(b: dict) -> str:
         lines.append(
             f"{'pipeline, all bounces':28s}{every[1]:14.4g}{every[2]:14.4g}"
             f"   (bounces=1 in the same runs: {one[1]:.4g}, {one[2]:.4g})"
+        )
+    az = b.get("full_azimuth")
+    if az:
+        r, t = az["samples_per_s"], az["predict_seconds"]
+        lines.append(
+            f"full-azimuth bins (72 × 5°) vs folded (37 × 5°), 2 threads: pipeline "
+            f"{r['full']:.4g} vs {r['folded']:.4g} samples/s; one model's bin averages "
+            f"{t['full']:.2f} s (anisotropic, full) vs {t['folded']:.2f} s (isotropic, folded)"
         )
     fc = b.get("fixed_cost")
     if fc:
