@@ -46,6 +46,7 @@ def _fake_result(R, ray_rel, tile_rel, seed=0):
     mean = F.mean(axis=0)[None]
     return _FakeResult(
         theta_i=np.array([30.0]),
+        phi_i=np.array([0.0]),
         bins=BINS,
         brdf=mean,
         stderr=np.abs(mean) * 0.0,

@@ -4,13 +4,22 @@ how far the isotropic stand-in renderers use is from the exact anisotropic Λ.
 Input: a ``Result`` holding the default models of an anisotropic Gaussian field
 (``sim.compare.default_models``: ``ts-beckmann-nominal-smith-corr`` — the exact Λ, height-
 correlated —, ``ts-beckmann-nominal-smith`` — exact Λ, separable — and ``GEOMEAN_MODEL`` — the
-Λ of α = √(αx αy), MaterialX) and its verdicts. Per incidence (θi at the scene's φi):
+Λ of α = √(αx αy), MaterialX) and its verdicts. Per incidence (θi, φi):
 
 * against the simulation: each variant's energy-weighted relative RMS error and energy deviation
   Σ_E Ω (f̄ − m)/Σ_E Ω m with its standard error, and its verdict, as the verdicts report them;
 * stand-in against exact: Σ_E Ω (m_stand-in − m_exact)/Σ_E Ω m_exact and the energy-weighted
   relative RMS of (m_stand-in − m_exact)/m_exact over the exact model's energy set E (90 % of
-  its Σ m Ω; ``stats.energy_set``) — model against model, no noise.
+  its Σ m Ω; ``stats.energy_set``) — model against model, no noise;
+* for a run traced with ``bounces`` > 1, the energy each variant misses: the simulated
+  reflected energy of all orders E_sim = Σ_o Σ_B f̄_B,o Ω_B (fraction of the incident power,
+  ± its standard error, ``multiple.order_energies``) against the variant's single-scattering
+  energy E_m = Σ_B m_B Ω_B over the hemisphere, missed = (E_sim − E_m)/E_sim with standard
+  error √((se(E_sim) E_m/E_sim²)² + (ε E_m/E_sim)²), ε the model's relative quadrature
+  tolerance (the verdicts' ``model_rtol``); and the simulated orders ≥ 2, the part no
+  single-scattering model can carry, beside the energy of orders ≥ 2 that the random walk on
+  the anisotropic Smith microsurface (Heitz et al. 2016) predicts — what the Smith model says
+  its own single-scattering form misses.
 """
 
 from __future__ import annotations
@@ -21,7 +30,9 @@ import numpy as np
 
 from microsim.stats import energy_set
 
-from .verdicts import verdict_kind
+from . import incidence
+from .multiple import order_energies
+from .verdicts import Significance, verdict_kind
 
 __all__ = ["VARIANTS", "anisotropy_summary"]
 
@@ -44,16 +55,54 @@ def _model_vs_model(a: np.ndarray, b: np.ndarray, omega: np.ndarray) -> tuple[fl
     return dev, rms
 
 
-def anisotropy_summary(result, verdicts: Sequence[Mapping]) -> dict | None:
-    """JSON-able summary (module docstring), or None when ``result`` lacks the variants."""
+def _walk_at(comparison: Mapping | None, here: tuple[float, float]) -> Mapping | None:
+    """The random walk's orders-≥ 2 entry of ``comparison`` at incidence ``here``, or None."""
+    for inc in (comparison or {}).get("incidences", []):
+        if incidence.key(inc) == here:
+            return inc["models"].get("random-walk")
+    return None
+
+
+def _missed(energies: Mapping, result, t: int, omega: np.ndarray, rtol: Mapping) -> dict:
+    """The energy each variant misses at incidence t (module docstring); ``rtol``: model
+    name → its relative quadrature tolerance."""
+    e_sim, se_sim = energies["reflected"], energies["reflected_se"]
+    out = {
+        "reflected": e_sim,
+        "reflected_se": se_sim,
+        "multiple": energies["multiple"],
+        "multiple_se": energies["multiple_se"],
+        "models": {},
+    }
+    for label, name in VARIANTS.items():
+        e_m = float(np.sum(np.asarray(result.models[name][t]) * omega))
+        out["models"][label] = {
+            "energy": e_m,
+            "missed": (e_sim - e_m) / e_sim,
+            "missed_se": float(np.hypot(se_sim * e_m / e_sim**2, rtol[name] * e_m / e_sim)),
+        }
+    return out
+
+
+def anisotropy_summary(
+    result, verdicts: Sequence[Mapping], comparison: Mapping | None = None
+) -> dict | None:
+    """JSON-able summary (module docstring), or None when ``result`` lacks the variants.
+    ``comparison``: the run's order comparison (``multiple.order_comparison``), whose random
+    walk on the anisotropic Smith microsurface gives the orders ≥ 2 the Smith model itself
+    predicts (``missed["walk_multiple"]``)."""
     names = list(VARIANTS.values())
     if not all(n in result.models for n in names):
         return None
     omega = result.bins.projected_solid_angle()
     exact, stand_in = names[0], names[2]
+    orders = None
+    if getattr(result, "brdf_orders", None) is not None and result.brdf_orders.shape[0] >= 2:
+        orders = order_energies(result)
     rows = []
     for t, th in enumerate(result.theta_i):
-        by = {v["model"]: v for v in verdicts if float(v["theta_i"]) == float(th)}
+        here = (float(th), float(result.phi_i[t]))
+        by = {v["model"]: v for v in verdicts if incidence.key(v) == here}
         dev, rms = _model_vs_model(
             np.asarray(result.models[stand_in][t]), np.asarray(result.models[exact][t]), omega
         )
@@ -74,4 +123,12 @@ def anisotropy_summary(result, verdicts: Sequence[Mapping]) -> dict | None:
                 },
             }
         )
+        if orders is not None:
+            rtol = {n: by[n]["model_rtol"] if n in by else Significance().model_rtol for n in names}
+            rows[-1]["missed"] = _missed(orders[t], result, t, omega, rtol)
+            walk = _walk_at(comparison, here)
+            if walk is not None:
+                rows[-1]["missed"].update(
+                    walk_multiple=walk["energy"], walk_multiple_se=walk["energy_se"]
+                )
     return {"variants": dict(VARIANTS), "incidences": rows}

@@ -45,7 +45,7 @@ def _ew(x: np.ndarray, w: np.ndarray) -> float:
 
 
 def error_budget(result) -> list[dict]:
-    """Per incidence: {"theta_i", "realisations", "ray", "tile", "total", "energy"} — the
+    """Per incidence: {"theta_i", "phi_i", "realisations", "ray", "tile", "total", "energy"} — the
     energy-weighted relative standard errors of the mean BRDF from ray noise, from tile scatter
     and in total, and the relative standard error of its energy over E (module docstring).
     ``tile``/``energy`` are None with fewer than 2 realisations (no scatter to measure)."""
@@ -57,7 +57,8 @@ def error_budget(result) -> list[dict]:
         f = result.brdf[t]
         ok = np.isfinite(f) & (f > 0) & np.isfinite(se_ray[t])
         E = energy_set(np.where(ok, f * omega, 0.0)).reshape(f.shape)
-        row = {"theta_i": float(theta), "realisations": 1, "ray": None, "tile": None}
+        row = {"theta_i": float(theta), "phi_i": float(result.phi_i[t]), "realisations": 1}
+        row.update({"ray": None, "tile": None})
         row.update({"total": None, "energy": None})
         if not E.any():
             out.append(row)

@@ -32,6 +32,7 @@ from matplotlib.figure import Figure
 from microsim.errors import UsageError
 
 from ..atomic import atomic_open
+from . import incidence
 from .verdicts import verdict_kind
 
 __all__ = [
@@ -258,6 +259,7 @@ def inplane_curves(
     curves = {name: _in_plane_slice(m, bins) for name, m in models.items()}
     styles = chart_styles(curves)
     n_t = len(result.theta_i)
+    with_phi = incidence.several_azimuths(result.phi_i)
     given = _given_axes(ax, n_t, "inplane_curves", "one per incidence")
     ratio_axes = [None] * n_t
     if given is None:
@@ -308,7 +310,7 @@ def inplane_curves(
         ax.set_ylim(lo, hi)
         ax.set_xlim(-90, 90)
         ax.set_xticks(np.arange(-90, 91, 30))
-        ax.set_title(f"θi = {th_i:g}°")
+        ax.set_title(incidence.label(th_i, float(result.phi_i[t]), with_phi))
         if t % cols == 0:
             ax.set_ylabel("BRDF (sr⁻¹)")
         ax.grid(True, which="major", alpha=0.3)
@@ -392,19 +394,21 @@ def _num(v) -> float:
     return np.nan if v is None else float(v)
 
 
-def _select_verdicts(verdicts, theta_i: float, names) -> list[dict]:
-    """Verdicts of incidence ``theta_i`` (deg) for the models in ``names`` with a finite rel_rms."""
+def _select_verdicts(verdicts, theta_i: float, phi_i: float, names) -> list[dict]:
+    """Verdicts of incidence (``theta_i``, ``phi_i``) (deg) for the models in ``names`` with a
+    finite rel_rms."""
     sel = [
         v
         for v in _flatten_verdicts(verdicts)
         if v["model"] in names
         and math.isclose(float(v["theta_i"]), theta_i, abs_tol=1e-6)
+        and math.isclose(incidence.key(v)[1], phi_i, abs_tol=1e-6)
         and np.isfinite(_num(v.get("rel_rms")))
     ]
     if not sel:
         raise UsageError(
-            f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}° "
-            f"and one of the models {sorted(names)}"
+            f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}°, "
+            f"φi = {phi_i:g}° and one of the models {sorted(names)}"
         )
     return sorted(sel, key=lambda v: _num(v["rel_rms"]))
 
@@ -479,8 +483,8 @@ def hemisphere_maps(
     if not (0 <= int(t_index) < n_t):
         raise UsageError(f"t_index must be in [0, {n_t - 1}], got {t_index}")
     t = int(t_index)
-    theta_i = float(result.theta_i[t])
-    sel = _select_verdicts(verdicts, theta_i, set(models))
+    theta_i, phi_i = float(result.theta_i[t]), float(result.phi_i[t])
+    sel = _select_verdicts(verdicts, theta_i, phi_i, set(models))
     best, worst = sel[0], sel[-1]
     shown = [best] if best["model"] == worst["model"] else [best, worst]
     sim = _positive(result.brdf[t])
@@ -580,7 +584,8 @@ def hemisphere_maps(
         transform=tax.transAxes,
     )
     if given is None:
-        fig.suptitle(_title(scene_name, f"hemisphere at θi = {theta_i:g}°"))
+        at = incidence.label(theta_i, phi_i, incidence.several_azimuths(result.phi_i))
+        fig.suptitle(_title(scene_name, f"hemisphere at {at}"))
     elif len(shown) == 1:
         given[2].axis("off")
         given[5].axis("off")

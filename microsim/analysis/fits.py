@@ -232,7 +232,11 @@ class FitData:
         """Broadcastable (θi, θo, Δθi, Δθo, Δφo) in degrees for ``an.low_e1/low_e2``."""
         b = self.bins
         ti = self.theta_i
-        d_ti = np.abs(np.gradient(ti)) if len(ti) > 1 else np.ones(1)
+        d_ti = np.ones(len(ti))  # Δθi among the incidences at the same φi
+        for phi in np.unique(self.phi_i):
+            sel = np.flatnonzero(self.phi_i == phi)
+            if len(sel) > 1:
+                d_ti[sel] = np.abs(np.gradient(ti[sel]))
         d_phi = np.diff(b.phi_edges) * (2.0 if b.folded else 1.0)
         return (
             ti[:, None, None],

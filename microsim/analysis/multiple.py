@@ -91,7 +91,7 @@ from microsim.analytic.energy_compensation import (
     mikkelsen_kd,
 )
 from microsim.analytic.fresnel import resolve_material
-from microsim.analytic.random_walk import walk_alpha, walk_bin_averages
+from microsim.analytic.random_walk import WalkNDF, walk_alpha, walk_bin_averages
 from microsim.atomic import atomic_open
 from microsim.errors import UsageError
 from microsim.sim.bounces import MAX_BOUNCES, ORDER_NAMES
@@ -100,6 +100,7 @@ from microsim.sim.paths import LEDGER
 from microsim.sim.tallies import terminal_ledger
 from microsim.stats import MIN_EVENTS, energy_set, norm_isf, norm_sf, sidak, t_isf, t_sf
 
+from . import incidence
 from .charts import DPI, SIM_COLOUR, model_colour
 from .verdicts import Measured, Prediction, Significance, verdict
 
@@ -204,7 +205,8 @@ def _realisation_rows(result, t):
 
 def _sim_energies(result, t):
     """Per incidence t: energy per order slot (O,), its se (O,), order ≥ 2 energy and se,
-    absorbed/cut/lost (value, se or None), R used, dof (R − 1 or None)."""
+    absorbed/cut/lost/reflected (value, se or None; reflected: all orders), R used, dof
+    (R − 1 or None)."""
     om = result.bins.projected_solid_angle()
     n_slots = result.brdf_orders.shape[0]
     E = np.sum(result.brdf_orders[:, t] * om, axis=(1, 2))
@@ -223,6 +225,7 @@ def _sim_energies(result, t):
         R = len(rows)
         se = e_r.std(axis=1, ddof=1) / np.sqrt(R)
         ms_se = float(e_r[1:].sum(axis=0).std(ddof=1) / np.sqrt(R))
+        extra["reflected"] = [float(E.sum()), float(e_r.sum(axis=0).std(ddof=1) / np.sqrt(R))]
         if led_n is not None and led_f is not None and rays_r is not None:
             term = terminal_ledger(
                 led_n[rows, t, _N_LEDGER:], led_f[rows, t, _N_LEDGER:], rays_r[rows, t]
@@ -248,9 +251,13 @@ def _sim_energies(result, t):
         se = np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / (n - 1.0))
         m2 = s1[1:].sum() / n
         ms_se = float(np.sqrt(max(s2[1:].sum() / n - m2**2, 0.0) / (n - 1.0)))
+        m_all = s1.sum() / n  # a path escapes at one order: Σ_o Σw_o² is its Σw²
+        all_se = float(np.sqrt(max(s2.sum() / n - m_all**2, 0.0) / (n - 1.0)))
     else:
         se = np.sqrt(np.sum((result.stderr_orders[:, t] * om) ** 2, axis=(1, 2)))
         ms_se = float(np.sqrt(np.sum(se[1:] ** 2)))
+        all_se = float(np.sqrt(np.sum(se**2)))
+    extra["reflected"] = [float(E.sum()), all_se]
     return E, se, ms, ms_se, extra, 1, None
 
 
@@ -321,8 +328,11 @@ def _shape(f, sf, m, sm, omega):
 
 
 def _energy_verdict(e_sim, se_sim, e_mod, se_mod, dof, alpha_each, fitted):
-    d = 1.0 - e_mod / e_sim
-    se_d = (e_mod / e_sim) * np.sqrt((se_mod / e_mod) ** 2 + (se_sim / e_sim) ** 2)
+    if e_sim > 0:
+        d = 1.0 - e_mod / e_sim
+        se_d = (e_mod / e_sim) * np.sqrt((se_mod / e_mod) ** 2 + (se_sim / e_sim) ** 2)
+    else:  # no multiply scattered light simulated: no relative deviation, the t test remains
+        d = se_d = None
     stat = (e_sim - e_mod) / np.hypot(se_sim, se_mod)
     if dof is None:
         p = float(2.0 * norm_sf(abs(stat)))
@@ -333,8 +343,8 @@ def _energy_verdict(e_sim, se_sim, e_mod, se_mod, dof, alpha_each, fitted):
     return {
         "energy": float(e_mod),
         "energy_se": float(se_mod),
-        "rel_dev": float(d),
-        "rel_dev_se": float(se_d),
+        "rel_dev": None if d is None else float(d),
+        "rel_dev_se": None if se_d is None else float(se_d),
         "t": float(stat),
         "dof": dof,
         "p_value": p,
@@ -417,7 +427,9 @@ def order_comparison(
     """
     _check_result(result)
     _check_material(result, material)
-    walk_alpha(ndf)
+    WalkNDF.of(ndf)
+    isotropic = not hasattr(ndf, "alpha_x")
+    names = MODELS if isotropic else MODELS[:1]
     if not isinstance(walk_paths, (int, np.integer)) or walk_paths < 2:
         raise UsageError(f"walk_paths must be an integer >= 2, got {walk_paths!r}")
     n_slots = result.brdf_orders.shape[0]
@@ -438,23 +450,11 @@ def order_comparison(
         folded=bool(bins.folded),
         seed=seed,
         max_bounces=_walk_limit(result),
+        phi_i=np.asarray(result.phi_i, dtype=np.float64),
     )
-    white = _albedo_table(ndf, None)
-    kc = KullaConty(table=white, material=material, fresnel_factor=material is not None)
-    table = white if material is None else _albedo_table(ndf, material)
     sims = [_sim_energies(result, t) for t in range(T)]
-    ms = np.array([s[2] for s in sims])
-    ms_se = np.array([s[3] for s in sims])
-    if not np.all(ms_se > 0):
-        raise UsageError("result must resolve the energy of orders >= 2 (a zero standard error)")
-    kd = mikkelsen_kd(th, ms, table, target_stderr=ms_se)
-    mik_e = mikkelsen_diffuse_albedo(th, table, kd)
-    kc_e = kc.albedo(th)
-    n_phi = bins.n_phi
-    kc_lobe = kc.bin_averages(th, bins.theta_edges, n_phi)
-    band = cos_lobe_bin_averages(lambda c: 1.0 - table.rho(c), bins.theta_edges, n_phi)
-    mik_lobe = (kd * (1.0 - table.rho(np.cos(np.radians(th)))) / np.pi)[:, None, None] * band
-    alpha_each = sidak(alpha, T * len(MODELS))
+    closed = _closed_forms(th, sims, bins, ndf, material) if isotropic else None
+    alpha_each = sidak(alpha, T * len(names))
     out = []
     for t in range(T):
         E, se, e_ms, se_ms, extra, R, dof = sims[t]
@@ -463,11 +463,14 @@ def order_comparison(
         w_lobe = walk.values[t, 1:].sum(axis=0)
         w_se = np.sqrt(np.sum(walk.stderr[t, 1:] ** 2, axis=0))
         models = {}
-        specs = (
-            ("random-walk", walk.multiple_energy[t], walk.multiple_stderr[t], w_lobe, w_se, False),
-            ("kulla-conty", kc_e[t], 0.0, kc_lobe[t], None, False),
-            ("mikkelsen-eq28", mik_e[t], 0.0, mik_lobe[t], None, True),
-        )
+        specs = [
+            ("random-walk", walk.multiple_energy[t], walk.multiple_stderr[t], w_lobe, w_se, False)
+        ]
+        if closed is not None:
+            specs += [
+                ("kulla-conty", closed["kc_e"][t], 0.0, closed["kc_lobe"][t], None, False),
+                ("mikkelsen-eq28", closed["mik_e"][t], 0.0, closed["mik_lobe"][t], None, True),
+            ]
         for name, e_mod, se_mod, lobe, lobe_se, fitted in specs:
             row = _energy_verdict(e_ms, se_ms, float(e_mod), float(se_mod), dof, alpha_each, fitted)
             rms, srms, floor, nE = _shape(f, sf, lobe, lobe_se, om)
@@ -510,6 +513,7 @@ def order_comparison(
         out.append(
             {
                 "theta_i": float(th[t]),
+                "phi_i": float(result.phi_i[t]),
                 "sim": {
                     "orders": [float(x) for x in E],
                     "order_se": [float(x) for x in se],
@@ -536,7 +540,8 @@ def order_comparison(
     return {
         "expected": smith,
         "expectation": None if smith else NOT_EXPECTED,
-        "ndf": {"kind": kind, "alpha": float(getattr(ndf, "m", getattr(ndf, "alpha", np.nan)))},
+        "ndf": {"kind": kind, **_ndf_roughness(ndf)},
+        "models": list(names),
         "material": None if material is None else str(material),
         "bounces": result.meta.get("bounces"),
         "order_labels": list(ORDER_LABELS[:n_slots]),
@@ -545,22 +550,60 @@ def order_comparison(
         "realisations": int(max(s[5] for s in sims)),
         "alpha": float(alpha),
         "alpha_each_energy": float(alpha_each),
-        "kd": float(kd),
+        "kd": None if closed is None else closed["kd"],
         "kd_note": (
             "one k_d for all θi (weighted least squares on the simulated energy of orders ≥ 2, "
             "weights 1/se²): the lobe stays reciprocal; its per-θi energies test eq. 28's "
             "θi-dependence, not its scale"
         ),
-        "kulla_conty_e_avg": float(kc.e_avg),
+        "kulla_conty_e_avg": None if closed is None else closed["e_avg"],
+        "closed_forms_note": None
+        if closed is not None
+        else (
+            "Kulla–Conty and Mikkelsen eq. 28 are left out: their albedo tables are of "
+            "isotropic NDFs"
+        ),
         "incidences": out,
     }
 
 
+def _ndf_roughness(ndf) -> dict:
+    """{"alpha": α} of an isotropic NDF (m for Beckmann), {"alpha_x", "alpha_y", "rotation"}
+    of an anisotropic one."""
+    if hasattr(ndf, "alpha_x"):
+        return {k: float(v) for k, v in ndf.params().items()}
+    return {"alpha": float(getattr(ndf, "m", getattr(ndf, "alpha", np.nan)))}
+
+
+def _closed_forms(th, sims, bins, ndf, material) -> dict:
+    """Kulla–Conty's and Mikkelsen eq. 28's energies and lobes of orders ≥ 2 per θi (module
+    docstring; isotropic NDFs: their albedo tables), with Mikkelsen's fitted k_d."""
+    white = _albedo_table(ndf, None)
+    kc = KullaConty(table=white, material=material, fresnel_factor=material is not None)
+    table = white if material is None else _albedo_table(ndf, material)
+    ms = np.array([s[2] for s in sims])
+    ms_se = np.array([s[3] for s in sims])
+    if not np.all(ms_se > 0):
+        raise UsageError("result must resolve the energy of orders >= 2 (a zero standard error)")
+    kd = mikkelsen_kd(th, ms, table, target_stderr=ms_se)
+    n_phi = bins.n_phi
+    band = cos_lobe_bin_averages(lambda c: 1.0 - table.rho(c), bins.theta_edges, n_phi)
+    return {
+        "kd": float(kd),
+        "e_avg": float(kc.e_avg),
+        "kc_e": kc.albedo(th),
+        "kc_lobe": kc.bin_averages(th, bins.theta_edges, n_phi),
+        "mik_e": mikkelsen_diffuse_albedo(th, table, kd),
+        "mik_lobe": (kd * (1.0 - table.rho(np.cos(np.radians(th)))) / np.pi)[:, None, None] * band,
+    }
+
+
 def order_energies(result) -> list[dict]:
-    """Per θi the simulated energy per order slot and of orders ≥ 2, ± standard errors
-    (realisation scatter for R ≥ 2, else ray noise; module docstring), and the absorbed, cut
-    and lost energy: [{"theta_i", "orders", "order_se", "multiple", "multiple_se", "absorbed",
-    "cut", "lost", "realisations"}]. The figures of a resolution study."""
+    """Per incidence the simulated energy per order slot, of orders ≥ 2 and of all orders
+    (``reflected``), ± standard errors (realisation scatter for R ≥ 2, else ray noise; module
+    docstring), and the absorbed, cut and lost energy: [{"theta_i", "phi_i", "orders",
+    "order_se", "multiple", "multiple_se", "reflected", "reflected_se", "absorbed", "cut",
+    "lost", "realisations"}]. The figures of a resolution study."""
     _check_result(result)
     out = []
     for t in range(len(result.theta_i)):
@@ -568,10 +611,13 @@ def order_energies(result) -> list[dict]:
         out.append(
             {
                 "theta_i": float(result.theta_i[t]),
+                "phi_i": float(result.phi_i[t]),
                 "orders": [float(x) for x in E],
                 "order_se": [float(x) for x in se],
                 "multiple": float(e_ms),
                 "multiple_se": float(se_ms),
+                "reflected": extra["reflected"][0],
+                "reflected_se": extra["reflected"][1],
                 "absorbed": extra["absorbed"][0],
                 "cut": extra["cut"][0],
                 "lost": extra["lost"][0],
@@ -589,8 +635,8 @@ def needs_more_bounces(result, threshold: float = 0.01) -> list[dict]:
     treated as independent: conservative since they correlate positively), and
     ``needs`` = q > threshold. With a finite K the paths still inside after K bounces are cut
     (``cut``, reported): q is then a lower bound (``bounces="all"`` gives the answer).
-    Returns [{"theta_i", "multiple_fraction", "multiple_fraction_se", "cut", "threshold",
-    "needs"}]."""
+    Returns [{"theta_i", "phi_i", "multiple_fraction", "multiple_fraction_se", "cut",
+    "threshold", "needs"}]."""
     _check_result(result)
     if not (isinstance(threshold, (int, float)) and 0.0 < float(threshold) < 1.0):
         raise UsageError(f"threshold must be a fraction in (0, 1), got {threshold!r}")
@@ -603,6 +649,7 @@ def needs_more_bounces(result, threshold: float = 0.01) -> list[dict]:
         out.append(
             {
                 "theta_i": float(result.theta_i[t]),
+                "phi_i": float(result.phi_i[t]),
                 "multiple_fraction": float(q),
                 "multiple_fraction_se": float(q_se),
                 "cut": extra["cut"][0],
@@ -637,6 +684,20 @@ def multiple_section(comparison: Mapping) -> list[str]:
     verdict, the lobe's relative RMS (and the noise floor) and the specular share."""
     c = comparison
     labels = c["order_labels"]
+    names = c.get("models", MODELS)
+    rough = ", ".join(
+        f"{k.replace('alpha', 'α').replace('_', '')} = {v:.4g}"
+        for k, v in c["ndf"].items()
+        if k != "kind"
+    )
+    closed = (
+        f", Kulla & Conty 2017 (E from Torrance–Sparrow with height-correlated Smith G, E_avg = "
+        f"{c['kulla_conty_e_avg']:.4f}) and Mikkelsen 2009 eq. 28 (k_d = {c['kd']:.4g}, "
+        f"{c['kd_note']})"
+        if "kulla-conty" in names
+        else f" ({c['closed_forms_note']})"
+    )
+    with_phi = incidence.several_azimuths(c["incidences"])
     lines = [
         "## How much light single scattering misses",
         "",
@@ -644,13 +705,12 @@ def multiple_section(comparison: Mapping) -> list[str]:
             f"Orders of scattering on the explicit surface (bounces = {c['bounces']}, "
             f"{c['realisations']} realisation(s); ± one standard error, "
             f"{'from the realisations' if c['realisations'] >= 2 else 'ray noise of one tile'})"
-            f" against the Heitz et al. 2016 random walk ({c['ndf']['kind']}, α = "
-            f"{c['ndf']['alpha']:.4g}, {c['walk_paths']:,} paths per θi), Kulla & Conty 2017 "
-            f"(E from Torrance–Sparrow with height-correlated Smith G, E_avg = "
-            f"{c['kulla_conty_e_avg']:.4f}) and Mikkelsen 2009 eq. 28 (k_d = {c['kd']:.4g}, "
-            f"{c['kd_note']}). Energies are fractions of the incident power; deviations "
-            f"(sim − model)/sim; 'agrees' at the Šidák level of {len(MODELS)} models × "
-            f"{len(c['incidences'])} θi (family α = {c['alpha']:g}). Lobe error: the "
+            f" against the Heitz et al. 2016 random walk ({c['ndf']['kind']}, {rough}, "
+            f"{c['walk_paths']:,} paths per incidence){closed}. Energies are fractions of the "
+            f"incident power; deviations "
+            f"(sim − model)/sim; 'agrees' at the Šidák level of {len(names)} "
+            f"model{'s' if len(names) > 1 else ''} × "
+            f"{len(c['incidences'])} incidences (family α = {c['alpha']:g}). Lobe error: the "
             "energy-weighted relative RMS of (model − simulation)/simulation over the bins "
             "carrying 90 % of the simulated order-≥ 2 energy; shape error: the same after "
             "scaling the model to the simulated energy of those bins (its shape alone); noise "
@@ -662,7 +722,7 @@ def multiple_section(comparison: Mapping) -> list[str]:
         lines += [f"*{c['expectation'][0].upper()}{c['expectation'][1:]}.*", ""]
     for inc in c["incidences"]:
         s = inc["sim"]
-        lines += [f"### θi = {inc['theta_i']:g}°", ""]
+        lines += [f"### {incidence.label(*incidence.key(inc), with_phi)}", ""]
         head = [f"order {k}" for k in labels] + ["orders ≥ 2", "absorbed", "cut"]
         lines.append("| | " + " | ".join(head) + " |")
         lines.append("|---" * (len(head) + 1) + "|")
@@ -681,7 +741,7 @@ def multiple_section(comparison: Mapping) -> list[str]:
             f"| simulation | {_pm(s['multiple'], s['multiple_se'])} | | | | | | "
             f"{_pm(s['specular_share'], None, 3)} |"
         )
-        for name in MODELS:
+        for name in names:
             m = inc["models"][name]
             verdict_txt = "agrees" if m["agrees"] else f"deviates (t = {m['t']:.1f})"
             lobe, shape, floor = (
@@ -718,8 +778,10 @@ def multiple_chart(comparison: Mapping, path=None, title: str = "", *, ax=None) 
     (points, ±1σ) and each model's prediction (random walk ±1σ, Kulla–Conty, Mikkelsen eq. 28
     with its fitted k_d). ``ax``: one matplotlib Axes to draw into (else a new 6.4 × 4.6 in
     Figure, Agg canvas); ``path``: also write a PNG. Returns the Figure."""
-    inc = comparison["incidences"]
-    th = np.array([i["theta_i"] for i in inc])
+    inc_all = comparison["incidences"]
+    names = comparison.get("models", MODELS)
+    phis = list(dict.fromkeys(incidence.key(i)[1] for i in inc_all))
+    with_phi = len(phis) > 1
     if ax is None:
         fig = Figure(figsize=(6.4, 4.6), dpi=DPI, layout="constrained")
         FigureCanvasAgg(fig)
@@ -729,31 +791,37 @@ def multiple_chart(comparison: Mapping, path=None, title: str = "", *, ax=None) 
         if not isinstance(ax, Axes):
             raise UsageError(f"ax must be one matplotlib Axes, got {ax!r}")
         fig, own = ax.figure, False
-    for k, name in enumerate(MODELS):
-        e = np.array([i["models"][name]["energy"] for i in inc])
-        es = np.array([i["models"][name]["energy_se"] for i in inc])
+    for g, phi in enumerate(phis):  # one series per incidence azimuth
+        inc = [i for i in inc_all if incidence.key(i)[1] == phi]
+        th = np.array([i["theta_i"] for i in inc])
+        at = f", φi = {phi:g}°" if with_phi else ""
+        for k, name in enumerate(names):
+            e = np.array([i["models"][name]["energy"] for i in inc])
+            es = np.array([i["models"][name]["energy_se"] for i in inc])
+            ax.errorbar(
+                th + 0.4 * (k - 1),
+                e,
+                yerr=es if np.any(es > 0) else None,
+                marker="s^v"[k],
+                ms=4,
+                lw=1.4,
+                ls=("-", "--", ":", "-.")[g % 4],
+                capsize=2,
+                color=model_colour(name),
+                label=name + (" (k_d fitted)" if name == "mikkelsen-eq28" else "") + at,
+            )
         ax.errorbar(
-            th + 0.4 * (k - 1),
-            e,
-            yerr=es if np.any(es > 0) else None,
-            marker="s^v"[k],
-            ms=4,
-            lw=1.4,
+            th,
+            [i["sim"]["multiple"] for i in inc],
+            yerr=[i["sim"]["multiple_se"] for i in inc],
+            fmt="os^D"[g % 4],
+            ms=5,
             capsize=2,
-            color=model_colour(name),
-            label=name + (" (k_d fitted)" if name == "mikkelsen-eq28" else ""),
+            color=SIM_COLOUR,
+            mfc=SIM_COLOUR if g == 0 else "white",
+            label="simulation ±1σ" + at,
+            zorder=5,
         )
-    ax.errorbar(
-        th,
-        [i["sim"]["multiple"] for i in inc],
-        yerr=[i["sim"]["multiple_se"] for i in inc],
-        fmt="o",
-        ms=5,
-        capsize=2,
-        color=SIM_COLOUR,
-        label="simulation ±1σ",
-        zorder=5,
-    )
     ax.set_xlabel("θi (°)")
     ax.set_ylabel("energy in orders ≥ 2 (fraction of incident)")
     ax.set_xlim(0, 90)

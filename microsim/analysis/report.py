@@ -17,6 +17,7 @@ import numpy as np
 
 from microsim.stats import t_isf
 
+from . import incidence
 from .anisotropy import VARIANTS as ANISOTROPY_VARIANTS
 from .multiple import NOT_EXPECTED
 from .verdicts import summary_row, verdict_kind, verdict_symbol
@@ -107,12 +108,12 @@ def albedo_stderr(result) -> np.ndarray:
     return np.sqrt(np.maximum(m2 - rho**2, 0.0) / np.maximum(n - 1, 1))
 
 
-def _ledger_rows(doc, result) -> list[list[str]]:
+def _ledger_rows(doc, result, with_phi: bool) -> list[list[str]]:
     led = result.ledger
     rho, se = led["single_fresnel"], albedo_stderr(result)
     return [
         [
-            f"{t:g}",
+            *([f"{t:g}", f"{p:g}"] if with_phi else [f"{t:g}"]),
             f"{int(r)}",
             f"{rho[k]:.4f} ± {se[k]:.1g}",
             f"{led['single'][k]:.4f}",
@@ -121,7 +122,7 @@ def _ledger_rows(doc, result) -> list[list[str]]:
             f"{led['unresolved'][k]:.2g}",
             f"{led['lost_fresnel'][k]:.4f}",
         ]
-        for k, (t, r) in enumerate(zip(result.theta_i, result.rays))
+        for k, (t, p, r) in enumerate(zip(result.theta_i, result.phi_i, result.rays))
     ]
 
 
@@ -143,11 +144,13 @@ def _reference_text(v: Mapping) -> str:
     return text
 
 
-def _verdict_rows(verdicts, outside: Mapping | None = None) -> list[list[str]]:
+def _verdict_rows(
+    verdicts, outside: Mapping | None = None, with_phi: bool = False
+) -> list[list[str]]:
     outside = outside or {}
     return [
         [
-            f"{v['theta_i']:g}",
+            *([f"{v['theta_i']:g}", f"{v['phi_i']:g}"] if with_phi else [f"{v['theta_i']:g}"]),
             v["model"] + (" (fit)" if v["fitted"] else ""),
             "outside domain" if v["model"] in outside else _verdict_word(v),
             _reference_text(v),
@@ -176,9 +179,10 @@ def _orders_section(orders) -> list[str]:
         return []
     from .multiple import multiple_section
 
+    with_phi = incidence.several_azimuths(orders["needs"])
     rows = [
         [
-            f"{n['theta_i']:g}",
+            *([f"{n['theta_i']:g}", f"{n['phi_i']:g}"] if with_phi else [f"{n['theta_i']:g}"]),
             f"{100 * n['multiple_fraction']:.3g} % ± {100 * n['multiple_fraction_se']:.2g} %",
             _pct(n["cut"]),
             "yes" if n["needs"] else "no",
@@ -192,7 +196,7 @@ def _orders_section(orders) -> list[str]:
         "Fraction of the reflected energy in orders ≥ 2 (± standard error), the energy cut off "
         "by the bounce limit, and whether single scattering misses more than 1 % of it.",
         "",
-        md_table(["θi", "orders ≥ 2", "cut", "> 1 %"], rows),
+        md_table(["θi", *(["φi"] if with_phi else []), "orders ≥ 2", "cut", "> 1 %"], rows),
         "",
     ]
     if orders.get("note"):
@@ -213,8 +217,11 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
         if not o:
             continue
         need = [n for n in o["needs"] if n["needs"]]
+        with_phi = incidence.several_azimuths(o["needs"])
         cells = ", ".join(
-            f"{n['theta_i']:g}°: {plain(100 * n['multiple_fraction'], 2)} %" for n in o["needs"]
+            f"{incidence.label(*incidence.key(n), with_phi, symbol=False)}: "
+            f"{plain(100 * n['multiple_fraction'], 2)} %"
+            for n in o["needs"]
         )
         comparison = o.get("comparison") or {}
         dev = {}
@@ -267,9 +274,10 @@ def _budget_section(budget, auto) -> list[str]:
     if not budget or all(b.get("tile") is None for b in budget):
         return []
     target = auto["target"] if auto else None
+    with_phi = incidence.several_azimuths(budget)
     rows = [
         [
-            f"{b['theta_i']:g}",
+            *([f"{b['theta_i']:g}", f"{b['phi_i']:g}"] if with_phi else [f"{b['theta_i']:g}"]),
             str(b["realisations"]),
             _pct(b["ray"]),
             _pct(b["tile"]),
@@ -279,7 +287,8 @@ def _budget_section(budget, auto) -> list[str]:
         + ([("yes" if b["tile"] is not None and b["tile"] <= target else "no")] if target else [])
         for b in budget
     ]
-    head = ["θi", "R", "ray noise", "tile scatter", "total", "energy"]
+    head = ["θi", *(["φi"] if with_phi else []), "R", "ray noise", "tile scatter", "total"]
+    head.append("energy")
     text = (
         "Standard errors of the mean BRDF, energy-weighted relative RMS over the bins carrying "
         "90 % of the energy (`microsim.analysis.budget`): from the rays' noise, from the "
@@ -302,6 +311,9 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     surf = meta.get("surface") or {}
     run = meta.get("run", {})
     mat = meta.get("material", {})
+    phis = doc.get("phi_i", [0.0])
+    with_phi = incidence.several_azimuths(phis)
+    inc_cols = ["θi", "φi"] if with_phi else ["θi"]
     lines = [f"# {doc['scene']}", ""]
     if doc.get("description"):
         lines += [doc["description"], ""]
@@ -321,6 +333,11 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 ["nominal", _params(surf.get("nominal", {}))],
                 ["material", _material(mat)],
                 ["incidences θi", ", ".join(f"{t:g}°" for t in doc["theta_i"])],
+                *(
+                    [["incidence azimuths φi", _azimuths_text(phis)]]
+                    if with_phi or any(phis)
+                    else []
+                ),
                 ["rays per incidence", f"{doc['rays']:,}"],
                 ["realisations", _realisations_text(run)],
                 ["bins (θo × Δφ)", " × ".join(str(b) for b in run.get("bins", []))],
@@ -345,8 +362,8 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         "Mikkelsen eq. 27, ± 1 standard error; lost: Fresnel-weighted masked + downward).",
         "",
         md_table(
-            ["θi", "rays", "ρ", "single", "masked", "downward", "unresolved", "lost"],
-            _ledger_rows(doc, result),
+            [*inc_cols, "rays", "ρ", "single", "masked", "downward", "unresolved", "lost"],
+            _ledger_rows(doc, result, with_phi),
         ),
         "",
     ]
@@ -374,7 +391,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         "",
         md_table(
             [
-                "θi",
+                *inc_cols,
                 "model",
                 "verdict",
                 "judged against",
@@ -387,7 +404,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 "deviating θo",
                 "bins",
             ],
-            _verdict_rows(doc["verdicts"], outside),
+            _verdict_rows(doc["verdicts"], outside, with_phi),
         ),
         "",
         "</details>",
@@ -433,7 +450,10 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         if key == "stability":
             st = doc.get("stability", {})
             lines += (
-                [f"Sweep: {len(st.get('theta_i', []))} incidences, {st.get('rays')} rays each."]
+                [
+                    f"Sweep: {len(st.get('theta_i', []))} incidences, {st.get('rays')} rays "
+                    f"each{_first_azimuth(phis, with_phi)}."
+                ]
                 + [f"- warning: {w}" for w in st.get("warnings", [])]
                 + [""]
             )
@@ -445,7 +465,8 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 for n, e in zip(r["rays"], r["rel_rms"])
             ]
             lines += [
-                f"θi = {fmt(sp.get('theta_i'))}°, error against {sp.get('reference')}; "
+                f"θi = {fmt(sp.get('theta_i'))}°{_first_azimuth(phis, with_phi)}, "
+                f"error against {sp.get('reference')}; "
                 "the wall times (this chart's x axis: tracing only, the surface and its "
                 "BVH are built once before the runs) are in `timings.json`. Both files "
                 "are written by every run but not kept in git, since wall times differ "
@@ -455,6 +476,19 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                 "",
             ]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _azimuths_text(phis) -> str:
+    text = ", ".join(f"{p:g}°" for p in phis)
+    if len(phis) > 1:
+        text += " (every θi at each; the side studies at the first)"
+    return text
+
+
+def _first_azimuth(phis, with_phi: bool) -> str:
+    """ ", at φi = 0°" for the side studies of a run with several azimuths (they trace the
+    first), else ""."""
+    return f", at φi = {phis[0]:g}°" if with_phi else ""
 
 
 _WAVE_STATUS = {
@@ -885,6 +919,7 @@ def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
     if not rows:
         return []
     labels = list(ANISOTROPY_VARIANTS)
+    missed = _anisotropy_missed(docs)
     return [
         "## Anisotropy: the Smith G variants",
         "",
@@ -899,6 +934,53 @@ def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
         "",
         md_table(
             ["scene", "θi", "φi", "stand-in vs exact Λ"] + [f"{x} vs simulation" for x in labels],
+            rows,
+        ),
+        "",
+    ] + missed
+
+
+def _anisotropy_missed(docs: Sequence[Mapping]) -> list[str]:
+    """The energy the anisotropic single-scattering models miss, for the scenes traced with
+    more than one bounce (``analysis.anisotropy``: ``missed``)."""
+    rows = []
+    for d in docs:
+        for inc in (d.get("anisotropy") or {}).get("incidences", []):
+            m = inc.get("missed")
+            if m is None:
+                continue
+            rows.append(
+                [
+                    f"[{d['scene']}]({d['scene']}/report.md)",
+                    f"{inc['theta_i']:g}°",
+                    f"{inc['phi_i']:g}°",
+                    f"{plain(m['reflected'], 3)} ± {plain(m['reflected_se'], 1)}",
+                    f"{plain(100 * m['multiple'] / m['reflected'])} % ± "
+                    f"{plain(100 * m['multiple_se'] / m['reflected'], 2)} %",
+                    "–"
+                    if m.get("walk_multiple") is None
+                    else f"{plain(100 * m['walk_multiple'] / m['reflected'])} % ± "
+                    f"{plain(100 * m['walk_multiple_se'] / m['reflected'], 2)} %",
+                ]
+                + [
+                    _signed_pct(m["models"][x]["missed"], m["models"][x]["missed_se"])
+                    for x in ANISOTROPY_VARIANTS
+                ]
+            )
+    if not rows:
+        return []
+    return [
+        "Energy the single-scattering models miss (scenes traced with every bounce): the "
+        "simulated reflected energy of all orders (fraction of the incident power ± standard "
+        "error), the share of it in orders ≥ 2 — light no single-scattering model carries — "
+        "beside the share the random walk on the anisotropic Smith microsurface predicts "
+        "(Heitz et al. 2016; the same realised αx, αy), and for each variant (simulated − "
+        "model)/simulated energy over the hemisphere: positive, the model is darker than the "
+        "surface.",
+        "",
+        md_table(
+            ["scene", "θi", "φi", "reflected (all orders)", "orders ≥ 2", "Smith walk: orders ≥ 2"]
+            + [f"{x} misses" for x in ANISOTROPY_VARIANTS],
             rows,
         ),
         "",
@@ -917,25 +999,30 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
     """Index cell: "✓" when ``summary_row`` says the model agrees everywhere, else "✗" with
     its largest relative RMS error over the deviating incidences and where."""
     mine = [v for v in verdicts if v["model"] == model]
+    with_phi = incidence.several_azimuths(verdicts)
+
+    def at(vs) -> str:
+        if with_phi:
+            return "θi " + incidence.where(vs, True)
+        return "θi " + ",".join(f"{v['theta_i']:g}" for v in vs) + "°"
+
     if summary == "agrees":
         res = [r for r in map(_resolvable_energy, mine) if r is not None]
         return f"✓ ±{100 * max(res):.2g}%" if res else "✓"
     deviating = [v for v in mine if verdict_kind(v) == "deviates"]
     if not deviating:  # only inconclusive failures: within the tile's departure, or unknown
         unsure = [v for v in mine if not v["agrees"]]
-        where = ",".join(f"{v['theta_i']:g}" for v in unsure)
         known = [v for v in unsure if v.get("tile_departure") is not None]
         if not known or len(known) != len(unsure):
-            return f"? (θi {where}°)"
+            return f"? ({at(unsure)})"
         rms = max(v["rel_rms"] for v in known)
         dep = max(v["tile_departure"] for v in known)
-        return f"? {100 * rms:.2g}% (tile departs {100 * dep:.2g}%; θi {where}°)"
-    where = ",".join(f"{v['theta_i']:g}" for v in deviating)
+        return f"? {100 * rms:.2g}% (tile departs {100 * dep:.2g}%; {at(unsure)})"
     rms = [v for v in deviating if v["rel_rms"] is not None]
     if not rms:
-        return f"✗ (θi {where}°)"
+        return f"✗ ({at(deviating)})"
     w = max(rms, key=lambda v: v["rel_rms"])
-    return f"✗ {100 * w['rel_rms']:.2g}% (θi {where}°)"
+    return f"✗ {100 * w['rel_rms']:.2g}% ({at(deviating)})"
 
 
 def _index_cell(d: Mapping, model: str, summary: Mapping[str, str]) -> str:
@@ -1075,10 +1162,11 @@ def run_summary(doc: Mapping) -> str:
     that deviate, where and by up to how much; inconclusive ones). Plain text, one line each."""
     verdicts = doc["verdicts"]
     outside = doc.get("outside_domain") or {}
-    thetas = list(dict.fromkeys(v["theta_i"] for v in verdicts))
+    thetas = list(dict.fromkeys(incidence.key(v) for v in verdicts))  # (θi, φi) pairs
+    with_phi = incidence.several_azimuths(verdicts)
     models = list(dict.fromkeys(v["model"] for v in verdicts))
-    by = {(v["model"], v["theta_i"]): v for v in verdicts}
-    rows = [["model"] + [f"θi {t:g}°" for t in thetas]]
+    by = {(v["model"], incidence.key(v)): v for v in verdicts}
+    rows = [["model"] + [incidence.label(t, p, with_phi).replace(" = ", " ") for t, p in thetas]]
     for m in models:
         label = m + (" (fit)" if any(v["fitted"] for v in verdicts if v["model"] == m) else "")
         if m in outside:
@@ -1099,11 +1187,15 @@ def run_summary(doc: Mapping) -> str:
         elif bad:
             rms = [v["rel_rms"] for v in bad if v.get("rel_rms") is not None]
             size = f" by up to {100 * max(rms):.2g}%" if rms else ""
-            where = ", ".join(f"{v['theta_i']:g}" for v in bad)
-            deviate.append(f"{m} at θi {where}°{size}")
+            where = (
+                incidence.where(bad, True)
+                if with_phi
+                else ", ".join(f"{v['theta_i']:g}" for v in bad) + "°"
+            )
+            deviate.append(f"{m} at θi {where}{size}")
         else:
             unsure.append(m)
-    parts = [f"agrees at every θi: {', '.join(agree) or 'none'}"]
+    parts = [f"agrees at every {'incidence' if with_phi else 'θi'}: {', '.join(agree) or 'none'}"]
     if deviate:
         parts.append(f"deviates: {'; '.join(deviate)}")
     if unsure:

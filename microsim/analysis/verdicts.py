@@ -72,6 +72,7 @@ from typing import Iterable, Mapping, NamedTuple
 import numpy as np
 
 from microsim import checks as _checks
+from microsim.analysis import incidence
 from microsim.errors import UsageError
 from microsim.stats import (
     ENERGY_FRACTION,
@@ -116,6 +117,7 @@ _OPT_NUM = (int, float, type(None))
 # dof ≤ 0) are null. ``validate_verdict`` checks keys, types and the simple invariants.
 VERDICT_SCHEMA: dict = {
     "theta_i": (_NUM, "incidence polar angle θi, degrees"),
+    "phi_i": (_NUM, "incidence azimuth φi in the surface frame, degrees"),
     "model": ((str,), "model name"),
     "params": ((dict,), "model parameters (name → JSON value); fitted values for fitted models"),
     "fitted": ((bool,), "True if the parameters were fitted to this simulation"),
@@ -240,7 +242,8 @@ class Measured(NamedTuple):
     solver): ``brdf`` f̄ and ``stderr`` (Θ, Φ) sr⁻¹, ``counts`` (Θ, Φ) events per bin,
     ``omega`` (Θ, Φ) projected solid angles sr, ``theta_edges`` (Θ+1,) and ``phi_edges``
     (Φ+1,, None: the folded grid of ``Bins``) degrees; ``realisations`` (R, Θ, Φ) the BRDFs of
-    R tiles of equal rays (sr⁻¹, their mean is ``brdf``) or None; ``theta_i`` degrees."""
+    R tiles of equal rays (sr⁻¹, their mean is ``brdf``) or None; ``theta_i``, ``phi_i``
+    degrees."""
 
     brdf: np.ndarray
     stderr: np.ndarray
@@ -250,6 +253,7 @@ class Measured(NamedTuple):
     phi_edges: np.ndarray | None = None
     realisations: np.ndarray | None = None
     theta_i: float = 0.0
+    phi_i: float = 0.0
 
     @classmethod
     def of(cls, result, t: int, **replace) -> "Measured":
@@ -263,6 +267,7 @@ class Measured(NamedTuple):
             "theta_edges": result.theta_edges,
             "phi_edges": result.phi_edges,
             "theta_i": float(result.theta_i[t]),
+            "phi_i": float(result.phi_i[t]),
         }
         return cls(**{**fields, **replace})
 
@@ -363,6 +368,7 @@ def verdict(
     max_rel_dev, worst = _worst_bin(rel, E | dev, theta_edges, a.phi_edges)
     return {
         "theta_i": float(theta_i),
+        "phi_i": float(m.phi_i),
         "model": str(name),
         "params": _jsonable_params(params),
         "fitted": bool(fitted),
@@ -707,16 +713,16 @@ class VerdictList(list):
         from microsim.display import html_table
 
         models = list(dict.fromkeys(v["model"] + (" (fit)" if v["fitted"] else "") for v in self))
-        thetas = list(dict.fromkeys(float(v["theta_i"]) for v in self))
-        cell = {
-            (v["model"] + (" (fit)" if v["fitted"] else ""), float(v["theta_i"])): v for v in self
-        }
+        incidences = list(dict.fromkeys(incidence.key(v) for v in self))
+        cell = {(v["model"] + (" (fit)" if v["fitted"] else ""), incidence.key(v)): v for v in self}
         rows = [
-            [m] + [verdict_symbol(cell[m, t]) if (m, t) in cell else "–" for t in thetas]
+            [m] + [verdict_symbol(cell[m, i]) if (m, i) in cell else "–" for i in incidences]
             for m in models
         ]
         caption = "✓ agrees · ✗ deviates (its relative RMS error) · ? inconclusive"
-        return html_table(["model"] + [f"θi = {t:g}°" for t in thetas], rows, caption)
+        with_phi = incidence.several_azimuths(self)
+        header = ["model"] + [incidence.label(t, p, with_phi) for t, p in incidences]
+        return html_table(header, rows, caption)
 
 
 def tile_departure(result) -> np.ndarray | None:
@@ -754,6 +760,12 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
     "inconclusive at θi=…" (after "; " when others deviate); else e.g.
     "deviates at θi=80°: rel RMS 12% at θi=80°, worst +35% at θo 84°
     (θi=80°)" (the largest rel_rms and |max_rel_dev| over the deviating incidences)."""
+    verdicts = list(verdicts)
+    with_phi = incidence.several_azimuths(verdicts)
+
+    def at(v):
+        return incidence.label(*incidence.key(v), with_phi).replace(" = ", "=")
+
     by_model: dict[str, list] = {}
     for v in verdicts:
         by_model.setdefault(v["model"], []).append(v)
@@ -766,23 +778,22 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
             continue
         note = ""
         if unsure:
-            where = ", ".join(f"{v['theta_i']:g}°" for v in unsure)
+            where = incidence.where(unsure, with_phi)
             note = f"inconclusive at θi={where} ({inconclusive_reason(unsure[-1])})"
         if not bad:
             out[name] = note
             continue
-        where = ", ".join(f"{v['theta_i']:g}°" for v in bad)
-        parts = [f"deviates at θi={where}"]
+        parts = [f"deviates at θi={incidence.where(bad, with_phi)}"]
         rms = [v for v in bad if v["rel_rms"] is not None]
         if rms:
             r = max(rms, key=lambda v: v["rel_rms"])
-            parts.append(f"rel RMS {100 * r['rel_rms']:.3g}% at θi={r['theta_i']:g}°")
+            parts.append(f"rel RMS {100 * r['rel_rms']:.3g}% at {at(r)}")
         worst = [v for v in bad if v["max_rel_dev"] is not None]
         if worst:
             w = max(worst, key=lambda v: abs(v["max_rel_dev"]))
             parts.append(
                 f"worst {100 * w['max_rel_dev']:+.3g}% at θo {w['worst_bin'][0]:g}°, "
-                f"Δφ {w['worst_bin'][1]:g}° (θi={w['theta_i']:g}°)"
+                f"Δφ {w['worst_bin'][1]:g}° ({at(w)})"
             )
         out[name] = parts[0] + (": " + ", ".join(parts[1:]) if len(parts) > 1 else "")
         out[name] += f"; {note}" if note else ""

@@ -159,16 +159,41 @@ def validate_wave_verdict(d) -> dict:
 
 # --- the surface's spectrum --------------------------------------------------------------------
 class SurfaceSpectrum:
-    """A surface's nominal isotropic 2D PSD(f) (length⁴, f in 1/length, ∫ PSD d²f = σ²) and
-    its description: ``kind`` ("abc": Church's a, b, c = ``A``, ``B``, ``C``; "gaussian":
-    σ, ℓ), ``f_max`` the band limit of the tile (the PSD is 0 beyond; inf: none)."""
+    """A surface's nominal 2D PSD (length⁴, f in 1/length, ∫ PSD d²f = σ²) and its
+    description: ``kind`` ("abc": Church's a, b, c = ``A``, ``B``, ``C``; "gaussian": σ, ℓ;
+    anisotropic fields also B_y or ℓy and the rotation), ``f_max`` the band limit of the tile
+    (the PSD is 0 beyond |f| = f_max; inf: none). ``psd(f)`` of |f| for an isotropic spectrum;
+    an anisotropic one has ``psd_xy(fx, fy)`` instead (``psd`` None)."""
 
-    def __init__(self, kind: str, params: dict, psd: Callable, f_max: float = math.inf):
+    def __init__(
+        self,
+        kind: str,
+        params: dict,
+        psd: Callable | None,
+        f_max: float = math.inf,
+        psd_xy: Callable | None = None,
+    ):
         self.kind, self.params, self._psd, self.f_max = kind, dict(params), psd, float(f_max)
+        self._psd_xy = psd_xy
+
+    @property
+    def isotropic(self) -> bool:
+        return self._psd_xy is None
 
     def __call__(self, f):
+        """PSD at |f| (isotropic spectra only)."""
+        if not self.isotropic:
+            raise UsageError("an anisotropic spectrum is evaluated at (fx, fy): use at_pair")
         f = np.asarray(f, dtype=np.float64)
         return np.where(f <= self.f_max, self._psd(f), 0.0)
+
+    def at_pair(self, wi, wo, lam: float):
+        """PSD at the scattering frequency (wi_t + wo_t)/λ of direction pairs (…, 3)."""
+        if self.isotropic:
+            return self(_tangential_f(wi, wo, lam))
+        d = (np.asarray(wi, dtype=np.float64) + np.asarray(wo, dtype=np.float64)) / lam
+        fx, fy = d[..., 0], d[..., 1]
+        return np.where(np.hypot(fx, fy) <= self.f_max, self._psd_xy(fx, fy), 0.0)
 
     def describe(self) -> dict:
         return {"kind": self.kind, **self.params, "f_max": self.f_max}
@@ -178,10 +203,33 @@ def surface_spectrum(surface) -> SurfaceSpectrum:
     """The nominal spectrum of an ``abc`` or ``gaussian`` heightfield ``Surface`` (from its
     ``nominal``; abc: band-limited at its ``f_max``); UsageError for other kinds."""
     from microsim.analytic.low import abc_psd_church
-    from microsim.surfaces.heightfields import gaussian_psd
+    from microsim.surfaces.heightfields import (
+        abc_anisotropic_psd,
+        gaussian_anisotropic_psd,
+        gaussian_psd,
+    )
 
     nom = getattr(surface, "nominal", {}) or {}
     kind = getattr(surface, "kind", None)
+    if kind == "abc" and nom.get("B_y") is not None:
+        a, b, c = float(nom["A"]), float(nom["B"]), float(nom["C"])
+        b_y, rot = float(nom["B_y"]), float(nom.get("rotation", 0.0))
+        return SurfaceSpectrum(
+            "abc",
+            {"A": a, "B": b, "C": c, "B_y": b_y, "rotation": rot},
+            None,
+            nom["f_max"],
+            lambda fx, fy: abc_anisotropic_psd(fx, fy, a, b, b_y, c, rot),
+        )
+    if kind == "gaussian" and nom.get("corr_len_y") is not None:
+        s, lx = float(nom["sigma"]), float(nom["corr_len"])
+        ly, rot = float(nom["corr_len_y"]), float(nom.get("rotation", 0.0))
+        return SurfaceSpectrum(
+            "gaussian",
+            {"sigma": s, "corr_len": lx, "corr_len_y": ly, "rotation": rot},
+            None,
+            psd_xy=lambda fx, fy: gaussian_anisotropic_psd(fx, fy, s, lx, ly, rot),
+        )
     if kind == "abc":
         a, b, c = float(nom["A"]), float(nom["B"]), float(nom["C"])
         return SurfaceSpectrum(
@@ -222,12 +270,15 @@ def closed_form(name: str, spectrum: SurfaceSpectrum, wavelength: float, materia
 
         def fn(wi, wo):
             q = rayleigh_rice(wi, wo, lam, 1.0, _TINY_B, 1.0, material)  # = k2 ci co Q
-            return q * spectrum(_tangential_f(wi, wo, lam))
+            return q * spectrum.at_pair(wi, wo, lam)
 
         return fn
     if name == "low-smooth":
-        if spectrum.kind != "abc":
-            raise UsageError(f"low-smooth needs an ABC spectrum, got {spectrum.kind!r}")
+        if spectrum.kind != "abc" or not spectrum.isotropic:
+            raise UsageError(
+                f"low-smooth needs an isotropic ABC spectrum, got {spectrum.kind!r}"
+                f"{'' if spectrum.isotropic else ' (anisotropic)'}"
+            )
         A, B, C = church_to_condensed(
             spectrum.params["A"], spectrum.params["B"], spectrum.params["C"]
         )
@@ -247,7 +298,7 @@ def closed_form(name: str, spectrum: SurfaceSpectrum, wavelength: float, materia
             ok = (ci > 0) & (co > 0)
             with np.errstate(divide="ignore", invalid="ignore"):
                 qk = fresnel(cos_d, material) * (c / (2.0 * ci * co)) ** 2
-                val = k2 * ci * co * qk * spectrum(_tangential_f(wi, wo, lam))
+                val = k2 * ci * co * qk * spectrum.at_pair(wi, wo, lam)
             return np.where(ok, val, 0.0)
 
         return fn
@@ -453,7 +504,7 @@ def wave_verdicts_for_result(
     spec = surface_spectrum(surface)
     fns = {}
     for name in models:
-        if name == "low-smooth" and spec.kind != "abc":
+        if name == "low-smooth" and (spec.kind != "abc" or not spec.isotropic):
             continue
         fns[name] = closed_form(name, spec, lam, material)
     fns.update(extra or {})

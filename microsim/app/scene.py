@@ -16,7 +16,8 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     # gaussian: n = 512 (8 … 4096), dx = 1.0, sigma, corr_len (required; corr_len >= dx and
     #           rms slope 2 sigma / corr_len <= 10), exact_amplitude = true
     # abc:      n = 512 (8 … 4096), dx = 1.0, sigma, B, C (required), band_limit = 4,
-    #           exact_amplitude = true
+    #           exact_amplitude = true; anisotropic: B_y (B along the y' axis), rotation = 0
+    #           (degrees, the x' axis from x)
     # file:     path (required; relative to the scene file; .npy, .npz or text, a real 2D
     #           array of at least 8 x 8 and at most 4096 x 4096 finite heights, not all
     #           equal, checked when the scene is loaded), dx (required), periodic = false
@@ -239,9 +240,13 @@ _KINDS = {
             "C": (_REQUIRED, _C_ABC),
             "band_limit": (4.0, _BAND),
             "exact_amplitude": (True, _BOOL),
+            "B_y": (None, _LENGTH),
+            "rotation": (0.0, _ANGLE),
         },
         _heightfield(surfaces.abc),
-        lambda p: abc_ensemble_ndf(p["n"], p["dx"], p["sigma"], p["B"], p["C"], p["band_limit"]),
+        lambda p: abc_ensemble_ndf(
+            p["n"], p["dx"], p["sigma"], p["B"], p["C"], p["band_limit"], p["B_y"], p["rotation"]
+        ),
     ),
     "file": _Kind(
         {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
@@ -284,6 +289,15 @@ _THETA_I = (
     ),
     f"a non-empty list of at most 180 angles in degrees, each in [0, {MAX_THETA_I:g}]",
 )
+MAX_PHI_I = 12
+"""Most incidence azimuths of one scene: each multiplies the run's incidences."""
+_PHI_I = (
+    lambda v: (
+        _ANGLE[0](v)
+        or (isinstance(v, list) and 0 < len(v) <= MAX_PHI_I and all(_ANGLE[0](p) for p in v))
+    ),
+    f"degrees in [-360, 360], or a non-empty list of at most {MAX_PHI_I} such angles",
+)
 _RAYS = (
     lambda v: v == "auto" or (_is_int(v) and 1 <= v <= MAX_RAYS),
     f'an integer in [1, {MAX_RAYS:,}] or "auto"',
@@ -309,7 +323,7 @@ _SIM_KEYS = {
         (lambda v: v == "all" or (_is_int(v) and 1 <= v <= 256), 'an integer in [1, 256] or "all"'),
     ),
     "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0")),
-    "phi_i": (0.0, _ANGLE),
+    "phi_i": (0.0, _PHI_I),
     "full_azimuth": (None, _BOOL),
 }
 _TOP_KEYS = ("name", "description", "surface", "material", "simulation", "wave")
@@ -340,6 +354,13 @@ _WAVE_KEYS = {
 }
 
 
+def incidence_pairs(theta_i, phi_i) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(θi, φi) per incidence of a run (degrees): every θi at the first φi, then every θi at
+    the next; with one φi the incidences are the θi in order, as before azimuths were a list."""
+    pairs = [(float(t), float(p)) for p in phi_i for t in theta_i]
+    return tuple(t for t, _ in pairs), tuple(p for _, p in pairs)
+
+
 # --- the scene ---------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class SurfaceSpec:
@@ -354,10 +375,12 @@ class SimSettings:
     """Simulation settings: incidence angles (degrees), rays per incidence (or "auto"),
     outgoing bins (θ over [0°, 90°], φ over [0°, 360°)), realisations (a count or "auto",
     then ``realisation_target``, default ``budget.AUTO_TARGET``), base seed; ``phi_i`` the
-    incidence azimuth in degrees (the surface frame: 0° is incidence in the xz plane, across
-    oriented grooves or the x correlation axis) and ``full_azimuth``: Δφ bins over the whole
+    incidence azimuths in degrees (the surface frame: 0° is incidence in the xz plane, across
+    oriented grooves or the x correlation axis; a run traces every θi at every φi, see
+    ``incidence_pairs``) and ``full_azimuth``: Δφ bins over the whole
     circle instead of folded onto [0°, 180°] (None: full for anisotropic surfaces — oriented
-    V-grooves, Gaussian fields with ``corr_len_y`` — and folded otherwise)."""
+    V-grooves, Gaussian fields with ``corr_len_y``, ABC fields with ``B_y`` — and folded
+    otherwise)."""
 
     theta_i: tuple[float, ...] = (0.0, 30.0, 60.0, 80.0)
     rays: int | str = 1_000_000
@@ -367,8 +390,13 @@ class SimSettings:
     realisation_target: float | None = None
     bounces: int | str = 1
     seed: int = 0
-    phi_i: float = 0.0
+    phi_i: tuple[float, ...] = (0.0,)
     full_azimuth: bool | None = None
+
+    @property
+    def phi_i_record(self) -> float | list[float]:
+        """``phi_i`` as a run records it: one azimuth as a number, several as a list."""
+        return self.phi_i[0] if len(self.phi_i) == 1 else list(self.phi_i)
 
 
 @dataclass(frozen=True)
@@ -400,11 +428,13 @@ class Scene:
 
     @property
     def anisotropic(self) -> bool:
-        """Oriented V-grooves or a Gaussian field with two correlation lengths."""
+        """Oriented V-grooves, a Gaussian field with two correlation lengths or an ABC field
+        with two B."""
         p = self.surface.params
         if self.surface.kind == "vgrooves":
             return bool(p.get("oriented", False))
-        return self.surface.kind == "gaussian" and p.get("corr_len_y") is not None
+        second = {"gaussian": "corr_len_y", "abc": "B_y"}.get(self.surface.kind)
+        return second is not None and p.get(second) is not None
 
     @property
     def full_azimuth(self) -> bool:
@@ -602,6 +632,15 @@ def _simulation(where, table) -> SimSettings:
     twice = sorted({t for t in s["theta_i"] if s["theta_i"].count(t) > 1})
     if twice:
         _fail(where, "simulation.theta_i", f"lists {twice[0]:g}° twice; give each angle once")
+    phis = s["phi_i"] if isinstance(s["phi_i"], list) else [s["phi_i"]]
+    s["phi_i"] = tuple(float(p) for p in phis)
+    same = sorted({p for p in s["phi_i"] if [q % 360.0 for q in s["phi_i"]].count(p % 360.0) > 1})
+    if same:
+        _fail(
+            where,
+            "simulation.phi_i",
+            f"lists {same[0]:g}° twice (modulo 360°); give each azimuth once",
+        )
     if s["realisation_target"] is not None and s["realisations"] != "auto":
         _fail(where, "simulation.realisation_target", 'needs realisations = "auto"')
     return SimSettings(**s)
@@ -757,6 +796,13 @@ def load_scene(path) -> Scene:
         wave=wave,
         material_name=_material_name(data.get("material")),
     )
+    if wave is not None and len(simulation.phi_i) > 1:
+        _fail(
+            where,
+            "simulation.phi_i",
+            f"must be one azimuth in a scene with [wave] (the wave solver traces one φi), "
+            f"got {list(simulation.phi_i)}",
+        )
     if scene.full_azimuth and scene.simulation.phi_bins % 2:
         _fail(
             where,

@@ -44,7 +44,7 @@ from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import Beckmann
 from microsim.errors import UsageError
 
-from .predict import ModelSpec, predict
+from .predict import ModelSpec, predict_incidences
 from .result import Result
 from .tracer import ESCAPED, Tracer
 
@@ -204,9 +204,12 @@ def departure_models(scene_or_surface, material, ndf=None) -> list[ModelSpec]:
     ensemble (``analysis.verdicts.tile_departure``): [the ensemble closed form with the
     surface's exact shadowing, ``ts-facets``] for one surface whose exact shadowing depends on
     its facets alone (V-grooves); [] where that departure is not computable without rays
-    (several realisations, heightfields, a flat mirror)."""
+    (several realisations, heightfields, a flat mirror) or there is no ensemble (oriented
+    grooves: ``ts-facets`` is their exact form)."""
     surfaces, _ = _surfaces_and_ndf(scene_or_surface, None)
     if len(surfaces) != 1 or surfaces[0].exact_shadowing in (None, "none"):
+        return []
+    if surfaces[0].ensemble_ndf is None:
         return []
     standard = default_models(scene_or_surface, material, ndf)
     facets = standard[-1]
@@ -283,13 +286,7 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
                 f"{len(traced)} realisation(s) the result was traced over; pass the same "
                 f"surfaces (the list of realisations) to default_models"
             )
-    out = {s.name: np.empty((len(result.theta_i),) + result.bins.shape) for s in specs}
-    phis = np.asarray(result.phi_i, dtype=np.float64)
-    for phi in np.unique(phis):
-        sel = np.flatnonzero(phis == phi)
-        pred = predict(specs, result.theta_i[sel], result.bins, phi_i=float(phi), rtol=rtol)
-        for name, values in pred.items():
-            out[name][sel] = values
+    out = predict_incidences(specs, result.theta_i, result.phi_i, result.bins, rtol)
     own = set(result.meta.get("realisation_models", ())) | {
         s.name for s in specs if s.kind == "facets"
     }

@@ -51,6 +51,7 @@ __all__ = [
     "bin_average_facets",
     "ModelSpec",
     "predict",
+    "predict_incidences",
 ]
 
 _MAX_POINTS = 2**20  # directions per brdf_fn call / per facet chunk (bounds memory)
@@ -607,4 +608,20 @@ def predict(
         out[m.name] = np.stack(
             [_predict_one(m, vectors.spherical_deg(t, phi_i), bins, phi_i, rtol) for t in thetas]
         )
+    return out
+
+
+def predict_incidences(
+    models: Iterable[ModelSpec], theta_i, phi_i, bins: Bins, rtol: float = 1e-3
+) -> dict[str, np.ndarray]:
+    """``predict`` at incidences (θi, φi) given pairwise (degrees; ``phi_i`` one per θi or a
+    scalar): name → array (T, n_theta, n_phi), the incidences in the given order."""
+    models = list(models)
+    thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+    phis = np.broadcast_to(np.asarray(phi_i, dtype=np.float64), thetas.shape)
+    out = {m.name: np.empty((len(thetas),) + bins.shape) for m in models}
+    for phi in np.unique(phis):
+        sel = np.flatnonzero(phis == phi)
+        for name, values in predict(models, thetas[sel], bins, float(phi), rtol).items():
+            out[name][sel] = values
     return out

@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from microsim.analysis import incidence
 from microsim.analysis.verdicts import (
     Measured,
     Prediction,
@@ -50,7 +51,7 @@ from microsim.analysis.verdicts import (
 )
 from microsim.errors import UsageError
 from microsim.sim.compare import attach_models, default_models, departure_models
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import ModelSpec, predict_incidences
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
 from .cache import AUTO_MAX_RAYS, AUTO_TARGET, cache_dir, cached, resolve_reference
@@ -80,8 +81,9 @@ microsim's own models)."""
 class Agreement(dict):
     """What ``assert_brdf_agrees`` found (a dict): ``verdicts`` (one verdict dict per
     incidence, ``microsim.analysis.verdicts.VERDICT_SCHEMA``, plus ``tolerance`` entries in
-    rtol mode), ``passed`` (bool), ``failing`` (θi list), ``model`` (T, Θ, Φ) the BRDF's bin
-    averages, ``reference`` (the Result), ``chart`` (path or None), ``message``."""
+    rtol mode), ``passed`` (bool), ``failing`` (θi list) and ``failing_incidences`` ((θi, φi)
+    list), ``model`` (T, Θ, Φ) the BRDF's bin averages, ``reference`` (the Result), ``chart``
+    (path or None), ``message``."""
 
 
 class BRDFMismatch(AssertionError):
@@ -148,7 +150,9 @@ def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # unconverged bins: rare, in σ anyway
-        values = predict([spec], result.theta_i, result.bins, phi_i=0.0, rtol=MODEL_RTOL)[spec.name]
+        values = predict_incidences(
+            [spec], result.theta_i, result.phi_i, result.bins, rtol=MODEL_RTOL
+        )[spec.name]
     return values, name
 
 
@@ -325,7 +329,8 @@ def _chart(result, model, name, verdicts, t: int, where: Path, key: str) -> str:
     )
     digest = h.hexdigest()
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:60]
-    path = where / f"{safe}-{key}-{digest[:10]}-theta{result.theta_i[t]:g}.png"
+    phi = f"-phi{result.phi_i[t]:g}" if any(result.phi_i) else ""
+    path = where / f"{safe}-{key}-{digest[:10]}-theta{result.theta_i[t]:g}{phi}.png"
     if path.is_file():
         return str(path)
     try:
@@ -346,6 +351,7 @@ def assert_brdf_agrees(
     material="scene",
     theta_i=None,
     *,
+    phi_i=None,
     rays="auto",
     bins=None,
     alpha: float = 0.01,
@@ -365,14 +371,17 @@ def assert_brdf_agrees(
 
     ``brdf``: a callable ``f(wi, wo)`` with ``wi``, ``wo`` float64 arrays of shape (N, 3) —
     unit vectors pointing away from the surface (towards the light, towards the viewer), z the
-    macro normal, incidence in the x–z plane (φi = 0) — returning N values in sr⁻¹ (one scalar
+    macro normal, wi at the incidence azimuth φi (0: in the x–z plane) — returning N values
+    in sr⁻¹ (one scalar
     per pair; the cosine factor is *not* included); or the name of one of the surface's
     catalogue models (``microsim.sim.compare.default_models``: "ts-vgroove", "ts-smith",
     "ts-smith-corr", "ts-facets", …).
 
     ``surface_or_scene``: a scene file or catalogue name ("vgroove-ggx-0.3"), a ``Scene``, a
     ``Surface`` or a sequence of Surfaces; ``material`` ("scene": the scene's; else a name, n,
-    n + ik or None for a mirror), ``theta_i`` (degrees; default the scene's), ``bins``
+    n + ik or None for a mirror), ``theta_i`` and ``phi_i`` (degrees; default the scene's
+    incidences — every θi at each of its φi —; for a Surface φi defaults to 0; ``phi_i`` a
+    scalar or one per θi, in the surface frame), ``bins``
     (``Bins`` or (n_theta, n_phi); default the scene's), ``rays`` (per incidence, or "auto":
     until the reference's energy-weighted relative standard error is ≤ ``target``, at most
     ``max_rays``; ``microsim.testing.cache.reference``), ``seed``, ``realisations`` (overrides
@@ -420,6 +429,7 @@ def assert_brdf_agrees(
         surface_or_scene,
         material,
         theta_i,
+        phi_i=phi_i,
         rays=rays,
         bins=bins,
         seed=seed,
@@ -467,6 +477,7 @@ def assert_brdf_agrees(
         verdicts=verdicts,
         passed=not failing,
         failing=[float(result.theta_i[t]) for t in failing],
+        failing_incidences=[(float(result.theta_i[t]), float(result.phi_i[t])) for t in failing],
         model=model,
         reference=result,
         chart=None,
@@ -487,7 +498,12 @@ def assert_brdf_agrees(
     raise BRDFMismatch(out["message"], out)
 
 
+def _at(result, t: int, with_phi: bool) -> str:
+    return incidence.label(float(result.theta_i[t]), float(result.phi_i[t]), with_phi)
+
+
 def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) -> str:
+    with_phi = incidence.several_azimuths(verdicts)
     rays = np.asarray(result.rays)
     rays_txt = (
         f"{int(rays.min()):,}"
@@ -508,7 +524,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
     )
     head = (
         f"brdf {name!r} is not {mode} from the reference at θi = "
-        f"{', '.join(f'{result.theta_i[t]:g}°' for t in failing)}\n"
+        f"{incidence.where([verdicts[t] for t in failing], with_phi)}\n"
         f"reference: {ref.label}; {rays_txt} rays per incidence, bins {result.bins.n_theta} × "
         f"{result.bins.n_phi}, seed {ref.seed}; judged against {against}; α = {alpha:g} over "
         f"{len(verdicts)} incidence(s) (Šidák)"
@@ -525,6 +541,8 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
     ]
     if rtol is not None:
         cols[3] = "excess z/thr"
+    if with_phi:
+        cols.insert(1, "φi")
     rows = [cols]
     for t, v in enumerate(verdicts):
         ok = t not in failing
@@ -538,6 +556,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
         rows.append(
             [
                 f"{v['theta_i']:g}°",
+                *([f"{v['phi_i']:g}°"] if with_phi else []),
                 ("ok" if ok else "FAIL") if rtol is not None else verdict_kind(v),
                 _num(v["chi2_dof"], "{:.3f}"),
                 zcol,
@@ -564,11 +583,11 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
     for t in failing:
         hint = _diagnosis(result, model, t, verdicts[t]["min_events"])
         if hint:
-            lines.append(f"at θi = {result.theta_i[t]:g}°: {hint}")
+            lines.append(f"at {_at(result, t, with_phi)}: {hint}")
     for t in failing:
         wb = _worst_bins(result, model, t, verdicts[t]["min_events"])
         if wb:
-            lines.append(f"worst bins at θi = {result.theta_i[t]:g}°:")
+            lines.append(f"worst bins at {_at(result, t, with_phi)}:")
             lines += [f"  {w}" for w in wb]
     lines.append(f"hemisphere chart: {chart}")
     return "\n".join(lines)

@@ -47,7 +47,7 @@ import microsim
 from microsim import atomic
 from microsim.analysis.budget import MIN_AUTO
 from microsim.analytic.fresnel import resolve_material
-from microsim.app.scene import Scene, load_scene
+from microsim.app.scene import Scene, incidence_pairs, load_scene
 from microsim.errors import UsageError
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
@@ -133,7 +133,8 @@ class Reference:
     """What to trace: the surfaces (one, or the realisations of a random scene) by their
     ``fingerprints`` and ``azimuth_average`` flags, built on demand by ``build`` (property
     ``surfaces``: only a cache miss or a facet model needs the meshes), the material η
-    (None = mirror), incidences (degrees), ``bins``, ``seed``, ``rays`` (int or "auto") with
+    (None = mirror), incidences ``theta_i`` with their azimuths ``phi_i`` (degrees, one per
+    incidence), ``bins``, ``seed``, ``rays`` (int or "auto") with
     the auto ``target``/``max_rays``, and a ``label`` for messages (scene file or surface)."""
 
     fingerprints: tuple[str, ...]
@@ -141,6 +142,7 @@ class Reference:
     build: Callable[[], tuple]
     material: complex | float | None
     theta_i: tuple[float, ...]
+    phi_i: tuple[float, ...]
     bins: Bins
     seed: int
     rays: int | str
@@ -170,7 +172,8 @@ class Reference:
             "azimuth_average": list(self.azimuth_average),
             "material": mat,
             "theta_i": [float(t) for t in self.theta_i],
-            "phi_i": 0.0,
+            # all at φi = 0 as the key had it before azimuths were given
+            "phi_i": [float(p) for p in self.phi_i] if any(self.phi_i) else 0.0,
             "bins": self.bins.to_dict(),
             "seed": int(self.seed),
             "rays": rays,
@@ -209,6 +212,20 @@ def _theta(theta_i) -> tuple[float, ...]:
     return tuple(float(t) for t in th)
 
 
+def _phi(phi_i, n: int) -> tuple[float, ...]:
+    """``phi_i`` (degrees; a scalar, or one per θi) as one azimuth per incidence."""
+    try:
+        ph = np.atleast_1d(np.asarray(phi_i, dtype=np.float64))
+    except (TypeError, ValueError):
+        ph = np.array([np.nan])
+    if ph.ndim != 1 or ph.size not in (1, n) or not np.all(np.abs(ph) <= 360.0):
+        raise UsageError(
+            f"phi_i must be an incidence azimuth in degrees in [-360, 360], or one per θi "
+            f"({n}), got {phi_i!r}"
+        )
+    return tuple(float(p) for p in np.broadcast_to(ph, (n,)))
+
+
 def _is_surface(s) -> bool:
     return hasattr(s, "facet_normals") and hasattr(s, "fingerprint")
 
@@ -218,6 +235,7 @@ def resolve_reference(
     material="scene",
     theta_i=None,
     *,
+    phi_i=None,
     rays="auto",
     bins=None,
     seed: int = 0,
@@ -229,13 +247,16 @@ def resolve_reference(
 
     ``surface_or_scene``: a ``Scene``, a scene file or catalogue name (``find_scene``), a
     ``Surface`` or a sequence of Surfaces (realisations). A scene supplies the defaults:
-    ``material="scene"`` takes its ior, ``theta_i=None`` its incidences, ``bins=None`` its
-    (theta_bins, phi_bins); its realisations r = 0 … R−1 are built with seed
+    ``material="scene"`` takes its ior, ``theta_i=None`` and ``phi_i=None`` its incidences
+    (every θi at each of its φi, as ``microsim run`` traces them), ``bins=None`` its
+    (theta_bins, phi_bins) — over the whole circle where the scene has ``full_azimuth``; its
+    realisations r = 0 … R−1 are built with seed
     ``simulation.seed + r`` at full size. ``realisations`` (an integer in [1, 1000]) overrides
     the scene's count; a scene with ``realisations = "auto"`` gets ``DEFAULT_REALISATIONS``
     (= ``microsim.analysis.budget.MIN_AUTO``, 8) — the runner's pilot rule, which may choose
     more, is not run here. For a Surface, ``material`` (name, n, n + ik, None =
-    mirror) and ``theta_i`` are required and ``bins`` defaults to ``Bins()``."""
+    mirror) and ``theta_i`` are required, ``phi_i`` defaults to 0 and ``bins`` to ``Bins()``.
+    ``phi_i`` given: a scalar or one azimuth per θi (degrees, the surface frame)."""
     scene = None
     if realisations is not None and (
         isinstance(realisations, bool)
@@ -256,11 +277,15 @@ def resolve_reference(
         build = _scene_builder(scene, int(s0), int(R))
         fingerprints, azimuth = _scene_identity(scene, int(s0), int(R), build)
         label = f"{scene.path or scene.name}"
-        default_bins = Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)
+        default_bins = Bins(
+            scene.simulation.theta_bins, scene.simulation.phi_bins, folded=not scene.full_azimuth
+        )
         if isinstance(material, str) and material == "scene":
             material = scene.ior
         if theta_i is None:
             theta_i = scene.simulation.theta_i
+        if phi_i is None:
+            theta_i, phi_i = incidence_pairs(_theta(theta_i), scene.simulation.phi_i)
     else:
         if realisations is not None:
             raise UsageError(
@@ -309,6 +334,7 @@ def resolve_reference(
         build=build,
         material=eta,
         theta_i=_theta(theta_i),
+        phi_i=_phi(0.0 if phi_i is None else phi_i, len(_theta(theta_i))),
         bins=_bins(bins, default_bins),
         seed=int(seed),
         rays=rays if isinstance(rays, str) else int(rays),
@@ -368,6 +394,7 @@ def _auto_first_surface(ref: Reference, threads) -> Result:
         ref.surfaces[0],
         ref.material,
         list(ref.theta_i),
+        phi_i=list(ref.phi_i),
         target=ref.target,
         bins=ref.bins,
         seed=ref.seed,
@@ -385,6 +412,7 @@ def _trace(ref: Reference, threads) -> Result:
             ref.surfaces[0],
             ref.material,
             list(ref.theta_i),
+            phi_i=list(ref.phi_i),
             rays=ref.rays,
             bins=ref.bins,
             seed=ref.seed,
@@ -395,6 +423,7 @@ def _trace(ref: Reference, threads) -> Result:
         None,
         ref.material,
         list(ref.theta_i),
+        phi_i=list(ref.phi_i),
         rays=rays,
         bins=ref.bins,
         seed=ref.seed,
@@ -445,8 +474,14 @@ def _load(entry: Path, description: dict) -> Result | None:
     for name, a in arrays.items():
         if a.shape != shape or not np.all(np.isfinite(a) & (a >= 0)):
             raise _DamagedEntry(f"{npz}: {name} is not {shape} finite values >= 0")
-    if not np.array_equal(res.theta_i, description["theta_i"]) or res.is_partial:
-        raise _DamagedEntry(f"{npz}: not the complete result at θi = {description['theta_i']}")
+    same = np.array_equal(res.theta_i, description["theta_i"]) and np.array_equal(
+        res.phi_i, np.broadcast_to(np.asarray(description["phi_i"], float), res.phi_i.shape)
+    )
+    if not same or res.is_partial:
+        raise _DamagedEntry(
+            f"{npz}: not the complete result at θi = {description['theta_i']}, "
+            f"φi = {description['phi_i']}"
+        )
     return res
 
 
@@ -483,6 +518,7 @@ def reference(
     material="scene",
     theta_i=None,
     *,
+    phi_i=None,
     rays="auto",
     bins=None,
     seed: int = 0,
@@ -507,6 +543,7 @@ def reference(
         surface_or_scene,
         material,
         theta_i,
+        phi_i=phi_i,
         rays=rays,
         bins=bins,
         seed=seed,

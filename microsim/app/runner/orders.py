@@ -4,14 +4,15 @@ random walk, Kulla–Conty and Mikkelsen eq. 28 (``analysis.multiple``).
 
 The verdicts of the run keep judging order 1 (``Result.brdf``), as without bounces. The
 walk needs a Smith microsurface NDF: for Gaussian/ABC heightfields Beckmann at the realised
-slope of the traced tiles (the ``ts-beckmann-realised-*`` models' m), for V-grooves the
-scene's NDF when it is Beckmann or GGX; otherwise only the order energies are reported.
+slope of the traced tiles (the ``ts-beckmann-realised-*`` models' m; the anisotropic Beckmann
+at the realised αx, αy for anisotropic fields), for V-grooves the scene's NDF when it is
+Beckmann or GGX; otherwise only the order energies are reported.
 """
 
 from __future__ import annotations
 
 from ...analysis.multiple import needs_more_bounces, order_comparison
-from ...analytic.ndf import GGX, Beckmann
+from ...analytic.random_walk import WALK_NDFS, WalkNDF
 from ...checkpoints import checkpoint
 from ...errors import UsageError
 
@@ -27,7 +28,10 @@ def walk_ndf(plan, specs):
         if s.name.startswith("ts-beckmann-realised"):
             return s.params["ndf"]
     ndf = plan.scene.ndf()
-    return ndf if isinstance(ndf, (Beckmann, GGX)) else None
+    try:
+        return WalkNDF.of(ndf).ndf
+    except UsageError:
+        return None
 
 
 def orders_study(plan, result, specs) -> dict | None:
@@ -41,8 +45,9 @@ def orders_study(plan, result, specs) -> dict | None:
     comparison, note = None, None
     if ndf is None:
         note = (
-            f"the random walk needs a Beckmann or GGX microsurface; this scene's NDF is "
-            f"{type(plan.scene.ndf()).__name__}: order energies only"
+            f"the random walk needs a {' or '.join(WALK_NDFS)} "
+            f"microsurface; this scene's NDF is {type(plan.scene.ndf()).__name__}: order "
+            f"energies only"
         )
     else:
         try:

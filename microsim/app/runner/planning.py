@@ -20,7 +20,7 @@ from ...analysis.budget import MAX_AUTO, MIN_AUTO
 from ...atomic import json_safe
 from ...errors import UsageError
 from ...sim import Bins, Result
-from ..scene import load_scene
+from ..scene import incidence_pairs, load_scene
 from .wave_run import check_wave_plan
 
 __all__ = [
@@ -145,6 +145,16 @@ class RunPlan:
         """The run's outgoing bins: folded onto Δφ ∈ [0°, 180°], or over the whole circle for
         a scene with ``full_azimuth`` (anisotropic surfaces)."""
         return Bins(*bins_shape(self.scene, self.effort), folded=not self.scene.full_azimuth)
+
+    @property
+    def phi_i(self) -> tuple[float, ...]:
+        """The scene's incidence azimuths, degrees."""
+        return self.scene.simulation.phi_i
+
+    @property
+    def incidences(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(θi, φi) per traced incidence, degrees (``scene.incidence_pairs``)."""
+        return incidence_pairs(self.theta_i, self.phi_i)
 
     @property
     def realisation_target(self) -> float:
@@ -440,7 +450,7 @@ def tally_settings(scene) -> dict:
     its content, not its path), the material's index (None: mirror) and the bounces."""
     surface = {"kind": scene.surface.kind, **scene.surface.params}
     if not scene.anisotropic:  # isotropic surfaces keep the settings they always had
-        for key in ("oriented", "corr_len_y", "rotation"):
+        for key in ("oriented", "corr_len_y", "B_y", "rotation"):
             surface.pop(key, None)
     if scene.surface.kind == "file":
         path = Path(surface.pop("path"))
@@ -452,8 +462,8 @@ def tally_settings(scene) -> dict:
         surface["sha256"] = digest.hexdigest()
     ior = None if scene.ior is None else [complex(scene.ior).real, complex(scene.ior).imag]
     record = {"surface": surface, "ior": ior, "bounces": scene.simulation.bounces}
-    if scene.anisotropic or scene.simulation.phi_i:  # absent otherwise: older runs resume
-        record.update(phi_i=scene.simulation.phi_i, full_azimuth=scene.full_azimuth)
+    if scene.anisotropic or any(scene.simulation.phi_i):  # absent otherwise: older runs resume
+        record.update(phi_i=scene.simulation.phi_i_record, full_azimuth=scene.full_azimuth)
     return json.loads(json.dumps(json_safe(record)))
 
 

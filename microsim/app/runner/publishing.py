@@ -161,12 +161,14 @@ def verdict_document(
         "quick": plan.quick,
         "rays": int(result.rays.max()) if plan.auto else plan.rays,
         "theta_i": list(plan.theta_i),
+        "phi_i": list(plan.phi_i),
         "seed": plan.seed,
         "ranking": ranking,
         "verdicts": verdicts,
         "fits": [fit_record(f) for f in fits.values()],
         "speed": {
             "theta_i": speed_theta,
+            "phi_i": plan.phi_i[0],
             "reference": speed_ref,
             "runs": {
                 k: {"rays": list(plan.effort.speed_rays), "rel_rms": e}
@@ -175,6 +177,7 @@ def verdict_document(
         },
         "stability": {
             "theta_i": sweep.theta_i,
+            "phi_i": plan.phi_i[0],
             "rays": plan.effort.sweep_rays,
             "rel_rms": stability,
             "warnings": warnings,

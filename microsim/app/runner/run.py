@@ -186,16 +186,18 @@ def _interrupted(
 def _trace(plan: RunPlan, prev, progress: bool):
     """The main simulation of ``plan`` with a progress bar, continuing ``prev``'s tallies."""
     bar = RayProgress(tracing.remaining_rays(plan, prev).sum(), plan.scene.name, enabled=progress)
+    theta_i, phi_i = plan.incidences
     try:
         return tracing.simulate_scene(
             plan,
-            plan.theta_i,
+            theta_i,
             plan.rays,
             plan.seed,
             plan.bins,
             progress=bar,
             resume=prev,
             bounces=plan.scene.simulation.bounces,
+            phi_i=phi_i,
         )
     finally:
         bar.close()
@@ -280,7 +282,8 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         )
         if orders_doc is not None:
             doc["orders"] = atomic.json_safe(orders_doc)
-        aniso = anisotropy_summary(result, verdicts) if sc.anisotropic else None
+        comparison = (orders_doc or {}).get("comparison")
+        aniso = anisotropy_summary(result, verdicts, comparison) if sc.anisotropic else None
         if aniso is not None:
             doc["anisotropy"] = atomic.json_safe(aniso)
         atomic.write_json(stage / VERDICTS_FILE, doc)

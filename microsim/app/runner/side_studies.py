@@ -147,7 +147,8 @@ def speed_runs(plan: RunPlan, result, shown, verdicts):
     tracer is built once and reused): the times are tracing times, without the scene build.
 
     Reference (noise-free): the prescribed model that agrees best (lowest rel_rms) at the
-    incidence nearest 30°; without one, the main run (whose own noise then floors the error)."""
+    incidence nearest 30° (at the first φi); without one, the main run (whose own noise then
+    floors the error)."""
     t_index = int(np.argmin(np.abs(np.asarray(plan.theta_i) - 30.0)))
     theta = plan.theta_i[t_index]
     ok = [
@@ -156,6 +157,7 @@ def speed_runs(plan: RunPlan, result, shown, verdicts):
         if v.get("agrees")
         and not v.get("fitted")
         and abs(v["theta_i"] - theta) < 1e-9
+        and v["phi_i"] == plan.phi_i[0]
         and v.get("rel_rms") is not None
     ]
     best = min(ok, key=lambda v: v["rel_rms"])["model"] if ok else None

@@ -59,8 +59,10 @@ def simulate_scene(
     realisations=True,
     bounces=1,
     surface=None,
+    phi_i=None,
 ):
-    """``estimate`` the plan's scene at ``theta_i`` (degrees) with ``rays`` per incidence over
+    """``estimate`` the plan's scene at ``theta_i`` (degrees; ``phi_i`` one azimuth per θi,
+    None: the scene's first φi at every θi — the side studies) with ``rays`` per incidence over
     ``realisations`` surfaces: True = the plan's, False = one (seed ``seed``), or a count;
     ``bounces``: scattering orders traced (``simulate``; the side studies trace one).
     ``surface``: that one realisation already built (``scene_surface``), so that repeated
@@ -77,7 +79,7 @@ def simulate_scene(
             surface,
             sc.material,
             tuple(theta_i),
-            sc.simulation.phi_i,
+            plan.phi_i[0] if phi_i is None else tuple(phi_i),
             bins=bins,
             bounces=bounces,
             surface_factory=factory,
@@ -102,10 +104,12 @@ def simulate_auto_scene(plan: RunPlan, log):
     per incidence; one progress line per batch through ``log`` (None: silent)."""
     sc = plan.scene
     surface = scene_surface(plan, plan.seed)
+    theta_i, phi_i = plan.incidences
     return simulate_auto(
         surface,
         sc.ior,
-        list(plan.theta_i),
+        list(theta_i),
+        phi_i=list(phi_i),
         target=AUTO_TARGET,
         bins=plan.bins,
         seed=plan.seed,
@@ -154,7 +158,7 @@ def remaining_rays(plan: RunPlan, prev) -> np.ndarray:
     of the plan's first k ≤ R realisations, or None) is continued."""
     n = plan.realisations
     per_real = np.array([plan.rays // n + (r < plan.rays % n) for r in range(n)], dtype=np.int64)
-    todo = np.repeat(per_real[:, None], len(plan.theta_i), axis=1)
+    todo = np.repeat(per_real[:, None], len(plan.incidences[0]), axis=1)
     if prev is not None and prev.tallies is not None and "rays" in prev.tallies:
         done = np.asarray(prev.tallies["rays"], dtype=np.int64).reshape(-1, todo.shape[1])
         todo[: len(done)] -= done

@@ -136,6 +136,7 @@ def run_wave(plan, result) -> tuple:
             surfaces,
             sc.ior,
             list(plan.theta_i),
+            phi_i=plan.phi_i[0],
             wavelength=w.wavelength,
             bins=result.bins,
             fresnel_angle=w.fresnel_angle,
