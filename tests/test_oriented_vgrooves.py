@@ -24,7 +24,8 @@ def test_oriented_grooves_keep_their_direction():
     assert SURFACE.nominal["oriented"] is True and SURFACE.exact_shadowing == "vgroove"
     iso = vgrooves(2000, Beckmann(0.3))
     assert iso.azimuth_average and "oriented" not in iso.nominal  # isotropic ones unchanged
-    assert [s.name for s in default_models(SURFACE, "aluminium")] == ["ts-facets"]
+    names = [s.name for s in default_models(SURFACE, "aluminium")]
+    assert names == ["ts-vgroove-oriented", "ts-facets"]
     with pytest.raises(UsageError, match="masking='analytic'"):
         simulate(SURFACE, None, 30, rays=4096, masking="analytic")
     with pytest.raises(UsageError, match="oriented"):
@@ -45,6 +46,12 @@ def test_facets_with_vgroove_g_are_exact_at_every_azimuth(phi_i):
     exact = [v for v in vs if v["model"] == "ts-facets"]
     assert len(exact) == len(THETA) and all(verdict_kind(v) == "agrees" for v in exact), exact
     assert all(v["chi2_dof"] > 100 for v in vs if v["model"] == "v-cavity")
+    # the continuum of tilts is the tile's ensemble: judged beyond the tile's computed
+    # departure from it, it never deviates; the V-cavity form is a conclusive deviation
+    continuum = [v for v in vs if v["model"] == "ts-vgroove-oriented"]
+    assert all(v["reference"] == "one-tile" and v["tile_departure"] is not None for v in continuum)
+    assert all(verdict_kind(v) != "deviates" for v in continuum), continuum
+    assert all(verdict_kind(v) == "deviates" for v in vs if v["model"] == "v-cavity")
 
 
 def test_the_brdf_depends_on_the_incidence_azimuth():

@@ -88,6 +88,7 @@ _STYLES = {
     "ts-smith-correlated": ("#2ca02c", "-"),
     "ts-none": ("#7f7f7f", "-"),
     "ts-facets": ("#17becf", "-"),
+    "ts-vgroove-oriented": ("#1f77b4", "--"),
     "facets": ("#17becf", "-"),
     "ts-beckmann-nominal-vgroove": ("#1f77b4", "--"),
     "ts-beckmann-nominal-smith": ("#ff7f0e", "--"),

@@ -212,6 +212,14 @@ REPORT_MODELS: tuple[ReportModel, ...] = (
         "Mikkelsen 2009, eq. 13, 14, 17",
     ),
     ReportModel(
+        ("ts-vgroove-oriented",),
+        "closed form",
+        "oriented V-grooves: Torrance–Sparrow with V-groove G on 2¹⁶ stratified tilts of the "
+        "tilt NDF — the continuum of grooves the traced tile quantises, its ensemble form",
+        "TorranceSparrow(Empirical(normals, weights), VGroove())",
+        "Mikkelsen 2009, eq. 25",
+    ),
+    ReportModel(
         tuple(f"ts-beckmann-nominal-{g}" for g in _TS_FAMILY),
         "closed form",
         "heightfields: Torrance–Sparrow with Beckmann at the scene's nominal m, with each G",

@@ -14,6 +14,12 @@ were drawn from, G = V-groove, Mikkelsen 2009, eq. 25, exact for the V-cavity su
   ``ts-facets``         D = the surface's own facets (azimuth-averaged when the surface asks
                         for it), the exact G: what the explicit surface represents exactly (no
                         tail beyond its last groove)
+Oriented V-grooves (no ensemble NDF: every facet normal lies in the xz plane):
+  ``ts-facets``         the tile's facets with V-groove G, exact for the tile
+  ``ts-vgroove-oriented``  the same with ``ORIENTED_CONTINUUM`` stratified tilts of the tilt
+                        NDF (``Surface.tilt_ndf``): the continuum of grooves the tile quantises
+                        (its tail beyond the tile's last quantile included), the ensemble form;
+                        the pair measures the tile's departure from it
 Surfaces with an exact shadowing and no NDF (the flat mirror, exact shadowing "none"):
   ``mirror-fresnel``    the exact answer: all reflected light in the mirror bin, weight F(θi)
 Surfaces without an exact shadowing (heightfields: ``gaussian``, ``abc``, ``file``;
@@ -112,6 +118,26 @@ def _pooled_facets(surfaces):
     return normals, weights, _realised_ndf(surfaces)
 
 
+ORIENTED_CONTINUUM = 2**16
+"""Grooves of ``ts-vgroove-oriented``: stratified tilts whose CDF is within 1/2¹⁷ of the tilt
+NDF's, 32 × the catalogue tile's 2000 (its bin averages cost ~0.1 s per incidence)."""
+
+ORIENTED_MODEL = "ts-vgroove-oriented"
+
+
+def _oriented_continuum(surface, material) -> ModelSpec | None:
+    """``ts-vgroove-oriented`` of an oriented V-groove tile (module docstring), or None without
+    a ``tilt_ndf``."""
+    from microsim.surfaces.vgrooves import vgrooves
+
+    if surface.tilt_ndf is None:
+        return None
+    dense = vgrooves(ORIENTED_CONTINUUM, surface.tilt_ndf, oriented=True)
+    normals, weights, _ = _pooled_facets([dense])
+    spec = ModelSpec.facets(ORIENTED_MODEL, normals, weights, "vgroove", material)
+    return ModelSpec(spec.name, spec.kind, {**spec.params, "continuum": True})
+
+
 GEOMEAN_MODEL = "ts-beckmann-nominal-smith-corr-geomean"
 """The anisotropic ensemble NDF with the height-correlated Smith G of the isotropic
 α = √(αx αy): the stand-in MaterialX uses for the anisotropic Smith G."""
@@ -167,8 +193,13 @@ def default_models(
     if exact == "none":  # nothing shadows (flat): all light in the mirror bin, weight F(θi)
         return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", material)]
     if exact is not None and ndf is None and not surfaces[0].azimuth_average:
-        # oriented V-grooves: no ensemble NDF; TS with the tile's facets and G is exact
-        return [ModelSpec.facets("ts-facets", normals, weights, exact, material)]
+        # oriented V-grooves: no ensemble NDF; TS with the tile's facets and G is exact, the
+        # same with the continuum of tilts is the ensemble form
+        facets = ModelSpec.facets("ts-facets", normals, weights, exact, material)
+        continuum = _oriented_continuum(surfaces[0], material)
+        if continuum is None:
+            return [facets]
+        return [continuum, _tagged(facets, surfaces, ensemble=ORIENTED_MODEL)]
     if exact is not None:
         if ndf is None:
             raise UsageError(
@@ -204,16 +235,20 @@ def departure_models(scene_or_surface, material, ndf=None) -> list[ModelSpec]:
     ensemble (``analysis.verdicts.tile_departure``): [the ensemble closed form with the
     surface's exact shadowing, ``ts-facets``] for one surface whose exact shadowing depends on
     its facets alone (V-grooves); [] where that departure is not computable without rays
-    (several realisations, heightfields, a flat mirror) or there is no ensemble (oriented
-    grooves: ``ts-facets`` is their exact form)."""
+    (several realisations, heightfields, a flat mirror) or there is no ensemble form (a
+    surface without ``tilt_ndf``); for oriented grooves the ensemble form is
+    ``ts-vgroove-oriented``."""
     surfaces, _ = _surfaces_and_ndf(scene_or_surface, None)
     if len(surfaces) != 1 or surfaces[0].exact_shadowing in (None, "none"):
         return []
-    if surfaces[0].ensemble_ndf is None:
+    if surfaces[0].ensemble_ndf is None and surfaces[0].tilt_ndf is None:
         return []
     standard = default_models(scene_or_surface, material, ndf)
     facets = standard[-1]
-    return [s for s in standard if s.name == facets.params["ensemble"]] + [facets]
+    ensemble = facets.params.get("ensemble")
+    if ensemble is None:
+        return []
+    return [s for s in standard if s.name == ensemble] + [facets]
 
 
 def _auto_azimuths(normals) -> int:
@@ -288,7 +323,7 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
             )
     out = predict_incidences(specs, result.theta_i, result.phi_i, result.bins, rtol)
     own = set(result.meta.get("realisation_models", ())) | {
-        s.name for s in specs if s.kind == "facets"
+        s.name for s in specs if s.kind == "facets" and not s.params.get("continuum")
     }
     meta = {**result.meta, "realisation_models": sorted(own)}
     models = {**result.models, **out}

@@ -118,6 +118,10 @@ class Surface:
                          or None
     ``generator_stats``  a function of the surface returning the generator's own measured
                          statistics for ``stats()`` (V-grooves: the tilt distribution), or None
+    ``tilt_ndf``         V-grooves: the NDF whose tilt density the groove tilts sample — for
+                         oriented grooves too, where it is no NDF of the facets (their normals
+                         all lie in the xz plane) but defines the continuum of tilts the tile
+                         quantises; None for other surfaces
     """
 
     kind: str
@@ -134,6 +138,7 @@ class Surface:
     exact_shadowing: str | None = None
     predicted: Predicted | None = None
     generator_stats: Callable[["Surface"], dict] | None = None
+    tilt_ndf: object = None
 
     def __repr__(self) -> str:
         """One line: kind, grid or groove count, tile, triangles and the nominal parameters."""

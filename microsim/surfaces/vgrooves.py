@@ -149,6 +149,7 @@ def vgrooves(
         ensemble_ndf=None if oriented else ndf,
         exact_shadowing="vgroove",
         generator_stats=groove_stats,
+        tilt_ndf=ndf,
     )
 
 
