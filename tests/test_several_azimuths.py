@@ -156,3 +156,14 @@ def test_bad_azimuth_lists_name_the_key(value, message):
     with pytest.raises(UsageError, match="simulation.phi_i") as e:
         load_scene_text(SCENE.format(phi_i=value))
     assert message in str(e.value)
+
+
+def test_grouped_incidence_lists_name_every_azimuth():
+    from microsim.analysis.incidence import grouped
+
+    def vs(*pairs):
+        return [{"theta_i": t, "phi_i": p} for t, p in pairs]
+
+    assert grouped(vs((80, 0))) == "80° at φi 0°"
+    assert grouped(vs((0, 0), (80, 0), (0, 90), (80, 90)), ",") == "0,80° at φi 0,90°"
+    assert grouped(vs((60, 0), (80, 0), (80, 90))) == "60, 80° at φi 0° and 80° at φi 90°"

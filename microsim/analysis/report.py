@@ -229,7 +229,10 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
             for name in ("random-walk", "kulla-conty"):
                 m = inc["models"].get(name)
                 if m and m.get("rel_dev") is not None:
-                    dev.setdefault(name, []).append(_signed_pct(m["rel_dev"]))
+                    at = incidence.label(*incidence.key(inc), True, symbol=False) + ": "
+                    dev.setdefault(name, []).append(
+                        (at if with_phi else "") + _signed_pct(m["rel_dev"])
+                    )
         mark = " †" if comparison.get("expected") is False else ""
         rows.append(
             [f"[{d['scene']}]({d['scene']}/report.md)", cells, "yes" if need else "no"]
@@ -1003,7 +1006,7 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
 
     def at(vs) -> str:
         if with_phi:
-            return "θi " + incidence.where(vs, True)
+            return "θi " + incidence.grouped(vs, ",")
         return "θi " + ",".join(f"{v['theta_i']:g}" for v in vs) + "°"
 
     if summary == "agrees":
@@ -1188,7 +1191,7 @@ def run_summary(doc: Mapping) -> str:
             rms = [v["rel_rms"] for v in bad if v.get("rel_rms") is not None]
             size = f" by up to {100 * max(rms):.2g}%" if rms else ""
             where = (
-                incidence.where(bad, True)
+                incidence.grouped(bad)
                 if with_phi
                 else ", ".join(f"{v['theta_i']:g}" for v in bad) + "°"
             )

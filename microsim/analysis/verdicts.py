@@ -778,12 +778,14 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
             continue
         note = ""
         if unsure:
-            where = incidence.where(unsure, with_phi)
+            where = incidence.grouped(unsure) if with_phi else incidence.where(unsure, False)
             note = f"inconclusive at θi={where} ({inconclusive_reason(unsure[-1])})"
         if not bad:
             out[name] = note
             continue
-        parts = [f"deviates at θi={incidence.where(bad, with_phi)}"]
+        parts = [
+            f"deviates at θi={incidence.grouped(bad) if with_phi else incidence.where(bad, False)}"
+        ]
         rms = [v for v in bad if v["rel_rms"] is not None]
         if rms:
             r = max(rms, key=lambda v: v["rel_rms"])

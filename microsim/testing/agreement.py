@@ -498,6 +498,10 @@ def assert_brdf_agrees(
     raise BRDFMismatch(out["message"], out)
 
 
+def _failing_text(verdicts, with_phi: bool) -> str:
+    return incidence.grouped(verdicts) if with_phi else incidence.where(verdicts, False)
+
+
 def _at(result, t: int, with_phi: bool) -> str:
     return incidence.label(float(result.theta_i[t]), float(result.phi_i[t]), with_phi)
 
@@ -524,7 +528,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
     )
     head = (
         f"brdf {name!r} is not {mode} from the reference at θi = "
-        f"{incidence.where([verdicts[t] for t in failing], with_phi)}\n"
+        f"{_failing_text([verdicts[t] for t in failing], with_phi)}\n"
         f"reference: {ref.label}; {rays_txt} rays per incidence, bins {result.bins.n_theta} × "
         f"{result.bins.n_phi}, seed {ref.seed}; judged against {against}; α = {alpha:g} over "
         f"{len(verdicts)} incidence(s) (Šidák)"

@@ -31,7 +31,7 @@ import numpy as np
 from microsim.analytic.models import BRDFModel
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import ModelSpec, predict_incidences
 
 from .agreement import BRDFMismatch, lobe_width_deg, readable_name, wrap_brdf
 
@@ -122,18 +122,21 @@ def assert_brdf_matches_model(
     model,
     theta_i=(0, 30, 60, 80),
     *,
+    phi_i=0.0,
     bins=(18, 19),
     name: str | None = None,
     seed: int = 0,
 ) -> dict:
     """Assert that the callable ``brdf(wi, wo)`` ((N, 3) unit vectors, away from the
-    surface, n = +z, wi in the x–z plane; N values in sr⁻¹, no cosine) implements ``model``
+    surface, n = +z, wi at azimuth ``phi_i``; N values in sr⁻¹, no cosine) implements ``model``
     (a ``microsim.analytic.models`` object, e.g. ``TorranceSparrow(GGX(0.3),
     Smith(correlated=True), "aluminium")``, or a callable) — module docstring for the
     tolerance, reciprocity and the diagnosis.
 
-    ``theta_i``: incidences (degrees, < 90); ``bins``: (n_theta, n_phi) or ``Bins`` (folded
-    Δφ, as microsim's own verdicts); ``name`` the brdf's name in messages (default its
+    ``theta_i``: incidences (degrees, < 90); ``phi_i``: their azimuth (degrees; a scalar or one
+    per θi: an anisotropic model depends on it, 0 is the x–z plane); ``bins``: (n_theta, n_phi)
+    or ``Bins`` (folded Δφ, as microsim's own verdicts; ``Bins(..., folded=False)`` resolves
+    an anisotropic BRDF's ±Δφ asymmetry); ``name`` the brdf's name in messages (default its
     ``agreement.readable_name``); ``seed`` the reciprocity pairs'. Returns a dict
     (``max_rel_dev``, ``energy_ratio`` per θi, ``reciprocity``) when it passes; raises
     ``BRDFMismatch`` (an AssertionError) whose message names the failing incidences, the
@@ -149,10 +152,16 @@ def assert_brdf_matches_model(
     theta = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     if theta.ndim != 1 or not np.all((theta >= 0) & (theta < 90)):
         raise UsageError(f"theta_i must be incidences in [0°, 90°), got {theta_i!r}")
+    phis = np.atleast_1d(np.asarray(phi_i, dtype=np.float64))
+    if phis.ndim != 1 or phis.size not in (1, theta.size) or not np.all(np.abs(phis) <= 360):
+        raise UsageError(
+            f"phi_i must be an azimuth in degrees in [-360, 360], or one per θi, got {phi_i!r}"
+        )
+    phis = np.broadcast_to(phis, theta.shape)
     specs = [ModelSpec.function("brdf", wrap_brdf(brdf)), _spec(model, "model")]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        vals = predict(specs, theta, b, phi_i=0.0, rtol=QUAD_RTOL)
+        vals = predict_incidences(specs, theta, phis, b, rtol=QUAD_RTOL)
     user, ref = vals["brdf"], vals["model"]
     allowed = 2 * QUAD_RTOL * ref + QUAD_RTOL * ref.max(axis=(1, 2), keepdims=True)
     bad = np.abs(user - ref) > allowed
@@ -176,7 +185,9 @@ def assert_brdf_matches_model(
         lines.append(
             f"brdf {name!r} does not implement the model ({getattr(model, 'name', 'model')}"
             f" {getattr(model, 'params', dict)()!r}) at θi = "
-            + ", ".join(f"{theta[t]:g}°" for t in failing)
+            + ", ".join(
+                f"{theta[t]:g}°" + (f" (φi {phis[t]:g}°)" if any(phis) else "") for t in failing
+            )
             + f" (bin averages {b.n_theta} × {b.n_phi}, quadrature accuracy {QUAD_RTOL:g})"
         )
         lines.append("  θi     energy ratio brdf/model   bins off   worst bin (model − brdf)/brdf")
