@@ -926,14 +926,15 @@ def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
     return [
         "## Anisotropy: the Smith G variants",
         "",
-        "Anisotropic Gaussian fields against Torrance–Sparrow with the ensemble's anisotropic "
-        "Beckmann D and three Smith G: the exact anisotropic Λ (projected roughness α(φ)), "
+        "Anisotropic heightfields (Gaussian, ABC) against Torrance–Sparrow with the "
+        "ensemble's anisotropic Beckmann D and three Smith G: the exact anisotropic Λ "
+        "(projected roughness α(φ)), "
         "height-correlated and separable, and the Λ of the isotropic α = √(αx αy) that "
         "MaterialX uses. Columns: the stand-in against the exact Λ, model against model "
         "(energy deviation and relative RMS over the exact model's 90 % energy bins); then "
         "each variant against the simulation: its verdict symbol, energy deviation "
         "(simulation − model)/model ± standard error, and relative RMS error. φi is the "
-        "incidence azimuth (0°: along the x correlation axis).",
+        "incidence azimuth (0°: along the field's x axis).",
         "",
         md_table(
             ["scene", "θi", "φi", "stand-in vs exact Λ"] + [f"{x} vs simulation" for x in labels],
