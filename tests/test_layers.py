@@ -30,6 +30,7 @@ LAYERS = [
     ("surfaces", ("microsim.surfaces",)),
     ("sim", ("microsim.sim",)),
     ("wave", ("microsim.wave",)),
+    ("measured", ("microsim.measured",)),
     ("analysis", ("microsim.analysis",)),
     ("app", ("microsim.app", "microsim.testing", "microsim.__main__")),
 ]

@@ -443,6 +443,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         "multiple": "Energy in scattering orders ≥ 2 against θi, with the models' predictions",
         "inplane": "In-plane scattering curves (simulation ± 1σ, models as bin averages)",
         "hemisphere": "Hemisphere maps: simulation, best and worst model, z-scores",
+        "appearance": "Appearance: a plane under a directional light, from the tables",
         "energy": "Single-bounce albedo ρ(θi) and lost energy against θi",
         "stability": "Stability: model relative RMS error against θi",
         "speed": "Speed against accuracy of the estimator variants",

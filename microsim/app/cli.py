@@ -190,9 +190,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     q.set_defaults(func=_cmd_report)
     from .bench import add_bench_command
+    from .measure import add_measure_command
     from .sweep import add_sweep_command
     from .view import add_view_command
 
+    add_measure_command(sub)
     add_view_command(sub)
     add_bench_command(sub)
     add_sweep_command(sub)

@@ -60,6 +60,7 @@ and the index show them as such (the fit numbers are kept), not as a test of the
 CHARTS = {
     "inplane": "inplane.png",
     "hemisphere": "hemisphere.png",
+    "appearance": "appearance.png",
     "energy": "energy.png",
     "stability": "stability.png",
     "speed": "speed.png",

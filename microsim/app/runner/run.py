@@ -38,6 +38,7 @@ from ...analysis.anisotropy import anisotropy_summary
 from ...analysis.budget import error_budget
 from ...analysis.fits import FIT_MODELS, fit_all
 from ...analysis.multiple import multiple_chart
+from ...analysis.pictures import appearance
 from ...analysis.report import albedo_stderr
 from ...analysis.verdicts import verdicts_for_result
 from ...checkpoints import checkpoint
@@ -362,6 +363,10 @@ def _charts(
         files["hemisphere"] = CHARTS["hemisphere"]
         ch.hemisphere_maps(
             result, judged, _nan_for_none(verdicts), stage / files["hemisphere"], t_index, name
+        )
+        files["appearance"] = CHARTS["appearance"]
+        appearance(
+            result, judged, _nan_for_none(verdicts), t_index, stage / files["appearance"], name
         )
     grid = np.linspace(0.0, 89.9, 180)
     files["energy"] = CHARTS["energy"]

@@ -1,0 +1,301 @@
+"""`microsim measure`: a virtual gonioreflectometer — the whole single-bounce BRDF of a scene's
+surface tabulated over a dense grid of incidences, each traced until its error target, with
+standard errors, resumable, written as a ``measured.BRDFTable``. It is the single-bounce BRDF
+(what the verdicts judge; the scene's ``bounces`` is not used).
+
+Acquisition: θi = 0, Δ, 2Δ, … ≤ ``theta_max`` (``--theta-step`` Δ, default 5°; at most
+89.99°) on the scene's bins (folded: isotropic surfaces only — an anisotropic surface's
+table would need φi as a dimension, which this table has not), one surface realisation (the
+scene's seed, at the ``--quick`` scale if given), each incidence traced by ``simulate_auto``
+until the energy-weighted relative standard error over the bins carrying 90 % of the energy is
+≤ ``--target`` (default 2 %) or ``--max-rays`` rays. Reciprocity is not used to save work:
+the table is measured at every θi it holds, so reciprocity stays a check of the result
+(``measured.BRDFTable`` does not impose it).
+
+Output directory: ``measure.json`` (the settings, written first; per incidence its rays,
+seconds, achieved error and convergence once traced, and the totals — the acquisition's
+cost), ``incidences/theta-XX.XX/`` (each incidence's ``Result``, written atomically when it
+is done), and at the end ``table.npz`` (``BRDFTable.save``). Ctrl-C keeps every finished
+incidence (exit 130); ``--resume DIR`` continues with the others after checking that the
+settings are the same. Memory does not grow with the ray count (``simulate_auto``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import atomic
+from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
+from ..measured import BRDFTable
+from ..sim import Bins, Result
+from ..sim.auto import simulate_auto
+from .runner.planning import check_output_path, effort_for, tally_settings
+from .scene import MAX_THETA_I, load_scene
+
+__all__ = ["Acquisition", "plan_measure", "measure", "add_measure_command", "SETTINGS_FILE"]
+
+SETTINGS_FILE = "measure.json"
+TABLE_FILE = "table.npz"
+INCIDENCES = "incidences"
+MAX_INCIDENCES = 900
+
+
+@dataclass(frozen=True)
+class Acquisition:
+    """A validated ``measure``: the scene, output directory, incidence grid (degrees), error
+    ``target``, ``max_rays`` per incidence, ``seed``, ``threads``, ``quick`` (surface scale)."""
+
+    scene: object
+    out: Path
+    theta_i: tuple[float, ...]
+    target: float
+    max_rays: int
+    seed: int
+    threads: int
+    quick: bool
+
+    @property
+    def bins(self) -> Bins:
+        sim = self.scene.simulation
+        return Bins(sim.theta_bins, sim.phi_bins)
+
+    def settings(self) -> dict:
+        """What a ``--resume`` must match (JSON values)."""
+        return atomic.json_safe(
+            {
+                "scene": self.scene.name,
+                **tally_settings(self.scene),
+                "theta_i": list(self.theta_i),
+                "target": self.target,
+                "max_rays": self.max_rays,
+                "seed": self.seed,
+                "quick": self.quick,
+                "bins": self.bins.to_dict(),
+            }
+        )
+
+    def incidence_dir(self, theta: float) -> Path:
+        return self.out / INCIDENCES / f"theta-{theta:05.2f}"
+
+
+def plan_measure(
+    scene_path,
+    *,
+    out=None,
+    theta_step: float = 5.0,
+    theta_max: float = 85.0,
+    target: float = 0.02,
+    max_rays: int = 10**8,
+    seed=None,
+    threads: int = 2,
+    quick: bool = False,
+    resume: bool = False,
+    force: bool = False,
+) -> Acquisition:
+    """Validate a ``measure`` without touching the disk (every problem a one-line UsageError
+    naming the option)."""
+    scene = load_scene(scene_path)
+    if scene.anisotropic:
+        raise UsageError(
+            f"scene {scene.name}: measure tabulates isotropic surfaces (a table over θi and "
+            f"folded bins); this surface is anisotropic"
+        )
+    step, top = float(theta_step), float(theta_max)
+    if not (math.isfinite(step) and step > 0):
+        raise UsageError(f"--theta-step must be a positive angle in degrees, got {theta_step!r}")
+    if not (math.isfinite(top) and 0 <= top <= MAX_THETA_I):
+        raise UsageError(f"--theta-max must be in [0, {MAX_THETA_I:g}] degrees, got {theta_max!r}")
+    thetas = tuple(float(t) for t in np.round(np.arange(0.0, top + 1e-9, step), 6))
+    if len(thetas) > MAX_INCIDENCES:
+        raise UsageError(
+            f"--theta-step {step:g} gives {len(thetas)} incidences; at most {MAX_INCIDENCES}"
+        )
+    if not (isinstance(target, (int, float)) and 1e-4 <= target <= 0.5):
+        raise UsageError(f"--target must be a relative error in [0.0001, 0.5], got {target!r}")
+    if isinstance(max_rays, bool) or int(max_rays) != max_rays or max_rays < 2**16:
+        raise UsageError(f"--max-rays must be an integer >= 65536, got {max_rays!r}")
+    if isinstance(threads, bool) or int(threads) != threads or threads < 1:
+        raise UsageError(f"--threads must be an integer >= 1, got {threads!r}")
+    out = Path(out) if out is not None else Path("runs") / f"{scene.name}-measured"
+    check_output_path(out, "--out", scene.path)
+    acq = Acquisition(
+        scene,
+        out,
+        thetas,
+        float(target),
+        int(max_rays),
+        scene.simulation.seed if seed is None else int(seed),
+        int(threads),
+        bool(quick),
+    )
+    if out.exists() and not (resume or force):
+        raise UsageError(
+            f"{out} already exists; pass --resume to continue it or --force to replace it"
+        )
+    if resume:
+        saved = _saved_settings(out)
+        if saved != acq.settings():
+            key = next(
+                k
+                for k in sorted({*saved, *acq.settings()})
+                if saved.get(k) != acq.settings().get(k)
+            )
+            raise UsageError(
+                f"--resume {out}: {key} is {saved.get(key)!r} there but "
+                f"{acq.settings().get(key)!r} now; resume with the same settings or use --force"
+            )
+    return acq
+
+
+def _read_json(path: Path) -> dict:
+    with open(path, encoding="utf-8") as fh:
+        return json.load(fh)
+
+
+def _saved_settings(out: Path) -> dict:
+    try:
+        doc = _read_json(out / SETTINGS_FILE)
+    except (OSError, ValueError) as e:
+        raise UsageError(
+            f"--resume {out}: no readable {SETTINGS_FILE} ({type(e).__name__}); not a "
+            f"microsim measure directory"
+        ) from None
+    return doc.get("settings", {})
+
+
+def measure(acq: Acquisition, log=print) -> BRDFTable:
+    """Trace every incidence of ``acq`` not already on disk, then write and return the table
+    (module docstring). ``log``: one line per incidence (None: silent)."""
+    acq.out.mkdir(parents=True, exist_ok=True)
+    with atomic.output_lock(acq.out, holder="measure"):
+        doc = {"settings": acq.settings(), "incidences": {}}
+        if (acq.out / SETTINGS_FILE).exists():
+            doc["incidences"] = _read_json(acq.out / SETTINGS_FILE).get("incidences", {})
+        atomic.write_json(acq.out / SETTINGS_FILE, doc)
+        scale = effort_for(acq.quick).scale_for(acq.scene.surface.kind)
+        surface = None
+        results = []
+        for k, theta in enumerate(acq.theta_i):
+            where = acq.incidence_dir(theta)
+            key = f"{theta:g}"
+            if key in doc["incidences"] and where.is_dir():
+                results.append(Result.load(where))
+                continue
+            if surface is None:
+                surface = acq.scene.build_surface(seed=acq.seed, scale=scale)
+            t0 = time.perf_counter()
+            res = simulate_auto(
+                surface,
+                acq.scene.material,
+                theta,
+                target=acq.target,
+                bins=acq.bins,
+                seed=acq.seed + k,
+                threads=acq.threads,
+                max_rays=acq.max_rays,
+            )
+            res.save(where)
+            auto = res.meta["auto"]["incidences"][0]
+            doc["incidences"][key] = {
+                "rays": int(auto["rays"]),
+                "seconds": time.perf_counter() - t0,
+                "rse": auto["rse"],
+                "converged": bool(auto["converged"]),
+            }
+            atomic.write_json(acq.out / SETTINGS_FILE, doc)
+            results.append(res)
+            if log:
+                log(
+                    f"microsim measure: θi = {theta:g}° ({k + 1}/{len(acq.theta_i)}): "
+                    f"{auto['rays']:,} rays, relative error {100 * auto['rse']:.2g} %"
+                    f"{'' if auto['converged'] else ' (max-rays reached)'}"
+                )
+        table = BRDFTable(
+            np.array(acq.theta_i),
+            acq.bins,
+            np.stack([r.brdf[0] for r in results]),
+            np.stack([r.stderr[0] for r in results]),
+            f"{acq.scene.name} (simulated)",
+        )
+        per = doc["incidences"].values()
+        doc["totals"] = {
+            "incidences": len(acq.theta_i),
+            "rays": int(sum(d["rays"] for d in per)),
+            "seconds": float(sum(d["seconds"] for d in per)),
+            "converged": all(d["converged"] for d in per),
+        }
+        table.save(acq.out / TABLE_FILE)
+        atomic.write_json(acq.out / SETTINGS_FILE, doc)
+    return table
+
+
+def _cmd_measure(args) -> int:
+    acq = plan_measure(
+        args.scene,
+        out=args.out,
+        theta_step=args.theta_step,
+        theta_max=args.theta_max,
+        target=args.target,
+        max_rays=args.max_rays,
+        seed=args.seed,
+        threads=args.threads,
+        quick=args.quick,
+        resume=args.resume,
+        force=args.force,
+    )
+    log = None if args.no_progress else (lambda s: print(s, flush=True))
+    try:
+        measure(acq, log)
+    except KeyboardInterrupt:
+        doc = _read_json(acq.out / SETTINGS_FILE)
+        print(
+            f"microsim measure: interrupted; {len(doc.get('incidences', {}))} of "
+            f"{len(acq.theta_i)} incidences kept in {acq.out}; continue with "
+            f"microsim measure {args.scene} --out {acq.out} --resume",
+            flush=True,
+        )
+        return EXIT_INTERRUPTED
+    doc = _read_json(acq.out / SETTINGS_FILE)
+    tot = doc["totals"]
+    print(
+        f"microsim measure: wrote {acq.out / TABLE_FILE} ({tot['incidences']} incidences, "
+        f"{tot['rays']:,} rays, {tot['seconds']:.1f} s of tracing"
+        f"{'' if tot['converged'] else '; some incidences stopped at --max-rays'})"
+    )
+    return EXIT_OK
+
+
+def add_measure_command(sub) -> None:
+    """Register ``microsim measure``."""
+    m = sub.add_parser(
+        "measure",
+        help="tabulate a scene's BRDF over a dense grid of incidences (a virtual "
+        "gonioreflectometer), each to an error target; writes table.npz",
+    )
+    m.add_argument("scene", help="scene file (TOML) of an isotropic surface")
+    m.add_argument("--out", help="output directory (default runs/<scene>-measured)")
+    m.add_argument("--theta-step", type=float, default=5.0, help="θi step, degrees (default 5)")
+    m.add_argument("--theta-max", type=float, default=85.0, help="largest θi (default 85)")
+    m.add_argument(
+        "--target",
+        type=float,
+        default=0.02,
+        help="energy-weighted relative standard error per incidence (default 0.02)",
+    )
+    m.add_argument(
+        "--max-rays", type=int, default=10**8, help="rays per incidence at most (default 1e8)"
+    )
+    m.add_argument("--seed", type=int, help="random seed (default: the scene's)")
+    m.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
+    m.add_argument("--quick", action="store_true", help="the --quick surface scale")
+    g = m.add_mutually_exclusive_group()
+    g.add_argument("--resume", action="store_true", help="continue an interrupted measure")
+    g.add_argument("--force", action="store_true", help="replace an existing output directory")
+    m.add_argument("--no-progress", action="store_true", help="no progress lines")
+    m.set_defaults(func=_cmd_measure)

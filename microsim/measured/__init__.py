@@ -1,0 +1,5 @@
+"""Measured BRDFs: tables of bin-averaged BRDF values over incidences (what microsim measures,
+``table.BRDFTable``), their evaluation at any direction pair, and the formats renderers and
+fitting tools read and write."""
+
+from .table import *  # noqa: F401,F403

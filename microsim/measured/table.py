@@ -1,0 +1,162 @@
+"""A tabulated isotropic BRDF: bin averages over incidence angles, evaluated anywhere.
+
+``BRDFTable`` holds f̄(θi, B) — the bin-averaged BRDF (sr⁻¹) of the outgoing bins B of a
+``sim.Bins`` grid (θo, Δφ = φo − φi, folded onto [0°, 180°]: the surface is isotropic) at
+incidence angles θi (degrees, increasing) — with its standard errors. It is what a dense
+``simulate`` run measures and what the exporters write.
+
+Evaluation (``evaluate``): at (θi, θo, |Δφ|) the logarithm of the table is interpolated
+linearly in θi between the tabulated incidences and in θo and Δφ between bin centres (a bin
+average stands for the BRDF at its centre, to second order in the bin width; lobes fall off
+exponentially, which log-linear interpolation follows where linear interpolation overshoots by
+orders of magnitude; a bin holding 0 counts as ``FLOOR``); outside the range of centres the
+nearest value is kept (θo beyond the last centre, θi beyond the last incidence: clamped — the
+table says nothing there, and the exporters say so). Δφ is folded: f(Δφ) = f(−Δφ). Reciprocity
+is not imposed (a measured table satisfies it within its noise). Directions below the horizon
+give 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+from microsim import checks as _checks
+from microsim.errors import UsageError
+from microsim.sim.bins import Bins
+
+__all__ = ["BRDFTable", "FLOOR"]
+
+FLOOR = 1e-12
+"""BRDF value (sr⁻¹) a bin of 0 stands for in the log-linear interpolation: below any value a
+traced bin can hold (one event of weight 1e-12 would need 10¹² rays), so it reads back as 0."""
+
+
+@dataclass(frozen=True, eq=False)
+class BRDFTable:
+    """Bin-averaged isotropic BRDF ``brdf`` (T, Θ, Φ) sr⁻¹ with ``stderr`` (same shape) at
+    incidences ``theta_i`` (T,) degrees (increasing, in [0, 90)) on folded ``bins``;
+    ``name`` describes it (scene, model). Arrays are copied read-only."""
+
+    theta_i: np.ndarray
+    bins: Bins
+    brdf: np.ndarray
+    stderr: np.ndarray
+    name: str = "brdf"
+
+    def __post_init__(self):
+        th = np.asarray(self.theta_i, dtype=np.float64).ravel()
+        if th.size == 0 or not np.all((th >= 0) & (th < 90)) or np.any(np.diff(th) <= 0):
+            raise UsageError(
+                f"theta_i must be increasing incidence angles in [0, 90) degrees, got {th!r}"
+            )
+        if not isinstance(self.bins, Bins) or not self.bins.folded:
+            raise UsageError(
+                "bins must be folded microsim.sim.Bins (a table of an isotropic BRDF), got "
+                f"{self.bins!r}"
+            )
+        shape = (th.size,) + self.bins.shape
+        arrays = {}
+        for key in ("brdf", "stderr"):
+            a = np.array(getattr(self, key), dtype=np.float64)
+            if a.shape != shape:
+                raise UsageError(f"{key} must have shape {shape} (θi, θo, Δφ), got {a.shape}")
+            if not np.all(np.isfinite(a) & (a >= 0)):
+                raise UsageError(f"{key} must be finite and >= 0")
+            a.setflags(write=False)
+            arrays[key] = a
+        th.setflags(write=False)
+        object.__setattr__(self, "theta_i", th)
+        object.__setattr__(self, "brdf", arrays["brdf"])
+        object.__setattr__(self, "stderr", arrays["stderr"])
+        object.__setattr__(self, "_interp", None)
+
+    @classmethod
+    def from_result(cls, result, model: str | None = None, name: str | None = None):
+        """The table of a ``Result`` on folded bins at φi = 0 (all incidences): its simulated
+        BRDF, or the bin averages of ``model`` (one of ``result.models``; stderr 0)."""
+        if not result.bins.folded or np.any(np.asarray(result.phi_i) != 0.0):
+            raise UsageError(
+                "result must be of an isotropic surface: folded bins, every φi = 0 (an "
+                "anisotropic BRDF needs its incidence azimuth in the table)"
+            )
+        order = np.argsort(result.theta_i)
+        if model is None:
+            f, se = np.asarray(result.brdf), np.asarray(result.stderr)
+        else:
+            if model not in result.models:
+                raise UsageError(
+                    f"model must be one of the result's models {sorted(result.models)}, "
+                    f"got {model!r}"
+                )
+            f = np.asarray(result.models[model])
+            se = np.zeros_like(f)
+        label = name or (model if model is not None else "simulation")
+        return cls(np.asarray(result.theta_i)[order], result.bins, f[order], se[order], label)
+
+    def save(self, path) -> None:
+        """Write the table to ``path`` (.npz: theta_i, brdf, stderr, the bins' n_theta, n_phi,
+        the name), atomically."""
+        from microsim.atomic import atomic_open
+
+        with atomic_open(str(path), "wb") as fh:
+            np.savez(
+                fh,
+                theta_i=self.theta_i,
+                brdf=self.brdf,
+                stderr=self.stderr,
+                bins=np.array([self.bins.n_theta, self.bins.n_phi]),
+                name=np.array(self.name),
+            )
+
+    @classmethod
+    def load(cls, path) -> "BRDFTable":
+        """Read a table written by ``save`` (checked as any table; a foreign or damaged file
+        is a UsageError naming it)."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                n_theta, n_phi = (int(x) for x in z["bins"])
+                return cls(
+                    z["theta_i"], Bins(n_theta, n_phi), z["brdf"], z["stderr"], str(z["name"])
+                )
+        except (OSError, KeyError, ValueError) as e:
+            raise UsageError(
+                f"{path}: not a microsim BRDF table ({type(e).__name__}: {e})"
+            ) from None
+
+    def _interpolator(self):
+        if self._interp is None:
+            th_o = self.bins.theta_centers
+            phi = self.bins.phi_centers  # 0 … 180 inclusive for folded bins
+            ti = self.theta_i
+            values = np.log(np.maximum(self.brdf, FLOOR))
+            if ti.size == 1:  # one incidence: constant in θi
+                ti = np.array([ti[0], ti[0] + 1.0])
+                values = np.concatenate([values, values])
+            interp = RegularGridInterpolator(
+                (ti, th_o, phi), values, method="linear", bounds_error=False, fill_value=None
+            )
+            lo = np.array([ti[0], th_o[0], 0.0])
+            hi = np.array([ti[-1], th_o[-1], 180.0])
+            object.__setattr__(self, "_interp", (interp, lo, hi))
+        return self._interp
+
+    def evaluate(self, wi, wo) -> np.ndarray:
+        """f(wi, wo) sr⁻¹ for unit directions (…, 3) pointing away from the surface (module
+        docstring: linear between tabulated θi and bin centres, clamped outside them)."""
+        wi = _checks.directions("wi", wi)
+        wo = _checks.directions("wo", wo)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        ti = np.degrees(np.arccos(np.clip(wi[..., 2], -1.0, 1.0)))
+        to = np.degrees(np.arccos(np.clip(wo[..., 2], -1.0, 1.0)))
+        dphi = np.degrees(np.arctan2(wo[..., 1], wo[..., 0]) - np.arctan2(wi[..., 1], wi[..., 0]))
+        dphi = np.abs(np.mod(dphi + 180.0, 360.0) - 180.0)
+        interp, lo, hi = self._interpolator()
+        pts = np.clip(np.stack([ti, to, dphi], axis=-1), lo, hi)
+        f = np.exp(interp(pts.reshape(-1, 3)).reshape(ti.shape))
+        f = np.where(f <= FLOOR * (1 + 1e-9), 0.0, f)
+        return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, 0.0)
+
+    __call__ = evaluate
