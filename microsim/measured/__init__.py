@@ -2,4 +2,5 @@
 ``table.BRDFTable``), their evaluation at any direction pair, and the formats renderers and
 fitting tools read and write."""
 
+from .merl import *  # noqa: F401,F403
 from .table import *  # noqa: F401,F403

@@ -9,7 +9,9 @@
 judges it against a ray-traced explicit surface (``agreement``); the reference simulation is
 cached on disk (``cache``: ``reference``, ``cache_dir``; env ``MICROSIM_CACHE``).
 ``assert_brdf_matches_model`` checks an implementation against microsim's closed form of the
-same model, without rays (``implementation``). ``assert_sampler_matches`` is the Pearson χ²
+same model, without rays (``implementation``). ``assert_brdf_matches_measured`` judges one
+against a measured BRDF — a MERL file, a ``microsim measure`` table — within a tolerance
+(``measured``). ``assert_sampler_matches`` is the Pearson χ²
 harness for importance samplers (``sampler``).
 The pytest plugin (``plugin``, entry point ``pytest11``) adds ``--microsim-cache DIR``, the
 ``microsim_reference`` fixture and the ``microsim`` marker. docs/testing.md has the guide.
@@ -28,6 +30,8 @@ _WHERE = {
     "find_scene": "cache",
     "ENV_VAR": "cache",
     "assert_brdf_matches_model": "implementation",
+    "assert_brdf_matches_measured": "measured",
+    "measured_reference": "measured",
     "assert_sampler_matches": "sampler",
     "pearson_chi2": "sampler",
     "SamplerCheck": "sampler",
