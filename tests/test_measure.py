@@ -46,8 +46,26 @@ def scene(tmp_path):
     return p
 
 
-def _plan(scene, out, **kw):
-    return plan_measure(scene, out=out, theta_step=20.0, theta_max=80.0, target=0.03, **kw)
+def _plan(scene, out, exports=(), **kw):
+    return plan_measure(
+        scene, out=out, theta_step=20.0, theta_max=80.0, target=0.03, exports=exports, **kw
+    )
+
+
+def test_the_merl_export_reads_back_to_the_table_within_its_noise(scene, tmp_path):
+    """The MERL file of the table, read back and bin-averaged, differs from the table by about
+    the table's own noise (the format stores a reciprocal average and interpolates, which
+    smooths the noise; the bins' second-order smoothing adds a little): at most twice it plus
+    1 %."""
+    fine = tmp_path / "fine.toml"  # 2° × 5° bins: coarser ones add their own smoothing
+    fine.write_text(SCENE.replace("theta_bins = 18", "theta_bins = 45").replace("19", "37"))
+    out = tmp_path / "m"
+    measure(_plan(fine, out, exports=("merl",)), log=None)
+    e = json.loads((out / "measure.json").read_text())["exports"]["merl"]
+    assert (out / e["file"]).stat().st_size == e["bytes"] == 34_992_012
+    # θi ≤ 60°: at 80° the reciprocal partner lies beyond the table's last θi (clamped)
+    for err, se in list(zip(e["interpolation_rel_rms"], e["table_rel_se"]))[:-1]:
+        assert err <= 2 * se + 0.01, (err, se)
 
 
 def test_the_table_is_the_exact_form_within_its_errors(scene, tmp_path):
@@ -85,6 +103,8 @@ def test_bad_input_names_the_option(scene, tmp_path, capsys):
         _plan(scene, out)
     with pytest.raises(UsageError, match="target is 0.03 there but 0.05 now"):
         plan_measure(scene, out=out, theta_step=20.0, theta_max=80.0, target=0.05, resume=True)
+    with pytest.raises(UsageError, match="--export"):
+        _plan(scene, tmp_path / "e", exports=("obj",))
     for kw, name in (({"theta_step": 0}, "--theta-step"), ({"target": 2.0}, "--target")):
         with pytest.raises(UsageError, match=name):
             plan_measure(scene, out=tmp_path / "x", **kw)

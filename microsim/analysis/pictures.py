@@ -137,10 +137,10 @@ def appearance(
     note.text(
         0.0,
         1.0,
-        f"plane under a directional light at {at},\n"
-        f"camera at {view:g}° from the normal on the\nmirror side, {FOV:g}° field of view;\n"
-        "each pixel: its bin's average × cos θi\n(the tables themselves, no renderer);\n"
-        f"one exposure for the three renders;\ngrey: sky, or < {MIN_EVENTS} simulated events",
+        f"plane under a directional\nlight at {at};\n"
+        f"camera {view:g}° from the normal,\nmirror side, {FOV:g}° field of view;\n"
+        "each pixel: its bin's average\n× cos θi (the tables, no renderer);\n"
+        f"one exposure for the renders;\ngrey: sky, or < {MIN_EVENTS} events",
         fontsize=8,
         va="top",
         transform=note.transAxes,
