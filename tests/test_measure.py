@@ -52,20 +52,24 @@ def _plan(scene, out, exports=(), **kw):
     )
 
 
-def test_the_merl_export_reads_back_to_the_table_within_its_noise(scene, tmp_path):
-    """The MERL file of the table, read back and bin-averaged, differs from the table by about
-    the table's own noise (the format stores a reciprocal average and interpolates, which
+def test_the_exports_read_back_to_the_table_within_its_noise(scene, tmp_path):
+    """The MERL and RGL files of the table, read back and bin-averaged, differ from the table by
+    about the table's own noise (MERL stores a reciprocal average, both interpolate, which
     smooths the noise; the bins' second-order smoothing adds a little): at most twice it plus
     1 %."""
     fine = tmp_path / "fine.toml"  # 2° × 5° bins: coarser ones add their own smoothing
     fine.write_text(SCENE.replace("theta_bins = 18", "theta_bins = 45").replace("19", "37"))
     out = tmp_path / "m"
-    measure(_plan(fine, out, exports=("merl",)), log=None)
-    e = json.loads((out / "measure.json").read_text())["exports"]["merl"]
-    assert (out / e["file"]).stat().st_size == e["bytes"] == 34_992_012
-    # θi ≤ 60°: at 80° the reciprocal partner lies beyond the table's last θi (clamped)
-    for err, se in list(zip(e["interpolation_rel_rms"], e["table_rel_se"]))[:-1]:
-        assert err <= 2 * se + 0.01, (err, se)
+    measure(_plan(fine, out, exports=None), log=None)
+    exports = json.loads((out / "measure.json").read_text())["exports"]
+    assert sorted(exports) == ["merl", "rgl"]
+    assert exports["merl"]["bytes"] == 34_992_012
+    for fmt, e in exports.items():
+        assert (out / e["file"]).stat().st_size == e["bytes"]
+        # θi ≤ 60°: at 80° the reciprocal partner (MERL) or the file's incidences between 80°
+        # and 88° (RGL) lie beyond the table's last θi, where it is clamped
+        for err, se in list(zip(e["interpolation_rel_rms"], e["table_rel_se"]))[:-1]:
+            assert err <= 2 * se + 0.01, (fmt, err, se)
 
 
 def test_the_table_is_the_exact_form_within_its_errors(scene, tmp_path):
@@ -108,6 +112,12 @@ def test_bad_input_names_the_option(scene, tmp_path, capsys):
     for kw, name in (({"theta_step": 0}, "--theta-step"), ({"target": 2.0}, "--target")):
         with pytest.raises(UsageError, match=name):
             plan_measure(scene, out=tmp_path / "x", **kw)
+    np.save(tmp_path / "h.npy", np.random.default_rng(0).normal(size=(16, 16)))
+    hf = tmp_path / "hf.toml"
+    hf.write_text('name = "hf"\n[surface]\nkind = "file"\npath = "h.npy"\ndx = 1.0\n')
+    with pytest.raises(UsageError, match="--export rgl: .* no ensemble NDF"):
+        plan_measure(hf, out=tmp_path / "h", exports=("rgl",))
+    assert plan_measure(hf, out=tmp_path / "h").exports == ("merl",)  # the RGL file left out
     aniso = tmp_path / "aniso.toml"
     aniso.write_text(SCENE.replace("m = 0.3", "m = 0.3\noriented = true").replace("19", "20"))
     with pytest.raises(UsageError, match="anisotropic"):

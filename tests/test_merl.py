@@ -43,6 +43,7 @@ from microsim.measured.merl import (
     sample_angles_rad,
     write_merl,
 )
+from microsim.measured.rgl import read_rgl, write_rgl
 from microsim.measured.table import BRDFTable
 from microsim.sim import Bins
 from microsim.sim.predict import ModelSpec, predict
@@ -271,18 +272,24 @@ def test_invalid_samples_read_as_no_data(ggx_file):
 
 
 # --- fits and tables ------------------------------------------------------------------------------
-def test_fit_recovers_cook_torrance(tmp_path):
-    """Löw's E2 fit of ``cook-torrance`` to a MERL file of that closed form recovers its
-    parameters within the shift the data's deviation δg (from the fit model's own bin averages
-    at the true parameters) can cause to first order: δp = (JᵀWJ)⁻¹JᵀW δg, bounded by
+@pytest.mark.parametrize("fmt", ["merl", "rgl"])
+def test_fit_recovers_cook_torrance(tmp_path, fmt):
+    """Löw's E2 fit of ``cook-torrance`` to a MERL (or RGL) file of that closed form recovers
+    its parameters (the RGL file warped by its Beckmann NDF with a 5 % Lambertian floor, which
+    its diffuse term needs) within the shift the data's deviation δg (from the fit model's own
+    bin averages at the true parameters) can cause to first order: δp = (JᵀWJ)⁻¹JᵀW δg, bounded by
     |δp_k| ≤ √([(JᵀWJ)⁻¹]_kk · Σ W δg²) (Cauchy–Schwarz), J = ∂g/∂p, W Löw's weights (eq. 33).
     """
     true = {"ks": 0.8, "m": 0.25, "kd": 0.05}
     model = CookTorrance(Beckmann(true["m"]), "aluminium", ks=true["ks"], kd=true["kd"])
-    path = tmp_path / "ct.binary"
-    write_merl(path, model.f)
+    if fmt == "merl":
+        write_merl(tmp_path / "ct.binary", model.f)
+        reader = read_merl(tmp_path / "ct.binary")
+    else:
+        write_rgl(tmp_path / "ct.bsdf", model.f, Beckmann(true["m"]), floor=0.05)
+        reader = read_rgl(tmp_path / "ct.bsdf")
     bins = Bins(18, 37)
-    result = low2012_result(read_merl(path), bins=bins)
+    result = low2012_result(reader, bins=bins)
     fit = fits.fit_all(result, "aluminium", names=("cook-torrance",), quick=True)["cook-torrance"]
     assert fit.converged
 

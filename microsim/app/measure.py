@@ -16,8 +16,12 @@ Output directory: ``measure.json`` (the settings, written first; per incidence i
 seconds, achieved error and convergence once traced, and the totals — the acquisition's
 cost), ``incidences/theta-XX.XX/`` (each incidence's ``Result``, written atomically when it
 is done), and at the end ``table.npz`` (``BRDFTable.save``) and the exports (``--export``,
-default all of ``EXPORTS``): ``table.binary`` (MERL, ``measured.write_merl``). Each export
-is read back and its bin averages compared with the table's: ``measure.json["exports"]``
+default all of ``EXPORTS``): ``table.binary`` (MERL, ``measured.write_merl``) and
+``table.bsdf`` (RGL, ``measured.write_rgl``, RGB flavour, warped by the scene's ensemble NDF
+with a ``RGL_FLOOR`` Lambertian share —
+an RGL file stores the NDF that parameterises it; a scene without one, a heightfield file, gets
+no RGL file by default and an error when ``--export rgl`` asks for it). Each export is read
+back and its bin averages compared with the table's: ``measure.json["exports"]``
 records per format the file, the seconds and that difference (energy-weighted relative RMS
 over each incidence's 90 % energy bins, its largest over the incidences) beside the table's
 own relative standard error over the same bins: a format that stores a reciprocal average
@@ -39,7 +43,7 @@ import numpy as np
 
 from .. import atomic
 from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
-from ..measured import BRDFTable, read_merl, write_merl
+from ..measured import BRDFTable, read_merl, read_rgl, write_merl, write_rgl
 from ..sim import Bins, Result
 from ..sim.auto import simulate_auto
 from ..stats import energy_set
@@ -49,8 +53,12 @@ from .scene import MAX_THETA_I, load_scene
 __all__ = ["Acquisition", "plan_measure", "measure", "add_measure_command", "SETTINGS_FILE"]
 
 SETTINGS_FILE = "measure.json"
-EXPORTS = {"merl": "table.binary"}
+EXPORTS = {"merl": "table.binary", "rgl": "table.bsdf"}
 """Export formats → file name in the output directory."""
+RGL_FLOOR = 0.01
+"""Lambertian share of the NDF an RGL export warps by (``measured.write_rgl``'s ``floor``): a
+table holds small values beyond the lobe (bin averages, their interpolation) where the
+scene's exact NDF vanishes, which the file could not otherwise carry."""
 TABLE_FILE = "table.npz"
 INCIDENCES = "incidences"
 MAX_INCIDENCES = 900
@@ -108,10 +116,11 @@ def plan_measure(
     quick: bool = False,
     resume: bool = False,
     force: bool = False,
-    exports=tuple(EXPORTS),
+    exports=None,
 ) -> Acquisition:
     """Validate a ``measure`` without touching the disk (every problem a one-line UsageError
-    naming the option)."""
+    naming the option). ``exports``: formats among ``EXPORTS`` (None: every one the scene
+    allows)."""
     scene = load_scene(scene_path)
     if scene.anisotropic:
         raise UsageError(
@@ -134,9 +143,17 @@ def plan_measure(
         raise UsageError(f"--max-rays must be an integer >= 65536, got {max_rays!r}")
     if isinstance(threads, bool) or int(threads) != threads or threads < 1:
         raise UsageError(f"--threads must be an integer >= 1, got {threads!r}")
-    exports = tuple(dict.fromkeys(exports))
+    asked = exports is not None
+    exports = tuple(dict.fromkeys(EXPORTS if exports is None else exports))
     if not all(e in EXPORTS for e in exports):
         raise UsageError(f"--export must be among {', '.join(EXPORTS)}, got {', '.join(exports)}")
+    if "rgl" in exports and scene.ndf() is None:
+        if asked:
+            raise UsageError(
+                f"--export rgl: scene {scene.name} has no ensemble NDF (a heightfield file), "
+                f"which an RGL file needs for its parameterisation; use --export merl"
+            )
+        exports = tuple(e for e in exports if e != "rgl")
     out = Path(out) if out is not None else Path("runs") / f"{scene.name}-measured"
     check_output_path(out, "--out", scene.path)
     acq = Acquisition(
@@ -247,18 +264,23 @@ def measure(acq: Acquisition, log=print) -> BRDFTable:
             "converged": all(d["converged"] for d in per),
         }
         table.save(acq.out / TABLE_FILE)
-        doc["exports"] = {e: _export(e, table, acq.out / EXPORTS[e]) for e in acq.exports}
+        doc["exports"] = {
+            e: _export(e, table, acq.out / EXPORTS[e], acq.scene) for e in acq.exports
+        }
         atomic.write_json(acq.out / SETTINGS_FILE, doc)
     return table
 
 
-def _export(fmt: str, table: BRDFTable, path: Path) -> dict:
+def _export(fmt: str, table: BRDFTable, path: Path, scene) -> dict:
     """Write ``table`` as ``fmt`` to ``path``, read it back and measure the format's
     interpolation error against the table (module docstring)."""
     t0 = time.perf_counter()
     if fmt == "merl":
         write_merl(path, table)
         back = read_merl(path).table(table.theta_i, table.bins)
+    else:
+        write_rgl(path, table.evaluate, scene.ndf(), description=table.name, floor=RGL_FLOOR)
+        back = read_rgl(path).table(table.theta_i, table.bins)
     seconds = time.perf_counter() - t0
     omega = table.bins.projected_solid_angle()
     errors, noise = [], []
@@ -290,7 +312,7 @@ def _cmd_measure(args) -> int:
         quick=args.quick,
         resume=args.resume,
         force=args.force,
-        exports=tuple(args.export) if args.export else tuple(EXPORTS),
+        exports=tuple(args.export) if args.export else None,
     )
     log = None if args.no_progress else (lambda s: print(s, flush=True))
     try:
@@ -348,7 +370,7 @@ def add_measure_command(sub) -> None:
         "--export",
         action="append",
         choices=tuple(EXPORTS),
-        help=f"formats to write (repeatable; default all: {', '.join(EXPORTS)})",
+        help=f"formats to write (repeatable; default all the scene allows: {', '.join(EXPORTS)})",
     )
     g = m.add_mutually_exclusive_group()
     g.add_argument("--resume", action="store_true", help="continue an interrupted measure")

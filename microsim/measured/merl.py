@@ -196,8 +196,9 @@ def _rgb(rgb) -> np.ndarray:
     return a
 
 
-def _evaluate_brdf(brdf: Callable, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """brdf at the pairs (M, 3) in chunks: (M, 3) RGB (a grey result repeated)."""
+def brdf_rgb(brdf: Callable, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """brdf at the pairs (M, 3) in chunks: (M, 3) RGB (a grey result repeated), checked to be
+    finite and >= 0 (the writers' common input check)."""
     out = np.empty((len(wi), 3))
     for s in range(0, len(wi), _CHUNK):
         a, b = wi[s : s + _CHUNK], wo[s : s + _CHUNK]
@@ -233,7 +234,7 @@ def write_merl(path, brdf: Callable, rgb=(1.0, 1.0, 1.0)) -> None:
     wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
     up = (wi[:, 2] > HORIZON) & (wo[:, 2] > HORIZON)
     a, b = wi[up], wo[up]
-    f = 0.5 * (_evaluate_brdf(brdf, a, b) + _evaluate_brdf(brdf, b, a))
+    f = 0.5 * (brdf_rgb(brdf, a, b) + brdf_rgb(brdf, b, a))
     raw = np.full((3, MERL_SAMPLES), INVALID)
     raw[:, up] = (f * (rgb / np.asarray(MERL_SCALE))).T
     header = np.asarray(MERL_SHAPE, dtype="<i4")
@@ -546,7 +547,10 @@ def low2012_result(
     """``result_of_table(brdf.table(theta_i, bins, rtol), theta_max)``: by default the data
     Löw et al. 2012 (§5.1) fit a MERL BRDF with — θi in 10° steps, 1° bins in θo and Δφ, θo
     above 80° left out — for ``fit_all(result, ior, ...)``, which fits Löw's E2 (eq. 31–33).
-    (One channel at a time; Löw also fit three channels with shared parameters.)"""
-    if not isinstance(brdf, MERLBRDF):
-        raise UsageError(f"brdf must be a MERLBRDF (read_merl), got {brdf!r}")
+    ``brdf``: a ``MERLBRDF`` (``read_merl``) or an ``RGLBRDF`` (``read_rgl``). (One channel at
+    a time; Löw also fit three channels with shared parameters.)"""
+    if not callable(getattr(brdf, "table", None)):  # MERLBRDF, RGLBRDF
+        raise UsageError(
+            f"brdf must be a MERLBRDF (read_merl) or an RGLBRDF (read_rgl), got {brdf!r}"
+        )
     return result_of_table(brdf.table(theta_i, bins, rtol), theta_max)

@@ -24,8 +24,10 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
+from microsim.sim.predict import bin_average
 
 __all__ = ["BRDFTable", "FLOOR"]
 
@@ -95,6 +97,27 @@ class BRDFTable:
             se = np.zeros_like(f)
         label = name or (model if model is not None else "simulation")
         return cls(np.asarray(result.theta_i)[order], result.bins, f[order], se[order], label)
+
+    @classmethod
+    def from_function(cls, brdf, theta_i, bins: Bins, name: str = "", rtol: float = 1e-3):
+        """The table of the bin averages of ``brdf(wi, wo)`` (sr⁻¹, isotropic) at incidences
+        ``theta_i`` (degrees, increasing, < 90) on folded ``bins`` (stderr 0): ``sim.predict``'s
+        adaptive quadrature ``bin_average`` with relative tolerance ``rtol``, both ±Δφ halves
+        folded together."""
+        if not isinstance(bins, Bins) or not bins.folded:
+            raise UsageError(f"bins must be folded microsim.sim.Bins, got {bins!r}")
+        theta = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+        for th in theta:
+            _checks.in_range("theta_i", th, 0.0, 90.0, hi_open=True)
+        values = np.stack(
+            [
+                bin_average(
+                    vectors.spherical_deg(th, 0.0), bins, brdf, 0.0, rtol, symmetric=True
+                ).values
+                for th in theta
+            ]
+        )
+        return cls(theta, bins, values, np.zeros_like(values), name)
 
     def save(self, path) -> None:
         """Write the table to ``path`` (.npz: theta_i, brdf, stderr, the bins' n_theta, n_phi,

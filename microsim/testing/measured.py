@@ -1,5 +1,5 @@
-"""Judging a BRDF against a measured one: a MERL ``.binary`` file, a microsim table
-(``microsim measure``'s ``table.npz``, a ``BRDFTable``) or any tabulated BRDF.
+"""Judging a BRDF against a measured one: a MERL ``.binary`` or RGL ``.bsdf`` file, a
+microsim table (``microsim measure``'s ``table.npz``, a ``BRDFTable``) or any tabulated BRDF.
 
 ``assert_brdf_matches_measured(brdf, reference, theta_i, bins=..., rtol=0.05)`` bin-averages
 the callable on the bins (``sim.predict``, both ±Δφ halves unless ``isotropic=True``) and takes
@@ -35,9 +35,10 @@ QUAD_RTOL = 1e-3
 
 
 def measured_reference(reference, theta_i, bins: Bins) -> BRDFTable:
-    """The reference's bin averages (``BRDFTable``) at ``theta_i`` on ``bins``: a path (.binary:
-    MERL; .npz: ``BRDFTable.load``), a ``MERLBRDF``, a ``BRDFTable`` (its own values when its
-    bins and incidences are these, else its evaluation averaged) or a callable f(wi, wo)."""
+    """The reference's bin averages (``BRDFTable``) at ``theta_i`` on ``bins``: a path
+    (.binary: MERL; .bsdf: RGL; .npz: ``BRDFTable.load``), a ``MERLBRDF``, a ``BRDFTable``
+    (its own values when its bins and incidences are these, else its evaluation averaged) or a
+    callable f(wi, wo)."""
     theta = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     if isinstance(reference, (str, os.PathLike)):
         path = Path(reference)
@@ -45,9 +46,15 @@ def measured_reference(reference, theta_i, bins: Bins) -> BRDFTable:
             reference = read_merl(path)
         elif path.suffix == ".npz":
             reference = BRDFTable.load(path)
+        elif path.suffix == ".bsdf":
+            from microsim.measured.rgl import read_rgl
+
+            rgl = read_rgl(path)
+            reference = rgl.evaluate
         else:
             raise UsageError(
-                f"reference must be a MERL .binary file or a microsim table .npz, got {path}"
+                f"reference must be a MERL .binary file, an RGL .bsdf file or a microsim table "
+                f".npz, got {path}"
             )
     if isinstance(reference, MERLBRDF):
         return reference.table(theta, bins)
