@@ -12,6 +12,9 @@ Facts checked:
 * Mitsuba 3's ``measured`` BSDF (variant ``scalar_spectral`` for a spectral file,
   ``scalar_rgb`` for an RGB one) evaluates the file as ``read_rgl`` does, to float32
   precision, so its error against the written function is the stated interpolation error;
+* a file written by another tool — Mitsuba 3's own tensor-file writer (``mitsuba.tensor_io``),
+  holding a hand-built constant BRDF with jacobian 0 — reads as Mitsuba reads it, and
+  Mitsuba's tensor reader reads microsim's files to the same arrays;
 * a damaged file is a UsageError naming it; a failed write leaves nothing — also that of a
   BRDF with a diffuse term warped by the exact narrow NDF (it needs ``floor``);
 * ``microsim.testing`` judges a BRDF against an RGL file (its own closed form passes, a 10 %
@@ -275,3 +278,42 @@ def test_testing_judges_a_brdf_against_an_rgl_file(files):
         assert_brdf_matches_measured(rough.f, files / "rgb.bsdf", (0, 30, 60), rtol=0.05)
     table = read_rgl(files / "rgb.bsdf").table([0.0, 45.0], Bins(9, 10))
     assert table.brdf.shape == (2, 9, 10) and np.all(table.stderr == 0)
+
+
+def test_files_of_mitsubas_own_tensor_writer(files, tmp_path):
+    """A file written by another tool: Mitsuba 3's ``mitsuba.tensor_io.write`` (its own
+    tensor-file writer, here with 16-byte alignment) holding a hand-built isotropic file with
+    jacobian 0 and ρ = c everywhere, i.e. f cos θo = c: ``read_rgl`` gives f = c/cos θo and
+    Mitsuba's ``measured`` BSDF c. And Mitsuba's ``tensor_io.read`` reads microsim's files to
+    the same arrays."""
+    mi = _mitsuba("scalar_rgb")
+    c, n = 0.25, 8
+    grid = np.ones((1, 3, n, n), np.float32)
+    fields = {
+        "description": np.frombuffer(b"constant, hand-built", np.uint8),
+        "jacobian": np.zeros(1, np.uint8),
+        "theta_i": np.radians([0.0, 45.0, 89.0]).astype(np.float32),
+        "phi_i": np.zeros(1, np.float32),
+        "ndf": np.ones((2, n), np.float32),
+        "sigma": np.ones((2, n), np.float32),
+        "vndf": grid,
+        "luminance": grid,
+        "rgb": np.full((1, 3, 3, n, n), c, np.float32),
+    }
+    path = tmp_path / "constant.bsdf"
+    mi.tensor_io.write(str(path), align=16, **fields)
+    rgl = read_rgl(path)
+    assert rgl.description == "constant, hand-built"
+    wi, wo = _cosine_pairs(200, seed=4)
+    np.testing.assert_allclose(rgl.evaluate(wi, wo) * wo[:, 2], c, rtol=1e-6)
+    bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
+    si = mi.SurfaceInteraction3f()
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    for a, b in zip(wi[:20], wo[:20]):
+        si.wi = mi.Vector3f(*a)
+        assert np.allclose(np.array(mi.BSDF.eval(bsdf, mi.BSDFContext(), si, mi.Vector3f(*b))), c)
+    ours = read_tensor_file(files / "rgb.bsdf")
+    theirs = mi.tensor_io.read(str(files / "rgb.bsdf"))
+    assert list(theirs) == list(ours)
+    for k in ours:
+        assert np.array_equal(theirs[k], ours[k]), k
