@@ -96,6 +96,7 @@ def _cmd_run(args) -> int:
         quick=args.quick,
         resume=args.resume,
         force=args.force,
+        scheduler=args.scheduler,
     )
     outcome = execute(plan, progress=not args.no_progress)
     if outcome.status == 0 and outcome.document is not None:
@@ -120,6 +121,7 @@ def _cmd_report(args) -> int:
         threads=args.threads,
         progress=not args.no_progress,
         resume=args.resume,
+        scheduler=args.scheduler,
     )
 
 
@@ -158,6 +160,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--out", help="output directory (default: runs/<scene name>)")
     r.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
+    r.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="trace on the workers of this Dask scheduler (e.g. tcp://host:8786); the result "
+        "is the local run's bit for bit (needs the `cluster` extra)",
+    )
     r.add_argument("--seed", type=int, help="random seed (default: the scene's)")
     r.add_argument(
         "--quick",
@@ -181,6 +189,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--catalogue", default="surfaces", help="directory of scene files (default surfaces)"
     )
     q.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
+    q.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="trace each scene on the workers of this Dask scheduler (as `run --scheduler`)",
+    )
     q.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
     q.add_argument(
         "--resume",

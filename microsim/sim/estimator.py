@@ -49,6 +49,7 @@ from .arguments import (
 )
 from .bins import Bins
 from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
+from .cluster import ClusterPool, RemoteSurface
 from .experiment import Estimator, Execution, Experiment
 from .paths import LEDGER, MASKING, Events, Incidence, trace_events, tracer_for
 from .progress import RaysDone
@@ -270,6 +271,8 @@ def estimate(
         "rays_traced": traced,
         "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None,
     }
+    if run.cluster is not None:  # absent: local threads (``threads``)
+        meta["cluster"] = _cluster_meta(run.cluster)
     if ex.bounces != 1:  # absent: 1 (single-bounce results keep their meta)
         meta["bounces"] = ex.bounces
         meta["max_bounces"] = MAX_BOUNCES
@@ -338,7 +341,7 @@ def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Exec
     """Trace every block not yet done, realisation by realisation, incidence by incidence;
     (seconds per realisation, seconds building surfaces and tracers, interrupted)."""
     timings, build, interrupted = [], 0.0, False
-    pool = thread_pool(run.threads)
+    pool = ClusterPool(run.cluster) if run.cluster is not None else thread_pool(run.threads)
     with DeferredInterrupt() as stop:
         try:
             for r in range(plan.n_real):
@@ -348,28 +351,36 @@ def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Exec
                 surf = plan.get_surface(r)
                 smeta = _surface_meta(surf)
                 _check_same_surface(state.surfaces[r], smeta, r)
-                # one surface: keep its tracer for the next call (``tracer_for``); several:
-                # each realisation's tracer is released once it is traced
-                reuse = smeta["fingerprint"] if plan.n_real == 1 else None
-                prepared = tracer_for(surf, est.masking, reuse)
+                prepared, info = _prepare(surf, smeta["fingerprint"], plan, est, run)
                 build += time.perf_counter() - t0
-                tracer = prepared[0]
-                state.surfaces[r] = {
-                    **smeta,
-                    "eps": tracer.eps,
-                    "max_wraps": tracer.max_wraps,
-                    "grid_walk": tracer.grid is not None,
-                }
-                del tracer
-                for i in range(len(ex.theta_i)):
-                    if stop.is_set():  # SIGINT while building the surface
-                        raise KeyboardInterrupt
-                    _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop)
+                state.surfaces[r] = {**smeta, **info}
+                try:
+                    for i in range(len(ex.theta_i)):
+                        if stop.is_set():  # SIGINT while building the surface
+                            raise KeyboardInterrupt
+                        _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop)
+                finally:
+                    if isinstance(prepared, RemoteSurface):
+                        prepared.release()
                 timings.append(time.perf_counter() - t0)
                 del prepared
         except KeyboardInterrupt:
             interrupted = True
     return timings, build, interrupted
+
+
+def _prepare(surf, fingerprint: str, plan: _Plan, est: Estimator, run: Execution):
+    """(prepared tracer, its meta) of one realisation: ``tracer_for``'s triple, or the
+    ``RemoteSurface`` scattered to ``run.cluster``."""
+    if run.cluster is not None:
+        remote = RemoteSurface(run.cluster, surf, est.masking, fingerprint)
+        return remote, remote.info
+    # one surface: keep its tracer for the next call (``tracer_for``); several: each
+    # realisation's tracer is released once it is traced
+    prepared = tracer_for(surf, est.masking, fingerprint if plan.n_real == 1 else None)
+    tracer = prepared[0]
+    info = {"eps": tracer.eps, "max_wraps": tracer.max_wraps, "grid_walk": tracer.grid is not None}
+    return prepared, info
 
 
 def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> None:
@@ -378,20 +389,29 @@ def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> N
     start, end = int(state.done[r, i]), int(plan.nblk[r])
     if start >= end:
         return
-    tracer, profile, azimuth = prepared
     t_deg, p_deg = ex.theta_i[i], ex.phi_i[i]
-    incidence = Incidence(
-        tracer,
-        spherical_deg(t_deg, p_deg),
-        p_deg,
-        ex.bins,
-        ex.ior,
-        plan.per_real[r],
-        (est.seed, r, i),
-        est.origins,
-    )
-    # one chain, cut after ex.bounces bounces (single bounce: its first, ``bounces.chain_task``)
-    task = chain_task(incidence, profile, azimuth, est.isotropic, ex.bounces, pool, run.threads)
+    key = (est.seed, r, i)
+    if isinstance(prepared, RemoteSurface):
+        task = prepared.chunks(
+            t_deg, p_deg, ex.bins, ex.ior, plan.per_real[r], key, est.origins,
+            est.isotropic, ex.bounces,
+        )  # fmt: skip
+        threads, depth, blocks = pool.threads, pool.depth, max(plan.chunk_blocks, pool.min_blocks)
+    else:
+        tracer, profile, azimuth = prepared
+        incidence = Incidence(
+            tracer,
+            spherical_deg(t_deg, p_deg),
+            p_deg,
+            ex.bins,
+            ex.ior,
+            plan.per_real[r],
+            key,
+            est.origins,
+        )
+        # one chain, cut after ex.bounces bounces (single bounce: its first, ``chain_task``)
+        task = chain_task(incidence, profile, azimuth, est.isotropic, ex.bounces, pool, run.threads)
+        threads, depth, blocks = run.threads, IN_FLIGHT * run.threads, plan.chunk_blocks
     rays, done, tally_ri = plan.per_real[r], state.done, state.tallies[r][i]
 
     def tally(chunk):
@@ -415,8 +435,8 @@ def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> N
     run_in_order(
         pool,
         task,
-        chunk_groups(start, end, plan.chunk_blocks, run.threads),
-        IN_FLIGHT * run.threads,
+        chunk_groups(start, end, blocks, threads),
+        depth,
         stop,
         tally,
     )
@@ -467,6 +487,12 @@ def ray_events(
 
 
 # --- run description and resume ------------------------------------------------------------
+def _cluster_meta(client) -> dict:
+    """Workers and threads of the cluster that traced."""
+    nthreads = client.nthreads()
+    return {"workers": len(nthreads), "threads": int(sum(nthreads.values()))}
+
+
 def _surface_meta(surface) -> dict:
     """JSON-able description of a traced surface (its own warnings plus the tracer's)."""
     warnings = list(getattr(surface, "warnings", ()))

@@ -38,6 +38,7 @@ from .arguments import (
 )
 from .bins import Bins
 from .bounces import check_bounces
+from .cluster import check_client
 from .paths import MASKING
 from .progress import RaysDone
 from .streams import ORIGINS
@@ -137,13 +138,17 @@ class Execution:
     """How the work runs; results are bitwise identical for any of these. ``threads``: worker
     threads in [1, ``MAX_THREADS``] (None: the machine's CPU count); ``chunk``: rays per
     thread task in [1, ``MAX_CHUNK``], rounded to whole blocks; ``progress``: None or a
-    callable receiving ``RaysDone`` events in the calling thread after every chunk."""
+    callable receiving ``RaysDone`` events in the calling thread after every chunk;
+    ``cluster``: None (local threads) or a ``dask.distributed.Client`` whose workers trace the
+    tasks instead (``sim.cluster``; ``threads`` is then unused)."""
 
     threads: int | None = None
     chunk: int = 2**16
     progress: Callable[[RaysDone], None] | None = None
+    cluster: object | None = None
 
     def __post_init__(self):
         _set(self, "threads", thread_count(self.threads))
+        _set(self, "cluster", check_client(self.cluster))
         _set(self, "chunk", integer("chunk", self.chunk, 1, MAX_CHUNK, " (rays per thread task)"))
         check_progress(self.progress, "microsim.sim.RaysDone events")

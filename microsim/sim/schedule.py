@@ -16,7 +16,7 @@ import os
 import signal
 import threading
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from typing import Iterator
 
 __all__ = ["IN_FLIGHT", "thread_pool", "chunk_groups", "run_in_order", "DeferredInterrupt"]
@@ -63,7 +63,8 @@ def run_in_order(
     lazily with at most ``depth`` tasks queued or running, and hand each result to
     ``consume`` in group order (calling thread). Raises KeyboardInterrupt when ``stop`` is set
     after a result was consumed; anything ``consume`` or a task raises propagates. On return
-    no task of this call is left queued or running."""
+    no task of this call is left queued or running (a cluster's tasks, ``sim.cluster``, are
+    cancelled: one still running there finishes unheeded)."""
     groups = iter(groups)
     pending: deque = deque(pool.submit(work, g) for g in itertools.islice(groups, depth))
     try:
@@ -78,7 +79,7 @@ def run_in_order(
     finally:
         for fut in pending:
             fut.cancel()
-        wait(pending)
+        wait([f for f in pending if isinstance(f, Future)])  # a cluster's: cancel() withdraws
 
 
 class DeferredInterrupt:

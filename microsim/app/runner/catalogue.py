@@ -100,6 +100,7 @@ def run_report(
     log: Callable[[str], None] | None = None,
     resume=False,
     regimes: bool | None = None,
+    scheduler: str | None = None,
 ) -> int:
     """Run every ``*.toml`` of ``catalogue`` into ``out/<scene>/`` (each folder replaced in one
     rename) and write ``out/index.md``. All scene files are validated before anything runs.
@@ -112,7 +113,9 @@ def run_report(
     its old report and tallies unused. Holds ``atomic.output_lock(out)`` throughout.
     ``regimes``: compute the regime maps for the index (None: when some scene has
     ``[wave]``; reduced in quick mode). A scene named like a file of the report itself
-    (``RESERVED_NAMES``) is refused before anything runs."""
+    (``RESERVED_NAMES``) is refused before anything runs. ``scheduler``: a Dask scheduler
+    address whose workers trace each scene's main simulation (``plan_run``; the scenes run
+    one after another, each bitwise as locally; ``rays = "auto"`` scenes trace locally)."""
     log = log or (lambda s: print(s, file=sys.stderr))
     catalogue, out = Path(catalogue), Path(out)
     if not catalogue.is_dir():
@@ -167,6 +170,7 @@ def run_report(
                     tallies=tallies,
                     partial_dir=partial,
                     resume_hint=hint,
+                    scheduler=None if s.simulation.rays == "auto" else scheduler,
                 )
             )
         state = {

@@ -139,6 +139,7 @@ class RunPlan:
     auto_realisations: bool = False  # realisations = "auto": a pilot decides the count
     partial_dir: Path | None = None  # where interrupted tallies go (None: ``out``)
     resume_hint: str | None = None  # how to continue, for the interrupt message
+    scheduler: str | None = None  # Dask scheduler address: the main tracing on its workers
 
     @property
     def bins(self) -> Bins:
@@ -201,6 +202,7 @@ def plan_run(
     tallies=None,
     partial_dir=None,
     resume_hint=None,
+    scheduler=None,
 ) -> RunPlan:
     """Validate a run without touching the disk; every problem is a one-line ``UsageError``.
 
@@ -212,7 +214,10 @@ def plan_run(
     symbolic link, or a name too long for the file system and the temporaries beside it, is
     refused. ``tallies`` (``microsim report --resume``): a directory of saved
     partial tallies to continue into ``out``; ``partial_dir``: where tallies go if the run is
-    interrupted (default ``out``); ``resume_hint``: how to continue, for that message."""
+    interrupted (default ``out``); ``resume_hint``: how to continue, for that message;
+    ``scheduler``: a Dask scheduler address whose workers trace the main simulation
+    (``sim.cluster``: the result is the local run's bit for bit; the side studies stay
+    local)."""
     scene = load_scene(scene_path)
     effort = effort_for(quick)
     rays = _int_option("rays", rays, 1)
@@ -225,6 +230,13 @@ def plan_run(
         raise UsageError(
             f'rays = "auto" needs realisations = 1 (scene {scene.name} has '
             f"{scene.simulation.realisations}); give --rays instead"
+        )
+    if scheduler is not None and not (isinstance(scheduler, str) and scheduler.strip()):
+        raise UsageError(f"--scheduler must be a Dask scheduler address, got {scheduler!r}")
+    if auto and scheduler is not None:
+        raise UsageError(
+            f'--scheduler is not available for a rays = "auto" scene ({scene.name}): its '
+            f"batches are decided one after another; give --rays"
         )
     if auto and resume is not None:
         raise UsageError(
@@ -287,6 +299,7 @@ def plan_run(
         auto_realisations=auto_real,
         partial_dir=None if partial_dir is None else Path(partial_dir),
         resume_hint=resume_hint,
+        scheduler=scheduler,
     )
 
 

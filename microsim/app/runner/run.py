@@ -25,6 +25,7 @@ import shutil
 import sys
 import time
 import warnings
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -44,6 +45,7 @@ from ...analysis.verdicts import verdicts_for_result
 from ...checkpoints import checkpoint
 from ...errors import UsageError
 from ...sim.schedule import DeferredInterrupt
+from ..cluster import connect
 from . import orders, side_studies, tracing, wave_run
 from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress
@@ -189,17 +191,22 @@ def _trace(plan: RunPlan, prev, progress: bool):
     bar = RayProgress(tracing.remaining_rays(plan, prev).sum(), plan.scene.name, enabled=progress)
     theta_i, phi_i = plan.incidences
     try:
-        return tracing.simulate_scene(
-            plan,
-            theta_i,
-            plan.rays,
-            plan.seed,
-            plan.bins,
-            progress=bar,
-            resume=prev,
-            bounces=plan.scene.simulation.bounces,
-            phi_i=phi_i,
-        )
+        with ExitStack() as stack:
+            client = None
+            if plan.scheduler is not None:  # closed after the tracing: the rest runs here
+                client = stack.enter_context(connect(plan.scheduler))
+            return tracing.simulate_scene(
+                plan,
+                theta_i,
+                plan.rays,
+                plan.seed,
+                plan.bins,
+                progress=bar,
+                resume=prev,
+                bounces=plan.scene.simulation.bounces,
+                phi_i=phi_i,
+                cluster=client,
+            )
     finally:
         bar.close()
 

@@ -60,13 +60,15 @@ def simulate_scene(
     bounces=1,
     surface=None,
     phi_i=None,
+    cluster=None,
 ):
     """``estimate`` the plan's scene at ``theta_i`` (degrees; ``phi_i`` one azimuth per θi,
     None: the scene's first φi at every θi — the side studies) with ``rays`` per incidence over
     ``realisations`` surfaces: True = the plan's, False = one (seed ``seed``), or a count;
     ``bounces``: scattering orders traced (``simulate``; the side studies trace one).
     ``surface``: that one realisation already built (``scene_surface``), so that repeated
-    runs on it reuse its tracer instead of building surface and BVH again."""
+    runs on it reuse its tracer instead of building surface and BVH again. ``cluster``: a
+    ``dask.distributed.Client`` whose workers trace (``sim.cluster``), or None."""
     sc = plan.scene
     scale = plan.effort.scale_for(sc.surface.kind)
     n = plan.realisations if realisations is True else max(1, int(realisations))
@@ -86,7 +88,7 @@ def simulate_scene(
             seeds=seeds,
         ),
         Estimator(rays, seed, origins=origins),
-        Execution(plan.threads, progress=progress),
+        Execution(plan.threads, progress=progress, cluster=cluster),
         resume=resume,
     )
 

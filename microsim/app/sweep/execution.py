@@ -15,6 +15,7 @@ from typing import Callable
 from ... import atomic
 from ...checkpoints import checkpoint
 from ...errors import EnvironmentFailure
+from ..cluster import connect
 from ..runner.planning import check_output_path
 from .grid import SweepSpec, fail, task_label, varying_values
 from .summary import write_summary
@@ -83,25 +84,6 @@ def _sigterm_interrupts():
         yield received
     finally:
         signal.signal(signal.SIGTERM, old)
-
-
-def _client(scheduler, timeout: float):
-    """A ``dask.distributed.Client``; one-line errors for a bad or unreachable address."""
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise EnvironmentFailure(
-            "--scheduler needs dask.distributed, an optional extra: pip install 'microsim[cluster]'"
-        ) from None
-    try:
-        return Client(scheduler, timeout=timeout)
-    except ValueError as e:
-        fail(f"--scheduler {scheduler}", f"not a Dask scheduler address ({e})")
-    except (OSError, TimeoutError) as e:
-        raise EnvironmentFailure(
-            f"--scheduler {scheduler}: no Dask scheduler reachable "
-            f"there within {timeout:g} s ({' '.join(str(e).split())})"
-        ) from None
 
 
 def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None]) -> None:
@@ -217,7 +199,7 @@ def run_sweep(
         received = stack.enter_context(_sigterm_interrupts())
         client = None
         if scheduler is not None:
-            client = stack.enter_context(_client(scheduler, float(connect_timeout)))
+            client = stack.enter_context(connect(scheduler, float(connect_timeout)))
         try:
             (out / "tasks").mkdir(parents=True, exist_ok=True)
             stack.enter_context(atomic.output_lock(out, out / LOCK_FILE, holder="sweep"))
