@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: demo test test-fast lint
+.PHONY: demo test test-fast test-fullwave lint
 
 demo: $(VENV)/.installed
 	$(BIN)/microsim report --quick
@@ -17,6 +17,12 @@ test: lint
 # inner loop while developing: no slow and no end-to-end tests
 test-fast: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -n 2 -m "not slow and not integration"
+
+# the full-wave rung's tests: installs the `fullwave` extra (pySCATMECH, compiled from source:
+# 3–5 min on one core, which is why `make test` leaves it out and those tests skip there)
+test-fullwave: $(VENV)/.installed-test
+	$(BIN)/python -m pip install --quiet -e '.[fullwave]'
+	$(BIN)/python -m pytest tests/test_fullwave.py
 
 lint: $(VENV)/.installed-test
 	$(BIN)/ruff check microsim tests examples tools

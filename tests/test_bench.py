@@ -16,6 +16,7 @@ from microsim.app.bench import (
     add_bench_command,
     build_times,
     format_bench,
+    machine,
     peak_rss_mb,
     throughput,
 )
@@ -121,9 +122,12 @@ def test_bench_figures_are_measured_and_printable():
         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
         "peak_rss_mb": {2**14: 100.0},
         "build_seconds": build_times(flat(), repeat=1),
+        "machine": machine(),
     }
     assert b["build_seconds"]["embreex"] > 0
+    assert b["machine"]["isa"] in ("AVX-512", "AVX2") or "x86" not in b["machine"]["isa"]
     text = format_bench(b)
+    assert text.startswith(f"machine: {b['machine']['cpu']}, {b['machine']['isa']}")
     assert "raw embreex rays/s" in text and "pipeline / raw" in text and "BVH build" in text
     assert ("packets / embreex" in text) == (raw["packets_unavailable"] is None)
     json.dumps(b)

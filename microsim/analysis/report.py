@@ -11,7 +11,8 @@ the model is too bright); BRDFs in sr⁻¹, angles in degrees.
 from __future__ import annotations
 
 import math
-from typing import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -19,6 +20,7 @@ from microsim.stats import t_isf
 
 from . import incidence
 from .anisotropy import VARIANTS as ANISOTROPY_VARIANTS
+from .markdown import md_table
 from .multiple import NOT_EXPECTED
 from .verdicts import summary_row, verdict_kind, verdict_symbol
 
@@ -66,20 +68,6 @@ def fmt(x, digits: int = 3) -> str:
 
 def _pct(x) -> str:
     return "–" if x is None or not math.isfinite(float(x)) else f"{plain(100 * float(x))}%"
-
-
-def _cell(s) -> str:
-    return str(s).replace("|", "\\|").replace("\n", " ")
-
-
-def md_table(header: Sequence[str], rows: Iterable[Sequence]) -> str:
-    """GitHub-flavoured markdown table (cells escaped)."""
-    lines = [
-        "| " + " | ".join(_cell(h) for h in header) + " |",
-        "|" + "|".join("---" for _ in header) + "|",
-    ]
-    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines)
 
 
 def _ranges(dev) -> str:
@@ -705,12 +693,16 @@ def _crossover_cell(x, devs, criterion: float, below: bool) -> str:
     return "–"
 
 
-def regime_section(docs: Sequence[Mapping], regimes: Mapping | None, methods=None) -> list[str]:
+def regime_section(
+    docs: Sequence[Mapping], regimes: Mapping | None, methods=None, fullwave=None
+) -> list[str]:
     """Index section "Where each method holds": the wave scenes' verdicts against Kirchhoff
     and, when ``regimes`` is given (``runner.wave_run.regime_maps``: ``chart``, ``maps`` as
     ``RegimeMap.to_dict``, ``settings`` text), the regime chart and crossover table; then
     "What each method costs" (``methods_section``) when ``methods`` is given (the path of
-    ``methods.json``, or its loaded dict)."""
+    ``methods.json``, or its loaded dict); before it "The rung above Kirchhoff"
+    (``fullwave_map.fullwave_section``) when ``fullwave``, the path of ``fullwave.json``,
+    exists."""
     models, rows = _wave_index_rows(docs)
     if not rows and not regimes and methods is None:
         return []
@@ -773,6 +765,10 @@ def regime_section(docs: Sequence[Mapping], regimes: Mapping | None, methods=Non
             md_table(["family", "method"] + [f"θi = {t:g}°" for t in thetas], table),
             "",
         ]
+    if fullwave is not None and Path(fullwave).is_file():
+        from .fullwave_map import fullwave_section, load_fullwave
+
+        lines += fullwave_section(load_fullwave(fullwave))
     if methods is not None:
         lines += methods_section(methods)
     return lines
@@ -1091,6 +1087,7 @@ def index_report(
     quick: bool,
     regimes: Mapping | None = None,
     methods=None,
+    fullwave=None,
 ) -> str:
     """``index.md``: verdict tables (scenes × models), Löw-style fit table, Mikkelsen Fig. 6,
     "Where each method holds" (``regime_section``: wave scenes' verdicts against Kirchhoff,
@@ -1154,7 +1151,7 @@ def index_report(
             f"![Mikkelsen Fig. 6]({fig6})",
             "",
         ]
-    lines += regime_section(docs, regimes, methods)
+    lines += regime_section(docs, regimes, methods, fullwave)
     lines += ["## Scenes", ""] + [
         f"- [{d['scene']}]({d['scene']}/report.md): {d.get('description', '')}" for d in docs
     ]

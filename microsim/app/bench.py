@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import subprocess
 import sys
 import time
@@ -459,6 +460,37 @@ def warm_up() -> None:
             )
 
 
+def machine() -> dict:
+    """What the figures were measured on: the CPU model, its widest x86 vector extension
+    ("AVX-512", "AVX2" or the machine's architecture), NumPy's dispatch targets in use (its
+    AVX-512 kernels change ulps of some functions) and numba's target CPU (``NUMBA_CPU_NAME``
+    or the host's)."""
+    flags, model = set(), platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                key, _, value = line.partition(":")
+                if key.strip() == "flags" and not flags:
+                    flags = set(value.split())
+                elif key.strip() == "model name":
+                    model = value.strip()
+    except OSError:
+        pass
+    isa = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else platform.machine()
+    try:
+        from numpy._core import _multiarray_umath as umath
+    except ImportError:  # NumPy < 2
+        from numpy.core import _multiarray_umath as umath
+    dispatch = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
+    try:
+        import llvmlite.binding as llvm
+
+        numba_cpu = os.environ.get("NUMBA_CPU_NAME") or llvm.get_host_cpu_name()
+    except Exception:  # numba's llvmlite without the binding: report what is known
+        numba_cpu = os.environ.get("NUMBA_CPU_NAME", "host")
+    return {"cpu": model, "isa": isa, "numpy_dispatch": dispatch, "numba_cpu": str(numba_cpu)}
+
+
 def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
     """Every figure of the module docstring, as a JSON-able dict (after ``warm_up``)."""
     warm_up()
@@ -466,6 +498,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
     raw, pipe = throughput(cfg, surface)
     out = {
         "config": asdict(cfg),
+        "machine": machine(),
         "load_average": list(os.getloadavg()),
         "cpus": os.cpu_count(),
         "mesh_triangles": int(len(surface.faces)),
@@ -497,7 +530,12 @@ def wave_rows(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> list[dict]:
 def format_bench(b: dict) -> str:
     """Human-readable table of ``run_bench`` output."""
     raw, pipe, ratio = b["raw"], b["pipeline_samples_per_s"], b["ratio"]
-    lines = [
+    m = b.get("machine")
+    lines = [] if m is None else [
+        f"machine: {m['cpu']}, {m['isa']} (NumPy dispatch "
+        f"{', '.join(m['numpy_dispatch']) or 'baseline'}; numba target {m['numba_cpu']})"
+    ]  # fmt: skip
+    lines += [
         f"mesh: {b['mesh_triangles']} triangles; {raw['primary_rays']} primary + "
         f"{raw['masking_rays']} masking rays; load average {b['load_average'][0]:.2f} "
         f"on {b['cpus']} CPUs",

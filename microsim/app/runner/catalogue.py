@@ -17,6 +17,7 @@ from typing import Callable
 from ... import atomic
 from ...analysis import charts as ch
 from ...analysis import report
+from ...analysis.fullwave_map import FULLWAVE_JSON
 from ...checkpoints import checkpoint
 from ...errors import UsageError
 from ..bench_methods import METHODS_JSON, METHODS_PNG
@@ -207,7 +208,14 @@ def run_report(
                 regime = _regimes(out, quick)
             atomic.write_text(
                 out / INDEX_FILE,
-                report.index_report(docs, fig6, quick, regimes=regime, methods=out / METHODS_JSON),
+                report.index_report(
+                    docs,
+                    fig6,
+                    quick,
+                    regimes=regime,
+                    methods=out / METHODS_JSON,
+                    fullwave=out / FULLWAVE_JSON,
+                ),
             )
         except KeyboardInterrupt:
             log(
