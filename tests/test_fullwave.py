@@ -2,7 +2,8 @@
 
 Facts checked:
 * the Kirchhoff order integrals in closed form (Bessel for the sinusoid, linear pieces for the
-  triangle) equal a brute-force quadrature of their definition;
+  triangle) equal a brute-force quadrature of their definition, and the efficiencies equal
+  microsim's tile solver (``wave.kirchhoff``) on the profile extruded along y to 1e-9;
 * RCW (NIST SCATMECH, the ``fullwave`` extra; skipped with the reason without it):
   - a lossless dielectric grating conserves energy, R + T = 1 for s and p separately, once
     converged (order and levels raised until no efficiency moves by 10⁻³; the study is kept);
@@ -145,3 +146,30 @@ def test_the_index_section_states_the_crossovers():
     text = "\n".join(fullwave_section(doc))
     assert "Λ = 8 λ, θi 0°: 30°" in text and "Λ = 8 λ, θi 30°: beyond the grid" in text
     assert "θi 0°: a/λ = 0.1" in text and "| 8 | 0° | 1.0 % | 4.0 % | 8.0 % |" in text
+
+
+@pytest.mark.parametrize("profile, surface", [("sinusoidal", "smooth"), ("triangular", "mesh")])
+def test_the_1d_kirchhoff_orders_are_the_tile_solvers_on_the_extruded_profile(profile, surface):
+    """The grating's Kirchhoff efficiencies equal ``wave.kirchhoff.kirchhoff_orders`` on the
+    profile extruded along y (one period, 128 samples; the sinusoid on the band-limited
+    interpolant, which it is; the triangle on the mesh, which holds it exactly)."""
+    from microsim.wave.kirchhoff import kirchhoff_orders
+
+    g = Grating(profile, 2.0, 0.3, "aluminium")
+    nx, ny = 128, 4
+    x = np.arange(nx) * g.period / nx
+    h = (
+        0.5 * g.amplitude * np.cos(2 * np.pi * x / g.period)
+        if profile == "sinusoidal"
+        else np.where(x <= g.period / 2, 2 * g.amplitude * x / g.period,
+                      2 * g.amplitude * (1 - x / g.period))
+    )  # fmt: skip
+    tile = kirchhoff_orders(
+        np.tile(h, (ny, 1)), g.period / nx, LAMBDA, 30.0, material="aluminium", surface=surface
+    )
+    mine = kirchhoff_efficiencies(g, LAMBDA, 30.0)
+    in_plane = tile.n == 0
+    assert np.allclose(tile.power[~in_plane], 0.0, atol=1e-12)
+    by_m = dict(zip(tile.m[in_plane].tolist(), tile.power[in_plane]))
+    for m, eta in zip(mine.orders.tolist(), mine.unpolarised):
+        assert abs(by_m[m] - eta) < 1e-9, (m, by_m[m], eta)

@@ -19,7 +19,9 @@ Kirchhoff (``kirchhoff_efficiencies``; Beckmann & Spizzichino 1963, ch. 3; the 1
     η_m = R_m (1 + wi·wo)² / (cos θi cos θm (cos θi + cos θm)²) · |I_m|²,
     I_m = (1/Λ) ∫₀^Λ exp(i(q_x x + q_z h(x))) dx,   q_x = 2πm/Λ,
 R_m the unpolarised Fresnel reflectance at the half-vector angle (scalar: no polarisation, no
-shadowing, no multiple scattering). For the sinusoid |I_m| = |J_m(q_z a/2)| (Jacobi–Anger); for
+shadowing, no multiple scattering). These equal ``wave.kirchhoff.kirchhoff_orders`` on the
+profile extruded along y (tests/test_fullwave.py; ``surfaces.sinusoidal_grating`` builds such
+a tile for the sinusoid). For the sinusoid |I_m| = |J_m(q_z a/2)| (Jacobi–Anger); for
 the triangle each linear piece integrates in closed form, ∫₀^L e^{iκx} dx = L e^{iκL/2}
 sinc(κL/2).
 
