@@ -4,7 +4,7 @@ nominal parameters, ``stats()`` and what the generator knows about it (``ensembl
 ``exact_shadowing``, ``predicted``). Scene files are read by ``microsim.app.scene.load_scene``.
 """
 
-from .gratings import sinusoidal_grating
+from .gratings import sinusoidal_grating, triangular_grating
 from .heightfields import abc, gaussian
 from .loader import from_file
 from .surface import Predicted, Surface, flat
@@ -19,4 +19,5 @@ __all__ = [
     "flat",
     "from_file",
     "sinusoidal_grating",
+    "triangular_grating",
 ]

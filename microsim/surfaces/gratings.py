@@ -1,4 +1,4 @@
-"""Deterministic periodic heightfields: the extruded sinusoidal grating.
+"""Deterministic periodic heightfields: the extruded sinusoidal and triangular gratings.
 
 A grating is the one rough surface whose Kirchhoff far field has a closed form (Jacobi–Anger:
 exp(i a q_z sin(2πx/Λ)) = Σ_m J_m(a q_z) exp(i 2π m x/Λ); Beckmann & Spizzichino 1963, ch. 4),
@@ -16,7 +16,7 @@ from microsim.errors import UsageError
 from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
 from .surface import Surface, check_relief, heightfield_mesh
 
-__all__ = ["sinusoidal_grating", "PERIOD_RTOL"]
+__all__ = ["sinusoidal_grating", "triangular_grating", "PERIOD_RTOL"]
 
 PERIOD_RTOL = 1e-9
 """Relative tolerance of "the period divides the tile": |nx·dx/Λ − round(nx·dx/Λ)| ≤ this ×
@@ -65,26 +65,49 @@ def sinusoidal_grating(
             f"period must be at least 2·dx = {2 * dx:g} (a period needs two grid steps), "
             f"got {period:g}"
         )
+    x = (np.arange(n) - n / 2.0) * dx
+    row = a * np.sin(2.0 * np.pi * x / period + np.radians(phase))
+    return _extruded(row, ny, dx, {"amplitude": a, "period": period, "phase_deg": phase,
+                                    "n": n, "ny": ny, "dx": dx, "periods": int(whole)})  # fmt: skip
+
+
+def triangular_grating(n: int, dx: float, amplitude: float, period: float, *, ny=None) -> Surface:
+    """Periodic extruded symmetric triangular (V-groove) grating on an (ny, n) grid: h rises
+    linearly from 0 to ``amplitude`` (peak to valley) over half a ``period`` and falls back
+    (facet slope tan α = 2·amplitude/period), the profile of ``wave.gratings.Grating``
+    ("triangular"). A half period must be a whole number of grid steps (the apex and the
+    valley on vertices, so the mesh holds the profile exactly); otherwise as
+    ``sinusoidal_grating``."""
+    n = integer("n", n, MIN_GRID, None, " (grid points along x)")
+    ny = n if ny is None else integer("ny", ny, 1, None, " (grid points along y)")
+    dx, period, a = positive("dx", dx), positive("period", period), positive("amplitude", amplitude)
+    half = period / (2.0 * dx)
+    if abs(half - round(half)) > PERIOD_RTOL * half or round(half) < 1:
+        raise UsageError(f"period must be an even number of grid steps dx = {dx:g}, got {period:g}")
+    cycles = n * dx / period
+    if abs(cycles - round(cycles)) > PERIOD_RTOL * cycles or round(cycles) < 1:
+        raise UsageError(
+            f"period must divide the tile n·dx = {n * dx:g} a whole number of times, got {period:g}"
+        )
+    phase = (np.arange(n) * dx / period) % 1.0
+    row = a * (1.0 - np.abs(2.0 * phase - 1.0))
+    return _extruded(row, ny, dx, {"amplitude": a, "period": period, "n": n, "ny": ny,
+                                    "dx": dx, "periods": int(round(cycles))})  # fmt: skip
+
+
+def _extruded(row: np.ndarray, ny: int, dx: float, nominal: dict) -> Surface:
+    """The periodic grating Surface of one profile row repeated along y."""
+    n = len(row)
+    lx = n * dx
     check_memory(
         "n",
         float(n) * ny * BYTES_PER_GRID_POINT,
         f"a {n}x{ny} heightfield ({BYTES_PER_GRID_POINT} bytes per grid point)",
     )
-    x = (np.arange(n) - n / 2.0) * dx
-    row = a * np.sin(2.0 * np.pi * x / period + np.radians(phase))
     heights = np.tile(row, (ny, 1))
     tile = (lx, ny * dx)
     check_relief("amplitude", heights.min(), heights.max(), tile)
     vertices, faces = heightfield_mesh(heights, dx)
-    nominal = {
-        "amplitude": a,
-        "period": period,
-        "phase_deg": phase,
-        "n": n,
-        "ny": ny,
-        "dx": dx,
-        "periods": int(whole),
-    }
     return Surface(
         kind="grating",
         vertices=vertices,
