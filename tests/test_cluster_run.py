@@ -173,3 +173,21 @@ def test_microsim_report_with_a_scheduler_traces_each_scene_there(tmp_path):
             assert np.array_equal(local[k], dask[k], equal_nan=True), k
     meta = json.loads((tmp_path / "dask" / "tiny-cluster" / "meta.json").read_text())
     assert meta["cluster"]["workers"] == 2
+
+
+def test_microsim_measure_with_a_scheduler_writes_the_local_table(tmp_path):
+    from microsim.app.measure import measure, plan_measure
+    from microsim.measured import BRDFTable
+
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(SCENE)
+    kw = {"theta_step": 30.0, "theta_max": 60.0, "target": 0.05, "exports": ()}
+    local = measure(plan_measure(scene, out=tmp_path / "local", **kw), log=None)
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        acq = plan_measure(scene, out=tmp_path / "dask", scheduler=cluster.scheduler_address, **kw)
+        remote = measure(acq, log=None)
+    assert np.array_equal(local.brdf, remote.brdf) and np.array_equal(local.stderr, remote.stderr)
+    saved = BRDFTable.load(tmp_path / "dask" / "table.npz")
+    assert np.array_equal(saved.brdf, local.brdf)

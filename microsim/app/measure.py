@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,9 +45,10 @@ import numpy as np
 from .. import atomic
 from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..measured import BRDFTable, read_merl, read_rgl, write_merl, write_rgl
-from ..sim import Bins, Result
-from ..sim.auto import simulate_auto
+from ..sim import Bins, Estimator, Execution, Experiment, Result
+from ..sim.auto import Precision, estimate_to_precision
 from ..stats import energy_set
+from .cluster import connect
 from .runner.planning import check_output_path, effort_for, tally_settings
 from .scene import MAX_THETA_I, load_scene
 
@@ -78,6 +80,7 @@ class Acquisition:
     threads: int
     quick: bool
     exports: tuple[str, ...] = tuple(EXPORTS)
+    scheduler: str | None = None  # Dask scheduler whose workers trace (``sim.cluster``)
 
     @property
     def bins(self) -> Bins:
@@ -117,10 +120,12 @@ def plan_measure(
     resume: bool = False,
     force: bool = False,
     exports=None,
+    scheduler: str | None = None,
 ) -> Acquisition:
     """Validate a ``measure`` without touching the disk (every problem a one-line UsageError
     naming the option). ``exports``: formats among ``EXPORTS`` (None: every one the scene
-    allows)."""
+    allows); ``scheduler``: a Dask scheduler address whose workers trace (the table is the
+    local one bit for bit)."""
     scene = load_scene(scene_path)
     if scene.anisotropic:
         raise UsageError(
@@ -166,6 +171,7 @@ def plan_measure(
         int(threads),
         bool(quick),
         exports,
+        scheduler,
     )
     if out.exists() and not (resume or force):
         raise UsageError(
@@ -206,7 +212,8 @@ def measure(acq: Acquisition, log=print) -> BRDFTable:
     """Trace every incidence of ``acq`` not already on disk, then write and return the table
     (module docstring). ``log``: one line per incidence (None: silent)."""
     acq.out.mkdir(parents=True, exist_ok=True)
-    with atomic.output_lock(acq.out, holder="measure"):
+    with atomic.output_lock(acq.out, holder="measure"), ExitStack() as stack:
+        client = None if acq.scheduler is None else stack.enter_context(connect(acq.scheduler))
         doc = {"settings": acq.settings(), "incidences": {}}
         if (acq.out / SETTINGS_FILE).exists():
             doc["incidences"] = _read_json(acq.out / SETTINGS_FILE).get("incidences", {})
@@ -223,15 +230,11 @@ def measure(acq: Acquisition, log=print) -> BRDFTable:
             if surface is None:
                 surface = acq.scene.build_surface(seed=acq.seed, scale=scale)
             t0 = time.perf_counter()
-            res = simulate_auto(
-                surface,
-                acq.scene.material,
-                theta,
-                target=acq.target,
-                bins=acq.bins,
-                seed=acq.seed + k,
-                threads=acq.threads,
-                max_rays=acq.max_rays,
+            res = estimate_to_precision(  # simulate_auto's, with its defaults
+                Experiment(surface, acq.scene.material, theta, 0.0, acq.bins),
+                Estimator(acq.max_rays, acq.seed + k),
+                Execution(acq.threads, cluster=client),
+                Precision(acq.target),
             )
             res.save(where)
             auto = res.meta["auto"]["incidences"][0]
@@ -313,6 +316,7 @@ def _cmd_measure(args) -> int:
         resume=args.resume,
         force=args.force,
         exports=tuple(args.export) if args.export else None,
+        scheduler=args.scheduler,
     )
     log = None if args.no_progress else (lambda s: print(s, flush=True))
     try:
@@ -366,6 +370,11 @@ def add_measure_command(sub) -> None:
     m.add_argument("--seed", type=int, help="random seed (default: the scene's)")
     m.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
     m.add_argument("--quick", action="store_true", help="the --quick surface scale")
+    m.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="trace on the workers of this Dask scheduler (the table is the local one)",
+    )
     m.add_argument(
         "--export",
         action="append",
