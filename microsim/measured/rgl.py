@@ -115,8 +115,11 @@ from typing import Callable
 import numpy as np
 
 from microsim import checks as _checks
+from microsim.analytic.ndf import NDF
+from microsim.analytic.shadowing import smith_lambda
 from microsim.atomic import atomic_open
 from microsim.errors import UsageError
+from microsim.vectors import spherical
 
 from .merl import brdf_rgb
 
@@ -695,8 +698,6 @@ DEFAULT_RESOLUTION = RGLResolution()
 
 
 def _check_ndf(ndf):
-    from microsim.analytic.ndf import NDF
-
     if not isinstance(ndf, NDF) or not getattr(ndf, "isotropic", True):
         raise UsageError(
             f"ndf must be an isotropic microsim NDF (microsim.analytic.ndf: Beckmann, GGX, "
@@ -707,8 +708,6 @@ def _check_ndf(ndf):
 
 def _sigma(ndf, theta) -> np.ndarray:
     """σ(θ) = (1 + Λ) cos θ (finite up to θ = 90°: cos θ is never exactly 0 in float64 here)."""
-    from microsim.analytic.shadowing import smith_lambda
-
     c = np.maximum(np.cos(np.minimum(theta, 0.5 * np.pi)), 1e-300)
     w = np.stack([np.sqrt((1 - c) * (1 + c)), np.zeros_like(c), c], axis=-1)
     return c * (1.0 + smith_lambda(w, ndf))
@@ -739,8 +738,6 @@ an NDF narrower than the BRDF's lobe), which the file cannot interpolate."""
 def _fields(
     brdf, ndf, res: RGLResolution, description: str, flavour: str, floor: float = 0.0
 ) -> dict:
-    from microsim.vectors import spherical
-
     theta_i = res.theta_i_rad()
     T, (Hv, Wv), n, Nn = len(theta_i), res.vndf, res.samples, res.ndf
     ndf = _WarpNDF(ndf, floor)
@@ -916,8 +913,6 @@ def _sample_file(rgl: RGLBRDF, wi, u) -> tuple[np.ndarray, np.ndarray]:
     params = (phi_i, theta_i)
     s, _ = _lum_table(rgl).sample(u, params)
     u_m, _ = rgl._vndf.sample(s, params)
-    from microsim.vectors import spherical
-
     m = spherical(_u2theta(u_m[:, 0]), _u2phi(u_m[:, 1]) + phi_i)
     wo = 2.0 * np.einsum("ij,ij->i", wi, m)[:, None] * m - wi
     return wo / np.linalg.norm(wo, axis=-1, keepdims=True), m

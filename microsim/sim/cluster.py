@@ -33,7 +33,7 @@ from .bounces import chain_task
 from .paths import Incidence, tracer_for
 from .tallies import ChunkTallies
 
-__all__ = ["ClusterPool", "RemoteSurface", "check_client", "IN_FLIGHT_PER_THREAD"]
+__all__ = ["ClusterPool", "RemoteSurface", "check_client", "tracer_info", "IN_FLIGHT_PER_THREAD"]
 
 MIN_TASK_BLOCKS = 64
 """Blocks (of ``streams.BLOCK`` = 4096 rays) a cluster task carries at least, but for the
@@ -82,10 +82,14 @@ def _prepared(surface, masking: str, fingerprint: str):
     return tracer_for(surface, masking, fingerprint)
 
 
-def _tracer_info(surface, masking: str, fingerprint: str) -> dict:
-    """What the run's meta records of the tracer (worker side; prepares it)."""
-    tracer = _prepared(surface, masking, fingerprint)[0]
+def tracer_info(tracer) -> dict:
+    """What a run's meta records of a surface's tracer."""
     return {"eps": tracer.eps, "max_wraps": tracer.max_wraps, "grid_walk": tracer.grid is not None}
+
+
+def _tracer_info(surface, masking: str, fingerprint: str) -> dict:
+    """``tracer_info`` of the worker's prepared tracer (worker side; prepares it)."""
+    return tracer_info(_prepared(surface, masking, fingerprint)[0])
 
 
 _TASKS: dict = {}

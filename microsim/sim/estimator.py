@@ -49,7 +49,7 @@ from .arguments import (
 )
 from .bins import Bins
 from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
-from .cluster import ClusterPool, RemoteSurface
+from .cluster import ClusterPool, RemoteSurface, tracer_info
 from .experiment import Estimator, Execution, Experiment
 from .paths import LEDGER, MASKING, Events, Incidence, trace_events, tracer_for
 from .progress import RaysDone
@@ -378,9 +378,7 @@ def _prepare(surf, fingerprint: str, plan: _Plan, est: Estimator, run: Execution
     # one surface: keep its tracer for the next call (``tracer_for``); several: each
     # realisation's tracer is released once it is traced
     prepared = tracer_for(surf, est.masking, fingerprint if plan.n_real == 1 else None)
-    tracer = prepared[0]
-    info = {"eps": tracer.eps, "max_wraps": tracer.max_wraps, "grid_walk": tracer.grid is not None}
-    return prepared, info
+    return prepared, tracer_info(prepared[0])
 
 
 def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> None:

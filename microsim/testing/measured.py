@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from microsim.errors import UsageError
-from microsim.measured import MERLBRDF, BRDFTable, read_merl
+from microsim.measured import MERLBRDF, BRDFTable, read_merl, read_rgl
 from microsim.sim.bins import Bins
 from microsim.sim.predict import ModelSpec, predict
 from microsim.stats import energy_set
@@ -47,10 +47,7 @@ def measured_reference(reference, theta_i, bins: Bins) -> BRDFTable:
         elif path.suffix == ".npz":
             reference = BRDFTable.load(path)
         elif path.suffix == ".bsdf":
-            from microsim.measured.rgl import read_rgl
-
-            rgl = read_rgl(path)
-            reference = rgl.evaluate
+            reference = read_rgl(path).evaluate
         else:
             raise UsageError(
                 f"reference must be a MERL .binary file, an RGL .bsdf file or a microsim table "

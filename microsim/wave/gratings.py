@@ -40,9 +40,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import jv
 
-from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.analytic.fresnel import resolve_material
 from microsim.checks import positive
 from microsim.errors import UsageError
+
+from .kirchhoff import incident_direction, obliquity, reflectance
 
 __all__ = [
     "PROFILES",
@@ -110,11 +112,10 @@ class Efficiencies:
 
 
 def incident(theta_i_deg: float) -> np.ndarray:
-    """wi = (sin θi, 0, cos θi) for θi in [0°, 90°)."""
+    """wi = (sin θi, 0, cos θi) for θi in [0°, 90°) (``kirchhoff.incident_direction``)."""
     if not 0.0 <= float(theta_i_deg) < 90.0:
         raise UsageError(f"theta_i must lie in [0, 90) degrees, got {theta_i_deg!r}")
-    t = np.radians(float(theta_i_deg))
-    return np.array([np.sin(t), 0.0, np.cos(t)])
+    return incident_direction(float(theta_i_deg), 0.0)
 
 
 def order_directions(grating: Grating, wavelength: float, theta_i_deg: float):
@@ -153,13 +154,9 @@ def kirchhoff_efficiencies(grating: Grating, wavelength: float, theta_i_deg: flo
     """Scalar Kirchhoff efficiencies of the reflected orders (module docstring)."""
     m, wo = order_directions(grating, wavelength, theta_i_deg)
     wi = incident(theta_i_deg)
-    k = 2.0 * np.pi / wavelength
-    q = k * (wo + wi)
-    c = 1.0 + wo @ wi
-    obliquity = c * c / (wi[2] * wo[:, 2] * (wi[2] + wo[:, 2]) ** 2)
-    cos_d = np.sqrt(np.clip(0.5 * c, 0.0, 1.0))
-    R = fresnel(cos_d, grating.index)
-    eta = R * obliquity * np.abs(_phase_integral(grating, q[:, 0], q[:, 2])) ** 2
+    q = 2.0 * np.pi / wavelength * (wo + wi)
+    R = reflectance(wi, wo, grating.index, "half")
+    eta = R * obliquity(wi, wo) * np.abs(_phase_integral(grating, q[:, 0], q[:, 2])) ** 2
     return Efficiencies(m, wo, eta, "kirchhoff")
 
 
@@ -180,8 +177,8 @@ def rayleigh_rice_efficiencies(
     wi = incident(theta_i_deg)
     first = np.abs(m) == 1
     base = np.pi**2 * grating.amplitude**2 * wi[2] * wo[:, 2] / wavelength**2
-    out = {}
-    for pol in ("s", "p", "unpolarised"):
-        q = np.array([_rr_q(wi, w, grating.index, pol) for w in wo], dtype=np.float64)
-        out[pol] = np.where(first, base * q, 0.0)
+    out = {
+        pol: np.where(first, base * _rr_q(wi, wo, grating.index, pol), 0.0)
+        for pol in ("s", "p", "unpolarised")
+    }
     return Efficiencies(m, wo, out["unpolarised"], "rayleigh-rice", out["s"], out["p"])
