@@ -154,3 +154,46 @@ def test_simulate_with_the_grid_walk_equals_embree_and_is_reproducible(monkeypat
     moved = np.abs(a.counts.astype(np.int64) - c.counts.astype(np.int64)).sum(axis=(1, 2)) / 2
     assert np.all(moved <= TIES * rays + 1)
     assert a.meta["surface"]["grid_walk"] and not c.meta["surface"]["grid_walk"]
+
+
+@pytest.mark.parametrize("theta, phi", [(0.0, 0.0), (30.0, 0.0), (55.0, 37.0), (70.0, 200.0)])
+def test_fused_walk_and_lookups_give_the_bits_of_walk_then_lookups(theta, phi):
+    """``primary.cast_tabled_primary`` (grid walk tile by tile, then the facet table's
+    look-ups and the masking rays' setup) writes exactly what the walk into whole columns
+    followed by ``primary.tabled_primary`` writes: every ledger entry and every masking ray."""
+    from microsim.analytic.fresnel import resolve_material
+    from microsim.sim.engine import primary, segments
+
+    tracer = Tracer(_rough(seed=7), grid=True)
+    wi = spherical_deg(theta, phi)
+    table = paths.facet_table(tracer, wi, resolve_material("aluminium"), Bins(18, 12), phi)
+    x = _starts(tracer, 3 * 1024 + 17, seed=3)  # several tiles and a short last one
+    down = [float(-c) for c in wi]
+    assert tracer.grid_walk(x, down) is not None
+    fused = paths.tabled_masking_rays(tracer, table, wi, x)
+    fused = [a.copy() for a in fused[:3]], _masking_rays(fused[3], fused[4])
+    hs, prim, p = tracer.cast_falling(x, down)
+    n = len(x[0])
+    out = np.empty(n, np.int8), np.empty(n), np.empty(n, np.int64)
+    mask = paths.MaskingRays.work(n)
+    m = primary.tabled_primary(
+        segments.WalkResult(hs, prim, *p),
+        primary.FacetColumns(
+            table.code, table.weight, *table.normal_cols, table.lift, table.wo32, table.bin,
+            table.clear,
+        ),
+        tracer.horizon,
+        paths._segment_geometry(tracer),
+        primary.PrimaryLedger(*out),
+        mask.kernel_args(),
+    )  # fmt: skip
+    for a, b in zip(fused[0], out):
+        np.testing.assert_array_equal(a, b)
+    assert m == len(fused[1][0]) and m > 0
+    for a, b in zip(fused[1], _masking_rays(mask, m)):
+        np.testing.assert_array_equal(a, b)
+
+
+def _masking_rays(mask, m):
+    """Copies of the first m masking rays' arrays (``MaskingRays.kernel_args``)."""
+    return [a[:m].copy() for a in mask.kernel_args()]

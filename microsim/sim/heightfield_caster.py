@@ -24,15 +24,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from .engine.codes import HIT, UNRESOLVED
+from .engine.jit import vector_inlined, vectorised
 
 __all__ = ["HeightfieldGrid", "heightfield_grid", "cast_falling"]
 
-_compiled = njit(cache=True, nogil=True, error_model="numpy")
+_compiled = vectorised
 # the walk inlined into the ray loop: ~30 % faster than as separate calls (same bits)
-_inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always")
+_inlined = vector_inlined
 
 
 class HeightfieldGrid:

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .engine.jit import vector_inlined, vectorised
+from .engine.jit import allocating, vector_inlined
 
 
 @vector_inlined
@@ -21,7 +21,7 @@ def _stratum(r, xi, n_total, rows):
     return s - row, row
 
 
-@vectorised
+@allocating
 def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, x, y, psi):
     """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``streams.
     chunk_origins``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
@@ -46,7 +46,7 @@ def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, 
             _groove_strata(u, base, base + 2 * m, first, m, n_total, rows, strata, lo, x, psi)
 
 
-@vectorised
+@allocating
 def stratified_groove_starts(u, r0, n, block, n_total, rows, lx, strata, x, psi):
     """x and groove azimuth ψ of stratified rays r0 … r0 + n − 1 as ``stratified_origins``
     (``azimuth``) gives them, from ξ and ψ/2π alone: block j (m rays) holds them as two runs

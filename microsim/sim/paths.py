@@ -59,6 +59,7 @@ from microsim.errors import UsageError
 from . import bin_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
 from .engine import primary, segments
+from .engine.jit import TILE
 from .ledger import DOWNWARD, LEDGER, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .scratch import WorkArray, WorkColumns
 from .streams import BLOCK, block_rotation, block_span, chunk_origins, groove_starts
@@ -426,6 +427,8 @@ _NEAR_EDGE = WorkArray("near-edge", np.bool_)
 _TRACED_WO = WorkColumns("traced-wo")
 _TRACED_COSINE = WorkArray("traced-cosine")
 _ANALYTIC_WO = WorkColumns("analytic-wo")
+_ANALYTIC_TILE = WorkArray("analytic-tile", rows=15)  # ``analytic_vgroove``'s scratch
+_ANALYTIC_NEAR = WorkArray("analytic-near", np.bool_)
 
 
 def falling_first_segment(tracer: Tracer, x, down) -> tuple:
@@ -466,25 +469,30 @@ def tabled_masking_rays(tracer: Tracer, table: FacetTable, wi: np.ndarray, origi
     n = len(x[0])
     wi = np.asarray(wi, dtype=np.float64)
     down = [float(-c) for c in wi]
-    hs, prim, p = primary_hits(tracer, x, down, (-wi).astype(np.float32)[None])
     status, weight = np.empty(n, dtype=np.int8), np.empty(n)
     where = np.empty(n, dtype=np.int64)
     mask = MaskingRays.work(n)
+    facets = primary.FacetColumns(
+        table.code,
+        table.weight,
+        *table.normal_cols,
+        table.lift,
+        table.wo32,
+        table.bin,
+        table.clear,
+    )
+    ledger = primary.PrimaryLedger(status, weight, where)
+    grid = tracer.grid_walk(x, down)
+    if grid is not None:  # the grid walk fused with the look-ups, tile by tile
+        m = primary.cast_tabled_primary(
+            tuple(x), tuple(down), grid, facets, tracer.horizon, _segment_geometry(tracer),
+            ledger, mask.kernel_args(),
+        )  # fmt: skip
+        return status, weight, where, mask, m
+    hs, prim, p = primary_hits(tracer, x, down, (-wi).astype(np.float32)[None])
+    walk = segments.WalkResult(hs, prim, *p)
     m = primary.tabled_primary(
-        segments.WalkResult(hs, prim, *p),
-        primary.FacetColumns(
-            table.code,
-            table.weight,
-            *table.normal_cols,
-            table.lift,
-            table.wo32,
-            table.bin,
-            table.clear,
-        ),
-        tracer.horizon,
-        _segment_geometry(tracer),
-        primary.PrimaryLedger(status, weight, where),
-        mask.kernel_args(),
+        walk, facets, tracer.horizon, _segment_geometry(tracer), ledger, mask.kernel_args()
     )
     return status, weight, where, mask, m
 
@@ -640,6 +648,8 @@ def analytic_columns(caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z: float, 
         weight,
         where,
         *wo,
+        _ANALYTIC_TILE(TILE),
+        _ANALYTIC_NEAR(TILE),
     )
     if not bins.folded:
         locate_single(bins, status, wo, phi_i, psi, where)

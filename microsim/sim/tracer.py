@@ -488,23 +488,31 @@ class Tracer:
             or all(x[a].min() >= -self.half[a] and x[a].max() < self.half[a] for a in (0, 1))
         )
 
+    def grid_walk(self, x, down):
+        """The grid walk's geometry (``HeightfieldGrid.geometry``) for rays from the starts
+        ``x`` (3 columns) along one falling direction ``down`` (3 floats), or None when the
+        tracer has no grid, a start lies outside the tile or below zmax, or the direction is
+        so grazing that its walk would cross more than ``GRID_WALK_CELLS`` cells (Embree is
+        faster there)."""
+        g = self.grid
+        if g is None or not down[2] < 0.0 or not self.holds(x):
+            return None
+        run = (self.zmax - self.zmin) * (abs(down[0]) + abs(down[1])) / (-down[2] * g.cell)
+        if run > GRID_WALK_CELLS or (len(x[0]) and x[2].min() < self.zmax):
+            return None
+        return g.geometry(self.zmin, self.zmax, self.max_wraps)
+
     def cast_falling(self, x, down):
         """First hits of rays from the starts ``x`` (3 columns, in the tile, at or above zmax)
         along one falling direction ``down`` (3 floats) by the grid walk
         (``heightfield_caster.cast_falling``): (status, prim, point columns) as
         ``trace_columns`` returns them, in this thread's work arrays (valid until its next
-        call) — or None when the tracer has no grid, the starts are elsewhere, or the
-        direction is so grazing that its walk would cross more than ``GRID_WALK_CELLS``
-        cells (Embree is faster there)."""
-        g = self.grid
-        if g is None or not down[2] < 0.0 or not self.holds(x):
+        call) — or None where ``grid_walk`` is None."""
+        geometry = self.grid_walk(x, down)
+        if geometry is None:
             return None
-        run = (self.zmax - self.zmin) * (abs(down[0]) + abs(down[1])) / (-down[2] * g.cell)
         n = len(x[0])
-        if run > GRID_WALK_CELLS or (n and x[2].min() < self.zmax):
-            return None
         status, prim, point = _CAST_STATUS(n), _CAST_PRIM(n), _CAST_POINT(n)
-        geometry = g.geometry(self.zmin, self.zmax, self.max_wraps)
         cast_falling(*x, *(float(c) for c in down), geometry, status, prim, *point)
         return status, prim, point
 

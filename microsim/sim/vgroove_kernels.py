@@ -120,6 +120,8 @@ def analytic_vgroove(
     wox,
     woy,
     woz,
+    tile,
+    near,
 ):
     """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``paths.
     analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
@@ -135,7 +137,8 @@ def analytic_vgroove(
     arithmetic as ``_groove_hit``/``_groove_reflection`` ray by ray (so
     ``analytic_vgroove_bounces`` agrees bitwise) and ``bin_rays``'s bins.
     ``groove``: ``tracer.GrooveProfile`` (the caster's ``profile``); ``material``:
-    ``fresnel_kernels.FresnelMaterial``."""
+    ``fresnel_kernels.FresnelMaterial``; ``tile`` (15, TILE) float64 and ``near`` (TILE,)
+    bool: scratch."""
     half, x_left, x_right, w_left, depth = groove[:5]
     facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz = groove[5:10]
     facet_signed_tan, facet_width = groove[10:]
@@ -147,10 +150,9 @@ def analytic_vgroove(
     n_phi = len(edges) - 1
     ts, fs, gt, gf = bin_scales(n_theta, n_phi)
     cos_phi, sin_phi = math.cos(math.radians(phi_i_deg)), math.sin(math.radians(phi_i_deg))
-    tile = np.empty((15, TILE))  # per-ray scratch of one tile
     wx, wy, x0, cp, sp, num, den = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
     nx, nz, tan, width, c = tile[7], tile[8], tile[9], tile[10], tile[11]
-    ox, oy, oz, near = tile[12], tile[13], tile[14], np.empty(TILE, np.bool_)
+    ox, oy, oz = tile[12], tile[13], tile[14]
     for t in range(0, len(x), TILE):
         m = min(TILE, len(x) - t)
         for j in range(m):  # vectorised: groove frame and z = 0 crossing
@@ -221,7 +223,8 @@ def analytic_vgroove_bounces(
     the path still inside (CUT_BOUNCES), below the weight ``floor`` (CUT_WEIGHT) or at a
     back-facing hit (PATH_UNRESOLVED, only from rounding). ``order`` = bounces made.
     ``groove``: ``tracer.GrooveProfile`` (the caster's ``profile``); ``material``:
-    ``fresnel_kernels.FresnelMaterial``."""
+    ``fresnel_kernels.FresnelMaterial``; ``tile`` (15, TILE) float64 and ``near`` (TILE,)
+    bool: scratch."""
     half, x_left, x_right, w_left, depth = groove[:5]
     facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz = groove[5:10]
     facet_signed_tan, facet_width = groove[10:]

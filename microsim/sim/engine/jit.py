@@ -22,26 +22,36 @@ thread count; tests/test_kernels.py checks each kernel against the NumPy stateme
 computes. Grouped arguments are ``typing.NamedTuple``s of arrays and scalars (passed by
 value). Units and frames are the callers': tile coordinates, unit directions, distances
 along the ray.
+
+No reference counting: the kernels are compiled without numba's runtime (``_nrt=False``), so
+they cannot allocate (scratch comes from the caller or from an ``allocating`` kernel around
+them), and numba does not increment and decrement the count of every array a helper
+receives — on the heightfield grid walk, which hands its height arrays to an inlined helper
+per ray, those calls cost a fifth of its time. The few kernels that allocate their per-tile
+scratch (``allocating``) keep the runtime; their per-ray loops index arrays directly.
 """
 
 from __future__ import annotations
 
 from numba import njit
 
-__all__ = ["compiled", "inlined", "vectorised", "vector_inlined", "TILE"]
+__all__ = ["compiled", "inlined", "vectorised", "vector_inlined", "allocating", "TILE"]
 
-compiled = njit(cache=True, nogil=True)
+compiled = njit(cache=True, nogil=True, _nrt=False)
 
 
-inlined = njit(cache=True, nogil=True, inline="always")  # small helpers of the per-ray loops
+inlined = njit(cache=True, nogil=True, inline="always", _nrt=False)  # the per-ray loops' helpers
 
 
 # branch-free passes the compiler vectorises: float division by zero gives inf/NaN there
 # instead of raising (the check is a branch per division), values the selects then discard
-vectorised = njit(cache=True, nogil=True, error_model="numpy")
+vectorised = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+
+# ``vectorised`` kernels that allocate their per-tile scratch (numba's runtime kept)
+allocating = njit(cache=True, nogil=True, error_model="numpy")
 
 
 TILE = 1024  # rays per tile of a kernel's vectorised passes (its scratch stays in L1/L2)
 
 
-vector_inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always")
+vector_inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always", _nrt=False)

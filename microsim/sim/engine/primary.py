@@ -10,9 +10,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..heightfield_caster import cast_falling
 from .codes import DOWNWARD, ESCAPED, HIT, MISSED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .horizon import CLEAR_MARGIN, horizon_clear
-from .jit import TILE, compiled, vector_inlined, vectorised
+from .jit import TILE, allocating, compiled, vector_inlined
 from .segments import setup_ray
 
 
@@ -52,7 +53,7 @@ class TracedLedger(NamedTuple):
     woz: np.ndarray
 
 
-@compiled
+@allocating
 def tabled_primary(walk, table, hz, geometry, out, masking):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
@@ -75,39 +76,71 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
     (``FacetColumns``: code, fweight, nx, ny, nz, lift, wo32, fbin, fclear), ``hz``,
     ``geometry``, ``out`` (``PrimaryLedger``: status, weight, where; written) and
     ``masking`` (the masking rays' arrays, ``paths.MaskingRays.kernel_args``)."""
-    hs, prim, px, py, pz = walk
-    code, fweight, nx, ny, nz, lift, wo32, fbin, fclear = table
-    status, weight, where = out
     tile = np.empty((10, TILE))  # per-ray scratch of one tile
-    a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
-    dx_, dy_, dz_ = tile[7], tile[8], tile[9]
     cand = np.empty(TILE, np.bool_)
     m = 0
-    for t in range(0, len(hs), TILE):
-        n = min(TILE, len(hs) - t)
-        for j in range(n):  # one by one: the hit facet's entries (indexed loads)
-            i = t + j
-            h = hs[i]
-            hit = h == HIT
-            f = prim[i] if hit else 0
-            c = code[f]
-            miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
-            status[i] = c if hit else miss
-            weight[i] = fweight[f] if hit else 0.0
-            where[i] = fbin[f] if hit & (c == SINGLE) else -1
-            cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
-            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
-            dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
-        for j in range(n):  # vectorised: the masking rays' starts on the facet planes
-            i = t + j
-            a, b, e = a_[j], b_[j], e_[j]
-            off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]
-            x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
-        m = masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
+    for t in range(0, len(walk[0]), TILE):
+        n = min(TILE, len(walk[0]) - t)
+        m = _tabled_tile(walk, t, t, n, table, hz, geometry, out, masking, tile, cand, m)
     return m
 
 
-@vectorised
+@allocating
+def cast_tabled_primary(origins, down, grid, table, hz, geometry, out, masking):
+    """``tabled_primary`` of rays from ``origins`` (x, y, z columns) along one falling
+    direction ``down`` (dx, dy, dz), their first hits found tile by tile by the heightfield
+    grid walk (``heightfield_caster.cast_falling`` on ``grid``, ``Tracer.grid_walk``) into
+    scratch of one tile: the same bits as the walk into whole columns followed by
+    ``tabled_primary``, without writing and reading back five columns of hits."""
+    x, y, z = origins
+    dx, dy, dz = down
+    tile = np.empty((10, TILE))
+    cand = np.empty(TILE, np.bool_)
+    hs = np.empty(TILE, np.int8)
+    prim = np.empty(TILE, np.int32)
+    hits = np.empty((3, TILE))
+    walk = (hs, prim, hits[0], hits[1], hits[2])
+    m = 0
+    for t in range(0, len(x), TILE):
+        n = min(TILE, len(x) - t)
+        e = t + n
+        cast_falling(x[t:e], y[t:e], z[t:e], dx, dy, dz, grid, hs, prim, hits[0], hits[1], hits[2])
+        m = _tabled_tile(walk, 0, t, n, table, hz, geometry, out, masking, tile, cand, m)
+    return m
+
+
+@compiled
+def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m):
+    """``tabled_primary`` for the n rays t … t + n − 1, their walk results at ``walk``'s
+    entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``tile`` (10, TILE)
+    and ``cand`` (TILE,) scratch; masking rays from slot m on. Returns the new m."""
+    hs, prim, px, py, pz = walk
+    code, fweight, nx, ny, nz, lift, wo32, fbin, fclear = table
+    status, weight, where = out
+    a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
+    dx_, dy_, dz_ = tile[7], tile[8], tile[9]
+    for j in range(n):  # one by one: the hit facet's entries (indexed loads)
+        i, k = t + j, w + j
+        h = hs[k]
+        hit = h == HIT
+        f = prim[k] if hit else 0
+        c = code[f]
+        miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
+        status[i] = c if hit else miss
+        weight[i] = fweight[f] if hit else 0.0
+        where[i] = fbin[f] if hit & (c == SINGLE) else -1
+        cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
+        a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
+        dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
+    for j in range(n):  # vectorised: the masking rays' starts on the facet planes
+        k = w + j
+        a, b, e = a_[j], b_[j], e_[j]
+        off = px[k] * a + py[k] * b + pz[k] * e - lift_[j]
+        x_[j], y_[j], z_[j] = px[k] - off * a, py[k] - off * b, pz[k] - off * e
+    return masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
+
+
+@allocating
 def traced_primary(
     walk, incident, facets, trace_masking, clear_slope, hz, groove, geometry, out, masking
 ):
