@@ -11,12 +11,14 @@ import pytest
 from support import heightfield_surface, random_heights
 
 from microsim.analytic.fresnel import fresnel, resolve_material
+from microsim.app import bench as bench_module
 from microsim.app.bench import (
     BenchConfig,
     add_bench_command,
     build_times,
     format_bench,
     machine,
+    marginal_throughput,
     peak_rss_mb,
     throughput,
 )
@@ -131,6 +133,20 @@ def test_bench_figures_are_measured_and_printable():
     assert "raw embreex rays/s" in text and "pipeline / raw" in text and "BVH build" in text
     assert ("packets / embreex" in text) == (raw["packets_unavailable"] is None)
     json.dumps(b)
+
+
+def test_marginal_throughput_fits_a_line_through_two_ray_counts():
+    """The marginal figures are the slope and intercept of wall time against rays: positive
+    rates, and the fixed cost below the smaller run's own time; printed with the ratio only
+    when the peer ran."""
+    cfg = BenchConfig(n=32, rays=2**16)
+    mg = marginal_throughput(cfg, repeat=1, peer=(None, "not in this test"))
+    assert mg["rays"] == [2**14, 2**16] and mg["peer"] is None and mg["ratio"] is None
+    for t in (1, 2):
+        rate, fixed = mg["pipeline"][t]["samples_per_s"], mg["pipeline"][t]["fixed_seconds"]
+        assert np.isfinite(rate) and rate > 0 and np.isfinite(fixed)
+    text = "\n".join(bench_module._marginal_lines(json.loads(json.dumps(mg))))
+    assert "marginal, 16,384 → 65,536 rays" in text and "Mitsuba" not in text
 
 
 def test_bench_subcommand_registers():

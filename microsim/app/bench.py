@@ -24,6 +24,13 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
 * the same estimator written with Mitsuba 3's LLVM backend (``bench_peer``, the peer the
   speed target is set against; ``pip install microsim[peer]``, skipped with a note without
   it), traced alternately with the others, best of the same runs, and the ratio;
+* the marginal throughput of the pipeline and of the peer (``marginal_throughput``): the
+  wall time of whole calls at ``rays``/4 and ``rays`` primary rays, alternating, best of three
+  each, on 1 and 2 threads; samples/s = the extra rays over the extra time, and the fixed
+  cost per call = the time the line through both points gives at zero rays (the pipeline's:
+  the per-call set-up with its tracer reused, the facet table; the peer's: its facet table
+  in NumPy and its Dr.Jit launches). The speed target is set on this ratio, since the
+  whole-run ratio above mixes each side's fixed cost into its rate;
 * the pipeline's samples/s with every scattering order traced (``bounces="all"``) beside
   ``bounces=1``, alternating, best of three;
 * the cost of full-azimuth bins (``azimuth_cost``): samples/s on folded and on full-azimuth
@@ -65,6 +72,7 @@ __all__ = [
     "BenchConfig",
     "bench_config",
     "throughput",
+    "marginal_throughput",
     "azimuth_cost",
     "build_times",
     "peak_rss_mb",
@@ -199,7 +207,7 @@ def build_times(surface, repeat: int = 3) -> dict:
     return {**best, "packets_unavailable": reason}
 
 
-def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) -> tuple:
+def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5, peer=None) -> tuple:
     """Raw embreex throughput for the pipeline's own rays and the pipeline's (``simulate``,
     scene build excluded), on 1 and 2 threads, best of ``repeat`` each. The two are measured
     alternately (raw, pipeline, raw, …), so that a transient slowdown of the shared machine
@@ -207,7 +215,8 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
     "masking_rays", "rays_per_s": {1: .., 2: ..}, "samples_per_s": {1: .., 2: ..}} (rays/s
     counts both kinds; samples/s = primary rays/s), pipeline = {1: samples/s, 2: samples/s}.
     raw also holds "packet_rays_per_s" ({1: .., 2: ..}, None when the packet binding is
-    unavailable), "packet_width" and "packets_unavailable" (the reason, or None)."""
+    unavailable), "packet_width" and "packets_unavailable" (the reason, or None). ``peer``:
+    the (scene, reason) of ``_peer``, built here when not given."""
     from microsim.sim import Tracer, simulate
     from microsim.sim import embree_packets as ep
     from microsim.vectors import spherical_deg
@@ -218,7 +227,7 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
     n_p, n_m = len(primary[0]), len(masking[0])
     reason = ep.binding_error()
     packets = None if reason else ep.PacketScene(tracer.vertices, tracer.faces)
-    peer, peer_reason = _peer(surface, cfg)
+    peer, peer_reason = _peer(surface, cfg) if peer is None else peer
     best_raw, pipe = {1: np.inf, 2: np.inf}, {1: 0.0, 2: 0.0}
     best_pk, best_peer = {1: np.inf, 2: np.inf}, {1: np.inf, 2: np.inf}
     for rep in range(repeat):
@@ -257,6 +266,7 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5) 
             "mitsuba_version": peer.mi.__version__,
             "copies": 2 * peer.m + 1,
             "build_seconds": peer.build_seconds,
+            "llvm_target": _peer_target(),
         },
         "peer_unavailable": peer_reason,
     }
@@ -274,6 +284,60 @@ def _peer(surface, cfg: BenchConfig):
         return peer, None
     except PeerUnavailable as exc:
         return None, str(exc)
+
+
+def marginal_throughput(
+    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3, peer=None
+) -> dict:
+    """Marginal samples/s and fixed cost per call of the pipeline (``simulate``, the surface's
+    tracer reused) and of the Mitsuba peer (``PeerScene.run``, its scene built once) on 1 and
+    2 threads: wall times of whole calls at n1 = ``rays``/4 and n2 = ``rays`` primary rays,
+    the pipeline and the peer alternating, best of ``repeat`` each; rate = (n2 − n1)/(T2 − T1),
+    fixed = T1 − n1/rate. Returns {"rays": [n1, n2], "pipeline": {threads: {"samples_per_s",
+    "fixed_seconds"}}, "peer": the same or None, "peer_unavailable": the reason or None,
+    "ratio": {threads: pipeline/peer samples/s} or None}. ``peer``: as ``throughput``'s."""
+    from microsim.sim import simulate
+
+    surface = surface if surface is not None else _surface(cfg)
+    scene, reason = _peer(surface, cfg) if peer is None else peer
+    sizes = (max(1, cfg.rays // 4), cfg.rays)
+    best = {who: {t: dict.fromkeys(sizes, np.inf) for t in (1, 2)} for who in ("pipe", "peer")}
+    for rep in range(repeat):
+        for threads in (1, 2):
+            for n in sizes:
+                t0 = time.perf_counter()
+                simulate(surface, "aluminium", cfg.theta_i, rays=n, bins=_bins(), threads=threads)
+                dt = time.perf_counter() - t0
+                best["pipe"][threads][n] = min(best["pipe"][threads][n], dt)
+                if scene is not None:
+                    r = scene.run(
+                        "aluminium", cfg.theta_i, n, _bins(), seed=1 + rep, threads=threads
+                    )
+                    best["peer"][threads][n] = min(best["peer"][threads][n], r.seconds)
+
+    def line(times: dict) -> dict:
+        (n1, t1), (n2, t2) = sorted(times.items())
+        rate = (n2 - n1) / (t2 - t1) if t2 > t1 else float("inf")
+        return {"samples_per_s": rate, "fixed_seconds": t1 - n1 / rate}
+
+    pipe = {t: line(best["pipe"][t]) for t in (1, 2)}
+    ours = None if scene is None else {t: line(best["peer"][t]) for t in (1, 2)}
+    return {
+        "rays": list(sizes),
+        "pipeline": pipe,
+        "peer": ours,
+        "peer_unavailable": reason,
+        "ratio": None
+        if ours is None
+        else {t: pipe[t]["samples_per_s"] / ours[t]["samples_per_s"] for t in (1, 2)},
+    }
+
+
+def _peer_target() -> dict:
+    """Dr.Jit's target for the peer's kernels (``bench_peer.llvm_target``)."""
+    from microsim.app.bench_peer import llvm_target
+
+    return llvm_target()
 
 
 def bounce_throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> dict:
@@ -495,7 +559,8 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
     """Every figure of the module docstring, as a JSON-able dict (after ``warm_up``)."""
     warm_up()
     surface = _surface(cfg)
-    raw, pipe = throughput(cfg, surface)
+    peer = _peer(surface, cfg)
+    raw, pipe = throughput(cfg, surface, peer=peer)
     out = {
         "config": asdict(cfg),
         "machine": machine(),
@@ -505,6 +570,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
         "raw": raw,
         "pipeline_samples_per_s": pipe,
         "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
+        "marginal": marginal_throughput(cfg, surface, peer=peer),
         "build_seconds": build_times(surface),
         "fixed_cost": fixed_cost(cfg),
         "bounces": bounce_throughput(cfg, surface),
@@ -563,12 +629,15 @@ def format_bench(b: dict) -> str:
         p = raw["peer"]
         lines += [
             f"{'Mitsuba 3 peer samples/s':28s}{pr[1]:14.4g}{pr[2]:14.4g}",
-            f"{'pipeline / Mitsuba peer':28s}{pipe[1] / pr[1]:14.2f}{pipe[2] / pr[2]:14.2f}",
-            f"  (mitsuba {p['mitsuba_version']} {p['variant']}, {p['copies']}×{p['copies']} "
-            f"tile copies, not robust; scene build {p['build_seconds']:.1f} s excluded)",
+            f"{'pipeline / Mitsuba peer':28s}{pipe[1] / pr[1]:14.2f}{pipe[2] / pr[2]:14.2f}"
+            "   (whole runs: each side's fixed cost included)",
+            f"  (mitsuba {p['mitsuba_version']} {p['variant']}{_target_text(p)}, "
+            f"{p['copies']}×{p['copies']} tile copies, not robust; scene build "
+            f"{p['build_seconds']:.1f} s excluded)",
         ]
     elif raw.get("peer_unavailable"):
         lines.append(f"Mitsuba 3 peer skipped: {raw['peer_unavailable']}")
+    lines += _marginal_lines(b.get("marginal"))
     bo = b.get("bounces")
     if bo:
         one, every = (
@@ -615,6 +684,38 @@ def format_bench(b: dict) -> str:
             f"{w['upsample']}, order power {w['albedo']:.4f}"
         )
     return "\n".join(lines)
+
+
+def _target_text(peer: dict) -> str:
+    """ ", kernels for znver4, 16 lanes" from the peer's recorded LLVM target, if any."""
+    t = peer.get("llvm_target")
+    if not t:
+        return ""
+    return f", kernels for {t['cpu']}" + (f", {t['lanes']} lanes" if t["lanes"] else "")
+
+
+def _marginal_lines(mg) -> list[str]:
+    """``format_bench``'s lines for ``marginal_throughput``'s figures (none without them)."""
+    if not mg:
+        return []
+    pipe = {int(t): v for t, v in mg["pipeline"].items()}  # JSON keys are strings
+    n1, n2 = mg["rays"]
+    lines = [
+        f"marginal, {n1:,} → {n2:,} rays:",
+        f"{'  pipeline samples/s':28s}{pipe[1]['samples_per_s']:14.4g}"
+        f"{pipe[2]['samples_per_s']:14.4g}   (fixed per call {pipe[1]['fixed_seconds']:.3f}, "
+        f"{pipe[2]['fixed_seconds']:.3f} s)",
+    ]
+    if mg.get("peer"):
+        peer = {int(t): v for t, v in mg["peer"].items()}
+        ratio = {int(t): v for t, v in mg["ratio"].items()}
+        lines += [
+            f"{'  Mitsuba peer samples/s':28s}{peer[1]['samples_per_s']:14.4g}"
+            f"{peer[2]['samples_per_s']:14.4g}   (fixed per call "
+            f"{peer[1]['fixed_seconds']:.3f}, {peer[2]['fixed_seconds']:.3f} s)",
+            f"{'  pipeline / Mitsuba peer':28s}{ratio[1]:14.2f}{ratio[2]:14.2f}",
+        ]
+    return lines
 
 
 QUICK = dict(

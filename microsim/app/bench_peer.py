@@ -57,6 +57,14 @@ The peer's approximations (where it is *not* the same as microsim):
   coordinate of the tiled scene (microsim: 2 ulp of one tile, projected onto the facet plane
   first in float64).
 
+Instruction set: Dr.Jit compiles the peer's kernels for the host CPU at its widest vector
+width (16 lanes with AVX-512, 8 with AVX2). ``MICROSIM_PEER_LLVM_CPU`` (an LLVM CPU name, e.g.
+``haswell``) pins them to that CPU at 8 lanes, AVX2 and FMA (Dr.Jit's ``jit_llvm_set_target``),
+so that with ``NUMBA_CPU_NAME`` and ``NPY_DISABLE_CPU_FEATURES`` both sides' compiled code
+takes its AVX2 path on an AVX-512 machine (docs/performance.md); ``llvm_target`` reports the
+target in use. Embree's own kernels, inside Mitsuba and inside microsim, still choose theirs
+from the host.
+
 Timing (``peer_throughput``): marginal samples/s (a sample = one primary ray and, when lit,
 its masking ray) excluding the scene build (mesh upload, BVH) and the JIT compilation (a
 warm-up run first; Dr.Jit caches the kernels), best of ``repeat`` runs, the per-incidence
@@ -65,6 +73,8 @@ facet table included (as microsim's pipeline figure includes its own).
 
 from __future__ import annotations
 
+import ctypes
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -82,6 +92,8 @@ __all__ = [
     "mitsuba_single_bounce",
     "peer_throughput",
     "copies_per_side",
+    "llvm_target",
+    "PEER_CPU_VARIABLE",
 ]
 
 VARIANTS = ("llvm_ad_rgb", "llvm_rgb")
@@ -96,6 +108,17 @@ MASKING_CAP_DEG = 88.0
 MAX_COPIES_PER_SIDE = 16
 LEDGER = ("single", "masked", "downward", "unresolved", "missed")
 _SINGLE, _MASKED, _DOWNWARD, _UNRESOLVED, _MISSED = range(5)
+
+
+PEER_CPU_VARIABLE = "MICROSIM_PEER_LLVM_CPU"
+"""An LLVM CPU name that pins Dr.Jit's kernels to it, 8 lanes (module docstring)."""
+_AVX2_FEATURES = b"+avx,+avx2,+fma,+f16c,+bmi,+bmi2,+popcnt,+lzcnt,+movbe"
+# Dr.Jit exports its C++ API unmangled only in headers: the symbols of jit.h as compiled
+_SET_TARGET, _TARGET_CPU, _VECTOR_WIDTH = (
+    "_Z19jit_llvm_set_targetPKcS0_j",
+    "_Z19jit_llvm_target_cpuv",
+    "_Z21jit_llvm_vector_widthv",
+)
 
 
 class PeerUnavailable(EnvironmentFailure):
@@ -119,13 +142,44 @@ def _mitsuba():
             continue
         try:
             mi.set_variant(variant)
-            return mi, dr, variant
         except Exception as exc:  # noqa: BLE001 - LLVM missing shows as ImportError/RuntimeError
             errors.append(f"{variant}: {exc}")
+            continue
+        cpu = os.environ.get(PEER_CPU_VARIABLE)
+        if cpu:
+            getattr(_jit_core(dr), _SET_TARGET)(cpu.encode(), _AVX2_FEATURES, ctypes.c_uint32(8))
+        return mi, dr, variant
     raise PeerUnavailable(
         "Mitsuba 3 is installed but no LLVM variant works (Dr.Jit's LLVM backend needs "
         f"libLLVM; set DRJIT_LIBLLVM_PATH): {'; '.join(errors)}"
     )
+
+
+def _jit_core(dr) -> ctypes.CDLL:
+    """Dr.Jit's core library, or PeerUnavailable when its LLVM target calls are missing."""
+    lib = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+    try:
+        getattr(lib, _TARGET_CPU).restype = ctypes.c_char_p
+        getattr(lib, _VECTOR_WIDTH).restype = ctypes.c_uint32
+        getattr(lib, _SET_TARGET)
+    except AttributeError as exc:
+        raise PeerUnavailable(
+            f"{PEER_CPU_VARIABLE} is set but this Dr.Jit does not export its LLVM target calls "
+            f"({exc})"
+        ) from None
+    return lib
+
+
+def llvm_target() -> dict:
+    """The CPU and vector width Dr.Jit compiles the peer's kernels for: {"cpu", "lanes"}
+    ("unknown" and None where its library does not say)."""
+    _, dr, _ = _mitsuba()
+    try:
+        lib = _jit_core(dr)
+    except PeerUnavailable:
+        return {"cpu": "unknown", "lanes": None}
+    cpu, lanes = getattr(lib, _TARGET_CPU)(), getattr(lib, _VECTOR_WIDTH)()
+    return {"cpu": cpu.decode(), "lanes": int(lanes)}
 
 
 def copies_per_side(depth: float, tile: tuple, theta_i_deg: float) -> int:

@@ -1,0 +1,146 @@
+"""Where a sample's time goes in the single-bounce pipeline on the bench scene (the 512²
+Gaussian heightfield of ``microsim bench``, aluminium, θi = 30°, 2²² rays, 1 thread): each
+stage of ``simulate`` timed by wrapping it (best of three runs), the fused walk-and-look-up
+kernel split by timing its two halves alone on one chunk, and what the masking rays Embree
+traces do (how many escape, how far they run). docs/performance.md quotes it.
+
+    .venv/bin/python tools/stage_profile.py
+"""
+
+import collections
+import time
+
+import numpy as np
+
+from microsim.analytic.fresnel import resolve_material
+from microsim.app.bench import BenchConfig, _bins, _surface, warm_up
+from microsim.sim import paths, simulate, tallies
+from microsim.sim.engine import primary, segments
+from microsim.sim.streams import chunk_origins
+from microsim.vectors import spherical_deg
+
+THETA = 30.0
+STAGES = {
+    "ray origins": (paths, "chunk_origins"),
+    "primary walk, look-ups, masking starts, horizon test": (paths, "tabled_masking_rays"),
+    "masking rays through Embree": (paths.MaskingRays, "trace"),
+    "tallies": (tallies, "split_tallies"),
+}
+
+
+def stage_times(surface, rays: int) -> tuple[float, dict]:
+    """(ns per sample of the whole call, {stage: ns per sample}), best of three calls."""
+    spent = collections.defaultdict(float)
+    for owner, name in STAGES.values():
+        inner = getattr(owner, name)
+
+        def timed(*a, _inner=inner, _name=name, **k):
+            t0 = time.perf_counter()
+            out = _inner(*a, **k)
+            spent[_name] += time.perf_counter() - t0
+            return out
+
+        setattr(owner, name, timed)
+    best = None
+    for _ in range(3):
+        spent.clear()
+        t0 = time.perf_counter()
+        simulate(surface, "aluminium", THETA, rays=rays, bins=_bins(), threads=1)
+        total = time.perf_counter() - t0
+        if best is None or total < best[0]:
+            best = (total, dict(spent))
+    total, spent = best
+    per = {label: spent[name] / rays * 1e9 for label, (_, name) in STAGES.items()}
+    return total / rays * 1e9, per
+
+
+def fused_split(tracer, table, wi) -> dict:
+    """ns per ray of the fused kernel (``primary.cast_tabled_primary``) on 16 blocks of the
+    stratified rays, of the grid walk alone and of the look-ups alone on its results."""
+    x, _ = chunk_origins(tracer, 2**22, range(16), (0, 0, 0), False)
+    x = [c.copy() for c in x]
+    n = len(x[0])
+    down = [float(-c) for c in wi]
+    facets = primary.FacetColumns(
+        table.code, table.weight, *table.normal_cols, table.lift, table.wo32, table.bin,
+        table.clear,
+    )  # fmt: skip
+    out = primary.PrimaryLedger(np.empty(n, np.int8), np.empty(n), np.empty(n, np.int64))
+    mask = paths.MaskingRays.work(n)
+    geo, grid = paths._segment_geometry(tracer), tracer.grid_walk(x, down)
+    hs, prim, p = tracer.cast_falling(x, down)
+    hs, prim, p = hs.copy(), prim.copy(), [c.copy() for c in p]
+    walk = segments.WalkResult(hs, prim, *p)
+    calls = {
+        "fused": lambda: primary.cast_tabled_primary(
+            tuple(x), tuple(down), grid, facets, tracer.horizon, geo, out, mask.kernel_args()
+        ),
+        "grid walk alone": lambda: tracer.cast_falling(x, down),
+        "look-ups, starts, horizon alone": lambda: primary.tabled_primary(
+            walk, facets, tracer.horizon, geo, out, mask.kernel_args()
+        ),
+    }
+    times = {}
+    for label, call in calls.items():
+        call()
+        times[label] = min(_timed(call) for _ in range(20)) / n * 1e9
+    candidates = (table.code[prim] == paths.SINGLE) & ~table.clear[prim]
+    return times, float(candidates.mean())
+
+
+def _timed(call) -> float:
+    t0 = time.perf_counter()
+    call()
+    return time.perf_counter() - t0
+
+
+def masking_rays(tracer, table, wi, n: int = 2**20) -> dict:
+    """The masking rays Embree traces for n uniform primary rays: their share, the share of
+    them that escape, and quantiles of their polar angle and of their run (cells crossed on
+    the climb to zmax) for the escaping ones."""
+    rng = np.random.default_rng(0)
+    lx, ly = tracer.tile
+    x = [rng.uniform(-lx / 2, lx / 2, n), rng.uniform(-ly / 2, ly / 2, n)]
+    x.append(np.full(n, tracer.zmax + tracer.top_margin))
+    status, _, _, mask, m = paths.tabled_masking_rays(tracer, table, wi, x)
+    d = np.stack([c[:m] for c in mask.d], 1)
+    start_z = mask.start[2][:m].copy()
+    mask.trace(tracer, m, status)
+    escaped = status[mask.ray[:m]] == paths.SINGLE
+    run = (tracer.zmax - start_z) * np.hypot(d[:, 0], d[:, 1]) / d[:, 2] / tracer.grid.cell
+    theta = np.degrees(np.arccos(d[:, 2]))
+    q = [0.05, 0.5, 0.95]
+    return {
+        "share of samples": m / n,
+        "escaping share": float(escaped.mean()),
+        "theta_o quantiles 5/50/95 % (deg)": np.round(np.quantile(theta, q), 1).tolist(),
+        "run of escaping ones, quantiles 5/50/95 % (cells)": np.round(
+            np.quantile(run[escaped], q), 1
+        ).tolist(),
+    }
+
+
+def main() -> None:
+    warm_up()
+    cfg = BenchConfig()
+    surface = _surface(cfg)
+    total, per = stage_times(surface, cfg.rays)
+    print(f"simulate, 1 thread, θi {THETA:g}°, {cfg.rays:,} rays: {total:.1f} ns per sample")
+    for label, ns in per.items():
+        print(f"  {label}: {ns:.1f} ns")
+    print(f"  the rest (thread pool, per-call set-up): {total - sum(per.values()):.1f} ns")
+    tracer, _, _ = paths.tracer_for(surface, "traced", surface.fingerprint())
+    wi = spherical_deg(THETA, 0.0)
+    table = paths.facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
+    times, candidates = fused_split(tracer, table, wi)
+    print("the fused primary kernel on one chunk, ns per ray:")
+    for label, ns in times.items():
+        print(f"  {label}: {ns:.1f}")
+    print(f"  share of rays that need the horizon test: {candidates:.3f}")
+    print("masking rays traced by Embree:")
+    for label, value in masking_rays(tracer, table, wi).items():
+        print(f"  {label}: {value}")
+
+
+if __name__ == "__main__":
+    main()
