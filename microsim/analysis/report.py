@@ -701,8 +701,8 @@ def regime_section(
     ``RegimeMap.to_dict``, ``settings`` text), the regime chart and crossover table; then
     "What each method costs" (``methods_section``) when ``methods`` is given (the path of
     ``methods.json``, or its loaded dict); before it "The rung above Kirchhoff"
-    (``fullwave_map.fullwave_section``) when ``fullwave``, the path of ``fullwave.json``,
-    exists."""
+    (``fullwave_map.fullwave_section``, with its chart when ``fullwave-map.png`` lies beside
+    it) when ``fullwave``, the path of ``fullwave.json``, exists."""
     models, rows = _wave_index_rows(docs)
     if not rows and not regimes and methods is None:
         return []
@@ -766,9 +766,10 @@ def regime_section(
             "",
         ]
     if fullwave is not None and Path(fullwave).is_file():
-        from .fullwave_map import fullwave_section, load_fullwave
+        from .fullwave_map import FULLWAVE_CHART, fullwave_section, load_fullwave
 
-        lines += fullwave_section(load_fullwave(fullwave))
+        chart = FULLWAVE_CHART if (Path(fullwave).parent / FULLWAVE_CHART).is_file() else None
+        lines += fullwave_section(load_fullwave(fullwave), chart=chart)
     if methods is not None:
         lines += methods_section(methods)
     return lines
@@ -856,8 +857,9 @@ def methods_section(methods) -> list[str]:
     load = load[0] if isinstance(load, (list, tuple)) else load
     commit = (m.get("commit") or "unknown")[:7]
     lines = head + [
-        "Wall time for one incidence against the error of each method on a geometric scene "
-        "and a wave scene, each against its own reference (ray-trace errors include their "
+        "Wall time for one incidence against the error of each method on a geometric scene, "
+        "a wave scene and (with the `fullwave` extra) a 1D random grating against rigorous "
+        "coupled-wave solutions, each against its own reference (ray-trace errors include their "
         "noise, so they fall with the ray count until the method's own error; ± is one "
         "standard error where a point has one).",
         "",

@@ -49,6 +49,16 @@ with the solver's own lattice averaging is kept as ``error_lattice``), and the r
 the reference tile itself at increasing ray counts — its error stops falling at the
 geometric-optics error of this σ/λ: more rays do not buy accuracy a wave scene needs.
 
+Panel C, full-wave rung (only with the `fullwave` extra; without it the study's
+``fullwave_skipped`` says why): a periodic Gaussian glass profile from the full-wave map
+(``wave.random_profiles``: ℓ = λ, nominal rms slope ``grating_slope``, Λ = 4 ℓ, 32 samples,
+seed 0), θi as above. Reference: RCW (``wave.fullwave.converged_efficiencies``, tolerance
+10⁻³). Error: the share of the reflected power put in the wrong orders, Σ|η − η_RCW|/Σ η_RCW
+over the orders with θo ≤ 80° (``analysis.fullwave_map.order_error``). Methods: RCW at each
+truncation of its convergence study (its error against the converged solution; the converged
+point's own error is its last change under a raise, the truncation it can vouch for), and
+scalar Kirchhoff (``wave.gratings.kirchhoff_efficiencies``) against it.
+
 Output (``methods_study``): a JSON-able dict — ``machine`` (cpus, load average at start and
 end, threads, git commit when the package is a checkout and whether its microsim/ had
 uncommitted changes), ``settings``, ``panels`` (each:
@@ -111,6 +121,7 @@ class MethodsConfig:
     repeat: int = 3
     cheap: float = 2.0  # a run longer than this (s) is not repeated
     threads: int = 2
+    grating_slope: float = 0.2  # nominal rms slope of panel C's random profile
 
 
 QUICK = dict(
@@ -468,6 +479,53 @@ _LABELS = {
 }
 
 
+# --- panel C: the full-wave rung -------------------------------------------------------------
+def _panel_fullwave(cfg: MethodsConfig) -> dict:
+    """Panel C of the module docstring (needs the `fullwave` extra)."""
+    from microsim.analysis.fullwave_map import order_error
+    from microsim.wave import fullwave
+    from microsim.wave.gratings import kirchhoff_efficiencies
+    from microsim.wave.random_profiles import RandomProfile, random_grating
+
+    lam, th = cfg.wavelength, float(cfg.theta_i)
+    ell = lam
+    prof = RandomProfile("gaussian", 4 * ell, cfg.grating_slope * ell / math.sqrt(2),
+                         corr_len=ell, n=32, seed=0)  # fmt: skip
+    g = random_grating(prof, 1.5)
+    t0 = time.perf_counter()
+    ref = fullwave.converged_efficiencies(g, lam, th, start=(int(2 * g.period / lam) + 5, 20))
+    ref_seconds = time.perf_counter() - t0
+    steps = ref.info["study"]
+    points = []
+    for k, (order, levels, slices, _, seconds) in enumerate(steps):
+        if k == len(steps) - 1:  # the converged one: its last change under a raise
+            before = fullwave.rcw_efficiencies(g, lam, th, *steps[k - 1][:2])
+            error = order_error(before, ref)[0]
+        else:
+            error = order_error(fullwave.rcw_efficiencies(g, lam, th, order, levels), ref)[0]
+        points.append({"key": "rcw", "method": "RCW (SCATMECH)", "kind": "curve",
+                       "setting": f"{order} orders × {slices} slices", "size": order,
+                       "seconds": seconds, "runs": 1, "error": error, "error_se": None,
+                       "converged_point": k == len(steps) - 1})  # fmt: skip
+    seconds, outs = _best_of(lambda _: kirchhoff_efficiencies(g, lam, th), cfg.repeat, cfg.cheap)
+    points.append({"key": "kirchhoff-1d", "method": "Kirchhoff (1D, per order)",
+                   "kind": "closed-form", "setting": "closed form per linear piece",
+                   "seconds": seconds, "runs": len(outs), "error": order_error(outs[0], ref)[0],
+                   "error_se": None})  # fmt: skip
+    return {
+        "key": "fullwave",
+        "title": f"Periodic Gaussian glass profile, rms slope {cfg.grating_slope:g}, θi = {th:g}°",
+        "scene": f"random_grating(RandomProfile('gaussian', {4 * ell:g}, "
+        f"{prof.sigma:.4g}, corr_len={ell:g}, n=32, seed=0), 1.5), λ = {lam:g} µm",
+        "reference": f"RCW converged to 1e-3 ({ref.info['order']} orders × "
+        f"{ref.info['slices']} slices)",
+        "reference_seconds": ref_seconds,
+        "error_measure": "share of the reflected power in the wrong orders (θo ≤ 80°); the "
+        "converged RCW point's error is its last change",
+        "points": points,
+    }
+
+
 def methods_study(quick: bool = False, cfg: MethodsConfig | None = None) -> dict:
     """Both panels of the module docstring as a JSON-able dict (``cfg`` overrides ``quick``)."""
     cfg = cfg if cfg is not None else methods_config(quick)
@@ -475,8 +533,14 @@ def methods_study(quick: bool = False, cfg: MethodsConfig | None = None) -> dict
     commit, dirty = _commit()
     t0 = time.perf_counter()
     panels = [_panel_geometric(cfg), _panel_wave(cfg)]
+    from microsim.wave import fullwave
+
+    skipped = fullwave.available()
+    if skipped is None:
+        panels.append(_panel_fullwave(cfg))
     settings = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
     return {
+        "fullwave_skipped": skipped,
         "schema": SCHEMA,
         "quick": bool(quick),
         "machine": {
@@ -503,6 +567,8 @@ _MARKERS = {
     "ray-traced": ("C4", "o"),
     "ray-analytic": ("C6", "s"),
     "kirchhoff": ("C9", "h"),
+    "rcw": ("C7", "P"),
+    "kirchhoff-1d": ("C9", "*"),
 }
 
 
@@ -559,8 +625,9 @@ def methods_chart(study: dict, path) -> None:
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("wall time for one incidence (s)")
-        geo = panel["key"] == "geometric"
-        ax.set_ylabel("energy-weighted rel. RMS error" if geo else "|energy deviation|")
+        ax.set_ylabel({"geometric": "energy-weighted rel. RMS error",
+                       "fullwave": "share of power in the wrong orders"}.get(
+                           panel["key"], "|energy deviation|"))  # fmt: skip
         ax.set_title(f"{panel['title']}\nreference: {panel['reference']}", fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="best")
