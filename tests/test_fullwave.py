@@ -372,6 +372,9 @@ def test_the_section_never_counts_an_unconverged_row_and_states_non_convergence(
     assert "![Kirchhoff and Rayleigh–Rice against RCW](fullwave-map.png)" in text
     assert "ℓ = 1 λ, θi 0°: 0.2" in text and "σ/λ = 0.04" in text
     assert "Kirchhoff in s departs by more than 5 % from slope: Λ = 4 λ, θi 0°: beyond" in text
+    # the summary: smallest crossing per θi, or the grid named as holding throughout
+    assert "on aluminium in TE from 10° at θi 0°" in text
+    assert "Rayleigh–Rice from σ/λ (within 5 % on the whole grid at θi 0°) on sinusoids" in text
 
 
 def test_the_map_chart_has_a_panel_per_incidence_and_method(tmp_path):

@@ -80,7 +80,7 @@ def write_chart(json_path: str) -> None:
         end = text.find("\n### ", start + len(head))
         if start >= 0 and end >= 0:
             section = "\n".join(fullwave_section(doc, chart=FULLWAVE_CHART))
-            atomic.write_text(str(index), text[:start] + section + text[end + 1 :])
+            atomic.write_text(str(index), text[:start] + section + text[end:])
             print(f"rewrote the section {head[4:]!r} of {index}")
 
 

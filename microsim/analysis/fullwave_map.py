@@ -335,6 +335,52 @@ def _crossing_text(cross: dict, keys, name, unit) -> str:
     )
 
 
+def _pct(x: float) -> str:
+    """An error as a percentage: one decimal below 10 %, none above."""
+    return f"{100 * x:.1f} %" if 100 * x < 10 else f"{100 * x:.0f} %"
+
+
+def _summary(doc: dict, cross: dict, crit: float) -> list[str]:
+    """The section's crossovers in one paragraph: per θi, the smallest grid value over the
+    periods (ℓ) at which each method departs by more than the criterion."""
+
+    thetas = sorted({r["theta_i"] for r in doc["triangular"]})
+
+    def per_theta(c: dict, unit: str = "") -> str:
+        by = {}
+        for k, v in c.items():
+            t = k[1] if isinstance(k, tuple) else k
+            by[t] = min(v, by.get(t, v))
+        text = ", ".join(f"{by[t]:.3g}{unit} at θi {t:g}°" for t in thetas if t in by)
+        never = [f"{t:g}°" for t in thetas if t not in by]
+        if never:
+            text += (
+                f"{' ' if by else ''}(within {crit:g} % on the whole grid at θi {', '.join(never)})"
+            )
+        return text
+
+    sin = {t: v / (2 * np.sqrt(2)) for t, v in cross["rayleigh_rice"].items()}
+    parts = [
+        f"In short — the smallest value of the grid at which a method departs from RCW by more "
+        f"than {crit:g} % (over the periods and correlation lengths mapped): scalar Kirchhoff "
+        f"on glass V-groove gratings from facet slope {per_theta(cross['kirchhoff'], '°')} "
+        f"(s: {per_theta(cross['kirchhoff_s'], '°')}; p: {per_theta(cross['kirchhoff_p'], '°')})",
+    ]
+    if cross.get("kirchhoff_aluminium_te"):
+        parts.append(f"on aluminium in TE from {per_theta(cross['kirchhoff_aluminium_te'], '°')}")
+    if doc.get("random"):
+        parts.append(
+            f"on glass Gaussian random profiles from rms slope "
+            f"{per_theta(cross['kirchhoff_random'])}"
+        )
+    text = "; ".join(parts) + (
+        f". First-order Rayleigh–Rice from σ/λ {per_theta(sin)} on sinusoids (σ = a/(2√2))"
+    )
+    if doc.get("random"):
+        text += f" and {per_theta(cross['rayleigh_rice_random'])} on the random profiles"
+    return [text + ".", ""]
+
+
 def _random_lines(doc: dict, cross: dict, crit: float) -> list[str]:
     """The random-profile part of the section (empty without ``random`` rows)."""
     rnd = doc.get("random", [])
@@ -351,8 +397,8 @@ def _random_lines(doc: dict, cross: dict, crit: float) -> list[str]:
             cells = []
             for a in slopes:
                 r = by[(c, t, a)]
-                text = (f"K {100 * r['kirchhoff_order_error']:.1f} %, RR "
-                        f"{100 * r['rayleigh_rice_error']:.0f} % (σ/λ "
+                text = (f"K {_pct(r['kirchhoff_order_error'])}, RR "
+                        f"{_pct(r['rayleigh_rice_error'])} (σ/λ "
                         f"{r['sigma_over_lambda']:.3f})")  # fmt: skip
                 cells.append(_cell(text, r))
             table.append([f"{c:g}", f"{t:g}°"] + cells)
@@ -361,11 +407,12 @@ def _random_lines(doc: dict, cross: dict, crit: float) -> list[str]:
     return [
         f"Periodic random profiles ({doc['settings'].get('random', 'Gaussian')}; "
         f"`microsim.wave.random_profiles`, RCW through SCATMECH's `Generic_Grating`; one "
-        f"realisation, scaled: the same shape in units of ℓ at every slope), by the profile's "
-        f"realised rms slope (its spectrum, sampled at multiples of 1/Λ, holds less than the "
-        f"nominal √2 σ/ℓ: {', '.join(f'{a:g}' for a in slopes)}): Kirchhoff's error (K) over "
-        f"every order and first-order Rayleigh–Rice's (RR) over the diffuse ones (it has no "
-        f"specular order), with the profile's realised σ/λ:",
+        f"realisation, scaled: the same shape in units of ℓ at every slope), by the rms slope "
+        f"of the profile's linear pieces (nominal √2 σ/ℓ: "
+        f"{', '.join(f'{a:g}' for a in slopes)}): Kirchhoff's error (K) over every order and "
+        f"first-order Rayleigh–Rice's (RR) over the diffuse ones (it has no specular order), "
+        f"with the profile's rms height σ/λ (below the nominal: the period holds no "
+        f"wavelength longer than Λ):",
         "",
         md_table(["ℓ/λ", "θi"] + [f"{realised[a]:.3g}" for a in slopes], table),
         "",
@@ -498,7 +545,8 @@ def fullwave_section(
         f"multiple scattering; RCW has both.",
         "",
         *picture,
-        "Kirchhoff on symmetric triangular (V-groove) gratings, by facet slope:",
+        *_summary(doc, cross, crit),
+        "Kirchhoff on symmetric triangular (V-groove) gratings of glass, by facet slope:",
         "",
         md_table(["Λ/λ", "θi"] + [f"{a:g}°" for a in slopes], rows),
         "",
