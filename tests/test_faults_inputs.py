@@ -240,6 +240,40 @@ def test_sigint_during_start_up_exits_130_without_traceback(tmp_path, delay):
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
 
 
+SWALLOWED = """
+import gc, os, signal, sys, time, weakref
+from microsim.app.cli import _CtrlC
+
+class Thing:
+    pass
+
+def callback(_):  # SIGINT handled inside a weakref callback: Python only reports it
+    os.kill(os.getpid(), signal.SIGINT)
+    t = time.time()
+    while time.time() - t < 5:
+        pass
+
+with _CtrlC() as ctrl_c:
+    thing = Thing()
+    ref = weakref.ref(thing, callback)
+    del thing
+    gc.collect()
+    try:
+        ctrl_c.check()
+    except KeyboardInterrupt:
+        sys.exit(130)
+sys.exit(0)
+"""
+
+
+def test_an_interrupt_swallowed_by_a_callback_is_raised_again_silently():
+    """A SIGINT whose KeyboardInterrupt a callback swallowed (as a module lock's weakref
+    callback does during an import) is not lost: ``check`` raises it again, and nothing is
+    printed for the swallowed one."""
+    proc = subprocess.run([sys.executable, "-c", SWALLOWED], capture_output=True, text=True)
+    assert proc.returncode == 130 and proc.stderr == "", proc.stderr
+
+
 def test_sigint_after_the_command_finished_keeps_its_status():
     """A Ctrl-C between the command's end and the interpreter's exit changes nothing."""
     entry = ENTRY.replace("sys.exit(main())", "s = main(); os.kill(os.getpid(), 2); sys.exit(s)")

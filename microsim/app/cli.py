@@ -241,15 +241,30 @@ class _CtrlC:
         main_thread = threading.current_thread() is threading.main_thread()
         if main_thread and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             self._old = signal.signal(signal.SIGINT, self._interrupt)
+            self._hook, sys.unraisablehook = sys.unraisablehook, self._unraisable
         return self
+
+    def _unraisable(self, info):
+        """Our KeyboardInterrupt swallowed by a callback stays silent (``check`` raises it
+        again); anything else goes to the previous hook."""
+        if not (self.seen and info.exc_type is KeyboardInterrupt):
+            self._hook(info)
 
     def _interrupt(self, signum, frame):
         self.seen = True
         raise KeyboardInterrupt
 
+    def check(self) -> None:
+        """Raise KeyboardInterrupt if SIGINT came and was swallowed: raised inside a callback
+        that Python runs for an import (a module lock's weakref callback), it is only printed
+        as "Exception ignored" and the start-up would go on as if nothing had happened."""
+        if self.seen:
+            raise KeyboardInterrupt
+
     def __exit__(self, *exc):
         if self._old is not None:
             signal.signal(signal.SIGINT, signal.SIG_IGN if self.ignore_after else self._old)
+            sys.unraisablehook = self._hook
         return False
 
 
@@ -270,6 +285,7 @@ def _main(argv, ctrl_c: _CtrlC) -> int:
             from ..sim.compilation import announce_compilation
 
             announce_compilation(sys.stderr)
+        ctrl_c.check()
         return args.func(args)
     except UsageError as exc:
         print(f"microsim: error: {_one_line(exc)}", file=sys.stderr)
