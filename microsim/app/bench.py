@@ -784,7 +784,8 @@ def add_bench_command(subparsers) -> None:
         default=None,
         metavar="DIR",
         help="instead: wall time against error of each method (closed forms, ray trace, exact "
-        "V-groove path, wave solver); writes DIR/methods.json and DIR/methods.png "
+        "V-groove path, wave solver; with the fullwave extra, rigorous coupled-wave "
+        "solutions of a 1D grating); writes DIR/methods.json and DIR/methods.png "
         "(default DIR: reports; microsim.app.bench_methods)",
     )
     p.set_defaults(func=_cmd_bench)
