@@ -293,9 +293,11 @@ def marginal_throughput(
     tracer reused) and of the Mitsuba peer (``PeerScene.run``, its scene built once) on 1 and
     2 threads: wall times of whole calls at n1 = ``rays``/4 and n2 = ``rays`` primary rays,
     the pipeline and the peer alternating, best of ``repeat`` each; rate = (n2 − n1)/(T2 − T1),
-    fixed = T1 − n1/rate. Returns {"rays": [n1, n2], "pipeline": {threads: {"samples_per_s",
-    "fixed_seconds"}}, "peer": the same or None, "peer_unavailable": the reason or None,
-    "ratio": {threads: pipeline/peer samples/s} or None}. ``peer``: as ``throughput``'s."""
+    fixed = T1 − n1/rate (both None when T2 ≤ T1: too few rays to resolve the margin).
+    Returns {"rays": [n1, n2], "pipeline": {threads: {"samples_per_s", "fixed_seconds",
+    "seconds": [T1, T2]}}, "peer": the same or None, "peer_unavailable": the reason or None,
+    "ratio": {threads: pipeline/peer samples/s (None where either is)} or None}. ``peer``: as
+    ``throughput``'s."""
     from microsim.sim import simulate
 
     surface = surface if surface is not None else _surface(cfg)
@@ -317,8 +319,10 @@ def marginal_throughput(
 
     def line(times: dict) -> dict:
         (n1, t1), (n2, t2) = sorted(times.items())
-        rate = (n2 - n1) / (t2 - t1) if t2 > t1 else float("inf")
-        return {"samples_per_s": rate, "fixed_seconds": t1 - n1 / rate}
+        if not t2 > t1:  # the larger call no faster: too few rays to resolve the margin
+            return {"samples_per_s": None, "fixed_seconds": None, "seconds": [t1, t2]}
+        rate = (n2 - n1) / (t2 - t1)
+        return {"samples_per_s": rate, "fixed_seconds": t1 - n1 / rate, "seconds": [t1, t2]}
 
     pipe = {t: line(best["pipe"][t]) for t in (1, 2)}
     ours = None if scene is None else {t: line(best["peer"][t]) for t in (1, 2)}
@@ -327,10 +331,15 @@ def marginal_throughput(
         "pipeline": pipe,
         "peer": ours,
         "peer_unavailable": reason,
-        "ratio": None
-        if ours is None
-        else {t: pipe[t]["samples_per_s"] / ours[t]["samples_per_s"] for t in (1, 2)},
+        "ratio": None if ours is None else {t: _ratio(pipe[t], ours[t]) for t in (1, 2)},
     }
+
+
+def _ratio(a: dict, b: dict):
+    """a's marginal samples/s over b's, None where either was not resolved."""
+    if a["samples_per_s"] is None or b["samples_per_s"] is None:
+        return None
+    return a["samples_per_s"] / b["samples_per_s"]
 
 
 def _peer_target() -> dict:
@@ -698,23 +707,23 @@ def _marginal_lines(mg) -> list[str]:
     """``format_bench``'s lines for ``marginal_throughput``'s figures (none without them)."""
     if not mg:
         return []
-    pipe = {int(t): v for t, v in mg["pipeline"].items()}  # JSON keys are strings
     n1, n2 = mg["rays"]
-    lines = [
-        f"marginal, {n1:,} → {n2:,} rays:",
-        f"{'  pipeline samples/s':28s}{pipe[1]['samples_per_s']:14.4g}"
-        f"{pipe[2]['samples_per_s']:14.4g}   (fixed per call {pipe[1]['fixed_seconds']:.3f}, "
-        f"{pipe[2]['fixed_seconds']:.3f} s)",
-    ]
+
+    def row(label, fig) -> str:
+        fig = {int(t): v for t, v in fig.items()}  # JSON keys are strings
+        if any(fig[t]["samples_per_s"] is None for t in (1, 2)):
+            return f"{label:28s}not resolved at these ray counts (the larger call was no slower)"
+        return (
+            f"{label:28s}{fig[1]['samples_per_s']:14.4g}{fig[2]['samples_per_s']:14.4g}"
+            f"   (fixed per call {fig[1]['fixed_seconds']:.3f}, {fig[2]['fixed_seconds']:.3f} s)"
+        )
+
+    lines = [f"marginal, {n1:,} → {n2:,} rays:", row("  pipeline samples/s", mg["pipeline"])]
     if mg.get("peer"):
-        peer = {int(t): v for t, v in mg["peer"].items()}
+        lines.append(row("  Mitsuba peer samples/s", mg["peer"]))
         ratio = {int(t): v for t, v in mg["ratio"].items()}
-        lines += [
-            f"{'  Mitsuba peer samples/s':28s}{peer[1]['samples_per_s']:14.4g}"
-            f"{peer[2]['samples_per_s']:14.4g}   (fixed per call "
-            f"{peer[1]['fixed_seconds']:.3f}, {peer[2]['fixed_seconds']:.3f} s)",
-            f"{'  pipeline / Mitsuba peer':28s}{ratio[1]:14.2f}{ratio[2]:14.2f}",
-        ]
+        if None not in ratio.values():
+            lines.append(f"{'  pipeline / Mitsuba peer':28s}{ratio[1]:14.2f}{ratio[2]:14.2f}")
     return lines
 
 
