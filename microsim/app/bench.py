@@ -266,7 +266,7 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5, 
             "mitsuba_version": peer.mi.__version__,
             "copies": 2 * peer.m + 1,
             "build_seconds": peer.build_seconds,
-            "llvm_target": _peer_target(),
+            "llvm_target": peer.llvm_target,
         },
         "peer_unavailable": peer_reason,
     }
@@ -340,13 +340,6 @@ def _ratio(a: dict, b: dict):
     if a["samples_per_s"] is None or b["samples_per_s"] is None:
         return None
     return a["samples_per_s"] / b["samples_per_s"]
-
-
-def _peer_target() -> dict:
-    """Dr.Jit's target for the peer's kernels (``bench_peer.llvm_target``)."""
-    from microsim.app.bench_peer import llvm_target
-
-    return llvm_target()
 
 
 def bounce_throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> dict:

@@ -113,7 +113,7 @@ _SINGLE, _MASKED, _DOWNWARD, _UNRESOLVED, _MISSED = range(5)
 PEER_CPU_VARIABLE = "MICROSIM_PEER_LLVM_CPU"
 """An LLVM CPU name that pins Dr.Jit's kernels to it, 8 lanes (module docstring)."""
 _AVX2_FEATURES = b"+avx,+avx2,+fma,+f16c,+bmi,+bmi2,+popcnt,+lzcnt,+movbe"
-# Dr.Jit exports its C++ API unmangled only in headers: the symbols of jit.h as compiled
+# Dr.Jit's core library exports jit.h's functions under their C++ (mangled) names
 _SET_TARGET, _TARGET_CPU, _VECTOR_WIDTH = (
     "_Z19jit_llvm_set_targetPKcS0_j",
     "_Z19jit_llvm_target_cpuv",
@@ -170,10 +170,11 @@ def _jit_core(dr) -> ctypes.CDLL:
     return lib
 
 
-def llvm_target() -> dict:
-    """The CPU and vector width Dr.Jit compiles the peer's kernels for: {"cpu", "lanes"}
-    ("unknown" and None where its library does not say)."""
-    _, dr, _ = _mitsuba()
+def llvm_target(dr=None) -> dict:
+    """The CPU and vector width Dr.Jit (the module ``dr``, else set up by ``_mitsuba``)
+    compiles the peer's kernels for: {"cpu", "lanes"} ("unknown" and None where its library
+    does not say)."""
+    dr = _mitsuba()[1] if dr is None else dr
     try:
         lib = _jit_core(dr)
     except PeerUnavailable:
@@ -259,7 +260,7 @@ class PeerScene:
     ``theta_max_deg``, or m = ``copies`` in [1, ``MAX_COPIES_PER_SIDE``]) with the float64
     facet normals; ``run`` traces one incidence up to ``theta_max_deg``.
     Building uploads the mesh buffers (``mi.Mesh`` + ``mi.traverse``) and builds Embree's BVH
-    (``mi.load_dict``); ``build_seconds`` records it."""
+    (``mi.load_dict``); ``build_seconds`` records it, ``llvm_target`` what Dr.Jit compiles for."""
 
     def __init__(self, surface, theta_max_deg: float = 30.0, copies: int | None = None):
         v, f, lx, ly = _check_surface(surface)
@@ -308,6 +309,7 @@ class PeerScene:
         self.scene = mi.load_dict({"type": "scene", "tile": mesh})
         dr.eval()
         self.build_seconds = time.perf_counter() - t0
+        self.llvm_target = llvm_target(dr)
         self.theta_max_deg = float(theta_max_deg)
         self.coherent = COHERENT
 
