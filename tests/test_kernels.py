@@ -249,6 +249,7 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
         normal_columns = tuple(np.ascontiguousarray(n[:, k]) for k in range(3))
         masking_lift = np.zeros(len(n))
         rise_bound = 0.8  # steepest slope of a pretend heightfield
+        beam = None  # no heightfield grid: no beams cleared (tests/test_beam.py)
         surely_escapes = staticmethod(lambda *d: Tracer.surely_escapes(Facets, *d))
 
     wi, bins = spherical_deg(55.0, 20.0), Bins(18, 13)

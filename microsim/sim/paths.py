@@ -58,7 +58,7 @@ from microsim.errors import UsageError
 
 from . import bin_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
-from .engine import primary, segments
+from .engine import beam, primary, segments
 from .engine.jit import TILE
 from .ledger import DOWNWARD, LEDGER, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .scratch import WorkArray, WorkColumns
@@ -288,8 +288,9 @@ class FacetTable:
     float64 value the walk uses too; ``bin`` (F,) int32 flat bin index of wo (from float64
     wo; −1 below the horizon); ``normal_cols`` (3 × (F,)) and ``lift`` (F,) = n·v0 + eps (a
     point p starts its masking ray at p − (p·n − lift) n: on the facet plane, eps above it);
-    ``clear`` (F,) bool: lit facets whose mirror direction rises more steeply than the
-    surface can (``Tracer.surely_escapes``): their rays escape without a masking ray.
+    ``clear`` (F,) bool: lit facets whose rays all escape without a masking ray, because
+    their mirror direction rises more steeply than the surface can (``Tracer.surely_escapes``)
+    or, on heightfield grids, because the beam of them clears the relief (``beam``).
     26 bytes per facet besides the tracer's own columns."""
 
     code: np.ndarray
@@ -343,6 +344,16 @@ def facet_table(
     list(pool.map(fill, slices) if pool is not None else map(fill, slices))
     wo = wo32.astype(np.float64)  # the direction the masking ray is traced along
     clear = (code == SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
+    if tracer.beam is not None:  # heightfield grids: whole beams cleared (``beam``)
+        candidates, cleared = (code == SINGLE) & ~clear, np.empty(f, dtype=np.bool_)
+
+        def clear_beams(part: slice) -> None:
+            beam.beam_clear(
+                part.start, candidates[part], wo32[part], tracer.beam, cleared[part]
+            )
+
+        list(pool.map(clear_beams, slices) if pool is not None else map(clear_beams, slices))
+        clear |= cleared
     return FacetTable(
         code=code,
         weight=weight,

@@ -47,7 +47,7 @@ from microsim.errors import UsageError
 from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 
 from . import embree_packets
-from .engine import codes, horizon, segments
+from .engine import beam, codes, horizon, segments
 from .heightfield_caster import cast_falling, heightfield_grid
 from .scratch import WorkArray, WorkColumns
 
@@ -336,6 +336,14 @@ class Tracer:
     def normal_columns(self) -> tuple:
         """Contiguous per-axis columns (3 × (F,)) of the unit facet normals."""
         return tuple(np.ascontiguousarray(self.normals[:, k]) for k in range(3))
+
+    @functools.cached_property
+    def beam(self) -> "beam.BeamGrid | None":
+        """What ``beam.beam_clear`` reads to clear a lit facet's masking rays all at once
+        (heightfield grids only, else None); tolerance that of ``horizon``."""
+        if self.grid is None:
+            return None
+        return beam.beam_grid(self.grid, self.normals, self.zmax, self.horizon[6])
 
     @functools.cached_property
     def masking_lift(self) -> np.ndarray:

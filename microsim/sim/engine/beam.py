@@ -1,0 +1,159 @@
+"""Masking decided per facet: whether every masking ray a lit facet of a heightfield grid can
+send along its mirror direction surely escapes (``beam_clear``), so that no ray from it
+needs a horizon test or an Embree ray (``paths.facet_table``'s ``clear``).
+
+With one incidence wi every ray reflected by facet f leaves along the same direction wo; the
+rays from all points of f form a beam: the facet's triangle swept along wo. On the grid of a
+heightfield (``heightfield_caster.HeightfieldGrid``: cells of size c, each split into two
+triangles) the facet lies in its cell C; the points of the beam at horizontal distance s from
+their starts lie in the unit square C + s·û (û the unit horizontal direction of wo), which is
+inside the 2 × 2 block of cells whose lower corner is ⌊corner of C + s·û⌋. Following that
+corner with a 2-D DDA visits, in order of s, blocks that cover the beam; in the block met over
+[s_in, s_out] a ray from p at height z_p ≥ h(p) climbs as z_p + s·cot (cot = wo_z/|wo_h|) and
+is above the surface throughout if either
+
+- it enters above the block's highest vertex: z_lo + s_in·cot > block max + tol, with z_lo
+  the facet's lowest vertex − tol (a height test, any start p); or
+- it stays above a Lipschitz chain along û: h(p + s·û) − h(p) ≤ B(s), B growing in each block
+  by D·(run in the block), D the largest directional slope ∇h·û of the block's eight
+  triangles (h is continuous and piecewise linear, so h(p + s·û) − h(p) = ∫ ∇h·û ds), checked
+  at both ends: s·cot − B(s) > tol (in the first block, which holds the start, at its exit
+  only: the ray starts on the surface, and the facet's own ∇h·û < cot because wo·n > 0).
+  After the first block cleared by height the chain is no longer followed (the blocks beyond
+  are decided by height alone: as cheap, and they almost always are).
+
+Every block up to the height zmax + tol cleared means every ray of the beam escapes. Any doubt
+(a block fails both tests, or more than ``MAX_BLOCKS`` blocks) leaves the facet to the per-ray
+tests. Grid coordinates u = (x − x0)/c, v = (y − y0)/c; distances s horizontal, tile units.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .jit import compiled, inlined
+
+MAX_BLOCKS = 256  # blocks followed per facet before the facet is left to the per-ray tests
+
+
+class BeamGrid(NamedTuple):
+    """What ``beam_clear`` reads of a heightfield grid: vertex heights ``hp`` (ny + 1, nx + 1),
+    ``block_max`` (``block_maxima``), per-facet gradients ``gx``/``gy`` (∇h = −n_h/n_z; faces
+    numbered as ``heightfield_caster``: A faces then B faces), cell size ``cell``, the relief's
+    top ``zmax`` and the height tolerance ``tol`` (tile units)."""
+
+    hp: np.ndarray
+    block_max: np.ndarray
+    gx: np.ndarray
+    gy: np.ndarray
+    cell: float
+    zmax: float
+    tol: float
+
+
+def beam_grid(grid, normals: np.ndarray, zmax: float, tol: float) -> BeamGrid:
+    """The ``BeamGrid`` of a ``HeightfieldGrid`` whose mesh has unit facet ``normals`` (F, 3)."""
+    return BeamGrid(
+        grid.hp,
+        block_maxima(grid.cell_max),
+        np.ascontiguousarray(-normals[:, 0] / normals[:, 2]),
+        np.ascontiguousarray(-normals[:, 1] / normals[:, 2]),
+        float(grid.cell),
+        float(zmax),
+        float(tol),
+    )
+
+
+def block_maxima(cell_max: np.ndarray) -> np.ndarray:
+    """Highest vertex of each 2 × 2 block of cells, indexed by its lower cell (j, i), wrapped:
+    max of ``cell_max`` over cells (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)."""
+    m = np.maximum(cell_max, np.roll(cell_max, -1, axis=1))
+    return np.ascontiguousarray(np.maximum(m, np.roll(m, -1, axis=0)))
+
+
+@inlined
+def _block_slope(gx, gy, ux, uy, bi, bj, nx, ny):
+    """Largest directional slope ∇h·(ux, uy) of the eight triangles of the 2 × 2 block with
+    lower cell (bi, bj) (``gx``/``gy``: per-facet gradients, A faces then B faces)."""
+    d = -math.inf
+    for dj in range(2):
+        j = bj + dj
+        j = j - ny if j >= ny else j
+        for di in range(2):
+            i = bi + di
+            i = i - nx if i >= nx else i
+            a = j * nx + i
+            b = a + nx * ny
+            d = max(d, gx[a] * ux + gy[a] * uy, gx[b] * ux + gy[b] * uy)
+    return d
+
+
+@compiled
+def beam_clear(f0, candidates, wo, grid, out):
+    """``out[k]`` = whether every masking ray of facet f = f0 + k surely escapes (module
+    docstring), for the facets with ``candidates[k]`` (others: False); ``wo[k]`` its float32
+    mirror direction (traced as the float64 value of it); ``grid`` a ``BeamGrid``."""
+    hp, bmax, gx, gy, cell, zmax, tol = grid
+    ny, nx = bmax.shape
+    for q in range(len(candidates)):
+        out[q] = False
+        if not candidates[q]:
+            continue
+        f = f0 + q
+        ox, oy, oz = np.float64(wo[q, 0]), np.float64(wo[q, 1]), np.float64(wo[q, 2])
+        h = math.sqrt(ox * ox + oy * oy)
+        if oz <= 0.0 or h == 0.0:
+            continue
+        cot = oz / h
+        ux, uy = ox / h, oy / h
+        k = f - nx * ny if f >= nx * ny else f
+        ci, cj = k % nx, k // nx
+        if f < nx * ny:  # triangle A: (v00, v01, v11)
+            zlo = min(hp[cj, ci], hp[cj, ci + 1], hp[cj + 1, ci + 1])
+        else:  # triangle B: (v00, v11, v10)
+            zlo = min(hp[cj, ci], hp[cj + 1, ci + 1], hp[cj + 1, ci])
+        zlo -= tol
+        s_end = (zmax + tol - zlo) / cot
+        # DDA of the block corner from (ci, cj) along û, grid units per unit s: û / cell
+        bi, bj = ci, cj
+        tx, dtx, sx = math.inf, math.inf, 0
+        if ux > 0.0:
+            tx, dtx, sx = cell / ux, cell / ux, 1
+        elif ux < 0.0:
+            tx, dtx, sx = cell / -ux, cell / -ux, -1
+            bi -= 1
+        ty, dty, sy = math.inf, math.inf, 0
+        if uy > 0.0:
+            ty, dty, sy = cell / uy, cell / uy, 1
+        elif uy < 0.0:
+            ty, dty, sy = cell / -uy, cell / -uy, -1
+            bj -= 1
+        bi = bi + nx if bi < 0 else bi
+        bj = bj + ny if bj < 0 else bj
+        s_in, chain = 0.0, 0.0
+        for step in range(MAX_BLOCKS):
+            s_out = min(tx, ty, s_end)
+            if not zlo + s_in * cot > bmax[bj, bi] + tol:  # the block may reach a ray
+                if step > 0 and not s_in * cot - chain > tol:  # (the start: on the surface)
+                    break
+                chain += _block_slope(gx, gy, ux, uy, bi, bj, nx, ny) * (s_out - s_in)
+                if not s_out * cot - chain > tol:
+                    break
+            else:  # above the block: the chain is not followed further (height tests only)
+                chain = math.inf
+            if s_out >= s_end:
+                out[q] = True
+                break
+            if tx < ty:
+                bi += sx
+                bi = 0 if bi == nx else (nx - 1 if bi < 0 else bi)
+                s_in = tx
+                tx += dtx
+            else:
+                bj += sy
+                bj = 0 if bj == ny else (ny - 1 if bj < 0 else bj)
+                s_in = ty
+                ty += dty
