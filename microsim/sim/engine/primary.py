@@ -70,13 +70,14 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
     HIT, MISSED/ESCAPED (→ RAY_MISSED) or UNRESOLVED. Writes ``status``, ``weight`` (0
     without a hit) and ``where`` (the facet bin for lit rays, else −1) of every ray; returns
     the number of masking rays. In tiles of ``TILE`` rays: the look-ups one by one, the
-    starts in a vectorised loop, the masking rays by ``masking_starts``.
+    starts only for the candidates (few: most lit facets are ``fclear``), the masking rays
+    by ``masking_starts``.
 
     Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``table``
     (``FacetColumns``: code, fweight, nx, ny, nz, lift, wo32, fbin, fclear), ``hz``,
     ``geometry``, ``out`` (``PrimaryLedger``: status, weight, where; written) and
     ``masking`` (the masking rays' arrays, ``paths.MaskingRays.kernel_args``)."""
-    tile = np.empty((10, TILE))  # per-ray scratch of one tile
+    tile = np.empty((6, TILE))  # per-ray scratch of one tile: masking starts, directions
     cand = np.empty(TILE, np.bool_)
     m = 0
     for t in range(0, len(walk[0]), TILE):
@@ -94,7 +95,7 @@ def cast_tabled_primary(origins, down, grid, table, hz, geometry, out, masking):
     ``tabled_primary``, without writing and reading back five columns of hits."""
     x, y, z = origins
     dx, dy, dz = down
-    tile = np.empty((10, TILE))
+    tile = np.empty((6, TILE))
     cand = np.empty(TILE, np.bool_)
     hs = np.empty(TILE, np.int8)
     prim = np.empty(TILE, np.int32)
@@ -112,13 +113,12 @@ def cast_tabled_primary(origins, down, grid, table, hz, geometry, out, masking):
 @compiled
 def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m):
     """``tabled_primary`` for the n rays t … t + n − 1, their walk results at ``walk``'s
-    entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``tile`` (10, TILE)
+    entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``tile`` (6, TILE)
     and ``cand`` (TILE,) scratch; masking rays from slot m on. Returns the new m."""
     hs, prim, px, py, pz = walk
     code, fweight, nx, ny, nz, lift, wo32, fbin, fclear = table
     status, weight, where = out
-    a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
-    dx_, dy_, dz_ = tile[7], tile[8], tile[9]
+    x_, y_, z_, dx_, dy_, dz_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
     for j in range(n):  # one by one: the hit facet's entries (indexed loads)
         i, k = t + j, w + j
         h = hs[k]
@@ -130,13 +130,11 @@ def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m
         weight[i] = fweight[f] if hit else 0.0
         where[i] = fbin[f] if hit & (c == SINGLE) else -1
         cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
-        a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
-        dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
-    for j in range(n):  # vectorised: the masking rays' starts on the facet planes
-        k = w + j
-        a, b, e = a_[j], b_[j], e_[j]
-        off = px[k] * a + py[k] * b + pz[k] * e - lift_[j]
-        x_[j], y_[j], z_[j] = px[k] - off * a, py[k] - off * b, pz[k] - off * e
+        if cand[j]:  # the masking ray's start on the facet plane (few rays: most are clear)
+            a, b, e = nx[f], ny[f], nz[f]
+            off = px[k] * a + py[k] * b + pz[k] * e - lift[f]
+            x_[j], y_[j], z_[j] = px[k] - off * a, py[k] - off * b, pz[k] - off * e
+            dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
     return masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
 
 
