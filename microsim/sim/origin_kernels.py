@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .engine.jit import allocating, vector_inlined
+from .engine.jit import vector_inlined, vectorised
 
 
 @vector_inlined
@@ -21,7 +21,7 @@ def _stratum(r, xi, n_total, rows):
     return s - row, row
 
 
-@allocating
+@vectorised
 def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, x, y, psi):
     """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``streams.
     chunk_origins``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
@@ -32,34 +32,36 @@ def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, 
     ψ are stratified over the grooves in order of tilt and the rows instead
     (``_groove_strata``). Writes ``x``, ``y`` (and ``psi``)."""
     per_ray = 3 if azimuth else 2
-    offset = np.arange(block).astype(np.float64)  # q as a float: the loop then vectorises
     for j in range((n + block - 1) // block):
         lo = j * block
         m = min(block, n - lo)
         base = per_ray * lo
         first = float(r0 + lo)  # float(r0 + lo) + q = float(r0 + lo + q) exactly (< 2⁵³)
+        # on slices, indexed from 0: the loop then vectorises (5× faster than indexing the
+        # whole columns at lo + q, whose index checks kept it scalar)
+        xs, ys, xi, eta = x[lo : lo + m], y[lo : lo + m], u[base : base + m], u[base + m :]
         for q in range(m):
-            frac, row = _stratum(first + offset[q], u[base + q], n_total, rows)
-            x[lo + q] = frac * lx - lx / 2
-            y[lo + q] = (row + u[base + m + q]) / rows * ly - ly / 2
+            frac, row = _stratum(first + float(q), xi[q], n_total, rows)
+            xs[q] = frac * lx - lx / 2
+            ys[q] = (row + eta[q]) / rows * ly - ly / 2
         if azimuth:
             _groove_strata(u, base, base + 2 * m, first, m, n_total, rows, strata, lo, x, psi)
 
 
-@allocating
+@vectorised
 def stratified_groove_starts(u, r0, n, block, n_total, rows, lx, strata, x, psi):
     """x and groove azimuth ψ of stratified rays r0 … r0 + n − 1 as ``stratified_origins``
     (``azimuth``) gives them, from ξ and ψ/2π alone: block j (m rays) holds them as two runs
     of m numbers from u[2·block·j] (``streams.groove_starts``)."""
-    offset = np.arange(block).astype(np.float64)
     for j in range((n + block - 1) // block):
         lo = j * block
         m = min(block, n - lo)
         base = 2 * lo
         first = float(r0 + lo)
+        xs, xi = x[lo : lo + m], u[base : base + m]  # slices: the loop vectorises
         for q in range(m):
-            frac, _ = _stratum(first + offset[q], u[base + q], n_total, rows)
-            x[lo + q] = frac * lx - lx / 2
+            frac, _ = _stratum(first + float(q), xi[q], n_total, rows)
+            xs[q] = frac * lx - lx / 2
         _groove_strata(u, base, base + m, first, m, n_total, rows, strata, lo, x, psi)
 
 
@@ -76,14 +78,15 @@ def _groove_strata(u, at_xi, at_psi, first, m, n_total, rows, strata, lo, x, psi
     azimuths, which halves the rays a V-groove run needs for a given error (the collapsed-
     strata error estimate stays valid: tests/test_kernels.py)."""
     rim = strata[0]
+    ps, up, xs, xi = psi[lo : lo + m], u[at_psi : at_psi + m], x[lo : lo + m], u[at_xi:]
     if len(rim) == 0:
         for q in range(m):
-            psi[lo + q] = 2 * np.pi * u[at_psi + q]
+            ps[q] = 2 * np.pi * up[q]
         return
     width, g = strata[1], len(rim)
     for q in range(m):
-        frac, row = _stratum(first + q, u[at_xi + q], n_total, rows)
-        psi[lo + q] = 2 * np.pi * ((row + u[at_psi + q]) / rows)
+        frac, row = _stratum(first + q, xi[q], n_total, rows)
+        ps[q] = 2 * np.pi * ((row + up[q]) / rows)
         rank = frac * g
         k = min(math.floor(rank), g - 1.0)
-        x[lo + q] = rim[int(k)] + (rank - k) * width
+        xs[q] = rim[int(k)] + (rank - k) * width
