@@ -46,3 +46,36 @@ def test_reused_tracer_gives_bitwise_the_same_result():
     for other in (again, fresh):
         for name in ("brdf", "stderr", "counts", "sum_w", "sum_w2"):
             assert np.array_equal(getattr(first, name), getattr(other, name), equal_nan=True)
+
+
+def test_facet_tables_are_kept_per_incidence_read_only_and_bounded():
+    """A tracer hands out the same facet table for the same incidence, material, bins and
+    azimuth (read-only, so a kept table cannot be altered), builds a new one when any of them
+    changes, keeps at most ``TABLES_KEPT``, and a run on kept tables equals a fresh one."""
+    import pytest
+
+    from microsim.analytic.fresnel import resolve_material
+    from microsim.sim import paths
+    from microsim.vectors import spherical_deg
+
+    s = _surface()
+    tr = tracer_for(s, "traced", s.fingerprint())[0]
+    al, bins = resolve_material("aluminium"), Bins(9, 7)
+    a = paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0)
+    assert paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0) is a
+    with pytest.raises(ValueError):
+        a.weight[0] = 1.0
+    others = [
+        paths.facet_table(tr, spherical_deg(31.0, 0.0), al, bins, 0.0),
+        paths.facet_table(tr, spherical_deg(30.0, 0.0), resolve_material("methanol"), bins, 0.0),
+        paths.facet_table(tr, spherical_deg(30.0, 0.0), al, Bins(9, 9), 0.0),
+        paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 10.0),
+    ]
+    assert all(t is not a for t in others)
+    assert len(tr._facet_tables) == paths.TABLES_KEPT
+    assert paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0) is not a  # dropped
+    kw = dict(rays=20_000, bins=Bins(9, 7), seed=4)
+    first, again = simulate(s, "aluminium", 30.0, **kw), simulate(s, "aluminium", 30.0, **kw)
+    fresh = simulate(_surface(), "aluminium", 30.0, **kw)
+    for r in (again, fresh):
+        assert np.array_equal(first.brdf, r.brdf) and np.array_equal(first.stderr, r.stderr)
