@@ -77,10 +77,23 @@ def test_clearing_beams_changes_no_tally(theta):
     assert m_fast < 0.5 * m_slow
 
 
-def test_no_beam_without_a_heightfield_grid():
-    """A tracer without the grid (or a mesh that is not one) clears no beam: the facet table's
-    ``clear`` is the steepness test alone."""
-    tr = Tracer(SURFACES["gaussian, rms slope 0.35"]())
+def test_beams_on_every_heightfield_grid_and_only_there():
+    """The beam test needs the mesh to be a heightfield grid, not the grid walk: a tracer that
+    casts its primary rays with Embree clears the same beams; the same mesh given as a custom
+    surface (not known to be a heightfield) clears none beyond the steepness test."""
+    from microsim.surfaces.surface import Surface
+
+    s = SURFACES["gaussian, rms slope 0.35"]()
+    wi = spherical_deg(40.0, 0.0)
+    walked, _ = _tables(Tracer(s, grid=True), wi)
+    embree = Tracer(s)
+    assert embree.grid is None and embree.beam is not None
+    np.testing.assert_array_equal(_tables(embree, wi)[0].clear, walked.clear)
+    custom = Surface(
+        kind="custom", vertices=s.vertices, faces=s.faces, tile_size=s.tile_size,
+        periodic=True, nominal={},
+    )  # fmt: skip
+    tr = Tracer(custom)
     assert tr.beam is None
-    table, steep = _tables(tr, spherical_deg(40.0, 0.0))
+    table, steep = _tables(tr, wi)
     np.testing.assert_array_equal(table.clear, steep.clear)

@@ -261,7 +261,8 @@ class Tracer:
             raise UsageError(f"backend must be 'auto', 'packets' or 'embreex', got {backend!r}")
         v, f, lx, ly = _validated_mesh(surface)
         self.vertices, self.faces = v, f
-        self.grid = heightfield_grid(surface, v, f) if grid else None
+        self._heightfield = heightfield_grid(surface, v, f)  # None unless a heightfield grid
+        self.grid = self._heightfield if grid else None
         cross = _cross_columns(self._e1, self._e2)
         norm = np.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2)
         if np.any(norm == 0):
@@ -340,10 +341,11 @@ class Tracer:
     @functools.cached_property
     def beam(self) -> "beam.BeamGrid | None":
         """What ``beam.beam_clear`` reads to clear a lit facet's masking rays all at once
-        (heightfield grids only, else None); tolerance that of ``horizon``."""
-        if self.grid is None:
+        (meshes that are heightfield grids, whether or not ``grid`` walks their primary
+        rays; else None); tolerance that of ``horizon``."""
+        if self._heightfield is None:
             return None
-        return beam.beam_grid(self.grid, self.normals, self.zmax, self.horizon[6])
+        return beam.beam_grid(self._heightfield, self.normals, self.zmax, self.horizon[6])
 
     @functools.cached_property
     def masking_lift(self) -> np.ndarray:
