@@ -147,7 +147,8 @@ SIM_LAYERS = [
     ),
     (
         "ray engine",
-        ("engine", "engine.horizon", "engine.primary", "engine.segments", "tracer")
+        ("engine", "engine.horizon", "engine.beam", "engine.primary", "engine.segments")
+        + ("tracer",)
         + ("heightfield_caster", "embree_packets"),
     ),
     (
