@@ -369,3 +369,23 @@ def test_bad_arguments(ggx_file):
         result_of_table(table, theta_max=5.0)
     with pytest.raises(UsageError, match="brdf"):
         write_merl(ggx_file.parent / "x.binary", "not callable")
+
+
+def test_a_table_bin_without_events_is_not_averaged_into_its_reciprocal_partner(tmp_path):
+    """A constant table (1/π) with the pole bins empty at the largest incidence: pairs whose
+    reversed order is interpolated from an empty bin are not ``resolved``, and the MERL file
+    holds the measured order there (1/π, not half of it); elsewhere the usual average."""
+    bins, theta = Bins(18, 7), np.array([0.0, 30.0, 60.0])
+    values = np.full((3, bins.n_theta, bins.n_phi), 1 / np.pi)
+    values[2, 0, :] = 0.0  # θi 60°, θo in the first (pole) bin: no events
+    table = BRDFTable(theta, bins, values, np.zeros_like(values), "constant")
+    wi, wo = vectors.spherical_deg(0.0, 0.0), vectors.spherical_deg(55.0, 0.0)
+    assert table.resolved(wi, wo) and not table.resolved(wo, wi)
+    assert table.evaluate(wo, wi) < 0.5 / np.pi  # pulled towards 0 by the empty bin
+    path = tmp_path / "t.binary"
+    write_merl(path, table)
+    back = read_merl(path, lookup="reader")
+    assert np.isclose(back.evaluate(wi[None], wo[None])[0], 1 / np.pi, rtol=1e-3)
+    wi2, wo2 = vectors.spherical_deg(20.0, 0.0), vectors.spherical_deg(30.0, 180.0)
+    assert table.resolved(wi2, wo2) and table.resolved(wo2, wi2)
+    assert np.isclose(back.evaluate(wi2[None], wo2[None])[0], 1 / np.pi, rtol=1e-3)

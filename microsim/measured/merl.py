@@ -222,7 +222,9 @@ def write_merl(path, brdf: Callable, rgb=(1.0, 1.0, 1.0)) -> None:
 
     Each sample holds ½[f(wi, wo) + f(wo, wi)] at its cell's centre (``sample_angles_rad``;
     the format stores one value for both orders — reciprocity — so a table that is not exactly
-    reciprocal is averaged), times ``rgb`` per channel, as raw = value / ``MERL_SCALE``;
+    reciprocal is averaged; for a ``BRDFTable``, where one order is interpolated from bins
+    that all hold events and the other is not (``BRDFTable.resolved``), the measured order
+    alone), times ``rgb`` per channel, as raw = value / ``MERL_SCALE``;
     samples whose wi or wo lies below the horizon get ``INVALID``. A grey BRDF gives equal
     channels (times ``rgb``). ``brdf`` may be a ``BRDFTable``, a model's ``.f``, a
     ``MERLBRDF.rgb``, any vectorised callable.
@@ -234,7 +236,11 @@ def write_merl(path, brdf: Callable, rgb=(1.0, 1.0, 1.0)) -> None:
     wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
     up = (wi[:, 2] > HORIZON) & (wo[:, 2] > HORIZON)
     a, b = wi[up], wo[up]
-    f = 0.5 * (brdf_rgb(brdf, a, b) + brdf_rgb(brdf, b, a))
+    fa, fb = brdf_rgb(brdf, a, b), brdf_rgb(brdf, b, a)
+    f = 0.5 * (fa + fb)
+    if hasattr(brdf, "resolved"):  # a table: where only one order is measured, that one
+        ra, rb = brdf.resolved(a, b)[:, None], brdf.resolved(b, a)[:, None]
+        f = np.where(ra & ~rb, fa, np.where(rb & ~ra, fb, f))
     raw = np.full((3, MERL_SAMPLES), INVALID)
     raw[:, up] = (f * (rgb / np.asarray(MERL_SCALE))).T
     header = np.asarray(MERL_SHAPE, dtype="<i4")

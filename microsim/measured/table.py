@@ -74,6 +74,7 @@ class BRDFTable:
         object.__setattr__(self, "brdf", arrays["brdf"])
         object.__setattr__(self, "stderr", arrays["stderr"])
         object.__setattr__(self, "_interp", None)
+        object.__setattr__(self, "_held", None)
 
     @classmethod
     def from_result(cls, result, model: str | None = None, name: str | None = None):
@@ -149,15 +150,20 @@ class BRDFTable:
                 f"{path}: not a microsim BRDF table ({type(e).__name__}: {e})"
             ) from None
 
+    def _values(self) -> np.ndarray:
+        """log f̄ on the interpolation grid (a bin of 0 as ``FLOOR``; one incidence repeated,
+        so that it is constant in θi)."""
+        values = np.log(np.maximum(self.brdf, FLOOR))
+        return np.concatenate([values, values]) if len(self.theta_i) == 1 else values
+
     def _interpolator(self):
         if self._interp is None:
             th_o = self.bins.theta_centers
             phi = self.bins.phi_centers  # 0 … 180 inclusive for folded bins
             ti = self.theta_i
-            values = np.log(np.maximum(self.brdf, FLOOR))
+            values = self._values()
             if ti.size == 1:  # one incidence: constant in θi
                 ti = np.array([ti[0], ti[0] + 1.0])
-                values = np.concatenate([values, values])
             interp = RegularGridInterpolator(
                 (ti, th_o, phi), values, method="linear", bounds_error=False, fill_value=None
             )
@@ -166,9 +172,9 @@ class BRDFTable:
             object.__setattr__(self, "_interp", (interp, lo, hi))
         return self._interp
 
-    def evaluate(self, wi, wo) -> np.ndarray:
-        """f(wi, wo) sr⁻¹ for unit directions (…, 3) pointing away from the surface (module
-        docstring: linear between tabulated θi and bin centres, clamped outside them)."""
+    def _points(self, wi, wo):
+        """(interpolation points (…, 3) of (θi, θo, |Δφ|) clamped to the table, whether both
+        directions are above the horizon) for unit directions (…, 3)."""
         wi = _checks.directions("wi", wi)
         wo = _checks.directions("wo", wo)
         wi, wo = np.broadcast_arrays(wi, wo)
@@ -176,10 +182,31 @@ class BRDFTable:
         to = np.degrees(np.arccos(np.clip(wo[..., 2], -1.0, 1.0)))
         dphi = np.degrees(np.arctan2(wo[..., 1], wo[..., 0]) - np.arctan2(wi[..., 1], wi[..., 0]))
         dphi = np.abs(np.mod(dphi + 180.0, 360.0) - 180.0)
-        interp, lo, hi = self._interpolator()
-        pts = np.clip(np.stack([ti, to, dphi], axis=-1), lo, hi)
-        f = np.exp(interp(pts.reshape(-1, 3)).reshape(ti.shape))
+        _, lo, hi = self._interpolator()
+        return np.clip(np.stack([ti, to, dphi], axis=-1), lo, hi), (wi[..., 2] > 0) & (wo[..., 2] > 0)
+
+    def evaluate(self, wi, wo) -> np.ndarray:
+        """f(wi, wo) sr⁻¹ for unit directions (…, 3) pointing away from the surface (module
+        docstring: linear between tabulated θi and bin centres, clamped outside them)."""
+        pts, up = self._points(wi, wo)
+        interp = self._interpolator()[0]
+        f = np.exp(interp(pts.reshape(-1, 3)).reshape(up.shape))
         f = np.where(f <= FLOOR * (1 + 1e-9), 0.0, f)
-        return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), f, 0.0)
+        return np.where(up, f, 0.0)
+
+    def resolved(self, wi, wo) -> np.ndarray:
+        """Whether ``evaluate(wi, wo)`` is interpolated from bins that all hold events (bool,
+        the directions' shape). A bin without events says only that no ray landed there (a
+        small bin at the edge of a lobe, the pole bins at large θi): a value interpolated
+        from it is pulled towards 0 by the log-linear rule, not measured."""
+        pts, up = self._points(wi, wo)
+        if self._held is None:
+            interp = self._interpolator()[0]
+            held = RegularGridInterpolator(
+                interp.grid, (self._values() > np.log(FLOOR)).astype(np.float64),
+                method="linear", bounds_error=False, fill_value=None,
+            )  # fmt: skip
+            object.__setattr__(self, "_held", held)
+        return up & (self._held(pts.reshape(-1, 3)).reshape(up.shape) >= 1.0 - 1e-9)
 
     __call__ = evaluate
