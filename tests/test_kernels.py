@@ -405,22 +405,3 @@ def test_bin_rays_is_locate(bins, rotate):
     assert np.array_equal(where[single], want[single])
     assert np.all(where[~single] == -7)
     assert near[n:].mean() > 0.5  # the edge directions did take the exact branch
-
-
-def test_uniforms_from_random_words_are_their_bit_fields():
-    """ξ, η are a word's upper and lower 32 bits over 2³², ψ/2π its upper 53 bits over 2⁵³
-    (NumPy's ``Generator.random`` of the same PCG64 output), all in [0, 1), for random words
-    and the extreme ones."""
-    from microsim.sim import origin_kernels as ok
-
-    words = np.random.default_rng(3).bit_generator.random_raw(1000)
-    words = np.concatenate([words, np.array([0, 2**32 - 1, 2**32, 2**64 - 1], np.uint64)])
-    for w in words:
-        v = int(w)
-        assert ok.upper_uniform(w) == (v >> 32) / 2.0**32
-        assert ok.lower_uniform(w) == (v & 0xFFFFFFFF) / 2.0**32
-        assert ok.unit_uniform(w) == (v >> 11) / 2.0**53
-        assert 0.0 <= ok.unit_uniform(w) < 1.0 and ok.upper_uniform(w) < 1.0
-    g = np.random.Generator(np.random.PCG64(9))
-    same = np.random.Generator(np.random.PCG64(9)).bit_generator.random_raw(5)
-    assert np.array_equal(g.random(5), [ok.unit_uniform(w) for w in same])

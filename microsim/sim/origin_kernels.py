@@ -1,9 +1,7 @@
 """Stratified ray origins (``streams.chunk_origins``): ray r of N at place s = (r + ξ)/N·rows
 of a row-major sweep of the tile, y jittered in its row, and, for V-grooves, x and the groove
-azimuth ψ stratified over the grooves in order of tilt and the rows. The uniforms come from
-the random stream's 64-bit words: ξ and η from the two 32-bit halves of one word (a jitter
-inside a stratum, resolved to 2⁻³² of it: far below the float32 ray origins), ψ/2π from the
-upper 53 bits of another. Tile coordinates, ψ in radians."""
+azimuth ψ stratified over the grooves in order of tilt and the rows. Tile coordinates,
+ψ in radians."""
 
 from __future__ import annotations
 
@@ -23,37 +21,17 @@ def _stratum(r, xi, n_total, rows):
     return s - row, row
 
 
-@vector_inlined
-def upper_uniform(w):
-    """ξ ∈ [0, 1) from the upper 32 bits of a 64-bit word: (w >> 32)·2⁻³² (exact)."""
-    return np.float64(w >> np.uint64(32)) * 2.0**-32
-
-
-@vector_inlined
-def lower_uniform(w):
-    """η ∈ [0, 1) from the lower 32 bits of a 64-bit word: (w mod 2³²)·2⁻³² (exact)."""
-    return np.float64(w & np.uint64(0xFFFFFFFF)) * 2.0**-32
-
-
-@vector_inlined
-def unit_uniform(w):
-    """u ∈ [0, 1) from the upper 53 bits of a 64-bit word, (w >> 11)·2⁻⁵³: NumPy's
-    ``Generator.random`` of the same PCG64 output."""
-    return np.float64(w >> np.uint64(11)) * 2.0**-53
-
-
 @vectorised
 def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, x, y, psi):
     """Stratified origins and groove azimuths of rays r0 … r0 + n − 1 (``streams.
-    chunk_origins``; r0 a multiple of ``block``) from their random 64-bit words ``u``
-    (uint64): block j of the chunk (m rays) holds one word per ray (ξ in its upper, η in its
-    lower 32 bits), then, if ``azimuth``, one more (ψ/2π, 53 bits), as runs of m words from
-    u[k·block·j], k = 2 if ``azimuth`` else 1. Ray r's stratum (``_stratum``) gives
+    chunk_origins``; r0 a multiple of ``block``) from their uniforms ``u``: block j of the
+    chunk (m rays) holds ξ, η (and ψ/2π if ``azimuth``) as runs of m numbers from
+    u[k·block·j], k = 3 if ``azimuth`` else 2. Ray r's stratum (``_stratum``) gives
     x = (s − ⌊s⌋)·Lx − Lx/2, y = (⌊s⌋ + η)/rows · Ly − Ly/2, and ψ = 2π·(ψ/2π) if
     ``azimuth``. With groove ``strata`` (``Tracer.groove_strata``: V-grooves, azimuth) x and
     ψ are stratified over the grooves in order of tilt and the rows instead
     (``_groove_strata``). Writes ``x``, ``y`` (and ``psi``)."""
-    per_ray = 2 if azimuth else 1
+    per_ray = 3 if azimuth else 2
     for j in range((n + block - 1) // block):
         lo = j * block
         m = min(block, n - lo)
@@ -61,36 +39,35 @@ def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, 
         first = float(r0 + lo)  # float(r0 + lo) + q = float(r0 + lo + q) exactly (< 2⁵³)
         # on slices, indexed from 0: the loop then vectorises (5× faster than indexing the
         # whole columns at lo + q, whose index checks kept it scalar)
-        xs, ys, w = x[lo : lo + m], y[lo : lo + m], u[base : base + m]
+        xs, ys, xi, eta = x[lo : lo + m], y[lo : lo + m], u[base : base + m], u[base + m :]
         for q in range(m):
-            frac, row = _stratum(first + float(q), upper_uniform(w[q]), n_total, rows)
+            frac, row = _stratum(first + float(q), xi[q], n_total, rows)
             xs[q] = frac * lx - lx / 2
-            ys[q] = (row + lower_uniform(w[q])) / rows * ly - ly / 2
+            ys[q] = (row + eta[q]) / rows * ly - ly / 2
         if azimuth:
-            _groove_strata(u, base, base + m, first, m, n_total, rows, strata, lo, x, psi)
+            _groove_strata(u, base, base + 2 * m, first, m, n_total, rows, strata, lo, x, psi)
 
 
 @vectorised
 def stratified_groove_starts(u, r0, n, block, n_total, rows, lx, strata, x, psi):
     """x and groove azimuth ψ of stratified rays r0 … r0 + n − 1 as ``stratified_origins``
-    (``azimuth``) gives them from the same words ``u``, without y
-    (``streams.groove_starts``)."""
+    (``azimuth``) gives them, from ξ and ψ/2π alone: block j (m rays) holds them as two runs
+    of m numbers from u[2·block·j] (``streams.groove_starts``)."""
     for j in range((n + block - 1) // block):
         lo = j * block
         m = min(block, n - lo)
         base = 2 * lo
         first = float(r0 + lo)
-        xs, w = x[lo : lo + m], u[base : base + m]  # slices: the loop vectorises
+        xs, xi = x[lo : lo + m], u[base : base + m]  # slices: the loop vectorises
         for q in range(m):
-            frac, _ = _stratum(first + float(q), upper_uniform(w[q]), n_total, rows)
+            frac, _ = _stratum(first + float(q), xi[q], n_total, rows)
             xs[q] = frac * lx - lx / 2
         _groove_strata(u, base, base + m, first, m, n_total, rows, strata, lo, x, psi)
 
 
 @vector_inlined
 def _groove_strata(u, at_xi, at_psi, first, m, n_total, rows, strata, lo, x, psi):
-    """Groove azimuths ψ of m rays from their words u[at_psi …] (``unit_uniform``; ξ from
-    the upper halves of u[at_xi …], ``upper_uniform``), ray
+    """Groove azimuths ψ of m rays from their uniforms u[at_psi …] (ξ at u[at_xi …]), ray
     ``first`` + q at x[lo + q], psi[lo + q]. Without ``strata`` (an empty array): ψ = 2π·u.
     With them, (left rims x of the grooves in order of tilt (G,), groove width) of equal-width
     V-grooves along y (whose BRDF does not depend on y): the ray's stratum (s − ⌊s⌋ =
@@ -104,12 +81,12 @@ def _groove_strata(u, at_xi, at_psi, first, m, n_total, rows, strata, lo, x, psi
     ps, up, xs, xi = psi[lo : lo + m], u[at_psi : at_psi + m], x[lo : lo + m], u[at_xi:]
     if len(rim) == 0:
         for q in range(m):
-            ps[q] = 2 * np.pi * unit_uniform(up[q])
+            ps[q] = 2 * np.pi * up[q]
         return
     width, g = strata[1], len(rim)
     for q in range(m):
-        frac, row = _stratum(first + q, upper_uniform(xi[q]), n_total, rows)
-        ps[q] = 2 * np.pi * ((row + unit_uniform(up[q])) / rows)
+        frac, row = _stratum(first + q, xi[q], n_total, rows)
+        ps[q] = 2 * np.pi * ((row + up[q]) / rows)
         rank = frac * g
         k = min(math.floor(rank), g - 1.0)
         xs[q] = rim[int(k)] + (rank - k) * width

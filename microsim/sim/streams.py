@@ -1,7 +1,7 @@
 """Per-block random streams and the origins of the primary rays.
 
 The primary rays of one (realisation r, incidence i) are numbered 0 … N − 1 and cut into
-blocks of ``BLOCK`` rays. Block b draws its 64-bit words from its own slot of the PCG64 stream
+blocks of ``BLOCK`` rays. Block b draws its numbers from its own slot of the PCG64 stream
 seeded with the key (seed, r, i) (``block_generator``), so its rays depend on (key, b) alone:
 never on how blocks are grouped into chunks or spread over threads. This is what makes
 ``simulate`` bitwise reproducible for any ``threads``/``chunk`` and resumable block by block.
@@ -11,10 +11,8 @@ Origins lie on the horizontal plane z = zmax + top_margin above one tile
 a horizontal plane sample the surface seen from wi flux-weighted, which is the
 (n_j·wi) dx_j / ((n·wi) dA) factor of the explicit integral (Mikkelsen 2009, eq. 9).
 ``"stratified"`` origins give ray r its own stratum [r/N, (r + 1)/N) of a row-major sweep of
-the tile, jittered inside it; ``"independent"`` origins are i.i.d. uniform. A ray's two
-jitters ξ, η are the upper and lower 32 bits of one word (``origin_kernels.upper_uniform``,
-``lower_uniform``), a groove azimuth the upper 53 bits of another. Angles are in radians
-here (groove azimuths ψ, block rotations ψ_b).
+the tile, jittered inside it; ``"independent"`` origins are i.i.d. uniform. Angles are in
+radians here (groove azimuths ψ, block rotations ψ_b).
 """
 
 from __future__ import annotations
@@ -52,6 +50,8 @@ _streams = threading.local()
 # this thread's work arrays (``scratch``): a chunk's origins, azimuths and uniforms
 _CHUNK_ORIGIN = WorkColumns("chunk-origin")
 _CHUNK_PSI = WorkArray("chunk-psi")
+_CHUNK_UNIFORM = WorkArray("chunk-uniform")
+_GROOVE_UNIFORM = WorkArray("groove-uniform")
 _GROOVE_X = WorkArray("groove-x")
 _GROOVE_PSI = WorkArray("groove-psi")
 
@@ -64,10 +64,10 @@ def stream_state(key: tuple) -> dict:
 
 def block_generator(key, block: int, per_ray: int) -> np.random.Generator:
     """This thread's generator positioned at block ``block``'s slot of stream ``key``: block b
-    owns the 64-bit words [b·k·BLOCK, (b + 1)·k·BLOCK) of the PCG64 stream seeded with
-    SeedSequence(key), k = ``per_ray`` words per ray (ξ and η in one, and ψ for groove
-    azimuths in another, in runs of the block's length), so every block's rays depend only
-    on (key, b), whatever the chunking, and one generator serves consecutive blocks."""
+    owns the numbers [b·k·BLOCK, (b + 1)·k·BLOCK) of the PCG64 stream seeded with
+    SeedSequence(key), k = ``per_ray`` numbers per ray (ξ, η, and ψ for groove azimuths, in
+    runs of the block's length), so every block's rays depend only on (key, b), whatever the
+    chunking, and one generator serves consecutive blocks."""
     try:
         rng = _streams.rng
     except AttributeError:
@@ -91,9 +91,8 @@ def chunk_origins(
     consecutive ``blocks``, in this thread's work arrays (valid until its next call). Every
     origin starts at z = zmax + top_margin.
 
-    Each block draws a run of n words (n its length: ξ and η, the halves of each) and, with
-    ``azimuth``, a run of n more (ψ/2π) from its own slot of the stream ``key``
-    (``block_generator``), so its rays do not depend on the chunking.
+    Each block draws ξ, η, then (``azimuth``) ψ/2π, n each (n its length), from its own slot
+    of the stream ``key`` (``block_generator``), so its rays do not depend on the chunking.
     ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
     row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
     y is jittered inside its row (``origin_kernels.stratified_origins``). The union of strata is the
@@ -110,22 +109,20 @@ def chunk_origins(
     z.fill(tracer.zmax + tracer.top_margin)
     psi = _CHUNK_PSI(n if azimuth else 0)
     lx, ly = tracer.tile
-    per_ray = 2 if azimuth else 1
+    per_ray = 3 if azimuth else 2
     rng = block_generator(key, blocks[0], per_ray)  # consecutive slots from here on
-    u = rng.bit_generator.random_raw(per_ray * n)  # words (ξ|η) (, ψ/2π) of each block
+    u = _CHUNK_UNIFORM(per_ray * n)  # ξ, η (, ψ/2π) of each block in turn
+    rng.random(out=u)
     if origins == "independent":
         for b in blocks:
             k = b * BLOCK - lo
             m, base = min(n - k, BLOCK), per_ray * k
-            w = u[base : base + m]
-            xi = (w >> np.uint64(32)).astype(np.float64) * 2.0**-32  # upper_uniform
-            eta = (w & np.uint64(0xFFFFFFFF)).astype(np.float64) * 2.0**-32  # lower_uniform
+            xi, eta = u[base : base + m], u[base + m : base + 2 * m]
             rows = max(1, int(round(np.sqrt(m * ly / lx))))
             order = np.lexsort((xi, np.minimum(np.floor(eta * rows), rows - 1)))
             x[k : k + m], y[k : k + m] = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2
             if azimuth:
-                unit = (u[base + m : base + 2 * m] >> np.uint64(11)) * 2.0**-53  # unit_uniform
-                psi[k : k + m] = 2 * np.pi * unit[order]
+                psi[k : k + m] = 2 * np.pi * u[base + 2 * m : base + 3 * m][order]
     else:
         rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
         origin_kernels.stratified_origins(
@@ -149,13 +146,19 @@ def chunk_origins(
 def groove_starts(tracer: Tracer, n_total: int, blocks, key):
     """x and groove azimuths ψ of the stratified rays of consecutive ``blocks``, bitwise as
     ``chunk_origins(..., azimuth=True)`` gives them, without y (grooves run along y, so the
-    analytic V-groove path never uses it). In this thread's work arrays (valid until its next
-    call)."""
+    analytic V-groove path never uses it): each block's η run is skipped by advancing the
+    generator instead of drawn. In this thread's work arrays (valid until its next call)."""
     blocks = list(blocks)
     lo, n = block_span(n_total, blocks)
     lx, ly = tracer.tile
-    rng = block_generator(key, blocks[0], 2)  # consecutive slots from here on
-    u = rng.bit_generator.random_raw(2 * n)  # words (ξ|η), then ψ/2π, of each block
+    rng = block_generator(key, blocks[0], 3)  # consecutive slots from here on
+    u = _GROOVE_UNIFORM(2 * n)  # ξ, then ψ/2π, of each block in turn
+    for b in blocks:
+        k = b * BLOCK - lo
+        m = min(n - k, BLOCK)
+        rng.random(out=u[2 * k : 2 * k + m])
+        rng.bit_generator.advance(m)  # η
+        rng.random(out=u[2 * k + m : 2 * k + 2 * m])
     x, psi = _GROOVE_X(n), _GROOVE_PSI(n)
     rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
     origin_kernels.stratified_groove_starts(
