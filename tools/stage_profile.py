@@ -1,8 +1,9 @@
 """Where a sample's time goes in the single-bounce pipeline on the bench scene (the 512²
 Gaussian heightfield of ``microsim bench``, aluminium, θi = 30°, 2²² rays, 1 thread): each
 stage of ``simulate`` timed by wrapping it (best of three runs), the fused walk-and-look-up
-kernel split by timing its two halves alone on one chunk, and what the masking rays Embree
-traces do (how many escape, how far they run). docs/performance.md quotes it.
+kernel split by timing its two halves alone on one chunk, what the per-facet beam test clears
+and costs (``engine.beam``), and what the masking rays Embree traces do (how many escape, how
+far they run). docs/performance.md quotes it.
 
     .venv/bin/python tools/stage_profile.py
 """
@@ -94,6 +95,24 @@ def _timed(call) -> float:
     return time.perf_counter() - t0
 
 
+def beams(tracer, table) -> dict:
+    """The lit facets the steepness test leaves (candidates), the share of them whose beam
+    ``engine.beam.beam_clear`` clears, and its time on 1 thread (best of five)."""
+    from microsim.sim.engine import beam
+
+    wo = table.wo32.astype(np.float64)
+    cand = (table.code == paths.SINGLE) & ~tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
+    out = np.empty(len(cand), dtype=np.bool_)
+    best = min(
+        _timed(lambda: beam.beam_clear(0, cand, table.wo32, tracer.beam, out)) for _ in range(5)
+    )
+    return {
+        "lit facets left by the steepness test": int(cand.sum()),
+        "share of them cleared": round(float(out.sum() / cand.sum()), 4),
+        "time per incidence (ms)": round(best * 1e3, 1),
+    }
+
+
 def masking_rays(tracer, table, wi, n: int = 2**20) -> dict:
     """The masking rays Embree traces for n uniform primary rays: their share, the share of
     them that escape, and quantiles of their polar angle and of their run (cells crossed on
@@ -137,6 +156,9 @@ def main() -> None:
     for label, ns in times.items():
         print(f"  {label}: {ns:.1f}")
     print(f"  share of rays that need the horizon test: {candidates:.3f}")
+    print("beams cleared per facet:")
+    for label, value in beams(tracer, table).items():
+        print(f"  {label}: {value}")
     print("masking rays traced by Embree:")
     for label, value in masking_rays(tracer, table, wi).items():
         print(f"  {label}: {value}")
