@@ -183,7 +183,8 @@ class BRDFTable:
         dphi = np.degrees(np.arctan2(wo[..., 1], wo[..., 0]) - np.arctan2(wi[..., 1], wi[..., 0]))
         dphi = np.abs(np.mod(dphi + 180.0, 360.0) - 180.0)
         _, lo, hi = self._interpolator()
-        return np.clip(np.stack([ti, to, dphi], axis=-1), lo, hi), (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        return np.clip(np.stack([ti, to, dphi], axis=-1), lo, hi), up
 
     def evaluate(self, wi, wo) -> np.ndarray:
         """f(wi, wo) sr⁻¹ for unit directions (…, 3) pointing away from the surface (module

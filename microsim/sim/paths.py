@@ -378,9 +378,7 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         candidates, cleared = (code == SINGLE) & ~clear, np.empty(f, dtype=np.bool_)
 
         def clear_beams(part: slice) -> None:
-            beam.beam_clear(
-                part.start, candidates[part], wo32[part], tracer.beam, cleared[part]
-            )
+            beam.beam_clear(part.start, candidates[part], wo32[part], tracer.beam, cleared[part])
 
         list(pool.map(clear_beams, slices) if pool is not None else map(clear_beams, slices))
         clear |= cleared
