@@ -51,7 +51,9 @@ def test_per_ray_path_is_identical_for_any_threads_and_chunk(rough):
 def test_fast_paths_equal_the_per_ray_events(rough, theta):
     """Same rays through the facet-table and column paths (tallies) and ``_trace`` (the
     per-ray Events of ``ray_events``): identical ledger classes and bins; Fresnel weights equal
-    to rounding (the table evaluates F once per facet, the others once per hit)."""
+    to rounding (the table evaluates F once per facet, the others once per hit). Rays whose
+    primary hit is a float32 edge tie (the float64 grid walk and Embree's float32 test give
+    neighbouring facets: ``heightfield_caster``) are left out; they are rare."""
     tracer, profile, az = paths.tracer_for(rough, "traced")
     wi = spherical_deg(theta, 10.0)
     bins = Bins(18, 13)
@@ -62,12 +64,20 @@ def test_fast_paths_equal_the_per_ray_events(rough, theta):
     single = ev.status == paths.SINGLE
     assert single.mean() > 0.5 and np.any(ev.status == paths.MASKED)  # not vacuous
     table = paths.facet_table(tracer, wi, AL, bins, 10.0)
+    cols = [np.ascontiguousarray(starts[:, k]) for k in range(3)]
+    walked = tracer.cast_falling(cols, [float(-c) for c in wi])  # None: Embree casts both
+    tie = (
+        np.zeros(len(starts), bool)
+        if walked is None
+        else walked[1] != tracer.first_hit(starts, -wi).prim
+    )
+    assert tie.mean() < 1e-3
     for status, weight, where in (
         paths.trace_tabled(tracer, table, wi, starts),
         paths.trace_columns(tracer, None, wi, 10.0, bins, starts, None, AL),
     ):
         assert np.mean(status != ev.status) <= 1e-4  # float32-grazing decisions only
-        same = status == ev.status
+        same = (status == ev.status) & ~tie
         assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
         ok = same & single
         assert np.array_equal(where[ok], bins.locate(ev.wo[ok], 10.0))
