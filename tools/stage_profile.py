@@ -9,6 +9,7 @@ far they run). docs/performance.md quotes it.
 """
 
 import collections
+import dataclasses
 import time
 
 import numpy as np
@@ -114,13 +115,18 @@ def beams(tracer, table) -> dict:
 
 
 def masking_rays(tracer, table, wi, n: int = 2**20) -> dict:
-    """The masking rays Embree traces for n uniform primary rays: their share, the share of
-    them that escape, and quantiles of their polar angle and of their run (cells crossed on
-    the climb to zmax) for the escaping ones."""
+    """The masking rays Embree traces for n uniform primary rays: their share (and what it
+    would be with the per-ray tests alone, no beam cleared), the share of them that escape,
+    and quantiles of their polar angle and of their run (cells crossed on the climb to zmax)
+    for the escaping ones."""
     rng = np.random.default_rng(0)
     lx, ly = tracer.tile
     x = [rng.uniform(-lx / 2, lx / 2, n), rng.uniform(-ly / 2, ly / 2, n)]
     x.append(np.full(n, tracer.zmax + tracer.top_margin))
+    wo = table.wo32.astype(np.float64)
+    steep = (table.code == paths.SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
+    per_ray = dataclasses.replace(table, clear=steep)
+    without_beams = paths.tabled_masking_rays(tracer, per_ray, wi, x)[4] / n
     status, _, _, mask, m = paths.tabled_masking_rays(tracer, table, wi, x)
     d = np.stack([c[:m] for c in mask.d], 1)
     start_z = mask.start[2][:m].copy()
@@ -131,6 +137,7 @@ def masking_rays(tracer, table, wi, n: int = 2**20) -> dict:
     q = [0.05, 0.5, 0.95]
     return {
         "share of samples": m / n,
+        "share of samples with the per-ray tests alone": without_beams,
         "escaping share": float(escaped.mean()),
         "theta_o quantiles 5/50/95 % (deg)": np.round(np.quantile(theta, q), 1).tolist(),
         "run of escaping ones, quantiles 5/50/95 % (cells)": np.round(
