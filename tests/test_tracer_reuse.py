@@ -72,7 +72,7 @@ def test_facet_tables_are_kept_per_incidence_read_only_and_bounded():
         paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 10.0),
     ]
     assert all(t is not a for t in others)
-    assert len(tr._facet_tables) == paths.TABLES_KEPT
+    assert len(tr.facet_tables) == paths.TABLES_KEPT
     assert paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0) is not a  # dropped
     kw = dict(rays=20_000, bins=Bins(9, 7), seed=4)
     first, again = simulate(s, "aluminium", 30.0, **kw), simulate(s, "aluminium", 30.0, **kw)

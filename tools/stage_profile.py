@@ -96,13 +96,12 @@ def _timed(call) -> float:
     return time.perf_counter() - t0
 
 
-def beams(tracer, table) -> dict:
-    """The lit facets the steepness test leaves (candidates), the share of them whose beam
-    ``engine.beam.beam_clear`` clears, and its time on 1 thread (best of five)."""
+def beams(tracer, table, steep) -> dict:
+    """The lit facets the steepness test (``steep``) leaves (candidates), the share of them
+    whose beam ``engine.beam.beam_clear`` clears, and its time on 1 thread (best of five)."""
     from microsim.sim.engine import beam
 
-    wo = table.wo32.astype(np.float64)
-    cand = (table.code == paths.SINGLE) & ~tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
+    cand = (table.code == paths.SINGLE) & ~steep
     out = np.empty(len(cand), dtype=np.bool_)
     best = min(
         _timed(lambda: beam.beam_clear(0, cand, table.wo32, tracer.beam, out)) for _ in range(5)
@@ -114,17 +113,15 @@ def beams(tracer, table) -> dict:
     }
 
 
-def masking_rays(tracer, table, wi, n: int = 2**20) -> dict:
+def masking_rays(tracer, table, steep, wi, n: int = 2**20) -> dict:
     """The masking rays Embree traces for n uniform primary rays: their share (and what it
-    would be with the per-ray tests alone, no beam cleared), the share of them that escape,
-    and quantiles of their polar angle and of their run (cells crossed on the climb to zmax)
-    for the escaping ones."""
+    would be with the per-ray tests alone: ``clear`` = ``steep``, no beam cleared), the share
+    of them that escape, and quantiles of their polar angle and of their run (cells crossed
+    on the climb to zmax) for the escaping ones."""
     rng = np.random.default_rng(0)
     lx, ly = tracer.tile
     x = [rng.uniform(-lx / 2, lx / 2, n), rng.uniform(-ly / 2, ly / 2, n)]
     x.append(np.full(n, tracer.zmax + tracer.top_margin))
-    wo = table.wo32.astype(np.float64)
-    steep = (table.code == paths.SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
     per_ray = dataclasses.replace(table, clear=steep)
     without_beams = paths.tabled_masking_rays(tracer, per_ray, wi, x)[4] / n
     status, _, _, mask, m = paths.tabled_masking_rays(tracer, table, wi, x)
@@ -164,10 +161,11 @@ def main() -> None:
         print(f"  {label}: {ns:.1f}")
     print(f"  share of rays that need the horizon test: {candidates:.3f}")
     print("beams cleared per facet:")
-    for label, value in beams(tracer, table).items():
+    steep = paths.steep_facets(tracer, table.code, table.wo32)  # the clear flags before beams
+    for label, value in beams(tracer, table, steep).items():
         print(f"  {label}: {value}")
     print("masking rays traced by Embree:")
-    for label, value in masking_rays(tracer, table, wi).items():
+    for label, value in masking_rays(tracer, table, steep, wi).items():
         print(f"  {label}: {value}")
 
 

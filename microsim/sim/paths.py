@@ -328,7 +328,7 @@ def facet_table(
     surface simulated again — build each once; the tracer itself is immutable, so a kept
     table stays exact."""
     key = (tuple(float(w) for w in wi), fresnel_kernels.fresnel_mode(ior), bins, float(phi_i))
-    kept = tracer.__dict__.setdefault("_facet_tables", {}) if isinstance(tracer, Tracer) else {}
+    kept = getattr(tracer, "facet_tables", {})  # (a stand-in without it keeps nothing)
     with _TABLES_LOCK:
         table = kept.pop(key, None)
         if table is not None:
@@ -372,8 +372,7 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
     cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
     list(pool.map(fill, slices) if pool is not None else map(fill, slices))
-    wo = wo32.astype(np.float64)  # the direction the masking ray is traced along
-    clear = (code == SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
+    clear = steep_facets(tracer, code, wo32)
     if tracer.beam is not None:  # heightfield grids: whole beams cleared (``beam``)
         candidates, cleared = (code == SINGLE) & ~clear, np.empty(f, dtype=np.bool_)
 
@@ -391,6 +390,14 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         lift=tracer.masking_lift,
         clear=clear,
     )
+
+
+def steep_facets(tracer: Tracer, code: np.ndarray, wo32: np.ndarray) -> np.ndarray:
+    """Lit facets (``code`` SINGLE) whose float32 mirror direction ``wo32`` (F, 3), traced as
+    its float64 value, rises more steeply than the surface can (``Tracer.surely_escapes``):
+    the facet table's ``clear`` before any beam is cleared."""
+    wo = wo32.astype(np.float64)
+    return (code == SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
 
 
 def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:

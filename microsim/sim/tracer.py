@@ -245,7 +245,8 @@ class Tracer:
     steepest facet slope of a heightfield, inf otherwise: masking rays steeper than it are
     not traced, ``surely_escapes``), ``horizon`` (a coarse grid of cell maxima on which the
     other masking rays of a heightfield are cleared without tracing when they can be,
-    ``clears_horizon``).
+    ``clears_horizon``), ``facet_tables`` (the facet tables ``paths.facet_table`` keeps for
+    the tracer's most recent incidences).
 
     ``backend``: "embreex" (the default and reference), "auto" (packets when
     ``embree_packets`` can bind the library, else embreex) or "packets" (UsageError when
@@ -299,6 +300,7 @@ class Tracer:
         self.groove_clear, self.groove_strata = (
             groove_tables(self) if grooved else (_NO_GROOVES, _NO_STRATA)
         )
+        self.facet_tables: dict = {}  # kept by paths.facet_table: its key → FacetTable
         reason = None if backend == "embreex" else embree_packets.binding_error()
         if backend == "packets" and reason is not None:
             raise UsageError(f"backend='packets' is unavailable here: {reason}")
