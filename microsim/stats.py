@@ -3,7 +3,7 @@
 ``sidak`` (Šidák 1967) keeps a family of n tests at level α; ``energy_set`` picks the bins
 that carry a share (``ENERGY_FRACTION``, 90 %) of the reflected energy, over which relative
 errors are weighted; ``MIN_EVENTS`` is the number of single-bounce events a bin needs before
-its standard error is trusted in a test (below it the collapsed-strata estimate is too noisy;
+its standard error is trusted in a test (below it the paired-strata estimate is too noisy;
 docs/design.md, "Verdicts"). ``chi2_sf``, ``t_sf``, ``t_isf`` and ``norm_isf`` are the tail
 probabilities and quantiles the tests use, from ``scipy.special`` (``scipy.stats`` gives the
 same numbers but takes ~1 s to import, which every ``microsim.testing`` check would pay).

@@ -387,7 +387,7 @@ def test_metal_ledger_balances_and_order_one_is_the_single_bounce_brdf():
 def test_order_standard_errors_cover_the_seed_to_seed_scatter():
     """Two independent ray streams on one tile: per (order ≥ 2, incidence, bin) the
     difference of the estimates over their combined standard error has mean square ≤ 1 +
-    3·√(2/k) for k bins (the collapsed-strata error is conservative, so ≤ 1 in expectation;
+    3·√(2/k) for k bins (the paired-strata error is unbiased, so 1 in expectation;
     χ²₁ terms have variance 2): the order-resolved errors are not too small."""
     s = gauss(seed=6, n=48)
     kw = dict(rays=40_000, bins=BINS, bounces="all", threads=2)

@@ -9,9 +9,9 @@ point raises ``PeerUnavailable``.
 The estimator (same as ``microsim.sim.simulate`` with traced masking, Mikkelsen 2009, eq. 9):
 
 * N primary rays along −wi start on the plane z = zmax + margin over one tile
-  [−Lx/2, Lx/2] × [−Ly/2, Ly/2], stratified like microsim: ray r gets the stratum
-  q ∈ [r/N, (r + 1)/N) of a row-major sweep of the tile (R = round(√(N·Ly/Lx)) rows),
-  jittered uniformly inside it (random numbers: Dr.Jit's PCG32, one stream per ray). Uniform
+  [−Lx/2, Lx/2] × [−Ly/2, Ly/2], stratified like microsim: rays 2k and 2k + 1 share the
+  stratum q ∈ [2k/N, (2k + 2)/N) of a row-major sweep of the tile (R = round(√(N·Ly/Lx))
+  rows), each uniform inside it (random numbers: Dr.Jit's PCG32, one stream per ray). Uniform
   origins on a horizontal plane sample the surface flux-weighted: the (n·wi) dA factor.
 * Closest hit (``Scene.ray_intersect_preliminary``, coherent rays) → facet f with unit
   geometric normal n (float64, cross(v1 − v0, v2 − v0), as ``microsim.sim.Tracer``); weight
@@ -22,12 +22,10 @@ The estimator (same as ``microsim.sim.simulate`` with traced masking, Mikkelsen 
 * Masking: a shadow ray (``Scene.ray_test``, coherent) from the hit point o + t·d offset by
   ``eps`` along n, along wo, up to the height zmax (nothing above can block it). Escaped rays
   with wo_z > 0 add w to their bin: f̄_B = Σ w / (N Ω_B) (sr⁻¹), Ω_B the bin's projected
-  solid angle; the standard error is microsim's collapsed-strata estimate,
-  se_B = √(Σw² − 2 Σ_k w_2k w_2k+1 [same bin]) / (N Ω_B) (``microsim.sim.tallies``).
+  solid angle; the standard error is microsim's paired-strata estimate,
+  se_B = √(Σw² − 2 Σ_k w_2k w_2k+1 [same bin]) / (N Ω_B) (``microsim.sim.tallies``),
+  unbiased since the two rays of a pair are independent in one stratum.
   Tallies are Dr.Jit scatter-adds in float64 (atomic: the last bits depend on scheduling).
-  Like microsim's, the pair estimate is conservative: on a 64² Gaussian tile (σ = 1.2,
-  ℓ = 8, θi = 30°, 2·10⁵ rays, Bins(9, 7)) it was 1.5× the scatter of 10 seeds (median over
-  bins; albedo 1.7×).
 
 Ledger (as ``microsim.sim.LEDGER``): single, masked, downward (wo_z ≤ 0), unresolved
 (back-facing facet n·wi ≤ 0, or a masking ray that would leave the tiled copies — below),
@@ -201,7 +199,7 @@ class PeerResult:
     ``brdf``/``stderr`` (n_theta, n_phi) in sr⁻¹ (NaN-free: empty bins are 0 ± 0);
     ``counts`` single-bounce events per bin; ``albedo`` Σ w / N over single events (the
     single-bounce albedo ρ(θi), Mikkelsen 2009, eq. 27) and ``albedo_stderr`` its
-    collapsed-strata standard error; ``ledger`` rays per class of ``LEDGER`` and
+    paired-strata standard error; ``ledger`` rays per class of ``LEDGER`` and
     ``ledger_fresnel`` their Fresnel sums / N; ``copies`` (2m + 1) tile copies per side.
     """
 
@@ -436,7 +434,9 @@ class PeerScene:
         r = dr.arange(mi.UInt32, n) + dr.opaque(mi.UInt32, lo)
         rng = mi.PCG32(n, initstate=op["seed"], initseq=mi.UInt64(r))
         xi, eta = rng.next_float64(), rng.next_float64()
-        s = (mi.Float64(r) + xi) / op["N"] * op["R"]  # stratum position in rows
+        pair = mi.Float64(r - (r & 1))  # rays 2k, 2k + 1 share a stratum of width 2/N
+        width = dr.select(op["N"] - pair < 2.0, op["N"] - pair, 2.0)  # (dr.minimum: LLVM 14)
+        s = (pair + width * xi) / op["N"] * op["R"]  # stratum position in rows
         row = dr.floor(s)
         row = dr.select(row > op["R"] - 1.0, op["R"] - 1.0, row)  # (dr.minimum: LLVM 14 fails)
         x = (s - row) * op["lx"] - 0.5 * op["lx"]

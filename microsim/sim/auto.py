@@ -14,7 +14,7 @@ The run is a sequence of independent batches (``simulate`` with seeds derived fr
 the batch index), each itself stratified over the tile; their raw sums Σw, Σw², counts and
 ledger tallies are added in batch order, which keeps the estimate unbiased. Batches are
 independent and each is a whole number of blocks (an even number of rays, so no pair of the
-collapsed-strata error straddles two batches): the variance of the pooled mean is the sum of
+paired-strata error straddles two batches): the variance of the pooled mean is the sum of
 the batches' pair terms, (Σx² − 2 Σ pairs)/N², i.e. the same ``tallies.bin_estimate`` on the
 pooled sums (``tallies.Tally``; per-ray formula for ``origins="independent"``). After each
 batch the number of rays still needed is predicted from rse ∝ N^(-1/2); batches grow at most
@@ -81,7 +81,7 @@ def _batch_seed(seed: int, incidence: int, batch: int) -> int:
 
 class _Batches:
     """The pooled running sums (``tallies.Tally``) of one incidence's batches, added in batch
-    order, with their rays and whether every batch used the collapsed-strata pair error."""
+    order, with their rays and whether every batch used the paired-strata error."""
 
     def __init__(self, nbin: int):
         self.total, self.rays, self.pairs = Tally.empty(nbin), 0, True

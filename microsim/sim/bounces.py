@@ -22,7 +22,7 @@ below ``WEIGHT_FLOOR`` (``cut_weight``), with at most ``MAX_BOUNCES`` bounces
 
 Per-order tallies: orders 1, 2, 3 and ≥ 4 (``ORDER_SLOTS`` = min(K, 4) slots) share the bin
 grid; order slot o of bin B is the flat tally index o·(Θ·Φ) + B, so the running sums, the
-collapsed-strata standard error (``tallies.bin_estimate``), realisations and resume work
+paired-strata standard error (``tallies.bin_estimate``), realisations and resume work
 unchanged on (slots · bins) tallies. A path ends in exactly one (slot, bin) or in no bin.
 
 Ledger of a path (``TERMINAL``): ``escaped_1`` … ``escaped_4plus`` (escaped after that many

@@ -3,7 +3,7 @@
 Parallel primary rays from wi fall on the periodic surface from origins spread uniformly over
 one tile; each is followed to its first hit, Fresnel weight, mirror direction and masking
 test, and tallied in the (θo, Δφ) bin of its outgoing direction. The bin average of eq. 9 is
-f̄_B = Σ_rays w / (N Ω_B) in sr⁻¹, with a collapsed-strata standard error. The work is split
+f̄_B = Σ_rays w / (N Ω_B) in sr⁻¹, with a paired-strata standard error. The work is split
 into modules with one job each:
 
 - ``streams``  per-block random streams and ray origins (reproducibility, stratification);
@@ -146,10 +146,11 @@ def simulate(
     on ``azimuth_average`` surfaces (V-grooves, already azimuth-averaged per ray). Off by
     default.
 
-    Standard error (``tallies.bin_estimate``): stratified origins use the collapsed-strata
-    pair estimate (rays 2k, 2k+1 as one stratum); ``origins="independent"`` and
-    ``isotropic=True`` use the per-ray formula (with ``isotropic`` neither includes the scatter
-    between the blocks' azimuths ψ_b, which is shared by all rays of a block).
+    Standard error (``tallies.bin_estimate``): stratified origins use the paired-strata
+    estimate (rays 2k, 2k+1 are two independent samples of one stratum: unbiased);
+    ``origins="independent"`` and ``isotropic=True`` use the per-ray formula (with
+    ``isotropic`` neither includes the scatter between the blocks' azimuths ψ_b, which is
+    shared by all rays of a block).
     ``meta["stderr_method"]`` records which ("pairs" or "per-ray").
 
     Interrupt and resume. A KeyboardInterrupt (SIGINT, or raised by ``progress``, by

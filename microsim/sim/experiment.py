@@ -129,7 +129,7 @@ class Estimator:
 
     @property
     def stderr_method(self) -> str:
-        """ "pairs" (collapsed strata) or "per-ray" (``tallies.bin_estimate``)."""
+        """ "pairs" (paired strata) or "per-ray" (``tallies.bin_estimate``)."""
         return "pairs" if self.origins == "stratified" and not self.isotropic else "per-ray"
 
 

@@ -1,7 +1,7 @@
-"""Stratified ray origins (``streams.chunk_origins``): ray r of N at place s = (r + ξ)/N·rows
-of a row-major sweep of the tile, y jittered in its row, and, for V-grooves, x and the groove
-azimuth ψ stratified over the grooves in order of tilt and the rows. Tile coordinates,
-ψ in radians."""
+"""Stratified ray origins (``streams.chunk_origins``): rays 2k and 2k + 1 of N at independent
+places s = (2k + 2ξ)/N·rows of one stratum of a row-major sweep of the tile, y jittered in
+its row, and, for V-grooves, x and the groove azimuth ψ stratified over the grooves in order
+of tilt and the rows. Tile coordinates, ψ in radians."""
 
 from __future__ import annotations
 
@@ -14,9 +14,13 @@ from .engine.jit import vector_inlined, vectorised
 
 @vector_inlined
 def _stratum(r, xi, n_total, rows):
-    """Ray r's place (r as a float) in its stratum of a row-major sweep of ``rows`` rows:
-    s = (r + ξ)/N · rows; (s − row, row) with row = ⌊s⌋ capped at rows − 1."""
-    s = (r + xi) / n_total * rows
+    """Ray r's place (r as a float) in its stratum of a row-major sweep of ``rows`` rows.
+    Rays 2k and 2k + 1 share the stratum [2k/N, (2k + w)/N), w = min(2, N − 2k) (a trailing
+    odd ray has one of width 1/N to itself), each uniform in it independently:
+    s = (2k + w·ξ)/N · rows; (s − row, row) with row = ⌊s⌋ capped at rows − 1. Two
+    independent samples per stratum make the pair error of ``tallies.bin_estimate`` unbiased."""
+    pair = math.floor(r * 0.5) * 2.0
+    s = (pair + min(2.0, n_total - pair) * xi) / n_total * rows
     row = min(math.floor(s), rows - 1.0)
     return s - row, row
 
@@ -75,8 +79,8 @@ def _groove_strata(u, at_xi, at_psi, first, m, n_total, rows, strata, lo, x, psi
     x = strata[k] + φ·W, and ψ = 2π(row + u)/rows is stratified by the row. Both maps keep
     every stratum's measure (x uniform over the tile, ψ over [0, 2π)), so the estimate stays
     unbiased; rays 2k and 2k + 1 then meet grooves of neighbouring tilt at neighbouring
-    azimuths, which halves the rays a V-groove run needs for a given error (the collapsed-
-    strata error estimate stays valid: tests/test_kernels.py)."""
+    azimuths, which halves the rays a V-groove run needs for a given error (the paired-
+    strata error estimate stays unbiased: tests/test_stderr.py)."""
     rim = strata[0]
     ps, up, xs, xi = psi[lo : lo + m], u[at_psi : at_psi + m], x[lo : lo + m], u[at_xi:]
     if len(rim) == 0:

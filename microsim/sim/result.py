@@ -147,7 +147,7 @@ class Result:
     ``rays`` counts the rays of the complete blocks per incidence (0 and NaN estimates for
     incidences not started). ``tallies`` holds the exact running sums needed to resume:
     ``sum_w``/``sum_w2``/``count`` (R, T, Θ·Φ), ``sum_pair`` (R, T, Θ·Φ) Σ_k w_2k w_2k+1 over
-    ray pairs (2k, 2k+1) landing in the same bin (the collapsed-strata standard error, see
+    ray pairs (2k, 2k+1) landing in the same bin (the paired-strata standard error, see
     ``tallies.bin_estimate``; ``meta["stderr_method"]`` says whether ``stderr`` uses it),
     ``led_n``/``led_f`` (R, T, 5) per realisation and incidence, ``blocks`` (R, T) blocks done
     and ``rays`` (R, T) rays tallied. Saved as ``tally_<name>`` arrays in ``brdf.npz``.

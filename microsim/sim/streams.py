@@ -10,9 +10,11 @@ Origins lie on the horizontal plane z = zmax + top_margin above one tile
 [−Lx/2, Lx/2] × [−Ly/2, Ly/2] (tile coordinates), spread uniformly over it: uniform origins on
 a horizontal plane sample the surface seen from wi flux-weighted, which is the
 (n_j·wi) dx_j / ((n·wi) dA) factor of the explicit integral (Mikkelsen 2009, eq. 9).
-``"stratified"`` origins give ray r its own stratum [r/N, (r + 1)/N) of a row-major sweep of
-the tile, jittered inside it; ``"independent"`` origins are i.i.d. uniform. Angles are in
-radians here (groove azimuths ψ, block rotations ψ_b).
+``"stratified"`` origins give rays 2k and 2k + 1 the stratum [2k/N, (2k + 2)/N) of a
+row-major sweep of the tile, each uniform inside it (two independent samples per stratum,
+which makes the standard error unbiased: ``tallies.bin_estimate``); ``"independent"``
+origins are i.i.d. uniform. Angles are in radians here (groove azimuths ψ, block rotations
+ψ_b).
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ __all__ = [
 
 BLOCK = 4096
 """Rays per block: the unit of the random streams, of the tallies and of resuming (even, so
-the pairs (2k, 2k + 1) of the collapsed-strata error never straddle two blocks)."""
+the pairs (2k, 2k + 1) of the paired-strata error never straddle two blocks)."""
 ORIGINS = ("stratified", "independent")
 ROTATION_STREAM = 0x150
 """Extra key of the per-block incidence-azimuth generator (``block_rotation``)."""
@@ -93,8 +95,9 @@ def chunk_origins(
 
     Each block draws ξ, η, then (``azimuth``) ψ/2π, n each (n its length), from its own slot
     of the stream ``key`` (``block_generator``), so its rays do not depend on the chunking.
-    ``origins="stratified"``: ray r of n_total gets a stratum q ∈ [(r)/N, (r+1)/N) of a
-    row-major sweep of the tile (``rows`` rows, ~square strata), jittered uniformly inside it;
+    ``origins="stratified"``: rays 2k and 2k + 1 of n_total share a stratum
+    q ∈ [2k/N, (2k + 2)/N) of a row-major sweep of the tile (``rows`` rows), each uniform
+    inside it independently;
     y is jittered inside its row (``origin_kernels.stratified_origins``). The union of strata is the
     whole tile, so origins are uniform over one period (and a block covers a compact strip:
     coherent rays). On equal-width V-grooves (``Tracer.groove_strata``, azimuth) x runs over

@@ -5,17 +5,18 @@ bin average of the explicit microfacet integral (Mikkelsen 2009, eq. 9) over N p
 
     f̄_B = Σ_r x_r / (N Ω_B),      Ω_B = bin projected solid angle (sr, ``Bins``),
 
-in sr⁻¹. Its standard error (``bin_estimate``) comes from collapsed strata: ray r samples its
-own stratum [r/N, (r + 1)/N) of the tile, and rays (2k, 2k + 1) are taken as two samples of
-one stratum of width 2/N, so
+in sr⁻¹. Its standard error (``bin_estimate``) comes from paired strata: rays 2k and 2k + 1
+are two independent uniform samples of one stratum [2k/N, (2k + 2)/N) of the tile
+(``streams.chunk_origins``), so (x_2k − x_2k+1)²/2 is an unbiased estimate of that stratum's
+variance and
 
-    se_B = √(Σx² − 2 Σ_k x_2k x_2k+1) / (N Ω_B),
+    se_B = √(Σx² − 2 Σ_k x_2k x_2k+1) / (N Ω_B)
 
+estimates the variance of f̄_B without bias (Cochran, Sampling Techniques, 3rd ed., §5.5),
 where Σ_k x_2k x_2k+1 is the tally ``sum_pair``. The per-ray (i.i.d.) formula
 √((Σx²/N − (Σx/N)²)/(N − 1)) / Ω_B ignores the stratification and overestimates the error
-(measured ≈ 2.7× in σ on a 128² Gaussian heightfield with 2·10⁵ rays; the pair estimate
-≈ 1.35×, its collapse bias — tests/test_stderr.py); it is kept for independent origins and
-for ``isotropic`` runs.
+(≈ 2.2× in σ on a 128² Gaussian heightfield with 2·10⁵ rays — tests/test_stderr.py); it is
+kept for independent origins and for ``isotropic`` runs.
 
 Sums are kept per block (``split_tallies``) and added in block order (``Tally.add_chunk``), so
 they are bitwise the same for any chunking or thread count, and exact enough to resume from
@@ -70,8 +71,8 @@ def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTall
     its ledger counts and Fresnel sums. Rays are added in ray order, so every block's sums
     are bitwise those of the block alone.
 
-    Pair sum (collapsed strata, see ``bin_estimate``): rays 2k and 2k+1 of the run (adjacent
-    strata; ``BLOCK`` is even and batches start on a block boundary, so pairs never straddle
+    Pair sum (paired strata, see ``bin_estimate``): rays 2k and 2k+1 of the run (one
+    stratum; ``BLOCK`` is even and batches start on a block boundary, so pairs never straddle
     a block) contribute w_2k·w_2k+1 to their bin when both are single-bounce events in the
     same bin. A trailing unpaired ray (odd last block) has no partner and adds nothing."""
     n = len(status)
@@ -204,7 +205,7 @@ class Tally:
 
     def estimate(self, rays: int, omega: np.ndarray, pairs: bool):
         """BRDF and standard error (sr⁻¹, flat) of these sums over ``rays`` primary rays
-        (``bin_estimate``; collapsed-strata pairs when ``pairs``, else per-ray)."""
+        (``bin_estimate``; paired strata when ``pairs``, else per-ray)."""
         return bin_estimate(self.sum_w, self.sum_w2, rays, omega, self.sum_pair if pairs else None)
 
 
@@ -215,17 +216,17 @@ def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None):
     solid angle (sr). With x_r = w_r·1[ray r in bin B] the bin mean is Σx/N. Per-ray (i.i.d.)
     error:
         se² = (Σx²/N − (Σx/N)²)/(N − 1).
-    ``sum_pair`` given (stratified origins): collapsed strata — rays (2k, 2k+1) of adjacent
-    strata are taken as two samples of one stratum of width 2/N, so
+    ``sum_pair`` given (stratified origins): paired strata — rays (2k, 2k+1) are two
+    independent samples of one stratum of width 2/N, so E[(x_2k − x_2k+1)²] = 2σ²_k and
         se² = Σ_k (x_2k − x_2k+1)²/N² = (Σx² − 2 Σ_k x_2k x_2k+1)/N²
-    (a trailing unpaired ray counts as paired with 0, adding x²/N²: conservative, one ray).
+    is unbiased (a trailing unpaired ray, alone in its stratum, counts as paired with 0,
+    adding x²/N²: conservative, one ray).
     Rule: the pair estimate, clipped at ≥ 0, is used where Σx² − 2Σ_k x_2k x_2k+1 exceeds the
     rounding level of that difference (64 ε Σx²); where it does not (no event, or every pair
     holding the bin's events is two equal weights) the per-ray formula is used instead, so a
-    bin never gets a zero error that the per-ray formula would not give.
-    Conservative: E[(x_2k − x_2k+1)²] = σ²_2k + σ²_2k+1 + (μ_2k − μ_2k+1)², so it exceeds the
-    true variance by Σ_k (μ_2k − μ_2k+1)²/N², small when neighbouring strata are alike
-    (collapsed strata, Cochran, Sampling Techniques, 3rd ed., §5A.12)."""
+    bin never gets a zero error that the per-ray formula would not give
+    (stratified sampling with two units per stratum, Cochran, Sampling Techniques, 3rd ed.,
+    §5.5)."""
     if n < 1:
         return np.full_like(sum_w, np.nan), np.full_like(sum_w, np.nan)
     mean = sum_w / n

@@ -1,4 +1,4 @@
-"""Per-block tallies (``tallies``): Σw, Σw², counts and the collapsed-strata pair sum
+"""Per-block tallies (``tallies``): Σw, Σw², counts and the paired-strata pair sum
 Σ w_2k·w_2k+1 per bin, stored sparsely per block, and the ledger per class; added in ray
 order and block order, so bitwise independent of chunking and threads."""
 

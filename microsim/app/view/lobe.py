@@ -63,7 +63,7 @@ def lobe_z(
 ) -> np.ndarray:
     """z = (sim − model)/σ per bin. σ is the simulation's standard error where the bin holds
     at least ``MIN_EVENTS`` events (``counts``; all bins when None); elsewhere — no ray, or so
-    few that the collapsed-strata estimate is meaningless (two equal Fresnel weights in one
+    few that the paired-strata estimate is meaningless (two equal Fresnel weights in one
     stratum pair give σ ≈ 0 and |z| in the thousands) — the Poisson error the model predicts,
     √(model · w̄ / (N Ω)) with w̄ the mean Fresnel weight. 0 where both vanish. The verdicts
     leave such bins out altogether (``analysis.verdicts``)."""
