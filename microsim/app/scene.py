@@ -90,6 +90,7 @@ from microsim.errors import EnvironmentFailure, UsageError
 from microsim.sim.arguments import MAX_RAYS
 from microsim.surfaces.heightfields import abc_ensemble_ndf, gaussian_ensemble_ndf
 from microsim.surfaces.loader import check_heightfield_file
+from microsim.surfaces.surface import is_anisotropic
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -429,12 +430,8 @@ class Scene:
     @property
     def anisotropic(self) -> bool:
         """Oriented V-grooves, a Gaussian field with two correlation lengths or an ABC field
-        with two B."""
-        p = self.surface.params
-        if self.surface.kind == "vgrooves":
-            return bool(p.get("oriented", False))
-        second = {"gaussian": "corr_len_y", "abc": "B_y"}.get(self.surface.kind)
-        return second is not None and p.get(second) is not None
+        with two B (``surfaces.surface.is_anisotropic``)."""
+        return is_anisotropic(self.surface.kind, self.surface.params)
 
     @property
     def full_azimuth(self) -> bool:

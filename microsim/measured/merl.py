@@ -29,7 +29,8 @@ the BRDF in sr⁻¹ (no cosine) is raw × scale, with scales red 1/1500, green 1
 1.66/1500 — multiplied on reading, as the reference reader does, divided on writing.
 Negative values mark samples without data (the reference reader prints "Below horizon." for
 them): the database's cells whose directions lie below the horizon or were not measured.
-``write_merl`` writes −1 where the cell's centre has wi or wo below the horizon (z ≤ 1e-9).
+``write_merl`` writes −1 where the cell's centre has wi or wo below the horizon (z ≤ 1e-9);
+``read_merl`` refuses a file in which no cell holds data in all three channels.
 
 Lookup (``MERLBRDF.evaluate``, in index coordinates u = (90 √(θh/90°), θd/1°, φd/1°), each
 sample centre at u = index + ½):
@@ -303,13 +304,19 @@ def _read_raw(path: Path) -> np.ndarray:
 
 def read_merl(path, channel: str = "luminance", lookup: str = "reader") -> "MERLBRDF":
     """The ``MERLBRDF`` of the MERL file ``path`` (a ``UsageError`` naming the file and what is
-    wrong for a missing, truncated or foreign file). ``channel``: one of ``CHANNELS``;
-    ``lookup``: one of ``LOOKUPS`` (module docstring)."""
+    wrong for a missing, truncated or foreign file, or one without a single valid sample).
+    ``channel``: one of ``CHANNELS``; ``lookup``: one of ``LOOKUPS`` (module docstring)."""
     path = Path(os.fspath(path))
     raw = _read_raw(path)
     values = raw * np.asarray(MERL_SCALE)[:, None]
     values[raw < 0] = INVALID  # invalid stays marked, whatever its scale
     values = values.reshape((3,) + MERL_SHAPE)
+    if not np.any(np.all(values >= 0, axis=0)):
+        raise _fail(
+            path,
+            "holds no measured samples: every cell has a negative value in some channel "
+            "(MERL's marker of a sample without data)",
+        )
     values.setflags(write=False)
     return MERLBRDF(values, channel, lookup, path.stem, str(path))
 

@@ -100,7 +100,9 @@ energy-weighted relative RMS error against the exported function (see there); fo
 Reading (``read_rgl``): isotropic files (P ≤ 2) of either flavour, jacobian 0 or 1; the
 result's ``evaluate`` follows the readers' evaluation above in float64 on the file's float32
 tables. Anisotropic files (P > 2: Mitsuba mirrors them by the symmetry ``phi_i`` spans) are
-refused. A missing, foreign, truncated or malformed file is a ``UsageError`` naming it.
+refused. A missing, foreign, truncated or malformed file is a ``UsageError`` naming it, and so
+is one whose ndf, sigma, vndf, luminance or rgb/spectra field holds a NaN, an infinite or a
+negative value (each is a density or a BRDF value: finite and >= 0).
 """
 
 from __future__ import annotations
@@ -640,14 +642,24 @@ def _check_fields(path, f: dict) -> None:
         a = f[k]
         if not np.all(np.isfinite(a)) or np.any(np.diff(a) <= 0):
             raise _fail(path, f"field {k!r} must be finite and increasing, got {a!r}")
-    for k in ("ndf", "sigma", "vndf", "luminance", spec):
+    what = {"ndf": "an NDF", "sigma": "a projected area", "vndf": "a density",
+            "luminance": "a density", spec: "BRDF values (ρ)"}  # fmt: skip
+    for k, meaning in what.items():
         if not np.all(np.isfinite(f[k])):
             raise _fail(path, f"field {k!r} holds NaN or infinite values")
+        negative = np.count_nonzero(f[k] < 0)
+        if negative:
+            raise _fail(
+                path,
+                f"field {k!r} holds {negative:,} negative values (down to {f[k].min():.4g}): "
+                f"{meaning} must be >= 0",
+            )
 
 
 def read_rgl(path, channel="luminance") -> RGLBRDF:
     """The ``RGLBRDF`` of the RGL .bsdf file ``path`` (``channel``: see ``RGLBRDF``); a
-    ``UsageError`` naming the file for a missing, foreign, truncated or malformed one."""
+    ``UsageError`` naming the file and the field for a missing, foreign, truncated or
+    malformed one — a table field holding NaN, infinite or negative values included."""
     path = Path(os.fspath(path))
     fields = read_tensor_file(path)
     _check_fields(path, fields)

@@ -18,6 +18,7 @@ give 0.
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,8 +29,12 @@ from microsim import vectors
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
 from microsim.sim.predict import bin_average
+from microsim.surfaces.surface import is_anisotropic
 
 __all__ = ["BRDFTable", "FLOOR"]
+
+_SAVED = ("theta_i", "brdf", "stderr", "bins", "name")
+"""The arrays of a table file (``BRDFTable.save``)."""
 
 FLOOR = 1e-12
 """BRDF value (sr⁻¹) a bin of 0 stands for in the log-linear interpolation: below any value a
@@ -79,12 +84,26 @@ class BRDFTable:
     @classmethod
     def from_result(cls, result, model: str | None = None, name: str | None = None):
         """The table of a ``Result`` on folded bins at φi = 0 (all incidences): its simulated
-        BRDF, or the bin averages of ``model`` (one of ``result.models``; stderr 0)."""
+        BRDF, or the bin averages of ``model`` (one of ``result.models``; stderr 0). A result
+        of an anisotropic surface (``meta["surface"]``, judged as ``microsim measure`` judges
+        a scene: ``surfaces.surface.is_anisotropic``) is refused: its BRDF depends on the
+        incidence azimuth, which the table does not hold."""
         if not result.bins.folded or np.any(np.asarray(result.phi_i) != 0.0):
             raise UsageError(
                 "result must be of an isotropic surface: folded bins, every φi = 0 (an "
                 "anisotropic BRDF needs its incidence azimuth in the table)"
             )
+        surface = result.meta.get("surface")
+        if isinstance(surface, dict):
+            params = surface.get("nominal", surface)  # a ray run's "nominal"; a wave run's own
+            kind = surface.get("kind")
+            if isinstance(params, dict) and is_anisotropic(kind, params):
+                raise UsageError(
+                    f"result must be of an isotropic surface, got one of an anisotropic {kind} "
+                    "surface (oriented grooves, a second correlation length or B, a grating): "
+                    "its BRDF depends on the incidence azimuth, which a table over θi and "
+                    "folded Δφ does not hold"
+                )
         order = np.argsort(result.theta_i)
         if model is None:
             f, se = np.asarray(result.brdf), np.asarray(result.stderr)
@@ -137,18 +156,42 @@ class BRDFTable:
 
     @classmethod
     def load(cls, path) -> "BRDFTable":
-        """Read a table written by ``save`` (checked as any table; a foreign or damaged file
-        is a UsageError naming it)."""
+        """Read a table written by ``save``, checked as any table: a missing, foreign (a .npy
+        array, an archive without the table's arrays), truncated or edited file (``bins`` not
+        two integers, arrays of the wrong shape or with negative values) is a UsageError
+        naming the file and what is wrong."""
         try:
-            with np.load(path, allow_pickle=False) as z:
-                n_theta, n_phi = (int(x) for x in z["bins"])
-                return cls(
-                    z["theta_i"], Bins(n_theta, n_phi), z["brdf"], z["stderr"], str(z["name"])
-                )
-        except (OSError, KeyError, ValueError) as e:
+            with open(path, "rb") as fh:  # closed here even when np.load fails on a broken zip
+                z = np.load(fh, allow_pickle=False)
+                if not isinstance(z, np.lib.npyio.NpzFile):
+                    raise UsageError(
+                        f"{path}: not a microsim BRDF table (a single array; a table is the "
+                        ".npz archive BRDFTable.save writes)"
+                    )
+                with z:
+                    missing = [k for k in _SAVED if k not in z.files]
+                    if missing:
+                        raise UsageError(f"{path}: not a microsim BRDF table (no {missing} arrays)")
+                    a = {k: z[k] for k in _SAVED}
+        except UsageError:
+            raise
+        except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:
             raise UsageError(
-                f"{path}: not a microsim BRDF table ({type(e).__name__}: {e})"
+                f"{path}: not a readable microsim BRDF table ({type(e).__name__}: "
+                f"{' '.join(str(e).split())})"
             ) from None
+        bins = a["bins"]
+        if bins.shape != (2,) or not np.issubdtype(bins.dtype, np.integer):
+            raise UsageError(
+                f"{path}: bins must be the two integers (n_theta, n_phi), got {_checks.short(bins)}"
+            )
+        try:
+            return cls(
+                a["theta_i"], Bins(int(bins[0]), int(bins[1])), a["brdf"], a["stderr"],
+                str(a["name"]),
+            )  # fmt: skip
+        except UsageError as e:
+            raise UsageError(f"{path}: {e}") from None
 
     def _values(self) -> np.ndarray:
         """log f̄ on the interpolation grid (a bin of 0 as ``FLOOR``; one incidence repeated,

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -28,6 +28,7 @@ __all__ = [
     "Surface",
     "Predicted",
     "flat",
+    "is_anisotropic",
     "heightfield_mesh",
     "facet_slopes",
     "check_relief",
@@ -60,6 +61,19 @@ def check_relief(name: str, zmin: float, zmax: float, tile) -> None:
             f"the tile ~{230 * relief / side:.2g} times (reduce the heights or "
             f"enlarge the tile)"
         )
+
+
+def is_anisotropic(kind: str, params: Mapping) -> bool:
+    """Whether a surface of generator ``kind`` with parameters ``params`` (a scene's
+    ``[surface]`` table or a ``Surface.nominal``) is anisotropic — its BRDF depends on the
+    incidence azimuth: oriented V-grooves, a Gaussian field with two correlation lengths
+    (``corr_len_y``), an ABC field with two B (``B_y``), a grating."""
+    if kind == "grating":
+        return True
+    if kind == "vgrooves":
+        return bool(params.get("oriented", False))
+    second = {"gaussian": "corr_len_y", "abc": "B_y"}.get(kind)
+    return second is not None and params.get(second) is not None
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,10 @@ test could use (MERL files have none; a microsim table's standard errors are per
 surface's departure from an ensemble is unknown), so the test is a tolerance: at every
 incidence the energy-weighted relative RMS of (reference − brdf)/reference over the bins
 carrying 90 % of the reference's energy (``stats.energy_set``) must be ≤ ``rtol``. Bins where
-the reference holds no data (0: MERL's invalid samples, empty table bins) are left out.
+the reference holds no data (0: bins touching MERL's invalid samples, empty table bins) are
+left out, and the number of bins compared at each incidence is returned and printed. An
+incidence at which the reference holds no data at all is refused (a ``UsageError``, never a
+pass on nothing compared), as is a MERL file without a single valid sample (``read_merl``).
 """
 
 from __future__ import annotations
@@ -86,8 +89,9 @@ def assert_brdf_matches_measured(
     """Assert that ``brdf(wi, wo)`` ((N, 3) unit vectors away from the surface, wi in the x–z
     plane; N values in sr⁻¹) matches the measured ``reference`` within ``rtol`` at every
     incidence (module docstring). ``bins``: (n_theta, n_phi) or folded ``Bins``. Returns
-    {"rel_rms": [per θi], "energy_ratio": [brdf/reference per θi]}; raises ``BRDFMismatch``
-    naming the failing incidences."""
+    {"rel_rms": [per θi], "energy_ratio": [brdf/reference per θi], "bins_compared": [the
+    number of bins in the relative RMS per θi]}; raises ``BRDFMismatch`` naming the failing
+    incidences, a ``UsageError`` naming the incidences where the reference holds no data."""
     __tracebackhide__ = True
     if not callable(brdf):
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹, got {brdf!r}")
@@ -100,22 +104,31 @@ def assert_brdf_matches_measured(
     if theta.ndim != 1 or not np.all((theta >= 0) & (theta < 90)) or np.any(np.diff(theta) <= 0):
         raise UsageError(f"theta_i must be increasing incidences in [0°, 90°), got {theta_i!r}")
     ref = measured_reference(reference, theta, b)
+    empty = [t for t in range(len(theta)) if not np.any(ref.brdf[t] > 0)]
+    if empty:
+        raise UsageError(
+            f"reference {ref.name!r} holds no measured data at θi = "
+            + ", ".join(f"{theta[t]:g}°" for t in empty)
+            + " (every bin 0: no valid samples there), so there is nothing to compare; "
+            "leave those incidences out of theta_i"
+        )
     name = name or readable_name(brdf)
     spec = ModelSpec.function("brdf", wrap_brdf(brdf), symmetric=isotropic)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         mine = predict([spec], theta, b, rtol=QUAD_RTOL)["brdf"]
     omega = b.projected_solid_angle()
-    rel_rms, ratio = [], []
+    rel_rms, ratio, compared = [], [], []
     for t in range(len(theta)):
         r = ref.brdf[t]
-        w = np.where(r > 0, r * omega, 0.0)
+        has = r > 0
+        w = np.where(has, r * omega, 0.0)
         E = energy_set(w).reshape(r.shape)
         rel = (r[E] - mine[t][E]) / r[E]
-        rel_rms.append(float(np.sqrt(np.sum(w[E] * rel**2) / np.sum(w[E]))) if E.any() else 0.0)
-        has = r > 0
-        ratio.append(float(np.sum(mine[t][has] * omega[has]) / np.sum(w)) if w.sum() else 1.0)
-    out = {"rel_rms": rel_rms, "energy_ratio": ratio}
+        rel_rms.append(float(np.sqrt(np.sum(w[E] * rel**2) / np.sum(w[E]))))
+        ratio.append(float(np.sum(mine[t][has] * omega[has]) / np.sum(w)))
+        compared.append(int(np.count_nonzero(E)))
+    out = {"rel_rms": rel_rms, "energy_ratio": ratio, "bins_compared": compared}
     failing = [t for t in range(len(theta)) if rel_rms[t] > rtol]
     if not failing:
         return out
@@ -124,9 +137,10 @@ def assert_brdf_matches_measured(
         f"{rtol:g} at θi = " + ", ".join(f"{theta[t]:g}°" for t in failing),
         f"  (bin averages {b.n_theta} × {b.n_phi}; energy-weighted relative RMS of "
         "(reference − brdf)/reference over the reference's 90 % energy bins)",
-        "  θi     rel RMS   energy ratio brdf/reference",
+        "  θi     rel RMS   energy ratio brdf/reference   bins compared",
     ]
     lines += [
-        f"  {theta[t]:>4g}°  {100 * rel_rms[t]:6.2f} %   {ratio[t]:.4f}" for t in range(len(theta))
+        f"  {theta[t]:>4g}°  {100 * rel_rms[t]:6.2f} %   {ratio[t]:<28.4f} {compared[t]}"
+        for t in range(len(theta))
     ]
     raise BRDFMismatch("\n".join(lines), out)
