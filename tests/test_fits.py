@@ -84,14 +84,6 @@ def test_noise_free_recovery(name, truth):
     assert res.cost < 1e-12 * scale and res.e2 < 1e-3 * scale
 
 
-def test_a_fit_ending_at_a_bound_is_not_converged():
-    """Data without a diffuse term: Cook–Torrance's best kd is its lower bound 0."""
-    data = _synthetic("cook-torrance", {"ks": 0.8, "m": 0.25, "kd": 0.0})
-    res = fits.fit_model("cook-torrance", data, "aluminium", n_starts=2)
-    assert res.params["kd"] < fits.AT_BOUND_RTOL  # the optimiser approaches the bound from inside
-    assert res.at_bounds == ("kd",) and not res.converged
-
-
 def test_at_bounds_names_the_parameters_at_either_end():
     model = fits.FIT_MODELS["low-microfacet"]
     lo, hi = model.bounds_x()
@@ -166,16 +158,3 @@ def test_cook_torrance_recovers_vgroove_roughness_over_realisations_slow():
     fitted = fits.fit_all(res, "aluminium", names=("cook-torrance",), quick=True)
     verdicts = _assert_vgroove_fit(res, fitted)
     assert all(v["reference"] == "realisations" and v["realisations"] == 8 for v in verdicts)
-
-
-def test_fits_at_a_bound_are_flagged_in_verdicts_report_and_index():
-    from microsim.analysis import report
-    from microsim.app.runner.publishing import fit_record
-
-    fit = fits.FitResult("low-microfacet", {"C": 10.0}, 1.0, 0.04, 0.01, True, 2, None, ("C",))
-    record = fit_record(fit)
-    assert record["at_bounds"] == ["C"] and record["converged"] is False
-    assert report._converged(record) == "no: at bound C"
-    assert report._index_fit_cell(record) == "0.2 / 0.1 (at bound: C)"
-    free = fit_record(fits.FitResult("low-smooth", {}, 1.0, 0.04, 0.01, True, 2, None))
-    assert free["converged"] is True and report._converged(free) == "yes"

@@ -33,6 +33,7 @@ from microsim.errors import UsageError
 
 from ..atomic import atomic_open
 from . import incidence
+from .markdown import percent
 from .verdicts import verdict_kind
 
 __all__ = [
@@ -615,7 +616,7 @@ def _verdict_table(sel: list[dict]) -> str:
     for v in sel:
         kind = verdict_kind(v) if "agrees" in v else "–"
         if kind == "inconclusive" and v.get("tile_departure") is not None:
-            kind += f" (tile departs {100 * v['tile_departure']:.2g}%)"
+            kind += f" (tile departs {percent(v['tile_departure'])})"
         rows.append(
             f"{str(v['model'])[:21]:<22}{_num(v.get('chi2_dof')):>8.2f}"
             f"{_num(v.get('max_abs_z')):>8.1f}{_num(v['rel_rms']):>9.3f}  {kind}"

@@ -17,7 +17,11 @@ precomputed); the fitted model is then evaluated once with the adaptive
 ``predict.bin_average`` (rtol 1e-3) for the verdict and for E1/E2 (``an.low_e1/low_e2``).
 
 Several starts (the model's default, then scrambled Halton points within the bounds, seeded)
-are run and the lowest cost is kept. Models (``FIT_MODELS``):
+are run and the lowest cost is kept. Each bound of a parameter's box is either *physical*, a
+constraint of the model itself (kd ≥ 0, a fraction ≤ 1, a lump exponent ≥ 0): a fit ending
+there is a constrained minimum, converged; or a *search limit*, a practical end of the search
+(C = 10, ior = 100, m = 0.01): a fit ending there was stopped by the box, and the best fit may
+lie beyond (``Param.physical``, ``FitResult.bounds_reached``). Models (``FIT_MODELS``):
 
 ``cook-torrance``   kd/π + ks·TS(Beckmann(m), V-groove G, exact Fresnel of the scene's ior).
                     Single scattering has no diffuse term, but fitting frameworks carry one
@@ -48,6 +52,7 @@ from microsim.sim.predict import bin_average
 
 __all__ = [
     "Param",
+    "BoundReached",
     "FitModel",
     "FIT_MODELS",
     "FitData",
@@ -70,19 +75,34 @@ AT_BOUND_RTOL = 1e-5
 @dataclass(frozen=True)
 class Param:
     """A bounded parameter. ``scale``: the optimiser works on x = p ("lin"), ln p ("log",
-    needs lo > 0) or ln(1 + p) ("log1p"); ``start`` is the first start's value."""
+    needs lo > 0) or ln(1 + p) ("log1p"); ``start`` is the first start's value; ``physical``:
+    (lower, upper), whether each bound is a constraint of the model (kd ≥ 0) rather than a
+    search limit (module docstring)."""
 
     name: str
     lo: float
     hi: float
     start: float
     scale: str = "lin"
+    physical: tuple[bool, bool] = (False, False)
 
     def encode(self, p):
         return {"lin": lambda v: v, "log": np.log, "log1p": np.log1p}[self.scale](p)
 
     def decode(self, x):
         return {"lin": lambda v: v, "log": np.exp, "log1p": np.expm1}[self.scale](x)
+
+
+@dataclass(frozen=True)
+class BoundReached:
+    """A fitted parameter ``param`` that ended on the ``side`` ("lower" or "upper") bound
+    ``bound`` of its box; ``physical``: the bound is a constraint of the model (the fit is a
+    constrained minimum there), else a search limit (the best fit may lie beyond)."""
+
+    param: str
+    bound: float
+    side: str
+    physical: bool
 
 
 @dataclass(frozen=True)
@@ -119,6 +139,14 @@ class FitModel:
         near |= np.abs(hi - np.asarray(x)) <= rtol * (hi - lo)
         return tuple(p.name for p, n in zip(self.params, near) if n)
 
+    def bound_reached(self, name: str, value: float) -> BoundReached:
+        """The bound of parameter ``name`` that ``value`` lies on: the nearer end of its box
+        (in the optimiser's encoding)."""
+        p = next(q for q in self.params if q.name == name)
+        lower = abs(p.encode(value) - p.encode(p.lo)) <= abs(p.encode(p.hi) - p.encode(value))
+        side = 0 if lower else 1
+        return BoundReached(name, (p.lo, p.hi)[side], ("lower", "upper")[side], p.physical[side])
+
 
 def _cook_torrance(p, ior):
     ndf = an.Beckmann(p["m"])
@@ -153,23 +181,32 @@ def _edwards(p, ior):
 
 
 def _edwards_params() -> tuple[Param, ...]:
+    """Edwards' box (``EdwardsParams.bounds``): the fractions cd, f0, f90, k are physical at
+    both ends, the lump exponents n1, n2 at 0; the radii and the exponents' 1e4 are search
+    limits."""
     lo, hi = an.EdwardsParams.bounds()
     start = an.EdwardsParams(cd=0.01, f0=0.5, f90=1.0, k=0.3, r1=0.5, n1=10.0, r2=1.0, n2=1.0)
     scales = {"r1": "log", "r2": "log", "n1": "log1p", "n2": "log1p"}
+    search_limits = (False, False)
+    physical = {
+        **dict.fromkeys(("cd", "f0", "f90", "k"), (True, True)),
+        **dict.fromkeys(("n1", "n2"), (True, False)),
+    }
     return tuple(
-        Param(n, float(a), float(b), float(s), scales.get(n, "lin"))
+        Param(n, float(a), float(b), float(s), scales.get(n, "lin"), physical.get(n, search_limits))
         for n, a, b, s in zip(an.EdwardsParams.names(), lo, hi, start.to_vector())
     )
 
 
 # Löw: A is a free amplitude (sr⁻¹); B spans "nearly flat" to "mirror-sharp" (fit in ln B);
 # C > 0.05 (C ≤ 0.5 is already a very heavy tail); real ior n from a weak dielectric to a
-# near-perfect reflector. These ranges are practical choices, not from the paper.
+# near-perfect reflector. These ranges are practical choices, not from the paper: search
+# limits. kd, a diffuse albedo, is physical at both ends (0 ≤ kd ≤ 1).
 _LOW_PARAMS = (
     Param("A", 1e-4, 1e6, 10.0, "log"),
     Param("B", 1e-2, 1e8, 100.0, "log"),
     Param("C", 0.05, 10.0, 1.5),
-    Param("kd", 0.0, 1.0, 0.01),
+    Param("kd", 0.0, 1.0, 0.01, physical=(True, True)),
     Param("ior", 1.01, 100.0, 1.5, "log"),
 )
 
@@ -177,9 +214,9 @@ FIT_MODELS: dict[str, FitModel] = {
     "cook-torrance": FitModel(
         "cook-torrance",
         (
-            Param("ks", 0.0, 10.0, 1.0),
+            Param("ks", 0.0, 10.0, 1.0, physical=(True, False)),
             Param("m", 0.01, 1.5, 0.3, "log"),
-            Param("kd", 0.0, 1.0, 0.01),
+            Param("kd", 0.0, 1.0, 0.01, physical=(True, True)),
         ),
         _cook_torrance,
         "kd/π + ks·TS(Beckmann m, V-groove G, exact Fresnel of the scene ior)",
@@ -341,8 +378,8 @@ class FitResult:
     fixed rule at the optimum; ``e1``/``e2``: Löw E1/E2 with the accurate bin averages
     (reports print √E); ``success``: the best start converged; ``n_starts`` run;
     ``model_values`` (T, Θ, Φ) accurate bin averages (sr⁻¹) of the fitted model;
-    ``at_bounds``: the parameters that ended at a bound of their box (``FitModel.at_bounds``):
-    there the optimiser stopped at the box, and the fit is not a converged minimum."""
+    ``at_bounds``: the parameters that ended at a bound of their box (``FitModel.at_bounds``;
+    which bound and its kind: ``bounds_reached``)."""
 
     name: str
     params: dict
@@ -355,9 +392,16 @@ class FitResult:
     at_bounds: tuple[str, ...] = ()
 
     @property
+    def bounds_reached(self) -> tuple[BoundReached, ...]:
+        """The bound each parameter of ``at_bounds`` ended on, physical or a search limit."""
+        model = FIT_MODELS[self.name]
+        return tuple(model.bound_reached(k, self.params[k]) for k in self.at_bounds)
+
+    @property
     def converged(self) -> bool:
-        """The optimiser converged and no parameter ended at a bound."""
-        return self.success and not self.at_bounds
+        """The optimiser converged and no parameter ended at a search limit (a physical bound
+        is a constrained minimum)."""
+        return self.success and all(b.physical for b in self.bounds_reached)
 
     def __repr__(self) -> str:
         params = ", ".join(f"{k}={v:.4g}" for k, v in self.params.items())
@@ -369,9 +413,8 @@ class FitResult:
     def _repr_html_(self) -> str:
         from microsim.display import html_table
 
-        rows = [
-            [k, f"{v:.4g}", "yes" if k in self.at_bounds else ""] for k, v in self.params.items()
-        ]
+        on = {b.param: "physical" if b.physical else "search limit" for b in self.bounds_reached}
+        rows = [[k, f"{v:.4g}", on.get(k, "")] for k, v in self.params.items()]
         caption = (
             f"fit {self.name}: √E1 = {np.sqrt(self.e1):.3g}, √E2 = {np.sqrt(self.e2):.3g} "
             f"(Löw et al. 2012, eq. 29–33); "

@@ -42,7 +42,14 @@ se_d = (E_model/E_sim) √((se_model/E_model)² + (se_sim/E_sim)²) (delta metho
 the closed forms, the walk's own for the walk); t = (E_sim − E_model)/√(se_sim² + se_model²),
 two-sided against Student t on R − 1 dof (R ≥ 2; conservative, the walk's error has ~N dof) or
 the normal (R = 1), at the Šidák level of the family of 3 models × T incidences
-(``alpha`` = 0.01 family-wise). The *angular shape*: over the energy set E (fewest bins carrying
+(``alpha`` = 0.01 family-wise). The tables (``multiple_section``, the index) print d only where
+the simulated energy is resolved, E_sim ≥ ``RESOLVED_SE`` se_sim (``deviation_text``): se_d is
+first order in se_sim/E_sim, and below 2 standard errors E_sim is not significantly different
+from 0 (|z| < 2, two-sided ≈ 5 % under the normal), its relative error exceeds 1/2 and 1/E_sim
+ranges up to infinity within the noise, so d has no meaningful size (a share of 0.00045 % ±
+0.00045 % gave "−706 %"). There they print the absolute difference E_sim − E_model in
+percentage points (pp) of the incident power, ± √(se_sim² + se_model²), which stays defined.
+The *angular shape*: over the energy set E (fewest bins carrying
 90 % of the simulated order-≥ 2 energy, ``stats.energy_set``) the energy-weighted relative RMS
 √(Σ_E fΩ ((m − f)/f)² / Σ_E fΩ) of the model's lobe m against the simulated f = Σ_{o≥2} f̄_o
 (``rel_rms``), the same after scaling the model to the simulated energy over E (``shape_rel_rms``:
@@ -102,6 +109,7 @@ from microsim.stats import MIN_EVENTS, energy_set, norm_isf, norm_sf, sidak, t_i
 
 from . import incidence
 from .charts import DPI, SIM_COLOUR, model_colour
+from .markdown import percent
 from .verdicts import Measured, Prediction, Significance, verdict
 
 __all__ = [
@@ -112,6 +120,8 @@ __all__ = [
     "order_comparison",
     "order_energies",
     "needs_more_bounces",
+    "RESOLVED_SE",
+    "deviation_text",
     "multiple_section",
     "multiple_chart",
 ]
@@ -669,12 +679,28 @@ def _pm(x, se, digits=4) -> str:
     return f"{x:.{digits}f} ± {se:.{digits}f}"
 
 
-def _pct(x, se=None) -> str:
-    if x is None:
-        return "–"
-    if se is None:
-        return f"{100 * x:+.1f} %"
-    return f"{100 * x:+.1f} ± {100 * se:.1f} %"
+def _pct(x, se=None, unit=" %") -> str:
+    """A signed percentage (3 significant figures) ± its standard error (2)."""
+    if x is None or se is None:
+        return percent(x, 3, signed=True, unit=unit)
+    return f"{percent(x, 3, signed=True, unit='')} ± {percent(se, unit=unit)}"
+
+
+RESOLVED_SE = 2.0
+"""The simulated energy of orders ≥ 2 is resolved from this many standard errors on: only then
+do the tables give a model's relative deviation (module docstring)."""
+
+
+def deviation_text(inc: Mapping, name: str, with_se: bool = True) -> str:
+    """Model ``name``'s energy deviation of orders ≥ 2 at one incidence of an
+    ``order_comparison``: relative, (sim − model)/sim, when the simulated energy is resolved
+    (≥ ``RESOLVED_SE`` standard errors); else the absolute difference sim − model in
+    percentage points of the incident power ("+0.003 pp"). ``with_se``: ± its standard error."""
+    s, m = inc["sim"], inc["models"][name]
+    if s["multiple"] >= RESOLVED_SE * s["multiple_se"] and m["rel_dev"] is not None:
+        return _pct(m["rel_dev"], m["rel_dev_se"] if with_se else None)
+    diff_se = float(np.hypot(s["multiple_se"], m["energy_se"])) if with_se else None
+    return _pct(s["multiple"] - m["energy"], diff_se, unit=" pp")
 
 
 def multiple_section(comparison: Mapping) -> list[str]:
@@ -708,7 +734,10 @@ def multiple_section(comparison: Mapping) -> list[str]:
             f" against the Heitz et al. 2016 random walk ({c['ndf']['kind']}, {rough}, "
             f"{c['walk_paths']:,} paths per incidence){closed}. Energies are fractions of the "
             f"incident power; deviations "
-            f"(sim − model)/sim; 'agrees' at the Šidák level of {len(names)} "
+            f"(sim − model)/sim, or, where the simulated energy of orders ≥ 2 is below "
+            f"{RESOLVED_SE:g} standard errors (not resolved: its relative deviation would be "
+            f"noise), sim − model in percentage points (pp) of the incident power; 'agrees' "
+            f"at the Šidák level of {len(names)} "
             f"model{'s' if len(names) > 1 else ''} × "
             f"{len(c['incidences'])} incidences (family α = {c['alpha']:g}). Lobe error: the "
             "energy-weighted relative RMS of (model − simulation)/simulation over the bins "
@@ -734,8 +763,8 @@ def multiple_section(comparison: Mapping) -> list[str]:
         w_row = [_pm(x, e) for x, e in zip(w["orders"], w["order_se"])]
         w_row += [_pm(w["energy"], w["energy_se"]), "–", _pm(w["cut"], None)]
         lines.append("| random walk | " + " | ".join(w_row) + " |")
-        lines += ["", "| model | energy ≥ 2 | deviation (sim − model)/sim | verdict | lobe error | "
-                  "shape error | noise floor | specular share |",
+        lines += ["", "| model | energy ≥ 2 | deviation (sim − model)/sim or pp | verdict | "
+                  "lobe error | shape error | noise floor | specular share |",
                   "|---|---|---|---|---|---|---|---|"]  # fmt: skip
         lines.append(
             f"| simulation | {_pm(s['multiple'], s['multiple_se'])} | | | | | | "
@@ -745,13 +774,12 @@ def multiple_section(comparison: Mapping) -> list[str]:
             m = inc["models"][name]
             verdict_txt = "agrees" if m["agrees"] else f"deviates (t = {m['t']:.1f})"
             lobe, shape, floor = (
-                "–" if m[k] is None else f"{100 * m[k]:.1f} %"
-                for k in ("rel_rms", "shape_rel_rms", "noise_floor")
+                percent(m[k], 3, unit=" %") for k in ("rel_rms", "shape_rel_rms", "noise_floor")
             )
             lines.append(
                 f"| {name}{' (k_d fitted)' if m['fitted'] else ''} | "
                 f"{_pm(m['energy'], m['energy_se'] or None)} | "
-                f"{_pct(m['rel_dev'], m['rel_dev_se'])} | {verdict_txt} | {lobe} | {shape} | "
+                f"{deviation_text(inc, name)} | {verdict_txt} | {lobe} | {shape} | "
                 f"{floor} | {_pm(m['specular_share'], None, 3)} |"
             )
         wv = inc["walk_verdicts"]
@@ -767,7 +795,8 @@ def multiple_section(comparison: Mapping) -> list[str]:
             parts.append(
                 f"order {key}: {res} (energy (sim − walk)/walk "
                 f"{_pct(v['energy_dev'], v['energy_dev_se'])} over the walk's 90 % bins, rel "
-                f"RMS {100 * v['rel_rms']:.1f} % over {v['energy_bins']} bins, {v['reference']})"
+                f"RMS {percent(v['rel_rms'], 3, unit=' %')} over {v['energy_bins']} bins, "
+                f"{v['reference']})"
             )
         lines += ["", "Random-walk BRDF verdicts: " + "; ".join(parts) + ".", ""]
     return lines

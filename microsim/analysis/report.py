@@ -20,8 +20,8 @@ from microsim.stats import t_isf
 
 from . import incidence
 from .anisotropy import VARIANTS as ANISOTROPY_VARIANTS
-from .markdown import md_table
-from .multiple import NOT_EXPECTED
+from .markdown import md_table, percent, plain
+from .multiple import NOT_EXPECTED, RESOLVED_SE, deviation_text
 from .verdicts import summary_row, verdict_kind, verdict_symbol
 
 __all__ = [
@@ -36,15 +36,6 @@ __all__ = [
     "load_methods",
     "OUT_OF_DOMAIN",
 ]
-
-
-def plain(x: float, digits: int = 3) -> str:
-    """``digits`` significant figures in positional notation, never an exponent: "-1080",
-    "0.011", "24"; below 1e-4 or from 1e7 on in magnitude, "1.2e-05" style (too many zeros)."""
-    x = float(x)
-    if x != 0 and not 1e-4 <= abs(x) < 1e7:
-        return f"{x:.{digits}g}"
-    return np.format_float_positional(x, precision=digits, unique=False, fractional=False, trim="-")
 
 
 def fmt(x, digits: int = 3) -> str:
@@ -67,7 +58,8 @@ def fmt(x, digits: int = 3) -> str:
 
 
 def _pct(x) -> str:
-    return "–" if x is None or not math.isfinite(float(x)) else f"{plain(100 * float(x))}%"
+    """A table's percentage column: 3 significant figures, "12.3%"."""
+    return percent(x, 3)
 
 
 def _ranges(dev) -> str:
@@ -171,7 +163,8 @@ def _orders_section(orders) -> list[str]:
     rows = [
         [
             *([f"{n['theta_i']:g}", f"{n['phi_i']:g}"] if with_phi else [f"{n['theta_i']:g}"]),
-            f"{100 * n['multiple_fraction']:.3g} % ± {100 * n['multiple_fraction_se']:.2g} %",
+            f"{percent(n['multiple_fraction'], 3, unit=' %')} ± "
+            f"{percent(n['multiple_fraction_se'], unit=' %')}",
             _pct(n["cut"]),
             "yes" if n["needs"] else "no",
         ]
@@ -208,18 +201,17 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
         with_phi = incidence.several_azimuths(o["needs"])
         cells = ", ".join(
             f"{incidence.label(*incidence.key(n), with_phi, symbol=False)}: "
-            f"{plain(100 * n['multiple_fraction'], 2)} %"
+            f"{percent(n['multiple_fraction'], unit=' %')}"
             for n in o["needs"]
         )
         comparison = o.get("comparison") or {}
         dev = {}
         for inc in comparison.get("incidences", []):
             for name in ("random-walk", "kulla-conty"):
-                m = inc["models"].get(name)
-                if m and m.get("rel_dev") is not None:
+                if name in inc["models"]:
                     at = incidence.label(*incidence.key(inc), True, symbol=False) + ": "
                     dev.setdefault(name, []).append(
-                        (at if with_phi else "") + _signed_pct(m["rel_dev"])
+                        (at if with_phi else "") + deviation_text(inc, name, with_se=False)
                     )
         mark = " †" if comparison.get("expected") is False else ""
         rows.append(
@@ -237,7 +229,10 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
         "1 % of it (then the scene needs more than one bounce); and, at the same θi in the "
         "same order, the relative energy deviation (simulation − model)/simulation of orders "
         "≥ 2 of Heitz et al.'s random walk and of Kulla–Conty's compensation (positive: the "
-        "model has too little multiple scattering). Each scene's report has the "
+        "model has too little multiple scattering); where the simulated energy of orders ≥ 2 "
+        f"is below {RESOLVED_SE:g} standard errors (not resolved), the absolute difference "
+        "simulation − model in percentage points (pp) of the incident power instead. Each "
+        "scene's report has the "
         "order-resolved tables, Mikkelsen eq. 28 and the lobes' shape errors.",
         "",
         md_table(
@@ -255,7 +250,7 @@ def _realisations_text(run: Mapping) -> str:
         return str(run.get("realisations"))
     return (
         f"{auto['realisations']} (auto: pilot of {auto['pilot_realisations']}, tile-scatter "
-        f"target {100 * auto['target']:.3g} %, at most {auto['max_realisations']})"
+        f"target {percent(auto['target'], 3, unit=' %')}, at most {auto['max_realisations']})"
     )
 
 
@@ -288,10 +283,11 @@ def _budget_section(budget, auto) -> list[str]:
         "models are judged against the realisations' scatter, which includes both."
     )
     if target:
-        head.append(f"tile ≤ {100 * target:.3g} %")
+        head.append(f"tile ≤ {percent(target, 3, unit=' %')}")
         text += (
             f' With `realisations = "auto"` the realisations are added until the tile scatter '
-            f"is below {100 * target:.3g} % at every θi, up to {auto['max_realisations']}."
+            f"is below {percent(target, 3, unit=' %')} at every θi, up to "
+            f"{auto['max_realisations']}."
         )
     return ["## Error budget", "", text, "", md_table(head, rows), ""]
 
@@ -407,8 +403,10 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
             "## Fits (Löw eq. 29–33)",
             "",
             "One parameter set per model for all incidences, least squares on E2; "
-            "√E1 and √E2 as in Löw Table II. A fit with a parameter at a bound of its box "
-            "is not converged: the optimiser stopped at the box, not at a minimum.",
+            "√E1 and √E2 as in Löw Table II. A parameter on a physical bound of its box "
+            "(kd ≥ 0, a fraction ≤ 1) is a constrained minimum; one at a search limit (the "
+            "box's practical ends, e.g. C = 10, ior = 100) means the optimiser was stopped "
+            "there and the best fit may lie beyond: that fit is not converged.",
             "",
             md_table(
                 ["model", "parameters", "√E1", "√E2", "converged", "starts"],
@@ -491,11 +489,9 @@ _WAVE_STATUS = {
 
 
 def _signed_pct(x, se=None) -> str:
-    if x is None or not math.isfinite(float(x)):
-        return "–"
-    v = 100 * float(x)
-    text = f"{'+' if x > 0 else ''}{plain(v)} %" if v == 0 or abs(v) >= 1e-4 else "< 0.0001 %"
-    return text if se is None else f"{text} ± {plain(100 * float(se), 2)} %"
+    """A signed deviation, 3 significant figures, ± its standard error when given."""
+    text = percent(x, 3, signed=True, unit=" %")
+    return text if se is None or text == "–" else f"{text} ± {percent(se, unit=' %')}"
 
 
 def _region_text(v: Mapping) -> str:
@@ -515,16 +511,50 @@ def _outside_text(v: Mapping) -> str:
     for side in ("forward", "backward"):
         o = v["outside"].get(side)
         if o:
-            parts.append(f"{side} {100 * o[0]:+.3g} … {100 * o[1]:+.3g} %")
+            lo, hi = (percent(x, 3, signed=True, unit="") for x in o)
+            parts.append(f"{side} {lo} … {hi} %")
     return "; ".join(parts) or "–"
 
 
+def _bound(b: Mapping) -> str:
+    return f"{b['param']} = {fmt(b['bound'], 4)}"
+
+
+def _bounds_text(at_bounds: Sequence[Mapping]) -> str:
+    """The bounds a fit ended on (``fits.BoundReached`` records), search limits first:
+    "stopped at the search limit C = 10: the best fit may lie beyond; kd = 0, on its physical
+    bound kd ≥ 0"; "" for none."""
+    limits = [_bound(b) for b in at_bounds if not b["physical"]]
+    parts = []
+    if limits:
+        plural = "s" if len(limits) > 1 else ""
+        parts.append(
+            f"stopped at the search limit{plural} {', '.join(limits)}: the best fit may lie beyond"
+        )
+    parts += [
+        f"{_bound(b)}, on its physical bound {b['param']} "
+        f"{'≥' if b['side'] == 'lower' else '≤'} {fmt(b['bound'], 4)}"
+        for b in at_bounds
+        if b["physical"]
+    ]
+    return "; ".join(parts)
+
+
+def _bounds_brief(at_bounds: Sequence[Mapping]) -> str:
+    """``_bounds_text`` for an index cell: "search limit: C = 10; physical bound: kd = 0"."""
+    parts = []
+    for physical, name in ((False, "search limit"), (True, "physical bound")):
+        mine = [_bound(b) for b in at_bounds if b["physical"] == physical]
+        parts += [f"{name}{'s' if len(mine) > 1 else ''}: {', '.join(mine)}"] if mine else []
+    return "; ".join(parts)
+
+
 def _converged(fit: dict) -> str:
-    """The fits table's "converged" cell: yes, no, or no with the parameters at a bound."""
-    at = fit.get("at_bounds") or []
-    if at:
-        return "no: at bound " + ", ".join(at)
-    return fmt(fit["success"])
+    """The fits table's "converged" cell: yes or no (the optimiser's evaluation limit or a
+    search limit reached), with the bounds the fit ended on."""
+    why = [] if fit["success"] else ["the optimiser stopped at its evaluation limit"]
+    why += [_bounds_text(fit["at_bounds"])] if fit["at_bounds"] else []
+    return fmt(fit["converged"]) + (f": {'; '.join(why)}" if why else "")
 
 
 def wave_section(wave: Mapping | None) -> list[str]:
@@ -823,12 +853,11 @@ def _methods_rows(panel: Mapping) -> list[list[str]]:
     rows = []
     for method, pts in by.items():
         for p in pts if len(pts) <= 2 else [pts[0], pts[-1]]:
-            err = "–" if p["error"] is None else f"{100 * p['error']:.3g}"
+            err = percent(p["error"], 3, unit=" %")
             if p["error"] is not None and p.get("error_se") is not None:
-                err += f" ± {100 * p['error_se']:.2g}"
-            err += " %" if p["error"] is not None else ""
+                err = f"{percent(p['error'], 3, unit='')} ± {percent(p['error_se'], unit=' %')}"
             if p.get("error_se") is None and p.get("noise_floor") is not None:
-                err += f" (ray noise alone {100 * p['noise_floor']:.2g} %)"
+                err += f" (ray noise alone {percent(p['noise_floor'], unit=' %')})"
             rows.append([f"{method}, {_setting(p['setting'])}", f"{fmt(p['seconds'])} s", err])
     return rows
 
@@ -897,7 +926,7 @@ def _variant_cell(v: Mapping | None) -> str:
     sym = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}[v["verdict"]]
     return (
         f"{sym} {_signed_pct(v['energy_dev'], v.get('energy_dev_se'))}, "
-        f"rel RMS {plain(100 * v['rel_rms'], 2)} %"
+        f"rel RMS {percent(v['rel_rms'], unit=' %')}"
     )
 
 
@@ -914,7 +943,7 @@ def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
                     f"[{d['scene']}]({d['scene']}/report.md)",
                     f"{inc['theta_i']:g}°",
                     f"{inc['phi_i']:g}°",
-                    f"{_signed_pct(sv['energy_dev'])}, rel RMS {plain(100 * sv['rel_rms'], 2)} %",
+                    f"{_signed_pct(sv['energy_dev'])}, rel RMS {percent(sv['rel_rms'], unit=' %')}",
                 ]
                 + [_variant_cell(inc["against_simulation"].get(x)) for x in ANISOTROPY_VARIANTS]
             )
@@ -958,12 +987,12 @@ def _anisotropy_missed(docs: Sequence[Mapping]) -> list[str]:
                     f"{inc['theta_i']:g}°",
                     f"{inc['phi_i']:g}°",
                     f"{plain(m['reflected'], 3)} ± {plain(m['reflected_se'], 1)}",
-                    f"{plain(100 * m['multiple'] / m['reflected'])} % ± "
-                    f"{plain(100 * m['multiple_se'] / m['reflected'], 2)} %",
+                    f"{percent(m['multiple'] / m['reflected'], 3, unit=' %')} ± "
+                    f"{percent(m['multiple_se'] / m['reflected'], unit=' %')}",
                     "–"
                     if m.get("walk_multiple") is None
-                    else f"{plain(100 * m['walk_multiple'] / m['reflected'])} % ± "
-                    f"{plain(100 * m['walk_multiple_se'] / m['reflected'], 2)} %",
+                    else f"{percent(m['walk_multiple'] / m['reflected'], 3, unit=' %')} ± "
+                    f"{percent(m['walk_multiple_se'] / m['reflected'], unit=' %')}",
                 ]
                 + [
                     _signed_pct(m["models"][x]["missed"], m["models"][x]["missed_se"])
@@ -1011,7 +1040,7 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
 
     if summary == "agrees":
         res = [r for r in map(_resolvable_energy, mine) if r is not None]
-        return f"✓ ±{100 * max(res):.2g}%" if res else "✓"
+        return f"✓ ±{percent(max(res))}" if res else "✓"
     deviating = [v for v in mine if verdict_kind(v) == "deviates"]
     if not deviating:  # only inconclusive failures: within the tile's departure, or unknown
         unsure = [v for v in mine if not v["agrees"]]
@@ -1020,12 +1049,12 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
             return f"? ({at(unsure)})"
         rms = max(v["rel_rms"] for v in known)
         dep = max(v["tile_departure"] for v in known)
-        return f"? {100 * rms:.2g}% (tile departs {100 * dep:.2g}%; {at(unsure)})"
+        return f"? {percent(rms)} (tile departs {percent(dep)}; {at(unsure)})"
     rms = [v for v in deviating if v["rel_rms"] is not None]
     if not rms:
         return f"✗ ({at(deviating)})"
     w = max(rms, key=lambda v: v["rel_rms"])
-    return f"✗ {100 * w['rel_rms']:.2g}% ({at(deviating)})"
+    return f"✗ {percent(w['rel_rms'])} ({at(deviating)})"
 
 
 def _index_cell(d: Mapping, model: str, summary: Mapping[str, str]) -> str:
@@ -1077,10 +1106,10 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
 
 
 def _index_fit_cell(fit: Mapping) -> str:
-    """√E1 / √E2 of one fit, with the parameters that ended at a bound."""
+    """√E1 / √E2 of one fit, with the bounds it ended on (``_bounds_brief``)."""
     cell = f"{fmt(fit['sqrt_e1'])} / {fmt(fit['sqrt_e2'])}"
-    at = fit.get("at_bounds") or []
-    return cell + (f" (at bound: {', '.join(at)})" if at else "")
+    at = _bounds_brief(fit["at_bounds"])
+    return cell + (f" ({at})" if at else "")
 
 
 def index_report(
@@ -1136,8 +1165,10 @@ def index_report(
             "## Fits: √E1 / √E2 (Löw et al. 2012, eq. 29–33, as their Table II)",
             "",
             "Each model fitted to all incidences of a scene at once; smaller is better. "
-            "(at bound: …) names the parameters that ended at a bound of their box: that fit "
-            "did not converge to a minimum.",
+            "In brackets, the bounds of its box a fit ended on: a parameter on a physical "
+            "bound (kd ≥ 0, a fraction ≤ 1) is a constrained minimum; at a search limit (a "
+            "practical end of the box, e.g. C = 10) the optimiser was stopped and the best fit "
+            "may lie beyond.",
             "",
             md_table(["scene"] + fit_models, fit_rows),
             "",
@@ -1190,7 +1221,7 @@ def run_summary(doc: Mapping) -> str:
             agree.append(m)
         elif bad:
             rms = [v["rel_rms"] for v in bad if v.get("rel_rms") is not None]
-            size = f" by up to {100 * max(rms):.2g}%" if rms else ""
+            size = f" by up to {percent(max(rms))}" if rms else ""
             where = (
                 incidence.grouped(bad)
                 if with_phi

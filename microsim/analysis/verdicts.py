@@ -73,6 +73,7 @@ import numpy as np
 
 from microsim import checks as _checks
 from microsim.analysis import incidence
+from microsim.analysis.markdown import percent
 from microsim.errors import UsageError
 from microsim.stats import (
     ENERGY_FRACTION,
@@ -564,10 +565,10 @@ def verdict_symbol(v: Mapping) -> str:
     if kind == "agrees":
         return "✓"
     if kind == "deviates":
-        return f"✗ {_pct(v['rel_rms'])}" if v.get("rel_rms") is not None else "✗"
+        return f"✗ {percent(v['rel_rms'])}" if v.get("rel_rms") is not None else "✗"
     if v.get("tile_departure") is None or v.get("rel_rms") is None:
         return "?"
-    return f"? {_pct(v['rel_rms'])} (tile departs {_pct(v['tile_departure'])})"
+    return f"? {percent(v['rel_rms'])} (tile departs {percent(v['tile_departure'])})"
 
 
 def inconclusive_reason(v: Mapping) -> str:
@@ -575,13 +576,9 @@ def inconclusive_reason(v: Mapping) -> str:
     if v.get("tile_departure") is None or v.get("rel_rms") is None:
         return "one realisation cannot separate tile scatter from model error"
     return (
-        f"its deviation (rel RMS {_pct(v['rel_rms'])}) is explained by the tile's own "
-        f"departure from its ensemble ({_pct(v['tile_departure'])}) and ray noise"
+        f"its deviation (rel RMS {percent(v['rel_rms'])}) is explained by the tile's own "
+        f"departure from its ensemble ({percent(v['tile_departure'])}) and ray noise"
     )
-
-
-def _pct(x: float) -> str:
-    return f"{100 * x:.2g}%"
 
 
 def _jsonable_params(params: Mapping | None) -> dict:
@@ -789,12 +786,12 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
         rms = [v for v in bad if v["rel_rms"] is not None]
         if rms:
             r = max(rms, key=lambda v: v["rel_rms"])
-            parts.append(f"rel RMS {100 * r['rel_rms']:.3g}% at {at(r)}")
+            parts.append(f"rel RMS {percent(r['rel_rms'], 3)} at {at(r)}")
         worst = [v for v in bad if v["max_rel_dev"] is not None]
         if worst:
             w = max(worst, key=lambda v: abs(v["max_rel_dev"]))
             parts.append(
-                f"worst {100 * w['max_rel_dev']:+.3g}% at θo {w['worst_bin'][0]:g}°, "
+                f"worst {percent(w['max_rel_dev'], 3, signed=True)} at θo {w['worst_bin'][0]:g}°, "
                 f"Δφ {w['worst_bin'][1]:g}° ({at(w)})"
             )
         out[name] = parts[0] + (": " + ", ".join(parts[1:]) if len(parts) > 1 else "")

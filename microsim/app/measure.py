@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import atomic
+from ..analysis.markdown import percent
 from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..measured import BRDFTable, read_merl, read_rgl, write_merl, write_rgl
 from ..sim import Bins, Estimator, Execution, Experiment, Result
@@ -249,7 +250,7 @@ def measure(acq: Acquisition, log=print) -> BRDFTable:
             if log:
                 log(
                     f"microsim measure: θi = {theta:g}° ({k + 1}/{len(acq.theta_i)}): "
-                    f"{auto['rays']:,} rays, relative error {100 * auto['rse']:.2g} %"
+                    f"{auto['rays']:,} rays, relative error {percent(auto['rse'], unit=' %')}"
                     f"{'' if auto['converged'] else ' (max-rays reached)'}"
                 )
         table = BRDFTable(
@@ -340,9 +341,9 @@ def _cmd_measure(args) -> int:
     for fmt, e in doc.get("exports", {}).items():
         print(
             f"microsim measure: wrote {acq.out / e['file']} ({fmt}, {e['bytes']:,} bytes; "
-            f"read back against the table: {100 * e['interpolation_rel_rms_max']:.2g} % "
+            f"read back against the table: {percent(e['interpolation_rel_rms_max'], unit=' %')} "
             f"energy-weighted relative RMS at worst; the table's own noise there: "
-            f"{100 * max(e['table_rel_se']):.2g} % at worst)"
+            f"{percent(max(e['table_rel_se']), unit=' %')} at worst)"
         )
     return EXIT_OK
 

@@ -12,6 +12,7 @@ import json
 import math
 import os
 import shutil
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -116,7 +117,7 @@ def save_tallies(result, dest: Path) -> None:
 
 def fit_record(fit) -> dict:
     """JSON form of a ``FitResult`` (Löw E1/E2 with their square roots, as Löw et al. 2012,
-    Table II)."""
+    Table II; ``at_bounds``: its ``bounds_reached``)."""
     e1, e2 = fit.e1, fit.e2
     root = lambda e: math.sqrt(e) if e is not None and np.isfinite(e) and e >= 0 else None  # noqa: E731
     return {
@@ -128,7 +129,7 @@ def fit_record(fit) -> dict:
         "sqrt_e1": root(e1),
         "sqrt_e2": root(e2),
         "success": bool(fit.success),
-        "at_bounds": list(fit.at_bounds),
+        "at_bounds": [asdict(b) for b in fit.bounds_reached],
         "converged": bool(fit.converged),
         "n_starts": int(fit.n_starts),
     }
