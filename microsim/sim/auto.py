@@ -94,7 +94,7 @@ class _Batches:
 
     def estimate(self, omega: np.ndarray):
         """BRDF and standard error (sr⁻¹), flat (``Tally.estimate``)."""
-        return self.total.estimate(self.rays, omega, self.pairs)
+        return self.total.estimate(self.rays, omega, "pairs" if self.pairs else "per-ray")
 
 
 BATCH_GROWTH = 16

@@ -113,6 +113,7 @@ def _chain(spec: _Chunks, surface):
             spec.rays,
             spec.key,
             spec.origins,
+            spec.isotropic,
         )
         task = chain_task(incidence, profile, azimuth, spec.isotropic, spec.bounces)
         _TASKS[key] = task

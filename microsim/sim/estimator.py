@@ -55,8 +55,8 @@ from .paths import LEDGER, MASKING, Events, Incidence, trace_events, tracer_for
 from .progress import RaysDone
 from .result import Result
 from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, thread_pool
-from .streams import BLOCK, ORIGINS, block_origins
-from .tallies import Tally, simulation_result, tallies_from_arrays
+from .streams import BLOCK, DESIGN, ORIGINS, block_origins
+from .tallies import TALLY_NAMES, Tally, simulation_result, tallies_from_arrays
 
 __all__ = [
     "simulate",
@@ -148,10 +148,11 @@ def simulate(
 
     Standard error (``tallies.bin_estimate``): stratified origins use the paired-strata
     estimate (rays 2k, 2k+1 are two independent samples of one stratum: unbiased);
-    ``origins="independent"`` and ``isotropic=True`` use the per-ray formula (with
-    ``isotropic`` neither includes the scatter between the blocks' azimuths ψ_b, which is
-    shared by all rays of a block).
-    ``meta["stderr_method"]`` records which ("pairs" or "per-ray").
+    ``origins="independent"`` uses the per-ray formula; ``isotropic=True`` makes every block
+    an independent replicate (a stratified sweep of the whole tile by itself, with its own
+    azimuth ψ_b) and takes the error from the scatter between the blocks, which includes the
+    azimuth-to-azimuth scatter of the one surface (NaN below two blocks).
+    ``meta["stderr_method"]`` records which ("pairs", "per-ray" or "blocks").
 
     Interrupt and resume. A KeyboardInterrupt (SIGINT, or raised by ``progress``, by
     ``microsim.checkpoints.checkpoint("simulation")`` — called after every chunk, after
@@ -265,6 +266,7 @@ def estimate(
         "threads": run.threads,
         "chunk_blocks": plan.chunk_blocks,
         "block": BLOCK,
+        "design": DESIGN,
         "versions": _versions(),
         "seconds": elapsed,
         "seconds_scene_build": build,
@@ -407,6 +409,7 @@ def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> N
             plan.per_real[r],
             key,
             est.origins,
+            est.isotropic,
         )
         # one chain, cut after ex.bounces bounces (single bounce: its first, ``chain_task``)
         task = chain_task(incidence, profile, azimuth, est.isotropic, ex.bounces, pool, run.threads)
@@ -549,6 +552,7 @@ def _run_config(
         "isotropic": isotropic,
         "bounces": bounces,
         "block": BLOCK,
+        "design": DESIGN,
     }
 
 
@@ -572,6 +576,7 @@ def _resume_state(resume, config, n_real, n_th):
         resume.meta.get("bounces", 1),
     )
     old["block"] = resume.meta.get("block")
+    old["design"] = resume.meta.get("design", 1)
     diff = [k for k in config if old[k] != config[k]]
     if set(diff) <= {"rays", "realisations"} and _is_prefix(old, config):
         diff = []  # the first realisations of this run, each with this run's rays
@@ -581,9 +586,10 @@ def _resume_state(resume, config, n_real, n_th):
             + "; ".join(f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in diff)
         )
     t = resume.tallies
-    if "sum_pair" not in t:
+    if any(name not in t for name in TALLY_NAMES):
+        missing = [name for name in TALLY_NAMES if name not in t]
         raise UsageError(
-            "resume holds no pair tally (Result.tallies['sum_pair'], written by an "
+            f"resume holds no {', '.join(missing)} tallies (Result.tallies, written by an "
             "older microsim): it cannot be continued"
         )
     k = old["realisations"]

@@ -109,7 +109,9 @@ class Estimator:
     of it alone); ``masking``: "traced" (Embree, the reference), "exact" or "analytic"
     (V-groove surfaces only, ``paths``); ``origins``: "stratified" or "independent"
     (``streams.chunk_origins``); ``isotropic``: rotate each block's incidence azimuth by its
-    own uniform angle (statistically isotropic surfaces only, ``paths.RotatedIncidencePath``).
+    own uniform angle (statistically isotropic surfaces only, ``paths.RotatedIncidencePath``),
+    each block a sweep of the whole tile by itself, so the blocks are independent replicates
+    and the standard error comes from their scatter (``stderr_method``).
     """
 
     rays: int = 1_000_000
@@ -129,8 +131,12 @@ class Estimator:
 
     @property
     def stderr_method(self) -> str:
-        """ "pairs" (paired strata) or "per-ray" (``tallies.bin_estimate``)."""
-        return "pairs" if self.origins == "stratified" and not self.isotropic else "per-ray"
+        """One of ``tallies.STDERR_METHODS``: "blocks" for ``isotropic`` runs (every block an
+        independent replicate: its own sweep of the tile, its own incidence azimuth), else
+        "pairs" (paired strata) for stratified origins, "per-ray" for independent ones."""
+        if self.isotropic:
+            return "blocks"
+        return "pairs" if self.origins == "stratified" else "per-ray"
 
 
 @dataclass(frozen=True)

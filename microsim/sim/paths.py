@@ -708,7 +708,8 @@ class Incidence:
     direction (global frame), ``phi_i`` its azimuth in degrees (Δφ is taken from it), ``ior``
     as ``resolve_material`` returns it, ``rays`` the primary rays N of this (realisation,
     incidence), ``key`` its random stream (seed, realisation, incidence), ``origins`` one of
-    ``streams.ORIGINS``."""
+    ``streams.ORIGINS``; ``replicates``: every block a stratified sweep of the whole tile by
+    itself (``streams.chunk_origins``; ``simulate(isotropic=True)``)."""
 
     tracer: Tracer
     wi: np.ndarray
@@ -718,17 +719,20 @@ class Incidence:
     rays: int
     key: tuple
     origins: str = "stratified"
+    replicates: bool = False
 
     def origins_of(self, blocks, azimuth: bool):
         """Origin columns and groove azimuths of consecutive ``blocks`` (``chunk_origins``)."""
-        return chunk_origins(self.tracer, self.rays, blocks, self.key, azimuth, self.origins)
+        return chunk_origins(
+            self.tracer, self.rays, blocks, self.key, azimuth, self.origins, self.replicates
+        )
 
     def groove_starts_of(self, blocks):
         """(x, ψ) of the rays of consecutive ``blocks``, as ``origins_of(blocks, True)``
         gives them: for the exact V-groove paths, where y plays no part (stratified origins:
         ``groove_starts``, y not even drawn)."""
         if self.origins == "stratified":
-            return groove_starts(self.tracer, self.rays, blocks, self.key)
+            return groove_starts(self.tracer, self.rays, blocks, self.key, self.replicates)
         (x, _, _), psi = self.origins_of(blocks, True)
         return x, psi
 
@@ -790,8 +794,10 @@ class RotatedIncidencePath(TracePath):
     about the macro normal, bins taken relative to the rotated azimuth φi + ψ_b: φi is then
     uniform, which averages a statistically isotropic surface's realisation over incident
     azimuths without changing the expected BRDF. One shared direction per block keeps the
-    batch coherent; the rays of a block share ψ_b, so the per-ray standard error omits the
-    (small) azimuth-to-azimuth scatter of one surface."""
+    batch coherent; the rays of a block share ψ_b, so each block (a sweep of the whole tile
+    by itself, ``Incidence.replicates``) is one replicate, and the standard error comes from
+    the scatter between blocks (``tallies.bin_estimate``), which holds the azimuth-to-azimuth
+    scatter of the one surface."""
 
     def __init__(self, incidence: Incidence, profile):
         super().__init__(incidence)

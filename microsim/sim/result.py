@@ -149,8 +149,10 @@ class Result:
     ``sum_w``/``sum_w2``/``count`` (R, T, Θ·Φ), ``sum_pair`` (R, T, Θ·Φ) Σ_k w_2k w_2k+1 over
     ray pairs (2k, 2k+1) landing in the same bin (the paired-strata standard error, see
     ``tallies.bin_estimate``; ``meta["stderr_method"]`` says whether ``stderr`` uses it),
-    ``led_n``/``led_f`` (R, T, 5) per realisation and incidence, ``blocks`` (R, T) blocks done
-    and ``rays`` (R, T) rays tallied. Saved as ``tally_<name>`` arrays in ``brdf.npz``.
+    ``sum_block2``/``sum_block_rays`` (R, T, Θ·Φ) Σ_b S_b² and Σ_b m_b S_b over the blocks
+    (the "blocks" error of ``isotropic`` runs), ``led_n``/``led_f`` (R, T, 5) per realisation
+    and incidence, ``blocks`` (R, T) blocks done and ``rays`` (R, T) rays tallied. Saved as
+    ``tally_<name>`` arrays in ``brdf.npz``.
 
     Scattering orders (``simulate(..., bounces=K)``, K > 1 or "all"; ``meta["bounces"]``):
     ``brdf_orders``/``stderr_orders`` (O, T, Θ, Φ) sr⁻¹, the BRDF of the light leaving after
@@ -475,8 +477,8 @@ def _check_tallies(a: dict, meta: dict, n: int, nbin: int, fail) -> None:
     classes = t["led_n"].shape[-1] if t["led_n"].ndim == 3 else 0
     want = {"rays": (r, n), "sum_w2": (r, n, slots), "count": (r, n, slots)}
     want.update(led_n=(r, n, max(classes, len(LEDGER))), led_f=(r, n, classes))
-    if "sum_pair" in t:
-        want["sum_pair"] = (r, n, slots)
+    optional = [k for k in ("sum_pair", "sum_block2", "sum_block_rays") if k in t]
+    want.update({k: (r, n, slots) for k in optional})
     for k, s in want.items():
         if t[k].shape != s:
             fail(f"tally_{k} has shape {t[k].shape}, expected {s}")
@@ -486,8 +488,9 @@ def _check_tallies(a: dict, meta: dict, n: int, nbin: int, fail) -> None:
     for k in ("sum_w", "sum_w2", "led_f"):
         if not np.all(np.isfinite(t[k])) or np.any(t[k] < 0):
             fail(f"tally_{k} must hold finite sums >= 0")
-    if "sum_pair" in t and not np.all(np.isfinite(t["sum_pair"])):
-        fail("tally_sum_pair must be finite")
+    for k in optional:
+        if not np.all(np.isfinite(t[k])):
+            fail(f"tally_{k} must be finite")
     block = meta.get("block")
     if (
         isinstance(block, int)

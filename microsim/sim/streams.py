@@ -32,6 +32,7 @@ from .tracer import Tracer
 __all__ = [
     "BLOCK",
     "ORIGINS",
+    "DESIGN",
     "stream_state",
     "block_generator",
     "block_span",
@@ -45,6 +46,10 @@ BLOCK = 4096
 """Rays per block: the unit of the random streams, of the tallies and of resuming (even, so
 the pairs (2k, 2k + 1) of the paired-strata error never straddle two blocks)."""
 ORIGINS = ("stratified", "independent")
+DESIGN = 2
+"""Version of the rays' design (their origins and strata): a resumed run or a cached result
+must share it. 2: rays 2k and 2k + 1 share a stratum, and ``isotropic`` blocks are replicates
+(saved runs without the key are of design 1: one ray per stratum)."""
 ROTATION_STREAM = 0x150
 """Extra key of the per-block incidence-azimuth generator (``block_rotation``)."""
 
@@ -87,7 +92,13 @@ def block_span(n_total: int, blocks) -> tuple:
 
 
 def chunk_origins(
-    tracer: Tracer, n_total: int, blocks, key, azimuth: bool, origins: str = "stratified"
+    tracer: Tracer,
+    n_total: int,
+    blocks,
+    key,
+    azimuth: bool,
+    origins: str = "stratified",
+    replicates: bool = False,
 ):
     """Origin columns [x, y, z] and groove azimuths ψ (None unless ``azimuth``) of the rays of
     consecutive ``blocks``, in this thread's work arrays (valid until its next call). Every
@@ -104,7 +115,10 @@ def chunk_origins(
     the grooves in order of tilt and ψ is stratified by the row instead
     (``origin_kernels._groove_strata``). ``origins="independent"``: i.i.d. uniform origins over the
     whole tile, then sorted row-major on a ~square grid of the block's size (coherence only:
-    the set is unchanged).
+    the set is unchanged). ``replicates`` (``simulate(isotropic=True)``): each block's m rays
+    are a stratified sweep of the whole tile by themselves (as a run of m rays), so that the
+    blocks are independent, identically designed replicates (``tallies.bin_estimate``'s
+    "blocks" error).
     """
     blocks = list(blocks)
     lo, n = block_span(n_total, blocks)
@@ -127,30 +141,44 @@ def chunk_origins(
             if azimuth:
                 psi[k : k + m] = 2 * np.pi * u[base + 2 * m : base + 3 * m][order]
     else:
-        rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-        origin_kernels.stratified_origins(
-            u,
-            lo,
-            n,
-            BLOCK,
-            float(n_total),
-            float(rows),
-            float(lx),
-            float(ly),
-            azimuth,
-            tracer.groove_strata,
-            x,
-            y,
-            psi,
-        )
+        for first, size, at, count in _sweeps(n_total, blocks, lo, n, replicates):
+            rows = max(1, int(round(np.sqrt(size * ly / lx))))
+            k = slice(at, at + count)
+            origin_kernels.stratified_origins(
+                u[per_ray * at :],
+                first,
+                count,
+                BLOCK,
+                float(size),
+                float(rows),
+                float(lx),
+                float(ly),
+                azimuth,
+                tracer.groove_strata,
+                x[k],
+                y[k],
+                psi[k] if azimuth else psi,
+            )
     return [x, y, z], (psi if azimuth else None)
 
 
-def groove_starts(tracer: Tracer, n_total: int, blocks, key):
+def _sweeps(n_total: int, blocks, lo: int, n: int, replicates: bool):
+    """The stratified sweeps of a chunk's ``n`` rays (from ray ``lo`` of the run) as (index in
+    its sweep of the chunk's first ray there, rays in the sweep, offset in the chunk, rays of
+    the chunk in it): one sweep of the whole run of ``n_total`` rays, or with ``replicates``
+    one sweep per block, of that block's rays alone."""
+    if not replicates:
+        return [(lo, n_total, 0, n)]
+    sizes = [min(BLOCK, n_total - b * BLOCK) for b in blocks]
+    return [(0, m, b * BLOCK - lo, m) for b, m in zip(blocks, sizes)]
+
+
+def groove_starts(tracer: Tracer, n_total: int, blocks, key, replicates: bool = False):
     """x and groove azimuths ψ of the stratified rays of consecutive ``blocks``, bitwise as
     ``chunk_origins(..., azimuth=True)`` gives them, without y (grooves run along y, so the
     analytic V-groove path never uses it): each block's η run is skipped by advancing the
-    generator instead of drawn. In this thread's work arrays (valid until its next call)."""
+    generator instead of drawn; ``replicates`` as there. In this thread's work arrays (valid
+    until its next call)."""
     blocks = list(blocks)
     lo, n = block_span(n_total, blocks)
     lx, ly = tracer.tile
@@ -163,10 +191,13 @@ def groove_starts(tracer: Tracer, n_total: int, blocks, key):
         rng.bit_generator.advance(m)  # η
         rng.random(out=u[2 * k + m : 2 * k + 2 * m])
     x, psi = _GROOVE_X(n), _GROOVE_PSI(n)
-    rows = max(1, int(round(np.sqrt(n_total * ly / lx))))
-    origin_kernels.stratified_groove_starts(
-        u, lo, n, BLOCK, float(n_total), float(rows), float(lx), tracer.groove_strata, x, psi
-    )
+    for first, size, at, count in _sweeps(n_total, blocks, lo, n, replicates):
+        rows = max(1, int(round(np.sqrt(size * ly / lx))))
+        k = slice(at, at + count)
+        origin_kernels.stratified_groove_starts(
+            u[2 * at :], first, count, BLOCK, float(size), float(rows), float(lx),
+            tracer.groove_strata, x[k], psi[k],
+        )  # fmt: skip
     return x, psi
 
 

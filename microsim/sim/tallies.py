@@ -50,12 +50,24 @@ __all__ = [
     "tally_arrays",
     "tallies_from_arrays",
     "TALLY_NAMES",
+    "STDERR_METHODS",
+    "BlockSums",
+    "block_sizes",
     "terminal_ledger",
     "split_order_tallies",
     "chunk_order_tallies",
 ]
 
-TALLY_NAMES = ("sum_w", "sum_w2", "count", "led_n", "led_f", "sum_pair")
+TALLY_NAMES = (
+    "sum_w",
+    "sum_w2",
+    "count",
+    "led_n",
+    "led_f",
+    "sum_pair",
+    "sum_block2",
+    "sum_block_rays",
+)
 """The running sums of a ``Tally``, in its field order (keys of ``Result.tallies``)."""
 
 
@@ -157,8 +169,9 @@ class ChunkTallies:
 @dataclass
 class Tally:
     """Running sums over the rays of one (realisation, incidence) — or of several, pooled —
-    added block by block in block order: per bin Σw, Σw², event counts and Σ pairs w_2k w_2k+1;
-    per ledger class (``LEDGER``) ray counts and Fresnel sums."""
+    added block by block in block order: per bin Σw, Σw², event counts, Σ pairs w_2k w_2k+1
+    and, over the blocks (S_b a block's Σw in the bin, m_b its rays), Σ_b S_b² and
+    Σ_b m_b S_b; per ledger class (``LEDGER``) ray counts and Fresnel sums."""
 
     sum_w: np.ndarray
     sum_w2: np.ndarray
@@ -166,6 +179,8 @@ class Tally:
     led_n: np.ndarray
     led_f: np.ndarray
     sum_pair: np.ndarray
+    sum_block2: np.ndarray
+    sum_block_rays: np.ndarray
 
     @classmethod
     def empty(cls, nbin: int, classes: int = len(LEDGER)) -> "Tally":
@@ -178,11 +193,13 @@ class Tally:
             np.zeros(classes, np.int64),
             np.zeros(classes),
             np.zeros(nbin),
+            np.zeros(nbin),
+            np.zeros(nbin),
         )
 
     def items(self) -> tuple:
-        """The sums in the order of a block's tallies (``split_tallies``)."""
-        return (self.sum_w, self.sum_w2, self.count, self.led_n, self.led_f, self.sum_pair)
+        """The sums in the order of ``TALLY_NAMES``."""
+        return tuple(getattr(self, name) for name in TALLY_NAMES)
 
     def add_chunk(self, chunk: ChunkTallies) -> int:
         """Add a chunk's per-block tallies, block by block in block order (callers add chunks
@@ -192,9 +209,12 @@ class Tally:
             self.sum_w2,
             self.count,
             self.sum_pair,
+            self.sum_block2,
+            self.sum_block_rays,
             self.led_n,
             self.led_f,
-            *chunk.take(),
+            len(LEDGER),
+            chunk.take(),
         )
         return chunk.blocks
 
@@ -203,13 +223,45 @@ class Tally:
         for total, part in zip(self.items(), other.items()):
             total += part
 
-    def estimate(self, rays: int, omega: np.ndarray, pairs: bool):
-        """BRDF and standard error (sr⁻¹, flat) of these sums over ``rays`` primary rays
-        (``bin_estimate``; paired strata when ``pairs``, else per-ray)."""
-        return bin_estimate(self.sum_w, self.sum_w2, rays, omega, self.sum_pair if pairs else None)
+    def estimate(self, rays, omega: np.ndarray, method: str):
+        """BRDF and standard error (sr⁻¹, flat) of these sums over ``rays`` primary rays — an
+        int, or for pooled realisations the rays of each (``bin_estimate``; ``method`` one of
+        ``STDERR_METHODS``)."""
+        n = int(np.sum(rays))
+        if method == "pairs":
+            return bin_estimate(self.sum_w, self.sum_w2, n, omega, sum_pair=self.sum_pair)
+        if method == "blocks":
+            blocks = BlockSums(self.sum_block2, self.sum_block_rays, *block_sizes(rays))
+            return bin_estimate(self.sum_w, self.sum_w2, n, omega, blocks=blocks)
+        return bin_estimate(self.sum_w, self.sum_w2, n, omega)
 
 
-def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None):
+STDERR_METHODS = ("pairs", "blocks", "per-ray")
+"""How a run's standard error is estimated (``meta["stderr_method"]``, ``bin_estimate``):
+paired strata (stratified origins), the scatter between blocks (``isotropic`` runs, every
+block an independent replicate), or the i.i.d. per-ray formula (independent origins)."""
+
+
+@dataclass(frozen=True)
+class BlockSums:
+    """The block tallies of ``bin_estimate``'s "blocks" error: per bin Σ_b S_b² and
+    Σ_b m_b S_b (``Tally``), and the blocks' count and Σ_b m_b²."""
+
+    sum_block2: np.ndarray
+    sum_block_rays: np.ndarray
+    blocks: int
+    sum_rays2: float
+
+
+def block_sizes(rays) -> tuple[int, float]:
+    """(blocks, Σ_b m_b²) of runs of ``rays`` primary rays each (an int or a sequence: one per
+    pooled realisation), cut into blocks of ``BLOCK`` rays, the last one short."""
+    n = np.atleast_1d(np.asarray(rays, dtype=np.int64))
+    full, rest = n // BLOCK, n % BLOCK
+    return int(np.sum(full + (rest > 0))), float(np.sum(full * float(BLOCK) ** 2 + rest**2.0))
+
+
+def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None, blocks: BlockSums | None = None):
     """BRDF and standard error of one tally (sr⁻¹); NaN when no ray was traced.
 
     ``sum_w``/``sum_w2`` per-bin Σx, Σx²; ``n`` primary rays; ``omega`` per-bin projected
@@ -226,12 +278,24 @@ def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None):
     holding the bin's events is two equal weights) the per-ray formula is used instead, so a
     bin never gets a zero error that the per-ray formula would not give
     (stratified sampling with two units per stratum, Cochran, Sampling Techniques, 3rd ed.,
-    §5.5)."""
+    §5.5).
+    ``blocks`` given (``isotropic`` runs): every block b is an independent replicate of one
+    design (its own sweep of the tile, its own incidence azimuth), with S_b its Σx and m_b its
+    rays, so the mean is the ratio estimate f = Σ_b S_b / Σ_b m_b over B blocks, with
+        se² = B/(B − 1) · Σ_b (S_b − m_b f)² / N²
+            = B/(B − 1) · (Σ S_b² − 2 f Σ m_b S_b + f² Σ m_b²) / N²
+    (the variance of a ratio estimate, Cochran, Sampling Techniques, ch. 6: unbiased for
+    equal blocks, to O(1/B) with the last one short). NaN with fewer than two blocks."""
     if n < 1:
         return np.full_like(sum_w, np.nan), np.full_like(sum_w, np.nan)
     mean = sum_w / n
     var = np.maximum(sum_w2 / n - mean * mean, 0.0) / (n - 1) if n > 1 else np.nan
-    if sum_pair is not None:
+    if blocks is not None:
+        b = blocks
+        spread = b.sum_block2 - 2 * mean * b.sum_block_rays + mean * mean * b.sum_rays2
+        var = np.maximum(spread, 0.0) / (float(n) * n)
+        var = var * b.blocks / (b.blocks - 1) if b.blocks > 1 else np.full_like(mean, np.nan)
+    elif sum_pair is not None:
         diff = sum_w2 - 2.0 * sum_pair
         pair = np.maximum(diff, 0.0) / (float(n) * n)
         var = np.where(diff > 64 * np.finfo(float).eps * sum_w2, pair, var)
@@ -335,9 +399,10 @@ def simulation_result(
     for r in range(n_real):
         for i in range(len(theta_i)):
             pooled[i].add_totals(tallies[r][i])
-    pairs = meta["stderr_method"] == "pairs"
+    method = meta["stderr_method"]
     brdf, se_ray = map(
-        np.array, zip(*[p.estimate(n_tot[i], omega, pairs) for i, p in enumerate(pooled)])
+        np.array,
+        zip(*[p.estimate(rays_done[:, i], omega, method) for i, p in enumerate(pooled)]),
     )
     extra = {}
     stderr = se_ray
@@ -345,7 +410,7 @@ def simulation_result(
         per = np.array(
             [
                 [
-                    tallies[r][i].estimate(rays_done[r, i], omega, False)[0]
+                    tallies[r][i].estimate(rays_done[r, i], omega, "per-ray")[0]
                     for i in range(len(theta_i))
                 ]
                 for r in range(n_real)
@@ -375,8 +440,9 @@ def simulation_result(
         return tally_result(theta_i, phi_i, bins, pooled, n_tot, brdf, stderr, meta, raw, **extra)
     by_order = lambda a: np.moveaxis(a.reshape((len(theta_i), slots) + bins.shape), 1, 0)  # noqa: E731
     extra.update(brdf_orders=by_order(brdf), stderr_orders=by_order(stderr))
+    ledger = ("led_n", "led_f")  # per class, not per slot
     first = [
-        Tally(p.sum_w[:nb], p.sum_w2[:nb], p.count[:nb], p.led_n, p.led_f, p.sum_pair[:nb])
+        Tally(*(a if k in ledger else a[:nb] for k, a in zip(TALLY_NAMES, p.items())))
         for p in pooled
     ]
     return tally_result(

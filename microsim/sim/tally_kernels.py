@@ -78,17 +78,28 @@ def block_tallies(
 
 
 @compiled
-def add_blocks(sum_w, sum_w2, count, sum_pair, led_n, led_f, bins, sums, cnt, offsets, ln, lf):
+def add_blocks(sum_w, sum_w2, count, sum_pair, block2, block_rays, led_n, led_f, first, chunk):
     """Add a chunk's sparse per-block sums (``block_tallies``: block b's distinct bins are
     ``bins[offsets[b]:offsets[b + 1]]``) to the running totals, block by block in block order
-    — bitwise what adding each block's dense sums would give (an untouched bin adds 0)."""
+    — bitwise what adding each block's dense sums would give (an untouched bin adds 0).
+    ``chunk``: (bins, sums, cnt, offsets, ln, lf) as ``block_tallies`` writes them. Besides
+    Σw, Σw², counts and Σ pairs per bin, the blocks' own sums: ``block2`` Σ_b S_b² and
+    ``block_rays`` Σ_b m_b S_b (S_b the block's Σw in the bin, m_b its rays: its counts in
+    the ``first`` first-bounce ledger classes, which every ray enters once)."""
+    bins, sums, cnt, offsets, ln, lf = chunk
     for b in range(len(offsets) - 1):
+        m = 0
+        for c in range(first):
+            m += ln[b, c]
         for q in range(offsets[b], offsets[b + 1]):
             k = bins[q]
-            sum_w[k] += sums[0, q]
+            s = sums[0, q]
+            sum_w[k] += s
             sum_w2[k] += sums[1, q]
             count[k] += cnt[q]
             sum_pair[k] += sums[2, q]
+            block2[k] += s * s
+            block_rays[k] += m * s
         for c in range(led_n.shape[0]):
             led_n[c] += ln[b, c]
             led_f[c] += lf[b, c]

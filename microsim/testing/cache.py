@@ -52,6 +52,7 @@ from microsim.errors import UsageError
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
 from microsim.sim.result import META, NPZ
+from microsim.sim.streams import DESIGN
 
 __all__ = [
     "ENV_VAR",
@@ -178,6 +179,7 @@ class Reference:
             "seed": int(self.seed),
             "rays": rays,
             "microsim": microsim.__version__,
+            "design": DESIGN,
         }
 
     def key(self) -> str:
