@@ -14,6 +14,15 @@ equal to ``Beckmann(m = α)`` / ``GGX(α)`` when αx = αy = α. The slope distr
 isotropic one with unit roughness stretched by (αx, αy), so samples of D(h) cos θ_h are the
 stretched samples of the unit one (``sample``).
 
+Tilt distribution (``cdf_theta_rad``, ``tilt_pdf_rad``, the isotropic NDFs' interface): a
+stretched slope is (αx ρ cos φ, αy ρ sin φ) with the unit slope radius ρ independent of the
+uniform φ, so tan²θ_h = ρ² α(φ)², α(φ)² = αx² cos²φ + αy² sin²φ, and
+
+    P(θ_h ≤ θ) = ⟨F(tan²θ / α(φ)²)⟩_φ,   F the CDF of ρ² (Beckmann 1 − e^{−x}, GGX x/(1 + x)),
+
+whose θ-derivative has the profile above as the density of ρ². The azimuth average is the
+trapezoid rule over the period (exponentially accurate for this smooth periodic integrand).
+
 Smith Λ (Heitz 2014): the isotropic Λ of the same family with α replaced by the roughness the
 direction sees,
 
@@ -37,9 +46,12 @@ import numpy as np
 from microsim import checks as _checks
 from microsim import vectors
 
-from .ndf import GGX, Beckmann, beckmann_lambda, ggx_lambda
+from .ndf import GGX, Beckmann, _tilt_rad, beckmann_lambda, ggx_lambda
 
 __all__ = ["AnisotropicBeckmann", "AnisotropicGGX"]
+
+AZIMUTH_NODES = 512
+"""Trapezoid nodes over the period of the azimuth averages of the tilt distribution."""
 
 
 class _Anisotropic:
@@ -89,6 +101,32 @@ class _Anisotropic:
         with np.errstate(over="ignore", invalid="ignore"):
             d = self._profile(rho2) / (np.pi * self.alpha_x * self.alpha_y * hz**4)
         return np.where(hz > 0.0, d, 0.0)
+
+    def _stretch2(self, theta):
+        """(tan²θ / α(φ)², 1 / α(φ)²) on the azimuth nodes (last axis) for tilts θ (radians),
+        with α(φ)² = αx² cos²φ + αy² sin²φ (module docstring)."""
+        phi = 2.0 * np.pi * np.arange(AZIMUTH_NODES) / AZIMUTH_NODES
+        inv_a2 = 1.0 / (self.alpha_x**2 * np.cos(phi) ** 2 + self.alpha_y**2 * np.sin(phi) ** 2)
+        t2 = np.tan(np.clip(theta, 0.0, 0.5 * np.pi))[..., None] ** 2
+        return t2 * inv_a2, inv_a2
+
+    def cdf_theta_rad(self, theta):
+        """P(θ_h ≤ θ) of the tilt under D(h) cos θ_h, θ in radians in [0, π/2] (UsageError
+        outside): the azimuth average of the CDF of ρ² (module docstring)."""
+        x, _ = self._stretch2(_tilt_rad("theta", theta))
+        with np.errstate(divide="ignore", over="ignore"):
+            return self._rho2_cdf(x).mean(axis=-1)
+
+    def tilt_pdf_rad(self, theta):
+        """Density of the tilt θ_h in radians⁻¹ at θ in radians in [0, π/2], the θ-derivative of
+        ``cdf_theta_rad``: 2 tanθ / cos²θ · ⟨profile(tan²θ / α²) / α²⟩_φ, equal to
+        ∫ D(θ, φ_h) cos θ sin θ dφ_h."""
+        theta = _tilt_rad("theta", theta)
+        x, inv_a2 = self._stretch2(theta)
+        c = np.cos(np.clip(theta, 0.0, 0.5 * np.pi))
+        with np.errstate(over="ignore"):
+            mean = (self._profile(x) * inv_a2).mean(axis=-1)
+            return 2.0 * np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c**3 * mean
 
     def pdf(self, h):
         """Solid-angle density D(h) cos θ_h of ``sample`` (sr⁻¹)."""
@@ -178,6 +216,10 @@ class AnisotropicBeckmann(_Anisotropic):
         return np.exp(-rho2)
 
     @staticmethod
+    def _rho2_cdf(x):
+        return -np.expm1(-x)
+
+    @staticmethod
     def _rho_quantile(u):
         with np.errstate(divide="ignore"):
             return np.sqrt(-np.log1p(-u))
@@ -207,6 +249,10 @@ class AnisotropicGGX(_Anisotropic):
     @staticmethod
     def _profile(rho2):
         return 1.0 / (1.0 + rho2) ** 2
+
+    @staticmethod
+    def _rho2_cdf(x):
+        return 1.0 / (1.0 + 1.0 / x)
 
     @staticmethod
     def _rho_quantile(u):

@@ -21,7 +21,9 @@ Views (local frame, macro normal +z; angles in degrees; BRDFs in sr⁻¹):
   disk     Edwards' halfway-vector disk (Edwards et al. 2006, Fig. 13) for one viewing
            direction: simulated half vectors in the scaling and the orthogonal projection against
            contours of a fitted Edwards data-fitting BRDF (Edwards et al. 2006, eq. 34–36).
-  normals  the facet-normal distribution (projected-area weighted) against the scene's NDF.
+  normals  the facet-normal distribution (projected-area weighted) against the scene's NDF
+           D(θh, φh) (anisotropic too), and the tilt densities; oriented grooves have no
+           density of normals (the title says so): their tilts against the NDF they sample.
 
 Headless: with no DISPLAY every view renders off screen (VTK's EGL window, Mesa's libEGL);
 without ``--screenshot`` the image goes to ``microsim-view-<scene>-<what>.png``.

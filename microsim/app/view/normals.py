@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from microsim.vectors import spherical_deg
+
 from .common import (
     COLOURS,
     WINDOW,
@@ -43,6 +45,18 @@ def _normal_histogram(surface, theta_max: float, n_theta: int, n_phi: int):
     return D, t_edges, p_edges, th, w
 
 
+def _model_note(sc) -> str:
+    """What the facet normals are drawn against (the title's second line)."""
+    if sc.ndf is not None:
+        return f"vs NDF {type(sc.ndf).__name__} (green wireframe)"
+    if sc.surface.tilt_ndf is not None:
+        return (
+            "no NDF density: oriented grooves' normals\nlie in one plane "
+            f"(tilts vs {type(sc.surface.tilt_ndf).__name__}'s)"
+        )
+    return "no analytic NDF: facets only"
+
+
 def view_normals(
     scene_or_surface,
     n_theta: int = 30,
@@ -53,8 +67,11 @@ def view_normals(
     window_size=WINDOW,
 ):
     """Facet-normal distribution (projected-area weighted; azimuth-averaged for V-grooves) as a
-    polar surface of D(h)·cos θh (per solid angle; radius and colour), with the scene's NDF as a
-    green wireframe on the same grid, beside the tilt densities 2π D cos θ sin θ (per degree)."""
+    polar surface of D(h)·cos θh (per solid angle; radius and colour), with the scene's NDF
+    D(θh, φh) (anisotropic too) as a green wireframe on the same grid, beside the tilt densities
+    2π D cos θ sin θ (per degree; for an anisotropic NDF its azimuth integral). Oriented grooves
+    have no density of normals (they lie in one plane): their tilts are compared with the tilt
+    density the grooves sample (``Surface.tilt_ndf``), and the title says so."""
     sc = resolve(scene_or_surface, material, seed)
     th_all = tilt_deg(sc.surface.facet_normals())
     theta_max = float(min(90.0, max(1.3 * np.quantile(th_all, 0.999), 1.0)))
@@ -62,9 +79,7 @@ def view_normals(
     tc = 0.5 * (t_edges[1:] + t_edges[:-1])
     pc = 0.5 * (p_edges[1:] + p_edges[:-1])
     cos_c = np.cos(np.radians(tc))[:, None]
-    ndf_D = None
-    if sc.ndf is not None:
-        ndf_D = np.broadcast_to(np.asarray(sc.ndf.D_cos(cos_c)), D.shape)
+    ndf_D = None if sc.ndf is None else sc.ndf.D(spherical_deg(tc[:, None], pc[None, :]))
     peak = float(
         np.max(D * cos_c) if ndf_D is None else max(np.max(D * cos_c), np.max(ndf_D * cos_c))
     )
@@ -79,12 +94,9 @@ def view_normals(
         m = polar_surface(ndf_D * cos_c / peak, np.minimum(tc * scale_t, 90.0), pc)
         p.add_mesh(m, style="wireframe", color=COLOURS["model"], line_width=1.5)
     avg = " (azimuth-averaged grooves)" if sc.surface.azimuth_average else ""
-    against = (
-        f"NDF {type(sc.ndf).__name__} (green wireframe)" if ndf_D is not None else "no analytic NDF"
-    )
     title(
         p,
-        f"{sc.name}: facet normals{avg} (surface)\nvs {against}"
+        f"{sc.name}: facet normals{avg} (surface)\n{_model_note(sc)}"
         f"\nradius: D cos θh / peak\npolar angle stretched ×{scale_t:.3g} "
         f"(θh ≤ {theta_max:.3g}°)",
     )
@@ -97,19 +109,20 @@ def view_normals(
     mid = 0.5 * (edges[1:] + edges[:-1])
     width = np.diff(edges)
     chart.line(mid, hist / (w.sum() * width), color="black", width=2.5, label="facets")
-    if sc.ndf is not None:
+    tilts = sc.ndf if sc.ndf is not None else sc.surface.tilt_ndf
+    if tilts is not None:
         try:
-            cdf = np.asarray(sc.ndf.cdf_theta_rad(np.radians(edges)))
+            cdf = np.asarray(tilts.cdf_theta_rad(np.radians(edges)))
             expected = np.diff(cdf) / width
         except NotImplementedError:
-            expected = sc.ndf.tilt_pdf_rad(np.radians(mid)) * np.pi / 180.0
+            expected = tilts.tilt_pdf_rad(np.radians(mid)) * np.pi / 180.0
         chart.line(
             mid,
             expected,
             color=COLOURS["model"],
             width=2.5,
             style="--",
-            label=f"NDF {type(sc.ndf).__name__} (bin average)",
+            label=f"{type(tilts).__name__} tilts (bin average)",
         )
     chart.title = "projected-area weighted tilt density 2 pi D cos(theta) sin(theta)"
     p.add_chart(chart)
