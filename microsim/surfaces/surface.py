@@ -31,6 +31,7 @@ __all__ = [
     "heightfield_mesh",
     "facet_slopes",
     "check_relief",
+    "anisotropy_of",
     "MAX_RELIEF",
     "MAX_COORDINATE",
 ]
@@ -41,6 +42,28 @@ ray through copies of the tile; one 89.5° from the normal crosses the tile ~230
 height it descends, so a relief of 1000 tiles already allows ~2·10⁵ crossings per ray."""
 MAX_COORDINATE = 1e30
 """Largest vertex coordinate: Embree traces in float32 (max 3.4e38), with room for products."""
+
+
+_ANISOTROPIC = {
+    "vgrooves": ("oriented", "oriented V-grooves"),
+    "gaussian": ("corr_len_y", "a Gaussian field with two correlation lengths"),
+    "abc": ("B_y", "an ABC field with two B"),
+    "grating": (None, "a grating, its grooves along y"),
+}
+"""Surface kind → (the generator parameter that makes it anisotropic, None: always; what it
+then is)."""
+
+
+def anisotropy_of(kind: str, params) -> str | None:
+    """What makes a surface of ``kind`` with generator parameters ``params`` (a scene's
+    ``[surface]`` table or ``Surface.nominal``) anisotropic — its BRDF then depends on the
+    incidence azimuth: oriented V-grooves, a Gaussian field with two correlation lengths, an
+    ABC field with two B, a grating — or None for a statistically isotropic one (a file's
+    heightfield counts as isotropic: nothing says otherwise)."""
+    key, what = _ANISOTROPIC.get(kind, ("", None))
+    if key is None or params.get(key) not in (None, False):
+        return what
+    return None
 
 
 def check_relief(name: str, zmin: float, zmax: float, tile) -> None:
@@ -157,6 +180,11 @@ class Surface:
             if k not in shown
         ]
         return f"Surface({', '.join(parts)})"
+
+    @property
+    def anisotropy(self) -> str | None:
+        """What makes this surface anisotropic (``anisotropy_of``), or None."""
+        return anisotropy_of(self.kind, self.nominal)
 
     def mesh(self):
         """``trimesh.Trimesh`` (process=False) of the tile, centred on the origin.

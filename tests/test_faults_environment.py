@@ -1,0 +1,144 @@
+"""Faults of the API and of the environment: descriptions passed to ``estimate`` in the wrong
+order, azimuth averaging asked of an anisotropic surface, a ``bench --rays`` that cannot fit
+in memory, paths holding a NUL character, a full disk while a run is staged, streams that
+cannot encode microsim's symbols, and a machine where numba finds no writable cache.
+
+The promises (docs/testing.md): bad input is one line naming the argument, key or option
+(status 2 from the CLI), an environment failure one line (status 1), nothing half-written
+left behind, and a run that works wherever Python does. The CLI is run as a subprocess where
+the environment is the fault (locale, read-only caches), in-process where a failure is
+injected.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from support import vgroove_surface
+
+from microsim.analytic import Beckmann
+from microsim.errors import UsageError
+from microsim.sim import Bins, Estimator, Execution, Experiment, estimate, simulate
+from microsim.surfaces import from_file, gaussian, vgrooves
+
+CLI = [sys.executable, "-m", "microsim.app.cli"]
+
+
+def cli(cwd: Path, *args, env: dict | None = None, timeout: float = 600):
+    """``microsim ARGS`` in a subprocess (cwd ``cwd``, PYTHONPATH inherited)."""
+    return subprocess.run(
+        [*CLI, *map(str, args)],
+        cwd=cwd,
+        env={**os.environ, **(env or {})},
+        capture_output=True,
+        timeout=timeout,
+    )
+
+
+def one_error_line(r) -> str:
+    """The only stderr line of a refused command (no traceback)."""
+    err = r.stderr.decode("utf-8", "replace")
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+# --- estimate(Experiment, Estimator, Execution) ---------------------------------------------
+@pytest.mark.parametrize(
+    "order, named, got",
+    [
+        ((1, 0, 2), "experiment", "Estimator"),
+        ((0, 2, 1), "estimator", "Execution"),
+        ((0, 1, 1), "execution", "Estimator"),
+    ],
+)
+def test_estimate_names_the_argument_of_the_wrong_class(order, named, got):
+    """Descriptions in the wrong order: a UsageError naming the argument, the class it got
+    and the order expected, not an AttributeError from inside the run."""
+    experiment = Experiment(vgroove_surface([30.0, 40.0]), None, 30.0)
+    given = (experiment, Estimator(rays=256), Execution())
+    with pytest.raises(UsageError) as e:
+        estimate(*(given[i] for i in order))
+    msg = str(e.value)
+    assert msg.startswith(f"{named} must be a microsim.sim."), msg
+    assert got in msg and "estimate(Experiment, Estimator, Execution)" in msg
+
+
+# --- isotropic=True on an anisotropic surface ----------------------------------------------
+@pytest.mark.parametrize(
+    "surface",
+    [
+        lambda: vgrooves(200, Beckmann(0.3), oriented=True),
+        lambda: gaussian(32, 1.0, 0.5, 8.0, corr_len_y=16.0, seed=1),
+    ],
+    ids=["oriented-vgrooves", "two-correlation-lengths"],
+)
+def test_isotropic_averaging_of_an_anisotropic_surface_is_refused(surface):
+    """The BRDF of an anisotropic surface depends on the incidence azimuth: averaging it away
+    answers another question, so ``isotropic=True`` is refused naming ``isotropic`` and why."""
+    s = surface()
+    with pytest.raises(UsageError, match=r"^isotropic=True .* anisotropic") as e:
+        simulate(s, None, 30.0, rays=256, bins=Bins(4, 4), isotropic=True, threads=1)
+    assert s.anisotropy in str(e.value) and "azimuth" in str(e.value)
+
+
+def test_isotropic_averaging_of_isotropic_surfaces_still_runs():
+    iso = simulate(vgrooves(50, Beckmann(0.3)), None, 30.0, rays=256, bins=Bins(4, 4),
+                   isotropic=True, threads=1)  # fmt: skip
+    assert iso.meta["isotropic"] is True
+    assert gaussian(32, 1.0, 0.5, 8.0, seed=1).anisotropy is None
+
+
+# --- bench --rays beyond the memory limit ----------------------------------------------------
+def test_bench_refuses_rays_that_cannot_fit_in_memory(tmp_path):
+    """``bench --rays`` is refused before anything runs when the rays it prepares would
+    exceed the memory limit: one line naming --rays and the limit, exit 2."""
+    r = cli(tmp_path, "bench", "--quick", "--rays", 10**13, timeout=120)
+    line = one_error_line(r)
+    assert r.returncode == 2 and r.stdout == b""
+    assert "--rays" in line and "limit" in line and "GB" in line, line
+
+
+# --- paths holding a NUL character ---------------------------------------------------------
+NUL_SCENE = """\
+name = "nul"
+[surface]
+kind = "file"
+path = "h\\u0000.npy"
+dx = 1.0
+[simulation]
+theta_i = [30]
+rays = 2000
+"""
+
+
+@pytest.mark.parametrize(
+    "command", [["run", "--quick"], ["measure"], ["view", "--what", "surface"]]
+)
+def test_a_nul_in_the_surface_path_is_one_line_naming_the_key(tmp_path, command):
+    np.save(tmp_path / "h.npy", np.zeros((16, 16)))
+    (tmp_path / "nul.toml").write_text(NUL_SCENE)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    r = cli(tmp_path, command[0], "nul.toml", *command[1:], timeout=120)
+    line = one_error_line(r)
+    assert r.returncode == 2 and "nul.toml: surface.path:" in line and "NUL" in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_a_nul_in_a_path_argument_is_a_usage_error(tmp_path):
+    from microsim.app.cli import main
+    from microsim.app.scene import load_scene
+
+    with pytest.raises(UsageError, match=r"^path must be a file path .*NUL"):
+        from_file("h\x00.npy", 1.0)
+    with pytest.raises(UsageError, match=r"^the scene file must be a file path .*NUL"):
+        load_scene("s\x00.toml")
+    np.save(tmp_path / "h.npy", np.zeros((16, 16)))
+    (tmp_path / "ok.toml").write_text(NUL_SCENE.replace("\\u0000", ""))
+    assert main(["run", str(tmp_path / "ok.toml"), "--out", str(tmp_path / "o\x00")]) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.npy", "ok.toml"]
