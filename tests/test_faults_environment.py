@@ -142,3 +142,37 @@ def test_a_nul_in_a_path_argument_is_a_usage_error(tmp_path):
     (tmp_path / "ok.toml").write_text(NUL_SCENE.replace("\\u0000", ""))
     assert main(["run", str(tmp_path / "ok.toml"), "--out", str(tmp_path / "o\x00")]) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["h.npy", "ok.toml"]
+
+
+# --- a full disk while a run is staged ------------------------------------------------------
+@pytest.mark.parametrize("folder", ["tmp", "old"])
+def test_disk_full_around_the_staging_folder_leaves_nothing_behind(
+    tmp_path, capsys, monkeypatch, folder
+):
+    """``run --force`` over a finished result on a disk so full that even the new staging
+    folder (``.OUT.tmp-*``) or the aside folder of the old result (``.OUT.old-*``) cannot get
+    its mode (a copy-on-write file system): exit 1, one line, the old result intact and no
+    temporary folder left."""
+    import errno
+
+    from test_faults_cli import _fast, run_cli, scene, tree
+
+    _fast(monkeypatch)
+    monkeypatch.chdir(tmp_path)
+    sc, out = scene(tmp_path), tmp_path / "o"
+    assert run_cli(capsys, "run", sc, "--quick", "--out", out, "--no-progress")[0] == 0
+    before = tree(tmp_path)
+    real_chmod = os.chmod
+
+    def chmod(path, mode, **kw):
+        if Path(path).name.startswith(f".o.{folder}-"):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+        return real_chmod(path, mode, **kw)
+
+    monkeypatch.setattr(os, "chmod", chmod)
+    status, lines, err = run_cli(
+        capsys, "run", sc, "--quick", "--out", out, "--force", "--no-progress"
+    )
+    assert status == 1 and len(lines) == 1 and "Traceback" not in err, err
+    assert "No space left" in lines[0] and f".o.{folder}-" in lines[0], lines
+    assert tree(tmp_path) == before
