@@ -176,3 +176,51 @@ def test_disk_full_around_the_staging_folder_leaves_nothing_behind(
     assert status == 1 and len(lines) == 1 and "Traceback" not in err, err
     assert "No space left" in lines[0] and f".o.{folder}-" in lines[0], lines
     assert tree(tmp_path) == before
+
+
+# --- no writable cache folder for numba ------------------------------------------------------
+def test_kernels_run_uncached_where_no_cache_folder_is_writable(tmp_path):
+    """The package folder, NUMBA_CACHE_DIR and HOME all unwritable (made so by a regular file
+    where each folder would be: as root, write permissions are not enforced): microsim imports,
+    its kernels compile uncached and give the same value as the Python statement, and one
+    line says so."""
+    import shutil
+
+    import microsim
+    from microsim.kernel_cache import NOTICE
+
+    pkg = tmp_path / "pkg"
+    shutil.copytree(
+        Path(microsim.__file__).parent,
+        pkg / "microsim",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
+    for folder in [pkg / "microsim", *(pkg / "microsim").rglob("*")]:
+        if folder.is_dir():
+            (folder / "__pycache__").write_text("not a folder\n")
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file, so no folder can be made under it\n")
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(pkg),
+        "PYTHONDONTWRITEBYTECODE": "1",
+        "NUMBA_CACHE_DIR": str(blocker / "numba"),
+        "HOME": str(blocker / "home"),
+        "XDG_CACHE_HOME": str(blocker / "cache"),
+    }
+    code = (
+        "import microsim, microsim.sim\n"
+        "from microsim.analytic.fresnel import fresnel_real_scalar as f\n"
+        "print(microsim.__file__)\n"
+        "print(f(0.5, 2.25, 0.0), f.py_func(0.5, 2.25, 0.0))\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+        timeout=300,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    where, values = r.stdout.splitlines()
+    assert where.startswith(str(pkg)), where
+    compiled, python = map(float, values.split())
+    assert compiled == python
+    assert r.stderr.splitlines() == [NOTICE], r.stderr
