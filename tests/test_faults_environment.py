@@ -224,3 +224,44 @@ def test_kernels_run_uncached_where_no_cache_folder_is_writable(tmp_path):
     compiled, python = map(float, values.split())
     assert compiled == python
     assert r.stderr.splitlines() == [NOTICE], r.stderr
+
+
+# --- streams that cannot encode microsim's symbols -------------------------------------------
+C_LOCALE = {"LC_ALL": "C", "PYTHONCOERCECLOCALE": "0", "PYTHONUTF8": "0"}
+
+
+def test_a_run_in_the_c_locale_prints_ascii(tmp_path):
+    """``LC_ALL=C`` without UTF-8 mode (ASCII stdout and stderr): the run, its progress lines
+    and its verdict table finish with status 0, every byte ASCII, ✓ written as "ok"."""
+    from test_faults_cli import scene
+
+    scene(tmp_path)
+    r = cli(tmp_path, "run", "tiny.toml", "--quick", "--threads", "1", env=C_LOCALE)
+    assert r.returncode == 0, r.stderr.decode("ascii", "replace")
+    assert r.stdout.isascii() and r.stderr.isascii()
+    assert b" ok" in r.stdout and b"theta" in r.stdout and b"% of 20,000 rays" in r.stderr
+    assert (tmp_path / "runs" / "tiny" / "report.md").read_text(encoding="utf-8").count("θ")
+
+
+@pytest.mark.parametrize("env", [C_LOCALE, {"PYTHONIOENCODING": "latin-1"}], ids=["C", "latin-1"])
+def test_listings_and_errors_fall_back_to_ascii_symbols(tmp_path, env):
+    """``models`` (a listing full of θ, ², …) and a one-line usage error print in the stream's
+    own encoding, with the symbols it lacks spelled in ASCII."""
+    encoding = env.get("PYTHONIOENCODING", "ascii")
+    r = cli(tmp_path, "models", env=env, timeout=120)
+    assert r.returncode == 0 and r.stderr == b"", r.stderr
+    text = r.stdout.decode(encoding)
+    assert "Models as microsim run" in text and "theta" in text
+    (tmp_path / "bad.toml").write_text('[surface]\nkind = "flat"\n[simulation]\ntheta_i = [95]\n')
+    r = cli(tmp_path, "run", "bad.toml", env=env, timeout=120)
+    line = one_error_line(r)
+    assert r.returncode == 2 and "simulation.theta_i" in line
+    r.stderr.decode(encoding)  # written in the stream's encoding
+
+
+def test_ascii_text_spells_the_symbols():
+    from microsim.display import ascii_text
+
+    assert ascii_text("✓ θi = 30° ± 1.2 sr⁻¹, ✗ Δφ ≤ σ/λ, Šidák") == (
+        "ok thetai = 30 deg +/- 1.2 sr^-1, x Deltaphi <= sigma/lambda, Sidak"
+    )
