@@ -139,9 +139,15 @@ def write_json(path, obj) -> None:
 
 # --- directories -------------------------------------------------------------------------------
 def _temp_dir(out: Path, kind: str) -> Path:
+    """A new empty ``.OUT.KIND-<pid>-*`` beside ``out`` in the normal mode; removed again if
+    setting the mode fails (a full copy-on-write file system refuses even that)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     d = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.{kind}-{os.getpid()}-"))
-    os.chmod(d, dir_mode())
+    try:
+        os.chmod(d, dir_mode())
+    except BaseException:
+        os.rmdir(d)
+        raise
     return d
 
 

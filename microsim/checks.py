@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numbers
 import os
+from pathlib import Path
 
 import numpy as np
 
@@ -54,6 +55,27 @@ def check_memory(name: str, need: float, what: str) -> None:
             f"the limit of {gigabytes(limit)} ({MEMORY_FRACTION:.0%} of this "
             f"machine's physical memory)"
         )
+
+
+PATH_RULE = "a file path (non-empty text without NUL characters)"
+"""What ``file_path`` accepts, for messages."""
+
+
+def is_file_path(value) -> bool:
+    """Whether ``value`` can name a file: text or ``os.PathLike``, not empty, and without the
+    NUL character no file system path can hold."""
+    if not isinstance(value, (str, os.PathLike)):
+        return False
+    text = os.fspath(value)
+    return isinstance(text, str) and text != "" and "\x00" not in text
+
+
+def file_path(name: str, value) -> Path:
+    """``value`` as a ``Path``, or a UsageError naming ``name`` unless ``is_file_path``."""
+    if not is_file_path(value):
+        shown = os.fspath(value) if isinstance(value, os.PathLike) else value
+        raise UsageError(f"{name} must be {PATH_RULE}, got {short(shown)}")
+    return Path(value)
 
 
 def integer(name: str, value, lo: int = 1, hi: int | None = None, why: str = "") -> int:

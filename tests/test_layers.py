@@ -2,9 +2,9 @@
 layers, and the module import graph has no cycle (function-local imports included).
 
 Layers, bottom to top (docs/layout.md): core (errors, checkpoints, atomic, checks, vectors,
-stats, display) → analytic → surfaces → sim → wave → analysis → app (``microsim.app``: scene,
-runner, sweep, bench, bench_methods, bench_peer, wave_bench, view, cli; and
-``microsim.testing``).
+stats, display, kernel_cache) → analytic → surfaces → sim → wave → analysis → app
+(``microsim.app``: scene, runner, sweep, bench, bench_methods, bench_peer, wave_bench, view,
+cli; and ``microsim.testing``).
 """
 
 import ast
@@ -24,6 +24,7 @@ LAYERS = [
             "microsim.vectors",
             "microsim.stats",
             "microsim.display",
+            "microsim.kernel_cache",
         ),
     ),
     ("analytic", ("microsim.analytic",)),

@@ -15,10 +15,10 @@ import math
 import numbers
 
 import numpy as np
-from numba import njit
 
 from microsim.checks import UNIT_TOL
 from microsim.errors import UsageError
+from microsim.kernel_cache import cached_njit
 
 __all__ = [
     "fresnel",
@@ -211,7 +211,7 @@ def fresnel_real_arithmetic(c, ior):
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")  # no zero divisor; vectorisable
+@cached_njit(nogil=True, error_model="numpy")  # no zero divisor; vectorisable
 def fresnel_real_scalar(c, n2, k2):
     """Unpolarised Fresnel reflectance onto η = n + ik (n2 = n², k2 = k²) at c = cos θ
     (clipped to [0, 1]) in real arithmetic (Born & Wolf §14.2; Cook–Torrance form): with
@@ -234,7 +234,7 @@ def fresnel_real_scalar(c, n2, k2):
     return min(max(0.5 * (rs + rp), 0.0), 1.0)
 
 
-@njit(cache=True, nogil=True)
+@cached_njit(nogil=True)
 def _fresnel_real_fill(c, n2, k2, out):
     for i in range(len(c)):
         out[i] = fresnel_real_scalar(c[i], n2, k2)

@@ -66,7 +66,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..checks import check_memory
 from ..errors import EnvironmentFailure
+from .options import rays_option
 
 __all__ = [
     "BenchConfig",
@@ -121,6 +123,12 @@ def _bins():
     from microsim.sim import Bins
 
     return Bins(45, 37)  # 2° θo bins, 5° Δφ bins (folded)
+
+
+RAY_SET_BYTES = 320
+"""Bytes per primary ray while ``_ray_set`` prepares the throughput runs' rays (their
+origins, the pipeline's per-ray arrays and the masking rays; measured 274 at its peak): a
+``--rays`` above ``checks.memory_limit()`` / this is refused before anything runs."""
 
 
 def _ray_set(tracer, wi: np.ndarray, rays: int):
@@ -737,7 +745,9 @@ def bench_config(
     rays: int | None = None, quick: bool = False, skip_accuracy: bool = False
 ) -> BenchConfig:
     """The configuration of ``microsim bench``: ``QUICK`` or the defaults, ``rays`` (primary
-    rays of the throughput runs, an integer >= 1) overriding either."""
+    rays of the throughput runs, an integer >= 1) overriding either. Rays whose prepared
+    arrays would not fit in memory (``RAY_SET_BYTES`` each) are refused, naming ``--rays``
+    and the limit (``checks.check_memory``)."""
     if rays is not None and (isinstance(rays, bool) or int(rays) != rays or rays < 1):
         from ..errors import UsageError
 
@@ -745,6 +755,12 @@ def bench_config(
     conf = dict(QUICK) if quick else {}
     if rays is not None:
         conf["rays"] = int(rays)
+        check_memory(
+            "--rays",
+            RAY_SET_BYTES * conf["rays"],
+            f"preparing {conf['rays']:,} primary rays and their masking rays for the "
+            f"throughput runs ({RAY_SET_BYTES} bytes per ray)",
+        )
     return BenchConfig(skip_accuracy=skip_accuracy, **conf)
 
 
@@ -770,7 +786,7 @@ def add_bench_command(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.add_argument(
         "--rays",
-        type=int,
+        type=rays_option,
         default=None,
         help=f"primary rays of the throughput runs (default {BenchConfig.rays}; "
         f"with --quick {QUICK['rays']})",

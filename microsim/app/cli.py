@@ -18,6 +18,7 @@ import threading
 import traceback
 
 from .. import __version__
+from ..display import ascii_fallback
 from ..errors import EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure, UsageError
 from .options import rays_option
 
@@ -274,6 +275,7 @@ def main(argv=None) -> int:
     Called as the process's command line (``argv`` None), a Ctrl-C after the command finished
     (while the interpreter shuts down) is ignored: the work is done and its status stands. Called
     with ``argv``, the caller's SIGINT handler is restored on return."""
+    ascii_fallback(sys.stdout, sys.stderr)  # symbols as ASCII where a stream lacks them
     with _CtrlC(ignore_after=argv is None) as ctrl_c:
         return _main(argv, ctrl_c)
 

@@ -86,11 +86,12 @@ import numpy as np
 
 from microsim import analytic as an
 from microsim import surfaces
+from microsim.checks import PATH_RULE, file_path, is_file_path
 from microsim.errors import EnvironmentFailure, UsageError
 from microsim.sim.arguments import MAX_RAYS
 from microsim.surfaces.heightfields import abc_ensemble_ndf, gaussian_ensemble_ndf
 from microsim.surfaces.loader import check_heightfield_file
-from microsim.surfaces.surface import is_anisotropic
+from microsim.surfaces.surface import anisotropy_of
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -152,6 +153,7 @@ NAME_RULE = (
 _BOOL = (lambda v: isinstance(v, bool), "true or false")
 _ANGLE = (lambda v: _is_num(v) and -360.0 <= v <= 360.0, "degrees in [-360, 360]")
 _STR = (lambda v: isinstance(v, str), "a string")
+_PATH = (is_file_path, PATH_RULE)
 _C_ABC = (lambda v: _is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
 _BAND = (lambda v: _is_num(v) and v >= 1, "a number >= 1")
 
@@ -250,7 +252,7 @@ _KINDS = {
         ),
     ),
     "file": _Kind(
-        {"path": (_REQUIRED, _STR), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
+        {"path": (_REQUIRED, _PATH), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
         lambda p, seed, scale, base: surfaces.from_file(base / p["path"], p["dx"], p["periodic"]),
         lambda p: None,
     ),
@@ -430,8 +432,8 @@ class Scene:
     @property
     def anisotropic(self) -> bool:
         """Oriented V-grooves, a Gaussian field with two correlation lengths or an ABC field
-        with two B (``surfaces.surface.is_anisotropic``)."""
-        return is_anisotropic(self.surface.kind, self.surface.params)
+        with two B (``surfaces.surface.anisotropy_of``)."""
+        return anisotropy_of(self.surface.kind, self.surface.params) is not None
 
     @property
     def full_azimuth(self) -> bool:
@@ -693,6 +695,7 @@ def read_toml(path, what: str = "scene") -> dict:
     or tables nested too deeply, or malformed TOML; a leading byte-order mark is allowed.
     Other OS errors (permission denied, an I/O error) are an ``EnvironmentFailure`` naming the
     path (exit status 1, as for any file the machine will not let microsim read)."""
+    file_path(f"the {what} file", path)
     try:
         return _parse_toml(path, what)
     except OSError as e:

@@ -29,7 +29,7 @@ from microsim import vectors
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
 from microsim.sim.predict import bin_average
-from microsim.surfaces.surface import is_anisotropic
+from microsim.surfaces.surface import anisotropy_of
 
 __all__ = ["BRDFTable", "FLOOR"]
 
@@ -86,7 +86,7 @@ class BRDFTable:
         """The table of a ``Result`` on folded bins at φi = 0 (all incidences): its simulated
         BRDF, or the bin averages of ``model`` (one of ``result.models``; stderr 0). A result
         of an anisotropic surface (``meta["surface"]``, judged as ``microsim measure`` judges
-        a scene: ``surfaces.surface.is_anisotropic``) is refused: its BRDF depends on the
+        a scene: ``surfaces.surface.anisotropy_of``) is refused: its BRDF depends on the
         incidence azimuth, which the table does not hold."""
         if not result.bins.folded or np.any(np.asarray(result.phi_i) != 0.0):
             raise UsageError(
@@ -97,10 +97,10 @@ class BRDFTable:
         if isinstance(surface, dict):
             params = surface.get("nominal", surface)  # a ray run's "nominal"; a wave run's own
             kind = surface.get("kind")
-            if isinstance(params, dict) and is_anisotropic(kind, params):
+            what = anisotropy_of(kind, params) if isinstance(params, dict) else None
+            if what is not None:
                 raise UsageError(
-                    f"result must be of an isotropic surface, got one of an anisotropic {kind} "
-                    "surface (oriented grooves, a second correlation length or B, a grating): "
+                    f"result must be of an isotropic surface, got one of {what}: "
                     "its BRDF depends on the incidence azimuth, which a table over θi and "
                     "folded Δφ does not hold"
                 )

@@ -42,9 +42,10 @@ import os
 import threading
 
 import llvmlite.binding as llvm
-import numba as nb
 import numpy as np
 from numba import types as nb_types
+
+from microsim.kernel_cache import cached_njit
 
 __all__ = [
     "PacketBindingError",
@@ -207,7 +208,7 @@ def _layout(width: int) -> np.ndarray:
     return np.array(fields, dtype=np.int64) * width
 
 
-@nb.njit(nogil=True, cache=True)
+@cached_njit(nogil=True)
 def _trace(scene, W, lay, o, d, tfar, occlusion, prim, t_out, buf, ubuf, valid, args):
     """Rays o[i] + t d[i] (d of shape (1, 3): shared), t in [0, tfar[i]], W (4, 8 or 16) per
     packet call; ``lay`` = ``_layout(W)``. Intersection: prim[i] = primID (−1 without a hit),

@@ -143,7 +143,9 @@ def simulate(
     taken relative to φi + ψ_b; ``paths.RotatedIncidencePath``). Valid only for statistically
     isotropic surfaces (e.g. Gaussian or ABC heightfields with isotropic spectra): the expected
     BRDF is then unchanged and one tile is averaged over incident azimuths; it has no effect
-    on ``azimuth_average`` surfaces (V-grooves, already azimuth-averaged per ray). Off by
+    on ``azimuth_average`` surfaces (V-grooves, already azimuth-averaged per ray). Refused
+    (``UsageError``) on an anisotropic surface (``Surface.anisotropy``: oriented V-grooves,
+    two correlation lengths, gratings), whose BRDF depends on the incidence azimuth. Off by
     default.
 
     Standard error (``tallies.bin_estimate``): stratified origins use the paired-strata
@@ -234,7 +236,9 @@ def estimate(
     """Bin-averaged BRDF of ``experiment`` by ``estimator`` (Mikkelsen 2009, eq. 9), run as
     ``execution`` says; ``resume``: a partial Result of the same experiment and estimator to
     continue (``simulate`` documents every field, the interrupt and the resume). Returns a
-    ``Result`` (BRDF in sr⁻¹)."""
+    ``Result`` (BRDF in sr⁻¹). Each description must be of its class (a ``UsageError``
+    names the argument otherwise, e.g. when they are passed in another order)."""
+    _check_descriptions(experiment=experiment, estimator=estimator, execution=execution)
     ex, est, run = experiment, estimator, execution
     if ex.bounces != 1 and est.masking == "exact":
         raise UsageError(
@@ -284,6 +288,18 @@ def estimate(
     return simulation_result(
         th, ph, ex.bins, state.tallies, n_done, plan.per_real, state.done, meta, plan.slots
     )
+
+
+def _check_descriptions(**given) -> None:
+    """A UsageError naming the first of ``estimate``'s descriptions (experiment, estimator,
+    execution) that is not of its class, with the class it got and the order expected."""
+    for (name, value), kind in zip(given.items(), (Experiment, Estimator, Execution)):
+        if not isinstance(value, kind):
+            raise UsageError(
+                f"{name} must be a microsim.sim.{kind.__name__}, got "
+                f"{type(value).__module__}.{type(value).__qualname__} (the arguments are "
+                f"estimate(Experiment, Estimator, Execution), in this order)"
+            )
 
 
 def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
@@ -352,6 +368,7 @@ def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Exec
                     continue
                 t0 = time.perf_counter()
                 surf = plan.get_surface(r)
+                _check_azimuth_average(surf, est)
                 smeta = _surface_meta(surf)
                 _check_same_surface(state.surfaces[r], smeta, r)
                 prepared, info = _prepare(surf, smeta["fingerprint"], plan, est, run)
@@ -370,6 +387,18 @@ def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Exec
         except KeyboardInterrupt:
             interrupted = True
     return timings, build, interrupted
+
+
+def _check_azimuth_average(surface, est: Estimator) -> None:
+    """``isotropic=True`` averages over the incidence azimuth: a UsageError on an anisotropic
+    surface (``Surface.anisotropy``), whose BRDF depends on that azimuth."""
+    what = getattr(surface, "anisotropy", None) if est.isotropic else None
+    if what is not None:
+        raise UsageError(
+            f"isotropic=True averages the BRDF over the incidence azimuth, but the surface is "
+            f"anisotropic ({what}): its BRDF depends on that azimuth, so the average answers "
+            f"another question; pass isotropic=False and choose the azimuths with phi_i"
+        )
 
 
 def _prepare(surf, fingerprint: str, plan: _Plan, est: Estimator, run: Execution):

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from microsim.checks import check_memory, positive
+from microsim.checks import check_memory, file_path, positive
 from microsim.errors import UsageError
 
 from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
@@ -165,7 +165,7 @@ def check_heightfield_file(
     (``_check_values``). ``dx`` (None: those two not checked) must be a finite length > 0.
     Every problem raises a one-line UsageError naming the file (or ``dx``); OS errors such as
     a permission denied propagate as ``OSError``."""
-    path = Path(path)
+    path = file_path("path", path)
     if dx is not None:
         positive("dx", dx)
     _regular_file(path)
@@ -203,7 +203,7 @@ def read_heights(path, periodic: bool = False) -> np.ndarray:
     whitespace-separated text (any other suffix). Raises a one-line UsageError naming the file
     for a missing or unreadable file, a wrong dtype, ndim or size, non-finite values, or a
     grid whose surface (mirrored unless ``periodic``) would not fit in memory."""
-    path = Path(path)
+    path = file_path("path", path)
     _regular_file(path)
     try:
         if path.suffix == ".npy":

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 
@@ -28,10 +28,10 @@ __all__ = [
     "Surface",
     "Predicted",
     "flat",
-    "is_anisotropic",
     "heightfield_mesh",
     "facet_slopes",
     "check_relief",
+    "anisotropy_of",
     "MAX_RELIEF",
     "MAX_COORDINATE",
 ]
@@ -42,6 +42,28 @@ ray through copies of the tile; one 89.5° from the normal crosses the tile ~230
 height it descends, so a relief of 1000 tiles already allows ~2·10⁵ crossings per ray."""
 MAX_COORDINATE = 1e30
 """Largest vertex coordinate: Embree traces in float32 (max 3.4e38), with room for products."""
+
+
+_ANISOTROPIC = {
+    "vgrooves": ("oriented", "oriented V-grooves"),
+    "gaussian": ("corr_len_y", "a Gaussian field with two correlation lengths"),
+    "abc": ("B_y", "an ABC field with two B"),
+    "grating": (None, "a grating, its grooves along y"),
+}
+"""Surface kind → (the generator parameter that makes it anisotropic, None: always; what it
+then is)."""
+
+
+def anisotropy_of(kind: str, params) -> str | None:
+    """What makes a surface of ``kind`` with generator parameters ``params`` (a scene's
+    ``[surface]`` table or ``Surface.nominal``) anisotropic — its BRDF then depends on the
+    incidence azimuth: oriented V-grooves, a Gaussian field with two correlation lengths, an
+    ABC field with two B, a grating — or None for a statistically isotropic one (a file's
+    heightfield counts as isotropic: nothing says otherwise)."""
+    key, what = _ANISOTROPIC.get(kind, ("", None))
+    if key is None or params.get(key) not in (None, False):
+        return what
+    return None
 
 
 def check_relief(name: str, zmin: float, zmax: float, tile) -> None:
@@ -61,19 +83,6 @@ def check_relief(name: str, zmin: float, zmax: float, tile) -> None:
             f"the tile ~{230 * relief / side:.2g} times (reduce the heights or "
             f"enlarge the tile)"
         )
-
-
-def is_anisotropic(kind: str, params: Mapping) -> bool:
-    """Whether a surface of generator ``kind`` with parameters ``params`` (a scene's
-    ``[surface]`` table or a ``Surface.nominal``) is anisotropic — its BRDF depends on the
-    incidence azimuth: oriented V-grooves, a Gaussian field with two correlation lengths
-    (``corr_len_y``), an ABC field with two B (``B_y``), a grating."""
-    if kind == "grating":
-        return True
-    if kind == "vgrooves":
-        return bool(params.get("oriented", False))
-    second = {"gaussian": "corr_len_y", "abc": "B_y"}.get(kind)
-    return second is not None and params.get(second) is not None
 
 
 @dataclass(frozen=True)
@@ -171,6 +180,11 @@ class Surface:
             if k not in shown
         ]
         return f"Surface({', '.join(parts)})"
+
+    @property
+    def anisotropy(self) -> str | None:
+        """What makes this surface anisotropic (``anisotropy_of``), or None."""
+        return anisotropy_of(self.kind, self.nominal)
 
     def mesh(self):
         """``trimesh.Trimesh`` (process=False) of the tile, centred on the origin.

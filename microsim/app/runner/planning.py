@@ -18,6 +18,7 @@ import numpy as np
 from ...analysis.budget import AUTO_TARGET as REALISATION_TARGET
 from ...analysis.budget import MAX_AUTO, MIN_AUTO
 from ...atomic import json_safe
+from ...checks import file_path
 from ...errors import UsageError
 from ...sim import Bins, Result
 from ..scene import incidence_pairs, load_scene
@@ -327,7 +328,7 @@ def check_output_path(out: Path, option: str, scene_file=None) -> None:
     ``scene_file`` (the scene or sweep file read), an existing non-directory, one whose
     parent is not a directory, or a name too long for its temporaries. ``microsim run`` and
     ``microsim sweep`` check their ``--out`` with it."""
-    norm = Path(os.path.normpath(out))
+    norm = Path(os.path.normpath(file_path(option, out)))
     if norm.name in ("", ".", ".."):
         raise UsageError(
             f"{option} {out}: must name a directory of its own, not the current "

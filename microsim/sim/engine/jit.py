@@ -1,4 +1,5 @@
-"""Compile options of every kernel (numba, ``nogil``) and the rules they follow.
+"""Compile options of every kernel (numba, ``nogil``, cached on disk where a cache folder is
+writable: ``microsim.kernel_cache``) and the rules they follow.
 
 Why compiled: written as NumPy array passes, the steps around Embree's traversal (ray
 origins, segment bounds, hit points, masking-ray starts, per-facet look-ups, tallies) cost
@@ -33,25 +34,25 @@ scratch (``allocating``) keep the runtime; their per-ray loops index arrays dire
 
 from __future__ import annotations
 
-from numba import njit
+from microsim.kernel_cache import cached_njit
 
 __all__ = ["compiled", "inlined", "vectorised", "vector_inlined", "allocating", "TILE"]
 
-compiled = njit(cache=True, nogil=True, _nrt=False)
+compiled = cached_njit(nogil=True, _nrt=False)
 
 
-inlined = njit(cache=True, nogil=True, inline="always", _nrt=False)  # the per-ray loops' helpers
+inlined = cached_njit(nogil=True, inline="always", _nrt=False)  # the per-ray loops' helpers
 
 
 # branch-free passes the compiler vectorises: float division by zero gives inf/NaN there
 # instead of raising (the check is a branch per division), values the selects then discard
-vectorised = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+vectorised = cached_njit(nogil=True, error_model="numpy", _nrt=False)
 
 # ``vectorised`` kernels that allocate their per-tile scratch (numba's runtime kept)
-allocating = njit(cache=True, nogil=True, error_model="numpy")
+allocating = cached_njit(nogil=True, error_model="numpy")
 
 
 TILE = 1024  # rays per tile of a kernel's vectorised passes (its scratch stays in L1/L2)
 
 
-vector_inlined = njit(cache=True, nogil=True, error_model="numpy", inline="always", _nrt=False)
+vector_inlined = cached_njit(nogil=True, error_model="numpy", inline="always", _nrt=False)
