@@ -1,9 +1,12 @@
 """Faults of `microsim run --scheduler` and `microsim sweep`: a Dask scheduler killed mid-run is
 an environment failure (status 1, one line naming it, no Dask log flood) that keeps the work
-done for a `--resume` ending bitwise equal to the uninterrupted run."""
+done for a `--resume` ending bitwise equal to the uninterrupted run; a sweep of oriented
+V-grooves judges them by the model `microsim run` judges them by, and a sweep that would leave
+them without a verdict is refused up front."""
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import signal
@@ -16,6 +19,8 @@ import pytest
 
 from microsim.app.cli import main
 from microsim.app.runner import plan_run, tracing
+from microsim.app.sweep import load_sweep, run_task
+from microsim.app.sweep.task import load_result
 from microsim.checkpoints import set_hook
 
 SCENE = """\
@@ -129,3 +134,67 @@ def test_a_killed_scheduler_keeps_the_tallies_for_a_resume(tmp_path, scheduler, 
             assert np.array_equal(getattr(whole, k), resumed[k], equal_nan=True), k
         for k, v in whole.tallies.items():
             assert np.array_equal(v, resumed[f"tally_{k}"]), k
+
+
+ORIENTED_SWEEP = """\
+name = "oriented"
+rays = 20_000
+theta_bins = 10
+phi_bins = 8
+theta_i = [20, 50]
+models = MODELS
+[[scenes]]
+name = "og"
+[scenes.surface]
+kind = "vgrooves"
+n_grooves = 100
+ndf = "beckmann"
+m = 0.3
+oriented = true
+"""
+
+
+def _sweep_cli(tmp_path, models: str) -> subprocess.CompletedProcess:
+    (tmp_path / "oriented.toml").write_text(ORIENTED_SWEEP.replace("MODELS", models))
+    args = ["sweep", "oriented.toml", "--out", "out", "--workers", "1"]
+    return subprocess.run(
+        [sys.executable, "-m", "microsim.app.cli", *args],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+
+
+def test_an_oriented_sweep_judges_every_task_by_the_oriented_vgroove_model(tmp_path):
+    """Oriented grooves have no ensemble NDF: each task gets the verdict of
+    ts-vgroove-oriented (the model `microsim run` judges them by, with the tile's departure),
+    and the isotropic-NDF smith variant asked beside it is not judged on them."""
+    proc = _sweep_cli(tmp_path, '["vgroove", "smith"]')
+    assert proc.returncode == 0, proc.stderr
+    with open(tmp_path / "out" / "summary.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2, rows
+    for row in rows:
+        assert row["model"] == "ts-vgroove-oriented", row
+        assert row["verdict"] in ("agrees", "deviates", "inconclusive"), row
+        assert float(row["rel_rms"]) >= 0 and float(row["tile_departure"]) > 0, row
+    assert {float(r["theta_i"]) for r in rows} == {20.0, 50.0}
+
+
+def test_an_oriented_sweep_without_the_vgroove_model_is_refused(tmp_path):
+    proc = _sweep_cli(tmp_path, '["smith", "none"]')
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert "oriented" in lines[0] and '"vgroove"' in lines[0] and "models" in lines[0], lines
+    assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
+
+
+def test_an_oriented_task_record_without_its_verdict_is_not_complete(tmp_path):
+    """A task file of oriented grooves holding no verdict is computed again by a rerun."""
+    (tmp_path / "oriented.toml").write_text(ORIENTED_SWEEP.replace("MODELS", '["vgroove"]'))
+    task = load_sweep(tmp_path / "oriented.toml").tasks[0]
+    (tmp_path / "tasks").mkdir()
+    record = run_task(task, tmp_path)
+    assert [v["model"] for v in record["verdicts"]] == ["ts-vgroove-oriented"]
+    assert load_result(task, tmp_path) is not None
+    path = tmp_path / "tasks" / f"{task.id}.json"
+    path.write_text(json.dumps({**record, "verdicts": []}))
+    assert load_result(task, tmp_path) is None
