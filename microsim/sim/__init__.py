@@ -20,6 +20,7 @@ walk and its compiled per-ray loops), the estimator's compiled loops (``bin_kern
 """
 
 from .bins import Bins
+from .cluster import SchedulerLost
 from .estimator import estimate, ray_events, simulate
 from .experiment import Estimator, Execution, Experiment
 from .paths import LEDGER, Events
@@ -44,4 +45,5 @@ __all__ = [
     "BLOCK",
     "LEDGER",
     "RaysDone",
+    "SchedulerLost",
 ]

@@ -20,20 +20,33 @@ a task is (surface, incidence, block range) → that range's per-block tallies.
   ``distributed.scheduler.allowed-failures`` workers in a row fails the run).
 * Ctrl-C: as locally — the chunk in hand is tallied, the queued tasks are cancelled, and the
   partial ``Result`` keeps every tallied block for a resume.
+* The scheduler lost mid-run (killed, its host or the network gone): Dask cancels every task
+  of the client; the run stops as after a Ctrl-C, with every block tallied so far, but raises
+  ``SchedulerLost`` (an ``EnvironmentFailure``) carrying that partial ``Result``, which a
+  ``resume`` — locally or on another cluster — completes to the uninterrupted run bit for bit.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import CancelledError
+from contextlib import contextmanager
 from dataclasses import dataclass
 
-from microsim.errors import UsageError
+from microsim.errors import EnvironmentFailure, UsageError
 from microsim.vectors import spherical_deg
 
 from .bounces import chain_task
 from .paths import Incidence, tracer_for
 from .tallies import ChunkTallies
 
-__all__ = ["ClusterPool", "RemoteSurface", "check_client", "tracer_info", "IN_FLIGHT_PER_THREAD"]
+__all__ = [
+    "ClusterPool",
+    "RemoteSurface",
+    "SchedulerLost",
+    "check_client",
+    "tracer_info",
+    "IN_FLIGHT_PER_THREAD",
+]
 
 MIN_TASK_BLOCKS = 64
 """Blocks (of ``streams.BLOCK`` = 4096 rays) a cluster task carries at least, but for the
@@ -57,6 +70,32 @@ def check_client(client):
             f"{type(client).__name__}"
         )
     return client
+
+
+class SchedulerLost(EnvironmentFailure):
+    """The Dask scheduler at ``address`` was lost mid-run. ``partial``: the run's ``Result``
+    of every block tallied before (``meta["partial"]``, ``meta["scheduler_lost"]``: the
+    address), to continue with ``estimate(..., resume=partial)``; set by ``estimate``."""
+
+    def __init__(self, address: str, partial=None):
+        super().__init__(f"the Dask scheduler {address} was lost mid-run")
+        self.address, self.partial = address, partial
+
+
+def _connected(client) -> bool:
+    """Whether ``client`` still talks to its scheduler (Dask's status "running")."""
+    return client.status == "running"
+
+
+@contextmanager
+def _scheduler_calls(client):
+    """``SchedulerLost`` for what a call to a lost scheduler raises: the tasks Dask cancelled
+    when the connection closed (``CancelledError``; this module waits for none it cancelled
+    itself) or a failed connection (``OSError``, ``TimeoutError``)."""
+    try:
+        yield
+    except (CancelledError, OSError, TimeoutError):
+        raise SchedulerLost(client.scheduler.address) from None
 
 
 @dataclass(frozen=True)
@@ -133,10 +172,11 @@ class RemoteSurface:
 
     def __init__(self, client, surface, masking: str, fingerprint: str):
         self.client, self.masking, self.fingerprint = client, masking, fingerprint
-        self.future = client.scatter(surface, hash=False, broadcast=True)
-        self.info = client.submit(
-            _tracer_info, self.future, masking, fingerprint, pure=False
-        ).result()
+        with _scheduler_calls(client):
+            self.future = client.scatter(surface, hash=False, broadcast=True)
+            self.info = client.submit(
+                _tracer_info, self.future, masking, fingerprint, pure=False
+            ).result()
 
     def chunks(self, theta_i, phi_i, bins, ior, rays, key, origins, isotropic, bounces):
         """The thread task of one incidence (``bounces.chain_task``'s role) as a cluster task:
@@ -148,8 +188,9 @@ class RemoteSurface:
         return _RemoteTask(spec, self.future)
 
     def release(self) -> None:
-        """Drop the scattered surface from the cluster."""
-        self.future.release()
+        """Drop the scattered surface from the cluster (nothing to drop on a lost scheduler)."""
+        if _connected(self.client):
+            self.future.release()
 
 
 @dataclass(frozen=True)
@@ -166,10 +207,12 @@ class _Pending:
         self.future = future
 
     def result(self) -> ChunkTallies:
-        return ChunkTallies(self.future.result())
+        with _scheduler_calls(self.future.client):
+            return ChunkTallies(self.future.result())
 
     def cancel(self) -> None:
-        self.future.cancel()
+        if _connected(self.future.client):  # a lost scheduler has cancelled it already
+            self.future.cancel()
 
 
 class ClusterPool:

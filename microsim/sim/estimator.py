@@ -49,7 +49,7 @@ from .arguments import (
 )
 from .bins import Bins
 from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
-from .cluster import ClusterPool, RemoteSurface, tracer_info
+from .cluster import ClusterPool, RemoteSurface, SchedulerLost, tracer_info
 from .experiment import Estimator, Execution, Experiment
 from .paths import LEDGER, MASKING, Events, Incidence, trace_events, tracer_for
 from .progress import RaysDone
@@ -237,7 +237,9 @@ def estimate(
     ``execution`` says; ``resume``: a partial Result of the same experiment and estimator to
     continue (``simulate`` documents every field, the interrupt and the resume). Returns a
     ``Result`` (BRDF in sr⁻¹). Each description must be of its class (a ``UsageError``
-    names the argument otherwise, e.g. when they are passed in another order)."""
+    names the argument otherwise, e.g. when they are passed in another order). On a cluster
+    whose scheduler is lost mid-run it raises ``SchedulerLost`` (an ``EnvironmentFailure``)
+    holding the partial Result to resume."""
     _check_descriptions(experiment=experiment, estimator=estimator, execution=execution)
     ex, est, run = experiment, estimator, execution
     if ex.bounces != 1 and est.masking == "exact":
@@ -248,8 +250,9 @@ def estimate(
     plan = _plan(ex, est, run)
     state = _start(plan, ex, resume)
     done_before = state.done.copy()
+    cluster = _cluster_meta(run.cluster) if run.cluster is not None else None
     t_all = time.perf_counter()
-    timings, build, interrupted = _trace(plan, state, ex, est, run)
+    timings, build, interrupted, lost = _trace(plan, state, ex, est, run)
     elapsed = time.perf_counter() - t_all
     per_real = np.array(plan.per_real)[:, None]
     n_done = np.minimum(state.done * BLOCK, per_real)
@@ -278,16 +281,22 @@ def estimate(
         "rays_traced": traced,
         "rays_per_second": traced / (elapsed - build) if elapsed > build and traced else None,
     }
-    if run.cluster is not None:  # absent: local threads (``threads``)
-        meta["cluster"] = _cluster_meta(run.cluster)
+    if cluster is not None:  # absent: local threads (``threads``)
+        meta["cluster"] = cluster
+    if lost is not None:  # absent: the scheduler stayed
+        meta["scheduler_lost"] = lost.address
     if ex.bounces != 1:  # absent: 1 (single-bounce results keep their meta)
         meta["bounces"] = ex.bounces
         meta["max_bounces"] = MAX_BOUNCES
         meta["weight_floor"] = WEIGHT_FLOOR if ex.bounces == "all" else 0.0
     th, ph = np.array(ex.theta_i), np.array(ex.phi_i)
-    return simulation_result(
+    result = simulation_result(
         th, ph, ex.bins, state.tallies, n_done, plan.per_real, state.done, meta, plan.slots
     )
+    if lost is not None:
+        lost.partial = result
+        raise lost
+    return result
 
 
 def _check_descriptions(**given) -> None:
@@ -358,8 +367,9 @@ def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
 
 def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Execution):
     """Trace every block not yet done, realisation by realisation, incidence by incidence;
-    (seconds per realisation, seconds building surfaces and tracers, interrupted)."""
-    timings, build, interrupted = [], 0.0, False
+    (seconds per realisation, seconds building surfaces and tracers, interrupted, the
+    ``SchedulerLost`` that stopped a cluster run or None)."""
+    timings, build, interrupted, lost = [], 0.0, False, None
     pool = ClusterPool(run.cluster) if run.cluster is not None else thread_pool(run.threads)
     with DeferredInterrupt() as stop:
         try:
@@ -386,7 +396,9 @@ def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Exec
                 del prepared
         except KeyboardInterrupt:
             interrupted = True
-    return timings, build, interrupted
+        except SchedulerLost as e:  # stops the run as an interrupt does; ``estimate`` raises it
+            lost = e
+    return timings, build, interrupted, lost
 
 
 def _check_azimuth_average(surface, est: Estimator) -> None:
@@ -519,7 +531,8 @@ def ray_events(
 
 # --- run description and resume ------------------------------------------------------------
 def _cluster_meta(client) -> dict:
-    """Workers and threads of the cluster that traced."""
+    """Workers and threads of the cluster that traces (asked before the run: a lost
+    scheduler cannot say afterwards)."""
     nthreads = client.nthreads()
     return {"workers": len(nthreads), "threads": int(sum(nthreads.values()))}
 

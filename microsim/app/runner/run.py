@@ -12,11 +12,13 @@
    a staging directory and publish it in one rename (``publishing``).
 
 An interrupted simulation, or an interrupt after it, saves the tallies for ``--resume``
-(status 130); no report is written from partial work, and no finished result is replaced by
-it: tallies read from the output (a finished run re-analysed) are not written again, and a
-``--force`` run leaves a finished output as it was. A Ctrl-C while the finished directory is
-moved in waits until it is in place (status 130, the result complete). An output a killed run
-was replacing is recovered first (``atomic.recover_publish``).
+(status 130); so does a Dask scheduler lost during the simulation (``--scheduler``), then an
+``EnvironmentFailure`` naming it (status 1). No report is written from partial work, and no
+finished result is replaced by it: tallies read from the output (a finished run re-analysed)
+are not written again, and a ``--force`` run leaves a finished output as it was. A Ctrl-C while
+the finished directory is moved in waits until it is in place (status 130, the result
+complete). An output a killed run was replacing is recovered first
+(``atomic.recover_publish``).
 """
 
 from __future__ import annotations
@@ -43,7 +45,8 @@ from ...analysis.pictures import appearance
 from ...analysis.report import albedo_stderr
 from ...analysis.verdicts import verdicts_for_result
 from ...checkpoints import checkpoint
-from ...errors import UsageError
+from ...errors import EnvironmentFailure, UsageError
+from ...sim import SchedulerLost
 from ...sim.schedule import DeferredInterrupt
 from ..cluster import connect
 from . import orders, side_studies, tracing, wave_run
@@ -137,6 +140,11 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     if plan.auto:
         run["auto"] = tracing.auto_summary(result)
     result = result.with_meta(run=run)
+    if result.is_partial and result.meta.get("scheduler_lost"):
+        kept = _keep(plan, result, dest, "partial tallies", f"continue with {hint}", False)
+        raise EnvironmentFailure(
+            f"--scheduler {plan.scheduler}: the Dask scheduler was lost mid-run; {kept}"
+        )
     if result.is_partial:
         return _interrupted(
             plan, result, dest, log, "", "partial tallies", f"continue with {hint}", from_previous
@@ -168,26 +176,32 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
 def _interrupted(
     plan: RunPlan, result, dest: Path, log, when: str, what: str, how: str, from_previous: bool
 ):
-    """Status 130 after Ctrl-C, the tallies saved in ``dest`` for ``--resume`` unless that
-    would lose something: tallies read from ``dest`` (``from_previous``: ``result`` derives
-    from ``plan.previous``) are not written again (a finished run re-analysed keeps its
-    report), and a run replacing a finished result (``--force``) leaves it as it was, dropping
-    its own tallies."""
-    if from_previous:
-        log(f"microsim: interrupted{when}; {dest} is unchanged ({how})")
-    elif plan.partial_dir is None and plan.previous is None and holds_finished_result(dest):
-        log(
-            f"microsim: interrupted{when}; {dest} keeps its finished result (this run's "
-            f"tallies are dropped; rerun with --force to replace it)"
-        )
-    else:
-        save_tallies(result, dest)
-        log(f"microsim: interrupted{when}; {what} saved in {dest} ({how})")
+    """Status 130 after Ctrl-C, the tallies kept as ``_keep`` says."""
+    log(f"microsim: interrupted{when}; {_keep(plan, result, dest, what, how, from_previous)}")
     return RunOutcome(130, plan.out)
 
 
+def _keep(plan: RunPlan, result, dest: Path, what: str, how: str, from_previous: bool) -> str:
+    """Save the tallies of a run cut short in ``dest`` for ``--resume`` unless that would lose
+    something, and say what was done: tallies read from ``dest`` (``from_previous``:
+    ``result`` derives from ``plan.previous``) are not written again (a finished run
+    re-analysed keeps its report), and a run replacing a finished result (``--force``) leaves
+    it as it was, dropping its own tallies."""
+    if from_previous:
+        return f"{dest} is unchanged ({how})"
+    if plan.partial_dir is None and plan.previous is None and holds_finished_result(dest):
+        return (
+            f"{dest} keeps its finished result (this run's tallies are dropped; rerun with "
+            f"--force to replace it)"
+        )
+    save_tallies(result, dest)
+    return f"{what} saved in {dest} ({how})"
+
+
 def _trace(plan: RunPlan, prev, progress: bool):
-    """The main simulation of ``plan`` with a progress bar, continuing ``prev``'s tallies."""
+    """The main simulation of ``plan`` with a progress bar, continuing ``prev``'s tallies; a
+    lost scheduler gives its partial result (``meta["scheduler_lost"]``), as an interrupt
+    does."""
     bar = RayProgress(tracing.remaining_rays(plan, prev).sum(), plan.scene.name, enabled=progress)
     theta_i, phi_i = plan.incidences
     try:
@@ -207,6 +221,8 @@ def _trace(plan: RunPlan, prev, progress: bool):
                 phi_i=phi_i,
                 cluster=client,
             )
+    except SchedulerLost as lost:
+        return lost.partial
     finally:
         bar.close()
 

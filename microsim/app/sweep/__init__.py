@@ -9,6 +9,7 @@ Sweep file (TOML, UTF-8)::
     theta_bins = 45                     # outgoing bins (folded Δφ)
     phi_bins = 37
     models = ["vgroove", "smith"]       # Torrance–Sparrow shadowing variants to judge
+                                        #   (oriented V-grooves: "vgroove" alone, required)
     masking = "traced"                  # or "exact" (V-grooves only)
     theta_i = [0, 30, 60, 80]           # degrees: the incidence axis
 
@@ -24,7 +25,8 @@ Sweep file (TOML, UTF-8)::
 A task is one (scene, parameter combination, material, θi). Its result — the verdict of each
 model (``microsim.analysis.verdicts.verdicts_for_result``: χ²/dof, p, max |z|, relative RMS
 error over the bins carrying 90 % of the energy, …) against the bin-averaged Torrance–Sparrow
-prediction with the scene's NDF, judged exactly as ``microsim run`` judges it: an ensemble
+prediction with the scene's NDF (oriented V-grooves: ``ts-vgroove-oriented`` for
+"vgroove", ``task.judged_models``), judged exactly as ``microsim run`` judges it: an ensemble
 model on the one traced tile, with the tile's own departure from its ensemble computed where
 the surface allows (V-grooves), so the ``verdict`` column reads "agrees", "deviates" or
 "inconclusive" (``verdicts.verdict_kind``) as the run's table would — is written as
@@ -32,8 +34,8 @@ the surface allows (V-grooves), so the ``verdict`` column reads "agrees", "devia
 if its simulation is complete (an interrupted simulation writes nothing); writes are atomic
 (``microsim.atomic``). The id is a hash of the task's full description. A rerun computes every
 task whose JSON is missing, unreadable, or not a complete result of that very task (fewer rays
-than requested, marked partial, no verdicts); ``gather`` ignores such files too. Finally every
-task JSON is gathered into ``OUT/summary.csv``, ``OUT/summary.md`` and
+than requested, marked partial, not one verdict per model it is judged by); ``gather`` ignores
+such files too. Finally every task JSON is gathered into ``OUT/summary.csv``, ``OUT/summary.md`` and
 ``OUT/error_vs_roughness.png``.
 
 Interrupts (Ctrl-C, or SIGTERM to the sweep's process): the finished tasks stay in

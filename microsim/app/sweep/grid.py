@@ -29,6 +29,10 @@ _TOP = (
     "scenes",
 )
 _SHADOWING = ("vgroove", "smith", "smith-correlated", "none")
+ORIENTED_SHADOWING = "vgroove"
+"""The one shadowing of ``models`` with a form for oriented V-grooves (``oriented = true``):
+they have no ensemble NDF, and ``microsim run`` judges them by ``ts-vgroove-oriented``, the
+grooves' own V-groove shadowing over their continuum of tilts (``task.judged_models``)."""
 MAX_TASKS = 100_000  # tasks per sweep file (each is seconds to minutes of tracing)
 _NAME_RULE = "1-100 characters from letters, digits, '.', '_', '-', not starting with '.'"
 
@@ -100,6 +104,11 @@ def _check_name(where: str, key: str, name) -> str:
     if not isinstance(name, str) or not sc.NAME_PATTERN.fullmatch(name):
         fail(where, f"{key}: must be {_NAME_RULE}, got {name!r}")
     return name
+
+
+def is_oriented(surface: dict) -> bool:
+    """Whether a concrete [surface] table is of oriented V-grooves."""
+    return surface.get("kind") == "vgrooves" and surface.get("oriented") is True
 
 
 def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
@@ -203,6 +212,13 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
             spec = scene_from_table(name, concrete, None, w).surface
             if spec.kind == "file":
                 _check_heightfield_file(w, spec, checked)
+            if is_oriented(concrete) and ORIENTED_SHADOWING not in models:
+                fail(
+                    w,
+                    f"surface.oriented: oriented V-grooves have no ensemble NDF and are judged "
+                    f"by the V-groove model alone (ts-vgroove-oriented, as microsim run judges "
+                    f'them); models must include "{ORIENTED_SHADOWING}", got {list(models)!r}',
+                )
             for ior in iors:
                 for t in thetas:
                     task = Task(name, concrete, ior, float(t), rays, seed, nt, npf, models, masking)

@@ -1,6 +1,7 @@
 """One task: ``run_task`` simulates it and judges every model as ``microsim run`` judges its
-scene, writing ``OUT/tasks/<id>.json`` atomically; ``is_done`` and ``load_result`` tell a
-complete result of that very task from a missing, damaged or partial one."""
+scene (``judged_models`` names them), writing ``OUT/tasks/<id>.json`` atomically; ``is_done``
+and ``load_result`` tell a complete result of that very task from a missing, damaged or
+partial one."""
 
 from __future__ import annotations
 
@@ -15,7 +16,9 @@ from pathlib import Path
 
 from ... import atomic
 from ...errors import EnvironmentFailure
-from .grid import Task, fail, is_int, scene_from_table
+from ...sim.compare import ORIENTED_MODEL
+from ..scene import RANDOM_KINDS
+from .grid import ORIENTED_SHADOWING, Task, fail, is_int, is_oriented, scene_from_table
 
 
 def _roughness(ndf) -> tuple[str, float | None]:
@@ -25,6 +28,35 @@ def _roughness(ndf) -> tuple[str, float | None]:
     params = ndf.params()
     key = next(iter(params))
     return key, float(params[key])
+
+
+def judged_models(task: Task) -> tuple[str, ...]:
+    """Names of the models ``task`` is judged by, one verdict each, as ``microsim run`` judges
+    the scene: Torrance–Sparrow with the surface's ensemble NDF and each shadowing of
+    ``task.models`` ("ts-vgroove", "ts-smith", …); on oriented V-grooves, which have no
+    ensemble NDF, run's ``ts-vgroove-oriented`` (the grooves' own V-groove shadowing over
+    their continuum of tilts) for "vgroove", the one shadowing with an oriented form; none on
+    a surface that is no ensemble's draw (flat, file)."""
+    if task.surface.get("kind") not in RANDOM_KINDS:
+        return ()
+    if is_oriented(task.surface):
+        return (ORIENTED_MODEL,) if ORIENTED_SHADOWING in task.models else ()
+    return tuple(f"ts-{g}" for g in task.models)
+
+
+def _models(task: Task, scene, surface, ndf) -> tuple[list, list]:
+    """(``judged_models``' specs, the models giving the tile's departure from its ensemble
+    that are not among them, ``compare.departure_models``); ``ndf``: the scene's."""
+    from microsim.sim.compare import departure_models
+    from microsim.sim.predict import ModelSpec
+
+    pair = departure_models(surface, scene.ior, ndf) if judged_models(task) else []
+    if ndf is None:  # oriented V-grooves: the judged model is the pair's ensemble form
+        specs = [s for s in pair if s.name in judged_models(task)]
+    else:
+        specs = [ModelSpec.torrance_sparrow(f"ts-{g}", ndf, g, scene.ior) for g in task.models]
+    asked = {s.name for s in specs}
+    return specs, [s for s in pair if s.name not in asked]
 
 
 @functools.lru_cache(maxsize=2)
@@ -56,8 +88,7 @@ def run_task(task: Task, out_dir) -> dict:
     from microsim.analysis.verdicts import verdicts_for_result
     from microsim.sim import Bins, simulate
     from microsim.sim.auto import relative_standard_error
-    from microsim.sim.compare import attach_models, departure_models
-    from microsim.sim.predict import ModelSpec
+    from microsim.sim.compare import attach_models
 
     t0 = time.perf_counter()
     scene = scene_from_table(task.scene, task.surface, task.ior, f"task {task.scene}")
@@ -77,16 +108,13 @@ def run_task(task: Task, out_dir) -> dict:
         _WORKER["stop"] = _WORKER["pool"]  # a pool worker starts no further task
         return {"id": task.id, "partial": True, "rays": int(res.rays[0]), "requested": task.rays}
     ndf = scene.ndf()
-    specs = [ModelSpec.torrance_sparrow(f"ts-{g}", ndf, g, scene.ior) for g in task.models]
+    specs, pair = _models(task, scene, surface, ndf)
     verdicts = []
-    if ndf is not None:
-        # as microsim run: on V-grooves, the tile's departure from its ensemble (the pair's
-        # ensemble twin is dropped when the task asks for that very model)
-        asked = {s.name for s in specs}
-        pair = [s for s in departure_models(surface, scene.ior, ndf) if s.name not in asked]
+    if specs:  # as microsim run: on V-grooves, with the tile's departure from its ensemble
         judged = attach_models(res, specs + pair)
+        asked = {s.name for s in specs}
         verdicts = [v for v in verdicts_for_result(judged) if v["model"] in asked]
-    key, value = _roughness(ndf)
+    key, value = _roughness(ndf if ndf is not None else surface.tilt_ndf)
     floor = relative_standard_error(
         res.brdf[0], res.stderr[0], res.counts[0], bins.projected_solid_angle()
     )
@@ -125,7 +153,8 @@ _VERDICT_KEYS = (
 
 
 def _complete(rec, task: Task) -> bool:
-    """Is ``rec`` a complete result of ``task`` (its description, every ray, every verdict)?"""
+    """Is ``rec`` a complete result of ``task`` (its description, every ray, one verdict of
+    each model it is judged by)?"""
     if not isinstance(rec, dict) or rec.get("id") != task.id or rec.get("partial"):
         return False
     if rec.get("task") != json.loads(json.dumps(task.to_dict())):
@@ -135,7 +164,9 @@ def _complete(rec, task: Task) -> bool:
         return False
     if not isinstance(rec.get("seconds"), (int, float)) or "roughness" not in rec:
         return False
-    return all(isinstance(v, dict) and all(k in v for k in _VERDICT_KEYS) for v in verdicts)
+    if not all(isinstance(v, dict) and all(k in v for k in _VERDICT_KEYS) for v in verdicts):
+        return False
+    return sorted(v["model"] for v in verdicts) == sorted(judged_models(task))
 
 
 _NOT_REGULAR = (
