@@ -17,6 +17,10 @@ the owner's pid), held for a run's duration: a second run on the same ``DIR`` is
 a ``UsageError`` (a sweep holds ``OUT/.sweep.lock`` inside its output instead). The kernel drops
 the lock when its process dies, so a stale lock file never blocks anyone. ``clean_temp_files``
 removes the temporaries of atomic writes cut short, under the lock.
+
+Files microsim saved are read back through ``read_json`` and ``read_npz``: a file that is
+missing, not a regular file, cut short, overwritten with something else or of another JSON
+type is a one-line ``UsageError`` naming it and what is wrong, never a parser's traceback.
 """
 
 from __future__ import annotations
@@ -28,7 +32,10 @@ import math
 import os
 import re
 import shutil
+import stat
 import tempfile
+import zipfile
+import zlib
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
@@ -42,6 +49,8 @@ __all__ = [
     "write_text",
     "json_safe",
     "write_json",
+    "read_json",
+    "read_npz",
     "umask",
     "file_mode",
     "dir_mode",
@@ -135,6 +144,91 @@ def write_json(path, obj) -> None:
     data = json.dumps(json_safe(obj), indent=1, allow_nan=False)
     with atomic_open(path) as fh:
         fh.write(data)
+
+
+# --- reading saved files -----------------------------------------------------------------------
+_JSON_TYPES = ((dict, "an object"), (list, "an array"), (str, "a string"), (bool, "a boolean"))
+_JSON_TYPES += (((int, float), "a number"), (type(None), "null"))
+
+
+def _json_type(value) -> str:
+    return next(name for kind, name in _JSON_TYPES if isinstance(value, kind))
+
+
+def _damaged(path, what: str, error: Exception) -> UsageError:
+    reason = " ".join(f"{error}".split()) or type(error).__name__
+    return UsageError(f"{path}: {what}, damaged or cut short ({reason[:160]})")
+
+
+def _check_saved_file(path: Path) -> None:
+    """UsageError unless ``path`` is a regular file (checked before opening: a FIFO would
+    block). An ``OSError`` of the environment (permission denied, I/O error) propagates."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except OSError as e:  # a symlink loop, a name too long, a file used as a directory
+        if e.errno not in (errno.ELOOP, errno.ENAMETOOLONG, errno.ENOTDIR):
+            raise
+        raise UsageError(f"{path}: {os.strerror(e.errno)}") from None
+    if stat.S_ISDIR(mode):
+        raise UsageError(f"{path}: is a directory, not a file")
+    if not stat.S_ISREG(mode):
+        raise UsageError(f"{path}: not a regular file")
+
+
+def read_json(path, kind: type = dict):
+    """The JSON value saved in ``path`` (UTF-8), which must be a ``kind`` (``dict``: an
+    object, ``list``: an array). Missing, not a regular file, not UTF-8 or not JSON (a write
+    cut short, another file put there), or JSON of another type: a one-line ``UsageError``
+    naming ``path`` and what is wrong. The keys inside are the caller's to check."""
+    path = Path(path)
+    _check_saved_file(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            value = json.load(fh)
+    except UnicodeDecodeError as e:
+        raise _damaged(path, "not UTF-8 text", e) from None
+    except ValueError as e:  # json.JSONDecodeError
+        raise _damaged(path, "not valid JSON", e) from None
+    if not isinstance(value, kind):
+        want = next(name for k, name in _JSON_TYPES if k is kind)
+        raise UsageError(f"{path}: must hold {want}, holds {_json_type(value)}")
+    return value
+
+
+_ZIP_MAGIC = b"PK\x03\x04"  # how every archive of np.savez starts
+_NPZ_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, ValueError, KeyError, NotImplementedError)
+"""What NumPy and ``zipfile`` raise on a damaged ``.npz``: no zip directory (cut short),
+a bad member CRC or size, a bad ``.npy`` header, an object array (pickles are refused)."""
+
+
+def read_npz(path) -> dict[str, np.ndarray]:
+    """Every array of the ``.npz`` archive ``path`` (``np.savez``), read into memory; object
+    arrays are refused (no pickles). Missing, not a regular file, cut short, not an ``.npz``
+    archive or a damaged member: a one-line ``UsageError`` naming ``path`` and what is wrong.
+    The arrays' names, shapes and values are the caller's to check."""
+    path = Path(path)
+    _check_saved_file(path)
+    with open(path, "rb") as fh:
+        start = fh.read(len(_ZIP_MAGIC))
+        if start != _ZIP_MAGIC:
+            got = "is empty" if not start else f"starts with {start!r}, not a zip header"
+            raise UsageError(f"{path}: not an .npz archive ({got}): damaged or another file")
+        try:
+            with zipfile.ZipFile(fh) as archive:  # np.load checks no CRC: testzip reads all
+                broken = archive.testzip()
+            if broken is not None:
+                raise zipfile.BadZipFile(f"bad CRC-32 for {broken}")
+            fh.seek(0)
+            with np.load(fh, allow_pickle=False) as archive:
+                return {k: archive[k] for k in archive.files}
+        except _NPZ_ERRORS as e:
+            raise _damaged(path, "not a readable .npz archive", e) from None
+        except OSError as e:  # a seek to a damaged offset; other errors are the environment's
+            if e.errno != errno.EINVAL:
+                raise
+            raise _damaged(path, "not a readable .npz archive", e) from None
 
 
 # --- directories -------------------------------------------------------------------------------

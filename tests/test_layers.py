@@ -8,6 +8,7 @@ cli; and ``microsim.testing``).
 """
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -185,14 +186,60 @@ def test_no_sim_module_imports_a_higher_sim_sub_layer(name):
     assert not up, f"{name} ({level}) imports from above its sub-layer: {up}"
 
 
-def test_the_layout_table_names_every_module():
-    import re
+def _outside_parentheses(text: str) -> str:
+    """``text`` without its parenthesised parts (nested ones included)."""
+    out, depth = [], 0
+    for ch in text:
+        depth += ch == "("
+        if depth == 0:
+            out.append(ch)
+        depth -= ch == ")" and depth > 0
+    return "".join(out)
 
+
+def _package_of(path: str) -> str:
+    """A package as the table writes it (``microsim/app/``, ``app/runner``, ``testing``) → its
+    dotted name."""
+    parts = path.strip("/").split("/")
+    return ".".join(parts if parts[0] == "microsim" else ["microsim", *parts])
+
+
+def _layout_table() -> tuple[set[str], set[str]]:
+    """(packages, modules) docs/layout.md's package layout table names, dotted. A row's second
+    column lists its packages; its third the modules of the first one and, after a prefix
+    such as "`runner/`:", those of the row's package ending in that name. Names mentioned only
+    inside parentheses (a module's description) are not counted."""
     layout = (PACKAGE.parent / "docs" / "layout.md").read_text(encoding="utf-8")
     table = layout[layout.index("### Package layout") :]
     table = table[: table.index("\n## ")]
-    named = set(re.findall(r"`([\w/]+)`", table))
-    missing = sorted(
-        p.stem for p in PACKAGE.rglob("*.py") if p.stem not in ("__init__", "__main__", *named)
+    packages, modules = set(), set()
+    for line in table.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) != 3 or cells[0] == "layer" or not cells[0].strip("-"):
+            continue
+        row = [_package_of(p) for p in re.findall(r"`([\w/]+)`", cells[1])]
+        packages.update(row)
+        current = row[0]
+        for name, colon in re.findall(r"`([\w/]+)`(:?)", _outside_parentheses(cells[2])):
+            if name.endswith("/") and colon:
+                current = next(p for p in row if p.endswith("." + name.strip("/")))
+            else:
+                modules.add(f"{current}.{name}")
+    return packages, modules
+
+
+def test_the_layout_table_names_every_module_of_every_package():
+    """Each module is named under its own package (``testing/measured`` is not named by the
+    ``measured`` package, nor ``sim/cluster`` by ``app/cluster``), and every name exists."""
+    packages, modules = _layout_table()
+    paths = list(PACKAGE.rglob("*.py"))
+    real_packages = {_module_name(p) for p in paths if p.name == "__init__.py"}
+    real_modules = {_module_name(p) for p in paths if p.name not in ("__init__.py", "__main__.py")}
+    assert packages == real_packages, (
+        f"docs/layout.md's package column lacks {sorted(real_packages - packages)}, "
+        f"names no such package {sorted(packages - real_packages)}"
     )
-    assert not missing, f"docs/layout.md's package layout table does not name {missing}"
+    assert modules == real_modules, (
+        f"docs/layout.md's package layout table lacks {sorted(real_modules - modules)}, "
+        f"names no such module {sorted(modules - real_modules)}"
+    )

@@ -26,18 +26,19 @@ saved JSON (``FULLWAVE_JSON``, written by ``tools/fullwave_study.py``).
 
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
 from microsim.analytic.fresnel import fresnel
+from microsim.atomic import read_json
+from microsim.errors import UsageError
 
 from .markdown import md_table
 
 __all__ = [
     "FULLWAVE_JSON",
+    "FULLWAVE_COMMAND",
     "FULLWAVE_CHART",
     "CRITERION",
     "fullwave_map",
@@ -48,6 +49,8 @@ __all__ = [
 ]
 
 FULLWAVE_JSON = "fullwave.json"
+FULLWAVE_COMMAND = "tools/fullwave_study.py"
+"""The command that writes ``FULLWAVE_JSON`` and its chart."""
 CRITERION = 0.05
 LAMBDA = 0.5
 GLASS = 1.5
@@ -298,11 +301,12 @@ def crossovers(doc: dict) -> dict:
 
 
 def load_fullwave(path) -> dict:
-    """The saved map (``fullwave_map``'s dict); ValueError naming what is missing."""
-    d = json.loads(Path(path).read_text(encoding="utf-8"))
+    """The saved map (``fullwave_map``'s dict); a ``UsageError`` naming the file and what is
+    wrong when it is damaged (``atomic.read_json``) or lacks a part."""
+    d = read_json(path)
     for key in ("settings", "triangular", "sinusoidal"):
         if key not in d:
-            raise ValueError(f"{path}: no {key!r}")
+            raise UsageError(f"{path}: no {key!r}")
     return d
 
 
@@ -498,7 +502,7 @@ def _aluminium_lines(doc: dict, cross: dict, crit: float) -> list[str]:
 
 
 def fullwave_section(
-    doc: dict, command: str = "tools/fullwave_study.py", chart: str | None = None
+    doc: dict, command: str = FULLWAVE_COMMAND, chart: str | None = None
 ) -> list[str]:
     """Index subsection "The rung above Kirchhoff" from a saved map; ``chart`` the file name
     of ``fullwave_chart``'s PNG beside the index, if there is one."""

@@ -16,6 +16,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from microsim.atomic import read_json
+from microsim.errors import UsageError
 from microsim.stats import t_isf
 
 from . import incidence
@@ -796,10 +798,19 @@ def regime_section(
             "",
         ]
     if fullwave is not None and Path(fullwave).is_file():
-        from .fullwave_map import FULLWAVE_CHART, fullwave_section, load_fullwave
+        from .fullwave_map import (
+            FULLWAVE_CHART,
+            FULLWAVE_COMMAND,
+            fullwave_section,
+            load_fullwave,
+        )
 
         chart = FULLWAVE_CHART if (Path(fullwave).parent / FULLWAVE_CHART).is_file() else None
-        lines += fullwave_section(load_fullwave(fullwave), chart=chart)
+        try:
+            lines += fullwave_section(load_fullwave(fullwave), chart=chart)
+        except UsageError as err:
+            name = Path(fullwave).name
+            lines += [f"`{name}` unreadable ({err}); rerun `{FULLWAVE_COMMAND}`.", ""]
     if methods is not None:
         lines += methods_section(methods)
     return lines
@@ -816,15 +827,14 @@ _METHODS_KEYS = {
 def load_methods(path) -> dict:
     """``methods.json`` (``microsim bench --methods``) read and checked: top-level ``machine``,
     ``panels``, and the keys ``_METHODS_KEYS`` names in each machine, panel and point; a
-    missing or malformed file raises ValueError (OSError if unreadable) naming what is
-    wrong."""
-    import json
-    from pathlib import Path
-
-    d = json.loads(Path(path).read_text(encoding="utf-8"))
-    if not isinstance(d, dict) or not isinstance(d.get("panels"), list):
-        raise ValueError(f"{path}: no 'panels' list")
-    missing = [k for k in _METHODS_KEYS["machine"] if k not in (d.get("machine") or {})]
+    missing, damaged (``atomic.read_json``) or incomplete file raises ``UsageError`` naming
+    what is wrong (an ``OSError`` if the environment fails)."""
+    d = read_json(path)
+    if not isinstance(d.get("panels"), list) or not all(isinstance(p, dict) for p in d["panels"]):
+        raise UsageError(f"{path}: no 'panels' list of objects")
+    if not isinstance(d.get("machine"), dict):
+        raise UsageError(f"{path}: no 'machine' object")
+    missing = [k for k in _METHODS_KEYS["machine"] if k not in d["machine"]]
     for i, p in enumerate(d["panels"]):
         missing += [f"panels[{i}].{k}" for k in _METHODS_KEYS["panel"] if k not in p]
         for j, q in enumerate(p.get("points") or []):
@@ -832,7 +842,7 @@ def load_methods(path) -> dict:
                 f"panels[{i}].points[{j}].{k}" for k in _METHODS_KEYS["point"] if k not in q
             ]
     if missing:
-        raise ValueError(f"{path}: missing keys {missing[:5]}{' …' if len(missing) > 5 else ''}")
+        raise UsageError(f"{path}: missing keys {missing[:5]}{' …' if len(missing) > 5 else ''}")
     return d
 
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from microsim.atomic import atomic_open
+from microsim.atomic import atomic_open, read_json, read_npz
 from microsim.errors import UsageError
 
 from .bins import Bins
@@ -327,14 +327,14 @@ class Result:
 
     @classmethod
     def load(cls, directory) -> "Result":
-        """Read a result written by ``save``. Everything read back is checked (``_check_saved``:
-        shapes, types, signs, finiteness, tallies against the ledger): a damaged or edited file
-        is a ``UsageError`` naming the file and the array or key."""
+        """Read a result written by ``save``. Everything read back is checked (``read_json``,
+        ``read_npz``: missing, cut short, not JSON or not an archive; ``_check_meta``: the
+        types of the keys a Result relies on; ``_check_saved``: shapes, types, signs,
+        finiteness, tallies against the ledger): a damaged or edited file is a ``UsageError``
+        naming the file and what is wrong."""
         meta_path, npz_path = os.path.join(directory, META), os.path.join(directory, NPZ)
-        with open(meta_path, encoding="utf-8") as fh:
-            meta = json.load(fh)
-        if not isinstance(meta, dict):
-            raise UsageError(f"{meta_path}: not a JSON object")
+        meta = read_json(meta_path)
+        _check_meta(meta, meta_path)
         grid = meta.pop("bins", None)
         if not isinstance(grid, dict):
             raise UsageError(
@@ -344,8 +344,7 @@ class Result:
             bins = Bins(**grid)
         except (TypeError, UsageError) as e:
             raise UsageError(f"{meta_path}: bins {grid!r}: {' '.join(str(e).split())}") from None
-        with np.load(npz_path) as z:
-            a = {k: z[k] for k in z.files}
+        a = read_npz(npz_path)
         _check_saved(a, meta, bins, npz_path, meta_path)
         pick = lambda prefix: {k[len(prefix) :]: v for k, v in a.items() if k.startswith(prefix)}  # noqa: E731
         return cls(
@@ -365,6 +364,27 @@ class Result:
             tallies=pick("tally_") or None,
             **{k: a[k] for k in _OPTIONAL if k in a},
         )
+
+
+_META_TYPES = {
+    "surface": ((dict,), "an object"),
+    "material": ((dict,), "an object"),
+    "realisations": ((list, int), "a list of surfaces or a count"),
+    "partial": ((bool,), "true or false"),
+}
+"""The keys of meta.json a Result and its readers rely on (each may be absent or null), with
+the JSON types they must have."""
+
+
+def _check_meta(meta: dict, meta_path: str) -> None:
+    """UsageError naming ``meta_path`` and the key unless each ``_META_TYPES`` key present in
+    ``meta`` has its type (``bins`` is checked by ``Bins``)."""
+    for key, (kinds, name) in _META_TYPES.items():
+        value = meta.get(key)
+        if value is None:
+            continue
+        if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+            raise UsageError(f"{meta_path}: {key} must be {name}, got {value!r:.80}")
 
 
 _REQUIRED = ("theta_i", "phi_i", "theta_edges", "phi_edges", "brdf", "stderr")
@@ -456,8 +476,6 @@ def _check_saved(a: dict, meta: dict, bins: Bins, npz: str, meta_path: str) -> N
             shape("brdf_realisations_orders", (o, a["brdf_realisations"].shape[0]) + grid)
     if any(k.startswith("tally_") for k in a):
         _check_tallies(a, meta, n, bins.shape[0] * bins.shape[1], fail)
-    if not isinstance(meta.get("partial", False), bool):
-        raise UsageError(f"{meta_path}: partial must be true or false, got {meta['partial']!r}")
 
 
 def _check_tallies(a: dict, meta: dict, n: int, nbin: int, fail) -> None:

@@ -35,7 +35,6 @@ import os
 import shutil
 import time
 import warnings
-import zipfile
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -439,42 +438,36 @@ class _DamagedEntry(Exception):
 
 
 def _fault(error: Exception) -> str:
-    text = " ".join(f"{type(error).__name__}: {error}".split())
+    """One line of at most 160 characters saying why an entry cannot be read (a
+    ``UsageError`` names the file itself; an ``OSError`` its path)."""
+    text = str(error) if isinstance(error, UsageError) else f"{type(error).__name__}: {error}"
+    text = " ".join(text.split())
     return text if len(text) <= 160 else text[:159] + "…"
 
 
 def _load(entry: Path, description: dict) -> Result | None:
     """The cached Result of ``entry``, or None if there is no entry. Raises ``_DamagedEntry``
-    naming the file if the entry cannot be read (any error: truncated, unreadable, edited),
-    was made for another description (``key.json``), or holds a result that is not the one
-    described (bins, incidences, array shapes, negative or non-finite values)."""
+    naming the file if the entry cannot be read (``atomic.read_json``, ``Result.load``:
+    missing, truncated, edited; or an ``OSError``), was made for another description
+    (``key.json``), or holds a result that is not the one described (bins, incidences, array
+    shapes, negative or non-finite values)."""
     if not os.path.lexists(entry):
         return None
     key, meta, npz = entry / KEY_FILE, entry / META, entry / NPZ
     try:
-        stored = json.loads(key.read_text(encoding="utf-8"))
-    except Exception as e:
-        raise _DamagedEntry(f"{key}: {_fault(e)}") from None
-    if stored != json.loads(json.dumps(description)):
-        raise _DamagedEntry(f"{key}: made for another reference than its name says")
-    try:
-        bins = Bins(**json.loads(meta.read_text(encoding="utf-8"))["bins"]).to_dict()
-    except Exception as e:
-        raise _DamagedEntry(f"{meta}: {_fault(e)}") from None
+        stored = atomic.read_json(key)
+        if stored != json.loads(json.dumps(description)):
+            raise _DamagedEntry(f"{key}: made for another reference than its name says")
+        res = Result.load(entry)
+    except (UsageError, OSError) as e:
+        raise _DamagedEntry(_fault(e)) from None
+    bins = res.bins.to_dict()
     if bins != description["bins"]:
         raise _DamagedEntry(f"{meta}: bins {bins} instead of {description['bins']}")
-    try:
-        with zipfile.ZipFile(npz) as z:  # before np.load, which leaves a broken zip open
-            broken = z.testzip()
-        if broken is not None:
-            raise zipfile.BadZipFile(f"bad CRC-32 for {broken}")
-        res = Result.load(entry)
-    except Exception as e:
-        raise _DamagedEntry(f"{npz}: {_fault(e)}") from None
     shape = (len(description["theta_i"]), res.bins.n_theta, res.bins.n_phi)
     arrays = {"brdf": res.brdf, "stderr": res.stderr, "counts": res.counts}
     for name, a in arrays.items():
-        if a.shape != shape or not np.all(np.isfinite(a) & (a >= 0)):
+        if a is None or a.shape != shape or not np.all(np.isfinite(a) & (a >= 0)):
             raise _DamagedEntry(f"{npz}: {name} is not {shape} finite values >= 0")
     same = np.array_equal(res.theta_i, description["theta_i"]) and np.array_equal(
         res.phi_i, np.broadcast_to(np.asarray(description["phi_i"], float), res.phi_i.shape)

@@ -7,7 +7,6 @@ verdicts against Kirchhoff, the regime chart ``regimes.png`` and the crossover t
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import shutil
 import sys
@@ -92,6 +91,16 @@ def _check_catalogue_out(catalogue: Path, out: Path) -> None:
         raise UsageError(f"--out {out}: exists and is not a directory")
 
 
+def _finished_verdicts(scene_out: Path, log: Callable[[str], None]) -> dict | None:
+    """The verdicts of a scene the interrupted report finished, or None when its verdicts.json
+    is missing or damaged (``atomic.read_json``; said in one line): the scene is run again."""
+    try:
+        return atomic.read_json(scene_out / VERDICTS_FILE)
+    except UsageError as e:
+        log(f"microsim: {e}; running {scene_out.name} again")
+        return None
+
+
 def run_report(
     catalogue="surfaces",
     out="reports",
@@ -153,10 +162,12 @@ def run_report(
         recorded = recorded if isinstance(recorded, dict) else {}
         unchanged = {name for name, digest in recorded.items() if digests.get(name) == digest}
         done = set(state["done"]) & unchanged if state else set()
-        plans = []
+        plans, finished = [], {}
         for p, s in zip(paths, scenes):
             scene_out, partial = out / s.name, out / f".{s.name}.partial"
-            if s.name in done and (scene_out / VERDICTS_FILE).is_file():
+            if s.name in done:
+                finished[s.name] = _finished_verdicts(scene_out, log)
+            if finished.get(s.name) is not None:
                 plans.append(scene_out)
                 continue
             saved = resume and s.name in unchanged and (partial / "meta.json").is_file()
@@ -187,7 +198,7 @@ def run_report(
                 checkpoint("report-scene")
                 if isinstance(plan, Path):
                     log(f"[{k}/{len(plans)}] {plan.name}: finished earlier, kept")
-                    docs.append(json.loads((plan / VERDICTS_FILE).read_text(encoding="utf-8")))
+                    docs.append(finished[plan.name])
                     continue
                 log(f"[{k}/{len(plans)}] {plan.scene.name}")
                 outcome = execute(plan, progress=progress, log=log)

@@ -9,11 +9,8 @@ import hashlib
 import json
 import math
 import os
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
 
 from ...analysis.budget import AUTO_TARGET as REALISATION_TARGET
 from ...analysis.budget import MAX_AUTO, MIN_AUTO
@@ -418,44 +415,22 @@ def check_replaceable(out: Path) -> None:
 
 
 def _load_saved(where: Path, what: str) -> Result:
-    """``Result.load(where)``; a missing, truncated or corrupt brdf.npz/meta.json is a
-    one-line ``UsageError`` naming the file."""
-    meta, npz = where / "meta.json", where / "brdf.npz"
-    for f in (meta, npz):
+    """``Result.load(where)`` of a microsim run (its meta.json holds the run record); a
+    missing, damaged or edited brdf.npz/meta.json is a one-line ``UsageError`` naming the
+    file."""
+    for f in (where / "meta.json", where / "brdf.npz"):
         if not f.is_file():
             raise UsageError(f"{what} {where}: no saved run there ({f.name} missing)")
     try:
-        with open(meta, encoding="utf-8") as fh:
-            m = json.load(fh)
-        if not isinstance(m, dict):
-            raise ValueError("not a JSON object")
-    except (ValueError, UnicodeDecodeError) as e:
-        raise UsageError(
-            f"{what} {where}: {meta} is unreadable ({' '.join(str(e).split())}); rerun with --force"
-        ) from None
-    if not isinstance(m.get("run"), dict):
-        raise UsageError(
-            f"{what} {where}: {meta} has no run record (run is {m.get('run')!r}, a microsim "
-            f"run writes an object); rerun with --force"
-        )
-    try:
-        with np.load(npz, allow_pickle=False) as z:
-            for k in z.files:
-                z[k]
-    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as e:
-        raise UsageError(
-            f"{what} {where}: {npz} is unreadable ({' '.join(str(e).split())}); rerun with --force"
-        ) from None
-    try:
-        return Result.load(where)
+        saved = Result.load(where)
     except UsageError as e:
         raise UsageError(f"{what} {where}: {e}; rerun with --force") from None
-    except (ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile) as e:
+    if not isinstance(saved.meta.get("run"), dict):
         raise UsageError(
-            f"{what} {where}: the saved run is inconsistent "
-            f"({type(e).__name__}: {' '.join(str(e).split())}); rerun with "
-            f"--force"
-        ) from None
+            f"{what} {where}: {where / 'meta.json'} has no run record (run is "
+            f"{saved.meta.get('run')!r}, a microsim run writes an object); rerun with --force"
+        )
+    return saved
 
 
 def tally_settings(scene) -> dict:

@@ -8,7 +8,6 @@ are reproducible byte for byte.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import shutil
@@ -95,10 +94,10 @@ def holds_finished_result(out: Path) -> bool:
     if not names & set(RESULT_FILES):
         return False  # empty, or only the user's files (publish_dir carries them over)
     try:
-        meta = json.loads((out / "meta.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        meta = atomic.read_json(out / "meta.json")
+    except (OSError, UsageError):
         return True
-    return not (isinstance(meta, dict) and meta.get("partial") is True)
+    return meta.get("partial") is not True
 
 
 def save_tallies(result, dest: Path) -> None:
@@ -222,18 +221,19 @@ def timings_document(plan: RunPlan, result, speed, speed_theta) -> dict:
 def read_report_state(out: Path) -> dict | None:
     """The interrupted report's state in ``out`` (None if there is none)."""
     path = out / REPORT_STATE
-    if not path.is_file():
+    if not os.path.lexists(path):
         return None
+    rerun = "run `microsim report` without --resume"
     try:
-        state = json.loads(path.read_text(encoding="utf-8"))
-        if not isinstance(state, dict) or not isinstance(state.get("done"), list):
-            raise ValueError("not a report state")
-        return state
-    except (ValueError, UnicodeDecodeError) as e:
+        state = atomic.read_json(path)
+    except UsageError as e:
+        raise UsageError(f"--resume: {e}; {rerun}") from None
+    done = state.get("done")
+    if not isinstance(done, list) or not all(isinstance(name, str) for name in done):
         raise UsageError(
-            f"--resume: {path} is unreadable ({' '.join(str(e).split())}); run "
-            f"`microsim report` without --resume"
-        ) from None
+            f"--resume: {path}: done must be a list of scene names, got {done!r:.80}; {rerun}"
+        )
+    return state
 
 
 def write_report_state(out: Path, state: dict) -> None:
