@@ -7,12 +7,16 @@
 * Small explicit surfaces built directly from their mesh: equal-width V-grooves with given
   tilts, and a periodic Gaussian-filtered heightfield.
 * ``walk_on``: the random walk's bin averages on a ``Bins`` grid.
+* ``refused``: a call refused with a one-line UsageError naming given words;
+  ``TINY_CLUSTER_SCENE``: the small V-groove scene the cluster tests trace.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from microsim.errors import UsageError
 from microsim.stats import sidak  # noqa: F401  (re-exported for the tests)
 from microsim.surfaces.surface import Surface, heightfield_mesh
 from microsim.testing import pearson_chi2  # noqa: F401  (the public harness, re-exported)
@@ -90,3 +94,32 @@ def flat_verdict(sim, stderr, counts, model, omega, theta_edges, **kw) -> dict:
     if kw:
         raise TypeError(f"verdict has no argument {sorted(kw)}")
     return verdict(measured, prediction, significance)
+
+
+def refused(call, *words):
+    """``call()`` raises a one-line UsageError naming every one of ``words``; its message."""
+    with pytest.raises(UsageError) as info:
+        call()
+    msg = str(info.value)
+    assert isinstance(info.value, ValueError)
+    assert "\n" not in msg, msg
+    for w in words:
+        assert w in msg, msg
+    return msg
+
+
+TINY_CLUSTER_SCENE = """\
+name = "tiny-cluster"
+[surface]
+kind = "vgrooves"
+n_grooves = 400
+ndf = "beckmann"
+m = 0.3
+[material]
+ior = "aluminium"
+[simulation]
+theta_i = [20, 60]
+rays = 200000
+theta_bins = 9
+phi_bins = 10
+"""

@@ -13,6 +13,7 @@ import signal
 
 import numpy as np
 import pytest
+from support import TINY_CLUSTER_SCENE
 
 from microsim.analytic import Beckmann
 from microsim.checkpoints import interrupt_at
@@ -111,21 +112,7 @@ def test_a_bad_cluster_names_the_parameter():
         Execution(cluster="tcp://localhost:8786")
 
 
-SCENE = """\
-name = "tiny-cluster"
-[surface]
-kind = "vgrooves"
-n_grooves = 400
-ndf = "beckmann"
-m = 0.3
-[material]
-ior = "aluminium"
-[simulation]
-theta_i = [20, 60]
-rays = 200000
-theta_bins = 9
-phi_bins = 10
-"""
+SCENE = TINY_CLUSTER_SCENE
 
 
 def test_microsim_run_with_a_scheduler_writes_the_local_result(tmp_path):

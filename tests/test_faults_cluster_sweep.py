@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 import pytest
+from support import TINY_CLUSTER_SCENE
 
 from microsim.app.cli import main
 from microsim.app.runner import plan_run, tracing
@@ -23,21 +24,7 @@ from microsim.app.sweep import load_sweep, run_task
 from microsim.app.sweep.task import load_result
 from microsim.checkpoints import set_hook
 
-SCENE = """\
-name = "tiny-cluster"
-[surface]
-kind = "vgrooves"
-n_grooves = 400
-ndf = "beckmann"
-m = 0.3
-[material]
-ior = "aluminium"
-[simulation]
-theta_i = [20, 60]
-rays = 200000
-theta_bins = 9
-phi_bins = 10
-"""
+SCENE = TINY_CLUSTER_SCENE
 
 
 def _spawn(*module_args) -> subprocess.Popen:

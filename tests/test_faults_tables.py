@@ -9,9 +9,9 @@ import dataclasses
 
 import numpy as np
 import pytest
+from support import refused
 
 from microsim.analytic import GGX, Beckmann, Smith, TorranceSparrow
-from microsim.errors import UsageError
 from microsim.measured import MERLBRDF, BRDFTable, read_merl, read_rgl, write_merl, write_rgl
 from microsim.measured.merl import MERL_SAMPLES, MERL_SHAPE
 from microsim.measured.rgl import RGLResolution, read_tensor_file, tensor_file_bytes
@@ -21,18 +21,6 @@ from microsim.testing import assert_brdf_matches_measured
 
 GGX_AL = TorranceSparrow(GGX(0.3), Smith(correlated=True), "aluminium")
 BINS = Bins(9, 10)
-
-
-def refused(call, *words):
-    """``call()`` raises a one-line UsageError naming every one of ``words``."""
-    with pytest.raises(UsageError) as info:
-        call()
-    msg = str(info.value)
-    assert isinstance(info.value, ValueError)
-    assert "\n" not in msg, msg
-    for w in words:
-        assert w in msg, msg
-    return msg
 
 
 # --- BRDFTable.load ----------------------------------------------------------------------------

@@ -14,6 +14,7 @@ import warnings
 
 import numpy as np
 import pytest
+from support import refused
 
 from microsim import atomic
 from microsim.analytic import (
@@ -25,25 +26,12 @@ from microsim.analytic import (
     sample_microfacet,
     torrance_sparrow,
 )
-from microsim.errors import UsageError
 from microsim.surfaces import vgrooves
 from microsim.testing import assert_brdf_agrees, assert_sampler_matches, pearson_chi2, reference
 from microsim.testing import cache as cache_mod
 
 AL = "aluminium"
 TINY = dict(rays=20_000, bins=(9, 10))
-
-
-def refused(call, *words):
-    """``call()`` raises a one-line UsageError naming every one of ``words``."""
-    with pytest.raises(UsageError) as info:
-        call()
-    msg = str(info.value)
-    assert isinstance(info.value, ValueError)
-    assert "\n" not in msg, msg
-    for w in words:
-        assert w in msg, msg
-    return msg
 
 
 @pytest.fixture(scope="module")
