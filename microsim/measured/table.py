@@ -100,7 +100,8 @@ class BRDFTable:
             what = anisotropy_of(kind, params) if isinstance(params, dict) else None
             if what is not None:
                 raise UsageError(
-                    f"result must be of an isotropic surface, got one of an anisotropic surface ({what}): "
+                    f"result must be of an isotropic surface, got one of an anisotropic {kind} "
+                    f"surface ({what}): "
                     "its BRDF depends on the incidence azimuth, which a table over θi and "
                     "folded Δφ does not hold"
                 )
