@@ -5,10 +5,18 @@ from __future__ import annotations
 
 from ..errors import EnvironmentFailure, UsageError
 
-__all__ = ["connect", "CONNECT_TIMEOUT"]
+__all__ = ["check_address", "connect", "CONNECT_TIMEOUT"]
 
 CONNECT_TIMEOUT = 10.0
 """Seconds to wait for a scheduler before giving up (``--scheduler-timeout``'s default)."""
+
+
+def check_address(scheduler):
+    """``--scheduler ADDRESS`` checked without connecting: a non-empty text (what the
+    address says is ``connect``'s to judge)."""
+    if not (isinstance(scheduler, str) and scheduler.strip()):
+        raise UsageError(f"--scheduler must be a Dask scheduler address, got {scheduler!r}")
+    return scheduler
 
 
 def connect(scheduler, timeout: float = CONNECT_TIMEOUT):
