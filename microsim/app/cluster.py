@@ -12,7 +12,7 @@ from contextlib import contextmanager
 
 from ..errors import EnvironmentFailure, UsageError
 
-__all__ = ["connect", "CONNECT_TIMEOUT"]
+__all__ = ["check_address", "connect", "CONNECT_TIMEOUT"]
 
 CONNECT_TIMEOUT = 10.0
 """Seconds to wait for a scheduler before giving up (``--scheduler-timeout``'s default)."""
@@ -38,6 +38,14 @@ def _quiet_dask_logs():
     finally:
         for lg, level in zip(loggers, levels):
             lg.setLevel(level)
+
+
+def check_address(scheduler):
+    """``--scheduler ADDRESS`` checked without connecting: a non-empty text (what the
+    address says is ``connect``'s to judge)."""
+    if not (isinstance(scheduler, str) and scheduler.strip()):
+        raise UsageError(f"--scheduler must be a Dask scheduler address, got {scheduler!r}")
+    return scheduler
 
 
 @contextmanager

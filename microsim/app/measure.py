@@ -26,34 +26,54 @@ records per format the file, the seconds and that difference (energy-weighted re
 over each incidence's 90 % energy bins, its largest over the incidences) beside the table's
 own relative standard error over the same bins: a format that stores a reciprocal average
 and interpolates smooths the table's noise, so a difference near the noise is no format
-error. Ctrl-C keeps every finished incidence (exit 130); ``--resume DIR`` continues with the
-others after checking that the settings are the same. Memory does not grow with the ray
-count (``simulate_auto``).
+error. Memory does not grow with the ray count (``simulate_auto``).
+
+Every option is checked and the scheduler reached before anything is written. A new measure
+(or ``--force``) is made in a staging directory that replaces the output in one rename once
+complete (``atomic.publish_dir``; the user's files in it carried over), so no file of an
+older measure survives it. Ctrl-C (``MeasureInterrupted``, exit 130) keeps the finished
+incidences in the output for ``--resume`` unless it holds a finished measure, which stays as
+it was. ``--resume`` continues after checking that the settings are the same; an incidence
+whose files or record are damaged is traced again (the same result: each incidence has its
+own seed), a damaged ``measure.json`` is a ``UsageError`` naming it.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
+import shutil
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
+from zipfile import BadZipFile
 
 import numpy as np
 
 from .. import atomic
 from ..analysis.markdown import percent
+from ..checks import integer
 from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..measured import BRDFTable, read_merl, read_rgl, write_merl, write_rgl
 from ..sim import Bins, Estimator, Execution, Experiment, Result
+from ..sim.arguments import MAX_RAYS, MAX_THREADS
 from ..sim.auto import Precision, estimate_to_precision
+from ..sim.schedule import DeferredInterrupt
 from ..stats import energy_set
-from .cluster import connect
+from .cluster import check_address, connect
 from .runner.planning import check_output_path, effort_for, tally_settings
 from .scene import MAX_THETA_I, load_scene
 
-__all__ = ["Acquisition", "plan_measure", "measure", "add_measure_command", "SETTINGS_FILE"]
+__all__ = [
+    "Acquisition",
+    "MeasureInterrupted",
+    "plan_measure",
+    "measure",
+    "add_measure_command",
+    "SETTINGS_FILE",
+]
 
 SETTINGS_FILE = "measure.json"
 EXPORTS = {"merl": "table.binary", "rgl": "table.bsdf"}
@@ -64,13 +84,20 @@ table holds small values beyond the lobe (bin averages, their interpolation) whe
 scene's exact NDF vanishes, which the file could not otherwise carry."""
 TABLE_FILE = "table.npz"
 INCIDENCES = "incidences"
+OUTPUT_NAMES = frozenset((SETTINGS_FILE, TABLE_FILE, INCIDENCES, *EXPORTS.values()))
+"""Everything ``measure`` writes into its directory; anything else there is the user's."""
 MAX_INCIDENCES = 900
+
+
+class MeasureInterrupted(KeyboardInterrupt):
+    """Ctrl-C during ``measure``: the one-line message says what was kept and how to go on."""
 
 
 @dataclass(frozen=True)
 class Acquisition:
     """A validated ``measure``: the scene, output directory, incidence grid (degrees), error
-    ``target``, ``max_rays`` per incidence, ``seed``, ``threads``, ``quick`` (surface scale)."""
+    ``target``, ``max_rays`` per incidence, ``seed``, ``threads``, ``quick`` (surface scale);
+    ``resume`` (continue the measure in ``out``) or ``force`` (replace ``out``)."""
 
     scene: object
     out: Path
@@ -82,6 +109,8 @@ class Acquisition:
     quick: bool
     exports: tuple[str, ...] = tuple(EXPORTS)
     scheduler: str | None = None  # Dask scheduler whose workers trace (``sim.cluster``)
+    resume: bool = False
+    force: bool = False
 
     @property
     def bins(self) -> Bins:
@@ -102,9 +131,6 @@ class Acquisition:
                 "bins": self.bins.to_dict(),
             }
         )
-
-    def incidence_dir(self, theta: float) -> Path:
-        return self.out / INCIDENCES / f"theta-{theta:05.2f}"
 
 
 def plan_measure(
@@ -145,10 +171,12 @@ def plan_measure(
         )
     if not (isinstance(target, (int, float)) and 1e-4 <= target <= 0.5):
         raise UsageError(f"--target must be a relative error in [0.0001, 0.5], got {target!r}")
-    if isinstance(max_rays, bool) or int(max_rays) != max_rays or max_rays < 2**16:
-        raise UsageError(f"--max-rays must be an integer >= 65536, got {max_rays!r}")
-    if isinstance(threads, bool) or int(threads) != threads or threads < 1:
-        raise UsageError(f"--threads must be an integer >= 1, got {threads!r}")
+    max_rays = integer("--max-rays", max_rays, 2**16, MAX_RAYS, " (rays per incidence)")
+    threads = integer("--threads", threads, 1, MAX_THREADS)
+    if seed is not None:
+        seed = integer("--seed", seed, 0, None, " (the random stream)")
+    if scheduler is not None:
+        check_address(scheduler)
     asked = exports is not None
     exports = tuple(dict.fromkeys(EXPORTS if exports is None else exports))
     if not all(e in EXPORTS for e in exports):
@@ -167,19 +195,19 @@ def plan_measure(
         out,
         thetas,
         float(target),
-        int(max_rays),
-        scene.simulation.seed if seed is None else int(seed),
-        int(threads),
+        max_rays,
+        scene.simulation.seed if seed is None else seed,
+        threads,
         bool(quick),
         exports,
         scheduler,
+        bool(resume),
+        bool(force),
     )
-    if out.exists() and not (resume or force):
-        raise UsageError(
-            f"{out} already exists; pass --resume to continue it or --force to replace it"
-        )
-    if resume:
-        saved = _saved_settings(out)
+    if not resume:
+        _check_replaceable(acq)
+    else:
+        saved = _saved_document(out)["settings"]
         if saved != acq.settings():
             key = next(
                 k
@@ -198,81 +226,230 @@ def _read_json(path: Path) -> dict:
         return json.load(fh)
 
 
-def _saved_settings(out: Path) -> dict:
+def _saved_document(out: Path) -> dict:
+    """``measure.json`` of the measure ``--resume`` continues; a one-line ``UsageError``
+    naming the file if it is missing, unreadable or not a measure's record."""
+    path = out / SETTINGS_FILE
     try:
-        doc = _read_json(out / SETTINGS_FILE)
-    except (OSError, ValueError) as e:
+        doc = _read_json(path)
+    except FileNotFoundError:
         raise UsageError(
-            f"--resume {out}: no readable {SETTINGS_FILE} ({type(e).__name__}); not a "
-            f"microsim measure directory"
+            f"--resume {out}: no {SETTINGS_FILE} there; not a microsim measure directory"
         ) from None
-    return doc.get("settings", {})
+    except ValueError as e:
+        raise UsageError(
+            f"--resume {out}: {path} is unreadable ({' '.join(str(e).split())}); "
+            f"rerun with --force to measure anew"
+        ) from None
+    if not (
+        isinstance(doc, dict)
+        and isinstance(doc.get("settings"), dict)
+        and isinstance(doc.get("incidences"), dict)
+    ):
+        raise UsageError(
+            f"--resume {out}: {path} is not a measure's record (an object with settings and "
+            f"incidences); rerun with --force to measure anew"
+        )
+    return doc
+
+
+def _check_replaceable(acq: Acquisition) -> None:
+    """A new measure's ``out`` must not exist, or (``--force``) be an empty directory or a
+    microsim measure directory (one with ``measure.json``)."""
+    if not acq.out.exists():
+        return
+    if not acq.force:
+        raise UsageError(
+            f"{acq.out} already exists; pass --resume to continue it or --force to replace it"
+        )
+    try:
+        names = os.listdir(acq.out)
+    except OSError as e:
+        raise UsageError(f"--out {acq.out}: cannot list it ({e.strerror})") from None
+    if names and SETTINGS_FILE not in names:
+        raise UsageError(
+            f"--force {acq.out}: not a microsim measure directory (no {SETTINGS_FILE}); "
+            f"refusing to replace it"
+        )
 
 
 def measure(acq: Acquisition, log=print) -> BRDFTable:
-    """Trace every incidence of ``acq`` not already on disk, then write and return the table
-    (module docstring). ``log``: one line per incidence (None: silent)."""
-    acq.out.mkdir(parents=True, exist_ok=True)
-    with atomic.output_lock(acq.out, holder="measure"), ExitStack() as stack:
+    """Trace every incidence of ``acq`` not already finished, then write and return the table
+    (module docstring). ``log``: one line per incidence (None: silent). The scheduler is
+    reached before anything is written. ``--resume`` continues in ``acq.out``; otherwise the
+    acquisition is made in a staging directory that replaces ``acq.out`` once complete (the
+    user's own files in it carried over). Ctrl-C raises ``MeasureInterrupted``, whose message
+    says what was kept."""
+    with ExitStack() as stack:
         client = None if acq.scheduler is None else stack.enter_context(connect(acq.scheduler))
-        doc = {"settings": acq.settings(), "incidences": {}}
-        if (acq.out / SETTINGS_FILE).exists():
-            doc["incidences"] = _read_json(acq.out / SETTINGS_FILE).get("incidences", {})
-        atomic.write_json(acq.out / SETTINGS_FILE, doc)
-        scale = effort_for(acq.quick).scale_for(acq.scene.surface.kind)
-        surface = None
-        results = []
-        for k, theta in enumerate(acq.theta_i):
-            where = acq.incidence_dir(theta)
-            key = f"{theta:g}"
-            if key in doc["incidences"] and where.is_dir():
-                results.append(Result.load(where))
-                continue
-            if surface is None:
-                surface = acq.scene.build_surface(seed=acq.seed, scale=scale)
-            t0 = time.perf_counter()
-            res = estimate_to_precision(  # simulate_auto's, with its defaults
-                Experiment(surface, acq.scene.material, theta, 0.0, acq.bins),
-                Estimator(acq.max_rays, acq.seed + k),
-                Execution(acq.threads, cluster=client),
-                Precision(acq.target),
-            )
-            res.save(where)
-            auto = res.meta["auto"]["incidences"][0]
-            doc["incidences"][key] = {
-                "rays": int(auto["rays"]),
-                "seconds": time.perf_counter() - t0,
-                "rse": auto["rse"],
-                "converged": bool(auto["converged"]),
-            }
-            atomic.write_json(acq.out / SETTINGS_FILE, doc)
-            results.append(res)
-            if log:
-                log(
-                    f"microsim measure: θi = {theta:g}° ({k + 1}/{len(acq.theta_i)}): "
-                    f"{auto['rays']:,} rays, relative error {percent(auto['rse'], unit=' %')}"
-                    f"{'' if auto['converged'] else ' (max-rays reached)'}"
-                )
-        table = BRDFTable(
-            np.array(acq.theta_i),
-            acq.bins,
-            np.stack([r.brdf[0] for r in results]),
-            np.stack([r.stderr[0] for r in results]),
-            f"{acq.scene.name} (simulated)",
-        )
-        per = doc["incidences"].values()
-        doc["totals"] = {
-            "incidences": len(acq.theta_i),
-            "rays": int(sum(d["rays"] for d in per)),
-            "seconds": float(sum(d["seconds"] for d in per)),
-            "converged": all(d["converged"] for d in per),
-        }
-        table.save(acq.out / TABLE_FILE)
-        doc["exports"] = {
-            e: _export(e, table, acq.out / EXPORTS[e], acq.scene) for e in acq.exports
-        }
-        atomic.write_json(acq.out / SETTINGS_FILE, doc)
+        stack.enter_context(atomic.output_lock(acq.out, holder="measure"))
+        atomic.clean_stale(acq.out)
+        if acq.resume:
+            doc = {"settings": acq.settings(), "incidences": _saved_document(acq.out)["incidences"]}
+            try:
+                return _acquire(acq, acq.out, doc, client, log)
+            except KeyboardInterrupt:
+                raise MeasureInterrupted(_kept(acq, doc)) from None
+        _check_replaceable(acq)
+        stage = atomic.make_staging(acq.out)
+        try:
+            doc = {"settings": acq.settings(), "incidences": {}}
+            try:
+                table = _acquire(acq, stage, doc, client, log)
+            except BaseException as e:
+                note = _keep_unfinished(acq, stage, doc)
+                if isinstance(e, KeyboardInterrupt):
+                    raise MeasureInterrupted(note) from None
+                raise
+            stopped = _publish(stage, acq.out)
+        finally:
+            shutil.rmtree(stage, ignore_errors=True)
+    if stopped:
+        raise MeasureInterrupted(f"{acq.out} was written completely before it stopped")
     return table
+
+
+def _publish(stage: Path, out: Path) -> bool:
+    """Move ``stage`` to ``out`` in one rename (the user's files in ``out`` carried over); a
+    Ctrl-C meanwhile waits until it is in place. Returns whether one came."""
+    with DeferredInterrupt() as stop:
+        atomic.publish_dir(stage, out, keep=lambda name: name not in OUTPUT_NAMES)
+    return stop.is_set()
+
+
+def _acquire(acq: Acquisition, root: Path, doc: dict, client, log) -> BRDFTable:
+    """Trace into ``root`` the incidences ``doc`` (``measure.json``'s content) does not hold
+    finished there, then write the table, its exports and the totals."""
+    atomic.write_json(root / SETTINGS_FILE, doc)
+    scale = effort_for(acq.quick).scale_for(acq.scene.surface.kind)
+    surface = None
+    results = []
+    for k, theta in enumerate(acq.theta_i):
+        where = root / INCIDENCES / f"theta-{theta:05.2f}"
+        key = f"{theta:g}"
+        saved = _finished_incidence(acq, theta, where, doc["incidences"].pop(key, None), log)
+        if saved is not None:
+            doc["incidences"][key] = saved[1]
+            results.append(saved[0])
+            continue
+        if surface is None:
+            surface = acq.scene.build_surface(seed=acq.seed, scale=scale)
+        t0 = time.perf_counter()
+        res = estimate_to_precision(  # simulate_auto's, with its defaults
+            Experiment(surface, acq.scene.material, theta, 0.0, acq.bins),
+            Estimator(acq.max_rays, acq.seed + k),
+            Execution(acq.threads, cluster=client),
+            Precision(acq.target),
+        )
+        res.save(where)
+        auto = res.meta["auto"]["incidences"][0]
+        doc["incidences"][key] = {
+            "rays": int(auto["rays"]),
+            "seconds": time.perf_counter() - t0,
+            "rse": auto["rse"],
+            "converged": bool(auto["converged"]),
+        }
+        atomic.write_json(root / SETTINGS_FILE, doc)
+        results.append(res)
+        if log:
+            log(
+                f"microsim measure: θi = {theta:g}° ({k + 1}/{len(acq.theta_i)}): "
+                f"{auto['rays']:,} rays, relative error {percent(auto['rse'], unit=' %')}"
+                f"{'' if auto['converged'] else ' (max-rays reached)'}"
+            )
+    table = BRDFTable(
+        np.array(acq.theta_i),
+        acq.bins,
+        np.stack([r.brdf[0] for r in results]),
+        np.stack([r.stderr[0] for r in results]),
+        f"{acq.scene.name} (simulated)",
+    )
+    per = [doc["incidences"][f"{theta:g}"] for theta in acq.theta_i]
+    doc["totals"] = {
+        "incidences": len(acq.theta_i),
+        "rays": int(sum(d["rays"] for d in per)),
+        "seconds": float(sum(d["seconds"] for d in per)),
+        "converged": all(d["converged"] for d in per),
+    }
+    table.save(root / TABLE_FILE)
+    doc["exports"] = {e: _export(e, table, root / EXPORTS[e], acq.scene) for e in acq.exports}
+    atomic.write_json(root / SETTINGS_FILE, doc)
+    return table
+
+
+def _finished_incidence(acq: Acquisition, theta: float, where: Path, entry, log):
+    """(Result, ``measure.json`` entry) of the incidence ``theta`` finished in ``where``, or
+    None to trace it: not finished, or damaged — an incomplete entry, or files that do not
+    load as this incidence on the measure's bins (``log`` names the damage; tracing it again
+    gives the same result, as each incidence has its own seed)."""
+    if entry is None:
+        return None
+    try:
+        if not _complete_entry(entry):
+            raise UsageError(f"{SETTINGS_FILE}: its record of this incidence is incomplete")
+        res = Result.load(where)
+        if res.bins != acq.bins or res.theta_i.tolist() != [theta]:
+            raise UsageError(f"{where}: not θi = {theta:g}° on the measure's bins")
+    except (
+        FileNotFoundError, ValueError, KeyError, TypeError, IndexError, EOFError, BadZipFile
+    ) as e:  # fmt: skip
+        if log:
+            log(
+                f"microsim measure: θi = {theta:g}°: the saved incidence is damaged "
+                f"({type(e).__name__}: {' '.join(str(e).split())}); tracing it again"
+            )
+        return None
+    return res, entry
+
+
+def _complete_entry(entry) -> bool:
+    """Whether ``entry`` is a whole ``measure.json`` record of one traced incidence."""
+    number = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)  # noqa: E731
+    return (
+        isinstance(entry, dict)
+        and number(entry.get("rays"))
+        and number(entry.get("seconds"))
+        and (entry.get("rse") is None or number(entry.get("rse")))
+        and isinstance(entry.get("converged"), bool)
+    )
+
+
+def _kept(acq: Acquisition, doc: dict) -> str:
+    """What an interrupted measure kept in ``acq.out`` and how to continue it."""
+    return (
+        f"{len(doc['incidences'])} of {len(acq.theta_i)} incidences kept in {acq.out}; "
+        f"continue with microsim measure {acq.scene.path} --out {acq.out} --resume "
+        f"(same options)"
+    )
+
+
+def _keep_unfinished(acq: Acquisition, stage: Path, doc: dict) -> str:
+    """After an acquisition in ``stage`` was interrupted or failed: its finished incidences
+    replace ``acq.out`` (for ``--resume``) unless there are none or ``acq.out`` holds a
+    finished measure, which is kept as it was. Returns the line saying which."""
+    done = len(doc["incidences"])
+    if done and not _holds_finished_measure(acq.out):
+        _publish(stage, acq.out)
+        return _kept(acq, doc)
+    if done:
+        return (
+            f"{acq.out} keeps its finished table (this run's {done} incidences are dropped; "
+            f"rerun with --force to replace it)"
+        )
+    state = "is unchanged" if acq.out.exists() else "was not written"
+    return f"no incidence was finished; {acq.out} {state}"
+
+
+def _holds_finished_measure(out: Path) -> bool:
+    """Whether ``out`` holds a finished measure (its ``measure.json`` has the totals; True
+    when unsure: an unreadable one)."""
+    try:
+        doc = _read_json(out / SETTINGS_FILE)
+    except FileNotFoundError:
+        return False
+    except (OSError, ValueError):
+        return True
+    return not isinstance(doc, dict) or "totals" in doc
 
 
 def _export(fmt: str, table: BRDFTable, path: Path, scene) -> dict:
@@ -322,14 +499,8 @@ def _cmd_measure(args) -> int:
     log = None if args.no_progress else (lambda s: print(s, flush=True))
     try:
         measure(acq, log)
-    except KeyboardInterrupt:
-        doc = _read_json(acq.out / SETTINGS_FILE)
-        print(
-            f"microsim measure: interrupted; {len(doc.get('incidences', {}))} of "
-            f"{len(acq.theta_i)} incidences kept in {acq.out}; continue with "
-            f"microsim measure {args.scene} --out {acq.out} --resume",
-            flush=True,
-        )
+    except MeasureInterrupted as e:
+        print(f"microsim measure: interrupted; {e}", flush=True)
         return EXIT_INTERRUPTED
     doc = _read_json(acq.out / SETTINGS_FILE)
     tot = doc["totals"]

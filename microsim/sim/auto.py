@@ -213,7 +213,7 @@ def estimate_to_precision(
         while n_next > 0:
             seed = _batch_seed(est.seed, i, batch)
             res = estimate(incidence, replace(est, rays=n_next, seed=seed), batch_run)
-            if res.is_partial:  # interrupted (SIGINT): batches cannot resume
+            if res.meta["interrupted"]:  # SIGINT, even after the last chunk: no resuming
                 raise KeyboardInterrupt
             meta0 = meta0 or res.meta
             acc.add(res)

@@ -162,6 +162,8 @@ def simulate(
     one thread task, well under a second at the default ``chunk``, whatever ``rays``) and
     *returns* a Result with ``meta["partial"] = True`` holding every complete block
     (``Result.rays`` counts them; incidences not started have 0 rays and NaN estimates).
+    ``meta["interrupted"]`` says that a SIGINT came, also one that came after the last chunk
+    was tallied (the Result then complete): a caller that must stop checks it.
     ``resume=<that Result>`` (same surface(s), material, θi, φi, bins, seed, rays, masking,
     origins, isotropic; else a UsageError naming what differs) continues from the first block
     not yet done; the final tallies are bitwise identical to an uninterrupted run, because
@@ -398,6 +400,7 @@ def _trace(plan: _Plan, state: _State, ex: Experiment, est: Estimator, run: Exec
             interrupted = True
         except SchedulerLost as e:  # stops the run as an interrupt does; ``estimate`` raises it
             lost = e
+        interrupted = interrupted or stop.is_set()  # SIGINT after the last chunk's check
     return timings, build, interrupted, lost
 
 

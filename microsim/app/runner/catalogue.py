@@ -20,6 +20,7 @@ from ...analysis.fullwave_map import FULLWAVE_JSON
 from ...checkpoints import checkpoint
 from ...errors import UsageError
 from ..bench_methods import METHODS_JSON, METHODS_PNG
+from ..cluster import check_address, connect
 from ..scene import load_scene
 from . import planning
 from .publishing import REPORT_STATE, VERDICTS_FILE, read_report_state, write_report_state
@@ -144,6 +145,9 @@ def run_report(
         f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
         f"--out {out}`"
     )
+    if scheduler is not None:  # an unusable address fails here, before anything is written
+        with connect(check_address(scheduler)):
+            pass
     with atomic.output_lock(out):
         state = read_report_state(out) if resume else None
         if resume:

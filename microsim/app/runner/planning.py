@@ -18,6 +18,7 @@ from ...atomic import json_safe
 from ...checks import file_path
 from ...errors import UsageError
 from ...sim import Bins, Result
+from ..cluster import check_address
 from ..scene import incidence_pairs, load_scene
 from .wave_run import check_wave_plan
 
@@ -229,8 +230,8 @@ def plan_run(
             f'rays = "auto" needs realisations = 1 (scene {scene.name} has '
             f"{scene.simulation.realisations}); give --rays instead"
         )
-    if scheduler is not None and not (isinstance(scheduler, str) and scheduler.strip()):
-        raise UsageError(f"--scheduler must be a Dask scheduler address, got {scheduler!r}")
+    if scheduler is not None:
+        check_address(scheduler)
     if auto and scheduler is not None:
         raise UsageError(
             f'--scheduler is not available for a rays = "auto" scene ({scene.name}): its '
