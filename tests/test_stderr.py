@@ -7,7 +7,7 @@ Rays 2k and 2k + 1 are two independent samples of one stratum, so the reported s
 unbiased estimate of the estimator's variance σ²_B: E[(x_2k − x_2k+1)²] = 2σ²_k per stratum
 (Cochran, Sampling Techniques, §5.5). Per bin B, r_B = s²_B / mean_K(se²_B) (s²_B the sample
 variance over the K seeds) then has expectation 1 up to O(1/events) (the Jensen term of the
-noisy denominator, small for bins with ≥ ``MIN_EVENTS`` events in every run). The test takes
+noisy denominator, small for bins with ≥ ``ENOUGH`` events in every run). The test takes
 the mean r̄ over the bins (every order slot, for bounce chains) and its standard error from
 the run itself — the jackknife over seeds, which carries whatever correlation the bins share
 — and asserts (a) |r̄ − 1| ≤ z·se_jack, z the two-sided normal quantile at α = 0.01 Šidák-
@@ -28,12 +28,12 @@ from support import sidak
 from microsim import analytic as an
 from microsim.checkpoints import interrupt_at
 from microsim.sim import BLOCK, LEDGER, Bins, Result, ray_events, simulate
-from microsim.sim.tallies import bin_estimate
-from microsim.stats import norm_isf
+from microsim.sim.tallies import PairSums, bin_estimate
+from microsim.stats import MIN_EVENTS, norm_isf  # MIN_EVENTS: the pair rule's threshold
 from microsim.surfaces import flat, gaussian, vgrooves
 
 K, RAYS, THETA, BINS = 16, 200_000, [30.0, 70.0], Bins(9, 7)
-MIN_EVENTS = 100
+ENOUGH = 100  # events a bin needs in every run to enter the calibration
 PATHS = {  # trace path → (surface fixture, simulate keywords)
     "heightfield": ("heightfield", {}),
     "heightfield-bounces": ("heightfield", {"bounces": 3}),
@@ -64,10 +64,10 @@ def slots(res: Result):
 
 
 def ratios(runs) -> np.ndarray:
-    """r_B = s²_B / mean(se²_B) over the bins with ≥ MIN_EVENTS events in every run, for each
+    """r_B = s²_B / mean(se²_B) over the bins with ≥ ENOUGH events in every run, for each
     leave-one-out subset too: (K + 1, M), row 0 from all runs."""
     f, se, n = (np.array(a) for a in zip(*map(slots, runs)))
-    used = n.reshape(len(runs), -1).min(axis=0) >= MIN_EVENTS
+    used = n.reshape(len(runs), -1).min(axis=0) >= ENOUGH
     f, se2 = f.reshape(len(runs), -1)[:, used], se.reshape(len(runs), -1)[:, used] ** 2
     keep = [np.ones(len(runs), bool)] + [np.arange(len(runs)) != k for k in range(len(runs))]
     return np.array([np.var(f[m], axis=0, ddof=1) / se2[m].mean(axis=0) for m in keep])
@@ -106,7 +106,7 @@ def test_stderr_matches_the_scatter_between_seeds(request, path):
     if path == "heightfield":  # the i.i.d. formula ignores the stratification: outside the band
         f = np.array([run.brdf.reshape(len(THETA), -1) for run in runs])
         old = np.array([[per_ray_stderr(run, i) for i in range(len(THETA))] for run in runs])
-        used = np.array([run.counts.reshape(len(THETA), -1) for run in runs]).min(0) >= MIN_EVENTS
+        used = np.array([run.counts.reshape(len(THETA), -1) for run in runs]).min(0) >= ENOUGH
         old_ratio = np.mean(np.var(f, axis=0, ddof=1)[used] / np.mean(old**2, axis=0)[used])
         print(f"  per-ray formula: variance ratio {old_ratio:.3f}")
         assert old_ratio < BAND[0]
@@ -167,12 +167,23 @@ def test_pair_rule_falls_back_to_per_ray_where_the_pair_estimate_is_zero():
     assert np.count_nonzero(res.counts) == 1
     assert np.all(res.stderr <= 1e-7 * res.brdf.max())
     # pair estimate 0 but per-ray > 0 (constructed): the per-ray value is used
-    omega = np.ones(2)
-    f, se = bin_estimate(
-        np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega, sum_pair=np.array([1.0, 0.0])
-    )
-    per = bin_estimate(np.array([2.0, 1.0]), np.array([2.0, 1.0]), 10, omega)[1]
+    omega, many = np.ones(2), np.full(2, MIN_EVENTS)
+    w, w2 = np.array([2.0, 1.0]), np.array([2.0, 1.0])
+    f, se = bin_estimate(w, w2, 10, omega, PairSums(np.array([1.0, 0.0]), many))
+    per = bin_estimate(w, w2, 10, omega)[1]
     assert se[0] == per[0] > 0 and se[1] == pytest.approx(0.1)  # √(1 − 0)/10
+
+
+def test_pair_rule_falls_back_to_per_ray_below_the_events_a_test_needs():
+    """Two rays of one pair in a rare bin with near-equal weights make a pair estimate of ~0:
+    below ``MIN_EVENTS`` events the per-ray formula (never below the stratified variance in
+    expectation) is used, at and above it the pair estimate."""
+    omega, w, w2, pair = np.ones(1), np.array([2.0]), np.array([2.0]), np.array([0.999])
+    few = bin_estimate(w, w2, 1000, omega, PairSums(pair, np.array([MIN_EVENTS - 1])))[1]
+    enough = bin_estimate(w, w2, 1000, omega, PairSums(pair, np.array([MIN_EVENTS])))[1]
+    per = bin_estimate(w, w2, 1000, omega)[1]
+    assert few[0] == per[0] and enough[0] == pytest.approx(np.sqrt(2.0 - 2 * 0.999) / 1000)
+    assert enough[0] < per[0] / 10
 
 
 # --- isotropic (per-block incidence-azimuth rotation) ------------------------------------------

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from microsim.stats import MIN_EVENTS
+
 from . import tally_kernels
 from .bins import Bins
 from .ledger import DOWNWARD, LEDGER, MASKED, TERMINAL
@@ -51,6 +53,7 @@ __all__ = [
     "tallies_from_arrays",
     "TALLY_NAMES",
     "STDERR_METHODS",
+    "PairSums",
     "BlockSums",
     "block_sizes",
     "terminal_ledger",
@@ -229,7 +232,8 @@ class Tally:
         ``STDERR_METHODS``)."""
         n = int(np.sum(rays))
         if method == "pairs":
-            return bin_estimate(self.sum_w, self.sum_w2, n, omega, sum_pair=self.sum_pair)
+            pairs = PairSums(self.sum_pair, self.count)
+            return bin_estimate(self.sum_w, self.sum_w2, n, omega, pairs=pairs)
         if method == "blocks":
             blocks = BlockSums(self.sum_block2, self.sum_block_rays, *block_sizes(rays))
             return bin_estimate(self.sum_w, self.sum_w2, n, omega, blocks=blocks)
@@ -240,6 +244,15 @@ STDERR_METHODS = ("pairs", "blocks", "per-ray")
 """How a run's standard error is estimated (``meta["stderr_method"]``, ``bin_estimate``):
 paired strata (stratified origins), the scatter between blocks (``isotropic`` runs, every
 block an independent replicate), or the i.i.d. per-ray formula (independent origins)."""
+
+
+@dataclass(frozen=True)
+class PairSums:
+    """The pair tallies of ``bin_estimate``'s paired-strata error: per bin Σ_k x_2k x_2k+1
+    and the events (``Tally.sum_pair``, ``Tally.count``)."""
+
+    sum_pair: np.ndarray
+    count: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -261,24 +274,28 @@ def block_sizes(rays) -> tuple[int, float]:
     return int(np.sum(full + (rest > 0))), float(np.sum(full * float(BLOCK) ** 2 + rest**2.0))
 
 
-def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None, blocks: BlockSums | None = None):
+def bin_estimate(
+    sum_w, sum_w2, n, omega, pairs: PairSums | None = None, blocks: BlockSums | None = None
+):
     """BRDF and standard error of one tally (sr⁻¹); NaN when no ray was traced.
 
     ``sum_w``/``sum_w2`` per-bin Σx, Σx²; ``n`` primary rays; ``omega`` per-bin projected
     solid angle (sr). With x_r = w_r·1[ray r in bin B] the bin mean is Σx/N. Per-ray (i.i.d.)
     error:
         se² = (Σx²/N − (Σx/N)²)/(N − 1).
-    ``sum_pair`` given (stratified origins): paired strata — rays (2k, 2k+1) are two
+    ``pairs`` given (stratified origins): paired strata — rays (2k, 2k+1) are two
     independent samples of one stratum of width 2/N, so E[(x_2k − x_2k+1)²] = 2σ²_k and
         se² = Σ_k (x_2k − x_2k+1)²/N² = (Σx² − 2 Σ_k x_2k x_2k+1)/N²
     is unbiased (a trailing unpaired ray, alone in its stratum, counts as paired with 0,
     adding x²/N²: conservative, one ray).
-    Rule: the pair estimate, clipped at ≥ 0, is used where Σx² − 2Σ_k x_2k x_2k+1 exceeds the
-    rounding level of that difference (64 ε Σx²); where it does not (no event, or every pair
-    holding the bin's events is two equal weights) the per-ray formula is used instead, so a
-    bin never gets a zero error that the per-ray formula would not give
-    (stratified sampling with two units per stratum, Cochran, Sampling Techniques, 3rd ed.,
-    §5.5).
+    Rule: the pair estimate, clipped at ≥ 0, is used where the bin holds at least
+    ``stats.MIN_EVENTS`` events and Σx² − 2Σ_k x_2k x_2k+1 exceeds the rounding level of that
+    difference (64 ε Σx²); elsewhere the per-ray formula (the variance of unstratified
+    sampling, which stratification never exceeds in expectation) is used instead. A bin of a
+    few events has a pair estimate of very few degrees of freedom (two rays of one pair in a
+    rare bin with near-equal weights give an error of ~0), and one whose pairs all hold two
+    equal weights would get a zero error (stratified sampling with two units per stratum,
+    Cochran, Sampling Techniques, 3rd ed., §5.5).
     ``blocks`` given (``isotropic`` runs): every block b is an independent replicate of one
     design (its own sweep of the tile, its own incidence azimuth), with S_b its Σx and m_b its
     rays, so the mean is the ratio estimate f = Σ_b S_b / Σ_b m_b over B blocks, with
@@ -295,10 +312,11 @@ def bin_estimate(sum_w, sum_w2, n, omega, sum_pair=None, blocks: BlockSums | Non
         spread = b.sum_block2 - 2 * mean * b.sum_block_rays + mean * mean * b.sum_rays2
         var = np.maximum(spread, 0.0) / (float(n) * n)
         var = var * b.blocks / (b.blocks - 1) if b.blocks > 1 else np.full_like(mean, np.nan)
-    elif sum_pair is not None:
-        diff = sum_w2 - 2.0 * sum_pair
+    elif pairs is not None:
+        diff = sum_w2 - 2.0 * pairs.sum_pair
         pair = np.maximum(diff, 0.0) / (float(n) * n)
-        var = np.where(diff > 64 * np.finfo(float).eps * sum_w2, pair, var)
+        trusted = (diff > 64 * np.finfo(float).eps * sum_w2) & (pairs.count >= MIN_EVENTS)
+        var = np.where(trusted, pair, var)
     se = np.sqrt(var) * np.ones_like(mean)
     return mean / omega, se / omega
 
