@@ -28,7 +28,7 @@ from support import sidak
 from microsim import analytic as an
 from microsim.checkpoints import interrupt_at
 from microsim.sim import BLOCK, LEDGER, Bins, Result, ray_events, simulate
-from microsim.sim.tallies import PairSums, bin_estimate
+from microsim.sim.tallies import PairSums, bin_estimate, stderr_dof
 from microsim.stats import MIN_EVENTS, norm_isf  # MIN_EVENTS: the pair rule's threshold
 from microsim.surfaces import flat, gaussian, vgrooves
 
@@ -253,3 +253,24 @@ def test_runner_refuses_auto_with_several_realisations(tmp_path):
     scene.write_text(AUTO_SCENE.format(realisations=2))
     with pytest.raises(ValueError, match="auto"):
         runner.plan_run(scene, out=tmp_path / "run", quick=True)
+
+
+def test_the_pair_error_has_the_discordant_pairs_as_degrees_of_freedom(grooves):
+    """``stderr_dof``: with equal weights in a bin, Σ_k (x_2k − x_2k+1)² has one non-zero term
+    per discordant pair (one ray of the pair in the bin), so ν is their count. Counted from the
+    per-ray events of the same stream; Fresnel weights differ a little within a bin (concordant
+    pairs of unequal weights add small terms), so per bin within 10 %."""
+    n, bins = 20 * BLOCK, Bins(9, 7)
+    res = simulate(grooves, "aluminium", 80.0, rays=n, bins=bins, seed=3)
+    ev = ray_events(grooves, "aluminium", 80.0, rays=n, seed=3)
+    where = np.where(
+        ev.status == LEDGER.index("single"), bins.locate(np.nan_to_num(ev.wo), 0.0), -1
+    )
+    a, b = where[0:n:2], where[1:n:2]
+    nbin = bins.shape[0] * bins.shape[1]
+    events = np.bincount(where[where >= 0], minlength=nbin)
+    discordant = events - 2 * np.bincount(a[(a == b) & (a >= 0)], minlength=nbin)
+    nu = stderr_dof(res)[0].ravel()
+    use = events >= MIN_EVENTS
+    assert use.sum() >= 10
+    assert np.allclose(nu[use], discordant[use], rtol=0.1), (nu[use], discordant[use])

@@ -9,7 +9,10 @@ documented again in ``VERDICT_SCHEMA``):
 * Used bins U: ≥ ``min_events`` single-bounce events, and sim, stderr, model finite, σ_B > 0.
 * σ_B² = se_B² + (model_rtol · m_B)²: the simulation's standard error and, in quadrature, the
   model's own quadrature error (``predict.bin_average`` converges to relative ``rtol``).
-  z_B = (f̄_B − m_B)/σ_B.
+  z_B = (f̄_B − m_B)/σ_B; where se_B comes with finite degrees of freedom ν_B (``Measured.dof``,
+  ``sim.tallies.stderr_dof``: a paired-strata error has as many as the bin's discordant
+  pairs) z_B is Student t on ν_B (σ/se)⁴ dof (Satterthwaite) and is replaced by the normal
+  deviate of the same two-sided p, so that both tests below keep their level.
 * χ² = Σ_U z², dof = |U| − k (k = number of fitted parameters, 0 for a prescribed model),
   p = P(χ²_dof ≥ χ²).
 * Agreement is a family of two tests per (incidence, model): the χ² test and the max-|z| test
@@ -75,6 +78,7 @@ from microsim import checks as _checks
 from microsim.analysis import incidence
 from microsim.analysis.markdown import percent
 from microsim.errors import UsageError
+from microsim.sim.tallies import stderr_dof
 from microsim.stats import (
     ENERGY_FRACTION,
     MIN_EVENTS,
@@ -244,7 +248,8 @@ class Measured(NamedTuple):
     ``omega`` (Θ, Φ) projected solid angles sr, ``theta_edges`` (Θ+1,) and ``phi_edges``
     (Φ+1,, None: the folded grid of ``Bins``) degrees; ``realisations`` (R, Θ, Φ) the BRDFs of
     R tiles of equal rays (sr⁻¹, their mean is ``brdf``) or None; ``theta_i``, ``phi_i``
-    degrees."""
+    degrees; ``dof`` (Θ, Φ) the degrees of freedom of ``stderr`` (``sim.tallies.stderr_dof``)
+    or None: exact."""
 
     brdf: np.ndarray
     stderr: np.ndarray
@@ -255,6 +260,7 @@ class Measured(NamedTuple):
     realisations: np.ndarray | None = None
     theta_i: float = 0.0
     phi_i: float = 0.0
+    dof: np.ndarray | None = None
 
     @classmethod
     def of(cls, result, t: int, **replace) -> "Measured":
@@ -320,6 +326,7 @@ def verdict(
             "phi_edges": m.phi_edges,
             "realisations": m.realisations,
             "departure": p.departure,
+            "dof": m.dof,
         },
         ensemble=ensemble,
         model_rtol=model_rtol,
@@ -332,7 +339,8 @@ def verdict(
     n_bins = int(used.sum())
     dof = n_bins - int(n_params)
     z_thr = float(norm_isf(0.5 * sidak(alpha_each, n_bins))) if n_bins else None
-    ray = _noise_tests(a.sim - a.mod, sigma, used, dof, alpha_each, z_thr)
+    normal = _normal_equivalent(a, sigma)
+    ray = _noise_tests(a.sim - a.mod, sigma, used, dof, alpha_each, z_thr, normal)
     Em = energy_set(np.where(used, a.mod * a.om, 0.0)).reshape(a.shape)
     energy = np.where(used, a.sim * a.om, 0.0)
     E = energy_set(energy).reshape(a.shape)
@@ -354,9 +362,8 @@ def verdict(
         reference, n_real = "one-tile", 1
         agrees, conclusive = ray["ok"], ray["ok"]
         if a.dep is not None:
-            tile = _noise_tests(
-                np.maximum(np.abs(a.sim - a.mod) - a.dep, 0.0), sigma, used, dof, alpha_each, z_thr
-            )
+            excess = np.maximum(np.abs(a.sim - a.mod) - a.dep, 0.0)
+            tile = _noise_tests(excess, sigma, used, dof, alpha_each, z_thr, normal)
             z_dev = tile["z"]
             out["tile_departure"] = _weighted_rms(energy, a.dep / np.where(used, a.mod, 1.0), E)
             out["departure_max_abs_z"] = tile["max_abs_z"]
@@ -414,6 +421,7 @@ class _Inputs(NamedTuple):
     F: np.ndarray | None
     dep: np.ndarray | None
     se_t: np.ndarray | None
+    nu: np.ndarray | None
 
     @property
     def shape(self) -> tuple:
@@ -467,7 +475,12 @@ def _checked_inputs(args: Mapping, *, ensemble, model_rtol, min_events, n_params
             raise UsageError(
                 f"departure must be a non-negative {shape} array (sr⁻¹), got shape {dep.shape}"
             )
-    return _Inputs(sim, se, cnt, mod, om, phi_edges, F, dep, se_t)
+    nu = args.get("dof")
+    if nu is not None:
+        nu = np.asarray(nu, dtype=np.float64)
+        if nu.shape != shape or not np.all(nu >= 1):  # NaN fails too
+            raise UsageError(f"dof must be a {shape} array of degrees of freedom >= 1")
+    return _Inputs(sim, se, cnt, mod, om, phi_edges, F, dep, se_t, nu)
 
 
 def _used_bins(a: _Inputs, model_rtol: float, min_events: int) -> tuple[np.ndarray, np.ndarray]:
@@ -487,9 +500,32 @@ def _used_bins(a: _Inputs, model_rtol: float, min_events: int) -> tuple[np.ndarr
     return used, sigma
 
 
-def _noise_tests(diff, sigma, used, dof, alpha_each, z_thr) -> dict:
-    """χ² and max-|z| tests of z = diff/σ over the used bins (each at ``alpha_each``)."""
+def _normal_equivalent(a: _Inputs, sigma):
+    """z ↦ its normal equivalent where σ's standard error has finite degrees of freedom ν
+    (``a.nu``), else None. A ratio diff/σ whose σ² is estimated on ν dof is Student t, not
+    normal: with few discordant pairs a bin's error is itself noisy, and normal quantiles
+    would then call far too many bins deviating. σ² = se² + (rtol·m)² with the model's part
+    exact has ν_σ = ν (σ/se)⁴ (Satterthwaite), and z keeps the two-sided p of t on ν_σ dof:
+    z' = sign(z) Φ⁻¹(1 − F_t(|z|; ν_σ))."""
+    if a.nu is None:
+        return None
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        nu = a.nu * (sigma / np.where(a.se > 0, a.se, np.inf)) ** 4
+
+    def convert(z):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            p = t_sf(np.abs(z), nu)
+            return np.where(p > 0, np.sign(z) * norm_isf(p), z)
+
+    return convert
+
+
+def _noise_tests(diff, sigma, used, dof, alpha_each, z_thr, normal=None) -> dict:
+    """χ² and max-|z| tests of z = diff/σ over the used bins (each at ``alpha_each``);
+    ``normal``: z ↦ its normal equivalent (``_normal_equivalent``) or None."""
     z = np.where(used, diff / np.where(used, sigma, 1.0), 0.0)
+    if normal is not None:
+        z = np.where(used, normal(z), 0.0)
     chi2 = float(np.sum(z**2))
     p_value = float(chi2_sf(chi2, dof)) if dof > 0 else None
     max_abs_z = float(np.max(np.abs(z))) if used.any() else None
@@ -676,11 +712,13 @@ def verdicts_for_result(
     # ray noise only; ensemble models also by the tile-to-tile scatter (``result.stderr``)
     own = set(result.meta.get("realisation_models", ()))
     ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
+    ray_dof = stderr_dof(result)  # of ray_err; ``result.stderr`` with realisations: none
     per = getattr(result, "brdf_realisations", None)
     out = []
     for t in range(T):
         for name, values, p, is_fit, k in entries:
-            stderr = ray_err if name in own else result.stderr
+            ray = name in own or result.stderr_ray is None
+            stderr, dof = (ray_err, ray_dof) if ray else (result.stderr, None)
             real_t = None
             if per is not None and name not in own:
                 real_t = per[result.realisations_traced(t), t]
@@ -694,7 +732,14 @@ def verdicts_for_result(
                 departure = departure_of(rel_departure[t], values[t])
             out.append(
                 verdict(
-                    Measured.of(result, t, stderr=stderr[t], omega=omega, realisations=real_t),
+                    Measured.of(
+                        result,
+                        t,
+                        stderr=stderr[t],
+                        omega=omega,
+                        realisations=real_t,
+                        dof=None if dof is None else dof[t],
+                    ),
                     Prediction(values[t], name, p, is_fit, k, name not in own, departure),
                     Significance(model_rtol, min_events, alpha, n_tests),
                 )

@@ -56,6 +56,7 @@ __all__ = [
     "PairSums",
     "BlockSums",
     "block_sizes",
+    "stderr_dof",
     "terminal_ledger",
     "split_order_tallies",
     "chunk_order_tallies",
@@ -272,6 +273,32 @@ def block_sizes(rays) -> tuple[int, float]:
     n = np.atleast_1d(np.asarray(rays, dtype=np.int64))
     full, rest = n // BLOCK, n % BLOCK
     return int(np.sum(full + (rest > 0))), float(np.sum(full * float(BLOCK) ** 2 + rest**2.0))
+
+
+def stderr_dof(result) -> np.ndarray | None:
+    """Degrees of freedom ν (T, Θ, Φ) of ``result``'s ray-noise standard error
+    (``stderr_ray``, or ``stderr`` with one realisation) per single-bounce bin, from its raw
+    tallies (None without them: the error is then taken as exact). Paired strata: the sum
+    Σ_k (x_2k − x_2k+1)² has as many non-zero terms as the bin has discordant pairs (one ray
+    in the bin, the other not, or unequal weights), so ν = N_B (Σx² − 2Σ pairs)/Σx² — exactly
+    the discordant pairs when the bin's weights are equal; where the per-ray formula serves
+    (``bin_estimate``'s rule), N_B − 1. Blocks: B − 1. Per-ray: N_B − 1. At least 1."""
+    t = result.tallies
+    if t is None:
+        return None
+    nb = result.bins.shape[0] * result.bins.shape[1]
+    count, sum_w2 = (np.asarray(t[k]).sum(axis=0)[:, :nb] for k in ("count", "sum_w2"))
+    method = result.meta.get("stderr_method")
+    nu = count - 1.0
+    if method == "pairs" and "sum_pair" in t:
+        diff = sum_w2 - 2.0 * np.asarray(t["sum_pair"]).sum(axis=0)[:, :nb]
+        trusted = (diff > 64 * np.finfo(float).eps * sum_w2) & (count >= MIN_EVENTS)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            nu = np.where(trusted, count * diff / np.where(trusted, sum_w2, 1.0), nu)
+    elif method == "blocks":
+        blocks = [block_sizes(rays)[0] for rays in np.asarray(t["rays"]).T]
+        nu = np.broadcast_to(np.array(blocks, float)[:, None] - 1.0, count.shape)
+    return np.maximum(nu, 1.0).reshape((len(result.theta_i),) + result.bins.shape)
 
 
 def bin_estimate(

@@ -52,6 +52,7 @@ from microsim.analysis.verdicts import (
 from microsim.errors import UsageError
 from microsim.sim.compare import attach_models, default_models, departure_models
 from microsim.sim.predict import ModelSpec, predict_incidences
+from microsim.sim.tallies import stderr_dof
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
 from .cache import AUTO_MAX_RAYS, AUTO_TARGET, cache_dir, cached, resolve_reference
@@ -444,6 +445,7 @@ def assert_brdf_agrees(
     per = result.brdf_realisations
     R = 1 if per is None else int(per.shape[0])
     departure = _one_tile_departure(ref, result) if R == 1 else None
+    dof = stderr_dof(result) if R == 1 else None  # of result.stderr: ray noise alone
     verdicts, failing = [], []
     for t in range(T):
         real_t = None
@@ -451,7 +453,9 @@ def assert_brdf_agrees(
             real_t = per[result.realisations_traced(t), t]
         dep_t = None if departure is None else departure_of(departure[t], model[t])
         v = verdict(
-            Measured.of(result, t, omega=omega, realisations=real_t),
+            Measured.of(
+                result, t, omega=omega, realisations=real_t, dof=None if dof is None else dof[t]
+            ),
             Prediction(model[t], name, ensemble=R >= 2 or departure is not None, departure=dep_t),
             Significance(MODEL_RTOL, min_events, alpha, T),
         )
