@@ -28,7 +28,7 @@ from support import sidak
 from microsim import analytic as an
 from microsim.checkpoints import interrupt_at
 from microsim.sim import BLOCK, LEDGER, Bins, Result, ray_events, simulate
-from microsim.sim.tallies import PairSums, bin_estimate, stderr_dof
+from microsim.sim.tallies import MIN_DISCORDANT, PairSums, bin_estimate, stderr_dof
 from microsim.stats import MIN_EVENTS, norm_isf  # MIN_EVENTS: the pair rule's threshold
 from microsim.surfaces import flat, gaussian, vgrooves
 
@@ -174,16 +174,27 @@ def test_pair_rule_falls_back_to_per_ray_where_the_pair_estimate_is_zero():
     assert se[0] == per[0] > 0 and se[1] == pytest.approx(0.1)  # √(1 − 0)/10
 
 
-def test_pair_rule_falls_back_to_per_ray_below_the_events_a_test_needs():
-    """Two rays of one pair in a rare bin with near-equal weights make a pair estimate of ~0:
-    below ``MIN_EVENTS`` events the per-ray formula (never below the stratified variance in
-    expectation) is used, at and above it the pair estimate."""
-    omega, w, w2, pair = np.ones(1), np.array([2.0]), np.array([2.0]), np.array([0.999])
-    few = bin_estimate(w, w2, 1000, omega, PairSums(pair, np.array([MIN_EVENTS - 1])))[1]
-    enough = bin_estimate(w, w2, 1000, omega, PairSums(pair, np.array([MIN_EVENTS])))[1]
+def test_pair_rule_falls_back_to_per_ray_below_the_events_and_pairs_a_test_needs():
+    """Pairs of a rare bin landing in it together with near-equal weights make a pair estimate
+    of ~0 on almost no degrees of freedom: below ``MIN_EVENTS`` events, or below
+    ``MIN_DISCORDANT`` discordant pairs (N·(Σx² − 2Σ pairs)/Σx²), the per-ray formula (never
+    below the stratified variance in expectation) is used, at and above both the pair
+    estimate."""
+    omega, w, w2 = np.ones(1), np.array([2.0]), np.array([2.0])
     per = bin_estimate(w, w2, 1000, omega)[1]
-    assert few[0] == per[0] and enough[0] == pytest.approx(np.sqrt(2.0 - 2 * 0.999) / 1000)
-    assert enough[0] < per[0] / 10
+
+    def pair_se(sum_pair, events):
+        return bin_estimate(w, w2, 1000, omega, PairSums(np.array([sum_pair]), np.array([events])))[
+            1
+        ]
+
+    # 2 − 2·0.5 = 1 of Σx² = 2 is discordant: MIN_EVENTS/2 discordant pairs
+    assert pair_se(0.5, MIN_EVENTS - 1)[0] == per[0]
+    assert pair_se(0.5, MIN_EVENTS)[0] == pytest.approx(1.0 / 1000)
+    assert 1.0 / 1000 < per[0]
+    # 2 − 2·0.999 = 0.002: 0.025 discordant pairs among MIN_EVENTS events, a collapsed error
+    assert MIN_EVENTS * 0.002 / 2.0 < MIN_DISCORDANT
+    assert pair_se(0.999, MIN_EVENTS)[0] == per[0]
 
 
 # --- isotropic (per-block incidence-azimuth rotation) ------------------------------------------

@@ -57,6 +57,8 @@ __all__ = [
     "BlockSums",
     "block_sizes",
     "stderr_dof",
+    "pair_error_trusted",
+    "MIN_DISCORDANT",
     "terminal_ledger",
     "split_order_tallies",
     "chunk_order_tallies",
@@ -275,6 +277,27 @@ def block_sizes(rays) -> tuple[int, float]:
     return int(np.sum(full + (rest > 0))), float(np.sum(full * float(BLOCK) ** 2 + rest**2.0))
 
 
+MIN_DISCORDANT = 5
+"""Discordant pairs (their equivalent N_B (Σx² − 2Σ pairs)/Σx²) a bin needs for its pair error:
+with fewer, that error has almost no degrees of freedom (every pair of a rare bin landing in
+it with near-equal weights makes it ~0) and the per-ray formula serves instead."""
+
+
+def pair_error_trusted(sum_w2, diff, count):
+    """(where the paired-strata error serves, the bins' discordant pairs ν = N_B·diff/Σx²) for
+    per-bin Σx², diff = Σx² − 2Σ pairs and event counts N_B: at least ``stats.MIN_EVENTS``
+    events, ``MIN_DISCORDANT`` discordant pairs and a difference above its rounding level
+    (64 ε Σx²). ν is exactly the discordant pairs when the bin's weights are equal."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        discordant = np.where(sum_w2 > 0, count * diff / np.where(sum_w2 > 0, sum_w2, 1.0), 0.0)
+    trusted = (
+        (diff > 64 * np.finfo(float).eps * sum_w2)
+        & (count >= MIN_EVENTS)
+        & (discordant >= MIN_DISCORDANT)
+    )
+    return trusted, discordant
+
+
 def stderr_dof(result) -> np.ndarray | None:
     """Degrees of freedom ν (T, Θ, Φ) of ``result``'s ray-noise standard error
     (``stderr_ray``, or ``stderr`` with one realisation) per single-bounce bin, from its raw
@@ -292,9 +315,8 @@ def stderr_dof(result) -> np.ndarray | None:
     nu = count - 1.0
     if method == "pairs" and "sum_pair" in t:
         diff = sum_w2 - 2.0 * np.asarray(t["sum_pair"]).sum(axis=0)[:, :nb]
-        trusted = (diff > 64 * np.finfo(float).eps * sum_w2) & (count >= MIN_EVENTS)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            nu = np.where(trusted, count * diff / np.where(trusted, sum_w2, 1.0), nu)
+        trusted, discordant = pair_error_trusted(sum_w2, diff, count)
+        nu = np.where(trusted, discordant, nu)
     elif method == "blocks":
         blocks = [block_sizes(rays)[0] for rays in np.asarray(t["rays"]).T]
         nu = np.broadcast_to(np.array(blocks, float)[:, None] - 1.0, count.shape)
@@ -315,13 +337,14 @@ def bin_estimate(
         se² = Σ_k (x_2k − x_2k+1)²/N² = (Σx² − 2 Σ_k x_2k x_2k+1)/N²
     is unbiased (a trailing unpaired ray, alone in its stratum, counts as paired with 0,
     adding x²/N²: conservative, one ray).
-    Rule: the pair estimate, clipped at ≥ 0, is used where the bin holds at least
-    ``stats.MIN_EVENTS`` events and Σx² − 2Σ_k x_2k x_2k+1 exceeds the rounding level of that
-    difference (64 ε Σx²); elsewhere the per-ray formula (the variance of unstratified
-    sampling, which stratification never exceeds in expectation) is used instead. A bin of a
-    few events has a pair estimate of very few degrees of freedom (two rays of one pair in a
-    rare bin with near-equal weights give an error of ~0), and one whose pairs all hold two
-    equal weights would get a zero error (stratified sampling with two units per stratum,
+    Rule (``pair_error_trusted``): the pair estimate, clipped at ≥ 0, is used where the bin
+    holds at least ``stats.MIN_EVENTS`` events and ``MIN_DISCORDANT`` discordant pairs, and
+    Σx² − 2Σ_k x_2k x_2k+1 exceeds the rounding level of that difference (64 ε Σx²);
+    elsewhere the per-ray formula (the variance of unstratified sampling, which
+    stratification never exceeds in expectation) is used instead. The pair estimate has as
+    many degrees of freedom as the bin has discordant pairs: a bin whose pairs nearly all
+    land in it together with near-equal weights gets an error of ~0, and one whose pairs all
+    hold two equal weights would get a zero error (stratified sampling with two units per stratum,
     Cochran, Sampling Techniques, 3rd ed., §5.5).
     ``blocks`` given (``isotropic`` runs): every block b is an independent replicate of one
     design (its own sweep of the tile, its own incidence azimuth), with S_b its Σx and m_b its
@@ -342,7 +365,7 @@ def bin_estimate(
     elif pairs is not None:
         diff = sum_w2 - 2.0 * pairs.sum_pair
         pair = np.maximum(diff, 0.0) / (float(n) * n)
-        trusted = (diff > 64 * np.finfo(float).eps * sum_w2) & (pairs.count >= MIN_EVENTS)
+        trusted, _ = pair_error_trusted(sum_w2, diff, pairs.count)
         var = np.where(trusted, pair, var)
     se = np.sqrt(var) * np.ones_like(mean)
     return mean / omega, se / omega
