@@ -59,6 +59,7 @@ __all__ = [
     "stderr_dof",
     "pair_error_trusted",
     "MIN_DISCORDANT",
+    "STDERR_RULE",
     "terminal_ledger",
     "split_order_tallies",
     "chunk_order_tallies",
@@ -276,6 +277,11 @@ def block_sizes(rays) -> tuple[int, float]:
     full, rest = n // BLOCK, n % BLOCK
     return int(np.sum(full + (rest > 0))), float(np.sum(full * float(BLOCK) ** 2 + rest**2.0))
 
+
+STDERR_RULE = 2
+"""Version of ``bin_estimate``'s rule (which error serves where): a cached result, whose
+standard errors are stored, must share it (``microsim.testing``'s cache key). 2: paired strata
+where a bin has ``MIN_EVENTS`` events and ``MIN_DISCORDANT`` discordant pairs."""
 
 MIN_DISCORDANT = 5
 """Discordant pairs (their equivalent N_B (Σx² − 2Σ pairs)/Σx²) a bin needs for its pair error:

@@ -6,8 +6,9 @@ an explicit surface. It is identified by a key of everything that determines it:
     the surface fingerprint(s) (``Surface.fingerprint``: the mesh; one per realisation),
     whether the estimator averages the groove azimuth, the material (η = n + ik or mirror),
     the incidences θi (degrees, φi = 0), the bins, the seed, the ray target (an integer count
-    per incidence, or "auto" with its target relative error and ray cap) and the microsim
-    version (``microsim.__version__``).
+    per incidence, or "auto" with its target relative error and ray cap), the microsim
+    version (``microsim.__version__``), the rays' design (``sim.streams.DESIGN``) and the
+    standard error's rule (``sim.tallies.STDERR_RULE``).
 
 The key is the SHA-256 of that description as canonical JSON; the entry is the directory
 ``CACHE/<first 24 hex digits>/`` holding ``brdf.npz`` and ``meta.json`` (``Result.save``) and
@@ -52,6 +53,7 @@ from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
 from microsim.sim.result import META, NPZ
 from microsim.sim.streams import DESIGN
+from microsim.sim.tallies import STDERR_RULE
 
 __all__ = [
     "ENV_VAR",
@@ -179,6 +181,7 @@ class Reference:
             "rays": rays,
             "microsim": microsim.__version__,
             "design": DESIGN,
+            "stderr_rule": STDERR_RULE,
         }
 
     def key(self) -> str:
