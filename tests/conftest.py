@@ -1,8 +1,13 @@
-"""Suite-wide hygiene: the SIGINT disposition and the signal mask are the process's, not a
-test's. Tests drive Ctrl-C in-process (``microsim.app.cli.main``, ``DeferredInterrupt``) and
-start subprocesses that inherit an ignored or blocked SIGINT; a test that leaves either changed
-would make a later one meaningless. Each is restored after every test, with a warning naming
-the test that changed it (seen once, on a heavily loaded machine, and not reproduced since)."""
+"""Suite-wide hygiene for the Ctrl-C tests, which drive SIGINT in-process
+(``microsim.app.cli.main``, ``DeferredInterrupt``) and into subprocesses that inherit the
+test process's disposition:
+
+* a suite started as a background job of a non-interactive shell inherits an *ignored* SIGINT
+  (POSIX: such jobs ignore SIGINT), under which Ctrl-C cannot be tested: the session starts
+  from Python's default handler and an unblocked SIGINT;
+* a test that leaves the handler or the mask changed would make a later one meaningless: both
+  are restored after every test, with a warning naming the test.
+"""
 
 import signal
 import warnings
@@ -10,12 +15,23 @@ import warnings
 import pytest
 
 
+def _sigint():
+    return signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, [])
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _sigint_deliverable():
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT])
+
+
 @pytest.fixture(autouse=True)
-def _sigint_restored(request):
-    handler, mask = signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, [])
+def _sigint_restored(request, _sigint_deliverable):
+    before = _sigint()
     yield
-    now = signal.getsignal(signal.SIGINT), signal.pthread_sigmask(signal.SIG_BLOCK, [])
-    if now != (handler, mask):
-        signal.signal(signal.SIGINT, handler)
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    now = _sigint()
+    if now != before:
+        signal.signal(signal.SIGINT, before[0])
+        signal.pthread_sigmask(signal.SIG_SETMASK, before[1])
         warnings.warn(f"{request.node.nodeid} left SIGINT as {now}; restored", stacklevel=1)
