@@ -1,5 +1,7 @@
 """Every catalogue scene (surfaces/*.toml) renders headless in every ``microsim view --what``
-view through the command line, with the fewest rays and a small image; and the anisotropic
+view through the command line, with the fewest rays and a small image (the whole grid with
+``-m slow``; by default the normals view of every scene and every view of the anisotropic
+ones); and the anisotropic
 NDFs answer the tilt-distribution interface the normals view compares the facets with."""
 
 from pathlib import Path
@@ -16,7 +18,19 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENES = sorted((ROOT / "surfaces").glob("*.toml"))
 RAYS = {"rays": 50, "lobe": 2000, "disk": 2000}
 """The fewest rays each tracing view is given: enough for a drawing, not for a judgement."""
-GRID = [pytest.param(scene, what, id=f"{scene.stem}-{what}") for scene in SCENES for what in VIEWS]
+ANISOTROPIC_SCENES = {"abc-aniso-smooth-wave", "gaussian-aniso-4", "vgroove-oriented-0.3"}
+"""Scenes whose surface is anisotropic: every view of them runs in the default test run, as
+does the normals view (the one that draws the distribution) of every scene; the rest of the
+grid is marked slow (``pytest -m slow tests/test_view_grid.py`` renders it all)."""
+
+
+def _case(scene: Path, what: str):
+    default = what == "normals" or scene.stem in ANISOTROPIC_SCENES
+    marks = () if default else (pytest.mark.slow,)
+    return pytest.param(scene, what, id=f"{scene.stem}-{what}", marks=marks)
+
+
+GRID = [_case(scene, what) for scene in SCENES for what in VIEWS]
 
 
 @pytest.fixture
