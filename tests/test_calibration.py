@@ -112,6 +112,7 @@ def test_one_tile_with_departure_false_alarms_within_binomial_bound():
     assert n_dev <= _max_false_alarms(seeds, alpha), n_dev
 
 
+@pytest.mark.slow  # power, 18 s; the default run keeps the one-tile false-alarm check
 def test_one_tile_ten_percent_off_is_flagged_beyond_departure():
     """Power on one random-tilt tile: ts-vgroove × 1.10 deviates beyond the tile's departure
     in ≥ 90 % of the seeds (before, any one-tile rejection was "inconclusive")."""

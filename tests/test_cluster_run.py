@@ -142,6 +142,7 @@ def test_microsim_run_with_a_scheduler_writes_the_local_result(tmp_path):
     assert main(["run", str(scene), "--out", str(tmp_path / "x"), "--scheduler", "nope://"]) == 2
 
 
+@pytest.mark.slow  # 23 s; the default run keeps `run --scheduler` end to end
 def test_microsim_report_with_a_scheduler_traces_each_scene_there(tmp_path):
     from microsim.app.runner import run_report
 

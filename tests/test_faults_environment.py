@@ -243,6 +243,7 @@ def test_a_run_in_the_c_locale_prints_ascii(tmp_path):
     assert (tmp_path / "runs" / "tiny" / "report.md").read_text(encoding="utf-8").count("θ")
 
 
+@pytest.mark.slow  # 9 s; the default run keeps a whole run in the C locale
 @pytest.mark.parametrize("env", [C_LOCALE, {"PYTHONIOENCODING": "latin-1"}], ids=["C", "latin-1"])
 def test_listings_and_errors_fall_back_to_ascii_symbols(tmp_path, env):
     """``models`` (a listing full of θ, ², …) and a one-line usage error print in the stream's
