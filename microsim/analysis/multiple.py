@@ -437,8 +437,7 @@ def order_comparison(
     """
     _check_result(result)
     _check_material(result, material)
-    WalkNDF.of(ndf)
-    isotropic = not hasattr(ndf, "alpha_x")
+    isotropic = WalkNDF.of(ndf).alpha is not None
     names = MODELS if isotropic else MODELS[:1]
     if not isinstance(walk_paths, (int, np.integer)) or walk_paths < 2:
         raise UsageError(f"walk_paths must be an integer >= 2, got {walk_paths!r}")
@@ -580,9 +579,10 @@ def order_comparison(
 def _ndf_roughness(ndf) -> dict:
     """{"alpha": α} of an isotropic NDF (m for Beckmann), {"alpha_x", "alpha_y", "rotation"}
     of an anisotropic one."""
-    if hasattr(ndf, "alpha_x"):
+    alpha = WalkNDF.of(ndf).alpha
+    if alpha is None:
         return {k: float(v) for k, v in ndf.params().items()}
-    return {"alpha": float(getattr(ndf, "m", getattr(ndf, "alpha", np.nan)))}
+    return {"alpha": alpha}
 
 
 def _closed_forms(th, sims, bins, ndf, material) -> dict:

@@ -45,8 +45,20 @@ import numpy as np
 
 from microsim import checks as _checks
 from microsim import vectors
+from microsim.errors import UsageError
 
-from .ndf import GGX, Beckmann, _tilt_rad, beckmann_lambda, ggx_lambda
+from .ndf import (
+    GGX,
+    NDF,
+    Beckmann,
+    _check_lambda_method,
+    _cos_array,
+    _sin2,
+    _tilt_rad,
+    _unit_interval,
+    beckmann_lambda,
+    ggx_lambda,
+)
 
 __all__ = ["AnisotropicBeckmann", "AnisotropicGGX"]
 
@@ -54,11 +66,14 @@ AZIMUTH_NODES = 512
 """Trapezoid nodes over the period of the azimuth averages of the tilt distribution."""
 
 
-class _Anisotropic:
-    """Shared frame, slopes, projected roughness and Λ; subclasses set the family."""
+class AnisotropicNDF(NDF):
+    """The stretched (αx, αy, rotation) family of the ``NDF`` protocol: shared frame, slopes,
+    projected roughness, Λ and visible normals; subclasses set the family (``_profile``,
+    ``_rho2_cdf``, ``_rho_quantile``, ``_lambda``, ``isotropic_at``)."""
 
     isotropic = False
     has_closed_smith = True
+    has_visible_sampler = True
     alpha_x: float
     alpha_y: float
     rotation: float
@@ -70,10 +85,6 @@ class _Anisotropic:
 
     def params(self) -> dict:
         return {"alpha_x": self.alpha_x, "alpha_y": self.alpha_y, "rotation": self.rotation}
-
-    def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.params().items())
-        return f"{type(self).__name__}({args})"
 
     def _to_local(self, w: np.ndarray) -> np.ndarray:
         """``w`` (..., 3) in the NDF's frame: rotated by −``rotation`` about z."""
@@ -102,6 +113,17 @@ class _Anisotropic:
             d = self._profile(rho2) / (np.pi * self.alpha_x * self.alpha_y * hz**4)
         return np.where(hz > 0.0, d, 0.0)
 
+    def D_cos(self, cos_theta):
+        """Azimuthal average of D at cos θ_h in sr⁻¹ (trapezoid rule over ``AZIMUTH_NODES``
+        facet azimuths); 0 for cos θ_h ≤ 0."""
+        c = np.minimum(_cos_array(cos_theta), 1.0)
+        pos = c > 0.0
+        cs = np.where(pos, c, 1.0)[..., None]
+        phi = 2.0 * np.pi * np.arange(AZIMUTH_NODES) / AZIMUTH_NODES
+        s = np.sqrt(_sin2(cs))
+        h = np.stack(np.broadcast_arrays(s * np.cos(phi), s * np.sin(phi), cs), axis=-1)
+        return np.where(pos, self.D(h).mean(axis=-1), 0.0)
+
     def _stretch2(self, theta):
         """(tan²θ / α(φ)², 1 / α(φ)²) on the azimuth nodes (last axis) for tilts θ (radians),
         with α(φ)² = αx² cos²φ + αy² sin²φ (module docstring)."""
@@ -127,6 +149,16 @@ class _Anisotropic:
         with np.errstate(over="ignore"):
             mean = (self._profile(x) * inv_a2).mean(axis=-1)
             return 2.0 * np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c**3 * mean
+
+    def tilt_quantile_rad(self, u):
+        """θ_h (radians) with ``cdf_theta_rad(θ_h)`` = u ∈ [0, 1], by bisection to ~1e-16 rad."""
+        u = _unit_interval(u)
+        lo, hi = np.zeros_like(u), np.full_like(u, 0.5 * np.pi)
+        for _ in range(54):
+            mid = 0.5 * (lo + hi)
+            below = self.cdf_theta_rad(mid) < u
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        return 0.5 * (lo + hi)
 
     def pdf(self, h):
         """Solid-angle density D(h) cos θ_h of ``sample`` (sr⁻¹)."""
@@ -159,46 +191,51 @@ class _Anisotropic:
         w = np.asarray(w, dtype=np.float64)
         return self._lambda(np.clip(w[..., 2], 0.0, 1.0), self.projected_alpha(w))
 
-    def sample_visible(self, v, u1, u2):
+    def smith_lambda_cos(self, cos_theta):
+        """Not defined: an anisotropic Λ depends on the azimuth too (``smith_lambda(w)``)."""
+        raise UsageError(
+            f"{type(self).__name__}'s Smith Λ depends on the azimuth: use smith_lambda(w)"
+        )
+
+    def _smith_lambda(self, w, method: str = "auto"):
+        """Λ(w) for unit w (no validation) by the closed form; inf at cos θ_w ≤ 0."""
+        _check_lambda_method(method)
+        if method == "numerical":
+            raise UsageError(
+                f"method='numerical' is not available for {type(self).__name__} (its Λ is "
+                f"exact in closed form; use 'auto' or 'closed')"
+            )
+        return np.where(w[..., 2] > 0.0, self.smith_lambda_w(w), np.inf)
+
+    def _sample_visible(self, v, u1, u2):
         """Visible normals m ~ D_v(m) = ⟨v, m⟩⁺ D(m) / ((1 + Λ(v)) cos θ_v) for unit view
         directions v (N, 3) and uniforms u1, u2 (N,): by the stretch to unit roughness —
         v' = normalize(αx v'x, αy v'y, v'z) in the NDF's frame, m' sampled from the unit
-        isotropic NDF seen from v' (``random_walk.sample_visible_normals``: Heitz 2018 for
-        GGX, Heitz & d'Eon 2014 for Beckmann), m = normalize(αx m'x, αy m'y, m'z) — valid
+        isotropic NDF seen from v' (its ``sample_visible``: Heitz 2018 for GGX, Heitz &
+        d'Eon 2014 for Beckmann), m = normalize(αx m'x, αy m'y, m'z) — valid
         because slopes scale by (αx, αy) under the stretch (as pbrt-v4's ``Sample_wm``), and
         ⟨v, m⟩ is a linear form in the slopes that the stretch carries to ⟨v', m'⟩. That holds
         for views below the horizon too (not straight down), where the normaliser is
         Λ(−v)|v_z| (``random_walk.visible_projected_area``): what a ray going up after a
         bounce sees in the random walk. Density (upper hemisphere): ``pdf_visible``."""
-        from .random_walk import sample_visible_normals
-
-        v = _checks.directions("v", v)
         vl = self._to_local(v)
         stretched = vectors.normalize(
             np.stack([self.alpha_x * vl[..., 0], self.alpha_y * vl[..., 1], vl[..., 2]], -1)
         )
-        m = sample_visible_normals(stretched, self._isotropic(1.0), u1, u2)
+        m = self.isotropic_at(1.0)._sample_visible(stretched, u1, u2)
         ml = vectors.normalize(
             np.stack([self.alpha_x * m[..., 0], self.alpha_y * m[..., 1], m[..., 2]], -1)
         )
         return self._from_local(ml)
 
-    def pdf_visible(self, m, v):
-        """D_v(m) = ⟨v, m⟩⁺ D(m) / ((1 + Λ(v)) cos θ_v) in sr⁻¹ (the Smith visible-normal
-        density, normalised by the projected-area identity)."""
-        m = _checks.directions("m", m)
-        v = _checks.directions("v", v, upper=True)
-        vm = np.maximum(np.einsum("...i,...i->...", v, m), 0.0)
-        return vm * self.D(m) / ((1.0 + self.smith_lambda_w(v)) * v[..., 2])
-
     def isotropic_equivalent(self):
         """The isotropic NDF of the same family with α = √(αx αy) (the stand-in MaterialX
         uses for the anisotropic Smith G)."""
-        return self._isotropic(float(np.sqrt(self.alpha_x * self.alpha_y)))
+        return self.isotropic_at(float(np.sqrt(self.alpha_x * self.alpha_y)))
 
 
 @dataclass(frozen=True, repr=False)
-class AnisotropicBeckmann(_Anisotropic):
+class AnisotropicBeckmann(AnisotropicNDF):
     """Anisotropic Beckmann NDF (module docstring): roughness ``alpha_x``, ``alpha_y`` > 0 along
     its axes, ``rotation`` of its x axis in degrees. Equals ``Beckmann(m=α)`` when αx = αy = α
     (for a Gaussian heightfield the per-axis slope variances are αx²/2, αy²/2)."""
@@ -229,12 +266,13 @@ class AnisotropicBeckmann(_Anisotropic):
         return beckmann_lambda(cos_w, alpha)
 
     @staticmethod
-    def _isotropic(alpha):
+    def isotropic_at(alpha):
+        """The isotropic Beckmann NDF of roughness ``alpha`` (m = α)."""
         return Beckmann(alpha)
 
 
 @dataclass(frozen=True, repr=False)
-class AnisotropicGGX(_Anisotropic):
+class AnisotropicGGX(AnisotropicNDF):
     """Anisotropic GGX (Trowbridge–Reitz) NDF (module docstring): ``alpha_x``, ``alpha_y`` > 0,
     ``rotation`` in degrees; equals ``GGX(α)`` when αx = αy = α."""
 
@@ -264,5 +302,6 @@ class AnisotropicGGX(_Anisotropic):
         return ggx_lambda(cos_w, alpha)
 
     @staticmethod
-    def _isotropic(alpha):
+    def isotropic_at(alpha):
+        """The isotropic GGX NDF of roughness ``alpha``."""
         return GGX(alpha)

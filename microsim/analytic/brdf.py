@@ -31,7 +31,7 @@ __all__ = [
 
 def _D_of(ndf, h: np.ndarray) -> np.ndarray:
     """D(h) without re-validating h (isotropic NDFs need only h_z)."""
-    if getattr(ndf, "isotropic", True):
+    if ndf.isotropic:
         return ndf.D_cos(h[..., 2])
     return ndf.D(h)
 
@@ -52,7 +52,7 @@ def _ts(wi, wo, ndf, kind: str, eta, masking_ndf=None) -> np.ndarray:
             wi_b, wo_b = np.broadcast_arrays(wi, wo)
             mndf = ndf if masking_ndf is None else masking_ndf
             val = _shadowing(kind, mndf, wi_b, wo_b, hz, cos_d, cos_d)
-        if getattr(ndf, "isotropic", True):
+        if ndf.isotropic:
             val *= ndf.D_cos(hz)
         else:
             h = np.where(valid[..., None], s * inv[..., None], (0.0, 0.0, 1.0))
@@ -206,7 +206,7 @@ def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int)
     ρ = ∫ f(wi, wo(h)) cos θo 4 (wi·h) dω_h. θ_h: Gauss–Legendre on the NDF's quantile panels;
     φ_h: Gauss–Legendre (``n_gl_phi`` nodes) between the kinks of ``_phi_breakpoints`` (over
     [0, π], doubled by symmetry; anisotropic D: over [0, 2π] with its cell edges added)."""
-    isotropic = getattr(ndf, "isotropic", True)
+    isotropic = ndf.isotropic
     gx, gw = np.polynomial.legendre.leggauss(8)
     e = _tilt_breakpoints(ndf)
     a, b = e[:-1, None], e[1:, None]

@@ -28,7 +28,8 @@ from microsim import checks as _checks
 from microsim import vectors
 from microsim.errors import UsageError
 
-from .ndf import NDF
+from . import smith
+from .ndf import NDF, _check_lambda_method
 
 __all__ = ["Empirical"]
 
@@ -171,6 +172,17 @@ class Empirical(NDF):
             f"Empirical(<{p['n_facets']} facets>, bins={p['n_theta_bins']}x"
             f"{p['n_phi_bins']}, isotropic={p['isotropic']})"
         )
+
+    def tilt_breakpoints_rad(self) -> np.ndarray:
+        """Quadrature panels: D is constant between the bin edges."""
+        return np.unique(np.concatenate([self.theta_edges, np.linspace(0, 0.5 * np.pi, 33)]))
+
+    def _smith_lambda(self, w, method: str = "auto"):
+        """Λ(w) for unit w: an anisotropic histogram's from its (θ_w, φ_w) table (``smith``)."""
+        if self.isotropic:
+            return super()._smith_lambda(w, method)
+        _check_lambda_method(method)
+        return smith.numerical_lambda_w(self, w)
 
     def _bin_of_q(self, q) -> np.ndarray:
         k = np.searchsorted(self.q_edges, q, side="right") - 1

@@ -123,7 +123,7 @@ class _Model:
 
 
 def _isotropic(ndf) -> bool:
-    return bool(getattr(ndf, "isotropic", True))
+    return bool(ndf.isotropic)
 
 
 # --- Torrance–Sparrow and Cook–Torrance -------------------------------------------------------

@@ -10,6 +10,26 @@ CDF ``_cdf_theta(θ)`` and its inverse ``tilt_quantile_rad(u)``. Everything else
 base class. Tilt angles are in radians, and every method taking or returning one says so
 (``cdf_theta_rad``, ``tilt_pdf_rad``, ``tilt_quantile_rad``); tilts outside [0, π/2] — say, a
 value in degrees — raise a UsageError.
+
+Visible normals (``sample_visible``, the phase function of the random walk): facet normals m
+from D_v(m) = ⟨v, m⟩⁺ D(m) / ∫⟨v, m⟩⁺ D dm, for views v on either side of the horizon.
+
+* GGX: Heitz 2018 ("Sampling the GGX distribution of visible normals", JCGT 7(4)): stretch v by
+  α, sample the projected visible hemisphere uniformly (disk, warped by s = (1 + v_z)/2), lift to
+  the hemisphere, unstretch. For v below the horizon the warped region is the half disk minus the
+  half ellipse of semi-axis |v_z| — exactly the projection of the hemisphere points facing v
+  (checked: its inner boundary t₂ = |v_z|√(1 − t₁²) lifts to z = 0), so the method holds for
+  every v but straight down (where nothing is visible and no ray arrives: Λ = 0 there).
+* Beckmann: Heitz & d'Eon 2014 / Heitz 2014 slope sampling. In the stretched frame with v at
+  polar angle θ and azimuth 0, the visible slope x̃ along v has density ∝ (a − x̃)⁺ e^{−x̃²},
+  a = cot θ ∈ ℝ (negative for v below the horizon), and the transverse slope ỹ is N(0, 1/2).
+  The CDF of x̃ is F(x) = a(1 + erf x)/2 + e^{−x²}/(2√π) (x ≤ a), written for x < 0 as
+  F = e^{−x²}(a·erfcx(−x) + 1/√π)/2 so that ln F stays finite far in the tail; F(a) is the
+  projected area. x̃ solves ln F(x̃) = ln(U F(a)) by safeguarded Newton iteration (ln F is
+  concave: F is the CDF of a log-concave density), vectorised over paths, to |Δx| < 1e-12.
+  Then the slope is rotated to v's azimuth, scaled by α, and m = (−x, −y, 1)/‖·‖. For a > 1e6
+  (v within 1e-6/α rad of the normal) a is clipped to 1e6: a relative change of the density of
+  O(1e-6).
 """
 
 from __future__ import annotations
@@ -23,6 +43,8 @@ from microsim import checks as _checks
 from microsim import vectors
 from microsim.errors import UsageError
 
+from . import smith
+
 __all__ = [
     "NDF",
     "Beckmann",
@@ -30,6 +52,8 @@ __all__ = [
     "BlinnPhong",
     "VonMisesFisher",
     "ABC",
+    "scene_distribution",
+    "scene_distributions",
     "beckmann_lambda",
     "ggx_lambda",
     "beckmann_to_phong",
@@ -38,18 +62,37 @@ __all__ = [
 
 
 class NDF:
-    """Base class of an isotropic microfacet normal distribution.
+    """Base class of a microfacet distribution, and the protocol every distribution satisfies.
 
-    Subclasses set ``name`` and implement ``D_cos``, ``tilt_quantile_rad``, ``_cdf_theta`` and
-    ``params``.
-    Those with a closed-form Smith Λ set ``has_closed_smith = True`` and implement
-    ``smith_lambda_cos``; for the others the shadowing module integrates the
-    projected-area identity numerically.
+    Every distribution has a ``name`` (also its scene-file name where it has one), ``isotropic``,
+    ``params()``, ``D(h)``, ``pdf(h)`` and ``sample(u1, u2)`` (of D(h)(h·n)), the tilt
+    distribution (``D_cos``: the azimuthal average of D; ``cdf_theta_rad``, ``tilt_pdf_rad``,
+    ``tilt_quantile_rad``), the Smith ``smith_lambda(w)``, ``G1(w, h)``, ``G2(wi, wo, h,
+    correlated)`` and the visible-normal density ``pdf_visible(m, v)``. What only some have is
+    declared, never probed for:
+
+    * ``has_closed_smith``: Λ in closed form (``smith_lambda_cos``, isotropic); the others'
+      Λ is integrated numerically from the projected-area identity (``smith``).
+    * ``has_visible_sampler``: ``sample_visible(v, u1, u2)`` draws visible normals for views on
+      either side of the horizon; without it that method raises a UsageError saying so.
+    * ``scene_params``: {parameter: (lo, hi)} of a distribution a scene file may name (by
+      ``name`` or one of ``scene_aliases``); declaring it registers the class
+      (``scene_distribution``).
+
+    Isotropic subclasses implement ``D_cos``, ``tilt_quantile_rad``, ``_cdf_theta`` and
+    ``params`` (and ``smith_lambda_cos`` with ``has_closed_smith``); the rest follows here.
     """
 
     name: str = "ndf"
     isotropic: bool = True
     has_closed_smith: bool = False
+    has_visible_sampler: bool = False
+    scene_aliases: tuple = ()
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if "scene_params" in cls.__dict__:
+            _register(cls)
 
     # --- to implement -------------------------------------------------------------------
     def params(self) -> dict:
@@ -70,7 +113,14 @@ class NDF:
 
     def smith_lambda_cos(self, cos_theta):
         """Smith Λ(w) as a function of cos θ_w (only when ``has_closed_smith``)."""
-        raise NotImplementedError
+        raise UsageError(f"{type(self).__name__} has no closed-form Smith Λ(cos θ)")
+
+    def _sample_visible(self, v, u1, u2):
+        """``sample_visible`` on checked, clipped inputs (only when ``has_visible_sampler``)."""
+        raise UsageError(
+            f"{type(self).__name__} has no visible-normal sampler (has_visible_sampler is "
+            f"False); those that have one: {', '.join(_visible_samplers())}"
+        )
 
     # --- derived ------------------------------------------------------------------------
     def cdf_theta_rad(self, theta):
@@ -102,9 +152,152 @@ class NDF:
         theta = self.tilt_quantile_rad(u1)
         return vectors.spherical(theta, 2.0 * np.pi * u2)
 
+    def tilt_breakpoints_rad(self) -> np.ndarray:
+        """θ_h (radians) that split [0, π/2] into panels on which D is smooth and well resolved
+        (for quadratures over the distribution): its tilt quantiles and a uniform grid."""
+        u = np.concatenate(
+            [
+                np.linspace(0.0, 1.0, 65)[1:-1],
+                np.logspace(-10, -2, 9),
+                1.0 - np.logspace(-10, -2, 9),
+            ]
+        )
+        q = np.asarray(self.tilt_quantile_rad(u), dtype=np.float64)
+        return np.unique(np.concatenate([q[np.isfinite(q)], np.linspace(0, 0.5 * np.pi, 33)]))
+
+    # --- Smith masking ------------------------------------------------------------------
+    def smith_lambda(self, w, method: str = "auto"):
+        """Smith Λ(w) (dimensionless, ≥ 0; inf at θ_w = 90°) for upper-hemisphere unit w.
+
+        ``method``: "auto" (closed form when ``has_closed_smith``, else numerical), "closed",
+        or "numerical" (projected-area identity, ``smith``; forced even when a closed form
+        exists, for checking it).
+        """
+        w = _checks.directions("w", w, upper=True)
+        return self._smith_lambda(w, method)
+
+    def _smith_lambda(self, w, method: str = "auto"):
+        """Λ(w) for unit w (no validation); inf at cos θ_w ≤ 0."""
+        _check_lambda_method(method)
+        c = w[..., 2]
+        if method == "closed" and not self.has_closed_smith:
+            raise UsageError(
+                f"method='closed' needs an NDF with a closed-form Smith Λ; "
+                f"{type(self).__name__} has none (use 'auto' or 'numerical')"
+            )
+        if self.has_closed_smith and method != "numerical":
+            pos = c > 0.0
+            lam = np.full(c.shape, np.inf)
+            lam[pos] = self.smith_lambda_cos(c[pos])
+            return lam
+        return smith.numerical_lambda_cos(self, c)
+
+    def G1(self, w, h):
+        """Smith masking G1(w, h) = χ⁺(w·h)/(1 + Λ(w)) (Smith 1967; Heitz 2014)."""
+        w = _checks.directions("w", w)
+        h = _checks.directions("h", h)
+        _checks.broadcast({"w": w, "h": h})
+        return _g1_from_lambda(self._smith_lambda(w), vectors.dot(w, h), w[..., 2])
+
+    def G2(self, wi, wo, h, correlated: bool = False):
+        """Smith shadowing–masking: separable G1(wi)G1(wo), or height-correlated
+        χ⁺(wi·h)χ⁺(wo·h)/(1 + Λ(wi) + Λ(wo)) when ``correlated``."""
+        wi = _checks.directions("wi", wi)
+        wo = _checks.directions("wo", wo)
+        h = _checks.directions("h", h)
+        _checks.broadcast({"wi": wi, "wo": wo, "h": h})
+        return self.smith_g2_dots(wi, wo, vectors.dot(wi, h), vectors.dot(wo, h), correlated)
+
+    def smith_g2_dots(self, wi, wo, wih, woh, correlated: bool):
+        """``G2`` for validated unit wi, wo and their precomputed dot products with h."""
+        lam_i, lam_o = self._smith_lambda(wi), self._smith_lambda(wo)
+        if correlated:
+            ok = (wih > 0.0) & (woh > 0.0) & (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+            with np.errstate(invalid="ignore"):
+                return np.where(ok, 1.0 / (1.0 + lam_i + lam_o), 0.0)
+        return _g1_from_lambda(lam_i, wih, wi[..., 2]) * _g1_from_lambda(lam_o, woh, wo[..., 2])
+
+    # --- visible normals ----------------------------------------------------------------
+    def pdf_visible(self, m, v):
+        """D_v(m) = ⟨v, m⟩⁺ D(m) / ((1 + Λ(v)) cos θ_v) in sr⁻¹ for views v of the upper
+        hemisphere (the Smith visible-normal density, normalised by the projected-area
+        identity)."""
+        m = _checks.directions("m", m)
+        v = _checks.directions("v", v, upper=True)
+        vm = np.maximum(np.einsum("...i,...i->...", v, m), 0.0)
+        return vm * self.D(m) / ((1.0 + self._smith_lambda(v)) * v[..., 2])
+
+    def sample_visible(self, v, u1, u2):
+        """Facet normals m ~ D_v(m) = ⟨v, m⟩⁺ D(m) / ∫⟨v, m'⟩⁺ D dm' for unit views v (N, 3)
+        of either hemisphere (not straight down) and uniforms u1, u2 of shape (N,) (only with
+        ``has_visible_sampler``, else UsageError)."""
+        v = _checks.directions("v", v)
+        if v.ndim != 2:
+            raise UsageError(f"v must have shape (N, 3), got {v.shape}")
+        u1 = np.clip(np.asarray(u1, dtype=np.float64), 1e-300, 1.0)
+        u2 = np.clip(np.asarray(u2, dtype=np.float64), 0.0, 1.0)
+        if u1.shape != (len(v),) or u2.shape != (len(v),):
+            raise UsageError(
+                f"v, u1 and u2 must have shapes (N, 3), (N,) and (N,), "
+                f"got v {v.shape}, u1 {u1.shape}, u2 {u2.shape}"
+            )
+        return self._sample_visible(v, u1, np.clip(u2, 1e-16, 1 - 1e-16))
+
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params().items())
         return f"{type(self).__name__}({args})"
+
+
+# --- the scene files' distributions -------------------------------------------------------------
+_SCENE_CLASSES: dict = {}
+_SCENE_ALIASES: dict = {}
+
+
+def _register(cls) -> None:
+    """Record a distribution class with ``scene_params`` under its ``name`` and aliases."""
+    for key in (cls.name, *cls.scene_aliases):
+        if key in _SCENE_CLASSES or key in _SCENE_ALIASES:
+            raise ValueError(f"scene distribution name {key!r} registered twice")
+    _SCENE_CLASSES[cls.name] = cls
+    _SCENE_ALIASES.update({alias: cls.name for alias in cls.scene_aliases})
+
+
+def scene_distributions() -> tuple:
+    """Names a scene file may give a distribution (the registered classes' ``name``)."""
+    return tuple(_SCENE_CLASSES)
+
+
+def scene_distribution(name):
+    """The distribution class a scene names (its ``name`` or an alias), else UsageError naming
+    the allowed values."""
+    cls = _SCENE_CLASSES.get(_SCENE_ALIASES.get(name, name)) if isinstance(name, str) else None
+    if cls is None:
+        raise UsageError(f"ndf must be one of {', '.join(_SCENE_CLASSES)}, got {name!r}")
+    return cls
+
+
+def _visible_samplers() -> list:
+    """Names of the distribution classes that declare a visible-normal sampler."""
+    out, todo = [], list(NDF.__subclasses__())
+    while todo:
+        cls = todo.pop(0)
+        todo.extend(cls.__subclasses__())
+        if cls.has_visible_sampler and not cls.__name__.startswith("_"):
+            out.append(cls.__name__)
+    return out
+
+
+_LAMBDA_METHODS = ("auto", "closed", "numerical")
+
+
+def _check_lambda_method(method) -> None:
+    if method not in _LAMBDA_METHODS:
+        raise UsageError(f"method must be one of 'auto', 'closed', 'numerical', got {method!r}")
+
+
+def _g1_from_lambda(lam, w_dot_h, cos_w):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where((w_dot_h > 0.0) & (cos_w > 0.0), 1.0 / (1.0 + lam), 0.0)
 
 
 # --- numerically careful building blocks -----------------------------------------------------
@@ -188,6 +381,8 @@ class Beckmann(NDF):
     m: float
     name = "beckmann"
     has_closed_smith = True
+    has_visible_sampler = True
+    scene_params = {"m": (1e-6, 10.0)}
 
     def __post_init__(self):
         object.__setattr__(self, "m", _checks.positive("m", self.m))
@@ -226,6 +421,10 @@ class Beckmann(NDF):
         """
         return beckmann_lambda(_cos_array(cos_theta), self.m)
 
+    def _sample_visible(self, v, u1, u2):
+        """Heitz & d'Eon 2014 visible-slope inversion (module docstring, "Visible normals")."""
+        return _beckmann_visible(v, self.m, u1, u2)
+
 
 # --- GGX ------------------------------------------------------------------------------------
 @dataclass(frozen=True, repr=False)
@@ -238,6 +437,8 @@ class GGX(NDF):
     alpha: float
     name = "ggx"
     has_closed_smith = True
+    has_visible_sampler = True
+    scene_params = {"alpha": (1e-6, 10.0)}
 
     def __post_init__(self):
         object.__setattr__(self, "alpha", _checks.positive("alpha", self.alpha))
@@ -270,6 +471,108 @@ class GGX(NDF):
         """
         return ggx_lambda(_cos_array(cos_theta), self.alpha)
 
+    def _sample_visible(self, v, u1, u2):
+        """Heitz 2018 (module docstring, "Visible normals")."""
+        return _ggx_visible(v, self.alpha, u1, u2)
+
+
+# --- visible normals of Beckmann and GGX ----------------------------------------------------
+_A_MAX = 1e6  # largest |cot θ| used in Beckmann visible-slope sampling (module docstring)
+_SQRT_PI = np.sqrt(np.pi)
+
+
+def _beckmann_ln_f(a, x):
+    """ln F(x), F(x) = a(1 + erf x)/2 + e^{−x²}/(2√π) = ∫_{−∞}^x (a − s) e^{−s²} ds/√π, x ≤ a;
+    for x < 0 as −x² + ln((a erfcx(−x) + 1/√π)/2) (finite far in the tail)."""
+    neg = x < 0
+    xn = np.where(neg, x, -1.0)
+    xp = np.where(neg, 1.0, x)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lneg = -xn * xn + np.log(0.5 * np.maximum(a * special.erfcx(-xn) + 1.0 / _SQRT_PI, 0.0))
+        lpos = np.log(0.5 * a * (1.0 + special.erf(xp)) + np.exp(-xp * xp) / (2.0 * _SQRT_PI))
+    return np.where(neg, lneg, lpos)
+
+
+def _beckmann_slope_x(a, u):
+    """x̃ ≤ a with F(x̃) = u F(a) (``_beckmann_ln_f``), vectorised over paths.
+
+    Safeguarded Newton on the concave increasing g(x) = ln F(x) − ln(u F(a)) inside the bracket
+    [min(a, 0) − 9, a] (F(lo)/F(a) < 1e-30 < u for every u the walk draws), with bisection
+    whenever a step leaves the bracket; only unconverged entries are iterated.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    target = np.log(u) + _beckmann_ln_f(a, a)
+    lo = np.minimum(a, 0.0) - 9.0
+    hi = a.copy()
+    # start: the root for a → +∞ (x = erfinv(2u − 1)) clipped into the bracket; for a < 0 near
+    # the median of the limiting Gamma(2, 2|a|) law of a − x̃ (density ∝ r e^{−2|a| r}, r = a − x̃)
+    x = np.where(
+        a >= 0,
+        np.clip(special.erfinv(2.0 * u - 1.0), lo, hi),
+        a - 1.68 / (2.0 * np.abs(a) + 1.2),
+    )
+    act = np.arange(len(a))
+    for _ in range(200):
+        xa, aa = x[act], a[act]
+        lf = _beckmann_ln_f(aa, xa)
+        g = lf - target[act]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            dg = (aa - xa) * np.exp(-xa * xa - lf) / _SQRT_PI  # d ln F/dx
+            step = g / dg
+            x_new = xa - step
+        lo_a = np.where(g < 0, xa, lo[act])
+        hi_a = np.where(g > 0, xa, hi[act])
+        bad = ~np.isfinite(x_new) | (x_new < lo_a) | (x_new > hi_a)
+        lo[act], hi[act] = lo_a, hi_a
+        done = (g == 0) | (~bad & (np.abs(step) <= 1e-12 * np.maximum(1.0, np.abs(xa))))
+        x[act] = np.where(g == 0, xa, np.where(bad, 0.5 * (lo_a + hi_a), x_new))
+        act = act[~done]
+        if len(act) == 0:
+            break
+    return np.minimum(x, a)
+
+
+def _beckmann_visible(v, alpha, u1, u2):
+    vs = np.stack([alpha * v[:, 0], alpha * v[:, 1], v[:, 2]], axis=1)
+    vs /= np.linalg.norm(vs, axis=1, keepdims=True)
+    rxy = np.hypot(vs[:, 0], vs[:, 1])
+    with np.errstate(divide="ignore"):
+        a = np.clip(vs[:, 2] / rxy, -_A_MAX, _A_MAX)  # cot θ of the stretched direction
+    a = np.where(rxy > 0, a, np.sign(vs[:, 2]) * _A_MAX)
+    x = _beckmann_slope_x(a, u1)
+    y = special.erfinv(2.0 * u2 - 1.0)
+    safe = rxy > 0
+    cphi = np.where(safe, vs[:, 0] / np.where(safe, rxy, 1.0), 1.0)
+    sphi = np.where(safe, vs[:, 1] / np.where(safe, rxy, 1.0), 0.0)
+    sx = alpha * (cphi * x - sphi * y)
+    sy = alpha * (sphi * x + cphi * y)
+    m = np.stack([-sx, -sy, np.ones_like(sx)], axis=1)
+    return m / np.linalg.norm(m, axis=1, keepdims=True)
+
+
+def _ggx_visible(v, alpha, u1, u2):
+    vh = np.stack([alpha * v[:, 0], alpha * v[:, 1], v[:, 2]], axis=1)
+    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    inv = np.where(lensq > 0, 1.0 / np.sqrt(np.where(lensq > 0, lensq, 1.0)), 0.0)
+    t1v = np.stack(
+        [np.where(lensq > 0, -vh[:, 1] * inv, 1.0), np.where(lensq > 0, vh[:, 0] * inv, 0.0)],
+        axis=1,
+    )
+    T1 = np.stack([t1v[:, 0], t1v[:, 1], np.zeros(len(v))], axis=1)
+    T2 = np.cross(vh, T1)
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    t1 = r * np.cos(phi)
+    t2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2])
+    w = np.sqrt(np.maximum(1.0 - t1 * t1, 0.0))
+    t2 = (1.0 - s) * w + s * t2
+    up = np.sqrt(np.maximum(1.0 - t1 * t1 - t2 * t2, 0.0))
+    nh = t1[:, None] * T1 + t2[:, None] * T2 + up[:, None] * vh
+    m = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 0.0)], axis=1)
+    return m / np.linalg.norm(m, axis=1, keepdims=True)
+
 
 # --- normalised Blinn–Phong -----------------------------------------------------------------
 @dataclass(frozen=True, repr=False)
@@ -278,7 +581,9 @@ class BlinnPhong(NDF):
     Mally 2015)."""
 
     e: float
-    name = "blinn_phong"
+    name = "blinn-phong"
+    scene_params = {"e": (1e-6, 1e12)}
+    scene_aliases = ("blinn_phong", "phong")
 
     def __post_init__(self):
         object.__setattr__(self, "e", _checks.in_range("e", self.e, 0.0, np.inf, hi_open=True))
@@ -335,6 +640,8 @@ class VonMisesFisher(NDF):
 
     kappa: float
     name = "vmf"
+    scene_params = {"kappa": (1e-6, 1e12)}
+    scene_aliases = ("von-mises-fisher",)
 
     def __post_init__(self):
         object.__setattr__(self, "kappa", _checks.positive("kappa", self.kappa))
@@ -398,6 +705,7 @@ class ABC(NDF):
     M: float = field(init=False, repr=False, compare=False)
     _table: tuple = field(init=False, repr=False, compare=False)  # (P_k, w_k): Newton starts
     name = "abc"
+    scene_params = {"B": (1e-6, 1e6), "C": (1e-6, 1e6)}
     _TABLE_SIZE = 2049
 
     def __post_init__(self):

@@ -39,24 +39,9 @@ e^{−a²}/(2a√π), a = 1/(m tan θ)) and ``GGX.smith_lambda_cos`` (Λ = (−1
 *Phase function.* At a hit by a ray travelling in direction d, the facet normal m is distributed
 as the visible normals from v = −d, D_v(m) = ⟨v, m⟩⁺ D(m) / ∫⟨v, m⟩⁺ D dm (v may point below
 the horizon after a bounce), and the ray leaves in wo = 2(v·m)m − v with weight F(v·m)
-(exact Fresnel, ``fresnel.fresnel``; 1 for the mirror). ``sample_visible_normals``:
-
-* GGX: Heitz 2018 ("Sampling the GGX distribution of visible normals", JCGT 7(4)): stretch v by
-  α, sample the projected visible hemisphere uniformly (disk, warped by s = (1 + v_z)/2), lift to
-  the hemisphere, unstretch. For v below the horizon the warped region is the half disk minus the
-  half ellipse of semi-axis |v_z| — exactly the projection of the hemisphere points facing v
-  (checked: its inner boundary t₂ = |v_z|√(1 − t₁²) lifts to z = 0), so the method holds for
-  every v but straight down (where nothing is visible and no ray arrives: Λ = 0 there).
-* Beckmann: Heitz & d'Eon 2014 / Heitz 2014 slope sampling. In the stretched frame with v at
-  polar angle θ and azimuth 0, the visible slope x̃ along v has density ∝ (a − x̃)⁺ e^{−x̃²},
-  a = cot θ ∈ ℝ (negative for v below the horizon), and the transverse slope ỹ is N(0, 1/2).
-  The CDF of x̃ is F(x) = a(1 + erf x)/2 + e^{−x²}/(2√π) (x ≤ a), written for x < 0 as
-  F = e^{−x²}(a·erfcx(−x) + 1/√π)/2 so that ln F stays finite far in the tail; F(a) is the
-  projected area. x̃ solves ln F(x̃) = ln(U F(a)) by safeguarded Newton iteration (ln F is
-  concave: F is the CDF of a log-concave density), vectorised over paths, to |Δx| < 1e-12.
-  Then the slope is rotated to v's azimuth, scaled by α, and m = (−x, −y, 1)/‖·‖. For a > 1e6
-  (v within 1e-6/α rad of the normal) a is clipped to 1e6: a relative change of the density of
-  O(1e-6).
+(exact Fresnel, ``fresnel.fresnel``; 1 for the mirror). The distribution draws them
+(``Beckmann.sample_visible``, ``GGX.sample_visible``: ``microsim.analytic.ndf``, "Visible
+normals").
 
 *Order 1.* The first hit is at τ₁ ~ Exp(1 + Λ(wi)), m ~ D_wi, and the path escapes from τ₁ with
 probability E[e^{−Λ(wo)τ₁}] = (1 + Λ(wi))/(1 + Λ(wi) + Λ(wo)); with the reflection Jacobian
@@ -74,17 +59,16 @@ approximation, because Λ(w) depends on D only through the 1-D distribution of t
 w's azimuth. Λ is constant along one flight, so the τ-form of the free flight holds unchanged,
 with Λ looked up per path and per flight; α(φ') = α(φ' + 180°), so Λ(−w) for a downward w is
 Λ of (w_x, w_y, |w_z|), as in the isotropic case. (ii) ``AnisotropicX.sample_visible``
-stretches the view to unit roughness, samples the isotropic unit-roughness visible normals (the
-samplers below) and unstretches. That is exact for views on either side of the horizon: slopes
-map linearly, s = diag(αx, αy) s' in the NDF's frame, so the slope density is the unit one
-stretched, and ⟨v, m⟩ ∝ v_z − v_x s_x − v_y s_y is the same linear form in s' for the
+stretches the view to unit roughness, samples the isotropic unit-roughness visible normals
+(the distributions' samplers) and unstretches. That is exact for views on either side of the
+horizon: slopes map linearly, s = diag(αx, αy) s' in the NDF's frame, so the slope density is
+the unit one stretched, and ⟨v, m⟩ ∝ v_z − v_x s_x − v_y s_y is the same linear form in s' for the
 stretched view v' = (αx v_x, αy v_y, v_z); hence ⟨v, m⟩⁺ D(m) dω maps to ⟨v', m'⟩⁺ D₁(m') dω'
 (D₁ the unit-roughness isotropic NDF) up to a constant factor. The projected-area identity
 ∫⟨v, m⟩⁺ D dm = (1 + Λ(v)) v_z holds with the exact Λ (tests/test_anisotropic.py), so order 1
 is Torrance–Sparrow with the anisotropic D and G2 = 1/(1 + Λ(wi) + Λ(wo)), each Λ at its own
 azimuth (tests/test_anisotropic_walk.py; the isotropic equivalent α = √(αx αy) walks a
-different surface). ``WalkNDF`` holds what the walk asks of an NDF; the isotropic families keep
-the samplers below, so their walk is unchanged bit for bit.
+different surface). ``WalkNDF`` holds what the walk asks of an NDF.
 
 *Energy.* With F = 1 every path eventually leaves (the walk on a Smith microsurface conserves
 energy; Heitz et al. 2016), so the escaping energy is 1 up to the paths cut at
@@ -112,6 +96,7 @@ from scipy import special
 from microsim import checks as _checks
 from microsim.errors import UsageError
 
+from .anisotropic import AnisotropicNDF
 from .fresnel import fresnel, resolve_material
 from .ndf import GGX, Beckmann
 
@@ -133,7 +118,6 @@ __all__ = [
 HEIGHT_DISTRIBUTIONS = ("uniform", "gaussian")
 """Height distributions of ``height_from_tau``: uniform on [−1, 1], standard normal."""
 
-_A_MAX = 1e6  # largest |cot θ| used in Beckmann visible-slope sampling (see module docstring)
 _SQRT_PI = np.sqrt(np.pi)
 
 
@@ -199,18 +183,11 @@ def _lambda_up(ndf, cos_abs):
 
 
 def _walk_family(ndf) -> tuple[str, float | None]:
-    """(family, isotropic α or None) of an NDF of ``WALK_NDFS``, else UsageError. An
-    anisotropic NDF is recognised by what the walk asks of it — Λ of a direction, projected
-    roughness, visible-normal sampler, an isotropic equivalent of the Beckmann or GGX family —
-    since ``anisotropic`` imports this module (importing its classes here would close an
-    import cycle, which tests/test_layers.py forbids)."""
+    """(family, isotropic α or None) of an NDF of ``WALK_NDFS``, else UsageError."""
     if isinstance(ndf, (Beckmann, GGX)):
         return walk_alpha(ndf)
-    needs = ("smith_lambda_w", "projected_alpha", "sample_visible", "isotropic_equivalent")
-    if not getattr(ndf, "isotropic", True) and all(callable(getattr(ndf, a, None)) for a in needs):
-        iso = ndf.isotropic_equivalent()
-        if isinstance(iso, (Beckmann, GGX)):
-            return walk_alpha(iso)[0], None
+    if isinstance(ndf, AnisotropicNDF):
+        return walk_alpha(ndf.isotropic_equivalent())[0], None
     raise UsageError(
         f"ndf must be one of {', '.join(WALK_NDFS)} (the random walk needs the Smith Λ of "
         f"every direction and visible-normal sampling), got {ndf!r}"
@@ -223,9 +200,8 @@ class WalkNDF:
     a flight direction (``lambda_up``), the roughness a direction sees (``roughness_seen``) and
     visible normals (``visible``). ``ndf``: one of ``WALK_NDFS``; ``family``: "beckmann" |
     "ggx"; ``alpha``: the isotropic roughness (α = m for Beckmann), None for an anisotropic NDF
-    (checked against ``ndf``; ``WalkNDF.of(ndf)`` fills them in). Isotropic NDFs use this
-    module's samplers (Heitz 2018, Heitz & d'Eon 2014), anisotropic ones their own
-    ``sample_visible`` (the stretch to unit roughness over the same samplers)."""
+    (checked against ``ndf``; ``WalkNDF.of(ndf)`` fills them in). Visible normals come from the
+    distribution's own sampler (``sample_visible``)."""
 
     ndf: object
     family: str
@@ -264,10 +240,9 @@ class WalkNDF:
 
     def visible(self, v, u1, u2):
         """Facet normals m ~ D_v(m) for unit views v (N, 3) of either hemisphere and uniforms
-        u1 ∈ (0, 1], u2 ∈ (0, 1) of shape (N,), without re-checking the isotropic inputs."""
-        if self.alpha is not None:
-            return _visible(self.family, self.alpha, v, u1, u2)
-        return self.ndf.sample_visible(v, u1, u2)
+        u1 ∈ (0, 1], u2 ∈ (0, 1) of shape (N,), without re-checking the inputs: the
+        distribution's own sampler."""
+        return self.ndf._sample_visible(v, u1, u2)
 
 
 def visible_projected_area(v, ndf):
@@ -286,124 +261,11 @@ def visible_projected_area(v, ndf):
     return np.where(c == 0.0, horizon, out)
 
 
-def _beckmann_ln_f(a, x):
-    """ln F(x), F(x) = a(1 + erf x)/2 + e^{−x²}/(2√π) = ∫_{−∞}^x (a − s) e^{−s²} ds/√π, x ≤ a;
-    for x < 0 as −x² + ln((a erfcx(−x) + 1/√π)/2) (finite far in the tail)."""
-    neg = x < 0
-    xn = np.where(neg, x, -1.0)
-    xp = np.where(neg, 1.0, x)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lneg = -xn * xn + np.log(0.5 * np.maximum(a * special.erfcx(-xn) + 1.0 / _SQRT_PI, 0.0))
-        lpos = np.log(0.5 * a * (1.0 + special.erf(xp)) + np.exp(-xp * xp) / (2.0 * _SQRT_PI))
-    return np.where(neg, lneg, lpos)
-
-
-def _beckmann_slope_x(a, u):
-    """x̃ ≤ a with F(x̃) = u F(a) (``_beckmann_ln_f``), vectorised over paths.
-
-    Safeguarded Newton on the concave increasing g(x) = ln F(x) − ln(u F(a)) inside the bracket
-    [min(a, 0) − 9, a] (F(lo)/F(a) < 1e-30 < u for every u the walk draws), with bisection
-    whenever a step leaves the bracket; only unconverged entries are iterated.
-    """
-    a = np.asarray(a, dtype=np.float64)
-    target = np.log(u) + _beckmann_ln_f(a, a)
-    lo = np.minimum(a, 0.0) - 9.0
-    hi = a.copy()
-    # start: the root for a → +∞ (x = erfinv(2u − 1)) clipped into the bracket; for a < 0 near
-    # the median of the limiting Gamma(2, 2|a|) law of a − x̃ (density ∝ r e^{−2|a| r}, r = a − x̃)
-    x = np.where(
-        a >= 0,
-        np.clip(special.erfinv(2.0 * u - 1.0), lo, hi),
-        a - 1.68 / (2.0 * np.abs(a) + 1.2),
-    )
-    act = np.arange(len(a))
-    for _ in range(200):
-        xa, aa = x[act], a[act]
-        lf = _beckmann_ln_f(aa, xa)
-        g = lf - target[act]
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            dg = (aa - xa) * np.exp(-xa * xa - lf) / _SQRT_PI  # d ln F/dx
-            step = g / dg
-            x_new = xa - step
-        lo_a = np.where(g < 0, xa, lo[act])
-        hi_a = np.where(g > 0, xa, hi[act])
-        bad = ~np.isfinite(x_new) | (x_new < lo_a) | (x_new > hi_a)
-        lo[act], hi[act] = lo_a, hi_a
-        done = (g == 0) | (~bad & (np.abs(step) <= 1e-12 * np.maximum(1.0, np.abs(xa))))
-        x[act] = np.where(g == 0, xa, np.where(bad, 0.5 * (lo_a + hi_a), x_new))
-        act = act[~done]
-        if len(act) == 0:
-            break
-    return np.minimum(x, a)
-
-
-def _beckmann_visible(v, alpha, u1, u2):
-    vs = np.stack([alpha * v[:, 0], alpha * v[:, 1], v[:, 2]], axis=1)
-    vs /= np.linalg.norm(vs, axis=1, keepdims=True)
-    rxy = np.hypot(vs[:, 0], vs[:, 1])
-    with np.errstate(divide="ignore"):
-        a = np.clip(vs[:, 2] / rxy, -_A_MAX, _A_MAX)  # cot θ of the stretched direction
-    a = np.where(rxy > 0, a, np.sign(vs[:, 2]) * _A_MAX)
-    x = _beckmann_slope_x(a, u1)
-    y = special.erfinv(2.0 * u2 - 1.0)
-    safe = rxy > 0
-    cphi = np.where(safe, vs[:, 0] / np.where(safe, rxy, 1.0), 1.0)
-    sphi = np.where(safe, vs[:, 1] / np.where(safe, rxy, 1.0), 0.0)
-    sx = alpha * (cphi * x - sphi * y)
-    sy = alpha * (sphi * x + cphi * y)
-    m = np.stack([-sx, -sy, np.ones_like(sx)], axis=1)
-    return m / np.linalg.norm(m, axis=1, keepdims=True)
-
-
-def _ggx_visible(v, alpha, u1, u2):
-    vh = np.stack([alpha * v[:, 0], alpha * v[:, 1], v[:, 2]], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
-    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
-    inv = np.where(lensq > 0, 1.0 / np.sqrt(np.where(lensq > 0, lensq, 1.0)), 0.0)
-    t1v = np.stack(
-        [np.where(lensq > 0, -vh[:, 1] * inv, 1.0), np.where(lensq > 0, vh[:, 0] * inv, 0.0)],
-        axis=1,
-    )
-    T1 = np.stack([t1v[:, 0], t1v[:, 1], np.zeros(len(v))], axis=1)
-    T2 = np.cross(vh, T1)
-    r = np.sqrt(u1)
-    phi = 2.0 * np.pi * u2
-    t1 = r * np.cos(phi)
-    t2 = r * np.sin(phi)
-    s = 0.5 * (1.0 + vh[:, 2])
-    w = np.sqrt(np.maximum(1.0 - t1 * t1, 0.0))
-    t2 = (1.0 - s) * w + s * t2
-    up = np.sqrt(np.maximum(1.0 - t1 * t1 - t2 * t2, 0.0))
-    nh = t1[:, None] * T1 + t2[:, None] * T2 + up[:, None] * vh
-    m = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 0.0)], axis=1)
-    return m / np.linalg.norm(m, axis=1, keepdims=True)
-
-
-def _visible(kind, alpha, v, u1, u2):
-    if kind == "beckmann":
-        return _beckmann_visible(v, alpha, u1, u2)
-    return _ggx_visible(v, alpha, u1, u2)
-
-
 def sample_visible_normals(v, ndf, u1, u2):
     """Facet normals m ~ D_v(m) = ⟨v, m⟩⁺ D(m) / ∫⟨v, m'⟩⁺ D dm' for unit view directions v
-    (N, 3) of either hemisphere (not straight down) and uniforms u1, u2 ∈ (0, 1) of shape (N,).
-
-    GGX: Heitz 2018; Beckmann: Heitz & d'Eon 2014 slope inversion (module docstring).
-    ``ndf``: one of ``WALK_NDFS``; an anisotropic one samples with its own ``sample_visible``
-    (the stretch to unit roughness over the isotropic samplers; module docstring)."""
-    walk = WalkNDF.of(ndf)
-    v = _checks.directions("v", v)
-    if v.ndim != 2:
-        raise UsageError(f"v must have shape (N, 3), got {v.shape}")
-    u1 = np.clip(np.asarray(u1, dtype=np.float64), 1e-300, 1.0)
-    u2 = np.clip(np.asarray(u2, dtype=np.float64), 0.0, 1.0)
-    if u1.shape != (len(v),) or u2.shape != (len(v),):
-        raise UsageError(
-            f"v, u1 and u2 must have shapes (N, 3), (N,) and (N,), "
-            f"got v {v.shape}, u1 {u1.shape}, u2 {u2.shape}"
-        )
-    return walk.visible(v, u1, np.clip(u2, 1e-16, 1 - 1e-16))
+    (N, 3) of either hemisphere (not straight down) and uniforms u1, u2 ∈ (0, 1) of shape (N,):
+    ``ndf.sample_visible(v, u1, u2)`` for one of ``WALK_NDFS``."""
+    return WalkNDF.of(ndf).ndf.sample_visible(v, u1, u2)
 
 
 # --- the walk ----------------------------------------------------------------------------------

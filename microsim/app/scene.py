@@ -110,7 +110,6 @@ __all__ = [
     "surface_spec",
     "material_ior",
     "check_heightfield",
-    "NDF_PARAMS",
     "SURFACE_KINDS",
     "WaveSpec",
     "WAVE_KINDS",
@@ -157,16 +156,6 @@ _PATH = (is_file_path, PATH_RULE)
 _C_ABC = (lambda v: _is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
 _BAND = (lambda v: _is_num(v) and v >= 1, "a number >= 1")
 
-NDF_PARAMS = {
-    "beckmann": ("m",),
-    "ggx": ("alpha",),
-    "blinn-phong": ("e",),
-    "vmf": ("kappa",),
-    "abc": ("B", "C"),
-}
-"""Scene NDF names and the parameters each one requires."""
-_NDF_ALIASES = {"blinn_phong": "blinn-phong", "phong": "blinn-phong", "von-mises-fisher": "vmf"}
-
 _REQUIRED = object()
 
 
@@ -184,7 +173,7 @@ class _Kind:
 
 
 def _vgroove_ndf(p):
-    return make_ndf(p["ndf"], {k: p[k] for k in NDF_PARAMS[p["ndf"]]})
+    return make_ndf(p["ndf"], p)
 
 
 def scaled_grid(n: int, scale: float) -> int:
@@ -271,16 +260,6 @@ def _num_in(lo, hi):
     return (lambda v: _is_num(v) and lo <= v <= hi, f"a number in [{lo:g}, {hi:g}]")
 
 
-_NDF_PARAM_CHECKS = {
-    "m": _num_in(1e-6, 10.0),
-    "alpha": _num_in(1e-6, 10.0),
-    "e": _num_in(1e-6, 1e12),
-    "kappa": _num_in(1e-6, 1e12),
-    "B": _num_in(1e-6, 1e6),
-    "C": _num_in(1e-6, 1e6),
-}
-"""Allowed V-groove NDF parameters: beyond them the closed forms over- or underflow (a
-roughness below 1e-6 is a mirror, above 10 the grooves are too deep for single bounces)."""
 MAX_THETA_I = 89.99
 """Largest incidence angle (degrees) of a scene or ``--theta-i``: closer to grazing the tracer
 loses rays to rounding."""
@@ -471,17 +450,10 @@ class Scene:
 
 
 def make_ndf(name: str, params: Mapping[str, float]):
-    """Analytic NDF from a scene name (``NDF_PARAMS``) and its parameters."""
-    cls = {
-        "beckmann": an.Beckmann,
-        "ggx": an.GGX,
-        "blinn-phong": an.BlinnPhong,
-        "vmf": an.VonMisesFisher,
-        "abc": an.ABC,
-    }
-    if name not in cls:
-        raise UsageError(f"ndf must be one of {', '.join(NDF_PARAMS)}, got {name!r}")
-    return cls[name](**params)
+    """Analytic NDF from a scene name (``analytic.scene_distributions()``) and its parameters
+    (the class's ``scene_params`` are taken from ``params``)."""
+    cls = an.scene_distribution(name)
+    return cls(**{k: params[k] for k in cls.scene_params})
 
 
 # --- loading -----------------------------------------------------------------------------------
@@ -533,12 +505,13 @@ def surface_spec(where, table) -> SurfaceSpec:
         _fail(where, "surface.kind", f"must be one of {', '.join(SURFACE_KINDS)}, got {kind!r}")
     schema = dict(_KINDS[kind].keys)
     if kind == "vgrooves":
-        ndf = table.get("ndf")
-        ndf = _NDF_ALIASES.get(ndf, ndf) if isinstance(ndf, str) else ndf
-        if ndf not in NDF_PARAMS:
-            _fail(where, "surface.ndf", f"must be one of {', '.join(NDF_PARAMS)}, got {ndf!r}")
-        table = {**table, "ndf": ndf}
-        schema.update({k: (_REQUIRED, _NDF_PARAM_CHECKS[k]) for k in NDF_PARAMS[ndf]})
+        try:
+            ndf = an.scene_distribution(table.get("ndf"))
+        except UsageError as e:
+            _fail(where, "surface.ndf", str(e).removeprefix("ndf "))
+        table = {**table, "ndf": ndf.name}
+        # beyond these bounds the closed forms over- or underflow
+        schema.update({k: (_REQUIRED, _num_in(*b)) for k, b in ndf.scene_params.items()})
     _check_keys(where, "surface", table, ["kind", *schema])
     params = _fill(where, "surface", {k: v for k, v in table.items() if k != "kind"}, schema)
     for key in (
@@ -550,16 +523,13 @@ def surface_spec(where, table) -> SurfaceSpec:
         "tile",
         "size",
         "band_limit",
-        "m",
-        "alpha",
-        "e",
-        "kappa",
+        *(an.scene_distribution(params["ndf"]).scene_params if kind == "vgrooves" else ()),
     ):
         if key in params:
             params[key] = float(params[key])
     if kind == "vgrooves":
         try:
-            make_ndf(params["ndf"], {k: params[k] for k in NDF_PARAMS[params["ndf"]]})
+            make_ndf(params["ndf"], params)
         except UsageError as e:
             raise SceneError(f"{where}: surface: {e}") from None
     if kind == "gaussian":

@@ -710,7 +710,7 @@ DEFAULT_RESOLUTION = RGLResolution()
 
 
 def _check_ndf(ndf):
-    if not isinstance(ndf, NDF) or not getattr(ndf, "isotropic", True):
+    if not isinstance(ndf, NDF) or not ndf.isotropic:
         raise UsageError(
             f"ndf must be an isotropic microsim NDF (microsim.analytic.ndf: Beckmann, GGX, "
             f"BlinnPhong, VonMisesFisher, ABC), got {_checks.short(ndf)}"

@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from microsim import vectors
-from microsim.analytic.anisotropic import AnisotropicBeckmann
+from microsim.analytic.anisotropic import AnisotropicBeckmann, AnisotropicNDF
 from microsim.analytic.fresnel import resolve_material
 from microsim.analytic.masking import Smith
 from microsim.analytic.models import TorranceSparrow
@@ -222,7 +222,7 @@ def default_models(
         for label, d in ndfs
         for k in kinds
     ]
-    if ndf is not None and hasattr(ndf, "isotropic_equivalent"):  # anisotropic ensemble
+    if isinstance(ndf, AnisotropicNDF):  # anisotropic ensemble
         stand_in = Smith(ndf.isotropic_equivalent(), correlated=True)
         model = TorranceSparrow(ndf, stand_in, material)
         specs.append(ModelSpec.from_model(GEOMEAN_MODEL, model))

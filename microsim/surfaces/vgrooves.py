@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from microsim.analytic.ndf import NDF
 from microsim.checks import check_memory, integer, positive
 from microsim.errors import UsageError
 
@@ -113,10 +114,9 @@ def vgrooves(
     if not isinstance(oriented, (bool, np.bool_)):
         raise UsageError(f"oriented must be True or False, got {oriented!r}")
     n_grooves = integer("n_grooves", n_grooves, 1)
-    if not callable(getattr(ndf, "tilt_quantile_rad", None)):
+    if not isinstance(ndf, NDF) or not ndf.isotropic:
         raise UsageError(
-            f"ndf must be an NDF with tilt_quantile_rad(u) (e.g. microsim.analytic."
-            f"Beckmann(0.3)), got {ndf!r}"
+            f"ndf must be an isotropic NDF (e.g. microsim.analytic.Beckmann(0.3)), got {ndf!r}"
         )
     seed, tile = integer("seed", seed, 0), positive("tile", tile)
     if sampling not in SAMPLINGS:
@@ -128,10 +128,9 @@ def vgrooves(
     )
     tilts = groove_tilts_rad(n_grooves, ndf, seed, sampling)
     vertices, faces = _extrude(*groove_profile(tilts, tile), tile)
-    params = ndf.params() if callable(getattr(ndf, "params", None)) else {}
     nominal = {
-        "ndf": getattr(ndf, "name", type(ndf).__name__),
-        **params,
+        "ndf": ndf.name,
+        **ndf.params(),
         "n_grooves": n_grooves,
         "sampling": sampling,
         "seed": seed,

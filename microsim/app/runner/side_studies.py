@@ -17,6 +17,7 @@ import numpy as np
 from ... import analytic as an
 from ...analysis.report import albedo_stderr
 from ...analysis.verdicts import verdicts_for_result
+from ...analytic.anisotropic import AnisotropicNDF
 from ...checkpoints import checkpoint
 from ...sim import Bins, simulate
 from ...sim.compare import attach_models, default_models
@@ -107,8 +108,8 @@ def estimator_warnings(plan: RunPlan, sweep) -> list[str]:
             )
     bin_w = 90.0 / sweep.bins.n_theta
     ndf = plan.scene.ndf()
-    if hasattr(ndf, "alpha_x"):  # anisotropic: the lobe is narrowest along the smooth axis
-        ndf = type(ndf.isotropic_equivalent())(min(ndf.alpha_x, ndf.alpha_y))
+    if isinstance(ndf, AnisotropicNDF):  # the lobe is narrowest along the smooth axis
+        ndf = ndf.isotropic_at(min(ndf.alpha_x, ndf.alpha_y))
     if ndf is None and plan.scene.surface.kind == "flat":
         out.append(
             f"the reflection lobe of a flat surface is a delta: narrower than any bin "
