@@ -29,7 +29,7 @@ from microsim import vectors
 from microsim.errors import UsageError
 
 from . import smith
-from .ndf import NDF, _check_lambda_method
+from .ndf import NDF
 
 __all__ = ["Empirical"]
 
@@ -181,7 +181,7 @@ class Empirical(NDF):
         """Λ(w) for unit w: an anisotropic histogram's from its (θ_w, φ_w) table (``smith``)."""
         if self.isotropic:
             return super()._smith_lambda(w, method)
-        _check_lambda_method(method)
+        self._check_lambda_method(method)
         return smith.numerical_lambda_w(self, w)
 
     def _bin_of_q(self, q) -> np.ndarray:

@@ -178,19 +178,24 @@ class NDF:
 
     def _smith_lambda(self, w, method: str = "auto"):
         """Λ(w) for unit w (no validation); inf at cos θ_w ≤ 0."""
-        _check_lambda_method(method)
+        self._check_lambda_method(method)
         c = w[..., 2]
-        if method == "closed" and not self.has_closed_smith:
-            raise UsageError(
-                f"method='closed' needs an NDF with a closed-form Smith Λ; "
-                f"{type(self).__name__} has none (use 'auto' or 'numerical')"
-            )
         if self.has_closed_smith and method != "numerical":
             pos = c > 0.0
             lam = np.full(c.shape, np.inf)
             lam[pos] = self.smith_lambda_cos(c[pos])
             return lam
         return smith.numerical_lambda_cos(self, c)
+
+    def _check_lambda_method(self, method) -> None:
+        """UsageError unless ``method`` is one of "auto", "closed", "numerical" and this
+        distribution has what it asks for."""
+        _check_lambda_method(method)
+        if method == "closed" and not self.has_closed_smith:
+            raise UsageError(
+                f"method='closed' needs an NDF with a closed-form Smith Λ; "
+                f"{type(self).__name__} has none (use 'auto' or 'numerical')"
+            )
 
     def G1(self, w, h):
         """Smith masking G1(w, h) = χ⁺(w·h)/(1 + Λ(w)) (Smith 1967; Heitz 2014)."""
