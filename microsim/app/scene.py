@@ -492,6 +492,16 @@ def _fill(where, section, table, schema):
     return out
 
 
+def _scene_ndf(where, name):
+    """The distribution class a V-groove scene names, else a SceneError naming the allowed
+    names."""
+    try:
+        return an.scene_distribution(name)
+    except UsageError as e:
+        message = str(e).removeprefix("ndf ")
+    _fail(where, "surface.ndf", message)
+
+
 def surface_spec(where, table) -> SurfaceSpec:
     """The validated ``SurfaceSpec`` of a ``[surface]`` table (defaults filled in); a bad
     value raises ``SceneError`` naming ``where`` (the file) and the key. Used by scene and
@@ -505,10 +515,7 @@ def surface_spec(where, table) -> SurfaceSpec:
         _fail(where, "surface.kind", f"must be one of {', '.join(SURFACE_KINDS)}, got {kind!r}")
     schema = dict(_KINDS[kind].keys)
     if kind == "vgrooves":
-        try:
-            ndf = an.scene_distribution(table.get("ndf"))
-        except UsageError as e:
-            _fail(where, "surface.ndf", str(e).removeprefix("ndf "))
+        ndf = _scene_ndf(where, table.get("ndf"))
         table = {**table, "ndf": ndf.name}
         # beyond these bounds the closed forms over- or underflow
         schema.update({k: (_REQUIRED, _num_in(*b)) for k, b in ndf.scene_params.items()})

@@ -564,7 +564,7 @@ def _predict_one(spec: ModelSpec, wi, bins: Bins, phi_i: float, rtol: float) -> 
         else:
             fn, symmetric = (
                 _ts_brdf(p["ndf"], p["shadowing"], p["material"]),
-                getattr(p["ndf"], "isotropic", True),
+                p["ndf"].isotropic,
             )
         res = bin_average(wi, bins, fn, phi_i, rtol, symmetric=symmetric)
         if not res.converged.all():

@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from microsim.analytic import Empirical
+from microsim.analytic.anisotropic import AnisotropicNDF
 from microsim.checks import positive
 from microsim.errors import EnvironmentFailure, UsageError
 
@@ -276,9 +277,8 @@ class Surface:
             out["rms_height"] = float(np.sqrt(np.mean(self.heights**2)))
         if self.predicted is not None:
             out.update(self.predicted.as_stats())
-        rot = getattr(self.ensemble_ndf, "rotation", None)
-        if rot is not None and getattr(self.ensemble_ndf, "alpha_x", None) is not None:
-            ax, ay = rotated_alphas(vx, cxy, vy, rot)
+        if isinstance(self.ensemble_ndf, AnisotropicNDF):
+            ax, ay = rotated_alphas(vx, cxy, vy, self.ensemble_ndf.rotation)
             out.update(alpha_x_realised=ax, alpha_y_realised=ay)
         if self.generator_stats is not None:
             out.update(self.generator_stats(self))

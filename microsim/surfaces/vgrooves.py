@@ -168,9 +168,8 @@ def groove_stats(surface: Surface) -> dict:
         "tilt_max_deg": float(np.degrees(tilts.max())),
         "cdf_bound": 0.5 / n if surface.nominal.get("sampling") == "stratified" else None,
     }
-    cdf = getattr(surface.ensemble_ndf, "cdf_theta_rad", None)
-    if callable(cdf):
-        F = np.asarray(cdf(np.sort(tilts)), dtype=np.float64)
+    if surface.ensemble_ndf is not None:
+        F = np.asarray(surface.ensemble_ndf.cdf_theta_rad(np.sort(tilts)), dtype=np.float64)
         i = np.arange(1, n + 1)
         out["cdf_max_dev"] = float(max(np.max(i / n - F), np.max(F - (i - 1) / n)))
     return out

@@ -111,11 +111,7 @@ def view_normals(
     chart.line(mid, hist / (w.sum() * width), color="black", width=2.5, label="facets")
     tilts = sc.ndf if sc.ndf is not None else sc.surface.tilt_ndf
     if tilts is not None:
-        try:
-            cdf = np.asarray(tilts.cdf_theta_rad(np.radians(edges)))
-            expected = np.diff(cdf) / width
-        except NotImplementedError:
-            expected = tilts.tilt_pdf_rad(np.radians(mid)) * np.pi / 180.0
+        expected = np.diff(np.asarray(tilts.cdf_theta_rad(np.radians(edges)))) / width
         chart.line(
             mid,
             expected,
