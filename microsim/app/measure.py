@@ -133,6 +133,54 @@ class Acquisition:
         )
 
 
+def _incidences(theta_step, theta_max) -> tuple[float, ...]:
+    """θi = 0, ``theta_step``, … up to ``theta_max`` degrees (refused beyond ``MAX_THETA_I``
+    or ``MAX_INCIDENCES``)."""
+    step, top = float(theta_step), float(theta_max)
+    if not (math.isfinite(step) and step > 0):
+        raise UsageError(f"--theta-step must be a positive angle in degrees, got {theta_step!r}")
+    if not (math.isfinite(top) and 0 <= top <= MAX_THETA_I):
+        raise UsageError(f"--theta-max must be in [0, {MAX_THETA_I:g}] degrees, got {theta_max!r}")
+    thetas = tuple(float(t) for t in np.round(np.arange(0.0, top + 1e-9, step), 6))
+    if len(thetas) > MAX_INCIDENCES:
+        raise UsageError(
+            f"--theta-step {step:g} gives {len(thetas)} incidences; at most {MAX_INCIDENCES}"
+        )
+    return thetas
+
+
+def _exports(scene, exports) -> tuple[str, ...]:
+    """The asked export formats (None: every one of ``EXPORTS`` the scene allows), each once;
+    RGL needs the scene's ensemble NDF (asked for without one: refused)."""
+    asked = exports is not None
+    exports = tuple(dict.fromkeys(EXPORTS if exports is None else exports))
+    if not all(e in EXPORTS for e in exports):
+        raise UsageError(f"--export must be among {', '.join(EXPORTS)}, got {', '.join(exports)}")
+    if "rgl" in exports and scene.ndf() is None:
+        if asked:
+            raise UsageError(
+                f"--export rgl: scene {scene.name} has no ensemble NDF (a heightfield file), "
+                f"which an RGL file needs for its parameterisation; use --export merl"
+            )
+        exports = tuple(e for e in exports if e != "rgl")
+    return exports
+
+
+def _check_resumable(acq: Acquisition) -> None:
+    """Refuse a ``--resume`` whose settings differ from the saved measure's, naming the first
+    setting that differs."""
+    out = acq.out
+    saved = _saved_document(out)["settings"]
+    if saved != acq.settings():
+        key = next(
+            k for k in sorted({*saved, *acq.settings()}) if saved.get(k) != acq.settings().get(k)
+        )
+        raise UsageError(
+            f"--resume {out}: {key} is {saved.get(key)!r} there but "
+            f"{acq.settings().get(key)!r} now; resume with the same settings or use --force"
+        )
+
+
 def plan_measure(
     scene_path,
     *,
@@ -159,16 +207,7 @@ def plan_measure(
             f"scene {scene.name}: measure tabulates isotropic surfaces (a table over θi and "
             f"folded bins); this surface is anisotropic"
         )
-    step, top = float(theta_step), float(theta_max)
-    if not (math.isfinite(step) and step > 0):
-        raise UsageError(f"--theta-step must be a positive angle in degrees, got {theta_step!r}")
-    if not (math.isfinite(top) and 0 <= top <= MAX_THETA_I):
-        raise UsageError(f"--theta-max must be in [0, {MAX_THETA_I:g}] degrees, got {theta_max!r}")
-    thetas = tuple(float(t) for t in np.round(np.arange(0.0, top + 1e-9, step), 6))
-    if len(thetas) > MAX_INCIDENCES:
-        raise UsageError(
-            f"--theta-step {step:g} gives {len(thetas)} incidences; at most {MAX_INCIDENCES}"
-        )
+    thetas = _incidences(theta_step, theta_max)
     if not (isinstance(target, (int, float)) and 1e-4 <= target <= 0.5):
         raise UsageError(f"--target must be a relative error in [0.0001, 0.5], got {target!r}")
     max_rays = integer("--max-rays", max_rays, 2**16, MAX_RAYS, " (rays per incidence)")
@@ -177,17 +216,7 @@ def plan_measure(
         seed = integer("--seed", seed, 0, None, " (the random stream)")
     if scheduler is not None:
         check_address(scheduler)
-    asked = exports is not None
-    exports = tuple(dict.fromkeys(EXPORTS if exports is None else exports))
-    if not all(e in EXPORTS for e in exports):
-        raise UsageError(f"--export must be among {', '.join(EXPORTS)}, got {', '.join(exports)}")
-    if "rgl" in exports and scene.ndf() is None:
-        if asked:
-            raise UsageError(
-                f"--export rgl: scene {scene.name} has no ensemble NDF (a heightfield file), "
-                f"which an RGL file needs for its parameterisation; use --export merl"
-            )
-        exports = tuple(e for e in exports if e != "rgl")
+    exports = _exports(scene, exports)
     out = Path(out) if out is not None else Path("runs") / f"{scene.name}-measured"
     check_output_path(out, "--out", scene.path)
     acq = Acquisition(
@@ -207,17 +236,7 @@ def plan_measure(
     if not resume:
         _check_replaceable(acq)
     else:
-        saved = _saved_document(out)["settings"]
-        if saved != acq.settings():
-            key = next(
-                k
-                for k in sorted({*saved, *acq.settings()})
-                if saved.get(k) != acq.settings().get(k)
-            )
-            raise UsageError(
-                f"--resume {out}: {key} is {saved.get(key)!r} there but "
-                f"{acq.settings().get(key)!r} now; resume with the same settings or use --force"
-            )
+        _check_resumable(acq)
     return acq
 
 
