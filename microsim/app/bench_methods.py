@@ -196,9 +196,58 @@ def _rel_rms(sim, se, counts, model, bins) -> dict:
     return {"rel_rms": v["rel_rms"], "noise_floor": noise}
 
 
+def _geometric_trace_points(cfg: MethodsConfig, surface, bins, ref, mask: str, label: str):
+    """Panel A's curve of one trace path (``masking=mask``): per ray count of ``cfg.rays``, the
+    best wall time and the mean rel_rms of the runs against ``ref`` with its standard error,
+    beside the runs' ray-noise floor and the path's one-off set-up time."""
+    from microsim.sim import simulate
+
+    th = float(cfg.theta_i)
+
+    def run(n, k):
+        return simulate(
+            surface,
+            "aluminium",
+            th,
+            rays=int(n),
+            bins=bins,
+            masking=mask,
+            seed=k,
+            threads=cfg.threads,
+        )
+
+    t0 = time.perf_counter()
+    run(cfg.rays[0], 99)  # scene + BVH (traced) or numba compilation (analytic)
+    setup = time.perf_counter() - t0
+    points = []
+    for n in cfg.rays:
+        sec, outs = _best_of(lambda k, n=n: run(n, k), cfg.repeat, cfg.cheap)
+        errs = [_rel_rms(r.brdf[0], r.stderr[0], r.counts[0], ref, bins) for r in outs]
+        e = np.array([np.nan if x["rel_rms"] is None else x["rel_rms"] for x in errs])
+        nf = [x["noise_floor"] for x in errs if x["noise_floor"] is not None]
+        points.append(
+            {
+                "method": label,
+                "key": f"ray-{mask}",
+                "kind": "curve",
+                "setting": f"{n:,} rays",
+                "size": int(n),
+                "seconds": sec,
+                "runs": len(outs),
+                "error": float(e.mean()),
+                "error_se": float(e.std(ddof=1) / math.sqrt(len(e))) if len(e) > 1 else None,
+                "errors": e.tolist(),
+                "noise_floor": float(np.mean(nf)) if nf else None,
+                "setup_seconds": setup,
+                "rays_per_s": n / sec,
+            }
+        )
+    return points
+
+
 def _panel_geometric(cfg: MethodsConfig) -> dict:
     from microsim import analytic as an
-    from microsim.sim import Bins, simulate
+    from microsim.sim import Bins
     from microsim.sim.predict import ModelSpec, predict
     from microsim.surfaces import vgrooves
 
@@ -240,44 +289,7 @@ def _panel_geometric(cfg: MethodsConfig) -> dict:
             }
         )
     for mask, label in (("traced", "ray trace (Embree)"), ("analytic", "exact V-groove path")):
-
-        def run(n, k, mask=mask):
-            return simulate(
-                surface,
-                "aluminium",
-                th,
-                rays=int(n),
-                bins=bins,
-                masking=mask,
-                seed=k,
-                threads=cfg.threads,
-            )
-
-        t0 = time.perf_counter()
-        run(cfg.rays[0], 99)  # scene + BVH (traced) or numba compilation (analytic)
-        setup = time.perf_counter() - t0
-        for n in cfg.rays:
-            sec, outs = _best_of(lambda k, n=n: run(n, k), cfg.repeat, cfg.cheap)
-            errs = [_rel_rms(r.brdf[0], r.stderr[0], r.counts[0], ref, bins) for r in outs]
-            e = np.array([np.nan if x["rel_rms"] is None else x["rel_rms"] for x in errs])
-            nf = [x["noise_floor"] for x in errs if x["noise_floor"] is not None]
-            points.append(
-                {
-                    "method": label,
-                    "key": f"ray-{mask}",
-                    "kind": "curve",
-                    "setting": f"{n:,} rays",
-                    "size": int(n),
-                    "seconds": sec,
-                    "runs": len(outs),
-                    "error": float(e.mean()),
-                    "error_se": float(e.std(ddof=1) / math.sqrt(len(e))) if len(e) > 1 else None,
-                    "errors": e.tolist(),
-                    "noise_floor": float(np.mean(nf)) if nf else None,
-                    "setup_seconds": setup,
-                    "rays_per_s": n / sec,
-                }
-            )
+        points += _geometric_trace_points(cfg, surface, bins, ref, mask, label)
     return {
         "key": "geometric",
         "title": f"V-grooves, Beckmann m = {cfg.m:g}, aluminium, θi = {th:g}°",
@@ -336,17 +348,93 @@ def _energy_point(ref, model_bins, model_se, name: str) -> dict:
     }
 
 
+def _kirchhoff_points(cfg: MethodsConfig, ref, solve) -> list[dict]:
+    """Panel B's Kirchhoff curve: ``solve`` (the reference's solver) on each smaller tile of
+    ``cfg.wave_tiles``, its |energy deviation| from ``ref``."""
+    from microsim.analysis.wave_verdicts import diffuse_brdf
+
+    points = []
+    for n in cfg.wave_tiles:
+        surface = _wave_surface(cfg, n)
+        sec, outs = _best_of(lambda k, s=surface: solve(s), cfg.repeat, cfg.cheap)
+        r = outs[0]
+        p = _energy_point(ref, diffuse_brdf(r, 0), r.stderr[0], f"kirchhoff-{n}")
+        points.append(
+            {
+                "method": "Kirchhoff, smaller tile",
+                "key": "kirchhoff",
+                "kind": "curve",
+                "setting": f"{n}² ({n * cfg.dx / float(cfg.wavelength):g} λ)",
+                "size": int(n),
+                "seconds": sec,
+                "runs": len(outs),
+                **p,
+                "orders": int(r.meta["orders"][0]),
+            }
+        )
+    return points
+
+
+def _wave_trace_points(cfg: MethodsConfig, ref, ref_surface, bins) -> list[dict]:
+    """Panel B's ray-trace curve on the reference tile itself: per ray count of
+    ``cfg.wave_rays``, the mean energy deviation of the runs from ``ref``, its uncertainty
+    (the reference's speckle and the runs' own noise in quadrature) and the one-off set-up."""
+    from microsim.sim import simulate
+
+    def trace(n, k):
+        return simulate(
+            ref_surface,
+            "aluminium",
+            float(cfg.theta_i),
+            rays=int(n),
+            bins=bins,
+            seed=k,
+            threads=cfg.threads,
+        )
+
+    t0 = time.perf_counter()
+    trace(cfg.wave_rays[0], 99)  # Embree scene + BVH of the reference tile
+    setup = time.perf_counter() - t0
+    points = []
+    for n in cfg.wave_rays:
+        sec, outs = _best_of(lambda k, n=n: trace(n, k), cfg.repeat, cfg.cheap)
+        ps = [_energy_point(ref, r.brdf[0], r.stderr[0], "ray-trace") for r in outs]
+        dev = float(np.mean([q["deviation"] for q in ps]))
+        own = math.sqrt(np.mean([q["own_se"] ** 2 for q in ps]) / len(ps))
+        points.append(
+            {
+                "method": "ray trace (Embree)",
+                "key": "ray-traced",
+                "kind": "curve",
+                "setting": f"{n:,} rays",
+                "size": int(n),
+                "seconds": sec,
+                "runs": len(outs),
+                "deviation": dev,
+                "error": abs(dev),
+                "error_se": math.hypot(
+                    float(np.mean([q["error_se"] ** 2 - q["own_se"] ** 2 for q in ps])) ** 0.5,
+                    own,
+                ),
+                "own_se": own,
+                "reference_se": ps[0]["reference_se"],
+                "rel_error": float(np.mean([q["rel_error"] for q in ps])),
+                "setup_seconds": setup,
+            }
+        )
+    return points
+
+
 def _panel_wave(cfg: MethodsConfig) -> dict:
     from microsim.analysis.wave_verdicts import (
         closed_form,
-        diffuse_brdf,
         lattice_average,
         surface_spectrum,
         wave_verdict,
     )
     from microsim.analytic import Beckmann
     from microsim.analytic.brdf import torrance_sparrow
-    from microsim.sim import Bins, simulate
+    from microsim.sim import Bins
     from microsim.sim.predict import bin_average
     from microsim.vectors import spherical_deg
     from microsim.wave import kirchhoff_brdf
@@ -399,59 +487,8 @@ def _panel_wave(cfg: MethodsConfig) -> dict:
                 "converged": bool(np.all(outs[0].converged)),
             }
         )
-    for n in cfg.wave_tiles:
-        surface = _wave_surface(cfg, n)
-        sec, outs = _best_of(lambda k, s=surface: solve(s), cfg.repeat, cfg.cheap)
-        r = outs[0]
-        p = _energy_point(ref, diffuse_brdf(r, 0), r.stderr[0], f"kirchhoff-{n}")
-        points.append(
-            {
-                "method": "Kirchhoff, smaller tile",
-                "key": "kirchhoff",
-                "kind": "curve",
-                "setting": f"{n}² ({n * cfg.dx / lam:g} λ)",
-                "size": int(n),
-                "seconds": sec,
-                "runs": len(outs),
-                **p,
-                "orders": int(r.meta["orders"][0]),
-            }
-        )
-
-    def trace(n, k):
-        return simulate(
-            ref_surface, "aluminium", th, rays=int(n), bins=bins, seed=k, threads=cfg.threads
-        )
-
-    t0 = time.perf_counter()
-    trace(cfg.wave_rays[0], 99)  # Embree scene + BVH of the reference tile
-    setup = time.perf_counter() - t0
-    for n in cfg.wave_rays:
-        sec, outs = _best_of(lambda k, n=n: trace(n, k), cfg.repeat, cfg.cheap)
-        ps = [_energy_point(ref, r.brdf[0], r.stderr[0], "ray-trace") for r in outs]
-        dev = float(np.mean([q["deviation"] for q in ps]))
-        own = math.sqrt(np.mean([q["own_se"] ** 2 for q in ps]) / len(ps))
-        points.append(
-            {
-                "method": "ray trace (Embree)",
-                "key": "ray-traced",
-                "kind": "curve",
-                "setting": f"{n:,} rays",
-                "size": int(n),
-                "seconds": sec,
-                "runs": len(outs),
-                "deviation": dev,
-                "error": abs(dev),
-                "error_se": math.hypot(
-                    float(np.mean([q["error_se"] ** 2 - q["own_se"] ** 2 for q in ps])) ** 0.5,
-                    own,
-                ),
-                "own_se": own,
-                "reference_se": ps[0]["reference_se"],
-                "rel_error": float(np.mean([q["rel_error"] for q in ps])),
-                "setup_seconds": setup,
-            }
-        )
+    points += _kirchhoff_points(cfg, ref, solve)
+    points += _wave_trace_points(cfg, ref, ref_surface, bins)
     return {
         "key": "wave",
         "title": f"ABC tile, σ = λ/{lam / cfg.sigma:g} (transition), aluminium, θi = {th:g}°",
