@@ -340,7 +340,7 @@ class Bench:
             "raw": RawThroughput.from_json,
             "pipeline_samples_per_s": per_thread,
             "ratio": per_thread,
-            "peak_rss_mb": per_thread,
+            "peak_rss_mb": lambda d: {int(rays): mb for rays, mb in d.items()},
             "machine": lambda d: Machine(**d),
             "marginal": Marginal.from_json,
             "build_seconds": lambda d: BuildTimes(**d),
