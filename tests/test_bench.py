@@ -11,7 +11,7 @@ import pytest
 from support import heightfield_surface, random_heights
 
 from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.app import bench as bench_module
+from microsim.app import bench_report
 from microsim.app.bench import (
     BenchConfig,
     add_bench_command,
@@ -22,6 +22,7 @@ from microsim.app.bench import (
     peak_rss_mb,
     throughput,
 )
+from microsim.app.bench_report import Bench, Marginal, to_json
 from microsim.sim import BLOCK, Bins, paths, simulate, streams
 from microsim.sim.tallies import Tally, chunk_tallies
 from microsim.surfaces.surface import flat
@@ -115,34 +116,48 @@ def test_peak_memory_does_not_grow_with_the_ray_count():
 def test_bench_figures_are_measured_and_printable():
     cfg = BenchConfig(n=32, rays=2**14)
     raw, pipe = throughput(cfg, repeat=1)
-    assert raw["primary_rays"] == 2**14 and 0 < raw["masking_rays"] <= raw["primary_rays"]
+    assert raw.primary_rays == 2**14 and 0 < raw.masking_rays <= raw.primary_rays
     for t in (1, 2):
-        assert np.isfinite(raw["rays_per_s"][t]) and raw["rays_per_s"][t] > 0
+        assert np.isfinite(raw.rays_per_s[t]) and raw.rays_per_s[t] > 0
         assert np.isfinite(pipe[t]) and pipe[t] > 0
-    if raw["packets_unavailable"] is None:
-        assert raw["packet_width"] in (4, 8, 16)
-        assert all(np.isfinite(raw["packet_rays_per_s"][t]) for t in (1, 2))
+    if raw.packets_unavailable is None:
+        assert raw.packet_width in (4, 8, 16)
+        assert all(np.isfinite(raw.packet_rays_per_s[t]) for t in (1, 2))
     else:
-        assert raw["packet_rays_per_s"] is None
-    b = {
-        "config": {"target": 0.01},
-        "load_average": [0.0],
-        "cpus": 2,
-        "mesh_triangles": 2048,
-        "raw": raw,
-        "pipeline_samples_per_s": pipe,
-        "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
-        "peak_rss_mb": {2**14: 100.0},
-        "build_seconds": build_times(flat(), repeat=1),
-        "machine": machine(),
-    }
-    assert b["build_seconds"]["embreex"] > 0
-    assert b["machine"]["isa"] in ("AVX-512", "AVX2") or "x86" not in b["machine"]["isa"]
+        assert raw.packet_rays_per_s is None
+    b = Bench(
+        config=BenchConfig(target=0.01),
+        load_average=[0.0],
+        cpus=2,
+        mesh_triangles=2048,
+        raw=raw,
+        pipeline_samples_per_s=pipe,
+        ratio={t: pipe[t] / raw.samples_per_s[t] for t in (1, 2)},
+        peak_rss_mb={2**14: 100.0},
+        build_seconds=build_times(flat(), repeat=1),
+        machine=machine(),
+    )
+    assert b.build_seconds.embreex > 0
+    assert b.machine.isa in ("AVX-512", "AVX2") or "x86" not in b.machine.isa
     text = format_bench(b)
-    assert text.startswith(f"machine: {b['machine']['cpu']}, {b['machine']['isa']}")
+    assert text.startswith(f"machine: {b.machine.cpu}, {b.machine.isa}")
     assert "raw embreex rays/s" in text and "pipeline / raw" in text and "BVH build" in text
-    assert ("packets / embreex" in text) == (raw["packets_unavailable"] is None)
-    json.dumps(b)
+    assert ("packets / embreex" in text) == (raw.packets_unavailable is None)
+    saved = json.loads(json.dumps(b.to_json()))
+    assert list(saved) == [
+        "config",
+        "machine",
+        "load_average",
+        "cpus",
+        "mesh_triangles",
+        "raw",
+        "pipeline_samples_per_s",
+        "ratio",
+        "build_seconds",
+        "peak_rss_mb",
+    ]
+    assert list(saved["raw"])[:3] == ["rays", "primary_rays", "masking_rays"]
+    assert Bench.from_json(saved) == b and format_bench(Bench.from_json(saved)) == text
 
 
 def test_marginal_throughput_fits_a_line_through_two_ray_counts():
@@ -151,17 +166,19 @@ def test_marginal_throughput_fits_a_line_through_two_ray_counts():
     is reported as such, not as a rate); printed, with the ratio only when the peer ran."""
     cfg = BenchConfig(n=32, rays=2**16)
     mg = marginal_throughput(cfg, repeat=1, peer=(None, "not in this test"))
-    assert mg["rays"] == [2**14, 2**16] and mg["peer"] is None and mg["ratio"] is None
+    assert mg.rays == [2**14, 2**16] and mg.peer is None and mg.ratio is None
     for t in (1, 2):
-        fig = mg["pipeline"][t]
-        (t1, t2), rate = fig["seconds"], fig["samples_per_s"]
+        fig = mg.pipeline[t]
+        (t1, t2), rate = fig.seconds, fig.samples_per_s
         assert 0 < t1 and 0 < t2
         if rate is None:
             assert t2 <= t1
         else:
-            for n, seconds in zip(mg["rays"], (t1, t2)):
-                assert fig["fixed_seconds"] + n / rate == pytest.approx(seconds, rel=1e-9)
-    text = "\n".join(bench_module._marginal_lines(json.loads(json.dumps(mg))))
+            for n, seconds in zip(mg.rays, (t1, t2)):
+                assert fig.fixed_seconds + n / rate == pytest.approx(seconds, rel=1e-9)
+    saved = Marginal.from_json(json.loads(json.dumps(to_json(mg))))
+    assert saved == mg
+    text = "\n".join(bench_report._marginal_lines(saved))
     assert "marginal, 16,384 → 65,536 rays" in text and "Mitsuba" not in text
 
 
@@ -186,7 +203,7 @@ def test_bench_rays_option_is_honoured_with_and_without_quick(monkeypatch, capsy
     import microsim.app.bench as B
 
     seen = []
-    monkeypatch.setattr(B, "run_bench", lambda cfg: seen.append(cfg) or {})
+    monkeypatch.setattr(B, "run_bench", lambda cfg: seen.append(cfg))
     monkeypatch.setattr(B, "format_bench", lambda b: "")
     p = argparse.ArgumentParser()
     add_bench_command(p.add_subparsers())
@@ -241,12 +258,12 @@ def test_wave_rows_are_measured_and_printed():
 
     cfg = BenchConfig(wave_n=64, wave_tile=12.5)  # the quick tile's dx = 0.195 λ
     rows = wave_rows(cfg)
-    assert [r["sigma"] for r in rows] == [0.01, 1.0]
+    assert [r.sigma for r in rows] == [0.01, 1.0]
     f30 = float(fresnel(np.cos(np.radians(30.0)), AL))
-    assert rows[0]["albedo"] == pytest.approx(f30, rel=1e-2)
+    assert rows[0].albedo == pytest.approx(f30, rel=1e-2)
     for r in rows:
-        assert r["n"] == 64 and r["orders"] > 100 and np.isfinite(r["seconds"]) and r["seconds"] > 0
-    text = format_bench({**_minimal_bench(), "wave": rows})
+        assert r.n == 64 and r.orders > 100 and np.isfinite(r.seconds) and r.seconds > 0
+    text = format_bench(Bench.from_json({**_minimal_bench(), "wave": to_json(rows)}))
     assert text.count("wave solver (Kirchhoff") == 2 and "σ = 1 λ" in text
     assert QUICK["wave_n"] == 128 and BenchConfig().wave_n == 1024
 

@@ -82,18 +82,18 @@ def test_interrupted_sweep_resumes_with_only_the_missing_tasks(tmp_path):
     spec = tiny_spec()
     out = tmp_path / "sweep"
     first = run_sweep(spec, out, workers=2, limit=2)  # "killed" after 2 results
-    assert len(first["computed"]) == 2 and first["skipped"] == []
+    assert len(first.computed) == 2 and first.skipped == []
     assert len(table(out)) == 2 * 2  # partial table: 2 tasks × 2 models
     # a write interrupted mid-way leaves only a temporary file, never a truncated result
     (out / "tasks" / ".junk-abc.tmp").write_text("{")
     second = run_sweep(spec, out, workers=2)
     ids = [t.id for t in spec.tasks]
-    assert sorted(second["skipped"]) == sorted(first["computed"])
-    assert sorted(second["computed"]) == sorted(set(ids) - set(first["computed"]))
+    assert sorted(second.skipped) == sorted(first.computed)
+    assert sorted(second.computed) == sorted(set(ids) - set(first.computed))
     rows = table(out)
     assert len(rows) == len(ids) * 2 and {r["task"] for r in rows} == set(ids)
     third = run_sweep(spec, out, workers=1)
-    assert third["computed"] == [] and len(third["skipped"]) == len(ids)
+    assert third.computed == [] and len(third.skipped) == len(ids)
     # the resumed sweep equals one uninterrupted run
     run_sweep(spec, tmp_path / "fresh", workers=2)
     assert table(out) == table(tmp_path / "fresh")
@@ -107,7 +107,7 @@ def test_unreadable_result_is_recomputed(tmp_path):
     done = next((tmp_path / "tasks").glob("*.json"))
     done.write_text('{"id": ')  # corrupt
     res = run_sweep(spec, tmp_path, workers=2)
-    assert done.stem in res["computed"]
+    assert done.stem in res.computed
 
 
 def test_atomic_write_leaves_nothing_on_failure(tmp_path):
@@ -125,7 +125,7 @@ def test_dask_local_cluster_gives_the_same_table(tmp_path):
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster:
         res = run_sweep(spec, tmp_path / "dask", scheduler=cluster.scheduler_address)
-    assert len(res["computed"]) == len(spec.tasks)
+    assert len(res.computed) == len(spec.tasks)
     assert table(tmp_path / "dask") == table(tmp_path / "local")
     rec = json.loads(next((tmp_path / "dask" / "tasks").glob("*.json")).read_text())
     assert {v["model"] for v in rec["verdicts"]} == {"ts-vgroove", "ts-smith"}
@@ -198,7 +198,7 @@ def test_incomplete_task_files_are_recomputed_and_never_summarised(tmp_path, dam
     write_summary(spec, tmp_path)
     assert spec.tasks[0].id not in {r["task"] for r in table(tmp_path)}
     res = run_sweep(spec, tmp_path, workers=1)
-    assert res["computed"] == [spec.tasks[0].id]
+    assert res.computed == [spec.tasks[0].id]
     back = _json(victim)
     assert back["rays"] == spec.tasks[0].rays and not back.get("partial")
     assert len(table(tmp_path)) == 2 * len(spec.tasks)
@@ -221,8 +221,8 @@ def test_interrupted_sweep_keeps_finished_tasks_and_writes_no_summary(tmp_path):
         assert rec["rays"] == spec.tasks[0].rays and not rec.get("partial")
     assert not (out / "summary.csv").exists() and not (out / "summary.md").exists()
     again = run_sweep(spec, out, workers=2)
-    assert sorted(again["skipped"]) == sorted(p.stem for p in kept)
-    assert len(again["computed"]) == len(spec.tasks) - len(kept)
+    assert sorted(again.skipped) == sorted(p.stem for p in kept)
+    assert len(again.computed) == len(spec.tasks) - len(kept)
     run_sweep(spec, tmp_path / "fresh", workers=2)
     assert table(out) == table(tmp_path / "fresh")
 

@@ -298,4 +298,4 @@ def test_index_section_where_each_method_holds(tmp_path, monkeypatch):
         cell = row.split("|")[3].strip()  # θi = 0°: "σ/λ < x", Rayleigh–Rice holds below x
         assert cell.startswith("σ/λ < "), row
         assert 0.01 < float(cell.removeprefix("σ/λ < ")) < 0.3, row
-    assert wave_run.REGIME_QUICK["sigmas"] < 14  # the quick map is the reduced one
+    assert wave_run.REGIME_QUICK.sigmas < 14  # the quick map is the reduced one

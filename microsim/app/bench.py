@@ -62,12 +62,29 @@ import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 
 from ..checks import check_memory
 from ..errors import EnvironmentFailure
+from .bench_report import (
+    THREADS,
+    Accuracy,
+    AzimuthCost,
+    Bench,
+    BenchConfig,
+    BounceThroughput,
+    BuildTimes,
+    FixedCost,
+    FoldedFull,
+    Machine,
+    Marginal,
+    MarginalLine,
+    PeerSetup,
+    RawThroughput,
+    format_bench,
+)
 from .options import rays_option
 
 __all__ = [
@@ -89,28 +106,6 @@ __all__ = [
 BATCH = 2**16
 ACCURACY_MASKING = "analytic"  # the V-groove path timed by ``time_to_accuracy``
 ACCURACY_CHUNK = 2**18  # rays per thread task there (fewer per-task overheads)
-
-
-@dataclass(frozen=True)
-class BenchConfig:
-    """What is measured: heightfield ``n``² (dx = 1, σ, ℓ), ``rays`` primary rays at
-    ``theta_i`` degrees; memory probed at ``memory_rays`` (two counts); time to ``target``
-    relative error on the V-groove scene with ``vgrooves`` grooves (``skip_accuracy`` omits it);
-    the wave solver on a ``wave_n``² tile of ``wave_tile`` wavelengths (``skip_wave`` omits it)."""
-
-    n: int = 512
-    sigma: float = 1.2
-    corr_len: float = 8.0
-    theta_i: float = 30.0
-    rays: int = 2**22
-    memory_rays: tuple = (2**20, 2**23)  # both above the mesh's facet count
-    target: float = 0.01
-    vgrooves: int = 4000
-    max_rays: int = 10**8
-    skip_accuracy: bool = False
-    wave_n: int = 1024
-    wave_tile: float = 200.0
-    skip_wave: bool = False
 
 
 def _surface(cfg: BenchConfig):
@@ -188,9 +183,8 @@ def _time_packets(scene, primary, masking, threads: int) -> float:
         return time.perf_counter() - t0
 
 
-def build_times(surface, repeat: int = 3) -> dict:
-    """Seconds to build the Embree scene + BVH of ``surface``'s mesh, best of ``repeat``:
-    {"embreex": s, "packets": s or None, "packets_unavailable": reason or None}."""
+def build_times(surface, repeat: int = 3) -> BuildTimes:
+    """Seconds to build the Embree scene + BVH of ``surface``'s mesh, best of ``repeat``."""
     from embreex import mesh_construction as mc
     from embreex import rtcore_scene as rs
 
@@ -199,32 +193,29 @@ def build_times(surface, repeat: int = 3) -> dict:
     v = np.asarray(surface.vertices, dtype=np.float64)
     f = np.asarray(surface.faces)
     reason = ep.binding_error()
-    best = {"embreex": np.inf, "packets": np.inf if reason is None else None}
+    embreex, packets = np.inf, np.inf if reason is None else None
     for _ in range(repeat):
         t0 = time.perf_counter()
         scene = rs.EmbreeScene(robust=True)
         mc.TriangleMesh(scene, v.astype(np.float32), f.astype(np.int32))
         one = np.zeros((1, 3), dtype=np.float32)
         scene.run(one, np.array([[0.0, 0.0, -1.0]], dtype=np.float32), dists=0.0)
-        best["embreex"] = min(best["embreex"], time.perf_counter() - t0)
+        embreex = min(embreex, time.perf_counter() - t0)
         del scene
         if reason is None:
             t0 = time.perf_counter()
             ep.PacketScene(v, f)
-            best["packets"] = min(best["packets"], time.perf_counter() - t0)
-    return {**best, "packets_unavailable": reason}
+            packets = min(packets, time.perf_counter() - t0)
+    return BuildTimes(embreex, packets, reason)
 
 
 def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5, peer=None) -> tuple:
     """Raw embreex throughput for the pipeline's own rays and the pipeline's (``simulate``,
     scene build excluded), on 1 and 2 threads, best of ``repeat`` each. The two are measured
     alternately (raw, pipeline, raw, …), so that a transient slowdown of the shared machine
-    hits both rather than one. Returns (raw, pipeline): raw = {"rays", "primary_rays",
-    "masking_rays", "rays_per_s": {1: .., 2: ..}, "samples_per_s": {1: .., 2: ..}} (rays/s
-    counts both kinds; samples/s = primary rays/s), pipeline = {1: samples/s, 2: samples/s}.
-    raw also holds "packet_rays_per_s" ({1: .., 2: ..}, None when the packet binding is
-    unavailable), "packet_width" and "packets_unavailable" (the reason, or None). ``peer``:
-    the (scene, reason) of ``_peer``, built here when not given."""
+    hits both rather than one. Returns (raw, pipeline): a ``RawThroughput`` (rays/s counts
+    both kinds; samples/s = primary rays/s) and {1: samples/s, 2: samples/s}. ``peer``: the
+    (scene, reason) of ``_peer``, built here when not given."""
     from microsim.sim import Tracer, simulate
     from microsim.sim import embree_packets as ep
     from microsim.vectors import spherical_deg
@@ -253,32 +244,33 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5, 
                 surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(), threads=threads
             )
             pipe[threads] = max(pipe[threads], res.meta["rays_per_second"])
-    raw = {
-        "rays": n_p + n_m,
-        "primary_rays": n_p,
-        "masking_rays": n_m,
-        "rays_per_s": {t: (n_p + n_m) / best_raw[t] for t in (1, 2)},
-        "samples_per_s": {t: n_p / best_raw[t] for t in (1, 2)},
-        "packet_rays_per_s": None
+    raw = RawThroughput(
+        rays=n_p + n_m,
+        primary_rays=n_p,
+        masking_rays=n_m,
+        rays_per_s={t: (n_p + n_m) / best_raw[t] for t in THREADS},
+        samples_per_s={t: n_p / best_raw[t] for t in THREADS},
+        packet_rays_per_s=None
         if packets is None
-        else {t: (n_p + n_m) / best_pk[t] for t in (1, 2)},
-        "packet_width": None if packets is None else packets.width,
-        "packets_unavailable": reason,
-        "peer_samples_per_s": None
-        if peer is None
-        else {t: cfg.rays / best_peer[t] for t in (1, 2)},
-        "peer": None
-        if peer is None
-        else {
-            "variant": peer.variant,
-            "mitsuba_version": peer.mi.__version__,
-            "copies": 2 * peer.m + 1,
-            "build_seconds": peer.build_seconds,
-            "llvm_target": peer.llvm_target,
-        },
-        "peer_unavailable": peer_reason,
-    }
+        else {t: (n_p + n_m) / best_pk[t] for t in THREADS},
+        packet_width=None if packets is None else packets.width,
+        packets_unavailable=reason,
+        peer_samples_per_s=None if peer is None else {t: cfg.rays / best_peer[t] for t in THREADS},
+        peer=None if peer is None else _peer_setup(peer),
+        peer_unavailable=peer_reason,
+    )
     return raw, pipe
+
+
+def _peer_setup(peer) -> PeerSetup:
+    """What ``raw`` records of a built peer scene."""
+    return PeerSetup(
+        variant=peer.variant,
+        mitsuba_version=peer.mi.__version__,
+        copies=2 * peer.m + 1,
+        build_seconds=peer.build_seconds,
+        llvm_target=peer.llvm_target,
+    )
 
 
 def _peer(surface, cfg: BenchConfig):
@@ -296,71 +288,50 @@ def _peer(surface, cfg: BenchConfig):
 
 def marginal_throughput(
     cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3, peer=None
-) -> dict:
+) -> Marginal:
     """Marginal samples/s and fixed cost per call of the pipeline (``simulate``, the surface's
     tracer reused) and of the Mitsuba peer (``PeerScene.run``, its scene built once) on 1 and
     2 threads: wall times of whole calls at n1 = ``rays``/4 and n2 = ``rays`` primary rays,
     the pipeline and the peer alternating, best of ``repeat`` each; rate = (n2 − n1)/(T2 − T1),
     fixed = T1 − n1/rate (both None when T2 ≤ T1: too few rays to resolve the margin).
-    Returns {"rays": [n1, n2], "pipeline": {threads: {"samples_per_s", "fixed_seconds",
-    "seconds": [T1, T2]}}, "peer": the same or None, "peer_unavailable": the reason or None,
-    "ratio": {threads: pipeline/peer samples/s (None where either is)} or None}. ``peer``: as
-    ``throughput``'s."""
+    ``peer``: as ``throughput``'s."""
     from microsim.sim import simulate
 
     surface = surface if surface is not None else _surface(cfg)
     scene, reason = _peer(surface, cfg) if peer is None else peer
     sizes = (max(1, cfg.rays // 4), cfg.rays)
-    best = {who: {t: dict.fromkeys(sizes, np.inf) for t in (1, 2)} for who in ("pipe", "peer")}
+    best_pipe, best_peer = ({t: dict.fromkeys(sizes, np.inf) for t in THREADS} for _ in "ab")
     for rep in range(repeat):
         for threads in (1, 2):
             for n in sizes:
                 t0 = time.perf_counter()
                 simulate(surface, "aluminium", cfg.theta_i, rays=n, bins=_bins(), threads=threads)
                 dt = time.perf_counter() - t0
-                best["pipe"][threads][n] = min(best["pipe"][threads][n], dt)
+                best_pipe[threads][n] = min(best_pipe[threads][n], dt)
                 if scene is not None:
                     r = scene.run(
                         "aluminium", cfg.theta_i, n, _bins(), seed=1 + rep, threads=threads
                     )
-                    best["peer"][threads][n] = min(best["peer"][threads][n], r.seconds)
+                    best_peer[threads][n] = min(best_peer[threads][n], r.seconds)
 
-    def line(times: dict) -> dict:
-        (n1, t1), (n2, t2) = sorted(times.items())
-        if not t2 > t1:  # the larger call no faster: too few rays to resolve the margin
-            return {"samples_per_s": None, "fixed_seconds": None, "seconds": [t1, t2]}
-        rate = (n2 - n1) / (t2 - t1)
-        return {"samples_per_s": rate, "fixed_seconds": t1 - n1 / rate, "seconds": [t1, t2]}
-
-    pipe = {t: line(best["pipe"][t]) for t in (1, 2)}
-    ours = None if scene is None else {t: line(best["peer"][t]) for t in (1, 2)}
-    return {
-        "rays": list(sizes),
-        "pipeline": pipe,
-        "peer": ours,
-        "peer_unavailable": reason,
-        "ratio": None if ours is None else {t: _ratio(pipe[t], ours[t]) for t in (1, 2)},
-    }
+    pipe = {t: MarginalLine.through(best_pipe[t]) for t in THREADS}
+    ours = None if scene is None else {t: MarginalLine.through(best_peer[t]) for t in THREADS}
+    return Marginal.of(list(sizes), pipe, ours, reason)
 
 
-def _ratio(a: dict, b: dict):
-    """a's marginal samples/s over b's, None where either was not resolved."""
-    if a["samples_per_s"] is None or b["samples_per_s"] is None:
-        return None
-    return a["samples_per_s"] / b["samples_per_s"]
-
-
-def bounce_throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> dict:
+def bounce_throughput(
+    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
+) -> BounceThroughput:
     """Pipeline samples/s (primary rays/s, scene build excluded) with ``bounces=1`` and
     ``bounces="all"`` (every scattering order, ``sim.bounces``) on 1 and 2 threads, best of
-    ``repeat``, alternating: {"1": {1: .., 2: ..}, "all": {1: .., 2: ..}}."""
+    ``repeat``, alternating."""
     from microsim.sim import simulate
 
     surface = surface if surface is not None else _surface(cfg)
-    best = {k: {1: 0.0, 2: 0.0} for k in ("1", "all")}
+    one, every = {1: 0.0, 2: 0.0}, {1: 0.0, 2: 0.0}
     for _ in range(repeat):
         for threads in (1, 2):
-            for key, b in (("1", 1), ("all", "all")):
+            for b, best in ((1, one), ("all", every)):
                 res = simulate(
                     surface,
                     "aluminium",
@@ -370,19 +341,18 @@ def bounce_throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: in
                     threads=threads,
                     bounces=b,
                 )
-                best[key][threads] = max(best[key][threads], res.meta["rays_per_second"])
-    return best
+                best[threads] = max(best[threads], res.meta["rays_per_second"])
+    return BounceThroughput(one=one, every=every)
 
 
-def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> dict:
+def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> AzimuthCost:
     """What full-azimuth bins cost: pipeline samples/s on folded bins (Δφ ∈ [0°, 180°], 37
     bins of 5°) and on full-azimuth bins over the whole circle (72 bins of 5°), 2 threads,
     alternating, best of ``repeat``; and the wall time of one model's bin averages on each at
     θi = ``cfg.theta_i`` (``predict``, best of ``repeat``): Torrance–Sparrow with the isotropic
     Beckmann m = 0.3 and Smith G on the folded bins (integrated over Δφ ≥ 0 only, by
     symmetry), and with the anisotropic Beckmann αx = 0.3, αy = 0.075 and its exact Smith G on
-    the full bins (no symmetry to use). {"samples_per_s": {"folded", "full"},
-    "predict_seconds": {"folded", "full"}}."""
+    the full bins (no symmetry to use)."""
     from microsim.analytic import AnisotropicBeckmann, Beckmann, Smith, TorranceSparrow
     from microsim.sim import Bins, simulate
     from microsim.sim.predict import ModelSpec, predict
@@ -400,10 +370,10 @@ def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
             t0 = time.perf_counter()
             predict([ModelSpec.from_model("ts", model)], [cfg.theta_i], b)
             seconds[key] = min(seconds[key], time.perf_counter() - t0)
-    return {"samples_per_s": rate, "predict_seconds": seconds}
+    return AzimuthCost(FoldedFull(**rate), FoldedFull(**seconds))
 
 
-def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> dict:
+def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> FixedCost:
     """Wall time of a ``simulate`` call of one block of rays on the bench surface: the first
     call (Embree scene + BVH built) and the best of ``repeat`` further calls on the same
     surface object, whose prepared tracer is reused (``sim.paths.tracer_for``), in seconds."""
@@ -417,7 +387,7 @@ def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> dict:
         return time.perf_counter() - t0
 
     first = call(fresh)
-    return {"first_call": first, "reused": min(call(fresh) for _ in range(repeat))}
+    return FixedCost(first_call=first, reused=min(call(fresh) for _ in range(repeat)))
 
 
 _PROBE = """
@@ -456,7 +426,7 @@ def peak_rss_mb(cfg: BenchConfig = BenchConfig(), rays: int | None = None) -> fl
 
 def time_to_accuracy(
     cfg: BenchConfig = BenchConfig(), threads: int = 2, masking: str = ACCURACY_MASKING
-) -> dict:
+) -> Accuracy:
     """Seconds and rays ``simulate_auto`` needs on the V-groove Beckmann m = 0.3 scene
     (aluminium, θi = 30°, Bins(45, 91): 2° bins; ``masking``: "analytic", the exact analytic
     V-groove path with no Embree, or "traced") to reach ``cfg.target`` relative standard
@@ -490,17 +460,17 @@ def time_to_accuracy(
     )["ts"][0]
     v = verdict(Measured.of(res, 0), Prediction(model))
     info = res.meta["auto"]["incidences"][0]
-    return {
-        "seconds": seconds,
-        "rays": int(res.rays[0]),
-        "rays_per_s": res.rays[0] / seconds,
-        "masking": masking,
-        "rse": info["rse"],
-        "converged": info["converged"],
-        "rel_rms_vs_closed_form": v["rel_rms"],
-        "chi2_dof": v["chi2_dof"],
-        "threads": threads,
-    }
+    return Accuracy(
+        seconds=seconds,
+        rays=int(res.rays[0]),
+        rays_per_s=res.rays[0] / seconds,
+        masking=masking,
+        rse=info["rse"],
+        converged=info["converged"],
+        rel_rms_vs_closed_form=v["rel_rms"],
+        chi2_dof=v["chi2_dof"],
+        threads=threads,
+    )
 
 
 def warm_up() -> None:
@@ -534,7 +504,7 @@ def warm_up() -> None:
             )
 
 
-def machine() -> dict:
+def machine() -> Machine:
     """What the figures were measured on: the CPU model, its widest x86 vector extension
     ("AVX-512", "AVX2" or the machine's architecture), NumPy's dispatch targets in use (its
     AVX-512 kernels change ulps of some functions) and numba's target CPU (``NUMBA_CPU_NAME``
@@ -562,170 +532,44 @@ def machine() -> dict:
         numba_cpu = os.environ.get("NUMBA_CPU_NAME") or llvm.get_host_cpu_name()
     except Exception:  # numba's llvmlite without the binding: report what is known
         numba_cpu = os.environ.get("NUMBA_CPU_NAME", "host")
-    return {"cpu": model, "isa": isa, "numpy_dispatch": dispatch, "numba_cpu": str(numba_cpu)}
+    return Machine(cpu=model, isa=isa, numpy_dispatch=dispatch, numba_cpu=str(numba_cpu))
 
 
-def run_bench(cfg: BenchConfig = BenchConfig()) -> dict:
-    """Every figure of the module docstring, as a JSON-able dict (after ``warm_up``)."""
+def run_bench(cfg: BenchConfig = BenchConfig()) -> Bench:
+    """Every figure of the module docstring (after ``warm_up``); ``Bench.to_json`` is its JSON."""
     warm_up()
     surface = _surface(cfg)
     peer = _peer(surface, cfg)
     raw, pipe = throughput(cfg, surface, peer=peer)
-    out = {
-        "config": asdict(cfg),
-        "machine": machine(),
-        "load_average": list(os.getloadavg()),
-        "cpus": os.cpu_count(),
-        "mesh_triangles": int(len(surface.faces)),
-        "raw": raw,
-        "pipeline_samples_per_s": pipe,
-        "ratio": {t: pipe[t] / raw["samples_per_s"][t] for t in (1, 2)},
-        "marginal": marginal_throughput(cfg, surface, peer=peer),
-        "build_seconds": build_times(surface),
-        "fixed_cost": fixed_cost(cfg),
-        "bounces": bounce_throughput(cfg, surface),
-        "full_azimuth": azimuth_cost(cfg, surface),
-        "peak_rss_mb": {int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
-    }
-    if not cfg.skip_accuracy:
-        out["time_to_accuracy"] = time_to_accuracy(cfg)
-        out["time_to_accuracy_traced"] = time_to_accuracy(cfg, masking="traced")
-    if not cfg.skip_wave:
-        out["wave"] = wave_rows(cfg)
-    return out
+    return Bench(
+        config=cfg,
+        machine=machine(),
+        load_average=list(os.getloadavg()),
+        cpus=os.cpu_count(),
+        mesh_triangles=int(len(surface.faces)),
+        raw=raw,
+        pipeline_samples_per_s=pipe,
+        ratio={t: pipe[t] / raw.samples_per_s[t] for t in THREADS},
+        marginal=marginal_throughput(cfg, surface, peer=peer),
+        build_seconds=build_times(surface),
+        fixed_cost=fixed_cost(cfg),
+        bounces=bounce_throughput(cfg, surface),
+        full_azimuth=azimuth_cost(cfg, surface),
+        peak_rss_mb={int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
+        time_to_accuracy=None if cfg.skip_accuracy else time_to_accuracy(cfg),
+        time_to_accuracy_traced=None
+        if cfg.skip_accuracy
+        else time_to_accuracy(cfg, masking="traced"),
+        wave=None if cfg.skip_wave else wave_rows(cfg),
+    )
 
 
-def wave_rows(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> list[dict]:
+def wave_rows(cfg: BenchConfig = BenchConfig(), threads: int = 2) -> list:
     """``wave.bench.wave_bench`` on a ``cfg.wave_n``² tile of ``cfg.wave_tile`` λ: one row per
     roughness (σ = λ/100 and σ = λ), smooth-interpolant solver, ``threads`` FFT workers."""
     from microsim.app.wave_bench import wave_bench
 
     return wave_bench(n=cfg.wave_n, tile=cfg.wave_tile, workers=threads)
-
-
-def format_bench(b: dict) -> str:
-    """Human-readable table of ``run_bench`` output."""
-    raw, pipe, ratio = b["raw"], b["pipeline_samples_per_s"], b["ratio"]
-    m = b.get("machine")
-    lines = [] if m is None else [
-        f"machine: {m['cpu']}, {m['isa']} (NumPy dispatch "
-        f"{', '.join(m['numpy_dispatch']) or 'baseline'}; numba target {m['numba_cpu']})"
-    ]  # fmt: skip
-    lines += [
-        f"mesh: {b['mesh_triangles']} triangles; {raw['primary_rays']} primary + "
-        f"{raw['masking_rays']} masking rays; load average {b['load_average'][0]:.2f} "
-        f"on {b['cpus']} CPUs",
-        f"{'':28s}{'1 thread':>14s}{'2 threads':>14s}",
-        f"{'raw embreex rays/s':28s}{raw['rays_per_s'][1]:14.4g}{raw['rays_per_s'][2]:14.4g}",
-        f"{'raw embreex samples/s':28s}{raw['samples_per_s'][1]:14.4g}"
-        f"{raw['samples_per_s'][2]:14.4g}",
-    ]
-    pk = raw.get("packet_rays_per_s")
-    if pk:
-        w = raw["packet_width"]
-        lines += [
-            f"{f'raw packets ({w} lanes) rays/s':28s}{pk[1]:14.4g}{pk[2]:14.4g}",
-            f"{'packets / embreex':28s}{pk[1] / raw['rays_per_s'][1]:14.2f}"
-            f"{pk[2] / raw['rays_per_s'][2]:14.2f}",
-        ]
-    elif "packets_unavailable" in raw:
-        lines.append(f"packets unavailable: {raw['packets_unavailable']}")
-    lines += [
-        f"{'pipeline samples/s':28s}{pipe[1]:14.4g}{pipe[2]:14.4g}",
-        f"{'pipeline / raw':28s}{ratio[1]:14.1%}{ratio[2]:14.1%}",
-    ]
-    pr = raw.get("peer_samples_per_s")
-    if pr:
-        p = raw["peer"]
-        lines += [
-            f"{'Mitsuba 3 peer samples/s':28s}{pr[1]:14.4g}{pr[2]:14.4g}",
-            f"{'pipeline / Mitsuba peer':28s}{pipe[1] / pr[1]:14.2f}{pipe[2] / pr[2]:14.2f}"
-            "   (whole runs: each side's fixed cost included)",
-            f"  (mitsuba {p['mitsuba_version']} {p['variant']}{_target_text(p)}, "
-            f"{p['copies']}×{p['copies']} tile copies, not robust; scene build "
-            f"{p['build_seconds']:.1f} s excluded)",
-        ]
-    elif raw.get("peer_unavailable"):
-        lines.append(f"Mitsuba 3 peer skipped: {raw['peer_unavailable']}")
-    lines += _marginal_lines(b.get("marginal"))
-    bo = b.get("bounces")
-    if bo:
-        one, every = (
-            {int(t): v for t, v in bo[k].items()} for k in ("1", "all")
-        )  # JSON keys are strings
-        lines.append(
-            f"{'pipeline, all bounces':28s}{every[1]:14.4g}{every[2]:14.4g}"
-            f"   (bounces=1 in the same runs: {one[1]:.4g}, {one[2]:.4g})"
-        )
-    az = b.get("full_azimuth")
-    if az:
-        r, t = az["samples_per_s"], az["predict_seconds"]
-        lines.append(
-            f"full-azimuth bins (72 × 5°) vs folded (37 × 5°), 2 threads: pipeline "
-            f"{r['full']:.4g} vs {r['folded']:.4g} samples/s; one model's bin averages "
-            f"{t['full']:.2f} s (anisotropic, full) vs {t['folded']:.2f} s (isotropic, folded)"
-        )
-    fc = b.get("fixed_cost")
-    if fc:
-        lines.append(
-            f"simulate fixed cost (one block of rays): first call {fc['first_call']:.3f} s, "
-            f"tracer reused {fc['reused']:.3f} s"
-        )
-    bt = b.get("build_seconds")
-    if bt:
-        pk_s = "unavailable" if bt["packets"] is None else f"{bt['packets']:.3f} s"
-        lines.append(f"scene + BVH build: embreex {bt['embreex']:.3f} s, packets {pk_s}")
-    lines += [f"peak RSS, {r} rays: {mb:.0f} MB" for r, mb in b["peak_rss_mb"].items()]
-    for t in (b.get("time_to_accuracy"), b.get("time_to_accuracy_traced")):
-        if not t:
-            continue
-        lines.append(
-            f"time to {b['config']['target']:.0%} (V-groove Beckmann 0.3, Al, 30°, 2° bins, "
-            f"masking={t['masking']}, {t['threads']} threads): {t['seconds']:.2f} s, "
-            f"{t['rays']} rays ({t['rays_per_s']:.3g} rays/s), rse "
-            f"{t['rse']:.4f}, rel. RMS vs closed form {t['rel_rms_vs_closed_form']:.4f}"
-            f" (χ²/dof {t['chi2_dof']:.3f})"
-        )
-    for w in b.get("wave", []):
-        lines.append(
-            f"wave solver (Kirchhoff, {w['surface']}), {w['n']}² tile of {w['tile']:g} λ, "
-            f"σ = {w['sigma']:g} λ, θi = {w['theta_i']:g}°: {w['seconds']:.2f} s for one "
-            f"incidence, {w['orders']} orders, {w['qz_nodes']} q_z nodes, upsample "
-            f"{w['upsample']}, order power {w['albedo']:.4f}"
-        )
-    return "\n".join(lines)
-
-
-def _target_text(peer: dict) -> str:
-    """ ", kernels for znver4, 16 lanes" from the peer's recorded LLVM target, if any."""
-    t = peer.get("llvm_target")
-    if not t:
-        return ""
-    return f", kernels for {t['cpu']}" + (f", {t['lanes']} lanes" if t["lanes"] else "")
-
-
-def _marginal_lines(mg) -> list[str]:
-    """``format_bench``'s lines for ``marginal_throughput``'s figures (none without them)."""
-    if not mg:
-        return []
-    n1, n2 = mg["rays"]
-
-    def row(label, fig) -> str:
-        fig = {int(t): v for t, v in fig.items()}  # JSON keys are strings
-        if any(fig[t]["samples_per_s"] is None for t in (1, 2)):
-            return f"{label:28s}not resolved at these ray counts (the larger call was no slower)"
-        return (
-            f"{label:28s}{fig[1]['samples_per_s']:14.4g}{fig[2]['samples_per_s']:14.4g}"
-            f"   (fixed per call {fig[1]['fixed_seconds']:.3f}, {fig[2]['fixed_seconds']:.3f} s)"
-        )
-
-    lines = [f"marginal, {n1:,} → {n2:,} rays:", row("  pipeline samples/s", mg["pipeline"])]
-    if mg.get("peer"):
-        lines.append(row("  Mitsuba peer samples/s", mg["peer"]))
-        ratio = {int(t): v for t, v in mg["ratio"].items()}
-        if None not in ratio.values():
-            lines.append(f"{'  pipeline / Mitsuba peer':28s}{ratio[1]:14.2f}{ratio[2]:14.2f}")
-    return lines
 
 
 QUICK = dict(
@@ -754,11 +598,12 @@ def bench_config(
         raise UsageError(f"--rays must be an integer >= 1, got {rays!r}")
     conf = dict(QUICK) if quick else {}
     if rays is not None:
-        conf["rays"] = int(rays)
+        rays = int(rays)
+        conf = {**conf, "rays": rays}
         check_memory(
             "--rays",
-            RAY_SET_BYTES * conf["rays"],
-            f"preparing {conf['rays']:,} primary rays and their masking rays for the "
+            RAY_SET_BYTES * rays,
+            f"preparing {rays:,} primary rays and their masking rays for the "
             f"throughput runs ({RAY_SET_BYTES} bytes per ray)",
         )
     return BenchConfig(skip_accuracy=skip_accuracy, **conf)
@@ -771,7 +616,7 @@ def _cmd_bench(args) -> int:
         return run_methods_command(args)
     cfg = bench_config(args.rays, args.quick, args.skip_accuracy)
     b = run_bench(cfg)
-    print(json.dumps(b, indent=1) if args.json else format_bench(b))
+    print(json.dumps(b.to_json(), indent=1) if args.json else format_bench(b))
     return 0
 
 

@@ -74,13 +74,14 @@ import os
 import subprocess
 import time
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
 
 __all__ = [
     "MethodsConfig",
+    "MethodsStudy",
     "QUICK",
     "methods_config",
     "methods_study",
@@ -196,9 +197,58 @@ def _rel_rms(sim, se, counts, model, bins) -> dict:
     return {"rel_rms": v["rel_rms"], "noise_floor": noise}
 
 
+def _geometric_trace_points(cfg: MethodsConfig, surface, bins, ref, mask: str, label: str):
+    """Panel A's curve of one trace path (``masking=mask``): per ray count of ``cfg.rays``, the
+    best wall time and the mean rel_rms of the runs against ``ref`` with its standard error,
+    beside the runs' ray-noise floor and the path's one-off set-up time."""
+    from microsim.sim import simulate
+
+    th = float(cfg.theta_i)
+
+    def run(n, k):
+        return simulate(
+            surface,
+            "aluminium",
+            th,
+            rays=int(n),
+            bins=bins,
+            masking=mask,
+            seed=k,
+            threads=cfg.threads,
+        )
+
+    t0 = time.perf_counter()
+    run(cfg.rays[0], 99)  # scene + BVH (traced) or numba compilation (analytic)
+    setup = time.perf_counter() - t0
+    points = []
+    for n in cfg.rays:
+        sec, outs = _best_of(lambda k, n=n: run(n, k), cfg.repeat, cfg.cheap)
+        errs = [_rel_rms(r.brdf[0], r.stderr[0], r.counts[0], ref, bins) for r in outs]
+        e = np.array([np.nan if x["rel_rms"] is None else x["rel_rms"] for x in errs])
+        nf = [x["noise_floor"] for x in errs if x["noise_floor"] is not None]
+        points.append(
+            {
+                "method": label,
+                "key": f"ray-{mask}",
+                "kind": "curve",
+                "setting": f"{n:,} rays",
+                "size": int(n),
+                "seconds": sec,
+                "runs": len(outs),
+                "error": float(e.mean()),
+                "error_se": float(e.std(ddof=1) / math.sqrt(len(e))) if len(e) > 1 else None,
+                "errors": e.tolist(),
+                "noise_floor": float(np.mean(nf)) if nf else None,
+                "setup_seconds": setup,
+                "rays_per_s": n / sec,
+            }
+        )
+    return points
+
+
 def _panel_geometric(cfg: MethodsConfig) -> dict:
     from microsim import analytic as an
-    from microsim.sim import Bins, simulate
+    from microsim.sim import Bins
     from microsim.sim.predict import ModelSpec, predict
     from microsim.surfaces import vgrooves
 
@@ -240,44 +290,7 @@ def _panel_geometric(cfg: MethodsConfig) -> dict:
             }
         )
     for mask, label in (("traced", "ray trace (Embree)"), ("analytic", "exact V-groove path")):
-
-        def run(n, k, mask=mask):
-            return simulate(
-                surface,
-                "aluminium",
-                th,
-                rays=int(n),
-                bins=bins,
-                masking=mask,
-                seed=k,
-                threads=cfg.threads,
-            )
-
-        t0 = time.perf_counter()
-        run(cfg.rays[0], 99)  # scene + BVH (traced) or numba compilation (analytic)
-        setup = time.perf_counter() - t0
-        for n in cfg.rays:
-            sec, outs = _best_of(lambda k, n=n: run(n, k), cfg.repeat, cfg.cheap)
-            errs = [_rel_rms(r.brdf[0], r.stderr[0], r.counts[0], ref, bins) for r in outs]
-            e = np.array([np.nan if x["rel_rms"] is None else x["rel_rms"] for x in errs])
-            nf = [x["noise_floor"] for x in errs if x["noise_floor"] is not None]
-            points.append(
-                {
-                    "method": label,
-                    "key": f"ray-{mask}",
-                    "kind": "curve",
-                    "setting": f"{n:,} rays",
-                    "size": int(n),
-                    "seconds": sec,
-                    "runs": len(outs),
-                    "error": float(e.mean()),
-                    "error_se": float(e.std(ddof=1) / math.sqrt(len(e))) if len(e) > 1 else None,
-                    "errors": e.tolist(),
-                    "noise_floor": float(np.mean(nf)) if nf else None,
-                    "setup_seconds": setup,
-                    "rays_per_s": n / sec,
-                }
-            )
+        points += _geometric_trace_points(cfg, surface, bins, ref, mask, label)
     return {
         "key": "geometric",
         "title": f"V-grooves, Beckmann m = {cfg.m:g}, aluminium, θi = {th:g}°",
@@ -336,17 +349,93 @@ def _energy_point(ref, model_bins, model_se, name: str) -> dict:
     }
 
 
+def _kirchhoff_points(cfg: MethodsConfig, ref, solve) -> list[dict]:
+    """Panel B's Kirchhoff curve: ``solve`` (the reference's solver) on each smaller tile of
+    ``cfg.wave_tiles``, its |energy deviation| from ``ref``."""
+    from microsim.analysis.wave_verdicts import diffuse_brdf
+
+    points = []
+    for n in cfg.wave_tiles:
+        surface = _wave_surface(cfg, n)
+        sec, outs = _best_of(lambda k, s=surface: solve(s), cfg.repeat, cfg.cheap)
+        r = outs[0]
+        p = _energy_point(ref, diffuse_brdf(r, 0), r.stderr[0], f"kirchhoff-{n}")
+        points.append(
+            {
+                "method": "Kirchhoff, smaller tile",
+                "key": "kirchhoff",
+                "kind": "curve",
+                "setting": f"{n}² ({n * cfg.dx / float(cfg.wavelength):g} λ)",
+                "size": int(n),
+                "seconds": sec,
+                "runs": len(outs),
+                **p,
+                "orders": int(r.meta["orders"][0]),
+            }
+        )
+    return points
+
+
+def _wave_trace_points(cfg: MethodsConfig, ref, ref_surface, bins) -> list[dict]:
+    """Panel B's ray-trace curve on the reference tile itself: per ray count of
+    ``cfg.wave_rays``, the mean energy deviation of the runs from ``ref``, its uncertainty
+    (the reference's speckle and the runs' own noise in quadrature) and the one-off set-up."""
+    from microsim.sim import simulate
+
+    def trace(n, k):
+        return simulate(
+            ref_surface,
+            "aluminium",
+            float(cfg.theta_i),
+            rays=int(n),
+            bins=bins,
+            seed=k,
+            threads=cfg.threads,
+        )
+
+    t0 = time.perf_counter()
+    trace(cfg.wave_rays[0], 99)  # Embree scene + BVH of the reference tile
+    setup = time.perf_counter() - t0
+    points = []
+    for n in cfg.wave_rays:
+        sec, outs = _best_of(lambda k, n=n: trace(n, k), cfg.repeat, cfg.cheap)
+        ps = [_energy_point(ref, r.brdf[0], r.stderr[0], "ray-trace") for r in outs]
+        dev = float(np.mean([q["deviation"] for q in ps]))
+        own = math.sqrt(np.mean([q["own_se"] ** 2 for q in ps]) / len(ps))
+        points.append(
+            {
+                "method": "ray trace (Embree)",
+                "key": "ray-traced",
+                "kind": "curve",
+                "setting": f"{n:,} rays",
+                "size": int(n),
+                "seconds": sec,
+                "runs": len(outs),
+                "deviation": dev,
+                "error": abs(dev),
+                "error_se": math.hypot(
+                    float(np.mean([q["error_se"] ** 2 - q["own_se"] ** 2 for q in ps])) ** 0.5,
+                    own,
+                ),
+                "own_se": own,
+                "reference_se": ps[0]["reference_se"],
+                "rel_error": float(np.mean([q["rel_error"] for q in ps])),
+                "setup_seconds": setup,
+            }
+        )
+    return points
+
+
 def _panel_wave(cfg: MethodsConfig) -> dict:
     from microsim.analysis.wave_verdicts import (
         closed_form,
-        diffuse_brdf,
         lattice_average,
         surface_spectrum,
         wave_verdict,
     )
     from microsim.analytic import Beckmann
     from microsim.analytic.brdf import torrance_sparrow
-    from microsim.sim import Bins, simulate
+    from microsim.sim import Bins
     from microsim.sim.predict import bin_average
     from microsim.vectors import spherical_deg
     from microsim.wave import kirchhoff_brdf
@@ -399,59 +488,8 @@ def _panel_wave(cfg: MethodsConfig) -> dict:
                 "converged": bool(np.all(outs[0].converged)),
             }
         )
-    for n in cfg.wave_tiles:
-        surface = _wave_surface(cfg, n)
-        sec, outs = _best_of(lambda k, s=surface: solve(s), cfg.repeat, cfg.cheap)
-        r = outs[0]
-        p = _energy_point(ref, diffuse_brdf(r, 0), r.stderr[0], f"kirchhoff-{n}")
-        points.append(
-            {
-                "method": "Kirchhoff, smaller tile",
-                "key": "kirchhoff",
-                "kind": "curve",
-                "setting": f"{n}² ({n * cfg.dx / lam:g} λ)",
-                "size": int(n),
-                "seconds": sec,
-                "runs": len(outs),
-                **p,
-                "orders": int(r.meta["orders"][0]),
-            }
-        )
-
-    def trace(n, k):
-        return simulate(
-            ref_surface, "aluminium", th, rays=int(n), bins=bins, seed=k, threads=cfg.threads
-        )
-
-    t0 = time.perf_counter()
-    trace(cfg.wave_rays[0], 99)  # Embree scene + BVH of the reference tile
-    setup = time.perf_counter() - t0
-    for n in cfg.wave_rays:
-        sec, outs = _best_of(lambda k, n=n: trace(n, k), cfg.repeat, cfg.cheap)
-        ps = [_energy_point(ref, r.brdf[0], r.stderr[0], "ray-trace") for r in outs]
-        dev = float(np.mean([q["deviation"] for q in ps]))
-        own = math.sqrt(np.mean([q["own_se"] ** 2 for q in ps]) / len(ps))
-        points.append(
-            {
-                "method": "ray trace (Embree)",
-                "key": "ray-traced",
-                "kind": "curve",
-                "setting": f"{n:,} rays",
-                "size": int(n),
-                "seconds": sec,
-                "runs": len(outs),
-                "deviation": dev,
-                "error": abs(dev),
-                "error_se": math.hypot(
-                    float(np.mean([q["error_se"] ** 2 - q["own_se"] ** 2 for q in ps])) ** 0.5,
-                    own,
-                ),
-                "own_se": own,
-                "reference_se": ps[0]["reference_se"],
-                "rel_error": float(np.mean([q["rel_error"] for q in ps])),
-                "setup_seconds": setup,
-            }
-        )
+    points += _kirchhoff_points(cfg, ref, solve)
+    points += _wave_trace_points(cfg, ref, ref_surface, bins)
     return {
         "key": "wave",
         "title": f"ABC tile, σ = λ/{lam / cfg.sigma:g} (transition), aluminium, θi = {th:g}°",
@@ -558,6 +596,73 @@ def methods_study(quick: bool = False, cfg: MethodsConfig | None = None) -> dict
 
 
 # --- output -----------------------------------------------------------------------------------
+def _fields_of(cls, doc: dict) -> dict:
+    """``cls``'s fields read from the JSON object ``doc`` (absent ones None)."""
+    return {f.name: doc.get(f.name) for f in fields(cls)}
+
+
+@dataclass(frozen=True)
+class MethodPoint:
+    """What the chart and the table read of one point of a panel (the JSON holds more)."""
+
+    method: str
+    key: str
+    kind: str  # "curve" (one of a series over a size) or "closed-form"
+    setting: str
+    seconds: float
+    error: float | None
+    error_se: float | None
+
+
+@dataclass(frozen=True)
+class Panel:
+    """What the chart and the table read of one panel: its title, reference, error measure,
+    the reference's own uncertainty (the wave panel's) and its points."""
+
+    key: str
+    title: str
+    reference: str
+    error_measure: str
+    reference_se: float | None
+    points: tuple
+
+
+@dataclass(frozen=True)
+class StudyMachine:
+    """Where and when the study ran (``methods.json``'s ``machine``)."""
+
+    cpus: int
+    load_average_start: list
+    load_average_end: list
+    threads: int
+    commit: str | None
+    worktree_modified: bool | None
+
+
+@dataclass(frozen=True)
+class MethodsStudy:
+    """The study as the chart and the table read it: ``MethodsStudy.from_json`` of
+    ``methods_study``'s JSON object."""
+
+    quick: bool
+    seconds: float
+    machine: StudyMachine
+    panels: tuple
+
+    @classmethod
+    def from_json(cls, doc: dict) -> MethodsStudy:
+        def panel(d):
+            points = tuple(MethodPoint(**_fields_of(MethodPoint, p)) for p in d.get("points"))
+            return Panel(**{**_fields_of(Panel, d), "points": points})
+
+        return cls(
+            quick=doc.get("quick"),
+            seconds=doc.get("seconds"),
+            machine=StudyMachine(**_fields_of(StudyMachine, doc.get("machine"))),
+            panels=tuple(panel(d) for d in doc.get("panels")),
+        )
+
+
 _MARKERS = {
     "ts-smith": ("C2", "^"),
     "ts-vgroove": ("C3", "v"),
@@ -584,23 +689,24 @@ def methods_chart(study: dict, path) -> None:
 
     from ..atomic import atomic_open
 
-    panels = study["panels"]
+    study = MethodsStudy.from_json(study)
+    panels = study.panels
     fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 4.8), squeeze=False)
     for ax, panel in zip(axes[0], panels):
         by: dict[str, list] = {}
-        for p in panel["points"]:
-            by.setdefault(p["key"], []).append(p)
+        for p in panel.points:
+            by.setdefault(p.key, []).append(p)
         for key, pts in by.items():
-            pts = [p for p in pts if p["error"] is not None and p["error"] > 0]
+            pts = [p for p in pts if p.error is not None and p.error > 0]
             if not pts:
                 continue
             colour, marker = _MARKERS.get(key, ("k", "x"))
-            x = [p["seconds"] for p in pts]
-            y = [p["error"] for p in pts]
-            yerr = [p["error_se"] or 0.0 for p in pts]
+            x = [p.seconds for p in pts]
+            y = [p.error for p in pts]
+            yerr = [p.error_se or 0.0 for p in pts]
             # an error bar below zero is drawn down to 1/10 of the point on the log axis
             lo = [min(e, 0.9 * v) for e, v in zip(yerr, y)]
-            curve = pts[0]["kind"] == "curve"
+            curve = pts[0].kind == "curve"
             ax.errorbar(
                 x,
                 y,
@@ -610,16 +716,16 @@ def methods_chart(study: dict, path) -> None:
                 ls="-" if curve else "none",
                 ms=6 if curve else 9,
                 capsize=2,
-                label=pts[0]["method"],
+                label=pts[0].method,
             )
             if curve:
-                ax.annotate(pts[0]["setting"], (x[0], y[0]), fontsize=7, xytext=(3, 3),
+                ax.annotate(pts[0].setting, (x[0], y[0]), fontsize=7, xytext=(3, 3),
                             textcoords="offset points")  # fmt: skip
-                ax.annotate(pts[-1]["setting"], (x[-1], y[-1]), fontsize=7, xytext=(3, 3),
+                ax.annotate(pts[-1].setting, (x[-1], y[-1]), fontsize=7, xytext=(3, 3),
                             textcoords="offset points")  # fmt: skip
-        if panel.get("key") == "wave" and panel.get("reference_se"):
-            ax.axhline(panel["reference_se"], color="grey", ls=":", lw=1)
-            ax.annotate("reference speckle (1 se)", (0.02, panel["reference_se"]),
+        if panel.key == "wave" and panel.reference_se:
+            ax.axhline(panel.reference_se, color="grey", ls=":", lw=1)
+            ax.annotate("reference speckle (1 se)", (0.02, panel.reference_se),
                         xycoords=("axes fraction", "data"), fontsize=7, color="grey",
                         xytext=(0, 2), textcoords="offset points")  # fmt: skip
         ax.set_xscale("log")
@@ -627,15 +733,15 @@ def methods_chart(study: dict, path) -> None:
         ax.set_xlabel("wall time for one incidence (s)")
         ax.set_ylabel({"geometric": "energy-weighted rel. RMS error",
                        "fullwave": "share of power in the wrong orders"}.get(
-                           panel["key"], "|energy deviation|"))  # fmt: skip
-        ax.set_title(f"{panel['title']}\nreference: {panel['reference']}", fontsize=8)
+                           panel.key, "|energy deviation|"))  # fmt: skip
+        ax.set_title(f"{panel.title}\nreference: {panel.reference}", fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="best")
-    m = study["machine"]
+    m = study.machine
     fig.suptitle(
-        f"What each method costs: wall time for one incidence on {m['cpus']} cores, "
-        f"{m['threads']} threads, load {m['load_average_start'][0]:.2f}, commit "
-        f"{(m['commit'] or '?')[:7]}{' (quick)' if study['quick'] else ''}",
+        f"What each method costs: wall time for one incidence on {m.cpus} cores, "
+        f"{m.threads} threads, load {m.load_average_start[0]:.2f}, commit "
+        f"{(m.commit or '?')[:7]}{' (quick)' if study.quick else ''}",
         fontsize=9,
     )
     fig.tight_layout()
@@ -652,24 +758,25 @@ def _num(x, fmt="{:.3g}") -> str:
 
 def format_methods(study: dict) -> str:
     """A short table: per panel, method, setting, seconds, error ± uncertainty."""
-    m = study["machine"]
+    study = MethodsStudy.from_json(study)
+    m = study.machine
     lines = [
-        f"methods study{' (quick)' if study['quick'] else ''}: {m['cpus']} CPUs, "
-        f"{m['threads']} threads, load average {m['load_average_start'][0]:.2f} → "
-        f"{m['load_average_end'][0]:.2f}, commit {(m['commit'] or '?')[:10]}, "
-        f"{study['seconds']:.1f} s"
+        f"methods study{' (quick)' if study.quick else ''}: {m.cpus} CPUs, "
+        f"{m.threads} threads, load average {m.load_average_start[0]:.2f} → "
+        f"{m.load_average_end[0]:.2f}, commit {(m.commit or '?')[:10]}, "
+        f"{study.seconds:.1f} s"
     ]
-    for panel in study["panels"]:
+    for panel in study.panels:
         lines += [
             "",
-            f"{panel['title']} — reference: {panel['reference']}",
-            f"error: {panel['error_measure']}",
+            f"{panel.title} — reference: {panel.reference}",
+            f"error: {panel.error_measure}",
             f"{'method':30s}{'setting':26s}{'seconds':>10s}{'error':>10s}{'± se':>10s}",
         ]
-        for p in panel["points"]:
+        for p in panel.points:
             lines.append(
-                f"{p['method'][:29]:30s}{p['setting'][:25]:26s}{p['seconds']:10.3g}"
-                f"{_num(p['error']):>10s}{_num(p['error_se']):>10s}"
+                f"{p.method[:29]:30s}{p.setting[:25]:26s}{p.seconds:10.3g}"
+                f"{_num(p.error):>10s}{_num(p.error_se):>10s}"
             )
     return "\n".join(lines)
 

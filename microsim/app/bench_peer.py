@@ -193,6 +193,28 @@ def copies_per_side(depth: float, tile: tuple, theta_i_deg: float) -> int:
 
 
 @dataclass(frozen=True)
+class _KernelScalars:
+    """The per-run scalars of the peer's kernel, as Dr.Jit opaque values (one compiled kernel
+    serves every batch and incidence): ``N`` rays over ``R`` rows of strata on the ``lx`` ×
+    ``ly`` tile, primary rays from height ``z0`` in direction ``d``, masking rays offset by
+    ``eps`` along the normal and followed up to ``ztop`` inside ±``half_x`` × ±``half_y``,
+    ``nf`` facets per tile copy, the stream ``seed``."""
+
+    N: object
+    R: object
+    lx: object
+    ly: object
+    z0: object
+    ztop: object
+    eps: object
+    half_x: object
+    half_y: object
+    nf: object
+    seed: object
+    d: object
+
+
+@dataclass(frozen=True)
 class PeerResult:
     """The peer's bin-averaged single-bounce BRDF and its bookkeeping.
 
@@ -379,7 +401,7 @@ class PeerScene:
         lx, ly = self.tile
         rows = max(1, int(round(np.sqrt(rays * ly / lx))))
         # scalars as opaque values: one compiled kernel serves every batch and incidence
-        op = dict(
+        op = _KernelScalars(
             N=dr.opaque(mi.Float64, float(rays)),
             R=dr.opaque(mi.Float64, float(rows)),
             lx=dr.opaque(mi.Float64, lx),
@@ -432,29 +454,29 @@ class PeerScene:
         t_code, t_w, t_bin, t_wo, t_n = table
         led_n, led_f, albedo_var = sums_out
         r = dr.arange(mi.UInt32, n) + dr.opaque(mi.UInt32, lo)
-        rng = mi.PCG32(n, initstate=op["seed"], initseq=mi.UInt64(r))
+        rng = mi.PCG32(n, initstate=op.seed, initseq=mi.UInt64(r))
         xi, eta = rng.next_float64(), rng.next_float64()
         pair = mi.Float64(r - (r & 1))  # rays 2k, 2k + 1 share a stratum of width 2/N
-        width = dr.select(op["N"] - pair < 2.0, op["N"] - pair, 2.0)  # (dr.minimum: LLVM 14)
-        s = (pair + width * xi) / op["N"] * op["R"]  # stratum position in rows
+        width = dr.select(op.N - pair < 2.0, op.N - pair, 2.0)  # (dr.minimum: LLVM 14)
+        s = (pair + width * xi) / op.N * op.R  # stratum position in rows
         row = dr.floor(s)
-        row = dr.select(row > op["R"] - 1.0, op["R"] - 1.0, row)  # (dr.minimum: LLVM 14 fails)
-        x = (s - row) * op["lx"] - 0.5 * op["lx"]
-        y = (row + eta) / op["R"] * op["ly"] - 0.5 * op["ly"]
-        o = mi.Point3f(mi.Float(x), mi.Float(y), op["z0"])
-        d = op["d"]
+        row = dr.select(row > op.R - 1.0, op.R - 1.0, row)  # (dr.minimum: LLVM 14 fails)
+        x = (s - row) * op.lx - 0.5 * op.lx
+        y = (row + eta) / op.R * op.ly - 0.5 * op.ly
+        o = mi.Point3f(mi.Float(x), mi.Float(y), op.z0)
+        d = op.d
         pi = self.scene.ray_intersect_preliminary(mi.Ray3f(o, d), coherent=self.coherent)
         hit = pi.is_valid()
-        facet = pi.prim_index % op["nf"]
+        facet = pi.prim_index % op.nf
         code = dr.gather(mi.UInt32, t_code, facet, hit)
         w = dr.gather(mi.Float64, t_w, facet, hit)
         wo = dr.gather(mi.Vector3f, t_wo, facet, hit)
         nrm = dr.gather(mi.Vector3f, t_n, facet, hit)
         lit = hit & (code == _SINGLE)
-        mo = o + pi.t * d + op["eps"] * nrm
-        tmax = (op["ztop"] - mo.z) / wo.z
+        mo = o + pi.t * d + op.eps * nrm
+        tmax = (op.ztop - mo.z) / wo.z
         end = mo + tmax * wo
-        inside = (dr.abs(end.x) <= op["half_x"]) & (dr.abs(end.y) <= op["half_y"])
+        inside = (dr.abs(end.x) <= op.half_x) & (dr.abs(end.y) <= op.half_y)
         test = lit & inside
         ray = mi.Ray3f(mo, wo)
         ray.maxt = dr.select(tmax > 0.0, tmax, 0.0)

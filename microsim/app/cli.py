@@ -126,18 +126,8 @@ def _cmd_report(args) -> int:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="microsim", description=__doc__.splitlines()[0], epilog=EPILOG)
-    p.add_argument("--version", action="version", version=f"microsim {__version__}")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    m = sub.add_parser("models", help="list every closed-form model with its parameters and source")
-    m.set_defaults(func=_cmd_models)
-    s = sub.add_parser(
-        "surface",
-        help="build a scene's surface and print its statistics next to the nominal values",
-    )
-    s.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
-    s.set_defaults(func=_cmd_surface)
+def _add_run_command(sub) -> None:
+    """Register ``microsim run SCENE [options]``."""
     r = sub.add_parser(
         "run",
         help="simulate a scene, compare and fit the models, write "
@@ -183,6 +173,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="print verdicts.json's content on stdout instead of the verdict table",
     )
     r.set_defaults(func=_cmd_run)
+
+
+def _add_report_command(sub) -> None:
+    """Register ``microsim report [options]``."""
     q = sub.add_parser("report", help="run the whole scene catalogue and write reports/index.md")
     q.add_argument("--quick", action="store_true", help="quick runs (as `run --quick`)")
     q.add_argument("--out", default="reports", help="report directory (default reports)")
@@ -203,6 +197,22 @@ def build_parser() -> argparse.ArgumentParser:
         "finished, continue the interrupted one from its saved tallies",
     )
     q.set_defaults(func=_cmd_report)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="microsim", description=__doc__.splitlines()[0], epilog=EPILOG)
+    p.add_argument("--version", action="version", version=f"microsim {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    m = sub.add_parser("models", help="list every closed-form model with its parameters and source")
+    m.set_defaults(func=_cmd_models)
+    s = sub.add_parser(
+        "surface",
+        help="build a scene's surface and print its statistics next to the nominal values",
+    )
+    s.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
+    s.set_defaults(func=_cmd_surface)
+    _add_run_command(sub)
+    _add_report_command(sub)
     from .bench import add_bench_command
     from .measure import add_measure_command
     from .sweep import add_sweep_command

@@ -46,7 +46,7 @@ import os
 import shutil
 import time
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from zipfile import BadZipFile
 
@@ -87,6 +87,99 @@ INCIDENCES = "incidences"
 OUTPUT_NAMES = frozenset((SETTINGS_FILE, TABLE_FILE, INCIDENCES, *EXPORTS.values()))
 """Everything ``measure`` writes into its directory; anything else there is the user's."""
 MAX_INCIDENCES = 900
+
+
+@dataclass(frozen=True)
+class IncidenceRecord:
+    """``measure.json``'s record of one traced incidence: its rays, tracing seconds, achieved
+    relative standard error and whether it reached the target."""
+
+    rays: int
+    seconds: float
+    rse: float | None
+    converged: bool
+
+    @classmethod
+    def read(cls, entry) -> IncidenceRecord | None:
+        """The record of a saved entry, None when it is not a whole one."""
+        number = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)  # noqa: E731
+        if not (
+            isinstance(entry, dict)
+            and number(entry.get("rays"))
+            and number(entry.get("seconds"))
+            and (entry.get("rse") is None or number(entry.get("rse")))
+            and isinstance(entry.get("converged"), bool)
+        ):
+            return None
+        return cls(**{f.name: entry.get(f.name) for f in fields(cls)})
+
+
+@dataclass(frozen=True)
+class Totals:
+    """The acquisition's cost over its incidences: rays, tracing seconds, all converged."""
+
+    incidences: int
+    rays: int
+    seconds: float
+    converged: bool
+
+
+@dataclass(frozen=True)
+class ExportRecord:
+    """One export (``_export``): its file name, size, the seconds to write and read it back,
+    the interpolation error per incidence and at worst, and the table's own relative standard
+    error per incidence over the same bins."""
+
+    file: str
+    bytes: int
+    seconds: float
+    interpolation_rel_rms: list
+    interpolation_rel_rms_max: float
+    table_rel_se: list
+
+
+@dataclass
+class MeasureRecord:
+    """``measure.json`` as the acquisition fills it: the ``settings`` a ``--resume`` must
+    match, the finished incidences by θi ("30" for 30°: an ``IncidenceRecord``, or a saved
+    entry that is not a whole one, kept as read until its incidence is traced again), then
+    the totals and the exports."""
+
+    settings: dict
+    incidences: dict = field(default_factory=dict)
+    totals: Totals | None = None
+    exports: dict | None = None
+
+    @classmethod
+    def from_json(cls, doc: dict) -> MeasureRecord:
+        """The record of a saved ``measure.json`` (an object with settings and incidences)."""
+        totals, exports = doc.get("totals"), doc.get("exports")
+        return cls(
+            settings=doc.get("settings"),
+            incidences={
+                key: IncidenceRecord.read(entry) or entry
+                for key, entry in doc.get("incidences").items()
+            },
+            totals=None if totals is None else Totals(**totals),
+            exports=None if exports is None else {e: ExportRecord(**r) for e, r in exports.items()},
+        )
+
+    def to_json(self) -> dict:
+        doc = {
+            "settings": self.settings,
+            "incidences": {
+                key: asdict(r) if isinstance(r, IncidenceRecord) else r
+                for key, r in self.incidences.items()
+            },
+        }
+        if self.totals is not None:
+            doc = {**doc, "totals": asdict(self.totals)}
+        if self.exports is not None:
+            doc = {**doc, "exports": {e: asdict(r) for e, r in self.exports.items()}}
+        return doc
+
+    def write(self, root: Path) -> None:
+        atomic.write_json(root / SETTINGS_FILE, self.to_json())
 
 
 class MeasureInterrupted(KeyboardInterrupt):
@@ -133,6 +226,54 @@ class Acquisition:
         )
 
 
+def _incidences(theta_step, theta_max) -> tuple[float, ...]:
+    """θi = 0, ``theta_step``, … up to ``theta_max`` degrees (refused beyond ``MAX_THETA_I``
+    or ``MAX_INCIDENCES``)."""
+    step, top = float(theta_step), float(theta_max)
+    if not (math.isfinite(step) and step > 0):
+        raise UsageError(f"--theta-step must be a positive angle in degrees, got {theta_step!r}")
+    if not (math.isfinite(top) and 0 <= top <= MAX_THETA_I):
+        raise UsageError(f"--theta-max must be in [0, {MAX_THETA_I:g}] degrees, got {theta_max!r}")
+    thetas = tuple(float(t) for t in np.round(np.arange(0.0, top + 1e-9, step), 6))
+    if len(thetas) > MAX_INCIDENCES:
+        raise UsageError(
+            f"--theta-step {step:g} gives {len(thetas)} incidences; at most {MAX_INCIDENCES}"
+        )
+    return thetas
+
+
+def _exports(scene, exports) -> tuple[str, ...]:
+    """The asked export formats (None: every one of ``EXPORTS`` the scene allows), each once;
+    RGL needs the scene's ensemble NDF (asked for without one: refused)."""
+    asked = exports is not None
+    exports = tuple(dict.fromkeys(EXPORTS if exports is None else exports))
+    if not all(e in EXPORTS for e in exports):
+        raise UsageError(f"--export must be among {', '.join(EXPORTS)}, got {', '.join(exports)}")
+    if "rgl" in exports and scene.ndf() is None:
+        if asked:
+            raise UsageError(
+                f"--export rgl: scene {scene.name} has no ensemble NDF (a heightfield file), "
+                f"which an RGL file needs for its parameterisation; use --export merl"
+            )
+        exports = tuple(e for e in exports if e != "rgl")
+    return exports
+
+
+def _check_resumable(acq: Acquisition) -> None:
+    """Refuse a ``--resume`` whose settings differ from the saved measure's, naming the first
+    setting that differs."""
+    out = acq.out
+    saved = _saved_document(out).settings
+    if saved != acq.settings():
+        key = next(
+            k for k in sorted({*saved, *acq.settings()}) if saved.get(k) != acq.settings().get(k)
+        )
+        raise UsageError(
+            f"--resume {out}: {key} is {saved.get(key)!r} there but "
+            f"{acq.settings().get(key)!r} now; resume with the same settings or use --force"
+        )
+
+
 def plan_measure(
     scene_path,
     *,
@@ -159,16 +300,7 @@ def plan_measure(
             f"scene {scene.name}: measure tabulates isotropic surfaces (a table over θi and "
             f"folded bins); this surface is anisotropic"
         )
-    step, top = float(theta_step), float(theta_max)
-    if not (math.isfinite(step) and step > 0):
-        raise UsageError(f"--theta-step must be a positive angle in degrees, got {theta_step!r}")
-    if not (math.isfinite(top) and 0 <= top <= MAX_THETA_I):
-        raise UsageError(f"--theta-max must be in [0, {MAX_THETA_I:g}] degrees, got {theta_max!r}")
-    thetas = tuple(float(t) for t in np.round(np.arange(0.0, top + 1e-9, step), 6))
-    if len(thetas) > MAX_INCIDENCES:
-        raise UsageError(
-            f"--theta-step {step:g} gives {len(thetas)} incidences; at most {MAX_INCIDENCES}"
-        )
+    thetas = _incidences(theta_step, theta_max)
     if not (isinstance(target, (int, float)) and 1e-4 <= target <= 0.5):
         raise UsageError(f"--target must be a relative error in [0.0001, 0.5], got {target!r}")
     max_rays = integer("--max-rays", max_rays, 2**16, MAX_RAYS, " (rays per incidence)")
@@ -177,17 +309,7 @@ def plan_measure(
         seed = integer("--seed", seed, 0, None, " (the random stream)")
     if scheduler is not None:
         check_address(scheduler)
-    asked = exports is not None
-    exports = tuple(dict.fromkeys(EXPORTS if exports is None else exports))
-    if not all(e in EXPORTS for e in exports):
-        raise UsageError(f"--export must be among {', '.join(EXPORTS)}, got {', '.join(exports)}")
-    if "rgl" in exports and scene.ndf() is None:
-        if asked:
-            raise UsageError(
-                f"--export rgl: scene {scene.name} has no ensemble NDF (a heightfield file), "
-                f"which an RGL file needs for its parameterisation; use --export merl"
-            )
-        exports = tuple(e for e in exports if e != "rgl")
+    exports = _exports(scene, exports)
     out = Path(out) if out is not None else Path("runs") / f"{scene.name}-measured"
     check_output_path(out, "--out", scene.path)
     acq = Acquisition(
@@ -207,17 +329,7 @@ def plan_measure(
     if not resume:
         _check_replaceable(acq)
     else:
-        saved = _saved_document(out)["settings"]
-        if saved != acq.settings():
-            key = next(
-                k
-                for k in sorted({*saved, *acq.settings()})
-                if saved.get(k) != acq.settings().get(k)
-            )
-            raise UsageError(
-                f"--resume {out}: {key} is {saved.get(key)!r} there but "
-                f"{acq.settings().get(key)!r} now; resume with the same settings or use --force"
-            )
+        _check_resumable(acq)
     return acq
 
 
@@ -226,7 +338,7 @@ def _read_json(path: Path) -> dict:
         return json.load(fh)
 
 
-def _saved_document(out: Path) -> dict:
+def _saved_document(out: Path) -> MeasureRecord:
     """``measure.json`` of the measure ``--resume`` continues; a one-line ``UsageError``
     naming the file if it is missing, unreadable or not a measure's record."""
     path = out / SETTINGS_FILE
@@ -250,7 +362,7 @@ def _saved_document(out: Path) -> dict:
             f"--resume {out}: {path} is not a measure's record (an object with settings and "
             f"incidences); rerun with --force to measure anew"
         )
-    return doc
+    return MeasureRecord.from_json(doc)
 
 
 def _check_replaceable(acq: Acquisition) -> None:
@@ -285,7 +397,7 @@ def measure(acq: Acquisition, log=print) -> BRDFTable:
         stack.enter_context(atomic.output_lock(acq.out, holder="measure"))
         atomic.clean_stale(acq.out)
         if acq.resume:
-            doc = {"settings": acq.settings(), "incidences": _saved_document(acq.out)["incidences"]}
+            doc = MeasureRecord(acq.settings(), _saved_document(acq.out).incidences)
             try:
                 return _acquire(acq, acq.out, doc, client, log)
             except KeyboardInterrupt:
@@ -293,7 +405,7 @@ def measure(acq: Acquisition, log=print) -> BRDFTable:
         _check_replaceable(acq)
         stage = atomic.make_staging(acq.out)
         try:
-            doc = {"settings": acq.settings(), "incidences": {}}
+            doc = MeasureRecord(acq.settings())
             try:
                 table = _acquire(acq, stage, doc, client, log)
             except BaseException as e:
@@ -317,19 +429,20 @@ def _publish(stage: Path, out: Path) -> bool:
     return stop.is_set()
 
 
-def _acquire(acq: Acquisition, root: Path, doc: dict, client, log) -> BRDFTable:
-    """Trace into ``root`` the incidences ``doc`` (``measure.json``'s content) does not hold
-    finished there, then write the table, its exports and the totals."""
-    atomic.write_json(root / SETTINGS_FILE, doc)
+def _acquire(acq: Acquisition, root: Path, doc: MeasureRecord, client, log) -> BRDFTable:
+    """Trace into ``root`` the incidences ``doc`` (``measure.json``'s content; a resumed one
+    holds the saved entries as read) does not hold finished there, then write the table, its
+    exports and the totals."""
+    doc.write(root)
     scale = effort_for(acq.quick).scale_for(acq.scene.surface.kind)
     surface = None
     results = []
     for k, theta in enumerate(acq.theta_i):
         where = root / INCIDENCES / f"theta-{theta:05.2f}"
         key = f"{theta:g}"
-        saved = _finished_incidence(acq, theta, where, doc["incidences"].pop(key, None), log)
+        saved = _finished_incidence(acq, theta, where, doc.incidences.pop(key, None), log)
         if saved is not None:
-            doc["incidences"][key] = saved[1]
+            doc.incidences[key] = saved[1]
             results.append(saved[0])
             continue
         if surface is None:
@@ -343,13 +456,13 @@ def _acquire(acq: Acquisition, root: Path, doc: dict, client, log) -> BRDFTable:
         )
         res.save(where)
         auto = res.meta["auto"]["incidences"][0]
-        doc["incidences"][key] = {
-            "rays": int(auto["rays"]),
-            "seconds": time.perf_counter() - t0,
-            "rse": auto["rse"],
-            "converged": bool(auto["converged"]),
-        }
-        atomic.write_json(root / SETTINGS_FILE, doc)
+        doc.incidences[key] = IncidenceRecord(
+            rays=int(auto["rays"]),
+            seconds=time.perf_counter() - t0,
+            rse=auto["rse"],
+            converged=bool(auto["converged"]),
+        )
+        doc.write(root)
         results.append(res)
         if log:
             log(
@@ -364,28 +477,29 @@ def _acquire(acq: Acquisition, root: Path, doc: dict, client, log) -> BRDFTable:
         np.stack([r.stderr[0] for r in results]),
         f"{acq.scene.name} (simulated)",
     )
-    per = [doc["incidences"][f"{theta:g}"] for theta in acq.theta_i]
-    doc["totals"] = {
-        "incidences": len(acq.theta_i),
-        "rays": int(sum(d["rays"] for d in per)),
-        "seconds": float(sum(d["seconds"] for d in per)),
-        "converged": all(d["converged"] for d in per),
-    }
+    per = [doc.incidences[f"{theta:g}"] for theta in acq.theta_i]
+    doc.totals = Totals(
+        incidences=len(acq.theta_i),
+        rays=int(sum(d.rays for d in per)),
+        seconds=float(sum(d.seconds for d in per)),
+        converged=all(d.converged for d in per),
+    )
     table.save(root / TABLE_FILE)
-    doc["exports"] = {e: _export(e, table, root / EXPORTS[e], acq.scene) for e in acq.exports}
-    atomic.write_json(root / SETTINGS_FILE, doc)
+    doc.exports = {e: _export(e, table, root / EXPORTS[e], acq.scene) for e in acq.exports}
+    doc.write(root)
     return table
 
 
 def _finished_incidence(acq: Acquisition, theta: float, where: Path, entry, log):
-    """(Result, ``measure.json`` entry) of the incidence ``theta`` finished in ``where``, or
+    """(Result, ``IncidenceRecord``) of the incidence ``theta`` finished in ``where``, or
     None to trace it: not finished, or damaged — an incomplete entry, or files that do not
     load as this incidence on the measure's bins (``log`` names the damage; tracing it again
     gives the same result, as each incidence has its own seed)."""
     if entry is None:
         return None
     try:
-        if not _complete_entry(entry):
+        record = entry if isinstance(entry, IncidenceRecord) else IncidenceRecord.read(entry)
+        if record is None:
             raise UsageError(f"{SETTINGS_FILE}: its record of this incidence is incomplete")
         res = Result.load(where)
         if res.bins != acq.bins or res.theta_i.tolist() != [theta]:
@@ -399,35 +513,23 @@ def _finished_incidence(acq: Acquisition, theta: float, where: Path, entry, log)
                 f"({type(e).__name__}: {' '.join(str(e).split())}); tracing it again"
             )
         return None
-    return res, entry
+    return res, record
 
 
-def _complete_entry(entry) -> bool:
-    """Whether ``entry`` is a whole ``measure.json`` record of one traced incidence."""
-    number = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)  # noqa: E731
-    return (
-        isinstance(entry, dict)
-        and number(entry.get("rays"))
-        and number(entry.get("seconds"))
-        and (entry.get("rse") is None or number(entry.get("rse")))
-        and isinstance(entry.get("converged"), bool)
-    )
-
-
-def _kept(acq: Acquisition, doc: dict) -> str:
+def _kept(acq: Acquisition, doc: MeasureRecord) -> str:
     """What an interrupted measure kept in ``acq.out`` and how to continue it."""
     return (
-        f"{len(doc['incidences'])} of {len(acq.theta_i)} incidences kept in {acq.out}; "
+        f"{len(doc.incidences)} of {len(acq.theta_i)} incidences kept in {acq.out}; "
         f"continue with microsim measure {acq.scene.path} --out {acq.out} --resume "
         f"(same options)"
     )
 
 
-def _keep_unfinished(acq: Acquisition, stage: Path, doc: dict) -> str:
+def _keep_unfinished(acq: Acquisition, stage: Path, doc: MeasureRecord) -> str:
     """After an acquisition in ``stage`` was interrupted or failed: its finished incidences
     replace ``acq.out`` (for ``--resume``) unless there are none or ``acq.out`` holds a
     finished measure, which is kept as it was. Returns the line saying which."""
-    done = len(doc["incidences"])
+    done = len(doc.incidences)
     if done and not _holds_finished_measure(acq.out):
         _publish(stage, acq.out)
         return _kept(acq, doc)
@@ -452,7 +554,7 @@ def _holds_finished_measure(out: Path) -> bool:
     return not isinstance(doc, dict) or "totals" in doc
 
 
-def _export(fmt: str, table: BRDFTable, path: Path, scene) -> dict:
+def _export(fmt: str, table: BRDFTable, path: Path, scene) -> ExportRecord:
     """Write ``table`` as ``fmt`` to ``path``, read it back and measure the format's
     interpolation error against the table (module docstring)."""
     t0 = time.perf_counter()
@@ -470,14 +572,14 @@ def _export(fmt: str, table: BRDFTable, path: Path, scene) -> dict:
         E = energy_set(w).reshape(f.shape) & (f > 0)
         errors.append(float(np.sqrt(np.sum(w[E] * ((g[E] - f[E]) / f[E]) ** 2) / np.sum(w[E]))))
         noise.append(float(np.sqrt(np.sum(w[E] * (se[E] / f[E]) ** 2) / np.sum(w[E]))))
-    return {
-        "file": path.name,
-        "bytes": path.stat().st_size,
-        "seconds": seconds,
-        "interpolation_rel_rms": errors,
-        "interpolation_rel_rms_max": max(errors),
-        "table_rel_se": noise,
-    }
+    return ExportRecord(
+        file=path.name,
+        bytes=path.stat().st_size,
+        seconds=seconds,
+        interpolation_rel_rms=errors,
+        interpolation_rel_rms_max=max(errors),
+        table_rel_se=noise,
+    )
 
 
 def _cmd_measure(args) -> int:
@@ -502,19 +604,19 @@ def _cmd_measure(args) -> int:
     except MeasureInterrupted as e:
         print(f"microsim measure: interrupted; {e}", flush=True)
         return EXIT_INTERRUPTED
-    doc = _read_json(acq.out / SETTINGS_FILE)
-    tot = doc["totals"]
+    doc = MeasureRecord.from_json(_read_json(acq.out / SETTINGS_FILE))
+    tot = doc.totals
     print(
-        f"microsim measure: wrote {acq.out / TABLE_FILE} ({tot['incidences']} incidences, "
-        f"{tot['rays']:,} rays, {tot['seconds']:.1f} s of tracing"
-        f"{'' if tot['converged'] else '; some incidences stopped at --max-rays'})"
+        f"microsim measure: wrote {acq.out / TABLE_FILE} ({tot.incidences} incidences, "
+        f"{tot.rays:,} rays, {tot.seconds:.1f} s of tracing"
+        f"{'' if tot.converged else '; some incidences stopped at --max-rays'})"
     )
-    for fmt, e in doc.get("exports", {}).items():
+    for fmt, e in (doc.exports or {}).items():
         print(
-            f"microsim measure: wrote {acq.out / e['file']} ({fmt}, {e['bytes']:,} bytes; "
-            f"read back against the table: {percent(e['interpolation_rel_rms_max'], unit=' %')} "
+            f"microsim measure: wrote {acq.out / e.file} ({fmt}, {e.bytes:,} bytes; "
+            f"read back against the table: {percent(e.interpolation_rel_rms_max, unit=' %')} "
             f"energy-weighted relative RMS at worst; the table's own noise there: "
-            f"{percent(max(e['table_rel_se']), unit=' %')} at worst)"
+            f"{percent(max(e.table_rel_se), unit=' %')} at worst)"
         )
     return EXIT_OK
 

@@ -77,7 +77,7 @@ import os
 import re
 import stat
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Callable, Mapping
@@ -603,23 +603,25 @@ def material_ior(where, table):
 def _simulation(where, table) -> SimSettings:
     table = {} if table is None else table
     _check_keys(where, "simulation", table, list(_SIM_KEYS))
-    s = _fill(where, "simulation", table, _SIM_KEYS)
-    s["theta_i"] = tuple(float(t) for t in s["theta_i"])
-    twice = sorted({t for t in s["theta_i"] if s["theta_i"].count(t) > 1})
+    sim = SimSettings(**_fill(where, "simulation", table, _SIM_KEYS))
+    phis = sim.phi_i if isinstance(sim.phi_i, list) else [sim.phi_i]
+    sim = replace(
+        sim, theta_i=tuple(float(t) for t in sim.theta_i), phi_i=tuple(float(p) for p in phis)
+    )
+    twice = sorted({t for t in sim.theta_i if sim.theta_i.count(t) > 1})
     if twice:
         _fail(where, "simulation.theta_i", f"lists {twice[0]:g}° twice; give each angle once")
-    phis = s["phi_i"] if isinstance(s["phi_i"], list) else [s["phi_i"]]
-    s["phi_i"] = tuple(float(p) for p in phis)
-    same = sorted({p for p in s["phi_i"] if [q % 360.0 for q in s["phi_i"]].count(p % 360.0) > 1})
+    turns = [q % 360.0 for q in sim.phi_i]
+    same = sorted({p for p in sim.phi_i if turns.count(p % 360.0) > 1})
     if same:
         _fail(
             where,
             "simulation.phi_i",
             f"lists {same[0]:g}° twice (modulo 360°); give each azimuth once",
         )
-    if s["realisation_target"] is not None and s["realisations"] != "auto":
+    if sim.realisation_target is not None and sim.realisations != "auto":
         _fail(where, "simulation.realisation_target", 'needs realisations = "auto"')
-    return SimSettings(**s)
+    return sim
 
 
 def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSpec | None:
@@ -627,9 +629,9 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
     if table is None:
         return None
     _check_keys(where, "wave", table, list(_WAVE_KEYS))
-    w = _fill(where, "wave", table, _WAVE_KEYS)
-    w["wavelength"] = float(w["wavelength"])
-    lam = w["wavelength"]
+    w = WaveSpec(**_fill(where, "wave", table, _WAVE_KEYS))
+    w = replace(w, wavelength=float(w.wavelength))
+    lam = w.wavelength
     if surface.kind not in WAVE_KINDS:
         _fail(
             where,
@@ -637,8 +639,8 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
             f"needs surface.kind {' or '.join(WAVE_KINDS)} (a heightfield with a nominal PSD), "
             f"got {surface.kind!r}",
         )
-    if w["surface_model"] == "mesh" and w["upsample"] != 1:
-        _fail(where, "wave.upsample", f'must be 1 with surface_model = "mesh", got {w["upsample"]}')
+    if w.surface_model == "mesh" and w.upsample != 1:
+        _fail(where, "wave.upsample", f'must be 1 with surface_model = "mesh", got {w.upsample}')
     n, dx = surface.params["n"], surface.params["dx"]
     if n * dx < MIN_TILE_WAVELENGTHS * lam:
         _fail(
@@ -648,19 +650,19 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
             f"solver needs >= {MIN_TILE_WAVELENGTHS:g} (wavelength <= "
             f"{n * dx / MIN_TILE_WAVELENGTHS:g} or a larger n·dx)",
         )
-    if w["surface_model"] == "smooth":
+    if w.surface_model == "smooth":
         s_max = float(np.sin(np.radians(max(simulation.theta_i))))
         need = lam / (2.0 * (1.0 + s_max))
-        if dx / w["upsample"] >= need:
+        if dx / w.upsample >= need:
             _fail(
                 where,
                 "surface.dx",
                 f"grid too coarse for wavelength {lam:g}: dx/upsample = "
-                f"{dx / w['upsample']:g} must be < λ/(2(1 + sin θi)) = {need:.4g} at θi = "
+                f"{dx / w.upsample:g} must be < λ/(2(1 + sin θi)) = {need:.4g} at θi = "
                 f"{max(simulation.theta_i):g}° (the diffraction orders' phase step); need dx < "
-                f"{need * w['upsample']:.4g} or upsample >= {int(np.floor(dx / need)) + 1}",
+                f"{need * w.upsample:.4g} or upsample >= {int(np.floor(dx / need)) + 1}",
             )
-    return WaveSpec(**w)
+    return w
 
 
 def read_toml(path, what: str = "scene") -> dict:

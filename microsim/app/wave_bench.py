@@ -13,11 +13,31 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from dataclasses import dataclass
 
 from microsim.errors import UsageError
 from microsim.wave.kirchhoff import kirchhoff_orders
 
-__all__ = ["wave_bench"]
+__all__ = ["WaveTiming", "wave_bench"]
+
+
+@dataclass(frozen=True)
+class WaveTiming:
+    """One timed incidence: roughness ``sigma`` (λ), the ``n``² tile of side ``tile`` λ, the
+    incidence ``theta_i`` (degrees), the Fourier ``upsample`` factor used, the propagating
+    ``orders``, the ``qz_nodes``, the wall ``seconds``, the ``albedo`` (sum of order powers)
+    and the ``surface`` interpolant ("smooth" or "mesh", ``kirchhoff_orders``)."""
+
+    sigma: float
+    n: int
+    tile: float
+    theta_i: float
+    upsample: int
+    orders: int
+    qz_nodes: int
+    seconds: float
+    albedo: float
+    surface: str
 
 
 def _tile(n, dx, sigma):
@@ -37,10 +57,8 @@ def wave_bench(
     material="aluminium",
     workers: int = 2,
     surface: str = "smooth",
-) -> list[dict]:
-    """One dict per σ (in λ): ``sigma``, ``n``, ``tile``, ``upsample``, ``orders`` (propagating
-    orders), ``qz_nodes``, ``seconds`` (wall time of one incidence), ``albedo`` (sum of order
-    powers), ``surface`` ("smooth" or "mesh", ``kirchhoff_orders``)."""
+) -> list[WaveTiming]:
+    """One ``WaveTiming`` per σ (in λ)."""
     dx = float(tile) / int(n)
     out = []
     for sigma in sigmas:
@@ -64,17 +82,17 @@ def wave_bench(
                 if "too coarse" not in str(err) or u == 8:
                     raise
         out.append(
-            {
-                "sigma": float(sigma),
-                "n": int(n),
-                "tile": float(tile),
-                "theta_i": float(theta_i),
-                "upsample": int(u),
-                "orders": int(len(o.m)),
-                "qz_nodes": int(o.meta["qz_nodes"]),
-                "seconds": float(sec),
-                "albedo": float(o.power.sum()),
-                "surface": surface,
-            }
+            WaveTiming(
+                sigma=float(sigma),
+                n=int(n),
+                tile=float(tile),
+                theta_i=float(theta_i),
+                upsample=int(u),
+                orders=int(len(o.m)),
+                qz_nodes=int(o.meta["qz_nodes"]),
+                seconds=float(sec),
+                albedo=float(o.power.sum()),
+                surface=surface,
+            )
         )
     return out

@@ -23,7 +23,13 @@ from ..bench_methods import METHODS_JSON, METHODS_PNG
 from ..cluster import check_address, connect
 from ..scene import load_scene
 from . import planning
-from .publishing import REPORT_STATE, VERDICTS_FILE, read_report_state, write_report_state
+from .publishing import (
+    REPORT_STATE,
+    VERDICTS_FILE,
+    ReportState,
+    read_report_state,
+    write_report_state,
+)
 from .run import execute
 from .side_studies import fig6_curves
 from .wave_run import regime_maps
@@ -102,6 +108,115 @@ def _finished_verdicts(scene_out: Path, log: Callable[[str], None]) -> dict | No
         return None
 
 
+def _load_catalogue(catalogue: Path, out: Path) -> tuple[list[Path], list]:
+    """The scene files of ``catalogue`` and their scenes, every one validated: unique names,
+    none named like a file of the report, the catalogue not inside ``out``."""
+    if not catalogue.is_dir():
+        raise UsageError(f"--catalogue {catalogue}: not a directory")
+    paths = sorted(catalogue.glob("*.toml"))
+    if not paths:
+        raise UsageError(f"--catalogue {catalogue}: no *.toml scene files")
+    scenes = [load_scene(p) for p in paths]
+    names = [s.name for s in scenes]
+    if len(set(names)) != len(names):
+        raise UsageError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
+    _check_scene_names(paths, scenes, out)
+    _check_catalogue_out(catalogue, out)
+    return paths, scenes
+
+
+def _resumed_state(out: Path, quick: bool, catalogue: Path) -> ReportState:
+    """The interrupted report's state in ``out``, refused when there is none or it ran with
+    other options."""
+    state = read_report_state(out)
+    if state is None:
+        raise UsageError(
+            f"--resume: no interrupted report in {out} ({REPORT_STATE} "
+            f"missing); run `microsim report` without --resume"
+        )
+    if state.quick != bool(quick) or state.catalogue != str(catalogue):
+        raise UsageError(
+            f"--resume: the interrupted report in {out} ran with quick = "
+            f"{state.quick}, catalogue {state.catalogue}; "
+            f"resume with the same options"
+        )
+    return state
+
+
+def _plan_scenes(paths, scenes, out: Path, done: set, reusable: set, log, scheduler, **options):
+    """(plans, finished verdicts): per scene, its folder in ``out`` when it is in ``done`` and
+    its verdicts read back (``finished``), else its ``planning.plan_run`` (``options``), which
+    continues from the scene's saved tallies when it is in ``reusable``; ``rays = "auto"``
+    scenes trace locally, the rest on ``scheduler``."""
+    plans, finished = [], {}
+    for p, s in zip(paths, scenes):
+        scene_out, partial = out / s.name, out / f".{s.name}.partial"
+        if s.name in done:
+            finished[s.name] = _finished_verdicts(scene_out, log)
+        if finished.get(s.name) is not None:
+            plans.append(scene_out)
+            continue
+        saved = s.name in reusable and (partial / "meta.json").is_file()
+        plans.append(
+            planning.plan_run(
+                p,
+                out=scene_out,
+                force=True,
+                tallies=partial if saved else None,
+                partial_dir=partial,
+                scheduler=None if s.simulation.rays == "auto" else scheduler,
+                **options,
+            )
+        )
+    return plans, finished
+
+
+def _run_scenes(plans, finished: dict, state: ReportState, out: Path, progress, log):
+    """(status, verdict documents): run the plans in turn (a finished scene's folder keeps its
+    ``finished`` verdicts), recording each finished scene in ``state``; the first scene that
+    does not finish ends the run with its status."""
+    docs = []
+    for k, plan in enumerate(plans, 1):
+        checkpoint("report-scene")
+        if isinstance(plan, Path):
+            log(f"[{k}/{len(plans)}] {plan.name}: finished earlier, kept")
+            docs.append(finished[plan.name])
+            continue
+        log(f"[{k}/{len(plans)}] {plan.scene.name}")
+        outcome = execute(plan, progress=progress, log=log)
+        if outcome.status != 0:
+            return outcome.status, docs
+        shutil.rmtree(plan.partial_dir, ignore_errors=True)
+        docs.append(outcome.document)
+        state = state.finished(plan.scene.name)
+        write_report_state(out, state)
+    return 0, docs
+
+
+def _write_index(out: Path, docs: list, scenes: list, quick, threads, regimes) -> None:
+    """``out/index.md`` over the scenes' verdict documents, with the Fig. 6 chart when a scene
+    asks for it and the regime maps when ``regimes`` (None: when some scene has ``[wave]``)."""
+    fig6 = None
+    curves = fig6_curves(scenes, planning.effort_for(quick), threads)
+    if curves:
+        fig6 = FIG6_CHART
+        ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
+    regime = None
+    if regimes or (regimes is None and any(s.wave is not None for s in scenes)):
+        regime = _regimes(out, quick)
+    atomic.write_text(
+        out / INDEX_FILE,
+        report.index_report(
+            docs,
+            fig6,
+            quick,
+            regimes=regime,
+            methods=out / METHODS_JSON,
+            fullwave=out / FULLWAVE_JSON,
+        ),
+    )
+
+
 def run_report(
     catalogue="surfaces",
     out="reports",
@@ -129,18 +244,8 @@ def run_report(
     one after another, each bitwise as locally; ``rays = "auto"`` scenes trace locally)."""
     log = log or (lambda s: print(s, file=sys.stderr))
     catalogue, out = Path(catalogue), Path(out)
-    if not catalogue.is_dir():
-        raise UsageError(f"--catalogue {catalogue}: not a directory")
-    paths = sorted(catalogue.glob("*.toml"))
-    if not paths:
-        raise UsageError(f"--catalogue {catalogue}: no *.toml scene files")
-    scenes = [load_scene(p) for p in paths]
-    names = [s.name for s in scenes]
-    if len(set(names)) != len(names):
-        raise UsageError(f"--catalogue {catalogue}: scene names must be unique, got {names}")
-    _check_scene_names(paths, scenes, out)
+    paths, scenes = _load_catalogue(catalogue, out)
     digests = {s.name: _scene_digest(p, s) for p, s in zip(paths, scenes)}
-    _check_catalogue_out(catalogue, out)
     hint = (
         f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
         f"--out {out}`"
@@ -149,89 +254,30 @@ def run_report(
         with connect(check_address(scheduler)):
             pass
     with atomic.output_lock(out):
-        state = read_report_state(out) if resume else None
-        if resume:
-            if state is None:
-                raise UsageError(
-                    f"--resume: no interrupted report in {out} ({REPORT_STATE} "
-                    f"missing); run `microsim report` without --resume"
-                )
-            if state.get("quick") != bool(quick) or state.get("catalogue") != str(catalogue):
-                raise UsageError(
-                    f"--resume: the interrupted report in {out} ran with quick = "
-                    f"{state.get('quick')}, catalogue {state.get('catalogue')}; "
-                    f"resume with the same options"
-                )
-        recorded = state.get("digests") if state else None
-        recorded = recorded if isinstance(recorded, dict) else {}
+        state = _resumed_state(out, quick, catalogue) if resume else None
+        recorded = state.digests if state else {}
         unchanged = {name for name, digest in recorded.items() if digests.get(name) == digest}
-        done = set(state["done"]) & unchanged if state else set()
-        plans, finished = [], {}
-        for p, s in zip(paths, scenes):
-            scene_out, partial = out / s.name, out / f".{s.name}.partial"
-            if s.name in done:
-                finished[s.name] = _finished_verdicts(scene_out, log)
-            if finished.get(s.name) is not None:
-                plans.append(scene_out)
-                continue
-            saved = resume and s.name in unchanged and (partial / "meta.json").is_file()
-            tallies = partial if saved else None
-            plans.append(
-                planning.plan_run(
-                    p,
-                    out=scene_out,
-                    threads=threads,
-                    quick=quick,
-                    force=True,
-                    tallies=tallies,
-                    partial_dir=partial,
-                    resume_hint=hint,
-                    scheduler=None if s.simulation.rays == "auto" else scheduler,
-                )
-            )
-        state = {
-            "quick": bool(quick),
-            "catalogue": str(catalogue),
-            "done": sorted(done),
-            "digests": digests,
-        }
+        done = set(state.done) & unchanged if state else set()
+        plans, finished = _plan_scenes(
+            paths,
+            scenes,
+            out,
+            done,
+            unchanged if resume else set(),
+            log,
+            threads=threads,
+            quick=quick,
+            resume_hint=hint,
+            scheduler=scheduler,
+        )
+        state = ReportState(bool(quick), str(catalogue), tuple(sorted(done)), digests)
         write_report_state(out, state)
         try:
-            docs = []
-            for k, plan in enumerate(plans, 1):
-                checkpoint("report-scene")
-                if isinstance(plan, Path):
-                    log(f"[{k}/{len(plans)}] {plan.name}: finished earlier, kept")
-                    docs.append(finished[plan.name])
-                    continue
-                log(f"[{k}/{len(plans)}] {plan.scene.name}")
-                outcome = execute(plan, progress=progress, log=log)
-                if outcome.status != 0:
-                    return outcome.status
-                shutil.rmtree(plan.partial_dir, ignore_errors=True)
-                docs.append(outcome.document)
-                state["done"] = sorted({*state["done"], plan.scene.name})
-                write_report_state(out, state)
+            status, docs = _run_scenes(plans, finished, state, out, progress, log)
+            if status != 0:
+                return status
             checkpoint("report-index")
-            fig6 = None
-            curves = fig6_curves(scenes, planning.effort_for(quick), threads)
-            if curves:
-                fig6 = FIG6_CHART
-                ch.mikkelsen_fig6(curves, out / fig6, "V-grooves, vMF NDF")
-            regime = None
-            if regimes or (regimes is None and any(s.wave is not None for s in scenes)):
-                regime = _regimes(out, quick)
-            atomic.write_text(
-                out / INDEX_FILE,
-                report.index_report(
-                    docs,
-                    fig6,
-                    quick,
-                    regimes=regime,
-                    methods=out / METHODS_JSON,
-                    fullwave=out / FULLWAVE_JSON,
-                ),
-            )
+            _write_index(out, docs, scenes, quick, threads, regimes)
         except KeyboardInterrupt:
             log(
                 f"microsim: interrupted; finished scene reports kept in {out}; continue with {hint}"

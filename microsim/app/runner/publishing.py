@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import os
 import shutil
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -218,8 +218,27 @@ def timings_document(plan: RunPlan, result, speed, speed_theta) -> dict:
     }
 
 
-def read_report_state(out: Path) -> dict | None:
-    """The interrupted report's state in ``out`` (None if there is none)."""
+@dataclass(frozen=True)
+class ReportState:
+    """``microsim report``'s progress (``REPORT_STATE``): the options it ran with, the scenes
+    finished so far and the digest of every scene file (``catalogue._scene_digest``)."""
+
+    quick: bool | None
+    catalogue: str | None
+    done: tuple = ()
+    digests: dict = field(default_factory=dict)
+
+    def finished(self, name: str) -> ReportState:
+        """This state with scene ``name`` finished too."""
+        return replace(self, done=tuple(sorted({*self.done, name})))
+
+    def to_json(self) -> dict:
+        return {**asdict(self), "done": list(self.done)}
+
+
+def read_report_state(out: Path) -> ReportState | None:
+    """The interrupted report's state in ``out`` (None if there is none); digests that are not
+    a table count as none recorded."""
     path = out / REPORT_STATE
     if not os.path.lexists(path):
         return None
@@ -233,8 +252,14 @@ def read_report_state(out: Path) -> dict | None:
         raise UsageError(
             f"--resume: {path}: done must be a list of scene names, got {done!r:.80}; {rerun}"
         )
-    return state
+    digests = state.get("digests")
+    return ReportState(
+        quick=state.get("quick"),
+        catalogue=state.get("catalogue"),
+        done=tuple(done),
+        digests=digests if isinstance(digests, dict) else {},
+    )
 
 
-def write_report_state(out: Path, state: dict) -> None:
-    atomic.write_json(out / REPORT_STATE, state)
+def write_report_state(out: Path, state: ReportState) -> None:
+    atomic.write_json(out / REPORT_STATE, state.to_json())

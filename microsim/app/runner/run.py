@@ -241,18 +241,7 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         result = side_studies.attach(result, specs)
         stages.stage("fits")
         checkpoint("fits")
-        # a flat mirror's lobe is a delta, narrower than any bin: fitting a lobe shape is
-        # meaningless
-        fits = (
-            {}
-            if sc.surface.kind == "flat"
-            else fit_all(
-                result,
-                sc.ior,
-                names=plan.effort.fit_names or tuple(FIT_MODELS),
-                quick=plan.effort.quick_fits,
-            )
-        )
+        fits = _fits(plan, result)
         verdicts = verdicts_for_result(result, fitted=fits)
         shown = {**result.models, **{f.name: f.model_values for f in fits.values()}}
         ranking = _ranking(verdicts)
@@ -275,16 +264,7 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         files, stability = _charts(
             plan, stage, result, shown, verdicts, ranking, sweep, sweep_verdicts, notes
         )
-        if orders_doc is not None and orders_doc["comparison"] is not None:
-            files = {"multiple": CHARTS["multiple"], **files}
-            multiple_chart(orders_doc["comparison"], stage / files["multiple"], sc.name)
-        files["speed"] = CHARTS["speed"]
-        ch.speed_accuracy(
-            speed,
-            stage / files["speed"],
-            f"{sc.name}, θi = {speed_theta:g}°",
-            f"relative RMS error against {speed_ref}",
-        )
+        files = _study_charts(plan, stage, files, orders_doc, (speed, speed_theta, speed_ref))
         stages.stage("writing")
         result = result.with_meta(seconds_analysis=time.perf_counter() - t0)
         result.save(stage)
@@ -319,17 +299,56 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
     finally:
         stages.close()
     checkpoint("publish")
-    with DeferredInterrupt() as stop:  # a Ctrl-C now waits until the directory is in place
+    status = _publish(plan, stage, len(files), log)
+    return RunOutcome(status, plan.out, doc, tuple(ranking))
+
+
+def _fits(plan: RunPlan, result) -> dict:
+    """The fitted models of the scene's effort (none on a flat mirror: its lobe is a delta,
+    narrower than any bin, so fitting a lobe shape is meaningless)."""
+    if plan.scene.surface.kind == "flat":
+        return {}
+    return fit_all(
+        result,
+        plan.scene.ior,
+        names=plan.effort.fit_names or tuple(FIT_MODELS),
+        quick=plan.effort.quick_fits,
+    )
+
+
+def _study_charts(plan: RunPlan, stage: Path, files: dict, orders_doc, speed_study) -> dict:
+    """``files`` with the side studies' charts written into ``stage``: the scattering orders'
+    comparison (first, when the run has one) and the speed chart of ``speed_study`` (the
+    speed runs, their θi and the reference they are judged against)."""
+    name = plan.scene.name
+    speed, speed_theta, speed_ref = speed_study
+    if orders_doc is not None and orders_doc["comparison"] is not None:
+        files = {"multiple": CHARTS["multiple"], **files}
+        multiple_chart(orders_doc["comparison"], stage / files["multiple"], name)
+    files = {**files, "speed": CHARTS["speed"]}
+    ch.speed_accuracy(
+        speed,
+        stage / files["speed"],
+        f"{name}, θi = {speed_theta:g}°",
+        f"relative RMS error against {speed_ref}",
+    )
+    return files
+
+
+def _publish(plan: RunPlan, stage: Path, charts: int, log) -> int:
+    """Move ``stage`` into place as ``plan.out`` (a Ctrl-C meanwhile waits until the directory
+    is in place) and say what was written; the status: 130 when a Ctrl-C came, else 0."""
+    with DeferredInterrupt() as stop:
         publish_dir(stage, plan.out)
     wrote = (
         f"{plan.out}/ ({REPORT_FILE}, {VERDICTS_FILE}, {TIMINGS_FILE}, brdf.npz, meta.json, "
-        f"{len(files)} charts)"
+        f"{charts} charts)"
     )
     if stop.is_set():
         log(f"microsim: interrupted while publishing; wrote {wrote} completely")
-        return RunOutcome(130, plan.out, doc, tuple(ranking))
+        return 130
     log(f"microsim: wrote {wrote}")
-    return RunOutcome(0, plan.out, doc, tuple(ranking))
+    return 0
 
 
 def _ranking(verdicts) -> list[str]:

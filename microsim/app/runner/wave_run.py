@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -187,7 +188,16 @@ def run_wave(plan, result) -> tuple:
     return kres, section, seconds
 
 
-REGIME_QUICK = {"sigmas": 8, "tile_over_lambda": 32.0}
+@dataclass(frozen=True)
+class RegimeGrid:
+    """How a regime map is sampled: ``sigmas`` values of σ/λ, one tile of ``tile_over_lambda``
+    wavelengths per σ."""
+
+    sigmas: int
+    tile_over_lambda: float
+
+
+REGIME_QUICK = RegimeGrid(sigmas=8, tile_over_lambda=32.0)
 """``microsim report --quick``'s regime map: 8 σ/λ values geometric from 0.01 to 3 and tiles
 of 32 λ; the full report uses ``regime_map``'s defaults (14 values, 64 λ: several times
 the cost)."""
@@ -203,8 +213,8 @@ def regime_maps(quick: bool) -> dict:
     kw = {}
     if quick:
         kw = {
-            "sigmas": np.geomspace(0.01, 3.0, REGIME_QUICK["sigmas"]),
-            "tile_over_lambda": REGIME_QUICK["tile_over_lambda"],
+            "sigmas": np.geomspace(0.01, 3.0, REGIME_QUICK.sigmas),
+            "tile_over_lambda": REGIME_QUICK.tile_over_lambda,
         }
     maps = [regime_map(family, **kw) for family in ("abc", "gaussian")]
     m = maps[0]

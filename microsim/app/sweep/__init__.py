@@ -53,15 +53,17 @@ traces on one thread. One sweep at a time may write to an output directory (a lo
 """
 
 from .command import add_sweep_command
-from .execution import LOCK_FILE, SweepInterrupted, run_sweep
+from .execution import LOCK_FILE, SweepInterrupted, SweepOutcome, run_sweep
 from .grid import MAX_TASKS, SweepSpec, Task, expand_tasks, load_sweep, material_text, task_label
-from .summary import COLUMNS, gather, summary_table, write_summary
+from .summary import COLUMNS, SummaryFiles, gather, summary_table, write_summary
 from .task import run_task
 
 __all__ = [
     "SweepSpec",
     "Task",
     "SweepInterrupted",
+    "SweepOutcome",
+    "SummaryFiles",
     "load_sweep",
     "expand_tasks",
     "run_task",

@@ -35,8 +35,8 @@ def _cmd_sweep(args) -> int:
         )
         return 128 + e.signum
     print(
-        f"{len(res['computed'])} tasks computed, {len(res['skipped'])} already done; "
-        f"{res['summary']['markdown']}, {res['summary']['csv']}, {res['summary']['chart']}"
+        f"{len(res.computed)} tasks computed, {len(res.skipped)} already done; "
+        f"{res.summary.markdown}, {res.summary.csv}, {res.summary.chart}"
     )
     return 0
 

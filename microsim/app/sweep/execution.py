@@ -9,6 +9,7 @@ import threading
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -18,7 +19,7 @@ from ...errors import EnvironmentFailure
 from ..cluster import connect
 from ..runner.planning import check_output_path
 from .grid import SweepSpec, fail, task_label, varying_values
-from .summary import write_summary
+from .summary import SummaryFiles, write_summary
 from .task import is_done, load_result, run_task, worker_init
 
 LOCK_FILE = ".sweep.lock"
@@ -165,6 +166,77 @@ def _dask(todo, out: Path, client, collect) -> None:
         raise
 
 
+@dataclass(frozen=True)
+class SweepOutcome:
+    """What ``run_sweep`` did: the ids of the tasks it ``computed`` and of those it
+    ``skipped`` (complete results found), and the ``summary`` files it wrote."""
+
+    computed: list
+    skipped: list
+    summary: SummaryFiles
+
+
+def _check_options(workers, connect_timeout) -> None:
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        fail("--workers", f"must be an integer >= 1, got {workers!r}")
+    if not (isinstance(connect_timeout, (int, float)) and 0 < connect_timeout <= 3600):
+        fail("--scheduler-timeout", f"must be seconds in (0, 3600], got {connect_timeout!r}")
+
+
+def _open_out(stack: ExitStack, out: Path) -> None:
+    """Create ``out/tasks``, hold the sweep's lock on ``out`` for the ``stack``'s lifetime and
+    remove the temporary files interrupted writes of earlier sweeps left."""
+    try:
+        (out / "tasks").mkdir(parents=True, exist_ok=True)
+        stack.enter_context(atomic.output_lock(out, out / LOCK_FILE, holder="sweep"))
+    except OSError as e:
+        raise EnvironmentFailure(
+            f"{out}: cannot create the sweep output ({e.strerror or e})"
+        ) from None
+    for d in (out, out / "tasks"):
+        atomic.clean_temp_files(d)
+
+
+class _Collector:
+    """Receives the finished task records of a sweep: keeps their ids and reports each in
+    one progress line ("k/N done: <scene params, material, θi> (s)")."""
+
+    def __init__(self, spec: SweepSpec, todo: list, skipped: list, progress):
+        self.spec, self.skipped, self.progress = spec, skipped, progress
+        self.by_id = {t.id: t for t in todo}
+        self.varying = varying_values(spec.tasks)
+        self.computed: list = []
+
+    def start(self, workers: int, on_cluster: bool) -> None:
+        """The first progress line: how many tasks, how many done, where the rest run."""
+        todo, total = self.by_id, len(self.spec.tasks)
+        if not (self.progress and todo):
+            return
+        where = (
+            f"{len(todo)} on the Dask cluster"
+            if on_cluster
+            else f"{len(todo)} on {min(workers, len(todo))} local workers"
+        )
+        self.progress(
+            f"sweep {self.spec.name}: {total} tasks, {len(self.skipped)} already done, "
+            f"running {where}"
+        )
+
+    def __call__(self, rec: dict) -> None:
+        if rec.get("partial"):  # a worker was interrupted
+            raise KeyboardInterrupt
+        task_id = rec["id"]
+        self.computed.append(task_id)
+        if self.progress:
+            task = self.by_id[task_id]
+            done = len(self.skipped) + len(self.computed)
+            self.progress(
+                f"sweep {self.spec.name}: {done}/{len(self.spec.tasks)} done: "
+                f"{task_label(task, self.varying.get(task.scene))} ({rec['seconds']:.1f} s)"
+            )
+        checkpoint("sweep-task")
+
+
 def run_sweep(
     spec: SweepSpec,
     out,
@@ -174,7 +246,7 @@ def run_sweep(
     limit: int | None = None,
     progress: Callable[[str], None] | None = None,
     connect_timeout: float = 10.0,
-) -> dict:
+) -> SweepOutcome:
     """Run the tasks of ``spec`` that have no complete result in ``out`` yet, then
     ``write_summary``.
 
@@ -185,13 +257,9 @@ def run_sweep(
     line per finished task ("k/N done: <scene params, material, θi> (s)"), and one at the start.
     Ctrl-C or SIGTERM: raises ``SweepInterrupted`` (the workers stopped, finished tasks
     kept, no summary written). Local worker processes that die: their tasks run again
-    (``_local``), or EnvironmentFailure. Returns {"computed": [ids], "skipped": [ids],
-    "summary": paths}.
+    (``_local``), or EnvironmentFailure.
     """
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        fail("--workers", f"must be an integer >= 1, got {workers!r}")
-    if not (isinstance(connect_timeout, (int, float)) and 0 < connect_timeout <= 3600):
-        fail("--scheduler-timeout", f"must be seconds in (0, 3600], got {connect_timeout!r}")
+    _check_options(workers, connect_timeout)
     check_output_path(Path(out), "--out", spec.path)
     out = Path(out).absolute()
     _check_out(out)
@@ -200,43 +268,14 @@ def run_sweep(
         client = None
         if scheduler is not None:
             client = stack.enter_context(connect(scheduler, float(connect_timeout)))
-        try:
-            (out / "tasks").mkdir(parents=True, exist_ok=True)
-            stack.enter_context(atomic.output_lock(out, out / LOCK_FILE, holder="sweep"))
-        except OSError as e:
-            raise EnvironmentFailure(
-                f"{out}: cannot create the sweep output ({e.strerror or e})"
-            ) from None
-        for d in (out, out / "tasks"):  # left by interrupted writes of earlier sweeps
-            atomic.clean_temp_files(d)
+        _open_out(stack, out)
         todo = [t for t in spec.tasks if not is_done(t, out)]
         skipped = [t.id for t in spec.tasks if t not in todo]
         if limit is not None:
             todo = todo[: int(limit)]
-        varying = varying_values(spec.tasks)
-        total, computed = len(spec.tasks), []
-        by_id = {t.id: t for t in todo}
-        if progress and todo:
-            where = (
-                f"{len(by_id)} on {min(workers, len(todo))} local workers"
-                if client is None
-                else f"{len(by_id)} on the Dask cluster"
-            )
-            progress(
-                f"sweep {spec.name}: {total} tasks, {len(skipped)} already done, running {where}"
-            )
-
-        def collect(rec: dict) -> None:
-            if rec.get("partial"):  # a worker was interrupted
-                raise KeyboardInterrupt
-            computed.append(rec["id"])
-            if progress:
-                progress(
-                    f"sweep {spec.name}: {len(skipped) + len(computed)}/{total} done: "
-                    f"{task_label(by_id[rec['id']], varying.get(rec['task']['scene']))} "
-                    f"({rec['seconds']:.1f} s)"
-                )
-            checkpoint("sweep-task")
+        total = len(spec.tasks)
+        collect = _Collector(spec, todo, skipped, progress)
+        collect.start(workers, client is not None)
 
         def done() -> int:
             return sum(is_done(t, out) for t in spec.tasks)
@@ -256,4 +295,4 @@ def run_sweep(
                 f"kept in {out / 'tasks'}, summary not written; rerun the same command to "
                 f"compute the rest"
             ) from None
-    return {"computed": computed, "skipped": skipped, "summary": paths}
+    return SweepOutcome(collect.computed, skipped, paths)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import dataclass
 from pathlib import Path
 
 from ... import atomic
@@ -31,6 +32,15 @@ COLUMNS = (
     "rays",
     "seconds",
 )
+
+
+@dataclass(frozen=True)
+class SummaryFiles:
+    """The paths ``write_summary`` wrote."""
+
+    csv: str
+    markdown: str
+    chart: str
 
 
 def gather(spec: SweepSpec, out) -> list[dict]:
@@ -86,7 +96,7 @@ def _fmt(v) -> str:
     return str(v)
 
 
-def write_summary(spec: SweepSpec, out) -> dict:
+def write_summary(spec: SweepSpec, out) -> SummaryFiles:
     """Write ``summary.csv``, ``summary.md`` and ``error_vs_roughness.png`` (atomically) from
     the complete task JSONs present; returns their paths."""
     out = Path(out)
@@ -98,7 +108,7 @@ def write_summary(spec: SweepSpec, out) -> dict:
         ) from None
 
 
-def _write_summary(spec: SweepSpec, out: Path) -> dict:
+def _write_summary(spec: SweepSpec, out: Path) -> SummaryFiles:
     recs = gather(spec, out)
     rows = summary_table(recs)
     buf = io.StringIO()
@@ -129,11 +139,9 @@ def _write_summary(spec: SweepSpec, out: Path) -> dict:
     atomic.write_text(out / "summary.md", "\n".join(md) + "\n")
     chart = out / "error_vs_roughness.png"
     _chart(rows, chart, spec.name)
-    return {
-        "csv": str(out / "summary.csv"),
-        "markdown": str(out / "summary.md"),
-        "chart": str(chart),
-    }
+    return SummaryFiles(
+        csv=str(out / "summary.csv"), markdown=str(out / "summary.md"), chart=str(chart)
+    )
 
 
 def _chart(rows: list[dict], path: Path, title: str) -> None:

@@ -46,6 +46,58 @@ def _disk_model_density(fit: DiskFit, wo: np.ndarray, projection: str, n: int = 
     return U, V, np.where(inside & (wi[..., 2] > 0), d, 0.0)
 
 
+def _disk_panel(p, fit, wo, uv, projection: str) -> None:
+    """One projection's view: the half vectors ``uv`` as points, contours of ``fit``'s density,
+    the unit disk, its centre and the mirror point, and the title."""
+    pv = pyvista()
+    c = an.disk_centre(wo)
+    p.add_mesh(
+        pv.PolyData(np.column_stack([uv, np.zeros(len(uv))])),
+        color="black",
+        point_size=3,
+        render_points_as_spheres=False,
+    )
+    U, V, d = _disk_model_density(fit, wo, projection)
+    img = pv.StructuredGrid(U, V, np.zeros_like(U))
+    img.point_data["density"] = d.ravel(order="F")
+    top = float(d.max())
+    for frac, colour in zip(CONTOUR_LEVELS, CONTOUR_COLOURS):
+        cont = img.contour(isosurfaces=[frac * top], scalars="density") if top > 0 else None
+        if cont is not None and cont.n_points:
+            p.add_mesh(cont, color=colour, line_width=3)
+    p.add_mesh(
+        pv.Circle(radius=1.0, resolution=200).translate((c[0], c[1], 0)).extract_feature_edges(),
+        color="#555555",
+        line_width=2,
+    )
+    for point, colour in (((c[0], c[1], 0.0), "#1f57c4"), ((0.0, 0.0, 0.0), "#d62728")):
+        p.add_mesh(
+            pv.PolyData(np.array([point])),
+            color=colour,
+            point_size=14,
+            render_points_as_spheres=True,
+        )
+    where = "retro-reflection" if projection == "scaling" else "wi = n"
+    title(
+        p,
+        f"{projection} projection (Edwards eq. {15 if projection == 'scaling' else 22})"
+        f"\nblue: disk centre ({where})\nred: (u,v) = 0 (mirror)",
+    )
+
+
+def _disk_camera(p) -> None:
+    """Looking down on the disk, in parallel projection, with room below the unit disk for the
+    colour key and the fit's text (lower corners)."""
+    p.view_xy()
+    p.enable_parallel_projection()
+    p.reset_camera()
+    cam = p.camera
+    fx, fy, fz = cam.focal_point
+    px, py, pz = cam.position
+    cam.focal_point, cam.position = (fx, fy - 0.28, fz), (px, py - 0.28, pz)
+    cam.zoom(0.95)
+
+
 def view_disk(
     scene_or_surface,
     theta_o: float = DEFAULT_THETA["disk"],
@@ -74,46 +126,10 @@ def view_disk(
     fit = fit_edwards_disk(wo, uv_o, ev.weight[single], int(rays))
     rng = np.random.default_rng(seed)
     show = rng.permutation(len(h))[: int(points)]
-    pv = pyvista()
     p = plotter((1, 2), window_size, off_screen)
-    c = an.disk_centre(wo)
     for col, projection in enumerate(("scaling", "orthogonal")):
         p.subplot(0, col)
-        uv = an.disk_projection(wo, h[show], projection)
-        p.add_mesh(
-            pv.PolyData(np.column_stack([uv, np.zeros(len(uv))])),
-            color="black",
-            point_size=3,
-            render_points_as_spheres=False,
-        )
-        U, V, d = _disk_model_density(fit, wo, projection)
-        img = pv.StructuredGrid(U, V, np.zeros_like(U))
-        img.point_data["density"] = d.ravel(order="F")
-        top = float(d.max())
-        for frac, colour in zip(CONTOUR_LEVELS, CONTOUR_COLOURS):
-            cont = img.contour(isosurfaces=[frac * top], scalars="density") if top > 0 else None
-            if cont is not None and cont.n_points:
-                p.add_mesh(cont, color=colour, line_width=3)
-        p.add_mesh(
-            pv.Circle(radius=1.0, resolution=200)
-            .translate((c[0], c[1], 0))
-            .extract_feature_edges(),
-            color="#555555",
-            line_width=2,
-        )
-        for point, colour in (((c[0], c[1], 0.0), "#1f57c4"), ((0.0, 0.0, 0.0), "#d62728")):
-            p.add_mesh(
-                pv.PolyData(np.array([point])),
-                color=colour,
-                point_size=14,
-                render_points_as_spheres=True,
-            )
-        where = "retro-reflection" if projection == "scaling" else "wi = n"
-        title(
-            p,
-            f"{projection} projection (Edwards eq. {15 if projection == 'scaling' else 22})"
-            f"\nblue: disk centre ({where})\nred: (u,v) = 0 (mirror)",
-        )
+        _disk_panel(p, fit, wo, an.disk_projection(wo, h[show], projection), projection)
         if col == 1:
             colour_key(
                 p,
@@ -122,15 +138,7 @@ def view_disk(
                     for f, c_ in zip(CONTOUR_LEVELS, CONTOUR_COLOURS)
                 ],
             )
-        p.view_xy()
-        p.enable_parallel_projection()
-        p.reset_camera()
-        # room below the unit disk for the colour key and the fit's text (lower corners)
-        cam = p.camera
-        fx, fy, fz = cam.focal_point
-        px, py, pz = cam.position
-        cam.focal_point, cam.position = (fx, fy - 0.28, fz), (px, py - 0.28, pz)
-        cam.zoom(0.95)
+        _disk_camera(p)
     q = fit.params
     p.subplot(0, 0)
     p.add_text(

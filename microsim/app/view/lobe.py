@@ -96,6 +96,56 @@ def _directions(p, wi: np.ndarray, length: float = 1.25) -> None:
     )
 
 
+def _simulation_panel(p, name, res, bins, model, r_sim, phi, theta_i) -> None:
+    """The simulated lobe (radius ``r_sim``) in ``p``'s current view: coloured by z against
+    ``model``'s bin averages, or by f where there is no model."""
+    sim, se, rays = res.brdf[0], res.stderr[0], int(res.rays[0])
+    if model is None:
+        g = polar_surface(r_sim, bins.theta_centers, phi, _full_circle(sim, bins)[0], "f")
+        p.add_mesh(g, scalars="f", cmap="viridis", scalar_bar_args=scalar_bar("f (1/sr)"))
+        title(
+            p,
+            f"{name}: simulated BRDF\nθi = {theta_i:g}°, {rays} rays (no analytic NDF: no model)",
+        )
+        return
+    single = res.ledger_counts["single"][0]
+    w_mean = res.ledger["single_fresnel"][0] * res.rays[0] / max(single, 1)
+    omega = bins.projected_solid_angle()
+    z = lobe_z(sim, se, model, omega, rays, w_mean, res.counts[0])
+    z_full, _ = _full_circle(z, bins)
+    g = polar_surface(r_sim, bins.theta_centers, phi, np.clip(z_full, -5, 5), "z")
+    p.add_mesh(
+        g,
+        scalars="z",
+        cmap="coolwarm",
+        clim=(-5, 5),
+        smooth_shading=True,
+        scalar_bar_args=scalar_bar(
+            "z = (sim − model)/σ",
+            vertical=False,
+            position_x=0.3,
+            position_y=0.1,
+            width=0.6,
+            height=0.08,
+        ),
+    )
+    title(
+        p,
+        f"{name}: simulation\nθi = {theta_i:g}°, {rays} rays, "
+        f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})\n"
+        f"(σ of bins under {MIN_EVENTS} events: Poisson)",
+    )
+
+
+def _model_panel(p, lobe, caption: str, wi) -> None:
+    """The model's lobe (the mesh ``lobe``) in the second view, linked to the first."""
+    p.subplot(0, 1)
+    p.add_mesh(lobe, color=COLOURS["model"], smooth_shading=True)
+    _directions(p, wi)
+    title(p, f"model: Torrance–Sparrow\n{caption}\n(same bins, same radius scale)")
+    p.link_views()
+
+
 def view_lobe(
     scene_or_surface,
     theta_i: float = DEFAULT_THETA["lobe"],
@@ -119,7 +169,7 @@ def view_lobe(
     sc = resolve(scene_or_surface, material, seed)
     bins = Bins(int(n_theta), int(n_phi), folded=True)
     res = simulate(sc.surface, sc.ior, theta_i, rays=int(rays), bins=bins, seed=int(seed))
-    sim, se = res.brdf[0], res.stderr[0]
+    sim = res.brdf[0]
     cos_o = np.cos(np.radians(bins.theta_centers))[:, None]
     model = None
     if sc.ndf is not None:
@@ -144,42 +194,7 @@ def view_lobe(
         if scale == "linear"
         else "radius = log10(1 + 1000 f·cosθo/peak), 3 decades"
     )
-    if model is not None:
-        single = res.ledger_counts["single"][0]
-        w_mean = res.ledger["single_fresnel"][0] * res.rays[0] / max(single, 1)
-        omega = bins.projected_solid_angle()
-        z = lobe_z(sim, se, model, omega, int(res.rays[0]), w_mean, res.counts[0])
-        z_full, _ = _full_circle(z, bins)
-        g = polar_surface(r_sim, bins.theta_centers, phi, np.clip(z_full, -5, 5), "z")
-        p.add_mesh(
-            g,
-            scalars="z",
-            cmap="coolwarm",
-            clim=(-5, 5),
-            smooth_shading=True,
-            scalar_bar_args=scalar_bar(
-                "z = (sim − model)/σ",
-                vertical=False,
-                position_x=0.3,
-                position_y=0.1,
-                width=0.6,
-                height=0.08,
-            ),
-        )
-        title(
-            p,
-            f"{sc.name}: simulation\nθi = {theta_i:g}°, {int(res.rays[0])} rays, "
-            f"coloured by z\n(clipped to ±5; largest abs(z) = {np.max(np.abs(z)):.1f})\n"
-            f"(σ of bins under {MIN_EVENTS} events: Poisson)",
-        )
-    else:
-        g = polar_surface(r_sim, bins.theta_centers, phi, _full_circle(sim, bins)[0], "f")
-        p.add_mesh(g, scalars="f", cmap="viridis", scalar_bar_args=scalar_bar("f (1/sr)"))
-        title(
-            p,
-            f"{sc.name}: simulated BRDF\nθi = {theta_i:g}°, {int(res.rays[0])} rays "
-            "(no analytic NDF: no model)",
-        )
+    _simulation_panel(p, sc.name, res, bins, model, r_sim, phi, theta_i)
     _directions(p, wi)
     scale_from = "model" if model is not None else "simulation"
     p.add_text(
@@ -193,18 +208,7 @@ def view_lobe(
     )
     side_camera(p, 20.0, -20.0, 1.3)
     if model is not None:
-        p.subplot(0, 1)
         r_mod, _ = _full_circle(_lobe_radius(model * cos_o, peak, scale), bins)
-        p.add_mesh(
-            polar_surface(r_mod, bins.theta_centers, phi),
-            color=COLOURS["model"],
-            smooth_shading=True,
-        )
-        _directions(p, wi)
-        title(
-            p,
-            f"model: Torrance–Sparrow\n{type(sc.ndf).__name__} NDF, {shadow} G\n"
-            "(same bins, same radius scale)",
-        )
-        p.link_views()
+        caption = f"{type(sc.ndf).__name__} NDF, {shadow} G"
+        _model_panel(p, polar_surface(r_mod, bins.theta_centers, phi), caption, wi)
     return p
