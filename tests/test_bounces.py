@@ -31,7 +31,8 @@ from microsim.checkpoints import interrupt_at
 from microsim.errors import UsageError
 from microsim.sim import BLOCK, Bins, Result, fresnel_kernels, simulate, vgroove_kernels
 from microsim.sim.bounces import MAX_BOUNCES, TERMINAL
-from microsim.sim.tracer import Tracer, VGrooveCaster
+from microsim.sim.tracer import Tracer
+from microsim.sim.vgroove_profile import VGrooveCaster
 from microsim.surfaces import gaussian
 
 BINS = Bins(9, 7)
