@@ -304,6 +304,7 @@ def analytic_bounces(
     term, wterm = np.empty(n, dtype=np.int8), np.empty(n)
     order = np.empty(n, dtype=np.int64)
     wo = [np.empty(n) for _ in range(3)]
+    ledger = vgroove_kernels.GrooveChainLedger(status1, weight1, term, wterm, order, *wo)
     vgroove_kernels.analytic_vgroove_bounces(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),
@@ -313,12 +314,7 @@ def analytic_bounces(
         fresnel_kernels.fresnel_material(ior),
         int(chain.limit),
         float(chain.floor),
-        status1,
-        weight1,
-        term,
-        wterm,
-        order,
-        *wo,
+        ledger,
     )
     where = np.full(n, -1, dtype=np.int64)
     g = np.flatnonzero(term <= codes.ESC_4UP)

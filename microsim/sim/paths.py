@@ -10,18 +10,18 @@ cap reached, or a numerically back-facing hit) or ``missed`` (no hit at all: imp
 closed periodic surface). These are the single-bounce paths (``simulate(bounces=1)``, the
 default); module ``bounces`` follows masked and downward paths on to their later bounces.
 
-One interface, ``TracePath.follow(blocks) -> (status, weight, bin)``, chosen once per
-(surface, masking, incidence) by ``choose_path``:
+One interface, ``TracePath.follow(blocks) -> RayOutcome`` (status, weight, bin per ray;
+``ray_columns``), chosen once per (surface, masking, incidence) by ``choose_path``:
 
 - ``AnalyticVGroovePath`` (``masking="analytic"``, V-grooves): no Embree. Every rim lies at
   z = 0, so the groove a falling ray enters decides its facet and the hit follows in closed
-  form (``VGrooveCaster``); masking is the float64 test of ``"exact"``. Same rays, bins and
-  streams as the traced paths, which stay the reference in the tests.
+  form (``vgroove_profile.VGrooveCaster``); masking is the float64 test of ``"exact"``. Same
+  rays, bins and streams as the traced paths, which stay the reference in the tests.
 - ``RotatedIncidencePath`` (``isotropic=True``): each block's incidence azimuth rotated by its
   own ψ_b (``streams.block_rotation``).
 - ``FacetTablePath``: surfaces without azimuth averaging and with no more facets than the
   incidence has rays look up Fresnel weight, mirror direction and bin per hit facet
-  (``facet_table``); only the two ray casts remain per ray.
+  (``facet_tables.facet_table``); only the two ray casts remain per ray.
 - ``TracedPath``: everything else (Embree hit; masking traced, or exact for V-grooves).
 
 V-grooves (``surface.azimuth_average``): each ray gets its own uniformly random groove azimuth
@@ -36,9 +36,10 @@ relative (≪ 0.1 %); on a unit tile of 4000 V-grooves it was measured at +0.1�
 
 Bitwise reproducibility: every per-ray operation is elementwise, in compiled loops that
 evaluate each ray alone (``engine``, ``*_kernels``); Fresnel, whose complex NumPy kernels
-round by array position, is evaluated per block (``fresnel_by_block``) or in real arithmetic.
-So a ray's outcome never depends on the chunk it is traced in. ``trace_events`` is the per-ray
-diagnostic path behind ``ray_events`` (full ``Events``, slower).
+round by array position, is evaluated per block (``events.fresnel_by_block``) or in real
+arithmetic. So a ray's outcome never depends on the chunk it is traced in.
+``events.trace_events`` is the per-ray diagnostic path behind ``ray_events`` (full ``Events``,
+slower).
 Directions are unit vectors in the global frame pointing away from the surface; φi in degrees.
 """
 
@@ -55,7 +56,7 @@ from .ledger import DOWNWARD, LEDGER, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .ray_columns import RayOutcome, analytic_columns, trace_columns, trace_tabled
 from .streams import BLOCK, block_rotation, block_span, chunk_origins, groove_starts
 from .tracer import Tracer
-from .vgroove_profile import VGrooveCaster, casts_primaries
+from .vgroove_profile import GrooveMasking, VGrooveCaster, casts_primaries
 
 __all__ = [
     "SINGLE",
@@ -133,7 +134,7 @@ class TracedPath(TracePath):
     """Embree primary hit; masking traced (``profile`` None) or decided exactly in float64
     (``VGrooveProfile``); groove azimuths per ray when ``azimuth``."""
 
-    def __init__(self, incidence: Incidence, profile, azimuth: bool):
+    def __init__(self, incidence: Incidence, profile: GrooveMasking | None, azimuth: bool):
         super().__init__(incidence)
         self.profile, self.azimuth = profile, azimuth
 
@@ -176,7 +177,7 @@ class RotatedIncidencePath(TracePath):
     the scatter between blocks (``tallies.bin_estimate``), which holds the azimuth-to-azimuth
     scatter of the one surface."""
 
-    def __init__(self, incidence: Incidence, profile):
+    def __init__(self, incidence: Incidence, profile: GrooveMasking | None):
         super().__init__(incidence)
         self.profile = profile
 
@@ -226,15 +227,16 @@ class AnalyticVGroovePath(TracePath):
 
 def choose_path(
     incidence: Incidence,
-    profile,
+    profile: GrooveMasking | None,
     azimuth: bool,
     isotropic: bool = False,
     pool: ThreadPoolExecutor | None = None,
     parts: int = 1,
 ) -> TracePath:
-    """The trace path of ``incidence`` on a surface prepared by ``tracer_for`` (``profile``,
-    ``azimuth``), with ``isotropic`` block rotations or not. A facet table is built here, in
-    ``parts`` facet ranges on ``pool`` (once per incidence, shared by the threads)."""
+    """The trace path of ``incidence`` on a surface prepared by ``tracer_cache.tracer_for``
+    (``profile``, ``azimuth``), with ``isotropic`` block rotations or not. A facet table is
+    built here, in ``parts`` facet ranges on ``pool`` (once per incidence, shared by the
+    threads)."""
     inc = incidence
     if casts_primaries(profile):
         return AnalyticVGroovePath(inc, profile)

@@ -221,16 +221,10 @@ def analytic_columns(
         np.asarray(wi, dtype=np.float64),
         caster.profile,
         fresnel_kernels.fresnel_material(ior),
-        float(phi_i),
-        bins.folded,
-        bins.n_theta,
-        bins.phi_edges,
-        status,
-        weight,
-        where,
-        *wo,
-        _ANALYTIC_TILE(TILE),
-        _ANALYTIC_NEAR(TILE),
+        vgroove_kernels.GrooveBins(float(phi_i), bins.folded, bins.n_theta, bins.phi_edges),
+        (status, weight, where),
+        tuple(wo),
+        (_ANALYTIC_TILE(TILE), _ANALYTIC_NEAR(TILE)),
     )
     if not bins.folded:
         locate_single(bins, status, wo, phi_i, psi, where)
