@@ -19,8 +19,17 @@ from scipy import stats
 from microsim import analytic as an
 from microsim import surfaces as sf
 from microsim.analytic.fresnel import fresnel_real_arithmetic, resolve_material
-from microsim.sim import BLOCK, Bins, paths, ray_events, simulate, streams
-from microsim.sim.tracer import VGrooveCaster
+from microsim.sim import (
+    BLOCK,
+    Bins,
+    paths,
+    ray_columns,
+    ray_events,
+    simulate,
+    streams,
+    tracer_cache,
+)
+from microsim.sim.vgroove_profile import VGrooveCaster
 from microsim.vectors import spherical_deg
 
 AL = resolve_material("aluminium")
@@ -65,13 +74,15 @@ def _ambiguous(caster, lx, origins, psi, wi):
 
 @pytest.mark.parametrize("theta", [0.0, 30.0, 60.0, 80.0, 89.0])
 def test_analytic_path_matches_the_traced_one_ray_by_ray(grooves, theta):
-    exact = paths.tracer_for(grooves, "exact")
-    tracer, caster, _ = paths.tracer_for(grooves, "analytic")
+    exact = tracer_cache.tracer_for(grooves, "exact")
+    tracer, caster, _ = tracer_cache.tracer_for(grooves, "analytic")
     wi, n = spherical_deg(theta, 20.0), 64 * BLOCK
     drawn = [streams.block_origins(tracer, n, b, (7, 0, 0), True) for b in range(n // BLOCK)]
     origins, psi = (np.concatenate(x) for x in zip(*drawn))
-    ref = paths.trace_columns(exact[0], exact[1], wi, 20.0, BINS, origins, psi, AL)
-    got = paths.analytic_columns(caster, wi, 20.0, BINS, origins[:, 0], origins[0, 2], psi, AL)
+    ref = ray_columns.trace_columns(exact[0], exact[1], wi, 20.0, BINS, origins, psi, AL)
+    got = ray_columns.analytic_columns(
+        caster, wi, 20.0, BINS, origins[:, 0], origins[0, 2], psi, AL
+    )
     assert np.all(got[0] != paths.RAY_MISSED) and np.any(got[0] == paths.SINGLE)
     differ = (got[0] != ref[0]) | ~np.isclose(got[1], ref[1], rtol=0, atol=1e-9)
     same_bin = got[2] == ref[2]
@@ -153,7 +164,7 @@ def test_bad_use_raises(grooves):
 
 def test_caster_geometry(grooves):
     """Facet columns reproduce the mesh: rims, normals of the reported triangles, depth."""
-    tracer, caster, _ = paths.tracer_for(grooves, "analytic")
+    tracer, caster, _ = tracer_cache.tracer_for(grooves, "analytic")
     assert isinstance(caster, VGrooveCaster)
     w = 1.0 / 1000
     assert np.allclose(np.diff(caster.x_left), w, rtol=0, atol=1e-12)

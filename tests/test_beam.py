@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from microsim.analytic.fresnel import resolve_material
-from microsim.sim import Bins, Tracer, paths
+from microsim.sim import Bins, Tracer, facet_tables, paths, ray_columns
 from microsim.sim.tracer import ESCAPED, HIT
 from microsim.surfaces import abc, gaussian
 from microsim.vectors import spherical_deg
@@ -20,7 +20,7 @@ SURFACES = {
 
 def _tables(tracer, wi):
     """(facet table with beams cleared, the same table with only the steepness test)."""
-    table = paths.facet_table(tracer, wi, resolve_material("aluminium"), Bins(30, 19), 0.0)
+    table = facet_tables.facet_table(tracer, wi, resolve_material("aluminium"), Bins(30, 19), 0.0)
     wo = table.wo32.astype(np.float64)
     steep = (table.code == paths.SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
     return table, dataclasses.replace(table, clear=steep)
@@ -68,12 +68,12 @@ def test_clearing_beams_changes_no_tally(theta):
     n, (lx, ly) = 200_000, tr.tile
     x = [rng.uniform(-lx / 2, lx / 2, n), rng.uniform(-ly / 2, ly / 2, n)]
     x.append(np.full(n, tr.zmax + tr.top_margin))
-    fast = [a.copy() for a in paths.trace_tabled(tr, table, wi, x)]
-    slow = [a.copy() for a in paths.trace_tabled(tr, steep, wi, x)]
+    fast = [a.copy() for a in ray_columns.trace_tabled(tr, table, wi, x)]
+    slow = [a.copy() for a in ray_columns.trace_tabled(tr, steep, wi, x)]
     for a, b in zip(fast, slow):
         np.testing.assert_array_equal(a, b)
-    m_fast = paths.tabled_masking_rays(tr, table, wi, x)[4]
-    m_slow = paths.tabled_masking_rays(tr, steep, wi, x)[4]
+    m_fast = ray_columns.tabled_masking_rays(tr, table, wi, x).m
+    m_slow = ray_columns.tabled_masking_rays(tr, steep, wi, x).m
     assert m_fast < 0.5 * m_slow
 
 

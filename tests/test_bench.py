@@ -23,7 +23,17 @@ from microsim.app.bench import (
     throughput,
 )
 from microsim.app.bench_report import Bench, Marginal, to_json
-from microsim.sim import BLOCK, Bins, paths, simulate, streams
+from microsim.sim import (
+    BLOCK,
+    Bins,
+    events,
+    facet_tables,
+    paths,
+    ray_columns,
+    simulate,
+    streams,
+    tracer_cache,
+)
 from microsim.sim.tallies import Tally, chunk_tallies
 from microsim.surfaces.surface import flat
 from microsim.vectors import spherical_deg
@@ -55,16 +65,16 @@ def test_fast_paths_equal_the_per_ray_events(rough, theta):
     to rounding (the table evaluates F once per facet, the others once per hit). Rays whose
     primary hit is a float32 edge tie (the float64 grid walk and Embree's float32 test give
     neighbouring facets: ``heightfield_caster``) are left out; they are rare."""
-    tracer, profile, az = paths.tracer_for(rough, "traced")
+    tracer, profile, az = tracer_cache.tracer_for(rough, "traced")
     wi = spherical_deg(theta, 10.0)
     bins = Bins(18, 13)
     starts = np.concatenate(
         [streams.block_origins(tracer, 3 * BLOCK, b, (0, 0, 0), False)[0] for b in range(3)]
     )
-    ev = paths.trace_events(tracer, profile, wi, starts, None, AL, False)
+    ev = events.trace_events(tracer, profile, wi, starts, None, AL, False)
     single = ev.status == paths.SINGLE
     assert single.mean() > 0.5 and np.any(ev.status == paths.MASKED)  # not vacuous
-    table = paths.facet_table(tracer, wi, AL, bins, 10.0)
+    table = facet_tables.facet_table(tracer, wi, AL, bins, 10.0)
     cols = [np.ascontiguousarray(starts[:, k]) for k in range(3)]
     walked = tracer.cast_falling(cols, [float(-c) for c in wi])  # None: Embree casts both
     tie = (
@@ -74,8 +84,8 @@ def test_fast_paths_equal_the_per_ray_events(rough, theta):
     )
     assert tie.mean() < 1e-3
     for status, weight, where in (
-        paths.trace_tabled(tracer, table, wi, starts),
-        paths.trace_columns(tracer, None, wi, 10.0, bins, starts, None, AL),
+        ray_columns.trace_tabled(tracer, table, wi, starts),
+        ray_columns.trace_columns(tracer, None, wi, 10.0, bins, starts, None, AL),
     ):
         assert np.mean(status != ev.status) <= 1e-4  # float32-grazing decisions only
         same = (status == ev.status) & ~tie
@@ -91,12 +101,14 @@ def test_groove_column_path_equals_the_per_ray_events(masking):
     from microsim import analytic as an
     from microsim.surfaces import vgrooves
 
-    tracer, profile, az = paths.tracer_for(vgrooves(64, an.Beckmann(0.4), seed=1), masking)
+    tracer, profile, az = tracer_cache.tracer_for(vgrooves(64, an.Beckmann(0.4), seed=1), masking)
     wi, bins = spherical_deg(60.0, 25.0), Bins(18, 13)
     drawn = [streams.block_origins(tracer, 2 * BLOCK, b, (1, 0, 0), True) for b in range(2)]
     starts, psi = (np.concatenate(x) for x in zip(*drawn))
-    ev = paths.trace_events(tracer, profile, wi, starts, psi, AL, True)
-    status, weight, where = paths.trace_columns(tracer, profile, wi, 25.0, bins, starts, psi, AL)
+    ev = events.trace_events(tracer, profile, wi, starts, psi, AL, True)
+    status, weight, where = ray_columns.trace_columns(
+        tracer, profile, wi, 25.0, bins, starts, psi, AL
+    )
     assert np.mean(status != ev.status) <= 1e-4 and np.any(status == paths.MASKED)
     same = status == ev.status
     assert np.allclose(weight[same], ev.weight[same], rtol=1e-13, atol=0)
@@ -226,7 +238,7 @@ def _tallies(tracer, wi, blocks_per_chunk, n_total, bins, rotate):
 
 
 def test_rotated_incidence_is_reproducible_for_any_chunk(rough):
-    tracer = paths.tracer_for(rough, "traced")[0]
+    tracer = tracer_cache.tracer_for(rough, "traced")[0]
     wi, bins, n = spherical_deg(50.0, 0.0), Bins(10, 7), 3 * BLOCK + 5
     a = _tallies(tracer, wi, 1, n, bins, True)
     b = _tallies(tracer, wi, 3, n, bins, True)
@@ -238,7 +250,7 @@ def test_rotated_incidence_is_reproducible_for_any_chunk(rough):
 @pytest.mark.parametrize("theta", [20.0, 65.0])
 def test_rotated_incidence_keeps_the_mirror_direction_of_a_flat_surface(theta):
     """Bins follow the rotated incidence: all energy F(θi) stays in the mirror bin Δφ = 180°."""
-    tracer = paths.tracer_for(flat(), "traced")[0]
+    tracer = tracer_cache.tracer_for(flat(), "traced")[0]
     bins = Bins(45, 37)
     tallies = _tallies(tracer, spherical_deg(theta, 0.0), 2, 3 * BLOCK, bins, True)
     sw = tallies[0]

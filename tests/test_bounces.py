@@ -31,7 +31,8 @@ from microsim.checkpoints import interrupt_at
 from microsim.errors import UsageError
 from microsim.sim import BLOCK, Bins, Result, fresnel_kernels, simulate, vgroove_kernels
 from microsim.sim.bounces import MAX_BOUNCES, TERMINAL
-from microsim.sim.tracer import Tracer, VGrooveCaster
+from microsim.sim.tracer import Tracer
+from microsim.sim.vgroove_profile import VGrooveCaster
 from microsim.surfaces import gaussian
 
 BINS = Bins(9, 7)
@@ -264,7 +265,8 @@ def test_analytic_chain_is_the_unfolded_geometry_ray_by_ray(tilt, theta):
     mirror = fresnel_kernels.FresnelMaterial(0.0, 0.0, fresnel_kernels.FRESNEL_MIRROR)
     vgroove_kernels.analytic_vgroove_bounces(
         x, 0.0, np.zeros(n), wi, caster.profile, mirror,
-        MAX_BOUNCES, 0.0, status1, weight1, term, wterm, order, *wo,
+        MAX_BOUNCES, 0.0,
+        vgroove_kernels.GrooveChainLedger(status1, weight1, term, wterm, order, *wo),
     )  # fmt: skip
     iv = unfolded_orders(tilt, theta)
     u = x + 0.5

@@ -13,7 +13,16 @@ import pytest
 from support import heightfield_surface, random_heights, vgroove_surface
 
 from microsim import surfaces as sf
-from microsim.sim import BLOCK, Bins, Tracer, paths, simulate
+from microsim.sim import (
+    BLOCK,
+    Bins,
+    Tracer,
+    facet_tables,
+    masking_rays,
+    ray_columns,
+    simulate,
+    tracer_cache,
+)
 from microsim.sim.tracer import HIT
 from microsim.vectors import spherical_deg
 
@@ -146,7 +155,7 @@ def test_simulate_with_the_grid_walk_equals_embree_and_is_reproducible(monkeypat
     for name in ("sum_w", "sum_w2", "counts", "brdf"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert all(np.array_equal(a.ledger[k], b.ledger[k]) for k in a.ledger)
-    monkeypatch.setattr(paths, "GRID_CASTER", False)
+    monkeypatch.setattr(tracer_cache, "GRID_CASTER", False)
     c = simulate(rough, "aluminium", angles, threads=2, chunk=BLOCK, **kw)
     rays = kw["rays"]
     for k in ("single", "masked", "downward", "unresolved", "missed"):
@@ -166,16 +175,16 @@ def test_fused_walk_and_lookups_give_the_bits_of_walk_then_lookups(theta, phi):
 
     tracer = Tracer(_rough(seed=7), grid=True)
     wi = spherical_deg(theta, phi)
-    table = paths.facet_table(tracer, wi, resolve_material("aluminium"), Bins(18, 12), phi)
+    table = facet_tables.facet_table(tracer, wi, resolve_material("aluminium"), Bins(18, 12), phi)
     x = _starts(tracer, 3 * 1024 + 17, seed=3)  # several tiles and a short last one
     down = [float(-c) for c in wi]
     assert tracer.grid_walk(x, down) is not None
-    fused = paths.tabled_masking_rays(tracer, table, wi, x)
-    fused = [a.copy() for a in fused[:3]], _masking_rays(fused[3], fused[4])
+    fused = ray_columns.tabled_masking_rays(tracer, table, wi, x)
+    fused = [a.copy() for a in fused.outcome], _masking_rays(fused.mask, fused.m)
     hs, prim, p = tracer.cast_falling(x, down)
     n = len(x[0])
     out = np.empty(n, np.int8), np.empty(n), np.empty(n, np.int64)
-    mask = paths.MaskingRays.work(n)
+    mask = masking_rays.MaskingRays.work(n)
     m = primary.tabled_primary(
         segments.WalkResult(hs, prim, *p),
         primary.FacetColumns(
@@ -183,7 +192,7 @@ def test_fused_walk_and_lookups_give_the_bits_of_walk_then_lookups(theta, phi):
             table.clear,
         ),
         tracer.horizon,
-        paths._segment_geometry(tracer),
+        masking_rays.segment_geometry(tracer),
         primary.PrimaryLedger(*out),
         mask.kernel_args(),
     )  # fmt: skip

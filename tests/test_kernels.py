@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.sim import BLOCK, Bins, paths, streams
+from microsim.sim import BLOCK, Bins, facet_tables, paths, streams, tracer_cache
+from microsim.sim.horizon_bounds import CLEAR_MARGIN
 from microsim.sim.scratch import WorkArray, WorkColumns
 from microsim.sim.tallies import Tally, split_tallies
-from microsim.sim.tracer import CLEAR_MARGIN, Tracer
+from microsim.sim.tracer import Tracer
 from microsim.surfaces.surface import flat
 from microsim.vectors import spherical_deg
 
@@ -105,7 +106,7 @@ def _grooves(n=64):
 @pytest.mark.parametrize("azimuth", [False, True])
 @pytest.mark.parametrize("origins", ["stratified", "independent"])
 def test_block_rays_do_not_depend_on_the_chunking(azimuth, origins, surface):
-    tracer = paths.tracer_for(surface(), "traced")[0]
+    tracer = tracer_cache.tracer_for(surface(), "traced")[0]
     n = 5 * BLOCK + 11
     (x, y, z), psi = (
         np.copy(a) if a is not None else None
@@ -124,7 +125,7 @@ def test_block_rays_do_not_depend_on_the_chunking(azimuth, origins, surface):
 def test_groove_starts_are_the_chunk_origins_without_y(surface):
     """``streams.groove_starts`` (η skipped by advancing the generator) gives x and ψ bitwise
     as ``chunk_origins`` does, for any grouping of blocks and a short last block."""
-    tracer = paths.tracer_for(surface(), "traced")[0]
+    tracer = tracer_cache.tracer_for(surface(), "traced")[0]
     n = 5 * BLOCK + 11
     (x, _, _), psi = streams.chunk_origins(tracer, n, range(6), (3, 1, 2), True)
     x, psi = x.copy(), psi.copy()
@@ -140,7 +141,7 @@ def test_vgroove_strata_sweep_the_grooves_in_order_of_tilt_and_psi_by_row():
     — one stratum — to the next along the row),
     every groove gets its share of the rays (within one per row), and ψ lies in the row's
     own stratum [row, row + 1)·2π/rows."""
-    tracer = paths.tracer_for(_grooves(), "traced")[0]
+    tracer = tracer_cache.tracer_for(_grooves(), "traced")[0]
     rims, width = tracer.groove_strata
     g = len(rims)
     assert g == 64 and np.all(np.diff(np.sort(rims)) > 0)
@@ -168,7 +169,7 @@ def test_stratified_origins_lie_in_their_own_strata():
     """Rays 2k and 2k + 1 lie in one stratum: ray r's origin is q = (2k + w·ξ)/N·rows of the
     row-major sweep, k = ⌊r/2⌋, w = min(2, N − 2k), ξ ∈ [0, 1), its y jittered inside row ⌊q⌋
     (η ∈ [0, 1)); N odd leaves the last ray a stratum of width 1/N to itself."""
-    tracer = paths.tracer_for(flat(), "traced")[0]
+    tracer = tracer_cache.tracer_for(flat(), "traced")[0]
     lx, ly = tracer.tile
     n = 3 * BLOCK + 5
     rows = max(1, int(round(np.sqrt(n * ly / lx))))
@@ -240,7 +241,7 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
         surely_escapes = staticmethod(lambda *d: Tracer.surely_escapes(Facets, *d))
 
     wi, bins = spherical_deg(55.0, 20.0), Bins(18, 13)
-    table = paths.facet_table(Facets, wi, ior, bins, 20.0)
+    table = facet_tables.facet_table(Facets, wi, ior, bins, 20.0)
     c = n @ wi
     wo = 2 * c[:, None] * n - wi
     assert np.array_equal(table.wo32, wo.astype(np.float32))

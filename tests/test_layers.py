@@ -150,12 +150,13 @@ SIM_LAYERS = [
     (
         "ray engine",
         ("engine", "engine.horizon", "engine.beam", "engine.primary", "engine.segments")
-        + ("tracer",)
+        + ("tracer", "periodic_walk", "embree_backends", "horizon_bounds", "vgroove_profile")
         + ("heightfield_caster", "embree_packets"),
     ),
     (
         "estimator",
-        ("streams", "origin_kernels", "fresnel_kernels", "vgroove_kernels", "paths")
+        ("streams", "origin_kernels", "fresnel_kernels", "vgroove_kernels", "tracer_cache")
+        + ("ray_bins", "masking_rays", "facet_tables", "ray_columns", "events", "paths")
         + ("bounce_kernels", "bounces", "tally_kernels", "tallies", "arguments", "cluster")
         + ("experiment", "estimator", "auto"),
     ),

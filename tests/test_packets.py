@@ -170,12 +170,12 @@ def test_tracer_backends_agree_on_vgroove_walks_through_the_tile_walls():
 def test_simulate_with_packets_equals_embreex_and_is_reproducible(monkeypatch):
     """Same simulate run with the packet and the embreex backends: identical ledgers, bins
     equal up to edge ties; with packets, bitwise identical for 1/2 threads and chunk sizes."""
-    from microsim.sim import BLOCK, Bins, Tracer, paths, simulate
+    from microsim.sim import BLOCK, Bins, Tracer, simulate, tracer_cache
 
     # simulate builds Tracer(surface): make its default "auto" (packets) for this test, and
     # keep the primary rays on Embree (not the heightfield grid walk)
     monkeypatch.setitem(Tracer.__init__.__kwdefaults__, "backend", "auto")
-    monkeypatch.setattr(paths, "GRID_CASTER", False)
+    monkeypatch.setattr(tracer_cache, "GRID_CASTER", False)
     rough = heightfield_surface(random_heights(sigma=0.03, seed=4), 1 / 64)
     kw = dict(rays=2 * BLOCK + 77, bins=Bins(18, 13), seed=3)
     a = simulate(rough, "aluminium", [25.0, 70.0], threads=1, chunk=BLOCK, **kw)

@@ -249,18 +249,18 @@ def test_vgroove_masking_rays_cleared_by_their_exact_margin_escape_when_traced(t
     the same with the test switched off (every skipped ray, traced, escapes), and the test
     skips most of the masking rays (not vacuous)."""
     from microsim import analytic as an
-    from microsim.sim import paths
-    from microsim.sim import tracer as tracer_module
+    from microsim.sim import masking_rays, ray_columns
     from microsim.sim.streams import chunk_origins
+    from microsim.sim.vgroove_profile import NO_GROOVES
     from microsim.surfaces import vgrooves
 
     s = vgrooves(400, an.Beckmann(0.5), seed=2)
     tr = Tracer(s, backend="auto")
     assert len(tr.groove_clear[0]) == len(tr.faces)
     traced = []
-    real_trace = paths.MaskingRays.trace
+    real_trace = masking_rays.MaskingRays.trace
     monkeypatch.setattr(
-        paths.MaskingRays,
+        masking_rays.MaskingRays,
         "trace",
         lambda self, tracer, m, status: traced.append(m) or real_trace(self, tracer, m, status),
     )
@@ -268,10 +268,10 @@ def test_vgroove_masking_rays_cleared_by_their_exact_margin_escape_when_traced(t
     x, psi = chunk_origins(tr, n, range(10), (1, 0, int(theta)), True)
     wi = spherical_deg(theta, 0.0)
     ior, bins = resolve_material("aluminium"), Bins(30, 37)
-    on = paths.trace_columns(tr, None, wi, 0.0, bins, x, psi, ior)
+    on = ray_columns.trace_columns(tr, None, wi, 0.0, bins, x, psi, ior)
     on = [a.copy() for a in on]
-    tr.groove_clear = tracer_module._NO_GROOVES
-    off = paths.trace_columns(tr, None, wi, 0.0, bins, x, psi, ior)
+    tr.groove_clear = NO_GROOVES
+    off = ray_columns.trace_columns(tr, None, wi, 0.0, bins, x, psi, ior)
     for a, b in zip(on, off):
         np.testing.assert_array_equal(a, b)
     assert traced[0] < 0.5 * traced[1] and np.any(on[0] == 1)  # skipped most; some masked

@@ -8,7 +8,7 @@ import numpy as np
 from support import heightfield_surface, random_heights
 
 from microsim.sim import Bins, simulate
-from microsim.sim.paths import tracer_for
+from microsim.sim.tracer_cache import tracer_for
 
 
 def _surface(seed=3):
@@ -55,25 +55,27 @@ def test_facet_tables_are_kept_per_incidence_read_only_and_bounded():
     import pytest
 
     from microsim.analytic.fresnel import resolve_material
-    from microsim.sim import paths
+    from microsim.sim import facet_tables
     from microsim.vectors import spherical_deg
 
     s = _surface()
     tr = tracer_for(s, "traced", s.fingerprint())[0]
     al, bins = resolve_material("aluminium"), Bins(9, 7)
-    a = paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0)
-    assert paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0) is a
+    a = facet_tables.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0)
+    assert facet_tables.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0) is a
     with pytest.raises(ValueError):
         a.weight[0] = 1.0
     others = [
-        paths.facet_table(tr, spherical_deg(31.0, 0.0), al, bins, 0.0),
-        paths.facet_table(tr, spherical_deg(30.0, 0.0), resolve_material("methanol"), bins, 0.0),
-        paths.facet_table(tr, spherical_deg(30.0, 0.0), al, Bins(9, 9), 0.0),
-        paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 10.0),
+        facet_tables.facet_table(tr, spherical_deg(31.0, 0.0), al, bins, 0.0),
+        facet_tables.facet_table(
+            tr, spherical_deg(30.0, 0.0), resolve_material("methanol"), bins, 0.0
+        ),
+        facet_tables.facet_table(tr, spherical_deg(30.0, 0.0), al, Bins(9, 9), 0.0),
+        facet_tables.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 10.0),
     ]
     assert all(t is not a for t in others)
-    assert len(tr.facet_tables) == paths.TABLES_KEPT
-    assert paths.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0) is not a  # dropped
+    assert len(tr.facet_tables) == facet_tables.TABLES_KEPT
+    assert facet_tables.facet_table(tr, spherical_deg(30.0, 0.0), al, bins, 0.0) is not a  # dropped
     kw = dict(rays=20_000, bins=Bins(9, 7), seed=4)
     first, again = simulate(s, "aluminium", 30.0, **kw), simulate(s, "aluminium", 30.0, **kw)
     fresh = simulate(_surface(), "aluminium", 30.0, **kw)

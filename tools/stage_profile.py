@@ -16,16 +16,24 @@ import numpy as np
 
 from microsim.analytic.fresnel import resolve_material
 from microsim.app.bench import BenchConfig, _bins, _surface, warm_up
-from microsim.sim import paths, simulate, tallies
+from microsim.sim import (
+    facet_tables,
+    paths,
+    ray_columns,
+    simulate,
+    tallies,
+    tracer_cache,
+)
 from microsim.sim.engine import primary, segments
+from microsim.sim.masking_rays import MaskingRays, segment_geometry
 from microsim.sim.streams import chunk_origins
 from microsim.vectors import spherical_deg
 
 THETA = 30.0
 STAGES = {
     "ray origins": (paths, "chunk_origins"),
-    "primary walk, look-ups, masking starts, horizon test": (paths, "tabled_masking_rays"),
-    "masking rays through Embree": (paths.MaskingRays, "trace"),
+    "primary walk, look-ups, masking starts, horizon test": (ray_columns, "tabled_masking_rays"),
+    "masking rays through Embree": (MaskingRays, "trace"),
     "tallies": (tallies, "split_tallies"),
 }
 
@@ -68,8 +76,8 @@ def fused_split(tracer, table, wi) -> dict:
         table.clear,
     )  # fmt: skip
     out = primary.PrimaryLedger(np.empty(n, np.int8), np.empty(n), np.empty(n, np.int64))
-    mask = paths.MaskingRays.work(n)
-    geo, grid = paths._segment_geometry(tracer), tracer.grid_walk(x, down)
+    mask = MaskingRays.work(n)
+    geo, grid = segment_geometry(tracer), tracer.grid_walk(x, down)
     hs, prim, p = tracer.cast_falling(x, down)
     hs, prim, p = hs.copy(), prim.copy(), [c.copy() for c in p]
     walk = segments.WalkResult(hs, prim, *p)
@@ -123,8 +131,8 @@ def masking_rays(tracer, table, steep, wi, n: int = 2**20) -> dict:
     x = [rng.uniform(-lx / 2, lx / 2, n), rng.uniform(-ly / 2, ly / 2, n)]
     x.append(np.full(n, tracer.zmax + tracer.top_margin))
     per_ray = dataclasses.replace(table, clear=steep)
-    without_beams = paths.tabled_masking_rays(tracer, per_ray, wi, x)[4] / n
-    status, _, _, mask, m = paths.tabled_masking_rays(tracer, table, wi, x)
+    without_beams = ray_columns.tabled_masking_rays(tracer, per_ray, wi, x).m / n
+    (status, _, _), mask, m = ray_columns.tabled_masking_rays(tracer, table, wi, x)
     d = np.stack([c[:m] for c in mask.d], 1)
     start_z = mask.start[2][:m].copy()
     mask.trace(tracer, m, status)
@@ -152,16 +160,18 @@ def main() -> None:
     for label, ns in per.items():
         print(f"  {label}: {ns:.1f} ns")
     print(f"  the rest (thread pool, per-call set-up): {total - sum(per.values()):.1f} ns")
-    tracer, _, _ = paths.tracer_for(surface, "traced", surface.fingerprint())
+    tracer, _, _ = tracer_cache.tracer_for(surface, "traced", surface.fingerprint())
     wi = spherical_deg(THETA, 0.0)
-    table = paths.facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
+    table = facet_tables.facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
     times, candidates = fused_split(tracer, table, wi)
     print("the fused primary kernel on one chunk, ns per ray:")
     for label, ns in times.items():
         print(f"  {label}: {ns:.1f}")
     print(f"  share of rays that need the horizon test: {candidates:.3f}")
     print("beams cleared per facet:")
-    steep = paths.steep_facets(tracer, table.code, table.wo32)  # the clear flags before beams
+    steep = facet_tables.steep_facets(
+        tracer, table.code, table.wo32
+    )  # the clear flags before beams
     for label, value in beams(tracer, table, steep).items():
         print(f"  {label}: {value}")
     print("masking rays traced by Embree:")

@@ -129,10 +129,11 @@ origins, the pipeline's per-ray arrays and the masking rays; measured 274 at its
 def _ray_set(tracer, wi: np.ndarray, rays: int):
     """float32 (origins, directions) of the primary rays (one shared direction) and of the
     masking rays the pipeline casts for them: set up by the pipeline's own compiled pass
-    (``paths.tabled_masking_rays``: its starts, offsets and directions, none for the rays it
+    (``ray_columns.tabled_masking_rays``: its starts, offsets and directions, none for the rays it
     clears without tracing)."""
     from microsim.analytic.fresnel import resolve_material
-    from microsim.sim.paths import facet_table, tabled_masking_rays
+    from microsim.sim.facet_tables import facet_table
+    from microsim.sim.ray_columns import tabled_masking_rays
     from microsim.sim.streams import BLOCK, block_origins
 
     nblk = -(-rays // BLOCK)
@@ -148,7 +149,7 @@ def _ray_set(tracer, wi: np.ndarray, rays: int):
 def _time_raw(tracer, primary, masking, threads: int) -> float:
     """Wall seconds Embree needs for both ray sets in BATCH-sized calls on ``threads``."""
     (po, pd), (mo, md) = primary, masking
-    scene = tracer._scene
+    scene = tracer.scene.embree
 
     def prim_batch(a):
         scene.run(po[a : a + BATCH], pd, output=1)
@@ -376,7 +377,7 @@ def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
 def fixed_cost(cfg: BenchConfig = BenchConfig(), repeat: int = 3) -> FixedCost:
     """Wall time of a ``simulate`` call of one block of rays on the bench surface: the first
     call (Embree scene + BVH built) and the best of ``repeat`` further calls on the same
-    surface object, whose prepared tracer is reused (``sim.paths.tracer_for``), in seconds."""
+    surface object, whose prepared tracer is reused (``tracer_cache.tracer_for``), in seconds."""
     from microsim.sim import BLOCK, simulate
 
     fresh = _surface(cfg)  # a new object: nothing to reuse yet

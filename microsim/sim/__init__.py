@@ -22,12 +22,14 @@ walk and its compiled per-ray loops), the estimator's compiled loops (``bin_kern
 from .bins import Bins
 from .cluster import SchedulerLost
 from .estimator import estimate, ray_events, simulate
+from .events import Events
 from .experiment import Estimator, Execution, Experiment
-from .paths import LEDGER, Events
+from .paths import LEDGER
 from .progress import RaysDone
 from .result import InPlane, Result
 from .streams import BLOCK
-from .tracer import Tracer, VGrooveProfile
+from .tracer import Tracer
+from .vgroove_profile import VGrooveProfile
 
 __all__ = [
     "simulate",

@@ -1,6 +1,34 @@
-"""One step of the Embree bounce chain (``bounces.trace_bounces``): per live path, weight
-w ← w·F(c), c = −d·n, mirror direction wo = d + 2c·n, the terminal class of a path that ends
-and the next ray (on the facet plane, eps above it) of one that goes on."""
+"""One step of the Embree bounce chain (``bounces.trace_bounces``, ``bounce_step``): per live
+path, weight w ← w·F(c), c = −d·n, mirror direction wo = d + 2c·n, the terminal class of a
+path that ends and the next ray (on the facet plane, eps above it) of one that goes on.
+
+Live path i (global index ``live[i]``, carried weight ``w[i]``) was traced along direction j
+(j = 0 if the directions are shared, else i) with walk outcome (status, prim, point)[i]
+(``Tracer.trace_columns``); the ray traced at step b is the primary ray (b = 1) or the ray
+reflected at bounce b − 1. Per path:
+
+* ESCAPED at b ≥ 2: the path leaves after order b − 1 (``term`` ESC_*, ``wterm`` = w, its
+  direction listed in ``Escapes`` for binning by the caller);
+* no hit (MISSED, UNRESOLVED; ESCAPED at b = 1): PATH_MISSED / PATH_UNRESOLVED, weight w;
+* a hit at b > limit: CUT_BOUNCES (the path would go on; weight w);
+* a back-facing hit (c = −d·n ≤ 0): PATH_UNRESOLVED;
+* otherwise bounce b: w ← w·F(c) (``fresnel_weight``), wo = d + 2c·n (the mirror direction
+  2(wi·n)n − wi with wi = −d); below the weight floor the path is cut (CUT_WEIGHT, weight
+  w·F); a downward wo at the last bounce (b = limit) is cut (CUT_BOUNCES: it must meet the
+  surface again); else the reflected ray is set up for the next step: it starts at
+  p − (p·n − lift)·n (on the facet plane, eps above it; lift = n·v0 + eps) wrapped into the
+  tile, along wo (and its float32 copy), compacted into ``NextRays``.
+
+The first-bounce ledger of the same rays (``status1``, ``weight1``: the classes and Fresnel
+weights of ``paths.LEDGER``, as the single-bounce paths give them) is written at b = 1
+(SINGLE provisionally for a rising wo) and settled at b = 2 (MASKED if the reflected ray met
+the surface, RAY_UNRESOLVED / RAY_MISSED if its walk failed).
+
+With a ``FirstBounceTable`` in use, the incidence's facet table's Fresnel weights and bins
+per facet serve the first bounce (the values the per-ray arithmetic gives, bitwise: same
+Fresnel kernel, same float64 mirror direction): its facet is kept in ``first_facet`` and a
+path escaping after order 1 gets ``where`` = its facet's bin there instead of being listed in
+``Escapes``."""
 
 from __future__ import annotations
 
@@ -24,7 +52,7 @@ from .engine.codes import (
     UNRESOLVED,
     order_class,
 )
-from .engine.jit import compiled
+from .engine.jit import compiled, inlined
 from .fresnel_kernels import fresnel_weight
 
 
@@ -87,7 +115,7 @@ class NextRays(NamedTuple):
 
 
 class FirstBounceTable(NamedTuple):
-    """``paths.FacetTable``'s per-facet Fresnel ``weight`` and ``bin`` for the first bounce
+    """``facet_tables.FacetTable``'s per-facet Fresnel ``weight`` and ``bin`` for the first bounce
     (``use`` False: not used, placeholder arrays), and ``first_facet`` per primary ray, the
     facet of its first bounce."""
 
@@ -113,96 +141,45 @@ def bounce_step(
     nxt,
     table,
 ):
-    """One step of the bounce chain (``bounces.trace_bounces``) over the live paths.
-
-    Live path i (global index ``live[i]``, carried weight ``w[i]``) was traced along
-    (dx, dy, dz)[j] (j = 0 if ``shared`` else i) with walk outcome ``hs[i]``, ``prim[i]``,
-    point (px, py, pz)[i] (``Tracer.trace_columns``); the ray traced at step ``b`` is the
-    primary ray (b = 1) or the ray reflected at bounce b − 1. Per path:
-
-    * ESCAPED at b ≥ 2: the path leaves after order b − 1 (``term`` ESC_*, ``wterm`` = w,
-      its direction written to ``esc``/``edx``/``edy``/``edz`` for binning by the caller);
-    * no hit (MISSED, UNRESOLVED; ESCAPED at b = 1): PATH_MISSED / PATH_UNRESOLVED, weight w;
-    * a hit at b > ``limit``: CUT_BOUNCES (the path would go on; weight w);
-    * a back-facing hit (c = −d·n ≤ 0): PATH_UNRESOLVED;
-    * otherwise bounce b: w ← w·F(c) (``fresnel_weight``), wo = d + 2c·n (the mirror
-      direction 2(wi·n)n − wi with wi = −d); below the ``floor`` the path is cut
-      (CUT_WEIGHT, weight w·F); a downward wo at the last bounce (b = limit) is cut
-      (CUT_BOUNCES: it must meet the surface again); else the reflected ray is set up for the
-      next step: it starts at p − (p·n − lift)·n (on the facet plane, eps above it; ``lift``
-      = n·v0 + eps) wrapped into the tile, along wo (float32 copy ``nd32``), compacted to
-      ``nlive``/``sx``…``nw``.
-
-    The first-bounce ledger of the same rays (``status1``, ``weight1``: the classes and
-    Fresnel weights of ``paths.LEDGER``, as the single-bounce paths give them) is written at
-    b = 1 (SINGLE provisionally for a rising wo) and settled at b = 2 (MASKED if the reflected
-    ray met the surface, RAY_UNRESOLVED / RAY_MISSED if its walk failed).
-
-    ``use_table``: the incidence's ``paths.FacetTable`` Fresnel weights ``tab_weight`` and
-    bins ``tab_bin`` per facet serve the first bounce (the values the per-ray arithmetic
-    gives, bitwise: same Fresnel kernel, same float64 mirror direction): its facet is kept in
-    ``first_facet`` and a path escaping after order 1 gets ``where`` = its facet's bin here
-    instead of being listed in ``esc``. Returns (continuing paths m, escapes e).
+    """One step ``b`` of the bounce chain (``bounces.trace_bounces``) over the live paths
+    (module docstring): returns (continuing paths m, escapes e).
 
     Arguments: step ``b``, bounce ``limit``, weight ``floor``, the live paths' global indices
-    ``live`` and weights ``w``; ``walk`` (``engine.segments.WalkResult`` of the traced
-    rays: hs, prim, px, py, pz), ``rays`` (``RayDirections``), ``facets``
-    (``FacetPlanes``: nx, ny, nz, lift, hx, hy),
-    ``material`` (``fresnel_kernels.FresnelMaterial``), ``ledger`` (``PathLedger``,
-    written), ``escapes`` (``Escapes``: esc, edx, edy, edz, written), ``nxt``
-    (``NextRays``: nlive, sx…nw, written) and ``table`` (``FirstBounceTable``: use_table,
-    tab_weight, tab_bin, first_facet)."""
+    ``live`` and weights ``w``; ``walk`` (``engine.segments.WalkResult`` of the rays traced
+    at this step), ``rays`` (``RayDirections``), ``facets`` (``FacetPlanes``), ``material``
+    (``fresnel_kernels.FresnelMaterial``), ``ledger`` (``PathLedger``, written),
+    ``escapes`` (``Escapes``, written), ``nxt`` (``NextRays``, written) and ``table``
+    (``FirstBounceTable``)."""
     hs, prim, px, py, pz = walk
     dx, dy, dz, shared = rays
     nx, ny, nz, lift, hx, hy = facets
     n2, k2, fresnel_mode = material
-    status1, weight1, term, wterm, where = ledger
-    esc, edx, edy, edz = escapes
-    nlive, sx, sy, sz, ndx, ndy, ndz, nd32, nw = nxt
-    use_table, tab_weight, tab_bin, first_facet = table
+    status1, weight1 = ledger.status1, ledger.weight1
+    use_table, tab_weight, first_facet = table.use, table.weight, table.first_facet
     m = 0
     e = 0
     for i in range(len(live)):
         g = live[i]
         j = 0 if shared else i
         h = hs[i]
-        if b == 2 and status1[g] == SINGLE:  # the first reflected ray's outcome
-            if h == HIT:
-                status1[g] = MASKED
-            elif h == UNRESOLVED:
-                status1[g] = RAY_UNRESOLVED
-            elif h == MISSED:
-                status1[g] = RAY_MISSED
+        if b == 2:
+            _settle_first_ray(status1, g, h)
         if h == ESCAPED and b >= 2:
-            term[g] = order_class(b - 1)
-            wterm[g] = w[i]
-            if use_table and b == 2:
-                where[g] = tab_bin[first_facet[g]]
-                continue
-            esc[e] = g
-            edx[e], edy[e], edz[e] = dx[j], dy[j], dz[j]
-            e += 1
+            e = _escape(ledger, escapes, table, b, g, w[i], (dx[j], dy[j], dz[j]), e)
             continue
         if h != HIT:
-            term[g] = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
-            wterm[g] = w[i]
-            if b == 1:
-                status1[g] = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
-                weight1[g] = 0.0
+            walk_failed = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
+            path_failed = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
+            _end_unresolved(ledger, b, g, w[i], path_failed, walk_failed)
             continue
         if b > limit:
-            term[g] = CUT_BOUNCES
-            wterm[g] = w[i]
+            _end_path(ledger, g, CUT_BOUNCES, w[i])
             continue
         f = prim[i]
         a0, a1, a2 = nx[f], ny[f], nz[f]
         c = -(dx[j] * a0 + dy[j] * a1 + dz[j] * a2)
         if c <= 0.0:  # back-facing
-            term[g] = PATH_UNRESOLVED
-            wterm[g] = w[i]
-            if b == 1:
-                status1[g] = RAY_UNRESOLVED
-                weight1[g] = 0.0
+            _end_unresolved(ledger, b, g, w[i], PATH_UNRESOLVED, RAY_UNRESOLVED)
             continue
         if use_table and b == 1:
             fw = tab_weight[f]
@@ -217,25 +194,82 @@ def bounce_step(
             weight1[g] = fw
             status1[g] = SINGLE if oz > 0.0 else DOWNWARD
         if wn < floor:
-            term[g] = CUT_WEIGHT
-            wterm[g] = wn
+            _end_path(ledger, g, CUT_WEIGHT, wn)
             continue
         if b == limit and not oz > 0.0:
-            term[g] = CUT_BOUNCES
-            wterm[g] = wn
+            _end_path(ledger, g, CUT_BOUNCES, wn)
             continue
-        off = px[i] * a0 + py[i] * a1 + pz[i] * a2 - lift[f]
-        x, y, z = px[i] - off * a0, py[i] - off * a1, pz[i] - off * a2
-        if x < -hx or x >= hx:  # into the tile
-            x = (x + hx) % (2.0 * hx) - hx
-        if y < -hy or y >= hy:
-            y = (y + hy) % (2.0 * hy) - hy
-        nlive[m] = g
-        sx[m], sy[m], sz[m] = x, y, z
-        ndx[m], ndy[m], ndz[m] = ox, oy, oz
-        nd32[m, 0] = np.float32(ox)
-        nd32[m, 1] = np.float32(oy)
-        nd32[m, 2] = np.float32(oz)
-        nw[m] = wn
+        p, n, o = (px[i], py[i], pz[i]), (a0, a1, a2), (ox, oy, oz)
+        _continue_path(nxt, m, g, p, n, lift[f], (hx, hy), o, wn)
         m += 1
     return m, e
+
+
+@inlined
+def _end_path(ledger, g, path_class, w):
+    """End path ``g`` as ``path_class`` carrying weight ``w``."""
+    ledger.term[g] = path_class
+    ledger.wterm[g] = w
+
+
+@inlined
+def _escape(ledger, escapes, table, b, g, w, d, e):
+    """Path ``g`` escapes after order b − 1 with weight ``w`` along ``d``: binned here from
+    the first bounce's facet at b = 2 with a table in use, else listed in ``escapes`` at
+    slot ``e``. Returns the number of escapes listed."""
+    _end_path(ledger, g, order_class(b - 1), w)
+    if table.use and b == 2:
+        ledger.where[g] = table.bin[table.first_facet[g]]
+        return e
+    escapes.index[e] = g
+    escapes.dx[e], escapes.dy[e], escapes.dz[e] = d
+    return e + 1
+
+
+@inlined
+def _settle_first_ray(status1, g, h):
+    """At step 2, the first reflected ray's walk outcome ``h`` settles the provisional
+    SINGLE of path ``g``: MASKED if it met the surface, RAY_UNRESOLVED / RAY_MISSED if its
+    walk failed."""
+    if status1[g] == SINGLE:
+        if h == HIT:
+            status1[g] = MASKED
+        elif h == UNRESOLVED:
+            status1[g] = RAY_UNRESOLVED
+        elif h == MISSED:
+            status1[g] = RAY_MISSED
+
+
+@inlined
+def _end_unresolved(ledger, b, g, w, path_class, first_class):
+    """End path ``g`` with carried weight ``w`` as ``path_class`` (its walk failed or its
+    hit faces away); at step 1 its first-bounce class is ``first_class``, weight 0."""
+    _end_path(ledger, g, path_class, w)
+    if b == 1:
+        ledger.status1[g] = first_class
+        ledger.weight1[g] = 0.0
+
+
+@inlined
+def _continue_path(nxt, m, g, p, n, lift, half, o, wn):
+    """Write continuing path ``g`` to slot ``m`` of ``nxt``: its next ray starts at the hit
+    ``p`` (px, py, pz) moved along the unit normal ``n`` onto its facet plane and eps above
+    it (``lift`` = n·v0 + eps), wrapped into the tile (``half`` extents), along ``o``,
+    carrying weight ``wn``."""
+    px, py, pz = p
+    a0, a1, a2 = n
+    hx, hy = half
+    ox, oy, oz = o
+    off = px * a0 + py * a1 + pz * a2 - lift
+    x, y, z = px - off * a0, py - off * a1, pz - off * a2
+    if x < -hx or x >= hx:  # into the tile
+        x = (x + hx) % (2.0 * hx) - hx
+    if y < -hy or y >= hy:
+        y = (y + hy) % (2.0 * hy) - hy
+    nxt.live[m] = g
+    nxt.x[m], nxt.y[m], nxt.z[m] = x, y, z
+    nxt.dx[m], nxt.dy[m], nxt.dz[m] = ox, oy, oz
+    nxt.d32[m, 0] = np.float32(ox)
+    nxt.d32[m, 1] = np.float32(oy)
+    nxt.d32[m, 2] = np.float32(oz)
+    nxt.w[m] = wn

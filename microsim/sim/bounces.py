@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import numbers
 from functools import partial
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -60,25 +60,16 @@ from microsim.errors import UsageError
 from . import bounce_kernels, fresnel_kernels, vgroove_kernels
 from .bins import Bins
 from .engine import codes, segments
+from .facet_tables import FacetTable, facet_table, uses_facet_table
 from .ledger import ORDER_NAMES, TERMINAL
-from .paths import (
-    ANALYTIC_BATCH,
-    LEDGER,
-    FacetTable,
-    GrooveFrameWork,
-    Incidence,
-    TracePath,
-    _columns,
-    choose_path,
-    facet_table,
-    groove_frame_rays,
-    primary_hits,
-    uses_facet_table,
-)
+from .masking_rays import primary_hits
+from .paths import ANALYTIC_BATCH, LEDGER, Incidence, choose_path
+from .ray_columns import GrooveFrameWork, columns, groove_frame_rays
 from .scratch import WorkArray, WorkColumns
 from .streams import block_rotation
 from .tallies import chunk_order_tallies, chunk_tallies
-from .tracer import UNRESOLVED, Tracer, VGrooveCaster
+from .tracer import UNRESOLVED, Tracer
+from .vgroove_profile import GrooveMasking, VGrooveCaster, casts_primaries
 
 __all__ = [
     "MAX_BOUNCES",
@@ -90,6 +81,9 @@ __all__ = [
     "order_slots",
     "trace_bounces",
     "analytic_bounces",
+    "ChainLimits",
+    "ChainOutcome",
+    "ChainPath",
     "BouncePath",
     "AnalyticBouncePath",
     "choose_bounce_path",
@@ -106,6 +100,20 @@ RETRY_WRAPS = 2**17
 |d_z| below ~(relief/tile)·2⁻¹⁶ stay unresolved (ledger ``unresolved_path``)."""
 WEIGHT_FLOOR = 1e-6
 """``bounces="all"``: a path whose carried weight falls below this is cut (``cut_weight``)."""
+
+
+class ChainOutcome(NamedTuple):
+    """Per primary ray, what the order tallies need of its bounce chain: ``status1`` (N,) int8
+    and ``weight1`` (N,) the first-bounce class (``paths.LEDGER``) and Fresnel weight;
+    ``term`` (N,) int8 and ``wterm`` (N,) the terminal class (``TERMINAL``) and carried
+    weight; ``where`` (N,) int64 the flat tally index slot·nbin + bin of the escape direction,
+    −1 for paths that do not escape."""
+
+    status1: np.ndarray
+    weight1: np.ndarray
+    term: np.ndarray
+    wterm: np.ndarray
+    where: np.ndarray
 
 
 # this thread's work arrays (``scratch``): a chain's first facets, each step's escapes and the
@@ -151,6 +159,16 @@ def ledger_classes(bounces) -> int:
     return len(LEDGER) + (0 if bounces == 1 else len(TERMINAL))
 
 
+class ChainLimits(NamedTuple):
+    """Where a bounce chain stops and how it is tallied: at most ``limit`` bounces, paths
+    whose weight falls below ``floor`` cut (``bounce_limit``); ``nbin`` bins per order
+    slot."""
+
+    limit: int
+    floor: float
+    nbin: int
+
+
 def trace_bounces(
     tracer: Tracer,
     wi,
@@ -159,92 +177,93 @@ def trace_bounces(
     origins,
     psi,
     ior,
-    limit: int,
-    floor: float,
-    nbin: int,
+    chain: ChainLimits,
     table: FacetTable | None = None,
-):
-    """Per primary ray (status1, weight1, term, wterm, where) of the bounce chain on Embree.
+) -> ChainOutcome:
+    """The ``ChainOutcome`` of primary rays followed through the bounce chain on Embree.
 
     Rays start at ``origins`` (N, 3) or 3 columns, falling along −wi (one shared direction
     when ``psi`` is None, else wi rotated by −ψ per ray into its groove frame, as
-    ``paths.trace_columns``). Each step traces the live paths' rays (``Tracer.
+    ``ray_columns.trace_columns``). Each step traces the live paths' rays (``Tracer.
     trace_columns``: the periodic walk, wraps exact as there) and hands the hits to
     ``bounce_kernels.bounce_step``, which weights, reflects, ends or continues each path and
-    compacts the continuing ones; at most ``limit`` bounces, paths below ``floor`` cut.
-    ``status1``/``weight1``: first-bounce class (``paths.LEDGER``) and Fresnel weight;
-    ``term``/``wterm``: terminal class (``TERMINAL``) and carried weight; ``where``: flat
-    tally index slot·``nbin`` + bin of the escape direction (Δφ against ``phi_i``, or
-    φi − ψ in the groove frame), −1 for paths that do not escape. ``table``: the incidence's
-    ``paths.FacetTable`` (shared direction only), whose per-facet Fresnel weights and bins
-    replace the per-ray arithmetic of the first bounce with the same values."""
-    x = _columns(origins)
+    compacts the continuing ones, within ``chain``'s limits. Escape directions are binned
+    with Δφ against ``phi_i``, or φi − ψ in the groove frame. ``table``: the incidence's
+    ``facet_tables.FacetTable`` (shared direction only), whose per-facet Fresnel weights and
+    bins replace the per-ray arithmetic of the first bounce with the same values."""
+    x = columns(origins)
     n = len(x[0])
-    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
-    status1 = np.empty(n, dtype=np.int8)
-    weight1 = np.zeros(n)
-    term = np.empty(n, dtype=np.int8)
-    wterm = np.empty(n)
-    where = np.full(n, -1, dtype=np.int64)
-    if psi is None:
-        d = [np.array([-float(c)]) for c in wi]
-        d32 = np.array([[c[0] for c in d]], dtype=np.float32)
-        hs, prim, p = primary_hits(tracer, x, [float(c[0]) for c in d], d32)
-        shared, phi = True, float(phi_i)
-    else:
-        _, d, d32 = groove_frame_rays(psi, wi, _BOUNCE_FRAME)
-        hs, prim, p = tracer.trace_columns(x, d, d32)
-        shared, phi = False, phi_i - np.degrees(psi)
+    out = ChainOutcome(
+        np.empty(n, dtype=np.int8),
+        np.zeros(n),
+        np.empty(n, dtype=np.int8),
+        np.empty(n),
+        np.full(n, -1, dtype=np.int64),
+    )
+    (hs, prim, p), d, shared = _primary_rays(tracer, x, wi, psi)
+    phi = float(phi_i) if psi is None else phi_i - np.degrees(psi)
     live = np.arange(n, dtype=np.int64)
     w = np.ones(n)
-    ncols, lift = tracer.normal_columns, tracer.masking_lift
     hx, hy = float(tracer.half[0]), float(tracer.half[1])
-    slots = min(limit, 4)
-    use_table = table is not None and psi is None
-    tab_weight = table.weight if use_table else np.zeros(1)
-    tab_bin = table.bin if use_table else np.zeros(1, dtype=np.int32)
-    first_facet = _BOUNCE_FACET(n if use_table else 1)
-    facets = bounce_kernels.FacetPlanes(*ncols, lift, hx, hy)
-    material = fresnel_kernels.FresnelMaterial(n2, k2, mode)
-    ledger = bounce_kernels.PathLedger(status1, weight1, term, wterm, where)
-    first = bounce_kernels.FirstBounceTable(use_table, tab_weight, tab_bin, first_facet)
+    facets = bounce_kernels.FacetPlanes(*tracer.normal_columns, tracer.masking_lift, hx, hy)
+    material = fresnel_kernels.fresnel_material(ior)
+    first = _first_bounce_table(table if psi is None else None, n)
     b = 1
     while True:
         k = len(live)
         par = b % 2  # generation: written at this step, read by the next
         esc, ed = _BOUNCE_ESCAPE(k), _BOUNCE_ESCAPE_DIRECTION(k)
-        nlive, s, nd = _NEXT_LIVE(k, par), _NEXT_START(k, par), _NEXT_DIRECTION(k, par)
-        nd32, nw = _NEXT_D32(k, par), _NEXT_WEIGHT(k, par)
+        nxt = bounce_kernels.NextRays(
+            _NEXT_LIVE(k, par), *_NEXT_START(k, par), *_NEXT_DIRECTION(k, par),
+            _NEXT_D32(k, par), _NEXT_WEIGHT(k, par),
+        )  # fmt: skip
         m, e = bounce_kernels.bounce_step(
-            b,
-            limit,
-            floor,
-            live,
-            w,
-            segments.WalkResult(hs, prim, *p),
-            bounce_kernels.RayDirections(*d, shared),
-            facets,
-            material,
-            ledger,
-            bounce_kernels.Escapes(esc, *ed),
-            bounce_kernels.NextRays(nlive, *s, *nd, nd32, nw),
-            first,
-        )
+            b, chain.limit, chain.floor, live, w, segments.WalkResult(hs, prim, *p),
+            bounce_kernels.RayDirections(*d, shared), facets, material,
+            bounce_kernels.PathLedger(*out), bounce_kernels.Escapes(esc, *ed), nxt, first,
+        )  # fmt: skip
         if e:
-            g = esc[:e]
-            ph = phi if np.ndim(phi) == 0 else phi[g]
-            loc = bins.locate_xyz(ed[0][:e], ed[1][:e], ed[2][:e], ph)
-            where[g] = np.where(loc >= 0, (min(b - 1, slots) - 1) * nbin + loc, -1)
+            slot = min(b - 1, min(chain.limit, 4)) - 1
+            _bin_escapes(bins, esc[:e], [c[:e] for c in ed], phi, slot * chain.nbin, out.where)
         if m == 0:
             break
-        live, w = nlive[:m], nw[:m]
-        d = [c[:m] for c in nd]
-        starts = [c[:m] for c in s]
-        hs, prim, p = tracer.trace_columns(starts, d, nd32[:m])
-        _resolve_grazing(tracer, starts, d, nd32[:m], hs, prim, p)
+        live, w = nxt.live[:m], nxt.w[:m]
+        d = [nxt.dx[:m], nxt.dy[:m], nxt.dz[:m]]
+        starts = [nxt.x[:m], nxt.y[:m], nxt.z[:m]]
+        hs, prim, p = tracer.trace_columns(starts, d, nxt.d32[:m])
+        _resolve_grazing(tracer, starts, d, nxt.d32[:m], hs, prim, p)
         shared = False
         b += 1
-    return status1, weight1, term, wterm, where
+    return out
+
+
+def _primary_rays(tracer: Tracer, x, wi, psi) -> tuple:
+    """(hits, direction columns, shared) of the primary rays from ``x`` along −wi (one
+    shared direction when ``psi`` is None, else per ray in its groove frame)."""
+    if psi is None:
+        d = [np.array([-float(c)]) for c in wi]
+        d32 = np.array([[c[0] for c in d]], dtype=np.float32)
+        return primary_hits(tracer, x, [float(c[0]) for c in d], d32), d, True
+    _, d, d32 = groove_frame_rays(psi, wi, _BOUNCE_FRAME)
+    return tracer.trace_columns(x, d, d32), d, False
+
+
+def _first_bounce_table(table: FacetTable | None, n: int) -> bounce_kernels.FirstBounceTable:
+    """The first bounce's look-ups for ``n`` rays: ``table``'s per-facet Fresnel weights and
+    bins, or none (placeholders) when ``table`` is None."""
+    if table is None:
+        return bounce_kernels.FirstBounceTable(
+            False, np.zeros(1), np.zeros(1, dtype=np.int32), _BOUNCE_FACET(1)
+        )
+    return bounce_kernels.FirstBounceTable(True, table.weight, table.bin, _BOUNCE_FACET(n))
+
+
+def _bin_escapes(bins: Bins, rows, wo, phi, offset: int, where) -> None:
+    """Set ``where[rows]`` to ``offset`` + the bin of the escape directions ``wo`` (3
+    columns), Δφ against ``phi`` (a scalar, or per ray of the chunk), −1 outside the grid."""
+    ph = phi if np.ndim(phi) == 0 else phi[rows]
+    loc = bins.locate_xyz(wo[0], wo[1], wo[2], ph)
+    where[rows] = np.where(loc >= 0, offset + loc, -1)
 
 
 def _resolve_grazing(tracer: Tracer, x, d, d32, hs, prim, p) -> None:
@@ -275,8 +294,8 @@ def _resolve_grazing(tracer: Tracer, x, d, d32, hs, prim, p) -> None:
 
 
 def analytic_bounces(
-    caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z, psi, ior, limit, floor, nbin
-):
+    caster: VGrooveCaster, wi, phi_i, bins: Bins, x, z, psi, ior, chain: ChainLimits
+) -> ChainOutcome:
     """``trace_bounces`` for ``masking="analytic"`` V-grooves: the exact float64 chain
     (``vgroove_kernels.analytic_vgroove_bounces``) from rays at x (N,) and height ``z`` with groove
     azimuths ``psi``; escape directions binned against φi − ψ."""
@@ -285,6 +304,7 @@ def analytic_bounces(
     term, wterm = np.empty(n, dtype=np.int8), np.empty(n)
     order = np.empty(n, dtype=np.int64)
     wo = [np.empty(n) for _ in range(3)]
+    ledger = vgroove_kernels.GrooveChainLedger(status1, weight1, term, wterm, order, *wo)
     vgroove_kernels.analytic_vgroove_bounces(
         np.ascontiguousarray(x, dtype=np.float64),
         float(z),
@@ -292,36 +312,41 @@ def analytic_bounces(
         np.asarray(wi, dtype=np.float64),
         caster.profile,
         fresnel_kernels.fresnel_material(ior),
-        int(limit),
-        float(floor),
-        status1,
-        weight1,
-        term,
-        wterm,
-        order,
-        *wo,
+        int(chain.limit),
+        float(chain.floor),
+        ledger,
     )
     where = np.full(n, -1, dtype=np.int64)
     g = np.flatnonzero(term <= codes.ESC_4UP)
     if g.size:
-        slot = np.minimum(order[g], min(limit, 4)) - 1
+        slot = np.minimum(order[g], min(chain.limit, 4)) - 1
         loc = bins.locate_xyz(wo[0][g], wo[1][g], wo[2][g], phi_i - np.degrees(psi[g]))
-        where[g] = np.where(loc >= 0, slot * nbin + loc, -1)
-    return status1, weight1, term, wterm, where
+        where[g] = np.where(loc >= 0, slot * chain.nbin + loc, -1)
+    return ChainOutcome(status1, weight1, term, wterm, where)
 
 
-class BouncePath(TracePath):
+class ChainPath:
+    """How the bounce chains of one ``Incidence`` are followed: ``follow(blocks)`` → the
+    ``ChainOutcome`` of the rays of the consecutive ``blocks``, in ray order; bitwise
+    independent of how blocks are grouped. Thread-safe: one path serves all worker threads."""
+
+    def __init__(self, incidence: Incidence):
+        self.incidence = incidence
+
+    def follow(self, blocks) -> ChainOutcome:
+        raise NotImplementedError
+
+
+class BouncePath(ChainPath):
     """Embree bounce chain (``trace_bounces``) of one ``Incidence``: per-ray groove azimuths
     when ``azimuth``; per-block incidence rotations (``paths.RotatedIncidencePath``) when
-    ``rotate``. ``follow(blocks)`` → (status1, weight1, term, wterm, where)."""
+    ``rotate``."""
 
     def __init__(
-        self, incidence: Incidence, azimuth: bool, rotate: bool, limit, floor, nbin, table=None
+        self, incidence: Incidence, azimuth: bool, rotate: bool, chain: ChainLimits, table=None
     ):
         super().__init__(incidence)
-        self.azimuth, self.rotate = azimuth, rotate
-        self.limit, self.floor, self.nbin = int(limit), float(floor), int(nbin)
-        self.table = table
+        self.azimuth, self.rotate, self.chain, self.table = azimuth, rotate, chain, table
 
     def follow(self, blocks):
         inc = self.incidence
@@ -335,9 +360,7 @@ class BouncePath(TracePath):
                 starts,
                 psi if self.azimuth else None,
                 inc.ior,
-                self.limit,
-                self.floor,
-                self.nbin,
+                self.chain,
                 self.table,
             )
         out, wi = [], inc.wi
@@ -355,22 +378,19 @@ class BouncePath(TracePath):
                     starts,
                     None,
                     inc.ior,
-                    self.limit,
-                    self.floor,
-                    self.nbin,
+                    self.chain,
                 )
             )
-        return tuple(np.concatenate(parts) for parts in zip(*out))
+        return ChainOutcome(*(np.concatenate(parts) for parts in zip(*out)))
 
 
-class AnalyticBouncePath(TracePath):
+class AnalyticBouncePath(ChainPath):
     """``masking="analytic"`` bounce chain (``analytic_bounces``), in batches of
     ``ANALYTIC_BATCH`` blocks."""
 
-    def __init__(self, incidence: Incidence, caster: VGrooveCaster, limit, floor, nbin):
+    def __init__(self, incidence: Incidence, caster: VGrooveCaster, chain: ChainLimits):
         super().__init__(incidence)
-        self.caster = caster
-        self.limit, self.floor, self.nbin = int(limit), float(floor), int(nbin)
+        self.caster, self.chain = caster, chain
 
     def follow(self, blocks):
         inc, blocks, parts = self.incidence, list(blocks), []
@@ -388,32 +408,31 @@ class AnalyticBouncePath(TracePath):
                     z,
                     psi,
                     inc.ior,
-                    self.limit,
-                    self.floor,
-                    self.nbin,
+                    self.chain,
                 )
             )
-        return tuple(np.concatenate(c) for c in zip(*parts))
+        return ChainOutcome(*(np.concatenate(c) for c in zip(*parts)))
 
 
 def choose_bounce_path(
     incidence: Incidence,
-    profile,
+    profile: GrooveMasking | None,
     azimuth: bool,
     isotropic: bool,
     bounces,
     nbin: int,
     pool=None,
     parts: int = 1,
-) -> TracePath:
+) -> ChainPath:
     """The bounce-chain path of ``incidence`` for a checked ``bounces`` > 1 on a surface
-    prepared by ``paths.tracer_for``; ``nbin`` bins per order slot. Where the single-bounce
-    paths use a facet table (``paths.uses_facet_table``) it is built here too (``parts``
+    prepared by ``tracer_cache.tracer_for``; ``nbin`` bins per order slot. Where the single-bounce
+    paths use a facet table (``facet_tables.uses_facet_table``) it is built here too (``parts``
     facet ranges on ``pool``) and serves the first bounce. UsageError for
     ``masking="exact"`` (``profile`` a ``VGrooveProfile`` but not a caster)."""
     limit, floor = bounce_limit(bounces)
-    if isinstance(profile, VGrooveCaster):
-        return AnalyticBouncePath(incidence, profile, limit, floor, nbin)
+    chain = ChainLimits(int(limit), float(floor), int(nbin))
+    if casts_primaries(profile):
+        return AnalyticBouncePath(incidence, profile, chain)
     if profile is not None:
         raise UsageError(
             "masking='exact' decides only the first masking test exactly; with bounces > 1 "
@@ -423,12 +442,12 @@ def choose_bounce_path(
     inc, table = incidence, None
     if uses_facet_table(inc.tracer, profile, azimuth, rotate, inc.rays):
         table = facet_table(inc.tracer, inc.wi, inc.ior, inc.bins, inc.phi_i, pool, parts)
-    return BouncePath(inc, azimuth, rotate, limit, floor, nbin, table)
+    return BouncePath(inc, azimuth, rotate, chain, table)
 
 
 def chain_task(
     incidence: Incidence,
-    profile,
+    profile: GrooveMasking | None,
     azimuth: bool,
     isotropic: bool,
     bounces,

@@ -11,7 +11,7 @@ a task is (surface, incidence, block range) → that range's per-block tallies.
 * Surfaces: each realisation is built on the client (as locally) and sent once to every
   worker (``Client.scatter(..., broadcast=True)``: a copy survives the loss of any one
   worker; a worker that joins later fetches it from a peer), which keeps it, with its
-  prepared tracer (``paths.tracer_for``'s reuse) and chain tasks, for all its tasks of that
+  prepared tracer (``tracer_cache.tracer_for``'s reuse) and chain tasks, for all its tasks of that
   realisation. It is released when the realisation is done.
 * Memory: at most ``IN_FLIGHT_PER_THREAD`` × (the cluster's threads) tasks are submitted ahead
   (``schedule.run_in_order``), so the client's memory does not grow with the ray count.
@@ -36,8 +36,9 @@ from microsim.errors import EnvironmentFailure, UsageError
 from microsim.vectors import spherical_deg
 
 from .bounces import chain_task
-from .paths import Incidence, tracer_for
+from .paths import Incidence
 from .tallies import ChunkTallies
+from .tracer_cache import tracer_for
 
 __all__ = [
     "ClusterPool",

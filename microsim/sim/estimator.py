@@ -50,13 +50,15 @@ from .arguments import (
 from .bins import Bins
 from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
 from .cluster import ClusterPool, RemoteSurface, SchedulerLost, tracer_info
+from .events import Events, trace_events
 from .experiment import Estimator, Execution, Experiment
-from .paths import LEDGER, MASKING, Events, Incidence, trace_events, tracer_for
+from .paths import LEDGER, MASKING, Incidence
 from .progress import RaysDone
 from .result import Result
 from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, thread_pool
 from .streams import BLOCK, DESIGN, ORIGINS, block_origins
 from .tallies import TALLY_NAMES, Tally, simulation_result, tallies_from_arrays
+from .tracer_cache import tracer_for
 
 __all__ = [
     "simulate",

@@ -1,4 +1,4 @@
-"""The V-groove closed form (``masking="analytic"``, ``tracer.VGrooveCaster``): per ray, wi
+"""The V-groove closed form (``masking="analytic"``, ``vgroove_profile.VGrooveCaster``): per ray, wi
 rotated by −ψ into its groove frame, the exact float64 primary hit (the groove crossed at
 z = 0 decides the facet), the masking margin s(1 + tanθ σ wo_x/wo_z) − W
 (``VGrooveProfile.margin_from_rim``), and the bounce chain between a groove's two walls.
@@ -7,6 +7,7 @@ Tile coordinates in the groove frame (x across the grooves, z up)."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -27,6 +28,33 @@ from .fresnel_kernels import fresnel_tile, fresnel_weight
 from .trig import cos_sin
 
 
+class GrooveBins(NamedTuple):
+    """How ``analytic_vgroove`` bins the reflected directions: on a ``folded`` grid
+    (``n_theta``, Δφ ``edges`` in degrees) itself, against φi (``phi_i_deg``) less ψ;
+    otherwise not (the caller bins them)."""
+
+    phi_i_deg: float
+    folded: bool
+    n_theta: int
+    edges: np.ndarray
+
+
+class GrooveChainLedger(NamedTuple):
+    """Per ray, ``analytic_vgroove_bounces``' answer: first-bounce class and Fresnel weight
+    (``status1``, ``weight1``), terminal class and carried weight (``term``, ``wterm``),
+    bounces made (``order``) and the escape direction in the groove frame (``wox``, ``woy``,
+    ``woz``; NaN unless escaped)."""
+
+    status1: np.ndarray
+    weight1: np.ndarray
+    term: np.ndarray
+    wterm: np.ndarray
+    order: np.ndarray
+    wox: np.ndarray
+    woy: np.ndarray
+    woz: np.ndarray
+
+
 @vector_inlined
 def groove_frame(psi, wi):
     """wi rotated by −ψ into the groove frame: (wx, wy, wz, cos ψ, sin ψ) (``cos_sin``)."""
@@ -38,7 +66,7 @@ def groove_frame(psi, wi):
 def _groove_facet(x0, r, half, scale, grooves):
     """The facet met by a ray crossing z = 0 at x0 inside the tile with horizontal advance
     r = −wi_x/wi_z per unit depth (groove frame; equal-width V-grooves,
-    ``tracer.VGrooveCaster``; ``scale`` = grooves per unit x; ``grooves``: the caster's
+    ``vgroove_profile.VGrooveCaster``; ``scale`` = grooves per unit x; ``grooves``: the caster's
     columns x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma): its groove k
     (the guess ⌊(x0 + half)·scale⌋ is off by one at most), the left wall unless the bottom
     comes first. Returns (f, |x0 − rim| w, w − σ a D): the hit's distance from the facet's
@@ -103,46 +131,31 @@ def groove_frame_directions(psi, wi, wx, wy, wz, dx, dy, dz, d32):
 
 
 @vectorised
-def analytic_vgroove(
-    x,
-    z,
-    psi,
-    wi,
-    groove,
-    material,
-    phi_i_deg,
-    folded,
-    n_theta,
-    edges,
-    status,
-    weight,
-    where,
-    wox,
-    woy,
-    woz,
-    tile,
-    near,
-):
-    """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``paths.
-    analytic_columns``; the geometry is ``tracer.VGrooveCaster``'s, its per-groove and
-    per-facet columns passed as one ``GrooveProfile``). Per ray, in the groove frame: the
+def analytic_vgroove(x, z, psi, wi, groove, material, bins, out, wo, scratch):
+    """``masking="analytic"`` for rays from (x, ·, z) with groove azimuths ψ (``ray_columns.
+    analytic_columns``; the geometry is ``vgroove_profile.VGrooveCaster``'s, its per-groove and per-
+    facet columns passed as one ``GrooveProfile``). Per ray, in the groove frame: the
     primary hit (``_groove_hit``) and its class, Fresnel weight and mirror direction wo
-    (``_groove_reflection``; ``status``, ``weight``); on a ``folded`` grid (``n_theta``,
-    Δφ ``edges`` in degrees) the bin of wo for SINGLE rays against φi (``phi_i_deg``) less
-    ψ, as ``bin_rays`` (``where``, −1 for the others); otherwise ``where`` = −1
-    and wo in ``wox/woy/woz`` for the caller to bin. In tiles of ``TILE`` rays, passes: the
-    arithmetic before and after the per-facet look-ups, and the bins, in branch-free loops
-    the compiler vectorises (AVX2 has no gather it deems worth using, so an indexed load
-    keeps a loop scalar), the look-ups and the bins near an edge one by one — the same
-    arithmetic as ``_groove_hit``/``_groove_reflection`` ray by ray (so
-    ``analytic_vgroove_bounces`` agrees bitwise) and ``bin_rays``'s bins.
-    ``groove``: ``tracer.GrooveProfile`` (the caster's ``profile``); ``material``:
-    ``fresnel_kernels.FresnelMaterial``; ``tile`` (15, TILE) float64 and ``near`` (TILE,)
-    bool: scratch."""
+    (``_groove_reflection``; ``status``, ``weight``); on a ``folded`` grid (``n_theta``, Δφ
+    ``edges`` in degrees: ``GrooveBins``) the bin of wo for SINGLE rays against φi less ψ,
+    as ``bin_rays`` (``where``, −1 for the others); otherwise ``where`` = −1 and wo in the
+    columns ``wo`` for the caller to bin. ``out``: (status, weight, where) (N,), written. In
+    tiles of ``TILE`` rays, passes: the arithmetic before and after the per-facet look-ups,
+    and the bins, in branch-free loops the compiler vectorises (AVX2 has no gather it deems
+    worth using, so an indexed load keeps a loop scalar), the look-ups and the bins near an
+    edge one by one — the same arithmetic as ``_groove_hit``/``_groove_reflection`` ray by
+    ray (so ``analytic_vgroove_bounces`` agrees bitwise) and ``bin_rays``'s bins.
+    ``groove``: ``vgroove_profile.GrooveProfile`` (the caster's ``profile``); ``material``:
+    ``fresnel_kernels.FresnelMaterial``; ``scratch``: (tile (15, TILE) float64, near (TILE,)
+    bool)."""
     half, x_left, x_right, w_left, depth = groove[:5]
     facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz = groove[5:10]
     facet_signed_tan, facet_width = groove[10:]
     n2, k2, fresnel_mode = material
+    phi_i_deg, folded, n_theta, edges = bins
+    status, weight, where = out
+    wox, woy, woz = wo
+    tile, near = scratch
     scale = len(x_left) / (2.0 * half)
     zw = z / wi[2]
     grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
@@ -187,24 +200,7 @@ def analytic_vgroove(
 
 
 @compiled
-def analytic_vgroove_bounces(
-    x,
-    z,
-    psi,
-    wi,
-    groove,
-    material,
-    limit,
-    floor,
-    status1,
-    weight1,
-    term,
-    wterm,
-    order,
-    wox,
-    woy,
-    woz,
-):
+def analytic_vgroove_bounces(x, z, psi, wi, groove, material, limit, floor, ledger):
     """The exact float64 bounce chain in a V-groove (``masking="analytic"``, ``bounces`` > 1).
 
     The primary hit is ``analytic_vgroove``'s (``_groove_hit``, so ``status1``/``weight1``
@@ -219,16 +215,17 @@ def analytic_vgroove_bounces(
         t = (s tanθ − (W − s) tanθ') / (oz − σ ox tanθ'),   s' = W − s − σ t ox,
     clipped to the wall [0, w_f']. Each bounce multiplies the weight by F(c), c = −d·n
     (``fresnel_weight``); the chain stops when the path escapes (``term`` ESC_*, ``wterm``,
-    its direction in the groove frame ``wox``/``woy``/``woz``), after ``limit`` bounces with
-    the path still inside (CUT_BOUNCES), below the weight ``floor`` (CUT_WEIGHT) or at a
-    back-facing hit (PATH_UNRESOLVED, only from rounding). ``order`` = bounces made.
-    ``groove``: ``tracer.GrooveProfile`` (the caster's ``profile``); ``material``:
-    ``fresnel_kernels.FresnelMaterial``; ``tile`` (15, TILE) float64 and ``near`` (TILE,)
-    bool: scratch."""
+    its direction in the groove frame ``wox``/``woy``/``woz``), after ``limit``
+    bounces with the path still inside (CUT_BOUNCES), below the weight ``floor``
+    (CUT_WEIGHT) or at a back-facing hit (PATH_UNRESOLVED, only from rounding). ``order`` =
+    bounces made. ``groove``: ``vgroove_profile.GrooveProfile`` (the caster's ``profile``);
+    ``material``: ``fresnel_kernels.FresnelMaterial``; ``ledger``: ``GrooveChainLedger``,
+    written."""
     half, x_left, x_right, w_left, depth = groove[:5]
     facet_rim, facet_wall, facet_sigma, facet_nx, facet_nz = groove[5:10]
     facet_signed_tan, facet_width = groove[10:]
     n2, k2, fresnel_mode = material
+    status1, weight1, term, wterm, order, wox, woy, woz = ledger
     scale = len(x_left) / (2.0 * half)
     zw = z / wi[2]
     grooves = (x_left, x_right, w_left, depth, facet_rim, facet_wall, facet_sigma)
@@ -242,12 +239,7 @@ def analytic_vgroove_bounces(
             nx, nz = facet_nx[f], facet_nz[f]
             c = -(dx * nx + dz * nz)
             if c <= 0.0:  # back-facing: unresolved
-                term[i] = PATH_UNRESOLVED
-                wterm[i] = weight
-                order[i] = b - 1
-                if b == 1:
-                    status1[i] = RAY_UNRESOLVED
-                    weight1[i] = 0.0
+                _end_back_facing(ledger, i, b, weight)
                 break
             fw = fresnel_weight(c, n2, k2, fresnel_mode)
             weight *= fw
@@ -273,13 +265,33 @@ def analytic_vgroove_bounces(
                 term[i] = CUT_WEIGHT
                 wterm[i] = weight
                 break
-            f2 = f ^ 1
-            sg = facet_sigma[f]
-            tan2 = abs(facet_signed_tan[f2])
-            tt = (s * abs(facet_signed_tan[f]) - (facet_width[f] - s) * tan2) / (
-                oz - sg * ox * tan2
-            )
-            s = min(max(facet_width[f] - s - sg * tt * ox, 0.0), facet_wall[f2])
-            f = f2
+            f, s = _other_wall(groove, f, s, ox, oz)
             dx, dy, dz = ox, oy, oz
             b += 1
+
+
+@inlined
+def _end_back_facing(ledger, i, b, weight):
+    """End chain ``i`` at a back-facing hit of bounce ``b`` (PATH_UNRESOLVED, ``weight``
+    carried; at b = 1 its first-bounce class is RAY_UNRESOLVED, weight 0)."""
+    ledger.term[i] = PATH_UNRESOLVED
+    ledger.wterm[i] = weight
+    ledger.order[i] = b - 1
+    if b == 1:
+        ledger.status1[i] = RAY_UNRESOLVED
+        ledger.weight1[i] = 0.0
+
+
+@inlined
+def _other_wall(groove, f, s, ox, oz):
+    """(facet f xor 1, s') where the ray reflected at distance ``s`` from the rim of facet
+    ``f`` along (``ox``, ·, ``oz``) meets its groove's other wall (``analytic_vgroove_bounces``:
+    t and s', s' clipped to the wall)."""
+    facet_wall, facet_sigma, facet_signed_tan, facet_width = (
+        groove.facet_wall, groove.facet_sigma, groove.facet_signed_tan, groove.facet_width,
+    )  # fmt: skip
+    f2 = f ^ 1
+    sg = facet_sigma[f]
+    tan2 = abs(facet_signed_tan[f2])
+    tt = (s * abs(facet_signed_tan[f]) - (facet_width[f] - s) * tan2) / (oz - sg * ox * tan2)
+    return f2, min(max(facet_width[f] - s - sg * tt * ox, 0.0), facet_wall[f2])

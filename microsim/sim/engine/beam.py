@@ -1,6 +1,6 @@
 """Masking decided per facet: whether every masking ray a lit facet of a heightfield grid can
 send along its mirror direction surely escapes (``beam_clear``), so that no ray from it
-needs a horizon test or an Embree ray (``paths.facet_table``'s ``clear``).
+needs a horizon test or an Embree ray (``facet_tables.facet_table``'s ``clear``).
 
 With one incidence wi every ray reflected by facet f leaves along the same direction wo; the
 rays from all points of f form a beam: the facet's triangle swept along wo. On the grid of a

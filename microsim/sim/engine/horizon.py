@@ -1,5 +1,5 @@
 """Masking rays decided without tracing: the steepness test wo_z > slope·|wo_h| against a
-heightfield's Lipschitz bound (``tracer.rise_bound``) and the coarse-grid horizon test
+heightfield's Lipschitz bound (``horizon_bounds.rise_bound``) and the coarse-grid horizon test
 (``horizon_clear``, a 2-D DDA over cell maxima and slopes). Tile coordinates."""
 
 from __future__ import annotations
@@ -108,14 +108,14 @@ def horizon_clear_all(px, py, pz, dx, dy, dz, hz, zmax, out):
             dx[i],
             dy[i],
             dz[i],
-            hz[0],
-            hz[1],
-            hz[2],
-            hz[3],
-            hz[4],
-            hz[5],
+            hz.x0,
+            hz.y0,
+            hz.cw,
+            hz.ch,
+            hz.cmax,
+            hz.cslope,
             zmax,
-            hz[6],
+            hz.tol,
         )
 
 

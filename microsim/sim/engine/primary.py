@@ -18,7 +18,7 @@ from .segments import setup_ray
 
 
 class FacetColumns(NamedTuple):
-    """A ``paths.FacetTable`` as ``tabled_primary`` reads it, per facet: ledger ``code``,
+    """A ``facet_tables.FacetTable`` as ``tabled_primary`` reads it, per facet: ledger ``code``,
     Fresnel ``fweight``, unit normal (nx, ny, nz), ``lift`` = n·v0 + eps, float32 mirror
     direction ``wo32`` (F, 3), bin ``fbin`` and ``fclear`` (surely escapes)."""
 
@@ -56,7 +56,7 @@ class TracedLedger(NamedTuple):
 @allocating
 def tabled_primary(walk, table, hz, geometry, out, masking):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
-    per facet (``paths.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
+    per facet (``facet_tables.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
     ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
     bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the masking rays of
     the other lit ones (code SINGLE) that the coarse grid ``hz`` (``horizon_clear``'s
@@ -76,7 +76,7 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
     Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``table``
     (``FacetColumns``: code, fweight, nx, ny, nz, lift, wo32, fbin, fclear), ``hz``,
     ``geometry``, ``out`` (``PrimaryLedger``: status, weight, where; written) and
-    ``masking`` (the masking rays' arrays, ``paths.MaskingRays.kernel_args``)."""
+    ``masking`` (the masking rays' arrays, ``masking_rays.MaskingRays.kernel_args``)."""
     tile = np.empty((6, TILE))  # per-ray scratch of one tile: masking starts, directions
     cand = np.empty(TILE, np.bool_)
     m = 0
@@ -225,7 +225,7 @@ def masking_starts(cand, t, n, x_, y_, z_, ox_, oy_, oz_, hz, geometry, m, maski
     that clears the coarse grid ``hz`` (``horizon_clear``) escapes; the others, wrapped into
     the tile, get slot m onwards of the first segment of their walk (``setup_ray``;
     ``keep[m]`` = m, ``mi[m]`` = their ray). ``geometry``: (hx, hy, zmax, eps, rel);
-    ``masking``: the ``paths.MaskingRays`` arrays (mi, sx, sy, sz, mdx, mdy, mdz, md32, o32,
+    ``masking``: the ``masking_rays.MaskingRays`` arrays (mi, sx, sy, sz, mdx, mdy, mdz, md32, o32,
     tq, keep, top). Returns the new m."""
     hx, hy, zmax, eps, rel = geometry
     mi, sx, sy, sz, mdx, mdy, mdz, md32, o32, tq, keep, top = masking
@@ -241,7 +241,7 @@ def masking_starts(cand, t, n, x_, y_, z_, ox_, oy_, oz_, hz, geometry, m, maski
             y = (y + hy) % (2.0 * hy) - hy
         ox, oy, oz = ox_[j], oy_[j], oz_[j]
         if horizon_clear(
-            x, y, z, ox, oy, oz, hz[0], hz[1], hz[2], hz[3], hz[4], hz[5], zmax, hz[6]
+            x, y, z, ox, oy, oz, hz.x0, hz.y0, hz.cw, hz.ch, hz.cmax, hz.cslope, zmax, hz.tol
         ):
             continue  # clears the coarse grid: escaped
         sx[m], sy[m], sz[m] = x, y, z

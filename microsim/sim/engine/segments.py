@@ -1,4 +1,4 @@
-"""One segment of the periodic walk (``Tracer._walk_columns``): the Embree input of the live
+"""One segment of the periodic walk (``periodic_walk.walk_columns``): the Embree input of the live
 rays (float32 origin strictly inside the tile, tfar to the nearer wall or up to zmax) and,
 from Embree's answers, hits, escapes, leaks and re-entries through the opposite wall.
 Tile coordinates, unit directions, distances along the ray."""
@@ -113,7 +113,7 @@ def _strictly_inside(v, half):
 
 @compiled
 def segment_setup(rays, d32, box, rel, status, o32, d32k, tq, keep, top):
-    """First half of one segment of the periodic walk (``Tracer._walk_columns``).
+    """First half of one segment of the periodic walk (``periodic_walk.walk_columns``).
 
     Live ray i (global index ``live[i]``) at (ox, oy, oz)[i] with direction (dx, dy, dz)[j]
     (j = 0 if ``shared`` else i) and float32 copy ``d32[j]``: a ray rising from at or above

@@ -1,0 +1,151 @@
+"""Facet tables: what a primary ray from one shared incidence does on each facet (Fresnel
+weight, mirror direction, bin, whether its masking ray surely escapes), built once per
+incidence and kept by the ``Tracer`` for repeated calls (``facet_table``)."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import fresnel_kernels
+from .bins import Bins
+from .engine import beam
+from .ledger import MASKED, SINGLE
+from .ray_bins import locate_single
+from .scratch import WorkColumns
+from .tracer import Tracer
+
+__all__ = ["FacetTable", "TABLES_KEPT", "facet_table", "steep_facets", "uses_facet_table"]
+
+_TABLE_WO = WorkColumns("table-wo")  # this thread's work array (``scratch``)
+
+
+@dataclass(frozen=True)
+class FacetTable:
+    """What a primary ray from ``wi`` does on each facet of a surface traced without azimuth
+    averaging (wi is then the same for every ray): ``code`` (F,) int8 SINGLE (lit, reflects
+    upwards: a masking ray decides), DOWNWARD or RAY_UNRESOLVED (back-facing); ``weight`` (F,)
+    Fresnel F(n·wi) (0 when back-facing); ``wo32`` (F, 3) the mirror direction
+    wo = 2(wi·n)n − wi in float32 — the direction Embree traces the masking ray along, whose
+    float64 value the walk uses too; ``bin`` (F,) int32 flat bin index of wo (from float64
+    wo; −1 below the horizon); ``normal_cols`` (3 × (F,)) and ``lift`` (F,) = n·v0 + eps (a
+    point p starts its masking ray at p − (p·n − lift) n: on the facet plane, eps above it);
+    ``clear`` (F,) bool: lit facets whose rays all escape without a masking ray, because
+    their mirror direction rises more steeply than the surface can (``Tracer.surely_escapes``)
+    or, on heightfield grids, because the beam of them clears the relief (``beam``).
+    26 bytes per facet besides the tracer's own columns."""
+
+    code: np.ndarray
+    weight: np.ndarray
+    bin: np.ndarray
+    wo32: np.ndarray
+    normal_cols: tuple
+    lift: np.ndarray
+    clear: np.ndarray
+
+
+TABLES_KEPT = 4
+"""Facet tables a ``Tracer`` keeps for repeated calls at the same incidence (the most recent;
+13 MB each on the bench's 524 288-facet mesh)."""
+_TABLES_LOCK = threading.Lock()
+
+
+def facet_table(
+    tracer: Tracer,
+    wi: np.ndarray,
+    ior,
+    bins: Bins,
+    phi_i: float,
+    pool: ThreadPoolExecutor | None = None,
+    parts: int = 1,
+) -> FacetTable:
+    """The ``FacetTable`` of incidence ``wi`` (``fresnel_kernels.facet_mirror``; Fresnel weights in
+    compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
+    in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
+    facet alone, so the split changes nothing). Bins are ``Bins.locate``'s
+    (``locate_single``: a compiled pass on folded grids).
+
+    A ``Tracer`` keeps its ``TABLES_KEPT`` most recent tables (read-only arrays), so that
+    repeated calls at one incidence — ``simulate_auto``'s batches, a run resumed, the same
+    surface simulated again — build each once; the tracer itself is immutable, so a kept
+    table stays exact."""
+    key = (tuple(float(w) for w in wi), fresnel_kernels.fresnel_mode(ior), bins, float(phi_i))
+    kept = getattr(tracer, "facet_tables", {})  # (a stand-in without it keeps nothing)
+    with _TABLES_LOCK:
+        table = kept.pop(key, None)
+        if table is not None:
+            kept[key] = table  # most recent last
+            return table
+    table = _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts)
+    for array in (table.code, table.weight, table.bin, table.wo32, table.clear):
+        array.flags.writeable = False
+    with _TABLES_LOCK:
+        kept[key] = table
+        for old in list(kept)[:-TABLES_KEPT]:
+            kept.pop(old, None)
+    return table
+
+
+def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
+    """``facet_table`` built (not looked up)."""
+    f = len(tracer.faces)
+    ncols = tracer.normal_columns
+    weight, code = np.empty(f), np.empty(f, dtype=np.int8)
+    wo32, where = np.empty((f, 3), dtype=np.float32), np.empty(f, dtype=np.int32)
+    wi = [float(w) for w in wi]
+    fresnel_args = fresnel_kernels.fresnel_mode(ior)
+
+    def fill(part: slice) -> None:
+        wo = _TABLE_WO(part.stop - part.start)
+        fresnel_kernels.facet_mirror(
+            *(a[part] for a in ncols),
+            *wi,
+            *fresnel_args[1:],
+            fresnel_args[0],
+            weight[part],
+            code[part],
+            *wo,
+            wo32[part],
+        )
+        rising = np.where(wo[2] > 0.0, SINGLE, MASKED).astype(np.int8)  # the others: −1
+        where[part] = -1
+        locate_single(bins, rising, wo, phi_i, None, where[part])
+
+    cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
+    slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
+    list(pool.map(fill, slices) if pool is not None else map(fill, slices))
+    clear = steep_facets(tracer, code, wo32)
+    if tracer.beam is not None:  # heightfield grids: whole beams cleared (``beam``)
+        candidates, cleared = (code == SINGLE) & ~clear, np.empty(f, dtype=np.bool_)
+
+        def clear_beams(part: slice) -> None:
+            beam.beam_clear(part.start, candidates[part], wo32[part], tracer.beam, cleared[part])
+
+        list(pool.map(clear_beams, slices) if pool is not None else map(clear_beams, slices))
+        clear |= cleared
+    return FacetTable(
+        code=code,
+        weight=weight,
+        bin=where,
+        wo32=wo32,
+        normal_cols=ncols,
+        lift=tracer.masking_lift,
+        clear=clear,
+    )
+
+
+def steep_facets(tracer: Tracer, code: np.ndarray, wo32: np.ndarray) -> np.ndarray:
+    """Lit facets (``code`` SINGLE) whose float32 mirror direction ``wo32`` (F, 3), traced as
+    its float64 value, rises more steeply than the surface can (``Tracer.surely_escapes``):
+    the facet table's ``clear`` before any beam is cleared."""
+    wo = wo32.astype(np.float64)
+    return (code == SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
+
+
+def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:
+    """Whether ``choose_path`` traces through a per-facet table: surfaces without azimuth
+    averaging or per-block rotation, with no more facets than the incidence has rays."""
+    return not azimuth and not rotate and profile is None and len(tracer.faces) <= n_total
