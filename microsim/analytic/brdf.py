@@ -16,8 +16,9 @@ from microsim import checks as _checks
 from microsim import vectors
 from microsim.errors import UsageError
 
-from .fresnel import fresnel, resolve_material
-from .shadowing import _check_kind, _shadowing, _tilt_breakpoints
+from .fresnel import resolve_material
+from .masking import masking_from_kind
+from .shadowing import _tilt_breakpoints
 
 __all__ = [
     "torrance_sparrow",
@@ -36,31 +37,13 @@ def _D_of(ndf, h: np.ndarray) -> np.ndarray:
     return ndf.D(h)
 
 
-def _ts(wi, wo, ndf, kind: str, eta, masking_ndf=None) -> np.ndarray:
-    """Torrance–Sparrow on validated unit arrays (see ``torrance_sparrow``)."""
-    s = wi + wo
-    norm = np.sqrt(np.einsum("...i,...i->...", s, s))
-    ci, co = wi[..., 2], wo[..., 2]
-    valid = (ci > 0.0) & (co > 0.0) & (norm > 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / norm
-        hz = s[..., 2] * inv
-        cos_d = 0.5 * norm  # wi·h = wo·h = |wi + wo|/2 for unit wi, wo
-        if kind == "vgroove":  # Mikkelsen 2009, eq. 25 with a shared denominator
-            val = np.minimum(2.0 * hz * np.minimum(ci, co) / cos_d, 1.0)
-        else:
-            wi_b, wo_b = np.broadcast_arrays(wi, wo)
-            mndf = ndf if masking_ndf is None else masking_ndf
-            val = _shadowing(kind, mndf, wi_b, wo_b, hz, cos_d, cos_d)
-        if getattr(ndf, "isotropic", True):
-            val *= ndf.D_cos(hz)
-        else:
-            h = np.where(valid[..., None], s * inv[..., None], (0.0, 0.0, 1.0))
-            val *= ndf.D(h)
-        if eta is not None:
-            val *= fresnel(cos_d, eta)
-        val /= 4.0 * ci * co
-    return np.where(valid, val, 0.0)
+def _ts_model(ndf, shadowing: str, material, masking_ndf=None):
+    """The ``TorranceSparrow`` model of the string form (``models`` imports this module, so
+    the class is imported here)."""
+    from .models import TorranceSparrow
+
+    masking = masking_from_kind(shadowing, ndf if masking_ndf is None else masking_ndf)
+    return TorranceSparrow(ndf, masking, material)
 
 
 def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None, masking_ndf=None):
@@ -74,12 +57,9 @@ def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None, mas
     limit of f itself stays finite). Reciprocal: every factor is symmetric in wi, wo.
     ``masking_ndf``: the NDF of the Smith G when it is not ``ndf`` (e.g. the isotropic
     stand-in renderers use for an anisotropic D, ``AnisotropicGGX.isotropic_equivalent``).
+    A wrapper over ``TorranceSparrow(ndf, masking_from_kind(shadowing), material).f``.
     """
-    kind = _check_kind(shadowing)
-    eta = resolve_material(material)
-    wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
-    _checks.broadcast({"wi": wi, "wo": wo})
-    return _ts(wi, wo, ndf, kind, eta, masking_ndf)
+    return _ts_model(ndf, shadowing, material, masking_ndf).f(wi, wo)
 
 
 def sample_microfacet(wo, u1, u2, ndf):
@@ -201,11 +181,13 @@ def _phi_breakpoints(cos_i: float, cos_h: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(np.nan_to_num(x, nan=1.0), -1.0, 1.0))
 
 
-def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int) -> np.ndarray:
+def _albedo_by_quadrature(model, cos_i: np.ndarray, n_gl_phi: int) -> np.ndarray:
     """ρ(θi) of Torrance–Sparrow by quadrature over h (Mikkelsen 2009, eq. 27 with eq. 15):
     ρ = ∫ f(wi, wo(h)) cos θo 4 (wi·h) dω_h. θ_h: Gauss–Legendre on the NDF's quantile panels;
     φ_h: Gauss–Legendre (``n_gl_phi`` nodes) between the kinks of ``_phi_breakpoints`` (over
-    [0, π], doubled by symmetry; anisotropic D: over [0, 2π] with its cell edges added)."""
+    [0, π], doubled by symmetry; anisotropic D: over [0, 2π] with its cell edges added).
+    ``model``: a ``TorranceSparrow``."""
+    ndf = model.ndf
     isotropic = getattr(ndf, "isotropic", True)
     gx, gw = np.polynomial.legendre.leggauss(8)
     e = _tilt_breakpoints(ndf)
@@ -238,7 +220,7 @@ def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int)
         wih = h @ wi
         wo = 2.0 * wih[..., None] * h - wi
         wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
-        f = _ts(wi, wo, ndf, kind, eta)
+        f = model.f_unit(wi, wo)
         integrand = f * 4.0 * np.maximum(wo[..., 2], 0.0) * np.maximum(wih, 0.0)
         out[k] = np.sum(integrand * wph * wth[:, None, None])
     return out
@@ -266,7 +248,7 @@ class AlbedoTable:
         n_gl_phi: int = 16,
     ):
         self.ndf = ndf
-        self.shadowing = _check_kind(shadowing)
+        self.shadowing = masking_from_kind(shadowing).kind
         self.material = resolve_material(material)
         n_theta = int(_checks.in_range("n_theta", n_theta, 3, 10**5))
         n_grazing = int(_checks.in_range("n_grazing", n_grazing, 0, 10**5))
@@ -279,9 +261,8 @@ class AlbedoTable:
         theta = np.radians(deg)
         theta[-1] -= 1e-7
         self.theta_nodes = theta
-        self.rho_nodes = _albedo_by_quadrature(
-            ndf, self.shadowing, self.material, np.cos(theta), n_gl_phi
-        )
+        self.model = _ts_model(ndf, self.shadowing, self.material)
+        self.rho_nodes = _albedo_by_quadrature(self.model, np.cos(theta), n_gl_phi)
         from scipy.interpolate import CubicSpline  # imported when a table is built
 
         self._interp = CubicSpline(theta, self.rho_nodes)
@@ -337,7 +318,7 @@ def mikkelsen_mix(
     wo = _checks.directions("wo", wo)
     _checks.broadcast({"wi": wi, "wo": wo})
     t = specular_table
-    fs = _ts(wi, wo, t.ndf, t.shadowing, t.material)
+    fs = t.model.f_unit(wi, wo)
     ci, co = np.broadcast_arrays(wi[..., 2], wo[..., 2])
     up = (ci > 0.0) & (co > 0.0)
     diffuse = (1.0 - ks * t.rho(ci)) * (1.0 - ks * t.rho(co)) / np.pi

@@ -27,7 +27,7 @@ from microsim.errors import UsageError
 
 from .fresnel import fresnel, resolve_material
 from .ndf import ABC
-from .shadowing import vgroove_g
+from .masking import vgroove_g
 
 __all__ = [
     "abc_psd",

@@ -1,5 +1,7 @@
 """The closed-form BRDFs as frozen model objects (the shape of pbrt-v4's BxDFs, Mitsuba 3's
-BSDFs), each delegating to the tested free functions of this package — no physics of its own.
+BSDFs). ``TorranceSparrow`` (and ``CookTorrance`` on it) computes f itself from its
+distribution, masking object and material; ``brdf.torrance_sparrow`` is a wrapper over it. The
+other models evaluate the functions of their paper's module (``low``, ``edwards``, ...).
 
 Protocol (``BRDFModel``): ``f(wi, wo)`` in sr⁻¹ for unit (..., 3) directions pointing away from
 the surface, n = +z (the wrapped function's argument order and conventions); ``params()``, a
@@ -33,7 +35,7 @@ import numpy as np
 from microsim import checks as _checks
 from microsim.errors import UsageError
 
-from .brdf import AlbedoTable, mikkelsen_mix, pdf_microfacet, sample_microfacet, torrance_sparrow
+from .brdf import AlbedoTable, mikkelsen_mix, pdf_microfacet, sample_microfacet
 from .edwards import (
     EdwardsParams,
     Lump,
@@ -44,7 +46,7 @@ from .edwards import (
     sample_edwards,
 )
 from .energy_compensation import KullaConty, mikkelsen_diffuse
-from .fresnel import resolve_material
+from .fresnel import fresnel, resolve_material
 from .low import (
     low_microfacet,
     low_smooth,
@@ -129,8 +131,8 @@ def _isotropic(ndf) -> bool:
 # --- Torrance–Sparrow and Cook–Torrance -------------------------------------------------------
 @dataclass(frozen=True)
 class TorranceSparrow(_Model):
-    """f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18):
-    ``torrance_sparrow(wi, wo, ndf, masking.kind, material)``.
+    """f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18); the free
+    function ``torrance_sparrow(wi, wo, ndf, masking.kind, material)`` wraps it.
 
     ``masking``: ``VGroove()``, ``Smith(correlated=...)`` (bound to ``ndf``; ``Smith(other,
     ...)`` evaluates G with another NDF's Λ — the isotropic stand-in renderers use for an
@@ -187,14 +189,37 @@ class TorranceSparrow(_Model):
         return None
 
     def f(self, wi, wo):
-        return torrance_sparrow(
-            wi,
-            wo,
-            self.ndf,
-            shadowing=self.masking.kind,
-            material=self.material,
-            masking_ndf=self.masking_ndf,
-        )
+        wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        return self.f_unit(wi, wo)
+
+    def f_unit(self, wi, wo):
+        """f on validated unit arrays (``f`` without the checks; the albedo tables use it).
+
+        With s = wi + wo, h = s/|s| (Mikkelsen 2009, eq. 10) and wi·h = wo·h = |s|/2; 0 where
+        wi or wo is at or below the horizon (there G → 0 like the vanishing cosine, so f cos θ
+        carries no energy)."""
+        s = wi + wo
+        norm = np.sqrt(np.einsum("...i,...i->...", s, s))
+        ci, co = wi[..., 2], wo[..., 2]
+        valid = (ci > 0.0) & (co > 0.0) & (norm > 0.0)
+        ndf, eta = self.ndf, resolve_material(self.material)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / norm
+            hz = s[..., 2] * inv
+            cos_d = 0.5 * norm
+            if isinstance(self.masking, Smith):
+                wi, wo = np.broadcast_arrays(wi, wo)
+            val = self.masking.g2_cosines(wi, wo, hz, cos_d, cos_d)
+            if getattr(ndf, "isotropic", True):
+                val *= ndf.D_cos(hz)
+            else:
+                h = np.where(valid[..., None], s * inv[..., None], (0.0, 0.0, 1.0))
+                val *= ndf.D(h)
+            if eta is not None:
+                val *= fresnel(cos_d, eta)
+            val /= 4.0 * ci * co
+        return np.where(valid, val, 0.0)
 
     def sample(self, wo, u1, u2) -> BRDFSample:
         return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
@@ -232,7 +257,7 @@ class CookTorrance(_Model):
         return _isotropic(self.ndf)
 
     def f(self, wi, wo):
-        ts = torrance_sparrow(wi, wo, self.ndf, "vgroove", self.material)
+        ts = TorranceSparrow(self.ndf, VGroove(), self.material).f(wi, wo)
         up = (np.asarray(wi)[..., 2] > 0.0) & (np.asarray(wo)[..., 2] > 0.0)
         return np.where(up, self.kd / np.pi + self.ks * ts, 0.0)
 
