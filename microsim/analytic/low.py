@@ -26,8 +26,8 @@ from microsim import vectors
 from microsim.errors import UsageError
 
 from .fresnel import fresnel, resolve_material
-from .ndf import ABC
 from .masking import vgroove_g
+from .ndf import ABC
 
 __all__ = [
     "abc_psd",
