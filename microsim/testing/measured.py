@@ -50,7 +50,7 @@ def measured_reference(reference, theta_i, bins: Bins) -> BRDFTable:
         elif path.suffix == ".npz":
             reference = BRDFTable.load(path)
         elif path.suffix == ".bsdf":
-            reference = read_rgl(path).evaluate
+            reference = read_rgl(path).f
         else:
             raise UsageError(
                 f"reference must be a MERL .binary file, an RGL .bsdf file or a microsim table "
@@ -62,7 +62,7 @@ def measured_reference(reference, theta_i, bins: Bins) -> BRDFTable:
         same = reference.bins == bins and np.array_equal(reference.theta_i, theta)
         if same:
             return reference
-        fn, name = reference.evaluate, reference.name
+        fn, name = reference.f, reference.name
     elif callable(reference):
         fn, name = reference, readable_name(reference)
     else:
