@@ -19,9 +19,10 @@ from microsim import vectors
 from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel
+from microsim.analytic.masking import vgroove_g
 from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import Beckmann, VonMisesFisher
-from microsim.analytic.shadowing import smith_g2, vgroove_g
+from microsim.analytic.shadowing import smith_g2
 from microsim.sim.bins import Bins
 from microsim.sim.predict import (
     QMC,

@@ -1,4 +1,5 @@
-"""Torrance–Sparrow BRDF, its microfacet sampler, albedo, and Mikkelsen's diffuse mix.
+"""Torrance–Sparrow: the model (``TorranceSparrow``, ``CookTorrance`` on it), its free function
+``torrance_sparrow`` (a wrapper), the microfacet sampler, albedo, and Mikkelsen's diffuse mix.
 
 Conventions (docs/design.md, "Conventions"): unit directions (..., 3) pointing away from the
 surface, n = +z, BRDFs in sr⁻¹, public angles in degrees. Arguments come in one order:
@@ -10,17 +11,23 @@ the incidence first for an integral over a BRDF — then the model. ``material``
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
 import numpy as np
 
 from microsim import checks as _checks
 from microsim import vectors
 from microsim.errors import UsageError
 
-from .fresnel import resolve_material
-from .masking import masking_from_kind
+from .fresnel import fresnel, resolve_material
+from .masking import Masking, Smith, VGroove, masking_from_kind
+from .protocol import BRDFSample, ModelBase
 from .shadowing import _tilt_breakpoints
 
 __all__ = [
+    "TorranceSparrow",
+    "CookTorrance",
     "torrance_sparrow",
     "sample_microfacet",
     "pdf_microfacet",
@@ -37,13 +44,144 @@ def _D_of(ndf, h: np.ndarray) -> np.ndarray:
     return ndf.D(h)
 
 
-def _ts_model(ndf, shadowing: str, material, masking_ndf=None):
-    """The ``TorranceSparrow`` model of the string form (``models`` imports this module, so
-    the class is imported here)."""
-    from .models import TorranceSparrow
+# --- Torrance–Sparrow and Cook–Torrance -------------------------------------------------------
+@dataclass(frozen=True)
+class TorranceSparrow(ModelBase):
+    """f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18); the free
+    function ``torrance_sparrow(wi, wo, ndf, masking.kind, material)`` wraps it.
 
-    masking = masking_from_kind(shadowing, ndf if masking_ndf is None else masking_ndf)
-    return TorranceSparrow(ndf, masking, material)
+    ``masking``: ``VGroove()``, ``Smith(correlated=...)`` (bound to ``ndf``; ``Smith(other,
+    ...)`` evaluates G with another NDF's Λ — the isotropic stand-in renderers use for an
+    anisotropic D, ``masking_ndf``), ``NoMasking()`` or a ``shadowing`` string. Sampler:
+    h ~ D(h)(h·n), wi = 2(wo·h)h − wo (``sample_microfacet``/``pdf_microfacet``).
+    """
+
+    ndf: Any
+    masking: Any = VGroove()
+    material: Any = None
+    name: ClassVar[str] = "TorranceSparrow"
+    params_doc: ClassVar[str] = (
+        "ndf, masking=VGroove() | Smith(correlated=False|True) | NoMasking() "
+        "(shadowing vgroove|smith|smith-correlated|none), material"
+    )
+    source: ClassVar[str] = "Mikkelsen 2009, eq. 13/18"
+    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
+    sampler_doc: ClassVar[str] = "wo, u1, u2; h ~ D(h)(h·n), pdf D h_z/(4|wo·h|)"
+    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
+
+    def __post_init__(self):
+        m = (
+            masking_from_kind(self.masking, self.ndf)
+            if isinstance(self.masking, str)
+            else self.masking
+        )
+        if not isinstance(m, Masking):
+            raise UsageError(
+                f"masking must be VGroove(), Smith(...), NoMasking() or a shadowing name, got {m!r}"
+            )
+        if isinstance(m, Smith) and m.ndf is None:
+            m = Smith(self.ndf, m.correlated)
+        object.__setattr__(self, "masking", m)
+        resolve_material(self.material)
+        super().__post_init__()
+
+    @property
+    def shadowing(self) -> str:
+        """The ``shadowing`` string of the masking (``SHADOWING_KINDS``)."""
+        return self.masking.kind
+
+    @property
+    def symmetric(self) -> bool:
+        return bool(getattr(self.ndf, "isotropic", True))
+
+    @property
+    def masking_ndf(self):
+        """The Smith G's NDF when it is not ``ndf`` (a stand-in such as MaterialX's isotropic
+        α = √(αx αy) for an anisotropic D), else None."""
+        m = self.masking
+        if isinstance(m, Smith) and m.ndf is not self.ndf and m.ndf != self.ndf:
+            return m.ndf
+        return None
+
+    def f(self, wi, wo):
+        wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        return self.f_unit(wi, wo)
+
+    def f_unit(self, wi, wo):
+        """f on validated unit arrays (``f`` without the checks; the albedo tables use it).
+
+        With s = wi + wo, h = s/|s| (Mikkelsen 2009, eq. 10) and wi·h = wo·h = |s|/2; 0 where
+        wi or wo is at or below the horizon (there G → 0 like the vanishing cosine, so f cos θ
+        carries no energy)."""
+        s = wi + wo
+        norm = np.sqrt(np.einsum("...i,...i->...", s, s))
+        ci, co = wi[..., 2], wo[..., 2]
+        valid = (ci > 0.0) & (co > 0.0) & (norm > 0.0)
+        ndf, eta = self.ndf, resolve_material(self.material)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / norm
+            hz = s[..., 2] * inv
+            cos_d = 0.5 * norm
+            if isinstance(self.masking, Smith):
+                wi, wo = np.broadcast_arrays(wi, wo)
+            val = self.masking.g2_cosines(wi, wo, hz, cos_d, cos_d)
+            if getattr(ndf, "isotropic", True):
+                val *= ndf.D_cos(hz)
+            else:
+                h = np.where(valid[..., None], s * inv[..., None], (0.0, 0.0, 1.0))
+                val *= ndf.D(h)
+            if eta is not None:
+                val *= fresnel(cos_d, eta)
+            val /= 4.0 * ci * co
+        return np.where(valid, val, 0.0)
+
+    def sample(self, wo, u1, u2) -> BRDFSample:
+        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
+
+    def pdf(self, wi, wo):
+        return pdf_microfacet(wi, wo, self.ndf)
+
+
+@dataclass(frozen=True)
+class CookTorrance(ModelBase):
+    """f = kd/π + ks·TS(ndf, V-groove G, material) for wi, wo above the horizon, 0 otherwise
+    (Cook & Torrance 1982 as Mikkelsen 2009, eq. 13/25; the ``cook-torrance`` fit model).
+    ks ≥ 0, kd ≥ 0. Sampler: the specular lobe's (``sample_microfacet``)."""
+
+    ndf: Any
+    material: Any = None
+    ks: float = 1.0
+    kd: float = 0.0
+    name: ClassVar[str] = "CookTorrance"
+    params_doc: ClassVar[str] = "ndf (Beckmann m in the paper), material, ks ≥ 0, kd ≥ 0"
+    source: ClassVar[str] = "Cook & Torrance 1982; Mikkelsen 2009, eq. 13, 25"
+    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
+    sampler_doc: ClassVar[str] = "wo, u1, u2; specular lobe only (h ~ D(h)(h·n))"
+    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
+
+    def __post_init__(self):
+        for key in ("ks", "kd"):
+            v = _checks.in_range(key, getattr(self, key), 0.0, np.inf, hi_open=True)
+            object.__setattr__(self, key, float(v))
+        super().__post_init__()
+
+    @property
+    def symmetric(self) -> bool:
+        return bool(getattr(self.ndf, "isotropic", True))
+
+    def f(self, wi, wo):
+        ts = TorranceSparrow(self.ndf, VGroove(), self.material).f(wi, wo)
+        up = (np.asarray(wi)[..., 2] > 0.0) & (np.asarray(wo)[..., 2] > 0.0)
+        return np.where(up, self.kd / np.pi + self.ks * ts, 0.0)
+
+    def sample(self, wo, u1, u2) -> BRDFSample:
+        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
+
+    def pdf(self, wi, wo):
+        return pdf_microfacet(wi, wo, self.ndf)
 
 
 def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None, masking_ndf=None):
@@ -59,7 +197,8 @@ def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None, mas
     stand-in renderers use for an anisotropic D, ``AnisotropicGGX.isotropic_equivalent``).
     A wrapper over ``TorranceSparrow(ndf, masking_from_kind(shadowing), material).f``.
     """
-    return _ts_model(ndf, shadowing, material, masking_ndf).f(wi, wo)
+    masking = masking_from_kind(shadowing, ndf if masking_ndf is None else masking_ndf)
+    return TorranceSparrow(ndf, masking, material).f(wi, wo)
 
 
 def sample_microfacet(wo, u1, u2, ndf):
@@ -261,7 +400,7 @@ class AlbedoTable:
         theta = np.radians(deg)
         theta[-1] -= 1e-7
         self.theta_nodes = theta
-        self.model = _ts_model(ndf, self.shadowing, self.material)
+        self.model = TorranceSparrow(ndf, self.shadowing, self.material)
         self.rho_nodes = _albedo_by_quadrature(self.model, np.cos(theta), n_gl_phi)
         from scipy.interpolate import CubicSpline  # imported when a table is built
 

@@ -1,7 +1,8 @@
 """The closed-form BRDFs as frozen model objects (the shape of pbrt-v4's BxDFs, Mitsuba 3's
-BSDFs). ``TorranceSparrow`` (and ``CookTorrance`` on it) computes f itself from its
-distribution, masking object and material; ``brdf.torrance_sparrow`` is a wrapper over it. The
-other models evaluate the functions of their paper's module (``low``, ``edwards``, ...).
+BSDFs). ``TorranceSparrow`` (and ``CookTorrance`` on it, both defined in ``brdf``) computes f
+itself from its distribution, masking object and material; ``brdf.torrance_sparrow`` is a
+wrapper over it. The other models evaluate the functions of their paper's module (``low``,
+``edwards``, ...). The protocol classes are in ``protocol``.
 
 Protocol (``BRDFModel``): ``f(wi, wo)`` in sr⁻¹ for unit (..., 3) directions pointing away from
 the surface, n = +z (the wrapped function's argument order and conventions); ``params()``, a
@@ -27,15 +28,21 @@ pointwise f (only bin averages, ``walk_bin_averages``), so it has no model objec
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Any, ClassVar, NamedTuple, Protocol, runtime_checkable
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 
-from microsim import checks as _checks
 from microsim.errors import UsageError
 
-from .brdf import AlbedoTable, mikkelsen_mix, pdf_microfacet, sample_microfacet
+from .brdf import (
+    AlbedoTable,
+    CookTorrance,
+    TorranceSparrow,
+    mikkelsen_mix,
+    pdf_microfacet,
+    sample_microfacet,
+)
 from .edwards import (
     EdwardsParams,
     Lump,
@@ -46,7 +53,6 @@ from .edwards import (
     sample_edwards,
 )
 from .energy_compensation import KullaConty, mikkelsen_diffuse
-from .fresnel import fresnel, resolve_material
 from .low import (
     low_microfacet,
     low_smooth,
@@ -56,7 +62,7 @@ from .low import (
     sample_low_microfacet,
     sample_low_smooth,
 )
-from .masking import Masking, Smith, VGroove, masking_from_kind
+from .protocol import BRDFModel, BRDFSample, ModelBase, SampleableBRDF
 
 __all__ = [
     "BRDFModel",
@@ -76,201 +82,13 @@ __all__ = [
 ]
 
 
-@runtime_checkable
-class BRDFModel(Protocol):
-    """A closed-form BRDF: ``f(wi, wo)`` (sr⁻¹), ``params()`` and ``source``."""
-
-    source: str
-
-    def f(self, wi, wo): ...
-
-    def params(self) -> dict: ...
-
-
-@runtime_checkable
-class SampleableBRDF(BRDFModel, Protocol):
-    """A ``BRDFModel`` with an importance sampler: ``sample(wo, u1, u2)`` → (wi, pdf, ...) and
-    its density ``pdf(wi, wo)`` (sr⁻¹, whole sphere of wi)."""
-
-    def sample(self, wo, u1, u2): ...
-
-    def pdf(self, wi, wo): ...
-
-
-class BRDFSample(NamedTuple):
-    """A sampled incident direction ``wi`` (..., 3) and its solid-angle density ``pdf`` (sr⁻¹)."""
-
-    wi: np.ndarray
-    pdf: np.ndarray
-
-
-_N = np.array([0.0, 0.0, 1.0])
-
-
-class _Model:
-    """Shared parts: ``params()`` from the dataclass fields, the construction check."""
-
-    name: ClassVar[str]
-    params_doc: ClassVar[str]
-    source: ClassVar[str]
-    functions: ClassVar[tuple[str, ...]]
-    symmetric: ClassVar[bool] = True
-
-    def params(self) -> dict:
-        """The model's parameters, name → value (its dataclass fields)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-    def __post_init__(self):
-        self.f(_N, _N)  # the wrapped function validates the parameters
-
-
 def _isotropic(ndf) -> bool:
     return bool(getattr(ndf, "isotropic", True))
 
 
-# --- Torrance–Sparrow and Cook–Torrance -------------------------------------------------------
-@dataclass(frozen=True)
-class TorranceSparrow(_Model):
-    """f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18); the free
-    function ``torrance_sparrow(wi, wo, ndf, masking.kind, material)`` wraps it.
-
-    ``masking``: ``VGroove()``, ``Smith(correlated=...)`` (bound to ``ndf``; ``Smith(other,
-    ...)`` evaluates G with another NDF's Λ — the isotropic stand-in renderers use for an
-    anisotropic D, ``masking_ndf``), ``NoMasking()`` or a ``shadowing`` string. Sampler:
-    h ~ D(h)(h·n), wi = 2(wo·h)h − wo (``sample_microfacet``/``pdf_microfacet``).
-    """
-
-    ndf: Any
-    masking: Any = VGroove()
-    material: Any = None
-    name: ClassVar[str] = "TorranceSparrow"
-    params_doc: ClassVar[str] = (
-        "ndf, masking=VGroove() | Smith(correlated=False|True) | NoMasking() "
-        "(shadowing vgroove|smith|smith-correlated|none), material"
-    )
-    source: ClassVar[str] = "Mikkelsen 2009, eq. 13/18"
-    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
-    sampler_doc: ClassVar[str] = "wo, u1, u2; h ~ D(h)(h·n), pdf D h_z/(4|wo·h|)"
-    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
-
-    def __post_init__(self):
-        m = (
-            masking_from_kind(self.masking, self.ndf)
-            if isinstance(self.masking, str)
-            else self.masking
-        )
-        if not isinstance(m, Masking):
-            raise UsageError(
-                f"masking must be VGroove(), Smith(...), NoMasking() or a shadowing name, got {m!r}"
-            )
-        if isinstance(m, Smith) and m.ndf is None:
-            m = Smith(self.ndf, m.correlated)
-        object.__setattr__(self, "masking", m)
-        resolve_material(self.material)
-        super().__post_init__()
-
-    @property
-    def shadowing(self) -> str:
-        """The ``shadowing`` string of the masking (``SHADOWING_KINDS``)."""
-        return self.masking.kind
-
-    @property
-    def symmetric(self) -> bool:
-        return _isotropic(self.ndf)
-
-    @property
-    def masking_ndf(self):
-        """The Smith G's NDF when it is not ``ndf`` (a stand-in such as MaterialX's isotropic
-        α = √(αx αy) for an anisotropic D), else None."""
-        m = self.masking
-        if isinstance(m, Smith) and m.ndf is not self.ndf and m.ndf != self.ndf:
-            return m.ndf
-        return None
-
-    def f(self, wi, wo):
-        wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
-        _checks.broadcast({"wi": wi, "wo": wo})
-        return self.f_unit(wi, wo)
-
-    def f_unit(self, wi, wo):
-        """f on validated unit arrays (``f`` without the checks; the albedo tables use it).
-
-        With s = wi + wo, h = s/|s| (Mikkelsen 2009, eq. 10) and wi·h = wo·h = |s|/2; 0 where
-        wi or wo is at or below the horizon (there G → 0 like the vanishing cosine, so f cos θ
-        carries no energy)."""
-        s = wi + wo
-        norm = np.sqrt(np.einsum("...i,...i->...", s, s))
-        ci, co = wi[..., 2], wo[..., 2]
-        valid = (ci > 0.0) & (co > 0.0) & (norm > 0.0)
-        ndf, eta = self.ndf, resolve_material(self.material)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / norm
-            hz = s[..., 2] * inv
-            cos_d = 0.5 * norm
-            if isinstance(self.masking, Smith):
-                wi, wo = np.broadcast_arrays(wi, wo)
-            val = self.masking.g2_cosines(wi, wo, hz, cos_d, cos_d)
-            if getattr(ndf, "isotropic", True):
-                val *= ndf.D_cos(hz)
-            else:
-                h = np.where(valid[..., None], s * inv[..., None], (0.0, 0.0, 1.0))
-                val *= ndf.D(h)
-            if eta is not None:
-                val *= fresnel(cos_d, eta)
-            val /= 4.0 * ci * co
-        return np.where(valid, val, 0.0)
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
-
-    def pdf(self, wi, wo):
-        return pdf_microfacet(wi, wo, self.ndf)
-
-
-@dataclass(frozen=True)
-class CookTorrance(_Model):
-    """f = kd/π + ks·TS(ndf, V-groove G, material) for wi, wo above the horizon, 0 otherwise
-    (Cook & Torrance 1982 as Mikkelsen 2009, eq. 13/25; the ``cook-torrance`` fit model).
-    ks ≥ 0, kd ≥ 0. Sampler: the specular lobe's (``sample_microfacet``)."""
-
-    ndf: Any
-    material: Any = None
-    ks: float = 1.0
-    kd: float = 0.0
-    name: ClassVar[str] = "CookTorrance"
-    params_doc: ClassVar[str] = "ndf (Beckmann m in the paper), material, ks ≥ 0, kd ≥ 0"
-    source: ClassVar[str] = "Cook & Torrance 1982; Mikkelsen 2009, eq. 13, 25"
-    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
-    sampler_doc: ClassVar[str] = "wo, u1, u2; specular lobe only (h ~ D(h)(h·n))"
-    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
-
-    def __post_init__(self):
-        for key in ("ks", "kd"):
-            v = _checks.in_range(key, getattr(self, key), 0.0, np.inf, hi_open=True)
-            object.__setattr__(self, key, float(v))
-        super().__post_init__()
-
-    @property
-    def symmetric(self) -> bool:
-        return _isotropic(self.ndf)
-
-    def f(self, wi, wo):
-        ts = TorranceSparrow(self.ndf, VGroove(), self.material).f(wi, wo)
-        up = (np.asarray(wi)[..., 2] > 0.0) & (np.asarray(wo)[..., 2] > 0.0)
-        return np.where(up, self.kd / np.pi + self.ks * ts, 0.0)
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
-
-    def pdf(self, wi, wo):
-        return pdf_microfacet(wi, wo, self.ndf)
-
-
 # --- Löw et al. 2012 ----------------------------------------------------------------------------
 @dataclass(frozen=True)
-class LowSmooth(_Model):
+class LowSmooth(ModelBase):
     """Löw's smooth-surface BRDF f = kd/π + G' Q' A/(1 + B|wi_t + wo_t|²)^C (Löw et al. 2012,
     eq. 12–14): ``low_smooth``. Sampler: the C = 1 disk density (``sample_low_smooth``)."""
 
@@ -301,7 +119,7 @@ class LowSmooth(_Model):
 
 
 @dataclass(frozen=True)
-class LowMicrofacet(_Model):
+class LowMicrofacet(ModelBase):
     """Löw's ABC microfacet BRDF f = kd/π + S F G/(π cos θi cos θo), S = A/(1 + B(1 − ĥ·n))^C
     (Löw et al. 2012, eq. 15): ``low_microfacet``. ``shadowing``: "cook-torrance" (V-groove)
     or "none". Sampler: ĥ ∝ (1 + B(1 − ĥ·n))^−C (``sample_low_microfacet``)."""
@@ -335,7 +153,7 @@ class LowMicrofacet(_Model):
 
 
 @dataclass(frozen=True)
-class RayleighRice(_Model):
+class RayleighRice(ModelBase):
     """First-order Rayleigh–Rice BRDF (16π²/λ⁴) cos θi cos θo Q S(|Dp|/λ) with the ABC PSD
     (Löw et al. 2012, eq. 3–8): ``rayleigh_rice``. With ``B_y`` the anisotropic PSD
     A/(1 + B f'x² + B_y f'y²)^C along axes rotated by ``rotation`` degrees (``B_y`` None: the
@@ -393,7 +211,7 @@ def _lumps_symmetric(lumps) -> bool:
 
 
 @dataclass(frozen=True)
-class EdwardsEmpirical(_Model):
+class EdwardsEmpirical(ModelBase):
     """Edwards' energy-conserving empirical BRDF f = (1 − F) C_d/π + F p(u, v) J/cos θi
     (Edwards et al. 2006, eq. 30–33): ``edwards_empirical``. Not reciprocal. Sampler: the lump
     density on the halfway disk (``sample_edwards``; Lump/LumpMixture lumps only)."""
@@ -428,7 +246,7 @@ class EdwardsEmpirical(_Model):
 
 
 @dataclass(frozen=True)
-class EdwardsFit(_Model):
+class EdwardsFit(ModelBase):
     """Edwards' data-fitting BRDF f = (1 − F_fit) C_d/π + F_fit p(u, v) J/cos θi with the
     two-lump p of eq. 35 (Edwards et al. 2006, eq. 34–36): ``edwards_fit_brdf``. Not
     reciprocal. Sampler: ``sample_edwards`` of ``fit_params.lumps()``."""
@@ -466,7 +284,7 @@ def _check_table(table):
 
 
 @dataclass(frozen=True)
-class MikkelsenMix(_Model):
+class MikkelsenMix(ModelBase):
     """Specular + reciprocal diffuse f = ks f_s + (1 − ks ρ(wi))(kd/π)(1 − ks ρ(wo))
     [/(1 − ks ρ̄)] (Mikkelsen 2009, eq. 28): ``mikkelsen_mix`` with a scalar kd ∈ [0, 1].
     Sampler: the specular lobe's (``sample_microfacet`` of ``table.ndf``)."""
@@ -505,7 +323,7 @@ class MikkelsenMix(_Model):
 
 
 @dataclass(frozen=True)
-class MikkelsenDiffuse(_Model):
+class MikkelsenDiffuse(ModelBase):
     """The diffuse-like term (1 − ks ρ(wi))(kd/π)(1 − ks ρ(wo)) of Mikkelsen 2009, eq. 28
     (``mikkelsen_diffuse``; kd ≥ 0 may exceed 1, fitted by ``mikkelsen_kd``). No sampler."""
 
@@ -529,7 +347,7 @@ class MikkelsenDiffuse(_Model):
 
 
 @dataclass(frozen=True)
-class KullaContyLobe(_Model):
+class KullaContyLobe(ModelBase):
     """Kulla & Conty's compensation lobe f_ms = F_ms (1 − E(μi))(1 − E(μo))/(π(1 − E_avg))
     (Kulla & Conty 2017; Kelemen & Szirmay-Kalos 2001): ``KullaConty(...).brdf``. No sampler."""
 

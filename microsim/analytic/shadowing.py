@@ -275,16 +275,3 @@ def smith_g2(wi, wo, h, ndf, correlated: bool = False):
     h = _checks.directions("h", h)
     _checks.broadcast({"wi": wi, "wo": wo, "h": h})
     return _smith_g2(ndf, wi, wo, vectors.dot(wi, h), vectors.dot(wo, h), correlated)
-
-
-_MOVED_TO_MASKING = ("vgroove_g", "vgroove_g1", "shadowing_g", "SHADOWING_KINDS")
-
-
-def __getattr__(name):
-    """The V-groove G and the shadowing-string functions live in ``masking`` (imported here
-    lazily: ``masking`` builds on this module's Smith G)."""
-    if name in _MOVED_TO_MASKING:
-        from . import masking
-
-        return getattr(masking, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
