@@ -83,7 +83,8 @@ def test_every_model_class_is_covered_and_exported():
         v
         for v in vars(models_module).values()
         if isinstance(v, type)
-        and v.__module__ in (models_module.__name__, "microsim.analytic.brdf")
+        and issubclass(v, models_module.ModelBase)
+        and v is not models_module.ModelBase
         and hasattr(v, "source")
         and dataclasses.is_dataclass(v)
     }

@@ -53,15 +53,7 @@ from .edwards import (
     sample_edwards,
 )
 from .energy_compensation import KullaConty, mikkelsen_diffuse
-from .low import (
-    low_microfacet,
-    low_smooth,
-    pdf_low_microfacet,
-    pdf_low_smooth,
-    rayleigh_rice,
-    sample_low_microfacet,
-    sample_low_smooth,
-)
+from .low import LowMicrofacet, LowSmooth, RayleighRice
 from .protocol import BRDFModel, BRDFSample, ModelBase, SampleableBRDF
 
 __all__ = [
@@ -84,116 +76,6 @@ __all__ = [
 
 def _isotropic(ndf) -> bool:
     return bool(getattr(ndf, "isotropic", True))
-
-
-# --- Löw et al. 2012 ----------------------------------------------------------------------------
-@dataclass(frozen=True)
-class LowSmooth(ModelBase):
-    """Löw's smooth-surface BRDF f = kd/π + G' Q' A/(1 + B|wi_t + wo_t|²)^C (Löw et al. 2012,
-    eq. 12–14): ``low_smooth``. Sampler: the C = 1 disk density (``sample_low_smooth``)."""
-
-    A: float
-    B: float
-    C: float
-    kd: float = 0.0
-    material: Any = None
-    obliquity: str = "one"
-    name: ClassVar[str] = "LowSmooth"
-    params_doc: ClassVar[str] = (
-        "A ≥ 0 (sr⁻¹), B > 0, C > 0, kd ≥ 0, material, obliquity=one|cos|harvey"
-    )
-    source: ClassVar[str] = "Löw et al. 2012, eq. 12–14"
-    functions: ClassVar[tuple[str, ...]] = ("low_smooth",)
-    sampler_doc: ClassVar[str] = "wo, u1, u2; B only (C = 1 disk density about the mirror)"
-    sampler_source: ClassVar[str] = "Löw et al. 2012, eq. 17–22"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_low_smooth", "pdf_low_smooth")
-
-    def f(self, wi, wo):
-        return low_smooth(wi, wo, self.A, self.B, self.C, self.kd, self.material, self.obliquity)
-
-    def sample(self, wo, u1, u2):
-        return sample_low_smooth(wo, u1, u2, self.B)
-
-    def pdf(self, wi, wo):
-        return pdf_low_smooth(wi, wo, self.B)
-
-
-@dataclass(frozen=True)
-class LowMicrofacet(ModelBase):
-    """Löw's ABC microfacet BRDF f = kd/π + S F G/(π cos θi cos θo), S = A/(1 + B(1 − ĥ·n))^C
-    (Löw et al. 2012, eq. 15): ``low_microfacet``. ``shadowing``: "cook-torrance" (V-groove)
-    or "none". Sampler: ĥ ∝ (1 + B(1 − ĥ·n))^−C (``sample_low_microfacet``)."""
-
-    A: float
-    B: float
-    C: float
-    kd: float = 0.0
-    material: Any = None
-    shadowing: str = "cook-torrance"
-    name: ClassVar[str] = "LowMicrofacet"
-    params_doc: ClassVar[str] = (
-        "A ≥ 0 (sr⁻¹), B > 0, C > 0, kd ≥ 0, material, shadowing=cook-torrance|none"
-    )
-    source: ClassVar[str] = "Löw et al. 2012, eq. 15"
-    functions: ClassVar[tuple[str, ...]] = ("low_microfacet", "low_microfacet_A_from_ndf")
-    sampler_doc: ClassVar[str] = "wo, u1, u2; B, C (half vectors, eq. 23 density)"
-    sampler_source: ClassVar[str] = "Löw et al. 2012, eq. 23–28"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_low_microfacet", "pdf_low_microfacet")
-
-    def f(self, wi, wo):
-        return low_microfacet(
-            wi, wo, self.A, self.B, self.C, self.kd, self.material, self.shadowing
-        )
-
-    def sample(self, wo, u1, u2):
-        return sample_low_microfacet(wo, u1, u2, self.B, self.C)
-
-    def pdf(self, wi, wo):
-        return pdf_low_microfacet(wi, wo, self.B, self.C)
-
-
-@dataclass(frozen=True)
-class RayleighRice(ModelBase):
-    """First-order Rayleigh–Rice BRDF (16π²/λ⁴) cos θi cos θo Q S(|Dp|/λ) with the ABC PSD
-    (Löw et al. 2012, eq. 3–8): ``rayleigh_rice``. With ``B_y`` the anisotropic PSD
-    A/(1 + B f'x² + B_y f'y²)^C along axes rotated by ``rotation`` degrees (``B_y`` None: the
-    isotropic PSD, ``rotation`` unused). No sampler."""
-
-    wavelength: float
-    A: float
-    B: float
-    C: float
-    material: Any
-    polarisation: str = "unpolarised"
-    B_y: float | None = None
-    rotation: float = 0.0
-    name: ClassVar[str] = "RayleighRice"
-    params_doc: ClassVar[str] = (
-        "wavelength > 0, A ≥ 0, B > 0, C > 1 (lengths in one unit), material (an ior), "
-        "polarisation, B_y > 0 or None (isotropic), rotation (degrees)"
-    )
-    source: ClassVar[str] = "Löw et al. 2012, eq. 3–8"
-    functions: ClassVar[tuple[str, ...]] = ("rayleigh_rice",)
-
-    @property
-    def symmetric(self) -> bool:
-        """Mirror symmetric about the plane of incidence for an isotropic PSD only (an
-        elliptical one is, only where that plane holds one of its axes)."""
-        return self.B_y is None
-
-    def f(self, wi, wo):
-        return rayleigh_rice(
-            wi,
-            wo,
-            self.wavelength,
-            self.A,
-            self.B,
-            self.C,
-            self.material,
-            self.polarisation,
-            self.B_y,
-            self.rotation,
-        )
 
 
 # --- Edwards et al. 2006 ------------------------------------------------------------------------
