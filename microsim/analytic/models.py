@@ -1,11 +1,15 @@
 """The closed-form BRDFs as frozen model objects (the shape of pbrt-v4's BxDFs, Mitsuba 3's
-BSDFs). ``TorranceSparrow`` (and ``CookTorrance`` on it, both defined in ``brdf``) computes f
-itself from its distribution, masking object and material; ``brdf.torrance_sparrow`` is a
-wrapper over it. The other models evaluate the functions of their paper's module (``low``,
-``edwards``, ...). The protocol classes are in ``protocol``.
+BSDFs), gathered in ``MODEL_CLASSES``. Each model is the implementation and lives beside the
+physics of its paper: ``TorranceSparrow`` (f from its distribution, masking object and material)
+and ``CookTorrance`` in ``brdf``, ``LowSmooth``, ``LowMicrofacet`` and ``RayleighRice`` in
+``low``, ``EdwardsEmpirical`` and ``EdwardsFit`` in ``edwards``; their free functions
+(``torrance_sparrow``, ``low_smooth``, ...) are wrappers over them. Defined here: the Mikkelsen
+2009, eq. 28 models, views of ``mikkelsen_mix``/``mikkelsen_diffuse`` with a scalar kd (the
+functions also take one kd per colour), and ``KullaContyLobe``, the lobe of a ``KullaConty``.
+The protocol classes are in ``protocol``.
 
 Protocol (``BRDFModel``): ``f(wi, wo)`` in sr⁻¹ for unit (..., 3) directions pointing away from
-the surface, n = +z (the wrapped function's argument order and conventions); ``params()``, a
+the surface, n = +z (the free functions' argument order and conventions); ``params()``, a
 dict of the model's parameters (its dataclass fields); ``source``, paper and equation
 (docs/references.md). Models with an importance sampler also satisfy ``SampleableBRDF``:
 ``sample(wo, u1, u2)`` draws wi from uniforms in [0, 1) and returns a NamedTuple whose first
@@ -16,7 +20,7 @@ the model's specular lobe; diffuse terms (kd, cd) are not sampled. Models withou
 no ``sample``/``pdf`` attributes at all: ``isinstance(m, SampleableBRDF)`` tells them apart.
 
 Class attributes feed ``catalogue.MODELS``: ``name`` (the class name), ``params_doc``,
-``source``, ``functions`` (the free functions wrapped) and, for samplers, ``sampler_doc``,
+``source``, ``functions`` (the free functions of the model) and, for samplers, ``sampler_doc``,
 ``sampler_source``, ``sampler_functions``. ``symmetric``: f is unchanged by mirroring wo about
 the plane of incidence (lets ``predict.bin_average`` integrate half of a folded bin).
 
@@ -29,7 +33,7 @@ pointwise f (only bin averages, ``walk_bin_averages``), so it has no model objec
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -43,15 +47,7 @@ from .brdf import (
     pdf_microfacet,
     sample_microfacet,
 )
-from .edwards import (
-    EdwardsParams,
-    Lump,
-    LumpMixture,
-    edwards_empirical,
-    edwards_fit_brdf,
-    pdf_edwards,
-    sample_edwards,
-)
+from .edwards import EdwardsEmpirical, EdwardsFit
 from .energy_compensation import KullaConty, mikkelsen_diffuse
 from .low import LowMicrofacet, LowSmooth, RayleighRice
 from .protocol import BRDFModel, BRDFSample, ModelBase, SampleableBRDF
@@ -76,81 +72,6 @@ __all__ = [
 
 def _isotropic(ndf) -> bool:
     return bool(getattr(ndf, "isotropic", True))
-
-
-# --- Edwards et al. 2006 ------------------------------------------------------------------------
-def _lumps_symmetric(lumps) -> bool:
-    """Lumps centred on their anchor and round are mirror symmetric; a callable may not be."""
-    if isinstance(lumps, Lump):
-        lumps = LumpMixture((lumps,), (1.0,))
-    if not isinstance(lumps, LumpMixture):
-        return False
-    return all(
-        tuple(lump.offset) == (0.0, 0.0) and lump.aspect == 1.0
-        for lump, w in zip(lumps.lumps, lumps.weights)
-        if w > 0
-    )
-
-
-@dataclass(frozen=True)
-class EdwardsEmpirical(ModelBase):
-    """Edwards' energy-conserving empirical BRDF f = (1 − F) C_d/π + F p(u, v) J/cos θi
-    (Edwards et al. 2006, eq. 30–33): ``edwards_empirical``. Not reciprocal. Sampler: the lump
-    density on the halfway disk (``sample_edwards``; Lump/LumpMixture lumps only)."""
-
-    lumps: Any
-    projection: str = "scaling"
-    fresnel: Any = None
-    diffuse: float = 0.0
-    name: ClassVar[str] = "EdwardsEmpirical"
-    params_doc: ClassVar[str] = (
-        "lumps (Lump | LumpMixture, e.g. empirical_lumps; or pdf_disk(uv, wo)), "
-        "projection=scaling|orthogonal, fresnel None|f0|F(cos θo), diffuse C_d ∈ [0, 1]"
-    )
-    source: ClassVar[str] = "Edwards et al. 2006, eq. 33"
-    functions: ClassVar[tuple[str, ...]] = ("edwards_empirical", "empirical_lumps")
-    sampler_doc: ClassVar[str] = "wo, u1, u2; lumps on the halfway disk (u1 also picks the lump)"
-    sampler_source: ClassVar[str] = "Edwards et al. 2006, eq. 26–29"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_edwards", "pdf_edwards")
-
-    @property
-    def symmetric(self) -> bool:
-        return _lumps_symmetric(self.lumps)
-
-    def f(self, wi, wo):
-        return edwards_empirical(wi, wo, self.lumps, self.projection, self.fresnel, self.diffuse)
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_edwards(wo, u1, u2, self.lumps, self.projection))
-
-    def pdf(self, wi, wo):
-        return pdf_edwards(wi, wo, self.lumps, self.projection)
-
-
-@dataclass(frozen=True)
-class EdwardsFit(ModelBase):
-    """Edwards' data-fitting BRDF f = (1 − F_fit) C_d/π + F_fit p(u, v) J/cos θi with the
-    two-lump p of eq. 35 (Edwards et al. 2006, eq. 34–36): ``edwards_fit_brdf``. Not
-    reciprocal. Sampler: ``sample_edwards`` of ``fit_params.lumps()``."""
-
-    fit_params: EdwardsParams
-    projection: str = "orthogonal"
-    name: ClassVar[str] = "EdwardsFit"
-    params_doc: ClassVar[str] = "fit_params: EdwardsParams, projection=orthogonal|scaling"
-    source: ClassVar[str] = "Edwards et al. 2006, eq. 34–36"
-    functions: ClassVar[tuple[str, ...]] = ("edwards_fit_brdf", "EdwardsParams")
-    sampler_doc: ClassVar[str] = "wo, u1, u2; the two lumps of eq. 35 (may leave the disk)"
-    sampler_source: ClassVar[str] = "Edwards et al. 2006, eq. 26–29"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_edwards", "pdf_edwards")
-
-    def f(self, wi, wo):
-        return edwards_fit_brdf(wi, wo, self.fit_params, self.projection)
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_edwards(wo, u1, u2, self.fit_params.lumps(), self.projection))
-
-    def pdf(self, wi, wo):
-        return pdf_edwards(wi, wo, self.fit_params.lumps(), self.projection)
 
 
 # --- Mikkelsen 2009, eq. 28 and energy compensation ---------------------------------------------
