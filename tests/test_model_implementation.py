@@ -123,6 +123,26 @@ def test_vgroove_functions_and_cook_torrance_are_bitwise_the_objects(directions)
     np.testing.assert_array_equal(ct.f(wi, wo), np.where(up, 0.2 / np.pi + 0.7 * ts, 0.0))
 
 
+def _upper(w):
+    return np.where(w[:, 2:3] > 0.05, w, np.array([0.0, 0.0, 1.0]))
+
+
+PAPER_MODELS = [
+    (an.LowSmooth(1.0, 20.0, 1.5, 0.1, "aluminium", "harvey"), an.low_smooth),
+    (an.LowMicrofacet(1.0, 20.0, 1.5, 0.0, 1.5, "none"), an.low_microfacet),
+    (an.RayleighRice(0.5, 1e-3, 100.0, 1.7, 1.5, "ss", B_y=30.0, rotation=20.0), an.rayleigh_rice),
+    (an.EdwardsEmpirical(an.Lump(20.0), "scaling", 0.5, 0.2), an.edwards_empirical),
+    (an.EdwardsFit(an.EdwardsParams(cd=0.2, n1=30.0, n2=3.0)), an.edwards_fit_brdf),
+]
+
+
+@pytest.mark.parametrize("model, function", PAPER_MODELS, ids=lambda v: type(v).__name__)
+def test_the_paper_functions_are_bitwise_their_models(directions, model, function):
+    wi, wo, _ = directions
+    wo = _upper(wo)
+    np.testing.assert_array_equal(function(wi, wo, *model.params().values()), model.f(wi, wo))
+
+
 # --- (model, rule) replaces ModelSpec -----------------------------------------------------------
 def test_model_spec_is_gone_from_the_package_but_its_deprecated_shim():
     users = [p.relative_to(PACKAGE).as_posix() for p in _sources() if "ModelSpec" in p.read_text()]
