@@ -476,10 +476,13 @@ class Quadrature:
 
 @dataclass(frozen=True)
 class QMC:
-    """Randomised QMC over ``n`` half vectors h ~ D(h) h_z (``bin_average_ts``): for a
-    ``TorranceSparrow`` model, a cross-check of ``Quadrature`` (tail bins get few samples)."""
+    """Randomised QMC over ``n`` half vectors h ~ D(h) h_z in ``replicates`` scramblings seeded
+    by ``seed`` (``bin_average_ts``): for a ``TorranceSparrow`` model, a cross-check of
+    ``Quadrature`` (tail bins get few samples)."""
 
     n: int = 2**20
+    replicates: int = 16
+    seed: int = 0
 
     def __post_init__(self):
         object.__setattr__(self, "n", int(_checks.in_range("n", self.n, 2, 2**40)))
@@ -489,7 +492,8 @@ class QMC:
 class Facets:
     """The exact finite sum over a facet set (``bin_average_facets``) for a ``TorranceSparrow``
     model whose D is those facets' (``facet_model``): its masking and material, these
-    ``normals`` (N, 3), projected-area ``weights`` (None: equal) and ``azimuths`` copies.
+    ``normals`` (N, 3), projected-area ``weights`` (None: equal) and ``azimuths`` copies
+    (their offsets seeded by ``seed``).
 
     Provenance (read by ``compare.attach_models``): ``fingerprints``, the sorted fingerprints
     of the surfaces the facets come from; ``ensemble``, the name of the ensemble prediction this
@@ -499,6 +503,7 @@ class Facets:
     normals: Any
     weights: Any = None
     azimuths: int | None = None
+    seed: int = 0
     fingerprints: tuple[str, ...] | None = None
     ensemble: str | None = None
     continuum: bool = False
@@ -596,10 +601,12 @@ class Predictor:
         eta = resolve_material(model.material)
         if isinstance(rule, QMC):
             return _half_vector_qmc(
-                wi, phi_i, bins, model.ndf, model.masking, eta, rule.n, 16, 0
+                wi, phi_i, bins, model.ndf, model.masking, eta, rule.n, rule.replicates, rule.seed
             ).values
         nrm, w = _facet_set(rule.normals, rule.weights)
-        return _facet_sum(wi, phi_i, bins, nrm, w, model.masking, eta, rule.azimuths, 0).values
+        return _facet_sum(
+            wi, phi_i, bins, nrm, w, model.masking, eta, rule.azimuths, rule.seed
+        ).values
 
 
 def predictions(models) -> list[Predictor]:
