@@ -221,3 +221,21 @@ def test_measured_tables_answer_the_model_protocol(tables, directions, kind):
         {"model": t, "function": FunctionBRDF(t.evaluate, symmetric=True)}, [20.0], bins, rtol=1e-2
     )
     np.testing.assert_array_equal(out["model"], out["function"])
+
+
+# --- microsim.analytic's public names -----------------------------------------------------------
+def test_the_documented_analytic_names_resolve_and_the_left_out_helpers_warn():
+    root = PACKAGE.parent
+    docs = ("README.md", "docs/python.md", "docs/testing.md")
+    text = "".join((root / f).read_text() for f in docs)
+    used = set(re.findall(r"\ban\.([A-Za-z]\w*)", text))
+    for block in re.findall(r"from microsim\.analytic import (\([^)]*\)|[\w ,]+)", text):
+        used |= set(re.findall(r"\w+", block))
+    assert used and used <= set(an.__all__), used - set(an.__all__)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        assert all(getattr(an, n) is not None for n in an.__all__)
+    with pytest.warns(DeprecationWarning, match="microsim.analytic.random_walk"):
+        an.WalkNDF
+    with pytest.raises(AttributeError):
+        an.no_such_name
