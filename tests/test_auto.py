@@ -9,9 +9,10 @@ from support import flat_verdict
 
 from microsim import analytic as an
 from microsim.analysis.verdicts import energy_set
+from microsim.analytic.models import TorranceSparrow
 from microsim.sim import Bins, simulate
 from microsim.sim.auto import _batch_seed, relative_standard_error, simulate_auto
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import Predictor, predict
 from microsim.surfaces import vgrooves
 
 ALPHA = 0.01
@@ -42,7 +43,7 @@ def test_auto_stops_at_target_and_matches_the_exact_model_at_that_precision(groo
         grooves, "aluminium", THETA, target=target, bins=BINS, masking="exact", first=8192, seed=1
     )
     model = predict(
-        [ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")], THETA, BINS
+        [Predictor("ts", TorranceSparrow(an.Beckmann(0.3), "vgroove", "aluminium"))], THETA, BINS
     )["ts"]
     omega = BINS.projected_solid_angle()
     alpha = 1 - (1 - ALPHA) ** (1 / len(THETA))  # Šidák over the incidences

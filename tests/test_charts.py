@@ -14,8 +14,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from microsim import analytic as an
 from microsim import surfaces as sf
 from microsim.analysis import charts as ch
+from microsim.analytic.models import TorranceSparrow
 from microsim.sim import Bins, simulate
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import Predictor, predict
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 COLOUR_TOL = 12 / 255  # max per-channel distance for a pixel to "be" a colour
@@ -65,8 +66,8 @@ def run():
     res = simulate(sf.vgrooves(400, NDF, seed=0), ior, [0.0, 45.0], rays=20_000, bins=bins, seed=3)
     models = predict(
         [
-            ModelSpec.torrance_sparrow("ts-vgroove", NDF, "vgroove", ior),
-            ModelSpec.torrance_sparrow("ts-ggx", an.GGX(0.6), "smith", ior),
+            Predictor("ts-vgroove", TorranceSparrow(NDF, "vgroove", ior)),
+            Predictor("ts-ggx", TorranceSparrow(an.GGX(0.6), "smith", ior)),
         ],
         res.theta_i,
         bins,

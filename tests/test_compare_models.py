@@ -1,5 +1,5 @@
 """``attach_models`` takes the model objects of ``analytic.models`` (as a mapping name → model)
-and predicts with them exactly as with the equivalent ``ModelSpec``s."""
+and predicts with them exactly as with the equivalent ``Predictor``s."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ from microsim import analytic as an
 from microsim.errors import UsageError
 from microsim.sim import Bins, simulate
 from microsim.sim.compare import attach_models
-from microsim.sim.predict import ModelSpec
+from microsim.sim.predict import FunctionBRDF, Predictor
 from microsim.surfaces import vgrooves
 
 
@@ -28,8 +28,8 @@ def test_model_objects_predict_like_their_specs(result):
     specs = attach_models(
         result,
         [
-            ModelSpec.torrance_sparrow("ts", ndf, "vgroove", "aluminium"),
-            ModelSpec.function("smooth", smooth.f, symmetric=smooth.symmetric),
+            Predictor("ts", an.TorranceSparrow(ndf, "vgroove", "aluminium")),
+            Predictor("smooth", FunctionBRDF(smooth.f, symmetric=smooth.symmetric)),
         ],
     )
     assert set(objects.models) == {"ts", "smooth"} and not result.models

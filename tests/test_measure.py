@@ -17,12 +17,13 @@ import numpy as np
 import pytest
 
 from microsim.analytic import Beckmann
+from microsim.analytic.models import TorranceSparrow
 from microsim.app.cli import main
 from microsim.app.measure import measure, plan_measure
 from microsim.checkpoints import interrupt_at
 from microsim.errors import UsageError
 from microsim.measured import BRDFTable
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import Predictor, predict
 
 SCENE = """\
 name = "tiny-measure"
@@ -79,7 +80,7 @@ def test_the_table_is_the_exact_form_within_its_errors(scene, tmp_path):
     doc = json.loads((out / "measure.json").read_text())
     assert all(d["converged"] and d["rse"] <= 0.03 for d in doc["incidences"].values())
     assert doc["totals"]["rays"] == sum(d["rays"] for d in doc["incidences"].values())
-    spec = ModelSpec.torrance_sparrow("ts", Beckmann(0.3), "vgroove", "aluminium")
+    spec = Predictor("ts", TorranceSparrow(Beckmann(0.3), "vgroove", "aluminium"))
     model = predict([spec], table.theta_i, table.bins)["ts"]
     ok = table.stderr > 0
     chi2 = np.mean(((table.brdf - model)[ok] / table.stderr[ok]) ** 2)

@@ -46,7 +46,7 @@ from microsim.measured.merl import (
 from microsim.measured.rgl import read_rgl, write_rgl
 from microsim.measured.table import BRDFTable
 from microsim.sim import Bins
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import Predictor, predict
 
 GGX_AL = TorranceSparrow(GGX(0.3), Smith(correlated=True), "aluminium")
 BECKMANN_GLASS = TorranceSparrow(Beckmann(0.2), Smith(correlated=True), 1.5)
@@ -331,7 +331,7 @@ def test_table_round_trip(tmp_path):
     agrees with that average within the lookups' interpolation errors."""
     bins = Bins(30, 31)
     theta = np.arange(0.0, 90.0, 10.0)
-    values = predict([ModelSpec.from_model("ggx", GGX_AL)], theta, bins)["ggx"]
+    values = predict([Predictor("ggx", GGX_AL)], theta, bins)["ggx"]
     table = BRDFTable(theta, bins, values, np.zeros_like(values), "ggx")
     path = tmp_path / "table.binary"
     write_merl(path, table)

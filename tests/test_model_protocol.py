@@ -1,6 +1,6 @@
 """The model objects of ``analytic.models`` / ``analytic.masking``: each is its wrapped function
 bitwise, satisfies the protocol, is frozen and hashable, samples with its own pdf, and is listed
-in the catalogue; ``ModelSpec.from_model`` predicts like the function-based specs."""
+in the catalogue; a model object predicts like the function-based predictors."""
 
 import dataclasses
 
@@ -14,7 +14,7 @@ from microsim.analytic import models as models_module
 from microsim.analytic.catalogue import MODELS
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import FunctionBRDF, Predictor, predict
 from microsim.testing import assert_sampler_matches
 
 _TABLE = an.AlbedoTable(an.Beckmann(0.3), n_theta=10, n_grazing=4)
@@ -83,7 +83,8 @@ def test_every_model_class_is_covered_and_exported():
         v
         for v in vars(models_module).values()
         if isinstance(v, type)
-        and v.__module__ == models_module.__name__
+        and issubclass(v, models_module.ModelBase)
+        and v is not models_module.ModelBase
         and hasattr(v, "source")
         and dataclasses.is_dataclass(v)
     }
@@ -196,26 +197,28 @@ def test_masking_objects_are_the_shadowing_functions():
 
 
 @pytest.mark.parametrize("shadowing", ["vgroove", "smith-correlated"])
-def test_from_model_ts_is_bitwise_the_ts_spec(shadowing):
+def test_ts_model_predicts_bitwise_as_its_function(shadowing):
     bins = Bins(9, 10)
     model = an.TorranceSparrow(_BECK, shadowing, "aluminium")
-    spec = ModelSpec.from_model("obj", model)
-    assert spec.kind == "ts"
-    ref = ModelSpec.torrance_sparrow("fn", _BECK, shadowing, "aluminium")
+    spec = Predictor("obj", model)
+
+    def fn(wi, wo):
+        return an.torrance_sparrow(wi, wo, _BECK, shadowing, "aluminium")
+
+    ref = Predictor("fn", FunctionBRDF(fn, symmetric=True))
     out = predict([spec, ref], [0.0, 50.0], bins)
     np.testing.assert_array_equal(out["obj"], out["fn"])
 
 
-def test_from_model_other_models_use_f():
+def test_other_models_predict_with_f():
     bins = Bins(9, 10)
     model = an.LowMicrofacet(10.0, 50.0, 2.0)
-    spec = ModelSpec.from_model("low", model)
-    assert spec.kind == "function" and spec.params["symmetric"] is True
-    ref = ModelSpec.function("ref", model.f)
+    spec = Predictor("low", model)
+    ref = Predictor("ref", FunctionBRDF(model.f, symmetric=True))
     out = predict([spec, ref], [30.0], bins)
     np.testing.assert_array_equal(out["low"], out["ref"])
     with pytest.raises(UsageError, match="BRDFModel"):
-        ModelSpec.from_model("x", lambda wi, wo: 1.0)
+        Predictor("x", lambda wi, wo: 1.0)
 
 
 def test_catalogue_lists_every_model_and_masking_class():

@@ -8,10 +8,11 @@ import pytest
 
 from microsim.analysis.verdicts import verdict_kind, verdicts_for_result
 from microsim.analytic import Beckmann
+from microsim.analytic.models import TorranceSparrow
 from microsim.errors import UsageError
 from microsim.sim import Bins, simulate
 from microsim.sim.compare import attach_models, default_models
-from microsim.sim.predict import ModelSpec
+from microsim.sim.predict import Predictor
 from microsim.surfaces import vgrooves
 
 SURFACE = vgrooves(2000, Beckmann(0.3), oriented=True)
@@ -40,7 +41,7 @@ def test_facets_with_vgroove_g_are_exact_at_every_azimuth(phi_i):
     (χ²/dof > 100): the test can tell."""
     res = simulate(SURFACE, "aluminium", THETA, phi_i=phi_i, rays=300_000, bins=BINS,
                    origins="independent", seed=5, threads=2)  # fmt: skip
-    cavity = ModelSpec.torrance_sparrow("v-cavity", Beckmann(0.3), "vgroove", "aluminium")
+    cavity = Predictor("v-cavity", TorranceSparrow(Beckmann(0.3), "vgroove", "aluminium"))
     judged = attach_models(res, default_models(SURFACE, "aluminium") + [cavity])
     vs = verdicts_for_result(judged)
     exact = [v for v in vs if v["model"] == "ts-facets"]

@@ -14,9 +14,10 @@ from scipy import stats
 
 from microsim import analytic as an
 from microsim import surfaces as sf
+from microsim.analytic.models import TorranceSparrow
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.compare import measure_g1
-from microsim.sim.predict import ModelSpec, bin_average_facets, predict
+from microsim.sim.predict import Predictor, bin_average_facets, predict
 from microsim.surfaces.surface import Surface, flat
 from microsim.vectors import normalize, spherical, spherical_deg
 
@@ -33,7 +34,7 @@ def sidak_z(n: int, alpha: float = ALPHA) -> float:
 
 
 def ts_vgroove(ndf, theta, bins, ior="aluminium"):
-    spec = ModelSpec.torrance_sparrow("ts", ndf, "vgroove", ior)
+    spec = Predictor("ts", TorranceSparrow(ndf, "vgroove", ior))
     return predict([spec], theta, bins, rtol=QUAD_RTOL)["ts"]
 
 

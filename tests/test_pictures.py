@@ -16,9 +16,10 @@ import pytest
 
 from microsim.analysis import pictures
 from microsim.analytic import Beckmann
+from microsim.analytic.models import TorranceSparrow
 from microsim.errors import UsageError
 from microsim.sim import Bins
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import Predictor, predict
 
 BINS = Bins(45, 37)
 
@@ -44,7 +45,7 @@ def test_a_constant_brdf_renders_flat_and_the_sky_is_empty():
 
 
 def test_the_highlight_is_where_the_mirror_direction_is():
-    spec = ModelSpec.torrance_sparrow("ts", Beckmann(0.1), "smith-correlated", "aluminium")
+    spec = Predictor("ts", TorranceSparrow(Beckmann(0.1), "smith-correlated", "aluminium"))
     theta = 50.0
     values = predict([spec], [theta], BINS)["ts"][0]
     wo, mask = pictures.view_directions(theta, 0.0, 241, 161)
@@ -66,7 +67,7 @@ class _FakeResult:
 
 def test_the_chart_shows_the_best_and_the_worst_model(tmp_path):
     specs = [
-        ModelSpec.torrance_sparrow(n, Beckmann(m), "smith-correlated", "aluminium")
+        Predictor(n, TorranceSparrow(Beckmann(m), "smith-correlated", "aluminium"))
         for n, m in (("near", 0.3), ("far", 0.5), ("exact", 0.31))
     ]
     models = {k: v for k, v in predict(specs, [60.0], BINS).items()}

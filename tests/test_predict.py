@@ -19,10 +19,20 @@ from microsim import vectors
 from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel
+from microsim.analytic.masking import vgroove_g
+from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import Beckmann, VonMisesFisher
-from microsim.analytic.shadowing import smith_g2, vgroove_g
+from microsim.analytic.shadowing import smith_g2
 from microsim.sim.bins import Bins
-from microsim.sim.predict import ModelSpec, bin_average, bin_average_facets, bin_average_ts, predict
+from microsim.sim.predict import (
+    QMC,
+    FunctionBRDF,
+    Predictor,
+    bin_average,
+    bin_average_facets,
+    bin_average_ts,
+    predict,
+)
 
 ALPHA = 0.01
 
@@ -250,10 +260,10 @@ def test_predict_runs_every_kind_and_matches_direct_calls(beckmann_facets):
     ndf, normals = beckmann_facets
     bins, angles = Bins(9, 10), [0.0, 45.0]
     models = [
-        ModelSpec.function("lambert", lambda wi, wo: np.full(wo.shape[:-1], 1 / np.pi)),
-        ModelSpec.torrance_sparrow("ts", ndf, "smith", "methanol"),
-        ModelSpec.torrance_sparrow("ts-qmc", ndf, "smith", "methanol", qmc_samples=2**14),
-        ModelSpec.facets("facets", normals[:10_000], shadowing="vgroove"),
+        Predictor("lambert", FunctionBRDF(lambda wi, wo: np.full(wo.shape[:-1], 1 / np.pi))),
+        Predictor("ts", TorranceSparrow(ndf, "smith", "methanol")),
+        Predictor("ts-qmc", TorranceSparrow(ndf, "smith", "methanol"), QMC(2**14)),
+        Predictor.facets("facets", normals[:10_000], masking="vgroove"),
     ]
     out = predict(models, angles, bins)
     assert set(out) == {m.name for m in models}
@@ -265,8 +275,10 @@ def test_predict_runs_every_kind_and_matches_direct_calls(beckmann_facets):
     np.testing.assert_array_equal(out["ts"][1], direct)
     with pytest.raises(ValueError, match="unique"):
         predict(models[:1] * 2, angles, bins)
-    with pytest.raises(ValueError, match="kind"):
-        ModelSpec("x", "nonsense")
+    with pytest.raises(ValueError, match="rule must be"):
+        Predictor("x", TorranceSparrow(ndf), "nonsense")
+    with pytest.raises(ValueError, match="TorranceSparrow for QMC"):
+        Predictor("x", FunctionBRDF(np.add), QMC(2**14))
 
 
 # --- edge cases ----------------------------------------------------------------------------------

@@ -11,8 +11,9 @@ from support import flat_verdict
 from microsim import analytic as an
 from microsim import surfaces as sf
 from microsim.analysis import verdicts as V
+from microsim.analytic.models import TorranceSparrow
 from microsim.sim import Bins, simulate
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import Predictor, predict
 
 BINS = Bins(30, 19)
 OMEGA = BINS.projected_solid_angle()
@@ -117,7 +118,7 @@ def small_vgroove_result():
     res = simulate(surface, "aluminium", [0.0, 60.0], rays=100_000, bins=BINS)
     res = res.with_models(
         predict(
-            [ModelSpec.torrance_sparrow("ts_vgroove", an.Beckmann(0.3), "vgroove", "aluminium")],
+            [Predictor("ts_vgroove", TorranceSparrow(an.Beckmann(0.3), "vgroove", "aluminium"))],
             res.theta_i,
             BINS,
         )
@@ -180,7 +181,7 @@ def _vgroove_verdicts(rays, n_grooves=4000, masking="traced"):
     )
     res = res.with_models(
         predict(
-            [ModelSpec.torrance_sparrow("ts_vgroove", an.Beckmann(0.3), "vgroove", "aluminium")],
+            [Predictor("ts_vgroove", TorranceSparrow(an.Beckmann(0.3), "vgroove", "aluminium"))],
             res.theta_i,
             BINS,
         )
@@ -225,9 +226,9 @@ def _gaussian_comparison(rays, seeds):
     res = res.with_models(
         predict(
             [
-                ModelSpec.torrance_sparrow("vgroove", ndf, "vgroove", "aluminium"),
-                ModelSpec.torrance_sparrow("smith", ndf, "smith-correlated", "aluminium"),
-                ModelSpec.torrance_sparrow("smith-separable", ndf, "smith", "aluminium"),
+                Predictor("vgroove", TorranceSparrow(ndf, "vgroove", "aluminium")),
+                Predictor("smith", TorranceSparrow(ndf, "smith-correlated", "aluminium")),
+                Predictor("smith-separable", TorranceSparrow(ndf, "smith", "aluminium")),
             ],
             res.theta_i,
             BINS,

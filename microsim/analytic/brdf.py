@@ -1,4 +1,5 @@
-"""Torrance–Sparrow BRDF, its microfacet sampler, albedo, and Mikkelsen's diffuse mix.
+"""Torrance–Sparrow: the model (``TorranceSparrow``, ``CookTorrance`` on it), its free function
+``torrance_sparrow`` (a wrapper), the microfacet sampler, albedo, and Mikkelsen's diffuse mix.
 
 Conventions (docs/design.md, "Conventions"): unit directions (..., 3) pointing away from the
 surface, n = +z, BRDFs in sr⁻¹, public angles in degrees. Arguments come in one order:
@@ -10,6 +11,9 @@ the incidence first for an integral over a BRDF — then the model. ``material``
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
 import numpy as np
 
 from microsim import checks as _checks
@@ -17,9 +21,13 @@ from microsim import vectors
 from microsim.errors import UsageError
 
 from .fresnel import fresnel, resolve_material
-from .shadowing import _check_kind, _shadowing, _tilt_breakpoints
+from .masking import Masking, Smith, VGroove, masking_from_kind
+from .protocol import BRDFSample, ModelBase
+from .shadowing import _tilt_breakpoints
 
 __all__ = [
+    "TorranceSparrow",
+    "CookTorrance",
     "torrance_sparrow",
     "sample_microfacet",
     "pdf_microfacet",
@@ -36,31 +44,144 @@ def _D_of(ndf, h: np.ndarray) -> np.ndarray:
     return ndf.D(h)
 
 
-def _ts(wi, wo, ndf, kind: str, eta, masking_ndf=None) -> np.ndarray:
-    """Torrance–Sparrow on validated unit arrays (see ``torrance_sparrow``)."""
-    s = wi + wo
-    norm = np.sqrt(np.einsum("...i,...i->...", s, s))
-    ci, co = wi[..., 2], wo[..., 2]
-    valid = (ci > 0.0) & (co > 0.0) & (norm > 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / norm
-        hz = s[..., 2] * inv
-        cos_d = 0.5 * norm  # wi·h = wo·h = |wi + wo|/2 for unit wi, wo
-        if kind == "vgroove":  # Mikkelsen 2009, eq. 25 with a shared denominator
-            val = np.minimum(2.0 * hz * np.minimum(ci, co) / cos_d, 1.0)
-        else:
-            wi_b, wo_b = np.broadcast_arrays(wi, wo)
-            mndf = ndf if masking_ndf is None else masking_ndf
-            val = _shadowing(kind, mndf, wi_b, wo_b, hz, cos_d, cos_d)
-        if ndf.isotropic:
-            val *= ndf.D_cos(hz)
-        else:
-            h = np.where(valid[..., None], s * inv[..., None], (0.0, 0.0, 1.0))
-            val *= ndf.D(h)
-        if eta is not None:
-            val *= fresnel(cos_d, eta)
-        val /= 4.0 * ci * co
-    return np.where(valid, val, 0.0)
+# --- Torrance–Sparrow and Cook–Torrance -------------------------------------------------------
+@dataclass(frozen=True)
+class TorranceSparrow(ModelBase):
+    """f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18); the free
+    function ``torrance_sparrow(wi, wo, ndf, masking.kind, material)`` wraps it.
+
+    ``masking``: ``VGroove()``, ``Smith(correlated=...)`` (bound to ``ndf``; ``Smith(other,
+    ...)`` evaluates G with another NDF's Λ — the isotropic stand-in renderers use for an
+    anisotropic D, ``masking_ndf``), ``NoMasking()`` or a ``shadowing`` string. Sampler:
+    h ~ D(h)(h·n), wi = 2(wo·h)h − wo (``sample_microfacet``/``pdf_microfacet``).
+    """
+
+    ndf: Any
+    masking: Any = VGroove()
+    material: Any = None
+    name: ClassVar[str] = "TorranceSparrow"
+    params_doc: ClassVar[str] = (
+        "ndf, masking=VGroove() | Smith(correlated=False|True) | NoMasking() "
+        "(shadowing vgroove|smith|smith-correlated|none), material"
+    )
+    source: ClassVar[str] = "Mikkelsen 2009, eq. 13/18"
+    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
+    sampler_doc: ClassVar[str] = "wo, u1, u2; h ~ D(h)(h·n), pdf D h_z/(4|wo·h|)"
+    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
+
+    def __post_init__(self):
+        m = (
+            masking_from_kind(self.masking, self.ndf)
+            if isinstance(self.masking, str)
+            else self.masking
+        )
+        if not isinstance(m, Masking):
+            raise UsageError(
+                f"masking must be VGroove(), Smith(...), NoMasking() or a shadowing name, got {m!r}"
+            )
+        if isinstance(m, Smith) and m.ndf is None:
+            m = Smith(self.ndf, m.correlated)
+        object.__setattr__(self, "masking", m)
+        resolve_material(self.material)
+        super().__post_init__()
+
+    @property
+    def shadowing(self) -> str:
+        """The ``shadowing`` string of the masking (``SHADOWING_KINDS``)."""
+        return self.masking.kind
+
+    @property
+    def symmetric(self) -> bool:
+        return bool(self.ndf.isotropic)
+
+    @property
+    def masking_ndf(self):
+        """The Smith G's NDF when it is not ``ndf`` (a stand-in such as MaterialX's isotropic
+        α = √(αx αy) for an anisotropic D), else None."""
+        m = self.masking
+        if isinstance(m, Smith) and m.ndf is not self.ndf and m.ndf != self.ndf:
+            return m.ndf
+        return None
+
+    def f(self, wi, wo):
+        wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        return self.f_unit(wi, wo)
+
+    def f_unit(self, wi, wo):
+        """f on validated unit arrays (``f`` without the checks; the albedo tables use it).
+
+        With s = wi + wo, h = s/|s| (Mikkelsen 2009, eq. 10) and wi·h = wo·h = |s|/2; 0 where
+        wi or wo is at or below the horizon (there G → 0 like the vanishing cosine, so f cos θ
+        carries no energy)."""
+        s = wi + wo
+        norm = np.sqrt(np.einsum("...i,...i->...", s, s))
+        ci, co = wi[..., 2], wo[..., 2]
+        valid = (ci > 0.0) & (co > 0.0) & (norm > 0.0)
+        ndf, eta = self.ndf, resolve_material(self.material)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / norm
+            hz = s[..., 2] * inv
+            cos_d = 0.5 * norm
+            if isinstance(self.masking, Smith):
+                wi, wo = np.broadcast_arrays(wi, wo)
+            val = self.masking.g2_cosines(wi, wo, hz, cos_d, cos_d)
+            if ndf.isotropic:
+                val *= ndf.D_cos(hz)
+            else:
+                h = np.where(valid[..., None], s * inv[..., None], (0.0, 0.0, 1.0))
+                val *= ndf.D(h)
+            if eta is not None:
+                val *= fresnel(cos_d, eta)
+            val /= 4.0 * ci * co
+        return np.where(valid, val, 0.0)
+
+    def sample(self, wo, u1, u2) -> BRDFSample:
+        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
+
+    def pdf(self, wi, wo):
+        return pdf_microfacet(wi, wo, self.ndf)
+
+
+@dataclass(frozen=True)
+class CookTorrance(ModelBase):
+    """f = kd/π + ks·TS(ndf, V-groove G, material) for wi, wo above the horizon, 0 otherwise
+    (Cook & Torrance 1982 as Mikkelsen 2009, eq. 13/25; the ``cook-torrance`` fit model).
+    ks ≥ 0, kd ≥ 0. Sampler: the specular lobe's (``sample_microfacet``)."""
+
+    ndf: Any
+    material: Any = None
+    ks: float = 1.0
+    kd: float = 0.0
+    name: ClassVar[str] = "CookTorrance"
+    params_doc: ClassVar[str] = "ndf (Beckmann m in the paper), material, ks ≥ 0, kd ≥ 0"
+    source: ClassVar[str] = "Cook & Torrance 1982; Mikkelsen 2009, eq. 13, 25"
+    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
+    sampler_doc: ClassVar[str] = "wo, u1, u2; specular lobe only (h ~ D(h)(h·n))"
+    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
+
+    def __post_init__(self):
+        for key in ("ks", "kd"):
+            v = _checks.in_range(key, getattr(self, key), 0.0, np.inf, hi_open=True)
+            object.__setattr__(self, key, float(v))
+        super().__post_init__()
+
+    @property
+    def symmetric(self) -> bool:
+        return bool(self.ndf.isotropic)
+
+    def f(self, wi, wo):
+        ts = TorranceSparrow(self.ndf, VGroove(), self.material).f(wi, wo)
+        up = (np.asarray(wi)[..., 2] > 0.0) & (np.asarray(wo)[..., 2] > 0.0)
+        return np.where(up, self.kd / np.pi + self.ks * ts, 0.0)
+
+    def sample(self, wo, u1, u2) -> BRDFSample:
+        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
+
+    def pdf(self, wi, wo):
+        return pdf_microfacet(wi, wo, self.ndf)
 
 
 def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None, masking_ndf=None):
@@ -74,12 +195,10 @@ def torrance_sparrow(wi, wo, ndf, shadowing: str = "vgroove", material=None, mas
     limit of f itself stays finite). Reciprocal: every factor is symmetric in wi, wo.
     ``masking_ndf``: the NDF of the Smith G when it is not ``ndf`` (e.g. the isotropic
     stand-in renderers use for an anisotropic D, ``AnisotropicGGX.isotropic_equivalent``).
+    A wrapper over ``TorranceSparrow(ndf, masking_from_kind(shadowing), material).f``.
     """
-    kind = _check_kind(shadowing)
-    eta = resolve_material(material)
-    wi, wo = _checks.directions("wi", wi), _checks.directions("wo", wo)
-    _checks.broadcast({"wi": wi, "wo": wo})
-    return _ts(wi, wo, ndf, kind, eta, masking_ndf)
+    masking = masking_from_kind(shadowing, ndf if masking_ndf is None else masking_ndf)
+    return TorranceSparrow(ndf, masking, material).f(wi, wo)
 
 
 def sample_microfacet(wo, u1, u2, ndf):
@@ -201,11 +320,13 @@ def _phi_breakpoints(cos_i: float, cos_h: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(np.nan_to_num(x, nan=1.0), -1.0, 1.0))
 
 
-def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int) -> np.ndarray:
+def _albedo_by_quadrature(model, cos_i: np.ndarray, n_gl_phi: int) -> np.ndarray:
     """ρ(θi) of Torrance–Sparrow by quadrature over h (Mikkelsen 2009, eq. 27 with eq. 15):
     ρ = ∫ f(wi, wo(h)) cos θo 4 (wi·h) dω_h. θ_h: Gauss–Legendre on the NDF's quantile panels;
     φ_h: Gauss–Legendre (``n_gl_phi`` nodes) between the kinks of ``_phi_breakpoints`` (over
-    [0, π], doubled by symmetry; anisotropic D: over [0, 2π] with its cell edges added)."""
+    [0, π], doubled by symmetry; anisotropic D: over [0, 2π] with its cell edges added).
+    ``model``: a ``TorranceSparrow``."""
+    ndf = model.ndf
     isotropic = ndf.isotropic
     gx, gw = np.polynomial.legendre.leggauss(8)
     e = _tilt_breakpoints(ndf)
@@ -238,7 +359,7 @@ def _albedo_by_quadrature(ndf, kind: str, eta, cos_i: np.ndarray, n_gl_phi: int)
         wih = h @ wi
         wo = 2.0 * wih[..., None] * h - wi
         wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
-        f = _ts(wi, wo, ndf, kind, eta)
+        f = model.f_unit(wi, wo)
         integrand = f * 4.0 * np.maximum(wo[..., 2], 0.0) * np.maximum(wih, 0.0)
         out[k] = np.sum(integrand * wph * wth[:, None, None])
     return out
@@ -266,7 +387,7 @@ class AlbedoTable:
         n_gl_phi: int = 16,
     ):
         self.ndf = ndf
-        self.shadowing = _check_kind(shadowing)
+        self.shadowing = masking_from_kind(shadowing).kind
         self.material = resolve_material(material)
         n_theta = int(_checks.in_range("n_theta", n_theta, 3, 10**5))
         n_grazing = int(_checks.in_range("n_grazing", n_grazing, 0, 10**5))
@@ -279,9 +400,8 @@ class AlbedoTable:
         theta = np.radians(deg)
         theta[-1] -= 1e-7
         self.theta_nodes = theta
-        self.rho_nodes = _albedo_by_quadrature(
-            ndf, self.shadowing, self.material, np.cos(theta), n_gl_phi
-        )
+        self.model = TorranceSparrow(ndf, self.shadowing, self.material)
+        self.rho_nodes = _albedo_by_quadrature(self.model, np.cos(theta), n_gl_phi)
         from scipy.interpolate import CubicSpline  # imported when a table is built
 
         self._interp = CubicSpline(theta, self.rho_nodes)
@@ -337,7 +457,7 @@ def mikkelsen_mix(
     wo = _checks.directions("wo", wo)
     _checks.broadcast({"wi": wi, "wo": wo})
     t = specular_table
-    fs = _ts(wi, wo, t.ndf, t.shadowing, t.material)
+    fs = t.model.f_unit(wi, wo)
     ci, co = np.broadcast_arrays(wi[..., 2], wo[..., 2])
     up = (ci > 0.0) & (co > 0.0)
     diffuse = (1.0 - ks * t.rho(ci)) * (1.0 - ks * t.rho(co)) / np.pi

@@ -5,7 +5,7 @@ and ``masking.MASKING_CLASSES`` (``name``, ``params_doc``, ``source``, ``functio
 sampleable class adds a "sampler" row from ``sampler_doc``, ``sampler_source``,
 ``sampler_functions``), the NDFs, Fresnel terms, albedo tools, the random walk and the metrics
 (which stay plain functions or classes without such attributes) from ``_FUNCTIONS`` below.
-Each entry names the Python object in ``microsim.analytic``, the free functions it wraps, its
+Each entry names the Python object in ``microsim.analytic``, its free functions, its
 parameters (units and ranges) and the paper and equation; docs/references.md has the full
 entries. Directions come first — ``(wi, wo, ...)``, samplers ``(wo, u1, u2, ...)`` — then the
 model; ``material`` is a name, n, n + ik or None (``resolve_material``).
@@ -31,11 +31,11 @@ class ModelInfo:
     name: str  # Python name in microsim.analytic ("Class.sample" for a sampler row)
     params: str  # parameters with units / ranges
     source: str  # paper and equation
-    functions: tuple[str, ...] = ()  # free functions of microsim.analytic it wraps
+    functions: tuple[str, ...] = ()  # its free functions in microsim.analytic
 
     @property
     def label(self) -> str:
-        """``name`` and the wrapped functions, as printed: "TorranceSparrow / torrance_sparrow"."""
+        """``name`` and its free functions, as printed: "TorranceSparrow / torrance_sparrow"."""
         return " / ".join((self.name,) + tuple(self.functions))
 
 
@@ -335,7 +335,7 @@ def _wrapped(head: str, lines: list[str], width: int, indent: int) -> list[str]:
 def model_table(width: int = 100) -> str:
     """``microsim models``: the models as the reports name them (name, what it is, the object
     that computes it, its source), then every building block of ``microsim.analytic``
-    (kind, name / wrapped functions, parameters, source); wrapped to ``width`` columns."""
+    (kind, name / free functions, parameters, source); wrapped to ``width`` columns."""
     width = max(int(width), 40)
     out = ["Models as microsim run and microsim report name them", ""]
     for m in REPORT_MODELS:

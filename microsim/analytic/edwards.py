@@ -37,7 +37,7 @@ directions first: ``(wi, wo, ...)`` where both are given, ``(wo, h)``, ``(wo, uv
 from __future__ import annotations
 
 from dataclasses import astuple, dataclass, fields
-from typing import Callable, Union
+from typing import Any, Callable, ClassVar, Union
 
 import numpy as np
 
@@ -46,8 +46,11 @@ from microsim import vectors
 from microsim.errors import UsageError
 
 from .fresnel import schlick
+from .protocol import BRDFSample, ModelBase
 
 __all__ = [
+    "EdwardsEmpirical",
+    "EdwardsFit",
     "DISK_PROJECTIONS",
     "disk_centre",
     "reflect_halfway",
@@ -459,22 +462,7 @@ def edwards_empirical(
     0 where wi is on or below the horizon (for the scaling projection f ~ 1/cos θi there when p
     is non-zero on the disk rim). Not reciprocal (module doc).
     """
-    projection = _check_projection(projection)
-    diffuse = _checks.in_range("diffuse", diffuse, 0.0, 1.0)
-    wo = _checks.directions("wo", wo, upper=True)
-    wi = _checks.directions("wi", wi)
-    _checks.broadcast({"wi": wi, "wo": wo})
-    if isinstance(lumps, (Lump, LumpMixture)) and not np.all(lumps.fits_on_disk(wo)):
-        raise UsageError(
-            "lumps must lie on the halfway disk for every wo: each lump needs "
-            "max(R_u, R_v) + |centre − wo_xy| <= 1 (§4: R_s <= 1 − sin θo, "
-            "R_r <= 1); use radius=None for the largest allowed radius"
-        )
-    F = _fresnel_factor(fresnel, _cos_o(wo))
-    spec = _disk_density(lumps, wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
-        wi, wo, projection
-    )
-    return np.where(wi[..., 2] > 0.0, (1.0 - F) * diffuse / np.pi + F * spec, 0.0)
+    return EdwardsEmpirical(lumps, projection, fresnel, diffuse).f(wi, wo)
 
 
 def brdf_to_disk_density(wi, wo, rho, projection: str = "scaling") -> np.ndarray:
@@ -581,17 +569,7 @@ def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogona
     "scaling" swaps in eq. 20. Not energy conserving where the lumps leave the disk, and not
     reciprocal. 0 where wi is on or below the horizon.
     """
-    projection = _check_projection(projection)
-    if not isinstance(params, EdwardsParams):
-        raise UsageError(f"params must be an EdwardsParams, got {type(params).__name__}")
-    wo = _checks.directions("wo", wo, upper=True)
-    wi = _checks.directions("wi", wi)
-    _checks.broadcast({"wi": wi, "wo": wo})
-    F = params.fresnel(_cos_o(wo))
-    spec = params.lumps().pdf(wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
-        wi, wo, projection
-    )
-    return np.where(wi[..., 2] > 0.0, (1.0 - F) * params.cd / np.pi + F * spec, 0.0)
+    return EdwardsFit(params, projection).f(wi, wo)
 
 
 # --------------------------------------------------------------------------------------------
@@ -639,3 +617,105 @@ def sample_edwards(wo, u1, u2, lumps, projection: str = "scaling"):
         on_disk & (wi[..., 2] > 0.0), p * disk_jacobian(vectors.normalize(wi), wo, projection), 0.0
     )
     return wi, pdf
+
+
+# --- the models as objects (the free functions above wrap them) ---------------------------------
+def _lumps_symmetric(lumps) -> bool:
+    """Lumps centred on their anchor and round are mirror symmetric; a callable may not be."""
+    if isinstance(lumps, Lump):
+        lumps = LumpMixture((lumps,), (1.0,))
+    if not isinstance(lumps, LumpMixture):
+        return False
+    return all(
+        tuple(lump.offset) == (0.0, 0.0) and lump.aspect == 1.0
+        for lump, w in zip(lumps.lumps, lumps.weights)
+        if w > 0
+    )
+
+
+@dataclass(frozen=True)
+class EdwardsEmpirical(ModelBase):
+    """Edwards' energy-conserving empirical BRDF f = (1 − F) C_d/π + F p(u, v) J/cos θi
+    (Edwards et al. 2006, eq. 30–33); ``edwards_empirical`` wraps it. Not reciprocal. Sampler:
+    the lump density on the halfway disk (``sample_edwards``; Lump/LumpMixture lumps only)."""
+
+    lumps: Any
+    projection: str = "scaling"
+    fresnel: Any = None
+    diffuse: float = 0.0
+    name: ClassVar[str] = "EdwardsEmpirical"
+    params_doc: ClassVar[str] = (
+        "lumps (Lump | LumpMixture, e.g. empirical_lumps; or pdf_disk(uv, wo)), "
+        "projection=scaling|orthogonal, fresnel None|f0|F(cos θo), diffuse C_d ∈ [0, 1]"
+    )
+    source: ClassVar[str] = "Edwards et al. 2006, eq. 33"
+    functions: ClassVar[tuple[str, ...]] = ("edwards_empirical", "empirical_lumps")
+    sampler_doc: ClassVar[str] = "wo, u1, u2; lumps on the halfway disk (u1 also picks the lump)"
+    sampler_source: ClassVar[str] = "Edwards et al. 2006, eq. 26–29"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_edwards", "pdf_edwards")
+
+    @property
+    def symmetric(self) -> bool:
+        return _lumps_symmetric(self.lumps)
+
+    def f(self, wi, wo):
+        lumps, fresnel = self.lumps, self.fresnel
+        projection = _check_projection(self.projection)
+        diffuse = _checks.in_range("diffuse", self.diffuse, 0.0, 1.0)
+        wo = _checks.directions("wo", wo, upper=True)
+        wi = _checks.directions("wi", wi)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        if isinstance(lumps, (Lump, LumpMixture)) and not np.all(lumps.fits_on_disk(wo)):
+            raise UsageError(
+                "lumps must lie on the halfway disk for every wo: each lump needs "
+                "max(R_u, R_v) + |centre − wo_xy| <= 1 (§4: R_s <= 1 − sin θo, "
+                "R_r <= 1); use radius=None for the largest allowed radius"
+            )
+        F = _fresnel_factor(fresnel, _cos_o(wo))
+        spec = _disk_density(lumps, wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
+            wi, wo, projection
+        )
+        return np.where(wi[..., 2] > 0.0, (1.0 - F) * diffuse / np.pi + F * spec, 0.0)
+
+    def sample(self, wo, u1, u2) -> BRDFSample:
+        return BRDFSample(*sample_edwards(wo, u1, u2, self.lumps, self.projection))
+
+    def pdf(self, wi, wo):
+        return pdf_edwards(wi, wo, self.lumps, self.projection)
+
+
+@dataclass(frozen=True)
+class EdwardsFit(ModelBase):
+    """Edwards' data-fitting BRDF f = (1 − F_fit) C_d/π + F_fit p(u, v) J/cos θi with the
+    two-lump p of eq. 35 (Edwards et al. 2006, eq. 34–36); ``edwards_fit_brdf`` wraps it. Not
+    reciprocal. Sampler: ``sample_edwards`` of ``fit_params.lumps()``."""
+
+    fit_params: EdwardsParams
+    projection: str = "orthogonal"
+    name: ClassVar[str] = "EdwardsFit"
+    params_doc: ClassVar[str] = "fit_params: EdwardsParams, projection=orthogonal|scaling"
+    source: ClassVar[str] = "Edwards et al. 2006, eq. 34–36"
+    functions: ClassVar[tuple[str, ...]] = ("edwards_fit_brdf", "EdwardsParams")
+    sampler_doc: ClassVar[str] = "wo, u1, u2; the two lumps of eq. 35 (may leave the disk)"
+    sampler_source: ClassVar[str] = "Edwards et al. 2006, eq. 26–29"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_edwards", "pdf_edwards")
+
+    def f(self, wi, wo):
+        params = self.fit_params
+        projection = _check_projection(self.projection)
+        if not isinstance(params, EdwardsParams):
+            raise UsageError(f"params must be an EdwardsParams, got {type(params).__name__}")
+        wo = _checks.directions("wo", wo, upper=True)
+        wi = _checks.directions("wi", wi)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        F = params.fresnel(_cos_o(wo))
+        spec = params.lumps().pdf(wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
+            wi, wo, projection
+        )
+        return np.where(wi[..., 2] > 0.0, (1.0 - F) * params.cd / np.pi + F * spec, 0.0)
+
+    def sample(self, wo, u1, u2) -> BRDFSample:
+        return BRDFSample(*sample_edwards(wo, u1, u2, self.fit_params.lumps(), self.projection))
+
+    def pdf(self, wi, wo):
+        return pdf_edwards(wi, wo, self.fit_params.lumps(), self.projection)

@@ -17,7 +17,8 @@ because the mirror direction R of L has Rp = −Lp. |Dp| = 0 exactly in the spec
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -26,10 +27,14 @@ from microsim import vectors
 from microsim.errors import UsageError
 
 from .fresnel import fresnel, resolve_material
+from .masking import vgroove_g
 from .ndf import ABC
-from .shadowing import vgroove_g
+from .protocol import ModelBase
 
 __all__ = [
+    "LowSmooth",
+    "LowMicrofacet",
+    "RayleighRice",
     "abc_psd",
     "abc_psd_church",
     "abc_psd_church_integral",
@@ -253,29 +258,9 @@ def rayleigh_rice(
     (2π) (its ``nominal["A"]``), the parameters are (A, B, B_y, C) = (a, b², b_y², (c + 1)/2)
     and the same ``rotation`` — as for the isotropic field, (A, B, C) = (a, b², (c + 1)/2)
     (``church_to_condensed``). Q is unchanged: it depends on the directions only.
+    ``RayleighRice(...).f``.
     """
-    wi = _checks.directions("wi", wi)
-    wo = _checks.directions("wo", wo)
-    _checks.broadcast({"wi": wi, "wo": wo})
-    lam = _checks.positive("wavelength", wavelength)
-    A, B, C = _abc(A, B, C)
-    eta = resolve_material(material)
-    if eta is None:
-        raise UsageError(
-            "material must have an index of refraction (ior) n or n+ik "
-            "(Rayleigh–Rice needs ε = ior²), got None"
-        )
-    _choice("polarisation", polarisation, RR_POLARISATIONS)
-    rotation = _checks.finite("rotation", rotation)
-    ci, co = wi[..., 2], wo[..., 2]
-    if B_y is None:
-        s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam**2)
-    else:
-        d = (wi + wo) / lam
-        s = abc_psd_anisotropic(d[..., 0], d[..., 1], A, B, C, B_y, rotation)
-    q = _rr_q(wi, wo, complex(eta), polarisation)
-    f = 16.0 * np.pi**2 / lam**4 * ci * co * q * s
-    return np.where((ci >= 0.0) & (co >= 0.0), f, 0.0)
+    return RayleighRice(wavelength, A, B, C, material, polarisation, B_y, rotation).f(wi, wo)
 
 
 # --- smooth-surface BRDF (eq. 12–14) --------------------------------------------------------
@@ -299,19 +284,9 @@ def low_smooth(wi, wo, A, B, C, kd=0.0, material=None, obliquity="one"):
     other choice).
     G' (``obliquity``): "one" (Löw's choice), "cos" = cosθi cosθo (eq. 3), "harvey" =
     ((cosθi + cosθo)/2)² (eq. 6). Reciprocal. Zero if either direction is below the horizon.
+    ``LowSmooth(...).f``.
     """
-    wi = _checks.directions("wi", wi)
-    wo = _checks.directions("wo", wo)
-    _checks.broadcast({"wi": wi, "wo": wo})
-    A, B, C = _abc(A, B, C)
-    kd = _nonneg("kd", kd)
-    _choice("obliquity", obliquity, LOW_OBLIQUITIES)
-    eta = resolve_material(material)
-    ci, co = wi[..., 2], wo[..., 2]
-    cos_d = np.sqrt(np.clip(1.0 - 0.25 * _tsq(wi - wo), 0.0, 1.0))
-    q = fresnel(cos_d, None if eta is None else complex(eta).real)
-    spec = _obliquity(obliquity, ci, co) * q * _s_of_sq(A, B, C, _tsq(wi + wo))
-    return np.where((ci >= 0.0) & (co >= 0.0), kd / np.pi + spec, 0.0)
+    return LowSmooth(A, B, C, kd, material, obliquity).f(wi, wo)
 
 
 # --- microfacet BRDF (eq. 15) ---------------------------------------------------------------
@@ -328,26 +303,9 @@ def low_microfacet(wi, wo, A, B, C, kd=0.0, material=None, shadowing="cook-torra
     identical to Cook–Torrance's formula; complex: conductor; None: 1). G (``shadowing``):
     "cook-torrance" = V-groove ``shadowing.vgroove_g`` (Mikkelsen 2009, eq. 25), or "none"
     (G = 1). The specular term is 0 when either direction is at or below the horizon (as G is).
-    Reciprocal.
+    Reciprocal. ``LowMicrofacet(...).f``.
     """
-    wi = _checks.directions("wi", wi)
-    wo = _checks.directions("wo", wo)
-    _checks.broadcast({"wi": wi, "wo": wo})
-    A, B, C = _abc(A, B, C)
-    kd = _nonneg("kd", kd)
-    _choice("shadowing", shadowing, ("cook-torrance", "none"))
-    eta = resolve_material(material)
-    wi, wo = np.broadcast_arrays(wi, wo)
-    ci, co = wi[..., 2], wo[..., 2]
-    H = wi + wo
-    hlen = np.sqrt(np.sum(H * H, axis=-1, keepdims=True))
-    inside = (ci > 0.0) & (co > 0.0)  # then H_z > 0, H ≠ 0
-    h = np.where(inside[..., None], H / np.where(hlen > 0.0, hlen, 1.0), [0.0, 0.0, 1.0])
-    d = _s_of_sq(A, B, C, _one_minus_cos_h(np.where(inside[..., None], H, h)))
-    f = fresnel(np.clip(vectors.dot(wi, h), 0.0, 1.0), eta)
-    g = vgroove_g(wi, wo, h) if shadowing == "cook-torrance" else 1.0
-    spec = np.where(inside, d * f * g / (np.pi * np.where(inside, ci * co, 1.0)), 0.0)
-    return np.where((ci >= 0.0) & (co >= 0.0), kd / np.pi + spec, 0.0)
+    return LowMicrofacet(A, B, C, kd, material, shadowing).f(wi, wo)
 
 
 def low_microfacet_A_from_ndf(B, C) -> float:
@@ -576,3 +534,149 @@ def low_e2(measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o) -> 
     return _fit_error(
         _log1p_checked, measured, model, theta_i, theta_o, d_theta_i, d_theta_o, d_phi_o
     )
+
+
+# --- the models as objects (the free functions above wrap them) ---------------------------------
+@dataclass(frozen=True)
+class LowSmooth(ModelBase):
+    """Löw's smooth-surface BRDF f = kd/π + G' Q' A/(1 + B|wi_t + wo_t|²)^C (Löw et al. 2012,
+    eq. 12–14); ``low_smooth`` wraps it. Sampler: the C = 1 disk density (``sample_low_smooth``)."""
+
+    A: float
+    B: float
+    C: float
+    kd: float = 0.0
+    material: Any = None
+    obliquity: str = "one"
+    name: ClassVar[str] = "LowSmooth"
+    params_doc: ClassVar[str] = (
+        "A ≥ 0 (sr⁻¹), B > 0, C > 0, kd ≥ 0, material, obliquity=one|cos|harvey"
+    )
+    source: ClassVar[str] = "Löw et al. 2012, eq. 12–14"
+    functions: ClassVar[tuple[str, ...]] = ("low_smooth",)
+    sampler_doc: ClassVar[str] = "wo, u1, u2; B only (C = 1 disk density about the mirror)"
+    sampler_source: ClassVar[str] = "Löw et al. 2012, eq. 17–22"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_low_smooth", "pdf_low_smooth")
+
+    def f(self, wi, wo):
+        wi = _checks.directions("wi", wi)
+        wo = _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        A, B, C = _abc(self.A, self.B, self.C)
+        kd = _nonneg("kd", self.kd)
+        _choice("obliquity", self.obliquity, LOW_OBLIQUITIES)
+        eta = resolve_material(self.material)
+        ci, co = wi[..., 2], wo[..., 2]
+        cos_d = np.sqrt(np.clip(1.0 - 0.25 * _tsq(wi - wo), 0.0, 1.0))
+        q = fresnel(cos_d, None if eta is None else complex(eta).real)
+        spec = _obliquity(self.obliquity, ci, co) * q * _s_of_sq(A, B, C, _tsq(wi + wo))
+        return np.where((ci >= 0.0) & (co >= 0.0), kd / np.pi + spec, 0.0)
+
+    def sample(self, wo, u1, u2):
+        return sample_low_smooth(wo, u1, u2, self.B)
+
+    def pdf(self, wi, wo):
+        return pdf_low_smooth(wi, wo, self.B)
+
+
+@dataclass(frozen=True)
+class LowMicrofacet(ModelBase):
+    """Löw's ABC microfacet BRDF f = kd/π + S F G/(π cos θi cos θo), S = A/(1 + B(1 − ĥ·n))^C
+    (Löw et al. 2012, eq. 15); ``low_microfacet`` wraps it. ``shadowing``: "cook-torrance"
+    (V-groove) or "none". Sampler: ĥ ∝ (1 + B(1 − ĥ·n))^−C (``sample_low_microfacet``)."""
+
+    A: float
+    B: float
+    C: float
+    kd: float = 0.0
+    material: Any = None
+    shadowing: str = "cook-torrance"
+    name: ClassVar[str] = "LowMicrofacet"
+    params_doc: ClassVar[str] = (
+        "A ≥ 0 (sr⁻¹), B > 0, C > 0, kd ≥ 0, material, shadowing=cook-torrance|none"
+    )
+    source: ClassVar[str] = "Löw et al. 2012, eq. 15"
+    functions: ClassVar[tuple[str, ...]] = ("low_microfacet", "low_microfacet_A_from_ndf")
+    sampler_doc: ClassVar[str] = "wo, u1, u2; B, C (half vectors, eq. 23 density)"
+    sampler_source: ClassVar[str] = "Löw et al. 2012, eq. 23–28"
+    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_low_microfacet", "pdf_low_microfacet")
+
+    def f(self, wi, wo):
+        wi = _checks.directions("wi", wi)
+        wo = _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        A, B, C = _abc(self.A, self.B, self.C)
+        kd = _nonneg("kd", self.kd)
+        _choice("shadowing", self.shadowing, ("cook-torrance", "none"))
+        eta = resolve_material(self.material)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        ci, co = wi[..., 2], wo[..., 2]
+        H = wi + wo
+        hlen = np.sqrt(np.sum(H * H, axis=-1, keepdims=True))
+        inside = (ci > 0.0) & (co > 0.0)  # then H_z > 0, H ≠ 0
+        h = np.where(inside[..., None], H / np.where(hlen > 0.0, hlen, 1.0), [0.0, 0.0, 1.0])
+        d = _s_of_sq(A, B, C, _one_minus_cos_h(np.where(inside[..., None], H, h)))
+        f = fresnel(np.clip(vectors.dot(wi, h), 0.0, 1.0), eta)
+        g = vgroove_g(wi, wo, h) if self.shadowing == "cook-torrance" else 1.0
+        spec = np.where(inside, d * f * g / (np.pi * np.where(inside, ci * co, 1.0)), 0.0)
+        return np.where((ci >= 0.0) & (co >= 0.0), kd / np.pi + spec, 0.0)
+
+    def sample(self, wo, u1, u2):
+        return sample_low_microfacet(wo, u1, u2, self.B, self.C)
+
+    def pdf(self, wi, wo):
+        return pdf_low_microfacet(wi, wo, self.B, self.C)
+
+
+@dataclass(frozen=True)
+class RayleighRice(ModelBase):
+    """First-order Rayleigh–Rice BRDF (16π²/λ⁴) cos θi cos θo Q S(|Dp|/λ) with the ABC PSD
+    (Löw et al. 2012, eq. 3–8); ``rayleigh_rice`` wraps it. With ``B_y`` the anisotropic PSD
+    A/(1 + B f'x² + B_y f'y²)^C along axes rotated by ``rotation`` degrees (``B_y`` None: the
+    isotropic PSD, ``rotation`` unused). No sampler."""
+
+    wavelength: float
+    A: float
+    B: float
+    C: float
+    material: Any
+    polarisation: str = "unpolarised"
+    B_y: float | None = None
+    rotation: float = 0.0
+    name: ClassVar[str] = "RayleighRice"
+    params_doc: ClassVar[str] = (
+        "wavelength > 0, A ≥ 0, B > 0, C > 1 (lengths in one unit), material (an ior), "
+        "polarisation, B_y > 0 or None (isotropic), rotation (degrees)"
+    )
+    source: ClassVar[str] = "Löw et al. 2012, eq. 3–8"
+    functions: ClassVar[tuple[str, ...]] = ("rayleigh_rice",)
+
+    @property
+    def symmetric(self) -> bool:
+        """Mirror symmetric about the plane of incidence for an isotropic PSD only (an
+        elliptical one is, only where that plane holds one of its axes)."""
+        return self.B_y is None
+
+    def f(self, wi, wo):
+        wi = _checks.directions("wi", wi)
+        wo = _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        lam = _checks.positive("wavelength", self.wavelength)
+        A, B, C = _abc(self.A, self.B, self.C)
+        eta = resolve_material(self.material)
+        if eta is None:
+            raise UsageError(
+                "material must have an index of refraction (ior) n or n+ik "
+                "(Rayleigh–Rice needs ε = ior²), got None"
+            )
+        _choice("polarisation", self.polarisation, RR_POLARISATIONS)
+        rotation = _checks.finite("rotation", self.rotation)
+        ci, co = wi[..., 2], wo[..., 2]
+        if self.B_y is None:
+            s = _s_of_sq(A, B, C, _tsq(wi + wo) / lam**2)
+        else:
+            d = (wi + wo) / lam
+            s = abc_psd_anisotropic(d[..., 0], d[..., 1], A, B, C, self.B_y, rotation)
+        q = _rr_q(wi, wo, complex(eta), self.polarisation)
+        f = 16.0 * np.pi**2 / lam**4 * ci * co * q * s
+        return np.where((ci >= 0.0) & (co >= 0.0), f, 0.0)

@@ -1,11 +1,15 @@
-"""Shadowing–masking terms as objects: ``VGroove()``, ``Smith(ndf, correlated)``, ``NoMasking()``.
+"""Shadowing–masking terms G as objects: ``VGroove()``, ``Smith(ndf, correlated)``, ``NoMasking()``.
 
-Each wraps the functions of ``shadowing`` (no physics of its own) and names the ``shadowing``
-string the BRDF functions take (``kind``), so ``TorranceSparrow(ndf, Smith(correlated=True))``
-is ``torrance_sparrow(wi, wo, ndf, "smith-correlated")``. Conventions as in ``shadowing``:
-unit directions (..., 3) pointing away from the surface, n = +z, h the microfacet normal;
-G1, G2 dimensionless in [0, 1]. A ``Smith()`` without an NDF is bound to the microsurface's
-own NDF by the model that uses it (``TorranceSparrow``); on its own it needs one.
+The V-groove G (Mikkelsen 2009, eq. 25) lives here; Smith's G comes from the NDF's Λ
+(``shadowing``). Each object names the ``shadowing`` string the BRDF functions take (``kind``),
+so ``TorranceSparrow(ndf, Smith(correlated=True))`` is ``torrance_sparrow(wi, wo, ndf,
+"smith-correlated")``; ``masking_from_kind`` is the one parser of those strings. Conventions as
+in ``shadowing``: unit directions (..., 3) pointing away from the surface, n = +z, h the
+microfacet normal; G1, G2 dimensionless in [0, 1]. A ``Smith()`` without an NDF is bound to the
+microsurface's own NDF by the model that uses it (``TorranceSparrow``); on its own it needs one.
+
+``g2_cosines(wi, wo, cos_h, wih, woh)`` is G2 from precomputed cosines h_z, wi·h, wo·h on
+validated unit arrays (the BRDFs and the bin averages call it at their half vectors).
 """
 
 from __future__ import annotations
@@ -15,17 +19,34 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 
-from .shadowing import SHADOWING_KINDS, shadowing_g, smith_g1, smith_g2, vgroove_g, vgroove_g1
+from .shadowing import _smith_g2, smith_g1, smith_g2
 
-__all__ = ["Masking", "VGroove", "Smith", "NoMasking", "MASKING_CLASSES", "masking_from_kind"]
+__all__ = [
+    "Masking",
+    "VGroove",
+    "Smith",
+    "NoMasking",
+    "MASKING_CLASSES",
+    "SHADOWING_KINDS",
+    "masking_from_kind",
+    "vgroove_g",
+    "vgroove_g1",
+    "shadowing_g",
+]
+
+SHADOWING_KINDS = ("vgroove", "smith", "smith-correlated", "none")
+"""Allowed values of the ``shadowing`` argument (``masking_from_kind``)."""
 
 
 @runtime_checkable
 class Masking(Protocol):
-    """A shadowing–masking term: ``kind`` (one of ``SHADOWING_KINDS``), ``g1(w, h)`` and
-    ``g2(wi, wo, h)`` (dimensionless), ``source`` (paper and equation)."""
+    """A shadowing–masking term: ``kind`` (one of ``SHADOWING_KINDS``), ``g1(w, h)``,
+    ``g2(wi, wo, h)`` and ``g2_cosines(wi, wo, cos_h, wih, woh)`` (dimensionless), ``source``
+    (paper and equation)."""
 
     kind: str
     source: str
@@ -33,6 +54,31 @@ class Masking(Protocol):
     def g1(self, w, h): ...
 
     def g2(self, wi, wo, h): ...
+
+    def g2_cosines(self, wi, wo, cos_h, wih, woh): ...
+
+
+def _unit_triple(wi, wo, h):
+    wi = _checks.directions("wi", wi)
+    wo = _checks.directions("wo", wo)
+    h = _checks.directions("h", h)
+    _checks.broadcast({"wi": wi, "wo": wo, "h": h})
+    return wi, wo, h
+
+
+def _unit_pair(w, h):
+    w = _checks.directions("w", w)
+    h = _checks.directions("h", h)
+    _checks.broadcast({"w": w, "h": h})
+    return w, h
+
+
+def _vgroove_g1(cos_w, w_dot_h, cos_h):
+    """min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) χ⁺(n·w) from the three cosines (Mikkelsen 2009, eq. 25)."""
+    ok = (w_dot_h > 0.0) & (cos_w > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = 2.0 * cos_h * cos_w / w_dot_h
+    return np.where(ok, np.clip(ratio, 0.0, 1.0), 0.0)
 
 
 @dataclass(frozen=True)
@@ -47,10 +93,15 @@ class VGroove:
     functions: ClassVar[tuple[str, ...]] = ("vgroove_g", "vgroove_g1")
 
     def g1(self, w, h):
-        return vgroove_g1(w, h)
+        w, h = _unit_pair(w, h)
+        return _vgroove_g1(w[..., 2], vectors.dot(w, h), h[..., 2])
 
     def g2(self, wi, wo, h):
-        return vgroove_g(wi, wo, h)
+        wi, wo, h = _unit_triple(wi, wo, h)
+        return self.g2_cosines(wi, wo, h[..., 2], vectors.dot(wi, h), vectors.dot(wo, h))
+
+    def g2_cosines(self, wi, wo, cos_h, wih, woh):
+        return np.minimum(_vgroove_g1(wi[..., 2], wih, cos_h), _vgroove_g1(wo[..., 2], woh, cos_h))
 
 
 @dataclass(frozen=True)
@@ -89,6 +140,9 @@ class Smith:
     def g2(self, wi, wo, h):
         return smith_g2(wi, wo, h, self._ndf(), correlated=self.correlated)
 
+    def g2_cosines(self, wi, wo, cos_h, wih, woh):
+        return _smith_g2(self.ndf, wi, wo, wih, woh, correlated=self.correlated)
+
 
 @dataclass(frozen=True)
 class NoMasking:
@@ -101,17 +155,22 @@ class NoMasking:
     functions: ClassVar[tuple[str, ...]] = ("shadowing_g",)
 
     def g1(self, w, h):
-        return shadowing_g(w, w, h, None, "none")  # χ⁺(w·h)²
+        return self.g2(w, w, h)  # χ⁺(w·h)²
 
     def g2(self, wi, wo, h):
-        return shadowing_g(wi, wo, h, None, "none")
+        wi, wo, h = _unit_triple(wi, wo, h)
+        return self.g2_cosines(wi, wo, h[..., 2], vectors.dot(wi, h), vectors.dot(wo, h))
+
+    def g2_cosines(self, wi, wo, cos_h, wih, woh):
+        return ((wih > 0.0) & (woh > 0.0)).astype(np.float64)
 
 
 MASKING_CLASSES = (VGroove, Smith, NoMasking)
 
 
 def masking_from_kind(kind: str, ndf=None):
-    """The masking object of a ``shadowing`` string (``SHADOWING_KINDS``)."""
+    """The masking object of a ``shadowing`` string (``SHADOWING_KINDS``); Smith kinds are
+    bound to ``ndf``. The one place a shadowing string is read."""
     if kind not in SHADOWING_KINDS:
         raise UsageError(
             f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, got {kind!r}"
@@ -121,3 +180,27 @@ def masking_from_kind(kind: str, ndf=None):
     if kind == "none":
         return NoMasking()
     return Smith(ndf, correlated=(kind == "smith-correlated"))
+
+
+# --- the free functions, kept for callers of the string form ----------------------------------
+def vgroove_g1(w, h):
+    """One-sided V-groove masking min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) (Mikkelsen 2009, eq. 25):
+    ``VGroove().g1``."""
+    return VGroove().g1(w, h)
+
+
+def vgroove_g(wi, wo, h):
+    """V-groove shadowing–masking min(1, 2(n·h)(n·wo)/(wo·h), 2(n·h)(n·wi)/(wi·h)) with χ⁺
+    conditions (Mikkelsen 2009, eq. 25, Blinn 1977); 0 where wi·h ≤ 0 or wo·h ≤ 0:
+    ``VGroove().g2``."""
+    return VGroove().g2(wi, wo, h)
+
+
+def shadowing_g(wi, wo, h, ndf, shadowing: str):
+    """G(wi, wo, h) of the model named by ``shadowing``: "vgroove" (Mikkelsen 2009, eq. 25),
+    "smith" (separable), "smith-correlated" (height-correlated) or "none" (χ⁺(wi·h)χ⁺(wo·h)
+    only); ``ndf`` is used by the Smith models only: ``masking_from_kind(shadowing, ndf).g2``
+    without the Smith NDF check."""
+    masking = masking_from_kind(shadowing, ndf)
+    wi, wo, h = _unit_triple(wi, wo, h)
+    return masking.g2_cosines(wi, wo, h[..., 2], vectors.dot(wi, h), vectors.dot(wo, h))

@@ -1,8 +1,15 @@
 """The closed-form BRDFs as frozen model objects (the shape of pbrt-v4's BxDFs, Mitsuba 3's
-BSDFs), each delegating to the tested free functions of this package — no physics of its own.
+BSDFs), gathered in ``MODEL_CLASSES``. Each model is the implementation and lives beside the
+physics of its paper: ``TorranceSparrow`` (f from its distribution, masking object and material)
+and ``CookTorrance`` in ``brdf``, ``LowSmooth``, ``LowMicrofacet`` and ``RayleighRice`` in
+``low``, ``EdwardsEmpirical`` and ``EdwardsFit`` in ``edwards``; their free functions
+(``torrance_sparrow``, ``low_smooth``, ...) are wrappers over them. Defined here: the Mikkelsen
+2009, eq. 28 models, views of ``mikkelsen_mix``/``mikkelsen_diffuse`` with a scalar kd (the
+functions also take one kd per colour), and ``KullaContyLobe``, the lobe of a ``KullaConty``.
+The protocol classes are in ``protocol``.
 
 Protocol (``BRDFModel``): ``f(wi, wo)`` in sr⁻¹ for unit (..., 3) directions pointing away from
-the surface, n = +z (the wrapped function's argument order and conventions); ``params()``, a
+the surface, n = +z (the free functions' argument order and conventions); ``params()``, a
 dict of the model's parameters (its dataclass fields); ``source``, paper and equation
 (docs/references.md). Models with an importance sampler also satisfy ``SampleableBRDF``:
 ``sample(wo, u1, u2)`` draws wi from uniforms in [0, 1) and returns a NamedTuple whose first
@@ -13,7 +20,7 @@ the model's specular lobe; diffuse terms (kd, cd) are not sampled. Models withou
 no ``sample``/``pdf`` attributes at all: ``isinstance(m, SampleableBRDF)`` tells them apart.
 
 Class attributes feed ``catalogue.MODELS``: ``name`` (the class name), ``params_doc``,
-``source``, ``functions`` (the free functions wrapped) and, for samplers, ``sampler_doc``,
+``source``, ``functions`` (the free functions of the model) and, for samplers, ``sampler_doc``,
 ``sampler_source``, ``sampler_functions``. ``symmetric``: f is unchanged by mirroring wo about
 the plane of incidence (lets ``predict.bin_average`` integrate half of a folded bin).
 
@@ -25,36 +32,25 @@ pointwise f (only bin averages, ``walk_bin_averages``), so it has no model objec
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Any, ClassVar, NamedTuple, Protocol, runtime_checkable
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-from microsim import checks as _checks
 from microsim.errors import UsageError
 
-from .brdf import AlbedoTable, mikkelsen_mix, pdf_microfacet, sample_microfacet, torrance_sparrow
-from .edwards import (
-    EdwardsParams,
-    Lump,
-    LumpMixture,
-    edwards_empirical,
-    edwards_fit_brdf,
-    pdf_edwards,
-    sample_edwards,
+from .brdf import (
+    AlbedoTable,
+    CookTorrance,
+    TorranceSparrow,
+    mikkelsen_mix,
+    pdf_microfacet,
+    sample_microfacet,
 )
+from .edwards import EdwardsEmpirical, EdwardsFit
 from .energy_compensation import KullaConty, mikkelsen_diffuse
-from .fresnel import resolve_material
-from .low import (
-    low_microfacet,
-    low_smooth,
-    pdf_low_microfacet,
-    pdf_low_smooth,
-    rayleigh_rice,
-    sample_low_microfacet,
-    sample_low_smooth,
-)
-from .masking import Masking, Smith, VGroove, masking_from_kind
+from .low import LowMicrofacet, LowSmooth, RayleighRice
+from .protocol import BRDFModel, BRDFSample, ModelBase, SampleableBRDF
 
 __all__ = [
     "BRDFModel",
@@ -74,358 +70,8 @@ __all__ = [
 ]
 
 
-@runtime_checkable
-class BRDFModel(Protocol):
-    """A closed-form BRDF: ``f(wi, wo)`` (sr⁻¹), ``params()`` and ``source``."""
-
-    source: str
-
-    def f(self, wi, wo): ...
-
-    def params(self) -> dict: ...
-
-
-@runtime_checkable
-class SampleableBRDF(BRDFModel, Protocol):
-    """A ``BRDFModel`` with an importance sampler: ``sample(wo, u1, u2)`` → (wi, pdf, ...) and
-    its density ``pdf(wi, wo)`` (sr⁻¹, whole sphere of wi)."""
-
-    def sample(self, wo, u1, u2): ...
-
-    def pdf(self, wi, wo): ...
-
-
-class BRDFSample(NamedTuple):
-    """A sampled incident direction ``wi`` (..., 3) and its solid-angle density ``pdf`` (sr⁻¹)."""
-
-    wi: np.ndarray
-    pdf: np.ndarray
-
-
-_N = np.array([0.0, 0.0, 1.0])
-
-
-class _Model:
-    """Shared parts: ``params()`` from the dataclass fields, the construction check."""
-
-    name: ClassVar[str]
-    params_doc: ClassVar[str]
-    source: ClassVar[str]
-    functions: ClassVar[tuple[str, ...]]
-    symmetric: ClassVar[bool] = True
-
-    def params(self) -> dict:
-        """The model's parameters, name → value (its dataclass fields)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-    def __post_init__(self):
-        self.f(_N, _N)  # the wrapped function validates the parameters
-
-
 def _isotropic(ndf) -> bool:
     return bool(ndf.isotropic)
-
-
-# --- Torrance–Sparrow and Cook–Torrance -------------------------------------------------------
-@dataclass(frozen=True)
-class TorranceSparrow(_Model):
-    """f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi cos θo) (Mikkelsen 2009, eq. 13/18):
-    ``torrance_sparrow(wi, wo, ndf, masking.kind, material)``.
-
-    ``masking``: ``VGroove()``, ``Smith(correlated=...)`` (bound to ``ndf``; ``Smith(other,
-    ...)`` evaluates G with another NDF's Λ — the isotropic stand-in renderers use for an
-    anisotropic D, ``masking_ndf``), ``NoMasking()`` or a ``shadowing`` string. Sampler:
-    h ~ D(h)(h·n), wi = 2(wo·h)h − wo (``sample_microfacet``/``pdf_microfacet``).
-    """
-
-    ndf: Any
-    masking: Any = VGroove()
-    material: Any = None
-    name: ClassVar[str] = "TorranceSparrow"
-    params_doc: ClassVar[str] = (
-        "ndf, masking=VGroove() | Smith(correlated=False|True) | NoMasking() "
-        "(shadowing vgroove|smith|smith-correlated|none), material"
-    )
-    source: ClassVar[str] = "Mikkelsen 2009, eq. 13/18"
-    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
-    sampler_doc: ClassVar[str] = "wo, u1, u2; h ~ D(h)(h·n), pdf D h_z/(4|wo·h|)"
-    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
-
-    def __post_init__(self):
-        m = (
-            masking_from_kind(self.masking, self.ndf)
-            if isinstance(self.masking, str)
-            else self.masking
-        )
-        if not isinstance(m, Masking):
-            raise UsageError(
-                f"masking must be VGroove(), Smith(...), NoMasking() or a shadowing name, got {m!r}"
-            )
-        if isinstance(m, Smith) and m.ndf is None:
-            m = Smith(self.ndf, m.correlated)
-        object.__setattr__(self, "masking", m)
-        resolve_material(self.material)
-        super().__post_init__()
-
-    @property
-    def shadowing(self) -> str:
-        """The ``shadowing`` string of the masking (``SHADOWING_KINDS``)."""
-        return self.masking.kind
-
-    @property
-    def symmetric(self) -> bool:
-        return _isotropic(self.ndf)
-
-    @property
-    def masking_ndf(self):
-        """The Smith G's NDF when it is not ``ndf`` (a stand-in such as MaterialX's isotropic
-        α = √(αx αy) for an anisotropic D), else None."""
-        m = self.masking
-        if isinstance(m, Smith) and m.ndf is not self.ndf and m.ndf != self.ndf:
-            return m.ndf
-        return None
-
-    def f(self, wi, wo):
-        return torrance_sparrow(
-            wi,
-            wo,
-            self.ndf,
-            shadowing=self.masking.kind,
-            material=self.material,
-            masking_ndf=self.masking_ndf,
-        )
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
-
-    def pdf(self, wi, wo):
-        return pdf_microfacet(wi, wo, self.ndf)
-
-
-@dataclass(frozen=True)
-class CookTorrance(_Model):
-    """f = kd/π + ks·TS(ndf, V-groove G, material) for wi, wo above the horizon, 0 otherwise
-    (Cook & Torrance 1982 as Mikkelsen 2009, eq. 13/25; the ``cook-torrance`` fit model).
-    ks ≥ 0, kd ≥ 0. Sampler: the specular lobe's (``sample_microfacet``)."""
-
-    ndf: Any
-    material: Any = None
-    ks: float = 1.0
-    kd: float = 0.0
-    name: ClassVar[str] = "CookTorrance"
-    params_doc: ClassVar[str] = "ndf (Beckmann m in the paper), material, ks ≥ 0, kd ≥ 0"
-    source: ClassVar[str] = "Cook & Torrance 1982; Mikkelsen 2009, eq. 13, 25"
-    functions: ClassVar[tuple[str, ...]] = ("torrance_sparrow",)
-    sampler_doc: ClassVar[str] = "wo, u1, u2; specular lobe only (h ~ D(h)(h·n))"
-    sampler_source: ClassVar[str] = "Mikkelsen 2009, eq. 15 (Jacobian)"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_microfacet", "pdf_microfacet")
-
-    def __post_init__(self):
-        for key in ("ks", "kd"):
-            v = _checks.in_range(key, getattr(self, key), 0.0, np.inf, hi_open=True)
-            object.__setattr__(self, key, float(v))
-        super().__post_init__()
-
-    @property
-    def symmetric(self) -> bool:
-        return _isotropic(self.ndf)
-
-    def f(self, wi, wo):
-        ts = torrance_sparrow(wi, wo, self.ndf, "vgroove", self.material)
-        up = (np.asarray(wi)[..., 2] > 0.0) & (np.asarray(wo)[..., 2] > 0.0)
-        return np.where(up, self.kd / np.pi + self.ks * ts, 0.0)
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_microfacet(wo, u1, u2, self.ndf))
-
-    def pdf(self, wi, wo):
-        return pdf_microfacet(wi, wo, self.ndf)
-
-
-# --- Löw et al. 2012 ----------------------------------------------------------------------------
-@dataclass(frozen=True)
-class LowSmooth(_Model):
-    """Löw's smooth-surface BRDF f = kd/π + G' Q' A/(1 + B|wi_t + wo_t|²)^C (Löw et al. 2012,
-    eq. 12–14): ``low_smooth``. Sampler: the C = 1 disk density (``sample_low_smooth``)."""
-
-    A: float
-    B: float
-    C: float
-    kd: float = 0.0
-    material: Any = None
-    obliquity: str = "one"
-    name: ClassVar[str] = "LowSmooth"
-    params_doc: ClassVar[str] = (
-        "A ≥ 0 (sr⁻¹), B > 0, C > 0, kd ≥ 0, material, obliquity=one|cos|harvey"
-    )
-    source: ClassVar[str] = "Löw et al. 2012, eq. 12–14"
-    functions: ClassVar[tuple[str, ...]] = ("low_smooth",)
-    sampler_doc: ClassVar[str] = "wo, u1, u2; B only (C = 1 disk density about the mirror)"
-    sampler_source: ClassVar[str] = "Löw et al. 2012, eq. 17–22"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_low_smooth", "pdf_low_smooth")
-
-    def f(self, wi, wo):
-        return low_smooth(wi, wo, self.A, self.B, self.C, self.kd, self.material, self.obliquity)
-
-    def sample(self, wo, u1, u2):
-        return sample_low_smooth(wo, u1, u2, self.B)
-
-    def pdf(self, wi, wo):
-        return pdf_low_smooth(wi, wo, self.B)
-
-
-@dataclass(frozen=True)
-class LowMicrofacet(_Model):
-    """Löw's ABC microfacet BRDF f = kd/π + S F G/(π cos θi cos θo), S = A/(1 + B(1 − ĥ·n))^C
-    (Löw et al. 2012, eq. 15): ``low_microfacet``. ``shadowing``: "cook-torrance" (V-groove)
-    or "none". Sampler: ĥ ∝ (1 + B(1 − ĥ·n))^−C (``sample_low_microfacet``)."""
-
-    A: float
-    B: float
-    C: float
-    kd: float = 0.0
-    material: Any = None
-    shadowing: str = "cook-torrance"
-    name: ClassVar[str] = "LowMicrofacet"
-    params_doc: ClassVar[str] = (
-        "A ≥ 0 (sr⁻¹), B > 0, C > 0, kd ≥ 0, material, shadowing=cook-torrance|none"
-    )
-    source: ClassVar[str] = "Löw et al. 2012, eq. 15"
-    functions: ClassVar[tuple[str, ...]] = ("low_microfacet", "low_microfacet_A_from_ndf")
-    sampler_doc: ClassVar[str] = "wo, u1, u2; B, C (half vectors, eq. 23 density)"
-    sampler_source: ClassVar[str] = "Löw et al. 2012, eq. 23–28"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_low_microfacet", "pdf_low_microfacet")
-
-    def f(self, wi, wo):
-        return low_microfacet(
-            wi, wo, self.A, self.B, self.C, self.kd, self.material, self.shadowing
-        )
-
-    def sample(self, wo, u1, u2):
-        return sample_low_microfacet(wo, u1, u2, self.B, self.C)
-
-    def pdf(self, wi, wo):
-        return pdf_low_microfacet(wi, wo, self.B, self.C)
-
-
-@dataclass(frozen=True)
-class RayleighRice(_Model):
-    """First-order Rayleigh–Rice BRDF (16π²/λ⁴) cos θi cos θo Q S(|Dp|/λ) with the ABC PSD
-    (Löw et al. 2012, eq. 3–8): ``rayleigh_rice``. With ``B_y`` the anisotropic PSD
-    A/(1 + B f'x² + B_y f'y²)^C along axes rotated by ``rotation`` degrees (``B_y`` None: the
-    isotropic PSD, ``rotation`` unused). No sampler."""
-
-    wavelength: float
-    A: float
-    B: float
-    C: float
-    material: Any
-    polarisation: str = "unpolarised"
-    B_y: float | None = None
-    rotation: float = 0.0
-    name: ClassVar[str] = "RayleighRice"
-    params_doc: ClassVar[str] = (
-        "wavelength > 0, A ≥ 0, B > 0, C > 1 (lengths in one unit), material (an ior), "
-        "polarisation, B_y > 0 or None (isotropic), rotation (degrees)"
-    )
-    source: ClassVar[str] = "Löw et al. 2012, eq. 3–8"
-    functions: ClassVar[tuple[str, ...]] = ("rayleigh_rice",)
-
-    @property
-    def symmetric(self) -> bool:
-        """Mirror symmetric about the plane of incidence for an isotropic PSD only (an
-        elliptical one is, only where that plane holds one of its axes)."""
-        return self.B_y is None
-
-    def f(self, wi, wo):
-        return rayleigh_rice(
-            wi,
-            wo,
-            self.wavelength,
-            self.A,
-            self.B,
-            self.C,
-            self.material,
-            self.polarisation,
-            self.B_y,
-            self.rotation,
-        )
-
-
-# --- Edwards et al. 2006 ------------------------------------------------------------------------
-def _lumps_symmetric(lumps) -> bool:
-    """Lumps centred on their anchor and round are mirror symmetric; a callable may not be."""
-    if isinstance(lumps, Lump):
-        lumps = LumpMixture((lumps,), (1.0,))
-    if not isinstance(lumps, LumpMixture):
-        return False
-    return all(
-        tuple(lump.offset) == (0.0, 0.0) and lump.aspect == 1.0
-        for lump, w in zip(lumps.lumps, lumps.weights)
-        if w > 0
-    )
-
-
-@dataclass(frozen=True)
-class EdwardsEmpirical(_Model):
-    """Edwards' energy-conserving empirical BRDF f = (1 − F) C_d/π + F p(u, v) J/cos θi
-    (Edwards et al. 2006, eq. 30–33): ``edwards_empirical``. Not reciprocal. Sampler: the lump
-    density on the halfway disk (``sample_edwards``; Lump/LumpMixture lumps only)."""
-
-    lumps: Any
-    projection: str = "scaling"
-    fresnel: Any = None
-    diffuse: float = 0.0
-    name: ClassVar[str] = "EdwardsEmpirical"
-    params_doc: ClassVar[str] = (
-        "lumps (Lump | LumpMixture, e.g. empirical_lumps; or pdf_disk(uv, wo)), "
-        "projection=scaling|orthogonal, fresnel None|f0|F(cos θo), diffuse C_d ∈ [0, 1]"
-    )
-    source: ClassVar[str] = "Edwards et al. 2006, eq. 33"
-    functions: ClassVar[tuple[str, ...]] = ("edwards_empirical", "empirical_lumps")
-    sampler_doc: ClassVar[str] = "wo, u1, u2; lumps on the halfway disk (u1 also picks the lump)"
-    sampler_source: ClassVar[str] = "Edwards et al. 2006, eq. 26–29"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_edwards", "pdf_edwards")
-
-    @property
-    def symmetric(self) -> bool:
-        return _lumps_symmetric(self.lumps)
-
-    def f(self, wi, wo):
-        return edwards_empirical(wi, wo, self.lumps, self.projection, self.fresnel, self.diffuse)
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_edwards(wo, u1, u2, self.lumps, self.projection))
-
-    def pdf(self, wi, wo):
-        return pdf_edwards(wi, wo, self.lumps, self.projection)
-
-
-@dataclass(frozen=True)
-class EdwardsFit(_Model):
-    """Edwards' data-fitting BRDF f = (1 − F_fit) C_d/π + F_fit p(u, v) J/cos θi with the
-    two-lump p of eq. 35 (Edwards et al. 2006, eq. 34–36): ``edwards_fit_brdf``. Not
-    reciprocal. Sampler: ``sample_edwards`` of ``fit_params.lumps()``."""
-
-    fit_params: EdwardsParams
-    projection: str = "orthogonal"
-    name: ClassVar[str] = "EdwardsFit"
-    params_doc: ClassVar[str] = "fit_params: EdwardsParams, projection=orthogonal|scaling"
-    source: ClassVar[str] = "Edwards et al. 2006, eq. 34–36"
-    functions: ClassVar[tuple[str, ...]] = ("edwards_fit_brdf", "EdwardsParams")
-    sampler_doc: ClassVar[str] = "wo, u1, u2; the two lumps of eq. 35 (may leave the disk)"
-    sampler_source: ClassVar[str] = "Edwards et al. 2006, eq. 26–29"
-    sampler_functions: ClassVar[tuple[str, ...]] = ("sample_edwards", "pdf_edwards")
-
-    def f(self, wi, wo):
-        return edwards_fit_brdf(wi, wo, self.fit_params, self.projection)
-
-    def sample(self, wo, u1, u2) -> BRDFSample:
-        return BRDFSample(*sample_edwards(wo, u1, u2, self.fit_params.lumps(), self.projection))
-
-    def pdf(self, wi, wo):
-        return pdf_edwards(wi, wo, self.fit_params.lumps(), self.projection)
 
 
 # --- Mikkelsen 2009, eq. 28 and energy compensation ---------------------------------------------
@@ -441,7 +87,7 @@ def _check_table(table):
 
 
 @dataclass(frozen=True)
-class MikkelsenMix(_Model):
+class MikkelsenMix(ModelBase):
     """Specular + reciprocal diffuse f = ks f_s + (1 − ks ρ(wi))(kd/π)(1 − ks ρ(wo))
     [/(1 − ks ρ̄)] (Mikkelsen 2009, eq. 28): ``mikkelsen_mix`` with a scalar kd ∈ [0, 1].
     Sampler: the specular lobe's (``sample_microfacet`` of ``table.ndf``)."""
@@ -480,7 +126,7 @@ class MikkelsenMix(_Model):
 
 
 @dataclass(frozen=True)
-class MikkelsenDiffuse(_Model):
+class MikkelsenDiffuse(ModelBase):
     """The diffuse-like term (1 − ks ρ(wi))(kd/π)(1 − ks ρ(wo)) of Mikkelsen 2009, eq. 28
     (``mikkelsen_diffuse``; kd ≥ 0 may exceed 1, fitted by ``mikkelsen_kd``). No sampler."""
 
@@ -504,7 +150,7 @@ class MikkelsenDiffuse(_Model):
 
 
 @dataclass(frozen=True)
-class KullaContyLobe(_Model):
+class KullaContyLobe(ModelBase):
     """Kulla & Conty's compensation lobe f_ms = F_ms (1 − E(μi))(1 − E(μo))/(π(1 − E_avg))
     (Kulla & Conty 2017; Kelemen & Szirmay-Kalos 2001): ``KullaConty(...).brdf``. No sampler."""
 

@@ -1,5 +1,5 @@
-"""Shadowing–masking functions G: V-groove (Mikkelsen 2009, eq. 25) and Smith (Smith 1967;
-Heitz 2014; docs/design.md, "Shadowing and Fresnel").
+"""Smith shadowing–masking G (Smith 1967; Heitz 2014; docs/design.md, "Shadowing and Fresnel");
+the V-groove G (Mikkelsen 2009, eq. 25) and the ``shadowing``-string functions are in ``masking``.
 
 Directions are unit (..., 3) arrays pointing away from the surface, macro normal n = +z; every
 function takes its directions first, ``(wi, wo, h, ...)`` or ``(w, h, ...)``, then the NDF.
@@ -20,53 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from microsim import checks as _checks
-from microsim import vectors
-from microsim.errors import UsageError
-
-__all__ = [
-    "vgroove_g",
-    "vgroove_g1",
-    "smith_lambda",
-    "smith_g1",
-    "smith_g2",
-    "shadowing_g",
-    "SHADOWING_KINDS",
-]
-
-SHADOWING_KINDS = ("vgroove", "smith", "smith-correlated", "none")
-"""Allowed values of the ``shadowing`` argument."""
-
-
-# --- V-groove (Blinn / Cook–Torrance) ---------------------------------------------------------
-def _vgroove_g1(cos_w, w_dot_h, cos_h):
-    """min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) χ⁺(n·w) from the three cosines (Mikkelsen 2009, eq. 25)."""
-    ok = (w_dot_h > 0.0) & (cos_w > 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = 2.0 * cos_h * cos_w / w_dot_h
-    return np.where(ok, np.clip(ratio, 0.0, 1.0), 0.0)
-
-
-def vgroove_g1(w, h):
-    """One-sided V-groove masking min(1, 2(n·h)(n·w)/(w·h)) χ⁺(w·h) (Mikkelsen 2009, eq. 25)."""
-    w = _checks.directions("w", w)
-    h = _checks.directions("h", h)
-    _checks.broadcast({"w": w, "h": h})
-    return _vgroove_g1(w[..., 2], vectors.dot(w, h), h[..., 2])
-
-
-def vgroove_g(wi, wo, h):
-    """V-groove shadowing–masking min(1, 2(n·h)(n·wo)/(wo·h), 2(n·h)(n·wi)/(wi·h)) with χ⁺
-    conditions (Mikkelsen 2009, eq. 25, Blinn 1977); 0 where wi·h ≤ 0 or wo·h ≤ 0."""
-    wi = _checks.directions("wi", wi)
-    wo = _checks.directions("wo", wo)
-    h = _checks.directions("h", h)
-    _checks.broadcast({"wi": wi, "wo": wo, "h": h})
-    hz = h[..., 2]
-    return np.minimum(
-        _vgroove_g1(wi[..., 2], vectors.dot(wi, h), hz),
-        _vgroove_g1(wo[..., 2], vectors.dot(wo, h), hz),
-    )
+__all__ = ["smith_lambda", "smith_g1", "smith_g2"]
 
 
 # --- Smith: thin wrappers over the distribution's own Λ, G1 and G2 ----------------------------
@@ -96,32 +50,3 @@ def smith_g2(wi, wo, h, ndf, correlated: bool = False):
     """Smith shadowing–masking: separable G1(wi)G1(wo), or height-correlated
     χ⁺(wi·h)χ⁺(wo·h)/(1 + Λ(wi) + Λ(wo)) when ``correlated``: ``ndf.G2(wi, wo, h, correlated)``."""
     return ndf.G2(wi, wo, h, correlated)
-
-
-def _check_kind(kind) -> str:
-    if kind not in SHADOWING_KINDS:
-        raise UsageError(
-            f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, got {kind!r}"
-        )
-    return kind
-
-
-def _shadowing(kind: str, ndf, wi, wo, cos_h, wih, woh):
-    """G for validated unit arrays from h_z and the precomputed wi·h, wo·h (used by the BRDFs)."""
-    if kind == "vgroove":
-        return np.minimum(_vgroove_g1(wi[..., 2], wih, cos_h), _vgroove_g1(wo[..., 2], woh, cos_h))
-    if kind == "none":
-        return ((wih > 0.0) & (woh > 0.0)).astype(np.float64)
-    return _smith_g2(ndf, wi, wo, wih, woh, correlated=(kind == "smith-correlated"))
-
-
-def shadowing_g(wi, wo, h, ndf, shadowing: str):
-    """G(wi, wo, h) of the model named by ``shadowing``: "vgroove" (Mikkelsen 2009, eq. 25),
-    "smith" (separable), "smith-correlated" (height-correlated) or "none" (χ⁺(wi·h)χ⁺(wo·h)
-    only); ``ndf`` is used by the Smith models only."""
-    kind = _check_kind(shadowing)
-    wi = _checks.directions("wi", wi)
-    wo = _checks.directions("wo", wo)
-    h = _checks.directions("h", h)
-    _checks.broadcast({"wi": wi, "wo": wo, "h": h})
-    return _shadowing(kind, ndf, wi, wo, h[..., 2], vectors.dot(wi, h), vectors.dot(wo, h))

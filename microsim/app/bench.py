@@ -356,7 +356,7 @@ def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
     the full bins (no symmetry to use)."""
     from microsim.analytic import AnisotropicBeckmann, Beckmann, Smith, TorranceSparrow
     from microsim.sim import Bins, simulate
-    from microsim.sim.predict import ModelSpec, predict
+    from microsim.sim.predict import predict
 
     surface = surface if surface is not None else _surface(cfg)
     bins = {"folded": _bins(), "full": Bins(45, 72, folded=False)}
@@ -369,7 +369,7 @@ def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
             rate[key] = max(rate[key], res.meta["rays_per_second"])
             model = TorranceSparrow(ndfs[key], Smith(ndfs[key]), "aluminium")
             t0 = time.perf_counter()
-            predict([ModelSpec.from_model("ts", model)], [cfg.theta_i], b)
+            predict({"ts": model}, [cfg.theta_i], b)
             seconds[key] = min(seconds[key], time.perf_counter() - t0)
     return AzimuthCost(FoldedFull(**rate), FoldedFull(**seconds))
 
@@ -438,7 +438,7 @@ def time_to_accuracy(
     from microsim.analysis.verdicts import Measured, Prediction, verdict
     from microsim.sim import Bins
     from microsim.sim.auto import simulate_auto
-    from microsim.sim.predict import ModelSpec, predict
+    from microsim.sim.predict import predict
     from microsim.surfaces import vgrooves
 
     bins = Bins(45, 91)
@@ -456,9 +456,8 @@ def time_to_accuracy(
         max_rays=cfg.max_rays,
     )
     seconds = time.perf_counter() - t0
-    model = predict(
-        [ModelSpec.torrance_sparrow("ts", an.Beckmann(0.3), "vgroove", "aluminium")], [30.0], bins
-    )["ts"][0]
+    ts = an.TorranceSparrow(an.Beckmann(0.3), an.VGroove(), "aluminium")
+    model = predict({"ts": ts}, [30.0], bins)["ts"][0]
     v = verdict(Measured.of(res, 0), Prediction(model))
     info = res.meta["auto"]["incidences"][0]
     return Accuracy(

@@ -249,15 +249,15 @@ def _geometric_trace_points(cfg: MethodsConfig, surface, bins, ref, mask: str, l
 def _panel_geometric(cfg: MethodsConfig) -> dict:
     from microsim import analytic as an
     from microsim.sim import Bins
-    from microsim.sim.predict import ModelSpec, predict
+    from microsim.sim.predict import Predictor, predict
     from microsim.surfaces import vgrooves
 
     bins = Bins(45, 37)  # bench's throughput bins: 2° θo × 5° Δφ, folded
     ndf = an.Beckmann(cfg.m)
     th = float(cfg.theta_i)
     surface = vgrooves(cfg.grooves, ndf, seed=0)
-    vg = ModelSpec.torrance_sparrow("ts-vgroove", ndf, "vgroove", "aluminium")
-    sm = ModelSpec.torrance_sparrow("ts-smith", ndf, "smith", "aluminium")
+    vg = Predictor("ts-vgroove", an.TorranceSparrow(ndf, an.VGroove(), "aluminium"))
+    sm = Predictor("ts-smith", an.TorranceSparrow(ndf, an.Smith(), "aluminium"))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         t0 = time.perf_counter()

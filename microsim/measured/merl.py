@@ -32,7 +32,7 @@ them): the database's cells whose directions lie below the horizon or were not m
 ``write_merl`` writes −1 where the cell's centre has wi or wo below the horizon (z ≤ 1e-9);
 ``read_merl`` refuses a file in which no cell holds data in all three channels.
 
-Lookup (``MERLBRDF.evaluate``, in index coordinates u = (90 √(θh/90°), θd/1°, φd/1°), each
+Lookup (``MERLBRDF.f``, in index coordinates u = (90 √(θh/90°), θd/1°, φd/1°), each
 sample centre at u = index + ½):
     "reader"      the value of the cell holding (θh, θd, φd), as BRDFRead.cpp computes it
                   (θ from atan2 instead of acos: the same angles, accurate near the pole):
@@ -65,7 +65,7 @@ import stat
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, ClassVar
 
 import numpy as np
 
@@ -378,11 +378,25 @@ class MERLBRDF:
             self._cache[self.channel] = s
         return self._cache[self.channel]
 
-    def evaluate(self, wi, wo) -> np.ndarray:
-        """f(wi, wo) sr⁻¹ of ``channel`` for unit directions (..., 3), by ``lookup``."""
+    source: ClassVar[str] = "MERL measured BRDF (Matusik et al. 2003)"
+    symmetric: ClassVar[bool] = True  # isotropic: mirroring wo about the plane of incidence
+
+    def params(self) -> dict:
+        """``channel``, ``lookup``, ``name``, ``path`` (the model protocol's ``params``)."""
+        return {
+            "channel": self.channel,
+            "lookup": self.lookup,
+            "name": self.name,
+            "path": self.path,
+        }
+
+    def f(self, wi, wo) -> np.ndarray:
+        """f(wi, wo) sr⁻¹ of ``channel`` for unit directions (..., 3), by ``lookup``; the model
+        protocol's ``f`` (``analytic.models.BRDFModel``)."""
         return self._lookup(wi, wo, self.samples().reshape(1, -1))[..., 0]
 
-    __call__ = evaluate
+    evaluate = f
+    __call__ = f
 
     def rgb(self, wi, wo) -> np.ndarray:
         """(..., 3) red, green, blue f(wi, wo) sr⁻¹ by ``lookup``."""
@@ -424,7 +438,7 @@ class MERLBRDF:
         missed = 0
         for t, th in enumerate(theta):
             wi = vectors.spherical_deg(th, 0.0)
-            est = bin_average(wi, bins, brdf.evaluate, 0.0, rtol, symmetric=True)
+            est = bin_average(wi, bins, brdf.f, 0.0, rtol, symmetric=True)
             touched = (
                 bin_average(
                     wi, bins, brdf._invalid_indicator, 0.0, 0.5, max_depth=1, min_depth=1

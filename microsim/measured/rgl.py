@@ -112,7 +112,7 @@ import stat
 import struct
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, ClassVar
 
 import numpy as np
 
@@ -562,8 +562,16 @@ class RGLBRDF:
         out = np.where(up[:, None], out * scale[:, None], 0.0)
         return out.reshape(shape + (len(self._chans),))
 
-    def evaluate(self, wi, wo) -> np.ndarray:
-        """f(wi, wo) sr⁻¹ of ``channel`` for unit directions (..., 3) away from the surface."""
+    source: ClassVar[str] = "RGL measured BSDF (Dupuy & Jakob 2018)"
+    symmetric: ClassVar[bool] = True  # isotropic: mirroring wo about the plane of incidence
+
+    def params(self) -> dict:
+        """``channel`` and ``path`` (the model protocol's ``params``)."""
+        return {"channel": self.channel, "path": self.path}
+
+    def f(self, wi, wo) -> np.ndarray:
+        """f(wi, wo) sr⁻¹ of ``channel`` for unit directions (..., 3) away from the surface;
+        the model protocol's ``f`` (``analytic.models.BRDFModel``)."""
         shape, sample, params, scale, up = self._setup(wi, wo)
         if self.spectral:
             v = self._channel_values(sample, params, float(self._select))
@@ -575,14 +583,15 @@ class RGLBRDF:
             )
         return np.where(up, v * scale, 0.0).reshape(shape)
 
-    __call__ = evaluate
+    evaluate = f
+    __call__ = f
 
     def table(self, theta_i, bins, rtol: float = 1e-3):
         """``BRDFTable`` of the bin averages of ``evaluate`` at incidences ``theta_i``
         (degrees) on folded ``bins`` (``BRDFTable.from_function``)."""
         from .table import BRDFTable
 
-        return BRDFTable.from_function(self.evaluate, theta_i, bins, self.description, rtol)
+        return BRDFTable.from_function(self.f, theta_i, bins, self.description, rtol)
 
 
 # --- reading ----------------------------------------------------------------------------------
@@ -896,7 +905,7 @@ def interpolation_error(rgl, brdf: Callable, n: int = 1 << 16, seed: int = 0) ->
     # cos²θi / (cos θi/π) ∝ cos θi for wi, cos²θo / p(wo) for wo
     w = np.where(up, wi[:, 2] * wo[:, 2] ** 2 / np.maximum(dens, 1e-300), 0.0)
     f = np.asarray(brdf(wi, wo), dtype=np.float64).reshape(n)
-    g = np.asarray(rgl.evaluate(wi, wo), dtype=np.float64)
+    g = np.asarray(rgl.f(wi, wo), dtype=np.float64)
     a, b = w * (g - f) ** 2, w * f**2
     A, B = a.mean(), b.mean()
     rel = np.sqrt(A / B)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import zipfile
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
@@ -230,9 +231,17 @@ class BRDFTable:
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         return np.clip(np.stack([ti, to, dphi], axis=-1), lo, hi), up
 
-    def evaluate(self, wi, wo) -> np.ndarray:
+    source: ClassVar[str] = "a tabulated BRDF (bin averages over incidences)"
+    symmetric: ClassVar[bool] = True  # isotropic: mirroring wo about the plane of incidence
+
+    def params(self) -> dict:
+        """The table's name, incidences (degrees) and bins (the model protocol's ``params``)."""
+        return {"name": self.name, "theta_i": self.theta_i, "bins": self.bins}
+
+    def f(self, wi, wo) -> np.ndarray:
         """f(wi, wo) sr⁻¹ for unit directions (…, 3) pointing away from the surface (module
-        docstring: linear between tabulated θi and bin centres, clamped outside them)."""
+        docstring: linear between tabulated θi and bin centres, clamped outside them); the
+        model protocol's ``f`` (``analytic.models.BRDFModel``)."""
         pts, up = self._points(wi, wo)
         interp = self._interpolator()[0]
         f = np.exp(interp(pts.reshape(-1, 3)).reshape(up.shape))
@@ -240,7 +249,7 @@ class BRDFTable:
         return np.where(up, f, 0.0)
 
     def resolved(self, wi, wo) -> np.ndarray:
-        """Whether ``evaluate(wi, wo)`` is interpolated from bins that all hold events (bool,
+        """Whether ``f(wi, wo)`` is interpolated from bins that all hold events (bool,
         the directions' shape). A bin without events says only that no ray landed there (a
         small bin at the edge of a lobe, the pole bins at large θi): a value interpolated
         from it is pulled towards 0 by the log-linear rule, not measured."""
@@ -254,4 +263,5 @@ class BRDFTable:
             object.__setattr__(self, "_held", held)
         return up & (self._held(pts.reshape(-1, 3)).reshape(up.shape) >= 1.0 - 1e-9)
 
-    __call__ = evaluate
+    evaluate = f
+    __call__ = f

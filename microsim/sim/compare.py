@@ -36,7 +36,6 @@ m_real = ``surface.stats()["m_realised"]``):
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -50,7 +49,7 @@ from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import Beckmann
 from microsim.errors import UsageError
 
-from .predict import ModelSpec, predict_incidences
+from .predict import Facets, Predictor, predict_incidences, predictions
 from .result import Result
 from .tracer import ESCAPED, Tracer
 
@@ -125,7 +124,7 @@ NDF's, 32 × the catalogue tile's 2000 (its bin averages cost ~0.1 s per inciden
 ORIENTED_MODEL = "ts-vgroove-oriented"
 
 
-def _oriented_continuum(surface, material) -> ModelSpec | None:
+def _oriented_continuum(surface, material) -> Predictor | None:
     """``ts-vgroove-oriented`` of an oriented V-groove tile (module docstring), or None without
     a ``tilt_ndf``."""
     from microsim.surfaces.vgrooves import vgrooves
@@ -134,8 +133,7 @@ def _oriented_continuum(surface, material) -> ModelSpec | None:
         return None
     dense = vgrooves(ORIENTED_CONTINUUM, surface.tilt_ndf, oriented=True)
     normals, weights, _ = _pooled_facets([dense])
-    spec = ModelSpec.facets(ORIENTED_MODEL, normals, weights, "vgroove", material)
-    return ModelSpec(spec.name, spec.kind, {**spec.params, "continuum": True})
+    return Predictor.facets(ORIENTED_MODEL, normals, weights, "vgroove", material, continuum=True)
 
 
 GEOMEAN_MODEL = "ts-beckmann-nominal-smith-corr-geomean"
@@ -169,7 +167,7 @@ def _m_of(stats) -> float:
 
 def default_models(
     scene_or_surface, material, ndf=None, *, azimuths: int | None = None
-) -> list[ModelSpec]:
+) -> list[Predictor]:
     """The standard model set for a Scene, a Surface, or the realisations of one random scene
     (a sequence of Surfaces: ``ts-facets`` and the realised m then pool all of them, see
     ``_pooled_facets``) — module docstring for the names.
@@ -182,7 +180,7 @@ def default_models(
     least ``VGROOVE_AZIMUTHS`` and at most 2¹⁶.
 
     ``ts-facets`` records the fingerprints of the surfaces it was built from
-    (``params["fingerprints"]``); ``attach_models`` refuses a result traced over other
+    (``rule.fingerprints``); ``attach_models`` refuses a result traced over other
     realisations (a model of one tile compared with the mean of several is not exact).
     """
     surfaces, ndf = _surfaces_and_ndf(scene_or_surface, ndf)
@@ -191,11 +189,11 @@ def default_models(
     normals, weights, realised = _pooled_facets(surfaces)
     exact = surfaces[0].exact_shadowing
     if exact == "none":  # nothing shadows (flat): all light in the mirror bin, weight F(θi)
-        return [ModelSpec.facets("mirror-fresnel", normals, weights, "none", material)]
+        return [Predictor.facets("mirror-fresnel", normals, weights, "none", material)]
     if exact is not None and ndf is None and not surfaces[0].azimuth_average:
         # oriented V-grooves: no ensemble NDF; TS with the tile's facets and G is exact, the
         # same with the continuum of tilts is the ensemble form
-        facets = ModelSpec.facets("ts-facets", normals, weights, exact, material)
+        facets = Predictor.facets("ts-facets", normals, weights, exact, material)
         continuum = _oriented_continuum(surfaces[0], material)
         if continuum is None:
             return [facets]
@@ -209,28 +207,28 @@ def default_models(
         if surfaces[0].azimuth_average:
             copies = int(azimuths) if azimuths is not None else _auto_azimuths(normals)
         specs = [
-            ModelSpec.torrance_sparrow(f"ts-{SHADOWING_SUFFIX[k]}", ndf, k, material) for k in kinds
+            Predictor(f"ts-{SHADOWING_SUFFIX[k]}", TorranceSparrow(ndf, k, material)) for k in kinds
         ]
-        facets = ModelSpec.facets("ts-facets", normals, weights, exact, material, azimuths=copies)
+        facets = Predictor.facets("ts-facets", normals, weights, exact, material, copies)
         # the same closed form with the ensemble NDF: the pair measures the tile's departure
         return specs + [_tagged(facets, surfaces, ensemble=f"ts-{SHADOWING_SUFFIX[exact]}")]
     ndfs = [("realised", realised)]
     if ndf is not None:
         ndfs.insert(0, ("nominal", ndf))
     specs = [
-        ModelSpec.torrance_sparrow(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", d, k, material)
+        Predictor(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", TorranceSparrow(d, k, material))
         for label, d in ndfs
         for k in kinds
     ]
     if isinstance(ndf, AnisotropicNDF):  # anisotropic ensemble
         stand_in = Smith(ndf.isotropic_equivalent(), correlated=True)
         model = TorranceSparrow(ndf, stand_in, material)
-        specs.append(ModelSpec.from_model(GEOMEAN_MODEL, model))
-    facets = ModelSpec.facets("ts-facets", normals, weights, "smith-correlated", material)
+        specs.append(Predictor(GEOMEAN_MODEL, model))
+    facets = Predictor.facets("ts-facets", normals, weights, "smith-correlated", material)
     return specs + [_tagged(facets, surfaces)]
 
 
-def departure_models(scene_or_surface, material, ndf=None) -> list[ModelSpec]:
+def departure_models(scene_or_surface, material, ndf=None) -> list[Predictor]:
     """The two models of ``default_models`` whose ratio is one tile's departure from its
     ensemble (``analysis.verdicts.tile_departure``): [the ensemble closed form with the
     surface's exact shadowing, ``ts-facets``] for one surface whose exact shadowing depends on
@@ -245,7 +243,7 @@ def departure_models(scene_or_surface, material, ndf=None) -> list[ModelSpec]:
         return []
     standard = default_models(scene_or_surface, material, ndf)
     facets = standard[-1]
-    ensemble = facets.params.get("ensemble")
+    ensemble = facets.rule.ensemble
     if ensemble is None:
         return []
     return [s for s in standard if s.name == ensemble] + [facets]
@@ -265,13 +263,12 @@ def surface_fingerprint(surface) -> str:
     return surface.fingerprint()
 
 
-def _tagged(spec: ModelSpec, surfaces, ensemble: str | None = None) -> ModelSpec:
+def _tagged(spec: Predictor, surfaces, ensemble: str | None = None) -> Predictor:
     """``spec`` with the sorted fingerprints of the surfaces its facets come from and, for a
     surface whose exact shadowing depends on its facets alone (V-grooves), the name of the
-    ensemble model with the same shadowing (``params["ensemble"]``; ``attach_models``)."""
+    ensemble model with the same shadowing (``rule.ensemble``; ``attach_models``)."""
     fps = tuple(sorted(surface_fingerprint(s) for s in surfaces))
-    extra = {"ensemble": ensemble} if ensemble is not None else {}
-    return ModelSpec(spec.name, spec.kind, {**spec.params, "fingerprints": fps, **extra})
+    return replace(spec, rule=replace(spec.rule, fingerprints=fps, ensemble=ensemble))
 
 
 def _result_fingerprints(result: Result) -> tuple[str, ...] | None:
@@ -283,23 +280,6 @@ def _result_fingerprints(result: Result) -> tuple[str, ...] | None:
     return tuple(sorted(fps))
 
 
-def _as_specs(specs) -> list:
-    """``specs`` as a list of ``ModelSpec`` (a mapping's model objects through ``from_model``)."""
-    if isinstance(specs, Mapping):
-        return [
-            s if isinstance(s, ModelSpec) else ModelSpec.from_model(str(name), s)
-            for name, s in specs.items()
-        ]
-    specs = list(specs)
-    for s in specs:
-        if not isinstance(s, ModelSpec):
-            raise UsageError(
-                f"specs: a list must hold ModelSpecs (pass model objects as a mapping name → "
-                f"model), got {s!r}"
-            )
-    return specs
-
-
 def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
     """A new Result: ``result`` with the bin-averaged predictions of ``specs`` (name → (T, Θ, Φ)
     sr⁻¹, on the result's bins, θi and φi; one ``predict`` call per distinct φi) added to its
@@ -309,12 +289,12 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
     itself is left untouched (Results are immutable); predictions travel inside the Result
     because they are saved with it (``model_*`` arrays) and every report reads them there.
     Facet models tagged with surface fingerprints (``default_models``) must match the result's
-    realisations, else UsageError. ``specs``: ``ModelSpec``s, or a mapping name → model object
-    (``analytic.models``, any ``BRDFModel``; ``ModelSpec.from_model``) or ``ModelSpec``."""
-    specs = _as_specs(specs)
+    realisations, else UsageError. ``specs``: ``Predictor``s, or a mapping name → model object
+    (``analytic.models``, any ``BRDFModel``), (model, rule) pair or ``Predictor``."""
+    specs = predictions(specs)
     traced = _result_fingerprints(result)
     for s in specs:
-        built = s.params.get("fingerprints") if s.kind == "facets" else None
+        built = s.rule.fingerprints if isinstance(s.rule, Facets) else None
         if built is not None and traced is not None and tuple(built) != traced:
             raise UsageError(
                 f"specs: model {s.name!r} was built from {len(built)} surface(s) other than the "
@@ -323,14 +303,14 @@ def attach_models(result: Result, specs, rtol: float = 1e-3) -> Result:
             )
     out = predict_incidences(specs, result.theta_i, result.phi_i, result.bins, rtol)
     own = set(result.meta.get("realisation_models", ())) | {
-        s.name for s in specs if s.kind == "facets" and not s.params.get("continuum")
+        s.name for s in specs if isinstance(s.rule, Facets) and not s.rule.continuum
     }
     meta = {**result.meta, "realisation_models": sorted(own)}
     models = {**result.models, **out}
     pairs = [
-        {"tile": s.name, "ensemble": s.params["ensemble"]}
+        {"tile": s.name, "ensemble": s.rule.ensemble}
         for s in specs
-        if s.kind == "facets" and s.params.get("ensemble") in models
+        if isinstance(s.rule, Facets) and s.rule.ensemble in models
     ]
     if pairs:
         meta["tile_departure"] = pairs[0]

@@ -13,7 +13,10 @@ so every model is reduced to the same numbers before it is compared. Three ways:
                         NDF's half vectors (a cross-check; tail bins get few samples).
 ``bin_average_facets``  Torrance–Sparrow with the *surface's own* facets as a discrete D.
 
-``predict`` evaluates a list of ``ModelSpec`` for several incidence angles.
+``predict`` evaluates named (model, integration rule) pairs, ``Predictor``s, for several
+incidence angles: the rule says how the bin average of the model is computed — ``Quadrature``
+(``bin_average`` of ``model.f``), ``QMC`` (``bin_average_ts``) or ``Facets``
+(``bin_average_facets``).
 
 Arguments come in one order: the incidence and the bins first, then the model — as the
 analytic BRDFs take ``(wi, wo, ...)`` first. Incidence: ``wi`` is a unit (3,) vector with
@@ -26,19 +29,17 @@ mirror, a name, n, n + ik).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
-from types import MappingProxyType
-from typing import Any, Callable, Iterable, Mapping, NamedTuple
+from dataclasses import dataclass
+from typing import Any, Callable, ClassVar, Iterable, Mapping, NamedTuple
 
 import numpy as np
 
 from microsim import checks as _checks
 from microsim import vectors
-from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.analytic.models import BRDFModel, TorranceSparrow
-from microsim.analytic.shadowing import SHADOWING_KINDS, shadowing_g
+from microsim.analytic.masking import Smith, masking_from_kind
+from microsim.analytic.models import TorranceSparrow
 from microsim.errors import UsageError
 
 from .bins import Bins
@@ -49,7 +50,14 @@ __all__ = [
     "bin_average",
     "bin_average_ts",
     "bin_average_facets",
-    "ModelSpec",
+    "Predictor",
+    "Quadrature",
+    "QMC",
+    "Facets",
+    "RULES",
+    "FunctionBRDF",
+    "facet_model",
+    "predictions",
     "predict",
     "predict_incidences",
 ]
@@ -269,28 +277,22 @@ def bin_average(
 
 
 # --- Torrance–Sparrow by sampling half vectors --------------------------------------------------
-def _reflection_terms(wi, h, cos_i: float, eta, shadowing: str, ndf):
-    """wo = 2(wi·h)h − wi and x = F(wi·h) G(wi, wo, h) (wi·h)⁺/(cos θi h_z) for unit h (N, 3).
+def _reflection_terms(wi, h, cos_i: float, eta, masking):
+    """wo = 2(wi·h)h − wi and x = F(wi·h) G(wi, wo, h) (wi·h)⁺/(cos θi h_z) for unit h (N, 3),
+    G of the ``masking`` object.
 
     x is what one half vector contributes to ∫_B f cos θo dω_o (see ``bin_average_ts``); it is 0
     where wi·h ≤ 0, wo is below the horizon (G = 0) or h_z = 0.
     """
     wih = h @ wi
     wo = vectors.normalize(2.0 * wih[:, None] * h - wi)
-    g = shadowing_g(np.broadcast_to(wi, wo.shape), wo, h, ndf, shadowing)
+    wi_b = np.broadcast_to(wi, wo.shape)
+    g = masking.g2_cosines(wi_b, wo, h[:, 2], vectors.dot(wi_b, h), vectors.dot(wo, h))
     hz = h[:, 2]
     ok = (wih > 0.0) & (hz > 0.0) & (wo[:, 2] > 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         x = fresnel(np.clip(wih, 0.0, 1.0), eta) * g * wih / (cos_i * hz)
     return wo, np.where(ok, x, 0.0)
-
-
-def _check_shadowing(shadowing: str) -> str:
-    if shadowing not in SHADOWING_KINDS:
-        raise UsageError(
-            f"shadowing must be one of {', '.join(map(repr, SHADOWING_KINDS))}, got {shadowing!r}"
-        )
-    return shadowing
 
 
 def bin_average_ts(
@@ -320,7 +322,12 @@ def bin_average_ts(
     Tail bins get few samples: use this to cross-check ``bin_average``, not instead of it.
     """
     wi, phi_i = _incidence(wi, phi_i)
-    shadowing, eta = _check_shadowing(shadowing), resolve_material(material)
+    masking, eta = masking_from_kind(shadowing, ndf), resolve_material(material)
+    return _half_vector_qmc(wi, phi_i, bins, ndf, masking, eta, n, replicates, seed)
+
+
+def _half_vector_qmc(wi, phi_i, bins, ndf, masking, eta, n, replicates, seed) -> BinEstimate:
+    """``bin_average_ts`` with h ~ ``ndf`` and G of ``masking`` (validated incidence)."""
     replicates = int(_checks.in_range("replicates", replicates, 2, 2**12))
     per = int(n) // replicates
     if int(n) != n or per < 1 or per & (per - 1):
@@ -338,7 +345,7 @@ def bin_average_ts(
         for s in range(0, per, _MAX_POINTS):
             u = sobol.random(min(_MAX_POINTS, per - s))
             h = ndf.sample(u[:, 0], u[:, 1])
-            wo, x = _reflection_terms(wi, h, wi[2], eta, shadowing, ndf)
+            wo, x = _reflection_terms(wi, h, wi[2], eta, masking)
             idx = bins.locate(wo, phi_i)
             keep = (idx >= 0) & (x > 0.0)
             sums[r] += np.bincount(idx[keep], x[keep], minlength=nb)
@@ -409,16 +416,27 @@ def bin_average_facets(
     Memory is bounded by processing ~1e6 (facet, azimuth) pairs at a time.
     """
     wi, phi_i = _incidence(wi, phi_i)
-    shadowing, eta = _check_shadowing(shadowing), resolve_material(material)
+    masking, eta = masking_from_kind(shadowing, smith_ndf), resolve_material(material)
+    nrm, w = _facet_set(normals, weights)
+    if isinstance(masking, Smith) and masking.ndf is None:
+        masking = Smith(Empirical(nrm, w), masking.correlated)
+    return _facet_sum(wi, phi_i, bins, nrm, w, masking, eta, azimuths, seed)
+
+
+def _facet_set(normals, weights) -> tuple[np.ndarray, np.ndarray]:
+    """Validated facet normals (N, 3) and weights (N,) (None: equal)."""
     nrm = _checks.directions("normals", normals)
     if nrm.ndim != 2 or len(nrm) == 0 or np.any(nrm[:, 2] <= 0.0):
         raise UsageError("normals must be a non-empty (N, 3) array of unit vectors with n_z > 0")
     w = np.ones(len(nrm)) if weights is None else np.asarray(weights, dtype=np.float64)
     if w.shape != (len(nrm),) or not np.all(np.isfinite(w)) or np.any(w < 0) or not w.sum() > 0:
         raise UsageError(f"weights must be {len(nrm)} finite values >= 0 with a positive sum")
+    return nrm, w
+
+
+def _facet_sum(wi, phi_i, bins, nrm, w, masking, eta, azimuths, seed) -> BinEstimate:
+    """``bin_average_facets`` on a validated incidence and facet set, G of ``masking``."""
     J = 1 if azimuths is None else int(_checks.in_range("azimuths", azimuths, 1, 2**16))
-    if shadowing.startswith("smith") and smith_ndf is None:
-        smith_ndf = Empirical(nrm, w)
     if azimuths is not None:
         nrm, w = _merge_tilts(nrm, w)
     a = w / w.sum()
@@ -433,7 +451,7 @@ def bin_average_facets(
         else:
             psi = 2.0 * np.pi * (np.arange(J)[None, :] + rng.random((len(n_k), 1))) / J
             h = _rotate_z(n_k, psi).reshape(-1, 3)
-        wo, x = _reflection_terms(wi, h, wi[2], eta, shadowing, smith_ndf)
+        wo, x = _reflection_terms(wi, h, wi[2], eta, masking)
         idx = bins.locate(wo, phi_i)
         facet = np.repeat(np.arange(len(n_k)), J)
         keep = (idx >= 0) & (x > 0.0)
@@ -449,82 +467,104 @@ def bin_average_facets(
     return BinEstimate((total / omega).reshape(shape), (np.sqrt(var) / omega).reshape(shape))
 
 
-# --- many models, many incidences ---------------------------------------------------------------
-MODEL_KINDS = ("function", "ts", "ts-qmc", "facets")
+# --- models and their integration rules -------------------------------------------------------
+@dataclass(frozen=True)
+class Quadrature:
+    """Integrate ``model.f`` per bin by adaptive Gauss–Legendre quadrature (``bin_average``,
+    to ``predict``'s ``rtol``; half a folded bin when ``model.symmetric``). Any model."""
+
+
+@dataclass(frozen=True)
+class QMC:
+    """Randomised QMC over ``n`` half vectors h ~ D(h) h_z in ``replicates`` scramblings seeded
+    by ``seed`` (``bin_average_ts``): for a ``TorranceSparrow`` model, a cross-check of
+    ``Quadrature`` (tail bins get few samples)."""
+
+    n: int = 2**20
+    replicates: int = 16
+    seed: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "n", int(_checks.in_range("n", self.n, 2, 2**40)))
 
 
 @dataclass(frozen=True, eq=False)
-class ModelSpec:
-    """A named model to predict: ``kind`` and its parameters (read-only mapping).
+class Facets:
+    """The exact finite sum over a facet set (``bin_average_facets``) for a ``TorranceSparrow``
+    model whose D is those facets' (``facet_model``): its masking and material, these
+    ``normals`` (N, 3), projected-area ``weights`` (None: equal) and ``azimuths`` copies
+    (their offsets seeded by ``seed``).
 
-    kinds and params:
-      "function": brdf_fn (wi, wo) -> sr⁻¹, symmetric (bool)          → ``bin_average``
-      "ts":       ndf, shadowing, material (Torrance–Sparrow, quadrature) → ``bin_average``
-      "ts-qmc":   ndf, shadowing, material, n                             → ``bin_average_ts``
-      "facets":   normals, weights, shadowing, material, azimuths         → ``bin_average_facets``
-    Build them with the class methods below (``from_model`` for an ``analytic.models``
-    object). Compared by identity (params hold arrays).
-    """
+    Provenance (read by ``compare.attach_models``): ``fingerprints``, the sorted fingerprints
+    of the surfaces the facets come from; ``ensemble``, the name of the ensemble prediction this
+    tile model is paired with; ``continuum``, True when the facets stand for a continuum of
+    tilts rather than a traced tile. Compared by identity (holds arrays)."""
 
-    name: str
-    kind: str
-    params: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self):
-        if self.kind not in MODEL_KINDS:
-            raise UsageError(
-                f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, got {self.kind!r}"
-            )
-        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+    normals: Any
+    weights: Any = None
+    azimuths: int | None = None
+    seed: int = 0
+    fingerprints: tuple[str, ...] | None = None
+    ensemble: str | None = None
+    continuum: bool = False
 
     def __repr__(self) -> str:
-        """Name, kind and parameters, arrays by shape only (a facet model holds ~10⁵ normals)."""
+        shape = " × ".join(map(str, np.shape(self.normals)))
+        return f"Facets(<{shape} normals>, azimuths={self.azimuths!r})"
 
-        def short(v):
-            if isinstance(v, np.ndarray):
-                return f"<{v.dtype} array {' × '.join(map(str, v.shape))}>"
-            if isinstance(v, (list, tuple)) and len(v) > 4:
-                return f"<{len(v)} values>"
-            return repr(v)
 
-        params = ", ".join(f"{k}={short(v)}" for k, v in self.params.items())
-        return f"ModelSpec({self.name!r}, {self.kind!r}, {params})"
+RULES = (Quadrature, QMC, Facets)
+"""The integration rules, each a frozen dataclass."""
 
-    @classmethod
-    def function(cls, name: str, brdf_fn: Callable, symmetric: bool = True) -> "ModelSpec":
-        return cls(name, "function", {"brdf_fn": brdf_fn, "symmetric": bool(symmetric)})
 
-    @classmethod
-    def from_model(cls, name: str, model) -> "ModelSpec":
-        """A spec from a model object (``analytic.models``, any ``BRDFModel``).
+@dataclass(frozen=True, eq=False)
+class FunctionBRDF:
+    """A vectorised ``fn(wi, wo)`` (sr⁻¹) as a model; ``symmetric``: f is unchanged by
+    mirroring wo about the plane of incidence (as ``BRDFModel``)."""
 
-        ``TorranceSparrow`` maps to the "ts" kind with its ndf, shadowing and material (the
-        same predictions as ``torrance_sparrow``) unless its Smith G has an NDF of its own
-        (``masking_ndf``); any other model to "function" with
-        ``model.f`` and ``model.symmetric`` (False when the model does not say).
-        """
-        if isinstance(model, TorranceSparrow) and model.masking_ndf is None:
-            return cls.torrance_sparrow(name, model.ndf, model.shadowing, model.material)
-        if not isinstance(model, BRDFModel):
+    fn: Callable
+    symmetric: bool = False
+    source: ClassVar[str] = "a function f(wi, wo)"
+
+    def f(self, wi, wo):
+        return self.fn(wi, wo)
+
+    def params(self) -> dict:
+        return {"fn": self.fn, "symmetric": self.symmetric}
+
+
+def facet_model(normals, weights=None, masking="vgroove", material=None) -> TorranceSparrow:
+    """``TorranceSparrow`` with D the facets' histogram (``Empirical(normals, weights)``), for
+    the ``Facets`` rule; ``masking``: an object or a shadowing name (Smith: the facets' Λ)."""
+    nrm, w = _facet_set(normals, weights)
+    return TorranceSparrow(Empirical(nrm, w), masking, material)
+
+
+@dataclass(frozen=True, eq=False)
+class Predictor:
+    """A named model to predict and the rule computing its bin averages: ``model`` any
+    ``BRDFModel`` (``f(wi, wo)``); ``rule`` one of ``RULES`` (``QMC`` and ``Facets`` need a
+    ``TorranceSparrow``). Compared by identity."""
+
+    name: str
+    model: Any
+    rule: Quadrature | QMC | Facets = Quadrature()
+
+    def __post_init__(self):
+        if not isinstance(self.rule, RULES):
             raise UsageError(
-                f"model must be a BRDFModel (f(wi, wo), params(), source), got {model!r}"
+                f"rule must be Quadrature(), QMC(n) or Facets(normals, ...), got {self.rule!r}"
             )
-        return cls.function(name, model.f, symmetric=bool(getattr(model, "symmetric", False)))
-
-    @classmethod
-    def torrance_sparrow(
-        cls,
-        name: str,
-        ndf,
-        shadowing: str = "vgroove",
-        material=None,
-        qmc_samples: int | None = None,
-    ) -> "ModelSpec":
-        """Torrance–Sparrow (Mikkelsen 2009, eq. 13); ``qmc_samples`` selects the sampling path."""
-        params = {"ndf": ndf, "shadowing": _check_shadowing(shadowing), "material": material}
-        if qmc_samples is None:
-            return cls(name, "ts", params)
-        return cls(name, "ts-qmc", {**params, "n": int(qmc_samples)})
+        if isinstance(self.rule, Quadrature):
+            if not callable(getattr(self.model, "f", None)):
+                raise UsageError(
+                    f"model must be a BRDFModel (f(wi, wo), params(), source), got {self.model!r}"
+                )
+        elif not isinstance(self.model, TorranceSparrow):
+            raise UsageError(
+                f"model must be a TorranceSparrow for {type(self.rule).__name__}(), "
+                f"got {self.model!r}"
+            )
 
     @classmethod
     def facets(
@@ -532,60 +572,68 @@ class ModelSpec:
         name: str,
         normals,
         weights=None,
-        shadowing: str = "vgroove",
+        masking="vgroove",
         material=None,
         azimuths: int | None = None,
-    ) -> "ModelSpec":
-        return cls(
-            name,
-            "facets",
-            {
-                "normals": normals,
-                "weights": weights,
-                "shadowing": _check_shadowing(shadowing),
-                "material": material,
-                "azimuths": azimuths,
-            },
-        )
+        **provenance,
+    ) -> "Predictor":
+        """``facet_model`` of the facets with the ``Facets`` rule (``provenance``: its
+        ``fingerprints``, ``ensemble``, ``continuum``)."""
+        model = facet_model(normals, weights, masking, material)
+        return cls(name, model, Facets(normals, weights, azimuths, **provenance))
 
-
-def _ts_brdf(ndf, shadowing: str, material) -> Callable:
-    def f(wi, wo):
-        return torrance_sparrow(wi, wo, ndf, shadowing=shadowing, material=material)
-
-    return f
-
-
-def _predict_one(spec: ModelSpec, wi, bins: Bins, phi_i: float, rtol: float) -> np.ndarray:
-    p = spec.params
-    if spec.kind in ("function", "ts"):
-        if spec.kind == "function":
-            fn, symmetric = p["brdf_fn"], p["symmetric"]
-        else:
-            fn, symmetric = (
-                _ts_brdf(p["ndf"], p["shadowing"], p["material"]),
-                p["ndf"].isotropic,
-            )
-        res = bin_average(wi, bins, fn, phi_i, rtol, symmetric=symmetric)
-        if not res.converged.all():
-            warnings.warn(
-                f"model {spec.name!r}: {int((~res.converged).sum())} bins did not "
-                f"reach rtol={rtol} (max error {res.error.max():.3g} sr^-1)",
-                RuntimeWarning,
-                stacklevel=3,
-            )
-        return res.values
-    if spec.kind == "ts-qmc":
-        return bin_average_ts(
-            wi, bins, p["ndf"], p["shadowing"], p["material"], phi_i, p["n"]
+    def bin_values(self, wi, bins: Bins, phi_i: float, rtol: float) -> np.ndarray:
+        """f̄_B (sr⁻¹, ``bins.shape``) at one incidence (quadrature warns when a bin misses
+        ``rtol``)."""
+        rule, model = self.rule, self.model
+        if isinstance(rule, Quadrature):
+            symmetric = bool(getattr(model, "symmetric", False))
+            res = bin_average(wi, bins, model.f, phi_i, rtol, symmetric=symmetric)
+            if not res.converged.all():
+                warnings.warn(
+                    f"model {self.name!r}: {int((~res.converged).sum())} bins did not "
+                    f"reach rtol={rtol} (max error {res.error.max():.3g} sr^-1)",
+                    RuntimeWarning,
+                    stacklevel=3,
+                )
+            return res.values
+        wi, phi_i = _incidence(wi, phi_i)
+        eta = resolve_material(model.material)
+        if isinstance(rule, QMC):
+            return _half_vector_qmc(
+                wi, phi_i, bins, model.ndf, model.masking, eta, rule.n, rule.replicates, rule.seed
+            ).values
+        nrm, w = _facet_set(rule.normals, rule.weights)
+        return _facet_sum(
+            wi, phi_i, bins, nrm, w, model.masking, eta, rule.azimuths, rule.seed
         ).values
-    return bin_average_facets(
-        wi, bins, p["normals"], p["weights"], p["shadowing"], p["material"], phi_i, p["azimuths"]
-    ).values
+
+
+def predictions(models) -> list[Predictor]:
+    """``models`` as a list of ``Predictor``: an iterable of them, or a mapping name → a
+    model, a (model, rule) pair or a ``Predictor``."""
+    if isinstance(models, Mapping):
+        out = []
+        for name, m in models.items():
+            if isinstance(m, Predictor):
+                out.append(m)
+            elif isinstance(m, tuple) and len(m) == 2:
+                out.append(Predictor(str(name), *m))
+            else:
+                out.append(Predictor(str(name), m))
+        return out
+    out = list(models)
+    for m in out:
+        if not isinstance(m, Predictor):
+            raise UsageError(
+                f"models: a list must hold Predictors (pass model objects as a mapping "
+                f"name → model or (model, rule)), got {m!r}"
+            )
+    return out
 
 
 def predict(
-    models: Iterable[ModelSpec],
+    models,
     theta_i: Iterable[float],
     bins: Bins,
     phi_i: float = 0.0,
@@ -594,9 +642,10 @@ def predict(
     """Bin averages (sr⁻¹) of every model for incidence angles ``theta_i`` (degrees, < 90)
     at azimuth ``phi_i`` (degrees): name → array (len(theta_i), n_theta, n_phi).
 
-    Quadrature models warn (RuntimeWarning) when a bin misses ``rtol``.
+    ``models``: ``Predictor``s, or a mapping name → model, (model, rule) or ``Predictor``
+    (``predictions``). Quadrature models warn (RuntimeWarning) when a bin misses ``rtol``.
     """
-    models = list(models)
+    models = predictions(models)
     names = [m.name for m in models]
     if len(set(names)) != len(names):
         raise UsageError(f"model names must be unique, got {names}")
@@ -606,17 +655,17 @@ def predict(
     out = {}
     for m in models:
         out[m.name] = np.stack(
-            [_predict_one(m, vectors.spherical_deg(t, phi_i), bins, phi_i, rtol) for t in thetas]
+            [m.bin_values(vectors.spherical_deg(t, phi_i), bins, phi_i, rtol) for t in thetas]
         )
     return out
 
 
 def predict_incidences(
-    models: Iterable[ModelSpec], theta_i, phi_i, bins: Bins, rtol: float = 1e-3
+    models, theta_i, phi_i, bins: Bins, rtol: float = 1e-3
 ) -> dict[str, np.ndarray]:
     """``predict`` at incidences (θi, φi) given pairwise (degrees; ``phi_i`` one per θi or a
     scalar): name → array (T, n_theta, n_phi), the incidences in the given order."""
-    models = list(models)
+    models = predictions(models)
     thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     phis = np.broadcast_to(np.asarray(phi_i, dtype=np.float64), thetas.shape)
     out = {m.name: np.empty((len(thetas),) + bins.shape) for m in models}
@@ -625,3 +674,53 @@ def predict_incidences(
         for name, values in predict(models, thetas[sel], bins, float(phi), rtol).items():
             out[name][sel] = values
     return out
+
+
+class ModelSpec:
+    """Deprecated: use ``Predictor(name, model, rule)``. The old constructors still work,
+    warn (DeprecationWarning) and return the equivalent ``Predictor``."""
+
+    def __new__(cls, name: str, kind: str, params=None):
+        _deprecated("ModelSpec(name, kind, params)")
+        p = dict(params or {})
+        if kind == "function":
+            return Predictor(name, FunctionBRDF(p["brdf_fn"], bool(p.get("symmetric", True))))
+        if kind in ("ts", "ts-qmc"):
+            model = TorranceSparrow(p["ndf"], p.get("shadowing", "vgroove"), p.get("material"))
+            return Predictor(name, model, QMC(p["n"]) if kind == "ts-qmc" else Quadrature())
+        if kind == "facets":
+            return Predictor.facets(name, **p)
+        raise UsageError(f"kind must be one of 'function', 'ts', 'ts-qmc', 'facets', got {kind!r}")
+
+    @staticmethod
+    def function(name: str, brdf_fn: Callable, symmetric: bool = True) -> Predictor:
+        _deprecated("ModelSpec.function")
+        return Predictor(name, FunctionBRDF(brdf_fn, bool(symmetric)))
+
+    @staticmethod
+    def from_model(name: str, model) -> Predictor:
+        _deprecated("ModelSpec.from_model")
+        return Predictor(name, model)
+
+    @staticmethod
+    def torrance_sparrow(
+        name: str, ndf, shadowing="vgroove", material=None, qmc_samples=None
+    ) -> Predictor:
+        _deprecated("ModelSpec.torrance_sparrow")
+        rule = Quadrature() if qmc_samples is None else QMC(qmc_samples)
+        return Predictor(name, TorranceSparrow(ndf, shadowing, material), rule)
+
+    @staticmethod
+    def facets(
+        name: str, normals, weights=None, shadowing="vgroove", material=None, azimuths=None
+    ) -> Predictor:
+        _deprecated("ModelSpec.facets")
+        return Predictor.facets(name, normals, weights, shadowing, material, azimuths)
+
+
+def _deprecated(what: str) -> None:
+    warnings.warn(
+        f"{what} is deprecated: use microsim.sim.predict.Predictor(name, model, rule)",
+        DeprecationWarning,
+        stacklevel=3,
+    )

@@ -51,7 +51,7 @@ from microsim.analysis.verdicts import (
 )
 from microsim.errors import UsageError
 from microsim.sim.compare import attach_models, default_models, departure_models
-from microsim.sim.predict import ModelSpec, predict_incidences
+from microsim.sim.predict import FunctionBRDF, Predictor, predict_incidences
 from microsim.sim.tallies import stderr_dof
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
@@ -146,7 +146,7 @@ def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray
         spec, name = specs[brdf], brdf
     elif callable(brdf):
         name = label or readable_name(brdf)
-        spec = ModelSpec.function(name, wrap_brdf(brdf), symmetric=isotropic)
+        spec = Predictor(name, FunctionBRDF(wrap_brdf(brdf), symmetric=isotropic))
     else:
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
     with warnings.catch_warnings():

@@ -31,7 +31,7 @@ import numpy as np
 from microsim.analytic.models import BRDFModel
 from microsim.errors import UsageError
 from microsim.sim.bins import Bins
-from microsim.sim.predict import ModelSpec, predict_incidences
+from microsim.sim.predict import FunctionBRDF, Predictor, predict_incidences
 
 from .agreement import BRDFMismatch, lobe_width_deg, readable_name, wrap_brdf
 
@@ -44,11 +44,11 @@ RECIPROCITY_RTOL = 1e-6
 """|f(a, b) − f(b, a)| ≤ RECIPROCITY_RTOL · max(f(a, b), f(b, a)) + 1e-300 at every pair."""
 
 
-def _spec(model, name: str) -> ModelSpec:
+def _spec(model, name: str) -> Predictor:
     if isinstance(model, BRDFModel):
-        return ModelSpec.from_model(name, model)
+        return Predictor(name, model)
     if callable(model):
-        return ModelSpec.function(name, wrap_brdf(model))
+        return Predictor(name, FunctionBRDF(wrap_brdf(model), symmetric=True))
     raise UsageError(
         f"model must be a microsim.analytic model or a callable f(wi, wo), got {model!r}"
     )
@@ -158,7 +158,7 @@ def assert_brdf_matches_model(
             f"phi_i must be an azimuth in degrees in [-360, 360], or one per θi, got {phi_i!r}"
         )
     phis = np.broadcast_to(phis, theta.shape)
-    specs = [ModelSpec.function("brdf", wrap_brdf(brdf)), _spec(model, "model")]
+    specs = [Predictor("brdf", FunctionBRDF(wrap_brdf(brdf), True)), _spec(model, "model")]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         vals = predict_incidences(specs, theta, phis, b, rtol=QUAD_RTOL)

@@ -27,7 +27,7 @@ import numpy as np
 from microsim.errors import UsageError
 from microsim.measured import MERLBRDF, BRDFTable, read_merl, read_rgl
 from microsim.sim.bins import Bins
-from microsim.sim.predict import ModelSpec, predict
+from microsim.sim.predict import FunctionBRDF, Predictor, predict
 from microsim.stats import energy_set
 
 from .agreement import BRDFMismatch, readable_name, wrap_brdf
@@ -50,7 +50,7 @@ def measured_reference(reference, theta_i, bins: Bins) -> BRDFTable:
         elif path.suffix == ".npz":
             reference = BRDFTable.load(path)
         elif path.suffix == ".bsdf":
-            reference = read_rgl(path).evaluate
+            reference = read_rgl(path).f
         else:
             raise UsageError(
                 f"reference must be a MERL .binary file, an RGL .bsdf file or a microsim table "
@@ -62,14 +62,14 @@ def measured_reference(reference, theta_i, bins: Bins) -> BRDFTable:
         same = reference.bins == bins and np.array_equal(reference.theta_i, theta)
         if same:
             return reference
-        fn, name = reference.evaluate, reference.name
+        fn, name = reference.f, reference.name
     elif callable(reference):
         fn, name = reference, readable_name(reference)
     else:
         raise UsageError(
             f"reference must be a file, a BRDFTable, a MERLBRDF or a callable, got {reference!r}"
         )
-    spec = ModelSpec.function("reference", wrap_brdf(fn), symmetric=True)
+    spec = Predictor("reference", FunctionBRDF(wrap_brdf(fn), symmetric=True))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         values = predict([spec], theta, bins, rtol=QUAD_RTOL)["reference"]
@@ -113,7 +113,7 @@ def assert_brdf_matches_measured(
             "leave those incidences out of theta_i"
         )
     name = name or readable_name(brdf)
-    spec = ModelSpec.function("brdf", wrap_brdf(brdf), symmetric=isotropic)
+    spec = Predictor("brdf", FunctionBRDF(wrap_brdf(brdf), symmetric=isotropic))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         mine = predict([spec], theta, b, rtol=QUAD_RTOL)["brdf"]

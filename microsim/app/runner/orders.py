@@ -26,7 +26,7 @@ def walk_ndf(plan, specs):
     """The Smith microsurface NDF of the scene for the walk (module docstring), or None."""
     for s in specs:
         if s.name.startswith("ts-beckmann-realised"):
-            return s.params["ndf"]
+            return s.model.ndf
     ndf = plan.scene.ndf()
     try:
         return WalkNDF.of(ndf).ndf

@@ -21,6 +21,7 @@ from ...analytic.anisotropic import AnisotropicNDF
 from ...checkpoints import checkpoint
 from ...sim import Bins, simulate
 from ...sim.compare import attach_models, default_models
+from ...sim.predict import Facets
 from ...stats import energy_set
 from . import tracing
 from .planning import Effort, RunPlan
@@ -137,7 +138,9 @@ def stability(plan: RunPlan):
         )
     )
     # the sweep's own surfaces: ts-facets must describe the facets it traced
-    specs = [m for m in models_for(plan, seed, n) if e.sweep_facets or m.kind != "facets"]
+    specs = [
+        m for m in models_for(plan, seed, n) if e.sweep_facets or not isinstance(m.rule, Facets)
+    ]
     sweep = attach(sweep, specs)
     return sweep, verdicts_for_result(sweep)
 

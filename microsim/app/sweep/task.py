@@ -47,14 +47,15 @@ def judged_models(task: Task) -> tuple[str, ...]:
 def _models(task: Task, scene, surface, ndf) -> tuple[list, list]:
     """(``judged_models``' specs, the models giving the tile's departure from its ensemble
     that are not among them, ``compare.departure_models``); ``ndf``: the scene's."""
+    from microsim.analytic.models import TorranceSparrow
     from microsim.sim.compare import departure_models
-    from microsim.sim.predict import ModelSpec
+    from microsim.sim.predict import Predictor
 
     pair = departure_models(surface, scene.ior, ndf) if judged_models(task) else []
     if ndf is None:  # oriented V-grooves: the judged model is the pair's ensemble form
         specs = [s for s in pair if s.name in judged_models(task)]
     else:
-        specs = [ModelSpec.torrance_sparrow(f"ts-{g}", ndf, g, scene.ior) for g in task.models]
+        specs = [Predictor(f"ts-{g}", TorranceSparrow(ndf, g, scene.ior)) for g in task.models]
     asked = {s.name for s in specs}
     return specs, [s for s in pair if s.name not in asked]
 

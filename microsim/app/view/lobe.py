@@ -10,9 +10,10 @@ import numpy as np
 
 from microsim.vectors import spherical_deg
 
+from ...analytic.models import TorranceSparrow
 from ...errors import UsageError
 from ...sim import Bins, simulate
-from ...sim.predict import ModelSpec, predict
+from ...sim.predict import predict
 from ...stats import MIN_EVENTS
 from .common import (
     COLOURS,
@@ -177,7 +178,7 @@ def view_lobe(
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             model = predict(
-                [ModelSpec.torrance_sparrow("ts", sc.ndf, shadow, sc.ior)],
+                {"ts": TorranceSparrow(sc.ndf, shadow, sc.ior)},
                 [theta_i],
                 bins,
                 rtol=1e-2,
