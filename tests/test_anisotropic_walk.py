@@ -17,7 +17,7 @@ from support import sidak, walk_on
 from microsim import analytic as an
 from microsim.analytic import random_walk as rw
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
+from microsim.sim import Bins
 from microsim.sim.predict import bin_average
 from microsim.stats import norm_isf
 from microsim.testing import assert_sampler_matches

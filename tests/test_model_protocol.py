@@ -13,7 +13,7 @@ from microsim.analytic import masking as masking_module
 from microsim.analytic import models as models_module
 from microsim.analytic.catalogue import MODELS
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
+from microsim.sim import Bins
 from microsim.sim.predict import ModelSpec, predict
 from microsim.testing import assert_sampler_matches
 

@@ -13,7 +13,7 @@ from microsim import analytic as an
 from microsim.analytic import energy_compensation as ec
 from microsim.analytic import random_walk as rw
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
+from microsim.sim import Bins
 from microsim.sim.predict import bin_average
 from microsim.vectors import spherical, spherical_deg
 

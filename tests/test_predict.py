@@ -21,7 +21,7 @@ from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel
 from microsim.analytic.ndf import Beckmann, VonMisesFisher
 from microsim.analytic.shadowing import smith_g2, vgroove_g
-from microsim.sim.bins import Bins
+from microsim.sim import Bins
 from microsim.sim.predict import ModelSpec, bin_average, bin_average_facets, bin_average_ts, predict
 
 ALPHA = 0.01

@@ -39,9 +39,8 @@ from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.analytic.models import BRDFModel, TorranceSparrow
 from microsim.analytic.shadowing import SHADOWING_KINDS, shadowing_g
+from microsim.bins import Bins
 from microsim.errors import UsageError
-
-from .bins import Bins
 
 __all__ = [
     "BinAverage",
