@@ -25,7 +25,7 @@ def probe(inputs: dict) -> dict:
     import microsim
     from microsim import analytic as an
     from microsim import surfaces as sf
-    from microsim.sim import Bins, bin_kernels
+    from microsim.sim import Bins, ray_bins
 
     try:
         from numpy._core import _multiarray_umath as umath
@@ -45,7 +45,7 @@ def probe(inputs: dict) -> dict:
             where = np.full(len(wo), -7, dtype=np.int64)
             near = np.empty(len(wo), dtype=np.bool_)
             cols = [np.ascontiguousarray(wo[:, k]) for k in range(3)]
-            bin_kernels.bin_rays(
+            ray_bins.bin_rays(
                 status, *cols, psi, True, phi_i, bins.n_theta, bins.phi_edges, near, where
             )
             out[f"bin_rays-{key}"] = where

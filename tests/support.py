@@ -23,20 +23,11 @@ from microsim.testing import pearson_chi2  # noqa: F401  (the public harness, re
 
 
 def walk_on(bins, theta_i, ndf, material=None, *, n, seed, orders, phi_i=0.0):
-    """``walk_bin_averages`` of ``ndf`` on ``bins`` (its edges and folding)."""
+    """``walk_bin_averages`` of ``ndf`` on ``bins``."""
     from microsim.analytic import random_walk as rw
 
     return rw.walk_bin_averages(
-        theta_i,
-        bins.theta_edges,
-        bins.phi_edges,
-        ndf,
-        material,
-        n_paths=n,
-        orders=orders,
-        folded=bins.folded,
-        seed=seed,
-        phi_i=phi_i,
+        theta_i, bins, ndf, material, n_paths=n, orders=orders, seed=seed, phi_i=phi_i
     )
 
 

@@ -17,7 +17,7 @@ from support import sidak, walk_on
 from microsim import analytic as an
 from microsim.analytic import random_walk as rw
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
+from microsim.sim import Bins
 from microsim.sim.predict import bin_average
 from microsim.stats import norm_isf
 from microsim.testing import assert_sampler_matches
@@ -215,7 +215,7 @@ def test_walk_refuses_other_ndfs_and_a_bad_azimuth():
     with pytest.raises(UsageError, match="ndf must be one of .*AnisotropicGGX"):
         rw.smith_random_walk(np.array([[0.0, 0.0, 1.0]]), an.BlinnPhong(20.0))
     with pytest.raises(UsageError, match="ndf must be one of"):
-        rw.walk_bin_averages(30.0, [0, 90], [0, 180], an.BlinnPhong(20.0), n_paths=10)
+        rw.walk_bin_averages(30.0, Bins(1, 2), an.BlinnPhong(20.0), n_paths=10)
     with pytest.raises(UsageError, match="phi_i"):
         _walk(an.AnisotropicGGX(AX, AY, ROT), 30.0, float("nan"), 10, seed=0)
     with pytest.raises(UsageError, match="family and alpha"):

@@ -320,7 +320,7 @@ def test_cos_sin_is_libm_to_an_ulp():
     math.cos/math.sin within 2.3e-16 over [−2π, 2π], quadrant edges included."""
     import math
 
-    from microsim.sim.trig import cos_sin
+    from microsim.trig import cos_sin
 
     psi = np.concatenate(
         [
@@ -338,7 +338,7 @@ def test_cos_sin_is_libm_to_an_ulp():
 def test_atan_approx_is_within_its_bound():
     """``trig.atan_approx`` is within ``ATAN_ERROR`` of atan2 for y ≥ 0 over every
     octant (and exactly 0 at the origin): ``bin_rays`` relies on the bound."""
-    from microsim.sim.trig import ATAN_ERROR, atan_approx
+    from microsim.trig import ATAN_ERROR, atan_approx
 
     rng = np.random.default_rng(3)
     y, x = np.abs(rng.normal(size=50_000)), rng.normal(size=50_000)
@@ -357,13 +357,13 @@ def test_atan_approx_is_within_its_bound():
 )
 @pytest.mark.parametrize("rotate", [False, True])
 def test_bin_rays_is_locate(bins, rotate):
-    """``bin_kernels.bin_rays`` (vectorised ``atan_approx`` bins, those near an edge by
+    """``ray_bins.bin_rays`` (vectorised ``atan_approx`` bins, those near an edge by
     ``Bins.locate``'s own arithmetic) bins every SINGLE ray as ``Bins.locate`` does against
     φi (less ψ per ray when ``rotate``): random directions, directions on and 1e-9 rad either
     side of every θ and ±Δφ edge, the mirror directions of a flat facet (θo = θi, Δφ = 180°:
     on an edge for θi = 30° and 60° on 2° or 3° bins) and the zenith; other rays keep their
     bin."""
-    from microsim.sim import bin_kernels
+    from microsim.sim import ray_bins
 
     rng = np.random.default_rng(4)
     phi_i = 35.0
@@ -387,7 +387,7 @@ def test_bin_rays_is_locate(bins, rotate):
     near = np.empty(m, dtype=np.bool_)
     cols = [np.ascontiguousarray(wo[:, k]) for k in range(3)]
     args = (bins.n_theta, bins.phi_edges, near, where)
-    bin_kernels.bin_rays(status, *cols, psi, rotate, phi_i, *args)
+    ray_bins.bin_rays(status, *cols, psi, rotate, phi_i, *args)
     want = bins.locate(wo, phi_i - np.degrees(psi))
     single = status == paths.SINGLE
     assert np.array_equal(where[single], want[single])

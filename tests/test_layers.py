@@ -2,9 +2,9 @@
 layers, and the module import graph has no cycle (function-local imports included).
 
 Layers, bottom to top (docs/layout.md): core (errors, checkpoints, atomic, checks, vectors,
-stats, display, kernel_cache) → analytic → surfaces → sim → wave → analysis → app
-(``microsim.app``: scene, runner, sweep, bench, bench_methods, bench_peer, wave_bench, view,
-cli; and ``microsim.testing``).
+stats, display, kernel_cache, jit, trig, bin_kernels, bins) → analytic → surfaces → sim → wave
+→ analysis → app (``microsim.app``: scene, runner, sweep, bench, bench_methods, bench_peer,
+wave_bench, view, cli; and ``microsim.testing``).
 """
 
 import ast
@@ -26,6 +26,10 @@ LAYERS = [
             "microsim.stats",
             "microsim.display",
             "microsim.kernel_cache",
+            "microsim.jit",
+            "microsim.trig",
+            "microsim.bin_kernels",
+            "microsim.bins",
         ),
     ),
     ("analytic", ("microsim.analytic",)),
@@ -132,13 +136,10 @@ def test_the_module_graph_has_no_cycle():
 
 
 SIM_LAYERS = [
-    ("compiled support", ("engine.jit", "engine.codes")),
+    ("compiled support", ("engine.codes",)),
     (
-        "bins, results, infrastructure",
+        "results, infrastructure",
         (
-            "bins",
-            "bin_kernels",
-            "trig",
             "ledger",
             "result",
             "progress",
@@ -162,7 +163,7 @@ SIM_LAYERS = [
     ),
     ("model predictions on the bins", ("predict", "compare")),
 ]
-"""Sub-layers of ``microsim.sim``, bottom to top: bins and results below the ray engine
+"""Sub-layers of ``microsim.sim``, bottom to top: results below the ray engine
 (periodic walk, Embree backends, grid walk), the engine below the estimator (streams, paths,
 the bounce chain, tallies, the drivers), the model predictions on top. The package's
 ``__init__`` (its public names) may import any of them."""

@@ -12,8 +12,8 @@ from microsim import vectors
 from microsim.analytic import masking as masking_module
 from microsim.analytic import models as models_module
 from microsim.analytic.catalogue import MODELS
+from microsim.bins import Bins
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
 from microsim.sim.predict import FunctionBRDF, Predictor, predict
 from microsim.testing import assert_sampler_matches
 

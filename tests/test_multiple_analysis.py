@@ -318,7 +318,7 @@ def test_high_orders_converge_as_the_triangulation_refines():
         res = simulate(None, None, theta, realisations=s, rays=1_000_000, bins=BINS,
                        bounces="all", seed=3, threads=2)  # fmt: skip
         rows[cells] = order_energies(res)
-    walk = walk_bin_averages(theta, [0, 90], [0, 180], realised_ndf(s), n_paths=10**6, seed=1)
+    walk = walk_bin_averages(theta, Bins(1, 2), realised_ndf(s), n_paths=10**6, seed=1)
     for t, th in enumerate(theta):
         for key, get in (
             ("≥2", lambda r: (r["multiple"], r["multiple_se"])),

@@ -13,7 +13,7 @@ from microsim import analytic as an
 from microsim.analytic import energy_compensation as ec
 from microsim.analytic import random_walk as rw
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
+from microsim.sim import Bins
 from microsim.sim.predict import bin_average
 from microsim.vectors import spherical, spherical_deg
 
@@ -239,10 +239,6 @@ def test_walk_refuses_bad_input():
         rw.smith_random_walk(np.array([[0.0, 0.0, -1.0]]), an.GGX(0.3))
     with pytest.raises(UsageError, match="theta_i"):
         _walk(90.0, an.GGX(0.3), n=10)
-    with pytest.raises(UsageError, match="theta_edges"):
-        rw.walk_bin_averages(0.0, [0, 100], [0, 180], an.GGX(0.3))
-    with pytest.raises(UsageError, match="phi_edges"):
-        rw.walk_bin_averages(0.0, [0, 90], [0, 200], an.GGX(0.3))
     with pytest.raises(UsageError, match="orders"):
         _walk(0.0, an.GGX(0.3), n=10, orders=0)
 

@@ -17,7 +17,8 @@ import numpy as np
 
 from microsim import analytic as an
 from microsim import surfaces as sf
-from microsim.sim import Bins, paths, trig
+from microsim import trig
+from microsim.sim import Bins, paths
 
 AVX2_ENV = {
     # NumPy 2's AVX-512 dispatch targets and NumPy 1's (each ignores the other's names)

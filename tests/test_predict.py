@@ -23,7 +23,7 @@ from microsim.analytic.masking import vgroove_g
 from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import Beckmann, VonMisesFisher
 from microsim.analytic.shadowing import smith_g2
-from microsim.sim.bins import Bins
+from microsim.bins import Bins
 from microsim.sim.predict import (
     QMC,
     FunctionBRDF,

@@ -46,8 +46,8 @@ from scipy.stats import qmc
 from microsim import analytic as an
 from microsim import checks as _checks
 from microsim import vectors
+from microsim.bins import Bins
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
 from microsim.sim.predict import bin_average
 
 __all__ = [

@@ -450,13 +450,11 @@ def order_comparison(
     T = len(th)
     walk = walk_bin_averages(
         th,
-        bins.theta_edges,
-        bins.phi_edges,
+        bins,
         ndf,
         material,
         n_paths=int(walk_paths),
         orders=n_slots,
-        folded=bool(bins.folded),
         seed=seed,
         max_bounces=_walk_limit(result),
         phi_i=np.asarray(result.phi_i, dtype=np.float64),

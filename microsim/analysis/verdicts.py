@@ -446,7 +446,7 @@ def _checked_inputs(args: Mapping, *, ensemble, model_rtol, min_events, n_params
         raise UsageError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
     phi_edges = args["phi_edges"]
     if phi_edges is None:
-        from microsim.sim.bins import Bins
+        from microsim.bins import Bins
 
         phi_edges = Bins(shape[0], shape[1], folded=True).phi_edges
     phi_edges = np.asarray(phi_edges, dtype=np.float64)

@@ -74,26 +74,26 @@ different surface). ``WalkNDF`` holds what the walk asks of an NDF.
 energy; Heitz et al. 2016), so the escaping energy is 1 up to the paths cut at
 ``max_bounces``, which are reported.
 
-Bins (mirroring ``microsim.sim.bins.Bins``, which this layer cannot import): ``theta_edges``
-(degrees, increasing within [0, 90]) and ``phi_edges`` (degrees, increasing) over the relative
-azimuth Δφ = φo − φi, the mirror direction at Δφ = 180°. ``folded=True``: Δφ is folded to
-|Δφ| ∈ [0°, 180°] and each bin's projected solid angle counts both halves; ``folded=False``: Δφ
-is taken into [phi_edges[0], phi_edges[0] + 360°). An anisotropic NDF has no mirror symmetry
-about the plane of incidence unless φi lies along one of its axes; elsewhere a folded bin holds
-the mean of f over ±Δφ (what a folded simulation measures) and full-azimuth bins resolve f. A
-bin average is the energy escaping into the bin per incident path divided by the bin's
-projected solid angle Ω_B = Δφ (sin²θ₂ − sin²θ₁)/2 (×2 folded):
+Bins: a ``microsim.bins.Bins`` grid over θo and the relative azimuth Δφ = φo − φi, the mirror
+direction at Δφ = 180°; ``Bins.locate`` bins each path's exit direction (the simulation's own
+rule) and ``Bins.projected_solid_angle`` gives each bin's Ω_B. Folded bins hold |Δφ| ∈ [0°,
+180°], each bin's Ω_B counting both halves. An anisotropic NDF has no mirror symmetry about the
+plane of incidence unless φi lies along one of its axes; elsewhere a folded bin holds the mean
+of f over ±Δφ (what a folded simulation measures) and full-azimuth bins resolve f. A bin
+average is the energy escaping into the bin per incident path divided by Ω_B:
 f̄_B = (1/Ω_B) ∫_B f cos θo dω_o in sr⁻¹.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import special
 
 from microsim import checks as _checks
+from microsim.bins import Bins
 from microsim.errors import UsageError
 
 from .anisotropic import AnisotropicNDF
@@ -357,48 +357,32 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
 
 
 # --- bin averages ------------------------------------------------------------------------------
-def _check_edges(theta_edges, phi_edges, folded):
+def _bins_of_edges(theta_edges, phi_edges, folded) -> Bins:
+    """The ``Bins`` with these edges (degrees) and folding, for ``walk_bin_averages``'s older
+    form (DeprecationWarning); UsageError for edges that no ``Bins`` has."""
     te = np.asarray(theta_edges, dtype=np.float64)
     pe = np.asarray(phi_edges, dtype=np.float64)
-    if te.ndim != 1 or len(te) < 2 or np.any(np.diff(te) <= 0) or te[0] < 0 or te[-1] > 90:
-        raise UsageError("theta_edges must be >= 2 increasing values in degrees within [0, 90]")
-    if pe.ndim != 1 or len(pe) < 2 or np.any(np.diff(pe) <= 0):
-        raise UsageError("phi_edges must be >= 2 increasing values in degrees")
-    if not isinstance(folded, (bool, np.bool_)):
-        raise UsageError(f"folded must be True or False, got {folded!r}")
-    if folded and (pe[0] < 0 or pe[-1] > 180):
-        raise UsageError("phi_edges must lie within [0, 180] degrees when folded=True")
-    if not folded and pe[-1] - pe[0] > 360:
-        raise UsageError("phi_edges must span at most 360 degrees when folded=False")
-    return te, pe, bool(folded)
-
-
-def _projected_solid_angle(te, pe, folded):
-    s2 = np.sin(np.radians(te)) ** 2
-    band = 0.5 * np.diff(s2)
-    dphi = np.radians(np.diff(pe)) * (2.0 if folded else 1.0)
-    return band[:, None] * dphi[None, :]
-
-
-def _locate(wo, te, pe, folded, phi_i=0.0):
-    """Flat bin index of exit directions for wi at azimuth ``phi_i`` (degrees), −1 outside the
-    grid."""
-    x, y, z = wo[:, 0], wo[:, 1], wo[:, 2]
-    theta = np.degrees(np.arctan2(np.hypot(x, y), z))
-    dphi = np.degrees(np.arctan2(y, x))  # (−180, 180]
-    if phi_i != 0.0:  # Δφ = φo − φi, back into (−180, 180]
-        dphi = np.mod(dphi - phi_i, 360.0)
-        dphi = np.where(dphi > 180.0, dphi - 360.0, dphi)
-    if folded:
-        dphi = np.abs(dphi)
-    else:
-        dphi = pe[0] + np.mod(dphi - pe[0], 360.0)
-    i = np.searchsorted(te, theta, side="right") - 1
-    i = np.where(theta == te[-1], len(te) - 2, i)
-    j = np.searchsorted(pe, dphi, side="right") - 1
-    j = np.where(dphi == pe[-1], len(pe) - 2, j)
-    ok = (i >= 0) & (i < len(te) - 1) & (j >= 0) & (j < len(pe) - 1) & (z > 0)
-    return np.where(ok, i * (len(pe) - 1) + j, -1)
+    folded = True if folded is None else folded
+    bins = None
+    if te.ndim == 1 and pe.ndim == 1 and len(te) >= 2 and len(pe) >= 3:
+        bins = Bins(len(te) - 1, len(pe) - 1, folded)
+    same = bins is not None and all(
+        np.allclose(mine, theirs, rtol=0.0, atol=1e-9)
+        for mine, theirs in ((bins.theta_edges, te), (bins.phi_edges, pe))
+    )
+    if not same:
+        raise UsageError(
+            "bins must be a microsim.bins.Bins (theta_edges and phi_edges are taken only as "
+            "the edges of one: θo uniform over [0°, 90°], Δφ as Bins(n_theta, n_phi, folded) "
+            f"builds them), got theta_edges {theta_edges!r} and phi_edges {phi_edges!r}"
+        )
+    warnings.warn(
+        "walk_bin_averages(theta_i, theta_edges, phi_edges, ndf, ..., folded=) is deprecated: "
+        "pass the Bins, walk_bin_averages(theta_i, bins, ndf, ...)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return bins
 
 
 @dataclass(frozen=True)
@@ -407,10 +391,10 @@ class WalkBinAverages:
 
     ``theta_i``: incidence angles (degrees), shape (I,); ``orders``: labels of the order axis
     ("1", "2", …, "≥K"); ``values``/``stderr``: f̄_B in sr⁻¹, shape (I, K, n_theta, n_phi);
-    ``energy``/``energy_stderr``: escaping energy per order and incident path (I, K) — includes
-    light leaving outside the bin grid; ``absorbed``/``absorbed_stderr``, ``cut``: (I,) energy
-    absorbed by Fresnel losses and energy of paths cut at ``max_bounces``; ``max_order``: the
-    highest order seen per incidence; ``n_paths``: paths per incidence; ``omega``: Ω_B (sr).
+    ``energy``/``energy_stderr``: escaping energy per order and incident path (I, K);
+    ``absorbed``/``absorbed_stderr``, ``cut``: (I,) energy absorbed by Fresnel losses and energy
+    of paths cut at ``max_bounces``; ``max_order``: the highest order seen per incidence;
+    ``n_paths``: paths per incidence; ``omega``: Ω_B (sr), ``Bins.projected_solid_angle``.
     ``multiple_energy``/``multiple_stderr``: energy escaping in orders ≥ 2 (I,); ``phi_i``: the
     incidence azimuths (degrees, (I,)) the bins' Δφ is measured from. Standard errors are those of a
     mean over i.i.d. paths.
@@ -436,34 +420,47 @@ class WalkBinAverages:
 
 def walk_bin_averages(
     theta_i,
-    theta_edges,
-    phi_edges,
+    bins: Bins,
     ndf,
     material=None,
+    *legacy,
     n_paths: int = 1_000_000,
     orders: int = 4,
-    folded: bool = True,
     seed=0,
     max_bounces: int = 256,
     chunk: int = 2**18,
     phi_i: float = 0.0,
+    folded: bool | None = None,
 ) -> WalkBinAverages:
-    """Heitz et al. 2016 random-walk BRDF averaged over (θo, Δφ) bins, per scattering order.
+    """Heitz et al. 2016 random-walk BRDF averaged over the ``bins`` (a ``Bins``), per
+    scattering order.
 
     ``theta_i``: incidence angles in degrees (scalar or 1-D, each in [0, 90)); ``phi_i``: the
     incidence azimuth in degrees (finite, any value; or one per θi), in the surface frame, where an
     anisotropic NDF's x axis lies at its ``rotation``: wi = (sin θi cos φi, sin θi sin φi,
-    cos θi), and the bins' Δφ = φo − φi. ``ndf``: one of ``WALK_NDFS``. ``theta_edges``,
-    ``phi_edges``, ``folded``: the bin grid as ``microsim.sim.bins.Bins`` builds it (module
-    docstring; an anisotropic NDF wants ``folded=False`` unless φi lies on one of its axes).
+    cos θi), and the bins' Δφ = φo − φi (module docstring; an anisotropic NDF wants
+    ``folded=False`` bins unless φi lies on one of its axes). ``ndf``: one of ``WALK_NDFS``.
     ``orders``: K ≥ 1 tallies orders 1 … K − 1 separately and K and above together ("≥K").
     ``n_paths`` per incidence, processed ``chunk`` at a time; ``seed``: anything
     ``numpy.random.default_rng`` takes (one generator for the whole call: the same seed,
     incidences, φi and ``chunk`` give the same result bit for bit). Returns
     ``WalkBinAverages``.
+
+    The older form ``walk_bin_averages(theta_i, theta_edges, phi_edges, ndf, material,
+    folded=...)`` still works, with a DeprecationWarning, where the edges are those of a
+    ``Bins``.
     """
+    if not isinstance(bins, Bins):  # the older form: (theta_edges, phi_edges, ndf, material)
+        if len(legacy) > 1:
+            raise UsageError("walk_bin_averages: pass n_paths, orders, ... by keyword")
+        bins = _bins_of_edges(bins, ndf, folded)
+        ndf, material = material, (legacy[0] if legacy else None)
+    elif legacy or folded is not None:
+        raise UsageError(
+            "walk_bin_averages takes theta_i, bins, ndf and material by position, the rest "
+            "by keyword; the folding is the bins' (Bins(..., folded=))"
+        )
     walk = WalkNDF.of(ndf)
-    te, pe, folded = _check_edges(theta_edges, phi_edges, folded)
     thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     if thetas.ndim != 1 or np.any(~((thetas >= 0) & (thetas < 90))):
         raise UsageError(f"theta_i must be angles in degrees within [0, 90), got {theta_i!r}")
@@ -478,7 +475,7 @@ def walk_bin_averages(
     orders = _checks.integer("orders", orders, 1, 1000)
     chunk = _checks.integer("chunk", chunk, 1, 2**24)
     rng = np.random.default_rng(seed)
-    omega = _projected_solid_angle(te, pe, folded)
+    omega = bins.projected_solid_angle()
     nb = omega.size
     n_i = len(thetas)
     s1 = np.zeros((n_i, orders, nb))
@@ -503,7 +500,7 @@ def walk_bin_averages(
             esc = p.order > 0
             kk = np.minimum(p.order[esc], orders) - 1
             ww = p.weight[esc]
-            b = _locate(p.wo[esc], te, pe, folded, phi_i)
+            b = bins.locate(p.wo[esc], phi_i)
             inb = b >= 0
             key = kk[inb] * nb + b[inb]
             s1[a] += np.bincount(key, ww[inb], minlength=orders * nb).reshape(orders, nb)

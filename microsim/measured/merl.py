@@ -72,8 +72,8 @@ import numpy as np
 from microsim import checks as _checks
 from microsim import vectors
 from microsim.atomic import atomic_open
+from microsim.bins import Bins
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
 from microsim.sim.predict import bin_average
 from microsim.sim.result import Result
 

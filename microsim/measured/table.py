@@ -27,8 +27,8 @@ from scipy.interpolate import RegularGridInterpolator
 
 from microsim import checks as _checks
 from microsim import vectors
+from microsim.bins import Bins
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
 from microsim.sim.predict import bin_average
 from microsim.surfaces.surface import anisotropy_of
 

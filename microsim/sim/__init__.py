@@ -14,12 +14,14 @@ Modules: ``experiment`` (``Experiment``, ``Estimator``, ``Execution``), ``estima
 ``estimate_to_precision``), ``streams`` (random streams, ray origins), ``paths`` (trace paths,
 ledger), ``tallies`` (running sums, bin estimate and standard error), ``schedule`` (threads,
 interrupts), ``arguments`` (argument checks), ``tracer`` and ``engine`` (Embree, the periodic
-walk and its compiled per-ray loops), the estimator's compiled loops (``bin_kernels``,
+walk and its compiled per-ray loops), the estimator's compiled loops (``ray_bins``,
 ``fresnel_kernels``, ``vgroove_kernels``, ``bounce_kernels``, ``tally_kernels``,
-``origin_kernels``, ``trig``), ``bins``, ``result``, ``progress``, ``predict``, ``compare``.
+``origin_kernels``), ``result``, ``progress``, ``predict``, ``compare``. ``Bins`` (with
+``MAX_BINS``) lives in the core layer, ``microsim.bins``, and is re-exported here.
 """
 
-from .bins import Bins
+from microsim.bins import MAX_BINS, Bins
+
 from .cluster import SchedulerLost
 from .estimator import estimate, ray_events, simulate
 from .events import Events
@@ -42,6 +44,7 @@ __all__ = [
     "Result",
     "InPlane",
     "Bins",
+    "MAX_BINS",
     "Tracer",
     "VGrooveProfile",
     "BLOCK",

@@ -13,10 +13,10 @@ import os
 
 import numpy as np
 
+from microsim.bins import Bins
 from microsim.checks import integer, short
 from microsim.errors import UsageError
 
-from .bins import Bins
 from .paths import MASKING
 from .streams import ORIGINS
 

@@ -30,6 +30,7 @@ from typing import Callable
 
 import numpy as np
 
+from microsim.bins import Bins
 from microsim.checks import in_range, integer
 from microsim.errors import UsageError
 from microsim.stats import ENERGY_FRACTION, MIN_EVENTS, energy_set
@@ -38,7 +39,6 @@ from .arguments import (
     MAX_RAYS,
     check_progress,
 )
-from .bins import Bins
 from .estimator import estimate
 from .experiment import Estimator, Execution, Experiment
 from .result import Result

@@ -36,6 +36,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from microsim.jit import compiled, inlined
+
 from .engine.codes import (
     CUT_BOUNCES,
     CUT_WEIGHT,
@@ -52,7 +54,6 @@ from .engine.codes import (
     UNRESOLVED,
     order_class,
 )
-from .engine.jit import compiled, inlined
 from .fresnel_kernels import fresnel_weight
 
 

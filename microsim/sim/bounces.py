@@ -55,10 +55,10 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from microsim.bins import Bins
 from microsim.errors import UsageError
 
 from . import bounce_kernels, fresnel_kernels, vgroove_kernels
-from .bins import Bins
 from .engine import codes, segments
 from .facet_tables import FacetTable, facet_table, uses_facet_table
 from .ledger import ORDER_NAMES, TERMINAL

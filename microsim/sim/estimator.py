@@ -34,6 +34,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from microsim.analytic.fresnel import resolve_material
+from microsim.bins import Bins
 from microsim.checkpoints import checkpoint
 from microsim.checks import check_memory
 from microsim.errors import UsageError
@@ -47,7 +48,6 @@ from .arguments import (
     is_surface,
     surface_error,
 )
-from .bins import Bins
 from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
 from .cluster import ClusterPool, RemoteSurface, SchedulerLost, tracer_info
 from .events import Events, trace_events

@@ -23,6 +23,7 @@ from typing import Callable
 import numpy as np
 
 from microsim.analytic.fresnel import resolve_material
+from microsim.bins import Bins
 from microsim.checks import integer
 from microsim.errors import UsageError
 
@@ -36,7 +37,6 @@ from .arguments import (
     realisation_source,
     thread_count,
 )
-from .bins import Bins
 from .bounces import check_bounces
 from .cluster import check_client
 from .paths import MASKING

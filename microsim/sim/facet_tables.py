@@ -10,8 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from microsim.bins import Bins
+
 from . import fresnel_kernels
-from .bins import Bins
 from .engine import beam
 from .ledger import MASKED, SINGLE
 from .ray_bins import locate_single

@@ -9,9 +9,9 @@ from typing import NamedTuple
 import numpy as np
 
 from microsim.analytic.fresnel import fresnel_real_scalar
+from microsim.jit import compiled, vector_inlined, vectorised
 
 from .engine.codes import DOWNWARD, RAY_UNRESOLVED, SINGLE
-from .engine.jit import compiled, vector_inlined, vectorised
 
 FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2  # ``fresnel_weight``'s modes
 

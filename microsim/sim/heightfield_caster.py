@@ -25,8 +25,9 @@ import math
 
 import numpy as np
 
+from microsim.jit import vector_inlined, vectorised
+
 from .engine.codes import HIT, UNRESOLVED
-from .engine.jit import vector_inlined, vectorised
 
 __all__ = ["HeightfieldGrid", "heightfield_grid", "cast_falling"]
 

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from .engine.jit import vector_inlined, vectorised
+from microsim.jit import vector_inlined, vectorised
 
 
 @vector_inlined

@@ -50,7 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bins import Bins
+from microsim.bins import Bins
+
 from .facet_tables import FacetTable, facet_table, uses_facet_table
 from .ledger import DOWNWARD, LEDGER, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .ray_columns import RayOutcome, analytic_columns, trace_columns, trace_tabled

@@ -40,9 +40,8 @@ from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.analytic.masking import Smith, masking_from_kind
 from microsim.analytic.models import TorranceSparrow
+from microsim.bins import Bins
 from microsim.errors import UsageError
-
-from .bins import Bins
 
 __all__ = [
     "BinAverage",

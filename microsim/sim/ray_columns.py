@@ -8,10 +8,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from microsim.bins import Bins
+from microsim.jit import TILE
+
 from . import fresnel_kernels, vgroove_kernels
-from .bins import Bins
 from .engine import primary, segments
-from .engine.jit import TILE
 from .facet_tables import FacetTable
 from .ledger import MASKED, SINGLE
 from .masking_rays import MaskingRays, primary_hits, segment_geometry

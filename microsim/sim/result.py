@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from microsim.atomic import atomic_open, read_json, read_npz
+from microsim.bins import Bins
 from microsim.errors import UsageError
 
-from .bins import Bins
 from .ledger import LEDGER
 
 __all__ = ["Result", "InPlane", "FrozenDict", "FrozenList"]

@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from microsim.bins import Bins
 from microsim.stats import MIN_EVENTS
 
 from . import tally_kernels
-from .bins import Bins
 from .ledger import DOWNWARD, LEDGER, MASKED, TERMINAL
 from .result import Result
 from .scratch import WorkArray

@@ -4,8 +4,9 @@ order and block order, so bitwise independent of chunking and threads."""
 
 from __future__ import annotations
 
+from microsim.jit import compiled
+
 from .engine.codes import DOWNWARD, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
-from .engine.jit import compiled
 
 
 @compiled

@@ -11,7 +11,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .bin_kernels import bin_guess, bin_scales, locate_one
+from microsim.bin_kernels import bin_guess, bin_scales, locate_one
+from microsim.jit import TILE, compiled, inlined, vector_inlined, vectorised
+from microsim.trig import cos_sin
+
 from .engine.codes import (
     CUT_BOUNCES,
     CUT_WEIGHT,
@@ -22,10 +25,8 @@ from .engine.codes import (
     SINGLE,
     order_class,
 )
-from .engine.jit import TILE, compiled, inlined, vector_inlined, vectorised
 from .engine.primary import groove_margin
 from .fresnel_kernels import fresnel_tile, fresnel_weight
-from .trig import cos_sin
 
 
 class GrooveBins(NamedTuple):

@@ -29,8 +29,8 @@ import warnings
 import numpy as np
 
 from microsim.analytic.models import BRDFModel
+from microsim.bins import Bins
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
 from microsim.sim.predict import FunctionBRDF, Predictor, predict_incidences
 
 from .agreement import BRDFMismatch, lobe_width_deg, readable_name, wrap_brdf

@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from microsim.bins import Bins
 from microsim.errors import UsageError
 from microsim.measured import MERLBRDF, BRDFTable, read_merl, read_rgl
-from microsim.sim.bins import Bins
 from microsim.sim.predict import FunctionBRDF, Predictor, predict
 from microsim.stats import energy_set
 

@@ -4,7 +4,7 @@ interpolant of the heights or on the ray tracer's triangle mesh (``kirchhoff``) 
 powers as the bin-averaged BRDF ``Result`` (``brdf``). The solver's timing for
 ``microsim bench`` is ``microsim.app.wave_bench``.
 
-Layer: "wave", between sim and analysis (imports core, analytic and sim.bins/paths/result)."""
+Layer: "wave", between sim and analysis (imports core, analytic and sim.paths/result)."""
 
 from .brdf import bin_orders, kirchhoff_brdf
 from .kirchhoff import (

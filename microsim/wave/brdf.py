@@ -29,8 +29,8 @@ import time
 
 import numpy as np
 
+from microsim.bins import Bins
 from microsim.errors import UsageError
-from microsim.sim.bins import Bins
 from microsim.sim.result import Result
 
 from .kirchhoff import kirchhoff_orders

@@ -11,9 +11,10 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from microsim.bins import MAX_BINS  # theta_bins × phi_bins at most
+
 from ...errors import UsageError
 from ...sim.arguments import MAX_RAYS
-from ...sim.bins import MAX_BINS  # theta_bins × phi_bins at most
 from .. import scene as sc
 
 _TOP = (

@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .jit import compiled, inlined
+from microsim.jit import compiled, inlined
 
 MAX_BLOCKS = 256  # blocks followed per facet before the facet is left to the per-ray tests
 

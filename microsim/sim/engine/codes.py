@@ -5,7 +5,7 @@ assert they agree."""
 
 from __future__ import annotations
 
-from .jit import compiled
+from microsim.jit import compiled
 
 # tracer status codes (``tracer.HIT`` ...) and ledger classes (``paths.SINGLE`` ...),
 # repeated here as compile-time constants; ``paths``/``tracer`` assert they agree

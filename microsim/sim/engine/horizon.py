@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from .jit import compiled, vectorised
+from microsim.jit import compiled, vectorised
 
 CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope bound × |wo_h|
 

@@ -10,10 +10,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from microsim.jit import TILE, allocating, compiled, vector_inlined
+
 from ..heightfield_caster import cast_falling
 from .codes import DOWNWARD, ESCAPED, HIT, MISSED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .horizon import CLEAR_MARGIN, horizon_clear
-from .jit import TILE, allocating, compiled, vector_inlined
 from .segments import setup_ray
 
 

@@ -10,8 +10,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from microsim.jit import compiled, vector_inlined, vectorised
+
 from .codes import ESCAPED, HIT, MISSED
-from .jit import compiled, vector_inlined, vectorised
 
 
 class WalkRays(NamedTuple):

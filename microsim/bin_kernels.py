@@ -1,21 +1,21 @@
 """Flat (θo, Δφ) bins of directions (``Bins.locate``): θo bin ⌊θo·n_θ/90°⌋, Δφ = φo − φi
-in degrees against the bin edges, angles by ``trig.atan2_portable``; the vectorised
-``bin_rays`` guesses with ``trig.atan_approx`` and settles the rays near an edge exactly."""
+in degrees against the bin edges, angles by ``trig.atan2_portable``; and the parts of the
+simulation's vectorised bin pass (``sim.ray_bins.bin_rays``): its branch-free guess by
+``trig.atan_approx`` and the exact decision near an edge."""
 
 from __future__ import annotations
 
 import math
 
-from .engine.codes import SINGLE
-from .engine.jit import compiled, inlined, vector_inlined, vectorised
-from .trig import ATAN_ERROR, atan2_portable, atan_approx, cos_sin
+from .jit import compiled, inlined, vector_inlined
+from .trig import ATAN_ERROR, atan2_portable, atan_approx
 
 
 @compiled
 def locate_one(ox, oy, oz, phi_i_deg, n_theta, n_phi, folded, edges):
     """``Bins.locate`` of one direction o against the incident azimuth ``phi_i_deg`` (degrees,
     any value): φi taken to (−180°, 180°] as ``bins._half_turn`` does, then ``_bin_of``. The
-    exact decision of ``bin_rays`` near an edge, ties included."""
+    exact decision of ``ray_bins.bin_rays`` near an edge, ties included."""
     phi_i = phi_i_deg % 360.0  # np.mod's (Python's) float remainder
     phi_i = phi_i - 360.0 if phi_i > 180.0 else phi_i
     return _bin_of(ox, oy, oz, phi_i, n_theta, n_phi, folded, edges)
@@ -23,7 +23,7 @@ def locate_one(ox, oy, oz, phi_i_deg, n_theta, n_phi, folded, edges):
 
 @vector_inlined
 def bin_guess(ox, oy, oz, ex, ey, n_theta, n_phi, t_scale, p_scale, gt, gp):
-    """Branch-free part of ``bin_rays``: the flat folded bin of the rising direction o
+    """Branch-free part of ``ray_bins.bin_rays``: the flat folded bin of the rising direction o
     against the unit azimuth (ex, ey) from ``atan_approx`` (θ bins ``t_scale`` per radian,
     Δφ bins ``p_scale`` per radian and half a bin shifted), and whether either angle lies
     within ``gt``/``gp`` (bins) of an edge, where the guess may differ from ``Bins.locate``'s:
@@ -46,34 +46,6 @@ def bin_scales(n_theta, n_phi):
     ``bin_guess``: the guards are twice ``ATAN_ERROR``."""
     t_scale, p_scale = n_theta / (0.5 * math.pi), (n_phi - 1) / math.pi
     return t_scale, p_scale, 2.0 * ATAN_ERROR * t_scale, 2.0 * ATAN_ERROR * p_scale
-
-
-@vectorised
-def bin_rays(status, wox, woy, woz, psi, rotate, phi_i_deg, n_theta, edges, near, where):
-    """``where[i]`` = ``Bins.locate`` of wo_i on the folded grid (``n_theta``, Δφ ``edges``
-    in degrees) for the SINGLE rays (others untouched), against the incident azimuth
-    ``phi_i_deg`` (degrees), less ψ_i when ``rotate`` (wo in the ray's groove frame: Δφ is
-    unchanged by the rotation). Two passes: a branch-free one that the compiler vectorises
-    (``bin_guess``: ``atan_approx`` angles, ~4× faster than the same arithmetic ray by
-    ray) flags in ``near`` (bool work array) the rays whose angle lies within twice
-    ``ATAN_ERROR`` of an edge; the second bins those with ``Bins.locate``'s own arithmetic
-    (``locate_one``), so the result is ``Bins.locate``'s for every ray, ties on an edge
-    included (a mirror at θo = 30° on 2° bins)."""
-    n_phi = len(edges) - 1
-    ts, fs, gt, gf = bin_scales(n_theta, n_phi)
-    cos_phi, sin_phi = math.cos(math.radians(phi_i_deg)), math.sin(math.radians(phi_i_deg))
-    for i in range(len(status)):
-        ex, ey = cos_phi, sin_phi
-        if rotate:
-            cp, sp = cos_sin(psi[i])
-            ex = cp * cos_phi + sp * sin_phi
-            ey = -sp * cos_phi + cp * sin_phi
-        flat, near[i] = bin_guess(wox[i], woy[i], woz[i], ex, ey, n_theta, n_phi, ts, fs, gt, gf)
-        where[i] = flat if status[i] == SINGLE else where[i]
-    for i in range(len(status)):
-        if near[i] and status[i] == SINGLE:
-            phi = phi_i_deg - psi[i] * (180.0 / math.pi) if rotate else phi_i_deg
-            where[i] = locate_one(wox[i], woy[i], woz[i], phi, n_theta, n_phi, True, edges)
 
 
 @inlined

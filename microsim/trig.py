@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from .engine.jit import inlined, vector_inlined
+from .jit import inlined, vector_inlined
 
 # fdlibm's __kernel_sin / __kernel_cos polynomial coefficients (Sun Microsystems 1993, |r| ≤ π/4)
 _S = (
