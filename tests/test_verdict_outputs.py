@@ -80,7 +80,9 @@ def test_inconclusive_prints_both_sizes():
     v = _case("inconclusive")
     text = V.verdict_symbol(v)
     assert text == f"? {100 * v['rel_rms']:.2g}% (tile departs {100 * v['tile_departure']:.2g}%)"
-    assert "tile departs" in report_index._index_cell({"verdicts": [v]}, v["model"], V.summary_row([v]))
+    assert "tile departs" in report_index._index_cell(
+        {"verdicts": [v]}, v["model"], V.summary_row([v])
+    )
     assert "departure" in V.summary_row([v])[v["model"]]
 
 
