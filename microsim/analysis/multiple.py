@@ -157,9 +157,10 @@ def _walk_limit(result) -> int:
     1 … K reflections are tallied and the paths that reflect a (K + 1)-th time are cut, as the
     simulation cuts paths still inside after K bounces (the cut *weight* of a metal then carries
     one more Fresnel factor in the walk: only the cut/absorbed split differs). "all": the
-    simulation's ``meta["max_bounces"]`` (``MAX_BOUNCES``) + 1."""
-    b = result.meta.get("bounces", "all")
-    return (int(result.meta.get("max_bounces", MAX_BOUNCES)) if b == "all" else int(b)) + 1
+    simulation's ``info.max_bounces`` (``MAX_BOUNCES``) + 1."""
+    info = result.info
+    b = "all" if info.bounces is None else info.bounces
+    return (int(info.max_bounces or MAX_BOUNCES) if b == "all" else int(b)) + 1
 
 
 def _check_result(result):
@@ -188,11 +189,11 @@ def _albedo_table(ndf, material) -> AlbedoTable:
 
 
 def _check_material(result, material) -> None:
-    """The material must be the one the result was traced with (``meta["material"]["ior"]``)."""
+    """The material must be the one the result was traced with (``info.material["ior"]``)."""
     eta = resolve_material(material)
-    if "material" not in result.meta:
+    if result.info.material is None:
         return
-    ior = (result.meta.get("material") or {}).get("ior")
+    ior = (result.info.material or {}).get("ior")
     if ior is None or eta is None:
         same = ior is None and eta is None
     else:
@@ -201,7 +202,7 @@ def _check_material(result, material) -> None:
     if not same:
         raise UsageError(
             f"material must be the material the result was traced with "
-            f"({result.meta['material']}), got {material!r}"
+            f"({result.info.material}), got {material!r}"
         )
 
 
@@ -546,14 +547,14 @@ def order_comparison(
             }
         )
     kind = type(ndf).__name__
-    smith = (result.meta.get("surface") or {}).get("kind") != "vgrooves"
+    smith = (result.info.surface or {}).get("kind") != "vgrooves"
     return {
         "expected": smith,
         "expectation": None if smith else NOT_EXPECTED,
         "ndf": {"kind": kind, **_ndf_roughness(ndf)},
         "models": list(names),
         "material": None if material is None else str(material),
-        "bounces": result.meta.get("bounces"),
+        "bounces": result.info.bounces,
         "order_labels": list(ORDER_LABELS[:n_slots]),
         "walk_paths": int(walk_paths),
         "walk_seed": repr(seed),

@@ -207,17 +207,28 @@ def _budget_section(budget, auto) -> list[str]:
 
 def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     """``report.md`` of one run: settings, energy ledger, verdicts, fits, charts."""
-    meta = result.meta
-    surf = meta.get("surface") or {}
-    run = meta.get("run", {})
-    mat = meta.get("material", {})
+    info = result.info
     phis = doc.get("phi_i", [0.0])
     with_phi = incidence.several_azimuths(phis)
-    inc_cols = ["θi", "φi"] if with_phi else ["θi"]
     lines = [f"# {doc['scene']}", ""]
     if doc.get("description"):
         lines += [doc["description"], ""]
-    lines += [
+    lines += _run_section(doc, info, phis, with_phi)
+    lines += _ledger_section(doc, result, with_phi)
+    lines += _budget_section(info.error_budget, (info.run or {}).get("realisations_auto"))
+    lines += _verdicts_section(doc, with_phi)
+    lines += wave_section(doc.get("wave"))
+    lines += _fits_section(doc.get("fits"))
+    lines += _orders_section(doc.get("orders"))
+    lines += _charts_section(doc, charts, phis, with_phi)
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _run_section(doc: Mapping, info, phis, with_phi: bool) -> list[str]:
+    """ "Run": the settings table, then the warnings of the surface generator and models."""
+    surf = info.surface or {}
+    run = info.run or {}
+    lines = [
         "## Run",
         "",
         md_table(
@@ -231,7 +242,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
                     f"{surf.get('triangles')} triangles (scale {fmt(run.get('surface_scale'))})",
                 ],
                 ["nominal", params_text(surf.get("nominal", {}))],
-                ["material", _material(mat)],
+                ["material", _material(info.material or {})],
                 ["incidences θi", ", ".join(f"{t:g}°" for t in doc["theta_i"])],
                 *(
                     [["incidence azimuths φi", _azimuths_text(phis)]]
@@ -248,14 +259,19 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         ),
         "",
     ]
-    warns = list(surf.get("warnings", [])) + list(meta.get("model_warnings", []))
+    warns = list(surf.get("warnings", [])) + list(info.model_warnings)
     if warns:
         lines += (
             ["Warnings (surface generator, tracer, model quadrature):", ""]
             + [f"- {w}" for w in warns]
             + [""]
         )
-    lines += [
+    return lines
+
+
+def _ledger_section(doc: Mapping, result, with_phi: bool) -> list[str]:
+    inc_cols = ["θi", "φi"] if with_phi else ["θi"]
+    return [
         "## Energy ledger",
         "",
         "Fractions of the incident rays (ρ: Fresnel-weighted single-bounce albedo, "
@@ -267,11 +283,29 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         ),
         "",
     ]
-    lines += _budget_section(meta.get("error_budget"), run.get("realisations_auto"))
+
+
+_VERDICT_COLUMNS = [
+    "model",
+    "verdict",
+    "judged against",
+    "χ²/dof",
+    "p",
+    "max |z|",
+    "rel RMS",
+    "max rel dev (sim − model)/sim",
+    "worst bin",
+    "deviating θo",
+    "bins",
+]
+
+
+def _verdicts_section(doc: Mapping, with_phi: bool) -> list[str]:
+    """ "Verdicts": one summary per model, the ranking, and every incidence × model folded."""
     summary = summary_row(doc["verdicts"])
     outside = doc.get("outside_domain") or {}
     summary.update({m: OUT_OF_DOMAIN for m in outside if m in summary})
-    lines += [
+    lines = [
         "## Verdicts",
         "",
         "A model *agrees* when the χ² and max-|z| tests (Šidák-corrected over the run's "
@@ -282,103 +316,103 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         "",
     ]
     lines += [f"- `{m}`: {why}." for m, why in outside.items()] + ([""] if outside else [])
-    lines += [
+    inc_cols = ["θi", "φi"] if with_phi else ["θi"]
+    return lines + [
         "Best to worst by mean relative RMS error: "
         + ", ".join(f"`{m}`" for m in doc.get("ranking", []))
         + ".",
         "",
         "<details><summary>Every incidence × model</summary>",
         "",
-        md_table(
-            [
-                *inc_cols,
-                "model",
-                "verdict",
-                "judged against",
-                "χ²/dof",
-                "p",
-                "max |z|",
-                "rel RMS",
-                "max rel dev (sim − model)/sim",
-                "worst bin",
-                "deviating θo",
-                "bins",
-            ],
-            _verdict_rows(doc["verdicts"], outside, with_phi),
-        ),
+        md_table([*inc_cols, *_VERDICT_COLUMNS], _verdict_rows(doc["verdicts"], outside, with_phi)),
         "",
         "</details>",
         "",
     ]
-    lines += wave_section(doc.get("wave"))
-    if doc.get("fits"):
-        lines += [
-            "## Fits (Löw eq. 29–33)",
-            "",
-            "One parameter set per model for all incidences, least squares on E2; "
-            "√E1 and √E2 as in Löw Table II. A parameter on a physical bound of its box "
-            "(kd ≥ 0, a fraction ≤ 1) is a constrained minimum; one at a search limit (the "
-            "box's practical ends, e.g. C = 10, ior = 100) means the optimiser was stopped "
-            "there and the best fit may lie beyond: that fit is not converged.",
-            "",
-            md_table(
-                ["model", "parameters", "√E1", "√E2", "converged", "starts"],
+
+
+def _fits_section(fits) -> list[str]:
+    if not fits:
+        return []
+    return [
+        "## Fits (Löw eq. 29–33)",
+        "",
+        "One parameter set per model for all incidences, least squares on E2; "
+        "√E1 and √E2 as in Löw Table II. A parameter on a physical bound of its box "
+        "(kd ≥ 0, a fraction ≤ 1) is a constrained minimum; one at a search limit (the "
+        "box's practical ends, e.g. C = 10, ior = 100) means the optimiser was stopped "
+        "there and the best fit may lie beyond: that fit is not converged.",
+        "",
+        md_table(
+            ["model", "parameters", "√E1", "√E2", "converged", "starts"],
+            [
                 [
-                    [
-                        f["model"],
-                        params_text(f["params"]),
-                        fmt(f["sqrt_e1"]),
-                        fmt(f["sqrt_e2"]),
-                        converged_text(f),
-                        str(f["n_starts"]),
-                    ]
-                    for f in doc["fits"]
-                ],
-            ),
-            "",
-        ]
-    lines += _orders_section(doc.get("orders"))
-    captions = {
-        "multiple": "Energy in scattering orders ≥ 2 against θi, with the models' predictions",
-        "inplane": "In-plane scattering curves (simulation ± 1σ, models as bin averages)",
-        "hemisphere": "Hemisphere maps: simulation, best and worst model, z-scores",
-        "appearance": "Appearance: a plane under a directional light, from the tables",
-        "energy": "Single-bounce albedo ρ(θi) and lost energy against θi",
-        "stability": "Stability: model relative RMS error against θi",
-        "speed": "Speed against accuracy of the estimator variants",
-    }
-    lines += ["## Charts", ""]
-    for key, path in charts.items():
-        lines += [f"### {captions.get(key, key)}", "", f"![{key}]({path})", ""]
-        if key == "stability":
-            st = doc.get("stability", {})
-            lines += (
-                [
-                    f"Sweep: {len(st.get('theta_i', []))} incidences, {st.get('rays')} rays "
-                    f"each{_first_azimuth(phis, with_phi)}."
+                    f["model"],
+                    params_text(f["params"]),
+                    fmt(f["sqrt_e1"]),
+                    fmt(f["sqrt_e2"]),
+                    converged_text(f),
+                    str(f["n_starts"]),
                 ]
-                + [f"- warning: {w}" for w in st.get("warnings", [])]
-                + [""]
-            )
+                for f in fits
+            ],
+        ),
+        "",
+    ]
+
+
+_CAPTIONS = {
+    "multiple": "Energy in scattering orders ≥ 2 against θi, with the models' predictions",
+    "inplane": "In-plane scattering curves (simulation ± 1σ, models as bin averages)",
+    "hemisphere": "Hemisphere maps: simulation, best and worst model, z-scores",
+    "appearance": "Appearance: a plane under a directional light, from the tables",
+    "energy": "Single-bounce albedo ρ(θi) and lost energy against θi",
+    "stability": "Stability: model relative RMS error against θi",
+    "speed": "Speed against accuracy of the estimator variants",
+}
+
+
+def _charts_section(doc: Mapping, charts: Mapping[str, str], phis, with_phi: bool) -> list[str]:
+    """ "Charts": each chart under its caption; the stability and speed charts with the
+    settings of their side studies."""
+    lines = ["## Charts", ""]
+    for key, path in charts.items():
+        lines += [f"### {_CAPTIONS.get(key, key)}", "", f"![{key}]({path})", ""]
+        if key == "stability":
+            lines += _stability_text(doc.get("stability", {}), phis, with_phi)
         if key == "speed":
-            sp = doc.get("speed", {})
-            rows = [
-                [name, f"{n:,}", pct(e)]
-                for name, r in sp.get("runs", {}).items()
-                for n, e in zip(r["rays"], r["rel_rms"])
-            ]
-            lines += [
-                f"θi = {fmt(sp.get('theta_i'))}°{_first_azimuth(phis, with_phi)}, "
-                f"error against {sp.get('reference')}; "
-                "the wall times (this chart's x axis: tracing only, the surface and its "
-                "BVH are built once before the runs) are in `timings.json`. Both files "
-                "are written by every run but not kept in git, since wall times differ "
-                "from run to run.",
-                "",
-                md_table(["origins", "rays", "rel RMS error"], rows),
-                "",
-            ]
-    return "\n".join(lines).rstrip() + "\n"
+            lines += _speed_text(doc.get("speed", {}), phis, with_phi)
+    return lines
+
+
+def _stability_text(st: Mapping, phis, with_phi: bool) -> list[str]:
+    return (
+        [
+            f"Sweep: {len(st.get('theta_i', []))} incidences, {st.get('rays')} rays "
+            f"each{_first_azimuth(phis, with_phi)}."
+        ]
+        + [f"- warning: {w}" for w in st.get("warnings", [])]
+        + [""]
+    )
+
+
+def _speed_text(sp: Mapping, phis, with_phi: bool) -> list[str]:
+    rows = [
+        [name, f"{n:,}", pct(e)]
+        for name, r in sp.get("runs", {}).items()
+        for n, e in zip(r["rays"], r["rel_rms"])
+    ]
+    return [
+        f"θi = {fmt(sp.get('theta_i'))}°{_first_azimuth(phis, with_phi)}, "
+        f"error against {sp.get('reference')}; "
+        "the wall times (this chart's x axis: tracing only, the surface and its "
+        "BVH are built once before the runs) are in `timings.json`. Both files "
+        "are written by every run but not kept in git, since wall times differ "
+        "from run to run.",
+        "",
+        md_table(["origins", "rays", "rel RMS error"], rows),
+        "",
+    ]
 
 
 def _azimuths_text(phis) -> str:

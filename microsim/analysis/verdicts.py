@@ -691,12 +691,12 @@ def verdicts_for_result(
     """Verdicts for every incidence × model of ``result.models`` (prescribed models) and of
     ``fitted`` (an iterable or name → mapping of ``fits.FitResult``; their ``model_values`` are
     compared and their parameter count reduces the dof). ``params``: optional name → parameter
-    dict for the prescribed models (default ``result.meta.get("model_params", {})``).
+    dict for the prescribed models (default ``result.info.model_params``).
     The family size n_tests = #incidences × #models (prescribed + fitted). Models in
-    ``meta["realisation_models"]`` are judged against ray noise, the others as ensemble models
+    ``info.realisation_models`` are judged against ray noise, the others as ensemble models
     over ``result.brdf_realisations`` (finite rows; "one-tile" without them)."""
     fits = list(fitted.values()) if isinstance(fitted, Mapping) else list(fitted or [])
-    params = dict(result.meta.get("model_params", {}) if params is None else params)
+    params = dict((result.info.model_params or {}) if params is None else params)
     entries = [
         (name, values, params.get(name, {}), False, 0) for name, values in result.models.items()
     ]
@@ -710,7 +710,7 @@ def verdicts_for_result(
     rel_departure = tile_departure(result)
     # models of the realised surfaces themselves (``ts-facets``) differ from the simulation by
     # ray noise only; ensemble models also by the tile-to-tile scatter (``result.stderr``)
-    own = set(result.meta.get("realisation_models", ()))
+    own = set(result.info.realisation_models)
     ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
     ray_dof = stderr_dof(result)  # of ray_err; ``result.stderr`` with realisations: none
     per = getattr(result, "brdf_realisations", None)
@@ -770,11 +770,11 @@ class VerdictList(list):
 def tile_departure(result) -> np.ndarray | None:
     """|r| (T, Θ, Φ), r = m_tile/m_ensemble − 1: the relative departure of the traced tile's
     BRDF from its ensemble's, computed without rays from the two models named by
-    ``meta["tile_departure"]`` ({"tile": facet model, "ensemble": the same closed form with
+    ``info.tile_departure`` ({"tile": facet model, "ensemble": the same closed form with
     the ensemble NDF}, recorded by ``sim.compare.attach_models``); 0 where the ensemble model
     is 0 and the tile's too, ∞ where only the tile's is. None if not recorded, or if the
     result has several realisations (their scatter is measured instead)."""
-    pair = result.meta.get("tile_departure")
+    pair = result.info.tile_departure
     if not pair or getattr(result, "brdf_realisations", None) is not None:
         return None
     if pair["tile"] not in result.models or pair["ensemble"] not in result.models:

@@ -16,7 +16,7 @@ therefore never says a closed form is "wrong": it reports how far the two theori
 over the bins carrying the energy, and the angular region where they agree within a tolerance.
 
 The compared quantity is the *diffuse* (incoherent) bin-averaged BRDF f̄_B of the Kirchhoff
-``Result``: the coherent specular order (``meta["specular_power"]`` in ``meta["specular_bin"]``,
+``Result``: the coherent specular order (``info.specular_power`` in ``info.specular_bin``,
 the Debye–Waller term F·exp(−(2kσ cos θi)²) of a smooth tile) is subtracted, because RR and the
 smooth-surface models describe the scattered part only, and a geometric model has no coherent
 term (which is below exp(−(2kσ cos θi)²) where geometric optics can hold).
@@ -308,12 +308,12 @@ def closed_form(name: str, spectrum: SurfaceSpectrum, wavelength: float, materia
 # --- the verdict -------------------------------------------------------------------------------
 def diffuse_brdf(result, t: int) -> np.ndarray:
     """(Θ, Φ) Kirchhoff bin averages of incidence ``t`` with the coherent specular order
-    (``meta["specular_power"]``) removed from its bin; other results are returned as they are."""
+    (``info.specular_power``) removed from its bin; other results are returned as they are."""
     f = np.array(result.brdf[t], dtype=np.float64)
-    sp = result.meta.get("specular_power")
+    sp = result.info.specular_power
     if sp is not None:
         flat = f.reshape(-1)
-        b = int(result.meta["specular_bin"][t])
+        b = int(result.info.specular_bin[t])
         omega = result.bins.projected_solid_angle().reshape(-1)
         flat[b] = max(flat[b] - float(sp[t]) / omega[b], 0.0)
     return f
@@ -321,13 +321,13 @@ def diffuse_brdf(result, t: int) -> np.ndarray:
 
 def lattice_average(result, t: int, brdf_fn: Callable) -> np.ndarray:
     """(Θ, Φ) bin averages of ``brdf_fn(wi, wo)`` sampled like the Kirchhoff result itself:
-    on the tile's diffraction orders (``wave.order_directions``, tile ``meta["tile"]``), each
+    on the tile's diffraction orders (``wave.order_directions``, tile ``info.tile``), each
     order standing for the projected solid angle λ²/(Lx Ly) it occupies,
         m_B = (1/Ω_B) Σ_{orders in B, not (0, 0)} f(wi, wo_k) λ²/(Lx Ly),
     so that a model equal to the solver's BRDF at the orders gives the solver's bins exactly
     (no lattice-against-continuum quadrature error in bins holding few orders)."""
-    lam = float(result.meta["wavelength"])
-    lx, ly = result.meta["tile"]
+    lam = float(result.info.wavelength)
+    lx, ly = result.info.tile
     th, ph = float(result.theta_i[t]), float(result.phi_i[t])
     m, n, wo = order_directions((lx, ly), lam, th, ph)
     keep = ~((m == 0) & (n == 0))
@@ -494,13 +494,13 @@ def wave_verdicts_for_result(
 ) -> list[dict]:
     """Wave verdicts of ``models`` (names of ``WAVE_MODELS``) plus ``extra`` (name →
     ``brdf_fn(wi, wo)``) against every incidence of a Kirchhoff ``result`` of ``surface`` (its
-    nominal spectrum, ``surface_spectrum``; wavelength from ``result.meta``). Models that do not
+    nominal spectrum, ``surface_spectrum``; wavelength from ``result.info``). Models that do not
     apply to the spectrum (Löw smooth on a Gaussian PSD) are skipped. ``averaging``: "lattice"
     (``lattice_average``, like for like with the solver; model_rtol then only rounding) or
     "continuum" (``sim.predict.bin_average`` to relative ``model_rtol``)."""
     if averaging not in ("lattice", "continuum"):
         raise UsageError(f"averaging must be 'lattice' or 'continuum', got {averaging!r}")
-    lam = float(result.meta["wavelength"])
+    lam = float(result.info.wavelength)
     spec = surface_spectrum(surface)
     fns = {}
     for name in models:

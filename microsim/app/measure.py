@@ -342,7 +342,7 @@ def _acquire(acq: Acquisition, root: Path, doc: dict, client, log) -> BRDFTable:
             Precision(acq.target),
         )
         res.save(where)
-        auto = res.meta["auto"]["incidences"][0]
+        auto = res.info.auto["incidences"][0]
         doc["incidences"][key] = {
             "rays": int(auto["rays"]),
             "seconds": time.perf_counter() - t0,
