@@ -80,6 +80,7 @@ misses"; ``multiple_chart``: energy of orders ≥ 2 against θi with the models'
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from typing import Mapping, Sequence
@@ -401,15 +402,15 @@ def _walk_verdict(result, t, slots, m, sm, alpha, n_tests, rows, name):
     p_e = float(2.0 * t_sf(abs(d.mean()) / se_e, R - 1))
     tb = np.abs(F.mean(axis=0)[used] - m[used]) / se_t[used]
     t_thr = float(t_isf(0.5 * sidak(v["p_threshold"], int(used.sum())), R - 1))
-    v.update(
+    return dataclasses.replace(
+        v,
         energy_dev=float(d.mean()),
         energy_dev_se=se_e,
         energy_p=p_e,
         max_abs_t=float(tb.max()),
         t_threshold=t_thr,
-        agrees=bool(p_e >= v["p_threshold"] and tb.max() < t_thr),
+        agrees=bool(p_e >= v.p_threshold and tb.max() < t_thr),
     )
-    return v
 
 
 # --- public ---------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ from .report_cells import converged_text, fmt, params_text, pct, ranges_text
 from .report_index import index_report
 from .report_methods import load_methods, methods_section
 from .report_wave import regime_section, wave_section
-from .verdicts import summary_row, verdict_kind, verdict_symbol
+from .verdicts import Verdict, as_verdicts, summary_row, verdict_symbol
 
 __all__ = [
     "md_table",
@@ -75,9 +75,8 @@ def _ledger_rows(doc, result, with_phi: bool) -> list[list[str]]:
     ]
 
 
-def _verdict_word(v: Mapping) -> str:
-    kind = verdict_kind(v)
-    return "**agrees**" if kind == "agrees" else kind
+def _verdict_word(v: Verdict) -> str:
+    return "**agrees**" if v.kind == "agrees" else v.kind
 
 
 OUT_OF_DOMAIN = "outside its domain (wave-optics model; fit-only)"
@@ -85,38 +84,35 @@ OUT_OF_DOMAIN = "outside its domain (wave-optics model; fit-only)"
 verdicts against the ray tracer are no test of it (the fit numbers are kept)."""
 
 
-def _reference_text(v: Mapping) -> str:
+def _reference_text(v: Verdict) -> str:
     """The verdict's reference, its R and, for a tile whose departure is known, its size."""
-    text = f"{v.get('reference', 'ray-noise')} (R = {v.get('realisations', 1)})"
-    if v.get("tile_departure") is not None:
-        text += f", tile departs {pct(v['tile_departure'])}"
+    text = f"{v.reference} (R = {v.realisations})"
+    if v.tile_departure is not None:
+        text += f", tile departs {pct(v.tile_departure)}"
     return text
 
 
 def _verdict_rows(
     verdicts, outside: Mapping | None = None, with_phi: bool = False
 ) -> list[list[str]]:
+    """The rows of "Every incidence × model" (``verdicts``: Verdicts or their JSON dicts)."""
     outside = outside or {}
     return [
         [
-            *([f"{v['theta_i']:g}", f"{v['phi_i']:g}"] if with_phi else [f"{v['theta_i']:g}"]),
-            v["model"] + (" (fit)" if v["fitted"] else ""),
-            "outside domain" if v["model"] in outside else _verdict_word(v),
+            *([f"{v.theta_i:g}", f"{v.phi_i:g}"] if with_phi else [f"{v.theta_i:g}"]),
+            v.model + (" (fit)" if v.fitted else ""),
+            "outside domain" if v.model in outside else _verdict_word(v),
             _reference_text(v),
-            fmt(v["chi2_dof"]),
-            fmt(v["p_value"]),
-            fmt(v["max_abs_z"]),
-            pct(v["rel_rms"]),
-            pct(v["max_rel_dev"]),
-            (
-                "–"
-                if v["worst_bin"] is None
-                else f"θo {v['worst_bin'][0]:g}°, Δφ {v['worst_bin'][1]:g}°"
-            ),
-            ranges_text(v["deviations"]),
-            str(v["n_bins"]),
+            fmt(v.chi2_dof),
+            fmt(v.p_value),
+            fmt(v.max_abs_z),
+            pct(v.rel_rms),
+            pct(v.max_rel_dev),
+            "–" if v.worst_bin is None else f"θo {v.worst_bin[0]:g}°, Δφ {v.worst_bin[1]:g}°",
+            ranges_text(v.deviations),
+            str(v.n_bins),
         ]
-        for v in verdicts
+        for v in as_verdicts(verdicts)
     ]
 
 
@@ -432,15 +428,15 @@ def run_summary(doc: Mapping) -> str:
     """What ``microsim run`` prints on stdout: a models × θi table of the verdicts in the
     index's symbols and a one-line conclusion (models that agree at every incidence; models
     that deviate, where and by up to how much; inconclusive ones). Plain text, one line each."""
-    verdicts = doc["verdicts"]
+    verdicts = as_verdicts(doc["verdicts"])
     outside = doc.get("outside_domain") or {}
     thetas = list(dict.fromkeys(incidence.key(v) for v in verdicts))  # (θi, φi) pairs
     with_phi = incidence.several_azimuths(verdicts)
-    models = list(dict.fromkeys(v["model"] for v in verdicts))
-    by = {(v["model"], incidence.key(v)): v for v in verdicts}
+    models = list(dict.fromkeys(v.model for v in verdicts))
+    by = {(v.model, incidence.key(v)): v for v in verdicts}
     rows = [["model"] + [incidence.label(t, p, with_phi).replace(" = ", " ") for t, p in thetas]]
     for m in models:
-        label = m + (" (fit)" if any(v["fitted"] for v in verdicts if v["model"] == m) else "")
+        label = m + (" (fit)" if any(v.fitted for v in verdicts if v.model == m) else "")
         if m in outside:
             rows.append([label, "outside its domain"] + [""] * (len(thetas) - 1))
             continue
@@ -448,22 +444,28 @@ def run_summary(doc: Mapping) -> str:
     table = [r for r in rows if r[1:2] != ["outside its domain"]]  # that note spans columns
     widths = [max(len(r[i]) for r in table) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    mine = {m: [by[m, t] for t in thetas if (m, t) in by] for m in models if m not in outside}
+    scene = doc.get("scene", "")
+    return "\n".join(
+        [f"{scene}: ✓ agrees, ✗ deviates (relative RMS error), ? inconclusive"]
+        + lines
+        + [_conclusion(mine, with_phi)]
+    )
+
+
+def _conclusion(by_model: Mapping[str, list], with_phi: bool) -> str:
+    """``run_summary``'s last line: the models that agree at every incidence, those that
+    deviate (where, by up to how much) and the inconclusive ones."""
     agree, deviate, unsure = [], [], []
-    for m in models:
-        if m in outside:
-            continue
-        mine = [by[m, t] for t in thetas if (m, t) in by]
-        bad = [v for v in mine if verdict_kind(v) == "deviates"]
-        if all(v["agrees"] for v in mine):
+    for m, mine in by_model.items():
+        bad = [v for v in mine if v.kind == "deviates"]
+        if all(v.agrees for v in mine):
             agree.append(m)
         elif bad:
-            rms = [v["rel_rms"] for v in bad if v.get("rel_rms") is not None]
+            rms = [v.rel_rms for v in bad if v.rel_rms is not None]
             size = f" by up to {percent(max(rms))}" if rms else ""
-            where = (
-                incidence.grouped(bad)
-                if with_phi
-                else ", ".join(f"{v['theta_i']:g}" for v in bad) + "°"
-            )
+            thetas = ", ".join(f"{v.theta_i:g}" for v in bad) + "°"
+            where = incidence.grouped(bad) if with_phi else thetas
             deviate.append(f"{m} at θi {where}{size}")
         else:
             unsure.append(m)
@@ -472,9 +474,4 @@ def run_summary(doc: Mapping) -> str:
         parts.append(f"deviates: {'; '.join(deviate)}")
     if unsure:
         parts.append(f"inconclusive (one tile): {', '.join(unsure)}")
-    scene = doc.get("scene", "")
-    return "\n".join(
-        [f"{scene}: ✓ agrees, ✗ deviates (relative RMS error), ? inconclusive"]
-        + lines
-        + ["; ".join(parts)]
-    )
+    return "; ".join(parts)

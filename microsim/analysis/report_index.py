@@ -15,7 +15,7 @@ from .markdown import md_table, percent, plain
 from .multiple import NOT_EXPECTED, RESOLVED_SE, deviation_text
 from .report_cells import bounds_brief, fmt, signed_pct
 from .report_wave import regime_section
-from .verdicts import summary_row, verdict_kind
+from .verdicts import Verdict, as_verdicts, summary_row
 
 __all__ = ["index_report"]
 
@@ -177,42 +177,43 @@ def _anisotropy_missed(docs: Sequence[Mapping]) -> list[str]:
     ]
 
 
-def _resolvable_energy(v: Mapping) -> float | None:
+def _resolvable_energy(v: Verdict) -> float | None:
     """Smallest relative energy deviation the realisations test of ``v`` would detect:
     t_{R−1} quantile at the test's level × ``energy_dev_se`` (None for other references)."""
-    if v.get("reference") != "realisations" or v.get("energy_dev_se") is None:
+    if v.reference != "realisations" or v.energy_dev_se is None:
         return None
-    return float(t_isf(0.5 * v["p_threshold"], v["realisations"] - 1) * v["energy_dev_se"])
+    return float(t_isf(0.5 * v.p_threshold, v.realisations - 1) * v.energy_dev_se)
 
 
 def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
     """Index cell: "✓" when ``summary_row`` says the model agrees everywhere, else "✗" with
     its largest relative RMS error over the deviating incidences and where."""
-    mine = [v for v in verdicts if v["model"] == model]
+    verdicts = as_verdicts(verdicts)
+    mine = [v for v in verdicts if v.model == model]
     with_phi = incidence.several_azimuths(verdicts)
 
     def at(vs) -> str:
         if with_phi:
             return "θi " + incidence.grouped(vs, ",")
-        return "θi " + ",".join(f"{v['theta_i']:g}" for v in vs) + "°"
+        return "θi " + ",".join(f"{v.theta_i:g}" for v in vs) + "°"
 
     if summary == "agrees":
         res = [r for r in map(_resolvable_energy, mine) if r is not None]
         return f"✓ ±{percent(max(res))}" if res else "✓"
-    deviating = [v for v in mine if verdict_kind(v) == "deviates"]
+    deviating = [v for v in mine if v.kind == "deviates"]
     if not deviating:  # only inconclusive failures: within the tile's departure, or unknown
-        unsure = [v for v in mine if not v["agrees"]]
-        known = [v for v in unsure if v.get("tile_departure") is not None]
+        unsure = [v for v in mine if not v.agrees]
+        known = [v for v in unsure if v.tile_departure is not None]
         if not known or len(known) != len(unsure):
             return f"? ({at(unsure)})"
-        rms = max(v["rel_rms"] for v in known)
-        dep = max(v["tile_departure"] for v in known)
+        rms = max(v.rel_rms for v in known)
+        dep = max(v.tile_departure for v in known)
         return f"? {percent(rms)} (tile departs {percent(dep)}; {at(unsure)})"
-    rms = [v for v in deviating if v["rel_rms"] is not None]
+    rms = [v for v in deviating if v.rel_rms is not None]
     if not rms:
         return f"✗ ({at(deviating)})"
-    w = max(rms, key=lambda v: v["rel_rms"])
-    return f"✗ {percent(w['rel_rms'])} ({at(deviating)})"
+    w = max(rms, key=lambda v: v.rel_rms)
+    return f"✗ {percent(w.rel_rms)} ({at(deviating)})"
 
 
 def _index_cell(d: Mapping, model: str, summary: Mapping[str, str]) -> str:
@@ -228,12 +229,12 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
     heightfields are compared with different closed forms); fitted models at the end."""
     groups: dict[tuple, list] = {}
     for d in docs:
-        pres = tuple(dict.fromkeys(v["model"] for v in d["verdicts"] if not v["fitted"]))
+        pres = tuple(dict.fromkeys(v.model for v in as_verdicts(d["verdicts"]) if not v.fitted))
         groups.setdefault(pres, []).append(d)
     out, dropped = [], {}
     for pres, group in groups.items():
         fitted = list(
-            dict.fromkeys(v["model"] for d in group for v in d["verdicts"] if v["fitted"])
+            dict.fromkeys(v.model for d in group for v in as_verdicts(d["verdicts"]) if v.fitted)
         )
         models = list(pres) + fitted
         for m in list(models):  # a model outside its domain on every scene: said once below
@@ -244,7 +245,7 @@ def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
         rows = []
         for d in group:
             s = summary_row(d["verdicts"])
-            n_real = max((v.get("realisations", 1) for v in d["verdicts"]), default=1)
+            n_real = max((v.realisations for v in as_verdicts(d["verdicts"])), default=1)
             rows.append(
                 [f"[{d['scene']}]({d['scene']}/report.md)" + (f" R={n_real}" if n_real > 1 else "")]
                 + [_index_cell(d, m, s) for m in models]

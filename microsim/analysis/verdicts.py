@@ -70,6 +70,8 @@ not ``agrees``. The false-alarm rate and power are measured in tests/test_calibr
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
 from typing import Iterable, Mapping, NamedTuple
 
 import numpy as np
@@ -78,6 +80,7 @@ from microsim import checks as _checks
 from microsim.analysis import incidence
 from microsim.analysis.markdown import percent
 from microsim.errors import UsageError
+from microsim.sim.result import FrozenDict
 from microsim.sim.tallies import stderr_dof
 from microsim.stats import (
     ENERGY_FRACTION,
@@ -92,6 +95,8 @@ from microsim.stats import (
 
 __all__ = [
     "VERDICT_SCHEMA",
+    "Verdict",
+    "as_verdicts",
     "verdict",
     "Measured",
     "Prediction",
@@ -225,6 +230,94 @@ VERDICT_SCHEMA: dict = {
 REFERENCES = ("ray-noise", "realisations", "one-tile")
 
 
+@dataclass(frozen=True, eq=False)
+class Verdict(FrozenDict):
+    """One verdict (module docstring; every field documented in ``VERDICT_SCHEMA``), read by
+    attribute. It is also a read-only dict of the same fields in the same order — what
+    verdicts.json holds — so ``v["rel_rms"]``, ``json.dumps(v)`` and ``==`` with its JSON
+    form keep working; ``from_json`` reads one back, checked."""
+
+    theta_i: float
+    phi_i: float
+    model: str
+    params: dict
+    fitted: bool
+    n_params: int
+    n_bins: int
+    min_events: int
+    chi2: float
+    dof: int
+    chi2_dof: float | None
+    p_value: float | None
+    max_abs_z: float | None
+    rel_rms: float | None
+    energy_bins: int
+    alpha: float
+    n_tests: int
+    alpha_eff: float
+    p_threshold: float
+    z_threshold: float | None
+    model_rtol: float
+    agrees: bool
+    deviations: list
+    max_rel_dev: float | None
+    worst_bin: list | None
+    reference: str
+    conclusive: bool
+    realisations: int
+    energy_dev: float | None
+    energy_dev_se: float | None
+    energy_p: float | None
+    max_abs_t: float | None
+    t_threshold: float | None
+    tile_departure: float | None
+    departure_max_abs_z: float | None
+
+    def __post_init__(self) -> None:
+        dict.update(self, ((k, getattr(self, k)) for k in _VERDICT_FIELDS))
+
+    def __reduce__(self):
+        return (_restore_verdict, (dict(self),))
+
+    @property
+    def kind(self) -> str:
+        """ "agrees", "deviates" or "inconclusive" (``verdict_kind``)."""
+        if self.agrees:
+            return "agrees"
+        return "deviates" if self.conclusive else "inconclusive"
+
+    @classmethod
+    def from_json(cls, d: Mapping) -> "Verdict":
+        """A verdict read back from verdicts.json, checked (``validate_verdict``); the fields
+        an older file lacks read as ``_OLDER_DEFAULTS`` (a ray-noise verdict, no realisation
+        tests)."""
+        if isinstance(d, cls):
+            return d
+        return cls(**validate_verdict({**_OLDER_DEFAULTS, **d}))
+
+
+_VERDICT_FIELDS = tuple(f.name for f in dataclass_fields(Verdict))
+
+
+_OLDER_DEFAULTS = {
+    "reference": "ray-noise",
+    "conclusive": True,
+    "realisations": 1,
+    **dict.fromkeys(_VERDICT_FIELDS[_VERDICT_FIELDS.index("energy_dev") :]),
+}
+"""The fields verdicts.json did not always hold, with the value they had before."""
+
+
+def as_verdicts(verdicts: Iterable[Mapping]) -> list[Verdict]:
+    """``verdicts`` as ``Verdict`` records (``Verdict.from_json`` for the dicts of a file)."""
+    return [Verdict.from_json(v) for v in verdicts]
+
+
+def _restore_verdict(fields: dict) -> Verdict:
+    """A pickled or copied ``Verdict`` rebuilt from its fields."""
+    return Verdict(**fields)
+
+
 def _merge_ranges(flag_theta: np.ndarray, theta_edges: np.ndarray) -> list[list[float]]:
     """[lo, hi] degree ranges of runs of True in ``flag_theta`` (one per θo bin)."""
     out, start = [], None
@@ -308,8 +401,8 @@ class Significance(NamedTuple):
 
 def verdict(
     measured: Measured, prediction: Prediction, significance: Significance = Significance()
-) -> dict:
-    """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``):
+) -> Verdict:
+    """Verdict of one model at one incidence (module docstring; fields in ``VERDICT_SCHEMA``):
     ``prediction`` against ``measured``, tested as ``significance`` says."""
     m, p = measured, prediction
     model_rtol, min_events, alpha, n_tests = significance
@@ -374,37 +467,37 @@ def verdict(
     rel = np.where(used, (a.sim - a.mod) / np.where(used, a.sim, 1.0), 0.0)
     dev = used & (np.abs(z_dev) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
     max_rel_dev, worst = _worst_bin(rel, E | dev, theta_edges, a.phi_edges)
-    return {
-        "theta_i": float(theta_i),
-        "phi_i": float(m.phi_i),
-        "model": str(name),
-        "params": _jsonable_params(params),
-        "fitted": bool(fitted),
-        "n_params": int(n_params),
-        "n_bins": n_bins,
-        "min_events": int(min_events),
-        "chi2": ray["chi2"],
-        "dof": int(dof),
-        "chi2_dof": ray["chi2"] / dof if dof > 0 else None,
-        "p_value": ray["p_value"],
-        "max_abs_z": ray["max_abs_z"],
-        "rel_rms": _weighted_rms(energy, rel, E),
-        "energy_bins": int(E.sum()),
-        "alpha": float(alpha),
-        "n_tests": int(n_tests),
-        "alpha_eff": alpha_eff,
-        "p_threshold": alpha_each,
-        "z_threshold": z_thr,
-        "model_rtol": float(model_rtol),
-        "agrees": bool(agrees),
-        "deviations": _merge_ranges(dev.any(axis=1), theta_edges),
-        "max_rel_dev": max_rel_dev,
-        "worst_bin": worst,
-        "reference": reference,
-        "conclusive": bool(conclusive),
-        "realisations": int(n_real),
+    return Verdict(
+        theta_i=float(theta_i),
+        phi_i=float(m.phi_i),
+        model=str(name),
+        params=_jsonable_params(params),
+        fitted=bool(fitted),
+        n_params=int(n_params),
+        n_bins=n_bins,
+        min_events=int(min_events),
+        chi2=ray["chi2"],
+        dof=int(dof),
+        chi2_dof=ray["chi2"] / dof if dof > 0 else None,
+        p_value=ray["p_value"],
+        max_abs_z=ray["max_abs_z"],
+        rel_rms=_weighted_rms(energy, rel, E),
+        energy_bins=int(E.sum()),
+        alpha=float(alpha),
+        n_tests=int(n_tests),
+        alpha_eff=alpha_eff,
+        p_threshold=alpha_each,
+        z_threshold=z_thr,
+        model_rtol=float(model_rtol),
+        agrees=bool(agrees),
+        deviations=_merge_ranges(dev.any(axis=1), theta_edges),
+        max_rel_dev=max_rel_dev,
+        worst_bin=worst,
+        reference=reference,
+        conclusive=bool(conclusive),
+        realisations=int(n_real),
         **out,
-    }
+    )
 
 
 class _Inputs(NamedTuple):

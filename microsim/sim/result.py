@@ -56,7 +56,7 @@ def _ior_text(ior) -> str:
 
 
 def _refuse(self, *args, **kwargs):
-    raise TypeError(f"{type(self).__name__} is read-only (a Result never changes: derive one)")
+    raise TypeError(f"{type(self).__name__} is read-only (derive a new one instead)")
 
 
 class FrozenDict(dict):
