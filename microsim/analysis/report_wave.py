@@ -52,6 +52,32 @@ def wave_section(wave: Mapping | None) -> list[str]:
     theory) and gives the agreement region rather than a bare pass/fail."""
     if not wave:
         return []
+    return [
+        "## Wave optics: closed forms against Kirchhoff (theory vs theory)",
+        "",
+        _wave_reference_text(wave),
+        "",
+        _wave_domain_table(wave),
+        "",
+        "F(θi)·e^(−g): the coherent (specular) power of the ensemble for Gaussian heights "
+        "(Davies/Debye–Waller); one tile keeps a speckle floor of about the incident power "
+        "over its number of correlation cells. Kirchhoff's domain: correlation length and "
+        "radii of curvature ≫ λ, no shadowing or multiple scattering (the ray tracer's masked "
+        "fraction stands for the shadowing). "
+        "Rayleigh–Rice is first order in σ/λ (σ ≪ λ); for small g the Kirchhoff diffuse power "
+        "is F(1 − e^(−g)) while Rayleigh–Rice's is ≈ F·g, so Rayleigh–Rice lies ≈ g/2 above.",
+        "",
+        _wave_verdict_table(wave["verdicts"]),
+        "",
+        f"The Kirchhoff result (order powers as bin-averaged BRDF, `Result` schema, "
+        f'`meta.method = "kirchhoff"`) is in `{wave["file"]}`.',
+        "",
+    ]
+
+
+def _wave_reference_text(wave: Mapping) -> str:
+    """What the wave verdicts are judged against: the Kirchhoff solver's settings, its tiles
+    and wavelength, and how the two sides are compared."""
     tile = " × ".join(
         f"{fmt(a, 4)} ({fmt(b, 3)} λ)" for a, b in zip(wave["tile"], wave["tile_over_lambda"])
     )
@@ -66,9 +92,7 @@ def wave_section(wave: Mapping | None) -> list[str]:
         if wave["stderr_method"] == "realisations"
         else "the speckle of the orders in each bin"
     )
-    lines = [
-        "## Wave optics: closed forms against Kirchhoff (theory vs theory)",
-        "",
+    return (
         f"Reference of every verdict in this section: the scalar Kirchhoff (tangent-plane) "
         f"solver (`microsim.wave`, surface model `{wave['surface_model']}`, Fresnel at the "
         f"{'half-vector' if wave['fresnel_angle'] == 'half' else 'incidence'} angle, "
@@ -86,78 +110,72 @@ def wave_section(wave: Mapping | None) -> list[str]:
         "noise), and the θo region where they agree within 2 % + 2 standard errors (forward: "
         "the mirror side, Δφ ≥ 90°); it never calls either wrong. Bins beyond θo = 80° are "
         "left out (grazing: outside Kirchhoff). The geometric verdicts above are judged "
-        "against the ray tracer.",
-        "",
-        md_table(
+        "against the ray tracer."
+    )
+
+
+def _wave_domain_table(wave: Mapping) -> str:
+    """Per θi: g, the specular order's power against Debye–Waller, the ray tracer's masked
+    fraction and whether Kirchhoff is in its domain."""
+    return md_table(
+        [
+            "θi",
+            "g = (4πσ cos θi/λ)²",
+            "specular order power",
+            "F(θi)·e^(−g)",
+            "masked (ray tracer)",
+            "Kirchhoff's domain",
+        ],
+        [
             [
-                "θi",
-                "g = (4πσ cos θi/λ)²",
-                "specular order power",
-                "F(θi)·e^(−g)",
-                "masked (ray tracer)",
-                "Kirchhoff's domain",
-            ],
+                f"{t:g}",
+                fmt(g),
+                fmt(p, 4),
+                fmt(dw, 4),
+                f"{m:.3g}",
+                "yes" if ok else f"no (masked ≥ {100 * wave['masked_limit']:g} %)",
+            ]
+            for t, g, p, dw, m, ok in zip(
+                wave["theta_i"],
+                wave["g"],
+                wave["specular_power"],
+                wave["debye_waller"],
+                wave["masked_fraction"],
+                wave["in_domain"],
+            )
+        ],
+    )
+
+
+def _wave_verdict_table(verdicts: Sequence[Mapping]) -> str:
+    """One row per wave verdict: status, energy deviation, rel RMS, agreement region."""
+    return md_table(
+        [
+            "θi",
+            "model",
+            "judged against",
+            "status",
+            "energy deviation",
+            "rel RMS (noise floor)",
+            "agreement region (θo)",
+            "outside the region",
+            "energy bins",
+        ],
+        [
             [
-                [
-                    f"{t:g}",
-                    fmt(g),
-                    fmt(p, 4),
-                    fmt(dw, 4),
-                    f"{m:.3g}",
-                    "yes" if ok else f"no (masked ≥ {100 * wave['masked_limit']:g} %)",
-                ]
-                for t, g, p, dw, m, ok in zip(
-                    wave["theta_i"],
-                    wave["g"],
-                    wave["specular_power"],
-                    wave["debye_waller"],
-                    wave["masked_fraction"],
-                    wave["in_domain"],
-                )
-            ],
-        ),
-        "",
-        "F(θi)·e^(−g): the coherent (specular) power of the ensemble for Gaussian heights "
-        "(Davies/Debye–Waller); one tile keeps a speckle floor of about the incident power "
-        "over its number of correlation cells. Kirchhoff's domain: correlation length and "
-        "radii of curvature ≫ λ, no shadowing or multiple scattering (the ray tracer's masked "
-        "fraction stands for the shadowing). "
-        "Rayleigh–Rice is first order in σ/λ (σ ≪ λ); for small g the Kirchhoff diffuse power "
-        "is F(1 − e^(−g)) while Rayleigh–Rice's is ≈ F·g, so Rayleigh–Rice lies ≈ g/2 above.",
-        "",
-        md_table(
-            [
-                "θi",
-                "model",
-                "judged against",
-                "status",
-                "energy deviation",
-                "rel RMS (noise floor)",
-                "agreement region (θo)",
-                "outside the region",
-                "energy bins",
-            ],
-            [
-                [
-                    f"{v['theta_i']:g}",
-                    v["model"],
-                    "Kirchhoff, theory vs theory",
-                    _WAVE_STATUS.get(v["status"], v["status"]),
-                    signed_pct(v["energy_dev"], v["energy_dev_se"]),
-                    f"{pct(v['rel_error'])} ({pct(v['noise_floor'])})",
-                    _region_text(v),
-                    _outside_text(v),
-                    str(v["energy_bins"]),
-                ]
-                for v in wave["verdicts"]
-            ],
-        ),
-        "",
-        f"The Kirchhoff result (order powers as bin-averaged BRDF, `Result` schema, "
-        f'`meta.method = "kirchhoff"`) is in `{wave["file"]}`.',
-        "",
-    ]
-    return lines
+                f"{v['theta_i']:g}",
+                v["model"],
+                "Kirchhoff, theory vs theory",
+                _WAVE_STATUS.get(v["status"], v["status"]),
+                signed_pct(v["energy_dev"], v["energy_dev_se"]),
+                f"{pct(v['rel_error'])} ({pct(v['noise_floor'])})",
+                _region_text(v),
+                _outside_text(v),
+                str(v["energy_bins"]),
+            ]
+            for v in verdicts
+        ],
+    )
 
 
 def _wave_index_rows(docs: Sequence[Mapping]) -> tuple[list[str], list[list[str]]]:
@@ -240,64 +258,64 @@ def regime_section(
             "",
         ]
     if regimes:
-        lines += [
-            "Regime map: the energy-weighted error (energy deviation over the 90 % energy set) "
-            "of each method against the Kirchhoff reference as the roughness σ/λ grows, for an "
-            "ABC-PSD and a Gaussian family at fixed correlation length "
-            "(`microsim.analysis.regimes`). Rayleigh–Rice and Löw smooth hold at small σ/λ, "
-            "geometric optics (Torrance–Sparrow with Smith masking, and the tile's own facets "
-            "without masking: the ray tracer with masking off) at large σ/λ; Kirchhoff has no "
-            "masking, so the geometric verdicts are clean only where masking is below 1 %.",
-            "",
-            f"Settings: {regimes['settings']}.",
-            "",
-            f"![Where each method holds]({regimes['chart']})",
-            "",
-        ]
-        crit = None
-        table = []
-        for m in regimes["maps"]:
-            crit = m["meta"].get("criterion", crit)
-            for model, by_theta in m["crossovers"].items():
-                below = model in ("rayleigh-rice", "low-smooth")  # small-roughness theories
-                i = m["models"].index(model)
-                table.append(
-                    [m["family"], model]
-                    + [
-                        _crossover_cell(
-                            by_theta.get(str(float(t))),
-                            [row[k] for row in m["energy_dev"][i]],
-                            crit or 0.05,
-                            below,
-                        )
-                        for k, t in enumerate(m["theta_i"])
-                    ]
-                )
-        thetas = regimes["maps"][0]["theta_i"]
-        lines += [
-            f"Where each method holds: the σ/λ range in which its |energy deviation| from "
-            f"Kirchhoff stays within {100 * (crit or 0.05):g} % (the crossing interpolated in "
-            "log σ); *never*: beyond it at every σ/λ of the grid; *everywhere*: within it at "
-            "every σ/λ; –: no single crossing (e.g. a method that holds only in the middle "
-            "of the grid).",
-            "",
-            md_table(["family", "method"] + [f"θi = {t:g}°" for t in thetas], table),
-            "",
-        ]
+        lines += _regime_lines(regimes)
     if fullwave is not None and Path(fullwave).is_file():
-        from .fullwave_map import (
-            FULLWAVE_CHART,
-            FULLWAVE_COMMAND,
-            fullwave_section,
-            load_fullwave,
-        )
-
-        chart = FULLWAVE_CHART if (Path(fullwave).parent / FULLWAVE_CHART).is_file() else None
-        try:
-            lines += fullwave_section(load_fullwave(fullwave), chart=chart)
-        except UsageError as err:
-            name = Path(fullwave).name
-            lines += [f"`{name}` unreadable ({err}); rerun `{FULLWAVE_COMMAND}`.", ""]
+        lines += _fullwave_lines(Path(fullwave))
     if methods is not None:
         lines += methods_section(methods)
     return lines
+
+
+def _regime_lines(regimes: Mapping) -> list[str]:
+    """The regime chart and, per family and method, the σ/λ range where it holds."""
+    crit = None
+    table = []
+    for m in regimes["maps"]:
+        crit = m["meta"].get("criterion", crit)
+        for model, by_theta in m["crossovers"].items():
+            below = model in ("rayleigh-rice", "low-smooth")  # small-roughness theories
+            devs = m["energy_dev"][m["models"].index(model)]
+            table.append(
+                [m["family"], model]
+                + [
+                    _crossover_cell(
+                        by_theta.get(str(float(t))), [row[k] for row in devs], crit or 0.05, below
+                    )
+                    for k, t in enumerate(m["theta_i"])
+                ]
+            )
+    thetas = regimes["maps"][0]["theta_i"]
+    return [
+        "Regime map: the energy-weighted error (energy deviation over the 90 % energy set) "
+        "of each method against the Kirchhoff reference as the roughness σ/λ grows, for an "
+        "ABC-PSD and a Gaussian family at fixed correlation length "
+        "(`microsim.analysis.regimes`). Rayleigh–Rice and Löw smooth hold at small σ/λ, "
+        "geometric optics (Torrance–Sparrow with Smith masking, and the tile's own facets "
+        "without masking: the ray tracer with masking off) at large σ/λ; Kirchhoff has no "
+        "masking, so the geometric verdicts are clean only where masking is below 1 %.",
+        "",
+        f"Settings: {regimes['settings']}.",
+        "",
+        f"![Where each method holds]({regimes['chart']})",
+        "",
+        f"Where each method holds: the σ/λ range in which its |energy deviation| from "
+        f"Kirchhoff stays within {100 * (crit or 0.05):g} % (the crossing interpolated in "
+        "log σ); *never*: beyond it at every σ/λ of the grid; *everywhere*: within it at "
+        "every σ/λ; –: no single crossing (e.g. a method that holds only in the middle "
+        "of the grid).",
+        "",
+        md_table(["family", "method"] + [f"θi = {t:g}°" for t in thetas], table),
+        "",
+    ]
+
+
+def _fullwave_lines(path: Path) -> list[str]:
+    """ "The rung above Kirchhoff" from ``fullwave.json`` at ``path`` (its chart when
+    ``fullwave-map.png`` lies beside it); an unreadable file says how to remake it."""
+    from .fullwave_map import FULLWAVE_CHART, FULLWAVE_COMMAND, fullwave_section, load_fullwave
+
+    chart = FULLWAVE_CHART if (path.parent / FULLWAVE_CHART).is_file() else None
+    try:
+        return fullwave_section(load_fullwave(path), chart=chart)
+    except UsageError as err:
+        return [f"`{path.name}` unreadable ({err}); rerun `{FULLWAVE_COMMAND}`.", ""]
