@@ -205,6 +205,17 @@ class Significance(NamedTuple):
     n_tests: int = 1
 
 
+_TEST_FIELDS = (
+    "energy_dev_se",
+    "energy_p",
+    "max_abs_t",
+    "t_threshold",
+    "tile_departure",
+    "departure_max_abs_z",
+)
+"""The fields of the realisation and tile-departure tests: null for a verdict without them."""
+
+
 def verdict(
     measured: Measured, prediction: Prediction, significance: Significance = Significance()
 ) -> Verdict:
@@ -214,24 +225,7 @@ def verdict(
     model_rtol, min_events, alpha, n_tests = significance
     theta_edges, theta_i = m.theta_edges, m.theta_i
     name, params, fitted, n_params, ensemble = p.name, p.params, p.fitted, p.n_params, p.ensemble
-    a = _checked_inputs(
-        {
-            "sim": m.brdf,
-            "stderr": m.stderr,
-            "counts": m.counts,
-            "model": p.values,
-            "omega": m.omega,
-            "theta_edges": theta_edges,
-            "phi_edges": m.phi_edges,
-            "realisations": m.realisations,
-            "departure": p.departure,
-            "dof": m.dof,
-        },
-        ensemble=ensemble,
-        model_rtol=model_rtol,
-        min_events=min_events,
-        n_params=n_params,
-    )
+    a = _inputs_of(m, p, significance)
     alpha_eff = sidak(alpha, n_tests)
     alpha_each = sidak(alpha_eff, 2)
     used, sigma = _used_bins(a, model_rtol, min_events)
@@ -243,15 +237,7 @@ def verdict(
     Em = energy_set(np.where(used, a.mod * a.om, 0.0)).reshape(a.shape)
     energy = np.where(used, a.sim * a.om, 0.0)
     E = energy_set(energy).reshape(a.shape)
-    out = {
-        "energy_dev": _energy_dev(a.sim, a.mod, a.om, Em),
-        "energy_dev_se": None,
-        "energy_p": None,
-        "max_abs_t": None,
-        "t_threshold": None,
-        "tile_departure": None,
-        "departure_max_abs_z": None,
-    }
+    out = {"energy_dev": _energy_dev(a.sim, a.mod, a.om, Em), **dict.fromkeys(_TEST_FIELDS)}
     z_dev = ray["z"]
     if a.F is not None:
         reference, n_real = "realisations", len(a.F)
@@ -303,6 +289,28 @@ def verdict(
         conclusive=bool(conclusive),
         realisations=int(n_real),
         **out,
+    )
+
+
+def _inputs_of(m: Measured, p: Prediction, s: Significance) -> "_Inputs":
+    """The arrays of one verdict from its three argument groups, checked (``_checked_inputs``)."""
+    return _checked_inputs(
+        {
+            "sim": m.brdf,
+            "stderr": m.stderr,
+            "counts": m.counts,
+            "model": p.values,
+            "omega": m.omega,
+            "theta_edges": m.theta_edges,
+            "phi_edges": m.phi_edges,
+            "realisations": m.realisations,
+            "departure": p.departure,
+            "dof": m.dof,
+        },
+        ensemble=p.ensemble,
+        model_rtol=s.model_rtol,
+        min_events=s.min_events,
+        n_params=p.n_params,
     )
 
 
