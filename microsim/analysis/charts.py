@@ -20,7 +20,7 @@ import math
 import os
 import textwrap
 import zlib
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Mapping, NamedTuple, Sequence
 
 import matplotlib as mpl
 import numpy as np
@@ -278,6 +278,7 @@ def inplane_curves(
     else:
         rows, cols, axes, fig = 1, n_t, given, given[0].figure
     lo, hi = _log_limits([ip.brdf] + [c for c in curves.values()], 1e-6)
+    panel = _InPlanePanel(ip, curves, styles, edges, centres)
     ratios = []
     for t in range(rows * cols):
         ax, rx = axes[t], ratio_axes[t]
@@ -286,32 +287,8 @@ def inplane_curves(
             if rx is not None:
                 rx.set_visible(False)
             continue
-        for name, c in curves.items():
-            colour, style = styles[name]
-            ax.stairs(
-                _positive(c[t]), edges, baseline=None, color=colour, ls=style, lw=1.6, label=name
-            )
-        y = _positive(ip.brdf[t])
-        ax.errorbar(
-            ip.theta,
-            y,
-            yerr=np.where(np.isfinite(y), ip.stderr[t], np.nan),
-            fmt="o",
-            ms=3.0,
-            color=SIM_COLOUR,
-            ecolor=SIM_COLOUR,
-            elinewidth=1.0,
-            capsize=1.5,
-            label="simulation ±1σ",
-            zorder=5,
-        )
         th_i = float(result.theta_i[t])
-        ax.axvline(th_i, color="0.35", ls="--", lw=0.9, label="mirror θo = +θi")
-        ax.axvline(0.0, color="0.75", lw=0.6)
-        ax.set_yscale("log")
-        ax.set_ylim(lo, hi)
-        ax.set_xlim(-90, 90)
-        ax.set_xticks(np.arange(-90, 91, 30))
+        panel.curves_panel(ax, t, th_i, (lo, hi))
         ax.set_title(incidence.label(th_i, float(result.phi_i[t]), with_phi))
         if t % cols == 0:
             ax.set_ylabel("BRDF (sr⁻¹)")
@@ -320,30 +297,7 @@ def inplane_curves(
             ax.set_xlabel("θo (°)   − backward (Δφ=0°) | + specular (Δφ=180°)")
             continue
         ax.tick_params(labelbottom=False)
-        sim = np.array(ip.brdf[t], dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel_se = np.asarray(ip.stderr[t], dtype=np.float64) / sim
-            keep = np.isfinite(rel_se) & (sim > 0) & (rel_se <= RATIO_MAX_REL_SE)
-            rx.fill_between(
-                centres,
-                np.where(keep, 1 - rel_se, np.nan),
-                np.where(keep, 1 + rel_se, np.nan),
-                step="mid",
-                color=SIM_COLOUR,
-                alpha=0.18,
-                lw=0,
-                label="simulation ±1σ",
-            )
-            marks = []
-            for name, c in curves.items():
-                r = np.where(keep, c[t] / sim, np.nan)
-                colour, style = styles[name]
-                marks.append((r, colour))
-                rx.stairs(r, edges, baseline=None, color=colour, ls=style, lw=1.4)
-            ratios.append((rx, centres, marks))
-        rx.axhline(1.0, color=SIM_COLOUR, lw=0.9)
-        rx.axvline(th_i, color="0.35", ls="--", lw=0.9)
-        rx.set_xlabel("θo (°)")
+        ratios.append(panel.ratios(rx, t, th_i))
         if t % cols == 0:
             rx.set_ylabel("model / sim.")
         rx.grid(True, which="major", alpha=0.3)
@@ -358,6 +312,77 @@ def inplane_curves(
         _title(scene_name, "in-plane scattering (bin averages); below: model / simulation")
     )
     return _output(fig, path)
+
+
+class _InPlanePanel(NamedTuple):
+    """What ``inplane_curves`` draws in each incidence's panels: the in-plane slice ``ip``,
+    the models' slices ``curves`` with their ``styles``, the signed θo bin ``edges`` and
+    ``centres``."""
+
+    ip: object
+    curves: Mapping[str, np.ndarray]
+    styles: Mapping[str, tuple]
+    edges: np.ndarray
+    centres: np.ndarray
+
+    def curves_panel(self, ax, t: int, th_i: float, ylim) -> None:
+        """The models as steps, the simulation ±1σ as points, the mirror direction marked."""
+        ip = self.ip
+        for name, c in self.curves.items():
+            colour, style = self.styles[name]
+            ax.stairs(
+                _positive(c[t]), self.edges, baseline=None, color=colour, ls=style, lw=1.6,
+                label=name,
+            )  # fmt: skip
+        y = _positive(ip.brdf[t])
+        ax.errorbar(
+            ip.theta,
+            y,
+            yerr=np.where(np.isfinite(y), ip.stderr[t], np.nan),
+            fmt="o",
+            ms=3.0,
+            color=SIM_COLOUR,
+            ecolor=SIM_COLOUR,
+            elinewidth=1.0,
+            capsize=1.5,
+            label="simulation ±1σ",
+            zorder=5,
+        )
+        ax.axvline(th_i, color="0.35", ls="--", lw=0.9, label="mirror θo = +θi")
+        ax.axvline(0.0, color="0.75", lw=0.6)
+        ax.set_yscale("log")
+        ax.set_ylim(*ylim)
+        ax.set_xlim(-90, 90)
+        ax.set_xticks(np.arange(-90, 91, 30))
+
+    def ratios(self, rx, t: int, th_i: float):
+        """Model / simulation per bin with the simulation's ±1σ band (noisy bins left out);
+        (rx, x, [(ratio, colour)]) for ``_ratio_limits``."""
+        ip = self.ip
+        sim = np.array(ip.brdf[t], dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel_se = np.asarray(ip.stderr[t], dtype=np.float64) / sim
+            keep = np.isfinite(rel_se) & (sim > 0) & (rel_se <= RATIO_MAX_REL_SE)
+            rx.fill_between(
+                self.centres,
+                np.where(keep, 1 - rel_se, np.nan),
+                np.where(keep, 1 + rel_se, np.nan),
+                step="mid",
+                color=SIM_COLOUR,
+                alpha=0.18,
+                lw=0,
+                label="simulation ±1σ",
+            )
+            marks = []
+            for name, c in self.curves.items():
+                r = np.where(keep, c[t] / sim, np.nan)
+                colour, style = self.styles[name]
+                marks.append((r, colour))
+                rx.stairs(r, self.edges, baseline=None, color=colour, ls=style, lw=1.4)
+        rx.axhline(1.0, color=SIM_COLOUR, lw=0.9)
+        rx.axvline(th_i, color="0.35", ls="--", lw=0.9)
+        rx.set_xlabel("θo (°)")
+        return rx, self.centres, marks
 
 
 def _ratio_limits(panels) -> None:
@@ -490,22 +515,62 @@ def hemisphere_maps(
     best, worst = sel[0], sel[-1]
     shown = [best] if best["model"] == worst["model"] else [best, worst]
     sim = _positive(result.brdf[t])
-    err = np.asarray(result.stderr[t], dtype=np.float64)
     maps = {v["model"]: np.asarray(models[v["model"]][t], dtype=np.float64) for v in shown}
-    lo, hi = _log_limits([sim], 1e-4)
-    hi = max(hi, _log_limits(list(maps.values()), 1e-4)[1])
-    norm = LogNorm(vmin=lo, vmax=hi)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        zs = {k: np.where(err > 0, (result.brdf[t] - m) / err, np.nan) for k, m in maps.items()}
-    zmax = max([np.nanmax(np.abs(z)) if np.isfinite(z).any() else 0.0 for z in zs.values()])
+    norm, zs, zmax = _hemisphere_scales(result, t, sim, maps)
     zlim = Z_LIMIT
     znorm = TwoSlopeNorm(vcenter=0.0, vmin=-zlim, vmax=zlim)
 
     given = _given_axes(ax, 6, "hemisphere_maps", "simulation, best, worst, table, z best, z worst")
+    fig, panel = _hemisphere_layout(given, len(shown))
+
+    def polar(row, col, values, norm, cmap, title, colour):
+        args = (result.bins, theta_i, norm, mpl.colormaps[cmap], title, colour)
+        return _polar_panel(panel(row, col), values, *args)
+
+    ax, mesh = polar(0, 0, sim, norm, "viridis", "simulation", SIM_COLOUR)
+    brdf_axes, z_axes = [ax], []
+    for j, v in enumerate(shown):
+        role = "model" if len(shown) == 1 else ("best" if v is best else "worst")
+        col, name = model_colour(v["model"]), v["model"]
+        brdf_axes.append(
+            polar(0, j + 1, _positive(maps[name]), norm, "viridis", f"{role}: {name}", col)[0]
+        )
+        z_title = f"z = (sim − {name}) / σ"
+        zax, zmesh = polar(1, j + 1, zs[name], znorm, "RdBu_r", z_title, col)
+        _mark_z5(zax, zs[name], result.bins)
+        z_axes.append(zax)
+    cb = fig.colorbar(mesh, ax=brdf_axes, shrink=0.8, pad=0.02)
+    cb.set_label("BRDF (sr⁻¹), log scale")
+    _z_colourbar(fig, zmesh, z_axes, zmax > zlim, zlim)
+    _hemisphere_notes(panel(1, 0, polar=False), sel, result.bins.folded)
+    if given is None:
+        at = incidence.label(theta_i, phi_i, incidence.several_azimuths(result.phi_i))
+        fig.suptitle(_title(scene_name, f"hemisphere at {at}"))
+    elif len(shown) == 1:
+        given[2].axis("off")
+        given[5].axis("off")
+    return _output(fig, path)
+
+
+def _hemisphere_scales(result, t: int, sim, maps: Mapping[str, np.ndarray]):
+    """(the BRDF maps' shared log scale, each model's z-scores (sim − model)/stderr, the
+    largest |z|) at incidence ``t``."""
+    err = np.asarray(result.stderr[t], dtype=np.float64)
+    lo, hi = _log_limits([sim], 1e-4)
+    hi = max(hi, _log_limits(list(maps.values()), 1e-4)[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zs = {k: np.where(err > 0, (result.brdf[t] - m) / err, np.nan) for k, m in maps.items()}
+    zmax = max([np.nanmax(np.abs(z)) if np.isfinite(z).any() else 0.0 for z in zs.values()])
+    return LogNorm(vmin=lo, vmax=hi), zs, zmax
+
+
+def _hemisphere_layout(given, n_models: int):
+    """(figure, panel(row, col, polar=True) → Axes) of ``hemisphere_maps``: the given six Axes
+    (checked polar where a map goes), or a new figure of 2 × (1 + ``n_models``) panels."""
     if given is None:
         w, h = figure_size("hemisphere_maps")
-        fig = _figure((w * (1 + len(shown)) / 3, h))  # no empty column for a single model
-        gs = fig.add_gridspec(2, 1 + len(shown))
+        fig = _figure((w * (1 + n_models) / 3, h))  # no empty column for a single model
+        gs = fig.add_gridspec(2, 1 + n_models)
     else:
         fig = given[0].figure
         for k in (0, 1, 2, 4, 5):
@@ -517,59 +582,26 @@ def hemisphere_maps(
             return given[3 * row + col]
         return fig.add_subplot(gs[row, col], **({"projection": "polar"} if polar else {}))
 
-    ax, mesh = _polar_panel(
-        panel(0, 0),
-        sim,
-        result.bins,
-        theta_i,
-        norm,
-        mpl.colormaps["viridis"],
-        "simulation",
-        SIM_COLOUR,
-    )
-    brdf_axes, z_axes = [ax], []
-    for j, v in enumerate(shown):
-        role = "model" if len(shown) == 1 else ("best" if v is best else "worst")
-        col = model_colour(v["model"])
-        brdf_axes.append(
-            _polar_panel(
-                panel(0, j + 1),
-                _positive(maps[v["model"]]),
-                result.bins,
-                theta_i,
-                norm,
-                mpl.colormaps["viridis"],
-                f"{role}: {v['model']}",
-                col,
-            )[0]
-        )
-        zax, zmesh = _polar_panel(
-            panel(1, j + 1),
-            zs[v["model"]],
-            result.bins,
-            theta_i,
-            znorm,
-            mpl.colormaps["RdBu_r"],
-            f"z = (sim − {v['model']}) / σ",
-            col,
-        )
-        _mark_z5(zax, zs[v["model"]], result.bins)
-        z_axes.append(zax)
-    cb = fig.colorbar(mesh, ax=brdf_axes, shrink=0.8, pad=0.02)
-    cb.set_label("BRDF (sr⁻¹), log scale")
-    zcb = fig.colorbar(
-        zmesh, ax=z_axes, shrink=0.8, pad=0.02, extend="both" if zmax > zlim else "neither"
-    )
+    return fig, panel
+
+
+def _z_colourbar(fig, zmesh, z_axes, beyond: bool, zlim: float) -> None:
+    """The z-scores' colour bar, ±5 marked; arrows when some |z| lies ``beyond`` ``zlim``."""
+    extend = "both" if beyond else "neither"
+    zcb = fig.colorbar(zmesh, ax=z_axes, shrink=0.8, pad=0.02, extend=extend)
     zcb.set_label("z-score (σ)")
     for s in (-5.0, 5.0):
         zcb.ax.axhline(s, color="k", lw=1.5)
     zcb.set_ticks(sorted({-zlim, -5.0, 0.0, 5.0, zlim}))
-    tax = panel(1, 0, polar=False)
+
+
+def _hemisphere_notes(tax, verdicts, folded: bool) -> None:
+    """The verdict table of the shown incidence and the key of the maps, in panel ``tax``."""
     tax.axis("off")
     tax.text(
         0.0,
         1.0,
-        _verdict_table(sel),
+        _verdict_table(verdicts),
         family="monospace",
         fontsize=8,
         va="top",
@@ -579,19 +611,12 @@ def hemisphere_maps(
         0.0,
         0.0,
         f"r = sin θo, angle = Δφ"
-        f"{' (mirrored from the folded half)' if result.bins.folded else ' (full circle)'}\n"
+        f"{' (mirrored from the folded half)' if folded else ' (full circle)'}\n"
         "○ mirror direction; black contour |z| = 5; grey: no events",
         fontsize=8,
         va="bottom",
         transform=tax.transAxes,
     )
-    if given is None:
-        at = incidence.label(theta_i, phi_i, incidence.several_azimuths(result.phi_i))
-        fig.suptitle(_title(scene_name, f"hemisphere at {at}"))
-    elif len(shown) == 1:
-        given[2].axis("off")
-        given[5].axis("off")
-    return _output(fig, path)
 
 
 def _mark_z5(ax, z, bins):
