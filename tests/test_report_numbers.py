@@ -23,7 +23,7 @@ from test_fits import _synthetic
 from microsim.analysis import charts, fits, report, report_cells, report_index, report_wave
 from microsim.analysis import verdicts as V
 from microsim.analysis.markdown import PERCENT_FLOOR, percent
-from microsim.analysis.multiple import RESOLVED_SE, deviation_text, multiple_section
+from microsim.analysis.multiple_report import RESOLVED_SE, deviation_text, multiple_section
 from microsim.app.runner.publishing import fit_record
 from microsim.sim import Bins
 

@@ -119,10 +119,10 @@ def _verdict_rows(
 def _orders_section(orders) -> list[str]:
     """ "How much light single scattering misses" for a run with ``bounces`` > 1: per θi the
     fraction of reflected energy in orders ≥ 2 (``analysis.multiple.needs_more_bounces``), then
-    the order-resolved comparison (``analysis.multiple.multiple_section``)."""
+    the order-resolved comparison (``analysis.multiple_report.multiple_section``)."""
     if not orders:
         return []
-    from .multiple import multiple_section
+    from .multiple_report import multiple_section
 
     with_phi = incidence.several_azimuths(orders["needs"])
     rows = [

@@ -12,7 +12,8 @@ from microsim.stats import t_isf
 from . import incidence
 from .anisotropy import VARIANTS as ANISOTROPY_VARIANTS
 from .markdown import md_table, percent, plain
-from .multiple import NOT_EXPECTED, RESOLVED_SE, deviation_text
+from .multiple import NOT_EXPECTED
+from .multiple_report import RESOLVED_SE, deviation_text
 from .report_cells import bounds_brief, fmt, signed_pct
 from .report_wave import regime_section
 from .verdicts import Verdict, as_verdicts, summary_row

@@ -40,7 +40,7 @@ from ...analysis import report
 from ...analysis.anisotropy import anisotropy_summary
 from ...analysis.budget import error_budget
 from ...analysis.fits import FIT_MODELS, fit_all
-from ...analysis.multiple import multiple_chart
+from ...analysis.multiple_report import multiple_chart
 from ...analysis.pictures import appearance
 from ...analysis.report import albedo_stderr
 from ...analysis.verdicts import verdicts_for_result
