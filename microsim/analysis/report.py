@@ -23,6 +23,7 @@ from .report_cells import converged_text, fmt, params_text, pct, ranges_text
 from .report_index import index_report
 from .report_methods import load_methods, methods_section
 from .report_wave import regime_section, wave_section
+from .verdict_record import RunDocument
 from .verdicts import Verdict, as_verdicts, summary_row, verdict_symbol
 
 __all__ = [
@@ -203,24 +204,25 @@ def _budget_section(budget, auto) -> list[str]:
 
 def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     """``report.md`` of one run: settings, energy ledger, verdicts, fits, charts."""
+    doc = RunDocument.from_json(doc)
     info = result.info
-    phis = doc.get("phi_i", [0.0])
+    phis = doc.phi_i
     with_phi = incidence.several_azimuths(phis)
-    lines = [f"# {doc['scene']}", ""]
-    if doc.get("description"):
-        lines += [doc["description"], ""]
+    lines = [f"# {doc.scene}", ""]
+    if doc.description:
+        lines += [doc.description, ""]
     lines += _run_section(doc, info, phis, with_phi)
     lines += _ledger_section(doc, result, with_phi)
     lines += _budget_section(info.error_budget, (info.run or {}).get("realisations_auto"))
     lines += _verdicts_section(doc, with_phi)
-    lines += wave_section(doc.get("wave"))
-    lines += _fits_section(doc.get("fits"))
-    lines += _orders_section(doc.get("orders"))
+    lines += wave_section(doc.wave)
+    lines += _fits_section(doc.fits)
+    lines += _orders_section(doc.orders)
     lines += _charts_section(doc, charts, phis, with_phi)
     return "\n".join(lines).rstrip() + "\n"
 
 
-def _run_section(doc: Mapping, info, phis, with_phi: bool) -> list[str]:
+def _run_section(doc: RunDocument, info, phis, with_phi: bool) -> list[str]:
     """ "Run": the settings table, then the warnings of the surface generator and models."""
     surf = info.surface or {}
     run = info.run or {}
@@ -230,7 +232,7 @@ def _run_section(doc: Mapping, info, phis, with_phi: bool) -> list[str]:
         md_table(
             ["setting", "value"],
             [
-                ["scene file", f"`{doc.get('scene_file')}`"],
+                ["scene file", f"`{doc.scene_file}`"],
                 [
                     "surface",
                     f"{surf.get('kind')}, tile "
@@ -239,17 +241,17 @@ def _run_section(doc: Mapping, info, phis, with_phi: bool) -> list[str]:
                 ],
                 ["nominal", params_text(surf.get("nominal", {}))],
                 ["material", _material(info.material or {})],
-                ["incidences θi", ", ".join(f"{t:g}°" for t in doc["theta_i"])],
+                ["incidences θi", ", ".join(f"{t:g}°" for t in doc.theta_i)],
                 *(
                     [["incidence azimuths φi", _azimuths_text(phis)]]
                     if with_phi or any(phis)
                     else []
                 ),
-                ["rays per incidence", f"{doc['rays']:,}"],
+                ["rays per incidence", f"{doc.rays:,}"],
                 ["realisations", _realisations_text(run)],
                 ["bins (θo × Δφ)", " × ".join(str(b) for b in run.get("bins", []))],
-                ["seed", str(doc["seed"])],
-                ["mode", "quick (`--quick`)" if doc["quick"] else "full"],
+                ["seed", str(doc.seed)],
+                ["mode", "quick (`--quick`)" if doc.quick else "full"],
                 ["wall times", "`timings.json` (machine-dependent)"],
             ],
         ),
@@ -296,10 +298,10 @@ _VERDICT_COLUMNS = [
 ]
 
 
-def _verdicts_section(doc: Mapping, with_phi: bool) -> list[str]:
+def _verdicts_section(doc: RunDocument, with_phi: bool) -> list[str]:
     """ "Verdicts": one summary per model, the ranking, and every incidence × model folded."""
-    summary = summary_row(doc["verdicts"])
-    outside = doc.get("outside_domain") or {}
+    summary = summary_row(doc.verdicts)
+    outside = doc.outside_domain
     summary.update({m: OUT_OF_DOMAIN for m in outside if m in summary})
     lines = [
         "## Verdicts",
@@ -315,12 +317,12 @@ def _verdicts_section(doc: Mapping, with_phi: bool) -> list[str]:
     inc_cols = ["θi", "φi"] if with_phi else ["θi"]
     return lines + [
         "Best to worst by mean relative RMS error: "
-        + ", ".join(f"`{m}`" for m in doc.get("ranking", []))
+        + ", ".join(f"`{m}`" for m in doc.ranking)
         + ".",
         "",
         "<details><summary>Every incidence × model</summary>",
         "",
-        md_table([*inc_cols, *_VERDICT_COLUMNS], _verdict_rows(doc["verdicts"], outside, with_phi)),
+        md_table([*inc_cols, *_VERDICT_COLUMNS], _verdict_rows(doc.verdicts, outside, with_phi)),
         "",
         "</details>",
         "",
@@ -368,16 +370,16 @@ _CAPTIONS = {
 }
 
 
-def _charts_section(doc: Mapping, charts: Mapping[str, str], phis, with_phi: bool) -> list[str]:
+def _charts_section(doc: RunDocument, charts: Mapping[str, str], phis, with_phi: bool) -> list[str]:
     """ "Charts": each chart under its caption; the stability and speed charts with the
     settings of their side studies."""
     lines = ["## Charts", ""]
     for key, path in charts.items():
         lines += [f"### {_CAPTIONS.get(key, key)}", "", f"![{key}]({path})", ""]
         if key == "stability":
-            lines += _stability_text(doc.get("stability", {}), phis, with_phi)
+            lines += _stability_text(doc.stability, phis, with_phi)
         if key == "speed":
-            lines += _speed_text(doc.get("speed", {}), phis, with_phi)
+            lines += _speed_text(doc.speed, phis, with_phi)
     return lines
 
 
@@ -428,8 +430,9 @@ def run_summary(doc: Mapping) -> str:
     """What ``microsim run`` prints on stdout: a models × θi table of the verdicts in the
     index's symbols and a one-line conclusion (models that agree at every incidence; models
     that deviate, where and by up to how much; inconclusive ones). Plain text, one line each."""
-    verdicts = as_verdicts(doc["verdicts"])
-    outside = doc.get("outside_domain") or {}
+    doc = RunDocument.from_json(doc)
+    verdicts = doc.verdicts
+    outside = doc.outside_domain
     thetas = list(dict.fromkeys(incidence.key(v) for v in verdicts))  # (θi, φi) pairs
     with_phi = incidence.several_azimuths(verdicts)
     models = list(dict.fromkeys(v.model for v in verdicts))
@@ -445,7 +448,7 @@ def run_summary(doc: Mapping) -> str:
     widths = [max(len(r[i]) for r in table) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     mine = {m: [by[m, t] for t in thetas if (m, t) in by] for m in models if m not in outside}
-    scene = doc.get("scene", "")
+    scene = doc.scene
     return "\n".join(
         [f"{scene}: ✓ agrees, ✗ deviates (relative RMS error), ? inconclusive"]
         + lines

@@ -16,19 +16,20 @@ from .multiple import NOT_EXPECTED
 from .multiple_report import RESOLVED_SE, deviation_text
 from .report_cells import bounds_brief, fmt, signed_pct
 from .report_wave import regime_section
+from .verdict_record import RunDocument
 from .verdicts import Verdict, as_verdicts, summary_row
 
 __all__ = ["index_report"]
 
 
-def _orders_index(docs: Sequence[Mapping]) -> list[str]:
+def _orders_index(docs: Sequence[RunDocument]) -> list[str]:
     """ "How much light single scattering misses": per scene traced with ``bounces`` > 1, the
     fraction of the reflected energy in orders ≥ 2 at each θi and whether it exceeds 1 % (the
     scene then needs more than one bounce), and the random walk's and Kulla–Conty's relative
     energy deviation there."""
     rows, not_expected = [], False
     for d in docs:
-        o = d.get("orders")
+        o = d.orders
         if not o:
             continue
         need = [n for n in o["needs"] if n["needs"]]
@@ -49,7 +50,7 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
                     )
         mark = " †" if comparison.get("expected") is False else ""
         rows.append(
-            [f"[{d['scene']}]({d['scene']}/report.md)", cells, "yes" if need else "no"]
+            [_scene_link(d), cells, "yes" if need else "no"]
             + [", ".join(dev.get(name, ["–"])) + mark for name in ("random-walk", "kulla-conty")]
         )
         not_expected = not_expected or bool(mark)
@@ -77,6 +78,10 @@ def _orders_index(docs: Sequence[Mapping]) -> list[str]:
     ] + ([f"† {NOT_EXPECTED}.", ""] if not_expected else [])
 
 
+def _scene_link(d: RunDocument) -> str:
+    return f"[{d.scene}]({d.scene}/report.md)"
+
+
 def _variant_cell(v: Mapping | None) -> str:
     """One Smith G variant against the simulation: verdict symbol, energy deviation ± se,
     relative RMS error."""
@@ -89,17 +94,17 @@ def _variant_cell(v: Mapping | None) -> str:
     )
 
 
-def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
+def _anisotropy_index(docs: Sequence[RunDocument]) -> list[str]:
     """ "Anisotropy: the Smith G variants" for the scenes with an ``anisotropy`` block
     (``analysis.anisotropy``): per θi, the isotropic stand-in against the exact Λ (model
     against model) and each variant against the simulation."""
     rows = []
     for d in docs:
-        for inc in (d.get("anisotropy") or {}).get("incidences", []):
+        for inc in (d.anisotropy or {}).get("incidences", []):
             sv = inc["stand_in_vs_exact"]
             rows.append(
                 [
-                    f"[{d['scene']}]({d['scene']}/report.md)",
+                    _scene_link(d),
                     f"{inc['theta_i']:g}°",
                     f"{inc['phi_i']:g}°",
                     f"{signed_pct(sv['energy_dev'])}, rel RMS {percent(sv['rel_rms'], unit=' %')}",
@@ -131,18 +136,18 @@ def _anisotropy_index(docs: Sequence[Mapping]) -> list[str]:
     ] + missed
 
 
-def _anisotropy_missed(docs: Sequence[Mapping]) -> list[str]:
+def _anisotropy_missed(docs: Sequence[RunDocument]) -> list[str]:
     """The energy the anisotropic single-scattering models miss, for the scenes traced with
     more than one bounce (``analysis.anisotropy``: ``missed``)."""
     rows = []
     for d in docs:
-        for inc in (d.get("anisotropy") or {}).get("incidences", []):
+        for inc in (d.anisotropy or {}).get("incidences", []):
             m = inc.get("missed")
             if m is None:
                 continue
             rows.append(
                 [
-                    f"[{d['scene']}]({d['scene']}/report.md)",
+                    _scene_link(d),
                     f"{inc['theta_i']:g}°",
                     f"{inc['phi_i']:g}°",
                     f"{plain(m['reflected'], 3)} ± {plain(m['reflected_se'], 1)}",
@@ -220,35 +225,34 @@ def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:
 def _index_cell(d: Mapping, model: str, summary: Mapping[str, str]) -> str:
     if model not in summary:
         return "–"
-    if model in (d.get("outside_domain") or {}):
+    d = RunDocument.from_json(d)
+    if model in d.outside_domain:
         return "outside its domain"
-    return _compact(d["verdicts"], model, summary[model])
+    return _compact(d.verdicts, model, summary[model])
 
 
-def _verdict_tables(docs: Sequence[Mapping]) -> list[str]:
+def _verdict_tables(docs: Sequence[RunDocument]) -> list[str]:
     """One scenes × models table per set of prescribed model names (V-grooves and
     heightfields are compared with different closed forms); fitted models at the end."""
     groups: dict[tuple, list] = {}
     for d in docs:
-        pres = tuple(dict.fromkeys(v.model for v in as_verdicts(d["verdicts"]) if not v.fitted))
+        pres = tuple(dict.fromkeys(v.model for v in d.verdicts if not v.fitted))
         groups.setdefault(pres, []).append(d)
     out, dropped = [], {}
     for pres, group in groups.items():
-        fitted = list(
-            dict.fromkeys(v.model for d in group for v in as_verdicts(d["verdicts"]) if v.fitted)
-        )
+        fitted = list(dict.fromkeys(v.model for d in group for v in d.verdicts if v.fitted))
         models = list(pres) + fitted
         for m in list(models):  # a model outside its domain on every scene: said once below
-            reasons = [(d.get("outside_domain") or {}).get(m) for d in group]
+            reasons = [d.outside_domain.get(m) for d in group]
             if all(reasons):
                 models.remove(m)
                 dropped[m + (" (fit)" if m in fitted else "")] = reasons[0]
         rows = []
         for d in group:
-            s = summary_row(d["verdicts"])
-            n_real = max((v.realisations for v in as_verdicts(d["verdicts"])), default=1)
+            s = summary_row(d.verdicts)
+            n_real = max((v.realisations for v in d.verdicts), default=1)
             rows.append(
-                [f"[{d['scene']}]({d['scene']}/report.md)" + (f" R={n_real}" if n_real > 1 else "")]
+                [_scene_link(d) + (f" R={n_real}" if n_real > 1 else "")]
                 + [_index_cell(d, m, s) for m in models]
             )
         out += [
@@ -285,14 +289,15 @@ def index_report(
     the regime chart ``regimes``; "What each method costs" from ``methods``, the path of
     ``methods.json`` or its dict), links to every scene's ``<scene>/report.md``. No wall
     time is written: the index is reproducible."""
+    docs = [RunDocument.from_json(d) for d in docs]
     fit_models: list[str] = []
     for d in docs:
-        fit_models += [f["model"] for f in d.get("fits", []) if f["model"] not in fit_models]
+        fit_models += [f["model"] for f in d.fits if f["model"] not in fit_models]
     fit_rows = []
     for d in docs:
-        by = {f["model"]: f for f in d.get("fits", [])}
+        by = {f["model"]: f for f in d.fits}
         fit_rows.append(
-            [d["scene"]] + [_index_fit_cell(by[m]) if m in by else "–" for m in fit_models]
+            [d.scene] + [_index_fit_cell(by[m]) if m in by else "–" for m in fit_models]
         )
     lines = [
         "# microsim report",
@@ -345,7 +350,5 @@ def index_report(
             "",
         ]
     lines += regime_section(docs, regimes, methods, fullwave)
-    lines += ["## Scenes", ""] + [
-        f"- [{d['scene']}]({d['scene']}/report.md): {d.get('description', '')}" for d in docs
-    ]
+    lines += ["## Scenes", ""] + [f"- {_scene_link(d)}: {d.description}" for d in docs]
     return "\n".join(lines).rstrip() + "\n"

@@ -13,6 +13,7 @@ from microsim.errors import UsageError
 from .markdown import md_table, percent
 from .report_cells import fmt, pct, ranges_text, signed_pct
 from .report_methods import methods_section
+from .verdict_record import RunDocument
 
 __all__ = ["wave_section", "regime_section"]
 
@@ -179,14 +180,17 @@ def _wave_verdict_table(verdicts: Sequence[Mapping]) -> str:
 
 
 def _wave_index_rows(docs: Sequence[Mapping]) -> tuple[list[str], list[list[str]]]:
+    """(the wave models in order of appearance, one row per wave scene and θi of each
+    model's status against Kirchhoff)."""
+    docs = [RunDocument.from_json(d) for d in docs]
     models: list[str] = []
     for d in docs:
-        for v in (d.get("wave") or {}).get("verdicts", []):
+        for v in (d.wave or {}).get("verdicts", []):
             if v["model"] not in models:
                 models.append(v["model"])
     rows = []
     for d in docs:
-        w = d.get("wave")
+        w = d.wave
         if not w:
             continue
         for t in w["theta_i"]:
@@ -208,8 +212,7 @@ def _wave_index_rows(docs: Sequence[Mapping]) -> tuple[list[str], list[list[str]
                     text += "; differs"
                 cells.append(text)
             rows.append(
-                [f"[{d['scene']}]({d['scene']}/report.md)", fmt(w["sigma_over_lambda"]), f"{t:g}"]
-                + cells
+                [f"[{d.scene}]({d.scene}/report.md)", fmt(w["sigma_over_lambda"]), f"{t:g}"] + cells
             )
     return models, rows
 

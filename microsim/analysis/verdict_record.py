@@ -5,16 +5,23 @@ verdicts.json holds, and the reader of such dicts (``Verdict.from_json``, checke
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from dataclasses import fields as dataclass_fields
-from typing import Iterable, Mapping
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
 from microsim.errors import UsageError
 from microsim.sim.result import FrozenDict
 
-__all__ = ["VERDICT_SCHEMA", "REFERENCES", "Verdict", "as_verdicts", "validate_verdict"]
+__all__ = [
+    "VERDICT_SCHEMA",
+    "REFERENCES",
+    "Verdict",
+    "as_verdicts",
+    "validate_verdict",
+    "RunDocument",
+]
 
 _NUM = (int, float)
 _OPT_NUM = (int, float, type(None))
@@ -253,3 +260,40 @@ def validate_verdict(d) -> dict:
     if (d["realisations"] >= 2) != (d["reference"] == "realisations"):
         raise UsageError("verdict['realisations'] >= 2 iff reference is 'realisations'")
     return d
+
+
+@dataclass(frozen=True)
+class RunDocument:
+    """A run's verdict document (``verdicts.json``, docs/verdicts.md) as the reports read it:
+    the scene and its settings, the ``verdicts`` as ``Verdict`` records, and the studies that
+    stay JSON objects (``fits``, ``wave``, ``orders``, ``anisotropy``, ``stability``,
+    ``speed``; None or empty when the run has none). ``from_json`` reads the dict written (or
+    about to be written) to the file; keys of no field are left out."""
+
+    scene: str = ""
+    verdicts: tuple[Verdict, ...] = ()
+    scene_file: str | None = None
+    description: str = ""
+    quick: bool = False
+    rays: int | None = None
+    theta_i: Sequence[float] = ()
+    phi_i: Sequence[float] = (0.0,)
+    seed: int | None = None
+    ranking: Sequence[str] = ()
+    outside_domain: Mapping = field(default_factory=dict)
+    fits: Sequence[Mapping] = ()
+    wave: Mapping | None = None
+    orders: Mapping | None = None
+    anisotropy: Mapping | None = None
+    stability: Mapping = field(default_factory=dict)
+    speed: Mapping = field(default_factory=dict)
+
+    @classmethod
+    def from_json(cls, doc: Mapping) -> "RunDocument":
+        """The record of ``doc`` (a RunDocument as it is); a null study reads as none."""
+        if isinstance(doc, cls):
+            return doc
+        names = {f.name for f in dataclass_fields(cls)}
+        given = {k: v for k, v in doc.items() if k in names and v is not None}
+        given["verdicts"] = tuple(as_verdicts(doc.get("verdicts") or ()))
+        return cls(**given)
