@@ -13,6 +13,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from microsim import analytic as an
 from microsim import surfaces as sf
+from microsim.analysis import chart_style
 from microsim.analysis import charts as ch
 from microsim.analytic.models import TorranceSparrow
 from microsim.sim import Bins, simulate
@@ -105,7 +106,7 @@ def test_model_styles_fixed_and_no_colour_twice_in_a_chart():
 
     assert ch.model_style("ts-vgroove") == ch.model_style("TS_vgroove")
     assert ch.model_style("some new model") == ch.model_style("some new model")
-    assert all(n.replace("_", "-") in ch._STYLES for n in report_names())
+    assert all(n.replace("_", "-") in chart_style._STYLES for n in report_names())
     heightfield = [f"ts-beckmann-{v}-{g}" for v in ("nominal", "realised")
                    for g in ("vgroove", "smith", "smith-corr")]  # fmt: skip
     fits = ["cook-torrance", "low-microfacet", "low-smooth", "edwards"]

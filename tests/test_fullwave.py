@@ -394,7 +394,7 @@ def test_the_methods_panel_places_rcw_and_kirchhoff_on_one_grating():
     """``microsim bench --methods``' full-wave panel: every point has the keys the index reads;
     the converged RCW point's error (its last change) is bounded by the tolerance per order,
     K·tol/Σ η over the K orders with θo ≤ 80°; Kirchhoff is cheaper than any RCW solve."""
-    from microsim.analysis.report import _METHODS_KEYS
+    from microsim.analysis.report_methods import _METHODS_KEYS
     from microsim.app.bench_methods import _panel_fullwave, methods_config
 
     panel = _panel_fullwave(methods_config(quick=True))

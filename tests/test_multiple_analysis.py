@@ -30,13 +30,12 @@ from scipy import stats
 
 from microsim.analysis.multiple import (
     MODELS,
-    multiple_chart,
-    multiple_section,
     needs_more_bounces,
     order_comparison,
     realised_ndf,
     specular_share,
 )
+from microsim.analysis.multiple_report import multiple_chart, multiple_section
 from microsim.analysis.verdicts import validate_verdict
 from microsim.errors import UsageError
 from microsim.sim import Bins, simulate

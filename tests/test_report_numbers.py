@@ -20,10 +20,10 @@ from hypothesis import strategies as st
 from support import flat_verdict
 from test_fits import _synthetic
 
-from microsim.analysis import charts, fits, report
+from microsim.analysis import charts, fits, report, report_cells, report_index, report_wave
 from microsim.analysis import verdicts as V
 from microsim.analysis.markdown import PERCENT_FLOOR, percent
-from microsim.analysis.multiple import RESOLVED_SE, deviation_text, multiple_section
+from microsim.analysis.multiple_report import RESOLVED_SE, deviation_text, multiple_section
 from microsim.app.runner.publishing import fit_record
 from microsim.sim import Bins
 
@@ -82,7 +82,7 @@ def test_builders_write_no_exponent_percentages_for_large_deviations():
         "report rows": str(report._verdict_rows(vs)),
         "chart table": charts._verdict_table(vs),
         "index": report.index_report([doc], None, True),
-        "wave outside": report._outside_text({"outside": {"forward": [-96.1, 1.0]}}),
+        "wave outside": report_wave._outside_text({"outside": {"forward": [-96.1, 1.0]}}),
     }
     for where, text in texts.items():
         assert not EXPONENT_PERCENT.search(text), (where, text)
@@ -100,8 +100,8 @@ def test_a_fit_on_a_physical_bound_is_a_constrained_minimum():
     assert res.converged
     record = fit_record(res)
     assert record["converged"] is True
-    assert report._converged(record) == "yes: kd = 0, on its physical bound kd ≥ 0"
-    assert report._index_fit_cell(record).endswith("(physical bound: kd = 0)")
+    assert report_cells.converged_text(record) == "yes: kd = 0, on its physical bound kd ≥ 0"
+    assert report_index._index_fit_cell(record).endswith("(physical bound: kd = 0)")
 
 
 def test_a_fit_at_a_search_limit_is_stopped_there():
@@ -115,10 +115,10 @@ def test_a_fit_at_a_search_limit_is_stopped_there():
     assert not res.converged
     record = fit_record(res)
     assert record["converged"] is False
-    assert report._converged(record).startswith(
+    assert report_cells.converged_text(record).startswith(
         "no: stopped at the search limit ks = 10: the best fit may lie beyond"
     )
-    assert "(search limit: ks = 10" in report._index_fit_cell(record)
+    assert "(search limit: ks = 10" in report_index._index_fit_cell(record)
 
 
 def test_every_bound_declares_its_kind():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from support import flat_verdict
 
-from microsim.analysis import charts, report
+from microsim.analysis import charts, report, report_index
 from microsim.analysis import verdicts as V
 from microsim.sim import Bins
 
@@ -67,7 +67,7 @@ def test_every_output_words_the_verdict_alike(kind):
     assert report._verdict_rows([v])[0][2] == WORD[kind]
     # the index cell and the index summary line
     summary = V.summary_row([v])
-    assert report._index_cell(doc, v["model"], summary).startswith(SYMBOL[kind])
+    assert report_index._index_cell(doc, v["model"], summary).startswith(SYMBOL[kind])
     assert summary[v["model"]].startswith(kind)
     # the hemisphere chart's table
     assert charts._verdict_table([v]).splitlines()[2].split()[4] == kind
@@ -80,7 +80,9 @@ def test_inconclusive_prints_both_sizes():
     v = _case("inconclusive")
     text = V.verdict_symbol(v)
     assert text == f"? {100 * v['rel_rms']:.2g}% (tile departs {100 * v['tile_departure']:.2g}%)"
-    assert "tile departs" in report._index_cell({"verdicts": [v]}, v["model"], V.summary_row([v]))
+    assert "tile departs" in report_index._index_cell(
+        {"verdicts": [v]}, v["model"], V.summary_row([v])
+    )
     assert "departure" in V.summary_row([v])[v["model"]]
 
 

@@ -32,7 +32,7 @@ from microsim.stats import energy_set
 
 from . import incidence
 from .multiple import order_energies
-from .verdicts import Significance, verdict_kind
+from .verdicts import Significance, as_verdicts
 
 __all__ = ["VARIANTS", "anisotropy_summary"]
 
@@ -102,7 +102,7 @@ def anisotropy_summary(
     rows = []
     for t, th in enumerate(result.theta_i):
         here = (float(th), float(result.phi_i[t]))
-        by = {v["model"]: v for v in verdicts if incidence.key(v) == here}
+        by = {v.model: v for v in as_verdicts(verdicts) if incidence.key(v) == here}
         dev, rms = _model_vs_model(
             np.asarray(result.models[stand_in][t]), np.asarray(result.models[exact][t]), omega
         )
@@ -113,10 +113,10 @@ def anisotropy_summary(
                 "stand_in_vs_exact": {"energy_dev": dev, "rel_rms": rms},
                 "against_simulation": {
                     label: {
-                        "rel_rms": by[name]["rel_rms"],
-                        "energy_dev": by[name]["energy_dev"],
-                        "energy_dev_se": by[name].get("energy_dev_se"),
-                        "verdict": verdict_kind(by[name]),
+                        "rel_rms": by[name].rel_rms,
+                        "energy_dev": by[name].energy_dev,
+                        "energy_dev_se": by[name].energy_dev_se,
+                        "verdict": by[name].kind,
                     }
                     for label, name in VARIANTS.items()
                     if name in by
@@ -124,7 +124,7 @@ def anisotropy_summary(
             }
         )
         if orders is not None:
-            rtol = {n: by[n]["model_rtol"] if n in by else Significance().model_rtol for n in names}
+            rtol = {n: by[n].model_rtol if n in by else Significance().model_rtol for n in names}
             rows[-1]["missed"] = _missed(orders[t], result, t, omega, rtol)
             walk = _walk_at(comparison, here)
             if walk is not None:

@@ -17,22 +17,35 @@ model looks the same in every chart, and no chart draws two models in one colour
 from __future__ import annotations
 
 import math
-import os
 import textwrap
-import zlib
-from typing import Iterable, Mapping, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 import matplotlib as mpl
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm, TwoSlopeNorm
 from matplotlib.figure import Figure
 
 from microsim.errors import UsageError
 
-from ..atomic import atomic_open
 from . import incidence
+from .chart_style import (
+    DPI,
+    FRESNEL_COLOUR,
+    SIM_COLOUR,
+    Z_LIMIT,
+    _figure,
+    _given_axes,
+    _grid,
+    _log_limits,
+    _output,
+    _positive,
+    _title,
+    chart_styles,
+    figure_size,
+    model_colour,
+    model_style,
+)
 from .markdown import percent
 from .verdicts import verdict_kind
 
@@ -53,177 +66,7 @@ __all__ = [
     "Z_LIMIT",
 ]
 
-DPI = 100
-SIM_COLOUR = "#c2185b"  # magenta: simulation points everywhere (no model uses it)
-FRESNEL_COLOUR = "#000000"
-Z_LIMIT = 10.0  # z-score colour range ±Z_LIMIT (beyond saturates); ±5 marked
 FAIL_THRESHOLD = 0.05  # relative error above which a closed form "fails" (stability chart)
-
-# Styles of the model names the runner uses (``catalogue.REPORT_MODELS``): a line style per
-# family — solid the closed forms with the ensemble NDF, dashed Beckmann at the nominal m,
-# dotted Beckmann at the realised m, dash-dot the fitted models, dotted the wave-optics and
-# multiple-scattering models — and a colour per model. A chart never draws two models in one
-# colour (``chart_styles``); names not listed get a stable colour from _PALETTE by CRC-32.
-_PALETTE = (
-    "#e6550d",
-    "#843c39",
-    "#5254a3",
-    "#31a354",
-    "#6b6ecf",
-    "#e7ba52",
-    "#3182bd",
-    "#756bb1",
-    "#636363",
-    "#8ca252",
-    "#ad494a",
-    "#7b4173",
-    "#17becf",
-    "#bcbd22",
-    "#393b79",
-    "#637939",
-)
-_STYLES = {
-    "ts-vgroove": ("#1f77b4", "-"),
-    "ts-smith": ("#ff7f0e", "-"),
-    "ts-smith-corr": ("#2ca02c", "-"),
-    "ts-smith-correlated": ("#2ca02c", "-"),
-    "ts-none": ("#7f7f7f", "-"),
-    "ts-facets": ("#17becf", "-"),
-    "ts-vgroove-oriented": ("#1f77b4", "--"),
-    "facets": ("#17becf", "-"),
-    "ts-beckmann-nominal-vgroove": ("#1f77b4", "--"),
-    "ts-beckmann-nominal-smith": ("#ff7f0e", "--"),
-    "ts-beckmann-nominal-smith-corr": ("#2ca02c", "--"),
-    "ts-beckmann-realised-vgroove": ("#5254a3", ":"),
-    "ts-beckmann-realised-smith": ("#e6550d", ":"),
-    "ts-beckmann-realised-smith-corr": ("#8ca252", ":"),
-    "ts-beckmann-nominal-smith-corr-geomean": ("#d62728", "--"),
-    "mirror-fresnel": ("#1f77b4", "-"),
-    "cook-torrance": ("#8c564b", "-."),
-    "low-microfacet": ("#9467bd", "-."),
-    "low-smooth": ("#bcbd22", "-."),
-    "edwards": ("#393b79", "-."),
-    "edwards-fit": ("#393b79", "-."),
-    "rayleigh-rice": ("#7b4173", ":"),
-    "kirchhoff-first-order": ("#636363", ":"),
-    "walk-2": ("#31a354", ":"),
-    "walk-2+": ("#756bb1", ":"),
-    "random-walk": ("#3182bd", ":"),
-    "kulla-conty": ("#e7ba52", "--"),
-    "mikkelsen-eq28": ("#843c39", "-."),
-    "mikkelsen-mix": ("#637939", "-."),
-    "stratified": ("#1f77b4", "-"),
-    "independent": ("#ff7f0e", "-"),
-    # Mikkelsen Fig. 6 draws κ=1024 in red: too close to SIM_COLOUR
-    "κ=17": ("#2ca02c", "-"),
-    "κ=1024": ("#1f77b4", "-"),
-}
-
-
-def _key(name: str) -> str:
-    return "-".join(str(name).strip().lower().replace("_", "-").split())
-
-
-def model_style(name: str) -> tuple[str, str]:
-    """(hex colour, matplotlib line style) of a model (or estimator variant) ``name``: fixed
-    for the report's names (case, spaces and underscores ignored), otherwise a stable colour
-    from a CRC-32 of the name, solid."""
-    key = _key(name)
-    if key in _STYLES:
-        return _STYLES[key]
-    return _PALETTE[zlib.crc32(key.encode("utf-8")) % len(_PALETTE)], "-"
-
-
-def model_colour(name: str) -> str:
-    """The colour of ``model_style(name)``."""
-    return model_style(name)[0]
-
-
-def chart_styles(names: Iterable[str]) -> dict[str, tuple[str, str]]:
-    """``model_style`` of each of ``names``, except that no colour is used twice in the
-    chart: a model whose colour is taken gets the first free one of _PALETTE (then grey)."""
-    out, used = {}, {SIM_COLOUR}
-    for name in names:
-        colour, style = model_style(name)
-        if colour in used:
-            colour = next((c for c in _PALETTE if c not in used), "#7f7f7f")
-        used.add(colour)
-        out[name] = (colour, style)
-    return out
-
-
-# --- writing ---------------------------------------------------------------------------------
-def figure_size(chart: str, n: int = 1) -> tuple[float, float]:
-    """(width, height) in inches of ``chart``; the PNG is that × ``DPI`` pixels. ``n``: panels
-    for "inplane" (incidences), materials for "mikkelsen_fig6", text lines of estimator notes
-    for "stability"; ignored otherwise."""
-    if chart == "inplane":
-        rows, cols = _grid(n)
-        return 4.6 * cols + 3.0, 5.0 * rows + 0.6  # + a legend column; ratio panels below
-    if chart == "mikkelsen_fig6":
-        return 5.2 * n + 0.4, 4.6
-    if chart == "stability":
-        return 9.0, 5.6 + 0.18 * n
-    fixed = {"hemisphere_maps": (13.0, 8.6), "energy": (11.0, 4.6), "speed_accuracy": (7.0, 5.0)}
-    if chart not in fixed:
-        raise UsageError(
-            f"chart must be one of inplane, mikkelsen_fig6, stability, "
-            f"{', '.join(fixed)}; got {chart!r}"
-        )
-    return fixed[chart]
-
-
-def _figure(size: tuple[float, float]) -> Figure:
-    fig = Figure(figsize=size, dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _output(fig: Figure, path) -> Figure:
-    """Write ``fig`` as PNG to ``path`` atomically (unless ``path`` is None); return ``fig``."""
-    if path is not None:
-        with atomic_open(os.fspath(path), "wb") as fh:
-            fig.savefig(fh, format="png", dpi=DPI)
-    return fig
-
-
-def _given_axes(ax, n: int, chart: str, what: str) -> list | None:
-    """The caller's ``ax`` as a list of ``n`` Axes (None: the chart makes its own figure)."""
-    if ax is None:
-        return None
-    axes = [ax] if isinstance(ax, Axes) else list(np.ravel(np.asarray(ax, dtype=object)))
-    if len(axes) != n or not all(isinstance(a, Axes) for a in axes):
-        raise UsageError(f"{chart}: ax must be {n} matplotlib Axes ({what}), got {ax!r}")
-    return axes
-
-
-def _title(prefix: str, text: str) -> str:
-    return f"{prefix} — {text}" if prefix else text
-
-
-def _grid(n: int) -> tuple[int, int]:
-    """(rows, cols) for ``n`` panels: one row up to 3, 2×2 for 4, then rows of 3."""
-    cols = n if n <= 3 else (2 if n == 4 else 3)
-    return math.ceil(n / cols), cols
-
-
-def _positive(a) -> np.ndarray:
-    """Float copy with non-positive / non-finite values set to NaN (for log axes)."""
-    a = np.array(a, dtype=np.float64)
-    a[~(np.isfinite(a) & (a > 0))] = np.nan
-    return a
-
-
-def _log_limits(values: Iterable[np.ndarray], floor_ratio: float) -> tuple[float, float]:
-    """(lo, hi) of a log axis covering the positive values, reaching down to at most
-    ``floor_ratio`` × the maximum (far-tail model values would otherwise squash the plot)."""
-    pos = np.concatenate([np.ravel(_positive(v)) for v in values])
-    pos = pos[np.isfinite(pos)]
-    if pos.size == 0:
-        return 1e-3, 1.0
-    hi = pos.max()
-    lo = max(pos.min(), hi * floor_ratio)
-    return lo / 2.0, hi * 2.0
 
 
 # --- 1. in-plane curves ----------------------------------------------------------------------
@@ -278,6 +121,7 @@ def inplane_curves(
     else:
         rows, cols, axes, fig = 1, n_t, given, given[0].figure
     lo, hi = _log_limits([ip.brdf] + [c for c in curves.values()], 1e-6)
+    panel = _InPlanePanel(ip, curves, styles, edges, centres)
     ratios = []
     for t in range(rows * cols):
         ax, rx = axes[t], ratio_axes[t]
@@ -286,32 +130,8 @@ def inplane_curves(
             if rx is not None:
                 rx.set_visible(False)
             continue
-        for name, c in curves.items():
-            colour, style = styles[name]
-            ax.stairs(
-                _positive(c[t]), edges, baseline=None, color=colour, ls=style, lw=1.6, label=name
-            )
-        y = _positive(ip.brdf[t])
-        ax.errorbar(
-            ip.theta,
-            y,
-            yerr=np.where(np.isfinite(y), ip.stderr[t], np.nan),
-            fmt="o",
-            ms=3.0,
-            color=SIM_COLOUR,
-            ecolor=SIM_COLOUR,
-            elinewidth=1.0,
-            capsize=1.5,
-            label="simulation ±1σ",
-            zorder=5,
-        )
         th_i = float(result.theta_i[t])
-        ax.axvline(th_i, color="0.35", ls="--", lw=0.9, label="mirror θo = +θi")
-        ax.axvline(0.0, color="0.75", lw=0.6)
-        ax.set_yscale("log")
-        ax.set_ylim(lo, hi)
-        ax.set_xlim(-90, 90)
-        ax.set_xticks(np.arange(-90, 91, 30))
+        panel.curves_panel(ax, t, th_i, (lo, hi))
         ax.set_title(incidence.label(th_i, float(result.phi_i[t]), with_phi))
         if t % cols == 0:
             ax.set_ylabel("BRDF (sr⁻¹)")
@@ -320,30 +140,7 @@ def inplane_curves(
             ax.set_xlabel("θo (°)   − backward (Δφ=0°) | + specular (Δφ=180°)")
             continue
         ax.tick_params(labelbottom=False)
-        sim = np.array(ip.brdf[t], dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel_se = np.asarray(ip.stderr[t], dtype=np.float64) / sim
-            keep = np.isfinite(rel_se) & (sim > 0) & (rel_se <= RATIO_MAX_REL_SE)
-            rx.fill_between(
-                centres,
-                np.where(keep, 1 - rel_se, np.nan),
-                np.where(keep, 1 + rel_se, np.nan),
-                step="mid",
-                color=SIM_COLOUR,
-                alpha=0.18,
-                lw=0,
-                label="simulation ±1σ",
-            )
-            marks = []
-            for name, c in curves.items():
-                r = np.where(keep, c[t] / sim, np.nan)
-                colour, style = styles[name]
-                marks.append((r, colour))
-                rx.stairs(r, edges, baseline=None, color=colour, ls=style, lw=1.4)
-            ratios.append((rx, centres, marks))
-        rx.axhline(1.0, color=SIM_COLOUR, lw=0.9)
-        rx.axvline(th_i, color="0.35", ls="--", lw=0.9)
-        rx.set_xlabel("θo (°)")
+        ratios.append(panel.ratios(rx, t, th_i))
         if t % cols == 0:
             rx.set_ylabel("model / sim.")
         rx.grid(True, which="major", alpha=0.3)
@@ -358,6 +155,77 @@ def inplane_curves(
         _title(scene_name, "in-plane scattering (bin averages); below: model / simulation")
     )
     return _output(fig, path)
+
+
+class _InPlanePanel(NamedTuple):
+    """What ``inplane_curves`` draws in each incidence's panels: the in-plane slice ``ip``,
+    the models' slices ``curves`` with their ``styles``, the signed θo bin ``edges`` and
+    ``centres``."""
+
+    ip: object
+    curves: Mapping[str, np.ndarray]
+    styles: Mapping[str, tuple]
+    edges: np.ndarray
+    centres: np.ndarray
+
+    def curves_panel(self, ax, t: int, th_i: float, ylim) -> None:
+        """The models as steps, the simulation ±1σ as points, the mirror direction marked."""
+        ip = self.ip
+        for name, c in self.curves.items():
+            colour, style = self.styles[name]
+            ax.stairs(
+                _positive(c[t]), self.edges, baseline=None, color=colour, ls=style, lw=1.6,
+                label=name,
+            )  # fmt: skip
+        y = _positive(ip.brdf[t])
+        ax.errorbar(
+            ip.theta,
+            y,
+            yerr=np.where(np.isfinite(y), ip.stderr[t], np.nan),
+            fmt="o",
+            ms=3.0,
+            color=SIM_COLOUR,
+            ecolor=SIM_COLOUR,
+            elinewidth=1.0,
+            capsize=1.5,
+            label="simulation ±1σ",
+            zorder=5,
+        )
+        ax.axvline(th_i, color="0.35", ls="--", lw=0.9, label="mirror θo = +θi")
+        ax.axvline(0.0, color="0.75", lw=0.6)
+        ax.set_yscale("log")
+        ax.set_ylim(*ylim)
+        ax.set_xlim(-90, 90)
+        ax.set_xticks(np.arange(-90, 91, 30))
+
+    def ratios(self, rx, t: int, th_i: float):
+        """Model / simulation per bin with the simulation's ±1σ band (noisy bins left out);
+        (rx, x, [(ratio, colour)]) for ``_ratio_limits``."""
+        ip = self.ip
+        sim = np.array(ip.brdf[t], dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel_se = np.asarray(ip.stderr[t], dtype=np.float64) / sim
+            keep = np.isfinite(rel_se) & (sim > 0) & (rel_se <= RATIO_MAX_REL_SE)
+            rx.fill_between(
+                self.centres,
+                np.where(keep, 1 - rel_se, np.nan),
+                np.where(keep, 1 + rel_se, np.nan),
+                step="mid",
+                color=SIM_COLOUR,
+                alpha=0.18,
+                lw=0,
+                label="simulation ±1σ",
+            )
+            marks = []
+            for name, c in self.curves.items():
+                r = np.where(keep, c[t] / sim, np.nan)
+                colour, style = self.styles[name]
+                marks.append((r, colour))
+                rx.stairs(r, self.edges, baseline=None, color=colour, ls=style, lw=1.4)
+        rx.axhline(1.0, color=SIM_COLOUR, lw=0.9)
+        rx.axvline(th_i, color="0.35", ls="--", lw=0.9)
+        rx.set_xlabel("θo (°)")
+        return rx, self.centres, marks
 
 
 def _ratio_limits(panels) -> None:
@@ -490,22 +358,62 @@ def hemisphere_maps(
     best, worst = sel[0], sel[-1]
     shown = [best] if best["model"] == worst["model"] else [best, worst]
     sim = _positive(result.brdf[t])
-    err = np.asarray(result.stderr[t], dtype=np.float64)
     maps = {v["model"]: np.asarray(models[v["model"]][t], dtype=np.float64) for v in shown}
-    lo, hi = _log_limits([sim], 1e-4)
-    hi = max(hi, _log_limits(list(maps.values()), 1e-4)[1])
-    norm = LogNorm(vmin=lo, vmax=hi)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        zs = {k: np.where(err > 0, (result.brdf[t] - m) / err, np.nan) for k, m in maps.items()}
-    zmax = max([np.nanmax(np.abs(z)) if np.isfinite(z).any() else 0.0 for z in zs.values()])
+    norm, zs, zmax = _hemisphere_scales(result, t, sim, maps)
     zlim = Z_LIMIT
     znorm = TwoSlopeNorm(vcenter=0.0, vmin=-zlim, vmax=zlim)
 
     given = _given_axes(ax, 6, "hemisphere_maps", "simulation, best, worst, table, z best, z worst")
+    fig, panel = _hemisphere_layout(given, len(shown))
+
+    def polar(row, col, values, norm, cmap, title, colour):
+        args = (result.bins, theta_i, norm, mpl.colormaps[cmap], title, colour)
+        return _polar_panel(panel(row, col), values, *args)
+
+    ax, mesh = polar(0, 0, sim, norm, "viridis", "simulation", SIM_COLOUR)
+    brdf_axes, z_axes = [ax], []
+    for j, v in enumerate(shown):
+        role = "model" if len(shown) == 1 else ("best" if v is best else "worst")
+        col, name = model_colour(v["model"]), v["model"]
+        brdf_axes.append(
+            polar(0, j + 1, _positive(maps[name]), norm, "viridis", f"{role}: {name}", col)[0]
+        )
+        z_title = f"z = (sim − {name}) / σ"
+        zax, zmesh = polar(1, j + 1, zs[name], znorm, "RdBu_r", z_title, col)
+        _mark_z5(zax, zs[name], result.bins)
+        z_axes.append(zax)
+    cb = fig.colorbar(mesh, ax=brdf_axes, shrink=0.8, pad=0.02)
+    cb.set_label("BRDF (sr⁻¹), log scale")
+    _z_colourbar(fig, zmesh, z_axes, zmax > zlim, zlim)
+    _hemisphere_notes(panel(1, 0, polar=False), sel, result.bins.folded)
+    if given is None:
+        at = incidence.label(theta_i, phi_i, incidence.several_azimuths(result.phi_i))
+        fig.suptitle(_title(scene_name, f"hemisphere at {at}"))
+    elif len(shown) == 1:
+        given[2].axis("off")
+        given[5].axis("off")
+    return _output(fig, path)
+
+
+def _hemisphere_scales(result, t: int, sim, maps: Mapping[str, np.ndarray]):
+    """(the BRDF maps' shared log scale, each model's z-scores (sim − model)/stderr, the
+    largest |z|) at incidence ``t``."""
+    err = np.asarray(result.stderr[t], dtype=np.float64)
+    lo, hi = _log_limits([sim], 1e-4)
+    hi = max(hi, _log_limits(list(maps.values()), 1e-4)[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zs = {k: np.where(err > 0, (result.brdf[t] - m) / err, np.nan) for k, m in maps.items()}
+    zmax = max([np.nanmax(np.abs(z)) if np.isfinite(z).any() else 0.0 for z in zs.values()])
+    return LogNorm(vmin=lo, vmax=hi), zs, zmax
+
+
+def _hemisphere_layout(given, n_models: int):
+    """(figure, panel(row, col, polar=True) → Axes) of ``hemisphere_maps``: the given six Axes
+    (checked polar where a map goes), or a new figure of 2 × (1 + ``n_models``) panels."""
     if given is None:
         w, h = figure_size("hemisphere_maps")
-        fig = _figure((w * (1 + len(shown)) / 3, h))  # no empty column for a single model
-        gs = fig.add_gridspec(2, 1 + len(shown))
+        fig = _figure((w * (1 + n_models) / 3, h))  # no empty column for a single model
+        gs = fig.add_gridspec(2, 1 + n_models)
     else:
         fig = given[0].figure
         for k in (0, 1, 2, 4, 5):
@@ -517,59 +425,26 @@ def hemisphere_maps(
             return given[3 * row + col]
         return fig.add_subplot(gs[row, col], **({"projection": "polar"} if polar else {}))
 
-    ax, mesh = _polar_panel(
-        panel(0, 0),
-        sim,
-        result.bins,
-        theta_i,
-        norm,
-        mpl.colormaps["viridis"],
-        "simulation",
-        SIM_COLOUR,
-    )
-    brdf_axes, z_axes = [ax], []
-    for j, v in enumerate(shown):
-        role = "model" if len(shown) == 1 else ("best" if v is best else "worst")
-        col = model_colour(v["model"])
-        brdf_axes.append(
-            _polar_panel(
-                panel(0, j + 1),
-                _positive(maps[v["model"]]),
-                result.bins,
-                theta_i,
-                norm,
-                mpl.colormaps["viridis"],
-                f"{role}: {v['model']}",
-                col,
-            )[0]
-        )
-        zax, zmesh = _polar_panel(
-            panel(1, j + 1),
-            zs[v["model"]],
-            result.bins,
-            theta_i,
-            znorm,
-            mpl.colormaps["RdBu_r"],
-            f"z = (sim − {v['model']}) / σ",
-            col,
-        )
-        _mark_z5(zax, zs[v["model"]], result.bins)
-        z_axes.append(zax)
-    cb = fig.colorbar(mesh, ax=brdf_axes, shrink=0.8, pad=0.02)
-    cb.set_label("BRDF (sr⁻¹), log scale")
-    zcb = fig.colorbar(
-        zmesh, ax=z_axes, shrink=0.8, pad=0.02, extend="both" if zmax > zlim else "neither"
-    )
+    return fig, panel
+
+
+def _z_colourbar(fig, zmesh, z_axes, beyond: bool, zlim: float) -> None:
+    """The z-scores' colour bar, ±5 marked; arrows when some |z| lies ``beyond`` ``zlim``."""
+    extend = "both" if beyond else "neither"
+    zcb = fig.colorbar(zmesh, ax=z_axes, shrink=0.8, pad=0.02, extend=extend)
     zcb.set_label("z-score (σ)")
     for s in (-5.0, 5.0):
         zcb.ax.axhline(s, color="k", lw=1.5)
     zcb.set_ticks(sorted({-zlim, -5.0, 0.0, 5.0, zlim}))
-    tax = panel(1, 0, polar=False)
+
+
+def _hemisphere_notes(tax, verdicts, folded: bool) -> None:
+    """The verdict table of the shown incidence and the key of the maps, in panel ``tax``."""
     tax.axis("off")
     tax.text(
         0.0,
         1.0,
-        _verdict_table(sel),
+        _verdict_table(verdicts),
         family="monospace",
         fontsize=8,
         va="top",
@@ -579,19 +454,12 @@ def hemisphere_maps(
         0.0,
         0.0,
         f"r = sin θo, angle = Δφ"
-        f"{' (mirrored from the folded half)' if result.bins.folded else ' (full circle)'}\n"
+        f"{' (mirrored from the folded half)' if folded else ' (full circle)'}\n"
         "○ mirror direction; black contour |z| = 5; grey: no events",
         fontsize=8,
         va="bottom",
         transform=tax.transAxes,
     )
-    if given is None:
-        at = incidence.label(theta_i, phi_i, incidence.several_azimuths(result.phi_i))
-        fig.suptitle(_title(scene_name, f"hemisphere at {at}"))
-    elif len(shown) == 1:
-        given[2].axis("off")
-        given[5].axis("off")
-    return _output(fig, path)
 
 
 def _mark_z5(ax, z, bins):

@@ -27,6 +27,7 @@ saved JSON (``FULLWAVE_JSON``, written by ``tools/fullwave_study.py``).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -248,13 +249,92 @@ def fullwave_map(
     }
 
 
+@dataclass(frozen=True)
+class MapRow:
+    """One grating of the map (``fullwave.json``: a row of ``triangular``,
+    ``triangular_aluminium_te``, ``sinusoidal`` or ``random``): its geometry, the closed
+    forms' errors against RCW (shares of the reflected power, module docstring) and how RCW
+    was run. What a kind of grating does not have is None."""
+
+    theta_i: float
+    period_over_lambda: float | None = None
+    slope: float | None = None
+    amplitude_over_lambda: float | None = None
+    corr_over_lambda: float | None = None
+    rms_slope: float | None = None
+    rms_slope_nominal: float | None = None
+    sigma_over_lambda: float | None = None
+    kirchhoff_order_error: float | None = None
+    kirchhoff_order_error_s: float | None = None
+    kirchhoff_order_error_p: float | None = None
+    kirchhoff_energy_ratio: float | None = None
+    geometric_group_ratio: float | None = None
+    rayleigh_rice_error: float | None = None
+    rcw_converged: bool = True
+    rcw_order: int | None = None
+    rcw_levels: int | None = None
+    rcw_slices: int | None = None
+    rcw_reflected: float | None = None
+    rcw_seconds: float | None = None
+
+
+@dataclass(frozen=True)
+class MapSettings:
+    """How the map was made: wavelength (µm), material, criterion (a fraction), RCW's
+    tolerance, the sinusoids' period (in λ) and the random profiles' description."""
+
+    wavelength_um: float
+    material: str
+    criterion: float
+    rcw_tol: float
+    sinusoid_period_over_lambda: float
+    random: str = "Gaussian"
+
+
+@dataclass(frozen=True)
+class FullwaveMap:
+    """``fullwave.json`` read as records (``from_json``); the dict ``fullwave_map`` returns
+    and ``load_fullwave`` reads is its JSON form."""
+
+    settings: MapSettings
+    triangular: tuple[MapRow, ...]
+    sinusoidal: tuple[MapRow, ...]
+    random: tuple[MapRow, ...] = ()
+    triangular_aluminium_te: tuple[MapRow, ...] = ()
+    aluminium_tm_study: dict | None = None
+    seconds: float | None = None
+
+    @classmethod
+    def from_json(cls, doc) -> "FullwaveMap":
+        """The records of ``doc`` (a ``fullwave_map`` dict; a FullwaveMap as it is); keys
+        of no field are ignored."""
+        if isinstance(doc, cls):
+            return doc
+        rows = lambda key: tuple(_record(MapRow, r) for r in doc.get(key) or ())  # noqa: E731
+        return cls(
+            settings=_record(MapSettings, doc["settings"]),
+            triangular=rows("triangular"),
+            sinusoidal=rows("sinusoidal"),
+            random=rows("random"),
+            triangular_aluminium_te=rows("triangular_aluminium_te"),
+            aluminium_tm_study=doc.get("aluminium_tm_study"),
+            seconds=doc.get("seconds"),
+        )
+
+
+def _record(cls, d: dict):
+    """``cls`` from the keys of ``d`` that name its fields."""
+    names = {f.name for f in fields(cls)}
+    return cls(**{k: v for k, v in d.items() if k in names})
+
+
 def _first_over(rows, key, value, error, crit) -> dict:
     """{key(row): value(row)} of the first converged row per key whose ``error`` exceeds
     ``crit`` (rows in increasing ``value`` per key); unconverged rows are never counted."""
     out = {}
     for row in rows:
         k = key(row)
-        if row.get("rcw_converged", True) and row[error] > crit and k not in out:
+        if row.rcw_converged and getattr(row, error) > crit and k not in out:
             out[k] = value(row)
     return out
 
@@ -264,38 +344,37 @@ def crossovers(doc: dict) -> dict:
     the realised rms slope per ℓ/λ and θi), a/λ (sinusoids, per θi) and σ/λ (Rayleigh–Rice on
     random profiles) at which the error exceeds the criterion, over the converged rows;
     absent when it never does on the grid."""
-    crit = doc["settings"]["criterion"]
-    by_period = lambda r: (r["period_over_lambda"], r["theta_i"])  # noqa: E731
-    by_corr = lambda r: (r["corr_over_lambda"], r["theta_i"])  # noqa: E731
+    doc = FullwaveMap.from_json(doc)
+    crit = doc.settings.criterion
+    by_period = lambda r: (r.period_over_lambda, r.theta_i)  # noqa: E731
+    by_corr = lambda r: (r.corr_over_lambda, r.theta_i)  # noqa: E731
     err, rr = "kirchhoff_order_error", "rayleigh_rice_error"
-    rnd = doc.get("random", [])
+    rnd = doc.random
     return {
-        "kirchhoff": _first_over(doc["triangular"], by_period, lambda r: r["slope"], err, crit),
+        "kirchhoff": _first_over(doc.triangular, by_period, lambda r: r.slope, err, crit),
         "kirchhoff_aluminium_te": _first_over(
-            doc.get("triangular_aluminium_te", []), by_period, lambda r: r["slope"], err, crit
+            doc.triangular_aluminium_te, by_period, lambda r: r.slope, err, crit
         ),
         **{
             f"kirchhoff_{q}": _first_over(
-                [r for r in doc["triangular"] if f"{err}_{q}" in r],
+                [r for r in doc.triangular if getattr(r, f"{err}_{q}") is not None],
                 by_period,
-                lambda r: r["slope"],
+                lambda r: r.slope,
                 f"{err}_{q}",
                 crit,
             )  # fmt: skip
             for q in ("s", "p")
         },
-        "kirchhoff_random": _first_over(
-            rnd, by_corr, lambda r: round(r["rms_slope"], 3), err, crit
-        ),
+        "kirchhoff_random": _first_over(rnd, by_corr, lambda r: round(r.rms_slope, 3), err, crit),
         "rayleigh_rice": _first_over(
-            doc["sinusoidal"],
-            lambda r: r["theta_i"],
-            lambda r: r["amplitude_over_lambda"],
+            doc.sinusoidal,
+            lambda r: r.theta_i,
+            lambda r: r.amplitude_over_lambda,
             rr,
             crit,
         ),  # fmt: skip
         "rayleigh_rice_random": _first_over(
-            rnd, by_corr, lambda r: round(r["sigma_over_lambda"], 3), rr, crit
+            rnd, by_corr, lambda r: round(r.sigma_over_lambda, 3), rr, crit
         ),
     }
 
@@ -311,19 +390,19 @@ def load_fullwave(path) -> dict:
 
 
 def _cell(value: str, row) -> str:
-    return value if row.get("rcw_converged", True) else f"{value} (RCW not converged)"
+    return value if row.rcw_converged else f"{value} (RCW not converged)"
 
 
 def _triangle_table(rows) -> tuple[list, list, dict]:
     """(slopes, table rows, rows by (Λ/λ, θi, slope)) of Kirchhoff's error on triangles."""
-    periods = sorted({r["period_over_lambda"] for r in rows})
-    thetas = sorted({r["theta_i"] for r in rows})
-    slopes = sorted({r["slope"] for r in rows})
-    by = {(r["period_over_lambda"], r["theta_i"], r["slope"]): r for r in rows}
+    periods = sorted({r.period_over_lambda for r in rows})
+    thetas = sorted({r.theta_i for r in rows})
+    slopes = sorted({r.slope for r in rows})
+    by = {(r.period_over_lambda, r.theta_i, r.slope): r for r in rows}
     table = [
         [f"{p:g}", f"{t:g}°"]
         + [
-            _cell(f"{100 * by[(p, t, a)]['kirchhoff_order_error']:.1f} %", by[(p, t, a)])
+            _cell(f"{100 * by[(p, t, a)].kirchhoff_order_error:.1f} %", by[(p, t, a)])
             for a in slopes
             if (p, t, a) in by
         ]  # fmt: skip
@@ -348,7 +427,7 @@ def _summary(doc: dict, cross: dict, crit: float) -> list[str]:
     """The section's crossovers in one paragraph: per θi, the smallest grid value over the
     periods (ℓ) at which each method departs by more than the criterion."""
 
-    thetas = sorted({r["theta_i"] for r in doc["triangular"]})
+    thetas = sorted({r.theta_i for r in doc.triangular})
 
     def per_theta(c: dict, unit: str = "") -> str:
         by = {}
@@ -372,7 +451,7 @@ def _summary(doc: dict, cross: dict, crit: float) -> list[str]:
     ]
     if cross.get("kirchhoff_aluminium_te"):
         parts.append(f"on aluminium in TE from {per_theta(cross['kirchhoff_aluminium_te'], '°')}")
-    if doc.get("random"):
+    if doc.random:
         parts.append(
             f"on glass Gaussian random profiles from rms slope "
             f"{per_theta(cross['kirchhoff_random'])}"
@@ -380,36 +459,36 @@ def _summary(doc: dict, cross: dict, crit: float) -> list[str]:
     text = "; ".join(parts) + (
         f". First-order Rayleigh–Rice from σ/λ {per_theta(sin)} on sinusoids (σ = a/(2√2))"
     )
-    if doc.get("random"):
+    if doc.random:
         text += f" and {per_theta(cross['rayleigh_rice_random'])} on the random profiles"
     return [text + ".", ""]
 
 
 def _random_lines(doc: dict, cross: dict, crit: float) -> list[str]:
     """The random-profile part of the section (empty without ``random`` rows)."""
-    rnd = doc.get("random", [])
+    rnd = doc.random
     if not rnd:
         return []
-    corrs = sorted({r["corr_over_lambda"] for r in rnd})
-    thetas = sorted({r["theta_i"] for r in rnd})
-    slopes = sorted({r["rms_slope_nominal"] for r in rnd})
-    by = {(r["corr_over_lambda"], r["theta_i"], r["rms_slope_nominal"]): r for r in rnd}
-    realised = {a: by[(corrs[0], thetas[0], a)]["rms_slope"] for a in slopes}
+    corrs = sorted({r.corr_over_lambda for r in rnd})
+    thetas = sorted({r.theta_i for r in rnd})
+    slopes = sorted({r.rms_slope_nominal for r in rnd})
+    by = {(r.corr_over_lambda, r.theta_i, r.rms_slope_nominal): r for r in rnd}
+    realised = {a: by[(corrs[0], thetas[0], a)].rms_slope for a in slopes}
     table = []
     for c in corrs:
         for t in thetas:
             cells = []
             for a in slopes:
                 r = by[(c, t, a)]
-                text = (f"K {_pct(r['kirchhoff_order_error'])}, RR "
-                        f"{_pct(r['rayleigh_rice_error'])} (σ/λ "
-                        f"{r['sigma_over_lambda']:.3f})")  # fmt: skip
+                text = (f"K {_pct(r.kirchhoff_order_error)}, RR "
+                        f"{_pct(r.rayleigh_rice_error)} (σ/λ "
+                        f"{r.sigma_over_lambda:.3f})")  # fmt: skip
                 cells.append(_cell(text, r))
             table.append([f"{c:g}", f"{t:g}°"] + cells)
     keys = [(c, t) for c in corrs for t in thetas]
     name = lambda k: f"ℓ = {k[0]:g} λ, θi {k[1]:g}°"  # noqa: E731
     return [
-        f"Periodic random profiles ({doc['settings'].get('random', 'Gaussian')}; "
+        f"Periodic random profiles ({doc.settings.random}; "
         f"`microsim.wave.random_profiles`, RCW through SCATMECH's `Generic_Grating`; one "
         f"realisation, scaled: the same shape in units of ℓ at every slope), by the rms slope "
         f"of the profile's linear pieces (nominal √2 σ/ℓ: "
@@ -432,18 +511,18 @@ def _random_lines(doc: dict, cross: dict, crit: float) -> list[str]:
 def _polarisation_lines(doc: dict, cross: dict, crit: float) -> list[str]:
     """Glass triangles in s and p separately (empty when the rows lack them): Kirchhoff with
     R_s or R_p at the half-vector angle against RCW's s or p efficiencies."""
-    rows = [r for r in doc["triangular"] if "kirchhoff_order_error_s" in r]
+    rows = [r for r in doc.triangular if r.kirchhoff_order_error_s is not None]
     if not rows:
         return []
-    slopes = sorted({r["slope"] for r in rows})
-    by = {(r["period_over_lambda"], r["theta_i"], r["slope"]): r for r in rows}
-    keys = sorted({(r["period_over_lambda"], r["theta_i"]) for r in rows})
+    slopes = sorted({r.slope for r in rows})
+    by = {(r.period_over_lambda, r.theta_i, r.slope): r for r in rows}
+    keys = sorted({(r.period_over_lambda, r.theta_i) for r in rows})
     table = [
         [f"{p:g}", f"{t:g}°"]
         + [
             _cell(
-                f"{100 * by[(p, t, a)]['kirchhoff_order_error_s']:.1f} / "
-                f"{100 * by[(p, t, a)]['kirchhoff_order_error_p']:.1f} %",
+                f"{100 * by[(p, t, a)].kirchhoff_order_error_s:.1f} / "
+                f"{100 * by[(p, t, a)].kirchhoff_order_error_p:.1f} %",
                 by[(p, t, a)],
             )
             for a in slopes
@@ -470,11 +549,11 @@ def _polarisation_lines(doc: dict, cross: dict, crit: float) -> list[str]:
 
 def _aluminium_lines(doc: dict, cross: dict, crit: float) -> list[str]:
     """The aluminium part of the section: TE rows, and the TM study that keeps it out."""
-    rows = doc.get("triangular_aluminium_te", [])
+    rows = doc.triangular_aluminium_te
     if not rows:
         return []
     slopes, table, _ = _triangle_table(rows)
-    keys = sorted({(r["period_over_lambda"], r["theta_i"]) for r in rows})
+    keys = sorted({(r.period_over_lambda, r.theta_i) for r in rows})
     name = lambda k: f"Λ = {k[0]:g} λ, θi {k[1]:g}°"  # noqa: E731
     lines = [
         "Aluminium, s (TE) polarisation, Kirchhoff with R_s at the half-vector angle against "
@@ -487,13 +566,13 @@ def _aluminium_lines(doc: dict, cross: dict, crit: float) -> list[str]:
         + ".",
         "",
     ]
-    tm = doc.get("aluminium_tm_study")
+    tm = doc.aluminium_tm_study
     if tm:
         steps = ", ".join(f"{o}×{lv}: {'—' if ch is None else f'{ch:.1e}'}"
                           for o, lv, ch in tm["study"])  # fmt: skip
         verdict = "converged" if tm["converged"] else "did **not** converge"
         lines += [
-            f"Aluminium in p (TM) {verdict} to {doc['settings']['rcw_tol']:g} ({tm['grating']}; "
+            f"Aluminium in p (TM) {verdict} to {doc.settings.rcw_tol:g} ({tm['grating']}; "
             f"orders × levels: largest change — {steps}), so aluminium appears in TE only "
             f"and its unpolarised efficiencies are not mapped.",
             "",
@@ -506,23 +585,24 @@ def fullwave_section(
 ) -> list[str]:
     """Index subsection "The rung above Kirchhoff" from a saved map; ``chart`` the file name
     of ``fullwave_chart``'s PNG beside the index, if there is one."""
-    s, crit = doc["settings"], 100 * doc["settings"]["criterion"]
+    doc = FullwaveMap.from_json(doc)
+    s, crit = doc.settings, 100 * doc.settings.criterion
     cross = crossovers(doc)
-    slopes, rows, by = _triangle_table(doc["triangular"])
-    periods = sorted({r["period_over_lambda"] for r in doc["triangular"]})
-    thetas = sorted({r["theta_i"] for r in doc["triangular"]})
+    slopes, rows, by = _triangle_table(doc.triangular)
+    periods = sorted({r.period_over_lambda for r in doc.triangular})
+    thetas = sorted({r.theta_i for r in doc.triangular})
     geo = [
         [f"{p:g}"]
-        + [f"{by[(p, 0.0, a)]['geometric_group_ratio']:.2f}" for a in slopes if (p, 0.0, a) in by]
+        + [f"{by[(p, 0.0, a)].geometric_group_ratio:.2f}" for a in slopes if (p, 0.0, a) in by]
         for p in periods
         if (p, 0.0, slopes[0]) in by
     ]
-    amps = sorted({r["amplitude_over_lambda"] for r in doc["sinusoidal"]})
-    sby = {(r["theta_i"], r["amplitude_over_lambda"]): r for r in doc["sinusoidal"]}
-    sthetas = sorted({r["theta_i"] for r in doc["sinusoidal"]})
+    amps = sorted({r.amplitude_over_lambda for r in doc.sinusoidal})
+    sby = {(r.theta_i, r.amplitude_over_lambda): r for r in doc.sinusoidal}
+    sthetas = sorted({r.theta_i for r in doc.sinusoidal})
     srows = [
         [f"{t:g}°"]
-        + [_cell(f"{100 * sby[(t, a)]['rayleigh_rice_error']:.1f} %", sby[(t, a)]) for a in amps]
+        + [_cell(f"{100 * sby[(t, a)].rayleigh_rice_error:.1f} %", sby[(t, a)]) for a in amps]
         for t in sthetas
     ]
     kcross = _crossing_text(
@@ -538,11 +618,11 @@ def fullwave_section(
         "",
         f"Scalar Kirchhoff and first-order Rayleigh–Rice against rigorous coupled-wave (RCW) "
         f"efficiencies (NIST SCATMECH, converged until no order moves by "
-        f"{s['rcw_tol']:g}) on gratings of {s['material']} (and aluminium in TE) at "
-        f"λ = {s['wavelength_um']:g} µm "
+        f"{s.rcw_tol:g}) on gratings of {s.material} (and aluminium in TE) at "
+        f"λ = {s.wavelength_um:g} µm "
         f"(`microsim.wave.gratings`, `microsim.wave.fullwave`; `{command}`, which needs the "
         f"`fullwave` extra, wrote `{FULLWAVE_JSON}` and the chart in "
-        f"{doc.get('seconds', 0):.0f} s). "
+        f"{doc.seconds or 0:.0f} s). "
         f"Error: the share of the reflected power Kirchhoff puts in the wrong orders, "
         f"Σ|η_K − η_RCW| / Σ η_RCW, over the orders with θo ≤ {THETA_O_MAX:g}° (towards the "
         f"horizon Kirchhoff's obliquity factor diverges). Kirchhoff has no shadowing and no "
@@ -564,7 +644,7 @@ def fullwave_section(
         "",
         md_table(["Λ/λ"] + [f"{a:g}°" for a in slopes], geo),
         "",
-        f"First-order Rayleigh–Rice on sinusoids (Λ = {s['sinusoid_period_over_lambda']:g} λ), "
+        f"First-order Rayleigh–Rice on sinusoids (Λ = {s.sinusoid_period_over_lambda:g} λ), "
         f"its error on the orders ±1 by peak-to-valley amplitude a/λ:",
         "",
         md_table(["θi"] + [f"{a:g}" for a in amps], srows),
@@ -608,9 +688,10 @@ def fullwave_chart(doc: dict):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    crit = doc["settings"]["criterion"]
-    thetas = sorted({r["theta_i"] for r in doc["triangular"]})
-    rnd = doc.get("random", [])
+    doc = FullwaveMap.from_json(doc)
+    crit = doc.settings.criterion
+    thetas = sorted({r.theta_i for r in doc.triangular})
+    rnd = doc.random
     fig = Figure(figsize=(4.0 * len(thetas) + 2.6, 9.0), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     grid = fig.subplots(3, len(thetas), squeeze=False, sharey="row")
@@ -618,39 +699,39 @@ def fullwave_chart(doc: dict):
 
     def series(rows, key, x, colour, marker, label, theta):
         out = []
-        for n, v in enumerate(sorted({r[key] for r in rows})):
-            sel = sorted((r for r in rows if r[key] == v and r["theta_i"] == theta), key=x)
+        for n, v in enumerate(sorted({getattr(r, key) for r in rows})):
+            sel = sorted((r for r in rows if getattr(r, key) == v and r.theta_i == theta), key=x)
             if sel:
                 out.append((label(v), (colour, dash[n % 4], marker), [x(r) for r in sel],
-                            [r["kirchhoff_order_error"] for r in sel],
-                            [r.get("rcw_converged", True) for r in sel]))  # fmt: skip
+                            [r.kirchhoff_order_error for r in sel],
+                            [r.rcw_converged for r in sel]))  # fmt: skip
         return out
 
     for c, t in enumerate(thetas):
-        tri = series(doc["triangular"], "period_over_lambda", lambda r: r["slope"], "tab:blue",
+        tri = series(doc.triangular, "period_over_lambda", lambda r: r.slope, "tab:blue",
                      "o", lambda v: f"glass, Λ = {v:g} λ", t)  # fmt: skip
-        tri += series(doc.get("triangular_aluminium_te", []), "period_over_lambda",
-                      lambda r: r["slope"], "tab:orange", "s",
+        tri += series(doc.triangular_aluminium_te, "period_over_lambda",
+                      lambda r: r.slope, "tab:orange", "s",
                       lambda v: f"aluminium TE, Λ = {v:g} λ", t)  # fmt: skip
         _error_panel(grid[0, c], tri, crit, "facet slope α (°)")
         grid[0, c].set_title(f"θi = {t:g}°\nKirchhoff, triangular gratings")
-        ran = series(rnd, "corr_over_lambda", lambda r: r["rms_slope"], "tab:green", "^",
+        ran = series(rnd, "corr_over_lambda", lambda r: r.rms_slope, "tab:green", "^",
                      lambda v: f"glass, ℓ = {v:g} λ (Λ = 4 ℓ)", t)  # fmt: skip
         _error_panel(grid[1, c], ran, crit, "rms slope of the profile")
         grid[1, c].set_title("Kirchhoff, Gaussian random profiles")
-        sin = sorted((r for r in doc["sinusoidal"] if r["theta_i"] == t),
-                     key=lambda r: r["amplitude_over_lambda"])  # fmt: skip
+        sin = sorted((r for r in doc.sinusoidal if r.theta_i == t),
+                     key=lambda r: r.amplitude_over_lambda)  # fmt: skip
         rr = [("sinusoid, Λ = 4 λ", ("tab:purple", "-", "D"),
-               [r["amplitude_over_lambda"] / (2 * np.sqrt(2)) for r in sin],
-               [r["rayleigh_rice_error"] for r in sin],
-               [r["rcw_converged"] for r in sin])]  # fmt: skip
-        for n, v in enumerate(sorted({r["corr_over_lambda"] for r in rnd})):
-            sel = sorted((r for r in rnd if r["corr_over_lambda"] == v and r["theta_i"] == t),
-                         key=lambda r: r["sigma_over_lambda"])  # fmt: skip
+               [r.amplitude_over_lambda / (2 * np.sqrt(2)) for r in sin],
+               [r.rayleigh_rice_error for r in sin],
+               [r.rcw_converged for r in sin])]  # fmt: skip
+        for n, v in enumerate(sorted({r.corr_over_lambda for r in rnd})):
+            sel = sorted((r for r in rnd if r.corr_over_lambda == v and r.theta_i == t),
+                         key=lambda r: r.sigma_over_lambda)  # fmt: skip
             rr.append((f"random, ℓ = {v:g} λ", ("tab:green", dash[(n + 1) % 4], "^"),
-                       [r["sigma_over_lambda"] for r in sel],
-                       [r["rayleigh_rice_error"] for r in sel],
-                       [r["rcw_converged"] for r in sel]))  # fmt: skip
+                       [r.sigma_over_lambda for r in sel],
+                       [r.rayleigh_rice_error for r in sel],
+                       [r.rcw_converged for r in sel]))  # fmt: skip
         _error_panel(grid[2, c], rr, crit, "rms height σ/λ", log_x=True)
         grid[2, c].set_title("Rayleigh–Rice (first order)")
     for r, what in enumerate(("Kirchhoff", "Kirchhoff", "Rayleigh–Rice")):
@@ -661,7 +742,7 @@ def fullwave_chart(doc: dict):
                            title_fontsize=8)  # fmt: skip
     fig.suptitle(
         "Where scalar Kirchhoff and first-order Rayleigh–Rice hold against rigorous RCW\n"
-        f"(1D gratings, λ = {doc['settings']['wavelength_um']:g} µm; error = share of the "
+        f"(1D gratings, λ = {doc.settings.wavelength_um:g} µm; error = share of the "
         "reflected power in the wrong orders; red rings: RCW not converged)"
     )
     return fig

@@ -77,6 +77,12 @@ import numpy as np
 from microsim import checks as _checks
 from microsim.analysis import incidence
 from microsim.analysis.markdown import percent
+from microsim.analysis.verdict_record import (
+    VERDICT_SCHEMA,
+    Verdict,
+    as_verdicts,
+    validate_verdict,
+)
 from microsim.errors import UsageError
 from microsim.sim.tallies import stderr_dof
 from microsim.stats import (
@@ -92,6 +98,8 @@ from microsim.stats import (
 
 __all__ = [
     "VERDICT_SCHEMA",
+    "Verdict",
+    "as_verdicts",
     "verdict",
     "Measured",
     "Prediction",
@@ -114,115 +122,6 @@ __all__ = [
 
 Z_DEVIATION = 5.0  # |z| beyond which a bin counts as a deviation ...
 REL_DEVIATION = 0.05  # ... if its relative error also exceeds this
-
-_NUM = (int, float)
-_OPT_NUM = (int, float, type(None))
-
-# name → (allowed Python types, description). Floats that cannot be defined (no used bins,
-# dof ≤ 0) are null. ``validate_verdict`` checks keys, types and the simple invariants.
-VERDICT_SCHEMA: dict = {
-    "theta_i": (_NUM, "incidence polar angle θi, degrees"),
-    "phi_i": (_NUM, "incidence azimuth φi in the surface frame, degrees"),
-    "model": ((str,), "model name"),
-    "params": ((dict,), "model parameters (name → JSON value); fitted values for fitted models"),
-    "fitted": ((bool,), "True if the parameters were fitted to this simulation"),
-    "n_params": ((int,), "number of fitted parameters k (0 unless fitted)"),
-    "n_bins": (
-        (int,),
-        "used bins U: ≥ min_events single-bounce events, finite sim/stderr/model, σ > 0",
-    ),
-    "min_events": ((int,), "event threshold for a used bin"),
-    "chi2": (
-        _NUM,
-        "Σ_U z², z = (sim − model)/σ, σ² = stderr² + (model_rtol·model)² (decides only for "
-        "'ray-noise' and 'one-tile'; descriptive for 'realisations')",
-    ),
-    "dof": ((int,), "n_bins − n_params"),
-    "chi2_dof": (_OPT_NUM, "chi2/dof (null if dof ≤ 0)"),
-    "p_value": (_OPT_NUM, "P(χ²_dof ≥ chi2) (null if dof ≤ 0)"),
-    "max_abs_z": (_OPT_NUM, "max_U |z| (null if no used bins)"),
-    "rel_rms": (
-        _OPT_NUM,
-        "energy-weighted relative RMS error over the energy set E (the fewest "
-        "used bins, by decreasing sim·Ω, reaching 90% of Σ_U sim·Ω): "
-        "√(Σ_E sim·Ω·((sim − model)/sim)² / Σ_E sim·Ω)",
-    ),
-    "energy_bins": ((int,), "number of bins in the energy set E"),
-    "alpha": (_NUM, "family significance level α of the run"),
-    "n_tests": ((int,), "number of (incidence, model) verdicts in the family"),
-    "alpha_eff": (_NUM, "Šidák(α, n_tests) = 1 − (1 − α)^(1/n_tests) for this verdict"),
-    "p_threshold": (_NUM, "the χ² test rejects when p_value < Šidák(alpha_eff, 2)"),
-    "z_threshold": (
-        _OPT_NUM,
-        "the max-|z| test rejects when max_abs_z ≥ this two-sided normal "
-        "quantile at Šidák(Šidák(alpha_eff, 2), n_bins)",
-    ),
-    "model_rtol": (_NUM, "relative quadrature error of the model added to σ in quadrature"),
-    "agrees": (
-        (bool,),
-        "conclusive agreement: 'ray-noise'/'one-tile': p_value ≥ p_threshold and max_abs_z < "
-        "z_threshold; 'realisations': energy_p ≥ p_threshold and max_abs_t < t_threshold "
-        "(false if n_bins = 0 or dof ≤ 0): statistically indistinguishable at the run's precision",
-    ),
-    "deviations": (
-        (list,),
-        "[θo_lo, θo_hi] ranges in degrees of bins with |z| > 5 and "
-        "|sim − model|/sim > 0.05 at any Δφ, adjacent θo bins merged",
-    ),
-    "max_rel_dev": (
-        _OPT_NUM,
-        "signed (sim − model)/sim of largest magnitude over E ∪ deviating bins (null if empty; "
-        "negative: the model is too bright there)",
-    ),
-    "worst_bin": ((list, type(None)), "[θo, Δφ] bin centre (degrees) of max_rel_dev"),
-    "reference": (
-        (str,),
-        "what the tests compare against (module docstring): 'ray-noise' (χ² and max-|z|), "
-        "'realisations' (t tests over the R realisations), 'one-tile' (ensemble model, one "
-        "realisation: ray-noise tests, and the excess over the tile's departure from its ensemble "
-        "where that is computable; a rejection it explains is inconclusive)",
-    ),
-    "conclusive": (
-        (bool,),
-        "False only for a 'one-tile' rejection that the tile's departure from its ensemble "
-        "explains (or, where the departure is not computable, any 'one-tile' rejection)",
-    ),
-    "realisations": ((int,), "number of realisations R the verdict used (1 unless 'realisations')"),
-    "tile_departure": (
-        _OPT_NUM,
-        "'one-tile' with a computable departure only (else null): energy-weighted relative RMS "
-        "√(Σ_E sim·Ω·(δ/model)² / Σ_E sim·Ω) of the tile's departure δ from its ensemble",
-    ),
-    "departure_max_abs_z": (
-        _OPT_NUM,
-        "'one-tile' with a computable departure only (else null): max_U of the excess "
-        "max(|sim − model| − δ, 0)/σ; with its χ² it decides between 'deviates' and "
-        "'inconclusive' against the same thresholds",
-    ),
-    "energy_dev": (
-        _OPT_NUM,
-        "relative energy deviation Σ_E Ω (sim − model)/Σ_E Ω model over the model's energy set "
-        "(mean over realisations for 'realisations'); null if the set is empty",
-    ),
-    "energy_dev_se": (
-        _OPT_NUM,
-        "standard error of energy_dev from the realisations' scatter, s_d/√R ('realisations' "
-        "only, else null)",
-    ),
-    "energy_p": (
-        _OPT_NUM,
-        "two-sided Student-t p-value of energy_dev on R − 1 dof ('realisations' only); the "
-        "energy test rejects when energy_p < p_threshold",
-    ),
-    "max_abs_t": (_OPT_NUM, "max_U |t_B| over the realisations ('realisations' only)"),
-    "t_threshold": (
-        _OPT_NUM,
-        "two-sided t_{R−1} quantile at Šidák(p_threshold, n_bins): the shape test rejects when "
-        "max_abs_t ≥ this ('realisations' only)",
-    ),
-}
-
-REFERENCES = ("ray-noise", "realisations", "one-tile")
 
 
 def _merge_ranges(flag_theta: np.ndarray, theta_edges: np.ndarray) -> list[list[float]]:
@@ -306,33 +205,27 @@ class Significance(NamedTuple):
     n_tests: int = 1
 
 
+_TEST_FIELDS = (
+    "energy_dev_se",
+    "energy_p",
+    "max_abs_t",
+    "t_threshold",
+    "tile_departure",
+    "departure_max_abs_z",
+)
+"""The fields of the realisation and tile-departure tests: null for a verdict without them."""
+
+
 def verdict(
     measured: Measured, prediction: Prediction, significance: Significance = Significance()
-) -> dict:
-    """Verdict of one model at one incidence (module docstring; keys in ``VERDICT_SCHEMA``):
+) -> Verdict:
+    """Verdict of one model at one incidence (module docstring; fields in ``VERDICT_SCHEMA``):
     ``prediction`` against ``measured``, tested as ``significance`` says."""
     m, p = measured, prediction
     model_rtol, min_events, alpha, n_tests = significance
     theta_edges, theta_i = m.theta_edges, m.theta_i
     name, params, fitted, n_params, ensemble = p.name, p.params, p.fitted, p.n_params, p.ensemble
-    a = _checked_inputs(
-        {
-            "sim": m.brdf,
-            "stderr": m.stderr,
-            "counts": m.counts,
-            "model": p.values,
-            "omega": m.omega,
-            "theta_edges": theta_edges,
-            "phi_edges": m.phi_edges,
-            "realisations": m.realisations,
-            "departure": p.departure,
-            "dof": m.dof,
-        },
-        ensemble=ensemble,
-        model_rtol=model_rtol,
-        min_events=min_events,
-        n_params=n_params,
-    )
+    a = _inputs_of(m, p, significance)
     alpha_eff = sidak(alpha, n_tests)
     alpha_each = sidak(alpha_eff, 2)
     used, sigma = _used_bins(a, model_rtol, min_events)
@@ -344,15 +237,7 @@ def verdict(
     Em = energy_set(np.where(used, a.mod * a.om, 0.0)).reshape(a.shape)
     energy = np.where(used, a.sim * a.om, 0.0)
     E = energy_set(energy).reshape(a.shape)
-    out = {
-        "energy_dev": _energy_dev(a.sim, a.mod, a.om, Em),
-        "energy_dev_se": None,
-        "energy_p": None,
-        "max_abs_t": None,
-        "t_threshold": None,
-        "tile_departure": None,
-        "departure_max_abs_z": None,
-    }
+    out = {"energy_dev": _energy_dev(a.sim, a.mod, a.om, Em), **dict.fromkeys(_TEST_FIELDS)}
     z_dev = ray["z"]
     if a.F is not None:
         reference, n_real = "realisations", len(a.F)
@@ -374,37 +259,59 @@ def verdict(
     rel = np.where(used, (a.sim - a.mod) / np.where(used, a.sim, 1.0), 0.0)
     dev = used & (np.abs(z_dev) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
     max_rel_dev, worst = _worst_bin(rel, E | dev, theta_edges, a.phi_edges)
-    return {
-        "theta_i": float(theta_i),
-        "phi_i": float(m.phi_i),
-        "model": str(name),
-        "params": _jsonable_params(params),
-        "fitted": bool(fitted),
-        "n_params": int(n_params),
-        "n_bins": n_bins,
-        "min_events": int(min_events),
-        "chi2": ray["chi2"],
-        "dof": int(dof),
-        "chi2_dof": ray["chi2"] / dof if dof > 0 else None,
-        "p_value": ray["p_value"],
-        "max_abs_z": ray["max_abs_z"],
-        "rel_rms": _weighted_rms(energy, rel, E),
-        "energy_bins": int(E.sum()),
-        "alpha": float(alpha),
-        "n_tests": int(n_tests),
-        "alpha_eff": alpha_eff,
-        "p_threshold": alpha_each,
-        "z_threshold": z_thr,
-        "model_rtol": float(model_rtol),
-        "agrees": bool(agrees),
-        "deviations": _merge_ranges(dev.any(axis=1), theta_edges),
-        "max_rel_dev": max_rel_dev,
-        "worst_bin": worst,
-        "reference": reference,
-        "conclusive": bool(conclusive),
-        "realisations": int(n_real),
+    return Verdict(
+        theta_i=float(theta_i),
+        phi_i=float(m.phi_i),
+        model=str(name),
+        params=_jsonable_params(params),
+        fitted=bool(fitted),
+        n_params=int(n_params),
+        n_bins=n_bins,
+        min_events=int(min_events),
+        chi2=ray["chi2"],
+        dof=int(dof),
+        chi2_dof=ray["chi2"] / dof if dof > 0 else None,
+        p_value=ray["p_value"],
+        max_abs_z=ray["max_abs_z"],
+        rel_rms=_weighted_rms(energy, rel, E),
+        energy_bins=int(E.sum()),
+        alpha=float(alpha),
+        n_tests=int(n_tests),
+        alpha_eff=alpha_eff,
+        p_threshold=alpha_each,
+        z_threshold=z_thr,
+        model_rtol=float(model_rtol),
+        agrees=bool(agrees),
+        deviations=_merge_ranges(dev.any(axis=1), theta_edges),
+        max_rel_dev=max_rel_dev,
+        worst_bin=worst,
+        reference=reference,
+        conclusive=bool(conclusive),
+        realisations=int(n_real),
         **out,
-    }
+    )
+
+
+def _inputs_of(m: Measured, p: Prediction, s: Significance) -> "_Inputs":
+    """The arrays of one verdict from its three argument groups, checked (``_checked_inputs``)."""
+    return _checked_inputs(
+        {
+            "sim": m.brdf,
+            "stderr": m.stderr,
+            "counts": m.counts,
+            "model": p.values,
+            "omega": m.omega,
+            "theta_edges": m.theta_edges,
+            "phi_edges": m.phi_edges,
+            "realisations": m.realisations,
+            "departure": p.departure,
+            "dof": m.dof,
+        },
+        ensemble=p.ensemble,
+        model_rtol=s.model_rtol,
+        min_events=s.min_events,
+        n_params=p.n_params,
+    )
 
 
 class _Inputs(NamedTuple):
@@ -638,47 +545,6 @@ def _jsonable_params(params: Mapping | None) -> dict:
     return {str(k): conv(v) for k, v in dict(params or {}).items()}
 
 
-def validate_verdict(d) -> dict:
-    """Check a verdict dict against ``VERDICT_SCHEMA`` (keys, types, invariants); return it.
-    Raises ValueError naming the offending key."""
-    if not isinstance(d, Mapping):
-        raise UsageError(f"verdict must be a dict, got {type(d).__name__}")
-    missing = [k for k in VERDICT_SCHEMA if k not in d]
-    if missing:
-        raise UsageError(f"verdict is missing keys {missing}")
-    extra = [k for k in d if k not in VERDICT_SCHEMA]
-    if extra:
-        raise UsageError(f"verdict has unknown keys {extra}")
-    for key, (types, _) in VERDICT_SCHEMA.items():
-        v = d[key]
-        if isinstance(v, bool) and bool not in types:
-            raise UsageError(f"verdict[{key!r}] must be of type {types}, got bool")
-        if not isinstance(v, types):
-            raise UsageError(f"verdict[{key!r}] must be of type {types}, got {type(v).__name__}")
-        if isinstance(v, float) and not np.isfinite(v):
-            raise UsageError(f"verdict[{key!r}] must be finite or null, got {v!r}")
-    if d["n_bins"] < 0 or d["dof"] != d["n_bins"] - d["n_params"]:
-        raise UsageError("verdict['dof'] must equal n_bins - n_params with n_bins >= 0")
-    if d["p_value"] is not None and not 0.0 <= d["p_value"] <= 1.0:
-        raise UsageError(f"verdict['p_value'] must lie in [0, 1], got {d['p_value']}")
-    for r in d["deviations"]:
-        if not (isinstance(r, list) and len(r) == 2 and 0.0 <= r[0] < r[1] <= 90.0):
-            raise UsageError(f"verdict['deviations'] entries must be [lo, hi] in [0, 90], got {r}")
-    if d["worst_bin"] is not None and len(d["worst_bin"]) != 2:
-        raise UsageError("verdict['worst_bin'] must be [θo, Δφ] or null")
-    if d["reference"] not in REFERENCES:
-        raise UsageError(
-            f"verdict['reference'] must be one of {REFERENCES}, got {d['reference']!r}"
-        )
-    if d["agrees"] and not d["conclusive"]:
-        raise UsageError("verdict['agrees'] can be true only for a conclusive verdict")
-    if not d["conclusive"] and d["reference"] != "one-tile":
-        raise UsageError("only a 'one-tile' verdict can be inconclusive")
-    if (d["realisations"] >= 2) != (d["reference"] == "realisations"):
-        raise UsageError("verdict['realisations'] >= 2 iff reference is 'realisations'")
-    return d
-
-
 def verdicts_for_result(
     result,
     fitted=None,
@@ -691,12 +557,12 @@ def verdicts_for_result(
     """Verdicts for every incidence × model of ``result.models`` (prescribed models) and of
     ``fitted`` (an iterable or name → mapping of ``fits.FitResult``; their ``model_values`` are
     compared and their parameter count reduces the dof). ``params``: optional name → parameter
-    dict for the prescribed models (default ``result.meta.get("model_params", {})``).
+    dict for the prescribed models (default ``result.info.model_params``).
     The family size n_tests = #incidences × #models (prescribed + fitted). Models in
-    ``meta["realisation_models"]`` are judged against ray noise, the others as ensemble models
+    ``info.realisation_models`` are judged against ray noise, the others as ensemble models
     over ``result.brdf_realisations`` (finite rows; "one-tile" without them)."""
     fits = list(fitted.values()) if isinstance(fitted, Mapping) else list(fitted or [])
-    params = dict(result.meta.get("model_params", {}) if params is None else params)
+    params = dict((result.info.model_params or {}) if params is None else params)
     entries = [
         (name, values, params.get(name, {}), False, 0) for name, values in result.models.items()
     ]
@@ -710,7 +576,7 @@ def verdicts_for_result(
     rel_departure = tile_departure(result)
     # models of the realised surfaces themselves (``ts-facets``) differ from the simulation by
     # ray noise only; ensemble models also by the tile-to-tile scatter (``result.stderr``)
-    own = set(result.meta.get("realisation_models", ()))
+    own = set(result.info.realisation_models)
     ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
     ray_dof = stderr_dof(result)  # of ray_err; ``result.stderr`` with realisations: none
     per = getattr(result, "brdf_realisations", None)
@@ -770,11 +636,11 @@ class VerdictList(list):
 def tile_departure(result) -> np.ndarray | None:
     """|r| (T, Θ, Φ), r = m_tile/m_ensemble − 1: the relative departure of the traced tile's
     BRDF from its ensemble's, computed without rays from the two models named by
-    ``meta["tile_departure"]`` ({"tile": facet model, "ensemble": the same closed form with
+    ``info.tile_departure`` ({"tile": facet model, "ensemble": the same closed form with
     the ensemble NDF}, recorded by ``sim.compare.attach_models``); 0 where the ensemble model
     is 0 and the tile's too, ∞ where only the tile's is. None if not recorded, or if the
     result has several realisations (their scatter is measured instead)."""
-    pair = result.meta.get("tile_departure")
+    pair = result.info.tile_departure
     if not pair or getattr(result, "brdf_realisations", None) is not None:
         return None
     if pair["tile"] not in result.models or pair["ensemble"] not in result.models:

@@ -16,7 +16,7 @@ therefore never says a closed form is "wrong": it reports how far the two theori
 over the bins carrying the energy, and the angular region where they agree within a tolerance.
 
 The compared quantity is the *diffuse* (incoherent) bin-averaged BRDF f̄_B of the Kirchhoff
-``Result``: the coherent specular order (``meta["specular_power"]`` in ``meta["specular_bin"]``,
+``Result``: the coherent specular order (``info.specular_power`` in ``info.specular_bin``,
 the Debye–Waller term F·exp(−(2kσ cos θi)²) of a smooth tile) is subtracted, because RR and the
 smooth-surface models describe the scattered part only, and a geometric model has no coherent
 term (which is below exp(−(2kσ cos θi)²) where geometric optics can hold).
@@ -308,12 +308,12 @@ def closed_form(name: str, spectrum: SurfaceSpectrum, wavelength: float, materia
 # --- the verdict -------------------------------------------------------------------------------
 def diffuse_brdf(result, t: int) -> np.ndarray:
     """(Θ, Φ) Kirchhoff bin averages of incidence ``t`` with the coherent specular order
-    (``meta["specular_power"]``) removed from its bin; other results are returned as they are."""
+    (``info.specular_power``) removed from its bin; other results are returned as they are."""
     f = np.array(result.brdf[t], dtype=np.float64)
-    sp = result.meta.get("specular_power")
+    sp = result.info.specular_power
     if sp is not None:
         flat = f.reshape(-1)
-        b = int(result.meta["specular_bin"][t])
+        b = int(result.info.specular_bin[t])
         omega = result.bins.projected_solid_angle().reshape(-1)
         flat[b] = max(flat[b] - float(sp[t]) / omega[b], 0.0)
     return f
@@ -321,13 +321,13 @@ def diffuse_brdf(result, t: int) -> np.ndarray:
 
 def lattice_average(result, t: int, brdf_fn: Callable) -> np.ndarray:
     """(Θ, Φ) bin averages of ``brdf_fn(wi, wo)`` sampled like the Kirchhoff result itself:
-    on the tile's diffraction orders (``wave.order_directions``, tile ``meta["tile"]``), each
+    on the tile's diffraction orders (``wave.order_directions``, tile ``info.tile``), each
     order standing for the projected solid angle λ²/(Lx Ly) it occupies,
         m_B = (1/Ω_B) Σ_{orders in B, not (0, 0)} f(wi, wo_k) λ²/(Lx Ly),
     so that a model equal to the solver's BRDF at the orders gives the solver's bins exactly
     (no lattice-against-continuum quadrature error in bins holding few orders)."""
-    lam = float(result.meta["wavelength"])
-    lx, ly = result.meta["tile"]
+    lam = float(result.info.wavelength)
+    lx, ly = result.info.tile
     th, ph = float(result.theta_i[t]), float(result.phi_i[t])
     m, n, wo = order_directions((lx, ly), lam, th, ph)
     keep = ~((m == 0) & (n == 0))
@@ -397,55 +397,81 @@ def wave_verdict(
         "min_share": float(min_share),
         "theta_o_max": float(theta_o_max),
     }
-    if E.any():
-        fe, me, se_e, oe = f[E], m[E], se[E], omega[E]
-        F, M = np.sum(oe * fe), np.sum(oe * me)
-        d = 1.0 - M / F
-        d_se = math.hypot(M / F**2 * math.sqrt(np.sum((oe * se_e) ** 2)), model_rtol * M / F)
-        e = (fe - me) / fe
-        w = fe * oe
-        r2 = np.sum(w * e**2) / F
-        r = math.sqrt(r2)
-        # ∂r²/∂f_B with w e² = Ω (m − f)²/f
-        g = (oe * (-2.0 * (me - fe) / fe - ((me - fe) / fe) ** 2)) / F - r2 * oe / F
-        r_se = math.sqrt(np.sum((g * se_e) ** 2)) / (2.0 * r) if r > 0 else 0.0
-        r_se = math.hypot(r_se, model_rtol)
-        noise = math.sqrt(np.sum(w * (se_e / fe) ** 2) / F)
-        j = int(np.argmax(np.abs(e)))
-        flat = np.flatnonzero(E)[j]
-        it, ip = divmod(int(flat), bins.n_phi)
-        out.update(
-            energy_dev=float(d),
-            energy_dev_se=float(d_se),
-            rel_error=float(r),
-            rel_error_se=float(r_se),
-            noise_floor=float(noise),
-            worst_bin=[float(bins.theta_centers[it]), float(bins.phi_centers[ip])],
-            max_rel_dev=float(e[j]),
-        )
-    else:
-        out.update(
-            energy_dev=None,
-            energy_dev_se=None,
-            rel_error=None,
-            rel_error_se=None,
-            noise_floor=None,
-            worst_bin=None,
-            max_rel_dev=None,
-        )
+    out.update(_energy_statistics(f, m, se, omega, E, bins, model_rtol))
     tested = good & (energy >= min_share * energy.sum())
     out["tested_bins"] = int(tested.sum())
+    stack = [a.reshape(bins.shape) for a in (f, m, se, omega)]
+    region, outside, rows = _regions(tested.reshape(bins.shape), *stack, bins, tol, z, model_rtol)
+    out["region"] = region
+    out["outside"] = outside
+    out["rows"] = rows
+    r = out["rel_error"]
+    if r is not None and r <= tol + z * out["rel_error_se"]:
+        status = "agrees"
+    elif any(v for v in region.values() if v):
+        status = "agrees-in-region"
+    else:
+        status = "differs"
+    out["status"] = status
+    return validate_wave_verdict(out)
+
+
+_ENERGY_FIELDS = (
+    "energy_dev",
+    "energy_dev_se",
+    "rel_error",
+    "rel_error_se",
+    "noise_floor",
+    "worst_bin",
+    "max_rel_dev",
+)
+
+
+def _energy_statistics(f, m, se, omega, E, bins, model_rtol) -> dict:
+    """The energy deviation, relative error and noise floor over the energy set ``E`` (flat
+    bins), each ± its standard error, and the worst bin; all None for an empty set."""
+    if not E.any():
+        return dict.fromkeys(_ENERGY_FIELDS)
+    fe, me, se_e, oe = f[E], m[E], se[E], omega[E]
+    F, M = np.sum(oe * fe), np.sum(oe * me)
+    d = 1.0 - M / F
+    d_se = math.hypot(M / F**2 * math.sqrt(np.sum((oe * se_e) ** 2)), model_rtol * M / F)
+    e = (fe - me) / fe
+    w = fe * oe
+    r2 = np.sum(w * e**2) / F
+    r = math.sqrt(r2)
+    # ∂r²/∂f_B with w e² = Ω (m − f)²/f
+    g = (oe * (-2.0 * (me - fe) / fe - ((me - fe) / fe) ** 2)) / F - r2 * oe / F
+    r_se = math.sqrt(np.sum((g * se_e) ** 2)) / (2.0 * r) if r > 0 else 0.0
+    r_se = math.hypot(r_se, model_rtol)
+    noise = math.sqrt(np.sum(w * (se_e / fe) ** 2) / F)
+    j = int(np.argmax(np.abs(e)))
+    flat = np.flatnonzero(E)[j]
+    it, ip = divmod(int(flat), bins.n_phi)
+    return dict(
+        energy_dev=float(d),
+        energy_dev_se=float(d_se),
+        rel_error=float(r),
+        rel_error_se=float(r_se),
+        noise_floor=float(noise),
+        worst_bin=[float(bins.theta_centers[it]), float(bins.phi_centers[ip])],
+        max_rel_dev=float(e[j]),
+    )
+
+
+def _regions(tested, f2, m2, se2, om2, bins, tol, z, model_rtol):
+    """Per side (forward: Δφ ≥ 90°) and θo row of the ``tested`` bins (Θ, Φ): the
+    energy-weighted mean deviation ± se and whether it is within ``tol`` + ``z`` se;
+    (agreement ranges per side, range of the deviations outside them, the rows)."""
     lo_all, hi_all = bins.theta_edges[:-1], bins.theta_edges[1:]
     phi_c = bins.phi_centers
     dphi = np.where(phi_c > 180.0, 360.0 - phi_c, phi_c)
     side_of = {"forward": dphi >= 90.0, "backward": dphi < 90.0}
-    T2 = tested.reshape(bins.shape)
-    f2, m2, se2, om2 = (a.reshape(bins.shape) for a in (f, m, se, omega))
     region, outside, rows = {}, {}, []
     for side, cols in side_of.items():
         oks, los, his, bad = [], [], [], []
         for i in range(bins.n_theta):
-            sel = T2[i] & cols
+            sel = tested[i] & cols
             if not sel.any():
                 continue
             w = f2[i, sel] * om2[i, sel]
@@ -467,18 +493,7 @@ def wave_verdict(
                 bad.append(mean)
         region[side] = _merge(oks, los, his) if oks else None
         outside[side] = [float(min(bad)), float(max(bad))] if bad else None
-    out["region"] = region
-    out["outside"] = outside
-    out["rows"] = rows
-    r = out["rel_error"]
-    if r is not None and r <= tol + z * out["rel_error_se"]:
-        status = "agrees"
-    elif any(v for v in region.values() if v):
-        status = "agrees-in-region"
-    else:
-        status = "differs"
-    out["status"] = status
-    return validate_wave_verdict(out)
+    return region, outside, rows
 
 
 def wave_verdicts_for_result(
@@ -494,13 +509,13 @@ def wave_verdicts_for_result(
 ) -> list[dict]:
     """Wave verdicts of ``models`` (names of ``WAVE_MODELS``) plus ``extra`` (name →
     ``brdf_fn(wi, wo)``) against every incidence of a Kirchhoff ``result`` of ``surface`` (its
-    nominal spectrum, ``surface_spectrum``; wavelength from ``result.meta``). Models that do not
+    nominal spectrum, ``surface_spectrum``; wavelength from ``result.info``). Models that do not
     apply to the spectrum (Löw smooth on a Gaussian PSD) are skipped. ``averaging``: "lattice"
     (``lattice_average``, like for like with the solver; model_rtol then only rounding) or
     "continuum" (``sim.predict.bin_average`` to relative ``model_rtol``)."""
     if averaging not in ("lattice", "continuum"):
         raise UsageError(f"averaging must be 'lattice' or 'continuum', got {averaging!r}")
-    lam = float(result.meta["wavelength"])
+    lam = float(result.info.wavelength)
     spec = surface_spectrum(surface)
     fns = {}
     for name in models:

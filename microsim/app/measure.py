@@ -455,7 +455,7 @@ def _acquire(acq: Acquisition, root: Path, doc: MeasureRecord, client, log) -> B
             Precision(acq.target),
         )
         res.save(where)
-        auto = res.meta["auto"]["incidences"][0]
+        auto = res.info.auto["incidences"][0]
         doc.incidences[key] = IncidenceRecord(
             rays=int(auto["rays"]),
             seconds=time.perf_counter() - t0,

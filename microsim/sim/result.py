@@ -5,6 +5,10 @@ A ``Result`` is immutable: a frozen dataclass whose arrays are read-only views, 
 ``json``, ``isinstance`` and ``==`` keep working) and whose ``models`` is a read-only mapping.
 Derivations return new objects (``with_meta``, ``with_models``, ``dataclasses.replace``).
 
+``meta`` is the run description in its JSON form, exactly as ``meta.json`` holds it (it stays
+readable by key for users and older scripts); code reads it typed, through ``Result.info``
+(a ``RunInfo``: one attribute per key, None where the run did not record it).
+
 Arrays are indexed (incidence T, θo bin Θ, Δφ bin Φ); angles in degrees, BRDFs in sr⁻¹.
 ``save(dir)`` writes ``brdf.npz`` and ``meta.json`` atomically (temporary files in the same
 directory, then ``os.replace``); ``Result.load(dir)`` reads them back.
@@ -16,6 +20,7 @@ import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -25,7 +30,7 @@ from microsim.errors import UsageError
 
 from .ledger import LEDGER
 
-__all__ = ["Result", "InPlane", "FrozenDict", "FrozenList"]
+__all__ = ["Result", "RunInfo", "InPlane", "FrozenDict", "FrozenList"]
 
 NPZ, META = "brdf.npz", "meta.json"
 _OPTIONAL = (
@@ -51,7 +56,7 @@ def _ior_text(ior) -> str:
 
 
 def _refuse(self, *args, **kwargs):
-    raise TypeError(f"{type(self).__name__} is read-only (a Result never changes: derive one)")
+    raise TypeError(f"{type(self).__name__} is read-only (derive a new one instead)")
 
 
 class FrozenDict(dict):
@@ -116,6 +121,86 @@ _ARRAY_FIELDS = (
 
 
 @dataclass(frozen=True)
+class RunInfo:
+    """The run description of a ``Result``, typed: one attribute per key of ``meta.json``
+    (``Result.meta`` is its JSON form; ``from_meta`` reads it, nothing writes it back). A key
+    the run did not record reads as the default (None, False or empty); nested records
+    (``surface``, ``material``, ``run``…) stay read-only mappings in their JSON form.
+
+    What every run records: ``surface`` (the generator's record: ``kind``, ``tile_size``,
+    ``triangles``, ``nominal``, ``warnings``…), ``realisations`` (one such record per tile, or
+    Kirchhoff's count; None for one tile), ``material`` (``name``, ``ior`` [n, k]; absent ior:
+    a mirror), ``seed``, ``rays`` per incidence, ``stderr_method``, ``partial``/
+    ``interrupted`` (an interrupted run) and the wall ``seconds``. The ray tracer's settings:
+    ``masking``, ``origins``, ``isotropic``, ``block``, ``bounces`` (1, K or "all") and
+    ``max_bounces``, with ``seconds_scene_build`` and ``rays_per_second``. What ``microsim
+    run`` adds: ``run`` (the scene's settings: ``bins``, ``realisations_auto``…),
+    ``error_budget``, ``realisation_models`` (models built per tile, judged against ray
+    noise), ``model_params``, ``model_warnings``, ``tile_departure`` and
+    ``seconds_analysis``; an adaptive run: ``auto``; a cluster run: ``scheduler_lost``. The
+    Kirchhoff solver's (``method = "kirchhoff"``): ``wavelength``, ``tile``, ``orders``,
+    ``qz_nodes``, ``specular_power``/``specular_bin`` per incidence. ``extra``: every other
+    key, as recorded."""
+
+    surface: Mapping | None = None
+    realisations: Sequence | int | None = None
+    material: Mapping | None = None
+    seed: int | None = None
+    rays: int | None = None
+    stderr_method: str | None = None
+    partial: bool = False
+    interrupted: bool = False
+    seconds: float | None = None
+    method: str | None = None
+    masking: str | None = None
+    origins: str | None = None
+    isotropic: bool = False
+    block: int | None = None
+    bounces: int | str | None = None
+    max_bounces: int | None = None
+    seconds_scene_build: float | None = None
+    rays_per_second: float | None = None
+    run: Mapping | None = None
+    error_budget: Sequence[Mapping] | None = None
+    realisation_models: Sequence[str] = ()
+    model_params: Mapping | None = None
+    model_warnings: Sequence[str] = ()
+    tile_departure: Mapping | None = None
+    seconds_analysis: float | None = None
+    auto: Mapping | None = None
+    scheduler_lost: int | None = None
+    wavelength: float | None = None
+    tile: Sequence[float] | None = None
+    orders: Sequence[int] | None = None
+    qz_nodes: int | None = None
+    specular_power: Sequence[float] | None = None
+    specular_bin: Sequence[int] | None = None
+    extra: Mapping = field(default_factory=lambda: FrozenDict())
+
+    @classmethod
+    def from_meta(cls, meta: Mapping) -> "RunInfo":
+        """The typed reading of ``meta`` (values as they are; keys of no attribute in
+        ``extra``)."""
+        names = {f.name for f in dataclasses.fields(cls)} - {"extra"}
+        known = {k: v for k, v in meta.items() if k in names}
+        rest = FrozenDict({k: v for k, v in meta.items() if k not in names})
+        return cls(**known, extra=rest)
+
+    @property
+    def material_text(self) -> str:
+        """The material in words: its name, else "n = 0.769+6.08i", "ior ?" if unknown."""
+        mat = self.material or {}
+        return mat.get("name") or _ior_text(mat.get("ior"))
+
+    @property
+    def n_realisations(self) -> int:
+        """How many tiles the run traced (the ray tracer's list, Kirchhoff's count; 1 if
+        absent)."""
+        reals = self.realisations
+        return reals if isinstance(reals, int) else len(reals or ()) or 1
+
+
+@dataclass(frozen=True)
 class InPlane:
     """Incidence-plane slice: signed θo in degrees (Δφ = 180°, specular side, positive;
     Δφ = 0°, backward side, negative), ``brdf`` and ``stderr`` (T, 2Θ) in sr⁻¹."""
@@ -133,8 +218,9 @@ class Result:
     ``theta_i``/``phi_i`` (T,) deg; ``bins`` the outgoing grid (``theta_edges``/``phi_edges``
     in deg); ``brdf``/``stderr`` (T, Θ, Φ) sr⁻¹ (stderr combines ray noise and, with several
     realisations, realisation scatter: see ``stderr_ray``/``stderr_realisation``); ``meta``
-    JSON-able run description (read-only); ``models`` name → (T, Θ, Φ) bin-averaged model
-    predictions (read-only; ``compare.attach_models`` returns a Result holding them).
+    JSON-able run description (read-only; ``info`` reads it typed, a ``RunInfo``); ``models``
+    name → (T, Θ, Φ) bin-averaged model predictions (read-only; ``compare.attach_models``
+    returns a Result holding them).
 
     Ray tallies, an optional part (None for a method without rays, e.g. Kirchhoff: see
     ``has_ray_tallies``): ``rays`` (T,) primary rays; ``ledger`` name → (T,) fractions of
@@ -143,18 +229,18 @@ class Result:
     Kirchhoff: diffraction orders); ``sum_w``/``sum_w2`` raw sums of the events' weights
     (Fresnel weights; Kirchhoff: order powers) and of their squares.
 
-    Partial runs (interrupted ``simulate``): ``meta["partial"]`` is True (``is_partial``),
+    Partial runs (interrupted ``simulate``): ``info.partial`` is True (``is_partial``),
     ``rays`` counts the rays of the complete blocks per incidence (0 and NaN estimates for
     incidences not started). ``tallies`` holds the exact running sums needed to resume:
     ``sum_w``/``sum_w2``/``count`` (R, T, Θ·Φ), ``sum_pair`` (R, T, Θ·Φ) Σ_k w_2k w_2k+1 over
     ray pairs (2k, 2k+1) landing in the same bin (the paired-strata standard error, see
-    ``tallies.bin_estimate``; ``meta["stderr_method"]`` says whether ``stderr`` uses it),
+    ``tallies.bin_estimate``; ``info.stderr_method`` says whether ``stderr`` uses it),
     ``sum_block2``/``sum_block_rays`` (R, T, Θ·Φ) Σ_b S_b² and Σ_b m_b S_b over the blocks
     (the "blocks" error of ``isotropic`` runs), ``led_n``/``led_f`` (R, T, 5) per realisation
     and incidence, ``blocks`` (R, T) blocks done and ``rays`` (R, T) rays tallied. Saved as
     ``tally_<name>`` arrays in ``brdf.npz``.
 
-    Scattering orders (``simulate(..., bounces=K)``, K > 1 or "all"; ``meta["bounces"]``):
+    Scattering orders (``simulate(..., bounces=K)``, K > 1 or "all"; ``info.bounces``):
     ``brdf_orders``/``stderr_orders`` (O, T, Θ, Φ) sr⁻¹, the BRDF of the light leaving after
     exactly 1, 2, 3 and ≥ 4 bounces (O = min(K, 4) slots, labels ``bounces.ORDER_NAMES``),
     ``brdf_realisations_orders`` (O, R, T, Θ, Φ) with several realisations. ``brdf``,
@@ -189,6 +275,7 @@ class Result:
     brdf_orders: np.ndarray | None = None
     stderr_orders: np.ndarray | None = None
     brdf_realisations_orders: np.ndarray | None = None
+    info: RunInfo = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         """Store read-only views of the arrays and deep read-only copies of the mappings."""
@@ -199,6 +286,7 @@ class Result:
             put(k, _arrays_of(getattr(self, k)))
         put("models", _arrays_of(self.models))
         put("meta", _freeze(dict(self.meta)))
+        put("info", RunInfo.from_meta(self.meta))
 
     @property
     def has_ray_tallies(self) -> bool:
@@ -215,11 +303,9 @@ class Result:
 
     def __repr__(self) -> str:
         """One line: surface, material, incidences, rays, bins, albedo, models (no arrays)."""
-        surface = (self.meta.get("surface") or {}).get("kind", "?")
-        mat = self.meta.get("material") or {}
-        material = mat.get("name") or _ior_text(mat.get("ior"))
-        reals = self.meta.get("realisations")  # the ray tracer's list, Kirchhoff's count
-        n_real = reals if isinstance(reals, int) else len(reals or ()) or 1
+        surface = (self.info.surface or {}).get("kind", "?")
+        material = self.info.material_text
+        n_real = self.info.n_realisations
         theta = ", ".join(f"{t:g}" for t in self.theta_i)
         rays = (
             "" if self.rays is None else f"rays=[{', '.join(f'{int(r):,}' for r in self.rays)}], "
@@ -238,8 +324,7 @@ class Result:
         under a caption of surface, material and bins — no arrays."""
         from microsim.display import html_table
 
-        surface = (self.meta.get("surface") or {}).get("kind", "?")
-        mat = self.meta.get("material") or {}
+        surface = (self.info.surface or {}).get("kind", "?")
         albedo = self.albedo()
         omega = self.bins.projected_solid_angle()
         names = list(self.models)
@@ -250,7 +335,7 @@ class Result:
             rows.append([f"{th:g}°", rays, f"{albedo[t]:.4g}", *model_albedo])
         caption = (
             f"Result{' (PARTIAL)' if self.is_partial else ''}: {surface}, "
-            f"{mat.get('name') or _ior_text(mat.get('ior'))}, bins "
+            f"{self.info.material_text}, bins "
             f"{self.bins.n_theta} × {self.bins.n_phi} (θo × Δφ); albedo = Σ f̄Ω"
         )
         header = ["θi", "rays", "albedo (simulation)", *[f"albedo ({n})" for n in names]]
@@ -259,7 +344,7 @@ class Result:
     @property
     def is_partial(self) -> bool:
         """True for an interrupted run (resume it with ``simulate(..., resume=result)``)."""
-        return bool(self.meta.get("partial", False))
+        return bool(self.info.partial)
 
     @property
     def theta_edges(self) -> np.ndarray:

@@ -460,18 +460,19 @@ def assert_brdf_agrees(
             Significance(MODEL_RTOL, min_events, alpha, T),
         )
         if rtol is not None:
-            v["tolerance"] = tolerance_check(
+            tolerance = tolerance_check(
                 result.brdf[t],
                 result.stderr[t],
                 result.counts[t],
                 model[t],
                 omega,
                 float(rtol),
-                v["p_threshold"],
-                v["realisations"],
+                v.p_threshold,
+                v.realisations,
                 min_events,
             )
-            ok = v["tolerance"]["passed"]
+            v = {**v, "tolerance": tolerance}
+            ok = tolerance["passed"]
         else:
             ok = verdict_kind(v) != "deviates"
         verdicts.append(v)

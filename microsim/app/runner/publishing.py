@@ -202,12 +202,13 @@ def verdict_document(
 def timings_document(plan: RunPlan, result, speed, speed_theta) -> dict:
     """``timings.json``: the wall times (simulation, analysis, speed runs; the pilot of
     ``realisations = "auto"`` separately)."""
-    auto = result.meta.get("run", {}).get("realisations_auto") or {}
+    info = result.info
+    auto = (info.run or {}).get("realisations_auto") or {}
     return {
-        "simulation_seconds": result.meta.get("seconds"),
+        "simulation_seconds": info.seconds,
         "pilot_seconds": auto.get("pilot_seconds"),
-        "rays_per_second": result.meta.get("rays_per_second"),
-        "analysis_seconds": result.meta["seconds_analysis"],
+        "rays_per_second": info.rays_per_second,
+        "analysis_seconds": info.seconds_analysis,
         "speed": {
             "theta_i": speed_theta,
             "runs": {

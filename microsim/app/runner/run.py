@@ -40,7 +40,7 @@ from ...analysis import report
 from ...analysis.anisotropy import anisotropy_summary
 from ...analysis.budget import error_budget
 from ...analysis.fits import FIT_MODELS, fit_all
-from ...analysis.multiple import multiple_chart
+from ...analysis.multiple_report import multiple_chart
 from ...analysis.pictures import appearance
 from ...analysis.report import albedo_stderr
 from ...analysis.verdicts import verdicts_for_result
@@ -111,7 +111,7 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     dest = plan.partial_dir or plan.out
     hint = plan.resume_hint or f"--resume {dest}"
     prev = plan.previous
-    record = prev.meta.get("run", {}).get("realisations_auto") if prev is not None else None
+    record = (prev.info.run or {}).get("realisations_auto") if prev is not None else None
     from_previous = prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays
     if from_previous:
         result = prev.with_models({})  # finished tallies: only the analysis is left
@@ -140,7 +140,7 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     if plan.auto:
         run["auto"] = tracing.auto_summary(result)
     result = result.with_meta(run=run)
-    if result.is_partial and result.meta.get("scheduler_lost"):
+    if result.is_partial and result.info.scheduler_lost:
         kept = _keep(plan, result, dest, "partial tallies", f"continue with {hint}", False)
         raise EnvironmentFailure(
             f"--scheduler {plan.scheduler}: the Dask scheduler was lost mid-run; {kept}"
@@ -200,7 +200,7 @@ def _keep(plan: RunPlan, result, dest: Path, what: str, how: str, from_previous:
 
 def _trace(plan: RunPlan, prev, progress: bool):
     """The main simulation of ``plan`` with a progress bar, continuing ``prev``'s tallies; a
-    lost scheduler gives its partial result (``meta["scheduler_lost"]``), as an interrupt
+    lost scheduler gives its partial result (``info.scheduler_lost``), as an interrupt
     does."""
     bar = RayProgress(tracing.remaining_rays(plan, prev).sum(), plan.scene.name, enabled=progress)
     theta_i, phi_i = plan.incidences
