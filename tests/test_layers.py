@@ -157,7 +157,7 @@ SIM_LAYERS = [
         "estimator",
         ("streams", "origin_kernels", "fresnel_kernels", "vgroove_kernels", "paths")
         + ("bounce_kernels", "bounces", "tally_kernels", "tallies", "arguments", "cluster")
-        + ("experiment", "estimator", "auto"),
+        + ("experiment", "identity", "estimator", "auto"),
     ),
     ("model predictions on the bins", ("predict", "compare")),
 ]

@@ -58,6 +58,7 @@ import numpy as np
 from microsim.errors import UsageError
 
 from . import bounce_kernels, fresnel_kernels, vgroove_kernels
+from .arguments import check_masking_bounces
 from .bins import Bins
 from .engine import codes, segments
 from .ledger import ORDER_NAMES, TERMINAL
@@ -414,11 +415,8 @@ def choose_bounce_path(
     limit, floor = bounce_limit(bounces)
     if isinstance(profile, VGrooveCaster):
         return AnalyticBouncePath(incidence, profile, limit, floor, nbin)
-    if profile is not None:
-        raise UsageError(
-            "masking='exact' decides only the first masking test exactly; with bounces > 1 "
-            "use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
-        )
+    if profile is not None:  # a VGrooveProfile without its caster: masking="exact"
+        check_masking_bounces("exact", bounces)
     rotate = bool(isotropic and not azimuth)
     inc, table = incidence, None
     if uses_facet_table(inc.tracer, profile, azimuth, rotate, inc.rays):
