@@ -238,22 +238,7 @@ def plan_run(
     seed = scene.simulation.seed if seed is None else seed
     Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)  # validates the grid
     check_wave_plan(scene, effort.scale_for(scene.surface.kind), seed, n_real, theta_i)
-    if resume is not None:
-        resume = Path(resume)
-        if out is not None and Path(out) != resume:
-            raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
-        out, saved, option = resume, resume, "--resume"
-        check_output_path(out, option, scene.path)
-    else:
-        out = Path(out) if out is not None else Path("runs") / scene.name
-        saved, option = (None if tallies is None else Path(tallies)), "saved tallies"
-        check_output_path(out, "--out", scene.path)
-        if out.exists() and not force:
-            raise UsageError(
-                f"{out} already exists; pass --resume {out} to continue it or --force to replace it"
-            )
-        if out.exists():
-            check_replaceable(out)
+    out, saved, option = _output(scene, out, resume, tallies, force)
     previous = None
     if saved is not None:
         previous = _load_saved(saved, option)
@@ -279,6 +264,26 @@ def plan_run(
         resume_hint=resume_hint,
         scheduler=scheduler,
     )
+
+
+def _output(scene, out, resume, tallies, force) -> tuple[Path, Path | None, str]:
+    """(output directory, saved run to continue or None, the option naming it), checked
+    (``plan_run``)."""
+    if resume is not None:
+        resume = Path(resume)
+        if out is not None and Path(out) != resume:
+            raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
+        check_output_path(resume, "--resume", scene.path)
+        return resume, resume, "--resume"
+    out = Path(out) if out is not None else Path("runs") / scene.name
+    check_output_path(out, "--out", scene.path)
+    if out.exists() and not force:
+        raise UsageError(
+            f"{out} already exists; pass --resume {out} to continue it or --force to replace it"
+        )
+    if out.exists():
+        check_replaceable(out)
+    return out, (None if tallies is None else Path(tallies)), "saved tallies"
 
 
 def _check_auto(scene, auto: bool, scheduler, resume) -> None:
