@@ -508,7 +508,10 @@ def _check_resumable(saved: Result, description: RunDescription, where) -> None:
     """The saved run is the run ``description`` asks for (or its first realisations): a
     one-line ``UsageError`` naming the first setting that differs, or that it does not
     record (saved by an older microsim)."""
-    for key, have, now in description.mismatches(saved_identity(saved)):
+    old = saved_identity(saved)
+    for key, have, now in description.mismatches(old):
+        if key in ("theta_i", "phi_i"):  # the traced pairs: name the scene's axis that differs
+            key, have, now = _incidence_axis(old, description.identity())
         name = RESUME_KEYS.get(key, key)
         if key == "surfaces":  # name the recipe's key, and the surface's
             key = next(k for k in now if (have or {}).get(k) != now[k])
@@ -525,3 +528,11 @@ def _check_resumable(saved: Result, description: RunDescription, where) -> None:
             f"--resume {where}: {name} is {have!r} there but {now!r} now; resume with the "
             f"same settings or rerun with --force"
         )
+
+
+def _incidence_axis(old: dict, new: dict) -> tuple[str, list, list]:
+    """(key, saved axis, this run's axis) of the incidence setting that differs between two
+    identities whose (θi, φi) pairs differ: the φi axis if it differs, else the θi axis."""
+    axes = {k: [list(dict.fromkeys(d[k])) for d in (old, new)] for k in ("phi_i", "theta_i")}
+    key = "phi_i" if axes["phi_i"][0] != axes["phi_i"][1] else "theta_i"
+    return key, *axes[key]
