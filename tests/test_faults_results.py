@@ -320,11 +320,11 @@ def test_resume_refuses_damaged_saved_arrays(work, saved, capsys, saved_run, kin
 def test_resume_of_a_run_saved_without_a_setting_asks_for_force(work, saved, capsys):
     """A run whose meta.json lacks a setting the tallies depend on (an older microsim's)."""
     out = copy_run(saved, work, "complete")
-    _edit_meta(out, lambda meta: meta["run"].pop("ior"))
+    _edit_meta(out, lambda meta: meta["run"].pop("surface"))
     before = tree(work)
     status, lines, err = run_cli(capsys, "run", "t.toml", *QUICK, "--resume", out)
     assert status == 2 and len(lines) == 1 and "Traceback" not in err, err
-    assert "material.ior" in lines[0] and "--force" in lines[0] and str(out) in lines[0], err
+    assert "surface" in lines[0] and "--force" in lines[0] and str(out) in lines[0], err
     assert tree(work) == before
 
 

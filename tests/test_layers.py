@@ -159,7 +159,7 @@ SIM_LAYERS = [
         ("streams", "origin_kernels", "fresnel_kernels", "vgroove_kernels", "tracer_cache")
         + ("ray_bins", "masking_rays", "facet_tables", "ray_columns", "events", "paths")
         + ("bounce_kernels", "bounces", "tally_kernels", "tallies", "arguments", "cluster")
-        + ("experiment", "estimator", "auto"),
+        + ("experiment", "identity", "estimator", "auto"),
     ),
     ("model predictions on the bins", ("predict", "compare")),
 ]

@@ -63,7 +63,7 @@ def test_reference_is_traced_once_then_read_and_keyed_by_what_determines_it(surf
     np.testing.assert_array_equal(a.brdf, b.brdf)
     np.testing.assert_array_equal(a.stderr, b.stderr)
     desc = json.loads((tmp_path / key / "key.json").read_text())
-    assert desc["fingerprints"] == [surface.fingerprint()]
+    assert desc["surfaces"]["fingerprints"] == [surface.fingerprint()]
     assert desc["microsim"] == microsim.__version__
     assert desc["rays"] == 20_000 and desc["seed"] == 0 and desc["theta_i"] == [30.0]
     # every ingredient of the key makes a new entry

@@ -9,8 +9,9 @@ or, with the run's three frozen descriptions (``experiment``)::
     res = estimate(Experiment(surface, "aluminium", (0, 30, 60, 80), bins=Bins(45, 37)),
                    Estimator(rays=10**6), Execution(threads=2))
 
-Modules: ``experiment`` (``Experiment``, ``Estimator``, ``Execution``), ``estimator``
-(``estimate``, ``simulate``, ``ray_events``: the driver), ``auto`` (``simulate_auto``,
+Modules: ``experiment`` (``Experiment``, ``Execution``), ``estimator`` (``Estimator``;
+``estimate``, ``simulate``, ``ray_events``: the driver), ``identity`` (``RunDescription``: the
+run's identity for resume, the testing cache and sweep task ids), ``auto`` (``simulate_auto``,
 ``estimate_to_precision``), ``streams`` (random streams, ray origins), ``paths`` (trace paths,
 ledger), ``tallies`` (running sums, bin estimate and standard error), ``schedule`` (threads,
 interrupts), ``arguments`` (argument checks), ``tracer`` and ``engine`` (Embree, the periodic
@@ -23,9 +24,9 @@ walk and its compiled per-ray loops), the estimator's compiled loops (``ray_bins
 from microsim.bins import MAX_BINS, Bins
 
 from .cluster import SchedulerLost
-from .estimator import estimate, ray_events, simulate
+from .estimator import Estimator, estimate, ray_events, simulate
 from .events import Events
-from .experiment import Estimator, Execution, Experiment
+from .experiment import Execution, Experiment
 from .paths import LEDGER
 from .progress import RaysDone
 from .result import InPlane, Result

@@ -30,6 +30,7 @@ __all__ = [
     "check_progress",
     "check_inputs",
     "check_run_options",
+    "check_masking_bounces",
     "thread_count",
     "is_surface",
     "surface_error",
@@ -107,6 +108,16 @@ def check_inputs(theta_i, phi_i, rays, chunk, masking, seed=0):
     return th, ph
 
 
+def check_masking_bounces(masking: str, bounces) -> None:
+    """UsageError for ``masking="exact"`` with ``bounces`` other than 1: it decides only the
+    first masking test exactly."""
+    if masking == "exact" and bounces != 1:
+        raise UsageError(
+            "masking='exact' decides only the first masking test exactly; with bounces "
+            f"{bounces!r} use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
+        )
+
+
 def thread_count(threads) -> int:
     """``threads`` as an int in [1, ``MAX_THREADS``]; None means the machine's CPU count
     (``os.cpu_count()``, capped at ``MAX_THREADS``). Results do not depend on it."""
@@ -157,45 +168,55 @@ def realisation_source(surface, realisations, surface_factory, seeds, seed: int)
       (seeds ``seed``, ``seed`` + 1, …, ``seed`` + n − 1), or with neither (one, ``seed``).
     """
     if surface_factory is None:
-        if seeds is not None:
-            raise UsageError(
-                "seeds are the seeds of surface_factory(seed): give surface_factory "
-                f"too, or leave seeds None (got seeds={short(seeds)})"
-            )
-        if realisations is None:
-            if not is_surface(surface):
-                raise surface_error("surface", surface)
-            return 1, lambda r: surface
-        if _is_count(realisations):
-            raise UsageError(
-                f"realisations={realisations!r} is a count of surfaces built by "
-                "surface_factory(seed): give surface_factory=callable(seed), or a "
-                "list of surfaces as realisations"
-            )
-        if isinstance(realisations, tuple) and len(realisations) == 2 and callable(realisations[0]):
-            raise UsageError(
-                "realisations=(factory, seeds) is written surface_factory=factory, seeds=seeds"
-            )
-        if isinstance(realisations, (str, bytes)) or not hasattr(realisations, "__iter__"):
-            raise UsageError(
-                "realisations must be None, a non-empty list of surfaces or a count "
-                f"(with surface_factory), got {short(realisations)}"
-            )
-        lst = list(realisations)
-        if not lst:
-            raise UsageError(
-                "realisations must be a non-empty list of surfaces (or a count, with "
-                "surface_factory)"
-            )
-        for k, s in enumerate(lst):
-            if not is_surface(s):
-                raise surface_error(f"realisations[{k}]", s)
-        if surface is not None and surface is not lst[0]:
-            raise UsageError(
-                "surface must be None (or realisations[0]) when realisations lists "
-                "the surfaces to trace"
-            )
-        return len(lst), lambda r: lst[r]
+        return _listed_realisations(surface, realisations, seeds)
+    return _factory_realisations(surface, realisations, surface_factory, seeds, seed)
+
+
+def _listed_realisations(surface, realisations, seeds):
+    """(count, getter) of ``surface`` alone or of the list ``realisations``."""
+    if seeds is not None:
+        raise UsageError(
+            "seeds are the seeds of surface_factory(seed): give surface_factory "
+            f"too, or leave seeds None (got seeds={short(seeds)})"
+        )
+    if realisations is None:
+        if not is_surface(surface):
+            raise surface_error("surface", surface)
+        return 1, lambda r: surface
+    if _is_count(realisations):
+        raise UsageError(
+            f"realisations={realisations!r} is a count of surfaces built by "
+            "surface_factory(seed): give surface_factory=callable(seed), or a "
+            "list of surfaces as realisations"
+        )
+    if isinstance(realisations, tuple) and len(realisations) == 2 and callable(realisations[0]):
+        raise UsageError(
+            "realisations=(factory, seeds) is written surface_factory=factory, seeds=seeds"
+        )
+    if isinstance(realisations, (str, bytes)) or not hasattr(realisations, "__iter__"):
+        raise UsageError(
+            "realisations must be None, a non-empty list of surfaces or a count "
+            f"(with surface_factory), got {short(realisations)}"
+        )
+    lst = list(realisations)
+    if not lst:
+        raise UsageError(
+            "realisations must be a non-empty list of surfaces (or a count, with surface_factory)"
+        )
+    for k, s in enumerate(lst):
+        if not is_surface(s):
+            raise surface_error(f"realisations[{k}]", s)
+    if surface is not None and surface is not lst[0]:
+        raise UsageError(
+            "surface must be None (or realisations[0]) when realisations lists "
+            "the surfaces to trace"
+        )
+    return len(lst), lambda r: lst[r]
+
+
+def _factory_realisations(surface, realisations, surface_factory, seeds, seed: int):
+    """(count, getter) of the surfaces ``surface_factory`` builds from ``seeds`` (or from
+    ``seed``, ``seed`` + 1, …)."""
     if not callable(surface_factory):
         raise UsageError(
             f"surface_factory must be a callable(seed) -> Surface, got {short(surface_factory)}"

@@ -39,8 +39,8 @@ from .arguments import (
     MAX_RAYS,
     check_progress,
 )
-from .estimator import estimate
-from .experiment import Estimator, Execution, Experiment
+from .estimator import Estimator, estimate
+from .experiment import Execution, Experiment
 from .result import Result
 from .streams import BLOCK
 from .tallies import Tally, tallies_from_arrays, tally_result

@@ -59,6 +59,7 @@ from microsim.bins import Bins
 from microsim.errors import UsageError
 
 from . import bounce_kernels, fresnel_kernels, vgroove_kernels
+from .arguments import check_masking_bounces
 from .engine import codes, segments
 from .facet_tables import FacetTable, facet_table, uses_facet_table
 from .ledger import ORDER_NAMES, TERMINAL
@@ -433,11 +434,8 @@ def choose_bounce_path(
     chain = ChainLimits(int(limit), float(floor), int(nbin))
     if casts_primaries(profile):
         return AnalyticBouncePath(incidence, profile, chain)
-    if profile is not None:
-        raise UsageError(
-            "masking='exact' decides only the first masking test exactly; with bounces > 1 "
-            "use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
-        )
+    if profile is not None:  # a V-groove profile without its caster: masking="exact"
+        check_masking_bounces("exact", bounces)
     rotate = bool(isotropic and not azimuth)
     inc, table = incidence, None
     if uses_facet_table(inc.tracer, profile, azimuth, rotate, inc.rays):

@@ -1,4 +1,5 @@
-"""``simulate``: the ray-traced single-bounce BRDF (Mikkelsen 2009, eq. 9), and ``ray_events``.
+"""The estimator: its frozen description ``Estimator`` and ``estimate``, which runs it — the
+ray-traced BRDF of Mikkelsen 2009, eq. 9 (``simulate``, its keyword form) — and ``ray_events``.
 
 Parallel primary rays from wi fall on the periodic surface from origins spread uniformly over
 one tile; each is followed to its first hit, Fresnel weight, mirror direction and masking
@@ -14,8 +15,9 @@ into modules with one job each:
 - ``tallies``  running sums per block, the bin estimate and its standard error, the Result;
 - ``schedule`` the thread pool, lazy in-order scheduling, deferred SIGINT;
 - ``arguments`` checking every argument before any work;
-- this module: the driver (``simulate``: memory check, realisations, resume, interrupt,
-  progress, run description) and ``ray_events`` (per-ray outcomes for diagnostics).
+- ``identity``  the run's identity (``RunDescription``), which a resumed run must share;
+- this module: ``Estimator`` and the driver (``estimate``: memory check, realisations,
+  resume, interrupt, progress, run meta) and ``ray_events`` (per-ray outcomes for diagnostics).
 
 Reproducibility: the rays of (realisation r, incidence i) are cut into fixed blocks of
 ``BLOCK`` rays, each drawing from its own slot of the stream (seed, r, i) and tallied on its
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import platform
 import time
+from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from typing import Callable, NamedTuple
 
@@ -36,7 +39,7 @@ import numpy as np
 from microsim.analytic.fresnel import resolve_material
 from microsim.bins import Bins
 from microsim.checkpoints import checkpoint
-from microsim.checks import check_memory
+from microsim.checks import check_memory, integer
 from microsim.errors import UsageError
 from microsim.vectors import spherical_deg
 
@@ -44,14 +47,17 @@ from .arguments import (
     MAX_CHUNK,
     MAX_RAYS,
     MAX_THREADS,
+    check_choice,
     check_inputs,
+    check_masking_bounces,
     is_surface,
     surface_error,
 )
 from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
 from .cluster import ClusterPool, RemoteSurface, SchedulerLost, tracer_info
 from .events import Events, trace_events
-from .experiment import Estimator, Execution, Experiment
+from .experiment import Execution, Experiment, normalise
+from .identity import RunDescription, saved_identity
 from .paths import LEDGER, MASKING, Incidence
 from .progress import RaysDone
 from .result import Result
@@ -61,6 +67,8 @@ from .tallies import TALLY_NAMES, Tally, simulation_result, tallies_from_arrays
 from .tracer_cache import tracer_for
 
 __all__ = [
+    "Estimator",
+    "estimate",
     "simulate",
     "ray_events",
     "Events",
@@ -83,6 +91,45 @@ BIN_BYTES_INCIDENCE = 96
 float64 arrays)."""
 BIN_BYTES_THREAD = 32
 """Bytes per bin per running thread task: its scratch sums and touched flags."""
+
+
+@dataclass(frozen=True)
+class Estimator:
+    """The estimator of one run: ``rays`` primary rays per incidence in [1, ``MAX_RAYS``]
+    (spread over the realisations); ``seed`` ≥ 0, the random stream (results are a function
+    of it alone); ``masking``: "traced" (Embree, the reference), "exact" or "analytic"
+    (V-groove surfaces only, ``paths``); ``origins``: "stratified" or "independent"
+    (``streams.chunk_origins``); ``isotropic``: rotate each block's incidence azimuth by its
+    own uniform angle (statistically isotropic surfaces only, ``paths.RotatedIncidencePath``),
+    each block a sweep of the whole tile by itself, so the blocks are independent replicates
+    and the standard error comes from their scatter (``stderr_method``).
+    """
+
+    rays: int = 1_000_000
+    seed: int = 0
+    masking: str = "traced"
+    origins: str = "stratified"
+    isotropic: bool = False
+
+    def __post_init__(self):
+        normalise(
+            self, "rays", integer("rays", self.rays, 1, MAX_RAYS, " (primary rays per incidence)")
+        )
+        normalise(self, "seed", integer("seed", self.seed, 0, None, " (the random stream)"))
+        check_choice("masking", self.masking, MASKING)
+        check_choice("origins", self.origins, ORIGINS)
+        if not isinstance(self.isotropic, (bool, np.bool_)):
+            raise UsageError(f"isotropic must be True or False, got {self.isotropic!r}")
+        normalise(self, "isotropic", bool(self.isotropic))
+
+    @property
+    def stderr_method(self) -> str:
+        """One of ``tallies.STDERR_METHODS``: "blocks" for ``isotropic`` runs (every block an
+        independent replicate: its own sweep of the tile, its own incidence azimuth), else
+        "pairs" (paired strata) for stratified origins, "per-ray" for independent ones."""
+        if self.isotropic:
+            return "blocks"
+        return "pairs" if self.origins == "stratified" else "per-ray"
 
 
 def simulate(
@@ -208,7 +255,7 @@ def simulate(
 class _Plan(NamedTuple):
     """What ``estimate`` derives from its descriptions before any work: realisations (count,
     lazy getter, rays of each), bins and tally slots, blocks per realisation, blocks per
-    thread task, and the configuration a resumed run must share."""
+    thread task, and the description a resumed run must share."""
 
     n_real: int
     get_surface: Callable[[int], object]
@@ -217,7 +264,7 @@ class _Plan(NamedTuple):
     slots: int | None
     nblk: np.ndarray
     chunk_blocks: int
-    config: dict
+    description: RunDescription
     material: dict
 
 
@@ -246,11 +293,7 @@ def estimate(
     holding the partial Result to resume."""
     _check_descriptions(experiment=experiment, estimator=estimator, execution=execution)
     ex, est, run = experiment, estimator, execution
-    if ex.bounces != 1 and est.masking == "exact":
-        raise UsageError(
-            "masking='exact' decides only the first masking test exactly; with bounces "
-            f"{ex.bounces!r} use masking='analytic' (the exact V-groove bounce chain) or 'traced'"
-        )
+    check_masking_bounces(est.masking, ex.bounces)
     plan = _plan(ex, est, run)
     state = _start(plan, ex, resume)
     done_before = state.done.copy()
@@ -337,22 +380,12 @@ def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
         f"{n_real} realisations",
     )
     material = _json_material(ex.material, ex.ior)
-    config = _run_config(
-        ex.theta_i,
-        ex.phi_i,
-        ex.bins,
-        est.seed,
-        est.rays,
-        est.masking,
-        est.origins,
-        material,
-        n_real,
-        est.isotropic,
-        ex.bounces,
-    )
+    description = RunDescription.of(ex, est, n_real)
     nblk = np.array([-(-n // BLOCK) for n in per_real], dtype=np.int64)
     chunk_blocks = max(1, int(round(run.chunk / BLOCK)))
-    return _Plan(n_real, get_surface, per_real, nbin, slots, nblk, chunk_blocks, config, material)
+    return _Plan(
+        n_real, get_surface, per_real, nbin, slots, nblk, chunk_blocks, description, material
+    )
 
 
 def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
@@ -362,7 +395,7 @@ def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
     if resume is None:
         tallies, done, metas = [], np.zeros((0, n_th), dtype=np.int64), []
     else:
-        tallies, done, metas = _resume_state(resume, plan.config, plan.n_real, n_th)
+        tallies, done, metas = _resume_state(resume, plan.description, n_th)
     extra = plan.n_real - len(tallies)  # realisations not started
     tallies += [[Tally.empty(nslot, classes) for _ in range(n_th)] for _ in range(extra)]
     done = np.vstack([done, np.zeros((extra, n_th), dtype=np.int64)])
@@ -582,55 +615,18 @@ def _versions() -> dict:
     return {"numpy": np.__version__, "python": platform.python_version(), "embreex": embree}
 
 
-def _run_config(
-    th, ph, bins, seed, rays, masking, origins, material, n_real, isotropic, bounces=1
-) -> dict:
-    """What a resumed run must share with the partial one (JSON-able, compared key by key)."""
-    return {
-        "theta_i": [float(t) for t in th],
-        "phi_i": [float(p) for p in ph],
-        "bins": bins.to_dict(),
-        "seed": seed,
-        "rays": rays,
-        "masking": masking,
-        "origins": origins,
-        "material": material["ior"],  # the index; a name given or not is the same material
-        "realisations": n_real,
-        "isotropic": isotropic,
-        "bounces": bounces,
-        "block": BLOCK,
-        "design": DESIGN,
-    }
-
-
-def _resume_state(resume, config, n_real, n_th):
-    """Running sums, blocks done (R, T) and surface metas restored from a partial ``Result``."""
+def _resume_state(resume, description: RunDescription, n_th: int):
+    """Running sums, blocks done (R, T) and surface metas restored from a partial ``Result``
+    of the run ``description`` (its identity read by ``identity.saved_identity``)."""
     if not isinstance(resume, Result):
         raise UsageError(f"resume must be a microsim.sim.Result (a partial run), got {resume!r}")
     if resume.tallies is None:
         raise UsageError("resume holds no raw tallies (Result.tallies): it cannot be continued")
-    old = _run_config(
-        resume.theta_i,
-        resume.phi_i,
-        resume.bins,
-        resume.meta.get("seed"),
-        resume.meta.get("rays"),
-        resume.meta.get("masking"),
-        resume.meta.get("origins", "stratified"),
-        resume.meta.get("material") or {"ior": None},
-        int(resume.tallies["blocks"].shape[0]),
-        bool(resume.meta.get("isotropic", False)),
-        resume.meta.get("bounces", 1),
-    )
-    old["block"] = resume.meta.get("block")
-    old["design"] = resume.meta.get("design", 1)
-    diff = [k for k in config if old[k] != config[k]]
-    if set(diff) <= {"rays", "realisations"} and _is_prefix(old, config):
-        diff = []  # the first realisations of this run, each with this run's rays
+    diff = description.mismatches(saved_identity(resume))
     if diff:
         raise UsageError(
             "resume does not match this run's configuration: "
-            + "; ".join(f"{k} (partial run: {old[k]!r}, now: {config[k]!r})" for k in diff)
+            + "; ".join(f"{k} (partial run: {old!r}, now: {now!r})" for k, old, now in diff)
         )
     t = resume.tallies
     if any(name not in t for name in TALLY_NAMES):
@@ -639,17 +635,10 @@ def _resume_state(resume, config, n_real, n_th):
             f"resume holds no {', '.join(missing)} tallies (Result.tallies, written by an "
             "older microsim): it cannot be continued"
         )
-    k = old["realisations"]
+    k = int(t["blocks"].shape[0])
     tallies = tallies_from_arrays(t, k, n_th)
     metas = resume.meta.get("realisations") if k > 1 else [resume.meta.get("surface")]
     return tallies, np.array(t["blocks"], dtype=np.int64), list(metas or [None] * k)
-
-
-def _is_prefix(old: dict, new: dict) -> bool:
-    """Whether run configuration ``old`` (k realisations) is the first k realisations of
-    ``new``: fewer realisations, every one with exactly the same rays (no remainder)."""
-    (k, n), (a, b) = (old["realisations"], new["realisations"]), (old["rays"], new["rays"])
-    return k < n and a % k == 0 and b % n == 0 and a // k == b // n
 
 
 def _check_same_surface(old: dict | None, new: dict, r: int) -> None:

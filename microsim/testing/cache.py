@@ -1,14 +1,13 @@
 """Reference simulations for agreement checks, traced once and cached on disk.
 
 A *reference* is the ``Result`` of ``simulate`` (or ``simulate_auto`` for ``rays="auto"``) on
-an explicit surface. It is identified by a key of everything that determines it:
-
-    the surface fingerprint(s) (``Surface.fingerprint``: the mesh; one per realisation),
-    whether the estimator averages the groove azimuth, the material (η = n + ik or mirror),
-    the incidences θi (degrees, φi = 0), the bins, the seed, the ray target (an integer count
-    per incidence, or "auto" with its target relative error and ray cap), the microsim
-    version (``microsim.__version__``), the rays' design (``sim.streams.DESIGN``) and the
-    standard error's rule (``sim.tallies.STDERR_RULE``).
+an explicit surface. It is identified by a key of everything that determines it: the run's
+identity (``microsim.sim.identity.RunDescription``: the surface fingerprint(s) —
+``Surface.fingerprint``, the mesh, one per realisation — and whether the estimator averages
+the groove azimuth, the material, the incidences, the bins, the seed, the ray target (an
+integer count per incidence, or "auto" with its target relative error and ray cap), the
+rays' design), the microsim version (``microsim.__version__``) and the standard error's rule
+(``sim.tallies.STDERR_RULE``).
 
 The key is the SHA-256 of that description as canonical JSON; the entry is the directory
 ``CACHE/<first 24 hex digits>/`` holding ``brdf.npz`` and ``meta.json`` (``Result.save``) and
@@ -51,8 +50,8 @@ from microsim.app.scene import Scene, incidence_pairs, load_scene
 from microsim.errors import UsageError
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
+from microsim.sim.identity import RunDescription, canonical_json
 from microsim.sim.result import META, NPZ
-from microsim.sim.streams import DESIGN
 from microsim.sim.tallies import STDERR_RULE
 
 __all__ = [
@@ -160,32 +159,39 @@ class Reference:
             raise UsageError("surface_or_scene: the scene's surfaces changed while in use")
         return built
 
-    def description(self) -> dict:
-        """The cache key's content (module docstring), JSON values only."""
-        m = self.material
-        mat = None if m is None else [float(np.real(m)), float(np.imag(m))]
+    def run(self) -> RunDescription:
+        """The run the reference traces (``microsim.sim.identity``): its surfaces by their
+        fingerprints and azimuth-average flags; ``rays`` a count or the "auto" rule."""
         rays = (
             {"auto": {"target": self.target, "max_rays": self.max_rays, "first": AUTO_FIRST}}
             if self.rays == "auto"
             else int(self.rays)
         )
+        return RunDescription(
+            material=self.material,
+            theta_i=self.theta_i,
+            phi_i=self.phi_i,
+            bins=self.bins,
+            rays=rays,
+            seed=self.seed,
+            surfaces={
+                "fingerprints": list(self.fingerprints),
+                "azimuth_average": list(self.azimuth_average),
+            },
+            realisations=len(self.fingerprints),
+        )
+
+    def description(self) -> dict:
+        """The cache key's content (module docstring), JSON values only: the run's identity,
+        the microsim version and the standard error's rule."""
         return {
-            "fingerprints": list(self.fingerprints),
-            "azimuth_average": list(self.azimuth_average),
-            "material": mat,
-            "theta_i": [float(t) for t in self.theta_i],
-            # all at φi = 0 as the key had it before azimuths were given
-            "phi_i": [float(p) for p in self.phi_i] if any(self.phi_i) else 0.0,
-            "bins": self.bins.to_dict(),
-            "seed": int(self.seed),
-            "rays": rays,
+            **self.run().identity(),
             "microsim": microsim.__version__,
-            "design": DESIGN,
             "stderr_rule": STDERR_RULE,
         }
 
     def key(self) -> str:
-        text = json.dumps(self.description(), sort_keys=True, separators=(",", ":"))
+        text = canonical_json(self.description())
         return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -261,66 +267,118 @@ def resolve_reference(
     more, is not run here. For a Surface, ``material`` (name, n, n + ik, None =
     mirror) and ``theta_i`` are required, ``phi_i`` defaults to 0 and ``bins`` to ``Bins()``.
     ``phi_i`` given: a scalar or one azimuth per θi (degrees, the surface frame)."""
-    scene = None
     if realisations is not None and (
         isinstance(realisations, bool)
         or not isinstance(realisations, (int, np.integer))
         or not 1 <= realisations <= 1000
     ):
         raise UsageError(f"realisations must be an integer in [1, 1000], got {realisations!r}")
-    if isinstance(surface_or_scene, (str, os.PathLike)):
-        scene = load_scene(find_scene(surface_or_scene))
-    elif isinstance(surface_or_scene, Scene):
+    if isinstance(surface_or_scene, (str, os.PathLike, Scene)):
         scene = surface_or_scene
-    if scene is not None:
-        R, s0 = scene.simulation.realisations, scene.simulation.seed
-        if realisations is not None:
-            R = int(realisations)
-        elif not isinstance(R, (int, np.integer)):  # "auto"
-            R = DEFAULT_REALISATIONS
-        build = _scene_builder(scene, int(s0), int(R))
-        fingerprints, azimuth = _scene_identity(scene, int(s0), int(R), build)
-        label = f"{scene.path or scene.name}"
-        default_bins = Bins(
-            scene.simulation.theta_bins, scene.simulation.phi_bins, folded=not scene.full_azimuth
-        )
-        if isinstance(material, str) and material == "scene":
-            material = scene.ior
-        if theta_i is None:
-            theta_i = scene.simulation.theta_i
-        if phi_i is None:
-            theta_i, phi_i = incidence_pairs(_theta(theta_i), scene.simulation.phi_i)
+        if not isinstance(scene, Scene):
+            scene = load_scene(find_scene(surface_or_scene))
+        source = _scene_source(scene, realisations, material, theta_i, phi_i)
     else:
-        if realisations is not None:
-            raise UsageError(
-                "realisations applies to a scene; for Surfaces pass the list of realisations"
-            )
-        if _is_surface(surface_or_scene):
-            surfaces = (surface_or_scene,)
-        elif (
-            isinstance(surface_or_scene, (list, tuple))
-            and surface_or_scene
-            and all(_is_surface(s) for s in surface_or_scene)
-        ):
-            surfaces = tuple(surface_or_scene)
-        else:
-            raise UsageError(
-                "surface_or_scene must be a Scene, a scene file or catalogue name, a Surface "
-                f"or a sequence of Surfaces (realisations), got {surface_or_scene!r}"
-            )
-        label = repr(surfaces[0]) + (f" (+{len(surfaces) - 1} realisations)" * (len(surfaces) > 1))
-        fingerprints = tuple(s.fingerprint() for s in surfaces)
-        azimuth = tuple(bool(s.azimuth_average) for s in surfaces)
-        build = lambda: surfaces  # noqa: E731
-        default_bins = Bins()
-        if isinstance(material, str) and material == "scene":
-            raise UsageError(
-                "material must be given for a Surface (a name such as 'aluminium', n, n + ik, "
-                "or None for a mirror); 'scene' takes it from a scene"
-            )
-        if theta_i is None:
-            raise UsageError("theta_i must be given for a Surface (degrees, each in [0, 90))")
-    eta = resolve_material(material)
+        source = _surfaces_source(surface_or_scene, realisations, material, theta_i, phi_i)
+    eta = resolve_material(source.material)
+    _check_budget(seed, rays, target, max_rays)
+    theta = _theta(source.theta_i)
+    return Reference(
+        fingerprints=source.fingerprints,
+        azimuth_average=source.azimuth_average,
+        build=source.build,
+        material=eta,
+        theta_i=theta,
+        phi_i=_phi(0.0 if source.phi_i is None else source.phi_i, len(theta)),
+        bins=_bins(bins, source.bins),
+        seed=int(seed),
+        rays=rays if isinstance(rays, str) else int(rays),
+        target=float(target),
+        max_rays=int(max_rays),
+        label=source.label,
+    )
+
+
+@dataclass(frozen=True)
+class _Source:
+    """What a scene or explicit surfaces give a reference: the surfaces (fingerprints,
+    azimuth-average flags, builder), the material, incidences and default bins, a label."""
+
+    fingerprints: tuple
+    azimuth_average: tuple
+    build: Callable[[], tuple]
+    material: object
+    theta_i: object
+    phi_i: object
+    bins: Bins
+    label: str
+
+
+def _scene_source(scene: Scene, realisations, material, theta_i, phi_i) -> _Source:
+    """A scene's realisations (its seeds, ``realisations`` or its count, "auto":
+    ``DEFAULT_REALISATIONS``) and its defaults for the other arguments."""
+    R, s0 = scene.simulation.realisations, int(scene.simulation.seed)
+    if realisations is not None:
+        R = int(realisations)
+    elif not isinstance(R, (int, np.integer)):  # "auto"
+        R = DEFAULT_REALISATIONS
+    build = _scene_builder(scene, s0, int(R))
+    fingerprints, azimuth = _scene_identity(scene, s0, int(R), build)
+    if isinstance(material, str) and material == "scene":
+        material = scene.ior
+    if theta_i is None:
+        theta_i = scene.simulation.theta_i
+    if phi_i is None:
+        theta_i, phi_i = incidence_pairs(_theta(theta_i), scene.simulation.phi_i)
+    bins = Bins(
+        scene.simulation.theta_bins, scene.simulation.phi_bins, folded=not scene.full_azimuth
+    )
+    label = f"{scene.path or scene.name}"
+    return _Source(fingerprints, azimuth, build, material, theta_i, phi_i, bins, label)
+
+
+def _surfaces_source(surface_or_surfaces, realisations, material, theta_i, phi_i) -> _Source:
+    """A Surface or a sequence of them (realisations); ``material`` and ``theta_i`` must be
+    given."""
+    if realisations is not None:
+        raise UsageError(
+            "realisations applies to a scene; for Surfaces pass the list of realisations"
+        )
+    if _is_surface(surface_or_surfaces):
+        surfaces = (surface_or_surfaces,)
+    elif (
+        isinstance(surface_or_surfaces, (list, tuple))
+        and surface_or_surfaces
+        and all(_is_surface(s) for s in surface_or_surfaces)
+    ):
+        surfaces = tuple(surface_or_surfaces)
+    else:
+        raise UsageError(
+            "surface_or_scene must be a Scene, a scene file or catalogue name, a Surface "
+            f"or a sequence of Surfaces (realisations), got {surface_or_surfaces!r}"
+        )
+    label = repr(surfaces[0]) + (f" (+{len(surfaces) - 1} realisations)" * (len(surfaces) > 1))
+    if isinstance(material, str) and material == "scene":
+        raise UsageError(
+            "material must be given for a Surface (a name such as 'aluminium', n, n + ik, "
+            "or None for a mirror); 'scene' takes it from a scene"
+        )
+    if theta_i is None:
+        raise UsageError("theta_i must be given for a Surface (degrees, each in [0, 90))")
+    return _Source(
+        tuple(s.fingerprint() for s in surfaces),
+        tuple(bool(s.azimuth_average) for s in surfaces),
+        lambda: surfaces,
+        material,
+        theta_i,
+        phi_i,
+        Bins(),
+        label,
+    )
+
+
+def _check_budget(seed, rays, target, max_rays) -> None:
+    """UsageError naming the first bad one of ``seed``, ``rays``, ``target``, ``max_rays``."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     if isinstance(rays, str):
@@ -332,20 +390,6 @@ def resolve_reference(
         raise UsageError(f"target must be a relative error in (0, 1), got {target!r}")
     if isinstance(max_rays, bool) or not isinstance(max_rays, (int, np.integer)) or max_rays < 1000:
         raise UsageError(f"max_rays must be an integer >= 1000, got {max_rays!r}")
-    return Reference(
-        fingerprints=fingerprints,
-        azimuth_average=azimuth,
-        build=build,
-        material=eta,
-        theta_i=_theta(theta_i),
-        phi_i=_phi(0.0 if phi_i is None else phi_i, len(_theta(theta_i))),
-        bins=_bins(bins, default_bins),
-        seed=int(seed),
-        rays=rays if isinstance(rays, str) else int(rays),
-        target=float(target),
-        max_rays=int(max_rays),
-        label=label,
-    )
 
 
 _IDENTITIES: dict = {}  # scene identity key → (fingerprints, azimuth flags), this process

@@ -18,6 +18,7 @@ from ...atomic import json_safe
 from ...checks import file_path
 from ...errors import UsageError
 from ...sim import Bins, Result
+from ...sim.identity import RunDescription, saved_identity
 from ..cluster import check_address
 from ..scene import incidence_pairs, load_scene
 from .wave_run import check_wave_plan
@@ -34,6 +35,7 @@ __all__ = [
     "check_replaceable",
     "check_output_path",
     "tally_settings",
+    "run_description",
     "RESULT_FILES",
 ]
 
@@ -225,63 +227,25 @@ def plan_run(
     auto = rays is None and scene.simulation.rays == "auto"
     auto_real = scene.simulation.realisations == "auto"
     n_real = MIN_AUTO if auto_real else scene.simulation.realisations
-    if auto and scene.simulation.realisations != 1:
-        raise UsageError(
-            f'rays = "auto" needs realisations = 1 (scene {scene.name} has '
-            f"{scene.simulation.realisations}); give --rays instead"
-        )
-    if scheduler is not None:
-        check_address(scheduler)
-    if auto and scheduler is not None:
-        raise UsageError(
-            f'--scheduler is not available for a rays = "auto" scene ({scene.name}): its '
-            f"batches are decided one after another; give --rays"
-        )
-    if auto and resume is not None:
-        raise UsageError(
-            '--resume is not available for a rays = "auto" scene; use --force to run it again'
-        )
+    _check_auto(scene, auto, scheduler, resume)
     if rays is None:
         rays = AUTO_MAX_RAYS if auto else scene.simulation.rays
         if effort.max_rays is not None:
             rays = min(rays, effort.max_rays)
     if rays < n_real:
         raise UsageError(f"--rays must be >= the scene's realisations ({n_real}), got {rays}")
-    if theta_i is None:
-        theta_i = scene.simulation.theta_i
-    theta_i = tuple(float(t) for t in theta_i)
-    if not theta_i or not all(math.isfinite(t) and 0 <= t < 90 for t in theta_i):
-        raise UsageError(
-            f"--theta-i must be angles in degrees, each in [0, 90), got {list(theta_i)}"
-        )
+    theta_i = _theta_option(scene.simulation.theta_i if theta_i is None else theta_i)
     seed = scene.simulation.seed if seed is None else seed
     Bins(scene.simulation.theta_bins, scene.simulation.phi_bins)  # validates the grid
     check_wave_plan(scene, effort.scale_for(scene.surface.kind), seed, n_real, theta_i)
+    out, saved, option = _output(scene, out, resume, tallies, force)
     previous = None
-    if resume is not None:
-        resume = Path(resume)
-        if out is not None and Path(out) != resume:
-            raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
-        out = resume
-        check_output_path(out, "--resume", scene.path)
-        previous = _load_saved(resume, "--resume")
+    if saved is not None:
+        previous = _load_saved(saved, option)
         if auto_real:
-            n_real, rays = _auto_realisations_of(previous, resume, rays)
-        _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, resume)
-    else:
-        out = Path(out) if out is not None else Path("runs") / scene.name
-        check_output_path(out, "--out", scene.path)
-        if out.exists() and not force:
-            raise UsageError(
-                f"{out} already exists; pass --resume {out} to continue it or --force to replace it"
-            )
-        if out.exists():
-            check_replaceable(out)
-        if tallies is not None:
-            previous = _load_saved(Path(tallies), "saved tallies")
-            if auto_real:
-                n_real, rays = _auto_realisations_of(previous, tallies, rays)
-            _check_resumable(previous, scene, theta_i, seed, quick, rays, effort, tallies)
+            n_real, rays = _auto_realisations_of(previous, saved, rays)
+        description = run_description(scene, theta_i, seed, bool(quick), rays, effort, n_real)
+        _check_resumable(previous, description, saved)
     return RunPlan(
         scene=scene,
         out=Path(out),
@@ -300,6 +264,57 @@ def plan_run(
         resume_hint=resume_hint,
         scheduler=scheduler,
     )
+
+
+def _output(scene, out, resume, tallies, force) -> tuple[Path, Path | None, str]:
+    """(output directory, saved run to continue or None, the option naming it), checked
+    (``plan_run``)."""
+    if resume is not None:
+        resume = Path(resume)
+        if out is not None and Path(out) != resume:
+            raise UsageError(f"--out {out} and --resume {resume} must name the same directory")
+        check_output_path(resume, "--resume", scene.path)
+        return resume, resume, "--resume"
+    out = Path(out) if out is not None else Path("runs") / scene.name
+    check_output_path(out, "--out", scene.path)
+    if out.exists() and not force:
+        raise UsageError(
+            f"{out} already exists; pass --resume {out} to continue it or --force to replace it"
+        )
+    if out.exists():
+        check_replaceable(out)
+    return out, (None if tallies is None else Path(tallies)), "saved tallies"
+
+
+def _check_auto(scene, auto: bool, scheduler, resume) -> None:
+    """A ``rays = "auto"`` scene traces one realisation, locally, and is not resumed; a
+    ``--scheduler`` address is checked."""
+    if auto and scene.simulation.realisations != 1:
+        raise UsageError(
+            f'rays = "auto" needs realisations = 1 (scene {scene.name} has '
+            f"{scene.simulation.realisations}); give --rays instead"
+        )
+    if scheduler is not None:
+        check_address(scheduler)
+    if auto and scheduler is not None:
+        raise UsageError(
+            f'--scheduler is not available for a rays = "auto" scene ({scene.name}): its '
+            f"batches are decided one after another; give --rays"
+        )
+    if auto and resume is not None:
+        raise UsageError(
+            '--resume is not available for a rays = "auto" scene; use --force to run it again'
+        )
+
+
+def _theta_option(theta_i) -> tuple[float, ...]:
+    """``--theta-i`` (or the scene's θi) as a tuple of degrees, each in [0, 90)."""
+    theta_i = tuple(float(t) for t in theta_i)
+    if not theta_i or not all(math.isfinite(t) and 0 <= t < 90 for t in theta_i):
+        raise UsageError(
+            f"--theta-i must be angles in degrees, each in [0, 90), got {list(theta_i)}"
+        )
+    return theta_i
 
 
 def _auto_realisations_of(previous, where, rays: int) -> tuple[int, int]:
@@ -458,43 +473,66 @@ def tally_settings(scene) -> dict:
 
 
 RESUME_KEYS = {
-    "ior": "material.ior",
+    "material": "material.ior",
     "bounces": "simulation.bounces",
     "phi_i": "simulation.phi_i",
-    "full_azimuth": "simulation.full_azimuth",
+    "bins": "bins (simulation.theta_bins, phi_bins, full_azimuth)",
+    "scene": "scene",
+    "quick": "--quick",
 }
-"""How ``--resume`` names a setting of ``meta["run"]`` whose scene key differs."""
+"""How ``--resume`` names a field of the run's identity (``sim.identity``) by its scene key
+or option."""
 
 
-def _check_resumable(prev, scene, theta_i, seed, quick, rays, effort, where) -> None:
-    """The saved run was made with the same scene (surface, material, bounces, realisations),
-    seed, effort, rays, incidences and bins."""
-    run = prev.meta["run"]
-    want = {
-        "scene": scene.name,
-        "seed": seed,
-        "quick": bool(quick),
-        "rays": rays,
-        "theta_i": list(theta_i),
-        "bins": list(bins_shape(scene, effort)),
-        **tally_settings(scene),
-    }
-    if scene.simulation.realisations != "auto":
-        want["realisations"] = scene.simulation.realisations
-    for key in want:
-        if key not in run:
+def run_description(scene, theta_i, seed, quick, rays, effort, realisations) -> RunDescription:
+    """The description (``sim.identity``) of the run a plan traces: the scene's surfaces by
+    their recipe (scene, [surface] settings, ``--quick``), the incidences θi × the scene's
+    φi, the effort's bins, traced masking and stratified origins as ``microsim run`` traces
+    them."""
+    theta, phi = incidence_pairs(theta_i, scene.simulation.phi_i)
+    recipe = {"scene": scene.name, "surface": tally_settings(scene)["surface"], "quick": quick}
+    return RunDescription(
+        material=scene.ior,
+        theta_i=theta,
+        phi_i=phi,
+        bins=Bins(*bins_shape(scene, effort), folded=not scene.full_azimuth),
+        rays=rays,
+        seed=seed,
+        surfaces=recipe,
+        bounces=scene.simulation.bounces,
+        realisations=realisations,
+    )
+
+
+def _check_resumable(saved: Result, description: RunDescription, where) -> None:
+    """The saved run is the run ``description`` asks for (or its first realisations): a
+    one-line ``UsageError`` naming the first setting that differs, or that it does not
+    record (saved by an older microsim)."""
+    old = saved_identity(saved)
+    for key, have, now in description.mismatches(old):
+        if key in ("theta_i", "phi_i"):  # the traced pairs: name the scene's axis that differs
+            key, have, now = _incidence_axis(old, description.identity())
+        name = RESUME_KEYS.get(key, key)
+        if key == "surfaces":  # name the recipe's key, and the surface's
+            key = next(k for k in now if (have or {}).get(k) != now[k])
+            have, now, name = (have or {}).get(key), now[key], RESUME_KEYS.get(key, key)
+            if isinstance(have, dict) and isinstance(now, dict):
+                sub = next(k for k in sorted({*have, *now}) if have.get(k) != now.get(k))
+                have, now, name = have.get(sub), now.get(sub), f"surface.{sub}"
+        if have is None:
             raise UsageError(
-                f"--resume {where}: the saved run does not record its "
-                f"{RESUME_KEYS.get(key, key)} (saved by an "
+                f"--resume {where}: the saved run does not record its {name} (saved by an "
                 f"older microsim); rerun with --force"
             )
-        have, now, name = run[key], want[key], RESUME_KEYS.get(key, key)
-        if have == now:
-            continue
-        if isinstance(have, dict) and isinstance(now, dict):  # name the surface key
-            sub = next(k for k in sorted({*have, *now}) if have.get(k) != now.get(k))
-            have, now, name = have.get(sub), now.get(sub), f"{key}.{sub}"
         raise UsageError(
             f"--resume {where}: {name} is {have!r} there but {now!r} now; resume with the "
             f"same settings or rerun with --force"
         )
+
+
+def _incidence_axis(old: dict, new: dict) -> tuple[str, list, list]:
+    """(key, saved axis, this run's axis) of the incidence setting that differs between two
+    identities whose (θi, φi) pairs differ: the φi axis if it differs, else the θi axis."""
+    axes = {k: [list(dict.fromkeys(d[k])) for d in (old, new)] for k in ("phi_i", "theta_i")}
+    key = "phi_i" if axes["phi_i"][0] != axes["phi_i"][1] else "theta_i"
+    return key, *axes[key]

@@ -4,17 +4,17 @@ into frozen ``Task``s, ``task_label`` names a task by its varying values."""
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from microsim.bins import MAX_BINS  # theta_bins × phi_bins at most
+from microsim.bins import MAX_BINS, Bins  # MAX_BINS: theta_bins × phi_bins at most
 
 from ...errors import UsageError
 from ...sim.arguments import MAX_RAYS
+from ...sim.identity import RunDescription
 from .. import scene as sc
 
 _TOP = (
@@ -56,9 +56,23 @@ class Task:
 
     @property
     def id(self) -> str:
-        """Stable id: readable prefix + hash of the full description."""
-        blob = json.dumps(self.to_dict(), sort_keys=True)
-        return f"{self.scene}-{hashlib.sha1(blob.encode()).hexdigest()[:12]}"
+        """Stable id: the scene's name + the key of the task's run (``run``) and the models
+        that judge it."""
+        return f"{self.scene}-{self.run().key({'models': list(self.models)})[:12]}"
+
+    def run(self) -> RunDescription:
+        """The run the task traces (``microsim.sim.identity``): its surface by the scene's
+        name and [surface] table, one incidence at φi = 0, one realisation."""
+        return RunDescription(
+            material=sc.material_ior(self.scene, {"ior": self.ior}),
+            theta_i=(self.theta_i,),
+            phi_i=(0.0,),
+            bins=Bins(self.theta_bins, self.phi_bins),
+            rays=self.rays,
+            seed=self.seed,
+            surfaces={"scene": self.scene, "surface": self.surface},
+            masking=self.masking,
+        )
 
     def to_dict(self) -> dict:
         return {
@@ -122,6 +136,49 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
     extra = sorted(set(data) - set(_TOP))
     if extra:
         fail(where, f"{extra[0]}: unknown key; allowed keys: {', '.join(_TOP)}")
+    shared = _shared_settings(data, where)
+    grid = _scene_grid(data.get("scenes"), len(shared.thetas), where)
+    tasks, first_scene, checked = [], {}, set()
+    for k, (name, keys, axes, iors) in enumerate(grid):
+        w = f"{where}: scenes[{k}]"
+        for values in itertools.product(*axes):
+            concrete = _resolve_paths(dict(zip(keys, values)), base)
+            _check_surface(w, name, concrete, shared.models, checked)
+            for ior in iors:
+                for t in shared.thetas:
+                    task = shared.task(name, concrete, ior, t)
+                    j = first_scene.setdefault(task.id, k)
+                    if j != k:
+                        fail(
+                            w,
+                            f"duplicate of a task of scenes[{j}] ({task_label(task)}); every "
+                            f"task must be distinct: remove the repeated scene or rename it",
+                        )
+                    tasks.append(task)
+    return tasks
+
+
+@dataclass(frozen=True)
+class _Shared:
+    """The settings every task of a sweep shares, and its θi axis ``thetas``."""
+
+    rays: int
+    seed: int
+    theta_bins: int
+    phi_bins: int
+    models: tuple
+    masking: str
+    thetas: list
+
+    def task(self, scene: str, surface: dict, ior, theta_i: float) -> Task:
+        return Task(
+            scene, surface, ior, float(theta_i), self.rays, self.seed, self.theta_bins,
+            self.phi_bins, self.models, self.masking,
+        )  # fmt: skip
+
+
+def _shared_settings(data: dict, where: str) -> _Shared:
+    """The sweep's rays, seed, models, masking, bins and θi axis, each checked."""
     rays, seed = data.get("rays", 200_000), data.get("seed", 0)
     if not is_int(rays) or not 1 <= rays <= MAX_RAYS:
         fail(where, f"rays: must be an integer in [1, {MAX_RAYS:,}] (per task), got {rays!r}")
@@ -140,6 +197,12 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
     if masking not in ("traced", "exact"):
         fail(where, f"masking: must be traced or exact, got {masking!r}")
     nt, npf = data.get("theta_bins", 45), data.get("phi_bins", 37)
+    _check_bins(where, nt, npf)
+    return _Shared(rays, seed, nt, npf, models, masking, _thetas(data, where))
+
+
+def _check_bins(where: str, nt, npf) -> None:
+    """theta_bins and phi_bins: integers >= 2, at most ``MAX_BINS`` bins, a valid grid."""
     for key, v in (("theta_bins", nt), ("phi_bins", npf)):
         if not is_int(v) or v < 2:
             fail(where, f"{key}: must be an integer >= 2, got {v!r}")
@@ -150,12 +213,14 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
             f"several float64 tallies of that size, {8 * nt * npf / 2**20:,.0f} MiB "
             f"each here), got {nt} × {npf} = {nt * npf:,}",
         )
-    from microsim.sim import Bins
-
     try:
         Bins(nt, npf)
     except ValueError as e:
         fail(where, f"theta_bins/phi_bins: {e}")
+
+
+def _thetas(data: dict, where: str) -> list:
+    """The θi axis: distinct degrees in [0, ``scene.MAX_THETA_I``]."""
     allowed = f"degrees in [0, {sc.MAX_THETA_I:g}] (as in a scene file)"
     thetas = _axis(data.get("theta_i", [0.0, 30.0, 60.0, 80.0]))
     if not thetas:
@@ -166,7 +231,12 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
     ):
         fail(where, f"theta_i: must be {allowed}, got {thetas!r}")
     _check_distinct(where, "theta_i", thetas)
-    scenes = data.get("scenes")
+    return thetas
+
+
+def _scene_grid(scenes, n_thetas: int, where: str) -> list:
+    """(name, surface keys, their axes, materials) of each [[scenes]] table, checked; at most
+    ``MAX_TASKS`` tasks in all."""
     if scenes is None:
         fail(where, "scenes: required; one or more [[scenes]] tables")
     if not isinstance(scenes, list) or not scenes:
@@ -195,7 +265,7 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         if not iors:
             fail(w, "ior: empty axis; give one or more materials")
         _check_distinct(w, "ior", iors)
-        n_tasks += math.prod(len(a) for a in axes) * len(iors) * len(thetas)
+        n_tasks += math.prod(len(a) for a in axes) * len(iors) * n_thetas
         if n_tasks > MAX_TASKS:
             fail(
                 w,
@@ -205,33 +275,22 @@ def expand_tasks(data: dict, where: str = "sweep", base=None) -> list[Task]:
         for ior in iors:
             _check_ior(w, ior)
         grid.append((name, keys, axes, iors))
-    tasks, first_scene, checked = [], {}, set()
-    for k, (name, keys, axes, iors) in enumerate(grid):
-        w = f"{where}: scenes[{k}]"
-        for values in itertools.product(*axes):
-            concrete = _resolve_paths(dict(zip(keys, values)), base)
-            spec = scene_from_table(name, concrete, None, w).surface
-            if spec.kind == "file":
-                _check_heightfield_file(w, spec, checked)
-            if is_oriented(concrete) and ORIENTED_SHADOWING not in models:
-                fail(
-                    w,
-                    f"surface.oriented: oriented V-grooves have no ensemble NDF and are judged "
-                    f"by the V-groove model alone (ts-vgroove-oriented, as microsim run judges "
-                    f'them); models must include "{ORIENTED_SHADOWING}", got {list(models)!r}',
-                )
-            for ior in iors:
-                for t in thetas:
-                    task = Task(name, concrete, ior, float(t), rays, seed, nt, npf, models, masking)
-                    j = first_scene.setdefault(task.id, k)
-                    if j != k:
-                        fail(
-                            w,
-                            f"duplicate of a task of scenes[{j}] ({task_label(task)}); every "
-                            f"task must be distinct: remove the repeated scene or rename it",
-                        )
-                    tasks.append(task)
-    return tasks
+    return grid
+
+
+def _check_surface(where: str, name: str, concrete: dict, models, checked: set) -> None:
+    """A concrete [surface] table: valid as a scene's, its heightfield file readable, and
+    oriented V-grooves judged by the V-groove model."""
+    spec = scene_from_table(name, concrete, None, where).surface
+    if spec.kind == "file":
+        _check_heightfield_file(where, spec, checked)
+    if is_oriented(concrete) and ORIENTED_SHADOWING not in models:
+        fail(
+            where,
+            f"surface.oriented: oriented V-grooves have no ensemble NDF and are judged "
+            f"by the V-groove model alone (ts-vgroove-oriented, as microsim run judges "
+            f'them); models must include "{ORIENTED_SHADOWING}", got {list(models)!r}',
+        )
 
 
 def _check_distinct(where: str, key: str, values: list) -> None:
