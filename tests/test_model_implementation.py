@@ -1,7 +1,7 @@
 """Models are the implementation: ``TorranceSparrow`` and the masking objects compute f and G
 themselves and the free functions are thin wrappers over them (bitwise the same numbers); one
-place parses a shadowing name; predictions are (model, integration rule) pairs — ``ModelSpec``
-survives only as a deprecated shim; measured tables answer the model protocol's ``f``."""
+place parses a shadowing name; predictions are (model, integration rule) pairs (no ``ModelSpec``);
+measured tables answer the model protocol's ``f``."""
 
 import re
 import warnings
@@ -19,7 +19,6 @@ from microsim.measured.merl import read_merl, write_merl
 from microsim.measured.rgl import RGLResolution, read_rgl, write_rgl
 from microsim.sim import Bins
 from microsim.sim.predict import (
-    QMC,
     Facets,
     FunctionBRDF,
     Predictor,
@@ -144,45 +143,12 @@ def test_the_paper_functions_are_bitwise_their_models(directions, model, functio
 
 
 # --- (model, rule) replaces ModelSpec -----------------------------------------------------------
-def test_model_spec_is_gone_from_the_package_but_its_deprecated_shim():
+def test_model_spec_is_gone():
     users = [p.relative_to(PACKAGE).as_posix() for p in _sources() if "ModelSpec" in p.read_text()]
-    assert users == ["sim/predict.py"], users
-    text = (PACKAGE / "sim" / "predict.py").read_text()
-    assert "ModelSpec" not in text[: text.index("class ModelSpec")]
+    assert users == [], users
+    import microsim.sim.predict as predict_module
 
-
-def test_the_deprecated_model_spec_warns_and_predicts_bitwise_as_its_predictor():
-    from microsim.sim.predict import ModelSpec
-
-    ndf, bins = an.Beckmann(0.3), Bins(9, 10)
-    tilted = _directions(np.random.default_rng(1), 500) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]
-    normals = vectors.normalize(tilted)
-
-    def lobe(wi, wo):
-        return ndf.D_cos(np.clip(wo[..., 2], 0.0, 1.0)) * wi[..., 2]
-
-    with pytest.warns(DeprecationWarning, match="Predictor"):
-        old = [
-            ModelSpec.torrance_sparrow("ts", ndf, "smith", "aluminium"),
-            ModelSpec.torrance_sparrow("qmc", ndf, "vgroove", "aluminium", qmc_samples=2**12),
-            ModelSpec.facets("facets", normals, shadowing="smith-correlated"),
-            ModelSpec.function("fn", lobe, symmetric=False),
-        ]
-    new = [
-        Predictor("ts", an.TorranceSparrow(ndf, an.Smith(), "aluminium")),
-        Predictor("qmc", an.TorranceSparrow(ndf, an.VGroove(), "aluminium"), QMC(2**12)),
-        Predictor.facets("facets", normals, masking="smith-correlated"),
-        Predictor("fn", FunctionBRDF(lobe, symmetric=False)),
-    ]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        a, b = predict(old, [0.0, 40.0], bins), predict(new, [0.0, 40.0], bins)
-    for name in a:
-        np.testing.assert_array_equal(a[name], b[name])
-    facets = bin_average_facets(
-        vectors.spherical_deg(40.0, 0.0), bins, normals, shadowing="smith-correlated"
-    )
-    np.testing.assert_array_equal(b["facets"][1], facets.values)
+    assert not hasattr(predict_module, "ModelSpec")
 
 
 def test_a_rule_needs_a_model_that_can_follow_it():
