@@ -450,41 +450,15 @@ def walk_bin_averages(
     folded=...)`` still works, with a DeprecationWarning, where the edges are those of a
     ``Bins``.
     """
-    if not isinstance(bins, Bins):  # the older form: (theta_edges, phi_edges, ndf, material)
-        if len(legacy) > 1:
-            raise UsageError("walk_bin_averages: pass n_paths, orders, ... by keyword")
-        bins = _bins_of_edges(bins, ndf, folded)
-        ndf, material = material, (legacy[0] if legacy else None)
-    elif legacy or folded is not None:
-        raise UsageError(
-            "walk_bin_averages takes theta_i, bins, ndf and material by position, the rest "
-            "by keyword; the folding is the bins' (Bins(..., folded=))"
-        )
+    bins, ndf, material = _walk_arguments(bins, ndf, material, legacy, folded)
     walk = WalkNDF.of(ndf)
-    thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
-    if thetas.ndim != 1 or np.any(~((thetas >= 0) & (thetas < 90))):
-        raise UsageError(f"theta_i must be angles in degrees within [0, 90), got {theta_i!r}")
-    phis = np.atleast_1d(np.asarray(phi_i, dtype=np.float64))
-    if phis.ndim != 1 or phis.size not in (1, thetas.size) or not np.all(np.isfinite(phis)):
-        raise UsageError(
-            f"phi_i must be a finite azimuth in degrees, or one per θi ({thetas.size}), "
-            f"got {phi_i!r}"
-        )
-    phis = np.broadcast_to(phis, thetas.shape)
+    thetas, phis = _walk_incidences(theta_i, phi_i)
     n_paths = _checks.integer("n_paths", n_paths, 2, 10**11)
     orders = _checks.integer("orders", orders, 1, 1000)
     chunk = _checks.integer("chunk", chunk, 1, 2**24)
     rng = np.random.default_rng(seed)
     omega = bins.projected_solid_angle()
-    nb = omega.size
-    n_i = len(thetas)
-    s1 = np.zeros((n_i, orders, nb))
-    s2 = np.zeros((n_i, orders, nb))
-    e1 = np.zeros((n_i, orders))
-    e2 = np.zeros((n_i, orders))
-    ms1, ms2 = np.zeros(n_i), np.zeros(n_i)
-    a1, a2, cut = np.zeros(n_i), np.zeros(n_i), np.zeros(n_i)
-    kmax = np.zeros(n_i, dtype=np.int64)
+    sums = _WalkSums(len(thetas), orders, omega.size)
     for a, th in enumerate(thetas):
         t, phi_i = np.radians(th), float(phis[a])
         if phi_i == 0.0:  # wi_y exactly 0
@@ -497,55 +471,103 @@ def walk_bin_averages(
             m = min(chunk, n_paths - done)
             p = smith_random_walk(np.broadcast_to(wi1, (m, 3)), walk, material, rng, max_bounces)
             done += m
-            esc = p.order > 0
-            kk = np.minimum(p.order[esc], orders) - 1
-            ww = p.weight[esc]
-            b = bins.locate(p.wo[esc], phi_i)
-            inb = b >= 0
-            key = kk[inb] * nb + b[inb]
-            s1[a] += np.bincount(key, ww[inb], minlength=orders * nb).reshape(orders, nb)
-            s2[a] += np.bincount(key, ww[inb] ** 2, minlength=orders * nb).reshape(orders, nb)
-            e1[a] += np.bincount(kk, ww, minlength=orders)
-            e2[a] += np.bincount(kk, ww**2, minlength=orders)
-            ms = ww[p.order[esc] >= 2]
-            ms1[a] += ms.sum()
-            ms2[a] += np.sum(ms**2)
-            a1[a] += p.absorbed.sum()
-            a2[a] += np.sum(p.absorbed**2)
-            cut[a] += p.cut.sum()
-            if esc.any():
-                kmax[a] = max(kmax[a], int(p.order.max()))
-    n = float(n_paths)
+            sums.add(a, p, bins.locate(p.wo[p.order > 0], phi_i))
+    return sums.averages(thetas, phis, n_paths, omega)
 
-    def mean_se(s, q):
-        mean = s / n
-        var = np.maximum(q / n - mean * mean, 0.0) / (n - 1.0)
-        return mean, np.sqrt(var)
 
-    f1, fse = mean_se(s1, s2)
-    shape = (n_i, orders) + omega.shape
-    values = (f1 / omega.ravel()).reshape(shape)
-    stderr = (fse / omega.ravel()).reshape(shape)
-    energy, energy_se = mean_se(e1, e2)
-    absorbed, absorbed_se = mean_se(a1, a2)
-    ms, ms_se = mean_se(ms1, ms2)
-    labels = tuple(str(k) for k in range(1, orders)) + (f"≥{orders}",)
-    if orders == 1:
-        labels = ("≥1",)
-    return WalkBinAverages(
-        thetas,
-        labels,
-        values,
-        stderr,
-        energy,
-        energy_se,
-        absorbed,
-        absorbed_se,
-        cut / n,
-        kmax,
-        n_paths,
-        omega,
-        ms,
-        ms_se,
-        phis.copy(),
-    )
+def _walk_arguments(bins, ndf, material, legacy, folded):
+    """(bins, ndf, material) of ``walk_bin_averages``'s arguments, its older edge form
+    (theta_edges, phi_edges, ndf, material) included."""
+    if not isinstance(bins, Bins):
+        if len(legacy) > 1:
+            raise UsageError("walk_bin_averages: pass n_paths, orders, ... by keyword")
+        return _bins_of_edges(bins, ndf, folded), material, (legacy[0] if legacy else None)
+    if legacy or folded is not None:
+        raise UsageError(
+            "walk_bin_averages takes theta_i, bins, ndf and material by position, the rest "
+            "by keyword; the folding is the bins' (Bins(..., folded=))"
+        )
+    return bins, ndf, material
+
+
+def _walk_incidences(theta_i, phi_i):
+    """θi (degrees, 1-D, each in [0, 90)) and φi broadcast to it, checked."""
+    thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+    if thetas.ndim != 1 or np.any(~((thetas >= 0) & (thetas < 90))):
+        raise UsageError(f"theta_i must be angles in degrees within [0, 90), got {theta_i!r}")
+    phis = np.atleast_1d(np.asarray(phi_i, dtype=np.float64))
+    if phis.ndim != 1 or phis.size not in (1, thetas.size) or not np.all(np.isfinite(phis)):
+        raise UsageError(
+            f"phi_i must be a finite azimuth in degrees, or one per θi ({thetas.size}), "
+            f"got {phi_i!r}"
+        )
+    return thetas, np.broadcast_to(phis, thetas.shape)
+
+
+class _WalkSums:
+    """Running sums of the walk's escaping weights (and their squares) per incidence, order
+    and bin; of the energy per order, in orders ≥ 2, absorbed and cut."""
+
+    def __init__(self, n_i: int, orders: int, nb: int):
+        self.orders, self.nb = orders, nb
+        self.s1, self.s2 = np.zeros((n_i, orders, nb)), np.zeros((n_i, orders, nb))
+        self.e1, self.e2 = np.zeros((n_i, orders)), np.zeros((n_i, orders))
+        self.ms1, self.ms2 = np.zeros(n_i), np.zeros(n_i)
+        self.a1, self.a2, self.cut = np.zeros(n_i), np.zeros(n_i), np.zeros(n_i)
+        self.kmax = np.zeros(n_i, dtype=np.int64)
+
+    def add(self, a: int, p: WalkPaths, b: np.ndarray) -> None:
+        """Add the paths ``p`` of incidence ``a``; ``b``: the bins of its escaping paths."""
+        orders, nb = self.orders, self.nb
+        esc = p.order > 0
+        kk = np.minimum(p.order[esc], orders) - 1
+        ww = p.weight[esc]
+        inb = b >= 0
+        key = kk[inb] * nb + b[inb]
+        self.s1[a] += np.bincount(key, ww[inb], minlength=orders * nb).reshape(orders, nb)
+        self.s2[a] += np.bincount(key, ww[inb] ** 2, minlength=orders * nb).reshape(orders, nb)
+        self.e1[a] += np.bincount(kk, ww, minlength=orders)
+        self.e2[a] += np.bincount(kk, ww**2, minlength=orders)
+        ms = ww[p.order[esc] >= 2]
+        self.ms1[a] += ms.sum()
+        self.ms2[a] += np.sum(ms**2)
+        self.a1[a] += p.absorbed.sum()
+        self.a2[a] += np.sum(p.absorbed**2)
+        self.cut[a] += p.cut.sum()
+        if esc.any():
+            self.kmax[a] = max(self.kmax[a], int(p.order.max()))
+
+    def averages(self, thetas, phis, n_paths: int, omega) -> "WalkBinAverages":
+        """Means over the ``n_paths`` i.i.d. paths per incidence with their standard errors;
+        bin sums divided by Ω_B."""
+        n = float(n_paths)
+
+        def mean_se(s, q):
+            mean = s / n
+            var = np.maximum(q / n - mean * mean, 0.0) / (n - 1.0)
+            return mean, np.sqrt(var)
+
+        orders = self.orders
+        f1, fse = mean_se(self.s1, self.s2)
+        shape = (len(thetas), orders) + omega.shape
+        energy, energy_se = mean_se(self.e1, self.e2)
+        absorbed, absorbed_se = mean_se(self.a1, self.a2)
+        ms, ms_se = mean_se(self.ms1, self.ms2)
+        labels = tuple(str(k) for k in range(1, orders)) + (f"≥{orders}",)
+        return WalkBinAverages(
+            thetas,
+            ("≥1",) if orders == 1 else labels,
+            (f1 / omega.ravel()).reshape(shape),
+            (fse / omega.ravel()).reshape(shape),
+            energy,
+            energy_se,
+            absorbed,
+            absorbed_se,
+            self.cut / n,
+            self.kmax,
+            n_paths,
+            omega,
+            ms,
+            ms_se,
+            phis.copy(),
+        )
