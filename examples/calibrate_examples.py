@@ -24,7 +24,7 @@ def main(n: int, start: int, cache=None, min_events=None) -> None:
     false_alarms = detected = 0
     schlick = {float(t): 0 for t in ex.THETA_I}
     for seed in range(start, start + n):
-        kw = dict(theta_i=ex.THETA_I, rays=ex.RAYS, bins=ex.BINS, isotropic=True, seed=seed)
+        kw = dict(theta_i=ex.THETA_I, rays=ex.RAYS, bins=ex.BINS, symmetric=True, seed=seed)
         kw["cache"] = cache
         if min_events is not None:
             kw["min_events"] = min_events

@@ -63,7 +63,7 @@ def ggx_brdf(alpha, fresnel=fresnel_conductor, eta=ALUMINIUM):
 # --- (a) a correct GGX passes ------------------------------------------------------------------
 def test_a_correct_ggx_agrees():
     result = assert_brdf_agrees(
-        ggx_brdf(0.3), SCENE, theta_i=THETA_I, rays=RAYS, bins=BINS, isotropic=True
+        ggx_brdf(0.3), SCENE, theta_i=THETA_I, rays=RAYS, bins=BINS, symmetric=True
     )
     assert result["passed"] and result["failing"] == []
 
@@ -72,7 +72,7 @@ def test_a_correct_ggx_agrees():
 def test_b_three_percent_rougher_fails_with_a_message_that_says_where():
     with pytest.raises(AssertionError) as err:
         assert_brdf_agrees(
-            ggx_brdf(0.3 * 1.03), SCENE, theta_i=THETA_I, rays=RAYS, bins=BINS, isotropic=True
+            ggx_brdf(0.3 * 1.03), SCENE, theta_i=THETA_I, rays=RAYS, bins=BINS, symmetric=True
         )
     msg = str(err.value)
     assert "θi = 0°, 30°, 60°, 80°" in msg  # every incidence fails
@@ -90,7 +90,7 @@ def test_c_schlick_fails_at_grazing_and_passes_near_normal_incidence():
     traces in docs/testing.md), so this test asserts only what holds for every trace."""
     schlick = ggx_brdf(0.3, fresnel_schlick)
     with pytest.raises(BRDFMismatch) as err:
-        assert_brdf_agrees(schlick, SCENE, theta_i=THETA_I, rays=RAYS, bins=BINS, isotropic=True)
+        assert_brdf_agrees(schlick, SCENE, theta_i=THETA_I, rays=RAYS, bins=BINS, symmetric=True)
     failing = err.value.agreement["failing"]
     assert 80.0 in failing and not {0.0, 30.0} & set(failing), str(err.value)
 

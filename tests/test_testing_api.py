@@ -191,7 +191,7 @@ def test_a_brdf_returning_negative_or_nan_values_fails(surface, tmp_path):
         (dict(bins=(10,)), "bins"),
         (dict(seed=-1), "seed"),
         (dict(target=2.0, rays="auto"), "target"),
-        (dict(isotropic="yes"), "isotropic"),
+        (dict(symmetric="yes"), "symmetric"),
         (dict(min_events=0), "min_events"),
     ],
 )
@@ -340,7 +340,7 @@ def test_false_alarm_and_power_over_seeds(tmp_path):
     0.017 under α), and the 3 % rougher GGX fails every time."""
     false_alarms = misses = 0
     for seed in range(20):
-        kw = dict(rays=250_000, bins=(30, 37), seed=seed, cache=tmp_path, isotropic=True)
+        kw = dict(rays=250_000, bins=(30, 37), seed=seed, cache=tmp_path, symmetric=True)
         try:
             assert_brdf_agrees(ts_ggx(0.3), "vgroove-ggx-0.3", **kw)
         except BRDFMismatch:
@@ -352,3 +352,15 @@ def test_false_alarm_and_power_over_seeds(tmp_path):
             pass
     assert false_alarms <= 1
     assert misses == 0
+
+
+def test_isotropic_is_the_deprecated_name_of_symmetric():
+    """``symmetric=`` says the callable is symmetric in Δφ; the older ``isotropic=`` still
+    sets it, with a DeprecationWarning, and is checked the same way."""
+    from microsim.testing.agreement import symmetric_keyword
+
+    assert symmetric_keyword(True) is True and symmetric_keyword(False) is False
+    with pytest.warns(DeprecationWarning, match="symmetric="):
+        assert symmetric_keyword(False, isotropic=True) is True
+    with pytest.raises(UsageError, match="symmetric must be True or False"):
+        symmetric_keyword("yes")

@@ -134,7 +134,7 @@ def readable_name(f) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in q)[:60]
 
 
-def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray, str]:
+def _model_values(brdf, ref, result, symmetric: bool, label) -> tuple[np.ndarray, str]:
     """(T, Θ, Φ) bin averages of the BRDF (callable or catalogue model name) and its name."""
     if isinstance(brdf, str):
         specs = {s.name: s for s in default_models(list(ref.surfaces), ref.material)}
@@ -146,7 +146,7 @@ def _model_values(brdf, ref, result, isotropic: bool, label) -> tuple[np.ndarray
         spec, name = specs[brdf], brdf
     elif callable(brdf):
         name = label or readable_name(brdf)
-        spec = Predictor(name, FunctionBRDF(wrap_brdf(brdf), symmetric=isotropic))
+        spec = Predictor(name, FunctionBRDF(wrap_brdf(brdf), symmetric=symmetric))
     else:
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
     with warnings.catch_warnings():
@@ -346,6 +346,21 @@ def _chart(result, model, name, verdicts, t: int, where: Path, key: str) -> str:
         return f"(chart not written: {type(e).__name__}: {e})"
 
 
+def symmetric_keyword(symmetric, isotropic=None) -> bool:
+    """The checked ``symmetric`` flag (the callable is symmetric in Δφ); ``isotropic``, its
+    older name, still sets it with a DeprecationWarning."""
+    if isotropic is not None:
+        warnings.warn(
+            "isotropic= is deprecated: it means symmetric= (f(Δφ) = f(−Δφ))",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+        symmetric = isotropic
+    if not isinstance(symmetric, bool):
+        raise UsageError(f"symmetric must be True or False, got {symmetric!r}")
+    return symmetric
+
+
 def assert_brdf_agrees(
     brdf,
     surface_or_scene,
@@ -362,9 +377,10 @@ def assert_brdf_agrees(
     max_rays: int = AUTO_MAX_RAYS,
     realisations: int | None = None,
     cache=None,
-    isotropic: bool = False,
+    symmetric: bool = False,
     name: str | None = None,
     min_events: int = MIN_EVENTS,
+    isotropic: bool | None = None,
     chart_dir=None,
     threads: int | None = None,
 ) -> Agreement:
@@ -387,10 +403,11 @@ def assert_brdf_agrees(
     until the reference's energy-weighted relative standard error is ≤ ``target``, at most
     ``max_rays``; ``microsim.testing.cache.reference``), ``seed``, ``realisations`` (overrides
     a scene's count), ``cache`` (directory, or False for no cache) as
-    ``microsim.testing.reference``. ``isotropic=True`` states that the
+    ``microsim.testing.reference``. ``symmetric=True`` states that the
     callable is symmetric in the relative azimuth, f(Δφ) = f(−Δφ) (isotropic BRDFs): the
     folded bins are then integrated over Δφ ≥ 0 only, half the evaluations (as microsim does
     for its isotropic models); by default both halves are integrated, exact for any callable.
+    (``isotropic=`` is the deprecated name of ``symmetric=``.)
     ``name``: the BRDF's name in the message and chart (default ``readable_name(brdf)``).
     ``min_events``: single-bounce events a bin needs to be tested (default ``MIN_EVENTS`` =
     100, see there).
@@ -420,8 +437,7 @@ def assert_brdf_agrees(
         raise UsageError(f"rtol must be None or a relative error in (0, 1), got {rtol!r}")
     if not (callable(brdf) or isinstance(brdf, str)):
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
-    if not isinstance(isotropic, bool):
-        raise UsageError(f"isotropic must be True or False, got {isotropic!r}")
+    symmetric = symmetric_keyword(symmetric, isotropic)
     if isinstance(min_events, bool) or not isinstance(min_events, int) or min_events < 1:
         raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
     if name is not None and not isinstance(name, str):
@@ -439,7 +455,7 @@ def assert_brdf_agrees(
         realisations=realisations,
     )
     result = cached(ref, cache=cache, threads=threads)
-    model, name = _model_values(brdf, ref, result, isotropic, name)
+    model, name = _model_values(brdf, ref, result, symmetric, name)
     T = len(result.theta_i)
     omega = result.bins.projected_solid_angle()
     per = result.brdf_realisations

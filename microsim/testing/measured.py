@@ -2,7 +2,7 @@
 microsim table (``microsim measure``'s ``table.npz``, a ``BRDFTable``) or any tabulated BRDF.
 
 ``assert_brdf_matches_measured(brdf, reference, theta_i, bins=..., rtol=0.05)`` bin-averages
-the callable on the bins (``sim.predict``, both ±Δφ halves unless ``isotropic=True``) and takes
+the callable on the bins (``sim.predict``, both ±Δφ halves unless ``symmetric=True``) and takes
 the reference's own bin averages — a ``BRDFTable`` on the same bins and incidences as they are,
 a MERL file through ``MERLBRDF.table`` (its quadrature of the log-linear interpolant), any other
 table evaluated and averaged likewise. Measured references carry no noise model a statistical
@@ -30,7 +30,7 @@ from microsim.measured import MERLBRDF, BRDFTable, read_merl, read_rgl
 from microsim.sim.predict import FunctionBRDF, Predictor, predict
 from microsim.stats import energy_set
 
-from .agreement import BRDFMismatch, readable_name, wrap_brdf
+from .agreement import BRDFMismatch, readable_name, symmetric_keyword, wrap_brdf
 
 __all__ = ["assert_brdf_matches_measured", "measured_reference"]
 
@@ -83,8 +83,9 @@ def assert_brdf_matches_measured(
     *,
     bins=(18, 37),
     rtol: float = 0.05,
-    isotropic: bool = False,
+    symmetric: bool = False,
     name: str | None = None,
+    isotropic: bool | None = None,
 ) -> dict:
     """Assert that ``brdf(wi, wo)`` ((N, 3) unit vectors away from the surface, wi in the x–z
     plane; N values in sr⁻¹) matches the measured ``reference`` within ``rtol`` at every
@@ -95,6 +96,7 @@ def assert_brdf_matches_measured(
     __tracebackhide__ = True
     if not callable(brdf):
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹, got {brdf!r}")
+    symmetric = symmetric_keyword(symmetric, isotropic)
     if isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 < rtol < 1:
         raise UsageError(f"rtol must be a relative error in (0, 1), got {rtol!r}")
     b = bins if isinstance(bins, Bins) else Bins(*bins)
@@ -113,7 +115,7 @@ def assert_brdf_matches_measured(
             "leave those incidences out of theta_i"
         )
     name = name or readable_name(brdf)
-    spec = Predictor("brdf", FunctionBRDF(wrap_brdf(brdf), symmetric=isotropic))
+    spec = Predictor("brdf", FunctionBRDF(wrap_brdf(brdf), symmetric=symmetric))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         mine = predict([spec], theta, b, rtol=QUAD_RTOL)["brdf"]
