@@ -101,7 +101,16 @@ def _commit() -> tuple[str | None, bool | None]:
 
 
 # --- panel A: geometric scene ------------------------------------------------------------------
-def _rel_rms(sim, se, counts, model, bins) -> dict:
+@dataclass(frozen=True)
+class _RelRms:
+    """``verdict``'s rel_rms of a model against a run, and the run's ray-noise floor over the
+    same energy set (None where there is none)."""
+
+    rel_rms: float | None
+    noise_floor: float | None
+
+
+def _rel_rms(sim, se, counts, model, bins) -> _RelRms:
     """``verdict``'s rel_rms of ``model`` against ``sim`` and the ray-noise floor over the
     same energy set (used bins: ≥ MIN_EVENTS events, f̄ > 0)."""
     from microsim.analysis.verdicts import Measured, Prediction, verdict
@@ -114,7 +123,7 @@ def _rel_rms(sim, se, counts, model, bins) -> dict:
     w = np.where(used, sim * omega, 0.0)
     E = energy_set(w).reshape(w.shape)
     noise = float(np.sqrt(np.sum(w[E] * (se[E] / sim[E]) ** 2) / w[E].sum())) if E.any() else None
-    return {"rel_rms": v["rel_rms"], "noise_floor": noise}
+    return _RelRms(v["rel_rms"], noise)
 
 
 def _geometric_trace_points(cfg: MethodsConfig, surface, bins, ref, mask: str, label: str):
@@ -144,8 +153,8 @@ def _geometric_trace_points(cfg: MethodsConfig, surface, bins, ref, mask: str, l
     for n in cfg.rays:
         sec, outs = _best_of(lambda k, n=n: run(n, k), cfg.repeat, cfg.cheap)
         errs = [_rel_rms(r.brdf[0], r.stderr[0], r.counts[0], ref, bins) for r in outs]
-        e = np.array([np.nan if x["rel_rms"] is None else x["rel_rms"] for x in errs])
-        nf = [x["noise_floor"] for x in errs if x["noise_floor"] is not None]
+        e = np.array([np.nan if x.rel_rms is None else x.rel_rms for x in errs])
+        nf = [x.noise_floor for x in errs if x.noise_floor is not None]
         points.append(
             {
                 "method": label,
@@ -195,7 +204,7 @@ def _panel_geometric(cfg: MethodsConfig) -> dict:
             cfg.repeat,
             cfg.cheap,
         )
-        e = _rel_rms(ref, exact, many, outs[0], bins)["rel_rms"]
+        e = _rel_rms(ref, exact, many, outs[0], bins).rel_rms
         points.append(
             {
                 "method": label,
@@ -235,7 +244,20 @@ def _wave_surface(cfg: MethodsConfig, n: int):
         return abc(n, cfg.dx, cfg.sigma, cfg.B, cfg.C, seed=0, band_limit=cfg.band_limit)
 
 
-def _energy_point(ref, model_bins, model_se, name: str) -> dict:
+@dataclass(frozen=True)
+class _EnergyError:
+    """A method's energy deviation from the Kirchhoff reference (``_energy_point``); its
+    fields go into the panel's JSON point as they are."""
+
+    deviation: float | None
+    error: float | None
+    error_se: float | None
+    own_se: float | None
+    reference_se: float
+    rel_error: float | None
+
+
+def _energy_point(ref, model_bins, model_se, name: str) -> _EnergyError:
     """|energy_dev| of ``model_bins`` against the Kirchhoff ``ref`` (incidence 0) and its
     uncertainty: ``wave_verdict``'s ``energy_dev_se`` (the reference's speckle) and the
     model's own (``model_se``, or None) over the same energy set, in quadrature; also
@@ -259,14 +281,14 @@ def _energy_point(ref, model_bins, model_se, name: str) -> dict:
         se_m = np.asarray(model_se, dtype=float).reshape(-1)
         own = float(np.sqrt(np.sum((omega[E] * se_m[E]) ** 2)) / norm)
     d = v["energy_dev"]
-    return {
-        "deviation": d,
-        "error": None if d is None else abs(d),
-        "error_se": None if d is None else math.hypot(v["energy_dev_se"], own or 0.0),
-        "own_se": own,
-        "reference_se": ref_se,
-        "rel_error": v["rel_error"],
-    }
+    return _EnergyError(
+        deviation=d,
+        error=None if d is None else abs(d),
+        error_se=None if d is None else math.hypot(v["energy_dev_se"], own or 0.0),
+        own_se=own,
+        reference_se=ref_se,
+        rel_error=v["rel_error"],
+    )
 
 
 def _kirchhoff_points(cfg: MethodsConfig, ref, solve) -> list[dict]:
@@ -289,8 +311,8 @@ def _kirchhoff_points(cfg: MethodsConfig, ref, solve) -> list[dict]:
                 "size": int(n),
                 "seconds": sec,
                 "runs": len(outs),
-                **p,
-                "orders": int(r.meta["orders"][0]),
+                **asdict(p),
+                "orders": int(r.info.orders[0]),
             }
         )
     return points
@@ -320,8 +342,8 @@ def _wave_trace_points(cfg: MethodsConfig, ref, ref_surface, bins) -> list[dict]
     for n in cfg.wave_rays:
         sec, outs = _best_of(lambda k, n=n: trace(n, k), cfg.repeat, cfg.cheap)
         ps = [_energy_point(ref, r.brdf[0], r.stderr[0], "ray-trace") for r in outs]
-        dev = float(np.mean([q["deviation"] for q in ps]))
-        own = math.sqrt(np.mean([q["own_se"] ** 2 for q in ps]) / len(ps))
+        dev = float(np.mean([q.deviation for q in ps]))
+        own = math.sqrt(np.mean([q.own_se**2 for q in ps]) / len(ps))
         points.append(
             {
                 "method": "ray trace (Embree)",
@@ -334,12 +356,12 @@ def _wave_trace_points(cfg: MethodsConfig, ref, ref_surface, bins) -> list[dict]
                 "deviation": dev,
                 "error": abs(dev),
                 "error_se": math.hypot(
-                    float(np.mean([q["error_se"] ** 2 - q["own_se"] ** 2 for q in ps])) ** 0.5,
+                    float(np.mean([q.error_se**2 - q.own_se**2 for q in ps])) ** 0.5,
                     own,
                 ),
                 "own_se": own,
-                "reference_se": ps[0]["reference_se"],
-                "rel_error": float(np.mean([q["rel_error"] for q in ps])),
+                "reference_se": ps[0].reference_se,
+                "rel_error": float(np.mean([q.rel_error for q in ps])),
                 "setup_seconds": setup,
             }
         )
@@ -393,6 +415,7 @@ def _panel_wave(cfg: MethodsConfig) -> dict:
             cfg.cheap,
         )
         p = _energy_point(ref, outs[0].values, None, key)
+        reference_se = p.reference_se  # the reference's speckle: the same for every method
         lat = wave_verdict(ref, 0, lattice_average(ref, 0, fn), model=key)["energy_dev"]
         points.append(
             {
@@ -403,7 +426,7 @@ def _panel_wave(cfg: MethodsConfig) -> dict:
                 "size": None,
                 "seconds": sec,
                 "runs": len(outs),
-                **p,
+                **asdict(p),
                 "error_lattice": None if lat is None else abs(lat),
                 "converged": bool(np.all(outs[0].converged)),
             }
@@ -419,7 +442,7 @@ def _panel_wave(cfg: MethodsConfig) -> dict:
         "reference": f"Kirchhoff on {cfg.wave_ref_n}² ({side:g} µm = {side / lam:g} λ), "
         f"upsample {cfg.upsample}",
         "reference_seconds": ref_seconds,
-        "reference_se": float(points[0]["reference_se"]),
+        "reference_se": float(reference_se),
         "m_realised": m_real,
         "error_measure": "|energy deviation| over the reference's 90 % diffuse energy set "
         "(wave_verdict energy_dev); uncertainty: reference speckle (common) and the "

@@ -47,15 +47,23 @@ DEFAULT_THETA = {"surface": 0.0, "rays": 60.0, "lobe": 30.0, "disk": 30.0, "norm
 DEFAULT_RAYS = {"rays": 300, "lobe": 200_000, "disk": 100_000}
 WINDOW = (1200, 800)
 BACKGROUND = "white"
-COLOURS = {
-    "incident": "#e6a100",
-    "single": "#2ca02c",
-    "masked": "#d62728",
-    "downward": "#1f57c4",
-    "model": "#2ca02c",
-    "mirror": "#444444",
-    "outline": "black",
-}
+
+
+@dataclass(frozen=True)
+class Colours:
+    """The views' colours: incident rays, the fates of the traced rays (single bounce, masked,
+    downward), a model's lobe or normals, the mirror direction and outlines."""
+
+    incident: str = "#e6a100"
+    single: str = "#2ca02c"
+    masked: str = "#d62728"
+    downward: str = "#1f57c4"
+    model: str = "#2ca02c"
+    mirror: str = "#444444"
+    outline: str = "black"
+
+
+COLOURS = Colours()
 
 
 # --- set-up --------------------------------------------------------------------------------------
