@@ -17,8 +17,7 @@ from ...sim.predict import predict
 from ...stats import MIN_EVENTS
 from .common import (
     COLOURS,
-    DEFAULT_RAYS,
-    DEFAULT_THETA,
+    LOBE_VIEW,
     WINDOW,
     ascii_text,
     plotter,
@@ -149,8 +148,8 @@ def _model_panel(p, lobe, caption: str, wi) -> None:
 
 def view_lobe(
     scene_or_surface,
-    theta_i: float = DEFAULT_THETA["lobe"],
-    rays: int = DEFAULT_RAYS["lobe"],
+    theta_i: float = LOBE_VIEW.theta,
+    rays: int = LOBE_VIEW.rays,
     scale: str = "linear",
     shadowing: str | None = None,
     n_theta: int = 30,

@@ -14,8 +14,7 @@ from ...sim import Tracer
 from ...sim.tracer import ESCAPED, HIT
 from .common import (
     COLOURS,
-    DEFAULT_RAYS,
-    DEFAULT_THETA,
+    RAYS_VIEW,
     WINDOW,
     Section,
     colour_key,
@@ -108,9 +107,9 @@ def segments(a: np.ndarray, b: np.ndarray):
 
 def view_rays(
     scene_or_surface,
-    theta_i: float = DEFAULT_THETA["rays"],
+    theta_i: float = RAYS_VIEW.theta,
     phi_i: float = 0.0,
-    rays: int = DEFAULT_RAYS["rays"],
+    rays: int = RAYS_VIEW.rays,
     grooves: int = 12,
     material=None,
     seed=0,
