@@ -440,7 +440,7 @@ def load_scene(path) -> Scene:
     if isinstance(surface, FileSurface):
         check_heightfield(where, path.parent / surface.path, surface.dx, surface.periodic)
     simulation = _simulation(where, data.get("simulation"))
-    if simulation.realisations == "auto" and surface.kind not in RANDOM_KINDS:
+    if simulation.realisations == "auto" and not surface.random:
         fail(
             where,
             "simulation.realisations",
