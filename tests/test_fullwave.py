@@ -395,7 +395,7 @@ def test_the_methods_panel_places_rcw_and_kirchhoff_on_one_grating():
     the converged RCW point's error (its last change) is bounded by the tolerance per order,
     K·tol/Σ η over the K orders with θo ≤ 80°; Kirchhoff is cheaper than any RCW solve."""
     from microsim.analysis.report_methods import _METHODS_KEYS
-    from microsim.app.bench_methods import _panel_fullwave, methods_config
+    from microsim.app.bench_methods_study import _panel_fullwave, methods_config
 
     panel = _panel_fullwave(methods_config(quick=True))
     assert all(k in panel for k in _METHODS_KEYS["panel"])

@@ -39,15 +39,13 @@ from microsim.errors import UsageError
 from microsim.measured.rgl import (
     LUMINANCE_WEIGHTS,
     RGLResolution,
-    _Table2D,
-    _u2phi,
-    _u2theta,
     interpolation_error,
     read_rgl,
     read_tensor_file,
     tensor_file_bytes,
     write_rgl,
 )
+from microsim.measured.rgl_warp import Table2D, u2phi, u2theta
 from microsim.sim import Bins
 from microsim.testing import BRDFMismatch, assert_brdf_matches_measured
 from microsim.vectors import spherical
@@ -100,7 +98,7 @@ def test_the_reader_returns_the_function_at_the_nodes(files):
     n = f["rgb"].shape[-1]
     sx, sy = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
     s = np.stack([sx.ravel(), sy.ravel()], -1)
-    warp = _Table2D(f["vndf"], (f["phi_i"], f["theta_i"]), warp=True)
+    warp = Table2D(f["vndf"], (f["phi_i"], f["theta_i"]), warp=True)
     rng = np.random.default_rng(1)
     checked = 0
     for t in (2, 7, 12):
@@ -108,7 +106,7 @@ def test_the_reader_returns_the_function_at_the_nodes(files):
         u_m, _ = warp.sample(s, (np.zeros_like(ti), ti))
         phi = rng.uniform(-np.pi, np.pi)
         wi = spherical(theta_i[t], phi)
-        m = spherical(_u2theta(u_m[:, 0]), _u2phi(u_m[:, 1]) + phi)
+        m = spherical(u2theta(u_m[:, 0]), u2phi(u_m[:, 1]) + phi)
         wo = 2 * (m @ wi)[:, None] * m - wi
         wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
         ok = wo[:, 2] > 1e-3

@@ -244,7 +244,7 @@ def throughput(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 5, 
             res = simulate(
                 surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(), threads=threads
             )
-            pipe[threads] = max(pipe[threads], res.meta["rays_per_second"])
+            pipe[threads] = max(pipe[threads], res.info.rays_per_second)
     raw = RawThroughput(
         rays=n_p + n_m,
         primary_rays=n_p,
@@ -342,7 +342,7 @@ def bounce_throughput(
                     threads=threads,
                     bounces=b,
                 )
-                best[threads] = max(best[threads], res.meta["rays_per_second"])
+                best[threads] = max(best[threads], res.info.rays_per_second)
     return BounceThroughput(one=one, every=every)
 
 
@@ -366,7 +366,7 @@ def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
     for _ in range(repeat):
         for key, b in bins.items():
             res = simulate(surface, "aluminium", cfg.theta_i, rays=cfg.rays, bins=b, threads=2)
-            rate[key] = max(rate[key], res.meta["rays_per_second"])
+            rate[key] = max(rate[key], res.info.rays_per_second)
             model = TorranceSparrow(ndfs[key], Smith(ndfs[key]), "aluminium")
             t0 = time.perf_counter()
             predict({"ts": model}, [cfg.theta_i], b)
@@ -437,7 +437,7 @@ def time_to_accuracy(
     from microsim import analytic as an
     from microsim.analysis.verdicts import Measured, Prediction, verdict
     from microsim.sim import Bins
-    from microsim.sim.auto import simulate_auto
+    from microsim.sim.auto import AutoRecord, simulate_auto
     from microsim.sim.predict import predict
     from microsim.surfaces import vgrooves
 
@@ -459,14 +459,14 @@ def time_to_accuracy(
     ts = an.TorranceSparrow(an.Beckmann(0.3), an.VGroove(), "aluminium")
     model = predict({"ts": ts}, [30.0], bins)["ts"][0]
     v = verdict(Measured.of(res, 0), Prediction(model))
-    info = res.meta["auto"]["incidences"][0]
+    incidence = AutoRecord.of(res.info.auto).incidences[0]
     return Accuracy(
         seconds=seconds,
         rays=int(res.rays[0]),
         rays_per_s=res.rays[0] / seconds,
         masking=masking,
-        rse=info["rse"],
-        converged=info["converged"],
+        rse=incidence.rse,
+        converged=incidence.converged,
         rel_rms_vs_closed_form=v["rel_rms"],
         chi2_dof=v["chi2_dof"],
         threads=threads,

@@ -21,7 +21,7 @@ default all of ``EXPORTS``): ``table.binary`` (MERL, ``measured.write_merl``) an
 with a ``RGL_FLOOR`` Lambertian share —
 an RGL file stores the NDF that parameterises it; a scene without one, a heightfield file, gets
 no RGL file by default and an error when ``--export rgl`` asks for it). Each export is read
-back and its bin averages compared with the table's: ``measure.json["exports"]``
+back and its bin averages compared with the table's: the ``exports`` of ``measure.json``
 records per format the file, the seconds and that difference (energy-weighted relative RMS
 over each incidence's 90 % energy bins, its largest over the incidences) beside the table's
 own relative standard error over the same bins: a format that stores a reciprocal average
@@ -59,7 +59,7 @@ from ..errors import EXIT_INTERRUPTED, EXIT_OK, UsageError
 from ..measured import BRDFTable, read_merl, read_rgl, write_merl, write_rgl
 from ..sim import Bins, Estimator, Execution, Experiment, Result
 from ..sim.arguments import MAX_RAYS, MAX_THREADS
-from ..sim.auto import Precision, estimate_to_precision
+from ..sim.auto import AutoRecord, Precision, estimate_to_precision
 from ..sim.schedule import DeferredInterrupt
 from ..stats import energy_set
 from .cluster import check_address, connect
@@ -455,20 +455,20 @@ def _acquire(acq: Acquisition, root: Path, doc: MeasureRecord, client, log) -> B
             Precision(acq.target),
         )
         res.save(where)
-        auto = res.info.auto["incidences"][0]
+        auto = AutoRecord.of(res.info.auto).incidences[0]
         doc.incidences[key] = IncidenceRecord(
-            rays=int(auto["rays"]),
+            rays=int(auto.rays),
             seconds=time.perf_counter() - t0,
-            rse=auto["rse"],
-            converged=bool(auto["converged"]),
+            rse=auto.rse,
+            converged=bool(auto.converged),
         )
         doc.write(root)
         results.append(res)
         if log:
             log(
                 f"microsim measure: θi = {theta:g}° ({k + 1}/{len(acq.theta_i)}): "
-                f"{auto['rays']:,} rays, relative error {percent(auto['rse'], unit=' %')}"
-                f"{'' if auto['converged'] else ' (max-rays reached)'}"
+                f"{auto.rays:,} rays, relative error {percent(auto.rse, unit=' %')}"
+                f"{'' if auto.converged else ' (max-rays reached)'}"
             )
     table = BRDFTable(
         np.array(acq.theta_i),

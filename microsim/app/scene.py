@@ -72,31 +72,43 @@ allowed values.
 
 from __future__ import annotations
 
-import errno
-import os
 import re
-import stat
-import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
-from types import MappingProxyType
-from typing import Any, Callable, Mapping
 
 import numpy as np
 
 from microsim import analytic as an
-from microsim import surfaces
-from microsim.checks import PATH_RULE, file_path, is_file_path
-from microsim.errors import EnvironmentFailure, UsageError
+from microsim.errors import UsageError
 from microsim.sim.arguments import MAX_RAYS
-from microsim.surfaces.heightfields import abc_ensemble_ndf, gaussian_ensemble_ndf
-from microsim.surfaces.loader import check_heightfield_file
 from microsim.surfaces.surface import anisotropy_of
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from .scene_checks import (
+    ANGLE,
+    BOOL,
+    REQUIRED,
+    STR,
+    SceneError,
+    check_keys,
+    check_value,
+    fail,
+    fill,
+    int_in,
+    is_int,
+    is_num,
+)
+from .scene_surface import (
+    MAX_GRID,
+    RANDOM_KINDS,
+    SURFACE_KINDS,
+    FileSurface,
+    SurfaceSpec,
+    check_heightfield,
+    make_ndf,
+    scaled_grid,
+    surface_spec,
+)
+from .toml_file import MAX_SCENE_BYTES, read_toml
 
 __all__ = [
     "SceneError",
@@ -115,150 +127,20 @@ __all__ = [
     "WAVE_KINDS",
     "MIN_TILE_WAVELENGTHS",
     "MAX_THETA_I",
+    "RANDOM_KINDS",
+    "MAX_GRID",
+    "MAX_SCENE_BYTES",
+    "scaled_grid",
+    "incidence_pairs",
 ]
 
-
-class SceneError(UsageError):
-    """A malformed scene file: the message names the file, the key and the allowed values."""
-
-
-# --- value checks: (predicate, description of the allowed values) ---------------------------
-def _is_int(v):
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_num(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
-
-
-def _int_in(lo, hi):
-    return (lambda v: _is_int(v) and lo <= v <= hi, f"an integer in [{lo}, {hi}]")
-
-
-_LENGTH = (lambda v: _is_num(v) and 1e-6 <= v <= 1e6, "a number in [1e-6, 1e6]")
-_POS_INT = (lambda v: _is_int(v) and v >= 1, "an integer >= 1")
-_GRID = _int_in(8, 4096)
-MAX_GRID = 4096
-"""Largest heightfield grid side a scene may ask for (grid points per side)."""
 MIN_IOR, MAX_IOR = 1e-3, 1e3
 """Bounds of a scene's index of refraction n (and of k, from 0)."""
-MAX_SCENE_BYTES = 1 << 20
-"""Largest scene (or sweep) file read: 1 MiB."""
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,99}")
 NAME_RULE = (
     "1-100 characters from letters, digits, '.', '_', '-', not starting with '.' "
     "(it names the output folder)"
 )
-_BOOL = (lambda v: isinstance(v, bool), "true or false")
-_ANGLE = (lambda v: _is_num(v) and -360.0 <= v <= 360.0, "degrees in [-360, 360]")
-_STR = (lambda v: isinstance(v, str), "a string")
-_PATH = (is_file_path, PATH_RULE)
-_C_ABC = (lambda v: _is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
-_BAND = (lambda v: _is_num(v) and v >= 1, "a number >= 1")
-
-_REQUIRED = object()
-
-
-# --- surface kinds: the scene-file keys of each generator, how it is built, its NDF -----------
-@dataclass(frozen=True)
-class _Kind:
-    """``keys``: name → (default or _REQUIRED, check) of the ``[surface]`` table;
-    ``build(params, seed, scale, base_dir) -> Surface`` (``scale`` shrinks the grid or the
-    groove count, see ``Scene.build_surface``); ``ensemble_ndf(params) -> NDF | None``, the
-    ``Surface.ensemble_ndf`` of the full-size surface, without building it."""
-
-    keys: dict[str, tuple[Any, tuple[Callable, str]]]
-    build: Callable
-    ensemble_ndf: Callable
-
-
-def _vgroove_ndf(p):
-    return make_ndf(p["ndf"], p)
-
-
-def scaled_grid(n: int, scale: float) -> int:
-    """Grid points per side of a heightfield of ``n`` built at surface scale ``scale``."""
-    return max(8, round(n * scale))
-
-
-def _heightfield(generator) -> Callable:
-    def build(p, seed, scale, base):
-        return generator(seed=seed, **{**p, "n": scaled_grid(p["n"], scale)})
-
-    return build
-
-
-_KINDS = {
-    "vgrooves": _Kind(
-        {
-            "n_grooves": (4000, _int_in(1, 1_000_000)),
-            "ndf": (_REQUIRED, _STR),
-            "sampling": (
-                "stratified",
-                (lambda v: v in ("stratified", "random"), '"stratified" or "random"'),
-            ),
-            "tile": (1.0, _LENGTH),
-            "oriented": (False, _BOOL),
-        },
-        lambda p, seed, scale, base: surfaces.vgrooves(
-            max(1, round(p["n_grooves"] * scale)),
-            _vgroove_ndf(p),
-            seed,
-            p["sampling"],
-            p["tile"],
-            oriented=p["oriented"],
-        ),
-        lambda p: None if p["oriented"] else _vgroove_ndf(p),
-    ),
-    "gaussian": _Kind(
-        {
-            "n": (512, _GRID),
-            "dx": (1.0, _LENGTH),
-            "sigma": (_REQUIRED, _LENGTH),
-            "corr_len": (_REQUIRED, _LENGTH),
-            "exact_amplitude": (True, _BOOL),
-            "corr_len_y": (None, _LENGTH),
-            "rotation": (0.0, _ANGLE),
-        },
-        _heightfield(surfaces.gaussian),
-        lambda p: gaussian_ensemble_ndf(p["sigma"], p["corr_len"], p["corr_len_y"], p["rotation"]),
-    ),
-    "abc": _Kind(
-        {
-            "n": (512, _GRID),
-            "dx": (1.0, _LENGTH),
-            "sigma": (_REQUIRED, _LENGTH),
-            "B": (_REQUIRED, _LENGTH),
-            "C": (_REQUIRED, _C_ABC),
-            "band_limit": (4.0, _BAND),
-            "exact_amplitude": (True, _BOOL),
-            "B_y": (None, _LENGTH),
-            "rotation": (0.0, _ANGLE),
-        },
-        _heightfield(surfaces.abc),
-        lambda p: abc_ensemble_ndf(
-            p["n"], p["dx"], p["sigma"], p["B"], p["C"], p["band_limit"], p["B_y"], p["rotation"]
-        ),
-    ),
-    "file": _Kind(
-        {"path": (_REQUIRED, _PATH), "dx": (_REQUIRED, _LENGTH), "periodic": (False, _BOOL)},
-        lambda p, seed, scale, base: surfaces.from_file(base / p["path"], p["dx"], p["periodic"]),
-        lambda p: None,
-    ),
-    "flat": _Kind(
-        {"size": (1.0, _LENGTH)},
-        lambda p, seed, scale, base: surfaces.flat(p["size"]),
-        lambda p: None,
-    ),
-}
-SURFACE_KINDS = tuple(_KINDS)
-RANDOM_KINDS = ("vgrooves", "gaussian", "abc")
-"""Kinds whose realisations (seeds seed, seed + 1, …) are independent draws of one ensemble."""
-
-
-def _num_in(lo, hi):
-    return (lambda v: _is_num(v) and lo <= v <= hi, f"a number in [{lo:g}, {hi:g}]")
-
 
 MAX_THETA_I = 89.99
 """Largest incidence angle (degrees) of a scene or ``--theta-i``: closer to grazing the tracer
@@ -267,7 +149,7 @@ _THETA_I = (
     lambda v: (
         isinstance(v, list)
         and 0 < len(v) <= 180
-        and all(_is_num(t) and 0 <= t <= MAX_THETA_I for t in v)
+        and all(is_num(t) and 0 <= t <= MAX_THETA_I for t in v)
     ),
     f"a non-empty list of at most 180 angles in degrees, each in [0, {MAX_THETA_I:g}]",
 )
@@ -275,38 +157,38 @@ MAX_PHI_I = 12
 """Most incidence azimuths of one scene: each multiplies the run's incidences."""
 _PHI_I = (
     lambda v: (
-        _ANGLE[0](v)
-        or (isinstance(v, list) and 0 < len(v) <= MAX_PHI_I and all(_ANGLE[0](p) for p in v))
+        ANGLE[0](v)
+        or (isinstance(v, list) and 0 < len(v) <= MAX_PHI_I and all(ANGLE[0](p) for p in v))
     ),
     f"degrees in [-360, 360], or a non-empty list of at most {MAX_PHI_I} such angles",
 )
 _RAYS = (
-    lambda v: v == "auto" or (_is_int(v) and 1 <= v <= MAX_RAYS),
+    lambda v: v == "auto" or (is_int(v) and 1 <= v <= MAX_RAYS),
     f'an integer in [1, {MAX_RAYS:,}] or "auto"',
 )
 _SIM_KEYS = {
     "theta_i": ([0.0, 30.0, 60.0, 80.0], _THETA_I),
     "rays": (1_000_000, _RAYS),
-    "theta_bins": (45, _int_in(1, 900)),
-    "phi_bins": (72, _int_in(2, 1440)),
+    "theta_bins": (45, int_in(1, 900)),
+    "phi_bins": (72, int_in(2, 1440)),
     "realisations": (
         1,
         (
-            lambda v: v == "auto" or (_is_int(v) and 1 <= v <= 1000),
+            lambda v: v == "auto" or (is_int(v) and 1 <= v <= 1000),
             'an integer in [1, 1000] or "auto"',
         ),
     ),
     "realisation_target": (
         None,
-        (lambda v: _is_num(v) and 1e-3 <= v <= 0.5, "a number in [0.001, 0.5]"),
+        (lambda v: is_num(v) and 1e-3 <= v <= 0.5, "a number in [0.001, 0.5]"),
     ),
     "bounces": (
         1,
-        (lambda v: v == "all" or (_is_int(v) and 1 <= v <= 256), 'an integer in [1, 256] or "all"'),
+        (lambda v: v == "all" or (is_int(v) and 1 <= v <= 256), 'an integer in [1, 256] or "all"'),
     ),
-    "seed": (0, (lambda v: _is_int(v) and v >= 0, "an integer >= 0")),
+    "seed": (0, (lambda v: is_int(v) and v >= 0, "an integer >= 0")),
     "phi_i": (0.0, _PHI_I),
-    "full_azimuth": (None, _BOOL),
+    "full_azimuth": (None, BOOL),
 }
 _TOP_KEYS = ("name", "description", "surface", "material", "simulation", "wave")
 WAVE_KINDS = ("gaussian", "abc")
@@ -318,9 +200,9 @@ _SURFACE_MODELS = ("smooth", "mesh")
 _FRESNEL_ANGLES = ("half", "incident")
 _WAVE_KEYS = {
     "wavelength": (
-        _REQUIRED,
+        REQUIRED,
         (
-            lambda v: _is_num(v) and 1e-6 <= v <= 1e6,
+            lambda v: is_num(v) and 1e-6 <= v <= 1e6,
             "a number > 0 in [1e-6, 1e6], in the unit of dx (micrometres by convention)",
         ),
     ),
@@ -328,7 +210,7 @@ _WAVE_KEYS = {
         "smooth",
         (lambda v: v in _SURFACE_MODELS, " or ".join(f'"{m}"' for m in _SURFACE_MODELS)),
     ),
-    "upsample": (1, _int_in(1, 16)),
+    "upsample": (1, int_in(1, 16)),
     "fresnel_angle": (
         "half",
         (lambda v: v in _FRESNEL_ANGLES, " or ".join(f'"{m}"' for m in _FRESNEL_ANGLES)),
@@ -344,14 +226,6 @@ def incidence_pairs(theta_i, phi_i) -> tuple[tuple[float, ...], tuple[float, ...
 
 
 # --- the scene ---------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SurfaceSpec:
-    """``kind`` and its parameters (read-only mapping, defaults filled in, validated)."""
-
-    kind: str
-    params: Mapping[str, Any]
-
-
 @dataclass(frozen=True)
 class SimSettings:
     """Simulation settings: incidence angles (degrees), rays per incidence (or "auto"),
@@ -440,133 +314,13 @@ class Scene:
     def _build(self, seed, scale):
         seed = self.simulation.seed if seed is None else seed
         base = self.path.parent if self.path is not None else Path.cwd()
-        return _KINDS[self.surface.kind].build(dict(self.surface.params), seed, scale, base)
+        return self.surface.build(seed, scale, base)
 
     def ndf(self):
         """The ensemble NDF of the scene's surface at its full size — the ``ensemble_ndf`` that
         ``build_surface()`` attaches (``microsim.surfaces.Surface``), computed from the
         parameters without building the surface — or None (file, flat)."""
-        return _KINDS[self.surface.kind].ensemble_ndf(self.surface.params)
-
-
-def make_ndf(name: str, params: Mapping[str, float]):
-    """Analytic NDF from a scene name (``analytic.scene_distributions()``) and its parameters
-    (the class's ``scene_params`` are taken from ``params``)."""
-    cls = an.scene_distribution(name)
-    return cls(**{k: params[k] for k in cls.scene_params})
-
-
-# --- loading -----------------------------------------------------------------------------------
-def _fail(where: str, key: str, msg: str):
-    raise SceneError(f"{where}: {key}: {msg}")
-
-
-def _check_value(where, key, value, check):
-    pred, allowed = check
-    try:
-        ok = bool(pred(value))
-    except TypeError:
-        ok = False
-    if not ok:
-        _fail(where, key, f"must be {allowed}, got {value!r}")
-    return value
-
-
-def _check_keys(where, section, table, allowed):
-    if not isinstance(table, dict):
-        _fail(where, section, f"must be a table, got {table!r}")
-    extra = sorted(set(table) - set(allowed))
-    if extra:
-        _fail(where, f"{section}.{extra[0]}", f"unknown key; allowed keys: {', '.join(allowed)}")
-
-
-def _fill(where, section, table, schema):
-    out = {}
-    for key, (default, check) in schema.items():
-        if key in table:
-            out[key] = _check_value(where, f"{section}.{key}", table[key], check)
-        elif default is _REQUIRED:
-            _fail(where, f"{section}.{key}", f"required; must be {check[1]}")
-        else:
-            out[key] = default
-    return out
-
-
-def _scene_ndf(where, name):
-    """The distribution class a V-groove scene names, else a SceneError naming the allowed
-    names."""
-    try:
-        return an.scene_distribution(name)
-    except UsageError as e:
-        message = str(e).removeprefix("ndf ")
-    _fail(where, "surface.ndf", message)
-
-
-def surface_spec(where, table) -> SurfaceSpec:
-    """The validated ``SurfaceSpec`` of a ``[surface]`` table (defaults filled in); a bad
-    value raises ``SceneError`` naming ``where`` (the file) and the key. Used by scene and
-    sweep files alike."""
-    if not isinstance(table, dict):
-        _fail(where, "surface", f"must be a table, got {table!r}")
-    kind = table.get("kind", _REQUIRED)
-    if kind is _REQUIRED:
-        _fail(where, "surface.kind", f"required; one of {', '.join(SURFACE_KINDS)}")
-    if kind not in _KINDS:
-        _fail(where, "surface.kind", f"must be one of {', '.join(SURFACE_KINDS)}, got {kind!r}")
-    schema = dict(_KINDS[kind].keys)
-    if kind == "vgrooves":
-        ndf = _scene_ndf(where, table.get("ndf"))
-        table = {**table, "ndf": ndf.name}
-        # beyond these bounds the closed forms over- or underflow
-        schema.update({k: (_REQUIRED, _num_in(*b)) for k, b in ndf.scene_params.items()})
-    _check_keys(where, "surface", table, ["kind", *schema])
-    params = _fill(where, "surface", {k: v for k, v in table.items() if k != "kind"}, schema)
-    for key in (
-        "sigma",
-        "corr_len",
-        "B",
-        "C",
-        "dx",
-        "tile",
-        "size",
-        "band_limit",
-        *(an.scene_distribution(params["ndf"]).scene_params if kind == "vgrooves" else ()),
-    ):
-        if key in params:
-            params[key] = float(params[key])
-    if kind == "vgrooves":
-        try:
-            make_ndf(params["ndf"], params)
-        except UsageError as e:
-            raise SceneError(f"{where}: surface: {e}") from None
-    if kind == "gaussian":
-        if params["corr_len"] < params["dx"]:
-            _fail(
-                where,
-                "surface.corr_len",
-                f"must be >= dx = {params['dx']:g} (a shorter "
-                f"correlation length is not resolved by the grid), got {params['corr_len']:g}",
-            )
-        if 2.0 * params["sigma"] / params["corr_len"] > 10.0:
-            _fail(
-                where,
-                "surface.sigma",
-                f"rms slope 2 sigma / corr_len must be <= 10, got "
-                f"{2.0 * params['sigma'] / params['corr_len']:.3g} (sigma = "
-                f"{params['sigma']:g}, corr_len = {params['corr_len']:g})",
-            )
-    return SurfaceSpec(kind, MappingProxyType(params))
-
-
-def check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> None:
-    """A heightfield file usable by ``surfaces.from_file``, checked before anything runs
-    (``surfaces.loader.check_heightfield_file``: a regular file holding a real 2D array of
-    finite heights that fits in memory, at most ``MAX_GRID`` per side); the one-line error
-    names the scene file, the key and the heightfield file."""
-    try:
-        check_heightfield_file(path, dx, periodic, max_side=MAX_GRID)
-    except UsageError as e:
-        _fail(where, "surface.path", " ".join(str(e).split()))
+        return self.surface.ensemble_ndf()
 
 
 def material_ior(where, table):
@@ -575,7 +329,7 @@ def material_ior(where, table):
     ``material.ior``."""
     if table is None:
         return None
-    _check_keys(where, "material", table, ["ior"])
+    check_keys(where, "material", table, ["ior"])
     v = table.get("ior", "mirror")
     allowed = (
         f"a name ({', '.join(an.MATERIALS)}), a number n, or [n, k], with n in "
@@ -584,10 +338,10 @@ def material_ior(where, table):
     if not isinstance(v, str):
         pair = v if isinstance(v, list) else [v, 0]
         n, k = pair if len(pair) == 2 else (None, None)
-        if not (_is_num(n) and _is_num(k) and MIN_IOR <= n <= MAX_IOR and 0 <= k <= MAX_IOR):
-            _fail(where, "material.ior", f"must be {allowed}, got {v!r}")
+        if not (is_num(n) and is_num(k) and MIN_IOR <= n <= MAX_IOR and 0 <= k <= MAX_IOR):
+            fail(where, "material.ior", f"must be {allowed}, got {v!r}")
         if n == 1 and k == 0:
-            _fail(
+            fail(
                 where,
                 "material.ior",
                 f"n = 1 with k = 0 matches the medium above and reflects nothing; must be "
@@ -597,30 +351,30 @@ def material_ior(where, table):
     try:
         return an.resolve_material(v)
     except UsageError:
-        _fail(where, "material.ior", f"must be {allowed}, got {table.get('ior')!r}")
+        fail(where, "material.ior", f"must be {allowed}, got {table.get('ior')!r}")
 
 
 def _simulation(where, table) -> SimSettings:
     table = {} if table is None else table
-    _check_keys(where, "simulation", table, list(_SIM_KEYS))
-    sim = SimSettings(**_fill(where, "simulation", table, _SIM_KEYS))
+    check_keys(where, "simulation", table, list(_SIM_KEYS))
+    sim = SimSettings(**fill(where, "simulation", table, _SIM_KEYS))
     phis = sim.phi_i if isinstance(sim.phi_i, list) else [sim.phi_i]
     sim = replace(
         sim, theta_i=tuple(float(t) for t in sim.theta_i), phi_i=tuple(float(p) for p in phis)
     )
     twice = sorted({t for t in sim.theta_i if sim.theta_i.count(t) > 1})
     if twice:
-        _fail(where, "simulation.theta_i", f"lists {twice[0]:g}° twice; give each angle once")
+        fail(where, "simulation.theta_i", f"lists {twice[0]:g}° twice; give each angle once")
     turns = [q % 360.0 for q in sim.phi_i]
     same = sorted({p for p in sim.phi_i if turns.count(p % 360.0) > 1})
     if same:
-        _fail(
+        fail(
             where,
             "simulation.phi_i",
             f"lists {same[0]:g}° twice (modulo 360°); give each azimuth once",
         )
     if sim.realisation_target is not None and sim.realisations != "auto":
-        _fail(where, "simulation.realisation_target", 'needs realisations = "auto"')
+        fail(where, "simulation.realisation_target", 'needs realisations = "auto"')
     return sim
 
 
@@ -628,22 +382,22 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
     """The ``[wave]`` table checked against the surface and incidences (module docstring)."""
     if table is None:
         return None
-    _check_keys(where, "wave", table, list(_WAVE_KEYS))
-    w = WaveSpec(**_fill(where, "wave", table, _WAVE_KEYS))
+    check_keys(where, "wave", table, list(_WAVE_KEYS))
+    w = WaveSpec(**fill(where, "wave", table, _WAVE_KEYS))
     w = replace(w, wavelength=float(w.wavelength))
     lam = w.wavelength
     if surface.kind not in WAVE_KINDS:
-        _fail(
+        fail(
             where,
             "wave",
             f"needs surface.kind {' or '.join(WAVE_KINDS)} (a heightfield with a nominal PSD), "
             f"got {surface.kind!r}",
         )
     if w.surface_model == "mesh" and w.upsample != 1:
-        _fail(where, "wave.upsample", f'must be 1 with surface_model = "mesh", got {w.upsample}')
-    n, dx = surface.params["n"], surface.params["dx"]
+        fail(where, "wave.upsample", f'must be 1 with surface_model = "mesh", got {w.upsample}')
+    n, dx = surface.n, surface.dx
     if n * dx < MIN_TILE_WAVELENGTHS * lam:
-        _fail(
+        fail(
             where,
             "wave.wavelength",
             f"the tile n·dx = {n * dx:g} holds only {n * dx / lam:.3g} wavelengths; the wave "
@@ -654,7 +408,7 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
         s_max = float(np.sin(np.radians(max(simulation.theta_i))))
         need = lam / (2.0 * (1.0 + s_max))
         if dx / w.upsample >= need:
-            _fail(
+            fail(
                 where,
                 "surface.dx",
                 f"grid too coarse for wavelength {lam:g}: dx/upsample = "
@@ -665,100 +419,29 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
     return w
 
 
-def read_toml(path, what: str = "scene") -> dict:
-    """The TOML table of the ``what`` file (scene, sweep) at ``path``, the one reader of both.
-
-    ``SceneError`` (one line naming the file) for a missing file, a symbolic-link loop, a name
-    too long, a directory or anything else not a regular file (opened without blocking, so a
-    FIFO is refused, never read), more than ``MAX_SCENE_BYTES``, not UTF-8, NUL bytes, arrays
-    or tables nested too deeply, or malformed TOML; a leading byte-order mark is allowed.
-    Other OS errors (permission denied, an I/O error) are an ``EnvironmentFailure`` naming the
-    path (exit status 1, as for any file the machine will not let microsim read)."""
-    file_path(f"the {what} file", path)
-    try:
-        return _parse_toml(path, what)
-    except OSError as e:
-        raise EnvironmentFailure(
-            f"{path}: cannot read the {what} file ({e.strerror or e})"
-        ) from None
-
-
-def _parse_toml(path, what: str) -> dict:
-    """``read_toml`` without its translation of unexpected OS errors."""
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except FileNotFoundError:
-        raise SceneError(f"{path}: no such {what} file") from None
-    except IsADirectoryError:
-        raise SceneError(f"{path}: is a directory, not a {what} file") from None
-    except OSError as e:  # a symlink loop, a name too long, a file used as a directory
-        if e.errno not in (errno.ELOOP, errno.ENAMETOOLONG, errno.ENOTDIR):
-            raise
-        raise SceneError(f"{path}: {e.strerror}; not a usable {what} file") from None
-    too_large = f"{path}: larger than {MAX_SCENE_BYTES >> 20} MiB; not a {what} file"
-    try:
-        st = os.fstat(fd)
-        if stat.S_ISDIR(st.st_mode):
-            raise SceneError(f"{path}: is a directory, not a {what} file")
-        if not stat.S_ISREG(st.st_mode):
-            raise SceneError(f"{path}: not a regular file (a {what} file must be a TOML file)")
-        if st.st_size > MAX_SCENE_BYTES:
-            raise SceneError(too_large)
-        raw = b""
-        while len(raw) <= MAX_SCENE_BYTES:
-            part = os.read(fd, MAX_SCENE_BYTES + 1 - len(raw))
-            if not part:
-                break
-            raw += part
-    finally:
-        os.close(fd)
-    if len(raw) > MAX_SCENE_BYTES:  # grew while being read
-        raise SceneError(too_large)
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise SceneError(
-            f"{path}: not UTF-8 text (invalid byte at offset {e.start}); "
-            f"a {what} file is UTF-8 TOML"
-        ) from None
-    if "\x00" in text:
-        raise SceneError(f"{path}: contains NUL bytes (a binary file?); a {what} file is TOML text")
-    try:
-        return tomllib.loads(text.removeprefix("\ufeff"))
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(f"{path}: not valid TOML ({' '.join(str(e).split())})") from None
-    except RecursionError:
-        raise SceneError(f"{path}: arrays or tables nested too deeply; not a {what} file") from None
-
-
 def load_scene(path) -> Scene:
     """Read and validate a scene file (module docstring for the schema)."""
     path = Path(path)
     where = str(path)
     data = read_toml(path)
-    _check_keys(where, "scene", data, list(_TOP_KEYS))
+    check_keys(where, "scene", data, list(_TOP_KEYS))
     if "surface" not in data:
-        _fail(where, "surface", f"required table with kind = one of {', '.join(SURFACE_KINDS)}")
-    name = _check_value(where, "name", data.get("name", path.stem), _STR)
+        fail(where, "surface", f"required table with kind = one of {', '.join(SURFACE_KINDS)}")
+    name = check_value(where, "name", data.get("name", path.stem), STR)
     if not NAME_PATTERN.fullmatch(name):
-        _fail(
+        fail(
             where,
             "name",
             f"must be {NAME_RULE}, got {name!r}"
             + (" (the default is the file name)" if "name" not in data else ""),
         )
-    description = _check_value(where, "description", data.get("description", ""), _STR)
+    description = check_value(where, "description", data.get("description", ""), STR)
     surface = surface_spec(where, data["surface"])
-    if surface.kind == "file":
-        check_heightfield(
-            where,
-            path.parent / surface.params["path"],
-            surface.params["dx"],
-            surface.params["periodic"],
-        )
+    if isinstance(surface, FileSurface):
+        check_heightfield(where, path.parent / surface.path, surface.dx, surface.periodic)
     simulation = _simulation(where, data.get("simulation"))
-    if simulation.realisations == "auto" and surface.kind not in RANDOM_KINDS:
-        _fail(
+    if simulation.realisations == "auto" and not surface.random:
+        fail(
             where,
             "simulation.realisations",
             f'"auto" needs a random surface (kind {", ".join(RANDOM_KINDS)}), '
@@ -776,14 +459,14 @@ def load_scene(path) -> Scene:
         material_name=_material_name(data.get("material")),
     )
     if wave is not None and len(simulation.phi_i) > 1:
-        _fail(
+        fail(
             where,
             "simulation.phi_i",
             f"must be one azimuth in a scene with [wave] (the wave solver traces one φi), "
             f"got {list(simulation.phi_i)}",
         )
     if scene.full_azimuth and scene.simulation.phi_bins % 2:
-        _fail(
+        fail(
             where,
             "simulation.phi_bins",
             f"must be even with full-azimuth bins (one bin centred on Δφ = 180°), got "

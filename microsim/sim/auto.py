@@ -24,9 +24,9 @@ batch the number of rays still needed is predicted from rse ∝ N^(-1/2); batche
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from functools import partial
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -49,6 +49,8 @@ __all__ = [
     "simulate_auto",
     "estimate_to_precision",
     "Precision",
+    "AutoRecord",
+    "AutoIncidence",
     "relative_standard_error",
     "ENERGY_FRACTION",
 ]
@@ -248,6 +250,41 @@ def estimate_to_precision(
         )
     th, ph = np.array(ex.theta_i), np.array(ex.phi_i)
     return _assemble(th, ph, bins, omega, runs, meta0, info, precision, est.seed)
+
+
+@dataclass(frozen=True)
+class AutoIncidence:
+    """One incidence of an adaptive run's record (``Result.info.auto``): θi (degrees), the rays
+    used, wall seconds, the achieved relative standard error, whether it met the target and
+    the batches traced."""
+
+    theta_i: float
+    rays: int
+    seconds: float
+    rse: float
+    converged: bool
+    batches: int
+
+
+@dataclass(frozen=True)
+class AutoRecord:
+    """An adaptive run's record (``Result.info.auto``), typed: the target, the energy share
+    its error covers (None if not recorded) and one ``AutoIncidence`` per incidence."""
+
+    target: float
+    energy: float | None
+    incidences: tuple[AutoIncidence, ...]
+
+    @classmethod
+    def of(cls, auto: Mapping | None) -> AutoRecord | None:
+        """The typed reading of ``Result.info.auto`` (None for a run that was not adaptive)."""
+        if not auto:
+            return None
+        names = [f.name for f in fields(AutoIncidence)]
+        incidences = tuple(
+            AutoIncidence(**{k: d.get(k) for k in names}) for d in auto.get("incidences")
+        )
+        return cls(auto.get("target"), auto.get("energy"), incidences)
 
 
 def _assemble(th, ph, bins, omega, runs, meta0, info, precision, seed) -> Result:

@@ -16,7 +16,7 @@ import numpy as np
 
 from ...analysis.budget import error_budget, realisations_needed
 from ...sim import Estimator, Execution, Experiment, estimate
-from ...sim.auto import simulate_auto
+from ...sim.auto import AutoRecord, simulate_auto
 from .planning import AUTO_TARGET, RunPlan, tally_settings
 
 __all__ = [
@@ -123,14 +123,13 @@ def simulate_auto_scene(plan: RunPlan, log):
 
 def auto_summary(result) -> dict | None:
     """Rays, seconds, achieved rse and convergence per incidence of an auto run (or None)."""
-    auto = result.meta.get("auto")
-    if not auto:
+    auto = AutoRecord.of(result.info.auto)
+    if auto is None:
         return None
-    keys = ("theta_i", "rays", "seconds", "rse", "converged", "batches")
     return {
-        "target": auto["target"],
-        "seconds": float(result.meta.get("seconds", 0.0)),
-        "incidences": [{k: d[k] for k in keys} for d in auto["incidences"]],
+        "target": auto.target,
+        "seconds": float(result.info.seconds or 0.0),
+        "incidences": [asdict(incidence) for incidence in auto.incidences],
     }
 
 

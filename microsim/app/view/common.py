@@ -21,6 +21,11 @@ from ..scene import Scene, load_scene
 __all__ = [
     "DEFAULT_THETA",
     "DEFAULT_RAYS",
+    "ViewDefaults",
+    "VIEW_DEFAULTS",
+    "RAYS_VIEW",
+    "LOBE_VIEW",
+    "DISK_VIEW",
     "WINDOW",
     "COLOURS",
     "headless",
@@ -43,19 +48,49 @@ __all__ = [
     "polar_surface",
 ]
 
-DEFAULT_THETA = {"surface": 0.0, "rays": 60.0, "lobe": 30.0, "disk": 30.0, "normals": 0.0}
-DEFAULT_RAYS = {"rays": 300, "lobe": 200_000, "disk": 100_000}
+
+@dataclass(frozen=True)
+class ViewDefaults:
+    """A view's defaults: ``theta`` in degrees (the incidence θi of rays and lobe, the viewing
+    angle θo of disk; unused by surface and normals) and ``rays`` traced (None: it traces
+    none)."""
+
+    theta: float
+    rays: int | None = None
+
+
+RAYS_VIEW = ViewDefaults(60.0, 300)
+LOBE_VIEW = ViewDefaults(30.0, 200_000)
+DISK_VIEW = ViewDefaults(30.0, 100_000)
+VIEW_DEFAULTS = {
+    "surface": ViewDefaults(0.0),
+    "rays": RAYS_VIEW,
+    "lobe": LOBE_VIEW,
+    "disk": DISK_VIEW,
+    "normals": ViewDefaults(0.0),
+}
+"""Each view's ``ViewDefaults`` by its name (``command.VIEWS``)."""
+DEFAULT_THETA = {name: d.theta for name, d in VIEW_DEFAULTS.items()}
+DEFAULT_RAYS = {name: d.rays for name, d in VIEW_DEFAULTS.items() if d.rays is not None}
 WINDOW = (1200, 800)
 BACKGROUND = "white"
-COLOURS = {
-    "incident": "#e6a100",
-    "single": "#2ca02c",
-    "masked": "#d62728",
-    "downward": "#1f57c4",
-    "model": "#2ca02c",
-    "mirror": "#444444",
-    "outline": "black",
-}
+
+
+@dataclass(frozen=True)
+class Colours:
+    """The views' colours: incident rays, the fates of the traced rays (single bounce, masked,
+    downward), a model's lobe or normals, the mirror direction and outlines."""
+
+    incident: str = "#e6a100"
+    single: str = "#2ca02c"
+    masked: str = "#d62728"
+    downward: str = "#1f57c4"
+    model: str = "#2ca02c"
+    mirror: str = "#444444"
+    outline: str = "black"
+
+
+COLOURS = Colours()
 
 
 # --- set-up --------------------------------------------------------------------------------------

@@ -13,8 +13,7 @@ from ... import analytic as an
 from ...analysis.fits import DiskFit, fit_edwards_disk
 from ...sim import LEDGER, ray_events
 from .common import (
-    DEFAULT_RAYS,
-    DEFAULT_THETA,
+    DISK_VIEW,
     WINDOW,
     ascii_text,
     colour_key,
@@ -100,8 +99,8 @@ def _disk_camera(p) -> None:
 
 def view_disk(
     scene_or_surface,
-    theta_o: float = DEFAULT_THETA["disk"],
-    rays: int = DEFAULT_RAYS["disk"],
+    theta_o: float = DISK_VIEW.theta,
+    rays: int = DISK_VIEW.rays,
     points: int = 3000,
     material=None,
     seed=0,

@@ -17,8 +17,7 @@ from ...sim.predict import predict
 from ...stats import MIN_EVENTS
 from .common import (
     COLOURS,
-    DEFAULT_RAYS,
-    DEFAULT_THETA,
+    LOBE_VIEW,
     WINDOW,
     ascii_text,
     plotter,
@@ -80,7 +79,7 @@ def _directions(p, wi: np.ndarray, length: float = 1.25) -> None:
     horizon circle for scale."""
     pv = pyvista()
     mirror = np.array([-wi[0], -wi[1], wi[2]])
-    for w, col in ((wi, COLOURS["incident"]), (mirror, COLOURS["mirror"])):
+    for w, col in ((wi, COLOURS.incident), (mirror, COLOURS.mirror)):
         p.add_mesh(
             pv.Arrow(
                 start=(0, 0, 0),
@@ -141,7 +140,7 @@ def _simulation_panel(p, name, res, bins, model, r_sim, phi, theta_i) -> None:
 def _model_panel(p, lobe, caption: str, wi) -> None:
     """The model's lobe (the mesh ``lobe``) in the second view, linked to the first."""
     p.subplot(0, 1)
-    p.add_mesh(lobe, color=COLOURS["model"], smooth_shading=True)
+    p.add_mesh(lobe, color=COLOURS.model, smooth_shading=True)
     _directions(p, wi)
     title(p, f"model: Torrance–Sparrow\n{caption}\n(same bins, same radius scale)")
     p.link_views()
@@ -149,8 +148,8 @@ def _model_panel(p, lobe, caption: str, wi) -> None:
 
 def view_lobe(
     scene_or_surface,
-    theta_i: float = DEFAULT_THETA["lobe"],
-    rays: int = DEFAULT_RAYS["lobe"],
+    theta_i: float = LOBE_VIEW.theta,
+    rays: int = LOBE_VIEW.rays,
     scale: str = "linear",
     shadowing: str | None = None,
     n_theta: int = 30,

@@ -92,7 +92,7 @@ def view_normals(
     )
     if ndf_D is not None:
         m = polar_surface(ndf_D * cos_c / peak, np.minimum(tc * scale_t, 90.0), pc)
-        p.add_mesh(m, style="wireframe", color=COLOURS["model"], line_width=1.5)
+        p.add_mesh(m, style="wireframe", color=COLOURS.model, line_width=1.5)
     avg = " (azimuth-averaged grooves)" if sc.surface.azimuth_average else ""
     title(
         p,
@@ -115,7 +115,7 @@ def view_normals(
         chart.line(
             mid,
             expected,
-            color=COLOURS["model"],
+            color=COLOURS.model,
             width=2.5,
             style="--",
             label=f"{type(tilts).__name__} tilts (bin average)",

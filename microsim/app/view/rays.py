@@ -14,8 +14,7 @@ from ...sim import Tracer
 from ...sim.tracer import ESCAPED, HIT
 from .common import (
     COLOURS,
-    DEFAULT_RAYS,
-    DEFAULT_THETA,
+    RAYS_VIEW,
     WINDOW,
     Section,
     colour_key,
@@ -108,9 +107,9 @@ def segments(a: np.ndarray, b: np.ndarray):
 
 def view_rays(
     scene_or_surface,
-    theta_i: float = DEFAULT_THETA["rays"],
+    theta_i: float = RAYS_VIEW.theta,
     phi_i: float = 0.0,
-    rays: int = DEFAULT_RAYS["rays"],
+    rays: int = RAYS_VIEW.rays,
     grooves: int = 12,
     material=None,
     seed=0,
@@ -133,32 +132,30 @@ def view_rays(
     p.add_mesh(outline(sec.window, float(sec.vertices[:, 2].max())), color="black", line_width=2)
     p.add_mesh(
         segments(paths.hit + length * paths.wi, paths.hit),
-        color=COLOURS["incident"],
+        color=COLOURS.incident,
         line_width=1,
         opacity=0.6,
     )
-    counts = {}
-    key = [("incident", COLOURS["incident"])]
-    for kind in (SINGLE, MASKED, DOWNWARD):
+    key = [("incident", COLOURS.incident)]
+    fates = (
+        (SINGLE, "escaping (single bounce)", COLOURS.single),
+        (MASKED, "masked (blocked on the way out)", COLOURS.masked),
+        (DOWNWARD, "downward (multi-bounce)", COLOURS.downward),
+    )
+    for kind, label, colour in fates:
         sel = paths.status == kind
-        counts[kind] = int(sel.sum())
         if not sel.any():
             continue
         end = paths.end[sel] if kind != SINGLE else paths.hit[sel] + length * paths.wo[sel]
         miss = ~np.all(np.isfinite(end), axis=1)  # second hit not resolved: fixed length
         end[miss] = paths.hit[sel][miss] + 0.2 * length * paths.wo[sel][miss]
-        label = {
-            SINGLE: "escaping (single bounce)",
-            MASKED: "masked (blocked on the way out)",
-            DOWNWARD: "downward (multi-bounce)",
-        }[kind]
         p.add_mesh(
             segments(paths.hit[sel], end),
-            color=COLOURS[kind],
+            color=colour,
             line_width=1.5 if kind == SINGLE else 4,
             opacity=0.7 if kind == SINGLE else 1,
         )
-        key.append((f"{label}: {counts[kind]}", COLOURS[kind]))
+        key.append((f"{label}: {int(sel.sum())}", colour))
     colour_key(p, key)
     title(
         p,

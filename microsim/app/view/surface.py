@@ -55,7 +55,7 @@ def view_surface(
             scalar_bar_args=scalar_bar("facet tilt θ (deg)"),
         )
     p.add_mesh(
-        outline(sec.window, float(sec.vertices[:, 2].max())), color=COLOURS["outline"], line_width=3
+        outline(sec.window, float(sec.vertices[:, 2].max())), color=COLOURS.outline, line_width=3
     )
     title(p, f"{sc.name}: surface coloured by {color}\n{sec.note}")
     side_camera(p, 20.0 if sc.surface.kind == "vgrooves" else 50.0)
