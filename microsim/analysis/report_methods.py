@@ -19,9 +19,11 @@ __all__ = ["METHODS_COMMAND", "MethodsDocument", "load_methods", "methods_sectio
 
 
 METHODS_COMMAND = "microsim bench --methods"
-_MACHINE_KEYS = ("cpus", "load_average_start", "threads", "commit")
-_PANEL_KEYS = ("title", "scene", "reference", "error_measure", "points")
-_POINT_KEYS = ("method", "kind", "setting", "seconds", "error", "error_se")
+_METHODS_KEYS = {
+    "machine": ("cpus", "load_average_start", "threads", "commit"),
+    "panel": ("title", "scene", "reference", "error_measure", "points"),
+    "point": ("method", "kind", "setting", "seconds", "error", "error_se"),
+}
 """The keys ``load_methods`` requires of the machine, each panel and each point."""
 
 
@@ -88,11 +90,13 @@ def load_methods(path) -> MethodsDocument:
         raise UsageError(f"{path}: no 'panels' list of objects")
     if not isinstance(machine, dict):
         raise UsageError(f"{path}: no 'machine' object")
-    missing = [k for k in _MACHINE_KEYS if k not in machine]
+    missing = [k for k in _METHODS_KEYS["machine"] if k not in machine]
     for i, p in enumerate(panels):
-        missing += [f"panels[{i}].{k}" for k in _PANEL_KEYS if k not in p]
+        missing += [f"panels[{i}].{k}" for k in _METHODS_KEYS["panel"] if k not in p]
         for j, q in enumerate(p.get("points") or []):
-            missing += [f"panels[{i}].points[{j}].{k}" for k in _POINT_KEYS if k not in q]
+            missing += [
+                f"panels[{i}].points[{j}].{k}" for k in _METHODS_KEYS["point"] if k not in q
+            ]
     if missing:
         raise UsageError(f"{path}: missing keys {missing[:5]}{' …' if len(missing) > 5 else ''}")
     return MethodsDocument.from_json(d)
