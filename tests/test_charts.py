@@ -218,7 +218,7 @@ def test_mikkelsen_fig6(tmp_path):
         [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"), ch.model_colour("κ=1024")],
     )
     first, last = ch.Fig6Curve.of(curves[0]), ch.Fig6Curve.of(curves[-1])
-    assert first.series == "κ=17" and last.material_name == "aluminium"
+    assert first.series == "κ=17" and last.material == "aluminium"
 
 
 def test_speed_accuracy(tmp_path):

@@ -588,54 +588,38 @@ def energy_chart(
 # --- 4. Mikkelsen Fig. 6(c)(d) -----------------------------------------------------------------
 @dataclass(frozen=True)
 class Fig6Curve:
-    """One curve of ``mikkelsen_fig6`` (``of`` reads its dict): θ (deg) with the model's
-    1 − ρ and the Fresnel transmittance; the simulation's θ, 1 − ρ and its standard error."""
+    """One curve of ``mikkelsen_fig6``, read from its dict by ``of``: the ``material`` (given,
+    else the label's first word), the ``series`` (the label without it, e.g. "κ=17": keys the
+    colour, the same in both panels); θ (deg) with the model's 1 − ρ and the Fresnel
+    transmittance; the simulation's θ, 1 − ρ and its standard error."""
 
-    label: str
+    material: str
+    series: str
     theta: np.ndarray
     one_minus_rho_model: np.ndarray
     fresnel_T: np.ndarray
     sim_theta: np.ndarray
     sim_one_minus_rho: np.ndarray
     sim_err: np.ndarray
-    material: str | None = None
 
     @classmethod
     def of(cls, curve: Mapping) -> "Fig6Curve":
-        """The curve of dict ``curve`` (the arrays as float arrays)."""
-        arrays = {f.name for f in fields(cls)} - {"label", "material"}
-        return cls(
-            label=str(curve.get("label")),
-            material=curve.get("material"),
-            **{k: np.asarray(curve.get(k), float) for k in arrays},
-        )
-
-    @property
-    def material_name(self) -> str:
-        """The given material, else the label's first word."""
-        return str(self.material or self.label.split()[0])
-
-    @property
-    def series(self) -> str:
-        """The label without its material word (e.g. "κ=17"): keys the colour, so the same
-        κ has the same colour in both panels."""
-        words = self.label.split()
-        rest = words[1:] if not self.material and len(words) > 1 else words
-        return " ".join(rest)
+        words, given = str(curve.get("label")).split(), curve.get("material")
+        series = words if given or len(words) < 2 else words[1:]
+        arrays = (np.asarray(curve.get(f.name), float) for f in fields(cls)[2:])
+        return cls(str(given or words[0]), " ".join(series), *arrays)
 
 
 def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None) -> Figure:
     """Mikkelsen 2009, Fig. 6(c)(d): 1 − ρ(θ) (ρ of eq. 27, vMF NDF) and the Fresnel transmittance
     Ft(θ) = 1 − F(θ) against θ (deg), one panel per material side by side.
 
-    ``curves``: dicts {label, theta, one_minus_rho_model, fresnel_T, sim_theta,
-    sim_one_minus_rho, sim_err} (optional "material"; otherwise the label's first word, e.g.
-    "methanol κ=17"). Model: line in ``model_colour(label)``; simulation: points ±1σ.
-    As in the paper, 1 − ρ approaches Ft as κ grows. ``ax``: one Axes per material.
-    """
+    ``curves``: dicts read by ``Fig6Curve.of`` (a "label" such as "methanol κ=17", an optional
+    "material", the arrays). Model: line in ``model_colour(series)``; simulation: points ±1σ.
+    As in the paper, 1 − ρ approaches Ft as κ grows. ``ax``: one Axes per material."""
     groups: dict[str, list[Fig6Curve]] = {}
     for c in map(Fig6Curve.of, curves):
-        groups.setdefault(c.material_name, []).append(c)
+        groups.setdefault(c.material, []).append(c)
     if not groups:
         raise UsageError("curves must hold at least one curve dict")
     given = _given_axes(ax, len(groups), "mikkelsen_fig6", "one per material")
@@ -647,25 +631,13 @@ def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None
     markers = ("o", "s", "^", "D", "v", "P")
     for ax, (material, group) in zip(axes, groups.items()):
         c0 = group[0]
-        ax.plot(
-            c0.theta,
-            c0.fresnel_T,
-            color=FRESNEL_COLOUR,
-            ls="--",
-            lw=1.4,
-            label="Fresnel transmittance Ft(θ)",
-        )
+        ax.plot(c0.theta, c0.fresnel_T, color=FRESNEL_COLOUR, ls="--", lw=1.4,
+                label="Fresnel transmittance Ft(θ)")  # fmt: skip
         top = [np.nanmax(c0.fresnel_T)]
         for k, c in enumerate(group):
-            series = c.series
-            col = model_colour(series)
-            ax.plot(
-                c.theta,
-                c.one_minus_rho_model,
-                color=col,
-                lw=1.8,
-                label=f"1 − ρ model, {series}",
-            )
+            col = model_colour(c.series)
+            ax.plot(c.theta, c.one_minus_rho_model, color=col, lw=1.8,
+                    label=f"1 − ρ model, {c.series}")  # fmt: skip
             ax.errorbar(
                 c.sim_theta,
                 c.sim_one_minus_rho,
@@ -678,7 +650,7 @@ def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None
                 ecolor=SIM_COLOUR,
                 capsize=2,
                 ls="none",
-                label=f"1 − ρ simulation ±1σ, {series}",
+                label=f"1 − ρ simulation ±1σ, {c.series}",
                 zorder=5,
             )
             top += [np.nanmax(c.one_minus_rho_model), np.nanmax(c.sim_one_minus_rho)]
