@@ -217,7 +217,8 @@ def test_mikkelsen_fig6(tmp_path):
         ch.figure_size("mikkelsen_fig6", 2),
         [ch.SIM_COLOUR, ch.FRESNEL_COLOUR, ch.model_colour("κ=17"), ch.model_colour("κ=1024")],
     )
-    assert ch._series_of(curves[0]) == "κ=17" and ch._material_of(curves[-1]) == "aluminium"
+    first, last = ch.Fig6Curve.of(curves[0]), ch.Fig6Curve.of(curves[-1])
+    assert first.series == "κ=17" and last.material == "aluminium"
 
 
 def test_speed_accuracy(tmp_path):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import textwrap
+from dataclasses import dataclass, fields
 from typing import Mapping, NamedTuple, Sequence
 
 import matplotlib as mpl
@@ -47,6 +48,7 @@ from .chart_style import (
     model_style,
 )
 from .markdown import percent
+from .verdict_record import JsonRecord
 from .verdicts import verdict_kind
 
 __all__ = [
@@ -247,11 +249,26 @@ def _ratio_limits(panels) -> None:
 
 
 # --- 2. hemisphere maps ----------------------------------------------------------------------
-def _flatten_verdicts(verdicts) -> list[dict]:
-    """All verdict dicts (those with a "model" key) in any nesting of lists / dicts."""
+@dataclass(frozen=True, eq=False)
+class ChartVerdict(JsonRecord):
+    """The fields of a verdict the charts show, read from a verdict or its dict (which may
+    hold NaN for an undefined number, or lack the verdict itself: ``agrees`` None)."""
+
+    model: str = ""
+    theta_i: float = 0.0
+    phi_i: float = 0.0
+    rel_rms: float | None = None
+    chi2_dof: float | None = None
+    max_abs_z: float | None = None
+    agrees: bool | None = None
+    tile_departure: float | None = None
+
+
+def _flatten_verdicts(verdicts) -> list[ChartVerdict]:
+    """All verdicts (dicts with a "model" key) in any nesting of lists / dicts."""
     if isinstance(verdicts, Mapping):
         if "model" in verdicts:
-            return [dict(verdicts)]
+            return [ChartVerdict.from_json(dict(verdicts))]
         verdicts = verdicts.values()
     out = []
     for v in verdicts:
@@ -264,23 +281,23 @@ def _num(v) -> float:
     return np.nan if v is None else float(v)
 
 
-def _select_verdicts(verdicts, theta_i: float, phi_i: float, names) -> list[dict]:
+def _select_verdicts(verdicts, theta_i: float, phi_i: float, names) -> list[ChartVerdict]:
     """Verdicts of incidence (``theta_i``, ``phi_i``) (deg) for the models in ``names`` with a
     finite rel_rms."""
     sel = [
         v
         for v in _flatten_verdicts(verdicts)
-        if v["model"] in names
-        and math.isclose(float(v["theta_i"]), theta_i, abs_tol=1e-6)
-        and math.isclose(incidence.key(v)[1], phi_i, abs_tol=1e-6)
-        and np.isfinite(_num(v.get("rel_rms")))
+        if v.model in names
+        and math.isclose(float(v.theta_i), theta_i, abs_tol=1e-6)
+        and math.isclose(float(v.phi_i), phi_i, abs_tol=1e-6)
+        and np.isfinite(_num(v.rel_rms))
     ]
     if not sel:
         raise UsageError(
             f"verdicts must hold a dict with finite rel_rms for θi = {theta_i:g}°, "
             f"φi = {phi_i:g}° and one of the models {sorted(names)}"
         )
-    return sorted(sel, key=lambda v: _num(v["rel_rms"]))
+    return sorted(sel, key=lambda v: _num(v.rel_rms))
 
 
 def _unfold(values: np.ndarray, bins) -> tuple[np.ndarray, np.ndarray]:
@@ -356,9 +373,9 @@ def hemisphere_maps(
     theta_i, phi_i = float(result.theta_i[t]), float(result.phi_i[t])
     sel = _select_verdicts(verdicts, theta_i, phi_i, set(models))
     best, worst = sel[0], sel[-1]
-    shown = [best] if best["model"] == worst["model"] else [best, worst]
+    shown = [best] if best.model == worst.model else [best, worst]
     sim = _positive(result.brdf[t])
-    maps = {v["model"]: np.asarray(models[v["model"]][t], dtype=np.float64) for v in shown}
+    maps = {v.model: np.asarray(models[v.model][t], dtype=np.float64) for v in shown}
     norm, zs, zmax = _hemisphere_scales(result, t, sim, maps)
     zlim = Z_LIMIT
     znorm = TwoSlopeNorm(vcenter=0.0, vmin=-zlim, vmax=zlim)
@@ -374,7 +391,7 @@ def hemisphere_maps(
     brdf_axes, z_axes = [ax], []
     for j, v in enumerate(shown):
         role = "model" if len(shown) == 1 else ("best" if v is best else "worst")
-        col, name = model_colour(v["model"]), v["model"]
+        col, name = model_colour(v.model), v.model
         brdf_axes.append(
             polar(0, j + 1, _positive(maps[name]), norm, "viridis", f"{role}: {name}", col)[0]
         )
@@ -476,18 +493,18 @@ def _mark_z5(ax, z, bins):
     ax.contour(ac, rc, np.ma.masked_invalid(v), levels=[5.0], colors="k", linewidths=0.8)
 
 
-def _verdict_table(sel: list[dict]) -> str:
+def _verdict_table(sel: list[ChartVerdict]) -> str:
     """The chart's text table: one row per verdict, its verdict in ``verdict_kind``'s words
     (the rule of every output) and, for an inconclusive tile, the tile's departure."""
     head = f"{'model':<22}{'χ²/dof':>8}{'max|z|':>8}{'rel rms':>9}  verdict"
     rows = [head, "-" * len(head)]
     for v in sel:
-        kind = verdict_kind(v) if "agrees" in v else "–"
-        if kind == "inconclusive" and v.get("tile_departure") is not None:
-            kind += f" (tile departs {percent(v['tile_departure'])})"
+        kind = verdict_kind(v) if v.agrees is not None else "–"
+        if kind == "inconclusive" and v.tile_departure is not None:
+            kind += f" (tile departs {percent(v.tile_departure)})"
         rows.append(
-            f"{str(v['model'])[:21]:<22}{_num(v.get('chi2_dof')):>8.2f}"
-            f"{_num(v.get('max_abs_z')):>8.1f}{_num(v['rel_rms']):>9.3f}  {kind}"
+            f"{str(v.model)[:21]:<22}{_num(v.chi2_dof):>8.2f}"
+            f"{_num(v.max_abs_z):>8.1f}{_num(v.rel_rms):>9.3f}  {kind}"
         )
     return "\n".join(rows)
 
@@ -569,30 +586,40 @@ def energy_chart(
 
 
 # --- 4. Mikkelsen Fig. 6(c)(d) -----------------------------------------------------------------
-def _material_of(curve: Mapping) -> str:
-    return str(curve.get("material") or str(curve["label"]).split()[0])
+@dataclass(frozen=True)
+class Fig6Curve:
+    """One curve of ``mikkelsen_fig6``, read from its dict by ``of``: the ``material`` (given,
+    else the label's first word), the ``series`` (the label without it, e.g. "κ=17": keys the
+    colour, the same in both panels); θ (deg) with the model's 1 − ρ and the Fresnel
+    transmittance; the simulation's θ, 1 − ρ and its standard error."""
 
+    material: str
+    series: str
+    theta: np.ndarray
+    one_minus_rho_model: np.ndarray
+    fresnel_T: np.ndarray
+    sim_theta: np.ndarray
+    sim_one_minus_rho: np.ndarray
+    sim_err: np.ndarray
 
-def _series_of(curve: Mapping) -> str:
-    """The curve's label without its material word (e.g. "κ=17"): keys the colour, so the
-    same κ has the same colour in both panels."""
-    words = str(curve["label"]).split()
-    rest = words[1:] if not curve.get("material") and len(words) > 1 else words
-    return " ".join(rest)
+    @classmethod
+    def of(cls, curve: Mapping) -> "Fig6Curve":
+        words, given = str(curve.get("label")).split(), curve.get("material")
+        series = words if given or len(words) < 2 else words[1:]
+        arrays = (np.asarray(curve.get(f.name), float) for f in fields(cls)[2:])
+        return cls(str(given or words[0]), " ".join(series), *arrays)
 
 
 def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None) -> Figure:
     """Mikkelsen 2009, Fig. 6(c)(d): 1 − ρ(θ) (ρ of eq. 27, vMF NDF) and the Fresnel transmittance
     Ft(θ) = 1 − F(θ) against θ (deg), one panel per material side by side.
 
-    ``curves``: dicts {label, theta, one_minus_rho_model, fresnel_T, sim_theta,
-    sim_one_minus_rho, sim_err} (optional "material"; otherwise the label's first word, e.g.
-    "methanol κ=17"). Model: line in ``model_colour(label)``; simulation: points ±1σ.
-    As in the paper, 1 − ρ approaches Ft as κ grows. ``ax``: one Axes per material.
-    """
-    groups: dict[str, list] = {}
-    for c in curves:
-        groups.setdefault(_material_of(c), []).append(c)
+    ``curves``: dicts read by ``Fig6Curve.of`` (a "label" such as "methanol κ=17", an optional
+    "material", the arrays). Model: line in ``model_colour(series)``; simulation: points ±1σ.
+    As in the paper, 1 − ρ approaches Ft as κ grows. ``ax``: one Axes per material."""
+    groups: dict[str, list[Fig6Curve]] = {}
+    for c in map(Fig6Curve.of, curves):
+        groups.setdefault(c.material, []).append(c)
     if not groups:
         raise UsageError("curves must hold at least one curve dict")
     given = _given_axes(ax, len(groups), "mikkelsen_fig6", "one per material")
@@ -604,29 +631,17 @@ def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None
     markers = ("o", "s", "^", "D", "v", "P")
     for ax, (material, group) in zip(axes, groups.items()):
         c0 = group[0]
-        ax.plot(
-            np.asarray(c0["theta"], float),
-            np.asarray(c0["fresnel_T"], float),
-            color=FRESNEL_COLOUR,
-            ls="--",
-            lw=1.4,
-            label="Fresnel transmittance Ft(θ)",
-        )
-        top = [np.nanmax(np.asarray(c0["fresnel_T"], float))]
+        ax.plot(c0.theta, c0.fresnel_T, color=FRESNEL_COLOUR, ls="--", lw=1.4,
+                label="Fresnel transmittance Ft(θ)")  # fmt: skip
+        top = [np.nanmax(c0.fresnel_T)]
         for k, c in enumerate(group):
-            series = _series_of(c)
-            col = model_colour(series)
-            ax.plot(
-                np.asarray(c["theta"], float),
-                np.asarray(c["one_minus_rho_model"], float),
-                color=col,
-                lw=1.8,
-                label=f"1 − ρ model, {series}",
-            )
+            col = model_colour(c.series)
+            ax.plot(c.theta, c.one_minus_rho_model, color=col, lw=1.8,
+                    label=f"1 − ρ model, {c.series}")  # fmt: skip
             ax.errorbar(
-                np.asarray(c["sim_theta"], float),
-                np.asarray(c["sim_one_minus_rho"], float),
-                yerr=np.asarray(c["sim_err"], float),
+                c.sim_theta,
+                c.sim_one_minus_rho,
+                yerr=c.sim_err,
                 fmt=markers[k % len(markers)],
                 ms=5,
                 mfc=SIM_COLOUR,
@@ -635,13 +650,10 @@ def mikkelsen_fig6(curves: list[Mapping], path=None, title: str = "", *, ax=None
                 ecolor=SIM_COLOUR,
                 capsize=2,
                 ls="none",
-                label=f"1 − ρ simulation ±1σ, {series}",
+                label=f"1 − ρ simulation ±1σ, {c.series}",
                 zorder=5,
             )
-            top += [
-                np.nanmax(np.asarray(c["one_minus_rho_model"], float)),
-                np.nanmax(np.asarray(c["sim_one_minus_rho"], float)),
-            ]
+            top += [np.nanmax(c.one_minus_rho_model), np.nanmax(c.sim_one_minus_rho)]
         ax.set_title(material)
         ax.set_xlim(0, 90)
         ax.set_xticks(np.arange(0, 91, 15))

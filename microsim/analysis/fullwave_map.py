@@ -27,7 +27,8 @@ saved JSON (``FULLWAVE_JSON``, written by ``tools/fullwave_study.py``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+from typing import Mapping
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from microsim.atomic import read_json
 from microsim.errors import UsageError
 
 from .markdown import md_table
+from .verdict_record import JsonRecord
 
 __all__ = [
     "FULLWAVE_JSON",
@@ -120,9 +122,7 @@ def _triangles(material, pol, slopes, periods, thetas, progress, limit=(160, 320
                     "kirchhoff_order_error": error,
                     "kirchhoff_energy_ratio": energy,
                     "rcw_reflected": float(getattr(r, pol).sum()),
-                    "rcw_order": r.info["order"],
-                    "rcw_levels": r.info["levels"],
-                    "rcw_converged": r.info["converged"],
+                    **_rcw_fields(r, "order", "levels", "converged"),
                     "rcw_seconds": seconds,
                 }
                 if pol == "unpolarised":  # both polarisations, converged in both
@@ -137,6 +137,12 @@ def _triangles(material, pol, slopes, periods, thetas, progress, limit=(160, 320
                     row["geometric_group_ratio"] = float(r.unpolarised[near].sum() / geo)
                 rows.append(row)
     return rows
+
+
+def _rcw_fields(r, *keys) -> dict:
+    """How RCW ran for efficiencies ``r``, as map-row fields: ``rcw_<key>`` of each of the
+    ``keys`` of its ``info``."""
+    return {f"rcw_{k}": r.info[k] for k in keys}
 
 
 def _random_profiles(slopes, corrs, thetas, progress) -> list[dict]:
@@ -174,9 +180,7 @@ def _random_profiles(slopes, corrs, thetas, progress) -> list[dict]:
                         "kirchhoff_order_error": k_err,
                         "kirchhoff_energy_ratio": k_energy,
                         "rayleigh_rice_error": rr_err,
-                        "rcw_order": r.info["order"],
-                        "rcw_slices": r.info["slices"],
-                        "rcw_converged": r.info["converged"],
+                        **_rcw_fields(r, "order", "slices", "converged"),
                         "rcw_seconds": seconds,
                     }
                 )
@@ -225,7 +229,7 @@ def fullwave_map(
                     "theta_i": theta,
                     "amplitude_over_lambda": amp,
                     "rayleigh_rice_error": float(max(errs)),
-                    "rcw_converged": r.info["converged"],
+                    **_rcw_fields(r, "converged"),
                 }
             )
     rnd = _random_profiles(RANDOM_SLOPES, RANDOM_CORRS, thetas, progress)
@@ -292,6 +296,17 @@ class MapSettings:
 
 
 @dataclass(frozen=True)
+class TmStudy:
+    """Aluminium's p (TM) convergence study: the ``grating``, RCW's ``limit``, whether it
+    ``converged`` and its ``study`` steps [orders, levels, largest change or None]."""
+
+    grating: str
+    converged: bool
+    study: tuple = ()
+    limit: tuple = ()
+
+
+@dataclass(frozen=True)
 class FullwaveMap:
     """``fullwave.json`` read as records (``from_json``); the dict ``fullwave_map`` returns
     and ``load_fullwave`` reads is its JSON form."""
@@ -301,7 +316,7 @@ class FullwaveMap:
     sinusoidal: tuple[MapRow, ...]
     random: tuple[MapRow, ...] = ()
     triangular_aluminium_te: tuple[MapRow, ...] = ()
-    aluminium_tm_study: dict | None = None
+    aluminium_tm_study: TmStudy | None = None
     seconds: float | None = None
 
     @classmethod
@@ -311,13 +326,14 @@ class FullwaveMap:
         if isinstance(doc, cls):
             return doc
         rows = lambda key: tuple(_record(MapRow, r) for r in doc.get(key) or ())  # noqa: E731
+        tm = doc.get("aluminium_tm_study")
         return cls(
             settings=_record(MapSettings, doc["settings"]),
             triangular=rows("triangular"),
             sinusoidal=rows("sinusoidal"),
             random=rows("random"),
             triangular_aluminium_te=rows("triangular_aluminium_te"),
-            aluminium_tm_study=doc.get("aluminium_tm_study"),
+            aluminium_tm_study=_record(TmStudy, tm) if tm else None,
             seconds=doc.get("seconds"),
         )
 
@@ -339,7 +355,21 @@ def _first_over(rows, key, value, error, crit) -> dict:
     return out
 
 
-def crossovers(doc: dict) -> dict:
+@dataclass(frozen=True, eq=False)
+class Crossovers(JsonRecord):
+    """Where each closed form departs from RCW by more than the criterion (``crossovers``):
+    grid key → first value over it. Also the dict of the same names."""
+
+    kirchhoff: Mapping = field(default_factory=dict)
+    kirchhoff_aluminium_te: Mapping = field(default_factory=dict)
+    kirchhoff_s: Mapping = field(default_factory=dict)
+    kirchhoff_p: Mapping = field(default_factory=dict)
+    kirchhoff_random: Mapping = field(default_factory=dict)
+    rayleigh_rice: Mapping = field(default_factory=dict)
+    rayleigh_rice_random: Mapping = field(default_factory=dict)
+
+
+def crossovers(doc: dict) -> Crossovers:
     """Smallest slope (triangles, per Λ/λ and θi, unpolarised and in s and p; random profiles,
     the realised rms slope per ℓ/λ and θi), a/λ (sinusoids, per θi) and σ/λ (Rayleigh–Rice on
     random profiles) at which the error exceeds the criterion, over the converged rows;
@@ -350,7 +380,7 @@ def crossovers(doc: dict) -> dict:
     by_corr = lambda r: (r.corr_over_lambda, r.theta_i)  # noqa: E731
     err, rr = "kirchhoff_order_error", "rayleigh_rice_error"
     rnd = doc.random
-    return {
+    found = {
         "kirchhoff": _first_over(doc.triangular, by_period, lambda r: r.slope, err, crit),
         "kirchhoff_aluminium_te": _first_over(
             doc.triangular_aluminium_te, by_period, lambda r: r.slope, err, crit
@@ -377,6 +407,7 @@ def crossovers(doc: dict) -> dict:
             rnd, by_corr, lambda r: round(r.sigma_over_lambda, 3), rr, crit
         ),
     }
+    return Crossovers.from_json(found)
 
 
 def load_fullwave(path) -> dict:
@@ -412,9 +443,10 @@ def _triangle_table(rows) -> tuple[list, list, dict]:
     return slopes, table, by
 
 
-def _crossing_text(cross: dict, keys, name, unit) -> str:
+def _crossing_text(first: Mapping, keys, name, unit) -> str:
+    """Each key of ``keys`` named with the crossover value ``first`` holds for it."""
     return "; ".join(
-        f"{name(k)}: {'beyond the grid' if cross.get(k) is None else unit(cross[k])}" for k in keys
+        f"{name(k)}: {'beyond the grid' if first.get(k) is None else unit(first[k])}" for k in keys
     )
 
 
@@ -423,7 +455,7 @@ def _pct(x: float) -> str:
     return f"{100 * x:.1f} %" if 100 * x < 10 else f"{100 * x:.0f} %"
 
 
-def _summary(doc: dict, cross: dict, crit: float) -> list[str]:
+def _summary(doc: dict, cross: Crossovers, crit: float) -> list[str]:
     """The section's crossovers in one paragraph: per θi, the smallest grid value over the
     periods (ℓ) at which each method departs by more than the criterion."""
 
@@ -442,29 +474,28 @@ def _summary(doc: dict, cross: dict, crit: float) -> list[str]:
             )
         return text
 
-    sin = {t: v / (2 * np.sqrt(2)) for t, v in cross["rayleigh_rice"].items()}
+    sin = {t: v / (2 * np.sqrt(2)) for t, v in cross.rayleigh_rice.items()}
     parts = [
         f"In short — the smallest value of the grid at which a method departs from RCW by more "
         f"than {crit:g} % (over the periods and correlation lengths mapped): scalar Kirchhoff "
-        f"on glass V-groove gratings from facet slope {per_theta(cross['kirchhoff'], '°')} "
-        f"(s: {per_theta(cross['kirchhoff_s'], '°')}; p: {per_theta(cross['kirchhoff_p'], '°')})",
+        f"on glass V-groove gratings from facet slope {per_theta(cross.kirchhoff, '°')} "
+        f"(s: {per_theta(cross.kirchhoff_s, '°')}; p: {per_theta(cross.kirchhoff_p, '°')})",
     ]
-    if cross.get("kirchhoff_aluminium_te"):
-        parts.append(f"on aluminium in TE from {per_theta(cross['kirchhoff_aluminium_te'], '°')}")
+    if cross.kirchhoff_aluminium_te:
+        parts.append(f"on aluminium in TE from {per_theta(cross.kirchhoff_aluminium_te, '°')}")
     if doc.random:
         parts.append(
-            f"on glass Gaussian random profiles from rms slope "
-            f"{per_theta(cross['kirchhoff_random'])}"
+            f"on glass Gaussian random profiles from rms slope {per_theta(cross.kirchhoff_random)}"
         )
     text = "; ".join(parts) + (
         f". First-order Rayleigh–Rice from σ/λ {per_theta(sin)} on sinusoids (σ = a/(2√2))"
     )
     if doc.random:
-        text += f" and {per_theta(cross['rayleigh_rice_random'])} on the random profiles"
+        text += f" and {per_theta(cross.rayleigh_rice_random)} on the random profiles"
     return [text + ".", ""]
 
 
-def _random_lines(doc: dict, cross: dict, crit: float) -> list[str]:
+def _random_lines(doc: dict, cross: Crossovers, crit: float) -> list[str]:
     """The random-profile part of the section (empty without ``random`` rows)."""
     rnd = doc.random
     if not rnd:
@@ -500,15 +531,15 @@ def _random_lines(doc: dict, cross: dict, crit: float) -> list[str]:
         md_table(["ℓ/λ", "θi"] + [f"{realised[a]:.3g}" for a in slopes], table),
         "",
         f"Kirchhoff departs by more than {crit:g} % from rms slope: "
-        + _crossing_text(cross["kirchhoff_random"], keys, name, lambda v: f"{v:g}")
+        + _crossing_text(cross.kirchhoff_random, keys, name, lambda v: f"{v:g}")
         + f". Rayleigh–Rice departs by more than {crit:g} % from: "
-        + _crossing_text(cross["rayleigh_rice_random"], keys, name, lambda v: f"σ/λ = {v:g}")
+        + _crossing_text(cross.rayleigh_rice_random, keys, name, lambda v: f"σ/λ = {v:g}")
         + ".",
         "",
     ]
 
 
-def _polarisation_lines(doc: dict, cross: dict, crit: float) -> list[str]:
+def _polarisation_lines(doc: dict, cross: Crossovers, crit: float) -> list[str]:
     """Glass triangles in s and p separately (empty when the rows lack them): Kirchhoff with
     R_s or R_p at the half-vector angle against RCW's s or p efficiencies."""
     rows = [r for r in doc.triangular if r.kirchhoff_order_error_s is not None]
@@ -539,7 +570,7 @@ def _polarisation_lines(doc: dict, cross: dict, crit: float) -> list[str]:
         "",
         *[
             f"Kirchhoff in {q} departs by more than {crit:g} % from slope: "
-            + _crossing_text(cross[f"kirchhoff_{q}"], keys, name, lambda v: f"{v:g}°")
+            + _crossing_text(getattr(cross, f"kirchhoff_{q}"), keys, name, lambda v: f"{v:g}°")
             + "."
             for q in ("s", "p")
         ],
@@ -547,7 +578,7 @@ def _polarisation_lines(doc: dict, cross: dict, crit: float) -> list[str]:
     ]
 
 
-def _aluminium_lines(doc: dict, cross: dict, crit: float) -> list[str]:
+def _aluminium_lines(doc: dict, cross: Crossovers, crit: float) -> list[str]:
     """The aluminium part of the section: TE rows, and the TM study that keeps it out."""
     rows = doc.triangular_aluminium_te
     if not rows:
@@ -562,17 +593,17 @@ def _aluminium_lines(doc: dict, cross: dict, crit: float) -> list[str]:
         md_table(["Λ/λ", "θi"] + [f"{a:g}°" for a in slopes], table),
         "",
         f"Kirchhoff (TE) departs by more than {crit:g} % from slope: "
-        + _crossing_text(cross["kirchhoff_aluminium_te"], keys, name, lambda v: f"{v:g}°")
+        + _crossing_text(cross.kirchhoff_aluminium_te, keys, name, lambda v: f"{v:g}°")
         + ".",
         "",
     ]
     tm = doc.aluminium_tm_study
     if tm:
         steps = ", ".join(f"{o}×{lv}: {'—' if ch is None else f'{ch:.1e}'}"
-                          for o, lv, ch in tm["study"])  # fmt: skip
-        verdict = "converged" if tm["converged"] else "did **not** converge"
+                          for o, lv, ch in tm.study)  # fmt: skip
+        verdict = "converged" if tm.converged else "did **not** converge"
         lines += [
-            f"Aluminium in p (TM) {verdict} to {doc.settings.rcw_tol:g} ({tm['grating']}; "
+            f"Aluminium in p (TM) {verdict} to {doc.settings.rcw_tol:g} ({tm.grating}; "
             f"orders × levels: largest change — {steps}), so aluminium appears in TE only "
             f"and its unpolarised efficiencies are not mapped.",
             "",
@@ -606,11 +637,11 @@ def fullwave_section(
         for t in sthetas
     ]
     kcross = _crossing_text(
-        cross["kirchhoff"], [(p, t) for p in periods for t in thetas],
+        cross.kirchhoff, [(p, t) for p in periods for t in thetas],
         lambda k: f"Λ = {k[0]:g} λ, θi {k[1]:g}°", lambda v: f"{v:g}°",
     )  # fmt: skip
     rcross = _crossing_text(
-        cross["rayleigh_rice"], sthetas, lambda t: f"θi {t:g}°", lambda v: f"a/λ = {v:g}"
+        cross.rayleigh_rice, sthetas, lambda t: f"θi {t:g}°", lambda v: f"a/λ = {v:g}"
     )
     picture = [] if chart is None else [f"![Kirchhoff and Rayleigh–Rice against RCW]({chart})", ""]
     return [

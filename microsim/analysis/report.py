@@ -13,7 +13,8 @@ the model is too bright); BRDFs in sr⁻¹, angles in degrees.
 
 from __future__ import annotations
 
-from typing import Mapping
+from dataclasses import dataclass
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from .report_cells import converged_text, fmt, params_text, pct, ranges_text
 from .report_index import index_report
 from .report_methods import load_methods, methods_section
 from .report_wave import regime_section, wave_section
-from .verdict_record import RunDocument
+from .verdict_record import Fit, JsonRecord, OrdersStudy, RunDocument, Speed, Stability
 from .verdicts import Verdict, as_verdicts, summary_row, verdict_symbol
 
 __all__ = [
@@ -37,6 +38,8 @@ __all__ = [
     "methods_section",
     "load_methods",
     "OUT_OF_DOMAIN",
+    "AutoRealisations",
+    "auto_realisations",
 ]
 
 
@@ -46,7 +49,8 @@ def _material(mat: Mapping) -> str:
         return "mirror (F = 1)"
     n, k = ior
     text = f"n = {n:g}" if k == 0 else f"n + ik = {n:g} + {k:g}i"
-    return f"{mat['name']}, {text}" if mat.get("name") else text
+    name = mat.get("name")
+    return f"{name}, {text}" if name else text
 
 
 def albedo_stderr(result) -> np.ndarray:
@@ -58,6 +62,16 @@ def albedo_stderr(result) -> np.ndarray:
     return np.sqrt(np.maximum(m2 - rho**2, 0.0) / np.maximum(n - 1, 1))
 
 
+_LEDGER_COLUMNS = (
+    ("single", ".4f"),
+    ("masked", ".4f"),
+    ("downward", ".4f"),
+    ("unresolved", ".2g"),
+    ("lost_fresnel", ".4f"),
+)
+"""The ledger entries of the energy table after ρ, in order, with their number format."""
+
+
 def _ledger_rows(doc, result, with_phi: bool) -> list[list[str]]:
     led = result.ledger
     rho, se = led["single_fresnel"], albedo_stderr(result)
@@ -66,11 +80,7 @@ def _ledger_rows(doc, result, with_phi: bool) -> list[list[str]]:
             *([f"{t:g}", f"{p:g}"] if with_phi else [f"{t:g}"]),
             f"{int(r)}",
             f"{rho[k]:.4f} ± {se[k]:.1g}",
-            f"{led['single'][k]:.4f}",
-            f"{led['masked'][k]:.4f}",
-            f"{led['downward'][k]:.4f}",
-            f"{led['unresolved'][k]:.2g}",
-            f"{led['lost_fresnel'][k]:.4f}",
+            *(format(led[name][k], spec) for name, spec in _LEDGER_COLUMNS),
         ]
         for k, (t, p, r) in enumerate(zip(result.theta_i, result.phi_i, result.rays))
     ]
@@ -117,7 +127,7 @@ def _verdict_rows(
     ]
 
 
-def _orders_section(orders) -> list[str]:
+def _orders_section(orders: OrdersStudy | None) -> list[str]:
     """ "How much light single scattering misses" for a run with ``bounces`` > 1: per θi the
     fraction of reflected energy in orders ≥ 2 (``analysis.multiple.needs_more_bounces``), then
     the order-resolved comparison (``analysis.multiple_report.multiple_section``)."""
@@ -125,62 +135,97 @@ def _orders_section(orders) -> list[str]:
         return []
     from .multiple_report import multiple_section
 
-    with_phi = incidence.several_azimuths(orders["needs"])
+    with_phi = incidence.several_azimuths(orders.needs)
     rows = [
         [
-            *([f"{n['theta_i']:g}", f"{n['phi_i']:g}"] if with_phi else [f"{n['theta_i']:g}"]),
-            f"{percent(n['multiple_fraction'], 3, unit=' %')} ± "
-            f"{percent(n['multiple_fraction_se'], unit=' %')}",
-            pct(n["cut"]),
-            "yes" if n["needs"] else "no",
+            *([f"{n.theta_i:g}", f"{n.phi_i:g}"] if with_phi else [f"{n.theta_i:g}"]),
+            f"{percent(n.multiple_fraction, 3, unit=' %')} ± "
+            f"{percent(n.multiple_fraction_se, unit=' %')}",
+            pct(n.cut),
+            "yes" if n.needs else "no",
         ]
-        for n in orders["needs"]
+        for n in orders.needs
     ]
     out = [
         "## Scattering orders",
         "",
-        f"Traced with `bounces = {orders['bounces']}`; the verdicts above judge order 1. "
+        f"Traced with `bounces = {orders.bounces}`; the verdicts above judge order 1. "
         "Fraction of the reflected energy in orders ≥ 2 (± standard error), the energy cut off "
         "by the bounce limit, and whether single scattering misses more than 1 % of it.",
         "",
         md_table(["θi", *(["φi"] if with_phi else []), "orders ≥ 2", "cut", "> 1 %"], rows),
         "",
     ]
-    if orders.get("note"):
-        out += [f"Note: {orders['note']}.", ""]
-    if orders.get("comparison"):
-        out += multiple_section(orders["comparison"]) + [""]
+    if orders.note:
+        out += [f"Note: {orders.note}.", ""]
+    if orders.comparison:
+        out += multiple_section(orders.comparison) + [""]
     return out
+
+
+@dataclass(frozen=True, eq=False)
+class AutoRealisations(JsonRecord):
+    """meta.json ``run.realisations_auto`` (``runner.tracing.realisations_record``): the
+    ``stage`` ("pilot", then "final"), the tile-scatter ``target``, the pilot's and the chosen
+    realisations, at most ``max_realisations``."""
+
+    stage: str = "final"
+    target: float | None = None
+    max_realisations: int | None = None
+    pilot_realisations: int | None = None
+    realisations: int | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class BudgetRow(JsonRecord):
+    """One incidence of meta.json ``error_budget`` (``analysis.budget``): the relative
+    standard errors of the mean BRDF from ray noise, tile scatter, in total, and of its
+    energy, over its ``realisations``."""
+
+    theta_i: float = 0.0
+    phi_i: float = 0.0
+    realisations: int = 1
+    ray: float | None = None
+    tile: float | None = None
+    total: float | None = None
+    energy: float | None = None
+
+
+def auto_realisations(run: Mapping) -> AutoRealisations | None:
+    """The run's ``realisations_auto`` record; None when the count was given."""
+    auto = run.get("realisations_auto")
+    return AutoRealisations.from_json(auto) if auto else None
 
 
 def _realisations_text(run: Mapping) -> str:
     """The realisation count; for ``realisations = "auto"`` also the pilot and the target."""
-    auto = run.get("realisations_auto")
-    if not auto:
+    auto = auto_realisations(run)
+    if auto is None:
         return str(run.get("realisations"))
     return (
-        f"{auto['realisations']} (auto: pilot of {auto['pilot_realisations']}, tile-scatter "
-        f"target {percent(auto['target'], 3, unit=' %')}, at most {auto['max_realisations']})"
+        f"{auto.realisations} (auto: pilot of {auto.pilot_realisations}, tile-scatter "
+        f"target {percent(auto.target, 3, unit=' %')}, at most {auto.max_realisations})"
     )
 
 
-def _budget_section(budget, auto) -> list[str]:
+def _budget_section(budget, auto: AutoRealisations | None) -> list[str]:
     """ "Error budget": per incidence the energy-weighted relative standard errors of the mean
     BRDF from ray noise and from tile scatter (``analysis.budget``); empty for one realisation."""
-    if not budget or all(b.get("tile") is None for b in budget):
+    budget = [BudgetRow.from_json(b) for b in budget or ()]
+    if all(b.tile is None for b in budget):
         return []
-    target = auto["target"] if auto else None
+    target = auto.target if auto else None
     with_phi = incidence.several_azimuths(budget)
     rows = [
         [
-            *([f"{b['theta_i']:g}", f"{b['phi_i']:g}"] if with_phi else [f"{b['theta_i']:g}"]),
-            str(b["realisations"]),
-            pct(b["ray"]),
-            pct(b["tile"]),
-            pct(b["total"]),
-            pct(b["energy"]),
+            *([f"{b.theta_i:g}", f"{b.phi_i:g}"] if with_phi else [f"{b.theta_i:g}"]),
+            str(b.realisations),
+            pct(b.ray),
+            pct(b.tile),
+            pct(b.total),
+            pct(b.energy),
         ]
-        + ([("yes" if b["tile"] is not None and b["tile"] <= target else "no")] if target else [])
+        + ([("yes" if b.tile is not None and b.tile <= target else "no")] if target else [])
         for b in budget
     ]
     head = ["θi", *(["φi"] if with_phi else []), "R", "ray noise", "tile scatter", "total"]
@@ -197,7 +242,7 @@ def _budget_section(budget, auto) -> list[str]:
         text += (
             f' With `realisations = "auto"` the realisations are added until the tile scatter '
             f"is below {percent(target, 3, unit=' %')} at every θi, up to "
-            f"{auto['max_realisations']}."
+            f"{auto.max_realisations}."
         )
     return ["## Error budget", "", text, "", md_table(head, rows), ""]
 
@@ -213,7 +258,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
         lines += [doc.description, ""]
     lines += _run_section(doc, info, phis, with_phi)
     lines += _ledger_section(doc, result, with_phi)
-    lines += _budget_section(info.error_budget, (info.run or {}).get("realisations_auto"))
+    lines += _budget_section(info.error_budget, auto_realisations(info.run or {}))
     lines += _verdicts_section(doc, with_phi)
     lines += wave_section(doc.wave)
     lines += _fits_section(doc.fits)
@@ -329,7 +374,7 @@ def _verdicts_section(doc: RunDocument, with_phi: bool) -> list[str]:
     ]
 
 
-def _fits_section(fits) -> list[str]:
+def _fits_section(fits: Sequence[Fit]) -> list[str]:
     if not fits:
         return []
     return [
@@ -345,12 +390,12 @@ def _fits_section(fits) -> list[str]:
             ["model", "parameters", "√E1", "√E2", "converged", "starts"],
             [
                 [
-                    f["model"],
-                    params_text(f["params"]),
-                    fmt(f["sqrt_e1"]),
-                    fmt(f["sqrt_e2"]),
+                    f.model,
+                    params_text(f.params),
+                    fmt(f.sqrt_e1),
+                    fmt(f.sqrt_e2),
                     converged_text(f),
-                    str(f["n_starts"]),
+                    str(f.n_starts),
                 ]
                 for f in fits
             ],
@@ -383,26 +428,24 @@ def _charts_section(doc: RunDocument, charts: Mapping[str, str], phis, with_phi:
     return lines
 
 
-def _stability_text(st: Mapping, phis, with_phi: bool) -> list[str]:
+def _stability_text(st: Stability, phis, with_phi: bool) -> list[str]:
     return (
         [
-            f"Sweep: {len(st.get('theta_i', []))} incidences, {st.get('rays')} rays "
+            f"Sweep: {len(st.theta_i)} incidences, {st.rays} rays "
             f"each{_first_azimuth(phis, with_phi)}."
         ]
-        + [f"- warning: {w}" for w in st.get("warnings", [])]
+        + [f"- warning: {w}" for w in st.warnings]
         + [""]
     )
 
 
-def _speed_text(sp: Mapping, phis, with_phi: bool) -> list[str]:
+def _speed_text(sp: Speed, phis, with_phi: bool) -> list[str]:
     rows = [
-        [name, f"{n:,}", pct(e)]
-        for name, r in sp.get("runs", {}).items()
-        for n, e in zip(r["rays"], r["rel_rms"])
+        [name, f"{n:,}", pct(e)] for name, r in sp.runs.items() for n, e in zip(r.rays, r.rel_rms)
     ]
     return [
-        f"θi = {fmt(sp.get('theta_i'))}°{_first_azimuth(phis, with_phi)}, "
-        f"error against {sp.get('reference')}; "
+        f"θi = {fmt(sp.theta_i)}°{_first_azimuth(phis, with_phi)}, "
+        f"error against {sp.reference}; "
         "the wall times (this chart's x axis: tracing only, the surface and its "
         "BVH are built once before the runs) are in `timings.json`. Both files "
         "are written by every run but not kept in git, since wall times differ "

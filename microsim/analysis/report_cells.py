@@ -9,6 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .markdown import percent, plain
+from .verdict_record import Fit, FitBound
 
 __all__ = [
     "fmt",
@@ -60,15 +61,15 @@ def signed_pct(x, se=None) -> str:
     return text if se is None or text == "–" else f"{text} ± {percent(se, unit=' %')}"
 
 
-def _bound(b: Mapping) -> str:
-    return f"{b['param']} = {fmt(b['bound'], 4)}"
+def _bound(b: FitBound) -> str:
+    return f"{b.param} = {fmt(b.bound, 4)}"
 
 
-def bounds_text(at_bounds: Sequence[Mapping]) -> str:
+def bounds_text(at_bounds: Sequence[FitBound]) -> str:
     """The bounds a fit ended on (``fits.BoundReached`` records), search limits first:
     "stopped at the search limit C = 10: the best fit may lie beyond; kd = 0, on its physical
     bound kd ≥ 0"; "" for none."""
-    limits = [_bound(b) for b in at_bounds if not b["physical"]]
+    limits = [_bound(b) for b in at_bounds if not b.physical]
     parts = []
     if limits:
         plural = "s" if len(limits) > 1 else ""
@@ -76,26 +77,28 @@ def bounds_text(at_bounds: Sequence[Mapping]) -> str:
             f"stopped at the search limit{plural} {', '.join(limits)}: the best fit may lie beyond"
         )
     parts += [
-        f"{_bound(b)}, on its physical bound {b['param']} "
-        f"{'≥' if b['side'] == 'lower' else '≤'} {fmt(b['bound'], 4)}"
+        f"{_bound(b)}, on its physical bound {b.param} "
+        f"{'≥' if b.side == 'lower' else '≤'} {fmt(b.bound, 4)}"
         for b in at_bounds
-        if b["physical"]
+        if b.physical
     ]
     return "; ".join(parts)
 
 
-def bounds_brief(at_bounds: Sequence[Mapping]) -> str:
+def bounds_brief(at_bounds: Sequence[FitBound]) -> str:
     """``bounds_text`` for an index cell: "search limit: C = 10; physical bound: kd = 0"."""
     parts = []
     for physical, name in ((False, "search limit"), (True, "physical bound")):
-        mine = [_bound(b) for b in at_bounds if b["physical"] == physical]
+        mine = [_bound(b) for b in at_bounds if b.physical == physical]
         parts += [f"{name}{'s' if len(mine) > 1 else ''}: {', '.join(mine)}"] if mine else []
     return "; ".join(parts)
 
 
-def converged_text(fit: dict) -> str:
-    """The fits table's "converged" cell: yes or no (the optimiser's evaluation limit or a
-    search limit reached), with the bounds the fit ended on."""
-    why = [] if fit["success"] else ["the optimiser stopped at its evaluation limit"]
-    why += [bounds_text(fit["at_bounds"])] if fit["at_bounds"] else []
-    return fmt(fit["converged"]) + (f": {'; '.join(why)}" if why else "")
+def converged_text(fit: Fit | Mapping) -> str:
+    """The fits table's "converged" cell of ``fit`` (a ``Fit`` or its JSON object): yes or
+    no (the optimiser's evaluation limit or a search limit reached), with the bounds the fit
+    ended on."""
+    fit = Fit.from_json(fit)
+    why = [] if fit.success else ["the optimiser stopped at its evaluation limit"]
+    why += [bounds_text(fit.at_bounds)] if fit.at_bounds else []
+    return fmt(fit.converged) + (f": {'; '.join(why)}" if why else "")

@@ -16,7 +16,7 @@ from .multiple import NOT_EXPECTED
 from .multiple_report import RESOLVED_SE, deviation_text
 from .report_cells import bounds_brief, fmt, signed_pct
 from .report_wave import regime_section
-from .verdict_record import RunDocument
+from .verdict_record import Fit, RunDocument, VariantVerdict
 from .verdicts import Verdict, as_verdicts, summary_row
 
 __all__ = ["index_report"]
@@ -32,14 +32,14 @@ def _orders_index(docs: Sequence[RunDocument]) -> list[str]:
         o = d.orders
         if not o:
             continue
-        need = [n for n in o["needs"] if n["needs"]]
-        with_phi = incidence.several_azimuths(o["needs"])
+        need = [n for n in o.needs if n.needs]
+        with_phi = incidence.several_azimuths(o.needs)
         cells = ", ".join(
             f"{incidence.label(*incidence.key(n), with_phi, symbol=False)}: "
-            f"{percent(n['multiple_fraction'], unit=' %')}"
-            for n in o["needs"]
+            f"{percent(n.multiple_fraction, unit=' %')}"
+            for n in o.needs
         )
-        comparison = o.get("comparison") or {}
+        comparison = o.comparison or {}
         dev = {}
         for inc in comparison.get("incidences", []):
             for name in ("random-walk", "kulla-conty"):
@@ -82,16 +82,23 @@ def _scene_link(d: RunDocument) -> str:
     return f"[{d.scene}]({d.scene}/report.md)"
 
 
-def _variant_cell(v: Mapping | None) -> str:
+_SYMBOLS = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}
+
+
+def _variant_cell(v: VariantVerdict | None) -> str:
     """One Smith G variant against the simulation: verdict symbol, energy deviation ± se,
     relative RMS error."""
-    if v is None or v["rel_rms"] is None:
+    if v is None or v.rel_rms is None:
         return "–"
-    sym = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}[v["verdict"]]
     return (
-        f"{sym} {signed_pct(v['energy_dev'], v.get('energy_dev_se'))}, "
-        f"rel RMS {percent(v['rel_rms'], unit=' %')}"
+        f"{_SYMBOLS[v.verdict]} {signed_pct(v.energy_dev, v.energy_dev_se)}, "
+        f"rel RMS {percent(v.rel_rms, unit=' %')}"
     )
+
+
+def _anisotropy_incidences(docs: Sequence[RunDocument]):
+    """(document, incidence) of every scene's ``anisotropy`` block."""
+    return [(d, inc) for d in docs if d.anisotropy for inc in d.anisotropy.incidences]
 
 
 def _anisotropy_index(docs: Sequence[RunDocument]) -> list[str]:
@@ -99,18 +106,17 @@ def _anisotropy_index(docs: Sequence[RunDocument]) -> list[str]:
     (``analysis.anisotropy``): per θi, the isotropic stand-in against the exact Λ (model
     against model) and each variant against the simulation."""
     rows = []
-    for d in docs:
-        for inc in (d.anisotropy or {}).get("incidences", []):
-            sv = inc["stand_in_vs_exact"]
-            rows.append(
-                [
-                    _scene_link(d),
-                    f"{inc['theta_i']:g}°",
-                    f"{inc['phi_i']:g}°",
-                    f"{signed_pct(sv['energy_dev'])}, rel RMS {percent(sv['rel_rms'], unit=' %')}",
-                ]
-                + [_variant_cell(inc["against_simulation"].get(x)) for x in ANISOTROPY_VARIANTS]
-            )
+    for d, inc in _anisotropy_incidences(docs):
+        sv = inc.stand_in_vs_exact
+        rows.append(
+            [
+                _scene_link(d),
+                f"{inc.theta_i:g}°",
+                f"{inc.phi_i:g}°",
+                f"{signed_pct(sv.energy_dev)}, rel RMS {percent(sv.rel_rms, unit=' %')}",
+            ]
+            + [_variant_cell(inc.against_simulation.get(x)) for x in ANISOTROPY_VARIANTS]
+        )
     if not rows:
         return []
     labels = list(ANISOTROPY_VARIANTS)
@@ -140,29 +146,25 @@ def _anisotropy_missed(docs: Sequence[RunDocument]) -> list[str]:
     """The energy the anisotropic single-scattering models miss, for the scenes traced with
     more than one bounce (``analysis.anisotropy``: ``missed``)."""
     rows = []
-    for d in docs:
-        for inc in (d.anisotropy or {}).get("incidences", []):
-            m = inc.get("missed")
-            if m is None:
-                continue
-            rows.append(
-                [
-                    _scene_link(d),
-                    f"{inc['theta_i']:g}°",
-                    f"{inc['phi_i']:g}°",
-                    f"{plain(m['reflected'], 3)} ± {plain(m['reflected_se'], 1)}",
-                    f"{percent(m['multiple'] / m['reflected'], 3, unit=' %')} ± "
-                    f"{percent(m['multiple_se'] / m['reflected'], unit=' %')}",
-                    "–"
-                    if m.get("walk_multiple") is None
-                    else f"{percent(m['walk_multiple'] / m['reflected'], 3, unit=' %')} ± "
-                    f"{percent(m['walk_multiple_se'] / m['reflected'], unit=' %')}",
-                ]
-                + [
-                    signed_pct(m["models"][x]["missed"], m["models"][x]["missed_se"])
-                    for x in ANISOTROPY_VARIANTS
-                ]
-            )
+    for d, inc in _anisotropy_incidences(docs):
+        m = inc.missed
+        if m is None:
+            continue
+        rows.append(
+            [
+                _scene_link(d),
+                f"{inc.theta_i:g}°",
+                f"{inc.phi_i:g}°",
+                f"{plain(m.reflected, 3)} ± {plain(m.reflected_se, 1)}",
+                f"{percent(m.multiple / m.reflected, 3, unit=' %')} ± "
+                f"{percent(m.multiple_se / m.reflected, unit=' %')}",
+                "–"
+                if m.walk_multiple is None
+                else f"{percent(m.walk_multiple / m.reflected, 3, unit=' %')} ± "
+                f"{percent(m.walk_multiple_se / m.reflected, unit=' %')}",
+            ]
+            + [signed_pct(m.models[x].missed, m.models[x].missed_se) for x in ANISOTROPY_VARIANTS]
+        )
     if not rows:
         return []
     return [
@@ -269,10 +271,12 @@ def _verdict_tables(docs: Sequence[RunDocument]) -> list[str]:
     return out
 
 
-def _index_fit_cell(fit: Mapping) -> str:
-    """√E1 / √E2 of one fit, with the bounds it ended on (``bounds_brief``)."""
-    cell = f"{fmt(fit['sqrt_e1'])} / {fmt(fit['sqrt_e2'])}"
-    at = bounds_brief(fit["at_bounds"])
+def _index_fit_cell(fit: Fit | Mapping) -> str:
+    """√E1 / √E2 of one fit (a ``Fit`` or its JSON object), with the bounds it ended on
+    (``bounds_brief``)."""
+    fit = Fit.from_json(fit)
+    cell = f"{fmt(fit.sqrt_e1)} / {fmt(fit.sqrt_e2)}"
+    at = bounds_brief(fit.at_bounds)
     return cell + (f" ({at})" if at else "")
 
 
@@ -292,10 +296,10 @@ def index_report(
     docs = [RunDocument.from_json(d) for d in docs]
     fit_models: list[str] = []
     for d in docs:
-        fit_models += [f["model"] for f in d.fits if f["model"] not in fit_models]
+        fit_models += [f.model for f in d.fits if f.model not in fit_models]
     fit_rows = []
     for d in docs:
-        by = {f["model"]: f for f in d.fits}
+        by = {f.model: f for f in d.fits}
         fit_rows.append(
             [d.scene] + [_index_fit_cell(by[m]) if m in by else "–" for m in fit_models]
         )

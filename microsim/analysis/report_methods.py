@@ -5,15 +5,17 @@ from __future__ import annotations
 
 import os
 import re
-from typing import Mapping
+from dataclasses import dataclass, field
+from typing import ClassVar, Mapping, Sequence
 
 from microsim.atomic import read_json
 from microsim.errors import UsageError
 
 from .markdown import md_table, percent
 from .report_cells import fmt
+from .verdict_record import JsonRecord
 
-__all__ = ["METHODS_COMMAND", "load_methods", "methods_section"]
+__all__ = ["METHODS_COMMAND", "MethodsDocument", "load_methods", "methods_section"]
 
 
 METHODS_COMMAND = "microsim bench --methods"
@@ -22,20 +24,74 @@ _METHODS_KEYS = {
     "panel": ("title", "scene", "reference", "error_measure", "points"),
     "point": ("method", "kind", "setting", "seconds", "error", "error_se"),
 }
+"""The keys ``load_methods`` requires of the machine, each panel and each point."""
 
 
-def load_methods(path) -> dict:
+@dataclass(frozen=True, eq=False)
+class MethodPoint(JsonRecord):
+    """One timed setting of a method: its wall ``seconds`` and its ``error`` (± ``error_se``;
+    ``noise_floor``: the ray noise alone, where known)."""
+
+    method: str = ""
+    kind: str = ""
+    setting: str = ""
+    seconds: float | None = None
+    error: float | None = None
+    error_se: float | None = None
+    noise_floor: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class MethodsPanel(JsonRecord):
+    """One scene of the study: its ``title``, ``scene``, the ``reference`` (timed
+    ``reference_seconds``), the ``error_measure`` and the methods' ``points``."""
+
+    title: str = ""
+    scene: str = ""
+    reference: str = ""
+    reference_seconds: float | None = None
+    error_measure: str = ""
+    points: tuple[MethodPoint, ...] = ()
+    _nested: ClassVar = {"points": MethodPoint}
+
+
+@dataclass(frozen=True, eq=False)
+class Machine(JsonRecord):
+    """Where the study ran: ``cpus``, the load average at the start, ``threads``, the
+    ``commit`` and whether the worktree had uncommitted changes."""
+
+    cpus: int | None = None
+    load_average_start: float | Sequence[float] = 0.0
+    threads: int | None = None
+    commit: str | None = None
+    worktree_modified: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class MethodsDocument(JsonRecord):
+    """``methods.json`` as ``methods_section`` reads it: the ``machine``, the ``panels`` and
+    whether the study was ``quick``."""
+
+    machine: Machine = field(default_factory=Machine)
+    panels: tuple[MethodsPanel, ...] = ()
+    quick: bool = False
+    _nested: ClassVar = {"machine": Machine, "panels": MethodsPanel}
+
+
+def load_methods(path) -> MethodsDocument:
     """``methods.json`` (``microsim bench --methods``) read and checked: top-level ``machine``,
     ``panels``, and the keys ``_METHODS_KEYS`` names in each machine, panel and point; a
     missing, damaged (``atomic.read_json``) or incomplete file raises ``UsageError`` naming
-    what is wrong (an ``OSError`` if the environment fails)."""
+    what is wrong (an ``OSError`` if the environment fails); the file's object, as a
+    ``MethodsDocument``."""
     d = read_json(path)
-    if not isinstance(d.get("panels"), list) or not all(isinstance(p, dict) for p in d["panels"]):
+    panels, machine = d.get("panels"), d.get("machine")
+    if not isinstance(panels, list) or not all(isinstance(p, dict) for p in panels):
         raise UsageError(f"{path}: no 'panels' list of objects")
-    if not isinstance(d.get("machine"), dict):
+    if not isinstance(machine, dict):
         raise UsageError(f"{path}: no 'machine' object")
-    missing = [k for k in _METHODS_KEYS["machine"] if k not in d["machine"]]
-    for i, p in enumerate(d["panels"]):
+    missing = [k for k in _METHODS_KEYS["machine"] if k not in machine]
+    for i, p in enumerate(panels):
         missing += [f"panels[{i}].{k}" for k in _METHODS_KEYS["panel"] if k not in p]
         for j, q in enumerate(p.get("points") or []):
             missing += [
@@ -43,7 +99,7 @@ def load_methods(path) -> dict:
             ]
     if missing:
         raise UsageError(f"{path}: missing keys {missing[:5]}{' …' if len(missing) > 5 else ''}")
-    return d
+    return MethodsDocument.from_json(d)
 
 
 def _setting(text: str) -> str:
@@ -52,21 +108,21 @@ def _setting(text: str) -> str:
     return f"{int(round(float(m.group(1)))):,} rays" if m else str(text)
 
 
-def _methods_rows(panel: Mapping) -> list[list[str]]:
+def _methods_rows(panel: MethodsPanel) -> list[list[str]]:
     """Every closed form; of each method with several points (ray counts, tile sizes) the
     first and the last."""
-    by: dict[str, list] = {}
-    for p in panel["points"]:
-        by.setdefault(p["method"], []).append(p)
+    by: dict[str, list[MethodPoint]] = {}
+    for p in panel.points:
+        by.setdefault(p.method, []).append(p)
     rows = []
     for method, pts in by.items():
         for p in pts if len(pts) <= 2 else [pts[0], pts[-1]]:
-            err = percent(p["error"], 3, unit=" %")
-            if p["error"] is not None and p.get("error_se") is not None:
-                err = f"{percent(p['error'], 3, unit='')} ± {percent(p['error_se'], unit=' %')}"
-            if p.get("error_se") is None and p.get("noise_floor") is not None:
-                err += f" (ray noise alone {percent(p['noise_floor'], unit=' %')})"
-            rows.append([f"{method}, {_setting(p['setting'])}", f"{fmt(p['seconds'])} s", err])
+            err = percent(p.error, 3, unit=" %")
+            if p.error is not None and p.error_se is not None:
+                err = f"{percent(p.error, 3, unit='')} ± {percent(p.error_se, unit=' %')}"
+            if p.error_se is None and p.noise_floor is not None:
+                err += f" (ray noise alone {percent(p.noise_floor, unit=' %')})"
+            rows.append([f"{method}, {_setting(p.setting)}", f"{fmt(p.seconds)} s", err])
     return rows
 
 
@@ -87,10 +143,11 @@ def methods_section(methods) -> list[str]:
             methods = load_methods(methods)
         except (OSError, ValueError) as err:
             return head + [f"`methods.json` unreadable ({err}); rerun `{METHODS_COMMAND}`.", ""]
-    m = methods["machine"]
-    load = m["load_average_start"]
+    methods = MethodsDocument.from_json(methods)
+    m = methods.machine
+    load = m.load_average_start
     load = load[0] if isinstance(load, (list, tuple)) else load
-    commit = (m.get("commit") or "unknown")[:7]
+    commit = (m.commit or "unknown")[:7]
     lines = head + [
         "Wall time for one incidence against the error of each method on a geometric scene, "
         "a wave scene and (with the `fullwave` extra) a 1D random grating against rigorous "
@@ -101,24 +158,24 @@ def methods_section(methods) -> list[str]:
         "![What each method costs](methods.png)",
         "",
     ]
-    for p in methods["panels"]:
+    for p in methods.panels:
         lines += [
-            f"*{p['title']}* — scene: {p['scene']}; reference: {p['reference']}"
+            f"*{p.title}* — scene: {p.scene}; reference: {p.reference}"
             + (
-                f" ({fmt(p['reference_seconds'])} s)"
-                if isinstance(p.get("reference_seconds"), (int, float))
+                f" ({fmt(p.reference_seconds)} s)"
+                if isinstance(p.reference_seconds, (int, float))
                 else ""
             )
-            + f"; error: {p['error_measure']}.",
+            + f"; error: {p.error_measure}.",
             "",
             md_table(["method", "time", "error"], _methods_rows(p)),
             "",
         ]
     lines += [
-        f"Measured by `{METHODS_COMMAND}`{' --quick' if methods.get('quick') else ''} on "
-        f"{m['cpus']} cores at load {float(load):.2f}, commit {commit}"
-        f"{' (with uncommitted changes)' if m.get('worktree_modified') else ''}; "
-        f"{m['threads']} threads; the machine may be shared, so the times are indicative.",
+        f"Measured by `{METHODS_COMMAND}`{' --quick' if methods.quick else ''} on "
+        f"{m.cpus} cores at load {float(load):.2f}, commit {commit}"
+        f"{' (with uncommitted changes)' if m.worktree_modified else ''}; "
+        f"{m.threads} threads; the machine may be shared, so the times are indicative.",
         "",
     ]
     return lines

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from dataclasses import fields as dataclass_fields
-from typing import Iterable, Mapping, Sequence
+from types import SimpleNamespace
+from typing import ClassVar, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -21,6 +22,15 @@ __all__ = [
     "as_verdicts",
     "validate_verdict",
     "RunDocument",
+    "JsonRecord",
+    "Fit",
+    "FitBound",
+    "OrdersStudy",
+    "OrderNeed",
+    "Stability",
+    "Speed",
+    "AnisotropyStudy",
+    "VariantVerdict",
 ]
 
 _NUM = (int, float)
@@ -240,34 +250,244 @@ def validate_verdict(d) -> dict:
             raise UsageError(f"verdict[{key!r}] must be of type {types}, got {type(v).__name__}")
         if isinstance(v, float) and not np.isfinite(v):
             raise UsageError(f"verdict[{key!r}] must be finite or null, got {v!r}")
-    if d["n_bins"] < 0 or d["dof"] != d["n_bins"] - d["n_params"]:
-        raise UsageError("verdict['dof'] must equal n_bins - n_params with n_bins >= 0")
-    if d["p_value"] is not None and not 0.0 <= d["p_value"] <= 1.0:
-        raise UsageError(f"verdict['p_value'] must lie in [0, 1], got {d['p_value']}")
-    for r in d["deviations"]:
-        if not (isinstance(r, list) and len(r) == 2 and 0.0 <= r[0] < r[1] <= 90.0):
-            raise UsageError(f"verdict['deviations'] entries must be [lo, hi] in [0, 90], got {r}")
-    if d["worst_bin"] is not None and len(d["worst_bin"]) != 2:
-        raise UsageError("verdict['worst_bin'] must be [θo, Δφ] or null")
-    if d["reference"] not in REFERENCES:
-        raise UsageError(
-            f"verdict['reference'] must be one of {REFERENCES}, got {d['reference']!r}"
-        )
-    if d["agrees"] and not d["conclusive"]:
-        raise UsageError("verdict['agrees'] can be true only for a conclusive verdict")
-    if not d["conclusive"] and d["reference"] != "one-tile":
-        raise UsageError("only a 'one-tile' verdict can be inconclusive")
-    if (d["realisations"] >= 2) != (d["reference"] == "realisations"):
-        raise UsageError("verdict['realisations'] >= 2 iff reference is 'realisations'")
+    _check_invariants(SimpleNamespace(**d))
     return d
+
+
+def _check_invariants(v) -> None:
+    """The relations between a verdict's fields (``v``: its fields by attribute, types
+    checked); a UsageError naming the field that breaks one."""
+    if v.n_bins < 0 or v.dof != v.n_bins - v.n_params:
+        raise UsageError("verdict's dof must equal n_bins - n_params with n_bins >= 0")
+    if v.p_value is not None and not 0.0 <= v.p_value <= 1.0:
+        raise UsageError(f"verdict's p_value must lie in [0, 1], got {v.p_value}")
+    for r in v.deviations:
+        if not (isinstance(r, list) and len(r) == 2 and 0.0 <= r[0] < r[1] <= 90.0):
+            raise UsageError(f"verdict's deviations entries must be [lo, hi] in [0, 90], got {r}")
+    if v.worst_bin is not None and len(v.worst_bin) != 2:
+        raise UsageError("verdict's worst_bin must be [θo, Δφ] or null")
+    if v.reference not in REFERENCES:
+        raise UsageError(f"verdict's reference must be one of {REFERENCES}, got {v.reference!r}")
+    if v.agrees and not v.conclusive:
+        raise UsageError("verdict's agrees can be true only for a conclusive verdict")
+    if not v.conclusive and v.reference != "one-tile":
+        raise UsageError("only a 'one-tile' verdict can be inconclusive")
+    if (v.realisations >= 2) != (v.reference == "realisations"):
+        raise UsageError("verdict's realisations >= 2 iff reference is 'realisations'")
+
+
+@dataclass(frozen=True, eq=False)
+class JsonRecord(FrozenDict):
+    """A frozen record of one JSON object of verdicts.json: its fields by attribute (nested
+    objects as their own records, ``_nested``) and, as a read-only dict, the object exactly as
+    read — so it is written back identically and ``==`` its JSON form. ``from_json`` is the
+    one reader; a key of no field stays in the dict only, a field the object lacks has its
+    default. A record made directly holds its fields as its dict."""
+
+    _nested: ClassVar[Mapping[str, object]] = {}
+
+    def __post_init__(self) -> None:
+        dict.update(self, ((f.name, getattr(self, f.name)) for f in dataclass_fields(self)))
+
+    def __reduce__(self):
+        return (type(self).from_json, (dict(self),))
+
+    @classmethod
+    def from_json(cls, d: Mapping):
+        if isinstance(d, cls):
+            return d
+        rec = cls(
+            **{
+                f.name: _read_nested(cls._nested.get(f.name), d[f.name])
+                for f in dataclass_fields(cls)
+                if f.name in d
+            }
+        )
+        dict.clear(rec)  # the object as read, in its own order
+        dict.update(rec, d)
+        return rec
+
+
+@dataclass(frozen=True)
+class MapOf:
+    """A ``_nested`` entry: a JSON object of name → ``record``."""
+
+    record: type
+
+
+def _read_nested(kind, value):
+    """``value`` as ``kind`` says: a record (a list of them: a tuple), ``MapOf`` a dict of
+    name → record, None left as it is."""
+    if kind is None or value is None:
+        return value
+    if isinstance(kind, MapOf):
+        return {k: kind.record.from_json(v) for k, v in value.items()}
+    if isinstance(value, Mapping):
+        return kind.from_json(value)
+    return tuple(kind.from_json(v) for v in value)
+
+
+@dataclass(frozen=True, eq=False)
+class FitBound(JsonRecord):
+    """A bound of its box a fit ended on: ``param`` at ``bound`` on its ``side`` ("lower",
+    "upper"); ``physical``: a physical bound (else a search limit)."""
+
+    param: str = ""
+    bound: float = 0.0
+    side: str = "lower"
+    physical: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class Fit(JsonRecord):
+    """One fitted model of verdicts.json ``fits`` (``analysis.fits``): its ``params``, Löw's
+    √E1 and √E2, whether the optimiser ``success``-ed and the fit ``converged``, its
+    ``n_starts`` and the bounds it ended on."""
+
+    model: str = ""
+    params: Mapping = field(default_factory=dict)
+    sqrt_e1: float | None = None
+    sqrt_e2: float | None = None
+    success: bool = True
+    converged: bool = True
+    n_starts: int = 1
+    at_bounds: tuple[FitBound, ...] = ()
+    _nested: ClassVar = {"at_bounds": FitBound}
+
+
+@dataclass(frozen=True, eq=False)
+class OrderNeed(JsonRecord):
+    """Whether one incidence needs scattering orders ≥ 2: their energy fraction ± its
+    standard error, the ``cut`` energy, the ``threshold`` and the answer ``needs``."""
+
+    theta_i: float = 0.0
+    phi_i: float = 0.0
+    multiple_fraction: float | None = None
+    multiple_fraction_se: float | None = None
+    cut: float | None = None
+    threshold: float | None = None
+    needs: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class OrdersStudy(JsonRecord):
+    """verdicts.json ``orders``: the run's ``bounces``, per incidence whether it ``needs``
+    orders ≥ 2, a ``note`` and the models' ``comparison`` (``analysis.multiple``)."""
+
+    bounces: object = None
+    needs: tuple[OrderNeed, ...] = ()
+    note: str | None = None
+    comparison: Mapping | None = None
+    _nested: ClassVar = {"needs": OrderNeed}
+
+
+@dataclass(frozen=True, eq=False)
+class Stability(JsonRecord):
+    """verdicts.json ``stability``: the θi sweep (``rays`` each at ``phi_i``), each model's
+    ``rel_rms`` over it, and the estimator's ``warnings``."""
+
+    theta_i: Sequence[float] = ()
+    phi_i: float = 0.0
+    rays: int | None = None
+    rel_rms: Mapping = field(default_factory=dict)
+    warnings: Sequence[str] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedRun(JsonRecord):
+    """One origin strategy of the speed study: its ``rays`` counts and their ``rel_rms``."""
+
+    rays: Sequence[int] = ()
+    rel_rms: Sequence[float] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Speed(JsonRecord):
+    """verdicts.json ``speed``: the speed runs at ``theta_i``, judged against ``reference``,
+    per origin strategy (``runs``)."""
+
+    theta_i: float | None = None
+    phi_i: float = 0.0
+    reference: str | None = None
+    runs: Mapping[str, SpeedRun] = field(default_factory=dict)
+    _nested: ClassVar = {"runs": MapOf(SpeedRun)}
+
+
+@dataclass(frozen=True, eq=False)
+class VariantVerdict(JsonRecord):
+    """An anisotropic variant against the simulation at one incidence: its ``verdict`` kind,
+    energy deviation (± its standard error) and rel RMS."""
+
+    verdict: str = "agrees"
+    rel_rms: float | None = None
+    energy_dev: float | None = None
+    energy_dev_se: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class StandIn(JsonRecord):
+    """The isotropic stand-in against the exact Λ: energy deviation and rel RMS."""
+
+    energy_dev: float | None = None
+    rel_rms: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class MissedModel(JsonRecord):
+    """A variant's single-scattering ``energy`` and what it ``missed`` (± ``missed_se``)."""
+
+    energy: float | None = None
+    missed: float | None = None
+    missed_se: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Missed(JsonRecord):
+    """The energy the single-scattering variants miss at one incidence: the simulation's
+    ``reflected`` and ``multiple`` energy (the walk's, when run), each ± its standard error,
+    and per variant (``models``)."""
+
+    reflected: float = 0.0
+    reflected_se: float = 0.0
+    multiple: float = 0.0
+    multiple_se: float = 0.0
+    walk_multiple: float | None = None
+    walk_multiple_se: float | None = None
+    models: Mapping[str, MissedModel] = field(default_factory=dict)
+    _nested: ClassVar = {"models": MapOf(MissedModel)}
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropyIncidence(JsonRecord):
+    """verdicts.json ``anisotropy`` at one incidence (``analysis.anisotropy``)."""
+
+    theta_i: float = 0.0
+    phi_i: float = 0.0
+    stand_in_vs_exact: StandIn | None = None
+    against_simulation: Mapping[str, VariantVerdict] = field(default_factory=dict)
+    missed: Missed | None = None
+    _nested: ClassVar = {
+        "stand_in_vs_exact": StandIn,
+        "against_simulation": MapOf(VariantVerdict),
+        "missed": Missed,
+    }
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropyStudy(JsonRecord):
+    """verdicts.json ``anisotropy``: the ``variants`` and their ``incidences``."""
+
+    variants: Sequence[str] = ()
+    incidences: tuple[AnisotropyIncidence, ...] = ()
+    _nested: ClassVar = {"incidences": AnisotropyIncidence}
 
 
 @dataclass(frozen=True)
 class RunDocument:
     """A run's verdict document (``verdicts.json``, docs/verdicts.md) as the reports read it:
-    the scene and its settings, the ``verdicts`` as ``Verdict`` records, and the studies that
-    stay JSON objects (``fits``, ``wave``, ``orders``, ``anisotropy``, ``stability``,
-    ``speed``; None or empty when the run has none). ``from_json`` reads the dict written (or
+    the scene and its settings, the ``verdicts`` as ``Verdict`` records, the studies as
+    records (``fits``, ``orders``, ``anisotropy``, ``stability``, ``speed``; None or empty
+    when the run has none; ``wave`` stays a JSON object). ``from_json`` reads the dict written (or
     about to be written) to the file; keys of no field are left out."""
 
     scene: str = ""
@@ -281,12 +501,12 @@ class RunDocument:
     seed: int | None = None
     ranking: Sequence[str] = ()
     outside_domain: Mapping = field(default_factory=dict)
-    fits: Sequence[Mapping] = ()
+    fits: tuple[Fit, ...] = ()
     wave: Mapping | None = None
-    orders: Mapping | None = None
-    anisotropy: Mapping | None = None
-    stability: Mapping = field(default_factory=dict)
-    speed: Mapping = field(default_factory=dict)
+    orders: OrdersStudy | None = None
+    anisotropy: AnisotropyStudy | None = None
+    stability: Stability = field(default_factory=Stability)
+    speed: Speed = field(default_factory=Speed)
 
     @classmethod
     def from_json(cls, doc: Mapping) -> "RunDocument":
@@ -295,5 +515,16 @@ class RunDocument:
             return doc
         names = {f.name for f in dataclass_fields(cls)}
         given = {k: v for k, v in doc.items() if k in names and v is not None}
-        given["verdicts"] = tuple(as_verdicts(doc.get("verdicts") or ()))
+        given = {k: _read_nested(_DOCUMENT_PARTS.get(k), v) for k, v in given.items()}
         return cls(**given)
+
+
+_DOCUMENT_PARTS = {
+    "verdicts": Verdict,
+    "fits": Fit,
+    "orders": OrdersStudy,
+    "anisotropy": AnisotropyStudy,
+    "stability": Stability,
+    "speed": Speed,
+}
+"""The parts of a verdict document read as records (``_read_nested``)."""

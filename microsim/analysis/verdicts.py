@@ -32,7 +32,7 @@ where the simulation has (almost) no events is not tested there.
 Reference of the test (``reference``), by what the model describes:
 
 * ``"ray-noise"``: a model of the traced facets themselves (``ts-facets``, listed in
-  ``meta["realisation_models"]``) or a standalone ``verdict`` call: f̄ differs from m by ray
+  ``info.realisation_models``) or a standalone ``verdict`` call: f̄ differs from m by ray
   noise only, the χ² and max-|z| tests above are exact. Always ``conclusive``.
 * ``"realisations"``: a model of the *ensemble* (nominal/realised Beckmann, V-groove closed
   forms, fitted models) with R ≥ 2 realisations f_r (``Result.brdf_realisations``). Each tile
@@ -238,24 +238,27 @@ def verdict(
     energy = np.where(used, a.sim * a.om, 0.0)
     E = energy_set(energy).reshape(a.shape)
     out = {"energy_dev": _energy_dev(a.sim, a.mod, a.om, Em), **dict.fromkeys(_TEST_FIELDS)}
-    z_dev = ray["z"]
+    z_dev = ray.z
     if a.F is not None:
         reference, n_real = "realisations", len(a.F)
-        out.update(_realisation_tests(a, used, Em, dof, model_rtol, alpha_each))
-        agrees, conclusive = out.pop("agrees"), True
+        agrees, tests = _realisation_tests(a, used, Em, dof, model_rtol, alpha_each)
+        out.update(tests)
+        conclusive = True
     elif ensemble:
         reference, n_real = "one-tile", 1
-        agrees, conclusive = ray["ok"], ray["ok"]
+        agrees, conclusive = ray.ok, ray.ok
         if a.dep is not None:
             excess = np.maximum(np.abs(a.sim - a.mod) - a.dep, 0.0)
             tile = _noise_tests(excess, sigma, used, dof, alpha_each, z_thr, normal)
-            z_dev = tile["z"]
-            out["tile_departure"] = _weighted_rms(energy, a.dep / np.where(used, a.mod, 1.0), E)
-            out["departure_max_abs_z"] = tile["max_abs_z"]
-            conclusive = ray["ok"] or not tile["ok"]
+            z_dev = tile.z
+            out.update(
+                tile_departure=_weighted_rms(energy, a.dep / np.where(used, a.mod, 1.0), E),
+                departure_max_abs_z=tile.max_abs_z,
+            )
+            conclusive = ray.ok or not tile.ok
     else:
         reference, n_real = "ray-noise", 1
-        agrees, conclusive = ray["ok"], True
+        agrees, conclusive = ray.ok, True
     rel = np.where(used, (a.sim - a.mod) / np.where(used, a.sim, 1.0), 0.0)
     dev = used & (np.abs(z_dev) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
     max_rel_dev, worst = _worst_bin(rel, E | dev, theta_edges, a.phi_edges)
@@ -268,11 +271,11 @@ def verdict(
         n_params=int(n_params),
         n_bins=n_bins,
         min_events=int(min_events),
-        chi2=ray["chi2"],
+        chi2=ray.chi2,
         dof=int(dof),
-        chi2_dof=ray["chi2"] / dof if dof > 0 else None,
-        p_value=ray["p_value"],
-        max_abs_z=ray["max_abs_z"],
+        chi2_dof=ray.chi2 / dof if dof > 0 else None,
+        p_value=ray.p_value,
+        max_abs_z=ray.max_abs_z,
         rel_rms=_weighted_rms(energy, rel, E),
         energy_bins=int(E.sum()),
         alpha=float(alpha),
@@ -292,30 +295,8 @@ def verdict(
     )
 
 
-def _inputs_of(m: Measured, p: Prediction, s: Significance) -> "_Inputs":
-    """The arrays of one verdict from its three argument groups, checked (``_checked_inputs``)."""
-    return _checked_inputs(
-        {
-            "sim": m.brdf,
-            "stderr": m.stderr,
-            "counts": m.counts,
-            "model": p.values,
-            "omega": m.omega,
-            "theta_edges": m.theta_edges,
-            "phi_edges": m.phi_edges,
-            "realisations": m.realisations,
-            "departure": p.departure,
-            "dof": m.dof,
-        },
-        ensemble=p.ensemble,
-        model_rtol=s.model_rtol,
-        min_events=s.min_events,
-        n_params=p.n_params,
-    )
-
-
 class _Inputs(NamedTuple):
-    """The arrays of one verdict, float64 and shape-checked (``_checked_inputs``): sim, se,
+    """The arrays of one verdict, float64 and shape-checked (``_inputs_of``): sim, se,
     counts, model, Ω (Θ, Φ); the φ edges; the R ≥ 2 realisations F (R, Θ, Φ) or None; the
     tile's departure δ (Θ, Φ, sr⁻¹) or None; se_t = √(s_B²/R + (rtol·m)²) with F, else None."""
 
@@ -335,12 +316,12 @@ class _Inputs(NamedTuple):
         return self.sim.shape
 
 
-def _checked_inputs(args: Mapping, *, ensemble, model_rtol, min_events, n_params) -> _Inputs:
-    """``verdict``'s array arguments (``args``: sim, stderr, counts, model, omega,
-    theta_edges, phi_edges, realisations, departure) converted and checked: one-line
-    UsageErrors naming the argument."""
+def _inputs_of(m: Measured, p: Prediction, s: Significance) -> _Inputs:
+    """The arrays of one verdict from its three argument groups, converted and checked:
+    one-line UsageErrors naming the argument."""
+    ensemble, model_rtol, min_events, n_params = p.ensemble, s.model_rtol, s.min_events, p.n_params
     sim, se, cnt, mod, om = (
-        np.asarray(args[k], dtype=np.float64) for k in ("sim", "stderr", "counts", "model", "omega")
+        np.asarray(x, dtype=np.float64) for x in (m.brdf, m.stderr, m.counts, p.values, m.omega)
     )
     shape = sim.shape
     if sim.ndim != 2 or any(x.shape != shape for x in (se, cnt, mod, om)):
@@ -348,10 +329,10 @@ def _checked_inputs(args: Mapping, *, ensemble, model_rtol, min_events, n_params
             "sim, stderr, counts, model and omega must be (Θ, Φ) arrays of one shape, "
             f"got {[x.shape for x in (sim, se, cnt, mod, om)]}"
         )
-    theta_edges = np.asarray(args["theta_edges"], dtype=np.float64)
+    theta_edges = np.asarray(m.theta_edges, dtype=np.float64)
     if theta_edges.shape != (shape[0] + 1,):
         raise UsageError(f"theta_edges must have shape ({shape[0] + 1},), got {theta_edges.shape}")
-    phi_edges = args["phi_edges"]
+    phi_edges = m.phi_edges
     if phi_edges is None:
         from microsim.bins import Bins
 
@@ -365,8 +346,8 @@ def _checked_inputs(args: Mapping, *, ensemble, model_rtol, min_events, n_params
     if int(n_params) != n_params or n_params < 0:
         raise UsageError(f"n_params must be an integer >= 0, got {n_params!r}")
     F = se_t = None
-    if ensemble and args["realisations"] is not None:
-        F = np.asarray(args["realisations"], dtype=np.float64)
+    if ensemble and m.realisations is not None:
+        F = np.asarray(m.realisations, dtype=np.float64)
         if F.ndim != 3 or F.shape[1:] != shape:
             raise UsageError(
                 f"realisations must be an (R, {shape[0]}, {shape[1]}) array, got {F.shape}"
@@ -376,13 +357,13 @@ def _checked_inputs(args: Mapping, *, ensemble, model_rtol, min_events, n_params
         with np.errstate(invalid="ignore", over="ignore"):
             se_t = np.sqrt(np.std(F, axis=0, ddof=1) ** 2 / len(F) + (model_rtol * mod) ** 2)
     dep = None
-    if ensemble and F is None and args["departure"] is not None:
-        dep = np.asarray(args["departure"], dtype=np.float64)
+    if ensemble and F is None and p.departure is not None:
+        dep = np.asarray(p.departure, dtype=np.float64)
         if dep.shape != shape or not np.all(dep >= 0):  # NaN fails too
             raise UsageError(
                 f"departure must be a non-negative {shape} array (sr⁻¹), got shape {dep.shape}"
             )
-    nu = args.get("dof")
+    nu = m.dof
     if nu is not None:
         nu = np.asarray(nu, dtype=np.float64)
         if nu.shape != shape or not np.all(nu >= 1):  # NaN fails too
@@ -427,7 +408,18 @@ def _normal_equivalent(a: _Inputs, sigma):
     return convert
 
 
-def _noise_tests(diff, sigma, used, dof, alpha_each, z_thr, normal=None) -> dict:
+class _NoiseTests(NamedTuple):
+    """The χ² and max-|z| tests of one verdict: the z-scores (Θ, Φ), χ², its p-value, max |z|
+    (None when undefined) and whether both pass (``ok``)."""
+
+    z: np.ndarray
+    chi2: float
+    p_value: float | None
+    max_abs_z: float | None
+    ok: bool
+
+
+def _noise_tests(diff, sigma, used, dof, alpha_each, z_thr, normal=None) -> _NoiseTests:
     """χ² and max-|z| tests of z = diff/σ over the used bins (each at ``alpha_each``);
     ``normal``: z ↦ its normal equivalent (``_normal_equivalent``) or None."""
     z = np.where(used, diff / np.where(used, sigma, 1.0), 0.0)
@@ -437,7 +429,7 @@ def _noise_tests(diff, sigma, used, dof, alpha_each, z_thr, normal=None) -> dict
     p_value = float(chi2_sf(chi2, dof)) if dof > 0 else None
     max_abs_z = float(np.max(np.abs(z))) if used.any() else None
     ok = bool(dof > 0 and p_value >= alpha_each and max_abs_z < z_thr)
-    return {"z": z, "chi2": chi2, "p_value": p_value, "max_abs_z": max_abs_z, "ok": ok}
+    return _NoiseTests(z, chi2, p_value, max_abs_z, ok)
 
 
 def _energy_dev(sim, mod, om, Em) -> float | None:
@@ -447,11 +439,11 @@ def _energy_dev(sim, mod, om, Em) -> float | None:
     return float(np.sum(om[Em] * (sim[Em] - mod[Em])) / np.sum(om[Em] * mod[Em]))
 
 
-def _realisation_tests(a: _Inputs, used, Em, dof, model_rtol, alpha_each) -> dict:
-    """The energy and shape t tests over R ≥ 2 realisations (module docstring)."""
-    out = {"agrees": False}
+def _realisation_tests(a: _Inputs, used, Em, dof, model_rtol, alpha_each) -> tuple[bool, dict]:
+    """The energy and shape t tests over R ≥ 2 realisations (module docstring): (whether both
+    pass, the verdict fields they fill)."""
     if not (used.any() and Em.any() and dof > 0):
-        return out
+        return False, {}
     R = len(a.F)
     norm = np.sum(a.om[Em] * a.mod[Em])
     d = np.sum(a.om[Em] * (a.F[:, Em] - a.mod[Em]), axis=1) / norm
@@ -459,15 +451,14 @@ def _realisation_tests(a: _Inputs, used, Em, dof, model_rtol, alpha_each) -> dic
     energy_p = float(2.0 * t_sf(abs(d.mean()) / np.sqrt(se_d**2 + model_rtol**2), R - 1))
     max_abs_t = float((np.abs(a.F.mean(axis=0)[used] - a.mod[used]) / a.se_t[used]).max())
     t_thr = float(t_isf(0.5 * sidak(alpha_each, int(used.sum())), R - 1))
-    out.update(
+    fields = dict(
         energy_dev=float(d.mean()),
         energy_dev_se=se_d,
         energy_p=energy_p,
         max_abs_t=max_abs_t,
         t_threshold=t_thr,
-        agrees=bool(energy_p >= alpha_each and max_abs_t < t_thr),
     )
-    return out
+    return bool(energy_p >= alpha_each and max_abs_t < t_thr), fields
 
 
 def _weighted_rms(energy, rel, E) -> float | None:
@@ -501,26 +492,28 @@ def verdict_kind(v: Mapping) -> str:
 
 
 def verdict_symbol(v: Mapping) -> str:
-    """One verdict in the symbols of the run's table and the index: "✓", "✗ 20%" (its
-    energy-weighted relative RMS error) or "?" — followed, when the tile's departure from its
-    ensemble is known, by both sizes: "? 2% (tile departs 3%)"."""
-    kind = verdict_kind(v)
-    if kind == "agrees":
+    """One verdict (a ``Verdict`` or its dict) in the symbols of the run's table and the
+    index: "✓", "✗ 20%" (its energy-weighted relative RMS error) or "?" — followed, when the
+    tile's departure from its ensemble is known, by both sizes: "? 2% (tile departs 3%)"."""
+    v = Verdict.from_json(v)
+    if v.kind == "agrees":
         return "✓"
-    if kind == "deviates":
-        return f"✗ {percent(v['rel_rms'])}" if v.get("rel_rms") is not None else "✗"
-    if v.get("tile_departure") is None or v.get("rel_rms") is None:
+    if v.kind == "deviates":
+        return f"✗ {percent(v.rel_rms)}" if v.rel_rms is not None else "✗"
+    if v.tile_departure is None or v.rel_rms is None:
         return "?"
-    return f"? {percent(v['rel_rms'])} (tile departs {percent(v['tile_departure'])})"
+    return f"? {percent(v.rel_rms)} (tile departs {percent(v.tile_departure)})"
 
 
 def inconclusive_reason(v: Mapping) -> str:
-    """Why an inconclusive verdict is one, in words (``verdict_kind`` "inconclusive")."""
-    if v.get("tile_departure") is None or v.get("rel_rms") is None:
+    """Why an inconclusive verdict (a ``Verdict`` or its dict) is one, in words
+    (``verdict_kind`` "inconclusive")."""
+    v = Verdict.from_json(v)
+    if v.tile_departure is None or v.rel_rms is None:
         return "one realisation cannot separate tile scatter from model error"
     return (
-        f"its deviation (rel RMS {percent(v['rel_rms'])}) is explained by the tile's own "
-        f"departure from its ensemble ({percent(v['tile_departure'])}) and ray noise"
+        f"its deviation (rel RMS {percent(v.rel_rms)}) is explained by the tile's own "
+        f"departure from its ensemble ({percent(v.tile_departure)}) and ray noise"
     )
 
 
@@ -620,9 +613,13 @@ class VerdictList(list):
     def _repr_html_(self) -> str:
         from microsim.display import html_table
 
-        models = list(dict.fromkeys(v["model"] + (" (fit)" if v["fitted"] else "") for v in self))
-        incidences = list(dict.fromkeys(incidence.key(v) for v in self))
-        cell = {(v["model"] + (" (fit)" if v["fitted"] else ""), incidence.key(v)): v for v in self}
+        def label(v: Verdict) -> str:
+            return v.model + (" (fit)" if v.fitted else "")
+
+        verdicts = as_verdicts(self)
+        models = list(dict.fromkeys(map(label, verdicts)))
+        incidences = list(dict.fromkeys(incidence.key(v) for v in verdicts))
+        cell = {(label(v), incidence.key(v)): v for v in verdicts}
         rows = [
             [m] + [verdict_symbol(cell[m, i]) if (m, i) in cell else "–" for i in incidences]
             for m in models
@@ -643,10 +640,10 @@ def tile_departure(result) -> np.ndarray | None:
     pair = result.info.tile_departure
     if not pair or getattr(result, "brdf_realisations", None) is not None:
         return None
-    if pair["tile"] not in result.models or pair["ensemble"] not in result.models:
+    names = (pair.get("tile"), pair.get("ensemble"))
+    if any(name not in result.models for name in names):
         return None
-    tile = np.asarray(result.models[pair["tile"]], dtype=np.float64)
-    ens = np.asarray(result.models[pair["ensemble"]], dtype=np.float64)
+    tile, ens = (np.asarray(result.models[name], dtype=np.float64) for name in names)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(ens > 0, np.abs(tile / np.where(ens > 0, ens, 1.0) - 1.0), np.inf)
     r = np.where((ens == 0) & (tile == 0), 0.0, r)
@@ -668,7 +665,7 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
     "inconclusive at θi=…" (after "; " when others deviate); else e.g.
     "deviates at θi=80°: rel RMS 12% at θi=80°, worst +35% at θo 84°
     (θi=80°)" (the largest rel_rms and |max_rel_dev| over the deviating incidences)."""
-    verdicts = list(verdicts)
+    verdicts = as_verdicts(verdicts)
     with_phi = incidence.several_azimuths(verdicts)
 
     def at(v):
@@ -676,11 +673,11 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
 
     by_model: dict[str, list] = {}
     for v in verdicts:
-        by_model.setdefault(v["model"], []).append(v)
+        by_model.setdefault(v.model, []).append(v)
     out = {}
     for name, vs in by_model.items():
-        bad = [v for v in vs if not v["agrees"] and v.get("conclusive", True)]
-        unsure = [v for v in vs if not v.get("conclusive", True)]
+        bad = [v for v in vs if v.kind == "deviates"]
+        unsure = [v for v in vs if v.kind == "inconclusive"]
         if not bad and not unsure:
             out[name] = "agrees"
             continue
@@ -694,16 +691,17 @@ def summary_row(verdicts: Iterable[Mapping]) -> dict[str, str]:
         parts = [
             f"deviates at θi={incidence.grouped(bad) if with_phi else incidence.where(bad, False)}"
         ]
-        rms = [v for v in bad if v["rel_rms"] is not None]
+        rms = [v for v in bad if v.rel_rms is not None]
         if rms:
-            r = max(rms, key=lambda v: v["rel_rms"])
-            parts.append(f"rel RMS {percent(r['rel_rms'], 3)} at {at(r)}")
-        worst = [v for v in bad if v["max_rel_dev"] is not None]
+            r = max(rms, key=lambda v: v.rel_rms)
+            parts.append(f"rel RMS {percent(r.rel_rms, 3)} at {at(r)}")
+        worst = [v for v in bad if v.max_rel_dev is not None]
         if worst:
-            w = max(worst, key=lambda v: abs(v["max_rel_dev"]))
+            w = max(worst, key=lambda v: abs(v.max_rel_dev))
+            theta_o, dphi = w.worst_bin
             parts.append(
-                f"worst {percent(w['max_rel_dev'], 3, signed=True)} at θo {w['worst_bin'][0]:g}°, "
-                f"Δφ {w['worst_bin'][1]:g}° ({at(w)})"
+                f"worst {percent(w.max_rel_dev, 3, signed=True)} at θo {theta_o:g}°, "
+                f"Δφ {dphi:g}° ({at(w)})"
             )
         out[name] = parts[0] + (": " + ", ".join(parts[1:]) if len(parts) > 1 else "")
         out[name] += f"; {note}" if note else ""

@@ -111,13 +111,13 @@ def _execute(plan: RunPlan, progress: bool, log) -> RunOutcome:
     dest = plan.partial_dir or plan.out
     hint = plan.resume_hint or f"--resume {dest}"
     prev = plan.previous
-    record = (prev.info.run or {}).get("realisations_auto") if prev is not None else None
+    record = report.auto_realisations(prev.info.run or {}) if prev is not None else None
     from_previous = prev is not None and not prev.is_partial and int(prev.rays[0]) == plan.rays
     if from_previous:
         result = prev.with_models({})  # finished tallies: only the analysis is left
     elif plan.auto:
         result = tracing.simulate_auto_scene(plan, log if progress else None)
-    elif plan.auto_realisations and (record is None or record["stage"] == "pilot"):
+    elif plan.auto_realisations and (record is None or record.stage == "pilot"):
         pilot_plan, pilot = plan, _trace(plan, prev, progress)
         record = tracing.realisations_record(plan, plan, None, "pilot")
         result = pilot
@@ -264,7 +264,8 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         files, stability = _charts(
             plan, stage, result, shown, verdicts, ranking, sweep, sweep_verdicts, notes
         )
-        files = _study_charts(plan, stage, files, orders_doc, (speed, speed_theta, speed_ref))
+        comparison = (orders_doc or {}).get("comparison")
+        files = _study_charts(plan, stage, files, comparison, (speed, speed_theta, speed_ref))
         stages.stage("writing")
         result = result.with_meta(seconds_analysis=time.perf_counter() - t0)
         result.save(stage)
@@ -284,12 +285,9 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
             notes,
             wave,
         )
-        if orders_doc is not None:
-            doc["orders"] = atomic.json_safe(orders_doc)
-        comparison = (orders_doc or {}).get("comparison")
         aniso = anisotropy_summary(result, verdicts, comparison) if sc.anisotropic else None
-        if aniso is not None:
-            doc["anisotropy"] = atomic.json_safe(aniso)
+        studies = {"orders": orders_doc, "anisotropy": aniso}
+        doc.update({k: atomic.json_safe(v) for k, v in studies.items() if v is not None})
         atomic.write_json(stage / VERDICTS_FILE, doc)
         timings = timings_document(plan, result, speed, speed_theta)
         if wave_seconds is not None:
@@ -316,19 +314,26 @@ def _fits(plan: RunPlan, result) -> dict:
     )
 
 
-def _study_charts(plan: RunPlan, stage: Path, files: dict, orders_doc, speed_study) -> dict:
+def _chart_path(files: dict, stage: Path, key: str) -> Path:
+    """The path in ``stage`` of chart ``key`` (``CHARTS``), entered in ``files`` (key → file
+    name) in the order the report shows them."""
+    files[key] = CHARTS[key]
+    return stage / CHARTS[key]
+
+
+def _study_charts(plan: RunPlan, stage: Path, files: dict, comparison, speed_study) -> dict:
     """``files`` with the side studies' charts written into ``stage``: the scattering orders'
-    comparison (first, when the run has one) and the speed chart of ``speed_study`` (the
+    ``comparison`` (first, when the run has one) and the speed chart of ``speed_study`` (the
     speed runs, their θi and the reference they are judged against)."""
     name = plan.scene.name
     speed, speed_theta, speed_ref = speed_study
-    if orders_doc is not None and orders_doc["comparison"] is not None:
-        files = {"multiple": CHARTS["multiple"], **files}
-        multiple_chart(orders_doc["comparison"], stage / files["multiple"], name)
-    files = {**files, "speed": CHARTS["speed"]}
+    first: dict = {}
+    if comparison is not None:
+        multiple_chart(comparison, _chart_path(first, stage, "multiple"), name)
+    files = {**first, **files}
     ch.speed_accuracy(
         speed,
-        stage / files["speed"],
+        _chart_path(files, stage, "speed"),
         f"{name}, θi = {speed_theta:g}°",
         f"relative RMS error against {speed_ref}",
     )
@@ -355,23 +360,19 @@ def _ranking(verdicts) -> list[str]:
     """Model names from best to worst by mean relative RMS error over the incidences."""
     score: dict[str, list[float]] = {}
     for v in verdicts:
-        x = v.get("rel_rms")
-        score.setdefault(v["model"], []).append(x if x is not None and np.isfinite(x) else np.inf)
+        x = v.rel_rms
+        score.setdefault(v.model, []).append(x if x is not None and np.isfinite(x) else np.inf)
     return sorted(score, key=lambda m: (np.mean(score[m]), m))
+
+
+_UNDEFINED_AS_NAN = ("chi2_dof", "p_value", "max_abs_z", "rel_rms", "max_rel_dev")
 
 
 def _nan_for_none(verdicts) -> list[dict]:
     """Verdicts with undefined numbers (null: no used bins / dof ≤ 0) as NaN, for the charts."""
     return [
-        {
-            k: (
-                np.nan
-                if v is None and k in ("chi2_dof", "p_value", "max_abs_z", "rel_rms", "max_rel_dev")
-                else v
-            )
-            for k, v in d.items()
-        }
-        for d in verdicts
+        {k: np.nan if x is None and k in _UNDEFINED_AS_NAN else x for k, x in v.items()}
+        for v in verdicts
     ]
 
 
@@ -390,35 +391,29 @@ def _charts(
     sweep's rel_rms per model over its θi). ``estimator_notes``: for the stability
     chart."""
     name = plan.scene.name
-    files = {}
-    files["inplane"] = CHARTS["inplane"]
-    ch.inplane_curves(result, shown, stage / files["inplane"], name)
+    files: dict = {}
+    ch.inplane_curves(result, shown, _chart_path(files, stage, "inplane"), name)
     judged = {k: v for k, v in shown.items() if k not in OUTSIDE_DOMAIN}
     ranking = [m for m in ranking if m in judged]  # best/worst among models in their domain
     if ranking:
         worst = ranking[-1]
         zs = [
-            (v.get("chi2_dof") or 0.0, k)
-            for k, v in enumerate([v for v in verdicts if v["model"] == worst])
+            (v.chi2_dof or 0.0, k) for k, v in enumerate([v for v in verdicts if v.model == worst])
         ]
         t_index = max(zs)[1] if zs else 0
-        files["hemisphere"] = CHARTS["hemisphere"]
-        ch.hemisphere_maps(
-            result, judged, _nan_for_none(verdicts), stage / files["hemisphere"], t_index, name
-        )
-        files["appearance"] = CHARTS["appearance"]
-        appearance(
-            result, judged, _nan_for_none(verdicts), t_index, stage / files["appearance"], name
-        )
+        shown_verdicts = _nan_for_none(verdicts)
+        path = _chart_path(files, stage, "hemisphere")
+        ch.hemisphere_maps(result, judged, shown_verdicts, path, t_index, name)
+        path = _chart_path(files, stage, "appearance")
+        appearance(result, judged, shown_verdicts, t_index, path, name)
     grid = np.linspace(0.0, 89.9, 180)
-    files["energy"] = CHARTS["energy"]
     ch.energy_chart(
         sweep.theta_i,
         sweep.ledger["single_fresnel"],
         albedo_stderr(sweep),
         side_studies.albedo_models(plan, grid),
         {"masked": sweep.ledger["masked_fresnel"], "downward": sweep.ledger["downward_fresnel"]},
-        stage / files["energy"],
+        _chart_path(files, stage, "energy"),
         name,
     )
     rel = {
@@ -426,9 +421,9 @@ def _charts(
             [
                 next(
                     (
-                        v["rel_rms"]
+                        v.rel_rms
                         for v in sweep_verdicts
-                        if v["model"] == m and abs(v["theta_i"] - t) < 1e-9
+                        if v.model == m and abs(v.theta_i - t) < 1e-9
                     ),
                     np.nan,
                 )
@@ -446,6 +441,6 @@ def _charts(
         "relative error = energy-weighted rel RMS with the sweep's own noise subtracted in "
         "quadrature; a missing point: not resolved above the noise"
     ] + estimator_notes
-    files["stability"] = CHARTS["stability"]
-    ch.stability_chart(sweep.theta_i, excess, stage / files["stability"], notes, name)
+    path = _chart_path(files, stage, "stability")
+    ch.stability_chart(sweep.theta_i, excess, path, notes, name)
     return files, rel

@@ -5,33 +5,15 @@ from __future__ import annotations
 
 import csv
 import io
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import ClassVar, Mapping
 
 from ... import atomic
+from ...analysis.verdict_record import JsonRecord, Verdict
 from ...errors import EnvironmentFailure
 from .grid import SweepSpec, fmt_num, material_text
 from .task import load_result
-
-COLUMNS = (
-    "task",
-    "scene",
-    "params",
-    "material",
-    "roughness",
-    "theta_i",
-    "model",
-    "rel_rms",
-    "noise_floor",
-    "chi2_dof",
-    "p_value",
-    "max_abs_z",
-    "verdict",
-    "tile_departure",
-    "n_bins",
-    "rays",
-    "seconds",
-)
 
 
 @dataclass(frozen=True)
@@ -43,47 +25,103 @@ class SummaryFiles:
     chart: str
 
 
-def gather(spec: SweepSpec, out) -> list[dict]:
+@dataclass(frozen=True, eq=False)
+class TaskSettings(JsonRecord):
+    """The part of a task's description the summary shows (``grid.Task.to_dict``)."""
+
+    scene: str = ""
+    surface: Mapping = field(default_factory=dict)
+    ior: object = None
+    theta_i: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class TaskRecord(JsonRecord):
+    """A finished task's ``tasks/<id>.json`` (``task.run_task``): its ``task`` description,
+    ``roughness``, ``rays``, wall ``seconds``, ray-noise floor and ``verdicts``."""
+
+    id: str = ""
+    task: TaskSettings = field(default_factory=TaskSettings)
+    roughness: float | None = None
+    rays: int = 0
+    seconds: float = 0.0
+    noise_floor: float | None = None
+    verdicts: tuple[Verdict, ...] = ()
+    _nested: ClassVar = {"task": TaskSettings, "verdicts": Verdict}
+
+
+@dataclass(frozen=True, eq=False)
+class SummaryRow(JsonRecord):
+    """One (task, model) row of the summary, its fields the ``COLUMNS`` (``material`` plain
+    text; ``verdict`` worded by ``verdicts.verdict_kind``); as a dict, the CSV row."""
+
+    task: str = ""
+    scene: str = ""
+    params: str = ""
+    material: str = ""
+    roughness: float | None = None
+    theta_i: float = 0.0
+    model: str = ""
+    rel_rms: float | None = None
+    noise_floor: float | None = None
+    chi2_dof: float | None = None
+    p_value: float | None = None
+    max_abs_z: float | None = None
+    verdict: str = ""
+    tile_departure: float | None = None
+    n_bins: int = 0
+    rays: int = 0
+    seconds: float = 0.0
+
+    @classmethod
+    def of(cls, r: TaskRecord, v: Verdict) -> "SummaryRow":
+        """The row of verdict ``v`` of task record ``r``."""
+        from microsim.analysis.verdicts import verdict_kind
+
+        t = r.task
+        return cls.from_json(
+            {
+                "task": r.id,
+                "scene": t.scene,
+                "params": _params_text(t.surface),
+                "material": material_text(t.ior),
+                "roughness": r.roughness,
+                "theta_i": t.theta_i,
+                "model": v.model,
+                "rel_rms": v.rel_rms,
+                "noise_floor": r.noise_floor,
+                "chi2_dof": v.chi2_dof,
+                "p_value": v.p_value,
+                "max_abs_z": v.max_abs_z,
+                "verdict": verdict_kind(v),
+                "tile_departure": v.tile_departure,
+                "n_bins": v.n_bins,
+                "rays": r.rays,
+                "seconds": round(r.seconds, 3),
+            }
+        )
+
+
+COLUMNS = tuple(f.name for f in fields(SummaryRow))
+"""The summary's columns: the fields of ``SummaryRow``, in order."""
+
+
+def gather(spec: SweepSpec, out) -> list[TaskRecord]:
     """Complete task records of ``spec`` in ``out``, in task order (missing, unreadable and
     partial ones left out)."""
-    return [r for r in (load_result(t, Path(out)) for t in spec.tasks) if r is not None]
+    records = (load_result(t, Path(out)) for t in spec.tasks)
+    return [TaskRecord.from_json(r) for r in records if r is not None]
 
 
 def _params_text(surface: dict) -> str:
     return " ".join(f"{k}={fmt_num(v)}" for k, v in sorted(surface.items()) if k != "kind")
 
 
-def summary_table(records: list[dict]) -> list[dict]:
-    """One row per (task, model) with the ``COLUMNS`` fields (``material`` plain text;
-    ``verdict`` worded by ``verdicts.verdict_kind``, the rule of every microsim output)."""
-    from microsim.analysis.verdicts import verdict_kind
-
-    rows = []
-    for r in records:
-        t = r["task"]
-        for v in r["verdicts"]:
-            rows.append(
-                {
-                    "task": r["id"],
-                    "scene": t["scene"],
-                    "params": _params_text(t["surface"]),
-                    "material": material_text(t["ior"]),
-                    "roughness": r["roughness"],
-                    "theta_i": t["theta_i"],
-                    "model": v["model"],
-                    "rel_rms": v["rel_rms"],
-                    "noise_floor": r.get("noise_floor"),
-                    "chi2_dof": v["chi2_dof"],
-                    "p_value": v["p_value"],
-                    "max_abs_z": v["max_abs_z"],
-                    "verdict": verdict_kind(v),
-                    "tile_departure": v["tile_departure"],
-                    "n_bins": v["n_bins"],
-                    "rays": r["rays"],
-                    "seconds": round(r["seconds"], 3),
-                }
-            )
-    return rows
+def summary_table(records) -> list[SummaryRow]:
+    """One row per (task, model) of the task ``records`` (``TaskRecord`` or their JSON
+    objects): ``SummaryRow``, the rule of every microsim output for the verdict."""
+    records = [TaskRecord.from_json(r) for r in records]
+    return [SummaryRow.of(r, v) for r in records for v in r.verdicts]
 
 
 def _fmt(v) -> str:
@@ -135,7 +173,7 @@ def _write_summary(spec: SweepSpec, out: Path) -> SummaryFiles:
         "| " + " | ".join(cols) + " |",
         "|" + "---|" * len(cols),
     ]
-    md += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in rows]
+    md += ["| " + " | ".join(_fmt(getattr(r, c)) for c in cols) + " |" for r in rows]
     atomic.write_text(out / "summary.md", "\n".join(md) + "\n")
     chart = out / "error_vs_roughness.png"
     _chart(rows, chart, spec.name)
@@ -144,7 +182,7 @@ def _write_summary(spec: SweepSpec, out: Path) -> SummaryFiles:
     )
 
 
-def _chart(rows: list[dict], path: Path, title: str) -> None:
+def _chart(rows: list[SummaryRow], path: Path, title: str) -> None:
     """Model relative RMS error against roughness: colour = θi, line style = model, marker =
     scene and material (one line per combination); a hollow marker is an inconclusive
     verdict (its error is within what the one tile's departure from its ensemble may
@@ -159,16 +197,12 @@ def _chart(rows: list[dict], path: Path, title: str) -> None:
     groups: dict = {}
     floors: dict = {}
     for r in rows:
-        if r["roughness"] is None or r["rel_rms"] is None:
+        if r.roughness is None or r.rel_rms is None:
             continue
-        key = (r["scene"], r["material"], r["model"], r["theta_i"])
-        groups.setdefault(key, []).append(
-            (r["roughness"], r["rel_rms"], r["verdict"] == "inconclusive")
-        )
-        if r.get("noise_floor") is not None:
-            floors.setdefault((r["scene"], r["material"], r["theta_i"]), {})[r["roughness"]] = r[
-                "noise_floor"
-            ]
+        key = (r.scene, r.material, r.model, r.theta_i)
+        groups.setdefault(key, []).append((r.roughness, r.rel_rms, r.verdict == "inconclusive"))
+        if r.noise_floor is not None:
+            floors.setdefault((r.scene, r.material, r.theta_i), {})[r.roughness] = r.noise_floor
     thetas = sorted({k[3] for k in groups})
     models = sorted({k[2] for k in groups})
     looks = sorted({k[:2] for k in groups})
