@@ -32,6 +32,7 @@ from microsim.stats import energy_set
 
 from . import incidence
 from .multiple import order_energies
+from .study_records import OrderComparison, OrderEnergy
 from .verdicts import Significance, as_verdicts
 
 __all__ = ["VARIANTS", "anisotropy_summary"]
@@ -57,21 +58,23 @@ def _model_vs_model(a: np.ndarray, b: np.ndarray, omega: np.ndarray) -> tuple[fl
 
 def _walk_at(comparison: Mapping | None, here: tuple[float, float]) -> Mapping | None:
     """The random walk's orders-≥ 2 entry of ``comparison`` at incidence ``here``, or None."""
-    for inc in (comparison or {}).get("incidences", []):
-        if incidence.key(inc) == here:
-            return inc["models"].get("random-walk")
+    if comparison is None:
+        return None
+    for inc in OrderComparison.from_json(comparison).incidences:
+        if (inc.theta_i, inc.phi_i) == here:
+            return inc.models.get("random-walk")
     return None
 
 
-def _missed(energies: Mapping, result, t: int, omega: np.ndarray, rtol: Mapping) -> dict:
+def _missed(energies: OrderEnergy, result, t: int, omega: np.ndarray, rtol: Mapping) -> dict:
     """The energy each variant misses at incidence t (module docstring); ``rtol``: model
     name → its relative quadrature tolerance."""
-    e_sim, se_sim = energies["reflected"], energies["reflected_se"]
+    e_sim, se_sim = energies.reflected, energies.reflected_se
     out = {
         "reflected": e_sim,
         "reflected_se": se_sim,
-        "multiple": energies["multiple"],
-        "multiple_se": energies["multiple_se"],
+        "multiple": energies.multiple,
+        "multiple_se": energies.multiple_se,
         "models": {},
     }
     for label, name in VARIANTS.items():
@@ -129,6 +132,6 @@ def anisotropy_summary(
             walk = _walk_at(comparison, here)
             if walk is not None:
                 rows[-1]["missed"].update(
-                    walk_multiple=walk["energy"], walk_multiple_se=walk["energy_se"]
+                    walk_multiple=walk.energy, walk_multiple_se=walk.energy_se
                 )
     return {"variants": dict(VARIANTS), "incidences": rows}
