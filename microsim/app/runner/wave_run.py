@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...analysis.study_records import WaveSection
 from ...analysis.wave_verdicts import wave_verdicts_for_result
 from ...analytic.fresnel import fresnel
 from ...errors import UsageError
@@ -122,8 +123,8 @@ def wave_surfaces(plan) -> list:
 
 
 def run_wave(plan, result) -> tuple:
-    """(Kirchhoff ``Result``, ``"wave"`` section of verdicts.json, seconds) of a planned run
-    whose ray-traced ``result`` is complete (module docstring). The section holds the
+    """(Kirchhoff ``Result``, ``"wave"`` section of verdicts.json (``WaveSection``), seconds)
+    of a planned run whose ray-traced ``result`` is complete (module docstring). It holds the
     settings, per incidence g = (4πσ cos θi/λ)² with σ the tiles' realised rms height (root
     mean square over the tiles), the specular order's
     power against the Debye–Waller value F(θi)·e^{−g}, the ray tracer's masked fraction and
@@ -158,33 +159,33 @@ def run_wave(plan, result) -> tuple:
     g = (4.0 * math.pi * sigma_r * cos_i / lam) ** 2
     f_i = np.asarray(fresnel(cos_i, sc.ior), dtype=float)
     masked = np.asarray(result.ledger["masked"], dtype=float)
-    tile = [float(v) for v in kres.meta["tile"]]
-    section = {
-        "reference": "kirchhoff",
-        "kind": "theory-vs-theory",
-        "wavelength": lam,
-        "length_unit": "unit of dx (micrometres by convention)",
-        "surface_model": w.surface_model,
-        "upsample": int(w.upsample),
-        "fresnel_angle": w.fresnel_angle,
-        "tile": tile,
-        "tile_over_lambda": [v / lam for v in tile],
-        "sigma_over_lambda": sigma / lam,
-        "realised_sigma_over_lambda": sigma_r / lam,
-        "realisations": int(kres.meta["realisations"]),
-        "run_realisations": int(plan.realisations),
-        "stderr_method": kres.meta["stderr_method"],
-        "theta_i": th.tolist(),
-        "g": g.tolist(),
-        "specular_power": [float(v) for v in kres.meta["specular_power"]],
-        "debye_waller": (f_i * np.exp(-g)).tolist(),
-        "masked_fraction": masked.tolist(),
-        "masked_limit": MASKED_LIMIT,
-        "in_domain": [bool(m < MASKED_LIMIT) for m in masked],
-        "orders": [int(v) for v in kres.meta["orders"]],
-        "file": f"{WAVE_DIR}/",
-        "verdicts": verdicts,
-    }
+    tile = [float(v) for v in kres.info.tile]
+    section = WaveSection(
+        reference="kirchhoff",
+        kind="theory-vs-theory",
+        wavelength=lam,
+        length_unit="unit of dx (micrometres by convention)",
+        surface_model=w.surface_model,
+        upsample=int(w.upsample),
+        fresnel_angle=w.fresnel_angle,
+        tile=tile,
+        tile_over_lambda=[v / lam for v in tile],
+        sigma_over_lambda=sigma / lam,
+        realised_sigma_over_lambda=sigma_r / lam,
+        realisations=int(kres.info.realisations),
+        run_realisations=int(plan.realisations),
+        stderr_method=kres.info.stderr_method,
+        theta_i=th.tolist(),
+        g=g.tolist(),
+        specular_power=[float(v) for v in kres.info.specular_power],
+        debye_waller=(f_i * np.exp(-g)).tolist(),
+        masked_fraction=masked.tolist(),
+        masked_limit=MASKED_LIMIT,
+        in_domain=[bool(m < MASKED_LIMIT) for m in masked],
+        orders=[int(v) for v in kres.info.orders],
+        file=f"{WAVE_DIR}/",
+        verdicts=verdicts,
+    )
     return kres, section, seconds
 
 
