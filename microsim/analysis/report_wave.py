@@ -13,7 +13,7 @@ from microsim.errors import UsageError
 from .markdown import md_table, percent
 from .report_cells import fmt, pct, ranges_text, signed_pct
 from .report_methods import methods_section
-from .study_records import WaveSection
+from .study_records import RegimeMaps, WaveSection
 from .verdict_record import RunDocument
 from .wave_verdicts import WaveVerdict
 
@@ -239,8 +239,8 @@ def regime_section(
     docs: Sequence[Mapping], regimes: Mapping | None, methods=None, fullwave=None
 ) -> list[str]:
     """Index section "Where each method holds": the wave scenes' verdicts against Kirchhoff
-    and, when ``regimes`` is given (``runner.wave_run.regime_maps``: ``chart``, ``maps`` as
-    ``RegimeMap.to_dict``, ``settings`` text), the regime chart and crossover table; then
+    and, when ``regimes`` is given (``RegimeMaps`` with its chart, or its dict), the regime
+    chart and crossover table; then
     "What each method costs" (``methods_section``) when ``methods`` is given (the path of
     ``methods.json``, or its loaded dict); before it "The rung above Kirchhoff"
     (``fullwave_map.fullwave_section``, with its chart when ``fullwave-map.png`` lies beside
@@ -263,7 +263,7 @@ def regime_section(
             "",
         ]
     if regimes:
-        lines += _regime_lines(regimes)
+        lines += _regime_lines(RegimeMaps.from_json(regimes))
     if fullwave is not None and Path(fullwave).is_file():
         lines += _fullwave_lines(Path(fullwave))
     if methods is not None:
@@ -271,25 +271,22 @@ def regime_section(
     return lines
 
 
-def _regime_lines(regimes: Mapping) -> list[str]:
+def _regime_lines(regimes: RegimeMaps) -> list[str]:
     """The regime chart and, per family and method, the σ/λ range where it holds."""
     crit = None
     table = []
-    for m in regimes["maps"]:
-        crit = m["meta"].get("criterion", crit)
-        for model, by_theta in m["crossovers"].items():
+    for m in regimes.maps:
+        crit = m.meta.get("criterion", crit)
+        for i, (model, by_theta) in enumerate(m.crossovers().items()):
             below = model in ("rayleigh-rice", "low-smooth")  # small-roughness theories
-            devs = m["energy_dev"][m["models"].index(model)]
             table.append(
-                [m["family"], model]
+                [m.family, model]
                 + [
-                    _crossover_cell(
-                        by_theta.get(str(float(t))), [row[k] for row in devs], crit or 0.05, below
-                    )
-                    for k, t in enumerate(m["theta_i"])
+                    _crossover_cell(by_theta[t], m.energy_dev[i, :, k], crit or 0.05, below)
+                    for k, t in enumerate(m.theta_i)
                 ]
             )
-    thetas = regimes["maps"][0]["theta_i"]
+    thetas = regimes.maps[0].theta_i
     return [
         "Regime map: the energy-weighted error (energy deviation over the 90 % energy set) "
         "of each method against the Kirchhoff reference as the roughness σ/λ grows, for an "
@@ -299,9 +296,9 @@ def _regime_lines(regimes: Mapping) -> list[str]:
         "without masking: the ray tracer with masking off) at large σ/λ; Kirchhoff has no "
         "masking, so the geometric verdicts are clean only where masking is below 1 %.",
         "",
-        f"Settings: {regimes['settings']}.",
+        f"Settings: {regimes.settings}.",
         "",
-        f"![Where each method holds]({regimes['chart']})",
+        f"![Where each method holds]({regimes.chart})",
         "",
         f"Where each method holds: the σ/λ range in which its |energy deviation| from "
         f"Kirchhoff stays within {100 * (crit or 0.05):g} % (the crossing interpolated in "

@@ -3,9 +3,10 @@ against the multiple-scattering models, ``multiple.order_comparison``), its part
 (``OrderIncidence``, ``SimOrders``, ``ModelEnergy``) and the per-θi rows ``OrderEnergy`` and
 ``BounceNeed``; ``WaveSection``, a wave scene's closed forms against Kirchhoff, and its
 ``WaveVerdict`` records (fields: ``WAVE_VERDICT_SCHEMA``; ``wave_verdicts`` module
-docstring). Each is a frozen dataclass that is also the read-only dict the file holds, in the
-same key order (``DictRecord``): builders read attributes, ``json`` writes it unchanged, and
-``from_json`` reads the dict of a file back."""
+docstring); ``RegimeMaps``, what the index prints of the regime maps. Each is a frozen
+dataclass that is also the read-only dict the file holds, in the same key order
+(``DictRecord``): builders read attributes, ``json`` writes it unchanged, and ``from_json``
+reads the dict of a file back."""
 
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ __all__ = [
     "validate_wave_verdict",
     "WaveVerdict",
     "WaveSection",
+    "RegimeMaps",
 ]
 
 
@@ -371,3 +373,16 @@ class WaveSection(DictRecord):
     @classmethod
     def _nested(cls, d: Mapping) -> dict:
         return {**d, "verdicts": FrozenList(WaveVerdict.from_json(v) for v in d["verdicts"])}
+
+
+@dataclass(frozen=True, eq=False)
+class RegimeMaps(DictRecord):
+    """The regime maps the index prints (``runner.wave_run.regime_maps``): the maps
+    (``regimes.RegimeMap``), one line saying which settings were used and the chart's file
+    name (None, and absent from the dict, until it is written)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("chart",)
+
+    maps: Sequence
+    settings: str
+    chart: str | None = None
