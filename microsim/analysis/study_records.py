@@ -3,7 +3,8 @@ against the multiple-scattering models, ``multiple.order_comparison``), its part
 (``OrderIncidence``, ``SimOrders``, ``ModelEnergy``) and the per-θi rows ``OrderEnergy`` and
 ``BounceNeed``; ``WaveSection``, a wave scene's closed forms against Kirchhoff, and its
 ``WaveVerdict`` records (fields: ``WAVE_VERDICT_SCHEMA``; ``wave_verdicts`` module
-docstring); ``RegimeMaps``, what the index prints of the regime maps. Each is a frozen
+docstring); ``RegimeMaps``, what the index prints of the regime maps; ``AnisotropySummary``
+(``anisotropy.anisotropy_summary``) and its parts. Each is a frozen
 dataclass that is also the read-only dict the file holds, in the same key order
 (``DictRecord``): builders read attributes, ``json`` writes it unchanged, and ``from_json``
 reads the dict of a file back."""
@@ -33,6 +34,9 @@ __all__ = [
     "WaveVerdict",
     "WaveSection",
     "RegimeMaps",
+    "MissedEnergy",
+    "AnisotropyIncidence",
+    "AnisotropySummary",
 ]
 
 
@@ -386,3 +390,57 @@ class RegimeMaps(DictRecord):
     maps: Sequence
     settings: str
     chart: str | None = None
+
+
+# --- the anisotropy summary (anisotropy.anisotropy_summary) -------------------------------------
+@dataclass(frozen=True, eq=False)
+class MissedEnergy(DictRecord):
+    """The energy the single-scattering variants miss at one incidence (``anisotropy`` module
+    docstring): the simulated reflected energy of all orders and of orders ≥ 2 ± se, per
+    variant label {"energy", "missed", "missed_se"}, and the random walk's orders ≥ 2 ± se
+    (None, and absent from the dict, without an order comparison)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("walk_multiple", "walk_multiple_se")
+
+    reflected: float
+    reflected_se: float
+    multiple: float
+    multiple_se: float
+    models: Mapping[str, Mapping]
+    walk_multiple: float | None = None
+    walk_multiple_se: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropyIncidence(DictRecord):
+    """One incidence of an anisotropy summary: the stand-in against the exact Λ
+    ({"energy_dev", "rel_rms"}), each variant label against the simulation ({"rel_rms",
+    "energy_dev", "energy_dev_se", "verdict"}) and, for a run with bounces > 1, the energy
+    each misses (``MissedEnergy``; None, and absent from the dict, otherwise)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("missed",)
+
+    theta_i: float
+    phi_i: float
+    stand_in_vs_exact: Mapping
+    against_simulation: Mapping[str, Mapping]
+    missed: MissedEnergy | None = None
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        missed = d.get("missed")
+        return {**d, "missed": None if missed is None else MissedEnergy.from_json(missed)}
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropySummary(DictRecord):
+    """An anisotropic scene's Smith G variants (verdicts.json "anisotropy"): ``variants``
+    (label → model name) and per incidence an ``AnisotropyIncidence``."""
+
+    variants: Mapping[str, str]
+    incidences: Sequence[AnisotropyIncidence]
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        rows = FrozenList(AnisotropyIncidence.from_json(i) for i in d["incidences"])
+        return {**d, "incidences": rows}
