@@ -27,23 +27,25 @@ _WAVE_STATUS = {
 }
 
 
-def _region_text(v: WaveVerdict) -> str:
-    """θo ranges of agreement per side: "forward 0–40°; backward 0–15°"; "none" for a side
-    with tested rows and no agreeing one; sides without tested rows left out."""
+def _region_text(region: Mapping) -> str:
+    """θo ranges of agreement per side (a wave verdict's ``region``): "forward 0–40°;
+    backward 0–15°"; "none" for a side with tested rows and no agreeing one; sides without
+    tested rows left out."""
     parts = []
     for side in ("forward", "backward"):
-        r = v.region.get(side)
+        r = region.get(side)
         if r is None:
             continue
         parts.append(f"{side} {ranges_text(r) if r else 'none'}")
     return "; ".join(parts) or "–"
 
 
-def _outside_text(v: WaveVerdict) -> str:
-    """The range of the row deviations outside the agreement region per side, in %."""
+def _outside_text(outside: Mapping) -> str:
+    """The range of the row deviations outside the agreement region per side (a wave
+    verdict's ``outside``), in %."""
     parts = []
     for side in ("forward", "backward"):
-        o = v.outside.get(side)
+        o = outside.get(side)
         if o:
             lo, hi = (percent(x, 3, signed=True, unit="") for x in o)
             parts.append(f"{side} {lo} … {hi} %")
@@ -175,8 +177,8 @@ def _wave_verdict_table(verdicts: Sequence[WaveVerdict]) -> str:
                 _WAVE_STATUS.get(v.status, v.status),
                 signed_pct(v.energy_dev, v.energy_dev_se),
                 f"{pct(v.rel_error)} ({pct(v.noise_floor)})",
-                _region_text(v),
-                _outside_text(v),
+                _region_text(v.region),
+                _outside_text(v.outside),
                 str(v.energy_bins),
             ]
             for v in verdicts
@@ -209,7 +211,7 @@ def _wave_index_rows(docs: Sequence[Mapping]) -> tuple[list[str], list[list[str]
                 if v.status == "agrees":
                     text = f"**agrees** {text}"
                 elif v.status == "agrees-in-region":
-                    text += f"; agrees only in θo {_region_text(v)}"
+                    text += f"; agrees only in θo {_region_text(v.region)}"
                 else:
                     text += "; differs"
                 cells.append(text)

@@ -44,8 +44,8 @@ __all__ = [
 class DictRecord(FrozenDict):
     """A frozen record that is also the read-only dict of its fields in declaration order (the
     fields named in ``OMITTED_IF_NONE`` are left out of the dict when None). ``from_json``
-    reads such a dict back, its nested records converted (``_nested``), the fields it lacks
-    taken from ``OLDER_DEFAULTS``."""
+    reads such a dict back, its nested records converted (``_nested``); a field it lacks (an
+    older or partial document) reads as its ``OLDER_DEFAULTS`` value, else None."""
 
     OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ()
     OLDER_DEFAULTS: ClassVar[Mapping] = {}
@@ -69,9 +69,9 @@ class DictRecord(FrozenDict):
         """The record of dict ``d`` (a record of this class as it is)."""
         if isinstance(d, cls):
             return d
-        names = {f.name for f in dataclass_fields(cls)}
-        given = cls._nested({**cls.OLDER_DEFAULTS, **d})
-        return cls(**{k: v for k, v in given.items() if k in names})
+        names = [f.name for f in dataclass_fields(cls)]
+        given = cls._nested({**dict.fromkeys(names), **cls.OLDER_DEFAULTS, **d})
+        return cls(**{k: given[k] for k in names})
 
 
 def _restore(cls, fields: dict):
@@ -336,8 +336,12 @@ class WaveVerdict(DictRecord):
     status: str
 
     @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        return validate_wave_verdict(d)
+    def from_json(cls, d: Mapping) -> "WaveVerdict":
+        """The record of wave verdict dict ``d``, checked (``validate_wave_verdict``: every
+        field present)."""
+        if isinstance(d, cls):
+            return d
+        return cls(**validate_wave_verdict(d))
 
 
 @dataclass(frozen=True, eq=False)
