@@ -17,6 +17,7 @@ from microsim.analysis.study_records import (
     ModelEnergy,
     OrderComparison,
     OrderIncidence,
+    OrdersStudy,
     WaveVerdict,
 )
 from microsim.analysis.verdict_record import Verdict
@@ -74,6 +75,16 @@ def test_per_incidence_rows_are_records(comparison):
     needs = needs_more_bounces(res)
     assert all(isinstance(n, BounceNeed) for n in needs)
     assert needs[0].needs == needs[0]["needs"] and needs[0].threshold == 0.01
+
+
+def test_the_orders_study_read_back_holds_its_records(comparison):
+    res, c = comparison
+    study = OrdersStudy(bounces=3, needs=needs_more_bounces(res), comparison=c, note=None)
+    back = OrdersStudy.from_json(json.loads(json.dumps(study)))
+    assert back == study and isinstance(back.comparison, OrderComparison)
+    assert all(isinstance(n, BounceNeed) for n in back.needs)
+    none = OrdersStudy.from_json({"bounces": 2, "needs": [], "comparison": None, "note": "x"})
+    assert none.comparison is None and none.note == "x"
 
 
 def test_a_wave_verdict_read_back_is_checked():

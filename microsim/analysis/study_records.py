@@ -1,13 +1,13 @@
 """The studies of verdicts.json as typed records: ``OrderComparison`` (the scattering orders
 against the multiple-scattering models, ``multiple.order_comparison``), its parts
-(``OrderIncidence``, ``SimOrders``, ``ModelEnergy``) and the per-θi rows ``OrderEnergy`` and
-``BounceNeed``; ``WaveSection``, a wave scene's closed forms against Kirchhoff, and its
-``WaveVerdict`` records (fields: ``WAVE_VERDICT_SCHEMA``; ``wave_verdicts`` module
-docstring); ``RegimeMaps``, what the index prints of the regime maps; ``AnisotropySummary``
-(``anisotropy.anisotropy_summary``) and its parts. Each is a frozen
-dataclass that is also the read-only dict the file holds, in the same key order
-(``DictRecord``): builders read attributes, ``json`` writes it unchanged, and ``from_json``
-reads the dict of a file back."""
+(``OrderIncidence``, ``SimOrders``, ``ModelEnergy``), the per-θi rows ``OrderEnergy`` and
+``BounceNeed`` and the run's orders study holding them (``OrdersStudy``); ``WaveSection``, a
+wave scene's closed forms against Kirchhoff, and its ``WaveVerdict`` records (fields:
+``WAVE_VERDICT_SCHEMA``; ``wave_verdicts`` module docstring); ``RegimeMaps``, what the index
+prints of the regime maps; ``AnisotropySummary`` (``anisotropy.anisotropy_summary``) and its
+parts. Each is a frozen dataclass that is also the read-only dict the file holds, in the same
+key order (``DictRecord``): builders read attributes, ``json`` writes it unchanged, and
+``from_json`` reads the dict of a file back."""
 
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ __all__ = [
     "OrderComparison",
     "OrderEnergy",
     "BounceNeed",
+    "OrdersStudy",
     "WAVE_VERDICT_SCHEMA",
     "validate_wave_verdict",
     "WaveVerdict",
@@ -448,3 +449,24 @@ class AnisotropySummary(DictRecord):
     def _nested(cls, d: Mapping) -> dict:
         rows = FrozenList(AnisotropyIncidence.from_json(i) for i in d["incidences"])
         return {**d, "incidences": rows}
+
+
+@dataclass(frozen=True, eq=False)
+class OrdersStudy(DictRecord):
+    """The scattering orders of a run traced with bounces > 1 (verdicts.json "orders"): the
+    bounce limit, per θi whether orders ≥ 2 matter (``needs``, ``BounceNeed``), the order
+    comparison (``OrderComparison``, None without one) and a note saying why not (or None)."""
+
+    bounces: int | str
+    needs: Sequence[BounceNeed]
+    comparison: OrderComparison | None
+    note: str | None
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        comparison = d.get("comparison")
+        return {
+            **d,
+            "needs": FrozenList(BounceNeed.from_json(n) for n in d.get("needs") or ()),
+            "comparison": None if comparison is None else OrderComparison.from_json(comparison),
+        }
