@@ -82,7 +82,7 @@ def test_builders_write_no_exponent_percentages_for_large_deviations():
         "report rows": str(report._verdict_rows(vs)),
         "chart table": charts._verdict_table(vs),
         "index": report.index_report([doc], None, True),
-        "wave outside": report_wave._outside_text({"outside": {"forward": [-96.1, 1.0]}}),
+        "wave outside": report_wave._outside_text({"forward": [-96.1, 1.0]}),
     }
     for where, text in texts.items():
         assert not EXPONENT_PERCENT.search(text), (where, text)

@@ -32,6 +32,13 @@ from microsim.stats import energy_set
 
 from . import incidence
 from .multiple import order_energies
+from .study_records import (
+    AnisotropyIncidence,
+    AnisotropySummary,
+    MissedEnergy,
+    OrderComparison,
+    OrderEnergy,
+)
 from .verdicts import Significance, as_verdicts
 
 __all__ = ["VARIANTS", "anisotropy_summary"]
@@ -57,40 +64,46 @@ def _model_vs_model(a: np.ndarray, b: np.ndarray, omega: np.ndarray) -> tuple[fl
 
 def _walk_at(comparison: Mapping | None, here: tuple[float, float]) -> Mapping | None:
     """The random walk's orders-≥ 2 entry of ``comparison`` at incidence ``here``, or None."""
-    for inc in (comparison or {}).get("incidences", []):
-        if incidence.key(inc) == here:
-            return inc["models"].get("random-walk")
+    if comparison is None:
+        return None
+    for inc in OrderComparison.from_json(comparison).incidences:
+        if (inc.theta_i, inc.phi_i) == here:
+            return inc.models.get("random-walk")
     return None
 
 
-def _missed(energies: Mapping, result, t: int, omega: np.ndarray, rtol: Mapping) -> dict:
-    """The energy each variant misses at incidence t (module docstring); ``rtol``: model
-    name → its relative quadrature tolerance."""
-    e_sim, se_sim = energies["reflected"], energies["reflected_se"]
-    out = {
-        "reflected": e_sim,
-        "reflected_se": se_sim,
-        "multiple": energies["multiple"],
-        "multiple_se": energies["multiple_se"],
-        "models": {},
-    }
+def _missed(energies: OrderEnergy, result, t: int, omega: np.ndarray, rtol: Mapping, walk):
+    """The energy each variant misses at incidence t (``MissedEnergy``; module docstring);
+    ``rtol``: model name → its relative quadrature tolerance; ``walk``: the random walk's
+    ``ModelEnergy`` at t, or None."""
+    e_sim, se_sim = energies.reflected, energies.reflected_se
+    models = {}
     for label, name in VARIANTS.items():
         e_m = float(np.sum(np.asarray(result.models[name][t]) * omega))
-        out["models"][label] = {
+        models[label] = {
             "energy": e_m,
             "missed": (e_sim - e_m) / e_sim,
             "missed_se": float(np.hypot(se_sim * e_m / e_sim**2, rtol[name] * e_m / e_sim)),
         }
-    return out
+    return MissedEnergy(
+        reflected=e_sim,
+        reflected_se=se_sim,
+        multiple=energies.multiple,
+        multiple_se=energies.multiple_se,
+        models=models,
+        walk_multiple=None if walk is None else walk.energy,
+        walk_multiple_se=None if walk is None else walk.energy_se,
+    )
 
 
 def anisotropy_summary(
     result, verdicts: Sequence[Mapping], comparison: Mapping | None = None
-) -> dict | None:
-    """JSON-able summary (module docstring), or None when ``result`` lacks the variants.
+) -> AnisotropySummary | None:
+    """The summary (module docstring; an ``AnisotropySummary``, also its JSON dict), or None
+    when ``result`` lacks the variants.
     ``comparison``: the run's order comparison (``multiple.order_comparison``), whose random
     walk on the anisotropic Smith microsurface gives the orders ≥ 2 the Smith model itself
-    predicts (``missed["walk_multiple"]``)."""
+    predicts (``MissedEnergy.walk_multiple``)."""
     names = list(VARIANTS.values())
     if not all(n in result.models for n in names):
         return None
@@ -106,12 +119,16 @@ def anisotropy_summary(
         dev, rms = _model_vs_model(
             np.asarray(result.models[stand_in][t]), np.asarray(result.models[exact][t]), omega
         )
+        missed = None
+        if orders is not None:
+            rtol = {n: by[n].model_rtol if n in by else Significance().model_rtol for n in names}
+            missed = _missed(orders[t], result, t, omega, rtol, _walk_at(comparison, here))
         rows.append(
-            {
-                "theta_i": float(th),
-                "phi_i": float(result.phi_i[t]),
-                "stand_in_vs_exact": {"energy_dev": dev, "rel_rms": rms},
-                "against_simulation": {
+            AnisotropyIncidence(
+                theta_i=float(th),
+                phi_i=float(result.phi_i[t]),
+                stand_in_vs_exact={"energy_dev": dev, "rel_rms": rms},
+                against_simulation={
                     label: {
                         "rel_rms": by[name].rel_rms,
                         "energy_dev": by[name].energy_dev,
@@ -121,14 +138,7 @@ def anisotropy_summary(
                     for label, name in VARIANTS.items()
                     if name in by
                 },
-            }
+                missed=missed,
+            )
         )
-        if orders is not None:
-            rtol = {n: by[n].model_rtol if n in by else Significance().model_rtol for n in names}
-            rows[-1]["missed"] = _missed(orders[t], result, t, omega, rtol)
-            walk = _walk_at(comparison, here)
-            if walk is not None:
-                rows[-1]["missed"].update(
-                    walk_multiple=walk["energy"], walk_multiple_se=walk["energy_se"]
-                )
-    return {"variants": dict(VARIANTS), "incidences": rows}
+    return AnisotropySummary(variants=dict(VARIANTS), incidences=rows)

@@ -26,13 +26,23 @@ margin covers that estimate's own scatter, so that the chosen run lands below th
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from microsim.errors import UsageError
 from microsim.stats import energy_set
 
-__all__ = ["MIN_AUTO", "MAX_AUTO", "AUTO_TARGET", "error_budget", "realisations_needed"]
+from .study_records import DictRecord
+
+__all__ = [
+    "MIN_AUTO",
+    "MAX_AUTO",
+    "AUTO_TARGET",
+    "BudgetRow",
+    "error_budget",
+    "realisations_needed",
+]
 
 MIN_AUTO = 8
 MAX_AUTO = 32
@@ -44,53 +54,68 @@ def _ew(x: np.ndarray, w: np.ndarray) -> float:
     return float(np.sqrt(np.sum(w * x**2) / np.sum(w)))
 
 
-def error_budget(result) -> list[dict]:
-    """Per incidence: {"theta_i", "phi_i", "realisations", "ray", "tile", "total", "energy"} — the
-    energy-weighted relative standard errors of the mean BRDF from ray noise, from tile scatter
-    and in total, and the relative standard error of its energy over E (module docstring).
-    ``tile``/``energy`` are None with fewer than 2 realisations (no scatter to measure)."""
+@dataclass(frozen=True, eq=False)
+class BudgetRow(DictRecord):
+    """The error budget of one incidence (module docstring): the energy-weighted relative
+    standard errors of the mean BRDF from ray noise (``ray``), from tile scatter (``tile``)
+    and in total, and the relative standard error of its energy over E (``energy``); each None
+    without an energy set, ``tile`` and ``energy`` also with fewer than 2 realisations."""
+
+    theta_i: float
+    phi_i: float
+    realisations: int = 1
+    ray: float | None = None
+    tile: float | None = None
+    total: float | None = None
+    energy: float | None = None
+
+
+def error_budget(result) -> list[BudgetRow]:
+    """Per incidence its ``BudgetRow`` (module docstring)."""
     omega = result.bins.projected_solid_angle()
     per = result.brdf_realisations
     se_ray = result.stderr_ray if result.stderr_ray is not None else result.stderr
     out = []
     for t, theta in enumerate(result.theta_i):
+        at = dict(theta_i=float(theta), phi_i=float(result.phi_i[t]))
         f = result.brdf[t]
         ok = np.isfinite(f) & (f > 0) & np.isfinite(se_ray[t])
         E = energy_set(np.where(ok, f * omega, 0.0)).reshape(f.shape)
-        row = {"theta_i": float(theta), "phi_i": float(result.phi_i[t]), "realisations": 1}
-        row.update({"ray": None, "tile": None})
-        row.update({"total": None, "energy": None})
         if not E.any():
-            out.append(row)
+            out.append(BudgetRow(**at))
             continue
         w, fe = (f * omega)[E], f[E]
-        row["ray"] = _ew(se_ray[t][E] / fe, w)
-        row["total"] = row["ray"]
-        if per is not None:
-            F = per[result.realisations_traced(t), t]
-            R = len(F)
-            if R >= 2:
-                s2 = np.var(F[:, E], axis=0, ddof=1)
-                tile2 = np.maximum(s2 / R - se_ray[t][E] ** 2, 0.0)
-                energies = np.sum(F[:, E] * omega[E], axis=1)
-                row.update(
-                    realisations=R,
-                    tile=_ew(np.sqrt(tile2) / fe, w),
-                    total=_ew(np.sqrt(s2 / R) / fe, w),
-                    energy=float(energies.std(ddof=1) / np.sqrt(R) / energies.mean()),
-                )
-        out.append(row)
+        ray = _ew(se_ray[t][E] / fe, w)
+        F = per[result.realisations_traced(t), t] if per is not None else None
+        if F is None or len(F) < 2:
+            out.append(BudgetRow(**at, ray=ray, total=ray))
+            continue
+        R = len(F)
+        s2 = np.var(F[:, E], axis=0, ddof=1)
+        tile2 = np.maximum(s2 / R - se_ray[t][E] ** 2, 0.0)
+        energies = np.sum(F[:, E] * omega[E], axis=1)
+        out.append(
+            BudgetRow(
+                **at,
+                realisations=R,
+                ray=ray,
+                tile=_ew(np.sqrt(tile2) / fe, w),
+                total=_ew(np.sqrt(s2 / R) / fe, w),
+                energy=float(energies.std(ddof=1) / np.sqrt(R) / energies.mean()),
+            )
+        )
     return out
 
 
 def realisations_needed(budget, target: float = AUTO_TARGET) -> int:
-    """Realisations for the tile scatter of every incidence in ``budget`` (``error_budget``) to
-    reach ``target`` (relative, e.g. 0.01), at least ``MIN_AUTO``, at most ``MAX_AUTO``."""
+    """Realisations for the tile scatter of every incidence in ``budget`` (``error_budget``, or
+    its dicts) to reach ``target`` (relative, e.g. 0.01), at least ``MIN_AUTO``, at most
+    ``MAX_AUTO``."""
     if not (isinstance(target, (int, float)) and 0.0 < target < 1.0):
         raise UsageError(f"target must be a relative error in (0, 1), got {target!r}")
     need = MIN_AUTO
-    for row in budget:
-        if row["tile"] is None:
+    for row in map(BudgetRow.from_json, budget):
+        if row.tile is None:
             continue
-        need = max(need, math.ceil(MARGIN * row["realisations"] * (row["tile"] / target) ** 2))
+        need = max(need, math.ceil(MARGIN * row.realisations * (row.tile / target) ** 2))
     return min(need, MAX_AUTO)

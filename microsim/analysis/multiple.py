@@ -7,7 +7,8 @@ ledger's ``absorbed_energy``/``cut_energy``; the raw ``tallies``). Energies are 
 incident power (per primary ray), BRDFs sr⁻¹, angles degrees, Δφ = φo − φi with the mirror
 direction at Δφ = 180°.
 
-``order_comparison`` (JSON-able dict, one entry per incidence θi):
+``order_comparison`` (an ``OrderComparison`` record, also its JSON dict; one entry per
+incidence θi):
 
 * *Simulated energy per order* E_o = Σ_B f̄_B,o Ω_B (the bins cover the hemisphere, so this is
   the ledger's ``escaped_<o>_energy``). Standard error: with R ≥ 2 realisations the scatter of
@@ -82,7 +83,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -100,9 +101,19 @@ from microsim.errors import UsageError
 from microsim.sim.bounces import MAX_BOUNCES, ORDER_NAMES
 from microsim.sim.compare import realised_m
 from microsim.sim.paths import LEDGER
+from microsim.sim.result import FrozenDict, FrozenList
 from microsim.sim.tallies import terminal_ledger
 from microsim.stats import MIN_EVENTS, energy_set, norm_isf, norm_sf, sidak, t_isf, t_sf
 
+from .study_records import (
+    MODELS,
+    BounceNeed,
+    ModelEnergy,
+    OrderComparison,
+    OrderEnergy,
+    OrderIncidence,
+    SimOrders,
+)
 from .verdicts import Measured, Prediction, Significance, verdict
 
 __all__ = [
@@ -115,16 +126,24 @@ __all__ = [
     "needs_more_bounces",
 ]
 
-MODELS = ("random-walk", "kulla-conty", "mikkelsen-eq28")
 WALK_VERDICTS = ("walk-2", "walk-2+")
+"""The random walk's verdicts against the traced orders: order 2, and all orders ≥ 2."""
 NOT_EXPECTED = (
     "not expected to hold: the random walk, Kulla–Conty and Mikkelsen eq. 28 model a Smith "
     "microsurface (heights uncorrelated with slopes), and a V-groove surface is not one; "
     "their deviations here measure that difference, not an error of the models"
 )
 """Why the multiple-scattering models are not expected to match a V-groove surface."""
-"""The random walk's verdicts against the traced orders: order 2, and all orders ≥ 2."""
-"""Models of the multiply scattered light judged per θi (module docstring)."""
+KD_NOTE = (
+    "one k_d for all θi (weighted least squares on the simulated energy of orders ≥ 2, "
+    "weights 1/se²): the lobe stays reciprocal; its per-θi energies test eq. 28's "
+    "θi-dependence, not its scale"
+)
+"""How Mikkelsen's k_d is fitted, as the comparison states it."""
+CLOSED_FORMS_NOTE = (
+    "Kulla–Conty and Mikkelsen eq. 28 are left out: their albedo tables are of isotropic NDFs"
+)
+"""Why an anisotropic NDF's comparison has the random walk alone."""
 ORDER_LABELS = ORDER_NAMES
 """Order slots of ``Result.brdf_orders`` (``sim.bounces.ORDER_NAMES``)."""
 _N_LEDGER = len(LEDGER)  # first-bounce ledger columns before the terminal ones in led_f
@@ -203,62 +222,81 @@ def _realisation_rows(result, t):
     return rows if rows is not None and len(rows) >= 2 else None
 
 
-def _sim_energies(result, t):
-    """Per incidence t: energy per order slot (O,), its se (O,), order ≥ 2 energy and se,
-    absorbed/cut/lost/reflected (value, se or None; reflected: all orders), R used, dof
-    (R − 1 or None)."""
+class _SimEnergy(NamedTuple):
+    """The simulated energies of one incidence (``_sim_energies``): per order slot (O,) ± se,
+    of orders ≥ 2 ± se, (value, se or None) of the absorbed, cut, lost and reflected (all
+    orders) energy, the realisations R used and the dof (R − 1, or None for one tile)."""
+
+    orders: np.ndarray
+    order_se: np.ndarray
+    multiple: float
+    multiple_se: float
+    absorbed: tuple
+    cut: tuple
+    lost: tuple
+    reflected: tuple
+    realisations: int
+    dof: int | None
+
+
+def _sim_energies(result, t) -> _SimEnergy:
+    """The simulated energies of incidence t (``_SimEnergy``; module docstring)."""
     om = result.bins.projected_solid_angle()
-    n_slots = result.brdf_orders.shape[0]
     E = np.sum(result.brdf_orders[:, t] * om, axis=(1, 2))
     ms = float(E[1:].sum())
     rows = _realisation_rows(result, t)
+    led = result.ledger
+    lost = led["unresolved_path_energy"][t] + led["missed_path_energy"][t]
+    ledger = (float(led["absorbed_energy"][t]), float(led["cut_energy"][t]), float(lost))
+    if rows is None:
+        se, ms_se, all_se = _ray_noise(result, t, om)
+        ledger_se = (None, None, None)
+        return _SimEnergy(
+            E, se, ms, ms_se, *zip(ledger, ledger_se), (float(E.sum()), all_se), 1, None
+        )
+    F = result.brdf_realisations_orders[:, rows, t]  # (O, R, Θ, Φ)
+    e_r = np.sum(F * om, axis=(2, 3))  # (O, R)
+    R = len(rows)
+    se = e_r.std(axis=1, ddof=1) / np.sqrt(R)
+    ms_se = float(e_r[1:].sum(axis=0).std(ddof=1) / np.sqrt(R))
+    reflected = (float(E.sum()), float(e_r.sum(axis=0).std(ddof=1) / np.sqrt(R)))
+    ledger_se = _ledger_scatter(result, t, rows)
+    return _SimEnergy(E, se, ms, ms_se, *zip(ledger, ledger_se), reflected, R, R - 1)
+
+
+def _ledger_scatter(result, t, rows) -> tuple:
+    """Standard errors s/√R of the absorbed, cut and lost energy over the realisations ``rows``
+    at incidence t, from the per-realisation ledger tallies (None each without them)."""
     tal = result.tallies or {}
     led_n, led_f, rays_r = tal.get("led_n"), tal.get("led_f"), tal.get("rays")
-    extra = {}
-    led = result.ledger
-    extra["absorbed"] = [float(led["absorbed_energy"][t]), None]
-    extra["cut"] = [float(led["cut_energy"][t]), None]
-    extra["lost"] = [float(led["unresolved_path_energy"][t] + led["missed_path_energy"][t]), None]
-    if rows is not None:
-        F = result.brdf_realisations_orders[:, rows, t]  # (O, R, Θ, Φ)
-        e_r = np.sum(F * om, axis=(2, 3))  # (O, R)
-        R = len(rows)
-        se = e_r.std(axis=1, ddof=1) / np.sqrt(R)
-        ms_se = float(e_r[1:].sum(axis=0).std(ddof=1) / np.sqrt(R))
-        extra["reflected"] = [float(E.sum()), float(e_r.sum(axis=0).std(ddof=1) / np.sqrt(R))]
-        if led_n is not None and led_f is not None and rays_r is not None:
-            term = terminal_ledger(
-                led_n[rows, t, _N_LEDGER:], led_f[rows, t, _N_LEDGER:], rays_r[rows, t]
-            )
-            per = {
-                "absorbed": term["absorbed_energy"],
-                "cut": term["cut_energy"],
-                "lost": term["unresolved_path_energy"] + term["missed_path_energy"],
-            }
-            for k, v in per.items():
-                extra[k][1] = float(v.std(ddof=1) / np.sqrt(R))
-        return E, se, ms, ms_se, extra, R, R - 1
-    # one tile: ray noise of a mean over N i.i.d. paths, from Σw and Σw² per order slot
+    if led_n is None or led_f is None or rays_r is None:
+        return (None, None, None)
+    term = terminal_ledger(led_n[rows, t, _N_LEDGER:], led_f[rows, t, _N_LEDGER:], rays_r[rows, t])
+    lost = term["unresolved_path_energy"] + term["missed_path_energy"]
+    per = (term["absorbed_energy"], term["cut_energy"], lost)
+    return tuple(float(v.std(ddof=1) / np.sqrt(len(rows))) for v in per)
+
+
+def _ray_noise(result, t, om) -> tuple:
+    """One tile: the ray noise of a mean over N i.i.d. paths, from Σw and Σw² per order slot,
+    of each order slot's energy, of orders ≥ 2 and of all orders (without those tallies the
+    stderr of the bins in quadrature: an over-estimate, bins anti-correlate)."""
+    tal = result.tallies or {}
     n = float(result.rays[t])
-    if "sum_w2" in tal and "sum_w" in tal and n > 1:
-        nb = result.bins.n_theta * result.bins.n_phi
-        s1 = tal["sum_w"][:, t].sum(axis=0).reshape(n_slots, nb).sum(axis=1)
-        s2 = tal["sum_w2"][:, t].sum(axis=0).reshape(n_slots, nb).sum(axis=1)
-    else:  # stderr of the bins in quadrature (an over-estimate: bins anti-correlate)
-        s1 = s2 = None
-    if s1 is not None:
-        mean = s1 / n
-        se = np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / (n - 1.0))
-        m2 = s1[1:].sum() / n
-        ms_se = float(np.sqrt(max(s2[1:].sum() / n - m2**2, 0.0) / (n - 1.0)))
-        m_all = s1.sum() / n  # a path escapes at one order: Σ_o Σw_o² is its Σw²
-        all_se = float(np.sqrt(max(s2.sum() / n - m_all**2, 0.0) / (n - 1.0)))
-    else:
+    if not ("sum_w2" in tal and "sum_w" in tal and n > 1):
         se = np.sqrt(np.sum((result.stderr_orders[:, t] * om) ** 2, axis=(1, 2)))
-        ms_se = float(np.sqrt(np.sum(se[1:] ** 2)))
-        all_se = float(np.sqrt(np.sum(se**2)))
-    extra["reflected"] = [float(E.sum()), all_se]
-    return E, se, ms, ms_se, extra, 1, None
+        return se, float(np.sqrt(np.sum(se[1:] ** 2))), float(np.sqrt(np.sum(se**2)))
+    n_slots = result.brdf_orders.shape[0]
+    nb = result.bins.n_theta * result.bins.n_phi
+    s1 = tal["sum_w"][:, t].sum(axis=0).reshape(n_slots, nb).sum(axis=1)
+    s2 = tal["sum_w2"][:, t].sum(axis=0).reshape(n_slots, nb).sum(axis=1)
+    mean = s1 / n
+    se = np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / (n - 1.0))
+    m2 = s1[1:].sum() / n
+    ms_se = float(np.sqrt(max(s2[1:].sum() / n - m2**2, 0.0) / (n - 1.0)))
+    m_all = s1.sum() / n  # a path escapes at one order: Σ_o Σw_o² is its Σw²
+    all_se = float(np.sqrt(max(s2.sum() / n - m_all**2, 0.0) / (n - 1.0)))
+    return se, ms_se, all_se
 
 
 def _sim_lobe(result, t, rows):
@@ -327,7 +365,9 @@ def _shape(f, sf, m, sm, omega):
     return ew(rel**2), shape_rms, ew(var / fe**2), int(E.sum())
 
 
-def _energy_verdict(e_sim, se_sim, e_mod, se_mod, dof, alpha_each, fitted):
+def _energy_verdict(e_sim, se_sim, e_mod, se_mod, dof, alpha_each, fitted) -> dict:
+    """The energy test of a model's energy of orders ≥ 2 (module docstring): the fields of
+    ``ModelEnergy`` from ``energy`` to ``fitted``."""
     if e_sim > 0:
         d = 1.0 - e_mod / e_sim
         se_d = (e_mod / e_sim) * np.sqrt((se_mod / e_mod) ** 2 + (se_sim / e_sim) ** 2)
@@ -340,18 +380,18 @@ def _energy_verdict(e_sim, se_sim, e_mod, se_mod, dof, alpha_each, fitted):
     else:
         p = float(2.0 * t_sf(abs(stat), dof))
         thr = float(t_isf(0.5 * alpha_each, dof))
-    return {
-        "energy": float(e_mod),
-        "energy_se": float(se_mod),
-        "rel_dev": None if d is None else float(d),
-        "rel_dev_se": None if se_d is None else float(se_d),
-        "t": float(stat),
-        "dof": dof,
-        "p_value": p,
-        "t_threshold": thr,
-        "agrees": bool(p >= alpha_each),
-        "fitted": bool(fitted),
-    }
+    return dict(
+        energy=float(e_mod),
+        energy_se=float(se_mod),
+        rel_dev=None if d is None else float(d),
+        rel_dev_se=None if se_d is None else float(se_d),
+        t=float(stat),
+        dof=dof,
+        p_value=p,
+        t_threshold=thr,
+        agrees=bool(p >= alpha_each),
+        fitted=bool(fitted),
+    )
 
 
 def _walk_verdict(result, t, slots, m, sm, alpha, n_tests, rows, name):
@@ -373,7 +413,7 @@ def _walk_verdict(result, t, slots, m, sm, alpha, n_tests, rows, name):
         Prediction(m, name, {"walk_noise": "in quadrature"}, ensemble=True),
         Significance(0.0, MIN_EVENTS, alpha, n_tests),
     )
-    if F is None or v["n_bins"] == 0:
+    if F is None or v.n_bins == 0:
         return v
     R = len(F)
     cnt = _counts(result, t, slots)
@@ -389,7 +429,7 @@ def _walk_verdict(result, t, slots, m, sm, alpha, n_tests, rows, name):
     se_e = float(np.sqrt(d.var(ddof=1) / R + se_M**2))
     p_e = float(2.0 * t_sf(abs(d.mean()) / se_e, R - 1))
     tb = np.abs(F.mean(axis=0)[used] - m[used]) / se_t[used]
-    t_thr = float(t_isf(0.5 * sidak(v["p_threshold"], int(used.sum())), R - 1))
+    t_thr = float(t_isf(0.5 * sidak(v.p_threshold, int(used.sum())), R - 1))
     return dataclasses.replace(
         v,
         energy_dev=float(d.mean()),
@@ -410,37 +450,30 @@ def order_comparison(
     walk_paths: int = 1_000_000,
     seed=0,
     alpha: float = 0.01,
-) -> dict:
+) -> OrderComparison:
     """Order-resolved comparison of ``result`` (bounces > 1, a random surface) with the random
     walk, Kulla–Conty and Mikkelsen eq. 28 (module docstring for every definition).
 
     ``material``: the run's material (None = mirror, or anything ``resolve_material`` takes);
     ``ndf``: ``Beckmann``/``GGX`` of the Smith microsurface (for Gaussian tiles
     ``realised_ndf(surfaces)``); ``walk_paths``: random-walk paths per θi; ``seed``: the walk's
-    seed; ``alpha``: family-wise level of each verdict family. Returns a JSON-able dict:
-    {"ndf": {...}, "walk_paths", "realisations", "kd" (fitted Mikkelsen k_d), "kd_note",
-    "incidences": [per θi: "theta_i", "sim" {orders, order_se, multiple, multiple_se, absorbed,
-    cut, lost (+ _se), specular_share (+ _se: the realisations' scatter)}, "models" {name:
-    {energy verdict, rel_rms, shape_rel_rms, noise_floor, energy_bins, specular_share, orders
-    (walk only)}},
-    "walk_verdicts" {"2", "2+": verdict dicts}]}.
-    """
+    seed; ``alpha``: family-wise level of each verdict family. Returns an ``OrderComparison``
+    (a record that is also its JSON dict): the settings, the fitted Mikkelsen k_d and per θi
+    the simulation (``SimOrders``), each model (``ModelEnergy``) and the walk's BRDF verdicts
+    of orders 2 and ≥ 2."""
     _check_result(result)
     _check_material(result, material)
-    isotropic = WalkNDF.of(ndf).alpha is not None
-    names = MODELS if isotropic else MODELS[:1]
     if not isinstance(walk_paths, (int, np.integer)) or walk_paths < 2:
         raise UsageError(f"walk_paths must be an integer >= 2, got {walk_paths!r}")
     n_slots = result.brdf_orders.shape[0]
     if n_slots < 2:
         raise UsageError("result must hold at least 2 order slots (bounces >= 2)")
-    bins = result.bins
-    om = bins.projected_solid_angle()
+    isotropic = WalkNDF.of(ndf).alpha is not None
+    names = MODELS if isotropic else MODELS[:1]
     th = np.asarray(result.theta_i, dtype=np.float64)
-    T = len(th)
     walk = walk_bin_averages(
         th,
-        bins,
+        result.bins,
         ndf,
         material,
         n_paths=int(walk_paths),
@@ -449,119 +482,115 @@ def order_comparison(
         max_bounces=_walk_limit(result),
         phi_i=np.asarray(result.phi_i, dtype=np.float64),
     )
-    sims = [_sim_energies(result, t) for t in range(T)]
-    closed = _closed_forms(th, sims, bins, ndf, material) if isotropic else None
-    alpha_each = sidak(alpha, T * len(names))
-    out = []
-    for t in range(T):
-        E, se, e_ms, se_ms, extra, R, dof = sims[t]
-        rows = _realisation_rows(result, t)
-        f, sf, F_ms = _sim_lobe(result, t, rows)
-        w_lobe = walk.values[t, 1:].sum(axis=0)
-        w_se = np.sqrt(np.sum(walk.stderr[t, 1:] ** 2, axis=0))
-        models = {}
-        specs = [
-            ("random-walk", walk.multiple_energy[t], walk.multiple_stderr[t], w_lobe, w_se, False)
-        ]
-        if closed is not None:
-            specs += [
-                ("kulla-conty", closed["kc_e"][t], 0.0, closed["kc_lobe"][t], None, False),
-                ("mikkelsen-eq28", closed["mik_e"][t], 0.0, closed["mik_lobe"][t], None, True),
-            ]
-        for name, e_mod, se_mod, lobe, lobe_se, fitted in specs:
-            row = _energy_verdict(e_ms, se_ms, float(e_mod), float(se_mod), dof, alpha_each, fitted)
-            rms, srms, floor, nE = _shape(f, sf, lobe, lobe_se, om)
-            row.update(
-                rel_rms=rms,
-                shape_rel_rms=srms,
-                noise_floor=floor,
-                energy_bins=nE,
-                specular_share=specular_share(lobe, om, bins.phi_edges),
-            )
-            models[name] = row
-        models["random-walk"]["orders"] = [float(x) for x in walk.energy[t]]
-        models["random-walk"]["order_se"] = [float(x) for x in walk.energy_stderr[t]]
-        models["random-walk"]["max_order"] = int(walk.max_order[t])
-        models["random-walk"]["cut"] = float(walk.cut[t])
-        wv = {}
-        n_tests = 2 * T
-        wv["2"] = _walk_verdict(
-            result,
-            t,
-            (1,),
-            walk.values[t, 1],
-            walk.stderr[t, 1],
-            alpha,
-            n_tests,
-            rows,
-            WALK_VERDICTS[0],
-        )
-        wv["2+"] = _walk_verdict(
-            result,
-            t,
-            tuple(range(1, n_slots)),
-            w_lobe,
-            w_se,
-            alpha,
-            n_tests,
-            rows,
-            WALK_VERDICTS[1],
-        )
-        out.append(
-            {
-                "theta_i": float(th[t]),
-                "phi_i": float(result.phi_i[t]),
-                "sim": {
-                    "orders": [float(x) for x in E],
-                    "order_se": [float(x) for x in se],
-                    "multiple": float(e_ms),
-                    "multiple_se": float(se_ms),
-                    "absorbed": extra["absorbed"][0],
-                    "absorbed_se": extra["absorbed"][1],
-                    "cut": extra["cut"][0],
-                    "cut_se": extra["cut"][1],
-                    "lost": extra["lost"][0],
-                    "lost_se": extra["lost"][1],
-                    "realisations": int(R),
-                    "se_from": "realisations" if R >= 2 else "ray noise (one tile)",
-                    "specular_share": specular_share(f, om, bins.phi_edges),
-                    "specular_share_se": _share_se(F_ms, om, bins.phi_edges),
-                    "energy_bins_90": int(energy_set(np.where(np.isfinite(f), f * om, 0.0)).sum()),
-                },
-                "models": models,
-                "walk_verdicts": wv,
-            }
-        )
-    kind = type(ndf).__name__
+    sims = [_sim_energies(result, t) for t in range(len(th))]
+    closed = _closed_forms(th, sims, result.bins, ndf, material) if isotropic else None
+    family = _Family(alpha, sidak(alpha, len(th) * len(names)), 2 * len(th))
     smith = (result.info.surface or {}).get("kind") != "vgrooves"
-    return {
-        "expected": smith,
-        "expectation": None if smith else NOT_EXPECTED,
-        "ndf": {"kind": kind, **_ndf_roughness(ndf)},
-        "models": list(names),
-        "material": None if material is None else str(material),
-        "bounces": result.info.bounces,
-        "order_labels": list(ORDER_LABELS[:n_slots]),
-        "walk_paths": int(walk_paths),
-        "walk_seed": repr(seed),
-        "realisations": int(max(s[5] for s in sims)),
-        "alpha": float(alpha),
-        "alpha_each_energy": float(alpha_each),
-        "kd": None if closed is None else closed["kd"],
-        "kd_note": (
-            "one k_d for all θi (weighted least squares on the simulated energy of orders ≥ 2, "
-            "weights 1/se²): the lobe stays reciprocal; its per-θi energies test eq. 28's "
-            "θi-dependence, not its scale"
+    return OrderComparison(
+        expected=smith,
+        expectation=None if smith else NOT_EXPECTED,
+        ndf={"kind": type(ndf).__name__, **_ndf_roughness(ndf)},
+        models=list(names),
+        material=None if material is None else str(material),
+        bounces=result.info.bounces,
+        order_labels=list(ORDER_LABELS[:n_slots]),
+        walk_paths=int(walk_paths),
+        walk_seed=repr(seed),
+        realisations=int(max(s.realisations for s in sims)),
+        alpha=float(alpha),
+        alpha_each_energy=float(family.alpha_each),
+        kd=None if closed is None else closed.kd,
+        kd_note=KD_NOTE,
+        kulla_conty_e_avg=None if closed is None else closed.e_avg,
+        closed_forms_note=None if closed is not None else CLOSED_FORMS_NOTE,
+        incidences=FrozenList(
+            _incidence(result, t, sims[t], walk, closed, family) for t in range(len(th))
         ),
-        "kulla_conty_e_avg": None if closed is None else closed["e_avg"],
-        "closed_forms_note": None
-        if closed is not None
-        else (
-            "Kulla–Conty and Mikkelsen eq. 28 are left out: their albedo tables are of "
-            "isotropic NDFs"
-        ),
-        "incidences": out,
+    )
+
+
+class _Family(NamedTuple):
+    """The levels of an order comparison: family-wise ``alpha``, the Šidák level of each energy
+    test (``alpha_each``) and the number of walk BRDF verdicts (``n_walk_tests``)."""
+
+    alpha: float
+    alpha_each: float
+    n_walk_tests: int
+
+
+def _incidence(result, t, sim: _SimEnergy, walk, closed, family: _Family) -> OrderIncidence:
+    """Incidence t of ``order_comparison``: the simulation, each model, the walk's verdicts."""
+    om = result.bins.projected_solid_angle()
+    phi_edges = result.bins.phi_edges
+    rows = _realisation_rows(result, t)
+    f, sf, F_ms = _sim_lobe(result, t, rows)
+    w_lobe = walk.values[t, 1:].sum(axis=0)
+    w_se = np.sqrt(np.sum(walk.stderr[t, 1:] ** 2, axis=0))
+    walk_orders = dict(
+        orders=[float(x) for x in walk.energy[t]],
+        order_se=[float(x) for x in walk.energy_stderr[t]],
+        max_order=int(walk.max_order[t]),
+        cut=float(walk.cut[t]),
+    )
+    specs = [("random-walk", walk.multiple_energy[t], walk.multiple_stderr[t], w_lobe, w_se)]
+    if closed is not None:
+        specs += [
+            ("kulla-conty", closed.kc_e[t], 0.0, closed.kc_lobe[t], None),
+            ("mikkelsen-eq28", closed.mik_e[t], 0.0, closed.mik_lobe[t], None),
+        ]
+    models = {}
+    for name, e_mod, se_mod, lobe, lobe_se in specs:
+        energy = _energy_verdict(
+            sim.multiple,
+            sim.multiple_se,
+            float(e_mod),
+            float(se_mod),
+            sim.dof,
+            family.alpha_each,
+            name == "mikkelsen-eq28",
+        )
+        rms, srms, floor, nE = _shape(f, sf, lobe, lobe_se, om)
+        models[name] = ModelEnergy(
+            **energy,
+            rel_rms=rms,
+            shape_rel_rms=srms,
+            noise_floor=floor,
+            energy_bins=nE,
+            specular_share=specular_share(lobe, om, phi_edges),
+            **(walk_orders if name == "random-walk" else {}),
+        )
+    n_slots = result.brdf_orders.shape[0]
+    walk_lobes = {"2": ((1,), walk.values[t, 1], walk.stderr[t, 1])}
+    walk_lobes["2+"] = (tuple(range(1, n_slots)), w_lobe, w_se)
+    verdicts = {
+        key: _walk_verdict(
+            result, t, slots, m, sm, family.alpha, family.n_walk_tests, rows, verdict_name
+        )
+        for (key, (slots, m, sm)), verdict_name in zip(walk_lobes.items(), WALK_VERDICTS)
     }
+    return OrderIncidence(
+        theta_i=float(result.theta_i[t]),
+        phi_i=float(result.phi_i[t]),
+        sim=SimOrders(
+            orders=[float(x) for x in sim.orders],
+            order_se=[float(x) for x in sim.order_se],
+            multiple=float(sim.multiple),
+            multiple_se=float(sim.multiple_se),
+            absorbed=sim.absorbed[0],
+            absorbed_se=sim.absorbed[1],
+            cut=sim.cut[0],
+            cut_se=sim.cut[1],
+            lost=sim.lost[0],
+            lost_se=sim.lost[1],
+            realisations=int(sim.realisations),
+            se_from="realisations" if sim.realisations >= 2 else "ray noise (one tile)",
+            specular_share=specular_share(f, om, phi_edges),
+            specular_share_se=_share_se(F_ms, om, phi_edges),
+            energy_bins_90=int(energy_set(np.where(np.isfinite(f), f * om, 0.0)).sum()),
+        ),
+        models=FrozenDict(models),
+        walk_verdicts=FrozenDict(verdicts),
+    )
 
 
 def _ndf_roughness(ndf) -> dict:
@@ -573,59 +602,70 @@ def _ndf_roughness(ndf) -> dict:
     return {"alpha": alpha}
 
 
-def _closed_forms(th, sims, bins, ndf, material) -> dict:
+class _ClosedForms(NamedTuple):
+    """Kulla–Conty's and Mikkelsen eq. 28's energies (T,) and lobes (T, Θ, Φ) of orders ≥ 2,
+    Mikkelsen's fitted k_d and Kulla–Conty's E_avg."""
+
+    kd: float
+    e_avg: float
+    kc_e: np.ndarray
+    kc_lobe: np.ndarray
+    mik_e: np.ndarray
+    mik_lobe: np.ndarray
+
+
+def _closed_forms(th, sims, bins, ndf, material) -> _ClosedForms:
     """Kulla–Conty's and Mikkelsen eq. 28's energies and lobes of orders ≥ 2 per θi (module
     docstring; isotropic NDFs: their albedo tables), with Mikkelsen's fitted k_d."""
     white = _albedo_table(ndf, None)
     kc = KullaConty(table=white, material=material, fresnel_factor=material is not None)
     table = white if material is None else _albedo_table(ndf, material)
-    ms = np.array([s[2] for s in sims])
-    ms_se = np.array([s[3] for s in sims])
+    ms = np.array([s.multiple for s in sims])
+    ms_se = np.array([s.multiple_se for s in sims])
     if not np.all(ms_se > 0):
         raise UsageError("result must resolve the energy of orders >= 2 (a zero standard error)")
     kd = mikkelsen_kd(th, ms, table, target_stderr=ms_se)
     n_phi = bins.n_phi
     band = cos_lobe_bin_averages(lambda c: 1.0 - table.rho(c), bins.theta_edges, n_phi)
-    return {
-        "kd": float(kd),
-        "e_avg": float(kc.e_avg),
-        "kc_e": kc.albedo(th),
-        "kc_lobe": kc.bin_averages(th, bins.theta_edges, n_phi),
-        "mik_e": mikkelsen_diffuse_albedo(th, table, kd),
-        "mik_lobe": (kd * (1.0 - table.rho(np.cos(np.radians(th)))) / np.pi)[:, None, None] * band,
-    }
+    return _ClosedForms(
+        kd=float(kd),
+        e_avg=float(kc.e_avg),
+        kc_e=kc.albedo(th),
+        kc_lobe=kc.bin_averages(th, bins.theta_edges, n_phi),
+        mik_e=mikkelsen_diffuse_albedo(th, table, kd),
+        mik_lobe=(kd * (1.0 - table.rho(np.cos(np.radians(th)))) / np.pi)[:, None, None] * band,
+    )
 
 
-def order_energies(result) -> list[dict]:
+def order_energies(result) -> list[OrderEnergy]:
     """Per incidence the simulated energy per order slot, of orders ≥ 2 and of all orders
     (``reflected``), ± standard errors (realisation scatter for R ≥ 2, else ray noise; module
-    docstring), and the absorbed, cut and lost energy: [{"theta_i", "phi_i", "orders",
-    "order_se", "multiple", "multiple_se", "reflected", "reflected_se", "absorbed", "cut",
-    "lost", "realisations"}]. The figures of a resolution study."""
+    docstring), and the absorbed, cut and lost energy (``OrderEnergy`` records). The figures
+    of a resolution study."""
     _check_result(result)
     out = []
     for t in range(len(result.theta_i)):
-        E, se, e_ms, se_ms, extra, R, _ = _sim_energies(result, t)
+        sim = _sim_energies(result, t)
         out.append(
-            {
-                "theta_i": float(result.theta_i[t]),
-                "phi_i": float(result.phi_i[t]),
-                "orders": [float(x) for x in E],
-                "order_se": [float(x) for x in se],
-                "multiple": float(e_ms),
-                "multiple_se": float(se_ms),
-                "reflected": extra["reflected"][0],
-                "reflected_se": extra["reflected"][1],
-                "absorbed": extra["absorbed"][0],
-                "cut": extra["cut"][0],
-                "lost": extra["lost"][0],
-                "realisations": int(R),
-            }
+            OrderEnergy(
+                theta_i=float(result.theta_i[t]),
+                phi_i=float(result.phi_i[t]),
+                orders=[float(x) for x in sim.orders],
+                order_se=[float(x) for x in sim.order_se],
+                multiple=float(sim.multiple),
+                multiple_se=float(sim.multiple_se),
+                reflected=sim.reflected[0],
+                reflected_se=sim.reflected[1],
+                absorbed=sim.absorbed[0],
+                cut=sim.cut[0],
+                lost=sim.lost[0],
+                realisations=int(sim.realisations),
+            )
         )
     return out
 
 
-def needs_more_bounces(result, threshold: float = 0.01) -> list[dict]:
+def needs_more_bounces(result, threshold: float = 0.01) -> list[BounceNeed]:
     """Per θi: does the light of orders ≥ 2 exceed ``threshold`` of the reflected energy?
 
     Fraction q = E_{≥2} / Σ_o E_o (reflected = escaping at any order), its standard error (from
@@ -633,26 +673,26 @@ def needs_more_bounces(result, threshold: float = 0.01) -> list[dict]:
     treated as independent: conservative since they correlate positively), and
     ``needs`` = q > threshold. With a finite K the paths still inside after K bounces are cut
     (``cut``, reported): q is then a lower bound (``bounces="all"`` gives the answer).
-    Returns [{"theta_i", "phi_i", "multiple_fraction", "multiple_fraction_se", "cut",
-    "threshold", "needs"}]."""
+    Returns ``BounceNeed`` records."""
     _check_result(result)
     if not (isinstance(threshold, (int, float)) and 0.0 < float(threshold) < 1.0):
         raise UsageError(f"threshold must be a fraction in (0, 1), got {threshold!r}")
     out = []
     for t in range(len(result.theta_i)):
-        E, se, e_ms, se_ms, extra, _, _ = _sim_energies(result, t)
+        sim = _sim_energies(result, t)
+        E, se, e_ms, se_ms = sim.orders, sim.order_se, sim.multiple, sim.multiple_se
         tot = float(E.sum())
         q = e_ms / tot if tot > 0 else float("nan")
         q_se = q * float(np.hypot(se_ms / e_ms, np.sqrt(np.sum(se**2)) / tot)) if e_ms > 0 else 0.0
         out.append(
-            {
-                "theta_i": float(result.theta_i[t]),
-                "phi_i": float(result.phi_i[t]),
-                "multiple_fraction": float(q),
-                "multiple_fraction_se": float(q_se),
-                "cut": extra["cut"][0],
-                "threshold": float(threshold),
-                "needs": bool(q > threshold),
-            }
+            BounceNeed(
+                theta_i=float(result.theta_i[t]),
+                phi_i=float(result.phi_i[t]),
+                multiple_fraction=float(q),
+                multiple_fraction_se=float(q_se),
+                cut=sim.cut[0],
+                threshold=float(threshold),
+                needs=bool(q > threshold),
+            )
         )
     return out

@@ -59,6 +59,7 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from typing import Mapping
 
 import numpy as np
 
@@ -71,12 +72,14 @@ from microsim.surfaces.heightfields import abc, gaussian
 from microsim.vectors import spherical_deg
 from microsim.wave import kirchhoff_brdf
 
+from .study_records import DictRecord
 from .wave_verdicts import closed_form, lattice_average, surface_spectrum, wave_verdict
 
 __all__ = [
     "FAMILIES",
     "MODELS",
     "RegimeMap",
+    "RegimeSettings",
     "regime_surface",
     "regime_map",
     "crossover",
@@ -92,12 +95,31 @@ ABC_C = 3.5
 GRIDS = (128, 256, 512, 1024, 2048)
 
 
+@dataclass(frozen=True, eq=False)
+class RegimeSettings(DictRecord):
+    """How a regime map was made (``RegimeMap.meta``): correlation length and tile in λ, the
+    material, the bins (``Bins.to_dict``), the seed, Church's C of the ABC family (None for
+    the Gaussian), the grid used and the seconds per σ, the criterion and what the error is."""
+
+    corr_over_lambda: float
+    tile_over_lambda: float
+    material: str
+    bins: dict
+    seed: int
+    abc_C: float | None
+    grids: list
+    seconds: list
+    criterion: float
+    error: str
+
+
 @dataclass
 class RegimeMap:
     """Errors of each model against Kirchhoff, arrays (models, σ, θi): ``energy_dev`` (signed
     energy-weighted mean relative error) and its ``energy_dev_se``, ``rel_error`` (energy-
     weighted RMS) and ``noise_floor``; ``sigma`` in units of λ; ``meta`` the settings, grids
-    and seconds per σ. NaN where a model does not apply (Löw smooth on a Gaussian PSD)."""
+    and seconds per σ (``RegimeSettings``). NaN where a model does not apply (Löw smooth on a
+    Gaussian PSD)."""
 
     family: str
     sigma: np.ndarray
@@ -107,7 +129,7 @@ class RegimeMap:
     energy_dev_se: np.ndarray
     rel_error: np.ndarray
     noise_floor: np.ndarray
-    meta: dict = field(default_factory=dict)
+    meta: Mapping = field(default_factory=dict)
 
     def crossovers(self, criterion: float = CRITERION) -> dict:
         """{model: {θi: σ/λ}}: for RR and Löw smooth the σ above which they stop holding
@@ -292,25 +314,25 @@ def regime_map(
                 if mb is None:
                     continue
                 v = wave_verdict(res, t, mb, model=name, tol=CRITERION)
-                if v["energy_dev"] is None:
+                if v.energy_dev is None:
                     continue
-                dev[i, j, t] = v["energy_dev"]
-                dev_se[i, j, t] = v["energy_dev_se"]
-                rel[i, j, t] = v["rel_error"]
-                noise[i, j, t] = v["noise_floor"]
+                dev[i, j, t] = v.energy_dev
+                dev_se[i, j, t] = v.energy_dev_se
+                rel[i, j, t] = v.rel_error
+                noise[i, j, t] = v.noise_floor
         seconds.append(time.perf_counter() - t0)
-    meta = {
-        "corr_over_lambda": float(corr_over_lambda),
-        "tile_over_lambda": float(tile_over_lambda),
-        "material": repr(material),
-        "bins": bins.to_dict(),
-        "seed": int(seed),
-        "abc_C": ABC_C if family == "abc" else None,
-        "grids": grid_used,
-        "seconds": seconds,
-        "criterion": CRITERION,
-        "error": "energy_dev (energy-weighted mean relative error over the 90 % energy set)",
-    }
+    meta = RegimeSettings(
+        corr_over_lambda=float(corr_over_lambda),
+        tile_over_lambda=float(tile_over_lambda),
+        material=repr(material),
+        bins=bins.to_dict(),
+        seed=int(seed),
+        abc_C=ABC_C if family == "abc" else None,
+        grids=grid_used,
+        seconds=seconds,
+        criterion=CRITERION,
+        error="energy_dev (energy-weighted mean relative error over the 90 % energy set)",
+    )
     return RegimeMap(family, sig, th, names, dev, dev_se, rel, noise, meta)
 
 

@@ -13,7 +13,9 @@ from microsim.errors import UsageError
 from .markdown import md_table, percent
 from .report_cells import fmt, pct, ranges_text, signed_pct
 from .report_methods import methods_section
+from .study_records import RegimeMaps, WaveSection
 from .verdict_record import RunDocument
+from .wave_verdicts import WaveVerdict
 
 __all__ = ["wave_section", "regime_section"]
 
@@ -25,22 +27,25 @@ _WAVE_STATUS = {
 }
 
 
-def _region_text(v: Mapping) -> str:
-    """θo ranges of agreement per side: "forward 0–40°; backward 0–15°"; "none" for a side
-    with tested rows and no agreeing one; sides without tested rows left out."""
+def _region_text(region: Mapping) -> str:
+    """θo ranges of agreement per side (a wave verdict's ``region``): "forward 0–40°;
+    backward 0–15°"; "none" for a side with tested rows and no agreeing one; sides without
+    tested rows left out."""
     parts = []
     for side in ("forward", "backward"):
-        r = v["region"].get(side)
+        r = region.get(side)
         if r is None:
             continue
         parts.append(f"{side} {ranges_text(r) if r else 'none'}")
     return "; ".join(parts) or "–"
 
 
-def _outside_text(v: Mapping) -> str:
+def _outside_text(outside: Mapping) -> str:
+    """The range of the row deviations outside the agreement region per side (a wave
+    verdict's ``outside``), in %."""
     parts = []
     for side in ("forward", "backward"):
-        o = v["outside"].get(side)
+        o = outside.get(side)
         if o:
             lo, hi = (percent(x, 3, signed=True, unit="") for x in o)
             parts.append(f"{side} {lo} … {hi} %")
@@ -50,9 +55,11 @@ def _outside_text(v: Mapping) -> str:
 def wave_section(wave: Mapping | None) -> list[str]:
     """Report lines of the wave-optics verdicts (``runner.wave_run``: verdicts.json "wave");
     empty for a geometric scene. Every verdict names its reference (Kirchhoff, theory vs
-    theory) and gives the agreement region rather than a bare pass/fail."""
+    theory) and gives the agreement region rather than a bare pass/fail. ``wave``: a
+    ``WaveSection`` (or its dict)."""
     if not wave:
         return []
+    wave = WaveSection.from_json(wave)
     return [
         "## Wave optics: closed forms against Kirchhoff (theory vs theory)",
         "",
@@ -68,21 +75,21 @@ def wave_section(wave: Mapping | None) -> list[str]:
         "Rayleigh–Rice is first order in σ/λ (σ ≪ λ); for small g the Kirchhoff diffuse power "
         "is F(1 − e^(−g)) while Rayleigh–Rice's is ≈ F·g, so Rayleigh–Rice lies ≈ g/2 above.",
         "",
-        _wave_verdict_table(wave["verdicts"]),
+        _wave_verdict_table(wave.verdicts),
         "",
         f"The Kirchhoff result (order powers as bin-averaged BRDF, `Result` schema, "
-        f'`meta.method = "kirchhoff"`) is in `{wave["file"]}`.',
+        f'`meta.method = "kirchhoff"`) is in `{wave.file}`.',
         "",
     ]
 
 
-def _wave_reference_text(wave: Mapping) -> str:
+def _wave_reference_text(wave: WaveSection) -> str:
     """What the wave verdicts are judged against: the Kirchhoff solver's settings, its tiles
     and wavelength, and how the two sides are compared."""
     tile = " × ".join(
-        f"{fmt(a, 4)} ({fmt(b, 3)} λ)" for a, b in zip(wave["tile"], wave["tile_over_lambda"])
+        f"{fmt(a, 4)} ({fmt(b, 3)} λ)" for a, b in zip(wave.tile, wave.tile_over_lambda)
     )
-    n, n_run = wave["realisations"], wave["run_realisations"]
+    n, n_run = wave.realisations, wave.run_realisations
     tiles = (
         ("the run's tile" if n == 1 else f"the run's {n} tiles")
         if n == n_run
@@ -90,17 +97,17 @@ def _wave_reference_text(wave: Mapping) -> str:
     )
     se_from = (
         "the scatter over the tiles"
-        if wave["stderr_method"] == "realisations"
+        if wave.stderr_method == "realisations"
         else "the speckle of the orders in each bin"
     )
     return (
         f"Reference of every verdict in this section: the scalar Kirchhoff (tangent-plane) "
-        f"solver (`microsim.wave`, surface model `{wave['surface_model']}`, Fresnel at the "
-        f"{'half-vector' if wave['fresnel_angle'] == 'half' else 'incidence'} angle, "
-        f"upsample {wave['upsample']}) on {tiles}, tile {tile}, wavelength λ = "
-        f"{fmt(wave['wavelength'], 4)} in the {wave['length_unit']}, σ/λ = "
-        f"{fmt(wave['sigma_over_lambda'])} (nominal; the tiles' realised rms height: "
-        f"{fmt(wave['realised_sigma_over_lambda'])} λ, the σ in g below), on the run's bins; "
+        f"solver (`microsim.wave`, surface model `{wave.surface_model}`, Fresnel at the "
+        f"{'half-vector' if wave.fresnel_angle == 'half' else 'incidence'} angle, "
+        f"upsample {wave.upsample}) on {tiles}, tile {tile}, wavelength λ = "
+        f"{fmt(wave.wavelength, 4)} in the {wave.length_unit}, σ/λ = "
+        f"{fmt(wave.sigma_over_lambda)} (nominal; the tiles' realised rms height: "
+        f"{fmt(wave.realised_sigma_over_lambda)} λ, the σ in g below), on the run's bins; "
         "its diffuse part "
         "(the coherent specular order removed); standard errors from "
         f"{se_from}. "
@@ -115,7 +122,7 @@ def _wave_reference_text(wave: Mapping) -> str:
     )
 
 
-def _wave_domain_table(wave: Mapping) -> str:
+def _wave_domain_table(wave: WaveSection) -> str:
     """Per θi: g, the specular order's power against Debye–Waller, the ray tracer's masked
     fraction and whether Kirchhoff is in its domain."""
     return md_table(
@@ -134,21 +141,21 @@ def _wave_domain_table(wave: Mapping) -> str:
                 fmt(p, 4),
                 fmt(dw, 4),
                 f"{m:.3g}",
-                "yes" if ok else f"no (masked ≥ {100 * wave['masked_limit']:g} %)",
+                "yes" if ok else f"no (masked ≥ {100 * wave.masked_limit:g} %)",
             ]
             for t, g, p, dw, m, ok in zip(
-                wave["theta_i"],
-                wave["g"],
-                wave["specular_power"],
-                wave["debye_waller"],
-                wave["masked_fraction"],
-                wave["in_domain"],
+                wave.theta_i,
+                wave.g,
+                wave.specular_power,
+                wave.debye_waller,
+                wave.masked_fraction,
+                wave.in_domain,
             )
         ],
     )
 
 
-def _wave_verdict_table(verdicts: Sequence[Mapping]) -> str:
+def _wave_verdict_table(verdicts: Sequence[WaveVerdict]) -> str:
     """One row per wave verdict: status, energy deviation, rel RMS, agreement region."""
     return md_table(
         [
@@ -164,15 +171,15 @@ def _wave_verdict_table(verdicts: Sequence[Mapping]) -> str:
         ],
         [
             [
-                f"{v['theta_i']:g}",
-                v["model"],
+                f"{v.theta_i:g}",
+                v.model,
                 "Kirchhoff, theory vs theory",
-                _WAVE_STATUS.get(v["status"], v["status"]),
-                signed_pct(v["energy_dev"], v["energy_dev_se"]),
-                f"{pct(v['rel_error'])} ({pct(v['noise_floor'])})",
-                _region_text(v),
-                _outside_text(v),
-                str(v["energy_bins"]),
+                _WAVE_STATUS.get(v.status, v.status),
+                signed_pct(v.energy_dev, v.energy_dev_se),
+                f"{pct(v.rel_error)} ({pct(v.noise_floor)})",
+                _region_text(v.region),
+                _outside_text(v.outside),
+                str(v.energy_bins),
             ]
             for v in verdicts
         ],
@@ -182,37 +189,34 @@ def _wave_verdict_table(verdicts: Sequence[Mapping]) -> str:
 def _wave_index_rows(docs: Sequence[Mapping]) -> tuple[list[str], list[list[str]]]:
     """(the wave models in order of appearance, one row per wave scene and θi of each
     model's status against Kirchhoff)."""
-    docs = [RunDocument.from_json(d) for d in docs]
-    models: list[str] = []
-    for d in docs:
-        for v in (d.wave or {}).get("verdicts", []):
-            if v["model"] not in models:
-                models.append(v["model"])
+    waves = [
+        (d.scene, WaveSection.from_json(d.wave))
+        for d in (RunDocument.from_json(d) for d in docs)
+        if d.wave
+    ]
+    models = list(dict.fromkeys(v.model for _, w in waves for v in w.verdicts))
     rows = []
-    for d in docs:
-        w = d.wave
-        if not w:
-            continue
-        for t in w["theta_i"]:
+    for scene, w in waves:
+        for t in w.theta_i:
             cells = []
             for m in models:
                 v = next(
-                    (x for x in w["verdicts"] if x["model"] == m and abs(x["theta_i"] - t) < 1e-9),
+                    (x for x in w.verdicts if x.model == m and abs(x.theta_i - t) < 1e-9),
                     None,
                 )
                 if v is None:
                     cells.append("–")
                     continue
-                text = signed_pct(v["energy_dev"], v["energy_dev_se"])
-                if v["status"] == "agrees":
+                text = signed_pct(v.energy_dev, v.energy_dev_se)
+                if v.status == "agrees":
                     text = f"**agrees** {text}"
-                elif v["status"] == "agrees-in-region":
-                    text += f"; agrees only in θo {_region_text(v)}"
+                elif v.status == "agrees-in-region":
+                    text += f"; agrees only in θo {_region_text(v.region)}"
                 else:
                     text += "; differs"
                 cells.append(text)
             rows.append(
-                [f"[{d.scene}]({d.scene}/report.md)", fmt(w["sigma_over_lambda"]), f"{t:g}"] + cells
+                [f"[{scene}]({scene}/report.md)", fmt(w.sigma_over_lambda), f"{t:g}"] + cells
             )
     return models, rows
 
@@ -237,8 +241,8 @@ def regime_section(
     docs: Sequence[Mapping], regimes: Mapping | None, methods=None, fullwave=None
 ) -> list[str]:
     """Index section "Where each method holds": the wave scenes' verdicts against Kirchhoff
-    and, when ``regimes`` is given (``runner.wave_run.regime_maps``: ``chart``, ``maps`` as
-    ``RegimeMap.to_dict``, ``settings`` text), the regime chart and crossover table; then
+    and, when ``regimes`` is given (``RegimeMaps`` with its chart, or its dict), the regime
+    chart and crossover table; then
     "What each method costs" (``methods_section``) when ``methods`` is given (the path of
     ``methods.json``, or its loaded dict); before it "The rung above Kirchhoff"
     (``fullwave_map.fullwave_section``, with its chart when ``fullwave-map.png`` lies beside
@@ -261,7 +265,7 @@ def regime_section(
             "",
         ]
     if regimes:
-        lines += _regime_lines(regimes)
+        lines += _regime_lines(RegimeMaps.from_json(regimes))
     if fullwave is not None and Path(fullwave).is_file():
         lines += _fullwave_lines(Path(fullwave))
     if methods is not None:
@@ -269,25 +273,22 @@ def regime_section(
     return lines
 
 
-def _regime_lines(regimes: Mapping) -> list[str]:
+def _regime_lines(regimes: RegimeMaps) -> list[str]:
     """The regime chart and, per family and method, the σ/λ range where it holds."""
     crit = None
     table = []
-    for m in regimes["maps"]:
-        crit = m["meta"].get("criterion", crit)
-        for model, by_theta in m["crossovers"].items():
+    for m in regimes.maps:
+        crit = m.meta.get("criterion", crit)
+        for i, (model, by_theta) in enumerate(m.crossovers().items()):
             below = model in ("rayleigh-rice", "low-smooth")  # small-roughness theories
-            devs = m["energy_dev"][m["models"].index(model)]
             table.append(
-                [m["family"], model]
+                [m.family, model]
                 + [
-                    _crossover_cell(
-                        by_theta.get(str(float(t))), [row[k] for row in devs], crit or 0.05, below
-                    )
-                    for k, t in enumerate(m["theta_i"])
+                    _crossover_cell(by_theta[t], m.energy_dev[i, :, k], crit or 0.05, below)
+                    for k, t in enumerate(m.theta_i)
                 ]
             )
-    thetas = regimes["maps"][0]["theta_i"]
+    thetas = regimes.maps[0].theta_i
     return [
         "Regime map: the energy-weighted error (energy deviation over the 90 % energy set) "
         "of each method against the Kirchhoff reference as the roughness σ/λ grows, for an "
@@ -297,9 +298,9 @@ def _regime_lines(regimes: Mapping) -> list[str]:
         "without masking: the ray tracer with masking off) at large σ/λ; Kirchhoff has no "
         "masking, so the geometric verdicts are clean only where masking is below 1 %.",
         "",
-        f"Settings: {regimes['settings']}.",
+        f"Settings: {regimes.settings}.",
         "",
-        f"![Where each method holds]({regimes['chart']})",
+        f"![Where each method holds]({regimes.chart})",
         "",
         f"Where each method holds: the σ/λ range in which its |energy deviation| from "
         f"Kirchhoff stays within {100 * (crit or 0.05):g} % (the crossing interpolated in "

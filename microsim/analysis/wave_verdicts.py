@@ -67,6 +67,8 @@ from microsim.stats import ENERGY_FRACTION, energy_set
 from microsim.vectors import spherical_deg
 from microsim.wave import order_directions
 
+from .study_records import WAVE_VERDICT_SCHEMA, WaveVerdict, validate_wave_verdict
+
 __all__ = [
     "WAVE_MODELS",
     "WAVE_VERDICT_SCHEMA",
@@ -78,6 +80,7 @@ __all__ = [
     "wave_verdict",
     "wave_verdicts_for_result",
     "validate_wave_verdict",
+    "WaveVerdict",
 ]
 
 WAVE_MODELS = ("rayleigh-rice", "low-smooth", "kirchhoff-first-order")
@@ -90,71 +93,6 @@ tangent-plane obliquity (1 + wi·wo)²/(cos θi cos θo (cos θi + cos θo)²) m
 next to the horizon carry power ∝ 1/cos θo (Kirchhoff ignores shadowing there), which would
 otherwise dominate the energy set at θi = 60°."""
 _TINY_B = 1e-30  # an ABC "PSD" ≡ 1 to rounding: rayleigh_rice(A=1, B=_TINY_B) is its Q factor
-
-_NUM = (int, float)
-_OPT_NUM = (int, float, type(None))
-
-WAVE_VERDICT_SCHEMA: dict = {
-    "theta_i": (_NUM, "incidence polar angle θi, degrees"),
-    "model": ((str,), "closed form judged (one of WAVE_MODELS, or a caller's name)"),
-    "reference": ((str,), "what it is judged against: 'kirchhoff' (diffuse part)"),
-    "kind": ((str,), "'theory-vs-theory': both are approximations; never 'deviates'"),
-    "params": ((dict,), "model parameters (PSD, wavelength, material), no fit"),
-    "tol": (_NUM, "relative tolerance of agreement (default 0.02)"),
-    "z": (_NUM, "noise multiplier: agreement within tol + z·standard error"),
-    "fraction": (_NUM, "share of the diffuse energy the energy set carries (0.9)"),
-    "energy_bins": ((int,), "bins in the energy set E"),
-    "energy_dev": (_OPT_NUM, "Σ_E Ω(ref − model)/Σ_E Ω ref, signed (null if E is empty)"),
-    "energy_dev_se": (_OPT_NUM, "standard error of energy_dev from the reference's stderr"),
-    "rel_error": (
-        _OPT_NUM,
-        "energy-weighted relative RMS error √(Σ_E refΩ e²/Σ_E refΩ), e = (ref − model)/ref",
-    ),
-    "rel_error_se": (_OPT_NUM, "delta-method standard error of rel_error"),
-    "noise_floor": (_OPT_NUM, "rel_error a perfect model would show: √(Σ_E refΩ (se/ref)²/Σ)"),
-    "model_rtol": (_NUM, "relative quadrature error of the model's bin averages"),
-    "tested_bins": ((int,), "bins with ref·Ω ≥ min_share of the diffuse energy"),
-    "min_share": (_NUM, "share of the diffuse energy a bin needs to enter the region test"),
-    "theta_o_max": (
-        _NUM,
-        "bins beyond this θo (degrees) are left out (grazing: outside Kirchhoff)",
-    ),
-    "region": (
-        (dict,),
-        "{'forward': [[θo_lo, θo_hi], ...], 'backward': [...]}: θo ranges (degrees) of rows "
-        "whose energy-weighted mean relative error is within tol + z·se (forward: Δφ ≥ 90°); "
-        "null for a side with no tested row",
-    ),
-    "outside": (
-        (dict,),
-        "{'forward': [min ē, max ē] or null, 'backward': ...}: the range of the row errors "
-        "outside the region",
-    ),
-    "rows": ((list,), "[side, θo_lo, θo_hi, ē, se, agrees] per tested row"),
-    "status": ((str,), "'agrees' | 'agrees-in-region' | 'differs'"),
-    "worst_bin": ((list, type(None)), "[θo, Δφ] bin centre of the largest |e| over E"),
-    "max_rel_dev": (_OPT_NUM, "signed e of largest magnitude over E"),
-}
-
-
-def validate_wave_verdict(d) -> dict:
-    """Check a wave verdict dict against ``WAVE_VERDICT_SCHEMA`` (keys, types, status);
-    returns it, or raises UsageError naming the first problem."""
-    if not isinstance(d, Mapping):
-        raise UsageError(f"wave verdict must be a dict, got {type(d).__name__}")
-    missing = set(WAVE_VERDICT_SCHEMA) - set(d)
-    extra = set(d) - set(WAVE_VERDICT_SCHEMA)
-    if missing or extra:
-        raise UsageError(f"wave verdict keys: missing {sorted(missing)}, unknown {sorted(extra)}")
-    for key, (types, _) in WAVE_VERDICT_SCHEMA.items():
-        v = d[key]
-        if isinstance(v, bool) and bool not in types:
-            raise UsageError(f"wave verdict {key!r} must be {types}, got a bool")
-        if not isinstance(v, types):
-            raise UsageError(f"wave verdict {key!r} must be {types}, got {type(v).__name__}")
-    if d["status"] not in ("agrees", "agrees-in-region", "differs"):
-        raise UsageError(f"wave verdict status {d['status']!r} is not one of the three")
-    return dict(d)
 
 
 # --- the surface's spectrum --------------------------------------------------------------------
@@ -364,10 +302,10 @@ def wave_verdict(
     min_share: float = 1e-4,
     model_rtol: float = 1e-3,
     theta_o_max: float = THETA_O_MAX,
-) -> dict:
+) -> "WaveVerdict":
     """Theory-against-theory verdict of a model's bin averages ``model_bins`` (Θ, Φ) against
     incidence ``t`` of a Kirchhoff ``Result`` (diffuse part, ``diffuse_brdf``), as the module
-    docstring defines; returns a dict following ``WAVE_VERDICT_SCHEMA``."""
+    docstring defines; returns a ``WaveVerdict`` (fields: ``WAVE_VERDICT_SCHEMA``)."""
     if not 0.0 < float(tol) < 1.0:
         raise UsageError(f"tol must lie in (0, 1), got {tol!r}")
     bins = result.bins
@@ -397,23 +335,19 @@ def wave_verdict(
         "min_share": float(min_share),
         "theta_o_max": float(theta_o_max),
     }
-    out.update(_energy_statistics(f, m, se, omega, E, bins, model_rtol))
+    stats = _energy_statistics(f, m, se, omega, E, bins, model_rtol)
     tested = good & (energy >= min_share * energy.sum())
-    out["tested_bins"] = int(tested.sum())
     stack = [a.reshape(bins.shape) for a in (f, m, se, omega)]
     region, outside, rows = _regions(tested.reshape(bins.shape), *stack, bins, tol, z, model_rtol)
-    out["region"] = region
-    out["outside"] = outside
-    out["rows"] = rows
-    r = out["rel_error"]
-    if r is not None and r <= tol + z * out["rel_error_se"]:
+    out.update(stats, tested_bins=int(tested.sum()), region=region, outside=outside, rows=rows)
+    r, r_se = stats["rel_error"], stats["rel_error_se"]
+    if r is not None and r <= tol + z * r_se:
         status = "agrees"
     elif any(v for v in region.values() if v):
         status = "agrees-in-region"
     else:
         status = "differs"
-    out["status"] = status
-    return validate_wave_verdict(out)
+    return WaveVerdict.from_json({**out, "status": status})
 
 
 _ENERGY_FIELDS = (
@@ -506,7 +440,7 @@ def wave_verdicts_for_result(
     model_rtol: float = 1e-3,
     extra: Mapping[str, Callable] | None = None,
     averaging: str = "lattice",
-) -> list[dict]:
+) -> list[WaveVerdict]:
     """Wave verdicts of ``models`` (names of ``WAVE_MODELS``) plus ``extra`` (name →
     ``brdf_fn(wi, wo)``) against every incidence of a Kirchhoff ``result`` of ``surface`` (its
     nominal spectrum, ``surface_spectrum``; wavelength from ``result.info``). Models that do not

@@ -6,6 +6,7 @@ verdicts against Kirchhoff, the regime chart ``regimes.png`` and the crossover t
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import shutil
@@ -17,6 +18,7 @@ from ... import atomic
 from ...analysis import charts as ch
 from ...analysis import report
 from ...analysis.fullwave_map import FULLWAVE_JSON
+from ...analysis.study_records import RegimeMaps
 from ...checkpoints import checkpoint
 from ...errors import UsageError
 from ..bench_methods import METHODS_JSON, METHODS_PNG
@@ -66,19 +68,15 @@ def _scene_digest(path: Path, scene) -> str:
     return h.hexdigest()
 
 
-def _regimes(out: Path, quick: bool) -> dict:
+def _regimes(out: Path, quick: bool) -> RegimeMaps:
     """Regime maps, their chart ``out/REGIME_CHART`` and what the index prints of them."""
     from ...analysis.regimes import regime_chart
 
-    rm = regime_maps(quick)
-    fig = regime_chart(rm["maps"])
+    rm = RegimeMaps.from_json(regime_maps(quick))
+    fig = regime_chart(rm.maps)
     with atomic.atomic_open(str(out / REGIME_CHART), "wb") as fh:
         fig.savefig(fh, format="png", dpi=100)
-    return {
-        "chart": REGIME_CHART,
-        "maps": [m.to_dict() for m in rm["maps"]],
-        "settings": rm["settings"],
-    }
+    return dataclasses.replace(rm, chart=REGIME_CHART)
 
 
 def _check_catalogue_out(catalogue: Path, out: Path) -> None:

@@ -12,6 +12,7 @@ Beckmann or GGX; otherwise only the order energies are reported.
 from __future__ import annotations
 
 from ...analysis.multiple import needs_more_bounces, order_comparison
+from ...analysis.study_records import OrdersStudy
 from ...analytic.random_walk import WALK_NDFS, WalkNDF
 from ...checkpoints import checkpoint
 from ...errors import UsageError
@@ -34,10 +35,10 @@ def walk_ndf(plan, specs):
         return None
 
 
-def orders_study(plan, result, specs) -> dict | None:
-    """``verdicts.json["orders"]`` of a run with ``bounces`` > 1 (None otherwise):
-    {"bounces", "needs" (``needs_more_bounces`` per θi), "comparison" (``order_comparison``,
-    or None when the scene's NDF has no walk), "note"}."""
+def orders_study(plan, result, specs) -> OrdersStudy | None:
+    """The ``"orders"`` study of verdicts.json (``OrdersStudy``) of a run with ``bounces`` > 1
+    (None otherwise): ``needs_more_bounces`` per θi and the ``order_comparison`` (None, with a
+    note saying why, when the scene's NDF has no walk)."""
     if getattr(result, "brdf_orders", None) is None or result.brdf_orders.shape[0] < 2:
         return None
     checkpoint("side-studies")
@@ -60,9 +61,9 @@ def orders_study(plan, result, specs) -> dict | None:
             )
         except UsageError as e:  # e.g. no multiply scattered light at some θi to compare
             note = f"no order-resolved comparison: {e}"
-    return {
-        "bounces": plan.scene.simulation.bounces,
-        "needs": needs_more_bounces(result),
-        "comparison": comparison,
-        "note": note,
-    }
+    return OrdersStudy(
+        bounces=plan.scene.simulation.bounces,
+        needs=needs_more_bounces(result),
+        comparison=comparison,
+        note=note,
+    )

@@ -16,6 +16,7 @@ import numpy as np
 
 from ... import analytic as an
 from ...analysis.report import albedo_stderr
+from ...analysis.verdict_record import as_verdicts
 from ...analysis.verdicts import verdicts_for_result
 from ...analytic.anisotropic import AnisotropicNDF
 from ...checkpoints import checkpoint
@@ -157,14 +158,14 @@ def speed_runs(plan: RunPlan, result, shown, verdicts):
     theta = plan.theta_i[t_index]
     ok = [
         v
-        for v in verdicts
-        if v.get("agrees")
-        and not v.get("fitted")
-        and abs(v["theta_i"] - theta) < 1e-9
-        and v["phi_i"] == plan.phi_i[0]
-        and v.get("rel_rms") is not None
+        for v in as_verdicts(verdicts)
+        if v.agrees
+        and not v.fitted
+        and abs(v.theta_i - theta) < 1e-9
+        and v.phi_i == plan.phi_i[0]
+        and v.rel_rms is not None
     ]
-    best = min(ok, key=lambda v: v["rel_rms"])["model"] if ok else None
+    best = min(ok, key=lambda v: v.rel_rms).model if ok else None
     ref = shown[best][t_index] if best else result.brdf[t_index]
     label = f"{best} (agrees)" if best else "the main run"
     omega = result.bins.projected_solid_angle()
@@ -186,7 +187,7 @@ def speed_runs(plan: RunPlan, result, shown, verdicts):
                     surface=surface,
                 )
             )
-            times.append(r.meta["seconds"] - r.meta["seconds_scene_build"])
+            times.append(r.info.seconds - r.info.seconds_scene_build)
             errs.append(_energy_rel_rms(r.brdf[0], ref, omega))
         runs[origins] = (times, errs)
     return runs, theta, label

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...analysis.study_records import RegimeMaps, WaveSection
 from ...analysis.wave_verdicts import wave_verdicts_for_result
 from ...analytic.fresnel import fresnel
 from ...errors import UsageError
@@ -122,8 +123,8 @@ def wave_surfaces(plan) -> list:
 
 
 def run_wave(plan, result) -> tuple:
-    """(Kirchhoff ``Result``, ``"wave"`` section of verdicts.json, seconds) of a planned run
-    whose ray-traced ``result`` is complete (module docstring). The section holds the
+    """(Kirchhoff ``Result``, ``"wave"`` section of verdicts.json (``WaveSection``), seconds)
+    of a planned run whose ray-traced ``result`` is complete (module docstring). It holds the
     settings, per incidence g = (4πσ cos θi/λ)² with σ the tiles' realised rms height (root
     mean square over the tiles), the specular order's
     power against the Debye–Waller value F(θi)·e^{−g}, the ray tracer's masked fraction and
@@ -158,33 +159,33 @@ def run_wave(plan, result) -> tuple:
     g = (4.0 * math.pi * sigma_r * cos_i / lam) ** 2
     f_i = np.asarray(fresnel(cos_i, sc.ior), dtype=float)
     masked = np.asarray(result.ledger["masked"], dtype=float)
-    tile = [float(v) for v in kres.meta["tile"]]
-    section = {
-        "reference": "kirchhoff",
-        "kind": "theory-vs-theory",
-        "wavelength": lam,
-        "length_unit": "unit of dx (micrometres by convention)",
-        "surface_model": w.surface_model,
-        "upsample": int(w.upsample),
-        "fresnel_angle": w.fresnel_angle,
-        "tile": tile,
-        "tile_over_lambda": [v / lam for v in tile],
-        "sigma_over_lambda": sigma / lam,
-        "realised_sigma_over_lambda": sigma_r / lam,
-        "realisations": int(kres.meta["realisations"]),
-        "run_realisations": int(plan.realisations),
-        "stderr_method": kres.meta["stderr_method"],
-        "theta_i": th.tolist(),
-        "g": g.tolist(),
-        "specular_power": [float(v) for v in kres.meta["specular_power"]],
-        "debye_waller": (f_i * np.exp(-g)).tolist(),
-        "masked_fraction": masked.tolist(),
-        "masked_limit": MASKED_LIMIT,
-        "in_domain": [bool(m < MASKED_LIMIT) for m in masked],
-        "orders": [int(v) for v in kres.meta["orders"]],
-        "file": f"{WAVE_DIR}/",
-        "verdicts": verdicts,
-    }
+    tile = [float(v) for v in kres.info.tile]
+    section = WaveSection(
+        reference="kirchhoff",
+        kind="theory-vs-theory",
+        wavelength=lam,
+        length_unit="unit of dx (micrometres by convention)",
+        surface_model=w.surface_model,
+        upsample=int(w.upsample),
+        fresnel_angle=w.fresnel_angle,
+        tile=tile,
+        tile_over_lambda=[v / lam for v in tile],
+        sigma_over_lambda=sigma / lam,
+        realised_sigma_over_lambda=sigma_r / lam,
+        realisations=int(kres.info.realisations),
+        run_realisations=int(plan.realisations),
+        stderr_method=kres.info.stderr_method,
+        theta_i=th.tolist(),
+        g=g.tolist(),
+        specular_power=[float(v) for v in kres.info.specular_power],
+        debye_waller=(f_i * np.exp(-g)).tolist(),
+        masked_fraction=masked.tolist(),
+        masked_limit=MASKED_LIMIT,
+        in_domain=[bool(m < MASKED_LIMIT) for m in masked],
+        orders=[int(v) for v in kres.info.orders],
+        file=f"{WAVE_DIR}/",
+        verdicts=verdicts,
+    )
     return kres, section, seconds
 
 
@@ -203,11 +204,11 @@ of 32 λ; the full report uses ``regime_map``'s defaults (14 values, 64 λ: seve
 the cost)."""
 
 
-def regime_maps(quick: bool) -> dict:
+def regime_maps(quick: bool) -> RegimeMaps:
     """The regime maps of the ABC and Gaussian families for the index's "Where each method
     holds" (``analysis.regimes.regime_map``; ℓ = 10 λ, θi = 0, 30, 60°, aluminium, seed 0,
-    18 × 7 folded bins), reduced in quick mode (``REGIME_QUICK``): {"maps": [RegimeMap],
-    "settings": one line saying which settings were used}."""
+    18 × 7 folded bins), reduced in quick mode (``REGIME_QUICK``), with one line saying which
+    settings were used."""
     from ...analysis.regimes import regime_map
 
     kw = {}
@@ -217,15 +218,15 @@ def regime_maps(quick: bool) -> dict:
             "tile_over_lambda": REGIME_QUICK.tile_over_lambda,
         }
     maps = [regime_map(family, **kw) for family in ("abc", "gaussian")]
-    m = maps[0]
+    m, s = maps[0], maps[0].meta
     settings = (
         f"{'quick (`--quick`): ' if quick else ''}{len(m.sigma)} values of σ/λ geometric "
-        f"from {m.sigma[0]:g} to {m.sigma[-1]:g}, ℓ = {m.meta['corr_over_lambda']:g} λ "
-        f"(ABC: B = 2πℓ, C = {maps[0].meta['abc_C']:g}), one tile of "
-        f"{m.meta['tile_over_lambda']:g} λ per σ (seed {m.meta['seed']}, grid refined until "
+        f"from {m.sigma[0]:g} to {m.sigma[-1]:g}, ℓ = {s.corr_over_lambda:g} λ "
+        f"(ABC: B = 2πℓ, C = {s.abc_C:g}), one tile of "
+        f"{s.tile_over_lambda:g} λ per σ (seed {s.seed}, grid refined until "
         f"the solver's phase sampling holds), aluminium, θi = "
-        f"{', '.join(f'{t:g}' for t in m.theta_i)}°, {m.meta['bins']['n_theta']} × "
-        f"{m.meta['bins']['n_phi']} folded bins, criterion {100 * m.meta['criterion']:g} % "
+        f"{', '.join(f'{t:g}' for t in m.theta_i)}°, {s.bins['n_theta']} × "
+        f"{s.bins['n_phi']} folded bins, criterion {100 * s.criterion:g} % "
         "on the energy deviation"
     )
-    return {"maps": maps, "settings": settings}
+    return RegimeMaps(maps=maps, settings=settings)

@@ -1,0 +1,472 @@
+"""The studies of verdicts.json as typed records: ``OrderComparison`` (the scattering orders
+against the multiple-scattering models, ``multiple.order_comparison``), its parts
+(``OrderIncidence``, ``SimOrders``, ``ModelEnergy``), the per-θi rows ``OrderEnergy`` and
+``BounceNeed`` and the run's orders study holding them (``OrdersStudy``); ``WaveSection``, a
+wave scene's closed forms against Kirchhoff, and its ``WaveVerdict`` records (fields:
+``WAVE_VERDICT_SCHEMA``; ``wave_verdicts`` module docstring); ``RegimeMaps``, what the index
+prints of the regime maps; ``AnisotropySummary`` (``anisotropy.anisotropy_summary``) and its
+parts. Each is a frozen dataclass that is also the read-only dict the file holds, in the same
+key order (``DictRecord``): builders read attributes, ``json`` writes it unchanged, and
+``from_json`` reads the dict of a file back."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from dataclasses import fields as dataclass_fields
+from typing import ClassVar, Mapping, Sequence
+
+from microsim.errors import UsageError
+from microsim.sim.result import FrozenDict, FrozenList
+
+from .verdict_record import Verdict
+
+__all__ = [
+    "DictRecord",
+    "MODELS",
+    "SimOrders",
+    "ModelEnergy",
+    "OrderIncidence",
+    "OrderComparison",
+    "OrderEnergy",
+    "BounceNeed",
+    "OrdersStudy",
+    "WAVE_VERDICT_SCHEMA",
+    "validate_wave_verdict",
+    "WaveVerdict",
+    "WaveSection",
+    "RegimeMaps",
+    "MissedEnergy",
+    "AnisotropyIncidence",
+    "AnisotropySummary",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class DictRecord(FrozenDict):
+    """A frozen record that is also the read-only dict of its fields in declaration order (the
+    fields named in ``OMITTED_IF_NONE`` are left out of the dict when None). ``from_json``
+    reads such a dict back, its nested records converted (``_nested``); a field it lacks (an
+    older or partial document) reads as its ``OLDER_DEFAULTS`` value, else None."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ()
+    OLDER_DEFAULTS: ClassVar[Mapping] = {}
+
+    def __post_init__(self) -> None:
+        for f in dataclass_fields(self):
+            value = getattr(self, f.name)
+            if value is not None or f.name not in self.OMITTED_IF_NONE:
+                dict.__setitem__(self, f.name, value)
+
+    def __reduce__(self):
+        return (_restore, (type(self), dict(self)))
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        """``d``'s values with its nested records converted (none here)."""
+        return dict(d)
+
+    @classmethod
+    def from_json(cls, d: Mapping):
+        """The record of dict ``d`` (a record of this class as it is)."""
+        if isinstance(d, cls):
+            return d
+        names = [f.name for f in dataclass_fields(cls)]
+        given = cls._nested({**dict.fromkeys(names), **cls.OLDER_DEFAULTS, **d})
+        return cls(**{k: given[k] for k in names})
+
+
+def _restore(cls, fields: dict):
+    """A pickled or copied record rebuilt from its dict."""
+    return cls.from_json(fields)
+
+
+def _records(cls, items: Mapping) -> FrozenDict:
+    """name → ``cls`` record of each dict in ``items``."""
+    return FrozenDict({k: cls.from_json(v) for k, v in items.items()})
+
+
+# --- the order comparison (multiple.order_comparison) -----------------------------------------
+MODELS = ("random-walk", "kulla-conty", "mikkelsen-eq28")
+"""Models of the multiply scattered light an order comparison judges per θi."""
+
+
+@dataclass(frozen=True, eq=False)
+class SimOrders(DictRecord):
+    """The simulated energies of one incidence (fractions of the incident power ± standard
+    errors): per order slot, of orders ≥ 2 (``multiple``), absorbed, cut and lost; where the
+    errors come from; the specular share of orders ≥ 2 and the size of its 90 % energy set."""
+
+    orders: Sequence[float]
+    order_se: Sequence[float]
+    multiple: float
+    multiple_se: float
+    absorbed: float
+    absorbed_se: float
+    cut: float
+    cut_se: float
+    lost: float
+    lost_se: float
+    realisations: int
+    se_from: str
+    specular_share: float | None
+    specular_share_se: float | None
+    energy_bins_90: int
+
+
+@dataclass(frozen=True, eq=False)
+class ModelEnergy(DictRecord):
+    """One model's energy of orders ≥ 2 at one incidence, its energy test against the
+    simulation (relative deviation (sim − model)/sim ± se, t, p, threshold, agrees) and its
+    lobe errors over the energy set; the random walk's also per order (``orders``,
+    ``order_se``, ``max_order``, ``cut``; None and absent from the dict for the others)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("orders", "order_se", "max_order", "cut")
+
+    energy: float
+    energy_se: float
+    rel_dev: float | None
+    rel_dev_se: float | None
+    t: float
+    dof: int | None
+    p_value: float
+    t_threshold: float
+    agrees: bool
+    fitted: bool
+    rel_rms: float | None
+    shape_rel_rms: float | None
+    noise_floor: float | None
+    energy_bins: int
+    specular_share: float | None
+    orders: Sequence[float] | None = None
+    order_se: Sequence[float] | None = None
+    max_order: int | None = None
+    cut: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class OrderIncidence(DictRecord):
+    """One incidence of an order comparison: the simulation (``sim``), each model (``models``,
+    name → ``ModelEnergy``) and the random walk's BRDF verdicts (``walk_verdicts``, "2" and
+    "2+" → ``Verdict``)."""
+
+    OLDER_DEFAULTS: ClassVar[Mapping] = {"phi_i": 0.0}
+
+    theta_i: float
+    phi_i: float
+    sim: SimOrders
+    models: Mapping[str, ModelEnergy]
+    walk_verdicts: Mapping[str, Verdict]
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        return {
+            **d,
+            "sim": SimOrders.from_json(d["sim"]),
+            "models": _records(ModelEnergy, d["models"]),
+            "walk_verdicts": _records(Verdict, d["walk_verdicts"]),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class OrderComparison(DictRecord):
+    """The scattering orders of a run against the random walk, Kulla–Conty and Mikkelsen eq. 28
+    (``multiple`` module docstring): the settings (NDF, models, material, bounces, walk paths
+    and seed, realisations, family level), Mikkelsen's fitted k_d, Kulla–Conty's E_avg (None
+    when the closed forms are left out, ``closed_forms_note`` says why), whether the models are
+    expected to hold (``expectation`` says why not) and the ``incidences``."""
+
+    OLDER_DEFAULTS: ClassVar[Mapping] = {
+        "expected": True,
+        "expectation": None,
+        "models": MODELS,
+        "closed_forms_note": None,
+    }
+
+    expected: bool
+    expectation: str | None
+    ndf: Mapping
+    models: Sequence[str]
+    material: str | None
+    bounces: int | str
+    order_labels: Sequence[str]
+    walk_paths: int
+    walk_seed: str
+    realisations: int
+    alpha: float
+    alpha_each_energy: float
+    kd: float | None
+    kd_note: str
+    kulla_conty_e_avg: float | None
+    closed_forms_note: str | None
+    incidences: Sequence[OrderIncidence]
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        return {**d, "incidences": FrozenList(OrderIncidence.from_json(i) for i in d["incidences"])}
+
+
+@dataclass(frozen=True, eq=False)
+class OrderEnergy(DictRecord):
+    """The simulated energy per order slot at one incidence, of orders ≥ 2 (``multiple``) and of
+    all orders (``reflected``) ± standard errors, and the absorbed, cut and lost energy."""
+
+    theta_i: float
+    phi_i: float
+    orders: Sequence[float]
+    order_se: Sequence[float]
+    multiple: float
+    multiple_se: float
+    reflected: float
+    reflected_se: float
+    absorbed: float
+    cut: float
+    lost: float
+    realisations: int
+
+
+@dataclass(frozen=True, eq=False)
+class BounceNeed(DictRecord):
+    """Whether the light of orders ≥ 2 at one incidence exceeds ``threshold`` of the reflected
+    energy (``needs``): its fraction ± se and the energy cut at the bounce limit."""
+
+    theta_i: float
+    phi_i: float
+    multiple_fraction: float
+    multiple_fraction_se: float
+    cut: float
+    threshold: float
+    needs: bool
+
+
+# --- the wave-optics section (runner.wave_run) -------------------------------------------------
+_NUM = (int, float)
+_OPT_NUM = (int, float, type(None))
+
+WAVE_VERDICT_SCHEMA: dict = {
+    "theta_i": (_NUM, "incidence polar angle θi, degrees"),
+    "model": ((str,), "closed form judged (one of WAVE_MODELS, or a caller's name)"),
+    "reference": ((str,), "what it is judged against: 'kirchhoff' (diffuse part)"),
+    "kind": ((str,), "'theory-vs-theory': both are approximations; never 'deviates'"),
+    "params": ((dict,), "model parameters (PSD, wavelength, material), no fit"),
+    "tol": (_NUM, "relative tolerance of agreement (default 0.02)"),
+    "z": (_NUM, "noise multiplier: agreement within tol + z·standard error"),
+    "fraction": (_NUM, "share of the diffuse energy the energy set carries (0.9)"),
+    "energy_bins": ((int,), "bins in the energy set E"),
+    "energy_dev": (_OPT_NUM, "Σ_E Ω(ref − model)/Σ_E Ω ref, signed (null if E is empty)"),
+    "energy_dev_se": (_OPT_NUM, "standard error of energy_dev from the reference's stderr"),
+    "rel_error": (
+        _OPT_NUM,
+        "energy-weighted relative RMS error √(Σ_E refΩ e²/Σ_E refΩ), e = (ref − model)/ref",
+    ),
+    "rel_error_se": (_OPT_NUM, "delta-method standard error of rel_error"),
+    "noise_floor": (_OPT_NUM, "rel_error a perfect model would show: √(Σ_E refΩ (se/ref)²/Σ)"),
+    "model_rtol": (_NUM, "relative quadrature error of the model's bin averages"),
+    "tested_bins": ((int,), "bins with ref·Ω ≥ min_share of the diffuse energy"),
+    "min_share": (_NUM, "share of the diffuse energy a bin needs to enter the region test"),
+    "theta_o_max": (
+        _NUM,
+        "bins beyond this θo (degrees) are left out (grazing: outside Kirchhoff)",
+    ),
+    "region": (
+        (dict,),
+        "{'forward': [[θo_lo, θo_hi], ...], 'backward': [...]}: θo ranges (degrees) of rows "
+        "whose energy-weighted mean relative error is within tol + z·se (forward: Δφ ≥ 90°); "
+        "null for a side with no tested row",
+    ),
+    "outside": (
+        (dict,),
+        "{'forward': [min ē, max ē] or null, 'backward': ...}: the range of the row errors "
+        "outside the region",
+    ),
+    "rows": ((list,), "[side, θo_lo, θo_hi, ē, se, agrees] per tested row"),
+    "status": ((str,), "'agrees' | 'agrees-in-region' | 'differs'"),
+    "worst_bin": ((list, type(None)), "[θo, Δφ] bin centre of the largest |e| over E"),
+    "max_rel_dev": (_OPT_NUM, "signed e of largest magnitude over E"),
+}
+
+
+def validate_wave_verdict(d) -> dict:
+    """Check a wave verdict dict against ``WAVE_VERDICT_SCHEMA`` (keys, types, status);
+    returns it, or raises UsageError naming the first problem."""
+    if not isinstance(d, Mapping):
+        raise UsageError(f"wave verdict must be a dict, got {type(d).__name__}")
+    missing = set(WAVE_VERDICT_SCHEMA) - set(d)
+    extra = set(d) - set(WAVE_VERDICT_SCHEMA)
+    if missing or extra:
+        raise UsageError(f"wave verdict keys: missing {sorted(missing)}, unknown {sorted(extra)}")
+    for key, (types, _) in WAVE_VERDICT_SCHEMA.items():
+        v = d[key]
+        if isinstance(v, bool) and bool not in types:
+            raise UsageError(f"wave verdict {key!r} must be {types}, got a bool")
+        if not isinstance(v, types):
+            raise UsageError(f"wave verdict {key!r} must be {types}, got {type(v).__name__}")
+    if d["status"] not in ("agrees", "agrees-in-region", "differs"):
+        raise UsageError(f"wave verdict status {d['status']!r} is not one of the three")
+    return dict(d)
+
+
+@dataclass(frozen=True, eq=False)
+class WaveVerdict(DictRecord):
+    """One wave verdict (every field documented in ``WAVE_VERDICT_SCHEMA``), read by attribute;
+    also the read-only dict verdicts.json holds. ``from_json`` reads one back, checked
+    (``validate_wave_verdict``)."""
+
+    theta_i: float
+    model: str
+    reference: str
+    kind: str
+    params: dict
+    tol: float
+    z: float
+    fraction: float
+    energy_bins: int
+    model_rtol: float
+    min_share: float
+    theta_o_max: float
+    energy_dev: float | None
+    energy_dev_se: float | None
+    rel_error: float | None
+    rel_error_se: float | None
+    noise_floor: float | None
+    worst_bin: list | None
+    max_rel_dev: float | None
+    tested_bins: int
+    region: dict
+    outside: dict
+    rows: list
+    status: str
+
+    @classmethod
+    def from_json(cls, d: Mapping) -> "WaveVerdict":
+        """The record of wave verdict dict ``d``, checked (``validate_wave_verdict``: every
+        field present)."""
+        if isinstance(d, cls):
+            return d
+        return cls(**validate_wave_verdict(d))
+
+
+@dataclass(frozen=True, eq=False)
+class WaveSection(DictRecord):
+    """A wave scene's closed forms against Kirchhoff (verdicts.json "wave"): the Kirchhoff
+    solver's settings (wavelength, surface model, upsample, Fresnel angle, tile and σ in
+    lengths and wavelengths, tiles used and traced, how its errors are estimated), per θi the
+    roughness g, the specular order's power against Debye–Waller, the ray tracer's masked
+    fraction and whether Kirchhoff is in its domain, the diffraction orders, the file of the
+    Kirchhoff result and the ``verdicts`` (``wave_verdicts.WaveVerdict``)."""
+
+    reference: str
+    kind: str
+    wavelength: float
+    length_unit: str
+    surface_model: str
+    upsample: int
+    fresnel_angle: str
+    tile: Sequence[float]
+    tile_over_lambda: Sequence[float]
+    sigma_over_lambda: float
+    realised_sigma_over_lambda: float
+    realisations: int
+    run_realisations: int
+    stderr_method: str
+    theta_i: Sequence[float]
+    g: Sequence[float]
+    specular_power: Sequence[float]
+    debye_waller: Sequence[float]
+    masked_fraction: Sequence[float]
+    masked_limit: float
+    in_domain: Sequence[bool]
+    orders: Sequence[int]
+    file: str
+    verdicts: Sequence
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        return {**d, "verdicts": FrozenList(WaveVerdict.from_json(v) for v in d["verdicts"])}
+
+
+@dataclass(frozen=True, eq=False)
+class RegimeMaps(DictRecord):
+    """The regime maps the index prints (``runner.wave_run.regime_maps``): the maps
+    (``regimes.RegimeMap``), one line saying which settings were used and the chart's file
+    name (None, and absent from the dict, until it is written)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("chart",)
+
+    maps: Sequence
+    settings: str
+    chart: str | None = None
+
+
+# --- the anisotropy summary (anisotropy.anisotropy_summary) -------------------------------------
+@dataclass(frozen=True, eq=False)
+class MissedEnergy(DictRecord):
+    """The energy the single-scattering variants miss at one incidence (``anisotropy`` module
+    docstring): the simulated reflected energy of all orders and of orders ≥ 2 ± se, per
+    variant label {"energy", "missed", "missed_se"}, and the random walk's orders ≥ 2 ± se
+    (None, and absent from the dict, without an order comparison)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("walk_multiple", "walk_multiple_se")
+
+    reflected: float
+    reflected_se: float
+    multiple: float
+    multiple_se: float
+    models: Mapping[str, Mapping]
+    walk_multiple: float | None = None
+    walk_multiple_se: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropyIncidence(DictRecord):
+    """One incidence of an anisotropy summary: the stand-in against the exact Λ
+    ({"energy_dev", "rel_rms"}), each variant label against the simulation ({"rel_rms",
+    "energy_dev", "energy_dev_se", "verdict"}) and, for a run with bounces > 1, the energy
+    each misses (``MissedEnergy``; None, and absent from the dict, otherwise)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("missed",)
+
+    theta_i: float
+    phi_i: float
+    stand_in_vs_exact: Mapping
+    against_simulation: Mapping[str, Mapping]
+    missed: MissedEnergy | None = None
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        missed = d.get("missed")
+        return {**d, "missed": None if missed is None else MissedEnergy.from_json(missed)}
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropySummary(DictRecord):
+    """An anisotropic scene's Smith G variants (verdicts.json "anisotropy"): ``variants``
+    (label → model name) and per incidence an ``AnisotropyIncidence``."""
+
+    variants: Mapping[str, str]
+    incidences: Sequence[AnisotropyIncidence]
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        rows = FrozenList(AnisotropyIncidence.from_json(i) for i in d["incidences"])
+        return {**d, "incidences": rows}
+
+
+@dataclass(frozen=True, eq=False)
+class OrdersStudy(DictRecord):
+    """The scattering orders of a run traced with bounces > 1 (verdicts.json "orders"): the
+    bounce limit, per θi whether orders ≥ 2 matter (``needs``, ``BounceNeed``), the order
+    comparison (``OrderComparison``, None without one) and a note saying why not (or None)."""
+
+    bounces: int | str
+    needs: Sequence[BounceNeed]
+    comparison: OrderComparison | None
+    note: str | None
+
+    @classmethod
+    def _nested(cls, d: Mapping) -> dict:
+        comparison = d.get("comparison")
+        return {
+            **d,
+            "needs": FrozenList(BounceNeed.from_json(n) for n in d.get("needs") or ()),
+            "comparison": None if comparison is None else OrderComparison.from_json(comparison),
+        }
