@@ -19,12 +19,13 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from . import incidence
+from .json_record import JsonRecord
 from .markdown import md_table, percent
 from .report_cells import converged_text, fmt, params_text, pct, ranges_text
 from .report_index import index_report
 from .report_methods import load_methods, methods_section
 from .report_wave import regime_section, wave_section
-from .verdict_record import Fit, JsonRecord, OrdersStudy, RunDocument, Speed, Stability
+from .study_records import Fit, OrdersStudy, RunDocument, Speed, Stability
 from .verdicts import Verdict, as_verdicts, summary_row, verdict_symbol
 
 __all__ = [
