@@ -554,4 +554,4 @@ _DOCUMENT_PARTS = {
     "stability": Stability,
     "speed": Speed,
 }
-"""The parts of a verdict document read as records (``_read_nested``)."""
+"""The parts of a verdict document read as records (``read_nested``)."""
