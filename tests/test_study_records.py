@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
+from microsim.analysis.json_record import JsonRecord
 from microsim.analysis.report_methods import MethodsDocument, load_methods
-from microsim.analysis.verdict_record import (
+from microsim.analysis.study_records import (
     AnisotropyStudy,
     Fit,
     FitBound,
-    JsonRecord,
     OrdersStudy,
     RunDocument,
     Speed,
@@ -77,7 +77,7 @@ def test_the_nested_parts_are_records_too():
             "cost": 1.0,
         }
     )
-    assert fit.at_bounds == (FitBound(param="kd", bound=0.0, side="lower", physical=True),)
+    assert fit.at_bounds == [FitBound(param="kd", bound=0.0, side="lower", physical=True)]
     assert fit["cost"] == 1.0  # a key of no field stays in the dict
     with pytest.raises((TypeError, dataclasses.FrozenInstanceError)):
         fit["model"] = "other"

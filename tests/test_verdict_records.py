@@ -13,7 +13,7 @@ import pytest
 from support import flat_verdict
 
 from microsim.analysis import report
-from microsim.analysis.verdict_record import RunDocument
+from microsim.analysis.study_records import RunDocument
 from microsim.analysis.verdicts import VERDICT_SCHEMA, Verdict, as_verdicts
 from microsim.errors import UsageError
 from microsim.sim import Bins
@@ -80,7 +80,7 @@ def test_the_report_reads_a_files_dicts_as_it_reads_the_records(deviating):
 def test_a_run_document_reads_its_verdicts_as_records_and_a_null_study_as_none(deviating):
     doc = {"scene": "s", "verdicts": [dict(deviating)], "fits": None, "tool": "x"}
     rec = RunDocument.from_json(doc)
-    assert rec.scene == "s" and rec.verdicts == (deviating,)
+    assert rec.scene == "s" and rec.verdicts == [deviating]
     assert isinstance(rec.verdicts[0], Verdict) and rec.verdicts[0].kind == "deviates"
     assert rec.fits == () and rec.outside_domain == {} and rec.wave is None
     assert RunDocument.from_json(rec) is rec

@@ -34,7 +34,7 @@ from . import incidence
 from .multiple import order_energies
 from .study_records import (
     AnisotropyIncidence,
-    AnisotropySummary,
+    AnisotropyStudy,
     MissedEnergy,
     OrderComparison,
     OrderEnergy,
@@ -98,8 +98,8 @@ def _missed(energies: OrderEnergy, result, t: int, omega: np.ndarray, rtol: Mapp
 
 def anisotropy_summary(
     result, verdicts: Sequence[Mapping], comparison: Mapping | None = None
-) -> AnisotropySummary | None:
-    """The summary (module docstring; an ``AnisotropySummary``, also its JSON dict), or None
+) -> AnisotropyStudy | None:
+    """The summary (module docstring; an ``AnisotropyStudy``, also its JSON dict), or None
     when ``result`` lacks the variants.
     ``comparison``: the run's order comparison (``multiple.order_comparison``), whose random
     walk on the anisotropic Smith microsurface gives the orders ≥ 2 the Smith model itself
@@ -141,4 +141,4 @@ def anisotropy_summary(
                 missed=missed,
             )
         )
-    return AnisotropySummary(variants=dict(VARIANTS), incidences=rows)
+    return AnisotropyStudy(variants=dict(VARIANTS), incidences=rows)

@@ -33,7 +33,7 @@ import numpy as np
 from microsim.errors import UsageError
 from microsim.stats import energy_set
 
-from .study_records import DictRecord
+from .json_record import JsonRecord
 
 __all__ = [
     "MIN_AUTO",
@@ -55,7 +55,7 @@ def _ew(x: np.ndarray, w: np.ndarray) -> float:
 
 
 @dataclass(frozen=True, eq=False)
-class BudgetRow(DictRecord):
+class BudgetRow(JsonRecord):
     """The error budget of one incidence (module docstring): the energy-weighted relative
     standard errors of the mean BRDF from ray noise (``ray``), from tile scatter (``tile``)
     and in total, and the relative standard error of its energy over E (``energy``); each None

@@ -47,8 +47,8 @@ from .chart_style import (
     model_colour,
     model_style,
 )
+from .json_record import JsonRecord
 from .markdown import percent
-from .verdict_record import JsonRecord
 from .verdicts import verdict_kind
 
 __all__ = [

@@ -36,8 +36,8 @@ from microsim.analytic.fresnel import fresnel
 from microsim.atomic import read_json
 from microsim.errors import UsageError
 
+from .json_record import JsonRecord
 from .markdown import md_table
-from .verdict_record import JsonRecord
 
 __all__ = [
     "FULLWAVE_JSON",

@@ -72,7 +72,7 @@ from microsim.surfaces.heightfields import abc, gaussian
 from microsim.vectors import spherical_deg
 from microsim.wave import kirchhoff_brdf
 
-from .study_records import DictRecord
+from .json_record import JsonRecord
 from .wave_verdicts import closed_form, lattice_average, surface_spectrum, wave_verdict
 
 __all__ = [
@@ -96,7 +96,7 @@ GRIDS = (128, 256, 512, 1024, 2048)
 
 
 @dataclass(frozen=True, eq=False)
-class RegimeSettings(DictRecord):
+class RegimeSettings(JsonRecord):
     """How a regime map was made (``RegimeMap.meta``): correlation length and tile in λ, the
     material, the bins (``Bins.to_dict``), the seed, Church's C of the ABC family (None for
     the Gaussian), the grid used and the seconds per σ, the criterion and what the error is."""

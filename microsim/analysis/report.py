@@ -19,12 +19,14 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from . import incidence
+from .budget import BudgetRow
+from .json_record import JsonRecord
 from .markdown import md_table, percent
 from .report_cells import converged_text, fmt, params_text, pct, ranges_text
 from .report_index import index_report
 from .report_methods import load_methods, methods_section
 from .report_wave import regime_section, wave_section
-from .verdict_record import Fit, JsonRecord, OrdersStudy, RunDocument, Speed, Stability
+from .study_records import Fit, OrdersStudy, RunDocument, Speed, Stability
 from .verdicts import Verdict, as_verdicts, summary_row, verdict_symbol
 
 __all__ = [
@@ -174,21 +176,6 @@ class AutoRealisations(JsonRecord):
     max_realisations: int | None = None
     pilot_realisations: int | None = None
     realisations: int | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class BudgetRow(JsonRecord):
-    """One incidence of meta.json ``error_budget`` (``analysis.budget``): the relative
-    standard errors of the mean BRDF from ray noise, tile scatter, in total, and of its
-    energy, over its ``realisations``."""
-
-    theta_i: float = 0.0
-    phi_i: float = 0.0
-    realisations: int = 1
-    ray: float | None = None
-    tile: float | None = None
-    total: float | None = None
-    energy: float | None = None
 
 
 def auto_realisations(run: Mapping) -> AutoRealisations | None:

@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .markdown import percent, plain
-from .verdict_record import Fit, FitBound
+from .study_records import Fit, FitBound
 
 __all__ = [
     "fmt",

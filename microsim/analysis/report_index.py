@@ -16,7 +16,7 @@ from .multiple import NOT_EXPECTED
 from .multiple_report import RESOLVED_SE, deviation_text
 from .report_cells import bounds_brief, fmt, signed_pct
 from .report_wave import regime_section
-from .verdict_record import Fit, RunDocument, VariantVerdict
+from .study_records import Fit, RunDocument, VariantVerdict
 from .verdicts import Verdict, as_verdicts, summary_row
 
 __all__ = ["index_report"]

@@ -11,9 +11,9 @@ from typing import ClassVar, Mapping, Sequence
 from microsim.atomic import read_json
 from microsim.errors import UsageError
 
+from .json_record import JsonRecord
 from .markdown import md_table, percent
 from .report_cells import fmt
-from .verdict_record import JsonRecord
 
 __all__ = ["METHODS_COMMAND", "MethodsDocument", "load_methods", "methods_section"]
 

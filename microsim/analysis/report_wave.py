@@ -13,8 +13,7 @@ from microsim.errors import UsageError
 from .markdown import md_table, percent
 from .report_cells import fmt, pct, ranges_text, signed_pct
 from .report_methods import methods_section
-from .study_records import RegimeMaps, WaveSection
-from .verdict_record import RunDocument
+from .study_records import RegimeMaps, RunDocument, WaveSection
 from .wave_verdicts import WaveVerdict
 
 __all__ = ["wave_section", "regime_section"]

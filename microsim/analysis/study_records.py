@@ -1,27 +1,27 @@
-"""The studies of verdicts.json as typed records: ``OrderComparison`` (the scattering orders
-against the multiple-scattering models, ``multiple.order_comparison``), its parts
-(``OrderIncidence``, ``SimOrders``, ``ModelEnergy``), the per-θi rows ``OrderEnergy`` and
-``BounceNeed`` and the run's orders study holding them (``OrdersStudy``); ``WaveSection``, a
-wave scene's closed forms against Kirchhoff, and its ``WaveVerdict`` records (fields:
-``WAVE_VERDICT_SCHEMA``; ``wave_verdicts`` module docstring); ``RegimeMaps``, what the index
-prints of the regime maps; ``AnisotropySummary`` (``anisotropy.anisotropy_summary``) and its
-parts. Each is a frozen dataclass that is also the read-only dict the file holds, in the same
-key order (``DictRecord``): builders read attributes, ``json`` writes it unchanged, and
-``from_json`` reads the dict of a file back."""
+"""A run's verdict document (verdicts.json, docs/verdicts.md) as typed records: the whole
+document (``RunDocument``), its fits (``Fit``, ``FitBound``), the orders study
+(``OrdersStudy``: per θi ``BounceNeed``, and the ``OrderComparison`` of the scattering orders
+against the multiple-scattering models, ``multiple.order_comparison``, with its parts
+``OrderIncidence``, ``SimOrders``, ``ModelEnergy``; the per-θi rows ``OrderEnergy``), the
+wave section (``WaveSection``: a wave scene's closed forms against Kirchhoff, and its
+``WaveVerdict`` records, fields ``WAVE_VERDICT_SCHEMA``), ``RegimeMaps`` (what the index prints
+of the regime maps), the anisotropy study (``AnisotropyStudy``,
+``anisotropy.anisotropy_summary``, and its parts), ``Stability`` and ``Speed``. Each is a
+``JsonRecord``: builders read attributes, ``json`` writes it unchanged, and ``from_json``
+reads the dict of a file back."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from dataclasses import fields as dataclass_fields
 from typing import ClassVar, Mapping, Sequence
 
 from microsim.errors import UsageError
-from microsim.sim.result import FrozenDict, FrozenList
 
+from .json_record import JsonRecord, MapOf, read_nested
 from .verdict_record import Verdict
 
 __all__ = [
-    "DictRecord",
     "MODELS",
     "SimOrders",
     "ModelEnergy",
@@ -35,54 +35,19 @@ __all__ = [
     "WaveVerdict",
     "WaveSection",
     "RegimeMaps",
+    "StandIn",
+    "VariantVerdict",
+    "MissedModel",
     "MissedEnergy",
     "AnisotropyIncidence",
-    "AnisotropySummary",
+    "AnisotropyStudy",
+    "FitBound",
+    "Fit",
+    "Stability",
+    "SpeedRun",
+    "Speed",
+    "RunDocument",
 ]
-
-
-@dataclass(frozen=True, eq=False)
-class DictRecord(FrozenDict):
-    """A frozen record that is also the read-only dict of its fields in declaration order (the
-    fields named in ``OMITTED_IF_NONE`` are left out of the dict when None). ``from_json``
-    reads such a dict back, its nested records converted (``_nested``); a field it lacks (an
-    older or partial document) reads as its ``OLDER_DEFAULTS`` value, else None."""
-
-    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ()
-    OLDER_DEFAULTS: ClassVar[Mapping] = {}
-
-    def __post_init__(self) -> None:
-        for f in dataclass_fields(self):
-            value = getattr(self, f.name)
-            if value is not None or f.name not in self.OMITTED_IF_NONE:
-                dict.__setitem__(self, f.name, value)
-
-    def __reduce__(self):
-        return (_restore, (type(self), dict(self)))
-
-    @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        """``d``'s values with its nested records converted (none here)."""
-        return dict(d)
-
-    @classmethod
-    def from_json(cls, d: Mapping):
-        """The record of dict ``d`` (a record of this class as it is)."""
-        if isinstance(d, cls):
-            return d
-        names = [f.name for f in dataclass_fields(cls)]
-        given = cls._nested({**dict.fromkeys(names), **cls.OLDER_DEFAULTS, **d})
-        return cls(**{k: given[k] for k in names})
-
-
-def _restore(cls, fields: dict):
-    """A pickled or copied record rebuilt from its dict."""
-    return cls.from_json(fields)
-
-
-def _records(cls, items: Mapping) -> FrozenDict:
-    """name → ``cls`` record of each dict in ``items``."""
-    return FrozenDict({k: cls.from_json(v) for k, v in items.items()})
 
 
 # --- the order comparison (multiple.order_comparison) -----------------------------------------
@@ -91,7 +56,7 @@ MODELS = ("random-walk", "kulla-conty", "mikkelsen-eq28")
 
 
 @dataclass(frozen=True, eq=False)
-class SimOrders(DictRecord):
+class SimOrders(JsonRecord):
     """The simulated energies of one incidence (fractions of the incident power ± standard
     errors): per order slot, of orders ≥ 2 (``multiple``), absorbed, cut and lost; where the
     errors come from; the specular share of orders ≥ 2 and the size of its 90 % energy set."""
@@ -114,7 +79,7 @@ class SimOrders(DictRecord):
 
 
 @dataclass(frozen=True, eq=False)
-class ModelEnergy(DictRecord):
+class ModelEnergy(JsonRecord):
     """One model's energy of orders ≥ 2 at one incidence, its energy test against the
     simulation (relative deviation (sim − model)/sim ± se, t, p, threshold, agrees) and its
     lobe errors over the energy set; the random walk's also per order (``orders``,
@@ -144,7 +109,7 @@ class ModelEnergy(DictRecord):
 
 
 @dataclass(frozen=True, eq=False)
-class OrderIncidence(DictRecord):
+class OrderIncidence(JsonRecord):
     """One incidence of an order comparison: the simulation (``sim``), each model (``models``,
     name → ``ModelEnergy``) and the random walk's BRDF verdicts (``walk_verdicts``, "2" and
     "2+" → ``Verdict``)."""
@@ -157,18 +122,15 @@ class OrderIncidence(DictRecord):
     models: Mapping[str, ModelEnergy]
     walk_verdicts: Mapping[str, Verdict]
 
-    @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        return {
-            **d,
-            "sim": SimOrders.from_json(d["sim"]),
-            "models": _records(ModelEnergy, d["models"]),
-            "walk_verdicts": _records(Verdict, d["walk_verdicts"]),
-        }
+    _nested: ClassVar = {
+        "sim": SimOrders,
+        "models": MapOf(ModelEnergy),
+        "walk_verdicts": MapOf(Verdict),
+    }
 
 
 @dataclass(frozen=True, eq=False)
-class OrderComparison(DictRecord):
+class OrderComparison(JsonRecord):
     """The scattering orders of a run against the random walk, Kulla–Conty and Mikkelsen eq. 28
     (``multiple`` module docstring): the settings (NDF, models, material, bounces, walk paths
     and seed, realisations, family level), Mikkelsen's fitted k_d, Kulla–Conty's E_avg (None
@@ -199,14 +161,11 @@ class OrderComparison(DictRecord):
     kulla_conty_e_avg: float | None
     closed_forms_note: str | None
     incidences: Sequence[OrderIncidence]
-
-    @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        return {**d, "incidences": FrozenList(OrderIncidence.from_json(i) for i in d["incidences"])}
+    _nested: ClassVar = {"incidences": OrderIncidence}
 
 
 @dataclass(frozen=True, eq=False)
-class OrderEnergy(DictRecord):
+class OrderEnergy(JsonRecord):
     """The simulated energy per order slot at one incidence, of orders ≥ 2 (``multiple``) and of
     all orders (``reflected``) ± standard errors, and the absorbed, cut and lost energy."""
 
@@ -225,7 +184,7 @@ class OrderEnergy(DictRecord):
 
 
 @dataclass(frozen=True, eq=False)
-class BounceNeed(DictRecord):
+class BounceNeed(JsonRecord):
     """Whether the light of orders ≥ 2 at one incidence exceeds ``threshold`` of the reflected
     energy (``needs``): its fraction ± se and the energy cut at the bounce limit."""
 
@@ -306,7 +265,7 @@ def validate_wave_verdict(d) -> dict:
 
 
 @dataclass(frozen=True, eq=False)
-class WaveVerdict(DictRecord):
+class WaveVerdict(JsonRecord):
     """One wave verdict (every field documented in ``WAVE_VERDICT_SCHEMA``), read by attribute;
     also the read-only dict verdicts.json holds. ``from_json`` reads one back, checked
     (``validate_wave_verdict``)."""
@@ -342,11 +301,11 @@ class WaveVerdict(DictRecord):
         field present)."""
         if isinstance(d, cls):
             return d
-        return cls(**validate_wave_verdict(d))
+        return super().from_json(validate_wave_verdict(d))
 
 
 @dataclass(frozen=True, eq=False)
-class WaveSection(DictRecord):
+class WaveSection(JsonRecord):
     """A wave scene's closed forms against Kirchhoff (verdicts.json "wave"): the Kirchhoff
     solver's settings (wavelength, surface model, upsample, Fresnel angle, tile and σ in
     lengths and wavelengths, tiles used and traced, how its errors are estimated), per θi the
@@ -378,14 +337,11 @@ class WaveSection(DictRecord):
     orders: Sequence[int]
     file: str
     verdicts: Sequence
-
-    @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        return {**d, "verdicts": FrozenList(WaveVerdict.from_json(v) for v in d["verdicts"])}
+    _nested: ClassVar = {"verdicts": WaveVerdict}
 
 
 @dataclass(frozen=True, eq=False)
-class RegimeMaps(DictRecord):
+class RegimeMaps(JsonRecord):
     """The regime maps the index prints (``runner.wave_run.regime_maps``): the maps
     (``regimes.RegimeMap``), one line saying which settings were used and the chart's file
     name (None, and absent from the dict, until it is written)."""
@@ -397,62 +353,9 @@ class RegimeMaps(DictRecord):
     chart: str | None = None
 
 
-# --- the anisotropy summary (anisotropy.anisotropy_summary) -------------------------------------
+# --- the orders study ---------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
-class MissedEnergy(DictRecord):
-    """The energy the single-scattering variants miss at one incidence (``anisotropy`` module
-    docstring): the simulated reflected energy of all orders and of orders ≥ 2 ± se, per
-    variant label {"energy", "missed", "missed_se"}, and the random walk's orders ≥ 2 ± se
-    (None, and absent from the dict, without an order comparison)."""
-
-    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("walk_multiple", "walk_multiple_se")
-
-    reflected: float
-    reflected_se: float
-    multiple: float
-    multiple_se: float
-    models: Mapping[str, Mapping]
-    walk_multiple: float | None = None
-    walk_multiple_se: float | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class AnisotropyIncidence(DictRecord):
-    """One incidence of an anisotropy summary: the stand-in against the exact Λ
-    ({"energy_dev", "rel_rms"}), each variant label against the simulation ({"rel_rms",
-    "energy_dev", "energy_dev_se", "verdict"}) and, for a run with bounces > 1, the energy
-    each misses (``MissedEnergy``; None, and absent from the dict, otherwise)."""
-
-    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("missed",)
-
-    theta_i: float
-    phi_i: float
-    stand_in_vs_exact: Mapping
-    against_simulation: Mapping[str, Mapping]
-    missed: MissedEnergy | None = None
-
-    @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        missed = d.get("missed")
-        return {**d, "missed": None if missed is None else MissedEnergy.from_json(missed)}
-
-
-@dataclass(frozen=True, eq=False)
-class AnisotropySummary(DictRecord):
-    """An anisotropic scene's Smith G variants (verdicts.json "anisotropy"): ``variants``
-    (label → model name) and per incidence an ``AnisotropyIncidence``."""
-
-    variants: Mapping[str, str]
-    incidences: Sequence[AnisotropyIncidence]
-
-    @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        rows = FrozenList(AnisotropyIncidence.from_json(i) for i in d["incidences"])
-        return {**d, "incidences": rows}
-
-
-@dataclass(frozen=True, eq=False)
-class OrdersStudy(DictRecord):
+class OrdersStudy(JsonRecord):
     """The scattering orders of a run traced with bounces > 1 (verdicts.json "orders"): the
     bounce limit, per θi whether orders ≥ 2 matter (``needs``, ``BounceNeed``), the order
     comparison (``OrderComparison``, None without one) and a note saying why not (or None)."""
@@ -461,12 +364,194 @@ class OrdersStudy(DictRecord):
     needs: Sequence[BounceNeed]
     comparison: OrderComparison | None
     note: str | None
+    _nested: ClassVar = {"needs": BounceNeed, "comparison": OrderComparison}
+    OLDER_DEFAULTS: ClassVar[Mapping] = {"needs": ()}
+
+
+# --- the anisotropy study (anisotropy.anisotropy_summary) ----------------------------------------
+@dataclass(frozen=True, eq=False)
+class StandIn(JsonRecord):
+    """The isotropic stand-in against the exact Λ: energy deviation and rel RMS."""
+
+    energy_dev: float | None = None
+    rel_rms: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class VariantVerdict(JsonRecord):
+    """An anisotropic variant against the simulation at one incidence: its ``verdict`` kind,
+    energy deviation (± its standard error) and rel RMS."""
+
+    rel_rms: float | None = None
+    energy_dev: float | None = None
+    energy_dev_se: float | None = None
+    verdict: str = "agrees"
+
+
+@dataclass(frozen=True, eq=False)
+class MissedModel(JsonRecord):
+    """A variant's single-scattering ``energy`` and what it ``missed`` (± ``missed_se``)."""
+
+    energy: float | None = None
+    missed: float | None = None
+    missed_se: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class MissedEnergy(JsonRecord):
+    """The energy the single-scattering variants miss at one incidence (``anisotropy`` module
+    docstring): the simulated reflected energy of all orders and of orders ≥ 2 ± se, per
+    variant label (``models``, ``MissedModel``), and the random walk's orders ≥ 2 ± se (None,
+    and absent from the dict, without an order comparison)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("walk_multiple", "walk_multiple_se")
+
+    reflected: float
+    reflected_se: float
+    multiple: float
+    multiple_se: float
+    models: Mapping[str, MissedModel]
+    walk_multiple: float | None = None
+    walk_multiple_se: float | None = None
+    _nested: ClassVar = {"models": MapOf(MissedModel)}
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropyIncidence(JsonRecord):
+    """One incidence of the anisotropy study: the stand-in against the exact Λ (``StandIn``),
+    each variant label against the simulation (``VariantVerdict``) and, for a run with
+    bounces > 1, the energy each misses (``MissedEnergy``; None, and absent from the dict,
+    otherwise)."""
+
+    OMITTED_IF_NONE: ClassVar[tuple[str, ...]] = ("missed",)
+
+    theta_i: float
+    phi_i: float
+    stand_in_vs_exact: StandIn
+    against_simulation: Mapping[str, VariantVerdict]
+    missed: MissedEnergy | None = None
+    _nested: ClassVar = {
+        "stand_in_vs_exact": StandIn,
+        "against_simulation": MapOf(VariantVerdict),
+        "missed": MissedEnergy,
+    }
+    OLDER_DEFAULTS: ClassVar[Mapping] = {"phi_i": 0.0}
+
+
+@dataclass(frozen=True, eq=False)
+class AnisotropyStudy(JsonRecord):
+    """An anisotropic scene's Smith G variants (verdicts.json "anisotropy"): ``variants``
+    (label → model name) and per incidence an ``AnisotropyIncidence``."""
+
+    variants: Mapping[str, str]
+    incidences: Sequence[AnisotropyIncidence]
+    _nested: ClassVar = {"incidences": AnisotropyIncidence}
+
+
+# --- the fits, the stability and speed studies, and the whole document -------------------------
+@dataclass(frozen=True, eq=False)
+class FitBound(JsonRecord):
+    """A bound of its box a fit ended on: ``param`` at ``bound`` on its ``side`` ("lower",
+    "upper"); ``physical``: a physical bound (else a search limit)."""
+
+    param: str = ""
+    bound: float = 0.0
+    side: str = "lower"
+    physical: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class Fit(JsonRecord):
+    """One fitted model of verdicts.json ``fits`` (``analysis.fits``): its ``params``, Löw's
+    √E1 and √E2, whether the optimiser ``success``-ed and the fit ``converged``, its
+    ``n_starts`` and the bounds it ended on."""
+
+    model: str = ""
+    params: Mapping = field(default_factory=dict)
+    sqrt_e1: float | None = None
+    sqrt_e2: float | None = None
+    success: bool = True
+    converged: bool = True
+    n_starts: int = 1
+    at_bounds: Sequence[FitBound] = ()
+    _nested: ClassVar = {"at_bounds": FitBound}
+
+
+@dataclass(frozen=True, eq=False)
+class Stability(JsonRecord):
+    """verdicts.json ``stability``: the θi sweep (``rays`` each at ``phi_i``), each model's
+    ``rel_rms`` over it, and the estimator's ``warnings``."""
+
+    theta_i: Sequence[float] = ()
+    phi_i: float = 0.0
+    rays: int | None = None
+    rel_rms: Mapping = field(default_factory=dict)
+    warnings: Sequence[str] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedRun(JsonRecord):
+    """One origin strategy of the speed study: its ``rays`` counts and their ``rel_rms``."""
+
+    rays: Sequence[int] = ()
+    rel_rms: Sequence[float] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Speed(JsonRecord):
+    """verdicts.json ``speed``: the speed runs at ``theta_i``, judged against ``reference``,
+    per origin strategy (``runs``)."""
+
+    theta_i: float | None = None
+    phi_i: float = 0.0
+    reference: str | None = None
+    runs: Mapping[str, SpeedRun] = field(default_factory=dict)
+    _nested: ClassVar = {"runs": MapOf(SpeedRun)}
+
+
+@dataclass(frozen=True)
+class RunDocument:
+    """A run's verdict document (``verdicts.json``, docs/verdicts.md) as the reports read it:
+    the scene and its settings, the ``verdicts`` as ``Verdict`` records, the studies as
+    records (``fits``, ``orders``, ``anisotropy``, ``stability``, ``speed``; None or empty
+    when the run has none; ``wave`` stays a JSON object). ``from_json`` reads the dict written (or
+    about to be written) to the file; keys of no field are left out."""
+
+    scene: str = ""
+    verdicts: Sequence[Verdict] = ()
+    scene_file: str | None = None
+    description: str = ""
+    quick: bool = False
+    rays: int | None = None
+    theta_i: Sequence[float] = ()
+    phi_i: Sequence[float] = (0.0,)
+    seed: int | None = None
+    ranking: Sequence[str] = ()
+    outside_domain: Mapping = field(default_factory=dict)
+    fits: Sequence[Fit] = ()
+    wave: Mapping | None = None
+    orders: OrdersStudy | None = None
+    anisotropy: AnisotropyStudy | None = None
+    stability: Stability = field(default_factory=Stability)
+    speed: Speed = field(default_factory=Speed)
 
     @classmethod
-    def _nested(cls, d: Mapping) -> dict:
-        comparison = d.get("comparison")
-        return {
-            **d,
-            "needs": FrozenList(BounceNeed.from_json(n) for n in d.get("needs") or ()),
-            "comparison": None if comparison is None else OrderComparison.from_json(comparison),
-        }
+    def from_json(cls, doc: Mapping) -> "RunDocument":
+        """The record of ``doc`` (a RunDocument as it is); a null study reads as none."""
+        if isinstance(doc, cls):
+            return doc
+        names = {f.name for f in dataclass_fields(cls)}
+        given = {k: v for k, v in doc.items() if k in names and v is not None}
+        given = {k: read_nested(_DOCUMENT_PARTS.get(k), v) for k, v in given.items()}
+        return cls(**given)
+
+
+_DOCUMENT_PARTS = {
+    "verdicts": Verdict,
+    "fits": Fit,
+    "orders": OrdersStudy,
+    "anisotropy": AnisotropyStudy,
+    "stability": Stability,
+    "speed": Speed,
+}
+"""The parts of a verdict document read as records (``read_nested``)."""

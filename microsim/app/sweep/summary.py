@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import ClassVar, Mapping
 
 from ... import atomic
-from ...analysis.verdict_record import JsonRecord, Verdict
+from ...analysis.json_record import JsonRecord
+from ...analysis.verdict_record import Verdict
 from ...errors import EnvironmentFailure
 from .grid import SweepSpec, fmt_num, material_text
 from .task import load_result
