@@ -120,7 +120,7 @@ FILES[0] = ("unknown-top-key", edit("rays = 20_000", "rays = 20_000\nraysx = 1")
 def _one_error_line(capsys):
     cap = capsys.readouterr()
     lines = cap.err.strip().splitlines()
-    assert "Traceback" not in cap.err
+    assert "Traceback" not in cap.err, cap.err  # the whole stderr: the traceback shows the cause
     assert len(lines) == 1, cap.err
     return lines[0]
 
