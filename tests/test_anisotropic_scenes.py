@@ -104,6 +104,7 @@ def test_gaussian_anisotropic_spectrum_and_low_smooth_is_left_out():
         closed_form("low-smooth", aniso_abc, lam, "aluminium")
 
 
+@pytest.mark.slow  # 12–15 s end to end; the default run keeps the elliptical-PSD check above
 @pytest.mark.integration
 def test_the_anisotropic_wave_scene_judges_the_elliptical_rayleigh_rice(tmp_path):
     """The catalogue's anisotropic smooth ABC scene end to end (``--quick``): the Kirchhoff

@@ -153,6 +153,7 @@ def test_run_writes_every_file_and_valid_verdicts(reference):
         assert (out / link).is_file(), link
 
 
+@pytest.mark.slow  # 10 s; test_faults_cli checks an interrupted run resumes bitwise at each phase
 def test_interrupt_then_resume_matches_uninterrupted(reference, tmp_path, capsys):
     """Ctrl-C (the in-process interrupt hook, deterministic) during the second incidence: exit
     130, partial tallies saved, no report; --resume completes them bitwise."""

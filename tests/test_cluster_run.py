@@ -115,6 +115,7 @@ def test_a_bad_cluster_names_the_parameter():
 SCENE = TINY_CLUSTER_SCENE
 
 
+@pytest.mark.slow  # 17–22 s; the default run keeps `measure --scheduler` and the API check
 def test_microsim_run_with_a_scheduler_writes_the_local_result(tmp_path):
     """``microsim run SCENE --scheduler ADDRESS``: the same brdf.npz arrays as the local run,
     and meta.json records the cluster; a bad address is a one-line error (exit 2)."""
