@@ -13,7 +13,8 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from microsim.errors import UsageError
-from microsim.sim.result import FrozenDict
+
+from .json_record import JsonRecord
 
 __all__ = [
     "VERDICT_SCHEMA",
@@ -134,7 +135,7 @@ REFERENCES = ("ray-noise", "realisations", "one-tile")
 
 
 @dataclass(frozen=True, eq=False)
-class Verdict(FrozenDict):
+class Verdict(JsonRecord):
     """One verdict (module docstring; every field documented in ``VERDICT_SCHEMA``), read by
     attribute. It is also a read-only dict of the same fields in the same order — what
     verdicts.json holds — so ``v["rel_rms"]``, ``json.dumps(v)`` and ``==`` with its JSON
@@ -176,12 +177,6 @@ class Verdict(FrozenDict):
     tile_departure: float | None
     departure_max_abs_z: float | None
 
-    def __post_init__(self) -> None:
-        dict.update(self, ((k, getattr(self, k)) for k in _VERDICT_FIELDS))
-
-    def __reduce__(self):
-        return (_restore_verdict, (dict(self),))
-
     @property
     def kind(self) -> str:
         """ "agrees", "deviates" or "inconclusive" (``verdict_kind``)."""
@@ -192,33 +187,27 @@ class Verdict(FrozenDict):
     @classmethod
     def from_json(cls, d: Mapping) -> "Verdict":
         """A verdict read back from verdicts.json, checked (``validate_verdict``); the fields
-        an older file lacks read as ``_OLDER_DEFAULTS`` (a ray-noise verdict, no realisation
+        an older file lacks read as ``OLDER_DEFAULTS`` (a ray-noise verdict, no realisation
         tests)."""
         if isinstance(d, cls):
             return d
-        return cls(**validate_verdict({**_OLDER_DEFAULTS, **d}))
+        return cls(**validate_verdict({**cls.OLDER_DEFAULTS, **d}))
 
 
 _VERDICT_FIELDS = tuple(f.name for f in dataclass_fields(Verdict))
 
 
-_OLDER_DEFAULTS = {
+Verdict.OLDER_DEFAULTS = {  # the fields verdicts.json did not always hold, as they were before
     "reference": "ray-noise",
     "conclusive": True,
     "realisations": 1,
     **dict.fromkeys(_VERDICT_FIELDS[_VERDICT_FIELDS.index("energy_dev") :]),
 }
-"""The fields verdicts.json did not always hold, with the value they had before."""
 
 
 def as_verdicts(verdicts: Iterable[Mapping]) -> list[Verdict]:
     """``verdicts`` as ``Verdict`` records (``Verdict.from_json`` for the dicts of a file)."""
     return [Verdict.from_json(v) for v in verdicts]
-
-
-def _restore_verdict(fields: dict) -> Verdict:
-    """A pickled or copied ``Verdict`` rebuilt from its fields."""
-    return Verdict(**fields)
 
 
 def validate_verdict(d) -> dict:
