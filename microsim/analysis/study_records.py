@@ -512,7 +512,8 @@ class Speed(JsonRecord):
 @dataclass(frozen=True)
 class RunDocument:
     """A run's verdict document (``verdicts.json``, docs/verdicts.md) as the reports read it:
-    the scene and its settings, the ``verdicts`` as ``Verdict`` records, the studies as
+    the scene and its settings (``surface``: its kind, keys and ensemble NDF), the ``verdicts``
+    as ``Verdict`` records, the studies as
     records (``fits``, ``orders``, ``anisotropy``, ``stability``, ``speed``; None or empty
     when the run has none; ``wave`` stays a JSON object). ``from_json`` reads the dict written (or
     about to be written) to the file; keys of no field are left out."""
@@ -521,6 +522,7 @@ class RunDocument:
     verdicts: Sequence[Verdict] = ()
     scene_file: str | None = None
     description: str = ""
+    surface: Mapping | None = None
     quick: bool = False
     rays: int | None = None
     theta_i: Sequence[float] = ()

@@ -134,6 +134,17 @@ def fit_record(fit) -> dict:
     }
 
 
+def surface_record(scene) -> dict:
+    """The ``surface`` of verdicts.json: the ``[surface]`` kind and keys, and the ensemble NDF
+    the nominal models use (its ``name`` and ``params()``; None for file and flat surfaces)."""
+    ndf = scene.ndf()
+    return {
+        "kind": scene.surface.kind,
+        "params": dict(scene.surface.params),
+        "ensemble_ndf": None if ndf is None else {"name": ndf.name, **ndf.params()},
+    }
+
+
 def verdict_document(
     plan: RunPlan,
     result,
@@ -159,6 +170,7 @@ def verdict_document(
         "scene": sc.name,
         "scene_file": str(sc.path),
         "description": sc.description,
+        "surface": surface_record(sc),
         "quick": plan.quick,
         "rays": int(result.rays.max()) if plan.auto else plan.rays,
         "theta_i": list(plan.theta_i),
