@@ -447,6 +447,7 @@ def load_scene(path) -> Scene:
             f'"auto" needs a random surface (kind {", ".join(RANDOM_KINDS)}), '
             f"got kind {surface.kind!r}",
         )
+    surface.check_simulation(where, simulation)
     wave = _wave(where, data.get("wave"), surface, simulation)
     scene = Scene(
         name=name,
@@ -540,6 +541,15 @@ def describe_surface(scene_or_surface) -> str:
         ]
         if "cdf_max_dev" in st:
             rows.append(("tilt CDF distance to NDF", st["cdf_max_dev"], st["cdf_bound"], None))
+    if "slope_ks" in st:  # a heightfield with a stated slope law (surfaces.student_t)
+        crit = st["slope_ks_critical"]
+        rows += [
+            ("|slope| KS distance to its law", st["slope_ks"], crit, None),
+            ("slope azimuth KS distance", st["azimuth_ks"], crit, None),
+            ("independent cells", st["independent_cells"], None, None),
+            ("law's mass beyond max |slope|", st["tail_mass_truncated"], None, None),
+            ("height-|slope| rank correlation", st["height_slope_rank_corr"], None, 0.0),
+        ]
     cells = [[r[0]] + [_fmt(v) for v in r[1:]] for r in rows]
     widths = [max(len(c[i]) for c in cells) for i in range(4)]
     lines = ["  ".join(c[i].ljust(widths[i]) for i in range(4)).rstrip() for c in cells]
@@ -548,5 +558,10 @@ def describe_surface(scene_or_surface) -> str:
         "(slope variances per axis; predicted = mesh-exact; nominal slope variance = "
         "continuum value)"
     ]
+    if "slope_ks" in st:
+        notes.append(
+            "(KS distances: predicted = critical value at level 0.01 for the independent cells, "
+            "tile area / corr_len²)"
+        )
     notes += [f"warning: {w}" for w in surf.warnings]
     return "\n".join(head + lines + notes)
