@@ -26,6 +26,8 @@ DISTRIBUTIONS = [
     an.ABC(100.0, 2.0),
     an.AnisotropicBeckmann(0.1, 0.3, 20.0),
     an.AnisotropicGGX(0.3, 0.1, -35.0),
+    an.StudentT(0.3, 3.0),
+    an.AnisotropicStudentT(0.2, 0.4, 4.0, 30.0),
     an.Empirical(vectors.normalize(_TILTS)),
     an.Empirical(vectors.normalize(_TILTS), isotropic=False),
 ]
@@ -98,6 +100,8 @@ def test_what_a_distribution_lacks_is_declared(ndf):
     [
         (an.AnisotropicBeckmann(0.3, 0.3, 40.0), an.Beckmann(0.3)),
         (an.AnisotropicGGX(0.2, 0.2), an.GGX(0.2)),
+        (an.AnisotropicStudentT(0.2, 0.2, 3.0, 10.0), an.StudentT(0.2, 3.0)),
+        (an.StudentT(0.2, 2.0), an.GGX(0.2)),
     ],
 )
 def test_equal_roughness_makes_the_anisotropic_family_its_isotropic_member(aniso, iso):
@@ -110,17 +114,17 @@ def test_equal_roughness_makes_the_anisotropic_family_its_isotropic_member(aniso
 
 def test_scene_names_are_the_classes_names():
     names = an.scene_distributions()
-    assert names == ("beckmann", "ggx", "blinn-phong", "vmf", "abc")
+    assert names == ("beckmann", "ggx", "blinn-phong", "vmf", "abc", "student-t")
     for name in names:
         cls = an.scene_distribution(name)
         assert cls.name == name
-        params = {k: 0.5 * (1.0 + lo) for k, (lo, _) in cls.scene_params.items()}
+        params = {k: min(lo + 0.5, hi) for k, (lo, hi) in cls.scene_params.items()}
         ndf = make_ndf(name, params)
         assert type(ndf) is cls and ndf.name == name and ndf.params() == params
     assert an.scene_distribution("phong") is an.BlinnPhong
     assert an.scene_distribution("von-mises-fisher") is an.VonMisesFisher
     with pytest.raises(UsageError, match="ndf must be one of beckmann, ggx, blinn-phong"):
-        an.scene_distribution("student-t")
+        an.scene_distribution("cauchy")
 
 
 def test_no_module_probes_a_distribution():

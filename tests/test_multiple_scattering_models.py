@@ -47,7 +47,7 @@ def _vndf_expected(v, ndf, t_edges, p_edges, n_gl=24):
     return cell / rw.visible_projected_area(v, ndf)
 
 
-@pytest.mark.parametrize("ndf", [an.Beckmann(0.5), an.GGX(0.4)], ids=repr)
+@pytest.mark.parametrize("ndf", [an.Beckmann(0.5), an.GGX(0.4), an.StudentT(0.4, 3.0)], ids=repr)
 def test_visible_normals_follow_the_vndf_above_and_below_the_horizon(ndf):
     """Histogram of sampled normals against ⟨v, m⟩⁺D(m)/A(v) for views above and below the
     horizon (below: what a ray going up after a bounce sees); the cells' quadrature also
@@ -102,7 +102,7 @@ def _ts_bins(theta_i, ndf, material=None, bins=BINS):
     return res.values
 
 
-@pytest.mark.parametrize("ndf", [an.Beckmann(0.5), an.GGX(0.3)], ids=repr)
+@pytest.mark.parametrize("ndf", [an.Beckmann(0.5), an.GGX(0.3), an.StudentT(0.4, 3.0)], ids=repr)
 def test_order_one_is_torrance_sparrow_with_height_correlated_smith(ndf):
     """Mirror: order-1 exits are multinomial counts over the bins (plus 'not order 1'); their
     expectation is TS with G2 = 1/(1 + Λi + Λo) bin-averaged by quadrature (rtol 1e-5)."""

@@ -87,7 +87,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from microsim.analytic import GGX, Beckmann
+from microsim.analytic import Beckmann
 from microsim.analytic.brdf import AlbedoTable
 from microsim.analytic.energy_compensation import (
     KullaConty,
@@ -182,8 +182,7 @@ def _check_result(result):
 
 
 @functools.lru_cache(maxsize=8)
-def _cached_table(kind: str, alpha: float, eta) -> AlbedoTable:
-    ndf = Beckmann(alpha) if kind == "beckmann" else GGX(alpha)
+def _cached_table(ndf, eta) -> AlbedoTable:
     return AlbedoTable(ndf, shadowing="smith-correlated", material=eta)
 
 
@@ -191,9 +190,9 @@ def _albedo_table(ndf, material) -> AlbedoTable:
     """Albedo table of Torrance–Sparrow with height-correlated Smith G (Mikkelsen 2009, eq. 27)
     for ``ndf`` and ``material`` (None: F = 1), memoised per (NDF, α, η): a table costs seconds
     and a catalogue compares several results of one surface."""
-    kind, alpha = walk_alpha(ndf)
+    walk_alpha(ndf)  # a UsageError names the distributions the walk takes
     eta = resolve_material(material)
-    return _cached_table(kind, float(alpha), None if eta is None else complex(eta))
+    return _cached_table(ndf, None if eta is None else complex(eta))
 
 
 def _check_material(result, material) -> None:

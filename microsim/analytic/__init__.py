@@ -138,6 +138,10 @@ from .shadowing import (
     smith_g2,
     smith_lambda,
 )
+from .student_t import (
+    AnisotropicStudentT,
+    StudentT,
+)
 
 __all__ = [
     "AnisotropicNDF",
@@ -155,6 +159,8 @@ __all__ = [
     "phong_to_beckmann",
     "AnisotropicBeckmann",
     "AnisotropicGGX",
+    "StudentT",
+    "AnisotropicStudentT",
     "Empirical",
     "fresnel",
     "fresnel_transmittance",

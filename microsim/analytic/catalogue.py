@@ -220,10 +220,11 @@ REPORT_MODELS: tuple[ReportModel, ...] = (
         "Mikkelsen 2009, eq. 25",
     ),
     ReportModel(
-        tuple(f"ts-beckmann-nominal-{g}" for g in _TS_FAMILY),
+        tuple(f"ts-{d}-nominal-{g}" for d in ("beckmann", "ggx", "student-t") for g in _TS_FAMILY),
         "closed form",
-        "heightfields: Torrance–Sparrow with Beckmann at the scene's nominal m, with each G",
-        "TorranceSparrow(Beckmann(m), VGroove() | Smith(...), material)",
+        "heightfields: Torrance–Sparrow with the ensemble NDF (Beckmann at the scene's nominal "
+        "m; GGX or Student-t on Student-t heightfields), with each G",
+        "TorranceSparrow(Beckmann(m) | GGX(α) | StudentT(α, γ), VGroove() | Smith(...), material)",
         "Mikkelsen 2009, eq. 13, 20",
     ),
     ReportModel(

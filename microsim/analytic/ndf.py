@@ -395,6 +395,12 @@ class Beckmann(NDF):
     def params(self) -> dict:
         return {"m": self.m}
 
+    @property
+    def horizon_area(self) -> float:
+        """lim Λ(θ) cos θ as θ → 90°: m/(2√π), the visible facets' projected area per unit
+        macro area for a view at the horizon."""
+        return self.m / (2.0 * _SQRT_PI)
+
     def D_cos(self, cos_theta):
         """D(cos θ) in sr⁻¹, evaluated as exp(−sin²/(c² m²) − 4 ln c)/(π m²); 0 for c ≤ 0."""
         c = _cos_array(cos_theta)
@@ -450,6 +456,11 @@ class GGX(NDF):
 
     def params(self) -> dict:
         return {"alpha": self.alpha}
+
+    @property
+    def horizon_area(self) -> float:
+        """lim Λ(θ) cos θ as θ → 90°: α/2 (as ``Beckmann.horizon_area``)."""
+        return 0.5 * self.alpha
 
     def D_cos(self, cos_theta):
         """D(cos θ) in sr⁻¹; 0 for c ≤ 0."""
@@ -537,15 +548,18 @@ def _beckmann_slope_x(a, u):
     return np.minimum(x, a)
 
 
-def _beckmann_visible(v, alpha, u1, u2):
+def slope_space_visible(v, alpha: float, u1, u2, slopes):
+    """Visible normals by the slope-space method (Heitz & d'Eon 2014) for unit views v (N, 3):
+    v stretched to unit roughness, a = cot θ of the stretched view (clipped to ±``_A_MAX``),
+    ``slopes(a, u1, u2)`` → the unit-roughness visible slopes (x̃ along the view's azimuth, ỹ
+    across), rotated to that azimuth, scaled by α, m = (−x, −y, 1)/‖·‖."""
     vs = np.stack([alpha * v[:, 0], alpha * v[:, 1], v[:, 2]], axis=1)
     vs /= np.linalg.norm(vs, axis=1, keepdims=True)
     rxy = np.hypot(vs[:, 0], vs[:, 1])
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         a = np.clip(vs[:, 2] / rxy, -_A_MAX, _A_MAX)  # cot θ of the stretched direction
     a = np.where(rxy > 0, a, np.sign(vs[:, 2]) * _A_MAX)
-    x = _beckmann_slope_x(a, u1)
-    y = special.erfinv(2.0 * u2 - 1.0)
+    x, y = slopes(a, u1, u2)
     safe = rxy > 0
     cphi = np.where(safe, vs[:, 0] / np.where(safe, rxy, 1.0), 1.0)
     sphi = np.where(safe, vs[:, 1] / np.where(safe, rxy, 1.0), 0.0)
@@ -553,6 +567,15 @@ def _beckmann_visible(v, alpha, u1, u2):
     sy = alpha * (sphi * x + cphi * y)
     m = np.stack([-sx, -sy, np.ones_like(sx)], axis=1)
     return m / np.linalg.norm(m, axis=1, keepdims=True)
+
+
+def _beckmann_slopes(a, u1, u2):
+    """Unit-roughness Beckmann visible slopes: x̃ by inversion, ỹ ~ N(0, 1/2)."""
+    return _beckmann_slope_x(a, u1), special.erfinv(2.0 * u2 - 1.0)
+
+
+def _beckmann_visible(v, alpha, u1, u2):
+    return slope_space_visible(v, alpha, u1, u2, _beckmann_slopes)
 
 
 def _ggx_visible(v, alpha, u1, u2):

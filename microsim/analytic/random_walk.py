@@ -99,6 +99,7 @@ from microsim.errors import UsageError
 from .anisotropic import AnisotropicNDF
 from .fresnel import fresnel, resolve_material
 from .ndf import GGX, Beckmann
+from .student_t import StudentT
 
 __all__ = [
     "HEIGHT_DISTRIBUTIONS",
@@ -160,19 +161,26 @@ def tau_from_height(h, heights: str = "uniform"):
 
 # --- NDF ---------------------------------------------------------------------------------------
 def walk_alpha(ndf) -> tuple[str, float]:
-    """("beckmann" | "ggx", α) of an isotropic NDF the walk supports (α = m for Beckmann), else
-    UsageError (the walk itself also takes anisotropic ones: ``WalkNDF``)."""
+    """(name, α) of an isotropic NDF the walk supports ("beckmann" with α = m, "ggx",
+    "student-t"), else UsageError (the walk itself also takes anisotropic ones: ``WalkNDF``)."""
     if isinstance(ndf, Beckmann):
-        return "beckmann", float(ndf.m)
-    if isinstance(ndf, GGX):
-        return "ggx", float(ndf.alpha)
+        return ndf.name, float(ndf.m)
+    if isinstance(ndf, (GGX, StudentT)):
+        return ndf.name, float(ndf.alpha)
     raise UsageError(
-        f"ndf must be an isotropic Beckmann or GGX NDF (closed Smith Λ and visible-normal "
-        f"sampling), got {ndf!r}"
+        f"ndf must be an isotropic Beckmann, GGX or Student-t NDF (closed Smith Λ and "
+        f"visible-normal sampling), got {ndf!r}"
     )
 
 
-WALK_NDFS = ("Beckmann", "GGX", "AnisotropicBeckmann", "AnisotropicGGX")
+WALK_NDFS = (
+    "Beckmann",
+    "GGX",
+    "StudentT",
+    "AnisotropicBeckmann",
+    "AnisotropicGGX",
+    "AnisotropicStudentT",
+)
 """The NDFs the walk takes: those with a closed Smith Λ of every direction and an exact
 visible-normal sampler for views on either side of the horizon."""
 
@@ -184,7 +192,7 @@ def _lambda_up(ndf, cos_abs):
 
 def _walk_family(ndf) -> tuple[str, float | None]:
     """(family, isotropic α or None) of an NDF of ``WALK_NDFS``, else UsageError."""
-    if isinstance(ndf, (Beckmann, GGX)):
+    if isinstance(ndf, (Beckmann, GGX, StudentT)):
         return walk_alpha(ndf)
     if isinstance(ndf, AnisotropicNDF):
         return walk_alpha(ndf.isotropic_equivalent())[0], None
@@ -197,11 +205,11 @@ def _walk_family(ndf) -> tuple[str, float | None]:
 @dataclass(frozen=True)
 class WalkNDF:
     """What the walk asks of its NDF (module docstring, "Anisotropic surfaces"): the Smith Λ of
-    a flight direction (``lambda_up``), the roughness a direction sees (``roughness_seen``) and
-    visible normals (``visible``). ``ndf``: one of ``WALK_NDFS``; ``family``: "beckmann" |
-    "ggx"; ``alpha``: the isotropic roughness (α = m for Beckmann), None for an anisotropic NDF
-    (checked against ``ndf``; ``WalkNDF.of(ndf)`` fills them in). Visible normals come from the
-    distribution's own sampler (``sample_visible``)."""
+    a flight direction (``lambda_up``), the projected area at the horizon (``horizon_area``)
+    and visible normals (``visible``). ``ndf``: one of ``WALK_NDFS``; ``family``: "beckmann" |
+    "ggx" | "student-t"; ``alpha``: the isotropic roughness (α = m for Beckmann), None for an
+    anisotropic NDF (checked against ``ndf``; ``WalkNDF.of(ndf)`` fills them in). Visible
+    normals come from the distribution's own sampler (``sample_visible``)."""
 
     ndf: object
     family: str
@@ -232,11 +240,12 @@ class WalkNDF:
         up = np.stack([w[..., 0], w[..., 1], np.abs(w[..., 2])], axis=-1)
         return self.ndf.smith_lambda_w(up)
 
-    def roughness_seen(self, w):
-        """α for an isotropic NDF, the projected roughness α(φ'_w) for an anisotropic one."""
+    def horizon_area(self, w):
+        """lim Λ cos θ at the horizon in w's azimuth (the distribution's ``horizon_area``; for
+        an anisotropic one that of its unit-roughness member times the roughness w sees)."""
         if self.alpha is not None:
-            return self.alpha
-        return self.ndf.projected_alpha(w)
+            return self.ndf.horizon_area
+        return self.ndf.isotropic_at(1.0).horizon_area * self.ndf.projected_alpha(w)
 
     def visible(self, v, u1, u2):
         """Facet normals m ~ D_v(m) for unit views v (N, 3) of either hemisphere and uniforms
@@ -255,10 +264,9 @@ def visible_projected_area(v, ndf):
     lam = walk.lambda_up(v)
     with np.errstate(invalid="ignore"):
         out = np.where(c >= 0, (1.0 + lam) * c, lam * np.abs(c))
-    # at the horizon Λ|v_z| → α/(2√π) (Beckmann), α/2 (GGX), α the roughness v sees
-    alpha = walk.roughness_seen(v)
-    horizon = alpha / (2.0 * _SQRT_PI) if walk.family == "beckmann" else 0.5 * alpha
-    return np.where(c == 0.0, horizon, out)
+    # at the horizon Λ|v_z| → α/(2√π) (Beckmann), α/2 (GGX), K(γ)α (Student-t), α the
+    # roughness v sees
+    return np.where(c == 0.0, walk.horizon_area(v), out)
 
 
 def sample_visible_normals(v, ndf, u1, u2):

@@ -25,8 +25,11 @@ Surfaces with an exact shadowing and no NDF (the flat mirror, exact shadowing "n
 Surfaces without an exact shadowing (heightfields: ``gaussian``, ``abc``, ``file``;
 m_nom = the ensemble NDF's Beckmann m — Gaussian 2σ/ℓ, ABC the predicted mesh m —,
 m_real = ``surface.stats()["m_realised"]``):
-  ``ts-beckmann-nominal-{vgroove,smith,smith-corr}``    the ensemble NDF (none for ``file``)
-  ``ts-beckmann-realised-{vgroove,smith,smith-corr}``   Beckmann(m_real)
+  ``ts-beckmann-nominal-{vgroove,smith,smith-corr}``    the ensemble NDF (none for ``file``);
+                        ``ts-ggx-nominal-*``, ``ts-student-t-nominal-*`` for Student-t
+                        heightfields (``ensemble_family``)
+  ``ts-beckmann-realised-{vgroove,smith,smith-corr}``   Beckmann(m_real) (Beckmann ensembles
+                        and ``file`` only: the slope variance of GGX is infinite)
   ``ts-facets``         D = the surface's own facets (Empirical), height-correlated Smith G with
                         the facets' own Λ
   For random scenes run over several realisations, ``ts-facets`` and m_real pool all of them
@@ -165,6 +168,13 @@ def _m_of(stats) -> float:
     return float(np.sqrt(np.mean([st["slope_var_x"] + st["slope_var_y"] for st in stats])))
 
 
+def ensemble_family(ndf) -> str:
+    """The distribution family naming a heightfield's ensemble models (``ts-<family>-nominal-*``):
+    the ``name`` of the NDF, of its isotropic member for an anisotropic one ("beckmann", "ggx",
+    "student-t")."""
+    return (ndf.isotropic_at(1.0) if isinstance(ndf, AnisotropicNDF) else ndf).name
+
+
 def default_models(
     scene_or_surface, material, ndf=None, *, azimuths: int | None = None
 ) -> list[Predictor]:
@@ -212,12 +222,13 @@ def default_models(
         facets = Predictor.facets("ts-facets", normals, weights, exact, material, copies)
         # the same closed form with the ensemble NDF: the pair measures the tile's departure
         return specs + [_tagged(facets, surfaces, ensemble=f"ts-{SHADOWING_SUFFIX[exact]}")]
-    ndfs = [("realised", realised)]
-    if ndf is not None:
-        ndfs.insert(0, ("nominal", ndf))
+    family = "beckmann" if ndf is None else ensemble_family(ndf)
+    ndfs = [(family, "nominal", ndf)] if ndf is not None else []
+    if family == "beckmann":  # a Beckmann m fitted to the slope variance (infinite for GGX)
+        ndfs.append(("beckmann", "realised", realised))
     specs = [
-        Predictor(f"ts-beckmann-{label}-{SHADOWING_SUFFIX[k]}", TorranceSparrow(d, k, material))
-        for label, d in ndfs
+        Predictor(f"ts-{fam}-{label}-{SHADOWING_SUFFIX[k]}", TorranceSparrow(d, k, material))
+        for fam, label, d in ndfs
         for k in kinds
     ]
     if isinstance(ndf, AnisotropicNDF):  # anisotropic ensemble
