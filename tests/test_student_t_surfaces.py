@@ -204,3 +204,13 @@ def test_cli_surface_prints_the_slope_law_statistics(tmp_path, capsys, kind):
     assert float(critical) == pytest.approx(st["slope_ks_critical"], rel=1e-5)
     assert int(rows["independent cells"][-3]) == st["independent_cells"]
     assert "height-|slope| rank correlation" in rows
+
+
+def test_vgrooves_with_student_t_tilts_describe(tmp_path, capsys):
+    path = tmp_path / "vg.toml"
+    path.write_text(
+        '[surface]\nkind = "vgrooves"\nn_grooves = 400\nndf = "student-t"\nalpha = 0.3\ngamma = 3\n'
+    )
+    status, out, err = run_cli(capsys, "surface", path)
+    assert status == 0, err
+    assert "ndf = student-t" in out and "tilt CDF distance to NDF" in out

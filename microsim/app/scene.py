@@ -8,7 +8,8 @@ Schema (every key optional unless marked required; unknown keys are errors)::
                                        # letters, digits, ".", "_", "-", not starting with "."
     description = "..."
     [surface]
-    kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat
+    kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat |
+                                       # student-t-transform | student-t-mixture
     # vgrooves: n_grooves = 4000 (at most 1 000 000), ndf (required) = beckmann | ggx |
     #           blinn-phong | vmf | abc with its parameter m | alpha (in [1e-6, 10]) |
     #           e | kappa (in [1e-6, 1e12]) | B and C (in [1e-6, 1e6]) (required),
@@ -18,6 +19,10 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     # abc:      n = 512 (8 … 4096), dx = 1.0, sigma, B, C (required), band_limit = 4,
     #           exact_amplitude = true; anisotropic: B_y (B along the y' axis), rotation = 0
     #           (degrees, the x' axis from x)
+    # student-t-transform: n, dx, alpha, gamma (in [2, 1e6]), corr_len (>= dx; required),
+    #           exact_amplitude = true; anisotropic: alpha_y, rotation = 0
+    # student-t-mixture: n, dx, alpha, gamma, corr_len, exact_amplitude, patches = 16
+    #           (realisations must be a multiple of patches)
     # file:     path (required; relative to the scene file; .npy, .npz or text, a real 2D
     #           array of at least 8 x 8 and at most 4096 x 4096 finite heights, not all
     #           equal, checked when the scene is loaded), dx (required), periodic = false
