@@ -8,7 +8,8 @@ Schema (every key optional unless marked required; unknown keys are errors)::
                                        # letters, digits, ".", "_", "-", not starting with "."
     description = "..."
     [surface]
-    kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat
+    kind = "vgrooves"                  # required: vgrooves | gaussian | abc | file | flat |
+                                       # student-t-transform | student-t-mixture
     # vgrooves: n_grooves = 4000 (at most 1 000 000), ndf (required) = beckmann | ggx |
     #           blinn-phong | vmf | abc with its parameter m | alpha (in [1e-6, 10]) |
     #           e | kappa (in [1e-6, 1e12]) | B and C (in [1e-6, 1e6]) (required),
@@ -18,6 +19,10 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     # abc:      n = 512 (8 … 4096), dx = 1.0, sigma, B, C (required), band_limit = 4,
     #           exact_amplitude = true; anisotropic: B_y (B along the y' axis), rotation = 0
     #           (degrees, the x' axis from x)
+    # student-t-transform: n, dx, alpha, gamma (in [2, 1e6]), corr_len (>= dx; required),
+    #           exact_amplitude = true; anisotropic: alpha_y, rotation = 0
+    # student-t-mixture: n, dx, alpha, gamma, corr_len, exact_amplitude, patches = 16
+    #           (realisations must be a multiple of patches)
     # file:     path (required; relative to the scene file; .npy, .npz or text, a real 2D
     #           array of at least 8 x 8 and at most 4096 x 4096 finite heights, not all
     #           equal, checked when the scene is loaded), dx (required), periodic = false
@@ -447,6 +452,7 @@ def load_scene(path) -> Scene:
             f'"auto" needs a random surface (kind {", ".join(RANDOM_KINDS)}), '
             f"got kind {surface.kind!r}",
         )
+    surface.check_simulation(where, simulation)
     wave = _wave(where, data.get("wave"), surface, simulation)
     scene = Scene(
         name=name,
@@ -540,6 +546,15 @@ def describe_surface(scene_or_surface) -> str:
         ]
         if "cdf_max_dev" in st:
             rows.append(("tilt CDF distance to NDF", st["cdf_max_dev"], st["cdf_bound"], None))
+    if "slope_ks" in st:  # a heightfield with a stated slope law (surfaces.student_t)
+        crit = st["slope_ks_critical"]
+        rows += [
+            ("|slope| KS distance to its law", st["slope_ks"], crit, None),
+            ("slope azimuth KS distance", st["azimuth_ks"], crit, None),
+            ("independent cells", st["independent_cells"], None, None),
+            ("law's mass beyond max |slope|", st["tail_mass_truncated"], None, None),
+            ("height-|slope| rank correlation", st["height_slope_rank_corr"], None, 0.0),
+        ]
     cells = [[r[0]] + [_fmt(v) for v in r[1:]] for r in rows]
     widths = [max(len(c[i]) for c in cells) for i in range(4)]
     lines = ["  ".join(c[i].ljust(widths[i]) for i in range(4)).rstrip() for c in cells]
@@ -548,5 +563,10 @@ def describe_surface(scene_or_surface) -> str:
         "(slope variances per axis; predicted = mesh-exact; nominal slope variance = "
         "continuum value)"
     ]
+    if "slope_ks" in st:
+        notes.append(
+            "(KS distances: predicted = critical value at level 0.01 for the independent cells, "
+            "tile area / corr_len²)"
+        )
     notes += [f"warning: {w}" for w in surf.warnings]
     return "\n".join(head + lines + notes)

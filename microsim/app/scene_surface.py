@@ -13,8 +13,13 @@ from typing import Any, ClassVar, Mapping
 from microsim import analytic as an
 from microsim import surfaces
 from microsim.errors import UsageError
-from microsim.surfaces.heightfields import abc_ensemble_ndf, gaussian_ensemble_ndf
+from microsim.surfaces.heightfields import (
+    MAX_RMS_SLOPE,
+    abc_ensemble_ndf,
+    gaussian_ensemble_ndf,
+)
 from microsim.surfaces.loader import check_heightfield_file
+from microsim.surfaces.student_t import student_t_mixture, student_t_transform
 
 from .scene_checks import (
     ANGLE,
@@ -38,6 +43,8 @@ __all__ = [
     "VGrooveSurface",
     "GaussianSurface",
     "ABCSurface",
+    "StudentTTransformSurface",
+    "StudentTMixtureSurface",
     "FileSurface",
     "FlatSurface",
     "SURFACE_TYPES",
@@ -125,6 +132,9 @@ class SurfaceSpec:
     def check(self, where: str) -> None:
         """Checks across keys (after each key's own), a ``SceneError`` naming ``where``."""
 
+    def check_simulation(self, where: str, simulation) -> None:
+        """Checks of the scene's ``SimSettings`` that this surface needs (none by default)."""
+
     @property
     def params(self) -> Mapping[str, Any]:
         """The table's keys and values (without ``kind``; read-only), as runs record them."""
@@ -146,6 +156,17 @@ def _scene_ndf(where, name):
     except UsageError as e:
         message = str(e).removeprefix("ndf ")
     fail(where, "surface.ndf", message)
+
+
+def _check_resolved(where, key, corr_len, dx) -> None:
+    """A correlation length the grid resolves (>= dx), else a SceneError naming ``key``."""
+    if corr_len < dx:
+        fail(
+            where,
+            key,
+            f"must be >= dx = {dx:g} (a shorter correlation length is not resolved by the "
+            f"grid), got {corr_len:g}",
+        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -236,18 +257,12 @@ class GaussianSurface(_Heightfield):
     rotation: float = _key(ANGLE, 0.0)
 
     def check(self, where):
-        if self.corr_len < self.dx:
-            fail(
-                where,
-                "surface.corr_len",
-                f"must be >= dx = {self.dx:g} (a shorter "
-                f"correlation length is not resolved by the grid), got {self.corr_len:g}",
-            )
-        if 2.0 * self.sigma / self.corr_len > 10.0:
+        _check_resolved(where, "surface.corr_len", self.corr_len, self.dx)
+        if 2.0 * self.sigma / self.corr_len > MAX_RMS_SLOPE:
             fail(
                 where,
                 "surface.sigma",
-                f"rms slope 2 sigma / corr_len must be <= 10, got "
+                f"rms slope 2 sigma / corr_len must be <= {MAX_RMS_SLOPE:g}, got "
                 f"{2.0 * self.sigma / self.corr_len:.3g} (sigma = "
                 f"{self.sigma:g}, corr_len = {self.corr_len:g})",
             )
@@ -277,6 +292,76 @@ class ABCSurface(_Heightfield):
         )
 
 
+_ALPHA: Check = num_in(*an.StudentT.scene_params["alpha"])
+_GAMMA: Check = num_in(*an.StudentT.scene_params["gamma"])
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudentTTransformSurface(_Heightfield):
+    """``surfaces.student_t_transform``: a Gaussian field of correlation length ``corr_len``
+    mapped so that its facet slopes follow the Student-t distribution (``alpha``, ``gamma``;
+    ``alpha_y`` across, the axes turned by ``rotation`` degrees)."""
+
+    kind: ClassVar[str] = "student-t-transform"
+    generator: ClassVar[Any] = staticmethod(student_t_transform)
+    alpha: float = _key(_ALPHA, real=True)
+    gamma: float = _key(_GAMMA, real=True)
+    corr_len: float = _key(LENGTH, real=True)
+    exact_amplitude: bool = _key(BOOL, True)
+    alpha_y: float | None = _key(_ALPHA, None)
+    rotation: float = _key(ANGLE, 0.0)
+
+    def check(self, where):
+        _check_resolved(where, "surface.corr_len", self.corr_len, self.dx)
+        if self.alpha_y is not None:
+            across = self.corr_len * self.alpha / self.alpha_y
+            if across < self.dx:
+                fail(
+                    where,
+                    "surface.alpha_y",
+                    f"the correlation length across, corr_len·alpha/alpha_y = {across:g}, "
+                    f"must be >= dx = {self.dx:g} (resolved by the grid); got alpha_y = "
+                    f"{self.alpha_y:g}",
+                )
+
+    def ensemble_ndf(self):
+        if self.alpha_y is None:
+            return an.StudentT(self.alpha, self.gamma)
+        return an.AnisotropicStudentT(self.alpha, self.alpha_y, self.gamma, self.rotation)
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudentTMixtureSurface(_Heightfield):
+    """``surfaces.student_t_mixture``: realisation seed s is patch s mod ``patches`` of the
+    Student-t (``alpha``, ``gamma``) as a Gamma mixture of Gaussian heightfields of correlation
+    length ``corr_len``; the realisations must be a multiple of ``patches``."""
+
+    kind: ClassVar[str] = "student-t-mixture"
+    generator: ClassVar[Any] = staticmethod(student_t_mixture)
+    alpha: float = _key(_ALPHA, real=True)
+    gamma: float = _key(_GAMMA, real=True)
+    corr_len: float = _key(LENGTH, real=True)
+    patches: int = _key(int_in(1, 1000), 16)
+    exact_amplitude: bool = _key(BOOL, True)
+
+    def check(self, where):
+        _check_resolved(where, "surface.corr_len", self.corr_len, self.dx)
+
+    def check_simulation(self, where, simulation):
+        n = simulation.realisations
+        if n == "auto" or n % self.patches:
+            fail(
+                where,
+                "simulation.realisations",
+                f"must be a multiple of surface.patches = {self.patches} (each run of "
+                f"{self.patches} consecutive seeds covers every stratum of the mixture once), "
+                f"got {n!r}",
+            )
+
+    def ensemble_ndf(self):
+        return an.StudentT(self.alpha, self.gamma)
+
+
 @dataclass(frozen=True, kw_only=True)
 class FileSurface(SurfaceSpec):
     """``surfaces.from_file``: the heightfield file ``path`` (relative to the scene file),
@@ -303,7 +388,18 @@ class FlatSurface(SurfaceSpec):
 
 
 SURFACE_TYPES: Mapping[str, type[SurfaceSpec]] = MappingProxyType(
-    {c.kind: c for c in (VGrooveSurface, GaussianSurface, ABCSurface, FileSurface, FlatSurface)}
+    {
+        c.kind: c
+        for c in (
+            VGrooveSurface,
+            GaussianSurface,
+            ABCSurface,
+            StudentTTransformSurface,
+            StudentTMixtureSurface,
+            FileSurface,
+            FlatSurface,
+        )
+    }
 )
 SURFACE_KINDS = tuple(SURFACE_TYPES)
 RANDOM_KINDS = tuple(k for k, c in SURFACE_TYPES.items() if c.random)

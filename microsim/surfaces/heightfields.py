@@ -59,6 +59,8 @@ __all__ = [
 
 MIN_GRID = 8
 GAUSS_MIN_CORR_CELLS = 7.0  # ℓ ≥ 7·dx keeps the triangulation slope bias under 1 %
+MAX_RMS_SLOPE = 10.0
+"""Largest nominal rms slope 2σ/ℓ of a Gaussian heightfield a scene may ask for."""
 GAUSS_RESOLVED_CELLS = 1.0
 """Shortest Gaussian ℓ, in grid steps, that the grid resolves: the synthesis keeps the spectrum
 up to the Nyquist frequency 1/(2dx), i.e. erf(πℓ/(2dx))² of σ² — 95 % at ℓ = dx, 18 % at dx/4,

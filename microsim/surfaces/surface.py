@@ -49,6 +49,7 @@ _ANISOTROPIC = {
     "vgrooves": ("oriented", "oriented V-grooves"),
     "gaussian": ("corr_len_y", "a Gaussian field with two correlation lengths"),
     "abc": ("B_y", "an ABC field with two B"),
+    "student-t-transform": ("alpha_y", "a Student-t field with two alphas"),
     "grating": (None, "a grating, its grooves along y"),
 }
 """Surface kind → (the generator parameter that makes it anisotropic, None: always; what it
