@@ -19,7 +19,11 @@ from microsim.surfaces.heightfields import (
     gaussian_ensemble_ndf,
 )
 from microsim.surfaces.loader import check_heightfield_file
-from microsim.surfaces.student_t import student_t_mixture, student_t_transform
+from microsim.surfaces.student_t import (
+    student_t_ensemble,
+    student_t_mixture,
+    student_t_transform,
+)
 
 from .scene_checks import (
     ANGLE,
@@ -325,9 +329,7 @@ class StudentTTransformSurface(_Heightfield):
                 )
 
     def ensemble_ndf(self):
-        if self.alpha_y is None:
-            return an.StudentT(self.alpha, self.gamma)
-        return an.AnisotropicStudentT(self.alpha, self.alpha_y, self.gamma, self.rotation)
+        return student_t_ensemble(self.alpha, self.gamma, self.alpha_y, self.rotation)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -359,7 +361,7 @@ class StudentTMixtureSurface(_Heightfield):
             )
 
     def ensemble_ndf(self):
-        return an.StudentT(self.alpha, self.gamma)
+        return student_t_ensemble(self.alpha, self.gamma)
 
 
 @dataclass(frozen=True, kw_only=True)

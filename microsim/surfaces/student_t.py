@@ -25,7 +25,7 @@ from scipy.integrate import cumulative_simpson
 from scipy.interpolate import CubicHermiteSpline
 from scipy.special import gammainc, gammainccinv, gammaincinv, ndtr
 
-from microsim.analytic import AnisotropicStudentT, Beckmann, StudentT
+from microsim.analytic import GGX, AnisotropicGGX, AnisotropicStudentT, Beckmann, StudentT
 from microsim.checks import finite, integer, positive
 from microsim.errors import UsageError
 
@@ -48,6 +48,7 @@ from .surface import Surface, facet_slopes
 __all__ = [
     "student_t_transform",
     "student_t_mixture",
+    "student_t_ensemble",
     "height_transform",
     "gamma_weight",
     "mixture_patch_m",
@@ -69,13 +70,23 @@ KS_LEVEL = 0.01
 """Level of the Kolmogorov–Smirnov critical value ``SlopeLaw`` reports."""
 
 
+def student_t_ensemble(alpha: float, gamma: float, alpha_y: float | None = None, rotation=0.0):
+    """The distribution a Student-t surface samples, as its models name it: GGX (``GGX``,
+    ``AnisotropicGGX``) at γ = 2, else ``StudentT`` / ``AnisotropicStudentT``."""
+    if alpha_y is None:
+        return GGX(alpha) if gamma == 2.0 else StudentT(alpha, gamma)
+    if gamma == 2.0:
+        return AnisotropicGGX(alpha, alpha_y, rotation)
+    return AnisotropicStudentT(alpha, alpha_y, gamma, rotation)
+
+
 def gamma_weight(g, gamma: float):
-    """w(g) = GammaInv_{γ−1}(Φ(−g)): the Gamma(γ − 1, 1) variable a unit normal g maps to,
-    decreasing in g (high g, the peaks, get small w: rough). Evaluated with the upper inverse
-    gammainccinv(γ − 1, Φ(g)) for g ≤ 0, where Φ(−g) is close to 1."""
+    """w(g) = GammaInv_{γ−1}(Φ(g)): the Gamma(γ − 1, 1) variable a unit normal g maps to,
+    increasing in g (low g, the valleys, get small w: rough). Evaluated with the upper inverse
+    gammainccinv(γ − 1, Φ(−g)) for g > 0, where Φ(g) is close to 1."""
     g = np.asarray(g, dtype=np.float64)
     a = gamma - 1.0
-    return np.where(g > 0, gammaincinv(a, ndtr(-g)), gammainccinv(a, ndtr(g)))
+    return np.where(g < 0, gammaincinv(a, ndtr(g)), gammainccinv(a, ndtr(-g)))
 
 
 def height_transform(gamma: float, scale: float) -> CubicHermiteSpline:
@@ -85,8 +96,12 @@ def height_transform(gamma: float, scale: float) -> CubicHermiteSpline:
     variance α²(γ−1)/(2w): the STD."""
     g = np.arange(-TRANSFORM_G_MAX, TRANSFORM_G_MAX + 0.5 * TRANSFORM_G_STEP, TRANSFORM_G_STEP)
     dT = scale * np.sqrt((gamma - 1.0) / (2.0 * gamma_weight(g, gamma)))
-    T = cumulative_simpson(dT, x=g, initial=0.0)
-    return CubicHermiteSpline(g, T - T[len(g) // 2], dT)
+    # integrated outwards from g = 0 on each side, so that the huge values of the rough end
+    # never enter (by rounding) the small increments of the smooth end
+    mid = len(g) // 2
+    right = cumulative_simpson(dT[mid:], x=g[mid:], initial=0.0)
+    left = -cumulative_simpson(dT[: mid + 1][::-1], x=-g[: mid + 1][::-1], initial=0.0)[::-1]
+    return CubicHermiteSpline(g, np.concatenate([left[:-1], right]), dT)
 
 
 @dataclass(frozen=True)
@@ -209,14 +224,18 @@ def student_t_transform(
 
     A unit-variance Gaussian field g (autocorrelation exp(−r²/ℓ²), ℓ = ``corr_len``, synthesised
     as ``heightfields.gaussian``) is mapped by h = T(g) (``height_transform``), T′(g)² v_g =
-    α²(γ−1)/(2 w(g)), w(g) = GammaInv_{γ−1}(Φ(−g)) (``gamma_weight``) and v_g the per-axis
+    α²(γ−1)/(2 w(g)), w(g) = GammaInv_{γ−1}(Φ(g)) (``gamma_weight``) and v_g the per-axis
     *mesh* slope variance of g (exact from the discrete spectrum, ``spectrum_moments``). At a
     point g and ∇g are independent and w(g) ~ Gamma(γ − 1), so the slope T′(g)∇g is exactly
     STD in the continuum; the mesh differences T over one grid step, which blurs the far tail
-    where T′ changes within a step (``SlopeLaw`` measures the realised law). Φ(−g) puts the
-    rough parts (small w) on the peaks: heights and |slope| are correlated by construction,
-    so Smith's uncorrelated-heights assumption does not hold (``stats()``'
-    ``height_slope_rank_corr``).
+    where T′ changes within a step (``SlopeLaw`` measures the realised law). Φ(g) puts the
+    rough parts (small w) in the valleys: heights and |slope| are (anti-)correlated by
+    construction, so Smith's uncorrelated-heights assumption does not hold (``stats()``'
+    ``height_slope_rank_corr``). The mirror choice, rough peaks, is the same slope law on the
+    upside-down surface, but its heavy tail becomes spires far above the rest of the tile (z
+    max ≈ 100 × the rms height on a 512² GGX tile) that shadow the tile at grazing incidence
+    and slow the periodic ray walk ~25× (every masking ray must climb above them); rough
+    valleys keep the top of the tile that of a Gaussian field.
 
     Anisotropic (``alpha_y`` given): g has correlation lengths ℓ and ℓ·α/αy along axes rotated
     by ``rotation`` degrees, so its slope variances there stand as αx² : αy²; T′ uses their
@@ -228,11 +247,11 @@ def student_t_transform(
     alpha, corr_len = positive("alpha", alpha), positive("corr_len", corr_len)
     rotation = finite("rotation", rotation)
     if alpha_y is None:
-        ensemble, corr_len_y = StudentT(alpha, gamma), None
+        ensemble, corr_len_y = student_t_ensemble(alpha, gamma), None
         _check_corr_len(dx, corr_len=corr_len)
     else:
         alpha_y = positive("alpha_y", alpha_y)
-        ensemble = AnisotropicStudentT(alpha, alpha_y, gamma, rotation)
+        ensemble = student_t_ensemble(alpha, alpha_y=alpha_y, gamma=gamma, rotation=rotation)
         corr_len_y = corr_len * alpha / alpha_y
         _check_corr_len(dx, corr_len=corr_len, **{"corr_len·alpha/alpha_y": corr_len_y})
     gamma = float(gamma)
@@ -308,7 +327,7 @@ def student_t_mixture(
     n, dx, seed = _grid_args(n, dx, seed)
     alpha, corr_len = positive("alpha", alpha), positive("corr_len", corr_len)
     patches = integer("patches", patches, 1, None, " (Gamma strata of the mixture)")
-    ensemble = StudentT(alpha, gamma)
+    ensemble = student_t_ensemble(alpha, gamma)
     gamma = float(gamma)
     _check_corr_len(dx, corr_len=corr_len)
     *_, mom = _unit_sigma_field(n, dx, corr_len, None, 0.0)
