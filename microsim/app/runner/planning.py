@@ -91,7 +91,13 @@ class Effort:
 FULL = Effort()
 QUICK = Effort(
     max_rays=200_000,
-    scale=(("vgrooves", 0.25), ("gaussian", 0.5), ("abc", 0.5)),
+    scale=(
+        ("vgrooves", 0.25),
+        ("gaussian", 0.5),
+        ("abc", 0.5),
+        ("student-t-transform", 0.5),
+        ("student-t-mixture", 0.5),
+    ),
     quick_fits=True,
     sweep_theta=(0, 30, 60, 75, 85, 89),
     sweep_rays=200_000,
