@@ -1,7 +1,7 @@
 """The catalogue index (``index.md``): verdict tables (scenes × models), scattering orders,
-the anisotropic Smith G variants, the fit table, Mikkelsen Fig. 6 and "Where each method
-holds" (``report_wave.regime_section``). Pure formatting of the verdict documents; no wall
-time is written, so the index is reproducible."""
+the anisotropic Smith G variants, Smith-GGX on surfaces that are GGX (``ggx_index``), the fit
+table, Mikkelsen Fig. 6 and "Where each method holds" (``report_wave.regime_section``). Pure
+formatting of the verdict documents; no wall time is written, so the index is reproducible."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from microsim.stats import t_isf
 
 from . import incidence
 from .anisotropy import VARIANTS as ANISOTROPY_VARIANTS
+from .ggx_index import ggx_section
 from .markdown import md_table, percent, plain
 from .multiple import NOT_EXPECTED
 from .multiple_report import RESOLVED_SE, deviation_text
@@ -329,6 +330,7 @@ def index_report(
     ] + _verdict_tables(docs)
     lines += _orders_index(docs)
     lines += _anisotropy_index(docs)
+    lines += ggx_section(docs)
     if fit_models:
         lines += [
             "## Fits: √E1 / √E2 (Löw et al. 2012, eq. 29–33, as their Table II)",
