@@ -33,6 +33,8 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   whole-run ratio above mixes each side's fixed cost into its rate;
 * the pipeline's samples/s with every scattering order traced (``bounces="all"``) beside
   ``bounces=1``, alternating, best of three;
+* GGX surfaces (``ggx_surface_cost``): samples/s on a GGX heightfield of the same grid
+  (the transform construction, α = 2σ/ℓ) beside the Gaussian one, alternating;
 * the cost of full-azimuth bins (``azimuth_cost``): samples/s on folded and on full-azimuth
   bins of the same width, and the time of one model's bin averages on each;
 * the fixed cost of a ``simulate`` call: the first call on a surface (scene + BVH built) and a
@@ -78,6 +80,7 @@ from .bench_report import (
     BuildTimes,
     FixedCost,
     FoldedFull,
+    GGXSurfaceCost,
     Machine,
     Marginal,
     MarginalLine,
@@ -346,6 +349,31 @@ def bounce_throughput(
     return BounceThroughput(one=one, every=every)
 
 
+def ggx_surface_cost(
+    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
+) -> GGXSurfaceCost:
+    """Pipeline samples/s (``simulate``, scene build excluded) on the Gaussian bench surface and
+    on a GGX heightfield of the same grid, roughness and correlation length (the transform
+    construction, ``surfaces.student_t_transform``: α = 2σ/ℓ, γ = 2), 1 and 2 threads,
+    alternating, best of ``repeat``."""
+    from microsim.sim import simulate
+    from microsim.surfaces import student_t_transform
+
+    surfaces = {
+        "gaussian": surface if surface is not None else _surface(cfg),
+        "ggx": student_t_transform(cfg.n, 1.0, 2.0 * cfg.sigma / cfg.corr_len, 2.0, cfg.corr_len),
+    }
+    best = {k: {1: 0.0, 2: 0.0} for k in surfaces}
+    for _ in range(repeat):
+        for threads in THREADS:
+            for key, s in surfaces.items():
+                res = simulate(
+                    s, "aluminium", cfg.theta_i, rays=cfg.rays, bins=_bins(), threads=threads
+                )
+                best[key][threads] = max(best[key][threads], res.info.rays_per_second)
+    return GGXSurfaceCost(**best)
+
+
 def azimuth_cost(cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3) -> AzimuthCost:
     """What full-azimuth bins cost: pipeline samples/s on folded bins (Δφ ∈ [0°, 180°], 37
     bins of 5°) and on full-azimuth bins over the whole circle (72 bins of 5°), 2 threads,
@@ -555,6 +583,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> Bench:
         fixed_cost=fixed_cost(cfg),
         bounces=bounce_throughput(cfg, surface),
         full_azimuth=azimuth_cost(cfg, surface),
+        ggx_surface=ggx_surface_cost(cfg, surface),
         peak_rss_mb={int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
         time_to_accuracy=None if cfg.skip_accuracy else time_to_accuracy(cfg),
         time_to_accuracy_traced=None

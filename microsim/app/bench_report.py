@@ -15,6 +15,7 @@ from .wave_bench import WaveTiming
 __all__ = [
     "Accuracy",
     "AzimuthCost",
+    "GGXSurfaceCost",
     "Bench",
     "BenchConfig",
     "BounceThroughput",
@@ -250,6 +251,19 @@ class AzimuthCost:
 
 
 @dataclass(frozen=True)
+class GGXSurfaceCost:
+    """``bench.ggx_surface_cost``: pipeline samples/s per thread count on the Gaussian bench
+    surface and on the GGX heightfield of the same grid."""
+
+    gaussian: dict
+    ggx: dict
+
+    @classmethod
+    def from_json(cls, doc: dict) -> GGXSurfaceCost:
+        return cls(**{name: per_thread(figures) for name, figures in doc.items()})
+
+
+@dataclass(frozen=True)
 class BounceThroughput:
     """Pipeline samples/s per thread count with ``bounces=1`` (``one``) and ``bounces="all"``
     (``every``); saved as {"1": .., "all": ..}."""
@@ -303,6 +317,7 @@ class Bench:
     fixed_cost: FixedCost | None = None
     bounces: BounceThroughput | None = None
     full_azimuth: AzimuthCost | None = None
+    ggx_surface: GGXSurfaceCost | None = None
     time_to_accuracy: Accuracy | None = None
     time_to_accuracy_traced: Accuracy | None = None
     wave: list | None = None
@@ -321,6 +336,7 @@ class Bench:
         "fixed_cost",
         "bounces",
         "full_azimuth",
+        "ggx_surface",
         "peak_rss_mb",
         "time_to_accuracy",
         "time_to_accuracy_traced",
@@ -347,6 +363,7 @@ class Bench:
             "fixed_cost": lambda d: FixedCost(**d),
             "bounces": BounceThroughput.from_json,
             "full_azimuth": AzimuthCost.from_json,
+            "ggx_surface": GGXSurfaceCost.from_json,
             "time_to_accuracy": lambda d: Accuracy(**d),
             "time_to_accuracy_traced": lambda d: Accuracy(**d),
             "wave": _wave_rows,
@@ -473,6 +490,13 @@ def _cost_lines(b: Bench) -> list[str]:
             f"full-azimuth bins (72 × 5°) vs folded (37 × 5°), 2 threads: pipeline "
             f"{r.full:.4g} vs {r.folded:.4g} samples/s; one model's bin averages "
             f"{t.full:.2f} s (anisotropic, full) vs {t.folded:.2f} s (isotropic, folded)"
+        )
+    if b.ggx_surface:
+        lines.append(
+            _row("pipeline, GGX heightfield", b.ggx_surface.ggx)
+            + "   (same grid; Gaussian in the same runs: "
+            + ", ".join(f"{b.ggx_surface.gaussian[t]:.4g}" for t in THREADS)
+            + ")"
         )
     if b.fixed_cost:
         lines.append(
