@@ -8,6 +8,9 @@
 ``assert_brdf_agrees`` bin-averages the callable as microsim bin-averages its own models and
 judges it against a ray-traced explicit surface (``agreement``); the reference simulation is
 cached on disk (``cache``: ``reference``, ``cache_dir``; env ``MICROSIM_CACHE``).
+``physics_error`` judges microsim's own Smith model against the same reference, the physics'
+own error a failure message reports too (``physics``: ``PhysicsError``,
+``PHYSICS_REFERENCES``, the scenes to check each distribution against).
 ``assert_brdf_matches_model`` checks an implementation against microsim's closed form of the
 same model, without rays (``implementation``). ``assert_brdf_matches_measured`` judges one
 against a measured BRDF — a MERL file, a ``microsim measure`` table — within a tolerance
@@ -21,6 +24,9 @@ import importlib
 
 _WHERE = {
     "assert_brdf_agrees": "agreement",
+    "physics_error": "agreement",
+    "PhysicsError": "physics",
+    "PHYSICS_REFERENCES": "physics",
     "tolerance_check": "agreement",
     "Agreement": "agreement",
     "BRDFMismatch": "agreement",

@@ -28,6 +28,11 @@ Which noise the BRDF is judged against:
   BRDFs), because each tile is one draw of the random surface.
 
 ``rtol`` turns the test into a tolerance check (module function ``tolerance_check``).
+
+The physics' own error (``physics_error``, module ``physics``): microsim's Torrance–Sparrow
+with the surface's ensemble NDF and height-correlated Smith G judged by the same code path
+(``_judge``) against the same reference, so that a failure message can say whether a correct
+BRDF of that distribution could pass at each failing incidence.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ import hashlib
 import json
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -55,12 +61,14 @@ from microsim.sim.predict import FunctionBRDF, Predictor, predict_incidences
 from microsim.sim.tallies import stderr_dof
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
-from .cache import AUTO_MAX_RAYS, AUTO_TARGET, cache_dir, cached, resolve_reference
+from .cache import AUTO_MAX_RAYS, AUTO_TARGET, Reference, cache_dir, cached, resolve_reference
+from .physics import PhysicsError, physics_lines, physics_model
 from .returns import real_values
 
 __all__ = [
     "MIN_EVENTS",
     "assert_brdf_agrees",
+    "physics_error",
     "Agreement",
     "BRDFMismatch",
     "tolerance_check",
@@ -84,7 +92,8 @@ class Agreement(dict):
     incidence, ``microsim.analysis.verdicts.VERDICT_SCHEMA``, plus ``tolerance`` entries in
     rtol mode), ``passed`` (bool), ``failing`` (θi list) and ``failing_incidences`` ((θi, φi)
     list), ``model`` (T, Θ, Φ) the BRDF's bin averages, ``reference`` (the Result), ``chart``
-    (path or None), ``message``."""
+    (path or None), ``message``, ``physics`` (on a failure over a surface with an ensemble
+    NDF: one ``PhysicsError`` per failing incidence, a tuple; else None)."""
 
 
 class BRDFMismatch(AssertionError):
@@ -134,8 +143,9 @@ def readable_name(f) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in q)[:60]
 
 
-def _model_values(brdf, ref, result, symmetric: bool, label) -> tuple[np.ndarray, str]:
-    """(T, Θ, Φ) bin averages of the BRDF (callable or catalogue model name) and its name."""
+def _brdf_spec(brdf, ref, symmetric: bool, label) -> Predictor:
+    """The ``Predictor`` of the BRDF under test (a callable or catalogue model name); its
+    ``name`` is the BRDF's name in messages."""
     if isinstance(brdf, str):
         specs = {s.name: s for s in default_models(list(ref.surfaces), ref.material)}
         if brdf not in specs:
@@ -143,18 +153,20 @@ def _model_values(brdf, ref, result, symmetric: bool, label) -> tuple[np.ndarray
                 f"brdf must be a callable f(wi, wo) or one of this surface's catalogue models "
                 f"{', '.join(specs)}, got {brdf!r}"
             )
-        spec, name = specs[brdf], brdf
-    elif callable(brdf):
+        return specs[brdf]
+    if callable(brdf):
         name = label or readable_name(brdf)
-        spec = Predictor(name, FunctionBRDF(wrap_brdf(brdf), symmetric=symmetric))
-    else:
-        raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
+        return Predictor(name, FunctionBRDF(wrap_brdf(brdf), symmetric=symmetric))
+    raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
+
+
+def _bin_averages(spec: Predictor, result, incidences: list[int]) -> np.ndarray:
+    """(len(incidences), Θ, Φ) bin averages of ``spec`` at those of the reference's
+    incidences, on its bins."""
+    th, ph = result.theta_i[incidences], result.phi_i[incidences]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # unconverged bins: rare, in σ anyway
-        values = predict_incidences(
-            [spec], result.theta_i, result.phi_i, result.bins, rtol=MODEL_RTOL
-        )[spec.name]
-    return values, name
+        return predict_incidences([spec], th, ph, result.bins, rtol=MODEL_RTOL)[spec.name]
 
 
 _DEPARTURES: dict = {}  # per process: (surfaces, material, θi, bins) → tile departure
@@ -169,11 +181,28 @@ def _one_tile_departure(ref, result) -> np.ndarray | None:
     if key not in _DEPARTURES:
         pair = departure_models(list(ref.surfaces), ref.material)
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # as _model_values
+            warnings.simplefilter("ignore", RuntimeWarning)  # as _bin_averages
             _DEPARTURES[key] = (
                 tile_departure(attach_models(result, pair, rtol=MODEL_RTOL)) if pair else None
             )
     return _DEPARTURES[key]
+
+
+def _used_bins(sim, se, cnt, mod, min_events: int) -> tuple[np.ndarray, np.ndarray]:
+    """(used bins: ≥ ``min_events`` events, finite, f̄ > 0, σ > 0; σ = √(se² + (1e-3 m)²))."""
+    with np.errstate(invalid="ignore"):
+        sigma = np.sqrt(se**2 + (MODEL_RTOL * mod) ** 2)
+        used = (cnt >= min_events) & np.isfinite(sim) & np.isfinite(mod) & (sigma > 0) & (sim > 0)
+    return used, sigma
+
+
+def _energy_deviation(sim, sigma, mod, om, used) -> tuple[float, float]:
+    """(d, se_d): d = Σ_E Ω (f̄ − m)/Σ_E Ω m over the model's energy set E (90 % of its energy
+    in the ``used`` bins), se_d = √(Σ_E Ω² σ²)/Σ_E Ω m its standard error from the bins' σ."""
+    E = energy_set(np.where(used, mod * om, 0.0)).reshape(sim.shape)
+    norm = np.sum(om[E] * mod[E])
+    d = float(np.sum(om[E] * (sim[E] - mod[E])) / norm)
+    return d, float(np.sqrt(np.sum((om[E] * sigma[E]) ** 2)) / norm)
 
 
 def tolerance_check(
@@ -205,9 +234,7 @@ def tolerance_check(
     sim, se, cnt, mod, om = (
         np.asarray(a, dtype=np.float64) for a in (sim, stderr, counts, model, omega)
     )
-    with np.errstate(invalid="ignore"):
-        sigma = np.sqrt(se**2 + (MODEL_RTOL * mod) ** 2)
-        used = (cnt >= min_events) & np.isfinite(sim) & np.isfinite(mod) & (sigma > 0) & (sim > 0)
+    used, sigma = _used_bins(sim, se, cnt, mod, min_events)
     n_bins = int(used.sum())
     if n_bins == 0:
         return {
@@ -226,10 +253,7 @@ def tolerance_check(
     else:
         z_thr = float(norm_isf(0.5 * q_bin))
         q_e = float(norm_isf(0.5 * p_threshold))
-    E = energy_set(np.where(used, mod * om, 0.0)).reshape(sim.shape)
-    norm = np.sum(om[E] * mod[E])
-    d = float(np.sum(om[E] * (sim[E] - mod[E])) / norm)
-    se_d = float(np.sqrt(np.sum((om[E] * sigma[E]) ** 2)) / norm)
+    d, se_d = _energy_deviation(sim, sigma, mod, om, used)
     passed = bool(excess.max() < z_thr and abs(d) - rtol < q_e * se_d)
     return {
         "passed": passed,
@@ -267,13 +291,13 @@ def _worst_bins(result, model, t: int, min_events: int, k: int = 3) -> list[str]
     return out
 
 
-def _energy_ratio(result, model, t: int) -> str:
-    """Σ Ω⊥ model / Σ Ω⊥ reference at incidence ``t`` (finite bins), as "1.00×"."""
-    om = result.bins.projected_solid_angle()
-    ref, mod = result.brdf[t], model[t]
-    ok = np.isfinite(ref) & np.isfinite(mod)
-    den = (ref * om)[ok].sum()
-    return "–" if den <= 0 else f"{(mod * om)[ok].sum() / den:.3f}×"
+def _energy_ratio(bins, numerator, denominator) -> float | None:
+    """Σ Ω⊥ numerator / Σ Ω⊥ denominator over the (Θ, Φ) ``bins`` where both are finite: the
+    ratio of their albedos (None where the denominator carries no energy)."""
+    om = bins.projected_solid_angle()
+    ok = np.isfinite(numerator) & np.isfinite(denominator)
+    den = (denominator * om)[ok].sum()
+    return None if den <= 0 else float((numerator * om)[ok].sum() / den)
 
 
 def lobe_width_deg(bins, f) -> float:
@@ -424,22 +448,16 @@ def assert_brdf_agrees(
 
     On failure raises AssertionError with a table (incidences; χ²/dof, max |z|,
     energy-weighted relative error rel_rms, energy deviation, θo ranges of deviation), the
-    worst bins of each failing incidence, and the path of a hemisphere chart of the worst
-    incidence (written under ``chart_dir``, default ``<cache>/charts``). Returns the
-    ``Agreement`` when it passes. Bad arguments raise UsageError naming the parameter.
+    physics' own error at each failing incidence (``physics_error``; where the surface has
+    an ensemble NDF), the worst bins of each failing incidence, and the path of a hemisphere
+    chart of the worst incidence (written under ``chart_dir``, default ``<cache>/charts``).
+    Returns the ``Agreement`` when it passes. Bad arguments raise UsageError naming the parameter.
     """
     __tracebackhide__ = True
-    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0 < alpha < 1:
-        raise UsageError(f"alpha must lie in (0, 1), got {alpha!r}")
-    if rtol is not None and (
-        isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 < rtol < 1
-    ):
-        raise UsageError(f"rtol must be None or a relative error in (0, 1), got {rtol!r}")
+    judging = _judging(alpha, rtol, min_events)
     if not (callable(brdf) or isinstance(brdf, str)):
         raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
     symmetric = symmetric_keyword(symmetric, isotropic)
-    if isinstance(min_events, bool) or not isinstance(min_events, int) or min_events < 1:
-        raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
     if name is not None and not isinstance(name, str):
         raise UsageError(f"name must be a string (the BRDF's name in messages), got {name!r}")
     ref = resolve_reference(
@@ -455,24 +473,94 @@ def assert_brdf_agrees(
         realisations=realisations,
     )
     result = cached(ref, cache=cache, threads=threads)
-    model, name = _model_values(brdf, ref, result, symmetric, name)
+    judged = _judge(_brdf_spec(brdf, ref, symmetric, name), ref, result, judging)
+    failing = judged.failing
+    out = Agreement(
+        verdicts=judged.verdicts,
+        passed=not failing,
+        failing=[float(result.theta_i[t]) for t in failing],
+        failing_incidences=[(float(result.theta_i[t]), float(result.phi_i[t])) for t in failing],
+        model=judged.values,
+        reference=result,
+        chart=None,
+        message="",
+        physics=None,
+    )
+    if not failing:
+        return out
+    worst = max(failing, key=lambda t: judged.verdicts[t]["chi2_dof"] or 0.0)
+    where = (
+        Path(chart_dir)
+        if chart_dir is not None
+        else (cache_dir(cache if cache is not False else None) / "charts")
+    )
+    out["chart"] = _chart(
+        result, judged.values, judged.name, judged.verdicts, worst, where, ref.key()[:10]
+    )
+    out["physics"] = _physics_errors(ref, result, judging, failing, judged.values)
+    out["message"] = _message(judged, ref, result, judging, out["chart"], out["physics"])
+    raise BRDFMismatch(out["message"], out)
+
+
+class _Judging(NamedTuple):
+    """How a model is judged against the reference: the family level ``alpha`` (Šidák over
+    the incidences), ``rtol`` (None: statistically; else the tolerance check) and the
+    ``min_events`` a bin needs."""
+
+    alpha: float
+    rtol: float | None
+    min_events: int
+
+
+def _judging(alpha, rtol, min_events) -> _Judging:
+    """The checked judging arguments of ``assert_brdf_agrees`` and ``physics_error``."""
+    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or not 0 < alpha < 1:
+        raise UsageError(f"alpha must lie in (0, 1), got {alpha!r}")
+    if rtol is not None and (
+        isinstance(rtol, bool) or not isinstance(rtol, (int, float)) or not 0 < rtol < 1
+    ):
+        raise UsageError(f"rtol must be None or a relative error in (0, 1), got {rtol!r}")
+    if isinstance(min_events, bool) or not isinstance(min_events, int) or min_events < 1:
+        raise UsageError(f"min_events must be an integer >= 1, got {min_events!r}")
+    return _Judging(alpha, None if rtol is None else float(rtol), min_events)
+
+
+class _Judged(NamedTuple):
+    """A model judged at some of the reference's incidences: its ``name``, its bin averages
+    ``values`` (one (Θ, Φ) array per judged incidence), their ``verdicts`` (with
+    ``tolerance`` in rtol mode), and ``failing``, the indices t of the incidences where it
+    fails."""
+
+    name: str
+    values: np.ndarray
+    verdicts: list
+    failing: list[int]
+
+
+def _judge(spec: Predictor, ref: Reference, result, judging: _Judging, incidences=None) -> _Judged:
+    """Judge ``spec`` against the reference ``result`` at the incidence indices
+    ``incidences`` (default all of them), each verdict within the family of all the
+    reference's incidences (``assert_brdf_agrees``' docstring says how)."""
     T = len(result.theta_i)
+    incidences = list(range(T)) if incidences is None else list(incidences)
+    values = _bin_averages(spec, result, incidences)
     omega = result.bins.projected_solid_angle()
     per = result.brdf_realisations
     R = 1 if per is None else int(per.shape[0])
     departure = _one_tile_departure(ref, result) if R == 1 else None
     dof = stderr_dof(result) if R == 1 else None  # of result.stderr: ray noise alone
+    alpha, rtol, min_events = judging
     verdicts, failing = [], []
-    for t in range(T):
+    for model, t in zip(values, incidences):
         real_t = None
         if R >= 2:
             real_t = per[result.realisations_traced(t), t]
-        dep_t = None if departure is None else departure_of(departure[t], model[t])
+        dep_t = None if departure is None else departure_of(departure[t], model)
         v = verdict(
             Measured.of(
                 result, t, omega=omega, realisations=real_t, dof=None if dof is None else dof[t]
             ),
-            Prediction(model[t], name, ensemble=R >= 2 or departure is not None, departure=dep_t),
+            Prediction(model, spec.name, ensemble=R >= 2 or departure is not None, departure=dep_t),
             Significance(MODEL_RTOL, min_events, alpha, T),
         )
         if rtol is not None:
@@ -480,9 +568,9 @@ def assert_brdf_agrees(
                 result.brdf[t],
                 result.stderr[t],
                 result.counts[t],
-                model[t],
+                model,
                 omega,
-                float(rtol),
+                rtol,
                 v.p_threshold,
                 v.realisations,
                 min_events,
@@ -494,29 +582,101 @@ def assert_brdf_agrees(
         verdicts.append(v)
         if not ok:
             failing.append(t)
-    out = Agreement(
-        verdicts=verdicts,
-        passed=not failing,
-        failing=[float(result.theta_i[t]) for t in failing],
-        failing_incidences=[(float(result.theta_i[t]), float(result.phi_i[t])) for t in failing],
-        model=model,
-        reference=result,
-        chart=None,
-        message="",
+    return _Judged(spec.name, values, verdicts, failing)
+
+
+def _physics_errors(ref: Reference, result, judging: _Judging, incidences, brdf_values=None):
+    """The physics model (``physics.physics_model``) judged as the brdf is at the incidence
+    indices ``incidences``: one ``PhysicsError`` each (a tuple), with the brdf's energy over
+    the model's where ``brdf_values`` (T, Θ, Φ) are given; None without an ensemble NDF."""
+    spec = physics_model(ref.ensemble_ndf, ref.material)
+    if spec is None:
+        return None
+    judged = _judge(spec, ref, result, judging, incidences)
+    records = []
+    for t, model, v in zip(incidences, judged.values, judged.verdicts):
+        holds = t not in judged.failing
+        if judging.rtol is None:
+            word = verdict_kind(v)
+        else:
+            word = f"{'within' if holds else 'beyond'} rtol = {judging.rtol:g}"
+        records.append(
+            PhysicsError(
+                theta_i=float(result.theta_i[t]),
+                phi_i=float(result.phi_i[t]),
+                model=judged.name,
+                ndf=repr(ref.ensemble_ndf),
+                holds=holds,
+                result=word,
+                energy_dev=v["energy_dev"],
+                energy_se=_energy_se(v, result, t, model, judging.min_events),
+                rel_rms=v["rel_rms"],
+                verdict={k: x for k, x in v.items() if k != "tolerance"},
+                tolerance=v.get("tolerance"),
+                brdf_energy_ratio=None
+                if brdf_values is None
+                else _energy_ratio(result.bins, brdf_values[t], model),
+            )
+        )
+    return tuple(records)
+
+
+def _energy_se(v, result, t: int, model, min_events: int) -> float | None:
+    """The standard error of verdict ``v``'s energy deviation at incidence ``t``: the
+    realisations' (the verdict's ``energy_dev_se``), else the reference's ray noise
+    (``_energy_deviation``)."""
+    if v["energy_dev_se"] is not None or v["energy_dev"] is None:
+        return v["energy_dev_se"]
+    sim, se, cnt = result.brdf[t], result.stderr[t], result.counts[t]
+    used, sigma = _used_bins(sim, se, cnt, model, min_events)
+    return _energy_deviation(sim, sigma, model, result.bins.projected_solid_angle(), used)[1]
+
+
+def physics_error(
+    surface_or_scene,
+    material="scene",
+    theta_i=None,
+    *,
+    phi_i=None,
+    rays="auto",
+    bins=None,
+    alpha: float = 0.01,
+    rtol: float | None = None,
+    seed: int = 0,
+    target: float = AUTO_TARGET,
+    max_rays: int = AUTO_MAX_RAYS,
+    realisations: int | None = None,
+    cache=None,
+    min_events: int = MIN_EVENTS,
+    threads: int | None = None,
+) -> tuple[PhysicsError, ...]:
+    """The physics' own error at every incidence of the reference: microsim's Torrance–Sparrow
+    with the surface's ensemble NDF and height-correlated Smith G (``physics.PHYSICS_MODEL``)
+    judged against the reference exactly as ``assert_brdf_agrees`` judges a BRDF (the same
+    arguments, the same cached reference). One ``PhysicsError`` per incidence, in the
+    reference's order; where ``holds`` is False a correct BRDF of that D with Smith's G fails
+    too. A surface without an ensemble NDF (a file heightfield, the flat mirror, oriented
+    V-grooves) is a UsageError naming ``surface_or_scene``."""
+    judging = _judging(alpha, rtol, min_events)
+    ref = resolve_reference(
+        surface_or_scene,
+        material,
+        theta_i,
+        phi_i=phi_i,
+        rays=rays,
+        bins=bins,
+        seed=seed,
+        target=target,
+        max_rays=max_rays,
+        realisations=realisations,
     )
-    if not failing:
-        return out
-    worst = max(failing, key=lambda t: verdicts[t]["chi2_dof"] or 0.0)
-    where = (
-        Path(chart_dir)
-        if chart_dir is not None
-        else (cache_dir(cache if cache is not False else None) / "charts")
-    )
-    out["chart"] = _chart(result, model, name, verdicts, worst, where, ref.key()[:10])
-    out["message"] = _message(
-        name, ref, result, verdicts, failing, model, alpha, rtol, out["chart"]
-    )
-    raise BRDFMismatch(out["message"], out)
+    if ref.ensemble_ndf is None:
+        raise UsageError(
+            f"surface_or_scene: {ref.label} has no ensemble NDF (a file heightfield, the flat "
+            "mirror or oriented V-grooves), so no Smith model of it to judge"
+        )
+    result = cached(ref, cache=cache, threads=threads)
+    return _physics_errors(ref, result, judging, range(len(result.theta_i)))
 
 
 def _failing_text(verdicts, with_phi: bool) -> str:
@@ -527,7 +687,12 @@ def _at(result, t: int, with_phi: bool) -> str:
     return incidence.label(float(result.theta_i[t]), float(result.phi_i[t]), with_phi)
 
 
-def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) -> str:
+def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics) -> str:
+    """The failure message (docs/testing.md, "The failure message"): ``judged`` the brdf at
+    every incidence, ``physics`` the ``PhysicsError`` records of its failing incidences (or
+    None)."""
+    name, model, verdicts, failing = judged
+    alpha, rtol = judging.alpha, judging.rtol
     with_phi = incidence.several_azimuths(verdicts)
     rays = np.asarray(result.rays)
     rays_txt = (
@@ -587,7 +752,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
                 zcol,
                 _num(v["rel_rms"], "{:.2%}"),
                 "–" if energy is None else f"{100 * energy:+.2f}%",
-                _energy_ratio(result, model, t),
+                _num(_energy_ratio(result.bins, model[t], result.brdf[t]), "{:.3f}×"),
                 dev,
             ]
         )
@@ -609,6 +774,7 @@ def _message(name, ref, result, verdicts, failing, model, alpha, rtol, chart) ->
         hint = _diagnosis(result, model, t, verdicts[t]["min_events"])
         if hint:
             lines.append(f"at {_at(result, t, with_phi)}: {hint}")
+    lines += physics_lines(physics or (), lambda r: incidence.label(r.theta_i, r.phi_i, with_phi))
     for t in failing:
         wb = _worst_bins(result, model, t, verdicts[t]["min_events"])
         if wb:

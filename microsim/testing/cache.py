@@ -136,7 +136,9 @@ class Reference:
     ``surfaces``: only a cache miss or a facet model needs the meshes), the material η
     (None = mirror), incidences ``theta_i`` with their azimuths ``phi_i`` (degrees, one per
     incidence), ``bins``, ``seed``, ``rays`` (int or "auto") with
-    the auto ``target``/``max_rays``, and a ``label`` for messages (scene file or surface)."""
+    the auto ``target``/``max_rays``, a ``label`` for messages (scene file or surface) and the
+    surfaces' ``ensemble_ndf`` (the analytic NDF their generator samples, or None: file, flat,
+    oriented V-grooves; ``Surface.ensemble_ndf``, ``Scene.ndf``)."""
 
     fingerprints: tuple[str, ...]
     azimuth_average: tuple[bool, ...]
@@ -150,6 +152,7 @@ class Reference:
     target: float
     max_rays: int
     label: str
+    ensemble_ndf: object = None
 
     @cached_property
     def surfaces(self) -> tuple:
@@ -296,13 +299,15 @@ def resolve_reference(
         target=float(target),
         max_rays=int(max_rays),
         label=source.label,
+        ensemble_ndf=source.ensemble_ndf,
     )
 
 
 @dataclass(frozen=True)
 class _Source:
     """What a scene or explicit surfaces give a reference: the surfaces (fingerprints,
-    azimuth-average flags, builder), the material, incidences and default bins, a label."""
+    azimuth-average flags, builder), the material, incidences and default bins, a label and
+    the surfaces' ensemble NDF (or None)."""
 
     fingerprints: tuple
     azimuth_average: tuple
@@ -312,6 +317,7 @@ class _Source:
     phi_i: object
     bins: Bins
     label: str
+    ensemble_ndf: object
 
 
 def _scene_source(scene: Scene, realisations, material, theta_i, phi_i) -> _Source:
@@ -334,7 +340,7 @@ def _scene_source(scene: Scene, realisations, material, theta_i, phi_i) -> _Sour
         scene.simulation.theta_bins, scene.simulation.phi_bins, folded=not scene.full_azimuth
     )
     label = f"{scene.path or scene.name}"
-    return _Source(fingerprints, azimuth, build, material, theta_i, phi_i, bins, label)
+    return _Source(fingerprints, azimuth, build, material, theta_i, phi_i, bins, label, scene.ndf())
 
 
 def _surfaces_source(surface_or_surfaces, realisations, material, theta_i, phi_i) -> _Source:
@@ -374,6 +380,7 @@ def _surfaces_source(surface_or_surfaces, realisations, material, theta_i, phi_i
         phi_i,
         Bins(),
         label,
+        surfaces[0].ensemble_ndf,
     )
 
 
