@@ -770,7 +770,10 @@ def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics) ->
         "reference over the reference's 90 % energy bins; energy ratio = Σ Ω⊥ brdf / "
         "Σ Ω⊥ reference over the hemisphere (the brdf's albedo over the reference's)",
     ]
+    physics_fails = {(r.theta_i, r.phi_i) for r in physics or () if not r.holds}
     for t in failing:
+        if (verdicts[t]["theta_i"], verdicts[t]["phi_i"]) in physics_fails:
+            continue  # a roughness or scale hint would blame the brdf for the physics' error
         hint = _diagnosis(result, model, t, verdicts[t]["min_events"])
         if hint:
             lines.append(f"at {_at(result, t, with_phi)}: {hint}")

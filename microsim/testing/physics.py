@@ -2,7 +2,7 @@
 reference surface, so that a failing BRDF can be told apart from a failing physics model.
 
 A BRDF of the surface's distribution is at best Torrance–Sparrow with that D and Smith's
-masking (Mikkelsen 2009, eq. 13; height-correlated G2, Heitz 2014, eq. 99). On a surface where
+masking (Mikkelsen 2009, eq. 13; height-correlated G2, Heitz 2014). On a surface where
 Smith's masking or single scattering does not hold at some incidence, a *correct* BRDF fails
 there too. ``PHYSICS_MODEL`` — that closed form with the reference's ensemble NDF — is judged
 against the same reference by the same verdict machinery as the BRDF under test
@@ -95,8 +95,8 @@ def physics_lines(records, at) -> list[str]:
     r0 = records[0]
     lines = [
         f"Smith's own error: {r0.model} = Torrance–Sparrow with the surface's ensemble NDF "
-        f"D = {r0.ndf} and height-correlated Smith G (Mikkelsen 2009, eq. 13; Heitz 2014, "
-        "eq. 99), judged against the same reference in the same way as the brdf"
+        f"D = {r0.ndf} and height-correlated Smith G (Mikkelsen 2009, eq. 13; Heitz 2014), "
+        "judged against the same reference in the same way as the brdf"
     ]
     for r in records:
         se = "" if r.energy_se is None else f" ± {100 * r.energy_se:.2f}%"
