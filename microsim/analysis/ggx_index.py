@@ -104,9 +104,14 @@ def _series(docs: Sequence[RunDocument], student: Sequence[RunDocument]) -> list
 
 
 def ggx_section(docs: Sequence[RunDocument]) -> list[str]:
-    """The section's markdown lines; [] when no scene has an isotropic Student-t ensemble."""
+    """The section's markdown lines; [] when no heightfield scene has an isotropic Student-t
+    (or GGX) ensemble (V-grooves with those tilts have their own exact G: not shown here)."""
     docs = [RunDocument.from_json(d) for d in docs]
-    student = [d for d in docs if _ndf(d).get("name") in _STUDENT_T]
+    student = [
+        d
+        for d in docs
+        if _ndf(d).get("name") in _STUDENT_T and (d.surface or {}).get("kind") in CONSTRUCTIONS
+    ]
     if not student:
         return []
     student.sort(key=lambda d: (_gamma(_ndf(d)), _alpha(_ndf(d)), d.surface["kind"], d.scene))

@@ -99,6 +99,9 @@ class SurfaceSpec:
 
     kind: ClassVar[str] = ""
     random: ClassVar[bool] = False
+    exact_shadowing: ClassVar[str | None] = None
+    """The surface's exact shadowing kind (``Surface.exact_shadowing``) known without building
+    it: "vgroove" for V-grooves, "none" for the flat mirror, None for heightfields."""
     """Whether realisations (seeds seed, seed + 1, …) are independent draws of one ensemble."""
 
     @classmethod
@@ -180,6 +183,7 @@ class VGrooveSurface(SurfaceSpec):
 
     kind: ClassVar[str] = "vgrooves"
     random: ClassVar[bool] = True
+    exact_shadowing: ClassVar[str | None] = "vgroove"
     n_grooves: int = _key(int_in(1, 1_000_000), 4000)
     ndf: str = _key(STR)
     sampling: str = _key(_SAMPLING, "stratified")
@@ -383,6 +387,7 @@ class FlatSurface(SurfaceSpec):
     """``surfaces.flat``: a plane tile of side ``size``."""
 
     kind: ClassVar[str] = "flat"
+    exact_shadowing: ClassVar[str | None] = "none"
     size: float = _key(LENGTH, 1.0, real=True)
 
     def build(self, seed, scale, base):

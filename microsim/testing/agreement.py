@@ -589,6 +589,8 @@ def _physics_errors(ref: Reference, result, judging: _Judging, incidences, brdf_
     """The physics model (``physics.physics_model``) judged as the brdf is at the incidence
     indices ``incidences``: one ``PhysicsError`` each (a tuple), with the brdf's energy over
     the model's where ``brdf_values`` (T, Θ, Φ) are given; None without an ensemble NDF."""
+    if ref.exact_shadowing is not None:  # V-grooves, flat: their own G is exact, not Smith's
+        return None
     spec = physics_model(ref.ensemble_ndf, ref.material)
     if spec is None:
         return None
@@ -670,10 +672,11 @@ def physics_error(
         max_rays=max_rays,
         realisations=realisations,
     )
-    if ref.ensemble_ndf is None:
+    if ref.ensemble_ndf is None or ref.exact_shadowing is not None:
         raise UsageError(
             f"surface_or_scene: {ref.label} has no ensemble NDF (a file heightfield, the flat "
-            "mirror or oriented V-grooves), so no Smith model of it to judge"
+            "mirror or oriented V-grooves) or an exact masking of its own (V-grooves: the "
+            "V-groove G), so no Smith model of it to judge"
         )
     result = cached(ref, cache=cache, threads=threads)
     return _physics_errors(ref, result, judging, range(len(result.theta_i)))

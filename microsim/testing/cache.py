@@ -138,7 +138,8 @@ class Reference:
     incidence), ``bins``, ``seed``, ``rays`` (int or "auto") with
     the auto ``target``/``max_rays``, a ``label`` for messages (scene file or surface) and the
     surfaces' ``ensemble_ndf`` (the analytic NDF their generator samples, or None: file, flat,
-    oriented V-grooves; ``Surface.ensemble_ndf``, ``Scene.ndf``)."""
+    oriented V-grooves; ``Surface.ensemble_ndf``, ``Scene.ndf``) and ``exact_shadowing`` (the
+    shadowing kind exact on them: "vgroove", "none", or None for heightfields)."""
 
     fingerprints: tuple[str, ...]
     azimuth_average: tuple[bool, ...]
@@ -153,6 +154,7 @@ class Reference:
     max_rays: int
     label: str
     ensemble_ndf: object = None
+    exact_shadowing: str | None = None
 
     @cached_property
     def surfaces(self) -> tuple:
@@ -300,6 +302,7 @@ def resolve_reference(
         max_rays=int(max_rays),
         label=source.label,
         ensemble_ndf=source.ensemble_ndf,
+        exact_shadowing=source.exact_shadowing,
     )
 
 
@@ -307,7 +310,7 @@ def resolve_reference(
 class _Source:
     """What a scene or explicit surfaces give a reference: the surfaces (fingerprints,
     azimuth-average flags, builder), the material, incidences and default bins, a label and
-    the surfaces' ensemble NDF (or None)."""
+    the surfaces' ensemble NDF (or None) and exact shadowing kind (or None)."""
 
     fingerprints: tuple
     azimuth_average: tuple
@@ -318,6 +321,7 @@ class _Source:
     bins: Bins
     label: str
     ensemble_ndf: object
+    exact_shadowing: str | None
 
 
 def _scene_source(scene: Scene, realisations, material, theta_i, phi_i) -> _Source:
@@ -340,7 +344,18 @@ def _scene_source(scene: Scene, realisations, material, theta_i, phi_i) -> _Sour
         scene.simulation.theta_bins, scene.simulation.phi_bins, folded=not scene.full_azimuth
     )
     label = f"{scene.path or scene.name}"
-    return _Source(fingerprints, azimuth, build, material, theta_i, phi_i, bins, label, scene.ndf())
+    return _Source(
+        fingerprints,
+        azimuth,
+        build,
+        material,
+        theta_i,
+        phi_i,
+        bins,
+        label,
+        scene.ndf(),
+        scene.surface.exact_shadowing,
+    )
 
 
 def _surfaces_source(surface_or_surfaces, realisations, material, theta_i, phi_i) -> _Source:
@@ -381,6 +396,7 @@ def _surfaces_source(surface_or_surfaces, realisations, material, theta_i, phi_i
         Bins(),
         label,
         surfaces[0].ensemble_ndf,
+        surfaces[0].exact_shadowing,
     )
 
 
