@@ -102,8 +102,9 @@ def _tile_family(seed, sampling, grooves, rays, bins, scale=1.0, alpha=0.05):
 def test_one_tile_with_departure_false_alarms_within_binomial_bound():
     """One random-tilt tile, its departure from the ensemble computed from its facets: the
     exact ensemble model (ts-vgroove) deviates beyond that departure in at most the nominal
-    share of seeds (the excess test is conservative, verdicts docstring)."""
-    seeds, alpha = 10, 0.05
+    share of seeds (the excess test is conservative, verdicts docstring); 6 seeds here, more in
+    the slow ``test_one_tile_with_departure_false_alarms_slow``."""
+    seeds, alpha = 6, 0.05
     n_dev, fams = _rate(
         _tile_family(s, "random", 200, 100_000, Bins(8, 5), alpha=alpha) for s in range(seeds)
     )

@@ -78,6 +78,7 @@ def scheduler(tmp_path):
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # 15 s; the default run keeps the cluster sweep's other fault checks
 def test_a_killed_scheduler_keeps_the_tallies_for_a_resume(tmp_path, scheduler, capfd):
     """The scheduler process is killed (SIGKILL) after the second chunk of rays is tallied:
     status 1, one line on stderr naming the scheduler's address and the --resume to continue,

@@ -323,7 +323,7 @@ def _complete_tasks(out, rays):
     return recs
 
 
-@pytest.mark.parametrize("after", [0, 3])
+@pytest.mark.parametrize("after", [0, pytest.param(3, marks=pytest.mark.slow)])
 def test_interrupt_via_hook(tmp_path, monkeypatch, capsys, after):
     from microsim.checkpoints import interrupt_at
 

@@ -88,7 +88,7 @@ def test_anisotropic_transform_realises_alpha_along_the_rotated_axes():
     assert d > 2 * crit  # the axes swapped
 
 
-@pytest.mark.parametrize("gamma", [2.0, 3.0])
+@pytest.mark.parametrize("gamma", [2.0, pytest.param(3.0, marks=pytest.mark.slow)])
 def test_mixture_patches_cover_the_strata_and_blend_to_the_law(gamma):
     patches = mixture(gamma)
     for seed, patch in enumerate(patches):  # w of patch k lies in the k-th stratum

@@ -117,6 +117,7 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # 13 s; tests/test_cluster_run.py keeps a cluster run bitwise the local one
 def test_dask_local_cluster_gives_the_same_table(tmp_path):
     distributed = pytest.importorskip("distributed")
     spec = tiny_spec()
@@ -174,7 +175,16 @@ def test_simulation_checkpoint_interrupt_writes_no_task_file(tmp_path):
     assert not (tmp_path / "tasks" / f"{task.id}.json").exists()
 
 
-@pytest.mark.parametrize("damage", ["short", "partial", "truncated", "other-task", "no-verdicts"])
+@pytest.mark.parametrize(
+    "damage",
+    [
+        "short",
+        pytest.param("partial", marks=pytest.mark.slow),
+        pytest.param("truncated", marks=pytest.mark.slow),
+        pytest.param("other-task", marks=pytest.mark.slow),
+        "no-verdicts",
+    ],
+)
 def test_incomplete_task_files_are_recomputed_and_never_summarised(tmp_path, damage):
     """Task JSONs left by an older interrupted sweep (fewer rays than requested, a partial flag,
     cut short, another task's record, no verdicts) count as missing: not in the summary, and
@@ -263,6 +273,7 @@ m = [0.2, 0.6]
 """
 
 
+@pytest.mark.slow  # 11 s; tests/test_progress_lines.py keeps the progress output's checks
 def test_progress_lines_show_parameter_values_not_task_ids(tmp_path):
     spec = load_sweep_text(tmp_path, TINY_TOML)
     lines = []

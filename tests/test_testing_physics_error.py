@@ -7,8 +7,8 @@ The reference: 8 realisations of a 256² GGX heightfield (``student_t_transform`
 mirror, so the BRDF below needs no Fresnel). Its heights and slopes are correlated, which
 Smith's masking assumes they are not: at θi = 0° Smith's error is within 1 % (the tolerance
 ``rtol = 0.01`` the checks use; statistically it is resolved, ~0.7 % with grazing bins off),
-at 60° it is ~12 % of the energy — measured, not assumed: test (c) checks both. On V-grooves (and the flat mirror) the surface's
-own G is exact, so no Smith line is added there."""
+at 60° it is ~12 % of the energy — measured, not assumed: test (c) checks both. On V-grooves
+(and the flat mirror) the surface's own G is exact, so no Smith line is added there."""
 
 import dataclasses
 import re
