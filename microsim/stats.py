@@ -11,6 +11,8 @@ same numbers but takes ~1 s to import, which every ``microsim.testing`` check wo
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy import special
 
@@ -26,6 +28,8 @@ __all__ = [
     "t_isf",
     "norm_sf",
     "norm_isf",
+    "StratifiedMean",
+    "stratified_mean",
 ]
 
 ENERGY_FRACTION = 0.9
@@ -85,3 +89,56 @@ def t_isf(q, dof):
 def norm_isf(q):
     """x with P(Z ≥ x) = q for a standard normal Z (``scipy.stats.norm.isf``)."""
     return -special.ndtri(q)
+
+
+class StratifiedMean(NamedTuple):
+    """``stratified_mean``'s answer: ``mean`` and ``var`` (the variance of that mean) along the
+    realisation axis, and ``dof``, the degrees of freedom of ``var``."""
+
+    mean: np.ndarray
+    var: np.ndarray
+    dof: int
+
+
+def stratified_mean(values, strata) -> StratifiedMean:
+    """Mean over realisations drawn one stratum each (or several) of K equal-probability
+    strata, and its variance (Cochran 1977, §5.2 and §5A.12, the collapsed-strata estimator).
+
+    ``values`` (R, ...): one row per realisation; ``strata`` (R,): the stratum of each. The
+    mean is that of the stratum means μ_k (equal weights 1/K). With ≥ 2 realisations in every
+    stratum, var = Σ_k s_k²/n_k / K² (s_k the within-stratum standard deviation), dof the
+    Welch–Satterthwaite value of that sum (at most R − K); with one in some stratum the strata,
+    in order, are collapsed into adjacent pairs (the last group a triple when K is odd),
+    var = Σ_G |G|/(|G| − 1) Σ_(k∈G) (μ_k − μ̄_G)² / K², dof = K − number of groups: it counts
+    the difference between neighbouring strata as noise, so it is conservative where the mean
+    varies smoothly from stratum to stratum. K ≥ 2 needed."""
+    values = np.asarray(values, dtype=np.float64)
+    strata = np.asarray(strata)
+    if strata.shape != values.shape[:1]:
+        raise UsageError(f"strata must have shape ({len(values)},), got {strata.shape}")
+    keys = np.unique(strata)
+    K = len(keys)
+    if K < 2:
+        raise UsageError(f"strata must hold at least 2 distinct strata, got {K}")
+    rows = [values[strata == k] for k in keys]
+    mu = np.stack([r.mean(axis=0) for r in rows])
+    mean = mu.mean(axis=0)
+    n = np.array([len(r) for r in rows])
+    if n.min() >= 2:
+        part = np.stack([r.var(axis=0, ddof=1) / len(r) for r in rows])
+        var = part.sum(axis=0) / K**2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ws = part.sum(axis=0) ** 2 / np.sum(
+                part**2 / (n - 1).reshape(-1, *[1] * (part.ndim - 1)), axis=0
+            )
+        finite = ws[np.isfinite(ws)] if np.ndim(ws) else np.array([ws])
+        dof = int(max(1, np.floor(finite.min()))) if finite.size else int(n.sum() - K)
+        return StratifiedMean(mean, var, dof)
+    groups = [list(range(i, min(i + 2, K))) for i in range(0, K - K % 2, 2)]
+    if K % 2:
+        groups[-1].append(K - 1)
+    var = np.zeros_like(mean)
+    for g in groups:
+        mg = mu[g]
+        var = var + len(g) / (len(g) - 1) * ((mg - mg.mean(axis=0)) ** 2).sum(axis=0)
+    return StratifiedMean(mean, var / K**2, K - len(groups))

@@ -188,10 +188,12 @@ def _anisotropy_missed(docs: Sequence[RunDocument]) -> list[str]:
 
 def _resolvable_energy(v: Verdict) -> float | None:
     """Smallest relative energy deviation the realisations test of ``v`` would detect:
-    t_{R−1} quantile at the test's level × ``energy_dev_se`` (None for other references)."""
+    t quantile on ``realisation_dof`` (R − 1 in older files) at the test's level ×
+    ``energy_dev_se`` (None for other references)."""
     if v.reference != "realisations" or v.energy_dev_se is None:
         return None
-    return float(t_isf(0.5 * v.p_threshold, v.realisations - 1) * v.energy_dev_se)
+    dof = v.realisation_dof if v.realisation_dof is not None else v.realisations - 1
+    return float(t_isf(0.5 * v.p_threshold, dof) * v.energy_dev_se)
 
 
 def _compact(verdicts: Sequence[Mapping], model: str, summary: str) -> str:

@@ -26,6 +26,7 @@ __all__ = [
 
 _NUM = (int, float)
 _OPT_NUM = (int, float, type(None))
+_OPT_INT = (int, type(None))
 
 # name → (allowed Python types, description). Floats that cannot be defined (no used bins,
 # dof ≤ 0) are null. ``validate_verdict`` checks keys, types and the simple invariants.
@@ -115,19 +116,26 @@ VERDICT_SCHEMA: dict = {
     ),
     "energy_dev_se": (
         _OPT_NUM,
-        "standard error of energy_dev from the realisations' scatter, s_d/√R ('realisations' "
-        "only, else null)",
+        "standard error of energy_dev from the realisations' scatter, s_d/√R, or the "
+        "stratified estimate when the realisations are strata of the ensemble "
+        "('realisations' only, else null)",
     ),
     "energy_p": (
         _OPT_NUM,
-        "two-sided Student-t p-value of energy_dev on R − 1 dof ('realisations' only); the "
-        "energy test rejects when energy_p < p_threshold",
+        "two-sided Student-t p-value of energy_dev on realisation_dof dof ('realisations' "
+        "only); the energy test rejects when energy_p < p_threshold",
     ),
     "max_abs_t": (_OPT_NUM, "max_U |t_B| over the realisations ('realisations' only)"),
     "t_threshold": (
         _OPT_NUM,
-        "two-sided t_{R−1} quantile at Šidák(p_threshold, n_bins): the shape test rejects when "
-        "max_abs_t ≥ this ('realisations' only)",
+        "two-sided t quantile on realisation_dof dof at Šidák(p_threshold, n_bins): the shape "
+        "test rejects when max_abs_t ≥ this ('realisations' only)",
+    ),
+    "realisation_dof": (
+        _OPT_INT,
+        "degrees of freedom of the realisations' standard errors: R − 1, or for realisations "
+        "drawn one per stratum of the ensemble the collapsed-strata value ('realisations' "
+        "only, else null)",
     ),
 }
 
@@ -176,6 +184,7 @@ class Verdict(JsonRecord):
     t_threshold: float | None
     tile_departure: float | None
     departure_max_abs_z: float | None
+    realisation_dof: int | None
 
     @property
     def kind(self) -> str:

@@ -92,6 +92,7 @@ from microsim.stats import (
     energy_set,
     norm_isf,
     sidak,
+    stratified_mean,
     t_isf,
     t_sf,
 )
@@ -103,6 +104,8 @@ __all__ = [
     "verdict",
     "Measured",
     "Prediction",
+    "realisation_strata",
+    "realisations_at",
     "Significance",
     "verdict_kind",
     "verdict_symbol",
@@ -148,7 +151,8 @@ class Measured(NamedTuple):
     (Φ+1,, None: the folded grid of ``Bins``) degrees; ``realisations`` (R, Θ, Φ) the BRDFs of
     R tiles of equal rays (sr⁻¹, their mean is ``brdf``) or None; ``theta_i``, ``phi_i``
     degrees; ``dof`` (Θ, Φ) the degrees of freedom of ``stderr`` (``sim.tallies.stderr_dof``)
-    or None: exact."""
+    or None: exact; ``strata`` (R,) the stratum of each realisation when they were drawn one
+    per stratum of the ensemble (``realisation_strata``), else None (i.i.d.)."""
 
     brdf: np.ndarray
     stderr: np.ndarray
@@ -160,6 +164,7 @@ class Measured(NamedTuple):
     theta_i: float = 0.0
     phi_i: float = 0.0
     dof: np.ndarray | None = None
+    strata: np.ndarray | None = None
 
     @classmethod
     def of(cls, result, t: int, **replace) -> "Measured":
@@ -212,6 +217,7 @@ _TEST_FIELDS = (
     "t_threshold",
     "tile_departure",
     "departure_max_abs_z",
+    "realisation_dof",
 )
 """The fields of the realisation and tile-departure tests: null for a verdict without them."""
 
@@ -298,7 +304,9 @@ def verdict(
 class _Inputs(NamedTuple):
     """The arrays of one verdict, float64 and shape-checked (``_inputs_of``): sim, se,
     counts, model, Ω (Θ, Φ); the φ edges; the R ≥ 2 realisations F (R, Θ, Φ) or None; the
-    tile's departure δ (Θ, Φ, sr⁻¹) or None; se_t = √(s_B²/R + (rtol·m)²) with F, else None."""
+    tile's departure δ (Θ, Φ, sr⁻¹) or None; se_t = √(s_B²/R + (rtol·m)²) with F, else None
+    (with ``strata``, the stratified variance of the mean, ``stats.stratified_mean``, in place
+    of s_B²/R); ``real_dof`` the degrees of freedom of that variance (R − 1, or stratified)."""
 
     sim: np.ndarray
     se: np.ndarray
@@ -310,6 +318,8 @@ class _Inputs(NamedTuple):
     dep: np.ndarray | None
     se_t: np.ndarray | None
     nu: np.ndarray | None
+    strata: np.ndarray | None = None
+    real_dof: int | None = None
 
     @property
     def shape(self) -> tuple:
@@ -353,9 +363,17 @@ def _inputs_of(m: Measured, p: Prediction, s: Significance) -> _Inputs:
                 f"realisations must be an (R, {shape[0]}, {shape[1]}) array, got {F.shape}"
             )
         F = F if len(F) >= 2 else None
-    if F is not None:
+    strata = real_dof = None
+    if F is not None and m.strata is not None:
+        strata = np.asarray(m.strata)
+        st = stratified_mean(F, strata)
+        with np.errstate(invalid="ignore", over="ignore"):
+            se_t = np.sqrt(st.var + (model_rtol * mod) ** 2)
+        real_dof = st.dof
+    elif F is not None:
         with np.errstate(invalid="ignore", over="ignore"):
             se_t = np.sqrt(np.std(F, axis=0, ddof=1) ** 2 / len(F) + (model_rtol * mod) ** 2)
+        real_dof = len(F) - 1
     dep = None
     if ensemble and F is None and p.departure is not None:
         dep = np.asarray(p.departure, dtype=np.float64)
@@ -368,7 +386,7 @@ def _inputs_of(m: Measured, p: Prediction, s: Significance) -> _Inputs:
         nu = np.asarray(nu, dtype=np.float64)
         if nu.shape != shape or not np.all(nu >= 1):  # NaN fails too
             raise UsageError(f"dof must be a {shape} array of degrees of freedom >= 1")
-    return _Inputs(sim, se, cnt, mod, om, phi_edges, F, dep, se_t, nu)
+    return _Inputs(sim, se, cnt, mod, om, phi_edges, F, dep, se_t, nu, strata, real_dof)
 
 
 def _used_bins(a: _Inputs, model_rtol: float, min_events: int) -> tuple[np.ndarray, np.ndarray]:
@@ -444,19 +462,25 @@ def _realisation_tests(a: _Inputs, used, Em, dof, model_rtol, alpha_each) -> tup
     pass, the verdict fields they fill)."""
     if not (used.any() and Em.any() and dof > 0):
         return False, {}
-    R = len(a.F)
+    R, nu = len(a.F), a.real_dof
     norm = np.sum(a.om[Em] * a.mod[Em])
     d = np.sum(a.om[Em] * (a.F[:, Em] - a.mod[Em]), axis=1) / norm
-    se_d = float(d.std(ddof=1) / np.sqrt(R))
-    energy_p = float(2.0 * t_sf(abs(d.mean()) / np.sqrt(se_d**2 + model_rtol**2), R - 1))
-    max_abs_t = float((np.abs(a.F.mean(axis=0)[used] - a.mod[used]) / a.se_t[used]).max())
-    t_thr = float(t_isf(0.5 * sidak(alpha_each, int(used.sum())), R - 1))
+    if a.strata is None:
+        d_mean, se_d, f_mean = d.mean(), float(d.std(ddof=1) / np.sqrt(R)), a.F.mean(axis=0)
+    else:
+        sd = stratified_mean(d, a.strata)
+        d_mean, se_d = sd.mean, float(np.sqrt(sd.var))
+        f_mean = stratified_mean(a.F, a.strata).mean
+    energy_p = float(2.0 * t_sf(abs(d_mean) / np.sqrt(se_d**2 + model_rtol**2), nu))
+    max_abs_t = float((np.abs(f_mean[used] - a.mod[used]) / a.se_t[used]).max())
+    t_thr = float(t_isf(0.5 * sidak(alpha_each, int(used.sum())), nu))
     fields = dict(
-        energy_dev=float(d.mean()),
+        energy_dev=float(d_mean),
         energy_dev_se=se_d,
         energy_p=energy_p,
         max_abs_t=max_abs_t,
         t_threshold=t_thr,
+        realisation_dof=int(nu),
     )
     return bool(energy_p >= alpha_each and max_abs_t < t_thr), fields
 
@@ -572,15 +596,14 @@ def verdicts_for_result(
     own = set(result.info.realisation_models)
     ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
     ray_dof = stderr_dof(result)  # of ray_err; ``result.stderr`` with realisations: none
-    per = getattr(result, "brdf_realisations", None)
     out = []
     for t in range(T):
         for name, values, p, is_fit, k in entries:
             ray = name in own or result.stderr_ray is None
             stderr, dof = (ray_err, ray_dof) if ray else (result.stderr, None)
-            real_t = None
-            if per is not None and name not in own:
-                real_t = per[result.realisations_traced(t), t]
+            real_t = strata_t = None
+            if name not in own:
+                real_t, strata_t = realisations_at(result, t)
             values = np.asarray(values)
             if values.shape != result.brdf.shape:
                 raise UsageError(
@@ -598,12 +621,38 @@ def verdicts_for_result(
                         omega=omega,
                         realisations=real_t,
                         dof=None if dof is None else dof[t],
+                        strata=strata_t,
                     ),
                     Prediction(values[t], name, p, is_fit, k, name not in own, departure),
                     Significance(model_rtol, min_events, alpha, n_tests),
                 )
             )
     return VerdictList(out)
+
+
+def realisation_strata(result) -> np.ndarray | None:
+    """The stratum of each realisation of ``result`` when its generator drew them one per
+    stratum of the ensemble (the surface's nominal ``patch``: the Student-t mixture's Beckmann
+    patches, ``surfaces.student_t_mixture``), else None (i.i.d. realisations)."""
+    metas = result.info.realisations
+    if isinstance(metas, (int, np.integer)) or not metas or len(metas) < 2:
+        return None
+    patches = [(m.get("nominal") or {}).get("patch") for m in metas]
+    return None if any(p is None for p in patches) else np.asarray(patches)
+
+
+def realisations_at(result, t: int) -> tuple:
+    """(F, strata) of incidence ``t``: the BRDFs (R, Θ, Φ) of the realisations traced there
+    and their strata (``realisation_strata``, when at least two are present), or (None, None)
+    for a result of one realisation."""
+    per = result.brdf_realisations
+    if per is None:
+        return None, None
+    traced = result.realisations_traced(t)
+    strata = realisation_strata(result)
+    if strata is not None and len(np.unique(strata[traced])) < 2:
+        strata = None
+    return per[traced, t], None if strata is None else strata[traced]
 
 
 class VerdictList(list):

@@ -51,6 +51,7 @@ from microsim.analysis.verdicts import (
     Prediction,
     Significance,
     departure_of,
+    realisations_at,
     tile_departure,
     verdict,
     verdict_kind,
@@ -552,13 +553,16 @@ def _judge(spec: Predictor, ref: Reference, result, judging: _Judging, incidence
     alpha, rtol, min_events = judging
     verdicts, failing = [], []
     for model, t in zip(values, incidences):
-        real_t = None
-        if R >= 2:
-            real_t = per[result.realisations_traced(t), t]
+        real_t, strata_t = realisations_at(result, t) if R >= 2 else (None, None)
         dep_t = None if departure is None else departure_of(departure[t], model)
         v = verdict(
             Measured.of(
-                result, t, omega=omega, realisations=real_t, dof=None if dof is None else dof[t]
+                result,
+                t,
+                omega=omega,
+                realisations=real_t,
+                dof=None if dof is None else dof[t],
+                strata=strata_t,
             ),
             Prediction(model, spec.name, ensemble=R >= 2 or departure is not None, departure=dep_t),
             Significance(MODEL_RTOL, min_events, alpha, T),
