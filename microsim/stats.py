@@ -102,7 +102,8 @@ class StratifiedMean(NamedTuple):
 
 def stratified_mean(values, strata) -> StratifiedMean:
     """Mean over realisations drawn one stratum each (or several) of K equal-probability
-    strata, and its variance (Cochran 1977, §5.2 and §5A.12, the collapsed-strata estimator).
+    strata, and its variance (Cochran 1977: stratified sampling, and the collapsed-strata
+    estimate where a stratum holds one unit).
 
     ``values`` (R, ...): one row per realisation; ``strata`` (R,): the stratum of each. The
     mean is that of the stratum means μ_k (equal weights 1/K). With ≥ 2 realisations in every
