@@ -39,6 +39,10 @@ def _gamma(ndf: dict) -> float:
     return {"ggx": 2.0, "beckmann": float("inf")}.get(ndf.get("name"), ndf.get("gamma"))
 
 
+def _gamma_text(gamma: float) -> str:
+    return "∞" if gamma == float("inf") else f"{gamma:g}"
+
+
 def _cell(d: RunDocument, model: str, theta: float) -> str:
     """Verdict symbol, energy deviation (simulation − model)/model ± se, relative RMS."""
     for v in d.verdicts:
@@ -90,7 +94,12 @@ def _series(docs: Sequence[RunDocument], student: Sequence[RunDocument]) -> list
         ndf = _ndf(d)
         model = f"ts-{ndf['name']}-nominal-smith-corr"
         rows.append(
-            [f"{_alpha(ndf):g}", f"{_gamma(ndf):g}", _link(d), CONSTRUCTIONS.get(d.surface["kind"])]
+            [
+                f"{_alpha(ndf):g}",
+                _gamma_text(_gamma(ndf)),
+                _link(d),
+                CONSTRUCTIONS[d.surface["kind"]],
+            ]
             + [_cell(d, model, t) for t in thetas]
         )
     return [
