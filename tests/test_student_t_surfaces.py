@@ -36,7 +36,7 @@ def transform(gamma: float, **aniso):
 
 @lru_cache(maxsize=None)
 def mixture(gamma: float):
-    return [student_t_mixture(256, 1.0, ALPHA, gamma, CORR, s, PATCHES) for s in range(PATCHES)]
+    return [student_t_mixture(160, 1.0, ALPHA, gamma, CORR, s, PATCHES) for s in range(PATCHES)]
 
 
 def ks(surfaces, *ndfs, stretch=(1.0, 1.0), rotation=0.0):
