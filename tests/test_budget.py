@@ -164,6 +164,7 @@ def _save_only(plan, stage, result, log, progress):
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # 10 s; tests/test_auto.py and tests/test_resume.py keep auto runs and resumes
 def test_auto_run_records_its_choice_and_resumes_bitwise_from_either_stage(auto_scene, monkeypatch):
     from microsim.app.runner import run
     from microsim.checkpoints import interrupt_at, set_hook

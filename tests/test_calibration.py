@@ -99,6 +99,7 @@ def _tile_family(seed, sampling, grooves, rays, bins, scale=1.0, alpha=0.05):
     return [validate_verdict(v) for v in verdicts_for_result(res, alpha=alpha)]
 
 
+@pytest.mark.slow  # 11–15 s; the default run keeps the realisations' and the facet model's checks
 def test_one_tile_with_departure_false_alarms_within_binomial_bound():
     """One random-tilt tile, its departure from the ensemble computed from its facets: the
     exact ensemble model (ts-vgroove) deviates beyond that departure in at most the nominal
@@ -113,7 +114,7 @@ def test_one_tile_with_departure_false_alarms_within_binomial_bound():
     assert n_dev <= _max_false_alarms(seeds, alpha), n_dev
 
 
-@pytest.mark.slow  # power, 18 s; the default run keeps the one-tile false-alarm check
+@pytest.mark.slow  # power, 18 s
 def test_one_tile_ten_percent_off_is_flagged_beyond_departure():
     """Power on one random-tilt tile: ts-vgroove × 1.10 deviates beyond the tile's departure
     in ≥ 90 % of the seeds (before, any one-tile rejection was "inconclusive")."""

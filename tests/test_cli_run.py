@@ -111,6 +111,7 @@ def test_run_prints_the_verdicts_it_wrote(reference):
     assert lines[-1].startswith(f"agrees at every θi: {', '.join(agree) or 'none'}")
 
 
+@pytest.mark.slow  # 10 s (a resumed run); the default run checks the verdicts.json it writes
 def test_run_json_prints_verdicts_json(reference, tmp_path, capsys):
     from microsim.app.cli import main
 

@@ -53,6 +53,7 @@ def _plan(scene, out, exports=(), **kw):
     )
 
 
+@pytest.mark.slow  # 10 s; tests/test_merl.py and tests/test_rgl.py keep the round trips
 def test_the_exports_read_back_to_the_table_within_its_noise(scene, tmp_path):
     """The MERL and RGL files of the table, read back and bin-averaged, differ from the table by
     about the table's own noise (MERL stores a reciprocal average, both interpolate, which

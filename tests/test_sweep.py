@@ -214,6 +214,7 @@ def test_incomplete_task_files_are_recomputed_and_never_summarised(tmp_path, dam
     assert len(table(tmp_path)) == 2 * len(spec.tasks)
 
 
+@pytest.mark.slow  # 8 s; the default run keeps the resume of an interrupted sweep
 def test_interrupted_sweep_keeps_finished_tasks_and_writes_no_summary(tmp_path):
     """Ctrl-C after the 2nd finished task: the finished tasks stay (complete), no summary is
     written, and the rerun computes only the rest and equals an uninterrupted sweep."""

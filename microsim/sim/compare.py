@@ -150,7 +150,7 @@ def _realised_ndf(surfaces):
     and the ensemble's rotation. The facet statistics are computed once."""
     stats = [s.stats() for s in surfaces]
     ens = surfaces[0].ensemble_ndf
-    if not hasattr(ens, "alpha_x"):
+    if not isinstance(ens, AnisotropicNDF):
         return Beckmann(_m_of(stats))
     ax = float(np.sqrt(np.mean([st["alpha_x_realised"] ** 2 for st in stats])))
     ay = float(np.sqrt(np.mean([st["alpha_y_realised"] ** 2 for st in stats])))
