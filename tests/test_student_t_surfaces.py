@@ -95,7 +95,8 @@ def test_mixture_patches_cover_the_strata_and_blend_to_the_law(gamma):
         w = (gamma - 1.0) * (ALPHA / patch.nominal["m_patch"]) ** 2
         assert seed / PATCHES <= gammainc(gamma - 1.0, w) < (seed + 1) / PATCHES
         assert patch.ensemble_ndf == (GGX(ALPHA) if gamma == 2.0 else StudentT(ALPHA, gamma))
-    assert mixture_patch_m(ALPHA, gamma, PATCHES, PATCHES) != patches[0].nominal["m_patch"]
+    # the stratum's midpoint, the same for every seed of that stratum
+    assert mixture_patch_m(ALPHA, gamma, PATCHES, PATCHES) == patches[0].nominal["m_patch"]
     ms = [p.nominal["m_patch"] for p in patches]
     blend = SlopeLaw(tuple(Beckmann(m) for m in ms), CORR**2)
     union = slope_law_stats(patches, blend)
@@ -103,13 +104,14 @@ def test_mixture_patches_cover_the_strata_and_blend_to_the_law(gamma):
     assert union["slope_ks"] < crit  # every patch realises its Beckmann law
     # Gaussian patches: height and |slope| uncorrelated (4 standard errors of the mean)
     assert abs(union["height_slope_rank_corr"]) < 4.0 / np.sqrt(union["independent_cells"])
-    # the drawn strata make a blend within 1/patches of the law (one draw per stratum) …
+    # the midpoint rule puts the blend within 0.12/patches of the law (its documented bound) …
     r = np.geomspace(1e-4, 1e4, 100_001)
     strata = np.max(np.abs(blend.cdf(r) - SlopeLaw((StudentT(ALPHA, gamma),), 1.0).cdf(r)))
-    assert strata <= 1.0 / PATCHES
-    # … so the union of patches is within crit + that distance of it, unlike Beckmann
-    assert ks(patches, StudentT(ALPHA, gamma))[0] < crit + strata
-    assert ks(patches, Beckmann(ALPHA))[0] > crit + 1.0 / PATCHES
+    assert strata <= 0.12 / PATCHES
+    # … so the union of patches passes the KS test against the Student-t law itself, and
+    # Beckmann(α) fails it
+    assert ks(patches, StudentT(ALPHA, gamma))[0] < crit
+    assert ks(patches, Beckmann(ALPHA))[0] > 2.0 * crit
 
 
 def test_tail_masses_equal_their_formulas():

@@ -347,7 +347,7 @@ class StudentTMixtureSurface(_Heightfield):
     alpha: float = _key(_ALPHA, real=True)
     gamma: float = _key(_GAMMA, real=True)
     corr_len: float = _key(LENGTH, real=True)
-    patches: int = _key(int_in(1, 1000), 16)
+    patches: int = _key(int_in(1, 1000), 64)
     exact_amplitude: bool = _key(BOOL, True)
 
     def check(self, where):
