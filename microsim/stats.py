@@ -128,12 +128,11 @@ def stratified_mean(values, strata) -> StratifiedMean:
     if n.min() >= 2:
         part = np.stack([r.var(axis=0, ddof=1) / len(r) for r in rows])
         var = part.sum(axis=0) / K**2
+        nu = (n - 1).reshape((K,) + (1,) * (part.ndim - 1))
         with np.errstate(invalid="ignore", divide="ignore"):
-            ws = part.sum(axis=0) ** 2 / np.sum(
-                part**2 / (n - 1).reshape(-1, *[1] * (part.ndim - 1)), axis=0
-            )
-        finite = ws[np.isfinite(ws)] if np.ndim(ws) else np.array([ws])
-        dof = int(max(1, np.floor(finite.min()))) if finite.size else int(n.sum() - K)
+            ws = np.atleast_1d(part.sum(axis=0) ** 2 / np.sum(part**2 / nu, axis=0))
+        ws = ws[np.isfinite(ws)]  # bins without scatter constrain nothing
+        dof = int(max(1, np.floor(ws.min()))) if ws.size else int(n.sum() - K)
         return StratifiedMean(mean, var, dof)
     groups = [list(range(i, min(i + 2, K))) for i in range(0, K - K % 2, 2)]
     if K % 2:

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from .markdown import md_table, percent
+from .markdown import md_table
 from .multiple_report import deviation_text
-from .report_cells import signed_pct
+from .report_cells import verdict_cell
 from .study_records import RunDocument
 
 __all__ = ["ggx_section", "CONSTRUCTIONS"]
@@ -24,7 +24,6 @@ CONSTRUCTIONS = {
 }
 """How the section names each surface kind."""
 _STUDENT_T = ("ggx", "student-t")
-_SYMBOLS = {True: "✓", False: "✗"}
 
 
 def _ndf(d: RunDocument) -> dict:
@@ -44,14 +43,10 @@ def _gamma_text(gamma: float) -> str:
 
 
 def _cell(d: RunDocument, model: str, theta: float) -> str:
-    """Verdict symbol, energy deviation (simulation − model)/model ± se, relative RMS."""
+    """``model``'s verdict at ``theta`` (``report_cells.verdict_cell``), "–" where it has none."""
     for v in d.verdicts:
-        if v.model == model and v.theta_i == theta and v.rel_rms is not None:
-            symbol = _SYMBOLS[bool(v.agrees)] if v.conclusive else "?"
-            return (
-                f"{symbol} {signed_pct(v.energy_dev, v.energy_dev_se)}, "
-                f"rel RMS {percent(v.rel_rms, unit=' %')}"
-            )
+        if v.model == model and v.theta_i == theta:
+            return verdict_cell(v.kind, v.energy_dev, v.energy_dev_se, v.rel_rms)
     return "–"
 
 

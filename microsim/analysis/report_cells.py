@@ -15,6 +15,8 @@ __all__ = [
     "fmt",
     "pct",
     "signed_pct",
+    "VERDICT_SYMBOLS",
+    "verdict_cell",
     "ranges_text",
     "params_text",
     "bounds_text",
@@ -59,6 +61,21 @@ def signed_pct(x, se=None) -> str:
     """A signed deviation, 3 significant figures, ± its standard error when given."""
     text = percent(x, 3, signed=True, unit=" %")
     return text if se is None or text == "–" else f"{text} ± {percent(se, unit=' %')}"
+
+
+VERDICT_SYMBOLS = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}
+"""The symbol of each verdict kind (``Verdict.kind``) in the reports' tables."""
+
+
+def verdict_cell(kind: str, energy_dev, energy_dev_se, rel_rms) -> str:
+    """A model against the simulation in one cell: the verdict kind's symbol, the energy
+    deviation ± its standard error and the relative RMS error ("–" without an RMS error)."""
+    if rel_rms is None:
+        return "–"
+    return (
+        f"{VERDICT_SYMBOLS[kind]} {signed_pct(energy_dev, energy_dev_se)}, "
+        f"rel RMS {percent(rel_rms, unit=' %')}"
+    )
 
 
 def _bound(b: FitBound) -> str:

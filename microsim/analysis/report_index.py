@@ -15,7 +15,7 @@ from .ggx_index import ggx_section
 from .markdown import md_table, percent, plain
 from .multiple import NOT_EXPECTED
 from .multiple_report import RESOLVED_SE, deviation_text
-from .report_cells import bounds_brief, fmt, signed_pct
+from .report_cells import bounds_brief, fmt, signed_pct, verdict_cell
 from .report_wave import regime_section
 from .study_records import Fit, RunDocument, VariantVerdict
 from .verdicts import Verdict, as_verdicts, summary_row
@@ -83,18 +83,11 @@ def _scene_link(d: RunDocument) -> str:
     return f"[{d.scene}]({d.scene}/report.md)"
 
 
-_SYMBOLS = {"agrees": "✓", "deviates": "✗", "inconclusive": "?"}
-
-
 def _variant_cell(v: VariantVerdict | None) -> str:
-    """One Smith G variant against the simulation: verdict symbol, energy deviation ± se,
-    relative RMS error."""
-    if v is None or v.rel_rms is None:
+    """One Smith G variant against the simulation (``report_cells.verdict_cell``)."""
+    if v is None:
         return "–"
-    return (
-        f"{_SYMBOLS[v.verdict]} {signed_pct(v.energy_dev, v.energy_dev_se)}, "
-        f"rel RMS {percent(v.rel_rms, unit=' %')}"
-    )
+    return verdict_cell(v.verdict, v.energy_dev, v.energy_dev_se, v.rel_rms)
 
 
 def _anisotropy_incidences(docs: Sequence[RunDocument]):

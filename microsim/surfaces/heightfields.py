@@ -54,6 +54,7 @@ __all__ = [
     "abc_continuum_slope_var",
     "abc_spectrum",
     "gaussian_ensemble_ndf",
+    "check_resolved",
     "abc_ensemble_ndf",
 ]
 
@@ -521,15 +522,21 @@ def abc(
     return _heightfield_surface("abc", h, dx, nominal, warns, ensemble, predicted)
 
 
+def check_resolved(dx: float, **lengths) -> None:
+    """UsageError naming the first correlation length (keyword: its name) shorter than the grid
+    step ``dx`` resolves (``GAUSS_RESOLVED_CELLS``)."""
+    for name, ell in lengths.items():
+        if ell < GAUSS_RESOLVED_CELLS * dx:
+            raise UsageError(f"{name} must be >= dx = {dx:g} (resolved by the grid), got {ell:g}")
+
+
 def _gaussian_anisotropic(n, dx, sigma, lx, ly, rotation, seed, exact_amplitude) -> Surface:
     """``gaussian`` with ``corr_len_y`` (its docstring)."""
     n, dx, seed = _grid_args(n, dx, seed)
     sigma = positive("sigma", sigma)
     lx, ly = positive("corr_len", lx), positive("corr_len_y", ly)
     rotation = finite("rotation", rotation)
-    for name, ell in (("corr_len", lx), ("corr_len_y", ly)):
-        if ell < GAUSS_RESOLVED_CELLS * dx:
-            raise UsageError(f"{name} must be >= dx = {dx:g} (resolved by the grid), got {ell:g}")
+    check_resolved(dx, corr_len=lx, corr_len_y=ly)
     with np.errstate(over="ignore", invalid="ignore"):
         S, FX, FY = psd_grid(
             lambda fx, fy: gaussian_anisotropic_psd(fx, fy, sigma, lx, ly, rotation),

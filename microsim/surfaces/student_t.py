@@ -27,15 +27,14 @@ from scipy.special import gammainc, gammainccinv, gammaincinv, ndtr
 
 from microsim.analytic import GGX, AnisotropicGGX, AnisotropicStudentT, Beckmann, StudentT
 from microsim.checks import finite, integer, positive
-from microsim.errors import UsageError
 
 from .heightfields import (
-    GAUSS_RESOLVED_CELLS,
     MAX_RMS_SLOPE,
     _finite_spectrum,
     _grid_args,
     _heightfield_surface,
     _mesh_alphas,
+    check_resolved,
     gaussian,
     gaussian_anisotropic_psd,
     gaussian_psd,
@@ -203,12 +202,6 @@ def _unit_sigma_field(n, dx, corr_len, corr_len_y, rotation):
     return S, FX, FY, spectrum_moments(S, FX, FY, dx)
 
 
-def _check_corr_len(dx, **lengths) -> None:
-    for name, ell in lengths.items():
-        if ell < GAUSS_RESOLVED_CELLS * dx:
-            raise UsageError(f"{name} must be >= dx = {dx:g} (resolved by the grid), got {ell:g}")
-
-
 def student_t_transform(
     n: int,
     dx: float,
@@ -248,12 +241,12 @@ def student_t_transform(
     rotation = finite("rotation", rotation)
     if alpha_y is None:
         ensemble, corr_len_y = student_t_ensemble(alpha, gamma), None
-        _check_corr_len(dx, corr_len=corr_len)
+        check_resolved(dx, corr_len=corr_len)
     else:
         alpha_y = positive("alpha_y", alpha_y)
         ensemble = student_t_ensemble(alpha, alpha_y=alpha_y, gamma=gamma, rotation=rotation)
         corr_len_y = corr_len * alpha / alpha_y
-        _check_corr_len(dx, corr_len=corr_len, **{"corr_len·alpha/alpha_y": corr_len_y})
+        check_resolved(dx, corr_len=corr_len, **{"corr_len·alpha/alpha_y": corr_len_y})
     gamma = float(gamma)
     S, FX, FY, mom = _unit_sigma_field(n, dx, corr_len, corr_len_y, rotation)
     # g = field/√var is N(0, 1) at every point (exactly the realised variance with
@@ -329,7 +322,7 @@ def student_t_mixture(
     patches = integer("patches", patches, 1, None, " (Gamma strata of the mixture)")
     ensemble = student_t_ensemble(alpha, gamma)
     gamma = float(gamma)
-    _check_corr_len(dx, corr_len=corr_len)
+    check_resolved(dx, corr_len=corr_len)
     *_, mom = _unit_sigma_field(n, dx, corr_len, None, 0.0)
     m_per_sigma = np.sqrt(mom.slope_var_x + mom.slope_var_y)  # the mesh m of gaussian(σ = 1)
     m_cap = MAX_RMS_SLOPE * corr_len / 2.0 * m_per_sigma
