@@ -493,17 +493,23 @@ def _mark_z5(ax, z, bins):
     ax.contour(ac, rc, np.ma.masked_invalid(v), levels=[5.0], colors="k", linewidths=0.8)
 
 
+MODEL_COLUMN = 38
+"""Longest model name the hemisphere chart's table prints whole (the catalogue's longest,
+``ts-beckmann-nominal-smith-corr-geomean``)."""
+
+
 def _verdict_table(sel: list[ChartVerdict]) -> str:
     """The chart's text table: one row per verdict, its verdict in ``verdict_kind``'s words
     (the rule of every output) and, for an inconclusive tile, the tile's departure."""
-    head = f"{'model':<22}{'χ²/dof':>8}{'max|z|':>8}{'rel rms':>9}  verdict"
+    width = min(max([len("model")] + [len(str(v.model)) for v in sel]), MODEL_COLUMN) + 1
+    head = f"{'model':<{width}}{'χ²/dof':>8}{'max|z|':>8}{'rel rms':>9}  verdict"
     rows = [head, "-" * len(head)]
     for v in sel:
         kind = verdict_kind(v) if v.agrees is not None else "–"
         if kind == "inconclusive" and v.tile_departure is not None:
             kind += f" (tile departs {percent(v.tile_departure)})"
         rows.append(
-            f"{str(v.model)[:21]:<22}{_num(v.chi2_dof):>8.2f}"
+            f"{str(v.model)[: width - 1]:<{width}}{_num(v.chi2_dof):>8.2f}"
             f"{_num(v.max_abs_z):>8.1f}{_num(v.rel_rms):>9.3f}  {kind}"
         )
     return "\n".join(rows)
