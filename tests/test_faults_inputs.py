@@ -8,6 +8,7 @@ test_faults_cli.py, except the start-up interrupt, which needs a real process.
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -219,9 +220,24 @@ def test_an_import_cut_short_by_ctrl_c_is_an_interrupt(capsys, monkeypatch):
 ENTRY = "import sys; from microsim.app.cli import main; sys.exit(main())"
 
 
-@pytest.mark.parametrize("delay", [0.15, 0.4])
+def _wait_until_mapped(pid: int, name: str, timeout: float = 60.0) -> None:
+    """Wait until process ``pid`` has a shared library whose path contains ``name`` mapped."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        with open(f"/proc/{pid}/maps") as f:
+            if name in f.read():
+                return
+        time.sleep(0.005)
+    raise AssertionError(f"{name} was not loaded within {timeout:g} s")
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs /proc to follow the child")
+@pytest.mark.parametrize("delay", [0.0, 0.4])
 def test_sigint_during_start_up_exits_130_without_traceback(tmp_path, delay):
-    """SIGINT while the command line imports its modules (or, on a fast machine, just after)."""
+    """SIGINT while the command loads its modules — as soon as NumPy's extension is mapped,
+    which only ``main`` imports (the command line's own modules do not) — or 0.4 s later. A
+    signal before ``main`` runs (while the interpreter itself starts, ~50 ms) is Python's
+    default KeyboardInterrupt: no program can catch it, so the test waits for ``main``."""
     sc = scene(tmp_path)
     proc = subprocess.Popen(
         [sys.executable, "-c", ENTRY, "run", str(sc), "--quick", "--no-progress"],
@@ -230,9 +246,10 @@ def test_sigint_during_start_up_exits_130_without_traceback(tmp_path, delay):
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(delay)
-    proc.send_signal(signal.SIGINT)
     try:
+        _wait_until_mapped(proc.pid, "_multiarray_umath")
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
         err = proc.communicate(timeout=60)[1]
     finally:
         proc.kill()
