@@ -512,8 +512,8 @@ def assert_sampler_matches(
         raise failure(
             f"sampler does not match its pdf: χ² = {chi2:.1f} on {dof} dof, p = {p:.3g} < "
             f"{p_thr:.3g} (α = {alpha:g}, Šidák over {n_tests} test(s)); {n} samples, "
-            f"{out['outside']} rejected (NaN direction, pdf value or weight 0; expected "
-            f"{exp[-1]:.1f}).\n"
+            f"{out['outside']} rejected, outside the direction cells (NaN direction, pdf value "
+            f"or weight 0; expected {exp[-1]:.1f}).\n"
         )
     return out
 
