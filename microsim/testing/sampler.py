@@ -389,7 +389,9 @@ def assert_sampler_matches(
     samples. The returned pdf values must equal ``pdf(directions)`` within ``pdf_rtol``
     (relative) where finite. With ``brdf`` (brdf(w) → (M,) BRDF values in sr⁻¹ for the
     sampler's fixed direction, no cosine), the weights must equal brdf(w)·|cos θ|/pdf(w)
-    within ``weight_rtol`` where pdf(w) > 0; without it, weights only mark rejections and
+    within ``weight_rtol`` where pdf(w) > 0 (a failure names the ratio weight/expected: a
+    constant, f and pdf normalised differently; ∝ cos θ^±1, the cosine twice or left out);
+    without it, weights only mark rejections and
     must otherwise be finite and >= 0. Both tolerances default to ``FLOAT32_RTOL`` (10⁻³,
     derived there from single precision).
 
@@ -403,12 +405,14 @@ def assert_sampler_matches(
     The test rejects when p < Šidák(alpha, n_tests) (``n_tests``: the size of the family the
     caller runs, e.g. several outgoing directions). On rejection AssertionError lists χ²,
     dof, p, samples that landed where pdf(w) is 0, the likely cause and the cells with the
-    largest contributions (θ and φ ranges, observed vs expected). The cause: the ratio
-    observed/expected over the cells expecting ≥ 20 samples (weighted by expected counts) is
-    fitted as a constant (pdf normalisation), ∝ cos θ^±1, and — given ``wi``, the sampler's
-    fixed direction (unit, away from the surface) and h = (wi + wo)/|wi + wo| — ∝ (4|wo·h|)^±1
-    (the half-vector Jacobian) or (h·n)^±1; the best is named if it explains ≥ 75 % of the
-    misfit. Returns the numbers (``SamplerCheck``).
+    largest contributions (θ and φ ranges, observed vs expected). The cause: log(observed /
+    expected) over the cells expecting ≥ 20 samples (weighted by its inverse variance, the
+    expected count scaled to the observed total) is fitted as a constant (pdf normalisation),
+    ∝ cos θ^±1, and — given ``wi``, the sampler's fixed direction (unit, away from the
+    surface) and h = (wi + wo)/|wi + wo| — ∝ (4|wo·h|)^±1 (the half-vector Jacobian) or
+    (h·n)^±1; the best is named if the misfit is real (5σ), it removes ≥ 75 % of it and
+    leaves noise. A pdf integrating to more than 1 fails with the same diagnosis. Returns the
+    numbers (``SamplerCheck``).
     """
     __tracebackhide__ = True
     if not callable(sample):
