@@ -41,6 +41,7 @@ _WHERE = {
     "assert_sampler_matches": "sampler",
     "pearson_chi2": "sampler",
     "SamplerCheck": "sampler",
+    "FLOAT32_RTOL": "sampler",
 }
 __all__ = list(_WHERE)
 
