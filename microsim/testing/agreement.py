@@ -56,6 +56,8 @@ from microsim.analysis.verdicts import (
     verdict,
     verdict_kind,
 )
+from microsim.analytic.brdf import TorranceSparrow
+from microsim.analytic.masking import Smith, VGroove
 from microsim.errors import UsageError
 from microsim.sim.compare import attach_models, default_models, departure_models
 from microsim.sim.predict import FunctionBRDF, Predictor, predict_incidences
@@ -63,7 +65,8 @@ from microsim.sim.tallies import stderr_dof
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
 from .cache import AUTO_MAX_RAYS, AUTO_TARGET, Reference, cache_dir, cached, resolve_reference
-from .physics import PhysicsError, physics_lines, physics_model
+from .diagnosis import closest, likely_cause, lobe_width_deg
+from .physics import PHYSICS_MODEL, PhysicsError, physics_lines, physics_model
 from .returns import real_values
 
 __all__ = [
@@ -301,27 +304,11 @@ def _energy_ratio(bins, numerator, denominator) -> float | None:
     return None if den <= 0 else float((numerator * om)[ok].sum() / den)
 
 
-def lobe_width_deg(bins, f) -> float:
-    """Energy-weighted RMS angle (deg) of the bins' centre directions about the energy-weighted
-    mean direction of ``f`` (Θ × Φ bin averages on ``bins``) over the outgoing hemisphere:
-    the lobe's width."""
-    from microsim.vectors import spherical_deg
-
-    th, ph = np.meshgrid(bins.theta_centers, bins.phi_centers, indexing="ij")
-    w = np.where(np.isfinite(f), f, 0.0) * bins.projected_solid_angle()
-    if not np.any(w > 0):
-        return float("nan")
-    d = spherical_deg(th, ph)
-    mean = (w[..., None] * d).sum((0, 1))
-    mean /= np.linalg.norm(mean)
-    ang = np.degrees(np.arccos(np.clip(d @ mean, -1.0, 1.0)))
-    return float(np.sqrt((w * ang**2).sum() / w.sum()))
-
-
 def _diagnosis(result, model, t: int, min_events: int) -> str | None:
-    """A hint at the cause of a failing incidence ``t``: a ratio brdf/reference that is the
-    same in every well-measured bin (a normalisation error: a constant factor), else a lobe
-    wider or narrower than the reference's (a roughness error?). None when neither shows."""
+    """For a surface without an ensemble NDF (no closed form to fit variants of): a ratio
+    brdf/reference that is the same in every well-measured bin (a normalisation error: a
+    constant factor), else a lobe wider or narrower than the reference's (a roughness error?).
+    None when neither shows."""
     ref, mod, cnt = result.brdf[t], model[t], result.counts[t]
     used = (cnt >= min_events) & np.isfinite(ref) & (ref > 0) & np.isfinite(mod)
     if used.sum() >= 3:
@@ -343,6 +330,65 @@ def _diagnosis(result, model, t: int, min_events: int) -> str | None:
                 f"reference's (RMS angle {width_mod:.1f}° vs {width_ref:.1f}°): roughness?"
             )
     return None
+
+
+def _correct_models(ref: Reference) -> dict:
+    """The closed forms a correct BRDF of the reference's ensemble NDF may implement (catalogue
+    names → models): Torrance–Sparrow with the surface's own exact G where it has one, and
+    with Smith's G, height-correlated and separable."""
+    ndf, material = ref.ensemble_ndf, ref.material
+    models = {}
+    if ref.exact_shadowing == "vgroove":
+        models["ts-vgroove"] = TorranceSparrow(ndf, VGroove(), material)
+    models[PHYSICS_MODEL] = TorranceSparrow(ndf, Smith(correlated=True), material)
+    models["ts-smith"] = TorranceSparrow(ndf, Smith(correlated=False), material)
+    return models
+
+
+def _percent(x) -> str:
+    return "–" if x is None else f"{100 * x:+.1f} %"
+
+
+def _cause_lines(ref: Reference, result, judged: "_Judged", physics, with_phi: bool) -> list[str]:
+    """What the failing incidences' deviation looks like: the brdf is one of the correct closed
+    forms itself (its deviation is that model's), or the variant of the nearest one that fits
+    it (``diagnosis.likely_cause``); for a surface without an ensemble NDF, the ratio to the
+    reference per incidence (``_diagnosis``)."""
+    name, values, verdicts, failing = judged
+    physics_fails = {(r.theta_i, r.phi_i) for r in physics or () if not r.holds}
+    if ref.ensemble_ndf is None or not ref.ensemble_ndf.isotropic:
+        lines = []
+        for t in failing:
+            if (verdicts[t]["theta_i"], verdicts[t]["phi_i"]) in physics_fails:
+                continue  # a roughness or scale hint would blame the brdf for the physics' error
+            hint = _diagnosis(result, values, t, verdicts[t]["min_events"])
+            if hint:
+                lines.append(f"at {_at(result, t, with_phi)}: {hint}")
+        return lines
+    theta, phi = result.theta_i[failing], result.phi_i[failing]
+    user = values[failing]
+    near = closest(user, _correct_models(ref), theta, phi, result.bins)
+    if near.is_the_model:
+        devs = ", ".join(
+            f"{_percent(verdicts[t]['energy_dev'])} at {_at(result, t, with_phi)}" for t in failing
+        )
+        return [
+            f"the brdf is {near.name} itself (within {near.misfit:.2%} relative RMS): this is "
+            f"the deviation of {near.name} on this surface ({devs}, energy): the physics, not "
+            "your implementation"
+        ]
+    causes = [
+        (cause, name)
+        for name, model in _correct_models(ref).items()
+        if (cause := likely_cause(user, model, None, theta, phi, result.bins)) is not None
+    ]
+    if not causes:
+        return [
+            f"the brdf is none of {', '.join(_correct_models(ref))} (nearest: {near.name}, "
+            f"{near.misfit:.2%} relative RMS) and no single common bug explains the difference"
+        ]
+    cause, name = min(causes, key=lambda c: c[0].misfit)
+    return [f"likely cause (against {name}): {cause.sentence()}"]
 
 
 def _chart(result, model, name, verdicts, t: int, where: Path, key: str) -> str:
@@ -777,13 +823,7 @@ def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics) ->
         "reference over the reference's 90 % energy bins; energy ratio = Σ Ω⊥ brdf / "
         "Σ Ω⊥ reference over the hemisphere (the brdf's albedo over the reference's)",
     ]
-    physics_fails = {(r.theta_i, r.phi_i) for r in physics or () if not r.holds}
-    for t in failing:
-        if (verdicts[t]["theta_i"], verdicts[t]["phi_i"]) in physics_fails:
-            continue  # a roughness or scale hint would blame the brdf for the physics' error
-        hint = _diagnosis(result, model, t, verdicts[t]["min_events"])
-        if hint:
-            lines.append(f"at {_at(result, t, with_phi)}: {hint}")
+    lines += _cause_lines(ref, result, judged, physics, with_phi)
     lines += physics_lines(physics or (), lambda r: incidence.label(r.theta_i, r.phi_i, with_phi))
     for t in failing:
         wb = _worst_bins(result, model, t, verdicts[t]["min_events"])
