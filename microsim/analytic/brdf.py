@@ -11,7 +11,7 @@ the incidence first for an integral over a BRDF — then the model. ``material``
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -81,7 +81,7 @@ class TorranceSparrow(ModelBase):
                 f"masking must be VGroove(), Smith(...), NoMasking() or a shadowing name, got {m!r}"
             )
         if isinstance(m, Smith) and m.ndf is None:
-            m = Smith(self.ndf, m.correlated)
+            m = replace(m, ndf=self.ndf)
         object.__setattr__(self, "masking", m)
         resolve_material(self.material)
         super().__post_init__()

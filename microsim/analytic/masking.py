@@ -23,8 +23,6 @@ from microsim import checks as _checks
 from microsim import vectors
 from microsim.errors import UsageError
 
-from .shadowing import _smith_g2, smith_g1, smith_g2
-
 __all__ = [
     "Masking",
     "VGroove",
@@ -108,10 +106,13 @@ class VGroove:
 class Smith:
     """Smith masking G1 = χ⁺(w·h)/(1 + Λ(w)) of ``ndf``; G2 separable G1(wi)G1(wo) or, with
     ``correlated``, height-correlated χ⁺χ⁺/(1 + Λ(wi) + Λ(wo)) (Smith 1967; Heitz 2014):
-    ``smith_g1`` / ``smith_g2``. ``ndf=None``: the NDF of the model using it."""
+    ``smith_g1`` / ``smith_g2``. ``ndf=None``: the NDF of the model using it. ``lambda_method``:
+    how Λ is evaluated, the NDF's ``smith_lambda`` method ("auto"; Beckmann's "walter2007" is
+    the rational G1 a renderer such as Mitsuba 3 uses)."""
 
     ndf: Any = None
     correlated: bool = False
+    lambda_method: str = "auto"
     name: ClassVar[str] = "Smith"
     params_doc: ClassVar[str] = (
         "ndf (None: the model's own), correlated=False|True; closed Λ for Beckmann/GGX, "
@@ -135,13 +136,14 @@ class Smith:
         return self.ndf
 
     def g1(self, w, h):
-        return smith_g1(w, h, self._ndf())
+        return self._ndf().G1(w, h, self.lambda_method)
 
     def g2(self, wi, wo, h):
-        return smith_g2(wi, wo, h, self._ndf(), correlated=self.correlated)
+        wi, wo, h = _unit_triple(wi, wo, h)
+        return self.g2_cosines(wi, wo, h[..., 2], vectors.dot(wi, h), vectors.dot(wo, h))
 
     def g2_cosines(self, wi, wo, cos_h, wih, woh):
-        return _smith_g2(self.ndf, wi, wo, wih, woh, correlated=self.correlated)
+        return self._ndf().smith_g2_dots(wi, wo, wih, woh, self.correlated, self.lambda_method)
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,7 @@ __all__ = [
     "scene_distribution",
     "scene_distributions",
     "beckmann_lambda",
+    "beckmann_lambda_walter2007",
     "ggx_lambda",
     "beckmann_to_phong",
     "phong_to_beckmann",
@@ -171,7 +172,7 @@ class NDF:
 
         ``method``: "auto" (closed form when ``has_closed_smith``, else numerical), "closed",
         or "numerical" (projected-area identity, ``smith``; forced even when a closed form
-        exists, for checking it).
+        exists, for checking it); ``Beckmann`` also "walter2007" (``beckmann_lambda_walter2007``).
         """
         w = _checks.directions("w", w, upper=True)
         return self._smith_lambda(w, method)
@@ -197,12 +198,13 @@ class NDF:
                 f"{type(self).__name__} has none (use 'auto' or 'numerical')"
             )
 
-    def G1(self, w, h):
-        """Smith masking G1(w, h) = χ⁺(w·h)/(1 + Λ(w)) (Smith 1967; Heitz 2014)."""
+    def G1(self, w, h, method: str = "auto"):
+        """Smith masking G1(w, h) = χ⁺(w·h)/(1 + Λ(w)) (Smith 1967; Heitz 2014); ``method``
+        as ``smith_lambda``'s."""
         w = _checks.directions("w", w)
         h = _checks.directions("h", h)
         _checks.broadcast({"w": w, "h": h})
-        return _g1_from_lambda(self._smith_lambda(w), vectors.dot(w, h), w[..., 2])
+        return _g1_from_lambda(self._smith_lambda(w, method), vectors.dot(w, h), w[..., 2])
 
     def G2(self, wi, wo, h, correlated: bool = False):
         """Smith shadowing–masking: separable G1(wi)G1(wo), or height-correlated
@@ -213,9 +215,10 @@ class NDF:
         _checks.broadcast({"wi": wi, "wo": wo, "h": h})
         return self.smith_g2_dots(wi, wo, vectors.dot(wi, h), vectors.dot(wo, h), correlated)
 
-    def smith_g2_dots(self, wi, wo, wih, woh, correlated: bool):
-        """``G2`` for validated unit wi, wo and their precomputed dot products with h."""
-        lam_i, lam_o = self._smith_lambda(wi), self._smith_lambda(wo)
+    def smith_g2_dots(self, wi, wo, wih, woh, correlated: bool, method: str = "auto"):
+        """``G2`` for validated unit wi, wo and their precomputed dot products with h; Λ by
+        ``method`` (``smith_lambda``)."""
+        lam_i, lam_o = self._smith_lambda(wi, method), self._smith_lambda(wo, method)
         if correlated:
             ok = (wih > 0.0) & (woh > 0.0) & (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
             with np.errstate(invalid="ignore"):
@@ -297,7 +300,10 @@ _LAMBDA_METHODS = ("auto", "closed", "numerical")
 
 def _check_lambda_method(method) -> None:
     if method not in _LAMBDA_METHODS:
-        raise UsageError(f"method must be one of 'auto', 'closed', 'numerical', got {method!r}")
+        raise UsageError(
+            f"method must be one of 'auto', 'closed', 'numerical' (Beckmann also "
+            f"{WALTER_2007!r}), got {method!r}"
+        )
 
 
 def _g1_from_lambda(lam, w_dot_h, cos_w):
@@ -357,6 +363,24 @@ def _cos_array(cos_theta) -> np.ndarray:
 
 
 # --- Beckmann -------------------------------------------------------------------------------
+WALTER_2007 = "walter2007"
+"""The Λ ``method`` of ``Beckmann`` that is Walter et al. 2007's rational G1 (eq. 27)."""
+
+
+def beckmann_lambda_walter2007(cos_theta, m):
+    """Beckmann Smith Λ = 1/G1 − 1 from the rational approximation of Walter et al. 2007,
+    eq. 27: G1 = (3.535a + 2.181a²)/(1 + 2.276a + 2.577a²) for a < 1.6, else 1, a = 1/(m tan θ)
+    ("< 0.35 %" from the exact G1; 0.31 % at a ≈ 1.34, and the rational form exceeds 1 by up
+    to 6e-5 just below a = 1.6, where this Λ is slightly negative). Mitsuba 3 evaluates its
+    Beckmann G1 so (``smith_g1`` in include/mitsuba/render/microfacet.h); cos θ in [0, 1]."""
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = c / (m * np.sqrt(_sin2(c)))  # inf at c = 1
+        g1 = (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
+        lam = 1.0 / g1 - 1.0  # inf at c = 0
+    return np.where(a >= 1.6, 0.0, lam)
+
+
 def beckmann_lambda(cos_theta, m):
     """Beckmann Smith Λ at cos θ (array, clipped to [0, 1]) for roughness ``m`` (scalar or an
     array broadcasting with it): ``Beckmann.smith_lambda_cos``'s formula."""
@@ -431,6 +455,15 @@ class Beckmann(NDF):
         (a = 0), so that G1 = 1/(1 + Λ) = 0 there.
         """
         return beckmann_lambda(_cos_array(cos_theta), self.m)
+
+    def _smith_lambda(self, w, method: str = "auto"):
+        """Λ(w) for unit w; ``method`` may also be ``WALTER_2007`` ("walter2007": the rational
+        G1 of ``beckmann_lambda_walter2007``, a renderer's approximation, for comparing with
+        one); inf at cos θ_w ≤ 0."""
+        if method != WALTER_2007:
+            return super()._smith_lambda(w, method)
+        c = w[..., 2]
+        return np.where(c > 0.0, beckmann_lambda_walter2007(c, self.m), np.inf)
 
     def _sample_visible(self, v, u1, u2):
         """Heitz & d'Eon 2014 visible-slope inversion (module docstring, "Visible normals")."""

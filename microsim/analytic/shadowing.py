@@ -41,11 +41,6 @@ def smith_g1(w, h, ndf):
     return ndf.G1(w, h)
 
 
-def _smith_g2(ndf, wi, wo, wih, woh, correlated: bool):
-    """Smith G2 on validated unit arrays from the precomputed wi·h, wo·h."""
-    return ndf.smith_g2_dots(wi, wo, wih, woh, correlated)
-
-
 def smith_g2(wi, wo, h, ndf, correlated: bool = False):
     """Smith shadowing–masking: separable G1(wi)G1(wo), or height-correlated
     χ⁺(wi·h)χ⁺(wo·h)/(1 + Λ(wi) + Λ(wo)) when ``correlated``: ``ndf.G2(wi, wo, h, correlated)``."""

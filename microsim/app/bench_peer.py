@@ -83,6 +83,7 @@ from microsim.errors import EnvironmentFailure, UsageError
 
 __all__ = [
     "PeerUnavailable",
+    "load_mitsuba",
     "PeerResult",
     "PeerScene",
     "VARIANTS",
@@ -123,8 +124,9 @@ class PeerUnavailable(EnvironmentFailure):
     """Mitsuba 3 (or its LLVM backend) cannot be used here; the message says why and how."""
 
 
-def _mitsuba():
-    """(mi, dr, variant): mitsuba with an LLVM variant set, or PeerUnavailable."""
+def load_mitsuba():
+    """(mi, dr, variant): mitsuba with an LLVM variant set, or PeerUnavailable (the one
+    loader of Mitsuba 3: the bench's peer and ``microsim.testing.mitsuba``)."""
     try:
         import drjit as dr
         import mitsuba as mi
@@ -169,10 +171,10 @@ def _jit_core(dr) -> ctypes.CDLL:
 
 
 def llvm_target(dr=None) -> dict:
-    """The CPU and vector width Dr.Jit (the module ``dr``, else set up by ``_mitsuba``)
+    """The CPU and vector width Dr.Jit (the module ``dr``, else set up by ``load_mitsuba``)
     compiles the peer's kernels for: {"cpu", "lanes"} ("unknown" and None where its library
     does not say)."""
-    dr = _mitsuba()[1] if dr is None else dr
+    dr = load_mitsuba()[1] if dr is None else dr
     try:
         lib = _jit_core(dr)
     except PeerUnavailable:
@@ -286,7 +288,7 @@ class PeerScene:
         v, f, lx, ly = _check_surface(surface)
         if not (0.0 <= float(theta_max_deg) < 90.0):
             raise UsageError(f"theta_i must lie in [0, 90) degrees, got {theta_max_deg!r}")
-        mi, dr, variant = _mitsuba()
+        mi, dr, variant = load_mitsuba()
         self.mi, self.dr, self.variant = mi, dr, variant
         t0 = time.perf_counter()
         e1, e2 = v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
