@@ -58,8 +58,9 @@ from microsim.analysis.verdicts import (
 )
 from microsim.analytic.brdf import TorranceSparrow
 from microsim.analytic.masking import Smith, VGroove
+from microsim.analytic.ndf import Beckmann
 from microsim.errors import UsageError
-from microsim.sim.compare import attach_models, default_models, departure_models
+from microsim.sim.compare import attach_models, default_models, departure_models, realised_m
 from microsim.sim.predict import FunctionBRDF, Predictor, predict_incidences
 from microsim.sim.tallies import stderr_dof
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
@@ -343,6 +344,33 @@ def _correct_models(ref: Reference) -> dict:
     models[PHYSICS_MODEL] = TorranceSparrow(ndf, Smith(correlated=True), material)
     models["ts-smith"] = TorranceSparrow(ndf, Smith(correlated=False), material)
     return models
+
+
+def _realised_lines(ref: Reference, result, judging: "_Judging", failing, with_phi) -> list[str]:
+    """For a Beckmann ensemble (Gaussian and ABC heightfields): the m its tiles realise when it
+    differs from the nominal one, and the physics model at that m judged at the failing
+    incidences — a BRDF of the nominal m departs from these tiles by the difference alone."""
+    ndf = ref.ensemble_ndf
+    if type(ndf) is not Beckmann or ref.exact_shadowing is not None:
+        return []
+    m = realised_m(ref.surfaces)
+    if abs(m / ndf.m - 1.0) < 1e-3:
+        return []
+    model = TorranceSparrow(Beckmann(m), Smith(correlated=True), ref.material)
+    judged = _judge(
+        Predictor(f"{PHYSICS_MODEL} at m = {m:.4g}", model), ref, result, judging, failing
+    )
+    agrees = [t for t in failing if t not in judged.failing]
+    where = "; ".join(
+        f"{word} at {', '.join(_at(result, t, with_phi) for t in ts)}"
+        for word, ts in (("passes", agrees), ("fails", judged.failing))
+        if ts
+    )
+    return [
+        f"the surface's tiles realise m = {m:.4g}, not the nominal {ndf.m:g} "
+        f"({m / ndf.m - 1.0:+.2%}: their own facet slopes, Surface.stats()), so a BRDF of the "
+        f"nominal m departs from them by that alone; {PHYSICS_MODEL} at the realised m {where}"
+    ]
 
 
 def _percent(x) -> str:
@@ -825,6 +853,7 @@ def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics) ->
     ]
     lines += _cause_lines(ref, result, judged, physics, with_phi)
     lines += physics_lines(physics or (), lambda r: incidence.label(r.theta_i, r.phi_i, with_phi))
+    lines += _realised_lines(ref, result, judging, failing, with_phi)
     for t in failing:
         wb = _worst_bins(result, model, t, verdicts[t]["min_events"])
         if wb:
