@@ -28,7 +28,7 @@ from microsim.app.measure import RGL_FLOOR, measure, plan_measure
 from microsim.measured.rgl import write_rgl
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "surfaces" / "vgroove-beckmann-0.3.toml"
+SCENE = "vgroove-beckmann-0.3"  # a catalogue scene
 LIGHT_DEG = 75.0
 SPP = 64
 SIZE = 256

@@ -6,7 +6,7 @@
     passes where Schlick's error is far below the reference's precision;
 (d) a user's importance sampler against its pdf: passes, and a wrong pdf fails.
 
-The scene ``surfaces/vgroove-ggx-0.3.toml`` is 4000 stratified V-grooves with GGX(α = 0.3)
+The catalogue scene ``vgroove-ggx-0.3`` is 4000 stratified V-grooves with GGX(α = 0.3)
 tilts on aluminium; azimuth-averaged, its single-bounce BRDF is Torrance–Sparrow with the GGX
 D, the V-groove G and exact Fresnel (Mikkelsen 2009, eq. 13, 25), which is what ``ggx_brdf``
 below implements without microsim. All checks share one reference simulation (traced once,

@@ -6,15 +6,13 @@ and the wave closed forms evaluate an anisotropic field's PSD at the scattering 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from microsim import vectors
 from microsim.analysis.wave_verdicts import WAVE_MODELS, closed_form, surface_spectrum
 from microsim.analytic import AnisotropicBeckmann, church_to_condensed, rayleigh_rice
-from microsim.app.scene import load_scene
+from microsim.app.scene import CATALOGUE, load_scene
 from microsim.errors import UsageError
 from microsim.surfaces import abc, gaussian
 from microsim.surfaces.heightfields import gaussian_anisotropic_psd
@@ -117,7 +115,7 @@ def test_the_anisotropic_wave_scene_judges_the_elliptical_rayleigh_rice(tmp_path
     from microsim.sim import Result
 
     out = tmp_path / "run"
-    scene = str(Path(__file__).resolve().parents[1] / "surfaces/abc-aniso-smooth-wave.toml")
+    scene = str(CATALOGUE / "abc-aniso-smooth-wave.toml")
     assert main(["run", scene, "--quick", "--out", str(out), "--no-progress"]) == 0
     k = Result.load(out / "kirchhoff")
     assert set(k.phi_i.tolist()) == {30.0} and not k.bins.folded

@@ -250,12 +250,10 @@ def test_gaussian_catalogue_verdicts_at_full_settings_slow():
     V-groove G, about 2× too bright at the grazing forward peak, must deviate at 80° (the
     per-bin z test of one pooled run called the first "deviates", 4 tiles could not flag
     the second)."""
-    from pathlib import Path
-
     from microsim.app.runner import tracing
     from microsim.app.runner.planning import plan_run
 
-    scene = Path(__file__).resolve().parents[1] / "surfaces" / "gaussian-m0.3.toml"
+    scene = "gaussian-m0.3"
     plan = plan_run(scene, theta_i=[0.0, 30.0, 80.0], out="unused-out-dir")
     pilot = tracing.simulate_scene(plan, plan.theta_i, plan.rays, plan.seed, plan.bins)
     plan = tracing.choose_realisations(plan, pilot)

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from microsim.analysis.verdicts import validate_verdict
+from microsim.app.scene import CATALOGUE
 
 pytestmark = pytest.mark.integration  # end to end: subprocesses, whole runs and reports
 
@@ -213,9 +214,6 @@ def test_malformed_scene_one_line_nothing_written(tmp_path, edit, key):
     assert len(lines) == 1, r.stderr
     assert str(scene) in lines[0] and key in lines[0] and "Traceback" not in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == [scene.name]  # no out/, no runs/
-
-
-CATALOGUE = Path(__file__).resolve().parents[1] / "surfaces"
 
 
 @pytest.mark.slow

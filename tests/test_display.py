@@ -61,5 +61,5 @@ def test_materials_are_accepted_as_microsim_writes_them(text, ior):
 def test_a_scene_records_its_material_name(tmp_path):
     from microsim.app.scene import load_scene
 
-    sc = load_scene("surfaces/vgroove-beckmann-0.3.toml")
+    sc = load_scene("vgroove-beckmann-0.3")
     assert sc.material == "aluminium" and sc.ior == resolve_material("aluminium")

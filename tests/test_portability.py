@@ -121,9 +121,9 @@ def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
 
 
 def _specular_scenes():
-    from microsim.app.scene import load_scene
+    from microsim.app.scene import CATALOGUE, load_scene
 
-    scenes = [load_scene(p) for p in sorted(Path(__file__).parents[1].glob("surfaces/*.toml"))]
+    scenes = [load_scene(p) for p in sorted(CATALOGUE.glob("*.toml"))]
     return [sc for sc in scenes if sc.surface.kind == "flat" or sc.wave is not None]
 
 

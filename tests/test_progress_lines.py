@@ -57,7 +57,7 @@ def test_disabled_progress_prints_nothing(monkeypatch):
 
 def test_a_piped_run_writes_lines_not_carriage_returns(tmp_path):
     r = subprocess.run(
-        [sys.executable, "-m", "microsim.app.cli", "run", "surfaces/flat-aluminium.toml",
+        [sys.executable, "-m", "microsim.app.cli", "run", "flat-aluminium",
          "--quick", "--rays", "200000", "--out", str(tmp_path / "out"), "--threads", "2"],
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from microsim import analytic as an
+from microsim.app.scene import CATALOGUE as SCENES
 from microsim.app.scene import SceneError, SimSettings, describe_surface, load_scene
 
-CATALOGUE = sorted((Path(__file__).resolve().parents[1] / "surfaces").glob("*.toml"))
+CATALOGUE = sorted(SCENES.glob("*.toml"))
 
 
 @pytest.fixture(autouse=True)

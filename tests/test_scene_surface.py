@@ -2,11 +2,11 @@
 read by attribute, the table's keys in its order, each key's check naming the allowed values."""
 
 import dataclasses
-from pathlib import Path
 
 import pytest
 
 from microsim import analytic as an
+from microsim.app.scene import CATALOGUE as SCENES
 from microsim.app.scene import SceneError, load_scene
 from microsim.app.scene_surface import (
     SURFACE_TYPES,
@@ -16,7 +16,7 @@ from microsim.app.scene_surface import (
     surface_spec,
 )
 
-CATALOGUE = sorted((Path(__file__).resolve().parents[1] / "surfaces").glob("*.toml"))
+CATALOGUE = sorted(SCENES.glob("*.toml"))
 
 
 @pytest.mark.parametrize("path", CATALOGUE, ids=[p.stem for p in CATALOGUE])

@@ -13,8 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from microsim.app.scene import CATALOGUE
+
 ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "surfaces" / "vgroove-beckmann-0.3.toml"
+SCENE = CATALOGUE / "vgroove-beckmann-0.3.toml"
 SIZE = (640, 480)
 PROBE = (
     "import pyvista as pv; p = pv.Plotter(off_screen=True, window_size=(64, 64)); "

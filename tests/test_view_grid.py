@@ -1,4 +1,4 @@
-"""Every catalogue scene (surfaces/*.toml) renders headless in every ``microsim view --what``
+"""Every catalogue scene (microsim/scenes/*.toml) renders headless in every ``microsim view --what``
 view through the command line, with the fewest rays and a small image (the whole grid with
 ``-m slow``; by default the normals view of every scene and every view of the anisotropic
 ones); and the anisotropic
@@ -12,10 +12,11 @@ from test_view import _image, opengl  # noqa: F401  (the off-screen OpenGL probe
 
 from microsim import analytic as an
 from microsim.app.cli import main
+from microsim.app.scene import CATALOGUE
 from microsim.app.view import VIEWS
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENES = sorted((ROOT / "surfaces").glob("*.toml"))
+SCENES = sorted(CATALOGUE.glob("*.toml"))
 RAYS = {"rays": 50, "lobe": 2000, "disk": 2000}
 """The fewest rays each tracing view is given: enough for a drawing, not for a judgement."""
 ANISOTROPIC_SCENES = {"abc-aniso-smooth-wave", "gaussian-aniso-4", "vgroove-oriented-0.3"}

@@ -25,11 +25,9 @@ from microsim.analysis.wave_verdicts import WAVE_MODELS, validate_wave_verdict
 from microsim.analytic.fresnel import fresnel
 from microsim.app.cli import main
 from microsim.app.runner import plan_run
-from microsim.app.scene import MIN_TILE_WAVELENGTHS, SceneError, load_scene
+from microsim.app.scene import CATALOGUE, MIN_TILE_WAVELENGTHS, SceneError, load_scene
 from microsim.errors import UsageError
 from microsim.sim import Result
-
-CATALOGUE = Path(__file__).resolve().parents[1] / "surfaces"
 
 WAVE = """\
 name = "tiny-wave"

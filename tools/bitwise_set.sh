@@ -5,7 +5,7 @@
 set -euo pipefail
 out=$1; rm -rf "$out"; mkdir -p "$out"
 for s in vgroove-beckmann-0.3 gaussian-m0.3 file-gaussian-64 abc-smooth-wave flat-aluminium; do
-  .venv/bin/microsim run surfaces/$s.toml --quick --threads 2 --no-progress --out "$out/$s" >/dev/null
+  .venv/bin/microsim run "$s" --quick --threads 2 --no-progress --out "$out/$s" >/dev/null
 done
 .venv/bin/python - "$out" <<'PY'
 import sys

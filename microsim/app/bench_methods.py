@@ -28,7 +28,7 @@ error is the mean over the repeated runs (seeds 0, 1, 2), its uncertainty the st
 deviation of those errors / √runs (None after a single run), and ``noise_floor`` = √(Σ_E f̄Ω
 (se/f̄)²/Σ_E f̄Ω) the part the ray noise alone contributes.
 
-Panel B, wave scene: the catalogue scene surfaces/abc-transition-wave.toml (ABC PSD, σ = 0.125
+Panel B, wave scene: the catalogue scene abc-transition-wave (ABC PSD, σ = 0.125
 µm = λ/4, B = 10 µm, C = 2.5, band limit 4, exact amplitudes, dx = 0.1 µm = λ/5, λ = 0.5 µm;
 the transition regime), aluminium, θi = 30°, ``Bins(18, 13)`` (5° × 15° folded). Reference:
 the Kirchhoff solver (``wave.kirchhoff_brdf``, the smooth interpolant upsampled 2×, as the

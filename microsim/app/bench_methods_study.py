@@ -436,7 +436,7 @@ def _panel_wave(cfg: MethodsConfig) -> dict:
     return {
         "key": "wave",
         "title": f"ABC tile, σ = λ/{lam / cfg.sigma:g} (transition), aluminium, θi = {th:g}°",
-        "scene": f"surfaces/abc-transition-wave.toml: ABC σ = {cfg.sigma:g} µm, B = {cfg.B:g} "
+        "scene": f"catalogue scene abc-transition-wave: ABC σ = {cfg.sigma:g} µm, B = {cfg.B:g} "
         f"µm, C = {cfg.C:g}, dx = {cfg.dx:g} µm, λ = {lam:g} µm, aluminium, θi = {th:g}°, "
         "Bins(18, 13)",
         "reference": f"Kirchhoff on {cfg.wave_ref_n}² ({side:g} µm = {side / lam:g} λ), "

@@ -20,7 +20,7 @@ import traceback
 from .. import __version__
 from ..display import ascii_fallback
 from ..errors import EXIT_ENVIRONMENT, EXIT_INTERRUPTED, EXIT_USAGE, EnvironmentFailure, UsageError
-from .options import rays_option
+from .options import SCENE_HELP, rays_option
 
 EPILOG = (
     "exit status: 0 ok; 1 environment failure (disk full, read-only, permission; one "
@@ -133,7 +133,7 @@ def _add_run_command(sub) -> None:
         help="simulate a scene, compare and fit the models, write "
         "brdf.npz, meta.json, verdicts.json, report.md and charts",
     )
-    r.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
+    r.add_argument("scene", help=SCENE_HELP)
     r.epilog = EPILOG
     r.add_argument(
         "--rays",
@@ -181,7 +181,9 @@ def _add_report_command(sub) -> None:
     q.add_argument("--quick", action="store_true", help="quick runs (as `run --quick`)")
     q.add_argument("--out", default="reports", help="report directory (default reports)")
     q.add_argument(
-        "--catalogue", default="surfaces", help="directory of scene files (default surfaces)"
+        "--catalogue",
+        help="directory of scene files (default: the catalogue shipped in the package, "
+        "microsim/scenes)",
     )
     q.add_argument("--threads", type=int, default=2, help="tracing threads (default 2)")
     q.add_argument(
@@ -209,7 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
         "surface",
         help="build a scene's surface and print its statistics next to the nominal values",
     )
-    s.add_argument("scene", help="scene file (TOML), e.g. surfaces/gaussian-m0.3.toml")
+    s.add_argument("scene", help=SCENE_HELP)
     s.set_defaults(func=_cmd_surface)
     _add_run_command(sub)
     _add_report_command(sub)

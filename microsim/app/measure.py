@@ -63,6 +63,7 @@ from ..sim.auto import AutoRecord, Precision, estimate_to_precision
 from ..sim.schedule import DeferredInterrupt
 from ..stats import energy_set
 from .cluster import check_address, connect
+from .options import SCENE_HELP
 from .runner.planning import check_output_path, effort_for, tally_settings
 from .scene import MAX_THETA_I, load_scene
 
@@ -628,7 +629,7 @@ def add_measure_command(sub) -> None:
         help="tabulate a scene's BRDF over a dense grid of incidences (a virtual "
         "gonioreflectometer), each to an error target; writes table.npz",
     )
-    m.add_argument("scene", help="scene file (TOML) of an isotropic surface")
+    m.add_argument("scene", help=f"{SCENE_HELP}; an isotropic surface")
     m.add_argument("--out", help="output directory (default runs/<scene>-measured)")
     m.add_argument("--theta-step", type=float, default=5.0, help="θi step, degrees (default 5)")
     m.add_argument("--theta-max", type=float, default=85.0, help="largest θi (default 85)")

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["rays_option"]
+__all__ = ["rays_option", "SCENE_HELP"]
+
+SCENE_HELP = (
+    "a scene file (TOML) or the name of a catalogue scene (docs/scenes.md), e.g. "
+    "vgroove-beckmann-0.3"
+)
+"""Help of every subcommand's SCENE argument (``scene.resolve_scene`` reads it)."""
 
 
 def rays_option(text: str) -> int:

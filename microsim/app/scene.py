@@ -1,5 +1,9 @@
-"""Scene files: a surface, a material and simulation settings in TOML (``surfaces/*.toml``;
-the reference page for users is docs/scenes.md).
+"""Scene files: a surface, a material and simulation settings in TOML (the catalogue shipped
+in the package, ``microsim/scenes/*.toml``; the reference page for users is docs/scenes.md).
+
+A scene is named by a path or by a catalogue name (``resolve_scene``, the one resolver of every
+command and API): a path that exists is taken as is; otherwise a bare name ``NAME`` or
+``NAME.toml`` is looked up in the packaged catalogue.
 
 Schema (every key optional unless marked required; unknown keys are errors)::
 
@@ -77,6 +81,7 @@ allowed values.
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -84,6 +89,7 @@ from pathlib import Path
 import numpy as np
 
 from microsim import analytic as an
+from microsim.checks import file_path
 from microsim.errors import UsageError
 from microsim.sim.arguments import MAX_RAYS
 from microsim.surfaces.surface import anisotropy_of
@@ -121,6 +127,10 @@ __all__ = [
     "SurfaceSpec",
     "SimSettings",
     "load_scene",
+    "resolve_scene",
+    "catalogue_dir",
+    "catalogue_names",
+    "CATALOGUE",
     "make_ndf",
     "describe_surface",
     "read_toml",
@@ -138,6 +148,10 @@ __all__ = [
     "scaled_grid",
     "incidence_pairs",
 ]
+
+CATALOGUE = Path(__file__).resolve().parents[1] / "scenes"
+"""The scene catalogue shipped in the package: ``microsim/scenes/NAME.toml`` (and the files
+they read, such as ``heightfields/``)."""
 
 MIN_IOR, MAX_IOR = 1e-3, 1e3
 """Bounds of a scene's index of refraction n (and of k, from 0)."""
@@ -424,9 +438,42 @@ def _wave(where, table, surface: SurfaceSpec, simulation: SimSettings) -> WaveSp
     return w
 
 
+def catalogue_dir() -> Path:
+    """The packaged catalogue's folder: relative to the working directory when inside it (a
+    source checkout: outputs that print a scene's path then read ``microsim/scenes/...`` on
+    every machine), else absolute."""
+    try:
+        return CATALOGUE.relative_to(Path.cwd().resolve())
+    except (ValueError, OSError):  # elsewhere, or the working directory is gone
+        return CATALOGUE
+
+
+def catalogue_names() -> list[str]:
+    """The names of the catalogue's scenes (their file stems), sorted."""
+    return sorted(p.stem for p in CATALOGUE.glob("*.toml"))
+
+
+def resolve_scene(name, parameter: str = "scene") -> Path:
+    """The scene file ``name`` stands for: a path that exists, as is; else a bare catalogue
+    name ``NAME`` or ``NAME.toml`` (no folder part), the file in ``catalogue_dir()``. A
+    ``UsageError`` naming ``parameter`` and listing the catalogue's names otherwise."""
+    path = file_path("the scene file", name)
+    if os.path.lexists(path):
+        return path
+    names = catalogue_names()
+    stem = path.name.removesuffix(".toml")
+    if len(path.parts) == 1 and stem in names:
+        return catalogue_dir() / f"{stem}.toml"
+    raise UsageError(
+        f"{parameter}: no such scene file {str(name)!r}, nor a catalogue scene of that name; "
+        f"give a scene file's path or one of the catalogue's scenes: {', '.join(names)}"
+    )
+
+
 def load_scene(path) -> Scene:
-    """Read and validate a scene file (module docstring for the schema)."""
-    path = Path(path)
+    """Read and validate a scene file, given as a path or a catalogue name (``resolve_scene``;
+    module docstring for the schema)."""
+    path = resolve_scene(path)
     where = str(path)
     data = read_toml(path)
     check_keys(where, "scene", data, list(_TOP_KEYS))

@@ -10,7 +10,7 @@ kept at level α by Šidák's correction.
 Which noise the BRDF is judged against:
 
 * one V-groove surface (a scene with ``realisations = 1``, e.g. the stratified V-grooves of
-  ``surfaces/vgroove-ggx-0.3.toml``): reference "one-tile", as ``microsim run`` judges an
+  the catalogue scene ``vgroove-ggx-0.3``): reference "one-tile", as ``microsim run`` judges an
   ensemble model on one tile. The tile's departure from its ensemble is computed without rays
   (Torrance–Sparrow with the tile's own facets against the same form with the ensemble NDF,
   both with the V-groove G: ``verdicts.tile_departure``) and each bin's deviation is

@@ -46,7 +46,7 @@ import microsim
 from microsim import atomic
 from microsim.analysis.budget import MIN_AUTO
 from microsim.analytic.fresnel import resolve_material
-from microsim.app.scene import Scene, incidence_pairs, load_scene
+from microsim.app.scene import Scene, incidence_pairs, load_scene, resolve_scene
 from microsim.errors import UsageError
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
@@ -111,22 +111,10 @@ def cache_dir(cache=None) -> Path:
 
 
 def find_scene(name) -> Path:
-    """Path of a scene given as a file path, or as a catalogue name (``NAME`` or ``NAME.toml``
-    looked up in ``./surfaces/`` and in the ``surfaces/`` folder beside the microsim package
-    of a source checkout). UsageError naming ``surface_or_scene`` if none exists."""
-    p = Path(name)
-    if p.is_file():
-        return p
-    stem = p.name if p.suffix == ".toml" else p.name + ".toml"
-    places = [Path.cwd() / "surfaces", Path(microsim.__file__).resolve().parents[1] / "surfaces"]
-    for d in places:
-        if (d / stem).is_file():
-            return d / stem
-    raise UsageError(
-        f"surface_or_scene: no scene file {str(name)!r} (looked for the path and for {stem} in "
-        f"{', '.join(str(d) for d in places)}); pass a Scene, a Surface, a scene file or a "
-        f"catalogue scene name"
-    )
+    """Path of a scene given as a file path or a catalogue name (``NAME`` or ``NAME.toml``,
+    the packaged catalogue: ``microsim.app.scene.resolve_scene``). UsageError naming
+    ``surface_or_scene`` and listing the catalogue's scenes if neither exists."""
+    return resolve_scene(name, "surface_or_scene")
 
 
 @dataclass(frozen=True)

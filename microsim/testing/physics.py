@@ -35,7 +35,7 @@ PHYSICS_REFERENCES = MappingProxyType(
         "student-t": ("student-t-3-0.3",),
     }
 )
-"""Distribution name → the catalogue scenes (``surfaces/``) to check a BRDF of it against
+"""Distribution name → the catalogue scenes (``microsim/scenes/``) to check a BRDF of it against
 (docs/testing.md, "Which reference for which BRDF")."""
 
 

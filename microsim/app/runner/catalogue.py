@@ -23,7 +23,7 @@ from ...checkpoints import checkpoint
 from ...errors import UsageError
 from ..bench_methods import METHODS_JSON, METHODS_PNG
 from ..cluster import check_address, connect
-from ..scene import load_scene
+from ..scene import catalogue_dir, load_scene
 from . import planning
 from .publishing import (
     REPORT_STATE,
@@ -216,7 +216,7 @@ def _write_index(out: Path, docs: list, scenes: list, quick, threads, regimes) -
 
 
 def run_report(
-    catalogue="surfaces",
+    catalogue=None,
     out="reports",
     quick=False,
     threads=2,
@@ -226,7 +226,8 @@ def run_report(
     regimes: bool | None = None,
     scheduler: str | None = None,
 ) -> int:
-    """Run every ``*.toml`` of ``catalogue`` into ``out/<scene>/`` (each folder replaced in one
+    """Run every ``*.toml`` of ``catalogue`` (None: the packaged catalogue,
+    ``scene.catalogue_dir``) into ``out/<scene>/`` (each folder replaced in one
     rename) and write ``out/index.md``. All scene files are validated before anything runs.
 
     Ctrl-C (status 130): finished scenes stay; the interrupted scene's previous report stays
@@ -241,13 +242,11 @@ def run_report(
     address whose workers trace each scene's main simulation (``plan_run``; the scenes run
     one after another, each bitwise as locally; ``rays = "auto"`` scenes trace locally)."""
     log = log or (lambda s: print(s, file=sys.stderr))
-    catalogue, out = Path(catalogue), Path(out)
+    given = "" if catalogue is None else f" --catalogue {catalogue}"
+    catalogue, out = catalogue_dir() if catalogue is None else Path(catalogue), Path(out)
     paths, scenes = _load_catalogue(catalogue, out)
     digests = {s.name: _scene_digest(p, s) for p, s in zip(paths, scenes)}
-    hint = (
-        f"`microsim report --resume{' --quick' if quick else ''} --catalogue {catalogue} "
-        f"--out {out}`"
-    )
+    hint = f"`microsim report --resume{' --quick' if quick else ''}{given} --out {out}`"
     if scheduler is not None:  # an unusable address fails here, before anything is written
         with connect(check_address(scheduler)):
             pass

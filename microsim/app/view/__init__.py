@@ -1,13 +1,13 @@
 """Visual inspection of scenes with pyvista: surface, ray paths, BRDF lobe, halfway disk, normals.
 
-    microsim view SCENE.toml [--what surface|rays|lobe|disk|normals] [--theta-i DEG]
-                             [--screenshot PNG] [--size WxH] [--rays N] [--seed S]
+    microsim view SCENE [--what surface|rays|lobe|disk|normals] [--theta-i DEG]
+                    [--screenshot PNG] [--size WxH] [--rays N] [--seed S]
 
 From Python (notebooks) every view returns a ``pyvista.Plotter``; call ``.show()`` or
 ``.screenshot(path)`` on it::
 
     from microsim.app import view
-    view.view_lobe("surfaces/gaussian-m0.3.toml", theta_i=60).show()
+    view.view_lobe("gaussian-m0.3", theta_i=60).show()
 
 Views (local frame, macro normal +z; angles in degrees; BRDFs in sr⁻¹):
   surface  the tile's mesh coloured by height or facet slope, the displayed region outlined. A

@@ -10,6 +10,7 @@ from pathlib import Path
 from microsim.checks import in_range
 
 from ...errors import UsageError
+from ..options import SCENE_HELP
 from ..scene import load_scene
 from .common import DEFAULT_RAYS, DEFAULT_THETA, WINDOW, headless
 from .disk import view_disk
@@ -70,7 +71,7 @@ def _window_size(text: str) -> tuple[int, int]:
 
 
 def _configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene file (TOML), e.g. surfaces/vgroove-beckmann-0.3.toml")
+    p.add_argument("scene", help=SCENE_HELP)
     p.add_argument("--what", choices=VIEWS, default="surface", help="which view (default surface)")
     p.add_argument(
         "--theta-i",
