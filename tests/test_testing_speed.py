@@ -2,7 +2,8 @@
 a V-groove tile's departure from its ensemble and the bin averages of catalogue and physics
 models, which the surfaces, material, incidences and bins alone determine. A new process
 reads them instead of computing them again (the test clears the in-process copies to act as
-one); what it reads equals what it would compute, bitwise; another input is another entry;
+one); what it reads equals what it would compute, bitwise; another input (material, bins,
+incidence, model, microsim's source) is another entry, rays and seed are not;
 a damaged entry is reported, discarded and computed again.
 
 References are tiny (200 GGX V-grooves, 2·10⁴ rays, one incidence, 9 × 10 bins)."""
@@ -104,7 +105,6 @@ def test_the_cached_departure_and_model_equal_the_recomputed_ones(
     assert read.tobytes() == computed.tobytes()
 
 
-@pytest.mark.slow  # ~3 s unloaded: the callable's quadrature, twice
 def test_a_callable_is_never_cached_but_its_departure_is(surface, warm, copy, fresh_process):
     before = _entries(copy)
     _check(lambda wi, wo: np.full(len(wi), 0.1), surface, copy)
@@ -112,7 +112,6 @@ def test_a_callable_is_never_cached_but_its_departure_is(surface, warm, copy, fr
     assert fresh_process == [] and _entries(copy) == before
 
 
-@pytest.mark.slow  # ~3 s each unloaded: a new reference and its derived quantities
 @pytest.mark.parametrize(
     "change, new",
     [
@@ -165,3 +164,10 @@ def test_an_unknown_model_name_is_still_refused(surface, copy, fresh_process):
     with pytest.raises(UsageError, match="catalogue models ts-vgroove, ts-smith"):
         _check("ts-nonsense", surface, copy)
     assert _entries(copy) == before
+
+
+def test_another_microsim_source_is_another_entry(surface, warm, copy, fresh_process, monkeypatch):
+    monkeypatch.setattr(cache_mod, "source_digest", lambda: "0" * 24)
+    again = _check("ts-smith-corr", surface, copy)
+    assert len(fresh_process) == 2 and len(_entries(copy)) == 4
+    assert _numbers(again) == _numbers(warm[1])

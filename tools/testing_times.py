@@ -25,8 +25,10 @@ ROOT = Path(__file__).resolve().parents[1]
 # What one subprocess runs: argv[1] the case name. Prints one JSON line of seconds and digests.
 CHILD = r'''
 import hashlib, json, sys, time
+from pathlib import Path
 t0 = time.perf_counter()
 import numpy as np
+import microsim
 from microsim.testing import BRDFMismatch, assert_brdf_agrees, assert_brdf_matches_model
 t_import = time.perf_counter() - t0
 
@@ -72,8 +74,12 @@ def numpy_brdf(ndf, alpha, masking):
     return f
 
 
+ROOT = str(Path(microsim.__file__).resolve().parents[1])
+
+
 def digest(*parts):
-    return hashlib.sha256(repr(parts).encode()).hexdigest()[:16]
+    """Of the numbers and words, not of where this microsim is (the scene's path)."""
+    return hashlib.sha256(repr(parts).replace(ROOT, "<microsim>").encode()).hexdigest()[:16]
 
 
 def agrees(brdf, scene):

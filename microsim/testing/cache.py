@@ -19,6 +19,13 @@ Location, first that is set: the ``cache`` argument, pytest's ``--microsim-cache
 plugin calls ``set_default_dir``), the environment variable ``MICROSIM_CACHE``, else
 ``$XDG_CACHE_HOME/microsim/references`` (default ``~/.cache/microsim/references``).
 
+Derived entries (``derived``): what the surfaces, material, incidences and bins alone
+determine — a V-groove tile's departure from its ensemble, a catalogue or physics model's
+bin averages — is kept in ``CACHE/derived/<key>.npz`` (the key and the array in one archive,
+written by one atomic rename), keyed by the reference's description without rays and seed,
+microsim's source (``source_digest``) and what the quantity is. Two processes missing one
+compute it both and write the same bytes; no lock is needed.
+
 Concurrency (several pytest-xdist workers asking for one reference): a reader that finds the
 entry loads it without locking (entries appear only by an atomic rename, ``atomic.publish_dir``);
 one that does not waits for the entry's lock (``atomic.output_lock`` on ``CACHE/.<key>.lock``,
@@ -29,6 +36,7 @@ damaged entry is discarded only by the lock's holder, after looking at it again.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -675,16 +683,30 @@ def cached(ref: Reference, *, cache=None, threads: int | None = None) -> Result:
 _DERIVED: dict = {}  # this process: derived description (canonical JSON) → array or None
 
 
+@functools.cache
+def source_digest() -> str:
+    """SHA-256 (24 hex digits) of microsim's own source (every ``.py`` file of the package,
+    by relative path): derived entries are keyed by it, so that code computing them
+    differently is never answered from an older computation."""
+    root = Path(microsim.__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        h.update(path.read_bytes())
+    return h.hexdigest()[:24]
+
+
 def derived(ref: Reference, what: dict, shape: tuple, compute, *, cache=None):
     """What the reference's surfaces, material, incidences and bins alone determine, not its
     rays or seed (a catalogue model's bin averages, the tile's departure from its ensemble):
     ``compute()``, a float array of ``shape`` or None, computed once per process and, unless
     ``cache=False``, once per cache directory: kept in ``CACHE/derived/<key>.npz`` under the
-    key of ``ref.description()`` without rays and seed plus ``what`` (JSON values naming the
-    quantity). Returns a copy. An entry that cannot be used is reported in one warning naming
-    the file, discarded and computed again; one that cannot be written is not kept."""
+    key of ``ref.description()`` without rays and seed, microsim's ``source_digest`` and
+    ``what`` (JSON values naming the quantity). Returns a copy. An entry that cannot be used
+    is reported in one warning naming the file, discarded and computed again; one that cannot
+    be written is not kept."""
     desc = {k: v for k, v in ref.description().items() if k not in ("seed", "rays")}
-    text = canonical_json({**desc, "derived": what})
+    text = canonical_json({**desc, "source": source_digest(), "derived": what})
     if text not in _DERIVED:
         _DERIVED[text] = _derived_value(text, tuple(shape), compute, cache)
     value = _DERIVED[text]
