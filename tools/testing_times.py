@@ -7,9 +7,12 @@ physics records and message; ``assert_brdf_matches_model``'s returned dict) so t
 versions of the code can be compared for bitwise equal results.
 
     .venv/bin/python tools/testing_times.py [--repeats 3] [--cache DIR] [--only CASE ...]
+                                            [--against OLD_TREE]
 
 ``--cache`` (default: ``$MICROSIM_CACHE`` or the default testing cache) is the reference cache
-the checks use; the first, warming, run traces what is missing into it.
+the checks use; the first, warming, run traces what is missing into it. ``--against`` times
+another source tree (``git archive <commit> | tar -x -C DIR``) alternately with this one, so
+that both see the same machine load, and prints its table after this one's.
 """
 
 import argparse
@@ -133,9 +136,15 @@ CASES = {
 
 
 def run_once(case: str, env: dict) -> dict:
-    """One fresh process running ``case`` twice; its JSON line."""
+    """One fresh process running ``case`` twice, in the source tree it times (``python -c``
+    puts the working directory first on the path); its JSON line."""
     proc = subprocess.run(
-        [sys.executable, "-c", CHILD, case], env=env, capture_output=True, text=True, check=False
+        [sys.executable, "-c", CHILD, case],
+        env=env,
+        cwd=env["PYTHONPATH"],
+        capture_output=True,
+        text=True,
+        check=False,
     )
     if proc.returncode != 0:
         raise SystemExit(f"{case}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
@@ -151,15 +160,28 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--cache", help="reference cache directory (default: the testing default)")
     ap.add_argument("--only", nargs="+", choices=list(CASES), help="cases to run")
+    ap.add_argument(
+        "--against",
+        metavar="DIR",
+        help="another microsim source tree (e.g. a checkout of the version before a change), "
+        "timed alternately with this one under the same load",
+    )
     args = ap.parse_args()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    if args.cache:
-        env["MICROSIM_CACHE"] = args.cache
+    roots = [str(ROOT)] + ([str(Path(args.against).resolve())] if args.against else [])
+    envs = {root: {**os.environ, "PYTHONPATH": root} for root in roots}
+    for env in envs.values():
+        if args.cache:
+            env["MICROSIM_CACHE"] = args.cache
     cases = args.only or list(CASES)
     load_before = os.getloadavg()
     for case in cases:
-        run_once(case, env)  # warm: traces missing references, compiles, caches on disk
-    rows = {case: [run_once(case, env) for _ in range(args.repeats)] for case in cases}
+        for env in envs.values():
+            run_once(case, env)  # warm: traces missing references, compiles, caches on disk
+    rows = {(root, case): [] for root in roots for case in cases}
+    for _ in range(args.repeats):
+        for case in cases:
+            for root, env in envs.items():
+                rows[root, case].append(run_once(case, env))
     load_after = os.getloadavg()
     print(
         f"{os.cpu_count()} cores; load average (1, 5, 15 min) before "
@@ -167,16 +189,18 @@ def main() -> None:
         f"{', '.join(f'{x:.2f}' for x in load_after)}; seconds, median (min–max) of "
         f"{args.repeats} fresh processes"
     )
-    print("| check | import | first check | second check | outcome | digest |")
-    print("|---|---|---|---|---|---|")
-    for case in cases:
-        runs = rows[case]
-        digests = {r["digest"] for r in runs}
-        print(
-            f"| `{CASES[case]}` | {spread([r['import'] for r in runs])} | "
-            f"{spread([r['first'] for r in runs])} | {spread([r['second'] for r in runs])} | "
-            f"{runs[0]['outcome']} | {', '.join(sorted(digests))} |"
-        )
+    for root in roots:
+        print(f"\n{root}\n")
+        print("| check | import | first check | second check | outcome | digest |")
+        print("|---|---|---|---|---|---|")
+        for case in cases:
+            runs = rows[root, case]
+            digests = {r["digest"] for r in runs}
+            print(
+                f"| `{CASES[case]}` | {spread([r['import'] for r in runs])} | "
+                f"{spread([r['first'] for r in runs])} | {spread([r['second'] for r in runs])} | "
+                f"{runs[0]['outcome']} | {', '.join(sorted(digests))} |"
+            )
 
 
 if __name__ == "__main__":
