@@ -26,7 +26,6 @@ import warnings as _warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import integrate
 
 from microsim.analytic import (
     AnisotropicBeckmann,
@@ -189,6 +188,8 @@ def abc_continuum_slope_var(
     band is radial, so the rotation drops out): along the direction θ of the rotated frame the
     PSD is ``abc_psd_church`` with b(θ)² = B² cos²θ + B_y² sin²θ, integrated over θ (4 × the
     quadrant, by symmetry)."""
+    from scipy import integrate  # ~0.3 s to import: only for ABC surfaces
+
     if B_y is None:
         A = abc_amplitude(sigma, B, C)
         val, _ = integrate.quad(lambda f: f**3 * abc_psd_church(f, A, B, C), 0.0, f_max, limit=200)

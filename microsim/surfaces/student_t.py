@@ -20,9 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import stats as _stats
-from scipy.integrate import cumulative_simpson
-from scipy.interpolate import CubicHermiteSpline
 from scipy.special import gammainc, gammainccinv, gammaincinv, ndtr
 
 from microsim.analytic import GGX, AnisotropicGGX, AnisotropicStudentT, Beckmann, StudentT
@@ -88,11 +85,14 @@ def gamma_weight(g, gamma: float):
     return np.where(g < 0, gammaincinv(a, ndtr(g)), gammainccinv(a, ndtr(-g)))
 
 
-def height_transform(gamma: float, scale: float) -> CubicHermiteSpline:
+def height_transform(gamma: float, scale: float):
     """T with T(0) = 0 and T′(g) = scale · √((γ−1)/(2 w(g))) (``gamma_weight``), tabulated on
     [−``TRANSFORM_G_MAX``, ``TRANSFORM_G_MAX``] with step ``TRANSFORM_G_STEP``. With scale² ·
     v_g = α², v_g the per-axis slope variance of g, the slope T′(g)∇g given w has per-axis
-    variance α²(γ−1)/(2w): the STD."""
+    variance α²(γ−1)/(2w): the STD. A ``scipy.interpolate.CubicHermiteSpline``."""
+    from scipy.integrate import cumulative_simpson  # scipy.integrate and .interpolate take
+    from scipy.interpolate import CubicHermiteSpline  # ~0.3 s to import: only when building
+
     g = np.arange(-TRANSFORM_G_MAX, TRANSFORM_G_MAX + 0.5 * TRANSFORM_G_STEP, TRANSFORM_G_STEP)
     dT = scale * np.sqrt((gamma - 1.0) / (2.0 * gamma_weight(g, gamma)))
     # integrated outwards from g = 0 on each side, so that the huge values of the rough end
@@ -153,6 +153,8 @@ def slope_law_stats(surfaces, law: SlopeLaw) -> dict:
     correlation of facet height (mean of its vertices) and |slope|, averaged over the surfaces
     (0 where Smith's uncorrelated-heights assumption holds); with ``law.gamma``:
     ``alpha_x_realised``/``alpha_y_realised`` from the median |slope| per rotated axis."""
+    from scipy import stats as _stats  # ~0.4 s to import: only when the statistics are asked
+
     c, s = np.cos(np.radians(law.rotation)), np.sin(np.radians(law.rotation))
     sx, sy, weights, corr = [], [], [], []
     cells = 0.0

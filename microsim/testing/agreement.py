@@ -38,10 +38,9 @@ BRDF of that distribution could pass at each failing incidence.
 from __future__ import annotations
 
 import hashlib
-import json
 import warnings
 from pathlib import Path
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -65,7 +64,15 @@ from microsim.sim.predict import FunctionBRDF, Predictor, predict_incidences
 from microsim.sim.tallies import stderr_dof
 from microsim.stats import energy_set, norm_isf, sidak, t_isf
 
-from .cache import AUTO_MAX_RAYS, AUTO_TARGET, Reference, cache_dir, cached, resolve_reference
+from .cache import (
+    AUTO_MAX_RAYS,
+    AUTO_TARGET,
+    Reference,
+    cache_dir,
+    cached,
+    derived,
+    resolve_reference,
+)
 from .diagnosis import closest, likely_cause, lobe_width_deg
 from .physics import PHYSICS_MODEL, PhysicsError, physics_lines, physics_model
 from .returns import real_values
@@ -148,21 +155,58 @@ def readable_name(f) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in q)[:60]
 
 
-def _brdf_spec(brdf, ref, symmetric: bool, label) -> Predictor:
-    """The ``Predictor`` of the BRDF under test (a callable or catalogue model name); its
-    ``name`` is the BRDF's name in messages."""
+class _KnownModel(NamedTuple):
+    """A model microsim knows by ``name``: a catalogue model of the reference's surfaces
+    (``source`` "catalogue") or the physics model ("physics"). Its bin averages depend on the
+    reference's surfaces, material, incidences and bins alone, so they are kept in the
+    testing cache (``cache.derived``); ``build()`` makes its ``Predictor`` on a miss only (a
+    catalogue model needs the surfaces' meshes)."""
+
+    name: str
+    source: str
+    build: Callable[[], Predictor]
+
+
+def _brdf_spec(brdf, ref, symmetric: bool, label) -> Predictor | _KnownModel:
+    """The BRDF under test: a callable's ``Predictor``, or a catalogue model name's
+    ``_KnownModel``; its ``name`` is the BRDF's name in messages."""
     if isinstance(brdf, str):
-        specs = {s.name: s for s in default_models(list(ref.surfaces), ref.material)}
-        if brdf not in specs:
-            raise UsageError(
-                f"brdf must be a callable f(wi, wo) or one of this surface's catalogue models "
-                f"{', '.join(specs)}, got {brdf!r}"
-            )
-        return specs[brdf]
+        return _KnownModel(brdf, "catalogue", lambda: _catalogue_model(brdf, ref))
     if callable(brdf):
         name = label or readable_name(brdf)
         return Predictor(name, FunctionBRDF(wrap_brdf(brdf), symmetric=symmetric))
     raise UsageError(f"brdf must be a callable f(wi, wo) -> sr⁻¹ or a model name, got {brdf!r}")
+
+
+def _catalogue_model(name: str, ref) -> Predictor:
+    """The ``Predictor`` of the reference surfaces' catalogue model ``name``
+    (``compare.default_models``); UsageError listing them for another name."""
+    specs = {s.name: s for s in default_models(list(ref.surfaces), ref.material)}
+    if name not in specs:
+        raise UsageError(
+            f"brdf must be a callable f(wi, wo) or one of this surface's catalogue models "
+            f"{', '.join(specs)}, got {name!r}"
+        )
+    return specs[name]
+
+
+def _model_values(spec, ref, result, incidences: list[int], cache) -> np.ndarray:
+    """(len(incidences), Θ, Φ) bin averages of ``spec`` at those of the reference's
+    incidences: a callable's computed, a ``_KnownModel``'s from the testing cache (computed
+    once per cache; ``cache.derived``)."""
+    if isinstance(spec, Predictor):
+        return _bin_averages(spec, result, incidences)
+    what = {
+        "model": spec.name,
+        "source": spec.source,
+        "ndf": repr(ref.ensemble_ndf),
+        "quadrature_rtol": MODEL_RTOL,
+        "incidences": incidences,
+    }
+    shape = (len(incidences), result.bins.n_theta, result.bins.n_phi)
+    return derived(
+        ref, what, shape, lambda: _bin_averages(spec.build(), result, incidences), cache=cache
+    )
 
 
 def _bin_averages(spec: Predictor, result, incidences: list[int]) -> np.ndarray:
@@ -174,23 +218,21 @@ def _bin_averages(spec: Predictor, result, incidences: list[int]) -> np.ndarray:
         return predict_incidences([spec], th, ph, result.bins, rtol=MODEL_RTOL)[spec.name]
 
 
-_DEPARTURES: dict = {}  # per process: (surfaces, material, θi, bins) → tile departure
-
-
-def _one_tile_departure(ref, result) -> np.ndarray | None:
+def _one_tile_departure(ref, result, cache) -> np.ndarray | None:
     """(T, Θ, Φ) relative departure of the one traced tile's BRDF from its ensemble's, where it
     is computable without rays (``compare.departure_models``: V-grooves;
     ``verdicts.tile_departure``), else None. It depends on the surface, material, incidences
-    and bins only, so each process computes it once per such reference."""
-    key = json.dumps({k: v for k, v in ref.description().items() if k not in ("seed", "rays")})
-    if key not in _DEPARTURES:
+    and bins only, so it is kept in the testing cache (``cache.derived``)."""
+
+    def compute():
         pair = departure_models(list(ref.surfaces), ref.material)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # as _bin_averages
-            _DEPARTURES[key] = (
-                tile_departure(attach_models(result, pair, rtol=MODEL_RTOL)) if pair else None
-            )
-    return _DEPARTURES[key]
+            return tile_departure(attach_models(result, pair, rtol=MODEL_RTOL)) if pair else None
+
+    what = {"tile_departure": "verdicts.tile_departure", "quadrature_rtol": MODEL_RTOL}
+    shape = (len(result.theta_i), result.bins.n_theta, result.bins.n_phi)
+    return derived(ref, what, shape, compute, cache=cache)
 
 
 def _used_bins(sim, se, cnt, mod, min_events: int) -> tuple[np.ndarray, np.ndarray]:
@@ -346,7 +388,7 @@ def _correct_models(ref: Reference) -> dict:
     return models
 
 
-def _realised_lines(ref: Reference, result, judging: "_Judging", failing, with_phi) -> list[str]:
+def _realised_lines(ref: Reference, result, judging: "_Judging", failing, with_phi, cache):
     """For a Beckmann ensemble (Gaussian and ABC heightfields): the m its tiles realise when it
     differs from the nominal one, and the physics model at that m judged at the failing
     incidences — a BRDF of the nominal m departs from these tiles by the difference alone."""
@@ -358,7 +400,7 @@ def _realised_lines(ref: Reference, result, judging: "_Judging", failing, with_p
         return []
     model = TorranceSparrow(Beckmann(m), Smith(correlated=True), ref.material)
     judged = _judge(
-        Predictor(f"{PHYSICS_MODEL} at m = {m:.4g}", model), ref, result, judging, failing
+        Predictor(f"{PHYSICS_MODEL} at m = {m:.4g}", model), ref, result, judging, cache, failing
     )
     agrees = [t for t in failing if t not in judged.failing]
     where = "; ".join(
@@ -548,7 +590,7 @@ def assert_brdf_agrees(
         realisations=realisations,
     )
     result = cached(ref, cache=cache, threads=threads)
-    judged = _judge(_brdf_spec(brdf, ref, symmetric, name), ref, result, judging)
+    judged = _judge(_brdf_spec(brdf, ref, symmetric, name), ref, result, judging, cache)
     failing = judged.failing
     out = Agreement(
         verdicts=judged.verdicts,
@@ -572,8 +614,8 @@ def assert_brdf_agrees(
     out["chart"] = _chart(
         result, judged.values, judged.name, judged.verdicts, worst, where, ref.key()[:10]
     )
-    out["physics"] = _physics_errors(ref, result, judging, failing, judged.values)
-    out["message"] = _message(judged, ref, result, judging, out["chart"], out["physics"])
+    out["physics"] = _physics_errors(ref, result, judging, failing, cache, judged.values)
+    out["message"] = _message(judged, ref, result, judging, out["chart"], out["physics"], cache)
     raise BRDFMismatch(out["message"], out)
 
 
@@ -612,17 +654,18 @@ class _Judged(NamedTuple):
     failing: list[int]
 
 
-def _judge(spec: Predictor, ref: Reference, result, judging: _Judging, incidences=None) -> _Judged:
-    """Judge ``spec`` against the reference ``result`` at the incidence indices
-    ``incidences`` (default all of them), each verdict within the family of all the
-    reference's incidences (``assert_brdf_agrees``' docstring says how)."""
+def _judge(spec, ref: Reference, result, judging: _Judging, cache, incidences=None) -> _Judged:
+    """Judge ``spec`` (a ``Predictor`` or ``_KnownModel``) against the reference ``result`` at
+    the incidence indices ``incidences`` (default all of them), each verdict within the family
+    of all the reference's incidences (``assert_brdf_agrees``' docstring says how); ``cache``
+    the testing cache's argument."""
     T = len(result.theta_i)
     incidences = list(range(T)) if incidences is None else list(incidences)
-    values = _bin_averages(spec, result, incidences)
+    values = _model_values(spec, ref, result, incidences, cache)
     omega = result.bins.projected_solid_angle()
     per = result.brdf_realisations
     R = 1 if per is None else int(per.shape[0])
-    departure = _one_tile_departure(ref, result) if R == 1 else None
+    departure = _one_tile_departure(ref, result, cache) if R == 1 else None
     dof = stderr_dof(result) if R == 1 else None  # of result.stderr: ray noise alone
     alpha, rtol, min_events = judging
     verdicts, failing = [], []
@@ -663,16 +706,18 @@ def _judge(spec: Predictor, ref: Reference, result, judging: _Judging, incidence
     return _Judged(spec.name, values, verdicts, failing)
 
 
-def _physics_errors(ref: Reference, result, judging: _Judging, incidences, brdf_values=None):
+def _physics_errors(ref: Reference, result, judging: _Judging, incidences, cache, brdf_values=None):
     """The physics model (``physics.physics_model``) judged as the brdf is at the incidence
     indices ``incidences``: one ``PhysicsError`` each (a tuple), with the brdf's energy over
-    the model's where ``brdf_values`` (T, Θ, Φ) are given; None without an ensemble NDF."""
+    the model's where ``brdf_values`` (T, Θ, Φ) are given; None without an ensemble NDF.
+    ``cache``: the testing cache's argument (the model's bin averages are kept there)."""
     if ref.exact_shadowing is not None:  # V-grooves, flat: their own G is exact, not Smith's
         return None
     spec = physics_model(ref.ensemble_ndf, ref.material)
     if spec is None:
         return None
-    judged = _judge(spec, ref, result, judging, incidences)
+    known = _KnownModel(spec.name, "physics", lambda: spec)
+    judged = _judge(known, ref, result, judging, cache, incidences)
     records = []
     for t, model, v in zip(incidences, judged.values, judged.verdicts):
         holds = t not in judged.failing
@@ -757,7 +802,7 @@ def physics_error(
             "V-groove G), so no Smith model of it to judge"
         )
     result = cached(ref, cache=cache, threads=threads)
-    return _physics_errors(ref, result, judging, range(len(result.theta_i)))
+    return _physics_errors(ref, result, judging, range(len(result.theta_i)), cache)
 
 
 def _failing_text(verdicts, with_phi: bool) -> str:
@@ -768,10 +813,10 @@ def _at(result, t: int, with_phi: bool) -> str:
     return incidence.label(float(result.theta_i[t]), float(result.phi_i[t]), with_phi)
 
 
-def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics) -> str:
+def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics, cache) -> str:
     """The failure message (docs/testing.md, "The failure message"): ``judged`` the brdf at
     every incidence, ``physics`` the ``PhysicsError`` records of its failing incidences (or
-    None)."""
+    None), ``cache`` the testing cache's argument."""
     name, model, verdicts, failing = judged
     alpha, rtol = judging.alpha, judging.rtol
     with_phi = incidence.several_azimuths(verdicts)
@@ -853,7 +898,7 @@ def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics) ->
     ]
     lines += _cause_lines(ref, result, judged, physics, with_phi)
     lines += physics_lines(physics or (), lambda r: incidence.label(r.theta_i, r.phi_i, with_phi))
-    lines += _realised_lines(ref, result, judging, failing, with_phi)
+    lines += _realised_lines(ref, result, judging, failing, with_phi, cache)
     for t in failing:
         wb = _worst_bins(result, model, t, verdicts[t]["min_events"])
         if wb:

@@ -19,6 +19,13 @@ Location, first that is set: the ``cache`` argument, pytest's ``--microsim-cache
 plugin calls ``set_default_dir``), the environment variable ``MICROSIM_CACHE``, else
 ``$XDG_CACHE_HOME/microsim/references`` (default ``~/.cache/microsim/references``).
 
+Derived entries (``derived``): what the surfaces, material, incidences and bins alone
+determine — a V-groove tile's departure from its ensemble, a catalogue or physics model's
+bin averages — is kept in ``CACHE/derived/<key>.npz`` (the key and the array in one archive,
+written by one atomic rename), keyed by the reference's description without rays and seed,
+microsim's source (``source_digest``) and what the quantity is. Two processes missing one
+compute it both and write the same bytes; no lock is needed.
+
 Concurrency (several pytest-xdist workers asking for one reference): a reader that finds the
 entry loads it without locking (entries appear only by an atomic rename, ``atomic.publish_dir``);
 one that does not waits for the entry's lock (``atomic.output_lock`` on ``CACHE/.<key>.lock``,
@@ -29,6 +36,7 @@ damaged entry is discarded only by the lock's holder, after looking at it again.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -67,6 +75,7 @@ __all__ = [
     "resolve_reference",
     "reference",
     "find_scene",
+    "derived",
 ]
 
 ENV_VAR = "MICROSIM_CACHE"
@@ -83,6 +92,7 @@ LOCK_TIMEOUT = 3600.0
 """Seconds a process waits for another one tracing the same reference before giving up."""
 
 KEY_FILE = "key.json"
+DERIVED_DIR = "derived"
 
 _default_dir: Path | None = None
 
@@ -407,7 +417,16 @@ _IDENTITIES: dict = {}  # scene identity key → (fingerprints, azimuth flags), 
 
 
 def _scene_builder(scene: Scene, seed: int, n: int) -> Callable[[], tuple]:
-    return lambda: tuple(scene.build_surface(seed=seed + r) for r in range(n))
+    """The scene's n realisations from seed ``seed``, built on the first call and kept: the
+    look-up of their fingerprints and a trace of the reference share one build."""
+    built: list[tuple] = []
+
+    def build() -> tuple:
+        if not built:
+            built.append(tuple(scene.build_surface(seed=seed + r) for r in range(n)))
+        return built[0]
+
+    return build
 
 
 def _mtime(path) -> tuple:
@@ -647,3 +666,83 @@ def cached(ref: Reference, *, cache=None, threads: int | None = None) -> Result:
         return res
     finally:
         lock.__exit__(None, None, None)
+
+
+_DERIVED: dict = {}  # this process: derived description (canonical JSON) → array or None
+
+
+@functools.cache
+def source_digest() -> str:
+    """SHA-256 (24 hex digits) of microsim's own source (every ``.py`` file of the package,
+    by relative path): derived entries are keyed by it, so that code computing them
+    differently is never answered from an older computation."""
+    root = Path(microsim.__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        h.update(path.read_bytes())
+    return h.hexdigest()[:24]
+
+
+def derived(ref: Reference, what: dict, shape: tuple, compute, *, cache=None):
+    """What the reference's surfaces, material, incidences and bins alone determine, not its
+    rays or seed (a catalogue model's bin averages, the tile's departure from its ensemble):
+    ``compute()``, a float array of ``shape`` or None, computed once per process and, unless
+    ``cache=False``, once per cache directory: kept in ``CACHE/derived/<key>.npz`` under the
+    key of ``ref.description()`` without rays and seed, microsim's ``source_digest`` and
+    ``what`` (JSON values naming the quantity). Returns a copy. An entry that cannot be used
+    is reported in one warning naming the file, discarded and computed again; one that cannot
+    be written is not kept."""
+    desc = {k: v for k, v in ref.description().items() if k not in ("seed", "rays")}
+    text = canonical_json({**desc, "source": source_digest(), "derived": what})
+    if text not in _DERIVED:
+        _DERIVED[text] = _derived_value(text, tuple(shape), compute, cache)
+    value = _DERIVED[text]
+    return None if value is None else value.copy()
+
+
+def _derived_value(text: str, shape: tuple, compute, cache):
+    """``derived``'s value: read from the cache entry of ``text``, else computed and stored."""
+    if cache is False:
+        return compute()
+    path = cache_dir(cache) / DERIVED_DIR / f"{hashlib.sha256(text.encode()).hexdigest()[:24]}.npz"
+    try:
+        stored = _load_derived(path, text, shape)
+    except _DamagedEntry as damaged:
+        stored = None
+        _discard(path)  # first: under ``-W error`` the warning raises
+        warnings.warn(
+            f"microsim reference cache: {damaged}; discarded the entry, computing it again",
+            stacklevel=3,
+        )
+    if stored is not None:
+        return stored[0]
+    value = compute()
+    arrays = {"key": np.array(text)}
+    if value is not None:
+        arrays["values"] = np.asarray(value, dtype=np.float64)
+    try:
+        with atomic.atomic_open(path, "wb") as fh:
+            np.savez(fh, **arrays)
+    except OSError:
+        pass  # a read-only cache: the value is computed again by the next process
+    return value
+
+
+def _load_derived(path: Path, text: str, shape: tuple) -> tuple | None:
+    """(value,) of the derived entry ``path`` (value None where None was stored), or None if
+    there is no entry. Raises ``_DamagedEntry`` naming the file if it cannot be read, was
+    made for another description or holds no float array of ``shape``."""
+    if not os.path.lexists(path):
+        return None
+    try:
+        arrays = atomic.read_npz(path)
+    except (UsageError, OSError) as e:
+        raise _DamagedEntry(_fault(e)) from None
+    key = arrays.get("key")
+    if key is None or key.shape != () or str(key) != text:
+        raise _DamagedEntry(f"{path}: made for another quantity than its name says")
+    value = arrays.get("values")
+    if value is not None and (value.dtype != np.float64 or value.shape != shape):
+        raise _DamagedEntry(f"{path}: values are not {shape} floats")
+    return (value,)
