@@ -458,7 +458,12 @@ def resolve_scene(name, parameter: str = "scene") -> Path:
     name ``NAME`` or ``NAME.toml`` (no folder part), the file in ``catalogue_dir()``. A
     ``UsageError`` naming ``parameter`` and listing the catalogue's names otherwise."""
     path = file_path("the scene file", name)
-    if os.path.lexists(path):
+    try:
+        os.lstat(path)
+        return path
+    except (FileNotFoundError, NotADirectoryError):
+        pass
+    except OSError:  # a name too long, a permission: the reader names the failure
         return path
     names = catalogue_names()
     stem = path.name.removesuffix(".toml")
