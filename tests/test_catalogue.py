@@ -64,7 +64,7 @@ def _words(text: str) -> str:
     return "".join(text.split())
 
 
-@pytest.mark.parametrize("columns", ["60", "100"])
+@pytest.mark.parametrize("columns", [pytest.param("60", marks=pytest.mark.slow), "100"])
 def test_cli_models_prints_every_entry_wrapped_to_the_terminal(columns):
     out = subprocess.run(
         [sys.executable, "-m", "microsim.app.cli", "models"],

@@ -200,8 +200,16 @@ def test_existing_directory_is_refused(tmp_path):
 @pytest.mark.parametrize(
     "edit, key",
     [
-        (lambda t: t.replace("seed = 3", "seed = 3\nspeed = 1"), "simulation.speed"),
-        (lambda t: t.replace("rays = 20000", 'rays = "many"'), "simulation.rays"),
+        pytest.param(
+            lambda t: t.replace("seed = 3", "seed = 3\nspeed = 1"),
+            "simulation.speed",
+            marks=pytest.mark.slow,
+        ),
+        pytest.param(
+            lambda t: t.replace("rays = 20000", 'rays = "many"'),
+            "simulation.rays",
+            marks=pytest.mark.slow,
+        ),
         (lambda t: t.replace('ndf = "beckmann"', 'ndf = "gauss"'), "surface.ndf"),
     ],
 )

@@ -643,8 +643,8 @@ def catalogue(tmp_path, monkeypatch, fast, capsys):
 @pytest.mark.parametrize(
     "phase, after, cut, saved",
     [
-        ("report-scene", 1, "tiny-b", None),  # between the scenes
-        ("fits", 1, "tiny-b", "complete"),  # after tiny-b's simulation
+        pytest.param("report-scene", 1, "tiny-b", None, marks=pytest.mark.slow),  # between scenes
+        pytest.param("fits", 1, "tiny-b", "complete", marks=pytest.mark.slow),  # after tiny-b's run
         # the same saved state as "fits", one phase later: slow (keeps the default run short)
         pytest.param("charts", 1, "tiny-b", "complete", marks=pytest.mark.slow),
         ("simulation", 0, "tiny-a", "partial"),  # inside tiny-a's simulation

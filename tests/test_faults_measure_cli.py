@@ -146,7 +146,14 @@ def _drop_rays(out):
     path.write_text(json.dumps(doc))
 
 
-@pytest.mark.parametrize("damage", [_truncate_npz, _garble_meta, _drop_rays])
+@pytest.mark.parametrize(
+    "damage",
+    [
+        _truncate_npz,
+        pytest.param(_garble_meta, marks=pytest.mark.slow),
+        pytest.param(_drop_rays, marks=pytest.mark.slow),
+    ],
+)
 def test_resume_traces_a_damaged_incidence_again(tmp_path, capsys, scene, damage):
     """The damaged incidence is named and traced again — to the same table, as each incidence
     has its own seed; the others are read back."""

@@ -248,7 +248,13 @@ def test_report_resume_with_a_damaged_state_is_one_line_exit_2(case, report_copy
 
 
 @pytest.mark.parametrize(
-    "damage", [cut_in_half, garbage, json_of([])], ids=["half", "garbage", "array"]
+    "damage",
+    [
+        pytest.param(cut_in_half, marks=pytest.mark.slow),
+        garbage,
+        pytest.param(json_of([]), marks=pytest.mark.slow),
+    ],
+    ids=["half", "garbage", "array"],
 )
 def test_report_resume_runs_again_a_finished_scene_whose_verdicts_are_damaged(
     damage, report_copy, capsys
