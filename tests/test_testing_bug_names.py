@@ -81,3 +81,15 @@ def test_each_bug_is_named(bug, named):
         assert_brdf_matches_model(ggx(bug=bug), MODEL, THETA_I)
     msg = str(e.value)
     assert "likely cause: " + named in msg, msg
+
+
+def test_a_deviation_no_common_bug_explains_is_not_given_a_cause():
+    correct = ggx()
+
+    def wavy(wi, wo):  # a ripple over θo: no variant of the model has that shape
+        return correct(wi, wo) * (1.0 + 0.05 * np.sin(9.0 * np.arccos(wo[:, 2])))
+
+    with pytest.raises(AssertionError) as e:
+        assert_brdf_matches_model(wavy, MODEL, THETA_I)
+    assert "likely cause" not in str(e.value)
+    assert "no single common bug" in str(e.value)

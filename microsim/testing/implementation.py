@@ -188,8 +188,12 @@ def assert_brdf_matches_model(
                 f"  {theta[t]:>4g}°  {energy[t]:>10.4f}×  {int(bad[t].sum()):>14d}   {worst}"
             )
         cause = likely_cause(user, specs[1].model, ref, theta, phis, b)
-        if cause is not None:
-            lines.append(f"likely cause: {cause.sentence()}")
+        lines.append(
+            f"likely cause: {cause.sentence()}"
+            if cause is not None
+            else 'no single common bug (docs/testing.md, "What a failure names") explains '
+            "the difference"
+        )
     if recip_bad:
         lines.append(
             f"brdf {name!r} is not reciprocal: f(wi, wo) and f(wo, wi) differ by {recip:.3g} "
