@@ -35,3 +35,10 @@ def _sigint_restored(request, _sigint_deliverable):
         signal.signal(signal.SIGINT, before[0])
         signal.pthread_sigmask(signal.SIG_SETMASK, before[1])
         warnings.warn(f"{request.node.nodeid} left SIGINT as {now}; restored", stacklevel=1)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``long`` (each ≥ 20 s on a cold start) first, in their collected order:
+    pytest-xdist hands tests out in collection order, so the two workers share the long ones
+    from the start instead of one worker finishing a long test alone at the end."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)

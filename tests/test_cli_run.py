@@ -252,6 +252,7 @@ def test_catalogue_file_heightfield_scene_runs(tmp_path):
     assert doc["scene"] == "file-gaussian-64" and doc["verdicts"]
 
 
+@pytest.mark.long
 def test_report_indexes_catalogue_with_working_links(tmp_path):
     cat = tmp_path / "cat"
     cat.mkdir()

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import dispatch_probe
 import numpy as np
+import pytest
 
 from microsim import analytic as an
 from microsim import surfaces as sf
@@ -89,6 +90,7 @@ def _inputs(tmp: Path) -> Path:
     return path
 
 
+@pytest.mark.long
 def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
     """The compiled bin pass, ``Bins.locate`` and the tallies of V-groove (exact, analytic,
     traced) and heightfield (traced, all bounces) runs are bitwise the same with NumPy's
