@@ -569,7 +569,7 @@ def reference(tmp_path_factory):
     [
         ("simulation", 0),
         ("side-studies", 0),
-        ("side-studies", 2),
+        pytest.param("side-studies", 2, marks=pytest.mark.slow),
         ("fits", 0),
         ("charts", 0),
         ("publish", 0),

@@ -102,7 +102,11 @@ def _ts_bins(theta_i, ndf, material=None, bins=BINS):
     return res.values
 
 
-@pytest.mark.parametrize("ndf", [an.Beckmann(0.5), an.GGX(0.3), an.StudentT(0.4, 3.0)], ids=repr)
+@pytest.mark.parametrize(
+    "ndf",
+    [an.Beckmann(0.5), an.GGX(0.3), pytest.param(an.StudentT(0.4, 3.0), marks=pytest.mark.slow)],
+    ids=repr,
+)
 def test_order_one_is_torrance_sparrow_with_height_correlated_smith(ndf):
     """Mirror: order-1 exits are multinomial counts over the bins (plus 'not order 1'); their
     expectation is TS with G2 = 1/(1 + Λi + Λo) bin-averaged by quadrature (rtol 1e-5)."""

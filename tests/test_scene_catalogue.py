@@ -122,6 +122,7 @@ def test_measure_plans_a_catalogue_name_from_an_empty_folder(empty_cwd):
     assert list(empty_cwd.iterdir()) == []  # planned, nothing written
 
 
+@pytest.mark.slow
 def test_view_renders_a_catalogue_name_from_an_empty_folder(empty_cwd, opengl):  # noqa: F811
     r = _run([CHEAPEST, "--what", "surface", "--screenshot", "v.png"], cwd=empty_cwd)
     assert r.returncode == 0, r.stderr

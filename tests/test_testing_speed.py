@@ -116,8 +116,8 @@ def test_a_callable_is_never_cached_but_its_departure_is(surface, warm, copy, fr
     "change, new",
     [
         (dict(material=1.5), 2),
-        (dict(bins=(9, 12)), 2),
-        (dict(theta_i=[40]), 2),
+        pytest.param(dict(bins=(9, 12)), 2, marks=pytest.mark.slow),
+        pytest.param(dict(theta_i=[40]), 2, marks=pytest.mark.slow),
         (dict(brdf="ts-smith"), 1),  # the model's bin averages only
     ],
 )

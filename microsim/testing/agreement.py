@@ -415,6 +415,11 @@ def _realised_lines(ref: Reference, result, judging: "_Judging", failing, with_p
     ]
 
 
+DIAGNOSIS_RTOL = 1e-3
+"""Relative accuracy of the correct models' and their variants' bin averages in the failure
+message's diagnosis: that of the brdf's own (``predict``'s default)."""
+
+
 def _percent(x) -> str:
     return "–" if x is None else f"{100 * x:+.1f} %"
 
@@ -437,7 +442,8 @@ def _cause_lines(ref: Reference, result, judged: "_Judged", physics, with_phi: b
         return lines
     theta, phi = result.theta_i[failing], result.phi_i[failing]
     user = values[failing]
-    near = closest(user, _correct_models(ref), theta, phi, result.bins)
+    models = _correct_models(ref)
+    near = closest(user, models, theta, phi, result.bins, DIAGNOSIS_RTOL)
     if near.is_the_model:
         devs = ", ".join(
             f"{_percent(verdicts[t]['energy_dev'])} at {_at(result, t, with_phi)}" for t in failing
@@ -447,17 +453,19 @@ def _cause_lines(ref: Reference, result, judged: "_Judged", physics, with_phi: b
             f"the deviation of {near.name} on this surface ({devs}, energy): the physics, not "
             "your implementation"
         ]
-    causes = [
-        (cause, name)
-        for name, model in _correct_models(ref).items()
-        if (cause := likely_cause(user, model, None, theta, phi, result.bins)) is not None
-    ]
-    if not causes:
+    # the nearest correct model first; the others only if no variant of it explains the brdf
+    others = [name for name in models if name != near.name]
+    for name in (near.name, *others):
+        values = near.values if name == near.name else None
+        args = (user, models[name], values, theta, phi, result.bins, DIAGNOSIS_RTOL)
+        cause = likely_cause(*args)
+        if cause is not None:
+            break
+    else:
         return [
-            f"the brdf is none of {', '.join(_correct_models(ref))} (nearest: {near.name}, "
+            f"the brdf is none of {', '.join(models)} (nearest: {near.name}, "
             f"{near.misfit:.2%} relative RMS) and no single common bug explains the difference"
         ]
-    cause, name = min(causes, key=lambda c: c[0].misfit)
     return [f"likely cause (against {name}): {cause.sentence()}"]
 
 

@@ -46,8 +46,8 @@ __all__ = ["EXPLAINS", "Cause", "bin_averages", "likely_cause", "misfit", "lobe_
 EXPLAINS = 0.3
 """A variant is named when its misfit is at most this share of the model's own misfit (it
 removes ≥ 70 % of the deviation)."""
-_QUAD_RTOL = 1e-4
-"""Relative accuracy of the variants' bin averages."""
+QUAD_RTOL = 1e-4
+"""Default relative accuracy of the variants' bin averages (``likely_cause``'s ``rtol``)."""
 
 
 @dataclass(frozen=True)
@@ -239,7 +239,7 @@ def _roughness_variants(model: TorranceSparrow) -> list[_Variant]:
     return out
 
 
-def _fitted_roughness(model: TorranceSparrow, user, model_values, bins, low: int, theta, phi):
+def _fitted_roughness(model, user, model_values, bins, low: int, theta, phi, rtol: float):
     """A variant with the roughness that fits ``user`` best (bounded search about the lobe
     widths' ratio at incidence ``low``), or None."""
     from scipy.optimize import minimize_scalar
@@ -255,7 +255,8 @@ def _fitted_roughness(model: TorranceSparrow, user, model_values, bins, low: int
     guess = np.log(a * w_user / w_model)
 
     def values_at(log_a):
-        return bin_averages([_with_roughness(model, float(np.exp(log_a)))], theta, phi, bins)[0]
+        varied = _with_roughness(model, float(np.exp(log_a)))
+        return bin_averages([varied], theta, phi, bins, rtol)[0]
 
     fit = minimize_scalar(
         lambda x: misfit(bins, user, values_at(x)),
@@ -276,12 +277,12 @@ def _fitted_roughness(model: TorranceSparrow, user, model_values, bins, low: int
     )
 
 
-def bin_averages(models, theta, phi, bins) -> list[np.ndarray]:
+def bin_averages(models, theta, phi, bins, rtol: float = QUAD_RTOL) -> list[np.ndarray]:
     """The bin averages (T, Θ, Φ) of each model at incidences ``theta``, ``phi`` (degrees)."""
     specs = [Predictor(f"v{k}", m) for k, m in enumerate(models)]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        out = predict_incidences(specs, theta, phi, bins, rtol=_QUAD_RTOL)
+        out = predict_incidences(specs, theta, phi, bins, rtol=rtol)
     return [out[s.name] for s in specs]
 
 
@@ -293,19 +294,22 @@ def _best_constant(bins, user, values) -> float:
     return float(num / den) if den > 0 else 1.0
 
 
-def likely_cause(user, model, model_values, theta_i, phi_i, bins: Bins) -> Cause | None:
+def likely_cause(
+    user, model, model_values, theta_i, phi_i, bins: Bins, rtol: float = QUAD_RTOL
+) -> Cause | None:
     """The variant of ``model`` (module docstring) that best explains ``user``, the BRDF's bin
     averages (T, Θ, Φ) at incidences ``theta_i``, ``phi_i`` (degrees) on ``bins``, given the
     model's own bin averages ``model_values`` (None: computed here); None when none explains it
-    (or the BRDF already matches the model)."""
+    (or the BRDF already matches the model). ``rtol``: the relative accuracy of the variants'
+    bin averages (that of ``user``'s is enough); deviations below 10 × rtol are not fitted."""
     user = np.asarray(user, dtype=np.float64)
     theta = np.asarray(theta_i, dtype=np.float64)
     phi = np.broadcast_to(np.asarray(phi_i, dtype=np.float64), theta.shape)
     if model_values is None:
-        model_values = bin_averages([model], theta, phi, bins)[0]
+        model_values = bin_averages([model], theta, phi, bins, rtol)[0]
     model_values = np.asarray(model_values, dtype=np.float64)
     base = misfit(bins, user, model_values)
-    if not np.isfinite(base) or base < 10 * _QUAD_RTOL:
+    if not np.isfinite(base) or base < 10 * rtol:
         return None
     low = int(np.argmin(theta))
     c = _best_constant(bins, user, model_values)
@@ -333,11 +337,11 @@ def likely_cause(user, model, model_values, theta_i, phi_i, bins: Bins) -> Cause
     if isinstance(model, TorranceSparrow):
         variants += _fresnel_variants(model) + _masking_variants(model) + _roughness_variants(model)
     to_average = [v.model for v in variants if v.values is None]
-    averaged = iter(bin_averages(to_average, theta, phi, bins))
+    averaged = iter(bin_averages(to_average, theta, phi, bins, rtol))
     values = [v.values if v.values is not None else next(averaged) for v in variants]
     fits = [(misfit(bins, user, vals), k) for k, vals in enumerate(values)]
     if isinstance(model, TorranceSparrow) and min(fits)[0] > 0.01 * base:
-        fitted = _fitted_roughness(model, user, model_values, bins, low, theta, phi)
+        fitted = _fitted_roughness(model, user, model_values, bins, low, theta, phi, rtol)
         if fitted is not None:
             fits.append((misfit(bins, user, fitted.values), len(variants)))
             variants.append(fitted)
@@ -369,10 +373,11 @@ IS_THE_MODEL = 3e-3
 model's agree to within their quadratures' accuracy)."""
 
 
-def closest(user, models: dict, theta_i, phi_i, bins: Bins) -> Closest:
-    """The model of ``models`` (name → model) nearest ``user`` (bin averages, T × Θ × Φ)."""
+def closest(user, models: dict, theta_i, phi_i, bins: Bins, rtol: float = QUAD_RTOL) -> Closest:
+    """The model of ``models`` (name → model) nearest ``user`` (bin averages, T × Θ × Φ), the
+    bin averages accurate to ``rtol``."""
     theta = np.asarray(theta_i, dtype=np.float64)
-    values = bin_averages(list(models.values()), theta, phi_i, bins)
+    values = bin_averages(list(models.values()), theta, phi_i, bins, rtol)
     fits = [misfit(bins, user, v) for v in values]
     k = int(np.argmin(fits))
     return Closest(list(models)[k], list(models.values())[k], values[k], fits[k])
