@@ -45,6 +45,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from microsim.analysis import incidence
+from microsim.analysis.markdown import percent
 from microsim.analysis.verdicts import (
     Measured,
     Prediction,
@@ -383,7 +384,7 @@ def _correct_models(ref: Reference) -> dict:
     models = {}
     if ref.exact_shadowing == "vgroove":
         models["ts-vgroove"] = TorranceSparrow(ndf, VGroove(), material)
-    models[PHYSICS_MODEL] = TorranceSparrow(ndf, Smith(correlated=True), material)
+    models[PHYSICS_MODEL] = physics_model(ndf, material).model
     models["ts-smith"] = TorranceSparrow(ndf, Smith(correlated=False), material)
     return models
 
@@ -398,7 +399,7 @@ def _realised_lines(ref: Reference, result, judging: "_Judging", failing, with_p
     m = realised_m(ref.surfaces)
     if abs(m / ndf.m - 1.0) < 1e-3:
         return []
-    model = TorranceSparrow(Beckmann(m), Smith(correlated=True), ref.material)
+    model = physics_model(Beckmann(m), ref.material).model
     judged = _judge(
         Predictor(f"{PHYSICS_MODEL} at m = {m:.4g}", model), ref, result, judging, cache, failing
     )
@@ -418,10 +419,6 @@ def _realised_lines(ref: Reference, result, judging: "_Judging", failing, with_p
 DIAGNOSIS_RTOL = 1e-3
 """Relative accuracy of the correct models' and their variants' bin averages in the failure
 message's diagnosis: that of the brdf's own (``predict``'s default)."""
-
-
-def _percent(x) -> str:
-    return "–" if x is None else f"{100 * x:+.1f} %"
 
 
 def _cause_lines(ref: Reference, result, judged: "_Judged", physics, with_phi: bool) -> list[str]:
@@ -446,7 +443,9 @@ def _cause_lines(ref: Reference, result, judged: "_Judged", physics, with_phi: b
     near = closest(user, models, theta, phi, result.bins, DIAGNOSIS_RTOL)
     if near.is_the_model:
         devs = ", ".join(
-            f"{_percent(verdicts[t]['energy_dev'])} at {_at(result, t, with_phi)}" for t in failing
+            f"{percent(verdicts[t]['energy_dev'], 3, signed=True, unit=' %')} at "
+            f"{_at(result, t, with_phi)}"
+            for t in failing
         )
         return [
             f"the brdf is {near.name} itself (within {near.misfit:.2%} relative RMS): this is "
@@ -456,9 +455,8 @@ def _cause_lines(ref: Reference, result, judged: "_Judged", physics, with_phi: b
     # the nearest correct model first; the others only if no variant of it explains the brdf
     others = [name for name in models if name != near.name]
     for name in (near.name, *others):
-        values = near.values if name == near.name else None
-        args = (user, models[name], values, theta, phi, result.bins, DIAGNOSIS_RTOL)
-        cause = likely_cause(*args)
+        known = near.values if name == near.name else None
+        cause = likely_cause(user, models[name], known, theta, phi, result.bins, DIAGNOSIS_RTOL)
         if cause is not None:
             break
     else:

@@ -419,12 +419,10 @@ _IDENTITIES: dict = {}  # scene identity key → (fingerprints, azimuth flags), 
 def _scene_builder(scene: Scene, seed: int, n: int) -> Callable[[], tuple]:
     """The scene's n realisations from seed ``seed``, built on the first call and kept: the
     look-up of their fingerprints and a trace of the reference share one build."""
-    built: list[tuple] = []
 
+    @functools.cache
     def build() -> tuple:
-        if not built:
-            built.append(tuple(scene.build_surface(seed=seed + r) for r in range(n)))
-        return built[0]
+        return tuple(scene.build_surface(seed=seed + r) for r in range(n))
 
     return build
 

@@ -34,6 +34,7 @@ from typing import Callable
 
 import numpy as np
 
+from microsim import vectors
 from microsim.analytic.brdf import TorranceSparrow
 from microsim.analytic.fresnel import f0_from_material, fresnel, resolve_material, schlick
 from microsim.analytic.masking import NoMasking, Smith
@@ -117,10 +118,8 @@ def _times(model, factor: Callable) -> FunctionBRDF:
 
 
 def _half_cos(wi, wo) -> np.ndarray:
-    """wi·h with h = (wi + wo)/|wi + wo| (the angle Fresnel's F is evaluated at)."""
-    h = wi + wo
-    n = np.linalg.norm(h, axis=-1)
-    return np.clip((wi * h).sum(-1) / np.where(n > 0, n, 1.0), 0.0, 1.0)
+    """wi·h, h the half vector (the angle Fresnel's F is evaluated at)."""
+    return np.clip(vectors.dot(wi, vectors.half_vector(wi, wo)), 0.0, 1.0)
 
 
 def _fresnel_variants(model: TorranceSparrow) -> list[_Variant]:
@@ -164,9 +163,7 @@ def _masking_variants(model: TorranceSparrow) -> list[_Variant]:
 
     def g1_of(which):
         def factor(wi, wo):
-            h = wi + wo
-            h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-            return m.g1(wi if which == "wi" else wo, h)
+            return m.g1(wi if which == "wi" else wo, vectors.half_vector(wi, wo))
 
         return factor
 

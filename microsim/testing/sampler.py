@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from microsim import checks as _checks
+from microsim import vectors
 from microsim.errors import UsageError
 from microsim.stats import chi2_sf, sidak
 
@@ -158,9 +159,8 @@ def _factors(w: np.ndarray, wi) -> list:
     with np.errstate(divide="ignore", invalid="ignore"):
         out = [_Factor("cos θ", np.abs(w[:, 2]))]
         if wi is not None:
-            h = w + wi
-            h /= np.linalg.norm(h, axis=1, keepdims=True)
-            out.append(_Factor("4|wo·h|", 4.0 * np.abs(np.einsum("ij,ij->i", w, h))))
+            h = vectors.half_vector(w, wi)
+            out.append(_Factor("4|wo·h|", 4.0 * np.abs(vectors.dot(w, h))))
             out.append(_Factor("h·n", np.abs(h[:, 2])))
     return out
 
