@@ -42,6 +42,7 @@ CHANGES = {
     "masking": "exact",
     "origins": "independent",
     "isotropic": True,
+    "transmission": True,
 }
 
 

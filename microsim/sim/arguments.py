@@ -61,12 +61,18 @@ def _angles(name: str, value, what: str) -> np.ndarray:
     return a
 
 
-def check_angles(theta_i, phi_i) -> tuple[np.ndarray, np.ndarray]:
+def check_angles(theta_i, phi_i, below: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Validated (θi, φi) float64 arrays in degrees, φi broadcast to θi's shape; a UsageError
-    naming theta_i or phi_i otherwise."""
-    th = _angles("theta_i", theta_i, "a scalar or a non-empty 1-D sequence of degrees in [0, 90)")
-    if not np.all((th >= 0) & (th < 90)):
-        raise UsageError(f"theta_i must lie in [0, 90) degrees, got {short(theta_i)}")
+    naming theta_i or phi_i otherwise. ``below``: θi may also lie in (90, 180] (light from
+    under the surface, through a dielectric: ``dielectric``)."""
+    allowed = "[0, 90) or (90, 180]" if below else "[0, 90)"
+    what = f"a scalar or a non-empty 1-D sequence of degrees in {allowed}"
+    th = _angles("theta_i", theta_i, what)
+    ok = (th >= 0) & (th < 90)
+    if below:
+        ok |= (th > 90) & (th <= 180)
+    if not np.all(ok):
+        raise UsageError(f"theta_i must lie in {allowed} degrees, got {short(theta_i)}")
     ph = _angles("phi_i", phi_i, f"finite degrees: a scalar or one per theta_i ({th.size})")
     if ph.size not in (1, th.size):
         raise UsageError(

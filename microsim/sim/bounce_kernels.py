@@ -171,16 +171,16 @@ def bounce_step(
         if h != HIT:
             walk_failed = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
             path_failed = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
-            _end_unresolved(ledger, b, g, w[i], path_failed, walk_failed)
+            end_unresolved(ledger, b, g, w[i], path_failed, walk_failed)
             continue
         if b > limit:
-            _end_path(ledger, g, CUT_BOUNCES, w[i])
+            end_path(ledger, g, CUT_BOUNCES, w[i])
             continue
         f = prim[i]
         a0, a1, a2 = nx[f], ny[f], nz[f]
         c = -(dx[j] * a0 + dy[j] * a1 + dz[j] * a2)
         if c <= 0.0:  # back-facing
-            _end_unresolved(ledger, b, g, w[i], PATH_UNRESOLVED, RAY_UNRESOLVED)
+            end_unresolved(ledger, b, g, w[i], PATH_UNRESOLVED, RAY_UNRESOLVED)
             continue
         if use_table and b == 1:
             fw = tab_weight[f]
@@ -195,19 +195,19 @@ def bounce_step(
             weight1[g] = fw
             status1[g] = SINGLE if oz > 0.0 else DOWNWARD
         if wn < floor:
-            _end_path(ledger, g, CUT_WEIGHT, wn)
+            end_path(ledger, g, CUT_WEIGHT, wn)
             continue
         if b == limit and not oz > 0.0:
-            _end_path(ledger, g, CUT_BOUNCES, wn)
+            end_path(ledger, g, CUT_BOUNCES, wn)
             continue
         p, n, o = (px[i], py[i], pz[i]), (a0, a1, a2), (ox, oy, oz)
-        _continue_path(nxt, m, g, p, n, lift[f], (hx, hy), o, wn)
+        continue_path(nxt, m, g, p, n, lift[f], (hx, hy), o, wn)
         m += 1
     return m, e
 
 
 @inlined
-def _end_path(ledger, g, path_class, w):
+def end_path(ledger, g, path_class, w):
     """End path ``g`` as ``path_class`` carrying weight ``w``."""
     ledger.term[g] = path_class
     ledger.wterm[g] = w
@@ -218,7 +218,7 @@ def _escape(ledger, escapes, table, b, g, w, d, e):
     """Path ``g`` escapes after order b − 1 with weight ``w`` along ``d``: binned here from
     the first bounce's facet at b = 2 with a table in use, else listed in ``escapes`` at
     slot ``e``. Returns the number of escapes listed."""
-    _end_path(ledger, g, order_class(b - 1), w)
+    end_path(ledger, g, order_class(b - 1), w)
     if table.use and b == 2:
         ledger.where[g] = table.bin[table.first_facet[g]]
         return e
@@ -242,17 +242,17 @@ def _settle_first_ray(status1, g, h):
 
 
 @inlined
-def _end_unresolved(ledger, b, g, w, path_class, first_class):
+def end_unresolved(ledger, b, g, w, path_class, first_class):
     """End path ``g`` with carried weight ``w`` as ``path_class`` (its walk failed or its
     hit faces away); at step 1 its first-bounce class is ``first_class``, weight 0."""
-    _end_path(ledger, g, path_class, w)
+    end_path(ledger, g, path_class, w)
     if b == 1:
         ledger.status1[g] = first_class
         ledger.weight1[g] = 0.0
 
 
 @inlined
-def _continue_path(nxt, m, g, p, n, lift, half, o, wn):
+def continue_path(nxt, m, g, p, n, lift, half, o, wn):
     """Write continuing path ``g`` to slot ``m`` of ``nxt``: its next ray starts at the hit
     ``p`` (px, py, pz) moved along the unit normal ``n`` onto its facet plane and eps above
     it (``lift`` = n·v0 + eps), wrapped into the tile (``half`` extents), along ``o``,

@@ -62,7 +62,7 @@ from . import bounce_kernels, fresnel_kernels, vgroove_kernels
 from .arguments import check_masking_bounces
 from .engine import codes, segments
 from .facet_tables import FacetTable, facet_table, uses_facet_table
-from .ledger import ORDER_NAMES, TERMINAL
+from .ledger import DIELECTRIC_COLUMNS, ORDER_NAMES, TERMINAL
 from .masking_rays import primary_hits
 from .paths import ANALYTIC_BATCH, LEDGER, Incidence, choose_path
 from .ray_columns import GrooveFrameWork, columns, groove_frame_rays
@@ -97,7 +97,7 @@ MAX_BOUNCES = 256
 Far above what the catalogue's surfaces need (the highest order seen on m ≈ 0.5 Gaussian
 tiles is ~12); whatever it cuts is in the ledger (``cut_bounces``)."""
 RETRY_WRAPS = 2**17
-"""Largest wrap cap of a re-traced grazing reflected ray (``_resolve_grazing``): rays with
+"""Largest wrap cap of a re-traced grazing reflected ray (``resolve_grazing``): rays with
 |d_z| below ~(relief/tile)·2⁻¹⁶ stay unresolved (ledger ``unresolved_path``)."""
 WEIGHT_FLOOR = 1e-6
 """``bounces="all"``: a path whose carried weight falls below this is cut (``cut_weight``)."""
@@ -155,8 +155,11 @@ def order_slots(bounces) -> int:
     return 4 if bounces == "all" else min(int(bounces), 4)
 
 
-def ledger_classes(bounces) -> int:
-    """Ledger columns of a tally: the first-bounce classes, plus the terminal ones for K > 1."""
+def ledger_classes(bounces, transmission: bool = False) -> int:
+    """Ledger columns of a tally: the first-bounce classes, plus the terminal ones for K > 1
+    (a dielectric interface's ``DIELECTRIC_COLUMNS`` for any K)."""
+    if transmission:
+        return len(LEDGER) + len(DIELECTRIC_COLUMNS)
     return len(LEDGER) + (0 if bounces == 1 else len(TERMINAL))
 
 
@@ -201,7 +204,7 @@ def trace_bounces(
         np.empty(n),
         np.full(n, -1, dtype=np.int64),
     )
-    (hs, prim, p), d, shared = _primary_rays(tracer, x, wi, psi)
+    (hs, prim, p), d, shared = primary_rays(tracer, x, wi, psi)
     phi = float(phi_i) if psi is None else phi_i - np.degrees(psi)
     live = np.arange(n, dtype=np.int64)
     w = np.ones(n)
@@ -214,10 +217,7 @@ def trace_bounces(
         k = len(live)
         par = b % 2  # generation: written at this step, read by the next
         esc, ed = _BOUNCE_ESCAPE(k), _BOUNCE_ESCAPE_DIRECTION(k)
-        nxt = bounce_kernels.NextRays(
-            _NEXT_LIVE(k, par), *_NEXT_START(k, par), *_NEXT_DIRECTION(k, par),
-            _NEXT_D32(k, par), _NEXT_WEIGHT(k, par),
-        )  # fmt: skip
+        nxt = next_rays(k, par)
         m, e = bounce_kernels.bounce_step(
             b, chain.limit, chain.floor, live, w, segments.WalkResult(hs, prim, *p),
             bounce_kernels.RayDirections(*d, shared), facets, material,
@@ -225,26 +225,47 @@ def trace_bounces(
         )  # fmt: skip
         if e:
             slot = min(b - 1, min(chain.limit, 4)) - 1
-            _bin_escapes(bins, esc[:e], [c[:e] for c in ed], phi, slot * chain.nbin, out.where)
+            bin_escapes(bins, esc[:e], [c[:e] for c in ed], phi, slot * chain.nbin, out.where)
         if m == 0:
             break
-        live, w = nxt.live[:m], nxt.w[:m]
-        d = [nxt.dx[:m], nxt.dy[:m], nxt.dz[:m]]
-        starts = [nxt.x[:m], nxt.y[:m], nxt.z[:m]]
-        hs, prim, p = tracer.trace_columns(starts, d, nxt.d32[:m])
-        _resolve_grazing(tracer, starts, d, nxt.d32[:m], hs, prim, p)
+        live, w, d, (hs, prim, p) = trace_continuing(tracer, nxt, m)
         shared = False
         b += 1
     return out
 
 
-def _primary_rays(tracer: Tracer, x, wi, psi) -> tuple:
+def next_rays(k: int, generation: int) -> bounce_kernels.NextRays:
+    """This thread's arrays for at most ``k`` continuing paths, in ``generation`` (written by
+    one step, read by the next)."""
+    return bounce_kernels.NextRays(
+        _NEXT_LIVE(k, generation), *_NEXT_START(k, generation),
+        *_NEXT_DIRECTION(k, generation), _NEXT_D32(k, generation), _NEXT_WEIGHT(k, generation),
+    )  # fmt: skip
+
+
+def trace_continuing(tracer: Tracer, nxt: bounce_kernels.NextRays, m: int) -> tuple:
+    """(global indices, weights, direction columns, walk hits) of the ``m`` continuing paths
+    written to ``nxt``, their rays traced (``Tracer.trace_columns``; grazing ones re-traced
+    with a larger wrap cap, ``resolve_grazing``)."""
+    live, w = nxt.live[:m], nxt.w[:m]
+    d = [nxt.dx[:m], nxt.dy[:m], nxt.dz[:m]]
+    starts = [nxt.x[:m], nxt.y[:m], nxt.z[:m]]
+    hs, prim, p = tracer.trace_columns(starts, d, nxt.d32[:m])
+    resolve_grazing(tracer, starts, d, nxt.d32[:m], hs, prim, p)
+    return live, w, d, (hs, prim, p)
+
+
+def primary_rays(tracer: Tracer, x, wi, psi) -> tuple:
     """(hits, direction columns, shared) of the primary rays from ``x`` along −wi (one
-    shared direction when ``psi`` is None, else per ray in its groove frame)."""
+    shared direction when ``psi`` is None, else per ray in its groove frame). Rays lit from
+    below (wi_z < 0: a dielectric's medium, ``dielectric``) rise from under the relief."""
     if psi is None:
         d = [np.array([-float(c)]) for c in wi]
         d32 = np.array([[c[0] for c in d]], dtype=np.float32)
-        return primary_hits(tracer, x, [float(c[0]) for c in d], d32), d, True
+        shared = [float(c[0]) for c in d]
+        if shared[2] > 0.0:
+            return tracer.trace_columns(x, shared, d32), d, True
+        return primary_hits(tracer, x, shared, d32), d, True
     _, d, d32 = groove_frame_rays(psi, wi, _BOUNCE_FRAME)
     return tracer.trace_columns(x, d, d32), d, False
 
@@ -259,15 +280,16 @@ def _first_bounce_table(table: FacetTable | None, n: int) -> bounce_kernels.Firs
     return bounce_kernels.FirstBounceTable(True, table.weight, table.bin, _BOUNCE_FACET(n))
 
 
-def _bin_escapes(bins: Bins, rows, wo, phi, offset: int, where) -> None:
-    """Set ``where[rows]`` to ``offset`` + the bin of the escape directions ``wo`` (3
-    columns), Δφ against ``phi`` (a scalar, or per ray of the chunk), −1 outside the grid."""
+def bin_escapes(bins: Bins, rows, wo, phi, offset, where) -> None:
+    """Set ``where[rows]`` to ``offset`` (one, or one per row) + the bin of the escape
+    directions ``wo`` (3 columns), Δφ against ``phi`` (a scalar, or per ray of the chunk), −1
+    outside the grid."""
     ph = phi if np.ndim(phi) == 0 else phi[rows]
     loc = bins.locate_xyz(wo[0], wo[1], wo[2], ph)
     where[rows] = np.where(loc >= 0, offset + loc, -1)
 
 
-def _resolve_grazing(tracer: Tracer, x, d, d32, hs, prim, p) -> None:
+def resolve_grazing(tracer: Tracer, x, d, d32, hs, prim, p) -> None:
     """Re-trace the reflected rays whose walk reached the wrap cap (UNRESOLVED): a ray
     reflected at grazing angles rises or falls so slowly (|d_z| ~ 1e-4) that it crosses the
     tile thousands of times before it escapes or meets the surface, beyond ``Tracer.
@@ -353,36 +375,24 @@ class BouncePath(ChainPath):
         inc = self.incidence
         if not self.rotate:
             starts, psi = inc.origins_of(blocks, self.azimuth)
-            return trace_bounces(
-                inc.tracer,
-                inc.wi,
-                inc.phi_i,
-                inc.bins,
-                starts,
-                psi if self.azimuth else None,
-                inc.ior,
-                self.chain,
-                self.table,
-            )
+            return self.trace(inc.wi, inc.phi_i, starts, psi if self.azimuth else None, blocks)
         out, wi = [], inc.wi
         for b in blocks:
             starts, _ = inc.origins_of([b], False)
             psi = block_rotation(inc.key, b)
             c, s = np.cos(psi), np.sin(psi)
             wb = np.array([c * wi[0] - s * wi[1], s * wi[0] + c * wi[1], wi[2]])
-            out.append(
-                trace_bounces(
-                    inc.tracer,
-                    wb,
-                    inc.phi_i + np.degrees(psi),
-                    inc.bins,
-                    starts,
-                    None,
-                    inc.ior,
-                    self.chain,
-                )
-            )
-        return ChainOutcome(*(np.concatenate(parts) for parts in zip(*out)))
+            out.append(self.trace(wb, inc.phi_i + np.degrees(psi), starts, None, [b]))
+        return type(out[0])(*(np.concatenate(parts) for parts in zip(*out)))
+
+    def trace(self, wi, phi_i, starts, psi, blocks) -> ChainOutcome:
+        """The chains of the rays of ``blocks`` from ``starts`` lit from ``wi`` (azimuth
+        ``phi_i``; per-ray groove azimuths ``psi`` or None): ``trace_bounces``."""
+        inc = self.incidence
+        table = None if self.rotate else self.table
+        return trace_bounces(
+            inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, table
+        )
 
 
 class AnalyticBouncePath(ChainPath):

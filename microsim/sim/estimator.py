@@ -55,6 +55,7 @@ from .arguments import (
 )
 from .bounces import MAX_BOUNCES, WEIGHT_FLOOR, chain_task, ledger_classes, order_slots
 from .cluster import ClusterPool, RemoteSurface, SchedulerLost, tracer_info
+from .dielectric import interface_task
 from .events import Events, trace_events
 from .experiment import Execution, Experiment, normalise
 from .identity import RunDescription, saved_identity
@@ -152,6 +153,7 @@ def simulate(
     progress: Callable[[RaysDone], None] | None = None,
     resume: Result | None = None,
     bounces: int | str = 1,
+    transmission: bool = False,
 ) -> Result:
     """Bin-averaged single-bounce BRDF of ``surface`` by ray tracing (Mikkelsen 2009, eq. 9).
 
@@ -233,6 +235,16 @@ def simulate(
     absorbed, cut off) and ``meta["bounces"]``; ``brdf`` stays the order-1 BRDF. Traced
     masking (Embree) or ``masking="analytic"`` (V-grooves, exact float64 chain);
     ``masking="exact"`` is refused with K > 1. ``resume`` must match ``bounces`` too.
+
+    ``transmission``: False (the default: the medium keeps what it refracts, results as
+    before) or True: ``material`` is a dielectric medium below the surface (a real index n;
+    n + ik, k > 0, an absorbing one) and every hit reflects or refracts (module
+    ``dielectric``: Russian roulette on the exact Fresnel factor, total internal reflection
+    included); θi may then also lie in (90, 180] (light from inside the medium). The Result
+    adds ``btdf_orders``/``stderr_btdf_orders`` (the light leaving on the other side),
+    ``brdf_orders`` holding the light leaving on the incidence's side, O = ``order_slots``
+    slots also for ``bounces=1``, and the ledger's transmitted and total-internal-reflection
+    columns; ``meta["transmission"]`` is True. Traced masking only; not on a cluster.
     """
     return estimate(
         Experiment(
@@ -245,6 +257,7 @@ def simulate(
             realisations=realisations,
             surface_factory=surface_factory,
             seeds=seeds,
+            transmission=transmission,
         ),
         Estimator(rays, seed, masking, origins, isotropic),
         Execution(threads, chunk, progress),
@@ -294,6 +307,7 @@ def estimate(
     _check_descriptions(experiment=experiment, estimator=estimator, execution=execution)
     ex, est, run = experiment, estimator, execution
     check_masking_bounces(est.masking, ex.bounces)
+    _check_transmission_run(ex, est, run)
     plan = _plan(ex, est, run)
     state = _start(plan, ex, resume)
     done_before = state.done.copy()
@@ -336,6 +350,8 @@ def estimate(
         meta["bounces"] = ex.bounces
         meta["max_bounces"] = MAX_BOUNCES
         meta["weight_floor"] = WEIGHT_FLOOR if ex.bounces == "all" else 0.0
+    if ex.transmission:  # absent: False (results without transmission keep their meta)
+        meta["transmission"] = True
     th, ph = np.array(ex.theta_i), np.array(ex.phi_i)
     result = simulation_result(
         th, ph, ex.bins, state.tallies, n_done, plan.per_real, state.done, meta, plan.slots
@@ -358,6 +374,19 @@ def _check_descriptions(**given) -> None:
             )
 
 
+def _check_transmission_run(ex: Experiment, est: Estimator, run: Execution) -> None:
+    """UsageError for transmission with a masking other than "traced" or on a cluster."""
+    if not ex.transmission:
+        return
+    if est.masking != "traced":
+        raise UsageError(
+            f"transmission=True traces every path through the interface with Embree: "
+            f"masking must be 'traced', got {est.masking!r}"
+        )
+    if run.cluster is not None:
+        raise UsageError("transmission=True runs on local threads only: pass cluster=None")
+
+
 def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
     """The run's realisations, tally slots and blocks; the tallies' memory checked up front
     (``BIN_BYTES_*``)."""
@@ -366,6 +395,8 @@ def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
     if min(per_real) < 1:
         raise UsageError(f"rays must be >= the number of realisations ({n_real}), got {est.rays}")
     slots = None if ex.bounces == 1 else order_slots(ex.bounces)
+    if ex.transmission:  # reflected and transmitted order slots
+        slots = 2 * order_slots(ex.bounces)
     nbin = ex.bins.shape[0] * ex.bins.shape[1]
     nslot, n_th = nbin * (slots or 1), len(ex.theta_i)  # tally slots: bins, or orders × bins
     check_memory(
@@ -391,7 +422,7 @@ def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
 def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
     """Empty tallies, or those of ``resume`` (plus empty ones for realisations it lacks)."""
     n_th, nslot = len(ex.theta_i), plan.nbin * (plan.slots or 1)
-    classes = ledger_classes(ex.bounces)
+    classes = ledger_classes(ex.bounces, ex.transmission)
     if resume is None:
         tallies, done, metas = [], np.zeros((0, n_th), dtype=np.int64), []
     else:
@@ -490,8 +521,12 @@ def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> N
             est.origins,
             est.isotropic,
         )
-        # one chain, cut after ex.bounces bounces (single bounce: its first, ``chain_task``)
-        task = chain_task(incidence, profile, azimuth, est.isotropic, ex.bounces, pool, run.threads)
+        if ex.transmission:  # paths through a dielectric interface
+            task = interface_task(incidence, azimuth, est.isotropic, ex.bounces)
+        else:  # one chain, cut after ex.bounces bounces (single bounce: its first)
+            task = chain_task(
+                incidence, profile, azimuth, est.isotropic, ex.bounces, pool, run.threads
+            )
         threads, depth, blocks = run.threads, IN_FLIGHT * run.threads, plan.chunk_blocks
     rays, done, tally_ri = plan.per_real[r], state.done, state.tallies[r][i]
 

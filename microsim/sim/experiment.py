@@ -31,6 +31,7 @@ from .arguments import (
 )
 from .bounces import check_bounces
 from .cluster import check_client
+from .dielectric import check_light_from_below, check_transmission
 from .progress import RaysDone
 
 __all__ = ["Experiment", "Execution", "normalise"]
@@ -53,7 +54,9 @@ class Experiment:
     n + ik, or None (a mirror; ``fresnel.resolve_material``). ``theta_i``: incidence polar
     angle(s) in degrees, each in [0, 90); ``phi_i``: azimuth(s) in degrees, a scalar or one
     per θi. ``bins``: the outgoing grid. ``bounces``: 1 (single scattering), K in
-    [2, ``bounces.MAX_BOUNCES``] or "all" (module ``bounces``).
+    [2, ``bounces.MAX_BOUNCES``] or "all" (module ``bounces``). ``transmission``: the
+    material is a dielectric medium below the surface and light is reflected *and* refracted
+    (module ``dielectric``); θi may then also lie in (90, 180] (light from inside the medium).
     """
 
     surface: object = None
@@ -65,14 +68,18 @@ class Experiment:
     realisations: object = None
     surface_factory: Callable[[int], object] | None = None
     seeds: tuple | None = None
+    transmission: bool = False
 
     def __post_init__(self):
-        th, ph = check_angles(self.theta_i, self.phi_i)
+        ior = resolve_material(self.material)
+        transmission = check_transmission(self.transmission, ior)
+        th, ph = check_angles(self.theta_i, self.phi_i, below=transmission)
+        normalise(self, "transmission", transmission)
         normalise(self, "theta_i", tuple(float(t) for t in th))
         normalise(self, "phi_i", tuple(float(p) for p in ph))
+        check_light_from_below(ior, th)
         normalise(self, "bounces", check_bounces(self.bounces))
         check_bins(self.bins)
-        resolve_material(self.material)
         if isinstance(self.realisations, list):
             normalise(self, "realisations", tuple(self.realisations))
         if self.seeds is not None and not isinstance(self.seeds, (str, bytes)):

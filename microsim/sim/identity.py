@@ -12,8 +12,9 @@ recipe; None when each realisation is checked by its fingerprint as it is built)
 material (n, k) or None (a mirror), the incidences (θi, φi in degrees, one pair each), the
 outgoing bins, the scattering orders traced (``bounces``), the realisations, the rays per
 incidence, the random stream (``seed``), the masking test, the origins' sampling and the
-per-block azimuth rotation (``isotropic``); the identity adds the block size and the rays'
-design (``streams.BLOCK``, ``streams.DESIGN``).
+per-block azimuth rotation (``isotropic``), and whether light is transmitted through a
+dielectric interface (``transmission``, recorded only when it is); the identity adds the
+block size and the rays' design (``streams.BLOCK``, ``streams.DESIGN``).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ COMPARED = (
     "isotropic",
     "block",
     "design",
+    "transmission",
 )
 """The identity's fields in the order a mismatch is reported."""
 
@@ -84,6 +86,7 @@ class RunDescription:
     masking: str = "traced"
     origins: str = "stratified"
     isotropic: bool = False
+    transmission: bool = False
 
     @classmethod
     def of(cls, experiment, estimator, realisations: int, surfaces=None) -> RunDescription:
@@ -101,10 +104,12 @@ class RunDescription:
             masking=estimator.masking,
             origins=estimator.origins,
             isotropic=estimator.isotropic,
+            transmission=experiment.transmission,
         )
 
     def identity(self) -> dict:
-        """The canonical, versioned, JSON-able identity (module docstring)."""
+        """The canonical, versioned, JSON-able identity (module docstring); ``transmission``
+        only when True (the identities of runs without it are unchanged)."""
         return {
             "identity": IDENTITY_VERSION,
             "surfaces": _json(self.surfaces),
@@ -121,7 +126,7 @@ class RunDescription:
             "isotropic": bool(self.isotropic),
             "block": BLOCK,
             "design": DESIGN,
-        }
+        } | ({"transmission": True} if self.transmission else {})
 
     def key(self, extra: dict | None = None) -> str:
         """SHA-256 (hex) of the identity (with ``extra``, JSON values, added)."""
@@ -135,10 +140,10 @@ class RunDescription:
         with this run's rays, is continued, not refused."""
         now = self.identity()
         fields = [k for k in COMPARED if (k != "surfaces" or now[k] is not None)]
-        diff = [k for k in fields if saved.get(k) != now[k]]
+        diff = [k for k in fields if saved.get(k) != now.get(k)]
         if set(diff) <= {"rays", "realisations"} and _is_prefix(saved, now):
             return []
-        return [(k, saved.get(k), now[k]) for k in diff]
+        return [(k, saved.get(k), now.get(k)) for k in diff]
 
 
 def _json(value):
@@ -180,7 +185,7 @@ def saved_identity(result) -> dict:
         "isotropic": bool(meta.get("isotropic", False)),
         "block": meta.get("block"),
         "design": meta.get("design", 1),
-    }
+    } | ({"transmission": True} if meta.get("transmission") else {})
 
 
 SCENE_RECIPE = ("scene", "surface", "quick")

@@ -41,6 +41,9 @@ _OPTIONAL = (
     "brdf_orders",
     "stderr_orders",
     "brdf_realisations_orders",
+    "btdf_orders",
+    "stderr_btdf_orders",
+    "btdf_realisations_orders",
 )
 
 
@@ -133,7 +136,8 @@ class RunInfo:
     a mirror), ``seed``, ``rays`` per incidence, ``stderr_method``, ``partial``/
     ``interrupted`` (an interrupted run) and the wall ``seconds``. The ray tracer's settings:
     ``masking``, ``origins``, ``isotropic``, ``block``, ``bounces`` (1, K or "all") and
-    ``max_bounces``, with ``seconds_scene_build`` and ``rays_per_second``. What ``microsim
+    ``max_bounces``, ``transmission`` (a dielectric interface: the Result also holds the
+    BTDF), with ``seconds_scene_build`` and ``rays_per_second``. What ``microsim
     run`` adds: ``run`` (the scene's settings: ``bins``, ``realisations_auto``…),
     ``error_budget``, ``realisation_models`` (models built per tile, judged against ray
     noise), ``model_params``, ``model_warnings``, ``tile_departure`` and
@@ -158,6 +162,7 @@ class RunInfo:
     block: int | None = None
     bounces: int | str | None = None
     max_bounces: int | None = None
+    transmission: bool = False
     seconds_scene_build: float | None = None
     rays_per_second: float | None = None
     run: Mapping | None = None
@@ -252,6 +257,18 @@ class Result:
     ``<name>_energy``, the fraction of incident energy it takes away) and
     ``escaped_energy``, ``cut_energy``, ``absorbed_energy`` (Fresnel losses); the tallies
     hold O·Θ·Φ slots and 5 + 8 ledger columns. All None/absent for ``bounces=1``.
+
+    A dielectric interface (``simulate(..., transmission=True)``, ``info.transmission``;
+    module ``dielectric``): ``brdf_orders`` hold the light leaving on the incidence's side
+    (reflected), ``btdf_orders``/``stderr_btdf_orders`` (O, T, Θ, Φ) sr⁻¹ the light leaving on
+    the other side (transmitted), on the same bins with θo measured from the pole of the side
+    it leaves by (−z for light refracted into the medium from above) and Δφ = φo − φi of the
+    direction itself (specular reflection and refraction both at Δφ = 180°); radiance
+    convention: Σ_B f̄_B Ω_B over both is the fraction of the incident flux (``albedo`` R,
+    ``transmittance`` T). O ≥ 1 even for ``bounces=1``; ``btdf_realisations_orders`` with
+    several realisations. The ledger adds ``transmitted_1`` … ``transmitted_4plus`` (with
+    ``_energy``), ``transmitted_energy`` and ``tir_1`` … ``tir_4plus``; the tallies hold
+    2O·Θ·Φ slots (reflected, then transmitted) and 5 + 12 + 4 ledger columns.
     """
 
     theta_i: np.ndarray
@@ -275,6 +292,9 @@ class Result:
     brdf_orders: np.ndarray | None = None
     stderr_orders: np.ndarray | None = None
     brdf_realisations_orders: np.ndarray | None = None
+    btdf_orders: np.ndarray | None = None
+    stderr_btdf_orders: np.ndarray | None = None
+    btdf_realisations_orders: np.ndarray | None = None
     info: RunInfo = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -362,6 +382,22 @@ class Result:
         """The BRDF summed over scattering orders (T, Θ, Φ) sr⁻¹: ``brdf_orders.sum(0)``, or
         ``brdf`` for a single-bounce run."""
         return self.brdf if self.brdf_orders is None else self.brdf_orders.sum(axis=0)
+
+    def btdf_total(self) -> np.ndarray | None:
+        """A dielectric interface's BTDF summed over scattering orders (T, Θ, Φ) sr⁻¹
+        (``btdf_orders.sum(0)``), None without transmission."""
+        return None if self.btdf_orders is None else self.btdf_orders.sum(axis=0)
+
+    def reflectance(self) -> np.ndarray:
+        """Σ_B f̄_B Ω_B of the whole BRDF (all orders traced) per incidence (T,): the fraction
+        of the incident flux the bins see reflected (R)."""
+        return np.sum(self.brdf_total() * self.bins.projected_solid_angle(), axis=(1, 2))
+
+    def transmittance(self) -> np.ndarray | None:
+        """Σ_B f̄_B Ω_B of the whole BTDF per incidence (T,): the fraction of the incident flux
+        the bins see transmitted (T), None without transmission."""
+        t = self.btdf_total()
+        return None if t is None else np.sum(t * self.bins.projected_solid_angle(), axis=(1, 2))
 
     def realisations_traced(self, t: int) -> np.ndarray | None:
         """Indices of the realisations traced at incidence ``t`` — all of them in a complete
@@ -559,6 +595,11 @@ def _check_saved(a: dict, meta: dict, bins: Bins, npz: str, meta_path: str) -> N
             shape("stderr_orders", (o,) + grid)
         if "brdf_realisations_orders" in a and "brdf_realisations" in a:
             shape("brdf_realisations_orders", (o, a["brdf_realisations"].shape[0]) + grid)
+        for k in ("btdf_orders", "stderr_btdf_orders"):
+            if k in a:
+                shape(k, (o,) + grid)
+        if "btdf_realisations_orders" in a and "brdf_realisations" in a:
+            shape("btdf_realisations_orders", (o, a["brdf_realisations"].shape[0]) + grid)
     if any(k.startswith("tally_") for k in a):
         _check_tallies(a, meta, n, bins.shape[0] * bins.shape[1], fail)
 

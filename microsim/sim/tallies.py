@@ -36,7 +36,15 @@ from microsim.bins import Bins
 from microsim.stats import MIN_EVENTS
 
 from . import tally_kernels
-from .ledger import DOWNWARD, LEDGER, MASKED, TERMINAL
+from .ledger import (
+    DIELECTRIC_COLUMNS,
+    DIELECTRIC_TERMINAL,
+    DOWNWARD,
+    LEDGER,
+    MASKED,
+    TERMINAL,
+    TIR_ORDERS,
+)
 from .result import Result
 from .scratch import WorkArray
 from .streams import BLOCK
@@ -116,12 +124,18 @@ def chunk_tallies(path, nbin: int, blocks) -> "ChunkTallies":
     return split_tallies(*path.follow(blocks), len(blocks), nbin)
 
 
-def split_order_tallies(status1, weight1, term, wterm, where, n_blocks: int, nbin_total: int):
+def split_order_tallies(
+    status1, weight1, term, wterm, where, n_blocks: int, nbin_total: int, tir=None
+):
     """``tallies.split_tallies`` for bounce chains (``tally_kernels.order_block_tallies``):
     per block, its (slot, bin) tallies and its ledger of 5 first-bounce + ``TERMINAL``
-    classes. ``nbin_total`` = order slots × bins."""
+    classes. ``nbin_total`` = order slots × bins. ``tir``: for paths through a dielectric
+    interface (``dielectric``), their total-internal-reflection bits; the ledger then has the
+    ``DIELECTRIC_TERMINAL`` classes and the ``TIR_ORDERS`` columns (column k: the paths with
+    bit k set, counted in both the count and the weight column)."""
     n = len(term)
-    ncls = len(LEDGER) + len(TERMINAL)
+    terminal = TERMINAL if tir is None else DIELECTRIC_TERMINAL
+    ncls = len(LEDGER) + len(terminal) + (0 if tir is None else len(TIR_ORDERS))
     acc, touched = np.zeros((3, nbin_total)), np.zeros(nbin_total, dtype=np.int64)
     out_bin, out_sums, out_cnt = _TALLY_BIN(n), _TALLY_SUMS(n), _TALLY_COUNT(n)
     offsets = np.empty(n_blocks + 1, dtype=np.int64)
@@ -143,6 +157,12 @@ def split_order_tallies(status1, weight1, term, wterm, where, n_blocks: int, nbi
         ln,
         lf,
     )
+    if tir is not None:
+        block = np.arange(n) // BLOCK
+        for k in range(len(TIR_ORDERS)):
+            c = len(LEDGER) + len(terminal) + k
+            ln[:, c] = np.bincount(block, weights=(tir >> k) & 1, minlength=n_blocks)
+            lf[:, c] = ln[:, c]
     used = int(offsets[-1])
     return ChunkTallies(
         (out_bin[:used].copy(), out_sums[:, :used].copy(), out_cnt[:used].copy(), offsets, ln, lf)
@@ -150,10 +170,12 @@ def split_order_tallies(status1, weight1, term, wterm, where, n_blocks: int, nbi
 
 
 def chunk_order_tallies(path, nbin_total: int, blocks):
-    """Per-block tallies of the consecutive ``blocks`` followed by a bounce-chain ``path``:
-    one thread task."""
+    """Per-block tallies of the consecutive ``blocks`` followed by a bounce-chain ``path``
+    (its outcome a ``bounces.ChainOutcome``, or a ``dielectric.InterfaceOutcome`` with the
+    paths' total-internal-reflection bits): one thread task."""
     blocks = list(blocks)
-    return split_order_tallies(*path.follow(blocks), len(blocks), nbin_total)
+    outcome = path.follow(blocks)._asdict()
+    return split_order_tallies(**outcome, n_blocks=len(blocks), nbin_total=nbin_total)
 
 
 class ChunkTallies:
@@ -404,7 +426,8 @@ def tally_result(
     counts = {name: led_n[:, k] for k, name in enumerate(LEDGER)}
     if led_n.shape[1] > len(LEDGER):  # bounce chains: the paths' terminal classes
         ledger.update(terminal_ledger(led_n[:, len(LEDGER) :], led_f[:, len(LEDGER) :], rays))
-        counts.update({name: led_n[:, len(LEDGER) + k] for k, name in enumerate(TERMINAL)})
+        names = TERMINAL if led_n.shape[1] == len(LEDGER) + len(TERMINAL) else DIELECTRIC_COLUMNS
+        counts.update({name: led_n[:, len(LEDGER) + k] for k, name in enumerate(names)})
     return Result(
         theta_i=theta_i,
         phi_i=np.asarray(phi_i, dtype=np.float64),
@@ -423,21 +446,38 @@ def tally_result(
     )
 
 
+TRANSMITTED_ARRAYS = {
+    "brdf_orders": "btdf_orders",
+    "stderr_orders": "stderr_btdf_orders",
+    "brdf_realisations_orders": "btdf_realisations_orders",
+}
+"""A dielectric interface's Result arrays: the reflected one → its transmitted twin."""
+
+
 def terminal_ledger(led_n, led_f, rays) -> dict:
     """Ledger entries (name → (T,)) of bounce chains from their terminal-class columns
-    (T, ``TERMINAL``) of path counts ``led_n`` and carried weights ``led_f`` over ``rays``
-    (T,) primary rays: per class ``<name>`` the fraction of paths and ``<name>_energy`` the
-    fraction of the incident energy it takes away; ``escaped_energy`` (all orders),
-    ``cut_energy`` (bounce limit + weight floor) and ``absorbed_energy`` = 1 − Σ of all
-    classes' energies (the Fresnel losses Σ_paths (1 − Π_b F_b), over N)."""
+    (T, ``TERMINAL``, or ``DIELECTRIC_COLUMNS`` for a dielectric interface) of path counts ``led_n``
+    and carried weights ``led_f`` over ``rays`` (T,) primary rays: per class ``<name>`` the
+    fraction of paths and ``<name>_energy`` the fraction of the incident energy it takes
+    away; ``escaped_energy`` (all orders; for a dielectric, left on the incidence's side: R),
+    ``transmitted_energy`` (a dielectric's T), ``cut_energy`` (bounce limit + weight floor)
+    and ``absorbed_energy`` = 1 − Σ of all classes' energies (the Fresnel losses
+    Σ_paths (1 − Π_b F_b), over N); a dielectric's ``tir_<k>``: the fraction of paths totally
+    internally reflected at their k-th interaction."""
+    dielectric = led_n.shape[1] == len(DIELECTRIC_COLUMNS)
+    classes = DIELECTRIC_TERMINAL if dielectric else TERMINAL
     out = {}
     with np.errstate(divide="ignore", invalid="ignore"):
-        for k, name in enumerate(TERMINAL):
+        for k, name in enumerate(classes):
             out[name] = led_n[:, k] / rays
             out[f"{name}_energy"] = led_f[:, k] / rays
         out["escaped_energy"] = led_f[:, :4].sum(axis=1) / rays
         out["cut_energy"] = led_f[:, 4:6].sum(axis=1) / rays
-        out["absorbed_energy"] = (rays - led_f.sum(axis=1)) / rays
+        if dielectric:
+            out["transmitted_energy"] = led_f[:, len(TERMINAL) : len(classes)].sum(axis=1) / rays
+            for k, name in enumerate(TIR_ORDERS):
+                out[name] = led_n[:, len(classes) + k] / rays
+        out["absorbed_energy"] = (rays - led_f[:, : len(classes)].sum(axis=1)) / rays
     return out
 
 
@@ -462,7 +502,10 @@ def simulation_result(
     (``bounces.order_slots``): the tallies then hold O·(Θ·Φ) slots (slot o·(Θ·Φ) + B), every
     estimate is made per slot exactly as for one bin, and the Result gets ``brdf_orders``/
     ``stderr_orders`` (O, T, Θ, Φ) (and ``brdf_realisations_orders`` (O, R, T, Θ, Φ)) while
-    ``brdf``, ``stderr``, ``counts``, ``sum_w``… hold order 1."""
+    ``brdf``, ``stderr``, ``counts``, ``sum_w``… hold order 1. With ``meta["transmission"]``
+    (a dielectric interface) the 2O slots are O reflected then O transmitted order slots:
+    ``btdf_orders``/``stderr_btdf_orders`` (and ``btdf_realisations_orders``) get the
+    transmitted ones (``TRANSMITTED_ARRAYS``)."""
     nb = bins.shape[0] * bins.shape[1]
     omega = np.tile(bins.projected_solid_angle().ravel(), 1 if slots is None else slots)
     shape = (len(theta_i),) + bins.shape
@@ -514,6 +557,12 @@ def simulation_result(
         return tally_result(theta_i, phi_i, bins, pooled, n_tot, brdf, stderr, meta, raw, **extra)
     by_order = lambda a: np.moveaxis(a.reshape((len(theta_i), slots) + bins.shape), 1, 0)  # noqa: E731
     extra.update(brdf_orders=by_order(brdf), stderr_orders=by_order(stderr))
+    if meta.get("transmission"):  # reflected order slots, then transmitted ones
+        o = slots // 2
+        for name, btdf_name in TRANSMITTED_ARRAYS.items():
+            if name in extra:
+                a = extra[name]
+                extra[name], extra[btdf_name] = a[:o], a[o:]
     ledger = ("led_n", "led_f")  # per class, not per slot
     first = [
         Tally(*(a if k in ledger else a[:nb] for k, a in zip(TALLY_NAMES, p.items())))

@@ -22,6 +22,10 @@ ESC_1, ESC_2, ESC_3, ESC_4UP, CUT_BOUNCES, CUT_WEIGHT, PATH_UNRESOLVED, PATH_MIS
 
 
 N_TERMINAL = 8
+# a dielectric interface's paths (``dielectric``) add: transmitted (left on the side opposite
+# the incidence) after order 1, 2, 3, >= 4
+TRANS_1, TRANS_2, TRANS_3, TRANS_4UP = range(N_TERMINAL, N_TERMINAL + 4)
+N_TERMINAL_DIELECTRIC = N_TERMINAL + 4
 
 
 @compiled

@@ -89,10 +89,10 @@ def setup_ray(k, x, y, z, dx, dy, dz, hx, hy, zmax, eps, rel, o32, tq, top):
     """Slot k of a segment's Embree input for the ray at (x, y, z) along (dx, dy, dz): float32
     origin ``o32[k]`` (kept strictly inside the tile, ``_strictly_inside``), tfar
     ``tq[k]`` = min(wall distance, distance to zmax when rising)·(1 + rel) + eps (float32; inf
-    beyond float32) and ``top[k]``: whether it reaches the top no later than a wall."""
+    beyond float32) and ``top[k]``: whether it rises to the top no later than a wall."""
     _, _, w, t = _segment_bounds(x, y, z, dx, dy, dz, hx, hy, zmax)
     tq[k] = np.float32(min(w, t) * (1.0 + rel) + eps)
-    top[k] = t <= w
+    top[k] = t <= w and dz > 0.0  # a vertical falling ray has t = w = inf
     o32[k, 0] = _strictly_inside(np.float32(x), np.float32(hx))
     o32[k, 1] = _strictly_inside(np.float32(y), np.float32(hy))
     o32[k, 2] = np.float32(z)
@@ -154,7 +154,7 @@ def falling_first_segment(x, y, z, dx, dy, dz, shared, hx, hy, zmax, eps, rel, o
         j = 0 if shared else i
         _, _, w, t = _segment_bounds(x[i], y[i], z[i], dx[j], dy[j], dz[j], hx, hy, zmax)
         tq[i] = np.float32(min(w, t) * (1.0 + rel) + eps)
-        top[i] = t <= w
+        top[i] = t <= w and dz[j] > 0.0
         keep[i] = i
     for i in range(len(x)):
         u, v = np.float32(x[i]), np.float32(y[i])
@@ -192,8 +192,10 @@ def segment_finish(
     o + t·d (``px``, ``py``, ``pz``, by global index). A ray without a hit whose top is no
     farther than its nearer wall (``top``) has escaped (not for ``falling_shared``: one shared
     falling direction never reaches the top); for the others the segment's distances are
-    recomputed (``_segment_bounds``, as in the setup): a ray that would leave below
-    zmin − eps (or never meets a wall) has leaked (MISSED); the others re-enter through the
+    recomputed (``_segment_bounds``, as in the setup): a ray not rising that would leave below
+    zmin − eps (or one that never meets a wall) has left the relief through its bottom
+    (MISSED: a leak, or for light refracted into a dielectric its escape into the medium); a
+    rising ray (one lit from below the relief) and the others re-enter through the
     opposite wall at the same height: the wall point, clipped into the tile, moved to
     −copysign(half, d) on the axis (or axes) whose wall it reached. The re-entering rays are
     written compacted to
@@ -226,7 +228,7 @@ def segment_finish(
         x = ox[i] + w * dx[j]
         y = oy[i] + w * dy[j]
         z = oz[i] + w * dz[j]
-        if z < zmin - eps or not math.isfinite(w):
+        if (dz[j] <= 0.0 and z < zmin - eps) or not math.isfinite(w):
             status[g] = MISSED
             continue
         x = min(max(x, -hx), hx)  # rounding along the wall

@@ -1,0 +1,222 @@
+"""Paths through a dielectric interface: reflection *and* transmission on an explicit surface
+(``simulate(..., transmission=True)``).
+
+The surface separates air (index 1, above) from a medium of index η (below); its facet normals
+point into the air. Light comes from above (θi in [0, 90): air → medium) or from below (θi in
+(90, 180], wi_z < 0: the surface lit from inside the medium, medium → air). At every hit the
+path is reflected or refracted with the exact unpolarised Fresnel factor of the dielectric
+interface, total internal reflection included (``dielectric_kernels``: Russian roulette, the
+weight of a lossless path stays 1), and goes on from either side until it leaves the relief:
+upward past its top or downward past its bottom. A path leaving on the incidence's side is
+reflected, on the other side transmitted; each is tallied under its order (the number of
+interactions: 1, 2, 3, ≥ 4) in the bin of its direction, θo measured from the pole of the side
+it leaves by. The bin average f̄_B = Σ w / (N Ω_B) (Mikkelsen 2009, eq. 9, on either
+hemisphere) is the BRDF, resp. the BTDF, in the radiance convention: Σ_B f̄_B Ω_B over both is
+the fraction R + T of the incident flux, and the BTDF obeys Walter et al. 2007's generalised
+reciprocity f_t(i, o)/η_o² = f_t(o, i)/η_i² (eq. 21; docs/dielectric.md).
+
+A complex index (k > 0) is an absorbing medium whose bulk keeps what it refracts: the path
+reflects with the weight F (as the opaque chain of ``bounces``) and the rest is absorbed; such
+a medium can be lit from above only. ``bounces``: K cuts the path after K interactions
+(``cut_bounces``), "all" follows it until it leaves (at most ``bounces.MAX_BOUNCES``).
+
+Tallies: 2·O order slots × bins (O = ``bounces.order_slots``): the O reflected slots, then the
+O transmitted ones (``tallies.simulation_result`` splits them into ``brdf_orders`` and
+``btdf_orders``); the ledger has the ``ledger.DIELECTRIC_TERMINAL`` classes and the
+``ledger.TIR_ORDERS`` columns. Traced masking only (Embree), on heightfields and V-grooves,
+with the periodic wrap; bitwise reproducible as the opaque chains are (each path on its own,
+its roulette draws a hash of its number).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from microsim.bins import Bins
+from microsim.errors import UsageError
+
+from . import bounce_kernels, dielectric_kernels
+from .bounces import (
+    BouncePath,
+    ChainLimits,
+    bin_escapes,
+    bounce_limit,
+    next_rays,
+    order_slots,
+    primary_rays,
+    trace_continuing,
+)
+from .dielectric_kernels import Interface, PathSides, Roulette, SideEscapes
+from .engine import segments
+from .ray_columns import columns
+from .scratch import WorkArray, WorkColumns
+from .streams import block_span
+from .tallies import chunk_order_tallies
+from .tracer import Tracer
+
+__all__ = [
+    "ROULETTE_STREAM",
+    "InterfaceOutcome",
+    "check_transmission",
+    "check_light_from_below",
+    "interface_task",
+    "interface_of",
+    "roulette_stream",
+    "trace_dielectric",
+    "DielectricPath",
+]
+
+ROULETTE_STREAM = 0xD1E1
+"""Extra key of the roulette's stream (``roulette_stream``), apart from the origins' streams."""
+
+
+class InterfaceOutcome(NamedTuple):
+    """``bounces.ChainOutcome`` of paths through a dielectric interface, with ``tir`` (N,)
+    int8: per path its total-internal-reflection bits (``dielectric_kernels.PathSides``)."""
+
+    status1: np.ndarray
+    weight1: np.ndarray
+    term: np.ndarray
+    wterm: np.ndarray
+    where: np.ndarray
+    tir: np.ndarray
+
+
+# this thread's work arrays (``scratch``): each step's escapes (the next step's rays are the
+# bounce chain's, ``bounces.next_rays``)
+_ESCAPE = WorkArray("interface-escape", np.int64)
+_ESCAPE_DIRECTION = WorkColumns("interface-escape-direction")
+_ESCAPE_SIDE = WorkArray("interface-escape-side", np.bool_)
+
+
+def check_transmission(transmission, ior) -> bool:
+    """``transmission`` as a bool, checked against the resolved material ``ior`` (an index or
+    None): UsageError for a non-bool, or with transmission for a mirror or an index of 1 (no
+    interface)."""
+    if not isinstance(transmission, (bool, np.bool_)):
+        raise UsageError(f"transmission must be True or False, got {transmission!r}")
+    if transmission and (ior is None or complex(ior) == 1):
+        raise UsageError(
+            "transmission=True needs a material with an index n (> 0, != 1) or n+ik: "
+            f"the medium below the surface, got {'a mirror' if ior is None else 'n = 1'}"
+        )
+    return bool(transmission)
+
+
+def check_light_from_below(ior, theta_i) -> None:
+    """UsageError if an incidence of ``theta_i`` (degrees) lights an absorbing medium (k > 0)
+    from inside: its bulk keeps the light."""
+    below = [t for t in theta_i if t > 90.0]
+    if below and ior is not None and complex(ior).imag > 0:
+        raise UsageError(
+            f"theta_i {below[0]:g} lights the surface from inside an absorbing medium "
+            f"(k = {complex(ior).imag:g} > 0), whose bulk keeps the light: use theta_i in [0, 90)"
+        )
+
+
+def interface_of(ior, tracer: Tracer) -> Interface:
+    """The kernel's ``Interface`` of the resolved index ``ior`` on ``tracer``'s surface."""
+    eta = complex(ior)
+    return Interface(eta.real**2, eta.imag**2, eta.imag > 0, float(tracer.eps))
+
+
+def roulette_stream(key) -> np.uint64:
+    """The roulette's 64-bit stream word of the random stream ``key`` (seed, realisation,
+    incidence)."""
+    seq = np.random.SeedSequence(list(key) + [ROULETTE_STREAM])
+    return np.uint64(seq.generate_state(1, np.uint64)[0])
+
+
+def trace_dielectric(
+    tracer: Tracer,
+    wi,
+    phi_i,
+    bins: Bins,
+    origins,
+    psi,
+    ior,
+    chain: ChainLimits,
+    roulette: Roulette,
+) -> InterfaceOutcome:
+    """The ``InterfaceOutcome`` of primary rays followed through the dielectric interface.
+
+    Rays start at ``origins`` (3 columns on the plane above the relief; moved under it when
+    lit from below, wi_z < 0) along −wi (one shared direction when ``psi`` is None, else wi
+    rotated by −ψ per ray into its groove frame, as ``bounces.trace_bounces``). Each step
+    traces the live paths' rays (``bounces.trace_continuing``) and hands the hits to
+    ``dielectric_kernels.interface_step``; escapes are binned with Δφ against ``phi_i`` (or
+    φi − ψ in the groove frame) into slot (side·O + order)·nbin + bin."""
+    x = columns(origins)
+    n = len(x[0])
+    from_below = float(wi[2]) < 0.0
+    if from_below:
+        x[2] = np.full(n, tracer.zmin - tracer.top_margin)
+    out = InterfaceOutcome(
+        np.empty(n, dtype=np.int8),
+        np.zeros(n),
+        np.empty(n, dtype=np.int8),
+        np.empty(n),
+        np.full(n, -1, dtype=np.int64),
+        np.zeros(n, dtype=np.int8),
+    )
+    sides = PathSides(np.full(n, from_below), from_below, out.tir)
+    ledger = bounce_kernels.PathLedger(*out[:5])
+    (hs, prim, p), d, shared = primary_rays(tracer, x, wi, psi)
+    phi = float(phi_i) if psi is None else phi_i - np.degrees(psi)
+    live, w = np.arange(n, dtype=np.int64), np.ones(n)
+    hx, hy = float(tracer.half[0]), float(tracer.half[1])
+    facets = bounce_kernels.FacetPlanes(*tracer.normal_columns, tracer.masking_lift, hx, hy)
+    interface = interface_of(ior, tracer)
+    slots = min(chain.limit, 4)
+    b = 1
+    while True:
+        k = len(live)
+        par = b % 2
+        esc = SideEscapes(_ESCAPE(k), *_ESCAPE_DIRECTION(k), _ESCAPE_SIDE(k))
+        nxt = next_rays(k, par)
+        m, e = dielectric_kernels.interface_step(
+            b, chain.limit, chain.floor, live, w, segments.WalkResult(hs, prim, *p),
+            bounce_kernels.RayDirections(*d, shared), facets, interface, roulette, sides,
+            ledger, esc, nxt,
+        )  # fmt: skip
+        if e:
+            order = min(b - 1, slots) - 1
+            offset = (esc.transmitted[:e] * slots + order) * chain.nbin
+            bin_escapes(bins, esc.index[:e], [c[:e] for c in esc[1:4]], phi, offset, out.where)
+        if m == 0:
+            break
+        live, w, d, (hs, prim, p) = trace_continuing(tracer, nxt, m)
+        shared = False
+        b += 1
+    return out
+
+
+class DielectricPath(BouncePath):
+    """``BouncePath`` whose chains go through a dielectric interface (``trace_dielectric``),
+    each block's roulette drawing from the incidence's stream at its rays' numbers."""
+
+    def __init__(self, incidence, azimuth: bool, rotate: bool, chain: ChainLimits):
+        super().__init__(incidence, azimuth, rotate, chain)
+        self.stream = roulette_stream(incidence.key)
+
+    def trace(self, wi, phi_i, starts, psi, blocks) -> InterfaceOutcome:
+        inc = self.incidence
+        roulette = Roulette(self.stream, block_span(inc.rays, list(blocks))[0])
+        return trace_dielectric(
+            inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, roulette
+        )
+
+
+def interface_task(incidence, azimuth: bool, isotropic: bool, bounces) -> Callable:
+    """The thread task of one incidence through a dielectric interface: ``task(blocks)``
+    follows the paths of those blocks (``DielectricPath``, at most a checked ``bounces``
+    interactions) and returns their per-block tallies over 2·O order slots × bins
+    (``tallies.chunk_order_tallies``)."""
+    nbin = incidence.bins.shape[0] * incidence.bins.shape[1]
+    limit, floor = bounce_limit(bounces)
+    chain = ChainLimits(int(limit), float(floor), nbin)
+    path = DielectricPath(incidence, azimuth, bool(isotropic and not azimuth), chain)
+    return partial(chunk_order_tallies, path, 2 * order_slots(bounces) * nbin)
