@@ -151,12 +151,12 @@ class WalterDielectric(ModelBase):
         valid = (ih > 0.0) & (oh > 0.0)
         ih, oh = np.where(valid, ih, 1.0), np.where(valid, oh, 1.0)
         g = self.masking.g2_cosines(i, -o, h[..., 2], ih, oh)
-        f_r = (
+        reflectance = (
             dielectric_fresnel(np.minimum(ih, 1.0), eta)
             if eta > 1.0
             else dielectric_fresnel(np.minimum(oh, 1.0), 1.0 / eta)
         )
-        val = g * _D_of(self.ndf, h) * (1.0 - f_r)
+        val = g * _D_of(self.ndf, h) * (1.0 - reflectance)
         val *= eta * eta * ih * oh / (i[..., 2] * -o[..., 2] * norm2)
         return np.where(valid, val, 0.0)
 
@@ -266,10 +266,10 @@ def _albedo_one(model, theta_deg: float, phi_i: float, n_gl_phi: int) -> tuple[f
     facing = h @ i > 0.0
     h, w = h[facing], wph[facing]
     o_r, jac_r, o_t, jac_t, refracts = _scattered(i, h, eta)
-    up = np.broadcast_to(i, h.shape)
+    wi_all = np.broadcast_to(wi, h.shape)
     r_ok, t_ok = o_r[:, 2] > 0.0, refracts & (o_t[:, 2] < 0.0)
-    f_r = np.where(r_ok, model.f_unit(sign * up, sign * o_r), 0.0)
-    f_t = np.where(t_ok, model.f_unit(sign * up, sign * o_t), 0.0)
+    f_r = np.where(r_ok, model.f_unit(wi_all, sign * o_r), 0.0)
+    f_t = np.where(t_ok, model.f_unit(wi_all, sign * o_t), 0.0)
     reflected = np.sum(w * f_r * np.abs(o_r[:, 2]) * jac_r)
     transmitted = np.sum(w * f_t * np.abs(o_t[:, 2]) * jac_t)
     return float(reflected), float(transmitted)
