@@ -25,6 +25,11 @@ from .brdf import (
     sample_microfacet,
     torrance_sparrow,
 )
+from .dielectric import (
+    WalterDielectric,
+    dielectric_albedo,
+    dielectric_fresnel,
+)
 from .edwards import (
     EdwardsParams,
     Lump,
@@ -202,6 +207,9 @@ __all__ = [
     "MikkelsenDiffuse",
     "KullaContyLobe",
     "MODEL_CLASSES",
+    "WalterDielectric",
+    "dielectric_fresnel",
+    "dielectric_albedo",
     "abc_psd",
     "abc_psd_church",
     "abc_psd_church_integral",

@@ -1,6 +1,7 @@
 """The list of closed-form models microsim implements, for `microsim models` and reports.
 
-Generated: the BRDFs and masking terms from the class attributes of ``models.MODEL_CLASSES``
+Generated: the BRDFs and masking terms from the class attributes of ``models.MODEL_CLASSES``,
+``dielectric.WalterDielectric`` (a BSDF: reflection and transmission, listed with the BRDFs)
 and ``masking.MASKING_CLASSES`` (``name``, ``params_doc``, ``source``, ``functions``; a
 sampleable class adds a "sampler" row from ``sampler_doc``, ``sampler_source``,
 ``sampler_functions``), the NDFs, Fresnel terms, albedo tools, the random walk and the metrics
@@ -17,6 +18,7 @@ import os
 import textwrap
 from dataclasses import dataclass
 
+from .dielectric import WalterDielectric
 from .masking import MASKING_CLASSES
 from .models import MODEL_CLASSES
 
@@ -45,6 +47,13 @@ _FUNCTIONS: tuple[ModelInfo, ...] = (
         "fresnel",
         "cos_theta ∈ [0,1], material: None (F≡1) | name | n>0 | n+ik (conductor)",
         "Mally 2015; Mikkelsen 2009, §2.1",
+    ),
+    ModelInfo(
+        "fresnel",
+        "dielectric_fresnel",
+        "cos_i ∈ [0,1] on the incident side, eta = η_t/η_i > 0 real (η < 1: total internal "
+        "reflection gives 1)",
+        "Walter et al. 2007, eq. 22; Mikkelsen 2009, §2.1",
     ),
     ModelInfo(
         "fresnel",
@@ -151,7 +160,7 @@ def _class_entries(cls, kind: str) -> list[ModelInfo]:
 
 def _build() -> tuple[ModelInfo, ...]:
     generated = [e for c in MASKING_CLASSES for e in _class_entries(c, "shadowing")]
-    generated += [e for c in MODEL_CLASSES for e in _class_entries(c, "brdf")]
+    generated += [e for c in MODEL_CLASSES + (WalterDielectric,) for e in _class_entries(c, "brdf")]
     rows = list(_FUNCTIONS) + generated
     return tuple(sorted(rows, key=lambda m: KINDS.index(m.kind)))  # stable within a kind
 
