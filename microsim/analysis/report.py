@@ -20,6 +20,7 @@ import numpy as np
 
 from . import incidence
 from .budget import BudgetRow
+from .glass_report import glass_section
 from .json_record import JsonRecord
 from .markdown import md_table, percent
 from .report_cells import converged_text, fmt, params_text, pct, ranges_text
@@ -250,6 +251,7 @@ def scene_report(doc: Mapping, result, charts: Mapping[str, str]) -> str:
     lines += wave_section(doc.wave)
     lines += _fits_section(doc.fits)
     lines += _orders_section(doc.orders)
+    lines += glass_section(doc.glass)
     lines += _charts_section(doc, charts, phis, with_phi)
     return "\n".join(lines).rstrip() + "\n"
 

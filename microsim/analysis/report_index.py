@@ -12,6 +12,7 @@ from microsim.stats import t_isf
 from . import incidence
 from .anisotropy import VARIANTS as ANISOTROPY_VARIANTS
 from .ggx_index import ggx_section
+from .glass_report import glass_index
 from .markdown import md_table, percent, plain
 from .multiple import NOT_EXPECTED
 from .multiple_report import RESOLVED_SE, deviation_text
@@ -325,6 +326,7 @@ def index_report(
     ] + _verdict_tables(docs)
     lines += _orders_index(docs)
     lines += _anisotropy_index(docs)
+    lines += glass_index(docs)
     lines += ggx_section(docs)
     if fit_models:
         lines += [

@@ -3,6 +3,7 @@ document (``RunDocument``), its fits (``Fit``, ``FitBound``), the orders study
 (``OrdersStudy``: per θi ``BounceNeed``, and the ``OrderComparison`` of the scattering orders
 against the multiple-scattering models, ``multiple.order_comparison``, with its parts
 ``OrderIncidence``, ``SimOrders``, ``ModelEnergy``; the per-θi rows ``OrderEnergy``), the
+rough-glass study (``GlassStudy`` and its ``GlassIncidence`` rows), the
 wave section (``WaveSection``: a wave scene's closed forms against Kirchhoff, and its
 ``WaveVerdict`` records, fields ``WAVE_VERDICT_SCHEMA``), ``RegimeMaps`` (what the index prints
 of the regime maps), the anisotropy study (``AnisotropyStudy``,
@@ -30,6 +31,8 @@ __all__ = [
     "OrderEnergy",
     "BounceNeed",
     "OrdersStudy",
+    "GlassIncidence",
+    "GlassStudy",
     "WAVE_VERDICT_SCHEMA",
     "validate_wave_verdict",
     "WaveVerdict",
@@ -368,6 +371,51 @@ class OrdersStudy(JsonRecord):
     OLDER_DEFAULTS: ClassVar[Mapping] = {"needs": ()}
 
 
+# --- the rough-glass study (glass.glass_study) ----------------------------------------------
+@dataclass(frozen=True, eq=False)
+class GlassIncidence(JsonRecord):
+    """One incidence of a rough-glass study: the ``side`` the light comes from ("air" or
+    "medium"), ``theta`` its angle from that side's pole and ``theta_i`` as traced (degrees,
+    (90, 180] from the medium); the fractions of the incident flux reflected and transmitted,
+    all orders (``reflected``, ``transmitted`` ± se) and at order 1 (``single_*`` ± se;
+    ``single`` their sum);
+    ``tir`` the paths totally internally reflected at their first interaction; per model
+    (name → [R, T]) its single-scattering reflectance and transmittance; the ``verdicts``
+    of the models' BRDF and BTDF against order 1 (``Verdict``, the lobe in its model name)."""
+
+    side: str
+    theta: float
+    theta_i: float
+    reflected: float
+    reflected_se: float
+    transmitted: float
+    transmitted_se: float
+    single_reflected: float
+    single_reflected_se: float
+    single_transmitted: float
+    single_transmitted_se: float
+    single: float
+    single_se: float
+    tir: float
+    models: Mapping[str, Sequence[float]]
+    verdicts: Sequence[Verdict]
+    _nested: ClassVar = {"verdicts": Verdict}
+
+
+@dataclass(frozen=True, eq=False)
+class GlassStudy(JsonRecord):
+    """A scene traced through a dielectric interface (verdicts.json "glass"): the medium's
+    index ``eta``, the microsurface distribution the models use (``ndf``, its text), the
+    folder of the run lit from inside (``inside``), and per incidence, from the air then from
+    the medium, a ``GlassIncidence``."""
+
+    eta: float
+    ndf: str
+    inside: str
+    incidences: Sequence[GlassIncidence]
+    _nested: ClassVar = {"incidences": GlassIncidence}
+
+
 # --- the anisotropy study (anisotropy.anisotropy_summary) ----------------------------------------
 @dataclass(frozen=True, eq=False)
 class StandIn(JsonRecord):
@@ -513,10 +561,10 @@ class Speed(JsonRecord):
 class RunDocument:
     """A run's verdict document (``verdicts.json``, docs/verdicts.md) as the reports read it:
     the scene and its settings (``surface``: its kind, keys and ensemble NDF), the ``verdicts``
-    as ``Verdict`` records, the studies as
-    records (``fits``, ``orders``, ``anisotropy``, ``stability``, ``speed``; None or empty
-    when the run has none; ``wave`` stays a JSON object). ``from_json`` reads the dict written (or
-    about to be written) to the file; keys of no field are left out."""
+    as ``Verdict`` records, the studies as records (``fits``, ``orders``, ``glass``,
+    ``anisotropy``, ``stability``, ``speed``; None or empty when the run has none; ``wave``
+    stays a JSON object). ``from_json`` reads the dict written (or about to be written) to
+    the file; keys of no field are left out."""
 
     scene: str = ""
     verdicts: Sequence[Verdict] = ()
@@ -533,6 +581,7 @@ class RunDocument:
     fits: Sequence[Fit] = ()
     wave: Mapping | None = None
     orders: OrdersStudy | None = None
+    glass: GlassStudy | None = None
     anisotropy: AnisotropyStudy | None = None
     stability: Stability = field(default_factory=Stability)
     speed: Speed = field(default_factory=Speed)
@@ -552,6 +601,7 @@ _DOCUMENT_PARTS = {
     "verdicts": Verdict,
     "fits": Fit,
     "orders": OrdersStudy,
+    "glass": GlassStudy,
     "anisotropy": AnisotropyStudy,
     "stability": Stability,
     "speed": Speed,

@@ -36,6 +36,10 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     ior = "mirror"                     # aluminium | methanol | mirror, a number n, or [n, k]
                                        # (n in [0.001, 1000], k in [0, 1000]; not n = 1 with
                                        # k = 0, which reflects nothing)
+    transmission = false               # true: the material is a dielectric medium below the
+                                       # surface (a real index n); light is reflected and
+                                       # refracted (microsim.sim.dielectric), traced at every
+                                       # θi from the air and from inside the medium
     [simulation]
     theta_i = [0, 30, 60, 80]          # degrees, distinct, each in [0, 89.99]; at most 180
     rays = 1_000_000                   # per incidence, an integer in [1, 2**48] or "auto"
@@ -290,7 +294,9 @@ class WaveSpec:
 class Scene:
     """A loaded scene file. ``ior``: None (mirror), float (dielectric) or complex n + ik.
     ``wave``: the ``[wave]`` settings, None for a geometric-only scene. ``material_name``: the
-    material's name when the file gave one ("aluminium"), which results then record."""
+    material's name when the file gave one ("aluminium"), which results then record.
+    ``transmission``: a dielectric medium traced with refraction, from the air and from inside
+    (``[material] transmission``)."""
 
     name: str
     path: Path | None
@@ -300,6 +306,7 @@ class Scene:
     simulation: SimSettings
     wave: WaveSpec | None = None
     material_name: str | None = None
+    transmission: bool = False
 
     @property
     def anisotropic(self) -> bool:
@@ -348,7 +355,7 @@ def material_ior(where, table):
     ``material.ior``."""
     if table is None:
         return None
-    check_keys(where, "material", table, ["ior"])
+    check_keys(where, "material", table, ["ior", "transmission"])
     v = table.get("ior", "mirror")
     allowed = (
         f"a name ({', '.join(an.MATERIALS)}), a number n, or [n, k], with n in "
@@ -506,16 +513,22 @@ def load_scene(path) -> Scene:
         )
     surface.check_simulation(where, simulation)
     wave = _wave(where, data.get("wave"), surface, simulation)
+    ior = material_ior(where, data.get("material"))
     scene = Scene(
         name=name,
         path=path,
         description=description,
         surface=surface,
-        ior=material_ior(where, data.get("material")),
+        ior=ior,
         simulation=simulation,
         wave=wave,
         material_name=_material_name(data.get("material")),
+        transmission=_transmission(where, data.get("material"), ior),
     )
+    if scene.transmission and wave is not None:
+        fail(where, "wave", "the wave solver traces reflection only: not with transmission")
+    if scene.transmission and simulation.rays == "auto":
+        fail(where, "simulation.rays", 'must be an integer with transmission, got "auto"')
     if wave is not None and len(simulation.phi_i) > 1:
         fail(
             where,
@@ -531,6 +544,19 @@ def load_scene(path) -> Scene:
             f"{scene.simulation.phi_bins}",
         )
     return scene
+
+
+def _transmission(where, table, ior) -> bool:
+    """``[material] transmission`` (default false); true needs a real index n: a dielectric
+    medium whose bulk the refracted light crosses."""
+    v = check_value(where, "material.transmission", (table or {}).get("transmission", False), BOOL)
+    if v and (ior is None or complex(ior).imag != 0):
+        fail(
+            where,
+            "material.transmission",
+            f"true needs a real index n (a clear dielectric medium), got ior {ior!r}",
+        )
+    return bool(v)
 
 
 def _material_name(table) -> str | None:

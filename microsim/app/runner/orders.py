@@ -37,9 +37,12 @@ def walk_ndf(plan, specs):
 
 def orders_study(plan, result, specs) -> OrdersStudy | None:
     """The ``"orders"`` study of verdicts.json (``OrdersStudy``) of a run with ``bounces`` > 1
-    (None otherwise): ``needs_more_bounces`` per θi and the ``order_comparison`` (None, with a
+    that reflects only (None otherwise; a dielectric interface's orders are in its "glass"
+    study): ``needs_more_bounces`` per θi and the ``order_comparison`` (None, with a
     note saying why, when the scene's NDF has no walk)."""
     if getattr(result, "brdf_orders", None) is None or result.brdf_orders.shape[0] < 2:
+        return None
+    if result.btdf_orders is not None:  # a dielectric interface: the "glass" study's orders
         return None
     checkpoint("side-studies")
     ndf = walk_ndf(plan, specs)

@@ -475,12 +475,15 @@ def tally_settings(scene) -> dict:
     record = {"surface": surface, "ior": ior, "bounces": scene.simulation.bounces}
     if scene.anisotropic or any(scene.simulation.phi_i):  # absent otherwise: older runs resume
         record.update(phi_i=scene.simulation.phi_i_record, full_azimuth=scene.full_azimuth)
+    if scene.transmission:  # absent otherwise, as in the run's identity
+        record["transmission"] = True
     return json.loads(json.dumps(json_safe(record)))
 
 
 RESUME_KEYS = {
     "material": "material.ior",
     "bounces": "simulation.bounces",
+    "transmission": "material.transmission",
     "phi_i": "simulation.phi_i",
     "bins": "bins (simulation.theta_bins, phi_bins, full_azimuth)",
     "scene": "scene",
@@ -507,6 +510,7 @@ def run_description(scene, theta_i, seed, quick, rays, effort, realisations) -> 
         surfaces=recipe,
         bounces=scene.simulation.bounces,
         realisations=realisations,
+        transmission=scene.transmission,
     )
 
 

@@ -8,6 +8,9 @@
    (``wave_run``; saved in ``kirchhoff/``, verdicts.json ``"wave"``);
 4c. a run with ``bounces`` > 1: the scattering orders against the random walk and the
    energy compensations (``orders``; verdicts.json ``"orders"``, report "Scattering orders");
+4d. a scene with ``[material] transmission``: the surface lit from inside the medium too, and
+   R, T and Walter et al. 2007's verdicts from both sides (``glass``; saved in ``inside/``,
+   verdicts.json ``"glass"``, report "Rough glass");
 5. write brdf.npz + meta.json, verdicts.json, timings.json, the PNG charts and report.md into
    a staging directory and publish it in one rename (``publishing``).
 
@@ -49,7 +52,7 @@ from ...errors import EnvironmentFailure, UsageError
 from ...sim import SchedulerLost
 from ...sim.schedule import DeferredInterrupt
 from ..cluster import connect
-from . import orders, side_studies, tracing, wave_run
+from . import glass, orders, side_studies, tracing, wave_run
 from .planning import RunPlan, check_replaceable
 from .progress import RayProgress, StageProgress
 from .publishing import (
@@ -231,9 +234,11 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
     """Models, fits, verdicts, side studies, charts and documents into ``stage``, then publish."""
     sc = plan.scene
     t0 = time.perf_counter()
-    has_orders = getattr(result, "brdf_orders", None) is not None
+    has_orders = getattr(result, "brdf_orders", None) is not None and not sc.transmission
     stages = StageProgress(
-        sc.name, enabled=progress, extra=int(sc.wave is not None) + int(has_orders)
+        sc.name,
+        enabled=progress,
+        extra=int(sc.wave is not None) + int(has_orders) + int(sc.transmission),
     )
     try:
         stages.stage("models")
@@ -259,6 +264,11 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         if has_orders:
             stages.stage("scattering orders")
             orders_doc = orders.orders_study(plan, result, specs)
+        inside, glass_doc = None, None
+        if sc.transmission:
+            stages.stage("rough glass")
+            inside = glass.trace_inside(plan)
+            glass_doc = glass.rough_glass(plan, result, inside, specs)
         stages.stage("charts")
         checkpoint("charts")
         files, stability = _charts(
@@ -271,6 +281,8 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         result.save(stage)
         if kres is not None:
             kres.save(stage / wave_run.WAVE_DIR)
+        if inside is not None:
+            inside.save(stage / glass.INSIDE_DIR)
         doc = verdict_document(
             plan,
             result,
@@ -286,7 +298,7 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
             wave,
         )
         aniso = anisotropy_summary(result, verdicts, comparison) if sc.anisotropic else None
-        studies = {"orders": orders_doc, "anisotropy": aniso}
+        studies = {"orders": orders_doc, "glass": glass_doc, "anisotropy": aniso}
         doc.update({k: atomic.json_safe(v) for k, v in studies.items() if v is not None})
         atomic.write_json(stage / VERDICTS_FILE, doc)
         timings = timings_document(plan, result, speed, speed_theta)

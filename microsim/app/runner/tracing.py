@@ -61,6 +61,7 @@ def simulate_scene(
     surface=None,
     phi_i=None,
     cluster=None,
+    transmission=None,
 ):
     """``estimate`` the plan's scene at ``theta_i`` (degrees; ``phi_i`` one azimuth per θi,
     None: the scene's first φi at every θi — the side studies) with ``rays`` per incidence over
@@ -68,7 +69,9 @@ def simulate_scene(
     ``bounces``: scattering orders traced (``simulate``; the side studies trace one).
     ``surface``: that one realisation already built (``scene_surface``), so that repeated
     runs on it reuse its tracer instead of building surface and BVH again. ``cluster``: a
-    ``dask.distributed.Client`` whose workers trace (``sim.cluster``), or None."""
+    ``dask.distributed.Client`` whose workers trace (``sim.cluster``), or None.
+    ``transmission``: refract at a dielectric interface (``simulate``); None: the scene's
+    ``transmission`` (the side studies trace reflection alone: False)."""
     sc = plan.scene
     scale = plan.effort.scale_for(sc.surface.kind)
     n = plan.realisations if realisations is True else max(1, int(realisations))
@@ -86,6 +89,7 @@ def simulate_scene(
             bounces=bounces,
             surface_factory=factory,
             seeds=seeds,
+            transmission=sc.transmission if transmission is None else transmission,
         ),
         Estimator(rays, seed, origins=origins),
         Execution(plan.threads, progress=progress, cluster=cluster),
