@@ -299,13 +299,14 @@ class BinAverages:
 
 def bin_averages(esc: Escapes, bins, phi_i: float, *, reflected: bool, orders=None):
     """``BinAverages`` of the rays of ``esc`` that left on the incidence's side
-    (``reflected``) or the other, after a number of interactions in ``orders`` (a container;
-    None: all). θo is the angle to the exit direction's own pole (+z upward, −z downward),
-    Δφ = atan2(o_y, o_x) − φi, folded to [0°, 180°] if ``bins.folded``; edges and Ω_B are
-    those of ``bins`` (a ``microsim.bins.Bins``)."""
+    (``reflected``) or the other, in the order slots ``orders`` (a container of 1, 2, 3, 4:
+    that many interactions, 4 standing for ≥ 4, as the estimator's slots; None: all).
+    θo is the angle to the exit direction's own pole (+z upward, −z downward), Δφ =
+    atan2(o_y, o_x) − φi, folded to [0°, 180°] if ``bins.folded``; edges and Ω_B are those of
+    ``bins`` (a ``microsim.bins.Bins``)."""
     keep = esc.reflected == reflected
     if orders is not None:
-        keep &= np.isin(esc.order, list(orders))
+        keep &= np.isin(np.minimum(esc.order, 4), list(orders))
     wo = esc.wo[keep]
     theta = np.degrees(np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), np.abs(wo[:, 2])))
     dphi = np.mod(np.degrees(np.arctan2(wo[:, 1], wo[:, 0])) - phi_i, 360.0)
