@@ -22,6 +22,37 @@ single-scattering microfacet model loses:
   of F_avg² omits the first bounce's Fresnel factor.) Off by default: the white (E from F = 1)
   lobe is what the compensation is defined by.
 
+* Kulla & Conty 2017, the dielectric variant (``KullaContyDielectric``): a rough interface
+  between air (index 1) above and a medium of real index η below loses, in single scattering,
+  1 − E±(μ) of the flux arriving from the air (+) or from inside (−), E± = R + T of the
+  single-scattering BSDF *with* its Fresnel factors (the interface absorbs nothing, so the
+  whole loss is put back; no F_ms factor). The slides give the ingredients — E tabulated
+  entering and exiting, E±_avg = 2∫₀¹ E±(μ) μ dμ, the lost energy split between reflection
+  and transmission, reciprocity — not one printed formula; this is our reading. Four
+  separable lobes, each (1 − E(μ)) on the side of each direction:
+
+      f_ms(i, o) = (1 − x±)(1 − E±(μi))(1 − E±(μo)) / (π (1 − E±_avg))   (o on i's side ±)
+      f_ms(i, o) = x±(1 − E±(μi))(1 − E∓(μo)) / (π (1 − E∓_avg))         (o on the other)
+
+  so light from side ± regains 1 − E±(μi), a fraction x± of it transmitted (the white
+  furnace closes: E±(μi) + R_ms + T_ms = 1). The reflection lobes are symmetric; the
+  transmission lobes obey the generalised reciprocity f_t(i, o)/η_o² = f_t(o, i)/η_i²
+  (Walter et al. 2007, eq. 21) iff x₊(1 − E₊_avg) = η² x₋(1 − E₋_avg) — the reciprocity
+  constraint, which fixes x₋ from x₊. The remaining freedom is x₊; the slides' own choice
+  could not be checked against their text here, so we take x₊ = 1 − F_avg(η), the
+  cosine-averaged Fresnel transmittance from the air (``fresnel_average``): the multiply
+  scattered light crosses as a diffuse flux would cross the smooth interface, the Fresnel
+  average being what Kulla & Conty weight multiply scattered light with. Or give
+  ``transmitted_fraction`` (e.g. a random walk's). x₋ must come out in [0, 1] (else
+  UsageError). Heitz et al. 2016's walk (GGX α = 0.5, η = 1.5) transmits about 0.95–0.97 of
+  its orders ≥ 2 from the air (x₊ = 0.908 here) and 0.07–0.23 from inside (x₋ ≈ 0.13).
+
+  E±(μ): ``DielectricAlbedoTable``, here from the first order of Heitz et al. 2016's
+  dielectric random walk (``DielectricAlbedoTable.from_walk``), which is Walter et al. 2007's
+  BSDF with height-correlated Smith masking (``random_walk`` module docstring): Monte Carlo,
+  so the table carries its standard errors; any other single-scattering albedo fills the same
+  table.
+
 * Mikkelsen 2009, eq. 28: f = k_s f_s + (1 − k_s ρ(wi)) (k_d/π) (1 − k_s ρ(wo)), ρ the specular
   albedo (eq. 27, ``brdf.AlbedoTable``). Here only the diffuse-like second term is modelled, with
   k_d chosen so that its energy matches a given multiply-scattered energy
@@ -38,6 +69,8 @@ the surface; BRDFs in sr⁻¹; angles in public arguments in degrees.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from microsim import checks as _checks
@@ -50,6 +83,8 @@ __all__ = [
     "fresnel_average",
     "cos_lobe_bin_averages",
     "KullaConty",
+    "DielectricAlbedoTable",
+    "KullaContyDielectric",
     "mikkelsen_diffuse",
     "mikkelsen_diffuse_albedo",
     "mikkelsen_kd",
@@ -175,6 +210,175 @@ class KullaConty:
             f"KullaConty(E_avg={self.e_avg:.6g}, F_avg={self.f_avg:.6g}, "
             f"fresnel_factor={self.fresnel_factor})"
         )
+
+
+# --- Kulla & Conty 2017, dielectric -------------------------------------------------------
+_DIELECTRIC_NODES_DEG = (0.0, 20.0, 35.0, 48.0, 58.0, 66.0, 72.0, 77.0, 81.0, 84.0, 86.5, 88.5)
+"""Incidence angles (degrees from the pole of the incidence's side) of the walk's albedo table:
+denser towards the horizon, where E changes fastest."""
+
+_SIDES = ("outside", "inside")
+
+
+@dataclass(frozen=True)
+class DielectricAlbedoTable:
+    """Single-scattering albedo E(μ) = R + T of a rough dielectric interface at the cosines
+    ``mu`` (increasing, in (0, 1]) for light from the air (``outside``) and from inside the
+    medium (``inside``), with their standard errors (``stderr_outside``, ``stderr_inside``;
+    zeros for an exact table). Between nodes E is linear in μ, constant beyond the end nodes.
+    """
+
+    mu: np.ndarray
+    outside: np.ndarray
+    inside: np.ndarray
+    stderr_outside: np.ndarray
+    stderr_inside: np.ndarray
+
+    def __post_init__(self):
+        mu = np.asarray(self.mu, dtype=np.float64)
+        if mu.ndim != 1 or len(mu) < 2 or np.any(np.diff(mu) <= 0) or mu[0] <= 0 or mu[-1] > 1:
+            raise UsageError("mu must be >= 2 increasing cosines within (0, 1]")
+        for name in ("outside", "inside", "stderr_outside", "stderr_inside"):
+            a = np.asarray(getattr(self, name), dtype=np.float64)
+            if a.shape != mu.shape or np.any(~(a >= 0)) or np.any(a > 1):
+                raise UsageError(f"{name} must be values in [0, 1] of the shape of mu {mu.shape}")
+            object.__setattr__(self, name, a)
+        object.__setattr__(self, "mu", mu)
+
+    @classmethod
+    def from_walk(cls, ndf, eta, n_paths: int = 100_000, seed=0) -> DielectricAlbedoTable:
+        """E± from the order-1 exits of Heitz et al. 2016's dielectric walk
+        (``random_walk.smith_random_walk(..., transmission=True)``), ``n_paths`` per node and
+        side: the fraction of paths that leave after one event (standard error
+        √(E(1 − E)/(n − 1))). ``ndf``: one of ``random_walk.WALK_NDFS``; ``seed``: one
+        generator for the whole table."""
+        from .random_walk import smith_random_walk
+
+        n_paths = _checks.integer("n_paths", n_paths, 2, 10**9)
+        rng = np.random.default_rng(seed)
+        theta = np.radians(np.asarray(_DIELECTRIC_NODES_DEG[::-1]))
+        mu = np.cos(theta)
+        values = {}
+        for side, sign in zip(_SIDES, (1.0, -1.0)):
+            e = np.empty(len(mu))
+            for j, t in enumerate(theta):
+                wi = np.array([np.sin(t), 0.0, sign * np.cos(t)])
+                p = smith_random_walk(
+                    np.broadcast_to(wi, (n_paths, 3)), ndf, eta, rng, 2, transmission=True
+                )
+                e[j] = np.count_nonzero(p.order == 1) / n_paths
+            values[side] = e
+            values["stderr_" + side] = np.sqrt(e * (1.0 - e) / (n_paths - 1.0))
+        return cls(mu, **values)
+
+    def E(self, mu, side: str):
+        """E(μ) of ``side`` ("outside" | "inside") at cosines μ (absolute values taken)."""
+        return np.interp(np.abs(np.asarray(mu, dtype=np.float64)), self.mu, self._values(side))
+
+    def average(self, side: str) -> float:
+        """E_avg = 2∫₀¹ E(μ) μ dμ of ``side``, exact for the table's interpolant (2-point
+        Gauss–Legendre per panel: E μ is quadratic on each)."""
+        x, w = np.polynomial.legendre.leggauss(2)
+        edges = np.unique(np.concatenate([[0.0], self.mu, [1.0]]))
+        a, b = edges[:-1, None], edges[1:, None]
+        mu = 0.5 * (a + b) + 0.5 * (b - a) * x
+        return float(2.0 * np.sum(0.5 * (b - a) * w * mu * self.E(mu, side)))
+
+    def _values(self, side: str) -> np.ndarray:
+        if side not in _SIDES:
+            raise UsageError(f"side must be one of {', '.join(map(repr, _SIDES))}, got {side!r}")
+        return self.outside if side == "outside" else self.inside
+
+
+class KullaContyDielectric:
+    """Kulla & Conty 2017 energy compensation of a rough dielectric interface (module
+    docstring, our reading): the multiply scattered light's BSDF f_ms(wi, wo) for wi, wo on
+    either side (sr⁻¹, radiance convention).
+
+    ``ndf`` and ``eta`` (the medium's real index, ≠ 1; air above) build the single-scattering
+    table from the walk (``DielectricAlbedoTable.from_walk``), or pass ``table``;
+    ``transmitted_fraction``: x₊, the fraction of the energy put back for light from the air
+    that is transmitted (default 1 − F_avg(η)); x₋ follows from reciprocity.
+    """
+
+    def __init__(
+        self,
+        ndf=None,
+        eta: float = 1.5,
+        table: DielectricAlbedoTable | None = None,
+        transmitted_fraction: float | None = None,
+    ):
+        eta = resolve_material(eta)
+        if eta is None or isinstance(eta, complex) or eta == 1.0:
+            raise UsageError(f"eta must be a real index of refraction > 0, != 1, got {eta!r}")
+        self.eta = float(eta)
+        if table is None:
+            if ndf is None:
+                raise UsageError("give ndf (to build the albedo table) or table")
+            table = DielectricAlbedoTable.from_walk(ndf, self.eta)
+        if not isinstance(table, DielectricAlbedoTable):
+            raise UsageError(f"table must be a DielectricAlbedoTable, got {type(table).__name__}")
+        self.table = table
+        self.e_avg = {side: table.average(side) for side in _SIDES}
+        if not max(self.e_avg.values()) < 1.0:
+            raise UsageError(f"table must lose energy on both sides (E_avg < 1), got {self.e_avg}")
+        if transmitted_fraction is None:
+            x_out = 1.0 - fresnel_average(self.eta)
+        else:
+            x_out = _checks.in_range("transmitted_fraction", transmitted_fraction, 0.0, 1.0)
+        loss = {side: 1.0 - self.e_avg[side] for side in _SIDES}
+        x_in = x_out * loss["outside"] / (self.eta**2 * loss["inside"])
+        if not x_in <= 1.0:
+            raise UsageError(
+                f"transmitted_fraction {x_out:.6g} needs {x_in:.6g} > 1 of the energy put back "
+                "for light from inside to be transmitted (reciprocity); give a smaller one"
+            )
+        self.transmitted = {"outside": x_out, "inside": x_in}
+        self._loss = loss
+
+    def bsdf(self, wi, wo):
+        """f_ms(wi, wo) in sr⁻¹ for unit wi, wo on either side (0 on the horizon)."""
+        wi = _checks.directions("wi", wi)
+        wo = _checks.directions("wo", wo)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        ci, co = np.broadcast_arrays(wi[..., 2], wo[..., 2])
+        out = np.zeros(ci.shape)
+        for side_i, sign in zip(_SIDES, (1.0, -1.0)):
+            for side_o, same in ((side_i, True), (_other(side_i), False)):
+                mask = (sign * ci > 0) & ((sign * co > 0) == same) & (co != 0)
+                x = self.transmitted[side_i]
+                share = (1.0 - x) if same else x
+                out[mask] = (
+                    share
+                    * (1.0 - self.table.E(ci[mask], side_i))
+                    * (1.0 - self.table.E(co[mask], side_o))
+                    / (np.pi * self._loss[side_o])
+                )
+        return out
+
+    def albedo(self, theta_deg):
+        """(R_ms, T_ms): the energy f_ms reflects and transmits for light at θi (degrees, [0,
+        90] from the air or [90, 180] from inside), (1 − x)(1 − E(μi)) and x(1 − E(μi))."""
+        t = np.asarray(theta_deg, dtype=np.float64)
+        if np.any(~((t >= 0) & (t <= 180))):
+            raise UsageError(f"theta_deg must lie in [0, 180], got {theta_deg!r}")
+        mu = np.cos(np.radians(t))
+        outside = mu >= 0
+        lost = np.where(
+            outside, 1.0 - self.table.E(mu, "outside"), 1.0 - self.table.E(mu, "inside")
+        )
+        x = np.where(outside, self.transmitted["outside"], self.transmitted["inside"])
+        return (1.0 - x) * lost, x * lost
+
+    def __repr__(self) -> str:
+        return (
+            f"KullaContyDielectric(eta={self.eta:.6g}, E_avg={self.e_avg}, "
+            f"transmitted={self.transmitted})"
+        )
+
+
+def _other(side: str) -> str:
+    return "inside" if side == "outside" else "outside"
 
 
 # --- Mikkelsen 2009, eq. 28 --------------------------------------------------------------------

@@ -70,6 +70,30 @@ is Torrance–Sparrow with the anisotropic D and G2 = 1/(1 + Λ(wi) + Λ(wo)), e
 azimuth (tests/test_anisotropic_walk.py; the isotropic equivalent α = √(αx αy) walks a
 different surface). ``WalkNDF`` holds what the walk asks of an NDF.
 
+*Dielectric interface* (Heitz et al. 2016, Sec. 5; ``transmission=True``). Air (index 1) above,
+a medium of real index η below; the Smith microsurface is seen from both sides. Seen from below
+(through the point reflection w → −w) it is again a Smith microsurface with the same D and Λ,
+whose heights are the mirrored ones: a point at height h with C1(h) = e^{−τ} lies at depth
+τ' = −ln(1 − C1(h)) = −ln(1 − e^{−τ}) for the other side. The walker keeps its direction and
+depth in the frame of its side (the side's surface "above"), so free flights are those above.
+At a hit from direction v (in the side's frame) on a facet m ~ D_v it reflects with the
+probability F(v·m) of the exact dielectric Fresnel reflectance for the relative index η
+(from the air) or 1/η (from the medium; total internal reflection: F = 1), else it refracts
+by Snell's law into t = −v/η_r + (v·m/η_r − cos θt) m and continues on the other side:
+direction −t, depth τ'. This Russian roulette keeps every path's weight 1, so each path
+leaves up (into the air) or down (into the medium) with weight 1, or is cut: R + T + cut = 1
+path by path. Order 1 is Walter et al. 2007's BSDF (eq. 20, 21) with height-correlated
+Smith masking: G2 = 1/(1 + Λ(i) + Λ(o)) for reflection as above, and for refraction
+E[(1 − e^{−τ₁})^{Λ(o)}] = (1 + Λ(i)) B(1 + Λ(i), 1 + Λ(o)), τ₁ ~ Exp(1 + Λ(i)), i.e.
+G2 = B(1 + Λ(i), 1 + Λ(o)) (B the Beta function; Heitz 2014's height-correlated form for
+transmission), Λ(o) that of the upward direction on o's side
+(tests/test_dielectric_walk.py). ``dielectric_walk_bin_averages`` bins the exits like the
+simulation's dielectric estimator (docs/dielectric.md): θo from the pole of the side the
+light leaves by, Δφ = φo − φi of the direction itself (specular reflection and refraction
+both at Δφ = 180°). Its bin averages are fractions of the incident flux per unit projected
+solid angle: the BTDF in the radiance convention (Walter et al. 2007, eq. 21), which obeys
+f_t(i, o)/η_o² = f_t(o, i)/η_i².
+
 *Energy.* With F = 1 every path eventually leaves (the walk on a Smith microsurface conserves
 energy; Heitz et al. 2016), so the escaping energy is 1 up to the paths cut at
 ``max_bounces``, which are reported.
@@ -114,6 +138,8 @@ __all__ = [
     "smith_random_walk",
     "WalkBinAverages",
     "walk_bin_averages",
+    "DielectricWalkBinAverages",
+    "dielectric_walk_bin_averages",
 ]
 
 HEIGHT_DISTRIBUTIONS = ("uniform", "gaussian")
@@ -281,7 +307,8 @@ def sample_visible_normals(v, ndf, u1, u2):
 class WalkPaths:
     """Outcome of ``smith_random_walk`` per path (arrays of length N).
 
-    ``wo``: exit direction (unit, upper hemisphere; NaN for paths cut off); ``weight``: the
+    ``wo``: exit direction (unit, upper hemisphere — either hemisphere for the dielectric walk;
+    NaN for paths cut off); ``weight``: the
     energy it carries out (product of the Fresnel factors; 0 if cut off); ``order``: number of
     reflections before it left (0 if cut off); ``absorbed``: energy lost to Fresnel absorption
     along the path; ``cut``: energy still on the surface after ``max_bounces`` reflections.
@@ -295,7 +322,9 @@ class WalkPaths:
     cut: np.ndarray
 
 
-def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) -> WalkPaths:
+def smith_random_walk(
+    wi, ndf, material=None, rng=None, max_bounces: int = 256, transmission: bool = False
+) -> WalkPaths:
     """Random walk of Heitz et al. 2016 on a Smith microsurface, one path per row of ``wi``.
 
     ``wi``: unit incident directions (N, 3) pointing to the light, z > 0, any azimuth (with an
@@ -305,13 +334,25 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
     ``fresnel.resolve_material`` accepts (conductor or dielectric treated as reflector only).
     ``rng``: numpy Generator or seed. All live paths advance together (one NumPy step per
     reflection order).
+
+    ``transmission=True``: the interface between air above and a medium of real index
+    ``material`` below (module docstring, "Dielectric interface"): wi on either side
+    (wi_z < 0: lit from inside the medium), every event reflects or refracts by Russian
+    roulette on the exact Fresnel reflectance, and ``wo`` may lie below (light leaving into
+    the medium).
     """
     walk = WalkNDF.of(ndf)
     eta = resolve_material(material)
     wi = _checks.directions("wi", wi)
     if wi.ndim != 2:
         raise UsageError(f"wi must have shape (N, 3), got {wi.shape}")
-    if np.any(wi[:, 2] <= 0):
+    if not isinstance(transmission, (bool, np.bool_)):
+        raise UsageError(f"transmission must be True or False, got {transmission!r}")
+    if transmission:
+        eta = _dielectric_index(eta)
+        if np.any(wi[:, 2] == 0):
+            raise UsageError("wi must not lie on the horizon (z != 0)")
+    elif np.any(wi[:, 2] <= 0):
         raise UsageError("wi must point above the horizon (z > 0)")
     max_bounces = _checks.integer("max_bounces", max_bounces, 1, 10**6)
     rng = np.random.default_rng(rng)
@@ -323,7 +364,10 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
     cut = np.zeros(n)
 
     idx = np.arange(n)
-    d = -wi.copy()  # ray direction
+    d = -wi.copy()  # ray direction (for the dielectric: in the frame of its side)
+    side = np.where(wi[:, 2] > 0, 1.0, -1.0) if transmission else None
+    if transmission:
+        d *= side[:, None]
     tau = np.zeros(n)
     w = np.ones(n)
     for k in range(1, max_bounces + 1):
@@ -338,14 +382,17 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
             tau_dn = tau + e / (1.0 + lam)
         if k > 1 and np.any(esc):
             j = idx[esc]
-            out_wo[j], out_w[j], out_k[j] = d[esc], w[esc], k - 1
+            out_wo[j] = d[esc] if side is None else d[esc] * side[esc, None]
+            out_w[j], out_k[j] = w[esc], k - 1
         keep = ~esc
         idx, d, w = idx[keep], d[keep], w[keep]
         tau = np.where(up, tau_up, tau_dn)[keep]
         tau = np.maximum(tau, 0.0)
+        if side is not None:
+            side = side[keep]
         if len(idx) == 0:
             break
-        # reflection at order k
+        # reflection (or refraction) at order k
         v = -d
         m = walk.visible(
             v,
@@ -353,6 +400,9 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
             np.clip(rng.random(len(idx)), 1e-16, 1 - 1e-16),
         )
         vm = np.clip(np.einsum("ij,ij->i", v, m), 0.0, 1.0)
+        if transmission:
+            d, side, tau = _dielectric_event(v, m, vm, side, tau, eta, rng)
+            continue
         d = 2.0 * vm[:, None] * m - v
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         if eta is not None:
@@ -362,6 +412,42 @@ def smith_random_walk(wi, ndf, material=None, rng=None, max_bounces: int = 256) 
     if len(idx):  # paths that reflected max_bounces times without leaving
         cut[idx] = w
     return WalkPaths(out_wo, out_w, out_k, absorbed, cut)
+
+
+def _dielectric_index(eta) -> float:
+    """The real index η ≠ 1 of the medium of a dielectric walk, else UsageError."""
+    if eta is None or isinstance(eta, complex) or eta == 1.0:
+        raise UsageError(
+            "material must be a real index of refraction > 0, != 1 (the medium below) for "
+            f"transmission=True, got {eta!r}"
+        )
+    return float(eta)
+
+
+def _dielectric_event(v, m, vm, side, tau, eta: float, rng):
+    """One event of the dielectric walk at facets ``m`` seen from ``v`` (side frames, vm = v·m):
+    reflect with the probability F(vm) of the relative index η (side +1) or 1/η (side −1),
+    total internal reflection included, else refract (Snell) and continue on the other side
+    of the microsurface: direction −t, side −side, depth τ' = −ln(1 − e^{−τ}) (module
+    docstring, "Dielectric interface"). Returns (d, side, τ)."""
+    outside = side > 0
+    f = np.empty_like(vm)
+    f[outside] = fresnel(vm[outside], eta)
+    f[~outside] = fresnel(vm[~outside], 1.0 / eta)
+    refract = rng.random(len(vm)) >= f
+    d = 2.0 * vm[:, None] * m - v
+    if np.any(refract):
+        rel = np.where(outside, eta, 1.0 / eta)[refract]
+        c = vm[refract]
+        cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / (rel * rel), 0.0))
+        t = -v[refract] / rel[:, None] + (c / rel - cos_t)[:, None] * m[refract]
+        d[refract] = -t
+        side = np.where(refract, -side, side)
+        flipped = -np.log(-np.expm1(-np.maximum(tau[refract], 1e-300)))
+        tau = tau.copy()
+        tau[refract] = flipped
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return d, side, tau
 
 
 # --- bin averages ------------------------------------------------------------------------------
@@ -468,12 +554,8 @@ def walk_bin_averages(
     omega = bins.projected_solid_angle()
     sums = _WalkSums(len(thetas), orders, omega.size)
     for a, th in enumerate(thetas):
-        t, phi_i = np.radians(th), float(phis[a])
-        if phi_i == 0.0:  # wi_y exactly 0
-            wi1 = np.array([np.sin(t), 0.0, np.cos(t)])
-        else:
-            ph = np.radians(phi_i)
-            wi1 = np.array([np.sin(t) * np.cos(ph), np.sin(t) * np.sin(ph), np.cos(t)])
+        phi_i = float(phis[a])
+        wi1 = _incidence(th, phi_i)
         done = 0
         while done < n_paths:
             m = min(chunk, n_paths - done)
@@ -481,6 +563,124 @@ def walk_bin_averages(
             done += m
             sums.add(a, p, bins.locate(p.wo[p.order > 0], phi_i))
     return sums.averages(thetas, phis, n_paths, omega)
+
+
+def _incidence(theta_deg: float, phi_deg: float) -> np.ndarray:
+    """The unit incident direction at θi, φi (degrees); wi_y exactly 0 at φi = 0."""
+    t = np.radians(theta_deg)
+    if phi_deg == 0.0:
+        return np.array([np.sin(t), 0.0, np.cos(t)])
+    ph = np.radians(phi_deg)
+    return np.array([np.sin(t) * np.cos(ph), np.sin(t) * np.sin(ph), np.cos(t)])
+
+
+@dataclass(frozen=True)
+class DielectricWalkBinAverages:
+    """Bin averages of the dielectric walk (``dielectric_walk_bin_averages``) per incidence and
+    scattering order, for the two hemispheres.
+
+    ``reflected``: the light leaving on the incidence's side (its ``values``: the BRDF's bin
+    averages, sr⁻¹, shape (I, K, n_theta, n_phi); ``energy``: the reflected energy per order);
+    ``transmitted``: the light leaving on the other side (the BTDF, radiance convention), both
+    ``WalkBinAverages`` on the same bins and orders (their ``absorbed`` and ``cut`` are 0: the
+    walk absorbs nothing, and the paths cut off are counted here). ``R``, ``T``: reflected and
+    transmitted fractions of the incident flux per incidence (I,), summed over orders, with
+    ``R_stderr``, ``T_stderr``; ``cut``: the fraction of paths cut at ``max_bounces``. Every path
+    is in exactly one of R, T and cut, so R + T + cut = 1 up to rounding.
+    """
+
+    reflected: WalkBinAverages
+    transmitted: WalkBinAverages
+    R: np.ndarray
+    R_stderr: np.ndarray
+    T: np.ndarray
+    T_stderr: np.ndarray
+    cut: np.ndarray
+
+    @property
+    def theta_i(self) -> np.ndarray:
+        """The incidence angles (degrees; (90, 180]: from inside the medium)."""
+        return self.reflected.theta_i
+
+
+def dielectric_walk_bin_averages(
+    theta_i,
+    bins: Bins,
+    ndf,
+    eta,
+    *,
+    n_paths: int = 1_000_000,
+    orders: int = 4,
+    seed=0,
+    max_bounces: int = 256,
+    chunk: int = 2**18,
+    phi_i: float = 0.0,
+) -> DielectricWalkBinAverages:
+    """Heitz et al. 2016's dielectric random walk (``smith_random_walk(...,
+    transmission=True)``) averaged over ``bins`` per scattering order, reflected and
+    transmitted.
+
+    ``theta_i``: incidence angles in degrees, in [0, 90) (light from the air) or (90, 180]
+    (light from inside the medium, wi_z < 0); ``eta``: the medium's real index (air above has
+    1). Each exit is binned on its own side (module docstring, "Dielectric interface"): θo
+    from the pole of the side it leaves by, Δφ = φo − φi of the direction itself. The other
+    arguments are ``walk_bin_averages``'s (the same seed, incidences, φi and ``chunk`` give the
+    same result bit for bit). Returns ``DielectricWalkBinAverages``.
+    """
+    if not isinstance(bins, Bins):
+        raise UsageError(f"bins must be a microsim.bins.Bins, got {type(bins).__name__}")
+    eta = _dielectric_index(resolve_material(eta))
+    walk = WalkNDF.of(ndf)
+    thetas, phis = _walk_incidences(theta_i, phi_i, below=True)
+    n_paths = _checks.integer("n_paths", n_paths, 2, 10**11)
+    orders = _checks.integer("orders", orders, 1, 1000)
+    chunk = _checks.integer("chunk", chunk, 1, 2**24)
+    rng = np.random.default_rng(seed)
+    omega = bins.projected_solid_angle()
+    sums = {side: _WalkSums(len(thetas), orders, omega.size) for side in ("r", "t")}
+    cut = np.zeros(len(thetas))
+    for a, th in enumerate(thetas):
+        phi_a = float(phis[a])
+        wi1 = _incidence(th, phi_a)
+        done = 0
+        while done < n_paths:
+            m = min(chunk, n_paths - done)
+            p = smith_random_walk(
+                np.broadcast_to(wi1, (m, 3)), walk, eta, rng, max_bounces, transmission=True
+            )
+            done += m
+            left = p.order > 0
+            same = left & (np.sign(np.nan_to_num(p.wo[:, 2])) == np.sign(wi1[2]))
+            for side, mine in (("r", same), ("t", left & ~same)):
+                wo = p.wo[mine]  # θo from the pole of its own side
+                wo[:, 2] = np.abs(wo[:, 2])
+                sums[side].add(a, _exits(p, mine), bins.locate(wo, phi_a))
+            cut[a] += p.cut.sum()
+    n = float(n_paths)
+    (r, r_se), (t, t_se) = (_total_energy(sums[side], n) for side in ("r", "t"))
+    return DielectricWalkBinAverages(
+        sums["r"].averages(thetas, phis, n_paths, omega),
+        sums["t"].averages(thetas, phis, n_paths, omega),
+        r,
+        r_se,
+        t,
+        t_se,
+        cut / n,
+    )
+
+
+def _exits(p: WalkPaths, mine: np.ndarray) -> WalkPaths:
+    """The paths ``p`` with only the exits ``mine`` kept (nothing absorbed or cut)."""
+    zero = np.zeros_like(p.weight)
+    return WalkPaths(p.wo, p.weight, np.where(mine, p.order, 0), zero, zero)
+
+
+def _total_energy(sums: "_WalkSums", n: float):
+    """Mean and standard error of the energy summed over orders (each path leaves in one order
+    at most, so its squared total is the sum of its squared per-order tallies)."""
+    mean = sums.e1.sum(axis=1) / n
+    var = np.maximum(sums.e2.sum(axis=1) / n - mean * mean, 0.0) / (n - 1.0)
+    return mean, np.sqrt(var)
 
 
 def _walk_arguments(bins, ndf, material, legacy, folded):
@@ -498,11 +698,16 @@ def _walk_arguments(bins, ndf, material, legacy, folded):
     return bins, ndf, material
 
 
-def _walk_incidences(theta_i, phi_i):
-    """θi (degrees, 1-D, each in [0, 90)) and φi broadcast to it, checked."""
+def _walk_incidences(theta_i, phi_i, below: bool = False):
+    """θi (degrees, 1-D, each in [0, 90), or also in (90, 180] if ``below``) and φi broadcast
+    to it, checked."""
     thetas = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
-    if thetas.ndim != 1 or np.any(~((thetas >= 0) & (thetas < 90))):
-        raise UsageError(f"theta_i must be angles in degrees within [0, 90), got {theta_i!r}")
+    inside = (thetas >= 0) & (thetas < 90)
+    if below:
+        inside |= (thetas > 90) & (thetas <= 180)
+    if thetas.ndim != 1 or np.any(~inside):
+        allowed = "[0, 90) (from above) or (90, 180] (from inside)" if below else "[0, 90)"
+        raise UsageError(f"theta_i must be angles in degrees within {allowed}, got {theta_i!r}")
     phis = np.atleast_1d(np.asarray(phi_i, dtype=np.float64))
     if phis.ndim != 1 or phis.size not in (1, thetas.size) or not np.all(np.isfinite(phis)):
         raise UsageError(
