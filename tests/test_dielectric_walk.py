@@ -3,12 +3,12 @@ transmission=True)``, ``dielectric_walk_bin_averages``) and Kulla & Conty 2017's
 compensation for rough dielectrics (``KullaContyDielectric``).
 
 The single-scattering reference is Walter et al. 2007, eq. 20 and 21, with height-correlated
-Smith masking (G2 = 1/(1 + Λi + Λo) reflecting, B(1 + Λi, 1 + Λo) refracting), integrated over
-each bin by Gauss–Legendre quadrature here."""
+Smith masking (G2 = 1/(1 + Λi + Λo) reflecting, B(1 + Λi, 1 + Λo) refracting:
+``WalterDielectric(..., crossing="height-correlated")``), integrated over each bin by
+Gauss–Legendre quadrature here."""
 
 import numpy as np
 import pytest
-from scipy import special
 
 from microsim import analytic as an
 from microsim.analytic import random_walk as rw
@@ -19,6 +19,7 @@ from microsim.errors import UsageError
 
 ETA = 1.5
 NDF = an.GGX(0.5)
+WALTER = an.WalterDielectric(NDF, an.Smith(correlated=True), ETA, "height-correlated")
 
 
 def _direction(theta_deg, phi_deg=0.0):
@@ -28,39 +29,11 @@ def _direction(theta_deg, phi_deg=0.0):
     )
 
 
-def _walter_single(wi, wo, eta=ETA, ndf=NDF):
+def _walter_single(wi, wo):
     """Walter et al. 2007 eq. 20 (reflection) and 21 (transmission, radiance convention) with
-    height-correlated Smith G, sr⁻¹, for one wi and an array of wo. Light from inside is the
-    same model under w → −w with the relative index 1/η."""
-    if wi[2] < 0:
-        return _walter_single(-wi, -wo, 1.0 / eta, ndf)
-    lam_i = ndf.smith_lambda_cos(wi[2])
-    lam_o = ndf.smith_lambda_cos(np.abs(wo[..., 2]))
-    out = np.zeros(wo.shape[:-1])
-    up = wo[..., 2] > 0
-    h = wi + wo[up]
-    h /= np.linalg.norm(h, axis=-1, keepdims=True)
-    ih = np.clip(h @ wi, 0.0, 1.0)
-    out[up] = fresnel(ih, eta) * NDF.D(h) / (4.0 * wi[2] * wo[up, 2] * (1.0 + lam_i + lam_o[up]))
-    o = wo[~up]
-    s = wi + eta * o
-    norm2 = np.sum(s * s, axis=-1)
-    h = -s / np.sqrt(norm2)[:, None]
-    h *= np.sign(h[:, 2:])
-    ih, oh = h @ wi, np.sum(o * h, axis=-1)
-    ok = (ih > 0) & (oh < 0)
-    g = special.beta(1.0 + lam_i, 1.0 + lam_o[~up])
-    f_t = (
-        np.abs(ih * oh)
-        / (wi[2] * np.abs(o[:, 2]))
-        * eta**2
-        * (1.0 - fresnel(np.clip(ih, 0.0, 1.0), eta))
-        * ndf.D(h)
-        * g
-        / norm2
-    )
-    out[~up] = np.where(ok, f_t, 0.0)
-    return out
+    height-correlated Smith G across the interface as Heitz 2014 derives it, sr⁻¹, for one wi
+    and an array of wo (``WalterDielectric(..., crossing="height-correlated")``)."""
+    return WALTER.f(np.broadcast_to(wi, wo.shape), wo)
 
 
 def _bin_averages(f, theta_i, bins, transmitted, n=8):

@@ -86,7 +86,7 @@ def test_a_glass_scene_is_traced_from_both_sides_and_reported(tmp_path):
     for g in glass["incidences"]:  # a lossless interface: every path reflected or transmitted
         assert g["reflected"] + g["transmitted"] == pytest.approx(1.0, abs=1e-12)
         assert 0.0 < g["single"] <= 1.0
-        assert set(g["models"]) == {"walter-smith", "walter-smith-corr"}
+        assert set(g["models"]) == {"walter-smith", "walter-smith-corr", "walter-smith-corr-beta"}
     with np.load(out / "inside" / "brdf.npz") as z:
         assert z["theta_i"].tolist() == [160.0, 110.0] and "btdf_orders" in z
     report = (out / "report.md").read_text()

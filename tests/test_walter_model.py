@@ -12,6 +12,7 @@ from support import refused
 from microsim import analytic as an
 from microsim import vectors
 from microsim.analytic.dielectric import WalterDielectric, dielectric_albedo, dielectric_fresnel
+from microsim.errors import UsageError
 
 ETA = 1.5
 QUADRATURE = 1e-5  # dielectric_albedo's stated accuracy
@@ -141,7 +142,12 @@ def test_dielectric_fresnel_from_either_side():
 def test_model_protocol_frozen_hashable():
     model = WalterDielectric(an.GGX(0.3))
     assert isinstance(model, an.BRDFModel) and not isinstance(model, an.SampleableBRDF)
-    assert model.params() == {"ndf": an.GGX(0.3), "masking": an.Smith(an.GGX(0.3)), "eta": 1.5}
+    assert model.params() == {
+        "ndf": an.GGX(0.3),
+        "masking": an.Smith(an.GGX(0.3)),
+        "eta": 1.5,
+        "crossing": "as-reflection",
+    }
     with pytest.raises(dataclasses.FrozenInstanceError):
         model.eta = 2.0
     assert hash(model) == hash(dataclasses.replace(model)) and model == dataclasses.replace(model)
@@ -168,3 +174,28 @@ def test_model_protocol_frozen_hashable():
 )
 def test_bad_parameters_are_refused_naming_them(call, word):
     refused(call, word)
+
+
+def test_the_crossing_g_is_chosen_and_checked():
+    """``crossing="height-correlated"`` replaces G of refraction only (reflection unchanged),
+    by Heitz 2014's B(1 + Λi, 1 + Λo) ≤ 1/(1 + Λi + Λo) (equal where either Λ is 0), and needs
+    the height-correlated Smith G; other values are refused naming the parameter."""
+    ndf = an.GGX(0.5)
+    shared = an.WalterDielectric(ndf, an.Smith(correlated=True), 1.5)
+    beta = an.WalterDielectric(ndf, an.Smith(correlated=True), 1.5, "height-correlated")
+    rng = np.random.default_rng(7)
+    wi = _random_upper(rng, 200)
+    wo_up, wo_down = _random_upper(rng, 200), -_random_upper(rng, 200)
+    np.testing.assert_array_equal(beta.f(wi, wo_up), shared.f(wi, wo_up))
+    ft_beta, ft_shared = beta.f(wi, wo_down), shared.f(wi, wo_down)
+    assert np.all(ft_beta <= ft_shared * (1 + 1e-12)) and np.any(ft_beta < 0.99 * ft_shared)
+    with pytest.raises(UsageError, match="crossing must be one of"):
+        an.WalterDielectric(ndf, an.Smith(correlated=True), 1.5, "beta")
+    with pytest.raises(UsageError, match="needs masking=Smith"):
+        an.WalterDielectric(ndf, an.Smith(correlated=False), 1.5, "height-correlated")
+
+
+def _random_upper(rng, n):
+    v = rng.normal(size=(n, 3))
+    v[:, 2] = np.abs(v[:, 2]) + 0.05
+    return v / np.linalg.norm(v, axis=1, keepdims=True)

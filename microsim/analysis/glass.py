@@ -8,7 +8,7 @@ Per incidence, from the air and from inside the medium:
   so each fraction is a proportion of paths: its standard error is the binomial √(p(1 − p)/N)
   (conservative for stratified origins);
 * per model, Walter et al. 2007's single-scattering BSDF with separable and height-correlated
-  Smith G on the surface's microfacet distribution: its R and T by quadrature
+  Smith G on the surface's microfacet distribution (``GLASS_MODELS``): its R and T by quadrature
   (``analytic.dielectric.dielectric_albedo``) — 1 − R − T is the energy single scattering
   loses, which the traced orders ≥ 2 hold;
 * verdicts of the models' BRDF and BTDF against order 1, bin by bin (``verdicts.verdict``,
@@ -40,15 +40,22 @@ from .verdicts import Measured, Prediction, Significance, verdict
 __all__ = ["GLASS_MODELS", "LOBES", "glass_models", "lobe_measured", "lobe_values", "glass_study"]
 
 LOBES = ("reflected", "transmitted")
-GLASS_MODELS = {"walter-smith": False, "walter-smith-corr": True}
-"""Walter et al. 2007's single-scattering BSDF by its Smith G: name → height-correlated."""
+GLASS_MODELS = {
+    "walter-smith": (False, "as-reflection"),
+    "walter-smith-corr": (True, "as-reflection"),
+    "walter-smith-corr-beta": (True, "height-correlated"),
+}
+"""Walter et al. 2007's single-scattering BSDF by its Smith G: name → (height-correlated,
+the G of transmission: ``WalterDielectric.crossing``). The first two are what renderers ship
+(the reflection's G2 also across the interface); the third takes Heitz 2014's
+height-correlated G for directions on opposite sides."""
 
 
 def glass_models(ndf, eta: float) -> dict:
     """Name → ``WalterDielectric`` on ``ndf`` at index ``eta`` (``GLASS_MODELS``)."""
     return {
-        name: WalterDielectric(ndf, Smith(correlated=corr), eta)
-        for name, corr in GLASS_MODELS.items()
+        name: WalterDielectric(ndf, Smith(correlated=corr), eta, crossing)
+        for name, (corr, crossing) in GLASS_MODELS.items()
     }
 
 

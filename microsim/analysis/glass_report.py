@@ -136,7 +136,9 @@ def glass_index(docs) -> list[str]:
         "R and T: the fractions of the incident flux reflected and transmitted, all orders "
         "(R + T = 1: nothing is lost, path by path); order 1: single scattering as traced; "
         f"then {' and '.join(names)}: Walter et al. 2007's single-scattering R + T by "
-        "quadrature (separable, height-correlated Smith G) — 1 minus it is the energy a "
+        "quadrature (separable Smith G; height-correlated, the reflection's form also across "
+        "the interface as renderers ship it; height-correlated across by Heitz 2014's Beta "
+        "form) — 1 minus it is the energy a "
         "single-scattering BSDF loses, the white-furnace number; last, the verdicts of the "
         "same models (in that order) against the traced order 1, reflected and transmitted "
         "lobes (✓ agrees; ✗ deviates by its energy-weighted relative RMS error).",

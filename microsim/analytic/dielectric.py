@@ -34,6 +34,7 @@ from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
+from scipy.special import gammaln
 
 from microsim import checks as _checks
 from microsim import vectors
@@ -44,7 +45,10 @@ from .fresnel import fresnel
 from .masking import Smith
 from .protocol import ModelBase
 
-__all__ = ["dielectric_fresnel", "WalterDielectric", "dielectric_albedo"]
+__all__ = ["dielectric_fresnel", "WalterDielectric", "dielectric_albedo", "CROSSINGS"]
+
+CROSSINGS = ("as-reflection", "height-correlated")
+"""``WalterDielectric.crossing``: the G of transmission."""
 
 _ANISOTROPIC_PANELS = 32
 """Equal azimuth panels ``dielectric_albedo`` adds for an anisotropic distribution."""
@@ -81,15 +85,21 @@ class WalterDielectric(ModelBase):
     1 + Λ(o)), since the heights visible from above and from below are anti-correlated), bound
     to ``ndf`` unless it names another distribution; ``eta`` > 0, ≠ 1 (1.5 by default).
     f = 0 where wi or wo lies on the horizon and where no facet refracts wi into wo.
+    ``crossing``: the G of transmission — "as-reflection" (the masking's own G2, what
+    renderers ship) or "height-correlated" (Heitz 2014's B(1 + Λ(i), 1 + Λ(o)) for directions
+    on opposite sides, with ``Smith(correlated=True)`` only; the first order of Heitz et al.
+    2016's dielectric random walk).
     """
 
     ndf: Any
     masking: Any = Smith()
     eta: float = 1.5
+    crossing: str = "as-reflection"
     name: ClassVar[str] = "WalterDielectric"
     params_doc: ClassVar[str] = (
         "ndf, masking=Smith(correlated=False|True), eta > 0, ≠ 1 (real index below; air "
-        "above); wi, wo on either side (sr⁻¹, radiance convention f_t(i,o)/η_o² = f_t(o,i)/η_i²)"
+        "above), crossing='as-reflection'|'height-correlated' (the G of transmission); wi, wo "
+        "on either side (sr⁻¹, radiance convention f_t(i,o)/η_o² = f_t(o,i)/η_i²)"
     )
     source: ClassVar[str] = "Walter et al. 2007, eq. 13, 16, 20, 21, 23"
     functions: ClassVar[tuple[str, ...]] = ("dielectric_albedo",)
@@ -106,6 +116,15 @@ class WalterDielectric(ModelBase):
         if eta == 1.0:
             raise UsageError("eta must differ from 1 (an index of 1 is no interface), got 1.0")
         object.__setattr__(self, "eta", eta)
+        if self.crossing not in CROSSINGS:
+            raise UsageError(
+                f"crossing must be one of {', '.join(CROSSINGS)}, got {self.crossing!r}"
+            )
+        if self.crossing == "height-correlated" and not self.masking.correlated:
+            raise UsageError(
+                "crossing='height-correlated' needs masking=Smith(correlated=True) (the "
+                "height-correlated G of reflection), got a separable Smith"
+            )
         super().__post_init__()
 
     @property
@@ -150,7 +169,7 @@ class WalterDielectric(ModelBase):
         ih, oh = vectors.dot(i, h), -vectors.dot(o, h)  # both > 0 where h refracts i into o
         valid = (ih > 0.0) & (oh > 0.0)
         ih, oh = np.where(valid, ih, 1.0), np.where(valid, oh, 1.0)
-        g = self.masking.g2_cosines(i, -o, h[..., 2], ih, oh)
+        g = self._crossing_g(i, -o, h[..., 2], ih, oh)
         reflectance = (
             dielectric_fresnel(np.minimum(ih, 1.0), eta)
             if eta > 1.0
@@ -159,6 +178,18 @@ class WalterDielectric(ModelBase):
         val = g * _D_of(self.ndf, h) * (1.0 - reflectance)
         val *= eta * eta * ih * oh / (i[..., 2] * -o[..., 2] * norm2)
         return np.where(valid, val, 0.0)
+
+    def _crossing_g(self, i, up, cos_h, ih, oh):
+        """G of a refracting pair, i above and o below given by its upper-side direction
+        ``up`` = −o: the masking's G2, or with ``crossing="height-correlated"``
+        B(1 + Λ(i), 1 + Λ(up)) = Γ(1 + Λi)Γ(1 + Λo)/Γ(2 + Λi + Λo) (Heitz 2014: the heights
+        visible from above and from below are anti-correlated)."""
+        if self.crossing == "as-reflection":
+            return self.masking.g2_cosines(i, up, cos_h, ih, oh)
+        ndf, method = self.masking.ndf, self.masking.lambda_method
+        lam_i, lam_o = ndf.smith_lambda(i, method), ndf.smith_lambda(up, method)
+        log_b = gammaln(1.0 + lam_i) + gammaln(1.0 + lam_o) - gammaln(2.0 + lam_i + lam_o)
+        return np.where((ih > 0.0) & (oh > 0.0), np.exp(log_b), 0.0)
 
 
 def _kink_azimuths(i, cos_h, eta):
