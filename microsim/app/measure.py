@@ -1,7 +1,11 @@
 """`microsim measure`: a virtual gonioreflectometer — the whole single-bounce BRDF of a scene's
 surface tabulated over a dense grid of incidences, each traced until its error target, with
 standard errors, resumable, written as a ``measured.BRDFTable``. It is the single-bounce BRDF
-(what the verdicts judge; the scene's ``bounces`` is not used).
+(what the verdicts judge; the scene's ``bounces`` is not used). A scene with ``[material]
+transmission`` gets its BRDF lit from the air — the reflected part of its BSDF (the
+expectation of the reflected first order): neither export format holds transmission (an RGL
+.bsdf file is read by Mitsuba's ``measured`` plugin as glossy front-side reflection only, and
+MERL's binary tabulates the upper hemisphere), and the command says so.
 
 Acquisition: θi = 0, Δ, 2Δ, … ≤ ``theta_max`` (``--theta-step`` Δ, default 5°; at most
 89.99°) on the scene's bins (folded: isotropic surfaces only — an anisotropic surface's
@@ -612,6 +616,12 @@ def _cmd_measure(args) -> int:
         f"{tot.rays:,} rays, {tot.seconds:.1f} s of tracing"
         f"{'' if tot.converged else '; some incidences stopped at --max-rays'})"
     )
+    if acq.scene.transmission:
+        print(
+            f"microsim measure: {acq.scene.name} transmits light: the table and its exports "
+            f"hold the BRDF lit from the air, the reflected part of its BSDF (RGL's .bsdf and "
+            f"MERL's binary store reflection only)"
+        )
     for fmt, e in (doc.exports or {}).items():
         print(
             f"microsim measure: wrote {acq.out / e.file} ({fmt}, {e.bytes:,} bytes; "
