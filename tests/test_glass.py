@@ -87,6 +87,8 @@ def test_a_glass_scene_is_traced_from_both_sides_and_reported(tmp_path):
         assert g["reflected"] + g["transmitted"] == pytest.approx(1.0, abs=1e-12)
         assert 0.0 < g["single"] <= 1.0
         assert set(g["models"]) == {"walter-smith", "walter-smith-corr", "walter-smith-corr-beta"}
+        walk = g["multiple"]["random-walk"]  # [R, T, se R, se T]: every path R or T
+        assert walk[0] + walk[1] == pytest.approx(1.0, abs=1e-12) and walk[2] > 0
     with np.load(out / "inside" / "brdf.npz") as z:
         assert z["theta_i"].tolist() == [160.0, 110.0] and "btdf_orders" in z
     report = (out / "report.md").read_text()

@@ -60,7 +60,10 @@ def test_catalogue_covers_the_issue():
     assert {n for n, _ in vg} == {"beckmann", "ggx", "blinn-phong", "vmf", "abc"}
     assert ("vmf", (("kappa", 17.0),)) in vg and ("vmf", (("kappa", 1024.0),)) in vg
     gauss = [s for s in scenes if s.surface.kind == "gaussian" and not s.anisotropic]
-    assert sorted(round(s.ndf().m, 6) for s in gauss) == [0.1, 0.3, 0.5]
+    opaque = [s for s in gauss if not s.transmission]
+    assert sorted(round(s.ndf().m, 6) for s in opaque) == [0.1, 0.3, 0.5]
+    glass = {(s.surface.kind, s.ior) for s in scenes if s.transmission}  # rough glass, water
+    assert glass == {("gaussian", 1.5), ("student-t-mixture", 1.5), ("gaussian", 1.33)}
     aniso = [s.ndf() for s in scenes if s.surface.kind == "gaussian" and s.anisotropic]
     assert any(4 <= max(n.alpha_x / n.alpha_y, n.alpha_y / n.alpha_x) <= 8 for n in aniso)
     assert any(s.anisotropic and s.surface.kind == "vgrooves" for s in scenes)

@@ -11,6 +11,8 @@ Per incidence, from the air and from inside the medium:
   Smith G on the surface's microfacet distribution (``GLASS_MODELS``): its R and T by quadrature
   (``analytic.dielectric.dielectric_albedo``) — 1 − R − T is the energy single scattering
   loses, which the traced orders ≥ 2 hold;
+* of every order, Heitz et al. 2016's dielectric random walk and Kulla & Conty 2017's
+  compensation (``MULTIPLE_MODELS``): their R and T against the traced ones;
 * verdicts of the models' BRDF and BTDF against order 1, bin by bin (``verdicts.verdict``,
   the same statistics as every verdict): where Walter's assumptions hold (single scattering,
   Smith's uncorrelated masking) they agree, and where they depart the verdict says by how
@@ -25,12 +27,17 @@ incidence to the canonical upper side, the outgoing direction to the side its lo
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 
 from microsim.analytic.dielectric import WalterDielectric, dielectric_albedo
+from microsim.analytic.energy_compensation import DielectricAlbedoTable, KullaContyDielectric
 from microsim.analytic.masking import Smith
+from microsim.analytic.random_walk import WalkNDF, dielectric_walk_bin_averages
+from microsim.bins import Bins
+from microsim.errors import UsageError
 from microsim.sim.predict import bin_average
 from microsim.vectors import spherical_deg
 
@@ -107,18 +114,57 @@ def lobe_measured(result, t: int, lobe: str) -> Measured:
     )
 
 
-def glass_study(above, inside, ndf, eta: float, inside_dir: str) -> GlassStudy:
+MULTIPLE_MODELS = ("random-walk", "kulla-conty")
+"""The models of every scattering order a glass study sets against the traced R and T:
+Heitz et al. 2016's dielectric random walk (Monte Carlo) and Kulla & Conty 2017's
+compensation added to ``walter-smith-corr-beta`` (the walk's first order)."""
+
+
+def multiple_models(ndf, eta: float, theta_i, walk_paths: int, seed: int) -> list[dict]:
+    """Per incidence ``theta_i`` (degrees, as traced), name → [R, T, se R, se T] of
+    ``MULTIPLE_MODELS`` on ``ndf`` (the walk needs a Beckmann or GGX distribution: without
+    one, none)."""
+    try:
+        WalkNDF.of(ndf)
+    except UsageError:
+        return [{} for _ in theta_i]
+    walk = dielectric_walk_bin_averages(
+        list(theta_i), Bins(1, 2), ndf, eta, n_paths=walk_paths, orders=1, seed=seed
+    )
+    single = glass_models(ndf, eta)["walter-smith-corr-beta"]
+    compensation = KullaContyDielectric(eta=eta, table=DielectricAlbedoTable.from_model(single))
+    out = []
+    for a, t in enumerate(theta_i):
+        r_ss, t_ss = dielectric_albedo(single, float(t))
+        r_ms, t_ms = compensation.albedo(float(t))
+        out.append(
+            {
+                "random-walk": [float(walk.R[a]), float(walk.T[a])]
+                + [float(walk.R_stderr[a]), float(walk.T_stderr[a])],
+                "kulla-conty": [float(r_ss + r_ms), float(t_ss + t_ms), 0.0, 0.0],
+            }
+        )
+    return out
+
+
+def glass_study(
+    above, inside, ndf, eta: float, inside_dir: str, walk_paths: int = 200_000, seed: int = 0
+) -> GlassStudy:
     """The ``GlassStudy`` of the runs ``above`` (lit from the air) and ``inside`` (from the
     medium) of one scene through a dielectric interface of index ``eta``, its models on the
-    microfacet distribution ``ndf`` (module docstring; None: no models, the energies only);
-    ``inside_dir`` names the folder the inside run is saved in. The verdicts of one study form
+    microfacet distribution ``ndf`` (module docstring; None: no models, the energies only),
+    the random walk with ``walk_paths`` paths per incidence from ``seed``; ``inside_dir``
+    names the folder the inside run is saved in. The verdicts of one study form
     one family (their false-alarm rate is shared, ``Significance.n_tests``)."""
     models = glass_models(ndf, eta) if ndf is not None else {}
     runs = [(r, t) for r in (above, inside) for t in range(len(r.theta_i))]
     significance = Significance(n_tests=max(1, len(runs) * len(LOBES) * len(models)))
+    angles = [float(r.theta_i[t]) for r, t in runs]
+    multiple = multiple_models(ndf, eta, angles, walk_paths, seed) if ndf is not None else None
     rows = []
-    for result, t in runs:
-        rows.append(_incidence(result, t, models, significance))
+    for k, (result, t) in enumerate(runs):
+        row = _incidence(result, t, models, significance)
+        rows.append(row if multiple is None else replace(row, multiple=multiple[k]))
     text = re.sub(r"(\d\.\d{3})\d+", r"\1", repr(ndf))  # the parameters to 4 digits
     return GlassStudy(eta=float(eta), ndf=text, inside=inside_dir, incidences=rows)
 

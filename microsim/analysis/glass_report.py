@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from .glass import MULTIPLE_MODELS
 from .markdown import md_table, percent
 from .study_records import GlassStudy
 from .verdicts import verdict_symbol
@@ -38,6 +39,28 @@ def glass_energy_table(study: GlassStudy) -> str:
     header = ["light", "θi", "R", "T", "R + T", "order 1: R₁ + T₁"]
     header += [f"{n}: R + T" for n in names] + ["TIR at 1st hit"]
     return md_table(header, rows)
+
+
+def _pp(model: float, traced: float) -> str:
+    """model − traced in percentage points."""
+    return percent(model - traced, 2, signed=True, unit=" pp")
+
+
+def _multiple_table(study: GlassStudy) -> str | None:
+    """Per incidence, R and T of every order traced, and each model of every order's minus
+    them (pp; the walk's own standard error beside it)."""
+    names = [n for n in MULTIPLE_MODELS if study.incidences and n in study.incidences[0].multiple]
+    if not names:
+        return None
+    rows = []
+    for g in study.incidences:
+        cells = []
+        for n in names:
+            r, t, r_se, t_se = g.multiple[n]
+            se = f" (± {percent(max(r_se, t_se), 1, unit=' pp')})" if r_se or t_se else ""
+            cells.append(f"R {_pp(r, g.reflected)}, T {_pp(t, g.transmitted)}{se}")
+        rows.append([SIDE_NAMES[g.side], f"{g.theta:g}", percent(g.reflected, 3), *cells])
+    return md_table(["light", "θi", "R traced", *(f"{n} − traced" for n in names)], rows)
 
 
 def _verdict_table(study: GlassStudy) -> str:
@@ -78,6 +101,18 @@ def glass_section(study: GlassStudy | None) -> list[str]:
         glass_energy_table(study),
         "",
     ]
+    multiple = _multiple_table(study)
+    if multiple is not None:
+        out += [
+            "Every order: Heitz et al. 2016's dielectric random walk and Kulla & Conty 2017's "
+            "compensation (added to Walter's BSDF with Heitz's height-correlated G, the walk's "
+            "first order) against the traced R and T, in percentage points of the incident "
+            "flux (the walk's R + T = 1, so its two differences are opposite; the "
+            "compensation's closes up to its table's interpolation in cos θi).",
+            "",
+            multiple,
+            "",
+        ]
     if study.incidences and study.incidences[0].verdicts:
         out += [
             f"Walter et al. 2007's BRDF and BTDF (microfacet distribution {study.ndf}) against "
@@ -124,6 +159,10 @@ def glass_index(docs) -> list[str]:
                         _verdicts_cell(symbols, names, lobe)
                         for lobe in ("reflected", "transmitted")
                     ),
+                    *(
+                        _pp(inc.multiple[m][0], inc.reflected) if m in inc.multiple else "–"
+                        for m in MULTIPLE_MODELS
+                    ),
                 ]
             )
     if not rows:
@@ -141,12 +180,16 @@ def glass_index(docs) -> list[str]:
         "form) — 1 minus it is the energy a "
         "single-scattering BSDF loses, the white-furnace number; last, the verdicts of the "
         "same models (in that order) against the traced order 1, reflected and transmitted "
-        "lobes (✓ agrees; ✗ deviates by its energy-weighted relative RMS error).",
+        "lobes (✓ agrees; ✗ deviates by its energy-weighted relative RMS error); then, of "
+        "every order, the reflectance of Heitz et al. 2016's dielectric random walk and of "
+        "Kulla & Conty 2017's compensation minus the traced R (percentage points; T differs "
+        "by the opposite).",
         "",
         md_table(
             ["scene", "light", "θi", "R", "T", "order 1: R₁ + T₁"]
             + [f"{n}: R + T" for n in names]
-            + ["BRDF verdicts", "BTDF verdicts"],
+            + ["BRDF verdicts", "BTDF verdicts"]
+            + [f"{m}: R − traced" for m in MULTIPLE_MODELS],
             rows,
         ),
         "",

@@ -381,7 +381,9 @@ class GlassIncidence(JsonRecord):
     ``single`` their sum);
     ``tir`` the paths totally internally reflected at their first interaction; per model
     (name → [R, T]) its single-scattering reflectance and transmittance; the ``verdicts``
-    of the models' BRDF and BTDF against order 1 (``Verdict``, the lobe in its model name)."""
+    of the models' BRDF and BTDF against order 1 (``Verdict``, the lobe in its model name);
+    ``multiple``: per model of every order ("random-walk", "kulla-conty") its
+    [R, T, se of R, se of T] (se 0 for a closed form), to set against R and T."""
 
     side: str
     theta: float
@@ -399,6 +401,7 @@ class GlassIncidence(JsonRecord):
     tir: float
     models: Mapping[str, Sequence[float]]
     verdicts: Sequence[Verdict]
+    multiple: Mapping[str, Sequence[float]] = field(default_factory=dict)
     _nested: ClassVar = {"verdicts": Verdict}
 
 

@@ -271,6 +271,21 @@ class DielectricAlbedoTable:
             values["stderr_" + side] = np.sqrt(e * (1.0 - e) / (n_paths - 1.0))
         return cls(mu, **values)
 
+    @classmethod
+    def from_model(cls, model) -> DielectricAlbedoTable:
+        """E± = R + T of a single-scattering dielectric BSDF ``model`` (a
+        ``dielectric.WalterDielectric``) by its quadrature (``dielectric.dielectric_albedo``,
+        ≲ 1e-5) at the table's nodes, from the air and from inside; standard errors 0."""
+        from .dielectric import dielectric_albedo
+
+        theta = np.asarray(_DIELECTRIC_NODES_DEG[::-1])
+        mu = np.cos(np.radians(theta))
+        values = {}
+        for side, angles in zip(_SIDES, (theta, 180.0 - theta)):
+            values[side] = np.array([sum(dielectric_albedo(model, float(t))) for t in angles])
+            values["stderr_" + side] = np.zeros(len(mu))
+        return cls(mu, **values)
+
     def E(self, mu, side: str):
         """E(μ) of ``side`` ("outside" | "inside") at cosines μ (absolute values taken)."""
         return np.interp(np.abs(np.asarray(mu, dtype=np.float64)), self.mu, self._values(side))

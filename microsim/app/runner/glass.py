@@ -15,7 +15,7 @@ from ...analysis.glass import glass_study
 from ...analysis.study_records import GlassStudy
 from ...checkpoints import checkpoint
 from . import tracing
-from .orders import walk_ndf
+from .orders import WALK_PATHS, walk_ndf
 
 __all__ = ["INSIDE_DIR", "trace_inside", "rough_glass"]
 
@@ -42,7 +42,10 @@ def trace_inside(plan):
 
 
 def rough_glass(plan, above, inside, specs) -> GlassStudy:
-    """The ``"glass"`` study of the runs ``above`` and ``inside`` (``analysis.glass``)."""
+    """The ``"glass"`` study of the runs ``above`` and ``inside`` (``analysis.glass``), the
+    random walk with ``orders.WALK_PATHS`` paths per incidence."""
     checkpoint("side-studies")
     ndf = walk_ndf(plan, specs) or plan.scene.ndf()
-    return glass_study(above, inside, ndf, float(plan.scene.ior.real), INSIDE_DIR)
+    eta = float(plan.scene.ior.real)
+    paths = WALK_PATHS[bool(plan.quick)]
+    return glass_study(above, inside, ndf, eta, INSIDE_DIR, walk_paths=paths, seed=plan.seed)
