@@ -17,12 +17,12 @@ size. For a Torrance–Sparrow model f = F(wi·h) D(h) G(wi, wo, h)/(4 cos θi c
   a roughness fitted to the lobe's width (``lobe_width_deg``).
 
 For Walter et al. 2007's rough dielectric BSDF (``WalterDielectric``, both lobes: ``lobes``)
-the variants are the normalisation and cosine ones (cos θo as |cos θo|, on either side), the
-roughness ones, and:
+the variants are the normalisation and cosine ones (their cos θi, cos θo the absolute
+values, on either side), the roughness ones, and:
 
-- the η² of the BTDF: f_t × η_i²/η_o² (η² missing, or the importance convention's f_t where
-  radiance's is asked, Walter et al. 2007, eq. 21) and f_t × η_o²/η_i² (the converse), η_i
-  the index on the incidence's side, η_o on the other;
+- the η² of the BTDF: f_t × η_i²/η_o² (η² missing, or the BSDF in the other convention than
+  the one checked: its adjoint f(wo, wi), Walter et al. 2007, eq. 21) and f_t × η_o²/η_i²
+  (η² applied twice), η_i the index on the incidence's side, η_o on the other;
 - Fresnel from the wrong side: for light from inside F(|wi·h|, η) for F(|wi·h|, 1/η) (the
   index not inverted with the side), and on the transmitted lobe 1 − F(|wo·h|, η_o/η_i) for
   1 − F(|wi·h|, η_o/η_i) (the refracted direction's cosine with the incident side's index);
@@ -289,15 +289,13 @@ def _dielectric_variants(model: WalterDielectric) -> list[_Variant]:
         _Variant(
             "eta2",
             "the BTDF's η² missing: f_t × η_i²/η_o² (1/η² lit from the air, η² from inside) — "
-            "or the importance (adjoint) convention's f_t(wo, wi) where the radiance "
-            "convention's is asked (Walter et al. 2007, eq. 21; convention=)",
+            "or the BSDF is in the other convention than convention= says: the adjoint "
+            "f(wo, wi), importance for radiance or the converse (Walter et al. 2007, eq. 21)",
             model=_times(model, _eta_squared(eta, 1.0)),
         ),
         _Variant(
             "eta2",
-            "an η² too many: f_t × η_o²/η_i² (η² lit from the air, 1/η² from inside) — or the "
-            "radiance convention's f_t where the importance convention's is asked "
-            "(convention=)",
+            "the BTDF's η² applied twice: f_t × η_o²/η_i² (η² lit from the air, 1/η² from inside)",
             model=_times(model, _eta_squared(eta, -1.0)),
         ),
         _Variant(
@@ -486,14 +484,14 @@ def likely_cause(
         ),
         _Variant(
             "cosine",
-            "a cosine left in: brdf ≈ model × |cos θi| (the incident cosine of the rendering "
+            "a cosine left in: brdf ≈ model × cos θi (the incident cosine of the rendering "
             "equation belongs to the integrator, not to f)",
             values=model_values * cos_i,
         ),
         _Variant(
             "cosine",
-            "a cosine left in: brdf ≈ model × |cos θo| (Mitsuba's and Cycles' eval return "
-            "f·|cos θo|; microsim wants f alone)",
+            "a cosine left in: brdf ≈ model × cos θo (Mitsuba's and Cycles' eval return "
+            "f·cos θo; microsim wants f alone)",
             model=_times(model, lambda wi, wo: np.abs(wo[..., 2])),
         ),
     ]
