@@ -12,7 +12,9 @@ cached on disk (``cache``: ``reference``, ``cache_dir``; env ``MICROSIM_CACHE``)
 own error a failure message reports too (``physics``: ``PhysicsError``,
 ``PHYSICS_REFERENCES``, the scenes to check each distribution against).
 ``assert_brdf_matches_model`` checks an implementation against microsim's closed form of the
-same model, without rays (``implementation``). ``assert_brdf_matches_measured`` judges one
+same model, without rays (``implementation``). ``assert_bsdf_matches_model`` and
+``assert_bsdf_agrees`` check a BSDF with transmission (a rough dielectric, wo on either side)
+the same way, lobe by lobe (``bsdf``). ``assert_brdf_matches_measured`` judges one
 against a measured BRDF — a MERL file, a ``microsim measure`` table — within a tolerance
 (``measured``). ``assert_sampler_matches`` is the Pearson χ²
 harness for importance samplers (``sampler``).
@@ -36,6 +38,8 @@ _WHERE = {
     "find_scene": "cache",
     "ENV_VAR": "cache",
     "assert_brdf_matches_model": "implementation",
+    "assert_bsdf_matches_model": "bsdf",
+    "assert_bsdf_agrees": "bsdf",
     "assert_brdf_matches_measured": "measured",
     "measured_reference": "measured",
     "assert_sampler_matches": "sampler",

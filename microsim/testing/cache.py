@@ -58,6 +58,7 @@ from microsim.app.scene import Scene, incidence_pairs, load_scene, resolve_scene
 from microsim.errors import UsageError
 from microsim.sim import Bins, Result, simulate
 from microsim.sim.auto import simulate_auto
+from microsim.sim.dielectric import check_transmission
 from microsim.sim.identity import RunDescription, canonical_json
 from microsim.sim.result import META, NPZ
 from microsim.sim.tallies import STDERR_RULE
@@ -137,7 +138,9 @@ class Reference:
     the auto ``target``/``max_rays``, a ``label`` for messages (scene file or surface) and the
     surfaces' ``ensemble_ndf`` (the analytic NDF their generator samples, or None: file, flat,
     oriented V-grooves; ``Surface.ensemble_ndf``, ``Scene.ndf``) and ``exact_shadowing`` (the
-    shadowing kind exact on them: "vgroove", "none", or None for heightfields)."""
+    shadowing kind exact on them: "vgroove", "none", or None for heightfields);
+    ``transmission``: traced through a dielectric interface (``simulate(...,
+    transmission=True)``, single scattering), θi in (90, 180] lit from inside the medium."""
 
     fingerprints: tuple[str, ...]
     azimuth_average: tuple[bool, ...]
@@ -153,6 +156,7 @@ class Reference:
     label: str
     ensemble_ndf: object = None
     exact_shadowing: str | None = None
+    transmission: bool = False
 
     @cached_property
     def surfaces(self) -> tuple:
@@ -182,6 +186,7 @@ class Reference:
                 "azimuth_average": list(self.azimuth_average),
             },
             realisations=len(self.fingerprints),
+            transmission=self.transmission,
         )
 
     def description(self) -> dict:
@@ -212,15 +217,18 @@ def _bins(bins, default: Bins) -> Bins:
     raise UsageError(f"bins must be a microsim.sim.Bins or (n_theta, n_phi), got {bins!r}")
 
 
-def _theta(theta_i) -> tuple[float, ...]:
+def _theta(theta_i, transmission: bool = False) -> tuple[float, ...]:
+    """The incidences: in [0, 90), or with ``transmission`` also (90, 180] (from inside)."""
     try:
         th = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
     except (TypeError, ValueError):
         th = np.array([np.nan])
-    if th.ndim != 1 or th.size == 0 or not np.all((th >= 0) & (th < 90)):
+    top = 180.0 if transmission else 90.0
+    if th.ndim != 1 or th.size == 0 or not np.all((th >= 0) & (th <= top) & (th != 90)):
         raise UsageError(
-            f"theta_i must be one or more incidence angles in degrees, each in [0, 90), "
-            f"got {theta_i!r}"
+            "theta_i must be one or more incidence angles in degrees, each in [0, 90)"
+            + (" or (90, 180] (from inside the medium)" if transmission else "")
+            + f", got {theta_i!r}"
         )
     return tuple(float(t) for t in th)
 
@@ -255,6 +263,7 @@ def resolve_reference(
     target: float = AUTO_TARGET,
     max_rays: int = AUTO_MAX_RAYS,
     realisations: int | None = None,
+    transmission: bool = False,
 ) -> Reference:
     """Validate the arguments of ``reference``/``assert_brdf_agrees`` into a ``Reference``.
 
@@ -269,7 +278,9 @@ def resolve_reference(
     (= ``microsim.analysis.budget.MIN_AUTO``, 8) — the runner's pilot rule, which may choose
     more, is not run here. For a Surface, ``material`` (name, n, n + ik, None =
     mirror) and ``theta_i`` are required, ``phi_i`` defaults to 0 and ``bins`` to ``Bins()``.
-    ``phi_i`` given: a scalar or one azimuth per θi (degrees, the surface frame)."""
+    ``phi_i`` given: a scalar or one azimuth per θi (degrees, the surface frame).
+    ``transmission=True`` (``assert_bsdf_agrees``): through the dielectric interface of a real
+    index ``material``, θi also in (90, 180], a fixed ray count."""
     if realisations is not None and (
         isinstance(realisations, bool)
         or not isinstance(realisations, (int, np.integer))
@@ -285,7 +296,11 @@ def resolve_reference(
         source = _surfaces_source(surface_or_scene, realisations, material, theta_i, phi_i)
     eta = resolve_material(source.material)
     _check_budget(seed, rays, target, max_rays)
-    theta = _theta(source.theta_i)
+    if transmission:
+        check_transmission(True, eta)
+        if rays == "auto":
+            raise UsageError("rays must be an integer >= 1000 with transmission, got 'auto'")
+    theta = _theta(source.theta_i, transmission)
     return Reference(
         fingerprints=source.fingerprints,
         azimuth_average=source.azimuth_average,
@@ -301,6 +316,7 @@ def resolve_reference(
         label=source.label,
         ensemble_ndf=source.ensemble_ndf,
         exact_shadowing=source.exact_shadowing,
+        transmission=bool(transmission),
     )
 
 
@@ -493,6 +509,7 @@ def _trace(ref: Reference, threads) -> Result:
             bins=ref.bins,
             seed=ref.seed,
             threads=threads,
+            transmission=ref.transmission,
         )
     rays = _auto_rays(ref, threads) if ref.rays == "auto" else ref.rays
     return simulate(
@@ -505,6 +522,7 @@ def _trace(ref: Reference, threads) -> Result:
         seed=ref.seed,
         threads=threads,
         realisations=list(ref.surfaces),
+        transmission=ref.transmission,
     )
 
 

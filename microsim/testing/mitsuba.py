@@ -31,6 +31,7 @@ import numpy as np
 
 from microsim import checks as _checks
 from microsim.analytic.brdf import TorranceSparrow
+from microsim.analytic.dielectric import WalterDielectric
 from microsim.analytic.masking import Smith
 from microsim.analytic.ndf import GGX, WALTER_2007, Beckmann
 from microsim.app.bench_peer import PeerUnavailable, load_mitsuba
@@ -41,6 +42,7 @@ __all__ = [
     "mitsuba_sampler",
     "mitsuba_model",
     "MitsubaBRDF",
+    "MODES",
     "DEFAULT_CHANNEL",
     "ALPHA_MIN",
 ]
@@ -122,16 +124,25 @@ def _one(value, channel: int) -> np.ndarray:
     return a[channel] if a.ndim == 2 else a
 
 
+MODES = ("radiance", "importance")
+"""Mitsuba's ``TransportMode`` by microsim's names (``testing.bsdf.CONVENTIONS``)."""
+
+
 @dataclass(frozen=True)
 class MitsubaBRDF:
-    """A Mitsuba BSDF as microsim's BRDF f(wi, wo): (N, 3) unit vectors away from the surface
-    (wi towards the light, wo towards the viewer, z the normal) → N values in sr⁻¹ without
-    the cosine, channel ``channel``; 0 where either direction is at or below the horizon.
-    One ``eval`` per call: si.wi = wo, Mitsuba's wo = wi, f = eval / cos θi (θi of the float32
-    direction Mitsuba saw)."""
+    """A Mitsuba BSDF as microsim's f(wi, wo): (N, 3) unit vectors away from the surface
+    (wi towards the light, wo towards the viewer, z the normal, the medium of a dielectric
+    below) → N values in sr⁻¹ without the cosine, channel ``channel``; 0 where either
+    direction is on the horizon (and, as Mitsuba's eval is, below it for a one-sided BSDF such
+    as ``roughconductor``). One ``eval`` per call in Mitsuba's ``TransportMode`` ``mode``
+    ("radiance" or "importance"): si.wi = wo, Mitsuba's wo = wi, f = eval / |cos θi| (θi of
+    the float32 direction Mitsuba saw). A ``roughdielectric`` in "radiance" mode is then
+    microsim's radiance-convention BSDF, in "importance" mode its adjoint f(wo, wi)
+    (``testing.bsdf``, ``convention="importance"``)."""
 
     bsdf: object
     channel: int = DEFAULT_CHANNEL
+    mode: str = "radiance"
 
     def __call__(self, wi, wo):
         mi, dr, _ = load_mitsuba()
@@ -142,16 +153,20 @@ class MitsubaBRDF:
         light, cos_light = _vectors(mi, wi)
         viewer, cos_viewer = _vectors(mi, wo)
         si = _viewers(mi, dr, viewer, len(wi))
-        value = _one(self.bsdf.eval(mi.BSDFContext(), si, light), self.channel)
-        up = (cos_light > 0.0) & (cos_viewer > 0.0)
-        return np.where(up, value / np.where(up, cos_light, 1.0), 0.0)
+        mode = mi.TransportMode.Radiance if self.mode == "radiance" else mi.TransportMode.Importance
+        value = _one(self.bsdf.eval(mi.BSDFContext(mode), si, light), self.channel)
+        ok = (cos_light != 0.0) & (cos_viewer != 0.0)
+        return np.where(ok, value / np.where(ok, np.abs(cos_light), 1.0), 0.0)
 
 
-def mitsuba_brdf(bsdf, channel: int = DEFAULT_CHANNEL) -> MitsubaBRDF:
+def mitsuba_brdf(bsdf, channel: int = DEFAULT_CHANNEL, mode: str = "radiance") -> MitsubaBRDF:
     """The Mitsuba BSDF ``bsdf`` (an ``mi.BSDF`` or a dict for ``mi.load_dict``) as microsim's
-    vectorised f(wi, wo) (``MitsubaBRDF``), one RGB ``channel``."""
+    vectorised f(wi, wo) (``MitsubaBRDF``), one RGB ``channel``, evaluated in Mitsuba's
+    transport ``mode`` ("radiance", its default, or "importance")."""
     _, _, loaded = _load(bsdf)
-    return MitsubaBRDF(loaded, _channel(channel))
+    if mode not in MODES:
+        raise UsageError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    return MitsubaBRDF(loaded, _channel(channel), mode)
 
 
 def mitsuba_sampler(bsdf, wi, channel: int = DEFAULT_CHANNEL):
@@ -194,11 +209,12 @@ def mitsuba_sampler(bsdf, wi, channel: int = DEFAULT_CHANNEL):
 
 
 def _parameters(mi, loaded) -> dict:
-    """{name: float32 values as float64 array} of the BSDF's uniform parameters."""
+    """{name: float32 values as float64 array} of the BSDF's uniform parameters (a texture's
+    ``.value``, or a plain float such as roughdielectric's ``eta``)."""
     out = {}
     for key, value in mi.traverse(loaded).items():
-        name, _, kind = key.partition(".")
-        if kind != "value":
+        name, dot, kind = key.partition(".")
+        if dot and kind != "value":
             raise UsageError(
                 f"bsdf: mitsuba_model needs constant parameters; {name!r} is a texture ({key})"
             )
@@ -214,39 +230,66 @@ def _setting(text: str, name: str) -> str:
     return found.group(1)
 
 
-def mitsuba_model(bsdf, channel: int = DEFAULT_CHANNEL) -> TorranceSparrow:
-    """microsim's closed form of the ``roughconductor`` ``bsdf`` (its ``channel``):
-    ``TorranceSparrow(ndf, Smith(correlated=False, ...), material)`` — Mitsuba's Smith G is
-    separable, G1(wi)G1(wo) — with
+def _distribution(loaded, alpha: float):
+    """(ndf, Smith G) of the plugin's ``distribution``: Mitsuba's separable Smith G, with the
+    rational G1 of Walter et al. 2007 (eq. 27) for Beckmann."""
+    if _setting(str(loaded), "distribution") == "ggx":
+        return GGX(alpha), Smith(correlated=False)
+    return Beckmann(alpha), Smith(correlated=False, lambda_method=WALTER_2007)
 
-    * ``distribution`` "ggx": ``GGX(α)`` and the exact Smith Λ (Mitsuba's G1 is exact);
-    * "beckmann": ``Beckmann(α)`` (Mitsuba's α is the RMS slope, microsim's m) and the Λ of
-      Walter et al. 2007's rational G1, eq. 27 (``lambda_method="walter2007"``), which is
-      what Mitsuba evaluates;
-    * α the plugin's float32 value, at least ``ALPHA_MIN``; material the plugin's (η, k) in
-      that channel: η + ik, or None (a mirror, F = 1) for η = 0 (material "none").
 
-    Isotropic roughness only (alpha_u ≠ alpha_v: UsageError), no ``specular_reflectance``
-    factor other than 1, constant parameters only; other plugins: UsageError.
-    """
-    mi, _, loaded = _load(bsdf)
-    channel = _channel(channel)
-    if loaded.class_name() != "RoughConductor":
-        raise UsageError(
-            f"bsdf: mitsuba_model knows Mitsuba's roughconductor only, got {loaded.class_name()}"
-        )
-    params = _parameters(mi, loaded)
+def _isotropic_alpha(params) -> float:
     if "alpha" not in params:
         raise UsageError(
             f"bsdf: mitsuba_model needs isotropic roughness (alpha), got alpha_u = "
             f"{params['alpha_u'][0]:g}, alpha_v = {params['alpha_v'][0]:g}"
         )
-    reflectance = params.get("specular_reflectance", np.ones(1))
-    if np.any(reflectance != 1.0):
+    return max(float(params["alpha"][0]), float(np.float32(ALPHA_MIN)))
+
+
+def _unit_factors(params, names) -> None:
+    for key in names:
+        factor = params.get(key, np.ones(1))
+        if np.any(factor != 1.0):
+            raise UsageError(f"bsdf: mitsuba_model has no {key} factor (got {factor.tolist()})")
+
+
+def mitsuba_model(bsdf, channel: int = DEFAULT_CHANNEL):
+    """microsim's closed form of the ``roughconductor`` or ``roughdielectric`` ``bsdf`` (its
+    ``channel``), with Mitsuba's separable Smith G, G1(wi)G1(wo), and
+
+    * ``distribution`` "ggx": ``GGX(α)`` and the exact Smith Λ (Mitsuba's G1 is exact);
+    * "beckmann": ``Beckmann(α)`` (Mitsuba's α is the RMS slope, microsim's m) and the Λ of
+      Walter et al. 2007's rational G1, eq. 27 (``lambda_method="walter2007"``), which is
+      what Mitsuba evaluates;
+    * α the plugin's float32 value, at least ``ALPHA_MIN``.
+
+    ``roughconductor``: ``TorranceSparrow(ndf, Smith(correlated=False, ...), material)``, the
+    material the plugin's (η, k) in that channel: η + ik, or None (a mirror, F = 1) for η = 0
+    (material "none"). ``roughdielectric``: ``WalterDielectric(ndf, Smith(correlated=False,
+    ...), eta)`` with η = int_ior/ext_ior, the plugin's float32 relative index (Mitsuba's
+    interior is microsim's medium below; the default ext_ior is air's 1.000277, so η =
+    1.5046/1.000277 unless both are given), in the radiance convention of Mitsuba's default
+    ``TransportMode.Radiance``.
+
+    Isotropic roughness only (alpha_u ≠ alpha_v: UsageError), no ``specular_reflectance`` or
+    ``specular_transmittance`` factor other than 1, constant parameters only; other plugins:
+    UsageError.
+    """
+    mi, _, loaded = _load(bsdf)
+    channel = _channel(channel)
+    kind = loaded.class_name()
+    if kind not in ("RoughConductor", "RoughDielectric"):
         raise UsageError(
-            f"bsdf: mitsuba_model has no specular_reflectance factor (got {reflectance.tolist()})"
+            f"bsdf: mitsuba_model knows Mitsuba's roughconductor and roughdielectric only, got "
+            f"{kind}"
         )
-    alpha = max(float(params["alpha"][0]), float(np.float32(ALPHA_MIN)))
+    params = _parameters(mi, loaded)
+    ndf, masking = _distribution(loaded, _isotropic_alpha(params))
+    if kind == "RoughDielectric":
+        _unit_factors(params, ("specular_reflectance", "specular_transmittance"))
+        return WalterDielectric(ndf, masking, float(params["eta"][0]))
+    _unit_factors(params, ("specular_reflectance",))
 
     def pick(values):
         return float(values[channel] if values.size == 3 else values[0])
@@ -255,9 +298,4 @@ def mitsuba_model(bsdf, channel: int = DEFAULT_CHANNEL) -> TorranceSparrow:
     if eta < 0.0 or k < 0.0:
         raise UsageError(f"bsdf: eta and k must be >= 0 for microsim's Fresnel, got {eta}, {k}")
     material = None if eta == 0.0 else complex(eta, k)
-    distribution = _setting(str(loaded), "distribution")
-    if distribution == "ggx":
-        return TorranceSparrow(GGX(alpha), Smith(correlated=False), material)
-    return TorranceSparrow(
-        Beckmann(alpha), Smith(correlated=False, lambda_method=WALTER_2007), material
-    )
+    return TorranceSparrow(ndf, masking, material)
