@@ -172,3 +172,33 @@ def test_the_bench_measures_the_dielectric_path_against_the_peer(mitsuba):
     text = _check_interface_figures(di, peer=True)
     assert "Mitsuba peer paths/s" in text
     assert all(line.rays_per_path > 1 for line in di.incidences)
+
+
+def test_rays_that_surely_leave_are_not_traced_and_change_nothing(monkeypatch, tile):
+    """``dielectric.trace_uncleared``: a continuing ray leaving the surface on its own side
+    more steeply than the steepest facet gets its walk's status without a walk — most of the
+    paths refracted into the glass at 30° — and every number stays bitwise that of tracing
+    every ray (``Tracer.surely_escapes`` switched off)."""
+    from microsim.sim.tracer import Tracer
+
+    traced = []
+    trace_columns = Tracer.trace_columns
+
+    def counting(self, x, *args, **kwargs):
+        traced[-1] += len(x[0])
+        return trace_columns(self, x, *args, **kwargs)
+
+    def run():
+        traced.append(0)
+        kw = dict(transmission=True, bounces="all", rays=20_000, bins=Bins(9, 7), seed=3)
+        return simulate(tile, ETA, [30.0, 150.0], **kw)
+
+    monkeypatch.setattr(Tracer, "trace_columns", counting)
+    fast = run()
+    monkeypatch.setattr(Tracer, "surely_escapes", lambda self, dx, dy, dz: np.zeros(len(dx), bool))
+    every = run()
+    assert traced[0] < 0.6 * traced[1], traced
+    for name in ("brdf_orders", "btdf_orders", "stderr_orders", "stderr_btdf_orders"):
+        np.testing.assert_array_equal(getattr(fast, name), getattr(every, name))
+    for key, counts in every.ledger_counts.items():
+        np.testing.assert_array_equal(fast.ledger_counts[key], counts)
