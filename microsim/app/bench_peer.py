@@ -645,7 +645,8 @@ class PeerScene:
         """Per facet, for the primary rays (direction −wi, one per incidence): whether it is
         met from the side the light comes from, the exact Fresnel reflectance F of the
         crossing (``microsim.analytic.fresnel``, float64; 1 at total internal reflection),
-        the reflected and the refracted (Snell) directions — as Dr.Jit arrays."""
+        the reflected and the refracted (Snell) directions, the facet normals — as Dr.Jit
+        arrays."""
         from microsim.analytic.fresnel import fresnel_real_arithmetic
 
         mi = self.mi
@@ -666,14 +667,8 @@ class PeerScene:
         def vec(a):
             return mi.Vector3f(*(mi.Float(a[:, k].astype(np.float32)) for k in range(3)))
 
-        normals = vec(n)
-        return (
-            mi.Bool(valid),
-            mi.Float(fresnel.astype(np.float32)),
-            vec(reflected),
-            vec(refracted),
-            normals,
-        )
+        fresnel32 = mi.Float(fresnel.astype(np.float32))
+        return mi.Bool(valid), fresnel32, vec(reflected), vec(refracted), vec(n)
 
     def _interface_batch(self, op, iface, lo, n, table, bins, tallies) -> int:
         """Follow paths lo … lo + n − 1 (lo even) through the interface, add them to the

@@ -491,9 +491,10 @@ def _throughput_lines(b: Bench) -> list[str]:
     return lines
 
 
-def _marginal_lines(mg: Marginal | None, title: str = "", unit: str = "samples/s") -> list[str]:
+def _marginal_lines(mg: Marginal | None, title: str = "", per: str = "rays") -> list[str]:
     """``format_bench``'s lines for ``marginal_throughput``'s figures (none without them):
-    ``title`` before the ray counts, rates in ``unit``."""
+    ``title`` before the two call sizes, counted in ``per`` ("rays": rates in samples/s; or
+    "paths": paths/s)."""
     if not mg:
         return []
     n1, n2 = mg.rays
@@ -506,7 +507,8 @@ def _marginal_lines(mg: Marginal | None, title: str = "", unit: str = "samples/s
             + f"   (fixed per call {fig[1].fixed_seconds:.3f}, {fig[2].fixed_seconds:.3f} s)"
         )
 
-    lines = [f"{title}marginal, {n1:,} → {n2:,} rays:", row(f"  pipeline {unit}", mg.pipeline)]
+    unit = "samples/s" if per == "rays" else f"{per}/s"
+    lines = [f"{title}marginal, {n1:,} → {n2:,} {per}:", row(f"  pipeline {unit}", mg.pipeline)]
     if mg.peer:
         lines.append(row(f"  Mitsuba peer {unit}", mg.peer))
         if None not in mg.ratio.values():
@@ -522,7 +524,7 @@ def _interface_lines(di: InterfaceThroughput | None) -> list[str]:
     for line in di.incidences:
         side = "from inside the medium" if line.theta_i > 90.0 else "from the air"
         title = f"dielectric path θi = {line.theta_i:g}° ({side}, η = {di.eta:g}), "
-        lines += _marginal_lines(line.marginal, title, "paths/s")
+        lines += _marginal_lines(line.marginal, title, "paths")
         if line.rays_per_path is not None:
             lines.append(
                 f"  (bounces={di.bounces}; the peer traced {line.rays_per_path:.3f} rays/path)"
