@@ -21,7 +21,7 @@ STAGES = {
     "  of which Embree walks (Tracer.trace_columns, primaries too)": (Tracer, "trace_columns"),
     "  of which re-traced grazing rays": (bounces, "resolve_grazing"),
     "interface step (Fresnel, roulette, new rays)": (dielectric_kernels, "interface_step"),
-    "binning the escapes (Bins.locate_xyz)": (dielectric, "bin_escapes"),
+    "binning the escapes": (dielectric, "bin_side_escapes"),
     "tallies (split_order_tallies)": (tallies, "split_order_tallies"),
     "a thread task (origins + the paths)": (dielectric.DielectricPath, "follow"),
 }

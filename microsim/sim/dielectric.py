@@ -54,7 +54,8 @@ from .bounces import (
 )
 from .dielectric_kernels import Interface, PathSides, Roulette, SideEscapes
 from .engine import segments
-from .engine.codes import ESCAPED, MISSED
+from .engine.codes import ESCAPED, MISSED, SINGLE
+from .ray_bins import locate_single
 from .ray_columns import columns
 from .scratch import WorkArray, WorkColumns
 from .streams import block_span
@@ -95,6 +96,7 @@ class InterfaceOutcome(NamedTuple):
 _ESCAPE = WorkArray("interface-escape", np.int64)
 _ESCAPE_DIRECTION = WorkColumns("interface-escape-direction")
 _ESCAPE_SIDE = WorkArray("interface-escape-side", np.bool_)
+_ESCAPE_BIN = WorkArray("interface-escape-bin", np.int64)
 
 
 def check_transmission(transmission, ior) -> bool:
@@ -190,13 +192,28 @@ def trace_dielectric(
         if e:
             order = min(b - 1, slots) - 1
             offset = (esc.transmitted[:e] * slots + order) * chain.nbin
-            bin_escapes(bins, esc.index[:e], [c[:e] for c in esc[1:4]], phi, offset, out.where)
+            bin_side_escapes(bins, esc, e, phi, offset, out.where)
         if m == 0:
             break
         live, w, d, (hs, prim, p) = trace_uncleared(tracer, nxt, m, sides.inside)
         shared = False
         b += 1
     return out
+
+
+def bin_side_escapes(bins: Bins, esc: SideEscapes, e: int, phi, offset, where) -> None:
+    """``bounces.bin_escapes`` of the first ``e`` escapes of ``esc`` (directions in the upper
+    hemisphere, flipped up when they left downward): with one incident azimuth ``phi`` on a
+    folded grid by ``ray_bins.locate_single`` (compiled and vectorised, ``Bins.locate``'s bin
+    for every direction, ties on an edge included), else by ``Bins.locate``."""
+    rows, wo = esc.index[:e], [c[:e] for c in esc[1:4]]
+    if not (bins.folded and np.ndim(phi) == 0):
+        bin_escapes(bins, rows, wo, phi, offset, where)
+        return
+    found = _ESCAPE_BIN(e)
+    every = np.full(e, SINGLE, dtype=np.int8)  # locate_single bins the SINGLE rows
+    locate_single(bins, every, wo, float(phi), None, found)
+    where[rows] = offset + found
 
 
 def trace_uncleared(tracer: Tracer, nxt, m: int, inside: np.ndarray) -> tuple:
