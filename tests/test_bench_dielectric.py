@@ -174,13 +174,22 @@ def test_the_bench_measures_the_dielectric_path_against_the_peer(mitsuba):
     assert all(line.rays_per_path > 1 for line in di.incidences)
 
 
-def test_rays_that_surely_leave_are_not_traced_and_change_nothing(monkeypatch, tile):
+@pytest.mark.parametrize("surface_name", ["tile", "flat"])
+def test_the_dielectric_shortcuts_change_nothing(monkeypatch, tile, surface_name):
     """``dielectric.trace_uncleared``: a continuing ray leaving the surface on its own side
     more steeply than the steepest facet gets its walk's status without a walk — most of the
-    paths refracted into the glass at 30° — and every number stays bitwise that of tracing
-    every ray (``Tracer.surely_escapes`` switched off)."""
+    paths refracted into the glass at 30° — and ``dielectric.bin_side_escapes`` bins the
+    escapes by the single bounce's vectorised binning; every number stays bitwise that of
+    tracing every ray (``Tracer.surely_escapes`` switched off) and binning by
+    ``Bins.locate`` (on the flat interface every escape lies on a Δφ edge or at the
+    zenith)."""
+    from microsim.sim import bounces, dielectric
     from microsim.sim.tracer import Tracer
+    from microsim.surfaces import flat
 
+    surface, incidences = (
+        (tile, [30.0, 150.0]) if surface_name == "tile" else (flat(1.0), [0.0, 60.0, 150.0])
+    )
     traced = []
     trace_columns = Tracer.trace_columns
 
@@ -191,13 +200,19 @@ def test_rays_that_surely_leave_are_not_traced_and_change_nothing(monkeypatch, t
     def run():
         traced.append(0)
         kw = dict(transmission=True, bounces="all", rays=20_000, bins=Bins(9, 7), seed=3)
-        return simulate(tile, ETA, [30.0, 150.0], **kw)
+        return simulate(surface, ETA, incidences, **kw)
 
     monkeypatch.setattr(Tracer, "trace_columns", counting)
     fast = run()
     monkeypatch.setattr(Tracer, "surely_escapes", lambda self, dx, dy, dz: np.zeros(len(dx), bool))
+
+    def by_locate(bins, esc, e, phi, offset, where):
+        bounces.bin_escapes(bins, esc.index[:e], [c[:e] for c in esc[1:4]], phi, offset, where)
+
+    monkeypatch.setattr(dielectric, "bin_side_escapes", by_locate)
     every = run()
-    assert traced[0] < 0.6 * traced[1], traced
+    if surface_name == "tile":
+        assert traced[0] < 0.6 * traced[1], traced
     for name in ("brdf_orders", "btdf_orders", "stderr_orders", "stderr_btdf_orders"):
         np.testing.assert_array_equal(getattr(fast, name), getattr(every, name))
     for key, counts in every.ledger_counts.items():
