@@ -591,7 +591,7 @@ def warm_up() -> None:
                 bounces=bounces,
             )
     for threads in (1, 2):  # the dielectric path, from the air and from inside
-        simulate(hf, 1.5, [30.0, 150.0], rays=BLOCK, bins=Bins(45, 37), threads=threads,
+        simulate(hf, GLASS, [30.0, 150.0], rays=BLOCK, bins=Bins(45, 37), threads=threads,
                  transmission=True, bounces="all")  # fmt: skip
 
 

@@ -72,6 +72,7 @@ __all__ = [
     "roulette_stream",
     "trace_dielectric",
     "trace_uncleared",
+    "bin_side_escapes",
     "DielectricPath",
 ]
 
