@@ -31,6 +31,10 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   the per-call set-up with its tracer reused, the facet table; the peer's: its facet table
   in NumPy and its Dr.Jit launches). The speed target is set on this ratio, since the
   whole-run ratio above mixes each side's fixed cost into its rate;
+* the dielectric path (``interface_throughput``): ``simulate(..., transmission=True,
+  bounces="all")`` with glass (η = ``GLASS``) at θi and at 180° − θi (the same angle from
+  inside the glass) against its Mitsuba peer (``bench_peer.PeerScene.run_dielectric``: the
+  same estimator), marginal paths/s and fixed cost per call as ``marginal_throughput``;
 * the pipeline's samples/s with every scattering order traced (``bounces="all"``) beside
   ``bounces=1``, alternating, best of three;
 * GGX surfaces (``ggx_surface_cost``): samples/s on a GGX heightfield of the same grid
@@ -81,6 +85,8 @@ from .bench_report import (
     FixedCost,
     FoldedFull,
     GGXSurfaceCost,
+    InterfaceLine,
+    InterfaceThroughput,
     Machine,
     Marginal,
     MarginalLine,
@@ -95,6 +101,7 @@ __all__ = [
     "bench_config",
     "throughput",
     "marginal_throughput",
+    "interface_throughput",
     "azimuth_cost",
     "build_times",
     "peak_rss_mb",
@@ -323,6 +330,58 @@ def marginal_throughput(
     return Marginal.of(list(sizes), pipe, ours, reason)
 
 
+GLASS = 1.5
+"""The index of the medium of ``interface_throughput``'s dielectric path (air → glass)."""
+
+
+def interface_throughput(
+    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3, peer=None
+) -> InterfaceThroughput:
+    """The dielectric path against its Mitsuba peer: marginal paths/s and fixed cost per call
+    of ``simulate(surface, GLASS, θi, transmission=True, bounces="all")`` (its tracer reused)
+    and of ``PeerScene.run_dielectric`` (the same estimator, its scene built once) at θi =
+    ``cfg.theta_i`` (air → glass) and 180° − θi (the same angle from inside the glass), on 1
+    and 2 threads: whole calls at ``rays``/4 and ``rays`` paths, alternating, best of
+    ``repeat`` each, as ``marginal_throughput``. ``peer``: as ``throughput``'s."""
+    from microsim.sim import simulate
+
+    surface = surface if surface is not None else _surface(cfg)
+    scene, reason = _peer(surface, cfg) if peer is None else peer
+    sizes = (max(2, cfg.rays // 4), max(2, cfg.rays))
+    lines = []
+    for theta in (cfg.theta_i, 180.0 - cfg.theta_i):
+        if scene is not None:  # compiles the peer's kernel (once per process)
+            scene.run_dielectric(GLASS, theta, min(cfg.rays, 2**16), _bins(), threads=1)
+        best_pipe, best_peer = ({t: dict.fromkeys(sizes, np.inf) for t in THREADS} for _ in "ab")
+        per_path = None
+        for rep in range(repeat):
+            for threads in THREADS:
+                for n in sizes:
+                    t0 = time.perf_counter()
+                    simulate(
+                        surface,
+                        GLASS,
+                        theta,
+                        rays=n,
+                        bins=_bins(),
+                        threads=threads,
+                        transmission=True,
+                        bounces="all",
+                    )
+                    dt = time.perf_counter() - t0
+                    best_pipe[threads][n] = min(best_pipe[threads][n], dt)
+                    if scene is not None:
+                        r = scene.run_dielectric(
+                            GLASS, theta, n, _bins(), seed=1 + rep, threads=threads
+                        )
+                        best_peer[threads][n] = min(best_peer[threads][n], r.seconds)
+                        per_path = r.segments
+        pipe = {t: MarginalLine.through(best_pipe[t]) for t in THREADS}
+        ours = None if scene is None else {t: MarginalLine.through(best_peer[t]) for t in THREADS}
+        lines.append(InterfaceLine(theta, Marginal.of(list(sizes), pipe, ours, reason), per_path))
+    return InterfaceThroughput(GLASS, "all", lines)
+
+
 def bounce_throughput(
     cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3
 ) -> BounceThroughput:
@@ -503,7 +562,8 @@ def time_to_accuracy(
 
 def warm_up() -> None:
     """Run every trace path the bench times once, on small surfaces of their own (tabled and
-    traced heightfield paths, the traced and the exact V-groove paths, one bounce and all),
+    traced heightfield paths, the traced and the exact V-groove paths, one bounce and all, the
+    dielectric path from the air and from inside),
     so that no timed figure includes a numba compilation: a process compiles each kernel once
     (seconds after an edit of the sources; docs/performance.md, "First-run compilation") and
     then loads it from its cache, a per-process cost, not a per-call one."""
@@ -530,6 +590,9 @@ def warm_up() -> None:
                 masking=masking,
                 bounces=bounces,
             )
+    for threads in (1, 2):  # the dielectric path, from the air and from inside
+        simulate(hf, GLASS, [30.0, 150.0], rays=BLOCK, bins=Bins(45, 37), threads=threads,
+                 transmission=True, bounces="all")  # fmt: skip
 
 
 def machine() -> Machine:
@@ -584,6 +647,7 @@ def run_bench(cfg: BenchConfig = BenchConfig()) -> Bench:
         bounces=bounce_throughput(cfg, surface),
         full_azimuth=azimuth_cost(cfg, surface),
         ggx_surface=ggx_surface_cost(cfg, surface),
+        dielectric=interface_throughput(cfg, surface, peer=peer),
         peak_rss_mb={int(r): peak_rss_mb(cfg, r) for r in cfg.memory_rays},
         time_to_accuracy=None if cfg.skip_accuracy else time_to_accuracy(cfg),
         time_to_accuracy_traced=None

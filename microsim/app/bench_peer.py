@@ -55,6 +55,34 @@ The peer's approximations (where it is *not* the same as microsim):
   coordinate of the tiled scene (microsim: 2 ulp of one tile, projected onto the facet plane
   first in float64).
 
+Dielectric paths (``PeerScene.run_dielectric``, ``mitsuba_dielectric``): the same estimator
+as ``simulate(..., transmission=True)`` (``microsim.sim.dielectric``; docs/dielectric.md). Air
+(index 1) above the surface, a medium of real index η below; light from above (θi < 90°) or
+from inside (θi in (90, 180]: primary rays start under the relief, z = zmin − margin).
+
+* Primary rays: stratified origins and closest hit as above; per facet (one direction per
+  incidence, so computed once in NumPy, float64) whether it is met from the light's side, the
+  exact unpolarised Fresnel reflectance F of the crossing (``microsim.analytic.fresnel``, 1 at
+  total internal reflection), the mirror and the refracted (Snell) directions. A facet met
+  from the other side ends the path as ``unresolved``, no hit as ``missed``.
+* Russian roulette, as microsim: reflect with probability F, refract otherwise, the weight
+  staying 1 (a uniform of the ray's PCG32 stream per interaction).
+* Continuation, per ray (its direction is its own) in one Dr.Jit loop (``dr.while_loop``,
+  symbolic: one kernel): closest hit from the start, offset ``eps`` off the facet to the new
+  ray's side and moved by whole tiles into the centre copy (the surface is periodic, so the
+  copies hold every ray that stays between zmin and zmax up to θ = ``MASKING_CAP_DEG``); at a
+  hit c = −d·n must say the path's side (else ``unresolved``), F and the new direction from
+  Mitsuba's own ``mi.fresnel``, ``mi.reflect``, ``mi.refract`` (float32); after ``bounces``
+  interactions a further hit ends the path as ``cut``. A ray without a hit leaves the relief
+  up or down: tallied as reflected (the incidence's side) or transmitted if it leaves from the
+  side the path is on (else a leak, ``missed``) and its exit from the relief lies over the
+  copies (else ``unresolved``: it might have met a copy beyond them).
+* Tallies: reflected and transmitted bins (``bins``, θo from the pole of the side the path
+  leaves by, Δφ of the direction itself; binned in Dr.Jit, float32), paired-strata standard
+  errors as above; R and T the fractions of the paths, with their paired-strata errors.
+
+The ledger (``INTERFACE_LEDGER``): reflected, transmitted, cut, unresolved, missed.
+
 Instruction set: Dr.Jit compiles the peer's kernels for the host CPU at its widest vector
 width (16 lanes with AVX-512, 8 with AVX2). ``MICROSIM_PEER_LLVM_CPU`` (an LLVM CPU name, e.g.
 ``haswell``) pins them to that CPU at 8 lanes, AVX2 and FMA (Dr.Jit's ``jit_llvm_set_target``),
@@ -63,10 +91,11 @@ takes its AVX2 path on an AVX-512 machine (docs/performance.md); ``llvm_target``
 target in use. Embree's own kernels, inside Mitsuba and inside microsim, still choose theirs
 from the host.
 
-Timing (``peer_throughput``): marginal samples/s (a sample = one primary ray and, when lit,
-its masking ray) excluding the scene build (mesh upload, BVH) and the JIT compilation (a
-warm-up run first; Dr.Jit caches the kernels), best of ``repeat`` runs, the per-incidence
-facet table included (as microsim's pipeline figure includes its own).
+Timing (``peer_throughput``; ``microsim bench`` times both estimators itself): marginal
+samples/s (a sample = one primary ray and, when lit, its masking ray) excluding the scene
+build (mesh upload, BVH) and the JIT compilation (a warm-up run first; Dr.Jit caches the
+kernels), best of ``repeat`` runs, the per-incidence facet table included (as microsim's
+pipeline figure includes its own).
 """
 
 from __future__ import annotations
@@ -89,6 +118,9 @@ __all__ = [
     "VARIANTS",
     "PIP_COMMAND",
     "mitsuba_single_bounce",
+    "mitsuba_dielectric",
+    "PeerInterfaceResult",
+    "INTERFACE_LEDGER",
     "peer_throughput",
     "copies_per_side",
     "llvm_target",
@@ -107,6 +139,10 @@ MASKING_CAP_DEG = 88.0
 MAX_COPIES_PER_SIDE = 16
 LEDGER = ("single", "masked", "downward", "unresolved", "missed")
 _SINGLE, _MASKED, _DOWNWARD, _UNRESOLVED, _MISSED = range(5)
+INTERFACE_LEDGER = ("reflected", "transmitted", "cut", "unresolved", "missed")
+"""Where each path through the dielectric interface ends (``PeerScene.run_dielectric``)."""
+_REFLECTED, _TRANSMITTED, _CUT = range(3)  # then _UNRESOLVED, _MISSED as in LEDGER
+_LIVE = len(INTERFACE_LEDGER)  # a path still being followed
 
 
 PEER_CPU_VARIABLE = "MICROSIM_PEER_LLVM_CPU"
@@ -238,6 +274,48 @@ class PeerResult:
     copies: int
     seconds: float
     meta: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PeerInterfaceResult:
+    """The peer's estimate of the paths through a dielectric interface (all orders summed).
+
+    ``brdf``/``btdf`` (n_theta, n_phi) sr⁻¹: the reflected and the transmitted light,
+    f̄_B = Σ w / (N Ω_B), θo from the pole of the side the path leaves by, with their
+    paired-strata ``stderr_brdf``/``stderr_btdf``; ``counts`` (2, n_theta, n_phi) paths per
+    reflected and transmitted bin; ``reflectance``/``transmittance`` R and T (fractions of
+    the paths) with their paired-strata standard errors; ``ledger`` paths per class of
+    ``INTERFACE_LEDGER``; ``segments`` the rays traced per path; ``copies`` tile copies per
+    side."""
+
+    brdf: np.ndarray
+    btdf: np.ndarray
+    stderr_brdf: np.ndarray
+    stderr_btdf: np.ndarray
+    counts: np.ndarray
+    reflectance: float
+    transmittance: float
+    reflectance_stderr: float
+    transmittance_stderr: float
+    ledger: dict
+    segments: float
+    rays: int
+    copies: int
+    seconds: float
+    meta: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _InterfaceScalars:
+    """The dielectric kernel's scalars beyond ``_KernelScalars`` (opaque): the relief's
+    bottom ``zbot``, the index ``eta`` of the medium, the interaction ``cap``, whether the
+    light comes from ``below``, the incidence azimuth ``phi_i`` (degrees)."""
+
+    zbot: object
+    eta: object
+    cap: object
+    below: object
+    phi_i: object
 
 
 def _check_surface(surface):
@@ -402,21 +480,7 @@ class PeerScene:
         led_f = np.zeros(len(LEDGER))
         lx, ly = self.tile
         rows = max(1, int(round(np.sqrt(rays * ly / lx))))
-        # scalars as opaque values: one compiled kernel serves every batch and incidence
-        op = _KernelScalars(
-            N=dr.opaque(mi.Float64, float(rays)),
-            R=dr.opaque(mi.Float64, float(rows)),
-            lx=dr.opaque(mi.Float64, lx),
-            ly=dr.opaque(mi.Float64, ly),
-            z0=dr.opaque(mi.Float, self.zmax + self.top_margin),
-            ztop=dr.opaque(mi.Float, self.zmax),
-            eps=dr.opaque(mi.Float, self.eps),
-            half_x=dr.opaque(mi.Float, (self.m + 0.5) * lx),
-            half_y=dr.opaque(mi.Float, (self.m + 0.5) * ly),
-            nf=dr.opaque(mi.UInt32, self.n_faces),
-            seed=dr.opaque(mi.UInt64, seed),
-            d=mi.Vector3f(*(dr.opaque(mi.Float, -float(x)) for x in wi)),
-        )
+        op = self._scalars(rays, rows, self.zmax + self.top_margin, seed, wi)
         albedo_var = np.zeros(1)  # Σx² − 2 Σ_k x_2k x_2k+1 over all single events
         for lo in range(0, rays, BATCH):
             n = min(BATCH, rays - lo)
@@ -450,11 +514,266 @@ class PeerScene:
             },
         )
 
-    def _batch(self, op, lo, n, table, acc, cnt, sums_out):
-        """Trace primary rays lo … lo + n − 1 (lo even) and add them to the tallies."""
+    def run_dielectric(
+        self,
+        material,
+        theta_i_deg: float,
+        rays: int,
+        bins,
+        seed: int = 0,
+        bounces="all",
+        threads: int | None = None,
+    ) -> PeerInterfaceResult:
+        """Follow ``rays`` paths through the dielectric interface of index ``material``
+        (real, the medium below the surface) lit at θi degrees (φi = 0; θi in (90, 180]: from
+        inside the medium), at most ``bounces`` interactions ("all": ``bounces.MAX_BOUNCES``),
+        on ``threads`` Dr.Jit threads (None: Dr.Jit's setting, the caller's restored). The
+        estimator is ``simulate(..., transmission=True)``'s (module docstring, "Dielectric
+        paths"); ``seconds`` the wall time of this run (first run: compilation included)."""
+        if threads is None:
+            return self._trace_dielectric(material, theta_i_deg, rays, bins, seed, bounces)
+        threads = _check_threads(threads)
+        before = self.dr.thread_count()
+        self.dr.set_thread_count(threads)
+        try:
+            return self._trace_dielectric(material, theta_i_deg, rays, bins, seed, bounces)
+        finally:
+            self.dr.set_thread_count(before)
+
+    def _trace_dielectric(self, material, theta_i_deg, rays, bins, seed, bounces):
+        from microsim.analytic.fresnel import resolve_material
+        from microsim.sim import Bins
+        from microsim.sim.bounces import bounce_limit, check_bounces
+        from microsim.sim.dielectric import check_transmission
+        from microsim.vectors import spherical_deg
+
+        if not isinstance(bins, Bins):
+            raise UsageError(f"bins must be a microsim.sim.Bins, got {type(bins).__name__}")
+        theta, top = float(theta_i_deg), self.theta_max_deg
+        if not (0.0 <= theta <= top or 180.0 - top <= theta <= 180.0):
+            raise UsageError(
+                f"theta_i must lie in [0, {top:g}] or [{180 - top:g}, 180] degrees for this "
+                f"scene (built for theta_max_deg={top:g}), got {theta_i_deg!r}"
+            )
+        rays = integer("rays", rays, 2, 2**31 - 2, " (primary rays)")
+        seed = integer("seed", seed, 0, 2**32 - 1, " (the random stream)")
+        ior = resolve_material(material)
+        check_transmission(True, ior)
+        if complex(ior).imag != 0:
+            raise UsageError(f"material must be a real index for the peer, got {ior!r}")
+        eta, cap = complex(ior).real, bounce_limit(check_bounces(bounces))[0]
         mi, dr = self.mi, self.dr
-        t_code, t_w, t_bin, t_wo, t_n = table
-        led_n, led_f, albedo_var = sums_out
+        t0 = time.perf_counter()
+        wi = spherical_deg(theta, 0.0)
+        below = theta > 90.0
+        table = self._interface_table(wi, eta)
+        nbin = bins.n_theta * bins.n_phi
+        acc = [dr.zeros(mi.Float64, 2 * nbin) for _ in range(3)]  # Σw, Σw², Σ pairs
+        cnt = dr.zeros(mi.UInt32, 2 * nbin)
+        led = np.zeros(len(INTERFACE_LEDGER), dtype=np.int64)
+        side_sums = np.zeros(4)  # paths reflected, transmitted; pairs both R, both T
+        lx, ly = self.tile
+        rows = max(1, int(round(np.sqrt(rays * ly / lx))))
+        start = self.zmin - self.top_margin if below else self.zmax + self.top_margin
+        op = self._scalars(rays, rows, start, seed, wi)
+        iface = _InterfaceScalars(
+            zbot=dr.opaque(mi.Float, self.zmin),
+            eta=dr.opaque(mi.Float, eta),
+            cap=dr.opaque(mi.UInt32, cap),
+            below=dr.opaque(mi.Bool, below),
+            phi_i=dr.opaque(mi.Float, 0.0),
+        )
+        segments = 0
+        for lo in range(0, rays, BATCH):
+            n = min(BATCH, rays - lo)
+            tallies = (acc, cnt, led, side_sums)
+            segments += self._interface_batch(op, iface, lo, n, table, bins, tallies)
+        s_w, s_w2, s_pair = (np.asarray(a, dtype=np.float64) for a in acc)
+        counts = np.asarray(cnt, dtype=np.int64).reshape((2, *bins.shape))
+        seconds = time.perf_counter() - t0
+        omega = np.tile(bins.projected_solid_angle().ravel(), 2)
+        f = (s_w / (rays * omega)).reshape((2, *bins.shape))
+        se = (np.sqrt(np.maximum(s_w2 - 2.0 * s_pair, 0.0)) / (rays * omega)).reshape(f.shape)
+        n_r, n_t, pairs_r, pairs_t = side_sums
+        return PeerInterfaceResult(
+            brdf=f[0],
+            btdf=f[1],
+            stderr_brdf=se[0],
+            stderr_btdf=se[1],
+            counts=counts,
+            reflectance=n_r / rays,
+            transmittance=n_t / rays,
+            reflectance_stderr=float(np.sqrt(max(n_r - 2.0 * pairs_r, 0.0)) / rays),
+            transmittance_stderr=float(np.sqrt(max(n_t - 2.0 * pairs_t, 0.0)) / rays),
+            ledger={k: int(c) for k, c in zip(INTERFACE_LEDGER, led)},
+            segments=segments / rays,
+            rays=rays,
+            copies=2 * self.m + 1,
+            seconds=seconds,
+            meta={
+                "variant": self.variant,
+                "mitsuba_version": mi.__version__,
+                "eps": self.eps,
+                "rows": rows,
+                "theta_i": theta,
+                "eta": eta,
+                "bounces": cap,
+            },
+        )
+
+    def _scalars(self, rays, rows, z0, seed, wi) -> _KernelScalars:
+        """The kernel's ``_KernelScalars`` of a run: scalars as opaque values, so that one
+        compiled kernel serves every batch and incidence."""
+        mi, dr = self.mi, self.dr
+        lx, ly = self.tile
+        return _KernelScalars(
+            N=dr.opaque(mi.Float64, float(rays)),
+            R=dr.opaque(mi.Float64, float(rows)),
+            lx=dr.opaque(mi.Float64, lx),
+            ly=dr.opaque(mi.Float64, ly),
+            z0=dr.opaque(mi.Float, z0),
+            ztop=dr.opaque(mi.Float, self.zmax),
+            eps=dr.opaque(mi.Float, self.eps),
+            half_x=dr.opaque(mi.Float, (self.m + 0.5) * lx),
+            half_y=dr.opaque(mi.Float, (self.m + 0.5) * ly),
+            nf=dr.opaque(mi.UInt32, self.n_faces),
+            seed=dr.opaque(mi.UInt64, seed),
+            d=mi.Vector3f(*(dr.opaque(mi.Float, -float(x)) for x in wi)),
+        )
+
+    def _interface_table(self, wi: np.ndarray, eta: float):
+        """Per facet, for the primary rays (direction −wi, one per incidence): whether it is
+        met from the side the light comes from, the exact Fresnel reflectance F of the
+        crossing (``microsim.analytic.fresnel``, float64; 1 at total internal reflection),
+        the reflected and the refracted (Snell) directions, the facet normals — as Dr.Jit
+        arrays."""
+        from microsim.analytic.fresnel import fresnel_real_arithmetic
+
+        mi = self.mi
+        n = self.normals
+        c = n @ wi  # = −d·n: > 0 met from above
+        valid = (c < 0.0) if wi[2] < 0.0 else (c > 0.0)
+        ci = np.abs(c)
+        rel2 = eta**2 if wi[2] > 0.0 else 1.0 / eta**2  # (η_t/η_i)²
+        tir = (1.0 - ci * ci) >= rel2
+        fresnel = np.ones(len(c))
+        ok = valid & ~tir
+        fresnel[ok] = fresnel_real_arithmetic(ci[ok], np.sqrt(rel2))
+        reflected = 2.0 * c[:, None] * n - wi
+        r = 1.0 / np.sqrt(rel2)
+        ct = np.sqrt(np.maximum(1.0 - r * r * (1.0 - ci * ci), 0.0))
+        refracted = -r * wi + ((r * ci - ct) * np.sign(c))[:, None] * n
+
+        def vec(a):
+            return mi.Vector3f(*(mi.Float(a[:, k].astype(np.float32)) for k in range(3)))
+
+        fresnel32 = mi.Float(fresnel.astype(np.float32))
+        return mi.Bool(valid), fresnel32, vec(reflected), vec(refracted), vec(n)
+
+    def _interface_batch(self, op, iface, lo, n, table, bins, tallies) -> int:
+        """Follow paths lo … lo + n − 1 (lo even) through the interface, add them to the
+        tallies; returns the rays traced."""
+        mi, dr = self.mi, self.dr
+        t_valid, t_fresnel, t_refl, t_refr, t_n = table
+        acc, cnt, led, side_sums = tallies
+        nbin = bins.n_theta * bins.n_phi
+        o, rng = self._origins(op, lo, n)
+        d = mi.Vector3f(op.d)
+        lx, ly = mi.Float(op.lx), mi.Float(op.ly)
+
+        def recentre(p):
+            """p moved by whole tiles into the centre copy (the surface is periodic)."""
+            return mi.Point3f(p.x - dr.round(p.x / lx) * lx, p.y - dr.round(p.y / ly) * ly, p.z)
+
+        def leave(p, nrm, new_d):
+            """The next ray's start: p moved eps off the facet to the new ray's side."""
+            side = dr.select(dr.dot(new_d, nrm) > 0.0, op.eps, -op.eps)
+            return recentre(p + side * nrm)
+
+        # the primary ray: closest hit, then the facet table's Fresnel and directions
+        pi = self.scene.ray_intersect_preliminary(mi.Ray3f(o, d), coherent=self.coherent)
+        hit = pi.is_valid()
+        facet = pi.prim_index % op.nf
+        valid = hit & dr.gather(mi.Bool, t_valid, facet, hit)
+        reflect = rng.next_float32() < dr.gather(mi.Float, t_fresnel, facet, hit)
+        nrm = dr.gather(mi.Vector3f, t_n, facet, hit)
+        new_d = dr.select(
+            reflect,
+            dr.gather(mi.Vector3f, t_refl, facet, hit),
+            dr.gather(mi.Vector3f, t_refr, facet, hit),
+        )
+        o = dr.select(valid, leave(o + pi.t * d, nrm, new_d), o)
+        inside = dr.select(reflect, iface.below, ~iface.below)
+        status = dr.select(
+            ~hit, _u(mi, _MISSED), dr.select(valid, _u(mi, _LIVE), _u(mi, _UNRESOLVED))
+        )
+        state = (o, new_d, inside, status, mi.UInt32(1), mi.UInt32(1), mi.UInt32(0), rng)
+
+        def cond(o, d, inside, status, b, traced, where, rng):
+            return status == _LIVE
+
+        def body(o, d, inside, status, b, traced, where, rng):
+            pi = self.scene.ray_intersect_preliminary(mi.Ray3f(o, d), coherent=self.coherent)
+            hit = pi.is_valid()
+            traced += 1
+            # no hit: the path leaves the relief up or down, if it stays over the copies
+            up = d.z > 0.0
+            t_out = (dr.select(up, op.ztop, iface.zbot) - o.z) / d.z
+            end = o + t_out * d
+            held = (d.z != 0.0) & (dr.abs(end.x) <= op.half_x) & (dr.abs(end.y) <= op.half_y)
+            leaves = ~hit & held & (up != inside)  # else it left through the wrong side
+            transmitted = up == iface.below
+            slot = dr.select(transmitted, mi.UInt32(nbin), mi.UInt32(0))
+            where = dr.select(leaves, slot + _bin_of(mi, dr, d, bins, iface.phi_i), where)
+            left = dr.select(transmitted, _u(mi, _TRANSMITTED), _u(mi, _REFLECTED))
+            ended = dr.select(held, dr.select(leaves, left, _u(mi, _MISSED)), _u(mi, _UNRESOLVED))
+            status = dr.select(~hit, ended, status)
+            # a hit: met from the path's side, then reflected or refracted by roulette
+            nrm = dr.gather(mi.Vector3f, t_n, pi.prim_index % op.nf, hit)
+            c = -dr.dot(d, nrm)
+            wrong = hit & ((c == 0.0) | ((c < 0.0) != inside))
+            cut = hit & ~wrong & (b >= iface.cap)
+            go = hit & ~wrong & ~cut
+            status = dr.select(wrong, _u(mi, _UNRESOLVED), dr.select(cut, _u(mi, _CUT), status))
+            fresnel, cos_t, _, eta_ti = mi.fresnel(c, iface.eta)
+            reflect = rng.next_float32(go) < fresnel
+            new_d = dr.select(
+                reflect, mi.reflect(-d, nrm), mi.refract(-d, mi.Normal3f(nrm), cos_t, eta_ti)
+            )
+            o = dr.select(go, leave(o + pi.t * d, nrm, new_d), o)
+            d = dr.select(go, new_d, d)
+            inside = dr.select(go & ~reflect, ~inside, inside)
+            b = dr.select(go, b + 1, b)
+            return o, d, inside, status, b, traced, where, rng
+
+        state = dr.while_loop(state, cond, body, label="peer-interface")
+        status, traced, where = state[3], state[5], state[6]
+        tallied = (status == _REFLECTED) | (status == _TRANSMITTED)
+        xw = dr.select(tallied, mi.Float64(1.0), 0.0)
+        dr.scatter_reduce(dr.ReduceOp.Add, acc[0], xw, where, tallied)
+        dr.scatter_reduce(dr.ReduceOp.Add, acc[1], xw * xw, where, tallied)
+        dr.scatter_reduce(dr.ReduceOp.Add, cnt, mi.UInt32(1), where, tallied)
+        dr.eval(status, where, xw, traced)
+        w0, w1, (b0, b1) = _pair_sums(mi, dr, acc[2], where, xw, n)
+        both = (w0 * w1 > 0.0) & ((b0 < nbin) == (b1 < nbin))  # same side
+        pairs_t = both & (b0 >= nbin)
+        sums = [
+            dr.sum(dr.select(status == _REFLECTED, 1, 0)),
+            dr.sum(dr.select(status == _TRANSMITTED, 1, 0)),
+            dr.sum(dr.select(both & ~pairs_t, 1, 0)),
+            dr.sum(dr.select(pairs_t, 1, 0)),
+        ]
+        per = [dr.sum(dr.select(status == c, 1, 0)) for c in range(len(INTERFACE_LEDGER))]
+        rays_traced = dr.sum(mi.UInt64(traced))
+        dr.eval(acc, cnt, sums, per, rays_traced)
+        led += np.array([int(p[0]) for p in per], dtype=np.int64)
+        side_sums += np.array([float(x[0]) for x in sums])
+        return int(rays_traced[0])
+
+    def _origins(self, op, lo, n):
+        """(float32 origins on the plane z = ``op.z0``, PCG32 streams) of primary rays lo … lo +
+        n − 1: rays 2k and 2k + 1 share a stratum of the tile (module docstring)."""
+        mi, dr = self.mi, self.dr
         r = dr.arange(mi.UInt32, n) + dr.opaque(mi.UInt32, lo)
         rng = mi.PCG32(n, initstate=op.seed, initseq=mi.UInt64(r))
         xi, eta = rng.next_float64(), rng.next_float64()
@@ -465,7 +784,14 @@ class PeerScene:
         row = dr.select(row > op.R - 1.0, op.R - 1.0, row)  # (dr.minimum: LLVM 14 fails)
         x = (s - row) * op.lx - 0.5 * op.lx
         y = (row + eta) / op.R * op.ly - 0.5 * op.ly
-        o = mi.Point3f(mi.Float(x), mi.Float(y), op.z0)
+        return mi.Point3f(mi.Float(x), mi.Float(y), op.z0), rng
+
+    def _batch(self, op, lo, n, table, acc, cnt, sums_out):
+        """Trace primary rays lo … lo + n − 1 (lo even) and add them to the tallies."""
+        mi, dr = self.mi, self.dr
+        t_code, t_w, t_bin, t_wo, t_n = table
+        led_n, led_f, albedo_var = sums_out
+        o, _ = self._origins(op, lo, n)
         d = op.d
         pi = self.scene.ray_intersect_preliminary(mi.Ray3f(o, d), coherent=self.coherent)
         hit = pi.is_valid()
@@ -499,12 +825,7 @@ class PeerScene:
         dr.scatter_reduce(dr.ReduceOp.Add, acc[1], xw * xw, where, single)
         dr.scatter_reduce(dr.ReduceOp.Add, cnt, mi.UInt32(1), where, single)
         dr.eval(status, where, xw, w)
-        # pairs (2k, 2k + 1): same bin -> the bin's pair sum; any bins -> the albedo's
-        k = dr.arange(mi.UInt32, n // 2) * 2
-        b0, b1 = dr.gather(mi.UInt32, where, k), dr.gather(mi.UInt32, where, k + 1)
-        w0, w1 = dr.gather(mi.Float64, xw, k), dr.gather(mi.Float64, xw, k + 1)
-        both = (w0 > 0.0) & (w1 > 0.0) & (b0 == b1)
-        dr.scatter_reduce(dr.ReduceOp.Add, acc[2], w0 * w1, b0, both)
+        w0, w1, _ = _pair_sums(mi, dr, acc[2], where, xw, n)  # any bins: the albedo's
         sums = [dr.sum(xw * xw), dr.sum(w0 * w1)]
         per = [dr.sum(dr.select(status == c, 1, 0)) for c in range(len(LEDGER))]
         fre = [dr.sum(dr.select(status == c, w, 0.0)) for c in range(len(LEDGER))]
@@ -512,6 +833,45 @@ class PeerScene:
         led_n += np.array([int(p[0]) for p in per], dtype=np.int64)
         led_f += np.array([float(f[0]) for f in fre])
         albedo_var += float(sums[0][0]) - 2.0 * float(sums[1][0])
+
+
+def _u(mi, code: int):
+    """A ledger code as a Dr.Jit UInt32 (the loop's status keeps one type)."""
+    return mi.UInt32(code)
+
+
+def _bin_of(mi, dr, d, bins, phi_i):
+    """Flat (θo, Δφ) bin of the directions ``d`` as ``Bins.locate`` (θo from the pole of the
+    side d points to: |d_z|; Δφ = φo − ``phi_i`` degrees, folded or not), in float32 with
+    Dr.Jit's arctangent (a direction within rounding of an edge may fall on either side)."""
+    to_deg = 180.0 / np.pi
+    n_theta, n_phi = bins.n_theta, bins.n_phi
+    theta = dr.atan2(dr.sqrt(d.x * d.x + d.y * d.y), dr.abs(d.z)) * to_deg
+    it = dr.floor(theta * (n_theta / 90.0))
+    it = dr.select(it > n_theta - 1, n_theta - 1, it)  # (dr.minimum: LLVM 14 fails)
+    dphi = dr.atan2(d.y, d.x) * to_deg - phi_i
+    dphi = dr.select(dphi < 0.0, dphi + 360.0, dphi)
+    if bins.folded:
+        w = 180.0 / (n_phi - 1)
+        dphi = dr.select(dphi > 180.0, 360.0 - dphi, dphi)
+    else:
+        w = 360.0 / n_phi
+        dphi = dr.select(dphi >= 360.0 - 0.5 * w, dphi - 360.0, dphi)
+    k = dr.floor(dphi / w + 0.5)
+    k = dr.select(k < 0.0, 0.0, dr.select(k > n_phi - 1, n_phi - 1, k))
+    return mi.UInt32(it) * n_phi + mi.UInt32(k)
+
+
+def _pair_sums(mi, dr, acc_pair, where, xw, n):
+    """Add w_2k·w_2k+1 of the pairs (2k, 2k + 1) of one batch tallied in the same bin to
+    ``acc_pair`` (the paired-strata variance, module docstring); returns the pairs' weights
+    (w0, w1) and bins (b0, b1)."""
+    k = dr.arange(mi.UInt32, n // 2) * 2
+    b0, b1 = dr.gather(mi.UInt32, where, k), dr.gather(mi.UInt32, where, k + 1)
+    w0, w1 = dr.gather(mi.Float64, xw, k), dr.gather(mi.Float64, xw, k + 1)
+    both = (w0 > 0.0) & (w1 > 0.0) & (b0 == b1)
+    dr.scatter_reduce(dr.ReduceOp.Add, acc_pair, w0 * w1, b0, both)
+    return w0, w1, (b0, b1)
 
 
 def mitsuba_single_bounce(
@@ -527,6 +887,21 @@ def mitsuba_single_bounce(
     threads = None if threads is None else _check_threads(threads)
     scene = PeerScene(surface, theta_i_deg)
     return scene.run(material, theta_i_deg, rays, bins, seed, threads=threads)
+
+
+def mitsuba_dielectric(
+    surface, material, theta_i_deg: float, rays: int, bins=None, seed: int = 0, **options
+) -> PeerInterfaceResult:
+    """The paths through the dielectric interface of index ``material`` below ``surface``
+    lit at θi (degrees, φi = 0; (90, 180]: from inside) by the Mitsuba 3 peer: ``rays``
+    stratified paths, ``bins`` (default microsim's ``Bins()``), ``seed`` the PCG32 streams;
+    ``options``: ``bounces`` (default "all") and ``threads`` of ``PeerScene.run_dielectric``."""
+    from microsim.sim import Bins
+
+    bins = Bins() if bins is None else bins
+    theta = float(theta_i_deg)
+    scene = PeerScene(surface, 180.0 - theta if theta > 90.0 else theta)
+    return scene.run_dielectric(material, theta, rays, bins, seed, **options)
 
 
 def peer_throughput(

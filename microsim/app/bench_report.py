@@ -16,6 +16,8 @@ __all__ = [
     "Accuracy",
     "AzimuthCost",
     "GGXSurfaceCost",
+    "InterfaceLine",
+    "InterfaceThroughput",
     "Bench",
     "BenchConfig",
     "BounceThroughput",
@@ -211,6 +213,38 @@ class Marginal:
 
 
 @dataclass(frozen=True)
+class InterfaceLine:
+    """One incidence of ``bench.interface_throughput``: θi in degrees ((90, 180]: from inside
+    the medium), the ``Marginal`` of the pipeline's and the peer's paths/s (a path = a primary
+    ray and every ray that continues it) and the rays the peer traced per path (None without
+    the peer)."""
+
+    theta_i: float
+    marginal: Marginal
+    rays_per_path: float | None = None
+
+    @classmethod
+    def from_json(cls, doc: dict) -> InterfaceLine:
+        return replace(_record(cls, doc), marginal=Marginal.from_json(doc["marginal"]))
+
+
+@dataclass(frozen=True)
+class InterfaceThroughput:
+    """``bench.interface_throughput``: the dielectric path (``simulate(..., transmission=True,
+    bounces=...)``) of a medium of index ``eta`` against the Mitsuba peer's
+    (``bench_peer.PeerScene.run_dielectric``), one ``InterfaceLine`` per incidence."""
+
+    eta: float
+    bounces: str
+    incidences: list
+
+    @classmethod
+    def from_json(cls, doc: dict) -> InterfaceThroughput:
+        lines = [InterfaceLine.from_json(d) for d in doc["incidences"]]
+        return cls(doc["eta"], doc["bounces"], lines)
+
+
+@dataclass(frozen=True)
 class BuildTimes:
     """Seconds to build the Embree scene + BVH with embreex and with the packet binding (None,
     with the reason, when unavailable)."""
@@ -318,6 +352,7 @@ class Bench:
     bounces: BounceThroughput | None = None
     full_azimuth: AzimuthCost | None = None
     ggx_surface: GGXSurfaceCost | None = None
+    dielectric: InterfaceThroughput | None = None
     time_to_accuracy: Accuracy | None = None
     time_to_accuracy_traced: Accuracy | None = None
     wave: list | None = None
@@ -337,6 +372,7 @@ class Bench:
         "bounces",
         "full_azimuth",
         "ggx_surface",
+        "dielectric",
         "peak_rss_mb",
         "time_to_accuracy",
         "time_to_accuracy_traced",
@@ -364,6 +400,7 @@ class Bench:
             "bounces": BounceThroughput.from_json,
             "full_azimuth": AzimuthCost.from_json,
             "ggx_surface": GGXSurfaceCost.from_json,
+            "dielectric": InterfaceThroughput.from_json,
             "time_to_accuracy": lambda d: Accuracy(**d),
             "time_to_accuracy_traced": lambda d: Accuracy(**d),
             "wave": _wave_rows,
@@ -401,6 +438,7 @@ def format_bench(b: Bench) -> str:
     lines = [] if b.machine is None else [_machine_line(b.machine)]
     lines += _throughput_lines(b)
     lines += _marginal_lines(b.marginal)
+    lines += _interface_lines(b.dielectric)
     lines += _cost_lines(b)
     lines += [f"peak RSS, {r} rays: {mb:.0f} MB" for r, mb in b.peak_rss_mb.items()]
     for t in (b.time_to_accuracy, b.time_to_accuracy_traced):
@@ -453,8 +491,10 @@ def _throughput_lines(b: Bench) -> list[str]:
     return lines
 
 
-def _marginal_lines(mg: Marginal | None) -> list[str]:
-    """``format_bench``'s lines for ``marginal_throughput``'s figures (none without them)."""
+def _marginal_lines(mg: Marginal | None, title: str = "", per: str = "rays") -> list[str]:
+    """``format_bench``'s lines for ``marginal_throughput``'s figures (none without them):
+    ``title`` before the two call sizes, counted in ``per`` ("rays": rates in samples/s; or
+    "paths": paths/s)."""
     if not mg:
         return []
     n1, n2 = mg.rays
@@ -467,11 +507,28 @@ def _marginal_lines(mg: Marginal | None) -> list[str]:
             + f"   (fixed per call {fig[1].fixed_seconds:.3f}, {fig[2].fixed_seconds:.3f} s)"
         )
 
-    lines = [f"marginal, {n1:,} → {n2:,} rays:", row("  pipeline samples/s", mg.pipeline)]
+    unit = "samples/s" if per == "rays" else f"{per}/s"
+    lines = [f"{title}marginal, {n1:,} → {n2:,} {per}:", row(f"  pipeline {unit}", mg.pipeline)]
     if mg.peer:
-        lines.append(row("  Mitsuba peer samples/s", mg.peer))
+        lines.append(row(f"  Mitsuba peer {unit}", mg.peer))
         if None not in mg.ratio.values():
             lines.append(_row("  pipeline / Mitsuba peer", mg.ratio, "14.2f"))
+    return lines
+
+
+def _interface_lines(di: InterfaceThroughput | None) -> list[str]:
+    """``format_bench``'s lines for the dielectric path against its peer, per incidence."""
+    if not di:
+        return []
+    lines = []
+    for line in di.incidences:
+        side = "from inside the medium" if line.theta_i > 90.0 else "from the air"
+        title = f"dielectric path θi = {line.theta_i:g}° ({side}, η = {di.eta:g}), "
+        lines += _marginal_lines(line.marginal, title, "paths")
+        if line.rays_per_path is not None:
+            lines.append(
+                f"  (bounces={di.bounces}; the peer traced {line.rays_per_path:.3f} rays/path)"
+            )
     return lines
 
 

@@ -24,8 +24,10 @@ Tallies: 2·O order slots × bins (O = ``bounces.order_slots``): the O reflected
 O transmitted ones (``tallies.simulation_result`` splits them into ``brdf_orders`` and
 ``btdf_orders``); the ledger has the ``ledger.DIELECTRIC_TERMINAL`` classes and the
 ``ledger.TIR_ORDERS`` columns. Traced masking only (Embree), on heightfields and V-grooves,
-with the periodic wrap; bitwise reproducible as the opaque chains are (each path on its own,
-its roulette draws a hash of its number).
+with the periodic wrap; a continuing ray that surely leaves the relief (steeper than the
+steepest facet, away from the surface on its side) is not traced (``trace_uncleared``: its
+walk's outcome is known, so no number changes); bitwise reproducible as the opaque chains are
+(each path on its own, its roulette draws a hash of its number).
 """
 
 from __future__ import annotations
@@ -47,10 +49,13 @@ from .bounces import (
     next_rays,
     order_slots,
     primary_rays,
+    resolve_grazing,
     trace_continuing,
 )
 from .dielectric_kernels import Interface, PathSides, Roulette, SideEscapes
 from .engine import segments
+from .engine.codes import ESCAPED, MISSED, SINGLE
+from .ray_bins import locate_single
 from .ray_columns import columns
 from .scratch import WorkArray, WorkColumns
 from .streams import block_span
@@ -66,6 +71,8 @@ __all__ = [
     "interface_of",
     "roulette_stream",
     "trace_dielectric",
+    "trace_uncleared",
+    "bin_side_escapes",
     "DielectricPath",
 ]
 
@@ -90,6 +97,7 @@ class InterfaceOutcome(NamedTuple):
 _ESCAPE = WorkArray("interface-escape", np.int64)
 _ESCAPE_DIRECTION = WorkColumns("interface-escape-direction")
 _ESCAPE_SIDE = WorkArray("interface-escape-side", np.bool_)
+_ESCAPE_BIN = WorkArray("interface-escape-bin", np.int64)
 
 
 def check_transmission(transmission, ior) -> bool:
@@ -185,13 +193,54 @@ def trace_dielectric(
         if e:
             order = min(b - 1, slots) - 1
             offset = (esc.transmitted[:e] * slots + order) * chain.nbin
-            bin_escapes(bins, esc.index[:e], [c[:e] for c in esc[1:4]], phi, offset, out.where)
+            bin_side_escapes(bins, esc, e, phi, offset, out.where)
         if m == 0:
             break
-        live, w, d, (hs, prim, p) = trace_continuing(tracer, nxt, m)
+        live, w, d, (hs, prim, p) = trace_uncleared(tracer, nxt, m, sides.inside)
         shared = False
         b += 1
     return out
+
+
+def bin_side_escapes(bins: Bins, esc: SideEscapes, e: int, phi, offset, where) -> None:
+    """``bounces.bin_escapes`` of the first ``e`` escapes of ``esc`` (directions in the upper
+    hemisphere, flipped up when they left downward): with one incident azimuth ``phi`` on a
+    folded grid by ``ray_bins.locate_single`` (compiled and vectorised, ``Bins.locate``'s bin
+    for every direction, ties on an edge included), else by ``Bins.locate``."""
+    rows, wo = esc.index[:e], [c[:e] for c in esc[1:4]]
+    if not (bins.folded and np.ndim(phi) == 0):
+        bin_escapes(bins, rows, wo, phi, offset, where)
+        return
+    found = _ESCAPE_BIN(e)
+    every = np.full(e, SINGLE, dtype=np.int8)  # locate_single bins the SINGLE rows
+    locate_single(bins, every, wo, float(phi), None, found)
+    where[rows] = offset + found
+
+
+def trace_uncleared(tracer: Tracer, nxt, m: int, inside: np.ndarray) -> tuple:
+    """``bounces.trace_continuing`` of the ``m`` continuing paths, except the rays that
+    surely leave the relief, which are not traced: a ray leaving the surface away from it on
+    its own side (up in the air, down inside the medium, ``inside`` per path) more steeply
+    than the steepest facet cannot meet it again (``Tracer.surely_escapes``, the Lipschitz
+    bound of ``horizon_bounds.rise_bound``, which holds either way up), so its walk would end
+    ESCAPED (rising) or MISSED (falling): it gets that status without one."""
+    live, d = nxt.live[:m], [nxt.dx[:m], nxt.dy[:m], nxt.dz[:m]]
+    sure = tracer.surely_escapes(d[0], d[1], np.where(inside[live], -d[2], d[2]))
+    if not sure.any():
+        return trace_continuing(tracer, nxt, m)
+    hs = np.where(d[2] > 0.0, ESCAPED, MISSED).astype(np.int8)
+    prim = np.full(m, -1, dtype=np.int32)
+    p = [np.empty(m) for _ in range(3)]
+    rest = np.flatnonzero(~sure)
+    if rest.size:
+        starts = [c[:m][rest] for c in (nxt.x, nxt.y, nxt.z)]
+        d_rest, d32 = [c[rest] for c in d], nxt.d32[:m][rest]
+        h, q, points = tracer.trace_columns(starts, d_rest, d32)
+        resolve_grazing(tracer, starts, d_rest, d32, h, q, points)
+        hs[rest], prim[rest] = h, q
+        for column, traced in zip(p, points):
+            column[rest] = traced
+    return live, nxt.w[:m], d, (hs, prim, p)
 
 
 class DielectricPath(BouncePath):
