@@ -44,7 +44,18 @@ from microsim.vectors import spherical_deg
 from .study_records import GlassIncidence, GlassStudy
 from .verdicts import Measured, Prediction, Significance, verdict
 
-__all__ = ["GLASS_MODELS", "LOBES", "glass_models", "lobe_measured", "lobe_values", "glass_study"]
+__all__ = [
+    "GLASS_MODELS",
+    "LOBES",
+    "MULTIPLE_MODELS",
+    "glass_models",
+    "canonical_incidence",
+    "lobe_function",
+    "lobe_measured",
+    "lobe_values",
+    "multiple_models",
+    "glass_study",
+]
 
 LOBES = ("reflected", "transmitted")
 GLASS_MODELS = {
@@ -70,7 +81,7 @@ def _flip(w: np.ndarray, flip: bool) -> np.ndarray:
     return w * np.array([1.0, 1.0, -1.0]) if flip else w
 
 
-def _lobe_function(model, inside: bool, lobe: str) -> Callable:
+def lobe_function(model, inside: bool, lobe: str) -> Callable:
     """f(wi, wo) of ``model`` on canonical upper-side directions: the incidence flipped to
     the medium's side when lit from ``inside``, the outgoing direction to the side ``lobe``
     leaves by."""
@@ -80,15 +91,15 @@ def _lobe_function(model, inside: bool, lobe: str) -> Callable:
 
 def lobe_values(model, result, t: int, lobe: str, rtol: float = 1e-3) -> np.ndarray:
     """``model``'s bin averages (Θ, Φ) sr⁻¹ of ``lobe`` at incidence ``t`` of ``result``."""
-    theta, inside = _canonical(float(result.theta_i[t]))
+    theta, inside = canonical_incidence(float(result.theta_i[t]))
     phi = float(result.phi_i[t])
-    fn = _lobe_function(model, inside, lobe)
+    fn = lobe_function(model, inside, lobe)
     return bin_average(
         spherical_deg(theta, phi), result.bins, fn, phi, rtol, symmetric=model.symmetric
     ).values
 
 
-def _canonical(theta_i: float) -> tuple[float, bool]:
+def canonical_incidence(theta_i: float) -> tuple[float, bool]:
     """(θ from the pole of the incidence's side, lit from inside the medium)."""
     return (180.0 - theta_i, True) if theta_i > 90.0 else (theta_i, False)
 
@@ -170,7 +181,7 @@ def glass_study(
 
 
 def _incidence(result, t: int, models: dict, significance: Significance) -> GlassIncidence:
-    theta, inside = _canonical(float(result.theta_i[t]))
+    theta, inside = canonical_incidence(float(result.theta_i[t]))
     n, L = int(result.rays[t]), result.ledger
     escaped = L["escaped_energy"][t]
     transmitted = L["transmitted_energy"][t]

@@ -50,7 +50,7 @@ from typing import Callable
 import numpy as np
 
 from microsim import vectors
-from microsim.analysis.glass import GLASS_MODELS, _canonical, _lobe_function
+from microsim.analysis.glass import GLASS_MODELS, canonical_incidence, lobe_function
 from microsim.analytic.brdf import TorranceSparrow
 from microsim.analytic.dielectric import WalterDielectric, dielectric_fresnel
 from microsim.analytic.fresnel import f0_from_material, fresnel, resolve_material, schlick
@@ -428,10 +428,10 @@ def bin_averages(models, theta, phi, bins, rtol: float = QUAD_RTOL, lobes=None) 
     if lobes is None:
         return _averages(models, theta, phi, bins, rtol)
     out = [np.empty((len(theta),) + bins.shape) for _ in models]
-    rows = [(*_canonical(float(t)), lobe) for t, lobe in zip(theta, lobes)]
+    rows = [(*canonical_incidence(float(t)), lobe) for t, lobe in zip(theta, lobes)]
     for inside, lobe in sorted({(inside, lobe) for _, inside, lobe in rows}):
         sel = [k for k, (_, i, b) in enumerate(rows) if (i, b) == (inside, lobe)]
-        sided = [FunctionBRDF(_lobe_function(m, inside, lobe), m.symmetric) for m in models]
+        sided = [FunctionBRDF(lobe_function(m, inside, lobe), m.symmetric) for m in models]
         canonical = np.array([rows[k][0] for k in sel])
         for values, part in zip(out, _averages(sided, canonical, phi[sel], bins, rtol)):
             values[sel] = part
