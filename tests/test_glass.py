@@ -92,7 +92,8 @@ def test_a_glass_scene_is_traced_from_both_sides_and_reported(tmp_path):
     with np.load(out / "inside" / "brdf.npz") as z:
         assert z["theta_i"].tolist() == [160.0, 110.0] and "btdf_orders" in z
     report = (out / "report.md").read_text()
-    assert "## Rough glass" in report and "medium → air" in report
+    assert "## Rough glass" in report and "medium → air" in report and "glass.png" in report
+    assert (out / "glass.png").is_file()
     index = "\n".join(glass_index([RunDocument.from_json(doc)]))
     assert "## Rough glass" in index and "glass-small" in index
 

@@ -159,14 +159,23 @@ def multiple_models(ndf, eta: float, theta_i, walk_paths: int, seed: int) -> lis
 
 
 def glass_study(
-    above, inside, ndf, eta: float, inside_dir: str, walk_paths: int = 200_000, seed: int = 0
+    above,
+    inside,
+    ndf,
+    eta: float,
+    inside_dir: str,
+    walk_paths: int = 200_000,
+    seed: int = 0,
+    predictions: dict | None = None,
 ) -> GlassStudy:
     """The ``GlassStudy`` of the runs ``above`` (lit from the air) and ``inside`` (from the
     medium) of one scene through a dielectric interface of index ``eta``, its models on the
     microfacet distribution ``ndf`` (module docstring; None: no models, the energies only),
     the random walk with ``walk_paths`` paths per incidence from ``seed``; ``inside_dir``
     names the folder the inside run is saved in. The verdicts of one study form
-    one family (their false-alarm rate is shared, ``Significance.n_tests``)."""
+    one family (their false-alarm rate is shared, ``Significance.n_tests``). ``predictions``:
+    a dict that receives every model's bin averages, (θi as traced, lobe, model name) →
+    (Θ, Φ) sr⁻¹ (``glass_report.glass_chart`` draws them)."""
     models = glass_models(ndf, eta) if ndf is not None else {}
     runs = [(r, t) for r in (above, inside) for t in range(len(r.theta_i))]
     significance = Significance(n_tests=max(1, len(runs) * len(LOBES) * len(models)))
@@ -174,13 +183,13 @@ def glass_study(
     multiple = multiple_models(ndf, eta, angles, walk_paths, seed) if ndf is not None else None
     rows = []
     for k, (result, t) in enumerate(runs):
-        row = _incidence(result, t, models, significance)
+        row = _incidence(result, t, models, significance, predictions)
         rows.append(row if multiple is None else replace(row, multiple=multiple[k]))
     text = re.sub(r"(\d\.\d{3})\d+", r"\1", repr(ndf))  # the parameters to 4 digits
     return GlassStudy(eta=float(eta), ndf=text, inside=inside_dir, incidences=rows)
 
 
-def _incidence(result, t: int, models: dict, significance: Significance) -> GlassIncidence:
+def _incidence(result, t: int, models: dict, significance, predictions) -> GlassIncidence:
     theta, inside = canonical_incidence(float(result.theta_i[t]))
     n, L = int(result.rays[t]), result.ledger
     escaped = L["escaped_energy"][t]
@@ -191,8 +200,11 @@ def _incidence(result, t: int, models: dict, significance: Significance) -> Glas
         if not measured.counts.any():  # no light leaves this way (total internal reflection)
             continue
         for name, model in models.items():
+            values = lobe_values(model, result, t, lobe)
+            if predictions is not None:
+                predictions[(float(result.theta_i[t]), lobe, name)] = values
             prediction = Prediction(
-                lobe_values(model, result, t, lobe),
+                values,
                 name=f"{name} ({lobe})",
                 params=model.params(),
                 ensemble=True,

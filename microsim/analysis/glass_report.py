@@ -1,14 +1,21 @@
 """The "Rough glass" section of a scene report and of the index (``glass_section``,
-``glass_index``), from the ``GlassStudy`` of verdicts.json (``analysis.glass``)."""
+``glass_index``) and its chart (``glass_chart``), from the ``GlassStudy`` of verdicts.json
+(``analysis.glass``)."""
 
 from __future__ import annotations
 
+from typing import Mapping
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from .chart_style import SIM_COLOUR, _figure, _log_limits, _output, _positive, chart_styles
 from .glass import MULTIPLE_MODELS
 from .markdown import md_table, percent
 from .study_records import GlassStudy
 from .verdicts import verdict_symbol
 
-__all__ = ["glass_section", "glass_index", "glass_energy_table", "SIDE_NAMES"]
+__all__ = ["glass_section", "glass_index", "glass_energy_table", "glass_chart", "SIDE_NAMES"]
 
 SIDE_NAMES = {"air": "air → medium", "medium": "medium → air"}
 """How a table names the side light comes from."""
@@ -194,3 +201,62 @@ def glass_index(docs) -> list[str]:
         ),
         "",
     ]
+
+
+CHART_MODELS = ("walter-smith", "walter-smith-corr", "walter-smith-corr-beta")
+"""The models ``glass_chart`` draws."""
+
+
+def glass_chart(above, inside, predictions: Mapping, path=None, title: str = "") -> Figure:
+    """The traced order 1 of a run through a dielectric interface against Walter et al.
+    2007's BSDF in the plane of incidence: one panel per incidence, from the air (top row)
+    and from inside the medium (bottom row); signed θo from the pole of the side the light
+    leaves by (+: the forward side, Δφ = 180°; −: Δφ = 0°), the reflected lobe (points) and
+    the transmitted one (squares) ±1σ, and the models' bin averages (``predictions`` of
+    ``glass.glass_study``). Log scale, sr⁻¹. ``path``: also write a PNG. Returns the Figure."""
+    runs = [above, inside]
+    cols = max(len(r.theta_i) for r in runs)
+    fig = _figure((3.2 * cols + 1.8, 6.6))
+    axes = np.atleast_2d(fig.subplots(2, cols, sharey=True, squeeze=False))
+    styles = chart_styles(CHART_MODELS)
+    for row, result in enumerate(runs):
+        f_idx, b_idx = result.bins.forward_index, result.bins.backward_index
+        tc = result.bins.theta_centers
+        signed = np.concatenate([-tc[::-1], tc])
+        cut = lambda a: np.concatenate([a[::-1, b_idx], a[:, f_idx]])  # noqa: E731
+        for t, theta_i in enumerate(result.theta_i):
+            ax = axes[row, t]
+            for lobe, values, stderr, marker in (
+                ("reflected", result.brdf_orders, result.stderr_orders, "o"),
+                ("transmitted", result.btdf_orders, result.stderr_btdf_orders, "s"),
+            ):
+                y, e = cut(values[0, t]), cut(stderr[0, t])
+                ok = y > 0
+                ax.errorbar(
+                    signed[ok], y[ok], yerr=e[ok], fmt=marker, ms=2.5, lw=0.6,
+                    color=SIM_COLOUR if lobe == "reflected" else "#555555",
+                    label=f"traced order 1, {lobe}",
+                )  # fmt: skip
+                for name in CHART_MODELS:
+                    m = predictions.get((float(theta_i), lobe, name))
+                    if m is None:
+                        continue
+                    colour, dash = styles[name]
+                    ax.step(signed, _positive(cut(m)), where="mid", color=colour, ls=dash,
+                            lw=1.0, label=name)  # fmt: skip
+            side, theta = (
+                ("from inside", 180.0 - theta_i) if theta_i > 90 else ("from the air", theta_i)
+            )
+            ax.set_title(f"θi = {theta:g}° {side}", fontsize=9)
+            ax.set_yscale("log")
+            ax.set_xlim(-90, 90)
+            ax.set_xlabel("θo (°)")
+        axes[row, 0].set_ylabel("f (sr⁻¹), order 1")
+    values = [v for v in predictions.values()]
+    lo, hi = _log_limits(values + [r.brdf_orders[0] for r in runs], 1e-4)
+    axes[0, 0].set_ylim(lo, hi)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    unique = dict(zip(labels, handles))
+    fig.legend(unique.values(), unique.keys(), loc="outside right center", fontsize=8)
+    fig.suptitle(f"{title} — rough glass: traced order 1 against Walter et al. 2007", fontsize=10)
+    return _output(fig, path)

@@ -41,11 +41,16 @@ def trace_inside(plan):
     )
 
 
-def rough_glass(plan, above, inside, specs) -> GlassStudy:
+def rough_glass(plan, above, inside, specs) -> tuple[GlassStudy, dict]:
     """The ``"glass"`` study of the runs ``above`` and ``inside`` (``analysis.glass``), the
-    random walk with ``orders.WALK_PATHS`` paths per incidence."""
+    random walk with ``orders.WALK_PATHS`` paths per incidence, and its models' bin averages
+    (``glass_study``'s ``predictions``, for the chart)."""
     checkpoint("side-studies")
     ndf = walk_ndf(plan, specs) or plan.scene.ndf()
     eta = float(plan.scene.ior.real)
-    paths = WALK_PATHS[bool(plan.quick)]
-    return glass_study(above, inside, ndf, eta, INSIDE_DIR, walk_paths=paths, seed=plan.seed)
+    paths, predictions = WALK_PATHS[bool(plan.quick)], {}
+    study = glass_study(
+        above, inside, ndf, eta, INSIDE_DIR, walk_paths=paths, seed=plan.seed,
+        predictions=predictions,
+    )  # fmt: skip
+    return study, predictions

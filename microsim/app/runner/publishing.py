@@ -19,6 +19,7 @@ import numpy as np
 from ... import atomic
 from ...errors import UsageError
 from ...sim.schedule import DeferredInterrupt
+from .glass import INSIDE_DIR
 from .planning import RESULT_FILES, RunPlan
 from .tracing import auto_summary
 from .wave_run import WAVE_DIR
@@ -65,9 +66,10 @@ CHARTS = {
     "stability": "stability.png",
     "speed": "speed.png",
     "multiple": "multiple.png",
+    "glass": "glass.png",
 }
 """The charts a run may write (key → file name in the run's directory)."""
-OUTPUT_NAMES = frozenset((*RESULT_FILES, TIMINGS_FILE, WAVE_DIR, *CHARTS.values()))
+OUTPUT_NAMES = frozenset((*RESULT_FILES, TIMINGS_FILE, WAVE_DIR, INSIDE_DIR, *CHARTS.values()))
 """Everything a run writes into its directory; anything else there is the user's."""
 
 

@@ -43,6 +43,7 @@ from ...analysis import report
 from ...analysis.anisotropy import anisotropy_summary
 from ...analysis.budget import error_budget
 from ...analysis.fits import FIT_MODELS, fit_all
+from ...analysis.glass_report import glass_chart
 from ...analysis.multiple_report import multiple_chart
 from ...analysis.pictures import appearance
 from ...analysis.report import albedo_stderr
@@ -264,11 +265,11 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         if has_orders:
             stages.stage("scattering orders")
             orders_doc = orders.orders_study(plan, result, specs)
-        inside, glass_doc = None, None
+        inside, glass_doc, glass_models = None, None, {}
         if sc.transmission:
             stages.stage("rough glass")
             inside = glass.trace_inside(plan)
-            glass_doc = glass.rough_glass(plan, result, inside, specs)
+            glass_doc, glass_models = glass.rough_glass(plan, result, inside, specs)
         stages.stage("charts")
         checkpoint("charts")
         files, stability = _charts(
@@ -276,6 +277,9 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         )
         comparison = (orders_doc or {}).get("comparison")
         files = _study_charts(plan, stage, files, comparison, (speed, speed_theta, speed_ref))
+        if inside is not None:
+            path = _chart_path(files, stage, "glass")
+            glass_chart(result, inside, glass_models, path, sc.name)
         stages.stage("writing")
         result = result.with_meta(seconds_analysis=time.perf_counter() - t0)
         result.save(stage)
