@@ -42,3 +42,17 @@ def pytest_collection_modifyitems(config, items):
     pytest-xdist hands tests out in collection order, so the two workers share the long ones
     from the start instead of one worker finishing a long test alone at the end."""
     items.sort(key=lambda item: item.get_closest_marker("long") is None)
+
+
+@pytest.fixture
+def mitsuba():
+    """The Mitsuba tests' guard: skip (with the reason) where Mitsuba or its LLVM backend is
+    unusable."""
+    from microsim.app.bench_peer import PeerUnavailable
+    from microsim.testing.mitsuba import _microfacet_kernels_compile
+
+    pytest.importorskip("mitsuba")
+    try:
+        _microfacet_kernels_compile()
+    except PeerUnavailable as exc:
+        pytest.skip(str(exc))

@@ -13,26 +13,13 @@ from support import refused
 from microsim.analytic.masking import Smith
 from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import GGX, Beckmann
-from microsim.app.bench_peer import PeerUnavailable
 from microsim.testing import assert_brdf_matches_model, assert_sampler_matches
 from microsim.testing.agreement import BRDFMismatch
 from microsim.testing.mitsuba import (
-    _microfacet_kernels_compile,
     mitsuba_brdf,
     mitsuba_model,
     mitsuba_sampler,
 )
-
-
-@pytest.fixture
-def mitsuba():
-    """Skip (with the reason) where Mitsuba or its LLVM backend is unusable."""
-    pytest.importorskip("mitsuba")
-    try:
-        _microfacet_kernels_compile()
-    except PeerUnavailable as exc:
-        pytest.skip(str(exc))
-
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "testing.md"
 

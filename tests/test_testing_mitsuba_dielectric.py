@@ -13,20 +13,9 @@ from support import refused
 
 from microsim.analytic import WalterDielectric
 from microsim.analytic.masking import Smith
-from microsim.app.bench_peer import PeerUnavailable
 from microsim.testing.agreement import BRDFMismatch
 from microsim.testing.bsdf import assert_bsdf_matches_model
-from microsim.testing.mitsuba import _microfacet_kernels_compile, mitsuba_brdf, mitsuba_model
-
-
-@pytest.fixture
-def mitsuba():
-    """Skip (with the reason) where Mitsuba or its LLVM backend is unusable."""
-    pytest.importorskip("mitsuba")
-    try:
-        _microfacet_kernels_compile()
-    except PeerUnavailable as exc:
-        pytest.skip(str(exc))
+from microsim.testing.mitsuba import mitsuba_brdf, mitsuba_model
 
 
 def _glass(distribution="ggx", alpha=0.3, **more):
