@@ -459,3 +459,22 @@ def test_a_standard_error_of_few_degrees_of_freedom_is_judged_as_student_t():
             alarms[kind] += not v["agrees"]
     assert alarms["dof"] <= stats.binom.isf(1e-3, trials, alpha), alarms
     assert alarms["exact"] > 0.5 * trials, alarms
+
+
+@pytest.mark.parametrize("realisations", [None, 4])
+def test_a_verdict_without_a_bin_to_test_is_inconclusive(realisations):
+    """When no bin holds ``min_events`` events (a faint or narrow lobe for the rays traced)
+    nothing is tested: the verdict is inconclusive ("?"), says why, and never "deviates" —
+    with ray noise as with realisations."""
+    bins = Bins(6, 5)
+    omega = bins.projected_solid_angle()
+    sim = np.full(bins.shape, 0.1)
+    model = np.full(bins.shape, 0.2)  # far off: only the missing evidence keeps it from ✗
+    counts = np.full(bins.shape, 3)
+    per_real = None if realisations is None else np.tile(sim, (realisations, 1, 1))
+    v = flat_verdict(
+        sim, 0.01 * sim, counts, model, omega, bins.theta_edges, realisations=per_real,
+        ensemble=realisations is not None, min_events=10,
+    )  # fmt: skip
+    assert v.n_bins == 0 and V.verdict_kind(v) == "inconclusive"
+    assert V.verdict_symbol(v) == "?" and "no bin holds 10 events" in V.inconclusive_reason(v)

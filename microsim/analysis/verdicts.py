@@ -64,6 +64,10 @@ Reference of the test (``reference``), by what the model describes:
   (heightfields: a tile's masking also departs from the ensemble's) a rejection is always
   inconclusive.
 
+Whatever the reference, a verdict without a bin to test (none holds ``min_events`` events, or
+no degree of freedom is left after the fitted parameters: dof ≤ 0) is inconclusive: there is
+no evidence either way (a lobe too narrow, or light too faint, for the rays traced).
+
 ``agrees`` is True only for a conclusive agreement; a verdict "deviates" iff ``conclusive`` and
 not ``agrees``. The false-alarm rate and power are measured in tests/test_calibration.py.
 """
@@ -265,6 +269,8 @@ def verdict(
     else:
         reference, n_real = "ray-noise", 1
         agrees, conclusive = ray.ok, True
+    if dof <= 0:  # no bin (or no degree of freedom) to test: no evidence either way
+        agrees, conclusive = False, False
     rel = np.where(used, (a.sim - a.mod) / np.where(used, a.sim, 1.0), 0.0)
     dev = used & (np.abs(z_dev) > Z_DEVIATION) & (np.abs(rel) > REL_DEVIATION)
     max_rel_dev, worst = _worst_bin(rel, E | dev, theta_edges, a.phi_edges)
@@ -533,6 +539,12 @@ def inconclusive_reason(v: Mapping) -> str:
     """Why an inconclusive verdict (a ``Verdict`` or its dict) is one, in words
     (``verdict_kind`` "inconclusive")."""
     v = Verdict.from_json(v)
+    if v.dof <= 0:
+        return (
+            f"no bin holds {v.min_events} events"
+            + (f" beyond the {v.n_params} fitted parameters" if v.n_params else "")
+            + ": nothing to test"
+        )
     if v.tile_departure is None or v.rel_rms is None:
         return "one realisation cannot separate tile scatter from model error"
     return (
