@@ -11,6 +11,7 @@ from support import flat_verdict
 from microsim import analytic as an
 from microsim import surfaces as sf
 from microsim.analysis import verdicts as V
+from microsim.analysis.verdict_record import validate_verdict
 from microsim.analytic.models import TorranceSparrow
 from microsim.sim import Bins, simulate
 from microsim.sim.predict import Predictor, predict
@@ -478,3 +479,4 @@ def test_a_verdict_without_a_bin_to_test_is_inconclusive(realisations):
     )  # fmt: skip
     assert v.n_bins == 0 and V.verdict_kind(v) == "inconclusive"
     assert V.verdict_symbol(v) == "?" and "no bin holds 10 events" in V.inconclusive_reason(v)
+    assert validate_verdict(json.loads(json.dumps(v))) == json.loads(json.dumps(v))  # writable

@@ -258,7 +258,9 @@ def _check_invariants(v) -> None:
         raise UsageError(f"verdict's reference must be one of {REFERENCES}, got {v.reference!r}")
     if v.agrees and not v.conclusive:
         raise UsageError("verdict's agrees can be true only for a conclusive verdict")
-    if not v.conclusive and v.reference != "one-tile":
-        raise UsageError("only a 'one-tile' verdict can be inconclusive")
+    if not v.conclusive and v.reference != "one-tile" and v.dof > 0:
+        raise UsageError(
+            "only a 'one-tile' verdict, or one without a degree of freedom, can be inconclusive"
+        )
     if (v.realisations >= 2) != (v.reference == "realisations"):
         raise UsageError("verdict's realisations >= 2 iff reference is 'realisations'")
