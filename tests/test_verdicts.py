@@ -480,3 +480,19 @@ def test_a_verdict_without_a_bin_to_test_is_inconclusive(realisations):
     assert v.n_bins == 0 and V.verdict_kind(v) == "inconclusive"
     assert V.verdict_symbol(v) == "?" and "no bin holds 10 events" in V.inconclusive_reason(v)
     assert validate_verdict(json.loads(json.dumps(v))) == json.loads(json.dumps(v))  # writable
+
+
+def test_a_fit_with_no_more_bins_than_parameters_is_inconclusive_and_says_so():
+    """Two testable bins against three fitted parameters leave no degree of freedom."""
+    bins = Bins(6, 5)
+    omega = bins.projected_solid_angle()
+    sim, counts = np.full(bins.shape, 0.1), np.full(bins.shape, 3)
+    counts[0, :2] = 100
+    v = flat_verdict(
+        sim, 0.01 * sim, counts, 2 * sim, omega, bins.theta_edges, fitted=True, n_params=3,
+        min_events=10,
+    )  # fmt: skip
+    assert (v.n_bins, v.dof) == (2, -1) and V.verdict_kind(v) == "inconclusive"
+    assert "2 bins hold 10 events, no more than the 3 fitted parameters" in (
+        V.inconclusive_reason(v)
+    )

@@ -540,10 +540,12 @@ def inconclusive_reason(v: Mapping) -> str:
     (``verdict_kind`` "inconclusive")."""
     v = Verdict.from_json(v)
     if v.dof <= 0:
+        if v.n_bins == 0:
+            return f"no bin holds {v.min_events} events: nothing to test"
+        held = f"{v.n_bins} bin{'s' if v.n_bins > 1 else ''} hold{'' if v.n_bins > 1 else 's'}"
         return (
-            f"no bin holds {v.min_events} events"
-            + (f" beyond the {v.n_params} fitted parameters" if v.n_params else "")
-            + ": nothing to test"
+            f"{held} {v.min_events} events, no more than the {v.n_params} fitted parameters: "
+            f"nothing to test"
         )
     if v.tile_departure is None or v.rel_rms is None:
         return "one realisation cannot separate tile scatter from model error"
