@@ -10,8 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from microsim.analysis.glass import glass_models, lobe_measured, lobe_values
-from microsim.analysis.glass_report import glass_index
+from microsim import analytic as an
+from microsim.analysis.glass import glass_models, glass_study, lobe_measured, lobe_values
+from microsim.analysis.glass_report import glass_chart, glass_index, glass_section
 from microsim.analysis.multiple import realised_ndf
 from microsim.analysis.study_records import RunDocument
 from microsim.analysis.verdicts import Prediction, verdict
@@ -67,7 +68,36 @@ seed = 1
 """
 
 
+def test_the_glass_study_reports_both_sides(tmp_path):
+    """The study of a run from the air and one from inside (``glass_study``): one row per
+    incidence and side, R + T = 1 (every path reflected or transmitted), the three Walter
+    variants' single-scattering energies below 1, the random walk's R and T summing to 1; the
+    report section, the index rows and the chart from it."""
+    tile = gaussian(64, 1.0, 1.2, 8.0, seed=3)
+    kw = dict(transmission=True, bounces="all", rays=20_000, bins=Bins(9, 7))
+    above, inside = simulate(tile, 1.5, [20.0], **kw), simulate(tile, 1.5, [160.0], **kw)
+    predictions = {}
+    study = glass_study(
+        above, inside, an.Beckmann(0.3), 1.5, "inside", walk_paths=4000, predictions=predictions
+    )
+    assert [(g.side, g.theta) for g in study.incidences] == [("air", 20.0), ("medium", 20.0)]
+    for g in study.incidences:
+        assert g.reflected + g.transmitted == pytest.approx(1.0, abs=1e-12)
+        assert all(0.9 < sum(rt) < 1.0 for rt in g.models.values())
+        assert sum(g.multiple["random-walk"][:2]) == pytest.approx(1.0, abs=1e-12)
+    assert (20.0, "transmitted", "walter-smith-corr-beta") in predictions
+    section = "\n".join(glass_section(study))
+    assert "## Rough glass" in section and "air → medium" in section and "medium → air" in section
+    doc = RunDocument(scene="glass-tiny", glass=study)
+    assert "glass-tiny" in "\n".join(glass_index([doc]))
+    glass_chart(above, inside, predictions, tmp_path / "glass.png", "glass-tiny")
+    assert (tmp_path / "glass.png").stat().st_size > 0
+
+
+# slow (15 s end to end, most of it the run's regular analysis): the default run covers the
+# study, its report, index and chart above, and the dielectric paths in test_dielectric
 @pytest.mark.integration
+@pytest.mark.slow
 def test_a_glass_scene_is_traced_from_both_sides_and_reported(tmp_path):
     scene = tmp_path / "glass.toml"
     scene.write_text(SCENE)
