@@ -84,6 +84,7 @@ def eta2_twice(wi, wo):
 
 
 SEPARABLE = WalterDielectric(GGX(0.3), Smith(correlated=False), ETA)
+SLOW = pytest.mark.slow  # the mirror image of a case the default run keeps, or a generic one
 BETA = WalterDielectric(GGX(0.3), Smith(correlated=True), ETA, "height-correlated")
 
 
@@ -91,17 +92,22 @@ BETA = WalterDielectric(GGX(0.3), Smith(correlated=True), ETA, "height-correlate
     "bsdf, model, named, reciprocal",
     [
         (eta2_dropped, MODEL, "η² missing", False),
-        (eta2_twice, MODEL, "η² applied twice", False),
+        pytest.param(eta2_twice, MODEL, "η² applied twice", False, marks=SLOW),
         (with_cos_o, MODEL, "× cos θo", False),
-        (lambda wi, wo: 0.8 * MODEL.f(wi, wo), MODEL, "constant factor: brdf ≈ 0.8 ×", True),
+        pytest.param(
+            lambda wi, wo: 0.8 * MODEL.f(wi, wo), MODEL, "constant factor: brdf ≈ 0.8 ×", True,
+            marks=SLOW,
+        ),
         (fresnel_not_flipped, MODEL, "relative index not inverted", False),
         (SEPARABLE.f, MODEL, "separable Smith G1(wi)·G1(wo) for the height-correlated", True),
-        (MODEL.f, SEPARABLE,
-         "height-correlated Smith 1/(1 + Λ(wi) + Λ(wo)) on both lobes for the separable", True),
+        pytest.param(MODEL.f, SEPARABLE,
+         "height-correlated Smith 1/(1 + Λ(wi) + Λ(wo)) on both lobes for the separable", True,
+         marks=SLOW),
         (BETA.f, MODEL,
          "B(1 + Λ(wi), 1 + Λ(wo)) across the interface for the height-correlated", True),
-        (MODEL.f, BETA,
-         "1/(1 + Λ(wi) + Λ(wo)) on both lobes for the height-correlated Smith with Heitz", True),
+        pytest.param(MODEL.f, BETA,
+         "1/(1 + Λ(wi) + Λ(wo)) on both lobes for the height-correlated Smith with Heitz", True,
+         marks=SLOW),
     ],
 )  # fmt: skip
 def test_a_broken_bsdf_fails_and_the_message_names_its_bug(bsdf, model, named, reciprocal):
