@@ -176,13 +176,13 @@ def test_the_bench_measures_the_dielectric_path_against_the_peer(mitsuba):
 
 @pytest.mark.parametrize("surface_name", ["tile", "flat"])
 def test_the_dielectric_shortcuts_change_nothing(monkeypatch, tile, surface_name):
-    """``dielectric.trace_uncleared``: a continuing ray leaving the surface on its own side
-    more steeply than the steepest facet gets its walk's status without a walk — most of the
-    paths refracted into the glass at 30° — and ``dielectric.bin_side_escapes`` bins the
-    escapes by the single bounce's vectorised binning; every number stays bitwise that of
-    tracing every ray (``Tracer.surely_escapes`` switched off) and binning by
-    ``Bins.locate`` (on the flat interface every escape lies on a Δφ edge or at the
-    zenith)."""
+    """``dielectric.leaving`` with ``bounces.trace_continuing``: a continuing ray leaving the
+    surface on its own side more steeply than the steepest facet gets its walk's status
+    without a walk — most of the paths refracted into the glass at 30° — and
+    ``dielectric.bin_side_escapes`` bins the escapes by the single bounce's vectorised
+    binning; every number stays bitwise that of tracing every ray (``Tracer.surely_escapes``
+    switched off) and binning by ``Bins.locate`` (on the flat interface every escape lies on
+    a Δφ edge or at the zenith)."""
     from microsim.sim import bounces, dielectric
     from microsim.sim.tracer import Tracer
     from microsim.surfaces import flat

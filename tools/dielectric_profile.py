@@ -10,6 +10,8 @@ import collections
 import sys
 import time
 
+from stage_profile import wrap_stages
+
 from microsim.app.bench import GLASS, BenchConfig, _bins, _surface
 from microsim.sim import bounces, dielectric, dielectric_kernels, simulate, tallies
 from microsim.sim.tracer import Tracer
@@ -17,7 +19,7 @@ from microsim.sim.tracer import Tracer
 PATHS = 2**21
 STAGES = {
     "primary rays (grid walk from above, Embree from below)": (dielectric, "primary_rays"),
-    "continuation rays through Embree (periodic walk)": (dielectric, "trace_uncleared"),
+    "continuation rays through Embree (periodic walk)": (dielectric, "trace_continuing"),
     "  of which Embree walks (Tracer.trace_columns, primaries too)": (Tracer, "trace_columns"),
     "  of which re-traced grazing rays": (bounces, "resolve_grazing"),
     "interface step (Fresnel, roulette, new rays)": (dielectric_kernels, "interface_step"),
@@ -27,23 +29,9 @@ STAGES = {
 }
 
 
-def wrap_stages(spent: dict) -> None:
-    """Replace every stage of ``STAGES`` by a wrapper adding its wall time to ``spent``."""
-    for label, (owner, name) in STAGES.items():
-        inner = getattr(owner, name)
-
-        def timed(*a, _inner=inner, _label=label, **k):
-            t0 = time.perf_counter()
-            out = _inner(*a, **k)
-            spent[_label] += time.perf_counter() - t0
-            return out
-
-        setattr(owner, name, timed)
-
-
 def profile(surface, theta: float, spent: dict) -> tuple[float, dict]:
     """(ns per path of the whole call, {stage: ns per path}), best of two calls; ``spent``
-    the stages' seconds (``wrap_stages``)."""
+    the stages' seconds (``stage_profile.wrap_stages``)."""
     kw = dict(bins=_bins(), threads=1, transmission=True, bounces="all")
     simulate(surface, GLASS, theta, rays=2**16, **kw)  # compilation, tracer
     best = None
@@ -61,7 +49,7 @@ def profile(surface, theta: float, spent: dict) -> tuple[float, dict]:
 def main(thetas) -> None:
     surface = _surface(BenchConfig())
     spent = collections.defaultdict(float)
-    wrap_stages(spent)
+    wrap_stages(STAGES, spent)
     for theta in thetas:
         total, stages = profile(surface, theta, spent)
         print(f"θi = {theta:g}°: {total:.0f} ns per path ({1e3 / total:.2f} M paths/s)")

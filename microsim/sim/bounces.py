@@ -243,15 +243,31 @@ def next_rays(k: int, generation: int) -> bounce_kernels.NextRays:
     )  # fmt: skip
 
 
-def trace_continuing(tracer: Tracer, nxt: bounce_kernels.NextRays, m: int) -> tuple:
+def trace_continuing(
+    tracer: Tracer, nxt: bounce_kernels.NextRays, m: int, leaving: np.ndarray | None = None
+) -> tuple:
     """(global indices, weights, direction columns, walk hits) of the ``m`` continuing paths
     written to ``nxt``, their rays traced (``Tracer.trace_columns``; grazing ones re-traced
-    with a larger wrap cap, ``resolve_grazing``)."""
+    with a larger wrap cap, ``resolve_grazing``). ``leaving``: (m,) bool, rays known to leave
+    the relief without a hit (``Tracer.surely_escapes`` on their side): not traced, they get
+    the status their walk would end with, ESCAPED rising or MISSED falling."""
     live, w = nxt.live[:m], nxt.w[:m]
     d = [nxt.dx[:m], nxt.dy[:m], nxt.dz[:m]]
-    starts = [nxt.x[:m], nxt.y[:m], nxt.z[:m]]
-    hs, prim, p = tracer.trace_columns(starts, d, nxt.d32[:m])
-    resolve_grazing(tracer, starts, d, nxt.d32[:m], hs, prim, p)
+    starts, d32 = [nxt.x[:m], nxt.y[:m], nxt.z[:m]], nxt.d32[:m]
+    if leaving is None or not leaving.any():
+        hs, prim, p = tracer.trace_columns(starts, d, d32)
+        resolve_grazing(tracer, starts, d, d32, hs, prim, p)
+        return live, w, d, (hs, prim, p)
+    hs = np.where(d[2] > 0.0, codes.ESCAPED, codes.MISSED).astype(np.int8)
+    prim, p = np.full(m, -1, dtype=np.int32), [np.empty(m) for _ in range(3)]
+    rest = np.flatnonzero(~leaving)
+    if rest.size:
+        starts, d_rest, d32 = [c[rest] for c in starts], [c[rest] for c in d], d32[rest]
+        h, q, points = tracer.trace_columns(starts, d_rest, d32)
+        resolve_grazing(tracer, starts, d_rest, d32, h, q, points)
+        hs[rest], prim[rest] = h, q
+        for column, traced in zip(p, points):
+            column[rest] = traced
     return live, w, d, (hs, prim, p)
 
 

@@ -25,9 +25,10 @@ O transmitted ones (``tallies.simulation_result`` splits them into ``brdf_orders
 ``btdf_orders``); the ledger has the ``ledger.DIELECTRIC_TERMINAL`` classes and the
 ``ledger.TIR_ORDERS`` columns. Traced masking only (Embree), on heightfields and V-grooves,
 with the periodic wrap; a continuing ray that surely leaves the relief (steeper than the
-steepest facet, away from the surface on its side) is not traced (``trace_uncleared``: its
-walk's outcome is known, so no number changes); bitwise reproducible as the opaque chains are
-(each path on its own, its roulette draws a hash of its number).
+steepest facet, away from the surface on its side) is not traced (``leaving``,
+``bounces.trace_continuing``: its walk's outcome is known, so no number changes); bitwise
+reproducible as the opaque chains are (each path on its own, its roulette draws a hash of
+its number).
 """
 
 from __future__ import annotations
@@ -49,12 +50,11 @@ from .bounces import (
     next_rays,
     order_slots,
     primary_rays,
-    resolve_grazing,
     trace_continuing,
 )
 from .dielectric_kernels import Interface, PathSides, Roulette, SideEscapes
 from .engine import segments
-from .engine.codes import ESCAPED, MISSED, SINGLE
+from .engine.codes import SINGLE
 from .ray_bins import locate_single
 from .ray_columns import columns
 from .scratch import WorkArray, WorkColumns
@@ -71,7 +71,7 @@ __all__ = [
     "interface_of",
     "roulette_stream",
     "trace_dielectric",
-    "trace_uncleared",
+    "leaving",
     "bin_side_escapes",
     "DielectricPath",
 ]
@@ -196,7 +196,8 @@ def trace_dielectric(
             bin_side_escapes(bins, esc, e, phi, offset, out.where)
         if m == 0:
             break
-        live, w, d, (hs, prim, p) = trace_uncleared(tracer, nxt, m, sides.inside)
+        sure = leaving(tracer, nxt, m, sides.inside)
+        live, w, d, (hs, prim, p) = trace_continuing(tracer, nxt, m, sure)
         shared = False
         b += 1
     return out
@@ -217,30 +218,13 @@ def bin_side_escapes(bins: Bins, esc: SideEscapes, e: int, phi, offset, where) -
     where[rows] = offset + found
 
 
-def trace_uncleared(tracer: Tracer, nxt, m: int, inside: np.ndarray) -> tuple:
-    """``bounces.trace_continuing`` of the ``m`` continuing paths, except the rays that
-    surely leave the relief, which are not traced: a ray leaving the surface away from it on
-    its own side (up in the air, down inside the medium, ``inside`` per path) more steeply
-    than the steepest facet cannot meet it again (``Tracer.surely_escapes``, the Lipschitz
-    bound of ``horizon_bounds.rise_bound``, which holds either way up), so its walk would end
-    ESCAPED (rising) or MISSED (falling): it gets that status without one."""
-    live, d = nxt.live[:m], [nxt.dx[:m], nxt.dy[:m], nxt.dz[:m]]
-    sure = tracer.surely_escapes(d[0], d[1], np.where(inside[live], -d[2], d[2]))
-    if not sure.any():
-        return trace_continuing(tracer, nxt, m)
-    hs = np.where(d[2] > 0.0, ESCAPED, MISSED).astype(np.int8)
-    prim = np.full(m, -1, dtype=np.int32)
-    p = [np.empty(m) for _ in range(3)]
-    rest = np.flatnonzero(~sure)
-    if rest.size:
-        starts = [c[:m][rest] for c in (nxt.x, nxt.y, nxt.z)]
-        d_rest, d32 = [c[rest] for c in d], nxt.d32[:m][rest]
-        h, q, points = tracer.trace_columns(starts, d_rest, d32)
-        resolve_grazing(tracer, starts, d_rest, d32, h, q, points)
-        hs[rest], prim[rest] = h, q
-        for column, traced in zip(p, points):
-            column[rest] = traced
-    return live, nxt.w[:m], d, (hs, prim, p)
+def leaving(tracer: Tracer, nxt, m: int, inside: np.ndarray) -> np.ndarray:
+    """Which of the ``m`` continuing rays surely leave the relief: away from the surface on
+    their own side (up in the air, down inside the medium, ``inside`` per path) more steeply
+    than the steepest facet, they cannot meet it again (``Tracer.surely_escapes``, the
+    Lipschitz bound of ``horizon_bounds.rise_bound``, which holds either way up)."""
+    dz = nxt.dz[:m]
+    return tracer.surely_escapes(nxt.dx[:m], nxt.dy[:m], np.where(inside[nxt.live[:m]], -dz, dz))
 
 
 class DielectricPath(BouncePath):
