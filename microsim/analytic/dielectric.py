@@ -224,10 +224,8 @@ def _scattered(i, h, eta):
     reflection)."""
     d = h @ i
     o_r = vectors.normalize(2.0 * d[..., None] * h - i)
-    sin2_t = (1.0 - d * d) / (eta * eta)
-    refracts = sin2_t < 1.0
-    cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
-    o_t = vectors.normalize(-i / eta + (d / eta - cos_t)[..., None] * h)
+    o_t, refracts = vectors.refract(i, h, eta, d)
+    o_t = vectors.normalize(o_t)
     jac_r = 4.0 * np.abs(np.einsum("...i,...i->...", o_r, h))
     oh = np.abs(np.einsum("...i,...i->...", o_t, h))
     with np.errstate(divide="ignore", invalid="ignore"):

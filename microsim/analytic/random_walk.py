@@ -117,6 +117,7 @@ import numpy as np
 from scipy import special
 
 from microsim import checks as _checks
+from microsim import vectors
 from microsim.bins import Bins
 from microsim.errors import UsageError
 
@@ -438,9 +439,7 @@ def _dielectric_event(v, m, vm, side, tau, eta: float, rng):
     d = 2.0 * vm[:, None] * m - v
     if np.any(refract):
         rel = np.where(outside, eta, 1.0 / eta)[refract]
-        c = vm[refract]
-        cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / (rel * rel), 0.0))
-        t = -v[refract] / rel[:, None] + (c / rel - cos_t)[:, None] * m[refract]
+        t, _ = vectors.refract(v[refract], m[refract], rel, vm[refract])
         d[refract] = -t
         side = np.where(refract, -side, side)
         flipped = -np.log(-np.expm1(-np.maximum(tau[refract], 1e-300)))
