@@ -38,19 +38,25 @@ STAGES = {
 }
 
 
-def stage_times(surface, rays: int) -> tuple[float, dict]:
-    """(ns per sample of the whole call, {stage: ns per sample}), best of three calls."""
-    spent = collections.defaultdict(float)
-    for owner, name in STAGES.values():
+def wrap_stages(stages: dict, spent: dict) -> None:
+    """Replace every stage of ``stages`` (label → (owner, attribute name)) by a wrapper adding
+    its wall time to ``spent[label]``."""
+    for label, (owner, name) in stages.items():
         inner = getattr(owner, name)
 
-        def timed(*a, _inner=inner, _name=name, **k):
+        def timed(*a, _inner=inner, _label=label, **k):
             t0 = time.perf_counter()
             out = _inner(*a, **k)
-            spent[_name] += time.perf_counter() - t0
+            spent[_label] += time.perf_counter() - t0
             return out
 
         setattr(owner, name, timed)
+
+
+def stage_times(surface, rays: int) -> tuple[float, dict]:
+    """(ns per sample of the whole call, {stage: ns per sample}), best of three calls."""
+    spent = collections.defaultdict(float)
+    wrap_stages(STAGES, spent)
     best = None
     for _ in range(3):
         spent.clear()
@@ -60,7 +66,7 @@ def stage_times(surface, rays: int) -> tuple[float, dict]:
         if best is None or total < best[0]:
             best = (total, dict(spent))
     total, spent = best
-    per = {label: spent[name] / rays * 1e9 for label, (_, name) in STAGES.items()}
+    per = {label: spent[label] / rays * 1e9 for label in STAGES}
     return total / rays * 1e9, per
 
 
