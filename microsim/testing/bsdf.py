@@ -183,7 +183,7 @@ def assert_bsdf_matches_model(
         "" if convention == "radiance" else ", in its radiance form f(wo, wi)"
     )
     out = check_bin_averages(
-        Compared(*values, rows.labels, b, name, model, rtol),
+        Compared(*values, rows.labels, b, name, model, rtol, kind="bsdf"),
         Reciprocity(*recip, reciprocity_rtol, law),
         lambda u, r: likely_cause(
             u, model, r, rows.theta, rows.phi, b, QUAD_RTOL, lobes=rows.lobes

@@ -172,7 +172,8 @@ def assert_brdf_matches_model(
 class Compared:
     """Bin averages (rows, Θ, Φ) of the code under test (``user``) and of the model (``ref``)
     on ``bins``, one row per ``labels`` entry (an incidence, or an incidence and a lobe), the
-    brdf's ``name``, the ``model`` and the check's ``rtol`` (None: the quadrature's)."""
+    brdf's ``name``, the ``model``, the check's ``rtol`` (None: the quadrature's) and what
+    the code under test is called in the message (``kind``: "brdf" or "bsdf")."""
 
     user: np.ndarray
     ref: np.ndarray
@@ -181,6 +182,7 @@ class Compared:
     name: str
     model: object
     rtol: float | None
+    kind: str = "brdf"
 
 
 @dataclass(frozen=True)
@@ -223,7 +225,7 @@ def check_bin_averages(c: Compared, recip: Reciprocity, cause) -> dict:
     lines = []
     if failing:
         lines.append(
-            f"brdf {c.name!r} does not implement the model ({getattr(c.model, 'name', 'model')}"
+            f"{c.kind} {c.name!r} does not implement the model ({getattr(c.model, 'name', 'model')}"
             f" {getattr(c.model, 'params', dict)()!r}) at θi = "
             + ", ".join(c.labels[t] for t in failing)
             + f" (bin averages {b.n_theta} × {b.n_phi}, "
@@ -231,8 +233,8 @@ def check_bin_averages(c: Compared, recip: Reciprocity, cause) -> dict:
         )
         width = max(6, max(len(x) for x in c.labels))
         lines.append(
-            f"  {'θi'.ljust(width)}  energy ratio brdf/model   bins off   worst bin "
-            "(model − brdf)/brdf"
+            f"  {'θi'.ljust(width)}  energy ratio {c.kind}/model   bins off   worst bin "
+            f"(model − {c.kind})/{c.kind}"
         )
         for t in range(len(c.labels)):
             k = np.unravel_index(
@@ -240,7 +242,7 @@ def check_bin_averages(c: Compared, recip: Reciprocity, cause) -> dict:
             )
             worst = (
                 f"θo {b.theta_centers[k[0]]:.1f}° Δφ {b.phi_centers[k[1]]:.0f}°: "
-                f"model {ref[t][k]:.4g} vs brdf {user[t][k]:.4g} sr⁻¹ ({100 * rel[t][k]:+.2f}%)"
+                f"model {ref[t][k]:.4g} vs {c.kind} {user[t][k]:.4g} sr⁻¹ ({100 * rel[t][k]:+.2f}%)"
                 if bad[t].any()
                 else "–"
             )
@@ -257,7 +259,7 @@ def check_bin_averages(c: Compared, recip: Reciprocity, cause) -> dict:
         )
     if recip_bad:
         lines.append(
-            f"brdf {c.name!r} is not reciprocal: f(wi, wo) and f(wo, wi) differ by "
+            f"{c.kind} {c.name!r} is not reciprocal: f(wi, wo) and f(wo, wi) differ by "
             f"{recip.error:.3g} (relative) at wi = {np.round(recip.a, 6).tolist()}, wo = "
             f"{np.round(recip.b, 6).tolist()} (allowed {recip.allowed:g}; {recip.law})"
         )
