@@ -93,7 +93,7 @@ BETA = WalterDielectric(GGX(0.3), Smith(correlated=True), ETA, "height-correlate
     [
         (eta2_dropped, MODEL, "η² missing", False),
         pytest.param(eta2_twice, MODEL, "η² applied twice", False, marks=SLOW),
-        (with_cos_o, MODEL, "× cos θo", False),
+        pytest.param(with_cos_o, MODEL, "× cos θo", False, marks=SLOW),
         pytest.param(
             lambda wi, wo: 0.8 * MODEL.f(wi, wo), MODEL, "constant factor: brdf ≈ 0.8 ×", True,
             marks=SLOW,
@@ -124,7 +124,8 @@ def test_the_adjoint_passes_as_the_importance_convention():
 
 
 @pytest.mark.parametrize(
-    "bsdf, convention", [(importance_form, "radiance"), (MODEL.f, "importance")]
+    "bsdf, convention",
+    [(importance_form, "radiance"), pytest.param(MODEL.f, "importance", marks=SLOW)],
 )
 def test_a_bsdf_in_the_other_convention_fails_as_the_eta2_question(bsdf, convention):
     """The adjoint f(wo, wi) read as radiance (the default), or the radiance BSDF read as

@@ -68,7 +68,10 @@ def test_f_vanishes_where_no_facet_refracts():
     assert model.f(up, np.array([1.0, 0.0, 0.0])) == 0.0
 
 
-@pytest.mark.parametrize("alpha", [0.1, 0.5, 1.0])
+@pytest.mark.parametrize(
+    "alpha",
+    [pytest.param(0.1, marks=pytest.mark.slow), 0.5, pytest.param(1.0, marks=pytest.mark.slow)],
+)
 def test_single_scattering_never_creates_energy(alpha):
     """R + T ≤ 1 (masking only removes flux) from above and from inside the medium."""
     for model in (
