@@ -40,6 +40,20 @@ def bin_guess(ox, oy, oz, ex, ey, n_theta, n_phi, t_scale, p_scale, gt, gp):
     return min(k, n_theta - 1) * n_phi + min(j, n_phi - 1), near
 
 
+@inlined
+def locate_folded(ox, oy, oz, ex, ey, phi_i_deg, n_theta, edges, scales):
+    """``Bins.locate`` of the rising unit direction o on a folded grid (``n_theta``, Δφ
+    ``edges`` in degrees) against the incident azimuth (ex, ey) = (cos φi, sin φi),
+    ``phi_i_deg`` in degrees, for one ray: ``bin_guess`` (``scales`` = ``bin_scales``), and
+    near an edge ``locate_one``'s exact arithmetic (as ``ray_bins.bin_rays``)."""
+    ts, fs, gt, gf = scales
+    n_phi = len(edges) - 1
+    flat, near = bin_guess(ox, oy, oz, ex, ey, n_theta, n_phi, ts, fs, gt, gf)
+    if near:
+        return locate_one(ox, oy, oz, phi_i_deg, n_theta, n_phi, True, edges)
+    return flat
+
+
 @vector_inlined
 def bin_scales(n_theta, n_phi):
     """(θ bins per radian, Δφ bins per radian, guards in bins) of a folded grid for

@@ -13,17 +13,20 @@ import time
 from stage_profile import wrap_stages
 
 from microsim.app.bench import GLASS, BenchConfig, _bins, _surface
-from microsim.sim import bounces, dielectric, dielectric_kernels, simulate, tallies
-from microsim.sim.tracer import Tracer
+from microsim.sim import dielectric, facet_tables, interface_grid, paths, simulate, tallies
 
 PATHS = 2**21
 STAGES = {
-    "primary rays (grid walk from above, Embree from below)": (dielectric, "primary_rays"),
-    "continuation rays through Embree (periodic walk)": (dielectric, "trace_continuing"),
-    "  of which Embree walks (Tracer.trace_columns, primaries too)": (Tracer, "trace_columns"),
-    "  of which re-traced grazing rays": (bounces, "resolve_grazing"),
-    "interface step (Fresnel, roulette, new rays)": (dielectric_kernels, "interface_step"),
-    "binning the escapes": (dielectric, "bin_side_escapes"),
+    "paths on the grid (one compiled loop: walks, interactions, bins)": (
+        interface_grid,
+        "grid_interface_paths",
+    ),
+    "  first interactions' facet table (built once per incidence)": (
+        facet_tables,
+        "interface_table",
+    ),
+    "paths step by step (primaries, Embree continuations)": (dielectric, "trace_dielectric"),
+    "origins (stratified starts)": (paths.Incidence, "origins_of"),
     "tallies (split_order_tallies)": (tallies, "split_order_tallies"),
     "a thread task (origins + the paths)": (dielectric.DielectricPath, "follow"),
 }

@@ -252,21 +252,30 @@ def end_unresolved(ledger, b, g, w, path_class, first_class):
 
 
 @inlined
-def continue_path(nxt, m, g, p, n, lift, half, o, wn):
-    """Write continuing path ``g`` to slot ``m`` of ``nxt``: its next ray starts at the hit
-    ``p`` (px, py, pz) moved along the unit normal ``n`` onto its facet plane and eps above
-    it (``lift`` = n·v0 + eps), wrapped into the tile (``half`` extents), along ``o``,
-    carrying weight ``wn``."""
+def next_start(p, n, lift, half):
+    """The start of the ray that continues a path from the hit ``p`` (px, py, pz): moved along
+    the unit normal ``n`` onto the plane n·x = ``lift`` (its facet plane, eps on the side the
+    ray leaves to), wrapped into the tile (``half`` extents)."""
     px, py, pz = p
     a0, a1, a2 = n
     hx, hy = half
-    ox, oy, oz = o
     off = px * a0 + py * a1 + pz * a2 - lift
     x, y, z = px - off * a0, py - off * a1, pz - off * a2
     if x < -hx or x >= hx:  # into the tile
         x = (x + hx) % (2.0 * hx) - hx
     if y < -hy or y >= hy:
         y = (y + hy) % (2.0 * hy) - hy
+    return x, y, z
+
+
+@inlined
+def continue_path(nxt, m, g, p, n, lift, half, o, wn):
+    """Write continuing path ``g`` to slot ``m`` of ``nxt``: its next ray starts at the hit
+    ``p`` (px, py, pz) moved along the unit normal ``n`` onto its facet plane and eps above
+    it (``lift`` = n·v0 + eps), wrapped into the tile (``half`` extents), along ``o``,
+    carrying weight ``wn``."""
+    x, y, z = next_start(p, n, lift, half)
+    ox, oy, oz = o
     nxt.live[m] = g
     nxt.x[m], nxt.y[m], nxt.z[m] = x, y, z
     nxt.dx[m], nxt.dy[m], nxt.dz[m] = ox, oy, oz

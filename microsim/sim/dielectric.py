@@ -23,12 +23,13 @@ a medium can be lit from above only. ``bounces``: K cuts the path after K intera
 Tallies: 2·O order slots × bins (O = ``bounces.order_slots``): the O reflected slots, then the
 O transmitted ones (``tallies.simulation_result`` splits them into ``brdf_orders`` and
 ``btdf_orders``); the ledger has the ``ledger.DIELECTRIC_TERMINAL`` classes and the
-``ledger.TIR_ORDERS`` columns. Traced masking only (Embree), on heightfields and V-grooves,
-with the periodic wrap; a continuing ray that surely leaves the relief (steeper than the
-steepest facet, away from the surface on its side) is not traced (``leaving``,
-``bounces.trace_continuing``: its walk's outcome is known, so no number changes); bitwise
-reproducible as the opaque chains are (each path on its own, its roulette draws a hash of
-its number).
+``ledger.TIR_ORDERS`` columns. Traced masking only, on heightfields and V-grooves, with the
+periodic wrap: step by step through Embree (``trace_dielectric``), or on a heightfield grid in
+one compiled loop per chunk (``interface_grid``, the same estimator); a continuing ray that
+surely leaves the relief (steeper than the steepest facet, away from the surface on its side)
+is not traced (``leaving``, ``bounces.trace_continuing``: its walk's outcome is known, so no
+number changes); bitwise reproducible as the opaque chains are (each path on its own, its
+roulette draws a hash of its number).
 """
 
 from __future__ import annotations
@@ -55,6 +56,8 @@ from .bounces import (
 from .dielectric_kernels import Interface, PathSides, Roulette, SideEscapes
 from .engine import segments
 from .engine.codes import SINGLE
+from .facet_tables import uses_facet_table
+from .interface_grid import trace_grid_interface, uses_grid_walk
 from .ray_bins import locate_single
 from .ray_columns import columns
 from .scratch import WorkArray, WorkColumns
@@ -90,6 +93,19 @@ class InterfaceOutcome(NamedTuple):
     wterm: np.ndarray
     where: np.ndarray
     tir: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> "InterfaceOutcome":
+        """The outcome arrays of ``n`` paths before they are followed (no escape bin, no
+        total internal reflection)."""
+        return cls(
+            np.empty(n, dtype=np.int8),
+            np.zeros(n),
+            np.empty(n, dtype=np.int8),
+            np.empty(n),
+            np.full(n, -1, dtype=np.int64),
+            np.zeros(n, dtype=np.int8),
+        )
 
 
 # this thread's work arrays (``scratch``): each step's escapes (the next step's rays are the
@@ -162,14 +178,7 @@ def trace_dielectric(
     from_below = float(wi[2]) < 0.0
     if from_below:
         x[2] = np.full(n, tracer.zmin - tracer.top_margin)
-    out = InterfaceOutcome(
-        np.empty(n, dtype=np.int8),
-        np.zeros(n),
-        np.empty(n, dtype=np.int8),
-        np.empty(n),
-        np.full(n, -1, dtype=np.int64),
-        np.zeros(n, dtype=np.int8),
-    )
+    out = InterfaceOutcome.empty(n)
     sides = PathSides(np.full(n, from_below), from_below, out.tir)
     ledger = bounce_kernels.PathLedger(*out[:5])
     (hs, prim, p), d, shared = primary_rays(tracer, x, wi, psi)
@@ -234,13 +243,24 @@ class DielectricPath(BouncePath):
     def __init__(self, incidence, azimuth: bool, rotate: bool, chain: ChainLimits):
         super().__init__(incidence, azimuth, rotate, chain)
         self.stream = roulette_stream(incidence.key)
+        tracer = incidence.tracer
+        self.table = uses_facet_table(tracer, None, azimuth, rotate, incidence.rays)
 
     def trace(self, wi, phi_i, starts, psi, blocks) -> InterfaceOutcome:
+        """The paths from ``starts``: on a heightfield grid in one compiled loop where it
+        applies (``interface_grid.uses_grid_walk``), else step by step through Embree."""
         inc = self.incidence
         roulette = Roulette(self.stream, block_span(inc.rays, list(blocks))[0])
-        return trace_dielectric(
-            inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, roulette
-        )
+        if not uses_grid_walk(inc.tracer, inc.bins, wi, psi):
+            return trace_dielectric(
+                inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, roulette
+            )
+        x = columns(starts)
+        out = InterfaceOutcome.empty(len(x[0]))
+        interface = interface_of(inc.ior, inc.tracer)
+        path = (self.chain, interface, roulette, self.table)
+        trace_grid_interface(inc.tracer, wi, phi_i, inc.bins, x, path, out)
+        return out
 
 
 def interface_task(incidence, azimuth: bool, isotropic: bool, bounces) -> Callable:

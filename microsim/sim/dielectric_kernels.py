@@ -51,9 +51,11 @@ from typing import NamedTuple
 import numpy as np
 
 from microsim.analytic.fresnel import fresnel_real_scalar
+from microsim.bin_kernels import locate_folded
 from microsim.jit import compiled, inlined
 
 from .bounce_kernels import continue_path, end_path, end_unresolved
+from .engine.beam import beam_escapes
 from .engine.codes import (
     CUT_BOUNCES,
     CUT_WEIGHT,
@@ -133,29 +135,121 @@ def path_uniform(stream, ray, step):
     return np.float64(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
+ENDS, ESCAPES, CONTINUES = 0, 1, 2
+"""What ``interact`` makes of a path's step: it ended (in the ledger), it leaves the relief
+on its own side (``end_escape``), or it goes on along a new ray."""
+
+
 @inlined
-def _escape(ledger, escapes, sides, b, g, w, d, e):
-    """Path ``g`` leaves the relief along ``d`` after order b − 1 with weight ``w``: reflected
-    if it leaves on the incidence's side, else transmitted; listed in ``escapes`` at slot
-    ``e`` (direction flipped up if it falls). Returns the number of escapes listed."""
-    dx, dy, dz = d
-    down = dz < 0.0
-    transmitted = down != sides.from_below
+def end_escape(ledger, sides, b, g, w, dz):
+    """End path ``g``, whose ray along (·, ·, ``dz``) leaves the relief after order b − 1 with
+    weight ``w``: reflected if it leaves on the incidence's side, else transmitted (returned)."""
+    transmitted = (dz < 0.0) != sides.from_below
     cls = order_class(b - 1)
     end_path(ledger, g, TRANS_1 + cls if transmitted else cls, w)
+    return transmitted
+
+
+@inlined
+def _escape(ledger, escapes, sides, b, g, w, d, e):
+    """``end_escape`` of path ``g`` along ``d``, listed in ``escapes`` at slot ``e`` (direction
+    flipped up if it falls). Returns the number of escapes listed."""
+    dx, dy, dz = d
+    escapes.transmitted[e] = end_escape(ledger, sides, b, g, w, dz)
     escapes.index[e] = g
     escapes.dx[e], escapes.dy[e] = dx, dy
-    escapes.dz[e] = -dz if down else dz
-    escapes.transmitted[e] = transmitted
+    escapes.dz[e] = -dz if dz < 0.0 else dz
     return e + 1
+
+
+@inlined
+def crossing(c, inside, interface):
+    """(rel2, F, tir) of a hit with c = −d·n ≠ 0 by a ray ``inside`` the medium or not:
+    (η_t/η_i)², the Fresnel reflectance (``fresnel_real_scalar``; 1 at total internal
+    reflection) and whether it is totally internally reflected, sin²θi ≥ (η_t/η_i)²."""
+    ci = abs(c)
+    rel2 = 1.0 / interface.eta2 if inside else interface.eta2  # (η_t/η_i)²
+    fw = fresnel_real_scalar(ci, rel2, 0.0 if inside else interface.k2)
+    return rel2, fw, not interface.absorbing and (1.0 - ci * ci) >= rel2
+
+
+@inlined
+def scatter(d, n, c, rel2, reflect):
+    """The direction leaving a hit with c = −d·n on the facet of unit normal ``n``:
+    reflected, d + 2c·n, or refracted (module docstring; (η_t/η_i)² = ``rel2``, below the
+    critical angle)."""
+    dx, dy, dz = d
+    a0, a1, a2 = n
+    if reflect:
+        return dx + 2.0 * c * a0, dy + 2.0 * c * a1, dz + 2.0 * c * a2
+    ci = abs(c)
+    s = 1.0 if c > 0.0 else -1.0  # n_s = s·n faces the arriving ray
+    r = 1.0 / math.sqrt(rel2)
+    ct = math.sqrt(max(1.0 - r * r * (1.0 - ci * ci), 0.0))
+    k = (r * ci - ct) * s
+    return r * dx + k * a0, r * dy + k * a1, r * dz + k * a2
+
+
+@inlined
+def interact(b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides, ledger):
+    """Step ``b`` of path ``g`` (weight ``w``) whose ray along ``d`` ended with walk status
+    ``h`` on face ``f`` (module docstring): (what, wn, ox, oy, oz, offset) — ``what`` one of
+    ENDS (the ledger written), ESCAPES (the ray left the relief on the path's side:
+    ``end_escape`` is the caller's) or CONTINUES along (ox, oy, oz) with weight ``wn`` from
+    the hit moved onto the plane n·x = ``offset`` (eps on the side the ray leaves to).
+    ``facets``: ``bounce_kernels.FacetPlanes``; ``sides`` and ``ledger`` are updated."""
+    dx, dy, dz = d
+    leaves_down = h == MISSED and dz < 0.0
+    if b == 2 and ledger.status1[g] == SINGLE and not (h == ESCAPED or leaves_down):
+        ledger.status1[g] = (
+            MASKED if h == HIT else (RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED)
+        )
+    if b >= 2 and (h == ESCAPED or leaves_down) and leaves_down == sides.inside[g]:
+        return ESCAPES, w, 0.0, 0.0, 0.0, 0.0
+    if h != HIT:
+        walk_failed = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
+        path_failed = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
+        end_unresolved(ledger, b, g, w, path_failed, walk_failed)
+        return ENDS, w, 0.0, 0.0, 0.0, 0.0
+    if b > limit:
+        end_path(ledger, g, CUT_BOUNCES, w)
+        return ENDS, w, 0.0, 0.0, 0.0, 0.0
+    absorbing, eps = interface.absorbing, interface.eps
+    n = (facets.nx[f], facets.ny[f], facets.nz[f])
+    a0, a1, a2 = n
+    c = -(dx * a0 + dy * a1 + dz * a2)
+    inside = sides.inside[g]
+    if c == 0.0 or (c < 0.0) != inside:  # met from the side the path is not on
+        end_unresolved(ledger, b, g, w, PATH_UNRESOLVED, RAY_UNRESOLVED)
+        return ENDS, w, 0.0, 0.0, 0.0, 0.0
+    rel2, fw, tir = crossing(c, inside, interface)
+    if tir:
+        sides.tir[g] |= np.int8(1 << (min(b, 4) - 1))
+    if absorbing or tir:
+        reflect, wn = True, w * fw  # fw = 1 at total internal reflection
+    else:
+        reflect = path_uniform(roulette.stream, roulette.ray0 + g, b) < fw
+        wn = w
+    if b == 1:
+        ledger.weight1[g] = wn
+        ledger.status1[g] = SINGLE
+    ox, oy, oz = scatter(d, n, c, rel2, reflect)
+    if not reflect:
+        sides.inside[g] = not inside
+    if wn < floor:
+        end_path(ledger, g, CUT_WEIGHT, wn)
+        return ENDS, wn, 0.0, 0.0, 0.0, 0.0
+    above = ox * a0 + oy * a1 + oz * a2 > 0.0
+    lift = facets.lift[f]
+    return CONTINUES, wn, ox, oy, oz, (lift if above else lift - 2.0 * eps)
 
 
 @compiled
 def interface_step(
     b, limit, floor, live, w, walk, rays, facets, interface, roulette, sides, ledger, escapes, nxt
 ):
-    """One step ``b`` of the paths through a dielectric interface (module docstring): returns
-    (continuing paths m, escapes e).
+    """One step ``b`` of the paths through a dielectric interface (``interact`` per path):
+    returns (continuing paths m, escapes e).
 
     Arguments: step ``b``, interaction ``limit``, weight ``floor``, the live paths' global
     indices ``live`` and weights ``w``; ``walk`` (``engine.segments.WalkResult`` of the rays
@@ -166,70 +260,65 @@ def interface_step(
     ``nxt`` (``bounce_kernels.NextRays``, written)."""
     hs, prim, px, py, pz = walk
     dx, dy, dz, shared = rays
-    nx, ny, nz, lift, hx, hy = facets
-    eta2, k2, absorbing, eps = interface
     m = 0
     e = 0
     for i in range(len(live)):
         g = live[i]
         j = 0 if shared else i
-        h = hs[i]
-        leaves_down = h == MISSED and dz[j] < 0.0
-        if b == 2 and ledger.status1[g] == SINGLE and not (h == ESCAPED or leaves_down):
-            ledger.status1[g] = (
-                MASKED if h == HIT else (RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED)
-            )
-        if b >= 2 and (h == ESCAPED or leaves_down) and leaves_down == sides.inside[g]:
-            e = _escape(ledger, escapes, sides, b, g, w[i], (dx[j], dy[j], dz[j]), e)
-            continue
-        if h != HIT:
-            walk_failed = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
-            path_failed = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
-            end_unresolved(ledger, b, g, w[i], path_failed, walk_failed)
-            continue
-        if b > limit:
-            end_path(ledger, g, CUT_BOUNCES, w[i])
-            continue
+        d = (dx[j], dy[j], dz[j])
         f = prim[i]
-        a0, a1, a2 = nx[f], ny[f], nz[f]
-        c = -(dx[j] * a0 + dy[j] * a1 + dz[j] * a2)
-        inside = sides.inside[g]
-        if c == 0.0 or (c < 0.0) != inside:  # met from the side the path is not on
-            end_unresolved(ledger, b, g, w[i], PATH_UNRESOLVED, RAY_UNRESOLVED)
-            continue
-        ci = abs(c)
-        rel2 = 1.0 / eta2 if inside else eta2  # (η_t/η_i)²
-        fw = fresnel_real_scalar(ci, rel2, 0.0 if inside else k2)
-        tir = not absorbing and (1.0 - ci * ci) >= rel2  # sin²θi ≥ (η_t/η_i)²: F = 1
-        if tir:
-            sides.tir[g] |= np.int8(1 << (min(b, 4) - 1))
-        if absorbing or tir:
-            reflect, wn = True, w[i] * fw  # fw = 1 at total internal reflection
-        else:
-            reflect = path_uniform(roulette.stream, roulette.ray0 + g, b) < fw
-            wn = w[i]
-        if b == 1:
-            ledger.weight1[g] = wn
-            ledger.status1[g] = SINGLE
-        if reflect:
-            ox = dx[j] + 2.0 * c * a0
-            oy = dy[j] + 2.0 * c * a1
-            oz = dz[j] + 2.0 * c * a2
-        else:
-            s = 1.0 if c > 0.0 else -1.0  # n_s = s·n faces the arriving ray
-            r = 1.0 / math.sqrt(rel2)
-            ct = math.sqrt(max(1.0 - r * r * (1.0 - ci * ci), 0.0))
-            k = (r * ci - ct) * s
-            ox = r * dx[j] + k * a0
-            oy = r * dy[j] + k * a1
-            oz = r * dz[j] + k * a2
-            sides.inside[g] = not inside
-        if wn < floor:
-            end_path(ledger, g, CUT_WEIGHT, wn)
-            continue
-        above = ox * a0 + oy * a1 + oz * a2 > 0.0
-        side_offset = lift[f] if above else lift[f] - 2.0 * eps
-        p, n, o = (px[i], py[i], pz[i]), (a0, a1, a2), (ox, oy, oz)
-        continue_path(nxt, m, g, p, n, side_offset, (hx, hy), o, wn)
-        m += 1
+        what, wn, ox, oy, oz, offset = interact(
+            b, limit, floor, g, w[i], hs[i], f, d, facets, interface, roulette, sides, ledger
+        )
+        if what == ESCAPES:
+            e = _escape(ledger, escapes, sides, b, g, w[i], d, e)
+        elif what == CONTINUES:
+            n = (facets.nx[f], facets.ny[f], facets.nz[f])
+            half = (facets.half_x, facets.half_y)
+            continue_path(nxt, m, g, (px[i], py[i], pz[i]), n, offset, half, (ox, oy, oz), wn)
+            m += 1
     return m, e
+
+
+TRACED = -2
+"""``InterfaceTable.bin`` of a choice whose ray must be traced (it may meet the surface)."""
+FACES_AWAY = 1
+TOTAL_REFLECTION = 2
+"""``InterfaceTable.flags`` bits: the facet faces away from the primary ray (its paths take
+``interact``'s checks), or reflects it totally."""
+
+
+@compiled
+def first_interactions(normals, d, inside, interface, leaving, binning, weight, flags, bins):
+    """Per facet of unit normals ``normals`` (3 columns), the first interaction of a primary
+    ray along ``d`` (3 floats) on the ``inside`` side (``interact``'s arithmetic, so the same
+    values): ``weight`` its Fresnel F, ``flags`` (FACES_AWAY, TOTAL_REFLECTION) and per
+    choice (0 reflected, 1 refracted) ``bins`` the bin its ray escapes into when it surely
+    leaves the relief (``bin_kernels.locate_folded`` on ``binning``, −1 outside the grid),
+    else TRACED. ``leaving`` = (slope, above, below): rays away from their side's surface
+    more steeply than ``slope``·|o_h| surely leave, and so do those of a facet whose whole
+    beam clears the relief (``engine.beam.beam_escapes`` on the ``BeamGrid`` ``above``, or
+    on ``below``, the relief upside down, for rays leaving downward below the surface)."""
+    nx, ny, nz = normals
+    slope, beam_above, beam_below = leaving
+    for f in range(len(nx)):
+        n = (nx[f], ny[f], nz[f])
+        c = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
+        bins[f, 0], bins[f, 1] = TRACED, TRACED
+        if c == 0.0 or (c < 0.0) != inside:
+            weight[f], flags[f] = 0.0, FACES_AWAY
+            continue
+        rel2, fw, tir = crossing(c, inside, interface)
+        weight[f], flags[f] = fw, TOTAL_REFLECTION if tir else 0
+        for k in range(1 if tir else 2):
+            ox, oy, oz = scatter(d, n, c, rel2, k == 0)
+            below = inside if k == 0 else not inside
+            if (-oz if below else oz) > slope * math.sqrt(ox * ox + oy * oy) or (
+                beam_escapes(f, (ox, oy, -oz), beam_below)
+                if below
+                else beam_escapes(f, (ox, oy, oz), beam_above)
+            ):
+                bins[f, k] = locate_folded(
+                    ox, oy, abs(oz), binning.ex, binning.ey, binning.phi_deg,
+                    binning.n_theta, binning.edges, binning.scales,
+                )  # fmt: skip

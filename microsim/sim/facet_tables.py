@@ -12,14 +12,22 @@ import numpy as np
 
 from microsim.bins import Bins
 
-from . import fresnel_kernels
+from . import dielectric_kernels, fresnel_kernels
 from .engine import beam
 from .ledger import MASKED, SINGLE
 from .ray_bins import locate_single
 from .scratch import WorkColumns
 from .tracer import Tracer
 
-__all__ = ["FacetTable", "TABLES_KEPT", "facet_table", "steep_facets", "uses_facet_table"]
+__all__ = [
+    "FacetTable",
+    "InterfaceTable",
+    "TABLES_KEPT",
+    "facet_table",
+    "interface_table",
+    "steep_facets",
+    "uses_facet_table",
+]
 
 _TABLE_WO = WorkColumns("table-wo")  # this thread's work array (``scratch``)
 
@@ -74,20 +82,75 @@ def facet_table(
     surface simulated again — build each once; the tracer itself is immutable, so a kept
     table stays exact."""
     key = (tuple(float(w) for w in wi), fresnel_kernels.fresnel_mode(ior), bins, float(phi_i))
+    return _kept(
+        tracer,
+        key,
+        lambda: _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts),
+        ("code", "weight", "bin", "wo32", "clear"),
+    )
+
+
+def _kept(tracer: Tracer, key, build, arrays):
+    """The table of ``key`` kept by ``tracer``, else ``build()``'s, its ``arrays`` made
+    read-only and kept (the ``TABLES_KEPT`` most recent)."""
     kept = getattr(tracer, "facet_tables", {})  # (a stand-in without it keeps nothing)
     with _TABLES_LOCK:
         table = kept.pop(key, None)
         if table is not None:
             kept[key] = table  # most recent last
             return table
-    table = _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts)
-    for array in (table.code, table.weight, table.bin, table.wo32, table.clear):
-        array.flags.writeable = False
+    table = build()
+    for name in arrays:
+        getattr(table, name).flags.writeable = False
     with _TABLES_LOCK:
         kept[key] = table
         for old in list(kept)[:-TABLES_KEPT]:
             kept.pop(old, None)
     return table
+
+
+@dataclass(frozen=True)
+class InterfaceTable:
+    """What a primary ray from one shared incidence does at its first interaction with each
+    facet of a lossless dielectric interface (``dielectric_kernels.first_interactions``):
+    ``weight`` (F,) its Fresnel F, ``flags`` (F,) int8 (``FACES_AWAY``, ``TOTAL_REFLECTION``)
+    and ``bin`` (F, 2) int32, per choice (reflected, refracted), the bin its ray escapes into
+    when it surely leaves the relief (−1 outside the grid) or ``TRACED``. 17 bytes per
+    facet."""
+
+    weight: np.ndarray
+    flags: np.ndarray
+    bin: np.ndarray
+
+
+def interface_table(tracer: Tracer, wi, interface, binning, slope: float) -> InterfaceTable:
+    """The ``InterfaceTable`` of primary rays lit from ``wi`` (from below when wi_z < 0) on
+    the ``dielectric_kernels.Interface`` ``interface``, bins ``binning``
+    (``interface_grid.FoldedBinning``), rays rising more steeply than ``slope`` surely
+    leaving; kept by the tracer as ``facet_table``'s tables are."""
+    d = tuple(-float(w) for w in wi)
+    key = ("interface", d, interface, binning.n_theta, binning.edges.tobytes(), binning.phi_deg)
+
+    def build() -> InterfaceTable:
+        f = len(tracer.faces)
+        table = InterfaceTable(
+            np.empty(f), np.empty(f, dtype=np.int8), np.empty((f, 2), dtype=np.int32)
+        )
+        inside = d[2] > 0.0
+        dielectric_kernels.first_interactions(
+            tracer.normal_columns,
+            d,
+            inside,
+            interface,
+            (float(slope), tracer.beam, tracer.beam_below),
+            binning,
+            table.weight,
+            table.flags,
+            table.bin,
+        )
+        return table
+
+    return _kept(tracer, key, build, ("weight", "flags", "bin"))
 
 
 def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:

@@ -12,6 +12,13 @@ stops in the first piece where f falls from > 0 to ≤ 0; the hit is that piece'
 piece's triangle. Because f is evaluated once per breakpoint and shared by the two pieces that
 meet there, the walk is watertight by construction: a ray cannot pass between two triangles.
 
+The same walk serves a ray on either side of the surface and in either direction
+(``cast_one``'s ``side``): above it (f = z − h, the first root where f falls to ≤ 0) or below it
+(inside a dielectric medium: f = h − z), rising or falling. A ray moving toward its side's
+surface (falling above it, rising below it) meets it by the time it crosses the relief's far
+level (zmin, resp. zmax); one moving away from it leaves the relief there without a hit
+(ESCAPED past zmax, MISSED past zmin) unless it meets a higher (lower) part of the surface first.
+
 The walk starts where the ray falls through z = zmax (nothing lies above it) and is exact in
 float64 on the float64 heights, where Embree tests the float32 mesh: the two agree on the hit
 triangle except for rays within float32 rounding of an edge (ties), and on the hit point to
@@ -21,13 +28,14 @@ UNRESOLVED, as in ``Tracer``'s walk.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 
 from microsim.jit import vector_inlined, vectorised
 
-from .engine.codes import HIT, UNRESOLVED
+from .engine.codes import ESCAPED, HIT, MISSED, UNRESOLVED
 
 __all__ = ["HeightfieldGrid", "heightfield_grid", "cast_falling"]
 
@@ -38,8 +46,9 @@ _inlined = vector_inlined
 
 class HeightfieldGrid:
     """The grid of a heightfield tile: its mesh's vertex heights ``hp`` (ny + 1, nx + 1) (the
-    last row and column repeat the first), each cell's highest vertex ``cell_max`` (ny, nx),
-    cell size ``cell`` and lower tile corner (``x0``, ``y0``)."""
+    last row and column repeat the first), each cell's highest vertex ``cell_max`` (ny, nx)
+    and lowest ``cell_min`` (built on first use: only walks below the surface read it), cell
+    size ``cell`` and lower tile corner (``x0``, ``y0``)."""
 
     def __init__(self, hp: np.ndarray, cell: float):
         self.hp = np.ascontiguousarray(hp, dtype=np.float64)
@@ -49,6 +58,17 @@ class HeightfieldGrid:
         )
         self.cell = float(cell)
         self.x0, self.y0 = -self.nx * self.cell / 2.0, -self.ny * self.cell / 2.0
+
+    @functools.cached_property
+    def cell_min(self) -> np.ndarray:
+        hp = self.hp
+        return np.minimum(
+            np.minimum(hp[:-1, :-1], hp[:-1, 1:]), np.minimum(hp[1:, :-1], hp[1:, 1:])
+        )
+
+    def side(self, below: bool) -> tuple:
+        """``cast_one``'s ``side`` argument for a ray above the surface or ``below`` it."""
+        return (-1.0, self.cell_min) if below else (1.0, self.cell_max)
 
     def geometry(self, zmin: float, zmax: float, max_wraps: int) -> tuple:
         """The kernels' grid argument: (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
@@ -135,17 +155,26 @@ def _clamp01(a):
 
 
 @_inlined
-def cast_one(x, y, z, dx, dy, dz, terms, geometry):
-    """(status, face, px, py, pz) of the ray (x, y, z) + t·(dx, dy, dz), dz < 0, started at
-    or above the surface, on ``geometry`` = (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
+def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps):
+    """(status, face, px, py, pz) of the ray (x, y, z) + t·(dx, dy, dz), dz ≠ 0, started on
+    ``side`` of the surface, on ``geometry`` = (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
     max_wraps) with the ray's ``direction_terms``: HIT with the face and the hit point (x and
-    y shifted by whole tiles into the tile of the face's cell), or UNRESOLVED after
-    ``max_wraps`` wall crossings (module docstring). Cells the ray leaves above their highest
-    vertex (``cell_max``) are stepped over without evaluating f."""
-    hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax, max_wraps = geometry
+    y shifted by whole tiles into the tile of the face's cell); ESCAPED (MISSED) for a ray
+    that rises past zmax (falls past zmin) without a hit; UNRESOLVED after ``max_wraps`` wall
+    crossings (module docstring). ``side`` = (s, bound): (1, cell_max) for a ray at or above
+    the surface (f = z − h), (−1, cell_min) for one at or below it (f = h − z)
+    (``HeightfieldGrid.side``). Cells the ray crosses wholly on its side (above their highest
+    vertex, resp. below their lowest) are stepped over without evaluating f."""
+    hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax, _ = geometry
+    s, bound = side
     du, dv, rdu, rdv, rdz, da, rda, si, sj = terms
-    t = (zmax - z) * rdz if z > zmax else 0.0
-    t_end = max(t, (zmin - z) * rdz)  # z(t_end) = zmin: f ≤ 0 there, the walk ends by then
+    if dz < 0.0:  # from where it falls through zmax (nothing lies above) to zmin
+        t = (zmax - z) * rdz if z > zmax else 0.0
+        t_end = max(t, (zmin - z) * rdz)
+    else:  # from where it rises through zmin to zmax
+        t = (zmin - z) * rdz if z < zmin else 0.0
+        t_end = max(t, (zmax - z) * rdz)
+    toward = (dz < 0.0) == (s > 0.0)  # meets the surface by t_end: f ≤ 0 there
     inv = 1.0 / cell
     u0, v0 = (x - x0) * inv, (y - y0) * inv  # grid coordinates at t = 0
     i, j = int(math.floor(u0 + t * du)), int(math.floor(v0 + t * dv))
@@ -158,8 +187,10 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry):
     fa, known = 0.0, False  # f at t, once known (the previous cell was not stepped over)
     while True:
         t_exit = min(tx, ty, t_end)
-        if t_exit < t_end and z + t_exit * dz > cell_max[cj, ci]:
-            known = False  # the ray stays above the whole cell
+        # the ray's point nearest the surface in this cell: where it leaves the cell when
+        # moving toward it, where it enters when moving away
+        if t_exit < t_end and s * (z + (t_exit if toward else t) * dz) > s * bound[cj, ci]:
+            known = False  # the ray stays on its side of the whole cell
         else:
             # a = (u − i) − (v − j) > 0 in triangle A; the side of a piece is taken at its
             # midpoint, so that a crossing lost to rounding cannot mislabel it
@@ -167,7 +198,7 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry):
             upper = a + da * (0.5 * (t_exit - t)) > 0.0
             if not known:  # f where the ray enters the cell
                 fu, fv = _clamp01(u0 + t * du - i), _clamp01(v0 + t * dv - j)
-                fa = z + t * dz - _plane_height(hp, ci, cj, fu, fv, fu >= fv)
+                fa = s * (z + t * dz - _plane_height(hp, ci, cj, fu, fv, fu >= fv))
             tb, fb = t_exit, 1.0
             if fa <= 0.0:  # at the surface already (entered exactly on an edge)
                 tb, fb = t, fa
@@ -176,15 +207,15 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry):
                 td = t - a * rda
                 if t < td < t_exit:  # crosses the diagonal inside the cell
                     upper = a + da * (0.5 * (td - t)) > 0.0
-                    s = _clamp01(u0 + td * du - i)
+                    r = _clamp01(u0 + td * du - i)
                     h00 = hp[cj, ci]
-                    fd = z + td * dz - (h00 + s * (hp[cj + 1, ci + 1] - h00))
+                    fd = s * (z + td * dz - (h00 + r * (hp[cj + 1, ci + 1] - h00)))
                     if fd <= 0.0:
                         tb, fb = td, fd
                     else:
                         t, fa, upper = td, fd, not upper
             if tb == t_exit:
-                if t_exit == t_end:  # below every vertex: f ≤ 0 (on this piece's plane)
+                if t_exit == t_end:  # at the relief's far level, on this piece's plane
                     fu, fv = _clamp01(u0 + t_end * du - i), _clamp01(v0 + t_end * dv - j)
                     h = _plane_height(hp, ci, cj, fu, fv, upper)
                 elif tx <= ty:  # leaves through the x wall at column ib
@@ -195,7 +226,11 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry):
                     jb = cj + 1 if sj > 0 else cj
                     fu = _clamp01(u0 + t_exit * du - i)
                     h = hp[jb, ci] + fu * (hp[jb, ci + 1] - hp[jb, ci])
-                fb = z + t_exit * dz - h
+                fb = s * (z + t_exit * dz - h)
+                if t_exit == t_end and fb > 0.0:
+                    if not toward:  # cleared the relief
+                        return ESCAPED if dz > 0.0 else MISSED, -1, math.nan, math.nan, math.nan
+                    fb = 0.0  # below every vertex (above, from below): only rounding says not
             if fb <= 0.0:  # the root of this piece
                 th = t + (tb - t) * (fa / (fa - fb)) if fa > fb else t
                 face = cj * nx + ci if upper else nx * ny + cj * nx + ci
@@ -223,6 +258,7 @@ def cast_falling(x, y, z, dx, dy, dz, geometry, status, prim, px, py, pz):
     ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps); writes
     ``status``, ``prim`` and the hit point columns."""
     terms = direction_terms(dx, dy, dz, geometry[4])
+    above = (1.0, geometry[1])
     for i in range(len(x)):
-        s, f, a, b, c = cast_one(x[i], y[i], z[i], dx, dy, dz, terms, geometry)
+        s, f, a, b, c = cast_one(x[i], y[i], z[i], dx, dy, dz, terms, geometry, above, geometry[9])
         status[i], prim[i], px[i], py[i], pz[i] = s, f, a, b, c

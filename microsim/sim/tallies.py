@@ -124,6 +124,9 @@ def chunk_tallies(path, nbin: int, blocks) -> "ChunkTallies":
     return split_tallies(*path.follow(blocks), len(blocks), nbin)
 
 
+_NO_TIR = np.zeros(0, dtype=np.int8)
+
+
 def split_order_tallies(
     status1, weight1, term, wterm, where, n_blocks: int, nbin_total: int, tir=None
 ):
@@ -156,13 +159,9 @@ def split_order_tallies(
         offsets,
         ln,
         lf,
+        _NO_TIR if tir is None else tir,
+        len(LEDGER) + len(terminal),
     )
-    if tir is not None:
-        block = np.arange(n) // BLOCK
-        for k in range(len(TIR_ORDERS)):
-            c = len(LEDGER) + len(terminal) + k
-            ln[:, c] = np.bincount(block, weights=(tir >> k) & 1, minlength=n_blocks)
-            lf[:, c] = ln[:, c]
     used = int(offsets[-1])
     return ChunkTallies(
         (out_bin[:used].copy(), out_sums[:, :used].copy(), out_cnt[:used].copy(), offsets, ln, lf)

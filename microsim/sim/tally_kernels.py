@@ -122,6 +122,8 @@ def order_block_tallies(
     offsets,
     ln,
     lf,
+    tir,
+    tir_col,
 ):
     """``block_tallies`` for paths followed over several bounces (``bounces``): a path that
     escapes adds its carried weight ``wterm`` to its (order, bin) slot ``where`` (≥ 0; −1
@@ -129,8 +131,11 @@ def order_block_tallies(
     the same slot) per block, stored sparsely as there. Ledger (blocks, 5 + N_TERMINAL):
     columns 0–4 count the first-bounce classes ``status1`` and sum their Fresnel weights
     ``weight1`` (``paths.LEDGER``), columns 5 + ``term`` the terminal classes and sum their
-    carried weights ``wterm`` (the energy each class takes away)."""
+    carried weights ``wterm`` (the energy each class takes away). ``tir`` (paths through a
+    dielectric interface; else empty): each path's total-internal-reflection bits, bit k
+    counted in column ``tir_col`` + k of both ``ln`` and ``lf``."""
     n = len(term)
+    bits = len(tir) > 0
     j = 0
     nl = 5
     for b in range((n + block - 1) // block):
@@ -143,6 +148,11 @@ def order_block_tallies(
             t = term[i]
             ln[b, nl + t] += 1
             lf[b, nl + t] += wterm[i]
+            if bits and tir[i] != 0:
+                for q in range(4):
+                    if (tir[i] >> q) & 1:
+                        ln[b, tir_col + q] += 1
+                        lf[b, tir_col + q] += 1.0
             k = where[i]
             if k >= 0:
                 if touched[k] == 0:

@@ -238,6 +238,15 @@ class Tracer:
         return beam.beam_grid(self._heightfield, self.normals, self.zmax, self.horizon.tol)
 
     @functools.cached_property
+    def beam_below(self) -> "beam.BeamGrid | None":
+        """``beam``'s grid for rays leaving the surface downward below it (inside a dielectric
+        medium): ``beam.mirrored_beam_grid``; None as ``beam``."""
+        if self._heightfield is None:
+            return None
+        tol = self.horizon.tol
+        return beam.mirrored_beam_grid(self._heightfield, self.normals, self.zmin, tol)
+
+    @functools.cached_property
     def masking_lift(self) -> np.ndarray:
         """n·v0 + eps per facet (F,): a point p on facet f's plane moved to
         p − (p·n − lift)·n starts its secondary ray eps above the plane."""
@@ -298,10 +307,18 @@ class Tracer:
         g = self.grid
         if g is None or not down[2] < 0.0 or not self.holds(x):
             return None
-        run = (self.zmax - self.zmin) * (abs(down[0]) + abs(down[1])) / (-down[2] * g.cell)
-        if run > GRID_WALK_CELLS or (len(x[0]) and x[2].min() < self.zmax):
+        if self.grid_walk_cells(down) > GRID_WALK_CELLS or (len(x[0]) and x[2].min() < self.zmax):
             return None
         return g.geometry(self.zmin, self.zmax, self.max_wraps)
+
+    def grid_walk_cells(self, d) -> float:
+        """Cells a ray along ``d`` (3 floats, d_z ≠ 0) crosses while it crosses the relief's
+        height range on the grid: (zmax − zmin)(|d_x| + |d_y|)/(|d_z|·cell) (inf without a
+        grid)."""
+        g = self.grid
+        if g is None:
+            return math.inf
+        return (self.zmax - self.zmin) * (abs(d[0]) + abs(d[1])) / (abs(d[2]) * g.cell)
 
     def cast_falling(self, x, down):
         """First hits of rays from the starts ``x`` (3 columns, in the tile, at or above zmax)

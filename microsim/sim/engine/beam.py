@@ -67,6 +67,22 @@ def beam_grid(grid, normals: np.ndarray, zmax: float, tol: float) -> BeamGrid:
     )
 
 
+def mirrored_beam_grid(grid, normals: np.ndarray, zmin: float, tol: float) -> BeamGrid:
+    """The ``BeamGrid`` of the relief turned upside down (heights −h, the lowest point −zmin
+    its top): whether rays leaving a facet downward, below the surface (inside a dielectric
+    medium), surely leave the relief is whether their mirror images (d_z → −d_z) escape on
+    it."""
+    return BeamGrid(
+        np.ascontiguousarray(-grid.hp),
+        block_maxima(-grid.cell_min),
+        np.ascontiguousarray(normals[:, 0] / normals[:, 2]),
+        np.ascontiguousarray(normals[:, 1] / normals[:, 2]),
+        float(grid.cell),
+        -float(zmin),
+        float(tol),
+    )
+
+
 def block_maxima(cell_max: np.ndarray) -> np.ndarray:
     """Highest vertex of each 2 × 2 block of cells, indexed by its lower cell (j, i), wrapped:
     max of ``cell_max`` over cells (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)."""
@@ -96,64 +112,70 @@ def beam_clear(f0, candidates, wo, grid, out):
     """``out[k]`` = whether every masking ray of facet f = f0 + k surely escapes (module
     docstring), for the facets with ``candidates[k]`` (others: False); ``wo[k]`` its float32
     mirror direction (traced as the float64 value of it); ``grid`` a ``BeamGrid``."""
-    hp, bmax, gx, gy, cell, zmax, tol = grid
-    ny, nx = bmax.shape
     for q in range(len(candidates)):
         out[q] = False
-        if not candidates[q]:
-            continue
-        f = f0 + q
-        ox, oy, oz = np.float64(wo[q, 0]), np.float64(wo[q, 1]), np.float64(wo[q, 2])
-        h = math.sqrt(ox * ox + oy * oy)
-        if oz <= 0.0 or h == 0.0:
-            continue
-        cot = oz / h
-        ux, uy = ox / h, oy / h
-        k = f - nx * ny if f >= nx * ny else f
-        ci, cj = k % nx, k // nx
-        if f < nx * ny:  # triangle A: (v00, v01, v11)
-            zlo = min(hp[cj, ci], hp[cj, ci + 1], hp[cj + 1, ci + 1])
-        else:  # triangle B: (v00, v11, v10)
-            zlo = min(hp[cj, ci], hp[cj + 1, ci + 1], hp[cj + 1, ci])
-        zlo -= tol
-        s_end = (zmax + tol - zlo) / cot
-        # DDA of the block corner from (ci, cj) along û, grid units per unit s: û / cell
-        bi, bj = ci, cj
-        tx, dtx, sx = math.inf, math.inf, 0
-        if ux > 0.0:
-            tx, dtx, sx = cell / ux, cell / ux, 1
-        elif ux < 0.0:
-            tx, dtx, sx = cell / -ux, cell / -ux, -1
-            bi -= 1
-        ty, dty, sy = math.inf, math.inf, 0
-        if uy > 0.0:
-            ty, dty, sy = cell / uy, cell / uy, 1
-        elif uy < 0.0:
-            ty, dty, sy = cell / -uy, cell / -uy, -1
-            bj -= 1
-        bi = bi + nx if bi < 0 else bi
-        bj = bj + ny if bj < 0 else bj
-        s_in, chain = 0.0, 0.0
-        for step in range(MAX_BLOCKS):
-            s_out = min(tx, ty, s_end)
-            if not zlo + s_in * cot > bmax[bj, bi] + tol:  # the block may reach a ray
-                if step > 0 and not s_in * cot - chain > tol:  # (the start: on the surface)
-                    break
-                chain += _block_slope(gx, gy, ux, uy, bi, bj, nx, ny) * (s_out - s_in)
-                if not s_out * cot - chain > tol:
-                    break
-            else:  # above the block: the chain is not followed further (height tests only)
-                chain = math.inf
-            if s_out >= s_end:
-                out[q] = True
-                break
-            if tx < ty:
-                bi += sx
-                bi = 0 if bi == nx else (nx - 1 if bi < 0 else bi)
-                s_in = tx
-                tx += dtx
-            else:
-                bj += sy
-                bj = 0 if bj == ny else (ny - 1 if bj < 0 else bj)
-                s_in = ty
-                ty += dty
+        if candidates[q]:
+            w = (np.float64(wo[q, 0]), np.float64(wo[q, 1]), np.float64(wo[q, 2]))
+            out[q] = beam_escapes(f0 + q, w, grid)
+
+
+@inlined
+def beam_escapes(f, wo, grid):
+    """Whether every ray leaving facet ``f`` of the ``BeamGrid`` ``grid`` along the float64
+    direction ``wo`` surely escapes (module docstring)."""
+    hp, bmax, gx, gy, cell, zmax, tol = grid
+    ny, nx = bmax.shape
+    ox, oy, oz = wo
+    h = math.sqrt(ox * ox + oy * oy)
+    if oz <= 0.0 or h == 0.0:
+        return False
+    cot = oz / h
+    ux, uy = ox / h, oy / h
+    k = f - nx * ny if f >= nx * ny else f
+    ci, cj = k % nx, k // nx
+    if f < nx * ny:  # triangle A: (v00, v01, v11)
+        zlo = min(hp[cj, ci], hp[cj, ci + 1], hp[cj + 1, ci + 1])
+    else:  # triangle B: (v00, v11, v10)
+        zlo = min(hp[cj, ci], hp[cj + 1, ci + 1], hp[cj + 1, ci])
+    zlo -= tol
+    s_end = (zmax + tol - zlo) / cot
+    # DDA of the block corner from (ci, cj) along û, grid units per unit s: û / cell
+    bi, bj = ci, cj
+    tx, dtx, sx = math.inf, math.inf, 0
+    if ux > 0.0:
+        tx, dtx, sx = cell / ux, cell / ux, 1
+    elif ux < 0.0:
+        tx, dtx, sx = cell / -ux, cell / -ux, -1
+        bi -= 1
+    ty, dty, sy = math.inf, math.inf, 0
+    if uy > 0.0:
+        ty, dty, sy = cell / uy, cell / uy, 1
+    elif uy < 0.0:
+        ty, dty, sy = cell / -uy, cell / -uy, -1
+        bj -= 1
+    bi = bi + nx if bi < 0 else bi
+    bj = bj + ny if bj < 0 else bj
+    s_in, chain = 0.0, 0.0
+    for step in range(MAX_BLOCKS):
+        s_out = min(tx, ty, s_end)
+        if not zlo + s_in * cot > bmax[bj, bi] + tol:  # the block may reach a ray
+            if step > 0 and not s_in * cot - chain > tol:  # (the start: on the surface)
+                return False
+            chain += _block_slope(gx, gy, ux, uy, bi, bj, nx, ny) * (s_out - s_in)
+            if not s_out * cot - chain > tol:
+                return False
+        else:  # above the block: the chain is not followed further (height tests only)
+            chain = math.inf
+        if s_out >= s_end:
+            return True
+        if tx < ty:
+            bi += sx
+            bi = 0 if bi == nx else (nx - 1 if bi < 0 else bi)
+            s_in = tx
+            tx += dtx
+        else:
+            bj += sy
+            bj = 0 if bj == ny else (ny - 1 if bj < 0 else bj)
+            s_in = ty
+            ty += dty
+    return False
