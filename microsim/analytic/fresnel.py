@@ -3,7 +3,8 @@
 
 Light arrives from air (index 1) at a medium of complex index η = n + ik (k ≥ 0: absorption).
 A real index is a dielectric, a complex one a conductor, ``None`` an ideal mirror (R = 1).
-Public functions take a ``material``: a name from ``MATERIALS``, an index n or n + ik, or None
+Public functions take a ``material``: a name from ``MATERIALS``, an index n or n + ik, None, or
+a (name, wavelength_nm) pair naming a real material at a wavelength (``materials.TABLE``)
 (``resolve_material``).
 ``cos_theta`` is always the cosine between the incident direction and the *facet* normal; it
 must lie in [0, 1] up to ``COS_TOL`` (values within the tolerance are clipped, others raise).
@@ -19,6 +20,8 @@ import numpy as np
 from microsim.checks import UNIT_TOL
 from microsim.errors import UsageError
 from microsim.kernel_cache import cached_njit
+
+from . import materials
 
 __all__ = [
     "fresnel",
@@ -94,7 +97,7 @@ def fresnel(cos_theta, material=None):
     The second factor of r_p vanishes at Brewster's angle, where r_p is legitimately ~0.
     """
     c = _cos(cos_theta)
-    ior = resolve_material(material) if isinstance(material, str) else material
+    ior = resolve_material(material) if isinstance(material, str | tuple) else material
     if ior is None:
         return np.ones_like(c)
     eta = _check_ior(ior, "material")
@@ -120,7 +123,7 @@ def fresnel_transmittance(cos_theta, material=None):
 def f0_from_material(material) -> float:
     """Normal-incidence reflectance |(η − 1)/(η + 1)|² of ``material`` (Edwards et al. 2006,
     eq. 31; 1 for a mirror)."""
-    ior = resolve_material(material) if isinstance(material, str) else material
+    ior = resolve_material(material) if isinstance(material, str | tuple) else material
     if ior is None:
         return 1.0
     eta = _check_ior(ior, "material")
@@ -166,15 +169,19 @@ def _ior_text(text: str):
 
 
 def resolve_material(material):
-    """Index of refraction from a material name (case-insensitive), a number, or None.
+    """Index of refraction from a material name (case-insensitive), a number, None, or a
+    (name, wavelength_nm) pair.
 
-    Names: those of ``MATERIALS`` (plus "aluminum"); numbers are an index of refraction
-    (ior) n > 0 or n + ik with k ≥ 0, also as text the way microsim writes them ("1.5",
-    "0.769+6.08i"; "j" for i is accepted too).
+    Names: those of ``MATERIALS`` (plus "aluminum"), fixed indices; numbers are an index of
+    refraction (ior) n > 0 or n + ik with k ≥ 0, also as text the way microsim writes them
+    ("1.5", "0.769+6.08i"; "j" for i is accepted too). A pair ("gold", 550) is a material of
+    ``materials.TABLE`` at a wavelength in nm (``materials.index``).
     Returns a float (dielectric), a complex (conductor) or None (mirror).
     """
     if material is None:
         return None
+    if isinstance(material, tuple):
+        return _material_at(material)
     if isinstance(material, str):
         name = material_name(material)
         if name is not None:
@@ -183,6 +190,12 @@ def resolve_material(material):
         if number is not None:
             return resolve_material(number)
         allowed = ", ".join(sorted(MATERIALS) + sorted(_ALIASES))
+        if materials.table_name(material) is not None:
+            raise UsageError(
+                f"material {material!r} needs a wavelength: a pair (name, wavelength_nm) such as "
+                f"({material!r}, 550); without one, material must be one of {allowed} or an "
+                f"index of refraction (ior) n / n+ik / None"
+            )
         raise UsageError(
             f"material must be one of {allowed} or an index of refraction "
             f"(ior) n / n+ik / None, got {material!r}"
@@ -191,6 +204,21 @@ def resolve_material(material):
     if isinstance(material, complex | np.complexfloating):
         return eta
     return eta.real
+
+
+def _material_at(pair: tuple):
+    """The index of a (name, wavelength_nm) pair (``resolve_material``)."""
+    if len(pair) != 2 or not isinstance(pair[0], str):
+        raise UsageError(
+            f"material as a pair must be (name, wavelength_nm), e.g. ('gold', 550), got {pair!r}"
+        )
+    name, wavelength_nm = pair
+    if np.ndim(wavelength_nm) != 0:
+        raise UsageError(
+            f"material as a pair takes one wavelength_nm (a number), got {wavelength_nm!r}"
+        )
+    eta = materials.index(name, wavelength_nm)
+    return eta.real if eta.imag == 0 else eta
 
 
 def fresnel_real_arithmetic(c, ior):
