@@ -36,6 +36,10 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     ior = "mirror"                     # aluminium | methanol | mirror, a number n, or [n, k]
                                        # (n in [0.001, 1000], k in [0, 1000]; not n = 1 with
                                        # k = 0, which reflects nothing)
+    wavelength_nm = 550                # optional: ior then names a real material of
+                                       # analytic.materials (gold, silver, copper, aluminium,
+                                       # chromium, bk7, fused-silica, methanol) at this
+                                       # wavelength in nm, within its dataset's range
     transmission = false               # true: the material is a dielectric medium below the
                                        # surface (a real index n); light is reflected and
                                        # refracted (microsim.sim.dielectric), traced at every
@@ -93,6 +97,7 @@ from pathlib import Path
 import numpy as np
 
 from microsim import analytic as an
+from microsim.analytic import materials
 from microsim.checks import file_path
 from microsim.errors import UsageError
 from microsim.sim.arguments import MAX_RAYS
@@ -355,7 +360,9 @@ def material_ior(where, table):
     ``material.ior``."""
     if table is None:
         return None
-    check_keys(where, "material", table, ["ior", "transmission"])
+    check_keys(where, "material", table, ["ior", "wavelength_nm", "transmission"])
+    if "wavelength_nm" in table:
+        return _material_at_wavelength(where, table)
     v = table.get("ior", "mirror")
     allowed = (
         f"a name ({', '.join(an.MATERIALS)}), a number n, or [n, k], with n in "
@@ -377,7 +384,28 @@ def material_ior(where, table):
     try:
         return an.resolve_material(v)
     except UsageError:
+        if materials.table_name(v) is not None:
+            fail(where, "material.wavelength_nm", f"required with ior = {v!r} (nm)")
         fail(where, "material.ior", f"must be {allowed}, got {table.get('ior')!r}")
+
+
+def _material_at_wavelength(where, table):
+    """The index of ``[material] ior`` (a name of ``analytic.materials.TABLE``) at
+    ``wavelength_nm``; a bad name or wavelength raises ``SceneError`` naming its key."""
+    name = table.get("ior")
+    if materials.table_name(name) is None:
+        allowed = ", ".join(sorted(materials.TABLE) + sorted(materials.ALIASES))
+        fail(where, "material.ior", f"with wavelength_nm must be one of {allowed}, got {name!r}")
+    nm = check_value(
+        where,
+        "material.wavelength_nm",
+        table["wavelength_nm"],
+        (lambda v: is_num(v) and v > 0, "a wavelength in nm (a number > 0)"),
+    )
+    try:
+        return an.resolve_material((name, nm))
+    except UsageError as e:
+        fail(where, "material.wavelength_nm", str(e))
 
 
 def _simulation(where, table) -> SimSettings:
@@ -560,8 +588,9 @@ def _transmission(where, table, ior) -> bool:
 
 
 def _material_name(table) -> str | None:
-    """The material's name as ``fresnel.MATERIALS`` spells it, if ``[material] ior`` is one."""
-    if table is None:
+    """The material's name as ``fresnel.MATERIALS`` spells it, if ``[material] ior`` is one
+    and no ``wavelength_nm`` is given (the name then stands for its fixed index)."""
+    if table is None or "wavelength_nm" in table:
         return None
     return an.material_name(table.get("ior", "mirror"))
 
