@@ -138,7 +138,7 @@ def _dataset(page: str):
 def rgb_reflectance(name) -> tuple[float, float, float]:
     """Linear sRGB (0–1) of the normal-incidence reflectance of material ``name`` lit by CIE
     D65: R(λ) = |(η − 1)/(η + 1)|² (Born & Wolf 1999, §14.2) over 380–780 nm every 5 nm,
-    integrated with the CIE 1931 2° observer to XYZ (CIE 015:2018, normalised so that a
+    summed with the CIE 1931 2° observer to XYZ (CIE 015:2018, normalised so that a
     perfect reflector has Y = 1) and taken to linear sRGB (IEC 61966-2-1), unclipped: a
     colour outside the sRGB gamut has a component above 1 or below 0 (gold's red is ~1.04).
     The material's dataset must cover 380–780 nm."""
@@ -163,6 +163,7 @@ def rgb_reflectance(name) -> tuple[float, float, float]:
         reflectance,
         colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(shape),
         colour.SDS_ILLUMINANTS["D65"].copy().align(shape),
+        method="Integration",
     )
     rgb = colour.XYZ_to_RGB(xyz / 100.0, "sRGB", apply_cctf_encoding=False)
     return tuple(float(c) for c in rgb)
