@@ -164,7 +164,7 @@ def test_scene_aluminium_without_wavelength_is_unchanged(tmp_path):
 @pytest.mark.parametrize(
     "lines, key, words",
     [
-        ('ior = "gold"', "material.wavelength_nm", ["required"]),
+        ('ior = "gold"', "material.ior", ["needs material.wavelength_nm"]),
         ('ior = "gold"\nwavelength_nm = 5000', "material.wavelength_nm", ["187.9", "1937"]),
         ('ior = "gold"\nwavelength_nm = "550"', "material.wavelength_nm", ["nm"]),
         ("ior = 1.5\nwavelength_nm = 550", "material.ior", ["gold", "bk7"]),

@@ -385,7 +385,11 @@ def material_ior(where, table):
         return an.resolve_material(v)
     except UsageError:
         if materials.table_name(v) is not None:
-            fail(where, "material.wavelength_nm", f"required with ior = {v!r} (nm)")
+            fail(
+                where,
+                "material.ior",
+                f"{v!r} needs material.wavelength_nm (nm); without it must be {allowed}",
+            )
         fail(where, "material.ior", f"must be {allowed}, got {table.get('ior')!r}")
 
 
