@@ -299,7 +299,8 @@ class WaveSpec:
 class Scene:
     """A loaded scene file. ``ior``: None (mirror), float (dielectric) or complex n + ik.
     ``wave``: the ``[wave]`` settings, None for a geometric-only scene. ``material_name``: the
-    material's name when the file gave one ("aluminium"), which results then record.
+    material's name when the file gave one ("aluminium"), which results then record (None with
+    ``[material] wavelength_nm``: the run records the dataset's index at that wavelength).
     ``transmission``: a dielectric medium traced with refraction, from the air and from inside
     (``[material] transmission``)."""
 
