@@ -535,7 +535,7 @@ def load_scene(path) -> Scene:
     description = check_value(where, "description", data.get("description", ""), STR)
     surface = surface_spec(where, data["surface"])
     if isinstance(surface, FileSurface):
-        check_heightfield(where, path.parent / surface.path, surface.dx, surface.periodic)
+        check_heightfield(where, path.parent / surface.path, surface)
     simulation = _simulation(where, data.get("simulation"))
     if simulation.realisations == "auto" and not surface.random:
         fail(

@@ -13,6 +13,7 @@ from typing import Any, ClassVar, Mapping
 from microsim import analytic as an
 from microsim import surfaces
 from microsim.errors import UsageError
+from microsim.surfaces import scan
 from microsim.surfaces.heightfields import (
     MAX_RMS_SLOPE,
     abc_ensemble_ndf,
@@ -67,6 +68,7 @@ _GRID = int_in(8, MAX_GRID)
 _C_ABC: Check = (lambda v: is_num(v) and v > 1, "a number > 1 (C <= 1: infinite height variance)")
 _BAND: Check = (lambda v: is_num(v) and v >= 1, "a number >= 1")
 _SAMPLING: Check = (lambda v: v in ("stratified", "random"), '"stratified" or "random"')
+_FORM: Check = (lambda v: v in scan.FORMS, " | ".join(f'"{f}"' for f in scan.FORMS))
 
 
 def _key(check: Check, default: Any = REQUIRED, *, real: bool = False):
@@ -120,7 +122,9 @@ class SurfaceSpec:
         check_keys(where, "surface", table, ["kind", *schema])
         values = fill(where, "surface", {k: v for k, v in table.items() if k != "kind"}, schema)
         reals = cls._real_keys(values)
-        spec = cls._from_values({k: float(v) if k in reals else v for k, v in values.items()})
+        spec = cls._from_values(
+            {k: float(v) if k in reals and v is not None else v for k, v in values.items()}
+        )
         spec.check(where)
         return spec
 
@@ -371,15 +375,40 @@ class StudentTMixtureSurface(_Heightfield):
 @dataclass(frozen=True, kw_only=True)
 class FileSurface(SurfaceSpec):
     """``surfaces.from_file``: the heightfield file ``path`` (relative to the scene file),
-    points ``dx`` apart, tiled ``periodic``-ally or not."""
+    points ``dx`` apart (an array file; a scan gives its own spacing, in micrometres), tiled
+    ``periodic``-ally or not, its ``form`` removed (default: "plane" for a scan, "none" for
+    an array, ``scan.default_form``)."""
 
     kind: ClassVar[str] = "file"
     path: str = _key(PATH)
-    dx: float = _key(LENGTH, real=True)
+    dx: float | None = _key(LENGTH, None, real=True)
     periodic: bool = _key(BOOL, False)
+    form: str | None = _key(_FORM, None)
+
+    @classmethod
+    def _from_values(cls, values):
+        if values["form"] is None:
+            values = {**values, "form": scan.default_form(values["path"])}
+        return cls(**values)
+
+    def check(self, where):
+        if scan.is_scan(self.path) and self.dx is not None:
+            fail(
+                where,
+                "surface.dx",
+                f"a scan file gives its own spacing (used in micrometres); leave dx out, "
+                f"got {self.dx:g}",
+            )
+        if not scan.is_scan(self.path) and self.dx is None:
+            fail(
+                where,
+                "surface.dx",
+                f"required for a .npy, .npz or text heightfield (it gives no spacing); must be "
+                f"{LENGTH[1]}",
+            )
 
     def build(self, seed, scale, base):
-        return surfaces.from_file(base / self.path, self.dx, self.periodic)
+        return surfaces.from_file(base / self.path, self.dx, self.periodic, self.form)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -427,12 +456,12 @@ def surface_spec(where, table) -> SurfaceSpec:
     return SURFACE_TYPES[kind].from_table(where, table)
 
 
-def check_heightfield(where: str, path: Path, dx: float, periodic: bool) -> None:
-    """A heightfield file usable by ``surfaces.from_file``, checked before anything runs
-    (``surfaces.loader.check_heightfield_file``: a regular file holding a real 2D array of
-    finite heights that fits in memory, at most ``MAX_GRID`` per side); the one-line error
-    names the scene file, the key and the heightfield file."""
+def check_heightfield(where: str, path: Path, spec: FileSurface) -> None:
+    """The heightfield file ``path`` of ``spec`` usable by ``surfaces.from_file``, checked
+    before anything runs (``surfaces.loader.check_heightfield_file``: a regular file holding a
+    real 2D array of finite heights, or a scan, that fits in memory, at most ``MAX_GRID`` per
+    side); the one-line error names the scene file, the key and the heightfield file."""
     try:
-        check_heightfield_file(path, dx, periodic, max_side=MAX_GRID)
+        check_heightfield_file(path, spec.dx, spec.periodic, max_side=MAX_GRID, form=spec.form)
     except UsageError as e:
         fail(where, "surface.path", " ".join(str(e).split()))

@@ -1,9 +1,11 @@
 """Measured or externally generated heightfields from files.
 
 Formats: ``.npy`` (read through its header first), ``.npz`` (its single array or the key
-'heights'; the member's header is read before it is inflated) or whitespace-separated text
-(any other suffix; at most ``MAX_TEXT_BYTES``). ``check_heightfield_file(path, dx)`` validates
-a file without building anything — callers run it before creating outputs; every problem is a
+'heights'; the member's header is read before it is inflated), a measured scan (``.x3p`` and
+the formats of ``scan.TOPOGRAPHY_SUFFIXES``: read, form removed, missing points filled and
+resampled to square cells by ``scan``, in micrometres) or whitespace-separated text (any other
+suffix; at most ``MAX_TEXT_BYTES``). ``check_heightfield_file(path, dx)`` validates a file
+without building anything — callers run it before creating outputs; every problem is a
 one-line ``UsageError`` naming the file.
 """
 
@@ -14,6 +16,7 @@ import os
 import stat
 import warnings
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +24,7 @@ import numpy as np
 from microsim.checks import check_memory, file_path, positive
 from microsim.errors import UsageError
 
+from . import scan
 from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
 from .surface import Surface, check_relief, heightfield_mesh
 
@@ -154,21 +158,96 @@ def _check_values(path: Path, heights, dx, periodic: bool) -> None:
         )
 
 
+@dataclass(frozen=True)
+class _ScanGrid:
+    """A scan prepared for the mesh (``_scan_grid``): ``heights`` (µm, square cells ``dx``
+    µm apart), the scan's own grid shape, what was done to it as ``nominal`` entries and as
+    report lines (``notes``)."""
+
+    heights: np.ndarray
+    dx: float
+    input_shape: tuple[int, int]
+    nominal: dict
+    notes: tuple[str, ...]
+
+
+def _form(path, form) -> str:
+    """``form`` checked (``scan.FORMS``), or the file's default (``scan.default_form``)."""
+    if form is None:
+        return scan.default_form(path)
+    scan.form_degree(form)
+    return form
+
+
+def _scan_grid(path: Path, dx, periodic: bool, form: str, max_side=None) -> _ScanGrid:
+    """A scan file's heights in micrometres (``scan.SCAN_UNIT``): read, checked in size (as
+    read and as resampled), the form removed, missing points filled, resampled to square
+    cells (``scan``). ``dx`` must be None: the scan gives its spacing."""
+    if dx is not None:
+        raise UsageError(f"dx: the scan {path} gives its own spacing; leave dx out (got {dx!r})")
+    measured = scan.read_scan(path)
+    h = measured.heights / scan.SCAN_UNIT
+    dx, dy = measured.dx / scan.SCAN_UNIT, measured.dy / scan.SCAN_UNIT
+    _check_shape(path, h.shape, None, periodic, max_side)
+    square, step = scan.square_shape(h.shape, dx, dy)
+    _check_shape(path, square, None, periodic, max_side)
+    try:
+        h, removed = scan.remove_form(h, dx, dy, form)
+        h, filled = scan.fill_missing(h, dx, dy)
+    except UsageError as e:
+        raise _fail(path, e) from None
+    h, step = scan.square_grid(h, dx, dy)
+    notes = [f"file: {path.name}: {removed.describe('µm')}"] if form != "none" else []
+    if filled:
+        notes.append(
+            f"file: {path.name}: {filled:.2%} of the points were not measured; filled by "
+            f"linear interpolation from their measured neighbours"
+        )
+    if square != measured.heights.shape:
+        notes.append(
+            f"file: {path.name}: cells {dx:.4g} × {dy:.4g} µm resampled to {step:.4g} µm "
+            f"square by linear interpolation along {'y' if dy > dx else 'x'}"
+        )
+    nominal = {
+        "unit": "µm",
+        "scan_spacing": (dx, dy),
+        "filled_fraction": filled,
+        "form": removed.as_dict(),
+    }
+    return _ScanGrid(h, step, tuple(measured.heights.shape), nominal, tuple(notes))
+
+
+def _array_form(path: Path, heights, dx: float, form: str):
+    """A heightfield array with ``form`` removed (none: as is), the nominal entries and the
+    report lines saying so."""
+    if form == "none":
+        return heights, {}, ()
+    heights, removed = scan.remove_form(heights, dx, dx, form)
+    return heights, {"form": removed.as_dict()}, (f"file: {path.name}: {removed.describe()}",)
+
+
 def check_heightfield_file(
-    path, dx=None, periodic: bool = False, max_side: int | None = None
+    path, dx=None, periodic: bool = False, max_side: int | None = None, form: str | None = None
 ) -> tuple[int, int]:
-    """Validate a heightfield file for ``from_file(path, dx, periodic)`` without building the
-    surface; returns its grid shape (ny, nx). Headers are read first (shape, dtype, size, at
-    most ``max_side`` per side if given: a file that would not fit in memory is refused
-    before it is read); the values are then checked to be finite (.npy through a memory map,
-    in slabs) and, given ``dx``, neither flat nor too tall or large for the tracer
-    (``_check_values``). ``dx`` (None: those two not checked) must be a finite length > 0.
-    Every problem raises a one-line UsageError naming the file (or ``dx``); OS errors such as
-    a permission denied propagate as ``OSError``."""
+    """Validate a heightfield file for ``from_file(path, dx, periodic, form)`` without
+    building the surface; returns the grid shape (ny, nx) it meshes. Headers are read first
+    (shape, dtype, size, at most ``max_side`` per side if given: a file that would not fit in
+    memory is refused before it is read); the values are then checked to be finite (.npy
+    through a memory map, in slabs) and, given ``dx``, neither flat nor too tall or large for
+    the tracer (``_check_values``; after the form's removal). ``dx`` (None: those two not
+    checked) must be a finite length > 0. A scan (``scan.is_scan``) is read and prepared as
+    ``from_file`` does, and checked with its own spacing (``dx`` must then be None). Every
+    problem raises a one-line UsageError naming the file (or ``dx``, ``form``); OS errors
+    such as a permission denied propagate as ``OSError``."""
     path = file_path("path", path)
+    form = _form(path, form)
     if dx is not None:
         positive("dx", dx)
     _regular_file(path)
+    if scan.is_scan(path):
+        grid = _scan_grid(path, dx, periodic, form, max_side)
+        _check_values(path, grid.heights, grid.dx, periodic)
+        return grid.heights.shape
     if path.suffix == ".npy":
         with open(path, "rb") as f:
             shape, dtype = _header(path, f)
@@ -183,6 +262,8 @@ def check_heightfield_file(
         except (ValueError, EOFError, OSError) as e:
             raise _fail(path, f"not a readable .npy array ({e})") from None
         _check_values(path, a, dx, periodic)
+        if form != "none" and dx is not None:
+            _check_values(path, _array_form(path, np.asarray(a), dx, form)[0], dx, periodic)
         return shape
     if path.suffix == ".npz":
         _check_npz_header(path, periodic, max_side)
@@ -195,6 +276,8 @@ def check_heightfield_file(
     heights = read_heights(path, periodic=periodic)
     _check_shape(path, heights.shape, None, periodic, max_side)
     _check_values(path, heights, dx, periodic)
+    if form != "none" and dx is not None:
+        _check_values(path, _array_form(path, heights, dx, form)[0], dx, periodic)
     return heights.shape
 
 
@@ -257,17 +340,35 @@ def mirror_periodic(h: np.ndarray) -> np.ndarray:
     return np.concatenate([h, h[:, -2:0:-1]], axis=1)
 
 
-def from_file(path, dx: float, periodic: bool = False) -> Surface:
-    """Heightfield surface from a file (``read_heights``) with grid spacing ``dx``.
+def from_file(path, dx: float | None = None, periodic: bool = False, form: str | None = None):
+    """Heightfield surface from a file: an array (``read_heights``) with grid spacing ``dx``
+    (required), or a scan (``scan.is_scan``: X3P or a SurfaceTopography format), which gives
+    its own spacing (``dx`` must be None) and is used in micrometres (``_scan_grid``).
 
-    ``periodic=True``: the caller asserts the grid already tiles seamlessly (the sample after
-    the last column is the first column) and it is used as is. Otherwise it is made periodic
-    by mirroring (``mirror_periodic``), which doubles the tile, keeps every slope magnitude
-    and symmetrises the slope distribution (each slope also appears with the opposite sign).
-    The mean height is subtracted.
+    ``form`` (``scan.FORMS``; None: "plane" for a scan, "none" for an array) is the
+    least-squares polynomial subtracted first (``scan.remove_form``); what was removed is
+    recorded in ``nominal["form"]`` and the surface's warnings, as are a scan's filled points
+    and resampling. ``periodic=True``: the caller asserts the grid already tiles seamlessly
+    (the sample after the last column is the first column) and it is used as is. Otherwise it
+    is made periodic by mirroring (``mirror_periodic``), which doubles the tile, keeps every
+    slope magnitude and symmetrises the slope distribution (each slope also appears with the
+    opposite sign). The mean height is subtracted.
     """
-    dx = positive("dx", dx)
-    raw = read_heights(path, periodic=periodic)
+    form = _form(path, form)
+    if scan.is_scan(path):
+        grid = _scan_grid(file_path("path", path), dx, periodic, form)
+        raw, dx, input_shape, extra, notes = (
+            grid.heights,
+            grid.dx,
+            grid.input_shape,
+            grid.nominal,
+            grid.notes,
+        )
+    else:
+        dx = positive("dx", dx)
+        raw = read_heights(path, periodic=periodic)
+        input_shape = raw.shape
+        raw, extra, notes = _array_form(Path(path), raw, dx, form)
     _check_values(Path(path), raw, dx, periodic)
     h = raw if periodic else mirror_periodic(raw)
     h = h - h.mean()
@@ -277,9 +378,10 @@ def from_file(path, dx: float, periodic: bool = False) -> Surface:
         "path": str(path),
         "dx": dx,
         "periodic_input": bool(periodic),
-        "input_shape": tuple(int(s) for s in raw.shape),
+        "input_shape": tuple(int(s) for s in input_shape),
+        **extra,
     }
-    warns = (
+    warns = notes + (
         ()
         if periodic
         else (

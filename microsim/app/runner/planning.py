@@ -464,6 +464,8 @@ def tally_settings(scene) -> dict:
         for key in ("oriented", "corr_len_y", "B_y", "rotation"):
             surface.pop(key, None)
     if scene.surface.kind == "file":
+        if surface["form"] == "none":  # heightfield arrays keep the settings they always had
+            del surface["form"]
         path = Path(surface.pop("path"))
         path = path if path.is_absolute() or scene.path is None else scene.path.parent / path
         digest = hashlib.sha256()

@@ -333,11 +333,11 @@ def _resolve_paths(surface: dict, base) -> dict:
 def _check_heightfield_file(where: str, spec, checked: set) -> None:
     """The heightfield file of a ``kind = "file"`` surface, read and checked as a scene file's
     (``microsim.app.scene``; an OS error such as permission denied propagates); ``checked`` holds
-    the (path, dx, periodic) already checked."""
-    key = (spec.params["path"], spec.params["dx"], spec.params["periodic"])
+    the (path, dx, periodic, form) already checked."""
+    key = (spec.path, spec.dx, spec.periodic, spec.form)
     if key in checked:
         return
-    sc.check_heightfield(where, Path(key[0]), key[1], key[2])
+    sc.check_heightfield(where, Path(spec.path), spec)
     checked.add(key)
 
 
