@@ -29,7 +29,10 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     #           (realisations must be a multiple of patches)
     # file:     path (required; relative to the scene file; .npy, .npz or text, a real 2D
     #           array of at least 8 x 8 and at most 4096 x 4096 finite heights, not all
-    #           equal, checked when the scene is loaded), dx (required), periodic = false
+    #           equal, checked when the scene is loaded; or a measured scan, .x3p or a
+    #           SurfaceTopography format, used in micrometres), dx (required for an array,
+    #           not given for a scan), periodic = false, form = "none" | "plane" | "poly2"
+    #           … "poly4" (default "plane" for a scan, "none" for an array)
     # flat:     size = 1.0
     # every length (dx, sigma, corr_len, B, tile, size) is a number in [1e-6, 1e6]
     [material]

@@ -212,7 +212,7 @@ def _scan_grid(path: Path, dx, periodic: bool, form: str, max_side=None) -> _Sca
         "unit": "µm",
         "scan_spacing": (dx, dy),
         "filled_fraction": filled,
-        "form": removed.as_dict(),
+        **removed.nominal(),
     }
     return _ScanGrid(h, step, tuple(measured.heights.shape), nominal, tuple(notes))
 
@@ -223,7 +223,7 @@ def _array_form(path: Path, heights, dx: float, form: str):
     if form == "none":
         return heights, {}, ()
     heights, removed = scan.remove_form(heights, dx, dx, form)
-    return heights, {"form": removed.as_dict()}, (f"file: {path.name}: {removed.describe()}",)
+    return heights, removed.nominal(), (f"file: {path.name}: {removed.describe()}",)
 
 
 def check_heightfield_file(
@@ -347,7 +347,8 @@ def from_file(path, dx: float | None = None, periodic: bool = False, form: str |
 
     ``form`` (``scan.FORMS``; None: "plane" for a scan, "none" for an array) is the
     least-squares polynomial subtracted first (``scan.remove_form``); what was removed is
-    recorded in ``nominal["form"]`` and the surface's warnings, as are a scan's filled points
+    recorded in ``nominal`` (``form``, ``form_rms_removed``) and the surface's warnings (with
+    its coefficients), as are a scan's filled points
     and resampling. ``periodic=True``: the caller asserts the grid already tiles seamlessly
     (the sample after the last column is the first column) and it is used as is. Otherwise it
     is made periodic by mirroring (``mirror_periodic``), which doubles the tile, keeps every

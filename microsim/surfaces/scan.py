@@ -93,13 +93,10 @@ class FormRemoved:
     coefficients: tuple[float, ...] = ()
     rms_removed: float = 0.0
 
-    def as_dict(self) -> dict:
-        """JSON-able record: method, {term: coefficient}, rms_removed."""
-        return {
-            "method": self.method,
-            "coefficients": dict(zip(self.terms, self.coefficients)),
-            "rms_removed": self.rms_removed,
-        }
+    def nominal(self) -> dict:
+        """The entries a surface's ``nominal`` records: ``form`` (the method) and
+        ``form_rms_removed``; the coefficients are in ``describe``'s line."""
+        return {"form": self.method, "form_rms_removed": self.rms_removed}
 
     def describe(self, unit: str = "") -> str:
         """One line for reports: the method, the coefficients and the rms removed."""
