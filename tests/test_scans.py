@@ -13,6 +13,7 @@ from support import random_heights, refused
 from test_faults_cli import run_cli, tree
 
 from microsim import surfaces
+from microsim.analysis.report_cells import params_text
 from microsim.app.scene import load_scene
 from microsim.sim import Bins, simulate
 from microsim.surfaces import scan
@@ -58,12 +59,12 @@ def test_missing_points_of_a_plane_are_filled_on_the_plane():
     y, x = np.mgrid[0:20, 0:30]
     plane = 0.3 * x - 0.2 * y + 1.0
     holed = plane.copy()
-    holed[5:9, 10:14] = np.nan  # inside: linear interpolation is exact on a plane
-    filled, fraction = scan.fill_missing(holed, 1.0, 1.0)
-    assert np.allclose(filled, plane, rtol=0, atol=1e-12) and fraction == 16 / 600
-    holed[0, 0] = np.nan  # a corner: the nearest measured point
-    filled, _ = scan.fill_missing(holed, 1.0, 1.0)
-    assert filled[0, 0] in (plane[0, 1], plane[1, 0], plane[1, 1])
+    holed[5:9, 10:14] = np.nan  # inside: a plane is harmonic, so it is filled exactly
+    filled, fraction = scan.fill_missing(holed, 1.0, 2.0)
+    assert np.allclose(filled, plane, rtol=0, atol=1e-9) and fraction == 16 / 600
+    holed[0, :3] = np.nan  # at the border: between the measured heights around the hole
+    filled, _ = scan.fill_missing(holed, 1.0, 2.0)
+    assert plane[1, :4].min() <= filled[0, :3].min() <= filled[0, :3].max() <= plane[1, :4].max()
 
 
 def test_a_non_square_grid_gives_a_non_square_tile(tmp_path):
@@ -120,6 +121,7 @@ def test_a_scene_reads_a_scan_in_micrometres_with_its_plane_removed(tmp_path):
     s = sc.build_surface(0)
     assert s.dx == 0.25 and s.nominal["unit"] == "µm"
     assert s.nominal["form"] == "plane" and s.nominal["form_rms_removed"] > 0
+    assert "form = plane" in params_text(s.nominal)  # the report's "nominal" row
     (line,) = [w for w in s.warnings if "form removed: plane" in w]
     slope = float(re.search(r"\bx: ([-+0-9.e]+)", line).group(1))
     assert slope == pytest.approx(0.04, abs=2e-3)  # µm per µm

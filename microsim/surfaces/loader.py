@@ -201,7 +201,7 @@ def _scan_grid(path: Path, dx, periodic: bool, form: str, max_side=None) -> _Sca
     if filled:
         notes.append(
             f"file: {path.name}: {filled:.2%} of the points were not measured; filled by "
-            f"linear interpolation from their measured neighbours"
+            f"harmonic inpainting from the measured points around them"
         )
     if square != measured.heights.shape:
         notes.append(

@@ -14,9 +14,8 @@ Preparing a scan for the mesh (``loader.from_file`` runs these in this order):
 * ``remove_form``: the F-operator of ISO 25178-2:2012 with the least-squares form of
   ISO 25178-3:2012 — the polynomial in x and y of the given degree (a plane by default)
   fitted to the measured points is subtracted;
-* ``fill_missing``: missing points are interpolated linearly (``scipy.interpolate.griddata``
-  on a Delaunay triangulation of the measured points around the holes), the nearest measured
-  point where a hole reaches the border; at most ``MAX_MISSING`` of the points;
+* ``fill_missing``: missing points are filled by harmonic inpainting (the discrete Laplace
+  equation over the holes, the measured points fixed); at most ``MAX_MISSING`` of the points;
 * ``square_grid``: the mesh has square cells, so a scan with dx != dy is resampled to the finer
   spacing by linear interpolation along the coarser axis (the other axis keeps its samples).
 """
@@ -247,14 +246,15 @@ def remove_form(heights, dx: float, dy: float, form: str) -> tuple[np.ndarray, F
 
 
 def fill_missing(heights, dx: float, dy: float, max_fraction: float = MAX_MISSING):
-    """``heights`` with its NaN points filled, and the fraction filled. Each missing point is
-    interpolated linearly between measured points (``scipy.interpolate.griddata`` on the
-    measured points within two cells of a hole, in lengths x = column·dx, y = row·dy); where
-    that leaves a point outside their hull (a hole at the border), the nearest measured point.
-    More than ``max_fraction`` missing is a UsageError."""
-    from scipy.interpolate import griddata
-    from scipy.ndimage import binary_dilation
-    from scipy.spatial import QhullError
+    """``heights`` with its NaN (and inf) points filled, and the fraction filled, by harmonic
+    inpainting: the filled heights solve the discrete Laplace equation (weights 1/dx² along x,
+    1/dy² along y) with the measured points held fixed and no flux across the grid's border
+    (the Laplace fill of Gwyddion and SurfaceTopography's harmonic one), one sparse linear
+    system over the missing points (``scipy.sparse.linalg.spsolve``). It is exact on a plane
+    inside a hole and never overshoots the measured heights around it. More than
+    ``max_fraction`` missing is a UsageError."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.linalg import spsolve
 
     heights = np.asarray(heights, dtype=np.float64)
     missing = ~np.isfinite(heights)
@@ -266,20 +266,27 @@ def fill_missing(heights, dx: float, dy: float, max_fraction: float = MAX_MISSIN
             f"heights: {fraction:.1%} of the points are missing (NaN); at most "
             f"{max_fraction:.0%} are filled — crop the scan to its measured part"
         )
-    rim = binary_dilation(missing, np.ones((3, 3), bool), iterations=2) & ~missing
-    spacing = np.array([dy, dx])
-    known = np.argwhere(rim) * spacing
-    wanted = np.argwhere(missing) * spacing
-    values = heights[rim]
-    try:
-        filled = griddata(known, values, wanted, method="linear")
-    except QhullError:  # measured points all on one line: no triangle to interpolate in
-        filled = np.full(len(wanted), np.nan)
-    outside = np.isnan(filled)
-    if outside.any():
-        filled[outside] = griddata(known, values, wanted[outside], method="nearest")
+    ny, nx = heights.shape
+    rows, cols = np.nonzero(missing)
+    n = len(rows)
+    unknown = np.full(heights.shape, -1, dtype=np.intp)
+    unknown[rows, cols] = np.arange(n)
+    diagonal, rhs = np.zeros(n), np.zeros(n)
+    links = ([np.arange(n)], [np.arange(n)], [diagonal])  # (row, column, weight) entries
+    for di, dj, weight in ((1, 0, dy**-2), (-1, 0, dy**-2), (0, 1, dx**-2), (0, -1, dx**-2)):
+        r, c = rows + di, cols + dj
+        inside = (r >= 0) & (r < ny) & (c >= 0) & (c < nx)
+        k, r, c = np.nonzero(inside)[0], r[inside], c[inside]
+        diagonal[k] += weight
+        other = unknown[r, c]
+        free = other >= 0
+        links[0].append(k[free])
+        links[1].append(other[free])
+        links[2].append(np.full(int(free.sum()), -weight))
+        np.add.at(rhs, k[~free], weight * heights[r[~free], c[~free]])
+    i, j, w = (np.concatenate(part) for part in links)
     out = heights.copy()
-    out[missing] = filled
+    out[rows, cols] = spsolve(csr_matrix((w, (i, j)), shape=(n, n)), rhs)
     return out, fraction
 
 
