@@ -182,10 +182,14 @@ def test_the_dielectric_shortcuts_change_nothing(monkeypatch, tile, surface_name
     ``dielectric.bin_side_escapes`` bins the escapes by the single bounce's vectorised
     binning; every number stays bitwise that of tracing every ray (``Tracer.surely_escapes``
     switched off) and binning by ``Bins.locate`` (on the flat interface every escape lies on
-    a Δφ edge or at the zenith)."""
+    a Δφ edge or at the zenith). The tile is traced through Embree step by step (its grid walk
+    switched off: ``interface_grid`` has its own test)."""
     from microsim.sim import bounces, dielectric
     from microsim.sim.tracer import Tracer
+    from microsim.sim.tracer_cache import GRID_SWITCH
     from microsim.surfaces import flat
+
+    monkeypatch.setenv(GRID_SWITCH, "0")
 
     surface, incidences = (
         (tile, [30.0, 150.0]) if surface_name == "tile" else (flat(1.0), [0.0, 60.0, 150.0])
