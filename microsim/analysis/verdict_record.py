@@ -45,7 +45,7 @@ VERDICT_SCHEMA: dict = {
     "chi2": (
         _NUM,
         "Σ_U z², z = (sim − model)/σ, σ² = stderr² + (model_rtol·model)² (decides only for "
-        "'ray-noise' and 'one-tile'; descriptive for 'realisations')",
+        "'ray-noise', 'one-tile' and 'this-tile'; descriptive for 'realisations')",
     ),
     "dof": ((int,), "n_bins − n_params"),
     "chi2_dof": (_OPT_NUM, "chi2/dof (null if dof ≤ 0)"),
@@ -70,9 +70,10 @@ VERDICT_SCHEMA: dict = {
     "model_rtol": (_NUM, "relative quadrature error of the model added to σ in quadrature"),
     "agrees": (
         (bool,),
-        "conclusive agreement: 'ray-noise'/'one-tile': p_value ≥ p_threshold and max_abs_z < "
-        "z_threshold; 'realisations': energy_p ≥ p_threshold and max_abs_t < t_threshold "
-        "(false if n_bins = 0 or dof ≤ 0): statistically indistinguishable at the run's precision",
+        "conclusive agreement: 'ray-noise'/'one-tile'/'this-tile': p_value ≥ p_threshold and "
+        "max_abs_z < z_threshold; 'realisations': energy_p ≥ p_threshold and max_abs_t < "
+        "t_threshold (false if n_bins = 0 or dof ≤ 0): statistically indistinguishable at the "
+        "run's precision",
     ),
     "deviations": (
         (list,),
@@ -90,12 +91,14 @@ VERDICT_SCHEMA: dict = {
         "what the tests compare against (module docstring): 'ray-noise' (χ² and max-|z|), "
         "'realisations' (t tests over the R realisations), 'one-tile' (ensemble model, one "
         "realisation: ray-noise tests, and the excess over the tile's departure from its ensemble "
-        "where that is computable; a rejection it explains is inconclusive)",
+        "where that is computable; a rejection it explains is inconclusive), 'this-tile' "
+        "(any model of a measured surface, judged as a model of that tile: ray-noise tests)",
     ),
     "conclusive": (
         (bool,),
         "False only for a 'one-tile' rejection that the tile's departure from its ensemble "
-        "explains (or, where the departure is not computable, any 'one-tile' rejection)",
+        "explains (or, where the departure is not computable, any 'one-tile' rejection), or "
+        "a verdict without a bin or degree of freedom to test (n_bins = 0 or dof ≤ 0)",
     ),
     "realisations": ((int,), "number of realisations R the verdict used (1 unless 'realisations')"),
     "tile_departure": (
@@ -139,7 +142,7 @@ VERDICT_SCHEMA: dict = {
     ),
 }
 
-REFERENCES = ("ray-noise", "realisations", "one-tile")
+REFERENCES = ("ray-noise", "realisations", "one-tile", "this-tile")
 
 
 @dataclass(frozen=True, eq=False)

@@ -64,6 +64,14 @@ Reference of the test (``reference``), by what the model describes:
   (heightfields: a tile's masking also departs from the ensemble's) a rejection is always
   inconclusive.
 
+* ``"this-tile"``: every model on a *measured* surface (``judged_as_tile``: a surface read
+  from a file, ``kind = "file"``). The traced tile is then not a draw of an ensemble but the
+  object of study: the question is which model describes *this* surface and by how much each
+  misses it. Its models are built from the tile itself (Beckmann at the tile's realised rms
+  slope, its own facets, fits to its BRDF), so f̄ differs from a model that describes the
+  tile by ray noise only: the χ² and max-|z| tests above decide, and agreement and deviation
+  are both ``conclusive`` (the same tests, and false-alarm rate, as ``"ray-noise"``).
+
 Whatever the reference, a verdict without a bin to test (none holds ``min_events`` events, or
 no degree of freedom is left after the fitted parameters: dof ≤ 0) is inconclusive: there is
 no evidence either way (a lobe too narrow, or light too faint, for the rays traced).
@@ -118,6 +126,8 @@ __all__ = [
     "VerdictList",
     "tile_departure",
     "departure_of",
+    "judged_as_tile",
+    "MEASURED_KINDS",
     "validate_verdict",
     "summary_row",
     "sidak",
@@ -156,7 +166,9 @@ class Measured(NamedTuple):
     R tiles of equal rays (sr⁻¹, their mean is ``brdf``) or None; ``theta_i``, ``phi_i``
     degrees; ``dof`` (Θ, Φ) the degrees of freedom of ``stderr`` (``sim.tallies.stderr_dof``)
     or None: exact; ``strata`` (R,) the stratum of each realisation when they were drawn one
-    per stratum of the ensemble (``realisation_strata``), else None (i.i.d.)."""
+    per stratum of the ensemble (``realisation_strata``), else None (i.i.d.); ``object_tile``:
+    the traced tile is itself the object of study (a measured surface, ``judged_as_tile``):
+    every model is judged as a model of it, against ray noise (reference "this-tile")."""
 
     brdf: np.ndarray
     stderr: np.ndarray
@@ -169,6 +181,7 @@ class Measured(NamedTuple):
     phi_i: float = 0.0
     dof: np.ndarray | None = None
     strata: np.ndarray | None = None
+    object_tile: bool = False
 
     @classmethod
     def of(cls, result, t: int, **replace) -> "Measured":
@@ -249,7 +262,10 @@ def verdict(
     E = energy_set(energy).reshape(a.shape)
     out = {"energy_dev": _energy_dev(a.sim, a.mod, a.om, Em), **dict.fromkeys(_TEST_FIELDS)}
     z_dev = ray.z
-    if a.F is not None:
+    if m.object_tile:
+        reference, n_real = "this-tile", 1
+        agrees, conclusive = ray.ok, True
+    elif a.F is not None:
         reference, n_real = "realisations", len(a.F)
         agrees, tests = _realisation_tests(a, used, Em, dof, model_rtol, alpha_each)
         out.update(tests)
@@ -334,8 +350,10 @@ class _Inputs(NamedTuple):
 
 def _inputs_of(m: Measured, p: Prediction, s: Significance) -> _Inputs:
     """The arrays of one verdict from its three argument groups, converted and checked:
-    one-line UsageErrors naming the argument."""
-    ensemble, model_rtol, min_events, n_params = p.ensemble, s.model_rtol, s.min_events, p.n_params
+    one-line UsageErrors naming the argument. On a measured surface (``object_tile``) no model
+    is an ensemble's: realisations and departure are not used."""
+    ensemble = p.ensemble and not m.object_tile
+    model_rtol, min_events, n_params = s.model_rtol, s.min_events, p.n_params
     sim, se, cnt, mod, om = (
         np.asarray(x, dtype=np.float64) for x in (m.brdf, m.stderr, m.counts, p.values, m.omega)
     )
@@ -589,9 +607,11 @@ def verdicts_for_result(
     ``fitted`` (an iterable or name → mapping of ``fits.FitResult``; their ``model_values`` are
     compared and their parameter count reduces the dof). ``params``: optional name → parameter
     dict for the prescribed models (default ``result.info.model_params``).
-    The family size n_tests = #incidences × #models (prescribed + fitted). Models in
-    ``info.realisation_models`` are judged against ray noise, the others as ensemble models
-    over ``result.brdf_realisations`` (finite rows; "one-tile" without them)."""
+    The family size n_tests = #incidences × #models (prescribed + fitted). On a measured
+    surface (``judged_as_tile``) every model is judged as a model of the traced tile, against
+    ray noise ("this-tile"); otherwise models in ``info.realisation_models`` are judged against
+    ray noise, the others as ensemble models over ``result.brdf_realisations`` (finite rows;
+    "one-tile" without them)."""
     fits = list(fitted.values()) if isinstance(fitted, Mapping) else list(fitted or [])
     params = dict((result.info.model_params or {}) if params is None else params)
     entries = [
@@ -605,9 +625,11 @@ def verdicts_for_result(
     n_tests = max(1, T * len(entries))
     omega = result.bins.projected_solid_angle()
     rel_departure = tile_departure(result)
-    # models of the realised surfaces themselves (``ts-facets``) differ from the simulation by
-    # ray noise only; ensemble models also by the tile-to-tile scatter (``result.stderr``)
-    own = set(result.info.realisation_models)
+    # models of the realised surfaces themselves (``ts-facets``), and every model of a measured
+    # surface, differ from the simulation by ray noise only; ensemble models also by the
+    # tile-to-tile scatter (``result.stderr``)
+    object_tile = judged_as_tile(result)
+    own = set(names) if object_tile else set(result.info.realisation_models)
     ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
     ray_dof = stderr_dof(result)  # of ray_err; ``result.stderr`` with realisations: none
     out = []
@@ -636,12 +658,25 @@ def verdicts_for_result(
                         realisations=real_t,
                         dof=None if dof is None else dof[t],
                         strata=strata_t,
+                        object_tile=object_tile,
                     ),
                     Prediction(values[t], name, p, is_fit, k, name not in own, departure),
                     Significance(model_rtol, min_events, alpha, n_tests),
                 )
             )
     return VerdictList(out)
+
+
+MEASURED_KINDS = ("file",)
+"""Surface kinds given as data rather than generated (a heightfield file, a measured scan):
+their traced tile is the object of study, not a draw of an ensemble (``judged_as_tile``)."""
+
+
+def judged_as_tile(result) -> bool:
+    """Whether ``result`` traced a measured surface (its recorded ``surface`` kind is one of
+    ``MEASURED_KINDS``): every model is then a model of that tile and is judged against its
+    ray noise, conclusively either way (reference "this-tile", module docstring)."""
+    return (result.info.surface or {}).get("kind") in MEASURED_KINDS
 
 
 def realisation_strata(result) -> np.ndarray | None:
