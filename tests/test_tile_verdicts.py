@@ -8,7 +8,7 @@ own facets and the V-groove G (Mikkelsen 2009, eq. 25) is exact. Facts checked: 
 agrees conclusively at every θi; the same model × 1.1 deviates conclusively by its known size;
 the default models of a file surface are judged against the tile too; a generated (ensemble)
 tile keeps the "one-tile" reference and its verdicts; the false-alarm rate of the exact model
-stays within the binomial bound (slow).
+stays within the binomial bound (``-s`` prints the measured rates).
 """
 
 import numpy as np
@@ -138,8 +138,7 @@ def _max_false_alarms(seeds, alpha, level=1e-3):
     return int(stats.binom.isf(level, seeds, alpha))
 
 
-@pytest.mark.slow
-def test_this_tile_false_alarms_within_binomial_bound_slow(tmp_path, capsys):
+def test_this_tile_false_alarms_within_binomial_bound(tmp_path, capsys):
     """Calibration of the "this-tile" reference on a traced heightfield file: over 40 seeds
     the exact model's family (3 incidences) deviates at most as often as Binomial(40, α)
     allows, at α = 0.01 and 0.05; the model × 1.03 is flagged in ≥ 90 % of the seeds."""

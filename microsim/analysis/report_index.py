@@ -320,7 +320,10 @@ def index_report(
         "RMS error there.",
         "- ? y% (tile departs z%) inconclusive: one tile, whose computed departure z from its "
         "ensemble explains the deviation y.",
-        "- ? (θi …) inconclusive: one heightfield tile cannot tell tile scatter from model error.",
+        "- ? (θi …) inconclusive: one generated heightfield tile cannot tell tile scatter from "
+        "model error.",
+        "- A surface read from a file (a measured surface) is judged as itself, not as a draw "
+        "of an ensemble: ✓ or ✗ against its ray noise (reference this-tile).",
         "- – not compared on this scene.",
         "",
     ] + _verdict_tables(docs)
