@@ -17,8 +17,11 @@ from scipy import stats
 
 from microsim import surfaces as sf
 from microsim.analysis.verdicts import (
+    Measured,
+    Prediction,
     judged_as_tile,
     validate_verdict,
+    verdict,
     verdict_symbol,
     verdicts_for_result,
 )
@@ -103,6 +106,18 @@ def test_wrong_model_of_a_scanned_tile_deviates_by_its_size(scan_run):
         assert wrong.kind == "deviates" and wrong["max_rel_dev"] < 0
         assert abs(wrong["rel_rms"] - 0.1) <= 1.1 * exact["rel_rms"] + 1e-12
     assert all(v.kind == "deviates" for v in by["ts-beckmann-realised-smith-corr"])
+
+
+def test_every_verdict_on_a_scanned_tile_is_judged_as_this_tile(scan_run):
+    """A verdict built directly from the run (``Measured.of``, as the glass and order-by-order
+    studies and ``microsim.testing`` build theirs) is judged as this tile even for a model
+    flagged as an ensemble's."""
+    for t in range(len(THETAS)):
+        v = verdict(
+            Measured.of(scan_run, t),
+            Prediction(scan_run.models["exact-x1.1"][t], "x1.1", ensemble=True),
+        )
+        assert v.reference == "this-tile" and v.kind == "deviates"
 
 
 def test_an_ensemble_tile_keeps_its_one_tile_verdicts(tmp_path):

@@ -186,7 +186,8 @@ class Measured(NamedTuple):
     @classmethod
     def of(cls, result, t: int, **replace) -> "Measured":
         """Incidence ``t`` of a ``Result`` (``replace``: fields to take from elsewhere, e.g.
-        another ``stderr``)."""
+        another ``stderr``); ``object_tile`` when it traced a measured surface
+        (``judged_as_tile``)."""
         fields = {
             "brdf": result.brdf[t],
             "stderr": result.stderr[t],
@@ -196,6 +197,7 @@ class Measured(NamedTuple):
             "phi_edges": result.phi_edges,
             "theta_i": float(result.theta_i[t]),
             "phi_i": float(result.phi_i[t]),
+            "object_tile": judged_as_tile(result),
         }
         return cls(**{**fields, **replace})
 
@@ -628,8 +630,7 @@ def verdicts_for_result(
     # models of the realised surfaces themselves (``ts-facets``), and every model of a measured
     # surface, differ from the simulation by ray noise only; ensemble models also by the
     # tile-to-tile scatter (``result.stderr``)
-    object_tile = judged_as_tile(result)
-    own = set(names) if object_tile else set(result.info.realisation_models)
+    own = set(names) if judged_as_tile(result) else set(result.info.realisation_models)
     ray_err = result.stderr_ray if result.stderr_ray is not None else result.stderr
     ray_dof = stderr_dof(result)  # of ray_err; ``result.stderr`` with realisations: none
     out = []
@@ -658,7 +659,6 @@ def verdicts_for_result(
                         realisations=real_t,
                         dof=None if dof is None else dof[t],
                         strata=strata_t,
-                        object_tile=object_tile,
                     ),
                     Prediction(values[t], name, p, is_fit, k, name not in own, departure),
                     Significance(model_rtol, min_events, alpha, n_tests),

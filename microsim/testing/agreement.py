@@ -22,7 +22,8 @@ Which noise the BRDF is judged against:
   passes;
 * one tile of another surface (a heightfield, ``realisations = 1``): reference "ray-noise" —
   the BRDF is compared with the traced tile itself within the simulation's ray noise (its
-  departure from the ensemble is not computable);
+  departure from the ensemble is not computable); a surface read from a file is judged the
+  same way as the object it is (reference "this-tile", ``verdicts.judged_as_tile``);
 * several realisations (a random scene, ``realisations = R ≥ 2``): the BRDF is judged as a
   model of the *ensemble* (reference "realisations": Student-t tests over the R tiles'
   BRDFs), because each tile is one draw of the random surface.
@@ -835,6 +836,7 @@ def _message(judged: _Judged, ref, result, judging: _Judging, chart, physics, ca
     v0 = verdicts[0]
     against = {
         "ray-noise": "the reference's ray noise",
+        "this-tile": "the reference's ray noise (a measured surface, judged as itself)",
         "realisations": f"the scatter of {v0['realisations']} realisations (t tests)",
         "one-tile": "the reference's ray noise beyond the tile's computed departure from its "
         "ensemble",
