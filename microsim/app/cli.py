@@ -11,6 +11,7 @@ is shown with its traceback (status 1).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import sys
@@ -45,15 +46,90 @@ def _cmd_models(args) -> int:
     return 0
 
 
+HEIGHTFIELD_OPTIONS = ("dx", "wavelength", "json", "chart")
+"""The options of ``microsim surface`` that only a heightfield file takes."""
+
+
 def _cmd_surface(args) -> int:
     import warnings
 
     from .scene import describe_surface, load_scene
 
+    if _is_heightfield(args):
+        return _heightfield_report(args)
+    given = [f"--{k}" for k in HEIGHTFIELD_OPTIONS if getattr(args, k) not in (None, False)]
+    if given:
+        raise UsageError(
+            f"{', '.join(given)}: only for a heightfield file, and {args.scene!r} is a scene "
+            f"(a .toml file or a catalogue name)"
+        )
     with warnings.catch_warnings():  # describe_surface lists the generator's warnings
         warnings.simplefilter("ignore", UserWarning)
         print(describe_surface(load_scene(args.scene)))
     return 0
+
+
+def _is_heightfield(args) -> bool:
+    """Whether ``microsim surface FILE`` names a heightfield file rather than a scene: neither
+    a .toml file nor a catalogue name, and either an existing file or given with ``--dx``."""
+    from .scene import catalogue_names
+
+    if args.scene.endswith(".toml") or args.scene in catalogue_names():
+        return False
+    return args.dx is not None or os.path.isfile(args.scene)
+
+
+def _heightfield_report(args) -> int:
+    """``microsim surface FILE --dx DX``: the report of a measured heightfield."""
+    import json
+
+    from ..analysis.surface_report import surface_chart, surface_report
+    from ..surfaces.loader import read_heights
+
+    if args.dx is None:
+        raise UsageError(
+            f"--dx is required for the heightfield file {args.scene!r}: its grid step, in the "
+            f"unit of its heights"
+        )
+    chart = None if args.chart is None else _chart_file(args.chart)
+    report = surface_report(read_heights(args.scene), args.dx, wavelength=args.wavelength)
+    if chart is not None:
+        surface_chart(report, chart)
+    if args.json:
+        print(json.dumps(report.to_dict(), indent=1))
+    else:
+        print(report.to_markdown(), end="")
+    if chart is not None:
+        print(f"microsim: chart written to {chart}", file=sys.stderr)
+    return 0
+
+
+def _chart_file(name: str) -> str:
+    """The PNG ``--chart name`` writes (".png" added to a name without a suffix), refused if it
+    is a directory, has another suffix or its folder does not exist."""
+    from pathlib import Path
+
+    path = Path(name)
+    if not path.suffix:
+        path = path.with_suffix(".png")
+    if path.suffix.lower() != ".png":
+        raise UsageError(f"--chart {name}: must be a .png file, got suffix {path.suffix!r}")
+    if path.is_dir():
+        raise UsageError(f"--chart {name}: is a directory; give a file, e.g. surface.png")
+    if not path.resolve().parent.is_dir():
+        raise UsageError(f"--chart {name}: no such folder {str(path.parent)!r}")
+    return str(path)
+
+
+def _length(text: str) -> float:
+    """``--dx`` and ``--wavelength``: a finite length > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite length > 0, got {text!r}")
+    return value
 
 
 def _theta_list(text: str) -> list[float]:
@@ -209,9 +285,24 @@ def build_parser() -> argparse.ArgumentParser:
     m.set_defaults(func=_cmd_models)
     s = sub.add_parser(
         "surface",
-        help="build a scene's surface and print its statistics next to the nominal values",
+        help="build a scene's surface and print its statistics next to the nominal values, "
+        "or report what a heightfield file is (docs/cli.md)",
     )
-    s.add_argument("scene", help=SCENE_HELP)
+    s.add_argument(
+        "scene",
+        metavar="SCENE_OR_FILE",
+        help=SCENE_HELP + "; or a heightfield file (.npy, .npz, text; rows = y) with --dx",
+    )
+    s.add_argument("--dx", type=_length, help="heightfield file: the grid step (heights' unit)")
+    s.add_argument(
+        "--wavelength",
+        type=_length,
+        help="heightfield file: a wavelength in the heights' unit, for σ/λ and the optics regime",
+    )
+    s.add_argument("--json", action="store_true", help="heightfield file: the report as JSON")
+    s.add_argument(
+        "--chart", metavar="PNG", help="heightfield file: also write the report's chart here"
+    )
     s.set_defaults(func=_cmd_surface)
     _add_run_command(sub)
     _add_report_command(sub)
