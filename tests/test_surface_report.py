@@ -59,14 +59,16 @@ def test_abc_fit_recovers_the_catalogue_parameters():
 
 
 def test_anisotropic_gaussian_axes_and_ratio_are_found():
-    """ℓx = 6, ℓy = 12 along axes rotated by 30°: αx/αy ≈ 2 (the generator's mesh α's) within
-    3 errors, the αx axis at 30°."""
-    surf = _quiet(gaussian, 128, 1.0, 1.0, 6.0, seed=3, corr_len_y=12.0, rotation=30.0)
+    """ℓx = 6, ℓy = 12 along axes rotated by 30° (random amplitudes): αx/αy ≈ 2 (the
+    generator's mesh α's) within 3 errors, the αx axis at 30°."""
+    surf = _quiet(
+        gaussian, 128, 1.0, 1.0, 6.0, seed=3, corr_len_y=12.0, rotation=30.0, exact_amplitude=False
+    )
     an = surface_report(surf.heights, 1.0).anisotropy
-    assert an.anisotropic
+    assert an.anisotropic and an.ratio.error < 0.1 * an.ratio.value
     assert _within(an.ratio, surf.predicted.alpha_x / surf.predicted.alpha_y), an
     assert an.angle_deg == pytest.approx(30.0, abs=3.0)
-    assert an.alpha_x == pytest.approx(surf.predicted.alpha_x, rel=0.05)
+    assert an.alpha_x == pytest.approx(surf.predicted.alpha_x, rel=0.1)
 
 
 def test_slopes_are_those_of_the_tracers_facets():
