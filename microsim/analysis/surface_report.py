@@ -41,7 +41,7 @@ the levelled surface.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
 
 import numpy as np
 
@@ -250,9 +250,12 @@ class SurfaceReport:
         raise UsageError(f"name must be one of {names}, got {name!r}")
 
     def to_dict(self) -> dict:
-        """Everything but the arrays, as JSON-ready values."""
-        skip = ("heights", "psd_image", "psd_fx", "psd_fy", "theta")
-        out = {k: v for k, v in asdict(self).items() if k not in skip}
+        """Everything but the arrays (the fields not compared), as JSON-ready values."""
+        out = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.compare:
+                out[f.name] = asdict(value) if is_dataclass(value) else value
         out["ndf_fits"] = [{**asdict(f), "consistent": f.consistent} for f in self.ndf_fits]
         return out
 
