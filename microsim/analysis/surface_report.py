@@ -276,9 +276,9 @@ def surface_report(heights, dx, *, wavelength=None) -> SurfaceReport:
     missing = int(np.count_nonzero(~np.isfinite(h)))
     periodic, edges = _periodicity(h)
     h, tilt = _levelled(h, dx, periodic)
-    heights_stats, acf_len = _height_stats(h, dx, tilt, periodic)
+    heights_stats = _height_stats(h, dx, tilt, periodic)
     sx, sy = _facet_slopes(h, dx, periodic)
-    cells = _independent_cells(h.shape, dx, acf_len, sx.size)
+    cells = _independent_cells(h.shape, dx, heights_stats.corr_len, sx.size)
     slopes = _slope_stats(sx, sy, cells)
     image, fx, fy = _psd_image(h, dx, periodic)
     radial, ring_of = _radial(image, fx, fy, dx)
@@ -302,18 +302,16 @@ def surface_report(heights, dx, *, wavelength=None) -> SurfaceReport:
         anisotropy=anisotropy,
         regime=regime,
     )
-    warns = _warnings(report, edges, acf_len)
-    for a in (h, image, fx, fy, theta):
-        a.flags.writeable = False
-    return SurfaceReport(
-        **report,
-        warnings=warns,
+    arrays = dict(
         heights=h,
         psd_image=np.fft.fftshift(image),
         psd_fx=np.fft.fftshift(fx),
         psd_fy=np.fft.fftshift(fy),
         theta=theta,
     )
+    for a in arrays.values():
+        a.flags.writeable = False
+    return SurfaceReport(**report, warnings=_warnings(report, edges), **arrays)
 
 
 def _checked_heights(heights) -> np.ndarray:
@@ -370,12 +368,12 @@ def _filled(h: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(h), h, 0.0)
 
 
-def _height_stats(h, dx, tilt, periodic) -> tuple[HeightStats, float]:
+def _height_stats(h, dx, tilt, periodic) -> HeightStats:
     z = h[np.isfinite(h)]
     z = z - z.mean()
     sq = float(np.sqrt(np.mean(z**2)))
     acf_len, sal = _correlation_lengths(h, dx, periodic)
-    stats = HeightStats(
+    return HeightStats(
         Sq=sq,
         Sa=float(np.mean(np.abs(z))),
         Ssk=float(np.mean(z**3) / sq**3),
@@ -385,7 +383,6 @@ def _height_stats(h, dx, tilt, periodic) -> tuple[HeightStats, float]:
         Sal=sal,
         tilt_deg=tilt,
     )
-    return stats, acf_len
 
 
 def _correlation_lengths(h, dx, periodic) -> tuple[float, float]:
@@ -682,9 +679,11 @@ def _regime(sigma: float, wavelength: float) -> Regime:
     )
 
 
-def _warnings(r: dict, edges, acf_len) -> tuple[str, ...]:
+def _warnings(r: dict, edges) -> tuple[str, ...]:
+    """The report's warnings (module docstring) from its parts ``r`` and the edge mismatch."""
     out = []
     dx, slopes, hs = r["dx"], r["slopes"], r["heights_stats"]
+    acf_len = hs.corr_len
     if acf_len < MIN_CORR_CELLS * dx:
         out.append(
             f"sampling too coarse: correlation length {acf_len:.3g} < {MIN_CORR_CELLS:g} dx = "
