@@ -198,3 +198,21 @@ def test_cli_bad_input_one_line_status_2_nothing_written(capsys, heightfile, mak
     for w in words:
         assert w in err[0], (w, err[0])
     assert sorted(p.name for p in heightfile.parent.iterdir()) == before
+
+
+def test_cli_reports_a_scan_in_micrometres_with_its_own_spacing(capsys, tmp_path, monkeypatch):
+    """An X3P carries its spacing: the report reads it (in µm), keeps the missing points out of
+    the statistics and refuses a --dx."""
+    from microsim.surfaces import scan
+
+    monkeypatch.chdir(tmp_path)
+    h = gaussian(48, 1.0, 1.0, 7.0, seed=0).heights * 1e-6  # metres
+    h[3:5, 7:11] = np.nan
+    scan.write_x3p("s.x3p", h, 0.5e-6, 0.5e-6)
+    status, out, err = _cli(capsys, "surface", "s.x3p", "--json")
+    assert status == 0, err
+    record = json.loads(out)
+    assert record["dx"] == pytest.approx(0.5) and record["missing"] == 8
+    assert record["heights_stats"]["Sq"] == pytest.approx(np.nanstd(h) * 1e6, rel=0.05)
+    status, out, err = _cli(capsys, "surface", "s.x3p", "--dx", "1")
+    assert status == 2 and len(err) == 1 and "--dx" in err[0]

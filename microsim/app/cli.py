@@ -84,15 +84,10 @@ def _heightfield_report(args) -> int:
     import json
 
     from ..analysis.surface_report import surface_chart, surface_report
-    from ..surfaces.loader import read_heights
 
-    if args.dx is None:
-        raise UsageError(
-            f"--dx is required for the heightfield file {args.scene!r}: its grid step, in the "
-            f"unit of its heights"
-        )
     chart = None if args.chart is None else _chart_file(args.chart)
-    report = surface_report(read_heights(args.scene), args.dx, wavelength=args.wavelength)
+    heights, dx = _heightfield_of(args)
+    report = surface_report(heights, dx, wavelength=args.wavelength)
     if chart is not None:
         surface_chart(report, chart)
     if args.json:
@@ -102,6 +97,31 @@ def _heightfield_report(args) -> int:
     if chart is not None:
         print(f"microsim: chart written to {chart}", file=sys.stderr)
     return 0
+
+
+def _heightfield_of(args) -> tuple:
+    """(heights, dx) of ``microsim surface FILE``: a scan (``surfaces.scan.is_scan``) with its
+    own spacing, in micrometres (``scan.SCAN_UNIT``; missing points kept as NaN unless dx ≠ dy,
+    when they are filled before the resampling to square cells); an array with ``--dx``."""
+    from ..surfaces import scan
+    from ..surfaces.loader import read_heights
+
+    if scan.is_scan(args.scene):
+        if args.dx is not None:
+            raise UsageError(
+                f"--dx: {args.scene!r} is a scan, which carries its own spacing; leave --dx out"
+            )
+        m = scan.read_scan(args.scene)
+        h, dx, dy = m.heights / scan.SCAN_UNIT, m.dx / scan.SCAN_UNIT, m.dy / scan.SCAN_UNIT
+        if scan.square_shape(h.shape, dx, dy)[0] == h.shape:
+            return h, dx
+        return scan.square_grid(scan.fill_missing(h, dx, dy)[0], dx, dy)
+    if args.dx is None:
+        raise UsageError(
+            f"--dx is required for the heightfield file {args.scene!r}: its grid step, in the "
+            f"unit of its heights"
+        )
+    return read_heights(args.scene), args.dx
 
 
 def _chart_file(name: str) -> str:
