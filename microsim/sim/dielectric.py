@@ -107,9 +107,30 @@ class InterfaceOutcome(NamedTuple):
             np.zeros(n, dtype=np.int8),
         )
 
+    @classmethod
+    def work(cls, n: int) -> "InterfaceOutcome":
+        """``empty``'s arrays as this thread's work arrays (``scratch``): for an outcome
+        consumed before the thread follows other paths."""
+        out = cls(*(w(n) for w in _OUTCOME))
+        out.weight1.fill(0.0)
+        out.where.fill(-1)
+        out.tir.fill(0)
+        return out
+
 
 # this thread's work arrays (``scratch``): each step's escapes (the next step's rays are the
 # bounce chain's, ``bounces.next_rays``)
+_OUTCOME = tuple(
+    WorkArray(f"interface-outcome-{name}", dtype)
+    for name, dtype in (
+        ("status1", np.int8),
+        ("weight1", np.float64),
+        ("term", np.int8),
+        ("wterm", np.float64),
+        ("where", np.int64),
+        ("tir", np.int8),
+    )
+)
 _ESCAPE = WorkArray("interface-escape", np.int64)
 _ESCAPE_DIRECTION = WorkColumns("interface-escape-direction")
 _ESCAPE_SIDE = WorkArray("interface-escape-side", np.bool_)
@@ -256,7 +277,8 @@ class DielectricPath(BouncePath):
                 inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, roulette
             )
         x = columns(starts)
-        out = InterfaceOutcome.empty(len(x[0]))
+        # rotated blocks' outcomes are gathered before they are tallied: their own arrays
+        out = (InterfaceOutcome.empty if self.rotate else InterfaceOutcome.work)(len(x[0]))
         interface = interface_of(inc.ior, inc.tracer)
         path = (self.chain, interface, roulette, self.table)
         trace_grid_interface(inc.tracer, wi, phi_i, inc.bins, x, path, out)

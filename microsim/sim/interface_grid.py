@@ -50,6 +50,7 @@ from .engine.codes import ESCAPED, HIT, MISSED, SINGLE, UNRESOLVED
 from .facet_tables import interface_table
 from .heightfield_caster import cast_one, direction_terms
 from .horizon_bounds import CLEAR_MARGIN
+from .scratch import WorkArray
 from .tracer import BASE_WRAPS, GRID_WALK_CELLS, Tracer
 
 __all__ = [
@@ -61,6 +62,11 @@ __all__ = [
     "grid_interface_paths",
     "trace_grid_interface",
 ]
+
+
+# this thread's work arrays (``scratch``)
+_INSIDE = WorkArray("grid-path-inside", np.bool_)
+_BELOW = WorkArray("grid-path-below")
 
 
 class GridWalk(NamedTuple):
@@ -243,9 +249,12 @@ def trace_grid_interface(tracer: Tracer, wi, phi_i, bins: Bins, origins, path, o
     xs, ys, zs = (np.ascontiguousarray(c, dtype=np.float64) for c in origins)
     down = tuple(-float(c) for c in wi)
     from_below = down[2] > 0.0
-    if from_below:
-        zs = np.full(len(xs), tracer.zmin - tracer.top_margin)
-    sides = PathSides(np.full(len(xs), from_below), from_below, out.tir)
+    if from_below:  # the starts moved under the relief
+        zs = _BELOW(len(xs))
+        zs.fill(tracer.zmin - tracer.top_margin)
+    inside = _INSIDE(len(xs))
+    inside.fill(from_below)
+    sides = PathSides(inside, from_below, out.tir)
     half = float(tracer.half[0]), float(tracer.half[1])
     facets = FacetPlanes(*tracer.normal_columns, tracer.masking_lift, *half)
     binning = folded_binning(bins, float(phi_i), min(chain.limit, 4), chain.nbin)
