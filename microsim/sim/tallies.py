@@ -86,10 +86,22 @@ TALLY_NAMES = (
 """The running sums of a ``Tally``, in its field order (keys of ``Result.tallies``)."""
 
 
-# this thread's work arrays (``scratch``): a chunk's compacted events per bin
+# this thread's work arrays (``scratch``): a chunk's compacted events per bin, and the
+# per-bin accumulators of the block in hand (zeroed here; the kernels reset what they touch)
 _TALLY_BIN = WorkArray("tally-bin", np.int64)
 _TALLY_SUMS = WorkArray("tally-sums", rows=3)
 _TALLY_COUNT = WorkArray("tally-count", np.int64)
+_TALLY_ACC = WorkArray("tally-acc", rows=3)
+_TALLY_TOUCHED = WorkArray("tally-touched", np.int64)
+
+
+def _accumulators(nbin: int) -> tuple:
+    """This thread's zeroed per-bin accumulators (3, nbin) and event counts (nbin,): reused
+    buffers, so that a chunk does not fault in fresh pages for them."""
+    acc, touched = _TALLY_ACC(nbin), _TALLY_TOUCHED(nbin)
+    acc.fill(0.0)
+    touched.fill(0)
+    return acc, touched
 
 
 def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTallies":
@@ -103,7 +115,7 @@ def split_tallies(status, weight, where, n_blocks: int, nbin: int) -> "ChunkTall
     a block) contribute w_2k·w_2k+1 to their bin when both are single-bounce events in the
     same bin. A trailing unpaired ray (odd last block) has no partner and adds nothing."""
     n = len(status)
-    acc, touched = np.zeros((3, nbin)), np.zeros(nbin, dtype=np.int64)
+    acc, touched = _accumulators(nbin)
     out_bin, out_sums, out_cnt = _TALLY_BIN(n), _TALLY_SUMS(n), _TALLY_COUNT(n)
     offsets = np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, len(LEDGER)), dtype=np.int64)
@@ -139,7 +151,7 @@ def split_order_tallies(
     n = len(term)
     terminal = TERMINAL if tir is None else DIELECTRIC_TERMINAL
     ncls = len(LEDGER) + len(terminal) + (0 if tir is None else len(TIR_ORDERS))
-    acc, touched = np.zeros((3, nbin_total)), np.zeros(nbin_total, dtype=np.int64)
+    acc, touched = _accumulators(nbin_total)
     out_bin, out_sums, out_cnt = _TALLY_BIN(n), _TALLY_SUMS(n), _TALLY_COUNT(n)
     offsets = np.empty(n_blocks + 1, dtype=np.int64)
     ln = np.zeros((n_blocks, ncls), dtype=np.int64)
