@@ -143,3 +143,15 @@ def test_report_runs_the_packaged_catalogue_by_default(empty_cwd, capsys, monkey
     assert status == EXIT_USAGE and err == ["microsim: error: stopped after loading the catalogue"]
     assert sorted(p.stem for p in loaded["paths"]) == catalogue_names()
     assert all(p.resolve().parent == CATALOGUE for p in loaded["paths"])
+
+
+def test_the_catalogue_scan_is_read_as_a_measured_surface(empty_cwd):
+    """The X3P beside its scene: read in micrometres with its own spacing, its plane removed,
+    its missing points filled and, not being periodic, mirrored into a periodic tile."""
+    surface = load_scene("scan-gaussian-96").build_surface()
+    assert Path(surface.nominal["path"]).resolve() == (
+        CATALOGUE / "heightfields" / "gaussian-window-96.x3p"
+    )
+    assert surface.nominal["unit"] == "µm" and surface.nominal["form"] == "plane"
+    assert 0.0 < surface.nominal["filled_fraction"] < 0.02
+    assert surface.periodic and not surface.nominal["periodic_input"]
