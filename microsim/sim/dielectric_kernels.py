@@ -72,6 +72,7 @@ from .engine.codes import (
     UNRESOLVED,
     order_class,
 )
+from .engine.horizon import rises_clear
 
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64's Weyl increment
 STEP_BITS = 9  # interactions per path in a counter: MAX_BOUNCES + 1 ≤ 2⁹
@@ -313,7 +314,7 @@ def first_interactions(normals, d, inside, interface, leaving, binning, weight, 
         for k in range(1 if tir else 2):
             ox, oy, oz = scatter(d, n, c, rel2, k == 0)
             below = inside if k == 0 else not inside
-            if (-oz if below else oz) > slope * math.sqrt(ox * ox + oy * oy) or (
+            if rises_clear(ox, oy, -oz if below else oz, slope) or (
                 beam_escapes(f, (ox, oy, -oz), beam_below)
                 if below
                 else beam_escapes(f, (ox, oy, oz), beam_above)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -109,8 +110,7 @@ def _kept(tracer: Tracer, key, build, arrays):
     return table
 
 
-@dataclass(frozen=True)
-class InterfaceTable:
+class InterfaceTable(NamedTuple):
     """What a primary ray from one shared incidence does at its first interaction with each
     facet of a lossless dielectric interface (``dielectric_kernels.first_interactions``):
     ``weight`` (F,) its Fresnel F, ``flags`` (F,) int8 (``FACES_AWAY``, ``TOTAL_REFLECTION``)

@@ -47,7 +47,8 @@ from .dielectric_kernels import (
     path_uniform,
 )
 from .engine.codes import ESCAPED, HIT, MISSED, SINGLE, UNRESOLVED
-from .facet_tables import interface_table
+from .engine.horizon import rises_clear
+from .facet_tables import InterfaceTable, interface_table
 from .heightfield_caster import cast_one, direction_terms
 from .horizon_bounds import CLEAR_MARGIN
 from .scratch import WorkArray
@@ -56,6 +57,7 @@ from .tracer import BASE_WRAPS, GRID_WALK_CELLS, Tracer
 __all__ = [
     "GridWalk",
     "FoldedBinning",
+    "NO_TABLE",
     "uses_grid_walk",
     "grid_walk_of",
     "folded_binning",
@@ -83,17 +85,9 @@ class GridWalk(NamedTuple):
     retry_wraps: int
 
 
-class FirstTable(NamedTuple):
-    """The kernel's view of a ``facet_tables.InterfaceTable`` (``use`` False: none, the
-    arrays placeholders)."""
-
-    use: bool
-    weight: np.ndarray
-    flags: np.ndarray
-    bin: np.ndarray
-
-
-NO_TABLE = FirstTable(False, np.zeros(1), np.zeros(1, dtype=np.int8), np.zeros((1, 2), np.int32))
+NO_TABLE = InterfaceTable(np.zeros(1), np.zeros(1, dtype=np.int8), np.zeros((1, 2), np.int32))
+"""The placeholder table of an incidence without one (``grid_interface_paths``'s ``first``
+then comes with ``use`` False)."""
 
 
 class FoldedBinning(NamedTuple):
@@ -149,6 +143,17 @@ def folded_binning(bins: Bins, phi_deg: float, slots: int, nbin: int) -> FoldedB
 
 
 @vector_inlined
+def _tally_index(binning, transmitted, order, loc):
+    """The flat tally index of an escape after ``order`` interactions into bin ``loc`` (−1:
+    none): (side·slots + min(order, slots) − 1)·nbin + loc, the transmitted slots after the
+    reflected ones."""
+    if loc < 0:
+        return -1
+    slot = (binning.slots if transmitted else 0) + min(order, binning.slots) - 1
+    return slot * binning.nbin + loc
+
+
+@vector_inlined
 def _wrap_cap(dx, dy, dz, walk):
     """The wrap cap of a continuing ray (``Tracer.wraps_needed``, at least the primaries' and
     at most ``walk.retry_wraps``)."""
@@ -161,7 +166,7 @@ def _wrap_cap(dx, dy, dz, walk):
 
 @vectorised
 def grid_interface_paths(
-    xs, ys, zs, down, walk, chain, facets, interface, roulette, sides, ledger, binning, first
+    xs, ys, zs, down, walk, chain, facets, interface, roulette, sides, ledger, binning, tables
 ):
     """Follow the paths from the starts (``xs``, ``ys``, ``zs``)[g] along the primary
     direction ``down`` (3 floats; rising when lit from below) to their ends (module
@@ -169,9 +174,10 @@ def grid_interface_paths(
     flat tally index side·slots·nbin + order·nbin + bin of each escape) and ``sides``
     (``dielectric_kernels.PathSides``). ``walk``: ``GridWalk``; ``chain``: (limit, floor);
     ``facets``: ``bounce_kernels.FacetPlanes``; ``interface``, ``roulette``: as
-    ``dielectric_kernels.interact``; ``binning``: ``FoldedBinning``; ``first``: the
-    ``FirstTable`` of the primary direction, whose paths that leave the relief at once are
-    ended from it (the values ``interact`` gives them)."""
+    ``dielectric_kernels.interact``; ``binning``: ``FoldedBinning``; ``tables``: (use_first,
+    first), whether the ``facet_tables.InterfaceTable`` ``first`` of the primary direction
+    ends the paths that leave the relief at once (with the values ``interact`` gives them)."""
+    use_first, first = tables
     geometry = walk.geometry
     cell = geometry[4]
     above, below = (1.0, geometry[1]), (-1.0, walk.cell_min)
@@ -184,7 +190,7 @@ def grid_interface_paths(
         h, f, px, py, pz = cast_one(
             xs[g], ys[g], zs[g], dx, dy, dz, primary, geometry, start, geometry[9]
         )
-        if first.use and h == HIT and first.flags[f] != FACES_AWAY:
+        if use_first and h == HIT and first.flags[f] != FACES_AWAY:
             fw = first.weight[f]
             reflect = first.flags[f] == TOTAL_REFLECTION
             reflect = reflect or path_uniform(roulette.stream, roulette.ray0 + g, 1) < fw
@@ -197,15 +203,14 @@ def grid_interface_paths(
                 # the escape's direction falls if it was reflected from above or refracted
                 # from below, as the primary rises or falls
                 transmitted = end_escape(ledger, sides, 2, g, 1.0, -dz if reflect else dz)
-                slot = binning.slots if transmitted else 0
-                ledger.where[g] = slot * binning.nbin + loc if loc >= 0 else -1
+                ledger.where[g] = _tally_index(binning, transmitted, 1, loc)
                 continue
         x, y, z, w = 0.0, 0.0, 0.0, 1.0  # the continuation's start, set at each interaction
         b = 1
         while True:
             if b > 1:
                 side = below if sides.inside[g] else above
-                if side[0] * dz > walk.slope * math.sqrt(dx * dx + dy * dy):
+                if rises_clear(dx, dy, side[0] * dz, walk.slope):
                     # surely leaves the relief: away from its side's surface (up above it,
                     # down below it: ``side[0]`` = ±1) more steeply than any facet
                     h, f, px, py, pz = ESCAPED if dz > 0.0 else MISSED, -1, 0.0, 0.0, 0.0
@@ -221,12 +226,11 @@ def grid_interface_paths(
             )
             if what == ESCAPES:
                 transmitted = end_escape(ledger, sides, b, g, w, dz)
-                slot = (binning.slots if transmitted else 0) + min(b - 1, binning.slots) - 1
                 loc = locate_folded(
                     dx, dy, abs(dz), binning.ex, binning.ey, binning.phi_deg,
                     binning.n_theta, binning.edges, binning.scales,
                 )  # fmt: skip
-                ledger.where[g] = slot * binning.nbin + loc if loc >= 0 else -1
+                ledger.where[g] = _tally_index(binning, transmitted, b - 1, loc)
                 break
             if what != CONTINUES:
                 break
@@ -259,11 +263,9 @@ def trace_grid_interface(tracer: Tracer, wi, phi_i, bins: Bins, origins, path, o
     facets = FacetPlanes(*tracer.normal_columns, tracer.masking_lift, *half)
     binning = folded_binning(bins, float(phi_i), min(chain.limit, 4), chain.nbin)
     walk = grid_walk_of(tracer)
-    first = NO_TABLE
-    if table and not interface.absorbing:
-        t = interface_table(tracer, wi, interface, binning, walk.slope)
-        first = FirstTable(True, t.weight, t.flags, t.bin)
+    use_first = bool(table and not interface.absorbing)
+    first = interface_table(tracer, wi, interface, binning, walk.slope) if use_first else NO_TABLE
     grid_interface_paths(
         xs, ys, zs, down, walk, (int(chain.limit), float(chain.floor)),
-        facets, interface, roulette, sides, PathLedger(*out[:5]), binning, first,
+        facets, interface, roulette, sides, PathLedger(*out[:5]), binning, (use_first, first),
     )  # fmt: skip

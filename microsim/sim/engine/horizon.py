@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from microsim.jit import compiled, vectorised
+from microsim.jit import compiled, vector_inlined, vectorised
 
 CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope bound × |wo_h|
 
@@ -119,9 +119,17 @@ def horizon_clear_all(px, py, pz, dx, dy, dz, hz, zmax, out):
         )
 
 
+@vector_inlined
+def rises_clear(dx, dy, dz, slope):
+    """Whether the direction (dx, dy, dz) rises more steeply than ``slope`` (a bound on the
+    surface's slopes): dz > slope·√(dx² + dy²) — a ray leaving the surface along it surely
+    escapes (``horizon_bounds.rise_bound``)."""
+    return dz > slope * math.sqrt(dx * dx + dy * dy)
+
+
 @vectorised
 def surely_escaping(dx, dy, dz, slope, out):
-    """out[i] = dz > slope·√(dx² + dy²): rays rising more steeply than the surface can
+    """out[i] = ``rises_clear``: rays rising more steeply than the surface can
     (``Tracer.surely_escapes``, ``traced_primary``), vectorised."""
     for i in range(len(dx)):
-        out[i] = dz[i] > slope * math.sqrt(dx[i] * dx[i] + dy[i] * dy[i])
+        out[i] = rises_clear(dx[i], dy[i], dz[i], slope)
