@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 
 from microsim.bins import Bins
-from microsim.sim import dielectric, interface_grid
+from microsim.sim import dielectric, interface_grid, tallies
 from microsim.sim.bounces import ChainLimits, bounce_limit
 from microsim.sim.dielectric import InterfaceOutcome, interface_of
 from microsim.sim.dielectric_kernels import Roulette
+from microsim.sim.streams import BLOCK
 from microsim.sim.tracer_cache import tracer_for
 from microsim.surfaces import gaussian
 
@@ -35,9 +36,10 @@ def grid_tracer():
     return tracer
 
 
-def _paths(tracer, theta_i: float, bins: Bins, table: bool | None):
+def _paths(tracer, theta_i: float, bins: Bins, table: bool | None, sums=None):
     """The ``InterfaceOutcome`` of ``PATHS`` paths lit from θi (φi = 30°) from the same
-    random starts: through Embree step by step (``table`` None) or on the grid."""
+    random starts: through Embree step by step (``table`` None) or on the grid, its per-block
+    tallies summed into ``sums`` (``tallies.chunk_sums``; fresh ones when None)."""
     rng = np.random.default_rng(7)
     starts = [
         rng.uniform(-tracer.half[0], tracer.half[0], PATHS),
@@ -56,8 +58,16 @@ def _paths(tracer, theta_i: float, bins: Bins, table: bool | None):
     assert interface_grid.uses_grid_walk(tracer, bins, wi, None)
     out = InterfaceOutcome.empty(PATHS)
     path = (chain, interface_of(ETA, tracer), roulette, table)
-    interface_grid.trace_grid_interface(tracer, wi, 30.0, bins, starts, path, out)
+    sums = _sums(bins) if sums is None else sums
+    interface_grid.trace_grid_interface(tracer, wi, 30.0, bins, starts, path, out, sums)
     return out
+
+
+def _sums(bins: Bins):
+    """Per-block sums of ``PATHS`` dielectric paths over 2 sides × 4 order slots × bins."""
+    blocks = -(-PATHS // BLOCK)
+    nbin = 2 * 4 * bins.shape[0] * bins.shape[1]
+    return tallies.chunk_sums(PATHS, blocks, nbin, tallies.ledger_columns(True)[0])
 
 
 def _differing(a: InterfaceOutcome, b: InterfaceOutcome) -> np.ndarray:
@@ -83,6 +93,22 @@ def test_the_first_interactions_table_changes_nothing(grid_tracer, theta_i):
     walked = _paths(grid_tracer, theta_i, bins, False)
     tabled = _paths(grid_tracer, theta_i, bins, True)
     assert not _differing(walked, tabled).any()
+
+
+@pytest.mark.parametrize("theta_i", [40.0, 160.0])
+def test_the_tallies_summed_as_paths_end_are_those_of_their_outcome(grid_tracer, theta_i):
+    """The grid loop adds each path to its block's sums as it ends: bitwise the per-block
+    tallies the outcome arrays give afterwards (``tallies.split_order_tallies``)."""
+    bins = Bins(30, 13)
+    sums = _sums(bins)
+    out = _paths(grid_tracer, theta_i, bins, True, sums)
+    fused = tallies.chunk_of(sums).take()
+    blocks, nbin = len(sums.offsets) - 1, sums.acc.shape[1]
+    # the work arrays the loop summed into are reused below: ``fused`` holds copies
+    after = tallies.split_order_tallies(**out._asdict(), n_blocks=blocks, nbin_total=nbin).take()
+    assert blocks > 1 and len(fused[0]) > blocks  # several blocks, several bins each
+    for a, b in zip(fused, after):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_the_grid_walk_is_used_only_where_it_applies(grid_tracer):

@@ -66,6 +66,59 @@ def test_block_tallies_are_per_block_bincounts(n):
         assert np.array_equal(lf[b], np.bincount(s, w, len(paths.LEDGER)))
 
 
+@pytest.mark.parametrize("n", [3 * BLOCK, 3 * BLOCK + 77])
+def test_order_block_tallies_are_per_block_bincounts(n):
+    """Bounce chains through an interface (``split_order_tallies``): per block, Σw, Σw²,
+    counts and pair sums of the escapes' carried weights per (slot, bin) as np.bincount, the
+    first-bounce and terminal ledgers, and each total-internal-reflection bit counted in its
+    column; and the tallies of a chunk split in two and ``ChunkTallies.joined`` are the
+    whole's."""
+    from microsim.sim.ledger import DIELECTRIC_TERMINAL, LEDGER
+    from microsim.sim.tallies import ChunkTallies, ledger_columns, split_order_tallies
+
+    nbin = 50
+    status1, weight1, where = ray_outcomes(n, nbin, seed=4)
+    rng = np.random.default_rng(5)
+    term = rng.integers(0, len(DIELECTRIC_TERMINAL), n).astype(np.int8)
+    wterm = rng.random(n)
+    tir = rng.integers(0, 16, n).astype(np.int8) * (rng.random(n) < 0.2)
+    n_blocks = -(-n // BLOCK)
+    outcome = dict(status1=status1, weight1=weight1, term=term, wterm=wterm, where=where, tir=tir)
+    bins, sums, cnt, offsets, ln, lf = split_order_tallies(**outcome, n_blocks=n_blocks,
+                                                           nbin_total=nbin).take()  # fmt: skip
+    classes, tir_col = ledger_columns(True)
+    for b in range(n_blocks):
+        lo, hi = b * BLOCK, min(n, (b + 1) * BLOCK)
+        w, k = wterm[lo:hi], where[lo:hi]
+        esc = k >= 0
+        part = slice(offsets[b], offsets[b + 1])
+        dense = np.zeros((4, nbin))
+        dense[:3, bins[part]] = sums[:, part]
+        dense[3, bins[part]] = cnt[part]
+        assert np.array_equal(dense[0], np.bincount(k[esc], w[esc], nbin))
+        assert np.array_equal(dense[1], np.bincount(k[esc], w[esc] ** 2, nbin))
+        assert np.array_equal(dense[3], np.bincount(k[esc], minlength=nbin))
+        e = np.arange(0, hi - lo - 1, 2)
+        both = e[esc[e] & (k[e] == k[e + 1])]
+        assert len(both) > 0
+        assert np.array_equal(dense[2], np.bincount(k[both], w[both] * w[both + 1], nbin))
+        first = len(LEDGER)
+        assert np.array_equal(ln[b, :first], np.bincount(status1[lo:hi], minlength=first))
+        assert np.array_equal(lf[b, :first], np.bincount(status1[lo:hi], weight1[lo:hi], first))
+        terminal = len(DIELECTRIC_TERMINAL)
+        assert np.array_equal(ln[b, first:tir_col], np.bincount(term[lo:hi], minlength=terminal))
+        assert np.array_equal(lf[b, first:tir_col], np.bincount(term[lo:hi], w, terminal))
+        bits = (tir[lo:hi, None] >> np.arange(4)) & 1
+        assert ln.shape[1] == classes and np.array_equal(ln[b, tir_col:], bits.sum(axis=0))
+    halves = [
+        split_order_tallies(**{c: a[s] for c, a in outcome.items()}, n_blocks=m, nbin_total=nbin)
+        for s, m in ((slice(0, BLOCK), 1), (slice(BLOCK, n), n_blocks - 1))
+    ]
+    whole = (bins, sums, cnt, offsets, ln, lf)
+    for a, b in zip(ChunkTallies.joined(halves).take(), whole):
+        assert np.array_equal(a, b)
+
+
 def test_adding_a_chunk_adds_its_blocks_in_order():
     """``Tally.add_chunk`` (sparse, one call) equals adding every block's dense sums in block
     order, bitwise."""

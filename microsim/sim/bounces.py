@@ -388,18 +388,26 @@ class BouncePath(ChainPath):
         self.azimuth, self.rotate, self.chain, self.table = azimuth, rotate, chain, table
 
     def follow(self, blocks):
+        out = [self.trace(*group) for group in self.groups(blocks)]
+        if len(out) == 1:
+            return out[0]
+        return type(out[0])(*(np.concatenate(parts) for parts in zip(*out)))
+
+    def groups(self, blocks):
+        """The rays of ``blocks`` as (wi, phi_i, starts, psi, blocks) groups lit alike, in
+        ray order: all at once, or block by block with its own rotation when ``rotate``."""
         inc = self.incidence
         if not self.rotate:
             starts, psi = inc.origins_of(blocks, self.azimuth)
-            return self.trace(inc.wi, inc.phi_i, starts, psi if self.azimuth else None, blocks)
-        out, wi = [], inc.wi
+            yield inc.wi, inc.phi_i, starts, psi if self.azimuth else None, blocks
+            return
+        wi = inc.wi
         for b in blocks:
             starts, _ = inc.origins_of([b], False)
             psi = block_rotation(inc.key, b)
             c, s = np.cos(psi), np.sin(psi)
             wb = np.array([c * wi[0] - s * wi[1], s * wi[0] + c * wi[1], wi[2]])
-            out.append(self.trace(wb, inc.phi_i + np.degrees(psi), starts, None, [b]))
-        return type(out[0])(*(np.concatenate(parts) for parts in zip(*out)))
+            yield wb, inc.phi_i + np.degrees(psi), starts, None, [b]
 
     def trace(self, wi, phi_i, starts, psi, blocks) -> ChainOutcome:
         """The chains of the rays of ``blocks`` from ``starts`` lit from ``wi`` (azimuth

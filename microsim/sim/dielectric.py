@@ -34,7 +34,6 @@ roulette draws a hash of its number).
 
 from __future__ import annotations
 
-from functools import partial
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -62,7 +61,8 @@ from .ray_bins import locate_single
 from .ray_columns import columns
 from .scratch import WorkArray, WorkColumns
 from .streams import block_span
-from .tallies import chunk_order_tallies
+from .tallies import ChunkTallies, chunk_of, chunk_sums, ledger_columns, split_order_tallies
+from .tally_kernels import ChunkSums
 from .tracer import Tracer
 
 __all__ = [
@@ -266,32 +266,66 @@ class DielectricPath(BouncePath):
         self.stream = roulette_stream(incidence.key)
         tracer = incidence.tracer
         self.table = uses_facet_table(tracer, None, azimuth, rotate, incidence.rays)
+        self.slots = order_slots(chain.limit)  # order slots per side
 
     def trace(self, wi, phi_i, starts, psi, blocks) -> InterfaceOutcome:
-        """The paths from ``starts``: on a heightfield grid in one compiled loop where it
-        applies (``interface_grid.uses_grid_walk``), else step by step through Embree."""
-        inc = self.incidence
-        roulette = Roulette(self.stream, block_span(inc.rays, list(blocks))[0])
-        if not uses_grid_walk(inc.tracer, inc.bins, wi, psi):
-            return trace_dielectric(
-                inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, roulette
-            )
+        """The paths from ``starts`` (``follow``'s outcome): step by step through Embree, or
+        on a heightfield grid in one compiled loop where it applies
+        (``interface_grid.uses_grid_walk``)."""
+        if not uses_grid_walk(self.incidence.tracer, self.incidence.bins, wi, psi):
+            return self._step_by_step(wi, phi_i, starts, psi, blocks)
         x = columns(starts)
-        # rotated blocks' outcomes are gathered before they are tallied: their own arrays
-        out = (InterfaceOutcome.empty if self.rotate else InterfaceOutcome.work)(len(x[0]))
-        interface = interface_of(inc.ior, inc.tracer)
-        path = (self.chain, interface, roulette, self.table)
-        trace_grid_interface(inc.tracer, wi, phi_i, inc.bins, x, path, out)
+        out = InterfaceOutcome.empty(len(x[0]))  # kept by the caller
+        self._on_grid(wi, phi_i, x, blocks, out, self._sums(len(x[0]), blocks))
         return out
+
+    def tallies(self, blocks) -> ChunkTallies:
+        """The per-block tallies of the paths of ``blocks`` over 2·O order slots × bins: on a
+        heightfield grid summed as each path ends (``interface_grid``), else from the
+        outcome (``tallies.split_order_tallies``); the same sums either way."""
+        blocks = list(blocks)
+        return ChunkTallies.joined([self._group_tallies(*g) for g in self.groups(blocks)])
+
+    def _group_tallies(self, wi, phi_i, starts, psi, blocks) -> ChunkTallies:
+        inc = self.incidence
+        if not uses_grid_walk(inc.tracer, inc.bins, wi, psi):
+            out = self._step_by_step(wi, phi_i, starts, psi, blocks)
+            nbin_total = 2 * self.slots * self.chain.nbin
+            return split_order_tallies(**out._asdict(), n_blocks=len(blocks), nbin_total=nbin_total)
+        x = columns(starts)
+        sums = self._sums(len(x[0]), blocks)
+        self._on_grid(wi, phi_i, x, blocks, InterfaceOutcome.work(len(x[0])), sums)
+        return chunk_of(sums)
+
+    def _sums(self, n: int, blocks) -> ChunkSums:
+        """The ``tally_kernels.ChunkSums`` of ``n`` paths in ``blocks``."""
+        nbin_total = 2 * self.slots * self.chain.nbin
+        return chunk_sums(n, len(blocks), nbin_total, ledger_columns(True)[0])
+
+    def _roulette(self, blocks) -> Roulette:
+        return Roulette(self.stream, block_span(self.incidence.rays, list(blocks))[0])
+
+    def _step_by_step(self, wi, phi_i, starts, psi, blocks) -> InterfaceOutcome:
+        inc = self.incidence
+        roulette = self._roulette(blocks)
+        return trace_dielectric(
+            inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, roulette
+        )
+
+    def _on_grid(self, wi, phi_i, x, blocks, out, sums) -> None:
+        inc = self.incidence
+        interface = interface_of(inc.ior, inc.tracer)
+        path = (self.chain, interface, self._roulette(blocks), self.table)
+        trace_grid_interface(inc.tracer, wi, phi_i, inc.bins, x, path, out, sums)
 
 
 def interface_task(incidence, azimuth: bool, isotropic: bool, bounces) -> Callable:
     """The thread task of one incidence through a dielectric interface: ``task(blocks)``
     follows the paths of those blocks (``DielectricPath``, at most a checked ``bounces``
     interactions) and returns their per-block tallies over 2·O order slots × bins
-    (``tallies.chunk_order_tallies``)."""
+    (``DielectricPath.tallies``)."""
     nbin = incidence.bins.shape[0] * incidence.bins.shape[1]
     limit, floor = bounce_limit(bounces)
     chain = ChainLimits(int(limit), float(floor), nbin)
     path = DielectricPath(incidence, azimuth, bool(isotropic and not azimuth), chain)
-    return partial(chunk_order_tallies, path, 2 * order_slots(bounces) * nbin)
+    return path.tallies

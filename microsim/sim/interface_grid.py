@@ -52,6 +52,9 @@ from .facet_tables import InterfaceTable, interface_table
 from .heightfield_caster import cast_one, direction_terms
 from .horizon_bounds import CLEAR_MARGIN
 from .scratch import WorkArray
+from .streams import BLOCK
+from .tallies import ledger_columns
+from .tally_kernels import ChunkSums, close_block, tally_path
 from .tracer import BASE_WRAPS, GRID_WALK_CELLS, Tracer
 
 __all__ = [
@@ -166,86 +169,114 @@ def _wrap_cap(dx, dy, dz, walk):
 
 @vectorised
 def grid_interface_paths(
-    xs, ys, zs, down, walk, chain, facets, interface, roulette, sides, ledger, binning, tables
-):
+    xs, ys, zs, down, walk, chain, facets, interface, roulette, sides, ledger, binning, tables,
+    tally,
+):  # fmt: skip
     """Follow the paths from the starts (``xs``, ``ys``, ``zs``)[g] along the primary
     direction ``down`` (3 floats; rising when lit from below) to their ends (module
     docstring), writing ``ledger`` (``bounce_kernels.PathLedger``: classes, weights and the
     flat tally index side·slots·nbin + order·nbin + bin of each escape) and ``sides``
-    (``dielectric_kernels.PathSides``). ``walk``: ``GridWalk``; ``chain``: (limit, floor);
+    (``dielectric_kernels.PathSides``), and adding each path to its block's tallies as it ends
+    (``tally`` = (block, sums, tir_col): ``tally_kernels.order_block_tallies``' arguments, the
+    same sums in the same order). ``walk``: ``GridWalk``; ``chain``: (limit, floor);
     ``facets``: ``bounce_kernels.FacetPlanes``; ``interface``, ``roulette``: as
     ``dielectric_kernels.interact``; ``binning``: ``FoldedBinning``; ``tables``: (use_first,
     first), whether the ``facet_tables.InterfaceTable`` ``first`` of the primary direction
     ends the paths that leave the relief at once (with the values ``interact`` gives them)."""
+    block, sums, tir_col = tally
+    outcome = (ledger.status1, ledger.weight1, ledger.term, ledger.wterm, ledger.where, sides.tir)
+    primary = direction_terms(down[0], down[1], down[2], walk.geometry[4])
+    n = len(xs)
+    j = 0
+    sums.offsets[0] = 0
+    for b in range((n + block - 1) // block):
+        lo, hi = b * block, min(n, (b + 1) * block)
+        for g in range(lo, hi):
+            start = (xs[g], ys[g], zs[g])
+            _follow_path(g, start, down, primary, walk, chain, facets, interface, roulette,
+                         sides, ledger, binning, tables)  # fmt: skip
+            j = tally_path(g, g - lo, b, j, outcome, sums, tir_col)
+        close_block(b, j, sums)
+
+
+@vector_inlined
+def _follow_path(
+    g, start, down, primary, walk, chain, facets, interface, roulette, sides, ledger, binning,
+    tables,
+):  # fmt: skip
+    """Path ``g`` of ``grid_interface_paths`` from ``start`` along ``down`` (its
+    ``direction_terms``: ``primary``), followed to its end."""
     use_first, first = tables
     geometry = walk.geometry
     cell = geometry[4]
     above, below = (1.0, geometry[1]), (-1.0, walk.cell_min)
     limit, floor = chain
     half = (facets.half_x, facets.half_y)
-    primary = direction_terms(down[0], down[1], down[2], cell)
-    start = below if sides.from_below else above
-    for g in range(len(xs)):
-        dx, dy, dz = down
-        h, f, px, py, pz = cast_one(
-            xs[g], ys[g], zs[g], dx, dy, dz, primary, geometry, start, geometry[9]
+    dx, dy, dz = down
+    side = below if sides.from_below else above
+    h, f, px, py, pz = cast_one(
+        start[0], start[1], start[2], dx, dy, dz, primary, geometry, side, geometry[9]
+    )
+    if use_first and h == HIT and first.flags[f] != FACES_AWAY:
+        fw = first.weight[f]
+        reflect = first.flags[f] == TOTAL_REFLECTION
+        reflect = reflect or path_uniform(roulette.stream, roulette.ray0 + g, 1) < fw
+        k = 0 if reflect else 1
+        loc = first.bin[f, k]
+        if loc != TRACED:  # leaves the relief at once: order 1, on its side
+            ledger.status1[g], ledger.weight1[g] = SINGLE, 1.0
+            if first.flags[f] == TOTAL_REFLECTION:
+                sides.tir[g] |= np.int8(1)
+            # the escape's direction falls if it was reflected from above or refracted
+            # from below, as the primary rises or falls
+            transmitted = end_escape(ledger, sides, 2, g, 1.0, -dz if reflect else dz)
+            ledger.where[g] = _tally_index(binning, transmitted, 1, loc)
+            return
+    x, y, z, w = 0.0, 0.0, 0.0, 1.0  # the continuation's start, set at each interaction
+    b = 1
+    while True:
+        if b > 1:
+            side = below if sides.inside[g] else above
+            if rises_clear(dx, dy, side[0] * dz, walk.slope):
+                # surely leaves the relief: away from its side's surface (up above it,
+                # down below it: ``side[0]`` = ±1) more steeply than any facet
+                h, f, px, py, pz = ESCAPED if dz > 0.0 else MISSED, -1, 0.0, 0.0, 0.0
+            elif dz == 0.0:
+                h, f, px, py, pz = UNRESOLVED, -1, 0.0, 0.0, 0.0
+            else:
+                terms = direction_terms(dx, dy, dz, cell)
+                cap = _wrap_cap(dx, dy, dz, walk)
+                h, f, px, py, pz = cast_one(x, y, z, dx, dy, dz, terms, geometry, side, cap)
+        d = (dx, dy, dz)
+        what, wn, ox, oy, oz, offset = interact(
+            b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides, ledger
         )
-        if use_first and h == HIT and first.flags[f] != FACES_AWAY:
-            fw = first.weight[f]
-            reflect = first.flags[f] == TOTAL_REFLECTION
-            reflect = reflect or path_uniform(roulette.stream, roulette.ray0 + g, 1) < fw
-            k = 0 if reflect else 1
-            loc = first.bin[f, k]
-            if loc != TRACED:  # leaves the relief at once: order 1, on its side
-                ledger.status1[g], ledger.weight1[g] = SINGLE, 1.0
-                if first.flags[f] == TOTAL_REFLECTION:
-                    sides.tir[g] |= np.int8(1)
-                # the escape's direction falls if it was reflected from above or refracted
-                # from below, as the primary rises or falls
-                transmitted = end_escape(ledger, sides, 2, g, 1.0, -dz if reflect else dz)
-                ledger.where[g] = _tally_index(binning, transmitted, 1, loc)
-                continue
-        x, y, z, w = 0.0, 0.0, 0.0, 1.0  # the continuation's start, set at each interaction
-        b = 1
-        while True:
-            if b > 1:
-                side = below if sides.inside[g] else above
-                if rises_clear(dx, dy, side[0] * dz, walk.slope):
-                    # surely leaves the relief: away from its side's surface (up above it,
-                    # down below it: ``side[0]`` = ±1) more steeply than any facet
-                    h, f, px, py, pz = ESCAPED if dz > 0.0 else MISSED, -1, 0.0, 0.0, 0.0
-                elif dz == 0.0:
-                    h, f, px, py, pz = UNRESOLVED, -1, 0.0, 0.0, 0.0
-                else:
-                    terms = direction_terms(dx, dy, dz, cell)
-                    cap = _wrap_cap(dx, dy, dz, walk)
-                    h, f, px, py, pz = cast_one(x, y, z, dx, dy, dz, terms, geometry, side, cap)
-            d = (dx, dy, dz)
-            what, wn, ox, oy, oz, offset = interact(
-                b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides, ledger
-            )
-            if what == ESCAPES:
-                transmitted = end_escape(ledger, sides, b, g, w, dz)
-                loc = locate_folded(
-                    dx, dy, abs(dz), binning.ex, binning.ey, binning.phi_deg,
-                    binning.n_theta, binning.edges, binning.scales,
-                )  # fmt: skip
-                ledger.where[g] = _tally_index(binning, transmitted, b - 1, loc)
-                break
-            if what != CONTINUES:
-                break
-            n = (facets.nx[f], facets.ny[f], facets.nz[f])
-            x, y, z = next_start((px, py, pz), n, offset, half)
-            dx, dy, dz = ox, oy, oz
-            w = wn
-            b += 1
+        if what == ESCAPES:
+            transmitted = end_escape(ledger, sides, b, g, w, dz)
+            loc = locate_folded(
+                dx, dy, abs(dz), binning.ex, binning.ey, binning.phi_deg,
+                binning.n_theta, binning.edges, binning.scales,
+            )  # fmt: skip
+            ledger.where[g] = _tally_index(binning, transmitted, b - 1, loc)
+            return
+        if what != CONTINUES:
+            return
+        n = (facets.nx[f], facets.ny[f], facets.nz[f])
+        x, y, z = next_start((px, py, pz), n, offset, half)
+        dx, dy, dz = ox, oy, oz
+        w = wn
+        b += 1
 
 
-def trace_grid_interface(tracer: Tracer, wi, phi_i, bins: Bins, origins, path, out) -> None:
+def trace_grid_interface(
+    tracer: Tracer, wi, phi_i, bins: Bins, origins, path, out, sums: ChunkSums
+) -> None:
     """``dielectric.trace_dielectric`` by the grid walk (``uses_grid_walk``): the paths from
     ``origins`` (3 columns, on the plane above the relief; moved under it when lit from below)
     along −wi, written to the ``dielectric.InterfaceOutcome`` ``out`` (``where`` −1 and
-    ``tir`` 0 on entry). ``path``: (chain, interface, roulette, table) — the
+    ``tir`` 0 on entry), each path added to its block's tallies in ``sums`` as it ends
+    (``tallies.chunk_sums``: ``BLOCK``-ray blocks, the dielectric ledger's
+    ``tallies.ledger_columns``). ``path``: (chain, interface, roulette, table) — the
     ``bounces.ChainLimits``, the ``dielectric_kernels.Interface`` and ``Roulette``, and
     whether the incidence's first interactions may come from a facet table (one incidence
     direction for all its rays, a lossless medium: ``facet_tables.interface_table``)."""
@@ -268,4 +299,5 @@ def trace_grid_interface(tracer: Tracer, wi, phi_i, bins: Bins, origins, path, o
     grid_interface_paths(
         xs, ys, zs, down, walk, (int(chain.limit), float(chain.floor)),
         facets, interface, roulette, sides, PathLedger(*out[:5]), binning, (use_first, first),
+        (BLOCK, sums, ledger_columns(True)[1]),
     )  # fmt: skip

@@ -71,6 +71,9 @@ __all__ = [
     "terminal_ledger",
     "split_order_tallies",
     "chunk_order_tallies",
+    "chunk_sums",
+    "chunk_of",
+    "ledger_columns",
 ]
 
 TALLY_NAMES = (
@@ -148,35 +151,51 @@ def split_order_tallies(
     interface (``dielectric``), their total-internal-reflection bits; the ledger then has the
     ``DIELECTRIC_TERMINAL`` classes and the ``TIR_ORDERS`` columns (column k: the paths with
     bit k set, counted in both the count and the weight column)."""
-    n = len(term)
-    terminal = TERMINAL if tir is None else DIELECTRIC_TERMINAL
-    ncls = len(LEDGER) + len(terminal) + (0 if tir is None else len(TIR_ORDERS))
-    acc, touched = _accumulators(nbin_total)
-    out_bin, out_sums, out_cnt = _TALLY_BIN(n), _TALLY_SUMS(n), _TALLY_COUNT(n)
-    offsets = np.empty(n_blocks + 1, dtype=np.int64)
-    ln = np.zeros((n_blocks, ncls), dtype=np.int64)
-    lf = np.zeros((n_blocks, ncls))
-    tally_kernels.order_block_tallies(
-        status1,
-        weight1,
-        term,
-        wterm,
-        where,
-        BLOCK,
+    classes, tir_col = ledger_columns(tir is not None)
+    sums = chunk_sums(len(term), n_blocks, nbin_total, classes)
+    outcome = (status1, weight1, term, wterm, where, _NO_TIR if tir is None else tir)
+    tally_kernels.order_block_tallies(outcome, BLOCK, sums, tir_col)
+    return chunk_of(sums)
+
+
+def ledger_columns(dielectric: bool) -> tuple[int, int]:
+    """(columns, first total-internal-reflection column) of a bounce chain's per-block
+    ledger: the first-bounce classes, the terminal ones (``DIELECTRIC_TERMINAL`` through a
+    dielectric interface, else ``TERMINAL``) and, through an interface, ``TIR_ORDERS``."""
+    terminal = DIELECTRIC_TERMINAL if dielectric else TERMINAL
+    tir_col = len(LEDGER) + len(terminal)
+    return tir_col + (len(TIR_ORDERS) if dielectric else 0), tir_col
+
+
+def chunk_sums(n: int, n_blocks: int, nbin: int, classes: int) -> tally_kernels.ChunkSums:
+    """The ``tally_kernels.ChunkSums`` of a chunk of ``n`` rays in ``n_blocks`` blocks over
+    ``nbin`` tallies and ``classes`` ledger columns: this thread's work arrays, the dense
+    ones zeroed, and fresh per-block ledgers."""
+    acc, touched = _accumulators(nbin)
+    return tally_kernels.ChunkSums(
         acc,
         touched,
-        out_bin,
-        out_sums,
-        out_cnt,
-        offsets,
-        ln,
-        lf,
-        _NO_TIR if tir is None else tir,
-        len(LEDGER) + len(terminal),
+        _TALLY_BIN(n),
+        _TALLY_SUMS(n),
+        _TALLY_COUNT(n),
+        np.empty(n_blocks + 1, dtype=np.int64),
+        np.zeros((n_blocks, classes), dtype=np.int64),
+        np.zeros((n_blocks, classes)),
     )
-    used = int(offsets[-1])
+
+
+def chunk_of(sums: tally_kernels.ChunkSums) -> "ChunkTallies":
+    """The ``ChunkTallies`` of filled ``sums``: the blocks' bins copied out of the work arrays."""
+    used = int(sums.offsets[-1])
     return ChunkTallies(
-        (out_bin[:used].copy(), out_sums[:, :used].copy(), out_cnt[:used].copy(), offsets, ln, lf)
+        (
+            sums.out_bin[:used].copy(),
+            sums.out_sums[:, :used].copy(),
+            sums.out_cnt[:used].copy(),
+            sums.offsets,
+            sums.ln,
+            sums.lf,
+        )
     )
 
 
@@ -204,6 +223,26 @@ class ChunkTallies:
         if parts is None:
             raise RuntimeError("these chunk tallies were already taken")
         return parts
+
+    @classmethod
+    def joined(cls, chunks: list) -> "ChunkTallies":
+        """The tallies of consecutive blocks tallied in parts (``chunks``, in block order) as
+        one chunk's."""
+        if len(chunks) == 1:
+            return chunks[0]
+        parts = [c.take() for c in chunks]
+        starts = np.cumsum([0] + [len(p[0]) for p in parts])
+        offsets = [p[3][:-1] + s for p, s in zip(parts, starts)] + [starts[-1:]]
+        return cls(
+            (
+                np.concatenate([p[0] for p in parts]),
+                np.concatenate([p[1] for p in parts], axis=1),
+                np.concatenate([p[2] for p in parts]),
+                np.concatenate(offsets),
+                np.concatenate([p[4] for p in parts]),
+                np.concatenate([p[5] for p in parts]),
+            )
+        )
 
 
 @dataclass

@@ -4,7 +4,11 @@ order and block order, so bitwise independent of chunking and threads."""
 
 from __future__ import annotations
 
-from microsim.jit import compiled
+from typing import NamedTuple
+
+import numpy as np
+
+from microsim.jit import compiled, inlined
 
 from .engine.codes import DOWNWARD, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 
@@ -106,70 +110,92 @@ def add_blocks(sum_w, sum_w2, count, sum_pair, block2, block_rays, led_n, led_f,
             led_f[c] += lf[b, c]
 
 
+class ChunkSums(NamedTuple):
+    """Where a chunk's per-block tallies are summed (``order_block_tallies``): the dense
+    scratch ``acc`` (3, bins) and ``touched`` (bins,) (zero on entry and on return), each
+    block's bins in the order first touched in ``out_bin`` with their Σw, Σw², Σ pairs in
+    ``out_sums`` (3, ·) and counts in ``out_cnt``, block b's between ``offsets[b]`` and
+    ``offsets[b + 1]``, and its ledger counts and weight sums ``ln``, ``lf`` (blocks,
+    classes)."""
+
+    acc: np.ndarray
+    touched: np.ndarray
+    out_bin: np.ndarray
+    out_sums: np.ndarray
+    out_cnt: np.ndarray
+    offsets: np.ndarray
+    ln: np.ndarray
+    lf: np.ndarray
+
+
+@inlined
+def tally_path(i, r, b, j, outcome, sums, tir_col):
+    """Add path ``i``, the ``r``-th of block ``b``, to the block's sums (``order_block_tallies``)
+    when its ``outcome`` (``dielectric.InterfaceOutcome``'s fields, ``tir`` empty for opaque
+    chains) is final; ``j``: the bins listed so far, returned updated. The block's first path
+    opens its list, every second one adds its pair's product; ``close_block`` writes the block
+    out after its last."""
+    status1, weight1, term, wterm, where, tir = outcome
+    if r == 0:
+        sums.offsets[b] = j
+    s = status1[i]
+    sums.ln[b, s] += 1
+    sums.lf[b, s] += weight1[i]
+    t = term[i]
+    sums.ln[b, 5 + t] += 1
+    sums.lf[b, 5 + t] += wterm[i]
+    if len(tir) > 0 and tir[i] != 0:
+        for q in range(4):
+            if (tir[i] >> q) & 1:
+                sums.ln[b, tir_col + q] += 1
+                sums.lf[b, tir_col + q] += 1.0
+    k = where[i]
+    if k >= 0:
+        if sums.touched[k] == 0:
+            sums.out_bin[j] = k
+            j += 1
+        v = wterm[i]
+        sums.acc[0, k] += v
+        sums.acc[1, k] += v * v
+        sums.touched[k] += 1
+        # rays 2k, 2k + 1 of the block (blocks are even) are one stratum's pair
+        if r & 1 and where[i - 1] == k:
+            sums.acc[2, k] += wterm[i - 1] * v
+    return j
+
+
+@inlined
+def close_block(b, j, sums):
+    """Write block ``b``'s bins (listed from ``sums.offsets[b]`` to ``j``) out of the dense
+    scratch, zeroing it, and open the next block's list at ``j``."""
+    for q in range(sums.offsets[b], j):
+        k = sums.out_bin[q]
+        for m in range(3):
+            sums.out_sums[m, q] = sums.acc[m, k]
+            sums.acc[m, k] = 0.0
+        sums.out_cnt[q] = sums.touched[k]
+        sums.touched[k] = 0
+    sums.offsets[b + 1] = j
+
+
 @compiled
-def order_block_tallies(
-    status1,
-    weight1,
-    term,
-    wterm,
-    where,
-    block,
-    acc,
-    touched,
-    out_bin,
-    out_sums,
-    out_cnt,
-    offsets,
-    ln,
-    lf,
-    tir,
-    tir_col,
-):
-    """``block_tallies`` for paths followed over several bounces (``bounces``): a path that
-    escapes adds its carried weight ``wterm`` to its (order, bin) slot ``where`` (≥ 0; −1
-    for paths that do not escape), with Σw, Σw², counts and the pair sum (rays 2k, 2k + 1 in
-    the same slot) per block, stored sparsely as there. Ledger (blocks, 5 + N_TERMINAL):
-    columns 0–4 count the first-bounce classes ``status1`` and sum their Fresnel weights
-    ``weight1`` (``paths.LEDGER``), columns 5 + ``term`` the terminal classes and sum their
-    carried weights ``wterm`` (the energy each class takes away). ``tir`` (paths through a
-    dielectric interface; else empty): each path's total-internal-reflection bits, bit k
-    counted in column ``tir_col`` + k of both ``ln`` and ``lf``."""
-    n = len(term)
-    bits = len(tir) > 0
+def order_block_tallies(outcome, block, sums, tir_col):
+    """``block_tallies`` for paths followed over several bounces (``bounces``), written to the
+    ``ChunkSums`` ``sums``: a path that escapes adds its carried weight ``wterm`` to its
+    (order, bin) slot ``where`` (≥ 0; −1 for paths that do not escape), with Σw, Σw², counts
+    and the pair sum (rays 2k, 2k + 1 in the same slot) per block, stored sparsely as there.
+    Ledger (blocks, 5 + N_TERMINAL): columns 0–4 count the first-bounce classes ``status1``
+    and sum their Fresnel weights ``weight1`` (``paths.LEDGER``), columns 5 + ``term`` the
+    terminal classes and sum their carried weights ``wterm`` (the energy each class takes
+    away). ``tir`` (paths through a dielectric interface; else empty): each path's
+    total-internal-reflection bits, bit k counted in column ``tir_col`` + k of both ``ln``
+    and ``lf``. ``outcome``: (status1, weight1, term, wterm, where, tir); each path is added
+    by ``tally_path``, as the loops that follow paths to their end add them."""
+    n = len(outcome[2])
     j = 0
-    nl = 5
+    sums.offsets[0] = 0
     for b in range((n + block - 1) // block):
-        offsets[b] = j
         lo, hi = b * block, min(n, (b + 1) * block)
         for i in range(lo, hi):
-            s = status1[i]
-            ln[b, s] += 1
-            lf[b, s] += weight1[i]
-            t = term[i]
-            ln[b, nl + t] += 1
-            lf[b, nl + t] += wterm[i]
-            if bits and tir[i] != 0:
-                for q in range(4):
-                    if (tir[i] >> q) & 1:
-                        ln[b, tir_col + q] += 1
-                        lf[b, tir_col + q] += 1.0
-            k = where[i]
-            if k >= 0:
-                if touched[k] == 0:
-                    out_bin[j] = k
-                    j += 1
-                v = wterm[i]
-                acc[0, k] += v
-                acc[1, k] += v * v
-                touched[k] += 1
-        for i in range(lo, hi - 1, 2):
-            if where[i] >= 0 and where[i] == where[i + 1]:
-                acc[2, where[i]] += wterm[i] * wterm[i + 1]
-        for q in range(offsets[b], j):
-            k = out_bin[q]
-            for m in range(3):
-                out_sums[m, q] = acc[m, k]
-                acc[m, k] = 0.0
-            out_cnt[q] = touched[k]
-            touched[k] = 0
-    offsets[(n + block - 1) // block] = j
+            j = tally_path(i, i - lo, b, j, outcome, sums, tir_col)
+        close_block(b, j, sums)
