@@ -8,7 +8,8 @@ wavelength (n and k apart), formula datasets (Sellmeier) evaluated. A wavelength
 dataset's range is refused, never extrapolated. ``fresnel.resolve_material`` takes a
 ``(name, wavelength_nm)`` pair through ``index``; a name alone keeps ``fresnel.MATERIALS``'s
 fixed index. ``rgb_reflectance(name)``: the colour of the material's normal-incidence
-reflectance under D65 (CIE 1931 2° observer, linear sRGB; needs colour-science, same extra).
+reflectance under D65 (``colour_matching``: CIE 1931 2° observer, linear sRGB; needs
+colour-science, same extra).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from microsim.errors import EnvironmentFailure, UsageError
+
+from . import colour_matching
 
 __all__ = [
     "MaterialRecord",
@@ -138,19 +141,12 @@ def _dataset(page: str):
 def rgb_reflectance(name) -> tuple[float, float, float]:
     """Linear sRGB (0–1) of the normal-incidence reflectance of material ``name`` lit by CIE
     D65: R(λ) = |(η − 1)/(η + 1)|² (Born & Wolf 1999, §14.2) over 380–780 nm every 5 nm,
-    summed with the CIE 1931 2° observer to XYZ (CIE 015:2018, normalised so that a
-    perfect reflector has Y = 1) and taken to linear sRGB (IEC 61966-2-1), unclipped: a
-    colour outside the sRGB gamut has a component above 1 or below 0 (gold's red is ~1.04).
-    The material's dataset must cover 380–780 nm."""
+    through ``colour_matching.linear_srgb`` (CIE 1931 2° observer, CIE 015:2018, normalised so
+    that a perfect reflector has Y = 1; IEC 61966-2-1), unclipped: a colour outside the sRGB
+    gamut has a component above 1 or below 0 (gold's red is ~1.04). The material's dataset
+    must cover 380–780 nm."""
     record = material_record(name)
-    try:
-        import colour
-    except ImportError:
-        raise EnvironmentFailure(
-            f"rgb_reflectance needs colour-science, an optional extra: {EXTRA}"
-        ) from None
-    shape = colour.SpectralShape(380, 780, 5)
-    nm = shape.wavelengths
+    nm = colour_matching.GRID_NM
     lo, hi = record.range_nm
     if nm[0] < lo or nm[-1] > hi:
         raise UsageError(
@@ -158,12 +154,5 @@ def rgb_reflectance(name) -> tuple[float, float, float]:
             f"({record.reference}) covers [{lo:g}, {hi:g}] nm"
         )
     eta = index(record.name, nm)
-    reflectance = colour.SpectralDistribution(np.abs((eta - 1) / (eta + 1)) ** 2, nm)
-    xyz = colour.sd_to_XYZ(
-        reflectance,
-        colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(shape),
-        colour.SDS_ILLUMINANTS["D65"].copy().align(shape),
-        method="Integration",
-    )
-    rgb = colour.XYZ_to_RGB(xyz / 100.0, "sRGB", apply_cctf_encoding=False)
+    rgb = colour_matching.linear_srgb(nm, np.abs((eta - 1) / (eta + 1)) ** 2)
     return tuple(float(c) for c in rgb)
