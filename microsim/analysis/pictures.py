@@ -20,6 +20,14 @@ Exposure: one scale for the three renders, the simulated image's 99.5th percenti
 0.9, then the sRGB curve; values beyond clip to white. Differences: (model − simulation)/
 simulation per pixel on a diverging scale of ±``DIFF_RANGE``, grey where the simulated bin
 holds fewer than ``MIN_EVENTS`` events (as the verdicts leave such bins out).
+
+In colour (``appearance_colour``): the same scene for BRDFs given at several wavelengths
+(``measured.SpectralBRDF``: a ``Result`` per wavelength, rendered from its bins as above, or a
+callable, evaluated at each pixel's wo), the light's spectrum that of an illuminant (D65 by
+default): each pixel's spectrum f(wo, λ) cos θi is taken to linear sRGB
+(``analytic.colour_matching``: CIE 1931 2°, a white of 1 where f cos θi = 1 at every
+wavelength), one exposure for all panels — the 99.5th percentile of the pixels' largest
+component mapped to 0.9 — clipped to [0, 1] per component, then the sRGB curve.
 """
 
 from __future__ import annotations
@@ -29,13 +37,27 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from microsim.analytic import colour_matching
+from microsim.analytic.colour_matching import srgb_encode
 from microsim.errors import UsageError
+from microsim.measured.spectral import SpectralBRDF
+from microsim.sim.result import Result
 from microsim.stats import MIN_EVENTS
+from microsim.vectors import spherical_deg
 
 from . import incidence
 from .charts import _figure, _output, _select_verdicts, _title
 
-__all__ = ["FOV", "VIEW_THETA", "DIFF_RANGE", "view_directions", "render", "appearance"]
+__all__ = [
+    "FOV",
+    "VIEW_THETA",
+    "DIFF_RANGE",
+    "view_directions",
+    "render",
+    "appearance",
+    "render_colour",
+    "appearance_colour",
+]
 
 FOV = 70.0
 """Horizontal field of view of the camera, degrees."""
@@ -80,8 +102,7 @@ def render(values: np.ndarray, bins, wo: np.ndarray, mask: np.ndarray, theta_i, 
 def _tone(radiance: np.ndarray, scale: float) -> np.ndarray:
     """sRGB grey levels in [0, 1] of ``radiance`` × ``scale``; the sky grey where NaN."""
     x = np.clip(np.nan_to_num(radiance, nan=0.0) * scale, 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.where(np.isnan(radiance), SKY, srgb)
+    return np.where(np.isnan(radiance), SKY, srgb_encode(x))
 
 
 def appearance(
@@ -148,4 +169,88 @@ def appearance(
     if diff_im is not None:
         fig.colorbar(diff_im, ax=list(axes[1, 1:]), shrink=0.8, label="relative difference")
     fig.suptitle(_title(scene_name, f"appearance at {at}"))
+    return _output(fig, path)
+
+
+def _incidence_index(result, theta_i: float, phi_i: float, nm: float) -> int:
+    """The index of incidence (``theta_i``, ``phi_i``) in ``result``, or a UsageError listing
+    the traced ones."""
+    at = np.isclose(result.theta_i, theta_i, atol=1e-6) & np.isclose(result.phi_i, phi_i, atol=1e-6)
+    if not np.any(at):
+        traced = ", ".join(f"({t:g}°, {p:g}°)" for t, p in zip(result.theta_i, result.phi_i))
+        raise UsageError(
+            f"theta_i, phi_i must be an incidence the Result at {nm:g} nm traced, one of "
+            f"{traced}; got ({theta_i:g}°, {phi_i:g}°)"
+        )
+    return int(np.flatnonzero(at)[0])
+
+
+def render_colour(brdf: SpectralBRDF, theta_i: float, phi_i: float = 0.0, illuminant="D65"):
+    """Linear sRGB radiance (H, W, 3) of the plane (module docstring) for the spectral
+    ``brdf`` under a light of ``illuminant`` from (``theta_i``, ``phi_i``) degrees; NaN off the
+    plane. A ``Result`` among ``brdf.brdfs`` must have traced that incidence."""
+    if not isinstance(brdf, SpectralBRDF):
+        raise UsageError(
+            f"brdf must be a microsim.measured.SpectralBRDF (wavelengths_nm, brdfs), got "
+            f"{type(brdf).__name__}"
+        )
+    th = float(theta_i)
+    if not 0.0 <= th < 90.0:
+        raise UsageError(f"theta_i must lie in [0, 90) degrees, got {theta_i!r}")
+    ph = float(phi_i)
+    wo, mask = view_directions(float(np.clip(th, *VIEW_THETA)), ph)
+    wi = np.broadcast_to(spherical_deg(th, ph), (int(mask.sum()), 3))
+    spectra = np.empty(mask.shape + (len(brdf.wavelengths_nm),))
+    for k, (nm, b) in enumerate(zip(brdf.wavelengths_nm, brdf.brdfs)):
+        if isinstance(b, Result):
+            t = _incidence_index(b, th, ph, nm)
+            spectra[..., k] = render(b.brdf[t], b.bins, wo, mask, th, ph)
+        else:
+            spectra[..., k] = np.nan
+            spectra[mask, k] = brdf.functions[k](wi, wo[mask]) * math.cos(math.radians(th))
+    rgb = np.full(mask.shape + (3,), np.nan)
+    seen = np.all(np.isfinite(spectra), axis=-1)
+    rgb[seen] = colour_matching.linear_srgb(brdf.wavelengths_nm, spectra[seen], illuminant)
+    return rgb
+
+
+def appearance_colour(
+    brdfs: Mapping[str, SpectralBRDF],
+    theta_i: float,
+    path=None,
+    *,
+    phi_i: float = 0.0,
+    scene_name: str = "",
+    illuminant: str = "D65",
+):
+    """The colour appearance chart: one panel per spectral BRDF of ``brdfs`` (name →
+    ``SpectralBRDF``; ``render_colour``) under a light of ``illuminant`` at (``theta_i``,
+    ``phi_i``) degrees, one exposure (module docstring). Returns the Figure; writes a PNG to
+    ``path`` unless None."""
+    if not isinstance(brdfs, Mapping) or not brdfs:
+        raise UsageError(
+            f"brdfs must be a non-empty mapping of names to SpectralBRDFs, got "
+            f"{type(brdfs).__name__}"
+        )
+    images = {name: render_colour(b, theta_i, phi_i, illuminant) for name, b in brdfs.items()}
+    brightest = np.concatenate([np.nanmax(img, axis=-1).ravel() for img in images.values()])
+    brightest = brightest[np.isfinite(brightest) & (brightest > 0)]
+    scale = 0.9 / float(np.percentile(brightest, 99.5)) if brightest.size else 1.0
+    fig = _figure((3.2 * len(images), 2.35 + 0.9))
+    axes = np.atleast_1d(fig.subplots(1, len(images)))
+    for ax, (name, img) in zip(axes, images.items()):
+        sky = np.isnan(img).any(axis=-1)
+        x = srgb_encode(np.clip(np.nan_to_num(img, nan=0.0) * scale, 0.0, 1.0))
+        ax.imshow(np.where(sky[..., None], SKY, x), interpolation="nearest")
+        ax.set_title(name, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    at = incidence.label(float(theta_i), float(phi_i), float(phi_i) != 0.0)
+    view = float(np.clip(float(theta_i), *VIEW_THETA))
+    fig.supxlabel(
+        f"plane under a directional {illuminant} light at {at}; camera {view:g}° from the "
+        f"normal, mirror side; CIE 1931 2°, linear sRGB, one exposure, sRGB curve",
+        fontsize=8,
+    )
+    fig.suptitle(_title(scene_name, f"appearance in colour at {at}"))
     return _output(fig, path)

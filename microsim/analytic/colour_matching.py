@@ -34,6 +34,7 @@ __all__ = [
     "ILLUMINANTS",
     "GRID_NM",
     "EXTRAPOLATED_LIMIT",
+    "check_wavelengths",
     "xyz_weights",
     "xyz",
     "linear_srgb",
@@ -77,7 +78,9 @@ def _grid_weights(illuminant: str) -> np.ndarray:
     return w
 
 
-def _wavelengths(wavelengths_nm) -> np.ndarray:
+def check_wavelengths(wavelengths_nm) -> np.ndarray:
+    """``wavelengths_nm`` as float64 (L,), or a UsageError unless they are at least 2 finite
+    increasing wavelengths > 0 (nm)."""
     a = np.asarray(wavelengths_nm)
     nm = a.astype(np.float64).ravel() if a.dtype.kind in "iuf" and a.ndim == 1 else None
     if nm is None or nm.size < 2 or not np.all(np.isfinite(nm) & (nm > 0)):
@@ -98,7 +101,7 @@ def xyz_weights(wavelengths_nm, illuminant: str = "D65") -> np.ndarray:
     extrapolation."""
     if illuminant not in ILLUMINANTS:
         raise UsageError(f"illuminant must be one of {ILLUMINANTS}, got {illuminant!r}")
-    nm = _wavelengths(wavelengths_nm)
+    nm = check_wavelengths(wavelengths_nm)
     grid = _grid_weights(illuminant)
     beyond = (GRID_NM < nm[0]) | (GRID_NM > nm[-1])
     share = grid[beyond].sum(axis=0) / grid.sum(axis=0)

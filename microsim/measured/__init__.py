@@ -4,4 +4,5 @@ fitting tools read and write."""
 
 from .merl import *  # noqa: F401,F403
 from .rgl import *  # noqa: F401,F403
+from .spectral import *  # noqa: F401,F403
 from .table import *  # noqa: F401,F403

@@ -19,13 +19,20 @@ What ``write_rgl`` stores (exact where microsim knows the quantity):
       and ≤ 1, which is why the grid can be small;
     * luminance: the luminance of ρ (0.212671 R + 0.715160 G + 0.072169 B, the weights of
       Mitsuba's ``luminance``; ρ itself for a grey BRDF, which the spectral flavour writes
-      as a constant spectrum); a slice that is 0 everywhere gets a uniform density (a reader
-      would divide by its zero integral);
+      as a constant spectrum; for a spectral BRDF in the spectral flavour the mean of ρ over
+      its wavelengths — a sampling density only, it does not enter f); a slice that is 0
+      everywhere gets a uniform density (a reader would divide by its zero integral);
     * description: the text given, UTF-8; jacobian: 1.
 A grey BRDF (f returns shape (M,)) gets equal channels; an RGB one ((M, 3)) its three
-channels (RGB flavour only). Spectral flavour: ``SPECTRAL_WAVELENGTHS_NM`` (the grey value at
-every wavelength; pbrt-v4 reads spectral files only, Mitsuba 3 spectral files in its spectral
-variants and RGB files in its RGB variants).
+channels (RGB flavour only). A spectral BRDF (``spectral.SpectralBRDF``: one BRDF per
+wavelength) gets in the spectral flavour its own wavelengths, ρ of each wavelength's BRDF at
+the nodes — the format stores any increasing wavelengths and the readers interpolate linearly
+between them (``read_rgl`` refuses a wavelength outside them, Mitsuba 3 holds the first and the
+last value beyond) — and in the RGB flavour the linear sRGB of ρ's spectrum at each node
+under D65 (``analytic.colour_matching``; ρ is linear in f), its negative components (a colour
+outside the sRGB gamut) set to 0. A grey BRDF's spectral flavour: ``SPECTRAL_WAVELENGTHS_NM``
+(the grey value at every wavelength). pbrt-v4 reads spectral files only, Mitsuba 3 spectral
+files in its spectral variants and RGB files in its RGB variants.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ from typing import Callable
 import numpy as np
 
 from microsim import checks as _checks
+from microsim.analytic import colour_matching
 from microsim.analytic.ndf import NDF
 from microsim.analytic.shadowing import smith_lambda
 from microsim.atomic import atomic_open
@@ -44,6 +52,7 @@ from microsim.vectors import spherical
 
 from .merl import brdf_rgb
 from .rgl_warp import Table2D, theta2u, u2phi, u2theta
+from .spectral import SpectralBRDF
 from .tensor_file import tensor_file_bytes
 
 __all__ = [
@@ -190,9 +199,10 @@ def _fields(
     u_wi = np.stack([theta2u(theta_i), np.full(T, 0.5)], -1)
     s_hat = np.repeat(sigma_tab.eval(u_wi), n * n)
     ok &= d_hat > 0.0
-    rho = np.zeros((len(s), 3))
+    spectral = isinstance(brdf, SpectralBRDF)
+    rho = np.zeros((len(s), len(brdf.wavelengths_nm) if spectral else 3))
     if np.any(ok):
-        f = brdf_rgb(brdf, wi_s[ok], wo[ok])
+        f = brdf(wi_s[ok], wo[ok]) if spectral else brdf_rgb(brdf, wi_s[ok], wo[ok])
         rho[ok] = f * (wo[ok, 2] * 4.0 * s_hat[ok] / d_hat[ok])[:, None]
     if rho.max() > RHO_LIMIT:
         raise UsageError(
@@ -201,9 +211,16 @@ def _fields(
             f"than the NDF; pass floor > 0 (a Lambertian share of the warp's NDF, e.g. 0.05) "
             f"or a wider ndf"
         )
-    grey = bool(np.all(rho[:, 0] == rho[:, 1]) and np.all(rho[:, 0] == rho[:, 2]))
-    rho = rho.reshape(T, n, n, 3)
-    lum = rho @ np.asarray(LUMINANCE_WEIGHTS) if not grey else rho[..., 0].copy()
+    if spectral and flavour == "rgb":
+        # each node's colour; one outside the sRGB gamut loses its negative components
+        rho = np.maximum(colour_matching.linear_srgb(brdf.wavelengths_nm, rho), 0.0)
+        spectral = False
+    grey = not spectral and bool(np.all(rho[:, 0] == rho[:, 1]) and np.all(rho[:, 0] == rho[:, 2]))
+    rho = rho.reshape(T, n, n, -1)
+    if spectral:
+        lum = rho.mean(axis=-1)
+    else:
+        lum = rho @ np.asarray(LUMINANCE_WEIGHTS) if not grey else rho[..., 0].copy()
     empty = ~np.any(lum > 0, axis=(1, 2))
     lum[empty] = 1.0
     fields = {
@@ -218,11 +235,14 @@ def _fields(
     }
     if flavour == "rgb":
         fields["rgb"] = np.moveaxis(rho, -1, 1).astype(np.float32)[None]  # (1, T, 3, n, n)
+    elif spectral:
+        fields["wavelengths"] = brdf.wavelengths_nm.astype(np.float32)
+        fields["spectra"] = np.moveaxis(rho, -1, 1).astype(np.float32)[None]  # (1, T, L, n, n)
     else:
         if not grey:
             raise UsageError(
-                "flavour='spectral' needs a grey brdf (one value per direction pair): an RGB "
-                "BRDF has no spectrum to write; use flavour='rgb'"
+                "flavour='spectral' needs a grey or a spectral brdf (measured.SpectralBRDF): "
+                "an RGB BRDF has no spectrum to write; use flavour='rgb'"
             )
         L = len(SPECTRAL_WAVELENGTHS_NM)
         fields["wavelengths"] = np.asarray(SPECTRAL_WAVELENGTHS_NM, dtype=np.float32)
@@ -240,8 +260,9 @@ def write_rgl(
     flavour: str = "rgb",
     floor: float = 0.0,
 ) -> None:
-    """Write ``brdf(wi, wo)`` (sr⁻¹; wi, wo (M, 3) unit; returns (M,) grey or (M, 3) RGB) to
-    the RGL .bsdf file ``path``, warped by the VNDF of the isotropic microsim NDF ``ndf``
+    """Write ``brdf(wi, wo)`` (sr⁻¹; wi, wo (M, 3) unit; returns (M,) grey or (M, 3) RGB), or
+    a ``SpectralBRDF`` (one BRDF per wavelength; module docstring), to the RGL .bsdf file
+    ``path``, warped by the VNDF of the isotropic microsim NDF ``ndf``
     (``microsim.measured.rgl``: what each field holds), atomically: nothing is written on an error.
 
     ``resolution``: an ``RGLResolution``; ``description``: the file's text (default: the
