@@ -28,6 +28,7 @@ from support import refused
 from microsim.analysis import pictures
 from microsim.analytic import GGX, Smith, TorranceSparrow, materials
 from microsim.analytic import colour_matching as cm
+from microsim.errors import EnvironmentFailure
 from microsim.measured import BRDFTable, RGLResolution, SpectralBRDF, read_rgl, write_rgl
 from microsim.measured.merl import result_of_table
 from microsim.measured.rgl_warp import Table2D, u2phi, u2theta
@@ -112,6 +113,16 @@ def test_bad_wavelengths_and_values_are_refused():
     refused(lambda: cm.xyz([380.0, 780.0], [1.0, 1.0, 1.0]), "values", "last axis")
     refused(lambda: cm.xyz([380.0, 780.0], [1.0, np.inf]), "values", "finite")
     refused(lambda: cm.xyz([380.0, 780.0], [1.0, 1.0], "D50"), "illuminant", "D65", "E")
+
+
+def test_without_colour_science_the_error_says_how_to_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "colour", None)  # makes `import colour` fail
+    cm._grid_weights.cache_clear()
+    try:
+        with pytest.raises(EnvironmentFailure, match=r"pip install 'microsim\[materials\]'"):
+            cm.linear_srgb([380.0, 780.0], [1.0, 1.0])
+    finally:
+        cm._grid_weights.cache_clear()
 
 
 def test_srgb_curve_is_the_standards():

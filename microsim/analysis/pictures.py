@@ -236,7 +236,7 @@ def appearance_colour(
     brightest = np.concatenate([np.nanmax(img, axis=-1).ravel() for img in images.values()])
     brightest = brightest[np.isfinite(brightest) & (brightest > 0)]
     scale = 0.9 / float(np.percentile(brightest, 99.5)) if brightest.size else 1.0
-    fig = _figure((3.2 * len(images), 2.35 + 0.9))
+    fig = _figure((max(3.2 * len(images), 4.8), 2.35 + 1.2))  # room for the title
     axes = np.atleast_1d(fig.subplots(1, len(images)))
     for ax, (name, img) in zip(axes, images.items()):
         sky = np.isnan(img).any(axis=-1)
@@ -248,8 +248,8 @@ def appearance_colour(
     at = incidence.label(float(theta_i), float(phi_i), float(phi_i) != 0.0)
     view = float(np.clip(float(theta_i), *VIEW_THETA))
     fig.supxlabel(
-        f"plane under a directional {illuminant} light at {at}; camera {view:g}° from the "
-        f"normal, mirror side; CIE 1931 2°, linear sRGB, one exposure, sRGB curve",
+        f"plane under a directional {illuminant} light at {at};\ncamera {view:g}° from the "
+        f"normal, mirror side;\nCIE 1931 2°, linear sRGB, one exposure, sRGB curve",
         fontsize=8,
     )
     fig.suptitle(_title(scene_name, f"appearance in colour at {at}"))
