@@ -12,6 +12,7 @@ incidences). Called with unit wi, wo (M, 3) it returns every wavelength's value 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +30,7 @@ __all__ = ["SpectralBRDF"]
 @dataclass(frozen=True, eq=False)
 class SpectralBRDF:
     """``brdfs`` (callables or ``Result``s, module docstring) at ``wavelengths_nm`` (nm,
-    increasing, at least 2); ``functions``: each as a callable f(wi, wo) → (M,)."""
+    increasing, at least 2)."""
 
     wavelengths_nm: np.ndarray
     brdfs: tuple
@@ -42,13 +43,8 @@ class SpectralBRDF:
                 f"brdfs must be a list of one BRDF per wavelength ({len(nm)}), got "
                 f"{_checks.short(self.brdfs)}"
             )
-        functions = []
         for lam, b in zip(nm, brdfs):
-            if isinstance(b, Result):
-                functions.append(BRDFTable.from_result(b).f)
-            elif callable(b):
-                functions.append(b)
-            else:
+            if not (isinstance(b, Result) or callable(b)):
                 raise UsageError(
                     f"brdfs at {lam:g} nm must be a callable f(wi, wo) -> sr⁻¹ or a microsim "
                     f"Result, got {_checks.short(b)}"
@@ -56,7 +52,12 @@ class SpectralBRDF:
         nm.setflags(write=False)
         object.__setattr__(self, "wavelengths_nm", nm)
         object.__setattr__(self, "brdfs", brdfs)
-        object.__setattr__(self, "functions", tuple(functions))
+
+    @functools.cached_property
+    def functions(self) -> tuple:
+        """Each of ``brdfs`` as a callable f(wi, wo) → (M,): a ``Result`` through its
+        ``BRDFTable`` (made on first use; an anisotropic result's is refused there)."""
+        return tuple(BRDFTable.from_result(b).f if isinstance(b, Result) else b for b in self.brdfs)
 
     def __repr__(self) -> str:
         nm = self.wavelengths_nm
