@@ -160,7 +160,7 @@ SIM_LAYERS = [
         + ("ray_bins", "masking_rays", "facet_tables", "ray_columns", "events", "paths")
         + ("bounce_kernels", "bounces", "dielectric_kernels", "interface_grid", "dielectric")
         + ("tally_kernels",)
-        + ("tallies", "arguments", "cluster")
+        + ("tallies", "spectral", "arguments", "cluster")
         + ("experiment", "identity", "estimator", "auto"),
     ),
     ("model predictions on the bins", ("predict", "compare")),

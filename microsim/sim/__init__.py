@@ -24,12 +24,20 @@ walk and its compiled per-ray loops), the estimator's compiled loops (``ray_bins
 from microsim.bins import MAX_BINS, Bins
 
 from .cluster import SchedulerLost
-from .estimator import Estimator, estimate, ray_events, simulate
+from .estimator import (
+    Estimator,
+    estimate,
+    estimate_spectral,
+    ray_events,
+    simulate,
+    simulate_spectral,
+)
 from .events import Events
 from .experiment import Execution, Experiment
 from .paths import LEDGER
 from .progress import RaysDone
 from .result import InPlane, Result
+from .spectral import SpectralResult, Spectrum
 from .streams import BLOCK
 from .tracer import Tracer
 from .vgroove_profile import VGrooveProfile
@@ -37,6 +45,10 @@ from .vgroove_profile import VGrooveProfile
 __all__ = [
     "simulate",
     "estimate",
+    "simulate_spectral",
+    "estimate_spectral",
+    "Spectrum",
+    "SpectralResult",
     "Experiment",
     "Estimator",
     "Execution",

@@ -28,7 +28,11 @@ With a ``FirstBounceTable`` in use, the incidence's facet table's Fresnel weight
 per facet serve the first bounce (the values the per-ray arithmetic gives, bitwise: same
 Fresnel kernel, same float64 mirror direction): its facet is kept in ``first_facet`` and a
 path escaping after order 1 gets ``where`` = its facet's bin there instead of being listed in
-``Escapes``."""
+``Escapes``.
+
+Each step also writes the cosine c of every live path's bounce (0 where the path made none
+at this step: it ended before reflecting), which ``spectral_step`` turns into the weights of
+W materials at once (spectral runs, ``spectral``)."""
 
 from __future__ import annotations
 
@@ -141,6 +145,7 @@ def bounce_step(
     escapes,
     nxt,
     table,
+    cosine,
 ):
     """One step ``b`` of the bounce chain (``bounces.trace_bounces``) over the live paths
     (module docstring): returns (continuing paths m, escapes e).
@@ -149,8 +154,9 @@ def bounce_step(
     ``live`` and weights ``w``; ``walk`` (``engine.segments.WalkResult`` of the rays traced
     at this step), ``rays`` (``RayDirections``), ``facets`` (``FacetPlanes``), ``material``
     (``fresnel_kernels.FresnelMaterial``), ``ledger`` (``PathLedger``, written),
-    ``escapes`` (``Escapes``, written), ``nxt`` (``NextRays``, written) and ``table``
-    (``FirstBounceTable``)."""
+    ``escapes`` (``Escapes``, written), ``nxt`` (``NextRays``, written), ``table``
+    (``FirstBounceTable``) and ``cosine`` (≥ len(live), written: c of each live path's bounce
+    at this step, 0 without one; a back-facing hit's c ≤ 0)."""
     hs, prim, px, py, pz = walk
     dx, dy, dz, shared = rays
     nx, ny, nz, lift, hx, hy = facets
@@ -163,6 +169,7 @@ def bounce_step(
         g = live[i]
         j = 0 if shared else i
         h = hs[i]
+        cosine[i] = 0.0
         if b == 2:
             _settle_first_ray(status1, g, h)
         if h == ESCAPED and b >= 2:
@@ -179,6 +186,7 @@ def bounce_step(
         f = prim[i]
         a0, a1, a2 = nx[f], ny[f], nz[f]
         c = -(dx[j] * a0 + dy[j] * a1 + dz[j] * a2)
+        cosine[i] = c
         if c <= 0.0:  # back-facing
             end_unresolved(ledger, b, g, w[i], PATH_UNRESOLVED, RAY_UNRESOLVED)
             continue
@@ -283,3 +291,91 @@ def continue_path(nxt, m, g, p, n, lift, half, o, wn):
     nxt.d32[m, 1] = np.float32(oy)
     nxt.d32[m, 2] = np.float32(oz)
     nxt.w[m] = wn
+
+
+class SpectralMaterials(NamedTuple):
+    """W materials as ``spectral_step`` takes them: per material (column) n², k² and the
+    mode of ``fresnel_kernels.FresnelMaterial``."""
+
+    n2: np.ndarray
+    k2: np.ndarray
+    mode: np.ndarray
+
+
+class SpectralLedger(NamedTuple):
+    """Per primary ray and material (N, W): the ``PathLedger`` a run of that material writes
+    (``status1``, ``weight1``, ``term``, ``wterm``, ``where``) and the weight ``w`` its path
+    carries; ``term`` is −1 while that material's path goes on."""
+
+    status1: np.ndarray
+    weight1: np.ndarray
+    term: np.ndarray
+    wterm: np.ndarray
+    where: np.ndarray
+    w: np.ndarray
+
+
+@compiled
+def spectral_step(b, floor, live, cosine, geometry, materials, ledger, nxt, m):
+    """Step ``b`` of a spectral chain: the ``bounce_step`` just made, traced with F = 1 and
+    no weight floor (``geometry``: its ``PathLedger``, ``term`` −1 for paths not ended;
+    ``cosine`` per live path), weighted for each of W ``materials`` (``SpectralMaterials``)
+    into ``ledger`` (``SpectralLedger``) exactly as ``bounce_step`` weights one material:
+    a path still carried by material l either ends here without a bounce (the geometry's
+    class, ``where`` and weight w) or bounces with w ← w·F_l(c) (``fresnel_weight``), is cut
+    below the weight ``floor`` (CUT_WEIGHT), ends where the geometry ended it after the bounce
+    (CUT_BOUNCES), or goes on. The first-bounce class is the geometry's (settled at b = 2
+    for the materials still on; kept provisional for one cut at b = 1, as its own run does).
+    Then the ``m`` continuing paths of ``nxt`` (``NextRays``) are compacted to those some
+    material still carries; returns their number."""
+    n2, k2, modes = materials
+    status1, weight1, term, wterm, where, w = ledger
+    for i in range(len(live)):
+        g = live[i]
+        c = cosine[i]
+        ended = geometry.term[g] >= 0
+        for j in range(len(n2)):
+            if b > 1 and term[g, j] >= 0:  # this material's path ended already
+                continue
+            if b <= 2:
+                status1[g, j] = geometry.status1[g]
+            if not c > 0.0:  # ended without a bounce
+                term[g, j] = geometry.term[g]
+                wterm[g, j] = w[g, j]
+                where[g, j] = geometry.where[g]
+                if b == 1:
+                    weight1[g, j] = 0.0
+                continue
+            fw = fresnel_weight(c, n2[j], k2[j], modes[j])
+            wn = w[g, j] * fw
+            if b == 1:
+                weight1[g, j] = fw
+            if wn < floor:
+                term[g, j] = CUT_WEIGHT
+                wterm[g, j] = wn
+            elif ended:
+                term[g, j] = geometry.term[g]
+                wterm[g, j] = wn
+            else:
+                w[g, j] = wn
+    kept = 0
+    for i in range(m):
+        g = nxt.live[i]
+        carried = False
+        for j in range(len(n2)):
+            carried = carried or term[g, j] < 0
+        if carried:
+            _move_next(nxt, i, kept)
+            kept += 1
+    return kept
+
+
+@inlined
+def _move_next(nxt, i, k):
+    """Move continuing path ``i`` of ``nxt`` to slot ``k`` ≤ i."""
+    nxt.live[k] = nxt.live[i]
+    nxt.x[k], nxt.y[k], nxt.z[k] = nxt.x[i], nxt.y[i], nxt.z[i]
+    nxt.dx[k], nxt.dy[k], nxt.dz[k] = nxt.dx[i], nxt.dy[i], nxt.dz[i]
+    for a in range(3):
+        nxt.d32[k, a] = nxt.d32[i, a]
+    nxt.w[k] = nxt.w[i]

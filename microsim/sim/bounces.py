@@ -50,6 +50,7 @@ ray, Fresnel in real arithmetic), so results are bitwise independent of threads 
 from __future__ import annotations
 
 import numbers
+from dataclasses import replace
 from functools import partial
 from typing import Callable, NamedTuple
 
@@ -128,6 +129,7 @@ _NEXT_START = WorkColumns("bounce-next-start", generations=2)
 _NEXT_DIRECTION = WorkColumns("bounce-next-direction", generations=2)
 _NEXT_D32 = WorkArray("bounce-next-d32", np.float32, columns=3, generations=2)
 _NEXT_WEIGHT = WorkArray("bounce-next-weight", generations=2)
+_BOUNCE_COSINE = WorkArray("bounce-cosine")
 
 
 def check_bounces(bounces):
@@ -173,6 +175,27 @@ class ChainLimits(NamedTuple):
     nbin: int
 
 
+class SpectralChain(NamedTuple):
+    """W materials weighting one traced chain (``trace_bounces``' ``spectrum``): their
+    ``bounce_kernels.SpectralMaterials`` and the weight ``floor`` each is cut at."""
+
+    materials: bounce_kernels.SpectralMaterials
+    floor: float
+
+    def ledger(self, n: int) -> bounce_kernels.SpectralLedger:
+        """The empty ``SpectralLedger`` of ``n`` primary rays: every weight 1, every path
+        going on (``term`` −1), no escape (``where`` −1)."""
+        shape = (n, len(self.materials.n2))
+        return bounce_kernels.SpectralLedger(
+            np.empty(shape, dtype=np.int8),
+            np.zeros(shape),
+            np.full(shape, -1, dtype=np.int8),
+            np.empty(shape),
+            np.full(shape, -1, dtype=np.int64),
+            np.ones(shape),
+        )
+
+
 def trace_bounces(
     tracer: Tracer,
     wi,
@@ -183,7 +206,8 @@ def trace_bounces(
     ior,
     chain: ChainLimits,
     table: FacetTable | None = None,
-) -> ChainOutcome:
+    spectrum: SpectralChain | None = None,
+) -> ChainOutcome | bounce_kernels.SpectralLedger:
     """The ``ChainOutcome`` of primary rays followed through the bounce chain on Embree.
 
     Rays start at ``origins`` (N, 3) or 3 columns, falling along −wi (one shared direction
@@ -194,16 +218,21 @@ def trace_bounces(
     compacts the continuing ones, within ``chain``'s limits. Escape directions are binned
     with Δφ against ``phi_i``, or φi − ψ in the groove frame. ``table``: the incidence's
     ``facet_tables.FacetTable`` (shared direction only), whose per-facet Fresnel weights and
-    bins replace the per-ray arithmetic of the first bounce with the same values."""
+    bins replace the per-ray arithmetic of the first bounce with the same values.
+    ``spectrum``: a ``SpectralChain`` (the chain then traced with ``ior`` None and no weight
+    floor): after every step its materials weight the step's bounces
+    (``bounce_kernels.spectral_step``), and the ``SpectralLedger`` of all of them is
+    returned."""
     x = columns(origins)
     n = len(x[0])
     out = ChainOutcome(
         np.empty(n, dtype=np.int8),
         np.zeros(n),
-        np.empty(n, dtype=np.int8),
+        np.full(n, -1, dtype=np.int8),  # −1 until the path ends
         np.empty(n),
         np.full(n, -1, dtype=np.int64),
     )
+    spectral = None if spectrum is None else spectrum.ledger(n)
     (hs, prim, p), d, shared = primary_rays(tracer, x, wi, psi)
     phi = float(phi_i) if psi is None else phi_i - np.degrees(psi)
     live = np.arange(n, dtype=np.int64)
@@ -217,21 +246,27 @@ def trace_bounces(
         k = len(live)
         par = b % 2  # generation: written at this step, read by the next
         esc, ed = _BOUNCE_ESCAPE(k), _BOUNCE_ESCAPE_DIRECTION(k)
-        nxt = next_rays(k, par)
+        nxt, cosine = next_rays(k, par), _BOUNCE_COSINE(k)
         m, e = bounce_kernels.bounce_step(
             b, chain.limit, chain.floor, live, w, segments.WalkResult(hs, prim, *p),
             bounce_kernels.RayDirections(*d, shared), facets, material,
             bounce_kernels.PathLedger(*out), bounce_kernels.Escapes(esc, *ed), nxt, first,
+            cosine,
         )  # fmt: skip
         if e:
             slot = min(b - 1, min(chain.limit, 4)) - 1
             bin_escapes(bins, esc[:e], [c[:e] for c in ed], phi, slot * chain.nbin, out.where)
+        if spectral is not None:
+            m = bounce_kernels.spectral_step(
+                b, spectrum.floor, live, cosine, bounce_kernels.PathLedger(*out),
+                spectrum.materials, spectral, nxt, m,
+            )  # fmt: skip
         if m == 0:
             break
         live, w, d, (hs, prim, p) = trace_continuing(tracer, nxt, m)
         shared = False
         b += 1
-    return out
+    return out if spectral is None else spectral
 
 
 def next_rays(k: int, generation: int) -> bounce_kernels.NextRays:
@@ -379,13 +414,20 @@ class ChainPath:
 class BouncePath(ChainPath):
     """Embree bounce chain (``trace_bounces``) of one ``Incidence``: per-ray groove azimuths
     when ``azimuth``; per-block incidence rotations (``paths.RotatedIncidencePath``) when
-    ``rotate``."""
+    ``rotate``; the materials of a spectral run (``trace_bounces``) when ``spectrum``."""
 
     def __init__(
-        self, incidence: Incidence, azimuth: bool, rotate: bool, chain: ChainLimits, table=None
+        self,
+        incidence: Incidence,
+        azimuth: bool,
+        rotate: bool,
+        chain: ChainLimits,
+        table=None,
+        spectrum: SpectralChain | None = None,
     ):
         super().__init__(incidence)
         self.azimuth, self.rotate, self.chain, self.table = azimuth, rotate, chain, table
+        self.spectrum = spectrum
 
     def follow(self, blocks):
         out = [self.trace(*group) for group in self.groups(blocks)]
@@ -415,8 +457,9 @@ class BouncePath(ChainPath):
         inc = self.incidence
         table = None if self.rotate else self.table
         return trace_bounces(
-            inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, table
-        )
+            inc.tracer, wi, phi_i, inc.bins, starts, psi, inc.ior, self.chain, table,
+            self.spectrum,
+        )  # fmt: skip
 
 
 class AnalyticBouncePath(ChainPath):
@@ -458,23 +501,33 @@ def choose_bounce_path(
     nbin: int,
     pool=None,
     parts: int = 1,
+    materials: bounce_kernels.SpectralMaterials | None = None,
 ) -> ChainPath:
     """The bounce-chain path of ``incidence`` for a checked ``bounces`` > 1 on a surface
     prepared by ``tracer_cache.tracer_for``; ``nbin`` bins per order slot. Where the single-bounce
     paths use a facet table (``facet_tables.uses_facet_table``) it is built here too (``parts``
     facet ranges on ``pool``) and serves the first bounce. UsageError for
-    ``masking="exact"`` (``profile`` a ``VGrooveProfile`` but not a caster)."""
+    ``masking="exact"`` (``profile`` a ``VGrooveProfile`` but not a caster).
+
+    ``materials``: the W materials of a spectral run (``spectral``): the chain is traced once
+    with F = 1 and no weight floor, each material weighting it (``SpectralChain``, with the
+    floor of ``bounces``); Embree chains only (``spectral.check_spectral_run`` refuses
+    ``masking="analytic"`` before any work)."""
     limit, floor = bounce_limit(bounces)
-    chain = ChainLimits(int(limit), float(floor), int(nbin))
+    spectrum = None if materials is None else SpectralChain(materials, float(floor))
+    chain = ChainLimits(int(limit), 0.0 if spectrum is not None else float(floor), int(nbin))
     if casts_primaries(profile):
+        assert spectrum is None, "the analytic V-groove chain weights one material"
         return AnalyticBouncePath(incidence, profile, chain)
     if profile is not None:  # a V-groove profile without its caster: masking="exact"
         check_masking_bounces("exact", bounces)
     rotate = bool(isotropic and not azimuth)
     inc, table = incidence, None
+    if spectrum is not None:  # the geometry, traced with F = 1
+        inc = replace(incidence, ior=None)
     if uses_facet_table(inc.tracer, profile, azimuth, rotate, inc.rays):
         table = facet_table(inc.tracer, inc.wi, inc.ior, inc.bins, inc.phi_i, pool, parts)
-    return BouncePath(inc, azimuth, rotate, chain, table)
+    return BouncePath(inc, azimuth, rotate, chain, table, spectrum)
 
 
 def chain_task(

@@ -63,6 +63,7 @@ from .paths import LEDGER, MASKING, Incidence
 from .progress import RaysDone
 from .result import Result
 from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, thread_pool
+from .spectral import SpectralResult, SpectralTally, Spectrum, check_spectral_run, spectral_task
 from .streams import BLOCK, DESIGN, ORIGINS, block_origins
 from .tallies import TALLY_NAMES, Tally, simulation_result, tallies_from_arrays
 from .tracer_cache import tracer_for
@@ -71,6 +72,8 @@ __all__ = [
     "Estimator",
     "estimate",
     "simulate",
+    "estimate_spectral",
+    "simulate_spectral",
     "ray_events",
     "Events",
     "BLOCK",
@@ -265,6 +268,85 @@ def simulate(
     )
 
 
+def simulate_spectral(
+    surface,
+    material,
+    theta_i,
+    *,
+    wavelengths_nm=None,
+    phi_i=0.0,
+    rays: int = 1_000_000,
+    bins: Bins = Bins(),
+    seed: int = 0,
+    threads: int | None = None,
+    chunk: int = 2**16,
+    masking: str = "traced",
+    realisations=None,
+    surface_factory: Callable[[int], object] | None = None,
+    seeds=None,
+    origins: str = "stratified",
+    isotropic: bool = False,
+    progress: Callable[[RaysDone], None] | None = None,
+    bounces: int | str = 1,
+    transmission: bool = False,
+) -> SpectralResult:
+    """``simulate`` for W materials at once: every path's geometry traced once, each
+    material's Fresnel factors applied to it (module ``spectral``). Returns a
+    ``SpectralResult``: one ``Result`` per material, each bitwise the Result of ``simulate``
+    with that material and the same arguments, and the wavelengths.
+
+    ``material`` with ``wavelengths_nm``: a material of ``materials.TABLE`` (e.g. "gold") at
+    each of the wavelengths (nm, inside its dataset's range; ``Result.meta["material"]``
+    holds the name, index and ``wavelength_nm``). Without ``wavelengths_nm``: a list of
+    materials, each as ``simulate`` takes one (a name, n / n+ik, ("gold", 550), None).
+    Every other argument is ``simulate``'s. ``bounces``: 1, K or "all" — with "all" each
+    material's path is cut where its own weight falls below ``bounces.WEIGHT_FLOOR`` (the
+    geometry goes on while any material's weight is above it). Refused (a UsageError naming
+    the argument, before any work): an empty list or a wavelength outside the table's range,
+    ``transmission=True``, ``masking="analytic"`` with ``bounces`` > 1. There is no
+    ``resume``: an interrupted spectral run returns its complete blocks (every Result
+    ``meta["partial"]``), and each Result can resume a ``simulate`` run of its material."""
+    spectrum = Spectrum.of(material, wavelengths_nm)
+    return estimate_spectral(
+        Experiment(
+            surface,
+            spectrum.materials[0],
+            theta_i,
+            phi_i,
+            bins,
+            bounces,
+            realisations=realisations,
+            surface_factory=surface_factory,
+            seeds=seeds,
+            transmission=transmission,
+        ),
+        spectrum,
+        Estimator(rays, seed, masking, origins, isotropic),
+        Execution(threads, chunk, progress),
+    )
+
+
+def estimate_spectral(
+    experiment: Experiment,
+    spectrum: Spectrum,
+    estimator: Estimator = Estimator(),
+    execution: Execution = Execution(),
+) -> SpectralResult:
+    """``estimate`` of ``experiment`` for each material of ``spectrum`` (its own material is
+    not used), the geometry traced once (module ``spectral``; ``simulate_spectral`` is the
+    keyword form and documents the rest)."""
+    _check_descriptions(experiment=experiment, estimator=estimator, execution=execution)
+    if not isinstance(spectrum, Spectrum):
+        raise UsageError(
+            f"spectrum must be a microsim.sim.spectral.Spectrum (Spectrum.of(material, "
+            f"wavelengths_nm)), got {type(spectrum).__name__}"
+        )
+    ex, est, run = experiment, estimator, execution
+    check_spectral_run(ex.transmission, est.masking, ex.bounces, run.cluster)
+    results = _run(ex, est, run, None, spectrum)
+    return SpectralResult(results, spectrum.wavelengths_nm)
+
+
 class _Plan(NamedTuple):
     """What ``estimate`` derives from its descriptions before any work: realisations (count,
     lazy getter, rays of each), bins and tally slots, blocks per realisation, blocks per
@@ -278,7 +360,8 @@ class _Plan(NamedTuple):
     nblk: np.ndarray
     chunk_blocks: int
     description: RunDescription
-    material: dict
+    material: dict | list
+    spectrum: Spectrum | None
 
 
 class _State(NamedTuple):
@@ -305,10 +388,21 @@ def estimate(
     whose scheduler is lost mid-run it raises ``SchedulerLost`` (an ``EnvironmentFailure``)
     holding the partial Result to resume."""
     _check_descriptions(experiment=experiment, estimator=estimator, execution=execution)
-    ex, est, run = experiment, estimator, execution
+    return _run(experiment, estimator, execution, resume)[0]
+
+
+def _run(
+    ex: Experiment,
+    est: Estimator,
+    run: Execution,
+    resume: Result | None,
+    spectrum: Spectrum | None = None,
+) -> list:
+    """``estimate``'s work for checked descriptions: its Result, in a list; with a
+    ``spectrum``, one Result per material (``spectral``)."""
     check_masking_bounces(est.masking, ex.bounces)
     _check_transmission_run(ex, est, run)
-    plan = _plan(ex, est, run)
+    plan = _plan(ex, est, run, spectrum)
     state = _start(plan, ex, resume)
     done_before = state.done.copy()
     cluster = _cluster_meta(run.cluster) if run.cluster is not None else None
@@ -353,13 +447,26 @@ def estimate(
     if ex.transmission:  # absent: False (results without transmission keep their meta)
         meta["transmission"] = True
     th, ph = np.array(ex.theta_i), np.array(ex.phi_i)
-    result = simulation_result(
-        th, ph, ex.bins, state.tallies, n_done, plan.per_real, state.done, meta, plan.slots
-    )
+    n_mat = 1 if spectrum is None else len(plan.material)
+    if spectrum is None:
+        by_material = [(state.tallies, meta)]
+    else:  # each material's tallies, material record and the count traced together
+        by_material = [
+            (
+                [[t.tallies[j] for t in row] for row in state.tallies],
+                {**meta, "material": spectrum.material_meta(j, rec), "spectral": n_mat},
+            )
+            for j, rec in enumerate(plan.material)
+        ]
+    slots = plan.slots
+    results = [
+        simulation_result(th, ph, ex.bins, tallies, n_done, plan.per_real, state.done, mt, slots)
+        for tallies, mt in by_material
+    ]
     if lost is not None:
-        lost.partial = result
+        lost.partial = results[0]
         raise lost
-    return result
+    return results
 
 
 def _check_descriptions(**given) -> None:
@@ -387,9 +494,10 @@ def _check_transmission_run(ex: Experiment, est: Estimator, run: Execution) -> N
         raise UsageError("transmission=True runs on local threads only: pass cluster=None")
 
 
-def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
-    """The run's realisations, tally slots and blocks; the tallies' memory checked up front
-    (``BIN_BYTES_*``)."""
+def _plan(ex: Experiment, est: Estimator, run: Execution, spectrum: Spectrum | None) -> _Plan:
+    """The run's realisations, tally slots and blocks; the tallies' memory (one set per
+    material of a ``spectrum``) checked up front (``BIN_BYTES_*``); the material records
+    (one per material of a ``spectrum``)."""
     n_real, get_surface = ex.surfaces(est.seed)
     per_real = [est.rays // n_real + (r < est.rays % n_real) for r in range(n_real)]
     if min(per_real) < 1:
@@ -399,24 +507,30 @@ def _plan(ex: Experiment, est: Estimator, run: Execution) -> _Plan:
         slots = 2 * order_slots(ex.bounces)
     nbin = ex.bins.shape[0] * ex.bins.shape[1]
     nslot, n_th = nbin * (slots or 1), len(ex.theta_i)  # tally slots: bins, or orders × bins
+    n_mat = 1 if spectrum is None else len(spectrum.iors)
     check_memory(
         "bins",
-        nslot
+        n_mat
+        * nslot
         * (
             BIN_BYTES_TALLY * n_real * n_th
             + BIN_BYTES_INCIDENCE * n_th
             + BIN_BYTES_THREAD * run.threads
         ),
         f"the tallies of {nbin:,} bins × {slots or 1} orders × {n_th} incidences × "
-        f"{n_real} realisations",
+        f"{n_real} realisations" + ("" if spectrum is None else f" × {n_mat} materials"),
     )
-    material = _json_material(ex.material, ex.ior)
+    if spectrum is None:
+        material = _json_material(ex.material, ex.ior)
+    else:
+        material = [_json_material(m, i) for m, i in zip(spectrum.materials, spectrum.iors)]
     description = RunDescription.of(ex, est, n_real)
     nblk = np.array([-(-n // BLOCK) for n in per_real], dtype=np.int64)
     chunk_blocks = max(1, int(round(run.chunk / BLOCK)))
     return _Plan(
-        n_real, get_surface, per_real, nbin, slots, nblk, chunk_blocks, description, material
-    )
+        n_real, get_surface, per_real, nbin, slots, nblk, chunk_blocks, description, material,
+        spectrum,
+    )  # fmt: skip
 
 
 def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
@@ -428,7 +542,11 @@ def _start(plan: _Plan, ex: Experiment, resume: Result | None) -> _State:
     else:
         tallies, done, metas = _resume_state(resume, plan.description, n_th)
     extra = plan.n_real - len(tallies)  # realisations not started
-    tallies += [[Tally.empty(nslot, classes) for _ in range(n_th)] for _ in range(extra)]
+    if plan.spectrum is None:
+        empty = lambda: Tally.empty(nslot, classes)  # noqa: E731
+    else:
+        empty = lambda: SpectralTally(len(plan.spectrum.iors), nslot, classes)  # noqa: E731
+    tallies += [[empty() for _ in range(n_th)] for _ in range(extra)]
     done = np.vstack([done, np.zeros((extra, n_th), dtype=np.int64)])
     return _State(tallies, done, metas + [None] * extra)
 
@@ -521,7 +639,12 @@ def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> N
             est.origins,
             est.isotropic,
         )
-        if ex.transmission:  # paths through a dielectric interface
+        if plan.spectrum is not None:  # the geometry once, weighted per material
+            task = spectral_task(
+                incidence, profile, azimuth, est.isotropic, ex.bounces, plan.spectrum, pool,
+                run.threads,
+            )  # fmt: skip
+        elif ex.transmission:  # paths through a dielectric interface
             task = interface_task(incidence, azimuth, est.isotropic, ex.bounces)
         else:  # one chain, cut after ex.bounces bounces (single bounce: its first)
             task = chain_task(

@@ -1,6 +1,11 @@
 """Fresnel weights F(c), c = n·wi > 0, of the compiled passes (``fresnel_real_scalar`` in
 real arithmetic onto η² = n² − k², or 1 for a mirror, 0 for η = 1), and the per-facet
-table of one incidence (``facet_mirror``: weight, mirror direction, ledger class)."""
+table of one incidence (``facet_mirror``: weight, mirror direction, ledger class).
+
+``COSINE``, a material for the geometry pass of spectral runs (``spectral``): its "weight" is
+the cosine c itself, so a single-bounce path traced with it hands back every ray's c, from
+which ``fresnel_weights`` gives each material's F(c) — the very values a run of that material
+computes."""
 
 from __future__ import annotations
 
@@ -13,7 +18,19 @@ from microsim.jit import compiled, vector_inlined, vectorised
 
 from .engine.codes import DOWNWARD, RAY_UNRESOLVED, SINGLE
 
-FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE = 0, 1, 2  # ``fresnel_weight``'s modes
+# ``fresnel_weight``'s modes
+FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE, FRESNEL_COSINE = 0, 1, 2, 3
+
+
+class _Cosine:
+    """The type of ``COSINE``: the weight of a hit is its cosine c (``FRESNEL_COSINE``)."""
+
+    def __repr__(self) -> str:
+        return "COSINE"
+
+
+COSINE = _Cosine()
+"""Not a material: the weight F(c) = c records each hit's cosine (``spectral``)."""
 
 
 @vectorised
@@ -26,9 +43,12 @@ def fresnel_weights(c, n2, k2, fresnel_mode, weight):
 @vector_inlined
 def fresnel_weight(c, n2, k2, fresnel_mode):
     """F(c) for c > 0 by ``fresnel_mode``: FRESNEL_REAL ``fresnel_real_scalar`` onto η² with
-    n2 = n², k2 = k²; FRESNEL_MIRROR 1; FRESNEL_NONE 0 (η = 1: nothing reflects off grazing)."""
+    n2 = n², k2 = k²; FRESNEL_MIRROR 1; FRESNEL_NONE 0 (η = 1: nothing reflects off grazing);
+    FRESNEL_COSINE c itself (``COSINE``)."""
     if fresnel_mode == FRESNEL_REAL:
         return fresnel_real_scalar(c, n2, k2)
+    if fresnel_mode == FRESNEL_COSINE:
+        return c
     return 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
 
 
@@ -67,6 +87,9 @@ def fresnel_tile(c, m, n2, k2, fresnel_mode, weight, t):
     if fresnel_mode == FRESNEL_REAL:
         for j in range(m):
             weight[t + j] = 0.0 if c[j] <= 0.0 else fresnel_real_scalar(c[j], n2, k2)
+    elif fresnel_mode == FRESNEL_COSINE:
+        for j in range(m):
+            weight[t + j] = 0.0 if c[j] <= 0.0 else c[j]
     else:
         one = 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
         for j in range(m):
@@ -75,7 +98,8 @@ def fresnel_tile(c, m, n2, k2, fresnel_mode, weight, t):
 
 class FresnelMaterial(NamedTuple):
     """The material as ``fresnel_kernels.fresnel_mode`` encodes it: n², k² (of η = n + ik)
-    and the mode (FRESNEL_REAL: Fresnel of η; FRESNEL_MIRROR: F = 1; FRESNEL_NONE: F = 0)."""
+    and the mode (FRESNEL_REAL: Fresnel of η; FRESNEL_MIRROR: F = 1; FRESNEL_NONE: F = 0;
+    FRESNEL_COSINE: F = c)."""
 
     n2: float
     k2: float
@@ -89,8 +113,11 @@ def fresnel_material(ior) -> FresnelMaterial:
 
 
 def fresnel_mode(ior) -> tuple:
-    """(mode, n², k²) of ``fresnel_weight`` for a resolved index ``ior`` (None = mirror)."""
+    """(mode, n², k²) of ``fresnel_weight`` for a resolved index ``ior`` (None = mirror;
+    ``COSINE``: the cosine itself)."""
     if ior is None:
         return FRESNEL_MIRROR, 0.0, 0.0
+    if ior is COSINE:
+        return FRESNEL_COSINE, 0.0, 0.0
     eta = complex(ior)
     return (FRESNEL_NONE if eta == 1 else FRESNEL_REAL), eta.real**2, eta.imag**2
