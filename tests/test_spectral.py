@@ -11,7 +11,8 @@ What is established here:
   first) are each cut where their own run cuts them;
 * W = 1 is ``simulate``;
 * bad input (no wavelength, one out of range, a name without a table, transmission,
-  masking="analytic" with bounces > 1) is refused naming it, before any work.
+  masking="analytic" with bounces > 1, tasks whose per-material state would exceed the memory
+  limit) is refused naming it, before any work.
 """
 
 from __future__ import annotations
@@ -119,6 +120,9 @@ def test_bad_input_is_refused_naming_it(table, surface):
     refused(run(material=[], wavelengths_nm=None), "material", "1 to")
     refused(run(material="gold", wavelengths_nm=None), "wavelengths_nm")
     refused(run(transmission=True), "transmission")
+    refused(run(material=[1.5] * 1025, wavelengths_nm=None), "material", "1 to 1024")
+    many = run(material=[1.5] * 1024, wavelengths_nm=None, chunk=2**22, threads=1024)
+    refused(many, "chunk", "1024 materials")
     grooves = vgroove_surface([35.0, 50.0])
     refused(
         lambda: simulate_spectral(

@@ -63,7 +63,14 @@ from .paths import LEDGER, MASKING, Incidence
 from .progress import RaysDone
 from .result import Result
 from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, thread_pool
-from .spectral import SpectralResult, SpectralTally, Spectrum, check_spectral_run, spectral_task
+from .spectral import (
+    SpectralResult,
+    SpectralTally,
+    Spectrum,
+    check_spectral_run,
+    check_task_memory,
+    spectral_task,
+)
 from .streams import BLOCK, DESIGN, ORIGINS, block_origins
 from .tallies import TALLY_NAMES, Tally, simulation_result, tallies_from_arrays
 from .tracer_cache import tracer_for
@@ -343,6 +350,7 @@ def estimate_spectral(
         )
     ex, est, run = experiment, estimator, execution
     check_spectral_run(ex.transmission, est.masking, ex.bounces, run.cluster)
+    check_task_memory(len(spectrum.iors), run.chunk, run.threads)
     results = _run(ex, est, run, None, spectrum)
     return SpectralResult(results, spectrum.wavelengths_nm)
 

@@ -40,6 +40,7 @@ import numpy as np
 
 from microsim.analytic import materials as material_table
 from microsim.analytic.fresnel import resolve_material
+from microsim.checks import check_memory
 from microsim.errors import UsageError
 
 from .bounce_kernels import SpectralMaterials
@@ -47,6 +48,7 @@ from .bounces import choose_bounce_path, order_slots
 from .fresnel_kernels import COSINE, fresnel_mode, fresnel_weights
 from .paths import Incidence, choose_path
 from .result import Result
+from .schedule import IN_FLIGHT
 from .tallies import ChunkTallies, Tally, split_order_tallies, split_tallies
 
 __all__ = [
@@ -55,11 +57,17 @@ __all__ = [
     "SpectralTally",
     "spectral_task",
     "check_spectral_run",
+    "check_task_memory",
     "MAX_MATERIALS",
+    "TASK_BYTES",
 ]
 
 MAX_MATERIALS = 1024
 """Most materials (wavelengths) of one spectral run."""
+TASK_BYTES = 80
+"""Bytes per ray and material a spectral thread task holds beyond a one-material run's: the
+bounce chain's per-material ledger (35, ``bounce_kernels.SpectralLedger``) and each
+material's per-block tallies until they are added (at most ~40)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,6 +144,18 @@ def check_spectral_run(transmission: bool, masking: str, bounces, cluster) -> No
         )
     if cluster is not None:
         raise UsageError("a spectral run traces on local threads only: pass cluster=None")
+
+
+def check_task_memory(materials: int, chunk: int, threads: int) -> None:
+    """A UsageError naming ``chunk`` when the thread tasks in flight (``IN_FLIGHT`` per
+    thread) of ``chunk`` rays would hold more than the memory limit for ``materials``
+    materials (``TASK_BYTES``; ``microsim.checks.check_memory``)."""
+    tasks = IN_FLIGHT * threads
+    check_memory(
+        "chunk",
+        tasks * chunk * materials * TASK_BYTES,
+        f"{tasks} thread tasks of {chunk:,} rays × {materials} materials (pass a smaller chunk)",
+    )
 
 
 def _check_count(name: str, values) -> None:
