@@ -9,7 +9,8 @@ What is established here:
   bounce, traced chain);
 * with "all", materials whose weights fall below the floor at different bounces (down to the
   first) are each cut where their own run cuts them;
-* W = 1 is ``simulate``;
+* W = 1 is ``simulate``; threads and chunks change no bit; an interrupt returns every
+  material's complete blocks (each Result partial), never a mix;
 * bad input (no wavelength, one out of range, a name without a table, transmission,
   masking="analytic" with bounces > 1, tasks whose per-material state would exceed the memory
   limit) is refused naming it, before any work.
@@ -21,7 +22,8 @@ import numpy as np
 import pytest
 from support import heightfield_surface, random_heights, refused, vgroove_surface
 
-from microsim.sim import Bins, SpectralResult, simulate, simulate_spectral
+from microsim.checkpoints import interrupt_at
+from microsim.sim import BLOCK, Bins, SpectralResult, simulate, simulate_spectral
 from microsim.sim.tracer_cache import GRID_SWITCH
 
 BINS = Bins(9, 7)
@@ -106,6 +108,26 @@ def test_each_material_is_cut_at_its_own_weight_floor(surface):
 
 def test_one_material_is_simulate(surface):
     compare(surface, ["aluminium"], ["aluminium"], rays=3000, bounces=2)
+
+
+def test_threads_and_chunks_change_no_bit_and_an_interrupt_keeps_whole_blocks(surface):
+    mats = ["aluminium", 1.5]
+    kw = dict(rays=5 * BLOCK + 77, bins=BINS, seed=2, bounces="all")
+    one = simulate_spectral(surface, mats, [20.0, 60.0], threads=1, **kw)
+    many = simulate_spectral(surface, mats, [20.0, 60.0], threads=2, chunk=BLOCK, **kw)
+    for a, b in zip(one, many):
+        assert_same_run(a, b)
+    with interrupt_at("simulation", after=3):
+        part = simulate_spectral(surface, mats, [20.0, 60.0], threads=2, chunk=BLOCK, **kw)
+    assert all(r.is_partial and r.meta["interrupted"] for r in part)
+    rays = [r.rays.tolist() for r in part]
+    assert rays[0] == rays[1] and 0 < sum(rays[0]) < 2 * kw["rays"], rays
+    # the blocks done are the whole run's first ones, for every material alike
+    resumed = [
+        simulate(surface, m, [20.0, 60.0], resume=r, threads=1, **kw) for m, r in zip(mats, part)
+    ]
+    for a, b in zip(one, resumed):
+        assert_same_run(a, b)
 
 
 def test_bad_input_is_refused_naming_it(table, surface):
