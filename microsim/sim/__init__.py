@@ -10,15 +10,17 @@ or, with the run's three frozen descriptions (``experiment``)::
                    Estimator(rays=10**6), Execution(threads=2))
 
 Modules: ``experiment`` (``Experiment``, ``Execution``), ``estimator`` (``Estimator``;
-``estimate``, ``simulate``, ``ray_events``: the driver), ``identity`` (``RunDescription``: the
-run's identity for resume, the testing cache and sweep task ids), ``auto`` (``simulate_auto``,
-``estimate_to_precision``), ``streams`` (random streams, ray origins), ``paths`` (trace paths,
-ledger), ``tallies`` (running sums, bin estimate and standard error), ``schedule`` (threads,
-interrupts), ``arguments`` (argument checks), ``tracer`` and ``engine`` (Embree, the periodic
-walk and its compiled per-ray loops), the estimator's compiled loops (``ray_bins``,
-``fresnel_kernels``, ``vgroove_kernels``, ``bounce_kernels``, ``tally_kernels``,
-``origin_kernels``), ``result``, ``progress``, ``predict``, ``compare``. ``Bins`` (with
-``MAX_BINS``) lives in the core layer, ``microsim.bins``, and is re-exported here.
+``estimate``, ``simulate``, ``ray_events``: the driver; ``estimate_spectral``,
+``simulate_spectral``: many materials over one traced geometry, module ``spectral``),
+``identity`` (``RunDescription``: the run's identity for resume, the testing cache and sweep
+task ids), ``auto`` (``simulate_auto``, ``estimate_to_precision``), ``streams`` (random
+streams, ray origins), ``paths`` (trace paths, ledger), ``tallies`` (running sums, bin estimate
+and standard error), ``schedule`` (threads, interrupts), ``arguments`` (argument checks),
+``tracer`` and ``engine`` (Embree, the periodic walk and its compiled per-ray loops), the
+estimator's compiled loops (``ray_bins``, ``fresnel_kernels``, ``vgroove_kernels``,
+``bounce_kernels``, ``tally_kernels``, ``origin_kernels``), ``result``, ``progress``,
+``predict``, ``compare``. ``Bins`` (with ``MAX_BINS``) lives in the core layer,
+``microsim.bins``, and is re-exported here.
 """
 
 from microsim.bins import MAX_BINS, Bins

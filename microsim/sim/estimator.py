@@ -455,26 +455,32 @@ def _run(
     if ex.transmission:  # absent: False (results without transmission keep their meta)
         meta["transmission"] = True
     th, ph = np.array(ex.theta_i), np.array(ex.phi_i)
-    n_mat = 1 if spectrum is None else len(plan.material)
-    if spectrum is None:
-        by_material = [(state.tallies, meta)]
-    else:  # each material's tallies, material record and the count traced together
-        by_material = [
-            (
-                [[t.tallies[j] for t in row] for row in state.tallies],
-                {**meta, "material": spectrum.material_meta(j, rec), "spectral": n_mat},
-            )
-            for j, rec in enumerate(plan.material)
-        ]
-    slots = plan.slots
     results = [
-        simulation_result(th, ph, ex.bins, tallies, n_done, plan.per_real, state.done, mt, slots)
-        for tallies, mt in by_material
+        simulation_result(
+            th, ph, ex.bins, tallies, n_done, plan.per_real, state.done, meta_j, plan.slots
+        )
+        for tallies, meta_j in _by_material(plan, state, meta)
     ]
     if lost is not None:
         lost.partial = results[0]
         raise lost
     return results
+
+
+def _by_material(plan: _Plan, state: _State, meta: dict) -> list:
+    """(running sums [r][i], meta) of each Result: the run's own, or one per material of a
+    spectral run (its material record, and ``spectral``: how many materials were traced
+    together)."""
+    spectrum = plan.spectrum
+    if spectrum is None:
+        return [(state.tallies, meta)]
+    return [
+        (
+            [[t.tallies[j] for t in row] for row in state.tallies],
+            {**meta, "material": spectrum.material_meta(j, record), "spectral": len(plan.material)},
+        )
+        for j, record in enumerate(plan.material)
+    ]
 
 
 def _check_descriptions(**given) -> None:
