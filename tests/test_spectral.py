@@ -110,6 +110,14 @@ def test_one_material_is_simulate(surface):
     compare(surface, ["aluminium"], ["aluminium"], rays=3000, bounces=2)
 
 
+def test_realisations_pool_per_material():
+    tiles = [heightfield_surface(random_heights(16, 0.05, 3.0, seed=s), 1 / 16) for s in (1, 2)]
+    mats = ["aluminium", 1.5]
+    spectral = compare(None, mats, mats, rays=4000, bounces=2, realisations=tiles)
+    for result in spectral:
+        assert result.brdf_realisations.shape[0] == 2
+
+
 def test_threads_and_chunks_change_no_bit_and_an_interrupt_keeps_whole_blocks(surface):
     mats = ["aluminium", 1.5]
     kw = dict(rays=5 * BLOCK + 77, bins=BINS, seed=2, bounces="all")
