@@ -58,6 +58,37 @@ def test_abc_fit_recovers_the_catalogue_parameters():
     assert fit.sigma == pytest.approx(1.0, rel=0.2)
 
 
+def test_abc_fit_of_a_band_limited_tile_is_unbiased():
+    """A band-limited tile (the catalogue's ABC scenes: power only up to f = 1/(2·4·dx), the
+    cut-off running through a ring): A, B, C within 3 standard errors, and the residuals those
+    of the periodogram's own scatter — reduced χ² within 4 of its standard deviations
+    √(2/dof) of 1 (a ring averaged over cells the band leaves empty biases C up and B down,
+    and χ² with them)."""
+    surf = _quiet(abc, 256, 1.0, 1.0, 32.0, 2.0, seed=3, band_limit=4, exact_amplitude=False)
+    fit = surface_report(surf.heights, 1.0).abc
+    nominal = surf.nominal
+    assert fit.f_range[1] <= 0.125 + 1e-9  # fitted over the band only
+    for name in "ABC":
+        assert _within(getattr(fit, name), nominal[name]), fit
+    rings = 0.125 * 256 - 1  # about one ring per frequency step inside the band
+    assert abs(fit.reduced_chi2 - 1.0) < 4.0 * np.sqrt(2.0 / (rings - 3)), fit
+
+
+def test_a_scenes_abc_surface_is_described_with_its_psd_fit():
+    """``microsim surface SCENE`` on an ABC heightfield: the fitted A, B, C with their errors
+    beside the generator's nominal values."""
+    from microsim.app.scene import describe_surface
+
+    surf = _quiet(abc, 128, 1.0, 1.0, 20.0, 3.5, seed=5, band_limit=1, exact_amplitude=False)
+    text = describe_surface(surf)
+    fit = surface_report(surf.heights, 1.0).abc
+    for name in "ABC":
+        row = next(line for line in text.splitlines() if line.startswith(f"PSD fit {name}"))
+        assert f"{getattr(fit, name).value:.4g} ± " in row
+        assert row.split()[-1] == f"{surf.nominal[name]:.6g}"
+    assert "reduced chi²" in text
+
+
 def test_anisotropic_gaussian_axes_and_ratio_are_found():
     """ℓx = 6, ℓy = 12 along axes rotated by 30° (random amplitudes): αx/αy ≈ 2 (the
     generator's mesh α's) within 3 errors, the αx axis at 30°."""

@@ -455,6 +455,11 @@ def _slope_stats(sx, sy, cells) -> SlopeStats:
 
 
 # --- the PSD -----------------------------------------------------------------------------
+EMPTY = 1e-12
+"""Periodogram cells below this fraction of the largest hold no power (a synthetic tile's
+band cut-off; a measured scan's noise floor lies far above it)."""
+
+
 def _psd_image(h, dx, periodic):
     """(S, FX, FY): the periodogram (module docstring) on the FFT grid."""
     z = _filled(h)
@@ -471,14 +476,16 @@ def _psd_image(h, dx, periodic):
 
 def _radial(S, FX, FY, dx) -> tuple[RadialPsd, np.ndarray]:
     """The rings (``RadialPsd``) from the first frequency step to Nyquist (the last whole
-    ring below it), and each FFT cell's
-    ring index (−1: outside every ring)."""
+    ring below it), and each FFT cell's ring index (−1: outside every ring). Cells without
+    power (``EMPTY`` of the largest: beyond a band-limited tile's cut-off, which may run
+    through a ring) belong to no ring, so that a ring's mean is that of the cells the band
+    holds and the fit's model is averaged over the same cells."""
     ny, nx = S.shape
     df = max(1.0 / (nx * dx), 1.0 / (ny * dx))
     f = np.hypot(FX, FY)
     ring = np.rint(f / df).astype(np.int64)
     rings = int(0.5 / dx / df - 0.5)  # whole rings below Nyquist
-    ring = np.where((ring >= 1) & (ring <= rings), ring - 1, -1)
+    ring = np.where((ring >= 1) & (ring <= rings) & (S > EMPTY * S.max()), ring - 1, -1)
     inside = ring >= 0
     cells = np.bincount(ring[inside], minlength=rings)
     power = np.bincount(ring[inside], S[inside], minlength=rings) / np.maximum(cells, 1)
@@ -502,7 +509,7 @@ def _abc_fit(radial: RadialPsd, ring_of, FX, FY, periodic: bool) -> AbcFit | Non
     from scipy.special import digamma, polygamma
 
     power = np.array(radial.power)
-    used = np.nonzero(power > 1e-12 * power.max())[0]
+    used = np.nonzero(power > EMPTY * power.max())[0]
     if used.size < 4:
         return None
     freq, cells = np.array(radial.frequency), np.array(radial.cells)

@@ -607,9 +607,20 @@ def _material_name(table) -> str | None:
 def _fmt(v) -> str:
     if v is None:
         return "-"
+    if hasattr(v, "error"):  # a fitted value with its standard error
+        return f"{v.value:.4g} ± {v.error:.2g}"
     if isinstance(v, float):
         return f"{v:.6g}"
     return str(v)
+
+
+def _abc_fit(surf):
+    """The surface report's ABC fit of a heightfield ``surf`` (``analysis.surface_report``),
+    None where it has none."""
+    from microsim.analysis.surface_report import surface_report
+
+    heights = getattr(surf, "heights", None)
+    return None if heights is None else surface_report(heights, surf.dx).abc
 
 
 def describe_surface(scene_or_surface) -> str:
@@ -670,6 +681,22 @@ def describe_surface(scene_or_surface) -> str:
             ("law's mass beyond max |slope|", st["tail_mass_truncated"], None, None),
             ("height-|slope| rank correlation", st["height_slope_rank_corr"], None, 0.0),
         ]
+    fit_notes = []
+    if surf.kind == "abc":  # the spectrum's parameters as a measured surface's report fits them
+        fit = _abc_fit(surf)
+        if fit is not None:
+            a_nom = nom.get("A")
+            rows += [
+                ("PSD fit A", fit.A, None, a_nom),
+                ("PSD fit B", fit.B, None, nom.get("B")),
+                ("PSD fit C", fit.C, None, nom.get("C")),
+            ]
+            lo, hi = fit.f_range
+            fit_notes.append(
+                f"(PSD fit: Löw et al. 2012's ABC PSD fitted to the tile's radial periodogram "
+                f"over f in [{lo:.3g}, {hi:.3g}] as microsim surface FILE fits a scan, "
+                f"± its standard error, reduced chi² {fit.reduced_chi2:.2f})"
+            )
     cells = [[r[0]] + [_fmt(v) for v in r[1:]] for r in rows]
     widths = [max(len(c[i]) for c in cells) for i in range(4)]
     lines = ["  ".join(c[i].ljust(widths[i]) for i in range(4)).rstrip() for c in cells]
@@ -683,5 +710,5 @@ def describe_surface(scene_or_surface) -> str:
             "(KS distances: predicted = critical value at level 0.01 for the independent cells, "
             "tile area / corr_len²)"
         )
-    notes += [f"warning: {w}" for w in surf.warnings]
+    notes += fit_notes + [f"warning: {w}" for w in surf.warnings]
     return "\n".join(head + lines + notes)
