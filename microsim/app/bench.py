@@ -73,7 +73,7 @@ from dataclasses import asdict
 import numpy as np
 
 from ..checks import check_memory
-from ..errors import EnvironmentFailure
+from ..errors import EnvironmentFailure, UsageError
 from .bench_report import (
     THREADS,
     Accuracy,
@@ -707,15 +707,36 @@ def _cmd_bench(args) -> int:
         from .bench_methods import run_methods_command
 
         return run_methods_command(args)
+    if args.scale:
+        return _cmd_scale(args)
     cfg = bench_config(args.rays, args.quick, args.skip_accuracy)
     b = run_bench(cfg)
     print(json.dumps(b.to_json(), indent=1) if args.json else format_bench(b))
     return 0
 
 
+def _cmd_scale(args) -> int:
+    """``microsim bench --scale``: ``bench_scale``'s table (or its rows as JSON)."""
+    from . import bench_scale as bs
+
+    if args.rays is not None or args.skip_accuracy:
+        given = "--rays" if args.rays is not None else "--skip-accuracy"
+        raise UsageError(f"{given}: not with --scale (its ray counts are fixed: {bs.RAYS})")
+    sizes, rays = (bs.QUICK_SIZES, bs.QUICK_RAYS) if args.quick else (bs.SIZES, bs.RAYS)
+    rows = bs.scale_rows(BenchConfig(), sizes, rays)
+    if args.json:
+        record = {"machine": asdict(machine()), "rays": list(rays)}
+        print(json.dumps({**record, "rows": [asdict(r) for r in rows]}, indent=1))
+    else:
+        m = machine()
+        print(f"{m.cpu} ({m.isa}, numba {m.numba_cpu}); 1 thread; rays {rays[0]:,} and {rays[1]:,}")
+        print(bs.format_scale(rows))
+    return 0
+
+
 def add_bench_command(subparsers) -> None:
     """Register ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]
-    [--methods [DIR]]``."""
+    [--methods [DIR]] [--scale]``."""
     p = subparsers.add_parser(
         "bench",
         help="measure raw Embree vs pipeline throughput, peak memory, time to 1%% precision "
@@ -733,6 +754,12 @@ def add_bench_command(subparsers) -> None:
         "--quick", action="store_true", help="small mesh and ray counts (seconds; for smoke tests)"
     )
     p.add_argument("--skip-accuracy", action="store_true", help="omit the time-to-1%% run")
+    p.add_argument(
+        "--scale",
+        action="store_true",
+        help="instead: build, first call, fixed cost, marginal samples/s and peak memory per "
+        "tile size (512² … 8192², the largest that fits; microsim.app.bench_scale)",
+    )
     p.add_argument(
         "--methods",
         nargs="?",

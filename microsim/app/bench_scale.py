@@ -1,0 +1,174 @@
+"""How a run scales with the tile (``microsim bench --scale``): per grid size, in a fresh
+process each, the surface build, the first ``simulate`` call, the fixed cost of a later call,
+the marginal samples/s and the peak resident memory.
+
+The surface is ``bench``'s (a Gaussian field, σ = ``BenchConfig.sigma``, ℓ = ``corr_len``
+cells) at n² points, n in ``SIZES``; the run is ``bench``'s (aluminium, θi =
+``BenchConfig.theta_i``, its bins, 1 thread). Each size runs in its own process
+(``_PROBE``): numba's kernels are loaded (compiled once per machine) on a 16² tile first,
+then the surface is built (``build``), traced once with one block of rays (``first``: the
+tracer, its tables and the first rays), and traced at ``RAYS`` = (2²⁰, 2²²) rays, best of
+``REPEAT`` each: the line through the two gives ``samples_per_s`` (marginal) and
+``fixed_seconds`` (the intercept: what a later call on the same surface costs besides its
+rays). ``rss_mb`` is the process's peak resident set (VmHWM), ``base_mb`` its resident set
+before the surface (interpreter, libraries, kernels), ``bytes_per_point`` the difference over
+n². A size whose expected peak (``BYTES_PER_POINT_GUESS`` per point, from the sizes
+already run when there are two) exceeds the memory the machine has available is skipped with
+that reason instead of run.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import asdict, dataclass
+
+from microsim.errors import EnvironmentFailure
+
+from .bench_report import BenchConfig
+
+__all__ = [
+    "SIZES",
+    "RAYS",
+    "QUICK_SIZES",
+    "QUICK_RAYS",
+    "ScaleRow",
+    "scale_rows",
+    "format_scale",
+    "available_mb",
+]
+
+SIZES = (512, 1024, 2048, 4096, 8192)
+RAYS = (2**20, 2**22)
+QUICK_SIZES, QUICK_RAYS = (64, 128), (2**14, 2**16)
+"""``--quick``: small tiles and ray counts (seconds; for smoke tests)."""
+REPEAT = 2
+BYTES_PER_POINT_GUESS = 600.0
+"""Peak bytes per grid point assumed for a size before two sizes have been measured."""
+
+_PROBE = """
+import sys
+sys.path.pop(0)  # "" (the working directory): a microsim/ folder there must not shadow ours
+import json, time
+from dataclasses import replace
+from microsim.app.bench import BenchConfig, _bins, _surface
+from microsim.sim import BLOCK, simulate
+
+def status_mb(key):
+    with open("/proc/self/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith(key)) / 1024.0
+
+cfg, rays = BenchConfig(**json.loads(sys.argv[1])), json.loads(sys.argv[2])
+repeat = int(sys.argv[3])
+run = dict(bins=_bins(), threads=1)
+simulate(_surface(replace(cfg, n=16)), "aluminium", cfg.theta_i, rays=BLOCK, **run)  # kernels
+base = status_mb("VmRSS:")
+t0 = time.perf_counter()
+surface = _surface(cfg)
+build = time.perf_counter() - t0
+t0 = time.perf_counter()
+simulate(surface, "aluminium", cfg.theta_i, rays=BLOCK, **run)
+first = time.perf_counter() - t0
+best = {}
+for _ in range(repeat):
+    for n in rays:
+        t0 = time.perf_counter()
+        simulate(surface, "aluminium", cfg.theta_i, rays=n, **run)
+        best[n] = min(best.get(n, float("inf")), time.perf_counter() - t0)
+times = {"build": build, "first": first, "seconds": [best[n] for n in rays]}
+print(json.dumps({**times, "rss_mb": status_mb("VmHWM:"), "base_mb": base}))
+"""
+
+
+@dataclass(frozen=True)
+class ScaleRow:
+    """One grid size: ``n``; the times (s) and rates of the module docstring, None with a
+    ``skipped`` reason when the size was not run."""
+
+    n: int
+    build_seconds: float | None = None
+    first_seconds: float | None = None
+    fixed_seconds: float | None = None
+    samples_per_s: float | None = None
+    rss_mb: float | None = None
+    base_mb: float | None = None
+    skipped: str | None = None
+
+    @property
+    def bytes_per_point(self) -> float | None:
+        """Peak memory above the process's own (interpreter, libraries, kernels) per point."""
+        return None if self.rss_mb is None else (self.rss_mb - self.base_mb) * 2**20 / self.n**2
+
+
+def available_mb() -> float:
+    """The memory the machine has available now (MemAvailable, MB)."""
+    with open("/proc/meminfo") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith("MemAvailable:")) / 1024
+
+
+def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
+    conf = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
+    conf["n"] = n
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE, json.dumps(conf), json.dumps(list(rays)), str(REPEAT)],
+        capture_output=True,
+        text=True,
+    )
+    if out.returncode != 0:
+        lines = (out.stderr or "").strip().splitlines() or ["(no output)"]
+        raise EnvironmentFailure(
+            f"the scale probe at {n}² ({sys.executable} -c …) failed with status "
+            f"{out.returncode}: {lines[-1]}"
+        )
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    (t1, t2), (n1, n2) = got["seconds"], rays
+    rate = (n2 - n1) / (t2 - t1) if t2 > t1 else None
+    fixed = None if rate is None else t1 - n1 / rate
+    return ScaleRow(n, got["build"], got["first"], fixed, rate, got["rss_mb"], got["base_mb"])
+
+
+def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list[ScaleRow]:
+    """``ScaleRow`` of each of ``sizes`` (module docstring), smallest first, the marginal rate
+    between the two ray counts ``rays``."""
+    rows = []
+    for n in sorted(sizes):
+        measured = [r for r in rows if r.rss_mb is not None]
+        per_point = BYTES_PER_POINT_GUESS
+        if len(measured) >= 2:  # the larger tiles' cost per point (fixed costs amortised)
+            per_point = max(r.bytes_per_point for r in measured[-2:])
+        base = measured[-1].base_mb if measured else 0.0
+        need, have = base + per_point * n * n / 2**20, available_mb()
+        if need > 0.9 * have:
+            reason = (
+                f"needs ~{need / 1024:.1f} GB at {per_point:.0f} B/point, "
+                f"{have / 1024:.1f} GB available"
+            )
+            rows.append(ScaleRow(n, skipped=reason))
+            continue
+        rows.append(_probe(cfg, n, rays))
+    return rows
+
+
+def format_scale(rows: list[ScaleRow]) -> str:
+    """The rows as the table of docs/performance.md."""
+
+    def fmt(v, f):
+        return "–" if v is None else f.format(v)
+
+    lines = [
+        "| grid | build | first call | fixed cost per later call | marginal samples/s | "
+        "peak RSS | bytes per point above the process's own |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if r.skipped:
+            lines.append(f"| {r.n}² | skipped: {r.skipped} | | | | | |")
+            continue
+        lines.append(
+            f"| {r.n}² | {fmt(r.build_seconds, '{:.2f} s')} | {fmt(r.first_seconds, '{:.2f} s')} "
+            f"| {fmt(r.fixed_seconds, '{:.2f} s')} "
+            f"| {fmt(r.samples_per_s and r.samples_per_s / 1e6, '{:.1f} M')} "
+            f"| {fmt(r.rss_mb, '{:.0f} MB')} | {fmt(r.bytes_per_point, '{:.0f}')} |"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,44 @@
+"""``microsim bench --scale`` (``microsim.app.bench_scale``): per tile size a fresh process's
+build, first call, marginal rate and peak memory; a size the machine cannot hold is skipped
+with the reason, not run; the command's refusals."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from microsim.app import bench_scale
+from microsim.app.cli import main
+
+
+def _cli(capsys, *args):
+    capsys.readouterr()
+    status = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return status, out, err.strip().splitlines()
+
+
+def test_a_size_that_does_not_fit_is_skipped_with_its_need(monkeypatch):
+    """No process is started for a tile whose expected peak exceeds the available memory."""
+    monkeypatch.setattr(bench_scale, "available_mb", lambda: 1024.0)
+    monkeypatch.setattr(bench_scale, "_probe", lambda *a: pytest.fail("probed a size too big"))
+    (row,) = bench_scale.scale_rows(sizes=(4096,))  # 600 B/point × 4096² ≈ 9.4 GB
+    assert row.skipped and "9.4 GB" in row.skipped and "1.0 GB available" in row.skipped
+    assert "skipped: needs" in bench_scale.format_scale([row])
+
+
+def test_scale_refuses_ray_options(capsys):
+    status, out, err = _cli(capsys, "bench", "--scale", "--rays", "1000")
+    assert status == 2 and out == "" and len(err) == 1 and "--rays" in err[0]
+
+
+@pytest.mark.slow  # two fresh processes (~7 s)
+def test_the_quick_scale_table_measures_each_size(capsys):
+    status, out, err = _cli(capsys, "bench", "--scale", "--quick", "--json")
+    assert status == 0, err
+    rows = json.loads(out)["rows"]
+    assert [r["n"] for r in rows] == list(bench_scale.QUICK_SIZES)
+    for r in rows:
+        assert r["skipped"] is None and r["samples_per_s"] > 0
+        assert r["rss_mb"] >= r["base_mb"] > 0 and r["first_seconds"] > 0
