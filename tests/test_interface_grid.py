@@ -198,3 +198,17 @@ def test_the_walk_finds_the_first_crossing_from_either_side(below):
         dx = (out[k, 1] - x0) - (u0[k] + hi * d[k, 0])
         assert abs(dx - n * np.round(dx / n)) < 1e-9
     assert checked > 0.9 * rays
+
+
+def test_a_glass_run_on_the_grid_never_builds_the_embree_scene():
+    """Every ray of a dielectric run on a heightfield grid walks the grid: its tracer's Embree
+    scene (BVH) is never built; the first ray traced through Embree builds it."""
+    from microsim.sim import simulate
+
+    surface = gaussian(32, 1.0, 0.5, 4.0, seed=1)
+    simulate(surface, ETA, 30.0, rays=BLOCK, bins=Bins(10, 7), transmission=True, threads=1)
+    tracer = tracer_for(surface, "traced").tracer
+    assert tracer.grid is not None and tracer._scene is None
+    top = tracer.zmax + tracer.top_margin
+    hits = tracer.first_hit(np.array([[0.1, 0.2, top]]), np.array([[0.0, 0.0, -1.0]]))
+    assert tracer._scene is not None and hits.prim[0] >= 0

@@ -17,7 +17,7 @@ from microsim.sim import dielectric, facet_tables, interface_grid, paths, simula
 
 PATHS = 2**21
 STAGES = {
-    "paths on the grid (one compiled loop: walks, interactions, bins)": (
+    "paths on the grid (one compiled loop: walks, interactions, bins, tallies)": (
         interface_grid,
         "grid_interface_paths",
     ),
@@ -27,8 +27,8 @@ STAGES = {
     ),
     "paths step by step (primaries, Embree continuations)": (dielectric, "trace_dielectric"),
     "origins (stratified starts)": (paths.Incidence, "origins_of"),
-    "tallies (split_order_tallies)": (tallies, "split_order_tallies"),
-    "a thread task (origins + the paths)": (dielectric.DielectricPath, "follow"),
+    "tallies of the step-by-step paths (split_order_tallies)": (tallies, "split_order_tallies"),
+    "a thread task (origins + the paths + their tallies)": (dielectric.DielectricPath, "tallies"),
 }
 
 

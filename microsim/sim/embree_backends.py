@@ -12,7 +12,7 @@ from microsim.errors import UsageError
 
 from . import embree_packets
 
-__all__ = ["BACKENDS", "EmbreexScene", "check_backend", "open_scene"]
+__all__ = ["BACKENDS", "EmbreexScene", "check_backend", "scene_backend", "open_scene"]
 
 BACKENDS = ("auto", "packets", "embreex")
 
@@ -47,14 +47,19 @@ def check_backend(backend: str) -> None:
         raise UsageError(f"backend must be 'auto', 'packets' or 'embreex', got {backend!r}")
 
 
-def open_scene(vertices: np.ndarray, faces: np.ndarray, backend: str):
-    """(name, scene) of ``backend``: "embreex", "packets" (UsageError when the library cannot
-    be bound) or "auto" (packets when available, else embreex;
+def scene_backend(backend: str) -> str:
+    """The backend ``backend`` resolves to: "embreex", "packets" (UsageError when the library
+    cannot be bound) or "auto" (packets when available, else embreex;
     ``MICROSIM_EMBREE_PACKETS=0`` in the environment makes it embreex)."""
     check_backend(backend)
     reason = None if backend == "embreex" else embree_packets.binding_error()
     if backend == "packets" and reason is not None:
         raise UsageError(f"backend='packets' is unavailable here: {reason}")
-    if backend != "embreex" and reason is None:
-        return "packets", embree_packets.PacketScene(vertices, faces)
-    return "embreex", EmbreexScene(vertices, faces)
+    return "packets" if backend != "embreex" and reason is None else "embreex"
+
+
+def open_scene(vertices: np.ndarray, faces: np.ndarray, backend: str):
+    """The scene of a resolved ``backend`` (``scene_backend``), its BVH built."""
+    if backend == "packets":
+        return embree_packets.PacketScene(vertices, faces)
+    return EmbreexScene(vertices, faces)

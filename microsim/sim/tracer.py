@@ -15,7 +15,8 @@ V-groove surfaces can instead decide masking exactly in float64
 (``vgroove_profile.VGrooveProfile``).
 
 Speed: each segment of the walk (``periodic_walk``) is one Embree call between two compiled
-passes over the live rays. The BVH is built in ``__init__``.
+passes over the live rays. The BVH is built on the first Embree query (``Tracer.scene``): runs
+whose rays all walk a heightfield grid never build it.
 
 Backends (``embree_backends``): each segment's Embree call goes either to embreex (one ray per
 ``rtcIntersect1``) or, when the Embree 4 library embreex bundles can be bound
@@ -37,6 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,7 +46,7 @@ import numpy as np
 from microsim.errors import UsageError
 from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 
-from .embree_backends import check_backend, open_scene
+from .embree_backends import check_backend, open_scene, scene_backend
 from .engine import beam, codes, horizon
 from .heightfield_caster import cast_falling, heightfield_grid
 from .horizon_bounds import CLEAR_MARGIN, horizon_grid, rise_bound
@@ -162,6 +164,8 @@ class Tracer:
     ``HeightfieldGrid`` (None when off or when the mesh is not a heightfield grid).
     """
 
+    _scene = None
+
     def __init__(self, surface, *, backend: str = "embreex", grid: bool = False):
         check_backend(backend)
         v, f, lx, ly = _validated_mesh(surface)
@@ -205,7 +209,17 @@ class Tracer:
             groove_tables(self) if grooved else (NO_GROOVES, NO_STRATA)
         )
         self.facet_tables: dict = {}  # kept by facet_tables.facet_table: its key → FacetTable
-        self.backend, self.scene = open_scene(v, f, backend)
+        self.backend = scene_backend(backend)
+        self._scene_lock = threading.Lock()
+
+    @property
+    def scene(self):
+        """The Embree scene of the mesh (``embree_backends.open_scene``), built on first use:
+        a run whose rays all walk the heightfield grid never builds it."""
+        with self._scene_lock:
+            if self._scene is None:
+                self._scene = open_scene(self.vertices, self.faces, self.backend)
+            return self._scene
 
     # --- facet geometry (float64, built on demand: 72 bytes per facet) --------------------
     @functools.cached_property
