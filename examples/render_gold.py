@@ -15,12 +15,13 @@ Simulated: the Gaussian heightfield ``SIMULATED`` (ensemble NDF Beckmann m = 2σ
 traced once by ``simulate_spectral`` for gold at ``SIMULATED_NM`` (16 wavelengths, 400–700 nm),
 every order of scattering, isotropic, at each incidence of ``SIMULATED_THETA_I`` (0–85° every
 5°: the table an RGL file is written from), ``--rays`` rays each. Each wavelength's ``Result``
-becomes a ``measured.BRDFTable`` twice: of the BRDF summed over the orders (``whole_table``),
-and of the single-scattering part (``BRDFTable.from_result``, which takes ``Result.brdf``: the
-order-1 estimate); each set, as a ``SpectralBRDF``, is written in the spectral flavour as
-``microsim measure`` writes a simulated table (warped by the ensemble NDF with the Lambertian
-share ``RGL_FLOOR``); beside them the closed form of the same NDF (Torrance–Sparrow Beckmann
-0.3, height-correlated Smith: single scattering) in the spectral flavour.
+is a BRDF twice: itself (``SpectralBRDF`` takes a ``Result`` as its whole BRDF, every order
+it traced: ``BRDFTable.from_result``), and the ``BRDFTable`` of its single-scattering part
+(``single_table``: the order-1 estimate); each set, as a ``SpectralBRDF``, is written in the
+spectral flavour as ``microsim measure`` writes a simulated table (warped by the ensemble NDF
+with the Lambertian share ``RGL_FLOOR``); beside them the closed form of the same NDF
+(Torrance–Sparrow Beckmann 0.3, height-correlated Smith: single scattering) in the spectral
+flavour.
 
 Each file is loaded by Mitsuba 3's ``measured`` BSDF on a sphere lit by ``scene``'s lights (a
 uniform sky and a sun, both of the spectrum of CIE D65); the spectral files rendered in
@@ -86,17 +87,16 @@ def simulated_gold(rays: int) -> tuple[SpectralBRDF, SpectralBRDF, object]:
         isotropic=True,
     )
     nm = spectrum.wavelengths_nm
-    whole = SpectralBRDF(nm, [whole_table(r).f for r in spectrum])
-    single = SpectralBRDF(nm, [BRDFTable.from_result(r).f for r in spectrum])
+    whole = SpectralBRDF(nm, list(spectrum))
+    single = SpectralBRDF(nm, [single_table(r).f for r in spectrum])
     return whole, single, gaussian_ensemble_ndf(SIMULATED["sigma"], SIMULATED["corr_len"])
 
 
-def whole_table(result) -> BRDFTable:
-    """The table of ``result``'s BRDF summed over its scattering orders (``brdf_total``; the
-    orders' standard errors added in quadrature). ``BRDFTable.from_result`` — and so a
-    ``SpectralBRDF`` of ``Result``s — takes its ``brdf``: the single-scattering part."""
-    stderr = np.sqrt(np.sum(np.square(result.stderr_orders), axis=0))
-    return BRDFTable(result.theta_i, result.bins, result.brdf_total(), stderr, "all orders")
+def single_table(result) -> BRDFTable:
+    """The table of ``result``'s single-scattering BRDF (order 1 of ``brdf_orders``)."""
+    return BRDFTable(
+        result.theta_i, result.bins, result.brdf_orders[0], result.stderr_orders[0], "order 1"
+    )
 
 
 def scene(

@@ -373,3 +373,23 @@ def test_mitsuba_renders_simulated_gold_gold_and_its_grey_grey(tmp_path):
     np.testing.assert_allclose(rgb, mean("closed"), rtol=0.03)
     grey = mean("grey")
     assert np.ptp(grey) < 0.02 * grey.mean(), grey
+
+
+def test_a_result_of_several_orders_stands_for_its_whole_brdf():
+    """``BRDFTable.from_result`` (and with it a ``SpectralBRDF`` of Results and the colour
+    picture) takes every order a run traced: ``brdf_total`` with the orders' standard errors
+    in quadrature; a single-bounce run's table is its ``brdf``."""
+    from microsim.measured import BRDFTable
+    from microsim.sim import Bins, simulate
+    from microsim.surfaces import gaussian
+
+    surface = gaussian(32, 1.0, 1.0, 3.0, seed=2)  # rms slope ~0.5: second orders abound
+    kw = dict(rays=2**14, bins=Bins(9, 5), threads=1)
+    several = simulate(surface, "aluminium", [0.0, 60.0], bounces=3, **kw)
+    table = BRDFTable.from_result(several)
+    assert np.array_equal(table.brdf, several.brdf_total())
+    assert not np.array_equal(table.brdf, several.brdf)  # the further orders count
+    quadrature = np.sqrt(np.sum(several.stderr_orders**2, axis=0))
+    assert np.array_equal(table.stderr, quadrature)
+    single = simulate(surface, "aluminium", [0.0, 60.0], **kw)
+    assert np.array_equal(BRDFTable.from_result(single).brdf, single.brdf)

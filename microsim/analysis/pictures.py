@@ -204,7 +204,7 @@ def render_colour(brdf: SpectralBRDF, theta_i: float, phi_i: float = 0.0, illumi
     for k, (nm, b) in enumerate(zip(brdf.wavelengths_nm, brdf.brdfs)):
         if isinstance(b, Result):
             t = _incidence_index(b, th, ph, nm)
-            spectra[..., k] = render(b.brdf[t], b.bins, wo, mask, th, ph)
+            spectra[..., k] = render(b.brdf_total()[t], b.bins, wo, mask, th, ph)
         else:
             spectra[..., k] = np.nan
             spectra[mask, k] = brdf.functions[k](wi, wo[mask]) * math.cos(math.radians(th))

@@ -85,8 +85,10 @@ class BRDFTable:
     @classmethod
     def from_result(cls, result, model: str | None = None, name: str | None = None):
         """The table of a ``Result`` on folded bins at φi = 0 (all incidences): its simulated
-        BRDF, or the bin averages of ``model`` (one of ``result.models``; stderr 0). A result
-        of an anisotropic surface (``meta["surface"]``, judged as ``microsim measure`` judges
+        BRDF — the whole BRDF of every order it traced (``Result.brdf_total``, standard errors
+        of the orders added in quadrature), ``brdf`` for a single-bounce run — or the bin
+        averages of ``model`` (one of ``result.models``; stderr 0). A result of an anisotropic
+        surface (``meta["surface"]``, judged as ``microsim measure`` judges
         a scene: ``surfaces.surface.anisotropy_of``) is refused: its BRDF depends on the
         incidence azimuth, which the table does not hold."""
         if not result.bins.folded or np.any(np.asarray(result.phi_i) != 0.0):
@@ -108,7 +110,10 @@ class BRDFTable:
                 )
         order = np.argsort(result.theta_i)
         if model is None:
-            f, se = np.asarray(result.brdf), np.asarray(result.stderr)
+            f, se = np.asarray(result.brdf_total()), np.asarray(result.stderr)
+            if result.stderr_orders is not None:  # conservative: the orders' sums of one
+                # run are anti-correlated (a path ends in one order), never positively
+                se = np.sqrt(np.sum(np.asarray(result.stderr_orders) ** 2, axis=0))
         else:
             if model not in result.models:
                 raise UsageError(
