@@ -1,0 +1,80 @@
+"""What the heightfield grid walk costs per ray (``heightfield_caster.cast_falling``) on the
+bench surface (512² Gaussian, σ = 1.2, ℓ = 8 cells), for falling rays from the top of the
+relief at several incidences: ns per ray (process time, best of three, 2²¹ starts on a
+jittered row-major grid, as stratified origins are ordered), and the mean number of cells a
+ray steps over above the relief before the cell it meets (counted in NumPy on 4096 of the
+starts). docs/performance.md quotes it.
+
+    .venv/bin/python tools/walk_cost.py
+"""
+
+import time
+
+import numpy as np
+
+from microsim.app.bench import BenchConfig, _surface
+from microsim.sim.heightfield_caster import cast_falling
+from microsim.sim.tracer_cache import tracer_for
+
+INCIDENCES = ((0.0, 0.0), (30.0, 0.0), (30.0, 30.0), (60.0, 0.0), (60.0, 30.0))
+STARTS = 2**21
+COUNTED = 4096
+
+
+def skipped_cells(grid, x, y, z, d) -> float:
+    """Mean number of cells the rays (x, y, z) + t·d cross wholly above their highest vertex
+    before the first cell they do not (steps of 1/64 cell along the ray's footprint)."""
+    cell_max = grid.cell_max
+    ny, nx = cell_max.shape
+    u, v = (x - grid.x0) / grid.cell, (y - grid.y0) / grid.cell
+    dh = np.hypot(d[0], d[1])
+    if dh == 0.0:
+        return 0.0
+    step = 1.0 / 64.0  # in cells along the footprint
+    count = np.zeros(len(x))
+    live = np.ones(len(x), dtype=bool)
+    last = np.stack([np.floor(u), np.floor(v)], axis=1)
+    s = 0.0
+    while live.any():
+        s += step
+        uu, vv = u + s * d[0] / dh, v + s * d[1] / dh
+        zz = z + s * grid.cell * d[2] / dh
+        i, j = np.floor(uu), np.floor(vv)
+        above = zz > cell_max[j.astype(int) % ny, i.astype(int) % nx]
+        moved = (i != last[:, 0]) | (j != last[:, 1])
+        count += live & moved  # left a cell the ray stayed above
+        last = np.stack([i, j], axis=1)
+        live &= above
+    return float(count.mean())
+
+
+def main() -> None:
+    tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
+    grid = tracer.grid
+    geometry = grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)
+    rng = np.random.default_rng(1)
+    m = int(np.sqrt(STARTS))
+    k = np.arange(STARTS)
+    hx, hy = tracer.half
+    x = -hx + (k % m + rng.uniform(size=STARTS)) * (2 * hx / m)
+    y = -hy + (k // m + rng.uniform(size=STARTS)) * (2 * hy / m)
+    z = np.full(STARTS, tracer.zmax + tracer.top_margin)
+    out = (np.empty(STARTS, np.int8), np.empty(STARTS, np.int64)) + tuple(
+        np.empty(STARTS) for _ in range(3)
+    )
+    print("θi    φi   ns per ray   cells stepped over")
+    for theta, phi in INCIDENCES:
+        t, p = np.radians(theta), np.radians(phi)
+        d = (-np.sin(t) * np.cos(p), -np.sin(t) * np.sin(p), -np.cos(t))
+        cast_falling(x[:8], y[:8], z[:8], *d, geometry, *(o[:8] for o in out))  # compile
+        best = np.inf
+        for _ in range(3):
+            t0 = time.process_time()
+            cast_falling(x, y, z, *d, geometry, *out)
+            best = min(best, time.process_time() - t0)
+        cells = skipped_cells(grid, x[:COUNTED], y[:COUNTED], z[0], d)
+        print(f"{theta:4.0f}  {phi:4.0f}   {best / STARTS * 1e9:10.1f}   {cells:18.2f}")
+
+
+if __name__ == "__main__":
+    main()
