@@ -7,15 +7,36 @@ cache folder (``~/.cache/numba``), so that later processes load it instead of co
 read-only install, home and cache folder), numba refuses to decorate a cached function at
 all; ``cached_njit`` then compiles it uncached — every process compiles it again — and says so
 once per process on stderr (``NOTICE``).
+
+A kernel inlines helpers from other modules, and numba checks a cached kernel only against its
+own source file (its modification time and size): after an edit of a helper's module it would
+load the kernel compiled with the old helper. So every kernel's cache entry is also stamped
+with ``PACKAGE_STAMP``, the modification times and sizes of all of microsim's modules: any
+change to any of them recompiles the kernels (an installed package only changes on
+reinstall; a checkout after every edit or pull).
 """
 
 from __future__ import annotations
 
+import hashlib
 import sys
+from pathlib import Path
 
 from numba import njit
 
-__all__ = ["cached_njit", "NOTICE"]
+__all__ = ["cached_njit", "NOTICE", "PACKAGE_STAMP"]
+
+
+def _package_stamp() -> str:
+    """A digest of the modification time and size of every module of the package."""
+    digest = hashlib.sha256()
+    for path in sorted(Path(__file__).resolve().parent.rglob("*.py")):
+        st = path.stat()
+        digest.update(f"{path.name}:{st.st_mtime_ns}:{st.st_size};".encode())
+    return digest.hexdigest()
+
+
+PACKAGE_STAMP = _package_stamp()
 
 NOTICE = (
     "microsim: numba finds no writable cache folder (NUMBA_CACHE_DIR, the package's "
@@ -40,9 +61,19 @@ def cached_njit(**options):
                 enable()
             except RuntimeError:  # numba: "cannot cache function …: no locator available"
                 _tell_uncached()
+            else:
+                _stamp_with_package(dispatcher)
         return dispatcher
 
     return decorate
+
+
+def _stamp_with_package(dispatcher) -> None:
+    """Add ``PACKAGE_STAMP`` to the source stamp numba's index of ``dispatcher`` is saved with
+    and checked against (``numba.core.caching.IndexDataCacheFile``)."""
+    index = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if index is not None and hasattr(index, "_source_stamp"):
+        index._source_stamp = (index._source_stamp, PACKAGE_STAMP)
 
 
 def _tell_uncached() -> None:

@@ -234,3 +234,15 @@ def test_the_kernel_cache_is_keyed_by_cpu_and_safe_for_concurrent_first_starts(t
     assert int(outs[0][0]) > 0 and int(outs[1][0]) > 0
     assert int(warm[0]) == 0 and int(other[0]) > 0
     assert outs[0][1] == outs[1][1] == warm[1] == other[1]
+
+
+def test_a_cached_kernel_is_checked_against_every_module_of_the_package():
+    """numba checks a cached kernel against its own file only; the kernels also carry the
+    package's stamp, so an edit of a helper they inline (another module) recompiles them."""
+    from microsim import kernel_cache
+    from microsim.sim import vgroove_kernels
+
+    kernel = vgroove_kernels.analytic_vgroove_bounces
+    stamp = kernel._cache._cache_file._source_stamp
+    assert stamp[1] == kernel_cache.PACKAGE_STAMP
+    assert len(kernel_cache.PACKAGE_STAMP) == 64
