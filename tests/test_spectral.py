@@ -81,7 +81,10 @@ def test_each_wavelength_is_its_own_run_on_the_grid_walk(table, surface, bounces
 
 
 @pytest.mark.parametrize("bounces", [1, 3])
-@pytest.mark.parametrize("rays, isotropic", [(6000, False), (1000, False), (1000, True)])
+@pytest.mark.parametrize(
+    "rays, isotropic",
+    [(6000, False), pytest.param(1000, False, marks=pytest.mark.slow), (1000, True)],
+)
 def test_each_material_is_its_own_run_on_embree(surface, monkeypatch, bounces, rays, isotropic):
     """Embree alone (no grid walk): 6000 rays trace through the facet table, 1000 (fewer
     than the facets) ray by ray, isotropic ones with per-block rotations."""
@@ -90,7 +93,10 @@ def test_each_material_is_its_own_run_on_embree(surface, monkeypatch, bounces, r
     compare(surface, mats, mats, rays=rays, bounces=bounces, isotropic=isotropic)
 
 
-@pytest.mark.parametrize("bounces, masking", [(1, "analytic"), (1, "traced"), (3, "traced")])
+@pytest.mark.parametrize(
+    "bounces, masking",
+    [(1, "analytic"), pytest.param(1, "traced", marks=pytest.mark.slow), (3, "traced")],
+)
 def test_each_material_is_its_own_run_on_vgrooves(bounces, masking):
     grooves = vgroove_surface([20.0, 35.0, 50.0, 65.0])
     mats = ["aluminium", "0.2+3.4i", None]
