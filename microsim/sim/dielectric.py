@@ -266,7 +266,7 @@ class DielectricPath(BouncePath):
         self.stream = roulette_stream(incidence.key)
         tracer = incidence.tracer
         self.table = uses_facet_table(tracer, None, azimuth, rotate, incidence.rays)
-        self.slots = order_slots(chain.limit)  # order slots per side
+        self.tallied = 2 * order_slots(chain.limit) * chain.nbin  # both sides' order slots × bins
 
     def trace(self, wi, phi_i, starts, psi, blocks) -> InterfaceOutcome:
         """The paths from ``starts`` (``follow``'s outcome): step by step through Embree, or
@@ -290,8 +290,8 @@ class DielectricPath(BouncePath):
         inc = self.incidence
         if not uses_grid_walk(inc.tracer, inc.bins, wi, psi):
             out = self._step_by_step(wi, phi_i, starts, psi, blocks)
-            nbin_total = 2 * self.slots * self.chain.nbin
-            return split_order_tallies(**out._asdict(), n_blocks=len(blocks), nbin_total=nbin_total)
+            n_blocks = len(blocks)
+            return split_order_tallies(**out._asdict(), n_blocks=n_blocks, nbin_total=self.tallied)
         x = columns(starts)
         sums = self._sums(len(x[0]), blocks)
         self._on_grid(wi, phi_i, x, blocks, InterfaceOutcome.work(len(x[0])), sums)
@@ -299,8 +299,7 @@ class DielectricPath(BouncePath):
 
     def _sums(self, n: int, blocks) -> ChunkSums:
         """The ``tally_kernels.ChunkSums`` of ``n`` paths in ``blocks``."""
-        nbin_total = 2 * self.slots * self.chain.nbin
-        return chunk_sums(n, len(blocks), nbin_total, ledger_columns(True)[0])
+        return chunk_sums(n, len(blocks), self.tallied, ledger_columns(True)[0])
 
     def _roulette(self, blocks) -> Roulette:
         return Roulette(self.stream, block_span(self.incidence.rays, list(blocks))[0])

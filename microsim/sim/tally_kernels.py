@@ -72,14 +72,8 @@ def block_tallies(
                 and where[i] == where[i + 1]
             ):
                 acc[2, where[i]] += weight[i] * weight[i + 1]
-        for q in range(offsets[b], j):
-            k = out_bin[q]
-            for m in range(3):
-                out_sums[m, q] = acc[m, k]
-                acc[m, k] = 0.0
-            out_cnt[q] = touched[k]
-            touched[k] = 0
-    offsets[(n + block - 1) // block] = j
+        close_block(b, j, ChunkSums(acc, touched, out_bin, out_sums, out_cnt, offsets, ln, lf))
+    offsets[(n + block - 1) // block] = j  # also for an empty batch
 
 
 @compiled
