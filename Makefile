@@ -10,9 +10,10 @@ BIN    := $(VENV)/bin
 demo: $(VENV)/.installed
 	$(BIN)/microsim report --quick
 
-# two pytest-xdist workers: both cores of the 2-core machines CI runs on
+# two pytest-xdist workers: both cores of the 2-core machines CI runs on; the kernels compiled
+# once before they start (--warm-kernels, tests/conftest.py) instead of by both
 test: lint
-	$(BIN)/python -m pytest -n 2
+	$(BIN)/python -m pytest -n 2 --warm-kernels
 
 # inner loop while developing: no slow and no end-to-end tests
 test-fast: $(VENV)/.installed-test

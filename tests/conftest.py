@@ -9,8 +9,12 @@ test process's disposition:
   are restored after every test, with a warning naming the test.
 """
 
+import os
+import shutil
 import signal
+import tempfile
 import warnings
+from pathlib import Path
 
 import pytest
 
@@ -35,6 +39,38 @@ def _sigint_restored(request, _sigint_deliverable):
         signal.signal(signal.SIGINT, before[0])
         signal.pthread_sigmask(signal.SIG_SETMASK, before[1])
         warnings.warn(f"{request.node.nodeid} left SIGINT as {now}; restored", stacklevel=1)
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--warm-kernels",
+        action="store_true",
+        help="before the xdist workers start, compile microsim's kernels once into numba's "
+        "cache (dispatch_probe.py natively) while the AVX2-pinned probe of test_portability "
+        "runs on the other core: the workers then load the kernels instead of both compiling "
+        "them (make test)",
+    )
+
+
+def pytest_configure(config):
+    """``--warm-kernels`` (controller only): the two probe processes, side by side; the
+    pinned output is handed to the workers through ``dispatch_probe.PREPARED``. A failed
+    probe is not reported here: test_portability then runs it again and says why."""
+    if not config.getoption("warm_kernels") or hasattr(config, "workerinput"):
+        return
+    import dispatch_probe
+
+    folder = Path(tempfile.mkdtemp(prefix="microsim-warm-kernels-"))
+    config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
+    inputs, pinned = dispatch_probe.write_inputs(folder), folder / "avx2.npz"
+    runs = [
+        dispatch_probe.start(inputs, folder / "native.npz", pinned=False),
+        dispatch_probe.start(inputs, pinned, pinned=True),
+    ]
+    for run in runs:
+        run.communicate()
+    if all(run.returncode == 0 for run in runs):
+        os.environ[dispatch_probe.PREPARED] = f"{inputs}{os.pathsep}{pinned}"
 
 
 def pytest_collection_modifyitems(config, items):

@@ -10,14 +10,89 @@ depend on the CPU dispatch.
 
 Usage: python dispatch_probe.py INPUT.npz OUTPUT.npz (INPUT: directions ``wo``, ``psi``,
 ``status``, incident azimuth ``phi_i``, V-groove ``grooves`` vertices, ``heightfield_path``).
-OUTPUT also records what this process ran on (``numpy_avx512``, ``numba_cpu``)."""
+OUTPUT also records what this process ran on (``numpy_avx512``, ``numba_cpu``).
+
+``make test`` runs this script twice before its workers start (``--warm-kernels``,
+tests/conftest.py): natively, which compiles the kernels once into numba's cache for both
+workers, and held to AVX2 (``AVX2_ENV``) on the other core; test_portability then reads the
+pinned output (``PREPARED``) instead of starting that process itself."""
 
 from __future__ import annotations
 
 import dataclasses
+import os
+import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
+
+AVX2_ENV = {
+    # NumPy 2's AVX-512 dispatch targets and NumPy 1's (each ignores the other's names)
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512_SKX",
+    "NUMBA_CPU_NAME": "haswell",
+    "NUMBA_CPU_FEATURES": "",  # the named CPU's own features, not the host's
+}
+PREPARED = "MICROSIM_TEST_PINNED_PROBE"
+"""Environment variable naming the (inputs, pinned output) files of a probe run up front,
+joined by ``os.pathsep``."""
+
+
+def write_inputs(tmp: Path) -> Path:
+    """Directions on, and 1e-9 rad beside, every θ and ±Δφ edge of the probe's grids, the
+    mirror directions of a flat facet (θo = θi on 0.5° steps, Δφ = 180°) and random ones;
+    a V-groove mesh and a heightfield file, all made in this process."""
+    from microsim import analytic as an
+    from microsim import surfaces as sf
+    from microsim.sim import Bins, paths
+
+    rng = np.random.default_rng(5)
+    phi_i = 35.0
+    te = np.radians(np.arange(0.0, 90.0, 1.0))[:, None] + [[-1e-9, 0.0, 1e-9]]
+    pe = np.radians(Bins(90, 181).phi_edges)[:, None] + [[-1e-9, 0.0, 1e-9]]
+    t, dp = np.meshgrid(np.append(te, 0.4), np.concatenate([pe.ravel(), -pe.ravel()]))
+    t = np.concatenate([t.ravel(), np.radians(np.arange(0.0, 90.0, 0.5))])
+    dp = np.concatenate([dp.ravel(), np.full(180, np.pi)])
+    n = 20_000
+    psi = np.concatenate([rng.uniform(0, 2 * np.pi, n), np.zeros(len(t))])
+    wo = rng.normal(size=(n, 3)) * [0.4, 0.4, 1.0]
+    wo[:, 2] = np.abs(wo[:, 2])
+    wo /= np.linalg.norm(wo, axis=1)[:, None]
+    phi = dp + np.radians(phi_i)
+    edge = np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.cos(t)], 1)
+    status = np.where(rng.random(n + len(t)) < 0.9, paths.SINGLE, paths.MASKED).astype(np.int8)
+    heights = tmp / "heights.npy"
+    np.save(heights, rng.normal(size=(48, 48)) * 0.4)
+    path = tmp / "inputs.npz"
+    np.savez(
+        path,
+        wo=np.concatenate([wo, edge]),
+        psi=psi,
+        status=status,
+        phi_i=phi_i,
+        grooves=sf.vgrooves(400, an.Beckmann(0.3)).vertices,
+        heightfield_path=str(heights),
+    )
+    return path
+
+
+def start(inputs: Path, out: Path, pinned: bool) -> subprocess.Popen:
+    """This script on ``inputs`` writing ``out`` in a new process, held to AVX2 if
+    ``pinned``."""
+    env = {**os.environ, **AVX2_ENV} if pinned else None
+    cmd = [sys.executable, "-W", "ignore", str(Path(__file__)), str(inputs), str(out)]
+    return subprocess.Popen(
+        cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+
+
+def prepared() -> tuple[Path, Path] | None:
+    """The (inputs, pinned output) of the run up front, if there was one and it succeeded."""
+    given = os.environ.get(PREPARED)
+    if not given:
+        return None
+    inputs, out = (Path(p) for p in given.split(os.pathsep))
+    return (inputs, out) if inputs.is_file() and out.is_file() else None
 
 
 def probe(inputs: dict) -> dict:

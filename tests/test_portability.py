@@ -10,23 +10,13 @@ import math
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import dispatch_probe
 import numpy as np
 import pytest
 
-from microsim import analytic as an
-from microsim import surfaces as sf
 from microsim import trig
-from microsim.sim import Bins, paths
-
-AVX2_ENV = {
-    # NumPy 2's AVX-512 dispatch targets and NumPy 1's (each ignores the other's names)
-    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512_SKX",
-    "NUMBA_CPU_NAME": "haswell",
-    "NUMBA_CPU_FEATURES": "",  # the named CPU's own features, not the host's
-}
+from microsim.sim import paths
 
 
 def _ulps(a: float, b: float) -> float:
@@ -56,40 +46,6 @@ def test_atan2_portable_is_libm_within_an_ulp_with_c99_special_values():
     assert math.isnan(trig.atan2_portable(math.nan, 1.0))
 
 
-def _inputs(tmp: Path) -> Path:
-    """Directions on, and 1e-9 rad beside, every θ and ±Δφ edge of the probe's grids, the
-    mirror directions of a flat facet (θo = θi on 0.5° steps, Δφ = 180°) and random ones;
-    a V-groove mesh and a heightfield file, all made in this process."""
-    rng = np.random.default_rng(5)
-    phi_i = 35.0
-    te = np.radians(np.arange(0.0, 90.0, 1.0))[:, None] + [[-1e-9, 0.0, 1e-9]]
-    pe = np.radians(Bins(90, 181).phi_edges)[:, None] + [[-1e-9, 0.0, 1e-9]]
-    t, dp = np.meshgrid(np.append(te, 0.4), np.concatenate([pe.ravel(), -pe.ravel()]))
-    t = np.concatenate([t.ravel(), np.radians(np.arange(0.0, 90.0, 0.5))])
-    dp = np.concatenate([dp.ravel(), np.full(180, np.pi)])
-    n = 20_000
-    psi = np.concatenate([rng.uniform(0, 2 * np.pi, n), np.zeros(len(t))])
-    wo = rng.normal(size=(n, 3)) * [0.4, 0.4, 1.0]
-    wo[:, 2] = np.abs(wo[:, 2])
-    wo /= np.linalg.norm(wo, axis=1)[:, None]
-    phi = dp + np.radians(phi_i)
-    edge = np.stack([np.sin(t) * np.cos(phi), np.sin(t) * np.sin(phi), np.cos(t)], 1)
-    status = np.where(rng.random(n + len(t)) < 0.9, paths.SINGLE, paths.MASKED).astype(np.int8)
-    heights = tmp / "heights.npy"
-    np.save(heights, rng.normal(size=(48, 48)) * 0.4)
-    path = tmp / "inputs.npz"
-    np.savez(
-        path,
-        wo=np.concatenate([wo, edge]),
-        psi=psi,
-        status=status,
-        phi_i=phi_i,
-        grooves=sf.vgrooves(400, an.Beckmann(0.3)).vertices,
-        heightfield_path=str(heights),
-    )
-    return path
-
-
 @pytest.mark.long
 def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
     """The compiled bin pass, ``Bins.locate`` and the tallies of V-groove (exact, analytic,
@@ -97,17 +53,18 @@ def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
     sides) runs are bitwise the same with NumPy's
     AVX-512 loops and numba's host target as with both held to AVX2 — and within each
     process the bin pass is ``Bins.locate``, ties on an edge included."""
-    inputs = _inputs(tmp_path)
+    ran = dispatch_probe.prepared()  # by make test before its workers started
+    proc = None
+    if ran is None:  # the pinned process runs while this one computes its own
+        inputs, out = dispatch_probe.write_inputs(tmp_path), tmp_path / "avx2.npz"
+        proc = dispatch_probe.start(inputs, out, pinned=True)
+    else:
+        inputs, out = ran
     with np.load(inputs) as f:
         native = dispatch_probe.probe(dict(f))
-    out = tmp_path / "avx2.npz"
-    env = {**os.environ, **AVX2_ENV}
-    probe = Path(dispatch_probe.__file__)
-    proc = subprocess.run(
-        [sys.executable, "-W", "ignore", str(probe), str(inputs), str(out)],
-        env=env, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
+    if proc is not None:
+        stderr = proc.communicate(timeout=600)[1]
+        assert proc.returncode == 0, stderr
     with np.load(out) as f:
         pinned = dict(f)
     assert not pinned["numpy_avx512"] and str(pinned["numba_cpu"]) == "haswell"
@@ -222,7 +179,7 @@ def test_the_kernel_cache_is_keyed_by_cpu_and_safe_for_concurrent_first_starts(t
     and agree; a third loads from the cache (compiles nothing); one targeting another CPU
     (Haswell) compiles anew rather than loading the host's machine code, and agrees too."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    for key in AVX2_ENV:
+    for key in dispatch_probe.AVX2_ENV:
         env.pop(key, None)
     cmd = [sys.executable, "-c", _CACHE_PROBE]
     run = lambda e: subprocess.Popen(cmd, env=e, stdout=subprocess.PIPE, text=True)  # noqa: E731
@@ -230,7 +187,7 @@ def test_the_kernel_cache_is_keyed_by_cpu_and_safe_for_concurrent_first_starts(t
     outs = [p.communicate(timeout=300)[0].split() for p in first]
     assert all(p.returncode == 0 for p in first)
     warm = run(env).communicate(timeout=300)[0].split()
-    other = run({**env, **AVX2_ENV}).communicate(timeout=300)[0].split()
+    other = run({**env, **dispatch_probe.AVX2_ENV}).communicate(timeout=300)[0].split()
     assert int(outs[0][0]) > 0 and int(outs[1][0]) > 0
     assert int(warm[0]) == 0 and int(other[0]) > 0
     assert outs[0][1] == outs[1][1] == warm[1] == other[1]
