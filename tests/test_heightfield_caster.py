@@ -134,14 +134,72 @@ def test_grid_is_found_only_for_heightfield_grids():
     assert Tracer(moved, grid=True).grid is None
 
 
-def test_grazing_or_foreign_rays_are_left_to_embree():
+def test_the_fused_primary_walk_takes_only_falling_rays_from_above_the_relief():
     s = _rough()
     walk = Tracer(s, grid=True)
     x = _starts(walk, 100, seed=1)
-    assert walk.cast_falling(x, [float(-c) for c in spherical_deg(89.0, 10.0)]) is None
+    assert walk.cast_falling(x, [float(-c) for c in spherical_deg(89.0, 10.0)]) is not None
     assert walk.cast_falling(x, [0.0, 0.0, 1.0]) is None  # rising
     low = [x[0], x[1], np.zeros(100)]  # below zmax: not a primary start
     assert walk.cast_falling(low, [0.0, 0.0, -1.0]) is None
+
+
+def _leaving_rays(tracer, n, seed, below=False):
+    """Rays leaving random points of the surface along random directions on one side of
+    their facet (above it, or below it for a medium's inside), started ``eps`` off its plane
+    as the tracer's secondary rays are: (starts, directions) as columns."""
+    rng = np.random.default_rng(seed)
+    lx, ly = tracer.tile
+    x = np.stack([rng.uniform(-lx / 2, lx / 2, n), rng.uniform(-ly / 2, ly / 2, n)], 1)
+    hits = tracer.first_hit(np.c_[x, np.full(n, tracer.zmax + 1.0)], np.array([0.0, 0.0, -1.0]))
+    nrm = hits.normal
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    sign = -1.0 if below else 1.0
+    d *= np.where(np.sum(d * nrm, axis=1) * sign < 0, -1.0, 1.0)[:, None]
+    start = tracer.on_plane(hits.prim, hits.point, sign * tracer.eps)
+    return [np.ascontiguousarray(start[:, k]) for k in range(3)], [d[:, k].copy() for k in range(3)]
+
+
+@pytest.mark.parametrize("below", [False, True])
+def test_walk_columns_on_the_grid_is_embrees_walk_from_either_side(below):
+    """Secondary rays (masking and bounce rays above the surface, a medium's rays below it)
+    through ``Tracer.trace_columns``/``escape_columns``: the grid's answers are Embree's
+    status and facet but for ties, the hit on its facet's plane and on the ray."""
+    s = _rough(n=48)
+    walk, ref = Tracer(s, grid=True), Tracer(s, backend="embreex")
+    n = 30_000
+    x, d = _leaving_rays(walk, n, seed=11 + below, below=below)
+    d32 = np.stack(d, 1).astype(np.float32)
+    hs, prim, point = (np.copy(a) if a is not None else a for a in walk.trace_columns(x, d, d32))
+    rs, rprim, _ = ref.trace_columns(x, d, d32)
+    assert np.sum(hs != rs) <= TIES * n + 1
+    both = (hs == HIT) & (rs == HIT)
+    assert both.mean() > 0.1 and np.mean(hs == HIT) < 0.9  # hits and escapes both tested
+    assert np.sum(prim[both] != rprim[both]) <= TIES * n + 1
+    p = np.stack(point, 1)[both]
+    nrm, v0 = walk.normals[prim[both]], walk.vertices[walk.faces[prim[both], 0]]
+    assert np.abs(np.einsum("ij,ij->i", p - v0, nrm)).max() < 1e-12
+    esc = walk.escape_columns(x, d, d32)
+    assert np.array_equal(esc, hs)  # occlusion queries: the same statuses
+
+
+def test_a_heightfield_run_never_builds_the_embree_scene():
+    """Primary, masking and bounce rays of opaque and dielectric runs all walk the grid, at
+    grazing incidence too; a tracer without the grid builds its scene on its first ray."""
+    s = _rough(n=32)
+    for options in (dict(), dict(bounces="all"), dict(bounces="all", transmission=True)):
+        tracer_cache._REUSED.clear()
+        r = simulate(s, 1.5 if options.get("transmission") else "aluminium", [0.0, 80.0],
+                     rays=BLOCK, bins=Bins(18, 13), **options)  # fmt: skip
+        assert r.meta["surface"]["grid_walk"]
+        prepared = tracer_cache.tracer_for(s, "traced", s.fingerprint())
+        assert prepared.tracer._scene is None, options
+    embree = Tracer(s, grid=False)
+    assert embree._scene is None
+    top = embree.zmax + embree.top_margin
+    hits = embree.first_hit(np.array([[0.1, 0.2, top]]), np.array([[0.0, 0.0, -1.0]]))
+    assert embree._scene is not None and hits.prim[0] >= 0
 
 
 def test_simulate_with_the_grid_walk_equals_embree_and_is_reproducible(monkeypatch):

@@ -2,7 +2,7 @@
 Gaussian heightfield of ``microsim bench``, aluminium, θi = 30°, 2²² rays, 1 thread): each
 stage of ``simulate`` timed by wrapping it (best of three runs), the fused walk-and-look-up
 kernel split by timing its two halves alone on one chunk, what the per-facet beam test clears
-and costs (``engine.beam``), and what the masking rays Embree traces do (how many escape, how
+and costs (``engine.beam``), and what the masking rays still walked do (how many escape, how
 far they run). docs/performance.md quotes it.
 
     .venv/bin/python tools/stage_profile.py
@@ -33,7 +33,7 @@ THETA = 30.0
 STAGES = {
     "ray origins": (paths, "chunk_origins"),
     "primary walk, look-ups, masking starts, horizon test": (ray_columns, "tabled_masking_rays"),
-    "masking rays through Embree": (MaskingRays, "trace"),
+    "masking rays walked (grid or Embree)": (MaskingRays, "trace"),
     "tallies": (tallies, "split_tallies"),
 }
 
@@ -128,7 +128,7 @@ def beams(tracer, table, steep) -> dict:
 
 
 def masking_rays(tracer, table, steep, wi, n: int = 2**20) -> dict:
-    """The masking rays Embree traces for n uniform primary rays: their share (and what it
+    """The masking rays walked for n uniform primary rays: their share (and what it
     would be with the per-ray tests alone: ``clear`` = ``steep``, no beam cleared), the share
     of them that escape, and quantiles of their polar angle and of their run (cells crossed
     on the climb to zmax) for the escaping ones."""
@@ -180,7 +180,7 @@ def main() -> None:
     )  # the clear flags before beams
     for label, value in beams(tracer, table, steep).items():
         print(f"  {label}: {value}")
-    print("masking rays traced by Embree:")
+    print("masking rays walked:")
     for label, value in masking_rays(tracer, table, steep, wi).items():
         print(f"  {label}: {value}")
 

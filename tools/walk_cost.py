@@ -3,20 +3,25 @@ bench surface (512² Gaussian, σ = 1.2, ℓ = 8 cells), for falling rays from t
 relief at several incidences: ns per ray (process time, best of three, 2²¹ starts on a
 jittered row-major grid, as stratified origins are ordered), and the mean number of cells a
 ray steps over above the relief before the cell it meets (counted in NumPy on 4096 of the
-starts). docs/performance.md quotes it.
+starts). With ``--embree``: instead, ns per primary ray of the grid walk and of Embree (the
+tracer's packets) for the same rays at grazing incidences, where the walk crosses the most
+cells. docs/performance.md and docs/design.md quote it.
 
-    .venv/bin/python tools/walk_cost.py
+    .venv/bin/python tools/walk_cost.py [--embree]
 """
 
+import sys
 import time
 
 import numpy as np
 
 from microsim.app.bench import BenchConfig, _surface
 from microsim.sim.heightfield_caster import cast_falling
-from microsim.sim.tracer_cache import tracer_for
+from microsim.sim.tracer import Tracer
+from microsim.sim.tracer_cache import TRACER_BACKEND, tracer_for
 
 INCIDENCES = ((0.0, 0.0), (30.0, 0.0), (30.0, 30.0), (60.0, 0.0), (60.0, 30.0))
+GRAZING = (60.0, 75.0, 80.0, 85.0, 88.0, 89.5)  # θi of the comparison with Embree (φi = 0)
 STARTS = 2**21
 COUNTED = 4096
 
@@ -48,7 +53,45 @@ def skipped_cells(grid, x, y, z, d) -> float:
     return float(count.mean())
 
 
+def _best_seconds(trace, repeat: int = 3) -> float:
+    trace()  # compiled, scene built
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.process_time()
+        trace()
+        best = min(best, time.process_time() - t0)
+    return best
+
+
+def against_embree() -> None:
+    """Grid walk and Embree per primary ray (``Tracer.trace_columns`` with and without the
+    grid) at the ``GRAZING`` incidences, 2¹⁸ stratified starts, and the cells the relief's
+    height range spans along the ray."""
+    surface = _surface(BenchConfig())
+    walk = Tracer(surface, backend=TRACER_BACKEND, grid=True)
+    embree = Tracer(surface, backend=TRACER_BACKEND, grid=False)
+    n = 2**18
+    rng = np.random.default_rng(1)
+    hx, hy = walk.half
+    x = [rng.uniform(-hx, hx, n), rng.uniform(-hy, hy, n), np.full(n, walk.zmax + walk.top_margin)]
+    order = np.lexsort((x[0], np.floor(x[1])))  # row by row, as stratified origins come
+    x = [np.ascontiguousarray(c[order]) for c in x]
+    print("θi    cells   grid walk ns   Embree ns")
+    for theta in GRAZING:
+        t = np.radians(theta)
+        down = [-np.sin(t), 0.0, -np.cos(t)]
+        d32 = np.array([down], dtype=np.float32)
+        ns = [
+            _best_seconds(lambda: tr.trace_columns(x, down, d32)) / n * 1e9 for tr in (walk, embree)
+        ]
+        cells = (walk.zmax - walk.zmin) * np.tan(t) / walk.grid.cell
+        print(f"{theta:4.1f}  {cells:6.0f}   {ns[0]:12.0f}   {ns[1]:9.0f}")
+
+
 def main() -> None:
+    if "--embree" in sys.argv[1:]:
+        against_embree()
+        return
     tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
     grid = tracer.grid
     geometry = grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)

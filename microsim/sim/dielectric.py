@@ -24,8 +24,9 @@ Tallies: 2·O order slots × bins (O = ``bounces.order_slots``): the O reflected
 O transmitted ones (``tallies.simulation_result`` splits them into ``brdf_orders`` and
 ``btdf_orders``); the ledger has the ``ledger.DIELECTRIC_TERMINAL`` classes and the
 ``ledger.TIR_ORDERS`` columns. Traced masking only, on heightfields and V-grooves, with the
-periodic wrap: step by step through Embree (``trace_dielectric``), or on a heightfield grid in
-one compiled loop per chunk (``interface_grid``, the same estimator); a continuing ray that
+periodic wrap: step by step (``trace_dielectric``: each step's rays through ``Tracer.
+trace_columns``, Embree or a heightfield's grid walk), or on a heightfield grid in one compiled
+loop per chunk (``interface_grid``, the same estimator); a continuing ray that
 surely leaves the relief (steeper than the steepest facet, away from the surface on its side)
 is not traced (``leaving``, ``bounces.trace_continuing``: its walk's outcome is known, so no
 number changes); bitwise reproducible as the opaque chains are (each path on its own, its
@@ -269,8 +270,8 @@ class DielectricPath(BouncePath):
         self.tallied = 2 * order_slots(chain.limit) * chain.nbin  # both sides' order slots × bins
 
     def trace(self, wi, phi_i, starts, psi, blocks) -> InterfaceOutcome:
-        """The paths from ``starts`` (``follow``'s outcome): step by step through Embree, or
-        on a heightfield grid in one compiled loop where it applies
+        """The paths from ``starts`` (``follow``'s outcome): step by step, or on a heightfield
+        grid in one compiled loop where it applies
         (``interface_grid.uses_grid_walk``)."""
         if not uses_grid_walk(self.incidence.tracer, self.incidence.bins, wi, psi):
             return self._step_by_step(wi, phi_i, starts, psi, blocks)

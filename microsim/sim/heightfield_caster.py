@@ -262,3 +262,51 @@ def cast_falling(x, y, z, dx, dy, dz, geometry, status, prim, px, py, pz):
     for i in range(len(x)):
         s, f, a, b, c = cast_one(x[i], y[i], z[i], dx, dy, dz, terms, geometry, above, geometry[9])
         status[i], prim[i], px[i], py[i], pz[i] = s, f, a, b, c
+
+
+@_inlined
+def height_at(hp, nx, ny, cell, x0, y0, x, y):
+    """h(x, y) on the periodic tile (any x, y; wrapped into it)."""
+    u, v = (x - x0) / cell, (y - y0) / cell
+    i, j = int(math.floor(u)), int(math.floor(v))
+    fu, fv = u - i, v - j
+    ci, cj = i - _tile_of(i, nx) * nx, j - _tile_of(j, ny) * ny
+    return _plane_height(hp, ci, cj, _clamp01(fu), _clamp01(fv), fu >= fv)
+
+
+@_compiled
+def cast_columns(x, y, z, dx, dy, dz, shared, geometry, cell_min, max_wraps, occlusion, out):
+    """``cast_one`` for rays (x, y, z)[i] along (dx, dy, dz)[i] (index 0 for all when
+    ``shared``), rising or falling, on ``geometry`` with the wrap cap ``max_wraps``; writes
+    ``out`` = (status, prim, px, py, pz) (``segments.WalkResult``; status only for
+    ``occlusion``). Each ray's side is that of its start: above the surface where z ≥ h(x, y)
+    (a start above zmax, or lifted off a facet along its normal), else below it (inside a
+    dielectric medium, bounded by ``cell_min``). A horizontal ray (dz = 0) beyond the relief
+    leaves it; one within it walks until it meets the surface or reaches the wrap cap."""
+    status, prim, px, py, pz = out
+    hp, nx, ny, cell, x0, y0 = (
+        geometry[0],
+        geometry[2],
+        geometry[3],
+        geometry[4],
+        geometry[5],
+        geometry[6],
+    )
+    zmin, zmax = geometry[7], geometry[8]
+    above, below = (1.0, geometry[1]), (-1.0, cell_min)
+    terms = direction_terms(dx[0], dy[0], dz[0], cell)
+    for i in range(len(x)):
+        k = 0 if shared else i
+        if not shared:
+            terms = direction_terms(dx[k], dy[k], dz[k], cell)
+        zi = z[i]
+        up = zi >= zmax or (zi > zmin and zi >= height_at(hp, nx, ny, cell, x0, y0, x[i], y[i]))
+        if dz[k] == 0.0 and (zi >= zmax or zi <= zmin):
+            status[i] = ESCAPED if zi >= zmax else MISSED
+            continue
+        s, f, a, b, c = cast_one(
+            x[i], y[i], zi, dx[k], dy[k], dz[k], terms, geometry, above if up else below, max_wraps
+        )
+        status[i] = s
+        if not occlusion:
+            prim[i], px[i], py[i], pz[i] = f, a, b, c

@@ -1,6 +1,6 @@
 """Paths through a dielectric interface on a heightfield grid, each followed to its end in one
 compiled loop (``trace_grid_interface``; ``dielectric.trace_dielectric`` is the same estimator
-step by step through Embree).
+step by step, through Embree on other meshes).
 
 On a heightfield tile (``heightfield_caster.HeightfieldGrid``) every ray of a path, the
 primary one and each continuation, from above the surface or from below it (inside the
@@ -18,8 +18,8 @@ Continuation rays: one that surely leaves the relief (steeper than the steepest 
 from the surface on its side: ``Tracer.surely_escapes``'s bound) is not walked; the others are
 walked with the wrap cap their direction needs (``Tracer.wraps_needed``, at most
 ``bounces.RETRY_WRAPS``, beyond which they stay unresolved, as ``bounces.resolve_grazing``
-leaves them). Used for incidences whose primary walk is short (``Tracer.grid_walk_cells`` ≤
-``tracer.GRID_WALK_CELLS``) on a folded bin grid; the others take ``dielectric``'s path.
+leaves them). Used for incidences with one direction on a folded bin grid; the others take
+``dielectric``'s path (on the same grid walk, one step at a time).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ from .scratch import WorkArray
 from .streams import BLOCK
 from .tallies import ledger_columns
 from .tally_kernels import ChunkSums, close_block, tally_path
-from .tracer import BASE_WRAPS, GRID_WALK_CELLS, Tracer
+from .tracer import BASE_WRAPS, Tracer
 
 __all__ = [
     "GridWalk",
@@ -110,11 +110,8 @@ class FoldedBinning(NamedTuple):
 
 def uses_grid_walk(tracer: Tracer, bins: Bins, wi, psi) -> bool:
     """Whether an incidence from ``wi`` takes the grid walk: a heightfield grid walked by the
-    tracer (``Tracer.grid``), one incident direction (``psi`` None), a folded bin grid and a
-    primary walk of at most ``GRID_WALK_CELLS`` cells."""
-    if tracer.grid is None or psi is not None or not bins.folded:
-        return False
-    return tracer.grid_walk_cells(-np.asarray(wi, dtype=np.float64)) <= GRID_WALK_CELLS
+    tracer (``Tracer.grid``), one incident direction (``psi`` None) and a folded bin grid."""
+    return tracer.grid is not None and psi is None and bins.folded
 
 
 def grid_walk_of(tracer: Tracer) -> GridWalk:

@@ -3,7 +3,12 @@ call per segment (``Tracer``'s scene) between two compiled passes over the live 
 (``segments.segment_setup``/``segment_finish``: float32 inputs and tfar; hits, escapes and
 wall re-entries). Embree gets a single direction when all rays share it, and the rays still
 live after a segment (those re-entering through a wall; most finish in the first) are
-compacted for the next."""
+compacted for the next.
+
+On a tracer with a heightfield grid (``Tracer.grid``) the same query walks each ray on the
+grid instead (``heightfield_caster.cast_columns``, in float64, from the side of the surface
+its start lies on): the same statuses, the facet Embree finds but for rays within float32
+rounding of an edge, the hit on the facet's plane."""
 
 from __future__ import annotations
 
@@ -12,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .engine import codes, segments
+from .heightfield_caster import cast_columns
 from .scratch import WorkArray, WorkColumns
 
 __all__ = ["TFAR_REL", "ColumnHits", "walk_columns"]
@@ -97,10 +103,13 @@ def walk_columns(tracer, x, d, d32, occlusion: bool, first=None, wraps=None) -> 
 
     ``first``: the first segment's Embree input (o32, tq, keep, top) already set up by the
     caller exactly as ``segment_setup`` would from these rays, which then all lie in the
-    tile and are all traced (``primary.tabled_primary``, ``segments.falling_first_segment``).
+    tile and are all traced (``primary.tabled_primary``, ``segments.falling_first_segment``;
+    unused on a grid).
     ``wraps``: the wrap cap (segments − 1) instead of ``tracer.max_wraps``."""
     n = len(x[0])
     shared = np.isscalar(d[0])
+    if tracer.grid is not None:
+        return _grid_columns(tracer, x, d, occlusion, wraps)
     x = _wrapped_starts(tracer, x, first)
     if shared:
         d = [np.array([float(c)]) for c in d]
@@ -151,6 +160,38 @@ def walk_columns(tracer, x, d, d32, occlusion: bool, first=None, wraps=None) -> 
     if occlusion:
         return ColumnHits(result.status, None, None)
     return ColumnHits(result.status, result.prim, [result.x, result.y, result.z])
+
+
+def _grid_columns(tracer, x, d, occlusion: bool, wraps) -> ColumnHits:
+    """``walk_columns`` on ``tracer``'s heightfield grid (``heightfield_caster.cast_columns``)."""
+    x = [np.ascontiguousarray(c, dtype=np.float64) for c in x]
+    shared = np.isscalar(d[0])
+    if shared:
+        d = [np.array([float(c)]) for c in d]
+    else:
+        d = [np.ascontiguousarray(c, dtype=np.float64) for c in d]
+    n = len(x[0])
+    hits = 0 if occlusion else n
+    out = segments.WalkResult(
+        np.empty(n, dtype=np.int8),
+        np.empty(hits, dtype=np.int32),
+        *(np.empty(hits) for _ in range(3)),
+    )
+    cap = tracer.max_wraps if wraps is None else int(wraps)
+    grid = tracer.grid
+    cast_columns(
+        *x,
+        *d,
+        shared,
+        grid.geometry(tracer.zmin, tracer.zmax, cap),
+        grid.cell_min,
+        cap,
+        occlusion,
+        out,
+    )
+    if occlusion:
+        return ColumnHits(out.status, None, None)
+    return ColumnHits(out.status, out.prim, [out.x, out.y, out.z])
 
 
 def _first_segment_misses(seg: _SegmentInput, pid, tfar, rays, result) -> tuple:

@@ -15,8 +15,9 @@ V-groove surfaces can instead decide masking exactly in float64
 (``vgroove_profile.VGrooveProfile``).
 
 Speed: each segment of the walk (``periodic_walk``) is one Embree call between two compiled
-passes over the live rays. The BVH is built on the first Embree query (``Tracer.scene``): runs
-whose rays all walk a heightfield grid never build it.
+passes over the live rays. The BVH is built on the first Embree query (``Tracer.scene``): a
+heightfield tile traced with ``grid`` walks every ray on its grid (``heightfield_caster``)
+and never builds it.
 
 Backends (``embree_backends``): each segment's Embree call goes either to embreex (one ray per
 ``rtcIntersect1``) or, when the Embree 4 library embreex bundles can be bound
@@ -56,7 +57,6 @@ from .vgroove_profile import NO_GROOVES, NO_STRATA, groove_tables
 
 __all__ = [
     "Tracer",
-    "GRID_WALK_CELLS",
     "Hits",
     "HIT",
     "ESCAPED",
@@ -76,10 +76,6 @@ assert (HIT, ESCAPED, UNRESOLVED, MISSED) == (
 BLOCKED = HIT  # an occlusion ray that met the surface
 MAX_TRACED_DEG = 89.5  # rays up to this polar angle are always resolved (wrap cap)
 BASE_WRAPS = 64
-GRID_WALK_CELLS = 64.0
-"""The longest grid walk ``Tracer.cast_falling`` takes (cells crossed over the tile's height
-range): on the 512² bench heightfield the walk and Embree cost about the same per primary ray
-at θi = 80° (a 62-cell walk); the walk is several times faster at small θi and slower beyond."""
 
 
 @dataclass(frozen=True)
@@ -159,9 +155,10 @@ class Tracer:
     ``embree_packets`` can bind the library, else embreex) or "packets" (UsageError when
     unavailable); the one used is ``self.backend``.
     ``MICROSIM_EMBREE_PACKETS=0`` in the environment makes "auto" choose embreex.
-    ``grid``: find the first hits of falling rays on a heightfield tile by walking its grid
-    (``cast_falling``, ``heightfield_caster``) instead of Embree; ``self.grid`` is the
-    ``HeightfieldGrid`` (None when off or when the mesh is not a heightfield grid).
+    ``grid``: on a heightfield tile, walk every ray on its grid (``heightfield_caster``:
+    primary, masking and bounce rays, from above or below the surface) instead of Embree,
+    whose scene is then never built; ``self.grid`` is the ``HeightfieldGrid`` (None when off
+    or when the mesh is not a heightfield grid).
     """
 
     _scene = None
@@ -315,24 +312,14 @@ class Tracer:
     def grid_walk(self, x, down):
         """The grid walk's geometry (``HeightfieldGrid.geometry``) for rays from the starts
         ``x`` (3 columns) along one falling direction ``down`` (3 floats), or None when the
-        tracer has no grid, a start lies outside the tile or below zmax, or the direction is
-        so grazing that its walk would cross more than ``GRID_WALK_CELLS`` cells (Embree is
-        faster there)."""
+        tracer has no grid or a start lies outside the tile or below zmax (``walk_columns``
+        walks those)."""
         g = self.grid
         if g is None or not down[2] < 0.0 or not self.holds(x):
             return None
-        if self.grid_walk_cells(down) > GRID_WALK_CELLS or (len(x[0]) and x[2].min() < self.zmax):
+        if len(x[0]) and x[2].min() < self.zmax:
             return None
         return g.geometry(self.zmin, self.zmax, self.max_wraps)
-
-    def grid_walk_cells(self, d) -> float:
-        """Cells a ray along ``d`` (3 floats, d_z ≠ 0) crosses while it crosses the relief's
-        height range on the grid: (zmax − zmin)(|d_x| + |d_y|)/(|d_z|·cell) (inf without a
-        grid)."""
-        g = self.grid
-        if g is None:
-            return math.inf
-        return (self.zmax - self.zmin) * (abs(d[0]) + abs(d[1])) / (abs(d[2]) * g.cell)
 
     def cast_falling(self, x, down):
         """First hits of rays from the starts ``x`` (3 columns, in the tile, at or above zmax)

@@ -35,10 +35,11 @@ ships when they bind (the scene and BVH build in 0.10 s instead of embreex's ~0.
 bench mesh; tracing at about the same rate on AVX2), else embreex. ``MICROSIM_EMBREE_PACKETS=0``
 forces embreex, which stays the reference path of the tests."""
 GRID_CASTER = True
-"""Simulations find the primary hits on heightfield tiles by walking the grid
-(``heightfield_caster``, ``Tracer.cast_falling``): faster than Embree up to θi ≈ 80° on
-the bench mesh, exact in float64, the same facet as Embree's but for edge ties. ``GRID_SWITCH``
-= "0" in the environment (or ``GRID_CASTER = False``) keeps every ray on Embree."""
+"""Simulations walk every ray on heightfield tiles on the grid (``heightfield_caster``,
+``Tracer``'s ``grid``): faster than Embree per primary ray up to θi ≈ 85° on the bench mesh,
+exact in float64, the same facet as Embree's but for edge ties, and no Embree scene to build.
+``GRID_SWITCH`` = "0" in the environment (or ``GRID_CASTER = False``) keeps every ray on
+Embree."""
 GRID_SWITCH = "MICROSIM_GRID_CASTER"
 _REUSE_LOCK = threading.Lock()
 
