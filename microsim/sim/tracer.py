@@ -120,7 +120,7 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     tol = 1e-9 * max(lx, ly)
     if np.any(np.abs(v[:, 0]) > lx / 2 + tol) or np.any(np.abs(v[:, 1]) > ly / 2 + tol):
         raise UsageError("surface.vertices must lie in the tile [-Lx/2, Lx/2] x [-Ly/2, Ly/2]")
-    return v, f.astype(np.int64), lx, ly
+    return v, f if f.dtype in (np.int32, np.int64) else f.astype(np.int64), lx, ly
 
 
 def _cross_columns(a: np.ndarray, b: np.ndarray) -> list:
@@ -132,6 +132,34 @@ def _cross_columns(a: np.ndarray, b: np.ndarray) -> list:
     ]
 
 
+PLANE_CHUNK = 1 << 18
+"""Facets per pass of ``_facet_planes`` (its temporaries: ~200 bytes per facet of a chunk)."""
+
+
+def _facet_planes(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The unit normals cross(v1 − v0, v2 − v0)/|…| of the facets as rows (3, F) and their
+    planes' offsets n·v0 (F,), float64, built ``PLANE_CHUNK`` facets at a time. UsageError
+    for a degenerate facet or one whose normal does not point up."""
+    rows, plane = np.empty((3, len(f))), np.empty(len(f))
+    for a in range(0, len(f), PLANE_CHUNK):
+        fc = f[a : a + PLANE_CHUNK]
+        v0 = v[fc[:, 0]]
+        cross = _cross_columns(v[fc[:, 1]] - v0, v[fc[:, 2]] - v0)
+        norm = np.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2)
+        if np.any(norm == 0):
+            raise UsageError("surface.faces must not contain degenerate (zero-area) triangles")
+        if np.any(cross[2] <= 0):
+            raise UsageError(
+                "surface.faces must be ordered so that every normal "
+                "cross(v1 - v0, v2 - v0) points up (z > 0)"
+            )
+        n = rows[:, a : a + len(fc)]
+        for k in range(3):
+            n[k] = cross[k] / norm
+        plane[a : a + len(fc)] = n[0] * v0[:, 0] + n[1] * v0[:, 1] + n[2] * v0[:, 2]
+    return rows, plane
+
+
 _CAST_STATUS = WorkArray("cast-status", np.int8)  # the grid walk's hits (``scratch``)
 _CAST_PRIM = WorkArray("cast-prim", np.int32)
 _CAST_POINT = WorkColumns("cast-point")
@@ -140,16 +168,17 @@ _CAST_POINT = WorkColumns("cast-point")
 class Tracer:
     """Periodic Embree scene of one tile of ``surface`` (a ``microsim.surfaces.Surface``).
 
-    Attributes: ``vertices`` (V, 3) / ``faces`` (F, 3) float64/int64 copies, ``normals`` (F, 3)
-    unit float64 facet normals, ``tile`` (Lx, Ly), ``zmin``/``zmax``, ``eps`` (secondary-ray
-    offset along the normal, length units), ``top_margin`` (primary rays start at zmax + it)
-    and ``max_wraps`` (tile crossings per ray before it counts as unresolved: 64 plus enough
-    for a ray 89.5° from the normal to cross the whole height range), ``rise_bound`` (the
-    steepest facet slope of a heightfield, inf otherwise: masking rays steeper than it are
-    not traced, ``surely_escapes``), ``horizon`` (a coarse grid of cell maxima on which the
-    other masking rays of a heightfield are cleared without tracing when they can be,
-    ``clears_horizon``), ``facet_tables`` (the facet tables ``facet_tables.facet_table`` keeps for
-    the tracer's most recent incidences).
+    Attributes: ``vertices`` (V, 3) float64 and ``faces`` (F, 3) integer (the surface's own
+    arrays where they already have these types), ``normals`` (F, 3) unit float64 facet normals
+    (a view of ``normal_columns``, their three contiguous (F,) columns), ``tile`` (Lx, Ly),
+    ``zmin``/``zmax``, ``eps`` (secondary-ray offset along the normal, length units),
+    ``top_margin`` (primary rays start at zmax + it) and ``max_wraps`` (tile crossings per ray
+    before it counts as unresolved: 64 plus enough for a ray 89.5° from the normal to cross the
+    whole height range), ``rise_bound`` (the steepest facet slope of a heightfield, inf
+    otherwise: masking rays steeper than it are not traced, ``surely_escapes``), ``horizon`` (a
+    coarse grid of cell maxima on which the other masking rays of a heightfield are cleared
+    without tracing when they can be, ``clears_horizon``), ``facet_tables`` (the facet tables
+    ``facet_tables.facet_table`` keeps for the tracer's most recent incidences).
 
     ``backend``: "embreex" (the default and reference), "auto" (packets when
     ``embree_packets`` can bind the library, else embreex) or "packets" (UsageError when
@@ -169,26 +198,9 @@ class Tracer:
         self.vertices, self.faces = v, f
         self._heightfield = heightfield_grid(surface, v, f)  # None unless a heightfield grid
         self.grid = self._heightfield if grid else None
-        cross = _cross_columns(self._e1, self._e2)
-        norm = np.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2)
-        if np.any(norm == 0):
-            raise UsageError("surface.faces must not contain degenerate (zero-area) triangles")
-        if np.any(cross[2] <= 0):
-            raise UsageError(
-                "surface.faces must be ordered so that every normal "
-                "cross(v1 - v0, v2 - v0) points up (z > 0)"
-            )
-        self.normals = np.empty((len(f), 3))
-        for k in range(3):
-            self.normals[:, k] = cross[k] / norm
-        del cross, self._e1, self._e2  # cached: only needed to build
-        v0 = self._v0
-        self._plane = (
-            self.normals[:, 0] * v0[:, 0]
-            + self.normals[:, 1] * v0[:, 1]
-            + self.normals[:, 2] * v0[:, 2]
-        )  # n·v0 per facet
-        del self._v0
+        rows, self._plane = _facet_planes(v, f)
+        self.normals = rows.T  # (F, 3), a view of the rows
+        self.normal_columns = tuple(rows)  # the three contiguous rows
         self.tile = (lx, ly)
         self.half = np.array([lx / 2, ly / 2])
         self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
@@ -217,27 +229,6 @@ class Tracer:
             if self._scene is None:
                 self._scene = open_scene(self.vertices, self.faces, self.backend)
             return self._scene
-
-    # --- facet geometry (float64, built on demand: 72 bytes per facet) --------------------
-    @functools.cached_property
-    def _v0(self) -> np.ndarray:
-        """First vertex of every facet, (F, 3)."""
-        return self.vertices[self.faces[:, 0]]
-
-    @functools.cached_property
-    def _e1(self) -> np.ndarray:
-        """Edge v1 − v0 of every facet, (F, 3)."""
-        return self.vertices[self.faces[:, 1]] - self._v0
-
-    @functools.cached_property
-    def _e2(self) -> np.ndarray:
-        """Edge v2 − v0 of every facet, (F, 3)."""
-        return self.vertices[self.faces[:, 2]] - self._v0
-
-    @functools.cached_property
-    def normal_columns(self) -> tuple:
-        """Contiguous per-axis columns (3 × (F,)) of the unit facet normals."""
-        return tuple(np.ascontiguousarray(self.normals[:, k]) for k in range(3))
 
     @functools.cached_property
     def beam(self) -> "beam.BeamGrid | None":
