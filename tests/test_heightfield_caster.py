@@ -134,6 +134,29 @@ def test_grid_is_found_only_for_heightfield_grids():
     assert Tracer(moved, grid=True).grid is None
 
 
+def test_a_mesh_is_known_as_its_heights_grid_only_when_it_is_exactly_that_grid():
+    """``is_heightfield_mesh`` against ``heightfield_mesh`` itself: true for its output
+    (square and oblong tiles), false after any one change of a coordinate or a face."""
+    from microsim.surfaces.surface import heightfield_mesh, is_heightfield_mesh
+
+    rng = np.random.default_rng(2)
+    for shape in ((8, 8), (5, 9)):
+        h = rng.normal(size=shape)
+        v, f = heightfield_mesh(h, 0.25)
+        assert is_heightfield_mesh(h, 0.25, v, f)
+        assert not is_heightfield_mesh(h, 0.5, v, f)
+        for k in range(3):  # a coordinate moved: the last vertex (a wrapped copy) or one inside
+            for row in (len(v) - 1, shape[1] + 2):
+                w = v.copy()
+                w[row, k] += 1e-12
+                assert not is_heightfield_mesh(h, 0.25, w, f), (k, row)
+        for row in (0, len(f) - 1):  # a face's corners turned
+            g = f.copy()
+            g[row] = g[row, [1, 2, 0]]
+            assert not is_heightfield_mesh(h, 0.25, v, g)
+        assert not is_heightfield_mesh(h, 0.25, v, f[::-1])
+
+
 def test_the_fused_primary_walk_takes_only_falling_rays_from_above_the_relief():
     s = _rough()
     walk = Tracer(s, grid=True)

@@ -94,18 +94,13 @@ def heightfield_grid(surface, vertices: np.ndarray, faces: np.ndarray) -> Height
     heights, dx = getattr(surface, "heights", None), getattr(surface, "dx", None)
     if heights is None or dx is None or not getattr(surface, "periodic", False):
         return None
-    from microsim.surfaces.surface import heightfield_mesh
+    from microsim.surfaces.surface import is_heightfield_mesh
 
     heights = np.asarray(heights, dtype=np.float64)
-    if heights.ndim != 2:
-        return None
-    v, f = heightfield_mesh(heights, float(dx))
-    if v.shape != vertices.shape or f.shape != faces.shape:
-        return None
-    if not (np.array_equal(v, vertices) and np.array_equal(f, faces)):
+    if heights.ndim != 2 or not is_heightfield_mesh(heights, float(dx), vertices, faces):
         return None
     ny, nx = heights.shape
-    return HeightfieldGrid(v[:, 2].reshape(ny + 1, nx + 1), float(dx))
+    return HeightfieldGrid(vertices[:, 2].reshape(ny + 1, nx + 1), float(dx))
 
 
 @_inlined

@@ -325,6 +325,36 @@ def heightfield_mesh(heights: np.ndarray, dx: float) -> tuple[np.ndarray, np.nda
     return vertices, faces
 
 
+def is_heightfield_mesh(
+    heights: np.ndarray, dx: float, vertices: np.ndarray, faces: np.ndarray
+) -> bool:
+    """Whether (``vertices``, ``faces``) is exactly ``heightfield_mesh(heights, dx)``, checked
+    axis by axis against its layout without building it (a few bytes per vertex at a time)."""
+    ny, nx = heights.shape
+    if vertices.shape != ((ny + 1) * (nx + 1), 3) or faces.shape != (2 * nx * ny, 3):
+        return False
+    v = vertices.reshape(ny + 1, nx + 1, 3)
+    x = (np.arange(nx + 1) - nx / 2.0) * dx
+    y = (np.arange(ny + 1) - ny / 2.0) * dx
+    z = v[:, :, 2]
+    if not (
+        np.array_equal(v[:, :, 0], np.broadcast_to(x, (ny + 1, nx + 1)))
+        and np.array_equal(v[:, :, 1], np.broadcast_to(y[:, None], (ny + 1, nx + 1)))
+        and np.array_equal(z[:-1, :-1], heights)
+        and np.array_equal(z[-1, :-1], heights[0])
+        and np.array_equal(z[:, -1], z[:, 0])
+    ):
+        return False
+    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :]
+    a, b = faces[: nx * ny].reshape(ny, nx, 3), faces[nx * ny :].reshape(ny, nx, 3)
+    corners = {"v00": 0, "v01": 1, "v10": nx + 1, "v11": nx + 2}
+    for half, order in ((a, ("v00", "v01", "v11")), (b, ("v00", "v11", "v10"))):
+        for k, corner in enumerate(order):
+            if not np.array_equal(half[:, :, k] - corners[corner], v00):
+                return False
+    return True
+
+
 def flat(size: float = 1.0) -> Surface:
     """A flat square mirror at z = 0 of side ``size`` (2 triangles), periodic; nothing shadows,
     so ``exact_shadowing`` is "none"."""
