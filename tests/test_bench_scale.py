@@ -23,9 +23,19 @@ def test_a_size_that_does_not_fit_is_skipped_with_its_need(monkeypatch):
     """No process is started for a tile whose expected peak exceeds the available memory."""
     monkeypatch.setattr(bench_scale, "available_mb", lambda: 1024.0)
     monkeypatch.setattr(bench_scale, "_probe", lambda *a: pytest.fail("probed a size too big"))
-    (row,) = bench_scale.scale_rows(sizes=(4096,))  # 600 B/point × 4096² ≈ 9.4 GB
-    assert row.skipped and "9.4 GB" in row.skipped and "1.0 GB available" in row.skipped
+    (row,) = bench_scale.scale_rows(sizes=(4096,))
+    need = f"{bench_scale.BYTES_PER_POINT_GUESS * 4096**2 / 2**30:.1f} GB"
+    assert row.skipped and need in row.skipped and "1.0 GB available" in row.skipped
     assert "skipped: needs" in bench_scale.format_scale([row])
+
+
+def test_a_size_whose_probe_fails_is_listed_with_the_failure(monkeypatch):
+    """The surface's own refusal (or any failure) of one size ends that row, not the table."""
+    refusal = "microsim.errors.UsageError: n: a 64x64 heightfield would need too much memory"
+    monkeypatch.setattr(bench_scale, "_PROBE", f"import sys; sys.exit({refusal!r})")
+    (row,) = bench_scale.scale_rows(sizes=(64,))
+    assert row.skipped == f"the probe failed with status 1: {refusal}"
+    assert f"| 64² | skipped: {row.skipped} |" in bench_scale.format_scale([row])
 
 
 def test_scale_refuses_ray_options(capsys):

@@ -58,6 +58,8 @@ class FacetTable:
 
 
 TABLES_KEPT = 4
+PIECE_FACETS = 1 << 18
+"""The most facets a facet table is built for at a time (its temporaries: ~100 B a facet)."""
 """Facet tables a ``Tracer`` keeps for repeated calls at the same incidence (the most recent;
 13 MB each on the bench's 524 288-facet mesh)."""
 _TABLES_LOCK = threading.Lock()
@@ -74,8 +76,9 @@ def facet_table(
 ) -> FacetTable:
     """The ``FacetTable`` of incidence ``wi`` (``fresnel_kernels.facet_mirror``; Fresnel weights in
     compiled real arithmetic, ``fresnel.fresnel_real_scalar``; bins by ``Bins.locate``), computed
-    in ``parts`` contiguous facet ranges on ``pool`` (each facet's entries depend on that
-    facet alone, so the split changes nothing). Bins are ``Bins.locate``'s
+    in ``parts`` contiguous facet ranges on ``pool``, each cut into pieces of at most
+    ``PIECE_FACETS`` (each facet's entries depend on that facet alone, so the split changes
+    nothing; the pieces keep the build's temporaries small). Bins are ``Bins.locate``'s
     (``locate_single``: a compiled pass on folded grids).
 
     A ``Tracer`` keeps its ``TABLES_KEPT`` most recent tables (read-only arrays), so that
@@ -159,6 +162,7 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
     ncols = tracer.normal_columns
     weight, code = np.empty(f), np.empty(f, dtype=np.int8)
     wo32, where = np.empty((f, 3), dtype=np.float32), np.empty(f, dtype=np.int32)
+    clear = np.empty(f, dtype=np.bool_)
     wi = [float(w) for w in wi]
     fresnel_args = fresnel_kernels.fresnel_mode(ior)
 
@@ -177,11 +181,12 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         rising = np.where(wo[2] > 0.0, SINGLE, MASKED).astype(np.int8)  # the others: −1
         where[part] = -1
         locate_single(bins, rising, wo, phi_i, None, where[part])
+        clear[part] = steep_facets(tracer, code[part], wo32[part])  # part by part: less memory
 
-    cuts = np.linspace(0, f, max(1, int(parts)) + 1).astype(int)
+    pieces = max(1, int(parts)) * max(1, -(-f // (max(1, int(parts)) * PIECE_FACETS)))
+    cuts = np.linspace(0, f, pieces + 1).astype(int)
     slices = [slice(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
     list(pool.map(fill, slices) if pool is not None else map(fill, slices))
-    clear = steep_facets(tracer, code, wo32)
     if tracer.beam is not None:  # heightfield grids: whole beams cleared (``beam``)
         candidates, cleared = (code == SINGLE) & ~clear, np.empty(f, dtype=np.bool_)
 

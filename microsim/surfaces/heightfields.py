@@ -65,11 +65,12 @@ GAUSS_RESOLVED_CELLS = 1.0
 """Shortest Gaussian ℓ, in grid steps, that the grid resolves: the synthesis keeps the spectrum
 up to the Nyquist frequency 1/(2dx), i.e. erf(πℓ/(2dx))² of σ² — 95 % at ℓ = dx, 18 % at dx/4,
 nothing as ℓ → 0 (the mesh turns flat whatever the nominal m = 2σ/ℓ). Shorter ℓ is refused."""
-BYTES_PER_GRID_POINT = 600
+BYTES_PER_GRID_POINT = 450
 """Peak memory per grid point of a heightfield built and traced (two triangles): measured
-≈ 520 bytes (RSS growth, 1024² and 2048² Gaussian grids: synthesis FFTs, mesh, Embree BVH,
-tracer facet arrays and per-facet table); checked against ``microsim.checks.memory_limit`` before
-synthesis."""
+≈ 430 bytes (peak RSS growth, 2048² Gaussian grid, 2 threads: single scattering at four
+incidences, whose four facet tables the tracer keeps, 52 bytes per point each; all orders and
+rough glass at four incidences ≈ 220 bytes; the synthesis alone ≈ 220: its FFTs); checked
+against ``microsim.checks.memory_limit`` before synthesis."""
 
 
 # --- spectra -----------------------------------------------------------------------------------
