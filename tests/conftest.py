@@ -13,6 +13,7 @@ import os
 import shutil
 import signal
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -60,6 +61,7 @@ def pytest_configure(config):
         return
     import dispatch_probe
 
+    started = time.monotonic()
     folder = Path(tempfile.mkdtemp(prefix="microsim-warm-kernels-"))
     config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
     inputs, pinned = dispatch_probe.write_inputs(folder), folder / "avx2.npz"
@@ -71,6 +73,21 @@ def pytest_configure(config):
         run.communicate()
     if all(run.returncode == 0 for run in runs):
         os.environ[dispatch_probe.PREPARED] = f"{inputs}{os.pathsep}{pinned}"
+    config.stash[_WARMED] = (time.monotonic() - started, [run.returncode for run in runs])
+
+
+_WARMED = pytest.StashKey[tuple]()
+
+
+def pytest_report_header(config):
+    """What ``--warm-kernels`` took (the session's own time does not include it)."""
+    if _WARMED in config.stash:
+        seconds, status = config.stash[_WARMED]
+        return (
+            f"--warm-kernels: {seconds:.0f} s before the workers started (dispatch probe "
+            f"natively and AVX2-pinned, exit statuses {status})"
+        )
+    return None
 
 
 def pytest_collection_modifyitems(config, items):

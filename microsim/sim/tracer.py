@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from microsim.errors import UsageError
+from microsim.jit import compiled
 from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 
 from .embree_backends import check_backend, open_scene, scene_backend
@@ -123,40 +124,45 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     return v, f if f.dtype in (np.int32, np.int64) else f.astype(np.int64), lx, ly
 
 
-def _cross_columns(a: np.ndarray, b: np.ndarray) -> list:
-    """a × b for (N, 3) arrays, as three (N,) columns."""
-    return [
-        a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-        a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-        a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-    ]
-
-
-PLANE_CHUNK = 1 << 18
-"""Facets per pass of ``_facet_planes`` (its temporaries: ~200 bytes per facet of a chunk)."""
+@compiled
+def _fill_facet_planes(v, f, rows, plane) -> tuple:
+    """The unit normal cross(v1 − v0, v2 − v0)/|…| of each facet of (``v``, ``f``) into
+    ``rows`` (3, F) and its plane's offset n·v0 into ``plane`` (F,), in NumPy's order of
+    operations (the same bits); (degenerate, downward): whether any facet has zero area (its
+    entries left unset), any normal z ≤ 0."""
+    degenerate, downward = False, False
+    for k in range(len(f)):
+        a, b, c = f[k, 0], f[k, 1], f[k, 2]
+        x0, y0, z0 = v[a, 0], v[a, 1], v[a, 2]
+        e1x, e1y, e1z = v[b, 0] - x0, v[b, 1] - y0, v[b, 2] - z0
+        e2x, e2y, e2z = v[c, 0] - x0, v[c, 1] - y0, v[c, 2] - z0
+        cx = e1y * e2z - e1z * e2y
+        cy = e1z * e2x - e1x * e2z
+        cz = e1x * e2y - e1y * e2x
+        norm = math.sqrt(cx * cx + cy * cy + cz * cz)
+        if norm == 0.0:
+            degenerate = True
+            continue
+        downward |= cz <= 0.0
+        nx, ny, nz = cx / norm, cy / norm, cz / norm
+        rows[0, k], rows[1, k], rows[2, k] = nx, ny, nz
+        plane[k] = nx * x0 + ny * y0 + nz * z0
+    return degenerate, downward
 
 
 def _facet_planes(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The unit normals cross(v1 − v0, v2 − v0)/|…| of the facets as rows (3, F) and their
-    planes' offsets n·v0 (F,), float64, built ``PLANE_CHUNK`` facets at a time. UsageError
-    for a degenerate facet or one whose normal does not point up."""
+    """The unit normals of the facets as rows (3, F) and their planes' offsets n·v0 (F,),
+    float64 (``_fill_facet_planes``). UsageError for a degenerate facet or one whose normal
+    does not point up."""
     rows, plane = np.empty((3, len(f))), np.empty(len(f))
-    for a in range(0, len(f), PLANE_CHUNK):
-        fc = f[a : a + PLANE_CHUNK]
-        v0 = v[fc[:, 0]]
-        cross = _cross_columns(v[fc[:, 1]] - v0, v[fc[:, 2]] - v0)
-        norm = np.sqrt(cross[0] ** 2 + cross[1] ** 2 + cross[2] ** 2)
-        if np.any(norm == 0):
-            raise UsageError("surface.faces must not contain degenerate (zero-area) triangles")
-        if np.any(cross[2] <= 0):
-            raise UsageError(
-                "surface.faces must be ordered so that every normal "
-                "cross(v1 - v0, v2 - v0) points up (z > 0)"
-            )
-        n = rows[:, a : a + len(fc)]
-        for k in range(3):
-            n[k] = cross[k] / norm
-        plane[a : a + len(fc)] = n[0] * v0[:, 0] + n[1] * v0[:, 1] + n[2] * v0[:, 2]
+    degenerate, downward = _fill_facet_planes(v, f, rows, plane)
+    if degenerate:
+        raise UsageError("surface.faces must not contain degenerate (zero-area) triangles")
+    if downward:
+        raise UsageError(
+            "surface.faces must be ordered so that every normal "
+            "cross(v1 - v0, v2 - v0) points up (z > 0)"
+        )
     return rows, plane
 
 

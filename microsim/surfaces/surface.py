@@ -121,6 +121,10 @@ class Predicted:
         return out
 
 
+FINGERPRINT_ROWS = 1 << 16
+"""Vertex or face rows ``Surface.fingerprint`` hashes at a time."""
+
+
 @dataclass(frozen=True, eq=False, repr=False)
 class Surface:
     """A periodic microsurface tile (the contract between surfaces and the tracer).
@@ -214,8 +218,12 @@ class Surface:
     def fingerprint(self) -> str:
         """The mesh's identity, as ``simulate`` records it in meta ("fingerprint"): SHA-1 of
         the vertices (float64) and faces (int64), first 16 hex digits."""
-        digest = hashlib.sha1(np.ascontiguousarray(self.vertices, dtype=np.float64).tobytes())
-        digest.update(np.ascontiguousarray(self.faces, dtype=np.int64).tobytes())
+        digest = hashlib.sha1()
+        for array, dtype in ((self.vertices, np.float64), (self.faces, np.int64)):
+            rows = np.asarray(array)  # hashed a block of rows at a time: no copy of the mesh
+            for a in range(0, len(rows), FINGERPRINT_ROWS):
+                block = np.ascontiguousarray(rows[a : a + FINGERPRINT_ROWS], dtype=dtype)
+                digest.update(memoryview(block).cast("B"))
         return digest.hexdigest()[:16]
 
     def facet_normals(self) -> np.ndarray:
