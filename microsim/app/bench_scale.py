@@ -10,12 +10,13 @@ then the surface is built (``build``), traced once with one block of rays (``fir
 tracer, its tables and the first rays), and traced at ``RAYS`` = (2²⁰, 2²²) rays, best of
 ``REPEAT`` each: the line through the two gives ``samples_per_s`` (marginal) and
 ``fixed_seconds`` (the intercept: what a later call on the same surface costs besides its
-rays). ``rss_mb`` is the process's peak resident set (VmHWM), ``base_mb`` its resident set
-before the surface (interpreter, libraries, kernels), ``bytes_per_point`` the difference over
-n². A size whose expected peak (``BYTES_PER_POINT_GUESS`` per point, from the sizes
-already run when there are two) exceeds the memory the machine has available is skipped with
-that reason instead of run; a size whose probe fails (a refusal by the surface's own memory
-check, a crash) is listed with its failure, after the sizes measured before it.
+rays). ``rss_mb`` is the process's peak resident set (VmHWM), ``build_rss_mb`` that peak right
+after the surface's build, ``base_mb`` its resident set before the surface (interpreter,
+libraries, kernels), ``bytes_per_point`` the difference over n². A size whose expected peak
+(``BYTES_PER_POINT_GUESS`` per point, from the sizes already run when there are two) exceeds the
+memory the machine has available is skipped with that reason instead of run; a size whose probe
+fails (a refusal by the surface's own memory check, a crash) is listed with its failure, after
+the sizes measured before it.
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ base = status_mb("VmRSS:")
 t0 = time.perf_counter()
 surface = _surface(cfg)
 build = time.perf_counter() - t0
+built = status_mb("VmHWM:")
 t0 = time.perf_counter()
 simulate(surface, "aluminium", cfg.theta_i, rays=BLOCK, **run)
 first = time.perf_counter() - t0
@@ -79,7 +81,8 @@ for _ in range(repeat):
         simulate(surface, "aluminium", cfg.theta_i, rays=n, **run)
         best[n] = min(best.get(n, float("inf")), time.perf_counter() - t0)
 times = {"build": build, "first": first, "seconds": [best[n] for n in rays]}
-print(json.dumps({**times, "rss_mb": status_mb("VmHWM:"), "base_mb": base}))
+peaks = {"rss_mb": status_mb("VmHWM:"), "build_rss_mb": built, "base_mb": base}
+print(json.dumps({**times, **peaks}))
 """
 
 
@@ -95,12 +98,20 @@ class ScaleRow:
     samples_per_s: float | None = None
     rss_mb: float | None = None
     base_mb: float | None = None
+    build_rss_mb: float | None = None
     skipped: str | None = None
 
     @property
     def bytes_per_point(self) -> float | None:
         """Peak memory above the process's own (interpreter, libraries, kernels) per point."""
         return None if self.rss_mb is None else (self.rss_mb - self.base_mb) * 2**20 / self.n**2
+
+    @property
+    def build_bytes_per_point(self) -> float | None:
+        """``bytes_per_point`` of the peak reached by the surface's build alone."""
+        if self.build_rss_mb is None:
+            return None
+        return (self.build_rss_mb - self.base_mb) * 2**20 / self.n**2
 
 
 def available_mb() -> float:
@@ -124,7 +135,8 @@ def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
     (t1, t2), (n1, n2) = got["seconds"], rays
     rate = (n2 - n1) / (t2 - t1) if t2 > t1 else None
     fixed = None if rate is None else t1 - n1 / rate
-    return ScaleRow(n, got["build"], got["first"], fixed, rate, got["rss_mb"], got["base_mb"])
+    peaks = got["rss_mb"], got["base_mb"], got["build_rss_mb"]
+    return ScaleRow(n, got["build"], got["first"], fixed, rate, *peaks)
 
 
 def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list[ScaleRow]:
@@ -157,17 +169,18 @@ def format_scale(rows: list[ScaleRow]) -> str:
 
     lines = [
         "| grid | build | first call | fixed cost per later call | marginal samples/s | "
-        "peak RSS | bytes per point above the process's own |",
-        "|---|---|---|---|---|---|---|",
+        "peak RSS | bytes per point above the process's own | of them, the build's peak |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         if r.skipped:
-            lines.append(f"| {r.n}² | skipped: {r.skipped} | | | | | |")
+            lines.append(f"| {r.n}² | skipped: {r.skipped} | | | | | | |")
             continue
         lines.append(
             f"| {r.n}² | {fmt(r.build_seconds, '{:.2f} s')} | {fmt(r.first_seconds, '{:.2f} s')} "
             f"| {fmt(r.fixed_seconds, '{:.2f} s')} "
             f"| {fmt(r.samples_per_s and r.samples_per_s / 1e6, '{:.1f} M')} "
-            f"| {fmt(r.rss_mb, '{:.0f} MB')} | {fmt(r.bytes_per_point, '{:.0f}')} |"
+            f"| {fmt(r.rss_mb, '{:.0f} MB')} | {fmt(r.bytes_per_point, '{:.0f}')} "
+            f"| {fmt(r.build_bytes_per_point, '{:.0f}')} |"
         )
     return "\n".join(lines)
