@@ -5,7 +5,7 @@ the marginal samples/s and the peak resident memory.
 The surface is ``bench``'s (a Gaussian field, σ = ``BenchConfig.sigma``, ℓ = ``corr_len``
 cells) at n² points, n in ``SIZES``; the run is ``bench``'s (aluminium, θi =
 ``BenchConfig.theta_i``, its bins, 1 thread). Each size runs in its own process
-(``_PROBE``): numba's kernels are loaded (compiled once per machine) on a 16² tile first,
+(``_PROBE``): numba's kernels are loaded (compiled once per machine) on a 64² tile first,
 then the surface is built (``build``), traced once with one block of rays (``first``: the
 tracer, its tables and the first rays), and traced at ``RAYS`` = (2²⁰, 2²²) rays, best of
 ``REPEAT`` each: the line through the two gives ``samples_per_s`` (marginal) and
@@ -65,7 +65,9 @@ def status_mb(key):
 cfg, rays = BenchConfig(**json.loads(sys.argv[1])), json.loads(sys.argv[2])
 repeat = int(sys.argv[3])
 run = dict(bins=_bins(), threads=1)
-simulate(_surface(replace(cfg, n=16)), "aluminium", cfg.theta_i, rays=BLOCK, **run)  # kernels
+small = _surface(replace(cfg, n=64))  # the kernels of the traced path and the facet table's,
+for warm in (BLOCK, 4 * BLOCK):  # rays < and > its 8192 facets (masking rays traced too)
+    simulate(small, "aluminium", cfg.theta_i, rays=warm, **run)
 base = status_mb("VmRSS:")
 t0 = time.perf_counter()
 surface = _surface(cfg)
