@@ -13,14 +13,27 @@ import numpy as np
 
 from .engine import horizon
 
-__all__ = ["CLEAR_MARGIN", "HORIZON_FACETS", "HorizonGrid", "rise_bound", "horizon_grid"]
+__all__ = [
+    "CLEAR_MARGIN",
+    "HORIZON_FACETS",
+    "HorizonGrid",
+    "facet_slopes",
+    "rise_bound",
+    "horizon_grid",
+]
 
 HORIZON_FACETS = 32  # facets per cell of the coarse grid of ``Tracer.horizon``
 CLEAR_MARGIN = horizon.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
 
 
-def rise_bound(surface, normals: np.ndarray) -> float:
-    """The steepest facet slope L = max_f |∇h_f| = max_f √(n_x² + n_y²)/n_z of a periodic
+def facet_slopes(normal_columns) -> np.ndarray:
+    """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,), from its unit normal's columns."""
+    nx, ny, nz = normal_columns
+    return np.hypot(nx, ny) / nz
+
+
+def rise_bound(surface, slopes) -> float:
+    """The steepest facet slope L = max_f |∇h_f| (``slopes``: ``facet_slopes``) of a periodic
     heightfield surface (one with ``heights``: Gaussian, ABC, file and grating tiles; or
     kind "vgrooves" or "flat", whose profiles are single-valued too), else inf.
 
@@ -34,8 +47,7 @@ def rise_bound(surface, normals: np.ndarray) -> float:
     known = surface.heights is not None or surface.kind in ("vgrooves", "flat")
     if not (known and surface.periodic):
         return math.inf
-    n = np.asarray(normals)
-    return float(np.max(np.hypot(n[:, 0], n[:, 1]) / n[:, 2]))
+    return float(np.max(slopes))
 
 
 class HorizonGrid(NamedTuple):
@@ -52,8 +64,9 @@ class HorizonGrid(NamedTuple):
     tol: float
 
 
-def horizon_grid(vertices, faces, normals, rise: float, tile, eps: float) -> HorizonGrid:
-    """The ``HorizonGrid`` of a heightfield mesh (finite ``rise`` bound), cells of
+def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float) -> HorizonGrid:
+    """The ``HorizonGrid`` of a heightfield mesh (finite ``rise`` bound; ``slopes``: its
+    ``facet_slopes``), cells of
     ~``HORIZON_FACETS`` facets, tol = 4 ``eps`` (float32 rays); for other meshes a 1 × 1 grid
     that clears nothing."""
     if not math.isfinite(rise):
@@ -65,8 +78,7 @@ def horizon_grid(vertices, faces, normals, rise: float, tile, eps: float) -> Hor
     nx = int(np.clip(round(math.sqrt(cells * lx / ly)), 1, 1024))
     ny = int(np.clip(round(math.sqrt(cells * ly / lx)), 1, 1024))
     cmax, cslope = np.full((ny, nx), -np.inf), np.zeros((ny, nx))
-    slope = np.hypot(normals[:, 0], normals[:, 1]) / normals[:, 2]
     x0, y0, cw, ch = -lx / 2, -ly / 2, lx / nx, ly / ny
     cols = [np.ascontiguousarray(vertices[:, k]) for k in range(3)]
-    horizon.fill_horizon(*cols, faces, slope, x0, y0, cw, ch, cmax, cslope)
+    horizon.fill_horizon(*cols, faces, slopes, x0, y0, cw, ch, cmax, cslope)
     return HorizonGrid(x0, y0, cw, ch, cmax, cslope, 4.0 * eps)

@@ -51,7 +51,7 @@ from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 from .embree_backends import check_backend, open_scene, scene_backend
 from .engine import beam, codes, horizon
 from .heightfield_caster import cast_falling, heightfield_grid
-from .horizon_bounds import CLEAR_MARGIN, horizon_grid, rise_bound
+from .horizon_bounds import CLEAR_MARGIN, facet_slopes, horizon_grid, rise_bound
 from .periodic_walk import ColumnHits, walk_columns
 from .scratch import WorkArray, WorkColumns
 from .vgroove_profile import NO_GROOVES, NO_STRATA, groove_tables
@@ -217,8 +217,10 @@ class Tracer:
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
-        self.rise_bound = rise_bound(surface, self.normals)
-        self.horizon = horizon_grid(v, f, self.normals, self.rise_bound, self.tile, self.eps)
+        slopes = facet_slopes(self.normal_columns)  # (F,), for the two bounds only
+        self.rise_bound = rise_bound(surface, slopes)
+        self.horizon = horizon_grid(v, f, slopes, self.rise_bound, self.tile, self.eps)
+        del slopes
         grooved = getattr(surface, "azimuth_average", False)
         self.groove_clear, self.groove_strata = (
             groove_tables(self) if grooved else (NO_GROOVES, NO_STRATA)
