@@ -131,10 +131,16 @@ def synthesize(S: np.ndarray, dx: float, rng: np.random.Generator, exact_amplitu
     """
     ny, nx = S.shape
     W = np.fft.fft2(rng.standard_normal((ny, nx)))
-    if exact_amplitude:
+    if exact_amplitude:  # in place, element by element as W·√N/|W| (1 where |W| = 0)
         mag = np.abs(W)
-        W = np.sqrt(nx * ny) * np.divide(W, mag, out=np.ones_like(W), where=mag > 0)
-    h = np.fft.ifft2(W * np.sqrt(S) / dx).real
+        np.divide(W, mag, out=W, where=mag > 0)
+        W[mag == 0] = 1.0
+        del mag
+        np.multiply(np.sqrt(nx * ny), W, out=W)
+    W *= np.sqrt(S)
+    W /= dx
+    h = np.fft.ifft2(W).real
+    del W
     return h - h.mean()
 
 

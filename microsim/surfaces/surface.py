@@ -319,17 +319,20 @@ def heightfield_mesh(heights: np.ndarray, dx: float) -> tuple[np.ndarray, np.nda
     projected area dx²/2.
     """
     ny, nx = heights.shape
-    hp = np.pad(heights, ((0, 1), (0, 1)), mode="wrap")
-    x = (np.arange(nx + 1) - nx / 2.0) * dx
-    y = (np.arange(ny + 1) - ny / 2.0) * dx
-    X, Y = np.meshgrid(x, y)
-    vertices = np.stack([X.ravel(), Y.ravel(), hp.ravel()], axis=1).astype(np.float64)
-    idx = np.arange((ny + 1) * (nx + 1), dtype=np.int64).reshape(ny + 1, nx + 1)
-    v00, v01 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
-    v10, v11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
-    faces = np.concatenate(
-        [np.stack([v00, v01, v11], axis=1), np.stack([v00, v11, v10], axis=1)]
-    ).astype(np.int32)
+    vertices = np.empty(((ny + 1) * (nx + 1), 3))  # filled in place: no meshgrid, no copies
+    grid = vertices.reshape(ny + 1, nx + 1, 3)
+    grid[:, :, 0] = (np.arange(nx + 1) - nx / 2.0) * dx
+    grid[:, :, 1] = ((np.arange(ny + 1) - ny / 2.0) * dx)[:, None]
+    grid[:-1, :-1, 2] = heights
+    grid[-1, :-1, 2] = heights[0]  # the last row and column repeat the first
+    grid[:, -1, 2] = grid[:, 0, 2]
+    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :]  # (ny, nx) corner indices
+    faces = np.empty((2 * nx * ny, 3), dtype=np.int32)
+    a, b = faces[: nx * ny].reshape(ny, nx, 3), faces[nx * ny :].reshape(ny, nx, 3)
+    a[:, :, 0] = b[:, :, 0] = v00
+    a[:, :, 1] = v00 + 1
+    a[:, :, 2] = b[:, :, 1] = v00 + nx + 2
+    b[:, :, 2] = v00 + nx + 1
     return vertices, faces
 
 
