@@ -38,6 +38,18 @@ def test_a_size_whose_probe_fails_is_listed_with_the_failure(monkeypatch):
     assert f"| 64² | skipped: {row.skipped} |" in bench_scale.format_scale([row])
 
 
+def test_both_ray_counts_of_a_size_take_one_path():
+    """A marginal rate is a line through two calls: never one per ray and one through the
+    facet table (rays ≥ the tile's 2n² facets, ``facet_tables.uses_facet_table``)."""
+    for n in (64, 128, 512, 1024, 2048, 4096, 8192):
+        for rays in (bench_scale.RAYS, bench_scale.QUICK_RAYS):
+            (lo, hi), path = bench_scale.rays_for(n, rays)
+            table = [r >= 2 * n * n for r in (lo, hi)]
+            assert table[0] == table[1] and path == bench_scale.PATHS[0 if table[0] else 1]
+            assert 0 < lo < hi
+    assert bench_scale.rays_for(1024, (2**20, 2**22)) == ((2**18, 2**20), "per ray")
+
+
 def test_scale_refuses_ray_options(capsys):
     status, out, err = _cli(capsys, "bench", "--scale", "--rays", "1000")
     assert status == 2 and out == "" and len(err) == 1 and "--rays" in err[0]
@@ -48,7 +60,8 @@ def test_the_quick_scale_table_measures_each_size(capsys):
     status, out, err = _cli(capsys, "bench", "--scale", "--quick", "--json")
     assert status == 0, err
     rows = json.loads(out)["rows"]
-    assert [r["n"] for r in rows] == list(bench_scale.QUICK_SIZES)
+    assert sorted({r["n"] for r in rows}) == list(bench_scale.QUICK_SIZES)
+    assert {r["path"] for r in rows} == set(bench_scale.PATHS)  # 64²: both paths
     for r in rows:
-        assert r["skipped"] is None and r["samples_per_s"] > 0
+        assert r["skipped"] is None and r["samples_per_s"] > 0 and r["path"] in bench_scale.PATHS
         assert r["rss_mb"] >= r["build_rss_mb"] >= r["base_mb"] > 0 and r["first_seconds"] > 0

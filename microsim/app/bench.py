@@ -729,7 +729,7 @@ def _cmd_scale(args) -> int:
         print(json.dumps({**record, "rows": [asdict(r) for r in rows]}, indent=1))
     else:
         m = machine()
-        print(f"{m.cpu} ({m.isa}, numba {m.numba_cpu}); 1 thread; rays {rays[0]:,} and {rays[1]:,}")
+        print(f"{m.cpu} ({m.isa}, numba {m.numba_cpu}); 1 thread")
         print(bs.format_scale(rows))
     return 0
 

@@ -2,15 +2,17 @@
 process each, the surface build, the first ``simulate`` call, the fixed cost of a later call,
 the marginal samples/s and the peak resident memory.
 
-The surface is ``bench``'s (a Gaussian field, σ = ``BenchConfig.sigma``, ℓ = ``corr_len``
-cells) at n² points, n in ``SIZES``; the run is ``bench``'s (aluminium, θi =
-``BenchConfig.theta_i``, its bins, 1 thread). Each size runs in its own process
-(``_PROBE``): numba's kernels are loaded (compiled once per machine) on a 64² tile first,
-then the surface is built (``build``), traced once with one block of rays (``first``: the
-tracer, its tables and the first rays), and traced at ``RAYS`` = (2²⁰, 2²²) rays, best of
-``REPEAT`` each: the line through the two gives ``samples_per_s`` (marginal) and
-``fixed_seconds`` (the intercept: what a later call on the same surface costs besides its
-rays). ``rss_mb`` is the process's peak resident set (VmHWM), ``build_rss_mb`` that peak right
+The surface is ``bench``'s (a Gaussian field, σ = ``BenchConfig.sigma``, ℓ = ``corr_len`` cells)
+at n² points, n in ``SIZES``; the run is ``bench``'s (aluminium, θi = ``BenchConfig.theta_i``,
+its bins, 1 thread). Each size runs in its own process (``_PROBE``): numba's kernels are loaded
+(compiled once per machine) on a 64² tile first, then the surface is built (``build``), traced
+once with one block of rays (``first``: the tracer, its tables and the first rays), and traced
+at ``RAYS`` = (2²⁰, 2²²) rays, best of ``REPEAT`` each: the line through the two gives
+``samples_per_s`` (marginal) and ``fixed_seconds`` (the intercept: what a later call on the same
+surface costs besides its rays). Both counts must take one path (``rays_for``: the facet table,
+or per ray on tiles with more facets than rays), which each row names; a size measured through
+the facet table is measured per ray too (``per_ray_rays``), so that every size has a per-ray
+rate. ``rss_mb`` is the process's peak resident set (VmHWM), ``build_rss_mb`` that peak right
 after the surface's build, ``base_mb`` its resident set before the surface (interpreter,
 libraries, kernels), ``bytes_per_point`` the difference over n². A size whose expected peak
 (``BYTES_PER_POINT_GUESS`` per point, from the sizes already run when there are two) exceeds the
@@ -101,6 +103,8 @@ class ScaleRow:
     rss_mb: float | None = None
     base_mb: float | None = None
     build_rss_mb: float | None = None
+    rays: tuple | None = None
+    path: str | None = None
     skipped: str | None = None
 
     @property
@@ -122,9 +126,33 @@ def available_mb() -> float:
         return next(int(line.split()[1]) for line in fh if line.startswith("MemAvailable:")) / 1024
 
 
+PATHS = ("facet table", "per ray")
+"""The single-scattering paths a marginal rate can measure (``facet_tables.uses_facet_table``:
+the facet table when the rays are at least the tile's 2n² facets, else per ray)."""
+
+
+def rays_for(n: int, rays: tuple) -> tuple[tuple, str]:
+    """The two ray counts of an n² tile and the path both take (``PATHS``): ``rays``, unless
+    they straddle its 2n² facets — the smaller traced per ray, the larger through the facet
+    table, a line through two paths — then ``per_ray_rays``."""
+    facets = 2 * n * n
+    if min(rays) >= facets:
+        return tuple(rays), PATHS[0]
+    if max(rays) < facets:
+        return tuple(rays), PATHS[1]
+    return per_ray_rays(n), PATHS[1]
+
+
+def per_ray_rays(n: int) -> tuple:
+    """F/8 and F/2 rays on an n² tile of F = 2n² facets: both per ray."""
+    facets = 2 * n * n
+    return facets // 8, facets // 2
+
+
 def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
     conf = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
     conf["n"] = n
+    rays, path = rays_for(n, rays)
     out = subprocess.run(
         [sys.executable, "-c", _PROBE, json.dumps(conf), json.dumps(list(rays)), str(REPEAT)],
         capture_output=True,
@@ -138,7 +166,7 @@ def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
     rate = (n2 - n1) / (t2 - t1) if t2 > t1 else None
     fixed = None if rate is None else t1 - n1 / rate
     peaks = got["rss_mb"], got["base_mb"], got["build_rss_mb"]
-    return ScaleRow(n, got["build"], got["first"], fixed, rate, *peaks)
+    return ScaleRow(n, got["build"], got["first"], fixed, rate, *peaks, rays, path)
 
 
 def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list[ScaleRow]:
@@ -160,6 +188,8 @@ def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list
             rows.append(ScaleRow(n, skipped=reason))
             continue
         rows.append(_probe(cfg, n, rays))
+        if rows[-1].path == PATHS[0]:  # this size per ray too: like with like across sizes
+            rows.append(_probe(cfg, n, per_ray_rays(n)))
     return rows
 
 
@@ -170,8 +200,9 @@ def format_scale(rows: list[ScaleRow]) -> str:
         return "–" if v is None else f.format(v)
 
     lines = [
-        "| grid | build | first call | fixed cost per later call | marginal samples/s | "
-        "peak RSS | bytes per point above the process's own | of them, the build's peak |",
+        "| grid | build | first call | fixed cost per later call | marginal samples/s "
+        "(path, rays) | peak RSS | bytes per point above the process's own "
+        "| of them, the build's peak |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -182,6 +213,7 @@ def format_scale(rows: list[ScaleRow]) -> str:
             f"| {r.n}² | {fmt(r.build_seconds, '{:.2f} s')} | {fmt(r.first_seconds, '{:.2f} s')} "
             f"| {fmt(r.fixed_seconds, '{:.2f} s')} "
             f"| {fmt(r.samples_per_s and r.samples_per_s / 1e6, '{:.1f} M')} "
+            f"({r.path}, {r.rays[0]:,} and {r.rays[1]:,}) "
             f"| {fmt(r.rss_mb, '{:.0f} MB')} | {fmt(r.bytes_per_point, '{:.0f}')} "
             f"| {fmt(r.build_bytes_per_point, '{:.0f}')} |"
         )
