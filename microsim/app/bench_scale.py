@@ -11,14 +11,14 @@ at ``RAYS`` = (2²⁰, 2²²) rays, best of ``REPEAT`` each: the line through th
 ``samples_per_s`` (marginal) and ``fixed_seconds`` (the intercept: what a later call on the same
 surface costs besides its rays). Both counts must take one path (``rays_for``: the facet table,
 or per ray on tiles with more facets than rays), which each row names; a size measured through
-the facet table is measured per ray too (``per_ray_rays``), so that every size has a per-ray
-rate. ``rss_mb`` is the process's peak resident set (VmHWM), ``build_rss_mb`` that peak right
-after the surface's build, ``base_mb`` its resident set before the surface (interpreter,
-libraries, kernels), ``bytes_per_point`` the difference over n². A size whose expected peak
-(``BYTES_PER_POINT_GUESS`` per point, from the sizes already run when there are two) exceeds the
-memory the machine has available is skipped with that reason instead of run; a size whose probe
-fails (a refusal by the surface's own memory check, a crash) is listed with its failure, after
-the sizes measured before it.
+the facet table is measured per ray too (``per_ray_rays``, when its smaller count is at least
+``PER_RAY_MIN``). ``rss_mb`` is the process's peak resident set (VmHWM), ``build_rss_mb`` that
+peak right after the surface's build, ``base_mb`` its resident set before the surface
+(interpreter, libraries, kernels), ``bytes_per_point`` the difference over n². A size whose
+expected peak (``BYTES_PER_POINT_GUESS`` per point, from the sizes already run when there are
+two) exceeds the memory the machine has available is skipped with that reason instead of run; a
+size whose probe fails (a refusal by the surface's own memory check, a crash) is listed with its
+failure, after the sizes measured before it.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ __all__ = [
 
 SIZES = (512, 1024, 2048, 4096, 8192)
 RAYS = (2**20, 2**22)
-QUICK_SIZES, QUICK_RAYS = (64, 128), (2**14, 2**16)
+QUICK_SIZES, QUICK_RAYS = (64, 128), (2**15, 2**17)
 """``--quick``: small tiles and ray counts (seconds; for smoke tests)."""
 REPEAT = 2
 BYTES_PER_POINT_GUESS = float(BYTES_PER_GRID_POINT)
@@ -143,6 +143,10 @@ def rays_for(n: int, rays: tuple) -> tuple[tuple, str]:
     return per_ray_rays(n), PATHS[1]
 
 
+PER_RAY_MIN = 2**16
+"""The fewest rays a per-ray call of a table-path size is timed with (fewer: not measured)."""
+
+
 def per_ray_rays(n: int) -> tuple:
     """F/8 and F/2 rays on an n² tile of F = 2n² facets: both per ray."""
     facets = 2 * n * n
@@ -188,8 +192,8 @@ def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list
             rows.append(ScaleRow(n, skipped=reason))
             continue
         rows.append(_probe(cfg, n, rays))
-        if rows[-1].path == PATHS[0]:  # this size per ray too: like with like across sizes
-            rows.append(_probe(cfg, n, per_ray_rays(n)))
+        if rows[-1].path == PATHS[0] and min(per_ray_rays(n)) >= PER_RAY_MIN:
+            rows.append(_probe(cfg, n, per_ray_rays(n)))  # like with like across sizes
     return rows
 
 
