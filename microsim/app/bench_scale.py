@@ -28,6 +28,7 @@ import subprocess
 import sys
 from dataclasses import asdict, dataclass
 
+from microsim.sim.facet_tables import table_pays
 from microsim.surfaces.heightfields import BYTES_PER_GRID_POINT
 
 from .bench_report import BenchConfig
@@ -128,18 +129,16 @@ def available_mb() -> float:
 
 PATHS = ("facet table", "per ray")
 """The single-scattering paths a marginal rate can measure (``facet_tables.uses_facet_table``:
-the facet table when the rays are at least the tile's 2n² facets, else per ray)."""
+the facet table where it pays, ``facet_tables.table_pays``, else per ray)."""
 
 
 def rays_for(n: int, rays: tuple) -> tuple[tuple, str]:
     """The two ray counts of an n² tile and the path both take (``PATHS``): ``rays``, unless
     they straddle its 2n² facets — the smaller traced per ray, the larger through the facet
     table, a line through two paths — then ``per_ray_rays``."""
-    facets = 2 * n * n
-    if min(rays) >= facets:
-        return tuple(rays), PATHS[0]
-    if max(rays) < facets:
-        return tuple(rays), PATHS[1]
+    tabled = {table_pays(2 * n * n, r) for r in rays}
+    if len(tabled) == 1:
+        return tuple(rays), PATHS[0] if tabled.pop() else PATHS[1]
     return per_ray_rays(n), PATHS[1]
 
 

@@ -58,10 +58,10 @@ class FacetTable:
 
 
 TABLES_KEPT = 4
-PIECE_FACETS = 1 << 18
-"""The most facets a facet table is built for at a time (its temporaries: ~100 B a facet)."""
 """Facet tables a ``Tracer`` keeps for repeated calls at the same incidence (the most recent;
 13 MB each on the bench's 524 288-facet mesh)."""
+PIECE_FACETS = 1 << 18
+"""The most facets a facet table is built for at a time (its temporaries: ~100 B a facet)."""
 _TABLES_LOCK = threading.Lock()
 
 
@@ -214,7 +214,14 @@ def steep_facets(tracer: Tracer, code: np.ndarray, wo32: np.ndarray) -> np.ndarr
     return (code == SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
 
 
+def table_pays(facets: int, rays: int) -> bool:
+    """Whether a facet table is worth building for ``rays`` on a mesh of ``facets``: no more
+    facets than rays (the table's build is one pass over the facets)."""
+    return facets <= rays
+
+
 def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:
     """Whether ``choose_path`` traces through a per-facet table: surfaces without azimuth
-    averaging or per-block rotation, with no more facets than the incidence has rays."""
-    return not azimuth and not rotate and profile is None and len(tracer.faces) <= n_total
+    averaging or per-block rotation, where the table pays (``table_pays``)."""
+    plain = not azimuth and not rotate and profile is None
+    return plain and table_pays(len(tracer.faces), n_total)

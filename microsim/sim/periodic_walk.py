@@ -106,10 +106,10 @@ def walk_columns(tracer, x, d, d32, occlusion: bool, first=None, wraps=None) -> 
     tile and are all traced (``primary.tabled_primary``, ``segments.falling_first_segment``;
     unused on a grid).
     ``wraps``: the wrap cap (segments − 1) instead of ``tracer.max_wraps``."""
-    n = len(x[0])
-    shared = np.isscalar(d[0])
     if tracer.grid is not None:
         return _grid_columns(tracer, x, d, occlusion, wraps)
+    n = len(x[0])
+    shared = np.isscalar(d[0])
     x = _wrapped_starts(tracer, x, first)
     if shared:
         d = [np.array([float(c)]) for c in d]

@@ -319,21 +319,34 @@ def heightfield_mesh(heights: np.ndarray, dx: float) -> tuple[np.ndarray, np.nda
     projected area dx²/2.
     """
     ny, nx = heights.shape
+    x, y, v00, corners = _grid_layout(ny, nx, dx)
     vertices = np.empty(((ny + 1) * (nx + 1), 3))  # filled in place: no meshgrid, no copies
     grid = vertices.reshape(ny + 1, nx + 1, 3)
-    grid[:, :, 0] = (np.arange(nx + 1) - nx / 2.0) * dx
-    grid[:, :, 1] = ((np.arange(ny + 1) - ny / 2.0) * dx)[:, None]
+    grid[:, :, 0] = x
+    grid[:, :, 1] = y[:, None]
     grid[:-1, :-1, 2] = heights
     grid[-1, :-1, 2] = heights[0]  # the last row and column repeat the first
     grid[:, -1, 2] = grid[:, 0, 2]
-    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :]  # (ny, nx) corner indices
     faces = np.empty((2 * nx * ny, 3), dtype=np.int32)
-    a, b = faces[: nx * ny].reshape(ny, nx, 3), faces[nx * ny :].reshape(ny, nx, 3)
-    a[:, :, 0] = b[:, :, 0] = v00
-    a[:, :, 1] = v00 + 1
-    a[:, :, 2] = b[:, :, 1] = v00 + nx + 2
-    b[:, :, 2] = v00 + nx + 1
+    for half, offsets in zip(_triangle_halves(faces, ny, nx), corners):
+        for k, offset in enumerate(offsets):
+            half[:, :, k] = v00 + offset
     return vertices, faces
+
+
+def _grid_layout(ny: int, nx: int, dx: float) -> tuple:
+    """What ``heightfield_mesh`` lays out: the vertex columns' x and rows' y, each cell's
+    (i, j) corner index v00 (ny, nx), and the corner offsets from it of its two triangles
+    (v00, v01, v11) and (v00, v11, v10)."""
+    x = (np.arange(nx + 1) - nx / 2.0) * dx
+    y = (np.arange(ny + 1) - ny / 2.0) * dx
+    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :]
+    return x, y, v00, ((0, 1, nx + 2), (0, nx + 2, nx + 1))
+
+
+def _triangle_halves(faces: np.ndarray, ny: int, nx: int) -> tuple:
+    """``faces``' two halves (triangles A, then B) as (ny, nx, 3) views, one row per cell."""
+    return faces[: nx * ny].reshape(ny, nx, 3), faces[nx * ny :].reshape(ny, nx, 3)
 
 
 def is_heightfield_mesh(
@@ -344,9 +357,8 @@ def is_heightfield_mesh(
     ny, nx = heights.shape
     if vertices.shape != ((ny + 1) * (nx + 1), 3) or faces.shape != (2 * nx * ny, 3):
         return False
+    x, y, v00, corners = _grid_layout(ny, nx, dx)
     v = vertices.reshape(ny + 1, nx + 1, 3)
-    x = (np.arange(nx + 1) - nx / 2.0) * dx
-    y = (np.arange(ny + 1) - ny / 2.0) * dx
     z = v[:, :, 2]
     if not (
         np.array_equal(v[:, :, 0], np.broadcast_to(x, (ny + 1, nx + 1)))
@@ -356,12 +368,9 @@ def is_heightfield_mesh(
         and np.array_equal(z[:, -1], z[:, 0])
     ):
         return False
-    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :]
-    a, b = faces[: nx * ny].reshape(ny, nx, 3), faces[nx * ny :].reshape(ny, nx, 3)
-    corners = {"v00": 0, "v01": 1, "v10": nx + 1, "v11": nx + 2}
-    for half, order in ((a, ("v00", "v01", "v11")), (b, ("v00", "v11", "v10"))):
-        for k, corner in enumerate(order):
-            if not np.array_equal(half[:, :, k] - corners[corner], v00):
+    for half, offsets in zip(_triangle_halves(faces, ny, nx), corners):
+        for k, offset in enumerate(offsets):
+            if not np.array_equal(half[:, :, k] - offset, v00):
                 return False
     return True
 
