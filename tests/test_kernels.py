@@ -288,7 +288,7 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
     class Facets:  # the table reads only these
         faces = n
         normal_columns = tuple(np.ascontiguousarray(n[:, k]) for k in range(3))
-        masking_lift = np.zeros(len(n))
+        plane, eps = np.zeros(len(n)), 0.0
         rise_bound = 0.8  # steepest slope of a pretend heightfield
         beam = None  # no heightfield grid: no beams cleared (tests/test_beam.py)
         surely_escapes = staticmethod(lambda *d: Tracer.surely_escapes(Facets, *d))

@@ -81,3 +81,47 @@ def test_facet_tables_are_kept_per_incidence_read_only_and_bounded():
     fresh = simulate(_surface(), "aluminium", 30.0, **kw)
     for r in (again, fresh):
         assert np.array_equal(first.brdf, r.brdf) and np.array_equal(first.stderr, r.stderr)
+
+
+def test_older_facet_tables_are_kept_only_within_their_byte_budget(monkeypatch):
+    """Beside the newest table a tracer keeps older ones only while their arrays add up to
+    ``TABLES_KEPT_BYTES``: with room for one, the newest two are kept, and a table asked for
+    again after being dropped is built anew (the same values)."""
+    from microsim.analytic.fresnel import resolve_material
+    from microsim.sim import facet_tables
+    from microsim.vectors import spherical_deg
+
+    s = _surface()
+    tr = tracer_for(s, "traced", s.fingerprint())[0]
+    al, bins = resolve_material("aluminium"), Bins(9, 7)
+
+    def table(theta):
+        return facet_tables.facet_table(tr, spherical_deg(theta, 0.0), al, bins, 0.0)
+
+    first = table(10.0)
+    size = sum(a.nbytes for a in (first.code, first.weight, first.bin, first.wo32, first.clear))
+    monkeypatch.setattr(facet_tables, "TABLES_KEPT_BYTES", size)  # room for one older table
+    for theta in (20.0, 30.0):
+        table(theta)
+    assert len(tr.facet_tables) == 2  # 30° (the newest) and 20°
+    assert table(20.0) is table(20.0)
+    again = table(10.0)  # dropped: built anew
+    assert again is not first and np.array_equal(again.weight, first.weight)
+
+
+def test_a_mesh_beyond_the_tabled_size_is_traced_ray_by_ray(monkeypatch):
+    """Above ``TABLED_FACETS_MAX`` facets no facet table is built, however many rays: the
+    run is traced per ray and agrees with the tabled one (Fresnel weights to rounding)."""
+    from microsim.sim import facet_tables
+
+    s = _surface()
+    kw = dict(rays=8 * len(s.faces), bins=Bins(9, 7), seed=5, threads=1)
+    tabled = simulate(s, "aluminium", 40.0, **kw)
+    tr = tracer_for(s, "traced", s.fingerprint())[0]
+    assert len(tr.facet_tables) == 1
+    monkeypatch.setattr(facet_tables, "TABLED_FACETS_MAX", len(s.faces) - 1)
+    tr.facet_tables.clear()
+    per_ray = simulate(s, "aluminium", 40.0, **kw)
+    assert len(tr.facet_tables) == 0
+    assert np.array_equal(per_ray.counts, tabled.counts)
+    assert np.allclose(per_ray.brdf, tabled.brdf, rtol=1e-12, atol=0, equal_nan=True)

@@ -16,8 +16,8 @@ reflected at bounce b − 1. Per path:
   2(wi·n)n − wi with wi = −d); below the weight floor the path is cut (CUT_WEIGHT, weight
   w·F); a downward wo at the last bounce (b = limit) is cut (CUT_BOUNCES: it must meet the
   surface again); else the reflected ray is set up for the next step: it starts at
-  p − (p·n − lift)·n (on the facet plane, eps above it; lift = n·v0 + eps) wrapped into the
-  tile, along wo (and its float32 copy), compacted into ``NextRays``.
+  p − (p·n − lift)·n (on the facet plane, eps above it; lift = n·v0 + eps, ``FacetPlanes``)
+  wrapped into the tile, along wo (and its float32 copy), compacted into ``NextRays``.
 
 The first-bounce ledger of the same rays (``status1``, ``weight1``: the classes and Fresnel
 weights of ``paths.LEDGER``, as the single-bounce paths give them) is written at b = 1
@@ -72,13 +72,15 @@ class RayDirections(NamedTuple):
 
 
 class FacetPlanes(NamedTuple):
-    """The tracer's facets: unit normals (nx, ny, nz), ``lift`` = n·v0 + eps (the plane a
-    reflected ray starts eps above) and the tile's half extents ``half_x``, ``half_y``."""
+    """The tracer's facets: unit normals (nx, ny, nz), their planes' offsets ``plane`` = n·v0
+    and the start offset ``eps`` (a reflected ray starts on the plane n·x = plane + eps, the
+    facet's "lift"), and the tile's half extents ``half_x``, ``half_y``."""
 
     nx: np.ndarray
     ny: np.ndarray
     nz: np.ndarray
-    lift: np.ndarray
+    plane: np.ndarray
+    eps: float
     half_x: float
     half_y: float
 
@@ -159,7 +161,7 @@ def bounce_step(
     at this step, 0 without one; a back-facing hit's c ≤ 0)."""
     hs, prim, px, py, pz = walk
     dx, dy, dz, shared = rays
-    nx, ny, nz, lift, hx, hy = facets
+    nx, ny, nz, plane, eps, hx, hy = facets
     n2, k2, fresnel_mode = material
     status1, weight1 = ledger.status1, ledger.weight1
     use_table, tab_weight, first_facet = table.use, table.weight, table.first_facet
@@ -209,7 +211,7 @@ def bounce_step(
             end_path(ledger, g, CUT_BOUNCES, wn)
             continue
         p, n, o = (px[i], py[i], pz[i]), (a0, a1, a2), (ox, oy, oz)
-        continue_path(nxt, m, g, p, n, lift[f], (hx, hy), o, wn)
+        continue_path(nxt, m, g, p, n, plane[f] + eps, (hx, hy), o, wn)
         m += 1
     return m, e
 

@@ -241,7 +241,7 @@ def interact(b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides,
         end_path(ledger, g, CUT_WEIGHT, wn)
         return ENDS, wn, 0.0, 0.0, 0.0, 0.0
     above = ox * a0 + oy * a1 + oz * a2 > 0.0
-    lift = facets.lift[f]
+    lift = facets.plane[f] + facets.eps
     return CONTINUES, wn, ox, oy, oz, (lift if above else lift - 2.0 * eps)
 
 
@@ -255,7 +255,7 @@ def interface_step(
     Arguments: step ``b``, interaction ``limit``, weight ``floor``, the live paths' global
     indices ``live`` and weights ``w``; ``walk`` (``engine.segments.WalkResult`` of the rays
     traced at this step), ``rays`` (``bounce_kernels.RayDirections``), ``facets``
-    (``bounce_kernels.FacetPlanes``; its lift n·v0 + eps), ``interface`` (``Interface``),
+    (``bounce_kernels.FacetPlanes``: lift n·v0 + eps), ``interface`` (``Interface``),
     ``roulette`` (``Roulette``), ``sides`` (``PathSides``, updated), ``ledger``
     (``bounce_kernels.PathLedger``, written), ``escapes`` (``SideEscapes``, written) and
     ``nxt`` (``bounce_kernels.NextRays``, written)."""

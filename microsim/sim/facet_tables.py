@@ -12,6 +12,7 @@ from typing import NamedTuple
 import numpy as np
 
 from microsim.bins import Bins
+from microsim.surfaces.heightfields import TABLED_FACETS_MAX, TABLES_KEPT_BYTES
 
 from . import dielectric_kernels, fresnel_kernels
 from .engine import beam
@@ -41,8 +42,9 @@ class FacetTable:
     Fresnel F(n·wi) (0 when back-facing); ``wo32`` (F, 3) the mirror direction
     wo = 2(wi·n)n − wi in float32 — the direction Embree traces the masking ray along, whose
     float64 value the walk uses too; ``bin`` (F,) int32 flat bin index of wo (from float64
-    wo; −1 below the horizon); ``normal_cols`` (3 × (F,)) and ``lift`` (F,) = n·v0 + eps (a
-    point p starts its masking ray at p − (p·n − lift) n: on the facet plane, eps above it);
+    wo; −1 below the horizon); ``normal_cols`` (3 × (F,)), ``plane`` (F,) = n·v0 and ``eps``
+    (a point p starts its masking ray at p − (p·n − lift) n, lift = plane + eps: on the facet
+    plane, eps above it);
     ``clear`` (F,) bool: lit facets whose rays all escape without a masking ray, because
     their mirror direction rises more steeply than the surface can (``Tracer.surely_escapes``)
     or, on heightfield grids, because the beam of them clears the relief (``beam``).
@@ -53,13 +55,16 @@ class FacetTable:
     bin: np.ndarray
     wo32: np.ndarray
     normal_cols: tuple
-    lift: np.ndarray
+    plane: np.ndarray
+    eps: float
     clear: np.ndarray
 
 
 TABLES_KEPT = 4
-"""Facet tables a ``Tracer`` keeps for repeated calls at the same incidence (the most recent;
-13 MB each on the bench's 524 288-facet mesh)."""
+"""Facet tables a ``Tracer`` keeps for repeated calls at the same incidence: the most recent,
+the older ones only while they add up to at most ``TABLES_KEPT_BYTES`` (13 MB each on the
+bench's 524 288-facet mesh: all four; one beyond the newest on a 2048² heightfield, none on
+a 4096² one)."""
 PIECE_FACETS = 1 << 18
 """The most facets a facet table is built for at a time (its temporaries: ~100 B a facet)."""
 _TABLES_LOCK = threading.Lock()
@@ -96,19 +101,24 @@ def facet_table(
 
 def _kept(tracer: Tracer, key, build, arrays):
     """The table of ``key`` kept by ``tracer``, else ``build()``'s, its ``arrays`` made
-    read-only and kept (the ``TABLES_KEPT`` most recent)."""
+    read-only and kept: the ``TABLES_KEPT`` most recent, the older ones only while their own
+    arrays add up to at most ``TABLES_KEPT_BYTES``. ``tracer.facet_tables`` maps each key to
+    (table, bytes of its arrays), most recent last."""
     kept = getattr(tracer, "facet_tables", {})  # (a stand-in without it keeps nothing)
     with _TABLES_LOCK:
-        table = kept.pop(key, None)
-        if table is not None:
-            kept[key] = table  # most recent last
-            return table
+        entry = kept.pop(key, None)
+        if entry is not None:
+            kept[key] = entry  # most recent last
+            return entry[0]
     table = build()
     for name in arrays:
         getattr(table, name).flags.writeable = False
     with _TABLES_LOCK:
-        kept[key] = table
-        for old in list(kept)[:-TABLES_KEPT]:
+        kept[key] = (table, sum(getattr(table, name).nbytes for name in arrays))
+        room, older = TABLES_KEPT_BYTES, list(kept)[-TABLES_KEPT:-1]
+        while older and kept[older[-1]][1] <= room:  # the newest of the older ones first
+            room -= kept[older.pop()][1]
+        for old in list(kept)[: -TABLES_KEPT or None] + older:
             kept.pop(old, None)
     return table
 
@@ -201,7 +211,8 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         bin=where,
         wo32=wo32,
         normal_cols=ncols,
-        lift=tracer.masking_lift,
+        plane=tracer.plane,
+        eps=tracer.eps,
         clear=clear,
     )
 
@@ -216,8 +227,10 @@ def steep_facets(tracer: Tracer, code: np.ndarray, wo32: np.ndarray) -> np.ndarr
 
 def table_pays(facets: int, rays: int) -> bool:
     """Whether a facet table is worth building for ``rays`` on a mesh of ``facets``: no more
-    facets than rays (the table's build is one pass over the facets)."""
-    return facets <= rays
+    facets than rays (the table's build is one pass over the facets), and no more than
+    ``TABLED_FACETS_MAX`` (larger meshes are traced ray by ray, so that their memory stays
+    proportional to their heights)."""
+    return facets <= rays and facets <= TABLED_FACETS_MAX
 
 
 def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_total: int) -> bool:

@@ -53,18 +53,19 @@ class HeightfieldGrid:
     def __init__(self, hp: np.ndarray, cell: float):
         self.hp = np.ascontiguousarray(hp, dtype=np.float64)
         self.ny, self.nx = self.hp.shape[0] - 1, self.hp.shape[1] - 1
-        self.cell_max = np.maximum(
-            np.maximum(hp[:-1, :-1], hp[:-1, 1:]), np.maximum(hp[1:, :-1], hp[1:, 1:])
-        )
+        hp = self.hp
+        self.cell_max = np.maximum(hp[:-1, :-1], hp[:-1, 1:])  # then in place: one array
+        np.maximum(self.cell_max, hp[1:, :-1], out=self.cell_max)
+        np.maximum(self.cell_max, hp[1:, 1:], out=self.cell_max)
         self.cell = float(cell)
         self.x0, self.y0 = -self.nx * self.cell / 2.0, -self.ny * self.cell / 2.0
 
     @functools.cached_property
     def cell_min(self) -> np.ndarray:
         hp = self.hp
-        return np.minimum(
-            np.minimum(hp[:-1, :-1], hp[:-1, 1:]), np.minimum(hp[1:, :-1], hp[1:, 1:])
-        )
+        low = np.minimum(hp[:-1, :-1], hp[:-1, 1:])  # then in place: one array
+        np.minimum(low, hp[1:, :-1], out=low)
+        return np.minimum(low, hp[1:, 1:], out=low)
 
     def side(self, below: bool) -> tuple:
         """``cast_one``'s ``side`` argument for a ray above the surface or ``below`` it."""

@@ -29,7 +29,9 @@ CLEAR_MARGIN = horizon.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × ri
 def facet_slopes(normal_columns) -> np.ndarray:
     """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,), from its unit normal's columns."""
     nx, ny, nz = normal_columns
-    return np.hypot(nx, ny) / nz
+    slopes = np.hypot(nx, ny)
+    slopes /= nz  # in place: one array of F
+    return slopes
 
 
 def rise_bound(surface, slopes) -> float:
@@ -79,6 +81,5 @@ def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float) -> Hori
     ny = int(np.clip(round(math.sqrt(cells * ly / lx)), 1, 1024))
     cmax, cslope = np.full((ny, nx), -np.inf), np.zeros((ny, nx))
     x0, y0, cw, ch = -lx / 2, -ly / 2, lx / nx, ly / ny
-    cols = [np.ascontiguousarray(vertices[:, k]) for k in range(3)]
-    horizon.fill_horizon(*cols, faces, slopes, x0, y0, cw, ch, cmax, cslope)
+    horizon.fill_horizon(vertices, faces, slopes, x0, y0, cw, ch, cmax, cslope)
     return HorizonGrid(x0, y0, cw, ch, cmax, cslope, 4.0 * eps)

@@ -288,7 +288,7 @@ def trace_grid_interface(
     inside.fill(from_below)
     sides = PathSides(inside, from_below, out.tir)
     half = float(tracer.half[0]), float(tracer.half[1])
-    facets = FacetPlanes(*tracer.normal_columns, tracer.masking_lift, *half)
+    facets = FacetPlanes(*tracer.normal_columns, tracer.plane, tracer.eps, *half)
     binning = folded_binning(bins, float(phi_i), min(chain.limit, 4), chain.nbin)
     walk = grid_walk_of(tracer)
     use_first = bool(table and not interface.absorbing)

@@ -76,7 +76,8 @@ def tabled_masking_rays(
         table.code,
         table.weight,
         *table.normal_cols,
-        table.lift,
+        table.plane,
+        table.eps,
         table.wo32,
         table.bin,
         table.clear,
@@ -177,7 +178,7 @@ def trace_columns(
     m = primary.traced_primary(
         segments.WalkResult(hs, prim, *p),
         tuple(wl),
-        (*tracer.normal_columns, tracer.masking_lift),
+        (*tracer.normal_columns, tracer.plane, tracer.eps),
         profile is None,
         tracer.rise_bound,
         tracer.horizon,

@@ -119,7 +119,7 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
         )
     check_relief("surface", v[:, 2].min(), v[:, 2].max(), (lx, ly))
     tol = 1e-9 * max(lx, ly)
-    if np.any(np.abs(v[:, 0]) > lx / 2 + tol) or np.any(np.abs(v[:, 1]) > ly / 2 + tol):
+    if any(max(-v[:, k].min(), v[:, k].max()) > side / 2 + tol for k, side in ((0, lx), (1, ly))):
         raise UsageError("surface.vertices must lie in the tile [-Lx/2, Lx/2] x [-Ly/2, Ly/2]")
     return v, f if f.dtype in (np.int32, np.int64) else f.astype(np.int64), lx, ly
 
@@ -176,7 +176,9 @@ class Tracer:
 
     Attributes: ``vertices`` (V, 3) float64 and ``faces`` (F, 3) integer (the surface's own
     arrays where they already have these types), ``normals`` (F, 3) unit float64 facet normals
-    (a view of ``normal_columns``, their three contiguous (F,) columns), ``tile`` (Lx, Ly),
+    (a view of ``normal_columns``, their three contiguous (F,) columns), ``plane`` (F,) their
+    planes' offsets n·v0 (a secondary ray from facet f starts on the plane n·x = plane[f] +
+    eps: computed where it is used, not stored), ``tile`` (Lx, Ly),
     ``zmin``/``zmax``, ``eps`` (secondary-ray offset along the normal, length units),
     ``top_margin`` (primary rays start at zmax + it) and ``max_wraps`` (tile crossings per ray
     before it counts as unresolved: 64 plus enough for a ray 89.5° from the normal to cross the
@@ -204,13 +206,13 @@ class Tracer:
         self.vertices, self.faces = v, f
         self._heightfield = heightfield_grid(surface, v, f)  # None unless a heightfield grid
         self.grid = self._heightfield if grid else None
-        rows, self._plane = _facet_planes(v, f)
+        rows, self.plane = _facet_planes(v, f)
         self.normals = rows.T  # (F, 3), a view of the rows
         self.normal_columns = tuple(rows)  # the three contiguous rows
         self.tile = (lx, ly)
         self.half = np.array([lx / 2, ly / 2])
         self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
-        big = max(float(np.abs(v).max()), lx / 2, ly / 2)
+        big = max(-float(v.min()), float(v.max()), lx / 2, ly / 2)  # max |v|, no copy
         self.eps = 2.0 * float(np.spacing(np.float32(big)))  # 2 ulp: 1.2e-7 on a unit tile
         self.top_margin = 4.0 * self.eps  # primary rays start this far above zmax
         depth = self.zmax - self.zmin + self.top_margin
@@ -225,7 +227,7 @@ class Tracer:
         self.groove_clear, self.groove_strata = (
             groove_tables(self) if grooved else (NO_GROOVES, NO_STRATA)
         )
-        self.facet_tables: dict = {}  # kept by facet_tables.facet_table: its key → FacetTable
+        self.facet_tables: dict = {}  # kept by facet_tables.facet_table: key → (table, bytes)
         self.backend = scene_backend(backend)
         self._scene_lock = threading.Lock()
 
@@ -255,12 +257,6 @@ class Tracer:
             return None
         tol = self.horizon.tol
         return beam.mirrored_beam_grid(self._heightfield, self.normals, self.zmin, tol)
-
-    @functools.cached_property
-    def masking_lift(self) -> np.ndarray:
-        """n·v0 + eps per facet (F,): a point p on facet f's plane moved to
-        p − (p·n − lift)·n starts its secondary ray eps above the plane."""
-        return self._plane + self.eps
 
     # --- periodic walk (``periodic_walk``) ------------------------------------------------
     def _walk(self, origins, dirs, occlusion: bool):
@@ -389,7 +385,7 @@ class Tracer:
             point[:, 0] * nrm[:, 0]
             + point[:, 1] * nrm[:, 1]
             + point[:, 2] * nrm[:, 2]
-            - self._plane[prim]
+            - self.plane[prim]
             - lift
         )
         return point - off[:, None] * nrm

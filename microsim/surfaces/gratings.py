@@ -13,7 +13,7 @@ import numpy as np
 from microsim.checks import check_memory, integer, positive
 from microsim.errors import UsageError
 
-from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
+from .heightfields import MIN_GRID, traced_bytes
 from .surface import Surface, check_relief, heightfield_mesh
 
 __all__ = ["sinusoidal_grating", "triangular_grating", "PERIOD_RTOL"]
@@ -101,8 +101,8 @@ def _extruded(row: np.ndarray, ny: int, dx: float, nominal: dict) -> Surface:
     lx = n * dx
     check_memory(
         "n",
-        float(n) * ny * BYTES_PER_GRID_POINT,
-        f"a {n}x{ny} heightfield ({BYTES_PER_GRID_POINT} bytes per grid point)",
+        traced_bytes(n * ny),
+        f"a {n}x{ny} heightfield ({traced_bytes(n * ny) / (n * ny):.0f} bytes per grid point)",
     )
     heights = np.tile(row, (ny, 1))
     tile = (lx, ny * dx)

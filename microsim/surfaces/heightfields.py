@@ -65,12 +65,36 @@ GAUSS_RESOLVED_CELLS = 1.0
 """Shortest Gaussian ℓ, in grid steps, that the grid resolves: the synthesis keeps the spectrum
 up to the Nyquist frequency 1/(2dx), i.e. erf(πℓ/(2dx))² of σ² — 95 % at ℓ = dx, 18 % at dx/4,
 nothing as ℓ → 0 (the mesh turns flat whatever the nominal m = 2σ/ℓ). Shorter ℓ is refused."""
-BYTES_PER_GRID_POINT = 450
-"""Peak memory per grid point of a heightfield built and traced (two triangles): measured
-≈ 430 bytes (peak RSS growth, 2048² Gaussian grid, 2 threads: single scattering at four
-incidences, whose four facet tables the tracer keeps, 52 bytes per point each; all orders and
-rough glass at four incidences ≈ 220 bytes; the synthesis alone ≈ 220: its FFTs); checked
-against ``microsim.checks.memory_limit`` before synthesis."""
+BYTES_PER_GRID_POINT = 180
+"""Peak memory per grid point of a heightfield built and traced ray by ray (two triangles):
+the mesh (float64 vertices, int32 faces, 48 bytes), the heights (8), the tracer's facet
+normals and plane offsets (64) and the grid walk's copy of the heights and cell maxima (16),
+besides the build's own peak (its in-place synthesis, ~100). Measured: 153 bytes per point
+at 4096², 152 at 8192² (peak RSS growth; ``microsim bench --scale``)."""
+TABLED_FACETS_MAX = 1 << 25
+"""Largest mesh, in facets, whose tracer builds per-incidence facet tables (the run's rays
+at least as many as its facets, ``sim.facet_tables.table_pays``): a 4096² heightfield. A
+larger one is traced ray by ray whatever the ray count, so that its memory stays
+``BYTES_PER_GRID_POINT`` per point."""
+TABLE_BYTES_PER_GRID_POINT = 100
+"""What the facet-table path adds per grid point where it is taken: the newest incidence's
+table (26 bytes per facet, 52 per point) and the beam grid it reads (per-facet gradients and
+block maxima, 40 per point), besides the older tables the tracer keeps
+(``TABLES_KEPT_BYTES`` in all)."""
+TABLES_KEPT_BYTES = 256 * 2**20
+"""Bytes of the older facet tables a tracer keeps beside the newest (``sim.facet_tables``)."""
+
+
+def traced_bytes(points: int) -> float:
+    """Peak bytes of a heightfield of ``points`` grid points built and traced:
+    ``BYTES_PER_GRID_POINT`` per point, and where its mesh is small enough for facet tables
+    (``TABLED_FACETS_MAX``) ``TABLE_BYTES_PER_GRID_POINT`` per point and the kept tables'
+    ``TABLES_KEPT_BYTES``; checked against ``microsim.checks.memory_limit`` before
+    synthesis."""
+    need = float(points) * BYTES_PER_GRID_POINT
+    if 2 * points <= TABLED_FACETS_MAX:
+        need += float(points) * TABLE_BYTES_PER_GRID_POINT + TABLES_KEPT_BYTES
+    return need
 
 
 # --- spectra -----------------------------------------------------------------------------------
@@ -214,14 +238,14 @@ def abc_continuum_slope_var(
 # --- generators --------------------------------------------------------------------------------
 def _grid_args(n, dx, seed):
     """(n, dx, seed) validated; an n×n grid that would not fit in memory is refused here,
-    before anything is allocated (``BYTES_PER_GRID_POINT``)."""
+    before anything is allocated (``traced_bytes``)."""
     n = integer("n", n, MIN_GRID, None, " (grid points per side)")
     dx, seed = positive("dx", dx), integer("seed", seed, 0)
     check_memory(
         "n",
-        float(n) * n * BYTES_PER_GRID_POINT,
-        f"a {n}x{n} heightfield ({BYTES_PER_GRID_POINT} bytes per grid point to "
-        f"synthesise, mesh and trace)",
+        traced_bytes(n * n),
+        f"a {n}x{n} heightfield (synthesised, meshed and traced: "
+        f"{traced_bytes(n * n) / (n * n):.0f} bytes per grid point)",
     )
     return n, dx, seed
 

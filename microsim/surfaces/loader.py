@@ -25,7 +25,7 @@ from microsim.checks import check_memory, file_path, positive
 from microsim.errors import UsageError
 
 from . import scan
-from .heightfields import BYTES_PER_GRID_POINT, MIN_GRID
+from .heightfields import MIN_GRID, traced_bytes
 from .surface import Surface, check_relief, heightfield_mesh
 
 __all__ = [
@@ -80,9 +80,10 @@ def _check_shape(
     try:
         check_memory(
             str(path),
-            points * BYTES_PER_GRID_POINT,
+            traced_bytes(points),
             f"a {ny}x{nx} heightfield ({'as is' if periodic else 'mirrored'}: "
-            f"{points:,} grid points × {BYTES_PER_GRID_POINT} bytes to mesh and trace)",
+            f"{points:,} grid points × {traced_bytes(points) / points:.0f} bytes to mesh "
+            f"and trace)",
         )
     except UsageError as e:
         raise UsageError(" ".join(str(e).split())) from None

@@ -12,19 +12,19 @@ CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope 
 
 
 @compiled
-def fill_horizon(vx, vy, vz, faces, slope, x0, y0, cw, ch, cmax, cslope):
-    """The coarse bounds of ``horizon_clear``: for every facet (vertex columns ``vx/vy/vz``,
+def fill_horizon(v, faces, slope, x0, y0, cw, ch, cmax, cslope):
+    """The coarse bounds of ``horizon_clear``: for every facet (vertices ``v`` (V, 3),
     ``faces``, facet slope ``slope`` = |∇h|), every cell of the (ny, nx) grid of cells
     cw × ch from (x0, y0) that its bounding box overlaps gets the facet's highest vertex in
     ``cmax`` and its slope in ``cslope`` (running maxima; start from −inf and 0)."""
     ny, nx = cmax.shape
     for f in range(len(faces)):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        i0 = max(int(math.floor((min(vx[a], vx[b], vx[c]) - x0) / cw)), 0)
-        i1 = min(int(math.floor((max(vx[a], vx[b], vx[c]) - x0) / cw)), nx - 1)
-        j0 = max(int(math.floor((min(vy[a], vy[b], vy[c]) - y0) / ch)), 0)
-        j1 = min(int(math.floor((max(vy[a], vy[b], vy[c]) - y0) / ch)), ny - 1)
-        top = max(vz[a], vz[b], vz[c])
+        i0 = max(int(math.floor((min(v[a, 0], v[b, 0], v[c, 0]) - x0) / cw)), 0)
+        i1 = min(int(math.floor((max(v[a, 0], v[b, 0], v[c, 0]) - x0) / cw)), nx - 1)
+        j0 = max(int(math.floor((min(v[a, 1], v[b, 1], v[c, 1]) - y0) / ch)), 0)
+        j1 = min(int(math.floor((max(v[a, 1], v[b, 1], v[c, 1]) - y0) / ch)), ny - 1)
+        top = max(v[a, 2], v[b, 2], v[c, 2])
         for j in range(j0, j1 + 1):
             for i in range(i0, i1 + 1):
                 cmax[j, i] = max(cmax[j, i], top)

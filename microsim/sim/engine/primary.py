@@ -20,7 +20,8 @@ from .segments import setup_ray
 
 class FacetColumns(NamedTuple):
     """A ``facet_tables.FacetTable`` as ``tabled_primary`` reads it, per facet: ledger ``code``,
-    Fresnel ``fweight``, unit normal (nx, ny, nz), ``lift`` = n·v0 + eps, float32 mirror
+    Fresnel ``fweight``, unit normal (nx, ny, nz), plane offset ``plane`` = n·v0 (a masking
+    ray starts on the plane n·x = plane + ``eps``, the facet's lift), float32 mirror
     direction ``wo32`` (F, 3), bin ``fbin`` and ``fclear`` (surely escapes)."""
 
     code: np.ndarray
@@ -28,7 +29,8 @@ class FacetColumns(NamedTuple):
     nx: np.ndarray
     ny: np.ndarray
     nz: np.ndarray
-    lift: np.ndarray
+    plane: np.ndarray
+    eps: float
     wo32: np.ndarray
     fbin: np.ndarray
     fclear: np.ndarray
@@ -58,10 +60,10 @@ class TracedLedger(NamedTuple):
 def tabled_primary(walk, table, hz, geometry, out, masking):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
     per facet (``facet_tables.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
-    ``lift`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as float64 too),
-    bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the masking rays of
-    the other lit ones (code SINGLE) that the coarse grid ``hz`` (``horizon_clear``'s
-    x0, y0, cw, ch, cmax, cslope, tol) cannot clear, set up as the first
+    lift = ``plane`` + ``eps`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as
+    float64 too), bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the
+    masking rays of the other lit ones (code SINGLE) that the coarse grid ``hz``
+    (``horizon_clear``'s x0, y0, cw, ch, cmax, cslope, tol) cannot clear, set up as the first
     segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
     ray ``mi[m]`` starts at its hit point p moved along n onto the facet plane and eps above
     it, p − (p·n − lift)·n, wrapped into the tile (``sx/sy/sz``), along the facet's mirror
@@ -75,7 +77,7 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
     by ``masking_starts``.
 
     Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``table``
-    (``FacetColumns``: code, fweight, nx, ny, nz, lift, wo32, fbin, fclear), ``hz``,
+    (``FacetColumns``: code, fweight, nx, ny, nz, plane, eps, wo32, fbin, fclear), ``hz``,
     ``geometry``, ``out`` (``PrimaryLedger``: status, weight, where; written) and
     ``masking`` (the masking rays' arrays, ``masking_rays.MaskingRays.kernel_args``)."""
     tile = np.empty((6, TILE))  # per-ray scratch of one tile: masking starts, directions
@@ -117,7 +119,7 @@ def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m
     entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``tile`` (6, TILE)
     and ``cand`` (TILE,) scratch; masking rays from slot m on. Returns the new m."""
     hs, prim, px, py, pz = walk
-    code, fweight, nx, ny, nz, lift, wo32, fbin, fclear = table
+    code, fweight, nx, ny, nz, plane, eps, wo32, fbin, fclear = table
     status, weight, where = out
     x_, y_, z_, dx_, dy_, dz_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
     for j in range(n):  # one by one: the hit facet's entries (indexed loads)
@@ -133,7 +135,7 @@ def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m
         cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
         if cand[j]:  # the masking ray's start on the facet plane (few rays: most are clear)
             a, b, e = nx[f], ny[f], nz[f]
-            off = px[k] * a + py[k] * b + pz[k] * e - lift[f]
+            off = px[k] * a + py[k] * b + pz[k] * e - (plane[f] + eps)
             x_[j], y_[j], z_[j] = px[k] - off * a, py[k] - off * b, pz[k] - off * e
             dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
     return masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
@@ -144,29 +146,27 @@ def traced_primary(
     walk, incident, facets, trace_masking, clear_slope, hz, groove, geometry, out, masking
 ):
     """``tabled_primary`` for rays that each carry their own incident direction wl (``wx/wy/
-    wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n
-    (unit normal ``nx/ny/nz``, ``lift`` = n·v0 + eps), c = n·wl (``cosine``: 0 without a hit
-    or back-facing, for ``fresnel_weights``); back-facing (c ≤ 0): RAY_UNRESOLVED; else the
-    mirror direction wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0, else
-    SINGLE. With
-    ``trace_masking`` the SINGLE rays whose float32 wo rises more steeply than
-    ``clear_slope`` (× ``CLEAR_MARGIN`` as in ``Tracer.surely_escapes``; inf: none), that
-    start at or above zmax or that clear the coarse grid ``hz`` (``horizon_clear``) escape
-    without a ray, and the others get their masking ray set up
-    as the first segment of their walk, exactly as ``tabled_primary`` (float64 direction wo,
-    its float32 copy in ``md32``); returns the number of masking rays (0 without
-    ``trace_masking``: the caller decides masking itself). ``groove``: V-groove surfaces'
-    per-facet (rim x, tanθ σ, rim-to-rim width W, rim-to-bottom extent) and a tolerance
-    (``Tracer.groove_clear``; empty arrays otherwise): a ray whose exact masking margin
-    s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``) is below −tolerance
-    escapes without a ray (the margins within it are left to Embree).
+    wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n (unit
+    normal ``nx/ny/nz``, lift = ``plane`` + ``eps`` = n·v0 + eps), c = n·wl (``cosine``: 0
+    without a hit or back-facing, for ``fresnel_weights``); back-facing (c ≤ 0): RAY_UNRESOLVED;
+    else the mirror direction wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0,
+    else SINGLE. With ``trace_masking`` the SINGLE rays whose float32 wo rises more steeply than
+    ``clear_slope`` (× ``CLEAR_MARGIN`` as in ``Tracer.surely_escapes``; inf: none), that start
+    at or above zmax or that clear the coarse grid ``hz`` (``horizon_clear``) escape without a
+    ray, and the others get their masking ray set up as the first segment of their walk, exactly
+    as ``tabled_primary`` (float64 direction wo, its float32 copy in ``md32``); returns the
+    number of masking rays (0 without ``trace_masking``: the caller decides masking itself).
+    ``groove``: V-groove surfaces' per-facet (rim x, tanθ σ, rim-to-rim width W, rim-to-bottom
+    extent) and a tolerance (``Tracer.groove_clear``; empty arrays otherwise): a ray whose exact
+    masking margin s(1 + tanθ σ wo_x/wo_z) − W (``VGrooveProfile.margin_from_rim``) is below
+    −tolerance escapes without a ray (the margins within it are left to Embree).
 
     Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``incident`` (wx,
-    wy, wz), ``facets`` (the tracer's nx, ny, nz, lift), ``out`` (``TracedLedger``: status,
+    wy, wz), ``facets`` (the tracer's nx, ny, nz, plane, eps), ``out`` (``TracedLedger``: status,
     cosine, wox, woy, woz; written); the others as named above."""
     hs, prim, px, py, pz = walk
     wx, wy, wz = incident
-    nx, ny, nz, lift = facets
+    nx, ny, nz, plane, eps = facets
     status, cosine, wox, woy, woz = out
     shared = len(wx) == 1
     grim, gtan, gwidth, gextent, gtol = groove
@@ -181,7 +181,7 @@ def traced_primary(
         n = min(TILE, len(hs) - t)
         for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
             f = prim[t + j] if hs[t + j] == HIT else 0
-            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], lift[f]
+            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], plane[f] + eps
         if grooved:
             for j in range(n):
                 f = prim[t + j] if hs[t + j] == HIT else 0
