@@ -16,13 +16,29 @@ def _surface(seed=3):
 
 
 def test_same_surface_same_tracer_changed_mesh_new_tracer():
+    """A surface's mesh is read-only (its fingerprint is computed once); a changed mesh is a
+    new surface, which gets a new tracer — also where the arrays are not the surface's own
+    (a view), whose fingerprint is then computed on every call."""
+    import dataclasses
+
+    import pytest
+
     s = _surface()
     a = tracer_for(s, "traced", s.fingerprint())
     assert tracer_for(s, "traced", s.fingerprint()) is a
     assert tracer_for(s, "traced") is not a  # no fingerprint: no reuse
-    s.vertices[:, 2] *= 1.5  # mutated in place: another mesh
-    b = tracer_for(s, "traced", s.fingerprint())
+    with pytest.raises(ValueError):
+        s.vertices[:, 2] *= 1.5
+    changed = s.vertices.copy()
+    changed[:, 2] *= 1.5
+    t = dataclasses.replace(s, vertices=changed)
+    b = tracer_for(t, "traced", t.fingerprint())
     assert b is not a and b[0].zmax != a[0].zmax
+    shared = np.array(s.vertices)  # writable, and viewed by the surface below
+    u = dataclasses.replace(s, vertices=shared[:])
+    before = u.fingerprint()
+    shared[:, 2] *= 1.5  # through the base the view still sees
+    assert u.fingerprint() != before and u.fingerprint() == t.fingerprint()
 
 
 def test_reuse_is_released_with_the_surface():

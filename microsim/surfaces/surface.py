@@ -125,12 +125,19 @@ FINGERPRINT_ROWS = 1 << 16
 """Vertex or face rows ``Surface.fingerprint`` hashes at a time."""
 
 
+def _frozen(array) -> bool:
+    """Whether ``array`` is a read-only ndarray owning its memory (no writable view of it can
+    exist)."""
+    return isinstance(array, np.ndarray) and array.base is None and not array.flags.writeable
+
+
 @dataclass(frozen=True, eq=False, repr=False)
 class Surface:
     """A periodic microsurface tile (the contract between surfaces and the tracer).
 
-    ``vertices`` (V, 3) float64 and ``faces`` (F, 3) int32 (normals up); ``tile_size`` (Lx, Ly)
-    are the periods; ``nominal`` holds the generator parameters; ``heights`` (ny, nx) with
+    ``vertices`` (V, 3) float64 and ``faces`` (F, 3) int32 (normals up), read-only (a changed
+    mesh is a new ``Surface``: its identity, ``fingerprint``, is computed once); ``tile_size``
+    (Lx, Ly) are the periods; ``nominal`` holds the generator parameters; ``heights`` (ny, nx) with
     spacing ``dx`` for heightfields (row = y index, col = x index); ``azimuth_average`` is True
     for V-grooves (the estimator averages the groove azimuth to get the isotropic V-cavity
     surface); ``warnings`` are caveats to show in reports.
@@ -168,6 +175,11 @@ class Surface:
     predicted: Predicted | None = None
     generator_stats: Callable[["Surface"], dict] | None = None
     tilt_ndf: object = None
+
+    def __post_init__(self):
+        for array in (self.vertices, self.faces):
+            if isinstance(array, np.ndarray):
+                array.flags.writeable = False
 
     def __repr__(self) -> str:
         """One line: kind, grid or groove count, tile, triangles and the nominal parameters."""
@@ -217,7 +229,19 @@ class Surface:
 
     def fingerprint(self) -> str:
         """The mesh's identity, as ``simulate`` records it in meta ("fingerprint"): SHA-1 of
-        the vertices (float64) and faces (int64), first 16 hex digits."""
+        the vertices (float64) and faces (int64), first 16 hex digits. Computed once where
+        both arrays are read-only and own their memory (the surface's own arrays: nothing can
+        change them), else on every call."""
+        cached = self.__dict__.get("_fingerprint")
+        if cached is not None:
+            return cached
+        digest = self._mesh_digest()
+        if all(_frozen(a) for a in (self.vertices, self.faces)):
+            object.__setattr__(self, "_fingerprint", digest)
+        return digest
+
+    def _mesh_digest(self) -> str:
+        """``fingerprint``, computed."""
         digest = hashlib.sha1()
         for array, dtype in ((self.vertices, np.float64), (self.faces, np.int64)):
             rows = np.asarray(array)  # hashed a block of rows at a time: no copy of the mesh
