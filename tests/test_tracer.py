@@ -135,6 +135,28 @@ def test_bad_meshes_raise():
         Tracer(Surface("vgrooves", good.vertices, good.faces[:, ::-1].copy(), (1.0, 1.0), True, {}))
 
 
+@pytest.mark.parametrize("parts", [2, 3])
+def test_the_set_up_in_parts_is_the_set_up_in_one(monkeypatch, parts):
+    """Facet normals, plane offsets and the bounds built from the facet slopes are the same
+    bits computed in facet ranges on several threads (``tracer.in_parts``) as in one pass; a
+    degenerate or downward facet in any range is still refused."""
+    import microsim.sim.tracer as tracer_module
+
+    s = heightfield_surface(random_heights(sigma=0.02, seed=7), 1 / 64)
+    one = Tracer(s)
+    monkeypatch.setattr(tracer_module, "SETUP_PART", 1000)
+    monkeypatch.setattr(tracer_module.os, "cpu_count", lambda: parts)
+    many = Tracer(s)
+    assert np.array_equal(many.normals, one.normals) and np.array_equal(many.plane, one.plane)
+    assert many.rise_bound == one.rise_bound
+    assert np.array_equal(many.horizon.cslope, one.horizon.cslope)
+    assert np.array_equal(many.horizon.cmax, one.horizon.cmax)
+    flipped = s.faces.copy()
+    flipped[-1] = flipped[-1, ::-1]  # in the last range
+    with pytest.raises(ValueError, match="faces.*up"):
+        Tracer(Surface("gaussian", s.vertices, flipped, s.tile_size, True, {}))
+
+
 # --- masking rays decided without tracing (Tracer.rise_bound) ----------------------------------
 def test_rise_bound_is_the_steepest_facet_slope_of_heightfields_only():
     from microsim.surfaces import gaussian

@@ -26,11 +26,20 @@ HORIZON_FACETS = 32  # facets per cell of the coarse grid of ``Tracer.horizon``
 CLEAR_MARGIN = horizon.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
 
 
-def facet_slopes(normal_columns) -> np.ndarray:
-    """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,), from its unit normal's columns."""
+def facet_slopes(normal_columns, parts=None) -> np.ndarray:
+    """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,), from its unit normal's columns; with
+    ``parts`` (``tracer.in_parts``) in facet ranges on as many threads."""
     nx, ny, nz = normal_columns
-    slopes = np.hypot(nx, ny)
-    slopes /= nz  # in place: one array of F
+    slopes = np.empty(len(nx))
+
+    def fill(lo: int, hi: int) -> None:
+        np.hypot(nx[lo:hi], ny[lo:hi], out=slopes[lo:hi])
+        slopes[lo:hi] /= nz[lo:hi]  # in place: one array of F
+
+    if parts is None:
+        fill(0, len(nx))
+    else:
+        parts(len(nx), fill)
     return slopes
 
 
@@ -66,11 +75,12 @@ class HorizonGrid(NamedTuple):
     tol: float
 
 
-def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float) -> HorizonGrid:
+def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float, parts=None) -> HorizonGrid:
     """The ``HorizonGrid`` of a heightfield mesh (finite ``rise`` bound; ``slopes``: its
-    ``facet_slopes``), cells of
-    ~``HORIZON_FACETS`` facets, tol = 4 ``eps`` (float32 rays); for other meshes a 1 × 1 grid
-    that clears nothing."""
+    ``facet_slopes``), cells of ~``HORIZON_FACETS`` facets, tol = 4 ``eps`` (float32 rays); for
+    other meshes a 1 × 1 grid that clears nothing. With ``parts`` (``tracer.in_parts``) each
+    facet range fills a grid of its own on its thread, and the grids' maxima are merged (the
+    same maxima)."""
     if not math.isfinite(rise):
         return HorizonGrid(
             0.0, 0.0, 1.0, 1.0, np.full((1, 1), np.inf), np.full((1, 1), np.inf), 0.0
@@ -79,7 +89,17 @@ def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float) -> Hori
     cells = len(faces) / HORIZON_FACETS
     nx = int(np.clip(round(math.sqrt(cells * lx / ly)), 1, 1024))
     ny = int(np.clip(round(math.sqrt(cells * ly / lx)), 1, 1024))
-    cmax, cslope = np.full((ny, nx), -np.inf), np.zeros((ny, nx))
     x0, y0, cw, ch = -lx / 2, -ly / 2, lx / nx, ly / ny
-    horizon.fill_horizon(vertices, faces, slopes, x0, y0, cw, ch, cmax, cslope)
+
+    def fill(lo: int, hi: int) -> tuple:
+        cmax, cslope = np.full((ny, nx), -np.inf), np.zeros((ny, nx))
+        cells = (x0, y0, cw, ch, cmax, cslope)
+        horizon.fill_horizon(vertices, faces[lo:hi], slopes[lo:hi], *cells)
+        return cmax, cslope
+
+    grids = [fill(0, len(faces))] if parts is None else parts(len(faces), fill)
+    cmax, cslope = grids[0]
+    for more_max, more_slope in grids[1:]:
+        np.maximum(cmax, more_max, out=cmax)
+        np.maximum(cslope, more_slope, out=cslope)
     return HorizonGrid(x0, y0, cw, ch, cmax, cslope, 4.0 * eps)

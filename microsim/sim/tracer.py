@@ -39,7 +39,9 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,13 +127,13 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
 
 
 @compiled
-def _fill_facet_planes(v, f, rows, plane) -> tuple:
-    """The unit normal cross(v1 − v0, v2 − v0)/|…| of each facet of (``v``, ``f``) into
-    ``rows`` (3, F) and its plane's offset n·v0 into ``plane`` (F,), in NumPy's order of
-    operations (the same bits); (degenerate, downward): whether any facet has zero area (its
-    entries left unset), any normal z ≤ 0."""
+def _fill_facet_planes(v, f, lo, hi, rows, plane) -> tuple:
+    """The unit normal cross(v1 − v0, v2 − v0)/|…| of facets ``lo`` … ``hi`` − 1 of (``v``,
+    ``f``) into ``rows`` (3, F) and their planes' offsets n·v0 into ``plane`` (F,), in NumPy's
+    order of operations (the same bits); (degenerate, downward): whether any of them has zero
+    area (its entries left unset), any normal z ≤ 0."""
     degenerate, downward = False, False
-    for k in range(len(f)):
+    for k in range(lo, hi):
         a, b, c = f[k, 0], f[k, 1], f[k, 2]
         x0, y0, z0 = v[a, 0], v[a, 1], v[a, 2]
         e1x, e1y, e1z = v[b, 0] - x0, v[b, 1] - y0, v[b, 2] - z0
@@ -152,10 +154,12 @@ def _fill_facet_planes(v, f, rows, plane) -> tuple:
 
 def _facet_planes(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The unit normals of the facets as rows (3, F) and their planes' offsets n·v0 (F,),
-    float64 (``_fill_facet_planes``). UsageError for a degenerate facet or one whose normal
-    does not point up."""
+    float64 (``_fill_facet_planes``, in ``setup_parts`` facet ranges at once: each facet's
+    entries depend on it alone). UsageError for a degenerate facet or one whose normal does
+    not point up."""
     rows, plane = np.empty((3, len(f))), np.empty(len(f))
-    degenerate, downward = _fill_facet_planes(v, f, rows, plane)
+    flags = in_parts(len(f), lambda lo, hi: _fill_facet_planes(v, f, lo, hi, rows, plane))
+    degenerate, downward = (any(flag[k] for flag in flags) for k in range(2))
     if degenerate:
         raise UsageError("surface.faces must not contain degenerate (zero-area) triangles")
     if downward:
@@ -164,6 +168,23 @@ def _facet_planes(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]
             "cross(v1 - v0, v2 - v0) points up (z > 0)"
         )
     return rows, plane
+
+
+SETUP_PART = 1 << 21
+"""Fewest facets per part of the tracer's set-up passes run in parallel (``in_parts``)."""
+
+
+def in_parts(n: int, fill) -> list:
+    """``fill(lo, hi)`` over ``n`` items cut into consecutive ranges, one per core but none
+    under ``SETUP_PART`` items, run on as many threads (the compiled passes release the GIL;
+    first touches of a large new array fault its pages in in parallel); their results in
+    order."""
+    parts = max(1, min(os.cpu_count() or 1, n // SETUP_PART))
+    cuts = [n * k // parts for k in range(parts + 1)]
+    if parts == 1:
+        return [fill(0, n)]
+    with ThreadPoolExecutor(parts) as pool:
+        return list(pool.map(fill, cuts[:-1], cuts[1:]))
 
 
 _CAST_STATUS = WorkArray("cast-status", np.int8)  # the grid walk's hits (``scratch``)
@@ -219,9 +240,9 @@ class Tracer:
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
-        slopes = facet_slopes(self.normal_columns)  # (F,), for the two bounds only
+        slopes = facet_slopes(self.normal_columns, in_parts)  # (F,), for the two bounds only
         self.rise_bound = rise_bound(surface, slopes)
-        self.horizon = horizon_grid(v, f, slopes, self.rise_bound, self.tile, self.eps)
+        self.horizon = horizon_grid(v, f, slopes, self.rise_bound, self.tile, self.eps, in_parts)
         del slopes
         grooved = getattr(surface, "azimuth_average", False)
         self.groove_clear, self.groove_strata = (

@@ -69,8 +69,8 @@ BYTES_PER_GRID_POINT = 180
 """Peak memory per grid point of a heightfield built and traced ray by ray (two triangles):
 the mesh (float64 vertices, int32 faces, 48 bytes), the heights (8), the tracer's facet
 normals and plane offsets (64) and the grid walk's copy of the heights and cell maxima (16),
-besides the build's own peak (its in-place synthesis, ~100). Measured: 153 bytes per point
-at 4096², 152 at 8192² (peak RSS growth; ``microsim bench --scale``)."""
+besides the build's own peak (its in-place synthesis, ~100). Measured: 155 bytes per point
+at 4096², 153 at 8192² (peak RSS growth; ``microsim bench --scale``)."""
 TABLED_FACETS_MAX = 1 << 25
 """Largest mesh, in facets, whose tracer builds per-incidence facet tables (the run's rays
 at least as many as its facets, ``sim.facet_tables.table_pays``): a 4096² heightfield. A
