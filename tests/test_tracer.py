@@ -138,14 +138,14 @@ def test_bad_meshes_raise():
 @pytest.mark.parametrize("parts", [2, 3])
 def test_the_set_up_in_parts_is_the_set_up_in_one(monkeypatch, parts):
     """Facet normals, plane offsets and the bounds built from the facet slopes are the same
-    bits computed in facet ranges on several threads (``tracer.in_parts``) as in one pass; a
+    bits computed in facet ranges on several threads (``schedule.in_parts``) as in one pass; a
     degenerate or downward facet in any range is still refused."""
-    import microsim.sim.tracer as tracer_module
+    from microsim.sim import schedule
 
     s = heightfield_surface(random_heights(sigma=0.02, seed=7), 1 / 64)
     one = Tracer(s)
-    monkeypatch.setattr(tracer_module, "SETUP_PART", 1000)
-    monkeypatch.setattr(tracer_module.os, "cpu_count", lambda: parts)
+    monkeypatch.setattr(schedule, "PART_ITEMS", 1000)
+    monkeypatch.setattr(schedule.os, "cpu_count", lambda: parts)
     many = Tracer(s)
     assert np.array_equal(many.normals, one.normals) and np.array_equal(many.plane, one.plane)
     assert many.rise_bound == one.rise_bound

@@ -47,8 +47,10 @@ _inlined = vector_inlined
 class HeightfieldGrid:
     """The grid of a heightfield tile: its mesh's vertex heights ``hp`` (ny + 1, nx + 1) (the
     last row and column repeat the first), each cell's highest vertex ``cell_max`` (ny, nx)
-    and lowest ``cell_min`` (built on first use: only walks below the surface read it), cell
-    size ``cell`` and lower tile corner (``x0``, ``y0``)."""
+    and lowest ``cell_min`` (built on first use: by the first walk whose rays may start below
+    the surface — any ``cast_columns`` walk, masking rays included; the primary walks of
+    ``cast_falling`` never need it), cell size ``cell`` and lower tile corner (``x0``,
+    ``y0``)."""
 
     def __init__(self, hp: np.ndarray, cell: float):
         self.hp = np.ascontiguousarray(hp, dtype=np.float64)

@@ -12,12 +12,13 @@ from typing import NamedTuple
 import numpy as np
 
 from .engine import horizon
+from .schedule import in_parts
 
 __all__ = [
     "CLEAR_MARGIN",
     "HORIZON_FACETS",
     "HorizonGrid",
-    "facet_slopes",
+    "slope_magnitudes",
     "rise_bound",
     "horizon_grid",
 ]
@@ -26,9 +27,9 @@ HORIZON_FACETS = 32  # facets per cell of the coarse grid of ``Tracer.horizon``
 CLEAR_MARGIN = horizon.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
 
 
-def facet_slopes(normal_columns, parts=None) -> np.ndarray:
-    """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,), from its unit normal's columns; with
-    ``parts`` (``tracer.in_parts``) in facet ranges on as many threads."""
+def slope_magnitudes(normal_columns) -> np.ndarray:
+    """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,), from its unit normal's columns, in
+    facet ranges on several threads (``schedule.in_parts``)."""
     nx, ny, nz = normal_columns
     slopes = np.empty(len(nx))
 
@@ -36,15 +37,12 @@ def facet_slopes(normal_columns, parts=None) -> np.ndarray:
         np.hypot(nx[lo:hi], ny[lo:hi], out=slopes[lo:hi])
         slopes[lo:hi] /= nz[lo:hi]  # in place: one array of F
 
-    if parts is None:
-        fill(0, len(nx))
-    else:
-        parts(len(nx), fill)
+    in_parts(len(nx), fill)
     return slopes
 
 
 def rise_bound(surface, slopes) -> float:
-    """The steepest facet slope L = max_f |∇h_f| (``slopes``: ``facet_slopes``) of a periodic
+    """The steepest facet slope L = max_f |∇h_f| (``slopes``: ``slope_magnitudes``) of a periodic
     heightfield surface (one with ``heights``: Gaussian, ABC, file and grating tiles; or
     kind "vgrooves" or "flat", whose profiles are single-valued too), else inf.
 
@@ -75,12 +73,12 @@ class HorizonGrid(NamedTuple):
     tol: float
 
 
-def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float, parts=None) -> HorizonGrid:
+def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float) -> HorizonGrid:
     """The ``HorizonGrid`` of a heightfield mesh (finite ``rise`` bound; ``slopes``: its
-    ``facet_slopes``), cells of ~``HORIZON_FACETS`` facets, tol = 4 ``eps`` (float32 rays); for
-    other meshes a 1 × 1 grid that clears nothing. With ``parts`` (``tracer.in_parts``) each
-    facet range fills a grid of its own on its thread, and the grids' maxima are merged (the
-    same maxima)."""
+    ``slope_magnitudes``), cells of ~``HORIZON_FACETS`` facets, tol = 4 ``eps`` (float32 rays);
+    for other meshes a 1 × 1 grid that clears nothing. Facet ranges on several threads
+    (``schedule.in_parts``) each fill a grid of their own, whose maxima are merged (the same
+    maxima)."""
     if not math.isfinite(rise):
         return HorizonGrid(
             0.0, 0.0, 1.0, 1.0, np.full((1, 1), np.inf), np.full((1, 1), np.inf), 0.0
@@ -97,7 +95,7 @@ def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float, parts=N
         horizon.fill_horizon(vertices, faces[lo:hi], slopes[lo:hi], *cells)
         return cmax, cslope
 
-    grids = [fill(0, len(faces))] if parts is None else parts(len(faces), fill)
+    grids = in_parts(len(faces), fill)
     cmax, cslope = grids[0]
     for more_max, more_slope in grids[1:]:
         np.maximum(cmax, more_max, out=cmax)

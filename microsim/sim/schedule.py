@@ -19,7 +19,15 @@ from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from typing import Iterator
 
-__all__ = ["IN_FLIGHT", "thread_pool", "chunk_groups", "run_in_order", "DeferredInterrupt"]
+__all__ = [
+    "IN_FLIGHT",
+    "PART_ITEMS",
+    "thread_pool",
+    "in_parts",
+    "chunk_groups",
+    "run_in_order",
+    "DeferredInterrupt",
+]
 
 IN_FLIGHT = 2
 """Thread tasks submitted ahead per thread: the scheduler keeps at most IN_FLIGHT·threads
@@ -41,6 +49,23 @@ def thread_pool(threads: int) -> ThreadPoolExecutor:
                 max_workers=threads, thread_name_prefix=f"microsim-{threads}"
             )
         return _POOLS[threads]
+
+
+PART_ITEMS = 1 << 21
+"""Fewest items per part of a one-off pass that ``in_parts`` runs on several threads."""
+
+
+def in_parts(n: int, fill) -> list:
+    """``fill(lo, hi)`` over ``n`` items cut into consecutive ranges, one per core but none
+    under ``PART_ITEMS`` items, run on the process's pool of as many threads (``thread_pool``;
+    for passes that release the GIL, such as a tracer's set-up: the first touches of a large
+    new array then fault its pages in in parallel); their results in order. Call it from
+    outside the pool's own tasks."""
+    parts = max(1, min(os.cpu_count() or 1, n // PART_ITEMS))
+    if parts == 1:
+        return [fill(0, n)]
+    cuts = [n * k // parts for k in range(parts + 1)]
+    return list(thread_pool(parts).map(fill, cuts[:-1], cuts[1:]))
 
 
 def chunk_groups(start: int, end: int, chunk_blocks: int, threads: int) -> Iterator[range]:

@@ -39,9 +39,7 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,8 +51,9 @@ from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 from .embree_backends import check_backend, open_scene, scene_backend
 from .engine import beam, codes, horizon
 from .heightfield_caster import cast_falling, heightfield_grid
-from .horizon_bounds import CLEAR_MARGIN, facet_slopes, horizon_grid, rise_bound
+from .horizon_bounds import CLEAR_MARGIN, horizon_grid, rise_bound, slope_magnitudes
 from .periodic_walk import ColumnHits, walk_columns
+from .schedule import in_parts
 from .scratch import WorkArray, WorkColumns
 from .vgroove_profile import NO_GROOVES, NO_STRATA, groove_tables
 
@@ -154,9 +153,9 @@ def _fill_facet_planes(v, f, lo, hi, rows, plane) -> tuple:
 
 def _facet_planes(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The unit normals of the facets as rows (3, F) and their planes' offsets n·v0 (F,),
-    float64 (``_fill_facet_planes``, in ``setup_parts`` facet ranges at once: each facet's
-    entries depend on it alone). UsageError for a degenerate facet or one whose normal does
-    not point up."""
+    float64 (``_fill_facet_planes``, in facet ranges on several threads, ``schedule.in_parts``:
+    each facet's entries depend on it alone). UsageError for a degenerate facet or one whose
+    normal does not point up."""
     rows, plane = np.empty((3, len(f))), np.empty(len(f))
     flags = in_parts(len(f), lambda lo, hi: _fill_facet_planes(v, f, lo, hi, rows, plane))
     degenerate, downward = (any(flag[k] for flag in flags) for k in range(2))
@@ -168,23 +167,6 @@ def _facet_planes(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]
             "cross(v1 - v0, v2 - v0) points up (z > 0)"
         )
     return rows, plane
-
-
-SETUP_PART = 1 << 21
-"""Fewest facets per part of the tracer's set-up passes run in parallel (``in_parts``)."""
-
-
-def in_parts(n: int, fill) -> list:
-    """``fill(lo, hi)`` over ``n`` items cut into consecutive ranges, one per core but none
-    under ``SETUP_PART`` items, run on as many threads (the compiled passes release the GIL;
-    first touches of a large new array fault its pages in in parallel); their results in
-    order."""
-    parts = max(1, min(os.cpu_count() or 1, n // SETUP_PART))
-    cuts = [n * k // parts for k in range(parts + 1)]
-    if parts == 1:
-        return [fill(0, n)]
-    with ThreadPoolExecutor(parts) as pool:
-        return list(pool.map(fill, cuts[:-1], cuts[1:]))
 
 
 _CAST_STATUS = WorkArray("cast-status", np.int8)  # the grid walk's hits (``scratch``)
@@ -240,9 +222,9 @@ class Tracer:
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
-        slopes = facet_slopes(self.normal_columns, in_parts)  # (F,), for the two bounds only
+        slopes = slope_magnitudes(self.normal_columns)  # (F,), for the two bounds only
         self.rise_bound = rise_bound(surface, slopes)
-        self.horizon = horizon_grid(v, f, slopes, self.rise_bound, self.tile, self.eps, in_parts)
+        self.horizon = horizon_grid(v, f, slopes, self.rise_bound, self.tile, self.eps)
         del slopes
         grooved = getattr(surface, "azimuth_average", False)
         self.groove_clear, self.groove_strata = (
