@@ -50,11 +50,11 @@ def test_every_ray_of_a_cleared_beam_escapes_when_traced(name, theta):
     rng = np.random.default_rng(int(theta))
     facets = rng.choice(np.flatnonzero(by_beam), min(4000, by_beam.sum()), replace=False)
     p, f = _points_on(tr, facets, 8, rng)
-    status = tr.escapes(p, tr.normals[f], table.wo32[f].astype(np.float64))
+    status = tr.escapes(p, tr.facets.normals(f), table.wo32[f].astype(np.float64))
     assert np.all(status == ESCAPED)
     others = rng.choice(np.flatnonzero(left), min(4000, left.sum()), replace=False)
     p, f = _points_on(tr, others, 8, rng)
-    assert np.any(tr.escapes(p, tr.normals[f], table.wo32[f].astype(np.float64)) == HIT)
+    assert np.any(tr.escapes(p, tr.facets.normals(f), table.wo32[f].astype(np.float64)) == HIT)
 
 
 @pytest.mark.parametrize("theta", [0.0, 40.0, 75.0])

@@ -269,8 +269,7 @@ def test_fused_walk_and_lookups_give_the_bits_of_walk_then_lookups(theta, phi):
     m = primary.tabled_primary(
         segments.WalkResult(hs, prim, *p),
         primary.FacetColumns(
-            table.code, table.weight, *table.normal_cols, table.plane, table.eps, table.wo32,
-            table.bin, table.clear,
+            table.code, table.weight, table.facets, table.wo32, table.bin, table.clear,
         ),
         tracer.horizon,
         masking_rays.segment_geometry(tracer),

@@ -11,6 +11,7 @@ import pytest
 
 from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.sim import BLOCK, Bins, facet_tables, paths, streams, tracer_cache
+from microsim.sim.engine.facets import mesh_facets
 from microsim.sim.horizon_bounds import CLEAR_MARGIN
 from microsim.sim.scratch import WorkArray, WorkColumns
 from microsim.sim.tallies import Tally, split_tallies
@@ -285,16 +286,14 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
     n[:, 2] = np.abs(n[:, 2]) + 0.05
     n /= np.linalg.norm(n, axis=1)[:, None]
 
-    class Facets:  # the table reads only these
-        faces = n
-        normal_columns = tuple(np.ascontiguousarray(n[:, k]) for k in range(3))
-        plane, eps = np.zeros(len(n)), 0.0
+    class Tile:  # the table reads only these
+        facets = mesh_facets(np.ascontiguousarray(n.T), np.zeros(len(n)), 0.0)
         rise_bound = 0.8  # steepest slope of a pretend heightfield
         beam = None  # no heightfield grid: no beams cleared (tests/test_beam.py)
-        surely_escapes = staticmethod(lambda *d: Tracer.surely_escapes(Facets, *d))
+        surely_escapes = staticmethod(lambda *d: Tracer.surely_escapes(Tile, *d))
 
     wi, bins = spherical_deg(55.0, 20.0), Bins(18, 13)
-    table = facet_tables.facet_table(Facets, wi, ior, bins, 20.0)
+    table = facet_tables.facet_table(Tile, wi, ior, bins, 20.0)
     c = n @ wi
     wo = 2 * c[:, None] * n - wi
     assert np.array_equal(table.wo32, wo.astype(np.float32))

@@ -150,7 +150,8 @@ SIM_LAYERS = [
     ),
     (
         "ray engine",
-        ("engine", "engine.horizon", "engine.beam", "engine.primary", "engine.segments")
+        ("engine", "engine.facets", "engine.horizon", "engine.beam", "engine.primary")
+        + ("engine.segments",)
         + ("tracer", "periodic_walk", "embree_backends", "horizon_bounds", "vgroove_profile")
         + ("heightfield_caster", "embree_packets"),
     ),

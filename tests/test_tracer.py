@@ -137,17 +137,20 @@ def test_bad_meshes_raise():
 
 @pytest.mark.parametrize("parts", [2, 3])
 def test_the_set_up_in_parts_is_the_set_up_in_one(monkeypatch, parts):
-    """Facet normals, plane offsets and the bounds built from the facet slopes are the same
-    bits computed in facet ranges on several threads (``schedule.in_parts``) as in one pass; a
-    degenerate or downward facet in any range is still refused."""
+    """Facet normals and plane offsets of a mesh, and the bounds built from a heightfield's
+    facet slopes, are the same bits computed in facet ranges on several threads
+    (``schedule.in_parts``) as in one pass; a degenerate or downward facet in any range is
+    still refused."""
     from microsim.sim import schedule
 
     s = heightfield_surface(random_heights(sigma=0.02, seed=7), 1 / 64)
-    one = Tracer(s)
+    mesh = Surface("gaussian", s.vertices, s.faces, s.tile_size, True, {})  # stored facets
+    one, one_mesh = Tracer(s), Tracer(mesh)
     monkeypatch.setattr(schedule, "PART_ITEMS", 1000)
     monkeypatch.setattr(schedule.os, "cpu_count", lambda: parts)
-    many = Tracer(s)
-    assert np.array_equal(many.normals, one.normals) and np.array_equal(many.plane, one.plane)
+    many, many_mesh = Tracer(s), Tracer(mesh)
+    assert many_mesh.facets.stored and np.array_equal(many_mesh.normals, one_mesh.normals)
+    assert np.array_equal(many_mesh.facets.plane, one_mesh.facets.plane)
     assert many.rise_bound == one.rise_bound
     assert np.array_equal(many.horizon.cslope, one.horizon.cslope)
     assert np.array_equal(many.horizon.cmax, one.horizon.cmax)
@@ -155,6 +158,30 @@ def test_the_set_up_in_parts_is_the_set_up_in_one(monkeypatch, parts):
     flipped[-1] = flipped[-1, ::-1]  # in the last range
     with pytest.raises(ValueError, match="faces.*up"):
         Tracer(Surface("gaussian", s.vertices, flipped, s.tile_size, True, {}))
+
+
+@pytest.mark.parametrize("shape", [(48, 64), (33, 17)])
+def test_facets_derived_from_the_heights_are_the_stored_bits(shape):
+    """On a heightfield grid the tracer keeps no per-facet normals or planes: derived from the
+    heights where they are read (``engine.facets``), they are bit for bit those computed from
+    the mesh (the same surface as a custom mesh), in odd and non-square grids; the kernels'
+    reader ``facet_plane`` gives the same, and a grid tracer stores nothing per facet."""
+    from microsim.sim.engine.facets import fill_normals
+
+    s = heightfield_surface(np.random.default_rng(11).normal(0.0, 0.01, shape), 1 / 48)
+    grid, mesh = Tracer(s), Tracer(Surface("gaussian", s.vertices, s.faces, s.tile_size, True, {}))
+    assert not grid.facets.stored and mesh.facets.stored
+    assert grid.facets.count == mesh.facets.count == len(s.faces)
+    every = np.arange(len(s.faces))
+    assert np.array_equal(grid.normals, mesh.normals)
+    assert np.array_equal(grid.facets.planes(every), mesh.facets.plane)
+    cols, plane = np.empty((3, len(every))), np.empty(len(every))
+    fill_normals(grid.facets, every[::-1].copy(), cols, plane)
+    assert np.array_equal(cols.T, mesh.normals[::-1])
+    assert np.array_equal(plane, mesh.facets.plane[::-1])
+    some = np.random.default_rng(2).integers(0, len(every), 500)
+    assert np.array_equal(grid.facets.normals(some), mesh.normals[some])
+    assert sum(a.nbytes for a in grid.facets[:4]) == 0
 
 
 # --- masking rays decided without tracing (Tracer.rise_bound) ----------------------------------

@@ -78,8 +78,7 @@ def fused_split(tracer, table, wi) -> dict:
     n = len(x[0])
     down = [float(-c) for c in wi]
     facets = primary.FacetColumns(
-        table.code, table.weight, *table.normal_cols, table.plane, table.eps, table.wo32, table.bin,
-        table.clear,
+        table.code, table.weight, table.facets, table.wo32, table.bin, table.clear,
     )  # fmt: skip
     out = primary.PrimaryLedger(np.empty(n, np.int8), np.empty(n), np.empty(n, np.int64))
     mask = MaskingRays.work(n)

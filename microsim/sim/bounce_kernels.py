@@ -58,6 +58,7 @@ from .engine.codes import (
     UNRESOLVED,
     order_class,
 )
+from .engine.facets import Facets, facet_plane
 from .fresnel_kernels import fresnel_weight
 
 
@@ -72,15 +73,11 @@ class RayDirections(NamedTuple):
 
 
 class FacetPlanes(NamedTuple):
-    """The tracer's facets: unit normals (nx, ny, nz), their planes' offsets ``plane`` = n·v0
-    and the start offset ``eps`` (a reflected ray starts on the plane n·x = plane + eps, the
-    facet's "lift"), and the tile's half extents ``half_x``, ``half_y``."""
+    """The tracer's ``facets`` (``engine.facets.Facets``: unit normals, their planes' offsets
+    n·v0 and the start offset eps — a reflected ray starts on the plane n·x = n·v0 + eps, the
+    facet's "lift") and the tile's half extents ``half_x``, ``half_y``."""
 
-    nx: np.ndarray
-    ny: np.ndarray
-    nz: np.ndarray
-    plane: np.ndarray
-    eps: float
+    facets: Facets
     half_x: float
     half_y: float
 
@@ -161,7 +158,7 @@ def bounce_step(
     at this step, 0 without one; a back-facing hit's c ≤ 0)."""
     hs, prim, px, py, pz = walk
     dx, dy, dz, shared = rays
-    nx, ny, nz, plane, eps, hx, hy = facets
+    planes, hx, hy = facets
     n2, k2, fresnel_mode = material
     status1, weight1 = ledger.status1, ledger.weight1
     use_table, tab_weight, first_facet = table.use, table.weight, table.first_facet
@@ -186,7 +183,7 @@ def bounce_step(
             end_path(ledger, g, CUT_BOUNCES, w[i])
             continue
         f = prim[i]
-        a0, a1, a2 = nx[f], ny[f], nz[f]
+        a0, a1, a2, plane = facet_plane(planes, f)
         c = -(dx[j] * a0 + dy[j] * a1 + dz[j] * a2)
         cosine[i] = c
         if c <= 0.0:  # back-facing
@@ -211,7 +208,7 @@ def bounce_step(
             end_path(ledger, g, CUT_BOUNCES, wn)
             continue
         p, n, o = (px[i], py[i], pz[i]), (a0, a1, a2), (ox, oy, oz)
-        continue_path(nxt, m, g, p, n, plane[f] + eps, (hx, hy), o, wn)
+        continue_path(nxt, m, g, p, n, plane + planes.eps, (hx, hy), o, wn)
         m += 1
     return m, e
 

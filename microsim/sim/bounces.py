@@ -238,7 +238,7 @@ def trace_bounces(
     live = np.arange(n, dtype=np.int64)
     w = np.ones(n)
     hx, hy = float(tracer.half[0]), float(tracer.half[1])
-    facets = bounce_kernels.FacetPlanes(*tracer.normal_columns, tracer.plane, tracer.eps, hx, hy)
+    facets = bounce_kernels.FacetPlanes(tracer.facets, hx, hy)
     material = fresnel_kernels.fresnel_material(ior)
     first = _first_bounce_table(table if psi is None else None, n)
     b = 1

@@ -207,7 +207,7 @@ def trace_dielectric(
     phi = float(phi_i) if psi is None else phi_i - np.degrees(psi)
     live, w = np.arange(n, dtype=np.int64), np.ones(n)
     hx, hy = float(tracer.half[0]), float(tracer.half[1])
-    facets = bounce_kernels.FacetPlanes(*tracer.normal_columns, tracer.plane, tracer.eps, hx, hy)
+    facets = bounce_kernels.FacetPlanes(tracer.facets, hx, hy)
     interface = interface_of(ior, tracer)
     slots = min(chain.limit, 4)
     b = 1

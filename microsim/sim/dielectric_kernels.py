@@ -72,6 +72,7 @@ from .engine.codes import (
     UNRESOLVED,
     order_class,
 )
+from .engine.facets import facet_plane
 from .engine.horizon import rises_clear
 
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64's Weyl increment
@@ -197,8 +198,10 @@ def interact(b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides,
     ``h`` on face ``f`` (module docstring): (what, wn, ox, oy, oz, offset) — ``what`` one of
     ENDS (the ledger written), ESCAPES (the ray left the relief on the path's side:
     ``end_escape`` is the caller's) or CONTINUES along (ox, oy, oz) with weight ``wn`` from
-    the hit moved onto the plane n·x = ``offset`` (eps on the side the ray leaves to).
+    the hit moved along the facet's unit normal ``n`` onto the plane n·x = ``offset`` (eps on
+    the side the ray leaves to): (what, wn, ox, oy, oz, offset, n).
     ``facets``: ``bounce_kernels.FacetPlanes``; ``sides`` and ``ledger`` are updated."""
+    none = (0.0, 0.0, 0.0)
     dx, dy, dz = d
     leaves_down = h == MISSED and dz < 0.0
     if b == 2 and ledger.status1[g] == SINGLE and not (h == ESCAPED or leaves_down):
@@ -206,23 +209,23 @@ def interact(b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides,
             MASKED if h == HIT else (RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED)
         )
     if b >= 2 and (h == ESCAPED or leaves_down) and leaves_down == sides.inside[g]:
-        return ESCAPES, w, 0.0, 0.0, 0.0, 0.0
+        return ESCAPES, w, 0.0, 0.0, 0.0, 0.0, none
     if h != HIT:
         walk_failed = RAY_UNRESOLVED if h == UNRESOLVED else RAY_MISSED
         path_failed = PATH_UNRESOLVED if h == UNRESOLVED else PATH_MISSED
         end_unresolved(ledger, b, g, w, path_failed, walk_failed)
-        return ENDS, w, 0.0, 0.0, 0.0, 0.0
+        return ENDS, w, 0.0, 0.0, 0.0, 0.0, none
     if b > limit:
         end_path(ledger, g, CUT_BOUNCES, w)
-        return ENDS, w, 0.0, 0.0, 0.0, 0.0
+        return ENDS, w, 0.0, 0.0, 0.0, 0.0, none
     absorbing, eps = interface.absorbing, interface.eps
-    n = (facets.nx[f], facets.ny[f], facets.nz[f])
-    a0, a1, a2 = n
+    a0, a1, a2, plane = facet_plane(facets.facets, f)
+    n = (a0, a1, a2)
     c = -(dx * a0 + dy * a1 + dz * a2)
     inside = sides.inside[g]
     if c == 0.0 or (c < 0.0) != inside:  # met from the side the path is not on
         end_unresolved(ledger, b, g, w, PATH_UNRESOLVED, RAY_UNRESOLVED)
-        return ENDS, w, 0.0, 0.0, 0.0, 0.0
+        return ENDS, w, 0.0, 0.0, 0.0, 0.0, none
     rel2, fw, tir = crossing(c, inside, interface)
     if tir:
         sides.tir[g] |= np.int8(1 << (min(b, 4) - 1))
@@ -239,10 +242,10 @@ def interact(b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides,
         sides.inside[g] = not inside
     if wn < floor:
         end_path(ledger, g, CUT_WEIGHT, wn)
-        return ENDS, wn, 0.0, 0.0, 0.0, 0.0
+        return ENDS, wn, 0.0, 0.0, 0.0, 0.0, none
     above = ox * a0 + oy * a1 + oz * a2 > 0.0
-    lift = facets.plane[f] + facets.eps
-    return CONTINUES, wn, ox, oy, oz, (lift if above else lift - 2.0 * eps)
+    lift = plane + facets.facets.eps
+    return CONTINUES, wn, ox, oy, oz, (lift if above else lift - 2.0 * eps), n
 
 
 @compiled
@@ -268,13 +271,12 @@ def interface_step(
         j = 0 if shared else i
         d = (dx[j], dy[j], dz[j])
         f = prim[i]
-        what, wn, ox, oy, oz, offset = interact(
+        what, wn, ox, oy, oz, offset, n = interact(
             b, limit, floor, g, w[i], hs[i], f, d, facets, interface, roulette, sides, ledger
         )
         if what == ESCAPES:
             e = _escape(ledger, escapes, sides, b, g, w[i], d, e)
         elif what == CONTINUES:
-            n = (facets.nx[f], facets.ny[f], facets.nz[f])
             half = (facets.half_x, facets.half_y)
             continue_path(nxt, m, g, (px[i], py[i], pz[i]), n, offset, half, (ox, oy, oz), wn)
             m += 1
@@ -290,20 +292,21 @@ TOTAL_REFLECTION = 2
 
 
 @compiled
-def first_interactions(normals, d, inside, interface, leaving, binning, weight, flags, bins):
-    """Per facet of unit normals ``normals`` (3 columns), the first interaction of a primary
-    ray along ``d`` (3 floats) on the ``inside`` side (``interact``'s arithmetic, so the same
-    values): ``weight`` its Fresnel F, ``flags`` (FACES_AWAY, TOTAL_REFLECTION) and per
-    choice (0 reflected, 1 refracted) ``bins`` the bin its ray escapes into when it surely
-    leaves the relief (``bin_kernels.locate_folded`` on ``binning``, −1 outside the grid),
-    else TRACED. ``leaving`` = (slope, above, below): rays away from their side's surface
-    more steeply than ``slope``·|o_h| surely leave, and so do those of a facet whose whole
-    beam clears the relief (``engine.beam.beam_escapes`` on the ``BeamGrid`` ``above``, or
-    on ``below``, the relief upside down, for rays leaving downward below the surface)."""
-    nx, ny, nz = normals
+def first_interactions(facets, d, inside, interface, leaving, binning, weight, flags, bins):
+    """Per facet of ``facets`` (``engine.facets.Facets``: unit normal n), the first
+    interaction of a primary ray along ``d`` (3 floats) on the ``inside`` side
+    (``interact``'s arithmetic, so the same values): ``weight`` its Fresnel F, ``flags``
+    (FACES_AWAY, TOTAL_REFLECTION) and per choice (0 reflected, 1 refracted) ``bins`` the bin
+    its ray escapes into when it surely leaves the relief (``bin_kernels.locate_folded`` on
+    ``binning``, −1 outside the grid), else TRACED. ``leaving`` = (slope, above, below): rays
+    away from their side's surface more steeply than ``slope``·|o_h| surely leave, and so do
+    those of a facet whose whole beam clears the relief (``engine.beam.beam_escapes`` on the
+    ``BeamGrid`` ``above``, or on ``below``, the relief upside down, for rays leaving
+    downward below the surface)."""
     slope, beam_above, beam_below = leaving
-    for f in range(len(nx)):
-        n = (nx[f], ny[f], nz[f])
+    for f in range(facets.count):
+        a0, a1, a2, _ = facet_plane(facets, f)
+        n = (a0, a1, a2)
         c = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
         bins[f, 0], bins[f, 1] = TRACED, TRACED
         if c == 0.0 or (c < 0.0) != inside:

@@ -118,5 +118,5 @@ def _analytic_hits(tracer: Tracer, caster: VGrooveCaster, origins, wl) -> Hits:
         status=np.full(len(prim), HIT, dtype=np.int8),
         prim=prim,
         point=point,
-        normal=tracer.normals[prim],
+        normal=tracer.facets.normals(prim),
     )

@@ -16,6 +16,7 @@ from microsim.surfaces.heightfields import TABLED_FACETS_MAX, TABLES_KEPT_BYTES
 
 from . import dielectric_kernels, fresnel_kernels
 from .engine import beam
+from .engine.facets import Facets
 from .ledger import MASKED, SINGLE
 from .ray_bins import locate_single
 from .scratch import WorkColumns
@@ -42,9 +43,9 @@ class FacetTable:
     Fresnel F(n·wi) (0 when back-facing); ``wo32`` (F, 3) the mirror direction
     wo = 2(wi·n)n − wi in float32 — the direction Embree traces the masking ray along, whose
     float64 value the walk uses too; ``bin`` (F,) int32 flat bin index of wo (from float64
-    wo; −1 below the horizon); ``normal_cols`` (3 × (F,)), ``plane`` (F,) = n·v0 and ``eps``
-    (a point p starts its masking ray at p − (p·n − lift) n, lift = plane + eps: on the facet
-    plane, eps above it);
+    wo; −1 below the horizon); the tracer's ``facets`` (``engine.facets.Facets``: a point p
+    starts its masking ray at p − (p·n − lift) n, lift = n·v0 + eps: on the facet plane, eps
+    above it);
     ``clear`` (F,) bool: lit facets whose rays all escape without a masking ray, because
     their mirror direction rises more steeply than the surface can (``Tracer.surely_escapes``)
     or, on heightfield grids, because the beam of them clears the relief (``beam``).
@@ -54,9 +55,7 @@ class FacetTable:
     weight: np.ndarray
     bin: np.ndarray
     wo32: np.ndarray
-    normal_cols: tuple
-    plane: np.ndarray
-    eps: float
+    facets: Facets
     clear: np.ndarray
 
 
@@ -145,13 +144,13 @@ def interface_table(tracer: Tracer, wi, interface, binning, slope: float) -> Int
     key = ("interface", d, interface, binning.n_theta, binning.edges.tobytes(), binning.phi_deg)
 
     def build() -> InterfaceTable:
-        f = len(tracer.faces)
+        f = tracer.facets.count
         table = InterfaceTable(
             np.empty(f), np.empty(f, dtype=np.int8), np.empty((f, 2), dtype=np.int32)
         )
         inside = d[2] > 0.0
         dielectric_kernels.first_interactions(
-            tracer.normal_columns,
+            tracer.facets,
             d,
             inside,
             interface,
@@ -168,8 +167,7 @@ def interface_table(tracer: Tracer, wi, interface, binning, slope: float) -> Int
 
 def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
     """``facet_table`` built (not looked up)."""
-    f = len(tracer.faces)
-    ncols = tracer.normal_columns
+    f = tracer.facets.count
     weight, code = np.empty(f), np.empty(f, dtype=np.int8)
     wo32, where = np.empty((f, 3), dtype=np.float32), np.empty(f, dtype=np.int32)
     clear = np.empty(f, dtype=np.bool_)
@@ -179,7 +177,8 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
     def fill(part: slice) -> None:
         wo = _TABLE_WO(part.stop - part.start)
         fresnel_kernels.facet_mirror(
-            *(a[part] for a in ncols),
+            tracer.facets,
+            part.start,
             *wi,
             *fresnel_args[1:],
             fresnel_args[0],
@@ -210,9 +209,7 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         weight=weight,
         bin=where,
         wo32=wo32,
-        normal_cols=ncols,
-        plane=tracer.plane,
-        eps=tracer.eps,
+        facets=tracer.facets,
         clear=clear,
     )
 
@@ -237,4 +234,4 @@ def uses_facet_table(tracer: Tracer, profile, azimuth: bool, rotate: bool, n_tot
     """Whether ``choose_path`` traces through a per-facet table: surfaces without azimuth
     averaging or per-block rotation, where the table pays (``table_pays``)."""
     plain = not azimuth and not rotate and profile is None
-    return plain and table_pays(len(tracer.faces), n_total)
+    return plain and table_pays(tracer.facets.count, n_total)

@@ -17,6 +17,7 @@ from microsim.analytic.fresnel import fresnel_real_scalar
 from microsim.jit import compiled, vector_inlined, vectorised
 
 from .engine.codes import DOWNWARD, RAY_UNRESOLVED, SINGLE
+from .engine.facets import facet_plane
 
 # ``fresnel_weight``'s modes
 FRESNEL_REAL, FRESNEL_MIRROR, FRESNEL_NONE, FRESNEL_COSINE = 0, 1, 2, 3
@@ -54,30 +55,32 @@ def fresnel_weight(c, n2, k2, fresnel_mode):
 
 @compiled
 def facet_mirror(
-    nx, ny, nz, wix, wiy, wiz, n2, k2, fresnel_mode, weight, code, wox, woy, woz, wo32
+    facets, lo, wix, wiy, wiz, n2, k2, fresnel_mode, weight, code, wox, woy, woz, wo32
 ):
-    """Per facet with unit normal n (``nx/ny/nz``) lit from wi: the Fresnel weight F(n·wi)
-    (``weight``, 0 if back-facing; ``fresnel_weight``), the mirror direction
-    wo = 2(n·wi)·n − wi (``wox/woy/woz``, float32 copy ``wo32``) and the class a primary hit
-    gets (``code``): SINGLE if lit and wo rises (a masking ray decides), DOWNWARD if lit and
-    wo points down, RAY_UNRESOLVED if back-facing (n·wi ≤ 0)."""
-    for f in range(len(nx)):
-        c = nx[f] * wix + ny[f] * wiy + nz[f] * wiz
-        x = 2.0 * c * nx[f] - wix
-        y = 2.0 * c * ny[f] - wiy
-        z = 2.0 * c * nz[f] - wiz
-        wox[f] = x
-        woy[f] = y
-        woz[f] = z
-        wo32[f, 0] = np.float32(x)
-        wo32[f, 1] = np.float32(y)
-        wo32[f, 2] = np.float32(z)
+    """Per facet f = ``lo`` + k (k < len(``weight``)) of ``facets`` (``engine.facets.Facets``:
+    unit normal n) lit from wi: the Fresnel weight F(n·wi) (``weight``, 0 if back-facing;
+    ``fresnel_weight``), the mirror direction wo = 2(n·wi)·n − wi (``wox/woy/woz``, float32
+    copy ``wo32``) and the class a primary hit gets (``code``): SINGLE if lit and wo rises (a
+    masking ray decides), DOWNWARD if lit and wo points down, RAY_UNRESOLVED if back-facing
+    (n·wi ≤ 0); all indexed by k."""
+    for k in range(len(weight)):
+        nx, ny, nz, _ = facet_plane(facets, lo + k)
+        c = nx * wix + ny * wiy + nz * wiz
+        x = 2.0 * c * nx - wix
+        y = 2.0 * c * ny - wiy
+        z = 2.0 * c * nz - wiz
+        wox[k] = x
+        woy[k] = y
+        woz[k] = z
+        wo32[k, 0] = np.float32(x)
+        wo32[k, 1] = np.float32(y)
+        wo32[k, 2] = np.float32(z)
         if c <= 0.0:
-            code[f] = RAY_UNRESOLVED
-            weight[f] = 0.0
+            code[k] = RAY_UNRESOLVED
+            weight[k] = 0.0
         else:
-            code[f] = SINGLE if z > 0.0 else DOWNWARD
-            weight[f] = fresnel_weight(c, n2, k2, fresnel_mode)
+            code[k] = SINGLE if z > 0.0 else DOWNWARD
+            weight[k] = fresnel_weight(c, n2, k2, fresnel_mode)
 
 
 @vector_inlined

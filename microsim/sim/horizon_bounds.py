@@ -24,20 +24,24 @@ __all__ = [
 ]
 
 HORIZON_FACETS = 32  # facets per cell of the coarse grid of ``Tracer.horizon``
+SLOPE_PIECE = 1 << 16  # facets whose normals ``slope_magnitudes`` reads at a time
 CLEAR_MARGIN = horizon.CLEAR_MARGIN  # ``surely_escapes`` asks wo_z > this × rise_bound × |wo_h|
 
 
-def slope_magnitudes(normal_columns) -> np.ndarray:
-    """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,), from its unit normal's columns, in
-    facet ranges on several threads (``schedule.in_parts``)."""
-    nx, ny, nz = normal_columns
-    slopes = np.empty(len(nx))
+def slope_magnitudes(facets) -> np.ndarray:
+    """|∇h_f| = √(n_x² + n_y²)/n_z of every facet (F,) of ``facets`` (``engine.facets.Facets``),
+    in facet ranges on several threads (``schedule.in_parts``), each ``SLOPE_PIECE`` facets at
+    a time (where the normals are derived, only those are computed at once)."""
+    slopes = np.empty(facets.count)
 
     def fill(lo: int, hi: int) -> None:
-        np.hypot(nx[lo:hi], ny[lo:hi], out=slopes[lo:hi])
-        slopes[lo:hi] /= nz[lo:hi]  # in place: one array of F
+        for a in range(lo, hi, SLOPE_PIECE):
+            b = min(hi, a + SLOPE_PIECE)
+            nx, ny, nz = facets.columns(a, b)
+            np.hypot(nx, ny, out=slopes[a:b])
+            slopes[a:b] /= nz  # in place: one array of F
 
-    in_parts(len(nx), fill)
+    in_parts(facets.count, fill)
     return slopes
 
 

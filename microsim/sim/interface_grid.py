@@ -245,7 +245,7 @@ def _follow_path(
                 cap = _wrap_cap(dx, dy, dz, walk)
                 h, f, px, py, pz = cast_one(x, y, z, dx, dy, dz, terms, geometry, side, cap)
         d = (dx, dy, dz)
-        what, wn, ox, oy, oz, offset = interact(
+        what, wn, ox, oy, oz, offset, n = interact(
             b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides, ledger
         )
         if what == ESCAPES:
@@ -258,7 +258,6 @@ def _follow_path(
             return
         if what != CONTINUES:
             return
-        n = (facets.nx[f], facets.ny[f], facets.nz[f])
         x, y, z = next_start((px, py, pz), n, offset, half)
         dx, dy, dz = ox, oy, oz
         w = wn
@@ -288,7 +287,7 @@ def trace_grid_interface(
     inside.fill(from_below)
     sides = PathSides(inside, from_below, out.tir)
     half = float(tracer.half[0]), float(tracer.half[1])
-    facets = FacetPlanes(*tracer.normal_columns, tracer.plane, tracer.eps, *half)
+    facets = FacetPlanes(tracer.facets, *half)
     binning = folded_binning(bins, float(phi_i), min(chain.limit, 4), chain.nbin)
     walk = grid_walk_of(tracer)
     use_first = bool(table and not interface.absorbing)

@@ -73,14 +73,7 @@ def tabled_masking_rays(
     where = np.empty(n, dtype=np.int64)
     mask = MaskingRays.work(n)
     facets = primary.FacetColumns(
-        table.code,
-        table.weight,
-        *table.normal_cols,
-        table.plane,
-        table.eps,
-        table.wo32,
-        table.bin,
-        table.clear,
+        table.code, table.weight, table.facets, table.wo32, table.bin, table.clear
     )
     ledger = primary.PrimaryLedger(status, weight, where)
     outcome = RayOutcome(status, weight, where)
@@ -178,7 +171,7 @@ def trace_columns(
     m = primary.traced_primary(
         segments.WalkResult(hs, prim, *p),
         tuple(wl),
-        (*tracer.normal_columns, tracer.plane, tracer.eps),
+        tracer.facets,
         profile is None,
         tracer.rise_bound,
         tracer.horizon,

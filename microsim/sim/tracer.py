@@ -45,11 +45,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from microsim.errors import UsageError
-from microsim.jit import compiled
+from microsim.jit import vectorised
 from microsim.surfaces.surface import MAX_COORDINATE, check_relief
 
 from .embree_backends import check_backend, open_scene, scene_backend
 from .engine import beam, codes, horizon
+from .engine.facets import Facets, grid_facets, mesh_facets, triangle_plane
 from .heightfield_caster import cast_falling, heightfield_grid
 from .horizon_bounds import CLEAR_MARGIN, horizon_grid, rise_bound, slope_magnitudes
 from .periodic_walk import ColumnHits, walk_columns
@@ -125,29 +126,24 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     return v, f if f.dtype in (np.int32, np.int64) else f.astype(np.int64), lx, ly
 
 
-@compiled
+@vectorised
 def _fill_facet_planes(v, f, lo, hi, rows, plane) -> tuple:
-    """The unit normal cross(v1 − v0, v2 − v0)/|…| of facets ``lo`` … ``hi`` − 1 of (``v``,
-    ``f``) into ``rows`` (3, F) and their planes' offsets n·v0 into ``plane`` (F,), in NumPy's
-    order of operations (the same bits); (degenerate, downward): whether any of them has zero
-    area (its entries left unset), any normal z ≤ 0."""
+    """The unit normal and plane offset n·v0 of facets ``lo`` … ``hi`` − 1 of (``v``, ``f``)
+    (``facets.triangle_plane``) into ``rows`` (3, F) and ``plane`` (F,); (degenerate,
+    downward): whether any of them has zero area (its entries left unset), any normal
+    z ≤ 0."""
     degenerate, downward = False, False
     for k in range(lo, hi):
         a, b, c = f[k, 0], f[k, 1], f[k, 2]
-        x0, y0, z0 = v[a, 0], v[a, 1], v[a, 2]
-        e1x, e1y, e1z = v[b, 0] - x0, v[b, 1] - y0, v[b, 2] - z0
-        e2x, e2y, e2z = v[c, 0] - x0, v[c, 1] - y0, v[c, 2] - z0
-        cx = e1y * e2z - e1z * e2y
-        cy = e1z * e2x - e1x * e2z
-        cz = e1x * e2y - e1y * e2x
-        norm = math.sqrt(cx * cx + cy * cy + cz * cz)
+        nx, ny, nz, offset, norm = triangle_plane(
+            v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2], v[c, 0], v[c, 1], v[c, 2]
+        )
         if norm == 0.0:
             degenerate = True
             continue
-        downward |= cz <= 0.0
-        nx, ny, nz = cx / norm, cy / norm, cz / norm
+        downward |= nz <= 0.0
         rows[0, k], rows[1, k], rows[2, k] = nx, ny, nz
-        plane[k] = nx * x0 + ny * y0 + nz * z0
+        plane[k] = offset
     return degenerate, downward
 
 
@@ -178,10 +174,10 @@ class Tracer:
     """Periodic Embree scene of one tile of ``surface`` (a ``microsim.surfaces.Surface``).
 
     Attributes: ``vertices`` (V, 3) float64 and ``faces`` (F, 3) integer (the surface's own
-    arrays where they already have these types), ``normals`` (F, 3) unit float64 facet normals
-    (a view of ``normal_columns``, their three contiguous (F,) columns), ``plane`` (F,) their
-    planes' offsets n·v0 (a secondary ray from facet f starts on the plane n·x = plane[f] +
-    eps: computed where it is used, not stored), ``tile`` (Lx, Ly),
+    arrays where they already have these types), ``facets`` (``engine.facets.Facets``: the
+    unit facet normals and their planes' offsets n·v0, stored for a mesh and derived from the
+    heights where they are read on a heightfield grid; a secondary ray from facet f starts on
+    the plane n·x = n·v0 + eps), ``tile`` (Lx, Ly),
     ``zmin``/``zmax``, ``eps`` (secondary-ray offset along the normal, length units),
     ``top_margin`` (primary rays start at zmax + it) and ``max_wraps`` (tile crossings per ray
     before it counts as unresolved: 64 plus enough for a ray 89.5° from the normal to cross the
@@ -209,20 +205,23 @@ class Tracer:
         self.vertices, self.faces = v, f
         self._heightfield = heightfield_grid(surface, v, f)  # None unless a heightfield grid
         self.grid = self._heightfield if grid else None
-        rows, self.plane = _facet_planes(v, f)
-        self.normals = rows.T  # (F, 3), a view of the rows
-        self.normal_columns = tuple(rows)  # the three contiguous rows
         self.tile = (lx, ly)
         self.half = np.array([lx / 2, ly / 2])
         self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
         big = max(-float(v.min()), float(v.max()), lx / 2, ly / 2)  # max |v|, no copy
         self.eps = 2.0 * float(np.spacing(np.float32(big)))  # 2 ulp: 1.2e-7 on a unit tile
+        hf = self._heightfield
+        self.facets: Facets = (
+            mesh_facets(*_facet_planes(v, f), self.eps)
+            if hf is None
+            else grid_facets(hf.hp, hf.cell, self.eps)  # derived from the heights
+        )
         self.top_margin = 4.0 * self.eps  # primary rays start this far above zmax
         depth = self.zmax - self.zmin + self.top_margin
         crossings = depth * np.tan(np.radians(MAX_TRACED_DEG)) * (1 / lx + 1 / ly)
         self.max_wraps = BASE_WRAPS + int(np.ceil(crossings))
         self.periodic = bool(surface.periodic)
-        slopes = slope_magnitudes(self.normal_columns)  # (F,), for the two bounds only
+        slopes = slope_magnitudes(self.facets)  # (F,), for the two bounds only
         self.rise_bound = rise_bound(surface, slopes)
         self.horizon = horizon_grid(v, f, slopes, self.rise_bound, self.tile, self.eps)
         del slopes
@@ -233,6 +232,12 @@ class Tracer:
         self.facet_tables: dict = {}  # kept by facet_tables.facet_table: key → (table, bytes)
         self.backend = scene_backend(backend)
         self._scene_lock = threading.Lock()
+
+    @property
+    def normals(self) -> np.ndarray:
+        """(F, 3) unit facet normals, float64 (``Facets.normals``: computed on each access
+        on a heightfield grid)."""
+        return self.facets.normals()
 
     @property
     def scene(self):
@@ -250,7 +255,7 @@ class Tracer:
         rays; else None); tolerance that of ``horizon``."""
         if self._heightfield is None:
             return None
-        return beam.beam_grid(self._heightfield, self.normals, self.zmax, self.horizon.tol)
+        return beam.beam_grid(self._heightfield, self.facets, self.zmax, self.horizon.tol)
 
     @functools.cached_property
     def beam_below(self) -> "beam.BeamGrid | None":
@@ -259,7 +264,7 @@ class Tracer:
         if self._heightfield is None:
             return None
         tol = self.horizon.tol
-        return beam.mirrored_beam_grid(self._heightfield, self.normals, self.zmin, tol)
+        return beam.mirrored_beam_grid(self._heightfield, self.facets, self.zmin, tol)
 
     # --- periodic walk (``periodic_walk``) ------------------------------------------------
     def _walk(self, origins, dirs, occlusion: bool):
@@ -383,12 +388,12 @@ class Tracer:
     def on_plane(self, prim: np.ndarray, point: np.ndarray, lift: float = 0.0) -> np.ndarray:
         """``point`` (N, 3) moved along the unit normal of facet ``prim`` (N,) onto that facet's
         plane, then ``lift`` (length units) above it."""
-        nrm = self.normals[prim]
+        nrm = self.facets.normals(prim)
         off = (
             point[:, 0] * nrm[:, 0]
             + point[:, 1] * nrm[:, 1]
             + point[:, 2] * nrm[:, 2]
-            - self.plane[prim]
+            - self.facets.planes(prim)
             - lift
         )
         return point - off[:, None] * nrm
@@ -405,7 +410,7 @@ class Tracer:
         hit = np.flatnonzero(status == HIT)
         pr = prim[hit]
         normal = np.full((len(status), 3), np.nan)
-        normal[hit] = self.normals[pr]
+        normal[hit] = self.facets.normals(pr)
         p[hit] = self.on_plane(pr, p[hit])
         return Hits(status=status, prim=prim.astype(np.int64), point=p, normal=normal)
 

@@ -65,12 +65,14 @@ GAUSS_RESOLVED_CELLS = 1.0
 """Shortest Gaussian ℓ, in grid steps, that the grid resolves: the synthesis keeps the spectrum
 up to the Nyquist frequency 1/(2dx), i.e. erf(πℓ/(2dx))² of σ² — 95 % at ℓ = dx, 18 % at dx/4,
 nothing as ℓ → 0 (the mesh turns flat whatever the nominal m = 2σ/ℓ). Shorter ℓ is refused."""
-BYTES_PER_GRID_POINT = 180
+BYTES_PER_GRID_POINT = 112
 """Peak memory per grid point of a heightfield built and traced ray by ray (two triangles):
-the mesh (float64 vertices, int32 faces, 48 bytes), the heights (8), the tracer's facet
-normals and plane offsets (64) and the grid walk's copy of the heights and cell maxima (16),
-besides the build's own peak (its in-place synthesis, ~100). Measured: 155 bytes per point
-at 4096², 153 at 8192² (peak RSS growth; ``microsim bench --scale``)."""
+the mesh (float64 vertices, int32 faces, 48 bytes), the heights (8), the grid walk's copy of
+the heights and its cell maxima and minima (24) and, during the tracer's set-up, the facet
+slopes (16); the tracer keeps no per-facet normals or plane offsets on a heightfield grid
+(derived from the heights where they are read, ``sim.engine.facets``). The build's own peak
+(its in-place synthesis) is about as large. Measured: 97 bytes per point at 4096², 96 at
+8192² (peak RSS growth; ``microsim bench --scale``)."""
 TABLED_FACETS_MAX = 1 << 25
 """Largest mesh, in facets, whose tracer builds per-incidence facet tables (the run's rays
 at least as many as its facets, ``sim.facet_tables.table_pays``): a 4096² heightfield. A

@@ -54,33 +54,45 @@ class BeamGrid(NamedTuple):
     tol: float
 
 
-def beam_grid(grid, normals: np.ndarray, zmax: float, tol: float) -> BeamGrid:
-    """The ``BeamGrid`` of a ``HeightfieldGrid`` whose mesh has unit facet ``normals`` (F, 3)."""
+def beam_grid(grid, facets, zmax: float, tol: float) -> BeamGrid:
+    """The ``BeamGrid`` of a ``HeightfieldGrid`` with facets ``facets``
+    (``engine.facets.Facets``)."""
+    gx, gy = facet_gradients(facets, 1.0)
     return BeamGrid(
-        grid.hp,
-        block_maxima(grid.cell_max),
-        np.ascontiguousarray(-normals[:, 0] / normals[:, 2]),
-        np.ascontiguousarray(-normals[:, 1] / normals[:, 2]),
-        float(grid.cell),
-        float(zmax),
-        float(tol),
+        grid.hp, block_maxima(grid.cell_max), gx, gy, float(grid.cell), float(zmax), float(tol)
     )
 
 
-def mirrored_beam_grid(grid, normals: np.ndarray, zmin: float, tol: float) -> BeamGrid:
+def mirrored_beam_grid(grid, facets, zmin: float, tol: float) -> BeamGrid:
     """The ``BeamGrid`` of the relief turned upside down (heights −h, the lowest point −zmin
     its top): whether rays leaving a facet downward, below the surface (inside a dielectric
     medium), surely leave the relief is whether their mirror images (d_z → −d_z) escape on
     it."""
+    gx, gy = facet_gradients(facets, -1.0)
     return BeamGrid(
         np.ascontiguousarray(-grid.hp),
         block_maxima(-grid.cell_min),
-        np.ascontiguousarray(normals[:, 0] / normals[:, 2]),
-        np.ascontiguousarray(normals[:, 1] / normals[:, 2]),
+        gx,
+        gy,
         float(grid.cell),
         -float(zmin),
         float(tol),
     )
+
+
+GRADIENT_PIECE = 1 << 16  # facets whose normals ``facet_gradients`` reads at a time
+
+
+def facet_gradients(facets, sign: float) -> tuple:
+    """Per facet the gradient ∇h = −n_h/n_z of the surface (``sign`` 1) or of the relief
+    turned upside down (−1: n_h/n_z), (F,) each, ``GRADIENT_PIECE`` facets at a time."""
+    gx, gy = np.empty(facets.count), np.empty(facets.count)
+    for a in range(0, facets.count, GRADIENT_PIECE):
+        b = min(facets.count, a + GRADIENT_PIECE)
+        nx, ny, nz = facets.columns(a, b)
+        gx[a:b] = (-nx if sign > 0 else nx) / nz
+        gy[a:b] = (-ny if sign > 0 else ny) / nz
+    return gx, gy
 
 
 def block_maxima(cell_max: np.ndarray) -> np.ndarray:

@@ -14,23 +14,21 @@ from microsim.jit import TILE, allocating, compiled, vector_inlined
 
 from ..heightfield_caster import cast_falling
 from .codes import DOWNWARD, ESCAPED, HIT, MISSED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
+from .facets import Facets, facet_plane
 from .horizon import CLEAR_MARGIN, horizon_clear
 from .segments import setup_ray
 
 
 class FacetColumns(NamedTuple):
     """A ``facet_tables.FacetTable`` as ``tabled_primary`` reads it, per facet: ledger ``code``,
-    Fresnel ``fweight``, unit normal (nx, ny, nz), plane offset ``plane`` = n·v0 (a masking
-    ray starts on the plane n·x = plane + ``eps``, the facet's lift), float32 mirror
-    direction ``wo32`` (F, 3), bin ``fbin`` and ``fclear`` (surely escapes)."""
+    Fresnel ``fweight``, the tracer's ``facets`` (``facets.Facets``: unit normal and plane
+    offset n·v0; a masking ray starts on the plane n·x = n·v0 + eps, the facet's lift),
+    float32 mirror direction ``wo32`` (F, 3), bin ``fbin`` and ``fclear`` (surely
+    escapes)."""
 
     code: np.ndarray
     fweight: np.ndarray
-    nx: np.ndarray
-    ny: np.ndarray
-    nz: np.ndarray
-    plane: np.ndarray
-    eps: float
+    facets: Facets
     wo32: np.ndarray
     fbin: np.ndarray
     fclear: np.ndarray
@@ -59,8 +57,8 @@ class TracedLedger(NamedTuple):
 @allocating
 def tabled_primary(walk, table, hz, geometry, out, masking):
     """Ledger class, Fresnel weight and bin of primary rays from their first hits, looked up
-    per facet (``facet_tables.FacetTable``: ``code``, ``fweight``, unit normal ``nx/ny/nz``,
-    lift = ``plane`` + ``eps`` = n·v0 + eps, mirror direction ``wo32`` (float32, used as
+    per facet (``facet_tables.FacetTable``: ``code``, ``fweight``, ``facets`` (unit normal n,
+    lift = n·v0 + eps), mirror direction ``wo32`` (float32, used as
     float64 too), bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the
     masking rays of the other lit ones (code SINGLE) that the coarse grid ``hz``
     (``horizon_clear``'s x0, y0, cw, ch, cmax, cslope, tol) cannot clear, set up as the first
@@ -77,7 +75,7 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
     by ``masking_starts``.
 
     Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``table``
-    (``FacetColumns``: code, fweight, nx, ny, nz, plane, eps, wo32, fbin, fclear), ``hz``,
+    (``FacetColumns``: code, fweight, facets, wo32, fbin, fclear), ``hz``,
     ``geometry``, ``out`` (``PrimaryLedger``: status, weight, where; written) and
     ``masking`` (the masking rays' arrays, ``masking_rays.MaskingRays.kernel_args``)."""
     tile = np.empty((6, TILE))  # per-ray scratch of one tile: masking starts, directions
@@ -119,7 +117,7 @@ def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m
     entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``tile`` (6, TILE)
     and ``cand`` (TILE,) scratch; masking rays from slot m on. Returns the new m."""
     hs, prim, px, py, pz = walk
-    code, fweight, nx, ny, nz, plane, eps, wo32, fbin, fclear = table
+    code, fweight, facets, wo32, fbin, fclear = table
     status, weight, where = out
     x_, y_, z_, dx_, dy_, dz_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
     for j in range(n):  # one by one: the hit facet's entries (indexed loads)
@@ -134,8 +132,8 @@ def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m
         where[i] = fbin[f] if hit & (c == SINGLE) else -1
         cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
         if cand[j]:  # the masking ray's start on the facet plane (few rays: most are clear)
-            a, b, e = nx[f], ny[f], nz[f]
-            off = px[k] * a + py[k] * b + pz[k] * e - (plane[f] + eps)
+            a, b, e, plane = facet_plane(facets, f)
+            off = px[k] * a + py[k] * b + pz[k] * e - (plane + facets.eps)
             x_[j], y_[j], z_[j] = px[k] - off * a, py[k] - off * b, pz[k] - off * e
             dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
     return masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
@@ -147,7 +145,7 @@ def traced_primary(
 ):
     """``tabled_primary`` for rays that each carry their own incident direction wl (``wx/wy/
     wz``, length N, or 1: one shared), so nothing can be tabled per facet: per hit facet n (unit
-    normal ``nx/ny/nz``, lift = ``plane`` + ``eps`` = n·v0 + eps), c = n·wl (``cosine``: 0
+    normal n and lift n·v0 + eps, ``facets``), c = n·wl (``cosine``: 0
     without a hit or back-facing, for ``fresnel_weights``); back-facing (c ≤ 0): RAY_UNRESOLVED;
     else the mirror direction wo = 2c·n − wl (``wox/woy/woz``, float64); DOWNWARD if wo_z ≤ 0,
     else SINGLE. With ``trace_masking`` the SINGLE rays whose float32 wo rises more steeply than
@@ -162,11 +160,10 @@ def traced_primary(
     −tolerance escapes without a ray (the margins within it are left to Embree).
 
     Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``incident`` (wx,
-    wy, wz), ``facets`` (the tracer's nx, ny, nz, plane, eps), ``out`` (``TracedLedger``: status,
+    wy, wz), ``facets`` (the tracer's ``facets.Facets``), ``out`` (``TracedLedger``: status,
     cosine, wox, woy, woz; written); the others as named above."""
     hs, prim, px, py, pz = walk
     wx, wy, wz = incident
-    nx, ny, nz, plane, eps = facets
     status, cosine, wox, woy, woz = out
     shared = len(wx) == 1
     grim, gtan, gwidth, gextent, gtol = groove
@@ -181,7 +178,8 @@ def traced_primary(
         n = min(TILE, len(hs) - t)
         for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
             f = prim[t + j] if hs[t + j] == HIT else 0
-            a_[j], b_[j], e_[j], lift_[j] = nx[f], ny[f], nz[f], plane[f] + eps
+            a_[j], b_[j], e_[j], plane = facet_plane(facets, f)
+            lift_[j] = plane + facets.eps
         if grooved:
             for j in range(n):
                 f = prim[t + j] if hs[t + j] == HIT else 0

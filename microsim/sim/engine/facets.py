@@ -1,0 +1,163 @@
+"""The facets' unit normals and plane offsets as the kernels read them (``Facets``): stored
+per facet for any mesh, or, on a heightfield grid, derived where they are read from the
+grid's vertex heights, so that a heightfield tile keeps nothing per facet.
+
+A facet (v0, v1, v2) has the unit normal n = cross(v1 − v0, v2 − v0)/|…| and the plane
+offset n·v0 (``triangle_plane``); a secondary ray from it starts on the plane n·x = n·v0 +
+eps. On the grid of ``surfaces.heightfield_mesh`` (heights hp (ny + 1, nx + 1), spacing c,
+vertex (i, j) at x_i = (i − nx/2)·c, y_j = (j − ny/2)·c) face k < nx·ny is triangle A =
+(v00, v01, v11) of cell (i, j) = (k mod nx, k div nx), and face nx·ny + k its triangle B =
+(v00, v11, v10) (``grid_facet_plane``): the same vertices in the same float64 arithmetic as
+the stored columns, so the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from microsim.jit import compiled, vector_inlined
+
+__all__ = [
+    "Facets",
+    "mesh_facets",
+    "grid_facets",
+    "facet_plane",
+    "grid_facet_plane",
+    "triangle_plane",
+    "fill_normals",
+    "fill_range",
+]
+
+NO_HEIGHTS = np.zeros((2, 2))
+"""``Facets.hp`` of a mesh that is not a heightfield grid (never read)."""
+NO_COLUMN = np.empty(0)
+"""``Facets``' stored columns on a heightfield grid (empty: derived where read)."""
+
+
+class Facets(NamedTuple):
+    """The ``count`` facets of a tile: their unit normals (``nx``, ``ny``, ``nz``) and plane
+    offsets ``plane`` = n·v0, stored (F,) each, or — on a heightfield grid, whose columns
+    are then empty — derived from its vertex heights ``hp`` (ny + 1, nx + 1) and cell size
+    ``cell`` (``grid_facet_plane``); ``eps``: a secondary ray starts on the plane
+    n·x = plane + eps (tile length units)."""
+
+    nx: np.ndarray
+    ny: np.ndarray
+    nz: np.ndarray
+    plane: np.ndarray
+    hp: np.ndarray
+    cell: float
+    count: int
+    eps: float
+
+    @property
+    def stored(self) -> bool:
+        """Whether the normals and planes are stored columns (else derived from ``hp``)."""
+        return len(self.plane) > 0
+
+    def columns(self, lo: int = 0, hi: int | None = None) -> tuple:
+        """The unit normals of facets ``lo`` … ``hi`` − 1 as three (hi − lo,) columns: views
+        of the stored ones, else computed (``fill_range``)."""
+        hi = self.count if hi is None else hi
+        if self.stored:
+            return self.nx[lo:hi], self.ny[lo:hi], self.nz[lo:hi]
+        cols = np.empty((3, hi - lo))
+        fill_range(self, lo, cols)
+        return tuple(cols)
+
+    def normals(self, prim=None) -> np.ndarray:
+        """(K, 3) unit normals of facets ``prim`` (an index array; None: every facet)."""
+        prim = np.arange(self.count) if prim is None else np.asarray(prim, dtype=np.int64)
+        if self.stored:
+            return np.stack([self.nx[prim], self.ny[prim], self.nz[prim]], axis=1)
+        cols = np.empty((3, len(prim)))
+        fill_normals(self, prim.ravel(), cols, np.empty(0))
+        return cols.T.reshape(*prim.shape, 3)
+
+    def planes(self, prim) -> np.ndarray:
+        """The plane offsets n·v0 of facets ``prim`` (an index array)."""
+        prim = np.asarray(prim, dtype=np.int64)
+        if self.stored:
+            return self.plane[prim]
+        out = np.empty(len(prim.ravel()))
+        fill_normals(self, prim.ravel(), np.empty((3, len(out))), out)
+        return out.reshape(prim.shape)
+
+
+def mesh_facets(rows: np.ndarray, plane: np.ndarray, eps: float) -> Facets:
+    """The ``Facets`` of a mesh from its normals' rows (3, F) and plane offsets (F,)."""
+    return Facets(*rows, plane, NO_HEIGHTS, 0.0, len(plane), float(eps))
+
+
+def grid_facets(hp: np.ndarray, cell: float, eps: float) -> Facets:
+    """The ``Facets`` of a heightfield grid of vertex heights ``hp`` (ny + 1, nx + 1), cell
+    size ``cell``: nothing stored per facet."""
+    count = 2 * (hp.shape[0] - 1) * (hp.shape[1] - 1)
+    return Facets(NO_COLUMN, NO_COLUMN, NO_COLUMN, NO_COLUMN, hp, float(cell), count, float(eps))
+
+
+@vector_inlined
+def triangle_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2):
+    """(nx, ny, nz, n·v0, |cross|) of the triangle (v0, v1, v2): n = cross(v1 − v0,
+    v2 − v0)/|…| in NumPy's order of operations (a zero-area triangle gives |cross| = 0 and
+    NaN components)."""
+    e1x, e1y, e1z = x1 - x0, y1 - y0, z1 - z0
+    e2x, e2y, e2z = x2 - x0, y2 - y0, z2 - z0
+    cx = e1y * e2z - e1z * e2y
+    cy = e1z * e2x - e1x * e2z
+    cz = e1x * e2y - e1y * e2x
+    norm = math.sqrt(cx * cx + cy * cy + cz * cz)
+    nx, ny, nz = cx / norm, cy / norm, cz / norm
+    return nx, ny, nz, nx * x0 + ny * y0 + nz * z0, norm
+
+
+@vector_inlined
+def grid_facet_plane(hp, cell, f):
+    """(nx, ny, nz, n·v0) of face ``f`` of the heightfield grid of vertex heights ``hp``
+    (module docstring: triangle A of cell k = f for f < nx·ny, else triangle B of cell
+    f − nx·ny)."""
+    rows, cols = hp.shape[0] - 1, hp.shape[1] - 1
+    upper = f < rows * cols
+    k = f if upper else f - rows * cols
+    j = k // cols
+    i = k - j * cols
+    xa, xb = (i - cols / 2.0) * cell, (i + 1 - cols / 2.0) * cell
+    ya, yb = (j - rows / 2.0) * cell, (j + 1 - rows / 2.0) * cell
+    h00, h11 = hp[j, i], hp[j + 1, i + 1]
+    if upper:
+        nx, ny, nz, plane, _ = triangle_plane(xa, ya, h00, xb, ya, hp[j, i + 1], xb, yb, h11)
+    else:
+        nx, ny, nz, plane, _ = triangle_plane(xa, ya, h00, xb, yb, h11, xa, yb, hp[j + 1, i])
+    return nx, ny, nz, plane
+
+
+@vector_inlined
+def facet_plane(facets, f):
+    """(nx, ny, nz, n·v0) of facet ``f`` of ``facets`` (``Facets``): stored, or derived from
+    the grid's heights."""
+    if len(facets.plane) > 0:
+        return facets.nx[f], facets.ny[f], facets.nz[f], facets.plane[f]
+    return grid_facet_plane(facets.hp, facets.cell, f)
+
+
+@compiled
+def fill_normals(facets, prim, cols, plane):
+    """The unit normals of facets ``prim`` into ``cols`` (3, K), and their plane offsets into
+    ``plane`` (K,) unless it is empty."""
+    offsets = len(plane) > 0
+    for k in range(len(prim)):
+        a, b, c, p = facet_plane(facets, prim[k])
+        cols[0, k], cols[1, k], cols[2, k] = a, b, c
+        if offsets:
+            plane[k] = p
+
+
+@compiled
+def fill_range(facets, lo, cols):
+    """The unit normals of facets ``lo`` … ``lo`` + K − 1 into ``cols`` (3, K)."""
+    for k in range(cols.shape[1]):
+        a, b, c, _ = facet_plane(facets, lo + k)
+        cols[0, k], cols[1, k], cols[2, k] = a, b, c
