@@ -28,7 +28,6 @@ __all__ = [
     "grid_facet_plane",
     "triangle_plane",
     "fill_normals",
-    "fill_range",
 ]
 
 NO_HEIGHTS = np.zeros((2, 2))
@@ -60,31 +59,33 @@ class Facets(NamedTuple):
 
     def columns(self, lo: int = 0, hi: int | None = None) -> tuple:
         """The unit normals of facets ``lo`` … ``hi`` − 1 as three (hi − lo,) columns: views
-        of the stored ones, else computed (``fill_range``)."""
+        of the stored ones, else computed."""
         hi = self.count if hi is None else hi
         if self.stored:
             return self.nx[lo:hi], self.ny[lo:hi], self.nz[lo:hi]
-        cols = np.empty((3, hi - lo))
-        fill_range(self, lo, cols)
-        return tuple(cols)
+        return tuple(self._derived(np.arange(lo, hi))[0])
 
     def normals(self, prim=None) -> np.ndarray:
         """(K, 3) unit normals of facets ``prim`` (an index array; None: every facet)."""
         prim = np.arange(self.count) if prim is None else np.asarray(prim, dtype=np.int64)
         if self.stored:
-            return np.stack([self.nx[prim], self.ny[prim], self.nz[prim]], axis=1)
-        cols = np.empty((3, len(prim)))
-        fill_normals(self, prim.ravel(), cols, np.empty(0))
-        return cols.T.reshape(*prim.shape, 3)
+            return np.stack([self.nx[prim], self.ny[prim], self.nz[prim]], axis=-1)
+        return self._derived(prim)[0].T.reshape(*prim.shape, 3)
 
     def planes(self, prim) -> np.ndarray:
         """The plane offsets n·v0 of facets ``prim`` (an index array)."""
         prim = np.asarray(prim, dtype=np.int64)
         if self.stored:
             return self.plane[prim]
-        out = np.empty(len(prim.ravel()))
-        fill_normals(self, prim.ravel(), np.empty((3, len(out))), out)
-        return out.reshape(prim.shape)
+        return self._derived(prim)[1].reshape(prim.shape)
+
+    def _derived(self, prim: np.ndarray) -> tuple:
+        """(normals (3, K), plane offsets (K,)) of facets ``prim``, computed
+        (``fill_normals``)."""
+        prim = np.ascontiguousarray(prim, dtype=np.int64).ravel()
+        cols, plane = np.empty((3, len(prim))), np.empty(len(prim))
+        fill_normals(self, prim, cols, plane)
+        return cols, plane
 
 
 def mesh_facets(rows: np.ndarray, plane: np.ndarray, eps: float) -> Facets:
@@ -102,8 +103,8 @@ def grid_facets(hp: np.ndarray, cell: float, eps: float) -> Facets:
 @vector_inlined
 def triangle_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2):
     """(nx, ny, nz, n·v0, |cross|) of the triangle (v0, v1, v2): n = cross(v1 − v0,
-    v2 − v0)/|…| in NumPy's order of operations (a zero-area triangle gives |cross| = 0 and
-    NaN components)."""
+    v2 − v0)/|…| in NumPy's order of operations. A zero-area triangle has |cross| = 0, which
+    the caller checks (its components are then NaN in a ``vectorised`` kernel)."""
     e1x, e1y, e1z = x1 - x0, y1 - y0, z1 - z0
     e2x, e2y, e2z = x2 - x0, y2 - y0, z2 - z0
     cx = e1y * e2z - e1z * e2y
@@ -145,19 +146,7 @@ def facet_plane(facets, f):
 
 @compiled
 def fill_normals(facets, prim, cols, plane):
-    """The unit normals of facets ``prim`` into ``cols`` (3, K), and their plane offsets into
-    ``plane`` (K,) unless it is empty."""
-    offsets = len(plane) > 0
+    """The unit normals of facets ``prim`` into ``cols`` (3, K) and their plane offsets into
+    ``plane`` (K,)."""
     for k in range(len(prim)):
-        a, b, c, p = facet_plane(facets, prim[k])
-        cols[0, k], cols[1, k], cols[2, k] = a, b, c
-        if offsets:
-            plane[k] = p
-
-
-@compiled
-def fill_range(facets, lo, cols):
-    """The unit normals of facets ``lo`` … ``lo`` + K − 1 into ``cols`` (3, K)."""
-    for k in range(cols.shape[1]):
-        a, b, c, _ = facet_plane(facets, lo + k)
-        cols[0, k], cols[1, k], cols[2, k] = a, b, c
+        cols[0, k], cols[1, k], cols[2, k], plane[k] = facet_plane(facets, prim[k])
