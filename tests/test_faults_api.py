@@ -419,7 +419,7 @@ def test_heightfield_file_problems_are_one_line_naming_the_file(tmp_path, kind):
 def test_heightfield_file_bomb_refused_by_its_memory(tmp_path, monkeypatch):
     """A small compressed .npz that would inflate past the memory limit is refused from its
     header (the limit lowered to 256 MiB so that the test is the same on any machine: the
-    mirrored 4094² grid would need ~10 GB)."""
+    mirrored 4094² grid would need ~3 GB)."""
     monkeypatch.setattr(_checks, "memory_limit", lambda: 256 << 20)
     p = heightfile(tmp_path, "npz-bomb")
     tracemalloc.start()

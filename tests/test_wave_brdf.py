@@ -26,7 +26,7 @@ def test_flat_tile_mirror_bin(tmp_path):
     """Flat tile: f̄ = F(θi)/Ω_B in the mirror bin, 0 elsewhere, albedo F(θi) to 1e-12, no
     speckle; Result.save/load keeps it."""
     s = _gauss(64, 0.2, 1e-3, 1.0, 0)
-    s = type(s)(**{**s.__dict__, "heights": np.zeros_like(s.heights)})
+    s = s.replaced(heights=np.zeros_like(s.heights))
     bins = Bins(30, 13, True)
     th = [0.0, 20.0, 50.0]
     r = kirchhoff_brdf(s, "aluminium", th, wavelength=1.0, bins=bins)

@@ -8,6 +8,7 @@ finite, scalar or one per θi); the integer bounds (``MAX_RAYS``, ``MAX_THREADS`
 
 from __future__ import annotations
 
+import inspect
 import numbers
 import os
 
@@ -148,10 +149,11 @@ def check_run_options(bins, origins, progress, progress_receives: str) -> None:
 
 
 def is_surface(obj) -> bool:
-    """A ``microsim.surfaces.Surface`` or an object with its mesh contract."""
-    return all(
-        hasattr(obj, a) for a in ("vertices", "faces", "tile_size", "periodic", "fingerprint")
-    )
+    """A ``microsim.surfaces.Surface`` or an object with its mesh contract (looked up without
+    reading them: a heightfield's mesh is derived on access)."""
+    missing = object()
+    names = ("vertices", "faces", "tile_size", "periodic", "fingerprint")
+    return all(inspect.getattr_static(obj, a, missing) is not missing for a in names)
 
 
 def surface_error(name: str, obj) -> UsageError:

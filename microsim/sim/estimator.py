@@ -755,14 +755,14 @@ def _surface_meta(surface) -> dict:
             "the tile was traced as periodic although surface.periodic is False: "
             "its seams act as steps"
         )
-    z = surface.vertices[:, 2]
+    zmin, zmax = surface.z_range
     return {
         "kind": surface.kind,
         "fingerprint": surface.fingerprint(),
         "nominal": dict(surface.nominal),
         "tile_size": [float(t) for t in surface.tile_size],
-        "triangles": int(len(surface.faces)),
-        "z_range": [float(np.min(z)), float(np.max(z))],
+        "triangles": int(surface.facet_count),
+        "z_range": [zmin, zmax],
         "periodic": bool(surface.periodic),
         "warnings": warnings,
     }

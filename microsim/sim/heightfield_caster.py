@@ -62,6 +62,16 @@ class HeightfieldGrid:
         self.cell = float(cell)
         self.x0, self.y0 = -self.nx * self.cell / 2.0, -self.ny * self.cell / 2.0
 
+    @classmethod
+    def of_heights(cls, heights: np.ndarray, cell: float) -> "HeightfieldGrid":
+        """The grid of ``heightfield_mesh(heights, cell)`` from the heights alone."""
+        ny, nx = heights.shape
+        hp = np.empty((ny + 1, nx + 1))
+        hp[:-1, :-1] = heights
+        hp[-1, :-1] = heights[0]  # the last row and column repeat the first
+        hp[:, -1] = hp[:, 0]
+        return cls(hp, cell)
+
     @functools.cached_property
     def cell_min(self) -> np.ndarray:
         hp = self.hp
@@ -90,16 +100,19 @@ class HeightfieldGrid:
         )
 
 
-def heightfield_grid(surface, vertices: np.ndarray, faces: np.ndarray) -> HeightfieldGrid | None:
-    """The ``HeightfieldGrid`` of ``surface`` when its mesh (``vertices``, ``faces``, as the
-    tracer holds them) is exactly ``heightfield_mesh(surface.heights, surface.dx)``, else
-    None (any other mesh is traced by Embree)."""
+def heightfield_grid(surface, vertices=None, faces=None) -> HeightfieldGrid | None:
+    """The ``HeightfieldGrid`` of a periodic heightfield ``surface``: from its heights when it
+    stores no mesh (``Surface.stores_mesh`` False), or when its mesh (``vertices``, ``faces``,
+    as the tracer holds them) is exactly ``heightfield_mesh(surface.heights, surface.dx)``;
+    else None (any other mesh is traced by Embree)."""
     heights, dx = getattr(surface, "heights", None), getattr(surface, "dx", None)
     if heights is None or dx is None or not getattr(surface, "periodic", False):
         return None
     from microsim.surfaces.surface import is_heightfield_mesh
 
     heights = np.asarray(heights, dtype=np.float64)
+    if getattr(surface, "stores_mesh", True) is False:
+        return HeightfieldGrid.of_heights(heights, float(dx))
     if heights.ndim != 2 or not is_heightfield_mesh(heights, float(dx), vertices, faces):
         return None
     ny, nx = heights.shape

@@ -77,18 +77,19 @@ class HorizonGrid(NamedTuple):
     tol: float
 
 
-def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float) -> HorizonGrid:
-    """The ``HorizonGrid`` of a heightfield mesh (finite ``rise`` bound; ``slopes``: its
-    ``slope_magnitudes``), cells of ~``HORIZON_FACETS`` facets, tol = 4 ``eps`` (float32 rays);
-    for other meshes a 1 × 1 grid that clears nothing. Facet ranges on several threads
-    (``schedule.in_parts``) each fill a grid of their own, whose maxima are merged (the same
-    maxima)."""
+def horizon_grid(facets, vertices, faces, slopes, rise: float, tile) -> HorizonGrid:
+    """The ``HorizonGrid`` of a heightfield's ``facets`` (``engine.facets.Facets``; corners
+    those of the mesh ``vertices``, ``faces``, or of the heightfield grid where ``faces`` is
+    empty; finite ``rise`` bound; ``slopes``: its ``slope_magnitudes``), cells of
+    ~``HORIZON_FACETS`` facets, tol = 4 eps (float32 rays); for other meshes a 1 × 1 grid
+    that clears nothing. Facet ranges on several threads (``schedule.in_parts``) each fill a
+    grid of their own, whose maxima are merged (the same maxima)."""
     if not math.isfinite(rise):
         return HorizonGrid(
             0.0, 0.0, 1.0, 1.0, np.full((1, 1), np.inf), np.full((1, 1), np.inf), 0.0
         )
     lx, ly = tile
-    cells = len(faces) / HORIZON_FACETS
+    cells = facets.count / HORIZON_FACETS
     nx = int(np.clip(round(math.sqrt(cells * lx / ly)), 1, 1024))
     ny = int(np.clip(round(math.sqrt(cells * ly / lx)), 1, 1024))
     x0, y0, cw, ch = -lx / 2, -ly / 2, lx / nx, ly / ny
@@ -96,12 +97,12 @@ def horizon_grid(vertices, faces, slopes, rise: float, tile, eps: float) -> Hori
     def fill(lo: int, hi: int) -> tuple:
         cmax, cslope = np.full((ny, nx), -np.inf), np.zeros((ny, nx))
         cells = (x0, y0, cw, ch, cmax, cslope)
-        horizon.fill_horizon(vertices, faces[lo:hi], slopes[lo:hi], *cells)
+        horizon.fill_horizon(facets, vertices, faces, lo, hi, slopes, *cells)
         return cmax, cslope
 
-    grids = in_parts(len(faces), fill)
+    grids = in_parts(facets.count, fill)
     cmax, cslope = grids[0]
     for more_max, more_slope in grids[1:]:
         np.maximum(cmax, more_max, out=cmax)
         np.maximum(cslope, more_slope, out=cslope)
-    return HorizonGrid(x0, y0, cw, ch, cmax, cslope, 4.0 * eps)
+    return HorizonGrid(x0, y0, cw, ch, cmax, cslope, 4.0 * facets.eps)

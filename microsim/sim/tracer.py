@@ -46,7 +46,12 @@ import numpy as np
 
 from microsim.errors import UsageError
 from microsim.jit import vectorised
-from microsim.surfaces.surface import MAX_COORDINATE, check_relief
+from microsim.surfaces.surface import (
+    MAX_COORDINATE,
+    check_relief,
+    heightfield_faces,
+    heightfield_vertices,
+)
 
 from .embree_backends import check_backend, open_scene, scene_backend
 from .engine import beam, codes, horizon
@@ -126,6 +131,32 @@ def _validated_mesh(surface) -> tuple[np.ndarray, np.ndarray, float, float]:
     return v, f if f.dtype in (np.int32, np.int64) else f.astype(np.int64), lx, ly
 
 
+def _validated_heights(surface) -> tuple[np.ndarray, float, float]:
+    """(heights, Lx, Ly) of a surface that stores no mesh (``Surface.stores_mesh`` False): a
+    finite (ny, nx) grid whose derived mesh spans its tile (nx·dx, ny·dx)."""
+    h = np.asarray(surface.heights, dtype=np.float64)
+    dx = float(surface.dx)
+    if h.ndim != 2 or min(h.shape) < 1:
+        raise UsageError(f"surface.heights must be a 2D (ny, nx) array, got shape {h.shape}")
+    if not (dx > 0 and np.isfinite(dx)):
+        raise UsageError(f"surface.dx must be a finite length > 0, got {surface.dx!r}")
+    ny, nx = h.shape
+    lx, ly = (float(t) for t in surface.tile_size)
+    if not np.allclose((lx, ly), (nx * dx, ny * dx), rtol=1e-9, atol=0.0):
+        raise UsageError(
+            f"surface.tile_size must be (nx·dx, ny·dx) = ({nx * dx:g}, {ny * dx:g}) for its "
+            f"heights, got {surface.tile_size!r}"
+        )
+    if not (max(lx, ly) <= MAX_COORDINATE):
+        raise UsageError(
+            f"surface.tile_size must be within {MAX_COORDINATE:g} (float32), "
+            f"got {surface.tile_size!r}"
+        )
+    zmin, zmax = float(h.min()), float(h.max())  # NaN propagates: refused as not finite
+    check_relief("surface", zmin, zmax, (lx, ly))
+    return h, lx, ly
+
+
 @vectorised
 def _fill_facet_planes(v, f, lo, hi, rows, plane) -> tuple:
     """The unit normal and plane offset n·v0 of facets ``lo`` … ``hi`` − 1 of (``v``, ``f``)
@@ -165,6 +196,8 @@ def _facet_planes(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return rows, plane
 
 
+NO_MESH = (np.empty((0, 3)), np.empty((0, 3), dtype=np.int32))
+"""``horizon_grid``'s corners argument for a heightfield grid: none (derived from heights)."""
 _CAST_STATUS = WorkArray("cast-status", np.int8)  # the grid walk's hits (``scratch``)
 _CAST_PRIM = WorkArray("cast-prim", np.int32)
 _CAST_POINT = WorkColumns("cast-point")
@@ -174,7 +207,8 @@ class Tracer:
     """Periodic Embree scene of one tile of ``surface`` (a ``microsim.surfaces.Surface``).
 
     Attributes: ``vertices`` (V, 3) float64 and ``faces`` (F, 3) integer (the surface's own
-    arrays where they already have these types), ``facets`` (``engine.facets.Facets``: the
+    arrays where they already have these types; derived from the heights on each access for
+    a surface that stores no mesh), ``facets`` (``engine.facets.Facets``: the
     unit facet normals and their planes' offsets n·v0, stored for a mesh and derived from the
     heights where they are read on a heightfield grid; a secondary ray from facet f starts on
     the plane n·x = n·v0 + eps), ``tile`` (Lx, Ly),
@@ -201,18 +235,25 @@ class Tracer:
 
     def __init__(self, surface, *, backend: str = "embreex", grid: bool = False):
         check_backend(backend)
-        v, f, lx, ly = _validated_mesh(surface)
-        self.vertices, self.faces = v, f
-        self._heightfield = heightfield_grid(surface, v, f)  # None unless a heightfield grid
+        if getattr(surface, "stores_mesh", True) is False and surface.periodic:
+            h, lx, ly = _validated_heights(surface)  # no mesh: derived where asked for
+            self._mesh = None
+            self._heightfield = heightfield_grid(surface)
+            self.zmin, self.zmax = float(h.min()), float(h.max())
+            big = max(-self.zmin, self.zmax, lx / 2, ly / 2)  # max |v| of the derived mesh
+        else:
+            v, f, lx, ly = _validated_mesh(surface)
+            self._mesh = (v, f)
+            self._heightfield = heightfield_grid(surface, v, f)  # None unless a grid
+            self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
+            big = max(-float(v.min()), float(v.max()), lx / 2, ly / 2)  # max |v|, no copy
         self.grid = self._heightfield if grid else None
         self.tile = (lx, ly)
         self.half = np.array([lx / 2, ly / 2])
-        self.zmin, self.zmax = float(v[:, 2].min()), float(v[:, 2].max())
-        big = max(-float(v.min()), float(v.max()), lx / 2, ly / 2)  # max |v|, no copy
         self.eps = 2.0 * float(np.spacing(np.float32(big)))  # 2 ulp: 1.2e-7 on a unit tile
         hf = self._heightfield
         self.facets: Facets = (
-            mesh_facets(*_facet_planes(v, f), self.eps)
+            mesh_facets(*_facet_planes(*self._mesh), self.eps)
             if hf is None
             else grid_facets(hf.hp, hf.cell, self.eps)  # derived from the heights
         )
@@ -223,7 +264,8 @@ class Tracer:
         self.periodic = bool(surface.periodic)
         slopes = slope_magnitudes(self.facets)  # (F,), for the two bounds only
         self.rise_bound = rise_bound(surface, slopes)
-        self.horizon = horizon_grid(v, f, slopes, self.rise_bound, self.tile, self.eps)
+        corners = NO_MESH if hf is not None else self._mesh  # a grid's: from its heights
+        self.horizon = horizon_grid(self.facets, *corners, slopes, self.rise_bound, self.tile)
         del slopes
         grooved = getattr(surface, "azimuth_average", False)
         self.groove_clear, self.groove_strata = (
@@ -232,6 +274,21 @@ class Tracer:
         self.facet_tables: dict = {}  # kept by facet_tables.facet_table: key → (table, bytes)
         self.backend = scene_backend(backend)
         self._scene_lock = threading.Lock()
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """(V, 3) float64 vertices: the surface's, or those of ``heightfield_mesh`` derived
+        from the grid's heights on each access (a surface that stores no mesh)."""
+        if self._mesh is not None:
+            return self._mesh[0]
+        return heightfield_vertices(self._heightfield.hp[:-1, :-1], self._heightfield.cell)
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(F, 3) integer faces, stored or derived as ``vertices``."""
+        if self._mesh is not None:
+            return self._mesh[1]
+        return heightfield_faces(self._heightfield.hp[:-1, :-1], self._heightfield.cell)
 
     @property
     def normals(self) -> np.ndarray:

@@ -14,7 +14,7 @@ from microsim.checks import check_memory, integer, positive
 from microsim.errors import UsageError
 
 from .heightfields import MIN_GRID, traced_bytes
-from .surface import Surface, check_relief, heightfield_mesh
+from .surface import Surface, check_relief
 
 __all__ = ["sinusoidal_grating", "triangular_grating", "PERIOD_RTOL"]
 
@@ -107,11 +107,10 @@ def _extruded(row: np.ndarray, ny: int, dx: float, nominal: dict) -> Surface:
     heights = np.tile(row, (ny, 1))
     tile = (lx, ny * dx)
     check_relief("amplitude", heights.min(), heights.max(), tile)
-    vertices, faces = heightfield_mesh(heights, dx)
     return Surface(
         kind="grating",
-        vertices=vertices,
-        faces=faces,
+        vertices=None,  # derived from the heights where needed
+        faces=None,
         tile_size=tile,
         periodic=True,
         nominal=nominal,

@@ -37,7 +37,7 @@ from microsim.analytic import (
 from microsim.checks import check_memory, finite, integer, positive
 from microsim.errors import UsageError
 
-from .surface import Predicted, Surface, check_relief, heightfield_mesh, rotated_alphas
+from .surface import Predicted, Surface, check_relief, rotated_alphas
 
 __all__ = [
     "gaussian",
@@ -65,14 +65,15 @@ GAUSS_RESOLVED_CELLS = 1.0
 """Shortest Gaussian ℓ, in grid steps, that the grid resolves: the synthesis keeps the spectrum
 up to the Nyquist frequency 1/(2dx), i.e. erf(πℓ/(2dx))² of σ² — 95 % at ℓ = dx, 18 % at dx/4,
 nothing as ℓ → 0 (the mesh turns flat whatever the nominal m = 2σ/ℓ). Shorter ℓ is refused."""
-BYTES_PER_GRID_POINT = 112
-"""Peak memory per grid point of a heightfield built and traced ray by ray (two triangles):
-the mesh (float64 vertices, int32 faces, 48 bytes), the heights (8), the grid walk's copy of
-the heights and its cell maxima and minima (24) and, during the tracer's set-up, the facet
-slopes (16); the tracer keeps no per-facet normals or plane offsets on a heightfield grid
-(derived from the heights where they are read, ``sim.engine.facets``). The build's own peak
-(its in-place synthesis) is about as large. Measured: 97 bytes per point at 4096², 96 at
-8192² (peak RSS growth; ``microsim bench --scale``)."""
+BYTES_PER_GRID_POINT = 64
+"""Peak memory per grid point of a heightfield built and traced ray by ray (two triangles).
+The build peaks highest: its in-place synthesis holds the spectrum (8 bytes), the noise's
+complex transform and its inverse (16 each) and the heights. The run holds the heights (8)
+— the surface stores no mesh (``Surface.stores_mesh``), and the tracer keeps no per-facet
+normals or plane offsets (``sim.engine.facets``) — the grid walk's copy of them with its
+cell maxima and minima (24) and, during the tracer's set-up, the facet slopes (16).
+Measured: 57 bytes per point at 4096², 56 at 8192² (peak RSS growth; ``microsim bench
+--scale``)."""
 TABLED_FACETS_MAX = 1 << 25
 """Largest mesh, in facets, whose tracer builds per-incidence facet tables (the run's rays
 at least as many as its facets, ``sim.facet_tables.table_pays``): a 4096² heightfield. A
@@ -265,11 +266,10 @@ def _heightfield_surface(kind, heights, dx, nominal, warns, ensemble_ndf, predic
     check_relief("sigma", heights.min(), heights.max(), (nx * dx, ny * dx))
     for w in warns:
         _warnings.warn(w, stacklevel=3)
-    vertices, faces = heightfield_mesh(heights, dx)
     return Surface(
         kind=kind,
-        vertices=vertices,
-        faces=faces,
+        vertices=None,  # derived from the heights where needed
+        faces=None,
         tile_size=(nx * dx, ny * dx),
         periodic=True,
         nominal=nominal,
@@ -435,6 +435,7 @@ def gaussian(
     _finite_spectrum(S, f"sigma = {sigma:g}, corr_len = {corr_len:g}")
     warns = []
     mom = spectrum_moments(S, FX, FY, dx)
+    del FX, FY  # 16 bytes per point fewer during the synthesis
     if corr_len < GAUSS_MIN_CORR_CELLS * dx:
         mesh = 0.5 * (mom.slope_var_x + mom.slope_var_y)
         bias = mesh / (2 * np.float64(sigma) ** 2 / np.float64(corr_len) ** 2)
@@ -534,6 +535,8 @@ def abc(
             f"abc: the tile (L = {n * dx:g}) and band (f <= {f_max:g}) keep only "
             f"{100 * kept:.1f} % of the nominal height variance σ² = {sigma**2:g}"
         )
+    ensemble = _abc_ndf(S, FX, FY, dx, mom, B_y, rotation)
+    del FX, FY  # 16 bytes per point fewer during the synthesis
     h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     aniso = {} if B_y is None else {"B_y": B_y, "rotation": rotation}
     nominal = {
@@ -550,7 +553,6 @@ def abc(
         "exact_amplitude": bool(exact_amplitude),
     }
     predicted = _predicted(mom, abc_continuum_slope_var(sigma, B, C, f_max, B_y))
-    ensemble = _abc_ndf(S, FX, FY, dx, mom, B_y, rotation)
     if B_y is not None:
         predicted = replace(predicted, alpha_x=ensemble.alpha_x, alpha_y=ensemble.alpha_y)
     return _heightfield_surface("abc", h, dx, nominal, warns, ensemble, predicted)
@@ -586,9 +588,10 @@ def _gaussian_anisotropic(n, dx, sigma, lx, ly, rotation, seed, exact_amplitude)
             "mesh slope variances fall short of the continuum 2σ²/ℓ² (predicted.alpha_x/_y "
             "state the mesh values)"
         )
-    h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     mom = spectrum_moments(S, FX, FY, dx)
     ax_, ay_ = _mesh_alphas(S, FX, FY, dx, mom, rotation)
+    del FX, FY  # 16 bytes per point fewer during the synthesis
+    h = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
     nominal = {
         "sigma": sigma,
         "corr_len": lx,

@@ -26,7 +26,7 @@ from microsim.errors import UsageError
 
 from . import scan
 from .heightfields import MIN_GRID, traced_bytes
-from .surface import Surface, check_relief, heightfield_mesh
+from .surface import Surface, check_relief
 
 __all__ = [
     "from_file",
@@ -374,7 +374,6 @@ def from_file(path, dx: float | None = None, periodic: bool = False, form: str |
     _check_values(Path(path), raw, dx, periodic)
     h = raw if periodic else mirror_periodic(raw)
     h = h - h.mean()
-    vertices, faces = heightfield_mesh(h, dx)
     ny, nx = h.shape
     nominal = {
         "path": str(path),
@@ -393,8 +392,8 @@ def from_file(path, dx: float | None = None, periodic: bool = False, form: str |
     )
     return Surface(
         kind="file",
-        vertices=vertices,
-        faces=faces,
+        vertices=None,  # derived from the heights where needed
+        faces=None,
         tile_size=(nx * dx, ny * dx),
         periodic=True,
         nominal=nominal,

@@ -17,7 +17,7 @@ Two constructions realise it:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import gammainc, gammainccinv, gammaincinv, ndtr
@@ -262,7 +262,9 @@ def student_t_transform(
         scale = np.sqrt(alpha * alpha_y * mom.height_var / (0.5 * gx * gy))
         stretch = (alpha, alpha_y)
         law = SlopeLaw((StudentT(1.0, gamma),), corr_len * corr_len_y, stretch, rotation, gamma)
-    g = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude) / np.sqrt(mom.height_var)
+    del FX, FY  # 16 bytes per point fewer during the synthesis
+    g = synthesize(S, dx, np.random.default_rng(seed), exact_amplitude)
+    g /= np.sqrt(mom.height_var)  # in place: the same quotients
     heights = height_transform(gamma, scale)(g)
     nominal = {
         "construction": "transform",
@@ -278,7 +280,7 @@ def student_t_transform(
     surf = _heightfield_surface(
         "student-t-transform", heights - heights.mean(), dx, nominal, [], ensemble, None
     )
-    return replace(surf, generator_stats=law)
+    return surf.replaced(generator_stats=law)
 
 
 def mixture_patch_m(alpha: float, gamma: float, patches: int, seed: int) -> float:
@@ -346,8 +348,7 @@ def student_t_mixture(
         "exact_amplitude": bool(exact_amplitude),
     }
     law = SlopeLaw((Beckmann(m),), corr_len**2)
-    return replace(
-        surf,
+    return surf.replaced(
         kind="student-t-mixture",
         nominal=nominal,
         ensemble_ndf=ensemble,

@@ -14,6 +14,7 @@ switching on ``kind``.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass
 from typing import Callable
@@ -136,7 +137,11 @@ class Surface:
     """A periodic microsurface tile (the contract between surfaces and the tracer).
 
     ``vertices`` (V, 3) float64 and ``faces`` (F, 3) int32 (normals up), read-only (a changed
-    mesh is a new ``Surface``: its identity, ``fingerprint``, is computed once); ``tile_size``
+    mesh is a new ``Surface``: its identity, ``fingerprint``, is computed once). A periodic
+    heightfield given as ``heights`` and ``dx`` with ``vertices`` and ``faces`` None (what the
+    generators and the file loader build) stores no mesh: its ``heightfield_mesh`` is derived
+    on each access of ``vertices`` or ``faces`` (48 bytes per grid point, not kept; the tracer
+    needs only the heights), ``replaced`` keeps it so; ``tile_size``
     (Lx, Ly) are the periods; ``nominal`` holds the generator parameters; ``heights`` (ny, nx) with
     spacing ``dx`` for heightfields (row = y index, col = x index); ``azimuth_average`` is True
     for V-grooves (the estimator averages the groove azimuth to get the isotropic V-cavity
@@ -177,9 +182,40 @@ class Surface:
     tilt_ndf: object = None
 
     def __post_init__(self):
-        for array in (self.vertices, self.faces):
+        if self.stores_mesh is None:
+            raise UsageError(
+                "Surface: give vertices and faces, or neither with heights (ny, nx) and dx "
+                "for a periodic heightfield"
+            )
+        stored = (self.__dict__["_vertices"], self.__dict__["_faces"])
+        for array in stored if self.stores_mesh else (self.heights,):
             if isinstance(array, np.ndarray):
                 array.flags.writeable = False
+
+    @property
+    def stores_mesh(self) -> bool | None:
+        """True when the surface holds its vertices and faces, False for a heightfield whose
+        mesh is derived from its heights on access, None when it has neither."""
+        stored = (self.__dict__.get("_vertices"), self.__dict__.get("_faces"))
+        if all(a is not None for a in stored):
+            return True
+        if all(a is None for a in stored) and self.heights is not None and self.dx is not None:
+            return False
+        return None
+
+    @property
+    def facet_count(self) -> int:
+        """The number of facets (triangles), without deriving a mesh."""
+        if self.stores_mesh:
+            return len(self.faces)
+        ny, nx = np.shape(self.heights)
+        return 2 * nx * ny
+
+    def replaced(self, **changes) -> "Surface":
+        """``dataclasses.replace`` that keeps a derived mesh derived (``dataclasses.replace``
+        itself would read, and then store, the derived arrays)."""
+        mesh = {"vertices": self.__dict__["_vertices"], "faces": self.__dict__["_faces"]}
+        return dataclasses.replace(self, **{**mesh, **changes})
 
     def __repr__(self) -> str:
         """One line: kind, grid or groove count, tile, triangles and the nominal parameters."""
@@ -191,7 +227,7 @@ class Surface:
         if "n_grooves" in self.nominal:
             parts.append(f"{self.nominal['n_grooves']} grooves")
         lx, ly = self.tile_size
-        parts.append(f"tile {lx:g}x{ly:g}, {len(self.faces)} triangles")
+        parts.append(f"tile {lx:g}x{ly:g}, {self.facet_count} triangles")
         parts += [
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
             for k, v in self.nominal.items()
@@ -235,20 +271,26 @@ class Surface:
         cached = self.__dict__.get("_fingerprint")
         if cached is not None:
             return cached
-        digest = self._mesh_digest()
-        if all(_frozen(a) for a in (self.vertices, self.faces)):
+        digest = hashlib.sha1()
+        for block in self._mesh_blocks():
+            digest.update(memoryview(np.ascontiguousarray(block)).cast("B"))
+        digest = digest.hexdigest()[:16]
+        owners = (self.vertices, self.faces) if self.stores_mesh else (self.heights,)
+        if all(_frozen(a) for a in owners):
             object.__setattr__(self, "_fingerprint", digest)
         return digest
 
-    def _mesh_digest(self) -> str:
-        """``fingerprint``, computed."""
-        digest = hashlib.sha1()
+    def _mesh_blocks(self):
+        """The vertices (float64) and then the faces (int64), a block of rows at a time: of
+        the stored arrays, or of the derived mesh (``heightfield_mesh_rows``) without building
+        it whole."""
+        if not self.stores_mesh:
+            yield from heightfield_mesh_rows(self.heights, self.dx, FINGERPRINT_ROWS)
+            return
         for array, dtype in ((self.vertices, np.float64), (self.faces, np.int64)):
-            rows = np.asarray(array)  # hashed a block of rows at a time: no copy of the mesh
+            rows = np.asarray(array)
             for a in range(0, len(rows), FINGERPRINT_ROWS):
-                block = np.ascontiguousarray(rows[a : a + FINGERPRINT_ROWS], dtype=dtype)
-                digest.update(memoryview(block).cast("B"))
-        return digest.hexdigest()[:16]
+                yield np.asarray(rows[a : a + FINGERPRINT_ROWS], dtype=dtype)
 
     def facet_normals(self) -> np.ndarray:
         """(F, 3) float64 unit facet normals (z > 0)."""
@@ -266,7 +308,7 @@ class Surface:
     @property
     def z_range(self) -> tuple[float, float]:
         """(zmin, zmax) of the vertices."""
-        z = self.vertices[:, 2]
+        z = self.vertices[:, 2] if self.stores_mesh else self.heights
         return float(z.min()), float(z.max())
 
     def ndf(self):
@@ -294,7 +336,7 @@ class Surface:
         cxy = float(np.sum(w * sx * sy))
         out = {
             "kind": self.kind,
-            "triangles": int(len(self.faces)),
+            "triangles": self.facet_count,
             "tile_size": tuple(float(t) for t in self.tile_size),
             "z_range": self.z_range,
             "slope_var_x": vx,
@@ -316,6 +358,29 @@ class Surface:
         if self.generator_stats is not None:
             out.update(self.generator_stats(self))
         return out
+
+
+def _mesh_array(name: str, index: int) -> property:
+    """``Surface.vertices`` / ``faces``: the stored array, else (a heightfield that stores no
+    mesh) the ``heightfield_mesh`` array derived from its heights, read-only, not kept."""
+    key = "_" + name
+
+    def get(self):
+        stored = self.__dict__.get(key)
+        if stored is not None or self.stores_mesh is not False:
+            return stored
+        array = (heightfield_vertices, heightfield_faces)[index](self.heights, self.dx)
+        array.flags.writeable = False
+        return array
+
+    def put(self, value) -> None:  # the dataclass's __init__ only: a Surface is frozen
+        self.__dict__[key] = value
+
+    return property(get, put, doc=get.__doc__)
+
+
+Surface.vertices = _mesh_array("vertices", 0)
+Surface.faces = _mesh_array("faces", 1)
 
 
 def rotated_alphas(vxx: float, vxy: float, vyy: float, rotation: float) -> tuple[float, float]:
@@ -342,29 +407,65 @@ def heightfield_mesh(heights: np.ndarray, dx: float) -> tuple[np.ndarray, np.nda
     (v00, v01, v11) and (v00, v11, v10): 2·nx·ny triangles, all with normal z > 0 and the same
     projected area dx²/2.
     """
-    ny, nx = heights.shape
-    x, y, v00, corners = _grid_layout(ny, nx, dx)
+    return heightfield_vertices(heights, dx), heightfield_faces(heights, dx)
+
+
+def heightfield_vertices(heights: np.ndarray, dx: float) -> np.ndarray:
+    """``heightfield_mesh``'s vertices ((ny + 1)(nx + 1), 3), filled in place."""
+    ny, nx = np.shape(heights)
+    x, y, _, _ = _grid_layout(ny, nx, dx, cells=False)
     vertices = np.empty(((ny + 1) * (nx + 1), 3))  # filled in place: no meshgrid, no copies
-    grid = vertices.reshape(ny + 1, nx + 1, 3)
-    grid[:, :, 0] = x
-    grid[:, :, 1] = y[:, None]
-    grid[:-1, :-1, 2] = heights
-    grid[-1, :-1, 2] = heights[0]  # the last row and column repeat the first
-    grid[:, -1, 2] = grid[:, 0, 2]
+    _fill_vertex_rows(vertices.reshape(ny + 1, nx + 1, 3), heights, x, y, 0)
+    return vertices
+
+
+def heightfield_faces(heights: np.ndarray, dx: float) -> np.ndarray:
+    """``heightfield_mesh``'s faces (2·nx·ny, 3) int32: triangles A of every cell, then B."""
+    ny, nx = np.shape(heights)
+    _, _, v00, corners = _grid_layout(ny, nx, dx)
     faces = np.empty((2 * nx * ny, 3), dtype=np.int32)
     for half, offsets in zip(_triangle_halves(faces, ny, nx), corners):
         for k, offset in enumerate(offsets):
             half[:, :, k] = v00 + offset
-    return vertices, faces
+    return faces
 
 
-def _grid_layout(ny: int, nx: int, dx: float) -> tuple:
+def heightfield_mesh_rows(heights: np.ndarray, dx: float, rows: int):
+    """``heightfield_mesh``'s vertices (float64) and then its faces (int64) in blocks of about
+    ``rows`` rows (whole grid rows of vertices, whole rows of cells of faces), each built on
+    its own: the mesh's bytes in order without the mesh."""
+    ny, nx = np.shape(heights)
+    x, y, _, corners = _grid_layout(ny, nx, dx, cells=False)
+    step = max(1, rows // (nx + 1))
+    for j in range(0, ny + 1, step):
+        block = np.empty((min(step, ny + 1 - j), nx + 1, 3))
+        _fill_vertex_rows(block, heights, x, y, j)
+        yield block.reshape(-1, 3)
+    for offsets in corners:
+        for j in range(0, ny, step):
+            k = min(step, ny - j)
+            v00 = (nx + 1) * np.arange(j, j + k)[:, None] + np.arange(nx)[None, :]
+            yield np.stack([v00 + offset for offset in offsets], axis=-1).reshape(-1, 3)
+
+
+def _fill_vertex_rows(block: np.ndarray, heights: np.ndarray, x, y, j: int) -> None:
+    """Vertex grid rows j … j + len(block) − 1 of ``heightfield_mesh`` into ``block``
+    (rows, nx + 1, 3): x, y and the heights, the last row and column repeating the first."""
+    ny, nx = np.shape(heights)
+    block[:, :, 0] = x
+    block[:, :, 1] = y[j : j + len(block), None]
+    for r in range(len(block)):
+        block[r, :-1, 2] = heights[(j + r) % ny]
+    block[:, -1, 2] = block[:, 0, 2]
+
+
+def _grid_layout(ny: int, nx: int, dx: float, cells: bool = True) -> tuple:
     """What ``heightfield_mesh`` lays out: the vertex columns' x and rows' y, each cell's
-    (i, j) corner index v00 (ny, nx), and the corner offsets from it of its two triangles
-    (v00, v01, v11) and (v00, v11, v10)."""
+    (i, j) corner index v00 (ny, nx; None without ``cells``), and the corner offsets from it
+    of its two triangles (v00, v01, v11) and (v00, v11, v10)."""
     x = (np.arange(nx + 1) - nx / 2.0) * dx
     y = (np.arange(ny + 1) - ny / 2.0) * dx
-    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :]
+    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :] if cells else None
     return x, y, v00, ((0, 1, nx + 2), (0, nx + 2, nx + 1))
 
 

@@ -26,6 +26,8 @@ __all__ = [
     "grid_facets",
     "facet_plane",
     "grid_facet_plane",
+    "grid_facet_corners",
+    "facet_corners",
     "triangle_plane",
     "fill_normals",
 ]
@@ -116,10 +118,10 @@ def triangle_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2):
 
 
 @vector_inlined
-def grid_facet_plane(hp, cell, f):
-    """(nx, ny, nz, n·v0) of face ``f`` of the heightfield grid of vertex heights ``hp``
-    (module docstring: triangle A of cell k = f for f < nx·ny, else triangle B of cell
-    f − nx·ny)."""
+def grid_facet_corners(hp, cell, f):
+    """The corners (x0, y0, z0, x1, y1, z1, x2, y2, z2) of face ``f`` of the heightfield grid of
+    vertex heights ``hp`` (module docstring: triangle A = (v00, v01, v11) of cell k = f for
+    f < nx·ny, else triangle B = (v00, v11, v10) of cell f − nx·ny)."""
     rows, cols = hp.shape[0] - 1, hp.shape[1] - 1
     upper = f < rows * cols
     k = f if upper else f - rows * cols
@@ -129,10 +131,31 @@ def grid_facet_plane(hp, cell, f):
     ya, yb = (j - rows / 2.0) * cell, (j + 1 - rows / 2.0) * cell
     h00, h11 = hp[j, i], hp[j + 1, i + 1]
     if upper:
-        nx, ny, nz, plane, _ = triangle_plane(xa, ya, h00, xb, ya, hp[j, i + 1], xb, yb, h11)
-    else:
-        nx, ny, nz, plane, _ = triangle_plane(xa, ya, h00, xb, yb, h11, xa, yb, hp[j + 1, i])
+        return xa, ya, h00, xb, ya, hp[j, i + 1], xb, yb, h11
+    return xa, ya, h00, xb, yb, h11, xa, yb, hp[j + 1, i]
+
+
+@vector_inlined
+def grid_facet_plane(hp, cell, f):
+    """(nx, ny, nz, n·v0) of face ``f`` of the heightfield grid of vertex heights ``hp``
+    (``grid_facet_corners``)."""
+    x0, y0, z0, x1, y1, z1, x2, y2, z2 = grid_facet_corners(hp, cell, f)
+    nx, ny, nz, plane, _ = triangle_plane(x0, y0, z0, x1, y1, z1, x2, y2, z2)
     return nx, ny, nz, plane
+
+
+@vector_inlined
+def facet_corners(facets, vertices, faces, f):
+    """The corners (x0, y0, z0, x1, …, z2) of facet ``f``: of the mesh (``vertices`` (V, 3),
+    ``faces`` (F, 3)), or, where ``faces`` is empty, of the heightfield grid of ``facets``."""
+    if len(faces) == 0:
+        return grid_facet_corners(facets.hp, facets.cell, f)
+    a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+    return (
+        vertices[a, 0], vertices[a, 1], vertices[a, 2],
+        vertices[b, 0], vertices[b, 1], vertices[b, 2],
+        vertices[c, 0], vertices[c, 1], vertices[c, 2],
+    )  # fmt: skip
 
 
 @vector_inlined

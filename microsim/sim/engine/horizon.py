@@ -8,23 +8,27 @@ import math
 
 from microsim.jit import compiled, vector_inlined, vectorised
 
+from .facets import facet_corners
+
 CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope bound × |wo_h|
 
 
 @compiled
-def fill_horizon(v, faces, slope, x0, y0, cw, ch, cmax, cslope):
-    """The coarse bounds of ``horizon_clear``: for every facet (vertices ``v`` (V, 3),
-    ``faces``, facet slope ``slope`` = |∇h|), every cell of the (ny, nx) grid of cells
-    cw × ch from (x0, y0) that its bounding box overlaps gets the facet's highest vertex in
-    ``cmax`` and its slope in ``cslope`` (running maxima; start from −inf and 0)."""
+def fill_horizon(facets, vertices, faces, lo, hi, slope, x0, y0, cw, ch, cmax, cslope):
+    """The coarse bounds of ``horizon_clear``: for facets ``lo`` … ``hi`` − 1 (corners
+    ``facets.facet_corners`` of the mesh ``vertices``, ``faces``, or of the heightfield grid
+    of ``facets`` where ``faces`` is empty; slope ``slope[f]`` = |∇h|), every cell of the
+    (ny, nx) grid of cells cw × ch from (x0, y0) that its bounding box overlaps gets the
+    facet's highest vertex in ``cmax`` and its slope in ``cslope`` (running maxima; start from
+    −inf and 0)."""
     ny, nx = cmax.shape
-    for f in range(len(faces)):
-        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        i0 = max(int(math.floor((min(v[a, 0], v[b, 0], v[c, 0]) - x0) / cw)), 0)
-        i1 = min(int(math.floor((max(v[a, 0], v[b, 0], v[c, 0]) - x0) / cw)), nx - 1)
-        j0 = max(int(math.floor((min(v[a, 1], v[b, 1], v[c, 1]) - y0) / ch)), 0)
-        j1 = min(int(math.floor((max(v[a, 1], v[b, 1], v[c, 1]) - y0) / ch)), ny - 1)
-        top = max(v[a, 2], v[b, 2], v[c, 2])
+    for f in range(lo, hi):
+        xa, ya, za, xb, yb, zb, xc, yc, zc = facet_corners(facets, vertices, faces, f)
+        i0 = max(int(math.floor((min(xa, xb, xc) - x0) / cw)), 0)
+        i1 = min(int(math.floor((max(xa, xb, xc) - x0) / cw)), nx - 1)
+        j0 = max(int(math.floor((min(ya, yb, yc) - y0) / ch)), 0)
+        j1 = min(int(math.floor((max(ya, yb, yc) - y0) / ch)), ny - 1)
+        top = max(za, zb, zc)
         for j in range(j0, j1 + 1):
             for i in range(i0, i1 + 1):
                 cmax[j, i] = max(cmax[j, i], top)
