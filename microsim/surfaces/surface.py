@@ -443,8 +443,7 @@ def heightfield_mesh_rows(heights: np.ndarray, dx: float, rows: int):
         yield block.reshape(-1, 3)
     for offsets in corners:
         for j in range(0, ny, step):
-            k = min(step, ny - j)
-            v00 = (nx + 1) * np.arange(j, j + k)[:, None] + np.arange(nx)[None, :]
+            v00 = _corner_index(nx, range(j, min(ny, j + step)))
             yield np.stack([v00 + offset for offset in offsets], axis=-1).reshape(-1, 3)
 
 
@@ -465,8 +464,14 @@ def _grid_layout(ny: int, nx: int, dx: float, cells: bool = True) -> tuple:
     of its two triangles (v00, v01, v11) and (v00, v11, v10)."""
     x = (np.arange(nx + 1) - nx / 2.0) * dx
     y = (np.arange(ny + 1) - ny / 2.0) * dx
-    v00 = (nx + 1) * np.arange(ny)[:, None] + np.arange(nx)[None, :] if cells else None
+    v00 = _corner_index(nx, range(ny)) if cells else None
     return x, y, v00, ((0, 1, nx + 2), (0, nx + 2, nx + 1))
+
+
+def _corner_index(nx: int, rows: range) -> np.ndarray:
+    """The vertex index v00 = (nx + 1)·j + i of each cell (i, j) of the cell ``rows`` (len(rows),
+    nx)."""
+    return (nx + 1) * np.arange(rows.start, rows.stop)[:, None] + np.arange(nx)[None, :]
 
 
 def _triangle_halves(faces: np.ndarray, ny: int, nx: int) -> tuple:
