@@ -283,6 +283,50 @@ def test_fused_walk_and_lookups_give_the_bits_of_walk_then_lookups(theta, phi):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("theta, phi", [(0.0, 0.0), (30.0, 0.0), (55.0, 37.0), (70.0, 200.0)])
+def test_fused_traced_walk_gives_the_bits_of_walk_then_shading_then_masking_rays(theta, phi):
+    """``ray_columns.trace_columns`` on a grid (``primary.cast_traced_primary``: the walk, the
+    per-ray classes and mirror directions and the masking rays' walk, tile by tile) returns
+    exactly what the walk into whole columns, ``primary.traced_primary``, the masking rays
+    walked afterwards, the Fresnel weights and the bins give, ray by ray."""
+    from microsim.analytic.fresnel import resolve_material
+    from microsim.sim import fresnel_kernels
+    from microsim.sim.engine import primary, segments
+    from microsim.sim.ray_bins import locate_single
+
+    tracer = Tracer(_rough(seed=7), grid=True)
+    wi = spherical_deg(theta, phi)
+    bins, ior = Bins(18, 12), resolve_material("aluminium")
+    x = _starts(tracer, 3 * 1024 + 17, seed=3)  # several tiles and a short last one
+    down = [float(-c) for c in wi]
+    assert tracer.grid_walk(x, down) is not None
+    fused = [a.copy() for a in ray_columns.trace_columns(tracer, None, wi, phi, bins, x, None, ior)]
+    hs, prim, p = tracer.cast_falling(x, down)
+    n = len(x[0])
+    status, cosine, wo = np.empty(n, np.int8), np.empty(n), [np.empty(n) for _ in range(3)]
+    mask = masking_rays.MaskingRays.work(n)
+    m = primary.traced_primary(
+        segments.WalkResult(hs, prim, *p),
+        tuple(np.array([float(c)]) for c in wi),
+        tracer.facets,
+        True,
+        tracer.rise_bound,
+        tracer.horizon,
+        tracer.groove_clear,
+        masking_rays.segment_geometry(tracer),
+        primary.TracedLedger(status, cosine, *wo),
+        mask.kernel_args(),
+    )
+    assert m > 0  # some masking rays are walked
+    mask.trace(tracer, m, status)
+    weight, where = np.empty(n), np.full(n, -1, np.int64)
+    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
+    fresnel_kernels.fresnel_weights(cosine, n2, k2, mode, weight)
+    locate_single(bins, status, wo, phi, None, where)
+    for a, b in zip(fused, (status, weight, where)):
+        np.testing.assert_array_equal(a, b)
+
+
 def _masking_rays(mask, m):
     """Copies of the first m masking rays' arrays (``MaskingRays.kernel_args``)."""
     return [a[:m].copy() for a in mask.kernel_args()]

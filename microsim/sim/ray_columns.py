@@ -15,7 +15,7 @@ from . import fresnel_kernels, vgroove_kernels
 from .engine import primary, segments
 from .facet_tables import FacetTable
 from .ledger import MASKED, SINGLE
-from .masking_rays import MaskingRays, primary_hits, segment_geometry
+from .masking_rays import FROM_ESCAPE, MaskingRays, primary_hits, segment_geometry
 from .ray_bins import locate_single
 from .scratch import WorkArray, WorkColumns
 from .tracer import Tracer
@@ -154,39 +154,51 @@ def trace_columns(
     the rotated incident azimuth φi − ψ instead of being rotated back. After the primary walk
     one compiled pass (``primary.traced_primary``: Fresnel in real arithmetic, mirror
     direction, ledger class) sets up the masking rays (traced masking, ``profile`` None) or
-    leaves them to ``profile`` (exact V-groove masking)."""
+    leaves them to ``profile`` (exact V-groove masking). On a heightfield grid with one
+    shared direction and traced masking, the walk, that pass and the masking rays' walk go
+    tile by tile in one kernel (``primary.cast_traced_primary``: the same bits)."""
     x = columns(origins)
     n = len(x[0])
+    status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
+    wo, cosine = _TRACED_WO(n), _TRACED_COSINE(n)
+    ledger = primary.TracedLedger(status, cosine, *wo)
     if psi is None:
         wl = [np.array([float(c)]) for c in wi]  # one shared direction
         down = [-float(c) for c in wi]
-        hs, prim, p = primary_hits(tracer, x, down, np.array([down], dtype=np.float32))
+        d32 = np.array([down], dtype=np.float32)
+        grid = tracer.grid_walk(x, down) if profile is None else None
     else:
         wl, down, d32 = groove_frame_rays(psi, wi, _TRACED_FRAME)
-        hs, prim, p = primary_hits(tracer, x, down, d32)
-    status, weight, where = np.empty(n, dtype=np.int8), np.empty(n), np.full(n, -1, np.int64)
-    wo, cosine = _TRACED_WO(n), _TRACED_COSINE(n)
-    mask = MaskingRays.work(n)
-    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
-    m = primary.traced_primary(
-        segments.WalkResult(hs, prim, *p),
-        tuple(wl),
-        tracer.facets,
-        profile is None,
-        tracer.rise_bound,
-        tracer.horizon,
-        tracer.groove_clear,
-        segment_geometry(tracer),
-        primary.TracedLedger(status, cosine, *wo),
-        mask.kernel_args(),
-    )
-    fresnel_kernels.fresnel_weights(cosine, n2, k2, mode, weight)
-    if profile is not None:
-        hu = np.flatnonzero(status == SINGLE)
-        margin = profile.margin_columns(prim[hu], p[0][hu], wo[0][hu], wo[2][hu])
-        status[hu] = np.where(margin > 0, MASKED, SINGLE)
+        grid = None
+    if grid is not None:  # walk, pass and masking rays tile by tile
+        primary.cast_traced_primary(
+            tuple(x), tuple(down), grid, tracer.grid.cell_min, tracer.facets,
+            tracer.rise_bound, tracer.horizon, tracer.groove_clear, segment_geometry(tracer),
+            ledger, FROM_ESCAPE,
+        )  # fmt: skip
     else:
-        mask.trace(tracer, m, status)
+        hs, prim, p = primary_hits(tracer, x, down, d32)
+        mask = MaskingRays.work(n)
+        m = primary.traced_primary(
+            segments.WalkResult(hs, prim, *p),
+            tuple(wl),
+            tracer.facets,
+            profile is None,
+            tracer.rise_bound,
+            tracer.horizon,
+            tracer.groove_clear,
+            segment_geometry(tracer),
+            ledger,
+            mask.kernel_args(),
+        )
+        if profile is not None:
+            hu = np.flatnonzero(status == SINGLE)
+            margin = profile.margin_columns(prim[hu], p[0][hu], wo[0][hu], wo[2][hu])
+            status[hu] = np.where(margin > 0, MASKED, SINGLE)
+        else:
+            mask.trace(tracer, m, status)
+    mode, n2, k2 = fresnel_kernels.fresnel_mode(ior)
+    fresnel_kernels.fresnel_weights(cosine, n2, k2, mode, weight)
     locate_single(bins, status, wo, phi_i, psi, where)
     return RayOutcome(status, weight, where)
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from microsim.jit import TILE, allocating, compiled, vector_inlined
 
-from ..heightfield_caster import cast_falling
+from ..heightfield_caster import cast_columns, cast_falling
 from .codes import DOWNWARD, ESCAPED, HIT, MISSED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .facets import Facets, facet_plane
 from .horizon import CLEAR_MARGIN, horizon_clear
@@ -94,21 +94,32 @@ def cast_tabled_primary(origins, down, grid, table, hz, geometry, out, masking):
     grid walk (``heightfield_caster.cast_falling`` on ``grid``, ``Tracer.grid_walk``) into
     scratch of one tile: the same bits as the walk into whole columns followed by
     ``tabled_primary``, without writing and reading back five columns of hits."""
-    x, y, z = origins
-    dx, dy, dz = down
     tile = np.empty((6, TILE))
     cand = np.empty(TILE, np.bool_)
-    hs = np.empty(TILE, np.int8)
-    prim = np.empty(TILE, np.int32)
-    hits = np.empty((3, TILE))
-    walk = (hs, prim, hits[0], hits[1], hits[2])
+    walk = _tile_walk()
     m = 0
-    for t in range(0, len(x), TILE):
-        n = min(TILE, len(x) - t)
-        e = t + n
-        cast_falling(x[t:e], y[t:e], z[t:e], dx, dy, dz, grid, hs, prim, hits[0], hits[1], hits[2])
+    for t in range(0, len(origins[0]), TILE):
+        n = _walk_tile(origins, down, grid, t, walk)
         m = _tabled_tile(walk, 0, t, n, table, hz, geometry, out, masking, tile, cand, m)
     return m
+
+
+@allocating
+def _tile_walk():
+    """The walk results of one tile (``segments.WalkResult``: hs, prim, px, py, pz)."""
+    hits = np.empty((3, TILE))
+    return np.empty(TILE, np.int8), np.empty(TILE, np.int32), hits[0], hits[1], hits[2]
+
+
+@compiled
+def _walk_tile(origins, down, grid, t, walk):
+    """The first hits of the rays t … t + n − 1 from ``origins`` along ``down`` by the grid
+    walk (``cast_falling`` on ``grid``) into ``walk`` (``_tile_walk``); returns n ≤ ``TILE``."""
+    x, y, z = origins
+    n = min(TILE, len(x) - t)
+    e = t + n
+    cast_falling(x[t:e], y[t:e], z[t:e], down[0], down[1], down[2], grid, *walk)
+    return n
 
 
 @compiled
@@ -162,58 +173,123 @@ def traced_primary(
     Arguments: ``walk`` (``segments.WalkResult``: hs, prim, px, py, pz), ``incident`` (wx,
     wy, wz), ``facets`` (the tracer's ``facets.Facets``), ``out`` (``TracedLedger``: status,
     cosine, wox, woy, woz; written); the others as named above."""
+    tile = np.empty((11, TILE))  # per-ray scratch of one tile
+    cand = np.empty(TILE, np.bool_)
+    rules = (trace_masking, CLEAR_MARGIN * clear_slope, hz, groove, geometry)
+    m = 0
+    for t in range(0, len(walk[0]), TILE):
+        n = min(TILE, len(walk[0]) - t)
+        m = _traced_tile(walk, t, t, n, incident, facets, rules, out, masking, tile, cand, m)
+    return m
+
+
+@allocating
+def cast_traced_primary(
+    origins, down, grid, cell_min, facets, clear_slope, hz, groove, geometry, out, escape
+):
+    """``traced_primary`` of rays from ``origins`` (x, y, z columns) along one falling
+    direction ``down`` (dx, dy, dz; the incident direction is −down), masking traced, on a
+    heightfield grid, tile by tile: the first hits by the grid walk (``cast_falling`` on
+    ``grid``, ``Tracer.grid_walk``), their classes, cosines and mirror directions, and at once
+    the masking rays the tests cannot clear, walked on the grid (``cast_columns``, occlusion,
+    the primaries' wrap cap; ``cell_min`` the grid's cell minima), their primaries' status
+    set from the walk's (``escape``: walk status → ledger class). A tile's masking rays start
+    among the cells its primaries just walked, which are still in cache. Every ray gets the
+    bits of the walk into whole columns, ``traced_primary`` and ``Tracer.escape_columns`` in
+    turn. ``facets``, ``clear_slope``, ``hz``, ``groove`` and ``geometry`` (the masking rays'
+    ``segment_geometry``) as ``traced_primary``'s; ``out`` a ``TracedLedger``, written."""
+    incident = (np.array([-down[0]]), np.array([-down[1]]), np.array([-down[2]]))
+    tile = np.empty((11, TILE))
+    cand = np.empty(TILE, np.bool_)
+    walk = _tile_walk()
+    masking = _tile_masking_rays()
+    esc = np.empty(TILE, np.int8)
+    no_hits = (np.empty(0, np.int32), np.empty(0), np.empty(0), np.empty(0))
+    rules = (True, CLEAR_MARGIN * clear_slope, hz, groove, geometry)
+    status = out[0]
+    for t in range(0, len(origins[0]), TILE):
+        n = _walk_tile(origins, down, grid, t, walk)
+        m = _traced_tile(walk, 0, t, n, incident, facets, rules, out, masking, tile, cand, 0)
+        mi, sx, sy, sz, mdx, mdy, mdz = masking[:7]
+        cast_columns(
+            sx[:m], sy[:m], sz[:m], mdx[:m], mdy[:m], mdz[:m], False, grid, cell_min, grid[9],
+            True, (esc[:m], *no_hits),
+        )  # fmt: skip
+        for k in range(m):
+            status[mi[k]] = escape[esc[k]]
+
+
+@allocating
+def _tile_masking_rays():
+    """The masking rays of one tile (``masking_starts``' arrays, ``TILE`` slots)."""
+    return (
+        np.empty(TILE, np.int64),
+        np.empty(TILE),
+        np.empty(TILE),
+        np.empty(TILE),
+        np.empty(TILE),
+        np.empty(TILE),
+        np.empty(TILE),
+        np.empty((TILE, 3), np.float32),
+        np.empty((TILE, 3), np.float32),
+        np.empty(TILE, np.float32),
+        np.empty(TILE, np.int64),
+        np.empty(TILE, np.bool_),
+    )
+
+
+@compiled
+def _traced_tile(walk, w, t, n, incident, facets, rules, out, masking, tile, cand, m):
+    """``traced_primary`` for the n rays t … t + n − 1, their walk results at ``walk``'s
+    entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``rules`` =
+    (trace_masking, slope bound × ``CLEAR_MARGIN``, hz, groove, geometry); ``tile``
+    (11, TILE) and ``cand`` (TILE,) scratch; masking rays from slot m on. Returns the new m."""
     hs, prim, px, py, pz = walk
     wx, wy, wz = incident
     status, cosine, wox, woy, woz = out
+    trace_masking, slope, hz, groove, geometry = rules
     shared = len(wx) == 1
     grim, gtan, gwidth, gextent, gtol = groove
     grooved = len(grim) > 0
-    tile = np.empty((11, TILE))  # per-ray scratch of one tile
     a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
     rim_, tan_, width_, extent_ = tile[7], tile[8], tile[9], tile[10]
-    cand = np.empty(TILE, np.bool_)
-    slope = CLEAR_MARGIN * clear_slope
-    m = 0
-    for t in range(0, len(hs), TILE):
-        n = min(TILE, len(hs) - t)
-        for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
-            f = prim[t + j] if hs[t + j] == HIT else 0
-            a_[j], b_[j], e_[j], plane = facet_plane(facets, f)
-            lift_[j] = plane + facets.eps
-        if grooved:
-            for j in range(n):
-                f = prim[t + j] if hs[t + j] == HIT else 0
-                rim_[j], tan_[j], width_[j], extent_[j] = grim[f], gtan[f], gwidth[f], gextent[f]
-        for j in range(n):  # vectorised: reflection and class
-            i = t + j
-            k = 0 if shared else i
-            h = hs[i]
-            a, b, e = a_[j], b_[j], e_[j]
-            c = wx[k] * a + wy[k] * b + wz[k] * e
-            oz = 2.0 * c * e - wz[k]
-            st = SINGLE if oz > 0.0 else DOWNWARD
-            st = st if c > 0.0 else RAY_UNRESOLVED
-            miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
-            status[i] = st if h == HIT else miss
-            cosine[i] = c if (h == HIT) & (c > 0.0) else 0.0
-            wox[i], woy[i], woz[i] = 2.0 * c * a - wx[k], 2.0 * c * b - wy[k], oz
-        for j in range(n):  # vectorised: masking candidates and their starts
-            i = t + j
-            ox, oy, oz = wox[i], woy[i], woz[i]
-            gx, gy = np.float64(np.float32(ox)), np.float64(np.float32(oy))
-            gz = np.float64(np.float32(oz))
-            steep = gz > slope * math.sqrt(gx * gx + gy * gy)  # escapes: no masking ray
-            if grooved:  # clears the opposite facet by more than the tolerance: escapes
-                s = min(abs(px[i] - rim_[j]), extent_[j])
-                steep |= groove_margin(s, tan_[j], width_[j], ox, oz) < -gtol
-            cand[j] = trace_masking & (status[i] == SINGLE) & (not steep)
-            a, b, e = a_[j], b_[j], e_[j]
-            off = px[i] * a + py[i] * b + pz[i] * e - lift_[j]  # on the facet plane, eps above
-            x_[j], y_[j], z_[j] = px[i] - off * a, py[i] - off * b, pz[i] - off * e
-        m = masking_starts(
-            cand, t, n, x_, y_, z_, wox[t:], woy[t:], woz[t:], hz, geometry, m, masking
-        )
-    return m
+    for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
+        f = prim[w + j] if hs[w + j] == HIT else 0
+        a_[j], b_[j], e_[j], plane = facet_plane(facets, f)
+        lift_[j] = plane + facets.eps
+    if grooved:
+        for j in range(n):
+            f = prim[w + j] if hs[w + j] == HIT else 0
+            rim_[j], tan_[j], width_[j], extent_[j] = grim[f], gtan[f], gwidth[f], gextent[f]
+    for j in range(n):  # vectorised: reflection and class
+        i = t + j
+        k = 0 if shared else i
+        h = hs[w + j]
+        a, b, e = a_[j], b_[j], e_[j]
+        c = wx[k] * a + wy[k] * b + wz[k] * e
+        oz = 2.0 * c * e - wz[k]
+        st = SINGLE if oz > 0.0 else DOWNWARD
+        st = st if c > 0.0 else RAY_UNRESOLVED
+        miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
+        status[i] = st if h == HIT else miss
+        cosine[i] = c if (h == HIT) & (c > 0.0) else 0.0
+        wox[i], woy[i], woz[i] = 2.0 * c * a - wx[k], 2.0 * c * b - wy[k], oz
+    for j in range(n):  # vectorised: masking candidates and their starts
+        i = t + j
+        ox, oy, oz = wox[i], woy[i], woz[i]
+        gx, gy = np.float64(np.float32(ox)), np.float64(np.float32(oy))
+        gz = np.float64(np.float32(oz))
+        steep = gz > slope * math.sqrt(gx * gx + gy * gy)  # escapes: no masking ray
+        if grooved:  # clears the opposite facet by more than the tolerance: escapes
+            s = min(abs(px[w + j] - rim_[j]), extent_[j])
+            steep |= groove_margin(s, tan_[j], width_[j], ox, oz) < -gtol
+        cand[j] = trace_masking & (status[i] == SINGLE) & (not steep)
+        a, b, e = a_[j], b_[j], e_[j]
+        off = px[w + j] * a + py[w + j] * b + pz[w + j] * e - lift_[j]  # on the plane, eps above
+        x_[j], y_[j], z_[j] = px[w + j] - off * a, py[w + j] - off * b, pz[w + j] - off * e
+    return masking_starts(
+        cand, t, n, x_, y_, z_, wox[t:], woy[t:], woz[t:], hz, geometry, m, masking
+    )
 
 
 @compiled
