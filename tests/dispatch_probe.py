@@ -141,6 +141,11 @@ def probe(inputs: dict) -> dict:
         )
         out[f"{name}-sum_w"], out[f"{name}-sum_w2"] = res.sum_w, res.sum_w2
         out[f"{name}-counts"] = res.counts
+    per_ray = microsim.simulate(  # fewer rays than facets: per ray, the grid walk's own pass
+        sf.from_file(heightfield, 1.0, periodic=True), "aluminium", [0.0, 30.0, 60.0],
+        rays=4000, bins=bins, threads=2,
+    )  # fmt: skip
+    out["file-per-ray-sum_w"], out["file-per-ray-counts"] = per_ray.sum_w, per_ray.counts
     glass = microsim.simulate(  # through a dielectric interface, from the air and from inside
         sf.from_file(heightfield, 1.0, periodic=True), 1.5, [0.0, 30.0, 60.0, 150.0, 120.0],
         rays=20_000, bins=bins, threads=2, bounces="all", transmission=True,

@@ -49,8 +49,8 @@ def test_atan2_portable_is_libm_within_an_ulp_with_c99_special_values():
 @pytest.mark.long
 def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
     """The compiled bin pass, ``Bins.locate`` and the tallies of V-groove (exact, analytic,
-    traced) and heightfield (traced, all bounces, through a dielectric interface from both
-    sides) runs are bitwise the same with NumPy's
+    traced) and heightfield (traced through the facet table and per ray, all bounces, through
+    a dielectric interface from both sides) runs are bitwise the same with NumPy's
     AVX-512 loops and numba's host target as with both held to AVX2 — and within each
     process the bin pass is ``Bins.locate``, ties on an edge included."""
     ran = dispatch_probe.prepared()  # by make test before its workers started
@@ -78,6 +78,7 @@ def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
         located = native[key.replace("bin_rays", "locate")]
         assert np.array_equal(native[key][single], located[single]), key
     assert native["vgroove-traced-counts"].sum() > 0 and native["file-bounces-counts"].sum() > 0
+    assert native["file-per-ray-counts"].sum() > 0
     assert native["file-glass-btdf"].sum() > 0
 
 
