@@ -101,6 +101,7 @@ pipeline figure includes its own).
 from __future__ import annotations
 
 import ctypes
+import inspect
 import os
 import time
 from dataclasses import dataclass, field
@@ -320,7 +321,8 @@ class _InterfaceScalars:
 
 def _check_surface(surface):
     """(vertices float64, faces int64, Lx, Ly) of an explicit (non-V-groove) surface."""
-    if surface is None or not hasattr(surface, "vertices") or not hasattr(surface, "faces"):
+    missing = object()  # looked up without reading: a heightfield derives its mesh on access
+    if any(inspect.getattr_static(surface, a, missing) is missing for a in ("vertices", "faces")):
         raise UsageError(
             f"surface must be a microsim.surfaces.Surface (vertices, faces, tile_size), "
             f"got {type(surface).__name__}"
