@@ -141,14 +141,29 @@ def test_the_walk_finds_the_first_crossing_from_either_side(below):
     downward (MISSED) — except rays that graze the relief within the march's resolution."""
     from microsim.jit import compiled
     from microsim.sim.engine.codes import ESCAPED, HIT, MISSED
-    from microsim.sim.heightfield_caster import HeightfieldGrid, cast_one, direction_terms
+    from microsim.sim.heightfield_caster import (
+        NO_STEPS,
+        HeightfieldGrid,
+        cast_one,
+        direction_terms,
+    )
 
     @compiled
     def cast(x, y, z, d, geometry, side, out):
         for k in range(len(x)):
             terms = direction_terms(d[k, 0], d[k, 1], d[k, 2], geometry[4])
             s, f, px, py, pz = cast_one(
-                x[k], y[k], z[k], d[k, 0], d[k, 1], d[k, 2], terms, geometry, side, geometry[9]
+                x[k],
+                y[k],
+                z[k],
+                d[k, 0],
+                d[k, 1],
+                d[k, 2],
+                terms,
+                geometry,
+                side,
+                geometry[9],
+                NO_STEPS,
             )
             out[k, 0], out[k, 1], out[k, 2], out[k, 3] = s, px, py, pz
 

@@ -88,8 +88,16 @@ def fused_split(tracer, table, wi) -> dict:
     walk = segments.WalkResult(hs, prim, *p)
     calls = {
         "fused": lambda: primary.cast_tabled_primary(
-            tuple(x), tuple(down), grid, facets, tracer.horizon, geo, out, mask.kernel_args()
-        ),
+            tuple(x),
+            tuple(down),
+            grid,
+            table.ahead,
+            facets,
+            tracer.horizon,
+            geo,
+            out,
+            mask.kernel_args(),
+        ),  # fmt: skip
         "grid walk alone": lambda: tracer.cast_falling(x, down),
         "look-ups, starts, horizon alone": lambda: primary.tabled_primary(
             walk, facets, tracer.horizon, geo, out, mask.kernel_args()

@@ -1,10 +1,13 @@
 """What the heightfield grid walk costs per ray (``heightfield_caster.cast_falling``) on the
 bench surface (512² Gaussian, σ = 1.2, ℓ = 8 cells), for falling rays from the top of the
 relief at several incidences: ns per ray (process time, best of three, 2²¹ starts on a
-jittered row-major grid, as stratified origins are ordered), and the mean number of cells a
-ray steps over above the relief before the cell it meets (counted in NumPy on 4096 of the
-starts). With ``--embree``: instead, ns per primary ray of the grid walk and of Embree (the
-tracer's packets) for the same rays at grazing incidences, where the walk crosses the most
+jittered row-major grid, as stratified origins are ordered) without and with the table of
+cells surely stepped over (``heightfield_caster.steps_over``, as the facet-table path walks),
+the mean number of cells a ray steps over above the relief before the cell it meets (counted
+in NumPy on 4096 of the starts) and how many of them the table lets it step over untested
+(on 4096 starts spread over the tile: the table counts no step across a tile wall).
+With ``--embree``: instead, ns per primary ray of the grid walk and of Embree (the tracer's
+packets) for the same rays at grazing incidences, where the walk crosses the most
 cells. docs/performance.md and docs/design.md quote it.
 
     .venv/bin/python tools/walk_cost.py [--embree]
@@ -16,7 +19,7 @@ import time
 import numpy as np
 
 from microsim.app.bench import BenchConfig, _surface
-from microsim.sim.heightfield_caster import cast_falling
+from microsim.sim.heightfield_caster import NO_STEPS, cast_falling, steps_over
 from microsim.sim.tracer import Tracer
 from microsim.sim.tracer_cache import TRACER_BACKEND, tracer_for
 
@@ -105,18 +108,36 @@ def main() -> None:
     out = (np.empty(STARTS, np.int8), np.empty(STARTS, np.int64)) + tuple(
         np.empty(STARTS) for _ in range(3)
     )
-    print("θi    φi   ns per ray   cells stepped over")
+    print("θi    φi   ns per ray   with the table   cells stepped over   of them, surely")
     for theta, phi in INCIDENCES:
         t, p = np.radians(theta), np.radians(phi)
         d = (-np.sin(t) * np.cos(p), -np.sin(t) * np.sin(p), -np.cos(t))
-        cast_falling(x[:8], y[:8], z[:8], *d, geometry, *(o[:8] for o in out))  # compile
-        best = np.inf
-        for _ in range(3):
-            t0 = time.process_time()
-            cast_falling(x, y, z, *d, geometry, *out)
-            best = min(best, time.process_time() - t0)
+        ahead = steps_over(grid, d, tracer.zmax)
+        times = []
+        for table in (NO_STEPS, ahead):
+            cast_falling(x[:8], y[:8], z[:8], *d, geometry, table, *(o[:8] for o in out))
+            best = np.inf
+            for _ in range(3):
+                t0 = time.process_time()
+                cast_falling(x, y, z, *d, geometry, table, *out)
+                best = min(best, time.process_time() - t0)
+            times.append(best / STARTS * 1e9)
         cells = skipped_cells(grid, x[:COUNTED], y[:COUNTED], z[0], d)
-        print(f"{theta:4.0f}  {phi:4.0f}   {best / STARTS * 1e9:10.1f}   {cells:18.2f}")
+        every = slice(None, None, STARTS // COUNTED)  # spread over the tile
+        sure = _start_cells(grid, ahead, x[every], y[every], z[0], d, tracer.zmax)
+        print(
+            f"{theta:4.0f}  {phi:4.0f}   {times[0]:10.1f}   {times[1]:14.1f}   {cells:18.2f}"
+            f"   {sure:15.2f}"
+        )
+
+
+def _start_cells(grid, ahead, x, y, z0, d, zmax) -> float:
+    """Mean of ``ahead`` over the cells where the rays (x, y, z0) + t·d cross the level
+    zmax: the cells the walk steps over without testing them."""
+    t = (zmax - z0) / d[2]
+    i = np.floor((x + t * d[0] - grid.x0) / grid.cell).astype(int) % grid.nx
+    j = np.floor((y + t * d[1] - grid.y0) / grid.cell).astype(int) % grid.ny
+    return float(ahead[j, i].mean())
 
 
 if __name__ == "__main__":

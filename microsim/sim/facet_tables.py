@@ -17,6 +17,7 @@ from microsim.surfaces.heightfields import TABLED_FACETS_MAX, TABLES_KEPT_BYTES
 from . import dielectric_kernels, fresnel_kernels
 from .engine import beam
 from .engine.facets import Facets
+from .heightfield_caster import NO_STEPS, steps_over
 from .ledger import MASKED, SINGLE
 from .ray_bins import locate_single
 from .scratch import WorkColumns
@@ -48,8 +49,11 @@ class FacetTable:
     above it);
     ``clear`` (F,) bool: lit facets whose rays all escape without a masking ray, because
     their mirror direction rises more steeply than the surface can (``Tracer.surely_escapes``)
-    or, on heightfield grids, because the beam of them clears the relief (``beam``).
-    26 bytes per facet besides the tracer's own columns."""
+    or, on heightfield grids, because the beam of them clears the relief (``beam``);
+    ``ahead`` (ny, nx) int8 on heightfield grids (else ``NO_STEPS``): per cell, the cells a
+    primary ray from wi that enters the relief there surely steps over
+    (``heightfield_caster.steps_over``). 26 bytes per facet, and one per grid cell, besides
+    the tracer's own columns."""
 
     code: np.ndarray
     weight: np.ndarray
@@ -57,6 +61,7 @@ class FacetTable:
     wo32: np.ndarray
     facets: Facets
     clear: np.ndarray
+    ahead: np.ndarray
 
 
 TABLES_KEPT = 4
@@ -94,7 +99,7 @@ def facet_table(
         tracer,
         key,
         lambda: _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts),
-        ("code", "weight", "bin", "wo32", "clear"),
+        ("code", "weight", "bin", "wo32", "clear", "ahead"),
     )
 
 
@@ -204,6 +209,8 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
 
         list(pool.map(clear_beams, slices) if pool is not None else map(clear_beams, slices))
         clear |= cleared
+    down = [-w for w in wi]
+    grid = tracer.grid
     return FacetTable(
         code=code,
         weight=weight,
@@ -211,6 +218,7 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         wo32=wo32,
         facets=tracer.facets,
         clear=clear,
+        ahead=NO_STEPS if grid is None else steps_over(grid, down, tracer.zmax),
     )
 
 

@@ -43,6 +43,9 @@ _compiled = vectorised
 # the walk inlined into the ray loop: ~30 % faster than as separate calls (same bits)
 _inlined = vector_inlined
 
+NO_STEPS = np.zeros((0, 0), dtype=np.int8)
+"""``cast_one``'s ``ahead`` without a table of cells surely stepped over."""
+
 
 class HeightfieldGrid:
     """The grid of a heightfield tile: its mesh's vertex heights ``hp`` (ny + 1, nx + 1) (the
@@ -119,6 +122,50 @@ def heightfield_grid(surface, vertices=None, faces=None) -> HeightfieldGrid | No
     return HeightfieldGrid(vertices[:, 2].reshape(ny + 1, nx + 1), float(dx))
 
 
+STEPS_AHEAD = 16
+"""The most cells ``steps_over`` counts ahead of a start (int8)."""
+
+
+def steps_over(grid: "HeightfieldGrid", down, zmax: float) -> np.ndarray:
+    """Per cell (ny, nx) int8: how many cells, from that one on, every ray falling along
+    ``down`` (dx, dy, dz < 0) from where it crosses the level ``zmax`` in that cell surely
+    steps over — it leaves each of them above its highest vertex (``cell_max``) — so that
+    ``cast_one`` need not test them (``ahead``), at most ``STEPS_AHEAD``. After k wall
+    crossings a ray is in one of the cells k steps away along the walk's axis directions (every
+    split of the k steps between the axes is taken), and its horizontal run r at the next
+    crossing is at most (k + 1)·c/|û_x| on one axis, (k + 2)·c/(|û_x| + |û_y|) on two (walls
+    c/|û| apart, the first within one spacing); it is then at least zmax − r·|d_z|/|d_h|,
+    which must clear the cells' highest vertex by a margin far above rounding. Periodic."""
+    dx, dy, dz = (float(c) for c in down)
+    h = math.hypot(dx, dy)
+    ahead = np.zeros(grid.cell_max.shape, dtype=np.int8)
+    if not dz < 0.0 or h == 0.0:  # a vertical ray stays in its cell
+        return ahead
+    ux, uy = abs(dx) / h, abs(dy) / h
+    axes = (ux > 0.0) + (uy > 0.0)
+    si, sj = int(np.sign(dx)), int(np.sign(dy))
+    cot, cell = -dz / h, grid.cell
+    margin = 1e-9 * (1.0 + abs(zmax) + float(np.max(np.abs(grid.cell_max))))
+    reach = grid.cell_max  # highest vertex of the cells k steps away, any split: k = 0
+    alive = np.ones(ahead.shape, dtype=bool)
+    ny, nx = ahead.shape
+    ci, cj = np.arange(nx)[None, :], np.arange(ny)[:, None]
+    for k in range(STEPS_AHEAD):
+        # the (k + 1)th step stays in the tile along each axis it may take
+        alive &= (0 <= ci + (k + 1) * si) & (ci + (k + 1) * si < nx)
+        alive &= (0 <= cj + (k + 1) * sj) & (cj + (k + 1) * sj < ny)
+        if k > 0:  # the cells k steps away: one more x step from k − 1, or k steps along y
+            none = np.full_like(reach, -np.inf)
+            along_x = np.roll(reach, -si, axis=1) if si else none
+            reach = np.maximum(along_x, np.roll(grid.cell_max, -k * sj, axis=0) if sj else none)
+        run = (k + 1) * cell / max(ux, uy) if axes == 1 else (k + 2) * cell / (ux + uy)
+        alive &= zmax - run * cot - margin > reach
+        if not alive.any():
+            break
+        ahead += alive
+    return ahead
+
+
 @_inlined
 def _plane_height(hp, ci, cj, fu, fv, upper):
     """h at fractions (fu, fv) of cell (ci, cj) on the plane of its triangle A (``upper``,
@@ -166,7 +213,7 @@ def _clamp01(a):
 
 
 @_inlined
-def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps):
+def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps, ahead):
     """(status, face, px, py, pz) of the ray (x, y, z) + t·(dx, dy, dz), dz ≠ 0, started on
     ``side`` of the surface, on ``geometry`` = (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
     max_wraps) with the ray's ``direction_terms``: HIT with the face and the hit point (x and
@@ -175,7 +222,10 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps):
     crossings (module docstring). ``side`` = (s, bound): (1, cell_max) for a ray at or above
     the surface (f = z − h), (−1, cell_min) for one at or below it (f = h − z)
     (``HeightfieldGrid.side``). Cells the ray crosses wholly on its side (above their highest
-    vertex, resp. below their lowest) are stepped over without evaluating f."""
+    vertex, resp. below their lowest) are stepped over without evaluating f; for a ray falling
+    from zmax or above, the first ``ahead[cell]`` of them without testing them either
+    (``steps_over``'s table for this direction; ``NO_STEPS``: none), the same steps with the
+    same bits."""
     hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax, _ = geometry
     s, bound = side
     du, dv, rdu, rdv, rdz, da, rda, si, sj = terms
@@ -196,6 +246,12 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps):
     ci, cj = i - ti * nx, j - tj * ny
     wraps = 0
     fa, known = 0.0, False  # f at t, once known (the previous cell was not stepped over)
+    for _ in range(ahead[cj, ci] if len(ahead) and z >= zmax else 0):  # stepped over, no test
+        t = min(tx, ty)  # < t_end, and no tile wall is crossed (``steps_over``)
+        if tx <= ty:
+            i, ci, tx = i + si, ci + si, tx + stx
+        else:
+            j, cj, ty = j + sj, cj + sj, ty + sty
     while True:
         t_exit = min(tx, ty, t_end)
         # the ray's point nearest the surface in this cell: where it leaves the cell when
@@ -264,14 +320,17 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps):
 
 
 @_compiled
-def cast_falling(x, y, z, dx, dy, dz, geometry, status, prim, px, py, pz):
+def cast_falling(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz):
     """``cast_one`` for rays (x, y, z)[i] along one falling direction (dx, dy, dz) on
-    ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps); writes
+    ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps), with the cells
+    ``ahead`` surely stepped over (``steps_over`` of this direction, or ``NO_STEPS``); writes
     ``status``, ``prim`` and the hit point columns."""
     terms = direction_terms(dx, dy, dz, geometry[4])
     above = (1.0, geometry[1])
     for i in range(len(x)):
-        s, f, a, b, c = cast_one(x[i], y[i], z[i], dx, dy, dz, terms, geometry, above, geometry[9])
+        s, f, a, b, c = cast_one(
+            x[i], y[i], z[i], dx, dy, dz, terms, geometry, above, geometry[9], ahead
+        )
         status[i], prim[i], px[i], py[i], pz[i] = s, f, a, b, c
 
 
@@ -316,7 +375,17 @@ def cast_columns(x, y, z, dx, dy, dz, shared, geometry, cell_min, max_wraps, occ
             status[i] = ESCAPED if zi >= zmax else MISSED
             continue
         s, f, a, b, c = cast_one(
-            x[i], y[i], zi, dx[k], dy[k], dz[k], terms, geometry, above if up else below, max_wraps
+            x[i],
+            y[i],
+            zi,
+            dx[k],
+            dy[k],
+            dz[k],
+            terms,
+            geometry,
+            above if up else below,
+            max_wraps,
+            NO_STEPS,
         )
         status[i] = s
         if not occlusion:

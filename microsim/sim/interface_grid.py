@@ -49,7 +49,7 @@ from .dielectric_kernels import (
 from .engine.codes import ESCAPED, HIT, MISSED, SINGLE, UNRESOLVED
 from .engine.horizon import rises_clear
 from .facet_tables import InterfaceTable, interface_table
-from .heightfield_caster import cast_one, direction_terms
+from .heightfield_caster import NO_STEPS, cast_one, direction_terms
 from .horizon_bounds import CLEAR_MARGIN
 from .scratch import WorkArray
 from .streams import BLOCK
@@ -212,7 +212,7 @@ def _follow_path(
     dx, dy, dz = down
     side = below if sides.from_below else above
     h, f, px, py, pz = cast_one(
-        start[0], start[1], start[2], dx, dy, dz, primary, geometry, side, geometry[9]
+        start[0], start[1], start[2], dx, dy, dz, primary, geometry, side, geometry[9], NO_STEPS
     )
     if use_first and h == HIT and first.flags[f] != FACES_AWAY:
         fw = first.weight[f]
@@ -243,7 +243,9 @@ def _follow_path(
             else:
                 terms = direction_terms(dx, dy, dz, cell)
                 cap = _wrap_cap(dx, dy, dz, walk)
-                h, f, px, py, pz = cast_one(x, y, z, dx, dy, dz, terms, geometry, side, cap)
+                h, f, px, py, pz = cast_one(
+                    x, y, z, dx, dy, dz, terms, geometry, side, cap, NO_STEPS
+                )
         d = (dx, dy, dz)
         what, wn, ox, oy, oz, offset, n = interact(
             b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides, ledger

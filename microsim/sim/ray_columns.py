@@ -80,8 +80,8 @@ def tabled_masking_rays(
     grid = tracer.grid_walk(x, down)
     if grid is not None:  # the grid walk fused with the look-ups, tile by tile
         m = primary.cast_tabled_primary(
-            tuple(x), tuple(down), grid, facets, tracer.horizon, segment_geometry(tracer),
-            ledger, mask.kernel_args(),
+            tuple(x), tuple(down), grid, table.ahead, facets, tracer.horizon,
+            segment_geometry(tracer), ledger, mask.kernel_args(),
         )  # fmt: skip
         return TabledMasking(outcome, mask, m)
     hs, prim, p = primary_hits(tracer, x, down, (-wi).astype(np.float32)[None])

@@ -56,7 +56,7 @@ from microsim.surfaces.surface import (
 from .embree_backends import check_backend, open_scene, scene_backend
 from .engine import beam, codes, horizon
 from .engine.facets import Facets, grid_facets, mesh_facets, triangle_plane
-from .heightfield_caster import cast_falling, heightfield_grid
+from .heightfield_caster import NO_STEPS, cast_falling, heightfield_grid
 from .horizon_bounds import CLEAR_MARGIN, horizon_grid, rise_bound, slope_magnitudes
 from .periodic_walk import ColumnHits, walk_columns
 from .schedule import in_parts
@@ -392,7 +392,7 @@ class Tracer:
             return None
         n = len(x[0])
         status, prim, point = _CAST_STATUS(n), _CAST_PRIM(n), _CAST_POINT(n)
-        cast_falling(*x, *(float(c) for c in down), geometry, status, prim, *point)
+        cast_falling(*x, *(float(c) for c in down), geometry, NO_STEPS, status, prim, *point)
         return ColumnHits(status, prim, point)
 
     def trace_columns(self, x, d, d32, wraps=None, first=None):

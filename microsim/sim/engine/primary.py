@@ -12,7 +12,7 @@ import numpy as np
 
 from microsim.jit import TILE, allocating, compiled, vector_inlined
 
-from ..heightfield_caster import cast_columns, cast_falling
+from ..heightfield_caster import NO_STEPS, cast_columns, cast_falling
 from .codes import DOWNWARD, ESCAPED, HIT, MISSED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .facets import Facets, facet_plane
 from .horizon import CLEAR_MARGIN, horizon_clear
@@ -88,7 +88,7 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
 
 
 @allocating
-def cast_tabled_primary(origins, down, grid, table, hz, geometry, out, masking):
+def cast_tabled_primary(origins, down, grid, ahead, table, hz, geometry, out, masking):
     """``tabled_primary`` of rays from ``origins`` (x, y, z columns) along one falling
     direction ``down`` (dx, dy, dz), their first hits found tile by tile by the heightfield
     grid walk (``heightfield_caster.cast_falling`` on ``grid``, ``Tracer.grid_walk``) into
@@ -99,7 +99,7 @@ def cast_tabled_primary(origins, down, grid, table, hz, geometry, out, masking):
     walk = _tile_walk()
     m = 0
     for t in range(0, len(origins[0]), TILE):
-        n = _walk_tile(origins, down, grid, t, walk)
+        n = _walk_tile(origins, down, grid, ahead, t, walk)
         m = _tabled_tile(walk, 0, t, n, table, hz, geometry, out, masking, tile, cand, m)
     return m
 
@@ -112,13 +112,13 @@ def _tile_walk():
 
 
 @compiled
-def _walk_tile(origins, down, grid, t, walk):
+def _walk_tile(origins, down, grid, ahead, t, walk):
     """The first hits of the rays t … t + n − 1 from ``origins`` along ``down`` by the grid
     walk (``cast_falling`` on ``grid``) into ``walk`` (``_tile_walk``); returns n ≤ ``TILE``."""
     x, y, z = origins
     n = min(TILE, len(x) - t)
     e = t + n
-    cast_falling(x[t:e], y[t:e], z[t:e], down[0], down[1], down[2], grid, *walk)
+    cast_falling(x[t:e], y[t:e], z[t:e], down[0], down[1], down[2], grid, ahead, *walk)
     return n
 
 
@@ -208,7 +208,7 @@ def cast_traced_primary(
     rules = (True, CLEAR_MARGIN * clear_slope, hz, groove, geometry)
     status = out[0]
     for t in range(0, len(origins[0]), TILE):
-        n = _walk_tile(origins, down, grid, t, walk)
+        n = _walk_tile(origins, down, grid, NO_STEPS, t, walk)
         m = _traced_tile(walk, 0, t, n, incident, facets, rules, out, masking, tile, cand, 0)
         mi, sx, sy, sz, mdx, mdy, mdz = masking[:7]
         cast_columns(
