@@ -142,28 +142,42 @@ def steps_over(grid: "HeightfieldGrid", down, zmax: float) -> np.ndarray:
     if not dz < 0.0 or h == 0.0:  # a vertical ray stays in its cell
         return ahead
     ux, uy = abs(dx) / h, abs(dy) / h
-    axes = (ux > 0.0) + (uy > 0.0)
     si, sj = int(np.sign(dx)), int(np.sign(dy))
-    cot, cell = -dz / h, grid.cell
+    runs = [  # the horizontal run bound at the (k + 1)th wall crossing, k = 0, 1, ...
+        (k + 1) * grid.cell / max(ux, uy) if min(ux, uy) == 0.0 else (k + 2) * grid.cell / (ux + uy)
+        for k in range(STEPS_AHEAD)
+    ]
     margin = 1e-9 * (1.0 + abs(zmax) + float(np.max(np.abs(grid.cell_max))))
-    reach = grid.cell_max  # highest vertex of the cells k steps away, any split: k = 0
-    alive = np.ones(ahead.shape, dtype=bool)
-    ny, nx = ahead.shape
-    ci, cj = np.arange(nx)[None, :], np.arange(ny)[:, None]
-    for k in range(STEPS_AHEAD):
+    clear = [zmax - run * (-dz / h) - margin for run in runs]  # the ray's least height there
+    for j0 in range(0, ahead.shape[0], STEPS_BAND):  # bands of rows: small temporaries
+        _steps_over_band(grid.cell_max, j0, si, sj, clear, ahead)
+    return ahead
+
+
+STEPS_BAND = 64
+"""Rows of cells ``steps_over`` works on at a time."""
+
+
+def _steps_over_band(cell_max, j0: int, si: int, sj: int, clear: list, ahead) -> None:
+    """``steps_over`` for the rows j0 … j0 + ``STEPS_BAND`` − 1 (of ``ahead``): ``clear[k]``
+    the height the ray surely keeps when it leaves the cell k steps away."""
+    ny, nx = cell_max.shape
+    rows = np.arange(j0, min(ny, j0 + STEPS_BAND))
+    ci, cj = np.arange(nx)[None, :], rows[:, None]
+    none = np.full((len(rows), nx), -np.inf)
+    reach = cell_max[rows]  # highest vertex of the cells k steps away, any split: k = 0
+    alive = np.ones(reach.shape, dtype=bool)
+    for k, least in enumerate(clear):
         # the (k + 1)th step stays in the tile along each axis it may take
         alive &= (0 <= ci + (k + 1) * si) & (ci + (k + 1) * si < nx)
         alive &= (0 <= cj + (k + 1) * sj) & (cj + (k + 1) * sj < ny)
         if k > 0:  # the cells k steps away: one more x step from k − 1, or k steps along y
-            none = np.full_like(reach, -np.inf)
             along_x = np.roll(reach, -si, axis=1) if si else none
-            reach = np.maximum(along_x, np.roll(grid.cell_max, -k * sj, axis=0) if sj else none)
-        run = (k + 1) * cell / max(ux, uy) if axes == 1 else (k + 2) * cell / (ux + uy)
-        alive &= zmax - run * cot - margin > reach
+            reach = np.maximum(along_x, cell_max[(rows + k * sj) % ny] if sj else none)
+        alive &= least > reach
         if not alive.any():
-            break
-        ahead += alive
-    return ahead
+            return
+        ahead[rows[0] : rows[-1] + 1] += alive
 
 
 @_inlined

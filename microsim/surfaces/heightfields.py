@@ -81,8 +81,8 @@ larger one is traced ray by ray whatever the ray count, so that its memory stays
 ``BYTES_PER_GRID_POINT`` per point."""
 TABLE_BYTES_PER_GRID_POINT = 100
 """What the facet-table path adds per grid point where it is taken: the newest incidence's
-table (26 bytes per facet and 1 per cell: 53 per point) and the beam grid it reads (per-facet gradients and
-block maxima, 40 per point), besides the older tables the tracer keeps
+table (26 bytes per facet and 1 per cell: 53 per point) and the beam grid it reads (per-facet
+gradients and block maxima, 40 per point), besides the older tables the tracer keeps
 (``TABLES_KEPT_BYTES`` in all)."""
 TABLES_KEPT_BYTES = 256 * 2**20
 """Bytes of the older facet tables a tracer keeps beside the newest (``sim.facet_tables``)."""
