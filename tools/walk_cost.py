@@ -5,7 +5,8 @@ jittered row-major grid, as stratified origins are ordered) without and with the
 cells surely stepped over (``heightfield_caster.steps_over``, as the facet-table path walks),
 the mean number of cells a ray steps over above the relief before the cell it meets (counted
 in NumPy on 4096 of the starts) and how many of them the table lets it step over untested
-(on 4096 starts spread over the tile: the table counts no step across a tile wall).
+(on 4096 starts spread over the tile: the table counts no step across a tile wall), and the
+table's build time (wall clock).
 With ``--embree``: instead, ns per primary ray of the grid walk and of Embree (the tracer's
 packets) for the same rays at grazing incidences, where the walk crosses the most
 cells. docs/performance.md and docs/design.md quote it.
@@ -108,11 +109,15 @@ def main() -> None:
     out = (np.empty(STARTS, np.int8), np.empty(STARTS, np.int64)) + tuple(
         np.empty(STARTS) for _ in range(3)
     )
-    print("θi    φi   ns per ray   with the table   cells stepped over   of them, surely")
+    print(
+        "θi    φi   ns per ray   with the table   cells stepped over   of them, surely   table ms"
+    )
     for theta, phi in INCIDENCES:
         t, p = np.radians(theta), np.radians(phi)
         d = (-np.sin(t) * np.cos(p), -np.sin(t) * np.sin(p), -np.cos(t))
+        t0 = time.perf_counter()
         ahead = steps_over(grid, d, tracer.zmax)
+        built = (time.perf_counter() - t0) * 1e3
         times = []
         for table in (NO_STEPS, ahead):
             cast_falling(x[:8], y[:8], z[:8], *d, geometry, table, *(o[:8] for o in out))
@@ -127,7 +132,7 @@ def main() -> None:
         sure = _start_cells(grid, ahead, x[every], y[every], z[0], d, tracer.zmax)
         print(
             f"{theta:4.0f}  {phi:4.0f}   {times[0]:10.1f}   {times[1]:14.1f}   {cells:18.2f}"
-            f"   {sure:15.2f}"
+            f"   {sure:15.2f}   {built:8.1f}"
         )
 
 
