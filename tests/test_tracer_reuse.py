@@ -115,7 +115,8 @@ def test_older_facet_tables_are_kept_only_within_their_byte_budget(monkeypatch):
         return facet_tables.facet_table(tr, spherical_deg(theta, 0.0), al, bins, 0.0)
 
     first = table(10.0)
-    size = sum(a.nbytes for a in (first.code, first.weight, first.bin, first.wo32, first.clear))
+    arrays = (first.code, first.weight, first.bin, first.wo32, first.clear, first.ahead)
+    size = sum(a.nbytes for a in arrays)
     monkeypatch.setattr(facet_tables, "TABLES_KEPT_BYTES", size)  # room for one older table
     for theta in (20.0, 30.0):
         table(theta)

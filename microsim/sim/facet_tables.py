@@ -210,7 +210,7 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         list(pool.map(clear_beams, slices) if pool is not None else map(clear_beams, slices))
         clear |= cleared
     down = [-w for w in wi]
-    grid = tracer.grid
+    grid = getattr(tracer, "grid", None)  # (a stand-in without a grid walk has no steps)
     return FacetTable(
         code=code,
         weight=weight,
