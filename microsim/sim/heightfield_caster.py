@@ -143,12 +143,13 @@ def steps_over(grid: "HeightfieldGrid", down, zmax: float) -> np.ndarray:
         return ahead
     ux, uy = abs(dx) / h, abs(dy) / h
     si, sj = int(np.sign(dx)), int(np.sign(dy))
-    runs = [  # the horizontal run bound at the (k + 1)th wall crossing, k = 0, 1, ...
-        (k + 1) * grid.cell / max(ux, uy) if min(ux, uy) == 0.0 else (k + 2) * grid.cell / (ux + uy)
+    one_axis = min(ux, uy) == 0.0
+    drops = [  # the drop over the run bound at the (k + 1)th wall crossing, k = 0, 1, ...
+        (k + 1 if one_axis else (k + 2) / (ux + uy)) * grid.cell * (-dz / h)
         for k in range(STEPS_AHEAD)
     ]
-    margin = 1e-9 * (1.0 + abs(zmax) + float(np.max(np.abs(grid.cell_max))))
-    clear = [zmax - run * (-dz / h) - margin for run in runs]  # the ray's least height there
+    margin = 1e-9 * (1.0 + abs(zmax) + drops[-1])  # far above the walk's rounding
+    clear = [zmax - drop - margin for drop in drops]  # the ray's least height there
     for j0 in range(0, ahead.shape[0], STEPS_BAND):  # bands of rows: small temporaries
         _steps_over_band(grid.cell_max, j0, si, sj, clear, ahead)
     return ahead
