@@ -157,7 +157,8 @@ SIM_LAYERS = [
     ),
     (
         "estimator",
-        ("streams", "origin_kernels", "fresnel_kernels", "vgroove_kernels", "tracer_cache")
+        ("pcg64", "streams", "origin_kernels", "fresnel_kernels", "vgroove_kernels")
+        + ("tracer_cache",)
         + ("ray_bins", "masking_rays", "facet_tables", "ray_columns", "events", "paths")
         + ("bounce_kernels", "bounces", "dielectric_kernels", "interface_grid", "dielectric")
         + ("tally_kernels",)

@@ -2,7 +2,7 @@
 
 The primary rays of one (realisation r, incidence i) are numbered 0 … N − 1 and cut into
 blocks of ``BLOCK`` rays. Block b draws its numbers from its own slot of the PCG64 stream
-seeded with the key (seed, r, i) (``block_generator``), so its rays depend on (key, b) alone:
+seeded with the key (seed, r, i) (``block_uniforms``), so its rays depend on (key, b) alone:
 never on how blocks are grouped into chunks or spread over threads. This is what makes
 ``simulate`` bitwise reproducible for any ``threads``/``chunk`` and resumable block by block.
 
@@ -20,12 +20,11 @@ origins are i.i.d. uniform. Angles are in radians here (groove azimuths ψ, bloc
 from __future__ import annotations
 
 import functools
-import threading
 from typing import Sequence
 
 import numpy as np
 
-from . import origin_kernels
+from . import origin_kernels, pcg64
 from .scratch import WorkArray, WorkColumns
 from .tracer import Tracer
 
@@ -33,8 +32,8 @@ __all__ = [
     "BLOCK",
     "ORIGINS",
     "DESIGN",
-    "stream_state",
-    "block_generator",
+    "key_stream",
+    "block_uniforms",
     "block_span",
     "chunk_origins",
     "groove_starts",
@@ -53,7 +52,6 @@ must share it. 2: rays 2k and 2k + 1 share a stratum, and ``isotropic`` blocks a
 ROTATION_STREAM = 0x150
 """Extra key of the per-block incidence-azimuth generator (``block_rotation``)."""
 
-_streams = threading.local()
 # this thread's work arrays (``scratch``): a chunk's origins, azimuths and uniforms
 _CHUNK_ORIGIN = WorkColumns("chunk-origin")
 _CHUNK_PSI = WorkArray("chunk-psi")
@@ -64,24 +62,21 @@ _GROOVE_PSI = WorkArray("groove-psi")
 
 
 @functools.lru_cache(maxsize=64)
-def stream_state(key: tuple) -> dict:
-    """Initial PCG64 state of the random stream ``key`` = (seed, realisation, incidence)."""
-    return np.random.PCG64(np.random.SeedSequence(list(key))).state
+def key_stream(key: tuple) -> tuple:
+    """The PCG64 stream seeded with SeedSequence(``key``), key = (seed, realisation,
+    incidence), as ``pcg64.fill_uniforms`` takes it (``pcg64.stream_of``)."""
+    return pcg64.stream_of(np.random.PCG64(np.random.SeedSequence(list(key))).state)
 
 
-def block_generator(key, block: int, per_ray: int) -> np.random.Generator:
-    """This thread's generator positioned at block ``block``'s slot of stream ``key``: block b
-    owns the numbers [b·k·BLOCK, (b + 1)·k·BLOCK) of the PCG64 stream seeded with
-    SeedSequence(key), k = ``per_ray`` numbers per ray (ξ, η, and ψ for groove azimuths, in
-    runs of the block's length), so every block's rays depend only on (key, b), whatever the
-    chunking, and one generator serves consecutive blocks."""
-    try:
-        rng = _streams.rng
-    except AttributeError:
-        rng = _streams.rng = np.random.Generator(np.random.PCG64())
-    rng.bit_generator.state = stream_state(tuple(int(k) for k in key))
-    rng.bit_generator.advance(block * per_ray * BLOCK)
-    return rng
+def block_uniforms(key, block: int, per_ray: int, out: np.ndarray, skip: int = 0) -> None:
+    """``out`` ← the numbers of stream ``key`` from block ``block``'s slot on, past its first
+    ``skip``: block b owns the numbers [b·k·BLOCK, (b + 1)·k·BLOCK) of the PCG64 stream
+    seeded with SeedSequence(key), k = ``per_ray`` numbers per ray (ξ, η, and ψ for groove
+    azimuths, in runs of the block's length), so every block's rays depend only on (key, b),
+    whatever the chunking; consecutive blocks' slots follow one another. Bitwise
+    ``Generator(PCG64).random`` from there (``pcg64.fill_uniforms``, compiled)."""
+    position = block * per_ray * BLOCK + skip
+    pcg64.fill_uniforms(key_stream(tuple(int(k) for k in key)), position, out)
 
 
 def block_span(n_total: int, blocks) -> tuple:
@@ -105,7 +100,7 @@ def chunk_origins(
     origin starts at z = zmax + top_margin.
 
     Each block draws ξ, η, then (``azimuth``) ψ/2π, n each (n its length), from its own slot
-    of the stream ``key`` (``block_generator``), so its rays do not depend on the chunking.
+    of the stream ``key`` (``block_uniforms``), so its rays do not depend on the chunking.
     ``origins="stratified"``: rays 2k and 2k + 1 of n_total share a stratum
     q ∈ [2k/N, (2k + 2)/N) of a row-major sweep of the tile (``rows`` rows), each uniform
     inside it independently;
@@ -127,9 +122,8 @@ def chunk_origins(
     psi = _CHUNK_PSI(n if azimuth else 0)
     lx, ly = tracer.tile
     per_ray = 3 if azimuth else 2
-    rng = block_generator(key, blocks[0], per_ray)  # consecutive slots from here on
     u = _CHUNK_UNIFORM(per_ray * n)  # ξ, η (, ψ/2π) of each block in turn
-    rng.random(out=u)
+    block_uniforms(key, blocks[0], per_ray, u)  # consecutive slots from there on
     if origins == "independent":
         for b in blocks:
             k = b * BLOCK - lo
@@ -182,14 +176,12 @@ def groove_starts(tracer: Tracer, n_total: int, blocks, key, replicates: bool = 
     blocks = list(blocks)
     lo, n = block_span(n_total, blocks)
     lx, ly = tracer.tile
-    rng = block_generator(key, blocks[0], 3)  # consecutive slots from here on
     u = _GROOVE_UNIFORM(2 * n)  # ξ, then ψ/2π, of each block in turn
     for b in blocks:
         k = b * BLOCK - lo
         m = min(n - k, BLOCK)
-        rng.random(out=u[2 * k : 2 * k + m])
-        rng.bit_generator.advance(m)  # η
-        rng.random(out=u[2 * k + m : 2 * k + 2 * m])
+        block_uniforms(key, b, 3, u[2 * k : 2 * k + m])
+        block_uniforms(key, b, 3, u[2 * k + m : 2 * k + 2 * m], skip=2 * m)  # past η
     x, psi = _GROOVE_X(n), _GROOVE_PSI(n)
     for first, size, at, count in _sweeps(n_total, blocks, lo, n, replicates):
         rows = max(1, int(round(np.sqrt(size * ly / lx))))
