@@ -14,11 +14,19 @@ load the kernel compiled with the old helper. So every kernel's cache entry is a
 with ``PACKAGE_STAMP``, the modification times and sizes of all of microsim's modules: any
 change to any of them recompiles the kernels (an installed package only changes on
 reinstall; a checkout after every edit or pull).
+
+numba reads a kernel's whole cache index (the types of its compiled signatures, pickled)
+before it compares the stamp, so an index written by another version of microsim, whose
+signatures name a type that no longer exists, would fail to load with an AttributeError on
+every call (an upgrade keeps the old ``__pycache__``; so does a checkout switched to an
+older commit). ``cached_njit`` treats an index that cannot be read back as empty: the kernel
+is compiled anew and its index rewritten.
 """
 
 from __future__ import annotations
 
 import hashlib
+import pickle
 import sys
 from pathlib import Path
 
@@ -63,6 +71,7 @@ def cached_njit(**options):
                 _tell_uncached()
             else:
                 _stamp_with_package(dispatcher)
+                _read_stale_index_as_empty(dispatcher)
         return dispatcher
 
     return decorate
@@ -74,6 +83,27 @@ def _stamp_with_package(dispatcher) -> None:
     index = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
     if index is not None and hasattr(index, "_source_stamp"):
         index._source_stamp = (index._source_stamp, PACKAGE_STAMP)
+
+
+_UNREADABLE = (AttributeError, ImportError, pickle.UnpicklingError, EOFError, TypeError, ValueError)
+"""What unpickling an index written by another version of the package can raise."""
+
+
+def _read_stale_index_as_empty(dispatcher) -> None:
+    """Make numba's index of ``dispatcher`` load as empty (a cache miss: compile, then
+    overwrite) where it cannot be unpickled, instead of raising on every call."""
+    index = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    load = getattr(index, "_load_index", None)
+    if load is None:
+        return
+
+    def load_index():
+        try:
+            return load()
+        except _UNREADABLE:
+            return {}
+
+    index._load_index = load_index
 
 
 def _tell_uncached() -> None:

@@ -194,6 +194,46 @@ def test_the_kernel_cache_is_keyed_by_cpu_and_safe_for_concurrent_first_starts(t
     assert outs[0][1] == outs[1][1] == warm[1] == other[1]
 
 
+_OLD_MODULE = """
+from typing import NamedTuple
+from microsim.kernel_cache import cached_njit
+
+@cached_njit()
+def total(p):
+    return p[0] + p[1]
+
+class Pair(NamedTuple):
+    a: float
+    b: float
+
+print(total(Pair(1.0, 2.0)))
+"""
+
+_NEW_MODULE = """
+from microsim.kernel_cache import cached_njit
+
+
+@cached_njit()
+def total(p):
+    return p[0] + p[1]
+
+print(total((1.0, 2.0)))
+"""  # ``total`` on the same line: the same cache index file
+
+
+def test_a_kernel_cache_left_by_another_version_is_recompiled_not_fatal(tmp_path):
+    """A kernel cached by a version of its module whose signature named a type since removed
+    (an upgrade, or a checkout of an older commit, keeps the cache folder): numba would fail
+    to unpickle the index on every call; the kernel compiles anew and runs instead."""
+    module = tmp_path / "kernels_then.py"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(tmp_path)}
+    cmd = [sys.executable, "-c", "import kernels_then"]  # imported: its types by reference
+    for text in (_OLD_MODULE, _NEW_MODULE):
+        module.write_text(text)
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0 and done.stdout.split() == ["3.0"], done.stderr
+
+
 def test_a_cached_kernel_is_checked_against_every_module_of_the_package():
     """numba checks a cached kernel against its own file only; the kernels also carry the
     package's stamp, so an edit of a helper they inline (another module) recompiles them."""
