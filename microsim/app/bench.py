@@ -25,12 +25,12 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   speed target is set against; ``pip install microsim[peer]``, skipped with a note without
   it), traced alternately with the others, best of the same runs, and the ratio;
 * the marginal throughput of the pipeline and of the peer (``marginal_throughput``): the
-  wall time of whole calls at ``rays``/4 and ``rays`` primary rays, alternating, best of three
-  each, on 1 and 2 threads; samples/s = the extra rays over the extra time, and the fixed
-  cost per call = the time the line through both points gives at zero rays (the pipeline's:
-  the per-call set-up with its tracer reused, the facet table; the peer's: its facet table
-  in NumPy and its Dr.Jit launches). The speed target is set on this ratio, since the
-  whole-run ratio above mixes each side's fixed cost into its rate;
+  wall time of whole calls at ``rays``/4 and ``rays`` primary rays, alternating, best of
+  ``MARGINAL_REPEAT`` each, on 1 and 2 threads; samples/s = the extra rays over the extra
+  time, and the fixed cost per call = the time the line through both points gives at zero
+  rays (the pipeline's: the per-call set-up with its tracer reused, the facet table; the
+  peer's: its facet table in NumPy and its Dr.Jit launches). The speed target is set on this
+  ratio, since the whole-run ratio above mixes each side's fixed cost into its rate;
 * the dielectric path (``interface_throughput``): ``simulate(..., transmission=True,
   bounces="all")`` with glass (η = ``GLASS``) at θi and at 180° − θi (the same angle from
   inside the glass) against its Mitsuba peer (``bench_peer.PeerScene.run_dielectric``: the
@@ -297,8 +297,14 @@ def _peer(surface, cfg: BenchConfig):
         return None, str(exc)
 
 
+MARGINAL_REPEAT = 5
+"""Calls per size, side and thread count of the marginal rates, the best kept: a rate comes
+from the difference of two short calls (0.04–0.6 s), which a slow turn of a shared host moves
+most on 2 threads; the best of five gives each side its rate in the host's quiet turns."""
+
+
 def marginal_throughput(
-    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3, peer=None
+    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = MARGINAL_REPEAT, peer=None
 ) -> Marginal:
     """Marginal samples/s and fixed cost per call of the pipeline (``simulate``, the surface's
     tracer reused) and of the Mitsuba peer (``PeerScene.run``, its scene built once) on 1 and
@@ -335,7 +341,7 @@ GLASS = 1.5
 
 
 def interface_throughput(
-    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = 3, peer=None
+    cfg: BenchConfig = BenchConfig(), surface=None, repeat: int = MARGINAL_REPEAT, peer=None
 ) -> InterfaceThroughput:
     """The dielectric path against its Mitsuba peer: marginal paths/s and fixed cost per call
     of ``simulate(surface, GLASS, θi, transmission=True, bounces="all")`` (its tracer reused)
