@@ -1,7 +1,8 @@
 """Where a sample's time goes in the single-bounce pipeline on the bench scene (the 512²
 Gaussian heightfield of ``microsim bench``, aluminium, θi = 30°, 2²² rays, 1 thread): each
 stage of ``simulate`` timed by wrapping it (best of three runs), the fused walk-and-look-up
-kernel split by timing its two halves alone on one chunk, what the per-facet beam test clears
+kernel split by timing its two halves alone on one chunk, the origins' uniform numbers (the
+compiled PCG64 against NumPy's generator), what the per-facet beam test clears
 and costs (``engine.beam``), and what the masking rays still walked do (how many escape, how
 far they run). docs/performance.md quotes it.
 
@@ -19,6 +20,7 @@ from microsim.app.bench import BenchConfig, _bins, _surface, warm_up
 from microsim.sim import (
     facet_tables,
     paths,
+    pcg64,
     ray_columns,
     simulate,
     tallies,
@@ -117,6 +119,25 @@ def _timed(call) -> float:
     return time.perf_counter() - t0
 
 
+def uniform_numbers(n: int = 2**17, repeat: int = 5) -> dict:
+    """ns per uniform number (a chunk's ξ and η: 2 per ray) of the compiled PCG64 the origins
+    use (``pcg64.fill_uniforms``) and of NumPy's ``Generator(PCG64).random`` on the same
+    stream position, best of ``repeat`` each, alternating (the same bits: tests/test_pcg64.py)."""
+    state = np.random.PCG64(np.random.SeedSequence([0, 0, 0])).state
+    stream, out = pcg64.stream_of(state), np.empty(n)
+    rng = np.random.Generator(np.random.PCG64())
+    ways = {
+        "compiled PCG64 (sim.pcg64)": lambda: pcg64.fill_uniforms(stream, 0, out),
+        "NumPy Generator.random": lambda: rng.random(out=out),
+    }
+    best = dict.fromkeys(ways, np.inf)
+    for _ in range(repeat):
+        for label, way in ways.items():
+            rng.bit_generator.state = state
+            best[label] = min(best[label], _timed(way))
+    return {label: t / n * 1e9 for label, t in best.items()}
+
+
 def beams(tracer, table, steep) -> dict:
     """The lit facets the steepness test (``steep``) leaves (candidates), the share of them
     whose beam ``engine.beam.beam_clear`` clears, and its time on 1 thread (best of five)."""
@@ -173,6 +194,9 @@ def main() -> None:
     for label, ns in per.items():
         print(f"  {label}: {ns:.1f} ns")
     print(f"  the rest (thread pool, per-call set-up): {total - sum(per.values()):.1f} ns")
+    print("the origins' uniform numbers (2 per ray), ns each:")
+    for label, ns in uniform_numbers().items():
+        print(f"  {label}: {ns:.2f}")
     tracer, _, _ = tracer_cache.tracer_for(surface, "traced", surface.fingerprint())
     wi = spherical_deg(THETA, 0.0)
     table = facet_tables.facet_table(tracer, wi, resolve_material("aluminium"), _bins(), 0.0)
