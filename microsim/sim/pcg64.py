@@ -7,7 +7,7 @@ permutation of the new state (the high and low 64-bit halves xor-ed, rotated rig
 (O'Neill 2014, §6.3; NumPy's ``pcg64.h``). ``fill_uniforms`` does the same in a compiled
 loop: a stream is a sequence of states, so the numbers from position p on are those of the
 state advanced by p steps (s ← A_p·s + C_p, computed by squaring: Brown 1994), and an array
-is filled in ``LANES`` consecutive runs, each from its own jumped state, whose steps are
+is filled in four consecutive runs, each from its own jumped state, whose steps are
 independent of one another and so overlap in the processor's pipeline, where NumPy's one
 generator waits for each step's multiply before the next. tests/test_pcg64.py compares them
 bit for bit with NumPy.
@@ -22,12 +22,11 @@ from numba.extending import intrinsic
 
 from microsim.jit import compiled, inlined
 
-__all__ = ["MULTIPLIER", "LANES", "stream_of", "fill_uniforms"]
+__all__ = ["MULTIPLIER", "stream_of", "fill_uniforms"]
 
 MULTIPLIER = 0x2360ED051FC65DA44385DF649FCCF645
 """PCG64's 128-bit LCG multiplier (NumPy's ``PCG_DEFAULT_MULTIPLIER_128``)."""
-LANES = 4
-"""Runs of an array filled side by side (independent dependency chains)."""
+_RUNS = 4  # the runs ``fill_uniforms`` fills side by side (its four states h0 … h3)
 
 _HALF = (1 << 64) - 1
 _MUL_HI, _MUL_LO = np.uint64(MULTIPLIER >> 64), np.uint64(MULTIPLIER & _HALF)
@@ -111,11 +110,11 @@ def _unit(sh, sl):
 def fill_uniforms(stream, position, out):
     """``out`` ← the numbers at ``position`` … ``position`` + len(out) − 1 of the PCG64
     ``stream`` (``stream_of``; position 0 is the first number a fresh generator draws),
-    bitwise ``Generator(PCG64).random`` after ``advance(position)``: ``LANES`` runs of
-    ⌈len/LANES⌉ numbers, each from its own jumped state, one step of each per pass."""
+    bitwise ``Generator(PCG64).random`` after ``advance(position)``: four runs of
+    ⌈len/4⌉ numbers, each from its own jumped state, one step of each per pass."""
     sh, sl, ch, cl = stream
     n = len(out)
-    q = (n + LANES - 1) // LANES
+    q = (n + _RUNS - 1) // _RUNS
     h0, l0 = _jump(sh, sl, ch, cl, position)
     h1, l1 = _jump(h0, l0, ch, cl, q)
     h2, l2 = _jump(h1, l1, ch, cl, q)
