@@ -290,6 +290,7 @@ def test_facet_table_is_the_mirror_law_with_fresnel_weights(ior):
         facets = mesh_facets(np.ascontiguousarray(n.T), np.zeros(len(n)), 0.0)
         rise_bound = 0.8  # steepest slope of a pretend heightfield
         beam = None  # no heightfield grid: no beams cleared (tests/test_beam.py)
+        grid = None  # nor a grid walk: no steps table
         surely_escapes = staticmethod(lambda *d: Tracer.surely_escapes(Tile, *d))
 
     wi, bins = spherical_deg(55.0, 20.0), Bins(18, 13)

@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from microsim.app.bench import BenchConfig, _bins, _surface
+from microsim.jit import TILE
 from microsim.sim import simulate
 from microsim.sim.engine import primary, segments
 from microsim.sim.masking_rays import FROM_ESCAPE, MaskingRays, segment_geometry
@@ -60,7 +61,7 @@ def main(n: int = 4096, rays: int = 2**20) -> None:
         primary.cast_traced_primary(
             tuple(x), tuple(down), tracer.grid_walk(x, down), tracer.grid.cell_min,
             tracer.facets, tracer.rise_bound, tracer.horizon, tracer.groove_clear, geometry,
-            ledger, FROM_ESCAPE,
+            ledger, MaskingRays.work(TILE).kernel_args(), FROM_ESCAPE,
         )  # fmt: skip
 
     ways = {

@@ -210,7 +210,6 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         list(pool.map(clear_beams, slices) if pool is not None else map(clear_beams, slices))
         clear |= cleared
     down = [-w for w in wi]
-    grid = getattr(tracer, "grid", None)  # (a stand-in without a grid walk has no steps)
     return FacetTable(
         code=code,
         weight=weight,
@@ -218,7 +217,7 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
         wo32=wo32,
         facets=tracer.facets,
         clear=clear,
-        ahead=NO_STEPS if grid is None else steps_over(grid, down, tracer.zmax),
+        ahead=NO_STEPS if tracer.grid is None else steps_over(tracer.grid, down, tracer.zmax),
     )
 
 

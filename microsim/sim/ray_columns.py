@@ -174,7 +174,7 @@ def trace_columns(
         primary.cast_traced_primary(
             tuple(x), tuple(down), grid, tracer.grid.cell_min, tracer.facets,
             tracer.rise_bound, tracer.horizon, tracer.groove_clear, segment_geometry(tracer),
-            ledger, FROM_ESCAPE,
+            ledger, MaskingRays.work(TILE).kernel_args(), FROM_ESCAPE,
         )  # fmt: skip
     else:
         hs, prim, p = primary_hits(tracer, x, down, d32)

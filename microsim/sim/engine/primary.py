@@ -185,7 +185,7 @@ def traced_primary(
 
 @allocating
 def cast_traced_primary(
-    origins, down, grid, cell_min, facets, clear_slope, hz, groove, geometry, out, escape
+    origins, down, grid, cell_min, facets, clear_slope, hz, groove, geometry, out, masking, escape
 ):
     """``traced_primary`` of rays from ``origins`` (x, y, z columns) along one falling
     direction ``down`` (dx, dy, dz; the incident direction is −down), masking traced, on a
@@ -197,12 +197,13 @@ def cast_traced_primary(
     among the cells its primaries just walked, which are still in cache. Every ray gets the
     bits of the walk into whole columns, ``traced_primary`` and ``Tracer.escape_columns`` in
     turn. ``facets``, ``clear_slope``, ``hz``, ``groove`` and ``geometry`` (the masking rays'
-    ``segment_geometry``) as ``traced_primary``'s; ``out`` a ``TracedLedger``, written."""
+    ``segment_geometry``) as ``traced_primary``'s; ``out`` a ``TracedLedger``, written;
+    ``masking`` the masking rays' arrays of one tile (``MaskingRays.work(TILE).kernel_args()``),
+    reused tile after tile."""
     incident = (np.array([-down[0]]), np.array([-down[1]]), np.array([-down[2]]))
     tile = np.empty((11, TILE))
     cand = np.empty(TILE, np.bool_)
     walk = _tile_walk()
-    masking = _tile_masking_rays()
     esc = np.empty(TILE, np.int8)
     no_hits = (np.empty(0, np.int32), np.empty(0), np.empty(0), np.empty(0))
     rules = (True, CLEAR_MARGIN * clear_slope, hz, groove, geometry)
@@ -215,27 +216,7 @@ def cast_traced_primary(
             sx[:m], sy[:m], sz[:m], mdx[:m], mdy[:m], mdz[:m], False, grid, cell_min, grid[9],
             True, (esc[:m], *no_hits),
         )  # fmt: skip
-        for k in range(m):
-            status[mi[k]] = escape[esc[k]]
-
-
-@allocating
-def _tile_masking_rays():
-    """The masking rays of one tile (``masking_starts``' arrays, ``TILE`` slots)."""
-    return (
-        np.empty(TILE, np.int64),
-        np.empty(TILE),
-        np.empty(TILE),
-        np.empty(TILE),
-        np.empty(TILE),
-        np.empty(TILE),
-        np.empty(TILE),
-        np.empty((TILE, 3), np.float32),
-        np.empty((TILE, 3), np.float32),
-        np.empty(TILE, np.float32),
-        np.empty(TILE, np.int64),
-        np.empty(TILE, np.bool_),
-    )
+        apply_escape(status, mi[:m], esc[:m], escape)
 
 
 @compiled
