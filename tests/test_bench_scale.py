@@ -10,6 +10,7 @@ import pytest
 
 from microsim.app import bench_scale
 from microsim.app.cli import main
+from microsim.sim.facet_tables import table_pays
 
 
 def _cli(capsys, *args):
@@ -48,6 +49,43 @@ def test_both_ray_counts_of_a_size_take_one_path():
             assert table[0] == table[1] and path == bench_scale.PATHS[0 if table[0] else 1]
             assert 0 < lo < hi
     assert bench_scale.rays_for(1024, (2**20, 2**22)) == ((2**18, 2**20), "per ray")
+    for n in (64, 512, 1024, 2048, 4096):  # the table's counts: one and two rays per facet
+        facets = 2 * n * n
+        assert bench_scale.tabled_rays(n) == (facets, 2 * facets)
+        assert all(table_pays(facets, r) for r in bench_scale.tabled_rays(n))
+    assert bench_scale.tabled_rays(8192) is None  # more facets than a table is built for
+    assert not table_pays(2 * 8192**2, 2 * 8192**2)
+
+
+def test_each_size_is_measured_on_both_paths_where_it_can_take_both(monkeypatch):
+    """A size traced per ray at ``RAYS`` gets a row through the facet table (where its tile
+    can have one) and a tabled size a row per ray, so that each path is compared with itself
+    across sizes; a table row that would not fit is skipped with the table's own need."""
+    probed = []
+
+    def probe(cfg, n, rays):
+        probed.append((n, tuple(rays)))
+        path = bench_scale.rays_for(n, rays)[1]
+        return bench_scale.ScaleRow(n, 0.1, 0.1, 0.0, 1e6, 300.0, 200.0, 250.0, rays, path)
+
+    monkeypatch.setattr(bench_scale, "_probe", probe)
+    monkeypatch.setattr(bench_scale, "available_mb", lambda: 1e6)
+    rows = bench_scale.scale_rows(sizes=(512, 4096, 8192))
+    assert probed == [
+        (512, bench_scale.RAYS),
+        (512, bench_scale.per_ray_rays(512)),
+        (4096, bench_scale.RAYS),
+        (4096, bench_scale.tabled_rays(4096)),
+        (8192, bench_scale.RAYS),
+    ]
+    assert [r.path for r in rows] == ["facet table", "per ray", "per ray", "facet table", "per ray"]
+    probed.clear()
+    room = 200.0 + 300 * 4096**2 / 2**20  # the per-ray run fits, the table's 100 B/point not
+    monkeypatch.setattr(bench_scale, "available_mb", lambda: room / 0.9)
+    monkeypatch.setattr(bench_scale, "BYTES_PER_POINT_GUESS", 300.0)
+    rows = bench_scale.scale_rows(sizes=(4096,))
+    assert probed == [(4096, bench_scale.RAYS)]
+    assert rows[1].skipped.startswith("needs ~") and "through the facet table" in rows[1].skipped
 
 
 def test_scale_refuses_ray_options(capsys):

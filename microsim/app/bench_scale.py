@@ -12,13 +12,17 @@ at ``RAYS`` = (2²⁰, 2²²) rays, best of ``REPEAT`` each: the line through th
 surface costs besides its rays). Both counts must take one path (``rays_for``: the facet table,
 or per ray on tiles with more facets than rays), which each row names; a size measured through
 the facet table is measured per ray too (``per_ray_rays``, when its smaller count is at least
-``PER_RAY_MIN``). ``rss_mb`` is the process's peak resident set (VmHWM), ``build_rss_mb`` that
-peak right after the surface's build, ``base_mb`` its resident set before the surface
-(interpreter, libraries, kernels), ``bytes_per_point`` the difference over n². A size whose
-expected peak (``BYTES_PER_POINT_GUESS`` per point, from the sizes already run when there are
-two) exceeds the memory the machine has available is skipped with that reason instead of run; a
+``PER_RAY_MIN``), and one measured per ray whose tile can have a facet table
+(``facet_tables.table_pays``) is measured through it too, at one and two rays per facet
+(``tabled_rays``): each path compared with itself across sizes. ``rss_mb`` is the process's
+peak resident set (VmHWM), ``build_rss_mb`` that peak right after the surface's build,
+``base_mb`` its resident set before the surface (interpreter, libraries, kernels),
+``bytes_per_point`` the difference over n². A size whose expected peak (``_does_not_fit``)
+exceeds the memory the machine has available is skipped with that reason instead of run; a
 size whose probe fails (a refusal by the surface's own memory check, a crash) is listed with its
-failure, after the sizes measured before it.
+failure, after the sizes measured before it. A row through the table expects
+``TABLE_BYTES_PER_GRID_POINT`` more per point and the kept tables' bytes besides
+(``surfaces.heightfields.traced_bytes``).
 """
 
 from __future__ import annotations
@@ -29,7 +33,11 @@ import sys
 from dataclasses import asdict, dataclass
 
 from microsim.sim.facet_tables import table_pays
-from microsim.surfaces.heightfields import BYTES_PER_GRID_POINT
+from microsim.surfaces.heightfields import (
+    BYTES_PER_GRID_POINT,
+    TABLE_BYTES_PER_GRID_POINT,
+    TABLES_KEPT_BYTES,
+)
 
 from .bench_report import BenchConfig
 
@@ -79,13 +87,14 @@ built = status_mb("VmHWM:")
 t0 = time.perf_counter()
 simulate(surface, "aluminium", cfg.theta_i, rays=BLOCK, **run)
 first = time.perf_counter() - t0
-best = {}
+best, once = {}, []
 for _ in range(repeat):
     for n in rays:
         t0 = time.perf_counter()
         simulate(surface, "aluminium", cfg.theta_i, rays=n, **run)
-        best[n] = min(best.get(n, float("inf")), time.perf_counter() - t0)
-times = {"build": build, "first": first, "seconds": [best[n] for n in rays]}
+        once.append(time.perf_counter() - t0)
+        best[n] = min(best.get(n, float("inf")), once[-1])
+times = {"build": build, "first": first, "seconds": [best[n] for n in rays], "once": once[0]}
 peaks = {"rss_mb": status_mb("VmHWM:"), "build_rss_mb": built, "base_mb": base}
 print(json.dumps({**times, **peaks}))
 """
@@ -94,7 +103,9 @@ print(json.dumps({**times, **peaks}))
 @dataclass(frozen=True)
 class ScaleRow:
     """One grid size: ``n``; the times (s) and rates of the module docstring, None with a
-    ``skipped`` reason when the size was not run."""
+    ``skipped`` reason when the size was not run; ``set_up_seconds``: what the first call at
+    the smaller ray count took beyond the best one (through the table: the incidence's facet
+    table, built by that call and kept for the later ones)."""
 
     n: int
     build_seconds: float | None = None
@@ -107,6 +118,7 @@ class ScaleRow:
     rays: tuple | None = None
     path: str | None = None
     skipped: str | None = None
+    set_up_seconds: float | None = None
 
     @property
     def bytes_per_point(self) -> float | None:
@@ -152,6 +164,13 @@ def per_ray_rays(n: int) -> tuple:
     return facets // 8, facets // 2
 
 
+def tabled_rays(n: int) -> tuple | None:
+    """F and 2F rays on an n² tile of F = 2n² facets, both through the facet table; None
+    where the tile is too large for one (``facet_tables.table_pays``)."""
+    facets = 2 * n * n
+    return (facets, 2 * facets) if table_pays(facets, facets) else None
+
+
 def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
     conf = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
     conf["n"] = n
@@ -169,7 +188,8 @@ def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
     rate = (n2 - n1) / (t2 - t1) if t2 > t1 else None
     fixed = None if rate is None else t1 - n1 / rate
     peaks = got["rss_mb"], got["base_mb"], got["build_rss_mb"]
-    return ScaleRow(n, got["build"], got["first"], fixed, rate, *peaks, rays, path)
+    set_up = got["once"] - t1
+    return ScaleRow(n, got["build"], got["first"], fixed, rate, *peaks, rays, path, None, set_up)
 
 
 def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list[ScaleRow]:
@@ -177,23 +197,39 @@ def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list
     between the two ray counts ``rays``."""
     rows = []
     for n in sorted(sizes):
-        measured = [r for r in rows if r.rss_mb is not None]
-        per_point = BYTES_PER_POINT_GUESS
-        if len(measured) >= 2:  # the larger tiles' cost per point (fixed costs amortised)
-            per_point = max(r.bytes_per_point for r in measured[-2:])
-        base = measured[-1].base_mb if measured else 0.0
-        need, have = base + per_point * n * n / 2**20, available_mb()
-        if need > 0.9 * have:
-            reason = (
-                f"needs ~{need / 1024:.1f} GB at {per_point:.0f} B/point, "
-                f"{have / 1024:.1f} GB available"
-            )
+        reason = _does_not_fit(rows, n, tabled=rays_for(n, rays)[1] == PATHS[0])
+        if reason:
             rows.append(ScaleRow(n, skipped=reason))
             continue
         rows.append(_probe(cfg, n, rays))
         if rows[-1].path == PATHS[0] and min(per_ray_rays(n)) >= PER_RAY_MIN:
             rows.append(_probe(cfg, n, per_ray_rays(n)))  # like with like across sizes
+        elif rows[-1].path == PATHS[1] and tabled_rays(n) is not None:
+            reason = _does_not_fit(rows, n, tabled=True)
+            rows.append(ScaleRow(n, skipped=reason) if reason else _probe(cfg, n, tabled_rays(n)))
     return rows
+
+
+def _does_not_fit(rows: list[ScaleRow], n: int, tabled: bool) -> str | None:
+    """Why an n² tile is not run (None: it fits): its expected peak above 90 % of the memory
+    available. The peak: ``BYTES_PER_POINT_GUESS`` per point, or once two tiles have been
+    measured per ray the larger of their bytes per point (fixed costs amortised); through the
+    table ``TABLE_BYTES_PER_GRID_POINT`` more per point and the kept tables' bytes."""
+    per_ray = [r for r in rows if r.rss_mb is not None and r.path == PATHS[1]]
+    measured = [r for r in rows if r.rss_mb is not None]
+    per_point = BYTES_PER_POINT_GUESS
+    if len(per_ray) >= 2:
+        per_point = max(r.bytes_per_point for r in per_ray[-2:])
+    base = measured[-1].base_mb if measured else 0.0
+    extra = TABLE_BYTES_PER_GRID_POINT * n * n + TABLES_KEPT_BYTES if tabled else 0.0
+    need, have = base + (per_point * n * n + extra) / 2**20, available_mb()
+    if need <= 0.9 * have:
+        return None
+    path = "through the facet table " if tabled else ""
+    return (
+        f"needs ~{need / 1024:.1f} GB {path}at {per_point:.0f} B/point, "
+        f"{have / 1024:.1f} GB available"
+    )
 
 
 def format_scale(rows: list[ScaleRow]) -> str:
@@ -212,11 +248,12 @@ def format_scale(rows: list[ScaleRow]) -> str:
         if r.skipped:
             lines.append(f"| {r.n}² | skipped: {r.skipped} | | | | | | |")
             continue
+        built = f" built in {r.set_up_seconds:.1f} s" if r.path == PATHS[0] else ""
         lines.append(
             f"| {r.n}² | {fmt(r.build_seconds, '{:.2f} s')} | {fmt(r.first_seconds, '{:.2f} s')} "
             f"| {fmt(r.fixed_seconds, '{:.2f} s')} "
             f"| {fmt(r.samples_per_s and r.samples_per_s / 1e6, '{:.1f} M')} "
-            f"({r.path}, {r.rays[0]:,} and {r.rays[1]:,}) "
+            f"({r.path}{built}, {r.rays[0]:,} and {r.rays[1]:,}) "
             f"| {fmt(r.rss_mb, '{:.0f} MB')} | {fmt(r.bytes_per_point, '{:.0f}')} "
             f"| {fmt(r.build_bytes_per_point, '{:.0f}')} |"
         )
