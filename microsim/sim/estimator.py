@@ -62,7 +62,14 @@ from .identity import RunDescription, saved_identity
 from .paths import LEDGER, MASKING, Incidence
 from .progress import RaysDone
 from .result import Result
-from .schedule import IN_FLIGHT, DeferredInterrupt, chunk_groups, run_in_order, thread_pool
+from .schedule import (
+    IN_FLIGHT,
+    DeferredInterrupt,
+    chunk_groups,
+    run_in_order,
+    set_up_pool,
+    thread_pool,
+)
 from .spectral import (
     SpectralResult,
     SpectralTally,
@@ -655,14 +662,14 @@ def _trace_incidence(plan, state, ex, est, run, prepared, r, i, pool, stop) -> N
         )
         if plan.spectrum is not None:  # the geometry once, weighted per material
             task = spectral_task(
-                incidence, profile, azimuth, est.isotropic, ex.bounces, plan.spectrum, pool,
-                run.threads,
+                incidence, profile, azimuth, est.isotropic, ex.bounces, plan.spectrum,
+                *set_up_pool(),
             )  # fmt: skip
         elif ex.transmission:  # paths through a dielectric interface
             task = interface_task(incidence, azimuth, est.isotropic, ex.bounces)
         else:  # one chain, cut after ex.bounces bounces (single bounce: its first)
             task = chain_task(
-                incidence, profile, azimuth, est.isotropic, ex.bounces, pool, run.threads
+                incidence, profile, azimuth, est.isotropic, ex.bounces, *set_up_pool()
             )
         threads, depth, blocks = run.threads, IN_FLIGHT * run.threads, plan.chunk_blocks
     rays, done, tally_ri = plan.per_real[r], state.done, state.tallies[r][i]

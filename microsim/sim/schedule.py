@@ -51,6 +51,15 @@ def thread_pool(threads: int) -> ThreadPoolExecutor:
         return _POOLS[threads]
 
 
+def set_up_pool() -> tuple[ThreadPoolExecutor, int]:
+    """(pool, parts) for a run's one-off set-up passes split into independent ranges (an
+    incidence's facet table, ``facet_tables.facet_table``): the process's pool of one thread
+    per core and that many parts, whatever the run's own threads, as ``in_parts``. Call it
+    from outside the pool's own tasks."""
+    cores = os.cpu_count() or 1
+    return thread_pool(cores), cores
+
+
 PART_ITEMS = 1 << 21
 """Fewest items per part of a one-off pass that ``in_parts`` runs on several threads."""
 

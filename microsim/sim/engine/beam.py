@@ -36,6 +36,8 @@ import numpy as np
 
 from microsim.jit import compiled, inlined
 
+from ..schedule import in_parts
+
 MAX_BLOCKS = 256  # blocks followed per facet before the facet is left to the per-ray tests
 
 
@@ -85,21 +87,31 @@ GRADIENT_PIECE = 1 << 16  # facets whose normals ``facet_gradients`` reads at a 
 
 def facet_gradients(facets, sign: float) -> tuple:
     """Per facet the gradient ∇h = −n_h/n_z of the surface (``sign`` 1) or of the relief
-    turned upside down (−1: n_h/n_z), (F,) each, ``GRADIENT_PIECE`` facets at a time."""
+    turned upside down (−1: n_h/n_z), (F,) each, in facet ranges on several threads
+    (``schedule.in_parts``), ``GRADIENT_PIECE`` facets at a time."""
     gx, gy = np.empty(facets.count), np.empty(facets.count)
-    for a in range(0, facets.count, GRADIENT_PIECE):
-        b = min(facets.count, a + GRADIENT_PIECE)
-        nx, ny, nz = facets.columns(a, b)
-        gx[a:b] = (-nx if sign > 0 else nx) / nz
-        gy[a:b] = (-ny if sign > 0 else ny) / nz
+
+    def fill(lo: int, hi: int) -> None:
+        for a in range(lo, hi, GRADIENT_PIECE):
+            b = min(hi, a + GRADIENT_PIECE)
+            nx, ny, nz = facets.columns(a, b)
+            np.divide(-nx if sign > 0 else nx, nz, out=gx[a:b])
+            np.divide(-ny if sign > 0 else ny, nz, out=gy[a:b])
+
+    in_parts(facets.count, fill)
     return gx, gy
 
 
 def block_maxima(cell_max: np.ndarray) -> np.ndarray:
     """Highest vertex of each 2 × 2 block of cells, indexed by its lower cell (j, i), wrapped:
     max of ``cell_max`` over cells (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)."""
-    m = np.maximum(cell_max, np.roll(cell_max, -1, axis=1))
-    return np.ascontiguousarray(np.maximum(m, np.roll(m, -1, axis=0)))
+    m = np.empty_like(cell_max)  # along rows, then along columns in place
+    np.maximum(cell_max[:, :-1], cell_max[:, 1:], out=m[:, :-1])
+    np.maximum(cell_max[:, -1], cell_max[:, 0], out=m[:, -1])
+    last = m[0].copy()  # row 0 before it is overwritten: the wrapped neighbour of the last
+    np.maximum(m[:-1], m[1:], out=m[:-1])
+    np.maximum(m[-1], last, out=m[-1])
+    return m
 
 
 @inlined
