@@ -283,6 +283,35 @@ def test_fused_walk_and_lookups_give_the_bits_of_walk_then_lookups(theta, phi):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("theta, phi, first", [(30.0, 0.0, 3), (55.0, 37.0, 0), (70.0, 200.0, 1)])
+def test_origins_drawn_in_the_walks_pass_give_the_bits_of_drawn_columns(theta, phi, first):
+    """``ray_columns.drawn_masking_rays`` (a chunk's stratified origins drawn block by block in
+    the walk's own pass) writes exactly what ``streams.chunk_origins`` followed by
+    ``tabled_masking_rays`` writes, on chunks of whole blocks and on a run's short last block;
+    a draw with a start outside the tile is refused (None), and the path then traces the
+    chunk from its columns."""
+    from microsim.analytic.fresnel import resolve_material
+    from microsim.sim import streams
+
+    tracer = Tracer(_rough(seed=7), grid=True)
+    wi = spherical_deg(theta, phi)
+    table = facet_tables.facet_table(tracer, wi, resolve_material("aluminium"), Bins(18, 12), phi)
+    rays, key = 5 * BLOCK + 1234, (3, 1, 2)  # the run's last block is short
+    blocks = range(first, 6)
+    draw = streams.stratified_draw(tracer, rays, blocks, key)
+    drawn = ray_columns.drawn_masking_rays(tracer, table, wi, draw)
+    drawn = [a.copy() for a in drawn.outcome], _masking_rays(drawn.mask, drawn.m)
+    x, _ = streams.chunk_origins(tracer, rays, blocks, key, False)
+    cols = ray_columns.tabled_masking_rays(tracer, table, wi, [c.copy() for c in x])
+    assert len(drawn[0][0]) == len(x[0]) == rays - first * BLOCK and cols.m > 0
+    for a, b in zip(drawn[0], cols.outcome):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(drawn[1], _masking_rays(cols.mask, cols.m)):
+        np.testing.assert_array_equal(a, b)
+    outside = draw._replace(hx=draw.hx / 2)  # most starts now outside the (shrunk) tile
+    assert ray_columns.drawn_masking_rays(tracer, table, wi, outside) is None
+
+
 @pytest.mark.parametrize("theta, phi", [(0.0, 0.0), (30.0, 0.0), (55.0, 37.0), (70.0, 200.0)])
 def test_fused_traced_walk_gives_the_bits_of_walk_then_shading_then_masking_rays(theta, phi):
     """``ray_columns.trace_columns`` on a grid (``primary.cast_traced_primary``: the walk, the

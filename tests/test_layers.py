@@ -161,7 +161,7 @@ SIM_LAYERS = [
         + ("tracer_cache",)
         + ("ray_bins", "masking_rays", "facet_tables", "ray_columns", "events", "paths")
         + ("bounce_kernels", "bounces", "dielectric_kernels", "interface_grid", "dielectric")
-        + ("tally_kernels",)
+        + ("drawn_primary", "tally_kernels")
         + ("tallies", "spectral", "arguments", "cluster")
         + ("experiment", "identity", "estimator", "auto"),
     ),

@@ -11,6 +11,8 @@ import numpy as np
 
 from microsim.jit import vector_inlined, vectorised
 
+from .pcg64 import fill_uniforms
+
 
 @vector_inlined
 def _stratum(r, xi, n_total, rows):
@@ -23,6 +25,19 @@ def _stratum(r, xi, n_total, rows):
     s = (pair + min(2.0, n_total - pair) * xi) / n_total * rows
     row = min(math.floor(s), rows - 1.0)
     return s - row, row
+
+
+@vector_inlined
+def _block_xy(u, first, m, n_total, rows, lx, ly, xs, ys):
+    """``stratified_origins``' x and y of one block's m rays, rays ``first`` (a float) onwards,
+    from its uniforms ``u``: ξ = u[:m], η = u[m:2m]."""
+    # on slices, indexed from 0: the loop then vectorises (5× faster than indexing the whole
+    # columns at lo + q, whose index checks kept it scalar)
+    xi, eta = u[:m], u[m:]
+    for q in range(m):
+        frac, row = _stratum(first + float(q), xi[q], n_total, rows)
+        xs[q] = frac * lx - lx / 2
+        ys[q] = (row + eta[q]) / rows * ly - ly / 2
 
 
 @vectorised
@@ -41,15 +56,24 @@ def stratified_origins(u, r0, n, block, n_total, rows, lx, ly, azimuth, strata, 
         m = min(block, n - lo)
         base = per_ray * lo
         first = float(r0 + lo)  # float(r0 + lo) + q = float(r0 + lo + q) exactly (< 2⁵³)
-        # on slices, indexed from 0: the loop then vectorises (5× faster than indexing the
-        # whole columns at lo + q, whose index checks kept it scalar)
-        xs, ys, xi, eta = x[lo : lo + m], y[lo : lo + m], u[base : base + m], u[base + m :]
-        for q in range(m):
-            frac, row = _stratum(first + float(q), xi[q], n_total, rows)
-            xs[q] = frac * lx - lx / 2
-            ys[q] = (row + eta[q]) / rows * ly - ly / 2
+        _block_xy(u[base:], first, m, n_total, rows, lx, ly, x[lo : lo + m], y[lo : lo + m])
         if azimuth:
             _groove_strata(u, base, base + 2 * m, first, m, n_total, rows, strata, lo, x, psi)
+
+
+@vectorised
+def draw_block(draw, k, block, u, x, y):
+    """The origins (x, y) of the rays k … k + m − 1 of the chunk of ``draw``
+    (``streams.StratifiedDraw``; k a multiple of ``block``, m = min(``block``, n − k)): their
+    2m uniforms, ξ then η, from their block's slot of the stream into ``u``
+    (``pcg64.fill_uniforms``, as ``streams.block_uniforms``), then their places as
+    ``stratified_origins`` gives them.
+    Writes ``x[:m]``, ``y[:m]``; returns m."""
+    m = min(block, draw.n - k)
+    r0 = draw.lo + k
+    fill_uniforms(draw.stream, (r0 // block) * 2 * block, u[: 2 * m])
+    _block_xy(u, float(r0), m, draw.n_total, draw.rows, draw.lx, draw.ly, x[:m], y[:m])
+    return m
 
 
 @vectorised

@@ -54,8 +54,21 @@ from microsim.bins import Bins
 
 from .facet_tables import FacetTable, facet_table, uses_facet_table
 from .ledger import DOWNWARD, LEDGER, MASKED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
-from .ray_columns import RayOutcome, analytic_columns, trace_columns, trace_tabled
-from .streams import BLOCK, block_rotation, block_span, chunk_origins, groove_starts
+from .ray_columns import (
+    RayOutcome,
+    analytic_columns,
+    drawn_masking_rays,
+    tabled_masking_rays,
+    trace_columns,
+)
+from .streams import (
+    BLOCK,
+    block_rotation,
+    block_span,
+    chunk_origins,
+    groove_starts,
+    stratified_draw,
+)
 from .tracer import Tracer
 from .vgroove_profile import GrooveMasking, VGrooveCaster, casts_primaries
 
@@ -155,17 +168,24 @@ class TracedPath(TracePath):
 
 
 class FacetTablePath(TracePath):
-    """Embree primary and masking rays; weight, mirror direction and bin looked up per hit
-    facet in a ``FacetTable`` built once for the incidence (``trace_tabled``)."""
+    """Primary and masking rays walked on the heightfield grid or traced by Embree; weight,
+    mirror direction and bin looked up per hit facet in a ``FacetTable`` built once for the
+    incidence (``tabled_masking_rays``). Stratified rays (not replicates) walked on the grid
+    draw their origins in the walk's own pass (``drawn_masking_rays``): the same bits."""
 
     def __init__(self, incidence: Incidence, table: FacetTable):
         super().__init__(incidence)
         self.table = table
 
     def follow(self, blocks):
-        inc = self.incidence
-        starts, _ = inc.origins_of(blocks, False)
-        return trace_tabled(inc.tracer, self.table, inc.wi, starts)
+        inc, found = self.incidence, None
+        if inc.origins == "stratified" and not inc.replicates:
+            draw = stratified_draw(inc.tracer, inc.rays, blocks, inc.key)
+            found = drawn_masking_rays(inc.tracer, self.table, inc.wi, draw)
+        if found is None:
+            starts, _ = inc.origins_of(blocks, False)
+            found = tabled_masking_rays(inc.tracer, self.table, inc.wi, starts)
+        return found.traced(inc.tracer)
 
 
 class RotatedIncidencePath(TracePath):

@@ -12,12 +12,14 @@ from microsim.bins import Bins
 from microsim.jit import TILE
 
 from . import fresnel_kernels, vgroove_kernels
+from .drawn_primary import cast_drawn_tabled
 from .engine import primary, segments
 from .facet_tables import FacetTable
 from .ledger import MASKED, SINGLE
 from .masking_rays import FROM_ESCAPE, MaskingRays, primary_hits, segment_geometry
 from .ray_bins import locate_single
 from .scratch import WorkArray, WorkColumns
+from .streams import BLOCK, StratifiedDraw
 from .tracer import Tracer
 from .vgroove_profile import GrooveMasking, VGrooveCaster
 
@@ -29,6 +31,7 @@ __all__ = [
     "groove_frame_rays",
     "trace_columns",
     "tabled_masking_rays",
+    "drawn_masking_rays",
     "trace_tabled",
     "analytic_columns",
 ]
@@ -51,6 +54,12 @@ class TabledMasking(NamedTuple):
     mask: MaskingRays
     m: int
 
+    def traced(self, tracer: Tracer) -> RayOutcome:
+        """The outcome once the masking rays are traced on ``tracer`` (their primaries'
+        status set from their walks)."""
+        self.mask.trace(tracer, self.m, self.outcome.status)
+        return self.outcome
+
 
 # this thread's work arrays (``scratch``)
 _TRACED_WO = WorkColumns("traced-wo")
@@ -66,17 +75,10 @@ def tabled_masking_rays(
     """``trace_tabled`` up to its masking rays (``TabledMasking``): the m masking rays set up
     but not yet traced (the status of their primary rays still SINGLE)."""
     x = columns(origins)
-    n = len(x[0])
     wi = np.asarray(wi, dtype=np.float64)
     down = [float(-c) for c in wi]
-    status, weight = np.empty(n, dtype=np.int8), np.empty(n)
-    where = np.empty(n, dtype=np.int64)
-    mask = MaskingRays.work(n)
-    facets = primary.FacetColumns(
-        table.code, table.weight, table.facets, table.wo32, table.bin, table.clear
-    )
-    ledger = primary.PrimaryLedger(status, weight, where)
-    outcome = RayOutcome(status, weight, where)
+    facets, ledger, mask = _tabled_work(table, len(x[0]))
+    outcome = RayOutcome(*ledger)
     grid = tracer.grid_walk(x, down)
     if grid is not None:  # the grid walk fused with the look-ups, tile by tile
         m = primary.cast_tabled_primary(
@@ -92,13 +94,45 @@ def tabled_masking_rays(
     return TabledMasking(outcome, mask, m)
 
 
+def drawn_masking_rays(
+    tracer: Tracer, table: FacetTable, wi: np.ndarray, draw: StratifiedDraw
+) -> TabledMasking | None:
+    """``tabled_masking_rays`` of the stratified rays of ``draw`` with their origins drawn in
+    the grid walk's own pass (``drawn_primary.cast_drawn_tabled``): the same bits, the chunk's
+    origins never written out. None where their grid walk does not apply (no grid, a rising
+    direction, a start outside the tile): the caller traces their origin columns."""
+    down = [float(-c) for c in wi]
+    grid = tracer.grid_walk(_NO_STARTS, down)  # the kernel checks the starts it draws
+    if grid is None:
+        return None
+    facets, ledger, mask = _tabled_work(table, draw.n)
+    m = cast_drawn_tabled(
+        draw, BLOCK, tuple(down), grid, table.ahead, facets, tracer.horizon,
+        segment_geometry(tracer), ledger, mask.kernel_args(),
+    )  # fmt: skip
+    return None if m < 0 else TabledMasking(RayOutcome(*ledger), mask, m)
+
+
+_NO_STARTS = (np.empty(0),) * 3
+
+
+def _tabled_work(table: FacetTable, n: int) -> tuple:
+    """The facet table as the kernels read it (``primary.FacetColumns``), a fresh
+    ``primary.PrimaryLedger`` of n rays and the masking rays' work arrays for them."""
+    facets = primary.FacetColumns(
+        table.code, table.weight, table.facets, table.wo32, table.bin, table.clear
+    )
+    ledger = primary.PrimaryLedger(
+        np.empty(n, dtype=np.int8), np.empty(n), np.empty(n, dtype=np.int64)
+    )
+    return facets, ledger, MaskingRays.work(n)
+
+
 def trace_tabled(tracer: Tracer, table: FacetTable, wi: np.ndarray, origins) -> RayOutcome:
     """The ``RayOutcome`` of primary rays, looked up per hit facet in ``table`` (the fast
     path for surfaces without azimuth averaging: only the two ray casts are per ray, the rest
     is one compiled pass, ``primary.tabled_primary``). ``origins``: (N, 3) or 3 columns."""
-    outcome, mask, m = tabled_masking_rays(tracer, table, wi, origins)
-    mask.trace(tracer, m, outcome.status)
-    return outcome
+    return tabled_masking_rays(tracer, table, wi, origins).traced(tracer)
 
 
 def columns(origins) -> list:

@@ -20,7 +20,7 @@ origins are i.i.d. uniform. Angles are in radians here (groove azimuths ψ, bloc
 from __future__ import annotations
 
 import functools
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
@@ -35,6 +35,9 @@ __all__ = [
     "key_stream",
     "block_uniforms",
     "block_span",
+    "sweep_rows",
+    "StratifiedDraw",
+    "stratified_draw",
     "chunk_origins",
     "groove_starts",
     "block_origins",
@@ -77,6 +80,52 @@ def block_uniforms(key, block: int, per_ray: int, out: np.ndarray, skip: int = 0
     ``Generator(PCG64).random`` from there (``pcg64.fill_uniforms``, compiled)."""
     position = block * per_ray * BLOCK + skip
     pcg64.fill_uniforms(key_stream(tuple(int(k) for k in key)), position, out)
+
+
+def sweep_rows(size: int, lx: float, ly: float) -> int:
+    """The rows of a row-major sweep of ``size`` strata over an ``lx`` × ``ly`` tile: about
+    square strata, at least one row."""
+    return max(1, int(round(np.sqrt(size * ly / lx))))
+
+
+class StratifiedDraw(NamedTuple):
+    """The stratified origins of a chunk of consecutive blocks, for a kernel that draws them
+    itself block by block (``origin_kernels.draw_block``), bitwise as ``chunk_origins``
+    gives them (stratified, without azimuths or replicates): the PCG64 ``stream`` of the
+    run's key (``key_stream``), the chunk's first ray ``lo`` and its ``n`` rays, the run's
+    ``n_total`` rays over ``rows`` rows of strata of the ``lx`` × ``ly`` tile, the origins'
+    height ``z`` and the tile's half-widths ``hx``, ``hy`` (a start lies in the tile when
+    −hx ≤ x < hx and −hy ≤ y < hy, as ``Tracer.holds``)."""
+
+    stream: tuple
+    lo: int
+    n: int
+    n_total: float
+    rows: float
+    lx: float
+    ly: float
+    z: float
+    hx: float
+    hy: float
+
+
+def stratified_draw(tracer: Tracer, n_total: int, blocks, key) -> StratifiedDraw:
+    """The ``StratifiedDraw`` of the rays of consecutive ``blocks`` of a run of ``n_total``
+    stratified rays with the random stream ``key``."""
+    lo, n = block_span(n_total, list(blocks))
+    lx, ly = tracer.tile
+    return StratifiedDraw(
+        key_stream(tuple(int(k) for k in key)),
+        lo,
+        n,
+        float(n_total),
+        float(sweep_rows(n_total, lx, ly)),
+        float(lx),
+        float(ly),
+        float(tracer.zmax + tracer.top_margin),
+        float(tracer.half[0]),
+        float(tracer.half[1]),
+    )
 
 
 def block_span(n_total: int, blocks) -> tuple:
@@ -129,14 +178,14 @@ def chunk_origins(
             k = b * BLOCK - lo
             m, base = min(n - k, BLOCK), per_ray * k
             xi, eta = u[base : base + m], u[base + m : base + 2 * m]
-            rows = max(1, int(round(np.sqrt(m * ly / lx))))
+            rows = sweep_rows(m, lx, ly)
             order = np.lexsort((xi, np.minimum(np.floor(eta * rows), rows - 1)))
             x[k : k + m], y[k : k + m] = xi[order] * lx - lx / 2, eta[order] * ly - ly / 2
             if azimuth:
                 psi[k : k + m] = 2 * np.pi * u[base + 2 * m : base + 3 * m][order]
     else:
         for first, size, at, count in _sweeps(n_total, blocks, lo, n, replicates):
-            rows = max(1, int(round(np.sqrt(size * ly / lx))))
+            rows = sweep_rows(size, lx, ly)
             k = slice(at, at + count)
             origin_kernels.stratified_origins(
                 u[per_ray * at :],
@@ -184,7 +233,7 @@ def groove_starts(tracer: Tracer, n_total: int, blocks, key, replicates: bool = 
         block_uniforms(key, b, 3, u[2 * k + m : 2 * k + 2 * m], skip=2 * m)  # past η
     x, psi = _GROOVE_X(n), _GROOVE_PSI(n)
     for first, size, at, count in _sweeps(n_total, blocks, lo, n, replicates):
-        rows = max(1, int(round(np.sqrt(size * ly / lx))))
+        rows = sweep_rows(size, lx, ly)
         k = slice(at, at + count)
         origin_kernels.stratified_groove_starts(
             u[2 * at :], first, count, BLOCK, float(size), float(rows), float(lx),

@@ -94,13 +94,27 @@ def cast_tabled_primary(origins, down, grid, ahead, table, hz, geometry, out, ma
     grid walk (``heightfield_caster.cast_falling`` on ``grid``, ``Tracer.grid_walk``) into
     scratch of one tile: the same bits as the walk into whole columns followed by
     ``tabled_primary``, without writing and reading back five columns of hits."""
-    tile = np.empty((6, TILE))
-    cand = np.empty(TILE, np.bool_)
-    walk = _tile_walk()
-    m = 0
+    return tabled_tiles(
+        origins, down, grid, ahead, table, hz, geometry, out, masking, 0, 0, tabled_scratch()
+    )
+
+
+@allocating
+def tabled_scratch():
+    """``tabled_tiles``' scratch of one tile: the walk's results (``_tile_walk``), the masking
+    starts and directions (6, TILE) and the candidates (TILE,)."""
+    return _tile_walk(), np.empty((6, TILE)), np.empty(TILE, np.bool_)
+
+
+@compiled
+def tabled_tiles(origins, down, grid, ahead, table, hz, geometry, out, masking, first, m, scratch):
+    """``cast_tabled_primary`` of the rays of ``origins``, tile by tile, as the rays
+    ``first`` … ``first`` + n − 1 of ``out`` and of the masking rays' ``mi``, their masking
+    rays from slot ``m`` on (``scratch``: ``tabled_scratch``). Returns the new m."""
+    walk, tile, cand = scratch
     for t in range(0, len(origins[0]), TILE):
         n = _walk_tile(origins, down, grid, ahead, t, walk)
-        m = _tabled_tile(walk, 0, t, n, table, hz, geometry, out, masking, tile, cand, m)
+        m = _tabled_tile(walk, 0, first + t, n, table, hz, geometry, out, masking, tile, cand, m)
     return m
 
 
