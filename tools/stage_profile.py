@@ -1,7 +1,7 @@
 """Where a sample's time goes in the single-bounce pipeline on the bench scene (the 512²
 Gaussian heightfield of ``microsim bench``, aluminium, θi = 30°, 2²² rays, 1 thread): each
-stage of ``simulate`` timed by wrapping it (best of three runs), the fused walk-and-look-up
-kernel split by timing its two halves alone on one chunk, the origins' uniform numbers (the
+stage of ``simulate`` timed by wrapping it (best of three runs), the one pass of origins,
+walk and look-ups split by timing its parts alone on one chunk, the origins' uniform numbers (the
 compiled PCG64 against NumPy's generator), what the per-facet beam test clears
 and costs (``engine.beam``), and what the masking rays still walked do (how many escape, how
 far they run). docs/performance.md quotes it.
@@ -28,13 +28,15 @@ from microsim.sim import (
 )
 from microsim.sim.engine import primary, segments
 from microsim.sim.masking_rays import MaskingRays, segment_geometry
-from microsim.sim.streams import chunk_origins
+from microsim.sim.streams import chunk_origins, stratified_draw
 from microsim.vectors import spherical_deg
 
 THETA = 30.0
 STAGES = {
-    "ray origins": (paths, "chunk_origins"),
-    "primary walk, look-ups, masking starts, horizon test": (ray_columns, "tabled_masking_rays"),
+    "ray origins, primary walk, look-ups, masking starts, horizon test (one pass)": (
+        paths,
+        "drawn_masking_rays",
+    ),
     "masking rays walked (grid or Embree)": (MaskingRays, "trace"),
     "tallies": (tallies, "split_tallies"),
 }
@@ -73,9 +75,14 @@ def stage_times(surface, rays: int) -> tuple[float, dict]:
 
 
 def fused_split(tracer, table, wi) -> dict:
-    """ns per ray of the fused kernel (``primary.cast_tabled_primary``) on 16 blocks of the
-    stratified rays, of the grid walk alone and of the look-ups alone on its results."""
-    x, _ = chunk_origins(tracer, 2**22, range(16), (0, 0, 0), False)
+    """ns per ray on 16 blocks of the stratified rays: the pass ``simulate`` takes (origins
+    drawn block by block in the walk's pass, ``ray_columns.drawn_masking_rays``), the origins
+    drawn as columns (``chunk_origins``) then the fused walk and look-ups
+    (``primary.cast_tabled_primary``) on them, each of those two alone, the grid walk alone and
+    the look-ups alone on its results."""
+    key, blocks = (0, 0, 0), range(16)
+    draw = stratified_draw(tracer, 2**22, blocks, key)
+    x, _ = chunk_origins(tracer, 2**22, blocks, key, False)
     x = [c.copy() for c in x]
     n = len(x[0])
     down = [float(-c) for c in wi]
@@ -88,8 +95,19 @@ def fused_split(tracer, table, wi) -> dict:
     hs, prim, p = tracer.cast_falling(x, down)
     hs, prim, p = hs.copy(), prim.copy(), [c.copy() for c in p]
     walk = segments.WalkResult(hs, prim, *p)
+
+    def columns():
+        return chunk_origins(tracer, 2**22, blocks, key, False)
+
     calls = {
-        "fused": lambda: primary.cast_tabled_primary(
+        "origins drawn in the pass, walk, look-ups": lambda: ray_columns.drawn_masking_rays(
+            tracer, table, wi, draw
+        ),
+        "origin columns, then walk and look-ups": lambda: ray_columns.tabled_masking_rays(
+            tracer, table, wi, columns()[0]
+        ),
+        "origin columns alone": columns,
+        "walk and look-ups on the columns alone": lambda: primary.cast_tabled_primary(
             tuple(x),
             tuple(down),
             grid,
