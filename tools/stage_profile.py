@@ -1,6 +1,7 @@
 """Where a sample's time goes in the single-bounce pipeline on the bench scene (the 512²
 Gaussian heightfield of ``microsim bench``, aluminium, θi = 30°, 2²² rays, 1 thread): each
-stage of ``simulate`` timed by wrapping it (best of three runs), the one pass of origins,
+stage of ``simulate`` timed by wrapping it (best of three runs), how much faster it runs with
+the origins drawn in the walk's pass than drawn as columns first, the one pass of origins,
 walk and look-ups split by timing its parts alone on one chunk, the origins' uniform numbers (the
 compiled PCG64 against NumPy's generator), what the per-facet beam test clears
 and costs (``engine.beam``), and what the masking rays still walked do (how many escape, how
@@ -72,6 +73,30 @@ def stage_times(surface, rays: int) -> tuple[float, dict]:
     total, spent = best
     per = {label: spent[label] / rays * 1e9 for label in STAGES}
     return total / rays * 1e9, per
+
+
+def drawn_against_columns(surface, rounds: int = 40) -> dict:
+    """How much faster ``simulate`` runs (1 thread, 2²² rays) with the origins drawn in the
+    walk's pass, as it does, than with ``paths.drawn_masking_rays`` declined, so that every
+    chunk's origins are drawn as columns first (the same bits): per round one call each way,
+    in alternating order, the ratio of their times; the median and quartiles over
+    ``rounds`` (paired rounds see the same turn of a shared host)."""
+    drawn = paths.drawn_masking_rays
+    ways = {"drawn": drawn, "columns": lambda *a: None}
+    ratios = []
+    try:
+        for r in range(rounds):
+            took = {}
+            for label in ("drawn", "columns") if r % 2 else ("columns", "drawn"):
+                paths.drawn_masking_rays = ways[label]
+                t0 = time.perf_counter()
+                simulate(surface, "aluminium", THETA, rays=2**22, bins=_bins(), threads=1)
+                took[label] = time.perf_counter() - t0
+            ratios.append(took["columns"] / took["drawn"])
+    finally:
+        paths.drawn_masking_rays = drawn
+    q1, median, q3 = np.quantile(ratios, [0.25, 0.5, 0.75])
+    return {"median": median, "lower quartile": q1, "upper quartile": q3, "rounds": rounds}
 
 
 def fused_split(tracer, table, wi) -> dict:
@@ -212,6 +237,9 @@ def main() -> None:
     for label, ns in per.items():
         print(f"  {label}: {ns:.1f} ns")
     print(f"  the rest (thread pool, per-call set-up): {total - sum(per.values()):.1f} ns")
+    print("speed-up of drawing the origins in the walk's pass (time as columns / drawn):")
+    for label, value in drawn_against_columns(surface).items():
+        print(f"  {label}: {value:.3f}" if label != "rounds" else f"  {label}: {value}")
     print("the origins' uniform numbers (2 per ray), ns each:")
     for label, ns in uniform_numbers().items():
         print(f"  {label}: {ns:.2f}")
