@@ -19,6 +19,7 @@ from microsim.sim import (
     Tracer,
     facet_tables,
     masking_rays,
+    paths,
     ray_columns,
     simulate,
     tracer_cache,
@@ -288,8 +289,7 @@ def test_origins_drawn_in_the_walks_pass_give_the_bits_of_drawn_columns(theta, p
     """``ray_columns.drawn_masking_rays`` (a chunk's stratified origins drawn block by block in
     the walk's own pass) writes exactly what ``streams.chunk_origins`` followed by
     ``tabled_masking_rays`` writes, on chunks of whole blocks and on a run's short last block;
-    a draw with a start outside the tile is refused (None), and the path then traces the
-    chunk from its columns."""
+    a draw with a start outside the tile is refused (None)."""
     from microsim.analytic.fresnel import resolve_material
     from microsim.sim import streams
 
@@ -310,6 +310,24 @@ def test_origins_drawn_in_the_walks_pass_give_the_bits_of_drawn_columns(theta, p
         np.testing.assert_array_equal(a, b)
     outside = draw._replace(hx=draw.hx / 2)  # most starts now outside the (shrunk) tile
     assert ray_columns.drawn_masking_rays(tracer, table, wi, outside) is None
+
+
+def test_the_facet_table_path_gives_the_same_bits_when_it_draws_the_origins_as_columns(
+    monkeypatch,
+):
+    """``paths.FacetTablePath.follow`` traces a chunk from its origin columns where the drawn
+    pass declines it (a start outside the tile): the same outcome as the drawn pass."""
+    from microsim.analytic.fresnel import resolve_material
+
+    tracer = Tracer(_rough(seed=7), grid=True)
+    wi, al = spherical_deg(40.0, 20.0), resolve_material("aluminium")
+    bins = Bins(18, 12)
+    incidence = paths.Incidence(tracer, wi, 20.0, bins, al, 3 * BLOCK + 7, (1, 0, 0))
+    path = paths.FacetTablePath(incidence, facet_tables.facet_table(tracer, wi, al, bins, 20.0))
+    drawn = [a.copy() for a in path.follow(range(1, 4))]
+    monkeypatch.setattr(paths, "drawn_masking_rays", lambda *a: None)  # declined
+    for a, b in zip(drawn, path.follow(range(1, 4))):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.parametrize("theta, phi", [(0.0, 0.0), (30.0, 0.0), (55.0, 37.0), (70.0, 200.0)])
