@@ -94,6 +94,9 @@ def tabled_masking_rays(
     return TabledMasking(outcome, mask, m)
 
 
+_NO_STARTS = (np.empty(0),) * 3  # ``Tracer.grid_walk``'s starts when a kernel draws its own
+
+
 def drawn_masking_rays(
     tracer: Tracer, table: FacetTable, wi: np.ndarray, draw: StratifiedDraw
 ) -> TabledMasking | None:
@@ -111,9 +114,6 @@ def drawn_masking_rays(
         segment_geometry(tracer), ledger, mask.kernel_args(),
     )  # fmt: skip
     return None if m < 0 else TabledMasking(RayOutcome(*ledger), mask, m)
-
-
-_NO_STARTS = (np.empty(0),) * 3
 
 
 def _tabled_work(table: FacetTable, n: int) -> tuple:
