@@ -64,10 +64,15 @@ _GROOVE_X = WorkArray("groove-x")
 _GROOVE_PSI = WorkArray("groove-psi")
 
 
-@functools.lru_cache(maxsize=64)
-def key_stream(key: tuple) -> tuple:
+def key_stream(key) -> tuple:
     """The PCG64 stream seeded with SeedSequence(``key``), key = (seed, realisation,
-    incidence), as ``pcg64.fill_uniforms`` takes it (``pcg64.stream_of``)."""
+    incidence) (any integers), as ``pcg64.fill_uniforms`` takes it (``pcg64.stream_of``);
+    computed once per key."""
+    return _seeded_stream(tuple(int(k) for k in key))
+
+
+@functools.lru_cache(maxsize=64)
+def _seeded_stream(key: tuple) -> tuple:
     return pcg64.stream_of(np.random.PCG64(np.random.SeedSequence(list(key))).state)
 
 
@@ -79,7 +84,7 @@ def block_uniforms(key, block: int, per_ray: int, out: np.ndarray, skip: int = 0
     whatever the chunking; consecutive blocks' slots follow one another. Bitwise
     ``Generator(PCG64).random`` from there (``pcg64.fill_uniforms``, compiled)."""
     position = block * per_ray * BLOCK + skip
-    pcg64.fill_uniforms(key_stream(tuple(int(k) for k in key)), position, out)
+    pcg64.fill_uniforms(key_stream(key), position, out)
 
 
 def sweep_rows(size: int, lx: float, ly: float) -> int:
@@ -115,7 +120,7 @@ def stratified_draw(tracer: Tracer, n_total: int, blocks, key) -> StratifiedDraw
     lo, n = block_span(n_total, list(blocks))
     lx, ly = tracer.tile
     return StratifiedDraw(
-        key_stream(tuple(int(k) for k in key)),
+        key_stream(key),
         lo,
         n,
         float(n_total),
