@@ -3,11 +3,12 @@ killed, a SIGTERM to the sweep, a FIFO among the task results, duplicate tasks, 
 worker used to find, catalogue scene names that clash with the report's own files, and a
 scene file edited before ``report --resume``.
 
-Through ``microsim.app.cli.main`` in-process (worker processes are forked from the test process,
-so a patched ``sweep.execution.run_task`` runs in them) except the SIGTERM, which needs its own
-process.
+Through ``microsim.app.cli.main`` in-process (a patched ``sweep.execution.run_task`` reaches the
+worker processes, which a fork server starts, by reference: module-level functions only) except the
+SIGTERM, which needs its own process.
 """
 
+import functools
 import json
 import os
 import re
@@ -17,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,21 +38,24 @@ def fast(monkeypatch):
     _fast(monkeypatch)
 
 
-_KILL: dict = {}  # set before the pool forks: which task kills its worker, and how often
-
-
-def _killing_run_task(task, out_dir):
-    """``sweep.run_task``, but the worker running the task ``_KILL["m"]`` SIGKILLs itself
-    (the first time only, unless ``_KILL["always"]``)."""
-    if task.surface["m"] == _KILL["m"]:
+def _killing_run_task(kill: dict, task, out_dir):
+    """``sweep.run_task``, but the worker running the task with ``m == kill["m"]`` SIGKILLs
+    itself (the first time only, unless ``kill["always"]``; ``kill["marker"]`` is the file
+    that says it has)."""
+    if task.surface["m"] == kill["m"]:
         try:
-            os.close(os.open(_KILL["marker"], os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            os.close(os.open(kill["marker"], os.O_CREAT | os.O_EXCL | os.O_WRONLY))
             first = True
         except FileExistsError:
             first = False
-        if first or _KILL["always"]:
+        if first or kill["always"]:
             os.kill(os.getpid(), signal.SIGKILL)
     return _REAL_RUN_TASK(task, out_dir)
+
+
+def _kill_in_task(monkeypatch, **kill) -> None:
+    """Workers run ``_killing_run_task`` with ``kill`` instead of ``sweep.run_task``."""
+    monkeypatch.setattr(sweep.execution, "run_task", functools.partial(_killing_run_task, kill))
 
 
 def _task_records(out):
@@ -60,11 +65,10 @@ def _task_records(out):
 def test_killed_worker_task_is_rerun(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "s.toml").write_text(THREE)
-    _KILL.update(m=0.2, always=False, marker=str(tmp_path / "killed"))
-    monkeypatch.setattr(sweep.execution, "run_task", _killing_run_task)
+    _kill_in_task(monkeypatch, m=0.2, always=False, marker=str(tmp_path / "killed"))
     rc = main(["sweep", "s.toml", "--out", "out", "--workers", "2"])
     err = capsys.readouterr().err
-    assert os.path.exists(_KILL["marker"])
+    assert (tmp_path / "killed").exists()
     assert rc == 0 and "Traceback" not in err, err
     recs = _task_records(tmp_path / "out")
     assert sorted(r["task"]["surface"]["m"] for r in recs.values()) == [0.2, 0.3, 0.4]
@@ -76,8 +80,7 @@ def test_worker_killed_every_time_fails_with_one_line_and_keeps_finished_tasks(
 ):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "s.toml").write_text(THREE)
-    _KILL.update(m=0.4, always=True, marker=str(tmp_path / "killed"))
-    monkeypatch.setattr(sweep.execution, "run_task", _killing_run_task)
+    _kill_in_task(monkeypatch, m=0.4, always=True, marker=str(tmp_path / "killed"))
     rc = main(["sweep", "s.toml", "--out", "out", "--workers", "1"])
     err = capsys.readouterr().err
     assert rc == 1 and "Traceback" not in err, err
@@ -184,29 +187,49 @@ def test_task_errors_are_found_before_any_output_exists(tmp_path, monkeypatch, c
     _nothing_written(tmp_path, inputs)
 
 
-def test_sigterm_to_the_sweep_stops_its_workers(tmp_path):
-    """SIGTERM to the main process only (as `kill PID` sends it): the workers stop too (no
-    process of the sweep's group outlives it), finished tasks are kept complete, no summary,
-    one line saying how to continue, status 143."""
+def _group_ends(pgid: int, within: float) -> bool:
+    """Whether process group ``pgid`` is empty within ``within`` seconds (the fork server
+    that started the workers exits just after the sweep, once its last client is gone)."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < within:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _sweep_with_a_task_done(tmp_path) -> tuple[subprocess.Popen, Path]:
+    """A CLI sweep of six tasks of 10⁶ rays in its own process group, once its first task
+    is done: (the process, the file its stderr goes to)."""
     (tmp_path / "s.toml").write_text(
         THREE.replace("m = [0.2, 0.3, 0.4]", "m = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7]").replace(
             "rays = 20_000", "rays = 1_000_000"
         )
     )
-    out, log = tmp_path / "out", tmp_path / "stderr.txt"
+    log = tmp_path / "stderr.txt"
     argv = [sys.executable, "-m", "microsim.app.cli", "sweep", "s.toml", "--out", "out"]
     with open(log, "w") as err:  # a file, not a pipe: orphaned workers would keep a pipe open
         proc = subprocess.Popen(argv, cwd=tmp_path, stderr=err, start_new_session=True)
+    t0 = time.monotonic()
+    while not re.search(r"\b1/6 done", log.read_text()) and proc.poll() is None:
+        if time.monotonic() - t0 > 120:
+            os.killpg(proc.pid, signal.SIGKILL)
+            pytest.fail(f"no task done in 120 s: {log.read_text()}")
+        time.sleep(0.05)
+    return proc, log
+
+
+def test_sigterm_to_the_sweep_stops_its_workers(tmp_path):
+    """SIGTERM to the main process only (as `kill PID` sends it): the workers stop too (no
+    process of the sweep's group outlives it), finished tasks are kept complete, no summary,
+    one line saying how to continue, status 143."""
+    proc, log = _sweep_with_a_task_done(tmp_path)
     try:
-        t0 = time.monotonic()
-        while not re.search(r"\b1/6 done", log.read_text()) and proc.poll() is None:
-            assert time.monotonic() - t0 < 120, log.read_text()
-            time.sleep(0.05)
         proc.send_signal(signal.SIGTERM)
         rc = proc.wait(timeout=60)
-        time.sleep(0.2)
-        with pytest.raises(ProcessLookupError):
-            os.killpg(proc.pid, 0)  # no worker left in the sweep's process group
+        assert _group_ends(proc.pid, within=10)  # no worker left in the sweep's process group
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -218,9 +241,27 @@ def test_sigterm_to_the_sweep_stops_its_workers(tmp_path):
     assert rc == 143 and "Traceback" not in text, text
     last = text.strip().splitlines()[-1]
     assert "terminated" in last and "rerun" in last, text
-    recs = _task_records(out)
+    recs = _task_records(tmp_path / "out")
     assert 1 <= len(recs) < 6 and all(r["rays"] == 1_000_000 for r in recs.values())
-    assert not (out / "summary.csv").exists()
+    assert not (tmp_path / "out" / "summary.csv").exists()
+
+
+def test_a_sweep_killed_outright_leaves_no_worker_running(tmp_path):
+    """SIGKILL to the main process (the out-of-memory killer, a batch system): it can stop
+    nothing, yet its workers and the fork server that started them end within seconds
+    instead of waiting for tasks forever, and the finished task stays complete."""
+    proc, log = _sweep_with_a_task_done(tmp_path)
+    try:
+        proc.kill()
+        assert proc.wait(timeout=60) == -signal.SIGKILL
+        assert _group_ends(proc.pid, within=10), log.read_text()
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    recs = _task_records(tmp_path / "out")
+    assert 1 <= len(recs) < 6 and all(r["rays"] == 1_000_000 for r in recs.values())
 
 
 # --- microsim report ----------------------------------------------------------------------------

@@ -45,7 +45,8 @@ telling to rerun the same command, exit 130 (143 for SIGTERM). A local worker pr
 dies (SIGKILL, out of memory) has its unfinished tasks run again in a fresh pool; two pools
 in a row breaking before any task finishes is an ``EnvironmentFailure``.
 
-Execution: local worker processes (``concurrent.futures.ProcessPoolExecutor``, ``--workers``),
+Execution: local worker processes (``concurrent.futures.ProcessPoolExecutor``, ``--workers``,
+started by a fork server; a worker ends when its sweep process does),
 or, with ``--scheduler ADDRESS``, the same task function on a Dask distributed cluster
 (``dask.distributed.Client(ADDRESS)``; the cluster's workers must see ``OUT``). Each task
 traces on one thread. One sweep at a time may write to an output directory (a lock file

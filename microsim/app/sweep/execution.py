@@ -3,6 +3,7 @@ interrupts (``SweepInterrupted``) and broken pools; ``run_sweep`` is the entry p
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import signal
 import threading
@@ -122,12 +123,27 @@ def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None]
         todo = rest
 
 
+def _worker_context():
+    """Where local workers come from: a fork server, a fresh single-threaded interpreter that
+    imported this package once. Forking the sweep's own process instead would copy its
+    threads' held locks (a deadlocked child) and its open files (an orphaned child holding a
+    parent's pipes) into every worker; Python 3.14 makes this its default on Linux for the
+    same reasons."""
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload([__name__])
+    return ctx
+
+
 def _local_pool(todo, out: Path, workers: int, collect) -> None:
     """One process pool for ``todo`` (``_local``). On any exception (Ctrl-C included) the
     queued tasks are cancelled, the running ones asked to stop (SIGINT: their simulation
     returns partial and writes nothing), and the exception re-raised once they have; a second
     Ctrl-C kills them."""
-    pool = ProcessPoolExecutor(max_workers=min(int(workers), len(todo)), initializer=worker_init)
+    pool = ProcessPoolExecutor(
+        max_workers=min(int(workers), len(todo)),
+        mp_context=_worker_context(),
+        initializer=worker_init,
+    )
     futures = []
     try:
         futures = [pool.submit(run_task, t, str(out)) for t in todo]

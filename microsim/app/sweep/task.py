@@ -8,9 +8,11 @@ from __future__ import annotations
 import functools
 import json
 import math
+import multiprocessing
 import os
 import signal
 import stat
+import threading
 import time
 from pathlib import Path
 
@@ -74,10 +76,23 @@ _WORKER = {"pool": False, "stop": False}  # in a local worker process: interrupt
 
 def worker_init() -> None:
     """Local worker processes: Ctrl-C between tasks only stops them from starting new ones
-    (inside ``simulate`` it makes the simulation return partial, see ``run_task``)."""
+    (inside ``simulate`` it makes the simulation return partial, see ``run_task``); a worker
+    whose sweep process is gone (SIGKILL, the out-of-memory killer) exits instead of waiting
+    for tasks that will never come."""
     _WORKER.update(pool=True, stop=False)
     signal.signal(signal.SIGINT, lambda signum, frame: _WORKER.update(stop=True))
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the pool terminates broken workers with it
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        threading.Thread(
+            target=_exit_after, args=(parent,), name="exit-with-sweep", daemon=True
+        ).start()
+
+
+def _exit_after(parent) -> None:
+    """Wait for the sweep process ``parent`` to end, then end this worker at once."""
+    parent.join()
+    os._exit(1)
 
 
 def run_task(task: Task, out_dir) -> dict:
