@@ -79,6 +79,29 @@ def pytest_configure(config):
 _WARMED = pytest.StashKey[tuple]()
 
 
+class _FailuresNamedAtOnce:
+    """Under pytest-xdist, each failure is named on the terminal when its report arrives:
+    the summary that names them comes only at the end, which a run stopped by a time limit
+    never reaches."""
+
+    def __init__(self, terminal):
+        self.terminal = terminal
+
+    def pytest_runtest_logreport(self, report):
+        if report.failed:
+            crash = getattr(report.longrepr, "reprcrash", None)
+            why = (crash.message if crash else str(report.longrepr)).strip().splitlines()
+            self.terminal.write_line(f"\nFAILED {report.nodeid}: {why[0] if why else report.when}")
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_sessionstart(session):
+    config = session.config
+    terminal = config.pluginmanager.get_plugin("terminalreporter")
+    if terminal and config.pluginmanager.has_plugin("dsession"):  # the xdist controller
+        config.pluginmanager.register(_FailuresNamedAtOnce(terminal), "failures-named-at-once")
+
+
 def pytest_report_header(config):
     """What ``--warm-kernels`` took (the session's own time does not include it)."""
     if _WARMED in config.stash:
