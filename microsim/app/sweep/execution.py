@@ -273,7 +273,9 @@ def run_sweep(
     line per finished task ("k/N done: <scene params, material, θi> (s)"), and one at the start.
     Ctrl-C or SIGTERM: raises ``SweepInterrupted`` (the workers stopped, finished tasks
     kept, no summary written). Local worker processes that die: their tasks run again
-    (``_local``), or EnvironmentFailure.
+    (``_local``), or EnvironmentFailure. Local workers import the caller's main module (as
+    with Python's forkserver and spawn start methods): a script calling this keeps the call
+    under ``if __name__ == "__main__":``.
     """
     _check_options(workers, connect_timeout)
     check_output_path(Path(out), "--out", spec.path)
