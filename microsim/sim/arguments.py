@@ -43,6 +43,9 @@ MAX_RAYS = 2**48
 which above 2⁴⁸ keeps fewer than 5 bits of the jitter ξ; at ~10⁷ rays/s it is also a year of
 tracing. Memory does not depend on it (rays are drawn and tallied one chunk at a time)."""
 MAX_THREADS = 1024
+CHUNK = 2**16
+"""Rays per thread task unless asked otherwise: each task's work arrays (~200 bytes a ray,
+13 MB) stay small beside the caches and give every thread many tasks to balance."""
 MAX_CHUNK = 2**22
 """Most rays per thread task: every task holds ~200 bytes per ray of work arrays (0.8 GB);
 bounce chains (``simulate(bounces=K)``, K > 1) ~230 bytes per ray more (``bounces.

@@ -44,6 +44,7 @@ from microsim.errors import UsageError
 from microsim.vectors import spherical_deg
 
 from .arguments import (
+    CHUNK,
     MAX_CHUNK,
     MAX_RAYS,
     MAX_THREADS,
@@ -160,7 +161,7 @@ def simulate(
     bins: Bins = Bins(),
     seed: int = 0,
     threads: int | None = None,
-    chunk: int = 2**16,
+    chunk: int = CHUNK,
     masking: str = "traced",
     realisations=None,
     surface_factory: Callable[[int], object] | None = None,
@@ -293,7 +294,7 @@ def simulate_spectral(
     bins: Bins = Bins(),
     seed: int = 0,
     threads: int | None = None,
-    chunk: int = 2**16,
+    chunk: int = CHUNK,
     masking: str = "traced",
     realisations=None,
     surface_factory: Callable[[int], object] | None = None,

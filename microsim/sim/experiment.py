@@ -22,6 +22,7 @@ from microsim.bins import Bins
 from microsim.checks import integer
 
 from .arguments import (
+    CHUNK,
     MAX_CHUNK,
     check_angles,
     check_bins,
@@ -110,7 +111,7 @@ class Execution:
     tasks instead (``sim.cluster``; ``threads`` is then unused)."""
 
     threads: int | None = None
-    chunk: int = 2**16
+    chunk: int = CHUNK
     progress: Callable[[RaysDone], None] | None = None
     cluster: object | None = None
 
