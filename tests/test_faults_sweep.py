@@ -285,6 +285,29 @@ def test_unwritable_out_parent_is_an_environment_failure(tmp_path, monkeypatch, 
     assert list(ro.iterdir()) == []
 
 
+def test_a_temporary_folder_too_deep_for_the_fork_server_is_an_environment_failure(tmp_path):
+    """The fork server's socket lives in TMPDIR, and a socket path has at most ~107 bytes:
+    one line naming the folder and the fix, status 1, nothing written. In its own process:
+    a fork server already running (an earlier test's) would not start again."""
+    sweep = _write_ok(tmp_path)
+    deep = tmp_path / ("t" * 120)
+    deep.mkdir()
+    before = sorted(p.name for p in tmp_path.iterdir())
+    r = subprocess.run(
+        [sys.executable, "-m", "microsim.app.cli", "sweep", str(sweep), "--out", "out"],
+        cwd=tmp_path,
+        env={**os.environ, "TMPDIR": str(deep)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 1 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert lines[0].startswith("microsim: error: ") and "fork server" in lines[0], r.stderr
+    assert str(deep) in lines[0] and "TMPDIR" in lines[0], r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
 def test_concurrent_sweep_to_the_same_out_is_refused(tmp_path, monkeypatch, capsys):
     """While one sweep holds OUT, a second one to the same OUT stops with one line."""
     from microsim import atomic

@@ -4,8 +4,10 @@ interrupts (``SweepInterrupted``) and broken pools; ``run_sweep`` is the entry p
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.forkserver
 import os
 import signal
+import tempfile
 import threading
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -88,8 +90,9 @@ def _sigterm_interrupts():
         signal.signal(signal.SIGTERM, old)
 
 
-def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None]) -> None:
-    """Run ``todo`` in local worker processes; ``collect(record)`` for each finished one.
+def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None], context) -> None:
+    """Run ``todo`` in local worker processes (from ``context``, ``_worker_context``);
+    ``collect(record)`` for each finished one.
 
     A worker process that dies (SIGKILL, the out-of-memory killer) breaks the pool: the tasks
     without a complete result then run again in a fresh pool (``notice`` says so); when two
@@ -103,7 +106,7 @@ def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None]
             finished.add(rec["id"])
 
         try:
-            _local_pool(todo, out, workers, note)
+            _local_pool(todo, out, workers, note, context)
             return
         except BrokenProcessPool:
             pass
@@ -124,24 +127,31 @@ def _local(todo, out: Path, workers: int, collect, notice: Callable[[str], None]
 
 
 def _worker_context():
-    """Where local workers come from: a fork server, a fresh single-threaded interpreter that
-    imported this package once. Forking the sweep's own process instead would copy its
-    threads' held locks (a deadlocked child) and its open files (an orphaned child holding a
-    parent's pipes) into every worker; Python 3.14 makes this its default on Linux for the
-    same reasons."""
+    """Where local workers come from, started now (EnvironmentFailure if it cannot be): a
+    fork server, a fresh single-threaded interpreter that imported this package once.
+    Forking the sweep's own process instead would copy its threads' held locks (a deadlocked
+    child) and its open files (an orphaned child holding a parent's pipes) into every worker;
+    Python 3.14 makes this its default on Linux for the same reasons."""
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload([__name__])
+    try:
+        multiprocessing.forkserver.ensure_running()
+    except OSError as e:  # its socket lives in the temporary folder, e.g. "path too long"
+        raise EnvironmentFailure(
+            f"cannot start the local worker processes' fork server ({e.strerror or e}); its "
+            f"socket lives in {tempfile.gettempdir()}: a shorter or writable TMPDIR fixes it"
+        ) from None
     return ctx
 
 
-def _local_pool(todo, out: Path, workers: int, collect) -> None:
+def _local_pool(todo, out: Path, workers: int, collect, context) -> None:
     """One process pool for ``todo`` (``_local``). On any exception (Ctrl-C included) the
     queued tasks are cancelled, the running ones asked to stop (SIGINT: their simulation
     returns partial and writes nothing), and the exception re-raised once they have; a second
     Ctrl-C kills them."""
     pool = ProcessPoolExecutor(
         max_workers=min(int(workers), len(todo)),
-        mp_context=_worker_context(),
+        mp_context=context,
         initializer=worker_init,
     )
     futures = []
@@ -283,9 +293,11 @@ def run_sweep(
     _check_out(out)
     with ExitStack() as stack:
         received = stack.enter_context(_sigterm_interrupts())
-        client = None
+        client = context = None
         if scheduler is not None:
             client = stack.enter_context(connect(scheduler, float(connect_timeout)))
+        else:  # as the cluster's connection: before anything is written
+            context = _worker_context()
         _open_out(stack, out)
         todo = [t for t in spec.tasks if not is_done(t, out)]
         skipped = [t.id for t in spec.tasks if t not in todo]
@@ -300,7 +312,7 @@ def run_sweep(
 
         try:
             if todo and client is None:
-                _local(todo, out, workers, collect, progress or (lambda line: None))
+                _local(todo, out, workers, collect, progress or (lambda line: None), context)
             elif todo:
                 _dask(todo, out, client, collect)
             paths = write_summary(spec, out)
