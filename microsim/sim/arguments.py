@@ -44,8 +44,8 @@ which above 2⁴⁸ keeps fewer than 5 bits of the jitter ξ; at ~10⁷ rays/s i
 tracing. Memory does not depend on it (rays are drawn and tallied one chunk at a time)."""
 MAX_THREADS = 1024
 CHUNK = 2**16
-"""Rays per thread task unless asked otherwise: each task's work arrays (~200 bytes a ray,
-13 MB) stay small beside the caches and give every thread many tasks to balance."""
+"""Rays per thread task unless asked otherwise: ~13 MB of work arrays per task (~200 bytes a
+ray), and a run of 10⁶ rays splits into 16 tasks, enough to keep every thread busy to its end."""
 MAX_CHUNK = 2**22
 """Most rays per thread task: every task holds ~200 bytes per ray of work arrays (0.8 GB);
 bounce chains (``simulate(bounces=K)``, K > 1) ~230 bytes per ray more (``bounces.
