@@ -30,6 +30,15 @@ them), and numba does not increment and decrement the count of every array a hel
 receives — on the heightfield grid walk, which hands its height arrays to an inlined helper
 per ray, those calls cost a fifth of its time. The few kernels that allocate their per-tile
 scratch (``allocating``) keep the runtime; their per-ray loops index arrays directly.
+
+Compile time (a fresh install, and every test run's warm-up, compiles them all): numba
+compiles a ``compiled`` callee once per distinct tuple of argument types, and a constant
+passed from compiled code is typed as its own literal (``m = 0`` carried through a loop of
+calls compiles the callee for ``Literal[int](0)`` and for ``int64``). Compiled callers
+therefore pass ``int(0)``/``bool(True)`` (plain types), the ``NamedTuple`` their Python
+callers pass, and read-only tables where Python passes read-only ones. ``inlined`` helpers are
+copied into every call site before typing, and numba's copy grows with the square of a
+helper's size: a large helper (the grid walk ``cast_one``) has one call site per kernel.
 """
 
 from __future__ import annotations

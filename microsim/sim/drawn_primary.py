@@ -29,7 +29,7 @@ def cast_drawn_tabled(draw, block, down, grid, ahead, table, hz, geometry, out, 
     u, x, y = np.empty(2 * block), np.empty(block), np.empty(block)
     z = np.full(block, draw.z)
     scratch = primary.tabled_scratch()
-    m = 0
+    m = int(0)  # a plain int, not a literal: one compiled ``tabled_tiles`` (``microsim.jit``)
     for k in range(0, draw.n, block):
         b = draw_block(draw, k, block, u, x, y)
         for q in range(b):

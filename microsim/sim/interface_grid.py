@@ -209,43 +209,43 @@ def _follow_path(
     above, below = (1.0, geometry[1]), (-1.0, walk.cell_min)
     limit, floor = chain
     half = (facets.half_x, facets.half_y)
+    x, y, z = start  # each ray's start: the primary's, then the continuation's
     dx, dy, dz = down
     side = below if sides.from_below else above
-    h, f, px, py, pz = cast_one(
-        start[0], start[1], start[2], dx, dy, dz, primary, geometry, side, geometry[9], NO_STEPS
-    )
-    if use_first and h == HIT and first.flags[f] != FACES_AWAY:
-        fw = first.weight[f]
-        reflect = first.flags[f] == TOTAL_REFLECTION
-        reflect = reflect or path_uniform(roulette.stream, roulette.ray0 + g, 1) < fw
-        k = 0 if reflect else 1
-        loc = first.bin[f, k]
-        if loc != TRACED:  # leaves the relief at once: order 1, on its side
-            ledger.status1[g], ledger.weight1[g] = SINGLE, 1.0
-            if first.flags[f] == TOTAL_REFLECTION:
-                sides.tir[g] |= np.int8(1)
-            # the escape's direction falls if it was reflected from above or refracted
-            # from below, as the primary rises or falls
-            transmitted = end_escape(ledger, sides, 2, g, 1.0, -dz if reflect else dz)
-            ledger.where[g] = _tally_index(binning, transmitted, 1, loc)
-            return
-    x, y, z, w = 0.0, 0.0, 0.0, 1.0  # the continuation's start, set at each interaction
+    terms, cap, w = primary, geometry[9], 1.0
     b = 1
     while True:
+        walks = True  # one call site of the (inlined) walk: it is compiled once
         if b > 1:
             side = below if sides.inside[g] else above
             if rises_clear(dx, dy, side[0] * dz, walk.slope):
                 # surely leaves the relief: away from its side's surface (up above it,
                 # down below it: ``side[0]`` = ±1) more steeply than any facet
                 h, f, px, py, pz = ESCAPED if dz > 0.0 else MISSED, -1, 0.0, 0.0, 0.0
+                walks = False
             elif dz == 0.0:
                 h, f, px, py, pz = UNRESOLVED, -1, 0.0, 0.0, 0.0
+                walks = False
             else:
                 terms = direction_terms(dx, dy, dz, cell)
                 cap = _wrap_cap(dx, dy, dz, walk)
-                h, f, px, py, pz = cast_one(
-                    x, y, z, dx, dy, dz, terms, geometry, side, cap, NO_STEPS
-                )
+        if walks:
+            h, f, px, py, pz = cast_one(x, y, z, dx, dy, dz, terms, geometry, side, cap, NO_STEPS)
+        if b == 1 and use_first and h == HIT and first.flags[f] != FACES_AWAY:
+            fw = first.weight[f]
+            reflect = first.flags[f] == TOTAL_REFLECTION
+            reflect = reflect or path_uniform(roulette.stream, roulette.ray0 + g, 1) < fw
+            k = 0 if reflect else 1
+            loc = first.bin[f, k]
+            if loc != TRACED:  # leaves the relief at once: order 1, on its side
+                ledger.status1[g], ledger.weight1[g] = SINGLE, 1.0
+                if first.flags[f] == TOTAL_REFLECTION:
+                    sides.tir[g] |= np.int8(1)
+                # the escape's direction falls if it was reflected from above or refracted
+                # from below, as the primary rises or falls
+                transmitted = end_escape(ledger, sides, 2, g, 1.0, -dz if reflect else dz)
+                ledger.where[g] = _tally_index(binning, transmitted, 1, loc)
+                return
         d = (dx, dy, dz)
         what, wn, ox, oy, oz, offset, n = interact(
             b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides, ledger

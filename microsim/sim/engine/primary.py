@@ -16,7 +16,7 @@ from ..heightfield_caster import NO_STEPS, cast_columns, cast_falling
 from .codes import DOWNWARD, ESCAPED, HIT, MISSED, RAY_MISSED, RAY_UNRESOLVED, SINGLE
 from .facets import Facets, facet_plane
 from .horizon import CLEAR_MARGIN, horizon_clear
-from .segments import setup_ray
+from .segments import WalkResult, setup_ray
 
 
 class FacetColumns(NamedTuple):
@@ -80,7 +80,7 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
     ``masking`` (the masking rays' arrays, ``masking_rays.MaskingRays.kernel_args``)."""
     tile = np.empty((6, TILE))  # per-ray scratch of one tile: masking starts, directions
     cand = np.empty(TILE, np.bool_)
-    m = 0
+    m = int(0)  # a plain int, not a literal: one compiled ``_tabled_tile`` (``microsim.jit``)
     for t in range(0, len(walk[0]), TILE):
         n = min(TILE, len(walk[0]) - t)
         m = _tabled_tile(walk, t, t, n, table, hz, geometry, out, masking, tile, cand, m)
@@ -94,8 +94,9 @@ def cast_tabled_primary(origins, down, grid, ahead, table, hz, geometry, out, ma
     grid walk (``heightfield_caster.cast_falling`` on ``grid``, ``Tracer.grid_walk``) into
     scratch of one tile: the same bits as the walk into whole columns followed by
     ``tabled_primary``, without writing and reading back five columns of hits."""
+    first, m = int(0), int(0)  # plain ints, not literals: one compiled ``tabled_tiles``
     return tabled_tiles(
-        origins, down, grid, ahead, table, hz, geometry, out, masking, 0, 0, tabled_scratch()
+        origins, down, grid, ahead, table, hz, geometry, out, masking, first, m, tabled_scratch()
     )
 
 
@@ -112,9 +113,10 @@ def tabled_tiles(origins, down, grid, ahead, table, hz, geometry, out, masking, 
     ``first`` … ``first`` + n − 1 of ``out`` and of the masking rays' ``mi``, their masking
     rays from slot ``m`` on (``scratch``: ``tabled_scratch``). Returns the new m."""
     walk, tile, cand = scratch
+    w = int(0)  # a plain int, not a literal: one compiled ``_tabled_tile``
     for t in range(0, len(origins[0]), TILE):
         n = _walk_tile(origins, down, grid, ahead, t, walk)
-        m = _tabled_tile(walk, 0, first + t, n, table, hz, geometry, out, masking, tile, cand, m)
+        m = _tabled_tile(walk, w, first + t, n, table, hz, geometry, out, masking, tile, cand, m)
     return m
 
 
@@ -122,7 +124,7 @@ def tabled_tiles(origins, down, grid, ahead, table, hz, geometry, out, masking, 
 def _tile_walk():
     """The walk results of one tile (``segments.WalkResult``: hs, prim, px, py, pz)."""
     hits = np.empty((3, TILE))
-    return np.empty(TILE, np.int8), np.empty(TILE, np.int32), hits[0], hits[1], hits[2]
+    return WalkResult(np.empty(TILE, np.int8), np.empty(TILE, np.int32), hits[0], hits[1], hits[2])
 
 
 @compiled
@@ -132,7 +134,10 @@ def _walk_tile(origins, down, grid, ahead, t, walk):
     x, y, z = origins
     n = min(TILE, len(x) - t)
     e = t + n
-    cast_falling(x[t:e], y[t:e], z[t:e], down[0], down[1], down[2], grid, ahead, *walk)
+    status, prim, px, py, pz = walk
+    cast_falling(
+        x[t:e], y[t:e], z[t:e], down[0], down[1], down[2], grid, ahead, status, prim, px, py, pz
+    )
     return n
 
 
@@ -190,7 +195,7 @@ def traced_primary(
     tile = np.empty((11, TILE))  # per-ray scratch of one tile
     cand = np.empty(TILE, np.bool_)
     rules = (trace_masking, CLEAR_MARGIN * clear_slope, hz, groove, geometry)
-    m = 0
+    m = int(0)  # a plain int, not a literal: one compiled ``_traced_tile`` (``microsim.jit``)
     for t in range(0, len(walk[0]), TILE):
         n = min(TILE, len(walk[0]) - t)
         m = _traced_tile(walk, t, t, n, incident, facets, rules, out, masking, tile, cand, m)
@@ -220,15 +225,18 @@ def cast_traced_primary(
     walk = _tile_walk()
     esc = np.empty(TILE, np.int8)
     no_hits = (np.empty(0, np.int32), np.empty(0), np.empty(0), np.empty(0))
-    rules = (True, CLEAR_MARGIN * clear_slope, hz, groove, geometry)
+    # plain ints and bools, not literals, and the walk's own tuple type: the callees are
+    # compiled once for these calls and for those from Python (``microsim.jit``)
+    yes, no, zero = bool(True), bool(False), int(0)
+    rules = (yes, CLEAR_MARGIN * clear_slope, hz, groove, geometry)
     status = out[0]
     for t in range(0, len(origins[0]), TILE):
         n = _walk_tile(origins, down, grid, NO_STEPS, t, walk)
-        m = _traced_tile(walk, 0, t, n, incident, facets, rules, out, masking, tile, cand, 0)
+        m = _traced_tile(walk, zero, t, n, incident, facets, rules, out, masking, tile, cand, zero)
         mi, sx, sy, sz, mdx, mdy, mdz = masking[:7]
         cast_columns(
-            sx[:m], sy[:m], sz[:m], mdx[:m], mdy[:m], mdz[:m], False, grid, cell_min, grid[9],
-            True, (esc[:m], *no_hits),
+            sx[:m], sy[:m], sz[:m], mdx[:m], mdy[:m], mdz[:m], no, grid, cell_min, grid[9],
+            yes, WalkResult(esc[:m], *no_hits),
         )  # fmt: skip
         apply_escape(status, mi[:m], esc[:m], escape)
 
