@@ -20,7 +20,7 @@ from .engine.facets import Facets
 from .heightfield_caster import NO_STEPS, steps_over
 from .ledger import MASKED, SINGLE
 from .ray_bins import locate_single
-from .scratch import WorkColumns
+from .scratch import WorkArray, WorkColumns
 from .tracer import Tracer
 
 __all__ = [
@@ -33,7 +33,8 @@ __all__ = [
     "uses_facet_table",
 ]
 
-_TABLE_WO = WorkColumns("table-wo")  # this thread's work array (``scratch``)
+_TABLE_WO = WorkColumns("table-wo")  # this thread's work arrays (``scratch``)
+_TABLE_BIN = WorkArray("table-bin", np.int64)
 
 
 @dataclass(frozen=True)
@@ -193,8 +194,10 @@ def _build_facet_table(tracer, wi, ior, bins, phi_i, pool, parts) -> FacetTable:
             wo32[part],
         )
         rising = np.where(wo[2] > 0.0, SINGLE, MASKED).astype(np.int8)  # the others: −1
-        where[part] = -1
-        locate_single(bins, rising, wo, phi_i, None, where[part])
+        found = _TABLE_BIN(part.stop - part.start)  # int64, as the rays' bins: one kernel
+        found.fill(-1)
+        locate_single(bins, rising, wo, phi_i, None, found)
+        where[part] = found
         clear[part] = steep_facets(tracer, code[part], wo32[part])  # part by part: less memory
 
     pieces = max(1, int(parts)) * max(1, -(-f // (max(1, int(parts)) * PIECE_FACETS)))
