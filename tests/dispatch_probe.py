@@ -10,7 +10,8 @@ depend on the CPU dispatch.
 
 Usage: python dispatch_probe.py INPUT.npz OUTPUT.npz (INPUT: directions ``wo``, ``psi``,
 ``status``, incident azimuth ``phi_i``, V-groove ``grooves`` vertices, ``heightfield_path``).
-OUTPUT also records what this process ran on (``numpy_avx512``, ``numba_cpu``).
+OUTPUT also records what this process ran on (``numpy_avx512``, ``numba_cpu``) and the
+kernels it compiled for more than one tuple of argument types (``several_signatures``).
 
 ``make test`` runs this script twice before its workers start (``--warm-kernels``,
 tests/conftest.py): natively, which compiles the kernels once into numba's cache for both
@@ -158,7 +159,28 @@ def probe(inputs: dict) -> dict:
     return out
 
 
+def several_signatures() -> list[str]:
+    """The microsim kernels this process compiled (or loaded) for more than one tuple of
+    argument types: each such tuple is compiled anew on an empty cache (``microsim.jit``)."""
+    from numba.core.registry import CPUDispatcher
+
+    kernels = {
+        id(v): v
+        for name, module in list(sys.modules.items())
+        if name.split(".")[0] == "microsim"
+        for v in vars(module).values()
+        if isinstance(v, CPUDispatcher)
+    }
+    return sorted(
+        f"{k.py_func.__module__}.{k.py_func.__qualname__}"
+        for k in kernels.values()
+        if len(k.signatures) > 1
+    )
+
+
 if __name__ == "__main__":
     with np.load(sys.argv[1]) as f:
         inputs = dict(f)
-    np.savez(sys.argv[2], **probe(inputs))
+    out = probe(inputs)
+    out["several_signatures"] = np.array(several_signatures(), dtype=str)  # a fresh process
+    np.savez(sys.argv[2], **out)

@@ -82,6 +82,25 @@ def test_bins_and_tallies_do_not_depend_on_the_cpu_dispatch(tmp_path):
     assert native["file-glass-btdf"].sum() > 0
 
 
+def test_the_probed_kernels_are_compiled_once_each(tmp_path):
+    """Every microsim kernel the dispatch probe runs (in a process of its own: the pinned
+    probe of make test's warm-up, else one started here) gets one tuple of argument types, so
+    a fresh cache compiles it once: a literal constant, a plain tuple for a NamedTuple or a
+    writable array for a read-only one passed from compiled code would compile it again
+    (``microsim.jit``)."""
+    ran = dispatch_probe.prepared()
+    if ran is None:
+        inputs, out = dispatch_probe.write_inputs(tmp_path), tmp_path / "native.npz"
+        proc = dispatch_probe.start(inputs, out, pinned=False)
+        stderr = proc.communicate(timeout=600)[1]
+        assert proc.returncode == 0, stderr
+    else:
+        out = ran[1]
+    with np.load(out) as f:
+        several = [str(name) for name in f["several_signatures"]]
+    assert not several, f"compiled for more than one tuple of argument types: {several}"
+
+
 def _specular_scenes():
     from microsim.app.scene import CATALOGUE, load_scene
 
