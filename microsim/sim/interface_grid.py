@@ -179,91 +179,82 @@ def grid_interface_paths(
     ``facets``: ``bounce_kernels.FacetPlanes``; ``interface``, ``roulette``: as
     ``dielectric_kernels.interact``; ``binning``: ``FoldedBinning``; ``tables``: (use_first,
     first), whether the ``facet_tables.InterfaceTable`` ``first`` of the primary direction
-    ends the paths that leave the relief at once (with the values ``interact`` gives them)."""
+    ends the paths that leave the relief at once (with the values ``interact`` gives them).
+
+    One loop, not a helper per path: numba copies an inlined helper into its caller before
+    typing, at a cost that grows with the square of its size (``microsim.jit``)."""
     block, sums, tir_col = tally
     outcome = (ledger.status1, ledger.weight1, ledger.term, ledger.wterm, ledger.where, sides.tir)
-    primary = direction_terms(down[0], down[1], down[2], walk.geometry[4])
-    n = len(xs)
-    j = 0
-    sums.offsets[0] = 0
-    for b in range((n + block - 1) // block):
-        lo, hi = b * block, min(n, (b + 1) * block)
-        for g in range(lo, hi):
-            start = (xs[g], ys[g], zs[g])
-            _follow_path(g, start, down, primary, walk, chain, facets, interface, roulette,
-                         sides, ledger, binning, tables)  # fmt: skip
-            j = tally_path(g, g - lo, b, j, outcome, sums, tir_col)
-        close_block(b, j, sums)
-
-
-@vector_inlined
-def _follow_path(
-    g, start, down, primary, walk, chain, facets, interface, roulette, sides, ledger, binning,
-    tables,
-):  # fmt: skip
-    """Path ``g`` of ``grid_interface_paths`` from ``start`` along ``down`` (its
-    ``direction_terms``: ``primary``), followed to its end."""
     use_first, first = tables
     geometry = walk.geometry
     cell = geometry[4]
     above, below = (1.0, geometry[1]), (-1.0, walk.cell_min)
     limit, floor = chain
     half = (facets.half_x, facets.half_y)
-    x, y, z = start  # each ray's start: the primary's, then the continuation's
-    dx, dy, dz = down
-    side = below if sides.from_below else above
-    terms, cap, w = primary, geometry[9], 1.0
-    b = 1
-    while True:
-        walks = True  # one call site of the (inlined) walk: it is compiled once
-        if b > 1:
-            side = below if sides.inside[g] else above
-            if rises_clear(dx, dy, side[0] * dz, walk.slope):
-                # surely leaves the relief: away from its side's surface (up above it,
-                # down below it: ``side[0]`` = ±1) more steeply than any facet
-                h, f, px, py, pz = ESCAPED if dz > 0.0 else MISSED, -1, 0.0, 0.0, 0.0
-                walks = False
-            elif dz == 0.0:
-                h, f, px, py, pz = UNRESOLVED, -1, 0.0, 0.0, 0.0
-                walks = False
-            else:
-                terms = direction_terms(dx, dy, dz, cell)
-                cap = _wrap_cap(dx, dy, dz, walk)
-        if walks:
-            h, f, px, py, pz = cast_one(x, y, z, dx, dy, dz, terms, geometry, side, cap, NO_STEPS)
-        if b == 1 and use_first and h == HIT and first.flags[f] != FACES_AWAY:
-            fw = first.weight[f]
-            reflect = first.flags[f] == TOTAL_REFLECTION
-            reflect = reflect or path_uniform(roulette.stream, roulette.ray0 + g, 1) < fw
-            k = 0 if reflect else 1
-            loc = first.bin[f, k]
-            if loc != TRACED:  # leaves the relief at once: order 1, on its side
-                ledger.status1[g], ledger.weight1[g] = SINGLE, 1.0
-                if first.flags[f] == TOTAL_REFLECTION:
-                    sides.tir[g] |= np.int8(1)
-                # the escape's direction falls if it was reflected from above or refracted
-                # from below, as the primary rises or falls
-                transmitted = end_escape(ledger, sides, 2, g, 1.0, -dz if reflect else dz)
-                ledger.where[g] = _tally_index(binning, transmitted, 1, loc)
-                return
-        d = (dx, dy, dz)
-        what, wn, ox, oy, oz, offset, n = interact(
-            b, limit, floor, g, w, h, f, d, facets, interface, roulette, sides, ledger
-        )
-        if what == ESCAPES:
-            transmitted = end_escape(ledger, sides, b, g, w, dz)
-            loc = locate_folded(
-                dx, dy, abs(dz), binning.ex, binning.ey, binning.phi_deg,
-                binning.n_theta, binning.edges, binning.scales,
-            )  # fmt: skip
-            ledger.where[g] = _tally_index(binning, transmitted, b - 1, loc)
-            return
-        if what != CONTINUES:
-            return
-        x, y, z = next_start((px, py, pz), n, offset, half)
-        dx, dy, dz = ox, oy, oz
-        w = wn
-        b += 1
+    primary = direction_terms(down[0], down[1], down[2], cell)
+    j = 0
+    sums.offsets[0] = 0
+    for b in range((len(xs) + block - 1) // block):
+        lo, hi = b * block, min(len(xs), (b + 1) * block)
+        for g in range(lo, hi):
+            x, y, z = xs[g], ys[g], zs[g]  # each ray's start: the primary's, then the next's
+            dx, dy, dz = down
+            side = below if sides.from_below else above
+            terms, cap, w = primary, geometry[9], 1.0
+            order = 1
+            while True:  # path g's rays, to its end
+                walks = True  # one call site of the (inlined) walk: it is compiled once
+                if order > 1:
+                    side = below if sides.inside[g] else above
+                    if rises_clear(dx, dy, side[0] * dz, walk.slope):
+                        # surely leaves the relief: away from its side's surface (up above
+                        # it, down below it: ``side[0]`` = ±1) more steeply than any facet
+                        h, f, px, py, pz = ESCAPED if dz > 0.0 else MISSED, -1, 0.0, 0.0, 0.0
+                        walks = False
+                    elif dz == 0.0:
+                        h, f, px, py, pz = UNRESOLVED, -1, 0.0, 0.0, 0.0
+                        walks = False
+                    else:
+                        terms = direction_terms(dx, dy, dz, cell)
+                        cap = _wrap_cap(dx, dy, dz, walk)
+                if walks:
+                    h, f, px, py, pz = cast_one(
+                        x, y, z, dx, dy, dz, terms, geometry, side, cap, NO_STEPS
+                    )
+                if order == 1 and use_first and h == HIT and first.flags[f] != FACES_AWAY:
+                    fw = first.weight[f]
+                    reflect = first.flags[f] == TOTAL_REFLECTION
+                    reflect = reflect or path_uniform(roulette.stream, roulette.ray0 + g, 1) < fw
+                    loc = first.bin[f, 0 if reflect else 1]
+                    if loc != TRACED:  # leaves the relief at once: order 1, on its side
+                        ledger.status1[g], ledger.weight1[g] = SINGLE, 1.0
+                        if first.flags[f] == TOTAL_REFLECTION:
+                            sides.tir[g] |= np.int8(1)
+                        # the escape's direction falls if it was reflected from above or
+                        # refracted from below, as the primary rises or falls
+                        transmitted = end_escape(ledger, sides, 2, g, 1.0, -dz if reflect else dz)
+                        ledger.where[g] = _tally_index(binning, transmitted, 1, loc)
+                        break
+                what, wn, ox, oy, oz, offset, normal = interact(
+                    order, limit, floor, g, w, h, f, (dx, dy, dz), facets, interface, roulette,
+                    sides, ledger,
+                )  # fmt: skip
+                if what == ESCAPES:
+                    transmitted = end_escape(ledger, sides, order, g, w, dz)
+                    loc = locate_folded(
+                        dx, dy, abs(dz), binning.ex, binning.ey, binning.phi_deg,
+                        binning.n_theta, binning.edges, binning.scales,
+                    )  # fmt: skip
+                    ledger.where[g] = _tally_index(binning, transmitted, order - 1, loc)
+                    break
+                if what != CONTINUES:
+                    break
+                x, y, z = next_start((px, py, pz), normal, offset, half)
+                dx, dy, dz = ox, oy, oz
+                w = wn
+                order += 1
+            j = tally_path(g, g - lo, b, j, outcome, sums, tir_col)
+        close_block(b, j, sums)
 
 
 def trace_grid_interface(
