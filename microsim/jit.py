@@ -36,16 +36,19 @@ compiles a ``compiled`` callee once per distinct tuple of argument types, and a 
 passed from compiled code is typed as its own literal (``m = 0`` carried through a loop of
 calls compiles the callee for ``Literal[int](0)`` and for ``int64``). Compiled callers
 therefore pass ``int(0)``/``bool(True)`` (plain types), the ``NamedTuple`` their Python
-callers pass, and read-only tables where Python passes read-only ones. ``inlined`` helpers are
-copied into every call site before typing, and numba's copy grows with the square of a
-helper's size: a large helper (the grid walk ``cast_one``) has one call site per kernel.
+callers pass, and read-only arrays (``read_only``) where Python passes read-only ones.
+``inlined`` helpers are copied into every call site before typing, and numba's copy grows
+with the square of a helper's size: a large helper (the grid walk ``cast_one``) has one call
+site per kernel.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from microsim.kernel_cache import cached_njit
 
-__all__ = ["compiled", "inlined", "vectorised", "vector_inlined", "allocating", "TILE"]
+__all__ = ["compiled", "inlined", "vectorised", "vector_inlined", "allocating", "TILE", "read_only"]
 
 compiled = cached_njit(nogil=True, _nrt=False)
 
@@ -65,3 +68,11 @@ TILE = 1024  # rays per tile of a kernel's vectorised passes (its scratch stays 
 
 
 vector_inlined = cached_njit(nogil=True, error_model="numpy", inline="always", _nrt=False)
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a``, for an argument that reaches a kernel both as a frozen and as
+    a writable array: typed read-only every time, the kernel is compiled once (above)."""
+    view = a.view()
+    view.flags.writeable = False
+    return view

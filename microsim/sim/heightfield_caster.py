@@ -44,7 +44,7 @@ _compiled = vectorised
 _inlined = vector_inlined
 
 NO_STEPS = np.zeros((0, 0), dtype=np.int8)
-NO_STEPS.flags.writeable = False  # read-only, as ``steps_over``'s tables: one compiled type
+NO_STEPS.flags.writeable = False  # read-only, as a facet table's ``ahead``: one compiled type
 """``cast_one``'s ``ahead`` without a table of cells surely stepped over."""
 
 
@@ -136,13 +136,11 @@ def steps_over(grid: "HeightfieldGrid", down, zmax: float) -> np.ndarray:
     split of the k steps between the axes is taken), and its horizontal run r at the next
     crossing is at most (k + 1)·c/|û_x| on one axis, (k + 2)·c/(|û_x| + |û_y|) on two (walls
     c/|û| apart, the first within one spacing); it is then at least zmax − r·|d_z|/|d_h|,
-    which must clear the cells' highest vertex by a margin far above rounding. Periodic.
-    Read-only (as ``NO_STEPS``: the kernels that take either are compiled for one type)."""
+    which must clear the cells' highest vertex by a margin far above rounding. Periodic."""
     dx, dy, dz = (float(c) for c in down)
     h = math.hypot(dx, dy)
     ahead = np.zeros(grid.cell_max.shape, dtype=np.int8)
     if not dz < 0.0 or h == 0.0:  # a vertical ray stays in its cell
-        ahead.flags.writeable = False
         return ahead
     ux, uy = abs(dx) / h, abs(dy) / h
     si, sj = int(np.sign(dx)), int(np.sign(dy))
@@ -155,7 +153,6 @@ def steps_over(grid: "HeightfieldGrid", down, zmax: float) -> np.ndarray:
     clear = [zmax - drop - margin for drop in drops]  # the ray's least height there
     for j0 in range(0, ahead.shape[0], STEPS_BAND):  # bands of rows: small temporaries
         _steps_over_band(grid.cell_max, j0, si, sj, clear, ahead)
-    ahead.flags.writeable = False
     return ahead
 
 

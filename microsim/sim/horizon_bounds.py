@@ -11,6 +11,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from microsim.jit import read_only
+
 from .engine import horizon
 from .schedule import in_parts
 
@@ -93,7 +95,7 @@ def horizon_grid(facets, vertices, faces, slopes, rise: float, tile) -> HorizonG
     nx = int(np.clip(round(math.sqrt(cells * lx / ly)), 1, 1024))
     ny = int(np.clip(round(math.sqrt(cells * ly / lx)), 1, 1024))
     x0, y0, cw, ch = -lx / 2, -ly / 2, lx / nx, ly / ny
-    vertices, faces = _read_only(vertices), _read_only(faces)
+    vertices, faces = read_only(vertices), read_only(faces)  # frozen or not: one type
 
     def fill(lo: int, hi: int) -> tuple:
         cmax, cslope = np.full((ny, nx), -np.inf), np.zeros((ny, nx))
@@ -107,11 +109,3 @@ def horizon_grid(facets, vertices, faces, slopes, rise: float, tile) -> HorizonG
         np.maximum(cmax, more_max, out=cmax)
         np.maximum(cslope, more_slope, out=cslope)
     return HorizonGrid(x0, y0, cw, ch, cmax, cslope, 4.0 * facets.eps)
-
-
-def _read_only(a: np.ndarray) -> np.ndarray:
-    """A read-only view of ``a``: a surface's mesh arrays may be frozen or not, and
-    ``fill_horizon`` is then compiled for one type (``microsim.jit``)."""
-    view = a.view()
-    view.flags.writeable = False
-    return view

@@ -16,6 +16,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from microsim.jit import read_only
+
 from .engine import codes, segments
 from .heightfield_caster import cast_columns
 from .scratch import WorkArray, WorkColumns
@@ -49,14 +51,6 @@ _NEXT_DIRECTION = WorkColumns("walk-next-direction", generations=2)
 _NEXT_D32 = WorkArray("walk-next-d32", np.float32, columns=3, generations=2)
 _NO_TFAR = np.empty(0, dtype=np.float32)
 _IDENTITY = np.arange(0, dtype=np.int64)
-
-
-def _read_only(a: np.ndarray) -> np.ndarray:
-    """A read-only view of ``a``: the walk's ``live`` rays are always typed read-only, so that
-    its kernels compile one specialisation, not one per segment kind."""
-    view = a.view()
-    view.flags.writeable = False
-    return view
 
 
 def _identity(n: int) -> np.ndarray:
@@ -154,7 +148,7 @@ def walk_columns(tracer, x, d, d32, occlusion: bool, first=None, wraps=None) -> 
             seg.k, pid, tfar, occlusion, seg.keep, seg.top, rays, falling_shared, seg.d32, box,
             result, nr,
         )  # fmt: skip
-        live, x = _read_only(nr.live[:m]), [nr.x[:m], nr.y[:m], nr.z[:m]]
+        live, x = read_only(nr.live[:m]), [nr.x[:m], nr.y[:m], nr.z[:m]]
         if not shared:
             d, d32 = [nr.dx[:m], nr.dy[:m], nr.dz[:m]], nr.d32[:m]
     if occlusion:
