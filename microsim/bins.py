@@ -189,5 +189,12 @@ class Bins:
         )
         return out
 
+    def kernel_grid(self, phi_i_deg: float = 0.0) -> tuple:
+        """(φi in degrees, taken to (−180°, 180°], n_theta, n_phi, folded, ``phi_edges``):
+        the grid as the compiled ``bin_kernels._bin_of`` takes it, for directions seen from
+        one incidence azimuth."""
+        phi_i = float(_half_turn(phi_i_deg))
+        return (phi_i, int(self.n_theta), int(self.n_phi), bool(self.folded), self.phi_edges)
+
     def to_dict(self) -> dict:
         return {"n_theta": self.n_theta, "n_phi": self.n_phi, "folded": self.folded}

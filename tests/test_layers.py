@@ -165,7 +165,7 @@ SIM_LAYERS = [
         + ("tallies", "spectral", "arguments", "cluster")
         + ("experiment", "identity", "estimator", "auto"),
     ),
-    ("model predictions on the bins", ("predict", "compare")),
+    ("model predictions on the bins", ("facet_sum_kernels", "predict", "compare")),
 ]
 """Sub-layers of ``microsim.sim``, bottom to top: results below the ray engine
 (periodic walk, Embree backends, grid walk), the engine below the estimator (streams, paths,

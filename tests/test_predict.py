@@ -19,15 +19,19 @@ from microsim import vectors
 from microsim.analytic.brdf import torrance_sparrow
 from microsim.analytic.empirical import Empirical
 from microsim.analytic.fresnel import fresnel
-from microsim.analytic.masking import vgroove_g
+from microsim.analytic.masking import masking_from_kind, vgroove_g
 from microsim.analytic.models import TorranceSparrow
 from microsim.analytic.ndf import Beckmann, VonMisesFisher
 from microsim.analytic.shadowing import smith_g2
 from microsim.bins import Bins
+from microsim.sim.facet_sum_kernels import G_NONE, G_VGROOVE, local_terms
+from microsim.sim.fresnel_kernels import fresnel_material
 from microsim.sim.predict import (
     QMC,
     FunctionBRDF,
     Predictor,
+    _reflection_terms,
+    _rotate_z,
     bin_average,
     bin_average_facets,
     bin_average_ts,
@@ -253,6 +257,30 @@ def test_vgroove_azimuth_average_matches_isotropic_ts():
     K = int(keep.sum())
     chi = np.sum(((est.values - ref)[keep] / est.stderr[keep]) ** 2)
     assert stats.chi2.ppf(0.5 * ALPHA, K) < chi < stats.chi2.isf(0.5 * ALPHA, K)
+
+
+@pytest.mark.parametrize("kind", ["vgroove", "none"])
+@pytest.mark.parametrize("copies", [1, 7])
+def test_compiled_facet_terms_are_the_numpy_terms(kind, copies):
+    """The compiled (facet, azimuth) terms of a local G (``facet_sum_kernels.local_terms``)
+    are the NumPy terms of every other G (``_reflection_terms`` and ``Bins.locate`` of the same
+    rotated normals) to rounding, in the same bins."""
+    rng = np.random.default_rng(5)
+    normals = Beckmann(0.4).sample(rng.random(3000), rng.random(3000))
+    u, eta, phi_i = rng.random(len(normals)), 0.769 + 6.08j, 20.0
+    wi, bins = vectors.spherical_deg(50.0, phi_i), Bins(30, 24, folded=False)
+    x, idx = np.empty(len(normals) * copies), np.empty(len(normals) * copies, dtype=np.int64)
+    mode = G_VGROOVE if kind == "vgroove" else G_NONE
+    grid = bins.kernel_grid(phi_i)
+    local_terms(normals, u, copies, wi, fresnel_material(eta), mode, grid, x, idx)
+    h = normals
+    if copies > 1:
+        psi = 2.0 * np.pi * (np.arange(copies)[None, :] + u[:, None]) / copies
+        h = _rotate_z(normals, psi).reshape(-1, 3)
+    wo, expected = _reflection_terms(wi, h, wi[2], eta, masking_from_kind(kind))
+    assert np.count_nonzero(expected) > len(expected) // 2
+    np.testing.assert_allclose(x, expected, rtol=1e-12, atol=1e-12 * expected.max())
+    np.testing.assert_array_equal(idx, bins.locate(wo, phi_i))
 
 
 # --- predict -------------------------------------------------------------------------------------

@@ -37,11 +37,14 @@ import numpy as np
 from microsim import checks as _checks
 from microsim import vectors
 from microsim.analytic.empirical import Empirical
-from microsim.analytic.fresnel import fresnel, resolve_material
-from microsim.analytic.masking import Smith, masking_from_kind
+from microsim.analytic.fresnel import fresnel_real_arithmetic, resolve_material
+from microsim.analytic.masking import NoMasking, Smith, VGroove, masking_from_kind
 from microsim.analytic.models import TorranceSparrow
 from microsim.bins import Bins
 from microsim.errors import UsageError
+
+from .facet_sum_kernels import G_NONE, G_VGROOVE, add_facet_terms, local_terms
+from .fresnel_kernels import fresnel_material
 
 __all__ = [
     "BinAverage",
@@ -278,7 +281,9 @@ def bin_average(
 # --- Torrance–Sparrow by sampling half vectors --------------------------------------------------
 def _reflection_terms(wi, h, cos_i: float, eta, masking):
     """wo = 2(wi·h)h − wi and x = F(wi·h) G(wi, wo, h) (wi·h)⁺/(cos θi h_z) for unit h (N, 3),
-    G of the ``masking`` object.
+    G of the ``masking`` object, F in the estimator's real arithmetic
+    (``fresnel_real_arithmetic``: ``fresnel`` to 1e-12, each value independent of its array
+    position, ~10× faster on the millions of half vectors of a facet sum).
 
     x is what one half vector contributes to ∫_B f cos θo dω_o (see ``bin_average_ts``); it is 0
     where wi·h ≤ 0, wo is below the horizon (G = 0) or h_z = 0.
@@ -290,7 +295,7 @@ def _reflection_terms(wi, h, cos_i: float, eta, masking):
     hz = h[:, 2]
     ok = (wih > 0.0) & (hz > 0.0) & (wo[:, 2] > 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        x = fresnel(np.clip(wih, 0.0, 1.0), eta) * g * wih / (cos_i * hz)
+        x = fresnel_real_arithmetic(np.clip(wih, 0.0, 1.0), eta) * g * wih / (cos_i * hz)
     return wo, np.where(ok, x, 0.0)
 
 
@@ -434,7 +439,10 @@ def _facet_set(normals, weights) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _facet_sum(wi, phi_i, bins, nrm, w, masking, eta, azimuths, seed) -> BinEstimate:
-    """``bin_average_facets`` on a validated incidence and facet set, G of ``masking``."""
+    """``bin_average_facets`` on a validated incidence and facet set, G of ``masking``: the
+    (facet, azimuth) pairs' terms compiled where G depends on a pair's cosines alone
+    (V-groove, none: ``facet_sum_kernels.local_terms``), from NumPy otherwise (Smith's Λ of
+    an NDF); their sums compiled (``facet_sum_kernels.add_facet_terms``)."""
     J = 1 if azimuths is None else int(_checks.in_range("azimuths", azimuths, 1, 2**16))
     if azimuths is not None:
         nrm, w = _merge_tilts(nrm, w)
@@ -442,24 +450,27 @@ def _facet_sum(wi, phi_i, bins, nrm, w, masking, eta, azimuths, seed) -> BinEsti
     rng = np.random.default_rng(seed)
     nb = bins.n_theta * bins.n_phi
     total, s1, s2 = np.zeros(nb), np.zeros(nb), np.zeros(nb)  # Σ a X, Σ a² X, Σ a² X²
+    acc, touched = np.zeros(nb), np.empty(nb, dtype=np.int64)
+    g_mode = {VGroove: G_VGROOVE, NoMasking: G_NONE}.get(type(masking))
+    wi = np.ascontiguousarray(wi, dtype=np.float64)
     per_chunk = max(1, _MAX_POINTS // J)
     for s in range(0, len(nrm), per_chunk):
-        n_k, a_k = nrm[s : s + per_chunk], a[s : s + per_chunk]
-        if J == 1:
-            h = n_k
+        n_k, a_k = nrm[s : s + per_chunk], np.ascontiguousarray(a[s : s + per_chunk])
+        u = rng.random(len(n_k)) if J > 1 else np.zeros(len(n_k))  # azimuth offsets u_k
+        if g_mode is not None:
+            x, idx = np.empty(len(n_k) * J), np.empty(len(n_k) * J, dtype=np.int64)
+            local_terms(
+                np.ascontiguousarray(n_k, dtype=np.float64), u, J, wi, fresnel_material(eta),
+                g_mode, bins.kernel_grid(phi_i), x, idx,
+            )  # fmt: skip
         else:
-            psi = 2.0 * np.pi * (np.arange(J)[None, :] + rng.random((len(n_k), 1))) / J
-            h = _rotate_z(n_k, psi).reshape(-1, 3)
-        wo, x = _reflection_terms(wi, h, wi[2], eta, masking)
-        idx = bins.locate(wo, phi_i)
-        facet = np.repeat(np.arange(len(n_k)), J)
-        keep = (idx >= 0) & (x > 0.0)
-        key, inv = np.unique(facet[keep] * nb + idx[keep], return_inverse=True)
-        xk = np.bincount(inv.ravel(), x[keep] / J)  # X_kB per (facet, bin) pair
-        kb, ak = key % nb, a_k[key // nb]
-        total += np.bincount(kb, ak * xk, minlength=nb)
-        s1 += np.bincount(kb, ak * ak * xk, minlength=nb)
-        s2 += np.bincount(kb, (ak * xk) ** 2, minlength=nb)
+            h = n_k
+            if J > 1:
+                psi = 2.0 * np.pi * (np.arange(J)[None, :] + u[:, None]) / J
+                h = _rotate_z(n_k, psi).reshape(-1, 3)
+            wo, x = _reflection_terms(wi, h, wi[2], eta, masking)
+            idx = bins.locate(wo, phi_i)
+        add_facet_terms(x, idx, J, a_k, acc, touched, total, s1, s2)
     var = np.maximum(s2 - 2.0 * total * s1 + total**2 * np.sum(a * a), 0.0)
     omega = bins.projected_solid_angle().ravel()
     shape = bins.shape
