@@ -120,6 +120,20 @@ def test_albedo_table_matches_qmc(ndf, kind, ior):
     assert abs(table.rho_bar - np.sum(table.rho(np.cos(t)) * np.sin(2 * t)) * np.pi / 8000) < 1e-6
 
 
+def test_a_memoised_albedo_table_is_the_table_built_anew():
+    """``AlbedoTable.of``: equal value-hashed distributions share one table, bitwise the table
+    built anew; a distribution hashed by identity (a tile's histogram) gets its own each time."""
+    args = ("smith", "aluminium", 9, 4, 6)
+    table = an.AlbedoTable.of(an.GGX(0.41), *args)
+    assert an.AlbedoTable.of(an.GGX(0.41), *args) is table
+    assert an.AlbedoTable.of(an.GGX(0.42), *args) is not table
+    fresh = an.AlbedoTable(an.GGX(0.41), *args)
+    assert np.array_equal(table.rho_nodes, fresh.rho_nodes) and table.rho_bar == fresh.rho_bar
+    normals = spherical(np.full(500, 0.3), np.linspace(0.0, 2.0 * np.pi, 500, endpoint=False))
+    histogram = an.Empirical(normals)
+    assert an.AlbedoTable.of(histogram, *args) is not an.AlbedoTable.of(histogram, *args)
+
+
 def test_albedo_of_lambertian_is_exact():
     """Cosine-weighted samples make f cos θ / p constant for f = kd/π: ρ = kd to rounding."""
     rho, se = an.directional_albedo(

@@ -82,7 +82,6 @@ misses"; ``multiple_chart``: energy of orders ≥ 2 against θi with the models'
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -181,18 +180,11 @@ def _check_result(result):
         raise UsageError("result must be a complete run (it is partial: resume it first)")
 
 
-@functools.lru_cache(maxsize=8)
-def _cached_table(ndf, eta) -> AlbedoTable:
-    return AlbedoTable(ndf, shadowing="smith-correlated", material=eta)
-
-
 def _albedo_table(ndf, material) -> AlbedoTable:
     """Albedo table of Torrance–Sparrow with height-correlated Smith G (Mikkelsen 2009, eq. 27)
-    for ``ndf`` and ``material`` (None: F = 1), memoised per (NDF, α, η): a table costs seconds
-    and a catalogue compares several results of one surface."""
+    for ``ndf`` and ``material`` (None: F = 1), memoised (``AlbedoTable.of``)."""
     walk_alpha(ndf)  # a UsageError names the distributions the walk takes
-    eta = resolve_material(material)
-    return _cached_table(ndf, None if eta is None else complex(eta))
+    return AlbedoTable.of(ndf, "smith-correlated", material)
 
 
 def _check_material(result, material) -> None:

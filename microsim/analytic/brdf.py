@@ -11,6 +11,7 @@ the incidence first for an integral over a BRDF — then the model. ``material``
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -414,6 +415,19 @@ class AlbedoTable:
         )
         self.rho_max = float(self.rho_nodes.max())
 
+    @classmethod
+    def of(cls, ndf, *args, **kwargs) -> AlbedoTable:
+        """``AlbedoTable(ndf, *args, **kwargs)``, memoised per process (the last 16) for the
+        frozen, value-hashed distributions (others, such as a tile's histogram, are built each
+        time and not kept alive): a table costs 0.3–1.5 s, and a run's side studies, its
+        scattering-order study, a catalogue's scenes and a sweep worker's tasks ask for the
+        same ones. The shared table is not to be modified."""
+        frozen = getattr(getattr(ndf, "__dataclass_params__", None), "frozen", False)
+        try:
+            return _memoised_table(ndf, *args, **kwargs) if frozen else cls(ndf, *args, **kwargs)
+        except TypeError:  # unhashable: a field the dataclass cannot hash
+            return cls(ndf, *args, **kwargs)
+
     def rho(self, cos_theta):
         """ρ at cos θ (clipped to [0, 1]), dimensionless."""
         c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
@@ -425,6 +439,11 @@ class AlbedoTable:
             f"material={self.material!r}, "
             f"rho_bar={self.rho_bar:.6g})"
         )
+
+
+@functools.lru_cache(maxsize=16)
+def _memoised_table(*args, **kwargs) -> AlbedoTable:
+    return AlbedoTable(*args, **kwargs)
 
 
 def mikkelsen_mix(

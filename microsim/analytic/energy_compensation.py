@@ -139,7 +139,7 @@ def _table(ndf, table, shadowing: str) -> AlbedoTable:
         return table
     if ndf is None:
         raise UsageError("give ndf (to build the F = 1 albedo table) or table (an AlbedoTable)")
-    return AlbedoTable(ndf, shadowing=shadowing, material=None)
+    return AlbedoTable.of(ndf, shadowing, None)
 
 
 class KullaConty:

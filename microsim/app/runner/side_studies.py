@@ -207,9 +207,9 @@ def albedo_models(plan: RunPlan, theta_grid):
     return {
         f"TS {kind}": (
             theta_grid,
-            an.AlbedoTable(ndf, kind, plan.scene.ior, n_theta=n_t, n_grazing=n_g, n_gl_phi=n_p).rho(
-                cos
-            ),
+            an.AlbedoTable.of(
+                ndf, kind, plan.scene.ior, n_theta=n_t, n_grazing=n_g, n_gl_phi=n_p
+            ).rho(cos),
         )
         for kind in ("vgroove", "smith", "smith-correlated")
     }
@@ -240,7 +240,7 @@ def fig6_curves(scenes, effort: Effort, threads: int) -> list[dict]:
                 )
             )
             n_t, n_g, n_p = effort.albedo_nodes
-            table = an.AlbedoTable(
+            table = an.AlbedoTable.of(
                 sc.ndf(), "vgroove", ior, n_theta=n_t, n_grazing=n_g, n_gl_phi=n_p
             )
             curves.append(
