@@ -121,8 +121,8 @@ def test_albedo_table_matches_qmc(ndf, kind, ior):
 
 
 def test_a_memoised_albedo_table_is_the_table_built_anew():
-    """``AlbedoTable.of``: equal value-hashed distributions share one table, bitwise the table
-    built anew; a distribution hashed by identity (a tile's histogram) gets its own each time."""
+    """``AlbedoTable.of``: equal frozen distributions share one table, bitwise the table built
+    anew; distributions hashed by identity (a tile's histogram) are told apart."""
     args = ("smith", "aluminium", 9, 4, 6)
     table = an.AlbedoTable.of(an.GGX(0.41), *args)
     assert an.AlbedoTable.of(an.GGX(0.41), *args) is table
@@ -130,8 +130,9 @@ def test_a_memoised_albedo_table_is_the_table_built_anew():
     fresh = an.AlbedoTable(an.GGX(0.41), *args)
     assert np.array_equal(table.rho_nodes, fresh.rho_nodes) and table.rho_bar == fresh.rho_bar
     normals = spherical(np.full(500, 0.3), np.linspace(0.0, 2.0 * np.pi, 500, endpoint=False))
-    histogram = an.Empirical(normals)
-    assert an.AlbedoTable.of(histogram, *args) is not an.AlbedoTable.of(histogram, *args)
+    histogram, other = an.Empirical(normals), an.Empirical(normals)
+    assert an.AlbedoTable.of(histogram, *args) is an.AlbedoTable.of(histogram, *args)
+    assert an.AlbedoTable.of(other, *args) is not an.AlbedoTable.of(histogram, *args)
 
 
 def test_albedo_of_lambertian_is_exact():

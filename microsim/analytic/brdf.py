@@ -417,15 +417,14 @@ class AlbedoTable:
 
     @classmethod
     def of(cls, ndf, *args, **kwargs) -> AlbedoTable:
-        """``AlbedoTable(ndf, *args, **kwargs)``, memoised per process (the last 16) for the
-        frozen, value-hashed distributions (others, such as a tile's histogram, are built each
-        time and not kept alive): a table costs 0.3–1.5 s, and a run's side studies, its
-        scattering-order study, a catalogue's scenes and a sweep worker's tasks ask for the
-        same ones. The shared table is not to be modified."""
-        frozen = getattr(getattr(ndf, "__dataclass_params__", None), "frozen", False)
+        """``AlbedoTable(ndf, *args, **kwargs)``, memoised per process (the last 16; equal
+        frozen distributions share one, other hashable ones are told apart by identity,
+        unhashable ones are built each time): a table costs 0.3–1.5 s, and a run's side
+        studies, its scattering-order study, a catalogue's scenes and a sweep worker's tasks
+        ask for the same ones. The shared table is not to be modified."""
         try:
-            return _memoised_table(ndf, *args, **kwargs) if frozen else cls(ndf, *args, **kwargs)
-        except TypeError:  # unhashable: a field the dataclass cannot hash
+            return _memoised_table(ndf, *args, **kwargs)
+        except TypeError:  # an argument that cannot be hashed
             return cls(ndf, *args, **kwargs)
 
     def rho(self, cos_theta):
