@@ -148,6 +148,11 @@ def test_run_writes_every_file_and_valid_verdicts(reference):
         assert f["sqrt_e2"] is None or abs(f["sqrt_e2"] ** 2 - f["e2"]) <= 1e-12 + 1e-9 * f["e2"]
     meta = json.loads((out / "meta.json").read_text())
     assert meta["partial"] is False and meta["run"]["quick"] is True
+    timings = json.loads((out / "timings.json").read_text())
+    stages = timings["analysis_stage_seconds"]  # in order, up to the writing stage
+    assert list(stages) == ["models", "fits", "stability sweep", "speed runs", "charts"]
+    assert all(t > 0 for t in stages.values())
+    assert sum(stages.values()) <= timings["analysis_seconds"]
     report = (out / "report.md").read_text()
     links = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", report)
     assert len(links) >= 4

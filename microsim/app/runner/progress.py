@@ -96,7 +96,8 @@ class RayProgress:
 class StageProgress:
     """The analysis after the simulation, one step per stage (models, fits, stability sweep,
     speed runs, [wave optics,] charts, writing), the current one named; ``extra``: stages
-    beyond ``STAGES`` (1 for a scene with ``[wave]``)."""
+    beyond ``STAGES`` (1 for a scene with ``[wave]``). ``seconds``: the wall time of each
+    stage finished so far, by name, in order (``timings.json``)."""
 
     STAGES = ("models", "fits", "stability sweep", "speed runs", "charts", "writing")
 
@@ -114,16 +115,24 @@ class StageProgress:
             bar_format="{desc}: {n_fmt}/{total_fmt} {bar} {postfix} [{elapsed}]",
         )
         self.current, self.count = None, 0
+        self.seconds: dict[str, float] = {}
+        self._started = 0.0
 
-    def stage(self, name: str) -> None:
+    def _finish(self) -> None:
+        now = time.perf_counter()
         if self.current is not None:
             self.bar.update(1)
+            self.seconds[self.current] = now - self._started
+        self._started = now
+
+    def stage(self, name: str) -> None:
+        self._finish()
         self.current, self.count = name, self.count + 1
         self.bar.set_postfix_str(name)
         if self.lines:
             _say(f"{self.desc} analysis: {name} ({self.count}/{self.total})")
 
     def close(self) -> None:
-        if self.current is not None:
-            self.bar.update(1)
+        self._finish()
+        self.current = None
         self.bar.close()

@@ -306,6 +306,7 @@ def _analyse(plan: RunPlan, stage: Path, result, log, progress: bool) -> RunOutc
         doc.update({k: atomic.json_safe(v) for k, v in studies.items() if v is not None})
         atomic.write_json(stage / VERDICTS_FILE, doc)
         timings = timings_document(plan, result, speed, speed_theta)
+        timings["analysis_stage_seconds"] = dict(stages.seconds)  # the stages before writing
         if wave_seconds is not None:
             timings["wave_seconds"] = wave_seconds
         atomic.write_json(stage / TIMINGS_FILE, timings)
