@@ -46,6 +46,7 @@ from scipy.stats import qmc
 from microsim import analytic as an
 from microsim import checks as _checks
 from microsim import vectors
+from microsim.analytic.edwards import DiskPoints
 from microsim.bins import Bins
 from microsim.errors import UsageError
 from microsim.sim.predict import bin_average
@@ -107,12 +108,43 @@ class BoundReached:
 
 @dataclass(frozen=True)
 class FitModel:
-    """A fittable model: ``make(params, ior) -> brdf_fn(wi, wo)`` (sr⁻¹, isotropic)."""
+    """A fittable model: ``make(params, ior) -> brdf_fn(wi, wo)`` (sr⁻¹, isotropic).
+
+    Optional, both or neither: ``prepare(wi, wo)``, the parameter-independent precomputation at
+    the rule's fixed (wi, wo), done once per fit, and ``make_prepared(params, ior) ->
+    fn(prepared)``, the values ``make(params, ior)(wi, wo)`` from it (``at`` uses them)."""
 
     name: str
     params: tuple[Param, ...]
     make: Callable[[Mapping[str, float], object], Callable]
     description: str
+    prepare: Callable[[np.ndarray, np.ndarray], object] | None = None
+    make_prepared: (
+        Callable[[Mapping[str, float], object], Callable[[object], np.ndarray]] | None
+    ) = None
+
+    def __post_init__(self):
+        if (self.prepare is None) != (self.make_prepared is None):
+            raise UsageError(
+                f"FitModel {self.name!r}: prepare and make_prepared must be given together"
+            )
+
+    def at(self, wi, wo) -> Callable[[Mapping[str, float], object], np.ndarray]:
+        """``values(params, ior)``: the model's values (sr⁻¹) at the fixed pairs (wi, wo),
+        with the ``prepare`` part computed once, here."""
+        if self.prepare is None:
+            make = self.make
+
+            def values(params, ior):
+                return make(params, ior)(wi, wo)
+
+            return values
+        prepared, make_prepared = self.prepare(wi, wo), self.make_prepared
+
+        def values_prepared(params, ior):
+            return make_prepared(params, ior)(prepared)
+
+        return values_prepared
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -180,6 +212,16 @@ def _edwards(p, ior):
     return f
 
 
+def _edwards_points(wi, wo) -> DiskPoints:
+    """The parameter-independent part of ``_edwards`` at (wi, wo)."""
+    return DiskPoints.of(wi, wo, "orthogonal")
+
+
+def _edwards_prepared(p, ior):
+    """``_edwards`` as a function of ``_edwards_points``."""
+    return an.EdwardsFit(an.EdwardsParams(**p), "orthogonal").f_at
+
+
 def _edwards_params() -> tuple[Param, ...]:
     """Edwards' box (``EdwardsParams.bounds``): the fractions cd, f0, f90, k are physical at
     both ends, the lump exponents n1, n2 at 0; the radii and the exponents' 1e4 are search
@@ -232,6 +274,8 @@ FIT_MODELS: dict[str, FitModel] = {
         _edwards_params(),
         _edwards,
         "Edwards eq. 36 (data-fitting BRDF, orthogonal projection)",
+        _edwards_points,
+        _edwards_prepared,
     ),
 }
 
@@ -367,8 +411,10 @@ class _Problem:
             np.sqrt(w),
         )
 
-    def residuals(self, brdf_fn: Callable) -> np.ndarray:
-        fbar = np.sum(self.weights * brdf_fn(self.wi, self.wo), axis=-1)
+    def residuals(self, f: np.ndarray) -> np.ndarray:
+        """√weight × (ln(1 + cosθi f̄) − target) (K,) of a model's values ``f`` (K, P) sr⁻¹ at
+        the nodes (wi, wo) (``FitModel.at``)."""
+        fbar = np.sum(self.weights * f, axis=-1)
         return self.sqrt_w * (np.log1p(self.cos_i * np.maximum(fbar, 0.0)) - self.target)
 
 
@@ -476,9 +522,10 @@ def fit_model(
     ior = an.resolve_material(ior)
     problem = _Problem.build(data, order)
     lo, hi = model.bounds_x()
+    evaluate = model.at(problem.wi, problem.wo)
 
     def res(x):
-        return problem.residuals(model.make(model.decode(x), ior))
+        return problem.residuals(evaluate(model.decode(x), ior))
 
     best = None
     for x0 in _starts(model, int(n_starts), seed):

@@ -71,6 +71,7 @@ __all__ = [
     "edwards_empirical",
     "brdf_to_disk_density",
     "EdwardsParams",
+    "DiskPoints",
     "edwards_fit_brdf",
     "sample_edwards",
     "pdf_edwards",
@@ -561,6 +562,43 @@ class EdwardsParams:
         return self.f0 + (self.f90 - self.f0) * np.asarray(schlick(cos_o, 0.0))
 
 
+@dataclass(frozen=True, eq=False)
+class DiskPoints:
+    """The parameter-free part of the data-fitting BRDF at pairs (wi, wo), for evaluating it
+    with many ``EdwardsParams`` (``EdwardsFit.f_at``; a least-squares fit).
+
+    wo          validated outgoing directions (..., 3)
+    uv          disk points of Ĥ under ``projection`` (..., 2) (``incident_to_disk``)
+    factor      J(wi, wo)/cos θi, the BRDF per unit disk density (...), 0 where cos θi ≤ 0
+    cos_o       cos θo (...), clipped to [0, 1]
+    lit         cos θi > 0 (...): where f is non-zero
+    projection  "orthogonal" or "scaling"
+    """
+
+    wo: np.ndarray
+    uv: np.ndarray
+    factor: np.ndarray
+    cos_o: np.ndarray
+    lit: np.ndarray
+    projection: str
+
+    @classmethod
+    def of(cls, wi, wo, projection: str = "orthogonal") -> "DiskPoints":
+        """Validate the directions once and compute the quantities for ``projection``."""
+        projection = _check_projection(projection)
+        wo = _checks.directions("wo", wo, upper=True)
+        wi = _checks.directions("wi", wi)
+        _checks.broadcast({"wi": wi, "wo": wo})
+        return cls(
+            wo,
+            incident_to_disk(wi, wo, projection),
+            _brdf_factor(wi, wo, projection),
+            _cos_o(wo),
+            wi[..., 2] > 0.0,
+            projection,
+        )
+
+
 def edwards_fit_brdf(wi, wo, params: EdwardsParams, projection: str = "orthogonal") -> np.ndarray:
     """Data-fitting BRDF (eq. 36), sr⁻¹.
 
@@ -701,18 +739,21 @@ class EdwardsFit(ModelBase):
     sampler_functions: ClassVar[tuple[str, ...]] = ("sample_edwards", "pdf_edwards")
 
     def f(self, wi, wo):
+        return self.f_at(DiskPoints.of(wi, wo, self.projection))
+
+    def f_at(self, points: DiskPoints) -> np.ndarray:
+        """f (eq. 36) at the pairs (wi, wo) of ``points`` (``DiskPoints.of``), sr⁻¹."""
         params = self.fit_params
-        projection = _check_projection(self.projection)
         if not isinstance(params, EdwardsParams):
             raise UsageError(f"params must be an EdwardsParams, got {type(params).__name__}")
-        wo = _checks.directions("wo", wo, upper=True)
-        wi = _checks.directions("wi", wi)
-        _checks.broadcast({"wi": wi, "wo": wo})
-        F = params.fresnel(_cos_o(wo))
-        spec = params.lumps().pdf(wo, incident_to_disk(wi, wo, projection)) * _brdf_factor(
-            wi, wo, projection
-        )
-        return np.where(wi[..., 2] > 0.0, (1.0 - F) * params.cd / np.pi + F * spec, 0.0)
+        if points.projection != self.projection:
+            raise UsageError(
+                f"points must be of the model's projection {self.projection!r}, "
+                f"got {points.projection!r}"
+            )
+        F = params.fresnel(points.cos_o)
+        spec = params.lumps().pdf(points.wo, points.uv) * points.factor
+        return np.where(points.lit, (1.0 - F) * params.cd / np.pi + F * spec, 0.0)
 
     def sample(self, wo, u1, u2) -> BRDFSample:
         return BRDFSample(*sample_edwards(wo, u1, u2, self.fit_params.lumps(), self.projection))
