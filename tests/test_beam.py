@@ -23,6 +23,7 @@ def _tables(tracer, wi):
     table = facet_tables.facet_table(tracer, wi, resolve_material("aluminium"), Bins(30, 19), 0.0)
     wo = table.wo32.astype(np.float64)
     steep = (table.code == paths.SINGLE) & tracer.surely_escapes(wo[:, 0], wo[:, 1], wo[:, 2])
+    steep.flags.writeable = False  # as a kept table's: the kernels compiled once
     return table, dataclasses.replace(table, clear=steep)
 
 

@@ -390,6 +390,7 @@ def test_cells_surely_stepped_over_give_the_walks_bits(theta, phi):
     tracer = Tracer(heightfield_surface(h, 1 / 48), grid=True)
     down = [float(-c) for c in spherical_deg(theta, phi)]
     ahead = steps_over(tracer.grid, down, tracer.zmax)
+    ahead.flags.writeable = False  # as a kept facet table's: the walk compiled once
     x = _starts(tracer, 4000, seed=int(theta + phi))
     geometry = tracer.grid_walk(x, down)
     outs = []

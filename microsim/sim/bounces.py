@@ -58,6 +58,7 @@ import numpy as np
 
 from microsim.bins import Bins
 from microsim.errors import UsageError
+from microsim.jit import read_only
 
 from . import bounce_kernels, fresnel_kernels, vgroove_kernels
 from .arguments import check_masking_bounces
@@ -321,13 +322,15 @@ def primary_rays(tracer: Tracer, x, wi, psi) -> tuple:
     return tracer.trace_columns(x, d, d32), d, False
 
 
+_NO_WEIGHT, _NO_BIN = read_only(np.zeros(1)), read_only(np.zeros(1, dtype=np.int32))
+
+
 def _first_bounce_table(table: FacetTable | None, n: int) -> bounce_kernels.FirstBounceTable:
     """The first bounce's look-ups for ``n`` rays: ``table``'s per-facet Fresnel weights and
-    bins, or none (placeholders) when ``table`` is None."""
+    bins, or none (read-only placeholders, typed as a kept table's arrays: one compiled
+    ``bounce_step``) when ``table`` is None."""
     if table is None:
-        return bounce_kernels.FirstBounceTable(
-            False, np.zeros(1), np.zeros(1, dtype=np.int32), _BOUNCE_FACET(1)
-        )
+        return bounce_kernels.FirstBounceTable(False, _NO_WEIGHT, _NO_BIN, _BOUNCE_FACET(1))
     return bounce_kernels.FirstBounceTable(True, table.weight, table.bin, _BOUNCE_FACET(n))
 
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from microsim.bin_kernels import bin_scales, locate_folded
 from microsim.bins import Bins
-from microsim.jit import vector_inlined, vectorised
+from microsim.jit import read_only, vector_inlined, vectorised
 
 from .bounce_kernels import FacetPlanes, PathLedger, next_start
 from .bounces import RETRY_WRAPS
@@ -88,9 +88,13 @@ class GridWalk(NamedTuple):
     retry_wraps: int
 
 
-NO_TABLE = InterfaceTable(np.zeros(1), np.zeros(1, dtype=np.int8), np.zeros((1, 2), np.int32))
+NO_TABLE = InterfaceTable(
+    read_only(np.zeros(1)),
+    read_only(np.zeros(1, dtype=np.int8)),
+    read_only(np.zeros((1, 2), np.int32)),
+)
 """The placeholder table of an incidence without one (``grid_interface_paths``'s ``first``
-then comes with ``use`` False)."""
+then comes with ``use`` False); read-only, as a kept table's arrays: one compiled kernel."""
 
 
 class FoldedBinning(NamedTuple):
