@@ -133,18 +133,9 @@ class FitModel:
         """``values(params, ior)``: the model's values (sr⁻¹) at the fixed pairs (wi, wo),
         with the ``prepare`` part computed once, here."""
         if self.prepare is None:
-            make = self.make
-
-            def values(params, ior):
-                return make(params, ior)(wi, wo)
-
-            return values
-        prepared, make_prepared = self.prepare(wi, wo), self.make_prepared
-
-        def values_prepared(params, ior):
-            return make_prepared(params, ior)(prepared)
-
-        return values_prepared
+            return lambda params, ior: self.make(params, ior)(wi, wo)
+        prepared = self.prepare(wi, wo)
+        return lambda params, ior: self.make_prepared(params, ior)(prepared)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -204,12 +195,7 @@ def _low_smooth(p, ior):
 
 
 def _edwards(p, ior):
-    params = an.EdwardsParams(**p)
-
-    def f(wi, wo):
-        return an.edwards_fit_brdf(wi, wo, params, "orthogonal")
-
-    return f
+    return an.EdwardsFit(an.EdwardsParams(**p), "orthogonal").f
 
 
 def _edwards_points(wi, wo) -> DiskPoints:
