@@ -63,7 +63,7 @@ def test_each_size_is_measured_on_both_paths_where_it_can_take_both(monkeypatch)
     across sizes; a table row that would not fit is skipped with the table's own need."""
     probed = []
 
-    def probe(cfg, n, rays):
+    def probe(cfg, n, rays, min_seconds):
         probed.append((n, tuple(rays)))
         path = bench_scale.rays_for(n, rays)[1]
         return bench_scale.ScaleRow(n, 0.1, 0.1, 0.0, 1e6, 300.0, 200.0, 250.0, rays, path)

@@ -729,7 +729,7 @@ def _cmd_scale(args) -> int:
         given = "--rays" if args.rays is not None else "--skip-accuracy"
         raise UsageError(f"{given}: not with --scale (its ray counts are fixed: {bs.RAYS})")
     sizes, rays = (bs.QUICK_SIZES, bs.QUICK_RAYS) if args.quick else (bs.SIZES, bs.RAYS)
-    rows = bs.scale_rows(BenchConfig(), sizes, rays)
+    rows = bs.scale_rows(BenchConfig(), sizes, rays, 0.0 if args.quick else bs.MIN_SECONDS)
     if args.json:
         record = {"machine": asdict(machine()), "rays": list(rays)}
         print(json.dumps({**record, "rows": [asdict(r) for r in rows]}, indent=1))

@@ -7,7 +7,8 @@ at n² points, n in ``SIZES``; the run is ``bench``'s (aluminium, θi = ``BenchC
 its bins, 1 thread). Each size runs in its own process (``_PROBE``): numba's kernels are loaded
 (compiled once per machine) on a 64² tile first, then the surface is built (``build``), traced
 once with one block of rays (``first``: the tracer, its tables and the first rays), and traced
-at ``RAYS`` = (2²⁰, 2²²) rays, best of ``REPEAT`` each: the line through the two gives
+at ``RAYS`` = (2²⁰, 2²²) rays, best of ``REPEAT`` calls each or more (``MIN_SECONDS``): the line
+through the two gives
 ``samples_per_s`` (marginal) and ``fixed_seconds`` (the intercept: what a later call on the same
 surface costs besides its rays). Both counts must take one path (``rays_for``: the facet table,
 or per ray on tiles with more facets than rays), which each row names; a size measured through
@@ -55,8 +56,13 @@ __all__ = [
 SIZES = (512, 1024, 2048, 4096, 8192)
 RAYS = (2**20, 2**22)
 QUICK_SIZES, QUICK_RAYS = (64, 128), (2**15, 2**17)
-"""``--quick``: small tiles and ray counts (seconds; for smoke tests)."""
+"""``--quick``: small tiles and ray counts, each called ``REPEAT`` times (seconds; for smoke
+tests)."""
 REPEAT = 2
+MIN_SECONDS = 1.0
+"""Each size's two counts are called alternately ``REPEAT`` times, and again until the calls
+have taken ``MIN_SECONDS`` per count on average: short calls (a 512² tile per ray, 0.01–0.05 s)
+are repeated dozens of times, so that their best is not one turn of a busy host."""
 BYTES_PER_POINT_GUESS = float(BYTES_PER_GRID_POINT)
 """Peak bytes per grid point assumed for a size before two sizes have been measured: the
 heightfields' own estimate (``surfaces.heightfields.BYTES_PER_GRID_POINT``)."""
@@ -74,7 +80,7 @@ def status_mb(key):
         return next(int(line.split()[1]) for line in fh if line.startswith(key)) / 1024.0
 
 cfg, rays = BenchConfig(**json.loads(sys.argv[1])), json.loads(sys.argv[2])
-repeat = int(sys.argv[3])
+repeat, min_seconds = int(sys.argv[3]), float(sys.argv[4])
 run = dict(bins=_bins(), threads=1)
 small = _surface(replace(cfg, n=64))  # the kernels of the traced path and the facet table's,
 for warm in (BLOCK, 4 * BLOCK):  # rays < and > its 8192 facets (masking rays traced too)
@@ -87,13 +93,14 @@ built = status_mb("VmHWM:")
 t0 = time.perf_counter()
 simulate(surface, "aluminium", cfg.theta_i, rays=BLOCK, **run)
 first = time.perf_counter() - t0
-best, once = {}, []
-for _ in range(repeat):
+best, once, calls = {}, [], 0
+while calls < repeat or sum(once) < min_seconds * len(rays):  # the counts alternating
     for n in rays:
         t0 = time.perf_counter()
         simulate(surface, "aluminium", cfg.theta_i, rays=n, **run)
         once.append(time.perf_counter() - t0)
         best[n] = min(best.get(n, float("inf")), once[-1])
+    calls += 1
 times = {"build": build, "first": first, "seconds": [best[n] for n in rays], "once": once[0]}
 peaks = {"rss_mb": status_mb("VmHWM:"), "build_rss_mb": built, "base_mb": base}
 print(json.dumps({**times, **peaks}))
@@ -171,12 +178,20 @@ def tabled_rays(n: int) -> tuple | None:
     return (facets, 2 * facets) if table_pays(facets, facets) else None
 
 
-def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
+def _probe(cfg: BenchConfig, n: int, rays: tuple, min_seconds: float) -> ScaleRow:
     conf = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(cfg).items()}
     conf["n"] = n
     rays, path = rays_for(n, rays)
     out = subprocess.run(
-        [sys.executable, "-c", _PROBE, json.dumps(conf), json.dumps(list(rays)), str(REPEAT)],
+        [
+            sys.executable,
+            "-c",
+            _PROBE,
+            json.dumps(conf),
+            json.dumps(list(rays)),
+            str(REPEAT),
+            str(min_seconds),
+        ],
         capture_output=True,
         text=True,
     )
@@ -192,21 +207,26 @@ def _probe(cfg: BenchConfig, n: int, rays: tuple) -> ScaleRow:
     return ScaleRow(n, got["build"], got["first"], fixed, rate, *peaks, rays, path, None, set_up)
 
 
-def scale_rows(cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS) -> list[ScaleRow]:
+def scale_rows(
+    cfg: BenchConfig = BenchConfig(), sizes=SIZES, rays=RAYS, min_seconds: float = MIN_SECONDS
+) -> list[ScaleRow]:
     """``ScaleRow`` of each of ``sizes`` (module docstring), smallest first, the marginal rate
-    between the two ray counts ``rays``."""
+    between the two ray counts ``rays``, each called until ``min_seconds`` (``MIN_SECONDS``)."""
     rows = []
     for n in sorted(sizes):
         reason = _does_not_fit(rows, n, tabled=rays_for(n, rays)[1] == PATHS[0])
         if reason:
             rows.append(ScaleRow(n, skipped=reason))
             continue
-        rows.append(_probe(cfg, n, rays))
+        rows.append(_probe(cfg, n, rays, min_seconds))
         if rows[-1].path == PATHS[0] and min(per_ray_rays(n)) >= PER_RAY_MIN:
-            rows.append(_probe(cfg, n, per_ray_rays(n)))  # like with like across sizes
+            rows.append(_probe(cfg, n, per_ray_rays(n), min_seconds))  # like with like
         elif rows[-1].path == PATHS[1] and tabled_rays(n) is not None:
             reason = _does_not_fit(rows, n, tabled=True)
-            rows.append(ScaleRow(n, skipped=reason) if reason else _probe(cfg, n, tabled_rays(n)))
+            table = tabled_rays(n)
+            rows.append(
+                ScaleRow(n, skipped=reason) if reason else _probe(cfg, n, table, min_seconds)
+            )
     return rows
 
 
