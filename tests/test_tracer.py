@@ -267,6 +267,18 @@ def test_skipping_sure_masking_rays_changes_no_result(monkeypatch):
         assert all(np.array_equal(a.ledger[k], b.ledger[k]) for k in a.ledger)
 
 
+def _rays_below_the_rise_bound(tr, cots, seed: int) -> tuple:
+    """(points, normals, directions) of rays leaving 60,000 random points of the tracer's
+    surface above their facets, in random azimuths, with cot θ uniform in ``cots`` × the rise
+    bound."""
+    p, nrm, rng = _surface_points(tr, 60_000, seed=seed)
+    phi = rng.uniform(0, 2 * np.pi, len(p))
+    d = np.column_stack([np.cos(phi), np.sin(phi), tr.rise_bound * rng.uniform(*cots, len(p))])
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    up = np.einsum("ij,ij->i", d, nrm) > 0
+    return p[up], nrm[up], d[up]
+
+
 def test_rays_cleared_by_the_coarse_grid_are_never_blocked():
     """Masking rays of a rough heightfield below the rise bound (cot θ < L) that the coarse
     grid of cell maxima clears (Tracer.clears_horizon) all escape when traced; it clears a
@@ -274,13 +286,7 @@ def test_rays_cleared_by_the_coarse_grid_are_never_blocked():
     from microsim.surfaces import gaussian
 
     tr = Tracer(gaussian(128, 1.0, 2.0, 8.0, seed=7))
-    L = tr.rise_bound
-    p, nrm, rng = _surface_points(tr, 60_000, seed=3)
-    phi = rng.uniform(0, 2 * np.pi, len(p))
-    d = np.column_stack([np.cos(phi), np.sin(phi), L * rng.uniform(0.05, 0.99, len(p))])
-    d /= np.linalg.norm(d, axis=1)[:, None]
-    up = np.einsum("ij,ij->i", d, nrm) > 0
-    p, nrm, d = p[up], nrm[up], d[up]
+    p, nrm, d = _rays_below_the_rise_bound(tr, (0.05, 0.99), seed=3)
     clear = tr.clears_horizon(p + tr.eps * nrm, d)  # the start a masking ray gets
     status = tr.escapes(p, nrm, d)
     assert 0.2 < clear.mean() < 0.99
@@ -289,6 +295,40 @@ def test_rays_cleared_by_the_coarse_grid_are_never_blocked():
     s = gaussian(128, 1.0, 2.0, 8.0, seed=7)
     other = _not_a_heightfield(s)  # the same mesh: nothing is cleared
     assert not Tracer(other).clears_horizon(p + tr.eps * nrm, d).any()
+
+
+def test_rays_cleared_by_the_nearby_slope_bound_are_never_blocked():
+    """The coarse grid's ``nearby`` bound (the steepest facet within ``NEARBY_CELLS`` cells,
+    wrapped) is the window maximum of ``cslope``, at most the tile's rise bound. Masking rays
+    below the tile's bound that it clears alone (the grid's cell maxima and slopes set to inf,
+    so that ``horizon_clear``'s walk over the grid clears nothing) all escape when traced, and
+    they are a good share of them. Its window is what makes it sound: each cell's own slope
+    taken as the bound over the same reach clears rays that are blocked."""
+    from microsim.sim.horizon_bounds import NEARBY_CELLS
+    from microsim.surfaces import gaussian
+
+    tr = Tracer(gaussian(128, 1.0, 2.0, 8.0, seed=7))
+    hz, L = tr.horizon, tr.rise_bound
+    k = NEARBY_CELLS
+    window = np.max(
+        [
+            np.roll(hz.cslope, (a, b), axis=(0, 1))
+            for a in range(-k, k + 1)
+            for b in range(-k, k + 1)
+        ],
+        axis=0,
+    )
+    assert np.array_equal(hz.nearby, window) and hz.nearby.max() <= L
+    assert hz.reach == k * min(hz.cw, hz.ch) and hz.nearby.mean() < 0.8 * L
+    p, nrm, d = _rays_below_the_rise_bound(tr, (0.3, 0.99), seed=4)
+    status = tr.escapes(p, nrm, d)
+    inf = np.full_like(hz.cmax, np.inf)
+    tr.horizon = hz._replace(cmax=inf, cslope=inf)  # only the nearby bound can clear
+    clear = tr.clears_horizon(p + tr.eps * nrm, d)
+    assert np.all(status[clear] == ESCAPED)
+    assert clear.mean() > 0.2
+    tr.horizon = tr.horizon._replace(nearby=hz.cslope)  # wrong: no window, each cell alone
+    assert np.sum(status[tr.clears_horizon(p + tr.eps * nrm, d)] == HIT) > 0
 
 
 @pytest.mark.parametrize("theta", [0.0, 45.0, 75.0, 87.0])

@@ -13,9 +13,11 @@ The grid walk alone (``Tracer.cast_falling``) is timed too: what a ray's first h
 tile grows at a given ray count. Then, on the first chunk, what the masking rays are: the
 share of primaries whose reflection rises less steeply than the tile's steepest facet
 (``Tracer.rise_bound``, printed) and is tested on the coarse grid
-(``engine.horizon.horizon_clear``), of those walked on the grid, of those masked, and of the
-walked ones whose start already fails the coarse grid's first cell (the ray rises less steeply
-than that cell's steepest facet, ``cslope``), and their elevations above the horizon.
+(``engine.horizon.horizon_clear``) and of those the share its first test, the steepest facet
+near the start (``HorizonGrid.nearby``), clears, and what the test costs per ray; of those
+walked on the grid, of those masked, and of the walked ones whose start already fails the
+coarse grid's first cell (the ray rises less steeply than that cell's steepest facet,
+``cslope``), and their elevations above the horizon.
 docs/performance.md quotes it.
 
     .venv/bin/python tools/per_ray_locality.py [n] [rays]      (defaults: 4096 1048576)
@@ -113,6 +115,9 @@ def _masking_rays(tracer, x, down, shared, geometry) -> None:
         wo[2] > CLEAR_MARGIN * tracer.rise_bound * np.hypot(wo[0], wo[1])
     )
     hz = tracer.horizon
+    hits = [c[tested] for c in tracer.cast_falling(x, down)[2]]  # the same walk again
+    nearby = _nearby_clears(tracer, hits, ledger, tested)
+    test_ns = _horizon_ns(tracer, hits, ledger, tested)
     (sx, sy, sz), (dx, dy, dz) = ([c[:k] for c in cols] for cols in (mask.start, mask.d))
     cx = np.floor((sx - hz.x0) / hz.cw).astype(np.int64) % hz.cmax.shape[1]
     cy = np.floor((sy - hz.y0) / hz.ch).astype(np.int64) % hz.cmax.shape[0]
@@ -125,11 +130,40 @@ def _masking_rays(tracer, x, down, shared, geometry) -> None:
     masked = ledger.status[mask.ray[:k]] == MASKED
     print(
         f"  masking rays of {m:,} primaries (slope bound {tracer.rise_bound:.3f}): "
-        f"{tested.mean():.1%} tested on the coarse grid, "
+        f"{tested.mean():.1%} tested on the coarse grid ({test_ns:.0f} ns each; {nearby:.1%} "
+        f"of them cleared by the steepest facet nearby), "
         f"{k / m:.2%} walked, {masked.sum() / m:.2%} masked; of the walked, {first.mean():.1%} "
         f"fail the coarse grid's first cell and {1 - masked.mean():.1%} escape; their "
         f"elevations' 10th, 50th and 90th percentiles {', '.join(deciles)}°"
     )
+
+
+def _nearby_clears(tracer, hits, ledger, tested) -> float:
+    """The share of the ``tested`` primaries' masking rays (from their ``hits``, without the
+    facet lift) that the coarse grid's ``nearby`` bound clears alone: its cell maxima and
+    slopes set to inf, so that ``horizon_clear``'s walk over the grid clears nothing."""
+    hz = tracer.horizon
+    inf = np.full_like(hz.cmax, np.inf)
+    start = np.column_stack(hits)
+    d = np.column_stack([ledger.wox[tested], ledger.woy[tested], ledger.woz[tested]])
+    try:
+        tracer.horizon = hz._replace(cmax=inf, cslope=inf)
+        return float(tracer.clears_horizon(start, d).mean())
+    finally:
+        tracer.horizon = hz
+
+
+def _horizon_ns(tracer, hits, ledger, tested) -> float:
+    """ns per ray of the coarse grid's whole test (``Tracer.clears_horizon``) on the
+    ``tested`` primaries' masking rays from their ``hits``, best of ``ROUNDS`` calls."""
+    start = np.column_stack(hits)
+    d = np.column_stack([ledger.wox[tested], ledger.woy[tested], ledger.woz[tested]])
+    best = np.inf
+    for _ in range(ROUNDS + 1):  # the first compiles or loads the kernel
+        t0 = time.perf_counter()
+        tracer.clears_horizon(start, d)
+        best = min(best, time.perf_counter() - t0)
+    return best / max(len(d), 1) * 1e9
 
 
 def _origins(tracer, rays: int, blocks) -> list:

@@ -1,6 +1,7 @@
 """Masking rays decided without tracing: the steepness test wo_z > slope·|wo_h| against a
 heightfield's Lipschitz bound (``horizon_bounds.rise_bound``) and the coarse-grid horizon test
-(``horizon_clear``, a 2-D DDA over cell maxima and slopes). Tile coordinates."""
+(``horizon_clear``: the same test against the steepest facet near the start, then a 2-D DDA
+over cell maxima and slopes). Tile coordinates."""
 
 from __future__ import annotations
 
@@ -36,23 +37,29 @@ def fill_horizon(facets, vertices, faces, lo, hi, slope, x0, y0, cw, ch, cmax, c
 
 
 @compiled
-def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
+def horizon_clear(x, y, z, dx, dy, dz, hz, zmax):
     """Whether a ray from (x, y, z) on a periodic heightfield (at or just above it), rising
     along (dx, dy, dz), surely clears the surface before it rises above ``zmax``, decided on
-    a coarse grid of cells (``fill_horizon``: highest vertex ``cmax`` and steepest facet
-    ``cslope`` of the facets overlapping each cell) without tracing it. The ray's height
-    z + s·cot (s horizontal distance, cot = dz/|d_h|) is followed cell by cell (2-D DDA,
-    indices wrapped) up to s = (zmax − z)/cot; a cell is cleared when the ray enters it above
-    the cell's highest vertex (+ ``tol``), or when it stays above the Lipschitz bound
-    h(p) ≤ z + Σ cslope·(run in each cell so far) at the cell's entry and exit (in the first
-    cell, where the ray starts on the surface: cot > cslope). Any doubt — a cell fails, or
-    more than 64 cells — returns False (the ray is traced)."""
+    the coarse grid ``hz`` (``horizon_bounds.HorizonGrid``: origin x0, y0, cells cw × ch, per
+    cell the highest vertex ``cmax``, the steepest facet ``cslope`` and the steepest facet
+    ``nearby`` within ``reach``; tolerance ``tol``) without tracing it. The ray's height is
+    z + s·cot (s horizontal distance, cot = dz/|d_h|); it must climb to zmax by
+    s = (zmax − z)/cot. First the slope bound of the start's surroundings: when that run is
+    within ``reach``, every point the ray passes over is within the cells ``nearby`` covers,
+    so a ray with cot > nearby clears them (h(p + s·û) − h(p) ≤ nearby·s, as
+    ``horizon_bounds.rise_bound`` over the whole tile). Else the height is followed cell by
+    cell (2-D DDA, indices wrapped) up to s = (zmax − z)/cot; a cell is cleared when the ray
+    enters it above the cell's highest vertex (+ ``tol``), or when it stays above the
+    Lipschitz bound h(p) ≤ z + Σ cslope·(run in each cell so far) at the cell's entry and exit
+    (in the first cell, where the ray starts on the surface: cot > cslope). Any doubt — a cell
+    fails, or more than 64 cells — returns False (the ray is traced)."""
     if dz <= 0.0:
         return False
     h = math.sqrt(dx * dx + dy * dy)
     if h == 0.0:
         return True
     cot = dz / h
+    x0, y0, cw, ch, cmax, cslope, tol = hz.x0, hz.y0, hz.cw, hz.ch, hz.cmax, hz.cslope, hz.tol
     s_end = (zmax + tol - z) / cot
     if s_end <= 0.0:
         return True
@@ -60,6 +67,9 @@ def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
     ux, uy = dx / h, dy / h
     gx, gy = (x - x0) / cw, (y - y0) / ch
     ix, iy = int(math.floor(gx)), int(math.floor(gy))
+    cx, cy = ix % nx, iy % ny  # the cell, wrapped; stepped by ±1 below (no modulo per step)
+    if s_end <= hz.reach and cot > hz.nearby[cy, cx] * CLEAR_MARGIN:
+        return True  # steeper than every facet it can pass over
     tx, dtx, sx = math.inf, math.inf, 0
     if ux > 0.0:
         tx, dtx, sx = (ix + 1 - gx) * cw / ux, cw / ux, 1
@@ -71,7 +81,6 @@ def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
     elif uy < 0.0:
         ty, dty, sy = (gy - iy) * ch / -uy, ch / -uy, -1
     s_in, bound = 0.0, z
-    cx, cy = ix % nx, iy % ny  # the cell, wrapped; stepped by ±1 below (no modulo per step)
     for step in range(64):
         s_out = min(tx, ty, s_end)
         slope = cslope[cy, cx] * CLEAR_MARGIN
@@ -103,24 +112,9 @@ def horizon_clear(x, y, z, dx, dy, dz, x0, y0, cw, ch, cmax, cslope, zmax, tol):
 @compiled
 def horizon_clear_all(px, py, pz, dx, dy, dz, hz, zmax, out):
     """``horizon_clear`` for rays from (px, py, pz)[i] (in the tile) along (dx, dy, dz)[i]
-    on the grid ``hz`` (x0, y0, cw, ch, cmax, cslope, tol); writes ``out``."""
+    on the grid ``hz`` (``horizon_bounds.HorizonGrid``); writes ``out``."""
     for i in range(len(px)):
-        out[i] = horizon_clear(
-            px[i],
-            py[i],
-            pz[i],
-            dx[i],
-            dy[i],
-            dz[i],
-            hz.x0,
-            hz.y0,
-            hz.cw,
-            hz.ch,
-            hz.cmax,
-            hz.cslope,
-            zmax,
-            hz.tol,
-        )
+        out[i] = horizon_clear(px[i], py[i], pz[i], dx[i], dy[i], dz[i], hz, zmax)
 
 
 @vector_inlined

@@ -61,7 +61,7 @@ def tabled_primary(walk, table, hz, geometry, out, masking):
     lift = n·v0 + eps), mirror direction ``wo32`` (float32, used as
     float64 too), bin ``fbin``, ``fclear``: lit facets whose rays surely escape), and the
     masking rays of the other lit ones (code SINGLE) that the coarse grid ``hz``
-    (``horizon_clear``'s x0, y0, cw, ch, cmax, cslope, tol) cannot clear, set up as the first
+    (``horizon_bounds.HorizonGrid``, ``horizon_clear``) cannot clear, set up as the first
     segment of their walk (``Tracer.escape_columns(first=...)``). Masking ray m of primary
     ray ``mi[m]`` starts at its hit point p moved along n onto the facet plane and eps above
     it, p − (p·n − lift)·n, wrapped into the tile (``sx/sy/sz``), along the facet's mirror
@@ -318,9 +318,7 @@ def masking_starts(cand, t, n, x_, y_, z_, ox_, oy_, oz_, hz, geometry, m, maski
         if y < -hy or y >= hy:
             y = (y + hy) % (2.0 * hy) - hy
         ox, oy, oz = ox_[j], oy_[j], oz_[j]
-        if horizon_clear(
-            x, y, z, ox, oy, oz, hz.x0, hz.y0, hz.cw, hz.ch, hz.cmax, hz.cslope, zmax, hz.tol
-        ):
+        if horizon_clear(x, y, z, ox, oy, oz, hz, zmax):
             continue  # clears the coarse grid: escaped
         sx[m], sy[m], sz[m] = x, y, z
         mdx[m], mdy[m], mdz[m] = ox, oy, oz
