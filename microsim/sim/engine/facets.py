@@ -129,10 +129,11 @@ def grid_facet_corners(hp, cell, f):
     i = k - j * cols
     xa, xb = (i - cols / 2.0) * cell, (i + 1 - cols / 2.0) * cell
     ya, yb = (j - rows / 2.0) * cell, (j + 1 - rows / 2.0) * cell
-    h00, h11 = hp[j, i], hp[j + 1, i + 1]
-    if upper:
-        return xa, ya, h00, xb, ya, hp[j, i + 1], xb, yb, h11
-    return xa, ya, h00, xb, yb, h11, xa, yb, hp[j + 1, i]
+    h00, h01, h10, h11 = hp[j, i], hp[j, i + 1], hp[j + 1, i], hp[j + 1, i + 1]
+    # both triangles' corners read, then selected: no branch on the triangle
+    y1, z1 = (ya, h01) if upper else (yb, h11)
+    x2, z2 = (xb, h11) if upper else (xa, h10)
+    return xa, ya, h00, xb, y1, z1, x2, yb, z2
 
 
 @vector_inlined
