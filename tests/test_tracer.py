@@ -297,6 +297,24 @@ def test_rays_cleared_by_the_coarse_grid_are_never_blocked():
     assert not Tracer(other).clears_horizon(p + tr.eps * nrm, d).any()
 
 
+def test_rays_whose_first_cell_is_walked_exactly_are_never_blocked():
+    """Where the masking rays are walked on the heightfield's grid, the coarse test walks a
+    first cell steeper than the ray exactly (``HorizonGrid.walked``): the rays it clears all
+    escape when walked, they include every ray the grid's bounds alone clear, and more."""
+    from microsim.surfaces import gaussian
+
+    tr = Tracer(gaussian(128, 1.0, 2.0, 8.0, seed=7), grid=True)
+    assert tr.horizon.walked and not Tracer(gaussian(32, 1.0, 2.0, 8.0), grid=False).horizon.walked
+    p, nrm, d = _rays_below_the_rise_bound(tr, (0.05, 0.99), seed=5)
+    start = p + tr.eps * nrm  # the start a masking ray gets
+    clear = tr.clears_horizon(start, d)
+    assert np.all(tr.escapes(p, nrm, d)[clear] == ESCAPED)
+    hz, tr.horizon = tr.horizon, tr.horizon._replace(walked=False)
+    bounds = tr.clears_horizon(start, d)
+    tr.horizon = hz
+    assert np.all(clear[bounds]) and clear.sum() > bounds.sum() + 0.02 * len(d)
+
+
 def test_rays_cleared_by_the_nearby_slope_bound_are_never_blocked():
     """The coarse grid's ``nearby`` bound (the steepest facet within ``NEARBY_CELLS`` cells,
     wrapped) is the window maximum of ``cslope``, at most the tile's rise bound. Masking rays

@@ -15,6 +15,7 @@ from scipy import ndimage
 from microsim.jit import read_only
 
 from .engine import horizon
+from .heightfield_caster import HeightfieldGrid
 from .schedule import in_parts
 
 __all__ = [
@@ -78,8 +79,10 @@ class HorizonGrid(NamedTuple):
     ``ch``), per cell (ny, nx) the highest vertex ``cmax`` and the steepest facet ``cslope`` of
     the facets overlapping it and the steepest of the cells within ``NEARBY_CELLS`` of it
     (``nearby``, wrapped), which bounds the slope of every point within ``reach`` =
-    ``NEARBY_CELLS``·min(cw, ch) of any point in the cell; and the tolerance ``tol`` (length
-    units)."""
+    ``NEARBY_CELLS``·min(cw, ch) of any point in the cell; the tolerance ``tol`` (length
+    units); and, where the masking rays are walked on a heightfield grid (``walked``), that
+    walk's geometry (``HeightfieldGrid.geometry``; else ``NO_WALK``'s), on which a ray's first
+    cell is walked exactly."""
 
     x0: float
     y0: float
@@ -90,18 +93,27 @@ class HorizonGrid(NamedTuple):
     nearby: np.ndarray
     reach: float
     tol: float
+    walk: tuple
+    walked: bool
 
 
-def horizon_grid(facets, vertices, faces, slopes, rise: float, tile) -> HorizonGrid:
+NO_WALK = HeightfieldGrid.of_heights(np.zeros((1, 1)), 1.0).geometry(0.0, 0.0, 0)
+"""``HorizonGrid.walk`` where the masking rays are not walked on a grid (typed as a grid's)."""
+
+
+def horizon_grid(facets, vertices, faces, slopes, rise: float, tile, walk=None) -> HorizonGrid:
     """The ``HorizonGrid`` of a heightfield's ``facets`` (``engine.facets.Facets``; corners
     those of the mesh ``vertices``, ``faces``, or of the heightfield grid where ``faces`` is
     empty; finite ``rise`` bound; ``slopes``: its ``slope_magnitudes``), cells of
     ~``HORIZON_FACETS`` facets, tol = 4 eps (float32 rays); for other meshes a 1 × 1 grid
     that clears nothing. Facet ranges on several threads (``schedule.in_parts``) each fill a
-    grid of their own, whose maxima are merged (the same maxima)."""
+    grid of their own, whose maxima are merged (the same maxima). ``walk``: the geometry of
+    the grid walk the masking rays take (``HeightfieldGrid.geometry``), if they are walked."""
+    walked = walk is not None
+    walk = walk if walked else NO_WALK
     if not math.isfinite(rise):
         none = np.full((1, 1), np.inf)
-        return HorizonGrid(0.0, 0.0, 1.0, 1.0, none, none, none, 0.0, 0.0)
+        return HorizonGrid(0.0, 0.0, 1.0, 1.0, none, none, none, 0.0, 0.0, walk, False)
     lx, ly = tile
     cells = facets.count / HORIZON_FACETS
     nx = int(np.clip(round(math.sqrt(cells * lx / ly)), 1, 1024))
@@ -122,4 +134,5 @@ def horizon_grid(facets, vertices, faces, slopes, rise: float, tile) -> HorizonG
         np.maximum(cslope, more_slope, out=cslope)
     nearby = ndimage.maximum_filter(cslope, size=2 * NEARBY_CELLS + 1, mode="wrap")
     reach = NEARBY_CELLS * min(cw, ch)
-    return HorizonGrid(x0, y0, cw, ch, cmax, cslope, nearby, reach, 4.0 * facets.eps)
+    tol = 4.0 * facets.eps
+    return HorizonGrid(x0, y0, cw, ch, cmax, cslope, nearby, reach, tol, walk, walked)

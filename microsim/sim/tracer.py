@@ -265,7 +265,10 @@ class Tracer:
         slopes = slope_magnitudes(self.facets)  # (F,), for the two bounds only
         self.rise_bound = rise_bound(surface, slopes)
         corners = NO_MESH if hf is not None else self._mesh  # a grid's: from its heights
-        self.horizon = horizon_grid(self.facets, *corners, slopes, self.rise_bound, self.tile)
+        walk = (
+            None if self.grid is None else self.grid.geometry(self.zmin, self.zmax, self.max_wraps)
+        )
+        self.horizon = horizon_grid(self.facets, *corners, slopes, self.rise_bound, self.tile, walk)
         del slopes
         grooved = getattr(surface, "azimuth_average", False)
         self.groove_clear, self.groove_strata = (

@@ -1,7 +1,8 @@
 """Masking rays decided without tracing: the steepness test wo_z > slope·|wo_h| against a
 heightfield's Lipschitz bound (``horizon_bounds.rise_bound``) and the coarse-grid horizon test
 (``horizon_clear``: the same test against the steepest facet near the start, then a 2-D DDA
-over cell maxima and slopes). Tile coordinates."""
+over cell maxima and slopes, its first cell walked exactly on a heightfield grid). Tile
+coordinates."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import math
 
 from microsim.jit import compiled, vector_inlined, vectorised
 
+from ..heightfield_caster import NO_STEPS, cast_one, direction_terms, height_at
+from .codes import ESCAPED
 from .facets import facet_corners
 
 CLEAR_MARGIN = 1.0 + 1e-6  # a masking ray is skipped when wo_z > this × slope bound × |wo_h|
@@ -51,8 +54,12 @@ def horizon_clear(x, y, z, dx, dy, dz, hz, zmax):
     cell (2-D DDA, indices wrapped) up to s = (zmax − z)/cot; a cell is cleared when the ray
     enters it above the cell's highest vertex (+ ``tol``), or when it stays above the
     Lipschitz bound h(p) ≤ z + Σ cslope·(run in each cell so far) at the cell's entry and exit
-    (in the first cell, where the ray starts on the surface: cot > cslope). Any doubt — a cell
-    fails, or more than 64 cells — returns False (the ray is traced)."""
+    (in the first cell, where the ray starts on the surface: cot > cslope). Where the masking
+    rays are walked on the heightfield's grid (``hz.walked``), a first cell steeper than the
+    ray is walked exactly instead (``_walk_clears``: the walk the ray would take, stopped where
+    it leaves the cell or rises above its highest vertex), and the chain goes on from the
+    surface's height where the ray leaves it. Any doubt — a cell fails, the walk meets the
+    surface, or more than 64 cells — returns False (the ray is traced)."""
     if dz <= 0.0:
         return False
     h = math.sqrt(dx * dx + dy * dy)
@@ -85,15 +92,29 @@ def horizon_clear(x, y, z, dx, dy, dz, hz, zmax):
         s_out = min(tx, ty, s_end)
         slope = cslope[cy, cx] * CLEAR_MARGIN
         z_in = z + cot * s_in
+        walked = False
         if z_in <= cmax[cy, cx] + tol:  # the cell may reach the ray: Lipschitz chain
             if step == 0:
                 if not cot > slope:
-                    return False
+                    # the first cell walked exactly, up to where the ray leaves it or rises
+                    # above its highest vertex; the chain goes on from the surface's height
+                    # where it leaves (at most that vertex when the ray rose above it first)
+                    s_stop = min(s_out, (cmax[cy, cx] + tol - z) / cot)
+                    if not hz.walked or not _walk_clears(
+                        x, y, z, dx, dy, dz, z + cot * s_stop, hz.walk
+                    ):
+                        return False
+                    walked, g = True, hz.walk
+                    bound = cmax[cy, cx]
+                    if s_stop >= s_out:
+                        x_out, y_out = x + ux * s_out, y + uy * s_out
+                        bound = height_at(g[0], g[2], g[3], g[4], g[5], g[6], x_out, y_out)
             elif not (
                 z_in - tol > bound and z + cot * s_out - tol > bound + slope * (s_out - s_in)
             ):
                 return False
-        bound += slope * (s_out - s_in)
+        if not walked:
+            bound += slope * (s_out - s_in)
         if s_out >= s_end:
             return True
         if tx < ty:
@@ -107,6 +128,28 @@ def horizon_clear(x, y, z, dx, dy, dz, hz, zmax):
             s_in = ty
             ty += dty
     return False
+
+
+@compiled
+def _walk_clears(x, y, z, dx, dy, dz, z_stop, walk):
+    """Whether the exact grid walk (``heightfield_caster.cast_one`` on ``walk``, from above)
+    of the ray from (x, y, z) rising along (dx, dy, dz) rises to ``z_stop`` without meeting
+    the surface."""
+    stopped = (
+        walk[0],
+        walk[1],
+        walk[2],
+        walk[3],
+        walk[4],
+        walk[5],
+        walk[6],
+        walk[7],
+        z_stop,
+        walk[9],
+    )
+    terms = direction_terms(dx, dy, dz, walk[4])
+    status = cast_one(x, y, z, dx, dy, dz, terms, stopped, (1.0, walk[1]), walk[9], NO_STEPS)[0]
+    return status == ESCAPED
 
 
 @compiled
