@@ -8,7 +8,9 @@ escaping: a timing of the walk and the per-ray pass alone, not a result), on ``b
 Gaussian field (σ = 1.2, ℓ = 8 cells) at n² points, aluminium at θi = 30°, 1 thread: the chunks
 (2¹⁶ rays each, as ``simulate`` cuts them) of a run of ``rays`` stratified rays, the ways
 alternating, four rounds; in turn and tile by tile write the same bits
-(tests/test_heightfield_caster.py).
+(tests/test_heightfield_caster.py). Tile by tile also with the coarse test's first cell decided
+by its bounds alone, not walked exactly (``HorizonGrid.walked`` off: the same results, as
+tests/test_tracer.py checks).
 The grid walk alone (``Tracer.cast_falling``) is timed too: what a ray's first hit costs as the
 tile grows at a given ray count. Then, on the first chunk, what the masking rays are: the
 share of primaries whose reflection rises less steeply than the tile's steepest facet
@@ -65,17 +67,19 @@ def main(n: int = 4096, rays: int = 2**20) -> None:
         mask, k = _walk_and_pass(tracer, x, down, shared, geometry, ledger)
         mask.trace(tracer, k, ledger.status)
 
-    def fused(x, slope=tracer.rise_bound):
+    def fused(x, slope=tracer.rise_bound, hz=tracer.horizon):
         primary.cast_traced_primary(
             tuple(x), tuple(down), tracer.grid_walk(x, down), tracer.grid.cell_min,
-            tracer.facets, slope, tracer.horizon, tracer.groove_clear, geometry,
+            tracer.facets, slope, hz, tracer.groove_clear, geometry,
             ledger, MaskingRays.work(TILE).kernel_args(), FROM_ESCAPE,
         )  # fmt: skip
 
+    bounds_alone = tracer.horizon._replace(walked=False)
     ways = {
         "grid walk alone": lambda x: tracer.cast_falling(x, down),
         "in turn": in_turn,
         "tile by tile": fused,
+        "first cell bound": lambda x: fused(x, hz=bounds_alone),
         "no masking ray": lambda x: fused(x, 0.0),
     }
     for way in ways.values():  # compiled and warm
@@ -89,7 +93,7 @@ def main(n: int = 4096, rays: int = 2**20) -> None:
             times[label].append((time.perf_counter() - t0) / (len(chunks) * m) * 1e9)
     print(f"{n}² Gaussian field, {rays:,} rays in chunks of {m:,}, θi = {THETA}°, 1 thread")
     for label, ns in times.items():
-        print(f"  {label:15s} ns per ray: best {min(ns):.1f}, rounds {[round(t, 1) for t in ns]}")
+        print(f"  {label:16s} ns per ray: best {min(ns):.1f}, rounds {[round(t, 1) for t in ns]}")
     _masking_rays(tracer, chunks[0], down, shared, geometry)
 
 
