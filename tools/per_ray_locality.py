@@ -17,9 +17,10 @@ share of primaries whose reflection rises less steeply than the tile's steepest 
 (``Tracer.rise_bound``, printed) and is tested on the coarse grid
 (``engine.horizon.horizon_clear``) and of those the share its first test, the steepest facet
 near the start (``HorizonGrid.nearby``), clears, and what the test costs per ray; of those
-walked on the grid, of those masked, and of the walked ones whose start already fails the
-coarse grid's first cell (the ray rises less steeply than that cell's steepest facet,
-``cslope``), and their elevations above the horizon.
+walked on the grid (and how many would be with the first cell's bounds alone), of those
+masked, and of the walked ones whose start already fails the coarse grid's first cell (the ray
+rises less steeply than that cell's steepest facet, ``cslope``), and their elevations above
+the horizon.
 docs/performance.md quotes it.
 
     .venv/bin/python tools/per_ray_locality.py [n] [rays]      (defaults: 4096 1048576)
@@ -113,6 +114,12 @@ def _masking_rays(tracer, x, down, shared, geometry) -> None:
     """Print what the masking rays of the primaries from ``x`` are (module docstring)."""
     m = len(x[0])
     ledger = primary.TracedLedger(np.empty(m, np.int8), np.empty(m), *(np.empty(m) for _ in "xyz"))
+    hz = tracer.horizon
+    try:  # how many would be walked with the coarse test's first cell decided by its bounds
+        tracer.horizon = hz._replace(walked=False)
+        bounded = _walk_and_pass(tracer, x, down, shared, geometry, ledger)[1]
+    finally:
+        tracer.horizon = hz
     mask, k = _walk_and_pass(tracer, x, down, shared, geometry, ledger)
     wo = np.stack([ledger.wox, ledger.woy, ledger.woz]).astype(np.float32).astype(np.float64)
     tested = (ledger.status == SINGLE) & ~(
@@ -136,7 +143,8 @@ def _masking_rays(tracer, x, down, shared, geometry) -> None:
         f"  masking rays of {m:,} primaries (slope bound {tracer.rise_bound:.3f}): "
         f"{tested.mean():.1%} tested on the coarse grid ({test_ns:.0f} ns each; {nearby:.1%} "
         f"of them cleared by the steepest facet nearby), "
-        f"{k / m:.2%} walked, {masked.sum() / m:.2%} masked; of the walked, {first.mean():.1%} "
+        f"{k / m:.2%} walked ({bounded / m:.2%} with the first cell's bounds alone), "
+        f"{masked.sum() / m:.2%} masked; of the walked, {first.mean():.1%} "
         f"fail the coarse grid's first cell and {1 - masked.mean():.1%} escape; their "
         f"elevations' 10th, 50th and 90th percentiles {', '.join(deciles)}°"
     )
