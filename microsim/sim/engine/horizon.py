@@ -135,18 +135,7 @@ def _walk_clears(x, y, z, dx, dy, dz, z_stop, walk):
     """Whether the exact grid walk (``heightfield_caster.cast_one`` on ``walk``, from above)
     of the ray from (x, y, z) rising along (dx, dy, dz) rises to ``z_stop`` without meeting
     the surface."""
-    stopped = (
-        walk[0],
-        walk[1],
-        walk[2],
-        walk[3],
-        walk[4],
-        walk[5],
-        walk[6],
-        walk[7],
-        z_stop,
-        walk[9],
-    )
+    stopped = walk[:8] + (z_stop, walk[9])  # its zmax lowered to z_stop
     terms = direction_terms(dx, dy, dz, walk[4])
     status = cast_one(x, y, z, dx, dy, dz, terms, stopped, (1.0, walk[1]), walk[9], NO_STEPS)[0]
     return status == ESCAPED
