@@ -3,7 +3,6 @@ figures are measured, never asserted; what is asserted is that batching changes 
 that the per-facet table path equals the per-ray path, and that memory does not grow with
 the number of rays."""
 
-import argparse
 import json
 
 import numpy as np
@@ -14,7 +13,6 @@ from microsim.analytic.fresnel import fresnel, resolve_material
 from microsim.app import bench_report
 from microsim.app.bench import (
     BenchConfig,
-    add_bench_command,
     build_times,
     format_bench,
     machine,
@@ -23,6 +21,7 @@ from microsim.app.bench import (
     throughput,
 )
 from microsim.app.bench_report import Bench, Marginal, to_json
+from microsim.app.cli import build_parser
 from microsim.sim import (
     BLOCK,
     Bins,
@@ -194,10 +193,8 @@ def test_marginal_throughput_fits_a_line_through_two_ray_counts():
     assert "marginal, 16,384 → 65,536 rays" in text and "Mitsuba" not in text
 
 
-def test_bench_subcommand_registers():
-    p = argparse.ArgumentParser()
-    add_bench_command(p.add_subparsers())
-    args = p.parse_args(["bench", "--json", "--quick"])
+def test_the_command_line_has_the_bench_subcommand():
+    args = build_parser(("bench",)).parse_args(["bench", "--json", "--quick"])
     assert args.json and args.quick and callable(args.func)
 
 
@@ -217,9 +214,7 @@ def test_bench_rays_option_is_honoured_with_and_without_quick(monkeypatch, capsy
     seen = []
     monkeypatch.setattr(B, "run_bench", lambda cfg: seen.append(cfg))
     monkeypatch.setattr(B, "format_bench", lambda b: "")
-    p = argparse.ArgumentParser()
-    add_bench_command(p.add_subparsers())
-    args = p.parse_args(["bench", *argv])
+    args = build_parser(("bench",)).parse_args(["bench", *argv])
     assert args.func(args) == 0
     assert seen[0].rays == rays
     assert seen[0].n == (128 if "--quick" in argv else BenchConfig.n)

@@ -411,6 +411,39 @@ def test_bad_report_and_bench_options(tmp_path, capsys, monkeypatch, args, word)
     assert tree(tmp_path) == before
 
 
+PARSED_WITH = """
+import sys
+from microsim.app.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit:  # --help, argparse's errors
+    pass
+print(" ".join(sorted(m for m in sys.modules if m.startswith(("microsim.", "numpy")))))
+"""
+
+
+@pytest.mark.parametrize(
+    "args, loaded",
+    [
+        (["--help"], set()),
+        (["not-a-command"], set()),
+        (["bench", "--rays", "x"], {"microsim.app.bench"}),
+        (["view", "--what", "x", "s.toml"], {"microsim.app.view"}),
+    ],
+)
+def test_the_parser_loads_only_the_chosen_commands_module(tmp_path, args, loaded):
+    """``microsim --help`` and a usage error need no simulator: the subcommands defined in
+    their own modules (``cli.COMMANDS``) are loaded only when chosen."""
+    proc = subprocess.run(
+        [sys.executable, "-c", PARSED_WITH, *args], cwd=tmp_path, capture_output=True, text=True
+    )
+    modules = set(proc.stdout.split("\n")[-2].split())
+    commands = {"microsim.app.measure", "microsim.app.view", "microsim.app.bench"}
+    commands |= {"microsim.app.sweep"}
+    assert modules & commands == loaded, proc.stderr
+    assert ("numpy" in modules) == bool(loaded), proc.stderr
+
+
 SWEEP_FILE = """\
 rays = 1000
 models = ["vgroove"]

@@ -194,8 +194,8 @@ def test_interrupt_while_the_parser_loads_is_one_line(capsys, monkeypatch):
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(sweep, "add_sweep_command", interrupted)
-    status, lines, err = run_cli(capsys, "models")
+    monkeypatch.setattr(sweep, "configure_sweep", interrupted)
+    status, lines, err = run_cli(capsys, "sweep", "s.toml")
     assert status == 130 and lines == ["microsim: interrupted"], err
 
 
@@ -209,8 +209,8 @@ def test_an_import_cut_short_by_ctrl_c_is_an_interrupt(capsys, monkeypatch):
         except KeyboardInterrupt:
             raise ImportError("initialization failed") from None
 
-    monkeypatch.setattr(sweep, "add_sweep_command", extension_init)
-    status, lines, err = run_cli(capsys, "models")
+    monkeypatch.setattr(sweep, "configure_sweep", extension_init)
+    status, lines, err = run_cli(capsys, "sweep", "s.toml")
     assert status == 130 and lines == ["microsim: interrupted"], err
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 

@@ -2,7 +2,6 @@
 missing tasks after an interruption, and the same table from a Dask LocalCluster as from the
 local process pool."""
 
-import argparse
 import csv
 import json
 import os
@@ -10,7 +9,8 @@ import re
 
 import pytest
 
-from microsim.app.sweep import SweepSpec, add_sweep_command, expand_tasks, load_sweep, run_sweep
+from microsim.app.cli import build_parser
+from microsim.app.sweep import SweepSpec, expand_tasks, load_sweep, run_sweep
 from microsim.atomic import write_json
 
 TINY = {
@@ -132,10 +132,10 @@ def test_dask_local_cluster_gives_the_same_table(tmp_path):
     assert {v["model"] for v in rec["verdicts"]} == {"ts-vgroove", "ts-smith"}
 
 
-def test_sweep_subcommand_registers():
-    p = argparse.ArgumentParser()
-    add_sweep_command(p.add_subparsers())
-    args = p.parse_args(["sweep", "s.toml", "--scheduler", "tcp://h:8786", "--workers", "3"])
+def test_the_command_line_has_the_sweep_subcommand():
+    args = build_parser(("sweep",)).parse_args(
+        ["sweep", "s.toml", "--scheduler", "tcp://h:8786", "--workers", "3"]
+    )
     assert args.scheduler == "tcp://h:8786" and args.workers == 3 and callable(args.func)
 
 

@@ -4,7 +4,6 @@ Each view runs in a subprocess with DISPLAY unset, as on a headless CI machine. 
 skipped only when no OpenGL implementation can be loaded at all (a tiny probe render fails).
 """
 
-import argparse
 import os
 import subprocess
 import sys
@@ -154,12 +153,13 @@ def test_bad_arguments_give_one_line_errors(tmp_path):
     assert not (tmp_path / "x.png").exists()
 
 
-def test_add_view_command_registers_the_subcommand():
-    from microsim.app.view import add_view_command, run_view
+def test_the_command_line_has_the_view_subcommand():
+    from microsim.app.cli import build_parser
+    from microsim.app.view import run_view
 
-    parser = argparse.ArgumentParser()
-    add_view_command(parser.add_subparsers(dest="command"))
-    args = parser.parse_args(["view", "s.toml", "--what", "disk", "--theta-i", "45"])
+    args = build_parser(("view",)).parse_args(
+        ["view", "s.toml", "--what", "disk", "--theta-i", "45"]
+    )
     assert args.func is run_view and args.what == "disk" and args.theta_i == 45.0
 
 

@@ -110,7 +110,7 @@ __all__ = [
     "run_bench",
     "format_bench",
     "wave_rows",
-    "add_bench_command",
+    "configure_bench",
 ]
 
 BATCH = 2**16
@@ -740,14 +740,9 @@ def _cmd_scale(args) -> int:
     return 0
 
 
-def add_bench_command(subparsers) -> None:
-    """Register ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]
-    [--methods [DIR]] [--scale]``."""
-    p = subparsers.add_parser(
-        "bench",
-        help="measure raw Embree vs pipeline throughput, peak memory, time to 1%% precision "
-        "and the wave solver's time",
-    )
+def configure_bench(p) -> None:
+    """The arguments of ``microsim bench [--json] [--quick] [--rays N] [--skip-accuracy]
+    [--methods [DIR]] [--scale]`` on its parser ``p`` (``cli.COMMANDS``)."""
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.add_argument(
         "--rays",

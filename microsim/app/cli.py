@@ -11,6 +11,7 @@ is shown with its traceback (status 1).
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 import os
 import signal
@@ -297,7 +298,37 @@ def _add_report_command(sub) -> None:
     q.set_defaults(func=_cmd_report)
 
 
-def build_parser() -> argparse.ArgumentParser:
+COMMANDS = {
+    "measure": (
+        "tabulate a scene's BRDF over a dense grid of incidences (a virtual "
+        "gonioreflectometer), each to an error target; writes table.npz",
+        "microsim.app.measure:configure_measure",
+    ),
+    "view": (
+        "inspect a scene with pyvista: surface, rays, lobe, halfway disk or normals (off "
+        "screen when headless)",
+        "microsim.app.view:configure_view",
+    ),
+    "bench": (
+        "measure raw Embree vs pipeline throughput, peak memory, time to 1%% precision and "
+        "the wave solver's time",
+        "microsim.app.bench:configure_bench",
+    ),
+    "sweep": (
+        "run a grid of scenes x parameters x incidences and gather the verdicts into one "
+        "table and chart",
+        "microsim.app.sweep:configure_sweep",
+    ),
+}
+"""The subcommands whose arguments their own modules define: name → (help line, the
+``module:function`` that adds the arguments to the subcommand's parser)."""
+
+
+def build_parser(commands=None) -> argparse.ArgumentParser:
+    """The command line's parser. The subcommands of ``COMMANDS`` get their arguments from
+    their modules (which import the simulator, ~2 s): every one when ``commands`` is None,
+    else those named in it, so that ``microsim --help`` and the other commands' usage errors
+    do not wait for them (``command_of``)."""
     p = _Parser(prog="microsim", description=__doc__.splitlines()[0], epilog=EPILOG)
     p.add_argument("--version", action="version", version=f"microsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -326,16 +357,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_surface)
     _add_run_command(sub)
     _add_report_command(sub)
-    from .bench import add_bench_command
-    from .measure import add_measure_command
-    from .sweep import add_sweep_command
-    from .view import add_view_command
-
-    add_measure_command(sub)
-    add_view_command(sub)
-    add_bench_command(sub)
-    add_sweep_command(sub)
+    for name, (help_line, where) in COMMANDS.items():
+        parser = sub.add_parser(name, help=help_line)
+        if commands is None or name in commands:
+            module, function = where.split(":")
+            getattr(importlib.import_module(module), function)(parser)
     return p
+
+
+def command_of(argv) -> tuple:
+    """The subcommand named in ``argv``: the first word not an option (the top-level options
+    take no value), as a 1-tuple, or () if there is none."""
+    return tuple(a for a in argv if not a.startswith("-"))[:1]
 
 
 def _one_line(text) -> str:
@@ -405,7 +438,9 @@ def main(argv=None) -> int:
 
 def _main(argv, ctrl_c: _CtrlC) -> int:
     try:
-        args = build_parser().parse_args(argv)  # Ctrl-C while its modules load: status 130
+        argv = sys.argv[1:] if argv is None else list(argv)
+        # Ctrl-C while its modules load: status 130
+        args = build_parser(command_of(argv)).parse_args(argv)
         if args.func not in (_cmd_models, _cmd_surface):  # the commands that compile kernels
             from ..sim.compilation import announce_compilation
 

@@ -76,7 +76,7 @@ __all__ = [
     "MeasureInterrupted",
     "plan_measure",
     "measure",
-    "add_measure_command",
+    "configure_measure",
     "SETTINGS_FILE",
 ]
 
@@ -632,13 +632,8 @@ def _cmd_measure(args) -> int:
     return EXIT_OK
 
 
-def add_measure_command(sub) -> None:
-    """Register ``microsim measure``."""
-    m = sub.add_parser(
-        "measure",
-        help="tabulate a scene's BRDF over a dense grid of incidences (a virtual "
-        "gonioreflectometer), each to an error target; writes table.npz",
-    )
+def configure_measure(m) -> None:
+    """The arguments of ``microsim measure`` on its parser ``m`` (``cli.COMMANDS``)."""
     m.add_argument("scene", help=f"{SCENE_HELP}; an isotropic surface")
     m.add_argument("--out", help="output directory (default runs/<scene>-measured)")
     m.add_argument("--theta-step", type=float, default=5.0, help="θi step, degrees (default 5)")

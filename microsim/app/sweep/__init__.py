@@ -53,7 +53,7 @@ traces on one thread. One sweep at a time may write to an output directory (a lo
 ``OUT/.sweep.lock``).
 """
 
-from .command import add_sweep_command
+from .command import configure_sweep
 from .execution import LOCK_FILE, SweepInterrupted, SweepOutcome, run_sweep
 from .grid import MAX_TASKS, SweepSpec, Task, expand_tasks, load_sweep, material_text, task_label
 from .summary import COLUMNS, SummaryFiles, gather, summary_table, write_summary
@@ -74,7 +74,7 @@ __all__ = [
     "write_summary",
     "task_label",
     "material_text",
-    "add_sweep_command",
+    "configure_sweep",
     "COLUMNS",
     "LOCK_FILE",
     "MAX_TASKS",

@@ -41,14 +41,10 @@ def _cmd_sweep(args) -> int:
     return 0
 
 
-def add_sweep_command(subparsers) -> None:
-    """Register ``microsim sweep SWEEP.toml [--scheduler ADDRESS] [--scheduler-timeout S]
-    [--out DIR] [--workers N | --threads N] [--rays N] [--quick]``."""
-    p = subparsers.add_parser(
-        "sweep",
-        help="run a grid of scenes x parameters x incidences "
-        "and gather the verdicts into one table and chart",
-    )
+def configure_sweep(p) -> None:
+    """The arguments of ``microsim sweep SWEEP.toml [--scheduler ADDRESS] [--scheduler-timeout
+    S] [--out DIR] [--workers N | --threads N] [--rays N] [--quick]`` on its parser ``p``
+    (``cli.COMMANDS``)."""
     p.add_argument("sweep", help="sweep file (TOML), e.g. sweeps/vgroove-roughness.toml")
     p.add_argument(
         "--scheduler",

@@ -34,7 +34,7 @@ set-up in ``common`` and the command line in ``command``.
 
 from __future__ import annotations
 
-from .command import VIEWS, add_view_command, main, run_view, view
+from .command import VIEWS, configure_view, main, run_view, view
 from .common import headless
 from .disk import view_disk
 from .lobe import lobe_z, view_lobe
@@ -50,7 +50,7 @@ __all__ = [
     "view_lobe",
     "view_disk",
     "view_normals",
-    "add_view_command",
+    "configure_view",
     "run_view",
     "main",
     "headless",

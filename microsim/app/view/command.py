@@ -19,7 +19,7 @@ from .normals import view_normals
 from .rays import view_rays
 from .surface import view_surface
 
-__all__ = ["VIEWS", "view", "add_view_command", "run_view", "main"]
+__all__ = ["VIEWS", "view", "configure_view", "run_view", "main"]
 
 VIEWS = ("surface", "rays", "lobe", "disk", "normals")
 IMAGE_SUFFIXES = (".png", ".jpeg", ".jpg", ".bmp", ".tif", ".tiff")
@@ -70,7 +70,9 @@ def _window_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _configure(p: argparse.ArgumentParser) -> None:
+def configure_view(p: argparse.ArgumentParser) -> None:
+    """The arguments of ``microsim view`` (``cli.COMMANDS``) and of ``python -m
+    microsim.app.view`` on their parser ``p``."""
     p.add_argument("scene", help=SCENE_HELP)
     p.add_argument("--what", choices=VIEWS, default="surface", help="which view (default surface)")
     p.add_argument(
@@ -111,17 +113,6 @@ def _configure(p: argparse.ArgumentParser) -> None:
         help="lobe radius: f·cosθo or log-scaled (default linear)",
     )
     p.set_defaults(func=run_view)
-
-
-def add_view_command(subparsers) -> argparse.ArgumentParser:
-    """Register ``view`` on an argparse subparsers object (``func`` = ``run_view``)."""
-    p = subparsers.add_parser(
-        "view",
-        help="inspect a scene with pyvista: surface, rays, lobe, "
-        "halfway disk or normals (off screen when headless)",
-    )
-    _configure(p)
-    return p
 
 
 def _screenshot_file(shot: str) -> str:
@@ -177,7 +168,7 @@ class _Parser(argparse.ArgumentParser):
 def main(argv=None) -> int:
     """``python -m microsim.app.view SCENE [options]`` (same options as ``microsim view``)."""
     p = _Parser(prog="python -m microsim.app.view", description="Inspect a scene with pyvista.")
-    _configure(p)
+    configure_view(p)
     args = p.parse_args(argv)
     try:
         return args.func(args)
