@@ -14,7 +14,10 @@ compiles to the CPU's vector instructions (AVX2 or AVX-512), with the per-facet 
 per ray (``trig.cos_sin``, ``trig.atan_approx``; bins near an edge by ``Bins.locate``'s
 arithmetic). Those use ``error_model="numpy"`` (``vectorised``): a zero-divisor check is a
 branch per division, which keeps a loop scalar (the values a select then discards may be inf
-or NaN).
+or NaN). And they index their arrays by the loop variable itself, on views that start at the
+tile's first ray (``a[t:]``), not by ``t + j``: numba wraps a negative index, and an index
+the compiler cannot tell is not negative turns each load and store of the vector loop into
+one per lane.
 
 Reproducibility: every kernel is a loop in ray order that evaluates each ray on its own, with
 no fast-math (no FMA contraction or reassociation); sums (``tally_kernels``) add a block's

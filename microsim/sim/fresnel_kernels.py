@@ -86,17 +86,19 @@ def facet_mirror(
 @vector_inlined
 def fresnel_tile(c, m, n2, k2, fresnel_mode, weight, t):
     """weight[t + j] = F(c[j]) (``fresnel_weight``), 0 where c ≤ 0 (back-facing), for
-    j < m: one loop per mode, so that each vectorises."""
+    j < m: one loop per mode, so that each vectorises (into ``weight``'s view from t: an index
+    from 0 needs no wrap-around)."""
+    w = weight[t:]
     if fresnel_mode == FRESNEL_REAL:
         for j in range(m):
-            weight[t + j] = 0.0 if c[j] <= 0.0 else fresnel_real_scalar(c[j], n2, k2)
+            w[j] = 0.0 if c[j] <= 0.0 else fresnel_real_scalar(c[j], n2, k2)
     elif fresnel_mode == FRESNEL_COSINE:
         for j in range(m):
-            weight[t + j] = 0.0 if c[j] <= 0.0 else c[j]
+            w[j] = 0.0 if c[j] <= 0.0 else c[j]
     else:
         one = 1.0 if fresnel_mode == FRESNEL_MIRROR else 0.0
         for j in range(m):
-            weight[t + j] = 0.0 if c[j] <= 0.0 else one
+            w[j] = 0.0 if c[j] <= 0.0 else one
 
 
 class FresnelMaterial(NamedTuple):

@@ -169,9 +169,12 @@ def analytic_vgroove(x, z, psi, wi, groove, material, bins, out, wo, scratch):
     ox, oy, oz = tile[12], tile[13], tile[14]
     for t in range(0, len(x), TILE):
         m = min(TILE, len(x) - t)
+        # the tile's rays as views indexed from 0: an index the compiler can tell is not
+        # negative needs no wrap-around, so the loops load and store whole vectors
+        psi_t, x_t, status_t, where_t = psi[t:], x[t:], status[t:], where[t:]
         for j in range(m):  # vectorised: groove frame and z = 0 crossing
-            wx[j], wy[j], _, cp[j], sp[j] = groove_frame(psi[t + j], w3)
-            x0[j] = x[t + j] - zw * wx[j]
+            wx[j], wy[j], _, cp[j], sp[j] = groove_frame(psi_t[j], w3)
+            x0[j] = x_t[j] - zw * wx[j]
         for j in range(m):  # one by one: wrap, groove, facet (indexed loads)
             xj = x0[j]
             if xj < -half or xj >= half:
@@ -180,24 +183,25 @@ def analytic_vgroove(x, z, psi, wi, groove, material, bins, out, wo, scratch):
             nx[j], nz[j] = facet_nx[f], facet_nz[f]
             tan[j], width[j] = facet_signed_tan[f], facet_width[f]
         for j in range(m):  # vectorised: reflection and class
-            status[t + j], c[j], ox[j], oy[j], oz[j] = _groove_reflection(
+            status_t[j], c[j], ox[j], oy[j], oz[j] = _groove_reflection(
                 wx[j], wy[j], w3[2], num[j] / den[j], nx[j], nz[j], tan[j], width[j]
             )
         fresnel_tile(c, m, n2, k2, fresnel_mode, weight, t)
         if not folded:  # the caller bins wo
+            wox_t, woy_t, woz_t = wox[t:], woy[t:], woz[t:]
             for j in range(m):
-                wox[t + j], woy[t + j], woz[t + j] = ox[j], oy[j], oz[j]
-                where[t + j] = -1
+                wox_t[j], woy_t[j], woz_t[j] = ox[j], oy[j], oz[j]
+                where_t[j] = -1
             continue
         for j in range(m):  # vectorised: bins against φi rotated by −ψ (``bin_rays``)
             ex = cp[j] * cos_phi + sp[j] * sin_phi
             ey = -sp[j] * cos_phi + cp[j] * sin_phi
             flat, near[j] = bin_guess(ox[j], oy[j], oz[j], ex, ey, n_theta, n_phi, ts, fs, gt, gf)
-            where[t + j] = flat if status[t + j] == SINGLE else -1
+            where_t[j] = flat if status_t[j] == SINGLE else -1
         for j in range(m):  # near an edge: Bins.locate's own arithmetic
-            if near[j] and status[t + j] == SINGLE:
-                phi = phi_i_deg - psi[t + j] * (180.0 / math.pi)
-                where[t + j] = locate_one(ox[j], oy[j], oz[j], phi, n_theta, n_phi, True, edges)
+            if near[j] and status_t[j] == SINGLE:
+                phi = phi_i_deg - psi_t[j] * (180.0 / math.pi)
+                where_t[j] = locate_one(ox[j], oy[j], oz[j], phi, n_theta, n_phi, True, edges)
 
 
 @compiled

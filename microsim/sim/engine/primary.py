@@ -146,25 +146,24 @@ def _tabled_tile(walk, w, t, n, table, hz, geometry, out, masking, tile, cand, m
     """``tabled_primary`` for the n rays t … t + n − 1, their walk results at ``walk``'s
     entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``tile`` (6, TILE)
     and ``cand`` (TILE,) scratch; masking rays from slot m on. Returns the new m."""
-    hs, prim, px, py, pz = walk
+    hs, prim, px, py, pz = (walk[0][w:], walk[1][w:], walk[2][w:], walk[3][w:], walk[4][w:])
+    status, weight, where = out[0][t:], out[1][t:], out[2][t:]  # views indexed from 0
     code, fweight, facets, wo32, fbin, fclear = table
-    status, weight, where = out
     x_, y_, z_, dx_, dy_, dz_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5]
     for j in range(n):  # one by one: the hit facet's entries (indexed loads)
-        i, k = t + j, w + j
-        h = hs[k]
+        h = hs[j]
         hit = h == HIT
-        f = prim[k] if hit else 0
+        f = prim[j] if hit else 0
         c = code[f]
         miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
-        status[i] = c if hit else miss
-        weight[i] = fweight[f] if hit else 0.0
-        where[i] = fbin[f] if hit & (c == SINGLE) else -1
+        status[j] = c if hit else miss
+        weight[j] = fweight[f] if hit else 0.0
+        where[j] = fbin[f] if hit & (c == SINGLE) else -1
         cand[j] = hit & (c == SINGLE) & (not fclear[f])  # else: escapes, no masking ray
         if cand[j]:  # the masking ray's start on the facet plane (few rays: most are clear)
             a, b, e, plane = facet_plane(facets, f)
-            off = px[k] * a + py[k] * b + pz[k] * e - (plane + facets.eps)
-            x_[j], y_[j], z_[j] = px[k] - off * a, py[k] - off * b, pz[k] - off * e
+            off = px[j] * a + py[j] * b + pz[j] * e - (plane + facets.eps)
+            x_[j], y_[j], z_[j] = px[j] - off * a, py[j] - off * b, pz[j] - off * e
             dx_[j], dy_[j], dz_[j] = wo32[f, 0], wo32[f, 1], wo32[f, 2]
     return masking_starts(cand, t, n, x_, y_, z_, dx_, dy_, dz_, hz, geometry, m, masking)
 
@@ -247,52 +246,51 @@ def _traced_tile(walk, w, t, n, incident, facets, rules, out, masking, tile, can
     entries w … w + n − 1 (w = t on whole columns, 0 on one tile's); ``rules`` =
     (trace_masking, slope bound × ``CLEAR_MARGIN``, hz, groove, geometry); ``tile``
     (11, TILE) and ``cand`` (TILE,) scratch; masking rays from slot m on. Returns the new m."""
-    hs, prim, px, py, pz = walk
-    wx, wy, wz = incident
-    status, cosine, wox, woy, woz = out
+    # the tile's own entries as views indexed from 0: an index the compiler can tell is not
+    # negative needs no wrap-around, so the loops below load and store whole vectors
+    hs, prim, px, py, pz = (walk[0][w:], walk[1][w:], walk[2][w:], walk[3][w:], walk[4][w:])
+    status, cosine, wox, woy, woz = (out[0][t:], out[1][t:], out[2][t:], out[3][t:], out[4][t:])
+    shared = len(incident[0]) == 1
+    s0 = 0 if shared else t  # one shared incident direction, or the tile's own
+    wx, wy, wz = incident[0][s0:], incident[1][s0:], incident[2][s0:]
     trace_masking, slope, hz, groove, geometry = rules
-    shared = len(wx) == 1
     grim, gtan, gwidth, gextent, gtol = groove
     grooved = len(grim) > 0
     a_, b_, e_, lift_, x_, y_, z_ = tile[0], tile[1], tile[2], tile[3], tile[4], tile[5], tile[6]
     rim_, tan_, width_, extent_ = tile[7], tile[8], tile[9], tile[10]
     for j in range(n):  # one by one: the hit facet's normal and lift (indexed loads)
-        f = prim[w + j] if hs[w + j] == HIT else 0
+        f = prim[j] if hs[j] == HIT else 0
         a_[j], b_[j], e_[j], plane = facet_plane(facets, f)
         lift_[j] = plane + facets.eps
     if grooved:
         for j in range(n):
-            f = prim[w + j] if hs[w + j] == HIT else 0
+            f = prim[j] if hs[j] == HIT else 0
             rim_[j], tan_[j], width_[j], extent_[j] = grim[f], gtan[f], gwidth[f], gextent[f]
     for j in range(n):  # vectorised: reflection and class
-        i = t + j
-        k = 0 if shared else i
-        h = hs[w + j]
+        k = 0 if shared else j
+        h = hs[j]
         a, b, e = a_[j], b_[j], e_[j]
         c = wx[k] * a + wy[k] * b + wz[k] * e
         oz = 2.0 * c * e - wz[k]
         st = SINGLE if oz > 0.0 else DOWNWARD
         st = st if c > 0.0 else RAY_UNRESOLVED
         miss = RAY_MISSED if (h == MISSED) | (h == ESCAPED) else RAY_UNRESOLVED
-        status[i] = st if h == HIT else miss
-        cosine[i] = c if (h == HIT) & (c > 0.0) else 0.0
-        wox[i], woy[i], woz[i] = 2.0 * c * a - wx[k], 2.0 * c * b - wy[k], oz
+        status[j] = st if h == HIT else miss
+        cosine[j] = c if (h == HIT) & (c > 0.0) else 0.0
+        wox[j], woy[j], woz[j] = 2.0 * c * a - wx[k], 2.0 * c * b - wy[k], oz
     for j in range(n):  # vectorised: masking candidates and their starts
-        i = t + j
-        ox, oy, oz = wox[i], woy[i], woz[i]
-        gx, gy = np.float64(np.float32(ox)), np.float64(np.float32(oy))
-        gz = np.float64(np.float32(oz))
+        gx, gy = np.float64(np.float32(wox[j])), np.float64(np.float32(woy[j]))
+        gz = np.float64(np.float32(woz[j]))
         steep = gz > slope * math.sqrt(gx * gx + gy * gy)  # escapes: no masking ray
-        if grooved:  # clears the opposite facet by more than the tolerance: escapes
-            s = min(abs(px[w + j] - rim_[j]), extent_[j])
-            steep |= groove_margin(s, tan_[j], width_[j], ox, oz) < -gtol
-        cand[j] = trace_masking & (status[i] == SINGLE) & (not steep)
+        cand[j] = trace_masking & (status[j] == SINGLE) & (not steep)
         a, b, e = a_[j], b_[j], e_[j]
-        off = px[w + j] * a + py[w + j] * b + pz[w + j] * e - lift_[j]  # on the plane, eps above
-        x_[j], y_[j], z_[j] = px[w + j] - off * a, py[w + j] - off * b, pz[w + j] - off * e
-    return masking_starts(
-        cand, t, n, x_, y_, z_, wox[t:], woy[t:], woz[t:], hz, geometry, m, masking
-    )
+        off = px[j] * a + py[j] * b + pz[j] * e - lift_[j]  # on the plane, eps above
+        x_[j], y_[j], z_[j] = px[j] - off * a, py[j] - off * b, pz[j] - off * e
+    if grooved:  # clears the opposite facet by more than the tolerance: escapes
+        for j in range(n):
+            s = min(abs(px[j] - rim_[j]), extent_[j])
+            cand[j] &= not groove_margin(s, tan_[j], width_[j], wox[j], woz[j]) < -gtol
+    return masking_starts(cand, t, n, x_, y_, z_, wox, woy, woz, hz, geometry, m, masking)
 
 
 @compiled
