@@ -14,6 +14,7 @@ V-grooves, 9 × 10 bins, θi every 40°, 2.6·10⁵ rays per incidence) so each 
 from __future__ import annotations
 
 import functools
+import gc
 import json
 import signal
 import socket
@@ -26,6 +27,7 @@ from microsim.app import cluster, measure
 from microsim.app.cli import main
 from microsim.app.runner import catalogue
 from microsim.checkpoints import interrupt_at
+from microsim.errors import EnvironmentFailure, UsageError
 from microsim.sim import estimator
 
 SCENE = """\
@@ -220,6 +222,28 @@ def test_a_bad_scheduler_address_writes_nothing(tmp_path, capsys, scene):
     args = ("report", "--quick", "--catalogue", cat, "--out", tmp_path / "rep", "--no-progress")
     _one_line_error(*_cli(capsys, *args, *bad), 2, "notanaddress")
     assert tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("address", ["notanaddress", "unreachable"])
+def test_a_client_that_failed_to_start_is_finalised_at_once(address):
+    """A Client that failed to start is garbage in a reference cycle; left to a later
+    collection, its finaliser can run inside the next Client's start, where both wait on dask's
+    one loop-runner lock and the process hangs (as a bad address followed by another did). So
+    ``connect`` finalises it before it reports the error: with automatic collection off, no
+    Client is left alive."""
+    distributed = pytest.importorskip("distributed", reason="needs the `cluster` extra")
+    if address == "unreachable":
+        address = f"tcp://127.0.0.1:{_free_port()}"
+    gc.collect()
+    gc.disable()
+    try:
+        with pytest.raises((UsageError, EnvironmentFailure)):
+            with cluster.connect(address, timeout=1.0):
+                pass
+        alive = sum(isinstance(o, distributed.Client) for o in gc.get_objects())
+    finally:
+        gc.enable()
+    assert alive == 0
 
 
 def test_ctrl_c_while_connecting_exits_130_and_writes_nothing(tmp_path, capsys, monkeypatch, scene):

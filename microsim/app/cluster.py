@@ -7,6 +7,7 @@ page of Dask's reconnection tracebacks on stderr would bury."""
 
 from __future__ import annotations
 
+import gc
 import logging
 from contextlib import contextmanager
 
@@ -61,16 +62,21 @@ def connect(scheduler, timeout: float = CONNECT_TIMEOUT):
             "--scheduler needs dask.distributed, an optional extra: pip install 'microsim[cluster]'"
         ) from None
     with _quiet_dask_logs():
+        failure = None
         try:
             client = Client(scheduler, timeout=timeout)
         except ValueError as e:
-            raise UsageError(
-                f"--scheduler {scheduler}: not a Dask scheduler address ({e})"
-            ) from None
+            failure = UsageError(f"--scheduler {scheduler}: not a Dask scheduler address ({e})")
         except (OSError, TimeoutError) as e:
-            raise EnvironmentFailure(
+            failure = EnvironmentFailure(
                 f"--scheduler {scheduler}: no Dask scheduler reachable "
                 f"there within {timeout:g} s ({' '.join(str(e).split())})"
-            ) from None
+            )
+        if failure is not None:
+            # the Client that failed to start is garbage in a reference cycle: finalise it now.
+            # Left to a later collection, its __del__ may run inside another Client's start,
+            # and both wait on dask's one loop-runner lock (the process hangs)
+            gc.collect()
+            raise failure from None
         with client:
             yield client
