@@ -17,6 +17,7 @@ from microsim.app.bench import (
     format_bench,
     machine,
     marginal_throughput,
+    numba_target,
     peak_rss_mb,
     throughput,
 )
@@ -313,3 +314,23 @@ def test_a_failing_memory_probe_is_an_environment_failure_naming_its_error(monke
     monkeypatch.setattr(bench, "_PROBE", "import sys; sys.exit('probe: out of luck')")
     with pytest.raises(EnvironmentFailure, match="probe: out of luck"):
         bench.peak_rss_mb(bench.BenchConfig(n=64), rays=4096)
+
+
+@pytest.mark.parametrize(
+    "name, features, reported",
+    [
+        ("haswell", None, "haswell with the host's features"),
+        ("haswell", "", "haswell"),
+        ("skylake-avx512", "-avx512f", "skylake-avx512 -avx512f"),
+    ],
+)
+def test_the_machine_record_says_when_numba_adds_the_hosts_features(
+    monkeypatch, name, features, reported
+):
+    # NUMBA_CPU_NAME alone compiles for the named CPU with every feature of the host (AVX-512
+    # too): the record must not call that the named CPU's code
+    from numba.core import config
+
+    monkeypatch.setattr(config, "CPU_NAME", name)
+    monkeypatch.setattr(config, "CPU_FEATURES", features)
+    assert numba_target() == reported

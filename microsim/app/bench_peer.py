@@ -86,8 +86,9 @@ The ledger (``INTERFACE_LEDGER``): reflected, transmitted, cut, unresolved, miss
 Instruction set: Dr.Jit compiles the peer's kernels for the host CPU at its widest vector
 width (16 lanes with AVX-512, 8 with AVX2). ``MICROSIM_PEER_LLVM_CPU`` (an LLVM CPU name, e.g.
 ``haswell``) pins them to that CPU at 8 lanes, AVX2 and FMA (Dr.Jit's ``jit_llvm_set_target``),
-so that with ``NUMBA_CPU_NAME`` and ``NPY_DISABLE_CPU_FEATURES`` both sides' compiled code
-takes its AVX2 path on an AVX-512 machine (docs/performance.md); ``llvm_target`` reports the
+so that with ``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES=""`` (else numba adds the host's
+features to the named CPU) and ``NPY_DISABLE_CPU_FEATURES`` both sides' compiled code takes
+its AVX2 path on an AVX-512 machine (docs/performance.md); ``llvm_target`` reports the
 target in use. Embree's own kernels, inside Mitsuba and inside microsim, still choose theirs
 from the host.
 
