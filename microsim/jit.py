@@ -51,7 +51,16 @@ import numpy as np
 
 from microsim.kernel_cache import cached_njit
 
-__all__ = ["compiled", "inlined", "vectorised", "vector_inlined", "allocating", "TILE", "read_only"]
+__all__ = [
+    "compiled",
+    "inlined",
+    "vectorised",
+    "vector_inlined",
+    "allocating",
+    "TILE",
+    "read_only",
+    "numba_target",
+]
 
 compiled = cached_njit(nogil=True, _nrt=False)
 
@@ -79,3 +88,20 @@ def read_only(a: np.ndarray) -> np.ndarray:
     view = a.view()
     view.flags.writeable = False
     return view
+
+
+def numba_target() -> str:
+    """numba's target CPU: the host's, or the one ``NUMBA_CPU_NAME`` names — with "with the
+    host's features" where ``NUMBA_CPU_FEATURES`` is unset, as numba then compiles for that
+    CPU with every feature of the host (its AVX-512 ones too), and with the features
+    ``NUMBA_CPU_FEATURES`` lists where it is set to any (``NUMBA_CPU_FEATURES=""``: the
+    named CPU's own)."""
+    from numba.core import config
+
+    if config.CPU_NAME is None:
+        import llvmlite.binding as llvm
+
+        return str(llvm.get_host_cpu_name())
+    if config.CPU_FEATURES is None:
+        return f"{config.CPU_NAME} with the host's features"
+    return f"{config.CPU_NAME} {config.CPU_FEATURES}".strip()

@@ -98,11 +98,10 @@ def prepared() -> tuple[Path, Path] | None:
 
 
 def probe(inputs: dict) -> dict:
-    from numba.core import config
-
     import microsim
     from microsim import analytic as an
     from microsim import surfaces as sf
+    from microsim.jit import numba_target
     from microsim.sim import Bins, ray_bins
 
     try:
@@ -113,7 +112,7 @@ def probe(inputs: dict) -> dict:
     targets = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
     out = {
         "numpy_avx512": any("512" in k or k == "X86_V4" for k in targets),
-        "numba_cpu": config.CPU_NAME or "host",
+        "numba_cpu": numba_target(),
     }
     wo, psi, status, phi_i = inputs["wo"], inputs["psi"], inputs["status"], float(inputs["phi_i"])
     for bins in (Bins(45, 37), Bins(90, 181), Bins(18, 72, folded=False)):

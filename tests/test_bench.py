@@ -17,12 +17,12 @@ from microsim.app.bench import (
     format_bench,
     machine,
     marginal_throughput,
-    numba_target,
     peak_rss_mb,
     throughput,
 )
 from microsim.app.bench_report import Bench, Marginal, to_json
 from microsim.app.cli import build_parser
+from microsim.jit import numba_target
 from microsim.sim import (
     BLOCK,
     Bins,

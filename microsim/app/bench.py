@@ -74,6 +74,7 @@ import numpy as np
 
 from ..checks import check_memory
 from ..errors import EnvironmentFailure, UsageError
+from ..jit import numba_target
 from .bench_report import (
     THREADS,
     Accuracy,
@@ -604,7 +605,7 @@ def warm_up() -> None:
 def machine() -> Machine:
     """What the figures were measured on: the CPU model, its widest x86 vector extension
     ("AVX-512", "AVX2" or the machine's architecture), NumPy's dispatch targets in use (its
-    AVX-512 kernels change ulps of some functions) and numba's target (``numba_target``)."""
+    AVX-512 kernels change ulps of some functions) and numba's target (``jit.numba_target``)."""
     flags, model = set(), platform.processor() or platform.machine()
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
@@ -623,23 +624,6 @@ def machine() -> Machine:
         from numpy.core import _multiarray_umath as umath
     dispatch = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
     return Machine(cpu=model, isa=isa, numpy_dispatch=dispatch, numba_cpu=numba_target())
-
-
-def numba_target() -> str:
-    """numba's target CPU: the host's, or the one ``NUMBA_CPU_NAME`` names — with "with the
-    host's features" where ``NUMBA_CPU_FEATURES`` is unset, as numba then compiles for that
-    CPU with every feature of the host (its AVX-512 ones too), and with the features
-    ``NUMBA_CPU_FEATURES`` lists where it is set to any (``NUMBA_CPU_FEATURES=""``: the
-    named CPU's own)."""
-    from numba.core import config
-
-    if config.CPU_NAME is None:
-        import llvmlite.binding as llvm
-
-        return str(llvm.get_host_cpu_name())
-    if config.CPU_FEATURES is None:
-        return f"{config.CPU_NAME} with the host's features"
-    return f"{config.CPU_NAME} {config.CPU_FEATURES}".strip()
 
 
 def run_bench(cfg: BenchConfig = BenchConfig()) -> Bench:
