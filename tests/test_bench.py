@@ -194,6 +194,31 @@ def test_marginal_throughput_fits_a_line_through_two_ray_counts():
     assert "marginal, 16,384 → 65,536 rays" in text and "Mitsuba" not in text
 
 
+def test_the_ratio_round_by_round_pairs_each_rounds_calls():
+    """Within a round the two sides' margins are divided (the same turn of the host): their
+    median and range over the rounds, a round where either side's larger call was not the
+    slower left out; the best-of figures still come from each side's fastest calls; records
+    written before the rounds were kept load without them."""
+    rays = [100, 400]
+    pipe = {t: {100: [1.0, 1.1, 1.2, 1.0], 400: [2.0, 2.3, 2.0, 0.9]} for t in (1, 2)}
+    peer = {t: {100: [2.0, 2.0, 2.1, 2.0], 400: [4.0, 5.0, 3.9, 4.0]} for t in (1, 2)}
+    mg = Marginal.of(rays, pipe, peer, None)
+    per_round = [2.0 / 1.0, 3.0 / 1.2, 1.8 / 0.8]  # (q2 − q1)/(p2 − p1); round 4 unresolved
+    for t in (1, 2):
+        r = mg.ratio_rounds[t]
+        assert r.rounds == 3
+        assert (r.median, r.low, r.high) == pytest.approx((2.25, min(per_round), max(per_round)))
+        assert mg.pipeline[t].seconds == [1.0, 0.9] and mg.pipeline[t].samples_per_s is None
+        assert mg.peer[t].seconds == [2.0, 3.9]
+    saved = json.loads(json.dumps(to_json(mg)))
+    assert Marginal.from_json(saved) == mg
+    del saved["ratio_rounds"]
+    assert Marginal.from_json(saved).ratio_rounds is None
+    slower = {t: {100: [1.0], 400: [0.5]} for t in (1, 2)}
+    assert Marginal.of(rays, slower, slower, None).ratio_rounds == {1: None, 2: None}
+    assert Marginal.of(rays, pipe, None, "no peer").ratio_rounds is None
+
+
 def test_the_command_line_has_the_bench_subcommand():
     args = build_parser(("bench",)).parse_args(["bench", "--json", "--quick"])
     assert args.json and args.quick and callable(args.func)

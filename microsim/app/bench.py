@@ -30,7 +30,9 @@ surface: 512², σ = 1.2, ℓ = 8, 524 288 triangles), aluminium, θi = 30°, 2�
   time, and the fixed cost per call = the time the line through both points gives at zero
   rays (the pipeline's: the per-call set-up with its tracer reused, the facet table; the
   peer's: its facet table in NumPy and its Dr.Jit launches). The speed target is set on this
-  ratio, since the whole-run ratio above mixes each side's fixed cost into its rate;
+  ratio, since the whole-run ratio above mixes each side's fixed cost into its rate; its
+  spread comes from the same calls, the ratio of the two sides' margins within each round
+  (median and range over the rounds, ``bench_report.RoundRatios``);
 * the dielectric path (``interface_throughput``): ``simulate(..., transmission=True,
   bounces="all")`` with glass (η = ``GLASS``) at θi and at 180° − θi (the same angle from
   inside the glass) against its Mitsuba peer (``bench_peer.PeerScene.run_dielectric``: the
@@ -90,7 +92,6 @@ from .bench_report import (
     InterfaceThroughput,
     Machine,
     Marginal,
-    MarginalLine,
     PeerSetup,
     RawThroughput,
     format_bench,
@@ -301,7 +302,8 @@ def _peer(surface, cfg: BenchConfig):
 MARGINAL_REPEAT = 5
 """Calls per size, side and thread count of the marginal rates, the best kept: a rate comes
 from the difference of two short calls (0.04–0.6 s), which a slow turn of a shared host moves
-most on 2 threads; the best of five gives each side its rate in the host's quiet turns."""
+most on 2 threads; the best of five gives each side its rate in the host's quiet turns, and
+the ratio within each of the five rounds its spread."""
 
 
 def marginal_throughput(
@@ -311,30 +313,32 @@ def marginal_throughput(
     tracer reused) and of the Mitsuba peer (``PeerScene.run``, its scene built once) on 1 and
     2 threads: wall times of whole calls at n1 = ``rays``/4 and n2 = ``rays`` primary rays,
     the pipeline and the peer alternating, best of ``repeat`` each; rate = (n2 − n1)/(T2 − T1),
-    fixed = T1 − n1/rate (both None when T2 ≤ T1: too few rays to resolve the margin).
-    ``peer``: as ``throughput``'s."""
+    fixed = T1 − n1/rate (both None when T2 ≤ T1: too few rays to resolve the margin); and
+    the ratio of the two rates round by round (``Marginal.ratio_rounds``). ``peer``: as
+    ``throughput``'s."""
     from microsim.sim import simulate
 
     surface = surface if surface is not None else _surface(cfg)
     scene, reason = _peer(surface, cfg) if peer is None else peer
     sizes = (max(1, cfg.rays // 4), cfg.rays)
-    best_pipe, best_peer = ({t: dict.fromkeys(sizes, np.inf) for t in THREADS} for _ in "ab")
+    pipe, peer = _round_times(sizes), _round_times(sizes)
     for rep in range(repeat):
         for threads in (1, 2):
             for n in sizes:
                 t0 = time.perf_counter()
                 simulate(surface, "aluminium", cfg.theta_i, rays=n, bins=_bins(), threads=threads)
-                dt = time.perf_counter() - t0
-                best_pipe[threads][n] = min(best_pipe[threads][n], dt)
+                pipe[threads][n].append(time.perf_counter() - t0)
                 if scene is not None:
                     r = scene.run(
                         "aluminium", cfg.theta_i, n, _bins(), seed=1 + rep, threads=threads
                     )
-                    best_peer[threads][n] = min(best_peer[threads][n], r.seconds)
+                    peer[threads][n].append(r.seconds)
+    return Marginal.of(list(sizes), pipe, None if scene is None else peer, reason)
 
-    pipe = {t: MarginalLine.through(best_pipe[t]) for t in THREADS}
-    ours = None if scene is None else {t: MarginalLine.through(best_peer[t]) for t in THREADS}
-    return Marginal.of(list(sizes), pipe, ours, reason)
+
+def _round_times(sizes) -> dict:
+    """{threads: {rays: []}}: the wall time of each round's call, per thread count and size."""
+    return {t: {n: [] for n in sizes} for t in THREADS}
 
 
 GLASS = 1.5
@@ -359,7 +363,7 @@ def interface_throughput(
     for theta in (cfg.theta_i, 180.0 - cfg.theta_i):
         if scene is not None:  # compiles the peer's kernel (once per process)
             scene.run_dielectric(GLASS, theta, min(cfg.rays, 2**16), _bins(), threads=1)
-        best_pipe, best_peer = ({t: dict.fromkeys(sizes, np.inf) for t in THREADS} for _ in "ab")
+        pipe, peer = _round_times(sizes), _round_times(sizes)
         per_path = None
         for rep in range(repeat):
             for threads in THREADS:
@@ -375,17 +379,15 @@ def interface_throughput(
                         transmission=True,
                         bounces="all",
                     )
-                    dt = time.perf_counter() - t0
-                    best_pipe[threads][n] = min(best_pipe[threads][n], dt)
+                    pipe[threads][n].append(time.perf_counter() - t0)
                     if scene is not None:
                         r = scene.run_dielectric(
                             GLASS, theta, n, _bins(), seed=1 + rep, threads=threads
                         )
-                        best_peer[threads][n] = min(best_peer[threads][n], r.seconds)
+                        peer[threads][n].append(r.seconds)
                         per_path = r.segments
-        pipe = {t: MarginalLine.through(best_pipe[t]) for t in THREADS}
-        ours = None if scene is None else {t: MarginalLine.through(best_peer[t]) for t in THREADS}
-        lines.append(InterfaceLine(theta, Marginal.of(list(sizes), pipe, ours, reason), per_path))
+        marginal = Marginal.of(list(sizes), pipe, None if scene is None else peer, reason)
+        lines.append(InterfaceLine(theta, marginal, per_path))
     return InterfaceThroughput(GLASS, "all", lines)
 
 

@@ -8,6 +8,7 @@ sections a run skipped stay None). ``format_bench`` is the table ``bench`` print
 
 from __future__ import annotations
 
+import statistics
 from dataclasses import dataclass, fields, is_dataclass, replace
 
 from .wave_bench import WaveTiming
@@ -177,29 +178,69 @@ class MarginalLine:
 
 
 @dataclass(frozen=True)
+class RoundRatios:
+    """The pipeline / peer ratio of the marginal rates within each round of
+    ``bench.marginal_throughput`` (its four calls, one after the other, see the same turn of a
+    shared host): ``median``, ``low`` and ``high`` over the ``rounds`` whose two margins were
+    resolved — the ratio's spread, where the best-of ratio gives one figure."""
+
+    median: float
+    low: float
+    high: float
+    rounds: int
+
+    @classmethod
+    def of(cls, rays: list, pipeline: dict, peer: dict) -> RoundRatios | None:
+        """From {rays: [seconds of each round]} of the two sides (the same rounds, in order);
+        a round counts where both sides' larger call was the slower; None if none did."""
+        n1, n2 = sorted(rays)
+        ratios = [
+            (q2 - q1) / (p2 - p1)  # (n2 − n1)/(p2 − p1) over (n2 − n1)/(q2 − q1)
+            for p1, p2, q1, q2 in zip(pipeline[n1], pipeline[n2], peer[n1], peer[n2])
+            if p2 > p1 and q2 > q1
+        ]
+        if not ratios:
+            return None
+        return cls(statistics.median(ratios), min(ratios), max(ratios), len(ratios))
+
+
+@dataclass(frozen=True)
 class Marginal:
     """``bench.marginal_throughput``: the two ray counts, the pipeline's and the peer's lines
-    per thread count (the peer's None, with the reason, when it did not run) and the ratio of
-    their rates (None where either is unresolved)."""
+    per thread count (the peer's None, with the reason, when it did not run), the ratio of
+    their rates (None where either is unresolved) and, per thread count, that ratio round by
+    round (``RoundRatios``; None without the peer or in records written before it)."""
 
     rays: list
     pipeline: dict
     peer: dict | None
     peer_unavailable: str | None
     ratio: dict | None
+    ratio_rounds: dict | None = None
 
     @classmethod
     def of(cls, rays: list, pipeline: dict, peer: dict | None, reason) -> Marginal:
-        """The record of the two callers' lines, with the ratio of their rates."""
-        ratio = None
-        if peer is not None:
-            ratio = {
-                t: pipeline[t].samples_per_s / peer[t].samples_per_s
-                if pipeline[t].resolved() and peer[t].resolved()
-                else None
-                for t in THREADS
+        """The record of the two callers' wall times per thread count, {rays: [seconds of
+        each round]} (``peer`` None: it did not run, ``reason``): the line through each side's
+        best times (``MarginalLine.through``), the ratio of their rates and its rounds."""
+
+        def lines(times: dict) -> dict:
+            return {
+                t: MarginalLine.through({n: min(s) for n, s in times[t].items()}) for t in THREADS
             }
-        return cls(rays, pipeline, peer, reason, ratio)
+
+        ours = lines(pipeline)
+        if peer is None:
+            return cls(rays, ours, None, reason, None)
+        theirs = lines(peer)
+        ratio = {
+            t: ours[t].samples_per_s / theirs[t].samples_per_s
+            if ours[t].resolved() and theirs[t].resolved()
+            else None
+            for t in THREADS
+        }
+        rounds = {t: RoundRatios.of(rays, pipeline[t], peer[t]) for t in THREADS}
+        return cls(rays, ours, theirs, reason, ratio, rounds)
 
     @classmethod
     def from_json(cls, doc: dict) -> Marginal:
@@ -208,7 +249,11 @@ class Marginal:
 
         mg = _record(cls, doc)
         return replace(
-            mg, pipeline=lines(mg.pipeline), peer=lines(mg.peer), ratio=per_thread(mg.ratio)
+            mg,
+            pipeline=lines(mg.pipeline),
+            peer=lines(mg.peer),
+            ratio=per_thread(mg.ratio),
+            ratio_rounds=per_thread(mg.ratio_rounds, lambda v: _record(RoundRatios, v)),
         )
 
 
@@ -513,6 +558,14 @@ def _marginal_lines(mg: Marginal | None, title: str = "", per: str = "rays") -> 
         lines.append(row(f"  Mitsuba peer {unit}", mg.peer))
         if None not in mg.ratio.values():
             lines.append(_row("  pipeline / Mitsuba peer", mg.ratio, "14.2f"))
+        rounds = mg.ratio_rounds
+        if rounds and None not in rounds.values():
+            ranges = ", ".join(f"{rounds[t].low:.2f}–{rounds[t].high:.2f}" for t in THREADS)
+            n = sorted({rounds[t].rounds for t in THREADS})
+            lines.append(
+                _row("  the same, round by round", {t: rounds[t].median for t in THREADS}, "14.2f")
+                + f"   (ranges {ranges}; medians of {' and '.join(map(str, n))} rounds)"
+            )
     return lines
 
 
