@@ -30,6 +30,7 @@ __all__ = [
     "MarginalLine",
     "PeerSetup",
     "RawThroughput",
+    "RoundRatios",
     "format_bench",
 ]
 
