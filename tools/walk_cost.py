@@ -9,9 +9,17 @@ in NumPy on 4096 of the starts) and how many of them the table lets it step over
 table's build time (wall clock).
 With ``--embree``: instead, ns per primary ray of the grid walk and of Embree (the tracer's
 packets) for the same rays at grazing incidences, where the walk crosses the most
-cells. docs/performance.md and docs/design.md quote it.
+cells.
+With ``--orders``: instead, what bounds the walk at the bench's incidence (θi = 30°, with the
+table): ns per ray of 2²¹ walks with the starts in four orders, in ``ROUNDS`` rounds of all
+four (median and range over the rounds, process time) — as stratified origins come; one
+start repeated (every branch predicted, its cells in L1: what is left is the ray's own chain
+of dependent steps); starts drawn at random within 8 × 8 cells (the cells in L1, the
+branches as unpredictable as the relief makes them); the same as the first, shuffled over the
+whole tile (each ray's cells fetched from further out in the memory hierarchy).
+docs/performance.md and docs/design.md quote it.
 
-    .venv/bin/python tools/walk_cost.py [--embree]
+    .venv/bin/python tools/walk_cost.py [--embree | --orders]
 """
 
 import sys
@@ -28,6 +36,7 @@ INCIDENCES = ((0.0, 0.0), (30.0, 0.0), (30.0, 30.0), (60.0, 0.0), (60.0, 30.0))
 GRAZING = (60.0, 75.0, 80.0, 85.0, 88.0, 89.5)  # θi of the comparison with Embree (φi = 0)
 STARTS = 2**21
 COUNTED = 4096
+ROUNDS = 7  # rounds of ``--orders``
 
 
 def skipped_cells(grid, x, y, z, d) -> float:
@@ -92,23 +101,72 @@ def against_embree() -> None:
         print(f"{theta:4.1f}  {cells:6.0f}   {ns[0]:12.0f}   {ns[1]:9.0f}")
 
 
-def main() -> None:
-    if "--embree" in sys.argv[1:]:
-        against_embree()
-        return
-    tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
-    grid = tracer.grid
-    geometry = grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)
-    rng = np.random.default_rng(1)
+def jittered_starts(tracer, rng) -> tuple:
+    """``STARTS`` starts (x, y, z) at the top of the relief on a jittered row-major grid over
+    the tile, as stratified origins are ordered."""
     m = int(np.sqrt(STARTS))
     k = np.arange(STARTS)
     hx, hy = tracer.half
     x = -hx + (k % m + rng.uniform(size=STARTS)) * (2 * hx / m)
     y = -hy + (k // m + rng.uniform(size=STARTS)) * (2 * hy / m)
-    z = np.full(STARTS, tracer.zmax + tracer.top_margin)
-    out = (np.empty(STARTS, np.int8), np.empty(STARTS, np.int64)) + tuple(
+    return x, y, np.full(STARTS, tracer.zmax + tracer.top_margin)
+
+
+def walk_outputs() -> tuple:
+    """``cast_falling``'s output columns for ``STARTS`` rays."""
+    return (np.empty(STARTS, np.int8), np.empty(STARTS, np.int64)) + tuple(
         np.empty(STARTS) for _ in range(3)
     )
+
+
+def orders() -> None:
+    """ns per ray of the walk at θi = 30° (φi = 0, with the table) for the starts in the
+    four orders of the module docstring, ``ROUNDS`` rounds of all four."""
+    tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
+    grid = tracer.grid
+    geometry = grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)
+    rng = np.random.default_rng(1)
+    x, y, z = jittered_starts(tracer, rng)
+    shuffled = rng.permutation(STARTS)
+    corner = 100 * grid.cell  # a block of 8 × 8 cells away from the tile's walls
+    starts = {
+        "as stratified origins come": (x, y),
+        "one start repeated": (np.full(STARTS, x[STARTS // 3]), np.full(STARTS, y[STARTS // 3])),
+        "at random within 8 × 8 cells": (
+            grid.x0 + corner + 8 * grid.cell * rng.random(STARTS),
+            grid.y0 + corner + 8 * grid.cell * rng.random(STARTS),
+        ),
+        "shuffled over the whole tile": (x[shuffled], y[shuffled]),
+    }
+    t = np.radians(30.0)
+    d = (-np.sin(t), 0.0, -np.cos(t))
+    ahead = steps_over(grid, d, tracer.zmax)
+    out = walk_outputs()
+    cast_falling(x, y, z, *d, geometry, ahead, *out)  # compiled, the output pages faulted in
+    ns = {label: [] for label in starts}
+    for _ in range(ROUNDS):
+        for label, (sx, sy) in starts.items():
+            t0 = time.process_time()
+            cast_falling(sx, sy, z, *d, geometry, ahead, *out)
+            ns[label].append((time.process_time() - t0) / STARTS * 1e9)
+    print(f"θi = 30°, {STARTS} walks a round, {ROUNDS} rounds: ns per ray, median (range)")
+    for label, values in ns.items():
+        print(f"  {label}: {np.median(values):.1f} ({min(values):.1f}–{max(values):.1f})")
+
+
+def main() -> None:
+    if "--embree" in sys.argv[1:]:
+        against_embree()
+        return
+    if "--orders" in sys.argv[1:]:
+        orders()
+        return
+    tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
+    grid = tracer.grid
+    geometry = grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)
+    rng = np.random.default_rng(1)
+    x, y, z = jittered_starts(tracer, rng)
+    out = walk_outputs()
     print(
         "θi    φi   ns per ray   with the table   cells stepped over   of them, surely   table ms"
     )
