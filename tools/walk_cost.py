@@ -101,6 +101,13 @@ def against_embree() -> None:
         print(f"{theta:4.1f}  {cells:6.0f}   {ns[0]:12.0f}   {ns[1]:9.0f}")
 
 
+def bench_grid() -> tuple:
+    """(tracer, its heightfield grid, the grid walk's geometry) of the bench surface."""
+    tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
+    grid = tracer.grid
+    return tracer, grid, grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)
+
+
 def jittered_starts(tracer, rng) -> tuple:
     """``STARTS`` starts (x, y, z) at the top of the relief on a jittered row-major grid over
     the tile, as stratified origins are ordered."""
@@ -122,9 +129,7 @@ def walk_outputs() -> tuple:
 def orders() -> None:
     """ns per ray of the walk at θi = 30° (φi = 0, with the table) for the starts in the
     four orders of the module docstring, ``ROUNDS`` rounds of all four."""
-    tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
-    grid = tracer.grid
-    geometry = grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)
+    tracer, grid, geometry = bench_grid()
     rng = np.random.default_rng(1)
     x, y, z = jittered_starts(tracer, rng)
     shuffled = rng.permutation(STARTS)
@@ -161,9 +166,7 @@ def main() -> None:
     if "--orders" in sys.argv[1:]:
         orders()
         return
-    tracer = tracer_for(_surface(BenchConfig()), "traced").tracer
-    grid = tracer.grid
-    geometry = grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps)
+    tracer, grid, geometry = bench_grid()
     rng = np.random.default_rng(1)
     x, y, z = jittered_starts(tracer, rng)
     out = walk_outputs()
