@@ -48,6 +48,9 @@ site per kernel.
 from __future__ import annotations
 
 import numpy as np
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from microsim.kernel_cache import cached_njit
 
@@ -60,6 +63,8 @@ __all__ = [
     "TILE",
     "read_only",
     "numba_target",
+    "wide_vectors",
+    "lane_scratch",
 ]
 
 compiled = cached_njit(nogil=True, _nrt=False)
@@ -105,3 +110,30 @@ def numba_target() -> str:
     if config.CPU_FEATURES is None:
         return f"{config.CPU_NAME} with the host's features"
     return f"{config.CPU_NAME} {config.CPU_FEATURES}".strip()
+
+
+def wide_vectors() -> bool:
+    """Whether numba compiles for AVX-512 (``avx512f`` among its target's features): the host's,
+    or those ``NUMBA_CPU_FEATURES`` lists (``numba_target``)."""
+    from numba.core import config
+
+    if config.CPU_FEATURES is not None:
+        features = config.CPU_FEATURES
+    else:
+        import llvmlite.binding as llvm
+
+        features = llvm.get_host_cpu_features().flatten()
+    return "+avx512f" in features.split(",")
+
+
+@intrinsic
+def lane_scratch(typingctx, size, dtype):
+    """A pointer to ``size`` (a compile-time int) values of ``dtype`` on the calling kernel's
+    stack, indexed p[k] (no runtime needed). Lane state lives there: the compiler knows that
+    stack memory no array argument can alias, so a loop over lanes that stores to it and loads
+    from arrays at computed indices (gathers) can be vectorised."""
+
+    def lower(context, builder, signature, args):
+        return cgutils.alloca_once(builder, context.get_value_type(dtype.dtype), size=args[0])
+
+    return types.CPointer(dtype.dtype)(types.int64, dtype), lower

@@ -404,6 +404,61 @@ def test_cells_surely_stepped_over_give_the_walks_bits(theta, phi):
         assert ahead.mean() > 1.0
 
 
+def _walk_both_ways(tracer, x, down, ahead, max_wraps=None):
+    """``cast_falling``'s outputs for the starts ``x`` one ray at a time and ``LANES`` at a
+    time (the geometry's last entry), with ``max_wraps`` (default the tracer's)."""
+    from microsim.sim.heightfield_caster import cast_falling
+
+    g = tracer.grid
+    wraps = tracer.max_wraps if max_wraps is None else max_wraps
+    base = g.geometry(tracer.zmin, tracer.zmax, wraps)[:10]
+    n = len(x[0])
+    outs = []
+    for lanes in (False, True):
+        out = [np.empty(n, np.int8), np.empty(n, np.int32)] + [np.empty(n) for _ in "xyz"]
+        cast_falling(*x, *down, base + (lanes,), ahead, *out)
+        outs.append(out)
+    return outs
+
+
+@pytest.mark.parametrize("theta, phi", DIRECTIONS + [(0.0, 0.0), (89.5, 3.0)])
+def test_the_walk_in_lanes_gives_the_bits_of_the_walk_ray_by_ray(theta, phi):
+    """``cast_lanes`` (rays walked side by side, branches as selects) gives every output
+    bitwise as ``cast_one`` ray by ray: random starts and starts exactly above vertices, walls
+    and diagonals (ties), on a rough and on a terraced surface (flat facets and level edges,
+    where a ray enters a cell on the surface), with and without the cells surely stepped
+    over, for ray counts that fill the lanes partly, and with a wrap cap that leaves grazing
+    rays UNRESOLVED."""
+    from microsim.sim.heightfield_caster import LANES, NO_STEPS, steps_over
+
+    rough = random_heights(n=48, sigma=0.03, seed=5)
+    terraced = np.round(random_heights(n=32, sigma=0.05, seed=6) / 0.02) * 0.02
+    down = [float(-c) for c in spherical_deg(theta, phi)]
+    if theta == 0.0:
+        down = [0.0, 0.0, -1.0]
+    for h, cell in ((np.vstack([rough] * 2)[:80], 1 / 48), (terraced, 1 / 32)):
+        tracer = Tracer(heightfield_surface(h, cell), grid=True)
+        ahead = steps_over(tracer.grid, down, tracer.zmax)
+        ahead.flags.writeable = False
+        x = _starts(tracer, 3000, seed=int(theta + phi))
+        k = np.arange(-12, 12) * cell
+        gx, gy = (a.ravel() for a in np.meshgrid(k, k))
+        ties = [np.concatenate([gx, gx + cell / 2, gx + cell * 3 / 8]),
+                np.concatenate([gy, gy, gy + cell * 3 / 8])]  # fmt: skip
+        x = [np.concatenate([x[0], ties[0]]), np.concatenate([x[1], ties[1]])]
+        x.append(np.full(len(x[0]), tracer.zmax + tracer.top_margin))
+        for table in (NO_STEPS, ahead):
+            for n in (1, LANES - 1, LANES + 1, len(x[0])):
+                per_ray, lanes = _walk_both_ways(tracer, [c[:n] for c in x], down, table)
+                for a, b in zip(per_ray, lanes):
+                    np.testing.assert_array_equal(a, b)
+        if theta > 80.0:  # a cap the grazing rays exceed: UNRESOLVED in both
+            per_ray, lanes = _walk_both_ways(tracer, x, down, NO_STEPS, max_wraps=0)
+            assert np.any(per_ray[0] != HIT)
+            for a, b in zip(per_ray, lanes):
+                np.testing.assert_array_equal(a, b)
+
+
 def test_cells_surely_stepped_over_are_stepped_over_from_anywhere_in_the_cell():
     """``steps_over``'s count, checked against a plain march of the grid walk (exact cell
     sequence by the walls' distances) from random points of each cell at the level zmax: every

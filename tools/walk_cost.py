@@ -17,9 +17,14 @@ start repeated (every branch predicted, its cells in L1: what is left is the ray
 of dependent steps); starts drawn at random within 8 × 8 cells (the cells in L1, the
 branches as unpredictable as the relief makes them); the same as the first, shuffled over the
 whole tile (each ray's cells fetched from further out in the memory hierarchy).
+With ``--lanes``: instead, ns per ray of the walk one ray at a time and ``LANES`` rays side by
+side (``heightfield_caster.cast_lanes``; the geometry's last entry chooses) at the
+``INCIDENCES``, with the table, ``ROUNDS`` rounds alternating (median and range, process
+time), after checking that both give the same bits. The default and ``--orders`` walk as
+``cast_falling`` does on this machine (``LANE_WALK``; ``MICROSIM_LANE_WALK=0``: one at a time).
 docs/performance.md and docs/design.md quote it.
 
-    .venv/bin/python tools/walk_cost.py [--embree | --orders]
+    .venv/bin/python tools/walk_cost.py [--embree | --orders | --lanes]
 """
 
 import sys
@@ -28,7 +33,7 @@ import time
 import numpy as np
 
 from microsim.app.bench import BenchConfig, _surface
-from microsim.sim.heightfield_caster import NO_STEPS, cast_falling, steps_over
+from microsim.sim.heightfield_caster import LANE_WALK, LANES, NO_STEPS, cast_falling, steps_over
 from microsim.sim.tracer import Tracer
 from microsim.sim.tracer_cache import TRACER_BACKEND, tracer_for
 
@@ -159,7 +164,40 @@ def orders() -> None:
         print(f"  {label}: {np.median(values):.1f} ({min(values):.1f}–{max(values):.1f})")
 
 
+def lanes() -> None:
+    """ns per ray of the walk one at a time and ``LANES`` side by side (module docstring)."""
+    tracer, grid, geometry = bench_grid()
+    x, y, z = jittered_starts(tracer, np.random.default_rng(1))
+    ways = {
+        "one at a time": geometry[:10] + (False,),
+        f"{LANES} side by side": geometry[:10] + (True,),
+    }
+    print(f"walk schedule of cast_falling here: {'lanes' if LANE_WALK else 'one at a time'}")
+    print(f"θi    φi   ns per ray, median (range) over {ROUNDS} rounds: " + " | ".join(ways))
+    for theta, phi in INCIDENCES:
+        t, p = np.radians(theta), np.radians(phi)
+        d = (-np.sin(t) * np.cos(p), -np.sin(t) * np.sin(p), -np.cos(t))
+        ahead = steps_over(grid, d, tracer.zmax)
+        outs = {}
+        for label, g in ways.items():
+            outs[label] = walk_outputs()
+            cast_falling(x, y, z, *d, g, ahead, *outs[label])
+        for a, b in zip(*outs.values()):
+            np.testing.assert_array_equal(a, b)  # the same bits
+        ns = {label: [] for label in ways}
+        for _ in range(ROUNDS):
+            for label, g in ways.items():
+                t0 = time.process_time()
+                cast_falling(x, y, z, *d, g, ahead, *outs[label])
+                ns[label].append((time.process_time() - t0) / STARTS * 1e9)
+        cols = [f"{np.median(v):.1f} ({min(v):.1f}–{max(v):.1f})" for v in ns.values()]
+        print(f"{theta:4.0f}  {phi:4.0f}   " + " | ".join(cols))
+
+
 def main() -> None:
+    if "--lanes" in sys.argv[1:]:
+        lanes()
+        return
     if "--embree" in sys.argv[1:]:
         against_embree()
         return

@@ -607,7 +607,8 @@ def warm_up() -> None:
 def machine() -> Machine:
     """What the figures were measured on: the CPU model, its widest x86 vector extension
     ("AVX-512", "AVX2" or the machine's architecture), NumPy's dispatch targets in use (its
-    AVX-512 kernels change ulps of some functions) and numba's target (``jit.numba_target``)."""
+    AVX-512 kernels change ulps of some functions), numba's target (``jit.numba_target``) and
+    how the grid walk runs (``heightfield_caster.LANE_WALK``)."""
     flags, model = set(), platform.processor() or platform.machine()
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
@@ -625,7 +626,12 @@ def machine() -> Machine:
     except ImportError:  # NumPy < 2
         from numpy.core import _multiarray_umath as umath
     dispatch = [k for k in umath.__cpu_dispatch__ if umath.__cpu_features__.get(k)]
-    return Machine(cpu=model, isa=isa, numpy_dispatch=dispatch, numba_cpu=numba_target())
+    from ..sim.heightfield_caster import LANE_WALK, LANES
+
+    walk = f"{LANES} rays side by side" if LANE_WALK else "one ray at a time"
+    return Machine(
+        cpu=model, isa=isa, numpy_dispatch=dispatch, numba_cpu=numba_target(), grid_walk=walk
+    )
 
 
 def run_bench(cfg: BenchConfig = BenchConfig()) -> Bench:
@@ -731,7 +737,7 @@ def _cmd_scale(args) -> int:
         print(json.dumps({**record, "rows": [asdict(r) for r in rows]}, indent=1))
     else:
         m = machine()
-        print(f"{m.cpu} ({m.isa}, numba {m.numba_cpu}); 1 thread")
+        print(f"{m.cpu} ({m.isa}, numba {m.numba_cpu}, grid walk {m.grid_walk}); 1 thread")
         print(bs.format_scale(rows))
     return 0
 

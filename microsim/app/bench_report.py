@@ -90,12 +90,15 @@ def _record(cls, doc: dict | None):
 
 @dataclass(frozen=True)
 class Machine:
-    """What the figures were measured on (``bench.machine``)."""
+    """What the figures were measured on (``bench.machine``) and how the heightfield grid walk
+    ran there (``grid_walk``: "16 rays side by side" or "one ray at a time",
+    ``heightfield_caster.LANE_WALK``; records without it were walked one ray at a time)."""
 
     cpu: str
     isa: str
     numpy_dispatch: list
     numba_cpu: str
+    grid_walk: str = "one ray at a time"
 
 
 @dataclass(frozen=True)
@@ -497,7 +500,8 @@ def format_bench(b: Bench) -> str:
 def _machine_line(m: Machine) -> str:
     return (
         f"machine: {m.cpu}, {m.isa} (NumPy dispatch "
-        f"{', '.join(m.numpy_dispatch) or 'baseline'}; numba target {m.numba_cpu})"
+        f"{', '.join(m.numpy_dispatch) or 'baseline'}; numba target {m.numba_cpu}; "
+        f"grid walk {m.grid_walk})"
     )
 
 

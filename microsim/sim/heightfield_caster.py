@@ -24,16 +24,24 @@ float64 on the float64 heights, where Embree tests the float32 mesh: the two agr
 triangle except for rays within float32 rounding of an edge (ties), and on the hit point to
 float32 precision. A ray that crosses the tile walls more than ``max_wraps`` times is
 UNRESOLVED, as in ``Tracer``'s walk.
+
+A ray's walk is a chain of dependent steps with unpredictable branches (which triangle,
+whether the diagonal is crossed, whether the cell is hit), so one ray at a time leaves the
+CPU idle for much of each step. ``cast_falling`` therefore walks falling rays from above the
+relief ``LANES`` at a time where the vector units are wide enough to pay for the gathers
+(``LANE_WALK``): the same steps as ``cast_one``, its branches computed and selected, one cell
+of every lane per round (``cast_lanes``).
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import os
 
 import numpy as np
 
-from microsim.jit import vector_inlined, vectorised
+from microsim.jit import lane_scratch, vector_inlined, vectorised, wide_vectors
 
 from .engine.codes import ESCAPED, HIT, MISSED, UNRESOLVED
 
@@ -89,7 +97,7 @@ class HeightfieldGrid:
 
     def geometry(self, zmin: float, zmax: float, max_wraps: int) -> tuple:
         """The kernels' grid argument: (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
-        max_wraps)."""
+        max_wraps, lanes), ``lanes`` = ``LANE_WALK``."""
         return (
             self.hp,
             self.cell_max,
@@ -101,7 +109,16 @@ class HeightfieldGrid:
             float(zmin),
             float(zmax),
             int(max_wraps),
+            LANE_WALK,
         )
+
+
+LANE_SWITCH = "MICROSIM_LANE_WALK"
+LANE_WALK = wide_vectors() and os.environ.get(LANE_SWITCH, "1") != "0"
+"""Whether ``cast_falling`` walks its rays ``LANES`` at a time (``cast_lanes``): where numba
+compiles for AVX-512 (``jit.wide_vectors``), unless ``MICROSIM_LANE_WALK=0``. On the AVX2
+path its gathers make it slower than the walk one ray at a time (docs/performance.md,
+``tools/walk_cost.py --lanes``). Both give the same bits."""
 
 
 def heightfield_grid(surface, vertices=None, faces=None) -> HeightfieldGrid | None:
@@ -194,6 +211,16 @@ def _plane_height(hp, ci, cj, fu, fv, upper):
 
 
 @_inlined
+def _corner_plane(h00, h10, h01, h11, fu, fv, upper):
+    """``_plane_height`` from the cell's four corner heights (h10 = hp[cj, ci + 1], h01 =
+    hp[cj + 1, ci]), its triangle chosen by selects: the same arithmetic, the same bits."""
+    hc = h10 if upper else h01
+    w1 = fu if upper else fv
+    w2 = fv if upper else fu
+    return h00 + w1 * (hc - h00) + w2 * (h11 - hc)
+
+
+@_inlined
 def _tile_of(i, n):
     """⌊i / n⌋ (the starts lie in or next to the first tile)."""
     return 0 if 0 <= i < n else i // n
@@ -229,6 +256,31 @@ def _clamp01(a):
 
 
 @_inlined
+def _first_cell(x, y, z, t, terms, geometry, ahead):
+    """Where the walk of the ray (x, y, z) + t·d starts: (t, u0, v0, i, j, tx, ty, ti, tj, ci,
+    cj) — t past the ``ahead`` cells stepped over, the grid coordinates (u0, v0) at t = 0, the
+    cell's indices (i, j) and, wrapped into the tile, (ci, cj), the tile (ti, tj) they are in,
+    and the times (tx, ty) of the next x and y walls (``cast_one``)."""
+    _, _, nx, ny, cell, x0, y0, _, zmax = geometry[:9]
+    du, dv, rdu, rdv, _, _, _, si, sj = terms
+    inv = 1.0 / cell
+    u0, v0 = (x - x0) * inv, (y - y0) * inv  # grid coordinates at t = 0
+    i, j = int(math.floor(u0 + t * du)), int(math.floor(v0 + t * dv))
+    tx = ((i + (1 if si > 0 else 0)) - u0) * rdu if si != 0 else math.inf
+    ty = ((j + (1 if sj > 0 else 0)) - v0) * rdv if sj != 0 else math.inf
+    stx, sty = abs(rdu), abs(rdv)
+    ti, tj = _tile_of(i, nx), _tile_of(j, ny)  # the tile the walk is in
+    ci, cj = i - ti * nx, j - tj * ny
+    for _ in range(ahead[cj, ci] if len(ahead) and z >= zmax else 0):  # stepped over, no test
+        t = min(tx, ty)  # < t_end, and no tile wall is crossed (``steps_over``)
+        if tx <= ty:
+            i, ci, tx = i + si, ci + si, tx + stx
+        else:
+            j, cj, ty = j + sj, cj + sj, ty + sty
+    return t, u0, v0, i, j, tx, ty, ti, tj, ci, cj
+
+
+@_inlined
 def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps, ahead):
     """(status, face, px, py, pz) of the ray (x, y, z) + t·(dx, dy, dz), dz ≠ 0, started on
     ``side`` of the surface, on ``geometry`` = (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
@@ -242,7 +294,7 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps, ahead):
     from zmax or above, the first ``ahead[cell]`` of them without testing them either
     (``steps_over``'s table for this direction; ``NO_STEPS``: none), the same steps with the
     same bits."""
-    hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax, _ = geometry
+    hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax = geometry[:9]
     s, bound = side
     du, dv, rdu, rdv, rdz, da, rda, si, sj = terms
     if dz < 0.0:  # from where it falls through zmax (nothing lies above) to zmin
@@ -252,22 +304,10 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps, ahead):
         t = (zmin - z) * rdz if z < zmin else 0.0
         t_end = max(t, (zmax - z) * rdz)
     toward = (dz < 0.0) == (s > 0.0)  # meets the surface by t_end: f ≤ 0 there
-    inv = 1.0 / cell
-    u0, v0 = (x - x0) * inv, (y - y0) * inv  # grid coordinates at t = 0
-    i, j = int(math.floor(u0 + t * du)), int(math.floor(v0 + t * dv))
-    tx = ((i + (1 if si > 0 else 0)) - u0) * rdu if si != 0 else math.inf
-    ty = ((j + (1 if sj > 0 else 0)) - v0) * rdv if sj != 0 else math.inf
+    t, u0, v0, i, j, tx, ty, ti, tj, ci, cj = _first_cell(x, y, z, t, terms, geometry, ahead)
     stx, sty = abs(rdu), abs(rdv)
-    ti, tj = _tile_of(i, nx), _tile_of(j, ny)  # the tile the walk is in
-    ci, cj = i - ti * nx, j - tj * ny
     wraps = 0
     fa, known = 0.0, False  # f at t, once known (the previous cell was not stepped over)
-    for _ in range(ahead[cj, ci] if len(ahead) and z >= zmax else 0):  # stepped over, no test
-        t = min(tx, ty)  # < t_end, and no tile wall is crossed (``steps_over``)
-        if tx <= ty:
-            i, ci, tx = i + si, ci + si, tx + stx
-        else:
-            j, cj, ty = j + sj, cj + sj, ty + sty
     while True:
         t_exit = min(tx, ty, t_end)
         # the ray's point nearest the surface in this cell: where it leaves the cell when
@@ -338,9 +378,13 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps, ahead):
 @_compiled
 def cast_falling(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz):
     """``cast_one`` for rays (x, y, z)[i] along one falling direction (dx, dy, dz) on
-    ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps), with the cells
-    ``ahead`` surely stepped over (``steps_over`` of this direction, or ``NO_STEPS``); writes
-    ``status``, ``prim`` and the hit point columns."""
+    ``geometry`` (``HeightfieldGrid.geometry``, then zmin, zmax, max_wraps, lanes), with the
+    cells ``ahead`` surely stepped over (``steps_over`` of this direction, or ``NO_STEPS``);
+    writes ``status``, ``prim`` and the hit point columns. ``LANES`` rays at a time
+    (``cast_lanes``) where ``lanes`` is set, else one by one: the same bits."""
+    if geometry[10]:
+        cast_lanes(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz)
+        return
     terms = direction_terms(dx, dy, dz, geometry[4])
     above = (1.0, geometry[1])
     for i in range(len(x)):
@@ -348,6 +392,163 @@ def cast_falling(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz)
             x[i], y[i], z[i], dx, dy, dz, terms, geometry, above, geometry[9], ahead
         )
         status[i], prim[i], px[i], py[i], pz[i] = s, f, a, b, c
+
+
+LANES = 16
+"""Rays ``cast_lanes`` walks side by side: two AVX-512 registers of float64 per quantity."""
+
+
+@_inlined
+def _above_cells(z, dz, t, t_end, tx, ty, stx, sty, i, j, ci, cj, si, sj, nx, ny, cell_max):
+    """(t, tx, ty, i, j, ci, cj) after the cells a ray falling from height z above the
+    surface leaves above their highest vertex, up to a tile wall: the steps ``cast_one``
+    takes through them (each sets nothing else), taken one by one here, where a mispredicted
+    exit costs less than a step of all the lanes."""
+    while True:
+        t_exit = min(tx, ty, t_end)
+        if not (t_exit < t_end and z + t_exit * dz > cell_max[cj, ci]):
+            return t, tx, ty, i, j, ci, cj
+        if tx <= ty:
+            if ci + si == nx or ci + si < 0:
+                return t, tx, ty, i, j, ci, cj
+            t, i, tx, ci = t_exit, i + si, tx + stx, ci + si
+        else:
+            if cj + sj == ny or cj + sj < 0:
+                return t, tx, ty, i, j, ci, cj
+            t, j, ty, cj = t_exit, j + sj, ty + sty, cj + sj
+
+
+@_compiled
+def cast_lanes(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz):
+    """``cast_falling`` with ``LANES`` rays walked side by side, one cell of each per round:
+    a round is ``cast_one``'s loop body for a ray above the surface (s = 1), its branches
+    turned into selects (``_lane_cell``), in a loop over the lanes that the compiler
+    vectorises (each lane's corner heights and highest vertex gathered); between rounds, one
+    by one, each lane whose ray hit (or went UNRESOLVED) writes it out and takes the next ray,
+    whose first cell and the cells it leaves above are found on its own (``_first_cell``,
+    ``_above_cells``). Every ray takes the same steps with the same arithmetic as
+    ``cast_one``: the same bits (tests/test_heightfield_caster.py). Lane state lives on the
+    stack (``lane_scratch``); with no ray left, a lane idles on ray 0's start."""
+    hp, cell_max, nx, ny, cell, _, _, zmin, zmax, max_wraps = geometry[:10]
+    terms = direction_terms(dx, dy, dz, cell)
+    du, dv, rdu, rdv, rdz, da, rda, si, sj = terms
+    stx, sty = abs(rdu), abs(rdv)
+    n = len(x)
+    ray, done = lane_scratch(LANES, np.int64), lane_scratch(LANES, np.int8)
+    t_, t_end_ = lane_scratch(LANES, np.float64), lane_scratch(LANES, np.float64)
+    u0_, v0_ = lane_scratch(LANES, np.float64), lane_scratch(LANES, np.float64)
+    tx_, ty_ = lane_scratch(LANES, np.float64), lane_scratch(LANES, np.float64)
+    fa_, z_ = lane_scratch(LANES, np.float64), lane_scratch(LANES, np.float64)
+    i_, j_ = lane_scratch(LANES, np.int64), lane_scratch(LANES, np.int64)
+    ci_, cj_ = lane_scratch(LANES, np.int64), lane_scratch(LANES, np.int64)
+    ti_, tj_ = lane_scratch(LANES, np.int64), lane_scratch(LANES, np.int64)
+    wraps_, known_ = lane_scratch(LANES, np.int64), lane_scratch(LANES, np.uint8)
+    th_, face_ = lane_scratch(LANES, np.float64), lane_scratch(LANES, np.int64)
+    for k in range(LANES):
+        ray[k], done[k] = -1, 1  # empty: takes a ray before the first round
+    nxt, live = 0, 0
+    while n > 0:
+        for k in range(LANES):  # one by one: write out the finished rays, start the next
+            if done[k] == 0:
+                continue
+            q = ray[k]
+            if q >= 0 and done[k] == 1:
+                th = th_[k]
+                status[q], prim[q] = HIT, face_[k]
+                px[q] = x[q] + th * dx - ti_[k] * nx * cell
+                py[q] = y[q] + th * dy - tj_[k] * ny * cell
+                pz[q] = z[q] + th * dz
+            elif q >= 0:
+                status[q], prim[q] = UNRESOLVED, -1
+                px[q], py[q], pz[q] = math.nan, math.nan, math.nan
+            live -= q >= 0
+            q = nxt if nxt < n else -1
+            nxt, live, r = nxt + (q >= 0), live + (q >= 0), max(q, 0)
+            t = (zmax - z[r]) * rdz if z[r] > zmax else 0.0
+            t_end = max(t, (zmin - z[r]) * rdz)
+            t, u0, v0, i, j, tx, ty, ti, tj, ci, cj = _first_cell(
+                x[r], y[r], z[r], t, terms, geometry, ahead
+            )
+            t, tx, ty, i, j, ci, cj = _above_cells(
+                z[r], dz, t, t_end, tx, ty, stx, sty, i, j, ci, cj, si, sj, nx, ny, cell_max
+            )
+            ray[k], done[k], z_[k], fa_[k], known_[k], wraps_[k] = q, 0, z[r], 0.0, 0, 0
+            t_[k], t_end_[k], u0_[k], v0_[k], tx_[k], ty_[k] = t, t_end, u0, v0, tx, ty
+            i_[k], j_[k], ci_[k], cj_[k], ti_[k], tj_[k] = i, j, ci, cj, ti, tj
+        if live == 0:
+            return
+        for k in range(LANES):  # vectorised: one cell of every lane
+            t, t_exit, above, hit, upper, th, fb = _lane_cell(
+                t_[k], t_end_[k], u0_[k], v0_[k], tx_[k], ty_[k], fa_[k], z_[k], known_[k] != 0,
+                i_[k], j_[k], ci_[k], cj_[k], dz, terms, hp, cell_max,
+            )  # fmt: skip
+            ci, cj, tx, ty = ci_[k], cj_[k], tx_[k], ty_[k]
+            th_[k], face_[k] = th, cj * nx + ci if upper else nx * ny + cj * nx + ci
+            fa_[k], known_[k], t_[k] = fa_[k] if above else fb, 0 if above else 1, t_exit
+            # the next cell (``_step``); a ray that hit keeps its tile for its hit point
+            xw = tx <= ty
+            c, m, sc = (ci + si, nx, si) if xw else (cj + sj, ny, sj)
+            wrapped = c == m or c < 0
+            c = c - sc * m if wrapped else c
+            tile = sc if wrapped and not hit else 0
+            if xw:
+                i_[k], tx_[k], ci_[k], ti_[k] = i_[k] + si, tx + stx, c, ti_[k] + tile
+            else:
+                j_[k], ty_[k], cj_[k], tj_[k] = j_[k] + sj, ty + sty, c, tj_[k] + tile
+            wraps_[k] += 1 if wrapped else 0
+            done[k] = 1 if hit else (2 if wraps_[k] > max_wraps else 0)
+
+
+@_inlined
+def _lane_cell(t, t_end, u0, v0, tx, ty, fa, z, known, i, j, ci, cj, dz, terms, hp, cell_max):
+    """``cast_one``'s loop body for one cell of a falling ray above the surface (s = 1, toward),
+    every branch computed and the taken one selected: (t, t_exit, above, hit, upper, th, fb) —
+    t as the body leaves it (past a diagonal crossed above the surface), the cell's exit time,
+    whether the ray left the cell above its highest vertex (f not evaluated), whether the
+    piece's root lies in this cell, the hit triangle (A if ``upper``), the hit's time th, and
+    f at the exit."""
+    du, dv, _, _, _, da, rda, si, sj = terms
+    uci, ucj = np.uint64(ci), np.uint64(cj)  # ≥ 0: no index wrap-around per lane
+    one = np.uint64(1)
+    t_exit = min(tx, ty, t_end)
+    far = t_exit == t_end
+    above = not far and z + t_exit * dz > cell_max[ucj, uci]
+    h00, h10 = hp[ucj, uci], hp[ucj, uci + one]
+    h01, h11 = hp[ucj + one, uci], hp[ucj + one, uci + one]
+    fi, fj = float(i), float(j)
+    ut, vt = u0 + t * du - fi, v0 + t * dv - fj
+    a = ut - vt
+    upper = a + da * (0.5 * (t_exit - t)) > 0.0
+    fu, fv = _clamp01(ut), _clamp01(vt)
+    fa = fa if known else z + t * dz - _corner_plane(h00, h10, h01, h11, fu, fv, fu >= fv)
+    at_surface = fa <= 0.0  # entered exactly on an edge
+    td = t - a * rda
+    crosses = not at_surface and da != 0.0 and t < td < t_exit  # the diagonal, in the cell
+    r = _clamp01(u0 + td * du - fi)
+    fd = z + td * dz - (h00 + r * (h11 - h00))
+    ends = crosses and fd <= 0.0  # the root lies before the diagonal
+    passes = crosses and not fd <= 0.0
+    upper_d = a + da * (0.5 * (td - t)) > 0.0
+    if at_surface:
+        upper = a > 0.0 or (a == 0.0 and da > 0.0)
+    elif crosses:
+        upper = upper_d if ends else not upper_d
+    tb = t if at_surface else (td if ends else t_exit)
+    fb = fa if at_surface else (fd if ends else 1.0)
+    t, fa = (td, fd) if passes else (t, fa)
+    # f where the piece ends: at the relief's far level on its plane, else on the wall crossed
+    fu_end, fv_end = _clamp01(u0 + t_end * du - fi), _clamp01(v0 + t_end * dv - fj)
+    h_end = _corner_plane(h00, h10, h01, h11, fu_end, fv_end, upper)
+    fv_x, fu_y = _clamp01(v0 + t_exit * dv - fj), _clamp01(u0 + t_exit * du - fi)
+    xa, xb = (h10, h11) if si > 0 else (h00, h01)
+    ya, yb = (h01, h11) if sj > 0 else (h00, h10)
+    h = h_end if far else (xa + fv_x * (xb - xa) if tx <= ty else ya + fu_y * (yb - ya))
+    f_wall = z + t_exit * dz - h
+    f_wall = 0.0 if far and f_wall > 0.0 else f_wall  # below every vertex: only rounding says not
+    fb = f_wall if tb == t_exit else fb
+    hit = not above and fb <= 0.0
+    th = t + (tb - t) * (fa / (fa - fb)) if fa > fb else t
+    return t, t_exit, above, hit, upper, th, fb
 
 
 @_inlined
