@@ -428,7 +428,7 @@ def cast_lanes(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz):
     whose first cell and the cells it leaves above are found on its own (``_first_cell``,
     ``_above_cells``). Every ray takes the same steps with the same arithmetic as
     ``cast_one``: the same bits (tests/test_heightfield_caster.py). Lane state lives on the
-    stack (``lane_scratch``); with no ray left, a lane idles on ray 0's start."""
+    stack (``lane_scratch``); with no ray left, a lane idles (its rounds read valid cells)."""
     hp, cell_max, nx, ny, cell, _, _, zmin, zmax, max_wraps = geometry[:10]
     terms = direction_terms(dx, dy, dz, cell)
     du, dv, rdu, rdv, rdz, da, rda, si, sj = terms
@@ -445,7 +445,7 @@ def cast_lanes(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz):
     wraps_, known_ = lane_scratch(LANES, np.int64), lane_scratch(LANES, np.uint8)
     th_, face_ = lane_scratch(LANES, np.float64), lane_scratch(LANES, np.int64)
     for k in range(LANES):
-        ray[k], done[k] = -1, 1  # empty: takes a ray before the first round
+        ray[k], done[k] = -2, 1  # empty: takes a ray (or ray 0's start, idle) before round 1
     nxt, live = 0, 0
     while n > 0:
         for k in range(LANES):  # one by one: write out the finished rays, start the next
@@ -462,6 +462,9 @@ def cast_lanes(x, y, z, dx, dy, dz, geometry, ahead, status, prim, px, py, pz):
                 status[q], prim[q] = UNRESOLVED, -1
                 px[q], py[q], pz[q] = math.nan, math.nan, math.nan
             live -= q >= 0
+            if nxt == n and q != -2:  # no ray left: the lane idles where it is
+                ray[k] = -1
+                continue
             q = nxt if nxt < n else -1
             nxt, live, r = nxt + (q >= 0), live + (q >= 0), max(q, 0)
             t = (zmax - z[r]) * rdz if z[r] > zmax else 0.0
