@@ -406,17 +406,17 @@ def test_cells_surely_stepped_over_give_the_walks_bits(theta, phi):
 
 def _walk_both_ways(tracer, x, down, ahead, max_wraps=None):
     """``cast_falling``'s outputs for the starts ``x`` one ray at a time and ``LANES`` at a
-    time (the geometry's last entry), with ``max_wraps`` (default the tracer's)."""
+    time (``HeightfieldGrid.geometry``'s ``lanes``), with ``max_wraps`` (default the
+    tracer's)."""
     from microsim.sim.heightfield_caster import cast_falling
 
-    g = tracer.grid
     wraps = tracer.max_wraps if max_wraps is None else max_wraps
-    base = g.geometry(tracer.zmin, tracer.zmax, wraps)[:10]
     n = len(x[0])
     outs = []
     for lanes in (False, True):
+        geometry = tracer.grid.geometry(tracer.zmin, tracer.zmax, wraps, lanes=lanes)
         out = [np.empty(n, np.int8), np.empty(n, np.int32)] + [np.empty(n) for _ in "xyz"]
-        cast_falling(*x, *down, base + (lanes,), ahead, *out)
+        cast_falling(*x, *down, geometry, ahead, *out)
         outs.append(out)
     return outs
 

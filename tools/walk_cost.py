@@ -18,7 +18,7 @@ of dependent steps); starts drawn at random within 8 × 8 cells (the cells in L1
 branches as unpredictable as the relief makes them); the same as the first, shuffled over the
 whole tile (each ray's cells fetched from further out in the memory hierarchy).
 With ``--lanes``: instead, ns per ray of the walk one ray at a time and ``LANES`` rays side by
-side (``heightfield_caster.cast_lanes``; the geometry's last entry chooses) at the
+side (``heightfield_caster.cast_lanes``; ``HeightfieldGrid.geometry``'s ``lanes``) at the
 ``INCIDENCES``, with the table, ``ROUNDS`` rounds alternating (median and range, process
 time), after checking that both give the same bits. The default and ``--orders`` walk as
 ``cast_falling`` does on this machine (``LANE_WALK``; ``MICROSIM_LANE_WALK=0``: one at a time).
@@ -41,7 +41,7 @@ INCIDENCES = ((0.0, 0.0), (30.0, 0.0), (30.0, 30.0), (60.0, 0.0), (60.0, 30.0))
 GRAZING = (60.0, 75.0, 80.0, 85.0, 88.0, 89.5)  # θi of the comparison with Embree (φi = 0)
 STARTS = 2**21
 COUNTED = 4096
-ROUNDS = 7  # rounds of ``--orders``
+ROUNDS = 7  # rounds of ``--orders`` and ``--lanes``
 
 
 def skipped_cells(grid, x, y, z, d) -> float:
@@ -166,11 +166,11 @@ def orders() -> None:
 
 def lanes() -> None:
     """ns per ray of the walk one at a time and ``LANES`` side by side (module docstring)."""
-    tracer, grid, geometry = bench_grid()
+    tracer, grid, _ = bench_grid()
     x, y, z = jittered_starts(tracer, np.random.default_rng(1))
     ways = {
-        "one at a time": geometry[:10] + (False,),
-        f"{LANES} side by side": geometry[:10] + (True,),
+        label: grid.geometry(tracer.zmin, tracer.zmax, tracer.max_wraps, lanes=lanes)
+        for label, lanes in (("one at a time", False), (f"{LANES} side by side", True))
     }
     print(f"walk schedule of cast_falling here: {'lanes' if LANE_WALK else 'one at a time'}")
     print(f"θi    φi   ns per ray, median (range) over {ROUNDS} rounds: " + " | ".join(ways))

@@ -95,9 +95,12 @@ class HeightfieldGrid:
         """``cast_one``'s ``side`` argument for a ray above the surface or ``below`` it."""
         return (-1.0, self.cell_min) if below else (1.0, self.cell_max)
 
-    def geometry(self, zmin: float, zmax: float, max_wraps: int) -> tuple:
+    def geometry(
+        self, zmin: float, zmax: float, max_wraps: int, lanes: bool | None = None
+    ) -> tuple:
         """The kernels' grid argument: (hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax,
-        max_wraps, lanes), ``lanes`` = ``LANE_WALK``."""
+        max_wraps, lanes): ``cast_falling`` walks ``LANES`` rays side by side where ``lanes``
+        (default ``LANE_WALK``), else one at a time — the same bits."""
         return (
             self.hp,
             self.cell_max,
@@ -109,7 +112,7 @@ class HeightfieldGrid:
             float(zmin),
             float(zmax),
             int(max_wraps),
-            LANE_WALK,
+            LANE_WALK if lanes is None else bool(lanes),
         )
 
 
@@ -294,7 +297,7 @@ def cast_one(x, y, z, dx, dy, dz, terms, geometry, side, max_wraps, ahead):
     from zmax or above, the first ``ahead[cell]`` of them without testing them either
     (``steps_over``'s table for this direction; ``NO_STEPS``: none), the same steps with the
     same bits."""
-    hp, cell_max, nx, ny, cell, x0, y0, zmin, zmax = geometry[:9]
+    hp, cell_max, nx, ny, cell, _, _, zmin, zmax = geometry[:9]
     s, bound = side
     du, dv, rdu, rdv, rdz, da, rda, si, sj = terms
     if dz < 0.0:  # from where it falls through zmax (nothing lies above) to zmin
